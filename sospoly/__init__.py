@@ -1,0 +1,39 @@
+"""sospoly: sum-of-squares polynomial programming.
+
+The layers, from meaning to numbers:
+
+* :mod:`sospoly.polynomial` -- sparse polynomials (``variables``, ``Polynomial``, ``det``);
+* :mod:`sospoly.basis` -- monomial bases, ``sigma``, ``tau``, Gram product tables;
+* :mod:`sospoly.program` -- SOS programs as pure data (decision polynomials, SOS constraints);
+* :mod:`sospoly.psatz` -- Positivstellensatz certificates for lower bounds (SPEC §5);
+* :mod:`sospoly.conic` -- lowering to one conic standard form (image or kernel Gram form);
+* :mod:`sospoly.backends` / :mod:`sospoly.solve` -- Clarabel (direct) or cvxpy, with
+  a-posteriori certificate checks;
+* :mod:`sospoly.gevp` -- bisection for the free-multiplier GEVP;
+* :mod:`sospoly.extraction` -- minimisers from Gram kernels and moment matrices;
+* :mod:`sospoly.minimize` -- ``minimize`` and ``is_sos``.
+"""
+from .basis import GramBasis, MonomialIndex, monomials, sigma, tau
+from .complexity import n_lmivar_formula
+from .conic import ConicProblem, GramForm, lower
+from .extraction import Candidate, extract_from_gram, extract_from_moment
+from .gevp import CompiledGevp, GevpResult, bisect
+from .linpoly import LinPoly
+from .minimize import MinimizeResult, SOSResult, feasibility_violation, is_sos, minimize
+from .polynomial import Polynomial, as_polynomial, det, variables
+from .program import Sense, SOSProgram
+from .psatz import Multiplier, PsatzProblem, build_psatz, default_q, delta_min
+from .solve import ProgramSolution, check_certificate, solve_program
+from .status import SolveStatus
+from .tolerances import DEFAULT_TOLERANCES, Tolerances
+
+__version__ = "0.1.0"
+
+__all__ = [
+    "GramBasis", "MonomialIndex", "monomials", "sigma", "tau", "n_lmivar_formula", "ConicProblem", "GramForm",
+    "lower", "Candidate", "extract_from_gram", "extract_from_moment", "CompiledGevp", "GevpResult", "bisect",
+    "LinPoly", "MinimizeResult", "SOSResult", "feasibility_violation", "is_sos", "minimize", "Polynomial",
+    "as_polynomial", "det", "variables", "Sense", "SOSProgram", "Multiplier", "PsatzProblem", "build_psatz",
+    "default_q", "delta_min", "ProgramSolution", "check_certificate", "solve_program", "SolveStatus",
+    "DEFAULT_TOLERANCES", "Tolerances",
+]

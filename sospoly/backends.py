@@ -1,0 +1,258 @@
+"""Solver back-ends for :class:`~sospoly.conic.ConicProblem`.
+
+This is the only module of sospoly that imports a solver.  Two back-ends:
+
+* :class:`ClarabelBackend` (default): Clarabel called directly on the standard
+  form, with a retry chain of settings for the routine numerical failures of
+  large batches (each attempt is recorded).  pyo3's ``PanicException`` (a
+  BaseException) is caught, the solver object is discarded and the next attempt
+  builds a fresh one.
+* :class:`CvxpyBackend`: the same conic data re-expressed as a cvxpy problem and
+  solved by any installed cvxpy SDP solver (for cross-checking).
+"""
+from __future__ import annotations
+
+import enum
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.sparse as sp
+
+from .conic import ConicProblem
+from .svec import triu_pairs, svec_scale
+from .tolerances import DEFAULT_TOLERANCES, Tolerances
+
+__all__ = ["RawStatus", "Attempt", "ConicSolution", "ClarabelBackend", "CvxpyBackend", "get_backend"]
+
+
+class RawStatus(str, enum.Enum):
+    """Solver-independent summary of what the solver itself said."""
+    SOLVED = "solved"
+    ALMOST_SOLVED = "almost_solved"
+    PRIMAL_INFEASIBLE = "primal_infeasible"
+    DUAL_INFEASIBLE = "dual_infeasible"
+    ALMOST_INFEASIBLE = "almost_infeasible"
+    FAILED = "failed"
+
+
+@dataclass(frozen=True)
+class Attempt:
+    label: str
+    raw_status: RawStatus
+    solver_status: str
+    iterations: int
+    seconds: float
+
+
+@dataclass(frozen=True)
+class ConicSolution:
+    raw_status: RawStatus
+    x: np.ndarray | None
+    z: np.ndarray | None
+    primal_objective: float | None
+    dual_objective: float | None
+    attempts: tuple = field(default_factory=tuple)
+
+    @property
+    def seconds(self) -> float:
+        return sum(a.seconds for a in self.attempts)
+
+
+_CLARABEL_MAP = {
+    "Solved": RawStatus.SOLVED,
+    "AlmostSolved": RawStatus.ALMOST_SOLVED,
+    "PrimalInfeasible": RawStatus.PRIMAL_INFEASIBLE,
+    "DualInfeasible": RawStatus.DUAL_INFEASIBLE,
+    "AlmostPrimalInfeasible": RawStatus.ALMOST_INFEASIBLE,
+    "AlmostDualInfeasible": RawStatus.ALMOST_INFEASIBLE,
+}
+
+#: Settings tried in order when an attempt fails numerically (label, overrides).
+CLARABEL_RETRY_CHAIN = (
+    ("default", {}),
+    ("qdldl", {"direct_solve_method": "qdldl"}),
+    ("no-equilibration", {"direct_solve_method": "qdldl", "equilibrate_enable": False}),
+    ("regularised", {"direct_solve_method": "qdldl", "equilibrate_enable": False,
+                     "static_regularization_constant": 1e-7, "max_iter": 1000}),
+)
+
+
+class ClarabelBackend:
+    name = "clarabel"
+
+    def __init__(self, tolerances: Tolerances = DEFAULT_TOLERANCES, retry_chain=CLARABEL_RETRY_CHAIN, **settings):
+        self.tolerances = tolerances
+        self.retry_chain = tuple(retry_chain)
+        self.settings = settings
+
+    def _settings(self, overrides):
+        import clarabel
+
+        s = clarabel.DefaultSettings()
+        s.verbose = False
+        s.tol_gap_abs = self.tolerances.solver_gap_abs
+        s.tol_gap_rel = self.tolerances.solver_gap_rel
+        s.tol_feas = self.tolerances.solver_feas
+        s.max_iter = self.tolerances.solver_max_iter
+        s.presolve_enable = False   # keep row structure: duals map 1:1 to our rows
+        for k, v in {**self.settings, **overrides}.items():
+            setattr(s, k, v)
+        return s
+
+    @staticmethod
+    def _cones(problem: ConicProblem):
+        import clarabel
+
+        out = []
+        for c in problem.cones:
+            if c.kind == "zero":
+                out.append(clarabel.ZeroConeT(c.dim))
+            elif c.kind == "psd":
+                out.append(clarabel.PSDTriangleConeT(c.size))
+            else:  # pragma: no cover
+                raise ValueError(f"unknown cone {c.kind}")
+        return out
+
+    def solve_once(self, problem: ConicProblem, label="default", overrides=None):
+        import clarabel
+
+        n = problem.n_cols
+        P = sp.csc_matrix((n, n))
+        t0 = time.perf_counter()
+        try:
+            solver = clarabel.DefaultSolver(P, np.asarray(problem.q, float), sp.csc_matrix(problem.A),
+                                            np.asarray(problem.b, float), self._cones(problem),
+                                            self._settings(overrides or {}))
+            sol = solver.solve()
+        except (KeyboardInterrupt, SystemExit):
+            raise
+        except BaseException as exc:  # pyo3 PanicException derives from BaseException
+            att = Attempt(label, RawStatus.FAILED, f"exception: {type(exc).__name__}: {exc}"[:200], 0,
+                          time.perf_counter() - t0)
+            return None, att
+        status_name = str(sol.status).split(".")[-1]
+        raw = _CLARABEL_MAP.get(status_name, RawStatus.FAILED)
+        att = Attempt(label, raw, status_name, int(sol.iterations), time.perf_counter() - t0)
+        return sol, att
+
+    def solve(self, problem: ConicProblem, accept=None, retry: bool = True) -> ConicSolution:
+        """Solve, walking the retry chain while the outcome is a numerical failure.
+
+        ``accept(x, z) -> bool`` is an optional a-posteriori check: a SOLVED attempt
+        that fails it is treated like a numerical failure and the chain continues.
+        ``retry=False`` makes a single attempt (bisection steps, where "unknown" is
+        simply treated as "not certified").
+        """
+        attempts = []
+        last = None
+        for label, overrides in (self.retry_chain if retry else self.retry_chain[:1]):
+            sol, att = self.solve_once(problem, label, overrides)
+            attempts.append(att)
+            if sol is None:
+                continue
+            x, z = np.asarray(sol.x, float), np.asarray(sol.z, float)
+            last = ConicSolution(att.raw_status, x, z, float(sol.obj_val), float(sol.obj_val_dual), tuple(attempts))
+            if att.raw_status in (RawStatus.PRIMAL_INFEASIBLE, RawStatus.DUAL_INFEASIBLE):
+                return last
+            if att.raw_status == RawStatus.SOLVED and (accept is None or accept(x, z)):
+                return last
+        if last is None:
+            return ConicSolution(RawStatus.FAILED, None, None, None, None, tuple(attempts))
+        return ConicSolution(last.raw_status, last.x, last.z, last.primal_objective, last.dual_objective,
+                             tuple(attempts))
+
+
+def _svec_operator(s: int) -> sp.csr_matrix:
+    """Sparse T with svec(S) = T @ vec(S) (vec column-major, as cvxpy's)."""
+    i, j = triu_pairs(s)
+    return sp.csr_matrix((svec_scale(s), (np.arange(i.size), j * s + i)), shape=(i.size, s * s))
+
+
+class CvxpyBackend:
+    """Re-expresses the conic data in cvxpy and solves it with ``solver`` (any SDP solver)."""
+
+    name = "cvxpy"
+
+    def __init__(self, solver: str | None = None, tolerances: Tolerances = DEFAULT_TOLERANCES, **solver_kwargs):
+        self.solver = solver
+        self.tolerances = tolerances
+        self.solver_kwargs = solver_kwargs
+
+    def _tolerance_kwargs(self, solver):
+        t = self.tolerances
+        if solver == "CLARABEL":
+            return {"tol_gap_abs": t.solver_gap_abs, "tol_gap_rel": t.solver_gap_rel, "tol_feas": t.solver_feas,
+                    "max_iter": t.solver_max_iter}
+        if solver == "SCS":
+            return {"eps_abs": 1e-9, "eps_rel": 1e-9, "max_iters": 200000}
+        return {}
+
+    def solve(self, problem: ConicProblem, accept=None, retry: bool = True) -> ConicSolution:
+        import cvxpy as cp
+
+        t0 = time.perf_counter()
+        x = cp.Variable(problem.n_cols)
+        cons = []
+        psd_cons = []
+        row = 0
+        for cone in problem.cones:
+            rows = slice(row, row + cone.dim)
+            Ar, br = problem.A[rows], problem.b[rows]
+            if cone.kind == "zero":
+                cons.append(Ar @ x == br)
+            else:
+                S = cp.Variable((cone.size, cone.size), symmetric=True)
+                cons.append(_svec_operator(cone.size) @ cp.vec(S, order="F") == br - Ar @ x)
+                c = S >> 0
+                cons.append(c)
+                psd_cons.append((row, cone.size, c))
+            row += cone.dim
+        prob = cp.Problem(cp.Minimize(problem.q @ x), cons)
+        solver = self.solver
+        if solver is None:
+            solver = "CLARABEL" if "CLARABEL" in cp.installed_solvers() else None
+        kwargs = dict(self._tolerance_kwargs(solver))
+        kwargs.update(self.solver_kwargs)
+        try:
+            prob.solve(solver=solver, **kwargs)
+            status = prob.status
+        except (KeyboardInterrupt, SystemExit):
+            raise
+        except BaseException as exc:
+            status = f"error: {type(exc).__name__}: {exc}"[:200]
+        secs = time.perf_counter() - t0
+        raw = {"optimal": RawStatus.SOLVED, "optimal_inaccurate": RawStatus.ALMOST_SOLVED,
+               "infeasible": RawStatus.PRIMAL_INFEASIBLE, "unbounded": RawStatus.DUAL_INFEASIBLE,
+               "infeasible_inaccurate": RawStatus.ALMOST_INFEASIBLE,
+               "unbounded_inaccurate": RawStatus.ALMOST_INFEASIBLE}.get(status, RawStatus.FAILED)
+        att = Attempt(f"cvxpy:{solver or 'default'}", raw, str(status), 0, secs)
+        if x.value is None:
+            return ConicSolution(raw, None, None, None, None, (att,))
+        xv = np.asarray(x.value, float)
+        z = np.zeros(problem.n_rows)
+        for row, s, c in psd_cons:
+            if c.dual_value is not None:
+                D = np.asarray(c.dual_value, float)
+                i, j = triu_pairs(s)
+                z[row:row + i.size] = D[i, j] * svec_scale(s)
+        obj = float(problem.q @ xv)
+        if raw == RawStatus.SOLVED and accept is not None and not accept(xv, z):
+            raw = RawStatus.ALMOST_SOLVED
+        return ConicSolution(raw, xv, z, obj, obj, (att,))
+
+
+def get_backend(backend, tolerances: Tolerances = DEFAULT_TOLERANCES):
+    """Resolve a back-end given by object, or by name ``"clarabel"`` / ``"cvxpy"`` / ``"cvxpy:SCS"``."""
+    if backend is None:
+        return ClarabelBackend(tolerances)
+    if isinstance(backend, str):
+        name, _, solver = backend.partition(":")
+        if name == "clarabel":
+            return ClarabelBackend(tolerances)
+        if name == "cvxpy":
+            return CvxpyBackend(solver or None, tolerances)
+        raise ValueError(f"unknown backend {backend!r}: use 'clarabel', 'cvxpy' or 'cvxpy:<SOLVER>'")
+    if not hasattr(backend, "solve"):
+        raise TypeError("backend must be a name or an object with a solve(problem, accept) method")
+    return backend

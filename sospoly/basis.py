@@ -1,0 +1,185 @@
+"""Monomial bases, their sizes and index look-ups (SPEC §4).
+
+Order (used everywhere in sospoly): **graded, then lexicographically decreasing
+exponent tuples**.  For variables ``(v1, ..., vn)`` the basis of degree <= 2 is::
+
+    1, v1, v2, ..., vn, v1^2, v1 v2, ..., v1 vn, v2^2, ..., vn^2
+
+so the constant monomial has index 0 and ``v_k`` has index ``k`` (1-based), which
+is what minimiser extraction relies on.
+
+``sigma(n, k) = C(n + k, k)`` is the number of monomials of degree <= k in n
+variables; ``tau(n, delta) = sigma(n, delta/2)(sigma(n, delta/2) + 1)/2 - sigma(n, delta)``
+is the dimension of the space L of symmetric matrices with ``b(v)^T L b(v) = 0``.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from functools import lru_cache
+from math import comb
+
+import numpy as np
+
+from .svec import triu_pairs
+
+__all__ = ["sigma", "tau", "monomials", "MonomialIndex", "GramBasis"]
+
+
+def sigma(n: int, k: int) -> int:
+    """Number of monomials of degree <= k in n variables, C(n+k, k) (0 for k < 0)."""
+    if k < 0:
+        return 0
+    return comb(n + k, k)
+
+
+def tau(n: int, delta: int) -> int:
+    """Number of free parameters alpha of L(alpha) for even degree ``delta`` (SPEC §4)."""
+    if delta % 2:
+        raise ValueError(f"the Gram degree delta must be even, got {delta}")
+    s = sigma(n, delta // 2)
+    return s * (s + 1) // 2 - sigma(n, delta)
+
+
+def _compositions_desc(n: int, d: int):
+    """Exponent tuples of total degree d in n variables, lexicographically decreasing."""
+    if n == 0:
+        if d == 0:
+            yield ()
+        return
+    if n == 1:
+        yield (d,)
+        return
+    for first in range(d, -1, -1):
+        for rest in _compositions_desc(n - 1, d - first):
+            yield (first,) + rest
+
+
+@lru_cache(maxsize=256)
+def _monomials_cached(n: int, k: int, mindeg: int) -> np.ndarray:
+    rows = [e for d in range(mindeg, k + 1) for e in _compositions_desc(n, d)]
+    arr = np.array(rows, dtype=np.int64).reshape(len(rows), n)
+    arr.setflags(write=False)
+    return arr
+
+
+def monomials(n: int, k: int, mindeg: int = 0) -> np.ndarray:
+    """All exponent vectors of degree in [mindeg, k] in n variables, in the documented order.
+
+    Returns a read-only integer array of shape ``(sigma(n, k) - sigma(n, mindeg - 1), n)``.
+    """
+    if n < 0 or k < -1:
+        raise ValueError(f"bad basis size n={n}, k={k}")
+    if k < mindeg:
+        return np.zeros((0, n), dtype=np.int64)
+    return _monomials_cached(int(n), int(k), int(mindeg))
+
+
+class MonomialIndex:
+    """Vectorised look-up of exponent rows in a fixed list of distinct monomials.
+
+    Rows are encoded to int64 keys by a mixed radix when that fits, else compared as
+    raw bytes; both give exact matches.
+    """
+
+    def __init__(self, exponents: np.ndarray):
+        E = np.ascontiguousarray(np.asarray(exponents, dtype=np.int64))
+        if E.ndim != 2:
+            raise ValueError("exponents must be a 2-D array")
+        self.exponents = E
+        self.n = E.shape[1]
+        maxdeg = int(E.max()) if E.size else 0
+        self._base = maxdeg + 1
+        self._use_int = self.n == 0 or self.n * np.log2(max(self._base, 2)) < 62
+        keys = self._keys(E)
+        order = np.argsort(keys, kind="stable")
+        self._sorted = keys[order]
+        self._order = order
+        if len(keys) > 1 and np.any(self._sorted[1:] == self._sorted[:-1]):
+            raise ValueError("duplicate monomials in the basis")
+
+    def _keys(self, E: np.ndarray):
+        if self._use_int:
+            radix = self._base ** np.arange(self.n, dtype=np.int64)
+            return E @ radix
+        return np.ascontiguousarray(E).view(np.dtype((np.void, 8 * self.n))).ravel()
+
+    def __len__(self) -> int:
+        return self.exponents.shape[0]
+
+    def find(self, E: np.ndarray, missing_ok: bool = False) -> np.ndarray:
+        """Indices of the rows of E in the basis (-1 where absent if ``missing_ok``)."""
+        E = np.ascontiguousarray(np.asarray(E, dtype=np.int64)).reshape(-1, self.n)
+        if len(self) == 0:
+            idx = np.full(E.shape[0], -1, dtype=np.int64)
+        else:
+            if self._use_int and E.size and int(E.max()) >= self._base:
+                big = (E >= self._base).any(axis=1)
+            else:
+                big = np.zeros(E.shape[0], dtype=bool)
+            Ec = np.where(big[:, None], 0, E)
+            keys = self._keys(Ec)
+            pos = np.searchsorted(self._sorted, keys)
+            pos = np.minimum(pos, len(self._sorted) - 1)
+            hit = (self._sorted[pos] == keys) & ~big
+            idx = np.where(hit, self._order[pos], -1)
+        if not missing_ok and np.any(idx < 0):
+            bad = E[np.argmax(idx < 0)]
+            raise KeyError(f"monomial with exponent {tuple(int(k) for k in bad)} is not in the basis")
+        return idx
+
+
+@dataclass(frozen=True)
+class GramBasis:
+    """The half-degree basis b(v) of a Gram matrix and its product table.
+
+    ``b`` holds the exponents of b(v) (all monomials of degree <= delta/2 unless
+    given explicitly).  ``products`` is the basis of all monomials of b(v) b(v)^T.
+    For every upper-triangular pair ``(i, j)``, ``i <= j`` (listed column-wise as in
+    the svec convention of :mod:`sospoly.svec`), ``pair_monomial[p]`` is the index in
+    ``products`` of ``b_i b_j``.
+    """
+
+    b: np.ndarray
+    products: np.ndarray
+    pair_i: np.ndarray
+    pair_j: np.ndarray
+    pair_monomial: np.ndarray
+    product_index: MonomialIndex = field(repr=False, compare=False)
+
+    @classmethod
+    def full(cls, nvars: int, half_degree: int) -> "GramBasis":
+        return cls.from_exponents(monomials(nvars, half_degree))
+
+    @classmethod
+    def from_exponents(cls, b: np.ndarray) -> "GramBasis":
+        b = np.asarray(b, dtype=np.int64)
+        s = b.shape[0]
+        ii, jj = triu_pairs(s)  # column-wise upper triangle, the svec order
+        prod_exps = b[ii] + b[jj]
+        uniq, inverse = np.unique(prod_exps, axis=0, return_inverse=True)
+        # reorder the products in the documented graded-lex-decreasing order
+        deg = uniq.sum(axis=1)
+        order = np.lexsort(tuple((-uniq[:, k]) for k in range(uniq.shape[1] - 1, -1, -1)) + (deg,))
+        rank = np.empty_like(order)
+        rank[order] = np.arange(len(order))
+        products = uniq[order]
+        pair_monomial = rank[np.asarray(inverse).ravel()]
+        return cls(b=b, products=products, pair_i=ii, pair_j=jj,
+                   pair_monomial=pair_monomial.astype(np.int64), product_index=MonomialIndex(products))
+
+    @property
+    def size(self) -> int:
+        return self.b.shape[0]
+
+    @property
+    def n_pairs(self) -> int:
+        return self.pair_i.shape[0]
+
+    def pairs_of(self, monomial_index: int) -> list[tuple[int, int]]:
+        sel = np.nonzero(self.pair_monomial == monomial_index)[0]
+        return [(int(self.pair_i[p]), int(self.pair_j[p])) for p in sel]
+
+    def evaluate(self, point: np.ndarray) -> np.ndarray:
+        """b(v) at a point."""
+        point = np.asarray(point, dtype=float)
+        return np.prod(point[None, :] ** self.b, axis=1)

@@ -1,0 +1,314 @@
+"""Lowering of an :class:`~sospoly.program.SOSProgram` to one conic standard form.
+
+Standard form (Clarabel's, with P = 0)::
+
+    minimise    q^T x
+    subject to  A x + s = b,   s in K = {0}^z  x  S_+^{s_1}  x ... x  S_+^{s_k}
+
+PSD blocks are in the svec convention of :mod:`sospoly.svec`.  Rows are ordered:
+all zero-cone rows first, then one PSD block per SOS-polynomial multiplier and
+one per SOS constraint.
+
+Two Gram forms (SPEC §4):
+
+``GramForm.IMAGE`` (default, the paper's)
+    u is SOS iff U(x) + L(alpha) >= 0: the Gram matrix is an *affine image* of the
+    decision variables.  U puts every coefficient u_m on one canonical pair (i, j)
+    with b_i b_j = m (the diagonal pair when m is a square); every other pair
+    (i', j') of m gets a new free alpha with +alpha on (i', j') and -alpha on the
+    canonical pair, which spans L = {L = L^T : b^T L b = 0} with exactly
+    tau = #pairs - #monomials elements.  No equality rows are needed, and the
+    number of columns is N_LMIVAR.
+``GramForm.KERNEL``
+    coefficient matching: a free Gram variable Q >= 0 and one linear equality per
+    monomial, sum_{b_i b_j = m} Q_ij = u_m(x).
+
+Both forms describe the same feasible set; tests check they give the same bounds.
+A program may carry *parameters* (``param_terms`` of SOS constraints): the
+lowered data is then ``A + sum_k theta_k A_k``, ``b + sum_k theta_k b_k`` so a
+re-solve with new parameter values needs no re-assembly (compile once).
+"""
+from __future__ import annotations
+
+import enum
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.sparse as sp
+
+from .linpoly import LinPoly
+from .program import BlockKind, Sense, SOSProgram
+from .svec import SQRT2, smat, svec_scale
+
+__all__ = ["GramForm", "Cone", "ConicProblem", "lower", "gram_structure"]
+
+
+class GramForm(str, enum.Enum):
+    IMAGE = "image"
+    KERNEL = "kernel"
+
+
+@dataclass(frozen=True)
+class Cone:
+    kind: str      # "zero" or "psd"
+    dim: int       # number of rows
+    size: int = 0  # matrix side for "psd"
+
+
+@dataclass(frozen=True)
+class PSDBlockMap:
+    """Where a Gram matrix lives in the lowered problem."""
+    name: str
+    row_start: int
+    size: int                  # matrix side
+    source: str                # "constraint" or "multiplier"
+    var_start: int | None = None   # kernel form: first column of its Q variables
+
+
+@dataclass(frozen=True)
+class ConicProblem:
+    q: np.ndarray
+    A: sp.csc_matrix
+    b: np.ndarray
+    cones: tuple
+    n_program_vars: int
+    psd_blocks: tuple
+    objective_sign: float = 1.0       # user objective = objective_sign * q^T x + objective_offset
+    objective_offset: float = 0.0
+    form: GramForm = GramForm.IMAGE
+    params: dict = field(default_factory=dict)   # name -> (A_k, b_k)
+
+    @property
+    def n_cols(self) -> int:
+        return self.A.shape[1]
+
+    @property
+    def n_rows(self) -> int:
+        return self.A.shape[0]
+
+    def instantiate(self, **theta: float) -> "ConicProblem":
+        """The problem with numeric parameter values (parameters not given are 0)."""
+        unknown = set(theta) - set(self.params)
+        if unknown:
+            raise ValueError(f"unknown parameters {sorted(unknown)}; this problem has {sorted(self.params)}")
+        A, b = self.A, self.b
+        for name, (Ak, bk) in self.params.items():
+            t = float(theta.get(name, 0.0))
+            if t != 0.0:
+                A = A + t * Ak
+                b = b + t * bk
+        return ConicProblem(self.q, sp.csc_matrix(A), b, self.cones, self.n_program_vars, self.psd_blocks,
+                            self.objective_sign, self.objective_offset, self.form, {})
+
+    def slack(self, x: np.ndarray) -> np.ndarray:
+        """s = b - A x (exact, recomputed from x)."""
+        return self.b - self.A @ x
+
+    def gram_matrices(self, x: np.ndarray) -> dict:
+        """Gram matrices of every PSD block recomputed from the primal x."""
+        out = {}
+        for blk in self.psd_blocks:
+            if self.form == GramForm.KERNEL and blk.var_start is not None:
+                n = blk.size * (blk.size + 1) // 2
+                out[blk.name] = smat(svec_scale(blk.size) * x[blk.var_start:blk.var_start + n])
+            else:
+                rows = slice(blk.row_start, blk.row_start + blk.size * (blk.size + 1) // 2)
+                out[blk.name] = smat(self.b[rows] - self.A[rows] @ x)
+        return out
+
+    def dual_matrices(self, z: np.ndarray) -> dict:
+        return {blk.name: smat(z[blk.row_start:blk.row_start + blk.size * (blk.size + 1) // 2])
+                for blk in self.psd_blocks}
+
+
+@dataclass(frozen=True)
+class GramStructure:
+    """Canonical pair per monomial and the alpha pairs of the image form."""
+    canonical: np.ndarray   # (n_products,) pair index of the canonical pair
+    alpha_pairs: np.ndarray  # (tau,) pair index carrying each alpha
+    alpha_canonical: np.ndarray  # (tau,) canonical pair of the same monomial
+    kappa: np.ndarray        # (n_pairs,) svec entry per unit monomial contribution
+
+
+def gram_structure(gb) -> GramStructure:
+    """The explicit L(alpha) basis of SPEC §4 for a Gram basis (see module docstring)."""
+    pm = gb.pair_monomial
+    is_diag = gb.pair_i == gb.pair_j
+    order = np.lexsort((np.arange(pm.size), ~is_diag, pm))
+    first = np.ones(order.size, dtype=bool)
+    first[1:] = pm[order][1:] != pm[order][:-1]
+    canonical = np.empty(gb.products.shape[0], dtype=np.int64)
+    canonical[pm[order][first]] = order[first]
+    alpha_pairs = np.sort(order[~first])
+    kappa = np.where(is_diag, 1.0, 1.0 / SQRT2)
+    return GramStructure(canonical, alpha_pairs, canonical[pm[alpha_pairs]], kappa)
+
+
+class _Builder:
+    def __init__(self):
+        self.r, self.c, self.v = [], [], []
+        self.b_parts = []
+        self.nrows = 0
+
+    def add(self, rows, cols, vals):
+        self.r.append(np.asarray(rows, np.int64))
+        self.c.append(np.asarray(cols, np.int64))
+        self.v.append(np.asarray(vals, float))
+
+    def matrix(self, nrows, ncols):
+        if not self.r:
+            return sp.csc_matrix((nrows, ncols))
+        return sp.csc_matrix((np.concatenate(self.v), (np.concatenate(self.r), np.concatenate(self.c))),
+                             shape=(nrows, ncols))
+
+
+def _coef_rows(expr: LinPoly, gb, missing_ok=True):
+    idx = gb.product_index.find(expr.E, missing_ok=missing_ok)
+    return idx
+
+
+def lower(program: SOSProgram, form: GramForm = GramForm.IMAGE) -> ConicProblem:
+    """Assemble the conic data of ``program`` (see module docstring)."""
+    form = GramForm(form)
+    n0 = program.n_vars
+    param_names = sorted({k for con in program.sos_constraints for k in con.param_terms})
+
+    # ---- columns: program vars, then per-constraint extra vars (alpha or Q)
+    col = n0
+    extra_start = []
+    for con in program.sos_constraints:
+        extra_start.append(col)
+        if form == GramForm.IMAGE:
+            col += con.gram.n_pairs - con.gram.products.shape[0]
+        else:
+            col += con.gram.n_pairs
+    ncols = col
+
+    main = _Builder()
+    pbuild = {k: _Builder() for k in param_names}
+    b_entries: list[tuple[np.ndarray, np.ndarray]] = []
+    pb_entries = {k: [] for k in param_names}
+
+    # ---------------- zero-cone rows
+    row = 0
+
+    def add_affine_rows(expr: LinPoly, rows_of_terms, sign, builder, bentries):
+        """rows: s = b - A x with  b = sign*const, A = -sign*lin  (s = sign * expr)."""
+        keep = rows_of_terms >= 0
+        if np.any(keep):
+            bentries.append((rows_of_terms[keep], sign * expr.const[keep]))
+        if expr.rows.size:
+            rr = rows_of_terms[expr.rows]
+            k2 = rr >= 0
+            builder.add(rr[k2], expr.cols[k2], -sign * expr.vals[k2])
+
+    # linear equalities: s = rhs - expr = 0
+    for eq in program.equalities:
+        n = eq.expr.E.shape[0]
+        rows_of_terms = np.full(n, row, dtype=np.int64)
+        add_affine_rows(eq.expr, rows_of_terms, -1.0, main, b_entries)
+        b_entries.append((np.array([row]), eq.rhs))
+        row += 1
+
+    # monomials of SOS expressions outside the Gram products: u_m = 0
+    structures = []
+    for con in program.sos_constraints:
+        gb = con.gram
+        terms = [(None, con.expr)] + list(con.param_terms.items())
+        missing_keys = {}
+        for _, expr in terms:
+            idx = gb.product_index.find(expr.E, missing_ok=True)
+            for e in map(tuple, expr.E[idx < 0]):
+                missing_keys.setdefault(e, None)
+        if missing_keys:
+            mk = np.array(list(missing_keys), dtype=np.int64).reshape(-1, len(program.gens))
+            from .basis import MonomialIndex
+            mindex = MonomialIndex(mk)
+            for name, expr in terms:
+                ridx = mindex.find(expr.E, missing_ok=True)
+                ridx = np.where(ridx >= 0, ridx + row, -1)
+                builder = main if name is None else pbuild[name]
+                bent = b_entries if name is None else pb_entries[name]
+                add_affine_rows(expr, ridx, -1.0, builder, bent)
+            row += mk.shape[0]
+        structures.append(gram_structure(gb) if form == GramForm.IMAGE else None)
+
+    # kernel form: coefficient matching rows  u_m - sum w Q = 0
+    if form == GramForm.KERNEL:
+        for k, con in enumerate(program.sos_constraints):
+            gb = con.gram
+            P = gb.products.shape[0]
+            w = np.where(gb.pair_i == gb.pair_j, 1.0, 2.0)
+            main.add(row + gb.pair_monomial, extra_start[k] + np.arange(gb.n_pairs), w)
+            for name, expr in [(None, con.expr)] + list(con.param_terms.items()):
+                idx = gb.product_index.find(expr.E, missing_ok=True)
+                ridx = np.where(idx >= 0, idx + row, -1)
+                builder = main if name is None else pbuild[name]
+                bent = b_entries if name is None else pb_entries[name]
+                add_affine_rows(expr, ridx, 1.0, builder, bent)
+            row += P
+    n_zero = row
+
+    # ---------------- PSD rows
+    psd_blocks = []
+    cones = [Cone("zero", n_zero)] if n_zero else []
+    for blk in program.blocks:
+        if blk.kind != BlockKind.SOS_POLY:
+            continue
+        s = blk.gram.size
+        n = blk.size
+        main.add(row + np.arange(n), blk.start + np.arange(n), -svec_scale(s))
+        psd_blocks.append(PSDBlockMap(blk.name, row, s, "multiplier"))
+        cones.append(Cone("psd", n, s))
+        row += n
+    for k, con in enumerate(program.sos_constraints):
+        gb = con.gram
+        s, npairs = gb.size, gb.n_pairs
+        if form == GramForm.IMAGE:
+            st = structures[k]
+            for name, expr in [(None, con.expr)] + list(con.param_terms.items()):
+                idx = gb.product_index.find(expr.E, missing_ok=True)
+                pair_row = np.where(idx >= 0, st.canonical[np.maximum(idx, 0)], -1)
+                scale = np.where(idx >= 0, st.kappa[np.maximum(pair_row, 0)], 0.0)
+                rows_of_terms = np.where(idx >= 0, row + pair_row, -1)
+                scaled = LinPoly(expr.gens, expr.E, expr.const * scale, expr.rows, expr.cols,
+                                 expr.vals * scale[expr.rows] if expr.rows.size else expr.vals, canonical=True)
+                builder = main if name is None else pbuild[name]
+                bent = b_entries if name is None else pb_entries[name]
+                add_affine_rows(scaled, rows_of_terms, 1.0, builder, bent)
+            tau = st.alpha_pairs.size
+            acols = extra_start[k] + np.arange(tau)
+            main.add(row + st.alpha_pairs, acols, -st.kappa[st.alpha_pairs])
+            main.add(row + st.alpha_canonical, acols, st.kappa[st.alpha_canonical])
+            psd_blocks.append(PSDBlockMap(con.name, row, s, "constraint"))
+        else:
+            main.add(row + np.arange(npairs), extra_start[k] + np.arange(npairs), -svec_scale(s))
+            psd_blocks.append(PSDBlockMap(con.name, row, s, "constraint", var_start=extra_start[k]))
+        cones.append(Cone("psd", npairs, s))
+        row += npairs
+    nrows = row
+
+    A = main.matrix(nrows, ncols)
+    b = np.zeros(nrows)
+    for r_, v_ in b_entries:
+        np.add.at(b, r_, v_)
+    params = {}
+    for name in param_names:
+        bk = np.zeros(nrows)
+        for r_, v_ in pb_entries[name]:
+            np.add.at(bk, r_, v_)
+        params[name] = (pbuild[name].matrix(nrows, ncols), bk)
+
+    q = np.zeros(ncols)
+    sign, offset = 1.0, 0.0
+    if program.objective is not None and program.sense != Sense.FEASIBILITY:
+        obj = program.objective
+        lin = np.zeros(n0)
+        np.add.at(lin, obj.cols, obj.vals)
+        offset = float(obj.const.sum())
+        if program.sense == Sense.MAXIMIZE:
+            q[:n0] = -lin
+            sign = -1.0
+        else:
+            q[:n0] = lin
+    return ConicProblem(q, A, b, tuple(cones), n0, tuple(psd_blocks), sign, offset, form, params)

@@ -1,0 +1,155 @@
+"""Extraction of minimisers from an optimal Gram matrix or moment matrix (SPEC §6).
+
+At an optimal certificate u*(v) = b(v)^T U* b(v) with U* >= 0, every minimiser v*
+satisfies b(v*) in ker(U*) (the paper's (51)); dually, the moment matrix M has
+b(v*) b(v*)^T in its range.  Both give a matrix W whose column span contains
+b(v*) for every minimiser; then
+
+* if dim span W = 1, v* is read from W's degree-1 entries after scaling the
+  constant monomial's entry to 1;
+* otherwise the Henrion-Lasserre procedure (2005) is applied: column echelon
+  form of W, multiplication matrices N_k for each variable on the echelon
+  monomials, a random combination's ordered Schur decomposition, and the points
+  read from the common eigenvectors.  It needs the echelon monomials x_k * beta
+  to stay in the basis (flat extension); when they do not (e.g. half-degree 1)
+  the kernel vectors themselves are returned as candidates, scaled as above.
+
+Candidates are only *candidates*: callers evaluate feasibility and the objective.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.linalg as sla
+
+from .basis import MonomialIndex
+from .tolerances import DEFAULT_TOLERANCES, Tolerances
+
+__all__ = ["Candidate", "kernel_basis", "range_basis", "candidates_from_span", "extract_from_gram",
+           "extract_from_moment", "henrion_lasserre"]
+
+
+@dataclass(frozen=True)
+class Candidate:
+    point: np.ndarray
+    source: str             # "gram-kernel", "gram-hl", "moment", "moment-hl"
+    span_residual: float    # ||b(v) - proj_W b(v)|| / ||b(v)||
+
+
+def _degree1_rows(basis: np.ndarray) -> np.ndarray | None:
+    n = basis.shape[1]
+    idx = MonomialIndex(basis).find(np.eye(n, dtype=np.int64), missing_ok=True)
+    const = MonomialIndex(basis).find(np.zeros((1, n), dtype=np.int64), missing_ok=True)
+    if np.any(idx < 0) or const[0] != 0:
+        return None
+    return idx
+
+
+def kernel_basis(G: np.ndarray, tol: Tolerances = DEFAULT_TOLERANCES) -> np.ndarray:
+    """Orthonormal eigenvectors of the (numerically) zero eigenvalues of G; at least one."""
+    lam, V = np.linalg.eigh(G)
+    top = max(abs(lam[-1]), 1e-300)
+    r = max(1, int(np.sum(lam <= tol.kernel_rel * top)))
+    return V[:, :r]
+
+
+def range_basis(M: np.ndarray, tol: Tolerances = DEFAULT_TOLERANCES) -> np.ndarray:
+    """sqrt(lambda)-scaled eigenvectors of the numerically non-zero eigenvalues of M."""
+    lam, V = np.linalg.eigh(M)
+    top = max(lam[-1], 1e-300)
+    keep = lam >= tol.moment_rank_rel * top
+    if not keep.any():
+        keep[-1] = True
+    return V[:, keep][:, ::-1] * np.sqrt(np.maximum(lam[keep][::-1], 0.0))
+
+
+def _span_residual(W: np.ndarray, basis: np.ndarray, point: np.ndarray) -> float:
+    bv = np.prod(point[None, :] ** basis, axis=1)
+    Q, _ = np.linalg.qr(W)
+    r = bv - Q @ (Q.T @ bv)
+    return float(np.linalg.norm(r) / max(np.linalg.norm(bv), 1e-300))
+
+
+def _column_echelon(W: np.ndarray, pivot_tol: float) -> tuple[np.ndarray, list[int]]:
+    """U with U[pivots] = I and span U = span W (Gauss-Jordan on W^T)."""
+    A = W.T.copy()
+    r, s = A.shape
+    pivots = []
+    row = 0
+    for col in range(s):
+        if row >= r:
+            break
+        k = row + int(np.argmax(np.abs(A[row:, col])))
+        if abs(A[k, col]) <= pivot_tol:
+            A[row:, col] = 0.0
+            continue
+        A[[row, k]] = A[[k, row]]
+        A[row] /= A[row, col]
+        others = np.arange(r) != row
+        A[others] -= np.outer(A[others, col], A[row])
+        pivots.append(col)
+        row += 1
+    return A[: len(pivots)].T, pivots
+
+
+def henrion_lasserre(W: np.ndarray, basis: np.ndarray, seed: int = 0) -> list[np.ndarray] | None:
+    """Points whose b(v) span span(W), or None when the basis is too small (no flat extension)."""
+    n = basis.shape[1]
+    scale = max(np.max(np.abs(W)), 1e-300)
+    U, piv = _column_echelon(W / scale, pivot_tol=1e-8)
+    r = len(piv)
+    if r == 0:
+        return None
+    index = MonomialIndex(basis)
+    B = basis[piv]
+    Ns = []
+    for k in range(n):
+        shifted = B.copy()
+        shifted[:, k] += 1
+        rows = index.find(shifted, missing_ok=True)
+        if np.any(rows < 0):
+            return None
+        Ns.append(U[rows, :])
+    rng = np.random.default_rng(seed)
+    lam = rng.random(n)
+    lam /= lam.sum()
+    N = sum(l * Nk for l, Nk in zip(lam, Ns))
+    T, Q = sla.schur(N, output="real")
+    return [np.array([Q[:, j] @ Nk @ Q[:, j] for Nk in Ns]) for j in range(r)]
+
+
+def candidates_from_span(W: np.ndarray, basis: np.ndarray, source: str) -> list[Candidate]:
+    deg1 = _degree1_rows(basis)
+    if deg1 is None:
+        raise ValueError("the Gram basis must contain 1 and every variable to read minimisers")
+    out: list[Candidate] = []
+    if W.shape[1] > 1:
+        pts = henrion_lasserre(W, basis)
+        if pts is not None:
+            out += [Candidate(p, source + "-hl", _span_residual(W, basis, p)) for p in pts if np.all(np.isfinite(p))]
+    for k in range(W.shape[1]):
+        w = W[:, k]
+        if abs(w[0]) > 1e-10 * max(np.max(np.abs(w)), 1e-300):
+            p = w[deg1] / w[0]
+            out.append(Candidate(p, source, _span_residual(W, basis, p)))
+    if W.shape[1] > 1:
+        # the vector of the span with unit constant entry closest to the first moments
+        c0 = W[0, :]
+        if np.linalg.norm(c0) > 1e-12:
+            a = c0 / (c0 @ c0)
+            p = (W @ a)[deg1]
+            out.append(Candidate(p, source + "-mean", _span_residual(W, basis, p)))
+    return out
+
+
+def extract_from_gram(G: np.ndarray, basis: np.ndarray, tol: Tolerances = DEFAULT_TOLERANCES) -> list[Candidate]:
+    """Candidates v* with b(v*) in the numerical kernel of the optimal Gram matrix."""
+    return candidates_from_span(kernel_basis(G, tol), basis, "gram")
+
+
+def extract_from_moment(M: np.ndarray, basis: np.ndarray, tol: Tolerances = DEFAULT_TOLERANCES) -> list[Candidate]:
+    """Candidates from the moment (dual) matrix with a rank test."""
+    if not np.all(np.isfinite(M)) or M[0, 0] <= 0:
+        return []
+    return candidates_from_span(range_basis(M / M[0, 0], tol), basis, "moment")

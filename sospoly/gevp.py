@@ -1,0 +1,150 @@
+"""Free-multiplier Positivstellensatz as a GEVP solved by bisection on c (SPEC §5).
+
+With q a free SOS (trace(Gram(q)) = 1), c multiplies decision variables, so
+``max c`` is a generalised eigenvalue problem.  For fixed c the constraints are
+an LMI feasibility problem; the program is lowered **once** with c as a
+parameter (``A(c) = A0 + c A1``, ``b(c) = b0 + c b1``) and only c changes
+between steps.
+
+Bracket: ``c_lo`` must be *verified* feasible (by default the fixed-q SDP's c*,
+which is feasible here too after scaling q to unit trace, or a descending search);
+``c_hi`` is any upper bound of the true minimum (f at a feasible point) or is
+found by doubling.  A level c is accepted as feasible only when the solver says
+solved **and** the certificate passes :func:`sospoly.solve.check_certificate`
+(Gram eigenvalues and equality residuals with the margins of
+:class:`~sospoly.tolerances.Tolerances`): near-degenerate q lets solvers report
+"solved" for infeasible c.  The bisection stops when
+``c_hi - c_lo <= bisection_abs + bisection_rel * max(1, |c_lo|)``; the lower bound
+reported is ``c_lo``, the last level with a checked certificate.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .conic import ConicProblem, GramForm, lower
+from .psatz import Multiplier, PsatzProblem
+from .solve import ProgramSolution, solve_conic
+from .status import SolveStatus
+from .tolerances import DEFAULT_TOLERANCES, Tolerances
+
+__all__ = ["GevpStep", "GevpResult", "CompiledGevp", "bisect"]
+
+
+@dataclass(frozen=True)
+class GevpStep:
+    c: float
+    status: SolveStatus
+
+
+@dataclass(frozen=True)
+class GevpResult:
+    status: SolveStatus
+    lower_bound: float | None
+    bracket: tuple
+    steps: tuple
+    solution: ProgramSolution | None = None   # the certificate at lower_bound
+    message: str = ""
+
+
+class CompiledGevp:
+    """A free-q Psatz program lowered once; ``feasible(c)`` solves one LMI."""
+
+    def __init__(self, psatz: PsatzProblem, backend=None, form: GramForm = GramForm.IMAGE,
+                 tolerances: Tolerances = DEFAULT_TOLERANCES):
+        if psatz.multiplier != Multiplier.FREE:
+            raise ValueError("CompiledGevp needs a Psatz problem built with multiplier='free'")
+        self.psatz = psatz
+        self.backend = backend
+        self.tolerances = tolerances
+        self.problem: ConicProblem = lower(psatz.program, form)
+
+    def _conditioning(self, c: float):
+        """Reject certificates whose q is nearly singular relative to u's PSD error.
+
+        u + eps ||b||^2 is SOS with eps = max(0, -lambda_min(G_u)); with q >= lambda_q
+        ||b_q||^2 the bound degrades by about eps / lambda_q.  We require that proxy
+        to stay below the bisection tolerance, which rejects the "solved" answers of
+        infeasible levels where q collapses onto the minimisers (seen on the
+        six-hump camel at degree 8: lambda_q ~ 6e-6, false bound 1.3e-4 too high).
+        """
+        tol = self.tolerances
+        limit = tol.bisection_abs + tol.bisection_rel * max(1.0, abs(c))
+
+        def check(mins):
+            eps = max(0.0, -mins.get("u", 0.0))
+            lam_q = mins.get("q", 0.0)
+            if lam_q <= 0.0 or eps / lam_q > limit:
+                return False, f"ill-conditioned q: lambda_min(q)={lam_q:.3g}, PSD error of u {eps:.3g}"
+            return True, ""
+        return check
+
+    def feasible(self, c: float) -> tuple[SolveStatus, ProgramSolution]:
+        inst = self.problem.instantiate(c=float(c))
+        status, sol, mins, resid, msg = solve_conic(inst, self.backend, self.tolerances, feasibility=True,
+                                                    extra_check=self._conditioning(c), retry=False)
+        prog = self.psatz.program
+        if status.ok:
+            ps = ProgramSolution(status, float(c), sol.x[: prog.n_vars].copy(), inst.gram_matrices(sol.x),
+                                 inst.dual_matrices(sol.z), mins, resid, sol.attempts, prog.n_lmivar(),
+                                 sol.seconds, msg)
+        else:
+            ps = ProgramSolution(status, None, None, attempts=sol.attempts, n_lmivar=prog.n_lmivar(),
+                                 seconds=sol.seconds, message=msg)
+        return status, ps
+
+
+def bisect(compiled: CompiledGevp, c_lo: float | None = None, c_hi: float | None = None,
+           max_search: int = 40) -> GevpResult:
+    """Maximise c by bisection (see module docstring)."""
+    tol = compiled.tolerances
+    steps: list[GevpStep] = []
+    best: ProgramSolution | None = None
+
+    def test(c):
+        st, ps = compiled.feasible(c)
+        steps.append(GevpStep(float(c), st))
+        return st.ok, ps
+
+    # ---- a verified feasible lower end
+    lo = None
+    start = 0.0 if c_lo is None else float(c_lo)
+    width = max(1.0, abs(start))
+    for k in range(max_search):
+        c = start - (0.0 if k == 0 else width * 2.0 ** (k - 1))
+        ok, ps = test(c)
+        if ok:
+            lo, best = c, ps
+            break
+    if lo is None:
+        return GevpResult(SolveStatus.INFEASIBLE, None, (None, c_hi), tuple(steps), None,
+                          "no feasible level c found: no certificate at this degree")
+    # ---- an upper end
+    if c_hi is None or c_hi <= lo:
+        hi = None
+        step = max(1.0, abs(lo))
+        for k in range(max_search):
+            c = lo + step * 2.0 ** k
+            ok, ps = test(c)
+            if ok:
+                lo, best = c, ps
+            else:
+                hi = c
+                break
+        if hi is None:
+            return GevpResult(SolveStatus.UNBOUNDED, np.inf, (lo, np.inf), tuple(steps), best,
+                              "every tested level is certified: the constraint set may be empty")
+    else:
+        hi = float(c_hi)
+    # ---- bisection
+    n = 0
+    while hi - lo > tol.bisection_abs + tol.bisection_rel * max(1.0, abs(lo)) and n < tol.bisection_max_steps:
+        mid = 0.5 * (lo + hi)
+        ok, ps = test(mid)
+        if ok:
+            lo, best = mid, ps
+        else:
+            hi = mid
+        n += 1
+    return GevpResult(SolveStatus.OPTIMAL, lo, (lo, hi), tuple(steps), best, "")

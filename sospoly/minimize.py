@@ -1,0 +1,219 @@
+"""User entry points: :func:`minimize` (certified polynomial optimisation) and :func:`is_sos`.
+
+``minimize(f, eq, ineq, degree, multiplier)`` returns a :class:`MinimizeResult`:
+
+* ``lower_bound`` -- c* of the Positivstellensatz program (a valid lower bound of
+  min f on {g = 0, h >= 0}), only when the solve is OPTIMAL and checked;
+* ``minimizers`` -- extracted candidate points (kernel of the optimal Gram
+  matrix, and moment matrix with a rank test), optionally polished locally, kept
+  when feasible to ``Tolerances.feasibility``, sorted by f;
+* ``upper_bound`` -- f at the best feasible candidate;
+* ``optimal`` -- ``upper_bound - lower_bound <= gap_abs + gap_rel*max(1,|upper|)``
+  (:class:`~sospoly.tolerances.Tolerances`): a certificate of global optimality
+  of ``minimizers[0]`` within that tolerance.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .conic import GramForm, lower
+from .extraction import Candidate, extract_from_gram, extract_from_moment
+from .gevp import CompiledGevp, GevpResult, bisect
+from .polynomial import Polynomial
+from .program import SOSProgram
+from .psatz import Multiplier, PsatzProblem, build_psatz, common_gens
+from .solve import ProgramSolution, solve_program
+from .status import SolveStatus
+from .svec import smat
+from .tolerances import DEFAULT_TOLERANCES, Tolerances
+
+__all__ = ["MinimizeResult", "SOSResult", "minimize", "is_sos", "feasibility_violation", "candidates_of"]
+
+
+@dataclass(frozen=True)
+class MinimizeResult:
+    status: SolveStatus
+    lower_bound: float | None
+    upper_bound: float | None
+    minimizers: tuple
+    optimal: bool
+    n_lmivar: int
+    degree: int
+    multiplier: str
+    gens: tuple
+    bracket: tuple | None = None
+    solution: ProgramSolution | None = None
+    seconds: float = 0.0
+    message: str = ""
+
+    @property
+    def gap(self) -> float | None:
+        if self.lower_bound is None or self.upper_bound is None:
+            return None
+        return self.upper_bound - self.lower_bound
+
+    def __str__(self) -> str:
+        return (f"MinimizeResult(status={self.status.value}, lower={self.lower_bound}, upper={self.upper_bound}, "
+                f"optimal={self.optimal}, degree={self.degree}, n_lmivar={self.n_lmivar})")
+
+
+def feasibility_violation(point: np.ndarray, eq, ineq) -> float:
+    """max over constraints of |g_k| and max(0, -h_k), each relative to max(1, ||coef||_inf)."""
+    worst = 0.0
+    for g in eq:
+        worst = max(worst, abs(g.evaluate(point)) / max(1.0, g.max_abs_coefficient()))
+    for h in ineq:
+        worst = max(worst, max(0.0, -h.evaluate(point)) / max(1.0, h.max_abs_coefficient()))
+    return worst
+
+
+def _polish(f: Polynomial, eq, ineq, x0: np.ndarray) -> np.ndarray | None:
+    """Local SLSQP polish of a candidate (any feasible point gives a valid upper bound)."""
+    from scipy.optimize import minimize as sp_min
+
+    grads_f = f.gradient()
+    cons = [{"type": "eq", "fun": g.evaluate, "jac": (lambda gg: (lambda v: np.array([d.evaluate(v) for d in gg])))(g.gradient())}
+            for g in eq]
+    cons += [{"type": "ineq", "fun": h.evaluate, "jac": (lambda hh: (lambda v: np.array([d.evaluate(v) for d in hh])))(h.gradient())}
+             for h in ineq]
+    try:
+        res = sp_min(f.evaluate, x0, jac=lambda v: np.array([d.evaluate(v) for d in grads_f]),
+                     constraints=cons, method="SLSQP", options={"ftol": 1e-14, "maxiter": 200})
+    except Exception:  # a failed polish just keeps the unpolished candidate
+        return None
+    return np.asarray(res.x, float) if np.all(np.isfinite(res.x)) else None
+
+
+def candidates_of(psatz: PsatzProblem, sol: ProgramSolution, tol: Tolerances) -> list[Candidate]:
+    """Minimiser candidates from the u-certificate's Gram kernel and moment matrix."""
+    basis = psatz.u.gram.b
+    cands = []
+    if "u" in sol.grams:
+        cands += extract_from_gram(sol.grams["u"], basis, tol)
+    if "u" in sol.moments:
+        cands += extract_from_moment(sol.moments["u"], basis, tol)
+    return cands
+
+
+def _upper_from_candidates(psatz: PsatzProblem, cands, tol: Tolerances, refine: bool):
+    pts = []
+    for cand in cands:
+        p = np.asarray(cand.point, float)
+        if not np.all(np.isfinite(p)):
+            continue
+        pts.append(p)
+        if refine:
+            q = _polish(psatz.f, psatz.eq, psatz.ineq, p)
+            if q is not None:
+                pts.append(q)
+    feas = []
+    for p in pts:
+        if feasibility_violation(p, psatz.eq, psatz.ineq) <= tol.feasibility:
+            feas.append((float(psatz.f.evaluate(p)), p))
+    feas.sort(key=lambda t: t[0])
+    uniq = []
+    for val, p in feas:
+        if all(np.linalg.norm(p - q) > 1e-6 * max(1.0, np.linalg.norm(q)) for _, q in uniq):
+            uniq.append((val, p))
+    return uniq
+
+
+def minimize(f, eq=(), ineq=(), degree: int | None = None, multiplier=Multiplier.FIXED, *,
+             backend=None, form: GramForm = GramForm.IMAGE, tolerances: Tolerances = DEFAULT_TOLERANCES,
+             refine: bool = True, gens=None) -> MinimizeResult:
+    """Certified lower bound and minimisers of ``f`` on ``{eq = 0, ineq >= 0}`` (see module docstring).
+
+    ``multiplier``: ``"fixed"`` (q = (1+||v||^2)^k, one SDP), ``"free"`` (q free SOS,
+    GEVP by bisection), or a Polynomial / positive number used as q.
+    """
+    t0 = time.perf_counter()
+    if isinstance(multiplier, Polynomial) and multiplier.degree > 0:
+        chk = is_sos(multiplier, backend=backend, tolerances=tolerances)
+        if not chk.is_sos:
+            raise ValueError("the given multiplier q is not SOS: the certificate would not be a valid bound")
+    psatz = build_psatz(f, eq, ineq, degree, multiplier, gens=gens)
+    n_lmivar = psatz.n_lmivar
+    mult_name = "given" if isinstance(multiplier, (Polynomial, int, float)) else psatz.multiplier.value
+
+    if psatz.multiplier == Multiplier.FREE:
+        # bracket from the fixed-q SDP (its certificate is feasible for the GEVP after scaling q)
+        fixed = build_psatz(psatz.f, psatz.eq, psatz.ineq, psatz.degree, Multiplier.FIXED, gens=psatz.gens)
+        fsol = solve_program(fixed.program, backend, form, tolerances)
+        c_lo = fsol.objective if fsol.status == SolveStatus.OPTIMAL else None
+        c_hi = None
+        if fsol.status == SolveStatus.OPTIMAL:
+            ub = _upper_from_candidates(fixed, candidates_of(fixed, fsol, tolerances), tolerances, refine)
+            c_hi = ub[0][0] if ub else None
+        compiled = CompiledGevp(psatz, backend, form, tolerances)
+        g: GevpResult = bisect(compiled, c_lo, c_hi)
+        if g.status != SolveStatus.OPTIMAL:
+            return MinimizeResult(g.status, g.lower_bound, None, (), False, n_lmivar, psatz.degree, "free",
+                                  psatz.gens, g.bracket, g.solution, time.perf_counter() - t0, g.message)
+        cands = candidates_of(psatz, g.solution, tolerances)
+        found = _upper_from_candidates(psatz, cands, tolerances, refine)
+        if c_hi is not None and fsol.status == SolveStatus.OPTIMAL:
+            found += _upper_from_candidates(fixed, candidates_of(fixed, fsol, tolerances), tolerances, refine)
+            found.sort(key=lambda t: t[0])
+        lower_b = g.lower_bound
+        upper = found[0][0] if found else None
+        return MinimizeResult(SolveStatus.OPTIMAL, lower_b, upper, tuple(p for _, p in found),
+                              tolerances.certified(lower_b, upper), n_lmivar, psatz.degree, "free", psatz.gens,
+                              g.bracket, g.solution, time.perf_counter() - t0, "")
+
+    sol = solve_program(psatz.program, backend, form, tolerances)
+    if sol.status != SolveStatus.OPTIMAL:
+        lb = np.inf if sol.status == SolveStatus.UNBOUNDED else None
+        msg = {SolveStatus.INFEASIBLE: f"no Positivstellensatz certificate at degree {psatz.degree}; try a larger degree",
+               SolveStatus.UNBOUNDED: "c is unbounded: the constraint set is empty"}.get(sol.status, sol.message)
+        return MinimizeResult(sol.status, lb, None, (), False, n_lmivar, psatz.degree, mult_name, psatz.gens,
+                              None, sol, time.perf_counter() - t0, msg)
+    found = _upper_from_candidates(psatz, candidates_of(psatz, sol, tolerances), tolerances, refine)
+    upper = found[0][0] if found else None
+    return MinimizeResult(SolveStatus.OPTIMAL, sol.objective, upper, tuple(p for _, p in found),
+                          tolerances.certified(sol.objective, upper), n_lmivar, psatz.degree, mult_name, psatz.gens,
+                          None, sol, time.perf_counter() - t0, "")
+
+
+@dataclass(frozen=True)
+class SOSResult:
+    """``is_sos`` answer; when True, ``p = sum_k decomposition[k]**2`` up to the solver's accuracy."""
+    is_sos: bool
+    status: SolveStatus
+    gram: np.ndarray | None
+    basis: np.ndarray | None
+    decomposition: tuple = ()
+    min_eigenvalue: float | None = None
+    message: str = ""
+
+
+def is_sos(p, *, backend=None, form: GramForm = GramForm.IMAGE,
+           tolerances: Tolerances = DEFAULT_TOLERANCES) -> SOSResult:
+    """Decide whether ``p`` is a sum of squares (Gram matrix method, SPEC §4)."""
+    if not isinstance(p, Polynomial):
+        raise TypeError(f"is_sos needs a sospoly Polynomial, got {type(p).__name__}")
+    if p.is_zero:
+        return SOSResult(True, SolveStatus.FEASIBLE, np.zeros((1, 1)), np.zeros((1, max(p.nvars, 1)), int), (), 0.0)
+    if p.degree % 2:
+        return SOSResult(False, SolveStatus.INFEASIBLE, None, None, message=f"odd degree {p.degree}")
+    if p.nvars == 0 or p.degree == 0:
+        c = p.coefficient((0,) * p.nvars)
+        return SOSResult(c >= 0, SolveStatus.FEASIBLE if c >= 0 else SolveStatus.INFEASIBLE,
+                         np.array([[c]]), np.zeros((1, p.nvars), int),
+                         (Polynomial.constant(np.sqrt(max(c, 0.0)), p.gens),) if c >= 0 else ())
+    prog = SOSProgram(p.gens)
+    con = prog.add_sos(p, degree=p.degree, name="p")
+    sol = solve_program(prog, backend, form, tolerances)
+    if not sol.status.ok:
+        return SOSResult(False, sol.status, None, con.gram.b, message=sol.message)
+    G = sol.grams["p"]
+    lam, V = np.linalg.eigh(G)
+    decomposition = []
+    for k in range(lam.size):
+        if lam[k] > tolerances.psd_margin * max(1.0, lam[-1]):
+            coef = np.sqrt(lam[k]) * V[:, k]
+            decomposition.append(Polynomial(p.gens, {tuple(int(t) for t in e): float(c)
+                                                     for e, c in zip(con.gram.b, coef) if c != 0.0}))
+    return SOSResult(True, sol.status, G, con.gram.b, tuple(decomposition), float(lam[0]))

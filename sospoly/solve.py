@@ -1,0 +1,145 @@
+"""Solve an SOS program and check its certificate a posteriori.
+
+A bound or certificate is only reported when the solver said *solved* **and**
+the returned numbers check out independently of the solver's word
+(:class:`~sospoly.tolerances.Tolerances` documents the margins):
+
+* every Gram matrix, recomputed from the primal x (so that the polynomial
+  identity u(v) = b(v)^T G b(v) holds exactly in the image form), has
+  ``lambda_min >= -psd_margin * max(1, max|G|)``;
+* the linear equalities (zero-cone rows) hold to ``identity_residual``;
+* the coefficient identity between each SOS expression and its Gram matrix holds
+  to ``identity_residual`` (non-trivial for the kernel form and cvxpy).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .backends import ConicSolution, RawStatus, get_backend
+from .conic import ConicProblem, GramForm, lower
+from .polynomial import Polynomial
+from .program import Sense, SOSProgram
+from .status import SolveStatus
+from .tolerances import DEFAULT_TOLERANCES, Tolerances
+
+__all__ = ["ProgramSolution", "solve_program", "solve_conic", "check_certificate"]
+
+
+@dataclass(frozen=True)
+class ProgramSolution:
+    """Result of solving an :class:`SOSProgram`.
+
+    ``grams`` maps every SOS constraint and SOS multiplier block name to its Gram
+    matrix; ``moments`` maps the same names to the dual (moment) matrices.
+    """
+
+    status: SolveStatus
+    objective: float | None
+    x: np.ndarray | None
+    grams: dict = field(default_factory=dict)
+    moments: dict = field(default_factory=dict)
+    min_eigenvalues: dict = field(default_factory=dict)
+    residual: float | None = None
+    attempts: tuple = ()
+    n_lmivar: int = 0
+    seconds: float = 0.0
+    message: str = ""
+
+    def value(self, expr) -> Polynomial | float:
+        """Numeric value of a decision expression (LinPoly) at the solution."""
+        if self.x is None:
+            raise ValueError(f"no solution values (status {self.status.value})")
+        return expr.value(self.x)
+
+    def block_values(self, program: SOSProgram, name: str) -> np.ndarray:
+        blk = program.block(name)
+        return self.x[blk.slice]
+
+
+def check_certificate(problem: ConicProblem, x: np.ndarray, tol: Tolerances) -> tuple[bool, dict, float, str]:
+    """A-posteriori check of a primal point; returns (ok, min eigenvalues, residual, message)."""
+    if x is None or not np.all(np.isfinite(x)):
+        return False, {}, np.inf, "non-finite solution"
+    grams = problem.gram_matrices(x)
+    mins = {}
+    ok = True
+    msg = []
+    for name, G in grams.items():
+        scale = max(1.0, float(np.max(np.abs(G))) if G.size else 1.0)
+        lam = float(np.linalg.eigvalsh(G)[0]) if G.size else 0.0
+        mins[name] = lam
+        if lam < -tol.psd_margin * scale:
+            ok = False
+            msg.append(f"Gram {name}: lambda_min {lam:.3g} < -{tol.psd_margin:g}*{scale:.3g}")
+    # zero-cone rows
+    resid = 0.0
+    row = 0
+    for cone in problem.cones:
+        if cone.kind == "zero":
+            r = problem.b[row:row + cone.dim] - problem.A[row:row + cone.dim] @ x
+            bscale = max(1.0, float(np.max(np.abs(problem.b[row:row + cone.dim]))) if cone.dim else 1.0)
+            resid = max(resid, float(np.max(np.abs(r))) / bscale if cone.dim else 0.0)
+        row += cone.dim
+    if resid > tol.identity_residual:
+        ok = False
+        msg.append(f"equality residual {resid:.3g} > {tol.identity_residual:g}")
+    return ok, mins, resid, "; ".join(msg)
+
+
+def solve_conic(problem: ConicProblem, backend=None, tolerances: Tolerances = DEFAULT_TOLERANCES,
+                feasibility: bool = False, extra_check=None,
+                retry: bool = True) -> tuple[SolveStatus, ConicSolution, dict, float, str]:
+    """Solve and classify; returns (status, raw solution, min eigenvalues, residual, message).
+
+    ``extra_check(min_eigenvalues) -> (ok, message)`` adds a caller-specific
+    acceptance rule on top of :func:`check_certificate`.
+    """
+    be = get_backend(backend, tolerances)
+    cache = {}
+
+    def accept(x, z):
+        res = check_certificate(problem, x, tolerances)
+        if res[0] and extra_check is not None:
+            ok, msg = extra_check(res[1])
+            if not ok:
+                res = (False, res[1], res[2], msg)
+        cache["last"] = res
+        return res[0]
+
+    sol = be.solve(problem, accept=accept, retry=retry)
+    if sol.raw_status == RawStatus.SOLVED:
+        ok, mins, resid, msg = cache["last"] if "last" in cache else check_certificate(problem, sol.x, tolerances)
+        if ok:
+            return (SolveStatus.FEASIBLE if feasibility else SolveStatus.OPTIMAL), sol, mins, resid, ""
+        return SolveStatus.CHECK_FAILED, sol, mins, resid, msg
+    status = {
+        RawStatus.PRIMAL_INFEASIBLE: SolveStatus.INFEASIBLE,
+        RawStatus.DUAL_INFEASIBLE: SolveStatus.UNBOUNDED,
+        RawStatus.ALMOST_SOLVED: SolveStatus.INACCURATE,
+        RawStatus.ALMOST_INFEASIBLE: SolveStatus.INACCURATE,
+    }.get(sol.raw_status, SolveStatus.NUMERICAL_ERROR)
+    if feasibility and status == SolveStatus.UNBOUNDED:  # a feasibility problem has no objective to be unbounded
+        status = SolveStatus.NUMERICAL_ERROR
+    detail = "; ".join(f"{a.label}: {a.solver_status}" for a in sol.attempts)
+    return status, sol, {}, np.nan, detail
+
+
+def solve_program(program: SOSProgram, backend=None, form: GramForm = GramForm.IMAGE,
+                  tolerances: Tolerances = DEFAULT_TOLERANCES, problem: ConicProblem | None = None) -> ProgramSolution:
+    """Lower (unless ``problem`` is given), solve and check ``program``."""
+    if problem is None:
+        problem = lower(program, form)
+    feas = program.sense == Sense.FEASIBILITY or program.objective is None
+    status, sol, mins, resid, msg = solve_conic(problem, backend, tolerances, feasibility=feas)
+    n_lmivar = program.n_lmivar()
+    if not status.ok:
+        return ProgramSolution(status, None, sol.x, attempts=sol.attempts, n_lmivar=n_lmivar,
+                               seconds=sol.seconds, message=msg, min_eigenvalues=mins)
+    x = sol.x
+    obj = None
+    if not feas:
+        obj = problem.objective_sign * float(problem.q @ x) + problem.objective_offset
+    return ProgramSolution(status, obj, x[: program.n_vars].copy(), problem.gram_matrices(x),
+                           problem.dual_matrices(sol.z), mins, resid, sol.attempts, n_lmivar, sol.seconds, msg)

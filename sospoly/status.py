@@ -1,0 +1,27 @@
+"""Solve statuses shared by every sospoly result."""
+from __future__ import annotations
+
+import enum
+
+__all__ = ["SolveStatus"]
+
+
+class SolveStatus(str, enum.Enum):
+    """Outcome of a conic solve, after the a-posteriori certificate checks.
+
+    Only ``OPTIMAL`` (and ``FEASIBLE`` for pure feasibility problems) carry numbers
+    that may be used as bounds or certificates.
+    """
+
+    OPTIMAL = "optimal"                    #: solved to tolerance and certificate checked
+    FEASIBLE = "feasible"                  #: feasibility problem solved, certificate checked
+    INFEASIBLE = "infeasible"              #: the conic program has no solution (no certificate at this degree)
+    UNBOUNDED = "unbounded"                #: objective unbounded (e.g. the constraint set is empty)
+    INACCURATE = "inaccurate"              #: solver stopped at reduced accuracy: no bound is reported
+    CHECK_FAILED = "certificate_check_failed"  #: solver said solved, a-posteriori check rejected it
+    NUMERICAL_ERROR = "numerical_error"    #: solver failed (error, panic, iteration limit)
+    NOT_SOLVED = "not_solved"
+
+    @property
+    def ok(self) -> bool:
+        return self in (SolveStatus.OPTIMAL, SolveStatus.FEASIBLE)

@@ -1,0 +1,69 @@
+"""Every numerical tolerance of sospoly, in one place.
+
+All tolerances are gathered in the frozen dataclass :class:`Tolerances`; pass a
+modified copy (``dataclasses.replace(DEFAULT_TOLERANCES, ...)``) to any entry point
+that takes ``tolerances=``.
+
+Why these values
+----------------
+* ``solver_*``: Clarabel's interior-point stopping tolerances.  We run one decade
+  tighter than Clarabel's defaults (1e-8) so that the reported bound carries
+  about 8-9 significant digits on well-scaled problems.
+* ``psd_margin``: a Gram matrix G returned by the solver is accepted as positive
+  semidefinite when ``lambda_min(G) >= -psd_margin * max(1, max|G_ij|)``.  Interior
+  point methods return points strictly inside the cone up to their feasibility
+  tolerance, so a genuine certificate passes with room to spare, while the
+  "optimal but infeasible" answers seen on near-degenerate problems (Motzkin at
+  degree 10) have eigenvalues around -1e-5 and are rejected.
+* ``identity_residual``: maximal coefficient mismatch (relative to the largest
+  coefficient of the polynomial) between u(v) and b(v)^T G b(v) for a certificate
+  to be accepted (the image form is exact by construction; the kernel form and
+  the cvxpy back-end are checked with this).
+* ``gap_abs`` / ``gap_rel``: ``optimal`` is reported only when
+  ``upper - lower <= gap_abs + gap_rel * max(1, |upper|)``, both sides computed
+  from the solver's returned certificate and an exactly evaluated feasible point.
+  With solver tolerances 1e-9 the bound itself is accurate to ~1e-8 relative;
+  extracted minimisers carry ~1e-5..1e-7 error whose effect on f is quadratic
+  near a minimiser, so 1e-6 / 1e-6 separates "equal" from "not equal" with two
+  decades of margin either way.
+* ``feasibility``: a candidate point counts as feasible when every equality
+  satisfies ``|g_k(v)| <= feasibility * max(1, ||coef(g_k)||_inf)`` and every
+  inequality ``h_k(v) >= -feasibility * max(1, ||coef(h_k)||_inf)``.
+* ``kernel_rel``: eigenvalues of a Gram matrix below ``kernel_rel * lambda_max``
+  are treated as zero when extracting minimisers (and moment-matrix eigenvalues
+  above ``moment_rank_rel * lambda_max`` count toward the rank).
+* ``bisection_abs`` / ``bisection_rel``: the GEVP bisection stops when the bracket
+  ``[c_lo, c_hi]`` satisfies ``c_hi - c_lo <= bisection_abs + bisection_rel*max(1,|c_lo|)``.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+__all__ = ["Tolerances", "DEFAULT_TOLERANCES"]
+
+
+@dataclass(frozen=True)
+class Tolerances:
+    solver_gap_abs: float = 1e-9
+    solver_gap_rel: float = 1e-9
+    solver_feas: float = 1e-9
+    solver_max_iter: int = 300
+    psd_margin: float = 1e-7
+    identity_residual: float = 1e-7
+    gap_abs: float = 1e-6
+    gap_rel: float = 1e-6
+    feasibility: float = 1e-6
+    kernel_rel: float = 1e-6
+    moment_rank_rel: float = 1e-4
+    bisection_abs: float = 1e-7
+    bisection_rel: float = 1e-7
+    bisection_max_steps: int = 60
+
+    def certified(self, lower: float | None, upper: float | None) -> bool:
+        """Is ``upper - lower`` within the documented optimality tolerance?"""
+        if lower is None or upper is None:
+            return False
+        return upper - lower <= self.gap_abs + self.gap_rel * max(1.0, abs(upper))
+
+
+DEFAULT_TOLERANCES = Tolerances()

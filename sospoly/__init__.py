@@ -19,7 +19,8 @@ from .conic import ConicProblem, GramForm, lower
 from .extraction import Candidate, extract_from_gram, extract_from_moment
 from .gevp import CompiledGevp, GevpResult, bisect
 from .linpoly import LinPoly
-from .minimize import MinimizeResult, SOSResult, feasibility_violation, is_sos, minimize
+from .minimize import (LowerBound, MinimizeResult, SOSResult, candidates_of, feasibility_violation, is_sos, minimize,
+                       solve_psatz)
 from .polynomial import Polynomial, as_polynomial, det, variables
 from .program import Sense, SOSProgram
 from .psatz import Multiplier, PsatzProblem, build_psatz, default_q, delta_min
@@ -32,7 +33,7 @@ __version__ = "0.1.0"
 __all__ = [
     "GramBasis", "MonomialIndex", "monomials", "sigma", "tau", "n_lmivar_formula", "ConicProblem", "GramForm",
     "lower", "Candidate", "extract_from_gram", "extract_from_moment", "CompiledGevp", "GevpResult", "bisect",
-    "LinPoly", "MinimizeResult", "SOSResult", "feasibility_violation", "is_sos", "minimize", "Polynomial",
+    "LinPoly", "LowerBound", "candidates_of", "solve_psatz", "MinimizeResult", "SOSResult", "feasibility_violation", "is_sos", "minimize", "Polynomial",
     "as_polynomial", "det", "variables", "Sense", "SOSProgram", "Multiplier", "PsatzProblem", "build_psatz",
     "default_q", "delta_min", "ProgramSolution", "check_certificate", "solve_program", "SolveStatus",
     "DEFAULT_TOLERANCES", "Tolerances",

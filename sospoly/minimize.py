@@ -30,7 +30,8 @@ from .status import SolveStatus
 from .svec import smat
 from .tolerances import DEFAULT_TOLERANCES, Tolerances
 
-__all__ = ["MinimizeResult", "SOSResult", "minimize", "is_sos", "feasibility_violation", "candidates_of"]
+__all__ = ["MinimizeResult", "SOSResult", "LowerBound", "minimize", "solve_psatz", "is_sos", "feasibility_violation",
+           "candidates_of"]
 
 
 @dataclass(frozen=True)
@@ -116,9 +117,46 @@ def _upper_from_candidates(psatz: PsatzProblem, cands, tol: Tolerances, refine: 
     feas.sort(key=lambda t: t[0])
     uniq = []
     for val, p in feas:
-        if all(np.linalg.norm(p - q) > 1e-6 * max(1.0, np.linalg.norm(q)) for _, q in uniq):
+        if all(np.linalg.norm(p - q) > 1e-5 * max(1.0, np.linalg.norm(q)) for _, q in uniq):
             uniq.append((val, p))
     return uniq
+
+
+@dataclass(frozen=True)
+class LowerBound:
+    """Outcome of one Positivstellensatz solve: the certified c*, its certificate, and for
+    the free multiplier the final bisection bracket."""
+    status: SolveStatus
+    lower_bound: float | None
+    solution: ProgramSolution | None
+    bracket: tuple | None = None
+    message: str = ""
+
+
+def solve_psatz(psatz: PsatzProblem, *, backend=None, form: GramForm = GramForm.IMAGE,
+                tolerances: Tolerances = DEFAULT_TOLERANCES, c_hi: float | None = None,
+                fixed_hint: ProgramSolution | None = None) -> LowerBound:
+    """Solve a Positivstellensatz program: one SDP (fixed q) or the GEVP bisection (free q).
+
+    For the free multiplier the bracket starts from the fixed-q SDP's c* (solved here
+    unless ``fixed_hint`` gives it) and from ``c_hi`` (f at a feasible point), if known.
+    """
+    if psatz.multiplier == Multiplier.FREE:
+        c_lo = None
+        if fixed_hint is None:
+            fixed = build_psatz(psatz.f, psatz.eq, psatz.ineq, psatz.degree, Multiplier.FIXED, gens=psatz.gens)
+            fixed_hint = solve_program(fixed.program, backend, form, tolerances)
+        if fixed_hint.status == SolveStatus.OPTIMAL:
+            c_lo = fixed_hint.objective
+        g: GevpResult = bisect(CompiledGevp(psatz, backend, form, tolerances), c_lo, c_hi)
+        return LowerBound(g.status, g.lower_bound, g.solution, g.bracket, g.message)
+    sol = solve_program(psatz.program, backend, form, tolerances)
+    if sol.status == SolveStatus.OPTIMAL:
+        return LowerBound(sol.status, sol.objective, sol)
+    lb = np.inf if sol.status == SolveStatus.UNBOUNDED else None
+    msg = {SolveStatus.INFEASIBLE: f"no Positivstellensatz certificate at degree {psatz.degree}; try a larger degree",
+           SolveStatus.UNBOUNDED: "c is unbounded: the constraint set is empty"}.get(sol.status, sol.message)
+    return LowerBound(sol.status, lb, sol, None, msg)
 
 
 def minimize(f, eq=(), ineq=(), degree: int | None = None, multiplier=Multiplier.FIXED, *,
@@ -135,46 +173,31 @@ def minimize(f, eq=(), ineq=(), degree: int | None = None, multiplier=Multiplier
         if not chk.is_sos:
             raise ValueError("the given multiplier q is not SOS: the certificate would not be a valid bound")
     psatz = build_psatz(f, eq, ineq, degree, multiplier, gens=gens)
-    n_lmivar = psatz.n_lmivar
     mult_name = "given" if isinstance(multiplier, (Polynomial, int, float)) else psatz.multiplier.value
-
+    found = []
+    c_hi = fixed_sol = None
     if psatz.multiplier == Multiplier.FREE:
-        # bracket from the fixed-q SDP (its certificate is feasible for the GEVP after scaling q)
+        # candidates of the fixed-q SDP give the bisection its upper end
         fixed = build_psatz(psatz.f, psatz.eq, psatz.ineq, psatz.degree, Multiplier.FIXED, gens=psatz.gens)
-        fsol = solve_program(fixed.program, backend, form, tolerances)
-        c_lo = fsol.objective if fsol.status == SolveStatus.OPTIMAL else None
-        c_hi = None
-        if fsol.status == SolveStatus.OPTIMAL:
-            ub = _upper_from_candidates(fixed, candidates_of(fixed, fsol, tolerances), tolerances, refine)
-            c_hi = ub[0][0] if ub else None
-        compiled = CompiledGevp(psatz, backend, form, tolerances)
-        g: GevpResult = bisect(compiled, c_lo, c_hi)
-        if g.status != SolveStatus.OPTIMAL:
-            return MinimizeResult(g.status, g.lower_bound, None, (), False, n_lmivar, psatz.degree, "free",
-                                  psatz.gens, g.bracket, g.solution, time.perf_counter() - t0, g.message)
-        cands = candidates_of(psatz, g.solution, tolerances)
-        found = _upper_from_candidates(psatz, cands, tolerances, refine)
-        if c_hi is not None and fsol.status == SolveStatus.OPTIMAL:
-            found += _upper_from_candidates(fixed, candidates_of(fixed, fsol, tolerances), tolerances, refine)
-            found.sort(key=lambda t: t[0])
-        lower_b = g.lower_bound
-        upper = found[0][0] if found else None
-        return MinimizeResult(SolveStatus.OPTIMAL, lower_b, upper, tuple(p for _, p in found),
-                              tolerances.certified(lower_b, upper), n_lmivar, psatz.degree, "free", psatz.gens,
-                              g.bracket, g.solution, time.perf_counter() - t0, "")
-
-    sol = solve_program(psatz.program, backend, form, tolerances)
-    if sol.status != SolveStatus.OPTIMAL:
-        lb = np.inf if sol.status == SolveStatus.UNBOUNDED else None
-        msg = {SolveStatus.INFEASIBLE: f"no Positivstellensatz certificate at degree {psatz.degree}; try a larger degree",
-               SolveStatus.UNBOUNDED: "c is unbounded: the constraint set is empty"}.get(sol.status, sol.message)
-        return MinimizeResult(sol.status, lb, None, (), False, n_lmivar, psatz.degree, mult_name, psatz.gens,
-                              None, sol, time.perf_counter() - t0, msg)
-    found = _upper_from_candidates(psatz, candidates_of(psatz, sol, tolerances), tolerances, refine)
+        fixed_sol = solve_program(fixed.program, backend, form, tolerances)
+        if fixed_sol.status == SolveStatus.OPTIMAL:
+            found = _upper_from_candidates(fixed, candidates_of(fixed, fixed_sol, tolerances), tolerances, refine)
+            c_hi = found[0][0] if found else None
+    lb = solve_psatz(psatz, backend=backend, form=form, tolerances=tolerances, c_hi=c_hi, fixed_hint=fixed_sol)
+    elapsed = time.perf_counter() - t0
+    if lb.status != SolveStatus.OPTIMAL:
+        return MinimizeResult(lb.status, lb.lower_bound, None, (), False, psatz.n_lmivar, psatz.degree, mult_name,
+                              psatz.gens, lb.bracket, lb.solution, elapsed, lb.message)
+    found = found + _upper_from_candidates(psatz, candidates_of(psatz, lb.solution, tolerances), tolerances, refine)
+    found.sort(key=lambda t: t[0])
     upper = found[0][0] if found else None
-    return MinimizeResult(SolveStatus.OPTIMAL, sol.objective, upper, tuple(p for _, p in found),
-                          tolerances.certified(sol.objective, upper), n_lmivar, psatz.degree, mult_name, psatz.gens,
-                          None, sol, time.perf_counter() - t0, "")
+    status, optimal, msg = SolveStatus.OPTIMAL, tolerances.certified(lb.lower_bound, upper), ""
+    if upper is not None and lb.lower_bound - upper > tolerances.gap_abs + tolerances.gap_rel * max(1.0, abs(upper)):
+        status, optimal = SolveStatus.INCONSISTENT, False
+        msg = f"lower bound {lb.lower_bound:.10g} exceeds f at a feasible point {upper:.10g}: numerical failure"
+    return MinimizeResult(status, lb.lower_bound, upper, tuple(p for _, p in found), optimal, psatz.n_lmivar,
+                          psatz.degree, mult_name, psatz.gens, lb.bracket, lb.solution,
+                          time.perf_counter() - t0, msg)
 
 
 @dataclass(frozen=True)

@@ -20,6 +20,7 @@ class SolveStatus(str, enum.Enum):
     INACCURATE = "inaccurate"              #: solver stopped at reduced accuracy: no bound is reported
     CHECK_FAILED = "certificate_check_failed"  #: solver said solved, a-posteriori check rejected it
     NUMERICAL_ERROR = "numerical_error"    #: solver failed (error, panic, iteration limit)
+    INCONSISTENT = "inconsistent_bounds"   #: lower bound above a feasible value: numerical failure
     NOT_SOLVED = "not_solved"
 
     @property

@@ -1,0 +1,204 @@
+"""Certified uncertain multiple-view L2 triangulation (Theorem 1 and Corollary 1).
+
+``triangulate(cameras, regions, method, delta, max_delta)``:
+
+1. validate and normalise the data (:mod:`tritools.normalize`; the L2 problem is
+   unchanged and every number reported is in the caller's units);
+2. build (f, g, h) (:mod:`tritools.problem`) and the Positivstellensatz program
+   at degree delta (:func:`sospoly.build_psatz`), solve it with sospoly
+   (fixed q = (1 + ||v||^2)^(delta/2 - 1) by default, or the free-q GEVP);
+3. gamma_LB = sqrt(c* / (2N)) (the paper's (52));
+4. candidates v* from the Gram kernel and the moment matrix; X^ from the SVD of
+   M0(v*) (the paper's (47)-(49)); the candidate with the smallest exact
+   gamma(X^) is kept (when the kernel has dimension > 1 every candidate the
+   kernel offers is tried -- this is the extraction rule);
+5. optional local L2 refinement of X^ (Theorem 1 holds for any X^, so it can
+   only lower gamma_UB); the raw extracted estimate is reported too;
+6. certificate: in c units, ``c_UB - c_LB <= gap_abs + gap_rel * max(1, c_UB)``
+   with the tolerances of :class:`sospoly.Tolerances`, c_UB = 2N gamma_UB'^2 in the
+   normalised units where c is O(1).  An error dc in c moves gamma by about
+   dc / (4 N gamma), so comparing gammas relatively would fail for tiny
+   residuals; comparing c does not.  A lower bound above the upper bound by more
+   than the tolerance is reported as NUMERICAL_FAILURE, never as a certificate;
+7. not certified: delta <- delta + 2 up to ``max_delta``.
+"""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+import sospoly
+from sospoly import DEFAULT_TOLERANCES, GramForm, Multiplier, SolveStatus, Tolerances
+
+from .constraints import Method
+from .geometry import gamma as gamma_of, point_from_image_points, validate_cameras
+from .normalize import Normalization, normalization_for
+from .problem import TriangulationProblem, build_problem
+from .regions import Region
+from .result import Status, TriangulationResult
+
+__all__ = ["triangulate", "validate_regions", "refine_l2"]
+
+
+def validate_regions(regions, n_views: int) -> list:
+    regions = list(regions)
+    if len(regions) != n_views:
+        raise ValueError(f"regions: expected one region per camera ({n_views}), got {len(regions)}")
+    for i, r in enumerate(regions):
+        if not isinstance(r, Region):
+            raise TypeError(f"regions[{i}] must be a tritools Region (Point, Segment, Polytope, Ellipse, "
+                            f"EllipseBorder), got {type(r).__name__}")
+    return regions
+
+
+def _residuals(X, cameras, regions):
+    Xh = np.append(X, 1.0)
+    out = []
+    for P, r in zip(cameras, regions):
+        p = P @ Xh
+        if abs(p[2]) < 1e-300:
+            return np.full(2 * len(regions), 1e150)
+        x = p[:2] / p[2]
+        out.append(x - r.closest_point(x))
+    return np.concatenate(out)
+
+
+def refine_l2(X0: np.ndarray, cameras: np.ndarray, regions) -> np.ndarray | None:
+    """Local minimisation of gamma from X0 (Levenberg-Marquardt-type least squares)."""
+    from scipy.optimize import least_squares
+
+    try:
+        res = least_squares(_residuals, np.asarray(X0, float), args=(cameras, regions), method="lm",
+                            xtol=1e-15, ftol=1e-15, gtol=1e-15, max_nfev=400)
+    except (ValueError, np.linalg.LinAlgError):
+        return None
+    return res.x if np.all(np.isfinite(res.x)) else None
+
+
+def _estimate(problem: TriangulationProblem, psatz, sol, cams_n, regs_n, tol):
+    """Best (gamma_n, X_n, image points_n) over the extracted candidates."""
+    best = None
+    for cand in sospoly.candidates_of(psatz, sol, tol):
+        xn = problem.image_points(cand.point)
+        Xn = point_from_image_points(xn, cams_n)
+        if Xn is None:
+            continue
+        g = gamma_of(Xn, cams_n, regs_n)
+        if np.isfinite(g) and (best is None or g < best[0]):
+            best = (float(g), np.asarray(Xn, float), xn)
+    return best
+
+
+def triangulate(cameras, regions, method: Method | str = Method.THEOREM1, delta: int | None = None,
+                max_delta: int | None = None, *, multiplier=Multiplier.FIXED, refine: bool = True,
+                normalize: bool = True, backend=None, form: GramForm = GramForm.IMAGE,
+                tolerances: Tolerances = DEFAULT_TOLERANCES) -> TriangulationResult:
+    """Certified triangulation of one scene point (see module docstring).
+
+    Parameters
+    ----------
+    cameras : array (N, 3, 4)
+    regions : N :class:`tritools.regions.Region` (Point, Segment, Polytope, EllipseBorder, Ellipse)
+    method : "theorem1" (4x4 minors + SVD reduction) or "corollary1" (epipolar constraints)
+    delta : first relaxation degree (even, >= delta_min; default delta_min)
+    max_delta : last degree tried (default: delta if given, else delta_min + 2)
+    multiplier : "fixed" (one SDP, the paper's q) or "free" (GEVP by bisection)
+    """
+    t_start = time.perf_counter()
+    try:
+        method = Method(method)
+    except ValueError:
+        raise ValueError(f"method must be 'theorem1' or 'corollary1', got {method!r}") from None
+    cams = validate_cameras(cameras)
+    regions = validate_regions(regions, cams.shape[0])
+    N = cams.shape[0]
+    timings = {}
+
+    t0 = time.perf_counter()
+    norm = normalization_for(cams, regions, enabled=normalize)
+    cams_n = norm.cameras(cams)
+    regs_n = norm.regions(regions)
+    problem = build_problem(cams_n, regs_n, method)
+    timings["build"] = time.perf_counter() - t0
+
+    dmin = sospoly.delta_min(problem.f, problem.eq, problem.ineq)
+    if delta is None:
+        delta = dmin
+        last = max_delta if max_delta is not None else dmin + 2
+    else:
+        last = max_delta if max_delta is not None else delta
+    if delta % 2 or delta < dmin:
+        raise ValueError(f"delta must be even and >= delta_min = {dmin} for this problem, got {delta}")
+    if last < delta:
+        raise ValueError(f"max_delta ({last}) is below delta ({delta})")
+
+    attempts = []
+    result = None
+    d = delta
+    while d <= last:
+        result = _solve_at(problem, norm, cams, regions, cams_n, regs_n, method, d, multiplier, refine,
+                           backend, form, tolerances, timings)
+        attempts.append((d, result.status.value, result.gamma_lb, result.gamma_ub))
+        if result.status == Status.OPTIMAL:
+            break
+        d += 2
+    timings["total"] = time.perf_counter() - t_start
+    return _replace(result, timings=dict(timings), attempts=tuple(attempts))
+
+
+def _replace(res: TriangulationResult, **kw) -> TriangulationResult:
+    import dataclasses
+
+    return dataclasses.replace(res, **kw)
+
+
+def _solve_at(problem, norm: Normalization, cams, regions, cams_n, regs_n, method, delta, multiplier, refine,
+              backend, form, tol: Tolerances, timings) -> TriangulationResult:
+    N = problem.n_views
+    t0 = time.perf_counter()
+    psatz = sospoly.build_psatz(problem.f, problem.eq, problem.ineq, delta, multiplier, gens=problem.gens)
+    timings[f"assemble_d{delta}"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    c_hi = None
+    lb = sospoly.solve_psatz(psatz, backend=backend, form=form, tolerances=tol, c_hi=c_hi)
+    timings[f"solve_d{delta}"] = time.perf_counter() - t0
+    common = dict(method=method.value, delta=delta, n_lmivar=psatz.n_lmivar)
+    if lb.status != SolveStatus.OPTIMAL or lb.solution is None or lb.solution.x is None:
+        return TriangulationResult(status=Status.SOLVER_FAILED, X=None, gamma_ub=None,
+                                   message=f"SDP at delta={delta}: {lb.status.value} {lb.message}".strip(), **common)
+    c_lb = float(lb.lower_bound)
+    gamma_lb = float(np.sqrt(max(c_lb, 0.0) / (2 * N)) / norm.scale)
+
+    t0 = time.perf_counter()
+    best = _estimate(problem, psatz, lb.solution, cams_n, regs_n, tol)
+    timings[f"extract_d{delta}"] = time.perf_counter() - t0
+    if best is None:
+        return TriangulationResult(status=Status.ILL_POSED, X=None, gamma_ub=None, gamma_lb=gamma_lb, optimal=False,
+                                   message="every extracted candidate has w4 ~ 0 (ill-posed: e.g. equal cameras)",
+                                   **common)
+    g_raw_n, X_raw_n, x_star_n = best
+    g_n, X_n = g_raw_n, X_raw_n
+    if refine:
+        t0 = time.perf_counter()
+        Xr = refine_l2(X_raw_n, cams_n, regs_n)
+        if Xr is not None:
+            gr = gamma_of(Xr, cams_n, regs_n)
+            if np.isfinite(gr) and gr < g_n:
+                g_n, X_n = float(gr), Xr
+        timings[f"refine_d{delta}"] = time.perf_counter() - t0
+    c_ub = 2 * N * g_n ** 2
+    X = norm.world_point(X_n)
+    X_raw = norm.world_point(X_raw_n)
+    # report gamma in the caller's units, evaluated on the original data
+    gamma_ub = float(gamma_of(X, cams, regions))
+    gamma_raw = float(gamma_of(X_raw, cams, regions))
+    optimal = tol.certified(c_lb, c_ub)
+    status = Status.OPTIMAL if optimal else Status.NOT_CERTIFIED
+    msg = ""
+    if c_lb - c_ub > tol.gap_abs + tol.gap_rel * max(1.0, c_ub):
+        status, optimal = Status.NUMERICAL_FAILURE, False
+        msg = f"lower bound c={c_lb:.10g} above c at the estimate {c_ub:.10g}: numerical failure, no certificate"
+    return TriangulationResult(status=status, X=X, gamma_ub=gamma_ub, gamma_lb=gamma_lb, optimal=optimal,
+                               image_points=norm.image_points(x_star_n), X_raw=X_raw, gamma_ub_raw=gamma_raw,
+                               certified_by="sdp" if optimal else None, message=msg, **common)

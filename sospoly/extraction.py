@@ -26,7 +26,8 @@ import scipy.linalg as sla
 from .basis import MonomialIndex
 from .tolerances import DEFAULT_TOLERANCES, Tolerances
 
-__all__ = ["Candidate", "kernel_basis", "range_basis", "candidates_from_span", "extract_from_gram",
+__all__ = ["Candidate", "CandidateFamily", "kernel_family", "best_in_family", "kernel_basis", "range_basis",
+           "candidates_from_span", "extract_from_gram",
            "extract_from_moment", "henrion_lasserre"]
 
 
@@ -153,3 +154,72 @@ def extract_from_moment(M: np.ndarray, basis: np.ndarray, tol: Tolerances = DEFA
     if not np.all(np.isfinite(M)) or M[0, 0] <= 0:
         return []
     return candidates_from_span(range_basis(M / M[0, 0], tol), basis, "moment")
+
+
+@dataclass(frozen=True)
+class CandidateFamily:
+    """All candidates the numerical kernel offers: v(t) = (W a(t))[deg-1 rows] / (W a(t))[0],
+    with a(t) = a0 + Z t ranging over the coefficient vectors whose constant entry is 1.
+
+    When the Gram kernel has dimension k > 1 the paper's rule ("eigenvectors of the
+    smallest eigenvalue") leaves a (k-1)-dimensional family; :func:`best_in_family`
+    searches it for the member that is best for the caller's own criterion.
+    """
+    W: np.ndarray
+    deg1: np.ndarray
+    a0: np.ndarray
+    Z: np.ndarray
+
+    @property
+    def dim(self) -> int:
+        return self.Z.shape[1]
+
+    def point(self, t) -> np.ndarray:
+        w = self.W @ (self.a0 + self.Z @ np.asarray(t, float))
+        return w[self.deg1] / w[0]
+
+
+def kernel_family(G: np.ndarray, basis: np.ndarray, tol: Tolerances = DEFAULT_TOLERANCES) -> CandidateFamily | None:
+    W = kernel_basis(G, tol)
+    deg1 = _degree1_rows(basis)
+    c0 = W[0, :]
+    if deg1 is None or np.linalg.norm(c0) < 1e-12:
+        return None
+    a0 = c0 / (c0 @ c0)
+    # orthonormal basis of {a : c0 . a = 0}
+    _, _, Vt = np.linalg.svd(c0[None, :])
+    Z = Vt[1:].T
+    return CandidateFamily(W, deg1, a0, Z)
+
+
+def best_in_family(family: CandidateFamily, objective, max_evals: int = 400) -> tuple[np.ndarray, float]:
+    """Minimise ``objective(v)`` over the family (Nelder-Mead from several starts)."""
+    from scipy.optimize import minimize as sp_min
+
+    def obj_t(t):
+        try:
+            val = float(objective(family.point(t)))
+        except (ValueError, FloatingPointError, np.linalg.LinAlgError):
+            return np.inf
+        return val if np.isfinite(val) else np.inf
+
+    starts = [np.zeros(family.dim)]
+    for k in range(family.W.shape[1]):
+        # the coefficient vector of the k-th kernel vector, rescaled to unit constant entry
+        if abs(family.W[0, k]) > 1e-12:
+            a = np.eye(family.W.shape[1])[k] / family.W[0, k]
+            starts.append(family.Z.T @ (a - family.a0))
+    best_t, best_v = starts[0], obj_t(starts[0])
+    if family.dim == 0:
+        return family.point(best_t), best_v
+    if family.dim == 1:
+        # a one-parameter family: scan it whole (t = tan(theta) reaches both ends) first
+        grid = np.tan(np.linspace(-np.pi / 2, np.pi / 2, 723)[1:-1])
+        vals = np.array([obj_t([t]) for t in grid])
+        starts += [np.array([grid[k]]) for k in np.argsort(vals)[:3]]
+    for t0 in starts:
+        res = sp_min(obj_t, t0, method="Nelder-Mead",
+                     options={"maxfev": max_evals, "xatol": 1e-10, "fatol": 1e-12})
+        if res.fun < best_v:
+            best_t, best_v = res.x, float(res.fun)
+    return family.point(best_t), best_v

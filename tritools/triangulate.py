@@ -30,6 +30,7 @@ import numpy as np
 
 import sospoly
 from sospoly import DEFAULT_TOLERANCES, GramForm, Multiplier, SolveStatus, Tolerances
+from sospoly.extraction import best_in_family, kernel_family
 
 from .constraints import Method
 from .geometry import gamma as gamma_of, point_from_image_points, validate_cameras
@@ -38,7 +39,10 @@ from .problem import TriangulationProblem, build_problem
 from .regions import Region
 from .result import Status, TriangulationResult
 
-__all__ = ["triangulate", "validate_regions", "refine_l2"]
+__all__ = ["triangulate", "validate_regions", "refine_l2", "MAX_FAMILY_DIM"]
+
+#: kernel families of dimension up to this are searched for the best candidate.
+MAX_FAMILY_DIM = 3
 
 
 def validate_regions(regions, n_views: int) -> list:
@@ -77,16 +81,32 @@ def refine_l2(X0: np.ndarray, cameras: np.ndarray, regions) -> np.ndarray | None
 
 
 def _estimate(problem: TriangulationProblem, psatz, sol, cams_n, regs_n, tol):
-    """Best (gamma_n, X_n, image points_n) over the extracted candidates."""
-    best = None
-    for cand in sospoly.candidates_of(psatz, sol, tol):
-        xn = problem.image_points(cand.point)
+    """Best (gamma_n, X_n, image points_n) over the extracted candidates.
+
+    Candidates: Henrion-Lasserre points and scaled kernel vectors of the optimal Gram
+    matrix, the moment matrix's, and -- when the kernel has dimension > 1 -- the
+    member of the kernel's affine family v(t) with the smallest gamma(X^(v(t)))
+    (every member satisfies b(v*) in ker U* at half-degree 1, so each is a
+    legitimate v* of the paper's (51)).
+    """
+    def evaluate(v):
+        xn = problem.image_points(v)
         Xn = point_from_image_points(xn, cams_n)
         if Xn is None:
-            continue
+            return None
         g = gamma_of(Xn, cams_n, regs_n)
-        if np.isfinite(g) and (best is None or g < best[0]):
-            best = (float(g), np.asarray(Xn, float), xn)
+        return (float(g), np.asarray(Xn, float), xn) if np.isfinite(g) else None
+
+    points = [c.point for c in sospoly.candidates_of(psatz, sol, tol)]
+    fam = kernel_family(sol.grams["u"], psatz.u.gram.b, tol) if "u" in sol.grams else None
+    if fam is not None and 0 < fam.dim <= MAX_FAMILY_DIM:
+        v, _ = best_in_family(fam, lambda v: (evaluate(v) or (np.inf,))[0])
+        points.append(v)
+    best = None
+    for v in points:
+        e = evaluate(v)
+        if e is not None and (best is None or e[0] < best[0]):
+            best = e
     return best
 
 

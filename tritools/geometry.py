@@ -1,0 +1,379 @@
+"""Projective geometry for multiple-view triangulation (SPEC §1, §3, §6, §7).
+
+Conventions
+-----------
+* A camera is a 3x4 projection matrix ``P`` with rows ``p1, p2, p3``; a scene point
+  ``X in R^3`` projects to ``Phi(X, P) = (p1.X~ / p3.X~, p2.X~ / p3.X~)``,
+  ``X~ = [X; 1]`` (paper eq. (4)).
+* ``cameras`` is an array of shape (N, 3, 4); ``points2d`` has shape (N, 2), one
+  image point per view.
+* ``fundamental_matrix(P_i, P_j)`` returns ``F_ij`` with
+  ``x~_i' F_ij x~_j = 0`` for exact projections ``x_i`` (view i) and ``x_j`` (view j)
+  of one scene point (SPEC §7, paper eq. (61)): the *first* index is the view on
+  the *left* of the bilinear form.
+"""
+from __future__ import annotations
+
+import itertools
+from typing import Sequence
+
+import numpy as np
+
+__all__ = [
+    "PointAtInfinityError", "validate_cameras", "validate_points2d", "project", "image_points",
+    "camera_center", "depths", "gamma", "dlt", "fundamental_matrix", "fundamental_matrices",
+    "M0", "point_from_image_points",
+    "CAMERA_RANK_RTOL", "SAME_CAMERA_RTOL", "PROJECTION_DENOM_RTOL", "POINT_AT_INFINITY_RTOL",
+    "SAME_CENTER_RTOL",
+]
+
+# ----------------------------------------------------------------------------- tolerances
+#: A camera has rank < 3 if its third singular value is <= CAMERA_RANK_RTOL * the first.
+CAMERA_RANK_RTOL = 1e-10
+#: Two cameras are "equal up to scale" if ``min_{s=+-1} ||P_i/||P_i|| - s P_j/||P_j||||_F`` is below this.
+SAME_CAMERA_RTOL = 1e-10
+#: ``Phi(X, P)`` is at infinity if ``|p3.X~| <= PROJECTION_DENOM_RTOL * ||p3|| * ||X~||``.
+PROJECTION_DENOM_RTOL = 1e-14
+#: A homogeneous solution ``w`` (unit norm) is a point at infinity if ``|w4| <= POINT_AT_INFINITY_RTOL``.
+#: With unit-scale data this rejects estimates farther than ~1e10 from the origin.
+POINT_AT_INFINITY_RTOL = 1e-10
+#: Two camera centres coincide (F undefined) if ``||F||_F <= SAME_CENTER_RTOL * ||P_i|| ||P_j||``.
+SAME_CENTER_RTOL = 1e-10
+
+
+class PointAtInfinityError(ValueError):
+    """The homogeneous solution has ``w4 ~ 0``: the problem is ill-posed (SPEC §6)."""
+
+
+# ----------------------------------------------------------------------------- validation
+def _as_float_array(value, name: str) -> np.ndarray:
+    try:
+        return np.array(value, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{name} must be a numeric array") from exc
+
+
+def _check_camera(P: np.ndarray, name: str) -> None:
+    if P.shape != (3, 4):
+        raise ValueError(f"{name} must be a 3x4 matrix, got shape {P.shape}")
+    if not np.all(np.isfinite(P)):
+        raise ValueError(f"{name} contains NaN or inf")
+    sv = np.linalg.svd(P, compute_uv=False)
+    if sv[0] == 0 or sv[2] <= CAMERA_RANK_RTOL * sv[0]:
+        raise ValueError(f"{name} has rank < 3 (singular values {np.round(sv, 16).tolist()})")
+
+
+def validate_cameras(cameras, *, min_views: int = 2, require_distinct: bool = True) -> np.ndarray:
+    """Check and convert projection matrices.
+
+    Parameters
+    ----------
+    cameras : array_like, shape (N, 3, 4)
+        Projection matrices ``P_i`` (paper eq. (2)).
+    min_views : int
+        Minimum number of views (2 for triangulation).
+    require_distinct : bool
+        If true, reject the ill-posed input where all cameras are equal up to a
+        (possibly negative) scale factor.
+
+    Returns
+    -------
+    ndarray, shape (N, 3, 4)
+        A float copy.
+
+    Raises
+    ------
+    ValueError
+        Wrong shape, NaN/inf, rank < 3, fewer than ``min_views`` views, all cameras equal.
+    """
+    C = _as_float_array(cameras, "cameras")
+    if C.ndim != 3 or C.shape[1:] != (3, 4):
+        raise ValueError(f"cameras must have shape (N, 3, 4), got {C.shape}")
+    if C.shape[0] < min_views:
+        raise ValueError(f"cameras: at least {min_views} views are needed, got {C.shape[0]}")
+    for i, P in enumerate(C):
+        _check_camera(P, f"cameras[{i}]")
+    if require_distinct and C.shape[0] >= 2:
+        U = C / np.linalg.norm(C, axis=(1, 2))[:, None, None]
+        diff = np.minimum(np.linalg.norm(U - U[0], axis=(1, 2)), np.linalg.norm(U + U[0], axis=(1, 2)))
+        if np.all(diff <= SAME_CAMERA_RTOL):
+            raise ValueError("cameras are all equal up to scale: the triangulation is ill-posed")
+    return C
+
+
+def validate_points2d(points2d, n_views: int, name: str = "points2d") -> np.ndarray:
+    """Check image points: shape (n_views, 2), finite."""
+    x = _as_float_array(points2d, name)
+    if x.shape != (n_views, 2):
+        raise ValueError(f"{name} must have shape ({n_views}, 2), one point per view, got {x.shape}")
+    if not np.all(np.isfinite(x)):
+        raise ValueError(f"{name} contains NaN or inf")
+    return x
+
+
+def _points3d(X, name: str = "X") -> tuple[np.ndarray, bool]:
+    A = _as_float_array(X, name)
+    if A.shape == (3,):
+        return A[None, :], True
+    if A.ndim == 2 and A.shape[1] == 3:
+        return A, False
+    raise ValueError(f"{name} must have shape (3,) or (m, 3), got {A.shape}")
+
+
+# ----------------------------------------------------------------------------- projection
+def _project(Xh: np.ndarray, P: np.ndarray) -> np.ndarray:
+    """Projections of homogeneous points Xh (m, 4) by P (3, 4); inf where at infinity."""
+    h = Xh @ P.T
+    den = h[:, 2]
+    tiny = np.abs(den) <= PROJECTION_DENOM_RTOL * np.linalg.norm(P[2]) * np.linalg.norm(Xh, axis=1)
+    safe = np.where(tiny, 1.0, den)
+    out = h[:, :2] / safe[:, None]
+    out[tiny] = np.inf
+    out[~np.all(np.isfinite(Xh), axis=1)] = np.nan
+    return out
+
+
+def project(X, P) -> np.ndarray:
+    """``Phi(X, P)`` (paper eq. (4)).
+
+    Parameters
+    ----------
+    X : array_like, shape (3,) or (m, 3)
+    P : array_like, shape (3, 4)
+
+    Returns
+    -------
+    ndarray, shape (2,) or (m, 2)
+        ``inf`` entries where ``p3.X~`` vanishes (projection at infinity).
+    """
+    A, single = _points3d(X)
+    P = _as_float_array(P, "P")
+    if P.shape != (3, 4):
+        raise ValueError(f"P must be a 3x4 matrix, got shape {P.shape}")
+    Xh = np.hstack([A, np.ones((len(A), 1))])
+    out = _project(Xh, P)
+    return out[0] if single else out
+
+
+def image_points(X, cameras) -> np.ndarray:
+    """Projections of ``X`` in every view: (3,) -> (N, 2); (m, 3) -> (m, N, 2)."""
+    A, single = _points3d(X)
+    C = validate_cameras(cameras, min_views=1, require_distinct=False)
+    Xh = np.hstack([A, np.ones((len(A), 1))])
+    out = np.stack([_project(Xh, P) for P in C], axis=1)
+    return out[0] if single else out
+
+
+def camera_center(P, homogeneous: bool = False) -> np.ndarray:
+    """Centre of projection: the null vector ``a`` of ``P`` (``P a = 0``).
+
+    Parameters
+    ----------
+    P : array_like, shape (3, 4)
+    homogeneous : bool
+        Return the unit 4-vector ``a`` instead of ``a[:3] / a[3]``.
+
+    Raises
+    ------
+    ValueError
+        Bad ``P``, or a centre at infinity (affine camera) when ``homogeneous`` is false.
+    """
+    P = _as_float_array(P, "P")
+    _check_camera(P, "P")
+    a = np.linalg.svd(P)[2][-1]
+    if homogeneous:
+        return a
+    if abs(a[3]) <= POINT_AT_INFINITY_RTOL:
+        raise ValueError("P has its centre at infinity (affine camera); use homogeneous=True")
+    return a[:3] / a[3]
+
+
+def depths(X, cameras) -> np.ndarray:
+    """Depth of ``X`` in each camera (Hartley & Zisserman eq. (6.15)):
+    ``depth = sign(det M) (p3.X~) / ||m3||``, ``M`` the left 3x3 block of ``P`` and
+    ``m3`` its third row; invariant to ``P -> k P``; positive in front of the camera.
+
+    Returns
+    -------
+    ndarray, shape (N,) for ``X`` of shape (3,), (m, N) for (m, 3).
+    """
+    A, single = _points3d(X)
+    C = validate_cameras(cameras, min_views=1, require_distinct=False)
+    Xh = np.hstack([A, np.ones((len(A), 1))])
+    w = Xh @ C[:, 2, :].T  # (m, N)
+    sign = np.sign(np.linalg.det(C[:, :, :3]))
+    sign[sign == 0] = 1.0
+    out = w * (sign / np.linalg.norm(C[:, 2, :3], axis=1))[None, :]
+    return out[0] if single else out
+
+
+# ----------------------------------------------------------------------------- cost
+def _gamma_unchecked(Xs: np.ndarray, cameras: np.ndarray, regions: Sequence) -> np.ndarray:
+    """gamma for validated inputs; Xs (m, 3) -> (m,). inf where a projection is at infinity."""
+    m = len(Xs)
+    Xh = np.hstack([Xs, np.ones((m, 1))])
+    total = np.zeros(m)
+    bad = ~np.all(np.isfinite(Xs), axis=1)
+    for P, R in zip(cameras, regions):
+        x = _project(Xh, P)
+        finite = np.all(np.isfinite(x), axis=1)
+        bad |= ~finite
+        if np.any(finite):
+            d = np.asarray(R.distance(x[finite]), dtype=float)
+            total[finite] += d * d
+    out = np.sqrt(total / (2 * len(cameras)))
+    out[bad] = np.inf
+    return out
+
+
+def gamma(X, cameras, regions) -> float | np.ndarray:
+    """RMS reprojection error (SPEC §1, paper eq. (6)):
+    ``gamma(X) = sqrt( sum_i d(Phi(X, P_i), R_i)^2 / (2N) )`` with exact distances.
+
+    Parameters
+    ----------
+    X : array_like, shape (3,) or (m, 3)
+    cameras : array_like, shape (N, 3, 4)
+    regions : sequence of N :class:`~tritools.regions.Region` (or dicts / 2-vectors)
+
+    Returns
+    -------
+    float or ndarray (m,)
+        ``inf`` where a projection is at infinity.
+    """
+    from .regions import as_regions
+
+    A, single = _points3d(X)
+    if not np.all(np.isfinite(A)):
+        raise ValueError("X contains NaN or inf")
+    C = validate_cameras(cameras, require_distinct=False)
+    R = as_regions(regions, len(C))
+    out = _gamma_unchecked(A, C, R)
+    return float(out[0]) if single else out
+
+
+# ----------------------------------------------------------------------------- linear triangulation
+def M0(points2d, cameras) -> np.ndarray:
+    """Numeric ``M0(v)`` of SPEC §3 (paper eq. (24)):
+    rows ``[I2, -x_i] P_i``, i.e. ``p1_i - x_i1 p3_i`` and ``p2_i - x_i2 p3_i``.
+
+    Returns
+    -------
+    ndarray, shape (2N, 4)
+        ``M0 X~ = 0`` iff the ``x_i`` are exact projections of ``X`` (for finite ``X``).
+    """
+    C = validate_cameras(cameras, min_views=1, require_distinct=False)
+    x = validate_points2d(points2d, len(C))
+    rows = C[:, :2, :] - x[:, :, None] * C[:, 2:3, :]
+    return rows.reshape(2 * len(C), 4)
+
+
+def _null_vector(A: np.ndarray) -> np.ndarray:
+    """Unit right singular vector of the smallest singular value."""
+    return np.linalg.svd(A)[2][-1]
+
+
+def point_from_image_points(points2d, cameras) -> np.ndarray | None:
+    """Scene point from image points via the SVD of ``M0`` (SPEC §6, paper eq. (53)):
+    ``w`` = last right singular vector of ``M0(v*)``, ``X^ = w[:3] / w[3]``.
+
+    Returns
+    -------
+    ndarray (3,) or None
+        ``None`` if ``|w4| <= POINT_AT_INFINITY_RTOL * ||w||`` (ill-posed; never divides by 0).
+    """
+    w = _null_vector(M0(points2d, cameras))
+    if abs(w[3]) <= POINT_AT_INFINITY_RTOL * np.linalg.norm(w):
+        return None
+    return w[:3] / w[3]
+
+
+def _hartley_normalisation(x: np.ndarray) -> np.ndarray:
+    """Similarity T (3x3) moving the centroid of x (N, 2) to 0 and the mean distance to sqrt(2)."""
+    c = x.mean(axis=0)
+    dist = np.linalg.norm(x - c, axis=1).mean()
+    if dist <= 1e-12 * (1.0 + np.abs(c).max()):
+        s = 1.0 / (1.0 + np.abs(c).max())
+    else:
+        s = np.sqrt(2.0) / dist
+    return np.array([[s, 0.0, -s * c[0]], [0.0, s, -s * c[1]], [0.0, 0.0, 1.0]])
+
+
+def dlt(cameras, points2d) -> np.ndarray:
+    """Linear (algebraic-error) triangulation, Hartley & Zisserman §12.2.
+
+    Image points are normalised by one similarity ``T`` (centroid 0, mean distance
+    sqrt(2)) applied to all views (``x' = T x~``, ``P' = T P``), each row of
+    ``M0`` is scaled to unit norm, and ``X~`` is the last right singular vector.
+
+    Returns
+    -------
+    ndarray, shape (3,)
+
+    Raises
+    ------
+    PointAtInfinityError
+        If ``|w4| <= POINT_AT_INFINITY_RTOL`` (the solution is a point at infinity).
+    ValueError
+        Bad shapes or values.
+    """
+    C = validate_cameras(cameras, require_distinct=False)
+    x = validate_points2d(points2d, len(C))
+    T = _hartley_normalisation(x)
+    xn = x @ T[:2, :2].T + T[:2, 2]
+    Cn = np.einsum("ab,nbc->nac", T, C)
+    A = (Cn[:, :2, :] - xn[:, :, None] * Cn[:, 2:3, :]).reshape(-1, 4)
+    norms = np.linalg.norm(A, axis=1)
+    A = A / np.where(norms > 0, norms, 1.0)[:, None]
+    w = _null_vector(A)
+    if abs(w[3]) <= POINT_AT_INFINITY_RTOL:
+        raise PointAtInfinityError(
+            f"linear triangulation gives a point at infinity (|w4| = {abs(w[3]):.3g}): ill-posed problem")
+    return w[:3] / w[3]
+
+
+# ----------------------------------------------------------------------------- epipolar geometry
+def _skew(e: np.ndarray) -> np.ndarray:
+    return np.array([[0.0, -e[2], e[1]], [e[2], 0.0, -e[0]], [-e[1], e[0], 0.0]])
+
+
+def fundamental_matrix(P_i, P_j, normalize: bool = True) -> np.ndarray:
+    """Fundamental matrix ``F_ij = [e]_x P_i P_j^+`` with ``e = P_i a_j``, ``P_j a_j = 0``,
+    ``||a_j|| = 1`` (SPEC §7; Hartley & Zisserman eq. (9.1)).
+
+    It satisfies ``x~_i' F_ij x~_j = 0`` for exact projections ``x_i = Phi(X, P_i)``,
+    ``x_j = Phi(X, P_j)`` (paper eq. (61)).  ``F_ji`` is proportional to ``F_ij'``.
+
+    Parameters
+    ----------
+    normalize : bool
+        Scale to unit Frobenius norm (the sign is arbitrary).
+
+    Raises
+    ------
+    ValueError
+        Bad cameras, or coincident camera centres (``F`` vanishes).
+    """
+    Pi = _as_float_array(P_i, "P_i")
+    Pj = _as_float_array(P_j, "P_j")
+    _check_camera(Pi, "P_i")
+    _check_camera(Pj, "P_j")
+    a = _null_vector(Pj)
+    e = Pi @ a
+    F = _skew(e) @ Pi @ np.linalg.pinv(Pj)
+    nrm = np.linalg.norm(F)
+    if nrm <= SAME_CENTER_RTOL * np.linalg.norm(Pi) * np.linalg.norm(Pj):
+        raise ValueError("P_i and P_j share the same camera centre: the fundamental matrix is undefined")
+    return F / nrm if normalize else F
+
+
+def fundamental_matrices(cameras, normalize: bool = True) -> dict[tuple[int, int], np.ndarray]:
+    """``{(i, j): F_ij for i < j}`` (0-based view indices), see :func:`fundamental_matrix`."""
+    C = validate_cameras(cameras, require_distinct=False)
+    out = {}
+    for i, j in itertools.combinations(range(len(C)), 2):
+        try:
+            out[(i, j)] = fundamental_matrix(C[i], C[j], normalize=normalize)
+        except ValueError as exc:
+            raise ValueError(f"cameras {i} and {j}: {exc}") from None
+    return out

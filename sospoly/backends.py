@@ -108,6 +108,8 @@ class ClarabelBackend:
         for c in problem.cones:
             if c.kind == "zero":
                 out.append(clarabel.ZeroConeT(c.dim))
+            elif c.kind == "nonneg":
+                out.append(clarabel.NonnegativeConeT(c.dim))
             elif c.kind == "psd":
                 out.append(clarabel.PSDTriangleConeT(c.size))
             else:  # pragma: no cover
@@ -201,6 +203,8 @@ class CvxpyBackend:
             Ar, br = problem.A[rows], problem.b[rows]
             if cone.kind == "zero":
                 cons.append(Ar @ x == br)
+            elif cone.kind == "nonneg":
+                cons.append(Ar @ x <= br)
             else:
                 S = cp.Variable((cone.size, cone.size), symmetric=True)
                 cons.append(_svec_operator(cone.size) @ cp.vec(S, order="F") == br - Ar @ x)

@@ -50,7 +50,7 @@ class GramForm(str, enum.Enum):
 
 @dataclass(frozen=True)
 class Cone:
-    kind: str      # "zero" or "psd"
+    kind: str      # "zero", "nonneg" or "psd"
     dim: int       # number of rows
     size: int = 0  # matrix side for "psd"
 
@@ -99,6 +99,24 @@ class ConicProblem:
                 b = b + t * bk
         return ConicProblem(self.q, sp.csc_matrix(A), b, self.cones, self.n_program_vars, self.psd_blocks,
                             self.objective_sign, self.objective_offset, self.form, {})
+
+    def with_margin(self, block: str, cap: float = 1.0) -> "ConicProblem":
+        """Feasibility with a margin: a last column t, G_block - t I in the PSD cone, t <= cap,
+        minimise -t.  The augmented problem is strictly feasible for every parameter value, so
+        interior-point solvers stay well-posed at the boundary of the original feasible set
+        (where the plain feasibility problem fails numerically); the original problem is
+        feasible iff t* >= 0.  ``gram_matrices(x[:-1])`` of the original gives the certificate."""
+        blk = next(b for b in self.psd_blocks if b.name == block)
+        s = blk.size
+        rows = blk.row_start + np.cumsum(np.arange(1, s + 1)) - 1   # svec diagonal positions
+        col = sp.csc_matrix((np.ones(s), (rows, np.zeros(s, np.int64))), shape=(self.n_rows, 1))
+        cap_row = sp.csc_matrix(([1.0], ([0], [self.n_cols])), shape=(1, self.n_cols + 1))
+        A = sp.vstack([sp.hstack([self.A, col]), cap_row]).tocsc()
+        b = np.append(self.b, cap)
+        q = np.zeros(self.n_cols + 1)
+        q[-1] = -1.0
+        return ConicProblem(q, A, b, self.cones + (Cone("nonneg", 1),), self.n_program_vars, self.psd_blocks,
+                            -1.0, 0.0, self.form, {})
 
     def slack(self, x: np.ndarray) -> np.ndarray:
         """s = b - A x (exact, recomputed from x)."""

@@ -25,7 +25,7 @@ import numpy as np
 
 from .conic import ConicProblem, GramForm, lower
 from .psatz import Multiplier, PsatzProblem
-from .solve import ProgramSolution, solve_conic
+from .solve import ProgramSolution, check_certificate, solve_conic
 from .status import SolveStatus
 from .tolerances import DEFAULT_TOLERANCES, Tolerances
 
@@ -60,38 +60,48 @@ class CompiledGevp:
         self.tolerances = tolerances
         self.problem: ConicProblem = lower(psatz.program, form)
 
-    def _conditioning(self, c: float):
-        """Reject certificates whose q is nearly singular relative to u's PSD error.
+    def _acceptance(self, inst: ConicProblem, c: float):
+        """Accept level c only if the original certificate checks out (see module docstring).
 
-        u + eps ||b||^2 is SOS with eps = max(0, -lambda_min(G_u)); with q >= lambda_q
-        ||b_q||^2 the bound degrades by about eps / lambda_q.  We require that proxy
-        to stay below the bisection tolerance, which rejects the "solved" answers of
-        infeasible levels where q collapses onto the minimisers (seen on the
-        six-hump camel at degree 8: lambda_q ~ 6e-6, false bound 1.3e-4 too high).
+        The solve maximises a margin t with G_u - t I >= 0; we require t >= 0 up to the PSD
+        margin, re-check every Gram matrix of the *original* problem at x, and reject
+        certificates whose q is nearly singular relative to u's PSD error: u + eps ||b||^2
+        is SOS with eps = max(0, -lambda_min(G_u)), and with q >= lambda_q ||b_q||^2 the
+        bound degrades by about eps / lambda_q, which must stay below the bisection
+        tolerance (this rejects the "solved" answers at infeasible levels where q
+        collapses onto the minimisers: six-hump camel at degree 8, lambda_q ~ 6e-6).
         """
         tol = self.tolerances
         limit = tol.bisection_abs + tol.bisection_rel * max(1.0, abs(c))
 
-        def check(mins):
+        def check(x, _mins):
+            ok, mins, resid, msg = check_certificate(inst, x[:-1], tol)
+            if not ok:
+                return False, msg
             eps = max(0.0, -mins.get("u", 0.0))
             lam_q = mins.get("q", 0.0)
             if lam_q <= 0.0 or eps / lam_q > limit:
                 return False, f"ill-conditioned q: lambda_min(q)={lam_q:.3g}, PSD error of u {eps:.3g}"
+            check.mins, check.resid = mins, resid
             return True, ""
+        check.mins, check.resid = {}, np.nan
         return check
 
     def feasible(self, c: float) -> tuple[SolveStatus, ProgramSolution]:
         inst = self.problem.instantiate(c=float(c))
-        status, sol, mins, resid, msg = solve_conic(inst, self.backend, self.tolerances, feasibility=True,
-                                                    extra_check=self._conditioning(c), retry=False)
+        aug = inst.with_margin("u")
+        check = self._acceptance(inst, c)
+        status, sol, _, _, msg = solve_conic(aug, self.backend, self.tolerances, feasibility=False,
+                                             extra_check=check, retry=False)
         prog = self.psatz.program
         if status.ok:
-            ps = ProgramSolution(status, float(c), sol.x[: prog.n_vars].copy(), inst.gram_matrices(sol.x),
-                                 inst.dual_matrices(sol.z), mins, resid, sol.attempts, prog.n_lmivar(),
-                                 sol.seconds, msg)
-        else:
-            ps = ProgramSolution(status, None, None, attempts=sol.attempts, n_lmivar=prog.n_lmivar(),
-                                 seconds=sol.seconds, message=msg)
+            x = sol.x[:-1]
+            ps = ProgramSolution(SolveStatus.FEASIBLE, float(c), x[: prog.n_vars].copy(), inst.gram_matrices(x),
+                                 inst.dual_matrices(sol.z[:-1]), check.mins, check.resid, sol.attempts,
+                                 prog.n_lmivar(), sol.seconds, msg)
+            return SolveStatus.FEASIBLE, ps
+        ps = ProgramSolution(status, None, None, attempts=sol.attempts, n_lmivar=prog.n_lmivar(),
+                             seconds=sol.seconds, message=msg)
         return status, ps
 
 

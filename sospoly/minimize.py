@@ -105,11 +105,14 @@ def _upper_from_candidates(psatz: PsatzProblem, cands, tol: Tolerances, refine: 
         p = np.asarray(cand.point, float)
         if not np.all(np.isfinite(p)):
             continue
-        pts.append(p)
         if refine:
             q = _polish(psatz.f, psatz.eq, psatz.ineq, p)
-            if q is not None:
+            if q is not None and feasibility_violation(q, psatz.eq, psatz.ineq) <= tol.feasibility:
+                # the polished point replaces the raw one: a raw candidate that violates a constraint
+                # by less than the tolerance may still have f below the true minimum (no upper bound)
                 pts.append(q)
+                continue
+        pts.append(p)
     feas = []
     for p in pts:
         if feasibility_violation(p, psatz.eq, psatz.ineq) <= tol.feasibility:
@@ -141,6 +144,12 @@ def solve_psatz(psatz: PsatzProblem, *, backend=None, form: GramForm = GramForm.
     For the free multiplier the bracket starts from the fixed-q SDP's c* (solved here
     unless ``fixed_hint`` gives it) and from ``c_hi`` (f at a feasible point), if known.
     """
+    if not psatz.eq and not psatz.ineq and psatz.f.degree % 2:
+        # f of odd degree on all of R^n is unbounded below, so no certificate exists at any degree.
+        # The SDP is then only *weakly* infeasible (no Farkas certificate): solvers cannot detect it
+        # and report numerical errors, so decide it exactly here.
+        return LowerBound(SolveStatus.INFEASIBLE, None, None, None,
+                          f"f has odd degree {psatz.f.degree} and there are no constraints: f is unbounded below")
     if psatz.multiplier == Multiplier.FREE:
         c_lo = None
         if fixed_hint is None:

@@ -93,7 +93,7 @@ def solve_conic(problem: ConicProblem, backend=None, tolerances: Tolerances = DE
                 retry: bool = True) -> tuple[SolveStatus, ConicSolution, dict, float, str]:
     """Solve and classify; returns (status, raw solution, min eigenvalues, residual, message).
 
-    ``extra_check(min_eigenvalues) -> (ok, message)`` adds a caller-specific
+    ``extra_check(x, min_eigenvalues) -> (ok, message)`` adds a caller-specific
     acceptance rule on top of :func:`check_certificate`.
     """
     be = get_backend(backend, tolerances)
@@ -102,7 +102,7 @@ def solve_conic(problem: ConicProblem, backend=None, tolerances: Tolerances = DE
     def accept(x, z):
         res = check_certificate(problem, x, tolerances)
         if res[0] and extra_check is not None:
-            ok, msg = extra_check(res[1])
+            ok, msg = extra_check(x, res[1])
             if not ok:
                 res = (False, res[1], res[2], msg)
         cache["last"] = res

@@ -1,0 +1,182 @@
+"""Loaders for the Oxford VGG multi-view data (the paper's Example 1).
+
+Formats (see the data folder's README):
+
+* ``*.P``: a 3x4 camera matrix, whitespace separated, world -> pixel;
+* ``*.corners``: one ``x y`` per line; the 0-based line number is the corner index;
+* ``*nview-corners``: one row per track, one column per view (views in file order),
+  each entry a corner index or ``*`` (also ``-1``) when the point is not visible;
+* dinosaur: ``viff.xy`` (x1 y1 ... x36 y36 per track, ``-1 -1`` missing) and
+  ``dino_Ps.mat`` (variable ``P``: a 1x36 cell of 3x4 matrices, read with scipy).
+
+The data directory is, in order: the ``data_dir`` argument, the environment variable
+``TRITOOLS_DATA``, then ``../shared/data/oxford`` relative to the working directory
+and to the repository.  The data are never part of the repository.
+"""
+from __future__ import annotations
+
+import os
+import re
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["DATA_ENV", "SEQUENCES", "PAPER_SEQUENCES", "Track", "Sequence", "data_dir", "load_sequence",
+           "read_camera", "read_corners", "read_nview_corners", "DataNotFoundError"]
+
+DATA_ENV = "TRITOOLS_DATA"
+#: sequences of the paper's Example 1 (Tables 1-6), in its order.
+PAPER_SEQUENCES = ("corridor", "dinosaur", "house", "library", "merton3", "wadham")
+SEQUENCES = PAPER_SEQUENCES + ("merton1", "merton2")
+
+
+class DataNotFoundError(FileNotFoundError):
+    pass
+
+
+@dataclass(frozen=True)
+class Track:
+    """One scene point: its row in the track file and its observations."""
+    track_id: int              # 0-based row of nview-corners / viff.xy
+    views: tuple               # view indices (0-based, file order)
+    points2d: np.ndarray       # (len(views), 2) pixels
+
+    @property
+    def n_views(self) -> int:
+        return len(self.views)
+
+
+@dataclass(frozen=True)
+class Sequence:
+    name: str
+    cameras: np.ndarray        # (V, 3, 4)
+    tracks: tuple              # Tracks seen in >= min_views views
+
+    def problem(self, track: Track):
+        """(cameras, points2d) of one track."""
+        return self.cameras[list(track.views)], track.points2d
+
+    def histogram(self) -> dict:
+        out: dict[int, int] = {}
+        for t in self.tracks:
+            out[t.n_views] = out.get(t.n_views, 0) + 1
+        return dict(sorted(out.items()))
+
+
+def data_dir(path: str | os.PathLike | None = None) -> Path:
+    """Resolve the Oxford data directory (argument, $TRITOOLS_DATA, ../shared/data/oxford)."""
+    candidates = []
+    if path is not None:
+        candidates.append(Path(path))
+    elif os.environ.get(DATA_ENV):
+        candidates.append(Path(os.environ[DATA_ENV]))
+    else:
+        candidates.append(Path.cwd().parent / "shared" / "data" / "oxford")
+        candidates.append(Path(__file__).resolve().parents[2] / "shared" / "data" / "oxford")
+    for c in candidates:
+        if c.is_dir():
+            return c
+    raise DataNotFoundError(f"Oxford data directory not found (tried {', '.join(map(str, candidates))}); "
+                            f"pass data_dir=... or set ${DATA_ENV}")
+
+
+def read_camera(path: Path) -> np.ndarray:
+    P = np.loadtxt(path, dtype=float)
+    if P.shape != (3, 4) or not np.all(np.isfinite(P)):
+        raise ValueError(f"{path}: expected a finite 3x4 camera matrix, got shape {P.shape}")
+    return P
+
+
+def read_corners(path: Path) -> np.ndarray:
+    C = np.loadtxt(path, dtype=float, ndmin=2)
+    if C.ndim != 2 or C.shape[1] != 2:
+        raise ValueError(f"{path}: expected one 'x y' pair per line, got shape {C.shape}")
+    return C
+
+
+def read_nview_corners(path: Path, n_views: int) -> list[list[int | None]]:
+    """Rows of corner indices, None where missing (``*`` or ``-1``)."""
+    rows = []
+    for lineno, line in enumerate(Path(path).read_text().splitlines(), 1):
+        tokens = line.split()
+        if not tokens:
+            continue
+        if len(tokens) != n_views:
+            raise ValueError(f"{path}:{lineno}: expected {n_views} entries, got {len(tokens)}")
+        row = []
+        for tok in tokens:
+            if tok in ("*", "-1"):
+                row.append(None)
+            else:
+                try:
+                    row.append(int(tok))
+                except ValueError:
+                    raise ValueError(f"{path}:{lineno}: bad corner index {tok!r}") from None
+        rows.append(row)
+    return rows
+
+
+def _view_files(folder: Path) -> list[tuple[Path, Path]]:
+    Ps = sorted(folder.glob("*.P"), key=lambda p: p.name)
+    if not Ps:
+        raise DataNotFoundError(f"{folder}: no *.P camera files")
+    pairs = []
+    for P in Ps:
+        corners = P.with_suffix(".corners")
+        if not corners.exists():
+            raise DataNotFoundError(f"{corners} is missing")
+        pairs.append((P, corners))
+    return pairs
+
+
+def _load_vgg(folder: Path, name: str, min_views: int) -> Sequence:
+    views = _view_files(folder)
+    cameras = np.array([read_camera(p) for p, _ in views])
+    corners = [read_corners(c) for _, c in views]
+    nv = [p for p in folder.glob("*nview-corners") if not p.name.endswith("~")]
+    if len(nv) != 1:
+        raise DataNotFoundError(f"{folder}: expected one *nview-corners file, found {len(nv)}")
+    tracks = []
+    for tid, row in enumerate(read_nview_corners(nv[0], len(views))):
+        vis = [(v, k) for v, k in enumerate(row) if k is not None]
+        if len(vis) < min_views:
+            continue
+        for v, k in vis:
+            if not 0 <= k < len(corners[v]):
+                raise ValueError(f"{nv[0]}: track {tid} refers to corner {k} of view {v}, "
+                                 f"which has {len(corners[v])} corners")
+        tracks.append(Track(tid, tuple(v for v, _ in vis), np.array([corners[v][k] for v, k in vis])))
+    return Sequence(name, cameras, tuple(tracks))
+
+
+def _load_dinosaur(folder: Path, min_views: int) -> Sequence:
+    from scipy.io import loadmat
+
+    mat = loadmat(folder / "dino_Ps.mat")
+    if "P" not in mat:
+        raise ValueError(f"{folder / 'dino_Ps.mat'}: no variable 'P'")
+    cameras = np.array([np.asarray(p, float) for p in mat["P"][0]])
+    xy = np.loadtxt(folder / "viff.xy", dtype=float, ndmin=2)
+    V = cameras.shape[0]
+    if xy.shape[1] != 2 * V:
+        raise ValueError(f"viff.xy has {xy.shape[1]} columns, expected {2 * V} for {V} cameras")
+    tracks = []
+    for tid, row in enumerate(xy):
+        pts = row.reshape(V, 2)
+        vis = [v for v in range(V) if not np.all(pts[v] == -1.0)]
+        if len(vis) >= min_views:
+            tracks.append(Track(tid, tuple(vis), pts[vis].copy()))
+    return Sequence("dinosaur", cameras, tuple(tracks))
+
+
+def load_sequence(name: str, data_dir_: str | os.PathLike | None = None, min_views: int = 2) -> Sequence:
+    """Load one Oxford sequence (cameras and tracks seen in >= ``min_views`` views)."""
+    if not re.fullmatch(r"[A-Za-z0-9_]+", str(name)):
+        raise ValueError(f"bad sequence name {name!r}")
+    folder = data_dir(data_dir_) / name
+    if not folder.is_dir():
+        raise DataNotFoundError(f"sequence {name!r} not found in {folder.parent} (known: {', '.join(SEQUENCES)})")
+    if (folder / "viff.xy").exists():
+        return _load_dinosaur(folder, min_views)
+    return _load_vgg(folder, name, min_views)

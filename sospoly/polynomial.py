@@ -62,6 +62,25 @@ class Polynomial:
 
     # ------------------------------------------------------------------ constructors
     @classmethod
+    def _raw(cls, gens: tuple, terms: dict) -> "Polynomial":
+        """Internal constructor for already-clean data (int exponent tuples, finite non-zero floats)."""
+        p = object.__new__(cls)
+        p.gens = gens
+        p.terms = terms
+        return p
+
+    @classmethod
+    def _checked(cls, gens: tuple, terms: dict) -> "Polynomial":
+        """Internal: drop exact zeros and refuse overflow to inf/NaN."""
+        out = {}
+        for e, c in terms.items():
+            if c != 0.0:
+                if not math.isfinite(c):
+                    raise ValueError(f"polynomial arithmetic overflowed (coefficient {c!r})")
+                out[e] = c
+        return cls._raw(gens, out)
+
+    @classmethod
     def constant(cls, value: float, gens: Sequence[str] = ()) -> "Polynomial":
         gens = tuple(gens)
         return cls(gens, {(0,) * len(gens): value})
@@ -155,12 +174,12 @@ class Polynomial:
         out = dict(a.terms)
         for e, c in b.terms.items():
             out[e] = out.get(e, 0.0) + c
-        return Polynomial(a.gens, out)
+        return Polynomial._raw(a.gens, {e: c for e, c in out.items() if c != 0.0})
 
     __radd__ = __add__
 
     def __neg__(self) -> "Polynomial":
-        return Polynomial(self.gens, {e: -c for e, c in self.terms.items()})
+        return Polynomial._raw(self.gens, {e: -c for e, c in self.terms.items()})
 
     def __pos__(self) -> "Polynomial":
         return self
@@ -178,7 +197,7 @@ class Polynomial:
     def __mul__(self, other) -> "Polynomial":
         if isinstance(other, numbers.Real) and not isinstance(other, bool):
             s = _check_finite(other, "scalar")
-            return Polynomial(self.gens, {e: c * s for e, c in self.terms.items()})
+            return Polynomial._checked(self.gens, {e: c * s for e, c in self.terms.items()})
         if not _is_operand(other):
             return NotImplemented
         other = as_polynomial(other, self.gens)
@@ -188,7 +207,7 @@ class Polynomial:
             for e2, c2 in b.terms.items():
                 e = tuple(p + q for p, q in zip(e1, e2))
                 out[e] = out.get(e, 0.0) + c1 * c2
-        return Polynomial(a.gens, out)
+        return Polynomial._checked(a.gens, out)
 
     __rmul__ = __mul__
 

@@ -196,3 +196,24 @@ def test_tritools_imports_no_solver():
     for path in root.rglob("*.py"):
         text = path.read_text()
         assert not re.search(r"^\s*(import|from)\s+(cvxpy|clarabel)", text, re.M), path
+
+
+def test_lower_bound_above_upper_bound_is_never_a_certificate(monkeypatch):
+    """A (simulated) solver whose bound is 1.0 too high in c: reported as a numerical failure."""
+    import dataclasses
+
+    import sospoly
+    import tritools.triangulate as T
+
+    real = sospoly.solve_psatz
+
+    def wrong(*a, **k):
+        lb = real(*a, **k)
+        return dataclasses.replace(lb, lower_bound=lb.lower_bound + 1.0)
+
+    monkeypatch.setattr(T.sospoly, "solve_psatz", wrong)
+    cams, regions, _ = _example(4)
+    res = tritools.triangulate(cams, regions, "corollary1", delta=4)
+    assert res.status == Status.NUMERICAL_FAILURE and res.optimal is False
+    assert res.gamma_lb > res.gamma_ub
+    assert [a[1] for a in res.attempts] == ["numerical_failure", "tight:numerical_failure"]

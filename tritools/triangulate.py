@@ -19,11 +19,13 @@
    normalised units where c is O(1).  An error dc in c moves gamma by about
    dc / (4 N gamma), so comparing gammas relatively would fail for tiny
    residuals; comparing c does not.  A lower bound above the upper bound by more
-   than the tolerance is reported as NUMERICAL_FAILURE, never as a certificate;
+   than the tolerance is re-solved once with 100x tighter solver tolerances, and
+   reported as NUMERICAL_FAILURE if it persists, never as a certificate;
 7. not certified: delta <- delta + 2 up to ``max_delta``.
 """
 from __future__ import annotations
 
+import dataclasses
 import time
 
 import numpy as np
@@ -160,6 +162,14 @@ def triangulate(cameras, regions, method: Method | str = Method.THEOREM1, delta:
         result = _solve_at(problem, norm, cams, regions, cams_n, regs_n, method, d, multiplier, refine,
                            backend, form, tolerances, timings)
         attempts.append((d, result.status.value, result.gamma_lb, result.gamma_ub))
+        if result.status == Status.NUMERICAL_FAILURE:
+            # a lower bound above a feasible value: solve again with 100x tighter solver tolerances
+            tight = dataclasses.replace(tolerances, solver_gap_abs=tolerances.solver_gap_abs * 1e-2,
+                                        solver_gap_rel=tolerances.solver_gap_rel * 1e-2,
+                                        solver_feas=tolerances.solver_feas * 1e-2)
+            result = _solve_at(problem, norm, cams, regions, cams_n, regs_n, method, d, multiplier, refine,
+                               backend, form, tight, timings)
+            attempts.append((d, "tight:" + result.status.value, result.gamma_lb, result.gamma_ub))
         if result.status == Status.OPTIMAL:
             break
         d += 2
@@ -168,8 +178,6 @@ def triangulate(cameras, regions, method: Method | str = Method.THEOREM1, delta:
 
 
 def _replace(res: TriangulationResult, **kw) -> TriangulationResult:
-    import dataclasses
-
     return dataclasses.replace(res, **kw)
 
 

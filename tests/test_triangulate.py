@@ -202,8 +202,11 @@ def test_lower_bound_above_upper_bound_is_never_a_certificate(monkeypatch):
     """A (simulated) solver whose bound is 1.0 too high in c: reported as a numerical failure."""
     import dataclasses
 
+    import importlib
+
     import sospoly
-    import tritools.triangulate as T
+
+    T = importlib.import_module("tritools.triangulate")   # the module (the package exports a function of that name)
 
     real = sospoly.solve_psatz
 

@@ -63,8 +63,12 @@ class CompiledGevp:
     def _acceptance(self, inst: ConicProblem, c: float):
         """Accept level c only if the original certificate checks out (see module docstring).
 
-        The solve maximises a margin t with G_u - t I >= 0; we require t >= 0 up to the PSD
-        margin, re-check every Gram matrix of the *original* problem at x, and reject
+        The solve maximises a margin t with G_u - t I >= 0; we require t and
+        lambda_min(G_u) >= -gevp_psd_margin * max(1, max|G_u|) (100x stricter than the
+        general PSD margin: above c*, lambda_min(G_u) ~ -(c - c*)/2, so this keeps the
+        accepted level within solver accuracy of c*; it cannot be 0 exactly because Gram
+        bases with monomials outside the Newton polytope force singular Grams), re-check
+        every Gram matrix of the *original* problem at x, and reject
         certificates whose q is nearly singular relative to u's PSD error: u + eps ||b||^2
         is SOS with eps = max(0, -lambda_min(G_u)), and with q >= lambda_q ||b_q||^2 the
         bound degrades by about eps / lambda_q, which must stay below the bisection
@@ -79,6 +83,12 @@ class CompiledGevp:
             if not ok:
                 return False, msg
             eps = max(0.0, -mins.get("u", 0.0))
+            G = inst.gram_matrices(x[:-1])["u"]
+            strict = tol.gevp_psd_margin * max(1.0, float(np.max(np.abs(G))))
+            if x[-1] < -strict or eps > strict:
+                # above c*, lambda_min(G_u) ~ -(c - c*)/2: the general PSD margin would let the
+                # accepted level creep ~1e-7 above c*; this one keeps it at solver accuracy
+                return False, f"margin t = {x[-1]:.3g}, lambda_min(G_u) = {-eps:.3g} (limit {strict:.2g})"
             lam_q = mins.get("q", 0.0)
             if lam_q <= 0.0 or eps / lam_q > limit:
                 return False, f"ill-conditioned q: lambda_min(q)={lam_q:.3g}, PSD error of u {eps:.3g}"

@@ -4,9 +4,11 @@
 
 * ``lower_bound`` -- c* of the Positivstellensatz program (a valid lower bound of
   min f on {g = 0, h >= 0}), only when the solve is OPTIMAL and checked;
-* ``minimizers`` -- extracted candidate points (kernel of the optimal Gram
-  matrix, and moment matrix with a rank test), optionally polished locally, kept
-  when feasible to ``Tolerances.feasibility``, sorted by f;
+* ``candidates`` -- every extracted point (kernel of the optimal Gram matrix, and
+  moment matrix with a rank test), optionally polished locally, kept when feasible
+  to ``Tolerances.feasibility``, sorted by f, near-duplicates merged;
+* ``minimizers`` -- the candidates whose f is within the optimality tolerance of
+  ``upper_bound`` (the global minimisers found, when ``optimal``);
 * ``upper_bound`` -- f at the best feasible candidate;
 * ``optimal`` -- ``upper_bound - lower_bound <= gap_abs + gap_rel*max(1,|upper|)``
   (:class:`~sospoly.tolerances.Tolerances`): a certificate of global optimality
@@ -49,6 +51,7 @@ class MinimizeResult:
     solution: ProgramSolution | None = None
     seconds: float = 0.0
     message: str = ""
+    candidates: tuple = ()
 
     @property
     def gap(self) -> float | None:
@@ -117,10 +120,14 @@ def _upper_from_candidates(psatz: PsatzProblem, cands, tol: Tolerances, refine: 
     for p in pts:
         if feasibility_violation(p, psatz.eq, psatz.ineq) <= tol.feasibility:
             feas.append((float(psatz.f.evaluate(p)), p))
-    feas.sort(key=lambda t: t[0])
+    return _dedupe(sorted(feas, key=lambda t: t[0]))
+
+
+def _dedupe(found, rtol: float = 1e-4):
+    """Merge candidates closer than rtol*max(1,|p|) (extraction noise), keeping the lowest f."""
     uniq = []
-    for val, p in feas:
-        if all(np.linalg.norm(p - q) > 1e-5 * max(1.0, np.linalg.norm(q)) for _, q in uniq):
+    for val, p in found:
+        if all(np.linalg.norm(p - q) > rtol * max(1.0, np.linalg.norm(q)) for _, q in uniq):
             uniq.append((val, p))
     return uniq
 
@@ -198,15 +205,17 @@ def minimize(f, eq=(), ineq=(), degree: int | None = None, multiplier=Multiplier
         return MinimizeResult(lb.status, lb.lower_bound, None, (), False, psatz.n_lmivar, psatz.degree, mult_name,
                               psatz.gens, lb.bracket, lb.solution, elapsed, lb.message)
     found = found + _upper_from_candidates(psatz, candidates_of(psatz, lb.solution, tolerances), tolerances, refine)
-    found.sort(key=lambda t: t[0])
+    found = _dedupe(sorted(found, key=lambda t: t[0]))
     upper = found[0][0] if found else None
     status, optimal, msg = SolveStatus.OPTIMAL, tolerances.certified(lb.lower_bound, upper), ""
     if upper is not None and lb.lower_bound - upper > tolerances.gap_abs + tolerances.gap_rel * max(1.0, abs(upper)):
         status, optimal = SolveStatus.INCONSISTENT, False
         msg = f"lower bound {lb.lower_bound:.10g} exceeds f at a feasible point {upper:.10g}: numerical failure"
-    return MinimizeResult(status, lb.lower_bound, upper, tuple(p for _, p in found), optimal, psatz.n_lmivar,
+    near = tolerances.gap_abs + tolerances.gap_rel * max(1.0, abs(upper)) if upper is not None else 0.0
+    minimizers = tuple(p for val, p in found if val <= upper + near) if upper is not None else ()
+    return MinimizeResult(status, lb.lower_bound, upper, minimizers, optimal, psatz.n_lmivar,
                           psatz.degree, mult_name, psatz.gens, lb.bracket, lb.solution,
-                          time.perf_counter() - t0, msg)
+                          time.perf_counter() - t0, msg, tuple(p for _, p in found))
 
 
 @dataclass(frozen=True)

@@ -15,6 +15,9 @@ Why these values
   tolerance, so a genuine certificate passes with room to spare, while the
   "optimal but infeasible" answers seen on near-degenerate problems (Motzkin at
   degree 10) have eigenvalues around -1e-5 and are rejected.
+* ``gevp_psd_margin``: the stricter margin for accepting a bisection level of the
+  GEVP (see :mod:`sospoly.gevp`): above the optimum c*, lambda_min(G_u) is about
+  -(c - c*)/2, so the general margin would let accepted levels creep ~1e-7 above c*.
 * ``identity_residual``: maximal coefficient mismatch (relative to the largest
   coefficient of the polynomial) between u(v) and b(v)^T G b(v) for a certificate
   to be accepted (the image form is exact by construction; the kernel form and
@@ -49,6 +52,7 @@ class Tolerances:
     solver_feas: float = 1e-9
     solver_max_iter: int = 300
     psd_margin: float = 1e-7
+    gevp_psd_margin: float = 1e-9
     identity_residual: float = 1e-7
     gap_abs: float = 1e-6
     gap_rel: float = 1e-6

@@ -36,6 +36,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse as sp
 
+from .basis import MonomialIndex
 from .linpoly import LinPoly
 from .program import BlockKind, Sense, SOSProgram
 from .svec import SQRT2, smat, svec_scale
@@ -180,11 +181,6 @@ class _Builder:
                              shape=(nrows, ncols))
 
 
-def _coef_rows(expr: LinPoly, gb, missing_ok=True):
-    idx = gb.product_index.find(expr.E, missing_ok=missing_ok)
-    return idx
-
-
 def lower(program: SOSProgram, form: GramForm = GramForm.IMAGE) -> ConicProblem:
     """Assemble the conic data of ``program`` (see module docstring)."""
     form = GramForm(form)
@@ -240,7 +236,6 @@ def lower(program: SOSProgram, form: GramForm = GramForm.IMAGE) -> ConicProblem:
                 missing_keys.setdefault(e, None)
         if missing_keys:
             mk = np.array(list(missing_keys), dtype=np.int64).reshape(-1, len(program.gens))
-            from .basis import MonomialIndex
             mindex = MonomialIndex(mk)
             for name, expr in terms:
                 ridx = mindex.find(expr.E, missing_ok=True)

@@ -19,7 +19,7 @@ reported is ``c_lo``, the last level with a checked certificate.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 

@@ -17,19 +17,18 @@
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
-from .conic import GramForm, lower
+from .conic import GramForm
 from .extraction import Candidate, extract_from_gram, extract_from_moment
 from .gevp import CompiledGevp, GevpResult, bisect
 from .polynomial import Polynomial
 from .program import SOSProgram
-from .psatz import Multiplier, PsatzProblem, build_psatz, common_gens
+from .psatz import Multiplier, PsatzProblem, build_psatz
 from .solve import ProgramSolution, solve_program
 from .status import SolveStatus
-from .svec import smat
 from .tolerances import DEFAULT_TOLERANCES, Tolerances
 
 __all__ = ["MinimizeResult", "SOSResult", "LowerBound", "minimize", "solve_psatz", "is_sos", "feasibility_violation",

@@ -23,10 +23,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .basis import GramBasis, monomials, sigma
+from .basis import GramBasis, monomials
 from .linpoly import LinPoly
 from .polynomial import Polynomial, as_polynomial
-from .svec import triu_pairs
 
 __all__ = ["SOSProgram", "Sense", "VarBlock", "SOSConstraint", "EqualityConstraint"]
 
@@ -213,7 +212,3 @@ class SOSProgram:
             lines.append(f"  SOS {c.name}: Gram {c.gram.size}x{c.gram.size}")
         lines.append(f"  N_LMIVAR = {self.n_lmivar()}")
         return "\n".join(lines)
-
-
-def gram_pairs(s: int):
-    return triu_pairs(s)

@@ -13,8 +13,6 @@ import sys
 
 
 def _example(args) -> int:
-    import numpy as np
-
     from .scene import paper_example, paper_table
     from .triangulate import triangulate
 

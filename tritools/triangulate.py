@@ -134,7 +134,6 @@ def triangulate(cameras, regions, method: Method | str = Method.THEOREM1, delta:
         raise ValueError(f"method must be 'theorem1' or 'corollary1', got {method!r}") from None
     cams = validate_cameras(cameras)
     regions = validate_regions(regions, cams.shape[0])
-    N = cams.shape[0]
     timings = {}
 
     t0 = time.perf_counter()

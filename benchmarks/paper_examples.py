@@ -13,6 +13,7 @@ Theorem 1 does not certify are counted for Theorem 1 and excluded for the others
 from __future__ import annotations
 
 import argparse
+import multiprocessing
 import os
 import sys
 import time
@@ -88,7 +89,8 @@ def example5(points: int, trials: int, seed: int, workers: int) -> list[str]:
     cases = example5_cases(seed=seed, n_points=points, trials=trials)
     t0 = time.perf_counter()
     if workers > 1:
-        with ProcessPoolExecutor(workers) as ex:
+        # spawn, not fork: a forked child deadlocks in the solver's thread pool initialised by the parent
+        with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn")) as ex:
             results = list(ex.map(_solve_case, cases, chunksize=4))
     else:
         results = [_solve_case(c) for c in cases]

@@ -26,6 +26,7 @@
 from __future__ import annotations
 
 import dataclasses
+import enum
 import time
 
 import numpy as np
@@ -33,15 +34,22 @@ import numpy as np
 import sospoly
 from sospoly import DEFAULT_TOLERANCES, GramForm, Multiplier, SolveStatus, Tolerances
 from sospoly.extraction import best_in_family, kernel_family
+from sospoly.verify import verify_quadratic
 
 from .constraints import Method
-from .geometry import gamma as gamma_of, point_from_image_points, validate_cameras
+from .geometry import dlt, gamma as gamma_of, point_from_image_points, project, validate_cameras
 from .normalize import Normalization, normalization_for
 from .problem import TriangulationProblem, build_problem
 from .regions import Region
 from .result import Status, TriangulationResult
 
-__all__ = ["triangulate", "validate_regions", "refine_l2", "MAX_FAMILY_DIM"]
+__all__ = ["triangulate", "validate_regions", "refine_l2", "MAX_FAMILY_DIM", "SolvePath"]
+
+
+class SolvePath(str, enum.Enum):
+    SDP = "sdp"
+    AUTO = "auto"
+
 
 #: kernel families of dimension up to this are searched for the best candidate.
 MAX_FAMILY_DIM = 3
@@ -113,7 +121,8 @@ def _estimate(problem: TriangulationProblem, psatz, sol, cams_n, regs_n, tol):
 
 
 def triangulate(cameras, regions, method: Method | str = Method.THEOREM1, delta: int | None = None,
-                max_delta: int | None = None, *, multiplier=Multiplier.FIXED, refine: bool = True,
+                max_delta: int | None = None, *, path: SolvePath | str = SolvePath.SDP,
+                multiplier=Multiplier.FIXED, refine: bool = True,
                 normalize: bool = True, backend=None, form: GramForm = GramForm.IMAGE,
                 tolerances: Tolerances = DEFAULT_TOLERANCES) -> TriangulationResult:
     """Certified triangulation of one scene point (see module docstring).
@@ -126,7 +135,15 @@ def triangulate(cameras, regions, method: Method | str = Method.THEOREM1, delta:
     delta : first relaxation degree (even, >= delta_min; default delta_min)
     max_delta : last degree tried (default: delta if given, else delta_min + 2)
     multiplier : "fixed" (one SDP, the paper's q) or "free" (GEVP by bisection)
+    path : "sdp" (always solve the SDP) or "auto" (at delta = 2 with point regions, first try
+        certification by verification -- local optimum, KKT multipliers, Lagrangian bound,
+        :mod:`sospoly.verify` -- and fall back to the SDP when it does not certify);
+        ``certified_by`` says which path certified the result
     """
+    try:
+        path = SolvePath(path)
+    except ValueError:
+        raise ValueError(f"path must be 'sdp' or 'auto', got {path!r}") from None
     t_start = time.perf_counter()
     try:
         method = Method(method)
@@ -156,6 +173,13 @@ def triangulate(cameras, regions, method: Method | str = Method.THEOREM1, delta:
 
     attempts = []
     result = None
+    if SolvePath(path) == SolvePath.AUTO and delta == 2:
+        result = _verify_fast(problem, norm, cams, regions, cams_n, regs_n, method, tolerances, timings)
+        if result is not None:
+            timings["total"] = time.perf_counter() - t_start
+            return _replace(result, timings=dict(timings), attempts=((2, "verified", result.gamma_lb,
+                                                                      result.gamma_ub),))
+        attempts.append((2, "verification_failed", None, None))
     d = delta
     while d <= last:
         result = _solve_at(problem, norm, cams, regions, cams_n, regs_n, method, d, multiplier, refine,
@@ -174,6 +198,39 @@ def triangulate(cameras, regions, method: Method | str = Method.THEOREM1, delta:
         d += 2
     timings["total"] = time.perf_counter() - t_start
     return _replace(result, timings=dict(timings), attempts=tuple(attempts))
+
+
+def _verify_fast(problem, norm, cams, regions, cams_n, regs_n, method, tol, timings):
+    """Certification by verification (:mod:`sospoly.verify`): local L2 optimum from the DLT
+    estimate, KKT multipliers, Lagrangian bound.  Only for delta = 2 programs without
+    inequalities or auxiliary variables (point regions); None when it does not certify."""
+    if problem.ineq or any(r.n_aux for r in regs_n) or problem.f.degree > 2 or \
+            any(g.degree > 2 for g in problem.eq):
+        return None
+    t0 = time.perf_counter()
+    try:
+        X0 = dlt(cams_n, np.array([r.center for r in regs_n]))
+    except ValueError:
+        return None
+    Xn = refine_l2(X0, cams_n, regs_n)
+    if Xn is None:
+        return None
+    g_n = gamma_of(Xn, cams_n, regs_n)
+    if not np.isfinite(g_n):
+        return None
+    v = np.concatenate([project(Xn, P) for P in cams_n])[: 2 * problem.n_views]
+    ver = verify_quadratic(problem.f, problem.eq, v, gens=problem.gens, tolerances=tol)
+    timings["verify"] = time.perf_counter() - t0
+    if not ver.certified:
+        return None
+    N = problem.n_views
+    X = norm.world_point(Xn)
+    gamma_ub = float(gamma_of(X, cams, regions))
+    gamma_lb = float(np.sqrt(max(ver.lower_bound, 0.0) / (2 * N)) / norm.scale)
+    n_lmivar = sospoly.n_lmivar_formula(len(problem.gens), 2, [g.degree for g in problem.eq])
+    return TriangulationResult(method=method.value, status=Status.OPTIMAL, X=X, gamma_ub=gamma_ub, gamma_lb=gamma_lb,
+                               optimal=True, delta=2, n_lmivar=n_lmivar, image_points=norm.image_points(v.reshape(N, 2)),
+                               X_raw=X, gamma_ub_raw=gamma_ub, certified_by="verification")
 
 
 def _replace(res: TriangulationResult, **kw) -> TriangulationResult:

@@ -197,3 +197,22 @@ def test_triangulation_result_record():
     fields = [f for f in TriangulationResult.__dataclass_fields__]
     assert fields == ["method", "status", "X", "gamma_ub", "gamma_lb", "optimal", "delta", "n_lmivar",
                       "image_points", "X_raw", "gamma_ub_raw", "certified_by", "message", "timings", "attempts"]
+
+
+def test_pycolmap_multiview_baseline_when_installed():
+    pytest.importorskip("pycolmap", reason="pycolmap not installed (optional extra 'colmap')")
+    from tritools.baselines import decompose_camera, pycolmap_multiview
+    from tritools.scene import random_scene
+
+    scene = random_scene(4, 2, noise_px=0.0, seed=5)
+    for P in scene.cameras:
+        K, Rt = decompose_camera(P)
+        Q = K @ Rt
+        # P = K [R | t] up to scale, R a rotation, K upper triangular with positive diagonal
+        # parallel as vectors: |<Q, P>| = |Q| |P|
+        assert abs(abs(Q.ravel() @ P.ravel()) - np.linalg.norm(Q) * np.linalg.norm(P)) <= 1e-9 * np.linalg.norm(Q) * np.linalg.norm(P)
+        assert np.allclose(Rt[:, :3] @ Rt[:, :3].T, np.eye(3), atol=1e-10) and np.linalg.det(Rt[:, :3]) > 0
+        assert np.allclose(np.tril(K, -1), 0) and np.all(np.diag(K) > 0)
+    r = pycolmap_multiview(scene.cameras, scene.regions(0, noisy=False))
+    np.testing.assert_allclose(r.X, scene.points3d[0], atol=1e-8 * max(1, np.linalg.norm(scene.points3d[0])))
+    assert r.gamma_lb is None and r.optimal is None

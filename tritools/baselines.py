@@ -32,6 +32,7 @@ from .result import Status, TriangulationResult
 
 __all__ = [
     "dlt_baseline", "newton", "nelder_mead", "particle_swarm", "sqp", "point_cost_derivatives", "BASELINES",
+    "pycolmap_multiview", "decompose_camera",
     "NEWTON_MAX_ITER", "NEWTON_GTOL", "PSO_SWARM_PER_DIM", "PSO_MAX_SWARM", "PSO_INERTIA_RANGE",
     "PSO_SELF_WEIGHT", "PSO_SOCIAL_WEIGHT", "PSO_MIN_NEIGHBORS_FRACTION", "PSO_MAX_STALL", "PSO_FTOL",
     "BIG_COST",
@@ -356,6 +357,43 @@ def particle_swarm(cameras, regions, *, seed=0, bounds: float = 100.0, max_iter:
     X, fbest, it, msg = _pso(lambda Xs: _gamma_unchecked(Xs, C, R), np.full(3, -b), np.full(3, b), rng,
                              max_iter, X0)
     return _finish("pso", X, C, R, t0, f"{msg} (iterations={it})")
+
+
+# ----------------------------------------------------------------------------- pycolmap (optional)
+def decompose_camera(P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """P ~ K [R | t] (RQ decomposition, K upper triangular with positive diagonal, K[2,2] = 1,
+    det R = +1).  Returns (K, cam_from_world = [R | t])."""
+    from scipy.linalg import rq
+
+    P = np.asarray(P, float)
+    if np.linalg.det(P[:, :3]) < 0:
+        P = -P
+    K, R = rq(P[:, :3])
+    S = np.diag(np.sign(np.diag(K)))
+    K, R = K @ S, S @ R
+    t = np.linalg.solve(K, P[:, 3])
+    scale = K[2, 2]
+    return K / scale, np.hstack([R, t[:, None]])
+
+
+def pycolmap_multiview(cameras, regions) -> TriangulationResult:
+    """COLMAP's multi-view linear triangulation (``pycolmap.triangulate_multi_view_point``) of
+    the region centres, each P decomposed into K [R | t] and each point turned into the
+    bearing K^-1 [x, 1].  Needs the optional ``pycolmap`` package (extra ``colmap``)."""
+    import pycolmap
+
+    t0 = time.perf_counter()
+    C, R = _prepare(cameras, regions)
+    cams, rays = [], []
+    for P, reg in zip(C, R):
+        K, Rt = decompose_camera(P)
+        ray = np.linalg.solve(K, np.append(reg.center, 1.0))
+        cams.append(Rt)
+        rays.append(ray / np.linalg.norm(ray))
+    X = pycolmap.triangulate_multi_view_point(cams, np.array(rays))
+    if X is None:
+        return _finish("pycolmap", None, C, R, t0, "pycolmap found no point", Status.ILL_POSED)
+    return _finish("pycolmap", np.asarray(X, float).ravel(), C, R, t0)
 
 
 BASELINES: dict[str, Callable[..., TriangulationResult]] = {

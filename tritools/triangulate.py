@@ -139,6 +139,9 @@ def triangulate(cameras, regions, method: Method | str = Method.THEOREM1, delta:
         certification by verification -- local optimum, KKT multipliers, Lagrangian bound,
         :mod:`sospoly.verify` -- and fall back to the SDP when it does not certify);
         ``certified_by`` says which path certified the result
+
+    ``result.attempts`` lists, per degree tried, ``(delta, status, gamma_lb, gamma_ub,
+    solver attempts)`` where the solver attempts are the retry chain's ``label:status``.
     """
     try:
         path = SolvePath(path)
@@ -184,7 +187,7 @@ def triangulate(cameras, regions, method: Method | str = Method.THEOREM1, delta:
     while d <= last:
         result = _solve_at(problem, norm, cams, regions, cams_n, regs_n, method, d, multiplier, refine,
                            backend, form, tolerances, timings)
-        attempts.append((d, result.status.value, result.gamma_lb, result.gamma_ub))
+        attempts.append((d, result.status.value, result.gamma_lb, result.gamma_ub, result.attempts))
         if result.status == Status.NUMERICAL_FAILURE:
             # a lower bound above a feasible value: solve again with 100x tighter solver tolerances
             tight = dataclasses.replace(tolerances, solver_gap_abs=tolerances.solver_gap_abs * 1e-2,
@@ -192,7 +195,7 @@ def triangulate(cameras, regions, method: Method | str = Method.THEOREM1, delta:
                                         solver_feas=tolerances.solver_feas * 1e-2)
             result = _solve_at(problem, norm, cams, regions, cams_n, regs_n, method, d, multiplier, refine,
                                backend, form, tight, timings)
-            attempts.append((d, "tight:" + result.status.value, result.gamma_lb, result.gamma_ub))
+            attempts.append((d, "tight:" + result.status.value, result.gamma_lb, result.gamma_ub, result.attempts))
         if result.status == Status.OPTIMAL:
             break
         d += 2
@@ -247,7 +250,8 @@ def _solve_at(problem, norm: Normalization, cams, regions, cams_n, regs_n, metho
     c_hi = None
     lb = sospoly.solve_psatz(psatz, backend=backend, form=form, tolerances=tol, c_hi=c_hi)
     timings[f"solve_d{delta}"] = time.perf_counter() - t0
-    common = dict(method=method.value, delta=delta, n_lmivar=psatz.n_lmivar)
+    solver_attempts = tuple(f"{a.label}:{a.solver_status}" for a in (lb.solution.attempts if lb.solution else ()))
+    common = dict(method=method.value, delta=delta, n_lmivar=psatz.n_lmivar, attempts=solver_attempts)
     if lb.status != SolveStatus.OPTIMAL or lb.solution is None or lb.solution.x is None:
         return TriangulationResult(status=Status.SOLVER_FAILED, X=None, gamma_ub=None,
                                    message=f"SDP at delta={delta}: {lb.status.value} {lb.message}".strip(), **common)

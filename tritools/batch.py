@@ -6,6 +6,7 @@ stops or shrinks the batch.
 """
 from __future__ import annotations
 
+import dataclasses
 import time
 from typing import Iterable, Sequence
 
@@ -61,7 +62,5 @@ def triangulate_many(problems: Iterable[Sequence], method="corollary1", delta=No
                 if r2.status == Status.OPTIMAL:
                     res = r2
                     break
-        import dataclasses
-
         out.append(dataclasses.replace(res, attempts=tuple(tried)))
     return out

@@ -40,8 +40,9 @@ class Candidate:
 
 def _degree1_rows(basis: np.ndarray) -> np.ndarray | None:
     n = basis.shape[1]
-    idx = MonomialIndex(basis).find(np.eye(n, dtype=np.int64), missing_ok=True)
-    const = MonomialIndex(basis).find(np.zeros((1, n), dtype=np.int64), missing_ok=True)
+    index = MonomialIndex(basis)
+    idx = index.find(np.eye(n, dtype=np.int64), missing_ok=True)
+    const = index.find(np.zeros((1, n), dtype=np.int64), missing_ok=True)
     if np.any(idx < 0) or const[0] != 0:
         return None
     return idx

@@ -14,16 +14,10 @@ from .constraints import Method
 from .geometry import dlt, fundamental_matrix, gamma, project, validate_cameras
 from .regions import Ellipse, EllipseBorder, Point, Polytope, Region, Segment
 from .result import Status, TriangulationResult
+from .scene import paper_example
 from .triangulate import triangulate
 
 __version__ = "0.1.0"
-
-
-def paper_example(k: int):
-    """(cameras, regions) of the paper's Example k (2, 3 or 4)."""
-    from .scene import paper_example as _pe
-
-    return _pe(k)
 
 
 __all__ = ["Method", "dlt", "fundamental_matrix", "gamma", "project", "validate_cameras", "Ellipse",

@@ -27,7 +27,7 @@ import numpy as np
 from scipy import optimize
 
 from .geometry import PointAtInfinityError, _gamma_unchecked, _project, dlt, point_from_image_points, validate_cameras
-from .regions import Point, as_regions
+from .regions import Point, as_regions, positive_number
 from .result import Status, TriangulationResult
 
 __all__ = [
@@ -262,13 +262,7 @@ def sqp(cameras, regions, *, bounds: float = 100.0, init: str = "algebraic", **o
 
 
 def _check_bounds(bounds) -> float:
-    try:
-        b = float(bounds)
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f"bounds must be a positive number, got {bounds!r}") from exc
-    if not (np.isfinite(b) and b > 0):
-        raise ValueError(f"bounds must be a positive finite number, got {bounds!r}")
-    return b
+    return positive_number(bounds, "bounds")
 
 
 # ----------------------------------------------------------------------------- PSO

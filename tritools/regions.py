@@ -95,14 +95,19 @@ def _points(points, name: str = "points") -> tuple[np.ndarray, bool]:
     raise ValueError(f"{name} must have shape (2,) or (m, 2), got {arr.shape}")
 
 
-def _similarity_args(scale, shift) -> tuple[float, np.ndarray]:
+def positive_number(value, name: str) -> float:
+    """``value`` as a float, or a ValueError naming ``name`` unless it is finite and > 0."""
     try:
-        s = float(scale)
+        v = float(value)
     except (TypeError, ValueError) as exc:
-        raise ValueError(f"scale must be a positive real number, got {scale!r}") from exc
-    if not (math.isfinite(s) and s > 0):
-        raise ValueError(f"scale must be a positive finite number, got {scale!r}")
-    return s, _vector(shift, "shift")
+        raise ValueError(f"{name} must be a positive real number, got {value!r}") from exc
+    if not (math.isfinite(v) and v > 0):
+        raise ValueError(f"{name} must be a positive finite number, got {value!r}")
+    return v
+
+
+def _similarity_args(scale, shift) -> tuple[float, np.ndarray]:
+    return positive_number(scale, "scale"), _vector(shift, "shift")
 
 
 def _sq(p):

@@ -18,9 +18,10 @@ Ellipse (filled)   2     ||x - y||^2               h = 1 - (y-x^)' D^-1 (y-x^)
 
 Besides the polynomials, every region computes the exact Euclidean distance
 ``d(p, R)`` (paper eq. (7)) and closest point, used to evaluate ``gamma(X)``.
-A new region type only needs to subclass :class:`Region` and implement
-``n_aux``, ``polynomials``, ``closest_point``, ``center``, ``similarity`` and
-``_fields``; it is registered for :meth:`Region.from_dict` by its ``kind``.
+A new region type only needs to subclass :class:`Region` (as a frozen dataclass
+with ``eq=False``) and implement ``n_aux``, ``polynomials``, ``closest_point``,
+``center`` and ``similarity`` (docs/regions.md has a worked example); a class
+attribute ``kind`` registers it for :meth:`Region.from_dict`.
 """
 from __future__ import annotations
 
@@ -162,7 +163,11 @@ class RegionPolynomials:
 class Region(abc.ABC):
     """Abstract admissible region ``R_i`` of the image plane (SPEC §2).
 
-    Subclasses are frozen dataclasses; equality and hashing use :meth:`to_dict`.
+    A region declares ``n_aux`` (``n_i``), ``polynomials(x, y)`` (``f_i``, ``g_i``,
+    ``h_i`` of paper eqs. (13)-(14)), the exact ``closest_point`` (hence ``distance``,
+    paper eq. (7)), a representative ``center`` and ``similarity`` (the region in
+    normalised coordinates).  Subclasses are frozen dataclasses declared with
+    ``eq=False``; equality and hashing use :meth:`to_dict`.
     """
 
     kind: ClassVar[str] = ""
@@ -195,9 +200,13 @@ class Region(abc.ABC):
     def similarity(self, scale: float, shift) -> "Region":
         """The same region in the coordinates ``x' = scale * (x - shift)``."""
 
-    @abc.abstractmethod
     def _fields(self) -> dict[str, Any]:
-        """Data fields for :meth:`to_dict` (lists of floats)."""
+        """Data fields for :meth:`to_dict`: by default the dataclass fields given to
+        ``__init__``, arrays as lists (override when the constructor differs)."""
+        import dataclasses
+
+        return {f.name: (lambda v: v.tolist() if isinstance(v, np.ndarray) else v)(getattr(self, f.name))
+                for f in dataclasses.fields(self) if f.init}
 
     # -- generic methods -----------------------------------------------------
     def distance(self, points) -> float | np.ndarray:

@@ -106,7 +106,9 @@ class TriangulationResult:
     X_raw, gamma_ub_raw : optional
         Extracted estimate before local refinement and its ``gamma``.
     certified_by : str, optional
-        Which estimate the certificate applies to (e.g. ``"raw"``/``"refined"``).
+        Which path produced the certificate: ``"sdp"`` (the LMI of Theorem 1 /
+        Corollary 1) or ``"verification"`` (``path="auto"``: KKT multipliers and
+        the Lagrangian bound of :mod:`sospoly.verify`); ``None`` when not certified.
     message : str
         Human readable details.
     timings : dict

@@ -402,6 +402,7 @@ def dataset_summary(results: Sequence[TriangulationResult], n_views: Sequence[in
             b.set_gid(gid)
         bottom += counts[c]
     ax_b.set_xticks(pos_x, [str(n) for n in Ns])
+    ax_b.set_ylim(0, max(1.0, float(bottom.max(initial=0.0))) * 1.12)
     ax_b.set_xlabel("number of views N")
     ax_b.set_ylabel("points")
     ax_b.set_title(f"certified: {int(counts[0].sum())} of {len(results)}", fontsize=10)

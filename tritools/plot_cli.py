@@ -1,0 +1,134 @@
+"""Command-line plots: ``tritools figure3`` and ``tritools plot-dataset``.
+
+``register(subparsers)`` adds the two sub-commands to the ``tritools`` argument
+parser; each sets ``func`` to a handler ``func(args) -> exit code`` (0 success,
+2 bad input, missing data or missing matplotlib, with a one-line message on stderr).
+
+* ``tritools figure3 [--out DIR] [--examples 2 3 4]`` solves the paper's Examples 2-4
+  (Theorem 1, delta = 4, as in the paper's Figure 3) and writes
+  ``DIR/figure3_example{k}.png``.
+* ``tritools plot-dataset NAME [--data-dir DIR] [--limit K] [--out FILE]`` triangulates
+  K tracks of an Oxford sequence (point regions) and writes
+  :func:`tritools.plot.dataset_summary`.
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["register", "run_figure3", "run_plot_dataset"]
+
+#: Default number of tracks of ``plot-dataset`` (a seeded random subset; 0 = all tracks).
+DEFAULT_LIMIT = 200
+
+
+def _fail(msg: str) -> int:
+    print(f"tritools: error: {msg}", file=sys.stderr)
+    return 2
+
+
+def run_figure3(args) -> int:
+    """Handler of ``tritools figure3``."""
+    os.environ.setdefault("RUST_BACKTRACE", "0")
+    try:
+        from .plot import save_figure3_examples
+
+        paths = save_figure3_examples(args.out, args.examples, method=args.method, delta=args.delta)
+    except ImportError as exc:
+        return _fail(str(exc))
+    except (ValueError, OSError) as exc:
+        return _fail(str(exc))
+    for p in paths:
+        print(p)
+    return 0
+
+
+def _select_tracks(tracks, limit: int, seed: int):
+    if limit <= 0 or limit >= len(tracks):
+        return list(tracks)
+    idx = np.sort(np.random.default_rng(seed).choice(len(tracks), size=limit, replace=False))
+    return [tracks[j] for j in idx]
+
+
+def run_plot_dataset(args) -> int:
+    """Handler of ``tritools plot-dataset``."""
+    os.environ.setdefault("RUST_BACKTRACE", "0")
+    from .batch import triangulate_many
+    from .io import DataNotFoundError, load_sequence
+    from .regions import Point
+
+    if args.limit < 0:
+        return _fail(f"--limit must be >= 0, got {args.limit}")
+    try:
+        from .plot import _matplotlib
+
+        _matplotlib()
+        seq = load_sequence(args.name, args.data_dir)
+    except (ImportError, DataNotFoundError, ValueError) as exc:
+        return _fail(str(exc))
+    tracks = _select_tracks(seq.tracks, args.limit, args.seed)
+    problems = []
+    for t in tracks:
+        cams, pts = seq.problem(t)
+        problems.append((cams, [Point(x) for x in pts]))
+    results = triangulate_many(problems, args.method, args.delta, path=args.path, progress=args.progress)
+    from .plot import dataset_summary
+
+    fig = dataset_summary(results, [t.n_views for t in tracks],
+                          title=f"{seq.name}: {len(tracks)} of {len(seq.tracks)} tracks, {args.method}"
+                                + (f" delta={args.delta}" if args.delta is not None else ""))
+    out = Path(args.out) if args.out else Path(f"{seq.name}_summary.png")
+    try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        fig.savefig(out, dpi=120)
+    except OSError as exc:
+        return _fail(f"cannot write {out}: {exc}")
+    n_cert = sum(bool(r.optimal) for r in results)
+    print(f"{out}  ({n_cert}/{len(results)} certified)")
+    return 0
+
+
+def register(subparsers) -> None:
+    """Add ``figure3`` and ``plot-dataset`` to an ``argparse`` sub-parser collection."""
+    f3 = subparsers.add_parser("figure3", help="the paper's Figure 3 (Examples 2-4) as PNG files",
+                               description="Solve Examples 2-4 and write figure3_example{k}.png (needs the extra 'plot').")
+    f3.add_argument("--out", default="figures", help="output directory (default: figures)")
+    f3.add_argument("--examples", type=int, nargs="+", choices=(2, 3, 4), default=[2, 3, 4],
+                    help="examples to plot (default: 2 3 4)")
+    f3.add_argument("--method", choices=("theorem1", "corollary1"), default="theorem1",
+                    help="certified method (default: theorem1, as the paper's Figure 3)")
+    f3.add_argument("--delta", type=int, default=4, help="relaxation degree (default: 4)")
+    f3.set_defaults(func=run_figure3)
+
+    pd = subparsers.add_parser("plot-dataset", help="gamma_UB histogram and certified counts of an Oxford sequence",
+                               description="Triangulate tracks of an Oxford sequence and plot a summary "
+                                           "(needs the extra 'plot').")
+    pd.add_argument("name", help="sequence name, e.g. library, house, dinosaur")
+    pd.add_argument("--data-dir", default=None, help="Oxford data directory (default: $TRITOOLS_DATA or "
+                                                     "../shared/data/oxford)")
+    pd.add_argument("--limit", type=int, default=DEFAULT_LIMIT,
+                    help=f"number of tracks, a seeded random subset (default {DEFAULT_LIMIT}; 0 = all)")
+    pd.add_argument("--seed", type=int, default=0, help="seed of the track subset (default 0)")
+    pd.add_argument("--method", choices=("theorem1", "corollary1"), default="corollary1",
+                    help="certified method (default: corollary1)")
+    pd.add_argument("--delta", type=int, default=None, help="first relaxation degree (default: delta_min)")
+    pd.add_argument("--path", choices=("auto", "sdp"), default="auto",
+                    help="'auto' certifies by verification when it can, else solves the SDP (default auto)")
+    pd.add_argument("--progress", action="store_true", help="progress bar (extra 'progress')")
+    pd.add_argument("--out", default=None, help="output PNG (default: NAME_summary.png)")
+    pd.set_defaults(func=run_plot_dataset)
+
+
+def main(argv=None) -> int:  # pragma: no cover - thin wrapper for running this module alone
+    ap = argparse.ArgumentParser(prog="tritools")
+    register(ap.add_subparsers(dest="command", required=True))
+    args = ap.parse_args(argv)
+    return args.func(args)
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

@@ -1,0 +1,397 @@
+"""COLMAP sparse models in COLMAP's documented text format (cameras.txt, images.txt, points3D.txt).
+
+* ``cameras.txt``: ``CAMERA_ID MODEL WIDTH HEIGHT PARAMS[]``, one line per camera;
+* ``images.txt``: two lines per image, ``IMAGE_ID QW QX QY QZ TX TY TZ CAMERA_ID NAME``
+  then ``POINTS2D[]`` as ``X Y POINT3D_ID`` triples (``-1``: no 3D point; the line is
+  empty for an image without keypoints).  ``(QW, QX, QY, QZ)`` is the Hamilton unit
+  quaternion (w first) and ``(TX, TY, TZ)`` the translation of ``cam_from_world``:
+  ``X_cam = R(q) X_world + t``;
+* ``points3D.txt``: ``POINT3D_ID X Y Z R G B ERROR TRACK[]`` with the track as
+  ``IMAGE_ID POINT2D_IDX`` pairs (0-based index into that image's POINTS2D).
+
+Comment lines start with ``#``.  :func:`write_text_model` writes COLMAP's header
+comments and floats with ``repr`` (the shortest string that reads back to the same
+double), so write -> read is exact.  Malformed input raises :class:`ModelFormatError`
+naming the file and line.  Newer COLMAP versions also write ``rigs.txt`` and
+``frames.txt``; they are not read here (COLMAP rebuilds trivial rigs without them).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from types import MappingProxyType
+from typing import Mapping
+
+import numpy as np
+
+from .camera_models import COLMAP_MODEL_N_PARAMS
+
+__all__ = ["Camera", "Image", "Point3D", "Model", "ModelFormatError", "read_text_model", "write_text_model",
+           "rotation_from_qvec", "qvec_from_rotation", "NO_POINT3D", "MODEL_FILES"]
+
+#: POINT3D_ID of a keypoint without a 3D point.
+NO_POINT3D = -1
+MODEL_FILES = ("cameras.txt", "images.txt", "points3D.txt")
+
+
+class ModelFormatError(ValueError):
+    """Malformed COLMAP text model; the message names the file and line."""
+
+
+def _finite_tuple(values, n: int | None, name: str) -> tuple:
+    try:
+        out = tuple(float(v) for v in values)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be numbers, got {values!r}") from None
+    if n is not None and len(out) != n:
+        raise ValueError(f"{name} must have {n} entries, got {len(out)}")
+    if not all(math.isfinite(v) for v in out):
+        raise ValueError(f"{name} contains NaN or inf: {out}")
+    return out
+
+
+@dataclass(frozen=True)
+class Camera:
+    """Intrinsics shared by images: ``model`` is a COLMAP model name (see camera_models)."""
+    id: int
+    model: str
+    width: int
+    height: int
+    params: tuple
+
+    def __post_init__(self):
+        object.__setattr__(self, "params", _finite_tuple(self.params, None, f"camera {self.id} params"))
+        if self.model not in COLMAP_MODEL_N_PARAMS:
+            raise ValueError(f"camera {self.id}: unknown COLMAP camera model {self.model!r}")
+        if len(self.params) != COLMAP_MODEL_N_PARAMS[self.model]:
+            raise ValueError(f"camera {self.id}: model {self.model} needs {COLMAP_MODEL_N_PARAMS[self.model]} "
+                             f"params, got {len(self.params)}")
+        if self.width <= 0 or self.height <= 0:
+            raise ValueError(f"camera {self.id}: width and height must be positive, got {self.width}x{self.height}")
+
+
+@dataclass(frozen=True)
+class Image:
+    """A registered image: pose ``cam_from_world`` = (qvec (w, x, y, z), tvec), its camera,
+    and its keypoints ``points2D`` = ((x, y, point3D_id), ...) in pixels."""
+    id: int
+    qvec: tuple
+    tvec: tuple
+    camera_id: int
+    name: str
+    points2D: tuple = ()
+
+    def __post_init__(self):
+        object.__setattr__(self, "qvec", _finite_tuple(self.qvec, 4, f"image {self.id} qvec"))
+        object.__setattr__(self, "tvec", _finite_tuple(self.tvec, 3, f"image {self.id} tvec"))
+        if np.linalg.norm(self.qvec) == 0:
+            raise ValueError(f"image {self.id}: qvec is zero")
+        if not self.name or any(c in self.name for c in "\r\n"):
+            raise ValueError(f"image {self.id}: name must be a non-empty single-line string, got {self.name!r}")
+        pts = []
+        for k, p in enumerate(self.points2D):
+            if len(p) != 3:
+                raise ValueError(f"image {self.id} points2D[{k}] must be (x, y, point3D_id), got {p!r}")
+            x, y = _finite_tuple(p[:2], 2, f"image {self.id} points2D[{k}]")
+            pts.append((x, y, int(p[2])))
+        object.__setattr__(self, "points2D", tuple(pts))
+
+    @property
+    def rotation(self) -> np.ndarray:
+        """R of ``cam_from_world`` (from the normalised quaternion)."""
+        return rotation_from_qvec(self.qvec)
+
+    @property
+    def cam_from_world(self) -> np.ndarray:
+        """[R | t], shape (3, 4)."""
+        return np.hstack([self.rotation, np.array(self.tvec)[:, None]])
+
+    @property
+    def xy(self) -> np.ndarray:
+        return np.array([p[:2] for p in self.points2D], float).reshape(-1, 2)
+
+
+@dataclass(frozen=True)
+class Point3D:
+    """A 3D point: ``xyz`` (world), colour, mean reprojection ``error`` (pixels) and
+    ``track`` = ((image_id, point2D_idx), ...)."""
+    id: int
+    xyz: tuple
+    rgb: tuple = (128, 128, 128)
+    error: float = 0.0
+    track: tuple = ()
+
+    def __post_init__(self):
+        object.__setattr__(self, "xyz", _finite_tuple(self.xyz, 3, f"point3D {self.id} xyz"))
+        rgb = tuple(int(c) for c in self.rgb)
+        if len(rgb) != 3 or not all(0 <= c <= 255 for c in rgb):
+            raise ValueError(f"point3D {self.id}: rgb must be 3 integers in 0..255, got {self.rgb!r}")
+        object.__setattr__(self, "rgb", rgb)
+        object.__setattr__(self, "error", float(self.error))
+        object.__setattr__(self, "track", tuple((int(i), int(k)) for i, k in self.track))
+
+
+@dataclass(frozen=True)
+class Model:
+    """A COLMAP sparse model (read-only mappings id -> record).
+
+    Construction checks the cross references COLMAP relies on: every image's camera
+    exists; every track entry (image_id, point2D_idx) names an existing keypoint whose
+    POINT3D_ID is this point; every keypoint's POINT3D_ID (other than -1) exists.
+    """
+    cameras: Mapping = field(default_factory=dict)
+    images: Mapping = field(default_factory=dict)
+    points3D: Mapping = field(default_factory=dict)
+
+    def __post_init__(self):
+        for name in ("cameras", "images", "points3D"):
+            d = getattr(self, name)
+            if not isinstance(d, Mapping):
+                d = {r.id: r for r in d}
+            for k, r in d.items():
+                if k != r.id:
+                    raise ValueError(f"{name}: key {k} differs from the record's id {r.id}")
+            object.__setattr__(self, name, MappingProxyType(dict(d)))
+        err = _reference_error(self.cameras, self.images, self.points3D)
+        if err:
+            raise ValueError(err[1])
+
+    def replace_points(self, points) -> "Model":
+        """The model with some Point3D records replaced (same ids)."""
+        new = dict(self.points3D)
+        for p in points:
+            if p.id not in new:
+                raise ValueError(f"point3D {p.id} is not in the model")
+            new[p.id] = p
+        return Model(self.cameras, self.images, new)
+
+
+def _reference_error(cameras, images, points3D):
+    """(kind, message) of the first broken cross reference, or None."""
+    for im in images.values():
+        if im.camera_id not in cameras:
+            return ("image", im.id), f"image {im.id} refers to camera {im.camera_id}, which does not exist"
+        for k, (_, _, pid) in enumerate(im.points2D):
+            if pid != NO_POINT3D and pid not in points3D:
+                return ("image", im.id), f"image {im.id} keypoint {k} refers to point3D {pid}, which does not exist"
+    for p in points3D.values():
+        for image_id, idx in p.track:
+            im = images.get(image_id)
+            if im is None:
+                return ("point", p.id), f"point3D {p.id} track refers to image {image_id}, which does not exist"
+            if not 0 <= idx < len(im.points2D):
+                return ("point", p.id), (f"point3D {p.id} track refers to keypoint {idx} of image {image_id}, "
+                                         f"which has {len(im.points2D)} keypoints")
+            if im.points2D[idx][2] != p.id:
+                return ("point", p.id), (f"point3D {p.id} track refers to keypoint {idx} of image {image_id}, "
+                                         f"whose POINT3D_ID is {im.points2D[idx][2]}")
+    return None
+
+
+# ----------------------------------------------------------------------------- rotations
+def rotation_from_qvec(qvec) -> np.ndarray:
+    """Rotation matrix of the Hamilton quaternion (w, x, y, z) (normalised first)."""
+    w, x, y, z = np.asarray(qvec, float) / np.linalg.norm(qvec)
+    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+                     [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+                     [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
+
+
+def qvec_from_rotation(R) -> np.ndarray:
+    """Unit quaternion (w, x, y, z), w >= 0, of a rotation matrix (largest-pivot formula)."""
+    R = np.asarray(R, float)
+    tr = np.trace(R)
+    cands = [tr, R[0, 0], R[1, 1], R[2, 2]]
+    k = int(np.argmax(cands))
+    if k == 0:
+        s = 2 * np.sqrt(1 + tr)
+        q = [s / 4, (R[2, 1] - R[1, 2]) / s, (R[0, 2] - R[2, 0]) / s, (R[1, 0] - R[0, 1]) / s]
+    elif k == 1:
+        s = 2 * np.sqrt(1 + R[0, 0] - R[1, 1] - R[2, 2])
+        q = [(R[2, 1] - R[1, 2]) / s, s / 4, (R[0, 1] + R[1, 0]) / s, (R[0, 2] + R[2, 0]) / s]
+    elif k == 2:
+        s = 2 * np.sqrt(1 + R[1, 1] - R[0, 0] - R[2, 2])
+        q = [(R[0, 2] - R[2, 0]) / s, (R[0, 1] + R[1, 0]) / s, s / 4, (R[1, 2] + R[2, 1]) / s]
+    else:
+        s = 2 * np.sqrt(1 + R[2, 2] - R[0, 0] - R[1, 1])
+        q = [(R[1, 0] - R[0, 1]) / s, (R[0, 2] + R[2, 0]) / s, (R[1, 2] + R[2, 1]) / s, s / 4]
+    q = np.array(q)
+    q /= np.linalg.norm(q)
+    return -q if q[0] < 0 else q
+
+
+# ----------------------------------------------------------------------------- reading
+def _data_lines(path: Path):
+    """(line number, stripped text) of the non-comment lines; blank lines kept (images.txt
+    uses an empty POINTS2D line for an image without keypoints)."""
+    for lineno, line in enumerate(path.read_text().splitlines(), 1):
+        s = line.strip()
+        if not s.startswith("#"):
+            yield lineno, s
+
+
+class _Fields:
+    def __init__(self, path: Path, lineno: int, text: str):
+        self.where = f"{path.name}:{lineno}"
+        self.tokens = text.split()
+
+    def fail(self, msg: str):
+        raise ModelFormatError(f"{self.where}: {msg}")
+
+    def need(self, n: int, what: str):
+        if len(self.tokens) < n:
+            self.fail(f"expected {what} ({n} fields), got {len(self.tokens)} fields")
+
+    def int(self, k: int, name: str) -> int:
+        try:
+            return int(self.tokens[k])
+        except ValueError:
+            self.fail(f"{name} must be an integer, got {self.tokens[k]!r}")
+
+    def float(self, k: int, name: str) -> float:
+        try:
+            v = float(self.tokens[k])
+        except ValueError:
+            self.fail(f"{name} must be a number, got {self.tokens[k]!r}")
+        if not math.isfinite(v):
+            self.fail(f"{name} is {self.tokens[k]}")
+        return v
+
+
+def _read_cameras(path: Path) -> dict:
+    cams = {}
+    for lineno, text in _data_lines(path):
+        if not text:
+            continue
+        f = _Fields(path, lineno, text)
+        f.need(4, "CAMERA_ID MODEL WIDTH HEIGHT PARAMS[]")
+        cid, model = f.int(0, "CAMERA_ID"), f.tokens[1]
+        if model not in COLMAP_MODEL_N_PARAMS:
+            f.fail(f"unknown camera MODEL {model!r} (COLMAP models: {', '.join(COLMAP_MODEL_N_PARAMS)})")
+        n = COLMAP_MODEL_N_PARAMS[model]
+        if len(f.tokens) != 4 + n:
+            f.fail(f"camera model {model} needs {n} PARAMS, got {len(f.tokens) - 4}")
+        width, height = f.int(2, "WIDTH"), f.int(3, "HEIGHT")
+        if width <= 0 or height <= 0:
+            f.fail(f"WIDTH and HEIGHT must be positive, got {width}x{height}")
+        if cid in cams:
+            f.fail(f"duplicate CAMERA_ID {cid}")
+        cams[cid] = Camera(cid, model, width, height, tuple(f.float(4 + k, f"PARAMS[{k}]") for k in range(n)))
+    return cams
+
+
+def _read_images(path: Path) -> tuple[dict, dict]:
+    images, where = {}, {}
+    lines = iter(_data_lines(path))
+    for lineno, text in lines:
+        if not text:
+            continue
+        f = _Fields(path, lineno, text)
+        f.need(10, "IMAGE_ID QW QX QY QZ TX TY TZ CAMERA_ID NAME")
+        iid = f.int(0, "IMAGE_ID")
+        q = tuple(f.float(k, n) for k, n in zip(range(1, 5), ("QW", "QX", "QY", "QZ")))
+        t = tuple(f.float(k, n) for k, n in zip(range(5, 8), ("TX", "TY", "TZ")))
+        cid = f.int(8, "CAMERA_ID")
+        name = text.split(None, 9)[9]
+        if np.linalg.norm(q) == 0:
+            f.fail("quaternion (QW, QX, QY, QZ) is zero")
+        if iid in images:
+            f.fail(f"duplicate IMAGE_ID {iid}")
+        try:
+            plineno, ptext = next(lines)
+        except StopIteration:
+            f.fail(f"image {iid} has no POINTS2D line (two lines per image)")
+        g = _Fields(path, plineno, ptext)
+        if len(g.tokens) % 3:
+            g.fail(f"POINTS2D of image {iid} must be (X, Y, POINT3D_ID) triples, got {len(g.tokens)} fields")
+        pts = tuple((g.float(k, f"X of keypoint {k // 3}"), g.float(k + 1, f"Y of keypoint {k // 3}"),
+                     g.int(k + 2, f"POINT3D_ID of keypoint {k // 3}")) for k in range(0, len(g.tokens), 3))
+        for k, p in enumerate(pts):
+            if p[2] < NO_POINT3D:
+                g.fail(f"POINT3D_ID of keypoint {k} must be >= -1, got {p[2]}")
+        images[iid] = Image(iid, q, t, cid, name, pts)
+        where[iid] = f.where
+    return images, where
+
+
+def _read_points(path: Path) -> tuple[dict, dict]:
+    points, where = {}, {}
+    for lineno, text in _data_lines(path):
+        if not text:
+            continue
+        f = _Fields(path, lineno, text)
+        f.need(8, "POINT3D_ID X Y Z R G B ERROR TRACK[]")
+        if (len(f.tokens) - 8) % 2:
+            f.fail("TRACK[] must be (IMAGE_ID, POINT2D_IDX) pairs, got an odd number of fields")
+        pid = f.int(0, "POINT3D_ID")
+        xyz = tuple(f.float(k, n) for k, n in zip(range(1, 4), "XYZ"))
+        rgb = tuple(f.int(k, n) for k, n in zip(range(4, 7), "RGB"))
+        if not all(0 <= c <= 255 for c in rgb):
+            f.fail(f"R G B must be in 0..255, got {rgb}")
+        try:
+            err = float(f.tokens[7])
+        except ValueError:
+            f.fail(f"ERROR must be a number, got {f.tokens[7]!r}")
+        track = tuple((f.int(k, "IMAGE_ID"), f.int(k + 1, "POINT2D_IDX")) for k in range(8, len(f.tokens), 2))
+        if pid in points:
+            f.fail(f"duplicate POINT3D_ID {pid}")
+        points[pid] = Point3D(pid, xyz, rgb, err, track)
+        where[pid] = f.where
+    return points, where
+
+
+def read_text_model(path) -> Model:
+    """Read ``cameras.txt``, ``images.txt`` and ``points3D.txt`` from the folder ``path``."""
+    folder = Path(path)
+    for name in MODEL_FILES:
+        if not (folder / name).is_file():
+            raise FileNotFoundError(f"{folder / name}: missing (a COLMAP text model has {', '.join(MODEL_FILES)})")
+    cameras = _read_cameras(folder / "cameras.txt")
+    images, img_where = _read_images(folder / "images.txt")
+    points, pt_where = _read_points(folder / "points3D.txt")
+    err = _reference_error(cameras, images, points)
+    if err:
+        (kind, rid), msg = err
+        raise ModelFormatError(f"{(img_where if kind == 'image' else pt_where)[rid]}: {msg}")
+    return Model(cameras, images, points)
+
+
+# ----------------------------------------------------------------------------- writing
+def _num(v: float) -> str:
+    return repr(float(v))
+
+
+def write_text_model(model: Model, path) -> Path:
+    """Write the model as COLMAP text files into the folder ``path`` (created if needed).
+    Records are written sorted by id.  Returns the folder."""
+    folder = Path(path)
+    folder.mkdir(parents=True, exist_ok=True)
+    lines = ["# Camera list with one line of data per camera:",
+             "#   CAMERA_ID, MODEL, WIDTH, HEIGHT, PARAMS[]",
+             f"# Number of cameras: {len(model.cameras)}"]
+    for c in sorted(model.cameras.values(), key=lambda c: c.id):
+        lines.append(" ".join([str(c.id), c.model, str(c.width), str(c.height)] + [_num(p) for p in c.params]))
+    (folder / "cameras.txt").write_text("\n".join(lines) + "\n")
+
+    n_obs = sum(p[2] != NO_POINT3D for im in model.images.values() for p in im.points2D)
+    mean_obs = n_obs / len(model.images) if model.images else 0.0
+    lines = ["# Image list with two lines of data per image:",
+             "#   IMAGE_ID, QW, QX, QY, QZ, TX, TY, TZ, CAMERA_ID, NAME",
+             "#   POINTS2D[] as (X, Y, POINT3D_ID)",
+             f"# Number of images: {len(model.images)}, mean observations per image: {mean_obs:.6g}"]
+    for im in sorted(model.images.values(), key=lambda i: i.id):
+        lines.append(" ".join([str(im.id)] + [_num(v) for v in im.qvec + im.tvec] + [str(im.camera_id), im.name]))
+        lines.append(" ".join(f"{_num(x)} {_num(y)} {pid}" for x, y, pid in im.points2D))
+    (folder / "images.txt").write_text("\n".join(lines) + "\n")
+
+    mean_track = (sum(len(p.track) for p in model.points3D.values()) / len(model.points3D)
+                  if model.points3D else 0.0)
+    lines = ["# 3D point list with one line of data per point:",
+             "#   POINT3D_ID, X, Y, Z, R, G, B, ERROR, TRACK[] as (IMAGE_ID, POINT2D_IDX)",
+             f"# Number of points: {len(model.points3D)}, mean track length: {mean_track:.6g}"]
+    for p in sorted(model.points3D.values(), key=lambda p: p.id):
+        lines.append(" ".join([str(p.id)] + [_num(v) for v in p.xyz] + [str(c) for c in p.rgb] + [_num(p.error)]
+                              + [f"{i} {k}" for i, k in p.track]))
+    (folder / "points3D.txt").write_text("\n".join(lines) + "\n")
+    return folder

@@ -45,7 +45,7 @@ from .triangulate import SolvePath
 
 __all__ = ["ProblemFileError", "ProblemSpec", "PROBLEM_FIELDS", "region_types", "parse_problems",
            "parse_problem_text", "load_problem_file", "problem_to_dict", "problems_to_json",
-           "result_to_dict", "result_from_dict"]
+           "result_to_dict", "result_from_dict", "jsonable"]
 
 #: Keys allowed in a problem object (anything else is reported as an unknown field, to catch typos).
 PROBLEM_FIELDS = ("name", "cameras", "regions", "method", "delta", "max_delta", "path", "comment")
@@ -308,10 +308,10 @@ def problems_to_json(problems: Iterable[dict], indent: int | None = 1) -> str:
     return json.dumps(doc, indent=indent, allow_nan=False)
 
 
-def _jsonable(v):
+def jsonable(v):
     """Arrays -> lists, enums -> values, non-finite floats -> None (JSON has no NaN)."""
     if isinstance(v, np.ndarray):
-        return [_jsonable(x) for x in v.tolist()]
+        return [jsonable(x) for x in v.tolist()]
     if isinstance(v, np.generic):
         v = v.item()
     if isinstance(v, enum.Enum):
@@ -319,17 +319,17 @@ def _jsonable(v):
     if isinstance(v, float):
         return v if math.isfinite(v) else None
     if isinstance(v, Mapping):
-        return {str(k): _jsonable(x) for k, x in v.items()}
+        return {str(k): jsonable(x) for k, x in v.items()}
     if isinstance(v, (list, tuple)):
-        return [_jsonable(x) for x in v]
+        return [jsonable(x) for x in v]
     return v
 
 
 def result_to_dict(result: TriangulationResult, **extra) -> dict:
     """Every field of ``result`` as NaN-free JSON values, after ``extra`` (e.g. name, index)."""
-    d = {k: _jsonable(v) for k, v in extra.items()}
+    d = {k: jsonable(v) for k, v in extra.items()}
     for f in dataclasses.fields(TriangulationResult):
-        d[f.name] = _jsonable(getattr(result, f.name))
+        d[f.name] = jsonable(getattr(result, f.name))
     return d
 
 

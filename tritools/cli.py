@@ -1,0 +1,396 @@
+"""The ``tritools`` command line (``python -m tritools`` or the ``tritools`` script).
+
+Subcommands
+-----------
+``solve FILE``       triangulate the problems of a JSON problem file (:mod:`tritools.problem_file`)
+``example K``        the paper's Example 2, 3, 4 (Tables 8-10) or a reduced Example 5 (Table 11)
+``dataset NAME``     an Oxford sequence of the paper's Example 1 (Tables 1-6), summarised per N
+
+More subcommands come from the modules named in :data:`SUBCOMMAND_MODULES`: each exposes
+``register(subparsers) -> None``, adding its parser with ``set_defaults(func=...)`` where
+``func(args) -> int`` is the exit code.  A module that does not exist (yet) is skipped.
+
+Exit codes: 0 success (whatever the statuses of the individual results), 1 unexpected
+internal error (one line; ``TRITOOLS_DEBUG=1`` re-raises it with its traceback),
+2 invalid input: bad arguments, an invalid problem file, missing data -- always one
+line on stderr naming what is wrong.
+"""
+from __future__ import annotations
+
+import argparse
+import csv
+import importlib
+import json
+import math
+import os
+import sys
+from collections import defaultdict
+from typing import Sequence
+
+import numpy as np
+
+from .constraints import Method
+from .problem_file import (ProblemFileError, ProblemSpec, jsonable, load_problem_file, parse_problem_text,
+                           result_to_dict)
+from .result import Status, TriangulationResult
+from .triangulate import SolvePath
+
+__all__ = ["main", "build_parser", "CLIError", "SUBCOMMAND_MODULES", "solve_problems", "format_table",
+           "EXIT_OK", "EXIT_INTERNAL", "EXIT_INVALID"]
+
+#: modules adding subcommands through ``register(subparsers)``; skipped while they do not exist.
+SUBCOMMAND_MODULES = ("tritools.colmap_cli", "tritools.plot_cli")
+EXIT_OK, EXIT_INTERNAL, EXIT_INVALID = 0, 1, 2
+#: set to 1 to get the traceback of an internal error instead of the one-line message.
+DEBUG_ENV = "TRITOOLS_DEBUG"
+#: Example 5 thetas (the paper's Section 5.5).
+EXAMPLE5_THETAS = (0.05, 0.1, 0.15, 0.2)
+FULL_EXAMPLE5_COMMAND = "python benchmarks/paper_examples.py --only-example5"
+
+METHODS = tuple(m.value for m in Method)
+PATHS = tuple(p.value for p in SolvePath)
+
+
+class CLIError(Exception):
+    """Invalid usage or input: printed as one line, exit code 2."""
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message):  # one line instead of usage + message, and no SystemExit
+        raise CLIError(f"{self.prog}: {message} (see '{self.prog} --help')")
+
+
+# ----------------------------------------------------------------------------- formatting
+def _num(v, digits: int = 3) -> str:
+    if v is None or (isinstance(v, float) and not math.isfinite(v)):
+        return "NA"
+    v = float(v)
+    if v != 0 and (abs(v) >= 1e4 or abs(v) < 10 ** -digits):
+        return f"{v:.{digits}e}"
+    return f"{v:.{digits}f}"
+
+
+def _point(X) -> str:
+    return "NA" if X is None else "(" + ", ".join(_num(c) for c in X) + ")"
+
+
+def _seconds(r: TriangulationResult):
+    t = r.timings.get("total")
+    return float(t) if t is not None and math.isfinite(t) else None
+
+
+def format_table(headers: Sequence[str], rows: Sequence[Sequence], right: Sequence[bool] | None = None) -> str:
+    """Plain-text table; cells are str()-ed; ``right[j]``: right-align column j (default: all but the first)."""
+    cells = [[str(c) for c in row] for row in rows]
+    widths = [max([len(h)] + [len(r[j]) for r in cells]) for j, h in enumerate(headers)]
+    right = right if right is not None else [j > 0 for j in range(len(headers))]
+
+    def line(row):
+        return "  ".join(c.rjust(w) if r else c.ljust(w) for c, w, r in zip(row, widths, right)).rstrip()
+
+    return "\n".join([line(headers), line(["-" * w for w in widths])] + [line(r) for r in cells])
+
+
+def _emit(text: str, output: str | None) -> None:
+    if output in (None, "-"):
+        print(text)
+        return
+    try:
+        with open(output, "w", encoding="utf-8") as fh:
+            fh.write(text + "\n")
+    except OSError as exc:
+        raise CLIError(f"cannot write {output}: {exc.strerror or exc}") from None
+
+
+def _dumps(obj) -> str:
+    return json.dumps(obj, indent=1, allow_nan=False)
+
+
+# ----------------------------------------------------------------------------- solving
+def solve_problems(specs: Sequence[ProblemSpec], method=Method.THEOREM1, delta=None, max_delta=None, path=None,
+                   progress: bool = False) -> list[TriangulationResult]:
+    """One result per problem, in order, through :func:`tritools.batch.triangulate_many`.
+
+    Per-problem ``method``/``delta``/``max_delta``/``path`` override the arguments; problems
+    sharing the same settings go through one batch call.  ``path=None`` keeps the library's
+    default.  A failing problem gets a result with a status and a message.
+    """
+    from .batch import triangulate_many
+
+    groups: dict[tuple, list[int]] = defaultdict(list)
+    for i, s in enumerate(specs):
+        d = s.delta if s.delta is not None else delta
+        md = s.max_delta if s.max_delta is not None else max_delta
+        if s.delta is not None and s.max_delta is None and md is not None:
+            md = max(md, s.delta)
+        m = Method(s.method if s.method is not None else method)
+        p = s.path if s.path is not None else path
+        groups[(m, d, md, None if p is None else SolvePath(p))].append(i)
+    out: list[TriangulationResult | None] = [None] * len(specs)
+    for (m, d, md, p), idx in groups.items():
+        kw = {} if p is None else {"path": p.value}
+        res = triangulate_many([(specs[i].cameras, specs[i].regions) for i in idx], method=m.value, delta=d,
+                               max_delta=md, progress=progress, **kw)
+        for i, r in zip(idx, res):
+            out[i] = r
+    return out
+
+
+def _read_specs(file: str) -> list[ProblemSpec]:
+    if file == "-":
+        return parse_problem_text(sys.stdin.read(), "<stdin>")
+    return load_problem_file(file)
+
+
+def _cmd_solve(args) -> int:
+    specs = _read_specs(args.file)
+    results = solve_problems(specs, args.method, args.delta, args.max_delta, args.path, args.progress)
+    if args.json:
+        _emit(_dumps([result_to_dict(r, index=i, name=s.name, n_views=s.n_views)
+                      for i, (s, r) in enumerate(zip(specs, results))]), args.output)
+        return EXIT_OK
+    headers = ("name", "N", "status", "X", "gamma_LB", "gamma_UB", "optimal", "delta", "N_LMIVAR", "time[s]")
+    rows, notes = [], []
+    for i, (s, r) in enumerate(zip(specs, results)):
+        name = s.name if s.name is not None else f"#{i}"
+        opt = "NA" if r.optimal is None else ("yes" if r.optimal else "no")
+        rows.append((name, s.n_views, r.status.value, _point(r.X), _num(r.gamma_lb), _num(r.gamma_ub), opt,
+                     "NA" if r.delta is None else r.delta, "NA" if r.n_lmivar is None else r.n_lmivar,
+                     _num(_seconds(r))))
+        if r.message:
+            notes.append(f"{name}: {r.status.value}: {r.message}")
+    text = format_table(headers, rows, [False, True, False, False] + [True] * 6)
+    if notes:
+        text += "\n\n" + "\n".join(notes)
+    _emit(text, args.output)
+    return EXIT_OK
+
+
+# ----------------------------------------------------------------------------- example
+def _example_paper(args) -> int:
+    from .scene import paper_example, paper_table
+    from .triangulate import triangulate
+
+    cams, regions = paper_example(args.k)
+    paper = {(r["method"], r.get("delta")): r for r in paper_table(args.k)}
+    rows = [("theorem1", 4), ("corollary1", 2), ("corollary1", 4)]
+    out = []
+    for method, delta in rows:
+        r = triangulate(cams, regions, method, delta=delta)
+        p = paper[(method, delta)]
+        out.append({"method": method, "delta": delta, "X": None if r.X is None else r.X.round(6).tolist(),
+                    "gamma_lb": r.gamma_lb, "gamma_ub": r.gamma_ub, "optimal": bool(r.optimal),
+                    "n_lmivar": r.n_lmivar, "seconds": round(r.timings.get("total", float("nan")), 3),
+                    "paper": {"X": p["X"], "gamma": p["gamma"], "optimal": p["optimal"], "n_lmivar": p["n_lmivar"]}})
+    if args.json:
+        _emit(_dumps(jsonable(out)), None)
+        return EXIT_OK
+    print(f"Example {args.k} of Chesi (2026): certified multiple-view L2 triangulation")
+    print(f"{'method':<16}{'X^':<30}{'gamma_LB':>10}{'gamma_UB':>10}{'optimal':>9}{'N_LMIVAR':>10}   "
+          "paper: X^, gamma, optimal, N_LMIVAR")
+    for o in out:
+        X = "NA" if o["X"] is None else "(" + ", ".join(f"{v:.3f}" if abs(v) < 1e4 else f"{v:.2e}" for v in o["X"]) + ")"
+        p = o["paper"]
+        print(f"{o['method'] + ' d=' + str(o['delta']):<16}{X:<30}{_num(o['gamma_lb']):>10}{_num(o['gamma_ub']):>10}"
+              f"{'yes' if o['optimal'] else 'no':>9}{o['n_lmivar']:>10}   "
+              f"({', '.join(f'{v:.3f}' for v in p['X'])}), {p['gamma']:.3f}, {'yes' if p['optimal'] else 'no'}, "
+              f"{p['n_lmivar']}")
+    return EXIT_OK
+
+
+def _example5(args) -> int:
+    from .scene import example5_cases
+
+    for name in ("points", "trials"):
+        if getattr(args, name) < 1:
+            raise CLIError(f"example 5: --{name} must be a positive integer, got {getattr(args, name)}")
+    cases = example5_cases(seed=args.seed, n_points=args.points, thetas=EXAMPLE5_THETAS, trials=args.trials)
+    results = solve_problems([ProblemSpec(c.cameras, c.regions) for c in cases], Method.THEOREM1, 4, 4,
+                             progress=args.progress)
+    summary = []
+    for theta in EXAMPLE5_THETAS:
+        sel = [(c, r) for c, r in zip(cases, results) if c.theta == theta]
+        gub = [r.gamma_ub for _, r in sel if r.gamma_ub is not None]
+        dist = [float(np.linalg.norm(r.X - c.X_obj)) for c, r in sel if r.X is not None]
+        secs = [t for _, r in sel if (t := _seconds(r)) is not None]
+        summary.append({"theta": theta, "cases": len(sel),
+                        "certified": sum(r.status == Status.OPTIMAL for _, r in sel),
+                        "mean_gamma_ub": float(np.mean(gub)) if gub else None,
+                        "mean_distance_to_X_obj": float(np.mean(dist)) if dist else None,
+                        "n_lmivar": sorted({r.n_lmivar for _, r in sel if r.n_lmivar is not None}),
+                        "mean_seconds": float(np.mean(secs)) if secs else None})
+    note = (f"reduced run: {args.points} points x {len(EXAMPLE5_THETAS)} theta x {args.trials} trials, seed "
+            f"{args.seed}; the paper certifies all 250 cases per theta with Theorem 1 at delta = 4; full run "
+            f"(Tables 11-12): {FULL_EXAMPLE5_COMMAND}")
+    if args.json:
+        _emit(_dumps(jsonable({"method": "theorem1", "delta": 4, "seed": args.seed,
+                                           "points": args.points, "trials": args.trials, "per_theta": summary,
+                                           "note": note})), None)
+        return EXIT_OK
+    print("Example 5 of Chesi (2026): certified cases of Theorem 1 at delta = 4 per uncertainty level theta")
+    rows = [(s["theta"], s["cases"], s["certified"], _num(s["mean_gamma_ub"]), _num(s["mean_distance_to_X_obj"]),
+             ",".join(map(str, s["n_lmivar"])) or "NA", _num(s["mean_seconds"])) for s in summary]
+    print(format_table(("theta", "cases", "certified", "mean gamma_UB", "mean |X^-X_obj|", "N_LMIVAR",
+                        "mean time[s]"), rows))
+    print(f"\nnote: {note}")
+    return EXIT_OK
+
+
+def _cmd_example(args) -> int:
+    if args.k == 5:
+        return _example5(args)
+    return _example_paper(args)
+
+
+# ----------------------------------------------------------------------------- dataset
+def _summary_row(rs: list[TriangulationResult]) -> dict:
+    gub = [r.gamma_ub for r in rs if r.gamma_ub is not None]
+    secs = [t for r in rs if (t := _seconds(r)) is not None]
+    return {"cases": len(rs), "certified": sum(r.status == Status.OPTIMAL for r in rs),
+            "mean_gamma_ub": float(np.mean(gub)) if gub else None,
+            "std_gamma_ub": float(np.std(gub)) if gub else None,
+            "n_lmivar": sorted({r.n_lmivar for r in rs if r.n_lmivar is not None}),
+            "mean_seconds": float(np.mean(secs)) if secs else None}
+
+
+def _cmd_dataset(args) -> int:
+    from .io import DATA_ENV, DataNotFoundError, load_sequence
+    from .regions import Point
+
+    if args.limit is not None and args.limit < 1:
+        raise CLIError(f"dataset: --limit must be a positive integer, got {args.limit}")
+    try:
+        seq = load_sequence(args.name, args.data_dir)
+    except DataNotFoundError as exc:
+        msg = str(exc).replace("pass data_dir=...", "pass --data-dir DIR")
+        if DATA_ENV not in msg:
+            msg += f" (pass --data-dir DIR or set ${DATA_ENV})"
+        raise CLIError(f"dataset: {msg}") from None
+    except ValueError as exc:
+        raise CLIError(f"dataset: {exc}") from None
+    tracks = seq.tracks[: args.limit] if args.limit else seq.tracks
+    specs = []
+    for tr in tracks:
+        cams, pts = seq.problem(tr)
+        specs.append(ProblemSpec(cams, tuple(Point(p) for p in pts), name=f"{seq.name}:{tr.track_id}"))
+    results = solve_problems(specs, args.method, args.delta, args.max_delta, args.path, args.progress)
+    by_n: dict[int, list] = defaultdict(list)
+    for tr, r in zip(tracks, results):
+        by_n[tr.n_views].append(r)
+    summary = [{"N": n, **_summary_row(by_n[n])} for n in sorted(by_n)]
+    total = _summary_row(results)
+    if args.csv:
+        _write_dataset_csv(args.csv, seq.name, tracks, results)
+    if args.json:
+        _emit(_dumps({"sequence": seq.name, "method": args.method, "tracks": len(tracks), "per_N": summary,
+                      "total": total}), None)
+        return EXIT_OK
+    print(f"{seq.name}: {len(tracks)} tracks, method {args.method}")
+    rows = [(s["N"], s["cases"], s["certified"], _num(s["mean_gamma_ub"]), _num(s["std_gamma_ub"]),
+             ",".join(map(str, s["n_lmivar"])) or "NA", _num(s["mean_seconds"]))
+            for s in summary + [{"N": "total", **total}]]
+    print(format_table(("N", "#cases", "#certified", "mean gamma_UB", "std gamma_UB", "N_LMIVAR", "mean time[s]"),
+                       rows))
+    if args.csv:
+        print(f"per-track results: {args.csv}")
+    return EXIT_OK
+
+
+def _write_dataset_csv(path, name, tracks, results) -> None:
+    try:
+        with open(path, "w", newline="", encoding="utf-8") as fh:
+            w = csv.writer(fh)
+            w.writerow(["sequence", "track_id", "views", "N", "status", "X1", "X2", "X3", "gamma_lb", "gamma_ub",
+                        "optimal", "delta", "n_lmivar", "certified_by", "seconds", "message"])
+            for tr, r in zip(tracks, results):
+                X = [None] * 3 if r.X is None else [float(v) for v in r.X]
+                w.writerow([name, tr.track_id, " ".join(map(str, tr.views)), tr.n_views, r.status.value, *X,
+                            r.gamma_lb, r.gamma_ub, r.optimal, r.delta, r.n_lmivar, r.certified_by,
+                            _seconds(r), r.message])
+    except OSError as exc:
+        raise CLIError(f"cannot write {path}: {exc.strerror or exc}") from None
+
+
+# ----------------------------------------------------------------------------- parser
+def _add_solver_options(p, default_method: str) -> None:
+    p.add_argument("--method", choices=METHODS, default=default_method,
+                   help=f"Theorem 1 (4x4 minors) or Corollary 1 (epipolar); default {default_method}")
+    p.add_argument("--delta", type=int, default=None, help="first relaxation degree (even; default delta_min)")
+    p.add_argument("--max-delta", type=int, default=None, dest="max_delta",
+                   help="last degree tried (default: delta if given, else delta_min + 2)")
+    p.add_argument("--path", choices=PATHS, default=None,
+                   help="'sdp' always solves the SDP; 'auto' first tries certification by verification "
+                        "(delta 2, point regions); default: the library's")
+    p.add_argument("--progress", action="store_true", help="progress bar on stderr (needs the 'progress' extra)")
+
+
+def register_builtin(sub) -> None:
+    """The built-in subcommands: solve, example, dataset."""
+    p = sub.add_parser("solve", help="triangulate the problems of a JSON problem file",
+                       description="Triangulate every problem of FILE (one problem, a list, or "
+                                   "{\"problems\": [...]}; schema in docs/cli.md).")
+    p.add_argument("file", metavar="FILE", help="problem file, or - for stdin")
+    _add_solver_options(p, Method.THEOREM1.value)
+    p.add_argument("--json", action="store_true", help="one JSON object per problem, all result fields")
+    p.add_argument("--output", "-o", default=None, metavar="OUT", help="write the output to OUT instead of stdout")
+    p.set_defaults(func=_cmd_solve)
+
+    p = sub.add_parser("example", help="the paper's Example 2, 3, 4 (Tables 8-10) or a reduced Example 5")
+    p.add_argument("k", type=int, choices=(2, 3, 4, 5))
+    p.add_argument("--json", action="store_true", help="machine-readable output")
+    p.add_argument("--points", type=int, default=2, help="Example 5: scene points (paper: 25)")
+    p.add_argument("--trials", type=int, default=2, help="Example 5: trials per point and theta (paper: 10)")
+    p.add_argument("--seed", type=int, default=0, help="Example 5: random seed")
+    p.add_argument("--progress", action="store_true", help="Example 5: progress bar on stderr")
+    p.set_defaults(func=_cmd_example)
+
+    p = sub.add_parser("dataset", help="triangulate the tracks of an Oxford sequence (Example 1)",
+                       description="Per-N summary of an Oxford sequence (the paper's Tables 1-6).")
+    p.add_argument("name", metavar="NAME", help="sequence (corridor, dinosaur, house, library, merton1-3, wadham)")
+    p.add_argument("--data-dir", default=None, dest="data_dir",
+                   help="Oxford data directory (default: $TRITOOLS_DATA, else ../shared/data/oxford)")
+    p.add_argument("--limit", type=int, default=None, metavar="K", help="only the first K tracks")
+    _add_solver_options(p, Method.COROLLARY1.value)
+    p.add_argument("--json", action="store_true", help="summary as JSON")
+    p.add_argument("--csv", default=None, metavar="OUT", help="write per-track results to OUT")
+    p.set_defaults(func=_cmd_dataset)
+
+
+def _registered_modules():
+    for name in SUBCOMMAND_MODULES:
+        try:
+            yield importlib.import_module(name)
+        except ModuleNotFoundError as exc:
+            if exc.name != name:      # the module exists but something it imports does not: a real error
+                raise
+
+
+def build_parser() -> argparse.ArgumentParser:
+    ap = _Parser(prog="tritools", description="certified multiple-view L2 triangulation (Chesi 2026)")
+    sub = ap.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    register_builtin(sub)
+    for module in _registered_modules():
+        module.register(sub)
+    return ap
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the command line; returns the exit code (0 ok, 1 internal error, 2 invalid input)."""
+    os.environ.setdefault("RUST_BACKTRACE", "0")
+    try:
+        args = build_parser().parse_args(argv)
+        return int(args.func(args) or EXIT_OK)
+    except (CLIError, ProblemFileError) as exc:
+        print(f"tritools: error: {exc}", file=sys.stderr)
+        return EXIT_INVALID
+    except SystemExit as exc:            # --help
+        return exc.code if isinstance(exc.code, int) else EXIT_OK if exc.code is None else EXIT_INVALID
+    except KeyboardInterrupt:
+        print("tritools: interrupted", file=sys.stderr)
+        return 130
+    except Exception as exc:  # noqa: BLE001 - one line instead of a traceback, unless debugging
+        if os.environ.get(DEBUG_ENV):
+            raise
+        print(f"tritools: internal error: {type(exc).__name__}: {exc} (set {DEBUG_ENV}=1 for the traceback)",
+              file=sys.stderr)
+        return EXIT_INTERNAL

@@ -18,6 +18,11 @@ minimum of the quadratic L, evaluated with a least-squares solve and checked by
 the residual of the stationarity system.  When f(v^) - c(lambda) is within the
 optimality tolerance, v^ is certified globally optimal exactly as the degree-2
 SDP would certify it; otherwise the caller falls back to the SDP.
+
+:func:`verify_quadratic_batch` runs the same test on a stack of M programs with one
+structure (n variables, K equalities), every step vectorised with numpy over the
+stack; :func:`verify_quadratic` is that function applied to a stack of one, so the
+single and the batched decisions are the same code.
 """
 from __future__ import annotations
 
@@ -29,7 +34,8 @@ from .polynomial import Polynomial
 from .status import SolveStatus
 from .tolerances import DEFAULT_TOLERANCES, Tolerances
 
-__all__ = ["Verification", "quadratic_parts", "verify_quadratic", "ROUNDOFF"]
+__all__ = ["Verification", "VerificationBatch", "quadratic_parts", "verify_quadratic", "verify_quadratic_batch",
+           "ROUNDOFF"]
 
 #: the Lagrangian Hessian must satisfy lambda_min >= -ROUNDOFF * max(1, max|H|): float
 #: round-off only (a genuinely indefinite H means no bound for these multipliers).
@@ -69,35 +75,121 @@ def quadratic_parts(p: Polynomial, gens) -> tuple[float, np.ndarray, np.ndarray]
     return p0, p1, P2
 
 
+@dataclass(frozen=True)
+class VerificationBatch:
+    """:class:`Verification` of M programs, one array entry per program.
+
+    ``lower_bound`` is NaN where no bound was computed; ``reason`` is 0 (bound computed),
+    1 (Lagrangian Hessian not PSD) or 2 (gradient of the Lagrangian not in range(H)).
+    """
+    lower_bound: np.ndarray            # (M,)
+    upper_bound: np.ndarray            # (M,) f(v^)
+    certified: np.ndarray              # (M,) bool
+    multipliers: np.ndarray            # (M, K)
+    min_hessian_eigenvalue: np.ndarray  # (M,)
+    reason: np.ndarray                 # (M,) int
+
+    MESSAGES = ("", "Lagrangian Hessian is not PSD: no degree-2 certificate with these multipliers",
+                "gradient of the Lagrangian not in range(H): unbounded below")
+
+    def __len__(self) -> int:
+        return len(self.certified)
+
+    def item(self, i: int) -> Verification:
+        """The :class:`Verification` of program ``i``."""
+        reason = int(self.reason[i])
+        bounded = reason == 0
+        certified = bool(self.certified[i])
+        msg = self.MESSAGES[reason] if reason else ("" if certified else "gap above tolerance")
+        return Verification(SolveStatus.OPTIMAL if bounded else SolveStatus.INFEASIBLE,
+                            float(self.lower_bound[i]) if bounded else None, float(self.upper_bound[i]),
+                            certified, self.multipliers[i].copy(), float(self.min_hessian_eigenvalue[i]), msg)
+
+
+def _lstsq_stack(A: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Minimum-norm least-squares solutions of A[m] x = b[m] for a stack (M, p, q), (M, p).
+
+    Singular values <= eps * max(p, q) * s_max are treated as zero: the rule of
+    ``numpy.linalg.lstsq(rcond=None)``, applied to every member of the stack.
+    """
+    M, p, q = A.shape
+    if p == 0 or q == 0:
+        return np.zeros((M, q))
+    U, S, Vt = np.linalg.svd(A, full_matrices=False)
+    cut = np.finfo(float).eps * max(p, q) * S[:, :1]
+    inv = np.where(S > cut, 1.0 / np.where(S > cut, S, 1.0), 0.0)
+    return np.einsum("mji,mj->mi", Vt, inv * np.einsum("mpj,mp->mj", U, b))
+
+
+def verify_quadratic_batch(f0, f1, F2, g0, g1, G2, points, *,
+                           tolerances: Tolerances = DEFAULT_TOLERANCES) -> VerificationBatch:
+    """The Lagrangian bound of the module docstring for M programs at once.
+
+    Program m: f(v) = f0[m] + f1[m].v + v^T F2[m] v and g_k(v) = g0[m,k] + g1[m,k].v +
+    v^T G2[m,k] v (k < K), candidate v^ = points[m].  Shapes: f0 (M,), f1 (M, n),
+    F2 (M, n, n), g0 (M, K), g1 (M, K, n), G2 (M, K, n, n), points (M, n); F2, G2 symmetric.
+
+    Steps, all vectorised over m: lambda = argmin ||J(v^)^T lambda + grad f(v^)|| (min-norm
+    least squares); L = f + lambda^T g with Hessian part L2; reject when
+    lambda_min(L2) < -ROUNDOFF * max(1, max|L2|); w = least-squares solution of
+    2 L2 w = -L1, rejected when ||2 L2 w + L1|| / max(1, ||L1||) > identity_residual;
+    c = L(w) = min_v L(v, lambda) <= min{f : g = 0}; certified iff
+    ``tolerances.certified(c, f(v^))``.
+    """
+    f0 = np.asarray(f0, float)
+    f1 = np.asarray(f1, float)
+    F2 = np.asarray(F2, float)
+    g0 = np.asarray(g0, float)
+    g1 = np.asarray(g1, float)
+    G2 = np.asarray(G2, float)
+    v = np.asarray(points, float)
+    M, n = f1.shape
+    K = g0.shape[1]
+    if F2.shape != (M, n, n) or g1.shape != (M, K, n) or G2.shape != (M, K, n, n) or v.shape != (M, n) \
+            or f0.shape != (M,) or g0.shape != (M, K):
+        raise ValueError(f"verify_quadratic_batch: inconsistent shapes f0 {f0.shape}, f1 {f1.shape}, F2 {F2.shape}, "
+                         f"g0 {g0.shape}, g1 {g1.shape}, G2 {G2.shape}, points {v.shape}")
+    fv = f0 + np.einsum("mi,mi->m", f1, v) + np.einsum("mi,mij,mj->m", v, F2, v)
+    grad_f = f1 + 2 * np.einsum("mij,mj->mi", F2, v)
+    if K:
+        J = g1 + 2 * np.einsum("mkij,mj->mki", G2, v)                    # rows: grad g_k(v)
+        lam = _lstsq_stack(np.swapaxes(J, 1, 2), -grad_f)
+    else:
+        lam = np.zeros((M, 0))
+    L0 = f0 + np.einsum("mk,mk->m", lam, g0)
+    L1 = f1 + np.einsum("mk,mki->mi", lam, g1)
+    L2 = F2 + np.einsum("mk,mkij->mij", lam, G2)
+    eig, Q = np.linalg.eigh(L2)
+    scale = np.maximum(1.0, np.max(np.abs(L2), axis=(1, 2)))
+    psd = eig[:, 0] >= -ROUNDOFF * scale
+    # min of L0 + L1.v + v^T L2 v: stationary point 2 L2 w = -L1 by least squares (the
+    # pseudo-inverse of the symmetric 2 L2 from its eigen-decomposition, lstsq's cut-off)
+    s = 2 * eig
+    cut = np.finfo(float).eps * n * np.max(np.abs(s), axis=1, keepdims=True)
+    inv = np.where(np.abs(s) > cut, 1.0 / np.where(np.abs(s) > cut, s, 1.0), 0.0)
+    w = -np.einsum("mij,mj->mi", Q, inv * np.einsum("mji,mj->mi", Q, L1))
+    resid = np.linalg.norm(2 * np.einsum("mij,mj->mi", L2, w) + L1, axis=1) / np.maximum(1.0, np.linalg.norm(L1, axis=1))
+    in_range = resid <= tolerances.identity_residual
+    c = L0 + np.einsum("mi,mi->m", L1, w) + np.einsum("mi,mij,mj->m", w, L2, w)
+    reason = np.where(~psd, 1, np.where(~in_range, 2, 0))
+    bounded = reason == 0
+    lower = np.where(bounded, c, np.nan)
+    certified = bounded & (fv - c <= tolerances.gap_abs + tolerances.gap_rel * np.maximum(1.0, np.abs(fv)))
+    return VerificationBatch(lower, fv, certified, lam, eig[:, 0], reason)
+
+
 def verify_quadratic(f: Polynomial, eq, point, *, gens=None,
                      tolerances: Tolerances = DEFAULT_TOLERANCES) -> Verification:
-    """Lagrangian lower bound at a candidate ``point`` (see module docstring)."""
+    """Lagrangian lower bound at a candidate ``point`` (see module docstring):
+    :func:`verify_quadratic_batch` on a stack of one program."""
     gens = tuple(gens or f.gens)
+    n = len(gens)
     v = np.asarray(point, float)
     f0, f1, F2 = quadratic_parts(f, gens)
     parts = [quadratic_parts(g, gens) for g in eq]
-    fv = float(f0 + f1 @ v + v @ F2 @ v)
-    if not parts:
-        lam = np.zeros(0)
-    else:
-        J = np.array([p1 + 2 * P2 @ v for _, p1, P2 in parts])        # rows: grad g_k(v)
-        grad_f = f1 + 2 * F2 @ v
-        lam, *_ = np.linalg.lstsq(J.T, -grad_f, rcond=None)
-    L0 = f0 + sum(l * p0 for l, (p0, _, _) in zip(lam, parts))
-    L1 = f1 + sum((l * p1 for l, (_, p1, _) in zip(lam, parts)), np.zeros_like(f1))
-    L2 = F2 + sum((l * P2 for l, (_, _, P2) in zip(lam, parts)), np.zeros_like(F2))
-    eig = np.linalg.eigvalsh(L2)
-    scale = max(1.0, float(np.max(np.abs(L2))))
-    if eig[0] < -ROUNDOFF * scale:
-        return Verification(SolveStatus.INFEASIBLE, None, fv, False, lam, float(eig[0]),
-                            "Lagrangian Hessian is not PSD: no degree-2 certificate with these multipliers")
-    # min of L0 + L1.v + v^T L2 v: stationary point 2 L2 w = -L1 (least squares), checked
-    w, *_ = np.linalg.lstsq(2 * L2, -L1, rcond=None)
-    resid = np.linalg.norm(2 * L2 @ w + L1) / max(1.0, np.linalg.norm(L1))
-    if resid > tolerances.identity_residual:
-        return Verification(SolveStatus.INFEASIBLE, None, fv, False, lam, float(eig[0]),
-                            "gradient of the Lagrangian not in range(H): unbounded below")
-    c = float(L0 + L1 @ w + w @ L2 @ w)
-    certified = tolerances.certified(c, fv)
-    return Verification(SolveStatus.OPTIMAL, c, fv, certified, lam, float(eig[0]),
-                        "" if certified else "gap above tolerance")
+    K = len(parts)
+    g0 = np.array([[p[0] for p in parts]]).reshape(1, K)
+    g1 = np.array([p[1] for p in parts]).reshape(1, K, n)
+    G2 = np.array([p[2] for p in parts]).reshape(1, K, n, n)
+    batch = verify_quadratic_batch(np.array([f0]), f1[None], F2[None], g0, g1, G2, v[None], tolerances=tolerances)
+    return batch.item(0)

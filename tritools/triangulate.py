@@ -40,7 +40,8 @@ from .constraints import Method
 from .geometry import dlt, gamma as gamma_of, point_from_image_points, project, validate_cameras
 from .normalize import Normalization, normalization_for
 from .problem import TriangulationProblem, build_problem
-from .regions import Region
+from .fastpath import fast_results
+from .regions import Point, Region
 from .result import Status, TriangulationResult
 
 __all__ = ["triangulate", "validate_regions", "refine_l2", "MAX_FAMILY_DIM", "SolvePath"]
@@ -206,7 +207,18 @@ def triangulate(cameras, regions, method: Method | str = Method.THEOREM1, delta:
 def _verify_fast(problem, norm, cams, regions, cams_n, regs_n, method, tol, timings):
     """Certification by verification (:mod:`sospoly.verify`): local L2 optimum from the DLT
     estimate, KKT multipliers, Lagrangian bound.  Only for delta = 2 programs without
-    inequalities or auxiliary variables (point regions); None when it does not certify."""
+    inequalities or auxiliary variables (point regions); None when it does not certify.
+
+    Corollary 1 with point regions goes through :func:`tritools.fastpath.fast_results` (a
+    batch of one, so :func:`tritools.batch.triangulate_many` decides exactly as this does;
+    it normalises the data itself, with the formulas of :mod:`tritools.normalize`); other
+    delta = 2 programs (Theorem 1 with two views) use the generic code below."""
+    if method == Method.COROLLARY1 and all(isinstance(r, Point) for r in regions):
+        t0 = time.perf_counter()
+        res = fast_results(cams[None], np.array([r.center for r in regions])[None], tolerances=tol,
+                           method=method.value)[0]
+        timings["verify"] = time.perf_counter() - t0
+        return res
     if problem.ineq or any(r.n_aux for r in regs_n) or problem.f.degree > 2 or \
             any(g.degree > 2 for g in problem.eq):
         return None

@@ -147,14 +147,21 @@ def undistort(uv_d: np.ndarray, dist: np.ndarray, scale_px: float = 1.0) -> tupl
     if not np.any(dist):
         return uv, np.ones(len(uv), bool)
     tol = UNDISTORT_TOL_PX / scale_px
-    for _ in range(UNDISTORT_MAX_ITER):
+    active = np.ones(len(uv), bool)        # rows still iterating (not converged, not stuck)
+    with np.errstate(all="ignore"):
+        for _ in range(UNDISTORT_MAX_ITER):
+            res = distort(uv, dist) - uv_d
+            active &= ~np.all(np.abs(res) <= tol, axis=1)
+            if not active.any():
+                break
+            J = _jacobian(uv, dist)          # 2x2 Newton step by Cramer's rule
+            det = J[:, 0, 0] * J[:, 1, 1] - J[:, 0, 1] * J[:, 1, 0]
+            active &= np.isfinite(det) & (det != 0)   # a fold of the distortion: no Newton step
+            safe = np.where(active, det, 1.0)
+            step = np.column_stack([J[:, 1, 1] * res[:, 0] - J[:, 0, 1] * res[:, 1],
+                                    J[:, 0, 0] * res[:, 1] - J[:, 1, 0] * res[:, 0]]) / safe[:, None]
+            uv = np.where(active[:, None], uv - step, uv)
         res = distort(uv, dist) - uv_d
-        ok = np.all(np.abs(res) <= tol, axis=1)
-        if ok.all():
-            break
-        step = np.linalg.solve(_jacobian(uv, dist), res[:, :, None])[:, :, 0]
-        uv = np.where(ok[:, None], uv, uv - step)
-    res = distort(uv, dist) - uv_d
     converged = np.all(np.isfinite(uv), axis=1) & np.all(np.abs(res) <= tol, axis=1)
     return uv, converged
 

@@ -20,7 +20,11 @@ from pathlib import Path
 
 import numpy as np
 
+from .constraints import Method
+
 __all__ = ["register", "run_figure3", "run_plot_dataset"]
+
+METHODS = tuple(m.value for m in Method)
 
 #: Default number of tracks of ``plot-dataset`` (a seeded random subset; 0 = all tracks).
 DEFAULT_LIMIT = 200
@@ -38,9 +42,7 @@ def run_figure3(args) -> int:
         from .plot import save_figure3_examples
 
         paths = save_figure3_examples(args.out, args.examples, method=args.method, delta=args.delta)
-    except ImportError as exc:
-        return _fail(str(exc))
-    except (ValueError, OSError) as exc:
+    except (ImportError, ValueError, OSError) as exc:
         return _fail(str(exc))
     for p in paths:
         print(p)
@@ -99,7 +101,7 @@ def register(subparsers) -> None:
     f3.add_argument("--out", default="figures", help="output directory (default: figures)")
     f3.add_argument("--examples", type=int, nargs="+", choices=(2, 3, 4), default=[2, 3, 4],
                     help="examples to plot (default: 2 3 4)")
-    f3.add_argument("--method", choices=("theorem1", "corollary1"), default="theorem1",
+    f3.add_argument("--method", choices=METHODS, default=Method.THEOREM1.value,
                     help="certified method (default: theorem1, as the paper's Figure 3)")
     f3.add_argument("--delta", type=int, default=4, help="relaxation degree (default: 4)")
     f3.set_defaults(func=run_figure3)
@@ -113,7 +115,7 @@ def register(subparsers) -> None:
     pd.add_argument("--limit", type=int, default=DEFAULT_LIMIT,
                     help=f"number of tracks, a seeded random subset (default {DEFAULT_LIMIT}; 0 = all)")
     pd.add_argument("--seed", type=int, default=0, help="seed of the track subset (default 0)")
-    pd.add_argument("--method", choices=("theorem1", "corollary1"), default="corollary1",
+    pd.add_argument("--method", choices=METHODS, default=Method.COROLLARY1.value,
                     help="certified method (default: corollary1)")
     pd.add_argument("--delta", type=int, default=None, help="first relaxation degree (default: delta_min)")
     pd.add_argument("--path", choices=("auto", "sdp"), default="auto",

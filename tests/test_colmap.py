@@ -381,3 +381,32 @@ def test_cli_colmap_from_oxford(tmp_path, capsys):
     assert len(m.images) == 3 and len(m.points3D) == 20 and {c.model for c in m.cameras.values()} == {"PINHOLE"}
     assert _cli(["colmap-from-oxford", "corridor", str(tmp_path / "c")]) == 2
     assert "skew" in capsys.readouterr().err
+
+
+def test_pycolmap_reads_the_output_and_agrees_on_projection_undistortion_and_error(tmp_path):
+    """COLMAP itself (pycolmap, optional extra 'colmap') as the reference for the file format,
+    the quaternion convention, the distortion models, the undistortion and Point3D.error."""
+    pycolmap = pytest.importorskip("pycolmap", reason="pycolmap not installed (extra 'colmap')")
+    model, _ = synthetic_model(n_points=12, noise_px=1.0, seed=8)
+    new, _ = retriangulate(model)
+    write_text_model(new, tmp_path)
+    rec = pycolmap.Reconstruction(str(tmp_path))
+    assert (len(rec.cameras), len(rec.images), len(rec.points3D)) == (5, 6, 12)
+    for p in new.points3D.values():
+        for iid, idx in p.track:
+            im, cam = new.images[iid], new.cameras[new.images[iid].camera_id]
+            ours = pixels_from_camera(cam.model, cam.params, im.cam_from_world @ np.append(p.xyz, 1.0))[0]
+            # same double-precision formula evaluated twice: 1e-9 px is rounding level at 1000 px
+            assert np.allclose(rec.images[iid].project_point(np.array(p.xyz)), ours, atol=1e-9)
+            xy = np.array([im.points2D[idx][:2]])
+            u = undistorted_pixels(cam.model, cam.params, xy)[0]
+            fx, fy, cx, cy = FX_FY_CX_CY[cam.id]
+            normalized = np.column_stack([(u[:, 0] - cx) / fx, (u[:, 1] - cy) / fy])
+            # COLMAP stops its own iterative undistortion earlier than we do (1e-10 px here):
+            # 1e-9 in normalised units is ~1e-6 px
+            assert np.allclose(rec.cameras[cam.id].cam_from_img(xy), normalized, atol=1e-9)
+    errors = {pid: rec.points3D[pid].error for pid in new.points3D}
+    rec.update_point_3d_errors()
+    for pid, p in new.points3D.items():
+        assert errors[pid] == p.error                                     # read back exactly
+        assert rec.points3D[pid].error == pytest.approx(p.error, rel=1e-9, abs=1e-12)

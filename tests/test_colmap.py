@@ -372,6 +372,10 @@ def test_cli_bad_input_exits_2(tmp_path, capsys):
     assert "cameras.txt: missing" in capsys.readouterr().err
     assert _cli(["colmap-from-oxford", "no_such_sequence", str(tmp_path / "o")]) == 2
     assert "error:" in capsys.readouterr().err
+    (tmp_path / "in" / "cameras.txt").write_text("1 OPENCV_FISHEYE 640 480 800 800 320 240 0 0 0 0\n")
+    (tmp_path / "in" / "points3D.txt").write_text("")
+    assert _cli(["colmap", str(tmp_path / "in"), str(tmp_path / "out")]) == 2
+    assert "camera model 'OPENCV_FISHEYE' is not supported" in capsys.readouterr().err
 
 
 @pytest.mark.skipif(DATA is None, reason="Oxford data not found (../shared/data/oxford or $TRITOOLS_DATA)")

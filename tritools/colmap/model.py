@@ -87,8 +87,9 @@ class Image:
         object.__setattr__(self, "tvec", _finite_tuple(self.tvec, 3, f"image {self.id} tvec"))
         if np.linalg.norm(self.qvec) == 0:
             raise ValueError(f"image {self.id}: qvec is zero")
-        if not self.name or any(c in self.name for c in "\r\n"):
-            raise ValueError(f"image {self.id}: name must be a non-empty single-line string, got {self.name!r}")
+        if not self.name or any(c in self.name for c in "\r\n") or self.name != self.name.strip():
+            raise ValueError(f"image {self.id}: name must be a non-empty single-line string without leading or "
+                             f"trailing whitespace (COLMAP's text format), got {self.name!r}")
         pts = []
         for k, p in enumerate(self.points2D):
             if len(p) != 3:

@@ -88,3 +88,10 @@ def test_missing_optional_module_is_skipped(gen_api):
 def test_api_md_has_no_python_fences():
     # tests/test_docs.py executes every python fence of docs/*.md: signatures must not be one
     assert "```python" not in (ROOT / "docs" / "api.md").read_text()
+
+
+def test_index_links_every_page():
+    index = (ROOT / "docs" / "index.md").read_text()
+    pages = sorted(p.name for p in (ROOT / "docs").glob("*.md") if p.name != "index.md")
+    missing = [name for name in pages if f"]({name})" not in index]
+    assert not missing, f"docs/index.md does not link: {missing}"

@@ -247,7 +247,7 @@ def figure3(cameras, regions, result: TriangulationResult, ax=None, title: str |
                 zorder=3)
         ax.plot([x[0]], [x[1]], linestyle="none", marker="o", markersize=7, color=color,
                 markeredgecolor="white", markeredgewidth=0.8, gid=f"projection-{i}", zorder=6)
-        ax.plot([q[0]], [q[1]], linestyle="none", marker="s", markersize=13, markerfacecolor="none",
+        ax.plot([q[0]], [q[1]], linestyle="none", marker="s", markersize=10, markerfacecolor="none",
                 markeredgecolor=color, markeredgewidth=1.6, color=color, gid=f"closest-{i}", zorder=5)
     marker_handles = _marker_legend_handles()
     if proj is not None and result.image_points is not None:

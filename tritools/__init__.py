@@ -10,6 +10,7 @@ imports a solver.
 >>> res = tritools.triangulate(cams, regions, "theorem1", delta=4)   # doctest: +SKIP
 >>> res.X, res.gamma_lb, res.gamma_ub, res.optimal          # doctest: +SKIP
 """
+from .batch import triangulate_many
 from .constraints import Method
 from .geometry import dlt, fundamental_matrix, gamma, project, validate_cameras
 from .regions import Ellipse, EllipseBorder, Point, Polytope, Region, Segment
@@ -22,4 +23,4 @@ __version__ = "0.1.0"
 
 __all__ = ["Method", "dlt", "fundamental_matrix", "gamma", "project", "validate_cameras", "Ellipse",
            "EllipseBorder", "Point", "Polytope", "Region", "Segment", "Status", "TriangulationResult",
-           "triangulate", "paper_example"]
+           "triangulate", "triangulate_many", "paper_example"]

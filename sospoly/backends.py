@@ -7,6 +7,10 @@ This is the only module of sospoly that imports a solver.  Two back-ends:
   large batches (each attempt is recorded).  pyo3's ``PanicException`` (a
   BaseException) is caught, the solver object is discarded and the next attempt
   builds a fresh one.
+* :class:`IpmBackend`: the small interior-point method of :mod:`sospoly.ipm` (Schur
+  complement of the size of the free scalars), falling back to Clarabel when it
+  does not converge or its answer fails the a-posteriori check; both attempts are
+  recorded.
 * :class:`CvxpyBackend`: the same conic data re-expressed as a cvxpy problem and
   solved by any installed cvxpy SDP solver (for cross-checking).
 """
@@ -23,7 +27,7 @@ from .conic import ConicProblem
 from .svec import triu_pairs, svec_scale
 from .tolerances import DEFAULT_TOLERANCES, Tolerances
 
-__all__ = ["RawStatus", "Attempt", "ConicSolution", "ClarabelBackend", "CvxpyBackend", "get_backend"]
+__all__ = ["RawStatus", "Attempt", "ConicSolution", "ClarabelBackend", "CvxpyBackend", "IpmBackend", "get_backend"]
 
 
 class RawStatus(str, enum.Enum):
@@ -165,6 +169,54 @@ class ClarabelBackend:
                              tuple(attempts))
 
 
+#: above this estimated cost (sum over PSD blocks of m n^3) the IPM forms its Schur
+#: complement from sparse A and the svec Kronecker operator instead of dense matmuls.
+IPM_DENSE_LIMIT = 3e6
+
+
+class IpmBackend:
+    """:mod:`sospoly.ipm` first, ``fallback`` (default Clarabel) when it does not converge
+    or ``accept`` rejects its answer."""
+
+    name = "ipm"
+
+    def __init__(self, tolerances: Tolerances = DEFAULT_TOLERANCES, fallback=None):
+        self.tolerances = tolerances
+        self.fallback = fallback if fallback is not None else ClarabelBackend(tolerances)
+
+    def solve(self, problem: ConicProblem, accept=None, retry: bool = True) -> ConicSolution:
+        from .ipm import ipm_solve_batch, ipm_solve_sparse, layout_of
+
+        t0 = time.perf_counter()
+        try:
+            lay = layout_of(problem.cones)
+        except ValueError as exc:   # cones the IPM does not handle: straight to the fallback
+            att = Attempt("ipm", RawStatus.FAILED, str(exc)[:200], 0, 0.0)
+            sol = None
+        else:
+            m = problem.n_cols
+            if sum(m * n ** 3 for n in lay.sizes) <= IPM_DENSE_LIMIT:
+                res = ipm_solve_batch(problem.A.toarray()[None], problem.b[None], problem.q, problem.cones,
+                                      self.tolerances)
+            else:
+                res = ipm_solve_sparse(problem.A, problem.b, problem.q, problem.cones, self.tolerances)
+            ok = bool(res.converged[0])
+            x, z = res.x[0], res.z[0]
+            if ok and accept is not None and not accept(x, z):
+                ok, why = False, "certificate check failed"
+            else:
+                why = "converged" if ok else res.reason[0]
+            att = Attempt("ipm", RawStatus.SOLVED if ok else RawStatus.FAILED, why, int(res.iterations[0]),
+                          time.perf_counter() - t0)
+            sol = ConicSolution(RawStatus.SOLVED, x, z, float(res.primal_objective[0]),
+                                float(res.dual_objective[0]), (att,)) if ok else None
+        if sol is not None:
+            return sol
+        fb = self.fallback.solve(problem, accept=accept, retry=retry)
+        return ConicSolution(fb.raw_status, fb.x, fb.z, fb.primal_objective, fb.dual_objective,
+                             (att,) + tuple(fb.attempts))
+
+
 def _svec_operator(s: int) -> sp.csr_matrix:
     """Sparse T with svec(S) = T @ vec(S) (vec column-major, as cvxpy's)."""
     i, j = triu_pairs(s)
@@ -247,7 +299,7 @@ class CvxpyBackend:
 
 
 def get_backend(backend, tolerances: Tolerances = DEFAULT_TOLERANCES):
-    """Resolve a back-end given by object, or by name ``"clarabel"`` / ``"cvxpy"`` / ``"cvxpy:SCS"``."""
+    """Resolve a back-end given by object, or by name ``"clarabel"`` / ``"ipm"`` / ``"cvxpy"`` / ``"cvxpy:SCS"``."""
     if backend is None:
         return ClarabelBackend(tolerances)
     if isinstance(backend, str):
@@ -256,7 +308,9 @@ def get_backend(backend, tolerances: Tolerances = DEFAULT_TOLERANCES):
             return ClarabelBackend(tolerances)
         if name == "cvxpy":
             return CvxpyBackend(solver or None, tolerances)
-        raise ValueError(f"unknown backend {backend!r}: use 'clarabel', 'cvxpy' or 'cvxpy:<SOLVER>'")
+        if name == "ipm":
+            return IpmBackend(tolerances)
+        raise ValueError(f"unknown backend {backend!r}: use 'clarabel', 'ipm', 'cvxpy' or 'cvxpy:<SOLVER>'")
     if not hasattr(backend, "solve"):
         raise TypeError("backend must be a name or an object with a solve(problem, accept) method")
     return backend

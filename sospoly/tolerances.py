@@ -35,6 +35,13 @@ Why these values
 * ``kernel_rel``: eigenvalues of a Gram matrix below ``kernel_rel * lambda_max``
   are treated as zero when extracting minimisers (and moment-matrix eigenvalues
   above ``moment_rank_rel * lambda_max`` count toward the rank).
+* ``ipm_max_iter`` / ``ipm_step_fraction`` / ``ipm_divergence``: the batched
+  interior-point solver (:mod:`sospoly.ipm`) stops after ``ipm_max_iter`` iterations
+  (Mehrotra's method needs 10-25 on the well-scaled programs of the hot path, so 60
+  only ends runs that will not converge), moves ``ipm_step_fraction`` of the way to
+  the cone boundary, and declares divergence (a likely infeasible or unbounded
+  program, handed to Clarabel) when |x| or |z| exceeds ``ipm_divergence``.  It stops
+  on the same ``solver_*`` tolerances as Clarabel.
 * ``bisection_abs`` / ``bisection_rel``: the GEVP bisection stops when the bracket
   ``[c_lo, c_hi]`` satisfies ``c_hi - c_lo <= bisection_abs + bisection_rel*max(1,|c_lo|)``.
 """
@@ -62,6 +69,9 @@ class Tolerances:
     bisection_abs: float = 1e-7
     bisection_rel: float = 1e-7
     bisection_max_steps: int = 60
+    ipm_max_iter: int = 60
+    ipm_step_fraction: float = 0.95
+    ipm_divergence: float = 1e10
 
     def certified(self, lower: float | None, upper: float | None) -> bool:
         """Is ``upper - lower`` within the documented optimality tolerance?"""

@@ -9,11 +9,14 @@ The layers, from meaning to numbers:
 * :mod:`sospoly.conic` -- lowering to one conic standard form (image or kernel Gram form);
 * :mod:`sospoly.backends` / :mod:`sospoly.solve` -- Clarabel (direct) or cvxpy, with
   a-posteriori certificate checks;
+* :mod:`sospoly.compiled` -- compile a Positivstellensatz structure once, fill numbers per
+  instance, solve batches; :mod:`sospoly.ipm` -- the batched interior-point method;
 * :mod:`sospoly.gevp` -- bisection for the free-multiplier GEVP;
 * :mod:`sospoly.extraction` -- minimisers from Gram kernels and moment matrices;
 * :mod:`sospoly.minimize` -- ``minimize`` and ``is_sos``.
 """
 from .basis import GramBasis, MonomialIndex, monomials, sigma, tau
+from .compiled import DEFAULT_CACHE, CompiledPsatz, PsatzCache, StructureMismatch, compile_psatz
 from .complexity import n_lmivar_formula
 from .conic import ConicProblem, GramForm, lower
 from .extraction import Candidate, extract_from_gram, extract_from_moment
@@ -36,5 +39,6 @@ __all__ = [
     "LinPoly", "LowerBound", "candidates_of", "solve_psatz", "MinimizeResult", "SOSResult", "feasibility_violation", "is_sos", "minimize", "Polynomial",
     "as_polynomial", "det", "variables", "Sense", "SOSProgram", "Multiplier", "PsatzProblem", "build_psatz",
     "default_q", "delta_min", "ProgramSolution", "check_certificate", "solve_program", "SolveStatus",
-    "DEFAULT_TOLERANCES", "Tolerances",
+    "DEFAULT_TOLERANCES", "Tolerances", "CompiledPsatz", "PsatzCache", "StructureMismatch", "compile_psatz",
+    "DEFAULT_CACHE",
 ]

@@ -282,6 +282,7 @@ def _ipm(schur, q, b, lay: _Layout, tol: Tolerances, AE_dense):
     reason = [""] * B
     active = np.arange(B)
     step_frac = tol.ipm_step_fraction
+    history = np.full((B, 5), np.inf)    # last merit values (gap + residuals) per instance
     for it in range(tol.ipm_max_iter + 1):
         if active.size == 0:
             break
@@ -309,13 +310,20 @@ def _ipm(schur, q, b, lay: _Layout, tol: Tolerances, AE_dense):
             & (pres <= tol.solver_feas * np.maximum(1.0, nb_inf[active] + xinf + sinf)) \
             & (dres <= tol.solver_feas * np.maximum(1.0, nq_inf[active] + zinf))
         diverged = ~np.isfinite(pobj) | ~np.isfinite(dobj) | (np.maximum(xinf, zinf) > tol.ipm_divergence)
-        done = ok | diverged | (it == tol.ipm_max_iter)
+        # stalled: the merit has not halved over the last 4 iterations (the iterates sit on a
+        # face from which the Newton direction makes no progress): hand over to the fallback
+        merit = gap + pres + dres
+        stalled = (it >= 8) & (merit > 0.5 * history[active, 0])
+        history[active, :-1] = history[active, 1:]
+        history[active, -1] = merit
+        done = ok | diverged | stalled | (it == tol.ipm_max_iter)
         for j in np.nonzero(done)[0]:
             g = active[j]
             converged[g] = bool(ok[j])
             its[g] = it
             if not ok[j]:
-                reason[g] = "diverged (infeasible or unbounded?)" if diverged[j] else "iteration limit"
+                reason[g] = "diverged (infeasible or unbounded?)" if diverged[j] else (
+                    "stalled" if stalled[j] else "iteration limit")
         keep = ~done
         if not keep.any():
             break

@@ -44,7 +44,8 @@ from .fastpath import fast_results
 from .regions import Point, Region
 from .result import Status, TriangulationResult
 
-__all__ = ["triangulate", "validate_regions", "refine_l2", "MAX_FAMILY_DIM", "SolvePath"]
+__all__ = ["triangulate", "validate_regions", "refine_l2", "MAX_FAMILY_DIM", "SolvePath", "solve_sdp_batch",
+           "STRUCTURE_CACHE"]
 
 
 class SolvePath(str, enum.Enum):
@@ -252,16 +253,64 @@ def _replace(res: TriangulationResult, **kw) -> TriangulationResult:
     return dataclasses.replace(res, **kw)
 
 
+#: compiled Positivstellensatz structures, keyed by (N, region types, method, delta, form):
+#: a triangulation only fills numbers into the structure of its key (sospoly.compiled).
+STRUCTURE_CACHE = sospoly.PsatzCache(maxsize=128)
+
+
+def _structure_key(problem, regs_n, method, delta, form):
+    return (problem.n_views, tuple(type(r).__name__ for r in regs_n), Method(method).value, int(delta),
+            GramForm(form).value)
+
+
+def _compiled_for(problem, regs_n, method, delta, multiplier, form):
+    """The cached compiled structure of this problem, or None (free multiplier, or an
+    instance whose degrees differ from its key's structure)."""
+    if isinstance(multiplier, str) and not isinstance(multiplier, sospoly.Polynomial):
+        try:
+            multiplier = Multiplier(multiplier)
+        except ValueError:
+            return None, multiplier
+    if multiplier == Multiplier.FREE:
+        return None, multiplier
+    key = _structure_key(problem, regs_n, method, delta, form) if multiplier == Multiplier.FIXED else None
+    try:
+        comp = STRUCTURE_CACHE.get(problem.f, problem.eq, problem.ineq, delta, multiplier, form, gens=problem.gens,
+                                   key=key)
+        comp.theta(problem.f, problem.eq, problem.ineq)
+    except sospoly.StructureMismatch:
+        return None, multiplier
+    return comp, multiplier
+
+
 def _solve_at(problem, norm: Normalization, cams, regions, cams_n, regs_n, method, delta, multiplier, refine,
               backend, form, tol: Tolerances, timings) -> TriangulationResult:
-    N = problem.n_views
+    """One degree: the compiled structure of (N, region types, method, delta) from
+    :data:`STRUCTURE_CACHE` filled with this problem's numbers and solved by ``backend``
+    (default ``"auto"``: Clarabel for small SDPs, the interior-point method of
+    :mod:`sospoly.ipm` with Clarabel fallback for large ones); the free-q GEVP goes
+    through :func:`sospoly.build_psatz` / :func:`sospoly.solve_psatz`."""
     t0 = time.perf_counter()
-    psatz = sospoly.build_psatz(problem.f, problem.eq, problem.ineq, delta, multiplier, gens=problem.gens)
-    timings[f"assemble_d{delta}"] = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    c_hi = None
-    lb = sospoly.solve_psatz(psatz, backend=backend, form=form, tolerances=tol, c_hi=c_hi)
+    comp, multiplier = _compiled_for(problem, regs_n, method, delta, multiplier, form)
+    if comp is None:
+        psatz = sospoly.build_psatz(problem.f, problem.eq, problem.ineq, delta, multiplier, gens=problem.gens)
+        timings[f"assemble_d{delta}"] = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        lb = sospoly.solve_psatz(psatz, backend=backend, form=form, tolerances=tol)
+    else:
+        psatz = comp
+        theta = comp.theta(problem.f, problem.eq, problem.ineq)
+        timings[f"assemble_d{delta}"] = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        lb = comp.solve_theta(theta, backend=backend if backend is not None else "auto", tolerances=tol)
     timings[f"solve_d{delta}"] = time.perf_counter() - t0
+    return _finish(problem, norm, cams, regions, cams_n, regs_n, method, delta, refine, tol, timings, psatz, lb)
+
+
+def _finish(problem, norm, cams, regions, cams_n, regs_n, method, delta, refine, tol, timings, psatz,
+            lb) -> TriangulationResult:
+    """gamma_LB from c*, the estimate from the certificate, refinement, the certificate test."""
+    N = problem.n_views
     solver_attempts = tuple(f"{a.label}:{a.solver_status}" for a in (lb.solution.attempts if lb.solution else ()))
     common = dict(method=method.value, delta=delta, n_lmivar=psatz.n_lmivar, attempts=solver_attempts)
     if lb.status != SolveStatus.OPTIMAL or lb.solution is None or lb.solution.x is None:
@@ -302,3 +351,64 @@ def _solve_at(problem, norm: Normalization, cams, regions, cams_n, regs_n, metho
     return TriangulationResult(status=status, X=X, gamma_ub=gamma_ub, gamma_lb=gamma_lb, optimal=optimal,
                                image_points=norm.image_points(x_star_n), X_raw=X_raw, gamma_ub_raw=gamma_raw,
                                certified_by="sdp" if optimal else None, message=msg, **common)
+
+
+def solve_sdp_batch(items, method: Method | str = Method.COROLLARY1, delta: int | None = None, *,
+                    refine: bool = True, normalize: bool = True, form: GramForm = GramForm.IMAGE,
+                    tolerances: Tolerances = DEFAULT_TOLERANCES, fallback=None) -> list[TriangulationResult]:
+    """The SDP path for many (cameras, regions) items at one degree, batched by structure.
+
+    Items are grouped by (N, region types); each group's compiled structure
+    (:data:`STRUCTURE_CACHE`) is solved for all its items at once by
+    :meth:`sospoly.CompiledPsatz.solve_batch` (the batched interior-point method; items it
+    does not converge on, or whose certificate fails the a-posteriori checks, are
+    re-solved by ``fallback``, default Clarabel).  Each result is what
+    ``triangulate(cameras, regions, method, delta, delta, path="sdp")`` reports, with the
+    fixed multiplier; ``delta`` defaults to each item's delta_min.  Invalid items raise
+    (validate first, or use :func:`tritools.batch.safe_triangulate` per item).  The
+    batch's solve time is shared equally among its items in ``timings``.
+    """
+    method = Method(method)
+    prepared, groups = [], {}
+    for idx, (cameras, regions) in enumerate(items):
+        t0 = time.perf_counter()
+        cams = validate_cameras(cameras)
+        regions = validate_regions(regions, cams.shape[0])
+        norm = normalization_for(cams, regions, enabled=normalize)
+        cams_n, regs_n = norm.cameras(cams), norm.regions(regions)
+        problem = build_problem(cams_n, regs_n, method)
+        dmin = sospoly.delta_min(problem.f, problem.eq, problem.ineq)
+        d = dmin if delta is None else int(delta)
+        if d % 2 or d < dmin:
+            raise ValueError(f"items[{idx}]: delta must be even and >= delta_min = {dmin}, got {d}")
+        timings = {"build": time.perf_counter() - t0}
+        t0 = time.perf_counter()
+        comp, _ = _compiled_for(problem, regs_n, method, d, Multiplier.FIXED, form)
+        theta = comp.theta(problem.f, problem.eq, problem.ineq) if comp is not None else None
+        timings[f"assemble_d{d}"] = time.perf_counter() - t0
+        prepared.append((problem, norm, cams, regions, cams_n, regs_n, d, comp, theta, timings))
+        groups.setdefault(id(comp), []).append(idx)
+    lbs = [None] * len(prepared)
+    for members in groups.values():
+        comp = prepared[members[0]][7]
+        t0 = time.perf_counter()
+        if comp is None:   # structure not compilable: one at a time through build_psatz
+            for i in members:
+                pb, d = prepared[i][0], prepared[i][6]
+                ps = sospoly.build_psatz(pb.f, pb.eq, pb.ineq, d, gens=pb.gens)
+                lbs[i] = (ps, sospoly.solve_psatz(ps, backend=fallback, form=form, tolerances=tolerances))
+        else:
+            out = comp.solve_batch(thetas=np.array([prepared[i][8] for i in members]), fallback=fallback,
+                                   tolerances=tolerances)
+            for i, lb in zip(members, out):
+                lbs[i] = (comp, lb)
+        share = (time.perf_counter() - t0) / len(members)
+        for i in members:
+            prepared[i][9][f"solve_d{prepared[i][6]}"] = share
+    results = []
+    for (problem, norm, cams, regions, cams_n, regs_n, d, comp, theta, timings), (ps, lb) in zip(prepared, lbs):
+        res = _finish(problem, norm, cams, regions, cams_n, regs_n, method, d, refine, tolerances, timings, ps, lb)
+        timings["total"] = sum(timings.values())
+        results.append(_replace(res, timings=dict(timings),
+                                attempts=((d, res.status.value, res.gamma_lb, res.gamma_ub, res.attempts),)))
+    return results

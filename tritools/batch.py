@@ -83,7 +83,7 @@ def _solve_item(cams, regions, method, delta, max_delta, path, prefix, retries, 
     """One problem through :func:`safe_triangulate`, then the ``retries`` steps while not certified."""
     res = safe_triangulate(cams, regions, method, delta, max_delta, path=path, **kw)
     if res.status == Status.INVALID_INPUT:
-        return res
+        prefix = ()          # the fast path did not fail: it could not read the data
     tried = list(prefix) + (list(res.attempts) or [(res.delta, res.status.value, res.gamma_lb, res.gamma_ub)])
     if res.status != Status.OPTIMAL:
         for m, d in retries:

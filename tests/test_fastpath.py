@@ -1,0 +1,179 @@
+"""The vectorised certification by verification (tritools.fastpath, sospoly.verify batch).
+
+References: closed forms (a circle), the single-program verify_quadratic, Hartley-Sturm's
+exact two-view optimum (tests/reference), and the delta = 2 SDP path of tritools.triangulate.
+"""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import sospoly
+import tritools
+from sospoly.verify import quadratic_parts, verify_quadratic, verify_quadratic_batch
+from tests.reference.hartley_sturm import hartley_sturm
+from tritools import Point, Status
+from tritools.fastpath import fast_results, verify_points
+from tritools.scene import random_scene
+
+# gamma agreement between two certified answers: both are within the certificate tolerance
+# (gap_abs + gap_rel on c = 2N gamma'^2, c ~ 1) of the same optimum, i.e. ~1e-6 relative in gamma.
+GAMMA_RTOL = 1e-6
+# gamma_LB from two different certificates (both valid, each within ~1e-6 of c*): 1e-5 relative.
+LB_RTOL = 1e-5
+
+
+def _stack(scene):
+    M = scene.n_points
+    return np.broadcast_to(scene.cameras, (M,) + scene.cameras.shape), scene.points2d
+
+
+def test_batch_matches_single_programs_and_closed_form():
+    # min x + y on x^2 + y^2 = r^2 is -sqrt(2) r at -(1, 1) r / sqrt(2); at +(1, 1) r / sqrt(2) the
+    # KKT multiplier makes the Lagrangian Hessian negative (no bound).  Stack both for several r.
+    x, y = sospoly.variables("x y")
+    radii = np.array([0.5, 1.0, 3.0])
+    f0, f1, F2, g0, g1, G2, pts = [], [], [], [], [], [], []
+    for r in radii:
+        for sign in (-1, 1):
+            p = quadratic_parts(x + y, x.gens)
+            q = quadratic_parts(x**2 + y**2 - r**2, x.gens)
+            f0.append(p[0]), f1.append(p[1]), F2.append(p[2])
+            g0.append([q[0]]), g1.append([q[1]]), G2.append([q[2]])
+            pts.append(sign * r * np.ones(2) / np.sqrt(2))
+    b = verify_quadratic_batch(f0, f1, F2, g0, g1, G2, pts)
+    assert b.certified.tolist() == [True, False] * 3
+    np.testing.assert_allclose(b.lower_bound[::2], -np.sqrt(2) * radii, atol=1e-12)
+    assert np.all(np.isnan(b.lower_bound[1::2])) and np.all(b.reason[1::2] == 1)
+    for m in range(6):   # the single API is the batch of one: identical decision and bound
+        single = verify_quadratic(x + y, [x**2 + y**2 - radii[m // 2] ** 2], pts[m])
+        item = b.item(m)
+        assert single.certified == item.certified and single.status == item.status
+        assert (single.lower_bound is None) == (item.lower_bound is None)
+        if item.lower_bound is not None:
+            assert single.lower_bound == pytest.approx(item.lower_bound, abs=1e-14)
+
+
+def test_batch_rejects_inconsistent_shapes():
+    with pytest.raises(ValueError, match="inconsistent shapes"):
+        verify_quadratic_batch(np.zeros(2), np.zeros((2, 3)), np.zeros((2, 3, 3)), np.zeros((2, 1)),
+                               np.zeros((2, 1, 3)), np.zeros((2, 1, 4, 4)), np.zeros((2, 3)))
+    with pytest.raises(ValueError, match=r"\(M, N, 3, 4\)"):
+        verify_points(np.zeros((3, 3, 4)), np.zeros((3, 2)))
+
+
+@pytest.mark.parametrize("noise", [0.5, 5.0, 40.0])
+def test_two_views_equal_hartley_sturm(noise):
+    # 300 two-view points per noise level: every certified gamma is the exact optimum
+    scene = random_scene(2, 300, noise_px=noise, seed=int(10 * noise))
+    b = verify_points(*_stack(scene))
+    assert b.certified.mean() > 0.9
+    for j in np.nonzero(b.certified)[0]:
+        _, cost = hartley_sturm(scene.cameras[0], scene.cameras[1], *scene.points2d[j])
+        g = np.sqrt(cost / 4)
+        assert abs(b.gamma_ub[j] - g) <= GAMMA_RTOL * max(1.0, g)
+        assert b.gamma_lb[j] <= g * (1 + LB_RTOL) and b.gamma_lb[j] >= g * (1 - LB_RTOL)
+
+
+@pytest.mark.parametrize("n_views", [3, 4, 5, 6, 8])
+def test_certified_bound_is_below_every_feasible_value(n_views):
+    # thousands of points (N = 3..8, noise up to 60 px): the certified gamma_LB can never exceed
+    # gamma at any scene point; we test the true point, the DLT point and 20 random perturbations
+    # of the estimate (an independent brute-force check of the bound's validity)
+    rng = np.random.default_rng(n_views)
+    for noise in (1.0, 60.0):
+        scene = random_scene(n_views, 200, noise_px=noise, seed=100 + n_views)
+        b = verify_points(*_stack(scene))
+        for j in np.nonzero(b.certified)[0][:60]:
+            regions = scene.regions(j)
+            trial = np.vstack([scene.points3d[j], tritools.dlt(scene.cameras, scene.points2d[j]),
+                               b.X[j] + rng.normal(scale=0.05, size=(20, 3))])
+            g = tritools.gamma(trial, scene.cameras, regions)
+            assert b.gamma_lb[j] <= np.min(g) * (1 + 1e-9) + 1e-9
+            assert b.gamma_lb[j] <= b.gamma_ub[j] * (1 + LB_RTOL)
+
+
+@pytest.mark.parametrize("n_views,noise,seed", [(2, 80.0, 0), (3, 20.0, 1), (3, 1.0, 2), (4, 60.0, 7),
+                                                (5, 5.0, 4), (6, 80.0, 5), (8, 2.0, 6)])
+def test_fast_path_against_sdp_path(n_views, noise, seed):
+    # (a) fast-certified => the SDP certifies the same gamma; (b) SDP-certified => auto certifies
+    scene = random_scene(n_views, 20, noise_px=noise, seed=300 + seed)
+    problems = [(scene.cameras, scene.regions(j)) for j in range(20)]
+    auto = tritools.triangulate_many(problems, "corollary1", 2, 2, progress=False)
+    for (cams, regions), a in zip(problems, auto):
+        sdp = tritools.triangulate(cams, regions, "corollary1", 2, 2, path="sdp")
+        if a.certified_by == "verification":
+            assert sdp.optimal, "the fast path certified a point the SDP path does not certify"
+            assert abs(a.gamma_ub - sdp.gamma_ub) <= GAMMA_RTOL * max(1.0, sdp.gamma_ub)
+            assert abs(a.gamma_lb - sdp.gamma_lb) <= LB_RTOL * max(1.0, sdp.gamma_lb)
+        if sdp.optimal:
+            assert a.optimal and a.certified_by in ("verification", "sdp")
+        assert a.status == sdp.status or a.certified_by == "verification"
+
+
+def test_single_triangulate_and_batch_decide_alike():
+    scene = random_scene(4, 30, noise_px=30.0, seed=42)
+    fast = fast_results(*_stack(scene))
+    for j, fr in enumerate(fast):
+        single = tritools.triangulate(scene.cameras, scene.regions(j), "corollary1", 2, 2, path="auto")
+        if fr is None:
+            assert single.certified_by != "verification"
+        else:
+            assert single.certified_by == "verification"
+            np.testing.assert_allclose(single.X, fr.X, rtol=1e-12, atol=1e-12)
+            assert single.gamma_lb == pytest.approx(fr.gamma_lb, rel=1e-12)
+
+
+def test_degenerate_problems_are_not_certified():
+    scene = random_scene(3, 4, noise_px=1.0, seed=5)
+    C, x = (np.array(a) for a in _stack(scene))
+    C[1, 0, 0, 0] = np.nan                     # NaN camera
+    C[2] = scene.cameras[0]                    # all cameras equal
+    C[3, 1] = 0.0                              # rank-0 camera
+    b = verify_points(C, x)
+    assert b.certified.tolist() == [True, False, False, False]
+
+
+def _oxford_subset(per_sequence):
+    from tritools.io import PAPER_SEQUENCES, DataNotFoundError, load_sequence
+
+    try:
+        seqs = [load_sequence(name) for name in PAPER_SEQUENCES]
+    except DataNotFoundError:
+        pytest.skip("Oxford data not found (../shared/data/oxford or $TRITOOLS_DATA)")
+    out = []
+    for seq in seqs:
+        for tr in seq.tracks[:per_sequence]:
+            cams, pts = seq.problem(tr)
+            out.append((cams, [Point(p) for p in pts]))
+    return out
+
+
+def test_oxford_subset_fast_path_agrees_with_sdp():
+    problems = _oxford_subset(300)           # 1800 real tracks through the fast path
+    auto = tritools.triangulate_many(problems, "corollary1", 2, 2, progress=False)
+    assert sum(r.certified_by == "verification" for r in auto) >= 0.99 * len(problems)
+    rng = np.random.default_rng(0)
+    for k in rng.choice(len(problems), 40, replace=False):   # 40 SDP solves
+        sdp = tritools.triangulate(*problems[k], "corollary1", 2, 2, path="sdp")
+        a = auto[k]
+        if a.certified_by == "verification":
+            assert sdp.optimal
+            assert abs(a.gamma_ub - sdp.gamma_ub) <= GAMMA_RTOL * max(1.0, sdp.gamma_ub)
+        if sdp.optimal:
+            assert a.optimal
+
+
+def test_oxford_corridor_point_falls_back():
+    from tritools.io import DataNotFoundError, load_sequence
+
+    try:
+        seq = load_sequence("corridor")
+    except DataNotFoundError:
+        pytest.skip("Oxford data not found (../shared/data/oxford or $TRITOOLS_DATA)")
+    tr = seq.tracks[[t.track_id for t in seq.tracks].index(513)]
+    cams, pts = seq.problem(tr)
+    assert fast_results(cams[None], pts[None])[0] is None
+    res = tritools.triangulate_many([(cams, [Point(p) for p in pts])], "corollary1", 2, 2, progress=False)[0]
+    assert res.status == Status.NOT_CERTIFIED and res.certified_by is None
+    assert res.attempts[0] == (2, "verification_failed", None, None)

@@ -141,12 +141,17 @@ class CompiledPsatz:
             params[f"f:{t}"] = qlin * Polynomial._raw(gens, {tuple(int(k) for k in e): 1.0})
         n_slots = max([E.shape[0] for E in self.supports[1:]], default=0)
         for t in range(n_slots):
-            term = None
-            for pi in range(1, len(self.supports)):
-                E = self.supports[pi]
-                if t < E.shape[0]:
-                    part = mults[pi - 1] * Polynomial._raw(gens, {tuple(int(k) for k in E[t]): 1.0})
-                    term = part if term is None else term + part
+            # sum_k mult_k * m_{k,t}: shifting a LinPoly's exponents by a monomial keeps its
+            # rows distinct, so the parts are concatenated and merged once
+            parts = [(mults[pi - 1], self.supports[pi][t]) for pi in range(1, len(self.supports))
+                     if t < self.supports[pi].shape[0]]
+            Es, cs, rs, cl, vs, off = [], [], [], [], [], 0
+            for M, e in parts:
+                Es.append(M.E + e), cs.append(M.const), rs.append(M.rows + off), cl.append(M.cols)
+                vs.append(M.vals)
+                off += M.E.shape[0]
+            term = LinPoly(gens, np.vstack(Es), np.concatenate(cs), np.concatenate(rs), np.concatenate(cl),
+                           np.concatenate(vs))
             params[f"m:{t}"] = term
         self.program = prog
         self.u = prog.add_sos(-1.0 * (c * q), degree=degree, name="u", param_terms=params)

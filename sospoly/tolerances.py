@@ -41,7 +41,11 @@ Why these values
   only ends runs that will not converge), moves ``ipm_step_fraction`` of the way to
   the cone boundary, and declares divergence (a likely infeasible or unbounded
   program, handed to Clarabel) when |x| or |z| exceeds ``ipm_divergence``.  It stops
-  on the same ``solver_*`` tolerances as Clarabel.
+  on the same ``solver_*`` tolerances as Clarabel, or -- when large multipliers make the
+  dual residual's contribution r_D^T x to the duality gap stall above them -- when the
+  rest of the gap (complementarity) meets them and |r_D^T x| <= ``ipm_dual_residual_gap``
+  * max(1, |objective|): the bound then agrees with Clarabel's to ~1e-7 relative, the
+  accuracy at which the PSD margin of the a-posteriori check separates certificates.
 * ``bisection_abs`` / ``bisection_rel``: the GEVP bisection stops when the bracket
   ``[c_lo, c_hi]`` satisfies ``c_hi - c_lo <= bisection_abs + bisection_rel*max(1,|c_lo|)``.
 """
@@ -72,6 +76,7 @@ class Tolerances:
     ipm_max_iter: int = 60
     ipm_step_fraction: float = 0.95
     ipm_divergence: float = 1e10
+    ipm_dual_residual_gap: float = 1e-8
 
     def certified(self, lower: float | None, upper: float | None) -> bool:
         """Is ``upper - lower`` within the documented optimality tolerance?"""

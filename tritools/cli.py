@@ -70,6 +70,10 @@ def _num(v, digits: int = 3) -> str:
     return f"{v:.{digits}f}"
 
 
+def _sec(t) -> str:
+    return "NA" if t is None else f"{t:.4f}"
+
+
 def _point(X) -> str:
     return "NA" if X is None else "(" + ", ".join(_num(c) for c in X) + ")"
 
@@ -156,7 +160,7 @@ def _cmd_solve(args) -> int:
         opt = "NA" if r.optimal is None else ("yes" if r.optimal else "no")
         rows.append((name, s.n_views, r.status.value, _point(r.X), _num(r.gamma_lb), _num(r.gamma_ub), opt,
                      "NA" if r.delta is None else r.delta, "NA" if r.n_lmivar is None else r.n_lmivar,
-                     _num(_seconds(r))))
+                     _sec(_seconds(r))))
         if r.message:
             notes.append(f"{name}: {r.status.value}: {r.message}")
     text = format_table(headers, rows, [False, True, False, False] + [True] * 6)
@@ -229,7 +233,7 @@ def _example5(args) -> int:
         return EXIT_OK
     print("Example 5 of Chesi (2026): certified cases of Theorem 1 at delta = 4 per uncertainty level theta")
     rows = [(s["theta"], s["cases"], s["certified"], _num(s["mean_gamma_ub"]), _num(s["mean_distance_to_X_obj"]),
-             ",".join(map(str, s["n_lmivar"])) or "NA", _num(s["mean_seconds"])) for s in summary]
+             ",".join(map(str, s["n_lmivar"])) or "NA", _sec(s["mean_seconds"])) for s in summary]
     print(format_table(("theta", "cases", "certified", "mean gamma_UB", "mean |X^-X_obj|", "N_LMIVAR",
                         "mean time[s]"), rows))
     print(f"\nnote: {note}")
@@ -287,7 +291,7 @@ def _cmd_dataset(args) -> int:
         return EXIT_OK
     print(f"{seq.name}: {len(tracks)} tracks, method {args.method}")
     rows = [(s["N"], s["cases"], s["certified"], _num(s["mean_gamma_ub"]), _num(s["std_gamma_ub"]),
-             ",".join(map(str, s["n_lmivar"])) or "NA", _num(s["mean_seconds"]))
+             ",".join(map(str, s["n_lmivar"])) or "NA", _sec(s["mean_seconds"]))
             for s in summary + [{"N": "total", **total}]]
     print(format_table(("N", "#cases", "#certified", "mean gamma_UB", "std gamma_UB", "N_LMIVAR", "mean time[s]"),
                        rows))
@@ -320,7 +324,7 @@ def _add_solver_options(p, default_method: str) -> None:
                    help="last degree tried (default: delta if given, else delta_min + 2)")
     p.add_argument("--path", choices=PATHS, default=None,
                    help="'sdp' always solves the SDP; 'auto' first tries certification by verification "
-                        "(delta 2, point regions); default: the library's")
+                        "(delta 2, point regions); default: that of tritools.batch.triangulate_many")
     p.add_argument("--progress", action="store_true", help="progress bar on stderr (needs the 'progress' extra)")
 
 
@@ -338,7 +342,7 @@ def register_builtin(sub) -> None:
     p = sub.add_parser("example", help="the paper's Example 2, 3, 4 (Tables 8-10) or a reduced Example 5")
     p.add_argument("k", type=int, choices=(2, 3, 4, 5))
     p.add_argument("--json", action="store_true", help="machine-readable output")
-    p.add_argument("--points", type=int, default=2, help="Example 5: scene points (paper: 25)")
+    p.add_argument("--points", type=int, default=1, help="Example 5: scene points (paper: 25)")
     p.add_argument("--trials", type=int, default=2, help="Example 5: trials per point and theta (paper: 10)")
     p.add_argument("--seed", type=int, default=0, help="Example 5: random seed")
     p.add_argument("--progress", action="store_true", help="Example 5: progress bar on stderr")

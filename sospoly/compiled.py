@@ -70,9 +70,19 @@ def _support(p: Polynomial) -> np.ndarray:
 
 @dataclass(frozen=True)
 class CompiledInstance:
-    """One instance's numbers in a compiled structure: theta and its conic problem."""
+    """One instance's numbers in a compiled structure: theta and its conic problem
+    (:func:`sospoly.solve_psatz` accepts it like a :class:`~sospoly.psatz.PsatzProblem`)."""
+    compiled: "CompiledPsatz"
     theta: np.ndarray
     problem: ConicProblem
+
+    @property
+    def n_lmivar(self) -> int:
+        return self.compiled.n_lmivar
+
+    @property
+    def u(self):
+        return self.compiled.u
 
 
 class CompiledPsatz:
@@ -272,7 +282,12 @@ class CompiledPsatz:
 
     def instantiate(self, f, eq=(), ineq=()) -> CompiledInstance:
         th = self.theta(f, eq, ineq)
-        return CompiledInstance(th, self.problem_from_theta(th))
+        return CompiledInstance(self, th, self.problem_from_theta(th))
+
+    def bind(self, theta) -> CompiledInstance:
+        """The instance of a coefficient vector theta."""
+        th = self._check_theta(theta)[0]
+        return CompiledInstance(self, th, self.problem_from_theta(th))
 
     def dense_batch(self, thetas) -> tuple[np.ndarray, np.ndarray]:
         """(A, b) of a batch as dense arrays (B, rows, cols), (B, rows)."""
@@ -299,11 +314,12 @@ class CompiledPsatz:
         """c* of one instance: :func:`sospoly.solve_psatz`'s answer for the fixed multiplier."""
         return self.solve_theta(self.theta(f, eq, ineq), backend=backend, tolerances=tolerances)
 
-    def solve_theta(self, theta, *, backend=None, tolerances: Tolerances = DEFAULT_TOLERANCES) -> LowerBound:
+    def solve_theta(self, theta, *, backend=None, tolerances: Tolerances = DEFAULT_TOLERANCES,
+                    problem: ConicProblem | None = None) -> LowerBound:
         if self._trivially_unbounded():
             return LowerBound(SolveStatus.INFEASIBLE, None, None, None, "f has odd degree and there are no "
                               "constraints: f is unbounded below")
-        problem = self.problem_from_theta(theta)
+        problem = self.problem_from_theta(theta) if problem is None else problem
         return self._lower_bound(solve_program(self.program, backend, self.form, tolerances, problem=problem))
 
     def solve_batch(self, instances=None, *, thetas=None, fallback=None,

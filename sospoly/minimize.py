@@ -149,7 +149,13 @@ def solve_psatz(psatz: PsatzProblem, *, backend=None, form: GramForm = GramForm.
 
     For the free multiplier the bracket starts from the fixed-q SDP's c* (solved here
     unless ``fixed_hint`` gives it) and from ``c_hi`` (f at a feasible point), if known.
+    ``psatz`` may also be a :class:`sospoly.compiled.CompiledInstance` (a compiled structure
+    filled with one instance's numbers): then only its conic data is solved.
     """
+    from .compiled import CompiledInstance
+
+    if isinstance(psatz, CompiledInstance):
+        return psatz.compiled.solve_theta(psatz.theta, backend=backend, tolerances=tolerances, problem=psatz.problem)
     if not psatz.eq and not psatz.ineq and psatz.f.degree % 2:
         # f of odd degree on all of R^n is unbounded below, so no certificate exists at any degree.
         # The SDP is then only *weakly* infeasible (no Farkas certificate): solvers cannot detect it

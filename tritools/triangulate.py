@@ -298,11 +298,10 @@ def _solve_at(problem, norm: Normalization, cams, regions, cams_n, regs_n, metho
         t0 = time.perf_counter()
         lb = sospoly.solve_psatz(psatz, backend=backend, form=form, tolerances=tol)
     else:
-        psatz = comp
-        theta = comp.theta(problem.f, problem.eq, problem.ineq)
+        psatz = comp.instantiate(problem.f, problem.eq, problem.ineq)
         timings[f"assemble_d{delta}"] = time.perf_counter() - t0
         t0 = time.perf_counter()
-        lb = comp.solve_theta(theta, backend=backend if backend is not None else "auto", tolerances=tol)
+        lb = sospoly.solve_psatz(psatz, backend=backend if backend is not None else "auto", tolerances=tol)
     timings[f"solve_d{delta}"] = time.perf_counter() - t0
     return _finish(problem, norm, cams, regions, cams_n, regs_n, method, delta, refine, tol, timings, psatz, lb)
 

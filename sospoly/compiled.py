@@ -47,7 +47,7 @@ from .basis import MonomialIndex
 from .conic import ConicProblem, GramForm, lower
 from .ipm import ipm_solve_batch
 from .linpoly import LinPoly
-from .minimize import LowerBound
+from .minimize import LowerBound, lower_bound_of
 from .polynomial import Polynomial
 from .program import SOSProgram
 from .psatz import Multiplier, _check_poly, common_gens, default_q, delta_min
@@ -300,12 +300,7 @@ class CompiledPsatz:
 
     # ------------------------------------------------------------------ solving
     def _lower_bound(self, sol: ProgramSolution) -> LowerBound:
-        if sol.status == SolveStatus.OPTIMAL:
-            return LowerBound(sol.status, sol.objective, sol)
-        lb = np.inf if sol.status == SolveStatus.UNBOUNDED else None
-        msg = {SolveStatus.INFEASIBLE: f"no Positivstellensatz certificate at degree {self.degree}; try a larger degree",
-               SolveStatus.UNBOUNDED: "c is unbounded: the constraint set is empty"}.get(sol.status, sol.message)
-        return LowerBound(sol.status, lb, sol, None, msg)
+        return lower_bound_of(sol, self.degree)
 
     def _trivially_unbounded(self) -> bool:
         return not self.n_eq and not self.n_ineq and self.degrees[0] % 2 == 1

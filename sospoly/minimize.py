@@ -171,11 +171,15 @@ def solve_psatz(psatz: PsatzProblem, *, backend=None, form: GramForm = GramForm.
             c_lo = fixed_hint.objective
         g: GevpResult = bisect(CompiledGevp(psatz, backend, form, tolerances), c_lo, c_hi)
         return LowerBound(g.status, g.lower_bound, g.solution, g.bracket, g.message)
-    sol = solve_program(psatz.program, backend, form, tolerances)
+    return lower_bound_of(solve_program(psatz.program, backend, form, tolerances), psatz.degree)
+
+
+def lower_bound_of(sol: ProgramSolution, degree: int) -> LowerBound:
+    """The LowerBound of a fixed-multiplier solve (c* when OPTIMAL, a status message otherwise)."""
     if sol.status == SolveStatus.OPTIMAL:
         return LowerBound(sol.status, sol.objective, sol)
     lb = np.inf if sol.status == SolveStatus.UNBOUNDED else None
-    msg = {SolveStatus.INFEASIBLE: f"no Positivstellensatz certificate at degree {psatz.degree}; try a larger degree",
+    msg = {SolveStatus.INFEASIBLE: f"no Positivstellensatz certificate at degree {degree}; try a larger degree",
            SolveStatus.UNBOUNDED: "c is unbounded: the constraint set is empty"}.get(sol.status, sol.message)
     return LowerBound(sol.status, lb, sol, None, msg)
 

@@ -311,3 +311,15 @@ def test_python_m_and_console_script_dispatch():
     if script:                                            # installed (editable) console script
         p = subprocess.run([script, "solve", "--help"], capture_output=True, text=True, env=env, timeout=60)
         assert p.returncode == 0 and "FILE" in p.stdout
+
+
+def test_docs_json_examples_follow_the_schema():
+    import pathlib
+    import re
+
+    text = (pathlib.Path(__file__).resolve().parents[1] / "docs" / "cli.md").read_text()
+    blocks = re.findall(r"^```json\n(.*?)^```", text, re.S | re.M)
+    assert blocks
+    for block in blocks:
+        specs = parse_problem_text(block)
+        assert all(s.n_views == len(s.cameras) for s in specs)

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from tritools import cli
-from tritools.geometry import gamma, image_points
+from tritools.geometry import image_points
 from tritools.problem_file import (ProblemFileError, parse_problem_text, parse_problems, problem_to_dict,
                                    problems_to_json, result_from_dict, result_to_dict)
 from tritools.regions import Ellipse, EllipseBorder, Point, Polytope, Segment

@@ -77,6 +77,11 @@ class PointCertificate:
 
 @dataclass(frozen=True)
 class RetriangulationReport:
+    """Outcome of :func:`retriangulate` over a whole model: one :class:`PointCertificate`
+    per 3D point of the input (``records``, in point-id order, skipped points included
+    with their status), the method and solve path used, and counts
+    (``n_points``, ``n_certified``, ``n_updated``, ``status_counts()``)."""
+
     method: str
     path: str
     records: tuple

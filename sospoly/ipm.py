@@ -35,6 +35,7 @@ returned x.
 """
 from __future__ import annotations
 
+from collections import OrderedDict
 from dataclasses import dataclass
 
 import numpy as np
@@ -433,12 +434,336 @@ def ipm_solve_batch(A: np.ndarray, b: np.ndarray, q: np.ndarray, cones,
 
 def ipm_solve_sparse(A: sp.spmatrix, b: np.ndarray, q: np.ndarray, cones,
                      tolerances: Tolerances = DEFAULT_TOLERANCES) -> IpmResult:
-    """One instance with sparse A (svec-Kronecker Schur complement); results with batch axis 1."""
+    """One instance with sparse A; results with batch axis 1.
+
+    One PSD block whose image-form columns mostly are *pair columns* (two entries, one of
+    them in a row no other column touches, zero cost: the alpha of ``GramForm.IMAGE``) is
+    solved in its reduced moment form (:class:`_MomentReduction`, Schur complement over the
+    coefficient-matching rows with disjoint supports); anything else with the
+    svec-Kronecker Schur complement of :class:`_SparseSchur`."""
     lay = layout_of(cones)
     A = sp.csr_matrix(A)
     if A.shape[0] != lay.n_rows:
         raise ValueError(f"the cones cover {lay.n_rows} rows but A has {A.shape[0]}")
     b = np.asarray(b, float).reshape(1, -1)
     q = np.asarray(q, float).reshape(1, -1)
+    if lay.p == 0 and len(lay.sizes) == 1:
+        red = _reduction_for(A, q[0], lay.sizes[0])
+        if red is not None:
+            res = red.solve(A, b[0], q[0], tolerances)
+            if res is not None:
+                return res
     AE_dense = A[:lay.p].toarray()[None] if lay.p else None
     return _ipm(_SparseSchur(A, lay), q, b, lay, tolerances, AE_dense)
+
+
+# --------------------------------------------------------------------------- one instance, reduced form
+#: reduction plans by sparsity pattern (least recently used dropped beyond _REDUCTIONS_MAX)
+_REDUCTIONS: OrderedDict = OrderedDict()
+_REDUCTIONS_MAX = 32
+#: the reduced form is used when pair columns are at least this fraction of all columns
+#: (a structural choice: below it the reduction saves little; not a numerical tolerance)
+_REDUCE_MIN_FRACTION = 0.25
+
+
+def _reduction_for(A: sp.spmatrix, q: np.ndarray, n: int):
+    """The cached :class:`_MomentReduction` of A's sparsity pattern (None: not reducible)."""
+    A = sp.csc_matrix(A)
+    A.sort_indices()
+    key = (A.shape, n, hash(A.indptr.tobytes()), hash(A.indices.tobytes()), hash((q != 0).tobytes()))
+    if key in _REDUCTIONS:
+        _REDUCTIONS.move_to_end(key)
+        return _REDUCTIONS[key]
+    plan = _MomentReduction.build(A, q != 0, n)
+    _REDUCTIONS[key] = plan
+    while len(_REDUCTIONS) > _REDUCTIONS_MAX:
+        _REDUCTIONS.popitem(last=False)
+    return plan
+
+
+def _svec1(X: np.ndarray, i, j, scale) -> np.ndarray:
+    return 0.5 * (X[i, j] + X[j, i]) * scale
+
+
+def _smat1(v: np.ndarray, n: int, i, j, scale) -> np.ndarray:
+    X = np.empty((n, n))
+    vals = v / scale
+    X[i, j] = vals
+    X[j, i] = vals
+    return X
+
+
+def _max_step1(X: np.ndarray, dX: np.ndarray) -> float:
+    """Largest a with X + a dX >= 0 (inf when dX >= 0), X > 0."""
+    try:
+        L = np.linalg.cholesky(X)
+    except np.linalg.LinAlgError:
+        return 0.0
+    Li = sla.solve_triangular(L, np.eye(X.shape[0]), lower=True, check_finite=False)
+    T = Li @ dX @ Li.T
+    lam = float(sla.eigvalsh(0.5 * (T + T.T), subset_by_index=[0, 0], check_finite=False)[0])
+    return -1.0 / lam if lam < 0 else np.inf
+
+
+class _MomentReduction:
+    r"""The image-form LMI of one PSD block, solved in its reduced *moment form*.
+
+    Image form (Clarabel's standard form, p = 0): min q^T x, svec S = b - A x, S >= 0.  A
+    *pair column* j has two entries, one of them in a *private* row p_j that no other column
+    touches, and q_j = 0 (the alpha of :class:`~sospoly.conic.GramForm` IMAGE: +alpha on a
+    non-canonical Gram pair, -alpha on the canonical one).  With x = (w, alpha), eliminating
+    alpha_j through its private row leaves one equation per remaining (*shared*) row:
+
+        E svec(S) = E b - E A_w w,    E = [I on shared rows; -A[o_j, j] / A[p_j, j] at (o_j, p_j)]
+
+    (o_j the pair column's other row), E A_alpha = 0 and rank E = #rows - #alpha, so this is
+    the kernel (coefficient-matching) form.  Each row of E^T has one entry: the adjoint
+    operators A_a = smat(E^T e_a) have *disjoint* supports (a monomial's Gram pairs).  Its
+    dual, in the variables y of the shared rows (z = E^T y the image form's dual):
+
+        min (E b)^T y   s.t.  (E A_w)^T y = -q_w,   smat(E^T y) >= 0,
+
+    is a dual-form LMI with m' = #shared rows columns and #w equality rows, solved by the
+    same Mehrotra/HKM method as :func:`_ipm`.  Its Schur complement
+    M_ab = <A_a, Z A_b S^-1> is formed from the padded entry lists (i_t, j_t, v_t) of every
+    A_b (at most K entries): P_b = Z A_b S^-1 = sum_t v_t Z[:, i_t] S^-1[j_t, :] is one
+    batched matmul of (n x K)(K x n) products, M_ab = sum_t v_t P_b[i_t, j_t] one sparse
+    product, O(m' n^2 K) instead of the O(m n^3) of the dense forms; the equality rows are
+    eliminated with the Cholesky factor of M.  The image form's x, s, z are read back:
+    w = -z_E, s = svec of the moment form's dual matrix (the Gram matrix),
+    alpha_j = (b - s)[p_j] / A[p_j, j], z = E^T y.
+    """
+
+    def __init__(self):
+        pass
+
+    @classmethod
+    def build(cls, A: sp.csc_matrix, qnz: np.ndarray, n: int):
+        L, m = A.shape
+        if L != n * (n + 1) // 2 or m == 0:
+            return None
+        indptr, indices = A.indptr, A.indices
+        nnzc = np.diff(indptr)
+        rc = np.bincount(indices, minlength=L)
+        cand = np.nonzero((nnzc == 2) & ~qnz)[0]
+        p0 = indptr[cand]
+        r1, r2 = indices[p0], indices[p0 + 1]
+        priv1 = rc[r1] == 1
+        priv2 = ~priv1 & (rc[r2] == 1)
+        ok = priv1 | priv2
+        cand, p0, r1, r2, priv1 = cand[ok], p0[ok], r1[ok], r2[ok], priv1[ok]
+        if cand.size < _REDUCE_MIN_FRACTION * m:
+            return None
+        self = cls()
+        self.n, self.L, self.m = n, L, m
+        self.alpha_cols = cand
+        self.pdat = np.where(priv1, p0, p0 + 1)
+        self.odat = np.where(priv1, p0 + 1, p0)
+        self.prow = np.where(priv1, r1, r2)
+        orow = np.where(priv1, r2, r1)
+        shared = np.ones(L, bool)
+        shared[self.prow] = False
+        shared_rows = np.nonzero(shared)[0]
+        m2 = shared_rows.size
+        self.m2 = m2
+        row2col = np.empty(L, np.int64)
+        row2col[shared_rows] = np.arange(m2)
+        row2col[self.prow] = row2col[orow]
+        self.row2col = row2col
+        wmask = np.ones(m, bool)
+        wmask[cand] = False
+        self.w_cols = np.nonzero(wmask)[0]
+        # ordered full-matrix entries of every A_a = smat(E^T e_a): (i, j, svec row, factor)
+        ii, jj = triu_pairs(n)
+        off = np.nonzero(ii != jj)[0]
+        er = np.concatenate([np.arange(L), off])
+        ei = np.concatenate([ii, jj[off]])
+        ej = np.concatenate([jj, ii[off]])
+        ef = np.where(ei == ej, 1.0, 1.0 / np.sqrt(2.0))
+        ecol = row2col[er]
+        order = np.argsort(ecol, kind="stable")
+        er, ei, ej, ef, ecol = er[order], ei[order], ej[order], ef[order], ecol[order]
+        counts = np.bincount(ecol, minlength=m2)
+        K = int(counts.max())
+        starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
+        slot = np.arange(er.size) - starts[ecol]
+        self.K = K
+        self.Ipad = np.zeros((m2, K), np.int64)
+        self.Jpad = np.zeros((m2, K), np.int64)
+        self.Rpad = np.zeros((m2, K), np.int64)
+        self.Fpad = np.zeros((m2, K))
+        self.Ipad[ecol, slot], self.Jpad[ecol, slot] = ei, ej
+        self.Rpad[ecol, slot], self.Fpad[ecol, slot] = er, ef
+        # sparse (m' x n^2) of vec(A_a), data refilled per instance: data = V[ent_a, ent_slot]
+        EF = sp.csr_matrix((np.arange(1, er.size + 1, dtype=float), (ecol, ei * n + ej)), shape=(m2, n * n))
+        perm = EF.data.astype(np.int64) - 1
+        self.EF = EF
+        self.ef_src = (ecol[perm], slot[perm])
+        # work buffers (allocating the (m', n, n) stack every iteration costs more than the product)
+        self._Zg = np.empty((m2, K, n))
+        self._Rg = np.empty((m2, K, n))
+        self._P = np.empty((m2, n, n))
+        self._PT = np.empty((n * n, m2))
+        return self
+
+    # ------------------------------------------------------------------ Schur complement
+    def schur(self, Z: np.ndarray, R: np.ndarray, V: np.ndarray) -> np.ndarray:
+        """M_ab = <A_a, Z A_b R> for all a, b (symmetrised)."""
+        m2, n = self.m2, self.n
+        np.take(Z, self.Ipad, axis=0, out=self._Zg)
+        np.multiply(self._Zg, V[:, :, None], out=self._Zg)
+        np.take(R, self.Jpad, axis=0, out=self._Rg)
+        np.matmul(self._Zg.transpose(0, 2, 1), self._Rg, out=self._P)   # P_b = Z A_b R
+        np.copyto(self._PT, self._P.reshape(m2, n * n).T)
+        M = self.EF @ self._PT                                              # M[a, b] = <A_a, P_b>
+        return 0.5 * (M + M.T)
+
+    # ------------------------------------------------------------------ one instance
+    def solve(self, A: sp.spmatrix, b: np.ndarray, q: np.ndarray, tol: Tolerances) -> IpmResult | None:
+        """The image-form problem (A, b, q) through the moment form; None when the
+        instance's values do not allow the reduction (a zero pivot A[p_j, j])."""
+        A = sp.csc_matrix(A)
+        A.sort_indices()
+        data = A.data
+        ap, ao = data[self.pdat], data[self.odat]
+        if np.any(ap == 0) or not (np.all(np.isfinite(data)) and np.all(np.isfinite(b)) and np.all(np.isfinite(q))):
+            return None
+        e = np.ones(self.L)
+        e[self.prow] = -ao / ap
+        m2 = self.m2
+        cq = np.bincount(self.row2col, e * b, minlength=m2)                 # E b
+        Aw = A[:, self.w_cols].tocoo()
+        AE = np.zeros((self.w_cols.size, m2))                               # (E A_w)^T
+        np.add.at(AE, (Aw.col, self.row2col[Aw.row]), e[Aw.row] * Aw.data)
+        bE = -q[self.w_cols]
+        V = self.Fpad * e[self.Rpad]
+        self.EF.data = V[self.ef_src]
+        out = self._ipm(cq, AE, bE, e, V, tol)
+        y, zE, Smom, Zgram, conv, its, why = out
+        i, j = triu_pairs(self.n)
+        sc = svec_scale(self.n)
+        s = _svec1(Zgram, i, j, sc)
+        x = np.zeros(self.m)
+        x[self.w_cols] = -zE
+        x[self.alpha_cols] = (b[self.prow] - s[self.prow]) / ap
+        z = e * y[self.row2col]
+        pobj = float(q @ x)
+        dobj = float(-(b @ z))
+        return IpmResult(np.array([conv]), x[None], z[None], s[None], np.array([pobj]), np.array([dobj]),
+                         np.array([its]), (why,))
+
+    def _ipm(self, cq, AE, bE, e, V, tol: Tolerances):
+        """Mehrotra predictor-corrector (HKM) on  min cq^T y, AE y = bE, smat(E^T y) >= 0;
+        the same stopping rules as :func:`_ipm`.  Returns (y, zE, S, Z, converged, iterations, reason)."""
+        n, m2, p = self.n, self.m2, AE.shape[0]
+        row2col = self.row2col
+        i, j = triu_pairs(n)
+        sc = svec_scale(n)
+        eye = np.eye(n)
+
+        def Et(y):
+            return e * y[row2col]
+
+        def Ev(v):
+            return np.bincount(row2col, e * v, minlength=m2)
+
+        nb_inf = float(np.abs(bE).max()) if p else 0.0
+        nq_inf = float(np.abs(cq).max())
+        y, zE = np.zeros(m2), np.zeros(p)
+        S = max(1.0, nb_inf) * eye
+        Z = max(1.0, nq_inf) * eye
+        history = [np.inf] * 5
+        step_frac = tol.ipm_step_fraction
+        reason, conv, it = "iteration limit", False, 0
+        for it in range(tol.ipm_max_iter + 1):
+            s, z = _svec1(S, i, j, sc), _svec1(Z, i, j, sc)
+            rP = Et(y) - s
+            rE = bE - AE @ y
+            rD = cq + AE.T @ zE - Ev(z)
+            pobj = float(cq @ y)
+            dobj = -float(bE @ zE)
+            xinf = float(np.abs(y).max())
+            sinf = float(np.abs(s).max())
+            zinf = max(float(np.abs(z).max()), float(np.abs(zE).max()) if p else 0.0)
+            pres = max(float(np.abs(rP).max()), float(np.abs(rE).max()) if p else 0.0)
+            dres = float(np.abs(rD).max())
+            gap = abs(pobj - dobj)
+            feas_ok = pres <= tol.solver_feas * max(1.0, nb_inf + xinf + sinf) and \
+                dres <= tol.solver_feas * max(1.0, nq_inf + zinf)
+            ok = feas_ok and (gap <= tol.solver_gap_abs or gap <= tol.solver_gap_rel * min(abs(pobj), abs(dobj)))
+            rdx = abs(float(rD @ y))
+            comp = abs(pobj - dobj - float(rD @ y))
+            scale_obj = max(1.0, abs(pobj))
+            ok = ok or (feas_ok and (comp <= tol.solver_gap_abs or comp <= tol.solver_gap_rel * scale_obj)
+                        and rdx <= tol.ipm_dual_residual_gap * scale_obj)
+            if ok:
+                reason, conv = "", True
+                break
+            if not (np.isfinite(pobj) and np.isfinite(dobj)) or max(xinf, zinf) > tol.ipm_divergence:
+                reason = "diverged (infeasible or unbounded?)"
+                break
+            merit = gap + pres + dres
+            if it >= 8 and merit > 0.5 * history[0]:
+                reason = "stalled"
+                break
+            history = history[1:] + [merit]
+            if it == tol.ipm_max_iter:
+                break
+            # ---- Newton system: [[M, AE^T], [AE, 0]], M by Cholesky, the equality rows by
+            # the Cholesky factor of their Schur complement AE M^-1 AE^T
+            try:
+                Ls = np.linalg.cholesky(S)
+                Li = sla.solve_triangular(Ls, eye, lower=True, check_finite=False)
+                R = Li.T @ Li
+                M = self.schur(Z, R, V)
+                M[np.diag_indices(m2)] += 1e-14 * max(1.0, float(np.abs(np.diagonal(M)).max()))
+                cf = sla.cho_factor(M, lower=True, check_finite=False)
+                if p:
+                    C = sla.solve_triangular(cf[0], AE.T, lower=True, check_finite=False)
+                    SE = C.T @ C
+                    SE[np.diag_indices(p)] += 1e-14 * max(1.0, float(np.abs(np.diagonal(SE)).max()))
+                    cfe = sla.cho_factor(SE, lower=True, check_finite=False)
+            except (np.linalg.LinAlgError, ValueError):
+                reason = "singular Schur complement or lost positive definiteness"
+                break
+            mu = float(np.sum(S * Z)) / n
+
+            def base(r1, r2):
+                dy0 = sla.cho_solve(cf, r1, check_finite=False)
+                if not p:
+                    return dy0, np.zeros(0)
+                dz = sla.cho_solve(cfe, AE @ dy0 - r2, check_finite=False)
+                return dy0 - sla.cho_solve(cf, AE.T @ dz, check_finite=False), dz
+
+            def newton(r1, r2):
+                dy, dz = base(r1, r2)
+                e1 = r1 - M @ dy - AE.T @ dz
+                e2 = r2 - AE @ dy
+                ddy, ddz = base(e1, e2)
+                return dy + ddy, dz + ddz
+
+            rPm = _smat1(rP, n, i, j, sc)
+            ZrR = Z @ rPm @ R
+
+            def direction(Kmat):
+                KR = Kmat @ R if Kmat is not None else 0.0
+                H = KR - Z - ZrR
+                rhs = -rD + Ev(_svec1(H, i, j, sc))
+                dy, dz = newton(rhs, rE)
+                dS = rPm + _smat1(Et(dy), n, i, j, sc)
+                dZ = KR - Z - Z @ dS @ R
+                return dy, dz, dS, 0.5 * (dZ + dZ.T)
+
+            dy, dz, dS, dZ = direction(None)
+            ap1 = min(1.0, _max_step1(S, dS))
+            ad1 = min(1.0, _max_step1(Z, dZ))
+            mu_aff = float(np.sum((S + ap1 * dS) * (Z + ad1 * dZ))) / n
+            sigma = min(1.0, max(0.0, (mu_aff / max(mu, 1e-300)) ** 3))
+            dy, dz, dS, dZ = direction(sigma * mu * eye - dZ @ dS)
+            ap = min(1.0, step_frac * _max_step1(S, dS))
+            ad = min(1.0, step_frac * _max_step1(Z, dZ))
+            y = y + ap * dy
+            S = S + ap * dS
+            zE = zE + ad * dz
+            Z = Z + ad * dZ
+        return y, zE, S, Z, conv, it, reason

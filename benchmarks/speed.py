@@ -9,7 +9,8 @@ of that N), the SDP path (``triangulate(..., path="sdp")``), a naive per-point c
 of the same delta = 2 SDP solved by Clarabel, the scipy local methods of tritools.baselines
 (Newton, Nelder-Mead, SQP), DLT, pycolmap's multi-view triangulation when installed, and
 the paper's ACT (Tables 1-6, mean over the sequences weighted by #cases).  Then: the whole
-of Example 1 through ``triangulate_many`` (path auto), Theorem 1 at delta = 4 on Example 4
+of Example 1 through ``triangulate_many`` (path auto; and first, path sdp: the batched
+delta = 2 SDP of tritools.sdp_batch, in-process, per N and whole), Theorem 1 at delta = 4 on Example 4
 (first solve vs later solves), and the peak memory of a full Example 1 run.
 
 BLAS is limited to one thread (OPENBLAS_NUM_THREADS=1, set before numpy is imported): the
@@ -125,6 +126,48 @@ def example4_theorem1(repeats=3):
     return times, r
 
 
+class InlineExecutor:
+    """A concurrent.futures-style executor that runs each task at once in this process (triangulate_many
+    would otherwise start a spawn process pool for >= LOCAL_PROCESS_MIN_ITEMS per-point items)."""
+
+    def submit(self, fn, *args, **kw):
+        import concurrent.futures as cf
+
+        fut = cf.Future()
+        try:
+            fut.set_result(fn(*args, **kw))
+        except Exception as exc:  # noqa: BLE001 - reported through the future, as an executor does
+            fut.set_exception(exc)
+        return fut
+
+
+def sdp_batch_example1(groups):
+    """All of Example 1 through triangulate_many(path="sdp") at delta = 2, single process: the batched SDP
+    (tritools.sdp_batch) with per-point fallbacks; per N and whole."""
+    paper_s = 0.020        # Table 7: Corollary 1, 0.020 s per point
+    print("\n## triangulate_many(problems, 'corollary1', 2, 2, path='sdp', executor=in-process), per N\n")
+    print("| N | #tracks | ms/point | #certified | #per-point fallbacks |")
+    print("|---|---|---|---|---|")
+    for N, items in groups.items():
+        probs = [(c, [Point(p) for p in x]) for c, x in items]
+        t0 = time.perf_counter()
+        res = tritools.triangulate_many(probs, "corollary1", 2, 2, path="sdp", executor=InlineExecutor(),
+                                        progress=False)
+        t = time.perf_counter() - t0
+        fb = sum(not (r.attempts and r.attempts[0][-1] == ("ipm-batch:converged",)) for r in res)
+        print(f"| {N} | {len(items)} | {1000 * t / len(items):.3f} | {sum(r.optimal for r in res)} | {fb} |")
+    problems = [(c, [Point(p) for p in x]) for items in groups.values() for c, x in items]
+    t0 = time.perf_counter()
+    res = tritools.triangulate_many(problems, "corollary1", 2, 2, path="sdp", executor=InlineExecutor(),
+                                    progress=False)
+    wall = time.perf_counter() - t0
+    n = len(problems)
+    cert = sum(r.optimal for r in res)
+    print(f"\nWhole Example 1 in one call: {n} tracks, {wall:.2f} s ({1000 * wall / n:.3f} ms/point, "
+          f"{wall / n / paper_s:.3f} x the paper's {paper_s} s/point), {cert} certified "
+          f"({sum(r.certified_by == 'sdp' for r in res)} by the SDP)")
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--data-dir", default=None)
@@ -132,8 +175,13 @@ def main(argv=None):
     ap.add_argument("--full", action="store_true", help="all 8956 tracks for every per-point method")
     ap.add_argument("--cvxpy-limit", type=int, default=3, help="tracks per N for the naive cvxpy build")
     ap.add_argument("--skip-memory", action="store_true")
+    ap.add_argument("--sdp-batch-only", action="store_true",
+                    help="only Example 1 through triangulate_many(path='sdp') (batched delta-2 SDP)")
     args = ap.parse_args(argv)
     groups = load_tracks(args.data_dir)
+    sdp_batch_example1(groups)
+    if args.sdp_batch_only:
+        return
     total = sum(map(len, groups.values()))
     act = paper_act()
     have_colmap = True

@@ -46,6 +46,7 @@ from .constraints import Method
 from .fastpath import fast_results
 from .regions import Point
 from .result import Status, TriangulationResult
+from .sdp_batch import sdp_results
 from .triangulate import SolvePath, triangulate
 
 __all__ = ["triangulate_many", "safe_triangulate", "RetryStep", "LOCAL_PROCESS_MIN_ITEMS", "FAST_CHUNK",
@@ -118,6 +119,27 @@ def _fast_eligible(method, delta, path, kw) -> bool:
     return path == SolvePath.AUTO and m == Method.COROLLARY1 and delta in (None, 2) and kw.get("normalize", True)
 
 
+#: options of triangulate under which the batched delta = 2 SDP (tritools.sdp_batch) gives its answer.
+_SDP_BATCH_DEFAULTS = {"refine": None, "normalize": True, "multiplier": "fixed", "form": "image", "backend": None,
+                       "tolerances": None}
+
+
+def _sdp_batch_eligible(method, delta, path, kw) -> bool:
+    try:
+        m = Method(method)
+    except ValueError:
+        return False
+    if path != SolvePath.SDP or m != Method.COROLLARY1 or delta not in (None, 2):
+        return False
+    for k, v in kw.items():
+        if k not in _SDP_BATCH_DEFAULTS:
+            return False
+        want = _SDP_BATCH_DEFAULTS[k]
+        if want is not None and str(getattr(v, "value", v)) != str(want) and v is not want:
+            return False
+    return True
+
+
 def _as_point_problem(cams, regions):
     """(cameras (N, 3, 4), centres (N, 2)) when the item is a well-shaped point-region problem, else None."""
     if not isinstance(regions, (list, tuple)) or not all(isinstance(r, Point) for r in regions):
@@ -175,6 +197,7 @@ def triangulate_many(problems: Iterable[Sequence], method="corollary1", delta=No
     results: list[TriangulationResult | None] = [None] * len(problems)
     bar = _progress_bar(len(problems), progress)
     fast = _fast_eligible(method, delta, path, kw)
+    sdp_batch = _sdp_batch_eligible(method, delta, path, kw)
     groups: dict[int, list] = {}
     items = []                                          # (index, cameras, regions, path, prefix)
     for i, prob in enumerate(problems):
@@ -184,7 +207,7 @@ def triangulate_many(problems: Iterable[Sequence], method="corollary1", delta=No
             results[i] = _failed(method, Status.INVALID_INPUT,
                                  f"problems[{i}] must be a (cameras, regions) pair, got {type(prob).__name__}")
             continue
-        pp = _as_point_problem(cams, regions) if fast else None
+        pp = _as_point_problem(cams, regions) if fast or sdp_batch else None
         if pp is None:
             items.append((i, cams, regions, path.value, ()))
         else:
@@ -194,14 +217,22 @@ def triangulate_many(problems: Iterable[Sequence], method="corollary1", delta=No
         bar.update(n_done)
 
     tol = kw.get("tolerances", DEFAULT_TOLERANCES)
+    # delta = 2 is the last degree when given as such (triangulate's rule) and no retries follow
+    final = not retries and (max_delta == 2 or (delta == 2 and max_delta is None))
     for group in groups.values():
         for start in range(0, len(group), FAST_CHUNK):
             part = group[start:start + FAST_CHUNK]
-            fres = fast_results(np.array([g[1] for g in part]), np.array([g[2] for g in part]), tolerances=tol,
-                                method=Method.COROLLARY1.value)
+            C, x = np.array([g[1] for g in part]), np.array([g[2] for g in part])
+            if sdp_batch:   # the delta = 2 SDP for the whole group; what it hands back goes per point
+                fres = sdp_results(C, x, tolerances=tol, refine=kw.get("refine", True), final=final,
+                                   method=Method.COROLLARY1.value)
+                prefix = ()
+            else:
+                fres = fast_results(C, x, tolerances=tol, method=Method.COROLLARY1.value)
+                prefix = (_VERIFICATION_FAILED,)
             for (i, _, _, cams, regions), r in zip(part, fres):
                 if r is None:
-                    items.append((i, cams, regions, SolvePath.SDP.value, (_VERIFICATION_FAILED,)))
+                    items.append((i, cams, regions, SolvePath.SDP.value, prefix))
                 else:
                     results[i] = r
             if bar is not None:

@@ -18,14 +18,15 @@ def _problems(n=6, n_views=3, seed=11):
     return [(scene.cameras, scene.regions(j)) for j in range(n)]
 
 
-def _same(a, b):
-    # identical inputs through the same deterministic code (Clarabel is deterministic): equal to round-off
+def _same(a, b, rtol=1e-12):
+    # identical inputs through the same deterministic code (Clarabel is deterministic): equal to round-off;
+    # rtol=1e-7 when one side is the batched delta-2 SDP (tritools.sdp_batch: batched IPM vs Clarabel)
     assert a.status == b.status and a.certified_by == b.certified_by and a.delta == b.delta
     for name in ("gamma_lb", "gamma_ub"):
         x, y = getattr(a, name), getattr(b, name)
-        assert (x is None) == (y is None) and (x is None or x == pytest.approx(y, rel=1e-12, abs=1e-12))
+        assert (x is None) == (y is None) and (x is None or x == pytest.approx(y, rel=rtol, abs=rtol))
     if a.X is not None:
-        np.testing.assert_allclose(a.X, b.X, rtol=1e-12, atol=1e-12)
+        np.testing.assert_allclose(a.X, b.X, rtol=rtol, atol=rtol)
 
 
 @pytest.mark.parametrize("path", ["auto", "sdp"])
@@ -46,7 +47,7 @@ def test_order_and_one_result_per_input_with_bad_items(path):
     assert {r.certified_by for r in res if r.optimal} == {want}
     # input order: each good result is the single call's result for that input
     for k, j in ((0, 0), (1, 1), (6, 2), (7, 3)):
-        _same(res[k], tritools.triangulate(*good[j], "corollary1", 2, 2, path=path))
+        _same(res[k], tritools.triangulate(*good[j], "corollary1", 2, 2, path=path), 1e-12 if path == "auto" else 1e-7)
 
 
 def test_bad_arguments_raise():
@@ -92,8 +93,9 @@ class _FailingExecutor(cf.ThreadPoolExecutor):
 
 def test_failed_executor_task_fails_its_items_only():
     problems = _problems(3)
-    with _FailingExecutor(1) as ex:
-        res = tritools.triangulate_many(problems, "corollary1", 2, 2, path="sdp", executor=ex, progress=False)
+    with _FailingExecutor(1) as ex:   # backend given: per-point items (not the in-process batched SDP)
+        res = tritools.triangulate_many(problems, "corollary1", 2, 2, path="sdp", executor=ex, progress=False,
+                                        backend="clarabel")
     assert [r.status for r in res] == [Status.SOLVER_FAILED] * 3
     assert all("worker lost" in r.message for r in res)
 

@@ -119,9 +119,11 @@ def _fast_eligible(method, delta, path, kw) -> bool:
     return path == SolvePath.AUTO and m == Method.COROLLARY1 and delta in (None, 2) and kw.get("normalize", True)
 
 
-#: options of triangulate under which the batched delta = 2 SDP (tritools.sdp_batch) gives its answer.
-_SDP_BATCH_DEFAULTS = {"refine": None, "normalize": True, "multiplier": "fixed", "form": "image", "backend": None,
-                       "tolerances": None}
+#: options of triangulate under which the batched delta = 2 SDP (tritools.sdp_batch) gives its answer:
+#: these values (ANY: every value is handled by the batch; backend must be left to the default).
+_ANY = object()
+_SDP_BATCH_DEFAULTS = {"refine": _ANY, "tolerances": _ANY, "normalize": True, "multiplier": "fixed", "form": "image",
+                       "backend": None}
 
 
 def _sdp_batch_eligible(method, delta, path, kw) -> bool:
@@ -135,7 +137,12 @@ def _sdp_batch_eligible(method, delta, path, kw) -> bool:
         if k not in _SDP_BATCH_DEFAULTS:
             return False
         want = _SDP_BATCH_DEFAULTS[k]
-        if want is not None and str(getattr(v, "value", v)) != str(want) and v is not want:
+        if want is _ANY:
+            continue
+        if want is None or isinstance(want, bool):
+            if v is not want:
+                return False
+        elif not isinstance(v, str) or str(getattr(v, "value", v)) != want:
             return False
     return True
 

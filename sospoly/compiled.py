@@ -210,6 +210,7 @@ class CompiledPsatz:
                                  shape=(nrows, self.n_theta)) if brows else sp.csr_matrix((nrows, self.n_theta))
         self._index = MonomialIndex(np.hstack([np.repeat(np.arange(len(self.supports)), np.diff(offsets))[:, None],
                                                np.vstack(self.supports) if self.n_theta else np.zeros((0, n), int)]))
+        self._theta_memo = None
         self.compile_seconds = time.perf_counter() - t0
 
     # ------------------------------------------------------------------ structure
@@ -226,8 +227,21 @@ class CompiledPsatz:
         return True
 
     def theta(self, f, eq=(), ineq=()) -> np.ndarray:
-        """The coefficient vector theta of an instance (raises :class:`StructureMismatch`)."""
+        """The coefficient vector theta of an instance (raises :class:`StructureMismatch`).
+
+        The last instance's theta is remembered by the identity of its polynomial objects
+        (Polynomials are not modified in place), so the containment test of a cache look-up
+        and the instantiation that follows read the coefficients once."""
         eq, ineq = tuple(eq), tuple(ineq)
+        memo = self._theta_memo
+        if memo is not None and len(memo[0]) == 1 + len(eq) + len(ineq) and \
+                all(a is b for a, b in zip(memo[0], (f,) + eq + ineq)):
+            return memo[1].copy()
+        th = self._theta(f, eq, ineq)
+        self._theta_memo = ((f,) + eq + ineq, th.copy())
+        return th
+
+    def _theta(self, f, eq, ineq) -> np.ndarray:
         if len(eq) != self.n_eq or len(ineq) != self.n_ineq:
             raise StructureMismatch(f"the structure has {self.n_eq} equalities and {self.n_ineq} inequalities; "
                                     f"the instance has {len(eq)} and {len(ineq)}")

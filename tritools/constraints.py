@@ -20,6 +20,7 @@ Both return plain :class:`sospoly.Polynomial` lists; the solver never appears he
 from __future__ import annotations
 
 import enum
+from functools import lru_cache
 from itertools import combinations
 
 import numpy as np
@@ -57,49 +58,60 @@ def _row_data(cameras: np.ndarray):
     return a, c, np.arange(2 * N)
 
 
+@lru_cache(maxsize=32)
+def _minor_structure(N: int):
+    """Per number of views, the cameras-independent part of M1 (cached).
+
+    Term t of minor R with row subset S is det of the 4 rows ``stack[T[t]]`` of
+    ``stack = [a_1..a_2N; c_1..c_2N]`` (c rows for S, a rows otherwise); it adds to
+    ``M1[minor[t], mono[t]]``.  Terms with two rows of one view in S are left out
+    (equal c rows: determinant 0).  Monomials are numbered in order of first appearance."""
+    nrow = 2 * N
+    subsets = [S for k in range(5) for S in combinations(range(4), k)]
+    monos: dict[tuple, int] = {}
+    T, minor, mono = [], [], []
+    for ri, R in enumerate(combinations(range(nrow), 4)):
+        for S in subsets:
+            m = tuple(sorted(R[k] for k in S))
+            if len({r // 2 for r in m}) != len(m):
+                continue
+            T.append([nrow + R[k] if k in S else R[k] for k in range(4)])
+            minor.append(ri)
+            mono.append(monos.setdefault(m, len(monos)))
+    B1 = np.zeros((len(monos), nrow), dtype=np.int64)
+    for m, j in monos.items():
+        B1[j, list(m)] = 1
+    n_minors = ri + 1 if nrow >= 4 else 0
+    arr = [np.array(T, np.int64).reshape(-1, 4), np.array(minor, np.int64), np.array(mono, np.int64), B1]
+    for x in arr:
+        x.setflags(write=False)
+    return arr[0], arr[1], arr[2], B1, n_minors
+
+
 def minors_matrix(cameras: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """M1 and the exponent rows b1 over the 2N image variables (x_11, x_12, ..., x_N2).
 
-    Returns ``(M1, B1)`` with ``m1 = M1 @ b1(x)``; B1 rows are 0/1 exponent vectors.
+    Returns ``(M1, B1)`` with ``m1 = M1 @ b1(x)``; B1 rows are 0/1 exponent vectors.  All
+    numeric 4x4 determinants of the module docstring's expansion are taken in one batched
+    ``det`` over the cached index structure of :func:`_minor_structure`; monomials whose
+    terms all vanish (special cameras) are dropped.
     """
     cameras = np.asarray(cameras, float)
     a, c, _ = _row_data(cameras)
-    nrow = a.shape[0]
-    subsets = [S for k in range(5) for S in combinations(range(4), k)]
-    monos: dict[tuple, int] = {}
-    rows_out = []
-    for R in combinations(range(nrow), 4):
-        coef: dict[int, float] = {}
-        for S in subsets:
-            mono = tuple(sorted(R[k] for k in S))
-            if len({r // 2 for r in mono}) != len(mono):
-                continue  # two rows of one view: equal c rows, determinant 0
-            rows = np.array([c[R[k]] if k in S else a[R[k]] for k in range(4)])
-            d = np.linalg.det(rows)
-            if d != 0.0:
-                j = monos.setdefault(mono, len(monos))
-                coef[j] = coef.get(j, 0.0) + d
-        rows_out.append(coef)
-    M1 = np.zeros((len(rows_out), len(monos)))
-    for i, coef in enumerate(rows_out):
-        for j, v in coef.items():
-            M1[i, j] = v
-    B1 = np.zeros((len(monos), nrow), dtype=np.int64)
-    for mono, j in monos.items():
-        B1[j, list(mono)] = 1
-    return M1, B1
+    T, minor, mono, B1, n_minors = _minor_structure(cameras.shape[0])
+    d = np.linalg.det(np.vstack([a, c])[T])
+    M1 = np.zeros((n_minors, B1.shape[0]))
+    np.add.at(M1, (minor, mono), d)
+    used = np.bincount(mono[d != 0.0], minlength=B1.shape[0]) > 0
+    return M1[:, used], B1[used]
 
 
-def _poly_from_row(gens, x_index, B1, row) -> Polynomial:
-    n = len(gens)
-    terms = {}
-    for e, cf in zip(B1, row):
-        if cf != 0.0:
-            exp = [0] * n
-            for k in np.nonzero(e)[0]:
-                exp[x_index[k]] = int(e[k])
-            terms[tuple(exp)] = float(cf)
-    return Polynomial(gens, terms)
+@lru_cache(maxsize=64)
+def _exponent_tuples(B1_bytes: bytes, shape: tuple, n: int, x_index: tuple) -> tuple:
+    B1 = np.frombuffer(B1_bytes, dtype=np.int64).reshape(shape)
+    E = np.zeros((shape[0], n), dtype=np.int64)
+    E[:, list(x_index)] = B1
+    return tuple(tuple(int(k) for k in row) for row in E)
 
 
 def theorem1_constraints(cameras: np.ndarray, gens, x_index) -> tuple[list[Polynomial], dict]:
@@ -115,11 +127,20 @@ def theorem1_constraints(cameras: np.ndarray, gens, x_index) -> tuple[list[Polyn
     U, S, Vt = np.linalg.svd(M1n, full_matrices=False)
     n2 = int(np.sum(S > RANK_RTOL * S[0])) if S.size else 0
     M2 = S[:n2, None] * Vt[:n2]
+    # unit scale per row (same zero set, better conditioned SDP); round-off coefficients to 0
+    M2 = M2 / np.max(np.abs(M2), axis=1, keepdims=True) if n2 else M2
+    M2 = np.where(np.abs(M2) > COEF_RTOL, M2, 0.0)
+    gens = tuple(gens)
+    exps = _exponent_tuples(np.ascontiguousarray(B1).tobytes(), B1.shape, len(gens),
+                            tuple(int(k) for k in x_index))
+    if not np.all(np.isfinite(M2)):
+        raise ValueError("cameras: the 4x4 minors of M0 are not finite (overflowing camera entries?)")
+    # the rows are finite and their entries non-zero on distinct int exponent tuples: the
+    # polynomials are built without Polynomial's per-term validation (4000+ terms at N = 4)
     polys = []
     for row in M2:
-        row = row / np.max(np.abs(row))   # unit scale: same zero set, better conditioned SDP
-        row = np.where(np.abs(row) > COEF_RTOL, row, 0.0)
-        polys.append(_poly_from_row(tuple(gens), x_index, B1, row))
+        nz = np.nonzero(row)[0]
+        polys.append(Polynomial._raw(gens, dict(zip([exps[k] for k in nz], row[nz].tolist()))))
     return polys, {"N1": M1.shape[0], "N2": n2, "singular_values": S}
 
 

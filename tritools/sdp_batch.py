@@ -39,8 +39,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from sospoly import DEFAULT_TOLERANCES, GramForm, Multiplier, Polynomial, Tolerances, variables
-from sospoly.ipm import ipm_solve_batch
-from sospoly.svec import svec_scale, triu_pairs
+from sospoly.ipm import _smat_batch, ipm_solve_batch
 
 from .fastpath import _epipolar_data, _normalise, _project_stack, _refine_stack, _valid_cameras
 from .geometry import POINT_AT_INFINITY_RTOL
@@ -140,15 +139,6 @@ def _fundamentals(g0, g1, G2, N):
     return F
 
 
-def _smat(v: np.ndarray, n: int) -> np.ndarray:
-    i, j = triu_pairs(n)
-    vals = v / svec_scale(n)
-    X = np.zeros(v.shape[:-1] + (n, n))
-    X[..., i, j] = vals
-    X[..., j, i] = vals
-    return X
-
-
 @dataclass(frozen=True)
 class SdpBatch:
     """Per-problem arrays (first axis = problem) of one batched delta = 2 SDP run.
@@ -229,7 +219,7 @@ def solve_corollary1_points(cameras, points2d, *, tolerances: Tolerances = DEFAU
             reason[part[j]] = f"ipm: {res.reason[j]}"
         ok[part[~conv]] = False
         S = b - np.einsum("brm,bm->br", A, res.x)                          # Gram from x (check_certificate)
-        G[part] = _smat(S, n)
+        G[part] = _smat_batch(S, n)
         c_lb[part] = tmpl.objective_sign * (res.x @ tmpl.q) + tmpl.objective_offset
     lam, V = np.linalg.eigh(np.where(ok[:, None, None], G, np.eye(n)))
     scale = np.maximum(1.0, np.abs(G).max(axis=(1, 2)))

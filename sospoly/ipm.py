@@ -569,12 +569,18 @@ class _MomentReduction:
         row2col = np.empty(L, np.int64)
         row2col[shared_rows] = np.arange(m2)
         row2col[self.prow] = row2col[orow]
+        # number the moment-form columns by their entry count, so that the Schur complement
+        # runs one batched matmul per count on contiguous slices (no padding)
+        ii, jj = triu_pairs(n)
+        size = np.bincount(row2col, weights=np.where(ii == jj, 1.0, 2.0), minlength=m2).astype(np.int64)
+        relabel = np.empty(m2, np.int64)
+        relabel[np.argsort(size, kind="stable")] = np.arange(m2)
+        row2col = relabel[row2col]
         self.row2col = row2col
         wmask = np.ones(m, bool)
         wmask[cand] = False
         self.w_cols = np.nonzero(wmask)[0]
         # ordered full-matrix entries of every A_a = smat(E^T e_a): (i, j, svec row, factor)
-        ii, jj = triu_pairs(n)
         off = np.nonzero(ii != jj)[0]
         er = np.concatenate([np.arange(L), off])
         ei = np.concatenate([ii, jj[off]])
@@ -594,6 +600,8 @@ class _MomentReduction:
         self.Fpad = np.zeros((m2, K))
         self.Ipad[ecol, slot], self.Jpad[ecol, slot] = ei, ej
         self.Rpad[ecol, slot], self.Fpad[ecol, slot] = er, ef
+        bounds = np.concatenate([[0], np.cumsum(np.bincount(counts)[1:])])   # columns with 1, 2, ... entries
+        self.groups = [(int(bounds[k - 1]), int(bounds[k]), k) for k in range(1, K + 1) if bounds[k] > bounds[k - 1]]
         # sparse (m' x n^2) of vec(A_a), data refilled per instance: data = V[ent_a, ent_slot]
         EF = sp.csr_matrix((np.arange(1, er.size + 1, dtype=float), (ecol, ei * n + ej)), shape=(m2, n * n))
         perm = EF.data.astype(np.int64) - 1
@@ -613,10 +621,10 @@ class _MomentReduction:
         np.take(Z, self.Ipad, axis=0, out=self._Zg)
         np.multiply(self._Zg, V[:, :, None], out=self._Zg)
         np.take(R, self.Jpad, axis=0, out=self._Rg)
-        np.matmul(self._Zg.transpose(0, 2, 1), self._Rg, out=self._P)   # P_b = Z A_b R
+        for a, b, k in self.groups:                                         # P_b = Z A_b R
+            np.matmul(self._Zg[a:b, :k].transpose(0, 2, 1), self._Rg[a:b, :k], out=self._P[a:b])
         np.copyto(self._PT, self._P.reshape(m2, n * n).T)
-        M = self.EF @ self._PT                                              # M[a, b] = <A_a, P_b>
-        return 0.5 * (M + M.T)
+        return self.EF @ self._PT       # M[a, b] = <A_a, P_b>; symmetric up to round-off (Cholesky reads one triangle)
 
     # ------------------------------------------------------------------ one instance
     def solve(self, A: sp.spmatrix, b: np.ndarray, q: np.ndarray, tol: Tolerances) -> IpmResult | None:
@@ -720,6 +728,7 @@ class _MomentReduction:
                 cf = sla.cho_factor(M, lower=True, check_finite=False)
                 if p:
                     C = sla.solve_triangular(cf[0], AE.T, lower=True, check_finite=False)
+                    W = sla.solve_triangular(cf[0], C, lower=True, trans="T", check_finite=False)  # M^-1 AE^T
                     SE = C.T @ C
                     SE[np.diag_indices(p)] += 1e-14 * max(1.0, float(np.abs(np.diagonal(SE)).max()))
                     cfe = sla.cho_factor(SE, lower=True, check_finite=False)
@@ -733,7 +742,7 @@ class _MomentReduction:
                 if not p:
                     return dy0, np.zeros(0)
                 dz = sla.cho_solve(cfe, AE @ dy0 - r2, check_finite=False)
-                return dy0 - sla.cho_solve(cf, AE.T @ dz, check_finite=False), dz
+                return dy0 - W @ dz, dz
 
             def newton(r1, r2):
                 dy, dz = base(r1, r2)

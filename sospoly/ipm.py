@@ -451,8 +451,10 @@ def ipm_solve_sparse(A: sp.spmatrix, b: np.ndarray, q: np.ndarray, cones,
         red = _reduction_for(A, q[0], lay.sizes[0])
         if red is not None:
             res = red.solve(A, b[0], q[0], tolerances)
-            if res is not None:
+            if res is not None and res.converged[0]:
                 return res
+            # not converged (e.g. stalled on some Example 5 cases): the unreduced method next,
+            # the caller's fallback (Clarabel) after that
     AE_dense = A[:lay.p].toarray()[None] if lay.p else None
     return _ipm(_SparseSchur(A, lay), q, b, lay, tolerances, AE_dense)
 
@@ -493,13 +495,8 @@ def _smat1(v: np.ndarray, n: int, i, j, scale) -> np.ndarray:
     return X
 
 
-def _max_step1(X: np.ndarray, dX: np.ndarray) -> float:
-    """Largest a with X + a dX >= 0 (inf when dX >= 0), X > 0."""
-    try:
-        L = np.linalg.cholesky(X)
-    except np.linalg.LinAlgError:
-        return 0.0
-    Li = sla.solve_triangular(L, np.eye(X.shape[0]), lower=True, check_finite=False)
+def _max_step1(Li: np.ndarray, dX: np.ndarray) -> float:
+    """Largest a with X + a dX >= 0 (inf when dX >= 0), X = L L^T > 0 given Li = L^-1."""
     T = Li @ dX @ Li.T
     lam = float(sla.eigvalsh(0.5 * (T + T.T), subset_by_index=[0, 0], check_finite=False)[0])
     return -1.0 / lam if lam < 0 else np.inf
@@ -577,6 +574,8 @@ class _MomentReduction:
         relabel[np.argsort(size, kind="stable")] = np.arange(m2)
         row2col = relabel[row2col]
         self.row2col = row2col
+        self.srow = np.empty(m2, np.int64)          # the shared (canonical) row of each column
+        self.srow[row2col[shared_rows]] = shared_rows
         wmask = np.ones(m, bool)
         wmask[cand] = False
         self.w_cols = np.nonzero(wmask)[0]
@@ -723,14 +722,25 @@ class _MomentReduction:
                 Ls = np.linalg.cholesky(S)
                 Li = sla.solve_triangular(Ls, eye, lower=True, check_finite=False)
                 R = Li.T @ Li
+                LiZ = sla.solve_triangular(np.linalg.cholesky(Z), eye, lower=True, check_finite=False)
                 M = self.schur(Z, R, V)
-                M[np.diag_indices(m2)] += 1e-14 * max(1.0, float(np.abs(np.diagonal(M)).max()))
-                cf = sla.cho_factor(M, lower=True, check_finite=False)
+                # Cholesky of M + reg I, reg = ipm_schur_regularization * max diag, raised 100x
+                # while M is numerically indefinite; the refinement in newton() uses M itself
+                dmax = max(1.0, float(np.abs(np.diagonal(M)).max()))
+                for k in range(3):
+                    Mr = M.copy()
+                    Mr[np.diag_indices(m2)] += tol.ipm_schur_regularization * 100.0 ** k * dmax
+                    try:
+                        cf = sla.cho_factor(Mr, lower=True, check_finite=False)
+                        break
+                    except np.linalg.LinAlgError:
+                        if k == 2:
+                            raise
                 if p:
                     C = sla.solve_triangular(cf[0], AE.T, lower=True, check_finite=False)
                     W = sla.solve_triangular(cf[0], C, lower=True, trans="T", check_finite=False)  # M^-1 AE^T
                     SE = C.T @ C
-                    SE[np.diag_indices(p)] += 1e-14 * max(1.0, float(np.abs(np.diagonal(SE)).max()))
+                    SE[np.diag_indices(p)] += tol.ipm_schur_regularization * max(1.0, float(np.abs(np.diagonal(SE)).max()))
                     cfe = sla.cho_factor(SE, lower=True, check_finite=False)
             except (np.linalg.LinAlgError, ValueError):
                 reason = "singular Schur complement or lost positive definiteness"
@@ -761,16 +771,23 @@ class _MomentReduction:
                 dy, dz = newton(rhs, rE)
                 dS = rPm + _smat1(Et(dy), n, i, j, sc)
                 dZ = KR - Z - Z @ dS @ R
-                return dy, dz, dS, 0.5 * (dZ + dZ.T)
+                dZ = 0.5 * (dZ + dZ.T)
+                # The linear equations of Z (coefficient matching, E svec(dZ) = rD + AE^T dz) hold
+                # only up to the round-off of M, which grows like cond(S) as the moment matrix S
+                # tends to rank one; restore them exactly on the shared entries (E is the identity
+                # there), so the dual residual decreases by (1 - step) as in exact arithmetic.
+                corr = np.zeros(self.L)
+                corr[self.srow] = rD + AE.T @ dz - Ev(_svec1(dZ, i, j, sc))
+                return dy, dz, dS, dZ + _smat1(corr, n, i, j, sc)
 
             dy, dz, dS, dZ = direction(None)
-            ap1 = min(1.0, _max_step1(S, dS))
-            ad1 = min(1.0, _max_step1(Z, dZ))
+            ap1 = min(1.0, _max_step1(Li, dS))
+            ad1 = min(1.0, _max_step1(LiZ, dZ))
             mu_aff = float(np.sum((S + ap1 * dS) * (Z + ad1 * dZ))) / n
             sigma = min(1.0, max(0.0, (mu_aff / max(mu, 1e-300)) ** 3))
             dy, dz, dS, dZ = direction(sigma * mu * eye - dZ @ dS)
-            ap = min(1.0, step_frac * _max_step1(S, dS))
-            ad = min(1.0, step_frac * _max_step1(Z, dZ))
+            ap = min(1.0, step_frac * _max_step1(Li, dS))
+            ad = min(1.0, step_frac * _max_step1(LiZ, dZ))
             y = y + ap * dy
             S = S + ap * dS
             zE = zE + ad * dz

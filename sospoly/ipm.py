@@ -568,16 +568,21 @@ class _MomentReduction:
         row2col[self.prow] = row2col[orow]
         # number the moment-form columns by their entry count, so that the Schur complement
         # runs one batched matmul per count on contiguous slices (no padding)
+        # and put the columns the equality rows (E A_w)^T touch last: L^-1 (E A_w) then only
+        # involves the trailing block of the Cholesky factor of M
         ii, jj = triu_pairs(n)
         size = np.bincount(row2col, weights=np.where(ii == jj, 1.0, 2.0), minlength=m2).astype(np.int64)
+        wmask = np.ones(m, bool)
+        wmask[cand] = False
+        touched = np.zeros(m2, np.int64)
+        touched[row2col[A[:, np.nonzero(wmask)[0]].tocoo().row]] = 1
         relabel = np.empty(m2, np.int64)
-        relabel[np.argsort(size, kind="stable")] = np.arange(m2)
+        relabel[np.lexsort((size, touched))] = np.arange(m2)
         row2col = relabel[row2col]
+        self.n_touched = int(touched.sum())
         self.row2col = row2col
         self.srow = np.empty(m2, np.int64)          # the shared (canonical) row of each column
         self.srow[row2col[shared_rows]] = shared_rows
-        wmask = np.ones(m, bool)
-        wmask[cand] = False
         self.w_cols = np.nonzero(wmask)[0]
         # ordered full-matrix entries of every A_a = smat(E^T e_a): (i, j, svec row, factor)
         off = np.nonzero(ii != jj)[0]
@@ -599,8 +604,9 @@ class _MomentReduction:
         self.Fpad = np.zeros((m2, K))
         self.Ipad[ecol, slot], self.Jpad[ecol, slot] = ei, ej
         self.Rpad[ecol, slot], self.Fpad[ecol, slot] = er, ef
-        bounds = np.concatenate([[0], np.cumsum(np.bincount(counts)[1:])])   # columns with 1, 2, ... entries
-        self.groups = [(int(bounds[k - 1]), int(bounds[k]), k) for k in range(1, K + 1) if bounds[k] > bounds[k - 1]]
+        # runs of columns with equal entry counts (contiguous by the numbering above)
+        cut = np.nonzero(np.diff(counts))[0] + 1
+        self.groups = [(int(a), int(b), int(counts[a])) for a, b in zip(np.r_[0, cut], np.r_[cut, m2])]
         # sparse (m' x n^2) of vec(A_a), data refilled per instance: data = V[ent_a, ent_slot]
         EF = sp.csr_matrix((np.arange(1, er.size + 1, dtype=float), (ecol, ei * n + ej)), shape=(m2, n * n))
         perm = EF.data.astype(np.int64) - 1
@@ -737,8 +743,9 @@ class _MomentReduction:
                         if k == 2:
                             raise
                 if p:
-                    C = sla.solve_triangular(cf[0], AE.T, lower=True, check_finite=False)
-                    W = sla.solve_triangular(cf[0], C, lower=True, trans="T", check_finite=False)  # M^-1 AE^T
+                    # AE^T vanishes on the leading rows: L^-1 AE^T = [0; L22^-1 AE2^T]
+                    t0 = m2 - self.n_touched
+                    C = sla.solve_triangular(cf[0][t0:, t0:], AE[:, t0:].T, lower=True, check_finite=False)
                     SE = C.T @ C
                     SE[np.diag_indices(p)] += tol.ipm_schur_regularization * max(1.0, float(np.abs(np.diagonal(SE)).max()))
                     cfe = sla.cho_factor(SE, lower=True, check_finite=False)
@@ -752,7 +759,7 @@ class _MomentReduction:
                 if not p:
                     return dy0, np.zeros(0)
                 dz = sla.cho_solve(cfe, AE @ dy0 - r2, check_finite=False)
-                return dy0 - W @ dz, dz
+                return dy0 - sla.cho_solve(cf, AE.T @ dz, check_finite=False), dz
 
             def newton(r1, r2):
                 dy, dz = base(r1, r2)

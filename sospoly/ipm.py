@@ -495,10 +495,17 @@ def _smat1(v: np.ndarray, n: int, i, j, scale) -> np.ndarray:
     return X
 
 
+_syevr = sla.lapack.dsyevr
+_trtri = sla.lapack.dtrtri
+
+
 def _max_step1(Li: np.ndarray, dX: np.ndarray) -> float:
     """Largest a with X + a dX >= 0 (inf when dX >= 0), X = L L^T > 0 given Li = L^-1."""
     T = Li @ dX @ Li.T
-    lam = float(sla.eigvalsh(0.5 * (T + T.T), subset_by_index=[0, 0], check_finite=False)[0])
+    w, _, _, _, info = _syevr(0.5 * (T + T.T), compute_v=0, range="I", il=1, iu=1)   # smallest eigenvalue
+    if info:
+        raise np.linalg.LinAlgError("eigenvalue computation failed")
+    lam = float(w[0])
     return -1.0 / lam if lam < 0 else np.inf
 
 
@@ -726,9 +733,9 @@ class _MomentReduction:
             # the Cholesky factor of their Schur complement AE M^-1 AE^T
             try:
                 Ls = np.linalg.cholesky(S)
-                Li = sla.solve_triangular(Ls, eye, lower=True, check_finite=False)
+                Li = _trtri(Ls, lower=1)[0]
                 R = Li.T @ Li
-                LiZ = sla.solve_triangular(np.linalg.cholesky(Z), eye, lower=True, check_finite=False)
+                LiZ = _trtri(np.linalg.cholesky(Z), lower=1)[0]
                 M = self.schur(Z, R, V)
                 # Cholesky of M + reg I, reg = ipm_schur_regularization * max diag, raised 100x
                 # while M is numerically indefinite; the refinement in newton() uses M itself
@@ -754,12 +761,16 @@ class _MomentReduction:
                 break
             mu = float(np.sum(S * Z)) / n
 
+            Lc = cf[0]
+
             def base(r1, r2):
-                dy0 = sla.cho_solve(cf, r1, check_finite=False)
+                # u = L^-1 r1; dz = SE^-1 (C^T u - r2); dy = L^-T (u - C dz), C = [0; C2] = L^-1 AE^T
+                u = sla.solve_triangular(Lc, r1, lower=True, check_finite=False)
                 if not p:
-                    return dy0, np.zeros(0)
-                dz = sla.cho_solve(cfe, AE @ dy0 - r2, check_finite=False)
-                return dy0 - sla.cho_solve(cf, AE.T @ dz, check_finite=False), dz
+                    return sla.solve_triangular(Lc, u, lower=True, trans="T", check_finite=False), np.zeros(0)
+                dz = sla.cho_solve(cfe, C.T @ u[t0:] - r2, check_finite=False)
+                u[t0:] -= C @ dz
+                return sla.solve_triangular(Lc, u, lower=True, trans="T", check_finite=False), dz
 
             def newton(r1, r2):
                 dy, dz = base(r1, r2)

@@ -20,8 +20,12 @@ when there are equality rows).  Two ways to form M:
 * dense, batched: ``Z A_i S^-1`` for all i with numpy matmul on stacks, for a batch
   of B instances sharing one structure (cost O(B (m n^3 + m^2 n^2)) per iteration);
 * svec-Kronecker, one instance with sparse A: the operator W = svec(sym(Z . S^-1))
-  on svec space (size n(n+1)/2), then M = A^T W A with sparse A (for Theorem 1
-  delta = 4, where A's columns have <= 4 entries except the r_k columns).
+  on svec space (size n(n+1)/2), then M = A^T W A with sparse A;
+* reduced moment form, one instance whose image-form columns are mostly alpha pairs
+  (:class:`_MomentReduction`, used by :func:`ipm_solve_sparse` when it applies, e.g.
+  Theorem 1 at delta = 4): the alphas are eliminated, leaving the coefficient-matching
+  rows, whose adjoint matrices have disjoint supports; M (one row per monomial of u) is
+  then one batched matmul of thin products and one sparse product per iteration.
 
 Stopping rule (Clarabel's, with :class:`~sospoly.tolerances.Tolerances`):
 |pobj - dobj| <= solver_gap_abs or <= solver_gap_rel min(|pobj|, |dobj|);
@@ -35,6 +39,7 @@ returned x.
 """
 from __future__ import annotations
 
+import threading
 from collections import OrderedDict
 from dataclasses import dataclass
 
@@ -538,9 +543,6 @@ class _MomentReduction:
     alpha_j = (b - s)[p_j] / A[p_j, j], z = E^T y.
     """
 
-    def __init__(self):
-        pass
-
     @classmethod
     def build(cls, A: sp.csc_matrix, qnz: np.ndarray, n: int):
         L, m = A.shape
@@ -558,7 +560,7 @@ class _MomentReduction:
         cand, p0, r1, r2, priv1 = cand[ok], p0[ok], r1[ok], r2[ok], priv1[ok]
         if cand.size < _REDUCE_MIN_FRACTION * m:
             return None
-        self = cls()
+        self = cls.__new__(cls)
         self.n, self.L, self.m = n, L, m
         self.alpha_cols = cand
         self.pdat = np.where(priv1, p0, p0 + 1)
@@ -617,26 +619,35 @@ class _MomentReduction:
         # sparse (m' x n^2) of vec(A_a), data refilled per instance: data = V[ent_a, ent_slot]
         EF = sp.csr_matrix((np.arange(1, er.size + 1, dtype=float), (ecol, ei * n + ej)), shape=(m2, n * n))
         perm = EF.data.astype(np.int64) - 1
-        self.EF = EF
+        self.ef_pattern = (EF.indices, EF.indptr)
+        self._local = threading.local()
         self.ef_src = (ecol[perm], slot[perm])
-        # work buffers (allocating the (m', n, n) stack every iteration costs more than the product)
-        self._Zg = np.empty((m2, K, n))
-        self._Rg = np.empty((m2, K, n))
-        self._P = np.empty((m2, n, n))
-        self._PT = np.empty((n * n, m2))
         return self
 
+    def workspace(self, V: np.ndarray) -> dict:
+        """Work buffers (allocating the (m', n, n) stack every iteration costs more than the
+        product; one set per thread, so a plan can be shared between threads) and the sparse
+        vec(A_a) of this instance's values V."""
+        m2, n, K = self.m2, self.n, self.K
+        EF = sp.csr_matrix((V[self.ef_src], *self.ef_pattern), shape=(m2, n * n))
+        bufs = getattr(self._local, "bufs", None)    # reused by later solves in the same thread
+        if bufs is None:
+            bufs = self._local.bufs = {"Zg": np.empty((m2, K, n)), "Rg": np.empty((m2, K, n)),
+                                       "P": np.empty((m2, n, n)), "PT": np.empty((n * n, m2))}
+        return dict(bufs, EF=EF, V=V)
+
     # ------------------------------------------------------------------ Schur complement
-    def schur(self, Z: np.ndarray, R: np.ndarray, V: np.ndarray) -> np.ndarray:
-        """M_ab = <A_a, Z A_b R> for all a, b (symmetrised)."""
+    def schur(self, Z: np.ndarray, R: np.ndarray, ws: dict) -> np.ndarray:
+        """M_ab = <A_a, Z A_b R> for all a, b (``ws`` from :meth:`workspace`)."""
         m2, n = self.m2, self.n
-        np.take(Z, self.Ipad, axis=0, out=self._Zg)
-        np.multiply(self._Zg, V[:, :, None], out=self._Zg)
-        np.take(R, self.Jpad, axis=0, out=self._Rg)
+        Zg, Rg, P, PT = ws["Zg"], ws["Rg"], ws["P"], ws["PT"]
+        np.take(Z, self.Ipad, axis=0, out=Zg)
+        np.multiply(Zg, ws["V"][:, :, None], out=Zg)
+        np.take(R, self.Jpad, axis=0, out=Rg)
         for a, b, k in self.groups:                                         # P_b = Z A_b R
-            np.matmul(self._Zg[a:b, :k].transpose(0, 2, 1), self._Rg[a:b, :k], out=self._P[a:b])
-        np.copyto(self._PT, self._P.reshape(m2, n * n).T)
-        return self.EF @ self._PT       # M[a, b] = <A_a, P_b>; symmetric up to round-off (Cholesky reads one triangle)
+            np.matmul(Zg[a:b, :k].transpose(0, 2, 1), Rg[a:b, :k], out=P[a:b])
+        np.copyto(PT, P.reshape(m2, n * n).T)
+        return ws["EF"] @ PT       # M[a, b] = <A_a, P_b>; symmetric up to round-off (Cholesky reads one triangle)
 
     # ------------------------------------------------------------------ one instance
     def solve(self, A: sp.spmatrix, b: np.ndarray, q: np.ndarray, tol: Tolerances) -> IpmResult | None:
@@ -656,9 +667,8 @@ class _MomentReduction:
         AE = np.zeros((self.w_cols.size, m2))                               # (E A_w)^T
         np.add.at(AE, (Aw.col, self.row2col[Aw.row]), e[Aw.row] * Aw.data)
         bE = -q[self.w_cols]
-        V = self.Fpad * e[self.Rpad]
-        self.EF.data = V[self.ef_src]
-        out = self._ipm(cq, AE, bE, e, V, tol)
+        ws = self.workspace(self.Fpad * e[self.Rpad])
+        out = self._ipm(cq, AE, bE, e, ws, tol)
         y, zE, Smom, Zgram, conv, its, why = out
         i, j = triu_pairs(self.n)
         sc = svec_scale(self.n)
@@ -672,7 +682,7 @@ class _MomentReduction:
         return IpmResult(np.array([conv]), x[None], z[None], s[None], np.array([pobj]), np.array([dobj]),
                          np.array([its]), (why,))
 
-    def _ipm(self, cq, AE, bE, e, V, tol: Tolerances):
+    def _ipm(self, cq, AE, bE, e, ws, tol: Tolerances):
         """Mehrotra predictor-corrector (HKM) on  min cq^T y, AE y = bE, smat(E^T y) >= 0;
         the same stopping rules as :func:`_ipm`.  Returns (y, zE, S, Z, converged, iterations, reason)."""
         n, m2, p = self.n, self.m2, AE.shape[0]
@@ -736,7 +746,7 @@ class _MomentReduction:
                 Li = _trtri(Ls, lower=1)[0]
                 R = Li.T @ Li
                 LiZ = _trtri(np.linalg.cholesky(Z), lower=1)[0]
-                M = self.schur(Z, R, V)
+                M = self.schur(Z, R, ws)
                 # Cholesky of M + reg I, reg = ipm_schur_regularization * max diag, raised 100x
                 # while M is numerically indefinite; the refinement in newton() uses M itself
                 dmax = max(1.0, float(np.abs(np.diagonal(M)).max()))
@@ -754,7 +764,8 @@ class _MomentReduction:
                     t0 = m2 - self.n_touched
                     C = sla.solve_triangular(cf[0][t0:, t0:], AE[:, t0:].T, lower=True, check_finite=False)
                     SE = C.T @ C
-                    SE[np.diag_indices(p)] += tol.ipm_schur_regularization * max(1.0, float(np.abs(np.diagonal(SE)).max()))
+                    reg = tol.ipm_schur_regularization * max(1.0, float(np.abs(np.diagonal(SE)).max()))
+                    SE[np.diag_indices(p)] += reg
                     cfe = sla.cho_factor(SE, lower=True, check_finite=False)
             except (np.linalg.LinAlgError, ValueError):
                 reason = "singular Schur complement or lost positive definiteness"

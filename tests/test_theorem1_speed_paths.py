@@ -56,13 +56,12 @@ def test_reduction_applies_and_schur_matches_dense_formula(example4):
     ap, ao = A.data[red.pdat], A.data[red.odat]
     e = np.ones(red.L)
     e[red.prow] = -ao / ap
-    V = red.Fpad * e[red.Rpad]
-    red.EF.data = V[red.ef_src]
+    ws = red.workspace(red.Fpad * e[red.Rpad])
     rng = np.random.default_rng(7)
     n = red.n
     Z = rng.standard_normal((n, n)); Z = Z @ Z.T + n * np.eye(n)
     R = rng.standard_normal((n, n)); R = R @ R.T + n * np.eye(n)
-    M = red.schur(Z, R, V)
+    M = red.schur(Z, R, ws)
     # dense reference: A_a = smat(E^T e_a), M_ab = tr(A_a Z A_b R) on a sample of columns
     cols = rng.choice(red.m2, 40, replace=False)
     mats = []

@@ -128,8 +128,10 @@ def normalization_for(cameras: np.ndarray, regions, enabled: bool = True) -> Nor
     rho_floor = RHO_FLOOR_REL * max(1.0, float(np.median(np.abs(centers))))
     if X0 is None:
         return Normalization(1.0, centers, np.zeros(3), 1.0)
-    X0 = _refined(X0, cameras, centers)
-    res = _residuals(X0, cameras, centers)
+    # image scale from the refined residual; the world frame stays at the DLT estimate (the
+    # refinement may run towards a point at infinity, and a huge depth d ruins the cameras'
+    # conditioning: Example 5 seed 7 case 455 had d ~ 1e8 and a bound 2e-6 above f in c units)
+    res = _residuals(_refined(X0, cameras, centers), cameras, centers)
     rho = float(np.sqrt(np.mean(res ** 2))) if np.all(np.isfinite(res)) else 1.0
     rho = max(rho, rho_floor)
     s = float(np.clip(1.0 / rho, *SCALE_BOUNDS))

@@ -47,6 +47,7 @@ import numpy as np
 import scipy.linalg as sla
 import scipy.sparse as sp
 
+from .blas import with_single_threaded_blas
 from .svec import svec_scale, triu_pairs
 from .tolerances import DEFAULT_TOLERANCES, Tolerances
 
@@ -417,6 +418,7 @@ def _ipm(schur, q, b, lay: _Layout, tol: Tolerances, AE_dense):
     return IpmResult(converged, x, zfull, sfull, pobj, dobj, its, tuple(reason))
 
 
+@with_single_threaded_blas
 def ipm_solve_batch(A: np.ndarray, b: np.ndarray, q: np.ndarray, cones,
                     tolerances: Tolerances = DEFAULT_TOLERANCES) -> IpmResult:
     """Solve B instances of one structure: A (B, n_rows, m) dense, b (B, n_rows), q (B, m) or (m,)."""
@@ -437,6 +439,7 @@ def ipm_solve_batch(A: np.ndarray, b: np.ndarray, q: np.ndarray, cones,
     return _ipm(_DenseSchur(A, lay), q, b, lay, tolerances, A[:, :lay.p, :])
 
 
+@with_single_threaded_blas
 def ipm_solve_sparse(A: sp.spmatrix, b: np.ndarray, q: np.ndarray, cones,
                      tolerances: Tolerances = DEFAULT_TOLERANCES) -> IpmResult:
     """One instance with sparse A; results with batch axis 1.

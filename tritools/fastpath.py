@@ -34,6 +34,7 @@ import numpy as np
 
 from sospoly import DEFAULT_TOLERANCES, Tolerances, n_lmivar_formula
 from sospoly.verify import verify_quadratic_batch
+from sospoly.blas import with_single_threaded_blas
 
 from .geometry import (POINT_AT_INFINITY_RTOL, PROJECTION_DENOM_RTOL, SAME_CAMERA_RTOL,
                        SAME_CENTER_RTOL)
@@ -247,6 +248,7 @@ def _epipolar_data(Cn: np.ndarray):
     return g0, g1, G2, ok
 
 
+@with_single_threaded_blas
 def verify_points(cameras, points2d, *, tolerances: Tolerances = DEFAULT_TOLERANCES) -> FastPathBatch:
     """Vectorised certification by verification of M point problems with N views each.
 

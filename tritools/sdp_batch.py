@@ -40,6 +40,7 @@ import numpy as np
 
 from sospoly import DEFAULT_TOLERANCES, GramForm, Multiplier, Polynomial, Tolerances, variables
 from sospoly.ipm import _smat_batch, ipm_solve_batch
+from sospoly.blas import with_single_threaded_blas
 
 from .fastpath import _epipolar_data, _normalise, _project_stack, _refine_stack, _valid_cameras
 from .geometry import POINT_AT_INFINITY_RTOL
@@ -170,6 +171,7 @@ def _chunk_size(N: int) -> int:
     return max(1, SDP_CHUNK_BYTES // per)
 
 
+@with_single_threaded_blas
 def solve_corollary1_points(cameras, points2d, *, tolerances: Tolerances = DEFAULT_TOLERANCES,
                             refine: bool = True) -> SdpBatch:
     """The delta = 2 SDP path (module docstring) for M point problems with N views.

@@ -9,8 +9,9 @@ program at delta = 2 (SPEC §7) is, in the normalised coordinates of
 f and every g_ij quadratic.  For each problem this module
 
 1. computes the normalisation of :func:`tritools.normalize.normalization_for`
-   (same formulas, vectorised: scale s from the DLT residual, shifts = observed
-   points, world origin = DLT estimate, depth = median camera distance);
+   (same formulas, vectorised: scale s from the residual of the locally refined
+   estimate, shifts = observed points, world origin = DLT estimate, depth = median
+   camera distance);
 2. finds a local minimiser of the L2 reprojection error from the DLT estimate by a
    vectorised Levenberg-Marquardt iteration on the 2N residuals Phi(X, P_i) - x^_i;
 3. takes v^ = (Phi(X, P_1), ..., Phi(X, P_N)) -- a feasible point of g = 0 -- and the
@@ -144,7 +145,9 @@ def _valid_cameras(C: np.ndarray) -> np.ndarray:
 def _normalise(C: np.ndarray, x: np.ndarray):
     """Vectorised :func:`tritools.normalize.normalization_for` and the normalised cameras.
 
-    Returns (scale (M,), origin (M, 3), depth (M,), cameras_n (M, N, 3, 4), ok (M,)).
+    Returns (scale (M,), origin (M, 3), depth (M,), cameras_n (M, N, 3, 4), ok (M,),
+    Xn (M, 3)): Xn is the locally refined estimate in the normalised world frame (the
+    scale comes from its residual; 0, the DLT point, where the refinement failed).
     """
     M, N = x.shape[:2]
     X0, ok = _dlt_stack(C, x)
@@ -171,7 +174,17 @@ def _normalise(C: np.ndarray, x: np.ndarray):
     Cn = CH.copy()
     Cn[:, :, :2, :] = s[:, None, None, None] * (CH[:, :, :2, :] - x[..., None] * CH[:, :, 2:3, :])
     Cn /= np.linalg.norm(Cn, axis=(2, 3))[..., None, None]
-    return s, X0, d, Cn, ok
+    # the scale from the residual of the locally refined estimate (as normalization_for): refine
+    # from the DLT point (Xn = 0), then the exact image similarity x' = k x', k = s_new / s
+    Xn, ok_r = _refine_stack(Cn, np.zeros((M, N, 2)), np.zeros((M, 3)), ok.copy())
+    u, _, fin = _project_stack(Cn, Xn)
+    r = np.sqrt(np.mean(np.sum(np.where(fin[:, None, None], u, 0.0) ** 2, axis=2), axis=1)) / s
+    use = ok_r & fin & np.isfinite(r)
+    rho_ref = np.where(use, np.maximum(np.minimum(r, rho), rho_floor), rho)
+    s_new = np.clip(1.0 / rho_ref, *SCALE_BOUNDS)
+    Cn[:, :, :2, :] *= (s_new / s)[:, None, None, None]
+    Cn /= np.linalg.norm(Cn, axis=(2, 3))[..., None, None]
+    return s_new, X0, d, Cn, ok, np.where(use[:, None], Xn, 0.0)
 
 
 def _refine_stack(Cn: np.ndarray, xhat: np.ndarray, X: np.ndarray, ok: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -270,11 +283,12 @@ def verify_points(cameras, points2d, *, tolerances: Tolerances = DEFAULT_TOLERAN
     ok = _valid_cameras(C) & np.all(np.isfinite(x), axis=(1, 2))
     C = np.where(ok[:, None, None, None], C, np.eye(3, 4))
     x = np.where(ok[:, None, None], x, 0.0)
-    s, origin, depth, Cn, ok_n = _normalise(C, x)
+    s, origin, depth, Cn, ok_n, Xn0 = _normalise(C, x)
     ok &= ok_n
     xhat = np.zeros((M, N, 2))          # the observed points, normalised: s (x^_i - t_i) = 0
-    # the world origin is the DLT estimate of the data: the local refinement starts at Xn = 0
-    Xn, ok = _refine_stack(Cn, xhat, np.zeros((M, 3)), ok)
+    # the world origin is the DLT estimate of the data; the local refinement of the
+    # normalisation (Xn0) is polished in the final coordinates
+    Xn, ok = _refine_stack(Cn, xhat, Xn0, ok)
     u, _, fin = _project_stack(Cn, Xn)
     ok &= fin
     v = np.where(ok[:, None], u.reshape(M, -1), 0.0)

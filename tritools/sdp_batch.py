@@ -194,7 +194,7 @@ def solve_corollary1_points(cameras, points2d, *, tolerances: Tolerances = DEFAU
         reason[m] = "invalid or degenerate data"
     C = np.where(ok[:, None, None, None], C, np.eye(3, 4))
     x = np.where(ok[:, None, None], x, 0.0)
-    s, origin, depth, Cn, ok_n = _normalise(C, x)
+    s, origin, depth, Cn, ok_n, _ = _normalise(C, x)
     g0, g1, G2, ok_f = _epipolar_data(Cn)
     for m in np.nonzero(ok & ~(ok_n & ok_f))[0]:
         reason[m] = "normalisation or epipolar data undefined"

@@ -140,3 +140,22 @@ def test_default_executor_rule():
     finally:
         if ex is not None:
             ex.shutdown()
+
+
+@pytest.mark.parametrize("path", ["auto", "sdp"])
+def test_extreme_item_does_not_lose_the_batch(path):
+    # a point at 1e308 px (finite, overflows inside the vectorised paths) used to raise LinAlgError out of
+    # triangulate_many, losing every result; now it gets its own status and the others are solved
+    good = _problems(3)
+    cams = good[0][0]
+    huge = (cams, [Point([1e308, 1e308])] + list(good[0][1][1:]))
+    with np.errstate(all="ignore"):
+        res = tritools.triangulate_many([good[0], huge, good[1], good[2]], "corollary1", 2, 2, path=path,
+                                        progress=False)
+    assert len(res) == 4
+    assert res[1].status in (Status.INVALID_INPUT, Status.SOLVER_FAILED, Status.NUMERICAL_FAILURE)
+    assert not res[1].optimal
+    alone = tritools.triangulate_many([good[0], good[1], good[2]], "corollary1", 2, 2, path=path, progress=False)
+    for a, b in zip([res[0], res[2], res[3]], alone):
+        assert a.status == b.status == Status.OPTIMAL
+        assert a.gamma_ub == pytest.approx(b.gamma_ub, rel=1e-7)

@@ -194,3 +194,18 @@ def test_vectorised_scale_is_normalization_for_scale():
     s, *_ = _normalise(C, x)
     ref = np.array([normalization_for(c.cameras, c.regions).scale for c in cases])
     assert np.allclose(s, ref, rtol=1e-3)
+
+
+def test_overflowing_problem_does_not_break_its_batch():
+    # |x| = 1e308 is finite but overflows in the normalisation; before the fix its NaN polynomials made
+    # the batched SVD of verify_quadratic_batch raise LinAlgError for the whole stack
+    scene = random_scene(3, 3, noise_px=1.0, seed=4)
+    C, x = _stack(scene)
+    x = x.copy()
+    x[1, 0] = 1e308
+    with np.errstate(all="ignore"):
+        batch = verify_points(C, x)
+    assert not batch.ok[1] and not batch.certified[1]
+    alone = verify_points(C[[0, 2]], x[[0, 2]])
+    np.testing.assert_array_equal(batch.certified[[0, 2]], alone.certified)
+    assert alone.certified.all()

@@ -230,13 +230,16 @@ def triangulate_many(problems: Iterable[Sequence], method="corollary1", delta=No
         for start in range(0, len(group), FAST_CHUNK):
             part = group[start:start + FAST_CHUNK]
             C, x = np.array([g[1] for g in part]), np.array([g[2] for g in part])
-            if sdp_batch:   # the delta = 2 SDP for the whole group; what it hands back goes per point
-                fres = sdp_results(C, x, tolerances=tol, refine=kw.get("refine", True), final=final,
-                                   method=Method.COROLLARY1.value)
-                prefix = ()
-            else:
-                fres = fast_results(C, x, tolerances=tol, method=Method.COROLLARY1.value)
-                prefix = (_VERIFICATION_FAILED,)
+            try:
+                if sdp_batch:   # the delta = 2 SDP for the whole group; what it hands back goes per point
+                    prefix = ()
+                    fres = sdp_results(C, x, tolerances=tol, refine=kw.get("refine", True), final=final,
+                                       method=Method.COROLLARY1.value)
+                else:
+                    prefix = (_VERIFICATION_FAILED,)
+                    fres = fast_results(C, x, tolerances=tol, method=Method.COROLLARY1.value)
+            except Exception:  # noqa: BLE001 - e.g. LinAlgError on extreme data: every item goes per point
+                fres = [None] * len(part)
             for (i, _, _, cams, regions), r in zip(part, fres):
                 if r is None:
                     items.append((i, cams, regions, SolvePath.SDP.value, prefix))

@@ -293,7 +293,10 @@ def verify_points(cameras, points2d, *, tolerances: Tolerances = DEFAULT_TOLERAN
     ok &= fin
     v = np.where(ok[:, None], u.reshape(M, -1), 0.0)
     g0, g1, G2, ok_f = _epipolar_data(Cn)
-    ok &= ok_f
+    # data that overflowed in the normalisation (e.g. |x| ~ 1e308) is not certified here; zero
+    # polynomials keep the batched linear algebra finite for the other problems
+    ok &= ok_f & np.isfinite(g0).all(axis=1) & np.isfinite(g1).all(axis=(1, 2)) & np.isfinite(G2).all(axis=(1, 2, 3))
+    g0, g1, G2 = (np.where(ok.reshape((M,) + (1,) * (a.ndim - 1)), a, 0.0) for a in (g0, g1, G2))
     n = 2 * N
     f0 = np.sum(xhat.reshape(M, -1) ** 2, axis=1)
     f1 = -2 * xhat.reshape(M, -1)

@@ -171,6 +171,9 @@ BAD_FILES = {
     "empty": ({"problems": []}, "problems: no problems"),
     "top_level": ("42", "$: expected a problem object, an array of problems"),
     "not_json": ('{"cameras": [1, 2', "not valid JSON: Expecting"),
+    # an integer literal beyond the float range used to escape as an internal OverflowError (exit 1)
+    "huge_integer": (json.dumps(example4_doc()).replace('"x": [0.4', '"x": [1' + "0" * 400, 1),
+                     "regions[1].x[0]: integer with 401 digits is too large"),
 }
 
 
@@ -323,3 +326,23 @@ def test_docs_json_examples_follow_the_schema():
     for block in blocks:
         specs = parse_problem_text(block)
         assert all(s.n_views == len(s.cameras) for s in specs)
+
+
+def test_overflowing_input_prints_no_numpy_warnings(tmp_path, capsys):
+    # finite but extreme numbers overflow inside numpy; its RuntimeWarnings used to add lines to the
+    # one-line error (exit 2) and to the output of a solve whose bad problem gets a status row (exit 0)
+    import warnings
+
+    bad_d = _ex4_with(lambda d: d["regions"].__setitem__(0, {"type": "ellipse", "center": [0, 0],
+                                                             "D": [[1e308, 0], [0, 1e308]]}))
+    huge_point = {"cameras": [np.eye(3, 4).tolist(), [[1, 0, 0, 1], [0, 1, 0, 0], [0, 0, 1, 0]]],
+                  "regions": [[1e308, 1e308], [0.5, 0.0]]}
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        rc, out, err = run(["solve", write(tmp_path, bad_d)], capsys)
+        assert rc == 2 and len(err.splitlines()) == 1 and "regions[0].D" in err, err
+        rc, out, err = run(["solve", write(tmp_path, huge_point, "huge.json"), "--method", "corollary1",
+                            "--delta", "2", "--path", "auto", "--json"], capsys)
+        assert rc == 0 and err == "", err
+        assert json.loads(out)[0]["status"] != "optimal"
+    assert not [w for w in caught if issubclass(w.category, RuntimeWarning)]

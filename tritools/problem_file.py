@@ -31,6 +31,7 @@ import enum
 import json
 import math
 import re
+import sys
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -119,6 +120,9 @@ def _find_non_finite(value, loc: str) -> None:
         raise ProblemFileError(loc or "$", f"non-finite number {value.literal} (NaN and Infinity are not allowed)")
     if isinstance(value, float) and not math.isfinite(value):
         raise ProblemFileError(loc or "$", f"non-finite number {value!r} (NaN and Infinity are not allowed)")
+    if isinstance(value, int) and not isinstance(value, bool) and abs(value) > sys.float_info.max:
+        raise ProblemFileError(loc or "$", f"integer with {len(str(abs(value)))} digits is too large for a "
+                                           f"float (NaN and Infinity are not allowed)")
     if isinstance(value, Mapping):
         for k, v in value.items():
             _find_non_finite(v, _join(loc, k))

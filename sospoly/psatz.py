@@ -28,11 +28,13 @@ import enum
 import numbers
 from dataclasses import dataclass
 
+from .basis import sigma
 from .linpoly import LinPoly
 from .polynomial import Polynomial, as_polynomial
 from .program import SOSConstraint, SOSProgram
 
-__all__ = ["Multiplier", "PsatzProblem", "build_psatz", "delta_min", "default_q", "common_gens"]
+__all__ = ["Multiplier", "PsatzProblem", "build_psatz", "delta_min", "default_q", "common_gens", "MAX_GRAM_SIDE",
+           "check_degree_supported"]
 
 
 class Multiplier(str, enum.Enum):
@@ -95,6 +97,22 @@ class PsatzProblem:
         return self.program.n_lmivar()
 
 
+#: the largest Gram matrix side sigma(n, delta/2) = C(n + delta/2, n) a program may have.  Far beyond what the
+#: solvers hold in memory (12.5M Gram entries, more equality rows); larger degrees are rejected at once
+#: instead of expanding (1 + ||v||^2)^(delta/2 - 1) for hours (a problem file with "delta": 1e30 hung).
+MAX_GRAM_SIDE = 5000
+
+
+def check_degree_supported(nvars: int, degree: int) -> None:
+    """ValueError when the degree-``degree`` program in ``nvars`` variables exceeds :data:`MAX_GRAM_SIDE`."""
+    side = sigma(int(nvars), int(degree) // 2)
+    if side > MAX_GRAM_SIDE:
+        def shown(k: int) -> str:
+            return f"{k}" if len(str(k)) <= 12 else f"~1e{len(str(k)) - 1}"
+        raise ValueError(f"degree {shown(int(degree))} is not supported: its Gram matrix in {nvars} variables would "
+                         f"have side {shown(side)} (limit {MAX_GRAM_SIDE})")
+
+
 def build_psatz(f, eq=(), ineq=(), degree: int | None = None, multiplier=Multiplier.FIXED,
                 gens=None) -> PsatzProblem:
     """Build the Positivstellensatz program of SPEC §5 (see module docstring)."""
@@ -121,6 +139,7 @@ def build_psatz(f, eq=(), ineq=(), degree: int | None = None, multiplier=Multipl
         raise ValueError(f"degree {degree} is below delta_min = {dmin} for these polynomials")
     if f.degree > degree:
         raise ValueError(f"deg f = {f.degree} exceeds degree {degree}")
+    check_degree_supported(len(gens), degree)
 
     prog = SOSProgram(gens)
     c = q_expr = None

@@ -147,3 +147,27 @@ def test_even_unbounded_objective_gives_infeasible_status():
     assert res.status == SolveStatus.INFEASIBLE and res.lower_bound is None and not res.optimal
     res = sp.minimize(x**2 - y**2, backend="cvxpy")
     assert res.status == SolveStatus.INFEASIBLE and res.lower_bound is None
+
+
+def test_unsupported_degree_is_rejected_at_once():
+    # degree 1e30 used to expand (1 + ||v||^2)^(delta/2 - 1) without end (a problem file with "delta": 1e30
+    # hung the CLI); the Gram side C(n + delta/2, n) is checked against MAX_GRAM_SIDE first
+    from sospoly.psatz import MAX_GRAM_SIDE, check_degree_supported
+
+    with pytest.raises(ValueError, match=r"degree ~1e30 is not supported: .* in 2 variables .* side ~1e59"):
+        sp.build_psatz(x**2 + y**2, degree=10**30)
+    # 2 variables: C(2 + k, 2) <= 5000 up to k = 98 (C(100, 2) = 4950), so degree 196 passes, 198 (5050) does not
+    check_degree_supported(2, 196)
+    with pytest.raises(ValueError, match=f"side 5050 \\(limit {MAX_GRAM_SIDE}\\)"):
+        check_degree_supported(2, 198)
+    assert sp.build_psatz(x**2 + y**2, degree=4) is not None
+
+
+def test_triangulate_names_the_unsupported_degree():
+    import tritools
+
+    cams, regions = tritools.paper_example(4)
+    with pytest.raises(ValueError, match=r"^delta: degree ~1e30 is not supported"):
+        tritools.triangulate(cams, regions, "corollary1", delta=10**30)
+    with pytest.raises(ValueError, match=r"^max_delta: degree 400 is not supported"):
+        tritools.triangulate(cams, regions, "corollary1", delta=2, max_delta=400)

@@ -175,6 +175,10 @@ def triangulate(cameras, regions, method: Method | str = Method.THEOREM1, delta:
         raise ValueError(f"delta must be even and >= delta_min = {dmin} for this problem, got {delta}")
     if last < delta:
         raise ValueError(f"max_delta ({last}) is below delta ({delta})")
+    try:
+        sospoly.psatz.check_degree_supported(len(problem.gens), last)
+    except ValueError as exc:
+        raise ValueError(f"{'max_delta' if last != delta else 'delta'}: {exc}") from None
 
     attempts = []
     result = None

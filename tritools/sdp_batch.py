@@ -47,14 +47,8 @@ from .geometry import POINT_AT_INFINITY_RTOL
 from .result import Status, TriangulationResult
 
 __all__ = ["SdpBatch", "corollary1_structure", "corollary1_thetas", "solve_corollary1_points",
-           "sdp_results", "SDP_CHUNK_BYTES", "IPM_DUAL_RESIDUAL_GAP"]
+           "sdp_results", "SDP_CHUNK_BYTES"]
 
-#: the IPM's ``ipm_dual_residual_gap`` for these programs.  With N >= 4 views the epipolar constraints
-#: are linearly dependent at v*, the optimal multipliers r form a long flat face (|r| ~ 1e3-1e5 at
-#: its analytic centre) and r_D^T x stalls at ~1e-7 relative while the complementarity part of the
-#: gap is ~1e-12; on the Oxford instances that stalled under 1e-8 the accepted c* then agrees with
-#: Clarabel's to <= 1.4e-9 (c units, normalised), and the Gram check and certificate still apply.
-IPM_DUAL_RESIDUAL_GAP = 1e-6
 #: the dense batched IPM holds ~(m n^2 + n_rows m) floats per instance; chunks stay below this many bytes.
 SDP_CHUNK_BYTES = 256 * 2 ** 20
 
@@ -210,7 +204,8 @@ def solve_corollary1_points(cameras, points2d, *, tolerances: Tolerances = DEFAU
     th = corollary1_thetas(cs, F[idx]) if idx.size else np.zeros((0, comp.n_theta))
     tmpl = comp.problem_from_theta(th[0]) if idx.size else None
     step = _chunk_size(N)
-    ipm_tol = dataclasses.replace(tol, ipm_dual_residual_gap=max(tol.ipm_dual_residual_gap, IPM_DUAL_RESIDUAL_GAP))
+    ipm_tol = dataclasses.replace(tol, ipm_dual_residual_gap=max(tol.ipm_dual_residual_gap,
+                                                                        tol.ipm_flat_face_dual_residual_gap))
     for start in range(0, idx.size, step):
         part = idx[start:start + step]
         A, b = comp.dense_batch(th[start:start + step])

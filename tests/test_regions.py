@@ -283,6 +283,7 @@ def test_filled_ellipse_distance():
     ([[1.0, 0.5], [0.0, 1.0]], "symmetric"),
     ([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]], "2x2"),
     ([[np.inf, 0.0], [0.0, 1.0]], "finite"),
+    ([[1e-320, 0.0], [0.0, 1e-320]], "singular"),      # denormal: positive, but 1/D overflows
 ])
 def test_ellipse_bad_input(D, match):
     for cls in (EllipseBorder, Ellipse):

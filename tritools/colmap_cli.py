@@ -47,7 +47,7 @@ def register(subparsers) -> None:
 
 
 def _fail(msg: str) -> int:
-    print(f"error: {msg}", file=sys.stderr)
+    print(f"tritools: error: {msg}", file=sys.stderr)
     return 2
 
 

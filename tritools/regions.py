@@ -682,6 +682,9 @@ class EllipseBorder(Region):
         object.__setattr__(self, "_Q", Q[:, ::-1].copy())
         Dinv = np.linalg.inv(D)
         Dinv = 0.5 * (Dinv + Dinv.T)
+        if not np.all(np.isfinite(Dinv)):
+            raise ValueError(f"D is too close to singular for floating point (its inverse overflows), "
+                             f"got eigenvalues {lam.tolist()}")
         object.__setattr__(self, "_Dinv", Dinv)
 
     @classmethod

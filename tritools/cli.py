@@ -343,7 +343,7 @@ def register_builtin(sub) -> None:
     p = sub.add_parser("example", help="the paper's Example 2, 3, 4 (Tables 8-10) or a reduced Example 5")
     p.add_argument("k", type=int, choices=(2, 3, 4, 5))
     p.add_argument("--json", action="store_true", help="machine-readable output")
-    p.add_argument("--points", type=int, default=1, help="Example 5: scene points (paper: 25)")
+    p.add_argument("--points", type=int, default=5, help="Example 5: scene points (paper: 25)")
     p.add_argument("--trials", type=int, default=2, help="Example 5: trials per point and theta (paper: 10)")
     p.add_argument("--seed", type=int, default=0, help="Example 5: random seed")
     p.add_argument("--progress", action="store_true", help="Example 5: progress bar on stderr")

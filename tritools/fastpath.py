@@ -142,6 +142,22 @@ def _valid_cameras(C: np.ndarray) -> np.ndarray:
     return finite & rank3 & distinct
 
 
+def _stack(cameras, points2d, caller: str):
+    """(cameras (M, N, 3, 4), points2d (M, N, 2), ok (M,)) as float arrays, shapes checked.
+
+    Problems with non-finite or degenerate data get ``ok = False`` and harmless stand-in
+    numbers (identity-like cameras, zero points) so the vectorised code runs on the rest."""
+    C = np.asarray(cameras, float)
+    x = np.asarray(points2d, float)
+    if C.ndim != 4 or C.shape[2:] != (3, 4) or x.shape != C.shape[:2] + (2,) or C.shape[1] < 2:
+        raise ValueError(f"{caller}: cameras must be (M, N, 3, 4) and points2d (M, N, 2) with N >= 2, "
+                         f"got {C.shape} and {x.shape}")
+    ok = _valid_cameras(C) & np.all(np.isfinite(x), axis=(1, 2))
+    C = np.where(ok[:, None, None, None], C, np.eye(3, 4))
+    x = np.where(ok[:, None, None], x, 0.0)
+    return C, x, ok
+
+
 def _normalise(C: np.ndarray, x: np.ndarray):
     """Vectorised :func:`tritools.normalize.normalization_for` and the normalised cameras.
 
@@ -274,15 +290,8 @@ def verify_points(cameras, points2d, *, tolerances: Tolerances = DEFAULT_TOLERAN
     tolerances : sospoly.Tolerances
         The certificate rule, as in :func:`sospoly.verify.verify_quadratic`.
     """
-    C = np.asarray(cameras, float)
-    x = np.asarray(points2d, float)
-    if C.ndim != 4 or C.shape[2:] != (3, 4) or x.shape != C.shape[:2] + (2,) or C.shape[1] < 2:
-        raise ValueError(f"verify_points: cameras must be (M, N, 3, 4) and points2d (M, N, 2) with N >= 2, "
-                         f"got {C.shape} and {x.shape}")
+    C, x, ok = _stack(cameras, points2d, "verify_points")
     M, N = x.shape[:2]
-    ok = _valid_cameras(C) & np.all(np.isfinite(x), axis=(1, 2))
-    C = np.where(ok[:, None, None, None], C, np.eye(3, 4))
-    x = np.where(ok[:, None, None], x, 0.0)
     s, origin, depth, Cn, ok_n, Xn0 = _normalise(C, x)
     ok &= ok_n
     xhat = np.zeros((M, N, 2))          # the observed points, normalised: s (x^_i - t_i) = 0

@@ -42,7 +42,7 @@ from sospoly import DEFAULT_TOLERANCES, GramForm, Multiplier, Polynomial, Tolera
 from sospoly.ipm import _smat_batch, ipm_solve_batch
 from sospoly.blas import with_single_threaded_blas
 
-from .fastpath import _epipolar_data, _normalise, _project_stack, _refine_stack, _valid_cameras
+from .fastpath import _epipolar_data, _normalise, _project_stack, _refine_stack, _stack
 from .geometry import POINT_AT_INFINITY_RTOL
 from .result import Status, TriangulationResult
 
@@ -175,19 +175,12 @@ def solve_corollary1_points(cameras, points2d, *, tolerances: Tolerances = DEFAU
     cameras : array (M, N, 3, 4)  (pixels)
     points2d : array (M, N, 2)    the point regions' centres
     """
-    C = np.asarray(cameras, float)
-    x = np.asarray(points2d, float)
-    if C.ndim != 4 or C.shape[2:] != (3, 4) or x.shape != C.shape[:2] + (2,) or C.shape[1] < 2:
-        raise ValueError(f"solve_corollary1_points: cameras must be (M, N, 3, 4) and points2d (M, N, 2) "
-                         f"with N >= 2, got {C.shape} and {x.shape}")
+    C, x, ok = _stack(cameras, points2d, "solve_corollary1_points")
     M, N = x.shape[:2]
     reason = [""] * M
     tol = tolerances
-    ok = _valid_cameras(C) & np.all(np.isfinite(x), axis=(1, 2))
     for m in np.nonzero(~ok)[0]:
         reason[m] = "invalid or degenerate data"
-    C = np.where(ok[:, None, None, None], C, np.eye(3, 4))
-    x = np.where(ok[:, None, None], x, 0.0)
     s, origin, depth, Cn, ok_n, _ = _normalise(C, x)
     g0, g1, G2, ok_f = _epipolar_data(Cn)
     for m in np.nonzero(ok & ~(ok_n & ok_f))[0]:

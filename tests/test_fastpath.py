@@ -164,15 +164,8 @@ def test_oxford_subset_fast_path_agrees_with_sdp():
             assert a.optimal
 
 
-def test_oxford_corridor_point_falls_back():
-    from tritools.io import DataNotFoundError, load_sequence
-
-    try:
-        seq = load_sequence("corridor")
-    except DataNotFoundError:
-        pytest.skip("Oxford data not found (../shared/data/oxford or $TRITOOLS_DATA)")
-    tr = seq.tracks[[t.track_id for t in seq.tracks].index(513)]
-    cams, pts = seq.problem(tr)
+def test_oxford_corridor_point_falls_back(corridor_point):
+    cams, pts = corridor_point
     assert fast_results(cams[None], pts[None])[0] is None
     res = tritools.triangulate_many([(cams, [Point(p) for p in pts])], "corollary1", 2, 2, progress=False)[0]
     assert res.status == Status.NOT_CERTIFIED and res.certified_by is None

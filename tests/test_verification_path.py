@@ -59,14 +59,7 @@ def test_fast_path_only_for_point_regions_at_delta_2():
         tritools.triangulate(cams, regions, "corollary1", path="fast")
 
 
-def test_corridor_point_not_certified_by_verification():
-    from tritools.io import DataNotFoundError, load_sequence
-
-    try:
-        seq = load_sequence("corridor")
-    except DataNotFoundError:
-        pytest.skip("Oxford data not found (../shared/data/oxford or $TRITOOLS_DATA)")
-    tr = seq.tracks[[t.track_id for t in seq.tracks].index(513)]
-    cams, pts = seq.problem(tr)
+def test_corridor_point_not_certified_by_verification(corridor_point):
+    cams, pts = corridor_point
     res = tritools.triangulate(cams, [Point(p) for p in pts], "corollary1", 2, 2, path="auto")
     assert res.status == Status.NOT_CERTIFIED and res.certified_by is None

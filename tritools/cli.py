@@ -36,8 +36,8 @@ from .problem_file import (ProblemFileError, ProblemSpec, jsonable, load_problem
 from .result import Status, TriangulationResult
 from .triangulate import SolvePath
 
-__all__ = ["main", "build_parser", "CLIError", "SUBCOMMAND_MODULES", "solve_problems", "format_table",
-           "EXIT_OK", "EXIT_INTERNAL", "EXIT_INVALID"]
+__all__ = ["main", "build_parser", "CLIError", "exit_invalid", "SUBCOMMAND_MODULES", "solve_problems",
+           "format_table", "EXIT_OK", "EXIT_INTERNAL", "EXIT_INVALID"]
 
 #: modules adding subcommands through ``register(subparsers)``; skipped while they do not exist.
 SUBCOMMAND_MODULES = ("tritools.colmap_cli", "tritools.plot_cli")
@@ -54,6 +54,15 @@ PATHS = tuple(p.value for p in SolvePath)
 
 class CLIError(Exception):
     """Invalid usage or input: printed as one line, exit code 2."""
+
+
+def exit_invalid(message) -> int:
+    """Print the one-line ``tritools: error: MESSAGE`` on stderr; returns :data:`EXIT_INVALID`.
+
+    Subcommand handlers return it for bad input, missing data or a missing extra.
+    """
+    print(f"tritools: error: {message}", file=sys.stderr)
+    return EXIT_INVALID
 
 
 class _Parser(argparse.ArgumentParser):
@@ -392,8 +401,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             warnings.simplefilter("ignore", RuntimeWarning)
             return int(args.func(args) or EXIT_OK)
     except (CLIError, ProblemFileError) as exc:
-        print(f"tritools: error: {exc}", file=sys.stderr)
-        return EXIT_INVALID
+        return exit_invalid(exc)
     except SystemExit as exc:            # --help
         return exc.code if isinstance(exc.code, int) else EXIT_OK if exc.code is None else EXIT_INVALID
     except KeyboardInterrupt:

@@ -14,8 +14,9 @@ from __future__ import annotations
 
 import json
 import shutil
-import sys
 from pathlib import Path
+
+from .cli import exit_invalid
 
 __all__ = ["register", "run_colmap", "run_from_oxford"]
 
@@ -46,25 +47,20 @@ def register(subparsers) -> None:
     o.set_defaults(func=run_from_oxford)
 
 
-def _fail(msg: str) -> int:
-    print(f"tritools: error: {msg}", file=sys.stderr)
-    return 2
-
-
 def run_colmap(args) -> int:
     from .colmap import read_text_model, retriangulate, write_certificates, write_text_model
 
     try:
         model = read_text_model(args.in_dir)
     except (OSError, ValueError) as exc:
-        return _fail(str(exc))
+        return exit_invalid(str(exc))
     if Path(args.out_dir).resolve() == Path(args.in_dir).resolve():
-        return _fail("OUT_DIR must differ from IN_DIR (the input model is never overwritten)")
+        return exit_invalid("OUT_DIR must differ from IN_DIR (the input model is never overwritten)")
     try:
         new_model, report = retriangulate(model, args.method, args.path, args.min_track_length, args.delta,
                                           args.max_delta, progress=args.progress)
     except ValueError as exc:
-        return _fail(str(exc))
+        return exit_invalid(str(exc))
     out = write_text_model(new_model, args.out_dir)
     sidecar = write_certificates(report, out)
     for extra in ("rigs.txt", "frames.txt"):
@@ -92,11 +88,11 @@ def run_from_oxford(args) -> int:
     from .io import DataNotFoundError
 
     if args.max_tracks is not None and args.max_tracks < 1:
-        return _fail(f"--max-tracks must be >= 1, got {args.max_tracks}")
+        return exit_invalid(f"--max-tracks must be >= 1, got {args.max_tracks}")
     try:
         model = model_from_oxford(args.name, args.data_dir, args.max_tracks)
     except (DataNotFoundError, ValueError) as exc:
-        return _fail(str(exc))
+        return exit_invalid(str(exc))
     out = write_text_model(model, args.out_dir)
     print(f"{args.name}: {len(model.images)} images, {len(model.points3D)} points written to {out}")
     return 0

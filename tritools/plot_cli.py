@@ -13,13 +13,13 @@ parser; each sets ``func`` to a handler ``func(args) -> exit code`` (0 success,
 """
 from __future__ import annotations
 
-import argparse
 import os
 import sys
 from pathlib import Path
 
 import numpy as np
 
+from .cli import exit_invalid
 from .constraints import Method
 
 __all__ = ["register", "run_figure3", "run_plot_dataset"]
@@ -30,11 +30,6 @@ METHODS = tuple(m.value for m in Method)
 DEFAULT_LIMIT = 200
 
 
-def _fail(msg: str) -> int:
-    print(f"tritools: error: {msg}", file=sys.stderr)
-    return 2
-
-
 def run_figure3(args) -> int:
     """Handler of ``tritools figure3``."""
     os.environ.setdefault("RUST_BACKTRACE", "0")
@@ -43,7 +38,7 @@ def run_figure3(args) -> int:
 
         paths = save_figure3_examples(args.out, args.examples, method=args.method, delta=args.delta)
     except (ImportError, ValueError, OSError) as exc:
-        return _fail(str(exc))
+        return exit_invalid(str(exc))
     for p in paths:
         print(p)
     return 0
@@ -64,14 +59,14 @@ def run_plot_dataset(args) -> int:
     from .regions import Point
 
     if args.limit < 0:
-        return _fail(f"--limit must be >= 0, got {args.limit}")
+        return exit_invalid(f"--limit must be >= 0, got {args.limit}")
     try:
         from .plot import _matplotlib
 
         _matplotlib()
         seq = load_sequence(args.name, args.data_dir)
     except (ImportError, DataNotFoundError, ValueError) as exc:
-        return _fail(str(exc))
+        return exit_invalid(str(exc))
     tracks = _select_tracks(seq.tracks, args.limit, args.seed)
     problems = []
     for t in tracks:
@@ -88,7 +83,7 @@ def run_plot_dataset(args) -> int:
         out.parent.mkdir(parents=True, exist_ok=True)
         fig.savefig(out, dpi=120)
     except OSError as exc:
-        return _fail(f"cannot write {out}: {exc}")
+        return exit_invalid(f"cannot write {out}: {exc}")
     n_cert = sum(bool(r.optimal) for r in results)
     print(f"{out}  ({n_cert}/{len(results)} certified)")
     return 0
@@ -125,12 +120,7 @@ def register(subparsers) -> None:
     pd.set_defaults(func=run_plot_dataset)
 
 
-def main(argv=None) -> int:  # pragma: no cover - thin wrapper for running this module alone
-    ap = argparse.ArgumentParser(prog="tritools")
-    register(ap.add_subparsers(dest="command", required=True))
-    args = ap.parse_args(argv)
-    return args.func(args)
+if __name__ == "__main__":  # pragma: no cover - the whole command line, these subcommands included
+    from .cli import main
 
-
-if __name__ == "__main__":  # pragma: no cover
     sys.exit(main())

@@ -270,6 +270,27 @@ def _solve_newton(M, AE_dense, p):
     return solve
 
 
+def _stopping_rule(tol: Tolerances, pobj, dobj, rdx, pres, dres, pscale, dscale, xzinf):
+    """(converged, diverged) by the module docstring's stopping rule, on scalars or on (B,) arrays.
+
+    ``rdx`` = r_D^T x, ``pscale`` = ||b|| + ||x|| + ||s||, ``dscale`` = ||q|| + ||z||,
+    ``xzinf`` = max(||x||, ||z||) (infinity norms).  pobj - dobj = <S, Z> + z^T r_P + r_D^T x
+    exactly.  With large multipliers x (nearly dependent constraints) the last term stalls above
+    the gap tolerance although the iterate is optimal to working precision; accepted also when
+    the complementarity part meets the gap tolerance and |r_D^T x| stays below
+    ipm_dual_residual_gap relative (Tolerances documents the bound)."""
+    gap = np.abs(pobj - dobj)
+    feas_ok = (pres <= tol.solver_feas * np.maximum(1.0, pscale)) & (dres <= tol.solver_feas * np.maximum(1.0, dscale))
+    ok = ((gap <= tol.solver_gap_abs) | (gap <= tol.solver_gap_rel * np.minimum(np.abs(pobj), np.abs(dobj)))) \
+        & feas_ok
+    comp = np.abs(pobj - dobj - rdx)
+    scale_obj = np.maximum(1.0, np.abs(pobj))
+    ok = ok | (feas_ok & ((comp <= tol.solver_gap_abs) | (comp <= tol.solver_gap_rel * scale_obj))
+               & (np.abs(rdx) <= tol.ipm_dual_residual_gap * scale_obj))
+    diverged = ~np.isfinite(pobj) | ~np.isfinite(dobj) | (xzinf > tol.ipm_divergence)
+    return ok, diverged
+
+
 def _ipm(schur, q, b, lay: _Layout, tol: Tolerances, AE_dense):
     B, m = q.shape
     p = lay.p
@@ -313,20 +334,8 @@ def _ipm(schur, q, b, lay: _Layout, tol: Tolerances, AE_dense):
         pres = np.max([np.abs(r).max(axis=1) for r in rP] + ([np.abs(rE).max(axis=1)] if p else []), axis=0)
         dres = np.abs(rD).max(axis=1) if m else np.zeros(active.size)
         gap = np.abs(pobj - dobj)
-        feas_ok = (pres <= tol.solver_feas * np.maximum(1.0, nb_inf[active] + xinf + sinf)) \
-            & (dres <= tol.solver_feas * np.maximum(1.0, nq_inf[active] + zinf))
-        ok = ((gap <= tol.solver_gap_abs) | (gap <= tol.solver_gap_rel * np.minimum(np.abs(pobj), np.abs(dobj)))) \
-            & feas_ok
-        # pobj - dobj = <S, Z> + z^T rP + rD^T x exactly.  With large multipliers x (nearly dependent
-        # constraints) the last term stalls above the gap tolerance although the iterate is optimal
-        # to working precision; accept when the complementarity part meets the gap tolerance and
-        # rD^T x stays below ipm_dual_residual_gap relative (Tolerances documents the bound).
-        rdx = np.abs(np.einsum("bm,bm->b", rD, xa))
-        comp = np.abs(pobj - dobj - np.einsum("bm,bm->b", rD, xa))
-        scale_obj = np.maximum(1.0, np.abs(pobj))
-        ok |= feas_ok & ((comp <= tol.solver_gap_abs) | (comp <= tol.solver_gap_rel * scale_obj)) \
-            & (rdx <= tol.ipm_dual_residual_gap * scale_obj)
-        diverged = ~np.isfinite(pobj) | ~np.isfinite(dobj) | (np.maximum(xinf, zinf) > tol.ipm_divergence)
+        ok, diverged = _stopping_rule(tol, pobj, dobj, np.einsum("bm,bm->b", rD, xa), pres, dres,
+                                      nb_inf[active] + xinf + sinf, nq_inf[active] + zinf, np.maximum(xinf, zinf))
         # stalled: the merit has not halved over the last 4 iterations (the iterates sit on a
         # face from which the Newton direction makes no progress): hand over to the fallback
         merit = gap + pres + dres
@@ -450,19 +459,22 @@ def ipm_solve_sparse(A: sp.spmatrix, b: np.ndarray, q: np.ndarray, cones,
     coefficient-matching rows with disjoint supports); anything else with the
     svec-Kronecker Schur complement of :class:`_SparseSchur`."""
     lay = layout_of(cones)
-    A = sp.csr_matrix(A)
+    A = A if sp.issparse(A) else sp.csr_matrix(A)
     if A.shape[0] != lay.n_rows:
         raise ValueError(f"the cones cover {lay.n_rows} rows but A has {A.shape[0]}")
     b = np.asarray(b, float).reshape(1, -1)
     q = np.asarray(q, float).reshape(1, -1)
     if lay.p == 0 and len(lay.sizes) == 1:
-        red = _reduction_for(A, q[0], lay.sizes[0])
+        Ac = sp.csc_matrix(A)     # the reduction reads columns: one conversion (none for a ConicProblem's A)
+        Ac.sort_indices()
+        red = _reduction_for(Ac, q[0], lay.sizes[0])
         if red is not None:
-            res = red.solve(A, b[0], q[0], tolerances)
+            res = red.solve(Ac, b[0], q[0], tolerances)
             if res is not None and res.converged[0]:
                 return res
             # not converged (e.g. stalled on some Example 5 cases): the unreduced method next,
             # the caller's fallback (Clarabel) after that
+    A = sp.csr_matrix(A)
     AE_dense = A[:lay.p].toarray()[None] if lay.p else None
     return _ipm(_SparseSchur(A, lay), q, b, lay, tolerances, AE_dense)
 
@@ -721,18 +733,12 @@ class _MomentReduction:
             pres = max(float(np.abs(rP).max()), float(np.abs(rE).max()) if p else 0.0)
             dres = float(np.abs(rD).max())
             gap = abs(pobj - dobj)
-            feas_ok = pres <= tol.solver_feas * max(1.0, nb_inf + xinf + sinf) and \
-                dres <= tol.solver_feas * max(1.0, nq_inf + zinf)
-            ok = feas_ok and (gap <= tol.solver_gap_abs or gap <= tol.solver_gap_rel * min(abs(pobj), abs(dobj)))
-            rdx = abs(float(rD @ y))
-            comp = abs(pobj - dobj - float(rD @ y))
-            scale_obj = max(1.0, abs(pobj))
-            ok = ok or (feas_ok and (comp <= tol.solver_gap_abs or comp <= tol.solver_gap_rel * scale_obj)
-                        and rdx <= tol.ipm_dual_residual_gap * scale_obj)
+            ok, diverged = _stopping_rule(tol, pobj, dobj, float(rD @ y), pres, dres, nb_inf + xinf + sinf,
+                                          nq_inf + zinf, max(xinf, zinf))
             if ok:
                 reason, conv = "", True
                 break
-            if not (np.isfinite(pobj) and np.isfinite(dobj)) or max(xinf, zinf) > tol.ipm_divergence:
+            if diverged:
                 reason = "diverged (infeasible or unbounded?)"
                 break
             merit = gap + pres + dres

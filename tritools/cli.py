@@ -36,8 +36,8 @@ from .problem_file import (ProblemFileError, ProblemSpec, jsonable, load_problem
 from .result import Status, TriangulationResult
 from .triangulate import SolvePath
 
-__all__ = ["main", "build_parser", "CLIError", "exit_invalid", "SUBCOMMAND_MODULES", "solve_problems",
-           "format_table", "EXIT_OK", "EXIT_INTERNAL", "EXIT_INVALID"]
+__all__ = ["main", "build_parser", "CLIError", "exit_invalid", "add_solver_options", "add_data_dir_option",
+           "SUBCOMMAND_MODULES", "solve_problems", "format_table", "EXIT_OK", "EXIT_INTERNAL", "EXIT_INVALID"]
 
 #: modules adding subcommands through ``register(subparsers)``; skipped while they do not exist.
 SUBCOMMAND_MODULES = ("tritools.colmap_cli", "tritools.plot_cli")
@@ -326,16 +326,27 @@ def _write_dataset_csv(path, name, tracks, results) -> None:
 
 
 # ----------------------------------------------------------------------------- parser
-def _add_solver_options(p, default_method: str) -> None:
+def add_solver_options(p, default_method: str, default_path: str | None = None) -> None:
+    """``--method --delta --max-delta --path --progress`` of the subcommands that solve.
+
+    ``default_path=None`` leaves the choice to :func:`tritools.batch.triangulate_many`.
+    """
     p.add_argument("--method", choices=METHODS, default=default_method,
                    help=f"Theorem 1 (4x4 minors) or Corollary 1 (epipolar); default {default_method}")
     p.add_argument("--delta", type=int, default=None, help="first relaxation degree (even; default delta_min)")
     p.add_argument("--max-delta", type=int, default=None, dest="max_delta",
                    help="last degree tried (default: delta if given, else delta_min + 2)")
-    p.add_argument("--path", choices=PATHS, default=None,
+    p.add_argument("--path", choices=PATHS, default=default_path,
                    help="'sdp' always solves the SDP; 'auto' first tries certification by verification "
-                        "(delta 2, point regions); default: that of tritools.batch.triangulate_many")
+                        "(delta 2, point regions); default: "
+                        + (default_path or "that of tritools.batch.triangulate_many"))
     p.add_argument("--progress", action="store_true", help="progress bar on stderr (needs the 'progress' extra)")
+
+
+def add_data_dir_option(p) -> None:
+    """``--data-dir`` of the subcommands reading an Oxford sequence (:func:`tritools.io.load_sequence`)."""
+    p.add_argument("--data-dir", default=None, dest="data_dir",
+                   help="Oxford data directory (default: $TRITOOLS_DATA, else ../shared/data/oxford)")
 
 
 def register_builtin(sub) -> None:
@@ -344,7 +355,7 @@ def register_builtin(sub) -> None:
                        description="Triangulate every problem of FILE (one problem, a list, or "
                                    "{\"problems\": [...]}; schema in docs/cli.md).")
     p.add_argument("file", metavar="FILE", help="problem file, or - for stdin")
-    _add_solver_options(p, Method.THEOREM1.value)
+    add_solver_options(p, Method.THEOREM1.value)
     p.add_argument("--json", action="store_true", help="one JSON object per problem, all result fields")
     p.add_argument("--output", "-o", default=None, metavar="OUT", help="write the output to OUT instead of stdout")
     p.set_defaults(func=_cmd_solve)
@@ -361,10 +372,9 @@ def register_builtin(sub) -> None:
     p = sub.add_parser("dataset", help="triangulate the tracks of an Oxford sequence (Example 1)",
                        description="Per-N summary of an Oxford sequence (the paper's Tables 1-6).")
     p.add_argument("name", metavar="NAME", help="sequence (corridor, dinosaur, house, library, merton1-3, wadham)")
-    p.add_argument("--data-dir", default=None, dest="data_dir",
-                   help="Oxford data directory (default: $TRITOOLS_DATA, else ../shared/data/oxford)")
+    add_data_dir_option(p)
     p.add_argument("--limit", type=int, default=None, metavar="K", help="only the first K tracks")
-    _add_solver_options(p, Method.COROLLARY1.value)
+    add_solver_options(p, Method.COROLLARY1.value)
     p.add_argument("--json", action="store_true", help="summary as JSON")
     p.add_argument("--csv", default=None, metavar="OUT", help="write per-track results to OUT")
     p.set_defaults(func=_cmd_dataset)

@@ -16,7 +16,7 @@ import json
 import shutil
 from pathlib import Path
 
-from .cli import exit_invalid
+from .cli import add_data_dir_option, add_solver_options, exit_invalid
 
 __all__ = ["register", "run_colmap", "run_from_oxford"]
 
@@ -30,19 +30,15 @@ def register(subparsers) -> None:
                                           "point with a certificate of global optimality, write OUT_DIR.")
     p.add_argument("in_dir", metavar="IN_DIR")
     p.add_argument("out_dir", metavar="OUT_DIR")
-    p.add_argument("--method", choices=[m.value for m in Method], default=Method.COROLLARY1.value)
-    p.add_argument("--path", choices=[s.value for s in SolvePath], default=SolvePath.AUTO.value)
+    add_solver_options(p, Method.COROLLARY1.value, SolvePath.AUTO.value)
     p.add_argument("--min-track-length", type=int, default=2, metavar="K")
-    p.add_argument("--delta", type=int, default=None)
-    p.add_argument("--max-delta", type=int, default=None)
     p.add_argument("--json", action="store_true", help="machine-readable output")
-    p.add_argument("--progress", action="store_true", help="progress bar (needs the 'progress' extra)")
     p.set_defaults(func=run_colmap)
 
     o = subparsers.add_parser("colmap-from-oxford", help="convert an Oxford VGG sequence to a COLMAP text model")
     o.add_argument("name", metavar="NAME", help="sequence (library, merton1, merton2, merton3, wadham)")
     o.add_argument("out_dir", metavar="OUT_DIR")
-    o.add_argument("--data-dir", default=None, help="Oxford data folder (default: $TRITOOLS_DATA, ../shared/...)")
+    add_data_dir_option(o)
     o.add_argument("--max-tracks", type=int, default=None, metavar="M", help="keep the first M tracks")
     o.set_defaults(func=run_from_oxford)
 

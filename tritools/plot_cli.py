@@ -19,12 +19,11 @@ from pathlib import Path
 
 import numpy as np
 
-from .cli import exit_invalid
+from .cli import METHODS, add_data_dir_option, add_solver_options, exit_invalid
 from .constraints import Method
+from .triangulate import SolvePath
 
 __all__ = ["register", "run_figure3", "run_plot_dataset"]
-
-METHODS = tuple(m.value for m in Method)
 
 #: Default number of tracks of ``plot-dataset`` (a seeded random subset; 0 = all tracks).
 DEFAULT_LIMIT = 200
@@ -72,7 +71,8 @@ def run_plot_dataset(args) -> int:
     for t in tracks:
         cams, pts = seq.problem(t)
         problems.append((cams, [Point(x) for x in pts]))
-    results = triangulate_many(problems, args.method, args.delta, path=args.path, progress=args.progress)
+    results = triangulate_many(problems, args.method, args.delta, args.max_delta, path=args.path,
+                               progress=args.progress)
     from .plot import dataset_summary
 
     fig = dataset_summary(results, [t.n_views for t in tracks],
@@ -105,17 +105,11 @@ def register(subparsers) -> None:
                                description="Triangulate tracks of an Oxford sequence and plot a summary "
                                            "(needs the extra 'plot').")
     pd.add_argument("name", help="sequence name, e.g. library, house, dinosaur")
-    pd.add_argument("--data-dir", default=None, help="Oxford data directory (default: $TRITOOLS_DATA or "
-                                                     "../shared/data/oxford)")
+    add_data_dir_option(pd)
     pd.add_argument("--limit", type=int, default=DEFAULT_LIMIT,
                     help=f"number of tracks, a seeded random subset (default {DEFAULT_LIMIT}; 0 = all)")
     pd.add_argument("--seed", type=int, default=0, help="seed of the track subset (default 0)")
-    pd.add_argument("--method", choices=METHODS, default=Method.COROLLARY1.value,
-                    help="certified method (default: corollary1)")
-    pd.add_argument("--delta", type=int, default=None, help="first relaxation degree (default: delta_min)")
-    pd.add_argument("--path", choices=("auto", "sdp"), default="auto",
-                    help="'auto' certifies by verification when it can, else solves the SDP (default auto)")
-    pd.add_argument("--progress", action="store_true", help="progress bar (extra 'progress')")
+    add_solver_options(pd, Method.COROLLARY1.value, SolvePath.AUTO.value)
     pd.add_argument("--out", default=None, help="output PNG (default: NAME_summary.png)")
     pd.set_defaults(func=run_plot_dataset)
 

@@ -17,6 +17,7 @@ import shutil
 from pathlib import Path
 
 from .cli import add_data_dir_option, add_solver_options, exit_invalid
+from .problem_file import jsonable
 
 __all__ = ["register", "run_colmap", "run_from_oxford"]
 
@@ -70,7 +71,7 @@ def run_colmap(args) -> int:
                               "gamma_lb": r.gamma_lb, "gamma_ub": r.gamma_ub, "certified": r.certified,
                               "certified_by": r.certified_by, "delta": r.delta, "gamma_input": r.gamma_input,
                               "updated": r.updated, "message": r.message} for r in report.records]
-        print(json.dumps(summary, indent=1))
+        print(json.dumps(jsonable(summary), indent=1, allow_nan=False))   # NaN/inf -> null, as tritools solve
         return 0
     print(f"{report.n_points} points, {report.n_certified} certified globally optimal, {report.n_updated} updated "
           f"({report.method}, path {report.path})")

@@ -295,7 +295,6 @@ def _ipm(schur, q, b, lay: _Layout, tol: Tolerances, AE_dense):
     B, m = q.shape
     p = lay.p
     nb = len(lay.sizes)
-    bE = b[:, :p]
     bk = [b[:, lay.block(k)] for k in range(nb)]
     scale_s = np.maximum(1.0, np.abs(b).max(axis=1))
     scale_z = np.maximum(1.0, np.abs(q).max(axis=1))
@@ -503,18 +502,6 @@ def _reduction_for(A: sp.spmatrix, q: np.ndarray, n: int):
     return plan
 
 
-def _svec1(X: np.ndarray, i, j, scale) -> np.ndarray:
-    return 0.5 * (X[i, j] + X[j, i]) * scale
-
-
-def _smat1(v: np.ndarray, n: int, i, j, scale) -> np.ndarray:
-    X = np.empty((n, n))
-    vals = v / scale
-    X[i, j] = vals
-    X[j, i] = vals
-    return X
-
-
 _syevr = sla.lapack.dsyevr
 _trtri = sla.lapack.dtrtri
 
@@ -613,7 +600,7 @@ class _MomentReduction:
         er = np.concatenate([np.arange(L), off])
         ei = np.concatenate([ii, jj[off]])
         ej = np.concatenate([jj, ii[off]])
-        ef = np.where(ei == ej, 1.0, 1.0 / np.sqrt(2.0))
+        ef = 1.0 / svec_scale(n)[er]
         ecol = row2col[er]
         order = np.argsort(ecol, kind="stable")
         er, ei, ej, ef, ecol = er[order], ei[order], ej[order], ef[order], ecol[order]
@@ -685,9 +672,7 @@ class _MomentReduction:
         ws = self.workspace(self.Fpad * e[self.Rpad])
         out = self._ipm(cq, AE, bE, e, ws, tol)
         y, zE, Smom, Zgram, conv, its, why = out
-        i, j = triu_pairs(self.n)
-        sc = svec_scale(self.n)
-        s = _svec1(Zgram, i, j, sc)
+        s = _svec_batch(Zgram)
         x = np.zeros(self.m)
         x[self.w_cols] = -zE
         x[self.alpha_cols] = (b[self.prow] - s[self.prow]) / ap
@@ -702,8 +687,6 @@ class _MomentReduction:
         the same stopping rules as :func:`_ipm`.  Returns (y, zE, S, Z, converged, iterations, reason)."""
         n, m2, p = self.n, self.m2, AE.shape[0]
         row2col = self.row2col
-        i, j = triu_pairs(n)
-        sc = svec_scale(n)
         eye = np.eye(n)
 
         def Et(y):
@@ -721,7 +704,7 @@ class _MomentReduction:
         step_frac = tol.ipm_step_fraction
         reason, conv, it = "iteration limit", False, 0
         for it in range(tol.ipm_max_iter + 1):
-            s, z = _svec1(S, i, j, sc), _svec1(Z, i, j, sc)
+            s, z = _svec_batch(S), _svec_batch(Z)
             rP = Et(y) - s
             rE = bE - AE @ y
             rD = cq + AE.T @ zE - Ev(z)
@@ -799,15 +782,15 @@ class _MomentReduction:
                 ddy, ddz = base(e1, e2)
                 return dy + ddy, dz + ddz
 
-            rPm = _smat1(rP, n, i, j, sc)
+            rPm = _smat_batch(rP, n)
             ZrR = Z @ rPm @ R
 
             def direction(Kmat):
                 KR = Kmat @ R if Kmat is not None else 0.0
                 H = KR - Z - ZrR
-                rhs = -rD + Ev(_svec1(H, i, j, sc))
+                rhs = -rD + Ev(_svec_batch(H))
                 dy, dz = newton(rhs, rE)
-                dS = rPm + _smat1(Et(dy), n, i, j, sc)
+                dS = rPm + _smat_batch(Et(dy), n)
                 dZ = KR - Z - Z @ dS @ R
                 dZ = 0.5 * (dZ + dZ.T)
                 # The linear equations of Z (coefficient matching, E svec(dZ) = rD + AE^T dz) hold
@@ -815,8 +798,8 @@ class _MomentReduction:
                 # tends to rank one; restore them exactly on the shared entries (E is the identity
                 # there), so the dual residual decreases by (1 - step) as in exact arithmetic.
                 corr = np.zeros(self.L)
-                corr[self.srow] = rD + AE.T @ dz - Ev(_svec1(dZ, i, j, sc))
-                return dy, dz, dS, dZ + _smat1(corr, n, i, j, sc)
+                corr[self.srow] = rD + AE.T @ dz - Ev(_svec_batch(dZ))
+                return dy, dz, dS, dZ + _smat_batch(corr, n)
 
             dy, dz, dS, dZ = direction(None)
             ap1 = min(1.0, _max_step1(Li, dS))

@@ -29,7 +29,7 @@ import abc
 import json
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from typing import Any, ClassVar, Sequence
 
 import numpy as np
@@ -203,10 +203,8 @@ class Region(abc.ABC):
     def _fields(self) -> dict[str, Any]:
         """Data fields for :meth:`to_dict`: by default the dataclass fields given to
         ``__init__``, arrays as lists (override when the constructor differs)."""
-        import dataclasses
-
-        return {f.name: (lambda v: v.tolist() if isinstance(v, np.ndarray) else v)(getattr(self, f.name))
-                for f in dataclasses.fields(self) if f.init}
+        values = {f.name: getattr(self, f.name) for f in fields(self) if f.init}
+        return {k: v.tolist() if isinstance(v, np.ndarray) else v for k, v in values.items()}
 
     # -- generic methods -----------------------------------------------------
     def distance(self, points) -> float | np.ndarray:
@@ -251,9 +249,7 @@ class Region(abc.ABC):
 
     @classmethod
     def _required(cls) -> tuple[str, ...]:
-        import dataclasses
-
-        return tuple(f.name for f in dataclasses.fields(cls) if f.init)
+        return tuple(f.name for f in fields(cls) if f.init)
 
     @classmethod
     def _from_fields(cls, d: Mapping) -> "Region":
@@ -305,9 +301,6 @@ class Point(Region):
     def similarity(self, scale, shift) -> "Point":
         s, t = _similarity_args(scale, shift)
         return Point(s * (self.x - t))
-
-    def _fields(self):
-        return {"x": self.x.tolist()}
 
 
 # ----------------------------------------------------------------------------- II: segment
@@ -536,9 +529,6 @@ class Polytope(Region):
             raise ValueError(f"half_widths must be positive, got {w.tolist()}")
         B = np.diag(1.0 / w)
         return cls(B, -B @ c0)
-
-    def _fields(self):
-        return {"B": self.B.tolist(), "c": self.c.tolist()}
 
 
 # ----------------------------------------------------------------------------- IV/V: ellipses

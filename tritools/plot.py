@@ -109,31 +109,33 @@ def _(region: Segment, ax, color, gid, label=None):
     return line
 
 
-@draw_region.register
-def _(region: Polytope, ax, color, gid, label=None):
+def _filled_polygon(vertices, ax, color, gid, label):
+    """A closed polygon with a translucent fill of ``color`` (filled regions)."""
     from matplotlib.patches import Polygon
 
-    patch = Polygon(np.asarray(region.vertices), closed=True, edgecolor=color, linewidth=1.8, gid=gid,
-                    label=label, zorder=1)
+    patch = Polygon(np.asarray(vertices), closed=True, edgecolor=color, linewidth=1.8, gid=gid, label=label,
+                    zorder=1)
     patch.set_facecolor(_translucent(color))
     ax.add_patch(patch)
     return patch
 
 
 @draw_region.register
-def _(region: EllipseBorder, ax, color, gid, label=None):
-    if isinstance(region, Ellipse):
-        from matplotlib.patches import Polygon
+def _(region: Polytope, ax, color, gid, label=None):
+    return _filled_polygon(region.vertices, ax, color, gid, label)
 
-        patch = Polygon(_ellipse_outline(region)[:-1], closed=True, edgecolor=color, linewidth=1.8,
-                        gid=gid, label=label, zorder=1)
-        patch.set_facecolor(_translucent(color))
-        ax.add_patch(patch)
-        return patch
+
+@draw_region.register
+def _(region: EllipseBorder, ax, color, gid, label=None):
     P = _ellipse_outline(region)
     (line,) = ax.plot(P[:, 0], P[:, 1], linestyle="-", linewidth=1.8, color=color, gid=gid, label=label,
                       zorder=2)
     return line
+
+
+@draw_region.register
+def _(region: Ellipse, ax, color, gid, label=None):
+    return _filled_polygon(_ellipse_outline(region)[:-1], ax, color, gid, label)
 
 
 def _translucent(color, alpha: float = 0.18):

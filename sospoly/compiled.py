@@ -34,7 +34,6 @@ outside the cached supports is recompiled on the union of the supports.
 """
 from __future__ import annotations
 
-import numbers
 import time
 from collections import OrderedDict
 from dataclasses import dataclass
@@ -50,7 +49,7 @@ from .linpoly import LinPoly
 from .minimize import LowerBound, lower_bound_of
 from .polynomial import Polynomial
 from .program import SOSProgram
-from .psatz import Multiplier, _check_poly, common_gens, default_q, delta_min
+from .psatz import Multiplier, _as_multiplier, _checked_inputs, _fixed_q, common_gens, delta_min
 from .solve import ProgramSolution, solve_program
 from .status import SolveStatus
 from .tolerances import DEFAULT_TOLERANCES, Tolerances
@@ -95,36 +94,12 @@ class CompiledPsatz:
 
     def __init__(self, f, eq=(), ineq=(), degree: int | None = None, multiplier=Multiplier.FIXED,
                  form: GramForm = GramForm.IMAGE, gens=None):
-        f = _check_poly(f, "f")
-        eq = tuple(_check_poly(g, "each equality g_k") for g in eq)
-        ineq = tuple(_check_poly(h, "each inequality h_k") for h in ineq)
-        gens = tuple(gens) if gens is not None else common_gens(f, *eq, *ineq)
-        if not gens:
-            raise ValueError("the problem has no variables")
-        f, eq, ineq = f.with_gens(gens), tuple(g.with_gens(gens) for g in eq), tuple(h.with_gens(gens) for h in ineq)
-        dmin = delta_min(f, eq, ineq)
-        degree = max(dmin, 2) if degree is None else degree
-        if not isinstance(degree, numbers.Integral) or isinstance(degree, bool) or degree % 2 or degree < dmin:
-            raise ValueError(f"degree must be an even integer >= delta_min = {dmin}, got {degree!r}")
-        degree = int(degree)
-        if isinstance(multiplier, str) and not isinstance(multiplier, Multiplier):
-            try:
-                multiplier = Multiplier(multiplier)
-            except ValueError:
-                raise ValueError(f"multiplier must be 'fixed', a Polynomial or a number; got {multiplier!r}") from None
+        f, eq, ineq, gens, degree = _checked_inputs(f, eq, ineq, degree, gens)
+        multiplier = _as_multiplier(multiplier)
         if multiplier == Multiplier.FREE:
             raise ValueError("CompiledPsatz compiles fixed multipliers; the free-q GEVP is compiled by "
                              "sospoly.gevp.CompiledGevp")
-        if multiplier == Multiplier.FIXED:
-            q = default_q(gens, degree, f.degree)
-        elif isinstance(multiplier, Polynomial):
-            q = multiplier.with_gens(gens)
-        else:
-            q = Polynomial.constant(float(multiplier), gens)
-        if q.is_zero or (q.degree == 0 and q.coefficient((0,) * len(gens)) <= 0):
-            raise ValueError("a fixed multiplier q must be SOS and not identically zero")
-        if q.degree + max(f.degree, 0) > degree:
-            raise ValueError(f"deg q + deg f = {q.degree + f.degree} exceeds degree {degree}")
+        q = _fixed_q(multiplier, gens, degree, f)
         self.gens, self.degree, self.q, self.form = gens, degree, q, GramForm(form)
         self.multiplier = multiplier
         self.supports = tuple(_support(p) for p in (f,) + eq + ineq)

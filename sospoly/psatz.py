@@ -113,9 +113,9 @@ def check_degree_supported(nvars: int, degree: int) -> None:
                          f"have side {shown(side)} (limit {MAX_GRAM_SIDE})")
 
 
-def build_psatz(f, eq=(), ineq=(), degree: int | None = None, multiplier=Multiplier.FIXED,
-                gens=None) -> PsatzProblem:
-    """Build the Positivstellensatz program of SPEC §5 (see module docstring)."""
+def _checked_inputs(f, eq, ineq, degree, gens) -> tuple:
+    """(f, eq, ineq, gens, degree) validated and on common variables: the input rules of
+    :func:`build_psatz` (also those of :class:`sospoly.compiled.CompiledPsatz`)."""
     f = _check_poly(f, "f")
     eq = tuple(_check_poly(g, "each equality g_k") for g in eq)
     ineq = tuple(_check_poly(h, "each inequality h_k") for h in ineq)
@@ -140,16 +140,43 @@ def build_psatz(f, eq=(), ineq=(), degree: int | None = None, multiplier=Multipl
     if f.degree > degree:
         raise ValueError(f"deg f = {f.degree} exceeds degree {degree}")
     check_degree_supported(len(gens), degree)
+    return f, eq, ineq, gens, degree
 
+
+def _as_multiplier(multiplier):
+    """A multiplier given by its string value as the :class:`Multiplier`; anything else unchanged."""
+    if isinstance(multiplier, str) and not isinstance(multiplier, Multiplier):
+        try:
+            return Multiplier(multiplier)
+        except ValueError:
+            raise ValueError(f"multiplier must be 'fixed', 'free', a Polynomial or a number; got {multiplier!r}") from None
+    return multiplier
+
+
+def _fixed_q(multiplier, gens, degree: int, f: Polynomial) -> Polynomial:
+    """The fixed multiplier q: :func:`default_q` for ``Multiplier.FIXED``, else the given SOS
+    polynomial or positive number (checked: not zero, deg q + deg f <= degree)."""
+    if multiplier == Multiplier.FIXED:
+        return default_q(gens, degree, f.degree)
+    q = _check_poly(multiplier, "multiplier q").with_gens(gens) if isinstance(multiplier, Polynomial) \
+        else Polynomial.constant(float(multiplier), gens)
+    if q.is_zero or (q.degree == 0 and q.coefficient((0,) * len(gens)) <= 0):
+        raise ValueError("a fixed multiplier q must be SOS and not identically zero (a positive number "
+                         "or an SOS polynomial)")
+    if q.degree + max(f.degree, 0) > degree:
+        raise ValueError(f"deg q + deg f = {q.degree + f.degree} exceeds degree {degree}")
+    return q
+
+
+def build_psatz(f, eq=(), ineq=(), degree: int | None = None, multiplier=Multiplier.FIXED,
+                gens=None) -> PsatzProblem:
+    """Build the Positivstellensatz program of SPEC §5 (see module docstring)."""
+    f, eq, ineq, gens, degree = _checked_inputs(f, eq, ineq, degree, gens)
     prog = SOSProgram(gens)
     c = q_expr = None
     q_fixed = None
     param_terms = {}
-    if isinstance(multiplier, str) and not isinstance(multiplier, Multiplier):
-        try:
-            multiplier = Multiplier(multiplier)
-        except ValueError:
-            raise ValueError(f"multiplier must be 'fixed', 'free', a Polynomial or a number; got {multiplier!r}") from None
+    multiplier = _as_multiplier(multiplier)
     if multiplier == Multiplier.FREE:
         kind = Multiplier.FREE
         qdeg = degree - max(f.degree, 0)
@@ -159,16 +186,7 @@ def build_psatz(f, eq=(), ineq=(), degree: int | None = None, multiplier=Multipl
         param_terms = {"c": q_expr * -1.0}
     else:
         kind = Multiplier.FIXED
-        if multiplier == Multiplier.FIXED:
-            q_fixed = default_q(gens, degree, f.degree)
-        else:
-            q_fixed = _check_poly(multiplier, "multiplier q").with_gens(gens) if isinstance(multiplier, Polynomial) \
-                else Polynomial.constant(float(multiplier), gens)
-            if q_fixed.is_zero or (q_fixed.degree == 0 and q_fixed.coefficient((0,) * len(gens)) <= 0):
-                raise ValueError("a fixed multiplier q must be SOS and not identically zero (a positive number "
-                                 "or an SOS polynomial)")
-            if q_fixed.degree + max(f.degree, 0) > degree:
-                raise ValueError(f"deg q + deg f = {q_fixed.degree + f.degree} exceeds degree {degree}")
+        q_fixed = _fixed_q(multiplier, gens, degree, f)
         c = prog.scalar("c")
         u = LinPoly.from_polynomial(q_fixed * f, gens) - c * q_fixed
     r = []

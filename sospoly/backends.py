@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import enum
 import time
+import dataclasses
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -213,8 +214,7 @@ class IpmBackend:
         if sol is not None:
             return sol
         fb = self.fallback.solve(problem, accept=accept, retry=retry)
-        return ConicSolution(fb.raw_status, fb.x, fb.z, fb.primal_objective, fb.dual_objective,
-                             (att,) + tuple(fb.attempts))
+        return dataclasses.replace(fb, attempts=(att,) + tuple(fb.attempts))
 
 
 #: below this estimated IPM cost (sum over PSD blocks of m n^3) one Clarabel call is faster

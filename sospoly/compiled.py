@@ -34,6 +34,7 @@ outside the cached supports is recompiled on the union of the supports.
 """
 from __future__ import annotations
 
+import dataclasses
 import time
 from collections import OrderedDict
 from dataclasses import dataclass
@@ -223,7 +224,7 @@ class CompiledPsatz:
         polys = (f,) + eq + ineq
         Es, cs, ids = [], [], []
         for pi, p in enumerate(polys):
-            what = "f" if pi == 0 else (f"eq[{pi - 1}]" if pi <= self.n_eq else f"ineq[{pi - 1 - self.n_eq}]")
+            what = self._name_of(pi)
             if not isinstance(p, Polynomial):
                 raise TypeError(f"{what} must be a sospoly Polynomial, got {type(p).__name__}")
             if p.gens != self.gens:
@@ -240,13 +241,15 @@ class CompiledPsatz:
         idx = self._index.find(E, missing_ok=True)
         if np.any(idx < 0):
             bad = E[np.argmax(idx < 0)]
-            pi = int(bad[0])
-            what = "f" if pi == 0 else (f"eq[{pi - 1}]" if pi <= self.n_eq else f"ineq[{pi - 1 - self.n_eq}]")
-            raise StructureMismatch(f"{what} has a term with exponent {tuple(int(k) for k in bad[1:])} outside the "
+            raise StructureMismatch(f"{self._name_of(int(bad[0]))} has a term with exponent {tuple(int(k) for k in bad[1:])} outside the "
                                     "compiled support")
         th = np.zeros(self.n_theta)
         th[idx] = np.concatenate(cs)
         return th
+
+    def _name_of(self, pi: int) -> str:
+        """The name of polynomial ``pi`` of (f, eq..., ineq...) in messages."""
+        return "f" if pi == 0 else (f"eq[{pi - 1}]" if pi <= self.n_eq else f"ineq[{pi - 1 - self.n_eq}]")
 
     def _check_theta(self, theta) -> np.ndarray:
         theta = np.asarray(theta, float)
@@ -264,10 +267,7 @@ class CompiledPsatz:
         th = self._check_theta(theta)[0]
         data = self._A0 + self._DA @ th
         A = sp.csc_matrix((data, self._pat_rows, self._indptr), shape=self._template.A.shape)
-        b = self._b0 + self._Db @ th
-        t = self._template
-        return ConicProblem(t.q, A, b, t.cones, t.n_program_vars, t.psd_blocks, t.objective_sign,
-                            t.objective_offset, t.form, {})
+        return dataclasses.replace(self._template, A=A, b=self._b0 + self._Db @ th, params={})
 
     def instantiate(self, f, eq=(), ineq=()) -> CompiledInstance:
         th = self.theta(f, eq, ineq)
@@ -354,8 +354,7 @@ class _Presolved:
                                                      "certificate check failed", self.attempt.iterations,
                                                      self.attempt.seconds)
         fb = self.fallback.solve(problem, accept=accept, retry=retry)
-        return ConicSolution(fb.raw_status, fb.x, fb.z, fb.primal_objective, fb.dual_objective,
-                             (att,) + tuple(fb.attempts))
+        return dataclasses.replace(fb, attempts=(att,) + tuple(fb.attempts))
 
 
 def compile_psatz(f, eq=(), ineq=(), degree=None, multiplier=Multiplier.FIXED, form=GramForm.IMAGE,

@@ -8,9 +8,9 @@ import json
 
 import numpy as np
 import pytest
-from scipy.optimize import least_squares
 
 from tests.reference.hartley_sturm import hartley_sturm
+from tests.reference.multistart import best_local_gamma
 from tritools import Status
 from tritools.colmap import (CERTIFICATES_FILE, Camera, Image, Model, ModelFormatError, Point3D, SkewError,
                              UnsupportedCameraModelError, distort, model_from_oxford, model_from_projections,
@@ -232,19 +232,6 @@ def _undistorted_problem(model, point):
     return np.array(cams), np.array(xs)
 
 
-def _multistart_gamma(cams, xs, rng, starts=30):
-    """Reference: best of LM runs from 30 random starts in the ball of radius 2 (the scene is in
-    the unit ball, cameras at distance 10) -- a dense search independent of the SOS machinery."""
-    def res(X):
-        p = cams @ np.append(X, 1.0)
-        return (p[:, :2] / p[:, 2:3] - xs).ravel()
-    best = np.inf
-    for _ in range(starts):
-        r = least_squares(res, rng.uniform(-2, 2, 3), method="lm", xtol=1e-15, ftol=1e-15, gtol=1e-15)
-        best = min(best, np.sqrt(np.sum(r.fun ** 2) / (2 * len(cams))))
-    return best
-
-
 def test_noisy_certified_gamma_matches_independent_references():
     model, _ = synthetic_model(n_points=12, noise_px=1.0, seed=2)
     new, report = retriangulate(model)
@@ -257,7 +244,9 @@ def test_noisy_certified_gamma_matches_independent_references():
             _, cost = hartley_sturm(cams[0], cams[1], xs[0], xs[1])
             ref = np.sqrt(cost / 4)
         else:
-            ref = _multistart_gamma(cams, xs, rng)
+            # 30 LM starts uniform in the ball of radius 2 (the scene is in the unit ball, cameras
+            # at distance 10): a dense search independent of the SOS machinery
+            ref = best_local_gamma(cams, xs, rng.uniform(-2, 2, (30, 3)))
         # both are global minima of the same function (gamma ~ 0.5 px): agreement to 1e-7 px is
         # the accuracy of the LM / polynomial-root references, far below any pixel effect
         assert abs(r.gamma_ub - ref) < 1e-7, (r, ref)

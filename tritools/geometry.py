@@ -377,3 +377,31 @@ def fundamental_matrices(cameras, normalize: bool = True) -> dict[tuple[int, int
         except ValueError as exc:
             raise ValueError(f"cameras {i} and {j}: {exc}") from None
     return out
+
+
+def _region_residuals(X, cameras, regions) -> np.ndarray:
+    """Stacked x_i - closest point of R_i to x_i, x_i = Phi(X, P_i) (huge where a projection is at infinity)."""
+    Xh = np.append(X, 1.0)
+    out = []
+    for P, r in zip(cameras, regions):
+        p = P @ Xh
+        if abs(p[2]) < 1e-300:
+            return np.full(2 * len(regions), 1e150)
+        x = p[:2] / p[2]
+        out.append(x - r.closest_point(x))
+    return np.concatenate(out)
+
+
+def refine_l2(X0, cameras, regions, *, xtol: float = 1e-15, ftol: float = 1e-15, gtol: float = 1e-15,
+              max_nfev: int = 400) -> np.ndarray | None:
+    """Local minimisation of gamma (SPEC §1) from X0 by Levenberg-Marquardt on the residuals
+    x_i - closest point of R_i (scipy's least_squares with these stopping tolerances); None
+    when the solver fails or leaves the finite numbers."""
+    from scipy.optimize import least_squares
+
+    try:
+        res = least_squares(_region_residuals, np.asarray(X0, float), args=(cameras, regions), method="lm",
+                            xtol=xtol, ftol=ftol, gtol=gtol, max_nfev=max_nfev)
+    except (ValueError, np.linalg.LinAlgError):
+        return None
+    return res.x if np.all(np.isfinite(res.x)) else None

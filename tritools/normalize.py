@@ -32,15 +32,17 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .geometry import camera_center, dlt
+from .geometry import camera_center, dlt, refine_l2
+from .regions import Point
 
-__all__ = ["Normalization", "normalization_for", "RHO_FLOOR_REL", "SCALE_BOUNDS", "REFINE_MAX_NFEV"]
+__all__ = ["Normalization", "normalization_for", "RHO_FLOOR_REL", "SCALE_BOUNDS", "REFINE_TOL", "REFINE_MAX_NFEV"]
 
 #: floor of the residual scale rho, relative to max(1, typical |centre|) of the views.
 RHO_FLOOR_REL = 1e-4
 #: the common image scale s is clipped to this range.
 SCALE_BOUNDS = (1e-6, 1e6)
-#: function evaluations of the local refinement that sets the scale (a few ms at most).
+#: the local refinement that sets the scale: its tolerance and function evaluations (a few ms at most).
+REFINE_TOL = 1e-10
 REFINE_MAX_NFEV = 200
 
 
@@ -83,35 +85,14 @@ class Normalization:
         return self.shifts + np.asarray(xn, float) / self.scale
 
 
-def _residuals(X: np.ndarray, cameras: np.ndarray, centers: np.ndarray) -> np.ndarray:
-    """Per-view reprojection distances ||Phi(X, P_i) - centre_i|| (inf behind the principal plane)."""
+def _view_distances(X: np.ndarray, cameras: np.ndarray, centers: np.ndarray) -> np.ndarray:
+    """Per-view distances ||Phi(X, P_i) - centre_i|| (inf where a projection is at infinity)."""
     Xh = np.append(X, 1.0)
     res = []
     for P, c in zip(cameras, centers):
         p = P @ Xh
         res.append(np.linalg.norm(p[:2] / p[2] - c) if abs(p[2]) > 1e-300 else np.inf)
     return np.array(res)
-
-
-def _refined(X0: np.ndarray, cameras: np.ndarray, centers: np.ndarray) -> np.ndarray:
-    """Local L2 refinement of X0 on the centres (Levenberg-Marquardt); X0 if it does not improve."""
-    from scipy.optimize import least_squares
-
-    def residual_vector(X):
-        Xh = np.append(X, 1.0)
-        p = np.einsum("nij,j->ni", cameras, Xh)
-        w = np.where(np.abs(p[:, 2]) > 1e-300, p[:, 2], np.nan)
-        r = (p[:, :2] / w[:, None] - centers).ravel()
-        return np.where(np.isfinite(r), r, 1e150)
-
-    r0 = residual_vector(X0)
-    try:
-        sol = least_squares(residual_vector, X0, method="lm", xtol=1e-10, ftol=1e-10, max_nfev=REFINE_MAX_NFEV)
-    except (ValueError, np.linalg.LinAlgError):
-        return X0
-    if np.all(np.isfinite(sol.x)) and np.sum(sol.fun ** 2) < np.sum(r0 ** 2):
-        return np.asarray(sol.x, float)
-    return X0
 
 
 def normalization_for(cameras: np.ndarray, regions, enabled: bool = True) -> Normalization:
@@ -131,7 +112,13 @@ def normalization_for(cameras: np.ndarray, regions, enabled: bool = True) -> Nor
     # image scale from the refined residual; the world frame stays at the DLT estimate (the
     # refinement may run towards a point at infinity, and a huge depth d ruins the cameras'
     # conditioning: Example 5 seed 7 case 455 had d ~ 1e8 and a bound 2e-6 above f in c units)
-    res = _residuals(_refined(X0, cameras, centers), cameras, centers)
+    X_ref = refine_l2(X0, cameras, [Point(c) for c in centers], xtol=REFINE_TOL, ftol=REFINE_TOL,
+                      max_nfev=REFINE_MAX_NFEV)
+    res = _view_distances(X0, cameras, centers)
+    if X_ref is not None:
+        res_ref = _view_distances(X_ref, cameras, centers)
+        if np.sum(res_ref ** 2) < np.sum(res ** 2):          # the refined point only where it is better
+            res = res_ref
     rho = float(np.sqrt(np.mean(res ** 2))) if np.all(np.isfinite(res)) else 1.0
     rho = max(rho, rho_floor)
     s = float(np.clip(1.0 / rho, *SCALE_BOUNDS))

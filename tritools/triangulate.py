@@ -37,15 +37,14 @@ from sospoly.extraction import best_in_family, kernel_family
 from sospoly.verify import verify_quadratic
 
 from .constraints import Method
-from .geometry import dlt, gamma as gamma_of, point_from_image_points, project, validate_cameras
+from .geometry import dlt, gamma as gamma_of, point_from_image_points, project, refine_l2, validate_cameras
 from .normalize import Normalization, normalization_for
 from .problem import TriangulationProblem, build_problem
 from .fastpath import fast_results
 from .regions import Point, Region
 from .result import Status, TriangulationResult
 
-__all__ = ["triangulate", "validate_regions", "refine_l2", "MAX_FAMILY_DIM", "SolvePath", "solve_sdp_batch",
-           "STRUCTURE_CACHE"]
+__all__ = ["triangulate", "validate_regions", "refine_l2", "MAX_FAMILY_DIM", "SolvePath", "STRUCTURE_CACHE"]
 
 
 class SolvePath(str, enum.Enum):
@@ -66,30 +65,6 @@ def validate_regions(regions, n_views: int) -> list:
             raise TypeError(f"regions[{i}] must be a tritools Region (Point, Segment, Polytope, Ellipse, "
                             f"EllipseBorder), got {type(r).__name__}")
     return regions
-
-
-def _residuals(X, cameras, regions):
-    Xh = np.append(X, 1.0)
-    out = []
-    for P, r in zip(cameras, regions):
-        p = P @ Xh
-        if abs(p[2]) < 1e-300:
-            return np.full(2 * len(regions), 1e150)
-        x = p[:2] / p[2]
-        out.append(x - r.closest_point(x))
-    return np.concatenate(out)
-
-
-def refine_l2(X0: np.ndarray, cameras: np.ndarray, regions) -> np.ndarray | None:
-    """Local minimisation of gamma from X0 (Levenberg-Marquardt-type least squares)."""
-    from scipy.optimize import least_squares
-
-    try:
-        res = least_squares(_residuals, np.asarray(X0, float), args=(cameras, regions), method="lm",
-                            xtol=1e-15, ftol=1e-15, gtol=1e-15, max_nfev=400)
-    except (ValueError, np.linalg.LinAlgError):
-        return None
-    return res.x if np.all(np.isfinite(res.x)) else None
 
 
 def _estimate(problem: TriangulationProblem, psatz, sol, cams_n, regs_n, tol):
@@ -268,23 +243,24 @@ def _structure_key(problem, regs_n, method, delta, form):
 
 
 def _compiled_for(problem, regs_n, method, delta, multiplier, form):
-    """The cached compiled structure of this problem, or None (free multiplier, or an
-    instance whose degrees differ from its key's structure)."""
+    """(compiled structure, this problem's coefficient vector theta, multiplier) from the
+    cache, or (None, None, multiplier) for a free multiplier or an instance whose degrees
+    differ from its key's structure."""
     if isinstance(multiplier, str) and not isinstance(multiplier, sospoly.Polynomial):
         try:
             multiplier = Multiplier(multiplier)
         except ValueError:
-            return None, multiplier
+            return None, None, multiplier
     if multiplier == Multiplier.FREE:
-        return None, multiplier
+        return None, None, multiplier
     key = _structure_key(problem, regs_n, method, delta, form) if multiplier == Multiplier.FIXED else None
     try:
         comp = STRUCTURE_CACHE.get(problem.f, problem.eq, problem.ineq, delta, multiplier, form, gens=problem.gens,
                                    key=key)
-        comp.theta(problem.f, problem.eq, problem.ineq)
+        theta = comp.theta(problem.f, problem.eq, problem.ineq)
     except sospoly.StructureMismatch:
-        return None, multiplier
-    return comp, multiplier
+        return None, None, multiplier
+    return comp, theta, multiplier
 
 
 def _solve_at(problem, norm: Normalization, cams, regions, cams_n, regs_n, method, delta, multiplier, refine,
@@ -295,14 +271,14 @@ def _solve_at(problem, norm: Normalization, cams, regions, cams_n, regs_n, metho
     :mod:`sospoly.ipm` with Clarabel fallback for large ones); the free-q GEVP goes
     through :func:`sospoly.build_psatz` / :func:`sospoly.solve_psatz`."""
     t0 = time.perf_counter()
-    comp, multiplier = _compiled_for(problem, regs_n, method, delta, multiplier, form)
+    comp, theta, multiplier = _compiled_for(problem, regs_n, method, delta, multiplier, form)
     if comp is None:
         psatz = sospoly.build_psatz(problem.f, problem.eq, problem.ineq, delta, multiplier, gens=problem.gens)
         timings[f"assemble_d{delta}"] = time.perf_counter() - t0
         t0 = time.perf_counter()
         lb = sospoly.solve_psatz(psatz, backend=backend, form=form, tolerances=tol)
     else:
-        psatz = comp.instantiate(problem.f, problem.eq, problem.ineq)
+        psatz = comp.bind(theta)
         timings[f"assemble_d{delta}"] = time.perf_counter() - t0
         t0 = time.perf_counter()
         lb = sospoly.solve_psatz(psatz, backend=backend if backend is not None else "auto", tolerances=tol)
@@ -354,64 +330,3 @@ def _finish(problem, norm, cams, regions, cams_n, regs_n, method, delta, refine,
     return TriangulationResult(status=status, X=X, gamma_ub=gamma_ub, gamma_lb=gamma_lb, optimal=optimal,
                                image_points=norm.image_points(x_star_n), X_raw=X_raw, gamma_ub_raw=gamma_raw,
                                certified_by="sdp" if optimal else None, message=msg, **common)
-
-
-def solve_sdp_batch(items, method: Method | str = Method.COROLLARY1, delta: int | None = None, *,
-                    refine: bool = True, normalize: bool = True, form: GramForm = GramForm.IMAGE,
-                    tolerances: Tolerances = DEFAULT_TOLERANCES, fallback=None) -> list[TriangulationResult]:
-    """The SDP path for many (cameras, regions) items at one degree, batched by structure.
-
-    Items are grouped by (N, region types); each group's compiled structure
-    (:data:`STRUCTURE_CACHE`) is solved for all its items at once by
-    :meth:`sospoly.CompiledPsatz.solve_batch` (the batched interior-point method; items it
-    does not converge on, or whose certificate fails the a-posteriori checks, are
-    re-solved by ``fallback``, default Clarabel).  Each result is what
-    ``triangulate(cameras, regions, method, delta, delta, path="sdp")`` reports, with the
-    fixed multiplier; ``delta`` defaults to each item's delta_min.  Invalid items raise
-    (validate first, or use :func:`tritools.batch.safe_triangulate` per item).  The
-    batch's solve time is shared equally among its items in ``timings``.
-    """
-    method = Method(method)
-    prepared, groups = [], {}
-    for idx, (cameras, regions) in enumerate(items):
-        t0 = time.perf_counter()
-        cams = validate_cameras(cameras)
-        regions = validate_regions(regions, cams.shape[0])
-        norm = normalization_for(cams, regions, enabled=normalize)
-        cams_n, regs_n = norm.cameras(cams), norm.regions(regions)
-        problem = build_problem(cams_n, regs_n, method)
-        dmin = sospoly.delta_min(problem.f, problem.eq, problem.ineq)
-        d = dmin if delta is None else int(delta)
-        if d % 2 or d < dmin:
-            raise ValueError(f"items[{idx}]: delta must be even and >= delta_min = {dmin}, got {d}")
-        timings = {"build": time.perf_counter() - t0}
-        t0 = time.perf_counter()
-        comp, _ = _compiled_for(problem, regs_n, method, d, Multiplier.FIXED, form)
-        theta = comp.theta(problem.f, problem.eq, problem.ineq) if comp is not None else None
-        timings[f"assemble_d{d}"] = time.perf_counter() - t0
-        prepared.append((problem, norm, cams, regions, cams_n, regs_n, d, comp, theta, timings))
-        groups.setdefault(id(comp), []).append(idx)
-    lbs = [None] * len(prepared)
-    for members in groups.values():
-        comp = prepared[members[0]][7]
-        t0 = time.perf_counter()
-        if comp is None:   # structure not compilable: one at a time through build_psatz
-            for i in members:
-                pb, d = prepared[i][0], prepared[i][6]
-                ps = sospoly.build_psatz(pb.f, pb.eq, pb.ineq, d, gens=pb.gens)
-                lbs[i] = (ps, sospoly.solve_psatz(ps, backend=fallback, form=form, tolerances=tolerances))
-        else:
-            out = comp.solve_batch(thetas=np.array([prepared[i][8] for i in members]), fallback=fallback,
-                                   tolerances=tolerances)
-            for i, lb in zip(members, out):
-                lbs[i] = (comp, lb)
-        share = (time.perf_counter() - t0) / len(members)
-        for i in members:
-            prepared[i][9][f"solve_d{prepared[i][6]}"] = share
-    results = []
-    for (problem, norm, cams, regions, cams_n, regs_n, d, comp, theta, timings), (ps, lb) in zip(prepared, lbs):
-        res = _finish(problem, norm, cams, regions, cams_n, regs_n, method, d, refine, tolerances, timings, ps, lb)
-        timings["total"] = sum(timings.values())
-        results.append(_replace(res, timings=dict(timings),
-                                attempts=((d, res.status.value, res.gamma_lb, res.gamma_ub, res.attempts),)))
-    return results

@@ -32,7 +32,7 @@ def _instance(cams, regs, delta=4):
     norm = normalization_for(cams, regs)
     cams_n, regs_n = norm.cameras(cams), norm.regions(regs)
     pb = build_problem(cams_n, regs_n, "theorem1")
-    comp, _ = _compiled_for(pb, regs_n, "theorem1", delta, "fixed", "image")
+    comp, _, _ = _compiled_for(pb, regs_n, "theorem1", delta, "fixed", "image")
     return comp, comp.instantiate(pb.f, pb.eq, pb.ineq)
 
 

@@ -9,12 +9,11 @@ import numpy as np
 import pytest
 
 import sospoly
-import tritools
 from sospoly import SolveStatus
 from tritools.normalize import normalization_for
 from tritools.problem import build_problem
 from tritools.scene import paper_example, paper_table, random_scene
-from tritools.triangulate import STRUCTURE_CACHE, solve_sdp_batch, triangulate
+from tritools.triangulate import STRUCTURE_CACHE, triangulate
 
 RTOL_C = 1e-7
 
@@ -110,17 +109,6 @@ def test_batched_ipm_agrees_with_clarabel_on_random_corollary1_instances():
             n_ipm += lb.solution.attempts[0].label == "ipm-batch" and len(lb.solution.attempts) == 1
         n_total += npts
     assert n_total == 250 and n_ipm >= 0.95 * n_total
-
-
-def test_solve_sdp_batch_matches_triangulate():
-    sc = random_scene(3, 6, seed=4)
-    items = [(sc.cameras, sc.regions(j)) for j in range(6)]
-    batch = solve_sdp_batch(items, "corollary1", 2)
-    for (cams, regs), rb in zip(items, batch):
-        r1 = triangulate(cams, regs, "corollary1", delta=2, max_delta=2, backend="clarabel")
-        assert rb.status == r1.status
-        assert abs(rb.gamma_lb - r1.gamma_lb) <= 1e-6 * max(1.0, r1.gamma_lb)
-        np.testing.assert_allclose(rb.X, r1.X, rtol=1e-5, atol=1e-8)
 
 
 def test_mismatch_errors_are_clear():

@@ -9,14 +9,22 @@ import pytest  # noqa: E402
 
 
 @pytest.fixture(scope="session")
-def corridor_point():
-    """(cameras (3, 3, 4), points2d (3, 2)) of the paper's corridor point (track 513, §5.1),
-    the one Example 1 track Corollary 1 does not certify at delta = 2; skips without the data."""
-    from tritools.io import DataNotFoundError, load_sequence
+def oxford_data():
+    """The Oxford data directory (tritools.io.data_dir); skips the test when it is not found."""
+    from tritools.io import DataNotFoundError, data_dir
 
     try:
-        seq = load_sequence("corridor")
+        return data_dir()
     except DataNotFoundError:
         pytest.skip("Oxford data not found (../shared/data/oxford or $TRITOOLS_DATA)")
+
+
+@pytest.fixture(scope="session")
+def corridor_point(oxford_data):
+    """(cameras (3, 3, 4), points2d (3, 2)) of the paper's corridor point (track 513, §5.1),
+    the one Example 1 track Corollary 1 does not certify at delta = 2; skips without the data."""
+    from tritools.io import load_sequence
+
+    seq = load_sequence("corridor", oxford_data)
     track = seq.tracks[[t.track_id for t in seq.tracks].index(513)]
     return seq.problem(track)

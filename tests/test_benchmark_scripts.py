@@ -34,13 +34,8 @@ def test_complexity_script_formula_equals_assembled(capsys):
     assert "| 3 | corollary1 | 2 | points | 6 |" in out and "| 4 | 4 |" in out
 
 
+@pytest.mark.usefixtures("oxford_data")
 def test_example1_script_on_a_slice(capsys, tmp_path):
-    from tritools.io import DataNotFoundError, data_dir
-
-    try:
-        data_dir()
-    except DataNotFoundError:
-        pytest.skip("Oxford data not found (../shared/data/oxford or $TRITOOLS_DATA)")
     csv_path = tmp_path / "ex1.csv"
     _load("example1").main(["--sequences", "merton3", "--limit", "20", "--csv", str(csv_path), "--baselines", "dlt"])
     out = capsys.readouterr().out

@@ -19,12 +19,7 @@ from tritools.colmap import (CERTIFICATES_FILE, Camera, Image, Model, ModelForma
                              undistorted_pixels, write_certificates, write_text_model)
 from tritools.colmap.camera_models import UNDISTORT_TOL_PX
 from tritools.colmap_cli import register
-from tritools.io import DataNotFoundError, data_dir, load_sequence
-
-try:
-    DATA = data_dir()
-except DataNotFoundError:
-    DATA = None
+from tritools.io import load_sequence
 
 #: one camera per supported model (f ~ 800 px, 640 x 480 images, realistic distortion).
 CAMERAS = {
@@ -308,7 +303,7 @@ def test_model_from_projections_reproduces_the_cameras():
         model_from_projections(Ps, (640, 480), [{0: (1.0, 2.0)}])
 
 
-@pytest.mark.skipif(DATA is None, reason="Oxford data not found (../shared/data/oxford or $TRITOOLS_DATA)")
+@pytest.mark.usefixtures("oxford_data")
 def test_oxford_library_converted_and_certified(tmp_path):
     """First 30 library tracks: the converted model re-reads exactly, every point is certified,
     and every 2-view gamma equals Hartley-Sturm on the *original* Oxford P (so the K[R|t]
@@ -367,7 +362,7 @@ def test_cli_bad_input_exits_2(tmp_path, capsys):
     assert "camera model 'OPENCV_FISHEYE' is not supported" in capsys.readouterr().err
 
 
-@pytest.mark.skipif(DATA is None, reason="Oxford data not found (../shared/data/oxford or $TRITOOLS_DATA)")
+@pytest.mark.usefixtures("oxford_data")
 def test_cli_colmap_from_oxford(tmp_path, capsys):
     assert _cli(["colmap-from-oxford", "merton3", str(tmp_path), "--max-tracks", "20"]) == 0
     m = read_text_model(tmp_path)

@@ -134,23 +134,19 @@ def test_degenerate_problems_are_not_certified():
     assert b.certified.tolist() == [True, False, False, False]
 
 
-def _oxford_subset(per_sequence):
-    from tritools.io import PAPER_SEQUENCES, DataNotFoundError, load_sequence
+def _oxford_subset(data, per_sequence):
+    from tritools.io import PAPER_SEQUENCES, load_sequence
 
-    try:
-        seqs = [load_sequence(name) for name in PAPER_SEQUENCES]
-    except DataNotFoundError:
-        pytest.skip("Oxford data not found (../shared/data/oxford or $TRITOOLS_DATA)")
     out = []
-    for seq in seqs:
+    for seq in (load_sequence(name, data) for name in PAPER_SEQUENCES):
         for tr in seq.tracks[:per_sequence]:
             cams, pts = seq.problem(tr)
             out.append((cams, [Point(p) for p in pts]))
     return out
 
 
-def test_oxford_subset_fast_path_agrees_with_sdp():
-    problems = _oxford_subset(300)           # 1800 real tracks through the fast path
+def test_oxford_subset_fast_path_agrees_with_sdp(oxford_data):
+    problems = _oxford_subset(oxford_data, 300)           # 1800 real tracks through the fast path
     auto = tritools.triangulate_many(problems, "corollary1", 2, 2, progress=False)
     assert sum(r.certified_by == "verification" for r in auto) >= 0.99 * len(problems)
     rng = np.random.default_rng(0)

@@ -13,14 +13,10 @@ import pytest
 import tritools
 from tritools import Point, Status
 from tritools.batch import triangulate_many
-from tritools.io import DataNotFoundError, data_dir, load_sequence, read_nview_corners
+from tritools.io import DataNotFoundError, load_sequence, read_nview_corners
 from tritools.scene import random_scene
 
-try:
-    DATA = data_dir()
-except DataNotFoundError:
-    DATA = None
-needs_data = pytest.mark.skipif(DATA is None, reason="Oxford data not found (../shared/data/oxford or $TRITOOLS_DATA)")
+needs_data = pytest.mark.usefixtures("oxford_data")         # tests/conftest.py: skips without the data
 
 
 def _write_vgg(folder, scene, missing):
@@ -115,12 +111,9 @@ def test_histograms_match_the_data_readme():
     assert dino.cameras.shape == (36, 3, 4) and dino.histogram()[2] == 2300 and len(dino.tracks) == 4983
 
 
-@needs_data
-def test_paper_corridor_point():
+def test_paper_corridor_point(corridor_point):
     """§5.1: delta=2 gives 0.163 < 0.175 (not certified); delta=4 certifies 0.170 at (3.852, 4.721, 19.722) up to sign."""
-    seq = load_sequence("corridor")
-    tr = seq.tracks[[t.track_id for t in seq.tracks].index(513)]   # nview-corners row 514 (1-based)
-    cams, pts = seq.problem(tr)
+    cams, pts = corridor_point          # track 513: nview-corners row 514 (1-based)
     np.testing.assert_allclose(pts, [[375.782, 130.811], [405.574, 129.657], [443.672, 125.769]], atol=1e-3)
     regions = [Point(p) for p in pts]
     r2 = tritools.triangulate(cams, regions, "corollary1", delta=2)

@@ -23,7 +23,6 @@ from matplotlib.patches import Patch  # noqa: E402
 from tritools import plot as tplot  # noqa: E402
 from tritools import plot_cli  # noqa: E402
 from tritools.geometry import gamma, project  # noqa: E402
-from tritools.io import DataNotFoundError, data_dir  # noqa: E402
 from tritools.regions import Ellipse, EllipseBorder, Point, Polytope, Segment  # noqa: E402
 from tritools.result import TriangulationResult  # noqa: E402
 from tritools.scene import paper_example  # noqa: E402
@@ -344,11 +343,8 @@ def test_cli_figure3_one_command(solved, tmp_path, capsys, monkeypatch):
         run_cli(["figure3", "--examples", "1"])                  # argparse: invalid choice
 
 
-def test_cli_plot_dataset(tmp_path, capsys):
-    try:
-        root = data_dir()
-    except DataNotFoundError:
-        pytest.skip("Oxford data not available")
+def test_cli_plot_dataset(oxford_data, tmp_path, capsys):
+    root = oxford_data
     out = tmp_path / "library.png"
     assert run_cli(["plot-dataset", "library", "--data-dir", str(root), "--limit", "6", "--out", str(out)]) == 0
     png_size(out)

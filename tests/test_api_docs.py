@@ -1,7 +1,6 @@
 """docs/api.md is generated from the docstrings (docs/gen_api.py) and must stay current;
 every public class and function must carry its own docstring."""
 import importlib.util
-import inspect
 import pathlib
 
 import pytest
@@ -76,7 +75,6 @@ def test_docstring_detection(gen_api):
     assert gen_api.own_docstring(Bare) == "" and gen_api.own_docstring(Child) == ""
     assert gen_api.own_docstring(Colour) == "" and gen_api.own_docstring(documented) == "Yes."
     assert gen_api.own_docstring(gen_api.generate).startswith("The full text")
-    assert inspect.isclass(Bare)
 
 
 def test_missing_optional_module_is_skipped(gen_api):

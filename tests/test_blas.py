@@ -11,22 +11,28 @@ def _blas_threads():
     return [i["num_threads"] for i in threadpoolctl.threadpool_info() if i["user_api"] == "blas"]
 
 
-def test_limit_inside_and_restored_after():
+@pytest.fixture
+def two_blas_threads():
+    """The caller's setting is 2 threads, so that "1 inside" and "restored after" can fail
+    (the tests are run with OPENBLAS_NUM_THREADS=1, where both would hold trivially)."""
     np.linalg.cholesky(np.eye(3))          # make sure the BLAS library is loaded
-    before = _blas_threads()
-    assert before, "numpy's BLAS should be visible to threadpoolctl"
+    with threadpoolctl.threadpool_limits(2, user_api="blas"):
+        before = _blas_threads()
+        assert before and set(before) == {2}, f"numpy's BLAS should be visible and settable: {before}"
+        yield before
+
+
+def test_limit_inside_and_restored_after(two_blas_threads):
     with single_threaded_blas():
-        assert _blas_threads() == [1] * len(before)
-    assert _blas_threads() == before
+        assert _blas_threads() == [1] * len(two_blas_threads)
+    assert _blas_threads() == two_blas_threads
 
 
-def test_decorator_returns_the_result_and_restores():
-    before = _blas_threads()
-
+def test_decorator_returns_the_result_and_restores(two_blas_threads):
     @with_single_threaded_blas
     def f(x):
-        assert _blas_threads() == [1] * len(before)
+        assert _blas_threads() == [1] * len(two_blas_threads)
         return 2 * x
 
     assert f(21) == 42
-    assert _blas_threads() == before
+    assert _blas_threads() == two_blas_threads

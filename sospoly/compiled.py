@@ -45,7 +45,7 @@ import scipy.sparse as sp
 from .backends import Attempt, ConicSolution, RawStatus, get_backend
 from .basis import MonomialIndex
 from .conic import ConicProblem, GramForm, lower
-from .ipm import ipm_solve_batch
+from .ipm import _smat_batch, ipm_solve_batch, layout_of
 from .linpoly import LinPoly
 from .minimize import LowerBound, lower_bound_of
 from .polynomial import Polynomial
@@ -55,7 +55,7 @@ from .solve import ProgramSolution, solve_program
 from .status import SolveStatus
 from .tolerances import DEFAULT_TOLERANCES, Tolerances
 
-__all__ = ["CompiledPsatz", "CompiledInstance", "PsatzCache", "compile_psatz", "StructureMismatch",
+__all__ = ["BatchBounds", "CompiledPsatz", "CompiledInstance", "PsatzCache", "compile_psatz", "StructureMismatch",
            "DEFAULT_CACHE"]
 
 
@@ -83,6 +83,25 @@ class CompiledInstance:
     @property
     def u(self):
         return self.compiled.u
+
+
+@dataclass(frozen=True)
+class BatchBounds:
+    """Vectorised outcome of :meth:`CompiledPsatz.batch_bounds` (leading axis: the instances).
+
+    ``ok`` is True where the batched interior-point method converged *and* the returned
+    Gram matrix passes :func:`sospoly.solve.check_certificate`'s PSD-margin rule
+    (lambda_min(G) >= -psd_margin * max(1, max|G_ij|)); the image form's coefficient
+    identity holds by construction.  Only there is ``lower_bound`` a certified bound;
+    ``reason`` says why not elsewhere.  ``eigenvalues`` / ``eigenvectors`` are those of
+    ``gram`` (ascending), for extraction (identity where the IPM did not converge)."""
+    lower_bound: np.ndarray     # (B,)
+    gram: np.ndarray            # (B, n, n)
+    eigenvalues: np.ndarray     # (B, n)
+    eigenvectors: np.ndarray    # (B, n, n)
+    ok: np.ndarray              # (B,) bool
+    iterations: np.ndarray      # (B,) int
+    reason: tuple               # (B,) str
 
 
 class CompiledPsatz:
@@ -339,6 +358,30 @@ class CompiledPsatz:
             out.append(self._lower_bound(sol))
         return out
 
+
+    def batch_bounds(self, thetas, tolerances: Tolerances = DEFAULT_TOLERANCES) -> BatchBounds:
+        """Lower bounds of many instances with no per-instance Python: the batched
+        interior-point method, the Gram matrices from its x (G = smat(b - A x)), their
+        eigendecomposition and the PSD-margin check, all on stacks.  No fallback: callers
+        re-solve the instances with ``ok = False`` one by one (:meth:`solve_theta`).
+        Programs with a single PSD block and no other cone (e.g. equality-constrained
+        programs in the image form) only."""
+        t = self._template
+        lay = layout_of(t.cones)
+        if lay.p or len(lay.sizes) != 1:
+            raise ValueError("batch_bounds handles programs with one PSD block and no other cone")
+        n = lay.sizes[0]
+        th = self._check_theta(thetas)
+        A, b = self.dense_batch(th)
+        res = ipm_solve_batch(A, b, t.q, t.cones, tolerances)
+        G = _smat_batch(b - np.einsum("brm,bm->br", A, res.x), n)
+        lam, V = np.linalg.eigh(np.where(res.converged[:, None, None], G, np.eye(n)))
+        psd = lam[:, 0] >= -tolerances.psd_margin * np.maximum(1.0, np.abs(G).max(axis=(1, 2)))
+        reason = tuple("" if (c and p) else (f"ipm: {r}" if not c else
+                                             f"Gram lambda_min {l0:.3g} below the PSD margin")
+                       for c, p, r, l0 in zip(res.converged, psd, res.reason, lam[:, 0]))
+        c_lb = t.objective_sign * (res.x @ t.q) + t.objective_offset
+        return BatchBounds(c_lb, G, lam, V, res.converged & psd, res.iterations, reason)
 
 class _Presolved:
     """Backend adaptor: an answer computed elsewhere (a batch), else the fallback backend."""

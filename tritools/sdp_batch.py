@@ -39,7 +39,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from sospoly import DEFAULT_TOLERANCES, GramForm, Multiplier, Polynomial, Tolerances, variables
-from sospoly.ipm import _smat_batch, ipm_solve_batch
 from sospoly.blas import with_single_threaded_blas
 
 from .fastpath import _epipolar_data, _normalise, _project_stack, _refine_stack, _stack
@@ -191,32 +190,21 @@ def solve_corollary1_points(cameras, points2d, *, tolerances: Tolerances = DEFAU
     F = _fundamentals(g0, g1, G2, N)
     n = 2 * N + 1
     c_lb = np.full(M, np.nan)
-    G = np.zeros((M, n, n))
+    lam, V = np.tile(np.ones(n), (M, 1)), np.tile(np.eye(n), (M, 1, 1))
     iters = np.zeros(M, int)
     idx = np.nonzero(ok)[0]
     th = corollary1_thetas(cs, F[idx]) if idx.size else np.zeros((0, comp.n_theta))
-    tmpl = comp.problem_from_theta(th[0]) if idx.size else None
     step = _chunk_size(N)
     ipm_tol = dataclasses.replace(tol, ipm_dual_residual_gap=max(tol.ipm_dual_residual_gap,
                                                                         tol.ipm_flat_face_dual_residual_gap))
     for start in range(0, idx.size, step):
         part = idx[start:start + step]
-        A, b = comp.dense_batch(th[start:start + step])
-        res = ipm_solve_batch(A, b, tmpl.q, tmpl.cones, ipm_tol)
-        iters[part] = res.iterations
-        conv = res.converged
-        for j in np.nonzero(~conv)[0]:
-            reason[part[j]] = f"ipm: {res.reason[j]}"
-        ok[part[~conv]] = False
-        S = b - np.einsum("brm,bm->br", A, res.x)                          # Gram from x (check_certificate)
-        G[part] = _smat_batch(S, n)
-        c_lb[part] = tmpl.objective_sign * (res.x @ tmpl.q) + tmpl.objective_offset
-    lam, V = np.linalg.eigh(np.where(ok[:, None, None], G, np.eye(n)))
-    scale = np.maximum(1.0, np.abs(G).max(axis=(1, 2)))
-    psd = lam[:, 0] >= -tol.psd_margin * scale
-    for m in np.nonzero(ok & ~psd)[0]:
-        reason[m] = f"Gram lambda_min {lam[m, 0]:.3g} below the PSD margin"
-    ok &= psd & np.isfinite(c_lb)
+        bb = comp.batch_bounds(th[start:start + step], ipm_tol)
+        iters[part], c_lb[part], lam[part], V[part] = bb.iterations, bb.lower_bound, bb.eigenvalues, bb.eigenvectors
+        for j in np.nonzero(~bb.ok)[0]:
+            reason[part[j]] = bb.reason[j]
+        ok[part[~bb.ok]] = False
+    ok &= np.isfinite(c_lb)
     # ---- extraction: kernel dimension 1, v* = kernel vector / its constant entry (sospoly.extraction)
     top = np.maximum(np.abs(lam[:, -1]), 1e-300)
     kdim = np.maximum(1, np.sum(lam <= tol.kernel_rel * top[:, None], axis=1))

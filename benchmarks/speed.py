@@ -21,6 +21,7 @@ Times are wall-clock on a shared machine: noisy.
 from __future__ import annotations
 
 import argparse
+import importlib.util
 import os
 import sys
 import time
@@ -39,7 +40,7 @@ from tritools import baselines as B  # noqa: E402
 from tritools.fastpath import verify_points  # noqa: E402
 from tritools.io import PAPER_SEQUENCES, load_sequence  # noqa: E402
 
-from example1 import PAPER  # noqa: E402
+from example1 import PAPER, PAPER_TABLE7  # noqa: E402
 
 
 def load_tracks(data_dir):
@@ -154,27 +155,26 @@ class InlineExecutor:
         return fut
 
 
-def sdp_batch_example1(groups):
-    """All of Example 1 through triangulate_many(path="sdp") at delta = 2, single process: the batched SDP
-    (tritools.sdp_batch) with per-point fallbacks; per N and whole."""
-    paper_s = 0.020        # Table 7: Corollary 1, 0.020 s per point
+def sdp_batch_example1(problems):
+    """All of Example 1 (``problems``: N -> point problems) through triangulate_many(path="sdp") at delta = 2,
+    single process: the batched SDP (tritools.sdp_batch) with per-point fallbacks; per N and whole."""
+    paper_s = PAPER_TABLE7["corollary1"][2]        # Table 7: s per point
     print("\n## triangulate_many(problems, 'corollary1', 2, 2, path='sdp', executor=in-process), per N\n")
     print("| N | #tracks | ms/point | #certified | #per-point fallbacks |")
     print("|---|---|---|---|---|")
-    for N, items in groups.items():
-        probs = [(c, [Point(p) for p in x]) for c, x in items]
+    for N, probs in problems.items():
         t0 = time.perf_counter()
         res = tritools.triangulate_many(probs, "corollary1", 2, 2, path="sdp", executor=InlineExecutor(),
                                         progress=False)
         t = time.perf_counter() - t0
         fb = sum(not (r.attempts and r.attempts[0][-1] == ("ipm-batch:converged",)) for r in res)
-        print(f"| {N} | {len(items)} | {1000 * t / len(items):.3f} | {sum(r.optimal for r in res)} | {fb} |")
-    problems = [(c, [Point(p) for p in x]) for items in groups.values() for c, x in items]
+        print(f"| {N} | {len(probs)} | {1000 * t / len(probs):.3f} | {sum(r.optimal for r in res)} | {fb} |")
+    everything = [p for probs in problems.values() for p in probs]
     t0 = time.perf_counter()
-    res = tritools.triangulate_many(problems, "corollary1", 2, 2, path="sdp", executor=InlineExecutor(),
+    res = tritools.triangulate_many(everything, "corollary1", 2, 2, path="sdp", executor=InlineExecutor(),
                                     progress=False)
     wall = time.perf_counter() - t0
-    n = len(problems)
+    n = len(everything)
     cert = sum(r.optimal for r in res)
     print(f"\nWhole Example 1 in one call: {n} tracks, {wall:.2f} s ({1000 * wall / n:.3f} ms/point, "
           f"{wall / n / paper_s:.3f} x the paper's {paper_s} s/point), {cert} certified "
@@ -192,16 +192,13 @@ def main(argv=None):
                     help="only Example 1 through triangulate_many(path='sdp') (batched delta-2 SDP)")
     args = ap.parse_args(argv)
     groups = load_tracks(args.data_dir)
-    sdp_batch_example1(groups)
+    problems = {N: [(c, [Point(p) for p in x]) for c, x in items] for N, items in groups.items()}
+    sdp_batch_example1(problems)
     if args.sdp_batch_only:
         return
     total = sum(map(len, groups.values()))
     act = paper_act()
-    have_colmap = True
-    try:
-        import pycolmap  # noqa: F401
-    except ImportError:
-        have_colmap = False
+    have_colmap = importlib.util.find_spec("pycolmap") is not None
 
     fast = fast_path_table(groups)
     fast_total = sum(t for _, _, t in fast.values())
@@ -249,9 +246,9 @@ def main(argv=None):
     print(f"\nAll {total} tracks (per-N means x counts): fast {fast_total:.2f} s; " +
           "; ".join(f"{m} {sums[m] / 1000:.1f} s" for m in sums) + " (estimated from the sampled means)")
 
-    problems = [(c, [Point(p) for p in x]) for items in groups.values() for c, x in items]
+    everything = [p for probs in problems.values() for p in probs]
     t0 = time.perf_counter()
-    res = tritools.triangulate_many(problems, "corollary1", path="auto", progress=False)
+    res = tritools.triangulate_many(everything, "corollary1", path="auto", progress=False)
     wall = time.perf_counter() - t0
     by = {}
     for r in res:
@@ -271,7 +268,7 @@ def main(argv=None):
         import tracemalloc
 
         tracemalloc.start()
-        tritools.triangulate_many(problems, "corollary1", path="auto", progress=False)
+        tritools.triangulate_many(everything, "corollary1", path="auto", progress=False)
         _, peak = tracemalloc.get_traced_memory()
         tracemalloc.stop()
         rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024

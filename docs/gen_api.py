@@ -188,8 +188,8 @@ def description_md(desc: str) -> list[str]:
             any(re.fullmatch(r"[=\- ]{3,}", ln.strip()) for ln in lines) or para.lstrip().startswith("|")
         if verbatim:
             out += ["```text", *[ln.rstrip() for ln in lines], "```", ""]
-        elif all(re.match(r"\s*([*-]|\d+\.)\s", ln) or ln.startswith("  ") for ln in lines[:1]) and \
-                len(lines) > 1 and any(re.match(r"\s*([*-]|\d+\.)\s", ln) for ln in lines[1:]):
+        elif (re.match(r"\s*([*-]|\d+\.)\s", lines[0]) or lines[0].startswith("  ")) and \
+                any(re.match(r"\s*([*-]|\d+\.)\s", ln) for ln in lines[1:]):
             out += [_rst_to_md(ln.rstrip()) for ln in lines] + [""]
         else:
             out += [_rst_to_md(" ".join(ln.strip() for ln in lines)), ""]
@@ -202,9 +202,7 @@ def anchor(heading: str) -> str:
 
 
 def _first_line(obj) -> str:
-    doc = own_docstring(obj) if not isinstance(obj, property) else inspect.cleandoc(obj.__doc__ or "")
-    desc = split_sections(doc)[0] if doc else ""
-    first = re.split(r"\n\s*\n", desc)[0] if desc else ""
+    first = re.split(r"\n\s*\n", split_sections(own_docstring(obj))[0])[0]
     return _rst_to_md(" ".join(ln.strip() for ln in first.splitlines()))
 
 
@@ -215,12 +213,12 @@ def class_members(cls) -> list[str]:
         for member in cls:
             out.append(f"- `{member.name}` = `{member.value!r}`")
         return out
-    if dataclasses.is_dataclass(cls):
-        fields = [f for f in dataclasses.fields(cls) if not f.name.startswith("_")]
-        if fields:
-            out.append("- fields: " + ", ".join(f"`{f.name}`" for f in fields))
+    fields = [f.name for f in dataclasses.fields(cls)] if dataclasses.is_dataclass(cls) else []
+    public_fields = [name for name in fields if not name.startswith("_")]
+    if public_fields:
+        out.append("- fields: " + ", ".join(f"`{name}`" for name in public_fields))
     for name, attr in vars(cls).items():
-        if name.startswith("_") or (dataclasses.is_dataclass(cls) and name in {f.name for f in dataclasses.fields(cls)}):
+        if name.startswith("_") or name in fields:
             continue
         if isinstance(attr, property):
             line = f"- `{name}` (property)"

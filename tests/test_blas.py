@@ -18,7 +18,9 @@ def two_blas_threads():
     np.linalg.cholesky(np.eye(3))          # make sure the BLAS library is loaded
     with threadpoolctl.threadpool_limits(2, user_api="blas"):
         before = _blas_threads()
-        assert before and set(before) == {2}, f"numpy's BLAS should be visible and settable: {before}"
+        # several BLAS libraries may be loaded (numpy's, scipy's, a solver's); some ignore the
+        # setting -- at least one at 2 threads is what makes the checks below able to fail
+        assert 2 in before, f"numpy's BLAS should be visible and settable: {before}"
         yield before
 
 

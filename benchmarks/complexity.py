@@ -8,7 +8,7 @@ is :func:`sospoly.n_lmivar_formula` fed with the constraint degrees;
 "assembled" counts the independent scalars of the program actually built by
 :func:`sospoly.build_psatz` (decision variables + tau of the u Gram matrix).
 Theorem 1's N2 is the numerical rank of the minor matrix at
-``tritools.constraints.RANK_RTOL`` on the normalised cameras of a random scene: for
+``tritools.model.constraints.RANK_RTOL`` on the normalised cameras of a random scene: for
 real camera geometry its singular values spread over many decades, so N2 is
 smaller than the generic rank (e.g. 50 for four views) and so is N_LMIVAR.
 Programs whose u Gram matrix has more than ``--max-assemble-pairs`` upper-triangular
@@ -28,8 +28,8 @@ sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
 import sospoly  # noqa: E402
 from sospoly import sigma  # noqa: E402
 from tritools import Point, Segment  # noqa: E402
-from tritools.normalize import normalization_for  # noqa: E402
-from tritools.problem import build_problem  # noqa: E402
+from tritools.model.normalize import normalization_for  # noqa: E402
+from tritools.model.problem import build_problem  # noqa: E402
 from tritools.scene import random_scene  # noqa: E402
 
 

@@ -29,8 +29,8 @@ os.environ["RUST_BACKTRACE"] = "0"
 
 from tritools import Point, Status  # noqa: E402
 from tritools import baselines as B  # noqa: E402
-from tritools.batch import safe_triangulate  # noqa: E402
-from tritools.io import PAPER_SEQUENCES, load_sequence  # noqa: E402
+from tritools.solve.batch import safe_triangulate  # noqa: E402
+from tritools.io.oxford import PAPER_SEQUENCES, load_sequence  # noqa: E402
 
 NONOPT_RTOL = 1e-4      # "non-optimal": gamma > gamma* (1 + NONOPT_RTOL) ...
 NONOPT_ABS = 1e-3       # ... or, second count, gamma > gamma* + 1e-3 px (the paper prints 3 decimals)

@@ -4,13 +4,13 @@
     python benchmarks/speed.py --limit 3       # quick
     python benchmarks/speed.py --full          # every method on all 8956 tracks (naive cvxpy: --cvxpy-limit)
 
-Columns per N (ms per point): the vectorised fast path (tritools.fastpath over *all* tracks
+Columns per N (ms per point): the vectorised fast path (tritools.solve.fastpath over *all* tracks
 of that N), the SDP path (``triangulate(..., path="sdp")``), a naive per-point cvxpy build
 of the same delta = 2 SDP solved by Clarabel, the scipy local methods of tritools.baselines
 (Newton, Nelder-Mead, SQP), DLT, pycolmap's multi-view triangulation when installed, and
 the paper's ACT (Tables 1-6, mean over the sequences weighted by #cases).  Then: the whole
 of Example 1 through ``triangulate_many`` (path auto; and first, path sdp: the batched
-delta = 2 SDP of tritools.sdp_batch, in-process, per N and whole), Theorem 1 at delta = 4 on Example 4
+delta = 2 SDP of tritools.solve.sdp_batch, in-process, per N and whole), Theorem 1 at delta = 4 on Example 4
 (first solve vs later solves) and on Example 5 cases (new data, same structure), and the peak memory
 of a full Example 1 run.
 
@@ -37,8 +37,8 @@ import numpy as np  # noqa: E402
 import tritools  # noqa: E402
 from tritools import Point  # noqa: E402
 from tritools import baselines as B  # noqa: E402
-from tritools.fastpath import verify_points  # noqa: E402
-from tritools.io import PAPER_SEQUENCES, load_sequence  # noqa: E402
+from tritools.solve.fastpath import verify_points  # noqa: E402
+from tritools.io.oxford import PAPER_SEQUENCES, load_sequence  # noqa: E402
 
 from example1 import PAPER, PAPER_TABLE7  # noqa: E402
 
@@ -69,8 +69,8 @@ def naive_cvxpy(cams, pts) -> float:
     import cvxpy as cp
 
     from sospoly.verify import quadratic_parts
-    from tritools.normalize import normalization_for
-    from tritools.problem import build_problem
+    from tritools.model.normalize import normalization_for
+    from tritools.model.problem import build_problem
 
     regions = [Point(p) for p in pts]
     norm = normalization_for(cams, regions)
@@ -157,7 +157,7 @@ class InlineExecutor:
 
 def sdp_batch_example1(problems):
     """All of Example 1 (``problems``: N -> point problems) through triangulate_many(path="sdp") at delta = 2,
-    single process: the batched SDP (tritools.sdp_batch) with per-point fallbacks; per N and whole."""
+    single process: the batched SDP (tritools.solve.sdp_batch) with per-point fallbacks; per N and whole."""
     paper_s = PAPER_TABLE7["corollary1"][2]        # Table 7: s per point
     print("\n## triangulate_many(problems, 'corollary1', 2, 2, path='sdp', executor=in-process), per N\n")
     print("| N | #tracks | ms/point | #certified | #per-point fallbacks |")
@@ -202,7 +202,7 @@ def main(argv=None):
 
     fast = fast_path_table(groups)
     fast_total = sum(t for _, _, t in fast.values())
-    print(f"## Fast path (tritools.fastpath.verify_points, vectorised per N): {total} tracks, "
+    print(f"## Fast path (tritools.solve.fastpath.verify_points, vectorised per N): {total} tracks, "
           f"{sum(c for _, c, _ in fast.values())} certified, {fast_total:.3f} s "
           f"({1000 * fast_total / total:.4f} ms/track; best of 3)\n")
 

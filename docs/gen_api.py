@@ -32,15 +32,16 @@ PACKAGES = ("sospoly", "tritools")
 #: public submodules whose ``__all__`` is documented too (missing ones are skipped).
 SUBMODULES = (
     "sospoly.verify",
-    "tritools.regions",
-    "tritools.geometry",
-    "tritools.constraints",
-    "tritools.batch",
+    "tritools.model.regions",
+    "tritools.model.geometry",
+    "tritools.model.constraints",
+    "tritools.solve.batch",
     "tritools.baselines",
     "tritools.scene",
-    "tritools.io",
+    "tritools.io.oxford",
     "tritools.plot",
-    "tritools.colmap",
+    "tritools.io.colmap",
+    "tritools.sfm",
 )
 #: numpy-docstring sections reproduced verbatim (others, e.g. Examples, are left out).
 KEPT_SECTIONS = ("Parameters", "Returns", "Yields", "Raises", "Attributes")

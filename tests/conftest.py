@@ -10,8 +10,8 @@ import pytest  # noqa: E402
 
 @pytest.fixture(scope="session")
 def oxford_data():
-    """The Oxford data directory (tritools.io.data_dir); skips the test when it is not found."""
-    from tritools.io import DataNotFoundError, data_dir
+    """The Oxford data directory (tritools.io.oxford.data_dir); skips the test when it is not found."""
+    from tritools.io.oxford import DataNotFoundError, data_dir
 
     try:
         return data_dir()
@@ -23,7 +23,7 @@ def oxford_data():
 def corridor_point(oxford_data):
     """(cameras (3, 3, 4), points2d (3, 2)) of the paper's corridor point (track 513, §5.1),
     the one Example 1 track Corollary 1 does not certify at delta = 2; skips without the data."""
-    from tritools.io import load_sequence
+    from tritools.io.oxford import load_sequence
 
     seq = load_sequence("corridor", oxford_data)
     track = seq.tracks[[t.track_id for t in seq.tracks].index(513)]

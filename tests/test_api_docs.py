@@ -17,8 +17,8 @@ REGENERATE = "docs/api.md is out of date: run `python docs/gen_api.py` and commi
 KNOWN_UNDOCUMENTED = {
     "sospoly.Candidate", "sospoly.ConicProblem", "sospoly.GevpResult", "sospoly.GramForm",
     "sospoly.MinimizeResult", "sospoly.Multiplier", "sospoly.Sense", "sospoly.Tolerances",
-    "tritools.Method", "tritools.constraints.Method", "tritools.io.DataNotFoundError",
-    "tritools.io.read_camera", "tritools.io.read_corners", "tritools.io.Sequence",
+    "tritools.Method", "tritools.model.constraints.Method", "tritools.io.oxford.DataNotFoundError",
+    "tritools.io.oxford.read_camera", "tritools.io.oxford.read_corners", "tritools.io.oxford.Sequence",
     "sospoly.verify.Verification",
 }
 

@@ -7,8 +7,8 @@ from scipy import optimize
 from tests.reference.hartley_sturm import hartley_sturm
 from tritools.baselines import (BASELINES, dlt_baseline, nelder_mead, newton, particle_swarm,
                                 point_cost_derivatives, sqp)
-from tritools.geometry import M0, gamma, point_from_image_points
-from tritools.regions import Point
+from tritools.model.geometry import M0, gamma, point_from_image_points
+from tritools.model.regions import Point
 from tritools.result import Status, TriangulationResult
 from tritools.scene import paper_example, paper_table, random_scene
 

@@ -9,7 +9,7 @@ import pytest
 
 import tritools
 from tritools import Point, Status
-from tritools.batch import LOCAL_PROCESS_MIN_ITEMS, _local_executor
+from tritools.solve.batch import LOCAL_PROCESS_MIN_ITEMS, _local_executor
 from tritools.scene import random_scene
 
 
@@ -20,7 +20,7 @@ def _problems(n=6, n_views=3, seed=11):
 
 def _same(a, b, rtol=1e-12):
     # identical inputs through the same deterministic code (Clarabel is deterministic): equal to round-off;
-    # rtol=1e-7 when one side is the batched delta-2 SDP (tritools.sdp_batch: batched IPM vs Clarabel)
+    # rtol=1e-7 when one side is the batched delta-2 SDP (tritools.solve.sdp_batch: batched IPM vs Clarabel)
     assert a.status == b.status and a.certified_by == b.certified_by and a.delta == b.delta
     for name in ("gamma_lb", "gamma_ub"):
         x, y = getattr(a, name), getattr(b, name)

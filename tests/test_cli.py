@@ -1,4 +1,4 @@
-"""The ``tritools`` command line (tritools.cli) and its problem-file schema (tritools.problem_file).
+"""The ``tritools`` command line (tritools.cli.app) and its problem-file schema (tritools.io.problem_file).
 
 References: the paper's Table 10 (Example 4, 3 decimals), scenes built so that every region
 contains the exact projections of a known point (gamma* = 0), and exact error messages.
@@ -13,11 +13,11 @@ import sys
 import numpy as np
 import pytest
 
-from tritools import cli
-from tritools.geometry import image_points
-from tritools.problem_file import (ProblemFileError, parse_problem_text, parse_problems, problem_to_dict,
+from tritools.cli import app as cli
+from tritools.model.geometry import image_points
+from tritools.io.problem_file import (ProblemFileError, parse_problem_text, parse_problems, problem_to_dict,
                                    problems_to_json, result_from_dict, result_to_dict)
-from tritools.regions import Ellipse, EllipseBorder, Point, Polytope, Segment
+from tritools.model.regions import Ellipse, EllipseBorder, Point, Polytope, Segment
 from tritools.scene import paper_example, paper_table, random_scene
 
 #: the paper prints 3 decimals: agreement to half a unit of the last digit (+ float slack).

@@ -12,14 +12,14 @@ import pytest
 from tests.reference.hartley_sturm import hartley_sturm
 from tests.reference.multistart import best_local_gamma
 from tritools import Status
-from tritools.colmap import (CERTIFICATES_FILE, Camera, Image, Model, ModelFormatError, Point3D, SkewError,
-                             UnsupportedCameraModelError, distort, model_from_oxford, model_from_projections,
-                             pixels_from_camera, projection_matrix, qvec_from_rotation, read_certificates,
-                             read_text_model, reprojection_error, retriangulate, rotation_from_qvec, undistort,
-                             undistorted_pixels, write_certificates, write_text_model)
-from tritools.colmap.camera_models import UNDISTORT_TOL_PX
-from tritools.colmap_cli import register
-from tritools.io import load_sequence
+from tritools.io.colmap import (Camera, Image, Model, ModelFormatError, Point3D, SkewError, UnsupportedCameraModelError,
+                                distort, model_from_oxford, model_from_projections, pixels_from_camera,
+                                projection_matrix, qvec_from_rotation, read_text_model, reprojection_error,
+                                rotation_from_qvec, undistort, undistorted_pixels, write_text_model)
+from tritools.sfm import CERTIFICATES_FILE, read_certificates, retriangulate, write_certificates
+from tritools.io.colmap.camera_models import UNDISTORT_TOL_PX
+from tritools.cli.colmap import register
+from tritools.io.oxford import load_sequence
 
 #: one camera per supported model (f ~ 800 px, 640 x 480 images, realistic distortion).
 CAMERAS = {

@@ -10,10 +10,10 @@ import pytest
 
 import sospoly
 from sospoly import SolveStatus
-from tritools.normalize import normalization_for
-from tritools.problem import build_problem
+from tritools.model.normalize import normalization_for
+from tritools.model.problem import build_problem
 from tritools.scene import paper_example, paper_table, random_scene
-from tritools.triangulate import STRUCTURE_CACHE, triangulate
+from tritools.solve.triangulate import STRUCTURE_CACHE, triangulate
 
 RTOL_C = 1e-7
 

@@ -15,8 +15,8 @@ import pytest
 
 import tritools
 from tests.reference.multistart import best_local_gamma
-from tritools.geometry import gamma as gamma_of
-from tritools.normalize import normalization_for
+from tritools.model.geometry import gamma as gamma_of
+from tritools.model.normalize import normalization_for
 from tritools.scene import example5_cases
 
 

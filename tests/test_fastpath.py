@@ -1,7 +1,7 @@
-"""The vectorised certification by verification (tritools.fastpath, sospoly.verify batch).
+"""The vectorised certification by verification (tritools.solve.fastpath, sospoly.verify batch).
 
 References: closed forms (a circle), the single-program verify_quadratic, Hartley-Sturm's
-exact two-view optimum (tests/reference), and the delta = 2 SDP path of tritools.triangulate.
+exact two-view optimum (tests/reference), and the delta = 2 SDP path of tritools.solve.triangulate.
 """
 from __future__ import annotations
 
@@ -13,7 +13,7 @@ import tritools
 from sospoly.verify import quadratic_parts, verify_quadratic, verify_quadratic_batch
 from tests.reference.hartley_sturm import hartley_sturm
 from tritools import Point, Status
-from tritools.fastpath import fast_results, verify_points
+from tritools.solve.fastpath import fast_results, verify_points
 from tritools.scene import random_scene
 
 # gamma agreement between two certified answers: both are within the certificate tolerance
@@ -135,7 +135,7 @@ def test_degenerate_problems_are_not_certified():
 
 
 def _oxford_subset(data, per_sequence):
-    from tritools.io import PAPER_SEQUENCES, load_sequence
+    from tritools.io.oxford import PAPER_SEQUENCES, load_sequence
 
     out = []
     for seq in (load_sequence(name, data) for name in PAPER_SEQUENCES):
@@ -173,8 +173,8 @@ def test_vectorised_scale_is_normalization_for_scale():
 
     Example 5 cases at large theta are where the two differ by up to two decades; the two LM
     implementations stop at slightly different points, hence 1e-3 relative (vs up to 100x)."""
-    from tritools.fastpath import _normalise
-    from tritools.normalize import normalization_for
+    from tritools.solve.fastpath import _normalise
+    from tritools.model.normalize import normalization_for
     from tritools.scene import example5_cases
 
     cases = example5_cases(0, n_points=3, thetas=(0.15, 0.2), trials=2)

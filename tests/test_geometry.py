@@ -1,13 +1,13 @@
-"""Tests of tritools.geometry: projection, validation, DLT, M0, fundamental matrices
+"""Tests of tritools.model.geometry: projection, validation, DLT, M0, fundamental matrices
 and gamma against the paper's tables (SPEC §1, §3, §6, §7, §10)."""
 import numpy as np
 import pytest
 
 from tests.reference.hartley_sturm import fundamental_from_determinant
-from tritools.geometry import (M0, PointAtInfinityError, camera_center, depths, dlt, fundamental_matrices,
+from tritools.model.geometry import (M0, PointAtInfinityError, camera_center, depths, dlt, fundamental_matrices,
                                fundamental_matrix, gamma, image_points, point_from_image_points, project,
                                validate_cameras)
-from tritools.regions import EllipseBorder, Point, Segment
+from tritools.model.regions import EllipseBorder, Point, Segment
 from tritools.scene import paper_example, paper_table, random_scene
 
 RNG = np.random.default_rng(7)

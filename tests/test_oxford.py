@@ -12,8 +12,8 @@ import pytest
 
 import tritools
 from tritools import Point, Status
-from tritools.batch import triangulate_many
-from tritools.io import DataNotFoundError, load_sequence, read_nview_corners
+from tritools.solve.batch import triangulate_many
+from tritools.io.oxford import DataNotFoundError, load_sequence, read_nview_corners
 from tritools.scene import random_scene
 
 needs_data = pytest.mark.usefixtures("oxford_data")         # tests/conftest.py: skips without the data

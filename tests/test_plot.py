@@ -1,8 +1,8 @@
-"""tritools.plot / tritools.plot_cli: Figure 3 and the dataset summary.
+"""tritools.plot / tritools.cli.plot: Figure 3 and the dataset summary.
 
 The figures are inspected through the artists' gids (``region-i``, ``center-i``,
 ``projection-i``, ``closest-i``, ``residual-i``, ``image-point-i``): what is drawn must be
-``Phi(X, P_i)`` (tritools.geometry.project) and ``R_i.closest_point`` of it, and the
+``Phi(X, P_i)`` (tritools.model.geometry.project) and ``R_i.closest_point`` of it, and the
 dashed residuals must reproduce the certified ``gamma_UB`` (paper eq. (6)).
 """
 import argparse
@@ -21,12 +21,12 @@ from matplotlib.lines import Line2D  # noqa: E402
 from matplotlib.patches import Patch  # noqa: E402
 
 from tritools import plot as tplot  # noqa: E402
-from tritools import plot_cli  # noqa: E402
-from tritools.geometry import gamma, project  # noqa: E402
-from tritools.regions import Ellipse, EllipseBorder, Point, Polytope, Segment  # noqa: E402
+from tritools.cli import plot as plot_cli  # noqa: E402
+from tritools.model.geometry import gamma, project  # noqa: E402
+from tritools.model.regions import Ellipse, EllipseBorder, Point, Polytope, Segment  # noqa: E402
 from tritools.result import TriangulationResult  # noqa: E402
 from tritools.scene import paper_example  # noqa: E402
-from tritools.triangulate import triangulate  # noqa: E402
+from tritools.solve.triangulate import triangulate  # noqa: E402
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 # Plotted coordinates are the very floats computed by project/closest_point (matplotlib stores them
@@ -322,7 +322,7 @@ def run_cli(argv):
 def test_cli_figure3_one_command(solved, tmp_path, capsys, monkeypatch):
     # The handler solves with the paper's setting (Theorem 1, delta = 4); the solve itself is the
     # shared certified one, so the test checks the command's wiring without a second SDP.
-    ttri = sys.modules["tritools.triangulate"]      # the package re-exports a function of the same name
+    ttri = sys.modules["tritools.solve.triangulate"]      # the package re-exports a function of the same name
     calls = []
 
     def cached(cams, regions, method, delta=None, **kw):
@@ -355,7 +355,7 @@ def test_cli_plot_dataset(oxford_data, tmp_path, capsys):
 
 
 def test_cli_registers_the_plot_commands():
-    cli = pytest.importorskip("tritools.cli", reason="tritools.cli (the CLI helper's module) not present")
-    assert "tritools.plot_cli" in cli.SUBCOMMAND_MODULES
+    cli = pytest.importorskip("tritools.cli.app", reason="tritools.cli.app (the CLI helper's module) not present")
+    assert "tritools.cli.plot" in cli.SUBCOMMAND_MODULES
     choices = next(a for a in cli.build_parser()._actions if isinstance(a, argparse._SubParsersAction)).choices
     assert {"figure3", "plot-dataset"} <= set(choices)

@@ -1,4 +1,4 @@
-"""Tests of tritools.regions: exact distances vs brute force, polynomial descriptions
+"""Tests of tritools.model.regions: exact distances vs brute force, polynomial descriptions
 (SPEC §2), similarity invariance, serialisation and input validation."""
 import json
 
@@ -7,7 +7,7 @@ import pytest
 from scipy.spatial import HalfspaceIntersection
 
 from sospoly.polynomial import variables
-from tritools.regions import (Ellipse, EllipseBorder, Point, Polytope, Region, RegionPolynomials, Segment,
+from tritools.model.regions import (Ellipse, EllipseBorder, Point, Polytope, Region, RegionPolynomials, Segment,
                               as_region, as_regions)
 
 RNG = np.random.default_rng(12345)

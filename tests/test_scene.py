@@ -5,8 +5,8 @@ import json
 import numpy as np
 import pytest
 
-from tritools.geometry import camera_center, depths, gamma, image_points
-from tritools.regions import EllipseBorder, Point, Segment
+from tritools.model.geometry import camera_center, depths, gamma, image_points
+from tritools.model.regions import EllipseBorder, Point, Segment
 from tritools.scene import (EXAMPLE5_MIN_DEPTH, SyntheticScene, example5_cameras, example5_cases, paper_data,
                             paper_example, paper_table, random_cameras, random_scene)
 

@@ -1,4 +1,4 @@
-"""The batched Corollary 1 delta = 2 SDP path (tritools.sdp_batch) against the per-point SDP path.
+"""The batched Corollary 1 delta = 2 SDP path (tritools.solve.sdp_batch) against the per-point SDP path.
 
 References: ``triangulate(..., "corollary1", 2, 2, path="sdp")`` per point (Clarabel on the
 polynomial route), the compiled structure's ``theta`` of the polynomial route, and the paper's
@@ -11,12 +11,12 @@ import pytest
 
 import tritools
 from tritools import Point, Status
-from tritools.batch import triangulate_many
-from tritools.fastpath import _epipolar_data
-from tritools.io import load_sequence
-from tritools.problem import build_problem
+from tritools.solve.batch import triangulate_many
+from tritools.solve.fastpath import _epipolar_data
+from tritools.io.oxford import load_sequence
+from tritools.model.problem import build_problem
 from tritools.scene import random_scene
-from tritools.sdp_batch import _fundamentals, corollary1_structure, corollary1_thetas, solve_corollary1_points
+from tritools.solve.sdp_batch import _fundamentals, corollary1_structure, corollary1_thetas, solve_corollary1_points
 
 # c = 2N (s gamma)^2 is O(1) in the normalised units; both solvers stop at 1e-9 gaps, but on the flat
 # multiplier faces of N >= 4 the two answers were seen to differ by up to 7.5e-7 on Oxford tracks;
@@ -61,7 +61,7 @@ def test_theta_equals_polynomial_route():
     the sign of each F_ij is arbitrary (SPEC §7: only its zero set matters), so it is aligned first."""
     scene = random_scene(4, 3, noise_px=1.0, seed=7)
     for m in range(3):
-        norm = tritools.normalize.normalization_for(scene.cameras, scene.regions(m))
+        norm = tritools.model.normalize.normalization_for(scene.cameras, scene.regions(m))
         cams_n, regs_n = norm.cameras(scene.cameras), norm.regions(scene.regions(m))
         pb = build_problem(cams_n, regs_n, "corollary1")
         cs = corollary1_structure(4)

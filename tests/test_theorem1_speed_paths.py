@@ -2,7 +2,7 @@
 
 * the reduced moment-form IPM of :func:`sospoly.ipm.ipm_solve_sparse` (disjoint-support
   Schur complement) against the dense formula tr(A_a Z A_b S^-1) and against Clarabel;
-* the batched-determinant minors of :mod:`tritools.constraints` against exact polynomial
+* the batched-determinant minors of :mod:`tritools.model.constraints` against exact polynomial
   determinants (:func:`sospoly.det`);
 * the paper's Example 4 value and Example 5 cases against Clarabel.
 
@@ -20,10 +20,10 @@ import tritools
 from sospoly.backends import RawStatus
 from sospoly.ipm import _MomentReduction, _SparseSchur, _ipm, _reduction_for, ipm_solve_sparse, layout_of
 from sospoly.svec import smat
-from tritools.constraints import minors_matrix, theorem1_constraints
-from tritools.normalize import normalization_for
-from tritools.problem import build_problem
-from tritools.triangulate import _compiled_for
+from tritools.model.constraints import minors_matrix, theorem1_constraints
+from tritools.model.normalize import normalization_for
+from tritools.model.problem import build_problem
+from tritools.solve.triangulate import _compiled_for
 
 TOL_C = 1e-7
 

@@ -14,10 +14,10 @@ import pytest
 
 import tritools
 from tritools import Ellipse, EllipseBorder, Point, Polytope, Segment, Status
-from tritools.geometry import gamma as gamma_of
+from tritools.model.geometry import gamma as gamma_of
 from sospoly import DEFAULT_TOLERANCES
-from tritools.normalize import normalization_for
-from tritools.regions import Region
+from tritools.model.normalize import normalization_for
+from tritools.model.regions import Region
 from tritools.scene import random_scene
 
 PAPER = json.loads(resources.files("tritools").joinpath("data/paper_examples.json").read_text())
@@ -221,7 +221,7 @@ def test_lower_bound_above_upper_bound_is_never_a_certificate(monkeypatch):
 
     import sospoly
 
-    T = importlib.import_module("tritools.triangulate")   # the module (the package exports a function of that name)
+    T = importlib.import_module("tritools.solve.triangulate")   # the module (the package exports a function of that name)
 
     real = sospoly.solve_psatz
 

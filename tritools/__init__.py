@@ -10,13 +10,13 @@ imports a solver.
 >>> res = tritools.triangulate(cams, regions, "theorem1", delta=4)   # doctest: +SKIP
 >>> res.X, res.gamma_lb, res.gamma_ub, res.optimal          # doctest: +SKIP
 """
-from .batch import triangulate_many
-from .constraints import Method
-from .geometry import dlt, fundamental_matrix, gamma, project, validate_cameras
-from .regions import Ellipse, EllipseBorder, Point, Polytope, Region, Segment
+from .solve.batch import triangulate_many
+from .model.constraints import Method
+from .model.geometry import dlt, fundamental_matrix, gamma, project, validate_cameras
+from .model.regions import Ellipse, EllipseBorder, Point, Polytope, Region, Segment
 from .result import Status, TriangulationResult
 from .scene import paper_example
-from .triangulate import triangulate
+from .solve.triangulate import triangulate
 
 __version__ = "0.1.0"
 

@@ -26,8 +26,8 @@ from typing import Callable
 import numpy as np
 from scipy import optimize
 
-from .geometry import PointAtInfinityError, _gamma_unchecked, _project, dlt, point_from_image_points, validate_cameras
-from .regions import Point, as_regions, positive_number
+from .model.geometry import PointAtInfinityError, _gamma_unchecked, _project, dlt, point_from_image_points, validate_cameras
+from .model.regions import Point, as_regions, positive_number
 from .result import Status, TriangulationResult
 
 __all__ = [

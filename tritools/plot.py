@@ -25,9 +25,9 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from .geometry import image_points as _image_points
-from .geometry import validate_cameras
-from .regions import Ellipse, EllipseBorder, Point, Polytope, Region, Segment, as_regions
+from .model.geometry import image_points as _image_points
+from .model.geometry import validate_cameras
+from .model.regions import Ellipse, EllipseBorder, Point, Polytope, Region, Segment, as_regions
 from .result import Status, TriangulationResult
 
 __all__ = ["figure3", "draw_region", "dataset_summary", "save_figure3_examples", "view_color",
@@ -297,7 +297,7 @@ def save_figure3_examples(out_dir, examples: Sequence[int] = (2, 3, 4), *, metho
         The written files, in the order of ``examples``.
     """
     from .scene import paper_example
-    from .triangulate import triangulate
+    from .solve.triangulate import triangulate
 
     _matplotlib()
     examples = [int(k) for k in examples]

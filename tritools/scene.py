@@ -17,8 +17,8 @@ from typing import Any
 
 import numpy as np
 
-from .geometry import depths, image_points, validate_cameras
-from .regions import Point, Region
+from .model.geometry import depths, image_points, validate_cameras
+from .model.regions import Point, Region
 
 __all__ = [
     "SyntheticScene", "Example5Case", "random_cameras", "random_scene", "example5_cases",

@@ -42,10 +42,10 @@ import numpy as np
 
 from sospoly import DEFAULT_TOLERANCES
 
-from .constraints import Method
+from ..model.constraints import Method
 from .fastpath import fast_results
-from .regions import Point
-from .result import Status, TriangulationResult
+from ..model.regions import Point
+from ..result import Status, TriangulationResult
 from .sdp_batch import sdp_results
 from .triangulate import SolvePath, triangulate
 

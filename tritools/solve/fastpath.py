@@ -37,10 +37,10 @@ from sospoly import DEFAULT_TOLERANCES, Tolerances, n_lmivar_formula
 from sospoly.verify import verify_quadratic_batch
 from sospoly.blas import with_single_threaded_blas
 
-from .geometry import (POINT_AT_INFINITY_RTOL, PROJECTION_DENOM_RTOL, SAME_CAMERA_RTOL,
+from ..model.geometry import (POINT_AT_INFINITY_RTOL, PROJECTION_DENOM_RTOL, SAME_CAMERA_RTOL,
                        SAME_CENTER_RTOL)
-from .normalize import RHO_FLOOR_REL, SCALE_BOUNDS
-from .result import Status, TriangulationResult
+from ..model.normalize import RHO_FLOOR_REL, SCALE_BOUNDS
+from ..result import Status, TriangulationResult
 
 __all__ = ["FastPathBatch", "verify_points", "fast_results", "LM_MAX_ITER", "LM_STEP_RTOL", "FAST_RANK_RTOL"]
 

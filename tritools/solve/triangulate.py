@@ -36,13 +36,13 @@ from sospoly import DEFAULT_TOLERANCES, GramForm, Multiplier, SolveStatus, Toler
 from sospoly.extraction import best_in_family, kernel_family
 from sospoly.verify import verify_quadratic
 
-from .constraints import Method
-from .geometry import dlt, gamma as gamma_of, point_from_image_points, project, refine_l2, validate_cameras
-from .normalize import Normalization, normalization_for
-from .problem import TriangulationProblem, build_problem
+from ..model.constraints import Method
+from ..model.geometry import dlt, gamma as gamma_of, point_from_image_points, project, refine_l2, validate_cameras
+from ..model.normalize import Normalization, normalization_for
+from ..model.problem import TriangulationProblem, build_problem
 from .fastpath import fast_results
-from .regions import Point, Region
-from .result import Status, TriangulationResult
+from ..model.regions import Point, Region
+from ..result import Status, TriangulationResult
 
 __all__ = ["triangulate", "validate_regions", "refine_l2", "MAX_FAMILY_DIM", "SolvePath", "STRUCTURE_CACHE"]
 

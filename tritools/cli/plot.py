@@ -19,9 +19,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .cli import METHODS, add_data_dir_option, add_solver_options, exit_invalid
-from .constraints import Method
-from .triangulate import SolvePath
+from .app import METHODS, add_data_dir_option, add_solver_options, exit_invalid
+from ..model.constraints import Method
+from ..solve.triangulate import SolvePath
 
 __all__ = ["register", "run_figure3", "run_plot_dataset"]
 
@@ -33,7 +33,7 @@ def run_figure3(args) -> int:
     """Handler of ``tritools figure3``."""
     os.environ.setdefault("RUST_BACKTRACE", "0")
     try:
-        from .plot import save_figure3_examples
+        from ..plot import save_figure3_examples
 
         paths = save_figure3_examples(args.out, args.examples, method=args.method, delta=args.delta)
     except (ImportError, ValueError, OSError) as exc:
@@ -53,14 +53,14 @@ def _select_tracks(tracks, limit: int, seed: int):
 def run_plot_dataset(args) -> int:
     """Handler of ``tritools plot-dataset``."""
     os.environ.setdefault("RUST_BACKTRACE", "0")
-    from .batch import triangulate_many
-    from .io import DataNotFoundError, load_sequence
-    from .regions import Point
+    from ..solve.batch import triangulate_many
+    from ..io.oxford import DataNotFoundError, load_sequence
+    from ..model.regions import Point
 
     if args.limit < 0:
         return exit_invalid(f"--limit must be >= 0, got {args.limit}")
     try:
-        from .plot import _matplotlib
+        from ..plot import _matplotlib
 
         _matplotlib()
         seq = load_sequence(args.name, args.data_dir)
@@ -73,7 +73,7 @@ def run_plot_dataset(args) -> int:
         problems.append((cams, [Point(x) for x in pts]))
     results = triangulate_many(problems, args.method, args.delta, args.max_delta, path=args.path,
                                progress=args.progress)
-    from .plot import dataset_summary
+    from ..plot import dataset_summary
 
     fig = dataset_summary(results, [t.n_views for t in tracks],
                           title=f"{seq.name}: {len(tracks)} of {len(seq.tracks)} tracks, {args.method}"
@@ -115,6 +115,6 @@ def register(subparsers) -> None:
 
 
 if __name__ == "__main__":  # pragma: no cover - the whole command line, these subcommands included
-    from .cli import main
+    from .app import main
 
     sys.exit(main())

@@ -16,15 +16,15 @@ import json
 import shutil
 from pathlib import Path
 
-from .cli import add_data_dir_option, add_solver_options, exit_invalid
-from .problem_file import jsonable
+from .app import add_data_dir_option, add_solver_options, exit_invalid
+from ..io.problem_file import jsonable
 
 __all__ = ["register", "run_colmap", "run_from_oxford"]
 
 
 def register(subparsers) -> None:
-    from .constraints import Method
-    from .triangulate import SolvePath
+    from ..model.constraints import Method
+    from ..solve.triangulate import SolvePath
 
     p = subparsers.add_parser("colmap", help="certified re-triangulation of a COLMAP text model",
                               description="Read IN_DIR/{cameras,images,points3D}.txt, re-triangulate every 3D "
@@ -45,7 +45,8 @@ def register(subparsers) -> None:
 
 
 def run_colmap(args) -> int:
-    from .colmap import read_text_model, retriangulate, write_certificates, write_text_model
+    from ..io.colmap import read_text_model, write_text_model
+    from ..sfm import retriangulate, write_certificates
 
     try:
         model = read_text_model(args.in_dir)
@@ -81,8 +82,8 @@ def run_colmap(args) -> int:
 
 
 def run_from_oxford(args) -> int:
-    from .colmap import model_from_oxford, write_text_model
-    from .io import DataNotFoundError
+    from ..io.colmap import model_from_oxford, write_text_model
+    from ..io.oxford import DataNotFoundError
 
     if args.max_tracks is not None and args.max_tracks < 1:
         return exit_invalid(f"--max-tracks must be >= 1, got {args.max_tracks}")

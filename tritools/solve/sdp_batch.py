@@ -42,8 +42,8 @@ from sospoly import DEFAULT_TOLERANCES, GramForm, Multiplier, Polynomial, Tolera
 from sospoly.blas import with_single_threaded_blas
 
 from .fastpath import _epipolar_data, _normalise, _project_stack, _refine_stack, _stack
-from .geometry import POINT_AT_INFINITY_RTOL
-from .result import Status, TriangulationResult
+from ..model.geometry import POINT_AT_INFINITY_RTOL
+from ..result import Status, TriangulationResult
 
 __all__ = ["SdpBatch", "corollary1_structure", "corollary1_thetas", "solve_corollary1_points",
            "sdp_results", "SDP_CHUNK_BYTES"]

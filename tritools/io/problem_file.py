@@ -39,10 +39,10 @@ from typing import Any, Iterable
 
 import numpy as np
 
-from .constraints import Method
-from .regions import Point, Region
-from .result import Status, TriangulationResult
-from .triangulate import SolvePath
+from ..model.constraints import Method
+from ..model.regions import Point, Region
+from ..result import Status, TriangulationResult
+from ..solve.triangulate import SolvePath
 
 __all__ = ["ProblemFileError", "ProblemSpec", "PROBLEM_FIELDS", "region_types", "parse_problems",
            "parse_problem_text", "load_problem_file", "problem_to_dict", "problems_to_json",

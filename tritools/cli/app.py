@@ -30,17 +30,17 @@ from typing import Sequence
 
 import numpy as np
 
-from .constraints import Method
-from .problem_file import (ProblemFileError, ProblemSpec, jsonable, load_problem_file, parse_problem_text,
+from ..model.constraints import Method
+from ..io.problem_file import (ProblemFileError, ProblemSpec, jsonable, load_problem_file, parse_problem_text,
                            result_to_dict)
-from .result import Status, TriangulationResult
-from .triangulate import SolvePath
+from ..result import Status, TriangulationResult
+from ..solve.triangulate import SolvePath
 
 __all__ = ["main", "build_parser", "CLIError", "exit_invalid", "add_solver_options", "add_data_dir_option",
            "SUBCOMMAND_MODULES", "solve_problems", "format_table", "EXIT_OK", "EXIT_INTERNAL", "EXIT_INVALID"]
 
 #: modules adding subcommands through ``register(subparsers)``; skipped while they do not exist.
-SUBCOMMAND_MODULES = ("tritools.colmap_cli", "tritools.plot_cli")
+SUBCOMMAND_MODULES = ("tritools.cli.colmap", "tritools.cli.plot")
 EXIT_OK, EXIT_INTERNAL, EXIT_INVALID = 0, 1, 2
 #: set to 1 to get the traceback of an internal error instead of the one-line message.
 DEBUG_ENV = "TRITOOLS_DEBUG"
@@ -129,7 +129,7 @@ def solve_problems(specs: Sequence[ProblemSpec], method=Method.THEOREM1, delta=N
     sharing the same settings go through one batch call.  ``path=None`` keeps the library's
     default.  A failing problem gets a result with a status and a message.
     """
-    from .batch import triangulate_many
+    from ..solve.batch import triangulate_many
 
     groups: dict[tuple, list[int]] = defaultdict(list)
     for i, s in enumerate(specs):
@@ -182,8 +182,8 @@ def _cmd_solve(args) -> int:
 
 # ----------------------------------------------------------------------------- example
 def _example_paper(args) -> int:
-    from .scene import paper_example, paper_table
-    from .triangulate import triangulate
+    from ..scene import paper_example, paper_table
+    from ..solve.triangulate import triangulate
 
     cams, regions = paper_example(args.k)
     paper = {(r["method"], r.get("delta")): r for r in paper_table(args.k)}
@@ -213,7 +213,7 @@ def _example_paper(args) -> int:
 
 
 def _example5(args) -> int:
-    from .scene import example5_cases
+    from ..scene import example5_cases
 
     for name in ("points", "trials"):
         if getattr(args, name) < 1:
@@ -268,8 +268,8 @@ def _summary_row(rs: list[TriangulationResult]) -> dict:
 
 
 def _cmd_dataset(args) -> int:
-    from .io import DATA_ENV, DataNotFoundError, load_sequence
-    from .regions import Point
+    from ..io.oxford import DATA_ENV, DataNotFoundError, load_sequence
+    from ..model.regions import Point
 
     if args.limit is not None and args.limit < 1:
         raise CLIError(f"dataset: --limit must be a positive integer, got {args.limit}")

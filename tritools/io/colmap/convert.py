@@ -18,10 +18,10 @@ import math
 
 import numpy as np
 
-from ..baselines import decompose_camera
-from ..geometry import PointAtInfinityError, dlt, validate_cameras
+from ...baselines import decompose_camera
+from ...model.geometry import PointAtInfinityError, dlt, validate_cameras
 from .model import Camera, Image, Model, Point3D, qvec_from_rotation
-from .retriangulate import reprojection_error
+from .projection import reprojection_error
 
 __all__ = ["MAX_SKEW_PX", "SkewError", "model_from_projections", "model_from_oxford"]
 
@@ -102,7 +102,7 @@ def model_from_oxford(name: str, data_dir=None, max_tracks: int | None = None, m
     containing all of its corners (``ceil(max x) + 1``, ``ceil(max y) + 1``).  Image names
     are ``<name>_<view>.png``.  ``max_tracks`` keeps the first tracks only.
     """
-    from ..io import load_sequence
+    from ..oxford import load_sequence
 
     seq = load_sequence(name, data_dir, min_views=min_views)
     tracks = seq.tracks if max_tracks is None else seq.tracks[:int(max_tracks)]

@@ -33,17 +33,18 @@ from pathlib import Path
 
 import numpy as np
 
-from ..batch import triangulate_many
-from ..geometry import gamma as gamma_of
-from ..regions import Point
+from ..solve.batch import triangulate_many
+from ..model.geometry import gamma as gamma_of
+from ..model.regions import Point
 from ..result import Status
-from ..triangulate import SolvePath
-from ..constraints import Method
-from .camera_models import camera_model, intrinsics, pixels_from_camera, undistorted_pixels
-from .model import Model, ModelFormatError, Point3D
+from ..solve.triangulate import SolvePath
+from ..model.constraints import Method
+from ..io.colmap.camera_models import camera_model, undistorted_pixels
+from ..io.colmap.model import Model, ModelFormatError, Point3D
+from ..io.colmap.projection import projection_matrix, reprojection_error
 
-__all__ = ["PointCertificate", "RetriangulationReport", "retriangulate", "projection_matrix",
-           "reprojection_error", "write_certificates", "read_certificates", "CERTIFICATES_FILE"]
+__all__ = ["PointCertificate", "RetriangulationReport", "retriangulate", "write_certificates",
+           "read_certificates", "CERTIFICATES_FILE"]
 
 CERTIFICATES_FILE = "points3D_certificates.txt"
 _HEADER = ("# Certified re-triangulation (tritools, Chesi 2026) of points3D.txt, one line per point:\n"
@@ -103,25 +104,6 @@ class RetriangulationReport:
         for r in self.records:
             out[r.status.value] = out.get(r.status.value, 0) + 1
         return dict(sorted(out.items()))
-
-
-def projection_matrix(model: Model, image_id: int) -> np.ndarray:
-    """P = K [R | t] of an image (pinhole part of its camera; see camera_models)."""
-    im = model.images[image_id]
-    cam = model.cameras[im.camera_id]
-    return intrinsics(cam.model, cam.params) @ im.cam_from_world
-
-
-def reprojection_error(model: Model, xyz, track) -> float:
-    """COLMAP's error: mean over the track of |pi_i(X) - x_i| (pixels, full camera model)."""
-    errs = []
-    for image_id, idx in track:
-        im = model.images[image_id]
-        cam = model.cameras[im.camera_id]
-        Xc = im.cam_from_world @ np.append(np.asarray(xyz, float), 1.0)
-        x = pixels_from_camera(cam.model, cam.params, Xc)[0]
-        errs.append(float(np.hypot(*(x - np.array(im.points2D[idx][:2])))))
-    return float(np.mean(errs)) if errs else 0.0
 
 
 def _problem(model: Model, point: Point3D):

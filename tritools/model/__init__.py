@@ -1,0 +1,1 @@
+"""tritools.model."""

@@ -74,7 +74,7 @@ def main(argv=None):
                     r = row(N, method, delta, unc, args)
                     if r is None:
                         print(f"| {N} | {method} | {delta} | {'1 segment' if unc else 'points'} | | | | | | "
-                              f"minor matrix C(2N,4) = {sospoly.basis.comb(2 * N, 4)} rows: not computed |")
+                              f"minor matrix C(2N,4) = {sospoly.algebra.basis.comb(2 * N, 4)} rows: not computed |")
                         continue
                     if "formula" not in r:
                         print(f"| {N} | {method} | {delta} | {'1 segment' if unc else 'points'} | {r['nv']} | | | | | {r['note']} |")

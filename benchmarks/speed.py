@@ -68,7 +68,7 @@ def naive_cvxpy(cams, pts) -> float:
     max c s.t. [[L0 - c, L1'/2], [L1/2, L2]] PSD, L = f + sum_k lambda_k g_k (normalised data)."""
     import cvxpy as cp
 
-    from sospoly.verify import quadratic_parts
+    from sospoly.analysis.verify import quadratic_parts
     from tritools.model.normalize import normalization_for
     from tritools.model.problem import build_problem
 

@@ -31,7 +31,7 @@ OUT = ROOT / "docs" / "api.md"
 PACKAGES = ("sospoly", "tritools")
 #: public submodules whose ``__all__`` is documented too (missing ones are skipped).
 SUBMODULES = (
-    "sospoly.verify",
+    "sospoly.analysis.verify",
     "tritools.model.regions",
     "tritools.model.geometry",
     "tritools.model.constraints",

@@ -21,13 +21,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .conic import GramForm
-from .extraction import Candidate, extract_from_gram, extract_from_moment
-from .gevp import CompiledGevp, GevpResult, bisect
-from .polynomial import Polynomial
-from .program import SOSProgram
-from .psatz import Multiplier, PsatzProblem, build_psatz
-from .solve import ProgramSolution, solve_program
+from .lowering.conic import GramForm
+from .analysis.extraction import Candidate, extract_from_gram, extract_from_moment
+from .solvers.gevp import CompiledGevp, GevpResult, bisect
+from .algebra.polynomial import Polynomial
+from .certificates.program import SOSProgram
+from .certificates.psatz import Multiplier, PsatzProblem, build_psatz
+from .solvers.solve import ProgramSolution, solve_program
 from .status import SolveStatus
 from .tolerances import DEFAULT_TOLERANCES, Tolerances
 
@@ -149,10 +149,10 @@ def solve_psatz(psatz: PsatzProblem, *, backend=None, form: GramForm = GramForm.
 
     For the free multiplier the bracket starts from the fixed-q SDP's c* (solved here
     unless ``fixed_hint`` gives it) and from ``c_hi`` (f at a feasible point), if known.
-    ``psatz`` may also be a :class:`sospoly.compiled.CompiledInstance` (a compiled structure
+    ``psatz`` may also be a :class:`sospoly.lowering.compiled.CompiledInstance` (a compiled structure
     filled with one instance's numbers): then only its conic data is solved.
     """
-    from .compiled import CompiledInstance
+    from .lowering.compiled import CompiledInstance
 
     if isinstance(psatz, CompiledInstance):
         return psatz.compiled.solve_theta(psatz.theta, backend=backend, tolerances=tolerances, problem=psatz.problem)

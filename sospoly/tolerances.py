@@ -16,7 +16,7 @@ Why these values
   "optimal but infeasible" answers seen on near-degenerate problems (Motzkin at
   degree 10) have eigenvalues around -1e-5 and are rejected.
 * ``gevp_psd_margin``: the stricter margin for accepting a bisection level of the
-  GEVP (see :mod:`sospoly.gevp`): above the optimum c*, lambda_min(G_u) is about
+  GEVP (see :mod:`sospoly.solvers.gevp`): above the optimum c*, lambda_min(G_u) is about
   -(c - c*)/2, so the general margin would let accepted levels creep ~1e-7 above c*.
 * ``identity_residual``: maximal coefficient mismatch (relative to the largest
   coefficient of the polynomial) between u(v) and b(v)^T G b(v) for a certificate
@@ -36,7 +36,7 @@ Why these values
   are treated as zero when extracting minimisers (and moment-matrix eigenvalues
   above ``moment_rank_rel * lambda_max`` count toward the rank).
 * ``ipm_max_iter`` / ``ipm_step_fraction`` / ``ipm_divergence``: the batched
-  interior-point solver (:mod:`sospoly.ipm`) stops after ``ipm_max_iter`` iterations
+  interior-point solver (:mod:`sospoly.solvers.ipm`) stops after ``ipm_max_iter`` iterations
   (Mehrotra's method needs 10-25 on the well-scaled programs of the hot path, so 60
   only ends runs that will not converge), moves ``ipm_step_fraction`` of the way to
   the cone boundary, and declares divergence (a likely infeasible or unbounded
@@ -48,13 +48,13 @@ Why these values
   accuracy at which the PSD margin of the a-posteriori check separates certificates.
 * ``ipm_flat_face_dual_residual_gap``: the ``ipm_dual_residual_gap`` used for programs
   whose optimal multipliers form a long flat face (the batched Corollary 1 delta = 2
-  path, :mod:`tritools.sdp_batch`): with N >= 4 views the epipolar constraints are
+  path, :mod:`tritools.solve.sdp_batch`): with N >= 4 views the epipolar constraints are
   linearly dependent at v*, |r| ~ 1e3-1e5 at the face's analytic centre, and r_D^T x
   stalls at ~1e-7 relative while the complementarity part of the gap is ~1e-12.  On the
   Oxford instances that stalled under 1e-8 the accepted c* agrees with Clarabel's to
   <= 1.4e-9 (normalised c units); the Gram check and the certificate test still apply.
 * ``ipm_schur_regularization``: the reduced (moment-form) path of
-  :func:`sospoly.ipm.ipm_solve_sparse` factorises its Schur complement M + r I with
+  :func:`sospoly.solvers.ipm.ipm_solve_sparse` factorises its Schur complement M + r I with
   r = ipm_schur_regularization * max diag(M) (raised 100x, at most twice, while M is
   numerically indefinite), and refines the solution with M itself.  Near the optimum M's
   entries span ~1e11 (the moment matrix tends to rank one); 1e-14 there biased the Newton

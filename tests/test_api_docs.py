@@ -19,7 +19,7 @@ KNOWN_UNDOCUMENTED = {
     "sospoly.MinimizeResult", "sospoly.Multiplier", "sospoly.Sense", "sospoly.Tolerances",
     "tritools.Method", "tritools.model.constraints.Method", "tritools.io.oxford.DataNotFoundError",
     "tritools.io.oxford.read_camera", "tritools.io.oxford.read_corners", "tritools.io.oxford.Sequence",
-    "sospoly.verify.Verification",
+    "sospoly.analysis.verify.Verification",
 }
 
 

@@ -152,7 +152,7 @@ def test_even_unbounded_objective_gives_infeasible_status():
 def test_unsupported_degree_is_rejected_at_once():
     # degree 1e30 used to expand (1 + ||v||^2)^(delta/2 - 1) without end (a problem file with "delta": 1e30
     # hung the CLI); the Gram side C(n + delta/2, n) is checked against MAX_GRAM_SIDE first
-    from sospoly.psatz import MAX_GRAM_SIDE, check_degree_supported
+    from sospoly.certificates.psatz import MAX_GRAM_SIDE, check_degree_supported
 
     with pytest.raises(ValueError, match=r"degree ~1e30 is not supported: .* in 2 variables .* side ~1e59"):
         sp.build_psatz(x**2 + y**2, degree=10**30)

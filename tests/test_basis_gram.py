@@ -12,8 +12,8 @@ import pytest
 
 import sospoly as sp
 from sospoly import GramBasis, MonomialIndex, Polynomial, SOSProgram, lower, monomials, sigma, tau
-from sospoly.conic import gram_structure
-from sospoly.svec import smat, svec, triu_pairs
+from sospoly.lowering.conic import gram_structure
+from sospoly.algebra.svec import smat, svec, triu_pairs
 
 
 def _count_exact(n, d):
@@ -109,10 +109,10 @@ def test_gram_basis_product_table_brute_force(n, half):
 
 
 def _L_matrices(gb):
-    """The explicit L(alpha) basis of sospoly.conic.gram_structure as symmetric matrices.
+    """The explicit L(alpha) basis of sospoly.lowering.conic.gram_structure as symmetric matrices.
 
     Alpha k contributes +1 x (monomial m) through its own pair and -1 x m through the canonical
-    pair of m (see the module docstring of sospoly.conic), i.e. L_ii = +-1 on a diagonal pair
+    pair of m (see the module docstring of sospoly.lowering.conic), i.e. L_ii = +-1 on a diagonal pair
     and L_ij = L_ji = +-1/2 off the diagonal.
     """
     st = gram_structure(gb)

@@ -1,8 +1,8 @@
-"""sospoly.blas: one BLAS thread inside the block, the caller's setting restored after."""
+"""sospoly.solvers.blas: one BLAS thread inside the block, the caller's setting restored after."""
 import numpy as np
 import pytest
 
-from sospoly.blas import single_threaded_blas, with_single_threaded_blas
+from sospoly.solvers.blas import single_threaded_blas, with_single_threaded_blas
 
 threadpoolctl = pytest.importorskip("threadpoolctl", reason="threadpoolctl not installed (a core dependency)")
 

@@ -1,4 +1,4 @@
-"""Compile once, solve many (sospoly.compiled) and its use by tritools.
+"""Compile once, solve many (sospoly.lowering.compiled) and its use by tritools.
 
 References: the uncompiled path (build_psatz + solve_psatz with Clarabel), the paper's Table 10
 (Example 4, Theorem 1 delta = 4: gamma = 0.760, N_LMIVAR = 591) and the paper's N_LMIVAR values.

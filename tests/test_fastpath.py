@@ -1,4 +1,4 @@
-"""The vectorised certification by verification (tritools.solve.fastpath, sospoly.verify batch).
+"""The vectorised certification by verification (tritools.solve.fastpath, sospoly.analysis.verify batch).
 
 References: closed forms (a circle), the single-program verify_quadratic, Hartley-Sturm's
 exact two-view optimum (tests/reference), and the delta = 2 SDP path of tritools.solve.triangulate.
@@ -10,7 +10,7 @@ import pytest
 
 import sospoly
 import tritools
-from sospoly.verify import quadratic_parts, verify_quadratic, verify_quadratic_batch
+from sospoly.analysis.verify import quadratic_parts, verify_quadratic, verify_quadratic_batch
 from tests.reference.hartley_sturm import hartley_sturm
 from tritools import Point, Status
 from tritools.solve.fastpath import fast_results, verify_points

@@ -4,7 +4,7 @@ import pytest
 
 import sospoly as sp
 from sospoly import DEFAULT_TOLERANCES as TOL, CompiledGevp, SolveStatus, bisect, build_psatz, monomials
-from sospoly.extraction import extract_from_gram, extract_from_moment, henrion_lasserre, candidates_from_span
+from sospoly.analysis.extraction import extract_from_gram, extract_from_moment, henrion_lasserre, candidates_from_span
 
 x, y = sp.variables("x y")
 # six-hump camel: f* = -1.0316284535 at +-(0.0898420, -0.7126564) (Jamil & Yang 2013, f_30)

@@ -1,4 +1,4 @@
-"""The batched interior-point method (sospoly.ipm) against closed forms and against Clarabel.
+"""The batched interior-point method (sospoly.solvers.ipm) against closed forms and against Clarabel.
 
 Tolerance: the IPM stops on Clarabel's criteria with the solver tolerances 1e-9 of
 sospoly.Tolerances, so optimal values agree with closed forms to ~1e-8 on these well-scaled
@@ -9,10 +9,10 @@ import pytest
 import scipy.sparse as sp
 
 import sospoly
-from sospoly.backends import ClarabelBackend, IpmBackend, RawStatus
-from sospoly.conic import Cone, ConicProblem, GramForm
-from sospoly.ipm import ipm_solve_batch, ipm_solve_sparse
-from sospoly.svec import svec
+from sospoly.solvers.backends import ClarabelBackend, IpmBackend, RawStatus
+from sospoly.lowering.conic import Cone, ConicProblem, GramForm
+from sospoly.solvers.ipm import ipm_solve_batch, ipm_solve_sparse
+from sospoly.algebra.svec import svec
 
 TOL = 1e-7
 

@@ -1,4 +1,4 @@
-"""Tests of sospoly.polynomial against sympy (an independent computer-algebra implementation).
+"""Tests of sospoly.algebra.polynomial against sympy (an independent computer-algebra implementation).
 
 Every reference value here comes from sympy's own ``expand`` / ``diff`` / ``subs`` / ``Matrix.det``
 or from numpy; integer coefficients keep the float arithmetic exact, so most comparisons are exact.

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy.spatial import HalfspaceIntersection
 
-from sospoly.polynomial import variables
+from sospoly.algebra.polynomial import variables
 from tritools.model.regions import (Ellipse, EllipseBorder, Point, Polytope, Region, RegionPolynomials, Segment,
                               as_region, as_regions)
 

@@ -1,4 +1,4 @@
-"""Sparsity layer (sospoly.sparsity) and sparse minimiser extraction (sospoly.sparse_extraction),
+"""Sparsity layer (sospoly.certificates.sparsity) and sparse minimiser extraction (sospoly.analysis.sparse_extraction),
 checked against independent references (networkx clique enumeration, scipy convex hulls,
 hand-derived blocks, exact moment matrices of known points)."""
 from __future__ import annotations
@@ -10,12 +10,12 @@ import numpy as np
 import pytest
 from scipy.spatial import ConvexHull
 
-from sospoly.basis import MonomialIndex, monomials
-from sospoly.sparse_extraction import (
+from sospoly.algebra.basis import MonomialIndex, monomials
+from sospoly.analysis.sparse_extraction import (
     extract_from_clique_moments,
     join_clique_candidates,
 )
-from sospoly.sparsity import (
+from sospoly.certificates.sparsity import (
     HEURISTICS,
     assign_constraints,
     chordal_extension,

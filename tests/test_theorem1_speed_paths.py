@@ -1,6 +1,6 @@
 """Correctness of the Theorem 1 speed paths (issue #5).
 
-* the reduced moment-form IPM of :func:`sospoly.ipm.ipm_solve_sparse` (disjoint-support
+* the reduced moment-form IPM of :func:`sospoly.solvers.ipm.ipm_solve_sparse` (disjoint-support
   Schur complement) against the dense formula tr(A_a Z A_b S^-1) and against Clarabel;
 * the batched-determinant minors of :mod:`tritools.model.constraints` against exact polynomial
   determinants (:func:`sospoly.det`);
@@ -17,9 +17,9 @@ import pytest
 
 import sospoly
 import tritools
-from sospoly.backends import RawStatus
-from sospoly.ipm import _MomentReduction, _SparseSchur, _ipm, _reduction_for, ipm_solve_sparse, layout_of
-from sospoly.svec import smat
+from sospoly.solvers.backends import RawStatus
+from sospoly.solvers.ipm import _MomentReduction, _SparseSchur, _ipm, _reduction_for, ipm_solve_sparse, layout_of
+from sospoly.algebra.svec import smat
 from tritools.model.constraints import minors_matrix, theorem1_constraints
 from tritools.model.normalize import normalization_for
 from tritools.model.problem import build_problem
@@ -84,7 +84,7 @@ def test_reduced_ipm_equals_unreduced_ipm_and_clarabel(example4):
     lay = layout_of(P.cones)
     plain = _ipm(_SparseSchur(P.A, lay), P.q[None], P.b[None], lay, sospoly.DEFAULT_TOLERANCES, None)
     assert plain.converged[0]
-    clar = sospoly.backends.ClarabelBackend().solve(P)
+    clar = sospoly.solvers.backends.ClarabelBackend().solve(P)
     assert clar.raw_status == RawStatus.SOLVED
     # x[0] is c (the first block)
     assert abs(res.x[0, 0] - plain.x[0, 0]) < TOL_C
@@ -96,8 +96,8 @@ def test_reduced_ipm_equals_unreduced_ipm_and_clarabel(example4):
 
 def test_not_reducible_falls_back_to_svec_kronecker_path():
     """One PSD block without pair columns (lambda_min LMI): no reduction, still solved."""
-    from sospoly.conic import Cone
-    from sospoly.svec import svec
+    from sospoly.lowering.conic import Cone
+    from sospoly.algebra.svec import svec
     import scipy.sparse as sp
 
     rng = np.random.default_rng(1)

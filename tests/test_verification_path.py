@@ -1,4 +1,4 @@
-"""Certification by verification (sospoly.verify) against the SDP path.
+"""Certification by verification (sospoly.analysis.verify) against the SDP path.
 
 The fast path must never certify a point the degree-2 SDP does not certify, and when it
 certifies, both paths must report the same optimum (the Lagrangian bound with the KKT
@@ -11,7 +11,7 @@ import pytest
 
 import sospoly
 import tritools
-from sospoly.verify import quadratic_parts, verify_quadratic
+from sospoly.analysis.verify import quadratic_parts, verify_quadratic
 from tritools import Point, Status
 from tritools.scene import random_scene
 

@@ -1,7 +1,7 @@
 """tritools: certified-optimal uncertain multiple-view L2 triangulation (Chesi 2026).
 
-A thin front-end: regions declare (n_i, f_i, g_i, h_i) (:mod:`tritools.regions`),
-camera geometry supplies the projection constraints (:mod:`tritools.constraints`),
+A thin front-end: regions declare (n_i, f_i, g_i, h_i) (:mod:`tritools.model.regions`),
+camera geometry supplies the projection constraints (:mod:`tritools.model.constraints`),
 and :mod:`sospoly` builds, solves and checks the certificate.  tritools never
 imports a solver.
 

@@ -1,4 +1,4 @@
-"""``python -m tritools``: the command line of :mod:`tritools.cli` (``tritools --help``)."""
+"""``python -m tritools``: the command line of :mod:`tritools.cli.app` (``tritools --help``)."""
 from __future__ import annotations
 
 import sys

@@ -11,7 +11,7 @@ admissible regions").
 ``init`` selects the linear start: ``"algebraic"`` (default; the unit ``X~`` minimising
 ``||M0(centres) X~||``, i.e. the paper's "minimum algebraic error" estimate, which
 reproduces the paper's NMS and SQP rows of Tables 8-10) or ``"normalized"`` (the
-Hartley-normalised :func:`~tritools.geometry.dlt`, advisable for pixel data).
+Hartley-normalised :func:`~tritools.model.geometry.dlt`, advisable for pixel data).
 
 Malformed input (shapes, NaN, bad cameras, wrong number of regions) raises
 ``ValueError``.  A well-formed problem a method cannot handle returns a result with
@@ -82,7 +82,7 @@ def _start(C, R, init: str = "algebraic"):
 
     ``"algebraic"``: the minimiser of the algebraic error ``||M0 X~||`` over unit
     ``X~`` (SVD of the raw ``M0``, SPEC §3), the paper's initialisation, which
-    reproduces its NMS/SQP rows; ``"normalized"``: :func:`~tritools.geometry.dlt`
+    reproduces its NMS/SQP rows; ``"normalized"``: :func:`~tritools.model.geometry.dlt`
     (Hartley-normalised, better conditioned for pixel data).
     """
     centres = np.array([r.center for r in R])

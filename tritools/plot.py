@@ -86,7 +86,7 @@ def _ellipse_outline(region: EllipseBorder, samples: int = ELLIPSE_SAMPLES) -> n
 def draw_region(region: Region, ax, color, gid: str, label: str | None = None):
     """Draw ``region`` on ``ax`` with its true geometry; returns the artist.
 
-    Dispatches on the region type; a new :class:`~tritools.regions.Region` subclass
+    Dispatches on the region type; a new :class:`~tritools.model.regions.Region` subclass
     is supported with ``@draw_region.register``.
     """
     raise TypeError(f"draw_region: no drawing rule for region type {type(region).__name__}; "
@@ -202,7 +202,7 @@ def figure3(cameras, regions, result: TriangulationResult, ax=None, title: str |
     Parameters
     ----------
     cameras : array (N, 3, 4)
-    regions : N regions (:class:`~tritools.regions.Region`, dicts or 2-vectors)
+    regions : N regions (:class:`~tritools.model.regions.Region`, dicts or 2-vectors)
     result : TriangulationResult
     ax : matplotlib Axes, optional
         Draw into this axes (its figure is returned); default: a new figure.

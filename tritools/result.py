@@ -108,7 +108,7 @@ class TriangulationResult:
     certified_by : str, optional
         Which path produced the certificate: ``"sdp"`` (the LMI of Theorem 1 /
         Corollary 1) or ``"verification"`` (``path="auto"``: KKT multipliers and
-        the Lagrangian bound of :mod:`sospoly.verify`); ``None`` when not certified.
+        the Lagrangian bound of :mod:`sospoly.analysis.verify`); ``None`` when not certified.
     message : str
         Human readable details.
     timings : dict

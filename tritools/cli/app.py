@@ -2,7 +2,7 @@
 
 Subcommands
 -----------
-``solve FILE``       triangulate the problems of a JSON problem file (:mod:`tritools.problem_file`)
+``solve FILE``       triangulate the problems of a JSON problem file (:mod:`tritools.io.problem_file`)
 ``example K``        the paper's Example 2, 3, 4 (Tables 8-10) or a reduced Example 5 (Table 11)
 ``dataset NAME``     an Oxford sequence of the paper's Example 1 (Tables 1-6), summarised per N
 
@@ -123,7 +123,7 @@ def _dumps(obj) -> str:
 # ----------------------------------------------------------------------------- solving
 def solve_problems(specs: Sequence[ProblemSpec], method=Method.THEOREM1, delta=None, max_delta=None, path=None,
                    progress: bool = False) -> list[TriangulationResult]:
-    """One result per problem, in order, through :func:`tritools.batch.triangulate_many`.
+    """One result per problem, in order, through :func:`tritools.solve.batch.triangulate_many`.
 
     Per-problem ``method``/``delta``/``max_delta``/``path`` override the arguments; problems
     sharing the same settings go through one batch call.  ``path=None`` keeps the library's
@@ -329,7 +329,7 @@ def _write_dataset_csv(path, name, tracks, results) -> None:
 def add_solver_options(p, default_method: str, default_path: str | None = None) -> None:
     """``--method --delta --max-delta --path --progress`` of the subcommands that solve.
 
-    ``default_path=None`` leaves the choice to :func:`tritools.batch.triangulate_many`.
+    ``default_path=None`` leaves the choice to :func:`tritools.solve.batch.triangulate_many`.
     """
     p.add_argument("--method", choices=METHODS, default=default_method,
                    help=f"Theorem 1 (4x4 minors) or Corollary 1 (epipolar); default {default_method}")
@@ -339,12 +339,12 @@ def add_solver_options(p, default_method: str, default_path: str | None = None) 
     p.add_argument("--path", choices=PATHS, default=default_path,
                    help="'sdp' always solves the SDP; 'auto' first tries certification by verification "
                         "(delta 2, point regions); default: "
-                        + (default_path or "that of tritools.batch.triangulate_many"))
+                        + (default_path or "that of tritools.solve.batch.triangulate_many"))
     p.add_argument("--progress", action="store_true", help="progress bar on stderr (needs the 'progress' extra)")
 
 
 def add_data_dir_option(p) -> None:
-    """``--data-dir`` of the subcommands reading an Oxford sequence (:func:`tritools.io.load_sequence`)."""
+    """``--data-dir`` of the subcommands reading an Oxford sequence (:func:`tritools.io.oxford.load_sequence`)."""
     p.add_argument("--data-dir", default=None, dest="data_dir",
                    help="Oxford data directory (default: $TRITOOLS_DATA, else ../shared/data/oxford)")
 

@@ -1,4 +1,4 @@
-"""Command-line subcommands for COLMAP models (registered by :mod:`tritools.cli`).
+"""Command-line subcommands for COLMAP models (registered by :mod:`tritools.cli.app`).
 
 * ``colmap IN_DIR OUT_DIR [--method M] [--path P] [--min-track-length K] [--delta D]
   [--max-delta D] [--json] [--progress]``: read the COLMAP text model in IN_DIR,

@@ -11,7 +11,7 @@ admissible image regions ``R_i`` (SPEC §2)::
      "delta": even int >= 2, "max_delta": int >= delta, "path": "sdp" | "auto",
      "comment": "ignored"}
 
-Regions are exactly :meth:`tritools.regions.Region.to_dict` (extra keys ignored):
+Regions are exactly :meth:`tritools.model.regions.Region.to_dict` (extra keys ignored):
 ``{"type": "point", "x": [u, v]}``, ``{"type": "segment", "center": [..], "direction": [..]}``
 (``{x^ + t d^ : |t| <= 1}``), ``{"type": "polytope", "B": [[b11, b12], ...], "c": [...]}``
 (``{y : ||B y + c||_inf <= 1}``), ``{"type": "ellipse_border" | "ellipse", "center": [..],

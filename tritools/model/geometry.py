@@ -234,7 +234,7 @@ def gamma(X, cameras, regions) -> float | np.ndarray:
     ----------
     X : array_like, shape (3,) or (m, 3)
     cameras : array_like, shape (N, 3, 4)
-    regions : sequence of N :class:`~tritools.regions.Region` (or dicts / 2-vectors)
+    regions : sequence of N :class:`~tritools.model.regions.Region` (or dicts / 2-vectors)
 
     Returns
     -------

@@ -7,7 +7,7 @@ y_i in R^{n_i} the auxiliary variables of region i.  Then
     gamma*^2 = (1/(2N)) inf f  s.t.  g = 0, h >= 0            (the paper's (41))
 
 Regions only declare (n_i, f_i, g_i, h_i); the projection constraints m2 come
-from :mod:`tritools.constraints`.  Nothing here solves anything.
+from :mod:`tritools.model.constraints`.  Nothing here solves anything.
 """
 from __future__ import annotations
 

@@ -4,9 +4,9 @@ For a Point3D with track ((image_i, point2D_idx_i), i = 1..N):
 
 * cameras ``P_i = K_i [R_i | t_i]`` (K of the image's camera, ``[R | t]`` = ``cam_from_world``);
 * regions ``R_i = Point(x^_i)``, x^_i the observed keypoint *undistorted* into the pixels of
-  the pinhole camera K_i (:mod:`tritools.colmap.camera_models`), so gamma (SPEC §1) is the
+  the pinhole camera K_i (:mod:`tritools.io.colmap.camera_models`), so gamma (SPEC §1) is the
   RMS reprojection error per coordinate in undistorted pixels;
-* :func:`tritools.batch.triangulate_many` solves every track (one result per point, always)
+* :func:`tritools.solve.batch.triangulate_many` solves every track (one result per point, always)
   and gives ``gamma_LB <= gamma* <= gamma_UB`` (Theorem 1 / Corollary 1).
 
 The written xyz is the estimate X^ when it is finite and no worse than the input point
@@ -129,7 +129,7 @@ def retriangulate(model: Model, method: Method | str = Method.COROLLARY1, path: 
     Parameters: ``method`` ("corollary1" or "theorem1"), ``path`` ("auto": certification
     by verification first, then the SDP; "sdp"), ``delta``/``max_delta`` as in
     :func:`tritools.triangulate`, ``min_track_length`` (>= 2), ``progress`` (tqdm bar);
-    other keyword options go to :func:`tritools.batch.triangulate_many`.
+    other keyword options go to :func:`tritools.solve.batch.triangulate_many`.
 
     Returns ``(new_model, report)``; ``report.records`` follow the point ids in increasing
     order.  See the module docstring for the rule deciding the written xyz.

@@ -5,7 +5,7 @@
 1. every input is checked for being a ``(cameras, regions)`` pair; Corollary 1 problems
    with point regions at delta = 2 and ``path="auto"`` are grouped by their number of
    views N and certified by verification with one vectorised computation per group
-   (:func:`tritools.fastpath.fast_results`: local L2 optimum, KKT multipliers,
+   (:func:`tritools.solve.fastpath.fast_results`: local L2 optimum, KKT multipliers,
    Lagrangian bound -- the degree-2 certificate without an SDP);
 2. the rest -- the fast path's failures (sent with ``path="sdp"``; their ``attempts``
    start with ``(2, "verification_failed", None, None)`` exactly as
@@ -119,7 +119,7 @@ def _fast_eligible(method, delta, path, kw) -> bool:
     return path == SolvePath.AUTO and m == Method.COROLLARY1 and delta in (None, 2) and kw.get("normalize", True)
 
 
-#: options of triangulate under which the batched delta = 2 SDP (tritools.sdp_batch) gives its answer:
+#: options of triangulate under which the batched delta = 2 SDP (tritools.solve.sdp_batch) gives its answer:
 #: these values (ANY: every value is handled by the batch; backend must be left to the default).
 _ANY = object()
 _SDP_BATCH_DEFAULTS = {"refine": _ANY, "tolerances": _ANY, "normalize": True, "multiplier": "fixed", "form": "image",

@@ -2,13 +2,13 @@
 
 For M problems with the same number N of views and point regions, the Corollary 1
 program at delta = 2 (SPEC §7) is, in the normalised coordinates of
-:mod:`tritools.normalize` (observed points at the origin of every view),
+:mod:`tritools.model.normalize` (observed points at the origin of every view),
 
     f(v) = sum_i ||x_i - x^_i||^2,   g_ij(v) = x~_i^T F_ij x~_j (i < j),   v = (x_1, ..., x_N),
 
 f and every g_ij quadratic.  For each problem this module
 
-1. computes the normalisation of :func:`tritools.normalize.normalization_for`
+1. computes the normalisation of :func:`tritools.model.normalize.normalization_for`
    (same formulas, vectorised: scale s from the residual of the locally refined
    estimate, shifts = observed points, world origin = DLT estimate, depth = median
    camera distance);
@@ -16,7 +16,7 @@ f and every g_ij quadratic.  For each problem this module
    vectorised Levenberg-Marquardt iteration on the 2N residuals Phi(X, P_i) - x^_i;
 3. takes v^ = (Phi(X, P_1), ..., Phi(X, P_N)) -- a feasible point of g = 0 -- and the
    epipolar polynomials with F_ij = [e]_x P_i P_j^+ / ||.||_F of the normalised cameras;
-4. calls :func:`sospoly.verify.verify_quadratic_batch`: KKT multipliers by least
+4. calls :func:`sospoly.analysis.verify.verify_quadratic_batch`: KKT multipliers by least
    squares, PSD test of the Lagrangian Hessian with the ROUNDOFF margin, exact minimum
    c of the Lagrangian quadratic, certificate ``Tolerances.certified(c, f(v^))``.
 
@@ -34,8 +34,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from sospoly import DEFAULT_TOLERANCES, Tolerances, n_lmivar_formula
-from sospoly.verify import verify_quadratic_batch
-from sospoly.blas import with_single_threaded_blas
+from sospoly.analysis.verify import verify_quadratic_batch
+from sospoly.solvers.blas import with_single_threaded_blas
 
 from ..model.geometry import (POINT_AT_INFINITY_RTOL, PROJECTION_DENOM_RTOL, SAME_CAMERA_RTOL,
                        SAME_CENTER_RTOL)
@@ -92,7 +92,7 @@ def _smallest_eigvec(A: np.ndarray) -> np.ndarray:
 
 
 def _dlt_stack(C: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`tritools.geometry.dlt` for a stack: C (M, N, 3, 4), x (M, N, 2) -> (X (M, 3), ok (M,))."""
+    """:func:`tritools.model.geometry.dlt` for a stack: C (M, N, 3, 4), x (M, N, 2) -> (X (M, 3), ok (M,))."""
     c = x.mean(axis=1)                                                     # (M, 2)
     dist = np.linalg.norm(x - c[:, None], axis=2).mean(axis=1)
     cmax = np.abs(c).max(axis=1)
@@ -125,7 +125,7 @@ def _project_stack(C: np.ndarray, X: np.ndarray) -> tuple[np.ndarray, np.ndarray
 
 
 def _valid_cameras(C: np.ndarray) -> np.ndarray:
-    """The checks of :func:`tritools.geometry.validate_cameras` (finite, rank 3, not all equal), per problem.
+    """The checks of :func:`tritools.model.geometry.validate_cameras` (finite, rank 3, not all equal), per problem.
 
     Rank: sigma_3^2 / sigma_1^2 >= det(P P^T) / trace(P P^T)^3 (the product of the squared singular
     values over the cube of their sum), required above ``FAST_RANK_RTOL^2``; cameras failing this
@@ -159,7 +159,7 @@ def _stack(cameras, points2d, caller: str):
 
 
 def _normalise(C: np.ndarray, x: np.ndarray):
-    """Vectorised :func:`tritools.normalize.normalization_for` and the normalised cameras.
+    """Vectorised :func:`tritools.model.normalize.normalization_for` and the normalised cameras.
 
     Returns (scale (M,), origin (M, 3), depth (M,), cameras_n (M, N, 3, 4), ok (M,),
     Xn (M, 3)): Xn is the locally refined estimate in the normalised world frame (the
@@ -288,7 +288,7 @@ def verify_points(cameras, points2d, *, tolerances: Tolerances = DEFAULT_TOLERAN
     points2d : array (M, N, 2)
         Observed image points (the point regions' centres).
     tolerances : sospoly.Tolerances
-        The certificate rule, as in :func:`sospoly.verify.verify_quadratic`.
+        The certificate rule, as in :func:`sospoly.analysis.verify.verify_quadratic`.
     """
     C, x, ok = _stack(cameras, points2d, "verify_points")
     M, N = x.shape[:2]

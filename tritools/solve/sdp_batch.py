@@ -1,7 +1,7 @@
 """The Corollary 1, delta = 2 SDP path for many point-region problems at once (issue #5).
 
 For M problems with N views and point regions, in the normalised coordinates of
-:mod:`tritools.normalize` (observed points at the origin of every view, common scale s)
+:mod:`tritools.model.normalize` (observed points at the origin of every view, common scale s)
 the program of SPEC §5/§7 at delta = 2 (q = 1) is
 
     max c  s.t.  u(v) = f(v) - c + sum_k r_k g_k(v)  is SOS,
@@ -10,17 +10,17 @@ the program of SPEC §5/§7 at delta = 2 (q = 1) is
 i.e. the (2N+1)x(2N+1) LMI  G(c, r) = G0 - c E00 + sum_k r_k G_k >= 0  on the basis
 b(v) = (1, x_11, x_12, ..., x_N2).  This module, with numpy over the whole stack:
 
-1. validates and normalises (the formulas of :func:`tritools.normalize.normalization_for`,
-   vectorised in :mod:`tritools.fastpath`), computes every F_ij of the normalised cameras
+1. validates and normalises (the formulas of :func:`tritools.model.normalize.normalization_for`,
+   vectorised in :mod:`tritools.solve.fastpath`), computes every F_ij of the normalised cameras
    and fills the compiled structure's coefficient vector theta (the layout of
    :meth:`sospoly.CompiledPsatz.theta`, found once per N from coded template polynomials);
-2. solves all the SDPs together with :func:`sospoly.ipm.ipm_solve_batch`;
-3. applies the a-posteriori checks of :func:`sospoly.solve.check_certificate` (Gram
+2. solves all the SDPs together with :func:`sospoly.solvers.ipm.ipm_solve_batch`;
+3. applies the a-posteriori checks of :func:`sospoly.solvers.solve.check_certificate` (Gram
    matrix recomputed from x, lambda_min >= -psd_margin max(1, max|G_ij|)); c* = the
    objective, gamma_LB = sqrt(max(c*, 0) / (2N)) / s (the paper's (52));
 4. extracts v* from the eigenvector of the smallest eigenvalue of the optimal Gram
    matrix scaled to a unit constant entry, X^ from the SVD of M0(v*) (paper (53)),
-   refines it with the vectorised Levenberg-Marquardt of :mod:`tritools.fastpath`, and
+   refines it with the vectorised Levenberg-Marquardt of :mod:`tritools.solve.fastpath`, and
    decides the certificate in c units exactly as :func:`tritools.triangulate` does.
 
 A problem is *handed back* (``None`` in the output) whenever the batch cannot reproduce
@@ -39,7 +39,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from sospoly import DEFAULT_TOLERANCES, GramForm, Multiplier, Polynomial, Tolerances, variables
-from sospoly.blas import with_single_threaded_blas
+from sospoly.solvers.blas import with_single_threaded_blas
 
 from .fastpath import _epipolar_data, _normalise, _project_stack, _refine_stack, _stack
 from ..model.geometry import POINT_AT_INFINITY_RTOL
@@ -53,7 +53,7 @@ SDP_CHUNK_BYTES = 256 * 2 ** 20
 
 
 def _gens(N: int) -> tuple:
-    names = [f"x{i + 1}_{k + 1}" for i in range(N) for k in range(2)]   # as tritools.problem.build_problem
+    names = [f"x{i + 1}_{k + 1}" for i in range(N) for k in range(2)]   # as tritools.model.problem.build_problem
     return variables(names)[0].gens
 
 
@@ -65,7 +65,7 @@ def _pairs(N: int):
 def corollary1_structure(N: int):
     """(compiled structure, slot index) of the Corollary 1 delta = 2 point-region program with N views.
 
-    The structure is :data:`tritools.triangulate.STRUCTURE_CACHE`'s entry for
+    The structure is :data:`tritools.solve.triangulate.STRUCTURE_CACHE`'s entry for
     (N, Point x N, corollary1, delta 2, image form), compiled on the full support
     (every F_ij entry may be non-zero).  ``slots`` (K, 3, 3) gives, for constraint k and
     entry F[a, b], its position in theta (F[a, b] multiplies x~_ia x~_jb); ``f_slots``
@@ -205,7 +205,7 @@ def solve_corollary1_points(cameras, points2d, *, tolerances: Tolerances = DEFAU
             reason[part[j]] = bb.reason[j]
         ok[part[~bb.ok]] = False
     ok &= np.isfinite(c_lb)
-    # ---- extraction: kernel dimension 1, v* = kernel vector / its constant entry (sospoly.extraction)
+    # ---- extraction: kernel dimension 1, v* = kernel vector / its constant entry (sospoly.analysis.extraction)
     top = np.maximum(np.abs(lam[:, -1]), 1e-300)
     kdim = np.maximum(1, np.sum(lam <= tol.kernel_rel * top[:, None], axis=1))
     w0 = V[:, 0, 0]

@@ -2,9 +2,9 @@
 
 ``triangulate(cameras, regions, method, delta, max_delta)``:
 
-1. validate and normalise the data (:mod:`tritools.normalize`; the L2 problem is
+1. validate and normalise the data (:mod:`tritools.model.normalize`; the L2 problem is
    unchanged and every number reported is in the caller's units);
-2. build (f, g, h) (:mod:`tritools.problem`) and the Positivstellensatz program
+2. build (f, g, h) (:mod:`tritools.model.problem`) and the Positivstellensatz program
    at degree delta (:func:`sospoly.build_psatz`), solve it with sospoly
    (fixed q = (1 + ||v||^2)^(delta/2 - 1) by default, or the free-q GEVP);
 3. gamma_LB = sqrt(c* / (2N)) (the paper's (52));
@@ -33,8 +33,8 @@ import numpy as np
 
 import sospoly
 from sospoly import DEFAULT_TOLERANCES, GramForm, Multiplier, SolveStatus, Tolerances
-from sospoly.extraction import best_in_family, kernel_family
-from sospoly.verify import verify_quadratic
+from sospoly.analysis.extraction import best_in_family, kernel_family
+from sospoly.analysis.verify import verify_quadratic
 
 from ..model.constraints import Method
 from ..model.geometry import dlt, gamma as gamma_of, point_from_image_points, project, refine_l2, validate_cameras
@@ -107,14 +107,14 @@ def triangulate(cameras, regions, method: Method | str = Method.THEOREM1, delta:
     Parameters
     ----------
     cameras : array (N, 3, 4)
-    regions : N :class:`tritools.regions.Region` (Point, Segment, Polytope, EllipseBorder, Ellipse)
+    regions : N :class:`tritools.model.regions.Region` (Point, Segment, Polytope, EllipseBorder, Ellipse)
     method : "theorem1" (4x4 minors + SVD reduction) or "corollary1" (epipolar constraints)
     delta : first relaxation degree (even, >= delta_min; default delta_min)
     max_delta : last degree tried (default: delta if given, else delta_min + 2)
     multiplier : "fixed" (one SDP, the paper's q) or "free" (GEVP by bisection)
     path : "sdp" (always solve the SDP) or "auto" (at delta = 2 with point regions, first try
         certification by verification -- local optimum, KKT multipliers, Lagrangian bound,
-        :mod:`sospoly.verify` -- and fall back to the SDP when it does not certify);
+        :mod:`sospoly.analysis.verify` -- and fall back to the SDP when it does not certify);
         ``certified_by`` says which path certified the result
 
     ``result.attempts`` lists, per degree tried, ``(delta, status, gamma_lb, gamma_ub,
@@ -151,7 +151,7 @@ def triangulate(cameras, regions, method: Method | str = Method.THEOREM1, delta:
     if last < delta:
         raise ValueError(f"max_delta ({last}) is below delta ({delta})")
     try:
-        sospoly.psatz.check_degree_supported(len(problem.gens), last)
+        sospoly.certificates.psatz.check_degree_supported(len(problem.gens), last)
     except ValueError as exc:
         raise ValueError(f"{'max_delta' if last != delta else 'delta'}: {exc}") from None
 
@@ -185,13 +185,13 @@ def triangulate(cameras, regions, method: Method | str = Method.THEOREM1, delta:
 
 
 def _verify_fast(problem, norm, cams, regions, cams_n, regs_n, method, tol, timings):
-    """Certification by verification (:mod:`sospoly.verify`): local L2 optimum from the DLT
+    """Certification by verification (:mod:`sospoly.analysis.verify`): local L2 optimum from the DLT
     estimate, KKT multipliers, Lagrangian bound.  Only for delta = 2 programs without
     inequalities or auxiliary variables (point regions); None when it does not certify.
 
-    Corollary 1 with point regions goes through :func:`tritools.fastpath.fast_results` (a
-    batch of one, so :func:`tritools.batch.triangulate_many` decides exactly as this does;
-    it normalises the data itself, with the formulas of :mod:`tritools.normalize`); other
+    Corollary 1 with point regions goes through :func:`tritools.solve.fastpath.fast_results` (a
+    batch of one, so :func:`tritools.solve.batch.triangulate_many` decides exactly as this does;
+    it normalises the data itself, with the formulas of :mod:`tritools.model.normalize`); other
     delta = 2 programs (Theorem 1 with two views) use the generic code below."""
     if method == Method.COROLLARY1 and all(isinstance(r, Point) for r in regions):
         t0 = time.perf_counter()
@@ -233,7 +233,7 @@ def _replace(res: TriangulationResult, **kw) -> TriangulationResult:
 
 
 #: compiled Positivstellensatz structures, keyed by (N, region types, method, delta, form):
-#: a triangulation only fills numbers into the structure of its key (sospoly.compiled).
+#: a triangulation only fills numbers into the structure of its key (sospoly.lowering.compiled).
 STRUCTURE_CACHE = sospoly.PsatzCache(maxsize=128)
 
 
@@ -268,7 +268,7 @@ def _solve_at(problem, norm: Normalization, cams, regions, cams_n, regs_n, metho
     """One degree: the compiled structure of (N, region types, method, delta) from
     :data:`STRUCTURE_CACHE` filled with this problem's numbers and solved by ``backend``
     (default ``"auto"``: Clarabel for small SDPs, the interior-point method of
-    :mod:`sospoly.ipm` with Clarabel fallback for large ones); the free-q GEVP goes
+    :mod:`sospoly.solvers.ipm` with Clarabel fallback for large ones); the free-q GEVP goes
     through :func:`sospoly.build_psatz` / :func:`sospoly.solve_psatz`."""
     t0 = time.perf_counter()
     comp, theta, multiplier = _compiled_for(problem, regs_n, method, delta, multiplier, form)

@@ -46,8 +46,8 @@ def model_from_projections(projections, image_sizes, tracks, names=None, *, rgb=
 
     Camera and image j get id j + 1 (one PINHOLE camera per view), point k gets id k + 1;
     keypoints are numbered per image in track order.  Each point's xyz is the normalised
-    DLT of its observations (:func:`tritools.geometry.dlt`); run
-    :func:`~tritools.colmap.retriangulate.retriangulate` to get the certified L2 points.
+    DLT of its observations (:func:`tritools.model.geometry.dlt`); run
+    :func:`~tritools.sfm.retriangulate.retriangulate` to get the certified L2 points.
     """
     Ps = validate_cameras(projections, min_views=1, require_distinct=False)
     V = len(Ps)
@@ -96,7 +96,7 @@ def model_from_projections(projections, image_sizes, tracks, names=None, *, rgb=
 
 
 def model_from_oxford(name: str, data_dir=None, max_tracks: int | None = None, min_views: int = 2) -> Model:
-    """Convert an Oxford VGG sequence (:func:`tritools.io.load_sequence`) to a COLMAP model.
+    """Convert an Oxford VGG sequence (:func:`tritools.io.oxford.load_sequence`) to a COLMAP model.
 
     The data carry no image sizes: each view's size is the smallest integer (width, height)
     containing all of its corners (``ceil(max x) + 1``, ``ceil(max y) + 1``).  Image names

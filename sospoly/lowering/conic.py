@@ -1,11 +1,11 @@
-"""Lowering of an :class:`~sospoly.program.SOSProgram` to one conic standard form.
+"""Lowering of an :class:`~sospoly.certificates.program.SOSProgram` to one conic standard form.
 
 Standard form (Clarabel's, with P = 0)::
 
     minimise    q^T x
     subject to  A x + s = b,   s in K = {0}^z  x  S_+^{s_1}  x ... x  S_+^{s_k}
 
-PSD blocks are in the svec convention of :mod:`sospoly.svec`.  Rows are ordered:
+PSD blocks are in the svec convention of :mod:`sospoly.algebra.svec`.  Rows are ordered:
 all zero-cone rows first, then one PSD block per SOS-polynomial multiplier and
 one per SOS constraint.
 
@@ -36,10 +36,10 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse as sp
 
-from .basis import MonomialIndex
-from .linpoly import LinPoly
-from .program import BlockKind, Sense, SOSProgram
-from .svec import SQRT2, smat, svec_scale
+from ..algebra.basis import MonomialIndex
+from ..algebra.linpoly import LinPoly
+from ..certificates.program import BlockKind, Sense, SOSProgram
+from ..algebra.svec import SQRT2, smat, svec_scale
 
 __all__ = ["GramForm", "Cone", "ConicProblem", "lower", "gram_structure"]
 

@@ -23,8 +23,8 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.linalg as sla
 
-from .basis import MonomialIndex
-from .tolerances import DEFAULT_TOLERANCES, Tolerances
+from ..algebra.basis import MonomialIndex
+from ..tolerances import DEFAULT_TOLERANCES, Tolerances
 
 __all__ = ["Candidate", "CandidateFamily", "kernel_family", "best_in_family", "kernel_basis", "range_basis",
            "candidates_from_span", "extract_from_gram",

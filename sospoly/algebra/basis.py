@@ -135,7 +135,7 @@ class GramBasis:
     ``b`` holds the exponents of b(v) (all monomials of degree <= delta/2 unless
     given explicitly).  ``products`` is the basis of all monomials of b(v) b(v)^T.
     For every upper-triangular pair ``(i, j)``, ``i <= j`` (listed column-wise as in
-    the svec convention of :mod:`sospoly.svec`), ``pair_monomial[p]`` is the index in
+    the svec convention of :mod:`sospoly.algebra.svec`), ``pair_monomial[p]`` is the index in
     ``products`` of ``b_i b_j``.
     """
 

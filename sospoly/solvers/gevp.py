@@ -10,7 +10,7 @@ Bracket: ``c_lo`` must be *verified* feasible (by default the fixed-q SDP's c*,
 which is feasible here too after scaling q to unit trace, or a descending search);
 ``c_hi`` is any upper bound of the true minimum (f at a feasible point) or is
 found by doubling.  A level c is accepted as feasible only when the solver says
-solved **and** the certificate passes :func:`sospoly.solve.check_certificate`
+solved **and** the certificate passes :func:`sospoly.solvers.solve.check_certificate`
 (Gram eigenvalues and equality residuals with the margins of
 :class:`~sospoly.tolerances.Tolerances`): near-degenerate q lets solvers report
 "solved" for infeasible c.  The bisection stops when
@@ -23,11 +23,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .conic import ConicProblem, GramForm, lower
-from .psatz import Multiplier, PsatzProblem
+from ..lowering.conic import ConicProblem, GramForm, lower
+from ..certificates.psatz import Multiplier, PsatzProblem
 from .solve import ProgramSolution, check_certificate, solve_conic
-from .status import SolveStatus
-from .tolerances import DEFAULT_TOLERANCES, Tolerances
+from ..status import SolveStatus
+from ..tolerances import DEFAULT_TOLERANCES, Tolerances
 
 __all__ = ["GevpStep", "GevpResult", "CompiledGevp", "bisect"]
 

@@ -7,7 +7,7 @@ off-diagonal entries multiplied by sqrt(2)::
     svec(X) = [X11, sqrt2 X12, X22, sqrt2 X13, sqrt2 X23, X33, ...]
 
 so that ``<X, Y> = svec(X) . svec(Y)``.  The pair list ``(i, j), i <= j`` in that
-order is :func:`triu_pairs`; :class:`sospoly.basis.GramBasis` uses the same order.
+order is :func:`triu_pairs`; :class:`sospoly.algebra.basis.GramBasis` uses the same order.
 """
 from __future__ import annotations
 

@@ -18,11 +18,11 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .backends import ConicSolution, RawStatus, get_backend
-from .conic import ConicProblem, GramForm, lower
-from .polynomial import Polynomial
-from .program import Sense, SOSProgram
-from .status import SolveStatus
-from .tolerances import DEFAULT_TOLERANCES, Tolerances
+from ..lowering.conic import ConicProblem, GramForm, lower
+from ..algebra.polynomial import Polynomial
+from ..certificates.program import Sense, SOSProgram
+from ..status import SolveStatus
+from ..tolerances import DEFAULT_TOLERANCES, Tolerances
 
 __all__ = ["ProgramSolution", "solve_program", "solve_conic", "check_certificate"]
 

@@ -1,10 +1,10 @@
 """Compile once, solve many: a Positivstellensatz *structure* lowered once.
 
-For the fixed-multiplier program of :mod:`sospoly.psatz` (SPEC §5)
+For the fixed-multiplier program of :mod:`sospoly.certificates.psatz` (SPEC §5)
 
     u(v) = q(v) (f(v) - c) + r(v)^T g(v) - s(v)^T h(v)   SOS,  s_k SOS,  max c,
 
-the conic data (A, b) of :func:`sospoly.conic.lower` is *affine in the coefficient
+the conic data (A, b) of :func:`sospoly.lowering.conic.lower` is *affine in the coefficient
 vector* theta = (coef f, coef g_1, ..., coef h_m) once the supports of f, g_k, h_k,
 the degree delta, the variables and q are fixed:
 
@@ -17,15 +17,15 @@ theta -> A.data (on the fixed sparsity pattern of A) and theta -> b as sparse
 matrices.  A new instance then costs one coefficient look-up and two sparse
 mat-vecs (:meth:`CompiledPsatz.instantiate`), and a batch of instances one
 sparse mat-mat (:meth:`CompiledPsatz.solve_batch`, which solves them together with
-the batched interior-point method of :mod:`sospoly.ipm`).
+the batched interior-point method of :mod:`sospoly.solvers.ipm`).
 
 The multiplier degrees (deg r_k = delta - deg g_k, ...) come from the template's
 degrees; an instance is accepted when each of its polynomials has its support inside
 the template's (zero coefficients are allowed), and the lowered program is then
-exactly :func:`~sospoly.psatz.build_psatz`'s whenever the instance's degrees equal the
+exactly :func:`~sospoly.certificates.psatz.build_psatz`'s whenever the instance's degrees equal the
 template's.  Results go through the same a-posteriori checks
-(:func:`sospoly.solve.solve_program`).  The free-q GEVP is compiled by
-:class:`sospoly.gevp.CompiledGevp` instead.
+(:func:`sospoly.solvers.solve.solve_program`).  The free-q GEVP is compiled by
+:class:`sospoly.solvers.gevp.CompiledGevp` instead.
 
 :class:`PsatzCache` keeps compiled structures keyed by the structure (number of
 variables, degree, supports, multiplier, Gram form), or by a caller's key (e.g. a
@@ -42,18 +42,18 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from .backends import Attempt, ConicSolution, RawStatus, get_backend
-from .basis import MonomialIndex
+from ..solvers.backends import Attempt, ConicSolution, RawStatus, get_backend
+from ..algebra.basis import MonomialIndex
 from .conic import ConicProblem, GramForm, lower
-from .ipm import _smat_batch, ipm_solve_batch, layout_of
-from .linpoly import LinPoly
-from .minimize import LowerBound, lower_bound_of
-from .polynomial import Polynomial
-from .program import SOSProgram
-from .psatz import Multiplier, _as_multiplier, _checked_inputs, _fixed_q, common_gens, delta_min
-from .solve import ProgramSolution, solve_program
-from .status import SolveStatus
-from .tolerances import DEFAULT_TOLERANCES, Tolerances
+from ..solvers.ipm import _smat_batch, ipm_solve_batch, layout_of
+from ..algebra.linpoly import LinPoly
+from ..minimize import LowerBound, lower_bound_of
+from ..algebra.polynomial import Polynomial
+from ..certificates.program import SOSProgram
+from ..certificates.psatz import Multiplier, _as_multiplier, _checked_inputs, _fixed_q, common_gens, delta_min
+from ..solvers.solve import ProgramSolution, solve_program
+from ..status import SolveStatus
+from ..tolerances import DEFAULT_TOLERANCES, Tolerances
 
 __all__ = ["BatchBounds", "CompiledPsatz", "CompiledInstance", "PsatzCache", "compile_psatz", "StructureMismatch",
            "DEFAULT_CACHE"]
@@ -71,7 +71,7 @@ def _support(p: Polynomial) -> np.ndarray:
 @dataclass(frozen=True)
 class CompiledInstance:
     """One instance's numbers in a compiled structure: theta and its conic problem
-    (:func:`sospoly.solve_psatz` accepts it like a :class:`~sospoly.psatz.PsatzProblem`)."""
+    (:func:`sospoly.solve_psatz` accepts it like a :class:`~sospoly.certificates.psatz.PsatzProblem`)."""
     compiled: "CompiledPsatz"
     theta: np.ndarray
     problem: ConicProblem
@@ -90,7 +90,7 @@ class BatchBounds:
     """Vectorised outcome of :meth:`CompiledPsatz.batch_bounds` (leading axis: the instances).
 
     ``ok`` is True where the batched interior-point method converged *and* the returned
-    Gram matrix passes :func:`sospoly.solve.check_certificate`'s PSD-margin rule
+    Gram matrix passes :func:`sospoly.solvers.solve.check_certificate`'s PSD-margin rule
     (lambda_min(G) >= -psd_margin * max(1, max|G_ij|)); the image form's coefficient
     identity holds by construction.  Only there is ``lower_bound`` a certified bound;
     ``reason`` says why not elsewhere.  ``eigenvalues`` / ``eigenvectors`` are those of
@@ -118,7 +118,7 @@ class CompiledPsatz:
         multiplier = _as_multiplier(multiplier)
         if multiplier == Multiplier.FREE:
             raise ValueError("CompiledPsatz compiles fixed multipliers; the free-q GEVP is compiled by "
-                             "sospoly.gevp.CompiledGevp")
+                             "sospoly.solvers.gevp.CompiledGevp")
         q = _fixed_q(multiplier, gens, degree, f)
         self.gens, self.degree, self.q, self.form = gens, degree, q, GramForm(form)
         self.multiplier = multiplier

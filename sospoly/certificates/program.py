@@ -13,8 +13,8 @@ Constraints: ``add_sos(u)`` -- the polynomial u, affine in x, is SOS, with its
 Gram basis chosen from its degree; ``add_equality(expr, rhs)`` -- linear
 equalities on x.  An objective is a scalar (degree-0) affine expression.
 
-Lowering to a conic problem lives in :mod:`sospoly.conic`; solving in
-:mod:`sospoly.solve`.  Nothing here imports a solver.
+Lowering to a conic problem lives in :mod:`sospoly.lowering.conic`; solving in
+:mod:`sospoly.solvers.solve`.  Nothing here imports a solver.
 """
 from __future__ import annotations
 
@@ -23,9 +23,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .basis import GramBasis, monomials
-from .linpoly import LinPoly
-from .polynomial import Polynomial, as_polynomial
+from ..algebra.basis import GramBasis, monomials
+from ..algebra.linpoly import LinPoly
+from ..algebra.polynomial import Polynomial, as_polynomial
 
 __all__ = ["SOSProgram", "Sense", "VarBlock", "SOSConstraint", "EqualityConstraint"]
 

@@ -16,7 +16,7 @@ Multiplier choices (:class:`Multiplier`):
   Putinar's certificate); a non-constant q is verified to be SOS first.
 * ``FREE`` -- q a free SOS with trace(Gram(q)) = 1.  c then multiplies decision
   variables (a generalised eigenvalue problem); the program is built once with c
-  as a *parameter* and solved by bisection (:mod:`sospoly.gevp`).
+  as a *parameter* and solved by bisection (:mod:`sospoly.solvers.gevp`).
 
 Any feasible certificate gives c <= f(v) on the feasible set (weak
 Positivstellensatz argument of Theorem 1), so c is a valid lower bound.
@@ -28,9 +28,9 @@ import enum
 import numbers
 from dataclasses import dataclass
 
-from .basis import sigma
-from .linpoly import LinPoly
-from .polynomial import Polynomial, as_polynomial
+from ..algebra.basis import sigma
+from ..algebra.linpoly import LinPoly
+from ..algebra.polynomial import Polynomial, as_polynomial
 from .program import SOSConstraint, SOSProgram
 
 __all__ = ["Multiplier", "PsatzProblem", "build_psatz", "delta_min", "default_q", "common_gens", "MAX_GRAM_SIDE",
@@ -115,7 +115,7 @@ def check_degree_supported(nvars: int, degree: int) -> None:
 
 def _checked_inputs(f, eq, ineq, degree, gens) -> tuple:
     """(f, eq, ineq, gens, degree) validated and on common variables: the input rules of
-    :func:`build_psatz` (also those of :class:`sospoly.compiled.CompiledPsatz`)."""
+    :func:`build_psatz` (also those of :class:`sospoly.lowering.compiled.CompiledPsatz`)."""
     f = _check_poly(f, "f")
     eq = tuple(_check_poly(g, "each equality g_k") for g in eq)
     ineq = tuple(_check_poly(h, "each inequality h_k") for h in ineq)

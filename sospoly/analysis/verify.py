@@ -30,9 +30,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .polynomial import Polynomial
-from .status import SolveStatus
-from .tolerances import DEFAULT_TOLERANCES, Tolerances
+from ..algebra.polynomial import Polynomial
+from ..status import SolveStatus
+from ..tolerances import DEFAULT_TOLERANCES, Tolerances
 
 __all__ = ["Verification", "VerificationBatch", "quadratic_parts", "verify_quadratic", "verify_quadratic_batch",
            "ROUNDOFF"]

@@ -1,11 +1,11 @@
 """Closed-form complexity counts N_LMIVAR of SPEC §8 (the paper's (59), (62), (63)).
 
-These are formulas only; :meth:`sospoly.program.SOSProgram.n_lmivar` counts the
+These are formulas only; :meth:`sospoly.certificates.program.SOSProgram.n_lmivar` counts the
 assembled program, and the tests check that both agree.
 """
 from __future__ import annotations
 
-from .basis import sigma, tau
+from ..algebra.basis import sigma, tau
 
 __all__ = ["n_lmivar_formula"]
 

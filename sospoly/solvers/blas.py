@@ -1,6 +1,6 @@
 """One BLAS thread inside the hot loops of the small dense solves.
 
-The interior-point iterations of :mod:`sospoly.ipm` factor many small matrices
+The interior-point iterations of :mod:`sospoly.solvers.ipm` factor many small matrices
 (a 495x495 Schur complement for Theorem 1 at delta = 4, stacks of 5x5..25x25 for
 batched Corollary 1 problems).  A multi-threaded BLAS gains nothing at these sizes
 and, on a machine with few cores that are busy (process pools, CI), its spinning

@@ -1,4 +1,4 @@
-"""Solver back-ends for :class:`~sospoly.conic.ConicProblem`.
+"""Solver back-ends for :class:`~sospoly.lowering.conic.ConicProblem`.
 
 This is the only module of sospoly that imports a solver.  Two back-ends:
 
@@ -7,7 +7,7 @@ This is the only module of sospoly that imports a solver.  Two back-ends:
   large batches (each attempt is recorded).  pyo3's ``PanicException`` (a
   BaseException) is caught, the solver object is discarded and the next attempt
   builds a fresh one.
-* :class:`IpmBackend`: the small interior-point method of :mod:`sospoly.ipm` (Schur
+* :class:`IpmBackend`: the small interior-point method of :mod:`sospoly.solvers.ipm` (Schur
   complement of the size of the free scalars), falling back to Clarabel when it
   does not converge or its answer fails the a-posteriori check; both attempts are
   recorded.
@@ -24,9 +24,9 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse as sp
 
-from .conic import ConicProblem
-from .svec import triu_pairs, svec_scale
-from .tolerances import DEFAULT_TOLERANCES, Tolerances
+from ..lowering.conic import ConicProblem
+from ..algebra.svec import triu_pairs, svec_scale
+from ..tolerances import DEFAULT_TOLERANCES, Tolerances
 
 __all__ = ["RawStatus", "Attempt", "ConicSolution", "ClarabelBackend", "CvxpyBackend", "IpmBackend", "AutoBackend", "get_backend"]
 
@@ -176,7 +176,7 @@ IPM_DENSE_LIMIT = 3e6
 
 
 class IpmBackend:
-    """:mod:`sospoly.ipm` first, ``fallback`` (default Clarabel) when it does not converge
+    """:mod:`sospoly.solvers.ipm` first, ``fallback`` (default Clarabel) when it does not converge
     or ``accept`` rejects its answer."""
 
     name = "ipm"
@@ -226,7 +226,7 @@ AUTO_IPM_MIN_COST = 5e4
 class AutoBackend:
     """Clarabel for small single problems, :class:`IpmBackend` (with Clarabel fallback) above
     ``AUTO_IPM_MIN_COST``; batches of equal structure should use
-    :meth:`sospoly.compiled.CompiledPsatz.solve_batch` instead."""
+    :meth:`sospoly.lowering.compiled.CompiledPsatz.solve_batch` instead."""
 
     name = "auto"
 

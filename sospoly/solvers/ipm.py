@@ -1,6 +1,6 @@
 """A small batched primal-dual interior-point method for LMIs in dual form.
 
-The conic standard form of :mod:`sospoly.conic` (Clarabel's)::
+The conic standard form of :mod:`sospoly.lowering.conic` (Clarabel's)::
 
     min q^T x   s.t.  A_E x = b_E,   S_k = smat(b_k - A_k x) >= 0   (k = 1..K blocks)
 
@@ -34,7 +34,7 @@ Stopping rule (Clarabel's, with :class:`~sospoly.tolerances.Tolerances`):
 meet it within ``ipm_max_iter`` iterations, or whose iterates diverge (infeasible
 or unbounded problems: this method has no infeasibility certificates), is reported
 ``converged = False``; callers fall back to Clarabel.  Nothing here is trusted
-either way: the a-posteriori certificate checks of :mod:`sospoly.solve` run on the
+either way: the a-posteriori certificate checks of :mod:`sospoly.solvers.solve` run on the
 returned x.
 """
 from __future__ import annotations
@@ -48,8 +48,8 @@ import scipy.linalg as sla
 import scipy.sparse as sp
 
 from .blas import with_single_threaded_blas
-from .svec import svec_scale, triu_pairs
-from .tolerances import DEFAULT_TOLERANCES, Tolerances
+from ..algebra.svec import svec_scale, triu_pairs
+from ..tolerances import DEFAULT_TOLERANCES, Tolerances
 
 __all__ = ["IpmResult", "ipm_solve_batch", "ipm_solve_sparse"]
 
@@ -521,7 +521,7 @@ class _MomentReduction:
 
     Image form (Clarabel's standard form, p = 0): min q^T x, svec S = b - A x, S >= 0.  A
     *pair column* j has two entries, one of them in a *private* row p_j that no other column
-    touches, and q_j = 0 (the alpha of :class:`~sospoly.conic.GramForm` IMAGE: +alpha on a
+    touches, and q_j = 0 (the alpha of :class:`~sospoly.lowering.conic.GramForm` IMAGE: +alpha on a
     non-canonical Gram pair, -alpha on the canonical one).  With x = (w, alpha), eliminating
     alpha_j through its private row leaves one equation per remaining (*shared*) row:
 

@@ -1,44 +1,49 @@
 """sospoly: sum-of-squares polynomial programming.
 
-The layers, from meaning to numbers:
+The layers, from meaning to numbers (docs/architecture.md draws them):
 
-* :mod:`sospoly.algebra.polynomial` -- sparse polynomials (``variables``, ``Polynomial``, ``det``);
-* :mod:`sospoly.algebra.basis` -- monomial bases, ``sigma``, ``tau``, Gram product tables;
-* :mod:`sospoly.certificates.program` -- SOS programs as pure data (decision polynomials, SOS constraints);
-* :mod:`sospoly.certificates.psatz` -- Positivstellensatz certificates for lower bounds (SPEC §5);
-* :mod:`sospoly.lowering.conic` -- lowering to one conic standard form (image or kernel Gram form);
-* :mod:`sospoly.solvers.backends` / :mod:`sospoly.solvers.solve` -- Clarabel (direct) or cvxpy, with
-  a-posteriori certificate checks;
-* :mod:`sospoly.lowering.compiled` -- compile a Positivstellensatz structure once, fill numbers per
-  instance, solve batches; :mod:`sospoly.solvers.ipm` -- the batched interior-point method;
-* :mod:`sospoly.solvers.gevp` -- bisection for the free-multiplier GEVP;
-* :mod:`sospoly.analysis.extraction` -- minimisers from Gram kernels and moment matrices;
+* :mod:`sospoly.algebra` -- sparse polynomials, monomial bases, Gram product tables, the svec convention;
+* :mod:`sospoly.certificates` -- *what* is sought, as pure data: SOS programs, the Positivstellensatz
+  program with its data slots, certificate shapes (dense, correlative/term sparsity, Newton polytope);
+* :mod:`sospoly.lowering` -- *how* it becomes numbers: the conic standard form, compile-once structures;
+* :mod:`sospoly.solvers` -- back-ends (Clarabel, cvxpy, the batched interior-point method), the
+  a-posteriori checks, GEVP bisection, lower bounds of Positivstellensatz programs;
+* :mod:`sospoly.analysis` -- minimisers (dense and clique-wise), certification by verification,
+  rigorous bounds, complexity counts;
+* :mod:`sospoly.tolerances` / :mod:`sospoly.budget` -- every tolerance and decision, every resource limit;
 * :mod:`sospoly.minimize` -- ``minimize`` and ``is_sos``.
 """
-from .algebra.basis import GramBasis, MonomialIndex, monomials, sigma, tau
-from .lowering.compiled import DEFAULT_CACHE, CompiledPsatz, PsatzCache, StructureMismatch, compile_psatz
-from .analysis.complexity import n_lmivar_formula
-from .lowering.conic import ConicProblem, GramForm, lower
-from .analysis.extraction import Candidate, extract_from_gram, extract_from_moment
-from .solvers.gevp import CompiledGevp, GevpResult, bisect
+from .algebra.basis import GramBasis, GramBlocks, MonomialIndex, monomials, sigma, tau
 from .algebra.linpoly import LinPoly
-from .minimize import (LowerBound, MinimizeResult, SOSResult, candidates_of, feasibility_violation, is_sos, minimize,
-                       solve_psatz)
 from .algebra.polynomial import Polynomial, as_polynomial, det, variables
+from .analysis.complexity import n_lmivar_formula, n_lmivar_shape
+from .analysis.extraction import Candidate, extract_from_gram, extract_from_moment
+from .analysis.rigor import ExactCheck, RigorousBound, exact_check, rigorous_psatz_bound
+from .budget import DEFAULT_BUDGET, UNLIMITED, Budget, BudgetExceeded, ProgramSize, estimate_size
 from .certificates.program import Sense, SOSProgram
-from .certificates.psatz import Multiplier, PsatzProblem, build_psatz, default_q, delta_min
-from .solvers.solve import ProgramSolution, check_certificate, solve_program
+from .certificates.psatz import (DataSlots, Multiplier, PsatzProblem, PsatzStructure, StructureMismatch, build_psatz,
+                                 default_q, delta_min)
+from .certificates.shape import CertificateShape, clique_shape, correlative_shape, dense_shape
+from .lowering.compiled import CompiledPsatz, PsatzCache, compile_psatz
+from .lowering.conic import ConicProblem, GramForm, lower
+from .minimize import MinimizeResult, SolveAttempt, SOSResult, candidates_of, feasibility_violation, is_sos, minimize
+from .solvers.gevp import CompiledGevp, GevpResult, bisect
+from .solvers.lower_bound import solve_psatz
+from .solvers.solve import LowerBound, ProgramSolution, check_certificate, solve_program
 from .status import SolveStatus
 from .tolerances import DEFAULT_TOLERANCES, Tolerances
 
-__version__ = "0.1.0"
+__version__ = "0.2.0"
 
 __all__ = [
-    "GramBasis", "MonomialIndex", "monomials", "sigma", "tau", "n_lmivar_formula", "ConicProblem", "GramForm",
-    "lower", "Candidate", "extract_from_gram", "extract_from_moment", "CompiledGevp", "GevpResult", "bisect",
-    "LinPoly", "LowerBound", "candidates_of", "solve_psatz", "MinimizeResult", "SOSResult", "feasibility_violation", "is_sos", "minimize", "Polynomial",
-    "as_polynomial", "det", "variables", "Sense", "SOSProgram", "Multiplier", "PsatzProblem", "build_psatz",
-    "default_q", "delta_min", "ProgramSolution", "check_certificate", "solve_program", "SolveStatus",
-    "DEFAULT_TOLERANCES", "Tolerances", "CompiledPsatz", "PsatzCache", "StructureMismatch", "compile_psatz",
-    "DEFAULT_CACHE",
+    "GramBasis", "GramBlocks", "MonomialIndex", "monomials", "sigma", "tau", "LinPoly", "Polynomial",
+    "as_polynomial", "det", "variables", "n_lmivar_formula", "n_lmivar_shape", "Candidate", "extract_from_gram",
+    "extract_from_moment", "ExactCheck", "RigorousBound", "exact_check", "rigorous_psatz_bound", "DEFAULT_BUDGET",
+    "UNLIMITED", "Budget", "BudgetExceeded", "ProgramSize", "estimate_size", "Sense", "SOSProgram", "DataSlots",
+    "Multiplier", "PsatzProblem", "PsatzStructure", "StructureMismatch", "build_psatz", "default_q", "delta_min",
+    "CertificateShape", "clique_shape", "correlative_shape", "dense_shape", "CompiledPsatz", "PsatzCache",
+    "compile_psatz", "ConicProblem", "GramForm", "lower", "MinimizeResult", "SolveAttempt", "SOSResult",
+    "candidates_of", "feasibility_violation", "is_sos", "minimize", "CompiledGevp", "GevpResult", "bisect",
+    "solve_psatz", "LowerBound", "ProgramSolution", "check_certificate", "solve_program", "SolveStatus",
+    "DEFAULT_TOLERANCES", "Tolerances",
 ]

@@ -1,18 +1,40 @@
 """User entry points: :func:`minimize` (certified polynomial optimisation) and :func:`is_sos`.
 
-``minimize(f, eq, ineq, degree, multiplier)`` returns a :class:`MinimizeResult`:
+``minimize(f, eq, ineq)`` returns a :class:`MinimizeResult`:
 
-* ``lower_bound`` -- c* of the Positivstellensatz program (a valid lower bound of
-  min f on {g = 0, h >= 0}), only when the solve is OPTIMAL and checked;
-* ``candidates`` -- every extracted point (kernel of the optimal Gram matrix, and
-  moment matrix with a rank test), optionally polished locally, kept when feasible
-  to ``Tolerances.feasibility``, sorted by f, near-duplicates merged;
-* ``minimizers`` -- the candidates whose f is within the optimality tolerance of
-  ``upper_bound`` (the global minimisers found, when ``optimal``);
-* ``upper_bound`` -- f at the best feasible candidate;
-* ``optimal`` -- ``upper_bound - lower_bound <= gap_abs + gap_rel*max(1,|upper|)``
-  (:class:`~sospoly.tolerances.Tolerances`): a certificate of global optimality
-  of ``minimizers[0]`` within that tolerance.
+* ``lower_bound`` -- c* of a checked Positivstellensatz certificate (a valid lower bound of min f on
+  {g = 0, h >= 0}); with ``radius`` (a ball known to hold a minimiser) the PSD defect and the
+  identity residual of the returned certificate are subtracted (:mod:`sospoly.analysis.rigor`);
+* ``minimizers`` / ``upper_bound`` -- extracted points (Gram kernel, moment matrices, clique moments
+  for sparse certificates), polished locally, kept when feasible, sorted by f; ``upper_bound`` is f
+  at the best one;
+* ``optimal`` -- ``Tolerances.certified(lower_bound, upper_bound, scale)`` with ``scale`` the
+  largest coefficient of f (the problem's own scale): a certificate of global optimality of
+  ``minimizers[0]`` within that tolerance.  A lower bound above the upper bound within the
+  tolerance is reported equal to it; beyond it the status is ``INCONSISTENT``.
+
+The default strategy (each step recorded in ``attempts``):
+
+1. **Scaling.** f is divided by its largest coefficient and every constraint by its own, so the
+   solver sees O(1) data; bounds are reported in the caller's units.
+2. **Degrees.** ``degree`` given: that degree only.  Otherwise delta_min, delta_min + 2, ... up to
+   ``max_degree`` (default delta_min + 4), stopping at the first certified degree.
+3. **Sparsity** (``sparsity="auto"``): a correlative-sparsity certificate (cliques of a chordal
+   extension of the variables' interaction graph; with a dense degree-2 block beside them when it is
+   small, so it is never weaker than the dense degree-2 certificate) when that graph is not complete
+   and the dense program is large or does not fit the budget; otherwise dense.  ``"none"``,
+   ``"correlative"``, ``"term"`` and ``"newton"`` force a choice; ``result.sparsity`` says which.
+4. **Multiplier** (``multiplier="auto"``): at each degree q = 1 first (Putinar's certificate, the
+   strongest on compact sets: Floudas' test 4.10 is certified at degree 8), then, when that does not
+   certify and the degree allows it, the paper's q = (1 + ||v||^2)^k (Reznick-type, for unconstrained
+   positive polynomials that are not SOS, e.g. Motzkin).  ``"fixed"``, ``"putinar"``, ``"free"``
+   or a user q force one.
+5. **Numerical failures.** A solve that ends inaccurate, with a failed certificate check or a solver
+   error is retried in the kernel form and with cvxpy's back-end (unless ``form`` / ``backend`` were
+   given) before the step is given up.
+6. **Budget.** Every program is sized before it is built (:mod:`sospoly.budget`); one that does not fit
+   is skipped with status ``budget_exceeded``, and the whole call stops at ``budget.time_limit``
+   (status ``time_limit``, with the best bounds found so far).
 """
 from __future__ import annotations
 
@@ -21,18 +43,43 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .lowering.conic import GramForm
-from .analysis.extraction import Candidate, extract_from_gram, extract_from_moment
-from .solvers.gevp import CompiledGevp, GevpResult, bisect
 from .algebra.polynomial import Polynomial
+from .analysis.extraction import Candidate, extract_from_gram, extract_from_moment
+from .analysis.sparse_extraction import extract_from_clique_moments
+from .budget import BudgetExceeded, as_budget
 from .certificates.program import SOSProgram
-from .certificates.psatz import Multiplier, PsatzProblem, build_psatz
-from .solvers.solve import ProgramSolution, solve_program
+from .certificates.psatz import Multiplier, PsatzProblem, as_multiplier, build_psatz, checked_inputs
+from .certificates.shape import SPARSITY_KINDS
+from .certificates.sparsity import correlative_sparsity
+from .lowering.conic import GramForm
+from .solvers.lower_bound import solve_psatz
+from .solvers.solve import LowerBound, ProgramSolution, solve_program
 from .status import SolveStatus
-from .tolerances import DEFAULT_TOLERANCES, Tolerances
+from .tolerances import DEFAULT_TOLERANCES, Tolerances, as_tolerances
 
-__all__ = ["MinimizeResult", "SOSResult", "LowerBound", "minimize", "solve_psatz", "is_sos", "feasibility_violation",
-           "candidates_of"]
+__all__ = ["MinimizeResult", "SOSResult", "SolveAttempt", "LowerBound", "minimize", "solve_psatz", "is_sos",
+           "feasibility_violation", "candidates_of", "DENSE_AUTO_MAX_SIDE"]
+
+#: ``sparsity="auto"`` uses a sparse certificate when the dense Gram matrix would be larger than this (and the
+#: interaction graph is not complete); smaller dense programs are solved as they are.
+DENSE_AUTO_MAX_SIDE = 120
+#: the dense degree-2 block beside clique blocks is added while it stays this small (its side is n + 1).
+LOW_BLOCK_MAX_SIDE = 61
+_NUMERICAL = (SolveStatus.NUMERICAL_ERROR, SolveStatus.INACCURATE, SolveStatus.CHECK_FAILED)
+
+
+@dataclass(frozen=True)
+class SolveAttempt:
+    """One solve of the strategy: degree, multiplier, sparsity, form, back-end, outcome."""
+    degree: int
+    multiplier: str
+    sparsity: str
+    form: str
+    backend: str
+    status: str
+    lower_bound: float | None
+    seconds: float
+    message: str = ""
 
 
 @dataclass(frozen=True)
@@ -51,6 +98,9 @@ class MinimizeResult:
     seconds: float = 0.0
     message: str = ""
     candidates: tuple = ()
+    sparsity: str = "dense"
+    attempts: tuple = ()
+    scale: float = 1.0
 
     @property
     def gap(self) -> float | None:
@@ -60,9 +110,10 @@ class MinimizeResult:
 
     def __str__(self) -> str:
         return (f"MinimizeResult(status={self.status.value}, lower={self.lower_bound}, upper={self.upper_bound}, "
-                f"optimal={self.optimal}, degree={self.degree}, n_lmivar={self.n_lmivar})")
+                f"optimal={self.optimal}, degree={self.degree}, n_lmivar={self.n_lmivar}, sparsity={self.sparsity})")
 
 
+# ----------------------------------------------------------------------------- candidates
 def feasibility_violation(point: np.ndarray, eq, ineq) -> float:
     """max over constraints of |g_k| and max(0, -h_k), each relative to max(1, ||coef||_inf)."""
     worst = 0.0
@@ -77,49 +128,70 @@ def _polish(f: Polynomial, eq, ineq, x0: np.ndarray) -> np.ndarray | None:
     """Local SLSQP polish of a candidate (any feasible point gives a valid upper bound)."""
     from scipy.optimize import minimize as sp_min
 
-    grads_f = f.gradient()
-    cons = [{"type": "eq", "fun": g.evaluate, "jac": (lambda gg: (lambda v: np.array([d.evaluate(v) for d in gg])))(g.gradient())}
-            for g in eq]
-    cons += [{"type": "ineq", "fun": h.evaluate, "jac": (lambda hh: (lambda v: np.array([d.evaluate(v) for d in hh])))(h.gradient())}
-             for h in ineq]
+    def jac_of(p):
+        grads = p.gradient()
+        return lambda v: np.array([d.evaluate(v) for d in grads])
+
+    cons = [{"type": "eq", "fun": g.evaluate, "jac": jac_of(g)} for g in eq]
+    cons += [{"type": "ineq", "fun": h.evaluate, "jac": jac_of(h)} for h in ineq]
     try:
-        res = sp_min(f.evaluate, x0, jac=lambda v: np.array([d.evaluate(v) for d in grads_f]),
-                     constraints=cons, method="SLSQP", options={"ftol": 1e-14, "maxiter": 200})
-    except Exception:  # a failed polish just keeps the unpolished candidate
+        res = sp_min(f.evaluate, x0, jac=jac_of(f), constraints=cons, method="SLSQP",
+                     options={"ftol": 1e-14, "maxiter": 200})
+    except Exception:  # noqa: BLE001 - a failed polish just keeps the unpolished candidate
         return None
     return np.asarray(res.x, float) if np.all(np.isfinite(res.x)) else None
 
 
-def candidates_of(psatz: PsatzProblem, sol: ProgramSolution, tol: Tolerances) -> list[Candidate]:
-    """Minimiser candidates from the u-certificate's Gram kernel and moment matrix."""
-    basis = psatz.u.gram.b
-    cands = []
-    if "u" in sol.grams:
-        cands += extract_from_gram(sol.grams["u"], basis, tol)
-    if "u" in sol.moments:
-        cands += extract_from_moment(sol.moments["u"], basis, tol)
+def candidates_of(psatz, sol: ProgramSolution, tol: Tolerances) -> list[Candidate]:
+    """Minimiser candidates: the Gram kernel and moment matrix of a dense certificate; for a sparse one
+    the clique moment matrices joined on their overlaps (:mod:`sospoly.analysis.sparse_extraction`) and
+    the dense low-degree block's first moments."""
+    u = psatz.u
+    names = u.block_names()
+    if len(names) == 1:
+        basis = u.gram.blocks[0].b
+        cands = []
+        if names[0] in sol.grams:
+            cands += extract_from_gram(sol.grams[names[0]], basis, tol)
+        if names[0] in sol.moments:
+            cands += extract_from_moment(sol.moments[names[0]], basis, tol)
+        return cands
+    shape = psatz.shape
+    n = len(psatz.gens)
+    moments, bases, cliques, cands = [], [], [], []
+    for name, blk, k in zip(names, u.gram.blocks, shape.block_clique or (-1,) * len(names)):
+        M = sol.moments.get(name)
+        if M is None:
+            continue
+        if k < 0:
+            cands += [c for c in extract_from_moment(M, blk.b, tol) if c.point.shape == (n,)]
+            continue
+        cl = np.asarray(shape.cliques[k], np.int64)
+        moments.append(M)
+        bases.append(blk.b[:, cl])
+        cliques.append(tuple(int(i) for i in cl))
+    if moments:
+        for p in extract_from_clique_moments(moments, bases, cliques, n, tol):
+            cands.append(Candidate(np.asarray(p, float), "clique-moments", 0.0))
     return cands
 
 
-def _upper_from_candidates(psatz: PsatzProblem, cands, tol: Tolerances, refine: bool):
+def _feasible_points(f, eq, ineq, cands, tol: Tolerances, refine: bool):
     pts = []
     for cand in cands:
         p = np.asarray(cand.point, float)
         if not np.all(np.isfinite(p)):
             continue
         if refine:
-            q = _polish(psatz.f, psatz.eq, psatz.ineq, p)
-            if q is not None and feasibility_violation(q, psatz.eq, psatz.ineq) <= tol.feasibility:
+            q = _polish(f, eq, ineq, p)
+            if q is not None and tol.feasible(feasibility_violation(q, eq, ineq)):
                 # the polished point replaces the raw one: a raw candidate that violates a constraint
                 # by less than the tolerance may still have f below the true minimum (no upper bound)
                 pts.append(q)
                 continue
         pts.append(p)
-    feas = []
-    for p in pts:
-        if feasibility_violation(p, psatz.eq, psatz.ineq) <= tol.feasibility:
-            feas.append((float(psatz.f.evaluate(p)), p))
-    return _dedupe(sorted(feas, key=lambda t: t[0]))
+    found = [(float(f.evaluate(p)), p) for p in pts if tol.feasible(feasibility_violation(p, eq, ineq))]
+    return _dedupe(sorted(found, key=lambda t: t[0]))
 
 
 def _dedupe(found, rtol: float = 1e-4):
@@ -131,102 +203,203 @@ def _dedupe(found, rtol: float = 1e-4):
     return uniq
 
 
-@dataclass(frozen=True)
-class LowerBound:
-    """Outcome of one Positivstellensatz solve: the certified c*, its certificate, and for
-    the free multiplier the final bisection bracket."""
-    status: SolveStatus
-    lower_bound: float | None
-    solution: ProgramSolution | None
-    bracket: tuple | None = None
-    message: str = ""
+# ----------------------------------------------------------------------------- strategy
+def _normalised(f, eq, ineq):
+    """f / max|coef f| and every constraint over its own largest coefficient (same feasible set)."""
+    fs = f.max_abs_coefficient() or 1.0
+    return (f * (1.0 / fs), tuple(g * (1.0 / (g.max_abs_coefficient() or 1.0)) for g in eq),
+            tuple(h * (1.0 / (h.max_abs_coefficient() or 1.0)) for h in ineq), fs)
 
 
-def solve_psatz(psatz: PsatzProblem, *, backend=None, form: GramForm = GramForm.IMAGE,
-                tolerances: Tolerances = DEFAULT_TOLERANCES, c_hi: float | None = None,
-                fixed_hint: ProgramSolution | None = None) -> LowerBound:
-    """Solve a Positivstellensatz program: one SDP (fixed q) or the GEVP bisection (free q).
-
-    For the free multiplier the bracket starts from the fixed-q SDP's c* (solved here
-    unless ``fixed_hint`` gives it) and from ``c_hi`` (f at a feasible point), if known.
-    ``psatz`` may also be a :class:`sospoly.lowering.compiled.CompiledInstance` (a compiled structure
-    filled with one instance's numbers): then only its conic data is solved.
-    """
-    from .lowering.compiled import CompiledInstance
-
-    if isinstance(psatz, CompiledInstance):
-        return psatz.compiled.solve_theta(psatz.theta, backend=backend, tolerances=tolerances, problem=psatz.problem)
-    if not psatz.eq and not psatz.ineq and psatz.f.degree % 2:
-        # f of odd degree on all of R^n is unbounded below, so no certificate exists at any degree.
-        # The SDP is then only *weakly* infeasible (no Farkas certificate): solvers cannot detect it
-        # and report numerical errors, so decide it exactly here.
-        return LowerBound(SolveStatus.INFEASIBLE, None, None, None,
-                          f"f has odd degree {psatz.f.degree} and there are no constraints: f is unbounded below")
-    if psatz.multiplier == Multiplier.FREE:
-        c_lo = None
-        if fixed_hint is None:
-            fixed = build_psatz(psatz.f, psatz.eq, psatz.ineq, psatz.degree, Multiplier.FIXED, gens=psatz.gens)
-            fixed_hint = solve_program(fixed.program, backend, form, tolerances)
-        if fixed_hint.status == SolveStatus.OPTIMAL:
-            c_lo = fixed_hint.objective
-        g: GevpResult = bisect(CompiledGevp(psatz, backend, form, tolerances), c_lo, c_hi)
-        return LowerBound(g.status, g.lower_bound, g.solution, g.bracket, g.message)
-    return lower_bound_of(solve_program(psatz.program, backend, form, tolerances), psatz.degree)
+def _support(p: Polynomial) -> np.ndarray:
+    return p.exponents() if p.terms else np.zeros((1, p.nvars), np.int64)
 
 
-def lower_bound_of(sol: ProgramSolution, degree: int) -> LowerBound:
-    """The LowerBound of a fixed-multiplier solve (c* when OPTIMAL, a status message otherwise)."""
-    if sol.status == SolveStatus.OPTIMAL:
-        return LowerBound(sol.status, sol.objective, sol)
-    lb = np.inf if sol.status == SolveStatus.UNBOUNDED else None
-    msg = {SolveStatus.INFEASIBLE: f"no Positivstellensatz certificate at degree {degree}; try a larger degree",
-           SolveStatus.UNBOUNDED: "c is unbounded: the constraint set is empty"}.get(sol.status, sol.message)
-    return LowerBound(sol.status, lb, sol, None, msg)
+def _choose_sparsity(sparsity, f, eq, ineq, degree: int) -> tuple[str, int | None]:
+    """(sparsity kind, low degree of a dense block) for ``sparsity`` (see the module docstring)."""
+    from .algebra.basis import sigma
+
+    if sparsity not in SPARSITY_KINDS:
+        raise ValueError(f"sparsity must be one of {', '.join(SPARSITY_KINDS)}, got {sparsity!r}")
+    n = len(f.gens)
+    low = 2 if degree > 2 and n + 1 <= LOW_BLOCK_MAX_SIDE else None
+    if sparsity == "correlative":
+        return "correlative", low
+    if sparsity != "auto":
+        return sparsity, None
+    if sigma(n, degree // 2) <= DENSE_AUTO_MAX_SIDE:
+        return "none", None
+    cs = correlative_sparsity(n, _support(f), [_support(g) for g in eq], [_support(h) for h in ineq])
+    return ("none", None) if cs.is_dense else ("correlative", low)
 
 
-def minimize(f, eq=(), ineq=(), degree: int | None = None, multiplier=Multiplier.FIXED, *,
-             backend=None, form: GramForm = GramForm.IMAGE, tolerances: Tolerances = DEFAULT_TOLERANCES,
-             refine: bool = True, gens=None) -> MinimizeResult:
-    """Certified lower bound and minimisers of ``f`` on ``{eq = 0, ineq >= 0}`` (see module docstring).
+def _multipliers(multiplier, degree: int, deg_f: int, dense: bool) -> list:
+    if multiplier != "auto":
+        return [as_multiplier(multiplier)]
+    out = [Multiplier.PUTINAR]
+    if dense and (degree - max(deg_f, 0)) // 2 >= 1:
+        out.append(Multiplier.FIXED)
+    return out
 
-    ``multiplier``: ``"fixed"`` (q = (1+||v||^2)^k, one SDP), ``"free"`` (q free SOS,
-    GEVP by bisection), or a Polynomial / positive number used as q.
+
+def _name_of(multiplier) -> str:
+    if isinstance(multiplier, Multiplier):
+        return multiplier.value
+    return "given"
+
+
+def _retry_chain(form, backend) -> list:
+    forms = [GramForm(form)] if form is not None else [GramForm.IMAGE, GramForm.KERNEL]
+    backends = [backend] if backend is not None else ["auto", "cvxpy"]
+    return [(fm, be) for be in backends for fm in forms]
+
+
+def minimize(f, eq=(), ineq=(), degree: int | None = None, multiplier="auto", *, sparsity="auto",
+             low_degree: int | None = None, max_degree: int | None = None, backend=None, form=None,
+             tolerances: Tolerances | None = None, budget=None, refine: bool = True, gens=None,
+             radius: float | None = None) -> MinimizeResult:
+    """Certified lower bound and minimisers of ``f`` on ``{eq = 0, ineq >= 0}`` (see the module docstring
+    for the strategy).
+
+    ``multiplier``: ``"auto"`` (default), ``"fixed"`` (q = (1+||v||^2)^k), ``"putinar"`` (q = 1), ``"free"``
+    (q a free SOS, GEVP by bisection), or a Polynomial / positive number used as q.  ``sparsity``:
+    ``"auto"``, ``"none"``, ``"correlative"`` (``low_degree``: add the dense certificate of that degree),
+    ``"term"``, ``"newton"``.  ``budget``: a :class:`sospoly.Budget` (time limit, memory).  ``radius``:
+    a bound on the norm of some global minimiser; the reported lower bound is then rigorous (PSD
+    defect and identity residual subtracted).
     """
     t0 = time.perf_counter()
+    tol, budget = as_tolerances(tolerances), as_budget(budget)
+    deadline = budget.deadline()
+    if isinstance(multiplier, str) and multiplier != "auto":
+        as_multiplier(multiplier)
     if isinstance(multiplier, Polynomial) and multiplier.degree > 0:
-        chk = is_sos(multiplier, backend=backend, tolerances=tolerances)
+        chk = is_sos(multiplier, backend=backend, tolerances=tol)
         if not chk.is_sos:
             raise ValueError("the given multiplier q is not SOS: the certificate would not be a valid bound")
-    psatz = build_psatz(f, eq, ineq, degree, multiplier, gens=gens)
-    mult_name = "given" if isinstance(multiplier, (Polynomial, int, float)) else psatz.multiplier.value
-    found = []
-    c_hi = fixed_sol = None
-    if psatz.multiplier == Multiplier.FREE:
-        # candidates of the fixed-q SDP give the bisection its upper end
-        fixed = build_psatz(psatz.f, psatz.eq, psatz.ineq, psatz.degree, Multiplier.FIXED, gens=psatz.gens)
-        fixed_sol = solve_program(fixed.program, backend, form, tolerances)
-        if fixed_sol.status == SolveStatus.OPTIMAL:
-            found = _upper_from_candidates(fixed, candidates_of(fixed, fixed_sol, tolerances), tolerances, refine)
-            c_hi = found[0][0] if found else None
-    lb = solve_psatz(psatz, backend=backend, form=form, tolerances=tolerances, c_hi=c_hi, fixed_hint=fixed_sol)
-    elapsed = time.perf_counter() - t0
-    if lb.status != SolveStatus.OPTIMAL:
-        return MinimizeResult(lb.status, lb.lower_bound, None, (), False, psatz.n_lmivar, psatz.degree, mult_name,
-                              psatz.gens, lb.bracket, lb.solution, elapsed, lb.message)
-    found = found + _upper_from_candidates(psatz, candidates_of(psatz, lb.solution, tolerances), tolerances, refine)
-    found = _dedupe(sorted(found, key=lambda t: t[0]))
-    upper = found[0][0] if found else None
-    status, optimal, msg = SolveStatus.OPTIMAL, tolerances.certified(lb.lower_bound, upper), ""
-    if upper is not None and lb.lower_bound - upper > tolerances.gap_abs + tolerances.gap_rel * max(1.0, abs(upper)):
-        status, optimal = SolveStatus.INCONSISTENT, False
-        msg = f"lower bound {lb.lower_bound:.10g} exceeds f at a feasible point {upper:.10g}: numerical failure"
-    near = tolerances.gap_abs + tolerances.gap_rel * max(1.0, abs(upper)) if upper is not None else 0.0
-    minimizers = tuple(p for val, p in found if val <= upper + near) if upper is not None else ()
-    return MinimizeResult(status, lb.lower_bound, upper, minimizers, optimal, psatz.n_lmivar,
-                          psatz.degree, mult_name, psatz.gens, lb.bracket, lb.solution,
-                          time.perf_counter() - t0, msg, tuple(p for _, p in found))
+    if radius is not None and not (np.isfinite(radius) and radius > 0):
+        raise ValueError(f"radius must be a positive finite number, got {radius!r}")
+    f, eq, ineq, gens, d0 = checked_inputs(f, eq, ineq, degree, gens, budget.max_gram_side)
+    if max_degree is not None and (int(max_degree) != max_degree or max_degree < d0):
+        raise ValueError(f"max_degree must be an integer >= the first degree {d0}, got {max_degree!r}")
+    last = d0 if degree is not None else int(max_degree if max_degree is not None else d0 + 4)
+    fn, eqn, ineqn, fscale = _normalised(f, eq, ineq)
+    run = _Run(f, eq, ineq, fn, eqn, ineqn, fscale, gens, tol, budget, deadline, refine, radius)
+    best = None
+    for d in range(d0, last + 1, 2):
+        kind, low = _choose_sparsity(sparsity, fn, eqn, ineqn, d)
+        low = low_degree if low_degree is not None else low
+        for mult in _multipliers(multiplier, d, f.degree, kind == "none"):
+            res = run.solve(d, mult, kind, low, form, backend)
+            best = res if best is None or _better(res, best) else best
+            if res.optimal or res.status in (SolveStatus.TIME_LIMIT,) or deadline.expired:
+                break
+        if best.optimal or deadline.expired:
+            break
+    return _finish(best, run, time.perf_counter() - t0)
 
 
+def _better(a: MinimizeResult, b: MinimizeResult) -> bool:
+    if a.optimal != b.optimal:
+        return a.optimal
+    la, lb = a.lower_bound, b.lower_bound
+    if la is None or not np.isfinite(la):
+        return False
+    return lb is None or not np.isfinite(lb) or la > lb or (la == lb and a.upper_bound is not None
+                                                            and (b.upper_bound is None or a.upper_bound < b.upper_bound))
+
+
+def _finish(best: MinimizeResult, run: "_Run", seconds: float) -> MinimizeResult:
+    import dataclasses
+
+    status = best.status
+    if run.deadline.expired and not best.optimal and status == SolveStatus.OPTIMAL:
+        status = SolveStatus.TIME_LIMIT
+    return dataclasses.replace(best, status=status, seconds=seconds, attempts=tuple(run.attempts))
+
+
+class _Run:
+    """The state of one :func:`minimize` call: data, tolerances, budget, attempts so far."""
+
+    def __init__(self, f, eq, ineq, fn, eqn, ineqn, fscale, gens, tol, budget, deadline, refine, radius):
+        self.f, self.eq, self.ineq = f, eq, ineq
+        self.fn, self.eqn, self.ineqn, self.fscale = fn, eqn, ineqn, fscale
+        self.gens, self.tol, self.budget, self.deadline = gens, tol, budget, deadline
+        self.refine, self.radius = refine, radius
+        self.attempts: list[SolveAttempt] = []
+
+    def _empty(self, status, degree, mult, kind, message, n_lmivar=0) -> MinimizeResult:
+        return MinimizeResult(status, None, None, (), False, n_lmivar, degree, _name_of(mult), self.gens,
+                              message=message, sparsity=kind, scale=self.fscale)
+
+    def solve(self, degree, mult, kind, low, form, backend) -> MinimizeResult:
+        label = "dense" if kind == "none" else kind
+        try:
+            psatz = build_psatz(self.fn, self.eqn, self.ineqn, degree, mult, self.gens, sparsity=kind,
+                                low_degree=low if kind == "correlative" else None, budget=self.budget)
+        except BudgetExceeded as exc:
+            self.attempts.append(SolveAttempt(degree, _name_of(mult), label, "-", "-", "budget_exceeded", None, 0.0,
+                                              str(exc)))
+            return self._empty(SolveStatus.BUDGET_EXCEEDED, degree, mult, label, str(exc))
+        fixed_sol = c_hi = None
+        found = []
+        lb = None
+        for fm, be in _retry_chain(form, backend):
+            t1 = time.perf_counter()
+            if psatz.multiplier == Multiplier.FREE and fixed_sol is None:
+                fixed = build_psatz(self.fn, self.eqn, self.ineqn, degree, Multiplier.FIXED, self.gens)
+                lb_fixed = solve_psatz(fixed, backend=be, form=fm, tolerances=self.tol, deadline=self.deadline)
+                fixed_sol = lb_fixed.solution
+                if lb_fixed.status == SolveStatus.OPTIMAL:
+                    found = self._points(fixed, fixed_sol)
+                    c_hi = found[0][0] if found else None
+            lb = solve_psatz(psatz, backend=be, form=fm, tolerances=self.tol, c_hi=c_hi, fixed_hint=fixed_sol,
+                             deadline=self.deadline)
+            self.attempts.append(SolveAttempt(degree, _name_of(mult), label, fm.value, str(be), lb.status.value,
+                                              None if lb.lower_bound is None else lb.lower_bound * self.fscale,
+                                              time.perf_counter() - t1, lb.message))
+            if lb.status not in _NUMERICAL or self.deadline.expired:
+                break
+        return self._evaluate(psatz, lb, found, degree, mult, label)
+
+    def _points(self, psatz, sol):
+        return _feasible_points(self.fn, self.eqn, self.ineqn, candidates_of(psatz, sol, self.tol), self.tol,
+                                self.refine)
+
+    def _evaluate(self, psatz: PsatzProblem, lb: LowerBound, found, degree, mult, label) -> MinimizeResult:
+        tol, fs = self.tol, self.fscale
+        bracket = None if lb.bracket is None else tuple(None if b is None else b * fs for b in lb.bracket)
+        if lb.status not in (SolveStatus.OPTIMAL, SolveStatus.TIME_LIMIT) or lb.lower_bound is None \
+                or lb.solution is None:
+            lower = None if lb.lower_bound is None else lb.lower_bound * fs
+            return MinimizeResult(lb.status, lower, None, (), False, psatz.n_lmivar, degree, _name_of(mult), self.gens,
+                                  bracket, lb.solution, 0.0, lb.message, sparsity=label, scale=fs)
+        c = float(lb.lower_bound)
+        msg = lb.message
+        if self.radius is not None:
+            from .analysis.rigor import rigorous_psatz_bound
+
+            rb = rigorous_psatz_bound(psatz, lb.solution, c, self.radius)
+            c = rb.lower_bound
+            msg = (msg + "; " if msg else "") + f"rigorous margin {rb.margin:.3g} subtracted (radius {self.radius:g})"
+        found = _dedupe(sorted(found + self._points(psatz, lb.solution), key=lambda t: t[0]))
+        upper = found[0][0] if found else None
+        status, optimal = lb.status, False
+        if upper is not None:
+            if tol.contradicts(c, upper):
+                status = SolveStatus.INCONSISTENT
+                msg = f"lower bound {c * fs:.10g} exceeds f at a feasible point {upper * fs:.10g}: numerical failure"
+            else:
+                optimal = bool(tol.certified(c, upper)) and status == SolveStatus.OPTIMAL
+                c = tol.consistent(c, upper)
+        near = tol.gap_tolerance(upper) if upper is not None else 0.0
+        minimizers = tuple(p for val, p in found if val <= upper + near) if upper is not None else ()
+        return MinimizeResult(status, c * fs, None if upper is None else upper * fs, minimizers, optimal,
+                              psatz.n_lmivar, degree, _name_of(mult), self.gens, bracket, lb.solution, 0.0, msg,
+                              tuple(p for _, p in found), label, scale=fs)
+
+
+# ----------------------------------------------------------------------------- is_sos
 @dataclass(frozen=True)
 class SOSResult:
     """``is_sos`` answer; when True, ``p = sum_k decomposition[k]**2`` up to the solver's accuracy."""
@@ -240,10 +413,13 @@ class SOSResult:
 
 
 def is_sos(p, *, backend=None, form: GramForm = GramForm.IMAGE,
-           tolerances: Tolerances = DEFAULT_TOLERANCES) -> SOSResult:
+           tolerances: Tolerances = DEFAULT_TOLERANCES, budget=None) -> SOSResult:
     """Decide whether ``p`` is a sum of squares (Gram matrix method, SPEC §4)."""
+    from .algebra.basis import sigma
+
     if not isinstance(p, Polynomial):
         raise TypeError(f"is_sos needs a sospoly Polynomial, got {type(p).__name__}")
+    tolerances, budget = as_tolerances(tolerances), as_budget(budget)
     if p.is_zero:
         return SOSResult(True, SolveStatus.FEASIBLE, np.zeros((1, 1)), np.zeros((1, max(p.nvars, 1)), int), (), 0.0)
     if p.degree % 2:
@@ -253,11 +429,16 @@ def is_sos(p, *, backend=None, form: GramForm = GramForm.IMAGE,
         return SOSResult(c >= 0, SolveStatus.FEASIBLE if c >= 0 else SolveStatus.INFEASIBLE,
                          np.array([[c]]), np.zeros((1, p.nvars), int),
                          (Polynomial.constant(np.sqrt(max(c, 0.0)), p.gens),) if c >= 0 else ())
+    side = sigma(p.nvars, p.degree // 2)
+    if side > budget.max_gram_side:
+        return SOSResult(False, SolveStatus.BUDGET_EXCEEDED, None, None,
+                         message=f"the Gram matrix would have side {side} (limit {budget.max_gram_side})")
     prog = SOSProgram(p.gens)
     con = prog.add_sos(p, degree=p.degree, name="p")
-    sol = solve_program(prog, backend, form, tolerances)
+    sol = solve_program(prog, backend, form, tolerances, deadline=budget.deadline())
+    basis = con.gram.blocks[0].b
     if not sol.status.ok:
-        return SOSResult(False, sol.status, None, con.gram.b, message=sol.message)
+        return SOSResult(False, sol.status, None, basis, message=sol.message)
     G = sol.grams["p"]
     lam, V = np.linalg.eigh(G)
     decomposition = []
@@ -265,5 +446,8 @@ def is_sos(p, *, backend=None, form: GramForm = GramForm.IMAGE,
         if lam[k] > tolerances.psd_margin * max(1.0, lam[-1]):
             coef = np.sqrt(lam[k]) * V[:, k]
             decomposition.append(Polynomial(p.gens, {tuple(int(t) for t in e): float(c)
-                                                     for e, c in zip(con.gram.b, coef) if c != 0.0}))
-    return SOSResult(True, sol.status, G, con.gram.b, tuple(decomposition), float(lam[0]))
+                                                     for e, c in zip(basis, coef) if c != 0.0}))
+    return SOSResult(True, sol.status, G, basis, tuple(decomposition), float(lam[0]))
+
+
+

@@ -21,6 +21,8 @@ class SolveStatus(str, enum.Enum):
     CHECK_FAILED = "certificate_check_failed"  #: solver said solved, a-posteriori check rejected it
     NUMERICAL_ERROR = "numerical_error"    #: solver failed (error, panic, iteration limit)
     INCONSISTENT = "inconsistent_bounds"   #: lower bound above a feasible value: numerical failure
+    TIME_LIMIT = "time_limit"              #: the time limit of the budget was reached first
+    BUDGET_EXCEEDED = "budget_exceeded"    #: the program's estimated size exceeds the budget: not built
     NOT_SOLVED = "not_solved"
 
     @property

@@ -1,8 +1,28 @@
-"""Every numerical tolerance of sospoly, in one place.
+"""Every numerical tolerance of sospoly, and every decision made with one, in one place.
 
-All tolerances are gathered in the frozen dataclass :class:`Tolerances`; pass a
-modified copy (``dataclasses.replace(DEFAULT_TOLERANCES, ...)``) to any entry point
-that takes ``tolerances=``.
+:class:`Tolerances` holds the numbers; its methods are the only place where a tolerance
+becomes a decision (is this a certificate? do these bounds contradict each other? is this
+Gram matrix PSD? how large is this kernel?).  Every path -- a single SOS solve, the batched
+interior-point method, the verification fast path, the triangulation front-end -- calls
+these methods, and every method accepts scalars or numpy arrays (elementwise), so a
+vectorised path decides exactly as the scalar one.  Pass a modified copy
+(``dataclasses.replace(DEFAULT_TOLERANCES, ...)``) to any entry point that takes
+``tolerances=``; the constructor refuses non-finite, negative or mistyped values.
+
+The certificate rule
+--------------------
+A lower bound ``lower`` (from a checked certificate) and an upper bound ``upper`` (the
+objective at an exactly evaluated feasible point) *meet* when
+
+    upper - lower <= gap_tolerance(upper, scale),
+    gap_tolerance(upper, scale) = gap_abs * scale + gap_rel * max(scale, |upper|),
+
+where ``scale`` is the problem's own scale (the largest coefficient of the objective for
+:func:`sospoly.minimize`; 1 for the triangulation's normalised units, where c = O(1) is
+arranged by the normalisation).  They *contradict* each other when
+``lower - upper > gap_tolerance(upper, scale)``: a numerical failure, never a certificate.
+When they meet with ``lower > upper`` (inside the tolerance), :meth:`Tolerances.consistent`
+reports ``lower = upper``, so a result never claims ``lower > upper``.
 
 Why these values
 ----------------
@@ -14,7 +34,9 @@ Why these values
   point methods return points strictly inside the cone up to their feasibility
   tolerance, so a genuine certificate passes with room to spare, while the
   "optimal but infeasible" answers seen on near-degenerate problems (Motzkin at
-  degree 10) have eigenvalues around -1e-5 and are rejected.
+  degree 10) have eigenvalues around -1e-5 and are rejected.  The small negative part
+  that *is* accepted is not ignored: :mod:`sospoly.analysis.rigor` subtracts its effect
+  from the bound (rigorous lower bounds).
 * ``gevp_psd_margin``: the stricter margin for accepting a bisection level of the
   GEVP (see :mod:`sospoly.solvers.gevp`): above the optimum c*, lambda_min(G_u) is about
   -(c - c*)/2, so the general margin would let accepted levels creep ~1e-7 above c*.
@@ -22,13 +44,10 @@ Why these values
   coefficient of the polynomial) between u(v) and b(v)^T G b(v) for a certificate
   to be accepted (the image form is exact by construction; the kernel form and
   the cvxpy back-end are checked with this).
-* ``gap_abs`` / ``gap_rel``: ``optimal`` is reported only when
-  ``upper - lower <= gap_abs + gap_rel * max(1, |upper|)``, both sides computed
-  from the solver's returned certificate and an exactly evaluated feasible point.
-  With solver tolerances 1e-9 the bound itself is accurate to ~1e-8 relative;
-  extracted minimisers carry ~1e-5..1e-7 error whose effect on f is quadratic
-  near a minimiser, so 1e-6 / 1e-6 separates "equal" from "not equal" with two
-  decades of margin either way.
+* ``gap_abs`` / ``gap_rel``: the certificate rule above.  With solver tolerances 1e-9 the
+  bound itself is accurate to ~1e-8 relative; extracted minimisers carry ~1e-5..1e-7
+  error whose effect on f is quadratic near a minimiser, so 1e-6 / 1e-6 separates
+  "equal" from "not equal" with two decades of margin either way.
 * ``feasibility``: a candidate point counts as feasible when every equality
   satisfies ``|g_k(v)| <= feasibility * max(1, ||coef(g_k)||_inf)`` and every
   inequality ``h_k(v) >= -feasibility * max(1, ||coef(h_k)||_inf)``.
@@ -65,13 +84,26 @@ Why these values
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+import math
+import numbers
+from dataclasses import dataclass, fields
 
-__all__ = ["Tolerances", "DEFAULT_TOLERANCES"]
+import numpy as np
+
+__all__ = ["Tolerances", "DEFAULT_TOLERANCES", "as_tolerances"]
+
+_INT_FIELDS = ("solver_max_iter", "bisection_max_steps", "ipm_max_iter")
+
+
+def _maybe_scalar(x):
+    """A 0-d result as a Python scalar (bool or float), arrays unchanged."""
+    return x.item() if isinstance(x, np.ndarray) and x.ndim == 0 else x
 
 
 @dataclass(frozen=True)
 class Tolerances:
+    """The tolerances of sospoly (see the module docstring for every value) and the decisions made with them."""
+
     solver_gap_abs: float = 1e-9
     solver_gap_rel: float = 1e-9
     solver_feas: float = 1e-9
@@ -94,11 +126,99 @@ class Tolerances:
     ipm_flat_face_dual_residual_gap: float = 1e-6
     ipm_schur_regularization: float = 1e-16
 
-    def certified(self, lower: float | None, upper: float | None) -> bool:
-        """Is ``upper - lower`` within the documented optimality tolerance?"""
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            v = getattr(self, f.name)
+            if f.name in _INT_FIELDS:
+                if isinstance(v, bool) or not isinstance(v, numbers.Integral) or v < 1:
+                    raise ValueError(f"Tolerances.{f.name} must be a positive integer, got {v!r}")
+                continue
+            if isinstance(v, bool) or not isinstance(v, numbers.Real) or not math.isfinite(v) or v < 0:
+                raise ValueError(f"Tolerances.{f.name} must be a finite number >= 0, got {v!r}")
+        if not 0 < self.ipm_step_fraction < 1:
+            raise ValueError(f"Tolerances.ipm_step_fraction must lie in (0, 1), got {self.ipm_step_fraction!r}")
+
+    # ------------------------------------------------------------------ the certificate rule
+    def gap_tolerance(self, upper, scale=1.0):
+        """``gap_abs * scale + gap_rel * max(scale, |upper|)``: the largest gap that still certifies."""
+        upper = np.asarray(upper, float)
+        scale = np.asarray(scale, float)
+        return _maybe_scalar(self.gap_abs * scale + self.gap_rel * np.maximum(scale, np.abs(upper)))
+
+    def certified(self, lower, upper, scale=1.0):
+        """Do ``lower`` and ``upper`` meet (``upper - lower <= gap_tolerance``)?  False where either
+        is None or NaN.  Scalars give a bool, arrays an elementwise boolean array."""
         if lower is None or upper is None:
             return False
-        return upper - lower <= self.gap_abs + self.gap_rel * max(1.0, abs(upper))
+        lo, up = np.asarray(lower, float), np.asarray(upper, float)
+        with np.errstate(invalid="ignore"):
+            out = np.isfinite(up) & ~np.isnan(lo) & (up - lo <= self.gap_tolerance(up, scale))
+        return _maybe_scalar(out)
+
+    def contradicts(self, lower, upper, scale=1.0):
+        """Is ``lower`` above ``upper`` by more than the tolerance (a numerical failure)?"""
+        if lower is None or upper is None:
+            return False
+        lo, up = np.asarray(lower, float), np.asarray(upper, float)
+        with np.errstate(invalid="ignore"):
+            out = np.isfinite(lo) & np.isfinite(up) & (lo - up > self.gap_tolerance(up, scale))
+        return _maybe_scalar(out)
+
+    def consistent(self, lower, upper):
+        """The lower bound to report beside ``upper``: ``min(lower, upper)`` (a lower bound that exceeds a
+        feasible value within the tolerance is reported as that value; beyond it the caller must already
+        have declared a numerical failure with :meth:`contradicts`)."""
+        if lower is None or upper is None:
+            return lower
+        lo, up = np.asarray(lower, float), np.asarray(upper, float)
+        with np.errstate(invalid="ignore"):
+            out = np.where(np.isfinite(up) & (lo > up), up, lo)
+        return _maybe_scalar(out)
+
+    # ------------------------------------------------------------------ matrices
+    def psd_accepts(self, lambda_min, max_abs_entry):
+        """Is a Gram matrix with smallest eigenvalue ``lambda_min`` and largest entry ``max_abs_entry``
+        accepted as PSD: ``lambda_min >= -psd_margin * max(1, max_abs_entry)``?"""
+        lam = np.asarray(lambda_min, float)
+        return _maybe_scalar(lam >= -self.psd_margin * np.maximum(1.0, np.asarray(max_abs_entry, float)))
+
+    def kernel_dimension(self, eigenvalues):
+        """Number (>= 1) of numerically zero eigenvalues, ``lambda <= kernel_rel * |lambda_max|``, of
+        ascending eigenvalues along the last axis."""
+        lam = np.asarray(eigenvalues, float)
+        top = np.maximum(np.abs(lam[..., -1:]), 1e-300)
+        return _maybe_scalar(np.maximum(1, np.sum(lam <= self.kernel_rel * top, axis=-1)))
+
+    def moment_rank_mask(self, eigenvalues):
+        """Which eigenvalues of a moment matrix count toward its rank (``>= moment_rank_rel * lambda_max``);
+        at least the largest one."""
+        lam = np.asarray(eigenvalues, float)
+        keep = lam >= self.moment_rank_rel * max(float(lam.max()), 1e-300) if lam.size else lam.astype(bool)
+        if lam.size and not keep.any():
+            keep[np.argmax(lam)] = True
+        return keep
+
+    def feasible(self, violation):
+        """Is a point with relative constraint violation ``violation`` feasible?"""
+        return _maybe_scalar(np.asarray(violation, float) <= self.feasibility)
+
+    def tightened(self, factor: float = 1e-2) -> "Tolerances":
+        """A copy with the solver's stopping tolerances multiplied by ``factor`` (a re-solve after an
+        inconsistent answer)."""
+        from dataclasses import replace
+
+        return replace(self, solver_gap_abs=self.solver_gap_abs * factor, solver_gap_rel=self.solver_gap_rel * factor,
+                       solver_feas=self.solver_feas * factor)
 
 
 DEFAULT_TOLERANCES = Tolerances()
+
+
+def as_tolerances(value) -> Tolerances:
+    """``value`` if it is a :class:`Tolerances`, :data:`DEFAULT_TOLERANCES` for None; TypeError otherwise
+    (the one input check of every ``tolerances=`` argument)."""
+    if value is None:
+        return DEFAULT_TOLERANCES
+    if not isinstance(value, Tolerances):
+        raise TypeError(f"tolerances must be a sospoly.Tolerances, got {type(value).__name__}")
+    return value

@@ -178,7 +178,7 @@ def test_particular_gram_reproduces_polynomial(seed):
     con = prog.add_sos(p, name="p")
     cp_ = lower(prog, sp.GramForm.IMAGE)
     assert cp_.n_cols == tau(2, 4)                    # only the alpha columns
-    gb = con.gram
+    gb = con.gram.blocks[0]
     pts = rng.uniform(-1.5, 1.5, size=(20, 2))
     vals = p.evaluate(pts)
     for x in (np.zeros(cp_.n_cols), rng.standard_normal(cp_.n_cols)):

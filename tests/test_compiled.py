@@ -84,8 +84,8 @@ def test_example4_theorem1_delta4_ipm_matches_clarabel_and_paper():
     assert abs(res.gamma_ub - row["gamma"]) < 5e-4                # the paper prints 3 decimals
     assert res.attempts[-1][-1][0] == "ipm:converged"
     pb = tri_problem(cams, regs, "theorem1")
-    comp = STRUCTURE_CACHE.get(pb.f, pb.eq, pb.ineq, 4, gens=pb.gens,
-                               key=(4, ("Point",) * 4, "theorem1", 4, "image"))
+    comp, _ = STRUCTURE_CACHE.get(pb.f, pb.eq, pb.ineq, 4, gens=pb.gens,
+                                  key=(4, ("Point",) * 4, "theorem1", 4, "image"))
     ipm = comp.solve(pb.f, pb.eq, pb.ineq, backend="ipm")
     clar = comp.solve(pb.f, pb.eq, pb.ineq, backend="clarabel")
     assert ipm.status == clar.status == SolveStatus.OPTIMAL
@@ -135,7 +135,7 @@ def test_batch_bounds_agree_with_single_solves():
 def test_mismatch_errors_are_clear():
     x, y = sospoly.variables("x y")
     comp = sospoly.compile_psatz(x ** 2 + y ** 2 - x, [x * y - 1], [], degree=2)
-    with pytest.raises(sospoly.StructureMismatch, match="eq\\[0\\].*outside the compiled support"):
+    with pytest.raises(sospoly.StructureMismatch, match="eq\\[0\\].*outside the structure's support"):
         comp.theta(x ** 2 + y ** 2, [x * y - 1 + y], [])
     with pytest.raises(sospoly.StructureMismatch, match="1 equalities"):
         comp.theta(x ** 2, [], [])
@@ -152,10 +152,10 @@ def test_mismatch_errors_are_clear():
 def test_cache_reuses_and_grows_support():
     x, y = sospoly.variables("x y")
     cache = sospoly.PsatzCache()
-    a = cache.get(x ** 2 + y ** 2, [x * y - 1], [], 2, key="k")
-    b = cache.get(x ** 2 + 2 * y ** 2, [3 * x * y - 2], [], 2, key="k")
+    a, _ = cache.get(x ** 2 + y ** 2, [x * y - 1], [], 2, key="k")
+    b, _ = cache.get(x ** 2 + 2 * y ** 2, [3 * x * y - 2], [], 2, key="k")
     assert a is b and cache.compiles == 1
-    c = cache.get(x ** 2 + y ** 2 + x, [x * y - 1], [], 2, key="k")     # new term in f: union support
+    c, _ = cache.get(x ** 2 + y ** 2 + x, [x * y - 1], [], 2, key="k")     # new term in f: union support
     assert c is not a and cache.compiles == 2
     assert c.contains(x ** 2 + y ** 2, [x * y - 1], []) and c.contains(x ** 2 + y ** 2 + x, [x * y], [])
     # the enlarged structure gives the uncompiled bound on both instances

@@ -52,7 +52,8 @@ def check_consistent(res, f, eq=(), ineq=()):
 def test_six_hump_camel_degree_6():
     res = sp.minimize(CAMEL)
     check_consistent(res, CAMEL)
-    assert res.status == SolveStatus.OPTIMAL and res.degree == 6 and res.multiplier == "fixed"
+    # the default strategy tries q = 1 first (at degree 6 it is also the paper's q for a sextic f)
+    assert res.status == SolveStatus.OPTIMAL and res.degree == 6 and res.multiplier == "putinar"
     # the degree-6 SOS bound is exact (Parrilo & Sturmfels 2003)
     assert res.lower_bound <= CAMEL_MIN + 1e-6
     assert res.lower_bound >= CAMEL_MIN - 1e-6
@@ -73,7 +74,7 @@ def test_motzkin_needs_degree_8():
 
 def test_motzkin_degree_6_is_not_certified():
     """M - c is never SOS, so at degree 6 (q = 1) there is no certificate: never `optimal`."""
-    res = sp.minimize(MOTZKIN)
+    res = sp.minimize(MOTZKIN, degree=6)
     check_consistent(res, MOTZKIN)
     assert res.degree == 6
     assert not res.optimal
@@ -155,10 +156,15 @@ def test_floudas_4_10_putinar_vs_fixed_multiplier():
     put = sp.minimize(f, ineq=FLOUDAS_INEQ, degree=8, multiplier=1.0)
     check_consistent(put, f, (), FLOUDAS_INEQ)
     assert put.optimal and put.multiplier == "given"
+    # the default strategy (q = 1 first, degrees from delta_min up) finds that certificate by itself
+    auto = sp.minimize(f, ineq=FLOUDAS_INEQ)
+    check_consistent(auto, f, (), FLOUDAS_INEQ)
+    assert auto.optimal and auto.degree <= 8 and auto.multiplier == "putinar"
+    assert auto.lower_bound <= fstar + 1e-6 and abs(auto.lower_bound - fstar) <= 1e-5
     assert put.lower_bound <= fstar + 1e-6
     assert np.allclose(put.minimizers[0], xstar, atol=1e-4)
     # ... where the fixed q = (1 + |v|^2)^k stalls: a valid but loose bound, never `optimal`
-    fix = sp.minimize(f, ineq=FLOUDAS_INEQ, degree=8)
+    fix = sp.minimize(f, ineq=FLOUDAS_INEQ, degree=8, multiplier="fixed")
     check_consistent(fix, f, (), FLOUDAS_INEQ)
     assert fix.status == SolveStatus.OPTIMAL
     assert fix.lower_bound <= fstar + 1e-6
@@ -213,7 +219,7 @@ def test_fixed_and_free_multiplier_agree():
         assert fixed.status == free.status == SolveStatus.OPTIMAL
         assert abs(fixed.lower_bound - free.lower_bound) <= 1e-5
         lo, hi = free.bracket
-        assert lo <= hi and free.lower_bound == lo
+        assert lo <= hi and free.lower_bound == min(lo, free.upper_bound)   # reported consistent with upper
         assert fixed.bracket is None
 
 

@@ -68,7 +68,7 @@ def _check_identity(prog, sol, name="u"):
     poly = sol.value(con.expr)
     G = sol.grams[name]
     pts = np.random.default_rng(0).uniform(-1.5, 1.5, size=(15, 2))
-    got = np.array([con.gram.evaluate(v) @ G @ con.gram.evaluate(v) for v in pts])
+    got = np.array([con.gram.blocks[0].evaluate(v) @ G @ con.gram.blocks[0].evaluate(v) for v in pts])
     np.testing.assert_allclose(got, poly.evaluate(pts), atol=1e-6 * max(1.0, poly.max_abs_coefficient()), rtol=1e-6)
     assert np.linalg.eigvalsh(G)[0] >= -1e-6 * max(1.0, np.abs(G).max())
 

@@ -18,7 +18,10 @@ import pytest
 import sospoly
 import tritools
 from sospoly.solvers.backends import RawStatus
-from sospoly.solvers.ipm import _MomentReduction, _SparseSchur, _ipm, _reduction_for, ipm_solve_sparse, layout_of
+from sospoly.solvers.ipm import MomentReduction, ipm_solve_sparse, layout_of
+from sospoly.solvers.ipm.core import mehrotra, result_of
+from sospoly.solvers.ipm.moment import reduction_for
+from sospoly.solvers.ipm.operators import SparseOperator
 from sospoly.algebra.svec import smat
 from tritools.model.constraints import minors_matrix, theorem1_constraints
 from tritools.model.normalize import normalization_for
@@ -46,8 +49,8 @@ def test_reduction_applies_and_schur_matches_dense_formula(example4):
     comp, inst = example4
     P = inst.problem
     lay = layout_of(P.cones)
-    red = _reduction_for(P.A, P.q, lay.sizes[0])
-    assert isinstance(red, _MomentReduction)
+    red = reduction_for(P.A, P.q, lay.sizes[0])
+    assert isinstance(red, MomentReduction)
     # Example 4, delta 4: 495 coefficient-matching rows, 540 alphas, 51 free (c, r_k)
     assert (red.m2, red.alpha_cols.size, red.w_cols.size) == (495, 540, 51)
     # per-instance values as in solve(): e, V, EF
@@ -82,7 +85,8 @@ def test_reduced_ipm_equals_unreduced_ipm_and_clarabel(example4):
     res = ipm_solve_sparse(P.A, P.b, P.q, P.cones)
     assert res.converged[0]
     lay = layout_of(P.cones)
-    plain = _ipm(_SparseSchur(P.A, lay), P.q[None], P.b[None], lay, sospoly.DEFAULT_TOLERANCES, None)
+    plain = result_of(*mehrotra(SparseOperator(P.A, lay), P.q[None], P.b[None], lay, sospoly.DEFAULT_TOLERANCES),
+                      P.q[None], P.b[None], lay)
     assert plain.converged[0]
     clar = sospoly.solvers.backends.ClarabelBackend().solve(P)
     assert clar.raw_status == RawStatus.SOLVED
@@ -104,7 +108,7 @@ def test_not_reducible_falls_back_to_svec_kronecker_path():
     B = rng.standard_normal((5, 5)); B = B + B.T
     A = sp.csr_matrix(svec(np.eye(5))[:, None])
     cones = (Cone("psd", 15, 5),)
-    assert _reduction_for(A, np.array([-1.0]), 5) is None
+    assert reduction_for(A, np.array([-1.0]), 5) is None
     r = ipm_solve_sparse(A, svec(B), np.array([-1.0]), cones)
     assert r.converged[0] and abs(r.x[0, 0] - np.linalg.eigvalsh(B)[0]) < TOL_C
 

@@ -22,7 +22,7 @@ import numpy as np
 
 from .svec import triu_pairs
 
-__all__ = ["sigma", "tau", "monomials", "MonomialIndex", "GramBasis"]
+__all__ = ["sigma", "tau", "monomials", "MonomialIndex", "GramBasis", "GramBlocks", "graded_order"]
 
 
 def sigma(n: int, k: int) -> int:
@@ -72,6 +72,15 @@ def monomials(n: int, k: int, mindeg: int = 0) -> np.ndarray:
     if k < mindeg:
         return np.zeros((0, n), dtype=np.int64)
     return _monomials_cached(int(n), int(k), int(mindeg))
+
+
+def graded_order(E: np.ndarray) -> np.ndarray:
+    """The permutation sorting exponent rows in the documented order (graded, then lexicographically
+    decreasing)."""
+    E = np.asarray(E, dtype=np.int64)
+    if E.shape[0] == 0:
+        return np.zeros(0, np.int64)
+    return np.lexsort(tuple((-E[:, k]) for k in range(E.shape[1] - 1, -1, -1)) + (E.sum(axis=1),))
 
 
 class MonomialIndex:
@@ -158,8 +167,7 @@ class GramBasis:
         prod_exps = b[ii] + b[jj]
         uniq, inverse = np.unique(prod_exps, axis=0, return_inverse=True)
         # reorder the products in the documented graded-lex-decreasing order
-        deg = uniq.sum(axis=1)
-        order = np.lexsort(tuple((-uniq[:, k]) for k in range(uniq.shape[1] - 1, -1, -1)) + (deg,))
+        order = graded_order(uniq)
         rank = np.empty_like(order)
         rank[order] = np.arange(len(order))
         products = uniq[order]
@@ -183,3 +191,67 @@ class GramBasis:
         """b(v) at a point."""
         point = np.asarray(point, dtype=float)
         return np.prod(point[None, :] ** self.b, axis=1)
+
+
+@dataclass(frozen=True)
+class GramBlocks:
+    """Several Gram bases whose sum represents one polynomial: p(v) = sum_j b_j(v)^T G_j b_j(v).
+
+    A dense certificate has one block (the full basis of degree delta/2); a sparse one has a
+    block per clique (correlative sparsity), per term-sparsity component, or a dense low-degree
+    block beside clique blocks.  The *pairs* (i <= j) of all blocks are concatenated block by
+    block, each block's pairs in its svec order, so a pair's index is also its row in the
+    concatenated svec vectors of the blocks.  ``products`` is the union of the blocks'
+    products (documented monomial order) and ``pair_monomial[p]`` the index in it of pair p's
+    monomial.
+    """
+
+    blocks: tuple
+    products: np.ndarray
+    pair_block: np.ndarray
+    pair_diag: np.ndarray
+    pair_monomial: np.ndarray
+    block_offsets: np.ndarray          # first pair (svec row) of each block
+    product_index: MonomialIndex = field(repr=False, compare=False)
+
+    @classmethod
+    def of(cls, bases) -> "GramBlocks":
+        """Blocks from GramBasis objects or exponent arrays (a single basis or a sequence)."""
+        if isinstance(bases, GramBasis) or (isinstance(bases, np.ndarray) and bases.ndim == 2):
+            bases = [bases]
+        blocks = tuple(b if isinstance(b, GramBasis) else GramBasis.from_exponents(b) for b in bases)
+        if not blocks:
+            raise ValueError("an SOS polynomial needs at least one Gram block")
+        n = blocks[0].b.shape[1]
+        if any(b.b.shape[1] != n for b in blocks):
+            raise ValueError("Gram blocks over different numbers of variables")
+        if len(blocks) == 1:
+            gb = blocks[0]
+            return cls(blocks, gb.products, np.zeros(gb.n_pairs, np.int64), gb.pair_i == gb.pair_j,
+                       gb.pair_monomial, np.zeros(1, np.int64), gb.product_index)
+        allp = np.vstack([b.products for b in blocks])
+        uniq = np.unique(allp, axis=0)
+        products = uniq[graded_order(uniq)]
+        index = MonomialIndex(products)
+        pm = np.concatenate([index.find(b.products)[b.pair_monomial] for b in blocks])
+        sizes = np.array([b.n_pairs for b in blocks], np.int64)
+        return cls(blocks, products, np.repeat(np.arange(len(blocks)), sizes),
+                   np.concatenate([b.pair_i == b.pair_j for b in blocks]), pm.astype(np.int64),
+                   np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.int64), index)
+
+    @property
+    def sizes(self) -> tuple:
+        return tuple(b.size for b in self.blocks)
+
+    @property
+    def n_pairs(self) -> int:
+        return int(self.pair_monomial.size)
+
+    @property
+    def n_products(self) -> int:
+        return int(self.products.shape[0])
+
+    @property
+    def b(self) -> np.ndarray:
+        """The basis of the first (for a dense certificate: the only) block."""
+        return self.blocks[0].b

@@ -45,20 +45,26 @@ def svec_scale(s: int) -> np.ndarray:
 
 
 def svec(X: np.ndarray) -> np.ndarray:
+    """svec of a symmetric matrix, or of a stack (..., s, s) along the last two axes (the symmetric part
+    0.5 (X + X^T) is taken, so round-off asymmetry does not bias the result)."""
     X = np.asarray(X, dtype=float)
-    s = X.shape[0]
+    s = X.shape[-1]
     i, j = triu_pairs(s)
-    return X[i, j] * svec_scale(s)
+    return 0.5 * (X[..., i, j] + X[..., j, i]) * svec_scale(s)
 
 
-def smat(v: np.ndarray) -> np.ndarray:
+def smat(v: np.ndarray, s: int | None = None) -> np.ndarray:
+    """The symmetric matrix of an svec, or of a stack (..., L) along the last axis (``s``: the side,
+    derived from L when omitted)."""
     v = np.asarray(v, dtype=float)
-    s = int(round((math.sqrt(8 * v.size + 1) - 1) / 2))
-    if svec_length(s) != v.size:
-        raise ValueError(f"vector of length {v.size} is not an svec")
+    L = v.shape[-1]
+    if s is None:
+        s = int(round((math.sqrt(8 * L + 1) - 1) / 2))
+    if svec_length(s) != L:
+        raise ValueError(f"vector of length {L} is not an svec")
     i, j = triu_pairs(s)
-    X = np.zeros((s, s))
+    X = np.zeros(v.shape[:-1] + (s, s))
     vals = v / svec_scale(s)
-    X[i, j] = vals
-    X[j, i] = vals
+    X[..., i, j] = vals
+    X[..., j, i] = vals
     return X

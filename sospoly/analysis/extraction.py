@@ -121,6 +121,47 @@ def henrion_lasserre(W: np.ndarray, basis: np.ndarray, seed: int = 0) -> list[np
     return [np.array([Q[:, j] @ Nk @ Q[:, j] for Nk in Ns]) for j in range(r)]
 
 
+#: span-residual searches run for spans of dimension > 1 with at most this many variables, from at most
+#: SPAN_SEARCH_STARTS starting points (a few ms each).
+SPAN_SEARCH_MAX_VARS = 30
+SPAN_SEARCH_STARTS = 8
+
+
+def span_search(W: np.ndarray, basis: np.ndarray, starts, seed: int = 0) -> list[np.ndarray]:
+    """Points v with b(v) in span(W), found by minimising the relative span residual
+    ||(I - Q Q^T) b(v)|| / ||b(v)|| (Q an orthonormal basis of span W) from the given starts and a few
+    seeded random ones.  A fallback when the span is not *flat* (Henrion-Lasserre needs a flat extension;
+    interior-point solutions often sit at the centre of a face and mix minimisers with spurious
+    directions)."""
+    from scipy.optimize import least_squares
+
+    n = basis.shape[1]
+    if n > SPAN_SEARCH_MAX_VARS:
+        return []
+    Q, _ = np.linalg.qr(W)
+    E = np.asarray(basis, np.int64)
+
+    def resid(v):
+        with np.errstate(over="ignore", invalid="ignore"):
+            bv = np.prod(v[None, :] ** E, axis=1)
+        nb = np.linalg.norm(bv)
+        r = (bv - Q @ (Q.T @ bv)) / max(nb, 1e-300)
+        return np.where(np.isfinite(r), r, 1e6)
+
+    rng = np.random.default_rng(seed)
+    pts = [np.asarray(s, float) for s in starts if np.all(np.isfinite(s)) and np.linalg.norm(s) < 1e6]
+    pts += list(rng.standard_normal((max(0, SPAN_SEARCH_STARTS - len(pts)), n)))
+    found = []
+    for v0 in pts[:SPAN_SEARCH_STARTS]:
+        try:
+            res = least_squares(resid, v0, method="lm", xtol=1e-14, ftol=1e-14, max_nfev=200 * (n + 1))
+        except (ValueError, np.linalg.LinAlgError):
+            continue
+        if np.all(np.isfinite(res.x)) and np.linalg.norm(res.fun) <= 1e-6:
+            found.append(res.x)
+    return found
+
+
 def candidates_from_span(W: np.ndarray, basis: np.ndarray, source: str) -> list[Candidate]:
     deg1 = _degree1_rows(basis)
     if deg1 is None:
@@ -130,6 +171,9 @@ def candidates_from_span(W: np.ndarray, basis: np.ndarray, source: str) -> list[
         pts = henrion_lasserre(W, basis)
         if pts is not None:
             out += [Candidate(p, source + "-hl", _span_residual(W, basis, p)) for p in pts if np.all(np.isfinite(p))]
+        starts = [p for p in (pts or [])]
+        starts += [W[deg1, k] / W[0, k] for k in range(W.shape[1]) if abs(W[0, k]) > 1e-10]
+        out += [Candidate(p, source + "-span", _span_residual(W, basis, p)) for p in span_search(W, basis, starts)]
     for k in range(W.shape[1]):
         w = W[:, k]
         if abs(w[0]) > 1e-10 * max(np.max(np.abs(w)), 1e-300):

@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..algebra.basis import GramBasis, monomials
+from ..algebra.basis import GramBasis, GramBlocks, monomials
 from ..algebra.linpoly import LinPoly
 from ..algebra.polynomial import Polynomial, as_polynomial
 
@@ -58,7 +58,8 @@ class VarBlock:
 
 @dataclass(frozen=True)
 class SOSConstraint:
-    """``expr + sum_k param_terms[k] * theta_k`` is SOS in the Gram basis ``gram``.
+    """``expr + sum_k param_terms[k] * theta_k`` is SOS: a sum of ``b_j^T G_j b_j`` over the Gram
+    blocks ``gram`` (:class:`~sospoly.algebra.basis.GramBlocks`; one block for a dense certificate).
 
     ``param_terms`` lets a scalar parameter (e.g. the level c of a GEVP) enter the
     data without rebuilding the program: the lowered problem is affine in it.
@@ -66,8 +67,13 @@ class SOSConstraint:
 
     name: str
     expr: LinPoly
-    gram: GramBasis
+    gram: GramBlocks
     param_terms: dict = field(default_factory=dict)
+
+    def block_names(self) -> tuple:
+        """Names of the Gram blocks in solutions: the constraint's name for one block, else name#j."""
+        k = len(self.gram.blocks)
+        return (self.name,) if k == 1 else tuple(f"{self.name}#{j}" for j in range(k))
 
 
 @dataclass(frozen=True)
@@ -127,11 +133,15 @@ class SOSProgram:
         blk = self._new_block(name, BlockKind.FREE_POLY, E.shape[0], monomials=E)
         return LinPoly.variable_terms(self.gens, E, np.arange(blk.start, blk.start + blk.size))
 
-    def sos_poly(self, degree: int, name: str | None = None) -> LinPoly:
-        """An SOS polynomial of degree <= ``degree`` (rounded down to even)."""
-        if degree < 0:
-            raise ValueError(f"SOS polynomial degree must be >= 0, got {degree}")
-        gb = GramBasis.full(self.nvars_poly, int(degree) // 2)
+    def sos_poly(self, degree: int, name: str | None = None, basis=None) -> LinPoly:
+        """An SOS polynomial b(v)^T S b(v): b all monomials of degree <= ``degree`` / 2 (rounded down),
+        or the exponent rows ``basis`` when given (then ``degree`` is ignored)."""
+        if basis is not None:
+            gb = GramBasis.from_exponents(np.asarray(basis, dtype=np.int64).reshape(-1, self.nvars_poly))
+        else:
+            if degree < 0:
+                raise ValueError(f"SOS polynomial degree must be >= 0, got {degree}")
+            gb = GramBasis.full(self.nvars_poly, int(degree) // 2)
         npairs = gb.n_pairs
         blk = self._new_block(name, BlockKind.SOS_POLY, npairs, monomials=gb.b, gram=gb)
         # coefficient of monomial m: sum over pairs (i<=j) with b_i b_j = m of w_ij S_ij, w = 1 (i=j) or 2
@@ -149,19 +159,25 @@ class SOSProgram:
                        np.zeros(diag.size, np.int64), blk.start + diag, np.ones(diag.size))
 
     # ------------------------------------------------------------------ constraints
-    def add_sos(self, expr, degree: int | None = None, name: str | None = None, param_terms=None) -> SOSConstraint:
-        """Require ``expr`` (+ parameter terms) to be SOS, with Gram basis of half-degree degree/2."""
+    def add_sos(self, expr, degree: int | None = None, name: str | None = None, param_terms=None,
+                bases=None) -> SOSConstraint:
+        """Require ``expr`` (+ parameter terms) to be SOS: with the full Gram basis of half-degree
+        degree/2, or as a sum of SOS polynomials in the given Gram ``bases`` (a sequence of exponent
+        arrays: a sparse certificate; monomials of ``expr`` outside every block's products must vanish)."""
         expr = self._as_linpoly(expr)
         param_terms = {k: self._as_linpoly(v) for k, v in (param_terms or {}).items()}
-        deg = max([expr.degree] + [p.degree for p in param_terms.values()])
-        if degree is None:
-            degree = deg + (deg % 2)
-        if degree % 2:
-            raise ValueError(f"an SOS constraint needs an even degree, got {degree}")
-        if deg > degree:
-            raise ValueError(f"polynomial of degree {deg} cannot be SOS of degree <= {degree}")
-        gb = GramBasis.full(self.nvars_poly, max(degree, 0) // 2)
-        con = SOSConstraint(name or f"sos{len(self.sos_constraints)}", expr, gb, param_terms)
+        if bases is not None:
+            blocks = GramBlocks.of([np.asarray(b, dtype=np.int64).reshape(-1, self.nvars_poly) for b in bases])
+        else:
+            deg = max([expr.degree] + [p.degree for p in param_terms.values()])
+            if degree is None:
+                degree = deg + (deg % 2)
+            if degree % 2:
+                raise ValueError(f"an SOS constraint needs an even degree, got {degree}")
+            if deg > degree:
+                raise ValueError(f"polynomial of degree {deg} cannot be SOS of degree <= {degree}")
+            blocks = GramBlocks.of(GramBasis.full(self.nvars_poly, max(degree, 0) // 2))
+        con = SOSConstraint(name or f"sos{len(self.sos_constraints)}", expr, blocks, param_terms)
         self.sos_constraints.append(con)
         return con
 
@@ -202,13 +218,13 @@ class SOSProgram:
         = number of decision variables + sum over SOS constraints of tau, where
         tau = (#Gram pairs) - (#distinct products) is the dimension of L(alpha).
         """
-        return self.n_vars + sum(c.gram.n_pairs - c.gram.products.shape[0] for c in self.sos_constraints)
+        return self.n_vars + sum(c.gram.n_pairs - c.gram.n_products for c in self.sos_constraints)
 
     def summary(self) -> str:
         lines = [f"SOSProgram over {len(self.gens)} variables, {self.n_vars} decision scalars"]
         for b in self.blocks:
             lines.append(f"  block {b.name}: {b.kind.value}, {b.size} scalars")
         for c in self.sos_constraints:
-            lines.append(f"  SOS {c.name}: Gram {c.gram.size}x{c.gram.size}")
+            lines.append(f"  SOS {c.name}: Gram blocks {' + '.join(f'{s}x{s}' for s in c.gram.sizes)}")
         lines.append(f"  N_LMIVAR = {self.n_lmivar()}")
         return "\n".join(lines)

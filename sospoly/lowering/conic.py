@@ -36,10 +36,10 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse as sp
 
-from ..algebra.basis import MonomialIndex
+from ..algebra.basis import GramBlocks, MonomialIndex
 from ..algebra.linpoly import LinPoly
 from ..certificates.program import BlockKind, Sense, SOSProgram
-from ..algebra.svec import SQRT2, smat, svec_scale
+from ..algebra.svec import smat, svec_scale
 
 __all__ = ["GramForm", "Cone", "ConicProblem", "lower", "gram_structure"]
 
@@ -142,32 +142,35 @@ class ConicProblem:
 
 @dataclass(frozen=True)
 class GramStructure:
-    """Canonical pair per monomial and the alpha pairs of the image form."""
+    """Canonical pair per monomial and the alpha pairs of the image form (pairs are indexed over the
+    concatenated blocks of a :class:`~sospoly.algebra.basis.GramBlocks`, i.e. by svec row)."""
     canonical: np.ndarray   # (n_products,) pair index of the canonical pair
     alpha_pairs: np.ndarray  # (tau,) pair index carrying each alpha
     alpha_canonical: np.ndarray  # (tau,) canonical pair of the same monomial
-    kappa: np.ndarray        # (n_pairs,) svec entry per unit monomial contribution
+    kappa: np.ndarray        # (n_pairs,) svec entry per unit monomial contribution (1 / svec scale)
 
 
 def gram_structure(gb) -> GramStructure:
-    """The explicit L(alpha) basis of SPEC §4 for a Gram basis (see module docstring)."""
+    """The explicit L(alpha) basis of SPEC §4 for Gram blocks or one GramBasis (see module docstring): every monomial's
+    coefficient goes on one canonical pair (a diagonal pair if there is one, the first otherwise);
+    every other pair of the same monomial carries one alpha."""
+    if not isinstance(gb, GramBlocks):
+        gb = GramBlocks.of(gb)
     pm = gb.pair_monomial
-    is_diag = gb.pair_i == gb.pair_j
+    is_diag = gb.pair_diag
     order = np.lexsort((np.arange(pm.size), ~is_diag, pm))
     first = np.ones(order.size, dtype=bool)
     first[1:] = pm[order][1:] != pm[order][:-1]
-    canonical = np.empty(gb.products.shape[0], dtype=np.int64)
+    canonical = np.empty(gb.n_products, dtype=np.int64)
     canonical[pm[order][first]] = order[first]
     alpha_pairs = np.sort(order[~first])
-    kappa = np.where(is_diag, 1.0, 1.0 / SQRT2)
+    kappa = 1.0 / np.concatenate([svec_scale(b.size) for b in gb.blocks])
     return GramStructure(canonical, alpha_pairs, canonical[pm[alpha_pairs]], kappa)
 
 
 class _Builder:
     def __init__(self):
         self.r, self.c, self.v = [], [], []
-        self.b_parts = []
-        self.nrows = 0
 
     def add(self, rows, cols, vals):
         self.r.append(np.asarray(rows, np.int64))
@@ -181,6 +184,48 @@ class _Builder:
                              shape=(nrows, ncols))
 
 
+class _Assembly:
+    """Rows s = b - A x under construction: the main (A, b) and one (A_k, b_k) per parameter."""
+
+    def __init__(self, param_names):
+        self.main, self.b = _Builder(), []
+        self.params = {k: (_Builder(), []) for k in param_names}
+
+    def target(self, name):
+        return (self.main, self.b) if name is None else self.params[name]
+
+    def add_affine(self, name, expr: LinPoly, rows_of_terms: np.ndarray, sign: float, scale=None) -> None:
+        """Rows ``rows_of_terms[t]`` (-1: skip) receive ``sign * scale[t] * term t of expr``:
+        b += sign * scale * const, A -= sign * scale * linear part."""
+        builder, bent = self.target(name)
+        scale = np.ones(expr.E.shape[0]) if scale is None else scale
+        keep = rows_of_terms >= 0
+        if np.any(keep):
+            bent.append((rows_of_terms[keep], sign * scale[keep] * expr.const[keep]))
+        if expr.rows.size:
+            rr = rows_of_terms[expr.rows]
+            k2 = rr >= 0
+            builder.add(rr[k2], expr.cols[k2], -sign * scale[expr.rows][k2] * expr.vals[k2])
+
+    @staticmethod
+    def _vector(entries, nrows):
+        b = np.zeros(nrows)
+        for r_, v_ in entries:
+            np.add.at(b, r_, v_)
+        return b
+
+    def finish(self, nrows, ncols):
+        A = self.main.matrix(nrows, ncols)
+        b = self._vector(self.b, nrows)
+        params = {k: (bld.matrix(nrows, ncols), self._vector(ent, nrows)) for k, (bld, ent) in self.params.items()}
+        return A, b, params
+
+
+def _terms(con):
+    """(parameter name or None, expression) of an SOS constraint's data."""
+    return [(None, con.expr)] + list(con.param_terms.items())
+
+
 def lower(program: SOSProgram, form: GramForm = GramForm.IMAGE) -> ConicProblem:
     """Assemble the conic data of ``program`` (see module docstring)."""
     form = GramForm(form)
@@ -192,74 +237,37 @@ def lower(program: SOSProgram, form: GramForm = GramForm.IMAGE) -> ConicProblem:
     extra_start = []
     for con in program.sos_constraints:
         extra_start.append(col)
-        if form == GramForm.IMAGE:
-            col += con.gram.n_pairs - con.gram.products.shape[0]
-        else:
-            col += con.gram.n_pairs
+        col += con.gram.n_pairs - (con.gram.n_products if form == GramForm.IMAGE else 0)
     ncols = col
-
-    main = _Builder()
-    pbuild = {k: _Builder() for k in param_names}
-    b_entries: list[tuple[np.ndarray, np.ndarray]] = []
-    pb_entries = {k: [] for k in param_names}
+    asm = _Assembly(param_names)
 
     # ---------------- zero-cone rows
     row = 0
-
-    def add_affine_rows(expr: LinPoly, rows_of_terms, sign, builder, bentries):
-        """rows: s = b - A x with  b = sign*const, A = -sign*lin  (s = sign * expr)."""
-        keep = rows_of_terms >= 0
-        if np.any(keep):
-            bentries.append((rows_of_terms[keep], sign * expr.const[keep]))
-        if expr.rows.size:
-            rr = rows_of_terms[expr.rows]
-            k2 = rr >= 0
-            builder.add(rr[k2], expr.cols[k2], -sign * expr.vals[k2])
-
-    # linear equalities: s = rhs - expr = 0
-    for eq in program.equalities:
-        n = eq.expr.E.shape[0]
-        rows_of_terms = np.full(n, row, dtype=np.int64)
-        add_affine_rows(eq.expr, rows_of_terms, -1.0, main, b_entries)
-        b_entries.append((np.array([row]), eq.rhs))
+    for eq in program.equalities:          # linear equalities: s = rhs - expr = 0
+        asm.add_affine(None, eq.expr, np.full(eq.expr.E.shape[0], row, dtype=np.int64), -1.0)
+        asm.b.append((np.array([row]), eq.rhs))
         row += 1
-
-    # monomials of SOS expressions outside the Gram products: u_m = 0
-    structures = []
-    for con in program.sos_constraints:
-        gb = con.gram
-        terms = [(None, con.expr)] + list(con.param_terms.items())
-        missing_keys = {}
-        for _, expr in terms:
-            idx = gb.product_index.find(expr.E, missing_ok=True)
+    for con in program.sos_constraints:    # monomials of SOS expressions outside the Gram products: u_m = 0
+        missing = {}
+        for _, expr in _terms(con):
+            idx = con.gram.product_index.find(expr.E, missing_ok=True)
             for e in map(tuple, expr.E[idx < 0]):
-                missing_keys.setdefault(e, None)
-        if missing_keys:
-            mk = np.array(list(missing_keys), dtype=np.int64).reshape(-1, len(program.gens))
-            mindex = MonomialIndex(mk)
-            for name, expr in terms:
+                missing.setdefault(e, None)
+        if missing:
+            mindex = MonomialIndex(np.array(list(missing), dtype=np.int64).reshape(-1, len(program.gens)))
+            for name, expr in _terms(con):
                 ridx = mindex.find(expr.E, missing_ok=True)
-                ridx = np.where(ridx >= 0, ridx + row, -1)
-                builder = main if name is None else pbuild[name]
-                bent = b_entries if name is None else pb_entries[name]
-                add_affine_rows(expr, ridx, -1.0, builder, bent)
-            row += mk.shape[0]
-        structures.append(gram_structure(gb) if form == GramForm.IMAGE else None)
-
-    # kernel form: coefficient matching rows  u_m - sum w Q = 0
-    if form == GramForm.KERNEL:
+                asm.add_affine(name, expr, np.where(ridx >= 0, ridx + row, -1), -1.0)
+            row += len(mindex)
+    if form == GramForm.KERNEL:            # coefficient matching rows  u_m - sum w Q = 0
         for k, con in enumerate(program.sos_constraints):
             gb = con.gram
-            P = gb.products.shape[0]
-            w = np.where(gb.pair_i == gb.pair_j, 1.0, 2.0)
-            main.add(row + gb.pair_monomial, extra_start[k] + np.arange(gb.n_pairs), w)
-            for name, expr in [(None, con.expr)] + list(con.param_terms.items()):
+            w = np.where(gb.pair_diag, 1.0, 2.0)
+            asm.main.add(row + gb.pair_monomial, extra_start[k] + np.arange(gb.n_pairs), w)
+            for name, expr in _terms(con):
                 idx = gb.product_index.find(expr.E, missing_ok=True)
-                ridx = np.where(idx >= 0, idx + row, -1)
-                builder = main if name is None else pbuild[name]
-                bent = b_entries if name is None else pb_entries[name]
-                add_affine_rows(expr, ridx, 1.0, builder, bent)
-            row += P
+                asm.add_affine(name, expr, np.where(idx >= 0, idx + row, -1), 1.0)
+            row += gb.n_products
     n_zero = row
 
     # ---------------- PSD rows
@@ -268,49 +276,34 @@ def lower(program: SOSProgram, form: GramForm = GramForm.IMAGE) -> ConicProblem:
     for blk in program.blocks:
         if blk.kind != BlockKind.SOS_POLY:
             continue
-        s = blk.gram.size
-        n = blk.size
-        main.add(row + np.arange(n), blk.start + np.arange(n), -svec_scale(s))
+        s, n = blk.gram.size, blk.size
+        asm.main.add(row + np.arange(n), blk.start + np.arange(n), -svec_scale(s))
         psd_blocks.append(PSDBlockMap(blk.name, row, s, "multiplier"))
         cones.append(Cone("psd", n, s))
         row += n
     for k, con in enumerate(program.sos_constraints):
         gb = con.gram
-        s, npairs = gb.size, gb.n_pairs
         if form == GramForm.IMAGE:
-            st = structures[k]
-            for name, expr in [(None, con.expr)] + list(con.param_terms.items()):
+            st = gram_structure(gb)
+            for name, expr in _terms(con):
                 idx = gb.product_index.find(expr.E, missing_ok=True)
                 pair_row = np.where(idx >= 0, st.canonical[np.maximum(idx, 0)], -1)
                 scale = np.where(idx >= 0, st.kappa[np.maximum(pair_row, 0)], 0.0)
-                rows_of_terms = np.where(idx >= 0, row + pair_row, -1)
-                scaled = LinPoly(expr.gens, expr.E, expr.const * scale, expr.rows, expr.cols,
-                                 expr.vals * scale[expr.rows] if expr.rows.size else expr.vals, canonical=True)
-                builder = main if name is None else pbuild[name]
-                bent = b_entries if name is None else pb_entries[name]
-                add_affine_rows(scaled, rows_of_terms, 1.0, builder, bent)
-            tau = st.alpha_pairs.size
-            acols = extra_start[k] + np.arange(tau)
-            main.add(row + st.alpha_pairs, acols, -st.kappa[st.alpha_pairs])
-            main.add(row + st.alpha_canonical, acols, st.kappa[st.alpha_canonical])
-            psd_blocks.append(PSDBlockMap(con.name, row, s, "constraint"))
+                asm.add_affine(name, expr, np.where(idx >= 0, row + pair_row, -1), 1.0, scale)
+            acols = extra_start[k] + np.arange(st.alpha_pairs.size)
+            asm.main.add(row + st.alpha_pairs, acols, -st.kappa[st.alpha_pairs])
+            asm.main.add(row + st.alpha_canonical, acols, st.kappa[st.alpha_canonical])
         else:
-            main.add(row + np.arange(npairs), extra_start[k] + np.arange(npairs), -svec_scale(s))
-            psd_blocks.append(PSDBlockMap(con.name, row, s, "constraint", var_start=extra_start[k]))
-        cones.append(Cone("psd", npairs, s))
-        row += npairs
+            scale = np.concatenate([svec_scale(b.size) for b in gb.blocks])
+            asm.main.add(row + np.arange(gb.n_pairs), extra_start[k] + np.arange(gb.n_pairs), -scale)
+        for j, (bname, blk_basis) in enumerate(zip(con.block_names(), gb.blocks)):
+            off = int(gb.block_offsets[j])
+            var_start = None if form == GramForm.IMAGE else extra_start[k] + off
+            psd_blocks.append(PSDBlockMap(bname, row + off, blk_basis.size, "constraint", var_start))
+            cones.append(Cone("psd", blk_basis.n_pairs, blk_basis.size))
+        row += gb.n_pairs
     nrows = row
-
-    A = main.matrix(nrows, ncols)
-    b = np.zeros(nrows)
-    for r_, v_ in b_entries:
-        np.add.at(b, r_, v_)
-    params = {}
-    for name in param_names:
-        bk = np.zeros(nrows)
-        for r_, v_ in pb_entries[name]:
-            np.add.at(bk, r_, v_)
-        params[name] = (pbuild[name].matrix(nrows, ncols), bk)
+    A, b, params = asm.finish(nrows, ncols)
 
     q = np.zeros(ncols)
     sign, offset = 1.0, 0.0

@@ -17,13 +17,15 @@ This is the only module of sospoly that imports a solver.  Two back-ends:
 from __future__ import annotations
 
 import enum
-import time
 import dataclasses
+import time
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.sparse as sp
 
+from ..budget import Deadline
 from ..lowering.conic import ConicProblem
 from ..algebra.svec import triu_pairs, svec_scale
 from ..tolerances import DEFAULT_TOLERANCES, Tolerances
@@ -38,6 +40,7 @@ class RawStatus(str, enum.Enum):
     PRIMAL_INFEASIBLE = "primal_infeasible"
     DUAL_INFEASIBLE = "dual_infeasible"
     ALMOST_INFEASIBLE = "almost_infeasible"
+    TIME_LIMIT = "time_limit"
     FAILED = "failed"
 
 
@@ -71,6 +74,7 @@ _CLARABEL_MAP = {
     "DualInfeasible": RawStatus.DUAL_INFEASIBLE,
     "AlmostPrimalInfeasible": RawStatus.ALMOST_INFEASIBLE,
     "AlmostDualInfeasible": RawStatus.ALMOST_INFEASIBLE,
+    "MaxTime": RawStatus.TIME_LIMIT,
 }
 
 #: Settings tried in order when an attempt fails numerically (label, overrides).
@@ -121,16 +125,20 @@ class ClarabelBackend:
                 raise ValueError(f"unknown cone {c.kind}")
         return out
 
-    def solve_once(self, problem: ConicProblem, label="default", overrides=None):
+    def solve_once(self, problem: ConicProblem, label="default", overrides=None, deadline: Deadline | None = None):
         import clarabel
 
         n = problem.n_cols
+        overrides = dict(overrides or {})
+        remaining = None if deadline is None else deadline.remaining()
+        if remaining is not None:
+            overrides["time_limit"] = max(remaining, 1e-3)
         P = sp.csc_matrix((n, n))
         t0 = time.perf_counter()
         try:
             solver = clarabel.DefaultSolver(P, np.asarray(problem.q, float), sp.csc_matrix(problem.A),
                                             np.asarray(problem.b, float), self._cones(problem),
-                                            self._settings(overrides or {}))
+                                            self._settings(overrides))
             sol = solver.solve()
         except (KeyboardInterrupt, SystemExit):
             raise
@@ -143,24 +151,29 @@ class ClarabelBackend:
         att = Attempt(label, raw, status_name, int(sol.iterations), time.perf_counter() - t0)
         return sol, att
 
-    def solve(self, problem: ConicProblem, accept=None, retry: bool = True) -> ConicSolution:
+    def solve(self, problem: ConicProblem, accept=None, retry: bool = True,
+              deadline: Deadline | None = None) -> ConicSolution:
         """Solve, walking the retry chain while the outcome is a numerical failure.
 
         ``accept(x, z) -> bool`` is an optional a-posteriori check: a SOLVED attempt
         that fails it is treated like a numerical failure and the chain continues.
         ``retry=False`` makes a single attempt (bisection steps, where "unknown" is
-        simply treated as "not certified").
+        simply treated as "not certified").  ``deadline`` becomes Clarabel's ``time_limit``;
+        the chain stops when it has passed.
         """
         attempts = []
         last = None
         for label, overrides in (self.retry_chain if retry else self.retry_chain[:1]):
-            sol, att = self.solve_once(problem, label, overrides)
+            if deadline is not None and deadline.expired:
+                attempts.append(Attempt(label, RawStatus.TIME_LIMIT, "time limit reached", 0, 0.0))
+                return ConicSolution(RawStatus.TIME_LIMIT, None, None, None, None, tuple(attempts))
+            sol, att = self.solve_once(problem, label, overrides, deadline)
             attempts.append(att)
             if sol is None:
                 continue
             x, z = np.asarray(sol.x, float), np.asarray(sol.z, float)
             last = ConicSolution(att.raw_status, x, z, float(sol.obj_val), float(sol.obj_val_dual), tuple(attempts))
-            if att.raw_status in (RawStatus.PRIMAL_INFEASIBLE, RawStatus.DUAL_INFEASIBLE):
+            if att.raw_status in (RawStatus.PRIMAL_INFEASIBLE, RawStatus.DUAL_INFEASIBLE, RawStatus.TIME_LIMIT):
                 return last
             if att.raw_status == RawStatus.SOLVED and (accept is None or accept(x, z)):
                 return last
@@ -185,7 +198,8 @@ class IpmBackend:
         self.tolerances = tolerances
         self.fallback = fallback if fallback is not None else ClarabelBackend(tolerances)
 
-    def solve(self, problem: ConicProblem, accept=None, retry: bool = True) -> ConicSolution:
+    def solve(self, problem: ConicProblem, accept=None, retry: bool = True,
+              deadline: Deadline | None = None) -> ConicSolution:
         from .ipm import ipm_solve_batch, ipm_solve_sparse, layout_of
 
         t0 = time.perf_counter()
@@ -198,9 +212,10 @@ class IpmBackend:
             m = problem.n_cols
             if sum(m * n ** 3 for n in lay.sizes) <= IPM_DENSE_LIMIT:
                 res = ipm_solve_batch(problem.A.toarray()[None], problem.b[None], problem.q, problem.cones,
-                                      self.tolerances)
+                                      self.tolerances, deadline=deadline)
             else:
-                res = ipm_solve_sparse(problem.A, problem.b, problem.q, problem.cones, self.tolerances)
+                res = ipm_solve_sparse(problem.A, problem.b, problem.q, problem.cones, self.tolerances,
+                                       deadline=deadline)
             ok = bool(res.converged[0])
             x, z = res.x[0], res.z[0]
             if ok and accept is not None and not accept(x, z):
@@ -213,7 +228,7 @@ class IpmBackend:
                                 float(res.dual_objective[0]), (att,)) if ok else None
         if sol is not None:
             return sol
-        fb = self.fallback.solve(problem, accept=accept, retry=retry)
+        fb = self.fallback.solve(problem, accept=accept, retry=retry, deadline=deadline)
         return dataclasses.replace(fb, attempts=(att,) + tuple(fb.attempts))
 
 
@@ -221,6 +236,9 @@ class IpmBackend:
 #: than the IPM's per-iteration Python overhead (measured crossover ~5e4: Corollary 1 at
 #: delta = 2 with N = 5 -> 6 ms Clarabel vs 21 ms IPM; N = 8 -> 42 ms vs 22 ms).
 AUTO_IPM_MIN_COST = 5e4
+#: the IPM's working set (~3 m sum_k n_k^2 + m^2 floats, see sospoly.budget) above which AutoBackend
+#: goes to Clarabel directly (whose memory grows with sum_k L_k^2 instead).
+AUTO_IPM_MAX_BYTES = 1.5 * 2 ** 30
 
 
 class AutoBackend:
@@ -234,16 +252,19 @@ class AutoBackend:
         self.clarabel = ClarabelBackend(tolerances)
         self.ipm = IpmBackend(tolerances, fallback=self.clarabel)
 
-    def solve(self, problem: ConicProblem, accept=None, retry: bool = True) -> ConicSolution:
+    def solve(self, problem: ConicProblem, accept=None, retry: bool = True,
+              deadline: Deadline | None = None) -> ConicSolution:
         from .ipm import layout_of
 
         try:
             lay = layout_of(problem.cones)
         except ValueError:
-            return self.clarabel.solve(problem, accept=accept, retry=retry)
-        cost = sum(problem.n_cols * n ** 3 for n in lay.sizes)
-        be = self.ipm if cost >= AUTO_IPM_MIN_COST else self.clarabel
-        return be.solve(problem, accept=accept, retry=retry)
+            return self.clarabel.solve(problem, accept=accept, retry=retry, deadline=deadline)
+        m = problem.n_cols
+        cost = sum(m * n ** 3 for n in lay.sizes)
+        ipm_bytes = 8.0 * (3.0 * m * sum(n * n for n in lay.sizes) + float(m) ** 2)
+        be = self.ipm if AUTO_IPM_MIN_COST <= cost and ipm_bytes <= AUTO_IPM_MAX_BYTES else self.clarabel
+        return be.solve(problem, accept=accept, retry=retry, deadline=deadline)
 
 
 def _svec_operator(s: int) -> sp.csr_matrix:
@@ -271,7 +292,8 @@ class CvxpyBackend:
             return {"eps_abs": 1e-9, "eps_rel": 1e-9, "max_iters": 200000}
         return {}
 
-    def solve(self, problem: ConicProblem, accept=None, retry: bool = True) -> ConicSolution:
+    def solve(self, problem: ConicProblem, accept=None, retry: bool = True,
+              deadline: Deadline | None = None) -> ConicSolution:
         import cvxpy as cp
 
         t0 = time.perf_counter()
@@ -300,7 +322,9 @@ class CvxpyBackend:
         kwargs = dict(self._tolerance_kwargs(solver))
         kwargs.update(self.solver_kwargs)
         try:
-            prob.solve(solver=solver, **kwargs)
+            with warnings.catch_warnings():          # inaccuracy is reported through the status, not a warning
+                warnings.simplefilter("ignore")
+                prob.solve(solver=solver, **kwargs)
             status = prob.status
         except (KeyboardInterrupt, SystemExit):
             raise

@@ -23,8 +23,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..lowering.conic import ConicProblem, GramForm, lower
 from ..certificates.psatz import Multiplier, PsatzProblem
+from ..lowering.compiled import CompiledPsatz
+from ..lowering.conic import ConicProblem, GramForm
 from .solve import ProgramSolution, check_certificate, solve_conic
 from ..status import SolveStatus
 from ..tolerances import DEFAULT_TOLERANCES, Tolerances
@@ -49,16 +50,18 @@ class GevpResult:
 
 
 class CompiledGevp:
-    """A free-q Psatz program lowered once; ``feasible(c)`` solves one LMI."""
+    """A free-q Psatz program lowered once (its level c is a parameter of the compiled structure);
+    ``feasible(c)`` solves one LMI."""
 
     def __init__(self, psatz: PsatzProblem, backend=None, form: GramForm = GramForm.IMAGE,
-                 tolerances: Tolerances = DEFAULT_TOLERANCES):
+                 tolerances: Tolerances = DEFAULT_TOLERANCES, deadline=None):
         if psatz.multiplier != Multiplier.FREE:
             raise ValueError("CompiledGevp needs a Psatz problem built with multiplier='free'")
         self.psatz = psatz
         self.backend = backend
         self.tolerances = tolerances
-        self.problem: ConicProblem = lower(psatz.program, form)
+        self.deadline = deadline
+        self.compiled = CompiledPsatz(psatz.structure, form)
 
     def _acceptance(self, inst: ConicProblem, c: float):
         """Accept level c only if the original certificate checks out (see module docstring).
@@ -98,11 +101,11 @@ class CompiledGevp:
         return check
 
     def feasible(self, c: float) -> tuple[SolveStatus, ProgramSolution]:
-        inst = self.problem.instantiate(c=float(c))
+        inst = self.compiled.problem_from_theta(self.psatz.theta, c=float(c))
         aug = inst.with_margin("u")
         check = self._acceptance(inst, c)
         status, sol, _, _, msg = solve_conic(aug, self.backend, self.tolerances, feasibility=False,
-                                             extra_check=check, retry=False)
+                                             extra_check=check, retry=False, deadline=self.deadline)
         prog = self.psatz.program
         if status.ok:
             x = sol.x[:-1]
@@ -120,12 +123,32 @@ def bisect(compiled: CompiledGevp, c_lo: float | None = None, c_hi: float | None
     """Maximise c by bisection (see module docstring)."""
     tol = compiled.tolerances
     steps: list[GevpStep] = []
-    best: ProgramSolution | None = None
+    found: list = [None, None]          # the highest certified level and its certificate
 
     def test(c):
         st, ps = compiled.feasible(c)
         steps.append(GevpStep(float(c), st))
+        if st == SolveStatus.TIME_LIMIT:
+            raise _OutOfTime
+        if st.ok and (found[0] is None or c > found[0]):
+            found[:] = [float(c), ps]
         return st.ok, ps
+
+    try:
+        return _bisect(c_lo, c_hi, max_search, tol, steps, test)
+    except _OutOfTime:
+        lo, best = found
+        return GevpResult(SolveStatus.TIME_LIMIT, lo, (lo, c_hi), tuple(steps), best,
+                          "time limit reached during the bisection" + (f" (best certified level {lo:.10g})"
+                                                                       if lo is not None else ""))
+
+
+class _OutOfTime(Exception):
+    pass
+
+
+def _bisect(c_lo, c_hi, max_search, tol, steps, test) -> GevpResult:
+    best = None
 
     # ---- a verified feasible lower end
     lo = None

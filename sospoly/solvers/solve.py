@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..budget import Deadline
 from .backends import ConicSolution, RawStatus, get_backend
 from ..lowering.conic import ConicProblem, GramForm, lower
 from ..algebra.polynomial import Polynomial
@@ -24,7 +25,7 @@ from ..certificates.program import Sense, SOSProgram
 from ..status import SolveStatus
 from ..tolerances import DEFAULT_TOLERANCES, Tolerances
 
-__all__ = ["ProgramSolution", "solve_program", "solve_conic", "check_certificate"]
+__all__ = ["ProgramSolution", "LowerBound", "lower_bound_of", "solve_program", "solve_conic", "check_certificate"]
 
 
 @dataclass(frozen=True)
@@ -67,12 +68,12 @@ def check_certificate(problem: ConicProblem, x: np.ndarray, tol: Tolerances) -> 
     ok = True
     msg = []
     for name, G in grams.items():
-        scale = max(1.0, float(np.max(np.abs(G))) if G.size else 1.0)
+        scale = float(np.max(np.abs(G))) if G.size else 0.0
         lam = float(np.linalg.eigvalsh(G)[0]) if G.size else 0.0
         mins[name] = lam
-        if lam < -tol.psd_margin * scale:
+        if not tol.psd_accepts(lam, scale):
             ok = False
-            msg.append(f"Gram {name}: lambda_min {lam:.3g} < -{tol.psd_margin:g}*{scale:.3g}")
+            msg.append(f"Gram {name}: lambda_min {lam:.3g} below the PSD margin ({tol.psd_margin:g} * max(1, {scale:.3g}))")
     # zero-cone rows
     resid = 0.0
     row = 0
@@ -89,14 +90,19 @@ def check_certificate(problem: ConicProblem, x: np.ndarray, tol: Tolerances) -> 
 
 
 def solve_conic(problem: ConicProblem, backend=None, tolerances: Tolerances = DEFAULT_TOLERANCES,
-                feasibility: bool = False, extra_check=None,
-                retry: bool = True) -> tuple[SolveStatus, ConicSolution, dict, float, str]:
+                feasibility: bool = False, extra_check=None, retry: bool = True,
+                deadline: Deadline | None = None) -> tuple[SolveStatus, ConicSolution, dict, float, str]:
     """Solve and classify; returns (status, raw solution, min eigenvalues, residual, message).
 
     ``extra_check(x, min_eigenvalues) -> (ok, message)`` adds a caller-specific
-    acceptance rule on top of :func:`check_certificate`.
+    acceptance rule on top of :func:`check_certificate`.  ``deadline``
+    (:class:`~sospoly.budget.Deadline`) bounds the solve's wall time: a solve that runs out of
+    time returns ``TIME_LIMIT``.
     """
     be = get_backend(backend, tolerances)
+    if deadline is not None and deadline.expired:
+        return SolveStatus.TIME_LIMIT, ConicSolution(RawStatus.TIME_LIMIT, None, None, None, None, ()), {}, np.nan, \
+            "time limit reached before the solve"
     cache = {}
 
     def accept(x, z):
@@ -108,7 +114,7 @@ def solve_conic(problem: ConicProblem, backend=None, tolerances: Tolerances = DE
         cache["last"] = res
         return res[0]
 
-    sol = be.solve(problem, accept=accept, retry=retry)
+    sol = be.solve(problem, accept=accept, retry=retry, deadline=deadline)
     if sol.raw_status == RawStatus.SOLVED:
         ok, mins, resid, msg = cache["last"] if "last" in cache else check_certificate(problem, sol.x, tolerances)
         if ok:
@@ -119,6 +125,7 @@ def solve_conic(problem: ConicProblem, backend=None, tolerances: Tolerances = DE
         RawStatus.DUAL_INFEASIBLE: SolveStatus.UNBOUNDED,
         RawStatus.ALMOST_SOLVED: SolveStatus.INACCURATE,
         RawStatus.ALMOST_INFEASIBLE: SolveStatus.INACCURATE,
+        RawStatus.TIME_LIMIT: SolveStatus.TIME_LIMIT,
     }.get(sol.raw_status, SolveStatus.NUMERICAL_ERROR)
     if feasibility and status == SolveStatus.UNBOUNDED:  # a feasibility problem has no objective to be unbounded
         status = SolveStatus.NUMERICAL_ERROR
@@ -127,12 +134,13 @@ def solve_conic(problem: ConicProblem, backend=None, tolerances: Tolerances = DE
 
 
 def solve_program(program: SOSProgram, backend=None, form: GramForm = GramForm.IMAGE,
-                  tolerances: Tolerances = DEFAULT_TOLERANCES, problem: ConicProblem | None = None) -> ProgramSolution:
+                  tolerances: Tolerances = DEFAULT_TOLERANCES, problem: ConicProblem | None = None,
+                  deadline: Deadline | None = None) -> ProgramSolution:
     """Lower (unless ``problem`` is given), solve and check ``program``."""
     if problem is None:
         problem = lower(program, form)
     feas = program.sense == Sense.FEASIBILITY or program.objective is None
-    status, sol, mins, resid, msg = solve_conic(problem, backend, tolerances, feasibility=feas)
+    status, sol, mins, resid, msg = solve_conic(problem, backend, tolerances, feasibility=feas, deadline=deadline)
     n_lmivar = program.n_lmivar()
     if not status.ok:
         return ProgramSolution(status, None, sol.x, attempts=sol.attempts, n_lmivar=n_lmivar,
@@ -143,3 +151,25 @@ def solve_program(program: SOSProgram, backend=None, form: GramForm = GramForm.I
         obj = problem.objective_sign * float(problem.q @ x) + problem.objective_offset
     return ProgramSolution(status, obj, x[: program.n_vars].copy(), problem.gram_matrices(x),
                            problem.dual_matrices(sol.z), mins, resid, sol.attempts, n_lmivar, sol.seconds, msg)
+
+
+@dataclass(frozen=True)
+class LowerBound:
+    """Outcome of one Positivstellensatz solve: the certified c*, its certificate, and for
+    the free multiplier the final bisection bracket."""
+    status: SolveStatus
+    lower_bound: float | None
+    solution: ProgramSolution | None
+    bracket: tuple | None = None
+    message: str = ""
+
+
+def lower_bound_of(sol: ProgramSolution, degree: int) -> LowerBound:
+    """The LowerBound of a fixed-multiplier solve (c* when OPTIMAL, a status message otherwise)."""
+    if sol.status == SolveStatus.OPTIMAL:
+        return LowerBound(sol.status, sol.objective, sol)
+    lb = np.inf if sol.status == SolveStatus.UNBOUNDED else None
+    msg = {SolveStatus.INFEASIBLE: f"no Positivstellensatz certificate at degree {degree}; try a larger degree",
+           SolveStatus.UNBOUNDED: "c is unbounded: the constraint set is empty",
+           SolveStatus.TIME_LIMIT: f"time limit reached at degree {degree}"}.get(sol.status, sol.message)
+    return LowerBound(sol.status, lb, sol, None, msg)

@@ -100,7 +100,7 @@ def corollary1_structure(N: int):
         eq.append(Polynomial(gens, terms))
     f = Polynomial(gens, f_terms)
     key = (N, ("Point",) * N, "corollary1", 2, GramForm.IMAGE.value)   # triangulate._structure_key
-    comp = STRUCTURE_CACHE.get(f, eq, (), 2, Multiplier.FIXED, GramForm.IMAGE, gens=gens, key=key)
+    comp, _ = STRUCTURE_CACHE.get(f, eq, (), 2, Multiplier.FIXED, GramForm.IMAGE, gens=gens, key=key)
     th = comp.theta(f, eq, ())
     pos = np.full(code + 1, -1, np.int64)
     nz = np.nonzero(th)[0]

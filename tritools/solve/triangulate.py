@@ -255,9 +255,8 @@ def _compiled_for(problem, regs_n, method, delta, multiplier, form):
         return None, None, multiplier
     key = _structure_key(problem, regs_n, method, delta, form) if multiplier == Multiplier.FIXED else None
     try:
-        comp = STRUCTURE_CACHE.get(problem.f, problem.eq, problem.ineq, delta, multiplier, form, gens=problem.gens,
-                                   key=key)
-        theta = comp.theta(problem.f, problem.eq, problem.ineq)
+        comp, theta = STRUCTURE_CACHE.get(problem.f, problem.eq, problem.ineq, delta, multiplier, form,
+                                          gens=problem.gens, key=key)
     except sospoly.StructureMismatch:
         return None, None, multiplier
     return comp, theta, multiplier

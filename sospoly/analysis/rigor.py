@@ -1,0 +1,315 @@
+"""Rigorous lower bounds from a numerically solved Positivstellensatz certificate.
+
+A solver returns decision values x (c, the multipliers r_k, the Gram entries of s_k) and Gram
+matrices G_j of u, accepted when lambda_min(G_j) >= -psd_margin max(1, |G_j|).  The accepted
+certificate is exact only up to two defects, and both are accounted for here:
+
+* the **PSD defect** eps_j = max(0, -lambda_min(G_j)) (plus the error bound of the eigenvalue
+  computation): G_j + eps_j I is PSD, so b_j^T G_j b_j >= -eps_j ||b_j(v)||^2;
+* the **identity residual** e(v) = u(v) - sum_j b_j(v)^T G_j b_j(v), where u is recomputed from x
+  and the data theta by its defining formula u = q (f - c) + sum r_k g_k - sum s_k h_k (including a
+  bound on the floating-point rounding of that computation).
+
+On the feasible set (g = 0, h >= 0) the identity gives
+q (f - c) = sum_j b_j^T G_j b_j + e + sum_k s_k h_k >= -sum_j eps_j ||b_j||^2 - |e| - sum_k eta_k ||b_sk||^2 h_k,
+so for every feasible v in a ball ||v|| <= R
+
+    f(v) >= c - margin,   margin = (sum_j eps_j W_j(R) + E(R) + sum_k eta_k W_sk(R) H_k(R)) / q_min(R),
+
+with W(R) = sum over the basis of R^(2 |m|) >= ||b(v)||^2, E(R) = sum_m |e_m| R^|m| >= |e(v)|,
+H_k(R) >= |h_k(v)| and q_min(R) <= q(v) on the ball.  If the ball holds a global minimiser, c - margin
+is a lower bound of the minimum in floating point, up to the stated rounding bounds (the caller knows
+the ball: e.g. tritools derives it from the objective at a feasible point).
+
+:func:`exact_check` verifies a certificate in exact rational arithmetic (``fractions``), for
+researchers who want one: the identity is restored exactly by moving the residual onto the Gram
+matrices, the level is lowered by a margin, and PSD-ness is decided by an exact LDL^T.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from fractions import Fraction
+
+import numpy as np
+
+from ..algebra.basis import MonomialIndex
+
+__all__ = ["RigorousBound", "rigorous_psatz_bound", "certificate_residual", "exact_check", "ExactCheck"]
+
+_EPS = np.finfo(float).eps
+
+
+@dataclass(frozen=True)
+class RigorousBound:
+    """A lower bound with the PSD defect and the identity residual of its certificate subtracted
+    (see the module docstring): f >= ``lower_bound`` on the feasible points of the ball of ``radius``."""
+    lower_bound: float          # c - margin (-inf when no bound can be proven on the ball)
+    margin: float
+    radius: float
+    psd_defect: float           # sum_j eps_j W_j(R) + sum_k eta_k W_sk H_k: the PSD part of the margin (before / q_min)
+    residual: float             # E(R)
+    q_min: float
+
+
+def _owner_offsets(structure) -> tuple[np.ndarray, np.ndarray]:
+    """(theta offset of each column's owning polynomial, mask of owned columns) for ``m:t`` parameters."""
+    prog, slots = structure.program, structure.slots
+    owner = np.full(prog.n_vars, -1, np.int64)
+    names = [f"r{k}" for k in range(slots.n_eq)] + [f"s{k}" for k in range(slots.n_ineq)]
+    for pi, name in enumerate(names, start=1):
+        owner[prog.block(name).slice] = pi
+    offsets = slots.offsets
+    return np.where(owner >= 0, offsets[np.maximum(owner, 0)], -1), owner >= 0
+
+
+def _u_terms(structure, theta, x, c_level):
+    """Every contribution to u's coefficients: (exponent rows (T, n), values (T,), weight factors (T,)):
+    the coefficient of monomial E[t] gets values[t] (computed in float); the triples let callers redo the
+    sum exactly or bound its rounding."""
+    u = structure.u
+    E, vals = [], []
+    const = u.expr
+    lin = np.zeros(const.E.shape[0]) + const.const
+    if const.rows.size:
+        np.add.at(lin, const.rows, const.vals * x[const.cols])
+    E.append(const.E), vals.append(lin)
+    off_of_col, owned = _owner_offsets(structure)
+    for name, expr in u.param_terms.items():
+        kind, _, t = name.partition(":")
+        coef = expr.const.copy()
+        if kind == "c":
+            w = np.full(expr.rows.size, c_level)
+            coef = coef * c_level
+        elif kind == "f":
+            th = theta[int(t)]
+            w = np.full(expr.rows.size, th)
+            coef = coef * th
+        else:
+            th_idx = off_of_col[expr.cols] + int(t)
+            w = np.where(owned[expr.cols], theta[np.maximum(th_idx, 0)], 0.0)
+        lin = coef
+        if expr.rows.size:
+            np.add.at(lin, expr.rows, expr.vals * x[expr.cols] * w)
+        E.append(expr.E), vals.append(lin)
+    return np.vstack(E), np.concatenate(vals)
+
+
+def certificate_residual(structure, theta, sol, c_level=0.0):
+    """(monomials (M, n), residual e_m, rounding bound of e_m) of e = u(x) - sum_j b_j^T G_j b_j."""
+    x = np.asarray(sol.x, float)
+    E_u, v_u = _u_terms(structure, theta, x, c_level)
+    u = structure.u
+    gb = u.gram
+    G_all = np.concatenate([_pairs_of(sol.grams[name], b.size) for name, b in zip(u.block_names(), gb.blocks)])
+    w = np.where(gb.pair_diag, 1.0, 2.0)
+    E_g = gb.products[gb.pair_monomial]
+    E = np.vstack([E_u, E_g])
+    vals = np.concatenate([v_u, -w * G_all])
+    uniq, inv = np.unique(E, axis=0, return_inverse=True)
+    inv = np.asarray(inv).ravel()
+    e = np.zeros(uniq.shape[0])
+    np.add.at(e, inv, vals)
+    a = np.zeros(uniq.shape[0])
+    np.add.at(a, inv, np.abs(vals))
+    count = np.bincount(inv, minlength=uniq.shape[0])
+    rounding = (count + 4) * _EPS * a * 4.0          # sums of products of a few floats, generous factor
+    return uniq, e, rounding
+
+
+def _pairs_of(G: np.ndarray, s: int) -> np.ndarray:
+    from ..algebra.svec import triu_pairs
+
+    i, j = triu_pairs(s)
+    return 0.5 * (G[i, j] + G[j, i])
+
+
+def _ball_weight(basis: np.ndarray, R: float) -> float:
+    deg = basis.sum(axis=1)
+    return float(np.sum(R ** (2.0 * deg)))
+
+
+def _psd_defect(G: np.ndarray) -> float:
+    if G.size == 0:
+        return 0.0
+    lam = np.linalg.eigvalsh(0.5 * (G + G.T))
+    err = 8 * G.shape[0] * _EPS * max(float(np.abs(lam).max()), 1e-300)
+    return max(0.0, -float(lam[0])) + err
+
+
+def _poly_sup(p, R: float) -> float:
+    """A bound of |p(v)| on ||v|| <= R."""
+    if not p.terms:
+        return 0.0
+    return float(np.sum(np.abs(p.coefficients()) * R ** p.exponents().sum(axis=1)))
+
+
+def _q_min(structure, sol, R: float) -> float:
+    """A lower bound of q on the ball (q fixed: 1 + ... with non-negative even terms, or a user q)."""
+    if structure.free:
+        Q = sol.grams.get("q")
+        return float(np.linalg.eigvalsh(Q)[0]) - 8 * Q.shape[0] * _EPS * float(np.abs(Q).max()) if Q is not None \
+            else 0.0
+    q = structure.q
+    E, c = q.exponents(), q.coefficients()
+    const = float(c[E.sum(axis=1) == 0].sum()) if E.size else 0.0
+    even_pos = np.all(E % 2 == 0, axis=1) & (c > 0)
+    rest = ~even_pos & (E.sum(axis=1) > 0)
+    return const - float(np.sum(np.abs(c[rest]) * R ** E[rest].sum(axis=1)))
+
+
+def rigorous_psatz_bound(psatz, sol, c: float, radius: float) -> RigorousBound:
+    """c minus the margin of the module docstring, for a solved fixed- or free-q Psatz certificate
+    (``psatz`` a PsatzProblem or compiled instance; ``sol`` its ProgramSolution; ``c`` its level)."""
+    structure = psatz.structure
+    theta = np.asarray(psatz.theta, float)
+    R = float(radius)
+    E_mono, e, rnd = certificate_residual(structure, theta, sol, c if structure.free else 0.0)
+    resid = float(np.sum((np.abs(e) + rnd) * R ** E_mono.sum(axis=1)))
+    psd = 0.0
+    u = structure.u
+    for name, blk in zip(u.block_names(), u.gram.blocks):
+        psd += _psd_defect(sol.grams[name]) * _ball_weight(blk.b, R)
+    prog = structure.program
+    x = np.asarray(sol.x, float)
+    for k in range(structure.slots.n_ineq):
+        blk = prog.block(f"s{k}")
+        S = np.zeros((blk.gram.size, blk.gram.size))
+        S[blk.gram.pair_i, blk.gram.pair_j] = x[blk.slice]
+        S[blk.gram.pair_j, blk.gram.pair_i] = x[blk.slice]
+        h = psatz.ineq[k] if hasattr(psatz, "ineq") else structure.slots.polynomials(theta)[2][k]
+        psd += _psd_defect(S) * _ball_weight(blk.gram.b, R) * _poly_sup(h, R)
+    qmin = _q_min(structure, sol, R)
+    if not qmin > 0:
+        return RigorousBound(-np.inf, np.inf, R, psd, resid, qmin)
+    margin = (psd + resid) / qmin
+    return RigorousBound(float(c) - margin, margin, R, psd, resid, qmin)
+
+
+# ----------------------------------------------------------------------------- exact rational check
+@dataclass(frozen=True)
+class ExactCheck:
+    """Outcome of :func:`exact_check`: ``ok`` when the certificate proves f >= ``level`` in exact arithmetic."""
+    ok: bool
+    level: float            # the level c' proven: f >= c' on the feasible set (when ok)
+    message: str = ""
+
+
+def _ldl_psd(M: list) -> bool:
+    """Exact PSD test of a symmetric rational matrix (list of lists of Fractions) by LDL^T with
+    symmetric pivoting: PSD iff every pivot is >= 0 and a zero pivot has a zero row."""
+    A = [row[:] for row in M]
+    n = len(A)
+    active = list(range(n))
+    while active:
+        k = max(active, key=lambda i: A[i][i])
+        piv = A[k][k]
+        if piv < 0:
+            return False
+        active.remove(k)
+        if piv == 0:
+            if any(A[k][j] != 0 for j in active):
+                return False
+            continue
+        for i in active:
+            if A[i][k] == 0:
+                continue
+            f = A[i][k] / piv
+            for j in active:
+                if A[k][j] != 0:
+                    A[i][j] -= f * A[k][j]
+    return True
+
+
+def exact_check(psatz, sol, c: float, margin: float | None = None) -> ExactCheck:
+    """Verify in exact rational arithmetic that f >= c - margin on the feasible set.
+
+    The certificate's numbers (decision values x, Gram matrices, data theta) are read as exact
+    rationals (every float is one); u is recomputed exactly; its residual against the Gram matrices is
+    moved onto one pair per monomial; the level is lowered by ``margin`` (default 1e-7 max(1, |c|))
+    through q's monomials on the diagonal; then every Gram matrix of u and every s_k must be PSD
+    (exact LDL^T).  Fixed multipliers only.  Cost grows like the cube of the Gram side with rational
+    arithmetic: meant for small programs."""
+    structure = psatz.structure
+    if structure.free:
+        return ExactCheck(False, float(c), "exact checks are implemented for fixed multipliers")
+    margin = 1e-7 * max(1.0, abs(c)) if margin is None else float(margin)
+    theta = np.asarray(psatz.theta, float)
+    x = np.asarray(sol.x, float)
+    u = structure.u
+    gb = u.gram
+    # exact u coefficients: every term of u(x) is a product of floats, summed in Fractions
+    coef: dict = {}
+    _exact_u_terms(structure, theta, x, coef)
+    # exact Gram entries (pairs) and their monomial contributions
+    G = [[[Fraction(float(v)) for v in row] for row in sol.grams[name]] for name in u.block_names()]
+    for j, blk in enumerate(gb.blocks):
+        for p in range(blk.n_pairs):
+            i, k = int(blk.pair_i[p]), int(blk.pair_j[p])
+            m = tuple(int(t) for t in blk.products[blk.pair_monomial[p]])
+            coef[m] = coef.get(m, Fraction(0)) - (1 if i == k else 2) * G[j][i][k]
+    # lower the level: u + margin * q
+    for e, cq in structure.q.terms.items():
+        coef[e] = coef.get(e, Fraction(0)) + Fraction(margin) * Fraction(cq)
+    index = MonomialIndex(gb.products)
+    diag_of = {}
+    for j, blk in enumerate(gb.blocks):
+        for i in range(blk.size):
+            m = tuple(int(t) for t in 2 * blk.b[i])
+            diag_of.setdefault(m, (j, i, i))
+    for j, blk in enumerate(gb.blocks):
+        for p in range(blk.n_pairs):
+            m = tuple(int(t) for t in blk.products[blk.pair_monomial[p]])
+            diag_of.setdefault(m, (j, int(blk.pair_i[p]), int(blk.pair_j[p])))
+    for m, r in coef.items():
+        if r == 0:
+            continue
+        if m not in diag_of or index.find(np.array([m]), missing_ok=True)[0] < 0:
+            return ExactCheck(False, float(c), f"the residual has monomial {m} outside every Gram block")
+        j, a, b = diag_of[m]
+        if a == b:
+            G[j][a][a] += r
+        else:
+            G[j][a][b] += r / 2
+            G[j][b][a] += r / 2
+    for j, Gj in enumerate(G):
+        if not _ldl_psd(Gj):
+            return ExactCheck(False, float(c), f"Gram block {u.block_names()[j]} is not PSD after exact restoration")
+    prog = structure.program
+    for k in range(structure.slots.n_ineq):
+        blk = prog.block(f"s{k}")
+        s = blk.gram.size
+        S = [[Fraction(0)] * s for _ in range(s)]
+        for p, val in enumerate(x[blk.slice]):
+            i, kk = int(blk.gram.pair_i[p]), int(blk.gram.pair_j[p])
+            S[i][kk] = S[kk][i] = Fraction(float(val))
+        if not _ldl_psd(S):
+            return ExactCheck(False, float(c), f"multiplier s{k} is not PSD")
+    return ExactCheck(True, float(Fraction(float(c)) - Fraction(margin)), "")
+
+
+def _exact_u_terms(structure, theta, x, coef: dict) -> None:
+    """Add u(x)'s coefficients, computed exactly in Fractions, into ``coef`` (monomial tuple -> Fraction)."""
+    u = structure.u
+    off_of_col, owned = _owner_offsets(structure)
+    F = Fraction
+
+    def add(E, row, value):
+        m = tuple(int(t) for t in E[row])
+        coef[m] = coef.get(m, F(0)) + value
+
+    parts = [(None, u.expr)] + list(u.param_terms.items())
+    for name, expr in parts:
+        kind, _, t = (name or "").partition(":")
+        weight = F(1) if name is None else (F(float(theta[int(t)])) if kind == "f" else None)
+        for r in np.nonzero(expr.const)[0]:
+            if kind == "m":
+                continue                       # multiplier parameters carry no constants
+            add(expr.E, r, F(float(expr.const[r])) * (weight if weight is not None else F(1)))
+        for r, col, val in zip(expr.rows, expr.cols, expr.vals):
+            if kind == "m":
+                if not owned[col]:
+                    continue
+                w = F(float(theta[off_of_col[col] + int(t)]))
+            else:
+                w = weight
+            add(expr.E, r, F(float(val)) * F(float(x[col])) * w)

@@ -1,0 +1,156 @@
+"""Bounded resources: the size of a program before it is built, and the budget it must fit.
+
+Every entry point that builds an SOS program (:func:`sospoly.minimize`, :func:`sospoly.solve_psatz`,
+the compiled structures, ``tritools.triangulate``) first *estimates* the program from the shape of
+its certificate (Gram bases, multiplier supports) with :func:`estimate_size`, compares the estimate
+with a :class:`Budget`, and refuses -- with a :class:`BudgetExceeded` error naming the estimate and
+the way out, or a result with status ``budget_exceeded`` -- instead of letting a solver allocate
+terabytes in native code.  Time is bounded the same way: ``Budget.time_limit`` becomes Clarabel's
+``time_limit`` setting and a deadline checked between the iterations of the interior-point method
+and between the steps of a bisection, so a solve returns with status ``time_limit`` instead of
+running for minutes.
+
+Memory model (8-byte floats; an estimate, deliberately on the safe side):
+
+* Clarabel factorises a KKT system whose PSD-cone blocks are dense in svec space: a Gram block of
+  side s contributes L^2 entries, L = s (s + 1) / 2, besides a few copies of the constraint matrix.
+* The batched interior-point method (:mod:`sospoly.solvers.ipm`) holds, per PSD block of side s,
+  the m full s x s matrices of the columns (m = number of decision columns) and the m x m Schur
+  complement.
+* The cheaper of the two is the program's estimate (the solver layer picks that back-end).
+"""
+from __future__ import annotations
+
+import math
+import numbers
+import time
+from dataclasses import dataclass
+
+__all__ = ["Budget", "DEFAULT_BUDGET", "UNLIMITED", "ProgramSize", "estimate_size", "BudgetExceeded", "Deadline",
+           "as_budget"]
+
+
+@dataclass(frozen=True)
+class Budget:
+    """Resources one solve may use.
+
+    ``time_limit``: seconds per call (``None``: no limit); ``max_bytes``: the largest estimated
+    memory of one program (``None``: no limit); ``max_gram_side``: the largest Gram matrix side
+    (a structural cap that also stops absurd degrees before any polynomial is expanded).
+    """
+
+    time_limit: float | None = 120.0
+    max_bytes: float | None = 4 * 2 ** 30
+    max_gram_side: int = 5000
+
+    def __post_init__(self) -> None:
+        for name in ("time_limit", "max_bytes"):
+            v = getattr(self, name)
+            if v is not None and (isinstance(v, bool) or not isinstance(v, numbers.Real) or not v > 0
+                                  or math.isnan(v)):
+                raise ValueError(f"Budget.{name} must be a positive number or None, got {v!r}")
+        v = self.max_gram_side
+        if isinstance(v, bool) or not isinstance(v, numbers.Integral) or v < 1:
+            raise ValueError(f"Budget.max_gram_side must be a positive integer, got {v!r}")
+
+    def deadline(self) -> "Deadline":
+        return Deadline.after(self.time_limit)
+
+
+#: the default budget: two minutes and 4 GiB per solve, Gram matrices of side <= 5000.
+DEFAULT_BUDGET = Budget()
+#: no time or memory limit (the Gram side cap stays: it only refuses programs no machine holds).
+UNLIMITED = Budget(time_limit=None, max_bytes=None)
+
+
+def as_budget(value) -> Budget:
+    """The one input check of every ``budget=`` argument (None -> :data:`DEFAULT_BUDGET`)."""
+    if value is None:
+        return DEFAULT_BUDGET
+    if not isinstance(value, Budget):
+        raise TypeError(f"budget must be a sospoly.Budget, got {type(value).__name__}")
+    return value
+
+
+@dataclass(frozen=True)
+class Deadline:
+    """A point in time (``time.monotonic``) after which work stops; ``None`` end: never."""
+
+    end: float | None
+
+    @classmethod
+    def after(cls, seconds: float | None) -> "Deadline":
+        return cls(None if seconds is None else time.monotonic() + float(seconds))
+
+    def remaining(self) -> float | None:
+        return None if self.end is None else max(0.0, self.end - time.monotonic())
+
+    @property
+    def expired(self) -> bool:
+        return self.end is not None and time.monotonic() >= self.end
+
+
+@dataclass(frozen=True)
+class ProgramSize:
+    """Estimated size of an SOS program (see the module docstring for the memory model)."""
+
+    gram_sides: tuple
+    n_columns: int          # decision columns of the image form (an upper bound of N_LMIVAR)
+    n_rows: int
+    clarabel_bytes: float
+    ipm_bytes: float
+
+    @property
+    def max_gram_side(self) -> int:
+        return max(self.gram_sides, default=0)
+
+    @property
+    def bytes(self) -> float:
+        return min(self.clarabel_bytes, self.ipm_bytes)
+
+    def describe(self) -> str:
+        sides = sorted(self.gram_sides, reverse=True)
+        shown = ", ".join(map(str, sides[:4])) + (f", ... ({len(sides)} blocks)" if len(sides) > 4 else "")
+        return (f"Gram blocks of side {shown}; ~{self.n_columns} decision columns; "
+                f"estimated memory {_human(self.bytes)}")
+
+    def exceeds(self, budget: Budget) -> str | None:
+        """Why this program does not fit ``budget`` (None when it fits)."""
+        if self.max_gram_side > budget.max_gram_side:
+            return (f"a Gram matrix of side {self.max_gram_side} exceeds the limit {budget.max_gram_side} "
+                    f"({self.describe()})")
+        if budget.max_bytes is not None and self.bytes > budget.max_bytes:
+            return f"{self.describe()} exceeds the memory budget {_human(budget.max_bytes)}"
+        return None
+
+
+def _human(n: float) -> str:
+    units = ("B", "KiB", "MiB", "GiB", "TiB")
+    k = 0
+    while n >= 1024 and k < len(units) - 1:
+        n, k = n / 1024.0, k + 1
+    return f"{n:.3g} {units[k]}"
+
+
+def estimate_size(gram_sides, n_free: int = 0, n_equality_rows: int = 0) -> ProgramSize:
+    """Estimate a program from its Gram block sides (every SOS constraint's and SOS multiplier's),
+    ``n_free`` free decision scalars (c, coefficients of free multipliers) and ``n_equality_rows``
+    linear equality rows.  Works on Python integers, so astronomically large programs are measured
+    without overflow."""
+    sides = tuple(int(s) for s in gram_sides)
+    L = [s * (s + 1) // 2 for s in sides]
+    n_cols = int(n_free) + sum(L)              # alphas/Gram entries: at most every svec entry
+    n_rows = int(n_equality_rows) + sum(L)
+    nnz = 3 * n_rows + 2 * n_cols
+    clarabel = 8.0 * (float(sum(x * x for x in L)) + 10.0 * nnz)
+    ipm = 8.0 * (2.0 * n_cols * float(sum(s * s for s in sides)) + float(n_cols) ** 2)
+    return ProgramSize(sides, n_cols, n_rows, clarabel, ipm)
+
+
+class BudgetExceeded(ValueError):
+    """A program does not fit its :class:`Budget`; ``size`` is the estimate, ``hint`` the way out."""
+
+    def __init__(self, reason: str, size: ProgramSize | None = None, hint: str = ""):
+        self.size = size
+        self.hint = hint
+        super().__init__(reason + (f"; {hint}" if hint else ""))

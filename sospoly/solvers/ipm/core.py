@@ -1,0 +1,309 @@
+"""The one Mehrotra predictor-corrector skeleton of the interior-point method.
+
+Problem (the conic standard form of :mod:`sospoly.lowering.conic`, Clarabel's), a dual-form LMI::
+
+    min q^T x   s.t.  A_E x = b_E,   S_k = smat(b_k - A_k x) >= 0   (k = 1..K blocks)
+
+with free scalars x, whose dual is  min <C, Z> + b_E^T z_E  s.t.  <A_i, Z> + (A_E^T z_E)_i = -q_i,
+Z >= 0.  Method: infeasible-start Mehrotra predictor-corrector with the HKM direction
+
+    dZ = sym(K S^-1) - Z - sym(Z dS S^-1),   K = sigma mu I - dZ_aff dS_aff,
+
+which reduces every Newton step to the Schur complement system of the size of the free scalars,
+M_ij = sum_k tr(A_{k,i} Z_k A_{k,j} S_k^-1), augmented by A_E when there are equality rows.
+
+Only the linear maps differ between formulations; they are an :class:`Operator` (apply A_k,
+its adjoint, A_E and its adjoint, and *factor*: form and factorise the Newton system for the
+current iterate).  :func:`mehrotra` runs the same iteration for all of them, on a batch of B
+instances sharing one structure (instances that finish leave the active set):
+
+* :class:`~.operators.DenseOperator` -- dense batched A (B instances at once);
+* :class:`~.operators.SparseOperator` -- one instance with sparse A (svec-Kronecker Schur);
+* :class:`~.moment.MomentReduction` -- one single-block image-form instance in its reduced
+  moment form (disjoint-support adjoint matrices, fast Schur complement).
+
+Stopping rule (Clarabel's, with :class:`~sospoly.tolerances.Tolerances`): see
+:func:`stopping_rule`.  An instance that does not meet it within ``ipm_max_iter`` iterations,
+stalls, diverges (infeasible or unbounded problems: this method has no infeasibility
+certificates) or runs past the deadline is reported ``converged = False`` with the reason;
+callers fall back to Clarabel.  Nothing here is trusted either way: the a-posteriori
+certificate checks of :mod:`sospoly.solvers.solve` run on the returned x.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.linalg as sla
+
+from ...algebra.svec import smat, svec
+from ...tolerances import Tolerances
+
+__all__ = ["IpmResult", "Layout", "layout_of", "Operator", "stopping_rule", "mehrotra", "Iterate"]
+
+
+@dataclass(frozen=True)
+class IpmResult:
+    """Per-instance outcome of a batch (arrays have a leading batch axis)."""
+    converged: np.ndarray        # (B,) bool
+    x: np.ndarray                # (B, m)
+    z: np.ndarray                # (B, n_rows): z_E then the svec blocks (Clarabel's row order)
+    s: np.ndarray                # (B, n_rows)
+    primal_objective: np.ndarray
+    dual_objective: np.ndarray
+    iterations: np.ndarray       # (B,) int
+    reason: tuple                # per instance: "" or why it did not converge
+
+
+class Layout:
+    """Row layout: p zero rows, then PSD blocks of sides ``sizes`` (svec rows)."""
+
+    def __init__(self, n_zero: int, sizes):
+        self.p = int(n_zero)
+        self.sizes = tuple(int(n) for n in sizes)
+        self.starts = []
+        r = self.p
+        for n in self.sizes:
+            self.starts.append(r)
+            r += n * (n + 1) // 2
+        self.n_rows = r
+        self.nu = sum(self.sizes)   # degree of the cone (mu = <S, Z> / nu)
+
+    def block(self, k) -> slice:
+        n = self.sizes[k]
+        return slice(self.starts[k], self.starts[k] + n * (n + 1) // 2)
+
+
+def layout_of(cones) -> Layout:
+    """Layout from sospoly cones: at most one leading zero cone, then PSD cones only."""
+    p, sizes = 0, []
+    for i, c in enumerate(cones):
+        if c.kind == "zero" and i == 0:
+            p = c.dim
+        elif c.kind == "psd":
+            sizes.append(c.size)
+        else:
+            raise ValueError(f"the interior-point solver handles a leading zero cone and PSD cones only, "
+                             f"got a {c.kind!r} cone at position {i}")
+    return Layout(p, sizes)
+
+
+class Operator:
+    """The linear maps of one formulation for the active instances (see the module docstring)."""
+
+    def apply(self, k: int, x: np.ndarray) -> np.ndarray:        # A_k x, (B, L_k)
+        raise NotImplementedError
+
+    def adjoint(self, k: int, v: np.ndarray) -> np.ndarray:      # A_k^T v, (B, m)
+        raise NotImplementedError
+
+    def eq_apply(self, x: np.ndarray) -> np.ndarray:             # A_E x, (B, p)
+        raise NotImplementedError
+
+    def eq_adjoint(self, z: np.ndarray) -> np.ndarray:           # A_E^T z, (B, m)
+        raise NotImplementedError
+
+    def factor(self, Z: list, R: list):
+        """A solver ``solve(r_x, r_E) -> (dx, dz_E)`` of [[M, A_E^T], [A_E, 0]] for the iterate with duals
+        Z and inverse slacks R = S^-1 (per block); raises LinAlgError when M cannot be factorised."""
+        raise NotImplementedError
+
+    def subset(self, idx: np.ndarray) -> "Operator":
+        """The operator of the instances ``idx`` of the batch."""
+        raise NotImplementedError
+
+    def restore(self, dZ: list, rD: np.ndarray, dzE: np.ndarray) -> list:
+        """Optional exact restoration of the dual linear equations after a step (default: none)."""
+        return dZ
+
+
+def stopping_rule(tol: Tolerances, pobj, dobj, rdx, pres, dres, pscale, dscale, xzinf):
+    """(converged, diverged), on scalars or on (B,) arrays.
+
+    |pobj - dobj| <= solver_gap_abs or <= solver_gap_rel min(|pobj|, |dobj|);
+    ||A x + s - b||_inf <= solver_feas max(1, ||b|| + ||x|| + ||s||) (``pres``, ``pscale``);
+    ||A^T z + q||_inf <= solver_feas max(1, ||q|| + ||z||) (``dres``, ``dscale``).
+    pobj - dobj = <S, Z> + z^T r_P + r_D^T x exactly (``rdx`` = r_D^T x).  With large multipliers x
+    (nearly dependent constraints) the last term stalls above the gap tolerance although the iterate
+    is optimal to working precision; accepted also when the complementarity part meets the gap
+    tolerance and |r_D^T x| stays below ipm_dual_residual_gap relative (Tolerances documents it).
+    ``xzinf`` = max(||x||, ||z||) beyond ``ipm_divergence``: diverged."""
+    gap = np.abs(pobj - dobj)
+    feas_ok = (pres <= tol.solver_feas * np.maximum(1.0, pscale)) & (dres <= tol.solver_feas * np.maximum(1.0, dscale))
+    ok = ((gap <= tol.solver_gap_abs) | (gap <= tol.solver_gap_rel * np.minimum(np.abs(pobj), np.abs(dobj)))) \
+        & feas_ok
+    comp = np.abs(pobj - dobj - rdx)
+    scale_obj = np.maximum(1.0, np.abs(pobj))
+    ok = ok | (feas_ok & ((comp <= tol.solver_gap_abs) | (comp <= tol.solver_gap_rel * scale_obj))
+               & (np.abs(rdx) <= tol.ipm_dual_residual_gap * scale_obj))
+    diverged = ~np.isfinite(pobj) | ~np.isfinite(dobj) | (xzinf > tol.ipm_divergence)
+    return ok, diverged
+
+
+_trtri = sla.lapack.dtrtri
+_syevr = sla.lapack.dsyevr
+
+
+def _inverse_cholesky(X: np.ndarray) -> np.ndarray:
+    """L^-1 for X = L L^T (stack (B, n, n)); LinAlgError when X is not positive definite."""
+    L = np.linalg.cholesky(X)
+    if X.shape[0] == 1:
+        Li, info = _trtri(L[0], lower=1)
+        if info:
+            raise np.linalg.LinAlgError("singular Cholesky factor")
+        return Li[None]
+    return np.linalg.inv(L)
+
+
+def _max_step(Li: np.ndarray, dX: np.ndarray) -> np.ndarray:
+    """Largest a with X + a dX >= 0 (inf when dX >= 0) for X = L L^T > 0 given Li = L^-1; batched."""
+    T = Li @ dX @ np.swapaxes(Li, -1, -2)
+    T = 0.5 * (T + np.swapaxes(T, -1, -2))
+    if T.shape[0] == 1:
+        w, _, _, _, info = _syevr(T[0], compute_v=0, range="I", il=1, iu=1)      # smallest eigenvalue only
+        if info:
+            raise np.linalg.LinAlgError("eigenvalue computation failed")
+        lam = w[:1]
+    else:
+        lam = np.linalg.eigvalsh(T)[..., 0]
+    with np.errstate(divide="ignore"):
+        return np.where(lam < 0, -1.0 / np.minimum(lam, -1e-300), np.inf)
+
+
+@dataclass
+class Iterate:
+    """x (B, m), z_E (B, p), slacks S_k and duals Z_k (lists of (B, n_k, n_k)) of a batch."""
+    x: np.ndarray
+    zE: np.ndarray
+    S: list
+    Z: list
+
+
+def mehrotra(op: Operator, q: np.ndarray, b: np.ndarray, lay: Layout, tol: Tolerances, deadline=None):
+    """Run the predictor-corrector on a batch; returns (Iterate, converged, iterations, reasons).
+
+    ``q`` (B, m) the costs, ``b`` (B, n_rows) the right-hand sides (zero rows first, then svec
+    blocks), ``op`` the operator of the whole batch (:meth:`Operator.subset` gives the active part)."""
+    B, m = q.shape
+    p, nb = lay.p, len(lay.sizes)
+    bk = [b[:, lay.block(k)] for k in range(nb)]
+    scale_s = np.maximum(1.0, np.abs(b).max(axis=1))
+    scale_z = np.maximum(1.0, np.abs(q).max(axis=1))
+    it_ = Iterate(np.zeros((B, m)), np.zeros((B, p)), [scale_s[:, None, None] * np.eye(n) for n in lay.sizes],
+                  [scale_z[:, None, None] * np.eye(n) for n in lay.sizes])
+    nb_inf, nq_inf = np.abs(b).max(axis=1), np.abs(q).max(axis=1)
+    converged, its, reason = np.zeros(B, bool), np.zeros(B, int), [""] * B
+    active = np.arange(B)
+    history = np.full((B, 5), np.inf)    # last merit values (gap + residuals) per instance
+    frac = tol.ipm_step_fraction
+
+    def finish(idx, it, why):
+        for g in idx:
+            its[g], reason[g] = it, why
+
+    for it in range(tol.ipm_max_iter + 1):
+        if active.size == 0:
+            break
+        sub = op if active.size == B else op.subset(active)
+        qa, ba = q[active], b[active]
+        x, zE = it_.x[active], it_.zE[active]
+        S, Z = [Sk[active] for Sk in it_.S], [Zk[active] for Zk in it_.Z]
+        svs, svz = [svec(Sk) for Sk in S], [svec(Zk) for Zk in Z]
+        rP = [bk[k][active] - sub.apply(k, x) - svs[k] for k in range(nb)]
+        rE = ba[:, :p] - sub.eq_apply(x) if p else np.zeros((active.size, 0))
+        rD = qa + (sub.eq_adjoint(zE) if p else 0.0) + sum(sub.adjoint(k, svz[k]) for k in range(nb))
+        pobj = np.einsum("bm,bm->b", qa, x)
+        dobj = -(np.einsum("bp,bp->b", ba[:, :p], zE) + sum(np.einsum("bl,bl->b", bk[k][active], svz[k])
+                                                            for k in range(nb)))
+        xinf = np.abs(x).max(axis=1) if m else np.zeros(active.size)
+        sinf = np.max([np.abs(v).max(axis=1) for v in svs], axis=0)
+        zinf = np.max([np.abs(v).max(axis=1) for v in svz] + ([np.abs(zE).max(axis=1)] if p else []), axis=0)
+        pres = np.max([np.abs(r).max(axis=1) for r in rP] + ([np.abs(rE).max(axis=1)] if p else []), axis=0)
+        dres = np.abs(rD).max(axis=1) if m else np.zeros(active.size)
+        ok, diverged = stopping_rule(tol, pobj, dobj, np.einsum("bm,bm->b", rD, x), pres, dres,
+                                     nb_inf[active] + xinf + sinf, nq_inf[active] + zinf, np.maximum(xinf, zinf))
+        # stalled: the merit has not halved over the last 4 iterations (the iterates sit on a face from
+        # which the Newton direction makes no progress): hand over to the fallback
+        merit = np.abs(pobj - dobj) + pres + dres
+        stalled = (it >= 8) & (merit > 0.5 * history[active, 0])
+        history[active, :-1] = history[active, 1:]
+        history[active, -1] = merit
+        timeout = deadline is not None and deadline.expired
+        done = ok | diverged | stalled | (it == tol.ipm_max_iter) | timeout
+        for j in np.nonzero(done)[0]:
+            converged[active[j]] = bool(ok[j])
+            finish([active[j]], it, "" if ok[j] else "diverged (infeasible or unbounded?)" if diverged[j] else
+                   "stalled" if stalled[j] else "time limit" if timeout else "iteration limit")
+        if done.all():
+            break
+        if done.any():
+            active = active[~done]
+            continue   # recompute on the compressed set (cheap) to keep the code single-path
+        # ---- Newton system
+        try:
+            LiS = [_inverse_cholesky(Sk) for Sk in S]
+            LiZ = [_inverse_cholesky(Zk) for Zk in Z]
+            R = [np.swapaxes(Li, -1, -2) @ Li for Li in LiS]
+            solve = sub.factor(Z, R)
+        except (np.linalg.LinAlgError, ValueError):
+            finish(active, it, "singular Schur complement or lost positive definiteness")
+            break
+        mu = sum(np.einsum("bij,bij->b", Sk, Zk) for Sk, Zk in zip(S, Z)) / lay.nu
+        rPm = [smat(r, n) for r, n in zip(rP, lay.sizes)]
+        ZrR = [Z[k] @ rPm[k] @ R[k] for k in range(nb)]
+
+        def direction(Kmats):
+            # dZ = sym(K R) - Z - sym(Z dS R),  dS = smat(rP - A dx)
+            rhs = -np.array(rD, dtype=float)
+            KR = [Kmats[k] @ R[k] if Kmats[k] is not None else 0.0 for k in range(nb)]
+            for k in range(nb):
+                rhs -= sub.adjoint(k, svec(KR[k] - Z[k] - ZrR[k]))
+            dx, dzE = solve(rhs, rE)
+            dS, dZ = [], []
+            for k in range(nb):
+                dSk = rPm[k] - smat(sub.apply(k, dx), lay.sizes[k])
+                dZk = KR[k] - Z[k] - Z[k] @ dSk @ R[k]
+                dS.append(dSk)
+                dZ.append(0.5 * (dZk + np.swapaxes(dZk, 1, 2)))
+            return dx, dzE, dS, sub.restore(dZ, rD, dzE)
+
+        def steps(dS, dZ):
+            ap = np.min([_max_step(LiS[k], dS[k]) for k in range(nb)], axis=0)
+            ad = np.min([_max_step(LiZ[k], dZ[k]) for k in range(nb)], axis=0)
+            return ap, ad
+
+        try:
+            dx, dzE, dS, dZ = direction([None] * nb)
+            ap, ad = steps(dS, dZ)
+            ap1, ad1 = np.minimum(1.0, ap), np.minimum(1.0, ad)
+            mu_aff = sum(np.einsum("bij,bij->b", S[k] + ap1[:, None, None] * dS[k], Z[k] + ad1[:, None, None] * dZ[k])
+                         for k in range(nb)) / lay.nu
+            sigma = np.clip((mu_aff / np.maximum(mu, 1e-300)) ** 3, 0.0, 1.0)
+            Kc = [sigma[:, None, None] * mu[:, None, None] * np.eye(n) - dZ[k] @ dS[k] for k, n in enumerate(lay.sizes)]
+            dx, dzE, dS, dZ = direction(Kc)
+            ap, ad = steps(dS, dZ)
+        except (np.linalg.LinAlgError, ValueError):
+            finish(active, it, "singular Schur complement or lost positive definiteness")
+            break
+        ap = np.minimum(1.0, frac * ap)
+        ad = np.minimum(1.0, frac * ad)
+        it_.x[active] = x + ap[:, None] * dx
+        if p:
+            it_.zE[active] = zE + ad[:, None] * dzE
+        for k in range(nb):
+            it_.S[k][active] = S[k] + ap[:, None, None] * dS[k]
+            it_.Z[k][active] = Z[k] + ad[:, None, None] * dZ[k]
+    return it_, converged, its, tuple(reason)
+
+
+def result_of(it_: Iterate, converged, its, reason, q, b, lay: Layout) -> IpmResult:
+    """The :class:`IpmResult` of a finished batch in the standard form's row order."""
+    B = q.shape[0]
+    zfull = np.concatenate([it_.zE] + [svec(Zk) for Zk in it_.Z], axis=1)
+    sfull = np.concatenate([np.zeros((B, lay.p))] + [svec(Sk) for Sk in it_.S], axis=1)
+    pobj = np.einsum("bm,bm->b", q, it_.x)
+    dobj = -np.einsum("br,br->b", b, zfull)
+    return IpmResult(converged, it_.x, zfull, sfull, pobj, dobj, its, reason)
+
+
+__all__ += ["result_of"]

@@ -5,8 +5,8 @@ import pytest
 
 from tests.reference.hartley_sturm import fundamental_from_determinant
 from tritools.model.geometry import (M0, PointAtInfinityError, camera_center, depths, dlt, fundamental_matrices,
-                               fundamental_matrix, gamma, image_points, point_from_image_points, project,
-                               validate_cameras)
+                                     fundamental_matrix, gamma, image_points, point_from_image_points, project,
+                                     validate_cameras)
 from tritools.model.regions import EllipseBorder, Point, Segment
 from tritools.scene import paper_example, paper_table, random_scene
 
@@ -33,7 +33,8 @@ def test_validate_cameras_accepts_and_copies():
     ([np.eye(3, 4), np.full((3, 4), np.nan)], r"cameras\[1\] contains NaN"),
     ([np.eye(3, 4), np.array([[1, 0, 0, 0], [0, 1, 0, 0], [1, 1, 0, 0.0]])], r"cameras\[1\] has rank < 3"),
     ([np.eye(3, 4), -2.5 * np.eye(3, 4), 7 * np.eye(3, 4)], "all equal up to scale"),
-    ("abc", "numeric"),
+    ("abc", "cameras must be real numbers, got str"),
+    (np.eye(3, 4)[None].repeat(2, 0) * 1j, "cameras must be real numbers, got complex128"),
 ])
 def test_validate_cameras_errors(cams, match):
     with pytest.raises(ValueError, match=match):
@@ -214,8 +215,9 @@ def test_fundamental_matrix_epipolar_residual_and_convention():
     X = RNG.uniform(-1, 1, size=(30, 3))
     x = np.concatenate([image_points(X, cams), np.ones((30, 4, 1))], axis=2)
     for (i, j), F in fundamental_matrices(cams).items():
-        res = np.einsum("ka,ab,kb->k", x[:, i], F, x[:, j]) / np.linalg.norm(x[:, i], axis=1) / np.linalg.norm(x[:, j], axis=1)
-        wrong = np.einsum("ka,ab,kb->k", x[:, j], F, x[:, i]) / np.linalg.norm(x[:, i], axis=1) / np.linalg.norm(x[:, j], axis=1)
+        size = np.linalg.norm(x[:, i], axis=1) * np.linalg.norm(x[:, j], axis=1)
+        res = np.einsum("ka,ab,kb->k", x[:, i], F, x[:, j]) / size
+        wrong = np.einsum("ka,ab,kb->k", x[:, j], F, x[:, i]) / size
         assert np.max(np.abs(res)) < 1e-12
         assert np.max(np.abs(wrong)) > 1e-3
 

@@ -8,7 +8,7 @@ from scipy.spatial import HalfspaceIntersection
 
 from sospoly.algebra.polynomial import variables
 from tritools.model.regions import (Ellipse, EllipseBorder, Point, Polytope, Region, RegionPolynomials, Segment,
-                              as_region, as_regions)
+                                    as_region, as_regions)
 
 RNG = np.random.default_rng(12345)
 X1, X2, Y1, Y2 = variables("x1 x2 y1 y2")
@@ -351,8 +351,9 @@ def test_as_region_and_as_regions():
     assert as_region({"type": "point", "x": [1, 2]}) == Point([1, 2])
     with pytest.raises(ValueError):
         as_region("nonsense")
-    with pytest.raises(ValueError, match="one region per view"):
+    with pytest.raises(ValueError, match=r"regions: expected one region per camera \(3\), got 2"):
         as_regions([[0, 0], [1, 1]], n_views=3)
+    assert as_regions(np.array([[0.0, 0.0], [1.0, 1.0]]), n_views=2) == (Point([0, 0]), Point([1, 1]))
 
 
 # ---------------------------------------------------------------- bad inputs

@@ -1,0 +1,257 @@
+"""Cases IV and V of SPEC §2: the border ``{y : (y - x^)' D^-1 (y - x^) = 1}`` of an ellipse
+(:class:`EllipseBorder`) and the filled ellipse (:class:`Ellipse`), with the exact
+point-to-ellipse distance (Eberly's bisection on the Lagrange condition's 1-D root)."""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import ClassVar
+
+import numpy as np
+
+from .base import (Region, RegionPolynomials, as_matrix, as_points, as_vector, check_xy, positive_number,
+                   similarity_args, square)
+
+__all__ = ["EllipseBorder", "Ellipse", "SYMMETRY_RTOL", "PD_RTOL", "ELLIPSE_MAX_ITER", "ELLIPSE_SCALAR_MAX"]
+
+#: Relative tolerance for ``D == D.T``.
+SYMMETRY_RTOL = 1e-10
+#: ``D`` is positive definite iff ``min eig > PD_RTOL * max eig`` (and ``max eig > 0``).
+PD_RTOL = 1e-12
+#: Maximum bisection steps of the point-to-ellipse root finder (converges in < 80 in practice).
+ELLIPSE_MAX_ITER = 200
+#: Up to this many points the point-to-ellipse solver runs a scalar loop (faster than numpy).
+ELLIPSE_SCALAR_MAX = 8
+
+
+def _ellipse_root(r0, z0, z1, g, max_iter=ELLIPSE_MAX_ITER):
+    """Vectorised bisection for the root ``u = s + 1 > 0`` of Eberly's function
+    ``G(s) = (r0 z0 / (s + r0))^2 + (z1 / (s + 1))^2 - 1`` (``z0, z1 > 0``, ``r0 >= 1``).
+
+    The root lies in ``[z1, 1]`` inside the ellipse (``g < 0``) and in
+    ``[z1, ||(r0 z0, z1)||]`` outside; bisecting on ``u`` (not ``s``) keeps full
+    relative precision when ``u`` is tiny (points close to the major axis).
+    """
+    n0 = r0 * z0
+    rm1 = r0 - 1.0
+    u0 = np.array(z1, dtype=float)
+    u1 = np.where(g < 0, 1.0, np.hypot(n0, z1))
+    u = 0.5 * (u0 + u1)
+    active = np.ones_like(u, dtype=bool)
+    eps = 2.0 * np.finfo(float).eps
+    for _ in range(max_iter):
+        u = np.where(active, 0.5 * (u0 + u1), u)
+        G = (n0 / (u + rm1)) ** 2 + (z1 / u) ** 2 - 1.0
+        u0 = np.where(active & (G > 0), u, u0)
+        u1 = np.where(active & (G < 0), u, u1)
+        done = (G == 0) | (u1 - u0 <= eps * u1)
+        u = np.where(active & done & (G != 0), 0.5 * (u0 + u1), u)
+        active &= ~done
+        if not active.any():
+            break
+    return u
+
+
+def _ellipse_closest_scalar(e0: float, e1: float, y0: float, y1: float) -> tuple[float, float]:
+    """Scalar version of :func:`_ellipse_closest_local` for ``y0, y1 >= 0`` (fast for few points)."""
+    if y1 > 0:
+        if y0 > 0:
+            z0, z1 = y0 / e0, y1 / e1
+            g = z0 * z0 + z1 * z1 - 1.0
+            if g == 0:
+                return y0, y1
+            r0 = (e0 / e1) ** 2
+            n0, rm1 = r0 * z0, r0 - 1.0
+            u0 = z1
+            u1 = 1.0 if g < 0 else math.hypot(n0, z1)
+            eps = 2.0 * np.finfo(float).eps
+            u = 0.5 * (u0 + u1)
+            for _ in range(ELLIPSE_MAX_ITER):
+                u = 0.5 * (u0 + u1)
+                G = (n0 / (u + rm1)) ** 2 + (z1 / u) ** 2 - 1.0
+                if G > 0:
+                    u0 = u
+                elif G < 0:
+                    u1 = u
+                else:
+                    break
+                if u1 - u0 <= eps * u1:
+                    u = 0.5 * (u0 + u1)
+                    break
+            return r0 * y0 / (u + rm1), y1 / u
+        return 0.0, e1
+    numer0, denom0 = e0 * y0, e0 * e0 - e1 * e1
+    if numer0 < denom0:
+        xde0 = numer0 / denom0
+        return e0 * xde0, e1 * math.sqrt(max(0.0, 1.0 - xde0 * xde0))
+    return e0, 0.0
+
+
+def _ellipse_closest_local(e0: float, e1: float, Y: np.ndarray) -> np.ndarray:
+    """Closest points on ``x0^2/e0^2 + x1^2/e1^2 = 1`` (``e0 >= e1 > 0``) to points Y (m, 2)
+    in the ellipse's own axes.  Works in the first quadrant and restores signs.
+    """
+    if len(Y) <= ELLIPSE_SCALAR_MAX:
+        out = np.empty_like(Y)
+        for k, (a, b) in enumerate(Y):
+            x0, x1 = _ellipse_closest_scalar(e0, e1, abs(float(a)), abs(float(b)))
+            out[k] = (-x0 if a < 0 else x0, -x1 if b < 0 else x1)
+        return out
+    sgn = np.where(Y < 0, -1.0, 1.0)
+    y0 = np.abs(Y[:, 0])
+    y1 = np.abs(Y[:, 1])
+    x0 = np.empty_like(y0)
+    x1 = np.empty_like(y1)
+
+    # y1 > 0 and y0 > 0: root finding
+    m = (y1 > 0) & (y0 > 0)
+    if np.any(m):
+        z0 = y0[m] / e0
+        z1 = y1[m] / e1
+        g = z0 * z0 + z1 * z1 - 1.0
+        r0 = (e0 / e1) ** 2
+        u = _ellipse_root(r0, z0, z1, g)
+        on = g == 0
+        x0[m] = np.where(on, y0[m], r0 * y0[m] / (u + (r0 - 1.0)))
+        x1[m] = np.where(on, y1[m], y1[m] / u)
+    # y0 == 0, y1 > 0: closest is the minor-axis end
+    m = (y1 > 0) & (y0 == 0)
+    x0[m] = 0.0
+    x1[m] = e1
+    # y1 == 0
+    m = y1 == 0
+    if np.any(m):
+        numer0 = e0 * y0[m]
+        denom0 = e0 * e0 - e1 * e1
+        inner = numer0 < denom0
+        xde0 = np.where(inner, numer0 / np.where(denom0 > 0, denom0, 1.0), 1.0)
+        x0[m] = np.where(inner, e0 * xde0, e0)
+        x1[m] = np.where(inner, e1 * np.sqrt(np.maximum(0.0, 1.0 - xde0 * xde0)), 0.0)
+    return np.column_stack([x0, x1]) * sgn
+
+
+@dataclass(frozen=True, eq=False)
+class EllipseBorder(Region):
+    """Case IV: ``R = {y : (y - x^)' D^-1 (y - x^) = 1}``, ``D`` symmetric positive
+    definite; ``n = 2``, ``f = ||x - y||^2``, ``g = 1 - (y - x^)' D^-1 (y - x^)``
+    (paper Section 4.2).  A circle of radius rho is ``D = rho^2 I``.
+
+    The distance is computed in ``D``'s eigenbasis (semi-axes ``sqrt(eig D)``) by
+    Eberly's bisection on the 1-D root of the Lagrange condition, with closed forms
+    for points on the axes and at the centre.
+    """
+
+    center_: np.ndarray
+    D: np.ndarray
+    _axes: np.ndarray = field(init=False, repr=False)   # semi-axes, descending
+    _Q: np.ndarray = field(init=False, repr=False)      # columns: matching axis directions
+    _Dinv: np.ndarray = field(init=False, repr=False)
+    kind: ClassVar[str] = "ellipse_border"
+
+    def __init__(self, center, D):
+        object.__setattr__(self, "center_", as_vector(center, "center"))
+        D = as_matrix(D, "D", (2, 2))
+        scale = float(np.max(np.abs(D)))
+        if np.max(np.abs(D - D.T)) > SYMMETRY_RTOL * max(scale, 1e-300):
+            raise ValueError(f"D must be symmetric, got {D.tolist()}")
+        D = 0.5 * (D + D.T)
+        lam, Q = np.linalg.eigh(D)
+        if not (lam[1] > 0 and lam[0] > PD_RTOL * lam[1]):
+            raise ValueError(f"D must be positive definite, got eigenvalues {lam.tolist()}")
+        D.setflags(write=False)
+        object.__setattr__(self, "D", D)
+        object.__setattr__(self, "_axes", np.sqrt(lam[::-1]))
+        object.__setattr__(self, "_Q", Q[:, ::-1].copy())
+        Dinv = np.linalg.inv(D)
+        Dinv = 0.5 * (Dinv + Dinv.T)
+        if not np.all(np.isfinite(Dinv)):
+            raise ValueError(f"D is too close to singular for floating point (its inverse overflows), "
+                             f"got eigenvalues {lam.tolist()}")
+        object.__setattr__(self, "_Dinv", Dinv)
+
+    @classmethod
+    def circle(cls, center, radius) -> EllipseBorder:
+        """The circle of radius ``radius`` (``D = radius^2 I``)."""
+        r = positive_number(radius, "radius")
+        return cls(center, r * r * np.eye(2))
+
+    @property
+    def semi_axes(self) -> np.ndarray:
+        """Semi-axis lengths ``sqrt(eig D)``, largest first."""
+        return self._axes.copy()
+
+    @property
+    def n_aux(self) -> int:
+        return 2
+
+    def _quadratic(self, y):
+        c1, c2 = (float(v) for v in self.center_)
+        u1 = y[0] - c1
+        u2 = y[1] - c2
+        a, b, d = float(self._Dinv[0, 0]), float(self._Dinv[0, 1]), float(self._Dinv[1, 1])
+        return 1.0 - (a * square(u1) + (2.0 * b) * (u1 * u2) + d * square(u2))
+
+    def polynomials(self, x, y) -> RegionPolynomials:
+        x, y = check_xy(x, y, 2)
+        f = square(x[0] - y[0]) + square(x[1] - y[1])
+        return RegionPolynomials(f, (self._quadratic(y),), ())
+
+    def level(self, points) -> float | np.ndarray:
+        """``(p - x^)' D^-1 (p - x^)`` (1 on the border, < 1 inside)."""
+        P, single = as_points(points)
+        U = P - self.center_
+        q = np.einsum("ij,jk,ik->i", U, self._Dinv, U)
+        return float(q[0]) if single else q
+
+    def _border_closest(self, P: np.ndarray) -> np.ndarray:
+        Y = (P - self.center_) @ self._Q
+        X = _ellipse_closest_local(float(self._axes[0]), float(self._axes[1]), Y)
+        return self.center_ + X @ self._Q.T
+
+    def closest_point(self, points) -> np.ndarray:
+        P, single = as_points(points)
+        C = self._border_closest(P)
+        return C[0] if single else C
+
+    @property
+    def center(self) -> np.ndarray:
+        return self.center_.copy()
+
+    def similarity(self, scale, shift):
+        s, t = similarity_args(scale, shift)
+        return type(self)(s * (self.center_ - t), s * s * self.D)
+
+    def _fields(self):
+        return {"center": self.center_.tolist(), "D": self.D.tolist()}
+
+    @classmethod
+    def _required(cls):
+        return ("center", "D")
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}(center={self.center_.tolist()}, D={self.D.tolist()})"
+
+
+@dataclass(frozen=True, eq=False, init=False, repr=False)
+class Ellipse(EllipseBorder):
+    """Case V: filled ellipse ``{y : (y - x^)' D^-1 (y - x^) <= 1}``; ``n = 2``,
+    ``f = ||x - y||^2``, ``h = 1 - (y - x^)' D^-1 (y - x^)`` (paper Section 4.2).
+    Distance 0 inside, else the border distance.
+    """
+
+    kind: ClassVar[str] = "ellipse"
+
+    def polynomials(self, x, y) -> RegionPolynomials:
+        x, y = check_xy(x, y, 2)
+        f = square(x[0] - y[0]) + square(x[1] - y[1])
+        return RegionPolynomials(f, (), (self._quadratic(y),))
+
+    def closest_point(self, points) -> np.ndarray:
+        P, single = as_points(points)
+        inside = np.atleast_1d(self.level(P)) <= 1.0
+        C = P.copy()
+        if np.any(~inside):
+            C[~inside] = self._border_closest(P[~inside])
+        return C[0] if single else C
+
+

@@ -1,0 +1,122 @@
+"""Cases I and II of SPEC §2: a point ``{x^}`` and a segment ``{x^ + t d^ : t in [-1, 1]}``."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import ClassVar
+
+import numpy as np
+
+from .base import Region, RegionPolynomials, as_points, as_vector, check_xy, similarity_args, square
+
+__all__ = ["Point", "Segment"]
+
+
+# ----------------------------------------------------------------------------- I: point
+@dataclass(frozen=True, eq=False)
+class Point(Region):
+    """Case I: ``R = {x^}``; ``n = 0``, ``f = ||x - x^||^2`` (paper Section 4.2)."""
+
+    x: np.ndarray
+    kind: ClassVar[str] = "point"
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "x", as_vector(self.x, "x"))
+
+    @property
+    def n_aux(self) -> int:
+        return 0
+
+    def polynomials(self, x, y=()) -> RegionPolynomials:
+        x, y = check_xy(x, y, 0)
+        f = square(x[0] - float(self.x[0])) + square(x[1] - float(self.x[1]))
+        return RegionPolynomials(f)
+
+    def closest_point(self, points) -> np.ndarray:
+        P, single = as_points(points)
+        C = np.broadcast_to(self.x, P.shape).copy()
+        return C[0] if single else C
+
+    @property
+    def center(self) -> np.ndarray:
+        return self.x.copy()
+
+    def similarity(self, scale, shift) -> Point:
+        s, t = similarity_args(scale, shift)
+        return Point(s * (self.x - t))
+
+
+# ----------------------------------------------------------------------------- II: segment
+@dataclass(frozen=True, eq=False)
+class Segment(Region):
+    """Case II: ``R = {x^ + t d^ : t in [-1, 1]}``; ``n = 1``,
+    ``f = ||x - x^ - y d^||^2``, ``h = 1 - y^2`` (paper Section 4.2).
+
+    A zero ``direction`` is allowed (the segment is then the point ``center``).
+    """
+
+    center_: np.ndarray
+    direction: np.ndarray
+    kind: ClassVar[str] = "segment"
+
+    def __init__(self, center, direction):
+        object.__setattr__(self, "center_", as_vector(center, "center"))
+        object.__setattr__(self, "direction", as_vector(direction, "direction"))
+
+    @classmethod
+    def from_endpoints(cls, a, b) -> Segment:
+        """The segment ``[a, b]``: centre ``a/2 + b/2``, direction ``b/2 - a/2`` (halved first,
+        so endpoints near the floating-point limit do not overflow)."""
+        a = as_vector(a, "a")
+        b = as_vector(b, "b")
+        return cls(a / 2.0 + b / 2.0, b / 2.0 - a / 2.0)
+
+    @property
+    def endpoints(self) -> tuple[np.ndarray, np.ndarray]:
+        return self.center_ - self.direction, self.center_ + self.direction
+
+    @property
+    def n_aux(self) -> int:
+        return 1
+
+    def polynomials(self, x, y) -> RegionPolynomials:
+        x, y = check_xy(x, y, 1)
+        (c1, c2), (d1, d2) = (float(v) for v in self.center_), (float(v) for v in self.direction)
+        f = square(x[0] - c1 - y[0] * d1) + square(x[1] - c2 - y[0] * d2)
+        return RegionPolynomials(f, (), (1.0 - square(y[0]),))
+
+    def parameter(self, points) -> float | np.ndarray:
+        """Minimising ``t* = clip((p - x^).d^ / ||d^||^2, -1, 1)`` of ``||p - x^ - t d^||``
+        (0 for a zero direction); computed with ``d^`` scaled by its largest entry, so
+        directions of any finite size neither overflow nor underflow."""
+        P, single = as_points(points)
+        s = float(np.max(np.abs(self.direction)))
+        if s == 0.0:
+            t = np.zeros(len(P))
+        else:
+            u = self.direction / s
+            t = np.clip(((P - self.center_) / s) @ u / float(u @ u), -1.0, 1.0)
+        return float(t[0]) if single else t
+
+    def closest_point(self, points) -> np.ndarray:
+        P, single = as_points(points)
+        t = np.atleast_1d(self.parameter(P))
+        C = self.center_ + t[:, None] * self.direction
+        return C[0] if single else C
+
+    @property
+    def center(self) -> np.ndarray:
+        return self.center_.copy()
+
+    def similarity(self, scale, shift) -> Segment:
+        s, t = similarity_args(scale, shift)
+        return Segment(s * (self.center_ - t), s * self.direction)
+
+    def _fields(self):
+        return {"center": self.center_.tolist(), "direction": self.direction.tolist()}
+
+    @classmethod
+    def _required(cls):
+        return ("center", "direction")
+
+    def __repr__(self) -> str:
+        return f"Segment(center={self.center_.tolist()}, direction={self.direction.tolist()})"

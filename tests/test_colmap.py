@@ -13,10 +13,10 @@ from tests.reference.hartley_sturm import hartley_sturm
 from tests.reference.multistart import best_local_gamma
 from tritools import Status
 from tritools.io.colmap import (Camera, Image, Model, ModelFormatError, Point3D, SkewError, UnsupportedCameraModelError,
-                                distort, model_from_oxford, model_from_projections, pixels_from_camera,
+                                distort, intrinsics, model_from_oxford, model_from_projections, pixels_from_camera,
                                 projection_matrix, qvec_from_rotation, read_text_model, reprojection_error,
                                 rotation_from_qvec, undistort, undistorted_pixels, write_text_model)
-from tritools.sfm import CERTIFICATES_FILE, read_certificates, retriangulate, write_certificates
+from tritools.sfm import CERTIFICATES_FILE, CameraError, read_certificates, retriangulate, write_certificates
 from tritools.io.colmap.camera_models import UNDISTORT_TOL_PX
 from tritools.cli.colmap import register
 from tritools.io.oxford import load_sequence
@@ -121,7 +121,8 @@ def test_reader_accepts_colmap_documentation_example(tmp_path):
     ("cameras.txt", "# c\n1 FISH 640 480 1\n", "cameras.txt:2: unknown camera MODEL 'FISH'"),
     ("cameras.txt", "1 PINHOLE 640 -4 800 800 320 240\n", "cameras.txt:1: WIDTH and HEIGHT must be positive"),
     ("cameras.txt", "1 PINHOLE 640 480 800 nan 320 240\n", "cameras.txt:1: PARAMS[1] is nan"),
-    ("images.txt", "1 1 0 0 0 0 0 0 1 a.png\n1.0 2.0\n", "images.txt:2: POINTS2D of image 1 must be (X, Y, POINT3D_ID)"),
+    ("images.txt", "1 1 0 0 0 0 0 0 1 a.png\n1.0 2.0\n",
+     "images.txt:2: POINTS2D of image 1 must be (X, Y, POINT3D_ID)"),
     ("images.txt", "1 1 0 0 0 0 0 x 1 a.png\n\n", "images.txt:1: TZ must be a number, got 'x'"),
     ("images.txt", "1 1 0 0 0 0 0 0 1 a.png\n", "images.txt:1: image 1 has no POINTS2D line"),
     ("images.txt", "1 1 0 0 0 0 0 0 9 a.png\n\n", "images.txt:1: image 1 refers to camera 9"),
@@ -193,13 +194,26 @@ def test_undistort_reports_non_convergence():
     assert np.allclose(distort(uv[1:], np.array([-1.0, 0, 0, 0])), [[0.1, 0.0]], atol=1e-14)
 
 
-def test_unsupported_model_is_named():
+def test_unsupported_model_is_skipped_or_refused_when_strict():
     cams = dict(CAMERAS)
     cams[1] = Camera(1, "OPENCV_FISHEYE", 640, 480, (800, 800, 320, 240, 0, 0, 0, 0))
-    model, _ = synthetic_model(n_points=2)
+    model, _ = synthetic_model(n_points=12)
     model = Model(cams, model.images, model.points3D)
-    with pytest.raises(UnsupportedCameraModelError, match="'OPENCV_FISHEYE' is not supported.*OPENCV"):
-        retriangulate(model)
+    with pytest.raises(CameraError, match="camera 1 \\(OPENCV_FISHEYE\\) cannot be used: camera model "
+                                          "'OPENCV_FISHEYE' is not supported.*OPENCV"):
+        retriangulate(model, strict=True)
+    with pytest.raises(UnsupportedCameraModelError, match="'OPENCV_FISHEYE' is not supported"):
+        intrinsics("OPENCV_FISHEYE", (800, 800, 320, 240, 0, 0, 0, 0))
+    _, report = retriangulate(model)          # image 1 uses camera 1: its observations are left out
+    (cid, name, reason, n_obs), = report.skipped_cameras
+    assert (cid, name) == (1, "OPENCV_FISHEYE") and "not supported" in reason and n_obs > 0
+    assert report.n_skipped_observations == n_obs
+    for r in report.records:
+        track = model.points3D[r.point3D_id].track
+        in_cam1 = sum(model.images[i].camera_id == 1 for i, _ in track)
+        assert r.n_views == len(track) - in_cam1
+        if in_cam1:
+            assert "unusable camera(s) 1 left out" in r.message
 
 
 # ----------------------------------------------------------------------------- re-triangulation
@@ -247,8 +261,9 @@ def test_noisy_certified_gamma_matches_independent_references():
         assert abs(r.gamma_ub - ref) < 1e-7, (r, ref)
         assert r.gamma_lb <= r.gamma_ub + 1e-9 and r.updated
         assert r.gamma_ub <= r.gamma_input
+        # the same formula, vectorised: equal to rounding
         assert new.points3D[r.point3D_id].error == pytest.approx(
-            reprojection_error(model, new.points3D[r.point3D_id].xyz, p.track), abs=0)
+            reprojection_error(model, new.points3D[r.point3D_id].xyz, p.track), rel=1e-12)
 
 
 def test_min_track_length_skips_short_tracks():
@@ -353,13 +368,21 @@ def test_cli_bad_input_exits_2(tmp_path, capsys):
     assert _cli(["colmap", str(tmp_path / "in"), str(tmp_path / "out")]) == 2
     assert "points3D.txt:1: ERROR must be a number, got 'x'" in capsys.readouterr().err
     assert _cli(["colmap", str(tmp_path / "nowhere"), str(tmp_path / "out")]) == 2
-    assert "cameras.txt: missing" in capsys.readouterr().err
+    assert "nowhere: no such directory" in capsys.readouterr().err
+    (tmp_path / "in" / "images.txt").unlink()
+    assert _cli(["colmap", str(tmp_path / "in"), str(tmp_path / "out")]) == 2
+    assert "images.txt: missing (a COLMAP text model has cameras.txt, images.txt, points3D.txt)" in \
+        capsys.readouterr().err
     assert _cli(["colmap-from-oxford", "no_such_sequence", str(tmp_path / "o")]) == 2
     assert "error:" in capsys.readouterr().err
+    (tmp_path / "in" / "images.txt").write_text("1 1 0 0 0 0 0 0 1 a\n\n")
     (tmp_path / "in" / "cameras.txt").write_text("1 OPENCV_FISHEYE 640 480 800 800 320 240 0 0 0 0\n")
     (tmp_path / "in" / "points3D.txt").write_text("")
-    assert _cli(["colmap", str(tmp_path / "in"), str(tmp_path / "out")]) == 2
-    assert "camera model 'OPENCV_FISHEYE' is not supported" in capsys.readouterr().err
+    assert _cli(["colmap", str(tmp_path / "in"), str(tmp_path / "out"), "--strict"]) == 2
+    assert "cameras.txt:1: camera 1 (OPENCV_FISHEYE) cannot be used: camera model 'OPENCV_FISHEYE' is not " \
+           "supported" in capsys.readouterr().err
+    assert _cli(["colmap", str(tmp_path / "in"), str(tmp_path / "out")]) == 0          # skipped, reported
+    assert "skipped camera 1 (OPENCV_FISHEYE)" in capsys.readouterr().out
 
 
 @pytest.mark.usefixtures("oxford_data")

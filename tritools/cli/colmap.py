@@ -1,96 +1,180 @@
 """Command-line subcommands for COLMAP models (registered by :mod:`tritools.cli.app`).
 
-* ``colmap IN_DIR OUT_DIR [--method M] [--path P] [--min-track-length K] [--delta D]
-  [--max-delta D] [--json] [--progress]``: read the COLMAP text model in IN_DIR,
-  re-triangulate every point with a certificate, write the model and
-  ``points3D_certificates.txt`` to OUT_DIR (``rigs.txt``/``frames.txt`` are copied when
-  present), print a summary (or JSON with one record per point).
-* ``colmap-from-oxford NAME OUT_DIR [--data-dir D] [--max-tracks M]``: convert an Oxford
-  VGG sequence to a COLMAP text model (PINHOLE cameras, DLT points).
+* ``colmap IN_DIR OUT_DIR``: read the COLMAP model in IN_DIR (binary ``*.bin`` or text ``*.txt``,
+  detected), re-triangulate every 3D point with a certificate of global optimality, write the model
+  (same format unless ``--output-type``), ``points3D_certificates.txt`` and copies of
+  ``rigs``/``frames`` files to OUT_DIR -- all into a temporary directory that replaces OUT_DIR
+  only once everything was written -- and print a summary (or JSON).
+* ``colmap-from-oxford NAME OUT_DIR``: convert an Oxford VGG sequence to a COLMAP model.
 
-Exit codes: 0 success, 2 bad input (message names the file/line or field).
+Exit codes: 0 success (whatever the points' statuses), 2 bad input, bad option or unusable output
+path -- one line ``tritools: error: ...`` naming the file and line/record, or the flag.
 """
 from __future__ import annotations
 
 import json
-import shutil
 from pathlib import Path
 
-from .app import add_data_dir_option, add_solver_options, exit_invalid
+from .app import add_data_dir_option, exit_invalid
 from ..io.problem_file import jsonable
 
-__all__ = ["register", "run_colmap", "run_from_oxford"]
+__all__ = ["register", "run_colmap", "run_from_oxford", "MAX_LISTED"]
+
+#: uncertified points listed in the text summary.
+MAX_LISTED = 10
 
 
 def register(subparsers) -> None:
-    from ..model.constraints import Method
-    from ..solve.triangulate import SolvePath
+    """Add the ``colmap`` and ``colmap-from-oxford`` subcommands."""
+    from ..sfm.pipeline import BEHIND_CHOICES, DEFAULT_MAX_TRACK_LENGTH
 
-    p = subparsers.add_parser("colmap", help="certified re-triangulation of a COLMAP text model",
-                              description="Read IN_DIR/{cameras,images,points3D}.txt, re-triangulate every 3D "
-                                          "point with a certificate of global optimality, write OUT_DIR.")
-    p.add_argument("in_dir", metavar="IN_DIR")
-    p.add_argument("out_dir", metavar="OUT_DIR")
-    add_solver_options(p, Method.COROLLARY1.value, SolvePath.AUTO.value)
-    p.add_argument("--min-track-length", type=int, default=2, metavar="K")
-    p.add_argument("--json", action="store_true", help="machine-readable output")
+    p = subparsers.add_parser(
+        "colmap", help="certified re-triangulation of a COLMAP model (binary or text)",
+        description="Read the COLMAP model in IN_DIR (cameras/images/points3D as .bin or .txt), re-triangulate "
+                    "every 3D point with a certificate of global optimality (cameras fixed), and write the model, "
+                    "points3D_certificates.txt and copies of rigs/frames files to OUT_DIR. Everything is written "
+                    "to a temporary directory next to OUT_DIR first; an existing OUT_DIR is replaced only after "
+                    "everything was written, and is left exactly as it was if anything fails. By default every "
+                    "point is certified at delta = 2 only (Corollary 1, path auto): points that this does not "
+                    "certify are reported with their status, not escalated.")
+    p.add_argument("in_dir", metavar="IN_DIR", help="folder of the input model (never modified)")
+    p.add_argument("out_dir", metavar="OUT_DIR", help="output folder (created, or replaced as a whole; must not be "
+                                                      "IN_DIR, contain IN_DIR, or be a file)")
+    p.add_argument("--input-type", choices=("auto", "bin", "txt"), default="auto",
+                   help="format of IN_DIR (default auto: binary if cameras.bin, images.bin, points3D.bin exist, "
+                        "else text)")
+    p.add_argument("--output-type", choices=("bin", "txt"), default=None,
+                   help="format of OUT_DIR (default: that of IN_DIR)")
+    p.add_argument("--method", choices=("corollary1", "theorem1"), default="corollary1",
+                   help="Corollary 1 (epipolar constraints; default) or Theorem 1 (4x4 minors, far more costly)")
+    p.add_argument("--path", choices=("auto", "sdp"), default="auto",
+                   help="'auto' (default): certification by verification first, vectorised, then the SDP for "
+                        "the rest; 'sdp': the SDP for every point")
+    p.add_argument("--delta", type=int, default=None,
+                   help="first relaxation degree, even >= 2 (default 2 for corollary1, delta_min for theorem1)")
+    p.add_argument("--max-delta", type=int, default=None, dest="max_delta",
+                   help="last relaxation degree, even >= --delta (default: the first degree; higher degrees solve "
+                        "an SDP per uncertified point whose size grows fast with the track length)")
+    p.add_argument("--min-track-length", type=int, default=2, metavar="K",
+                   help="do not solve points with fewer than K usable observations (default 2)")
+    p.add_argument("--max-track-length", type=int, default=DEFAULT_MAX_TRACK_LENGTH, metavar="K",
+                   help=f"do not solve points with more than K usable observations (default "
+                        f"{DEFAULT_MAX_TRACK_LENGTH}; the certificate's cost grows as K^4)")
+    p.add_argument("--behind", choices=BEHIND_CHOICES, default="keep-input",
+                   help="a point whose estimate lies behind one of its cameras: keep the input xyz (default) or "
+                        "write the estimate; either way IN_FRONT = 0 and CERTIFIED = 0 in the sidecar")
+    p.add_argument("--strict", action="store_true",
+                   help="refuse the model (exit 2) when a camera cannot be used (unsupported model, focal <= 0) "
+                        "instead of leaving its observations out")
+    p.add_argument("--export", action="append", default=[], metavar="FILE",
+                   help="also write the points with their certificate fields to FILE (.ply or .npz; repeatable)")
+    p.add_argument("--chunk-points", type=int, default=100_000, metavar="N",
+                   help="points processed at a time (bounds memory; default 100000)")
+    p.add_argument("--json", action="store_true", help="print a JSON summary with one record per point")
+    p.add_argument("--progress", action="store_true",
+                   help="progress bar over all points on stderr (needs the 'progress' extra; none for small models)")
     p.set_defaults(func=run_colmap)
 
-    o = subparsers.add_parser("colmap-from-oxford", help="convert an Oxford VGG sequence to a COLMAP text model")
+    o = subparsers.add_parser("colmap-from-oxford", help="convert an Oxford VGG sequence to a COLMAP model",
+                              description="Convert an Oxford VGG sequence to a COLMAP model (PINHOLE cameras, DLT "
+                                          "points), written atomically to OUT_DIR.")
     o.add_argument("name", metavar="NAME", help="sequence (library, merton1, merton2, merton3, wadham)")
-    o.add_argument("out_dir", metavar="OUT_DIR")
+    o.add_argument("out_dir", metavar="OUT_DIR", help="output folder (created, or replaced as a whole)")
     add_data_dir_option(o)
     o.add_argument("--max-tracks", type=int, default=None, metavar="M", help="keep the first M tracks")
+    o.add_argument("--output-type", choices=("bin", "txt"), default="txt", help="model format (default txt)")
     o.set_defaults(func=run_from_oxford)
 
 
+def _flag(name: str) -> str:
+    return "--" + name.replace("_", "-")
+
+
+def _os_message(exc: OSError) -> str:
+    where = exc.filename if exc.filename is not None else ""
+    return f"{where}: {exc.strerror}" if where and exc.strerror else str(exc)
+
+
 def run_colmap(args) -> int:
-    from ..io.colmap import read_text_model, write_text_model
-    from ..sfm import retriangulate, write_certificates
+    """``tritools colmap``: returns the exit code."""
+    from ..io.colmap.model import ModelFormatError
+    from ..sfm import CameraError, OptionError, OutputError, RetriangulationOptions, retriangulate_folder
 
     try:
-        model = read_text_model(args.in_dir)
-    except (OSError, ValueError) as exc:
-        return exit_invalid(str(exc))
-    if Path(args.out_dir).resolve() == Path(args.in_dir).resolve():
-        return exit_invalid("OUT_DIR must differ from IN_DIR (the input model is never overwritten)")
+        options = RetriangulationOptions(method=args.method, path=args.path, delta=args.delta,
+                                         max_delta=args.max_delta, min_track_length=args.min_track_length,
+                                         max_track_length=args.max_track_length, behind=args.behind,
+                                         strict=args.strict, chunk_points=args.chunk_points, progress=args.progress)
+    except OptionError as exc:
+        return exit_invalid(f"{_flag(exc.field)} {exc.detail}")
     try:
-        new_model, report = retriangulate(model, args.method, args.path, args.min_track_length, args.delta,
-                                          args.max_delta, progress=args.progress)
+        result = retriangulate_folder(args.in_dir, args.out_dir, options,
+                                      input_format=None if args.input_type == "auto" else args.input_type,
+                                      output_format=args.output_type, exports=args.export)
+    except OptionError as exc:
+        return exit_invalid(f"{_flag(exc.field)} {exc.detail}")
+    except (ModelFormatError, CameraError, OutputError) as exc:
+        return exit_invalid(str(exc))
+    except OSError as exc:
+        return exit_invalid(_os_message(exc))
     except ValueError as exc:
         return exit_invalid(str(exc))
-    out = write_text_model(new_model, args.out_dir)
-    sidecar = write_certificates(report, out)
-    for extra in ("rigs.txt", "frames.txt"):
-        if (Path(args.in_dir) / extra).is_file():
-            shutil.copyfile(Path(args.in_dir) / extra, out / extra)
-    summary = {"in_dir": str(args.in_dir), "out_dir": str(out), "certificates": str(sidecar),
-               "method": report.method, "path": report.path, "n_points": report.n_points,
-               "n_certified": report.n_certified, "n_updated": report.n_updated, "status": report.status_counts()}
+    report = result.report
+    summary = {"in_dir": str(args.in_dir), "out_dir": str(result.out_dir), "input_type": result.input_format,
+               "output_type": result.output_format, "certificates": str(result.certificates),
+               "exports": [str(e) for e in result.exports], "copied": list(result.copied), "notes": list(result.notes),
+               "delta": options.certify_options().delta, "max_delta": options.certify_options().max_delta,
+               **report.summary()}
     if args.json:
         summary["points"] = [{"point3D_id": r.point3D_id, "n_views": r.n_views, "status": r.status.value,
                               "gamma_lb": r.gamma_lb, "gamma_ub": r.gamma_ub, "certified": r.certified,
                               "certified_by": r.certified_by, "delta": r.delta, "gamma_input": r.gamma_input,
-                              "updated": r.updated, "message": r.message} for r in report.records]
+                              "updated": r.updated, "in_front": r.in_front, "message": r.message}
+                             for r in report.records]
         print(json.dumps(jsonable(summary), indent=1, allow_nan=False))   # NaN/inf -> null, as tritools solve
         return 0
-    print(f"{report.n_points} points, {report.n_certified} certified globally optimal, {report.n_updated} updated "
-          f"({report.method}, path {report.path})")
-    print("status: " + ", ".join(f"{k} {v}" for k, v in summary["status"].items()))
-    print(f"model written to {out}, certificates to {sidecar}")
+    _print_summary(report, result, summary)
     return 0
 
 
+def _print_summary(report, result, summary) -> None:
+    print(f"{report.n_points} points, {report.n_certified} certified globally optimal, {report.n_updated} updated, "
+          f"{report.n_behind} behind a camera ({report.method}, path {report.path}, delta {summary['delta'] or 'min'}"
+          f"..{summary['max_delta'] or 'min'})")
+    print("status: " + (", ".join(f"{k} {v}" for k, v in summary["status"].items()) or "-"))
+    for cid, model, reason, n_obs in report.skipped_cameras:
+        print(f"skipped camera {cid} ({model}): {reason}; {n_obs} observation(s) left out")
+    bad = report.uncertified(MAX_LISTED)
+    if bad:
+        n_bad = report.n_points - report.n_certified
+        print(f"not certified: {n_bad} point(s)" + (f", first {len(bad)}:" if n_bad > len(bad) else ":"))
+        for r in bad:
+            print(f"  point3D {r.point3D_id} ({r.n_views} views): {r.status.value}"
+                  + ("" if r.in_front else ", behind a camera") + (f" -- {r.message}" if r.message else ""))
+    for note in result.notes:
+        print(f"note: {note}")
+    print(f"model ({result.output_format}) written to {result.out_dir}, certificates to {result.certificates}")
+    for e in result.exports:
+        print(f"exported {e}")
+
+
 def run_from_oxford(args) -> int:
-    from ..io.colmap import model_from_oxford, write_text_model
+    """``tritools colmap-from-oxford``: returns the exit code."""
+    from ..io.colmap import model_from_oxford, write_model
     from ..io.oxford import DataNotFoundError
+    from ..sfm import OutputError, atomic_directory
 
     if args.max_tracks is not None and args.max_tracks < 1:
         return exit_invalid(f"--max-tracks must be >= 1, got {args.max_tracks}")
+    if Path(args.out_dir).exists() and not Path(args.out_dir).is_dir():
+        return exit_invalid(f"OUT_DIR {args.out_dir}: exists and is not a directory")
     try:
         model = model_from_oxford(args.name, args.data_dir, args.max_tracks)
-    except (DataNotFoundError, ValueError) as exc:
+        with atomic_directory(args.out_dir) as tmp:
+            write_model(model, tmp, args.output_type)
+    except (DataNotFoundError, OutputError, ValueError) as exc:
         return exit_invalid(str(exc))
-    out = write_text_model(model, args.out_dir)
-    print(f"{args.name}: {len(model.images)} images, {len(model.points3D)} points written to {out}")
+    except OSError as exc:
+        return exit_invalid(_os_message(exc))
+    print(f"{args.name}: {len(model.images)} images, {len(model.points3D)} points written to {args.out_dir}")
     return 0

@@ -1,61 +1,57 @@
-"""Certified re-triangulation of every 3D point of a COLMAP model, and the certificate sidecar.
+"""Certified re-triangulation of every 3D point of a COLMAP model (cameras and poses fixed).
 
-For a Point3D with track ((image_i, point2D_idx_i), i = 1..N):
+For each Point3D with track ((image_id, point2D_idx), ...):
 
-* cameras ``P_i = K_i [R_i | t_i]`` (K of the image's camera, ``[R | t]`` = ``cam_from_world``);
-* regions ``R_i = Point(x^_i)``, x^_i the observed keypoint *undistorted* into the pixels of
-  the pinhole camera K_i (:mod:`tritools.io.colmap.camera_models`), so gamma (SPEC §1) is the
-  RMS reprojection error per coordinate in undistorted pixels;
-* :func:`tritools.solve.batch.triangulate_many` solves every track (one result per point, always)
-  and gives ``gamma_LB <= gamma* <= gamma_UB`` (Theorem 1 / Corollary 1).
+* the cameras are ``P_i = K_i [R_i | t_i]`` (``cam_from_world`` of the image, K of its camera);
+* the regions are ``tritools.Point(x^_i)`` with the observed keypoints *undistorted* into the pixels
+  of the pinhole camera K_i (:mod:`tritools.io.colmap.camera_models`), so gamma (SPEC §1) is the RMS
+  reprojection error per coordinate in undistorted pixels;
+* :func:`.certify.certify_stack` certifies whole groups of tracks at once and gives
+  ``gamma_LB <= gamma* <= gamma_UB`` (Corollary 1 at delta = 2 by default; see
+  :class:`~.pipeline.RetriangulationOptions` for the degrees).
 
-The written xyz is the estimate X^ when it is finite and no worse than the input point
-(``gamma(X^) <= gamma(xyz_in)``, always true when certified); otherwise the input point
-is kept.  ``Point3D.error`` is COLMAP's mean reprojection error of the written point: the
-mean over the track of ``|pi(X) - x_i|`` in (distorted) image pixels with the full camera
-model.  Points whose track is shorter than ``min_track_length``, or with a keypoint the
-undistortion cannot invert, are not solved and are left unchanged (status
-``invalid_input`` with a message).
-
-Sidecar ``points3D_certificates.txt`` (COLMAP ignores unknown files), one line per point::
-
-    # POINT3D_ID N_VIEWS GAMMA_LB GAMMA_UB CERTIFIED STATUS DELTA CERTIFIED_BY GAMMA_INPUT UPDATED
-
-GAMMA_* in undistorted pixels (``nan`` when absent), CERTIFIED and UPDATED ``0``/``1``,
-STATUS a :class:`tritools.result.Status` value, DELTA the relaxation degree (``-1`` when
-absent), CERTIFIED_BY ``sdp``/``verification``/``-``.
+The written xyz is the estimate X^ when it is finite, no worse than the input point
+(``gamma(X^) <= gamma(xyz_in)``, always true when certified) and in front of every camera of its
+track (positive depth ``(R_i X + t_i)_z``); a point whose estimate lies behind a camera keeps its
+input xyz unless ``behind="write"``, and is never reported as certified (``in_front = False``).
+``Point3D.error`` of an updated point is COLMAP's mean reprojection error: the mean over its usable
+observations of ``|pi(X) - x_i|`` in recorded pixels, full camera model.  Observations in a camera
+tritools cannot use (unsupported model, focal length <= 0) are left out of the track (counted in the
+report); points with too few or too many usable observations, or a keypoint the undistortion cannot
+invert, are not solved and left unchanged (status ``invalid_input`` with a message).
 """
 from __future__ import annotations
 
-import math
+import logging
 from dataclasses import dataclass
-from pathlib import Path
+from functools import cached_property
 
 import numpy as np
 
-from ..solve.batch import triangulate_many
-from ..model.geometry import gamma as gamma_of
-from ..model.regions import Point
+from ..io.colmap.arrays import ModelArrays
+from ..io.colmap.model import Model, Point3D
 from ..result import Status
-from ..solve.triangulate import SolvePath
-from ..model.constraints import Method
-from ..io.colmap.camera_models import camera_model, undistorted_pixels
-from ..io.colmap.model import Model, ModelFormatError, Point3D
-from ..io.colmap.projection import projection_matrix, reprojection_error
+from .certify import STATUS_LEGEND, status_code
+from .pipeline import RetriangulationOptions, prepare_geometry, process_chunk
 
-__all__ = ["PointCertificate", "RetriangulationReport", "retriangulate", "write_certificates",
-           "read_certificates", "CERTIFICATES_FILE"]
+__all__ = ["PointCertificate", "RetriangulationReport", "retriangulate", "retriangulate_arrays", "progress_bar",
+           "skipped_cameras", "PROGRESS_MIN_POINTS", "REPORT_FIELDS"]
 
-CERTIFICATES_FILE = "points3D_certificates.txt"
-_HEADER = ("# Certified re-triangulation (tritools, Chesi 2026) of points3D.txt, one line per point:\n"
-           "#   POINT3D_ID, N_VIEWS, GAMMA_LB, GAMMA_UB, CERTIFIED, STATUS, DELTA, CERTIFIED_BY, GAMMA_INPUT, UPDATED\n"
-           "# gamma: RMS reprojection error per coordinate in undistorted pixels; "
-           "gamma_lb <= gamma* <= gamma_ub; CERTIFIED = 1 iff they meet\n")
+logger = logging.getLogger(__name__)
+#: no progress bar for runs with fewer points than this.
+PROGRESS_MIN_POINTS = 2000
+#: per-point arrays of a report (and of a :class:`~.pipeline.ChunkResult`).
+REPORT_FIELDS = ("n_views", "status", "gamma_lb", "gamma_ub", "optimal", "certified_by", "delta", "gamma_input",
+                 "updated", "in_front", "message")
 
 
 @dataclass(frozen=True)
 class PointCertificate:
-    """Certificate of one re-triangulated point (gammas in undistorted pixels)."""
+    """Certificate of one re-triangulated point (gammas in undistorted pixels).
+
+    ``optimal``: the solver certified its estimate; ``in_front``: the estimate (or, without one, the
+    input point) has positive depth in every camera of the track; ``certified`` = both, with status
+    ``optimal``: the *written* point is a certified global L2 minimiser in front of its cameras."""
     point3D_id: int
     n_views: int
     status: Status
@@ -67,149 +63,185 @@ class PointCertificate:
     gamma_input: float | None = None
     updated: bool = False
     message: str = ""
+    in_front: bool = True
 
     def __post_init__(self):
         object.__setattr__(self, "status", Status(self.status))
 
     @property
     def certified(self) -> bool:
-        return self.status == Status.OPTIMAL and bool(self.optimal)
+        """Status optimal, certified, in front of the cameras."""
+        return self.status == Status.OPTIMAL and bool(self.optimal) and bool(self.in_front)
 
 
-@dataclass(frozen=True)
+def _opt(v) -> float | None:
+    v = float(v)
+    return v if np.isfinite(v) else None
+
+
+@dataclass(frozen=True, eq=False)
 class RetriangulationReport:
-    """Outcome of :func:`retriangulate` over a whole model: one :class:`PointCertificate`
-    per 3D point of the input (``records``, in point-id order, skipped points included
-    with their status), the method and solve path used, and counts
-    (``n_points``, ``n_certified``, ``n_updated``, ``status_counts()``)."""
-
+    """Outcome of a re-triangulation: per-point arrays (``point_ids`` and :data:`REPORT_FIELDS`,
+    in the order of the points), the method and path, and the skipped cameras as
+    ``((camera_id, model, reason, n_observations), ...)``.  ``records`` gives one
+    :class:`PointCertificate` per point (built on first use)."""
     method: str
     path: str
-    records: tuple
+    point_ids: np.ndarray
+    n_views: np.ndarray
+    status: np.ndarray
+    gamma_lb: np.ndarray
+    gamma_ub: np.ndarray
+    optimal: np.ndarray
+    certified_by: np.ndarray
+    delta: np.ndarray
+    gamma_input: np.ndarray
+    updated: np.ndarray
+    in_front: np.ndarray
+    message: np.ndarray
+    skipped_cameras: tuple = ()
+    n_skipped_observations: int = 0
+
+    @classmethod
+    def from_chunks(cls, options: RetriangulationOptions, ids: list, results: list, skipped_cameras=()):
+        """Concatenate per-chunk :class:`~.pipeline.ChunkResult`."""
+        def cat(name, dtype):
+            """Concatenation of one field over the chunks."""
+            parts = [getattr(r, name) for r in results]
+            return np.concatenate(parts) if parts else np.zeros(0, dtype)
+        dtypes = dict(n_views=np.int32, status=np.int8, gamma_lb=float, gamma_ub=float, optimal=bool,
+                      certified_by=object, delta=np.int16, gamma_input=float, updated=bool, in_front=bool,
+                      message=object)
+        arrays = {k: cat(k, dtypes[k]) for k in REPORT_FIELDS}
+        return cls(options.method, options.path, np.concatenate(ids) if ids else np.zeros(0, np.int64),
+                   skipped_cameras=tuple(skipped_cameras),
+                   n_skipped_observations=sum(r.n_skipped_observations for r in results), **arrays)
 
     @property
     def n_points(self) -> int:
-        return len(self.records)
+        """Number of points."""
+        return len(self.point_ids)
+
+    @property
+    def certified(self) -> np.ndarray:
+        """(P,) bool: status optimal, certified by the solver, in front of the cameras."""
+        return (self.status == status_code(Status.OPTIMAL)) & self.optimal & self.in_front
 
     @property
     def n_certified(self) -> int:
-        return sum(r.certified for r in self.records)
+        """Number of certified points."""
+        return int(np.count_nonzero(self.certified))
 
     @property
     def n_updated(self) -> int:
-        return sum(r.updated for r in self.records)
+        """Number of points whose xyz was replaced."""
+        return int(np.count_nonzero(self.updated))
+
+    @property
+    def n_behind(self) -> int:
+        """Number of points behind one of their cameras."""
+        return int(np.count_nonzero(~self.in_front))
 
     def status_counts(self) -> dict:
-        out: dict[str, int] = {}
-        for r in self.records:
-            out[r.status.value] = out.get(r.status.value, 0) + 1
-        return dict(sorted(out.items()))
+        """{status value: number of points} (statuses that occur, sorted by name)."""
+        counts = np.bincount(self.status.astype(np.int64), minlength=len(STATUS_LEGEND))
+        return dict(sorted((STATUS_LEGEND[k], int(c)) for k, c in enumerate(counts) if c))
+
+    def record(self, i: int) -> PointCertificate:
+        """The :class:`PointCertificate` of the i-th point."""
+        return PointCertificate(int(self.point_ids[i]), int(self.n_views[i]), STATUS_LEGEND[self.status[i]],
+                                _opt(self.gamma_lb[i]), _opt(self.gamma_ub[i]), bool(self.optimal[i]),
+                                self.certified_by[i] or None, None if self.delta[i] < 0 else int(self.delta[i]),
+                                _opt(self.gamma_input[i]), bool(self.updated[i]), str(self.message[i]),
+                                bool(self.in_front[i]))
+
+    @cached_property
+    def records(self) -> tuple:
+        """One :class:`PointCertificate` per point (built on first use)."""
+        return tuple(self.record(i) for i in range(self.n_points))
+
+    def uncertified(self, limit: int | None = None) -> list:
+        """Records of the points that are not certified (at most ``limit``)."""
+        idx = np.nonzero(~self.certified)[0][:limit]
+        return [self.record(int(i)) for i in idx]
+
+    def summary(self) -> dict:
+        """Counts, JSON-ready."""
+        return {"method": self.method, "path": self.path, "n_points": self.n_points,
+                "n_certified": self.n_certified, "n_updated": self.n_updated, "n_behind": self.n_behind,
+                "n_skipped_observations": self.n_skipped_observations, "status": self.status_counts(),
+                "skipped_cameras": [{"camera_id": c, "model": m, "reason": r, "n_observations": k}
+                                    for c, m, r, k in self.skipped_cameras]}
 
 
-def _problem(model: Model, point: Point3D):
-    """(cameras (N, 3, 4), Point regions) of a track, or an error message."""
-    cams, regions = [], []
-    for image_id, idx in point.track:
-        im = model.images[image_id]
-        cam = model.cameras[im.camera_id]
-        xy, ok = undistorted_pixels(cam.model, cam.params, np.array(im.points2D[idx][:2]))
-        if not ok[0]:
-            return None, (f"keypoint {idx} of image {image_id} cannot be undistorted "
-                          f"(Newton did not converge for camera {cam.id}, {cam.model})")
-        cams.append(projection_matrix(model, image_id))
-        regions.append(Point(xy[0]))
-    return (np.array(cams), regions), ""
+def progress_bar(total: int | None, enabled: bool):
+    """A tqdm bar over points, or None (disabled, tqdm missing, or fewer than PROGRESS_MIN_POINTS points)."""
+    if not enabled or (total is not None and total < PROGRESS_MIN_POINTS):
+        return None
+    try:
+        from tqdm import tqdm
+    except ImportError:  # optional extra 'progress'
+        return None
+    return tqdm(total=total, desc="re-triangulating", unit="pt", leave=False)
 
 
-def retriangulate(model: Model, method: Method | str = Method.COROLLARY1, path: SolvePath | str = SolvePath.AUTO,
-                  min_track_length: int = 2, delta: int | None = None, max_delta: int | None = None,
-                  progress: bool = False, **batch_options) -> tuple[Model, RetriangulationReport]:
+def skipped_cameras(arrays: ModelArrays, geom) -> tuple:
+    """((camera_id, model, reason, n_observations), ...) of the cameras whose observations are left out."""
+    kp_cam = np.repeat(arrays.image_camera, np.diff(arrays.kp_offsets))
+    n_obs = np.bincount(kp_cam[arrays.kp_point3D != -1], minlength=arrays.n_cameras)
+    out = []
+    for k, reason in enumerate(geom.camera_reason):
+        if reason is not None and np.any(arrays.image_camera == k):
+            out.append((int(arrays.camera_ids[k]), arrays.camera_models[k],
+                        f"{arrays.camera_source(k)}: {reason}", int(n_obs[k])))
+            logger.warning("camera %d (%s) skipped: %s", arrays.camera_ids[k], arrays.camera_models[k], reason)
+    return tuple(out)
+
+
+def retriangulate_arrays(arrays: ModelArrays, options: RetriangulationOptions | None = None
+                         ) -> tuple[ModelArrays, RetriangulationReport]:
+    """Re-triangulate every point of ``arrays`` (in chunks of ``options.chunk_points``).
+
+    Returns the model with new xyz/errors and the report (points in the arrays' order)."""
+    options = options or RetriangulationOptions()
+    geom = prepare_geometry(arrays, options.strict)
+    bar = progress_bar(arrays.n_points, options.progress)
+    ids, results = [], []
+    try:
+        for a in range(0, arrays.n_points, options.chunk_points):
+            chunk = arrays.points(a, a + options.chunk_points)
+            results.append(process_chunk(arrays, geom, chunk, options, bar))
+            ids.append(chunk.ids)
+    finally:
+        if bar is not None:
+            bar.close()
+    report = RetriangulationReport.from_chunks(options, ids, results, skipped_cameras(arrays, geom))
+    xyz = np.concatenate([r.xyz for r in results]) if results else arrays.point_xyz
+    err = np.concatenate([r.error for r in results]) if results else arrays.point_error
+    return arrays.with_points(xyz, err), report
+
+
+def retriangulate(model: Model, method: str = "corollary1", path: str = "auto", min_track_length: int = 2,
+                  delta: int | None = None, max_delta: int | None = None, progress: bool = False, *,
+                  options: RetriangulationOptions | None = None, **kw) -> tuple[Model, RetriangulationReport]:
     """Re-triangulate every Point3D of ``model`` with a certificate of global optimality.
 
-    Parameters: ``method`` ("corollary1" or "theorem1"), ``path`` ("auto": certification
-    by verification first, then the SDP; "sdp"), ``delta``/``max_delta`` as in
-    :func:`tritools.triangulate`, ``min_track_length`` (>= 2), ``progress`` (tqdm bar);
-    other keyword options go to :func:`tritools.solve.batch.triangulate_many`.
+    ``method``, ``path``, ``min_track_length``, ``delta``, ``max_delta``, ``progress`` and any
+    other field of :class:`~.pipeline.RetriangulationOptions` (``behind``, ``strict``,
+    ``max_track_length``, ``executor``, ...) as keywords, or a whole ``options`` object.  By default
+    every point is certified at delta = 2 only (Corollary 1, path auto): bounded cost per point.
 
-    Returns ``(new_model, report)``; ``report.records`` follow the point ids in increasing
-    order.  See the module docstring for the rule deciding the written xyz.
+    Returns ``(new_model, report)``; ``report.records`` follow the point ids in increasing order.
     """
-    method, path = Method(method), SolvePath(path)
-    if isinstance(min_track_length, bool) or int(min_track_length) != min_track_length or min_track_length < 2:
-        raise ValueError(f"min_track_length must be an integer >= 2, got {min_track_length!r}")
-    for cam in model.cameras.values():
-        camera_model(cam.model)                  # unsupported model: clear error before solving
-    ids = sorted(model.points3D)
-    records: dict[int, PointCertificate] = {}
-    todo, problems = [], []
-    for pid in ids:
-        p = model.points3D[pid]
-        n = len(p.track)
-        if n < min_track_length:
-            records[pid] = PointCertificate(pid, n, Status.INVALID_INPUT,
-                                            message=f"skipped: track length {n} < min_track_length {min_track_length}")
-            continue
-        prob, msg = _problem(model, p)
-        if prob is None:
-            records[pid] = PointCertificate(pid, n, Status.INVALID_INPUT, message=f"skipped: {msg}")
-            continue
-        todo.append(pid)
-        problems.append(prob)
-    results = triangulate_many(problems, method=method.value, delta=delta, max_delta=max_delta, progress=progress,
-                               path=path.value, **batch_options) if problems else []
-    new_points = []
-    for pid, (cams, regions), res in zip(todo, problems, results):
-        p = model.points3D[pid]
-        g_in = float(gamma_of(np.array(p.xyz), cams, regions))
-        g_in = g_in if math.isfinite(g_in) else None
-        better = (res.X is not None and np.all(np.isfinite(res.X)) and res.gamma_ub is not None
-                  and (g_in is None or res.gamma_ub <= g_in or bool(res.optimal)))
-        if better:
-            xyz = tuple(float(v) for v in res.X)
-            new_points.append(Point3D(pid, xyz, p.rgb, reprojection_error(model, xyz, p.track), p.track))
-        records[pid] = PointCertificate(pid, len(p.track), res.status, res.gamma_lb, res.gamma_ub,
-                                        bool(res.optimal), res.certified_by, res.delta, g_in, bool(better),
-                                        res.message)
-    report = RetriangulationReport(method.value, path.value, tuple(records[pid] for pid in ids))
-    return model.replace_points(new_points), report
+    if options is None:
+        options = RetriangulationOptions(method=method, path=path, min_track_length=min_track_length, delta=delta,
+                                         max_delta=max_delta, progress=progress, **kw)
+    arrays = ModelArrays.from_model(model)
+    new, report = retriangulate_arrays(arrays, options)
+    changed = np.nonzero(report.updated)[0]
+    points = []
+    for i in changed:
+        p = model.points3D[int(arrays.point_ids[i])]
+        points.append(Point3D(p.id, tuple(new.point_xyz[i].tolist()), p.rgb, float(new.point_error[i]), p.track))
+    return model.replace_points(points), report
 
-
-# ----------------------------------------------------------------------------- sidecar
-def _f(v) -> str:
-    return "nan" if v is None else repr(float(v))
-
-
-def write_certificates(report: RetriangulationReport, folder) -> Path:
-    """Write ``points3D_certificates.txt`` (format in the module docstring) into ``folder``."""
-    folder = Path(folder)
-    folder.mkdir(parents=True, exist_ok=True)
-    lines = [_HEADER + f"# Number of points: {report.n_points}, certified: {report.n_certified}, "
-             f"method: {report.method}, path: {report.path}"]
-    for r in report.records:
-        lines.append(" ".join([str(r.point3D_id), str(r.n_views), _f(r.gamma_lb), _f(r.gamma_ub),
-                               str(int(r.certified)), r.status.value, str(-1 if r.delta is None else r.delta),
-                               r.certified_by or "-", _f(r.gamma_input), str(int(r.updated))]))
-    out = folder / CERTIFICATES_FILE
-    out.write_text("\n".join(lines) + "\n")
-    return out
-
-
-def read_certificates(folder) -> dict[int, PointCertificate]:
-    """Read the sidecar back: point3D_id -> :class:`PointCertificate` (without messages)."""
-    path = Path(folder) / CERTIFICATES_FILE
-    out = {}
-    for lineno, line in enumerate(path.read_text().splitlines(), 1):
-        t = line.split()
-        if not t or t[0].startswith("#"):
-            continue
-        if len(t) != 10:
-            raise ModelFormatError(f"{path.name}:{lineno}: expected 10 fields, got {len(t)}")
-        try:
-            pid, n = int(t[0]), int(t[1])
-            lb, ub, g_in = (None if v == "nan" else float(v) for v in (t[2], t[3], t[8]))
-            cert, status, delta, by, upd = t[4] == "1", Status(t[5]), int(t[6]), t[7], t[9] == "1"
-        except ValueError as exc:
-            raise ModelFormatError(f"{path.name}:{lineno}: {exc}") from None
-        out[pid] = PointCertificate(pid, n, status, lb, ub, cert, None if by == "-" else by,
-                                    None if delta < 0 else delta, g_in, upd)
-    return out

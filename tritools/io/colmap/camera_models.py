@@ -33,9 +33,9 @@ import enum
 
 import numpy as np
 
-__all__ = ["CameraModel", "COLMAP_MODEL_N_PARAMS", "UNDISTORT_TOL_PX", "UNDISTORT_MAX_ITER",
-           "UnsupportedCameraModelError", "camera_model", "intrinsics", "distortion", "distort", "undistort",
-           "pixels_from_camera", "undistorted_pixels"]
+__all__ = ["CameraModel", "COLMAP_MODEL_N_PARAMS", "COLMAP_MODEL_IDS", "COLMAP_MODEL_NAMES", "UNDISTORT_TOL_PX",
+           "UNDISTORT_MAX_ITER", "UnsupportedCameraModelError", "camera_model", "camera_problem", "intrinsics",
+           "distortion", "distort", "distort_rows", "undistort", "pixels_from_camera", "undistorted_pixels"]
 
 #: Newton's iteration for D^-1 stops when the forward model reproduces the observed pixel
 #: to this many pixels (a few hundred ulps of a 1000 px coordinate, far below any
@@ -45,13 +45,23 @@ UNDISTORT_TOL_PX = 1e-10
 #: suffice for the distortions of real lenses within their image).
 UNDISTORT_MAX_ITER = 50
 
-#: number of PARAMS[] of every model COLMAP knows (used to check cameras.txt; only the
-#: models of :class:`CameraModel` can be used for triangulation).
+#: number of PARAMS[] of every model COLMAP knows (used to check cameras.txt / cameras.bin; only
+#: the models of :class:`CameraModel` can be used for triangulation).
 COLMAP_MODEL_N_PARAMS = {
     "SIMPLE_PINHOLE": 3, "PINHOLE": 4, "SIMPLE_RADIAL": 4, "RADIAL": 5, "OPENCV": 8, "OPENCV_FISHEYE": 8,
     "FULL_OPENCV": 12, "FOV": 5, "SIMPLE_RADIAL_FISHEYE": 4, "RADIAL_FISHEYE": 5, "THIN_PRISM_FISHEYE": 12,
-    "RAD_TAN_THIN_PRISM_FISHEYE": 16,
+    "RAD_TAN_THIN_PRISM_FISHEYE": 16, "SIMPLE_DIVISION": 4, "DIVISION": 5, "SIMPLE_FISHEYE": 3, "FISHEYE": 4,
+    "EUCM": 6,
 }
+#: COLMAP's numeric model ids (``cameras.bin``; ``CameraModelId`` in COLMAP's sensor/models.h).
+COLMAP_MODEL_IDS = {
+    "SIMPLE_PINHOLE": 0, "PINHOLE": 1, "SIMPLE_RADIAL": 2, "RADIAL": 3, "OPENCV": 4, "OPENCV_FISHEYE": 5,
+    "FULL_OPENCV": 6, "FOV": 7, "SIMPLE_RADIAL_FISHEYE": 8, "RADIAL_FISHEYE": 9, "THIN_PRISM_FISHEYE": 10,
+    "RAD_TAN_THIN_PRISM_FISHEYE": 11, "SIMPLE_DIVISION": 12, "DIVISION": 13, "SIMPLE_FISHEYE": 14, "FISHEYE": 15,
+    "EUCM": 16,
+}
+#: model id -> name.
+COLMAP_MODEL_NAMES = {v: k for k, v in COLMAP_MODEL_IDS.items()}
 
 
 class CameraModel(str, enum.Enum):
@@ -68,12 +78,28 @@ class UnsupportedCameraModelError(ValueError):
 
 
 def camera_model(name: str) -> CameraModel:
+    """The :class:`CameraModel` of a name, or UnsupportedCameraModelError naming it."""
     try:
         return CameraModel(name)
     except ValueError:
         raise UnsupportedCameraModelError(
             f"camera model {name!r} is not supported for triangulation (supported: "
             f"{', '.join(m.value for m in CameraModel)})") from None
+
+
+def camera_problem(model: str, params) -> str | None:
+    """Why a camera cannot be used for triangulation (``None`` when it can): an unsupported
+    model, a wrong number of parameters, non-finite parameters or a focal length <= 0."""
+    try:
+        fx, fy, cx, cy, dist = _split(model, params)
+    except ValueError as exc:
+        return str(exc)
+    bad = [name for name, v in (("fx", fx), ("fy", fy)) if not (np.isfinite(v) and v > 0)]
+    if bad:
+        return ", ".join(f"focal length {n} = {v!r} must be > 0" for n, v in (("fx", fx), ("fy", fy)) if n in bad)
+    if not (np.all(np.isfinite(dist)) and np.isfinite(cx) and np.isfinite(cy)):
+        return "parameters must be finite"
+    return None
 
 
 def _split(model: str, params) -> tuple[float, float, float, float, np.ndarray]:
@@ -113,6 +139,16 @@ def distortion(model: str, params) -> np.ndarray:
 def distort(uv: np.ndarray, dist: np.ndarray) -> np.ndarray:
     """D(u, v) of the module docstring, for an (M, 2) array of normalised coordinates."""
     k1, k2, p1, p2 = dist
+    u, v = uv[:, 0], uv[:, 1]
+    r2 = u * u + v * v
+    radial = k1 * r2 + k2 * r2 * r2
+    return np.column_stack([u * (1 + radial) + 2 * p1 * u * v + p2 * (r2 + 2 * u * u),
+                            v * (1 + radial) + 2 * p2 * u * v + p1 * (r2 + 2 * v * v)])
+
+
+def distort_rows(uv: np.ndarray, dist: np.ndarray) -> np.ndarray:
+    """D(u, v) with one set of coefficients per row: uv (M, 2), dist (M, 4) = (k1, k2, p1, p2)."""
+    k1, k2, p1, p2 = (dist[:, j] for j in range(4))
     u, v = uv[:, 0], uv[:, 1]
     r2 = u * u + v * v
     radial = k1 * r2 + k2 * r2 * r2

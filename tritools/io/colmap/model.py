@@ -9,7 +9,9 @@
 * ``points3D.txt``: ``POINT3D_ID X Y Z R G B ERROR TRACK[]`` with the track as
   ``IMAGE_ID POINT2D_IDX`` pairs (0-based index into that image's POINTS2D).
 
-Comment lines start with ``#``.  :func:`write_text_model` writes COLMAP's header
+Comment lines start with ``#``.  A file cut short is refused: a points3D.txt line with fewer
+than 8 fields, an odd number of TRACK[] fields or an empty track, an image without its POINTS2D
+line, or a keypoint naming a point whose track does not list it.  :func:`write_text_model` writes COLMAP's header
 comments and floats with ``repr`` (the shortest string that reads back to the same
 double), so write -> read is exact.  Malformed input raises :class:`ModelFormatError`
 naming the file and line.  Newer COLMAP versions also write ``rigs.txt`` and
@@ -110,6 +112,7 @@ class Image:
 
     @property
     def xy(self) -> np.ndarray:
+        """Keypoint coordinates, shape (K, 2)."""
         return np.array([p[:2] for p in self.points2D], float).reshape(-1, 2)
 
 
@@ -139,7 +142,8 @@ class Model:
 
     Construction checks the cross references COLMAP relies on: every image's camera
     exists; every track entry (image_id, point2D_idx) names an existing keypoint whose
-    POINT3D_ID is this point; every keypoint's POINT3D_ID (other than -1) exists.
+    POINT3D_ID is this point, and no keypoint is listed twice; every keypoint's POINT3D_ID
+    (other than -1) is a point whose track lists that keypoint.
     """
     cameras: Mapping = field(default_factory=dict)
     images: Mapping = field(default_factory=dict)
@@ -187,6 +191,20 @@ def _reference_error(cameras, images, points3D):
             if im.points2D[idx][2] != p.id:
                 return ("point", p.id), (f"point3D {p.id} track refers to keypoint {idx} of image {image_id}, "
                                          f"whose POINT3D_ID is {im.points2D[idx][2]}")
+    listed = {}
+    for p in points3D.values():
+        for e in p.track:
+            if e in listed:
+                return ("point", p.id), (f"point3D {p.id} track lists keypoint {e[1]} of image {e[0]} twice"
+                                         if listed[e] == p.id else
+                                         f"keypoint {e[1]} of image {e[0]} is listed by the tracks of point3D "
+                                         f"{listed[e]} and {p.id}")
+            listed[e] = p.id
+    for im in images.values():
+        for k, (_, _, pid) in enumerate(im.points2D):
+            if pid != NO_POINT3D and (im.id, k) not in listed:
+                return ("point", pid), (f"image {im.id} keypoint {k} has POINT3D_ID {pid}, but the track of point3D "
+                                        f"{pid} does not list it (track cut short?)")
     return None
 
 
@@ -238,19 +256,23 @@ class _Fields:
         self.tokens = text.split()
 
     def fail(self, msg: str):
+        """Raise ModelFormatError at this file:line."""
         raise ModelFormatError(f"{self.where}: {msg}")
 
     def need(self, n: int, what: str):
+        """Fail unless the line has at least n fields."""
         if len(self.tokens) < n:
             self.fail(f"expected {what} ({n} fields), got {len(self.tokens)} fields")
 
     def int(self, k: int, name: str) -> int:
+        """Field k as an integer."""
         try:
             return int(self.tokens[k])
         except ValueError:
             self.fail(f"{name} must be an integer, got {self.tokens[k]!r}")
 
     def float(self, k: int, name: str) -> float:
+        """Field k as a finite float."""
         try:
             v = float(self.tokens[k])
         except ValueError:
@@ -260,8 +282,8 @@ class _Fields:
         return v
 
 
-def _read_cameras(path: Path) -> dict:
-    cams = {}
+def _read_cameras(path: Path) -> tuple[dict, dict]:
+    cams, where = {}, {}
     for lineno, text in _data_lines(path):
         if not text:
             continue
@@ -279,7 +301,60 @@ def _read_cameras(path: Path) -> dict:
         if cid in cams:
             f.fail(f"duplicate CAMERA_ID {cid}")
         cams[cid] = Camera(cid, model, width, height, tuple(f.float(4 + k, f"PARAMS[{k}]") for k in range(n)))
-    return cams
+        where[cid] = f.where
+    return cams, where
+
+
+def parse_image_header(path: Path, lineno: int, text: str) -> tuple:
+    """``(image_id, qvec, tvec, camera_id, name)`` of an images.txt header line (ModelFormatError
+    naming file:line when malformed)."""
+    f = _Fields(path, lineno, text)
+    f.need(10, "IMAGE_ID QW QX QY QZ TX TY TZ CAMERA_ID NAME")
+    iid = f.int(0, "IMAGE_ID")
+    q = tuple(f.float(k, n) for k, n in zip(range(1, 5), ("QW", "QX", "QY", "QZ")))
+    t = tuple(f.float(k, n) for k, n in zip(range(5, 8), ("TX", "TY", "TZ")))
+    cid = f.int(8, "CAMERA_ID")
+    name = text.split(None, 9)[9]
+    if np.linalg.norm(q) == 0:
+        f.fail("quaternion (QW, QX, QY, QZ) is zero")
+    return iid, q, t, cid, name
+
+
+def parse_points2d(path: Path, lineno: int, text: str, image_id: int) -> tuple:
+    """The ``(x, y, point3D_id)`` triples of an images.txt POINTS2D line."""
+    g = _Fields(path, lineno, text)
+    if len(g.tokens) % 3:
+        g.fail(f"POINTS2D of image {image_id} must be (X, Y, POINT3D_ID) triples, got {len(g.tokens)} fields")
+    pts = tuple((g.float(k, f"X of keypoint {k // 3}"), g.float(k + 1, f"Y of keypoint {k // 3}"),
+                 g.int(k + 2, f"POINT3D_ID of keypoint {k // 3}")) for k in range(0, len(g.tokens), 3))
+    for k, p in enumerate(pts):
+        if p[2] < NO_POINT3D:
+            g.fail(f"POINT3D_ID of keypoint {k} must be >= -1, got {p[2]}")
+    return pts
+
+
+def parse_point(path: Path, lineno: int, text: str) -> Point3D:
+    """The :class:`Point3D` of a points3D.txt line."""
+    f = _Fields(path, lineno, text)
+    f.need(8, "POINT3D_ID X Y Z R G B ERROR TRACK[]")
+    if (len(f.tokens) - 8) % 2:
+        f.fail("TRACK[] must be (IMAGE_ID, POINT2D_IDX) pairs, got an odd number of fields (line cut short?)")
+    pid = f.int(0, "POINT3D_ID")
+    xyz = tuple(f.float(k, n) for k, n in zip(range(1, 4), "XYZ"))
+    rgb = tuple(f.int(k, n) for k, n in zip(range(4, 7), "RGB"))
+    if not all(0 <= c <= 255 for c in rgb):
+        f.fail(f"R G B must be in 0..255, got {rgb}")
+    try:
+        err = float(f.tokens[7])
+    except ValueError:
+        f.fail(f"ERROR must be a number, got {f.tokens[7]!r}")
+    if len(f.tokens) == 8:
+        f.fail(f"point3D {pid} has an empty TRACK[] (line cut short?)")
+    track = tuple((f.int(k, "IMAGE_ID"), f.int(k + 1, "POINT2D_IDX")) for k in range(8, len(f.tokens), 2))
+    for i, k in track:
+        if k < 0:
+            f.fail(f"POINT2D_IDX must be >= 0, got {k} (image {i})")
+    return Point3D(pid, xyz, rgb, err, track)
 
 
 def _read_images(path: Path) -> tuple[dict, dict]:
@@ -288,31 +363,15 @@ def _read_images(path: Path) -> tuple[dict, dict]:
     for lineno, text in lines:
         if not text:
             continue
-        f = _Fields(path, lineno, text)
-        f.need(10, "IMAGE_ID QW QX QY QZ TX TY TZ CAMERA_ID NAME")
-        iid = f.int(0, "IMAGE_ID")
-        q = tuple(f.float(k, n) for k, n in zip(range(1, 5), ("QW", "QX", "QY", "QZ")))
-        t = tuple(f.float(k, n) for k, n in zip(range(5, 8), ("TX", "TY", "TZ")))
-        cid = f.int(8, "CAMERA_ID")
-        name = text.split(None, 9)[9]
-        if np.linalg.norm(q) == 0:
-            f.fail("quaternion (QW, QX, QY, QZ) is zero")
+        iid, q, t, cid, name = parse_image_header(path, lineno, text)
         if iid in images:
-            f.fail(f"duplicate IMAGE_ID {iid}")
+            _Fields(path, lineno, text).fail(f"duplicate IMAGE_ID {iid}")
         try:
             plineno, ptext = next(lines)
         except StopIteration:
-            f.fail(f"image {iid} has no POINTS2D line (two lines per image)")
-        g = _Fields(path, plineno, ptext)
-        if len(g.tokens) % 3:
-            g.fail(f"POINTS2D of image {iid} must be (X, Y, POINT3D_ID) triples, got {len(g.tokens)} fields")
-        pts = tuple((g.float(k, f"X of keypoint {k // 3}"), g.float(k + 1, f"Y of keypoint {k // 3}"),
-                     g.int(k + 2, f"POINT3D_ID of keypoint {k // 3}")) for k in range(0, len(g.tokens), 3))
-        for k, p in enumerate(pts):
-            if p[2] < NO_POINT3D:
-                g.fail(f"POINT3D_ID of keypoint {k} must be >= -1, got {p[2]}")
-        images[iid] = Image(iid, q, t, cid, name, pts)
-        where[iid] = f.where
+            _Fields(path, lineno, text).fail(f"image {iid} has no POINTS2D line (two lines per image)")
+        images[iid] = Image(iid, q, t, cid, name, parse_points2d(path, plineno, ptext, iid))
+        where[iid] = f"{path.name}:{lineno}"
     return images, where
 
 
@@ -321,24 +380,11 @@ def _read_points(path: Path) -> tuple[dict, dict]:
     for lineno, text in _data_lines(path):
         if not text:
             continue
-        f = _Fields(path, lineno, text)
-        f.need(8, "POINT3D_ID X Y Z R G B ERROR TRACK[]")
-        if (len(f.tokens) - 8) % 2:
-            f.fail("TRACK[] must be (IMAGE_ID, POINT2D_IDX) pairs, got an odd number of fields")
-        pid = f.int(0, "POINT3D_ID")
-        xyz = tuple(f.float(k, n) for k, n in zip(range(1, 4), "XYZ"))
-        rgb = tuple(f.int(k, n) for k, n in zip(range(4, 7), "RGB"))
-        if not all(0 <= c <= 255 for c in rgb):
-            f.fail(f"R G B must be in 0..255, got {rgb}")
-        try:
-            err = float(f.tokens[7])
-        except ValueError:
-            f.fail(f"ERROR must be a number, got {f.tokens[7]!r}")
-        track = tuple((f.int(k, "IMAGE_ID"), f.int(k + 1, "POINT2D_IDX")) for k in range(8, len(f.tokens), 2))
-        if pid in points:
-            f.fail(f"duplicate POINT3D_ID {pid}")
-        points[pid] = Point3D(pid, xyz, rgb, err, track)
-        where[pid] = f.where
+        p = parse_point(path, lineno, text)
+        if p.id in points:
+            _Fields(path, lineno, text).fail(f"duplicate POINT3D_ID {p.id}")
+        points[p.id] = p
+        where[p.id] = f"{path.name}:{lineno}"
     return points, where
 
 
@@ -348,7 +394,7 @@ def read_text_model(path) -> Model:
     for name in MODEL_FILES:
         if not (folder / name).is_file():
             raise FileNotFoundError(f"{folder / name}: missing (a COLMAP text model has {', '.join(MODEL_FILES)})")
-    cameras = _read_cameras(folder / "cameras.txt")
+    cameras, _ = _read_cameras(folder / "cameras.txt")
     images, img_where = _read_images(folder / "images.txt")
     points, pt_where = _read_points(folder / "points3D.txt")
     err = _reference_error(cameras, images, points)

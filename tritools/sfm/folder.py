@@ -1,0 +1,203 @@
+"""Re-triangulate a COLMAP model folder into another one, streaming and atomically.
+
+:func:`retriangulate_folder` reads the cameras and images of IN (binary or text), streams the
+points in chunks (:meth:`tritools.io.colmap.formats.ModelSource.chunks`), processes each chunk
+(:func:`.pipeline.process_chunk`) and appends it to the output points file and the certificate
+sidecar; memory is the keypoints plus one chunk.  Everything -- the model, the sidecar, copies of
+``rigs``/``frames`` files -- is written into a temporary directory next to OUT, which then replaces
+OUT by renames (:func:`atomic_directory`): an existing OUT is replaced only after everything was
+written, and a failure at any point leaves it exactly as it was.  Exports (.ply/.npz) are written
+to temporary files and renamed into place after the model.
+"""
+from __future__ import annotations
+
+import contextlib
+import logging
+import os
+import shutil
+import tempfile
+import time
+import uuid
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..io.colmap.formats import ModelWriter, open_model
+from .certificates import CertificateWriter
+from .pipeline import OptionError, RetriangulationOptions, prepare_geometry, process_chunk
+from .retriangulate import RetriangulationReport, progress_bar, skipped_cameras
+
+__all__ = ["OutputError", "atomic_directory", "check_output", "retriangulate_folder", "FolderResult",
+           "EXTRA_FILES", "EXPORT_SUFFIXES"]
+
+logger = logging.getLogger(__name__)
+#: files of newer COLMAP versions copied unchanged when the output has the input's format.
+EXTRA_FILES = {"txt": ("rigs.txt", "frames.txt"), "bin": ("rigs.bin", "frames.bin")}
+EXPORT_SUFFIXES = (".ply", ".npz")
+
+
+class OutputError(ValueError):
+    """An output path that cannot be used (a file where a folder is needed, OUT = IN, ...)."""
+
+
+def _umask() -> int:
+    mask = os.umask(0o22)
+    os.umask(mask)
+    return mask
+
+
+@contextlib.contextmanager
+def atomic_directory(target):
+    """Yield a fresh temporary directory next to ``target``; on success it replaces ``target``
+    (an existing directory is renamed away, the new one renamed in, the old one removed); on any
+    exception the temporary directory is removed and ``target`` is untouched."""
+    target = Path(target)
+    if target.exists() and not target.is_dir():
+        raise OutputError(f"{target}: exists and is not a directory")
+    target.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{target.name}.tmp-", dir=target.parent))
+    try:
+        os.chmod(tmp, 0o777 & ~_umask())
+        yield tmp
+        if target.exists():
+            old = target.with_name(f".{target.name}.old-{uuid.uuid4().hex[:8]}")
+            os.rename(target, old)
+            try:
+                os.rename(tmp, target)
+            except BaseException:
+                os.rename(old, target)
+                raise
+            shutil.rmtree(old, ignore_errors=True)
+        else:
+            os.rename(tmp, target)
+    finally:
+        if tmp.exists():
+            shutil.rmtree(tmp, ignore_errors=True)
+
+
+def _timed(iterator, timings: dict, key: str):
+    """Iterate, adding the time spent producing each item to ``timings[key]``."""
+    while True:
+        t0 = time.perf_counter()
+        item = next(iterator, None)
+        timings[key] += time.perf_counter() - t0
+        if item is None:
+            return
+        yield item
+
+
+def check_output(in_dir, out_dir, exports=()) -> None:
+    """Refuse unusable outputs before any work (:class:`OutputError`): OUT a file, OUT = IN, OUT
+    containing IN (replacing OUT would delete the input), an export that is a directory or has
+    another suffix than .ply/.npz."""
+    src, dst = Path(in_dir).resolve(), Path(out_dir).resolve()
+    if dst.exists() and not dst.is_dir():
+        raise OutputError(f"OUT_DIR {out_dir}: exists and is not a directory")
+    if dst == src:
+        raise OutputError("OUT_DIR must differ from IN_DIR (the input model is never overwritten)")
+    if dst in src.parents:
+        raise OutputError(f"OUT_DIR {out_dir} contains IN_DIR {in_dir}: replacing it would delete the input")
+    for e in exports:
+        p = Path(e)
+        if p.suffix.lower() not in EXPORT_SUFFIXES:
+            raise OptionError("export", f"{e}: the file name must end with .ply or .npz")
+        if p.is_dir():
+            raise OptionError("export", f"{e}: is a directory")
+
+
+@dataclass(frozen=True)
+class FolderResult:
+    """What :func:`retriangulate_folder` did: the report, where things went, and timings in seconds
+    (``open``: cameras and images read; ``geometry``: undistortion; ``read``: points read and
+    checked; ``solve``: processing; ``write``; ``total``)."""
+    report: RetriangulationReport
+    out_dir: Path
+    input_format: str
+    output_format: str
+    certificates: Path
+    exports: tuple = ()
+    copied: tuple = ()
+    notes: tuple = ()
+    timings: dict = field(default_factory=dict)
+
+
+def retriangulate_folder(in_dir, out_dir, options: RetriangulationOptions | None = None, *,
+                         input_format: str | None = None, output_format: str | None = None,
+                         exports=()) -> FolderResult:
+    """Re-triangulate the model in ``in_dir`` into ``out_dir`` (see the module docstring).
+
+    ``input_format`` None detects it; ``output_format`` None keeps it; ``exports``: .ply / .npz
+    paths written with the certificate fields (:mod:`tritools.io.export`)."""
+    from ..io.export import export_points
+
+    options = options or RetriangulationOptions()
+    t_start = time.perf_counter()
+    check_output(in_dir, out_dir, exports)
+    timings = dict.fromkeys(("open", "geometry", "read", "solve", "write"), 0.0)
+    t0 = time.perf_counter()
+    src = open_model(in_dir, input_format)
+    fmt_out = output_format or src.format
+    timings["open"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    geom = prepare_geometry(src.arrays, options.strict)
+    timings["geometry"] = time.perf_counter() - t0
+    bar = progress_bar(src.count_points() if options.progress else None, options.progress)
+    ids, results, xyz, rgb = [], [], [], []
+    copied, notes, staged = [], [], []
+    try:
+        with atomic_directory(out_dir) as tmp:
+            writer = ModelWriter(src.arrays, tmp, fmt_out)
+            certs = CertificateWriter(tmp, options.method, options.path)
+            try:
+                for chunk in _timed(src.chunks(options.chunk_points), timings, "read"):
+                    t0 = time.perf_counter()
+                    res = process_chunk(src.arrays, geom, chunk, options, bar)
+                    timings["solve"] += time.perf_counter() - t0
+                    t0 = time.perf_counter()
+                    writer.write_points(chunk, res.xyz, res.error)
+                    certs.write(chunk.ids, res)
+                    timings["write"] += time.perf_counter() - t0
+                    ids.append(chunk.ids)
+                    results.append(res)
+                    if exports:
+                        xyz.append(res.xyz)
+                        rgb.append(chunk.rgb)
+                t0 = time.perf_counter()
+                writer.close()
+                sidecar = certs.close()
+            except BaseException:
+                writer.abort()
+                certs.abort()
+                raise
+            for fmt, names in EXTRA_FILES.items():
+                for name in names:
+                    if (src.folder / name).is_file():
+                        if fmt == fmt_out:
+                            shutil.copyfile(src.folder / name, tmp / name)
+                            copied.append(name)
+                        else:
+                            notes.append(f"{name} not copied: the output is a {fmt_out} model")
+            report = RetriangulationReport.from_chunks(options, ids, results, skipped_cameras(src.arrays, geom))
+            all_xyz = np.concatenate(xyz) if xyz else np.zeros((0, 3))
+            all_rgb = np.concatenate(rgb) if rgb else np.zeros((0, 3), np.uint8)
+            for e in exports:
+                target = Path(e)
+                target.parent.mkdir(parents=True, exist_ok=True)
+                staged.append((target.with_name(f".{target.name}.tmp-{uuid.uuid4().hex[:8]}"), target))
+                export_points(staged[-1][0], all_xyz, all_rgb, report, fmt=target.suffix.lower()[1:])
+            timings["write"] += time.perf_counter() - t0
+    except BaseException:
+        for t, _ in staged:
+            t.unlink(missing_ok=True)
+        raise
+    finally:
+        if bar is not None:
+            bar.close()
+    for t, target in staged:
+        os.replace(t, target)
+    timings["total"] = time.perf_counter() - t_start
+    out = Path(out_dir)
+    logger.info("re-triangulated %d points into %s in %.2f s", report.n_points, out, timings["total"])
+    return FolderResult(report, out, src.format, fmt_out, out / sidecar.name, tuple(Path(e) for e in exports),
+                        tuple(copied), tuple(notes), timings)

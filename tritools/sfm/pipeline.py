@@ -1,0 +1,325 @@
+"""The vectorised model path: options, per-camera geometry, and one chunk of points at a time.
+
+:func:`prepare_geometry` works per camera and per image, once per model: the pinhole matrices
+``P = K [R | t]`` of every image, and every keypoint that belongs to a track undistorted with one
+numpy call per camera (:func:`tritools.io.colmap.camera_models.undistorted_pixels`).  A camera whose
+model tritools cannot undistort (fisheye models, FULL_OPENCV, ...) or whose parameters are invalid
+(focal length <= 0) is *skipped*: its observations are left out of every track (a count and the
+camera's reason go to the report), unless ``strict`` (then :class:`CameraError`).
+
+:func:`process_chunk` then handles a :class:`~tritools.io.colmap.arrays.PointChunk`: tracks are
+grouped by their number N of usable observations, each group becomes stacked arrays (cameras
+(M, N, 3, 4), undistorted points (M, N, 2)) for :func:`.certify.certify_stack`; gamma of the input
+point, the depth of every observation (cheirality), the written xyz and COLMAP's mean reprojection
+error (full distortion model) are computed with numpy over the whole chunk.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..io.colmap.arrays import ModelArrays, PointChunk
+from ..io.colmap.camera_models import camera_problem, distort_rows, distortion, intrinsics, undistorted_pixels
+from ..result import Status
+from .certify import CertifyOptions, certify_stack, status_code
+
+__all__ = ["RetriangulationOptions", "OptionError", "CameraError", "ModelGeometry", "prepare_geometry",
+           "ChunkResult", "process_chunk", "point_gammas", "rotations", "BEHIND_CHOICES", "DEFAULT_MAX_TRACK_LENGTH"]
+
+BEHIND_CHOICES = ("keep-input", "write")
+#: tracks with more usable observations than this are not solved by default: the Corollary 1
+#: certificate has N(N-1)/2 constraints in 2N variables, so its cost grows as N^4.
+DEFAULT_MAX_TRACK_LENGTH = 50
+
+
+class OptionError(ValueError):
+    """An invalid option; ``field`` names it (the CLI turns ``max_delta`` into ``--max-delta``)."""
+
+    def __init__(self, field_name: str, message: str):
+        super().__init__(f"{field_name} {message}")
+        self.field = field_name
+        self.detail = message
+
+
+class CameraError(ValueError):
+    """A camera that cannot be used, under ``strict=True``; the message names the camera and its
+    place in the files."""
+
+
+def _int_option(name, value, low):
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < low:
+        raise OptionError(name, f"must be an integer >= {low}, got {value!r}")
+
+
+@dataclass(frozen=True)
+class RetriangulationOptions:
+    """Settings of the model path (all validated on construction, :class:`OptionError`).
+
+    method, path
+        "corollary1" (default) or "theorem1"; "auto" (certification by verification first, the
+        SDP for the rest; default) or "sdp".
+    delta, max_delta
+        First and last relaxation degree (even, >= 2, ``max_delta >= delta``).  Defaults: delta
+        = 2 for Corollary 1 (delta_min for Theorem 1) and ``max_delta = delta``: every point is
+        certified at its first degree or reported uncertified -- no escalation, so the cost per
+        point is bounded.  Raise ``max_delta`` to try higher degrees on the uncertified points
+        (an SDP per point whose size grows fast with N and delta).
+    min_track_length, max_track_length
+        Tracks with fewer / more usable observations are not solved (status invalid_input).
+    behind
+        "keep-input" (default): a point whose estimate lies behind one of its cameras keeps its
+        input xyz; "write": it is written anyway.  Either way it is flagged (in_front = False,
+        not certified) in the report.
+    strict
+        Raise :class:`CameraError` for an unusable camera instead of skipping its observations.
+    chunk_points, progress, executor
+        Points per chunk (bounds memory); a tqdm bar over the whole run (from
+        ``PROGRESS_MIN_POINTS`` points); executor of the per-point SDPs.
+    """
+    method: str = "corollary1"
+    path: str = "auto"
+    delta: int | None = None
+    max_delta: int | None = None
+    min_track_length: int = 2
+    max_track_length: int = DEFAULT_MAX_TRACK_LENGTH
+    behind: str = "keep-input"
+    strict: bool = False
+    chunk_points: int = 100_000
+    progress: bool = False
+    executor: object = field(default=None, compare=False)
+
+    def __post_init__(self):
+        from ..model.constraints import Method
+        from ..solve.triangulate import SolvePath
+
+        for name, enum in (("method", Method), ("path", SolvePath)):
+            value = getattr(self, name)
+            try:
+                object.__setattr__(self, name, enum(value).value)
+            except ValueError:
+                raise OptionError(name, f"must be one of {', '.join(m.value for m in enum)}, got {value!r}") from None
+        for name in ("delta", "max_delta"):
+            v = getattr(self, name)
+            if v is not None and (isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 2 or v % 2):
+                raise OptionError(name, f"must be an even integer >= 2, got {v!r}")
+        first = self.delta if self.delta is not None else 2
+        if self.max_delta is not None and self.max_delta < first:
+            raise OptionError("max_delta", f"must be >= delta ({first}), got {self.max_delta}")
+        _int_option("min_track_length", self.min_track_length, 2)
+        _int_option("max_track_length", self.max_track_length, 2)
+        if self.max_track_length < self.min_track_length:
+            raise OptionError("max_track_length", f"must be >= min_track_length ({self.min_track_length}), "
+                                                  f"got {self.max_track_length}")
+        if self.behind not in BEHIND_CHOICES:
+            raise OptionError("behind", f"must be one of {', '.join(BEHIND_CHOICES)}, got {self.behind!r}")
+        _int_option("chunk_points", self.chunk_points, 1)
+
+    def certify_options(self) -> CertifyOptions:
+        """The solver settings, degrees resolved (Corollary 1: delta = 2 unless given)."""
+        delta = self.delta if self.delta is not None else (2 if self.method == "corollary1" else None)
+        max_delta = self.max_delta if self.max_delta is not None else delta
+        return CertifyOptions(self.method, self.path, delta, max_delta, self.executor)
+
+
+@dataclass(frozen=True, eq=False)
+class ModelGeometry:
+    """Per-model arrays of the fast path (see :func:`prepare_geometry`)."""
+    camera_reason: tuple          # None, or why camera k cannot be used
+    image_ok: np.ndarray          # (V,) the image's camera is usable
+    R: np.ndarray                 # (V, 3, 3) cam_from_world rotations
+    t: np.ndarray                 # (V, 3)
+    P: np.ndarray                 # (V, 3, 4) K [R | t] (zeros for unusable cameras)
+    focal: np.ndarray             # (V, 2) fx, fy of the image's camera
+    centre: np.ndarray            # (V, 2) cx, cy
+    dist: np.ndarray              # (V, 4) k1, k2, p1, p2
+    xy_u: np.ndarray              # (K, 2) undistorted keypoints (NaN where not computed)
+    kp_ok: np.ndarray             # (K,) undistortion converged
+
+
+def rotations(qvec: np.ndarray) -> np.ndarray:
+    """Rotation matrices (V, 3, 3) of Hamilton quaternions (V, 4), w first (normalised first)."""
+    q = qvec / np.linalg.norm(qvec, axis=1, keepdims=True)
+    w, x, y, z = q.T
+    return np.stack([np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
+                     np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
+                     np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1)], 1)
+
+
+def prepare_geometry(arrays: ModelArrays, strict: bool = False) -> ModelGeometry:
+    """Pinhole cameras of every image and every track keypoint undistorted (one call per camera)."""
+    C, V = arrays.n_cameras, arrays.n_images
+    reasons = tuple(camera_problem(m, p) for m, p in zip(arrays.camera_models, arrays.camera_params))
+    used = np.zeros(C, bool)
+    used[arrays.image_camera] = True
+    if strict:
+        for k in np.nonzero(used)[0]:
+            if reasons[k] is not None:
+                raise CameraError(f"{arrays.camera_source(k)}: camera {int(arrays.camera_ids[k])} "
+                                  f"({arrays.camera_models[k]}) cannot be used: {reasons[k]}")
+    Ks = np.zeros((C, 3, 3))
+    dists = np.zeros((C, 4))
+    for k in range(C):
+        if reasons[k] is None:
+            Ks[k] = intrinsics(arrays.camera_models[k], arrays.camera_params[k])
+            dists[k] = distortion(arrays.camera_models[k], arrays.camera_params[k])
+    R = rotations(arrays.image_qvec) if V else np.zeros((0, 3, 3))
+    t = arrays.image_tvec
+    Rt = np.concatenate([R, t[:, :, None]], axis=2)
+    cam = arrays.image_camera
+    P = np.matmul(Ks[cam], Rt)
+    cam_ok = np.array([r is None for r in reasons], bool)
+    image_ok = cam_ok[cam] if V else np.zeros(0, bool)
+    counts = np.diff(arrays.kp_offsets)
+    kp_cam = np.repeat(cam, counts)
+    need = (arrays.kp_point3D != -1) & cam_ok[kp_cam] if len(kp_cam) else np.zeros(0, bool)
+    xy_u = np.full(arrays.kp_xy.shape, np.nan)
+    kp_ok = np.zeros(len(arrays.kp_xy), bool)
+    rows = np.nonzero(need)[0]
+    rows = rows[np.argsort(kp_cam[rows], kind="stable")]           # the needed keypoints, camera by camera
+    bounds = np.searchsorted(kp_cam[rows], np.arange(C + 1))
+    for k in np.nonzero(cam_ok)[0]:
+        r = rows[bounds[k]:bounds[k + 1]]
+        if r.size:
+            xy_u[r], kp_ok[r] = undistorted_pixels(arrays.camera_models[k], arrays.camera_params[k], arrays.kp_xy[r])
+    return ModelGeometry(reasons, image_ok, R, t, P, np.column_stack([Ks[cam, 0, 0], Ks[cam, 1, 1]]),
+                         np.column_stack([Ks[cam, 0, 2], Ks[cam, 1, 2]]), dists[cam], xy_u, kp_ok)
+
+
+@dataclass(frozen=True, eq=False)
+class ChunkResult:
+    """Per-point arrays of one processed chunk (see :class:`~.retriangulate.RetriangulationReport`)."""
+    xyz: np.ndarray
+    error: np.ndarray
+    n_views: np.ndarray
+    status: np.ndarray
+    gamma_lb: np.ndarray
+    gamma_ub: np.ndarray
+    optimal: np.ndarray
+    certified_by: np.ndarray
+    delta: np.ndarray
+    gamma_input: np.ndarray
+    updated: np.ndarray
+    in_front: np.ndarray
+    message: np.ndarray
+    n_skipped_observations: int = 0
+
+
+def _gamma(C: np.ndarray, x: np.ndarray, X: np.ndarray) -> np.ndarray:
+    """gamma (SPEC §1) of points X (M, 3) for stacks C (M, N, 3, 4), x (M, N, 2); inf at infinity."""
+    h = np.einsum("mnij,mj->mni", C, np.concatenate([X, np.ones((len(X), 1))], axis=1))
+    den = h[..., 2]
+    tiny = ~(np.abs(den) > 1e-300) | ~np.all(np.isfinite(h), axis=2)
+    proj = h[..., :2] / np.where(tiny, 1.0, den)[..., None]
+    g = np.sqrt(np.sum((proj - x) ** 2, axis=(1, 2)) / (2 * x.shape[1]))
+    return np.where(np.any(tiny, axis=1), np.inf, g)
+
+
+def point_gammas(arrays: ModelArrays, geom: ModelGeometry, xyz: np.ndarray | None = None) -> np.ndarray:
+    """gamma (SPEC §1, undistorted pixels) of every point of ``arrays`` (or of ``xyz`` (P, 3) for its
+    tracks) over its usable observations; NaN for points without any, inf at infinity."""
+    X = arrays.point_xyz if xyz is None else np.asarray(xyz, float)
+    owner = np.repeat(np.arange(arrays.n_points), np.diff(arrays.track_offsets))
+    use = geom.image_ok[arrays.track_image]
+    img, own = arrays.track_image[use], owner[use]
+    gk = arrays.kp_offsets[img] + arrays.track_kp[use]
+    h = np.einsum("tij,tj->ti", geom.P[img], np.concatenate([X[own], np.ones((len(own), 1))], axis=1))
+    with np.errstate(all="ignore"):
+        r2 = np.sum((h[:, :2] / h[:, 2:3] - geom.xy_u[gk]) ** 2, axis=1)
+        n = np.bincount(own, minlength=arrays.n_points)
+        return np.sqrt(np.bincount(own, weights=r2, minlength=arrays.n_points) / (2 * n))
+
+
+def _colmap_error(arrays, geom, X, obs_img, gk, owner, n) -> np.ndarray:
+    """COLMAP's ERROR: mean over the observations of |pi(X) - x| in recorded pixels (full camera model)."""
+    Xc = np.einsum("tij,tj->ti", geom.R[obs_img], X[owner]) + geom.t[obs_img]
+    with np.errstate(all="ignore"):
+        uv = distort_rows(Xc[:, :2] / Xc[:, 2:3], geom.dist[obs_img])
+        px = geom.focal[obs_img] * uv + geom.centre[obs_img]
+        e = np.hypot(*(px - arrays.kp_xy[gk]).T)
+    return np.bincount(owner, weights=e, minlength=n) / np.maximum(np.bincount(owner, minlength=n), 1)
+
+
+def process_chunk(arrays: ModelArrays, geom: ModelGeometry, chunk: PointChunk, options: RetriangulationOptions,
+                  progress=None) -> ChunkResult:
+    """Re-triangulate the points of ``chunk`` (see the module docstring)."""
+    n = len(chunk)
+    lens = chunk.track_lengths
+    owner = np.repeat(np.arange(n), lens)
+    obs_img = chunk.track_image
+    gk = arrays.kp_offsets[obs_img] + chunk.track_kp
+    usable = geom.image_ok[obs_img]
+    n_used = np.bincount(owner[usable], minlength=n)
+    stuck = np.bincount(owner[usable & ~geom.kp_ok[gk]], minlength=n) > 0
+    solve = (n_used >= options.min_track_length) & (n_used <= options.max_track_length) & ~stuck
+    r = ChunkResult(chunk.xyz.copy(), chunk.error.copy(), n_used.astype(np.int32),
+                    np.full(n, status_code(Status.INVALID_INPUT), np.int8), np.full(n, np.nan), np.full(n, np.nan),
+                    np.zeros(n, bool), np.full(n, "", object), np.full(n, -1, np.int16), np.full(n, np.nan),
+                    np.zeros(n, bool), np.ones(n, bool), np.full(n, "", object), int(np.count_nonzero(~usable)))
+    X = np.full((n, 3), np.nan)
+    used_obs = np.nonzero(usable)[0]                 # CSR of the usable observations
+    used_off = np.concatenate([[0], np.cumsum(n_used)])
+    copts = options.certify_options()
+    for N in np.unique(n_used[solve]):
+        pts = np.nonzero(solve & (n_used == N))[0]
+        o = used_obs[used_off[pts][:, None] + np.arange(N)]
+        C, x = geom.P[obs_img[o]], geom.xy_u[gk[o]]
+        s = certify_stack(C, x, copts)
+        X[pts] = s.X
+        for name in ("gamma_lb", "gamma_ub", "status", "optimal", "certified_by", "delta", "message"):
+            getattr(r, name)[pts] = getattr(s, name)
+        with np.errstate(all="ignore"):
+            g = _gamma(C, x, chunk.xyz[pts])
+        r.gamma_input[pts] = np.where(np.isfinite(g), g, np.nan)
+        if progress is not None:
+            progress.update(len(pts))
+    # cheirality: depth of every observation of the track (skipped cameras included) of the
+    # estimate, or of the input point where there is none
+    has_X = np.all(np.isfinite(X), axis=1)
+    test = np.where(has_X[:, None], X, chunk.xyz)
+    depth = np.einsum("tj,tj->t", geom.R[obs_img, 2, :], test[owner]) + geom.t[obs_img, 2]
+    behind = np.bincount(owner[~(depth > 0)], minlength=n) > 0
+    r.in_front[:] = ~behind
+    ub, g_in = r.gamma_ub, r.gamma_input
+    better = has_X & np.isfinite(ub) & (r.optimal | ~np.isfinite(g_in) | (ub <= g_in))
+    upd = better & (~behind | (options.behind == "write"))
+    r.updated[:] = upd
+    r.xyz[upd] = X[upd]
+    if upd.any():
+        sel = upd[owner] & usable
+        r.error[upd] = _colmap_error(arrays, geom, r.xyz, obs_img[sel], gk[sel], owner[sel], n)[upd]
+    _messages(arrays, geom, chunk, r, dict(owner=owner, obs_img=obs_img, usable=usable, depth=depth, solve=solve,
+                                           stuck=stuck, behind=behind, has_X=has_X, better=better), options)
+    if progress is not None:
+        progress.update(int(np.count_nonzero(~solve)))
+    return r
+
+
+def _messages(arrays, geom, chunk, r, d, options) -> None:
+    """Per-point messages for the points that need one (skips, skipped observations, cheirality)."""
+    owner, off = d["owner"], chunk.track_offsets
+    unusable = np.nonzero(~d["usable"])[0]
+    if unusable.size:
+        cams = arrays.camera_ids[arrays.image_camera[d["obs_img"][unusable]]]
+        pairs = np.unique(np.stack([owner[unusable], cams], axis=1), axis=0)
+        counts = np.bincount(owner[unusable], minlength=len(chunk))
+        starts = np.searchsorted(pairs[:, 0], np.arange(len(chunk) + 1))
+        for p in np.nonzero(counts)[0]:
+            ids = ", ".join(str(c) for c in pairs[starts[p]:starts[p + 1], 1])
+            note = f"{int(counts[p])} observation(s) in unusable camera(s) {ids} left out"
+            r.message[p] = note if not r.message[p] else f"{r.message[p]}; {note}"
+    for p in np.nonzero(~d["solve"])[0]:
+        k = int(r.n_views[p])
+        if d["stuck"][p]:
+            why = "a keypoint cannot be undistorted (Newton did not converge)"
+        elif k < options.min_track_length:
+            why = f"{k} usable observation(s) < min_track_length {options.min_track_length}"
+        else:
+            why = f"{k} usable observations > max_track_length {options.max_track_length}"
+        r.message[p] = f"skipped: {why}" + (f"; {r.message[p]}" if r.message[p] else "")
+    for p in np.nonzero(d["behind"] & d["has_X"])[0]:
+        j = int(off[p] + np.argmin(d["depth"][off[p]:off[p + 1]]))
+        what = "written anyway (behind = write)" if r.updated[p] else "input point kept"
+        note = (f"behind camera: the estimate has depth {d['depth'][j]:.6g} in image "
+                f"{int(arrays.image_ids[d['obs_img'][j]])}; {what}")
+        r.message[p] = note if not r.message[p] else f"{note}; {r.message[p]}"

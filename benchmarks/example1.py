@@ -29,6 +29,7 @@ os.environ["RUST_BACKTRACE"] = "0"
 
 from tritools import Point, Status  # noqa: E402
 from tritools import baselines as B  # noqa: E402
+from tritools import TriangulationOptions  # noqa: E402
 from tritools.solve.batch import safe_triangulate  # noqa: E402
 from tritools.io.oxford import PAPER_SEQUENCES, load_sequence  # noqa: E402
 
@@ -76,13 +77,13 @@ def run_sequence(name, args, writer, base_stats):
         cams, pts = seq.problem(tr)
         regions = [Point(p) for p in pts]
         t0 = time.perf_counter()
-        r = safe_triangulate(cams, regions, "corollary1", 2, 2, path=args.path)
+        r = safe_triangulate(cams, regions, TriangulationOptions("corollary1", 2, 2, path=args.path))
         act = time.perf_counter() - t0
         final = r
         retried = []
         if r.status != Status.OPTIMAL:
             for m, d in (("corollary1", 4), ("theorem1", None)):
-                r2 = safe_triangulate(cams, regions, m, d, d)
+                r2 = safe_triangulate(cams, regions, TriangulationOptions(m, d, d))
                 retried.append(f"{m}:{r2.delta}:{r2.status.value}")
                 if r2.status == Status.OPTIMAL:
                     final = r2

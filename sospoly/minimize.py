@@ -21,9 +21,11 @@ The default strategy (each step recorded in ``attempts``):
    ``max_degree`` (default delta_min + 4), stopping at the first certified degree.
 3. **Sparsity** (``sparsity="auto"``): a correlative-sparsity certificate (cliques of a chordal
    extension of the variables' interaction graph; with a dense degree-2 block beside them when it is
-   small, so it is never weaker than the dense degree-2 certificate) when that graph is not complete
-   and the dense program is large or does not fit the budget; otherwise dense.  ``"none"``,
-   ``"correlative"``, ``"term"`` and ``"newton"`` force a choice; ``result.sparsity`` says which.
+   small, so it is never weaker than the dense degree-2 certificate) when that graph is not complete;
+   when it does not certify and the dense program is small (Gram side <= ``DENSE_AUTO_MAX_SIDE``) and
+   fits the budget, the dense certificate of the same degree next.  A complete graph: dense.
+   ``"none"``, ``"correlative"``, ``"term"`` and ``"newton"`` force a choice; ``result.sparsity`` says
+   which certificate gave the result.
 4. **Multiplier** (``multiplier="auto"``): at each degree q = 1 first (Putinar's certificate, the
    strongest on compact sets: Floudas' test 4.10 is certified at degree 8), then, when that does not
    certify and the degree allows it, the paper's q = (1 + ||v||^2)^k (Reznick-type, for unconstrained
@@ -60,8 +62,8 @@ from .tolerances import DEFAULT_TOLERANCES, Tolerances, as_tolerances
 __all__ = ["MinimizeResult", "SOSResult", "SolveAttempt", "LowerBound", "minimize", "solve_psatz", "is_sos",
            "feasibility_violation", "candidates_of", "DENSE_AUTO_MAX_SIDE"]
 
-#: ``sparsity="auto"`` uses a sparse certificate when the dense Gram matrix would be larger than this (and the
-#: interaction graph is not complete); smaller dense programs are solved as they are.
+#: ``sparsity="auto"`` falls back from a sparse certificate that does not certify to the dense one of the same
+#: degree while the dense Gram matrix is at most this large.
 DENSE_AUTO_MAX_SIDE = 120
 #: the dense degree-2 block beside clique blocks is added while it stays this small (its side is n + 1).
 LOW_BLOCK_MAX_SIDE = 61
@@ -84,6 +86,7 @@ class SolveAttempt:
 
 @dataclass(frozen=True)
 class MinimizeResult:
+    """Outcome of :func:`minimize` (see the module docstring for every field's meaning)."""
     status: SolveStatus
     lower_bound: float | None
     upper_bound: float | None
@@ -215,8 +218,9 @@ def _support(p: Polynomial) -> np.ndarray:
     return p.exponents() if p.terms else np.zeros((1, p.nvars), np.int64)
 
 
-def _choose_sparsity(sparsity, f, eq, ineq, degree: int) -> tuple[str, int | None]:
-    """(sparsity kind, low degree of a dense block) for ``sparsity`` (see the module docstring)."""
+def _choose_sparsity(sparsity, f, eq, ineq, degree: int) -> list[tuple[str, int | None]]:
+    """The (sparsity kind, low degree of a dense block) steps for ``sparsity`` at ``degree`` (see the
+    module docstring)."""
     from .algebra.basis import sigma
 
     if sparsity not in SPARSITY_KINDS:
@@ -224,13 +228,16 @@ def _choose_sparsity(sparsity, f, eq, ineq, degree: int) -> tuple[str, int | Non
     n = len(f.gens)
     low = 2 if degree > 2 and n + 1 <= LOW_BLOCK_MAX_SIDE else None
     if sparsity == "correlative":
-        return "correlative", low
+        return [("correlative", low)]
     if sparsity != "auto":
-        return sparsity, None
-    if sigma(n, degree // 2) <= DENSE_AUTO_MAX_SIDE:
-        return "none", None
+        return [(sparsity, None)]
     cs = correlative_sparsity(n, _support(f), [_support(g) for g in eq], [_support(h) for h in ineq])
-    return ("none", None) if cs.is_dense else ("correlative", low)
+    if cs.is_dense:
+        return [("none", None)]
+    steps = [("correlative", low)]
+    if sigma(n, degree // 2) <= DENSE_AUTO_MAX_SIDE:
+        steps.append(("none", None))
+    return steps
 
 
 def _multipliers(multiplier, degree: int, deg_f: int, dense: bool) -> list:
@@ -287,12 +294,14 @@ def minimize(f, eq=(), ineq=(), degree: int | None = None, multiplier="auto", *,
     run = _Run(f, eq, ineq, fn, eqn, ineqn, fscale, gens, tol, budget, deadline, refine, radius)
     best = None
     for d in range(d0, last + 1, 2):
-        kind, low = _choose_sparsity(sparsity, fn, eqn, ineqn, d)
-        low = low_degree if low_degree is not None else low
-        for mult in _multipliers(multiplier, d, f.degree, kind == "none"):
-            res = run.solve(d, mult, kind, low, form, backend)
-            best = res if best is None or _better(res, best) else best
-            if res.optimal or res.status in (SolveStatus.TIME_LIMIT,) or deadline.expired:
+        for kind, low in _choose_sparsity(sparsity, fn, eqn, ineqn, d):
+            low = low_degree if low_degree is not None else low
+            for mult in _multipliers(multiplier, d, f.degree, kind == "none"):
+                res = run.solve(d, mult, kind, low, form, backend)
+                best = res if best is None or _better(res, best) else best
+                if res.optimal or res.status == SolveStatus.TIME_LIMIT or deadline.expired:
+                    break
+            if best.optimal or deadline.expired:
                 break
         if best.optimal or deadline.expired:
             break

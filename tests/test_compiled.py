@@ -82,7 +82,7 @@ def test_example4_theorem1_delta4_ipm_matches_clarabel_and_paper():
     row = next(r for r in paper_table(4) if r["method"] == "theorem1")
     assert res.optimal and res.n_lmivar == row["n_lmivar"] == 591
     assert abs(res.gamma_ub - row["gamma"]) < 5e-4                # the paper prints 3 decimals
-    assert res.attempts[-1][-1][0] == "ipm:converged"
+    assert res.attempts[-1].solver[0] == "ipm:converged"
     pb = tri_problem(cams, regs, "theorem1")
     comp, _ = STRUCTURE_CACHE.get(pb.f, pb.eq, pb.ineq, 4, gens=pb.gens,
                                   key=(4, ("Point",) * 4, "theorem1", 4, "image"))

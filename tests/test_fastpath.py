@@ -13,7 +13,7 @@ import tritools
 from sospoly.analysis.verify import quadratic_parts, verify_quadratic, verify_quadratic_batch
 from tests.reference.hartley_sturm import hartley_sturm
 from tritools import Point, Status
-from tritools.solve.fastpath import fast_results, verify_points
+from tritools.solve.fastpath import verify_points
 from tritools.scene import random_scene
 
 # gamma agreement between two certified answers: both are within the certificate tolerance
@@ -113,15 +113,15 @@ def test_fast_path_against_sdp_path(n_views, noise, seed):
 
 def test_single_triangulate_and_batch_decide_alike():
     scene = random_scene(4, 30, noise_px=30.0, seed=42)
-    fast = fast_results(*_stack(scene))
-    for j, fr in enumerate(fast):
+    fast = verify_points(*_stack(scene))
+    for j in range(30):
         single = tritools.triangulate(scene.cameras, scene.regions(j), "corollary1", 2, 2, path="auto")
-        if fr is None:
+        if not fast.certified[j]:
             assert single.certified_by != "verification"
         else:
             assert single.certified_by == "verification"
-            np.testing.assert_allclose(single.X, fr.X, rtol=1e-12, atol=1e-12)
-            assert single.gamma_lb == pytest.approx(fr.gamma_lb, rel=1e-12)
+            np.testing.assert_allclose(single.X, fast.X[j], rtol=1e-12, atol=1e-12)
+            assert single.gamma_lb == pytest.approx(fast.gamma_lb[j], rel=1e-12)
 
 
 def test_degenerate_problems_are_not_certified():
@@ -162,27 +162,25 @@ def test_oxford_subset_fast_path_agrees_with_sdp(oxford_data):
 
 def test_oxford_corridor_point_falls_back(corridor_point):
     cams, pts = corridor_point
-    assert fast_results(cams[None], pts[None])[0] is None
+    assert not verify_points(cams[None], pts[None]).certified[0]
     res = tritools.triangulate_many([(cams, [Point(p) for p in pts])], "corollary1", 2, 2, progress=False)[0]
     assert res.status == Status.NOT_CERTIFIED and res.certified_by is None
-    assert res.attempts[0] == (2, "verification_failed", None, None)
+    assert res.attempts[0].step == "verification" and res.attempts[0].status == "verification_failed"
 
 
 def test_vectorised_scale_is_normalization_for_scale():
-    """The batched paths normalise like triangulate: s from the refined residual, not the DLT's.
-
-    Example 5 cases at large theta are where the two differ by up to two decades; the two LM
-    implementations stop at slightly different points, hence 1e-3 relative (vs up to 100x)."""
-    from tritools.solve.fastpath import _normalise
-    from tritools.model.normalize import normalization_for
+    """The batched paths normalise like triangulate (one implementation: the single problem is a stack of
+    one), with s from the refined residual, not the DLT's (Example 5 cases at large theta are where the two
+    differ by up to two decades)."""
+    from tritools.model.normalize import normalization_for, normalization_stack
     from tritools.scene import example5_cases
 
     cases = example5_cases(0, n_points=3, thetas=(0.15, 0.2), trials=2)
     C = np.array([c.cameras for c in cases])
     x = np.array([c.image_points for c in cases])
-    s, *_ = _normalise(C, x)
+    s = normalization_stack(C, x).scale
     ref = np.array([normalization_for(c.cameras, c.regions).scale for c in cases])
-    assert np.allclose(s, ref, rtol=1e-3)
+    assert np.allclose(s, ref, rtol=1e-12)
 
 
 def test_overflowing_problem_does_not_break_its_batch():

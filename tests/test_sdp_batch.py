@@ -12,11 +12,12 @@ import pytest
 import tritools
 from tritools import Point, Status
 from tritools.solve.batch import triangulate_many
-from tritools.solve.fastpath import _epipolar_data
 from tritools.io.oxford import load_sequence
 from tritools.model.problem import build_problem
+from tritools.model.stacked import fundamental_stack
 from tritools.scene import random_scene
-from tritools.solve.sdp_batch import _fundamentals, corollary1_structure, corollary1_thetas, solve_corollary1_points
+from tritools.solve.sdp_batch import solve_corollary1_points
+from tritools.solve.structures import corollary1_point_structure
 
 # c = 2N (s gamma)^2 is O(1) in the normalised units; both solvers stop at 1e-9 gaps, but on the flat
 # multiplier faces of N >= 4 the two answers were seen to differ by up to 7.5e-7 on Oxford tracks;
@@ -52,24 +53,26 @@ def test_batch_equals_per_point_synthetic(N, noise):
     assert out.done.all()          # well-posed synthetic scenes never need the per-point path
     s = np.sqrt(out.c_lower / (2 * N)) / out.gamma_lb
     for m in range(6):
-        assert res[m].attempts[0][-1] == ("ipm-batch:converged",)
+        assert res[m].attempts[0].step == "sdp-batch" and res[m].attempts[0].solver == ("ipm-batch:converged",)
         _compare(res[m], scene.cameras, scene.regions(m), s[m])
 
 
 def test_theta_equals_polynomial_route():
-    """theta filled with numpy equals CompiledPsatz.theta of build_problem's polynomials (same cameras);
-    the sign of each F_ij is arbitrary (SPEC §7: only its zero set matters), so it is aligned first."""
+    """theta filled from stacks of F_ij through the structure's public data slots equals DataSlots.theta of
+    build_problem's polynomials (same cameras); the sign of each F_ij is arbitrary (SPEC §7: only its zero
+    set matters), so it is aligned first."""
     scene = random_scene(4, 3, noise_px=1.0, seed=7)
+    ps = corollary1_point_structure(4)
     for m in range(3):
         norm = tritools.model.normalize.normalization_for(scene.cameras, scene.regions(m))
         cams_n, regs_n = norm.cameras(scene.cameras), norm.regions(scene.regions(m))
         pb = build_problem(cams_n, regs_n, "corollary1")
-        cs = corollary1_structure(4)
-        th_poly = cs[0].theta(pb.f, pb.eq, pb.ineq)
-        F = _fundamentals(*_epipolar_data(cams_n[None])[:3], 4)
-        th = corollary1_thetas(cs, F)[0]
+        th_poly = ps.compiled.theta(pb.f, pb.eq, pb.ineq)
+        F, defined = fundamental_stack(cams_n[None])
+        assert defined.all()
+        th = ps.thetas(F)[0]
         for k in range(6):
-            sl = cs[2][k].reshape(-1)
+            sl = ps.F_slots[k].reshape(-1)
             sign = np.sign(th[sl] @ th_poly[sl])
             th[sl] *= sign
         np.testing.assert_allclose(th, th_poly, atol=1e-12)
@@ -101,7 +104,7 @@ def test_oxford_subset_and_corridor_point(oxford_data, corridor_point):
     assert not res[0].optimal and abs(res[0].gamma_lb - 0.163) <= 5e-4
     C, x = np.array([probs[0][0]]), np.array([probs[0][1]])
     out = solve_corollary1_points(C, x)
-    assert not out.certified[0]
+    assert not out.optimal[0]
     for r, (cams, regions) in zip(res[1:], items[1:]):
         assert r.certified_by == "sdp"
         N = len(regions)

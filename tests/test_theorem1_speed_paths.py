@@ -26,7 +26,6 @@ from sospoly.algebra.svec import smat
 from tritools.model.constraints import minors_matrix, theorem1_constraints
 from tritools.model.normalize import normalization_for
 from tritools.model.problem import build_problem
-from tritools.solve.triangulate import _compiled_for
 
 TOL_C = 1e-7
 
@@ -35,7 +34,7 @@ def _instance(cams, regs, delta=4):
     norm = normalization_for(cams, regs)
     cams_n, regs_n = norm.cameras(cams), norm.regions(regs)
     pb = build_problem(cams_n, regs_n, "theorem1")
-    comp, _, _ = _compiled_for(pb, regs_n, "theorem1", delta, "fixed", "image")
+    comp = sospoly.compile_psatz(pb.f, pb.eq, pb.ineq, delta, gens=pb.gens)
     return comp, comp.instantiate(pb.f, pb.eq, pb.ineq)
 
 

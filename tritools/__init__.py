@@ -1,26 +1,35 @@
 """tritools: certified-optimal uncertain multiple-view L2 triangulation (Chesi 2026).
 
-A thin front-end: regions declare (n_i, f_i, g_i, h_i) (:mod:`tritools.model.regions`),
-camera geometry supplies the projection constraints (:mod:`tritools.model.constraints`),
-and :mod:`sospoly` builds, solves and checks the certificate.  tritools never
-imports a solver.
+A thin front-end: regions declare (n_i, f_i, g_i, h_i) (:mod:`tritools.model.regions`), camera
+geometry supplies the projection constraints (:mod:`tritools.model.constraints`), and :mod:`sospoly`
+builds, solves and checks the certificate.  tritools never imports a solver.
+
+Layout (docs/architecture.md): :mod:`tritools.model` (the problem as data), :mod:`tritools.solve`
+(options, strategies, batches), :mod:`tritools.io` (problem files, Oxford data, COLMAP models),
+:mod:`tritools.sfm` (COLMAP workflows), :mod:`tritools.cli`, :mod:`tritools.plot`.
 
 >>> import tritools
 >>> cams, regions = tritools.paper_example(4)            # doctest: +SKIP
 >>> res = tritools.triangulate(cams, regions, "theorem1", delta=4)   # doctest: +SKIP
 >>> res.X, res.gamma_lb, res.gamma_ub, res.optimal          # doctest: +SKIP
 """
-from .solve.batch import triangulate_many
+import logging as _logging
+
 from .model.constraints import Method
-from .model.geometry import dlt, fundamental_matrix, gamma, project, validate_cameras
-from .model.regions import Ellipse, EllipseBorder, Point, Polytope, Region, Segment
-from .result import Status, TriangulationResult
+from .model.geometry import depths, dlt, fundamental_matrix, gamma, project, validate_cameras
+from .model.regions import Ellipse, EllipseBorder, Point, Polytope, Region, Segment, as_regions
+from .result import Attempt, Status, TriangulationResult
 from .scene import paper_example
+from .solve.batch import triangulate_many
+from .solve.options import DEFAULT_OPTIONS, SolvePath, Sparsity, TriangulationOptions
+from .solve.points import PointsResult, triangulate_points
 from .solve.triangulate import triangulate
 
-__version__ = "0.1.0"
+__version__ = "0.2.0"
 
+_logging.getLogger(__name__).addHandler(_logging.NullHandler())
 
-__all__ = ["Method", "dlt", "fundamental_matrix", "gamma", "project", "validate_cameras", "Ellipse",
-           "EllipseBorder", "Point", "Polytope", "Region", "Segment", "Status", "TriangulationResult",
-           "triangulate", "triangulate_many", "paper_example"]
+__all__ = ["Method", "depths", "dlt", "fundamental_matrix", "gamma", "project", "validate_cameras", "Ellipse",
+           "EllipseBorder", "Point", "Polytope", "Region", "Segment", "as_regions", "Attempt", "Status",
+           "TriangulationResult", "paper_example", "triangulate_many", "DEFAULT_OPTIONS", "SolvePath", "Sparsity",
+           "TriangulationOptions", "PointsResult", "triangulate_points", "triangulate"]

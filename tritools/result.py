@@ -1,56 +1,123 @@
-"""Result record shared by the certified triangulation and the baseline methods.
+"""Result records shared by the certified triangulation and the baseline methods.
 
-A :class:`TriangulationResult` reports, for one triangulation problem (SPEC §1,
-paper eq. (5)), the estimate ``X`` of the scene point, the upper bound
-``gamma_ub = gamma(X)`` (exact distances to the regions, paper eq. (6)), and for the
-certified method (Theorem 1 / Corollary 1) the lower bound ``gamma_lb`` with
-``gamma_lb <= gamma* <= gamma_ub``.  Local and baseline methods leave ``gamma_lb``
-and ``optimal`` at ``None`` (no certificate; "NA" in the paper's tables).
+A :class:`TriangulationResult` reports, for one triangulation problem (SPEC §1, paper eq. (5)),
+the estimate ``X`` of the scene point, the upper bound ``gamma_ub = gamma(X)`` (exact distances
+to the regions, paper eq. (6)), and for the certified method (Theorem 1 / Corollary 1) the lower
+bound ``gamma_lb`` with ``gamma_lb <= gamma* <= gamma_ub``.  Local and baseline methods leave
+``gamma_lb`` and ``optimal`` at ``None`` (no certificate; "NA" in the paper's tables).
+
+Every certified result is self-consistent: ``gamma_lb <= gamma_ub`` always (a lower bound above
+the upper bound beyond the tolerance is a ``numerical_failure``, never a certificate; within the
+tolerance it is reported equal to the upper bound).  Each step tried is an :class:`Attempt`.
+:meth:`TriangulationResult.to_dict` / :meth:`TriangulationResult.from_dict` are the one JSON form
+(NaN and infinity become ``null``).
 """
 from __future__ import annotations
 
 import enum
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from typing import Any
 
 import numpy as np
 
-__all__ = ["Status", "TriangulationResult"]
+__all__ = ["Status", "Attempt", "TriangulationResult", "jsonable"]
 
 
 class Status(str, enum.Enum):
     """Outcome of a triangulation method.
 
     OPTIMAL
-        ``gamma_lb == gamma_ub`` to the stated tolerance: ``X`` is a certified
-        global minimiser (Theorem 1).
+        ``gamma_lb == gamma_ub`` to the stated tolerance: ``X`` is a certified global minimiser
+        (Theorem 1), in front of every camera.
+    BEHIND_CAMERA
+        With ``require_in_front``: certified as OPTIMAL, but the minimiser lies behind at least one
+        camera (``in_front`` is False, ``depths`` say which).  The L2 problem ignores cheirality, so
+        such data are not consistent with a physical point in front of the cameras; by default the
+        status stays OPTIMAL and ``in_front`` says it.
     NOT_CERTIFIED
         The LMI method returned bounds that do not meet.
     NO_CERTIFICATE
         A local or baseline method: an estimate without any bound.
     ILL_POSED
-        The problem has no finite estimate (e.g. the extracted homogeneous point has
-        ``w4 = 0``, all cameras share one centre).
+        The problem has no finite estimate (e.g. the extracted homogeneous point has ``w4 = 0``, all
+        cameras share one centre).
     SOLVER_FAILED
         The SDP solver or the local optimiser reported a failure.
     NUMERICAL_FAILURE
         Results are not trustworthy (NaN, inconsistent bounds, ...).
+    TIME_LIMIT
+        The time limit of the budget was reached first (the best bounds found so far are reported).
+    BUDGET_EXCEEDED
+        Every program that could certify the point exceeds the memory budget (nothing was built).
     INVALID_INPUT
-        The method is not applicable to the given input (e.g. Newton with a
-        non-point region).
+        The method is not applicable to the given input (e.g. Newton with a non-point region).
     """
 
     OPTIMAL = "optimal"
+    BEHIND_CAMERA = "behind_camera"
     NOT_CERTIFIED = "not_certified"
     NO_CERTIFICATE = "no_certificate"
     ILL_POSED = "ill_posed"
     SOLVER_FAILED = "solver_failed"
     NUMERICAL_FAILURE = "numerical_failure"
+    TIME_LIMIT = "time_limit"
+    BUDGET_EXCEEDED = "budget_exceeded"
     INVALID_INPUT = "invalid_input"
 
     def __str__(self) -> str:  # "optimal" rather than "Status.OPTIMAL"
         return self.value
+
+    @property
+    def certified(self) -> bool:
+        """A certificate of global optimality was found (OPTIMAL or BEHIND_CAMERA)."""
+        return self in (Status.OPTIMAL, Status.BEHIND_CAMERA)
+
+
+def jsonable(v):
+    """Arrays -> lists, enums -> values, non-finite floats -> None (JSON has no NaN), records -> dicts."""
+    if isinstance(v, np.ndarray):
+        return [jsonable(x) for x in v.tolist()]
+    if isinstance(v, np.generic):
+        v = v.item()
+    if isinstance(v, enum.Enum):
+        return v.value
+    if isinstance(v, float):
+        return v if math.isfinite(v) else None
+    if isinstance(v, Attempt):
+        return {f.name: jsonable(getattr(v, f.name)) for f in fields(v)}
+    if isinstance(v, dict):
+        return {str(k): jsonable(x) for k, x in v.items()}
+    if isinstance(v, (list, tuple)):
+        return [jsonable(x) for x in v]
+    return v
+
+
+@dataclass(frozen=True)
+class Attempt:
+    """One step of a triangulation strategy.
+
+    ``step`` names it (``"sdp"``, ``"verification"``, ``"sdp-batch"``, ``"tight"`` for a re-solve
+    with tighter solver tolerances, ``"retry"`` for a batch retry step); ``solver`` lists the
+    back-end attempts (``label:status``) of an SDP.
+    """
+
+    method: str
+    delta: int | None
+    status: str
+    gamma_lb: float | None = None
+    gamma_ub: float | None = None
+    step: str = "sdp"
+    sparsity: str | None = None
+    solver: tuple = ()
+    seconds: float = 0.0
+
+    @classmethod
+    def from_dict(cls, d) -> "Attempt":
+        kw = {f.name: d.get(f.name) for f in fields(cls) if f.name in d}
+        kw["solver"] = tuple(kw.get("solver") or ())
+        kw["seconds"] = float(kw.get("seconds") or 0.0)
+        return cls(**kw)
 
 
 def _opt_array(value, shape_tail: tuple, name: str) -> np.ndarray | None:
@@ -63,6 +130,9 @@ def _opt_array(value, shape_tail: tuple, name: str) -> np.ndarray | None:
     if shape_tail == (3,):
         if arr.shape != (3,):
             raise ValueError(f"{name} must have shape (3,), got {arr.shape}")
+    elif shape_tail == (None,):
+        if arr.ndim != 1:
+            raise ValueError(f"{name} must have shape (N,), got {arr.shape}")
     elif arr.ndim != 2 or arr.shape[1] != 2:
         raise ValueError(f"{name} must have shape (N, 2), got {arr.shape}")
     arr.setflags(write=False)
@@ -91,14 +161,14 @@ class TriangulationResult:
     X : ndarray, shape (3,), optional
         Final estimate of the scene point.
     gamma_ub : float, optional
-        ``gamma(X)`` with exact distances (SPEC §1, paper eq. (6)); an upper bound
-        on ``gamma*``.
+        ``gamma(X)`` with exact distances (SPEC §1, paper eq. (6)); an upper bound on ``gamma*``.
     gamma_lb : float, optional
-        ``sqrt(c*/(2N))``, a lower bound on ``gamma*`` (paper eq. (44), Theorem 1).
+        A lower bound on ``gamma*`` from ``sqrt(c*/(2N))`` (paper eq. (44), Theorem 1), with the PSD
+        defect of the returned certificate subtracted; never above ``gamma_ub``.
     optimal : bool, optional
         Whether ``gamma_lb`` certifies ``X`` (``None`` when no certificate exists).
     delta : int, optional
-        Relaxation degree used.
+        Relaxation degree of the certificate (or of the last degree tried).
     n_lmivar : int, optional
         Number of independent scalar LMI variables (SPEC §8).
     image_points : ndarray, shape (N, 2), optional
@@ -106,15 +176,22 @@ class TriangulationResult:
     X_raw, gamma_ub_raw : optional
         Extracted estimate before local refinement and its ``gamma``.
     certified_by : str, optional
-        Which path produced the certificate: ``"sdp"`` (the LMI of Theorem 1 /
-        Corollary 1) or ``"verification"`` (``path="auto"``: KKT multipliers and
-        the Lagrangian bound of :mod:`sospoly.analysis.verify`); ``None`` when not certified.
+        ``"sdp"`` (the LMI of Theorem 1 / Corollary 1) or ``"verification"`` (KKT multipliers and the
+        Lagrangian bound of :mod:`sospoly.analysis.verify`); ``None`` when not certified.
     message : str
         Human readable details.
     timings : dict
         Wall-clock times in seconds, at least ``"total"``.
-    attempts : tuple
-        Per-degree records of an escalation strategy.
+    attempts : tuple of :class:`Attempt`
+        Every step tried, in order.
+    sparsity : str, optional
+        The formulation of the certificate: ``"dense"`` or ``"views"`` (view cliques).
+    in_front : bool, optional
+        Whether ``X`` lies in front of every camera (positive depth).
+    depths : ndarray, shape (N,), optional
+        Depth of ``X`` in each camera (Hartley & Zisserman eq. (6.15); positive in front).
+    residuals : ndarray, shape (N,), optional
+        Per-view distance ``d(Phi(X, P_i), R_i)`` (pixels); ``gamma_ub`` is their RMS over 2N.
     """
 
     method: str
@@ -132,27 +209,36 @@ class TriangulationResult:
     message: str = ""
     timings: dict = field(default_factory=dict)
     attempts: tuple = ()
+    sparsity: str | None = None
+    in_front: bool | None = None
+    depths: np.ndarray | None = None
+    residuals: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         try:
             status = Status(self.status)
         except ValueError as exc:
             raise ValueError(f"status must be one of {[s.value for s in Status]}, got {self.status!r}") from exc
-        object.__setattr__(self, "status", status)
-        object.__setattr__(self, "method", str(self.method))
-        object.__setattr__(self, "X", _opt_array(self.X, (3,), "X"))
-        object.__setattr__(self, "X_raw", _opt_array(self.X_raw, (3,), "X_raw"))
-        object.__setattr__(self, "image_points", _opt_array(self.image_points, (None, 2), "image_points"))
+        set_ = object.__setattr__
+        set_(self, "status", status)
+        set_(self, "method", str(self.method))
+        set_(self, "X", _opt_array(self.X, (3,), "X"))
+        set_(self, "X_raw", _opt_array(self.X_raw, (3,), "X_raw"))
+        set_(self, "image_points", _opt_array(self.image_points, (None, 2), "image_points"))
+        set_(self, "depths", _opt_array(self.depths, (None,), "depths"))
+        set_(self, "residuals", _opt_array(self.residuals, (None,), "residuals"))
         for name in ("gamma_ub", "gamma_lb", "gamma_ub_raw"):
-            object.__setattr__(self, name, _opt_float(getattr(self, name), name))
-        if self.optimal is not None:
-            object.__setattr__(self, "optimal", bool(self.optimal))
+            set_(self, name, _opt_float(getattr(self, name), name))
+        for name in ("optimal", "in_front"):
+            if getattr(self, name) is not None:
+                set_(self, name, bool(getattr(self, name)))
         for name in ("delta", "n_lmivar"):
             value = getattr(self, name)
             if value is not None:
-                object.__setattr__(self, name, int(value))
-        object.__setattr__(self, "timings", dict(self.timings))
-        object.__setattr__(self, "attempts", tuple(self.attempts))
+                set_(self, name, int(value))
+        set_(self, "timings", dict(self.timings))
+        set_(self, "attempts", tuple(a if isinstance(a, Attempt) else Attempt.from_dict(a) if isinstance(a, dict)
+                                     else a for a in self.attempts))
 
     @property
     def gap(self) -> float | None:
@@ -162,33 +248,18 @@ class TriangulationResult:
         return self.gamma_ub - self.gamma_lb
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-friendly dictionary (arrays become lists, status its string value)."""
+        """The one JSON form: every field, arrays as lists, the status its value, attempts as objects, NaN
+        and infinity as ``null``."""
+        return {f.name: jsonable(getattr(self, f.name)) for f in fields(self)}
 
-        def conv(v):
-            if isinstance(v, np.ndarray):
-                return v.tolist()
-            if isinstance(v, Status):
-                return v.value
-            if isinstance(v, float) and not math.isfinite(v):
-                return str(v)
-            return v
-
-        return {
-            "method": self.method,
-            "status": self.status.value,
-            "X": conv(self.X),
-            "gamma_ub": conv(self.gamma_ub),
-            "gamma_lb": conv(self.gamma_lb),
-            "optimal": self.optimal,
-            "delta": self.delta,
-            "n_lmivar": self.n_lmivar,
-            "image_points": conv(self.image_points),
-            "X_raw": conv(self.X_raw),
-            "gamma_ub_raw": conv(self.gamma_ub_raw),
-            "certified_by": self.certified_by,
-            "message": self.message,
-            "timings": {k: conv(v) for k, v in self.timings.items()},
-        }
+    @classmethod
+    def from_dict(cls, d) -> "TriangulationResult":
+        """Inverse of :meth:`to_dict` (unknown keys ignored; ``null`` stays ``None``)."""
+        kw = {f.name: d[f.name] for f in fields(cls) if f.name in d}
+        kw["status"] = Status(kw["status"])
+        kw["attempts"] = tuple(Attempt.from_dict(a) if isinstance(a, dict) else a for a in kw.get("attempts") or ())
+        kw["timings"] = kw.get("timings") or {}
+        return cls(**kw)
 
     def __str__(self) -> str:
         def f(v):

@@ -44,6 +44,7 @@ ROUNDOFF = 1e-12
 
 @dataclass(frozen=True)
 class Verification:
+    """The outcome of :func:`verify_quadratic` for one program (a :class:`VerificationBatch` item)."""
     status: SolveStatus          # OPTIMAL when a bound was computed and checked
     lower_bound: float | None
     upper_bound: float | None    # f(v^)
@@ -122,7 +123,7 @@ def _lstsq_stack(A: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 
 def verify_quadratic_batch(f0, f1, F2, g0, g1, G2, points, *,
-                           tolerances: Tolerances = DEFAULT_TOLERANCES) -> VerificationBatch:
+                           tolerances: Tolerances = DEFAULT_TOLERANCES, radius=None) -> VerificationBatch:
     """The Lagrangian bound of the module docstring for M programs at once.
 
     Program m: f(v) = f0[m] + f1[m].v + v^T F2[m] v and g_k(v) = g0[m,k] + g1[m,k].v +
@@ -135,6 +136,11 @@ def verify_quadratic_batch(f0, f1, F2, g0, g1, G2, points, *,
     2 L2 w = -L1, rejected when ||2 L2 w + L1|| / max(1, ||L1||) > identity_residual;
     c = L(w) = min_v L(v, lambda) <= min{f : g = 0}; certified iff
     ``tolerances.certified(c, f(v^))``.
+
+    ``radius`` (scalar or (M,)): a bound on the norm of a minimiser.  The bound is then made rigorous
+    against the accepted round-off: with eps = max(0, -lambda_min(L2)) and the stationarity residual
+    r = 2 L2 w + L1, L(v) >= L(w) - eps ||v - w||^2 - ||r|| ||v - w|| for every v, so on the ball
+    c - eps (R + ||w||)^2 - ||r|| (R + ||w||) - 8 eps_mach (|L0| + |L1.w| + |w^T L2 w|) is a lower bound.
     """
     f0 = np.asarray(f0, float)
     f1 = np.asarray(f1, float)
@@ -170,11 +176,17 @@ def verify_quadratic_batch(f0, f1, F2, g0, g1, G2, points, *,
     w = -np.einsum("mij,mj->mi", Q, inv * np.einsum("mji,mj->mi", Q, L1))
     resid = np.linalg.norm(2 * np.einsum("mij,mj->mi", L2, w) + L1, axis=1) / np.maximum(1.0, np.linalg.norm(L1, axis=1))
     in_range = resid <= tolerances.identity_residual
-    c = L0 + np.einsum("mi,mi->m", L1, w) + np.einsum("mi,mij,mj->m", w, L2, w)
+    t1, t2 = np.einsum("mi,mi->m", L1, w), np.einsum("mi,mij,mj->m", w, L2, w)
+    c = L0 + t1 + t2
+    if radius is not None:
+        reach = np.asarray(radius, float) + np.linalg.norm(w, axis=1)
+        r_abs = np.linalg.norm(2 * np.einsum("mij,mj->mi", L2, w) + L1, axis=1)
+        c = c - np.maximum(0.0, -eig[:, 0]) * reach ** 2 - r_abs * reach \
+            - 8 * np.finfo(float).eps * (np.abs(L0) + np.abs(t1) + np.abs(t2))
     reason = np.where(~psd, 1, np.where(~in_range, 2, 0))
     bounded = reason == 0
     lower = np.where(bounded, c, np.nan)
-    certified = bounded & (fv - c <= tolerances.gap_abs + tolerances.gap_rel * np.maximum(1.0, np.abs(fv)))
+    certified = bounded & np.asarray(tolerances.certified(lower, fv), bool)
     return VerificationBatch(lower, fv, certified, lam, eig[:, 0], reason)
 
 

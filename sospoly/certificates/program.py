@@ -31,6 +31,7 @@ __all__ = ["SOSProgram", "Sense", "VarBlock", "SOSConstraint", "EqualityConstrai
 
 
 class Sense(str, enum.Enum):
+    """Objective sense of an :class:`SOSProgram`."""
     MINIMIZE = "minimize"
     MAXIMIZE = "maximize"
     FEASIBILITY = "feasibility"

@@ -57,6 +57,7 @@ __all__ = ["Multiplier", "DataSlots", "PsatzStructure", "PsatzProblem", "Structu
 
 
 class Multiplier(str, enum.Enum):
+    """The multiplier q of the Positivstellensatz certificate (see the module docstring)."""
     FIXED = "fixed"          #: q = (1 + ||v||^2)^k for dense certificates, 1 for sparse ones
     PUTINAR = "putinar"      #: q = 1 (Putinar's certificate)
     FREE = "free"            #: q a free SOS with unit trace (GEVP)

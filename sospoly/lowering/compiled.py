@@ -75,6 +75,10 @@ class CompiledInstance:
     def gens(self) -> tuple:
         return self.compiled.structure.gens
 
+    @property
+    def shape(self):
+        return self.compiled.structure.shape
+
     def as_problem(self) -> PsatzProblem:
         """The :class:`~sospoly.certificates.psatz.PsatzProblem` of these numbers (polynomials rebuilt)."""
         f, eq, ineq = self.compiled.structure.slots.polynomials(self.theta)

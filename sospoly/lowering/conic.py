@@ -45,6 +45,7 @@ __all__ = ["GramForm", "Cone", "ConicProblem", "lower", "gram_structure"]
 
 
 class GramForm(str, enum.Enum):
+    """How an SOS constraint is lowered: ``image`` (U + L(alpha), the paper's) or ``kernel`` (coefficient matching)."""
     IMAGE = "image"
     KERNEL = "kernel"
 
@@ -68,6 +69,7 @@ class PSDBlockMap:
 
 @dataclass(frozen=True)
 class ConicProblem:
+    """Conic data in the standard form of the module docstring (min q^T x, A x + s = b, s in the cones), with the PSD block map and the affine parameter matrices."""
     q: np.ndarray
     A: sp.csc_matrix
     b: np.ndarray

@@ -41,6 +41,7 @@ class GevpStep:
 
 @dataclass(frozen=True)
 class GevpResult:
+    """Outcome of :func:`bisect`: the last certified level ``lower_bound``, the final ``bracket``, every tested step and the certificate at the lower end."""
     status: SolveStatus
     lower_bound: float | None
     bracket: tuple

@@ -34,9 +34,10 @@ from ..model.constraints import Method
 from ..io.problem_file import (ProblemFileError, ProblemSpec, jsonable, load_problem_file, parse_problem_text,
                            result_to_dict)
 from ..result import Status, TriangulationResult
-from ..solve.triangulate import SolvePath
+from ..solve.options import TRIANGULATION_BUDGET, MethodChoice, SolvePath, Sparsity, TriangulationOptions
 
-__all__ = ["main", "build_parser", "CLIError", "exit_invalid", "add_solver_options", "add_data_dir_option",
+__all__ = ["main", "build_parser", "CLIError", "exit_invalid", "add_solver_options", "options_from_args",
+           "add_data_dir_option",
            "SUBCOMMAND_MODULES", "solve_problems", "format_table", "EXIT_OK", "EXIT_INTERNAL", "EXIT_INVALID"]
 
 #: modules adding subcommands through ``register(subparsers)``; skipped while they do not exist.
@@ -48,8 +49,9 @@ DEBUG_ENV = "TRITOOLS_DEBUG"
 EXAMPLE5_THETAS = (0.05, 0.1, 0.15, 0.2)
 FULL_EXAMPLE5_COMMAND = "python benchmarks/paper_examples.py --only-example5"
 
-METHODS = tuple(m.value for m in Method)
+METHODS = tuple(m.value for m in MethodChoice)
 PATHS = tuple(p.value for p in SolvePath)
+SPARSITIES = tuple(x.value for x in Sparsity)
 
 
 class CLIError(Exception):
@@ -121,30 +123,26 @@ def _dumps(obj) -> str:
 
 
 # ----------------------------------------------------------------------------- solving
-def solve_problems(specs: Sequence[ProblemSpec], method=Method.THEOREM1, delta=None, max_delta=None, path=None,
-                   progress: bool = False) -> list[TriangulationResult]:
+def solve_problems(specs: Sequence[ProblemSpec], options: TriangulationOptions | None = None,
+                   progress: bool | None = None) -> list[TriangulationResult]:
     """One result per problem, in order, through :func:`tritools.solve.batch.triangulate_many`.
 
-    Per-problem ``method``/``delta``/``max_delta``/``path`` override the arguments; problems
-    sharing the same settings go through one batch call.  ``path=None`` keeps the library's
-    default.  A failing problem gets a result with a status and a message.
+    Per-problem ``method``/``delta``/``max_delta``/``path`` override ``options`` (a problem's ``delta``
+    without ``max_delta`` also raises the options' ``max_delta`` to it); problems sharing the same settings
+    go through one batch call.  A failing problem gets a result with a status and a message.
     """
     from ..solve.batch import triangulate_many
 
-    groups: dict[tuple, list[int]] = defaultdict(list)
+    options = options or TriangulationOptions()
+    groups: dict = defaultdict(list)
     for i, s in enumerate(specs):
-        d = s.delta if s.delta is not None else delta
-        md = s.max_delta if s.max_delta is not None else max_delta
-        if s.delta is not None and s.max_delta is None and md is not None:
-            md = max(md, s.delta)
-        m = Method(s.method if s.method is not None else method)
-        p = s.path if s.path is not None else path
-        groups[(m, d, md, None if p is None else SolvePath(p))].append(i)
+        md = s.max_delta
+        if s.delta is not None and md is None and options.max_delta is not None:
+            md = max(options.max_delta, s.delta)
+        groups[options.replace(method=s.method, delta=s.delta, max_delta=md, path=s.path)].append(i)
     out: list[TriangulationResult | None] = [None] * len(specs)
-    for (m, d, md, p), idx in groups.items():
-        kw = {} if p is None else {"path": p.value}
-        res = triangulate_many([(specs[i].cameras, specs[i].regions) for i in idx], method=m.value, delta=d,
-                               max_delta=md, progress=progress, **kw)
+    for opts, idx in groups.items():
+        res = triangulate_many([(specs[i].cameras, specs[i].regions) for i in idx], options=opts, progress=progress)
         for i, r in zip(idx, res):
             out[i] = r
     return out
@@ -158,7 +156,7 @@ def _read_specs(file: str) -> list[ProblemSpec]:
 
 def _cmd_solve(args) -> int:
     specs = _read_specs(args.file)
-    results = solve_problems(specs, args.method, args.delta, args.max_delta, args.path, args.progress)
+    results = solve_problems(specs, options_from_args(args), args.progress)
     if args.json:
         _emit(_dumps([result_to_dict(r, index=i, name=s.name, n_views=s.n_views)
                       for i, (s, r) in enumerate(zip(specs, results))]), args.output)
@@ -219,7 +217,8 @@ def _example5(args) -> int:
         if getattr(args, name) < 1:
             raise CLIError(f"example 5: --{name} must be a positive integer, got {getattr(args, name)}")
     cases = example5_cases(seed=args.seed, n_points=args.points, thetas=EXAMPLE5_THETAS, trials=args.trials)
-    results = solve_problems([ProblemSpec(c.cameras, c.regions) for c in cases], Method.THEOREM1, 4, 4,
+    results = solve_problems([ProblemSpec(c.cameras, c.regions) for c in cases],
+                             TriangulationOptions(Method.THEOREM1, 4, 4),
                              progress=args.progress)
     summary = []
     for theta in EXAMPLE5_THETAS:
@@ -287,7 +286,7 @@ def _cmd_dataset(args) -> int:
     for tr in tracks:
         cams, pts = seq.problem(tr)
         specs.append(ProblemSpec(cams, tuple(Point(p) for p in pts), name=f"{seq.name}:{tr.track_id}"))
-    results = solve_problems(specs, args.method, args.delta, args.max_delta, args.path, args.progress)
+    results = solve_problems(specs, options_from_args(args), args.progress)
     by_n: dict[int, list] = defaultdict(list)
     for tr, r in zip(tracks, results):
         by_n[tr.n_views].append(r)
@@ -326,21 +325,56 @@ def _write_dataset_csv(path, name, tracks, results) -> None:
 
 
 # ----------------------------------------------------------------------------- parser
-def add_solver_options(p, default_method: str, default_path: str | None = None) -> None:
-    """``--method --delta --max-delta --path --progress`` of the subcommands that solve.
-
-    ``default_path=None`` leaves the choice to :func:`tritools.solve.batch.triangulate_many`.
-    """
+def add_solver_options(p, default_method: str = "auto", default_path: str = "auto") -> None:
+    """The solver flags of every subcommand that solves (``--method --delta --max-delta --path --sparsity
+    --time-limit --memory-limit --require-in-front --progress``); :func:`options_from_args` validates them
+    exactly like the fields of a problem file."""
     p.add_argument("--method", choices=METHODS, default=default_method,
-                   help=f"Theorem 1 (4x4 minors) or Corollary 1 (epipolar); default {default_method}")
-    p.add_argument("--delta", type=int, default=None, help="first relaxation degree (even; default delta_min)")
-    p.add_argument("--max-delta", type=int, default=None, dest="max_delta",
-                   help="last degree tried (default: delta if given, else delta_min + 2)")
+                   help=f"auto (Corollary 1 at delta 2, then delta 4), theorem1 (4x4 minors) or corollary1 "
+                        f"(epipolar); default {default_method}")
+    p.add_argument("--delta", type=int, default=None, metavar="D",
+                   help="first relaxation degree (even >= 2; default delta_min)")
+    p.add_argument("--max-delta", type=int, default=None, dest="max_delta", metavar="D",
+                   help="last degree tried (even >= delta; default 4 for method auto, else delta or delta_min + 2)")
     p.add_argument("--path", choices=PATHS, default=default_path,
-                   help="'sdp' always solves the SDP; 'auto' first tries certification by verification "
-                        "(delta 2, point regions); default: "
-                        + (default_path or "that of tritools.solve.batch.triangulate_many"))
-    p.add_argument("--progress", action="store_true", help="progress bar on stderr (needs the 'progress' extra)")
+                   help=f"'auto' first tries certification by verification (delta 2, point regions); 'sdp' always "
+                        f"solves the SDP; default {default_path}")
+    p.add_argument("--sparsity", choices=SPARSITIES, default="auto",
+                   help="formulation above delta 2: auto (dense where small), none (dense), views (view cliques)")
+    p.add_argument("--time-limit", type=float, default=None, dest="time_limit", metavar="S",
+                   help="seconds per point (default 60); exceeding it gives status time_limit")
+    p.add_argument("--memory-limit", type=float, default=None, dest="memory_limit", metavar="GIB",
+                   help="largest estimated program, GiB (default 2); larger ones give status budget_exceeded")
+    p.add_argument("--require-in-front", action="store_true", dest="require_in_front",
+                   help="a certified point behind a camera gets status behind_camera (default: optimal, in_front "
+                        "false)")
+    p.add_argument("--progress", action="store_true", default=None,
+                   help="progress bar on stderr (needs the 'progress' extra; default: only for large batches)")
+
+
+def options_from_args(args) -> TriangulationOptions:
+    """The :class:`TriangulationOptions` of parsed solver flags; a bad value is a :class:`CLIError` naming the flag
+    (the same rules as the problem-file fields)."""
+    from sospoly import Budget
+
+    base = TRIANGULATION_BUDGET
+    try:
+        budget = Budget(time_limit=base.time_limit if args.time_limit is None else args.time_limit,
+                        max_bytes=base.max_bytes if args.memory_limit is None else args.memory_limit * 2 ** 30)
+    except ValueError as exc:
+        flag = "--time-limit" if "time_limit" in str(exc) else "--memory-limit"
+        raise CLIError(f"{flag}: must be a positive number") from None
+    try:
+        return TriangulationOptions(method=args.method, delta=args.delta, max_delta=args.max_delta, path=args.path,
+                                    sparsity=args.sparsity, budget=budget, require_in_front=args.require_in_front)
+    except (ValueError, TypeError) as exc:
+        msg = str(exc)
+        field = msg.split()[0]
+        flag = "--" + field.replace("_", "-") if field in ("delta", "max_delta", "method", "path", "sparsity") \
+            else "options"
+        if msg.startswith("max_delta (") or msg.startswith("max_delta must be >="):
+            flag = "--max-delta"
+        raise CLIError(f"{flag}: {msg}") from None
 
 
 def add_data_dir_option(p) -> None:
@@ -355,7 +389,7 @@ def register_builtin(sub) -> None:
                        description="Triangulate every problem of FILE (one problem, a list, or "
                                    "{\"problems\": [...]}; schema in docs/cli.md).")
     p.add_argument("file", metavar="FILE", help="problem file, or - for stdin")
-    add_solver_options(p, Method.THEOREM1.value)
+    add_solver_options(p)
     p.add_argument("--json", action="store_true", help="one JSON object per problem, all result fields")
     p.add_argument("--output", "-o", default=None, metavar="OUT", help="write the output to OUT instead of stdout")
     p.set_defaults(func=_cmd_solve)
@@ -374,7 +408,7 @@ def register_builtin(sub) -> None:
     p.add_argument("name", metavar="NAME", help="sequence (corridor, dinosaur, house, library, merton1-3, wadham)")
     add_data_dir_option(p)
     p.add_argument("--limit", type=int, default=None, metavar="K", help="only the first K tracks")
-    add_solver_options(p, Method.COROLLARY1.value)
+    add_solver_options(p)
     p.add_argument("--json", action="store_true", help="summary as JSON")
     p.add_argument("--csv", default=None, metavar="OUT", help="write per-track results to OUT")
     p.set_defaults(func=_cmd_dataset)

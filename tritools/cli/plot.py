@@ -19,9 +19,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .app import METHODS, add_data_dir_option, add_solver_options, exit_invalid
+from .app import CLIError, METHODS, add_data_dir_option, add_solver_options, exit_invalid, options_from_args
 from ..model.constraints import Method
-from ..solve.triangulate import SolvePath
 
 __all__ = ["register", "run_figure3", "run_plot_dataset"]
 
@@ -71,7 +70,11 @@ def run_plot_dataset(args) -> int:
     for t in tracks:
         cams, pts = seq.problem(t)
         problems.append((cams, [Point(x) for x in pts]))
-    results = triangulate_many(problems, args.method, args.delta, args.max_delta, path=args.path,
+    try:
+        options = options_from_args(args)
+    except CLIError as exc:
+        return exit_invalid(exc)
+    results = triangulate_many(problems, options=options,
                                progress=args.progress)
     from ..plot import dataset_summary
 
@@ -109,7 +112,7 @@ def register(subparsers) -> None:
     pd.add_argument("--limit", type=int, default=DEFAULT_LIMIT,
                     help=f"number of tracks, a seeded random subset (default {DEFAULT_LIMIT}; 0 = all)")
     pd.add_argument("--seed", type=int, default=0, help="seed of the track subset (default 0)")
-    add_solver_options(pd, Method.COROLLARY1.value, SolvePath.AUTO.value)
+    add_solver_options(pd)
     pd.add_argument("--out", default=None, help="output PNG (default: NAME_summary.png)")
     pd.set_defaults(func=run_plot_dataset)
 

@@ -32,6 +32,7 @@ SEQUENCES = PAPER_SEQUENCES + ("merton1", "merton2")
 
 
 class DataNotFoundError(FileNotFoundError):
+    """The Oxford data directory, a sequence, or one of its files is missing."""
     pass
 
 
@@ -49,6 +50,7 @@ class Track:
 
 @dataclass(frozen=True)
 class Sequence:
+    """An Oxford sequence: its cameras (V, 3, 4) and the tracks seen in at least ``min_views`` views."""
     name: str
     cameras: np.ndarray        # (V, 3, 4)
     tracks: tuple              # Tracks seen in >= min_views views
@@ -82,6 +84,7 @@ def data_dir(path: str | os.PathLike | None = None) -> Path:
 
 
 def read_camera(path: Path) -> np.ndarray:
+    """A 3x4 camera matrix from a ``*.P`` file (ValueError naming the file when it is not one)."""
     P = np.loadtxt(path, dtype=float)
     if P.shape != (3, 4) or not np.all(np.isfinite(P)):
         raise ValueError(f"{path}: expected a finite 3x4 camera matrix, got shape {P.shape}")
@@ -89,6 +92,7 @@ def read_camera(path: Path) -> np.ndarray:
 
 
 def read_corners(path: Path) -> np.ndarray:
+    """The ``x y`` rows of a ``*.corners`` file, shape (K, 2)."""
     C = np.loadtxt(path, dtype=float, ndmin=2)
     if C.ndim != 2 or C.shape[1] != 2:
         raise ValueError(f"{path}: expected one 'x y' pair per line, got shape {C.shape}")

@@ -26,7 +26,6 @@ a result status.  Nothing in this module prints.
 """
 from __future__ import annotations
 
-import dataclasses
 import enum
 import json
 import math
@@ -41,8 +40,8 @@ import numpy as np
 
 from ..model.constraints import Method
 from ..model.regions import Point, Region
-from ..result import Status, TriangulationResult
-from ..solve.triangulate import SolvePath
+from ..result import TriangulationResult, jsonable
+from ..solve.options import SolvePath
 
 __all__ = ["ProblemFileError", "ProblemSpec", "PROBLEM_FIELDS", "region_types", "parse_problems",
            "parse_problem_text", "load_problem_file", "problem_to_dict", "problems_to_json",
@@ -312,41 +311,12 @@ def problems_to_json(problems: Iterable[dict], indent: int | None = 1) -> str:
     return json.dumps(doc, indent=indent, allow_nan=False)
 
 
-def jsonable(v):
-    """Arrays -> lists, enums -> values, non-finite floats -> None (JSON has no NaN)."""
-    if isinstance(v, np.ndarray):
-        return [jsonable(x) for x in v.tolist()]
-    if isinstance(v, np.generic):
-        v = v.item()
-    if isinstance(v, enum.Enum):
-        return v.value
-    if isinstance(v, float):
-        return v if math.isfinite(v) else None
-    if isinstance(v, Mapping):
-        return {str(k): jsonable(x) for k, x in v.items()}
-    if isinstance(v, (list, tuple)):
-        return [jsonable(x) for x in v]
-    return v
-
-
 def result_to_dict(result: TriangulationResult, **extra) -> dict:
-    """Every field of ``result`` as NaN-free JSON values, after ``extra`` (e.g. name, index)."""
-    d = {k: jsonable(v) for k, v in extra.items()}
-    for f in dataclasses.fields(TriangulationResult):
-        d[f.name] = jsonable(getattr(result, f.name))
-    return d
-
-
-def _tuples(v):
-    return tuple(_tuples(x) for x in v) if isinstance(v, list) else v
+    """``extra`` (e.g. name, index) then every field of ``result`` in its one JSON form
+    (:meth:`TriangulationResult.to_dict`: NaN-free, attempts as objects)."""
+    return {**{k: jsonable(v) for k, v in extra.items()}, **result.to_dict()}
 
 
 def result_from_dict(d: Mapping) -> TriangulationResult:
     """Inverse of :func:`result_to_dict` (extra keys ignored; ``null`` stays ``None``)."""
-    kw = {f.name: d[f.name] for f in dataclasses.fields(TriangulationResult) if f.name in d}
-    kw["status"] = Status(kw["status"])
-    if "attempts" in kw:
-        kw["attempts"] = _tuples(kw["attempts"])
-    if kw.get("timings") is None:
-        kw["timings"] = {}
-    return TriangulationResult(**kw)
+    return TriangulationResult.from_dict(d)

@@ -29,7 +29,8 @@ from sospoly import Polynomial
 
 from .geometry import fundamental_matrix
 
-__all__ = ["Method", "RANK_RTOL", "COEF_RTOL", "minors_matrix", "theorem1_constraints", "corollary1_constraints"]
+__all__ = ["Method", "RANK_RTOL", "COEF_RTOL", "minors_matrix", "theorem1_constraints", "corollary1_constraints",
+           "triple_minor_constraints", "THEOREM1_DENSE_MAX_VIEWS"]
 
 #: relative singular-value threshold for the numerical rank N2 of M1 (rows scaled to unit norm first).
 #: Directions below it are dropped: at an exactly feasible point their values are float
@@ -43,6 +44,7 @@ COEF_RTOL = 1e-12
 
 
 class Method(str, enum.Enum):
+    """Projection constraints: Theorem 1 (4x4 minors of M0, SVD-reduced) or Corollary 1 (epipolar constraints)."""
     THEOREM1 = "theorem1"
     COROLLARY1 = "corollary1"
 
@@ -144,11 +146,43 @@ def theorem1_constraints(cameras: np.ndarray, gens, x_index) -> tuple[list[Polyn
     return polys, {"N1": M1.shape[0], "N2": n2, "singular_values": S}
 
 
-def corollary1_constraints(cameras: np.ndarray, gens, x_index) -> tuple[list[Polynomial], dict]:
-    """The N(N-1)/2 epipolar constraints x~_i^T F_ij x~_j (SPEC §7), F_ij scaled to unit norm."""
+#: Theorem 1 with all C(2N, 4) minors is built for at most this many views; beyond, the minors of view
+#: triples (:func:`triple_minor_constraints`) are used (C(20, 4) = 4845 minors at N = 10 already).
+THEOREM1_DENSE_MAX_VIEWS = 8
+
+
+def triple_minor_constraints(cameras: np.ndarray, gens, x_index, triples) -> tuple[list[Polynomial], dict]:
+    """Theorem 1's constraints restricted to view triples: for each triple (i, j, k) the 4x4 minors of the
+    six rows of M0 of those views, reduced by SVD as in :func:`theorem1_constraints`.
+
+    Every minor of a triple is a minor of the full M0, so {m = 0} over the triples contains the image of
+    the scene points: a relaxation of rank M0 < 4 (the lower bound stays valid).  For a chain of
+    overlapping triples it is exact at generic configurations (consecutive triples share two views,
+    which fix the point).  ``info["views"]`` gives the triple of each returned polynomial."""
+    x_index = np.asarray(x_index)
+    polys, views, n1, n2 = [], [], 0, 0
+    for t in triples:
+        t = tuple(int(i) for i in t)
+        sub = np.concatenate([x_index[2 * i:2 * i + 2] for i in t])
+        p, info = theorem1_constraints(cameras[list(t)], gens, sub)
+        polys += p
+        views += [t] * len(p)
+        n1 += info["N1"]
+        n2 += info["N2"]
+    return polys, {"N1": n1, "N2": n2, "views": views}
+
+
+def corollary1_constraints(cameras: np.ndarray, gens, x_index, pairs=None) -> tuple[list[Polynomial], dict]:
+    """The epipolar constraints x~_i^T F_ij x~_j (SPEC §7) of the view pairs ``pairs`` (default all i < j),
+    F_ij scaled to unit norm.
+
+    A pair whose camera centres coincide (a duplicated view) has no fundamental matrix and carries no
+    epipolar constraint: it is skipped (``info["skipped"]``; the other pairs still tie both views to the
+    point).  ``info["pairs"]`` lists the pairs kept, in the order of the returned polynomials."""
     gens = tuple(gens)
     n = len(gens)
     N = cameras.shape[0]
+    pairs = [(i, j) for i in range(N) for j in range(i + 1, N)] if pairs is None else [tuple(p) for p in pairs]
 
     def var(k):
         e = [0] * n
@@ -157,15 +191,19 @@ def corollary1_constraints(cameras: np.ndarray, gens, x_index) -> tuple[list[Pol
 
     one = Polynomial.constant(1.0, gens)
     xt = [[var(2 * i), var(2 * i + 1), one] for i in range(N)]
-    polys = []
-    for i in range(N):
-        for j in range(i + 1, N):
+    polys, kept, skipped = [], [], []
+    for i, j in pairs:
+        try:
             F = fundamental_matrix(cameras[i], cameras[j])
-            F = F / np.linalg.norm(F)
-            p = Polynomial(gens, {})
-            for a in range(3):
-                for b in range(3):
-                    if F[a, b] != 0.0:
-                        p = p + float(F[a, b]) * xt[i][a] * xt[j][b]
-            polys.append(p)
-    return polys, {"N1": len(polys), "N2": len(polys)}
+        except ValueError:
+            skipped.append((i, j))
+            continue
+        F = F / np.linalg.norm(F)
+        p = Polynomial(gens, {})
+        for a in range(3):
+            for b in range(3):
+                if F[a, b] != 0.0:
+                    p = p + float(F[a, b]) * xt[i][a] * xt[j][b]
+        polys.append(p)
+        kept.append((i, j))
+    return polys, {"N1": len(polys), "N2": len(polys), "pairs": kept, "skipped": skipped}

@@ -1,30 +1,33 @@
 """Data normalisation that keeps the L2 problem the same (SPEC §9).
 
-Image side: view i is translated by its region centre t_i and **all** views are
-scaled by one common factor s, x' = s (x - t_i).  A common isotropic scale
-multiplies every distance by s, so gamma' = s gamma and the minimiser is
-unchanged (a per-view scale would re-weight the views and change the problem).
-The scale is chosen so that the unknowns are O(1) at the optimum: s = 1 / rho with
-rho the RMS residual of a *locally refined* L2 estimate of the region centres (the
-linear (DLT) estimate, then Levenberg-Marquardt on the reprojection residuals), an
-approximation of gamma* from above, floored at ``RHO_FLOOR_REL`` times the image
-coordinates' magnitude so that noise-free data does not blow the scale up.  Then
-c = 2N gamma'^2 is O(1), well above the solver's absolute tolerances (shrinking
-everything to O(1) pixels-per-image instead makes c ~ 1e-6 and the bounds
-unreliable).
+Image side: view i is translated by its region centre t_i and **all** views are scaled by one
+common factor s, x' = s (x - t_i).  A common isotropic scale multiplies every distance by s, so
+gamma' = s gamma and the minimiser is unchanged (a per-view scale would re-weight the views and
+change the problem).  The scale makes the unknowns O(1) at the optimum: s = 1 / rho with rho the RMS
+residual of a *locally refined* L2 estimate of the region centres (the linear (DLT) estimate, then
+Levenberg-Marquardt on the reprojection residuals), an approximation of gamma* from above.  Then
+c = 2N gamma'^2 is O(1), the scale at which the certificate tolerances of
+:class:`sospoly.Tolerances` are meaningful.
 
-Why the refined residual and not the DLT residual: with noisy cameras the DLT
-residual can exceed gamma* by two orders of magnitude (Example 5 at theta >= 0.1:
-rho_DLT ~ 30-200 for gamma* ~ 1).  The unknowns are then ~1e-2 at the optimum, so
-the fixed multiplier q = (1 + ||v||^2)^(delta/2 - 1) is ~1 there and the delta = 4
-relaxation loses most of its strength (measured: Example 5 cases with
-gamma_LB = 0.627 < gamma* = 0.653 at the DLT scale are certified at the refined
-scale).  The degree-2 certificate (q = 1) is invariant under this scaling.
+The floor: noise-free data have rho = 0, so rho is floored at ``RHO_FLOOR_REL`` times the views'
+median *pixel scale* (:func:`tritools.model.stacked.pixel_scales`: pixels per radian, the focal
+length of a finite camera) -- a property of the cameras, not of the coordinates' magnitude, so a
+principal point at 1e6 px does not inflate it (a floor relative to |x| made c ~ 1e-11 there and the
+certificate tolerances meaningless).  With the floor at 1e-5 f, the gap tolerance of a noise-free
+problem corresponds to ~1e-8 f px.
 
-World side: X = X0 + d X' with X0 the DLT estimate and d the median distance to
-the camera centres (an affine change of the 3D frame leaves reprojections
-unchanged).  Cameras become P_i' = T_i P_i H, each scaled to unit Frobenius norm
-(the overall scale of a camera does not change its projection).
+Why the refined residual and not the DLT residual: with noisy cameras the DLT residual can exceed
+gamma* by two orders of magnitude; the unknowns are then ~1e-2 at the optimum, the fixed multiplier
+q = (1 + ||v||^2)^(delta/2 - 1) is ~1 there and the delta = 4 relaxation loses most of its strength
+(measured on Example 5).
+
+World side: X = X0 + d X' with X0 the DLT estimate and d the median distance to the camera centres
+(an affine change of the 3D frame leaves reprojections unchanged).  Cameras become
+P_i' = T_i P_i H, each scaled to unit Frobenius norm.
+
+:func:`normalization_stack` computes all of this for a stack of problems with numpy;
+:func:`normalization_for` is that function applied to a stack of one (the regions' centres as the
+points), so the single-point and the batched paths normalise identically.
 """
 from __future__ import annotations
 
@@ -32,22 +35,21 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .geometry import camera_center, dlt, refine_l2
-from .regions import Point
+from .geometry import POINT_AT_INFINITY_RTOL
+from .stacked import dlt_stack, null_vectors, pixel_scales, project_stack, refine_points_stack
 
-__all__ = ["Normalization", "normalization_for", "RHO_FLOOR_REL", "SCALE_BOUNDS", "REFINE_TOL", "REFINE_MAX_NFEV"]
+__all__ = ["Normalization", "NormalizationStack", "normalization_for", "normalization_stack", "RHO_FLOOR_REL",
+           "SCALE_BOUNDS"]
 
-#: floor of the residual scale rho, relative to max(1, typical |centre|) of the views.
-RHO_FLOOR_REL = 1e-4
+#: floor of the residual scale rho, relative to the median pixel scale (focal length) of the views.
+RHO_FLOOR_REL = 1e-5
 #: the common image scale s is clipped to this range.
-SCALE_BOUNDS = (1e-6, 1e6)
-#: the local refinement that sets the scale: its tolerance and function evaluations (a few ms at most).
-REFINE_TOL = 1e-10
-REFINE_MAX_NFEV = 200
+SCALE_BOUNDS = (1e-8, 1e8)
 
 
 @dataclass(frozen=True)
 class Normalization:
+    """The normalisation of one problem: x' = scale (x - shifts[i]), X = origin + depth X'."""
     scale: float
     shifts: np.ndarray      # (N, 2)
     origin: np.ndarray      # (3,)
@@ -85,47 +87,93 @@ class Normalization:
         return self.shifts + np.asarray(xn, float) / self.scale
 
 
-def _view_distances(X: np.ndarray, cameras: np.ndarray, centers: np.ndarray) -> np.ndarray:
-    """Per-view distances ||Phi(X, P_i) - centre_i|| (inf where a projection is at infinity)."""
-    Xh = np.append(X, 1.0)
-    res = []
-    for P, c in zip(cameras, centers):
-        p = P @ Xh
-        res.append(np.linalg.norm(p[:2] / p[2] - c) if abs(p[2]) > 1e-300 else np.inf)
-    return np.array(res)
+@dataclass(frozen=True)
+class NormalizationStack:
+    """The normalisations of M problems (arrays with a leading problem axis); ``ok`` False where the data
+    could not be normalised (DLT at infinity, a camera centre at infinity, overflow); ``Xn`` the locally
+    refined estimate in the normalised frame (0, the DLT point, where the refinement failed)."""
+    scale: np.ndarray       # (M,)
+    shifts: np.ndarray      # (M, N, 2)
+    origin: np.ndarray      # (M, 3)
+    depth: np.ndarray       # (M,)
+    cameras_n: np.ndarray   # (M, N, 3, 4) normalised cameras, unit Frobenius norm each
+    Xn: np.ndarray          # (M, 3)
+    ok: np.ndarray          # (M,)
+
+    def item(self, m: int) -> Normalization:
+        return Normalization(float(self.scale[m]), self.shifts[m].copy(), self.origin[m].copy(), float(self.depth[m]))
+
+    def world_points(self, Xn: np.ndarray) -> np.ndarray:
+        return self.origin + self.depth[:, None] * Xn
+
+
+def _rho_floor(C: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """RHO_FLOOR_REL * median pixel scale per problem (fallback: 1e-4 max(1, median |x|) where no view has a
+    finite pixel scale)."""
+    ps = pixel_scales(C, x)
+    with np.errstate(all="ignore"):
+        med = np.nanmedian(np.where(np.isfinite(ps) & (ps > 0), ps, np.nan), axis=1) if ps.size else ps
+    fallback = 1e-4 * np.maximum(1.0, np.median(np.abs(x.reshape(len(x), -1)), axis=1))
+    return np.where(np.isfinite(med) & (med > 0), RHO_FLOOR_REL * med, fallback)
+
+
+def normalization_stack(C: np.ndarray, x: np.ndarray, ok: np.ndarray | None = None) -> NormalizationStack:
+    """The normalisation of the module docstring for M problems: cameras C (M, N, 3, 4), points x (M, N, 2)
+    (the regions' centres)."""
+    M, N = x.shape[:2]
+    ok = np.ones(M, bool) if ok is None else ok.copy()
+    X0, ok_dlt = dlt_stack(C, x)
+    ok &= ok_dlt
+    rho_floor = _rho_floor(C, x)
+    u0, _, fin0 = project_stack(C, X0)
+    with np.errstate(over="ignore", invalid="ignore"):
+        res = np.where(fin0[:, None], np.linalg.norm(u0 - x, axis=2), np.inf)
+        rho = np.where(fin0, np.sqrt(np.mean(np.where(fin0[:, None], res, 0.0) ** 2, axis=1)), 1.0)
+    rho = np.maximum(rho, rho_floor)
+    s = np.clip(1.0 / rho, *SCALE_BOUNDS)
+    a = null_vectors(C)
+    with np.errstate(over="ignore", invalid="ignore"):
+        a = a / np.linalg.norm(a, axis=2, keepdims=True)
+    affine = ~(np.abs(a[..., 3]) > POINT_AT_INFINITY_RTOL)
+    ok &= ~np.any(affine, axis=1)
+    with np.errstate(over="ignore", invalid="ignore"):
+        centres = a[..., :3] / np.where(affine, 1.0, a[..., 3])[..., None]
+        d = np.median(np.linalg.norm(centres - X0[:, None], axis=2), axis=1)
+    d = np.where(np.isfinite(d) & (d > 0), d, 1.0)
+    # P_i' = T_i P_i H / ||.||_F with T_i = [[s, 0, -s t_i], [0, s, -s t_i'], [0, 0, 1]], H = [[d I, X0], [0, 1]]
+    Xh = np.concatenate([X0, np.ones((M, 1))], axis=1)
+    CH = C.copy()
+    CH[..., :3] *= d[:, None, None, None]
+    CH[..., 3] = np.einsum("mnij,mj->mni", C, Xh)
+    Cn = CH.copy()
+    Cn[:, :, :2, :] = s[:, None, None, None] * (CH[:, :, :2, :] - x[..., None] * CH[:, :, 2:3, :])
+    with np.errstate(over="ignore", invalid="ignore"):
+        Cn /= np.linalg.norm(Cn, axis=(2, 3))[..., None, None]
+    ok &= np.all(np.isfinite(Cn), axis=(1, 2, 3))
+    Cn = np.where(ok[:, None, None, None], Cn, np.eye(3, 4))
+    # the scale from the residual of the locally refined estimate: refine from the DLT point (Xn = 0), then
+    # the exact image similarity x' -> k x', k = s_new / s
+    Xn, ok_r = refine_points_stack(Cn, np.zeros((M, N, 2)), np.zeros((M, 3)), ok.copy())
+    u, _, fin = project_stack(Cn, Xn)
+    r = np.sqrt(np.mean(np.sum(np.where(fin[:, None, None], u, 0.0) ** 2, axis=2), axis=1)) / s
+    use = ok_r & fin & np.isfinite(r)
+    rho_ref = np.where(use, np.maximum(np.minimum(r, rho), rho_floor), rho)
+    s_new = np.clip(1.0 / rho_ref, *SCALE_BOUNDS)
+    Cn[:, :, :2, :] *= (s_new / s)[:, None, None, None]
+    Cn /= np.linalg.norm(Cn, axis=(2, 3))[..., None, None]
+    return NormalizationStack(s_new, x.copy(), X0, d, Cn, np.where(use[:, None], Xn, 0.0), ok)
 
 
 def normalization_for(cameras: np.ndarray, regions, enabled: bool = True) -> Normalization:
+    """The normalisation of one problem: :func:`normalization_stack` on a stack of one, with the regions'
+    centres as the points (identity when ``enabled`` is False; the centres as shifts with unit scale when
+    the data cannot be normalised, e.g. the DLT estimate is at infinity)."""
     N = len(regions)
     if not enabled:
         return Normalization.identity(N)
     centers = np.array([r.center for r in regions], float)
-    try:
-        X0 = np.asarray(dlt(cameras, centers), float)
-        if not np.all(np.isfinite(X0)):
-            raise ValueError
-    except (ValueError, np.linalg.LinAlgError):
-        X0 = None
-    rho_floor = RHO_FLOOR_REL * max(1.0, float(np.median(np.abs(centers))))
-    if X0 is None:
+    st = normalization_stack(np.asarray(cameras, float)[None], centers[None])
+    if not st.ok[0]:
         return Normalization(1.0, centers, np.zeros(3), 1.0)
-    # image scale from the refined residual; the world frame stays at the DLT estimate (the
-    # refinement may run towards a point at infinity, and a huge depth d ruins the cameras'
-    # conditioning: Example 5 seed 7 case 455 had d ~ 1e8 and a bound 2e-6 above f in c units)
-    X_ref = refine_l2(X0, cameras, [Point(c) for c in centers], xtol=REFINE_TOL, ftol=REFINE_TOL,
-                      max_nfev=REFINE_MAX_NFEV)
-    res = _view_distances(X0, cameras, centers)
-    if X_ref is not None:
-        res_ref = _view_distances(X_ref, cameras, centers)
-        if np.sum(res_ref ** 2) < np.sum(res ** 2):          # the refined point only where it is better
-            res = res_ref
-    rho = float(np.sqrt(np.mean(res ** 2))) if np.all(np.isfinite(res)) else 1.0
-    rho = max(rho, rho_floor)
-    s = float(np.clip(1.0 / rho, *SCALE_BOUNDS))
-    dists = []
-    for P in cameras:
-        C = camera_center(P)
-        if C is not None and np.all(np.isfinite(C)):
-            dists.append(np.linalg.norm(C - X0))
-    d = float(np.median(dists)) if dists and np.median(dists) > 0 else 1.0
-    return Normalization(s, centers, X0, d)
+    return st.item(0)
+

@@ -1,13 +1,23 @@
 """The polynomial program of uncertain multiple-view L2 triangulation (SPEC §2, §5).
 
-v = (x_1, ..., x_N, y_1, ..., y_N) with x_i in R^2 the image point of view i and
-y_i in R^{n_i} the auxiliary variables of region i.  Then
+v = (x_1, ..., x_N, y_1, ..., y_N) with x_i in R^2 the image point of view i and y_i in R^{n_i}
+the auxiliary variables of region i.  Then
 
     f = sum_i f_i,   g = (g_1, ..., g_N, m2),   h = (h_1, ..., h_N),
     gamma*^2 = (1/(2N)) inf f  s.t.  g = 0, h >= 0            (the paper's (41))
 
-Regions only declare (n_i, f_i, g_i, h_i); the projection constraints m2 come
-from :mod:`tritools.model.constraints`.  Nothing here solves anything.
+Regions only declare (n_i, f_i, g_i, h_i); the projection constraints m2 come from
+:mod:`tritools.model.constraints`.  Every constraint records the views it involves
+(``eq_views`` / ``ineq_views``) and every view its variables (``view_vars``): that is all a sparse
+certificate needs to know (the solve layer turns view cliques into variable cliques for
+:func:`sospoly.clique_shape`).  Nothing here solves anything.
+
+Formulations (``formulation``):
+
+* ``"dense"`` -- the paper's: Theorem 1's minors of all views (C(2N, 4), for N <=
+  :data:`~tritools.model.constraints.THEOREM1_DENSE_MAX_VIEWS`) or Corollary 1's epipolar pairs;
+* ``"views"`` -- for sparse certificates over a chain of view triples: every epipolar pair (they
+  enter the dense degree-2 block) and, for Theorem 1, the minors of each triple of the chain.
 """
 from __future__ import annotations
 
@@ -17,9 +27,12 @@ import numpy as np
 
 from sospoly import Polynomial, variables
 
-from .constraints import Method, corollary1_constraints, theorem1_constraints
+from .constraints import (THEOREM1_DENSE_MAX_VIEWS, Method, corollary1_constraints, theorem1_constraints,
+                          triple_minor_constraints)
 
-__all__ = ["TriangulationProblem", "build_problem"]
+__all__ = ["TriangulationProblem", "build_problem", "view_chain", "FORMULATIONS"]
+
+FORMULATIONS = ("dense", "views")
 
 
 @dataclass(frozen=True)
@@ -33,15 +46,32 @@ class TriangulationProblem:
     method: Method
     projection: tuple             # the m2 polynomials alone
     info: dict = field(default_factory=dict)
+    view_vars: tuple = ()         # per view: indices in gens of x_i and y_i
+    eq_views: tuple = ()          # per equality: the views it involves
+    ineq_views: tuple = ()        # per inequality: the views it involves
+    formulation: str = "dense"
 
     def image_points(self, v: np.ndarray) -> np.ndarray:
         """(N, 2) image points x_i read from a vector v in ``gens`` order."""
         return np.asarray(v, float)[self.x_index].reshape(self.n_views, 2)
 
+    def variables_of_views(self, views) -> frozenset:
+        return frozenset(i for view in views for i in self.view_vars[view])
 
-def build_problem(cameras: np.ndarray, regions, method: Method = Method.THEOREM1) -> TriangulationProblem:
+
+def view_chain(n_views: int, width: int = 3) -> tuple:
+    """Consecutive view groups of ``width`` (the chain of triples by default): a chordal band whose
+    clique tree is a path; one group of all views when there are at most ``width``."""
+    width = max(1, min(int(width), n_views))
+    return tuple(tuple(range(k, k + width)) for k in range(n_views - width + 1))
+
+
+def build_problem(cameras: np.ndarray, regions, method: Method = Method.THEOREM1,
+                  formulation: str = "dense") -> TriangulationProblem:
     """Assemble (f, g, h) for validated cameras (N, 3, 4) and regions (SPEC §2 table)."""
     method = Method(method)
+    if formulation not in FORMULATIONS:
+        raise ValueError(f"formulation must be one of {FORMULATIONS}, got {formulation!r}")
     N = len(regions)
     names = [f"x{i + 1}_{k + 1}" for i in range(N) for k in range(2)]
     for i, reg in enumerate(regions):
@@ -50,19 +80,36 @@ def build_problem(cameras: np.ndarray, regions, method: Method = Method.THEOREM1
     gens = v[0].gens
     x_index = np.arange(2 * N)
     f = Polynomial(gens, {})
-    eq, ineq = [], []
+    eq, ineq, eq_views, ineq_views, view_vars = [], [], [], [], []
     pos = 2 * N
     for i, reg in enumerate(regions):
         xi = (v[2 * i], v[2 * i + 1])
         yi = tuple(v[pos:pos + reg.n_aux])
+        view_vars.append((2 * i, 2 * i + 1) + tuple(range(pos, pos + reg.n_aux)))
         pos += reg.n_aux
         polys = reg.polynomials(xi, yi)
         f = f + polys.f
         eq += [p.with_gens(gens) for p in polys.eq]
         ineq += [p.with_gens(gens) for p in polys.ineq]
-    if method == Method.THEOREM1:
+        eq_views += [(i,)] * len(polys.eq)
+        ineq_views += [(i,)] * len(polys.ineq)
+    if method == Method.THEOREM1 and formulation == "dense":
+        if N > THEOREM1_DENSE_MAX_VIEWS:
+            raise ValueError(f"Theorem 1 with all minors is built for at most {THEOREM1_DENSE_MAX_VIEWS} views "
+                             f"(C(2N, 4) = {_comb4(2 * N)} minors for N = {N}); use the 'views' formulation")
         proj, info = theorem1_constraints(cameras, gens, x_index)
+        proj_views = [tuple(range(N))] * len(proj)
     else:
         proj, info = corollary1_constraints(cameras, gens, x_index)
+        proj_views = list(info["pairs"])
+        if method == Method.THEOREM1:
+            minors, tinfo = triple_minor_constraints(cameras, gens, x_index, view_chain(N))
+            proj, proj_views = proj + minors, proj_views + tinfo["views"]
+            info = {**info, "N1": info["N1"] + tinfo["N1"], "N2": info["N2"] + tinfo["N2"], "triples": view_chain(N)}
     return TriangulationProblem(gens, x_index, f.with_gens(gens), tuple(eq) + tuple(proj), tuple(ineq), N,
-                                method, tuple(proj), info)
+                                method, tuple(proj), info, tuple(view_vars), tuple(eq_views) + tuple(proj_views),
+                                tuple(ineq_views), formulation)
+
+
+def _comb4(n: int) -> int:
+    return n * (n - 1) * (n - 2) * (n - 3) // 24

@@ -1,163 +1,107 @@
 """Batches of triangulation problems: one result per input, in input order, always.
 
-:func:`triangulate_many` (issue #5):
+:func:`triangulate_many` (and :func:`tritools.triangulate_points`):
 
-1. every input is checked for being a ``(cameras, regions)`` pair; Corollary 1 problems
-   with point regions at delta = 2 and ``path="auto"`` are grouped by their number of
-   views N and certified by verification with one vectorised computation per group
-   (:func:`tritools.solve.fastpath.fast_results`: local L2 optimum, KKT multipliers,
-   Lagrangian bound -- the degree-2 certificate without an SDP);
-2. the rest -- the fast path's failures (sent with ``path="sdp"``; their ``attempts``
-   start with ``(2, "verification_failed", None, None)`` exactly as
-   :func:`~tritools.triangulate` records it) and every problem the fast path does not
-   apply to -- are solved one by one with :func:`safe_triangulate` plus ``retries``, in
+1. every input is read as a ``(cameras, regions)`` pair; point-region problems (regions that are
+   :class:`~tritools.model.regions.Point` objects or an (N, 2) array) are grouped by their number of
+   views and go through the vectorised paths of :class:`tritools.solve.points.PointStack`;
+2. everything else -- other regions, problems a vectorised path handed back, later degrees of the
+   plan -- is solved one by one by :func:`tritools.triangulate` (plus the ``retries`` steps), in
    chunks of ``chunk_size`` submitted to an executor;
 3. results are put back in input order.
 
-A failing item (bad input, solver error, anything raised, a crashed worker) becomes a
-:class:`~tritools.result.TriangulationResult` with a status and a message
-(``INVALID_INPUT`` for bad input, ``SOLVER_FAILED`` otherwise); it never stops or
-shrinks the batch.  ``certified_by`` says which path certified each result
-(``"verification"``, ``"sdp"`` or ``None``).
+A failing item (bad input, solver error, anything raised, a crashed worker) becomes a result with a
+status and a message (``INVALID_INPUT`` for bad input, ``SOLVER_FAILED`` otherwise); it never stops or
+shrinks the batch.  Each result's ``attempts`` lists every step, batched ones included.
 
-Executors: any :class:`concurrent.futures.Executor` (``submit``), or a
-``dask.distributed.Client`` (its ``get_executor()`` is used).  With ``executor=None``
-the per-item work runs in a local :class:`~concurrent.futures.ProcessPoolExecutor`
-with the *spawn* start method (fork deadlocks Clarabel's thread pool) when there are
-at least ``LOCAL_PROCESS_MIN_ITEMS`` items for it and more than one CPU -- starting
-spawned workers costs about a second each, which ~100 SDP solves pay for -- else in
-this process.  Scripts using the local pool need the usual
-``if __name__ == "__main__":`` guard of the spawn start method; if the pool breaks,
-the remaining chunks run in this process.
+Executors: any :class:`concurrent.futures.Executor` (``submit``), or a ``dask.distributed.Client``
+(its ``get_executor()`` is used).  With ``executor=None`` the per-item work runs in a local
+:class:`~concurrent.futures.ProcessPoolExecutor` with the *spawn* start method (fork deadlocks
+Clarabel's thread pool) when there are at least ``LOCAL_PROCESS_MIN_ITEMS`` items and more than one
+CPU, else in this process.  Scripts using the local pool need the usual ``if __name__ ==
+"__main__":`` guard of the spawn start method.  When a pool breaks (a worker killed), the chunks it
+did not finish are retried in this process before anything is reported as failed.
 """
 from __future__ import annotations
 
 import concurrent.futures as cf
 import dataclasses
+import logging
 import os
 import time
 from typing import Iterable, Sequence
 
 import numpy as np
 
-from sospoly import DEFAULT_TOLERANCES
-
-from ..model.constraints import Method
-from .fastpath import fast_results
 from ..model.regions import Point
-from ..result import Status, TriangulationResult
-from .sdp_batch import sdp_results
-from .triangulate import SolvePath, triangulate
+from ..result import Attempt, Status, TriangulationResult
+from .options import TriangulationOptions, options_from
+from .points import PointStack
+from .triangulate import triangulate
 
-__all__ = ["triangulate_many", "safe_triangulate", "RetryStep", "LOCAL_PROCESS_MIN_ITEMS", "FAST_CHUNK",
-           "DEFAULT_CHUNK_SIZE"]
+__all__ = ["triangulate_many", "safe_triangulate", "solve_point_problems", "RetryStep", "LOCAL_PROCESS_MIN_ITEMS",
+           "DEFAULT_CHUNK_SIZE", "PROGRESS_MIN_ITEMS"]
+
+log = logging.getLogger(__name__)
 
 #: a retry step: (method, delta) tried when the previous steps did not certify.
 RetryStep = tuple
 #: with executor=None, a local process pool is used from this many per-item (SDP) problems on.
 LOCAL_PROCESS_MIN_ITEMS = 200
-#: the vectorised fast path handles at most this many problems per numpy call (bounds memory).
-FAST_CHUNK = 4096
 #: per-item problems per executor task.
 DEFAULT_CHUNK_SIZE = 8
-_VERIFICATION_FAILED = (2, "verification_failed", None, None)
+#: with progress=None a bar is shown from this many problems on (and only when tqdm is installed).
+PROGRESS_MIN_ITEMS = 1000
 
 
-def safe_triangulate(cameras, regions, method="corollary1", delta=None, max_delta=None, **kw) -> TriangulationResult:
+def safe_triangulate(cameras, regions, options: TriangulationOptions) -> TriangulationResult:
     """:func:`triangulate` that returns a failed result instead of raising."""
     t0 = time.perf_counter()
     try:
-        return triangulate(cameras, regions, method, delta, max_delta, **kw)
+        return triangulate(cameras, regions, options=options)
     except (ValueError, TypeError) as exc:
         status, msg = Status.INVALID_INPUT, f"{type(exc).__name__}: {exc}"
     except Exception as exc:  # noqa: BLE001 - a batch records every failure
+        log.debug("triangulate failed", exc_info=True)
         status, msg = Status.SOLVER_FAILED, f"{type(exc).__name__}: {exc}"
-    return TriangulationResult(method=str(getattr(method, "value", method)), status=status, message=msg,
-                               timings={"total": time.perf_counter() - t0})
+    return TriangulationResult(method=options.method.value, status=status, message=msg,
+                               timings={"total": time.perf_counter() - t0},
+                               attempts=(Attempt(options.method.value, options.delta, status.value, step="call"),))
 
 
-def _failed(method, status: Status, message: str) -> TriangulationResult:
-    return TriangulationResult(method=str(getattr(method, "value", method)), status=status, message=message)
+def _failed(opts: TriangulationOptions, status: Status, message: str) -> TriangulationResult:
+    return TriangulationResult(method=opts.method.value, status=status, message=message)
 
 
-def _solve_item(cams, regions, method, delta, max_delta, path, prefix, retries, kw) -> TriangulationResult:
+def _solve_item(cams, regions, opts: TriangulationOptions, prefix: tuple, retries) -> TriangulationResult:
     """One problem through :func:`safe_triangulate`, then the ``retries`` steps while not certified."""
-    res = safe_triangulate(cams, regions, method, delta, max_delta, path=path, **kw)
+    res = safe_triangulate(cams, regions, opts)
+    tried = list(prefix) + list(res.attempts)
     if res.status == Status.INVALID_INPUT:
-        prefix = ()          # the fast path did not fail: it could not read the data
-    tried = list(prefix) + (list(res.attempts) or [(res.delta, res.status.value, res.gamma_lb, res.gamma_ub)])
-    if res.status != Status.OPTIMAL:
+        tried = list(res.attempts)          # the batch did not fail on it: it could not read the data
+    if not res.status.certified:
         for m, d in retries:
-            r2 = safe_triangulate(cams, regions, m, d, d, path=path, **kw)
-            tried.append((f"{getattr(m, 'value', m)}:{r2.delta}", r2.status.value, r2.gamma_lb, r2.gamma_ub))
-            if r2.status == Status.OPTIMAL:
+            r2 = safe_triangulate(cams, regions, opts.replace(method=m, delta=d, max_delta=d))
+            tried.append(Attempt(r2.method, r2.delta, r2.status.value, r2.gamma_lb, r2.gamma_ub, "retry", r2.sparsity))
+            if r2.status.certified:
                 res = r2
                 break
     return dataclasses.replace(res, attempts=tuple(tried))
 
 
-def _run_chunk(items, method, delta, max_delta, retries, kw) -> list:
-    """Executor task: [(index, result)] for items [(index, cameras, regions, path, prefix)]."""
-    return [(i, _solve_item(c, r, method, delta, max_delta, p, pre, retries, kw)) for i, c, r, p, pre in items]
+def _run_chunk(items, retries) -> list:
+    """Executor task: [(index, result)] for items [(index, cameras, regions, options, prefix)]."""
+    return [(i, _solve_item(c, r, o, pre, retries)) for i, c, r, o, pre in items]
 
 
-def _progress_bar(total: int, enabled: bool):
-    if not enabled:
+def _progress_bar(total: int, progress):
+    if progress is False or (progress is None and total < PROGRESS_MIN_ITEMS):
         return None
     try:
         from tqdm import tqdm
     except ImportError:  # optional extra 'progress': silently no bar
         return None
     return tqdm(total=total, desc="triangulating", leave=False)
-
-
-def _fast_eligible(method, delta, path, kw) -> bool:
-    try:
-        m = Method(method)
-    except ValueError:
-        return False
-    return path == SolvePath.AUTO and m == Method.COROLLARY1 and delta in (None, 2) and kw.get("normalize", True)
-
-
-#: options of triangulate under which the batched delta = 2 SDP (tritools.solve.sdp_batch) gives its answer:
-#: these values (ANY: every value is handled by the batch; backend must be left to the default).
-_ANY = object()
-_SDP_BATCH_DEFAULTS = {"refine": _ANY, "tolerances": _ANY, "normalize": True, "multiplier": "fixed", "form": "image",
-                       "backend": None}
-
-
-def _sdp_batch_eligible(method, delta, path, kw) -> bool:
-    try:
-        m = Method(method)
-    except ValueError:
-        return False
-    if path != SolvePath.SDP or m != Method.COROLLARY1 or delta not in (None, 2):
-        return False
-    for k, v in kw.items():
-        if k not in _SDP_BATCH_DEFAULTS:
-            return False
-        want = _SDP_BATCH_DEFAULTS[k]
-        if want is _ANY:
-            continue
-        if want is None or isinstance(want, bool):
-            if v is not want:
-                return False
-        elif not isinstance(v, str) or str(getattr(v, "value", v)) != want:
-            return False
-    return True
-
-
-def _as_point_problem(cams, regions):
-    """(cameras (N, 3, 4), centres (N, 2)) when the item is a well-shaped point-region problem, else None."""
-    if not isinstance(regions, (list, tuple)) or not all(isinstance(r, Point) for r in regions):
-        return None
-    try:
-        C = np.asarray(cams, dtype=float)
-    except (TypeError, ValueError):
-        return None
-    if C.ndim != 3 or C.shape[1:] != (3, 4) or C.shape[0] != len(regions) or len(regions) < 2:
-        return None
-    return C, np.array([r.x for r in regions])
 
 
 def _local_executor(n_items: int, n_chunks: int):
@@ -174,124 +118,187 @@ def _worker_init() -> None:
     os.environ["RUST_BACKTRACE"] = "0"   # Clarabel panics are caught and reported; no backtrace noise
 
 
-def triangulate_many(problems: Iterable[Sequence], method="corollary1", delta=None, max_delta=None, *,
-                     path: SolvePath | str = SolvePath.AUTO, executor=None, progress: bool = True,
-                     retries: Sequence[RetryStep] = (), chunk_size: int = DEFAULT_CHUNK_SIZE,
-                     **kw) -> list[TriangulationResult]:
-    """Triangulate every (cameras, regions) pair; results in input order, one per input.
-
-    Parameters
-    ----------
-    problems : iterable of (cameras (N, 3, 4), regions) pairs
-    method, delta, max_delta, kw : as for :func:`tritools.triangulate`
-    path : "auto" (certification by verification first, vectorised over problems with the
-        same structure; SDP fallback) or "sdp" (always the SDP)
-    executor : None, a :class:`concurrent.futures.Executor`, or a ``dask.distributed.Client``
-        (see the module docstring for the default)
-    progress : a tqdm bar (optional extra ``progress``; silently none without tqdm)
-    retries : (method, delta) steps tried in order on items the first call did not certify
-        (e.g. ``[("corollary1", 4), ("theorem1", None)]``); the first certified result is
-        kept, else the first call's.  Each result's ``attempts`` lists them all.
-    chunk_size : per-item problems per executor task
-    """
+def _as_point_problem(cams, regions):
+    """(cameras (N, 3, 4), points (N, 2)) when the item is a well-shaped point-region problem, else None
+    (the item then goes through :func:`triangulate`, whose validation reports any problem)."""
+    if isinstance(regions, np.ndarray):
+        x = regions
+        if x.ndim != 2 or x.shape[1] != 2 or not np.issubdtype(x.dtype, np.number) or np.iscomplexobj(x):
+            return None
+        x = x.astype(float)
+    elif isinstance(regions, (list, tuple)) and regions and all(isinstance(r, Point) for r in regions):
+        x = np.array([r.x for r in regions])
+    else:
+        return None
     try:
-        path = SolvePath(path)
-    except ValueError:
-        raise ValueError(f"path must be 'sdp' or 'auto', got {path!r}") from None
-    if int(chunk_size) != chunk_size or chunk_size < 1:
-        raise ValueError(f"chunk_size must be a positive integer, got {chunk_size!r}")
-    problems = list(problems)
-    results: list[TriangulationResult | None] = [None] * len(problems)
-    bar = _progress_bar(len(problems), progress)
-    fast = _fast_eligible(method, delta, path, kw)
-    sdp_batch = _sdp_batch_eligible(method, delta, path, kw)
-    groups: dict[int, list] = {}
-    items = []                                          # (index, cameras, regions, path, prefix)
-    for i, prob in enumerate(problems):
-        try:
-            cams, regions = prob
-        except (TypeError, ValueError):
-            results[i] = _failed(method, Status.INVALID_INPUT,
-                                 f"problems[{i}] must be a (cameras, regions) pair, got {type(prob).__name__}")
-            continue
-        pp = _as_point_problem(cams, regions) if fast or sdp_batch else None
-        if pp is None:
-            items.append((i, cams, regions, path.value, ()))
-        else:
-            groups.setdefault(len(regions), []).append((i, *pp, cams, regions))
-    n_done = len(problems) - len(items) - sum(map(len, groups.values()))
-    if bar is not None:
-        bar.update(n_done)
+        C = np.asarray(cams)
+        if not np.issubdtype(C.dtype, np.number) or np.iscomplexobj(C):
+            return None
+        C = C.astype(float)
+    except (TypeError, ValueError):
+        return None
+    if C.ndim != 3 or C.shape[1:] != (3, 4) or C.shape[0] != len(x) or len(x) < 2:
+        return None
+    return C, x
 
-    tol = kw.get("tolerances", DEFAULT_TOLERANCES)
-    # delta = 2 is the last degree when given as such (triangulate's rule) and no retries follow
-    final = not retries and (max_delta == 2 or (delta == 2 and max_delta is None))
-    for group in groups.values():
-        for start in range(0, len(group), FAST_CHUNK):
-            part = group[start:start + FAST_CHUNK]
-            C, x = np.array([g[1] for g in part]), np.array([g[2] for g in part])
-            try:
-                if sdp_batch:   # the delta = 2 SDP for the whole group; what it hands back goes per point
-                    prefix = ()
-                    fres = sdp_results(C, x, tolerances=tol, refine=kw.get("refine", True), final=final,
-                                       method=Method.COROLLARY1.value)
-                else:
-                    prefix = (_VERIFICATION_FAILED,)
-                    fres = fast_results(C, x, tolerances=tol, method=Method.COROLLARY1.value)
-            except Exception:  # noqa: BLE001 - e.g. LinAlgError on extreme data: every item goes per point
-                fres = [None] * len(part)
-            for (i, _, _, cams, regions), r in zip(part, fres):
-                if r is None:
-                    items.append((i, cams, regions, SolvePath.SDP.value, prefix))
-                else:
-                    results[i] = r
-            if bar is not None:
-                bar.update(sum(r is not None for r in fres))
 
-    items.sort(key=lambda it: it[0])
+class BatchOutcome:
+    """Results of a batch: vectorised ones kept in their :class:`PointStack` arrays, per-item ones as objects."""
+
+    def __init__(self, n: int):
+        self.objects: dict[int, TriangulationResult] = {}
+        self.stacked: dict[int, tuple] = {}         # index -> (stack, row)
+        self.n = n
+
+    def result(self, i: int) -> TriangulationResult:
+        if i in self.objects:
+            return self.objects[i]
+        stack, m = self.stacked[i]
+        return stack.result(m)
+
+    def results(self) -> list[TriangulationResult]:
+        return [self.result(i) for i in range(self.n)]
+
+    def arrays(self) -> dict:
+        """X (n, 3), gamma_lb, gamma_ub, status, optimal, in_front, delta, certified_by as arrays (vectorised
+        results copied from their stacks, per-item ones read from their objects)."""
+        n = self.n
+        out = {"X": np.full((n, 3), np.nan), "gamma_lb": np.full(n, np.nan), "gamma_ub": np.full(n, np.nan),
+               "status": np.full(n, None, dtype=object), "optimal": np.zeros(n, bool),
+               "in_front": np.zeros(n, bool), "delta": np.full(n, -1), "certified_by": np.full(n, None, dtype=object)}
+        by_stack: dict[int, tuple] = {}
+        for i, (stack, m) in self.stacked.items():
+            by_stack.setdefault(id(stack), (stack, [], []))[1].append(i)
+            by_stack[id(stack)][2].append(m)
+        for stack, idx, rows in by_stack.values():
+            idx, rows = np.array(idx), np.array(rows)
+            for name in out:
+                out[name][idx] = getattr(stack, name)[rows]
+        for i, r in self.objects.items():
+            out["status"][i] = r.status.value
+            for name in ("gamma_lb", "gamma_ub", "optimal", "in_front", "delta", "certified_by"):
+                v = getattr(r, name)
+                if v is not None:
+                    out[name][i] = v
+            if r.X is not None:
+                out["X"][i] = r.X
+        return out
+
+
+def _run_items(items, retries, executor, chunk_size: int, store) -> None:
+    """Solve per-item problems in chunks through ``executor`` (see the module docstring)."""
     chunks = [items[k:k + chunk_size] for k in range(0, len(items), chunk_size)]
-    args = (method, delta, max_delta, tuple(retries), kw)
-
-    def store(pairs):
-        for i, r in pairs:
-            results[i] = r
-        if bar is not None:
-            bar.update(len(pairs))
-
+    if not chunks:
+        return
     own = None
     ex = executor
     if ex is not None and hasattr(ex, "get_executor"):       # dask.distributed.Client
         ex = ex.get_executor()
-    elif ex is None and chunks:
+    elif ex is None:
         ex = own = _local_executor(len(items), len(chunks))
+    pending = list(range(len(chunks)))
     try:
-        pending = list(range(len(chunks)))
         if ex is not None:
-            futures = {ex.submit(_run_chunk, chunks[k], *args): k for k in pending}
-            for fut in cf.as_completed(futures):
-                k = futures[fut]
-                try:
-                    store(fut.result())
-                    pending.remove(k)
-                except cf.BrokenExecutor:
-                    if own is None:
+            futures = {}
+            try:
+                futures = {ex.submit(_run_chunk, chunks[k], retries): k for k in pending}
+                for fut in cf.as_completed(futures):
+                    k = futures[fut]
+                    try:
+                        store(fut.result())
+                        pending.remove(k)
+                    except cf.BrokenExecutor:
                         raise
-                    break                                        # our own pool broke: finish in-process
-                except Exception as exc:  # noqa: BLE001 - a failed task fails its items, not the batch
-                    store([(it[0], _failed(method, Status.SOLVER_FAILED, f"executor task failed: "
-                                                                         f"{type(exc).__name__}: {exc}"))
-                           for it in chunks[k]])
-                    pending.remove(k)
-        for k in list(pending) if ex is None or own is not None else []:
-            if all(results[it[0]] is None for it in chunks[k]):
-                store(_run_chunk(chunks[k], *args))
-    except cf.BrokenExecutor as exc:
-        for k in pending:
-            store([(it[0], _failed(method, Status.SOLVER_FAILED, f"executor broke: {exc}")) for it in chunks[k]
-                   if results[it[0]] is None])
+                    except Exception as exc:  # noqa: BLE001 - a failed task fails its items, not the batch
+                        log.warning("executor task failed: %s", exc)
+                        store([(it[0], _failed(it[3], Status.SOLVER_FAILED,
+                                               f"executor task failed: {type(exc).__name__}: {exc}"))
+                               for it in chunks[k]])
+                        pending.remove(k)
+            except cf.BrokenExecutor as exc:       # a worker died: the unfinished chunks are retried here
+                log.warning("executor broke (%s); retrying %d chunk(s) in this process", exc, len(pending))
+        for k in list(pending):
+            store(_run_chunk(chunks[k], retries))
+            pending.remove(k)
     finally:
         if own is not None:
             own.shutdown(wait=True, cancel_futures=True)
+
+
+def solve_point_problems(problems, opts: TriangulationOptions, *, executor=None, progress=None, retries=(),
+                         chunk_size: int = DEFAULT_CHUNK_SIZE) -> BatchOutcome:
+    """The engine of :func:`triangulate_many` (module docstring); ``problems`` a sequence of (cameras, regions)."""
+    n = len(problems)
+    out = BatchOutcome(n)
+    bar = _progress_bar(n, progress)
+    groups: dict[int, list] = {}
+    items = []                                       # (index, cameras, regions, options, prefix)
+    for i, prob in enumerate(problems):
+        try:
+            cams, regions = prob
+        except (TypeError, ValueError):
+            out.objects[i] = _failed(opts, Status.INVALID_INPUT,
+                                     f"problems[{i}] must be a (cameras, regions) pair, got {type(prob).__name__}")
+            continue
+        pp = _as_point_problem(cams, regions)
+        if pp is None:
+            items.append((i, cams, regions, opts, ()))
+        else:
+            groups.setdefault(len(pp[1]), []).append((i, *pp))
+    if bar is not None:
+        bar.update(len(out.objects))
+    for group in groups.values():
+        idx = [g[0] for g in group]
+        stack = PointStack(np.array([g[1] for g in group]), np.array([g[2] for g in group]), opts).run()
+        for m, i in enumerate(idx):
+            if stack.done[m]:
+                out.stacked[i] = (stack, m)
+            else:
+                items.append((i, *stack.item(m), stack.todo.get(m, opts), stack.prefix[m]))
+        if bar is not None:
+            bar.update(int(stack.done.sum()))
+
+    def store(pairs):
+        for i, r in pairs:
+            out.objects[i] = r
+        if bar is not None:
+            bar.update(len(pairs))
+
+    items.sort(key=lambda it: it[0])
+    try:
+        _run_items(items, tuple(retries), executor, chunk_size, store)
+    finally:
         if bar is not None:
             bar.close()
-    return results
+    return out
+
+
+def triangulate_many(problems: Iterable[Sequence], method=None, delta=None, max_delta=None, *,
+                     options: TriangulationOptions | None = None, executor=None, progress: bool | None = None,
+                     retries: Sequence[RetryStep] = (), chunk_size: int = DEFAULT_CHUNK_SIZE,
+                     **overrides) -> list[TriangulationResult]:
+    """Triangulate every (cameras, regions) pair; results in input order, one per input.
+
+    Parameters
+    ----------
+    problems : iterable of (cameras (N, 3, 4), regions) pairs; regions as for :func:`tritools.triangulate`
+    method, delta, max_delta, options, overrides : as for :func:`tritools.triangulate` (one
+        :class:`~tritools.solve.options.TriangulationOptions` for the whole batch; the default path "auto"
+        certifies by verification first, vectorised over problems with the same structure)
+    executor : None, a :class:`concurrent.futures.Executor`, or a ``dask.distributed.Client``
+        (see the module docstring for the default)
+    progress : a tqdm bar: True, False, or None (default: only for batches of PROGRESS_MIN_ITEMS or more)
+    retries : (method, delta) steps tried in order on items the first call did not certify
+        (e.g. ``[("corollary1", 4), ("theorem1", None)]``); the first certified result is kept, else the
+        first call's.  Each result's ``attempts`` lists them all.
+    chunk_size : per-item problems per executor task
+    """
+    opts = options_from(options, method=method, delta=delta, max_delta=max_delta, **overrides)
+    if isinstance(chunk_size, bool) or int(chunk_size) != chunk_size or chunk_size < 1:
+        raise ValueError(f"chunk_size must be a positive integer, got {chunk_size!r}")
+    for step in retries:
+        if not (isinstance(step, (tuple, list)) and len(step) == 2):
+            raise ValueError(f"retries must be (method, delta) pairs, got {step!r}")
+        opts.replace(method=step[0], delta=step[1])           # validated like every option
+    return solve_point_problems(list(problems), opts, executor=executor, progress=progress, retries=retries,
+                                chunk_size=int(chunk_size)).results()

@@ -1,0 +1,181 @@
+"""Vectorised twins of the scalar geometry of :mod:`tritools.model.geometry`, over stacks of problems.
+
+Every function takes a leading problem axis M (cameras (M, N, 3, 4), points (M, N, 2)) and runs as
+numpy operations over the whole stack; ``tests/test_stacked.py`` checks each against its scalar twin
+(``dlt``, ``project``, ``refine_l2`` with point regions, ``fundamental_matrix``, ``camera_center``).
+Problems whose data a function cannot handle are flagged in a boolean mask, never raised on, so one
+bad problem does not stop the stack.
+
+* :func:`null_vectors` -- camera centres a (P a = 0) from the signed 3x3 minors;
+* :func:`dlt_stack` -- Hartley-normalised linear triangulation;
+* :func:`project_stack` -- projections with a finite mask;
+* :func:`refine_points_stack` -- Levenberg-Marquardt on sum_i ||Phi(X, P_i) - x_i||^2;
+* :func:`fundamental_stack` -- F_ij = [e]_x P_i P_j^+ of view pairs (coincident centres flagged);
+* :func:`epipolar_quadratics` -- the quadratic parts of x~_i^T F_ij x~_j;
+* :func:`pixel_scales` -- the image scale of each view at a point (the focal length in pixels for a
+  finite camera), used by the normalisation's floor.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .geometry import POINT_AT_INFINITY_RTOL, PROJECTION_DENOM_RTOL, SAME_CENTER_RTOL
+
+__all__ = ["null_vectors", "dlt_stack", "project_stack", "refine_points_stack", "fundamental_stack",
+           "epipolar_quadratics", "pixel_scales", "view_pairs", "LM_MAX_ITER", "LM_STEP_RTOL"]
+
+#: Levenberg-Marquardt iterations at most (from the DLT start it converges in ~5-10).
+LM_MAX_ITER = 100
+#: a problem's iteration stops when its step is below LM_STEP_RTOL * (1 + ||X||) (normalised units, X ~ 1).
+LM_STEP_RTOL = 1e-13
+
+
+def view_pairs(N: int) -> tuple[np.ndarray, np.ndarray]:
+    """(I, J) of the view pairs i < j in the order of Corollary 1's constraints."""
+    return np.triu_indices(N, 1)
+
+
+def null_vectors(P: np.ndarray) -> np.ndarray:
+    """Null vectors a (P a = 0) of a stack of 3x4 matrices (..., 3, 4), from the signed 3x3 minors
+    (a_k = (-1)^k det P[:, columns != k]); ||a||^2 = det(P P^T) (Cauchy-Binet), 0 iff rank P < 3."""
+    def det3(c0, c1, c2):
+        A = np.stack([P[..., :, c0], P[..., :, c1], P[..., :, c2]], axis=-1)
+        return (A[..., 0, 0] * (A[..., 1, 1] * A[..., 2, 2] - A[..., 1, 2] * A[..., 2, 1])
+                - A[..., 0, 1] * (A[..., 1, 0] * A[..., 2, 2] - A[..., 1, 2] * A[..., 2, 0])
+                + A[..., 0, 2] * (A[..., 1, 0] * A[..., 2, 1] - A[..., 1, 1] * A[..., 2, 0]))
+    return np.stack([det3(1, 2, 3), -det3(0, 2, 3), det3(0, 1, 3), -det3(0, 1, 2)], axis=-1)
+
+
+def _smallest_eigvec(A: np.ndarray) -> np.ndarray:
+    """Unit right singular vector of the smallest singular value of each A (M, p, 4): the eigenvector of
+    the smallest eigenvalue of A^T A (4x4, one batched eigh)."""
+    return np.linalg.eigh(np.einsum("mki,mkj->mij", A, A))[1][..., 0]
+
+
+def dlt_stack(C: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`tritools.model.geometry.dlt` for a stack: C (M, N, 3, 4), x (M, N, 2) -> (X (M, 3), ok (M,))."""
+    c = x.mean(axis=1)
+    dist = np.linalg.norm(x - c[:, None], axis=2).mean(axis=1)
+    cmax = np.abs(c).max(axis=1)
+    small = dist <= 1e-12 * (1.0 + cmax)
+    s = np.where(small, 1.0 / (1.0 + cmax), np.sqrt(2.0) / np.where(small, 1.0, dist))
+    T = np.zeros((len(x), 3, 3))
+    T[:, 0, 0] = T[:, 1, 1] = s
+    T[:, :2, 2] = -s[:, None] * c
+    T[:, 2, 2] = 1.0
+    xn = s[:, None, None] * (x - c[:, None])
+    Cn = np.einsum("mab,mnbc->mnac", T, C)
+    A = (Cn[:, :, :2, :] - xn[..., None] * Cn[:, :, 2:3, :]).reshape(len(x), -1, 4)
+    norms = np.linalg.norm(A, axis=2, keepdims=True)
+    A = A / np.where(norms > 0, norms, 1.0)
+    w = _smallest_eigvec(A)
+    ok = np.abs(w[:, 3]) > POINT_AT_INFINITY_RTOL
+    return w[:, :3] / np.where(ok, w[:, 3], 1.0)[:, None], ok
+
+
+def project_stack(C: np.ndarray, X: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Projections Phi(X_m, P_mi) (M, N, 2), homogeneous images (M, N, 3) and a finite mask (M,)."""
+    Xh = np.concatenate([X, np.ones((len(X), 1))], axis=1)
+    h = np.einsum("mnij,mj->mni", C, Xh)
+    den = h[..., 2]
+    tiny = np.abs(den) <= PROJECTION_DENOM_RTOL * np.linalg.norm(C[:, :, 2, :], axis=2) * \
+        np.linalg.norm(Xh, axis=1)[:, None]
+    with np.errstate(over="ignore", invalid="ignore"):
+        x = h[..., :2] / np.where(tiny, 1.0, den)[..., None]
+    ok = ~np.any(tiny, axis=1) & np.all(np.isfinite(x), axis=(1, 2))
+    return x, h, ok
+
+
+def refine_points_stack(C: np.ndarray, xhat: np.ndarray, X: np.ndarray, ok: np.ndarray
+                        ) -> tuple[np.ndarray, np.ndarray]:
+    """Levenberg-Marquardt on sum_i ||Phi(X, P_i) - x^_i||^2 from X (M, 3), for the problems where ``ok``;
+    the twin of :func:`tritools.model.geometry.refine_l2` with point regions."""
+    X = X.copy()
+    mu = np.full(len(X), 1e-3)
+
+    def cost_of(Xc, Cc, xc):
+        u, _, fin = project_stack(Cc, Xc)
+        return np.where(fin, np.sum((u - xc) ** 2, axis=(1, 2)), np.inf), u, fin
+
+    cost, _, fin = cost_of(X, C, xhat)
+    ok = ok & fin
+    active = np.nonzero(ok)[0]
+    for _ in range(LM_MAX_ITER):
+        if active.size == 0:
+            break
+        Ca, xa, Xa = C[active], xhat[active], X[active]
+        u, h, _ = project_stack(Ca, Xa)
+        # d Phi / d X = (P[:2, :3] - u P[2, :3]) / (P[2] . X~)
+        Jac = (Ca[..., :2, :3] - u[..., None] * Ca[..., 2:3, :3]) / h[..., 2][..., None, None]
+        Jac = Jac.reshape(len(active), -1, 3)
+        r = (u - xa).reshape(len(active), -1)
+        JtJ = np.einsum("mki,mkj->mij", Jac, Jac)
+        g = np.einsum("mki,mk->mi", Jac, r)
+        A = JtJ + mu[active, None, None] * np.eye(3) * (1.0 + np.trace(JtJ, axis1=1, axis2=2))[:, None, None] / 3
+        try:
+            step = -np.linalg.solve(A, g[..., None])[..., 0]
+        except np.linalg.LinAlgError:
+            step = -np.einsum("mij,mj->mi", np.linalg.pinv(A), g)
+        Xt = Xa + step
+        ct, _, _ = cost_of(Xt, Ca, xa)
+        better = np.isfinite(ct) & (ct <= cost[active])
+        X[active[better]] = Xt[better]
+        cost[active[better]] = ct[better]
+        mu[active] = np.where(better, np.maximum(mu[active] / 10, 1e-12), mu[active] * 10)
+        small = np.linalg.norm(step, axis=1) <= LM_STEP_RTOL * (1.0 + np.linalg.norm(Xa, axis=1))
+        stalled = mu[active] > 1e12
+        active = active[~((better & small) | stalled | (~better & small))]
+    return X, ok & np.all(np.isfinite(X), axis=1)
+
+
+def fundamental_stack(C: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(F (M, K, 3, 3) unit Frobenius norm, defined (M, K)) for the view pairs of :func:`view_pairs`:
+    F_ij = [e]_x P_i P_j^+, e = P_i a_j, P_j a_j = 0 (SPEC §7); ``defined`` is False where the two camera
+    centres coincide (F vanishes; the twin of :func:`tritools.model.geometry.fundamental_matrix`'s error)."""
+    M, N = C.shape[:2]
+    I, J = view_pairs(N)
+    Pi, Pj = C[:, I], C[:, J]
+    a = null_vectors(C)
+    with np.errstate(over="ignore", invalid="ignore"):
+        pinv = np.einsum("mnij,mnjk->mnik", np.swapaxes(C, 2, 3), np.linalg.inv(C @ np.swapaxes(C, 2, 3)))
+        e = np.einsum("mkij,mkj->mki", Pi, a[:, J])
+    ex = np.zeros(e.shape + (3,))
+    ex[..., 0, 1], ex[..., 0, 2], ex[..., 1, 2] = -e[..., 2], e[..., 1], -e[..., 0]
+    ex[..., 1, 0], ex[..., 2, 0], ex[..., 2, 1] = e[..., 2], -e[..., 1], e[..., 0]
+    F = ex @ Pi @ pinv[:, J]
+    nrm = np.linalg.norm(F, axis=(2, 3))
+    defined = nrm > SAME_CENTER_RTOL * np.linalg.norm(Pi, axis=(2, 3)) * np.linalg.norm(Pj, axis=(2, 3))
+    defined &= np.isfinite(nrm)
+    F = np.where(defined[..., None, None], F / np.where(nrm > 0, nrm, 1.0)[..., None, None], 0.0)
+    return F, defined
+
+
+def epipolar_quadratics(F: np.ndarray, N: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Quadratic parts (g0 (M, K), g1 (M, K, 2N), G2 (M, K, 2N, 2N)) of g_ij(v) = x~_i^T F_ij x~_j over
+    v = (x_11, x_12, ..., x_N2), for F (M, K, 3, 3) in the order of :func:`view_pairs`."""
+    M, K = F.shape[:2]
+    I, J = view_pairs(N)
+    n = 2 * N
+    g0 = F[..., 2, 2]
+    g1 = np.zeros((M, K, n))
+    G2 = np.zeros((M, K, n, n))
+    k = np.arange(K)
+    for a_ in range(2):
+        g1[:, k, 2 * I + a_] = F[:, :, a_, 2]
+        g1[:, k, 2 * J + a_] = F[:, :, 2, a_]
+        for b_ in range(2):
+            G2[:, k, 2 * I + a_, 2 * J + b_] = F[:, :, a_, b_] / 2
+            G2[:, k, 2 * J + b_, 2 * I + a_] = F[:, :, a_, b_] / 2
+    return g0, g1, G2
+
+
+def pixel_scales(C: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """The image scale of each view (M, N): sigma_max(P[:2, :3] - x P[2, :3]) / ||P[2, :3]||, i.e. pixels per
+    radian at the observed point x (the focal length, up to the obliquity, for a finite camera K [R | t]).
+    Invariant to the camera's scale, image translations and similarities of the world frame; NaN where the
+    camera has no finite depth direction (||P[2, :3]|| = 0)."""
+    B = C[..., :2, :3] - x[..., :, None] * C[..., 2:3, :3]
+    s = np.linalg.svd(B, compute_uv=False)[..., 0]
+    d = np.linalg.norm(C[..., 2, :3], axis=-1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(d > 0, s / d, np.nan)

@@ -1,0 +1,62 @@
+"""The one decision step of every triangulation path, scalar and vectorised alike.
+
+Every path -- the per-point SDP (:mod:`.triangulate`), the vectorised verification path
+(:mod:`.fastpath`) and the batched degree-2 SDP (:mod:`.sdp_batch`) -- ends with a lower bound
+c_LB and an upper bound c_UB = 2N gamma'(X^)^2 in the normalised units where c = O(1) (see
+:mod:`tritools.model.normalize`), and calls :func:`decide` on them: the certificate rule of
+:class:`sospoly.Tolerances` (``certified`` / ``contradicts`` / ``consistent``) applied in c units.
+An error dc in c moves gamma by about dc / (4 N gamma), so comparing gammas relatively would fail
+for tiny residuals; comparing c does not.  Then :func:`cheirality` tells whether the estimate lies in
+front of every camera (and, with ``require_in_front``, turns a certified minimiser behind a camera into
+``BEHIND_CAMERA``).  Both take scalars or arrays.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..result import Status
+
+__all__ = ["decide", "gamma_from_c", "cheirality"]
+
+_CODES = np.array([Status.NOT_CERTIFIED.value, Status.OPTIMAL.value, Status.NUMERICAL_FAILURE.value], dtype=object)
+
+
+def decide(c_lower, c_upper, tolerances):
+    """(status, optimal, reported lower bound) for lower/upper bounds in c units (scalars or arrays).
+
+    OPTIMAL when the bounds meet (``tolerances.certified``), NUMERICAL_FAILURE when the lower bound is above
+    the upper bound beyond the tolerance (``tolerances.contradicts``: never a certificate), NOT_CERTIFIED
+    otherwise; the reported lower bound is ``tolerances.consistent`` (never above the upper bound)."""
+    certified = np.asarray(tolerances.certified(c_lower, c_upper), bool)
+    contradicts = np.asarray(tolerances.contradicts(c_lower, c_upper), bool)
+    code = np.where(contradicts, 2, np.where(certified, 1, 0))
+    status = _CODES[code]
+    optimal = certified & ~contradicts
+    lower = tolerances.consistent(c_lower, c_upper)
+    if np.ndim(code) == 0:
+        return Status(status.item() if hasattr(status, "item") else status), bool(optimal), lower
+    return status, optimal, lower
+
+
+def gamma_from_c(c, n_views, scale):
+    """gamma = sqrt(max(c, 0) / (2N)) / s: a bound in c units as an RMS error in the caller's pixels."""
+    c = np.asarray(c, float)
+    with np.errstate(invalid="ignore"):
+        out = np.sqrt(np.maximum(c, 0.0) / (2 * np.asarray(n_views, float))) / np.asarray(scale, float)
+    return out.item() if out.ndim == 0 else out
+
+
+def cheirality(status, depths, require_in_front: bool = False):
+    """(status, in_front): ``in_front`` whether every depth is positive (``depths`` (N,) or (M, N); NaN counts as
+    not in front).  The L2 problem ignores cheirality, so a certified minimiser may lie behind a camera; with
+    ``require_in_front`` such an OPTIMAL status becomes ``BEHIND_CAMERA``."""
+    d = np.asarray(depths, float)
+    in_front = np.all(np.isfinite(d) & (d > 0), axis=-1)
+    if np.ndim(in_front) == 0:
+        st = Status(status)
+        behind = require_in_front and st == Status.OPTIMAL and not in_front
+        return (Status.BEHIND_CAMERA if behind else st), bool(in_front)
+    st = np.asarray(status, dtype=object)
+    if not require_in_front:
+        return st, in_front
+    return np.where((st == Status.OPTIMAL.value) & ~in_front, Status.BEHIND_CAMERA.value, st), in_front

@@ -1,0 +1,71 @@
+"""The degree plan of a triangulation: which (method, delta, formulation) steps to try, in order.
+
+With ``method="auto"`` (the default everywhere):
+
+1. Corollary 1 at delta = 2 -- the paper's economical certificate, a (2N + sum n_i + 1)-sided Gram
+   matrix; with ``path="auto"`` certification by verification is tried before it;
+2. Corollary 1 at delta = 4 (up to ``max_delta``, default 4): *dense* while the dense Gram matrix has
+   side <= :data:`DENSE_MAX_SIDE` (at most 8 variables: e.g. 4 views with point regions), else the
+   *views* formulation (view cliques, :mod:`tritools.model.problem`): clique-wise degree-4 blocks over
+   a chain of view triples beside the dense degree-2 certificate, so it is never weaker than step 1
+   and its cost grows linearly with N.
+
+With an explicit method, the degrees run from ``delta`` (default delta_min) to ``max_delta`` (default
+``delta`` when given, else delta_min + 2) with that method; ``sparsity`` ("none" / "views") forces
+the formulation of the steps above delta = 2.  Theorem 1's dense formulation holds all C(2N, 4)
+minors and is used for at most :data:`~tritools.model.constraints.THEOREM1_DENSE_MAX_VIEWS` views.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from sospoly import sigma
+
+from ..model.constraints import THEOREM1_DENSE_MAX_VIEWS, Method
+from .options import Sparsity, TriangulationOptions
+
+__all__ = ["Step", "degree_plan", "DENSE_MAX_SIDE"]
+
+#: ``sparsity="auto"``: dense certificates above degree 2 while the Gram side stays at most this (sigma(8, 2) = 45).
+DENSE_MAX_SIDE = 45
+
+
+@dataclass(frozen=True)
+class Step:
+    method: Method
+    delta: int
+    formulation: str          # "dense" or "views"
+
+
+def _formulation(options: TriangulationOptions, method: Method, delta: int, n_views: int, n_vars: int) -> str:
+    if delta <= 2 or n_views <= 3:
+        return "dense"                              # one view clique holds everything: the dense certificate
+    if options.sparsity == Sparsity.NONE:
+        return "dense"
+    if options.sparsity == Sparsity.VIEWS:
+        return "views"
+    if method == Method.THEOREM1 and n_views > THEOREM1_DENSE_MAX_VIEWS:
+        return "views"
+    return "dense" if sigma(n_vars, delta // 2) <= DENSE_MAX_SIDE else "views"
+
+
+def degree_plan(options: TriangulationOptions, n_views: int, n_vars: int, delta_min: int) -> list[Step]:
+    """The steps for a problem with ``n_views`` views and ``n_vars`` polynomial variables (module docstring).
+    Raises ValueError for a ``delta`` below ``delta_min``."""
+    method = options.explicit_method
+    if options.delta is not None and options.delta < delta_min:
+        raise ValueError(f"delta must be even and >= delta_min = {delta_min} for this problem, got {options.delta}")
+    if method is None:
+        first = options.delta if options.delta is not None else max(delta_min, 2)
+        last = options.max_delta if options.max_delta is not None else max(first, 4)
+        method = Method.COROLLARY1
+    else:
+        first = options.delta if options.delta is not None else delta_min
+        last = options.max_delta if options.max_delta is not None else (
+            options.delta if options.delta is not None else delta_min + 2)
+    if last < first:
+        raise ValueError(f"max_delta ({last}) is below delta ({first})")
+    return [Step(method, d, _formulation(options, method, d, n_views, n_vars)) for d in range(first, last + 1, 2)]
+
+
+

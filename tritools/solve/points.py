@@ -1,0 +1,222 @@
+"""Point-region problems as stacked arrays: the vectorised paths and ``triangulate_points``.
+
+For M problems with point regions, grouped by their number of views N (cameras (M, N, 3, 4),
+observed points (M, N, 2)), :class:`PointStack` runs, with numpy over each group:
+
+1. with ``path="auto"``: certification by verification (:func:`tritools.solve.fastpath.verify_points`);
+2. with ``path="sdp"`` (or for what verification did not certify, when the plan's first step is
+   Corollary 1 at delta = 2): the batched degree-2 SDP (:func:`tritools.solve.sdp_batch.solve_corollary1_points`);
+3. everything else (later degrees of the plan, problems a batch handed back, other options) is solved
+   one by one by :func:`tritools.triangulate` through the executor of :mod:`tritools.solve.batch`.
+
+Results of the vectorised steps stay in arrays (``X``, ``gamma_lb``, ``gamma_ub``, ``status``,
+``in_front`` ...) and become :class:`~tritools.result.TriangulationResult` objects only on request,
+so a million points cost arrays, not objects.  ``triangulate_points(cameras, points2d, visible)``
+is the arrays API (``cv2.triangulatePoints``-like: one camera per view, a visibility mask).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from sospoly import GramForm, Multiplier, n_lmivar_formula
+
+from ..model.constraints import Method
+from ..model.regions import Point
+from ..result import Attempt, Status, TriangulationResult
+from .decide import cheirality
+from .fastpath import verify_points
+from .options import MethodChoice, SolvePath, TriangulationOptions, options_from
+from .report import points_report_stack
+from .sdp_batch import solve_corollary1_points
+
+__all__ = ["PointStack", "PointsResult", "triangulate_points", "FAST_CHUNK"]
+
+#: the vectorised paths handle at most this many problems per numpy call (bounds memory).
+FAST_CHUNK = 4096
+
+
+def batch_steps(opts: TriangulationOptions) -> tuple[bool, bool]:
+    """(verification batch, delta = 2 SDP batch) applicable under these options: Corollary 1 (or auto) starting
+    at delta = 2 with normalisation; the SDP batch also needs the default multiplier, form and back-end."""
+    first_is_cor1_d2 = opts.method in (MethodChoice.AUTO, MethodChoice.COROLLARY1) and opts.delta in (None, 2) \
+        and opts.normalize
+    verify = first_is_cor1_d2 and opts.path == SolvePath.AUTO
+    sdp = first_is_cor1_d2 and opts.multiplier == Multiplier.FIXED and opts.form == GramForm.IMAGE \
+        and opts.backend is None
+    return verify, sdp
+
+
+def _last_delta(opts: TriangulationOptions) -> int:
+    if opts.max_delta is not None:
+        return opts.max_delta
+    if opts.method == MethodChoice.AUTO:
+        return max(opts.delta or 2, 4)
+    return opts.delta if opts.delta is not None else 4
+
+
+class PointStack:
+    """M point problems of N views (see the module docstring); ``todo`` lists the problems left for the
+    per-point path, with the options and the attempts each continues from."""
+
+    def __init__(self, cameras: np.ndarray, points2d: np.ndarray, opts: TriangulationOptions):
+        self.C = np.asarray(cameras, float)
+        self.x = np.asarray(points2d, float)
+        self.opts = opts
+        M, N = self.x.shape[:2]
+        self.M, self.N = M, N
+        self.X = np.full((M, 3), np.nan)
+        self.X_raw = np.full((M, 3), np.nan)
+        self.gamma_lb = np.full(M, np.nan)
+        self.image_points = np.full((M, N, 2), np.nan)
+        self.status = np.full(M, None, dtype=object)
+        self.optimal = np.zeros(M, bool)
+        self.certified_by = np.full(M, None, dtype=object)
+        self.delta = np.full(M, -1)
+        self.n_lmivar = n_lmivar_formula(2 * N, 2, [2] * (N * (N - 1) // 2))
+        self.prefix: list = [() for _ in range(M)]
+        self.done = np.zeros(M, bool)
+        self.todo: dict[int, TriangulationOptions] = {}
+
+    def run(self) -> "PointStack":
+        verify, sdp = batch_steps(self.opts)
+        left = np.arange(self.M)
+        for start in range(0, self.M, FAST_CHUNK):
+            part = left[start:start + FAST_CHUNK]
+            if verify:
+                part = self._verify(part)
+            if sdp and part.size:
+                part = self._sdp(part)
+            for m in part:
+                self.todo.setdefault(int(m), self.opts.replace(path="sdp") if verify else self.opts)
+        self._report()
+        return self
+
+    def _verify(self, idx: np.ndarray) -> np.ndarray:
+        try:
+            b = verify_points(self.C[idx], self.x[idx], tolerances=self.opts.tolerances)
+        except (ValueError, np.linalg.LinAlgError, FloatingPointError):
+            b = None
+        for k, m in enumerate(idx):
+            ok = b is not None and bool(b.certified[k])
+            self.prefix[m] += (Attempt("corollary1", 2, "verified" if ok else "verification_failed",
+                                       float(b.gamma_lb[k]) if ok else None, None, "verification", "dense"),)
+        if b is None:
+            return idx
+        cert = b.certified
+        self._store(idx[cert], b.X[cert], b.X[cert], b.gamma_lb[cert], b.image_points[cert], Status.OPTIMAL.value,
+                    True, "verification")
+        return idx[~cert]
+
+    def _sdp(self, idx: np.ndarray) -> np.ndarray:
+        try:
+            b = solve_corollary1_points(self.C[idx], self.x[idx], tolerances=self.opts.tolerances,
+                                        refine=self.opts.refine)
+        except (ValueError, np.linalg.LinAlgError, FloatingPointError):
+            return idx
+        final = _last_delta(self.opts) <= 2
+        rest = []
+        for k, m in enumerate(idx):
+            if not b.done[k]:
+                rest.append(m)
+                continue
+            opt = bool(b.optimal[k])
+            self.prefix[m] += (Attempt("corollary1", 2, str(b.status[k]), float(b.gamma_lb[k]), None, "sdp-batch",
+                                       "dense", ("ipm-batch:converged",)),)
+            if opt or final:
+                self._store(np.array([m]), b.X[k:k + 1], b.X_raw[k:k + 1], b.gamma_lb[k:k + 1],
+                            b.image_points[k:k + 1], str(b.status[k]), opt, "sdp" if opt else None)
+            else:                       # delta = 2 decided, not certified: the per-point path continues at 4
+                self.todo[int(m)] = self.opts.replace(delta=4, path="sdp")
+        return np.array(rest, dtype=int)
+
+    def _store(self, idx, X, X_raw, gamma_lb, image_points, status, optimal, certified_by) -> None:
+        self.X[idx], self.X_raw[idx], self.gamma_lb[idx], self.image_points[idx] = X, X_raw, gamma_lb, image_points
+        self.status[idx], self.optimal[idx], self.certified_by[idx] = status, optimal, certified_by
+        self.delta[idx] = 2
+        self.done[idx] = True
+
+    def _report(self) -> None:
+        """gamma_UB, residuals, depths, cheirality of the batch-decided problems (vectorised)."""
+        d = np.nonzero(self.done)[0]
+        self.gamma_ub = np.full(self.M, np.nan)
+        self.gamma_ub_raw = np.full(self.M, np.nan)
+        self.residuals = np.full((self.M, self.N), np.nan)
+        self.depths = np.full((self.M, self.N), np.nan)
+        self.in_front = np.zeros(self.M, bool)
+        if not d.size:
+            return
+        g, res, dep = points_report_stack(self.C[d], self.x[d], self.X[d])
+        self.gamma_ub[d], self.residuals[d], self.depths[d] = g, res, dep
+        self.gamma_ub_raw[d] = points_report_stack(self.C[d], self.x[d], self.X_raw[d])[0]
+        self.status[d], self.in_front[d] = cheirality(self.status[d], dep, self.opts.require_in_front)
+        self.gamma_lb[d] = np.minimum(self.gamma_lb[d], self.gamma_ub[d])
+
+    def result(self, m: int) -> TriangulationResult:
+        """The :class:`TriangulationResult` of a batch-decided problem."""
+        st = Status(self.status[m])
+        msg = "" if self.in_front[m] or not self.optimal[m] else "certified L2 optimum, but behind a camera"
+        return TriangulationResult(
+            Method.COROLLARY1.value, st, X=self.X[m], gamma_ub=float(self.gamma_ub[m]), gamma_lb=float(self.gamma_lb[m]),
+            optimal=bool(self.optimal[m]), delta=2, n_lmivar=self.n_lmivar, image_points=self.image_points[m],
+            X_raw=self.X_raw[m], gamma_ub_raw=float(self.gamma_ub_raw[m]), certified_by=self.certified_by[m],
+            message=msg, attempts=self.prefix[m], sparsity="dense", in_front=bool(self.in_front[m]),
+            depths=self.depths[m], residuals=self.residuals[m])
+
+    def item(self, m: int):
+        """(cameras, regions) of problem m for the per-point path."""
+        return self.C[m], [Point(p) for p in self.x[m]]
+
+
+class PointsResult:
+    """Arrays of a :func:`triangulate_points` call (first axis = point): ``X`` (M, 3), ``gamma_lb``,
+    ``gamma_ub``, ``status`` (status values), ``optimal``, ``in_front``, ``n_views``, ``delta``,
+    ``certified_by``; :meth:`results` gives the :class:`TriangulationResult` objects."""
+
+    def __init__(self, results_of, arrays: dict):
+        self._results_of = results_of
+        for k, v in arrays.items():
+            setattr(self, k, v)
+
+    def __len__(self) -> int:
+        return len(self.status)
+
+    def results(self) -> list[TriangulationResult]:
+        return [self._results_of(m) for m in range(len(self))]
+
+
+def triangulate_points(cameras, points2d, visible=None, *, options: TriangulationOptions | None = None,
+                       executor=None, progress: bool | None = None, **overrides) -> PointsResult:
+    """Certified triangulation of M points observed in V views, as arrays (like ``cv2.triangulatePoints``).
+
+    Parameters
+    ----------
+    cameras : array (V, 3, 4)
+        One projection matrix per view, shared by all points.
+    points2d : array (M, V, 2)
+        Observed image points; entries of views that do not see a point are ignored.
+    visible : bool array (M, V), optional
+        Which views see which point (default: the finite entries of ``points2d``); each point needs >= 2.
+    options, overrides : :class:`~tritools.solve.options.TriangulationOptions` and its fields
+    executor, progress : as :func:`tritools.triangulate_many`
+    """
+    from .batch import solve_point_problems
+
+    opts = options_from(options, **overrides)
+    C = np.asarray(cameras, float)
+    x = np.asarray(points2d, float)
+    if C.ndim != 3 or C.shape[1:] != (3, 4):
+        raise ValueError(f"cameras must have shape (V, 3, 4), got {C.shape}")
+    if x.ndim != 3 or x.shape[1:] != (C.shape[0], 2):
+        raise ValueError(f"points2d must have shape (M, {C.shape[0]}, 2), got {x.shape}")
+    vis = np.all(np.isfinite(x), axis=2) if visible is None else np.asarray(visible, bool)
+    if vis.shape != x.shape[:2]:
+        raise ValueError(f"visible must have shape {x.shape[:2]}, got {vis.shape}")
+    if np.any(vis.sum(axis=1) < 2):
+        bad = int(np.argmax(vis.sum(axis=1) < 2))
+        raise ValueError(f"points2d[{bad}] is visible in fewer than 2 views")
+    views = [np.nonzero(row)[0] for row in vis]
+    outcome = solve_point_problems([(C[v], x[m, v]) for m, v in enumerate(views)], opts, executor=executor,
+                                   progress=progress)
+    arrays = outcome.arrays()
+    arrays["n_views"] = vis.sum(axis=1)
+    return PointsResult(outcome.result, arrays)

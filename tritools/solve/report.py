@@ -1,0 +1,84 @@
+"""What a result reports about an estimate X, in the caller's units: gamma(X) on the original data, the
+per-view residuals d(Phi(X, P_i), R_i) and depths -- scalar (:func:`point_report`, any regions) and
+vectorised for point regions (:func:`points_report_stack`), tested equal -- and the radius of a ball that
+holds a minimiser of the normalised program (:func:`solve_radius`, for rigorous lower bounds)."""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..model.geometry import depths as depths_of
+from ..model.geometry import depths_stack
+from ..model.regions import EllipseBorder, Point, Polytope, Segment
+from ..model.stacked import project_stack
+
+__all__ = ["PointReport", "point_report", "points_report_stack", "solve_radius", "region_extent"]
+
+
+@dataclass(frozen=True)
+class PointReport:
+    gamma: float | None          # RMS reprojection error per coordinate (inf: a projection at infinity)
+    residuals: np.ndarray | None  # (N,) distances to the regions
+    depths: np.ndarray | None     # (N,)
+
+
+def point_report(X, cameras, regions) -> PointReport:
+    """gamma(X) (SPEC §1), per-view residuals and depths of ``X`` for validated cameras and regions."""
+    if X is None or not np.all(np.isfinite(X)):
+        return PointReport(None, None, None)
+    Xh = np.append(np.asarray(X, float), 1.0)
+    res = []
+    for P, r in zip(cameras, regions):
+        h = P @ Xh
+        if not abs(h[2]) > 0:
+            res.append(np.inf)
+            continue
+        with np.errstate(over="ignore", invalid="ignore"):
+            x = h[:2] / h[2]
+        res.append(float(r.distance(x)) if np.all(np.isfinite(x)) else np.inf)
+    res = np.array(res)
+    gamma = float(np.sqrt(np.sum(res ** 2) / (2 * len(res)))) if np.all(np.isfinite(res)) else math.inf
+    return PointReport(gamma, res, np.asarray(depths_of(X, cameras), float))
+
+
+def points_report_stack(C: np.ndarray, x: np.ndarray, X: np.ndarray):
+    """The twin of :func:`point_report` for M point problems: (gamma (M,), residuals (M, N), depths (M, N));
+    gamma is inf where a projection is at infinity."""
+    u, _, fin = project_stack(C, X)
+    res = np.where(fin[:, None], np.linalg.norm(u - x, axis=2), np.inf)
+    gamma = np.where(fin, np.sqrt(np.sum(np.where(fin[:, None], res, 0.0) ** 2, axis=1) / (2 * x.shape[1])), np.inf)
+    return gamma, res, depths_stack(C, X)
+
+
+def region_extent(region) -> tuple[float, float] | None:
+    """(rho, a): every point of the region has norm <= rho, every feasible auxiliary vector y_i norm <= a; None
+    for a region type whose extent is not known here (then no rigorous margin is computed)."""
+    if isinstance(region, Point):
+        return float(np.linalg.norm(region.x)), 0.0
+    if isinstance(region, Segment):
+        return float(np.linalg.norm(region.center) + np.linalg.norm(region.direction)), 1.0
+    if isinstance(region, Polytope):
+        rho = float(np.max(np.linalg.norm(region.vertices, axis=1)))
+        return rho, rho
+    if isinstance(region, EllipseBorder):            # Ellipse too
+        rho = float(np.linalg.norm(region.center) + np.max(region.semi_axes))
+        return rho, rho
+    return None
+
+
+def solve_radius(regions_n, c_upper: float) -> float | None:
+    """A radius R with ||v*|| <= R for a minimiser v* of the normalised program: f(v*) <= f(v^) = c_upper gives
+    ||x_i - y_i|| <= sqrt(c_upper) (y_i the closest region point), so ||x_i|| <= rho_i + sqrt(c_upper), and the
+    auxiliary variables are bounded by the regions (:func:`region_extent`)."""
+    if not np.isfinite(c_upper):
+        return None
+    total = 0.0
+    for r in regions_n:
+        ext = region_extent(r)
+        if ext is None:
+            return None
+        rho, a = ext
+        total += (rho + math.sqrt(max(c_upper, 0.0))) ** 2 + a ** 2
+    return math.sqrt(total)

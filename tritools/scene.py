@@ -315,3 +315,49 @@ def example5_cases(seed=0, n_points: int = 25, thetas=(0.05, 0.1, 0.15, 0.2), tr
                 Cn = C + rng.uniform(-theta, theta, size=C.shape)
                 cases.append(Example5Case(j, theta, trial, X, C, Cn, x, tuple(Point(p) for p in xn)))
     return cases
+
+
+# ----------------------------------------------------------------------------- uncertain regions
+#: region kinds of :func:`uncertain_problem` (``"mixed"`` draws one of them per view).
+UNCERTAIN_KINDS = ("point", "segment", "ellipse", "ellipse_border", "polytope")
+
+
+def uncertain_problem(n_views: int, seed=0, *, noise_px: float = 1.0, size_px: float = 0.5,
+                      kinds: str | tuple = "mixed", focal: float = 800.0) -> tuple[np.ndarray, tuple, np.ndarray]:
+    """A seeded triangulation problem with *uncertain* regions: ``n_views`` cameras of
+    :func:`random_scene`, one scene point observed with Gaussian noise ``noise_px``, and per view a region
+    around the noisy observation of about ``size_px`` pixels: a point, a segment (random direction), a
+    filled ellipse, an ellipse border (random axes and orientation) or a polytope (a random rotated box).
+    ``kinds``: ``"mixed"`` (one drawn per view), one kind, or a tuple of kinds (one per view).
+
+    Returns (cameras (N, 3, 4), regions, the true scene point).  Every region contains its view's noisy
+    observation or passes within ``size_px`` of it (the border), so gamma* <= ~noise_px; with regions
+    smaller than the noise (the default) gamma* > 0 in general (no point projects into every region).
+    """
+    from .model.regions import Ellipse, EllipseBorder, Polytope, Segment
+
+    rng = _rng(seed)
+    scene = random_scene(n_views, 1, noise_px=noise_px, seed=rng, focal=focal)
+    if isinstance(kinds, str):
+        kinds = tuple(rng.choice(UNCERTAIN_KINDS) for _ in range(n_views)) if kinds == "mixed" else (kinds,) * n_views
+    if len(kinds) != n_views or any(k not in UNCERTAIN_KINDS for k in kinds):
+        raise ValueError(f"kinds must be 'mixed', one of {UNCERTAIN_KINDS}, or one per view")
+    regions = []
+    for x, kind in zip(scene.points2d[0], kinds):
+        a = rng.uniform(0, np.pi)
+        R = np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]])
+        axes = size_px * rng.uniform(0.4, 1.0, size=2)
+        if kind == "point":
+            regions.append(Point(x))
+        elif kind == "segment":
+            regions.append(Segment(x, axes[0] * R[:, 0]))
+        elif kind in ("ellipse", "ellipse_border"):
+            D = R @ np.diag(axes ** 2) @ R.T
+            regions.append((Ellipse if kind == "ellipse" else EllipseBorder)(x, 0.5 * (D + D.T)))
+        else:
+            B = (R / axes).T                     # ||B (y - x)||_inf <= 1: a rotated box of half widths axes
+            regions.append(Polytope(B, -B @ x))
+    return scene.cameras, tuple(regions), scene.points3d[0]
+
+
+__all__ += ["uncertain_problem", "UNCERTAIN_KINDS"]

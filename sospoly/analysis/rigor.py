@@ -14,12 +14,14 @@ On the feasible set (g = 0, h >= 0) the identity gives
 q (f - c) = sum_j b_j^T G_j b_j + e + sum_k s_k h_k >= -sum_j eps_j ||b_j||^2 - |e| - sum_k eta_k ||b_sk||^2 h_k,
 so for every feasible v in a ball ||v|| <= R
 
-    f(v) >= c - margin,   margin = (sum_j eps_j W_j(R) + E(R) + sum_k eta_k W_sk(R) H_k(R)) / q_min(R),
+    f(v) >= c - margin,   margin = (sum_j eps_j W_j + E + sum_k eta_k W_sk H_k) / q_min,
 
-with W(R) = sum over the basis of R^(2 |m|) >= ||b(v)||^2, E(R) = sum_m |e_m| R^|m| >= |e(v)|,
-H_k(R) >= |h_k(v)| and q_min(R) <= q(v) on the ball.  If the ball holds a global minimiser, c - margin
+on the box |v_i| <= r_i (``radius``: one bound per variable, or one for all): W_j = sum_{d in degrees of
+b_j} R_j^(2d) >= ||b_j(v)||^2 with R_j^2 = sum of r_i^2 over the block's variables (the monomials of
+degree d in b_j satisfy sum_m v^(2m) <= (sum_i v_i^2)^d), E = sum_m |e_m| prod_i r_i^(m_i) >= |e(v)|,
+H_k >= |h_k(v)| likewise, and q_min <= q(v) on the box.  If the box holds a global minimiser, c - margin
 is a lower bound of the minimum in floating point, up to the stated rounding bounds (the caller knows
-the ball: e.g. tritools derives it from the objective at a feasible point).
+the box: e.g. tritools derives it from the objective at a feasible point).
 
 :func:`exact_check` verifies a certificate in exact rational arithmetic (``fractions``), for
 researchers who want one: the identity is restored exactly by moving the residual onto the Gram
@@ -123,9 +125,19 @@ def _pairs_of(G: np.ndarray, s: int) -> np.ndarray:
     return 0.5 * (G[i, j] + G[j, i])
 
 
-def _ball_weight(basis: np.ndarray, R: float) -> float:
-    deg = basis.sum(axis=1)
-    return float(np.sum(R ** (2.0 * deg)))
+def _block_weight(basis: np.ndarray, r: np.ndarray, ball: bool) -> float:
+    """sum over the degrees d present in ``basis`` of R^(2d): a bound of ||b(v)||^2 (sum_{|m| = d} v^(2m) <=
+    (sum_i v_i^2)^d), with R^2 the sum of r_i^2 over the basis' variables on the box |v_i| <= r_i, or the
+    ball's R^2 (``ball``: every r_i is the ball's radius)."""
+    used = np.any(basis > 0, axis=0)
+    R2 = float(r[0] ** 2) if ball else float(np.sum(r[used] ** 2))
+    return float(sum(R2 ** d for d in np.unique(basis.sum(axis=1))))
+
+
+def _monomial_sup(E: np.ndarray, r: np.ndarray) -> np.ndarray:
+    """prod_i r_i^(m_i) for every exponent row m: the sup of |v^m| on the box."""
+    with np.errstate(over="ignore"):
+        return np.prod(r[None, :] ** E, axis=1)
 
 
 def _psd_defect(G: np.ndarray) -> float:
@@ -136,15 +148,15 @@ def _psd_defect(G: np.ndarray) -> float:
     return max(0.0, -float(lam[0])) + err
 
 
-def _poly_sup(p, R: float) -> float:
-    """A bound of |p(v)| on ||v|| <= R."""
+def _poly_sup(p, r: np.ndarray) -> float:
+    """A bound of |p(v)| on the box |v_i| <= r_i."""
     if not p.terms:
         return 0.0
-    return float(np.sum(np.abs(p.coefficients()) * R ** p.exponents().sum(axis=1)))
+    return float(np.sum(np.abs(p.coefficients()) * _monomial_sup(p.exponents(), r)))
 
 
-def _q_min(structure, sol, R: float) -> float:
-    """A lower bound of q on the ball (q fixed: 1 + ... with non-negative even terms, or a user q)."""
+def _q_min(structure, sol, r: np.ndarray) -> float:
+    """A lower bound of q on the box (q fixed: 1 + ... with non-negative even terms, or a user q)."""
     if structure.free:
         Q = sol.grams.get("q")
         return float(np.linalg.eigvalsh(Q)[0]) - 8 * Q.shape[0] * _EPS * float(np.abs(Q).max()) if Q is not None \
@@ -154,21 +166,25 @@ def _q_min(structure, sol, R: float) -> float:
     const = float(c[E.sum(axis=1) == 0].sum()) if E.size else 0.0
     even_pos = np.all(E % 2 == 0, axis=1) & (c > 0)
     rest = ~even_pos & (E.sum(axis=1) > 0)
-    return const - float(np.sum(np.abs(c[rest]) * R ** E[rest].sum(axis=1)))
+    return const - float(np.sum(np.abs(c[rest]) * _monomial_sup(E[rest], r)))
 
 
-def rigorous_psatz_bound(psatz, sol, c: float, radius: float) -> RigorousBound:
+def rigorous_psatz_bound(psatz, sol, c: float, radius) -> RigorousBound:
     """c minus the margin of the module docstring, for a solved fixed- or free-q Psatz certificate
-    (``psatz`` a PsatzProblem or compiled instance; ``sol`` its ProgramSolution; ``c`` its level)."""
+    (``psatz`` a PsatzProblem or compiled instance; ``sol`` its ProgramSolution; ``c`` its level; ``radius``
+    a bound of ||v|| (one number: a ball) or of every |v_i| (one per variable: a box))."""
     structure = psatz.structure
     theta = np.asarray(psatz.theta, float)
-    R = float(radius)
+    n = len(structure.gens)
+    ball = np.ndim(radius) == 0
+    r = np.broadcast_to(np.asarray(radius, float), (n,)).copy()
+    R = float(r[0]) if ball else float(np.sqrt(np.sum(r ** 2)))
     E_mono, e, rnd = certificate_residual(structure, theta, sol, c if structure.free else 0.0)
-    resid = float(np.sum((np.abs(e) + rnd) * R ** E_mono.sum(axis=1)))
+    resid = float(np.sum((np.abs(e) + rnd) * _monomial_sup(E_mono, r)))
     psd = 0.0
     u = structure.u
     for name, blk in zip(u.block_names(), u.gram.blocks):
-        psd += _psd_defect(sol.grams[name]) * _ball_weight(blk.b, R)
+        psd += _psd_defect(sol.grams[name]) * _block_weight(blk.b, r, ball)
     prog = structure.program
     x = np.asarray(sol.x, float)
     for k in range(structure.slots.n_ineq):
@@ -177,8 +193,8 @@ def rigorous_psatz_bound(psatz, sol, c: float, radius: float) -> RigorousBound:
         S[blk.gram.pair_i, blk.gram.pair_j] = x[blk.slice]
         S[blk.gram.pair_j, blk.gram.pair_i] = x[blk.slice]
         h = psatz.ineq[k] if hasattr(psatz, "ineq") else structure.slots.polynomials(theta)[2][k]
-        psd += _psd_defect(S) * _ball_weight(blk.gram.b, R) * _poly_sup(h, R)
-    qmin = _q_min(structure, sol, R)
+        psd += _psd_defect(S) * _block_weight(blk.gram.b, r, ball) * _poly_sup(h, r)
+    qmin = _q_min(structure, sol, r)
     if not qmin > 0:
         return RigorousBound(-np.inf, np.inf, R, psd, resid, qmin)
     margin = (psd + resid) / qmin

@@ -15,7 +15,10 @@ global minimisers v_j, so minimisers are found by
    mean), the shared coordinates being averaged.  The search is depth-first along the
    clique tree (each clique after its parent, so by the running intersection property
    everything it shares with earlier cliques is in its parent), pruning on disagreement,
-   with a cap on the number of partial combinations explored.
+   with a cap on the number of partial combinations explored;
+3. on request, when no combination agrees, joining greedily (:func:`greedy_join`: each clique's candidate
+   nearest to the running mean), e.g. for two global minimisers that differ in a few variables and
+   nearly, but not within the tolerance, coincide in the others (Broyden tridiagonal, n = 40).
 
 Variables in no clique are set to 0.  The points returned are only *candidates*:
 callers check feasibility and the objective themselves (as with
@@ -34,7 +37,7 @@ from .extraction import candidates_from_span, henrion_lasserre, range_basis
 from ..certificates.sparsity import clique_tree
 from ..tolerances import DEFAULT_TOLERANCES, Tolerances
 
-__all__ = ["clique_candidates", "extract_from_clique_moments", "join_clique_candidates"]
+__all__ = ["clique_candidates", "extract_from_clique_moments", "greedy_join", "join_clique_candidates"]
 
 
 def _degree1_rows(basis: np.ndarray) -> np.ndarray:
@@ -58,8 +61,8 @@ def clique_candidates(moment: np.ndarray, basis: np.ndarray, tolerances: Toleran
                       agree_tol: float = 1e-4) -> list[np.ndarray]:
     """Candidate local points (in the clique's own variables) from one moment matrix.
 
-    Rank 1 (numerical rank by ``tolerances.moment_rank_rel``): the first moments scaled by
-    the constant entry.  Rank > 1: the Henrion-Lasserre points, or -- when the basis is too
+    Rank 1 (numerical rank by ``tolerances.moment_rank_rel``) or a basis of degree 1: the first
+    moments scaled by the constant entry.  Rank > 1: the Henrion-Lasserre points, or -- when the basis is too
     small for them (no flat extension) -- every candidate of
     :func:`sospoly.analysis.extraction.candidates_from_span`.  Non-finite points are dropped and
     near-duplicates merged; an empty list when M[0, 0] <= 0 or M is not finite.
@@ -71,7 +74,10 @@ def clique_candidates(moment: np.ndarray, basis: np.ndarray, tolerances: Toleran
         return []
     M = M / M[0, 0]
     W = range_basis((M + M.T) / 2, tolerances)
-    if W.shape[1] == 1:
+    if W.shape[1] == 1 or int(B.sum(axis=1).max()) <= 1:
+        # rank 1, or a basis of degree 1: the points v with b(v) in a span of dimension r > 1 then form
+        # an (r-1)-dimensional affine set, no search can single minimisers out of it; the first
+        # moments (the weighted mean of the minimisers) are the one candidate
         points = [M[deg1, 0]]
     else:
         hl = henrion_lasserre(W, B)
@@ -144,10 +150,45 @@ def join_clique_candidates(candidates: Sequence[Sequence[np.ndarray]], cliques: 
     return _dedupe(results, agree_tol)
 
 
+def greedy_join(candidates: Sequence[Sequence[np.ndarray]], cliques: Sequence[Sequence[int]],
+                n_vars: int, agree_tol: float = 1e-4) -> list[np.ndarray]:
+    """Global points joined without the agreement test: from each candidate of the first clique (in
+    the clique-tree order of :func:`join_clique_candidates`), every later clique contributes its
+    candidate nearest (largest relative difference) to the running mean on the shared variables.
+
+    The fallback when no combination agrees within the tolerance, e.g. two global minimisers that
+    differ in a few variables and nearly coincide (but not to the tolerance) in the rest, whose
+    moment matrices are then numerically of rank one there.  The points are only starting points:
+    callers polish them and check feasibility and the objective."""
+    m = len(cliques)
+    if m == 0 or len(candidates) != m or any(len(c) == 0 for c in candidates):
+        return []
+    idx = [np.asarray(c, dtype=np.int64) for c in cliques]
+    order = _dfs_order(clique_tree(cliques))
+    results = []
+    for start in candidates[order[0]]:
+        sums, counts = np.zeros(n_vars), np.zeros(n_vars, dtype=np.int64)
+        sums[idx[order[0]]] += start
+        counts[idx[order[0]]] += 1
+        for k in order[1:]:
+            vs = idx[k]
+            seen = counts[vs] > 0
+            mean = sums[vs] / np.maximum(counts[vs], 1)
+
+            def miss(p):
+                return float(np.max(np.where(seen, np.abs(p - mean) / np.maximum(1.0, np.abs(mean)), 0.0),
+                                    initial=0.0))
+            p = min(candidates[k], key=miss)
+            sums[vs] += p
+            counts[vs] += 1
+        results.append(np.where(counts > 0, sums / np.maximum(counts, 1), 0.0))
+    return _dedupe(results, agree_tol)
+
+
 def extract_from_clique_moments(moments: Sequence[np.ndarray], bases: Sequence[np.ndarray],
                                 cliques: Sequence[Sequence[int]], n_vars: int,
                                 tolerances: Tolerances = DEFAULT_TOLERANCES, agree_tol: float = 1e-4,
-                                max_combinations: int = 10_000) -> list[np.ndarray]:
+                                max_combinations: int = 10_000, *, greedy: bool = False) -> list[np.ndarray]:
     """Candidate global minimisers from per-clique moment matrices (possibly an empty list).
 
     Parameters
@@ -167,12 +208,14 @@ def extract_from_clique_moments(moments: Sequence[np.ndarray], bases: Sequence[n
         Relative tolerance for two cliques to agree on a shared variable.
     max_combinations : int
         Cap on the partial combinations explored by the join.
+    greedy : bool
+        When no combination agrees, return the :func:`greedy_join` points instead of none.
 
     Returns
     -------
     list of numpy.ndarray
-        Points of length ``n_vars`` (each consistent across cliques); callers check
-        feasibility and objective values.
+        Points of length ``n_vars`` (each consistent across cliques, or with ``greedy`` the
+        :func:`greedy_join` points when none is); callers check feasibility and objective values.
 
     Raises
     ------
@@ -198,4 +241,5 @@ def extract_from_clique_moments(moments: Sequence[np.ndarray], bases: Sequence[n
         if M.shape != (B.shape[0], B.shape[0]):
             raise ValueError(f"moment matrix {k} has shape {M.shape}, expected {(B.shape[0], B.shape[0])}")
         cands.append(clique_candidates(M, B.astype(np.int64), tolerances, agree_tol))
-    return join_clique_candidates(cands, cliques, n_vars, agree_tol, max_combinations)
+    joined = join_clique_candidates(cands, cliques, n_vars, agree_tol, max_combinations)
+    return joined if joined or not greedy else greedy_join(cands, cliques, n_vars, agree_tol)

@@ -34,8 +34,8 @@ from ..algebra.polynomial import Polynomial
 from ..status import SolveStatus
 from ..tolerances import DEFAULT_TOLERANCES, Tolerances
 
-__all__ = ["Verification", "VerificationBatch", "quadratic_parts", "verify_quadratic", "verify_quadratic_batch",
-           "ROUNDOFF"]
+__all__ = ["Verification", "VerificationBatch", "SparseQuadratics", "quadratic_parts", "verify_quadratic",
+           "verify_quadratic_batch", "ROUNDOFF"]
 
 #: the Lagrangian Hessian must satisfy lambda_min >= -ROUNDOFF * max(1, max|H|): float
 #: round-off only (a genuinely indefinite H means no bound for these multipliers).
@@ -122,6 +122,34 @@ def _lstsq_stack(A: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.einsum("mji,mj->mi", Vt, inv * np.einsum("mpj,mp->mj", U, b))
 
 
+@dataclass(frozen=True)
+class SparseQuadratics:
+    """The quadratic parts G2[m, k] of K constraints over a stack of M programs, stored as one entry pattern
+    (constraint ``k``, row ``i``, column ``j``; both triangles listed for off-diagonal entries) shared by the
+    stack and the values ``vals`` (M, nnz)."""
+    k: np.ndarray
+    i: np.ndarray
+    j: np.ndarray
+    vals: np.ndarray
+
+    @classmethod
+    def from_dense(cls, G2: np.ndarray) -> "SparseQuadratics":
+        nz = np.nonzero(np.any(G2 != 0, axis=0))
+        return cls(nz[0], nz[1], nz[2], G2[:, nz[0], nz[1], nz[2]])
+
+    def apply(self, v: np.ndarray, K: int, n: int) -> np.ndarray:
+        """(M, K, n): G2[m, k] @ v[m] for every k."""
+        out = np.zeros((v.shape[0], K, n))
+        np.add.at(out, (slice(None), self.k, self.i), self.vals * v[:, self.j])
+        return out
+
+    def combine(self, lam: np.ndarray, n: int) -> np.ndarray:
+        """(M, n, n): sum_k lam[m, k] G2[m, k]."""
+        out = np.zeros((lam.shape[0], n, n))
+        np.add.at(out, (slice(None), self.i, self.j), self.vals * lam[:, self.k])
+        return out
+
+
 def verify_quadratic_batch(f0, f1, F2, g0, g1, G2, points, *,
                            tolerances: Tolerances = DEFAULT_TOLERANCES, radius=None) -> VerificationBatch:
     """The Lagrangian bound of the module docstring for M programs at once.
@@ -129,6 +157,8 @@ def verify_quadratic_batch(f0, f1, F2, g0, g1, G2, points, *,
     Program m: f(v) = f0[m] + f1[m].v + v^T F2[m] v and g_k(v) = g0[m,k] + g1[m,k].v +
     v^T G2[m,k] v (k < K), candidate v^ = points[m].  Shapes: f0 (M,), f1 (M, n),
     F2 (M, n, n), g0 (M, K), g1 (M, K, n), G2 (M, K, n, n), points (M, n); F2, G2 symmetric.
+    ``G2`` may also be given sparsely, as a :class:`SparseQuadratics` (one entry pattern shared by the
+    stack, values per program): memory O(M (K n + n^2)) instead of O(M K n^2).
 
     Steps, all vectorised over m: lambda = argmin ||J(v^)^T lambda + grad f(v^)|| (min-norm
     least squares); L = f + lambda^T g with Hessian part L2; reject when
@@ -147,24 +177,26 @@ def verify_quadratic_batch(f0, f1, F2, g0, g1, G2, points, *,
     F2 = np.asarray(F2, float)
     g0 = np.asarray(g0, float)
     g1 = np.asarray(g1, float)
-    G2 = np.asarray(G2, float)
     v = np.asarray(points, float)
     M, n = f1.shape
     K = g0.shape[1]
-    if F2.shape != (M, n, n) or g1.shape != (M, K, n) or G2.shape != (M, K, n, n) or v.shape != (M, n) \
-            or f0.shape != (M,) or g0.shape != (M, K):
+    G2 = G2 if isinstance(G2, SparseQuadratics) else SparseQuadratics.from_dense(np.asarray(G2, float)) \
+        if np.asarray(G2).shape == (M, K, n, n) else np.asarray(G2)
+    if F2.shape != (M, n, n) or g1.shape != (M, K, n) or v.shape != (M, n) or f0.shape != (M,) or g0.shape != (M, K) \
+            or not isinstance(G2, SparseQuadratics) or G2.vals.shape[0] != M:
         raise ValueError(f"verify_quadratic_batch: inconsistent shapes f0 {f0.shape}, f1 {f1.shape}, F2 {F2.shape}, "
-                         f"g0 {g0.shape}, g1 {g1.shape}, G2 {G2.shape}, points {v.shape}")
+                         f"g0 {g0.shape}, g1 {g1.shape}, G2 {np.shape(G2) if not isinstance(G2, SparseQuadratics) else G2.vals.shape}, "
+                         f"points {v.shape}")
     fv = f0 + np.einsum("mi,mi->m", f1, v) + np.einsum("mi,mij,mj->m", v, F2, v)
     grad_f = f1 + 2 * np.einsum("mij,mj->mi", F2, v)
     if K:
-        J = g1 + 2 * np.einsum("mkij,mj->mki", G2, v)                    # rows: grad g_k(v)
+        J = g1 + 2 * G2.apply(v, K, n)                                  # rows: grad g_k(v)
         lam = _lstsq_stack(np.swapaxes(J, 1, 2), -grad_f)
     else:
         lam = np.zeros((M, 0))
     L0 = f0 + np.einsum("mk,mk->m", lam, g0)
     L1 = f1 + np.einsum("mk,mki->mi", lam, g1)
-    L2 = F2 + np.einsum("mk,mkij->mij", lam, G2)
+    L2 = F2 + G2.combine(lam, n)
     eig, Q = np.linalg.eigh(L2)
     scale = np.maximum(1.0, np.max(np.abs(L2), axis=(1, 2)))
     psd = eig[:, 0] >= -ROUNDOFF * scale

@@ -150,22 +150,30 @@ def fundamental_stack(C: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return F, defined
 
 
-def epipolar_quadratics(F: np.ndarray, N: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Quadratic parts (g0 (M, K), g1 (M, K, 2N), G2 (M, K, 2N, 2N)) of g_ij(v) = x~_i^T F_ij x~_j over
-    v = (x_11, x_12, ..., x_N2), for F (M, K, 3, 3) in the order of :func:`view_pairs`."""
+def epipolar_quadratics(F: np.ndarray, N: int):
+    """Quadratic parts (g0 (M, K), g1 (M, K, 2N), G2) of g_ij(v) = x~_i^T F_ij x~_j over
+    v = (x_11, x_12, ..., x_N2), for F (M, K, 3, 3) in the order of :func:`view_pairs`; G2 as
+    :class:`sospoly.analysis.verify.SparseQuadratics` (8 entries per pair, so memory grows like N^2, not N^4)."""
+    from sospoly.analysis.verify import SparseQuadratics
+
     M, K = F.shape[:2]
     I, J = view_pairs(N)
     n = 2 * N
     g0 = F[..., 2, 2]
     g1 = np.zeros((M, K, n))
-    G2 = np.zeros((M, K, n, n))
     k = np.arange(K)
+    ks, ii, jj, vals = [], [], [], []
     for a_ in range(2):
         g1[:, k, 2 * I + a_] = F[:, :, a_, 2]
         g1[:, k, 2 * J + a_] = F[:, :, 2, a_]
         for b_ in range(2):
-            G2[:, k, 2 * I + a_, 2 * J + b_] = F[:, :, a_, b_] / 2
-            G2[:, k, 2 * J + b_, 2 * I + a_] = F[:, :, a_, b_] / 2
+            half = F[:, :, a_, b_] / 2
+            ks += [k, k]
+            ii += [2 * I + a_, 2 * J + b_]
+            jj += [2 * J + b_, 2 * I + a_]
+            vals += [half, half]
+    G2 = SparseQuadratics(np.concatenate(ks), np.concatenate(ii), np.concatenate(jj),
+                          np.concatenate(vals, axis=1) if vals else np.zeros((M, 0)))
     return g0, g1, G2
 
 

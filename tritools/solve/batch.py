@@ -39,7 +39,8 @@ from .options import TriangulationOptions, options_from
 from .points import PointStack
 from .triangulate import triangulate
 
-__all__ = ["triangulate_many", "safe_triangulate", "solve_point_problems", "RetryStep", "LOCAL_PROCESS_MIN_ITEMS",
+__all__ = ["triangulate_many", "safe_triangulate", "solve_point_problems", "solve_point_stack", "BatchOutcome",
+           "RetryStep", "LOCAL_PROCESS_MIN_ITEMS",
            "DEFAULT_CHUNK_SIZE", "PROGRESS_MIN_ITEMS"]
 
 log = logging.getLogger(__name__)
@@ -165,7 +166,8 @@ class BatchOutcome:
         n = self.n
         out = {"X": np.full((n, 3), np.nan), "gamma_lb": np.full(n, np.nan), "gamma_ub": np.full(n, np.nan),
                "status": np.full(n, None, dtype=object), "optimal": np.zeros(n, bool),
-               "in_front": np.zeros(n, bool), "delta": np.full(n, -1), "certified_by": np.full(n, None, dtype=object)}
+               "in_front": np.zeros(n, bool), "delta": np.full(n, -1), "certified_by": np.full(n, None, dtype=object),
+               "message": np.full(n, "", dtype=object)}
         by_stack: dict[int, tuple] = {}
         for i, (stack, m) in self.stacked.items():
             by_stack.setdefault(id(stack), (stack, [], []))[1].append(i)
@@ -176,7 +178,7 @@ class BatchOutcome:
                 out[name][idx] = getattr(stack, name)[rows]
         for i, r in self.objects.items():
             out["status"][i] = r.status.value
-            for name in ("gamma_lb", "gamma_ub", "optimal", "in_front", "delta", "certified_by"):
+            for name in ("gamma_lb", "gamma_ub", "optimal", "in_front", "delta", "certified_by", "message"):
                 v = getattr(r, name)
                 if v is not None:
                     out[name][i] = v
@@ -223,6 +225,28 @@ def _run_items(items, retries, executor, chunk_size: int, store) -> None:
     finally:
         if own is not None:
             own.shutdown(wait=True, cancel_futures=True)
+
+
+def solve_point_stack(cameras: np.ndarray, points2d: np.ndarray, opts: TriangulationOptions, *, executor=None,
+                      chunk_size: int = DEFAULT_CHUNK_SIZE) -> BatchOutcome:
+    """M point problems of N views given as stacks (cameras (M, N, 3, 4), points2d (M, N, 2)): the vectorised
+    paths of :class:`PointStack`, then the per-point path for the rest (no per-item parsing)."""
+    M = len(points2d)
+    out = BatchOutcome(M)
+    stack = PointStack(cameras, points2d, opts).run()
+    items = []
+    for m in range(M):
+        if stack.done[m]:
+            out.stacked[m] = (stack, m)
+        else:
+            items.append((m, *stack.item(m), stack.todo.get(m, opts), stack.prefix[m]))
+
+    def store(pairs):
+        for i, r in pairs:
+            out.objects[i] = r
+
+    _run_items(items, (), executor, chunk_size, store)
+    return out
 
 
 def solve_point_problems(problems, opts: TriangulationOptions, *, executor=None, progress=None, retries=(),

@@ -25,6 +25,7 @@ overflow, LM failure) are simply not certified here: callers send them through
 """
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -105,9 +106,10 @@ def verify_points(cameras, points2d, *, tolerances: Tolerances = DEFAULT_TOLERAN
     F, defined = fundamental_stack(Cn)
     ok &= np.any(defined, axis=1) if F.shape[1] else ok
     g0, g1, G2 = epipolar_quadratics(F, N)
-    finite = np.isfinite(g0).all(axis=1) & np.isfinite(g1).all(axis=(1, 2)) & np.isfinite(G2).all(axis=(1, 2, 3))
+    finite = np.isfinite(g0).all(axis=1) & np.isfinite(g1).all(axis=(1, 2)) & np.isfinite(G2.vals).all(axis=1)
     ok &= finite
-    g0, g1, G2 = (np.where(ok.reshape((M,) + (1,) * (a.ndim - 1)), a, 0.0) for a in (g0, g1, G2))
+    g0, g1 = (np.where(ok.reshape((M,) + (1,) * (a.ndim - 1)), a, 0.0) for a in (g0, g1))
+    G2 = dataclasses.replace(G2, vals=np.where(ok[:, None], G2.vals, 0.0))
     n = 2 * N
     # a minimiser v* has ||v*||^2 = f(v*) <= f(v^) = ||v^||^2 (observed points at the origin): the radius of the
     # rigorous margin of the Lagrangian bound

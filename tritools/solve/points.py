@@ -31,8 +31,16 @@ from .sdp_batch import solve_corollary1_points
 
 __all__ = ["PointStack", "PointsResult", "triangulate_points", "FAST_CHUNK"]
 
-#: the vectorised paths handle at most this many problems per numpy call (bounds memory).
+#: the vectorised paths handle at most this many problems per numpy call ...
 FAST_CHUNK = 4096
+#: ... and use at most about this many bytes per call (the verification's arrays grow like N^3 per problem).
+FAST_CHUNK_BYTES = 256 * 2 ** 20
+
+
+def chunk_for(n_views: int) -> int:
+    """Problems per vectorised call for N views (memory ~ 8 (4 K n + 8 n^2) bytes each, K = N(N-1)/2, n = 2N)."""
+    K, n = n_views * (n_views - 1) // 2, 2 * n_views
+    return int(max(1, min(FAST_CHUNK, FAST_CHUNK_BYTES // (8 * (4 * K * n + 8 * n * n + 64)))))
 
 
 def batch_steps(opts: TriangulationOptions) -> tuple[bool, bool]:
@@ -72,6 +80,7 @@ class PointStack:
         self.optimal = np.zeros(M, bool)
         self.certified_by = np.full(M, None, dtype=object)
         self.delta = np.full(M, -1)
+        self.message = np.full(M, "", dtype=object)
         self.n_lmivar = n_lmivar_formula(2 * N, 2, [2] * (N * (N - 1) // 2))
         self.prefix: list = [() for _ in range(M)]
         self.done = np.zeros(M, bool)
@@ -80,8 +89,9 @@ class PointStack:
     def run(self) -> "PointStack":
         verify, sdp = batch_steps(self.opts)
         left = np.arange(self.M)
-        for start in range(0, self.M, FAST_CHUNK):
-            part = left[start:start + FAST_CHUNK]
+        step = chunk_for(self.N)
+        for start in range(0, self.M, step):
+            part = left[start:start + step]
             if verify:
                 part = self._verify(part)
             if sdp and part.size:
@@ -149,12 +159,13 @@ class PointStack:
         self.gamma_ub[d], self.residuals[d], self.depths[d] = g, res, dep
         self.gamma_ub_raw[d] = points_report_stack(self.C[d], self.x[d], self.X_raw[d])[0]
         self.status[d], self.in_front[d] = cheirality(self.status[d], dep, self.opts.require_in_front)
+        self.message[d] = np.where(self.in_front[d] | ~self.optimal[d], "", "certified L2 optimum, but behind a camera")
         self.gamma_lb[d] = np.minimum(self.gamma_lb[d], self.gamma_ub[d])
 
     def result(self, m: int) -> TriangulationResult:
         """The :class:`TriangulationResult` of a batch-decided problem."""
         st = Status(self.status[m])
-        msg = "" if self.in_front[m] or not self.optimal[m] else "certified L2 optimum, but behind a camera"
+        msg = self.message[m]
         return TriangulationResult(
             Method.COROLLARY1.value, st, X=self.X[m], gamma_ub=float(self.gamma_ub[m]), gamma_lb=float(self.gamma_lb[m]),
             optimal=bool(self.optimal[m]), delta=2, n_lmivar=self.n_lmivar, image_points=self.image_points[m],

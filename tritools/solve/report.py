@@ -68,17 +68,20 @@ def region_extent(region) -> tuple[float, float] | None:
     return None
 
 
-def solve_radius(regions_n, c_upper: float) -> float | None:
-    """A radius R with ||v*|| <= R for a minimiser v* of the normalised program: f(v*) <= f(v^) = c_upper gives
-    ||x_i - y_i|| <= sqrt(c_upper) (y_i the closest region point), so ||x_i|| <= rho_i + sqrt(c_upper), and the
-    auxiliary variables are bounded by the regions (:func:`region_extent`)."""
+def solve_radius(regions_n, c_upper: float) -> np.ndarray | None:
+    """Bounds r_i >= |v_i| for a minimiser v* of the normalised program, one per variable in the order of
+    :func:`tritools.model.problem.build_problem` (x_11, x_12, ..., then every view's auxiliary variables):
+    f(v*) <= f(v^) = c_upper gives ||x_i - y_i|| <= sqrt(c_upper) (y_i the closest region point), so
+    |x_ik| <= rho_i + sqrt(c_upper), and the auxiliary variables are bounded by the regions
+    (:func:`region_extent`).  None when a region's extent is unknown or c_upper is not finite."""
     if not np.isfinite(c_upper):
         return None
-    total = 0.0
+    xs, aux = [], []
     for r in regions_n:
         ext = region_extent(r)
         if ext is None:
             return None
         rho, a = ext
-        total += (rho + math.sqrt(max(c_upper, 0.0))) ** 2 + a ** 2
-    return math.sqrt(total)
+        xs += [rho + math.sqrt(max(c_upper, 0.0))] * 2
+        aux += [a] * r.n_aux
+    return np.array(xs + aux)

@@ -54,6 +54,8 @@ __all__ = ["triangulate", "MAX_FAMILY_DIM"]
 
 #: kernel families of dimension up to this are searched for the best candidate.
 MAX_FAMILY_DIM = 3
+#: views per clique of the view-clique formulation with Corollary 1 (Theorem 1's triple minors need 3).
+VIEW_CLIQUE_WIDTH = 2
 
 
 def triangulate(cameras, regions, method=None, delta: int | None = None, max_delta: int | None = None, *,
@@ -228,7 +230,8 @@ class _PointSolve:
         certificate (sospoly's clique shape; tritools only says which variables belong together)."""
         if step.formulation == "dense":
             return "none"
-        cliques = [sorted(problem.variables_of_views(t)) for t in view_chain(problem.n_views)]
+        width = 3 if step.method == Method.THEOREM1 else VIEW_CLIQUE_WIDTH
+        cliques = [sorted(problem.variables_of_views(t)) for t in view_chain(problem.n_views, width)]
         n = len(problem.gens)
         return sospoly.clique_shape(n, step.delta, cliques, [problem.variables_of_views(v) for v in problem.eq_views],
                                     [problem.variables_of_views(v) for v in problem.ineq_views],

@@ -53,7 +53,7 @@ class Budget:
         if isinstance(v, bool) or not isinstance(v, numbers.Integral) or v < 1:
             raise ValueError(f"Budget.max_gram_side must be a positive integer, got {v!r}")
 
-    def deadline(self) -> "Deadline":
+    def deadline(self) -> Deadline:
         return Deadline.after(self.time_limit)
 
 
@@ -79,7 +79,7 @@ class Deadline:
     end: float | None
 
     @classmethod
-    def after(cls, seconds: float | None) -> "Deadline":
+    def after(cls, seconds: float | None) -> Deadline:
         return cls(None if seconds is None else time.monotonic() + float(seconds))
 
     def remaining(self) -> float | None:

@@ -202,7 +202,7 @@ class Tolerances:
         """Is a point with relative constraint violation ``violation`` feasible?"""
         return _maybe_scalar(np.asarray(violation, float) <= self.feasibility)
 
-    def tightened(self, factor: float = 1e-2) -> "Tolerances":
+    def tightened(self, factor: float = 1e-2) -> Tolerances:
         """A copy with the solver's stopping tolerances multiplied by ``factor`` (a re-solve after an
         inconsistent answer)."""
         from dataclasses import replace

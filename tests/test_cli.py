@@ -165,9 +165,10 @@ BAD_FILES = {
                                                                               "B": [[1, 0], [2, 0]], "c": [0, 0]})),
                            "regions[0].B: has rank < 2"),
     "typo_field": (_ex4_with(lambda d: d.__setitem__("delat", 4)), "delat: unknown field"),
-    "odd_delta": (_ex4_with(lambda d: d.__setitem__("delta", 3)), "delta: expected an even integer >= 2, got 3"),
+    # solver settings: the rules (and words) of TriangulationOptions, the one validation of the flags too
+    "odd_delta": (_ex4_with(lambda d: d.__setitem__("delta", 3)), "delta: must be an even integer >= 2, got 3"),
     "bad_method": (_ex4_with(lambda d: d.__setitem__("method", "newton")),
-                   "method: expected one of 'theorem1', 'corollary1', got 'newton'"),
+                   "method: must be one of 'auto', 'theorem1', 'corollary1', got 'newton'"),
     "empty": ({"problems": []}, "problems: no problems"),
     "top_level": ("42", "$: expected a problem object, an array of problems"),
     "not_json": ('{"cameras": [1, 2', "not valid JSON: Expecting"),
@@ -191,7 +192,8 @@ def test_bad_file_exit_2_one_line_naming_the_field(kind, tmp_path, capsys):
 
 def test_unreadable_file(tmp_path, capsys):
     rc, out, err = run(["solve", tmp_path / "missing.json"], capsys)
-    assert rc == 2 and err.strip() == f"tritools: error: {tmp_path / 'missing.json'}: cannot read: No such file or directory"
+    missing = tmp_path / "missing.json"
+    assert rc == 2 and err.strip() == f"tritools: error: {missing}: cannot read: No such file or directory"
 
 
 def test_bad_arguments_one_line(tmp_path, capsys):
@@ -205,7 +207,7 @@ def test_internal_error_one_line_or_traceback_when_debugging(tmp_path, capsys, m
     def boom(*a, **k):
         raise RuntimeError("kaboom")
 
-    monkeypatch.setattr(cli, "solve_problems", boom)
+    monkeypatch.setattr(cli, "_timed_solve", boom)
     path = write(tmp_path, example4_doc())
     rc, _, err = run(["solve", path], capsys)
     assert rc == 1

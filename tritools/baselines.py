@@ -21,12 +21,13 @@ start is a point at infinity).
 from __future__ import annotations
 
 import time
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 from scipy import optimize
 
-from .model.geometry import PointAtInfinityError, _gamma_unchecked, _project, dlt, point_from_image_points, validate_cameras
+from .model.geometry import (PointAtInfinityError, gamma_validated, project_homogeneous, dlt, point_from_image_points,
+                             validate_cameras)
 from .model.regions import Point, as_regions, positive_number
 from .result import Status, TriangulationResult
 
@@ -65,7 +66,7 @@ def _prepare(cameras, regions):
 
 
 def _gamma1(X: np.ndarray, C: np.ndarray, R) -> float:
-    return float(_gamma_unchecked(np.asarray(X, dtype=float).reshape(1, 3), C, R)[0])
+    return float(gamma_validated(np.asarray(X, dtype=float).reshape(1, 3), C, R)[0])
 
 
 INITS = ("algebraic", "normalized")
@@ -107,7 +108,7 @@ def _finish(method: str, X, C, R, t0: float, message: str = "", status: Status =
         return TriangulationResult(method, Status.NUMERICAL_FAILURE, message=message + " (non-finite estimate)",
                                    timings={"total": total}, **extra)
     Xh = np.append(X, 1.0)[None, :]
-    x = np.array([_project(Xh, P)[0] for P in C])
+    x = np.array([project_homogeneous(Xh, P)[0] for P in C])
     return TriangulationResult(method, status, X=X, gamma_ub=_gamma1(X, C, R),
                                image_points=x if np.all(np.isfinite(x)) else None,
                                message=message, timings={"total": total}, **extra)
@@ -348,7 +349,7 @@ def particle_swarm(cameras, regions, *, seed=0, bounds: float = 100.0, max_iter:
     b = _check_bounds(bounds)
     rng = np.random.default_rng(seed)
     X0 = _start(C, R, _check_init(init))[0] if include_dlt else None
-    X, fbest, it, msg = _pso(lambda Xs: _gamma_unchecked(Xs, C, R), np.full(3, -b), np.full(3, b), rng,
+    X, fbest, it, msg = _pso(lambda Xs: gamma_validated(Xs, C, R), np.full(3, -b), np.full(3, b), rng,
                              max_iter, X0)
     return _finish("pso", X, C, R, t0, f"{msg} (iterations={it})")
 

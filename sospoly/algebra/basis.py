@@ -156,11 +156,11 @@ class GramBasis:
     product_index: MonomialIndex = field(repr=False, compare=False)
 
     @classmethod
-    def full(cls, nvars: int, half_degree: int) -> "GramBasis":
+    def full(cls, nvars: int, half_degree: int) -> GramBasis:
         return cls.from_exponents(monomials(nvars, half_degree))
 
     @classmethod
-    def from_exponents(cls, b: np.ndarray) -> "GramBasis":
+    def from_exponents(cls, b: np.ndarray) -> GramBasis:
         b = np.asarray(b, dtype=np.int64)
         s = b.shape[0]
         ii, jj = triu_pairs(s)  # column-wise upper triangle, the svec order
@@ -215,7 +215,7 @@ class GramBlocks:
     product_index: MonomialIndex = field(repr=False, compare=False)
 
     @classmethod
-    def of(cls, bases) -> "GramBlocks":
+    def of(cls, bases) -> GramBlocks:
         """Blocks from GramBasis objects or exponent arrays (a single basis or a sequence)."""
         if isinstance(bases, GramBasis) or (isinstance(bases, np.ndarray) and bases.ndim == 2):
             bases = [bases]

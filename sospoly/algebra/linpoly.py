@@ -58,20 +58,20 @@ class LinPoly:
 
     # ------------------------------------------------------------------ constructors
     @classmethod
-    def from_polynomial(cls, p: Polynomial, gens) -> "LinPoly":
+    def from_polynomial(cls, p: Polynomial, gens) -> LinPoly:
         p = p.with_gens(gens)
         if not p.terms:
             return cls(gens, np.zeros((0, len(gens)), np.int64), np.zeros(0), canonical=True)
         return cls(gens, p.exponents(), p.coefficients())
 
     @classmethod
-    def variable_terms(cls, gens, E, var_index) -> "LinPoly":
+    def variable_terms(cls, gens, E, var_index) -> LinPoly:
         """sum_k x[var_index[k]] * v^E[k] (one decision variable per monomial)."""
         E = np.asarray(E, dtype=np.int64).reshape(-1, len(gens))
         m = E.shape[0]
         return cls(gens, E, np.zeros(m), np.arange(m), np.asarray(var_index), np.ones(m))
 
-    def _coerce(self, other) -> "LinPoly":
+    def _coerce(self, other) -> LinPoly:
         if isinstance(other, LinPoly):
             if other.gens != self.gens:
                 raise ValueError(f"LinPoly generators differ: {self.gens} vs {other.gens}")
@@ -79,7 +79,7 @@ class LinPoly:
         return LinPoly.from_polynomial(as_polynomial(other, self.gens), self.gens)
 
     # ------------------------------------------------------------------ arithmetic
-    def __add__(self, other) -> "LinPoly":
+    def __add__(self, other) -> LinPoly:
         o = self._coerce(other)
         m = self.E.shape[0]
         return LinPoly(self.gens, np.vstack([self.E, o.E]), np.concatenate([self.const, o.const]),
@@ -88,16 +88,16 @@ class LinPoly:
 
     __radd__ = __add__
 
-    def __neg__(self) -> "LinPoly":
+    def __neg__(self) -> LinPoly:
         return self * -1.0
 
-    def __sub__(self, other) -> "LinPoly":
+    def __sub__(self, other) -> LinPoly:
         return self + (-self._coerce(other))
 
-    def __rsub__(self, other) -> "LinPoly":
+    def __rsub__(self, other) -> LinPoly:
         return self._coerce(other) - self
 
-    def __mul__(self, other) -> "LinPoly":
+    def __mul__(self, other) -> LinPoly:
         if isinstance(other, LinPoly):
             raise TypeError("the product of two decision-dependent polynomials is not affine")
         if isinstance(other, (numbers.Real, np.floating, np.integer)) and not isinstance(other, bool):

@@ -7,13 +7,16 @@ polynomials with different generators works on the union of the generators
 ``x`` and ``y``.
 
 Only exact zeros are dropped from the term dictionary; no coefficient is ever
-rounded.  Coefficients must be finite: NaN or inf raise :class:`ValueError`.
+rounded.  Coefficients must be finite real numbers: NaN or inf raise :class:`ValueError`,
+strings and booleans :class:`TypeError`.  Exponents must be non-negative integers
+(``int`` or a numpy integer): a float exponent (even ``2.0``), a boolean or a numpy float
+raises :class:`TypeError` naming the exponent instead of being truncated.
 """
 from __future__ import annotations
 
 import math
 import numbers
-from typing import Iterable, Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 
 import numpy as np
 
@@ -23,7 +26,12 @@ Exponent = tuple  # tuple[int, ...]
 
 
 def _check_finite(value: float, what: str = "coefficient") -> float:
-    value = float(value)
+    if isinstance(value, (str, bytes, bool, np.bool_, complex, np.complexfloating)):
+        raise TypeError(f"polynomial {what} must be a real number, got {type(value).__name__} {value!r}")
+    try:
+        value = float(value)
+    except TypeError:
+        raise TypeError(f"polynomial {what} must be a real number, got {type(value).__name__}") from None
     if not math.isfinite(value):
         raise ValueError(f"polynomial {what} must be finite, got {value!r}")
     return value
@@ -37,7 +45,7 @@ class Polynomial:
     gens:
         Variable names, e.g. ``("x", "y")``.
     terms:
-        Mapping from exponent tuples (one int per generator) to coefficients.
+        Mapping from exponent tuples (one non-negative int per generator) to finite real coefficients.
     """
 
     __slots__ = ("gens", "terms")
@@ -50,7 +58,7 @@ class Polynomial:
         clean: dict[Exponent, float] = {}
         n = len(gens)
         for e, c in (terms or {}).items():
-            e = tuple(int(k) for k in e)
+            e = _exponent(e)
             if len(e) != n:
                 raise ValueError(f"exponent {e} does not match the {n} variables {gens}")
             if any(k < 0 for k in e):
@@ -62,7 +70,7 @@ class Polynomial:
 
     # ------------------------------------------------------------------ constructors
     @classmethod
-    def _raw(cls, gens: tuple, terms: dict) -> "Polynomial":
+    def _raw(cls, gens: tuple, terms: dict) -> Polynomial:
         """Internal constructor for already-clean data (int exponent tuples, finite non-zero floats)."""
         p = object.__new__(cls)
         p.gens = gens
@@ -70,7 +78,7 @@ class Polynomial:
         return p
 
     @classmethod
-    def _checked(cls, gens: tuple, terms: dict) -> "Polynomial":
+    def _checked(cls, gens: tuple, terms: dict) -> Polynomial:
         """Internal: drop exact zeros and refuse overflow to inf/NaN."""
         out = {}
         for e, c in terms.items():
@@ -81,12 +89,12 @@ class Polynomial:
         return cls._raw(gens, out)
 
     @classmethod
-    def constant(cls, value: float, gens: Sequence[str] = ()) -> "Polynomial":
+    def constant(cls, value: float, gens: Sequence[str] = ()) -> Polynomial:
         gens = tuple(gens)
         return cls(gens, {(0,) * len(gens): value})
 
     @classmethod
-    def from_sympy(cls, expr, gens: Sequence | None = None) -> "Polynomial":
+    def from_sympy(cls, expr, gens: Sequence | None = None) -> Polynomial:
         """Convert a sympy expression (polynomial in ``gens``) to a Polynomial."""
         import sympy
 
@@ -138,7 +146,7 @@ class Polynomial:
         return max((abs(c) for c in self.terms.values()), default=0.0)
 
     # ------------------------------------------------------------------ generator alignment
-    def with_gens(self, gens: Sequence[str]) -> "Polynomial":
+    def with_gens(self, gens: Sequence[str]) -> Polynomial:
         """The same polynomial expressed over ``gens`` (must contain every used variable)."""
         gens = tuple(gens)
         if gens == self.gens:
@@ -159,14 +167,14 @@ class Polynomial:
             out[tuple(new)] = c
         return Polynomial(gens, out)
 
-    def _aligned(self, other: "Polynomial") -> tuple["Polynomial", "Polynomial"]:
+    def _aligned(self, other: Polynomial) -> tuple[Polynomial, Polynomial]:
         if self.gens == other.gens:
             return self, other
         gens = self.gens + tuple(g for g in other.gens if g not in self.gens)
         return self.with_gens(gens), other.with_gens(gens)
 
     # ------------------------------------------------------------------ arithmetic
-    def __add__(self, other) -> "Polynomial":
+    def __add__(self, other) -> Polynomial:
         if not _is_operand(other):
             return NotImplemented
         other = as_polynomial(other, self.gens)
@@ -178,23 +186,23 @@ class Polynomial:
 
     __radd__ = __add__
 
-    def __neg__(self) -> "Polynomial":
+    def __neg__(self) -> Polynomial:
         return Polynomial._raw(self.gens, {e: -c for e, c in self.terms.items()})
 
-    def __pos__(self) -> "Polynomial":
+    def __pos__(self) -> Polynomial:
         return self
 
-    def __sub__(self, other) -> "Polynomial":
+    def __sub__(self, other) -> Polynomial:
         if not _is_operand(other):
             return NotImplemented
         return self + (-as_polynomial(other, self.gens))
 
-    def __rsub__(self, other) -> "Polynomial":
+    def __rsub__(self, other) -> Polynomial:
         if not _is_operand(other):
             return NotImplemented
         return as_polynomial(other, self.gens) - self
 
-    def __mul__(self, other) -> "Polynomial":
+    def __mul__(self, other) -> Polynomial:
         if isinstance(other, numbers.Real) and not isinstance(other, bool):
             s = _check_finite(other, "scalar")
             return Polynomial._checked(self.gens, {e: c * s for e, c in self.terms.items()})
@@ -211,15 +219,15 @@ class Polynomial:
 
     __rmul__ = __mul__
 
-    def __truediv__(self, other) -> "Polynomial":
+    def __truediv__(self, other) -> Polynomial:
         if isinstance(other, numbers.Real) and not isinstance(other, bool):
             if other == 0:
                 raise ZeroDivisionError("division of a polynomial by zero")
             return self * (1.0 / float(other))
         return NotImplemented
 
-    def __pow__(self, k: int) -> "Polynomial":
-        if not isinstance(k, numbers.Integral) or k < 0:
+    def __pow__(self, k: int) -> Polynomial:
+        if isinstance(k, (bool, np.bool_)) or not isinstance(k, numbers.Integral) or k < 0:
             raise ValueError(f"only non-negative integer powers are supported, got {k!r}")
         result = Polynomial.constant(1.0, self.gens)
         base = self
@@ -254,7 +262,7 @@ class Polynomial:
         )
 
     # ------------------------------------------------------------------ calculus & substitution
-    def diff(self, name: str) -> "Polynomial":
+    def diff(self, name: str) -> Polynomial:
         """Partial derivative with respect to the variable ``name``."""
         if name not in self.gens:
             return Polynomial(self.gens, {})
@@ -267,10 +275,10 @@ class Polynomial:
                 out[tuple(e2)] = c * e[k]
         return Polynomial(self.gens, out)
 
-    def gradient(self) -> list["Polynomial"]:
+    def gradient(self) -> list[Polynomial]:
         return [self.diff(g) for g in self.gens]
 
-    def subs(self, values: Mapping[str, object]) -> "Polynomial":
+    def subs(self, values: Mapping[str, object]) -> Polynomial:
         """Substitute numbers or polynomials for variables; keeps the other variables."""
         values = {str(k) if not isinstance(k, Polynomial) else _name_of(k): v for k, v in values.items()}
         unknown = set(values) - set(self.gens)
@@ -340,6 +348,21 @@ class Polynomial:
         return "Polynomial(" + " ".join(parts) + ")"
 
 
+def _exponent(e) -> tuple:
+    """An exponent tuple of Python ints; TypeError naming it when it is not a sequence of integers (a float
+    such as 1.5 used to be truncated by int() and the monomial silently changed)."""
+    if isinstance(e, (str, bytes)) or not hasattr(e, "__iter__"):
+        raise TypeError(f"exponent {e!r} must be a tuple of non-negative integers, got {type(e).__name__}")
+    out = []
+    for k in e:
+        if type(k) is not int:
+            if isinstance(k, (bool, np.bool_)) or not isinstance(k, numbers.Integral):
+                raise TypeError(f"exponent {tuple(e)!r} must contain integers, got {k!r} ({type(k).__name__})")
+            k = int(k)
+        out.append(k)
+    return tuple(out)
+
+
 def _is_operand(value) -> bool:
     return isinstance(value, (Polynomial, numbers.Real, np.floating, np.integer)) and not isinstance(value, bool)
 
@@ -370,6 +393,8 @@ def variables(names: str | Iterable[str], n: int | None = None) -> tuple[Polynom
     if n is not None:
         if not isinstance(names, str):
             raise TypeError("with n=..., names must be one prefix string")
+        if isinstance(n, (bool, np.bool_)) or not isinstance(n, numbers.Integral) or n < 1:
+            raise ValueError(f"n must be a positive integer, got {n!r}")
         gens = tuple(f"{names}{k}" for k in range(1, int(n) + 1))
     else:
         gens = tuple(names.replace(",", " ").split()) if isinstance(names, str) else tuple(names)
@@ -390,7 +415,8 @@ def det(matrix: Sequence[Sequence[object]]) -> Polynomial:
         for e in r:
             if isinstance(e, Polynomial):
                 gens = gens + tuple(g for g in e.gens if g not in gens)
-    M = [[as_polynomial(e, gens).with_gens(gens) if isinstance(e, Polynomial) else as_polynomial(e, gens) for e in r] for r in rows]
+    M = [[as_polynomial(e, gens).with_gens(gens) if isinstance(e, Polynomial) else as_polynomial(e, gens)
+          for e in r] for r in rows]
 
     def rec(cols: tuple[int, ...], row: int) -> Polynomial:
         if len(cols) == 1:

@@ -33,7 +33,8 @@ __all__ = ["Candidate", "CandidateFamily", "kernel_family", "best_in_family", "k
 
 @dataclass(frozen=True)
 class Candidate:
-    """A minimiser candidate ``point`` read from a span (``source``: gram, moment, -hl, -span, -mean) with its relative span residual."""
+    """A minimiser candidate ``point`` read from a span (``source``: gram, moment, -hl, -span, -mean) with
+    its relative span residual."""
     point: np.ndarray
     source: str             # "gram-kernel", "gram-hl", "moment", "moment-hl"
     span_residual: float    # ||b(v) - proj_W b(v)|| / ||b(v)||

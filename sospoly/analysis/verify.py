@@ -133,7 +133,7 @@ class SparseQuadratics:
     vals: np.ndarray
 
     @classmethod
-    def from_dense(cls, G2: np.ndarray) -> "SparseQuadratics":
+    def from_dense(cls, G2: np.ndarray) -> SparseQuadratics:
         nz = np.nonzero(np.any(G2 != 0, axis=0))
         return cls(nz[0], nz[1], nz[2], G2[:, nz[0], nz[1], nz[2]])
 
@@ -185,7 +185,8 @@ def verify_quadratic_batch(f0, f1, F2, g0, g1, G2, points, *,
     if F2.shape != (M, n, n) or g1.shape != (M, K, n) or v.shape != (M, n) or f0.shape != (M,) or g0.shape != (M, K) \
             or not isinstance(G2, SparseQuadratics) or G2.vals.shape[0] != M:
         raise ValueError(f"verify_quadratic_batch: inconsistent shapes f0 {f0.shape}, f1 {f1.shape}, F2 {F2.shape}, "
-                         f"g0 {g0.shape}, g1 {g1.shape}, G2 {np.shape(G2) if not isinstance(G2, SparseQuadratics) else G2.vals.shape}, "
+                         f"g0 {g0.shape}, g1 {g1.shape}, "
+                         f"G2 {G2.vals.shape if isinstance(G2, SparseQuadratics) else np.shape(G2)}, "
                          f"points {v.shape}")
     fv = f0 + np.einsum("mi,mi->m", f1, v) + np.einsum("mi,mij,mj->m", v, F2, v)
     grad_f = f1 + 2 * np.einsum("mij,mj->mi", F2, v)
@@ -206,7 +207,8 @@ def verify_quadratic_batch(f0, f1, F2, g0, g1, G2, points, *,
     cut = np.finfo(float).eps * n * np.max(np.abs(s), axis=1, keepdims=True)
     inv = np.where(np.abs(s) > cut, 1.0 / np.where(np.abs(s) > cut, s, 1.0), 0.0)
     w = -np.einsum("mij,mj->mi", Q, inv * np.einsum("mji,mj->mi", Q, L1))
-    resid = np.linalg.norm(2 * np.einsum("mij,mj->mi", L2, w) + L1, axis=1) / np.maximum(1.0, np.linalg.norm(L1, axis=1))
+    resid = np.linalg.norm(2 * np.einsum("mij,mj->mi", L2, w) + L1, axis=1) \
+        / np.maximum(1.0, np.linalg.norm(L1, axis=1))
     in_range = resid <= tolerances.identity_residual
     t1, t2 = np.einsum("mi,mi->m", L1, w), np.einsum("mi,mij,mj->m", w, L2, w)
     c = L0 + t1 + t2

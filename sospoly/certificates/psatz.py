@@ -156,7 +156,8 @@ def as_multiplier(multiplier):
         except ValueError:
             raise ValueError(f"multiplier must be 'fixed', 'putinar', 'free', a Polynomial or a number; got "
                              f"{multiplier!r}") from None
-    if isinstance(multiplier, Polynomial) or (isinstance(multiplier, numbers.Real) and not isinstance(multiplier, bool)):
+    if isinstance(multiplier, Polynomial) or (isinstance(multiplier, numbers.Real)
+                                              and not isinstance(multiplier, bool)):
         return multiplier
     raise TypeError(f"multiplier must be 'fixed', 'free', a Polynomial or a positive number, got "
                     f"{type(multiplier).__name__}")
@@ -210,7 +211,7 @@ class DataSlots:
         object.__setattr__(self, "_index", MonomialIndex(np.hstack([ids[:, None], stacked])))
 
     @classmethod
-    def of(cls, f: Polynomial, eq=(), ineq=(), gens=None) -> "DataSlots":
+    def of(cls, f: Polynomial, eq=(), ineq=(), gens=None) -> DataSlots:
         """The slots of the polynomials' own supports."""
         gens = tuple(gens if gens is not None else common_gens(f, *eq, *ineq))
         polys = (f,) + tuple(eq) + tuple(ineq)
@@ -247,13 +248,13 @@ class DataSlots:
     def key(self) -> tuple:
         return (self.gens, self.n_eq, self.n_ineq, self.degrees, tuple(E.tobytes() for E in self.supports))
 
-    def contains(self, other: "DataSlots") -> bool:
+    def contains(self, other: DataSlots) -> bool:
         """Does every support of ``other`` (same variables and counts) lie in this one's?"""
         if other.gens != self.gens or other.n_eq != self.n_eq or other.n_ineq != self.n_ineq:
             return False
         return all(np.all(self.index(p, E) >= 0) for p, E in enumerate(other.supports))
 
-    def union(self, other: "DataSlots") -> "DataSlots":
+    def union(self, other: DataSlots) -> DataSlots:
         sup = []
         for a, b in zip(self.supports, other.supports):
             u = np.unique(np.vstack([a, b]), axis=0)

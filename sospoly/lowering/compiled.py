@@ -51,7 +51,7 @@ __all__ = ["BatchBounds", "CompiledPsatz", "CompiledInstance", "PsatzCache", "co
 class CompiledInstance:
     """One instance's numbers in a compiled structure: theta and its conic problem
     (:func:`sospoly.solve_psatz` accepts it like a :class:`~sospoly.certificates.psatz.PsatzProblem`)."""
-    compiled: "CompiledPsatz"
+    compiled: CompiledPsatz
     theta: np.ndarray
     problem: ConicProblem
 

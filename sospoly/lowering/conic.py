@@ -69,7 +69,8 @@ class PSDBlockMap:
 
 @dataclass(frozen=True)
 class ConicProblem:
-    """Conic data in the standard form of the module docstring (min q^T x, A x + s = b, s in the cones), with the PSD block map and the affine parameter matrices."""
+    """Conic data in the standard form of the module docstring (min q^T x, A x + s = b, s in the cones),
+    with the PSD block map and the affine parameter matrices."""
     q: np.ndarray
     A: sp.csc_matrix
     b: np.ndarray
@@ -89,7 +90,7 @@ class ConicProblem:
     def n_rows(self) -> int:
         return self.A.shape[0]
 
-    def instantiate(self, **theta: float) -> "ConicProblem":
+    def instantiate(self, **theta: float) -> ConicProblem:
         """The problem with numeric parameter values (parameters not given are 0)."""
         unknown = set(theta) - set(self.params)
         if unknown:
@@ -103,7 +104,7 @@ class ConicProblem:
         return ConicProblem(self.q, sp.csc_matrix(A), b, self.cones, self.n_program_vars, self.psd_blocks,
                             self.objective_sign, self.objective_offset, self.form, {})
 
-    def with_margin(self, block: str, cap: float = 1.0) -> "ConicProblem":
+    def with_margin(self, block: str, cap: float = 1.0) -> ConicProblem:
         """Feasibility with a margin: a last column t, G_block - t I in the PSD cone, t <= cap,
         minimise -t.  The augmented problem is strictly feasible for every parameter value, so
         interior-point solvers stay well-posed at the boundary of the original feasible set

@@ -30,7 +30,8 @@ from ..lowering.conic import ConicProblem
 from ..algebra.svec import triu_pairs, svec_scale
 from ..tolerances import DEFAULT_TOLERANCES, Tolerances
 
-__all__ = ["RawStatus", "Attempt", "ConicSolution", "ClarabelBackend", "CvxpyBackend", "IpmBackend", "AutoBackend", "get_backend"]
+__all__ = ["RawStatus", "Attempt", "ConicSolution", "ClarabelBackend", "CvxpyBackend", "IpmBackend", "AutoBackend",
+           "get_backend"]
 
 
 class RawStatus(str, enum.Enum):
@@ -352,7 +353,8 @@ class CvxpyBackend:
 
 
 def get_backend(backend, tolerances: Tolerances = DEFAULT_TOLERANCES):
-    """Resolve a back-end given by object, or by name ``"clarabel"`` / ``"ipm"`` / ``"auto"`` / ``"cvxpy"`` / ``"cvxpy:SCS"``."""
+    """Resolve a back-end given by object, or by name ``"clarabel"`` / ``"ipm"`` / ``"auto"`` / ``"cvxpy"`` /
+    ``"cvxpy:SCS"``."""
     if backend is None:
         return ClarabelBackend(tolerances)
     if isinstance(backend, str):

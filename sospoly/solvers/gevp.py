@@ -41,7 +41,8 @@ class GevpStep:
 
 @dataclass(frozen=True)
 class GevpResult:
-    """Outcome of :func:`bisect`: the last certified level ``lower_bound``, the final ``bracket``, every tested step and the certificate at the lower end."""
+    """Outcome of :func:`bisect`: the last certified level ``lower_bound``, the final ``bracket``, every tested
+    step and the certificate at the lower end."""
     status: SolveStatus
     lower_bound: float | None
     bracket: tuple

@@ -73,7 +73,8 @@ def check_certificate(problem: ConicProblem, x: np.ndarray, tol: Tolerances) -> 
         mins[name] = lam
         if not tol.psd_accepts(lam, scale):
             ok = False
-            msg.append(f"Gram {name}: lambda_min {lam:.3g} below the PSD margin ({tol.psd_margin:g} * max(1, {scale:.3g}))")
+            msg.append(f"Gram {name}: lambda_min {lam:.3g} below the PSD margin "
+                       f"({tol.psd_margin:g} * max(1, {scale:.3g}))")
     # zero-cone rows
     resid = 0.0
     row = 0

@@ -13,7 +13,9 @@ More subcommands come from the modules named in :data:`SUBCOMMAND_MODULES`: each
 Exit codes: 0 success (whatever the statuses of the individual results), 1 unexpected
 internal error (one line; ``TRITOOLS_DEBUG=1`` re-raises it with its traceback),
 2 invalid input: bad arguments, an invalid problem file, missing data -- always one
-line on stderr naming what is wrong.
+line on stderr naming what is wrong (the flag, the field's location or ``file:line``).
+Problems that are well formed but not well posed (equal or rank-deficient cameras) are
+not input errors: they get a result row with a status.
 """
 from __future__ import annotations
 
@@ -24,20 +26,21 @@ import json
 import math
 import os
 import sys
+import time
 import warnings
 from collections import defaultdict
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 
 from ..model.constraints import Method
-from ..io.problem_file import (ProblemFileError, ProblemSpec, jsonable, load_problem_file, parse_problem_text,
-                           result_to_dict)
+from ..io.problem_file import (ProblemFileError, ProblemSpec, jsonable, load_problem_file, parse_problem_bytes,
+                               parse_problem_text, result_to_dict)
 from ..result import Status, TriangulationResult
 from ..solve.options import TRIANGULATION_BUDGET, MethodChoice, SolvePath, Sparsity, TriangulationOptions
 
 __all__ = ["main", "build_parser", "CLIError", "exit_invalid", "add_solver_options", "options_from_args",
-           "add_data_dir_option",
+           "add_data_dir_option", "add_track_options", "select_tracks",
            "SUBCOMMAND_MODULES", "solve_problems", "format_table", "EXIT_OK", "EXIT_INTERNAL", "EXIT_INVALID"]
 
 #: modules adding subcommands through ``register(subparsers)``; skipped while they do not exist.
@@ -48,6 +51,11 @@ DEBUG_ENV = "TRITOOLS_DEBUG"
 #: Example 5 thetas (the paper's Section 5.5).
 EXAMPLE5_THETAS = (0.05, 0.1, 0.15, 0.2)
 FULL_EXAMPLE5_COMMAND = "python benchmarks/paper_examples.py --only-example5"
+#: which estimate is which in ``tritools example 2|3|4``.
+EXAMPLE_NOTE = ("X_raw is the estimate extracted from the certificate (the X^ the paper tabulates); 'X refined' is "
+                "X_raw after the local L2 refinement (the result's X), which can only lower gamma but, when the "
+                "relaxation is not tight, may run off to a far point; gamma is the point's RMS reprojection error "
+                "(gamma_UB), gamma_LB the certified lower bound")
 
 METHODS = tuple(m.value for m in MethodChoice)
 PATHS = tuple(p.value for p in SolvePath)
@@ -63,13 +71,32 @@ def exit_invalid(message) -> int:
 
     Subcommand handlers return it for bad input, missing data or a missing extra.
     """
-    print(f"tritools: error: {message}", file=sys.stderr)
+    text = " ".join(str(message).splitlines())          # one line, whatever the message holds
+    print(f"tritools: error: {text}", file=sys.stderr)
     return EXIT_INVALID
 
 
 class _Parser(argparse.ArgumentParser):
     def error(self, message):  # one line instead of usage + message, and no SystemExit
         raise CLIError(f"{self.prog}: {message} (see '{self.prog} --help')")
+
+    def parse_args(self, args=None, namespace=None):
+        # unknown arguments are named even when the command is missing (argparse reports the missing
+        # COMMAND first); the subcommand parsers collect theirs into the top-level parse
+        ns, extra = self.parse_known_args(args, namespace)
+        if extra:
+            self.error(f"unrecognized arguments: {' '.join(extra)}")
+        return ns
+
+    def parse_known_args(self, args=None, namespace=None):
+        try:
+            return super().parse_known_args(args, namespace)
+        except CLIError as exc:
+            # without a COMMAND every argument is an unknown option: name it, not only the missing COMMAND
+            unknown = [a for a in (sys.argv[1:] if args is None else args) if str(a).startswith("-")]
+            if self._subparsers is None or "required: COMMAND" not in str(exc) or not unknown:
+                raise
+            self.error(f"unrecognized arguments: {' '.join(map(str, unknown))}")
 
 
 # ----------------------------------------------------------------------------- formatting
@@ -91,8 +118,28 @@ def _point(X) -> str:
 
 
 def _seconds(r: TriangulationResult):
+    """The result's own solve time (``timings["total"]``), None when it has none."""
     t = r.timings.get("total")
     return float(t) if t is not None and math.isfinite(t) else None
+
+
+#: ``seconds_source`` of a time: the result's own ``timings["total"]``, or its share of a vectorised batch.
+OWN, BATCH_SHARE = "own", "batch_share"
+
+
+def _timed_solve(problems: list, options: TriangulationOptions, progress) -> tuple[list, list]:
+    """:func:`triangulate_many` on ``problems`` and, per result, ``(seconds, source)``: the result's own
+    ``timings["total"]`` (a per-problem solve), else -- a problem decided inside a vectorised batch, which
+    has no time of its own -- an even share of the call's wall time not spent in the per-problem solves."""
+    from ..solve.batch import triangulate_many
+
+    t0 = time.perf_counter()
+    results = triangulate_many(problems, options=options, progress=progress)
+    wall = time.perf_counter() - t0
+    own = [_seconds(r) for r in results]
+    shared = [i for i, t in enumerate(own) if t is None]
+    share = max(wall - sum(t for t in own if t is not None), 0.0) / len(shared) if shared else None
+    return results, [(t, OWN) if t is not None else (share, BATCH_SHARE) for t in own]
 
 
 def format_table(headers: Sequence[str], rows: Sequence[Sequence], right: Sequence[bool] | None = None) -> str:
@@ -123,55 +170,74 @@ def _dumps(obj) -> str:
 
 
 # ----------------------------------------------------------------------------- solving
+def problem_options(spec: ProblemSpec, options: TriangulationOptions) -> TriangulationOptions:
+    """``options`` with the problem's own settings: they override the options, and a problem's ``delta``
+    (``max_delta``) without the other raises the options' ``max_delta`` (lowers their ``delta``) to it."""
+    delta, md = spec.delta, spec.max_delta
+    if delta is not None and md is None and options.max_delta is not None:
+        md = max(options.max_delta, delta)
+    if md is not None and delta is None and options.delta is not None:
+        delta = min(options.delta, md)
+    return options.replace(method=spec.method, delta=delta, max_delta=md, path=spec.path)
+
+
 def solve_problems(specs: Sequence[ProblemSpec], options: TriangulationOptions | None = None,
                    progress: bool | None = None) -> list[TriangulationResult]:
     """One result per problem, in order, through :func:`tritools.solve.batch.triangulate_many`.
 
-    Per-problem ``method``/``delta``/``max_delta``/``path`` override ``options`` (a problem's ``delta``
-    without ``max_delta`` also raises the options' ``max_delta`` to it); problems sharing the same settings
-    go through one batch call.  A failing problem gets a result with a status and a message.
+    Per-problem ``method``/``delta``/``max_delta``/``path`` override ``options`` (:func:`problem_options`);
+    problems sharing the same settings go through one batch call.  A failing problem gets a result with a
+    status and a message.  ``progress``: None (the library's default: a bar only for large batches), True, False.
     """
-    from ..solve.batch import triangulate_many
+    return _solve_specs(specs, options, progress)[0]
 
+
+def _solve_specs(specs, options, progress) -> tuple[list, list]:
+    """(results, [(seconds, source)]) of :func:`solve_problems` (sources in :func:`_timed_solve`)."""
     options = options or TriangulationOptions()
     groups: dict = defaultdict(list)
     for i, s in enumerate(specs):
-        md = s.max_delta
-        if s.delta is not None and md is None and options.max_delta is not None:
-            md = max(options.max_delta, s.delta)
-        groups[options.replace(method=s.method, delta=s.delta, max_delta=md, path=s.path)].append(i)
-    out: list[TriangulationResult | None] = [None] * len(specs)
+        try:
+            groups[problem_options(s, options)].append(i)
+        except (ValueError, TypeError) as exc:       # a problem's settings against the flags
+            raise CLIError(f"problem {s.name if s.name is not None else f'#{i}'}: {exc}") from None
+    out: list = [None] * len(specs)
+    times: list = [(None, OWN)] * len(specs)
     for opts, idx in groups.items():
-        res = triangulate_many([(specs[i].cameras, specs[i].regions) for i in idx], options=opts, progress=progress)
-        for i, r in zip(idx, res):
-            out[i] = r
-    return out
+        res, tms = _timed_solve([(specs[i].cameras, specs[i].regions) for i in idx], opts, progress)
+        for i, r, t in zip(idx, res, tms):
+            out[i], times[i] = r, t
+    return out, times
 
 
 def _read_specs(file: str) -> list[ProblemSpec]:
     if file == "-":
-        return parse_problem_text(sys.stdin.read(), "<stdin>")
+        stream = getattr(sys.stdin, "buffer", None)
+        return parse_problem_bytes(stream.read(), "<stdin>") if stream is not None else \
+            parse_problem_text(sys.stdin.read(), "<stdin>")
     return load_problem_file(file)
 
 
 def _cmd_solve(args) -> int:
     specs = _read_specs(args.file)
-    results = solve_problems(specs, options_from_args(args), args.progress)
+    results, times = _solve_specs(specs, options_from_args(args), args.progress)
     if args.json:
         _emit(_dumps([result_to_dict(r, index=i, name=s.name, n_views=s.n_views)
                       for i, (s, r) in enumerate(zip(specs, results))]), args.output)
         return EXIT_OK
     headers = ("name", "N", "status", "X", "gamma_LB", "gamma_UB", "optimal", "delta", "N_LMIVAR", "time[s]")
     rows, notes = [], []
-    for i, (s, r) in enumerate(zip(specs, results)):
+    for i, (s, r, (t, source)) in enumerate(zip(specs, results, times)):
         name = s.name if s.name is not None else f"#{i}"
         opt = "NA" if r.optimal is None else ("yes" if r.optimal else "no")
         rows.append((name, s.n_views, r.status.value, _point(r.X), _num(r.gamma_lb), _num(r.gamma_ub), opt,
                      "NA" if r.delta is None else r.delta, "NA" if r.n_lmivar is None else r.n_lmivar,
-                     _sec(_seconds(r))))
+                     ("~" if source == BATCH_SHARE and t is not None else "") + _sec(t)))
         if r.message:
             notes.append(f"{name}: {r.status.value}: {r.message}")
     text = format_table(headers, rows, [False, True, False, False] + [True] * 6)
+    if any(source == BATCH_SHARE for _, source in times):
+        notes.insert(0, "time[s]: ~ marks a problem decided in a vectorised batch: its share of the batch's time")
     if notes:
         text += "\n\n" + "\n".join(notes)
     _emit(text, args.output)
@@ -190,23 +256,27 @@ def _example_paper(args) -> int:
     for method, delta in rows:
         r = triangulate(cams, regions, method, delta=delta)
         p = paper[(method, delta)]
-        out.append({"method": method, "delta": delta, "X": None if r.X is None else r.X.round(6).tolist(),
-                    "gamma_lb": r.gamma_lb, "gamma_ub": r.gamma_ub, "optimal": bool(r.optimal),
-                    "n_lmivar": r.n_lmivar, "seconds": round(r.timings.get("total", float("nan")), 3),
-                    "paper": {"X": p["X"], "gamma": p["gamma"], "optimal": p["optimal"], "n_lmivar": p["n_lmivar"]}})
+        out.append({"method": method, "delta": delta,
+                     "X_raw": None if r.X_raw is None else r.X_raw.round(6).tolist(), "gamma_ub_raw": r.gamma_ub_raw,
+                     "X": None if r.X is None else r.X.round(6).tolist(),
+                     "gamma_lb": r.gamma_lb, "gamma_ub": r.gamma_ub, "optimal": bool(r.optimal),
+                     "n_lmivar": r.n_lmivar, "seconds": round(r.timings.get("total", float("nan")), 3),
+                     "paper": {"X": p["X"], "gamma": p["gamma"], "optimal": p["optimal"], "n_lmivar": p["n_lmivar"]}})
     if args.json:
         _emit(_dumps(jsonable(out)), None)
         return EXIT_OK
     print(f"Example {args.k} of Chesi (2026): certified multiple-view L2 triangulation")
-    print(f"{'method':<16}{'X^':<30}{'gamma_LB':>10}{'gamma_UB':>10}{'optimal':>9}{'N_LMIVAR':>10}   "
-          "paper: X^, gamma, optimal, N_LMIVAR")
+    table = []
     for o in out:
-        X = "NA" if o["X"] is None else "(" + ", ".join(f"{v:.3f}" if abs(v) < 1e4 else f"{v:.2e}" for v in o["X"]) + ")"
         p = o["paper"]
-        print(f"{o['method'] + ' d=' + str(o['delta']):<16}{X:<30}{_num(o['gamma_lb']):>10}{_num(o['gamma_ub']):>10}"
-              f"{'yes' if o['optimal'] else 'no':>9}{o['n_lmivar']:>10}   "
-              f"({', '.join(f'{v:.3f}' for v in p['X'])}), {p['gamma']:.3f}, {'yes' if p['optimal'] else 'no'}, "
-              f"{p['n_lmivar']}")
+        table += [(f"{o['method']} d={o['delta']}", "X_raw", _point(o["X_raw"]), _num(o["gamma_ub_raw"]),
+                   _num(o["gamma_lb"]), "yes" if o["optimal"] else "no", o["n_lmivar"]),
+                  ("", "X refined", _point(o["X"]), _num(o["gamma_ub"]), "", "", ""),
+                  ("", "paper X^", _point(p["X"]), _num(p["gamma"]), "", "yes" if p["optimal"] else "no",
+                   p["n_lmivar"])]
+    print(format_table(("method", "estimate", "point", "gamma", "gamma_LB", "optimal", "N_LMIVAR"), table,
+                       [False, False, False] + [True] * 4))
+    print(f"\nnote: {EXAMPLE_NOTE}")
     return EXIT_OK
 
 
@@ -216,21 +286,22 @@ def _example5(args) -> int:
     for name in ("points", "trials"):
         if getattr(args, name) < 1:
             raise CLIError(f"example 5: --{name} must be a positive integer, got {getattr(args, name)}")
+    if args.seed < 0:
+        raise CLIError(f"example 5: --seed must be a non-negative integer, got {args.seed}")
     cases = example5_cases(seed=args.seed, n_points=args.points, thetas=EXAMPLE5_THETAS, trials=args.trials)
-    results = solve_problems([ProblemSpec(c.cameras, c.regions) for c in cases],
-                             TriangulationOptions(Method.THEOREM1, 4, 4),
-                             progress=args.progress)
+    results, times = _solve_specs([ProblemSpec(c.cameras, c.regions) for c in cases],
+                                  TriangulationOptions(Method.THEOREM1, 4, 4), args.progress)
     summary = []
     for theta in EXAMPLE5_THETAS:
-        sel = [(c, r) for c, r in zip(cases, results) if c.theta == theta]
-        gub = [r.gamma_ub for _, r in sel if r.gamma_ub is not None]
-        dist = [float(np.linalg.norm(r.X - c.X_obj)) for c, r in sel if r.X is not None]
-        secs = [t for _, r in sel if (t := _seconds(r)) is not None]
+        sel = [(c, r, t) for c, r, (t, _) in zip(cases, results, times) if c.theta == theta]
+        gub = [r.gamma_ub for _, r, _ in sel if r.gamma_ub is not None]
+        dist = [float(np.linalg.norm(r.X - c.X_obj)) for c, r, _ in sel if r.X is not None]
+        secs = [t for _, _, t in sel if t is not None]
         summary.append({"theta": theta, "cases": len(sel),
-                        "certified": sum(r.status == Status.OPTIMAL for _, r in sel),
+                        "certified": sum(r.status == Status.OPTIMAL for _, r, _ in sel),
                         "mean_gamma_ub": float(np.mean(gub)) if gub else None,
                         "mean_distance_to_X_obj": float(np.mean(dist)) if dist else None,
-                        "n_lmivar": sorted({r.n_lmivar for _, r in sel if r.n_lmivar is not None}),
+                        "n_lmivar": sorted({r.n_lmivar for _, r, _ in sel if r.n_lmivar is not None}),
                         "mean_seconds": float(np.mean(secs)) if secs else None})
     note = (f"reduced run: {args.points} points x {len(EXAMPLE5_THETAS)} theta x {args.trials} trials, seed "
             f"{args.seed}; the paper certifies all 250 cases per theta with Theorem 1 at delta = 4; full run "
@@ -256,9 +327,9 @@ def _cmd_example(args) -> int:
 
 
 # ----------------------------------------------------------------------------- dataset
-def _summary_row(rs: list[TriangulationResult]) -> dict:
+def _summary_row(rs: list[TriangulationResult], times: list) -> dict:
     gub = [r.gamma_ub for r in rs if r.gamma_ub is not None]
-    secs = [t for r in rs if (t := _seconds(r)) is not None]
+    secs = [t for t, _ in times if t is not None]
     return {"cases": len(rs), "certified": sum(r.status == Status.OPTIMAL for r in rs),
             "mean_gamma_ub": float(np.mean(gub)) if gub else None,
             "std_gamma_ub": float(np.std(gub)) if gub else None,
@@ -266,34 +337,57 @@ def _summary_row(rs: list[TriangulationResult]) -> dict:
             "mean_seconds": float(np.mean(secs)) if secs else None}
 
 
-def _cmd_dataset(args) -> int:
+def load_oxford(name: str, data_dir, command: str):
+    """:func:`tritools.io.oxford.load_sequence` for a subcommand: a missing or unreadable sequence is a
+    :class:`CLIError` naming what was tried (``--data-dir``, ``$TRITOOLS_DATA``) or the bad file."""
     from ..io.oxford import DATA_ENV, DataNotFoundError, load_sequence
-    from ..model.regions import Point
 
-    if args.limit is not None and args.limit < 1:
-        raise CLIError(f"dataset: --limit must be a positive integer, got {args.limit}")
     try:
-        seq = load_sequence(args.name, args.data_dir)
+        return load_sequence(name, data_dir)
     except DataNotFoundError as exc:
         msg = str(exc).replace("pass data_dir=...", "pass --data-dir DIR")
         if DATA_ENV not in msg:
             msg += f" (pass --data-dir DIR or set ${DATA_ENV})"
-        raise CLIError(f"dataset: {msg}") from None
-    except ValueError as exc:
-        raise CLIError(f"dataset: {exc}") from None
-    tracks = seq.tracks[: args.limit] if args.limit else seq.tracks
+        raise CLIError(f"{command}: {msg}") from None
+    except (ValueError, OSError) as exc:
+        raise CLIError(f"{command}: {exc}") from None
+
+
+def select_tracks(tracks: Sequence, limit: int | None = None, sample: int | None = None, seed: int = 0) -> list:
+    """The tracks of ``--limit K`` (the first K, in file order) then ``--sample K`` (K of those drawn at random
+    with ``--seed``, kept in file order); CLIError for a bad value."""
+    for flag, value in (("--limit", limit), ("--sample", sample)):
+        if value is not None and value < 1:
+            raise CLIError(f"{flag}: must be a positive integer, got {value}")
+    if seed < 0:
+        raise CLIError(f"--seed: must be a non-negative integer, got {seed}")
+    out = list(tracks[:limit] if limit is not None else tracks)
+    if sample is not None and sample < len(out):
+        idx = np.sort(np.random.default_rng(seed).choice(len(out), size=sample, replace=False))
+        out = [out[j] for j in idx]
+    return out
+
+
+def _cmd_dataset(args) -> int:
+    from ..model.regions import Point
+
+    options = options_from_args(args)
+    select_tracks((), args.limit, args.sample, args.seed)            # the flags checked before any data is read
+    seq = load_oxford(args.name, args.data_dir, "dataset")
+    tracks = select_tracks(seq.tracks, args.limit, args.sample, args.seed)
     specs = []
     for tr in tracks:
         cams, pts = seq.problem(tr)
         specs.append(ProblemSpec(cams, tuple(Point(p) for p in pts), name=f"{seq.name}:{tr.track_id}"))
-    results = solve_problems(specs, options_from_args(args), args.progress)
-    by_n: dict[int, list] = defaultdict(list)
-    for tr, r in zip(tracks, results):
-        by_n[tr.n_views].append(r)
-    summary = [{"N": n, **_summary_row(by_n[n])} for n in sorted(by_n)]
-    total = _summary_row(results)
+    results, times = _solve_specs(specs, options, args.progress)
+    by_n: dict[int, tuple] = defaultdict(lambda: ([], []))
+    for tr, r, t in zip(tracks, results, times):
+        by_n[tr.n_views][0].append(r)
+        by_n[tr.n_views][1].append(t)
+    summary = [{"N": n, **_summary_row(*by_n[n])} for n in sorted(by_n)]
+    total = _summary_row(results, times)
     if args.csv:
-        _write_dataset_csv(args.csv, seq.name, tracks, results)
+        _write_dataset_csv(args.csv, seq.name, tracks, results, times)
     if args.json:
         _emit(_dumps({"sequence": seq.name, "method": args.method, "tracks": len(tracks), "per_N": summary,
                       "total": total}), None)
@@ -309,17 +403,22 @@ def _cmd_dataset(args) -> int:
     return EXIT_OK
 
 
-def _write_dataset_csv(path, name, tracks, results) -> None:
+#: columns of ``tritools dataset --csv`` (``seconds``: the track's own solve time when ``seconds_source`` is
+#: ``own``, its share of a vectorised batch when ``batch_share``; see :func:`_timed_solve`).
+DATASET_CSV_COLUMNS = ("sequence", "track_id", "views", "N", "status", "X1", "X2", "X3", "gamma_lb", "gamma_ub",
+                       "optimal", "delta", "n_lmivar", "certified_by", "seconds", "seconds_source", "message")
+
+
+def _write_dataset_csv(path, name, tracks, results, times) -> None:
     try:
         with open(path, "w", newline="", encoding="utf-8") as fh:
             w = csv.writer(fh)
-            w.writerow(["sequence", "track_id", "views", "N", "status", "X1", "X2", "X3", "gamma_lb", "gamma_ub",
-                        "optimal", "delta", "n_lmivar", "certified_by", "seconds", "message"])
-            for tr, r in zip(tracks, results):
+            w.writerow(DATASET_CSV_COLUMNS)
+            for tr, r, (t, source) in zip(tracks, results, times):
                 X = [None] * 3 if r.X is None else [float(v) for v in r.X]
                 w.writerow([name, tr.track_id, " ".join(map(str, tr.views)), tr.n_views, r.status.value, *X,
                             r.gamma_lb, r.gamma_ub, r.optimal, r.delta, r.n_lmivar, r.certified_by,
-                            _seconds(r), r.message])
+                            t, source, r.message])
     except OSError as exc:
         raise CLIError(f"cannot write {path}: {exc.strerror or exc}") from None
 
@@ -349,7 +448,8 @@ def add_solver_options(p, default_method: str = "auto", default_path: str = "aut
                    help="a certified point behind a camera gets status behind_camera (default: optimal, in_front "
                         "false)")
     p.add_argument("--progress", action="store_true", default=None,
-                   help="progress bar on stderr (needs the 'progress' extra; default: only for large batches)")
+                   help="progress bar on stderr (needs the 'progress' extra; default: only for batches of 1000 "
+                        "problems or more)")
 
 
 def options_from_args(args) -> TriangulationOptions:
@@ -358,15 +458,21 @@ def options_from_args(args) -> TriangulationOptions:
     from sospoly import Budget
 
     base = TRIANGULATION_BUDGET
+    time_limit, memory = getattr(args, "time_limit", None), getattr(args, "memory_limit", None)
+    limits = {"time_limit": base.time_limit if time_limit is None else time_limit,
+              "max_bytes": base.max_bytes if memory is None else memory * 2 ** 30}
+    for flag, field, value, unit in (("--time-limit", "time_limit", time_limit, "seconds"),
+                                     ("--memory-limit", "max_bytes", memory, "GiB")):
+        try:                                   # sospoly.Budget is the one validation (inf: no limit)
+            Budget(**{field: limits[field]})
+        except ValueError:
+            raise CLIError(f"{flag}: must be a positive number of {unit}, got {value}") from None
+    budget = Budget(**limits)
+    get = vars(args).get                     # subcommands with only some of the flags (figure3: method, delta)
     try:
-        budget = Budget(time_limit=base.time_limit if args.time_limit is None else args.time_limit,
-                        max_bytes=base.max_bytes if args.memory_limit is None else args.memory_limit * 2 ** 30)
-    except ValueError as exc:
-        flag = "--time-limit" if "time_limit" in str(exc) else "--memory-limit"
-        raise CLIError(f"{flag}: must be a positive number") from None
-    try:
-        return TriangulationOptions(method=args.method, delta=args.delta, max_delta=args.max_delta, path=args.path,
-                                    sparsity=args.sparsity, budget=budget, require_in_front=args.require_in_front)
+        return TriangulationOptions(method=get("method", "auto"), delta=get("delta"), max_delta=get("max_delta"),
+                                    path=get("path", "auto"), sparsity=get("sparsity", "auto"), budget=budget,
+                                    require_in_front=bool(get("require_in_front")))
     except (ValueError, TypeError) as exc:
         msg = str(exc)
         field = msg.split()[0]
@@ -375,6 +481,15 @@ def options_from_args(args) -> TriangulationOptions:
         if msg.startswith("max_delta (") or msg.startswith("max_delta must be >="):
             flag = "--max-delta"
         raise CLIError(f"{flag}: {msg}") from None
+
+
+def add_track_options(p) -> None:
+    """``--limit K --sample K --seed S`` of the subcommands running an Oxford sequence (:func:`select_tracks`)."""
+    p.add_argument("--limit", type=int, default=None, metavar="K",
+                   help="only the first K tracks, in file order (default: all)")
+    p.add_argument("--sample", type=int, default=None, metavar="K",
+                   help="K tracks drawn at random (after --limit; kept in file order; default: no sampling)")
+    p.add_argument("--seed", type=int, default=0, metavar="S", help="seed of --sample (default 0)")
 
 
 def add_data_dir_option(p) -> None:
@@ -395,19 +510,21 @@ def register_builtin(sub) -> None:
     p.set_defaults(func=_cmd_solve)
 
     p = sub.add_parser("example", help="the paper's Example 2, 3, 4 (Tables 8-10) or a reduced Example 5")
-    p.add_argument("k", type=int, choices=(2, 3, 4, 5))
+    p.add_argument("k", type=int, choices=(2, 3, 4, 5), metavar="K",
+                   help="2, 3, 4: the paper's Tables 8-10 (X_raw, refined X and the paper's X^); 5: reduced Table 11")
     p.add_argument("--json", action="store_true", help="machine-readable output")
     p.add_argument("--points", type=int, default=5, help="Example 5: scene points (paper: 25)")
     p.add_argument("--trials", type=int, default=2, help="Example 5: trials per point and theta (paper: 10)")
     p.add_argument("--seed", type=int, default=0, help="Example 5: random seed")
-    p.add_argument("--progress", action="store_true", help="Example 5: progress bar on stderr")
+    p.add_argument("--progress", action="store_true", default=None,
+                   help="Example 5: progress bar on stderr (default: only for 1000 cases or more)")
     p.set_defaults(func=_cmd_example)
 
     p = sub.add_parser("dataset", help="triangulate the tracks of an Oxford sequence (Example 1)",
                        description="Per-N summary of an Oxford sequence (the paper's Tables 1-6).")
     p.add_argument("name", metavar="NAME", help="sequence (corridor, dinosaur, house, library, merton1-3, wadham)")
     add_data_dir_option(p)
-    p.add_argument("--limit", type=int, default=None, metavar="K", help="only the first K tracks")
+    add_track_options(p)
     add_solver_options(p)
     p.add_argument("--json", action="store_true", help="summary as JSON")
     p.add_argument("--csv", default=None, metavar="OUT", help="write per-track results to OUT")
@@ -424,8 +541,12 @@ def _registered_modules():
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from .. import __version__
+
     ap = _Parser(prog="tritools", description="certified multiple-view L2 triangulation (Chesi 2026)")
-    sub = ap.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    ap.add_argument("--version", action="version", version=f"tritools {__version__}",
+                    help="print the version and exit")
+    sub = ap.add_subparsers(dest="command", required=True, metavar="COMMAND", help="the subcommand")
     register_builtin(sub)
     for module in _registered_modules():
         module.register(sub)

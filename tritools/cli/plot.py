@@ -7,9 +7,11 @@ parser; each sets ``func`` to a handler ``func(args) -> exit code`` (0 success,
 * ``tritools figure3 [--out DIR] [--examples 2 3 4]`` solves the paper's Examples 2-4
   (Theorem 1, delta = 4, as in the paper's Figure 3) and writes
   ``DIR/figure3_example{k}.png``.
-* ``tritools plot-dataset NAME [--data-dir DIR] [--limit K] [--out FILE]`` triangulates
-  K tracks of an Oxford sequence (point regions) and writes
-  :func:`tritools.plot.dataset_summary`.
+* ``tritools plot-dataset NAME [--data-dir DIR] [--limit K] [--sample K --seed S] [--out FILE]``
+  triangulates the tracks of an Oxford sequence (point regions) and writes
+  :func:`tritools.plot.dataset_summary`.  ``--limit``/``--sample``/``--seed`` select the tracks
+  exactly as for ``tritools dataset`` (:func:`tritools.cli.app.select_tracks`: the first K in
+  file order, then K drawn at random); default: every track.
 """
 from __future__ import annotations
 
@@ -17,65 +19,58 @@ import os
 import sys
 from pathlib import Path
 
-import numpy as np
-
-from .app import CLIError, METHODS, add_data_dir_option, add_solver_options, exit_invalid, options_from_args
+from .app import (METHODS, CLIError, add_data_dir_option, add_solver_options, add_track_options, exit_invalid,
+                  load_oxford, options_from_args, select_tracks)
 from ..model.constraints import Method
 
 __all__ = ["register", "run_figure3", "run_plot_dataset"]
-
-#: Default number of tracks of ``plot-dataset`` (a seeded random subset; 0 = all tracks).
-DEFAULT_LIMIT = 200
 
 
 def run_figure3(args) -> int:
     """Handler of ``tritools figure3``."""
     os.environ.setdefault("RUST_BACKTRACE", "0")
     try:
+        options_from_args(args)           # --method/--delta validated like every solver flag
         from ..plot import save_figure3_examples
 
         paths = save_figure3_examples(args.out, args.examples, method=args.method, delta=args.delta)
-    except (ImportError, ValueError, OSError) as exc:
+    except (CLIError, ImportError, ValueError, OSError) as exc:
         return exit_invalid(str(exc))
     for p in paths:
         print(p)
     return 0
 
 
-def _select_tracks(tracks, limit: int, seed: int):
-    if limit <= 0 or limit >= len(tracks):
-        return list(tracks)
-    idx = np.sort(np.random.default_rng(seed).choice(len(tracks), size=limit, replace=False))
-    return [tracks[j] for j in idx]
-
-
 def run_plot_dataset(args) -> int:
-    """Handler of ``tritools plot-dataset``."""
+    """Handler of ``tritools plot-dataset`` (bad flags, missing data or matplotlib: one line, exit 2)."""
     os.environ.setdefault("RUST_BACKTRACE", "0")
+    try:
+        return _plot_dataset(args)
+    except CLIError as exc:
+        return exit_invalid(exc)
+
+
+def _plot_dataset(args) -> int:
     from ..solve.batch import triangulate_many
-    from ..io.oxford import DataNotFoundError, load_sequence
     from ..model.regions import Point
 
-    if args.limit < 0:
-        return exit_invalid(f"--limit must be >= 0, got {args.limit}")
+    options = options_from_args(args)
+    select_tracks((), args.limit, args.sample, args.seed)            # the flags checked before any data is read
     try:
         from ..plot import _matplotlib
 
         _matplotlib()
-        seq = load_sequence(args.name, args.data_dir)
-    except (ImportError, DataNotFoundError, ValueError) as exc:
+    except ImportError as exc:
         return exit_invalid(str(exc))
-    tracks = _select_tracks(seq.tracks, args.limit, args.seed)
+    seq = load_oxford(args.name, args.data_dir, "plot-dataset")
+    tracks = select_tracks(seq.tracks, args.limit, args.sample, args.seed)
+    if not tracks:
+        return exit_invalid(f"plot-dataset: sequence {seq.name!r} has no track seen in 2 views")
     problems = []
     for t in tracks:
         cams, pts = seq.problem(t)
         problems.append((cams, [Point(x) for x in pts]))
-    try:
-        options = options_from_args(args)
-    except CLIError as exc:
-        return exit_invalid(exc)
-    results = triangulate_many(problems, options=options,
-                               progress=args.progress)
+    results = triangulate_many(problems, options=options, progress=args.progress)
     from ..plot import dataset_summary
 
     fig = dataset_summary(results, [t.n_views for t in tracks],
@@ -95,13 +90,14 @@ def run_plot_dataset(args) -> int:
 def register(subparsers) -> None:
     """Add ``figure3`` and ``plot-dataset`` to an ``argparse`` sub-parser collection."""
     f3 = subparsers.add_parser("figure3", help="the paper's Figure 3 (Examples 2-4) as PNG files",
-                               description="Solve Examples 2-4 and write figure3_example{k}.png (needs the extra 'plot').")
+                               description="Solve Examples 2-4 and write figure3_example{k}.png "
+                                           "(needs the extra 'plot').")
     f3.add_argument("--out", default="figures", help="output directory (default: figures)")
     f3.add_argument("--examples", type=int, nargs="+", choices=(2, 3, 4), default=[2, 3, 4],
                     help="examples to plot (default: 2 3 4)")
     f3.add_argument("--method", choices=METHODS, default=Method.THEOREM1.value,
                     help="certified method (default: theorem1, as the paper's Figure 3)")
-    f3.add_argument("--delta", type=int, default=4, help="relaxation degree (default: 4)")
+    f3.add_argument("--delta", type=int, default=4, metavar="D", help="relaxation degree (even; default: 4)")
     f3.set_defaults(func=run_figure3)
 
     pd = subparsers.add_parser("plot-dataset", help="gamma_UB histogram and certified counts of an Oxford sequence",
@@ -109,9 +105,7 @@ def register(subparsers) -> None:
                                            "(needs the extra 'plot').")
     pd.add_argument("name", help="sequence name, e.g. library, house, dinosaur")
     add_data_dir_option(pd)
-    pd.add_argument("--limit", type=int, default=DEFAULT_LIMIT,
-                    help=f"number of tracks, a seeded random subset (default {DEFAULT_LIMIT}; 0 = all)")
-    pd.add_argument("--seed", type=int, default=0, help="seed of the track subset (default 0)")
+    add_track_options(pd)
     add_solver_options(pd)
     pd.add_argument("--out", default=None, help="output PNG (default: NAME_summary.png)")
     pd.set_defaults(func=run_plot_dataset)

@@ -12,6 +12,10 @@ Formats (see the data folder's README):
 The data directory is, in order: the ``data_dir`` argument, the environment variable
 ``TRITOOLS_DATA``, then ``../shared/data/oxford`` relative to the working directory
 and to the repository.  The data are never part of the repository.
+
+A missing directory, sequence or file raises :class:`DataNotFoundError`; a file that cannot be
+read or does not follow its format raises :class:`ValueError` whose message starts with
+``path:line:`` (or ``path:``), e.g. ``house.000.P:2: expected a number, got 'x'``.
 """
 from __future__ import annotations
 
@@ -83,26 +87,73 @@ def data_dir(path: str | os.PathLike | None = None) -> Path:
                             f"pass data_dir=... or set ${DATA_ENV}")
 
 
+def _read_text(path) -> str:
+    """A data file's text: DataNotFoundError when it is missing, ValueError naming it when it is unreadable
+    (a directory, no permission) or not text."""
+    path = Path(path)
+    try:
+        raw = path.read_bytes()
+    except FileNotFoundError:
+        raise DataNotFoundError(f"{path} is missing") from None
+    except OSError as exc:
+        raise ValueError(f"{path}: cannot read: {exc.strerror or exc}") from None
+    try:
+        return raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        line = raw.count(b"\n", 0, exc.start) + 1
+        raise ValueError(f"{path}:{line}: not a text file "
+                         f"(byte 0x{raw[exc.start]:02x} at offset {exc.start})") from None
+
+
+def _read_table(path, columns: int | None = None, what: str = "numbers") -> np.ndarray:
+    """Whitespace-separated finite numbers, one row per non-empty line, every row of the same length
+    (``columns`` when given); ValueError naming ``path:line`` otherwise.  Shape (rows, columns)."""
+    rows = []
+    for lineno, line in enumerate(_read_text(path).splitlines(), 1):
+        tokens = line.split()
+        if not tokens or tokens[0].startswith("#"):
+            continue
+        want = columns if columns is not None else (len(rows[0]) if rows else len(tokens))
+        if len(tokens) != want:
+            raise ValueError(f"{path}:{lineno}: expected {want} {what} per line, got {len(tokens)}")
+        try:
+            row = [float(t) for t in tokens]
+        except ValueError:
+            bad = next(t for t in tokens if not _is_float(t))
+            raise ValueError(f"{path}:{lineno}: expected a number, got {bad[:40]!r}") from None
+        if not all(np.isfinite(row)):
+            raise ValueError(f"{path}:{lineno}: non-finite number (NaN and Infinity are not allowed)")
+        rows.append(row)
+    if not rows:
+        raise ValueError(f"{path}: no data")
+    return np.array(rows, dtype=float)
+
+
+def _is_float(token: str) -> bool:
+    try:
+        float(token)
+    except ValueError:
+        return False
+    return True
+
+
 def read_camera(path: Path) -> np.ndarray:
     """A 3x4 camera matrix from a ``*.P`` file (ValueError naming the file when it is not one)."""
-    P = np.loadtxt(path, dtype=float)
-    if P.shape != (3, 4) or not np.all(np.isfinite(P)):
-        raise ValueError(f"{path}: expected a finite 3x4 camera matrix, got shape {P.shape}")
+    P = _read_table(path, 4, "numbers (a 3x4 camera matrix)")
+    if P.shape != (3, 4):
+        raise ValueError(f"{path}: expected a 3x4 camera matrix, got {P.shape[0]} rows")
     return P
 
 
 def read_corners(path: Path) -> np.ndarray:
     """The ``x y`` rows of a ``*.corners`` file, shape (K, 2)."""
-    C = np.loadtxt(path, dtype=float, ndmin=2)
-    if C.ndim != 2 or C.shape[1] != 2:
-        raise ValueError(f"{path}: expected one 'x y' pair per line, got shape {C.shape}")
-    return C
+    return _read_table(path, 2, "numbers ('x y')")
 
 
 def read_nview_corners(path: Path, n_views: int) -> list[list[int | None]]:
     """Rows of corner indices, None where missing (``*`` or ``-1``)."""
     rows = []
-    for lineno, line in enumerate(Path(path).read_text().splitlines(), 1):
+    for lineno, line in enumerate(_read_text(path).splitlines(), 1):
         tokens = line.split()
         if not tokens:
             continue
@@ -154,17 +205,31 @@ def _load_vgg(folder: Path, name: str, min_views: int) -> Sequence:
     return Sequence(name, cameras, tuple(tracks))
 
 
-def _load_dinosaur(folder: Path, min_views: int) -> Sequence:
+def _read_dino_cameras(path: Path) -> np.ndarray:
+    """The (V, 3, 4) cameras of ``dino_Ps.mat`` (variable ``P``, a 1xV cell of 3x4 matrices)."""
     from scipy.io import loadmat
 
-    mat = loadmat(folder / "dino_Ps.mat")
+    if not path.exists():
+        raise DataNotFoundError(f"{path} is missing")
+    try:
+        mat = loadmat(path)
+    except Exception as exc:  # noqa: BLE001 - scipy raises many types for a file that is not MATLAB data
+        raise ValueError(f"{path}: not a readable MATLAB file ({type(exc).__name__}: {exc})") from None
     if "P" not in mat:
-        raise ValueError(f"{folder / 'dino_Ps.mat'}: no variable 'P'")
-    cameras = np.array([np.asarray(p, float) for p in mat["P"][0]])
-    xy = np.loadtxt(folder / "viff.xy", dtype=float, ndmin=2)
+        raise ValueError(f"{path}: no variable 'P'")
+    try:
+        cameras = np.array([np.asarray(p, float) for p in np.asarray(mat["P"], dtype=object).ravel()])
+    except (TypeError, ValueError):
+        cameras = None
+    if cameras is None or cameras.ndim != 3 or cameras.shape[1:] != (3, 4) or not np.all(np.isfinite(cameras)):
+        raise ValueError(f"{path}: variable 'P' must be a cell of finite 3x4 camera matrices")
+    return cameras
+
+
+def _load_dinosaur(folder: Path, min_views: int) -> Sequence:
+    cameras = _read_dino_cameras(folder / "dino_Ps.mat")
     V = cameras.shape[0]
-    if xy.shape[1] != 2 * V:
-        raise ValueError(f"viff.xy has {xy.shape[1]} columns, expected {2 * V} for {V} cameras")
+    xy = _read_table(folder / "viff.xy", 2 * V, f"numbers (x y for each of the {V} cameras)")
     tracks = []
     for tid, row in enumerate(xy):
         pts = row.reshape(V, 2)

@@ -7,8 +7,8 @@ admissible image regions ``R_i`` (SPEC §2)::
     {"name": "optional label",
      "cameras": [P_1, ..., P_N],            # each [[4 numbers], [4 numbers], [4 numbers]]
      "regions": [R_1, ..., R_N],            # Region.to_dict() forms, or [u, v] for a point
-     "method": "theorem1" | "corollary1",   # optional per-problem overrides
-     "delta": even int >= 2, "max_delta": int >= delta, "path": "sdp" | "auto",
+     "method": "auto" | "theorem1" | "corollary1",   # optional per-problem overrides
+     "delta": even int >= 2, "max_delta": even int >= delta, "path": "auto" | "sdp",
      "comment": "ignored"}
 
 Regions are exactly :meth:`tritools.model.regions.Region.to_dict` (extra keys ignored):
@@ -20,13 +20,15 @@ Regions are exactly :meth:`tritools.model.regions.Region.to_dict` (extra keys ig
 Every problem found is reported with a JSON-path-like location
 (``problems[1].regions[0].D: must be positive definite ...``) through
 :class:`ProblemFileError`.  NaN and +-Infinity, which Python's JSON parser accepts, are
-rejected.  Only the file's structure is checked here; whether the triangulation is
-well posed (e.g. all cameras equal, rank-deficient cameras) is reported by the solver as
+rejected, and so are integer literals too large for a float (whatever their number of
+digits).  The solver settings (method, delta, max_delta, path) are validated by
+:class:`tritools.solve.options.TriangulationOptions` -- the same rules as the command-line
+flags -- and reported at their location.  Only the file's structure is checked here; whether
+the triangulation is well posed (e.g. all cameras equal, rank-deficient cameras) is reported by the solver as
 a result status.  Nothing in this module prints.
 """
 from __future__ import annotations
 
-import enum
 import json
 import math
 import re
@@ -34,23 +36,27 @@ import sys
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Iterable
+from typing import Any
+from collections.abc import Iterable
 
 import numpy as np
 
-from ..model.constraints import Method
 from ..model.regions import Point, Region
 from ..result import TriangulationResult, jsonable
-from ..solve.options import SolvePath
+from ..solve.options import MethodChoice, SolvePath, TriangulationOptions
 
 __all__ = ["ProblemFileError", "ProblemSpec", "PROBLEM_FIELDS", "region_types", "parse_problems",
-           "parse_problem_text", "load_problem_file", "problem_to_dict", "problems_to_json",
+           "parse_problem_text", "parse_problem_bytes", "load_problem_file", "problem_to_dict", "problems_to_json",
            "result_to_dict", "result_from_dict", "jsonable"]
 
 #: Keys allowed in a problem object (anything else is reported as an unknown field, to catch typos).
 PROBLEM_FIELDS = ("name", "cameras", "regions", "method", "delta", "max_delta", "path", "comment")
+#: The solver settings a problem may override, validated by :class:`TriangulationOptions`.
+OPTION_FIELDS = ("method", "delta", "max_delta", "path")
 #: Smallest number of views a triangulation problem can have.
 MIN_VIEWS = 2
+#: An integer literal with more digits than this is beyond the float range (10**309 > 1.8e308).
+MAX_FLOAT_DIGITS = 309
 
 
 class ProblemFileError(ValueError):
@@ -61,19 +67,27 @@ class ProblemFileError(ValueError):
     """
 
     def __init__(self, location: str, problem: str):
-        self.location = location
-        self.problem = problem
-        super().__init__(f"{location}: {problem}" if location else problem)
+        self.location = _one_line(location, 200)
+        self.problem = _one_line(problem, 300)
+        super().__init__(f"{self.location}: {self.problem}" if self.location else self.problem)
+
+
+def _one_line(text: str, limit: int) -> str:
+    """``text`` on one line (control characters escaped) and at most ``limit`` characters (a message must never
+    print a whole document)."""
+    text = "".join(c if c.isprintable() else repr(c)[1:-1] for c in str(text))
+    return text if len(text) <= limit else text[:limit] + "..."
 
 
 @dataclass(frozen=True)
 class ProblemSpec:
-    """One validated problem: cameras (N, 3, 4), N regions and optional solver overrides."""
+    """One validated problem: cameras (N, 3, 4), N regions and optional solver overrides
+    (``None``: not given; ``method`` is a :class:`MethodChoice`, ``auto`` included)."""
 
     cameras: np.ndarray
     regions: tuple
     name: str | None = None
-    method: Method | None = None
+    method: MethodChoice | None = None
     delta: int | None = None
     max_delta: int | None = None
     path: SolvePath | None = None
@@ -84,9 +98,14 @@ class ProblemSpec:
 
 
 # ----------------------------------------------------------------------------- helpers
+_IDENTIFIER = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
+
+
 def _join(loc: str, key) -> str:
     if isinstance(key, int):
         return f"{loc}[{key}]"
+    if not _IDENTIFIER.fullmatch(str(key)):          # a key such as "a b" or "\n": quoted, JSON-escaped
+        return f"{loc}[{json.dumps(str(key))}]"
     return f"{loc}.{key}" if loc else str(key)
 
 
@@ -107,43 +126,63 @@ def _json_type(v) -> str:
 
 
 class _NonFinite:
-    """What the JSON decoder returns for ``NaN``/``Infinity`` literals, so that the
-    validator can name the field holding them."""
+    """What the JSON decoder returns for ``NaN``/``Infinity`` literals and for integer literals too
+    long for a float, so that the validator can name the field holding them."""
 
-    def __init__(self, literal: str):
+    def __init__(self, literal: str, problem: str | None = None):
         self.literal = literal
+        self.problem = problem or f"non-finite number {literal} (NaN and Infinity are not allowed)"
 
 
-def _find_non_finite(value, loc: str) -> None:
-    if isinstance(value, _NonFinite):
-        raise ProblemFileError(loc or "$", f"non-finite number {value.literal} (NaN and Infinity are not allowed)")
-    if isinstance(value, float) and not math.isfinite(value):
-        raise ProblemFileError(loc or "$", f"non-finite number {value!r} (NaN and Infinity are not allowed)")
-    if isinstance(value, int) and not isinstance(value, bool) and abs(value) > sys.float_info.max:
-        raise ProblemFileError(loc or "$", f"integer with {len(str(abs(value)))} digits is too large for a "
-                                           f"float (NaN and Infinity are not allowed)")
-    if isinstance(value, Mapping):
-        for k, v in value.items():
-            _find_non_finite(v, _join(loc, k))
-    elif isinstance(value, (list, tuple)):
-        for i, v in enumerate(value):
-            _find_non_finite(v, _join(loc, i))
+def _json_int(literal: str):
+    """``parse_int`` of the decoder: Python's int() refuses literals of more than 4300 digits (a ValueError
+    that named no field); any literal beyond the float range is reported where it stands instead."""
+    digits = len(literal.lstrip("-"))
+    if digits > MAX_FLOAT_DIGITS:
+        return _NonFinite(literal[:12] + "...", f"integer with {digits} digits is too large for a float "
+                                                f"(NaN and Infinity are not allowed)")
+    return int(literal)
 
 
-def _nested_shape(value, loc: str) -> tuple:
-    """Shape of a nested list of numbers (ValueError naming the element otherwise)."""
+def _find_non_finite(data, root: str) -> None:
+    """The first non-finite number of decoded JSON, by location (iterative: no recursion limit)."""
+    stack = [(data, root)]
+    while stack:
+        value, loc = stack.pop()
+        if isinstance(value, _NonFinite):
+            raise ProblemFileError(loc or "$", value.problem)
+        if isinstance(value, float) and not math.isfinite(value):
+            raise ProblemFileError(loc or "$", f"non-finite number {value!r} (NaN and Infinity are not allowed)")
+        if isinstance(value, int) and not isinstance(value, bool) and abs(value) > sys.float_info.max:
+            raise ProblemFileError(loc or "$", f"integer with {len(str(abs(value)))} digits is too large for a "
+                                               f"float (NaN and Infinity are not allowed)")
+        if isinstance(value, Mapping):
+            stack.extend(reversed([(v, _join(loc, k)) for k, v in value.items()]))
+        elif isinstance(value, (list, tuple)):
+            stack.extend(reversed([(v, _join(loc, i)) for i, v in enumerate(value)]))
+
+
+def _nested_shape(value, loc: str, depth: int) -> tuple:
+    """Shape of a nested list of numbers at most ``depth`` deep (ProblemFileError naming the element otherwise)."""
     if isinstance(value, (list, tuple)):
-        shapes = [_nested_shape(v, _join(loc, i)) for i, v in enumerate(value)]
+        if depth <= 0:
+            raise ProblemFileError(loc, "expected a number, got array")
+        shapes = [_nested_shape(v, _join(loc, i), depth - 1) for i, v in enumerate(value)]
         if any(s != shapes[0] for s in shapes[1:]):
             raise ProblemFileError(loc, f"ragged array: entries have shapes {sorted(set(shapes))}")
         return (len(value),) + (shapes[0] if shapes else ())
     if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise ProblemFileError(loc, f"expected a number, got {_json_type(value)} {value!r}")
+        raise ProblemFileError(loc, f"expected a number, got {_json_type(value)} {_short(value)}")
     return ()
 
 
+def _short(value, limit: int = 60) -> str:
+    text = repr(value)
+    return text if len(text) <= limit else text[:limit] + "..."
+
+
 def _numeric(value, loc: str, shape: tuple) -> np.ndarray:
-    got = _nested_shape(value, loc)
+    got = _nested_shape(value, loc, len(shape))
     if got != shape:
         raise ProblemFileError(loc, f"expected shape {shape}, got {got}")
     return np.array(value, dtype=float)
@@ -173,7 +212,7 @@ def _parse_region(value, loc: str) -> Region:
     kinds = region_types()
     if value["type"] not in kinds:
         raise ProblemFileError(_join(loc, "type"),
-                               f"unknown region type {value['type']!r} (expected {', '.join(kinds)})")
+                               f"unknown region type {_short(value['type'])} (expected {', '.join(kinds)})")
     try:
         return Region.from_dict(value)
     except (ValueError, TypeError) as exc:
@@ -181,28 +220,37 @@ def _parse_region(value, loc: str) -> Region:
         m = _MISSING.search(msg)
         if m:
             raise ProblemFileError(_join(loc, m.group(1)),
-                                   f"missing required field of a {value['type']!r} region") from None
+                                   f"missing required field of a {_short(value['type'])} region") from None
         head, _, rest = msg.partition(" ")
         if head in value and head != "type":        # region messages start with the field's name
             raise ProblemFileError(_join(loc, head), rest) from None
         raise ProblemFileError(loc, msg) from None
 
 
-def _parse_int(value, loc: str, minimum: int, even: bool = False) -> int:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or value != int(value):
-        raise ProblemFileError(loc, f"expected an integer, got {_json_type(value)} {value!r}")
-    v = int(value)
-    if v < minimum or (even and v % 2):
-        raise ProblemFileError(loc, f"expected an {'even ' if even else ''}integer >= {minimum}, got {v}")
-    return v
-
-
-def _parse_enum(enum_cls: type[enum.Enum], value, loc: str):
+def _parse_options(obj: Mapping, loc: str) -> dict:
+    """The solver settings of a problem (``null`` = not given), validated by :class:`TriangulationOptions` --
+    the one validation of the command-line flags too -- with the message placed at the field's location."""
+    given = {k: obj[k] for k in OPTION_FIELDS if obj.get(k) is not None}
+    if not given:
+        return {}
+    for key, value in given.items():           # a JSON string or number only: a message never prints a document
+        if isinstance(value, (list, tuple, Mapping)):
+            raise ProblemFileError(_join(loc, key), f"expected a {'string' if key in ('method', 'path') else 'number'}"
+                                                    f", got {_json_type(value)}")
     try:
-        return enum_cls(value)
-    except ValueError:
-        allowed = ", ".join(repr(e.value) for e in enum_cls)
-        raise ProblemFileError(loc, f"expected one of {allowed}, got {value!r}") from None
+        opts = TriangulationOptions(**given)
+    except (ValueError, TypeError) as exc:
+        msg = str(exc)
+        for value in given.values():          # long values (a 300-digit delta) shortened in the one-line message
+            for text in {repr(value), str(value)} | ({str(int(value))} if isinstance(value, float) else set()):
+                if len(text) > 60:
+                    msg = msg.replace(text, _short(value))
+        field = next((k for k in sorted(given, key=len, reverse=True) if msg.startswith(k)), None)
+        if field is None:                     # not a message about one field: the problem object itself
+            raise ProblemFileError(loc or "$", msg) from None
+        rest = msg[len(field):].lstrip()
+        raise ProblemFileError(_join(loc, field), rest if rest.startswith("must") else msg) from None
+    return {k: getattr(opts, k) for k in given}
 
 
 def _parse_problem(obj, loc: str) -> ProblemSpec:
@@ -231,13 +279,7 @@ def _parse_problem(obj, loc: str) -> ProblemSpec:
     name = obj.get("name")
     if name is not None and not isinstance(name, str):
         raise ProblemFileError(_join(loc, "name"), f"expected a string, got {_json_type(name)}")
-    method = _parse_enum(Method, obj["method"], _join(loc, "method")) if "method" in obj else None
-    delta = _parse_int(obj["delta"], _join(loc, "delta"), 2, even=True) if obj.get("delta") is not None else None
-    max_delta = None
-    if obj.get("max_delta") is not None:
-        max_delta = _parse_int(obj["max_delta"], _join(loc, "max_delta"), delta or 2)
-    path = _parse_enum(SolvePath, obj["path"], _join(loc, "path")) if "path" in obj else None
-    return ProblemSpec(cameras, regions, name, method, delta, max_delta, path)
+    return ProblemSpec(cameras, regions, name, **_parse_options(obj, loc))
 
 
 # ----------------------------------------------------------------------------- parsing
@@ -253,7 +295,7 @@ def parse_problems(data: Any) -> list[ProblemSpec]:
     if isinstance(data, Mapping) and "problems" in data:
         extra = [k for k in data if k not in ("problems", "comment")]
         if extra:
-            raise ProblemFileError(str(extra[0]), "unknown top-level field next to 'problems' (allowed: comment)")
+            raise ProblemFileError(_join("", extra[0]), "unknown top-level field next to 'problems' (allowed: comment)")
         items, prefix = data["problems"], "problems"
         if not isinstance(items, list):
             raise ProblemFileError(prefix, f"expected an array of problems, got {_json_type(items)}")
@@ -271,23 +313,42 @@ def parse_problems(data: Any) -> list[ProblemSpec]:
 
 def parse_problem_text(text: str, source: str = "<input>") -> list[ProblemSpec]:
     """Decode JSON text (NaN/Infinity literals rejected with their location) and validate it."""
+    if not isinstance(text, str):
+        raise TypeError(f"text must be a str, got {type(text).__name__}")
+    if not text.strip():
+        raise ProblemFileError(source, "empty file (expected a JSON problem, an array of problems or "
+                                       "{\"problems\": [...]})")
     try:
-        data = json.loads(text, parse_constant=_NonFinite)
+        data = json.loads(text, parse_constant=_NonFinite, parse_int=_json_int)
     except json.JSONDecodeError as exc:
         raise ProblemFileError(source, f"not valid JSON: {exc.msg} (line {exc.lineno}, column {exc.colno})") from None
     except RecursionError:
         raise ProblemFileError(source, "not valid JSON: nested too deeply") from None
-    return parse_problems(data)
+    try:
+        return parse_problems(data)
+    except RecursionError:                     # a region or shape nested far deeper than any schema field
+        raise ProblemFileError(source, "nested too deeply for the problem-file schema") from None
 
 
 def load_problem_file(path: str | Path) -> list[ProblemSpec]:
     """Read and validate a problem file (UTF-8 JSON)."""
     try:
-        text = Path(path).read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
-        reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc)
-        raise ProblemFileError(str(path), f"cannot read: {reason}") from None
-    return parse_problem_text(text, str(path))
+        raw = Path(path).read_bytes()
+    except OSError as exc:               # missing, a directory, no permission, ...
+        raise ProblemFileError(str(path), f"cannot read: {exc.strerror or exc}") from None
+    return parse_problem_bytes(raw, str(path))
+
+
+def parse_problem_bytes(raw: bytes, source: str = "<input>") -> list[ProblemSpec]:
+    """:func:`parse_problem_text` of UTF-8 bytes (a byte-order mark is tolerated); bytes that are not UTF-8
+    are a :class:`ProblemFileError` at ``source:line``."""
+    try:
+        text = bytes(raw).decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        line = raw.count(b"\n", 0, exc.start) + 1
+        raise ProblemFileError(f"{source}:{line}", f"not UTF-8 text (byte 0x{raw[exc.start]:02x} at offset "
+                                                   f"{exc.start})") from None
+    return parse_problem_text(text, source)
 
 
 # ----------------------------------------------------------------------------- serialising

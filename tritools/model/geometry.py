@@ -318,7 +318,7 @@ def _points3d(X, name: str = "X") -> tuple[np.ndarray, bool]:
 
 
 # ----------------------------------------------------------------------------- projection
-def _project(Xh: np.ndarray, P: np.ndarray) -> np.ndarray:
+def project_homogeneous(Xh: np.ndarray, P: np.ndarray) -> np.ndarray:
     """Projections of homogeneous points Xh (m, 4) by P (3, 4); inf where at infinity, NaN for
     non-finite points.  ``P`` and each ``Xh`` row are first divided by a power of two near their
     largest entry (``Phi`` does not depend on either scale; the result is the same to the last
@@ -356,7 +356,7 @@ def project(X, P) -> np.ndarray:
     if P.shape != (3, 4):
         raise ValueError(f"P must be a 3x4 matrix, got shape {P.shape}")
     Xh = np.hstack([A, np.ones((len(A), 1))])
-    out = _project(Xh, P)
+    out = project_homogeneous(Xh, P)
     return out[0] if single else out
 
 
@@ -365,7 +365,7 @@ def image_points(X, cameras) -> np.ndarray:
     A, single = _points3d(X)
     C = validate_cameras(cameras, min_views=1, require_distinct=False)
     Xh = np.hstack([A, np.ones((len(A), 1))])
-    out = np.stack([_project(Xh, P) for P in C], axis=1)
+    out = np.stack([project_homogeneous(Xh, P) for P in C], axis=1)
     return out[0] if single else out
 
 
@@ -458,14 +458,14 @@ def depths_stack(cameras, X) -> np.ndarray:
 
 
 # ----------------------------------------------------------------------------- cost
-def _gamma_unchecked(Xs: np.ndarray, cameras: np.ndarray, regions: Sequence) -> np.ndarray:
+def gamma_validated(Xs: np.ndarray, cameras: np.ndarray, regions: Sequence) -> np.ndarray:
     """gamma for validated inputs; Xs (m, 3) -> (m,). inf where a projection is at infinity."""
     m = len(Xs)
     Xh = np.hstack([Xs, np.ones((m, 1))])
     total = np.zeros(m)
     bad = ~np.all(np.isfinite(Xs), axis=1)
     for P, R in zip(cameras, regions):
-        x = _project(Xh, P)
+        x = project_homogeneous(Xh, P)
         finite = np.all(np.isfinite(x), axis=1)
         bad |= ~finite
         if np.any(finite):
@@ -499,7 +499,7 @@ def gamma(X, cameras, regions) -> float | np.ndarray:
         raise ValueError("X contains NaN or inf")
     C = validate_cameras(cameras, require_distinct=False)
     R = as_regions(regions, len(C))
-    out = _gamma_unchecked(A, C, R)
+    out = gamma_validated(A, C, R)
     return float(out[0]) if single else out
 
 

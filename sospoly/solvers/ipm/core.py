@@ -108,7 +108,7 @@ class Operator:
         Z and inverse slacks R = S^-1 (per block); raises LinAlgError when M cannot be factorised."""
         raise NotImplementedError
 
-    def subset(self, idx: np.ndarray) -> "Operator":
+    def subset(self, idx: np.ndarray) -> Operator:
         """The operator of the instances ``idx`` of the batch."""
         raise NotImplementedError
 

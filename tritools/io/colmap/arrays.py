@@ -115,7 +115,7 @@ class ModelArrays:
                           self.point_error[start:stop], self.track_offsets[start:stop + 1] - a,
                           self.track_image[a:b], self.track_kp[a:b], start)
 
-    def with_points(self, xyz: np.ndarray, error: np.ndarray) -> "ModelArrays":
+    def with_points(self, xyz: np.ndarray, error: np.ndarray) -> ModelArrays:
         """The same model with new point coordinates and errors (tracks, colours, ids unchanged)."""
         xyz = np.asarray(xyz, float).reshape(self.point_xyz.shape)
         error = np.asarray(error, float).reshape(self.point_error.shape)
@@ -123,7 +123,7 @@ class ModelArrays:
         fields.update(point_xyz=xyz, point_error=error)
         return ModelArrays(**fields)
 
-    def equals(self, other: "ModelArrays") -> bool:
+    def equals(self, other: ModelArrays) -> bool:
         """Exact equality of every field but ``sources`` (floats bit for bit, NaN never occurs)."""
         for k in self.__dataclass_fields__:
             if k == "sources":
@@ -141,7 +141,7 @@ class ModelArrays:
 
     # ------------------------------------------------------------------ conversion
     @classmethod
-    def from_model(cls, model: Model) -> "ModelArrays":
+    def from_model(cls, model: Model) -> ModelArrays:
         """Arrays of a :class:`Model`; cameras, images and points sorted by id."""
         cams = sorted(model.cameras.values(), key=lambda c: c.id)
         cam_index = {c.id: k for k, c in enumerate(cams)}

@@ -23,7 +23,7 @@ import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import MappingProxyType
-from typing import Mapping
+from collections.abc import Mapping
 
 import numpy as np
 
@@ -162,7 +162,7 @@ class Model:
         if err:
             raise ValueError(err[1])
 
-    def replace_points(self, points) -> "Model":
+    def replace_points(self, points) -> Model:
         """The model with some Point3D records replaced (same ids)."""
         new = dict(self.points3D)
         for p in points:
@@ -250,7 +250,9 @@ def _data_lines(path: Path):
             yield lineno, s
 
 
-class _Fields:
+class LineFields:
+    """The whitespace-separated fields of one line of a text model, with errors naming file:line."""
+
     def __init__(self, path: Path, lineno: int, text: str):
         self.where = f"{path.name}:{lineno}"
         self.tokens = text.split()
@@ -282,12 +284,13 @@ class _Fields:
         return v
 
 
-def _read_cameras(path: Path) -> tuple[dict, dict]:
+def read_camera_records(path: Path) -> tuple[dict, dict]:
+    """Cameras of a ``cameras.txt`` and the file:line of each (ModelFormatError naming the line)."""
     cams, where = {}, {}
     for lineno, text in _data_lines(path):
         if not text:
             continue
-        f = _Fields(path, lineno, text)
+        f = LineFields(path, lineno, text)
         f.need(4, "CAMERA_ID MODEL WIDTH HEIGHT PARAMS[]")
         cid, model = f.int(0, "CAMERA_ID"), f.tokens[1]
         if model not in COLMAP_MODEL_N_PARAMS:
@@ -308,7 +311,7 @@ def _read_cameras(path: Path) -> tuple[dict, dict]:
 def parse_image_header(path: Path, lineno: int, text: str) -> tuple:
     """``(image_id, qvec, tvec, camera_id, name)`` of an images.txt header line (ModelFormatError
     naming file:line when malformed)."""
-    f = _Fields(path, lineno, text)
+    f = LineFields(path, lineno, text)
     f.need(10, "IMAGE_ID QW QX QY QZ TX TY TZ CAMERA_ID NAME")
     iid = f.int(0, "IMAGE_ID")
     q = tuple(f.float(k, n) for k, n in zip(range(1, 5), ("QW", "QX", "QY", "QZ")))
@@ -322,7 +325,7 @@ def parse_image_header(path: Path, lineno: int, text: str) -> tuple:
 
 def parse_points2d(path: Path, lineno: int, text: str, image_id: int) -> tuple:
     """The ``(x, y, point3D_id)`` triples of an images.txt POINTS2D line."""
-    g = _Fields(path, lineno, text)
+    g = LineFields(path, lineno, text)
     if len(g.tokens) % 3:
         g.fail(f"POINTS2D of image {image_id} must be (X, Y, POINT3D_ID) triples, got {len(g.tokens)} fields")
     pts = tuple((g.float(k, f"X of keypoint {k // 3}"), g.float(k + 1, f"Y of keypoint {k // 3}"),
@@ -335,7 +338,7 @@ def parse_points2d(path: Path, lineno: int, text: str, image_id: int) -> tuple:
 
 def parse_point(path: Path, lineno: int, text: str) -> Point3D:
     """The :class:`Point3D` of a points3D.txt line."""
-    f = _Fields(path, lineno, text)
+    f = LineFields(path, lineno, text)
     f.need(8, "POINT3D_ID X Y Z R G B ERROR TRACK[]")
     if (len(f.tokens) - 8) % 2:
         f.fail("TRACK[] must be (IMAGE_ID, POINT2D_IDX) pairs, got an odd number of fields (line cut short?)")
@@ -365,11 +368,11 @@ def _read_images(path: Path) -> tuple[dict, dict]:
             continue
         iid, q, t, cid, name = parse_image_header(path, lineno, text)
         if iid in images:
-            _Fields(path, lineno, text).fail(f"duplicate IMAGE_ID {iid}")
+            LineFields(path, lineno, text).fail(f"duplicate IMAGE_ID {iid}")
         try:
             plineno, ptext = next(lines)
         except StopIteration:
-            _Fields(path, lineno, text).fail(f"image {iid} has no POINTS2D line (two lines per image)")
+            LineFields(path, lineno, text).fail(f"image {iid} has no POINTS2D line (two lines per image)")
         images[iid] = Image(iid, q, t, cid, name, parse_points2d(path, plineno, ptext, iid))
         where[iid] = f"{path.name}:{lineno}"
     return images, where
@@ -382,7 +385,7 @@ def _read_points(path: Path) -> tuple[dict, dict]:
             continue
         p = parse_point(path, lineno, text)
         if p.id in points:
-            _Fields(path, lineno, text).fail(f"duplicate POINT3D_ID {p.id}")
+            LineFields(path, lineno, text).fail(f"duplicate POINT3D_ID {p.id}")
         points[p.id] = p
         where[p.id] = f"{path.name}:{lineno}"
     return points, where
@@ -394,7 +397,7 @@ def read_text_model(path) -> Model:
     for name in MODEL_FILES:
         if not (folder / name).is_file():
             raise FileNotFoundError(f"{folder / name}: missing (a COLMAP text model has {', '.join(MODEL_FILES)})")
-    cameras, _ = _read_cameras(folder / "cameras.txt")
+    cameras, _ = read_camera_records(folder / "cameras.txt")
     images, img_where = _read_images(folder / "images.txt")
     points, pt_where = _read_points(folder / "points3D.txt")
     err = _reference_error(cameras, images, points)

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .model import (_Fields, _read_cameras, parse_image_header, parse_point,
+from .model import (LineFields, read_camera_records, parse_image_header, parse_point,
                     parse_points2d)
 
 __all__ = ["read_cameras_text", "read_images_text", "TextPointsReader", "write_cameras_text", "write_images_text",
@@ -55,7 +55,7 @@ def _data_lines(path: Path):
 def read_cameras_text(path) -> dict:
     """Camera table of ``cameras.txt`` (same keys as :func:`.binary.read_cameras_binary`)."""
     path = Path(path)
-    cams, where = _read_cameras(path)
+    cams, where = read_camera_records(path)
     order = list(cams)
     return {"ids": [cams[c].id for c in order], "models": [cams[c].model for c in order],
             "width": [cams[c].width for c in order], "height": [cams[c].height for c in order],
@@ -72,7 +72,7 @@ def read_images_text(path, camera_ids: np.ndarray) -> dict:
         if not text:
             continue
         iid, q, t, cid, name = parse_image_header(path, lineno, text)
-        f = _Fields(path, lineno, "")
+        f = LineFields(path, lineno, "")
         if iid in seen:
             f.fail(f"duplicate IMAGE_ID {iid}")
         if cid not in cam_index:

@@ -113,7 +113,7 @@ class Attempt:
     seconds: float = 0.0
 
     @classmethod
-    def from_dict(cls, d) -> "Attempt":
+    def from_dict(cls, d) -> Attempt:
         kw = {f.name: d.get(f.name) for f in fields(cls) if f.name in d}
         kw["solver"] = tuple(kw.get("solver") or ())
         kw["seconds"] = float(kw.get("seconds") or 0.0)
@@ -253,7 +253,7 @@ class TriangulationResult:
         return {f.name: jsonable(getattr(self, f.name)) for f in fields(self)}
 
     @classmethod
-    def from_dict(cls, d) -> "TriangulationResult":
+    def from_dict(cls, d) -> TriangulationResult:
         """Inverse of :meth:`to_dict` (unknown keys ignored; ``null`` stays ``None``)."""
         kw = {f.name: d[f.name] for f in fields(cls) if f.name in d}
         kw["status"] = Status(kw["status"])

@@ -56,7 +56,7 @@ class Normalization:
     depth: float
 
     @classmethod
-    def identity(cls, n_views: int) -> "Normalization":
+    def identity(cls, n_views: int) -> Normalization:
         return cls(1.0, np.zeros((n_views, 2)), np.zeros(3), 1.0)
 
     def transform(self, i: int) -> np.ndarray:

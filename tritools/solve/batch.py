@@ -29,7 +29,7 @@ import dataclasses
 import logging
 import os
 import time
-from typing import Iterable, Sequence
+from collections.abc import Iterable, Sequence
 
 import numpy as np
 

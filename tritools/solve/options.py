@@ -147,7 +147,7 @@ class TriangulationOptions:
             raise ValueError(f"backend must be 'clarabel', 'ipm', 'auto', 'cvxpy' or 'cvxpy:<SOLVER>', "
                              f"got {self.backend!r}")
 
-    def replace(self, **changes) -> "TriangulationOptions":
+    def replace(self, **changes) -> TriangulationOptions:
         """A copy with some fields changed (validated again); None values are ignored."""
         changes = {k: v for k, v in changes.items() if v is not None}
         unknown = set(changes) - {f.name for f in dataclasses.fields(self)}

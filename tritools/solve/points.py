@@ -86,7 +86,7 @@ class PointStack:
         self.done = np.zeros(M, bool)
         self.todo: dict[int, TriangulationOptions] = {}
 
-    def run(self) -> "PointStack":
+    def run(self) -> PointStack:
         verify, sdp = batch_steps(self.opts)
         left = np.arange(self.M)
         step = chunk_for(self.N)
@@ -167,7 +167,8 @@ class PointStack:
         st = Status(self.status[m])
         msg = self.message[m]
         return TriangulationResult(
-            Method.COROLLARY1.value, st, X=self.X[m], gamma_ub=float(self.gamma_ub[m]), gamma_lb=float(self.gamma_lb[m]),
+            Method.COROLLARY1.value, st, X=self.X[m], gamma_ub=float(self.gamma_ub[m]),
+            gamma_lb=float(self.gamma_lb[m]),
             optimal=bool(self.optimal[m]), delta=2, n_lmivar=self.n_lmivar, image_points=self.image_points[m],
             X_raw=self.X_raw[m], gamma_ub_raw=float(self.gamma_ub_raw[m]), certified_by=self.certified_by[m],
             message=msg, attempts=self.prefix[m], sparsity="dense", in_front=bool(self.in_front[m]),

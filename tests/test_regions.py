@@ -426,3 +426,9 @@ def test_new_region_type_only_needs_the_interface():
     assert H.distance([-3.0, 4.0]) == pytest.approx(5.0)
     assert H.distance([3.0, 4.0]) == pytest.approx(4.0)
     assert Region.from_dict(H.to_dict()) == H
+
+
+def test_ellipse_with_entries_near_the_float_limit_is_accepted():
+    """0.5 (D + D^T) overflowed for D = 1e308 I ("eigenvalues [nan, nan]"); D is positive definite."""
+    e = Ellipse([0.0, 0.0], [[1e308, 0.0], [0.0, 1e308]])
+    assert e.distance([0.0, 0.0]) == 0.0 and np.all(np.isfinite(e.semi_axes))

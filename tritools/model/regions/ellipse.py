@@ -154,7 +154,7 @@ class EllipseBorder(Region):
         scale = float(np.max(np.abs(D)))
         if np.max(np.abs(D - D.T)) > SYMMETRY_RTOL * max(scale, 1e-300):
             raise ValueError(f"D must be symmetric, got {D.tolist()}")
-        D = 0.5 * (D + D.T)
+        D = 0.5 * D + 0.5 * D.T                  # (not 0.5 (D + D^T): that overflows for entries near 1e308)
         lam, Q = np.linalg.eigh(D)
         if not (lam[1] > 0 and lam[0] > PD_RTOL * lam[1]):
             raise ValueError(f"D must be positive definite, got eigenvalues {lam.tolist()}")

@@ -94,7 +94,9 @@ class Segment(Region):
             t = np.zeros(len(P))
         else:
             u = self.direction / s
-            t = np.clip(((P - self.center_) / s) @ u / float(u @ u), -1.0, 1.0)
+            with np.errstate(over="ignore", divide="ignore", invalid="ignore"):
+                t = np.clip(((P - self.center_) @ u) / (s * float(u @ u)), -1.0, 1.0)   # +-inf clips to +-1
+            t = np.where(np.isnan(t), 0.0, t)
         return float(t[0]) if single else t
 
     def closest_point(self, points) -> np.ndarray:

@@ -335,8 +335,8 @@ def test_overflowing_input_prints_no_numpy_warnings(tmp_path, capsys):
     # one-line error (exit 2) and to the output of a solve whose bad problem gets a status row (exit 0)
     import warnings
 
-    bad_d = _ex4_with(lambda d: d["regions"].__setitem__(0, {"type": "ellipse", "center": [0, 0],
-                                                             "D": [[1e308, 0], [0, 1e308]]}))
+    bad_d = _ex4_with(lambda d: d["regions"].__setitem__(0, {"type": "ellipse", "center": [0, 0],     # not PD
+                                                             "D": [[1e308, 1e307], [1e307, -1e308]]}))
     huge_point = {"cameras": [np.eye(3, 4).tolist(), [[1, 0, 0, 1], [0, 1, 0, 0], [0, 0, 1, 0]]],
                   "regions": [[1e308, 1e308], [0.5, 0.0]]}
     with warnings.catch_warnings(record=True) as caught:

@@ -181,7 +181,8 @@ class TriangulationResult:
     message : str
         Human readable details.
     timings : dict
-        Wall-clock times in seconds, at least ``"total"``.
+        Wall-clock times in seconds: ``"total"`` (and per stage) for a point solved on its own,
+        ``"batch_share"`` (its even share of the vectorised calls) for a point decided inside a batch.
     attempts : tuple of :class:`Attempt`
         Every step tried, in order.
     sparsity : str, optional

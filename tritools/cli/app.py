@@ -26,7 +26,6 @@ import json
 import math
 import os
 import sys
-import time
 import warnings
 from collections import defaultdict
 from collections.abc import Sequence
@@ -118,8 +117,9 @@ def _point(X) -> str:
 
 
 def _seconds(r: TriangulationResult):
-    """The result's own solve time (``timings["total"]``), None when it has none."""
-    t = r.timings.get("total")
+    """The result's solve time: its own ``timings["total"]``, else its share of a vectorised batch
+    (``timings["batch_share"]``); None when it has neither."""
+    t = r.timings.get("total", r.timings.get("batch_share"))
     return float(t) if t is not None and math.isfinite(t) else None
 
 
@@ -129,17 +129,12 @@ OWN, BATCH_SHARE = "own", "batch_share"
 
 def _timed_solve(problems: list, options: TriangulationOptions, progress) -> tuple[list, list]:
     """:func:`triangulate_many` on ``problems`` and, per result, ``(seconds, source)``: the result's own
-    ``timings["total"]`` (a per-problem solve), else -- a problem decided inside a vectorised batch, which
-    has no time of its own -- an even share of the call's wall time not spent in the per-problem solves."""
+    ``timings["total"]`` (a per-problem solve), else its share of the vectorised batch that decided it
+    (``timings["batch_share"]``)."""
     from ..solve.batch import triangulate_many
 
-    t0 = time.perf_counter()
     results = triangulate_many(problems, options=options, progress=progress)
-    wall = time.perf_counter() - t0
-    own = [_seconds(r) for r in results]
-    shared = [i for i, t in enumerate(own) if t is None]
-    share = max(wall - sum(t for t in own if t is not None), 0.0) / len(shared) if shared else None
-    return results, [(t, OWN) if t is not None else (share, BATCH_SHARE) for t in own]
+    return results, [(_seconds(r), OWN if "total" in r.timings else BATCH_SHARE) for r in results]
 
 
 def format_table(headers: Sequence[str], rows: Sequence[Sequence], right: Sequence[bool] | None = None) -> str:

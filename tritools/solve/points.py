@@ -16,6 +16,8 @@ is the arrays API (``cv2.triangulatePoints``-like: one camera per view, a visibi
 """
 from __future__ import annotations
 
+import time
+
 import numpy as np
 
 from sospoly import GramForm, Multiplier, n_lmivar_formula
@@ -81,6 +83,7 @@ class PointStack:
         self.certified_by = np.full(M, None, dtype=object)
         self.delta = np.full(M, -1)
         self.message = np.full(M, "", dtype=object)
+        self.seconds = np.zeros(M)              # each problem's share of the vectorised calls it went through
         self.n_lmivar = n_lmivar_formula(2 * N, 2, [2] * (N * (N - 1) // 2))
         self.prefix: list = [() for _ in range(M)]
         self.done = np.zeros(M, bool)
@@ -93,13 +96,20 @@ class PointStack:
         for start in range(0, self.M, step):
             part = left[start:start + step]
             if verify:
-                part = self._verify(part)
+                part = self._timed(part, self._verify)
             if sdp and part.size:
-                part = self._sdp(part)
+                part = self._timed(part, self._sdp)
             for m in part:
                 self.todo.setdefault(int(m), self.opts.replace(path="sdp") if verify else self.opts)
         self._report()
         return self
+
+    def _timed(self, idx: np.ndarray, step, *args):
+        t0 = time.perf_counter()
+        out = step(idx, *args)
+        if idx.size:
+            self.seconds[idx] += (time.perf_counter() - t0) / idx.size
+        return out
 
     def _verify(self, idx: np.ndarray) -> np.ndarray:
         try:
@@ -171,7 +181,8 @@ class PointStack:
             gamma_lb=float(self.gamma_lb[m]),
             optimal=bool(self.optimal[m]), delta=2, n_lmivar=self.n_lmivar, image_points=self.image_points[m],
             X_raw=self.X_raw[m], gamma_ub_raw=float(self.gamma_ub_raw[m]), certified_by=self.certified_by[m],
-            message=msg, attempts=self.prefix[m], sparsity="dense", in_front=bool(self.in_front[m]),
+            message=msg, timings={"batch_share": float(self.seconds[m])}, attempts=self.prefix[m], sparsity="dense",
+            in_front=bool(self.in_front[m]),
             depths=self.depths[m], residuals=self.residuals[m])
 
     def item(self, m: int):

@@ -12,39 +12,18 @@ Conventions
   of one scene point (SPEC §7, paper eq. (61)): the *first* index is the view on
   the *left* of the bilinear form.
 
-Camera check
-------------
-:func:`validate_cameras` (one problem, errors with messages) and :func:`camera_problems`
-(a stack of problems, a mask and reason codes) apply the same rule, computed by the same
-vectorised functions (:func:`camera_rank_ratio`, :func:`cameras_all_equal`):
-
-1. every entry is finite;
-2. every camera has rank 3, tested on a conditioned copy (:func:`camera_rank_ratio`):
-   the camera is divided by its largest absolute entry (no overflow, whatever its scale),
-   rows 1 and 2 are replaced by their components orthogonal to row 3 (left multiplication
-   by an image translation ``[[1, 0, -a], [0, 1, -b], [0, 0, 1]]``), and each row is scaled
-   to unit norm (an image scaling).  These are invertible left factors: they change neither
-   the rank, nor the centre, nor the geometry of the camera (the image is only translated
-   and scaled).  They remove what makes a perfectly good pixel camera look nearly singular:
-   ``K = [[1e3, 0, 1e6], [0, 1e3, 1e6], [0, 0, 1]]`` gives rows 1 and 2 that are ~1e3 times
-   row 3 plus a small part, and sigma_3 / sigma_1 ~ 5e-11 before conditioning, ~1 after.
-   The rank is 3 iff ``sigma_3 / sigma_1 > CAMERA_RANK_RTOL`` of the conditioned matrix;
-   a row whose component orthogonal to row 3 is at most ``CAMERA_RANK_RTOL`` of its norm
-   counts as zero (it is a multiple of row 3 to that precision);
-3. (optional) the cameras are not all equal up to a (possibly negative) scale factor, the
-   one ill-posed configuration of the problem; each camera is divided by its largest
-   entry before its Frobenius norm is taken, so no norm overflows.  Views sharing a centre
-   (a repeated view, a camera rotated about its centre) are valid input.
+Camera validation lives in :mod:`tritools.model.cameras` (re-exported here).
 """
 from __future__ import annotations
 
-import enum
 import itertools
 from collections.abc import Sequence
-from dataclasses import dataclass
 
 import numpy as np
 
+from .cameras import (CAMERA_RANK_RTOL, POINT_AT_INFINITY_RTOL, SAME_CAMERA_RTOL, CameraIssue, CameraProblems,
+                      camera_center, camera_problems, camera_rank_ratio, cameras_all_equal, check_camera, depths,
+                      depths_stack, points3d_array, power2_scale, unit_rows, validate_cameras)
 from .regions.base import real_array
 
 __all__ = [
@@ -57,16 +36,8 @@ __all__ = [
 ]
 
 # ----------------------------------------------------------------------------- tolerances
-#: A camera has rank < 3 if sigma_3 <= CAMERA_RANK_RTOL * sigma_1 for the conditioned camera
-#: (see :func:`camera_rank_ratio`).
-CAMERA_RANK_RTOL = 1e-10
-#: Two cameras are "equal up to scale" if ``min_{s=+-1} ||P_i/||P_i|| - s P_j/||P_j||||_F`` is below this.
-SAME_CAMERA_RTOL = 1e-10
 #: ``Phi(X, P)`` is at infinity if ``|p3.X~| <= PROJECTION_DENOM_RTOL * ||p3|| * ||X~||``.
 PROJECTION_DENOM_RTOL = 1e-14
-#: A homogeneous solution ``w`` (unit norm) is a point at infinity if ``|w4| <= POINT_AT_INFINITY_RTOL``.
-#: With unit-scale data this rejects estimates farther than ~1e10 from the origin.
-POINT_AT_INFINITY_RTOL = 1e-10
 #: Two camera centres coincide (F undefined) if ``||F||_F <= SAME_CENTER_RTOL * ||P_i|| ||P_j||``
 #: (cameras divided by their largest entry first).
 SAME_CENTER_RTOL = 1e-10
@@ -76,245 +47,15 @@ class PointAtInfinityError(ValueError):
     """The homogeneous solution has ``w4 ~ 0``: the problem is ill-posed (SPEC §6)."""
 
 
-class CameraIssue(enum.IntEnum):
-    """Why :func:`camera_problems` refuses a problem (the first check that fails)."""
-
-    OK = 0
-    NOT_FINITE = 1
-    RANK = 2
-    ALL_EQUAL = 3
-
-
-@dataclass(frozen=True)
-class CameraProblems:
-    """Result of :func:`camera_problems` for M problems.
-
-    Attributes
-    ----------
-    valid : ndarray of bool, shape (M,)
-        The problem's cameras pass :func:`validate_cameras`.
-    reason : ndarray of int8, shape (M,)
-        :class:`CameraIssue` code of the first failing check (0 = OK).
-    view : ndarray of int, shape (M,)
-        The first offending view for NOT_FINITE and RANK, -1 otherwise.
-    """
-
-    valid: np.ndarray
-    reason: np.ndarray
-    view: np.ndarray
-
-
 # ----------------------------------------------------------------------------- validation
-def _as_float_array(value, name: str) -> np.ndarray:
-    """A float copy of ``value``; complex, boolean, string and object data are refused by name."""
-    return real_array(value, name)
-
-
-def _max_abs(A: np.ndarray, axes: tuple) -> np.ndarray:
-    """The power of two at or just above the largest absolute entry over ``axes`` (kept as size-1
-    axes), 1 where that entry is 0 or not finite.  Dividing by it is exact (barring underflow) and
-    brings the entries into [-1, 1], so that later products and norms cannot overflow."""
-    m = np.max(np.abs(A), axis=axes, keepdims=True)
-    ok = (m > 0) & np.isfinite(m)
-    return np.where(ok, np.ldexp(1.0, np.frexp(np.where(ok, m, 1.0))[1]), 1.0)
-
-
-def _unit_rows(R: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(R / ||R|| along the last axis, nonzero mask) for finite R; zero rows stay zero.  The rows
-    are divided by a power of two near their largest entry first (exact), so nothing overflows."""
-    S = R / _max_abs(R, (-1,))
-    n = np.sqrt(np.sum(S * S, axis=-1, keepdims=True))
-    return S / np.where(n > 0, n, 1.0), n[..., 0] > 0
-
-
-def camera_rank_ratio(cameras) -> np.ndarray:
-    """``sigma_3 / sigma_1`` of the conditioned camera(s), the quantity of the rank rule.
-
-    For ``P`` with rows ``r1, r2, r3`` (after division by ``max |P_ij|``): ``u3 = r3 / ||r3||``,
-    ``q_k = (r_k - (r_k.u3) u3) / ||.||`` (k = 1, 2, orthogonalised twice against ``u3``, ``r_k``
-    scaled to unit norm first).  The rows of the conditioned matrix ``[q1; q2; u3]`` are unit vectors
-    and ``q1, q2`` are orthogonal to ``u3``, so its singular values are ``sqrt(1 + |q1.q2|)``, 1,
-    ``sqrt(1 - |q1.q2|)`` and
-
-        sigma_3 / sigma_1 = ||q1 - s q2|| / ||q1 + s q2||,  s = sign(q1.q2),
-
-    evaluated in this form (no cancellation).  It is 0 when ``r3 = 0`` or when ``r1`` or ``r2``
-    has a component orthogonal to ``u3`` of at most ``CAMERA_RANK_RTOL`` times its norm.
-
-    Parameters
-    ----------
-    cameras : array_like, shape (..., 3, 4)
-
-    Returns
-    -------
-    ndarray, shape (...)
-        NaN for a camera with a NaN or inf entry.
-    """
-    C = _as_float_array(cameras, "cameras")
-    if C.ndim < 2 or C.shape[-2:] != (3, 4):
-        raise ValueError(f"cameras must have shape (..., 3, 4), got {C.shape}")
-    finite = np.all(np.isfinite(C), axis=(-2, -1))
-    C = np.where(finite[..., None, None], C, 0.0)
-    C = C / _max_abs(C, (-2, -1))
-    u3, has3 = _unit_rows(C[..., 2, :])
-    q, ok = [], has3
-    for k in (0, 1):
-        r, nonzero = _unit_rows(C[..., k, :])
-        p = r - np.sum(r * u3, axis=-1, keepdims=True) * u3
-        p = p - np.sum(p * u3, axis=-1, keepdims=True) * u3          # twice is enough
-        pn = np.sqrt(np.sum(p * p, axis=-1))
-        ok = ok & nonzero & (pn > CAMERA_RANK_RTOL)
-        q.append(p / np.where(pn > 0, pn, 1.0)[..., None])
-    s = np.where(np.sum(q[0] * q[1], axis=-1) < 0, -1.0, 1.0)[..., None]
-    num = np.sqrt(np.sum((q[0] - s * q[1]) ** 2, axis=-1))
-    den = np.sqrt(np.sum((q[0] + s * q[1]) ** 2, axis=-1))
-    ratio = np.where(ok, num / np.where(den > 0, den, 1.0), 0.0)
-    return np.where(finite, ratio, np.nan)
-
-
-def cameras_all_equal(cameras) -> np.ndarray:
-    """Whether all cameras of each problem are equal up to a (possibly negative) scale factor.
-
-    Each camera is divided by its largest absolute entry, then by its Frobenius norm (so no
-    norm overflows or underflows); the cameras are all equal if
-    ``min_{s = +-1} ||U_i - s U_0||_F <= SAME_CAMERA_RTOL`` for every view i.
-
-    Parameters
-    ----------
-    cameras : array_like, shape (..., N, 3, 4), finite
-
-    Returns
-    -------
-    ndarray of bool, shape (...)
-        True for N = 1.
-    """
-    C = _as_float_array(cameras, "cameras")
-    if C.ndim < 3 or C.shape[-2:] != (3, 4):
-        raise ValueError(f"cameras must have shape (..., N, 3, 4), got {C.shape}")
-    U = C / _max_abs(C, (-2, -1))
-    n = np.sqrt(np.sum(U * U, axis=(-2, -1), keepdims=True))
-    U = U / np.where(n > 0, n, 1.0)
-    U0 = U[..., :1, :, :]
-    minus = np.sqrt(np.sum((U - U0) ** 2, axis=(-2, -1)))
-    plus = np.sqrt(np.sum((U + U0) ** 2, axis=(-2, -1)))
-    return np.all(np.minimum(minus, plus) <= SAME_CAMERA_RTOL, axis=-1)
-
-
-def _rank_message(name: str, ratio: float) -> str:
-    return (f"{name} has rank < 3: sigma3/sigma1 = {ratio:.3g} <= CAMERA_RANK_RTOL = {CAMERA_RANK_RTOL:g} "
-            f"after conditioning (rows 1, 2 made orthogonal to row 3, every row scaled to unit norm)")
-
-
-def _check_camera(P: np.ndarray, name: str) -> None:
-    """One camera: shape (3, 4), finite, rank 3 by the conditioned rule (ValueError naming ``name``)."""
-    if P.shape != (3, 4):
-        raise ValueError(f"{name} must be a 3x4 matrix, got shape {P.shape}")
-    if not np.all(np.isfinite(P)):
-        raise ValueError(f"{name} contains NaN or inf")
-    ratio = float(camera_rank_ratio(P))
-    if not ratio > CAMERA_RANK_RTOL:
-        raise ValueError(_rank_message(name, ratio))
-
-
-def validate_cameras(cameras, *, min_views: int = 2, require_distinct: bool = True) -> np.ndarray:
-    """Check and convert projection matrices (the rule is in the module docstring).
-
-    Parameters
-    ----------
-    cameras : array_like, shape (N, 3, 4)
-        Projection matrices ``P_i`` (paper eq. (2)), real numbers of any finite scale.
-    min_views : int
-        Minimum number of views (2 for triangulation).
-    require_distinct : bool
-        If true, reject the ill-posed input where all cameras are equal up to a
-        (possibly negative) scale factor (:func:`cameras_all_equal`).
-
-    Returns
-    -------
-    ndarray, shape (N, 3, 4)
-        A float copy.
-
-    Raises
-    ------
-    ValueError
-        Not real numbers (``"cameras must be real numbers, got complex128"``), wrong shape,
-        NaN/inf, rank < 3 after conditioning (:func:`camera_rank_ratio`), fewer than
-        ``min_views`` views, all cameras equal.  :func:`camera_problems` is the vectorised
-        twin for stacks of problems.
-    """
-    C = _as_float_array(cameras, "cameras")
-    if C.ndim != 3 or C.shape[1:] != (3, 4):
-        raise ValueError(f"cameras must have shape (N, 3, 4), got {C.shape}")
-    if C.shape[0] < min_views:
-        raise ValueError(f"cameras: at least {min_views} views are needed, got {C.shape[0]}")
-    finite = np.all(np.isfinite(C), axis=(1, 2))
-    if not np.all(finite):
-        raise ValueError(f"cameras[{int(np.argmin(finite))}] contains NaN or inf")
-    ratio = camera_rank_ratio(C)
-    for i, r in enumerate(ratio):
-        if not r > CAMERA_RANK_RTOL:
-            raise ValueError(_rank_message(f"cameras[{i}]", float(r)))
-    if require_distinct and C.shape[0] >= 2 and cameras_all_equal(C):
-        raise ValueError("cameras are all equal up to scale: the triangulation is ill-posed")
-    return C
-
-
-def camera_problems(cameras, *, require_distinct: bool = True) -> CameraProblems:
-    """:func:`validate_cameras` for a stack of M problems, without exceptions, in numpy over the stack.
-
-    Parameters
-    ----------
-    cameras : array_like, shape (M, N, 3, 4)
-    require_distinct : bool
-        As in :func:`validate_cameras` (only for N >= 2).
-
-    Returns
-    -------
-    CameraProblems
-        ``valid[m]`` is true iff ``validate_cameras(cameras[m], min_views=1,
-        require_distinct=require_distinct)`` accepts problem m; ``reason`` and ``view`` say
-        which check failed first (the order of :func:`validate_cameras`).
-
-    Raises
-    ------
-    ValueError
-        Not real numbers or not of shape (M, N, 3, 4).
-    """
-    C = _as_float_array(cameras, "cameras")
-    if C.ndim != 4 or C.shape[2:] != (3, 4):
-        raise ValueError(f"cameras must have shape (M, N, 3, 4), got {C.shape}")
-    M, N = C.shape[:2]
-    bad_finite = ~np.all(np.isfinite(C), axis=(2, 3))                          # (M, N)
-    bad_rank = ~(camera_rank_ratio(C) > CAMERA_RANK_RTOL) & ~bad_finite        # NaN ratio -> not finite
-    any_finite, any_rank = bad_finite.any(axis=1), bad_rank.any(axis=1)
-    equal = np.zeros(M, dtype=bool)
-    if require_distinct and N >= 2:
-        equal = cameras_all_equal(np.where(bad_finite[..., None, None], 0.0, C)) & ~any_finite & ~any_rank
-    reason = np.full(M, CameraIssue.OK, dtype=np.int8)
-    reason[equal] = CameraIssue.ALL_EQUAL
-    reason[any_rank] = CameraIssue.RANK
-    reason[any_finite] = CameraIssue.NOT_FINITE
-    view = np.where(any_finite, np.argmax(bad_finite, axis=1), np.where(any_rank, np.argmax(bad_rank, axis=1), -1))
-    return CameraProblems(valid=reason == CameraIssue.OK, reason=reason, view=view)
-
-
 def validate_points2d(points2d, n_views: int, name: str = "points2d") -> np.ndarray:
     """Check image points: shape (n_views, 2), finite."""
-    x = _as_float_array(points2d, name)
+    x = real_array(points2d, name)
     if x.shape != (n_views, 2):
         raise ValueError(f"{name} must have shape ({n_views}, 2), one point per view, got {x.shape}")
     if not np.all(np.isfinite(x)):
         raise ValueError(f"{name} contains NaN or inf")
     return x
-
-
-def _points3d(X, name: str = "X") -> tuple[np.ndarray, bool]:
-    A = _as_float_array(X, name)
-    if A.shape == (3,):
-        return A[None, :], True
-    if A.ndim == 2 and A.shape[1] == 3:
-        return A, False
-    raise ValueError(f"{name} must have shape (3,) or (m, 3), got {A.shape}")
 
 
 # ----------------------------------------------------------------------------- projection
@@ -325,8 +66,8 @@ def project_homogeneous(Xh: np.ndarray, P: np.ndarray) -> np.ndarray:
     bit unless a product would have overflowed)."""
     finite = np.all(np.isfinite(Xh), axis=1)
     Xs = np.where(finite[:, None], Xh, 0.0)
-    Xs = Xs / _max_abs(Xs, (1,))
-    Ps = P / _max_abs(P, (0, 1))
+    Xs = Xs / power2_scale(Xs, (1,))
+    Ps = P / power2_scale(P, (0, 1))
     h = Xs @ Ps.T
     den = h[:, 2]
     tiny = np.abs(den) <= PROJECTION_DENOM_RTOL * np.linalg.norm(Ps[2]) * np.linalg.norm(Xs, axis=1)
@@ -351,8 +92,8 @@ def project(X, P) -> np.ndarray:
     ndarray, shape (2,) or (m, 2)
         ``inf`` entries where ``p3.X~`` vanishes (projection at infinity).
     """
-    A, single = _points3d(X)
-    P = _as_float_array(P, "P")
+    A, single = points3d_array(X)
+    P = real_array(P, "P")
     if P.shape != (3, 4):
         raise ValueError(f"P must be a 3x4 matrix, got shape {P.shape}")
     Xh = np.hstack([A, np.ones((len(A), 1))])
@@ -362,99 +103,11 @@ def project(X, P) -> np.ndarray:
 
 def image_points(X, cameras) -> np.ndarray:
     """Projections of ``X`` in every view: (3,) -> (N, 2); (m, 3) -> (m, N, 2)."""
-    A, single = _points3d(X)
+    A, single = points3d_array(X)
     C = validate_cameras(cameras, min_views=1, require_distinct=False)
     Xh = np.hstack([A, np.ones((len(A), 1))])
     out = np.stack([project_homogeneous(Xh, P) for P in C], axis=1)
     return out[0] if single else out
-
-
-def camera_center(P, homogeneous: bool = False) -> np.ndarray:
-    """Centre of projection: the null vector ``a`` of ``P`` (``P a = 0``).
-
-    Parameters
-    ----------
-    P : array_like, shape (3, 4)
-    homogeneous : bool
-        Return the unit 4-vector ``a`` instead of ``a[:3] / a[3]``.
-
-    Raises
-    ------
-    ValueError
-        Bad ``P``, or a centre at infinity (affine camera) when ``homogeneous`` is false.
-    """
-    P = _as_float_array(P, "P")
-    _check_camera(P, "P")
-    a = np.linalg.svd(P / _max_abs(P, (0, 1)))[2][-1]
-    if homogeneous:
-        return a
-    if abs(a[3]) <= POINT_AT_INFINITY_RTOL:
-        raise ValueError("P has its centre at infinity (affine camera); use homogeneous=True")
-    return a[:3] / a[3]
-
-
-def _depth_rows(C: np.ndarray) -> np.ndarray:
-    """``sign(det M) p3 / ||m3||`` for cameras (..., 3, 4) -> (..., 4), so that depth = row . X~.
-
-    Each camera is divided by a power of two near its largest entry first (the depth does not
-    change under ``P -> k P``, k > 0), and ``||m3||`` is taken without overflow or underflow.
-    NaN rows for cameras with ``m3 = 0`` (depth undefined) or non-finite entries.
-    """
-    Cs = C / _max_abs(C, (-2, -1))
-    m3 = Cs[..., 2, :3]
-    k = _max_abs(m3, (-1,))[..., 0]
-    n = k * np.sqrt(np.sum((m3 / k[..., None]) ** 2, axis=-1))
-    sign = np.sign(np.linalg.det(Cs[..., :3]))
-    sign = np.where(sign == 0, 1.0, sign)
-    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-        f = np.where(n > 0, sign / np.where(n > 0, n, 1.0), np.nan)
-    return Cs[..., 2, :] * f[..., None]
-
-
-def depths(X, cameras) -> np.ndarray:
-    """Depth of ``X`` in each camera (Hartley & Zisserman eq. (6.15)):
-    ``depth = sign(det M) (p3.X~) / ||m3||``, ``M`` the left 3x3 block of ``P`` and
-    ``m3`` its third row; invariant to ``P -> k P``; positive in front of the camera.
-    For ``P = K [R | t]`` with ``det K > 0`` it is the third coordinate of ``R X + t``.
-
-    Returns
-    -------
-    ndarray, shape (N,) for ``X`` of shape (3,), (m, N) for (m, 3).
-        NaN for a camera with ``m3 = 0`` (an affine camera: no depth).
-
-    Raises
-    ------
-    ValueError
-        Bad ``X`` or cameras (:func:`validate_cameras` with ``min_views=1``, distinctness not required).
-    """
-    A, single = _points3d(X)
-    C = validate_cameras(cameras, min_views=1, require_distinct=False)
-    Xh = np.hstack([A, np.ones((len(A), 1))])
-    with np.errstate(over="ignore", invalid="ignore"):
-        out = np.einsum("mj,nj->mn", Xh, _depth_rows(C))
-    return out[0] if single else out
-
-
-def depths_stack(cameras, X) -> np.ndarray:
-    """:func:`depths` for M problems at once: cameras (M, N, 3, 4), X (M, 3) -> (M, N), the depth
-    of ``X[m]`` in camera ``cameras[m, i]`` (same formula, numpy over the stack).
-
-    The cameras are not validated (use :func:`camera_problems`): non-finite data give NaN.
-
-    Raises
-    ------
-    ValueError
-        Not real numbers, or shapes other than (M, N, 3, 4) and (M, 3).
-    """
-    C = _as_float_array(cameras, "cameras")
-    A = _as_float_array(X, "X")
-    if C.ndim != 4 or C.shape[2:] != (3, 4):
-        raise ValueError(f"cameras must have shape (M, N, 3, 4), got {C.shape}")
-    if A.shape != (C.shape[0], 3):
-        raise ValueError(f"X must have shape ({C.shape[0]}, 3), one point per problem, got {A.shape}")
-    Xh = np.concatenate([A, np.ones((len(A), 1))], axis=1)
-    with np.errstate(over="ignore", invalid="ignore"):
-        return np.einsum("mj,mnj->mn", Xh, _depth_rows(C))
 
 
 # ----------------------------------------------------------------------------- cost
@@ -494,7 +147,7 @@ def gamma(X, cameras, regions) -> float | np.ndarray:
     """
     from .regions import as_regions
 
-    A, single = _points3d(X)
+    A, single = points3d_array(X)
     if not np.all(np.isfinite(A)):
         raise ValueError("X contains NaN or inf")
     C = validate_cameras(cameras, require_distinct=False)
@@ -572,9 +225,9 @@ def dlt(cameras, points2d) -> np.ndarray:
     x = validate_points2d(points2d, len(C))
     T = _hartley_normalisation(x)
     xn = x @ T[:2, :2].T + T[:2, 2]
-    Cn = np.einsum("ab,nbc->nac", T, C / _max_abs(C, (1, 2)))      # per-camera scale: no effect after row scaling
+    Cn = np.einsum("ab,nbc->nac", T, C / power2_scale(C, (1, 2)))      # per-camera scale: no effect after row scaling
     A = (Cn[:, :2, :] - xn[:, :, None] * Cn[:, 2:3, :]).reshape(-1, 4)
-    A = _unit_rows(A)[0]
+    A = unit_rows(A)[0]
     w = _null_vector(A)
     if abs(w[3]) <= POINT_AT_INFINITY_RTOL:
         raise PointAtInfinityError(
@@ -608,11 +261,11 @@ def fundamental_matrix(P_i, P_j, normalize: bool = True) -> np.ndarray:
         Bad cameras (:func:`validate_cameras`' rule), or coincident camera centres
         (``||F||_F <= SAME_CENTER_RTOL ||P_i|| ||P_j||`` for the scaled cameras: ``F`` vanishes).
     """
-    Pi = _as_float_array(P_i, "P_i")
-    Pj = _as_float_array(P_j, "P_j")
-    _check_camera(Pi, "P_i")
-    _check_camera(Pj, "P_j")
-    ki, kj = _max_abs(Pi, (0, 1)).item(), _max_abs(Pj, (0, 1)).item()
+    Pi = real_array(P_i, "P_i")
+    Pj = real_array(P_j, "P_j")
+    check_camera(Pi, "P_i")
+    check_camera(Pj, "P_j")
+    ki, kj = power2_scale(Pi, (0, 1)).item(), power2_scale(Pj, (0, 1)).item()
     Pi, Pj = Pi / ki, Pj / kj
     a = _null_vector(Pj)
     e = Pi @ a

@@ -264,7 +264,10 @@ class AutoBackend:
         m = problem.n_cols
         cost = sum(m * n ** 3 for n in lay.sizes)
         ipm_bytes = 8.0 * (3.0 * m * sum(n * n for n in lay.sizes) + float(m) ** 2)
-        be = self.ipm if AUTO_IPM_MIN_COST <= cost and ipm_bytes <= AUTO_IPM_MAX_BYTES else self.clarabel
+        # the IPM's Schur complement is dense over every column: it pays off for one dominant Gram block (the
+        # moment form), not for programs of many blocks, whose sparsity Clarabel's factorisation keeps
+        single = len(lay.sizes) == 1
+        be = self.ipm if single and AUTO_IPM_MIN_COST <= cost and ipm_bytes <= AUTO_IPM_MAX_BYTES else self.clarabel
         return be.solve(problem, accept=accept, retry=retry, deadline=deadline)
 
 

@@ -63,7 +63,7 @@ def ipm_solve_sparse(A: sp.spmatrix, b: np.ndarray, q: np.ndarray, cones,
         Ac = sp.csc_matrix(A)     # the reduction reads columns: one conversion (none for a ConicProblem's A)
         Ac.sort_indices()
         red = reduction_for(Ac, q[0], lay.sizes[0])
-        if red is not None:
+        if red is not None and red.m2 < A.shape[1]:      # only when the moment form is the smaller system
             res = red.solve(Ac, b[0], q[0], tolerances, deadline)
             if res is not None and (res.converged[0] or res.reason[0] == "time limit"):
                 return res

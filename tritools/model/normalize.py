@@ -35,10 +35,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .cameras import power2_scale
 from .geometry import POINT_AT_INFINITY_RTOL
 from .stacked import dlt_stack, null_vectors, pixel_scales, project_stack, refine_points_stack
 
-__all__ = ["Normalization", "NormalizationStack", "normalization_for", "normalization_stack", "RHO_FLOOR_REL",
+__all__ = ["Normalization", "NormalizationStack", "normalization_for", "normalization_stack", "unconstrained_reason",
+           "RHO_FLOOR_REL",
            "SCALE_BOUNDS"]
 
 #: floor of the residual scale rho, relative to the median pixel scale (focal length) of the views.
@@ -71,8 +73,12 @@ class Normalization:
 
     def cameras(self, cameras: np.ndarray) -> np.ndarray:
         H = self.world()
-        out = np.array([self.transform(i) @ P @ H for i, P in enumerate(cameras)])
-        return out / np.linalg.norm(out, axis=(1, 2))[:, None, None]
+        C = np.asarray(cameras, float)
+        C = C / power2_scale(C, (1, 2))                  # exact, projectively the same: nothing below overflows
+        out = np.array([self.transform(i) @ P @ H for i, P in enumerate(C)])
+        with np.errstate(over="ignore", invalid="ignore"):
+            out = out / power2_scale(out, (1, 2))
+            return out / np.linalg.norm(out, axis=(1, 2))[:, None, None]
 
     def regions(self, regions) -> list:
         return [r.similarity(self.scale, self.shifts[i]) for i, r in enumerate(regions)]
@@ -122,7 +128,8 @@ def normalization_stack(C: np.ndarray, x: np.ndarray, ok: np.ndarray | None = No
     (the regions' centres)."""
     M, N = x.shape[:2]
     ok = np.ones(M, bool) if ok is None else ok.copy()
-    X0, ok_dlt = dlt_stack(C, x)
+    C = C / power2_scale(C, (2, 3))     # each camera by a power of two near its largest entry: exact, projectively
+    X0, ok_dlt = dlt_stack(C, x)        # the same camera, and no product below overflows (cameras x 1e300)
     ok &= ok_dlt
     rho_floor = _rho_floor(C, x)
     u0, _, fin0 = project_stack(C, X0)
@@ -177,3 +184,29 @@ def normalization_for(cameras: np.ndarray, regions, enabled: bool = True) -> Nor
         return Normalization(1.0, centers, np.zeros(3), 1.0)
     return st.item(0)
 
+
+
+def unconstrained_reason(cameras: np.ndarray, regions) -> tuple:
+    """(status value, message) for a problem whose normalised data leave no view pair that constrains the point.
+
+    Either the camera centres really coincide (``ill_posed``), or the pairs were lost in floating point: image
+    coordinates so far from the cameras' image scale (points at 1e20 px and more) that the normalised cameras
+    are numerically rank-deficient (``numerical_failure``, and the message says so instead of blaming the
+    cameras)."""
+    from .geometry import fundamental_matrices
+
+    C = np.asarray(cameras, float)
+    with np.errstate(all="ignore"):
+        C = C / power2_scale(C, (1, 2))
+        try:
+            pairs = fundamental_matrices(C, skip_coincident=True)
+        except ValueError:
+            pairs = {}
+    if not pairs:
+        return "ill_posed", "all camera centres coincide: no view pair constrains the point (its depth is undetermined)"
+    centers = np.array([r.center for r in regions], float)
+    with np.errstate(all="ignore"):
+        big = float(np.max(np.abs(centers))) if centers.size else float("nan")
+    return "numerical_failure", (f"the image data (|x| up to {big:.3g}) are too large for the cameras' image scale "
+                                 f"to be represented in floating point: no view pair constrains the point after "
+                                 f"normalisation (the cameras' centres are distinct)")

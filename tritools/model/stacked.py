@@ -137,7 +137,12 @@ def fundamental_stack(C: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     Pi, Pj = C[:, I], C[:, J]
     a = null_vectors(C)
     with np.errstate(over="ignore", invalid="ignore"):
-        pinv = np.einsum("mnij,mnjk->mnik", np.swapaxes(C, 2, 3), np.linalg.inv(C @ np.swapaxes(C, 2, 3)))
+        CCt = C @ np.swapaxes(C, 2, 3)
+        try:
+            inv = np.linalg.inv(CCt)
+        except np.linalg.LinAlgError:       # an exactly singular camera (points at 1e20 px) must not fail the stack
+            inv = np.linalg.pinv(np.where(np.isfinite(CCt), CCt, 0.0))
+        pinv = np.einsum("mnij,mnjk->mnik", np.swapaxes(C, 2, 3), inv)
         e = np.einsum("mkij,mkj->mki", Pi, a[:, J])
     ex = np.zeros(e.shape + (3,))
     ex[..., 0, 1], ex[..., 0, 2], ex[..., 1, 2] = -e[..., 2], e[..., 1], -e[..., 0]

@@ -39,7 +39,7 @@ from sospoly.budget import Deadline
 
 from ..model.constraints import Method
 from ..model.geometry import (dlt, gamma as gamma_of, point_from_image_points, project, refine_l2, validate_cameras)
-from ..model.normalize import Normalization, normalization_for
+from ..model.normalize import Normalization, normalization_for, unconstrained_reason
 from ..model.problem import TriangulationProblem, build_problem, view_chain
 from ..model.regions import Point, as_regions
 from ..result import Attempt, Status, TriangulationResult
@@ -198,8 +198,8 @@ class _PointSolve:
         except ValueError as exc:                     # e.g. Theorem 1 with all minors for too many views
             return self._failed(step, Status.BUDGET_EXCEEDED, str(exc), label, t)
         if not problem.projection:
-            return self._failed(step, Status.ILL_POSED, "all camera centres coincide: no view pair constrains the "
-                                                        "point (its depth is undetermined)", label, t)
+            status, why = unconstrained_reason(self.cams, self.regions)
+            return self._failed(step, Status(status), why, label, t)
         if sospoly.delta_min(problem.f, problem.eq, problem.ineq) > step.delta:
             return self._failed(step, Status.INVALID_INPUT, f"delta {step.delta} is below delta_min of this "
                                                             f"problem", label, t)

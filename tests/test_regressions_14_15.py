@@ -52,3 +52,54 @@ def test_points_at_1e300_are_not_blamed_on_the_cameras(k):
         assert "too large" in res.message and not any(m in res.message for m in MISLEADING[:2])
         assert "centres coincide" not in res.message
 
+
+
+# ----------------------------------------------------------------------------- #14: input types
+@pytest.mark.parametrize("cams", [CAMS.astype(complex), CAMS + 1e-3j, CAMS.astype(object), CAMS.astype(str)],
+                         ids=["complex-real", "complex", "object", "str"])
+def test_complex_object_and_string_cameras_are_refused_on_every_path(cams):
+    """#14: complex cameras were reduced to their real part and certified (triangulate_points still did it)."""
+    from tritools.sfm import certify_stack
+
+    dtype = np.asarray(cams).dtype.name
+    with pytest.raises(ValueError, match=f"cameras must be real numbers, got {dtype[:3]}"):
+        tritools.triangulate(cams, PTS)
+    with pytest.raises(ValueError, match="cameras must be real numbers"):
+        tritools.triangulate_points(cams, PTS[None], progress=False)
+    with pytest.raises(ValueError, match="cameras must be real numbers"):
+        certify_stack(np.asarray(cams)[None], PTS[None])
+    (res,) = tritools.triangulate_many([(cams, PTS)], progress=False)     # a batch never raises: a status
+    assert res.status == Status.INVALID_INPUT and "cameras must be real numbers" in res.message
+
+
+def test_complex_image_points_are_refused():
+    with pytest.raises(ValueError, match="must be real numbers, got complex"):
+        tritools.triangulate(CAMS, PTS + 0j)
+    with pytest.raises(ValueError, match="points2d must be real numbers, got complex"):
+        tritools.triangulate_points(CAMS, (PTS + 1e-9j)[None], progress=False)
+
+
+def test_tolerances_none_means_the_defaults_and_anything_else_is_refused_by_name():
+    """#14: ``tolerances=None`` raised AttributeError deep in the IPM (and gave numerical_error with Clarabel)."""
+    import sospoly as sp
+    from sospoly.solvers.backends import AutoBackend, ClarabelBackend, IpmBackend, get_backend
+
+    x, y = sp.variables("x y")
+    f = x**2 + y**2 - x                                     # min -1/4 at (1/2, 0)
+    ps = sp.build_psatz(f, degree=2)
+    comp = sp.compile_psatz(f, degree=2)
+    runs = [lambda t: sp.solve_psatz(ps, tolerances=t), lambda t: sp.solve_psatz(ps, backend="ipm", tolerances=t),
+            lambda t: sp.solve_psatz(ps, backend="auto", tolerances=t), lambda t: comp.solve(f, tolerances=t),
+            lambda t: sp.solve_psatz(ps, backend=ClarabelBackend(t)), lambda t: sp.solve_psatz(ps, backend=IpmBackend(t)),
+            lambda t: sp.minimize(f, tolerances=t), lambda t: sp.minimize(f, backend="ipm", tolerances=t)]
+    for run in runs:
+        res = run(None)
+        assert res.status == sp.SolveStatus.OPTIMAL and res.lower_bound == pytest.approx(-0.25, abs=1e-6)
+        with pytest.raises(TypeError, match="tolerances must be a sospoly.Tolerances, got float"):
+            run(1e-6)
+    for make in (ClarabelBackend, IpmBackend, AutoBackend, lambda t: get_backend("ipm", t)):
+        with pytest.raises(TypeError, match="got str"):
+            make("tight")
+    assert tritools.triangulate(CAMS, PTS, tolerances=None).optimal
+    with pytest.raises(TypeError, match="tolerances must be a sospoly.Tolerances"):
+        tritools.triangulate(CAMS, PTS, tolerances={"gap_abs": 1e-6})

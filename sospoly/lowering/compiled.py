@@ -40,7 +40,7 @@ from ..solvers.backends import Attempt, ConicSolution, RawStatus, get_backend
 from ..solvers.ipm import ipm_solve_batch, layout_of
 from ..solvers.solve import LowerBound, lower_bound_of, solve_program
 from ..status import SolveStatus
-from ..tolerances import DEFAULT_TOLERANCES, Tolerances
+from ..tolerances import DEFAULT_TOLERANCES, Tolerances, as_tolerances
 from .conic import ConicProblem, GramForm, lower
 
 __all__ = ["BatchBounds", "CompiledPsatz", "CompiledInstance", "PsatzCache", "compile_psatz", "structure_for",
@@ -258,6 +258,7 @@ class CompiledPsatz:
 
     def solve_theta(self, theta, *, backend=None, tolerances: Tolerances = DEFAULT_TOLERANCES,
                     problem: ConicProblem | None = None, deadline=None) -> LowerBound:
+        tolerances = as_tolerances(tolerances)
         if self.structure.free:
             raise ValueError("a free-multiplier structure is solved by bisection (sospoly.solve_psatz)")
         if self._trivially_unbounded():
@@ -277,6 +278,7 @@ class CompiledPsatz:
         is re-solved by ``fallback`` (default Clarabel) and its ``solution.attempts``
         record both.
         """
+        tolerances = as_tolerances(tolerances)
         if thetas is None:
             thetas = np.array([self.theta(*inst) for inst in instances]) if instances else np.zeros((0, self.n_theta))
         th = self._check_theta(thetas) if len(thetas) else np.zeros((0, self.n_theta))
@@ -309,6 +311,7 @@ class CompiledPsatz:
         programs in the image form) only."""
         from ..algebra.svec import smat
 
+        tolerances = as_tolerances(tolerances)
         t = self._template
         lay = layout_of(t.cones)
         if lay.p or len(lay.sizes) != 1:

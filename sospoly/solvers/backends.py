@@ -28,7 +28,7 @@ import scipy.sparse as sp
 from ..budget import Deadline
 from ..lowering.conic import ConicProblem
 from ..algebra.svec import triu_pairs, svec_scale
-from ..tolerances import DEFAULT_TOLERANCES, Tolerances
+from ..tolerances import DEFAULT_TOLERANCES, Tolerances, as_tolerances
 
 __all__ = ["RawStatus", "Attempt", "ConicSolution", "ClarabelBackend", "CvxpyBackend", "IpmBackend", "AutoBackend",
            "get_backend"]
@@ -92,7 +92,7 @@ class ClarabelBackend:
     name = "clarabel"
 
     def __init__(self, tolerances: Tolerances = DEFAULT_TOLERANCES, retry_chain=CLARABEL_RETRY_CHAIN, **settings):
-        self.tolerances = tolerances
+        self.tolerances = as_tolerances(tolerances)
         self.retry_chain = tuple(retry_chain)
         self.settings = settings
 
@@ -196,8 +196,8 @@ class IpmBackend:
     name = "ipm"
 
     def __init__(self, tolerances: Tolerances = DEFAULT_TOLERANCES, fallback=None):
-        self.tolerances = tolerances
-        self.fallback = fallback if fallback is not None else ClarabelBackend(tolerances)
+        self.tolerances = as_tolerances(tolerances)
+        self.fallback = fallback if fallback is not None else ClarabelBackend(self.tolerances)
 
     def solve(self, problem: ConicProblem, accept=None, retry: bool = True,
               deadline: Deadline | None = None) -> ConicSolution:
@@ -250,8 +250,8 @@ class AutoBackend:
     name = "auto"
 
     def __init__(self, tolerances: Tolerances = DEFAULT_TOLERANCES):
-        self.clarabel = ClarabelBackend(tolerances)
-        self.ipm = IpmBackend(tolerances, fallback=self.clarabel)
+        self.clarabel = ClarabelBackend(as_tolerances(tolerances))
+        self.ipm = IpmBackend(self.clarabel.tolerances, fallback=self.clarabel)
 
     def solve(self, problem: ConicProblem, accept=None, retry: bool = True,
               deadline: Deadline | None = None) -> ConicSolution:
@@ -284,7 +284,7 @@ class CvxpyBackend:
 
     def __init__(self, solver: str | None = None, tolerances: Tolerances = DEFAULT_TOLERANCES, **solver_kwargs):
         self.solver = solver
-        self.tolerances = tolerances
+        self.tolerances = as_tolerances(tolerances)
         self.solver_kwargs = solver_kwargs
 
     def _tolerance_kwargs(self, solver):
@@ -358,6 +358,7 @@ class CvxpyBackend:
 def get_backend(backend, tolerances: Tolerances = DEFAULT_TOLERANCES):
     """Resolve a back-end given by object, or by name ``"clarabel"`` / ``"ipm"`` / ``"auto"`` / ``"cvxpy"`` /
     ``"cvxpy:SCS"``."""
+    tolerances = as_tolerances(tolerances)
     if backend is None:
         return ClarabelBackend(tolerances)
     if isinstance(backend, str):

@@ -28,7 +28,7 @@ from ..lowering.compiled import CompiledPsatz
 from ..lowering.conic import ConicProblem, GramForm
 from .solve import ProgramSolution, check_certificate, solve_conic
 from ..status import SolveStatus
-from ..tolerances import DEFAULT_TOLERANCES, Tolerances
+from ..tolerances import DEFAULT_TOLERANCES, Tolerances, as_tolerances
 
 __all__ = ["GevpStep", "GevpResult", "CompiledGevp", "bisect"]
 
@@ -61,7 +61,7 @@ class CompiledGevp:
             raise ValueError("CompiledGevp needs a Psatz problem built with multiplier='free'")
         self.psatz = psatz
         self.backend = backend
-        self.tolerances = tolerances
+        self.tolerances = as_tolerances(tolerances)
         self.deadline = deadline
         self.compiled = CompiledPsatz(psatz.structure, form)
 

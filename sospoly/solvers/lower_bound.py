@@ -12,7 +12,7 @@ from ..certificates.psatz import Multiplier, PsatzProblem, psatz_structure
 from ..lowering.compiled import CompiledInstance, CompiledPsatz
 from ..lowering.conic import GramForm
 from ..status import SolveStatus
-from ..tolerances import DEFAULT_TOLERANCES, Tolerances
+from ..tolerances import DEFAULT_TOLERANCES, Tolerances, as_tolerances
 from .gevp import CompiledGevp, GevpResult, bisect
 from .solve import LowerBound, ProgramSolution
 
@@ -41,6 +41,7 @@ def solve_psatz(psatz, *, backend=None, form: GramForm = GramForm.IMAGE,
     one instance's numbers): then only its conic data is solved.  ``deadline`` bounds the wall time
     (status ``TIME_LIMIT``; a bisection then reports its best certified level).
     """
+    tolerances = as_tolerances(tolerances)
     if isinstance(psatz, CompiledInstance):
         return psatz.compiled.solve_theta(psatz.theta, backend=backend, tolerances=tolerances, problem=psatz.problem,
                                           deadline=deadline)

@@ -23,7 +23,7 @@ from ..lowering.conic import ConicProblem, GramForm, lower
 from ..algebra.polynomial import Polynomial
 from ..certificates.program import Sense, SOSProgram
 from ..status import SolveStatus
-from ..tolerances import DEFAULT_TOLERANCES, Tolerances
+from ..tolerances import DEFAULT_TOLERANCES, Tolerances, as_tolerances
 
 __all__ = ["ProgramSolution", "LowerBound", "lower_bound_of", "solve_program", "solve_conic", "check_certificate"]
 
@@ -100,6 +100,7 @@ def solve_conic(problem: ConicProblem, backend=None, tolerances: Tolerances = DE
     (:class:`~sospoly.budget.Deadline`) bounds the solve's wall time: a solve that runs out of
     time returns ``TIME_LIMIT``.
     """
+    tolerances = as_tolerances(tolerances)
     be = get_backend(backend, tolerances)
     if deadline is not None and deadline.expired:
         return SolveStatus.TIME_LIMIT, ConicSolution(RawStatus.TIME_LIMIT, None, None, None, None, ()), {}, np.nan, \
@@ -138,6 +139,7 @@ def solve_program(program: SOSProgram, backend=None, form: GramForm = GramForm.I
                   tolerances: Tolerances = DEFAULT_TOLERANCES, problem: ConicProblem | None = None,
                   deadline: Deadline | None = None) -> ProgramSolution:
     """Lower (unless ``problem`` is given), solve and check ``program``."""
+    tolerances = as_tolerances(tolerances)
     if problem is None:
         problem = lower(program, form)
     feas = program.sense == Sense.FEASIBILITY or program.objective is None

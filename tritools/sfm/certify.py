@@ -73,8 +73,10 @@ def certify_stack(cameras, points2d, options: CertifyOptions = CertifyOptions())
     from ..solve.batch import solve_point_stack
     from ..solve.options import TriangulationOptions
 
-    C = np.asarray(cameras, float)
-    x = np.asarray(points2d, float)
+    from ..model.regions import real_array
+
+    C = real_array(cameras, "cameras")
+    x = real_array(points2d, "points2d")
     M, N = x.shape[:2]
     out = StackResult(np.full((M, 3), np.nan), np.full(M, np.nan), np.full(M, np.nan),
                       np.full(M, _CODE[Status.SOLVER_FAILED.value], np.int8), np.zeros(M, bool),

@@ -23,7 +23,7 @@ import numpy as np
 from sospoly import GramForm, Multiplier, n_lmivar_formula
 
 from ..model.constraints import Method
-from ..model.regions import Point
+from ..model.regions import Point, real_array
 from ..result import Attempt, Status, TriangulationResult
 from .decide import cheirality
 from .fastpath import verify_points
@@ -225,8 +225,8 @@ def triangulate_points(cameras, points2d, visible=None, *, options: Triangulatio
     from .batch import solve_point_problems
 
     opts = options_from(options, **overrides)
-    C = np.asarray(cameras, float)
-    x = np.asarray(points2d, float)
+    C = real_array(cameras, "cameras")          # complex, object, string and boolean arrays refused by name
+    x = real_array(points2d, "points2d")
     if C.ndim != 3 or C.shape[1:] != (3, 4):
         raise ValueError(f"cameras must have shape (V, 3, 4), got {C.shape}")
     if x.ndim != 3 or x.shape[1:] != (C.shape[0], 2):

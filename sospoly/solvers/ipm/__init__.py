@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-from ...tolerances import DEFAULT_TOLERANCES, Tolerances
+from ...tolerances import DEFAULT_TOLERANCES, Tolerances, as_tolerances
 from ..blas import with_single_threaded_blas
 from .core import IpmResult, Layout, layout_of, mehrotra, result_of, stopping_rule
 from .moment import MomentReduction, reduction_for
@@ -26,6 +26,7 @@ __all__ = ["IpmResult", "Layout", "layout_of", "stopping_rule", "ipm_solve_batch
 def ipm_solve_batch(A: np.ndarray, b: np.ndarray, q: np.ndarray, cones,
                     tolerances: Tolerances = DEFAULT_TOLERANCES, *, deadline=None) -> IpmResult:
     """Solve B instances of one structure: A (B, n_rows, m) dense, b (B, n_rows), q (B, m) or (m,)."""
+    tolerances = as_tolerances(tolerances)
     A = np.asarray(A, float)
     b = np.asarray(b, float)
     if A.ndim != 3:
@@ -53,6 +54,7 @@ def ipm_solve_sparse(A: sp.spmatrix, b: np.ndarray, q: np.ndarray, cones,
     row no other column touches, zero cost: the alpha of ``GramForm.IMAGE``) is solved in its reduced
     moment form (:class:`MomentReduction`); anything else (and a reduced solve that did not converge)
     with the svec-Kronecker Schur complement of :class:`SparseOperator`."""
+    tolerances = as_tolerances(tolerances)
     lay = layout_of(cones)
     A = A if sp.issparse(A) else sp.csr_matrix(A)
     if A.shape[0] != lay.n_rows:

@@ -7,11 +7,16 @@ run of minutes is what these tests catch); the whole file runs in well under a m
 """
 from __future__ import annotations
 
+import json
+import time
+
 import numpy as np
 import pytest
 
+import sospoly
 import tritools
-from tritools import Status
+from tritools import Ellipse, EllipseBorder, Polytope, Status
+from tritools.solve.options import TRIANGULATION_BUDGET, TriangulationOptions
 
 #: three cameras and the exact projections of X_TRUE (gamma* = 0, certified by verification in milliseconds).
 CAMS = np.array([[[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 1]],
@@ -90,7 +95,8 @@ def test_tolerances_none_means_the_defaults_and_anything_else_is_refused_by_name
     comp = sp.compile_psatz(f, degree=2)
     runs = [lambda t: sp.solve_psatz(ps, tolerances=t), lambda t: sp.solve_psatz(ps, backend="ipm", tolerances=t),
             lambda t: sp.solve_psatz(ps, backend="auto", tolerances=t), lambda t: comp.solve(f, tolerances=t),
-            lambda t: sp.solve_psatz(ps, backend=ClarabelBackend(t)), lambda t: sp.solve_psatz(ps, backend=IpmBackend(t)),
+            lambda t: sp.solve_psatz(ps, backend=ClarabelBackend(t)),
+            lambda t: sp.solve_psatz(ps, backend=IpmBackend(t)),
             lambda t: sp.minimize(f, tolerances=t), lambda t: sp.minimize(f, backend="ipm", tolerances=t)]
     for run in runs:
         res = run(None)
@@ -103,3 +109,88 @@ def test_tolerances_none_means_the_defaults_and_anything_else_is_refused_by_name
     assert tritools.triangulate(CAMS, PTS, tolerances=None).optimal
     with pytest.raises(TypeError, match="tolerances must be a sospoly.Tolerances"):
         tritools.triangulate(CAMS, PTS, tolerances={"gap_abs": 1e-6})
+
+
+# ----------------------------------------------------------------------------- #14: resources
+def _example4_variants():
+    cams, regions = tritools.paper_example(4)
+    x = [r.x for r in regions]
+    w = 1e-12                                               # R = {y : ||(y - x_1) / w||_inf <= 1}
+    return cams, {
+        "filled ellipse D=1e30 I": [Ellipse(x[0], 1e30 * np.eye(2))] + list(regions[1:]),
+        "filled ellipse D=1e-30 I": [Ellipse(x[0], 1e-30 * np.eye(2))] + list(regions[1:]),
+        "four ellipse borders of radius 1e-8": [EllipseBorder.circle(c, 1e-8) for c in x],
+        "a 1e-12 box": [Polytope(np.eye(2) / w, -x[0] / w)] + list(regions[1:]),
+    }
+
+
+def _timed(fn):
+    t0 = time.perf_counter()
+    out = fn()
+    return out, time.perf_counter() - t0
+
+
+def _assert_a_result(res):
+    assert isinstance(res, tritools.TriangulationResult) and isinstance(res.status, Status)
+    json.dumps(res.to_dict(), allow_nan=False)
+    if res.status == Status.TIME_LIMIT:
+        assert "time limit" in res.message
+
+
+@pytest.mark.parametrize("name", list(_example4_variants()[1]))
+def test_regions_that_ran_for_minutes_return_within_the_time_limit(name):
+    """#14: with Theorem 1 these regions ran for minutes and could not be interrupted (no time limit)."""
+    cams, variants = _example4_variants()
+    if name == "a 1e-12 box":                               # the box really is 2e-12 wide around x_1
+        V = variants[name][0].vertices
+        assert len(V) == 4 and np.abs(V - variants[name][0].center).max() <= 1.01e-12
+    res, elapsed = _timed(lambda: tritools.triangulate(cams, variants[name], "theorem1", time_limit=2))
+    _assert_a_result(res)
+    assert elapsed < 2 + SLACK, f"{name}: {elapsed:.1f} s"
+
+
+def test_the_default_budget_bounds_every_point():
+    """No single point may take minutes or gigabytes by default: every entry point starts from the same
+    finite budget (the CLI flags and the COLMAP workflow included, see test_defaults_agree)."""
+    b = TriangulationOptions().budget
+    assert b == TRIANGULATION_BUDGET and b.time_limit <= 60 and b.max_bytes <= 2 * 2 ** 30
+    assert TriangulationOptions().replace(time_limit=5).budget == sospoly.Budget(5, TRIANGULATION_BUDGET.max_bytes)
+
+
+def _duplicated_views_scene():
+    """#14's input: 5 views, two of them duplicates of others, one camera scaled by 1e17."""
+    from tritools.scene import random_scene
+
+    sc = random_scene(3, 1, noise_px=1.0, seed=1)
+    cams = np.concatenate([sc.cameras, sc.cameras[:2]])
+    cams[2] = cams[2] * 1e17
+    return cams, np.concatenate([sc.points2d[0], sc.points2d[0][:2]])
+
+
+def test_duplicated_views_and_a_1e17_camera_give_a_status_not_a_memory_error():
+    """#14: Theorem 1 on this scene let a MemoryError escape (an (8008, 286, 286) array in the IPM, the dense
+    delta = 6 program).  The dense program is now refused by its size estimate before anything is allocated,
+    and the default plan returns within its time limit."""
+    cams, pts = _duplicated_views_scene()
+    try:
+        dense, elapsed = _timed(lambda: tritools.triangulate(cams, pts, "theorem1", delta=6, sparsity="none",
+                                                            time_limit=30))
+        res, elapsed_plan = _timed(lambda: tritools.triangulate(cams, pts, "theorem1", time_limit=2))
+    except MemoryError:                                   # pragma: no cover - the defect
+        pytest.fail("MemoryError")
+    assert dense.status == Status.BUDGET_EXCEEDED and "Gram blocks of side 286" in dense.message
+    assert "exceeds the memory budget 2 GiB" in dense.message and elapsed < 10
+    _assert_a_result(res)
+    assert res.delta is not None and elapsed_plan < 2 + SLACK
+    assert [a.delta for a in res.attempts][:1] == [4]
+
+
+def test_dense_40_variable_quartic_gives_budget_exceeded_by_default():
+    """#14: sospoly.minimize on 40 variables aborted the interpreter in native code (exit 134).  A quartic
+    coupling all 40 variables has no sparsity to exploit: the default call refuses it by its estimate
+    (the chained 40-variable case with sparsity="none" is tests/test_sparse_minimize.py)."""
+    xs = sospoly.variables(" ".join(f"x{i}" for i in range(40)))
+    s = sum(x * x for x in xs)
+    res, elapsed = _timed(lambda: sospoly.minimize(s * s - sum(xs)))
+    assert res.status == sospoly.SolveStatus.BUDGET_EXCEEDED and not res.optimal and res.lower_bound is None
+    assert "exceeds the memory budget" in res.message and elapsed < 30

@@ -15,7 +15,8 @@ Defaults (the same everywhere):
 * ``sparsity="auto"``: dense where small, view cliques (chain of view triples plus the dense
   degree-2 certificate) where not;
 * ``budget``: 60 s and 2 GiB per point; programs that do not fit are skipped with status
-  ``budget_exceeded``.
+  ``budget_exceeded``, a point that runs out of time gets ``time_limit`` (the keyword shorthands
+  ``time_limit=`` and ``max_bytes=`` of every entry point change one field of it).
 """
 from __future__ import annotations
 
@@ -56,6 +57,9 @@ class MethodChoice(str, enum.Enum):
 
 #: the default budget of one triangulation (all its degrees together): 60 s, 2 GiB.
 TRIANGULATION_BUDGET = Budget(time_limit=60.0, max_bytes=2 * 2 ** 30)
+#: keyword shorthands of :meth:`TriangulationOptions.replace` (and so of ``triangulate(..., time_limit=5)``) for
+#: the fields of the budget.
+BUDGET_SHORTHANDS = ("time_limit", "max_bytes")
 
 
 def _enum(cls, value, name):
@@ -148,8 +152,16 @@ class TriangulationOptions:
                              f"got {self.backend!r}")
 
     def replace(self, **changes) -> TriangulationOptions:
-        """A copy with some fields changed (validated again); None values are ignored."""
+        """A copy with some fields changed (validated again); None values are ignored.
+
+        ``time_limit`` (seconds) and ``max_bytes`` are accepted as shorthands for the fields of the
+        budget: ``replace(time_limit=5)`` keeps the budget's memory limit (``budget=Budget(time_limit=5)``
+        would take sospoly's default memory limit instead)."""
         changes = {k: v for k, v in changes.items() if v is not None}
+        limits = {k: changes.pop(k) for k in BUDGET_SHORTHANDS if k in changes}
+        if limits:
+            base = as_budget(changes["budget"]) if "budget" in changes else self.budget
+            changes["budget"] = dataclasses.replace(base, **limits)      # validated by Budget
         unknown = set(changes) - {f.name for f in dataclasses.fields(self)}
         if unknown:
             raise TypeError(f"unknown triangulation option(s): {', '.join(sorted(unknown))}")

@@ -92,9 +92,11 @@ def test_exports_are_not_left_half_written(binary_in, tmp_path, monkeypatch, cap
 
 
 @pytest.mark.parametrize("flags, expect", [
-    (["--delta", "3"], "--delta must be an even integer >= 2, got 3"),
-    (["--delta", "4", "--max-delta", "2"], "--max-delta must be >= delta (4), got 2"),
-    (["--max-delta", "5"], "--max-delta must be an even integer >= 2, got 5"),
+    (["--delta", "3"], "--delta: delta must be an even integer >= 2, got 3"),            # the messages of `solve`
+    (["--delta", "4", "--max-delta", "2"], "--max-delta: max_delta (2) must be >= delta (4)"),
+    (["--max-delta", "5"], "--max-delta: max_delta must be an even integer >= 2, got 5"),
+    (["--method", "nms"], "argument --method: invalid choice: 'nms'"),
+    (["--time-limit", "0"], "--time-limit: must be a positive number of seconds, got 0"),
     (["--min-track-length", "1"], "--min-track-length must be an integer >= 2, got 1"),
     (["--max-track-length", "1"], "--max-track-length must be an integer >= 2, got 1"),
     (["--chunk-points", "0"], "--chunk-points must be an integer >= 1, got 0"),
@@ -148,7 +150,8 @@ def test_cameras_are_skipped_or_refused_with_strict(tmp_path, capsys):
     (skip,) = out["skipped_cameras"]
     assert skip["camera_id"] == 3 and "focal length fx = 0.0 must be > 0" in skip["reason"]
     assert skip["reason"].startswith("cameras.bin: record 2 (offset ") and out["n_skipped_observations"] > 0
-    assert out["n_points"] == 10 and len(out["points"]) == 10 and out["delta"] == out["max_delta"] == 2
+    assert out["n_points"] == 10 and len(out["points"]) == 10 and out["delta"] is None and out["max_delta"] is None
+    assert out["method"] == "auto" and out["time_limit"] == 60                    # the defaults of `tritools solve`
     assert main(["colmap", str(tmp_path / "in"), str(tmp_path / "o2"), "--strict"]) == 2
     assert "cameras.bin: record 2 (offset " in _one_line_error(capsys) and not (tmp_path / "o2").exists()
 

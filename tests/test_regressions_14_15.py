@@ -194,3 +194,153 @@ def test_dense_40_variable_quartic_gives_budget_exceeded_by_default():
     res, elapsed = _timed(lambda: sospoly.minimize(s * s - sum(xs)))
     assert res.status == sospoly.SolveStatus.BUDGET_EXCEEDED and not res.optimal and res.lower_bound is None
     assert "exceeds the memory budget" in res.message and elapsed < 30
+
+
+# ----------------------------------------------------------------------------- #14: executors
+def _problems(n):
+    from tritools.scene import random_scene
+
+    sc = random_scene(3, n, noise_px=0.5, seed=7)
+    return [(sc.cameras, sc.points2d[j]) for j in range(n)]
+
+
+#: per-item SDPs (a back-end given: not the in-process batched SDP), so every item goes through the executor
+PER_ITEM = dict(method="corollary1", delta=2, max_delta=2, path="sdp", backend="clarabel", progress=False)
+
+
+def test_a_users_broken_process_pool_is_retried(caplog):
+    """#14: a user's own ProcessPoolExecutor that broke (a worker killed) marked every remaining item
+    solver_failed ("executor broke") without a retry; its unfinished items are now solved in this process."""
+    import concurrent.futures as cf
+    import multiprocessing
+    import os
+
+    problems = _problems(3)
+    ref = tritools.triangulate_many(problems, **PER_ITEM)
+    with cf.ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn")) as ex:
+        with pytest.raises(cf.process.BrokenProcessPool):
+            ex.submit(os._exit, 3).result()                       # the worker is killed: the pool is broken
+        with caplog.at_level("WARNING", logger="tritools"):
+            res = tritools.triangulate_many(problems, executor=ex, **PER_ITEM)
+    assert [r.status for r in res] == [r.status for r in ref] and all(r.optimal for r in res)
+    for a, b in zip(res, ref):
+        np.testing.assert_allclose(a.X, b.X, rtol=1e-9)
+    assert any("executor broke" in m and "retrying" in m for m in caplog.messages)
+
+
+class _BreaksMidRun:
+    """An executor whose second task dies with its pool (BrokenProcessPool), after the first one finished."""
+
+    def __init__(self):
+        self.calls = 0
+
+    def submit(self, fn, *args, **kwargs):
+        import concurrent.futures as cf
+
+        self.calls += 1
+        fut = cf.Future()
+        if self.calls == 1:
+            fut.set_result(fn(*args, **kwargs))
+        else:
+            fut.set_exception(cf.process.BrokenProcessPool("a worker was killed"))
+        return fut
+
+
+def test_a_pool_that_breaks_mid_run_loses_no_item():
+    problems = _problems(4)
+    ex = _BreaksMidRun()
+    res = tritools.triangulate_many(problems, executor=ex, chunk_size=1, **PER_ITEM)
+    assert ex.calls >= 2 and len(res) == 4 and all(r.optimal for r in res)
+    assert not any("executor" in (r.message or "") for r in res)
+
+
+# ----------------------------------------------------------------------------- #15 / #12: one set of defaults
+def test_defaults_agree(monkeypatch, tmp_path, capsys):
+    """triangulate, triangulate_many, triangulate_points, `tritools solve`, `tritools dataset` and `tritools colmap`
+    (and the library's model path) build the same TriangulationOptions by default: method auto, path auto, the
+    same per-point budget.  (#12 found Theorem 1/SDP on one path and Corollary 1/auto on another; #15 asked colmap
+    for the flags of solve.)"""
+    import tritools.solve.batch as batch
+    import tritools.solve.triangulate as tri
+    from tests.test_colmap import synthetic_model
+    from tritools.cli import app as cli
+    from tritools.io.colmap import write_binary_model
+    from tritools.sfm import RetriangulationOptions, certify_stack, retriangulate
+    from tritools.solve.options import DEFAULT_OPTIONS
+
+    seen = {}
+
+    def spy(name, module, attr, pick):
+        real = getattr(module, attr)
+
+        def wrapper(*args, **kwargs):
+            seen.setdefault(name, []).append(pick(args, kwargs))
+            return real(*args, **kwargs)
+        monkeypatch.setattr(module, attr, wrapper)
+
+    spy("per point", tri, "_PointSolve", lambda a, k: a[2])
+    spy("problems", batch, "solve_point_problems", lambda a, k: a[1])
+    spy("stack", batch, "solve_point_stack", lambda a, k: a[2])
+
+    def built(name, call):
+        seen.clear()
+        call()
+        key = {"triangulate": "per point", "colmap": "stack", "certify_stack": "stack",
+               "retriangulate": "stack"}.get(name, "problems")
+        assert seen.get(key), (name, seen)
+        return seen[key]
+
+    paths = {
+        "triangulate": lambda: tritools.triangulate(CAMS, PTS),
+        "triangulate_many": lambda: tritools.triangulate_many([(CAMS, PTS)], progress=False),
+        "triangulate_points": lambda: tritools.triangulate_points(CAMS, PTS[None], progress=False),
+        "certify_stack": lambda: certify_stack(CAMS[None], PTS[None]),
+    }
+    model, _ = synthetic_model(n_points=6, noise_px=0.5, seed=3)
+    paths["retriangulate"] = lambda: retriangulate(model)
+    write_binary_model(model, tmp_path / "in")
+    (tmp_path / "p.json").write_text(json.dumps({"cameras": CAMS.tolist(), "regions": PTS.tolist()}))
+    paths["solve"] = lambda: cli.main(["solve", str(tmp_path / "p.json")])
+    paths["colmap"] = lambda: cli.main(["colmap", str(tmp_path / "in"), str(tmp_path / "out")])
+    for name, call in paths.items():
+        for opts in built(name, call):
+            assert opts == DEFAULT_OPTIONS, (name, opts)
+    capsys.readouterr()
+    # `dataset` reads an Oxford sequence: its flags build the same object (no data needed to compare)
+    for argv in (["dataset", "house"], ["solve", "x.json"], ["colmap", "a", "b"]):
+        assert cli.options_from_args(cli.build_parser().parse_args(argv)) == DEFAULT_OPTIONS, argv
+    assert RetriangulationOptions().solver == DEFAULT_OPTIONS
+    assert DEFAULT_OPTIONS.method.value == "auto" and DEFAULT_OPTIONS.path.value == "auto"
+    assert DEFAULT_OPTIONS.budget == TRIANGULATION_BUDGET
+
+
+SOLVER_FLAG_ERRORS = [
+    (["--delta", "3"], "--delta: delta must be an even integer >= 2, got 3"),
+    (["--delta", "0"], "--delta: delta must be an even integer >= 2, got 0"),
+    (["--max-delta", "1"], "--max-delta: max_delta must be an even integer >= 2, got 1"),
+    (["--delta", "4", "--max-delta", "2"], "--max-delta: max_delta (2) must be >= delta (4)"),
+    (["--time-limit", "-1"], "--time-limit: must be a positive number of seconds, got -1"),
+    (["--memory-limit", "0"], "--memory-limit: must be a positive number of GiB, got 0"),
+    (["--method", "newton"], "argument --method: invalid choice: 'newton'"),
+]
+
+
+@pytest.mark.parametrize("flags, expect", SOLVER_FLAG_ERRORS, ids=[" ".join(f) for f, _ in SOLVER_FLAG_ERRORS])
+def test_solver_flags_are_refused_alike_by_solve_and_colmap(flags, expect, tmp_path, capsys):
+    """#14: --delta 3 / 0, --max-delta 1, --delta 4 --max-delta 2 exited 0 (the same values in a file exited 2)
+    and `colmap --delta 3` wrote a model with every point invalid.  Both commands now exit 2 with the same line,
+    and colmap writes nothing."""
+    from tritools.cli.app import main
+    from tritools.io.colmap import write_text_model
+    from tests.test_colmap import synthetic_model
+
+    (tmp_path / "p.json").write_text(json.dumps({"cameras": CAMS.tolist(), "regions": PTS.tolist()}))
+    write_text_model(synthetic_model(n_points=4, seed=1)[0], tmp_path / "in")
+    lines = []
+    for argv in (["solve", str(tmp_path / "p.json")], ["colmap", str(tmp_path / "in"), str(tmp_path / "out")]):
+        assert main(argv + flags) == 2, argv
+        out, err = capsys.readouterr()
+        assert out == "" and err.count("\n") == 1 and expect in err, (argv, err)
+        lines.append(err)
+    assert lines[0].replace("tritools solve", "tritools colmap") == lines[1]     # argparse names its command
+    assert not (tmp_path / "out").exists()

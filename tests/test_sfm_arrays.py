@@ -171,11 +171,18 @@ def test_options_are_validated_with_their_name(kw, field, text):
 
 
 def test_default_degrees_are_bounded():
+    """The model path has the defaults of tritools.triangulate (method auto, the per-point budget: no point may
+    take minutes or gigabytes); max_delta=2 keeps every point at delta = 2."""
+    from tritools.solve.options import DEFAULT_OPTIONS, TRIANGULATION_BUDGET
+
     o = RetriangulationOptions()
-    assert (o.certify_options().delta, o.certify_options().max_delta) == (2, 2)
-    assert RetriangulationOptions(delta=4).certify_options().max_delta == 4
-    t1 = RetriangulationOptions(method="theorem1").certify_options()
-    assert (t1.delta, t1.max_delta) == (None, None)
+    assert o.solver == DEFAULT_OPTIONS and o.certify_options().triangulation_options() == DEFAULT_OPTIONS
+    assert (o.method, o.path, o.delta, o.max_delta) == ("auto", "auto", None, None)
+    assert o.solver.budget == TRIANGULATION_BUDGET
+    assert RetriangulationOptions(max_delta=2).solver.max_delta == 2
+    assert RetriangulationOptions(delta=4).solver.delta == 4
+    t1 = RetriangulationOptions(method="theorem1", solver=DEFAULT_OPTIONS.replace(time_limit=5))
+    assert (t1.solver.method.value, t1.solver.budget.time_limit) == ("theorem1", 5)
 
 
 def test_certify_stack_returns_arrays_and_reports_what_it_does_not_certify():

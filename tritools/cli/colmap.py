@@ -15,7 +15,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from .app import add_data_dir_option, exit_invalid
+from .app import add_data_dir_option, add_solver_options, exit_invalid, options_from_args
 from ..io.problem_file import jsonable
 
 __all__ = ["register", "run_colmap", "run_from_oxford", "MAX_LISTED"]
@@ -34,9 +34,11 @@ def register(subparsers) -> None:
                     "every 3D point with a certificate of global optimality (cameras fixed), and write the model, "
                     "points3D_certificates.txt and copies of rigs/frames files to OUT_DIR. Everything is written "
                     "to a temporary directory next to OUT_DIR first; an existing OUT_DIR is replaced only after "
-                    "everything was written, and is left exactly as it was if anything fails. By default every "
-                    "point is certified at delta = 2 only (Corollary 1, path auto): points that this does not "
-                    "certify are reported with their status, not escalated.")
+                    "everything was written, and is left exactly as it was if anything fails. The solver flags and "
+                    "their defaults are those of 'tritools solve': method auto (Corollary 1 at delta = 2, then "
+                    "delta = 4 for the points that does not certify), each point within --time-limit and "
+                    "--memory-limit; --max-delta 2 keeps every point at delta = 2. --progress: a bar over all "
+                    "points (by default only for models of 2000 points or more).")
     p.add_argument("in_dir", metavar="IN_DIR", help="folder of the input model (never modified)")
     p.add_argument("out_dir", metavar="OUT_DIR", help="output folder (created, or replaced as a whole; must not be "
                                                       "IN_DIR, contain IN_DIR, or be a file)")
@@ -45,16 +47,7 @@ def register(subparsers) -> None:
                         "else text)")
     p.add_argument("--output-type", choices=("bin", "txt"), default=None,
                    help="format of OUT_DIR (default: that of IN_DIR)")
-    p.add_argument("--method", choices=("corollary1", "theorem1"), default="corollary1",
-                   help="Corollary 1 (epipolar constraints; default) or Theorem 1 (4x4 minors, far more costly)")
-    p.add_argument("--path", choices=("auto", "sdp"), default="auto",
-                   help="'auto' (default): certification by verification first, vectorised, then the SDP for "
-                        "the rest; 'sdp': the SDP for every point")
-    p.add_argument("--delta", type=int, default=None,
-                   help="first relaxation degree, even >= 2 (default 2 for corollary1, delta_min for theorem1)")
-    p.add_argument("--max-delta", type=int, default=None, dest="max_delta",
-                   help="last relaxation degree, even >= --delta (default: the first degree; higher degrees solve "
-                        "an SDP per uncertified point whose size grows fast with the track length)")
+    add_solver_options(p)            # the flags and defaults of `tritools solve`: one TriangulationOptions
     p.add_argument("--min-track-length", type=int, default=2, metavar="K",
                    help="do not solve points with fewer than K usable observations (default 2)")
     p.add_argument("--max-track-length", type=int, default=DEFAULT_MAX_TRACK_LENGTH, metavar="K",
@@ -71,8 +64,6 @@ def register(subparsers) -> None:
     p.add_argument("--chunk-points", type=int, default=100_000, metavar="N",
                    help="points processed at a time (bounds memory; default 100000)")
     p.add_argument("--json", action="store_true", help="print a JSON summary with one record per point")
-    p.add_argument("--progress", action="store_true",
-                   help="progress bar over all points on stderr (needs the 'progress' extra; none for small models)")
     p.set_defaults(func=run_colmap)
 
     o = subparsers.add_parser("colmap-from-oxford", help="convert an Oxford VGG sequence to a COLMAP model",
@@ -100,9 +91,9 @@ def run_colmap(args) -> int:
     from ..io.colmap.model import ModelFormatError
     from ..sfm import CameraError, OptionError, OutputError, RetriangulationOptions, retriangulate_folder
 
+    solver = options_from_args(args)                 # exactly as `tritools solve` (CLIError: exit 2 naming the flag)
     try:
-        options = RetriangulationOptions(method=args.method, path=args.path, delta=args.delta,
-                                         max_delta=args.max_delta, min_track_length=args.min_track_length,
+        options = RetriangulationOptions(solver=solver, min_track_length=args.min_track_length,
                                          max_track_length=args.max_track_length, behind=args.behind,
                                          strict=args.strict, chunk_points=args.chunk_points, progress=args.progress)
     except OptionError as exc:
@@ -123,7 +114,8 @@ def run_colmap(args) -> int:
     summary = {"in_dir": str(args.in_dir), "out_dir": str(result.out_dir), "input_type": result.input_format,
                "output_type": result.output_format, "certificates": str(result.certificates),
                "exports": [str(e) for e in result.exports], "copied": list(result.copied), "notes": list(result.notes),
-               "delta": options.certify_options().delta, "max_delta": options.certify_options().max_delta,
+               "delta": solver.delta, "max_delta": solver.max_delta, "time_limit": solver.budget.time_limit,
+               "memory_limit_bytes": solver.budget.max_bytes,
                **report.summary()}
     if args.json:
         summary["points"] = [{"point3D_id": r.point3D_id, "n_views": r.n_views, "status": r.status.value,
@@ -138,9 +130,11 @@ def run_colmap(args) -> int:
 
 
 def _print_summary(report, result, summary) -> None:
+    first = summary["delta"] or "min"
+    last = summary["max_delta"] or ("4" if report.method == "auto" else "min+2" if summary["delta"] is None
+                                    else summary["delta"])
     print(f"{report.n_points} points, {report.n_certified} certified globally optimal, {report.n_updated} updated, "
-          f"{report.n_behind} behind a camera ({report.method}, path {report.path}, delta {summary['delta'] or 'min'}"
-          f"..{summary['max_delta'] or 'min'})")
+          f"{report.n_behind} behind a camera ({report.method}, path {report.path}, delta {first}..{last})")
     print("status: " + (", ".join(f"{k} {v}" for k, v in summary["status"].items()) or "-"))
     for cid, model, reason, n_obs in report.skipped_cameras:
         print(f"skipped camera {cid} ({model}): {reason}; {n_obs} observation(s) left out")

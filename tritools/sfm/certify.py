@@ -16,7 +16,7 @@ import numpy as np
 from ..io.export import STATUS_LEGEND
 from ..result import Status
 
-__all__ = ["CertifyOptions", "StackResult", "certify_stack", "STATUS_LEGEND", "status_code", "resolved_degrees"]
+__all__ = ["CertifyOptions", "StackResult", "certify_stack", "STATUS_LEGEND", "status_code"]
 
 _CODE = {s: k for k, s in enumerate(STATUS_LEGEND)}
 
@@ -30,15 +30,24 @@ def status_code(status) -> int:
 class CertifyOptions:
     """Solver settings of :func:`certify_stack`.
 
-    ``delta``/``max_delta``: first and last relaxation degree (None: the method's delta_min,
-    and no escalation beyond the first degree); ``path``: "auto" (verification first) or
-    "sdp"; ``executor``: for the per-problem SDPs (see :func:`tritools.solve.batch.triangulate_many`).
+    ``options``: the :class:`~tritools.solve.options.TriangulationOptions` of every problem (None: the
+    defaults of ``tritools.triangulate`` -- method auto, path auto, the default per-point budget);
+    ``method``, ``path``, ``delta``, ``max_delta``: shorthands for its fields (None: its value);
+    ``executor``: for the per-problem SDPs (see :func:`tritools.solve.batch.triangulate_many`).
     """
-    method: str = "corollary1"
-    path: str = "auto"
-    delta: int | None = 2
-    max_delta: int | None = 2
+    method: str | None = None
+    path: str | None = None
+    delta: int | None = None
+    max_delta: int | None = None
     executor: object = field(default=None, compare=False)
+    options: object = None
+
+    def triangulation_options(self):
+        """The :class:`~tritools.solve.options.TriangulationOptions` these settings stand for (validated)."""
+        from ..solve.options import options_from
+
+        return options_from(self.options, method=self.method, path=self.path, delta=self.delta,
+                            max_delta=self.max_delta)
 
 
 @dataclass(frozen=True)
@@ -58,23 +67,20 @@ class StackResult:
     message: np.ndarray
 
 
-def resolved_degrees(options: CertifyOptions, n_views: int) -> tuple[int | None, int]:
-    """(first, last) relaxation degree for problems with ``n_views`` views: the last degree defaults
-    to the first, and the first to the method's delta_min (Corollary 1: 2; Theorem 1 with point
-    regions: 2 for two views, 4 from three views on, the degree of the 4x4 minors rounded up)."""
-    delta_min = 2 if options.method == "corollary1" or n_views == 2 else 4
-    first = options.delta
-    last = options.max_delta if options.max_delta is not None else (first if first is not None else delta_min)
-    return first, last
+def certify_stack(cameras, points2d, options=None) -> StackResult:
+    """Certify M problems of N views with point regions (see the module docstring).
 
-
-def certify_stack(cameras, points2d, options: CertifyOptions = CertifyOptions()) -> StackResult:
-    """Certify M problems of N views with point regions (see the module docstring)."""
+    ``options``: a :class:`CertifyOptions`, a :class:`~tritools.solve.options.TriangulationOptions`, or None
+    (the defaults of ``tritools.triangulate``)."""
+    from ..model.regions import real_array
     from ..solve.batch import solve_point_stack
     from ..solve.options import TriangulationOptions
 
-    from ..model.regions import real_array
-
+    if options is None or isinstance(options, TriangulationOptions):
+        options = CertifyOptions(options=options)
+    if not isinstance(options, CertifyOptions):
+        raise TypeError(f"options must be a CertifyOptions or a TriangulationOptions, got {type(options).__name__}")
+    opts = options.triangulation_options()
     C = real_array(cameras, "cameras")
     x = real_array(points2d, "points2d")
     M, N = x.shape[:2]
@@ -83,8 +89,6 @@ def certify_stack(cameras, points2d, options: CertifyOptions = CertifyOptions())
                       np.full(M, "", object), np.full(M, -1, np.int16), np.full(M, "", object))
     if M == 0:
         return out
-    first, last = resolved_degrees(options, N)
-    opts = TriangulationOptions(options.method, first, last, path=options.path)
     arrays = solve_point_stack(C, x, opts, executor=options.executor).arrays()
     out.X[:] = arrays["X"]
     out.gamma_lb[:] = arrays["gamma_lb"]

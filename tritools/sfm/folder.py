@@ -26,7 +26,7 @@ import numpy as np
 from ..io.colmap.formats import ModelWriter, open_model
 from .certificates import CertificateWriter
 from .pipeline import OptionError, RetriangulationOptions, prepare_geometry, process_chunk
-from .retriangulate import RetriangulationReport, progress_bar, skipped_cameras
+from .retriangulate import RetriangulationReport, has_tqdm, progress_bar, skipped_cameras
 
 __all__ = ["OutputError", "atomic_directory", "check_output", "retriangulate_folder", "FolderResult",
            "EXTRA_FILES", "EXPORT_SUFFIXES"]
@@ -142,7 +142,9 @@ def retriangulate_folder(in_dir, out_dir, options: RetriangulationOptions | None
     t0 = time.perf_counter()
     geom = prepare_geometry(src.arrays, options.strict)
     timings["geometry"] = time.perf_counter() - t0
-    bar = progress_bar(src.count_points() if options.progress else None, options.progress)
+    # the total only when a bar may be shown (a text model costs one quick pass over points3D.txt)
+    want = options.progress is True or (options.progress is None and has_tqdm())
+    bar = progress_bar(src.count_points() if want else None, options.progress)
     ids, results, xyz, rgb = [], [], [], []
     copied, notes, staged = [], [], []
     try:

@@ -22,6 +22,7 @@ import numpy as np
 from ..io.colmap.arrays import ModelArrays, PointChunk
 from ..io.colmap.camera_models import camera_problem, distort_rows, distortion, intrinsics, undistorted_pixels
 from ..result import Status
+from ..solve.options import DEFAULT_OPTIONS, MethodChoice, SolvePath, TriangulationOptions
 from .certify import CertifyOptions, certify_stack, status_code
 
 __all__ = ["RetriangulationOptions", "OptionError", "CameraError", "ModelGeometry", "prepare_geometry",
@@ -56,15 +57,17 @@ def _int_option(name, value, low):
 class RetriangulationOptions:
     """Settings of the model path (all validated on construction, :class:`OptionError`).
 
-    method, path
-        "corollary1" (default) or "theorem1"; "auto" (certification by verification first, the
-        SDP for the rest; default) or "sdp".
-    delta, max_delta
-        First and last relaxation degree (even, >= 2, ``max_delta >= delta``).  Defaults: delta
-        = 2 for Corollary 1 (delta_min for Theorem 1) and ``max_delta = delta``: every point is
-        certified at its first degree or reported uncertified -- no escalation, so the cost per
-        point is bounded.  Raise ``max_delta`` to try higher degrees on the uncertified points
-        (an SDP per point whose size grows fast with N and delta).
+    solver
+        The :class:`~tritools.solve.options.TriangulationOptions` of every point (None: the defaults of
+        ``tritools.triangulate`` -- method auto, path auto, the default per-point budget of 60 s and
+        2 GiB); ``tritools colmap`` builds it from the same flags as ``tritools solve``.
+    method, path, delta, max_delta
+        Shorthands for the solver's fields (None: the solver's value): method "auto" (Corollary 1 at
+        delta = 2, then delta = 4 for the points that does not certify), "corollary1" or "theorem1";
+        path "auto" (certification by verification first, the SDP for the rest) or "sdp"; first and
+        last relaxation degree (even, >= 2, ``max_delta >= delta``).  ``max_delta=2`` keeps every point
+        at delta = 2 (no escalation); higher degrees are bounded per point by the solver's budget
+        (status ``time_limit`` / ``budget_exceeded`` when they do not fit).
     min_track_length, max_track_length
         Tracks with fewer / more usable observations are not solved (status invalid_input).
     behind
@@ -74,11 +77,11 @@ class RetriangulationOptions:
     strict
         Raise :class:`CameraError` for an unusable camera instead of skipping its observations.
     chunk_points, progress, executor
-        Points per chunk (bounds memory); a tqdm bar over the whole run (from
-        ``PROGRESS_MIN_POINTS`` points); executor of the per-point SDPs.
+        Points per chunk (bounds memory); a tqdm bar over the whole run (None: from
+        ``PROGRESS_MIN_POINTS`` points on, True: always, False: never); executor of the per-point SDPs.
     """
-    method: str = "corollary1"
-    path: str = "auto"
+    method: str | None = None
+    path: str | None = None
     delta: int | None = None
     max_delta: int | None = None
     min_track_length: int = 2
@@ -86,26 +89,42 @@ class RetriangulationOptions:
     behind: str = "keep-input"
     strict: bool = False
     chunk_points: int = 100_000
-    progress: bool = False
+    progress: bool | None = None
     executor: object = field(default=None, compare=False)
+    solver: TriangulationOptions | None = None
 
     def __post_init__(self):
-        from ..model.constraints import Method
-        from ..solve.triangulate import SolvePath
-
-        for name, enum in (("method", Method), ("path", SolvePath)):
+        base = DEFAULT_OPTIONS if self.solver is None else self.solver
+        if not isinstance(base, TriangulationOptions):
+            raise OptionError("solver", f"must be a tritools.TriangulationOptions, got {type(base).__name__}")
+        for name, enum in (("method", MethodChoice), ("path", SolvePath)):
             value = getattr(self, name)
+            if value is None:
+                continue
             try:
-                object.__setattr__(self, name, enum(value).value)
+                enum(getattr(value, "value", value))
             except ValueError:
                 raise OptionError(name, f"must be one of {', '.join(m.value for m in enum)}, got {value!r}") from None
         for name in ("delta", "max_delta"):
             v = getattr(self, name)
             if v is not None and (isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 2 or v % 2):
                 raise OptionError(name, f"must be an even integer >= 2, got {v!r}")
-        first = self.delta if self.delta is not None else 2
-        if self.max_delta is not None and self.max_delta < first:
-            raise OptionError("max_delta", f"must be >= delta ({first}), got {self.max_delta}")
+        first = self.delta if self.delta is not None else (base.delta or 2)
+        last = self.max_delta if self.max_delta is not None else base.max_delta
+        if last is not None and last < first:
+            raise OptionError("max_delta", f"must be >= delta ({first}), got {last}")
+        try:
+            solver = base.replace(method=self.method, path=self.path, delta=self.delta, max_delta=self.max_delta)
+        except (ValueError, TypeError) as exc:
+            name = str(exc).split()[0]
+            raise OptionError(name if name in ("delta", "max_delta") else "solver",
+                              str(exc)[len(name):].strip() if name in ("delta", "max_delta") else str(exc)) from None
+        set_ = object.__setattr__
+        set_(self, "solver", solver)
+        set_(self, "method", solver.method.value)
+        set_(self, "path", solver.path.value)
+        set_(self, "delta", solver.delta)
+        set_(self, "max_delta", solver.max_delta)
         _int_option("min_track_length", self.min_track_length, 2)
         _int_option("max_track_length", self.max_track_length, 2)
         if self.max_track_length < self.min_track_length:
@@ -114,12 +133,12 @@ class RetriangulationOptions:
         if self.behind not in BEHIND_CHOICES:
             raise OptionError("behind", f"must be one of {', '.join(BEHIND_CHOICES)}, got {self.behind!r}")
         _int_option("chunk_points", self.chunk_points, 1)
+        if self.progress is not None and not isinstance(self.progress, (bool, np.bool_)):
+            raise OptionError("progress", f"must be True, False or None, got {self.progress!r}")
 
     def certify_options(self) -> CertifyOptions:
-        """The solver settings, degrees resolved (Corollary 1: delta = 2 unless given)."""
-        delta = self.delta if self.delta is not None else (2 if self.method == "corollary1" else None)
-        max_delta = self.max_delta if self.max_delta is not None else delta
-        return CertifyOptions(self.method, self.path, delta, max_delta, self.executor)
+        """The solver settings of :func:`.certify.certify_stack` (the ``solver`` options and the executor)."""
+        return CertifyOptions(options=self.solver, executor=self.executor)
 
 
 @dataclass(frozen=True, eq=False)

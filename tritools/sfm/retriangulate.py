@@ -7,8 +7,8 @@ For each Point3D with track ((image_id, point2D_idx), ...):
   of the pinhole camera K_i (:mod:`tritools.io.colmap.camera_models`), so gamma (SPEC §1) is the RMS
   reprojection error per coordinate in undistorted pixels;
 * :func:`.certify.certify_stack` certifies whole groups of tracks at once and gives
-  ``gamma_LB <= gamma* <= gamma_UB`` (Corollary 1 at delta = 2 by default; see
-  :class:`~.pipeline.RetriangulationOptions` for the degrees).
+  ``gamma_LB <= gamma* <= gamma_UB`` (the options of ``tritools.triangulate``, method auto by default:
+  Corollary 1 at delta = 2, then delta = 4; see :class:`~.pipeline.RetriangulationOptions`).
 
 The written xyz is the estimate X^ when it is finite, no worse than the input point
 (``gamma(X^) <= gamma(xyz_in)``, always true when certified) and in front of every camera of its
@@ -35,7 +35,7 @@ from .certify import STATUS_LEGEND, status_code
 from .pipeline import RetriangulationOptions, prepare_geometry, process_chunk
 
 __all__ = ["PointCertificate", "RetriangulationReport", "retriangulate", "retriangulate_arrays", "progress_bar",
-           "skipped_cameras", "PROGRESS_MIN_POINTS", "REPORT_FIELDS"]
+           "has_tqdm", "skipped_cameras", "PROGRESS_MIN_POINTS", "REPORT_FIELDS"]
 
 logger = logging.getLogger(__name__)
 #: no progress bar for runs with fewer points than this.
@@ -174,9 +174,17 @@ class RetriangulationReport:
                                     for c, m, r, k in self.skipped_cameras]}
 
 
-def progress_bar(total: int | None, enabled: bool):
-    """A tqdm bar over points, or None (disabled, tqdm missing, or fewer than PROGRESS_MIN_POINTS points)."""
-    if not enabled or (total is not None and total < PROGRESS_MIN_POINTS):
+def has_tqdm() -> bool:
+    """Is the optional extra 'progress' (tqdm) installed?"""
+    import importlib.util
+
+    return importlib.util.find_spec("tqdm") is not None
+
+
+def progress_bar(total: int | None, enabled: bool | None):
+    """A tqdm bar over points, or None: ``enabled`` False, tqdm missing, or ``enabled`` None (the default, as
+    in :func:`tritools.triangulate_many`) and fewer than PROGRESS_MIN_POINTS points (or an unknown total)."""
+    if enabled is False or (enabled is None and (total is None or total < PROGRESS_MIN_POINTS)):
         return None
     try:
         from tqdm import tqdm
@@ -221,15 +229,17 @@ def retriangulate_arrays(arrays: ModelArrays, options: RetriangulationOptions | 
     return arrays.with_points(xyz, err), report
 
 
-def retriangulate(model: Model, method: str = "corollary1", path: str = "auto", min_track_length: int = 2,
-                  delta: int | None = None, max_delta: int | None = None, progress: bool = False, *,
+def retriangulate(model: Model, method: str | None = None, path: str | None = None, min_track_length: int = 2,
+                  delta: int | None = None, max_delta: int | None = None, progress: bool | None = None, *,
                   options: RetriangulationOptions | None = None, **kw) -> tuple[Model, RetriangulationReport]:
     """Re-triangulate every Point3D of ``model`` with a certificate of global optimality.
 
     ``method``, ``path``, ``min_track_length``, ``delta``, ``max_delta``, ``progress`` and any
-    other field of :class:`~.pipeline.RetriangulationOptions` (``behind``, ``strict``,
-    ``max_track_length``, ``executor``, ...) as keywords, or a whole ``options`` object.  By default
-    every point is certified at delta = 2 only (Corollary 1, path auto): bounded cost per point.
+    other field of :class:`~.pipeline.RetriangulationOptions` (``solver``, ``behind``, ``strict``,
+    ``max_track_length``, ``executor``, ...) as keywords, or a whole ``options`` object.  The solver
+    defaults are those of :func:`tritools.triangulate` (method auto: Corollary 1 at delta = 2, then
+    delta = 4 for the points that does not certify, within the per-point budget); ``max_delta=2``
+    keeps every point at delta = 2.
 
     Returns ``(new_model, report)``; ``report.records`` follow the point ids in increasing order.
     """

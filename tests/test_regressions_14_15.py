@@ -344,3 +344,123 @@ def test_solver_flags_are_refused_alike_by_solve_and_colmap(flags, expect, tmp_p
         lines.append(err)
     assert lines[0].replace("tritools solve", "tritools colmap") == lines[1]     # argparse names its command
     assert not (tmp_path / "out").exists()
+
+
+# ----------------------------------------------------------------------------- #15: logging, progress bars
+def test_library_code_never_prints():
+    """#15: `logging` instead of prints in library code (everything but the command line, tritools/cli)."""
+    import ast
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    offenders = []
+    for package in ("sospoly", "tritools"):
+        for path in sorted((root / package).rglob("*.py")):
+            if "cli" in path.relative_to(root / package).parts:
+                continue
+            for node in ast.walk(ast.parse(path.read_text(), str(path))):
+                if isinstance(node, ast.Call):
+                    f = node.func
+                    if isinstance(f, ast.Name) and f.id == "print":
+                        offenders.append(f"{path.relative_to(root)}:{node.lineno}: print")
+                    if isinstance(f, ast.Attribute) and f.attr == "write" and isinstance(f.value, ast.Attribute) \
+                            and f.value.attr in ("stdout", "stderr"):
+                        offenders.append(f"{path.relative_to(root)}:{node.lineno}: sys.{f.value.attr}.write")
+    assert not offenders, offenders
+
+
+def test_library_warnings_go_through_logging(caplog):
+    """A skipped camera is reported by the library through `logging` (the CLI prints the summary)."""
+    from tests.test_colmap import synthetic_model
+    from tritools.io.colmap import Camera, Model
+    from tritools.sfm import retriangulate
+
+    model, _ = synthetic_model(n_points=6, noise_px=0.5, seed=3)
+    cams = dict(model.cameras)
+    cams[3] = Camera(3, "PINHOLE", 640, 480, (0.0, 800.0, 320.0, 240.0))
+    with caplog.at_level("WARNING", logger="tritools"):
+        retriangulate(Model(cams, model.images, model.points3D), max_delta=2)
+    assert any(r.name.startswith("tritools.") and "camera 3 (PINHOLE) skipped" in r.getMessage()
+               for r in caplog.records)
+
+
+def test_no_progress_bar_for_tiny_batches(capsys):
+    """#15: a progress bar was shown even for one item.  By default (progress=None) there is none below the
+    thresholds, on every batch path; the thresholds are the documented ones."""
+    from tests.test_colmap import synthetic_model
+    from tritools.sfm import retriangulate
+    from tritools.sfm.retriangulate import PROGRESS_MIN_POINTS, progress_bar
+    from tritools.solve.batch import PROGRESS_MIN_ITEMS, _progress_bar
+
+    tritools.triangulate_many([(CAMS, PTS)])
+    tritools.triangulate_points(CAMS, PTS[None])
+    retriangulate(synthetic_model(n_points=4, seed=1)[0], max_delta=2)
+    assert capsys.readouterr().err == ""
+    assert _progress_bar(1, None) is None and _progress_bar(PROGRESS_MIN_ITEMS - 1, None) is None
+    assert progress_bar(1, None) is None and progress_bar(PROGRESS_MIN_POINTS - 1, None) is None
+    assert progress_bar(None, None) is None and progress_bar(10 ** 6, False) is None
+    pytest.importorskip("tqdm", reason="tqdm not installed (pip install '.[progress]')")
+    for bar in (_progress_bar(PROGRESS_MIN_ITEMS, None), progress_bar(PROGRESS_MIN_POINTS, None),
+                progress_bar(3, True)):
+        assert bar is not None
+        bar.close()
+    capsys.readouterr()
+
+
+# ----------------------------------------------------------------------------- #15: arrays in
+def test_arrays_api_agrees_with_the_object_api():
+    """#15: `triangulate(P, points_array)` raised "regions[0] must be a tritools Region" and `triangulate_many` with
+    ndarray regions returned all invalid_input; `triangulate_points` (M points x V views, a visibility mask, like
+    cv2.triangulatePoints) returns arrays that agree with the result objects of the other entry points."""
+    from tritools.scene import random_scene
+
+    sc = random_scene(4, 6, noise_px=1.0, seed=5)
+    x = np.array(sc.points2d, float)                          # (M, V, 2)
+    visible = np.ones(x.shape[:2], bool)
+    visible[0, 3] = visible[2, 0] = visible[2, 1] = False     # points seen by 3, 4 and 2 views
+    x[0, 3] = np.nan                                          # an unseen entry may hold anything
+    res = tritools.triangulate_points(sc.cameras, x, visible, progress=False)
+    assert len(res) == 6 and list(res.n_views) == [3, 4, 2, 4, 4, 4]
+    objects = res.results()
+    many = tritools.triangulate_many([(sc.cameras[v], x[m, v]) for m, v in enumerate(visible)], progress=False)
+    for m, (o, r) in enumerate(zip(objects, many)):
+        single = tritools.triangulate(sc.cameras[visible[m]], x[m, visible[m]])      # an (N, 2) array of points
+        for other in (r, single):
+            assert other.status == o.status and o.status.value == res.status[m]
+            np.testing.assert_allclose(other.X, o.X, rtol=1e-6, atol=1e-9)
+            assert other.gamma_ub == pytest.approx(o.gamma_ub, rel=1e-6)
+        np.testing.assert_array_equal(res.X[m], o.X)
+        assert (res.gamma_lb[m], res.gamma_ub[m], res.optimal[m], res.in_front[m]) == \
+            (o.gamma_lb, o.gamma_ub, o.optimal, o.in_front)
+        assert o.residuals.shape == (int(res.n_views[m]),)                          # per-view residuals
+        np.testing.assert_allclose(o.residuals, single.residuals, rtol=1e-6, atol=1e-9)
+    assert all(res.optimal)
+    one_view = visible.copy()
+    one_view[1] = [True, False, False, False]
+    with pytest.raises(ValueError, match=r"points2d\[1\] is visible in fewer than 2 views"):
+        tritools.triangulate_points(sc.cameras, x, one_view, progress=False)
+
+
+# ----------------------------------------------------------------------------- #14: COLMAP diagnoses
+def test_colmap_text_camera_with_focal_0_is_named_with_file_and_line(tmp_path, capsys):
+    """#14: a COLMAP camera with focal 0 was diagnosed "x must be finite" and one bad camera aborted the whole
+    model without file:line.  Now its observations are skipped with cameras.txt:LINE named (the binary twin is
+    tests/test_colmap_cli.py::test_cameras_are_skipped_or_refused_with_strict), or, with --strict, exit 2."""
+    from tests.test_colmap import synthetic_model
+    from tritools.cli.app import main
+    from tritools.io.colmap import Camera, Model, write_text_model
+
+    model, _ = synthetic_model(n_points=10, noise_px=0.5, seed=3)
+    cams = dict(model.cameras)
+    cams[3] = Camera(3, "PINHOLE", 640, 480, (0.0, 800.0, 320.0, 240.0))
+    write_text_model(Model(cams, model.images, model.points3D), tmp_path / "in")
+    line = 1 + (tmp_path / "in" / "cameras.txt").read_text().splitlines().index("3 PINHOLE 640 480 0.0 800.0 320.0 "
+                                                                                "240.0")
+    assert main(["colmap", str(tmp_path / "in"), str(tmp_path / "o"), "--json", "--max-delta", "2"]) == 0
+    (skip,) = json.loads(capsys.readouterr().out)["skipped_cameras"]
+    assert skip["reason"] == f"cameras.txt:{line}: focal length fx = 0.0 must be > 0"
+    assert main(["colmap", str(tmp_path / "in"), str(tmp_path / "o2"), "--strict"]) == 2
+    err = capsys.readouterr().err
+    assert err == f"tritools: error: cameras.txt:{line}: camera 3 (PINHOLE) cannot be used: focal length fx = 0.0 " \
+                  "must be > 0\n"
+    assert "finite" not in err and not (tmp_path / "o2").exists()

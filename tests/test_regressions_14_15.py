@@ -464,3 +464,25 @@ def test_colmap_text_camera_with_focal_0_is_named_with_file_and_line(tmp_path, c
     assert err == f"tritools: error: cameras.txt:{line}: camera 3 (PINHOLE) cannot be used: focal length fx = 0.0 " \
                   "must be > 0\n"
     assert "finite" not in err and not (tmp_path / "o2").exists()
+
+
+def test_colmap_escalation_is_bounded_per_point(tmp_path, capsys):
+    """#14: `tritools colmap` with defaults ran 10 minutes at 11 GB on a 2,000-point model because two points went
+    to dense delta = 4 (one 7-view point: 242 s, 4.1 GB).  Every point that goes beyond the vectorised paths now
+    runs under the per-point budget of `tritools solve` (--time-limit, --memory-limit): a limit too small for any
+    certificate gives each point status time_limit at once, the input xyz kept, exit 0."""
+    from tests.test_colmap import synthetic_model
+    from tritools.cli.app import main
+    from tritools.io.colmap import read_model, write_binary_model
+
+    model, _ = synthetic_model(n_points=6, noise_px=0.5, seed=3)
+    write_binary_model(model, tmp_path / "in")
+    out, elapsed = _timed(lambda: main(["colmap", str(tmp_path / "in"), str(tmp_path / "o"), "--delta", "4",
+                                        "--time-limit", "0.001", "--json"]))
+    assert out == 0 and elapsed < 30
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["status"] == {"time_limit": 6} and summary["time_limit"] == 0.001
+    assert read_model(tmp_path / "o").points3D == model.points3D                 # nothing certified: input kept
+    assert main(["colmap", str(tmp_path / "in"), str(tmp_path / "o4"), "--delta", "4", "--json"]) == 0
+    points = json.loads(capsys.readouterr().out)["points"]
+    assert all(p["status"] == "optimal" and p["delta"] == 4 for p in points)

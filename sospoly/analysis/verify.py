@@ -225,9 +225,10 @@ def verify_quadratic_batch(f0, f1, F2, g0, g1, G2, points, *,
 
 
 def verify_quadratic(f: Polynomial, eq, point, *, gens=None,
-                     tolerances: Tolerances = DEFAULT_TOLERANCES) -> Verification:
+                     tolerances: Tolerances = DEFAULT_TOLERANCES, radius: float | None = None) -> Verification:
     """Lagrangian lower bound at a candidate ``point`` (see module docstring):
-    :func:`verify_quadratic_batch` on a stack of one program."""
+    :func:`verify_quadratic_batch` on a stack of one program (``radius``: a bound on the norm of a
+    minimiser, which makes the bound rigorous)."""
     gens = tuple(gens or f.gens)
     n = len(gens)
     v = np.asarray(point, float)
@@ -237,5 +238,6 @@ def verify_quadratic(f: Polynomial, eq, point, *, gens=None,
     g0 = np.array([[p[0] for p in parts]]).reshape(1, K)
     g1 = np.array([p[1] for p in parts]).reshape(1, K, n)
     G2 = np.array([p[2] for p in parts]).reshape(1, K, n, n)
-    batch = verify_quadratic_batch(np.array([f0]), f1[None], F2[None], g0, g1, G2, v[None], tolerances=tolerances)
+    batch = verify_quadratic_batch(np.array([f0]), f1[None], F2[None], g0, g1, G2, v[None], tolerances=tolerances,
+                                   radius=None if radius is None else np.array([float(radius)]))
     return batch.item(0)

@@ -177,7 +177,9 @@ class _PointSolve:
         if Xn is None or not np.isfinite(gamma_of(Xn, self.cams_n, self.regs_n)):
             return None
         v = np.concatenate([project(Xn, P) for P in self.cams_n])[: 2 * self.N]
-        ver = verify_quadratic(problem.f, problem.eq, v, gens=problem.gens, tolerances=self.opts.tolerances)
+        R = solve_radius(self.regs_n, float(problem.f(v)))         # holds a minimiser: a rigorous bound
+        ver = verify_quadratic(problem.f, problem.eq, v, gens=problem.gens, tolerances=self.opts.tolerances,
+                               radius=None if R is None else float(np.linalg.norm(R)))
         if not ver.certified:
             return None
         lb = gamma_from_c(ver.lower_bound, self.N, self.norm.scale)

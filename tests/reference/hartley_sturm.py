@@ -14,6 +14,11 @@ minimiser follows Hartley & Zisserman Algorithm 12.1:
 4. evaluate ``s`` at the real roots and at ``t = inf``; take the minimum;
 5. the optimal image points are the feet of the perpendiculars from the origin to
    the two epipolar lines, transferred back; ``X`` is their (exact) triangulation.
+
+Conditioning: all of this is done in image coordinates ``x' = s (x - x_i)`` with one common
+scale ``s`` (about one over the focal length), so that principal points at 1e6 px or
+coordinates of 1e-3 do not spoil ``F`` in floating point; a common isotropic scale leaves the
+minimiser unchanged and multiplies the cost by ``s^2``, which is divided out.
 """
 from __future__ import annotations
 
@@ -46,6 +51,19 @@ def _foot(line: np.ndarray) -> np.ndarray:
     return np.array([-lam * nu, -mu * nu, lam * lam + mu * mu])
 
 
+def _pixel_scale(P: np.ndarray, x: np.ndarray) -> float:
+    """About the focal length of ``P`` (pixels per radian) seen from image point ``x``: the size of the
+    rows of ``M = P[:, :3]`` after moving ``x`` to the origin, relative to the depth row."""
+    M = P[:, :3] / np.linalg.norm(P[2, :3])
+    return float(np.linalg.norm(M[:2] - np.outer(x, M[2])) / np.sqrt(2.0))
+
+
+def _conditioned(P: np.ndarray, x: np.ndarray, s: float) -> np.ndarray:
+    T = np.array([[s, 0.0, -s * x[0]], [0.0, s, -s * x[1]], [0.0, 0.0, 1.0]])
+    Q = T @ P
+    return Q / np.linalg.norm(Q)
+
+
 def hartley_sturm(P1, P2, x1, x2) -> tuple[np.ndarray, float]:
     """Optimal triangulation from two views.
 
@@ -58,6 +76,12 @@ def hartley_sturm(P1, P2, x1, x2) -> tuple[np.ndarray, float]:
     """
     P1, P2 = np.asarray(P1, float), np.asarray(P2, float)
     x1, x2 = np.asarray(x1, float), np.asarray(x2, float)
+    s = 2.0 / (_pixel_scale(P1, x1) + _pixel_scale(P2, x2))
+    X, cost = _hartley_sturm(_conditioned(P1, x1, s), _conditioned(P2, x2, s), np.zeros(2), np.zeros(2))
+    return X, cost / s ** 2
+
+
+def _hartley_sturm(P1, P2, x1, x2) -> tuple[np.ndarray, float]:
     F = fundamental_from_determinant(P1, P2)
     F = F / np.linalg.norm(F)
     T1 = np.array([[1.0, 0.0, -x1[0]], [0.0, 1.0, -x1[1]], [0.0, 0.0, 1.0]])
@@ -77,8 +101,12 @@ def hartley_sturm(P1, P2, x1, x2) -> tuple[np.ndarray, float]:
     t = Poly([0.0, 1.0])
     g = t * ((a * t + b) ** 2 + f2 ** 2 * (c * t + d) ** 2) ** 2 \
         - (a * d - b * c) * (1 + f1 ** 2 * t ** 2) ** 2 * (a * t + b) * (c * t + d)
+    # drop negligible *leading* coefficients only (their roots go to t = inf, a candidate below); a small
+    # low-order coefficient is a root near t = 0 (image points near the epipoles) and must stay
     coef = g.coef
-    coef = np.trim_zeros(np.where(np.abs(coef) <= 1e-14 * np.abs(coef).max(), 0.0, coef), "b")
+    top = np.abs(coef).max()
+    while len(coef) > 1 and abs(coef[-1]) <= 1e-14 * top:
+        coef = coef[:-1]
     roots = np.polynomial.polynomial.polyroots(coef) if len(coef) > 1 else np.array([])
     candidates = [float(r.real) for r in np.atleast_1d(roots)]
 

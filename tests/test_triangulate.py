@@ -214,22 +214,23 @@ def test_tritools_imports_no_solver():
 
 
 def test_lower_bound_above_upper_bound_is_never_a_certificate(monkeypatch):
-    """A (simulated) solver whose bound is 1.0 too high in c: reported as a numerical failure."""
+    """A (simulated) certificate whose proven bound is 1.0 too high in c: reported as a numerical failure.
+
+    (A solver that only *reports* a level 1.0 too high is caught one step earlier: the rigorous bound
+    recomputes u at the reported level, so the lie becomes identity residual -- tests/test_soundness.py.)"""
     import dataclasses
 
     import importlib
 
-    import sospoly
-
     T = importlib.import_module("tritools.solve.triangulate")   # the module (the package exports a function of that name)
 
-    real = sospoly.solve_psatz
+    real = T.rigorous_psatz_bound
 
     def wrong(*a, **k):
-        lb = real(*a, **k)
-        return dataclasses.replace(lb, lower_bound=lb.lower_bound + 1.0)
+        rb = real(*a, **k)
+        return dataclasses.replace(rb, lower_bound=rb.lower_bound + 1.0)
 
-    monkeypatch.setattr(T.sospoly, "solve_psatz", wrong)
+    monkeypatch.setattr(T, "rigorous_psatz_bound", wrong)
     cams, regions, _ = _example(4)
     res = tritools.triangulate(cams, regions, "corollary1", delta=4)
     assert res.status == Status.NUMERICAL_FAILURE and res.optimal is False

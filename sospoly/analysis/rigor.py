@@ -23,9 +23,18 @@ H_k >= |h_k(v)| likewise, and q_min <= q(v) on the box.  If the box holds a glob
 is a lower bound of the minimum in floating point, up to the stated rounding bounds (the caller knows
 the box: e.g. tritools derives it from the objective at a feasible point).
 
+Both functions check the certificate *at the level c they are given*: for a fixed multiplier the level
+column of x is set to c before u is recomputed, so a c above the solver's level cannot be reported as
+proven (it shows up as residual, or makes the check fail).
+
 :func:`exact_check` verifies a certificate in exact rational arithmetic (``fractions``), for
-researchers who want one: the identity is restored exactly by moving the residual onto the Gram
-matrices, the level is lowered by a margin, and PSD-ness is decided by an exact LDL^T.
+researchers who want one (Peyrl & Parrilo 2008): the level is lowered by a margin; Gram rows that the
+identity forces to zero (a monomial 2b_i whose only Gram entry is the diagonal one and whose coefficient
+is 0, e.g. y^4 absent from f) are removed; the Gram matrices, shifted by t I for a few small t, are
+projected orthogonally onto the affine space where the identity holds exactly (rationals: the residual of
+each monomial spread evenly over its Gram entries); PSD-ness is decided by an exact LDL^T.  A solver's
+Gram matrix at the optimum lies on the boundary of the cone (every minimiser is a kernel vector), so
+the shift and the lowered level are what give the projection room.
 """
 from __future__ import annotations
 
@@ -34,7 +43,6 @@ from fractions import Fraction
 
 import numpy as np
 
-from ..algebra.basis import MonomialIndex
 
 __all__ = ["RigorousBound", "rigorous_psatz_bound", "certificate_residual", "exact_check", "ExactCheck"]
 
@@ -96,10 +104,21 @@ def _u_terms(structure, theta, x, c_level):
     return np.vstack(E), np.concatenate(vals)
 
 
-def certificate_residual(structure, theta, sol, c_level=0.0):
-    """(monomials (M, n), residual e_m, rounding bound of e_m) of e = u(x) - sum_j b_j^T G_j b_j."""
-    x = np.asarray(sol.x, float)
-    E_u, v_u = _u_terms(structure, theta, x, c_level)
+def _at_level(structure, x, c) -> np.ndarray:
+    """A copy of the decision values ``x`` with a fixed multiplier's level column set to ``c`` (free
+    multipliers take the level as a parameter instead)."""
+    x = np.array(x, float)
+    if not structure.free and c is not None:
+        x[structure.program.block("c").slice] = c
+    return x
+
+
+def certificate_residual(structure, theta, sol, c_level=None):
+    """(monomials (M, n), residual e_m, rounding bound of e_m) of e = u(x) - sum_j b_j^T G_j b_j, u at level
+    ``c_level`` (for a fixed multiplier the level column of x is set to it; None: x's own level, 0 for a
+    free multiplier)."""
+    x = _at_level(structure, sol.x, c_level)
+    E_u, v_u = _u_terms(structure, theta, x, 0.0 if c_level is None else c_level)
     u = structure.u
     gb = u.gram
     G_all = np.concatenate([_pairs_of(sol.grams[name], b.size) for name, b in zip(u.block_names(), gb.blocks)])
@@ -179,7 +198,7 @@ def rigorous_psatz_bound(psatz, sol, c: float, radius) -> RigorousBound:
     ball = np.ndim(radius) == 0
     r = np.broadcast_to(np.asarray(radius, float), (n,)).copy()
     R = float(r[0]) if ball else float(np.sqrt(np.sum(r ** 2)))
-    E_mono, e, rnd = certificate_residual(structure, theta, sol, c if structure.free else 0.0)
+    E_mono, e, rnd = certificate_residual(structure, theta, sol, c)
     resid = float(np.sum((np.abs(e) + rnd) * _monomial_sup(E_mono, r)))
     psd = 0.0
     u = structure.u
@@ -236,63 +255,52 @@ def _ldl_psd(M: list) -> bool:
     return True
 
 
+#: the shifts t (relative to the margin) tried by :func:`exact_check`, largest first: the shift must exceed the
+#: solver's PSD defect (~1e-10) and stay below the margin the lowered level provides on the minimisers'
+#: directions (t = margin itself can undo it).
+EXACT_SHIFTS = (1e-1, 1e-2, 1e-3, 1e-4, 1e-5, 0.0)
+#: an inequality multiplier s_k with lambda_min below -SHIFT_LIMIT max(1, max|S|) is refused outright (the
+#: PSD margin of the numerical check); above it, s_k is shifted to PSD and u recomputed with the shift.
+SHIFT_LIMIT = 1e-6
+
+
 def exact_check(psatz, sol, c: float, margin: float | None = None) -> ExactCheck:
     """Verify in exact rational arithmetic that f >= c - margin on the feasible set.
 
-    The certificate's numbers (decision values x, Gram matrices, data theta) are read as exact
-    rationals (every float is one); u is recomputed exactly; its residual against the Gram matrices is
-    moved onto one pair per monomial; the level is lowered by ``margin`` (default 1e-7 max(1, |c|))
-    through q's monomials on the diagonal; then every Gram matrix of u and every s_k must be PSD
-    (exact LDL^T).  Fixed multipliers only.  Cost grows like the cube of the Gram side with rational
-    arithmetic: meant for small programs."""
+    The certificate's numbers (decision values x with the level set to ``c``, Gram matrices, data theta)
+    are read as exact rationals (every float is one) and u + margin q is recomputed exactly; the
+    inequality multipliers s_k are shifted by their PSD defect (u changes accordingly, exactly); Gram
+    rows the identity forces to zero are removed; for t in ``margin * EXACT_SHIFTS`` the Gram matrices
+    G + t I are projected onto the affine space of exact identities and tested by exact LDL^T (see the
+    module docstring).  ``ok`` is True when some t gives PSD matrices: a proof, whatever the t.  ``level``
+    is then c - margin rounded down to a float.  Fixed multipliers only; ``margin`` defaults to
+    1e-7 max(1, |c|).  Cost grows like the cube of the Gram side with rational arithmetic: meant for
+    small programs."""
     structure = psatz.structure
     if structure.free:
         return ExactCheck(False, float(c), "exact checks are implemented for fixed multipliers")
     margin = 1e-7 * max(1.0, abs(c)) if margin is None else float(margin)
+    if not (np.isfinite(c) and np.isfinite(margin) and margin >= 0):
+        return ExactCheck(False, float(c), "c and margin must be finite, margin >= 0")
     theta = np.asarray(psatz.theta, float)
-    x = np.asarray(sol.x, float)
-    u = structure.u
-    gb = u.gram
-    # exact u coefficients: every term of u(x) is a product of floats, summed in Fractions
-    coef: dict = {}
-    _exact_u_terms(structure, theta, x, coef)
-    # exact Gram entries (pairs) and their monomial contributions
-    G = [[[Fraction(float(v)) for v in row] for row in sol.grams[name]] for name in u.block_names()]
-    for j, blk in enumerate(gb.blocks):
-        for p in range(blk.n_pairs):
-            i, k = int(blk.pair_i[p]), int(blk.pair_j[p])
-            m = tuple(int(t) for t in blk.products[blk.pair_monomial[p]])
-            coef[m] = coef.get(m, Fraction(0)) - (1 if i == k else 2) * G[j][i][k]
-    # lower the level: u + margin * q
-    for e, cq in structure.q.terms.items():
-        coef[e] = coef.get(e, Fraction(0)) + Fraction(margin) * Fraction(cq)
-    index = MonomialIndex(gb.products)
-    diag_of = {}
-    for j, blk in enumerate(gb.blocks):
-        for i in range(blk.size):
-            m = tuple(int(t) for t in 2 * blk.b[i])
-            diag_of.setdefault(m, (j, i, i))
-    for j, blk in enumerate(gb.blocks):
-        for p in range(blk.n_pairs):
-            m = tuple(int(t) for t in blk.products[blk.pair_monomial[p]])
-            diag_of.setdefault(m, (j, int(blk.pair_i[p]), int(blk.pair_j[p])))
-    for m, r in coef.items():
-        if r == 0:
-            continue
-        if m not in diag_of or index.find(np.array([m]), missing_ok=True)[0] < 0:
-            return ExactCheck(False, float(c), f"the residual has monomial {m} outside every Gram block")
-        j, a, b = diag_of[m]
-        if a == b:
-            G[j][a][a] += r
-        else:
-            G[j][a][b] += r / 2
-            G[j][b][a] += r / 2
-    for j, Gj in enumerate(G):
-        if not _ldl_psd(Gj):
-            return ExactCheck(False, float(c), f"Gram block {u.block_names()[j]} is not PSD after exact restoration")
+    x = _at_level(structure, sol.x, c)
     prog = structure.program
+    # the inequality multipliers: shift each by (twice) its PSD defect, then check them exactly
+    S_all = []
     for k in range(structure.slots.n_ineq):
         blk = prog.block(f"s{k}")
+        pi, pj = blk.gram.pair_i, blk.gram.pair_j
+        vals = x[blk.slice]
+        S = np.zeros((blk.gram.size, blk.gram.size))
+        S[pi, pj] = vals
+        S[pj, pi] = vals
+        lam = float(np.linalg.eigvalsh(S)[0]) if S.size else 0.0
+        if lam < -SHIFT_LIMIT * max(1.0, float(np.abs(S).max())):
+            return ExactCheck(False, float(c), f"multiplier s{k} is not PSD (lambda_min {lam:.3g})")
+        if lam < 0:
+            x[blk.slice] = np.where(pi == pj, vals + 2.0 * (-lam) + _EPS * float(np.abs(S).max()), vals)
+        S_all.append((k, blk))
+    for k, blk in S_all:
         s = blk.gram.size
         S = [[Fraction(0)] * s for _ in range(s)]
         for p, val in enumerate(x[blk.slice]):
@@ -300,7 +308,81 @@ def exact_check(psatz, sol, c: float, margin: float | None = None) -> ExactCheck
             S[i][kk] = S[kk][i] = Fraction(float(val))
         if not _ldl_psd(S):
             return ExactCheck(False, float(c), f"multiplier s{k} is not PSD")
-    return ExactCheck(True, float(Fraction(float(c)) - Fraction(margin)), "")
+    # the target coefficients p = u(x) + margin q, exactly
+    u = structure.u
+    coef: dict = {}
+    _exact_u_terms(structure, theta, x, coef)
+    for e, cq in structure.q.terms.items():
+        coef[e] = coef.get(e, Fraction(0)) + Fraction(margin) * Fraction(cq)
+    # every Gram entry (block j, i <= k) with its monomial and weight (1 on the diagonal, 2 off it)
+    names = u.block_names()
+    pairs: dict = {}
+    for j, blk in enumerate(u.gram.blocks):
+        for p in range(blk.n_pairs):
+            i, k = int(blk.pair_i[p]), int(blk.pair_j[p])
+            m = tuple(int(t) for t in blk.products[blk.pair_monomial[p]])
+            pairs.setdefault(m, []).append((j, i, k))
+    for m, val in coef.items():
+        if val != 0 and m not in pairs:
+            return ExactCheck(False, float(c), f"the residual has monomial {m} outside every Gram block")
+    # facial reduction: a monomial whose remaining entries are all diagonal and whose coefficient is 0
+    # forces those diagonal entries, hence their rows, to 0 (PSD); a negative one is infeasible
+    live = [np.ones(blk.size, bool) for blk in u.gram.blocks]
+    changed = True
+    while changed:
+        changed = False
+        for m, entries in pairs.items():
+            alive = [(j, i, k) for j, i, k in entries if live[j][i] and live[j][k]]
+            if alive and all(i == k for _, i, k in alive):
+                target = coef.get(m, Fraction(0))
+                if target < 0:
+                    return ExactCheck(False, float(c), f"monomial {m} has a negative coefficient and only "
+                                                       f"diagonal Gram entries")
+                if target == 0:
+                    for j, i, _ in alive:
+                        live[j][i] = False
+                    changed = True
+    G0 = [np.asarray(sol.grams[name], float) for name in names]
+    lam = min((float(np.linalg.eigvalsh(G[np.ix_(lv, lv)])[0]) for G, lv in zip(G0, live) if lv.any()),
+              default=0.0)
+    shifts = sorted({max(0.0, 4.0 * -lam)} | {margin * r for r in EXACT_SHIFTS}, reverse=True)
+    G0q = [[[Fraction(float(v)) for v in row] for row in G] for G in G0]
+    for t in shifts:
+        if _projected_psd(G0q, live, pairs, coef, Fraction(t)):
+            level = Fraction(float(c)) - Fraction(margin)
+            out = float(level)
+            if Fraction(out) > level:
+                out = float(np.nextafter(out, -np.inf))
+            return ExactCheck(True, out, f"exact identity with PSD Gram matrices (shift t = {t:.3g})")
+    return ExactCheck(False, float(c), "no projected Gram matrix is PSD (the level may be above what the "
+                                       "certificate proves, or the margin too small)")
+
+
+def _projected_psd(G0q: list, live: list, pairs: dict, coef: dict, t: Fraction) -> bool:
+    """Are the orthogonal projections of G0 + t I (live rows only) onto the exact identities PSD?  Each
+    monomial's residual p_m - sum_e w_e G_e is spread evenly (G_e += r_m / sum_e w_e) over its live entries."""
+    G = [[row[:] for row in Gj] for Gj in G0q]
+    for j, Gj in enumerate(G):
+        for i in range(len(Gj)):
+            if live[j][i]:
+                Gj[i][i] += t
+    for m, entries in pairs.items():
+        alive = [(j, i, k) for j, i, k in entries if live[j][i] and live[j][k]]
+        r = coef.get(m, Fraction(0)) - sum((1 if i == k else 2) * G[j][i][k] for j, i, k in alive)
+        if not alive:
+            if r != 0:
+                return False
+            continue
+        step = r / sum(1 if i == k else 2 for _, i, k in alive)
+        for j, i, k in alive:
+            G[j][i][k] += step
+            if i != k:
+                G[j][k][i] += step
+    for j, Gj in enumerate(G):
+        idx = [i for i in range(len(Gj)) if live[j][i]]
+        if idx and not _ldl_psd([[Gj[a][b] for b in idx] for a in idx]):
+            return False
+    return True
 
 
 def _exact_u_terms(structure, theta, x, coef: dict) -> None:

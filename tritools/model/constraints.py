@@ -29,8 +29,8 @@ from sospoly import Polynomial
 
 from .geometry import fundamental_matrix
 
-__all__ = ["Method", "RANK_RTOL", "COEF_RTOL", "DET_ROUNDOFF", "minors_matrix", "theorem1_constraints",
-           "corollary1_constraints", "triple_minor_constraints", "THEOREM1_DENSE_MAX_VIEWS"]
+__all__ = ["Method", "RANK_RTOL", "COEF_RTOL", "minors_matrix", "theorem1_constraints", "corollary1_constraints",
+           "triple_minor_constraints", "THEOREM1_DENSE_MAX_VIEWS", "centre_groups"]
 
 #: relative singular-value threshold for the numerical rank N2 of M1 (rows scaled to unit norm first).
 #: Directions below it are dropped: at an exactly feasible point their values are float
@@ -41,14 +41,6 @@ __all__ = ["Method", "RANK_RTOL", "COEF_RTOL", "DET_ROUNDOFF", "minors_matrix", 
 RANK_RTOL = 1e-6
 #: m2 coefficients below COEF_RTOL * max|row| are SVD round-off and set to zero (this also fixes deg m2_i).
 COEF_RTOL = 1e-12
-#: a term of M1 (a numeric 4x4 determinant) at most DET_ROUNDOFF times Hadamard's bound (the product of its
-#: rows' norms) is the round-off of an exact zero and is set to 0.  Four rows of views that share a camera
-#: centre (a duplicated view, a camera rotated about its centre) all annihilate that centre, so their
-#: minors vanish identically; the computed determinants are ~1e-17 relative, and the unit scaling of
-#: M1's rows in :func:`theorem1_constraints` made that round-off a constraint the true image points
-#: violate (a duplicated view gave c_LB = 6.4 above c = 4 at a feasible point).  Genuine terms of
-#: conditioned cameras are >= 1e-10 relative even for a camera rotated about another's centre.
-DET_ROUNDOFF = 64 * np.finfo(float).eps
 
 
 class Method(str, enum.Enum):
@@ -104,21 +96,41 @@ def minors_matrix(cameras: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     Returns ``(M1, B1)`` with ``m1 = M1 @ b1(x)``; B1 rows are 0/1 exponent vectors.  All
     numeric 4x4 determinants of the module docstring's expansion are taken in one batched
     ``det`` over the cached index structure of :func:`_minor_structure`; monomials whose
-    terms all vanish (special cameras) are dropped; a term below ``DET_ROUNDOFF`` times Hadamard's bound
-    counts as vanishing (views with one centre).
+    terms all vanish (special cameras) are dropped.
+
+    Views that share a camera centre (:func:`centre_groups`: a duplicated view, a scaled copy, a camera
+    rotated about another's centre): the rows of M0 of such views all annihilate that centre, so a term
+    whose four rows come from them vanishes identically and is set to exactly 0.  Computed, it is
+    round-off (~1e-17), and the unit scaling of M1's rows in :func:`theorem1_constraints` made it a
+    constraint the true image points violate (a duplicated view gave c_LB = 6.4 above c = 4 at a
+    feasible point).  A threshold on the determinants' size would not do: near-consistent data make
+    genuine terms just as small.
     """
     cameras = np.asarray(cameras, float)
     a, c, _ = _row_data(cameras)
     T, minor, mono, B1, n_minors = _minor_structure(cameras.shape[0])
-    stack = np.vstack([a, c])
-    d = np.linalg.det(stack[T])
-    with np.errstate(over="ignore", under="ignore"):
-        hadamard = np.prod(np.linalg.norm(stack, axis=1)[T], axis=1)
-    d = np.where(np.abs(d) > DET_ROUNDOFF * hadamard, d, 0.0)           # round-off of exact zeros
+    d = np.linalg.det(np.vstack([a, c])[T])
+    group = centre_groups(cameras)[(T % (2 * cameras.shape[0])) // 2]          # the centre of each term's rows
+    d = np.where(np.all(group == group[:, :1], axis=1), 0.0, d)
     M1 = np.zeros((n_minors, B1.shape[0]))
     np.add.at(M1, (minor, mono), d)
     used = np.bincount(mono[d != 0.0], minlength=B1.shape[0]) > 0
     return M1[:, used], B1[used]
+
+
+def centre_groups(cameras: np.ndarray) -> np.ndarray:
+    """One label per view; views whose camera centres coincide share one (the rule of
+    :func:`tritools.model.geometry.fundamental_matrix`: F_ij vanishes; Corollary 1 drops such pairs)."""
+    N = cameras.shape[0]
+    label = np.arange(N)
+    for i, j in combinations(range(N), 2):
+        try:
+            fundamental_matrix(cameras[i], cameras[j])
+        except ValueError as exc:
+            if "same camera centre" not in str(exc):
+                raise
+            label[label == label[j]] = label[i]
+    return label
 
 
 @lru_cache(maxsize=64)

@@ -44,7 +44,8 @@ from fractions import Fraction
 import numpy as np
 
 
-__all__ = ["RigorousBound", "rigorous_psatz_bound", "certificate_residual", "exact_check", "ExactCheck"]
+__all__ = ["RigorousBound", "rigorous_psatz_bound", "certificate_residual", "exact_check", "ExactCheck",
+           "image_form_stack_margin"]
 
 _EPS = np.finfo(float).eps
 
@@ -218,6 +219,20 @@ def rigorous_psatz_bound(psatz, sol, c: float, radius) -> RigorousBound:
         return RigorousBound(-np.inf, np.inf, R, psd, resid, qmin)
     margin = (psd + resid) / qmin
     return RigorousBound(float(c) - margin, margin, R, psd, resid, qmin)
+
+
+def image_form_stack_margin(eigenvalues, gram_error, weight, q_min=1.0) -> np.ndarray:
+    """The margin of the module docstring for a stack of single-block certificates in the image form (the
+    coefficient identity u = b^T G(x) b holds for every x by construction, so only the computation of G and
+    its PSD defect count): ``(max(0, -lambda_min) + eigen error + gram_error) * weight / q_min``.
+
+    ``eigenvalues`` (B, n) ascending, of the computed G; ``gram_error`` (B,) a bound of ||G_computed - G(x)||_2;
+    ``weight`` (B,) a bound of ||b(v)||^2 on a region that holds a minimiser; ``q_min`` a lower bound of q
+    there.  Subtracting it from c gives a lower bound of the minimum in floating point."""
+    lam = np.asarray(eigenvalues, float)
+    n = lam.shape[-1]
+    defect = np.maximum(0.0, -lam[..., 0]) + 8 * n * _EPS * np.maximum(np.abs(lam).max(axis=-1), 1e-300)
+    return (defect + np.asarray(gram_error, float)) * np.asarray(weight, float) / q_min
 
 
 # ----------------------------------------------------------------------------- exact rational check

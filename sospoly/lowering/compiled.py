@@ -94,7 +94,9 @@ class BatchBounds:
     :func:`sospoly.solvers.solve.check_certificate`); the image form's coefficient identity holds by
     construction.  Only there is ``lower_bound`` a certified bound; ``reason`` says why not
     elsewhere.  ``eigenvalues`` / ``eigenvectors`` are those of ``gram`` (ascending), for
-    extraction (identity where the IPM did not converge)."""
+    extraction (identity where the IPM did not converge).  ``gram_error`` bounds the rounding of
+    ``gram`` (||G_computed - G(x)||_2) for :func:`sospoly.analysis.rigor.image_form_stack_margin`: the
+    caller, who knows a region holding a minimiser, makes ``lower_bound`` rigorous with it."""
     lower_bound: np.ndarray     # (B,)
     gram: np.ndarray            # (B, n, n)
     eigenvalues: np.ndarray     # (B, n)
@@ -102,6 +104,7 @@ class BatchBounds:
     ok: np.ndarray              # (B,) bool
     iterations: np.ndarray      # (B,) int
     reason: tuple               # (B,) str
+    gram_error: np.ndarray | None = None    # (B,)
 
 
 def _param_source(name: str, col_owner: np.ndarray, cols: np.ndarray, offsets: np.ndarray, n_theta: int):
@@ -321,13 +324,20 @@ class CompiledPsatz:
         A, b = self.dense_batch(th)
         res = ipm_solve_batch(A, b, t.q, t.cones, tolerances)
         G = smat(b - np.einsum("brm,bm->br", A, res.x), n)
+        # rounding of b - A x: |error_r| <= gamma_(m+1) (|b_r| + sum_k |A_rk| |x_k|); smat scales off-diagonal
+        # svec entries by 1/sqrt(2), so ||Delta G||_2 <= ||Delta G||_F <= ||error||_2
+        m = A.shape[2]
+        size = np.abs(b) + np.einsum("brm,bm->br", np.abs(A), np.abs(res.x))
+        eps = np.finfo(float).eps
+        gram_error = (m + 1) * eps / (1 - (m + 1) * eps) * np.linalg.norm(size, axis=1) \
+            + eps * np.linalg.norm(G, axis=(1, 2))                   # and the division by sqrt(2) in smat
         lam, V = np.linalg.eigh(np.where(res.converged[:, None, None], G, np.eye(n)))
         psd = tolerances.psd_accepts(lam[:, 0], np.abs(G).max(axis=(1, 2)))
         reason = tuple("" if (c and p) else (f"ipm: {r}" if not c else
                                              f"Gram lambda_min {l0:.3g} below the PSD margin")
                        for c, p, r, l0 in zip(res.converged, psd, res.reason, lam[:, 0]))
         c_lb = t.objective_sign * (res.x @ t.q) + t.objective_offset
-        return BatchBounds(c_lb, G, lam, V, res.converged & psd, res.iterations, reason)
+        return BatchBounds(c_lb, G, lam, V, res.converged & psd, res.iterations, reason, gram_error)
 
 
 class _Presolved:

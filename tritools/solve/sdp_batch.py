@@ -32,6 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from sospoly import DEFAULT_TOLERANCES, Tolerances
+from sospoly.analysis.rigor import image_form_stack_margin
 from sospoly.solvers.blas import with_single_threaded_blas
 
 from ..model.geometry import POINT_AT_INFINITY_RTOL
@@ -98,6 +99,7 @@ def solve_corollary1_points(cameras, points2d, *, tolerances: Tolerances = DEFAU
     n = 2 * N + 1
     c_lb = np.full(M, np.nan)
     lam, V = np.tile(np.ones(n), (M, 1)), np.tile(np.eye(n), (M, 1, 1))
+    gram_error = np.zeros(M)
     iters = np.zeros(M, int)
     idx = np.nonzero(ok)[0]
     th = ps.thetas(F[idx]) if idx.size else np.zeros((0, comp.n_theta))
@@ -108,6 +110,7 @@ def solve_corollary1_points(cameras, points2d, *, tolerances: Tolerances = DEFAU
         part = idx[start:start + step]
         bb = comp.batch_bounds(th[start:start + step], ipm_tol)
         iters[part], c_lb[part], lam[part], V[part] = bb.iterations, bb.lower_bound, bb.eigenvalues, bb.eigenvectors
+        gram_error[part] = bb.gram_error
         for j in np.nonzero(~bb.ok)[0]:
             reason[part[j]] = bb.reason[j]
         ok[part[~bb.ok]] = False
@@ -140,6 +143,10 @@ def solve_corollary1_points(cameras, points2d, *, tolerances: Tolerances = DEFAU
         better = gr < g_n
         X_n[better], g_n[better] = Xr[better], gr[better]
     c_ub = 2 * N * g_n ** 2
+    # rigorous bound (sospoly.analysis.rigor): the observed points are the origin, so f(v) = ||v||^2 and a
+    # minimiser has ||v*||^2 = f(v*) <= c_ub; the basis is b = (1, v) (||b||^2 <= 1 + c_ub) and q = 1 (degree 2)
+    assert comp.structure.q.degree == 0
+    c_lb = c_lb - image_form_stack_margin(lam, gram_error, 1.0 + c_ub, q_min=float(comp.structure.q.coefficients()[0]))
     status, optimal, c_rep = decide(c_lb, c_ub, tol)
     above = ok & (status == Status.NUMERICAL_FAILURE.value)
     for m in np.nonzero(above)[0]:

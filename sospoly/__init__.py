@@ -24,6 +24,7 @@ from .certificates.program import Sense, SOSProgram
 from .certificates.psatz import (DataSlots, Multiplier, PsatzProblem, PsatzStructure, StructureMismatch, build_psatz,
                                  default_q, delta_min)
 from .certificates.shape import CertificateShape, clique_shape, correlative_shape, dense_shape
+from .certificates.reduction import diagonal_reduction, ideal_reduction, reduce_shape
 from .lowering.compiled import CompiledPsatz, PsatzCache, compile_psatz
 from .lowering.conic import ConicProblem, GramForm, lower
 from .minimize import MinimizeResult, SolveAttempt, SOSResult, candidates_of, feasibility_violation, is_sos, minimize
@@ -41,7 +42,8 @@ __all__ = [
     "extract_from_moment", "ExactCheck", "RigorousBound", "exact_check", "rigorous_psatz_bound", "DEFAULT_BUDGET",
     "UNLIMITED", "Budget", "BudgetExceeded", "ProgramSize", "estimate_size", "Sense", "SOSProgram", "DataSlots",
     "Multiplier", "PsatzProblem", "PsatzStructure", "StructureMismatch", "build_psatz", "default_q", "delta_min",
-    "CertificateShape", "clique_shape", "correlative_shape", "dense_shape", "CompiledPsatz", "PsatzCache",
+    "CertificateShape", "clique_shape", "correlative_shape", "dense_shape", "diagonal_reduction", "ideal_reduction",
+    "reduce_shape", "CompiledPsatz", "PsatzCache",
     "compile_psatz", "ConicProblem", "GramForm", "lower", "MinimizeResult", "SolveAttempt", "SOSResult",
     "candidates_of", "feasibility_violation", "is_sos", "minimize", "CompiledGevp", "GevpResult", "bisect",
     "solve_psatz", "LowerBound", "ProgramSolution", "check_certificate", "solve_program", "SolveStatus",

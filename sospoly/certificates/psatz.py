@@ -50,6 +50,7 @@ from ..algebra.polynomial import Polynomial, as_polynomial
 from ..budget import BudgetExceeded
 from .program import SOSConstraint, SOSProgram
 from .shape import CertificateShape, correlative_shape, dense_shape, newton_shape, term_shape
+from .reduction import reduce_shape
 
 __all__ = ["Multiplier", "DataSlots", "PsatzStructure", "PsatzProblem", "StructureMismatch", "build_psatz",
            "psatz_structure", "delta_min", "default_q", "common_gens", "checked_inputs", "as_multiplier",
@@ -348,6 +349,13 @@ def psatz_structure(slots: DataSlots, degree: int, shape: CertificateShape, q: P
     n = len(gens)
     if len(shape.r_supports) != slots.n_eq or len(shape.s_bases) != slots.n_ineq:
         raise ValueError("the certificate shape does not match the number of constraints")
+    if shape.facial_reduction:
+        eqs, ineqs = slots.supports[1:1 + slots.n_eq], slots.supports[1 + slots.n_eq:]
+        if q is None:
+            shape = reduce_shape(shape, slots.supports[0], eqs, ineqs,
+                                 q_basis=monomials(n, (degree - max(slots.degrees[0], 0)) // 2))
+        else:
+            shape = reduce_shape(shape, slots.supports[0], eqs, ineqs, q_support=_support(q))
     prog = SOSProgram(gens)
     params = {}
     if q is None:

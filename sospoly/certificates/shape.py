@@ -70,6 +70,8 @@ class CertificateShape:
     cliques: tuple = ()
     block_clique: tuple = ()
     low_degree: int | None = None
+    #: apply the exact basis reductions of :mod:`sospoly.certificates.reduction` against the data
+    facial_reduction: bool = False
     _key: bytes = field(default=b"", repr=False, compare=False)
 
     def __post_init__(self) -> None:
@@ -78,7 +80,8 @@ class CertificateShape:
             for a in arrs:
                 a.setflags(write=False)
             object.__setattr__(self, name, arrs)
-        parts = [self.kind.encode(), repr(self.cliques).encode(), repr(self.low_degree).encode()]
+        parts = [self.kind.encode(), repr(self.cliques).encode(), repr(self.low_degree).encode(),
+                 repr(self.facial_reduction).encode()]
         for name in ("u_bases", "r_supports", "s_bases"):
             for a in getattr(self, name):
                 parts += [repr(a.shape).encode(), a.tobytes()]
@@ -88,6 +91,12 @@ class CertificateShape:
     def key(self) -> bytes:
         """A hashable description (equal keys: equal shapes)."""
         return self._key
+
+    def reduced(self) -> CertificateShape:
+        """This shape with the exact basis reductions requested (:mod:`sospoly.certificates.reduction`;
+        applied when a program is built from the shape and its data)."""
+        from dataclasses import replace
+        return replace(self, facial_reduction=True)
 
     @property
     def is_dense(self) -> bool:

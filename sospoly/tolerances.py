@@ -79,6 +79,14 @@ Why these values
   entries span ~1e11 (the moment matrix tends to rank one); 1e-14 there biased the Newton
   directions enough to stall 2 of 10 Example 5 cases at a duality gap of 3e-8, machine
   precision (1e-16) converges on all of them.
+* ``accept_inaccurate`` (a policy, default False): when True, a solver answer that stopped
+  short of the ``solver_*`` tolerances (Clarabel's *almost solved*: its reduced tolerances,
+  ~5e-5) but passes the a-posteriori checks ends the retry chain and is returned with status
+  ``INACCURATE``, its objective and its Gram matrices -- never as ``OPTIMAL``.  Only for callers
+  that turn the iterate into a rigorous bound themselves (:mod:`sospoly.analysis.rigor`, which
+  charges the PSD defect and the identity residual to the bound over a box holding the
+  minimiser): tritools does, so its bounds stay valid while large many-view programs are not
+  re-solved three more times for the last digits.
 * ``bisection_abs`` / ``bisection_rel``: the GEVP bisection stops when the bracket
   ``[c_lo, c_hi]`` satisfies ``c_hi - c_lo <= bisection_abs + bisection_rel*max(1,|c_lo|)``.
 """
@@ -93,6 +101,7 @@ import numpy as np
 __all__ = ["Tolerances", "DEFAULT_TOLERANCES", "as_tolerances"]
 
 _INT_FIELDS = ("solver_max_iter", "bisection_max_steps", "ipm_max_iter")
+_BOOL_FIELDS = ("accept_inaccurate",)
 
 
 def _maybe_scalar(x):
@@ -125,10 +134,15 @@ class Tolerances:
     ipm_dual_residual_gap: float = 1e-8
     ipm_flat_face_dual_residual_gap: float = 1e-6
     ipm_schur_regularization: float = 1e-16
+    accept_inaccurate: bool = False
 
     def __post_init__(self) -> None:
         for f in fields(self):
             v = getattr(self, f.name)
+            if f.name in _BOOL_FIELDS:
+                if not isinstance(v, bool):
+                    raise ValueError(f"Tolerances.{f.name} must be True or False, got {v!r}")
+                continue
             if f.name in _INT_FIELDS:
                 if isinstance(v, bool) or not isinstance(v, numbers.Integral) or v < 1:
                     raise ValueError(f"Tolerances.{f.name} must be a positive integer, got {v!r}")

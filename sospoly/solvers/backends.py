@@ -178,6 +178,9 @@ class ClarabelBackend:
                 return last
             if att.raw_status == RawStatus.SOLVED and (accept is None or accept(x, z)):
                 return last
+            if att.raw_status == RawStatus.ALMOST_SOLVED and self.tolerances.accept_inaccurate and \
+                    (accept is None or accept(x, z)):
+                return last                              # the caller makes the bound rigorous (Tolerances)
         if last is None:
             return ConicSolution(RawStatus.FAILED, None, None, None, None, tuple(attempts))
         return ConicSolution(last.raw_status, last.x, last.z, last.primal_objective, last.dual_objective,

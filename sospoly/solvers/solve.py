@@ -107,20 +107,31 @@ def solve_conic(problem: ConicProblem, backend=None, tolerances: Tolerances = DE
             "time limit reached before the solve"
     cache = {}
 
-    def accept(x, z):
+    def checked(x):
+        """The a-posteriori check of ``x`` (with ``extra_check``), made once per iterate."""
+        if "last" in cache and cache["last"][0] is x:
+            return cache["last"][1]
         res = check_certificate(problem, x, tolerances)
         if res[0] and extra_check is not None:
             ok, msg = extra_check(x, res[1])
             if not ok:
                 res = (False, res[1], res[2], msg)
-        cache["last"] = res
-        return res[0]
+        cache["last"] = (x, res)
+        return res
+
+    def accept(x, z):
+        return checked(x)[0]
 
     sol = be.solve(problem, accept=accept, retry=retry, deadline=deadline)
     if sol.raw_status == RawStatus.SOLVED:
-        ok, mins, resid, msg = cache["last"] if "last" in cache else check_certificate(problem, sol.x, tolerances)
+        ok, mins, resid, msg = checked(sol.x)
         if ok:
             return (SolveStatus.FEASIBLE if feasibility else SolveStatus.OPTIMAL), sol, mins, resid, ""
+        return SolveStatus.CHECK_FAILED, sol, mins, resid, msg
+    if sol.raw_status == RawStatus.ALMOST_SOLVED and tolerances.accept_inaccurate and sol.x is not None:
+        ok, mins, resid, msg = checked(sol.x)
+        if ok:
+            return SolveStatus.INACCURATE, sol, mins, resid, "inaccurate iterate; the a-posteriori checks passed"
         return SolveStatus.CHECK_FAILED, sol, mins, resid, msg
     status = {
         RawStatus.PRIMAL_INFEASIBLE: SolveStatus.INFEASIBLE,
@@ -145,7 +156,8 @@ def solve_program(program: SOSProgram, backend=None, form: GramForm = GramForm.I
     feas = program.sense == Sense.FEASIBILITY or program.objective is None
     status, sol, mins, resid, msg = solve_conic(problem, backend, tolerances, feasibility=feas, deadline=deadline)
     n_lmivar = program.n_lmivar()
-    if not status.ok:
+    accepted_iterate = status == SolveStatus.INACCURATE and tolerances.accept_inaccurate and bool(mins)
+    if not status.ok and not accepted_iterate:
         return ProgramSolution(status, None, sol.x, attempts=sol.attempts, n_lmivar=n_lmivar,
                                seconds=sol.seconds, message=msg, min_eigenvalues=mins)
     x = sol.x

@@ -16,8 +16,9 @@ Formulations (``formulation``):
 
 * ``"dense"`` -- the paper's: Theorem 1's minors of all views (C(2N, 4), for N <=
   :data:`~tritools.model.constraints.THEOREM1_DENSE_MAX_VIEWS`) or Corollary 1's epipolar pairs;
-* ``"views"`` -- for sparse certificates over a chain of view triples: every epipolar pair (they
-  enter the dense degree-2 block) and, for Theorem 1, the minors of each triple of the chain.
+* ``"views"`` -- for sparse certificates over view cliques (a cyclic band of view pairs for Corollary 1, a
+  chain of view triples for Theorem 1): every epipolar pair (they enter the dense degree-2 block) and,
+  for Theorem 1, the minors of each triple of the chain.
 """
 from __future__ import annotations
 
@@ -30,7 +31,7 @@ from sospoly import Polynomial, variables
 from .constraints import (THEOREM1_DENSE_MAX_VIEWS, Method, corollary1_constraints, theorem1_constraints,
                           triple_minor_constraints)
 
-__all__ = ["TriangulationProblem", "build_problem", "view_chain", "FORMULATIONS"]
+__all__ = ["TriangulationProblem", "build_problem", "view_chain", "view_band", "FORMULATIONS"]
 
 FORMULATIONS = ("dense", "views")
 
@@ -57,6 +58,21 @@ class TriangulationProblem:
 
     def variables_of_views(self, views) -> frozenset:
         return frozenset(i for view in views for i in self.view_vars[view])
+
+
+def view_band(n_views: int, reach: int = 2) -> tuple:
+    """The view pairs {i, i + d mod N} for d = 1..``reach``: a cyclic band of pairs (N * reach pairs, all
+    pairs when N <= 2 reach + 1), sorted and without repeats.
+
+    Why a closed band: the first and last views' epipolar constraint gets a quartic multiplier too,
+    and pairs two apart tie each view to more than its two neighbours.  On random mixed-region scenes
+    with large regions the open chain of pairs leaves gaps of ~1e-3 at N = 4..16 that the band closes,
+    at a cost linear in N (benchmarks/manyview.py)."""
+    if n_views <= 2:
+        return (tuple(range(n_views)),)
+    pairs = {tuple(sorted((i, (i + d) % n_views))) for d in range(1, max(1, int(reach)) + 1)
+             for i in range(n_views)}
+    return tuple(sorted(p for p in pairs if p[0] != p[1]))
 
 
 def view_chain(n_views: int, width: int = 3) -> tuple:

@@ -26,6 +26,7 @@
 """
 from __future__ import annotations
 
+import dataclasses
 import time
 
 import numpy as np
@@ -40,7 +41,7 @@ from sospoly.budget import Deadline
 from ..model.constraints import Method
 from ..model.geometry import (dlt, gamma as gamma_of, point_from_image_points, project, refine_l2, validate_cameras)
 from ..model.normalize import Normalization, normalization_for, unconstrained_reason
-from ..model.problem import TriangulationProblem, build_problem, view_chain
+from ..model.problem import TriangulationProblem, build_problem, view_band, view_chain
 from ..model.regions import Point, as_regions
 from ..result import Attempt, Status, TriangulationResult
 from .decide import cheirality, decide, gamma_from_c
@@ -54,8 +55,6 @@ __all__ = ["triangulate", "MAX_FAMILY_DIM"]
 
 #: kernel families of dimension up to this are searched for the best candidate.
 MAX_FAMILY_DIM = 3
-#: views per clique of the view-clique formulation with Corollary 1 (Theorem 1's triple minors need 3).
-VIEW_CLIQUE_WIDTH = 2
 
 
 def triangulate(cameras, regions, method=None, delta: int | None = None, max_delta: int | None = None, *,
@@ -191,6 +190,7 @@ class _PointSolve:
     def solve_step(self, step: Step, tight: bool = False) -> TriangulationResult:
         opts = self.opts
         tol = opts.tolerances.tightened() if tight else opts.tolerances
+        tol = dataclasses.replace(tol, accept_inaccurate=True)     # made rigorous in _finish
         label = "tight" if tight else "sdp"
         sparsity = "dense" if step.formulation == "dense" else "views"
         common = dict(method=step.method.value, delta=step.delta, sparsity=sparsity)
@@ -228,17 +228,18 @@ class _PointSolve:
         return _replace(res, **common, n_lmivar=psatz.n_lmivar)
 
     def _shape(self, problem: TriangulationProblem, step: Step):
-        """The certificate shape: dense, or view cliques (a chain of view triples) beside the dense degree-2
-        certificate (sospoly's clique shape; tritools only says which variables belong together)."""
+        """The certificate shape: dense, or view cliques beside the dense degree-2 certificate -- a cyclic band of
+        view pairs (Corollary 1) or a chain of view triples (Theorem 1, whose minors need three views) -- with
+        sospoly's exact basis reductions (tritools only says which variables belong together)."""
         if step.formulation == "dense":
             return "none"
-        width = 3 if step.method == Method.THEOREM1 else VIEW_CLIQUE_WIDTH
-        cliques = [sorted(problem.variables_of_views(t)) for t in view_chain(problem.n_views, width)]
+        groups = view_chain(problem.n_views, 3) if step.method == Method.THEOREM1 else view_band(problem.n_views)
+        cliques = [sorted(problem.variables_of_views(t)) for t in groups]
         n = len(problem.gens)
         return sospoly.clique_shape(n, step.delta, cliques, [problem.variables_of_views(v) for v in problem.eq_views],
                                     [problem.variables_of_views(v) for v in problem.ineq_views],
                                     [g.degree for g in problem.eq], [h.degree for h in problem.ineq], low_degree=2,
-                                    max_gram_side=self.opts.budget.max_gram_side)
+                                    max_gram_side=self.opts.budget.max_gram_side).reduced()
 
     def _compiled(self, problem: TriangulationProblem, step: Step):
         """(compiled structure, theta) from the cache, or (None, None) for a free or user multiplier."""
@@ -256,17 +257,20 @@ class _PointSolve:
 
     def _finish(self, problem, step: Step, psatz, lb, tol, label) -> TriangulationResult:
         """Rigorous gamma_LB, the estimate, the decision."""
-        if lb.solution is None or lb.lower_bound is None or lb.status not in (SolveStatus.OPTIMAL,
-                                                                              SolveStatus.TIME_LIMIT):
-            status = {SolveStatus.TIME_LIMIT: Status.TIME_LIMIT, SolveStatus.BUDGET_EXCEEDED: Status.BUDGET_EXCEEDED}\
-                .get(lb.status, Status.SOLVER_FAILED)
-            return TriangulationResult(step.method.value, status,
-                                       message=f"SDP at delta={step.delta}: {lb.status.value} {lb.message}".strip())
+        # an inaccurate iterate that passed the a-posteriori checks (Tolerances.accept_inaccurate) is used only
+        # through the rigorous bound below, which charges its PSD defect and identity residual
+        iterate = lb.status == SolveStatus.INACCURATE and lb.solution is not None and \
+            lb.solution.objective is not None
+        if lb.solution is None or (lb.lower_bound is None and not iterate) or \
+                lb.status not in (SolveStatus.OPTIMAL, SolveStatus.TIME_LIMIT, SolveStatus.INACCURATE):
+            return self._unsolved(step, lb)
         t = time.perf_counter()
         best = self._estimate(problem, psatz, lb.solution)
         self.timings[f"extract_d{step.delta}"] = time.perf_counter() - t
-        c = float(lb.lower_bound)
+        c = float(lb.lower_bound if lb.lower_bound is not None else lb.solution.objective)
         if best is None:
+            if iterate:
+                return self._unsolved(step, lb)
             lb_g = gamma_from_c(c, self.N, self.norm.scale)
             return TriangulationResult(step.method.value, Status.ILL_POSED, gamma_lb=lb_g, optimal=False,
                                        message="every extracted candidate has w4 ~ 0 (ill-posed: e.g. equal cameras)")
@@ -282,6 +286,8 @@ class _PointSolve:
         R = solve_radius(self.regs_n, c_ub)
         if R is not None:
             c = rigorous_psatz_bound(psatz, lb.solution, c, R).lower_bound
+        elif iterate:
+            return self._unsolved(step, lb)
         status, optimal, c_rep = decide(c, c_ub, tol)
         if lb.status == SolveStatus.TIME_LIMIT:
             status, optimal = Status.TIME_LIMIT, False
@@ -292,6 +298,13 @@ class _PointSolve:
         res = self._report(step, status, optimal, gamma_lb, self.norm.world_point(X_n), self.norm.world_point(X_raw_n),
                            self.norm.image_points(x_star_n), "sdp" if optimal else None)
         return _replace(res, message="; ".join(m for m in (msg, res.message) if m))
+
+    @staticmethod
+    def _unsolved(step: Step, lb) -> TriangulationResult:
+        status = {SolveStatus.TIME_LIMIT: Status.TIME_LIMIT, SolveStatus.BUDGET_EXCEEDED: Status.BUDGET_EXCEEDED}\
+            .get(lb.status, Status.SOLVER_FAILED)
+        return TriangulationResult(step.method.value, status,
+                                   message=f"SDP at delta={step.delta}: {lb.status.value} {lb.message}".strip())
 
     def _estimate(self, problem: TriangulationProblem, psatz, sol):
         """Best (gamma_n, X_n, image points_n) over the extracted candidates: Henrion-Lasserre points and scaled

@@ -127,6 +127,9 @@ def henrion_lasserre(W: np.ndarray, basis: np.ndarray, seed: int = 0) -> list[np
 #: SPAN_SEARCH_STARTS starting points (a few ms each).
 SPAN_SEARCH_MAX_VARS = 30
 SPAN_SEARCH_STARTS = 8
+#: residual evaluations per start (Levenberg-Marquardt with the analytic Jacobian converges in a few
+#: iterations near a point of the span; runs that need more are not converging)
+SPAN_SEARCH_EVALS = 60
 
 
 def span_search(W: np.ndarray, basis: np.ndarray, starts, seed: int = 0) -> list[np.ndarray]:
@@ -150,13 +153,25 @@ def span_search(W: np.ndarray, basis: np.ndarray, starts, seed: int = 0) -> list
         r = (bv - Q @ (Q.T @ bv)) / max(nb, 1e-300)
         return np.where(np.isfinite(r), r, 1e6)
 
+    # analytic Jacobian: d b_i / d v_j = E_ij v^(E_i - e_j); r = P b / |b| with P = I - Q Q^T
+    lowered = [np.where(np.arange(n)[None, :] == j, np.maximum(E - 1, 0), E) for j in range(n)]
+
+    def jac(v):
+        with np.errstate(over="ignore", invalid="ignore"):
+            bv = np.prod(v[None, :] ** E, axis=1)
+            D = np.stack([E[:, j] * np.prod(v[None, :] ** lowered[j], axis=1) for j in range(n)], axis=1)
+            nb = max(np.linalg.norm(bv), 1e-300)
+            J = D / nb - np.outer(bv, bv @ D) / nb ** 3
+            J = J - Q @ (Q.T @ J)
+        return np.where(np.isfinite(J), J, 0.0)
+
     rng = np.random.default_rng(seed)
     pts = [np.asarray(s, float) for s in starts if np.all(np.isfinite(s)) and np.linalg.norm(s) < 1e6]
     pts += list(rng.standard_normal((max(0, SPAN_SEARCH_STARTS - len(pts)), n)))
     found = []
     for v0 in pts[:SPAN_SEARCH_STARTS]:
         try:
-            res = least_squares(resid, v0, method="lm", xtol=1e-14, ftol=1e-14, max_nfev=200 * (n + 1))
+            res = least_squares(resid, v0, jac=jac, method="lm", xtol=1e-14, ftol=1e-14, max_nfev=SPAN_SEARCH_EVALS)
         except (ValueError, np.linalg.LinAlgError):
             continue
         if np.all(np.isfinite(res.x)) and np.linalg.norm(res.fun) <= 1e-6:
@@ -240,7 +255,9 @@ def kernel_family(G: np.ndarray, basis: np.ndarray, tol: Tolerances = DEFAULT_TO
 
 
 def best_in_family(family: CandidateFamily, objective, max_evals: int = 400) -> tuple[np.ndarray, float]:
-    """Minimise ``objective(v)`` over the family (Nelder-Mead from several starts)."""
+    """Minimise ``objective(v)`` over the family (Nelder-Mead from several starts), with at most about
+    ``max_evals`` evaluations of ``objective`` in all (a third for the scan of a one-parameter family, the
+    rest shared by the starts)."""
     from scipy.optimize import minimize as sp_min
 
     def obj_t(t):
@@ -261,12 +278,14 @@ def best_in_family(family: CandidateFamily, objective, max_evals: int = 400) -> 
         return family.point(best_t), best_v
     if family.dim == 1:
         # a one-parameter family: scan it whole (t = tan(theta) reaches both ends) first
-        grid = np.tan(np.linspace(-np.pi / 2, np.pi / 2, 723)[1:-1])
+        grid = np.tan(np.linspace(-np.pi / 2, np.pi / 2, max(8, max_evals // 3) + 2)[1:-1])
         vals = np.array([obj_t([t]) for t in grid])
         starts += [np.array([grid[k]]) for k in np.argsort(vals)[:3]]
+        max_evals -= grid.size
+    per_start = max(10, max_evals // len(starts))
     for t0 in starts:
         res = sp_min(obj_t, t0, method="Nelder-Mead",
-                     options={"maxfev": max_evals, "xatol": 1e-10, "fatol": 1e-12})
+                     options={"maxfev": per_start, "xatol": 1e-10, "fatol": 1e-12})
         if res.fun < best_v:
             best_t, best_v = res.x, float(res.fun)
     return family.point(best_t), best_v

@@ -39,7 +39,8 @@ from sospoly.analysis.verify import verify_quadratic
 from sospoly.budget import Deadline
 
 from ..model.constraints import Method
-from ..model.geometry import (dlt, gamma as gamma_of, point_from_image_points, project, refine_l2, validate_cameras)
+from ..model.geometry import (dlt, gamma as gamma_of, gamma_validated, point_from_image_points, project, refine_l2,
+                              validate_cameras)
 from ..model.normalize import Normalization, normalization_for, unconstrained_reason
 from ..model.problem import TriangulationProblem, build_problem, view_band, view_chain
 from ..model.regions import Point, as_regions
@@ -55,6 +56,9 @@ __all__ = ["triangulate", "MAX_FAMILY_DIM"]
 
 #: kernel families of dimension up to this are searched for the best candidate.
 MAX_FAMILY_DIM = 3
+#: evaluations of gamma spent searching a Gram kernel's family for the best estimate (the local refinement
+#: that follows does the fine work)
+FAMILY_SEARCH_EVALS = 300
 
 
 def triangulate(cameras, regions, method=None, delta: int | None = None, max_delta: int | None = None, *,
@@ -316,7 +320,7 @@ class _PointSolve:
             Xn = point_from_image_points(xn, self.cams_n)
             if Xn is None:
                 return None
-            g = gamma_of(Xn, self.cams_n, self.regs_n)
+            g = gamma_validated(np.asarray(Xn, float)[None], self.cams_n, self.regs_n)[0]
             return (float(g), np.asarray(Xn, float), xn) if np.isfinite(g) else None
 
         tol = self.opts.tolerances
@@ -324,7 +328,7 @@ class _PointSolve:
         if len(psatz.u.block_names()) == 1 and "u" in sol.grams:
             fam = kernel_family(sol.grams["u"], psatz.u.gram.b, tol)
             if fam is not None and 0 < fam.dim <= MAX_FAMILY_DIM:
-                v, _ = best_in_family(fam, lambda v: (evaluate(v) or (np.inf,))[0])
+                v, _ = best_in_family(fam, lambda v: (evaluate(v) or (np.inf,))[0], max_evals=FAMILY_SEARCH_EVALS)
                 points.append(v)
         best = None
         for v in points:

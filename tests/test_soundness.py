@@ -27,14 +27,14 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
-from scipy.optimize import least_squares
 
 import sospoly
 import tritools
 from sospoly import DEFAULT_TOLERANCES as TOL
 from tests.reference.hartley_sturm import hartley_sturm
 from tests.reference.multistart import best_local_gamma
-from tritools import Ellipse, EllipseBorder, Point, Polytope, Segment, Status, TriangulationOptions
+from tests.reference.regions import region_and_spec as _region, region_reference
+from tritools import Status, TriangulationOptions
 from tritools.model.constraints import theorem1_constraints
 from tritools.model.normalize import normalization_for
 
@@ -413,72 +413,6 @@ def test_point_in_front_is_not_flagged():
 
 
 # ----------------------------------------------------------------------------- 5. property: random scenes
-def _region(kind, c, rng):
-    """(region, spec) with spec the parametrisation used by the reference below."""
-    if kind == "point":
-        return Point(c), ("point", c)
-    if kind == "segment":
-        d = rng.normal(scale=4.0, size=2)
-        return Segment(c, d), ("segment", c, d)
-    if kind in ("ellipse", "border"):
-        A = rng.normal(size=(2, 2))
-        D = 4.0 * A @ A.T + np.eye(2)
-        return (Ellipse if kind == "ellipse" else EllipseBorder)(c, D), (kind, c, np.linalg.cholesky(D))
-    h = np.abs(rng.normal(scale=2.0, size=2)) + 0.5
-    return Polytope.box(c, h), ("box", c, h)
-
-
-def region_reference(cams, specs, starts, rng):
-    """min over (X, region parameters) of the RMS reprojection residual, by bounded least squares from each
-    start: y = c (point), c + t d with |t| <= 1 (segment), c + L r (cos a, sin a) with 0 <= r <= 1 (ellipse,
-    r = 1 on its border; D = L L^T), c + h * u with |u_k| <= 1 (box).  Every value is attained at a feasible
-    point: an upper bound on gamma*."""
-    lo, hi = [-np.inf] * 3, [np.inf] * 3
-    box = {"point": ([], []), "segment": ([-1], [1]), "ellipse": ([0, -np.inf], [1, np.inf]),
-           "border": ([-np.inf], [np.inf]), "box": ([-1, -1], [1, 1])}
-    for s in specs:
-        lo += box[s[0]][0]
-        hi += box[s[0]][1]
-
-    def points(p):
-        out, j = [], 0
-        for s in specs:
-            kind = s[0]
-            if kind == "point":
-                out.append(s[1])
-            elif kind == "segment":
-                out.append(s[1] + p[j] * s[2])
-                j += 1
-            elif kind == "ellipse":
-                out.append(s[1] + s[2] @ (p[j] * np.array([np.cos(p[j + 1]), np.sin(p[j + 1])])))
-                j += 2
-            elif kind == "border":
-                out.append(s[1] + s[2] @ np.array([np.cos(p[j]), np.sin(p[j])]))
-                j += 1
-            else:
-                out.append(s[1] + s[2] * p[j:j + 2])
-                j += 2
-        return np.array(out)
-
-    def residuals(z):
-        h = cams @ np.append(z[:3], 1.0)
-        return (h[:, :2] / h[:, 2:] - points(z[3:])).ravel()
-
-    best = np.inf
-    for X0 in starts:
-        for _ in range(3):
-            p0 = np.array([rng.uniform(0.1, 0.9) if (a == 0 and b == 1) else rng.uniform(-0.9, 0.9)
-                           for a, b in zip(lo[3:], hi[3:])])
-            try:
-                r = least_squares(residuals, np.concatenate([X0, p0]), bounds=(lo, hi), xtol=1e-15, ftol=1e-15,
-                                  gtol=1e-15, max_nfev=600)
-            except ValueError:
-                continue
-            if np.all(np.isfinite(r.fun)):
-                best = min(best, float(np.sqrt(np.mean(r.fun ** 2))))
-    return best
-
-
 KINDS = ["point", "segment", "ellipse", "border", "box"]
 
 

@@ -145,12 +145,15 @@ def _pairs_of(G: np.ndarray, s: int) -> np.ndarray:
     return 0.5 * (G[i, j] + G[j, i])
 
 
-def _block_weight(basis: np.ndarray, r: np.ndarray, ball: bool) -> float:
+def _block_weight(basis: np.ndarray, r: np.ndarray, ball: bool, cap: float | None = None) -> float:
     """sum over the degrees d present in ``basis`` of R^(2d): a bound of ||b(v)||^2 (sum_{|m| = d} v^(2m) <=
     (sum_i v_i^2)^d), with R^2 the sum of r_i^2 over the basis' variables on the box |v_i| <= r_i, or the
-    ball's R^2 (``ball``: every r_i is the ball's radius)."""
+    ball's R^2 (``ball``: every r_i is the ball's radius); at most ``cap``^2 when a ball ||v|| <= cap holds
+    too."""
     used = np.any(basis > 0, axis=0)
     R2 = float(r[0] ** 2) if ball else float(np.sum(r[used] ** 2))
+    if cap is not None:
+        R2 = min(R2, float(cap) ** 2)
     return float(sum(R2 ** d for d in np.unique(basis.sum(axis=1))))
 
 
@@ -189,13 +192,16 @@ def _q_min(structure, sol, r: np.ndarray) -> float:
     return const - float(np.sum(np.abs(c[rest]) * _monomial_sup(E[rest], r)))
 
 
-def rigorous_psatz_bound(psatz, sol, c: float, radius) -> RigorousBound:
+def rigorous_psatz_bound(psatz, sol, c: float, radius, ball: float | None = None) -> RigorousBound:
     """c minus the margin of the module docstring, for a solved fixed- or free-q Psatz certificate
     (``psatz`` a PsatzProblem or compiled instance; ``sol`` its ProgramSolution; ``c`` its level; ``radius``
-    a bound of ||v|| (one number: a ball) or of every |v_i| (one per variable: a box))."""
+    a bound of ||v|| (one number: a ball) or of every |v_i| (one per variable: a box); ``ball`` optionally a
+    bound of ||v|| that holds on the box's minimiser too (it caps each block's R^2: a box of many variables
+    has corners far outside a ball of the same per-variable radius))."""
     structure = psatz.structure
     theta = np.asarray(psatz.theta, float)
     n = len(structure.gens)
+    cap = None if ball is None else float(ball)
     ball = np.ndim(radius) == 0
     r = np.broadcast_to(np.asarray(radius, float), (n,)).copy()
     R = float(r[0]) if ball else float(np.sqrt(np.sum(r ** 2)))
@@ -204,7 +210,7 @@ def rigorous_psatz_bound(psatz, sol, c: float, radius) -> RigorousBound:
     psd = 0.0
     u = structure.u
     for name, blk in zip(u.block_names(), u.gram.blocks):
-        psd += _psd_defect(sol.grams[name]) * _block_weight(blk.b, r, ball)
+        psd += _psd_defect(sol.grams[name]) * _block_weight(blk.b, r, ball, cap)
     prog = structure.program
     x = np.asarray(sol.x, float)
     for k in range(structure.slots.n_ineq):
@@ -213,7 +219,7 @@ def rigorous_psatz_bound(psatz, sol, c: float, radius) -> RigorousBound:
         S[blk.gram.pair_i, blk.gram.pair_j] = x[blk.slice]
         S[blk.gram.pair_j, blk.gram.pair_i] = x[blk.slice]
         h = psatz.ineq[k] if hasattr(psatz, "ineq") else structure.slots.polynomials(theta)[2][k]
-        psd += _psd_defect(S) * _block_weight(blk.gram.b, r, ball) * _poly_sup(h, r)
+        psd += _psd_defect(S) * _block_weight(blk.gram.b, r, ball, cap) * _poly_sup(h, r)
     qmin = _q_min(structure, sol, r)
     if not qmin > 0:
         return RigorousBound(-np.inf, np.inf, R, psd, resid, qmin)

@@ -39,12 +39,12 @@ class Step:
 
 
 def _formulation(options: TriangulationOptions, method: Method, delta: int, n_views: int, n_vars: int) -> str:
-    if delta <= 2 or n_views <= 3:
-        return "dense"                              # one view clique holds everything: the dense certificate
-    if options.sparsity == Sparsity.NONE:
+    if delta <= 2 or options.sparsity == Sparsity.NONE:
         return "dense"
     if options.sparsity == Sparsity.VIEWS:
         return "views"
+    if n_views <= 3:
+        return "dense"                              # the views hold little less than the dense certificate
     if method == Method.THEOREM1 and n_views > THEOREM1_DENSE_MAX_VIEWS:
         return "views"
     return "dense" if sigma(n_vars, delta // 2) <= DENSE_MAX_SIDE else "views"

@@ -14,7 +14,7 @@ from ..model.geometry import depths_stack
 from ..model.regions import EllipseBorder, Point, Polytope, Segment
 from ..model.stacked import project_stack
 
-__all__ = ["PointReport", "point_report", "points_report_stack", "solve_radius", "region_extent"]
+__all__ = ["PointReport", "point_report", "points_report_stack", "solve_radius", "solve_ball", "region_extent"]
 
 
 @dataclass(frozen=True)
@@ -50,6 +50,23 @@ def points_report_stack(C: np.ndarray, x: np.ndarray, X: np.ndarray):
     res = np.where(fin[:, None], np.linalg.norm(u - x, axis=2), np.inf)
     gamma = np.where(fin, np.sqrt(np.sum(np.where(fin[:, None], res, 0.0) ** 2, axis=1) / (2 * x.shape[1])), np.inf)
     return gamma, res, depths_stack(C, X)
+
+
+def solve_ball(regions_n, c_upper: float) -> float | None:
+    """A bound of ||v|| for a minimiser v* of the normalised program, valid with :func:`solve_radius`'s box:
+    sum_i ||x_i - y_i||^2 <= c_upper and ||y_i|| <= rho_i give ||x|| <= ||rho|| + sqrt(c_upper) (triangle
+    inequality), and the auxiliary variables add sum a_i^2 (one per auxiliary variable).  Much smaller than
+    the box's diagonal with many views.  None as for :func:`solve_radius`."""
+    if not np.isfinite(c_upper):
+        return None
+    rho2, aux2 = 0.0, 0.0
+    for r in regions_n:
+        ext = region_extent(r)
+        if ext is None:
+            return None
+        rho2 += ext[0] ** 2
+        aux2 += r.n_aux * ext[1] ** 2
+    return math.sqrt((math.sqrt(rho2) + math.sqrt(max(c_upper, 0.0))) ** 2 + aux2)
 
 
 def region_extent(region) -> tuple[float, float] | None:

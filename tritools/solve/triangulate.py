@@ -49,7 +49,7 @@ from .decide import cheirality, decide, gamma_from_c
 from .fastpath import verify_points
 from .options import SolvePath, TriangulationOptions, options_from
 from .plan import Step, degree_plan
-from .report import point_report, solve_radius
+from .report import point_report, solve_ball, solve_radius
 from .structures import STRUCTURE_CACHE, structure_key
 
 __all__ = ["triangulate", "MAX_FAMILY_DIM"]
@@ -117,7 +117,7 @@ class _PointSolve:
         first_method = self.opts.explicit_method or Method.COROLLARY1
         n_vars = 2 * self.N + sum(r.n_aux for r in self.regions)
         steps = degree_plan(self.opts, self.N, n_vars, _delta_min(first_method, self.N))
-        best = None
+        best, skipped = None, None
         for k, step in enumerate(steps):
             if self.deadline.expired:
                 break
@@ -130,6 +130,8 @@ class _PointSolve:
             if res.status == Status.NUMERICAL_FAILURE:
                 res = self.solve_step(step, tight=True)
             best = res if best is None or _better(res, best) else best
+            if res.status == Status.BUDGET_EXCEEDED:
+                skipped = res
             if res.status.certified or res.status in (Status.ILL_POSED, Status.BUDGET_EXCEEDED):
                 break                   # certified, hopeless, or every later (larger) step exceeds the budget too
         if best is None:
@@ -138,6 +140,11 @@ class _PointSolve:
         elif self.deadline.expired and not best.status.certified and best.status != Status.ILL_POSED:
             best = _replace(best, status=Status.TIME_LIMIT,
                             message=(best.message + "; " if best.message else "") + "time limit reached")
+        elif skipped is not None and skipped is not best and not best.status.certified and \
+                best.status != Status.ILL_POSED:
+            # the best bounds so far, and why the plan stopped short of a certificate
+            best = _replace(best, status=Status.BUDGET_EXCEEDED,
+                            message="; ".join(m for m in (best.message, f"skipped {skipped.message}") if m))
         self.timings["total"] = time.perf_counter() - self.t0
         return _replace(best, timings=dict(self.timings), attempts=tuple(self.attempts))
 
@@ -180,9 +187,9 @@ class _PointSolve:
         if Xn is None or not np.isfinite(gamma_of(Xn, self.cams_n, self.regs_n)):
             return None
         v = np.concatenate([project(Xn, P) for P in self.cams_n])[: 2 * self.N]
-        R = solve_radius(self.regs_n, float(problem.f(v)))         # holds a minimiser: a rigorous bound
+        ball = solve_ball(self.regs_n, float(problem.f(v)))          # holds a minimiser: a rigorous bound
         ver = verify_quadratic(problem.f, problem.eq, v, gens=problem.gens, tolerances=self.opts.tolerances,
-                               radius=None if R is None else float(np.linalg.norm(R)))
+                               radius=ball)
         if not ver.certified:
             return None
         lb = gamma_from_c(ver.lower_bound, self.N, self.norm.scale)
@@ -289,7 +296,7 @@ class _PointSolve:
         c_ub = 2 * self.N * g_n ** 2
         R = solve_radius(self.regs_n, c_ub)
         if R is not None:
-            c = rigorous_psatz_bound(psatz, lb.solution, c, R).lower_bound
+            c = rigorous_psatz_bound(psatz, lb.solution, c, R, ball=solve_ball(self.regs_n, c_ub)).lower_bound
         elif iterate:
             return self._unsolved(step, lb)
         status, optimal, c_rep = decide(c, c_ub, tol)

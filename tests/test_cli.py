@@ -143,7 +143,7 @@ BAD_FILES = {
                      "cameras[2]: expected shape (3, 4), got (3, 3)"),
     "unknown_type": (_ex4_with(lambda d: d["regions"].__setitem__(0, {"type": "circle", "center": [0, 0]})),
                      "regions[0].type: unknown region type 'circle' (expected point, segment, polytope, "
-                     "ellipse_border, ellipse)"),
+                     "ellipse_border, ellipse"),   # (+ any types registered by other code)
     "missing_region_field": (_ex4_with(lambda d: d["regions"][1].pop("x")), "regions[1].x: missing required field"),
     "missing_type": (_ex4_with(lambda d: d["regions"][3].pop("type")), "regions[3].type: missing required field"),
     "missing_cameras": (_ex4_with(lambda d: d.pop("cameras")), "cameras: missing required field"),

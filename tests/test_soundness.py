@@ -510,3 +510,25 @@ def test_exact_check_refuses_a_tampered_multiplier():
     other = sospoly.build_psatz(1.5 * x_ + 0 * y_, eq, ineq, d, "fixed")
     assert other.structure.program.n_vars == ps.structure.program.n_vars
     assert not sospoly.exact_check(other, lb.solution, float(lb.lower_bound)).ok
+
+
+# ----------------------------------------------------------------------------- 7. the data's own resolution
+@pytest.mark.parametrize("k", [1e4, 1e6, 1e8, 1e10])
+def test_a_certified_gap_is_within_the_resolution_of_the_coordinates(k):
+    """Three unit-focal cameras, exact projections scaled by k (points far off-axis): the image scale cannot be
+    estimated (it is clipped), and before the decision scale of tritools.model.normalize a 460 px residual at
+    k = 1e10 was certified against gamma_LB = 0.  A certificate now promises gamma_UB - gamma_LB within
+    ~1e-8 of the coordinates' magnitude (docs/certificates.md)."""
+    cams = np.array([[[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 1]],
+                     [[1, 0, 0, 1], [0, 1, 0, 0], [0, 0, 1, 1]],
+                     [[1, 0, 0, 0], [0, 1, 0, 1], [0, 0, 1, 1]]], dtype=float)
+    h = cams @ np.array([0.2, -0.1, 1.0, 1.0])
+    x = k * h[:, :2] / h[:, 2:]
+    res = tritools.triangulate(cams, x)
+    ref = best_local_gamma(cams, x, [np.zeros(3), np.array([0.2, -0.1, 1.0])] + ([res.X] if res.X is not None else []))
+    if res.gamma_lb is not None:
+        assert res.gamma_lb <= ref * (1 + 1e-9) + ulp(x)
+    if res.optimal:
+        assert res.gamma_ub - res.gamma_lb <= 1e-8 * max(1.0, float(np.median(np.abs(x)))) + 1e-6 * res.gamma_ub
+    if k >= 1e10:
+        assert not res.optimal                     # gamma* = 460 px at |x| ~ 1e9: far above the resolution

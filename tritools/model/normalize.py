@@ -21,6 +21,15 @@ gamma* by two orders of magnitude; the unknowns are then ~1e-2 at the optimum, t
 q = (1 + ||v||^2)^(delta/2 - 1) is ~1 there and the delta = 4 relaxation loses most of its strength
 (measured on Example 5).
 
+The resolution: the certificate rule compares c_LB and c_UB with a tolerance that has an absolute part
+(``gap_abs``, for gamma* = 0: the solver's error in c is absolute) and a relative one.  In pixels the
+absolute part allows a gap of ~sqrt(gap_abs / 2N) / s, small whenever s is the scale of the residuals --
+but not when s could not be estimated (clipped to ``SCALE_BOUNDS``: points 1e10 px off-axis of
+unit-focal cameras gave c ~ 1e-10 for a 460 px residual, "certified" against gamma_LB = 0).  So a gap
+that passes only through the absolute part must also be at most ``resolution`` in gamma:
+``RESOLUTION_REL`` max(1, median |x|) pixels (sqrt(eps) of the coordinates' magnitude, the resolution of
+a least-squares optimum in floating point), stored in normalised units (times s).
+
 World side: X = X0 + d X' with X0 the DLT estimate and d the median distance to the camera centres
 (an affine change of the 3D frame leaves reprojections unchanged).  Cameras become
 P_i' = T_i P_i H, each scaled to unit Frobenius norm.
@@ -40,26 +49,31 @@ from .geometry import POINT_AT_INFINITY_RTOL
 from .stacked import dlt_stack, null_vectors, pixel_scales, project_stack, refine_points_stack
 
 __all__ = ["Normalization", "NormalizationStack", "normalization_for", "normalization_stack", "unconstrained_reason",
-           "RHO_FLOOR_REL",
+           "resolutions", "RHO_FLOOR_REL", "RESOLUTION_REL",
            "SCALE_BOUNDS"]
 
 #: floor of the residual scale rho, relative to the median pixel scale (focal length) of the views.
 RHO_FLOOR_REL = 1e-5
+#: the resolution of the coordinates, relative to their magnitude (sqrt of the machine epsilon).
+RESOLUTION_REL = 1e-8
 #: the common image scale s is clipped to this range.
 SCALE_BOUNDS = (1e-8, 1e8)
 
 
 @dataclass(frozen=True)
 class Normalization:
-    """The normalisation of one problem: x' = scale (x - shifts[i]), X = origin + depth X'."""
+    """The normalisation of one problem: x' = scale (x - shifts[i]), X = origin + depth X'; ``resolution`` the
+    coordinates' resolution in normalised units (module docstring; inf: not known, no guard)."""
     scale: float
     shifts: np.ndarray      # (N, 2)
     origin: np.ndarray      # (3,)
     depth: float
+    resolution: float = np.inf
 
     @classmethod
-    def identity(cls, n_views: int) -> Normalization:
-        return cls(1.0, np.zeros((n_views, 2)), np.zeros(3), 1.0)
+    def identity(cls, n_views: int, points=None) -> Normalization:
+        res = np.inf if points is None else float(resolutions(np.ones(1), np.asarray(points, float)[None])[0])
+        return cls(1.0, np.zeros((n_views, 2)), np.zeros(3), 1.0, res)
 
     def transform(self, i: int) -> np.ndarray:
         s, (tx, ty) = self.scale, self.shifts[i]
@@ -105,12 +119,23 @@ class NormalizationStack:
     cameras_n: np.ndarray   # (M, N, 3, 4) normalised cameras, unit Frobenius norm each
     Xn: np.ndarray          # (M, 3)
     ok: np.ndarray          # (M,)
+    resolution: np.ndarray  # (M,) the coordinates' resolution in normalised units (module docstring)
 
     def item(self, m: int) -> Normalization:
-        return Normalization(float(self.scale[m]), self.shifts[m].copy(), self.origin[m].copy(), float(self.depth[m]))
+        return Normalization(float(self.scale[m]), self.shifts[m].copy(), self.origin[m].copy(), float(self.depth[m]),
+                             float(self.resolution[m]))
 
     def world_points(self, Xn: np.ndarray) -> np.ndarray:
         return self.origin + self.depth[:, None] * Xn
+
+
+def resolutions(scale: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """s RESOLUTION_REL max(1, median |x|) per problem (x (M, N, 2)): the coordinates' resolution in normalised
+    units (module docstring)."""
+    with np.errstate(all="ignore"):
+        mag = np.median(np.abs(x.reshape(len(x), -1)), axis=1) if x.size else np.ones(len(x))
+        out = np.asarray(scale, float) * RESOLUTION_REL * np.maximum(1.0, np.where(np.isfinite(mag), mag, 1.0))
+    return np.where(np.isfinite(out) & (out > 0), out, np.inf)
 
 
 def _rho_floor(C: np.ndarray, x: np.ndarray) -> np.ndarray:
@@ -168,7 +193,8 @@ def normalization_stack(C: np.ndarray, x: np.ndarray, ok: np.ndarray | None = No
     s_new = np.clip(1.0 / rho_ref, *SCALE_BOUNDS)
     Cn[:, :, :2, :] *= (s_new / s)[:, None, None, None]
     Cn /= np.linalg.norm(Cn, axis=(2, 3))[..., None, None]
-    return NormalizationStack(s_new, x.copy(), X0, d, Cn, np.where(use[:, None], Xn, 0.0), ok)
+    return NormalizationStack(s_new, x.copy(), X0, d, Cn, np.where(use[:, None], Xn, 0.0), ok,
+                              resolutions(s_new, x))
 
 
 def normalization_for(cameras: np.ndarray, regions, enabled: bool = True) -> Normalization:
@@ -176,12 +202,12 @@ def normalization_for(cameras: np.ndarray, regions, enabled: bool = True) -> Nor
     centres as the points (identity when ``enabled`` is False; the centres as shifts with unit scale when
     the data cannot be normalised, e.g. the DLT estimate is at infinity)."""
     N = len(regions)
-    if not enabled:
-        return Normalization.identity(N)
     centers = np.array([r.center for r in regions], float)
+    if not enabled:
+        return Normalization.identity(N, centers)
     st = normalization_stack(np.asarray(cameras, float)[None], centers[None])
     if not st.ok[0]:
-        return Normalization(1.0, centers, np.zeros(3), 1.0)
+        return Normalization(1.0, centers, np.zeros(3), 1.0, float(resolutions(np.ones(1), centers[None])[0]))
     return st.item(0)
 
 

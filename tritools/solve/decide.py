@@ -16,18 +16,28 @@ import numpy as np
 
 from ..result import Status
 
-__all__ = ["decide", "gamma_from_c", "cheirality"]
+__all__ = ["decide", "decide_reported", "gamma_from_c", "c_from_gamma", "cheirality"]
 
 _CODES = np.array([Status.NOT_CERTIFIED.value, Status.OPTIMAL.value, Status.NUMERICAL_FAILURE.value], dtype=object)
 
 
-def decide(c_lower, c_upper, tolerances):
+def decide(c_lower, c_upper, tolerances, n_views=None, resolution=None):
     """(status, optimal, reported lower bound) for lower/upper bounds in c units (scalars or arrays).
 
-    OPTIMAL when the bounds meet (``tolerances.certified``), NUMERICAL_FAILURE when the lower bound is above
-    the upper bound beyond the tolerance (``tolerances.contradicts``: never a certificate), NOT_CERTIFIED
-    otherwise; the reported lower bound is ``tolerances.consistent`` (never above the upper bound)."""
+    OPTIMAL when the bounds meet (``tolerances.certified``) and -- when the gap passes only through the rule's
+    absolute part -- the gap in gamma = sqrt(c / 2N) is at most ``resolution`` (the normalisation's
+    resolution of the coordinates, :mod:`tritools.model.normalize`; with ``n_views``), NUMERICAL_FAILURE
+    when the lower bound is above the upper bound beyond the tolerance (``tolerances.contradicts``: never a
+    certificate), NOT_CERTIFIED otherwise; the reported lower bound is ``tolerances.consistent`` (never above
+    the upper bound)."""
     certified = np.asarray(tolerances.certified(c_lower, c_upper), bool)
+    if resolution is not None and n_views is not None:
+        lo, up = np.asarray(c_lower, float), np.asarray(c_upper, float)
+        with np.errstate(invalid="ignore"):
+            relative = up - lo <= tolerances.gap_rel * np.abs(up)
+            n2 = 2 * np.asarray(n_views, float)
+            gap = np.sqrt(np.maximum(up, 0.0) / n2) - np.sqrt(np.maximum(lo, 0.0) / n2)
+            certified = certified & (relative | (gap <= np.asarray(resolution, float)))
     contradicts = np.asarray(tolerances.contradicts(c_lower, c_upper), bool)
     code = np.where(contradicts, 2, np.where(certified, 1, 0))
     status = _CODES[code]
@@ -38,11 +48,32 @@ def decide(c_lower, c_upper, tolerances):
     return status, optimal, lower
 
 
+def decide_reported(gamma_lb, gamma_ub, tolerances, n_views, scale, resolution):
+    """Whether the bounds as reported in pixels (gamma_UB at the world point, after the normalisation's
+    inverse) still pass :func:`decide`: the final consistency step of every path.  The world point can lose
+    what the normalised one had (e.g. a depth of 1e-8 in world units), so a decision taken in normalised
+    coordinates is confirmed on the numbers the user sees; False where either bound is missing."""
+    lo, up = np.asarray(gamma_lb, float), np.asarray(gamma_ub, float)
+    known = np.isfinite(lo) & np.isfinite(up)
+    lo, up = np.where(known, lo, 0.0), np.where(known, up, 0.0)
+    _, optimal, _ = decide(c_from_gamma(np.minimum(lo, up), n_views, scale), c_from_gamma(up, n_views, scale),
+                           tolerances, n_views, resolution)
+    out = np.asarray(optimal, bool) & known
+    return bool(out) if out.ndim == 0 else out
+
+
 def gamma_from_c(c, n_views, scale):
     """gamma = sqrt(max(c, 0) / (2N)) / s: a bound in c units as an RMS error in the caller's pixels."""
     c = np.asarray(c, float)
     with np.errstate(invalid="ignore"):
         out = np.sqrt(np.maximum(c, 0.0) / (2 * np.asarray(n_views, float))) / np.asarray(scale, float)
+    return out.item() if out.ndim == 0 else out
+
+
+def c_from_gamma(gamma, n_views, scale):
+    """c = 2N (s gamma)^2: the inverse of :func:`gamma_from_c` (for gamma >= 0)."""
+    g = np.asarray(gamma, float) * np.asarray(scale, float)
+    out = 2 * np.asarray(n_views, float) * g * g
     return out.item() if out.ndim == 0 else out
 
 

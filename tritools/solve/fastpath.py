@@ -37,7 +37,7 @@ from sospoly.solvers.blas import with_single_threaded_blas
 from ..model.geometry import camera_problems
 from ..model.normalize import normalization_stack
 from ..model.stacked import epipolar_quadratics, fundamental_stack, project_stack, refine_points_stack
-from .decide import decide, gamma_from_c
+from .decide import decide, decide_reported, gamma_from_c
 
 __all__ = ["FastPathBatch", "verify_points", "stack_point_problems"]
 
@@ -115,12 +115,12 @@ def verify_points(cameras, points2d, *, tolerances: Tolerances = DEFAULT_TOLERAN
     # rigorous margin of the Lagrangian bound
     ver = verify_quadratic_batch(np.zeros(M), np.zeros((M, n)), np.broadcast_to(np.eye(n), (M, n, n)), g0, g1, G2,
                                  v, tolerances=tolerances, radius=np.linalg.norm(v, axis=1))
-    status, optimal, c_lower = decide(ver.lower_bound, ver.upper_bound, tolerances)
+    status, optimal, c_lower = decide(ver.lower_bound, ver.upper_bound, tolerances, N, norm.resolution)
     X = norm.world_points(Xn)
     uw, _, fin_w = project_stack(C, X)
     ok &= fin_w
     gamma_ub = np.where(fin_w, np.sqrt(np.sum((uw - x) ** 2, axis=(1, 2)) / (2 * N)), np.inf)
-    certified = ok & optimal
     gamma_lb = np.minimum(gamma_from_c(c_lower, N, norm.scale), gamma_ub)
+    certified = ok & optimal & decide_reported(gamma_lb, gamma_ub, tolerances, N, norm.scale, norm.resolution)
     return FastPathBatch(certified, ok, X, gamma_lb, gamma_ub, x + u / norm.scale[:, None, None], c_lower,
                          ver.upper_bound, norm.scale)

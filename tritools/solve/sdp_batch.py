@@ -39,7 +39,7 @@ from ..model.geometry import POINT_AT_INFINITY_RTOL
 from ..model.normalize import normalization_stack
 from ..model.stacked import fundamental_stack, project_stack, refine_points_stack
 from ..result import Status
-from .decide import decide, gamma_from_c
+from .decide import decide, decide_reported, gamma_from_c
 from .fastpath import stack_point_problems
 from .structures import corollary1_point_structure
 
@@ -147,12 +147,21 @@ def solve_corollary1_points(cameras, points2d, *, tolerances: Tolerances = DEFAU
     # minimiser has ||v*||^2 = f(v*) <= c_ub; the basis is b = (1, v) (||b||^2 <= 1 + c_ub) and q = 1 (degree 2)
     assert comp.structure.q.degree == 0
     c_lb = c_lb - image_form_stack_margin(lam, gram_error, 1.0 + c_ub, q_min=float(comp.structure.q.coefficients()[0]))
-    status, optimal, c_rep = decide(c_lb, c_ub, tol)
+    status, optimal, c_rep = decide(c_lb, c_ub, tol, N, norm.resolution)
     above = ok & (status == Status.NUMERICAL_FAILURE.value)
     for m in np.nonzero(above)[0]:
         reason[m] = "lower bound above the upper bound: per-point tight re-solve"
     ok &= ~above
+    X_world = norm.world_points(X_n)
+    g_lb = gamma_from_c(c_rep, N, norm.scale)
+    u_w, _, fin_w = project_stack(C, X_world)
+    g_ub = np.where(fin_w, np.sqrt(np.sum((u_w - x) ** 2, axis=(1, 2)) / (2 * N)), np.inf)
+    reported = decide_reported(g_lb, g_ub, tol, N, norm.scale, norm.resolution)
+    for m in np.nonzero(ok & optimal & ~reported)[0]:
+        reason[m] = "the bounds met in normalised coordinates, but not at the estimate in world coordinates"
+    status = np.where(optimal & ~reported, Status.NOT_CERTIFIED.value, status)
+    optimal = optimal & reported
     reason = tuple("" if done else r for done, r in zip(ok, reason))
-    return SdpBatch(ok, status, optimal & ok, c_rep, c_ub, gamma_from_c(c_rep, N, norm.scale),
-                    norm.world_points(X_n), norm.world_points(X_raw_n), x + xn / norm.scale[:, None, None],
+    return SdpBatch(ok, status, optimal & ok, c_rep, c_ub, g_lb,
+                    X_world, norm.world_points(X_raw_n), x + xn / norm.scale[:, None, None],
                     comp.n_lmivar, iters, reason)

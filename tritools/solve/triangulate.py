@@ -45,7 +45,7 @@ from ..model.normalize import Normalization, normalization_for, unconstrained_re
 from ..model.problem import TriangulationProblem, build_problem, view_band, view_chain
 from ..model.regions import Point, as_regions
 from ..result import Attempt, Status, TriangulationResult
-from .decide import cheirality, decide, gamma_from_c
+from .decide import cheirality, decide, decide_reported, gamma_from_c
 from .fastpath import verify_points
 from .options import SolvePath, TriangulationOptions, options_from
 from .plan import Step, degree_plan
@@ -190,9 +190,11 @@ class _PointSolve:
         ball = solve_ball(self.regs_n, float(problem.f(v)))          # holds a minimiser: a rigorous bound
         ver = verify_quadratic(problem.f, problem.eq, v, gens=problem.gens, tolerances=self.opts.tolerances,
                                radius=ball)
-        if not ver.certified:
+        status, optimal, c_lb = decide(ver.lower_bound, ver.upper_bound, self.opts.tolerances, self.N,
+                                       self.norm.resolution)
+        if not optimal:
             return None
-        lb = gamma_from_c(ver.lower_bound, self.N, self.norm.scale)
+        lb = gamma_from_c(c_lb, self.N, self.norm.scale)
         return self._report(step, Status.OPTIMAL, True, lb, self.norm.world_point(Xn), self.norm.world_point(Xn),
                             self.norm.image_points(v.reshape(self.N, 2)), "verification",
                             n_lmivar=sospoly.n_lmivar_formula(len(problem.gens), 2, [g.degree for g in problem.eq]))
@@ -225,18 +227,28 @@ class _PointSolve:
         if comp is None:
             psatz = sospoly.build_psatz(problem.f, problem.eq, problem.ineq, step.delta, opts.multiplier,
                                         gens=problem.gens, sparsity=self._shape(problem, step), budget=opts.budget)
-            lb = sospoly.solve_psatz(psatz, backend=opts.backend, form=opts.form, tolerances=tol,
-                                     deadline=self.deadline)
+            backend, form = opts.backend, opts.form
         else:
             psatz = comp.bind(theta)
-            lb = sospoly.solve_psatz(psatz, backend=opts.backend if opts.backend is not None else "auto",
-                                     tolerances=tol, deadline=self.deadline)
+            backend, form = (opts.backend if opts.backend is not None else "auto"), sospoly.GramForm.IMAGE
+        lb = self._solve_psatz(psatz, backend, form, tol)
         self.timings[f"solve_d{step.delta}"] = time.perf_counter() - t1
         res = self._finish(problem, step, psatz, lb, tol, label)
+        if lb.status == SolveStatus.INACCURATE and not res.optimal and not self._out_of_time():
+            # the inaccurate iterate did not certify through the rigorous bound: the full retry chain
+            lb = self._solve_psatz(psatz, backend, form, dataclasses.replace(tol, accept_inaccurate=False))
+            res = self._finish(problem, step, psatz, lb, tol, label)
+            self.timings[f"solve_d{step.delta}"] = time.perf_counter() - t1
         solver = tuple(f"{a.label}:{a.solver_status}" for a in (lb.solution.attempts if lb.solution else ()))
         self.attempts.append(Attempt(step.method.value, step.delta, res.status.value, res.gamma_lb, res.gamma_ub, label,
                                      sparsity, solver, time.perf_counter() - t))
         return _replace(res, **common, n_lmivar=psatz.n_lmivar)
+
+    def _solve_psatz(self, psatz, backend, form, tol):
+        return sospoly.solve_psatz(psatz, backend=backend, form=form, tolerances=tol, deadline=self.deadline)
+
+    def _out_of_time(self) -> bool:
+        return self.deadline.expired
 
     def _shape(self, problem: TriangulationProblem, step: Step):
         """The certificate shape: dense, or view cliques beside the dense degree-2 certificate -- a cyclic band of
@@ -299,7 +311,7 @@ class _PointSolve:
             c = rigorous_psatz_bound(psatz, lb.solution, c, R, ball=solve_ball(self.regs_n, c_ub)).lower_bound
         elif iterate:
             return self._unsolved(step, lb)
-        status, optimal, c_rep = decide(c, c_ub, tol)
+        status, optimal, c_rep = decide(c, c_ub, tol, self.N, self.norm.resolution)
         if lb.status == SolveStatus.TIME_LIMIT:
             status, optimal = Status.TIME_LIMIT, False
         msg, gamma_lb = "", gamma_from_c(c_rep, self.N, self.norm.scale) if np.isfinite(c_rep) else None
@@ -349,11 +361,19 @@ class _PointSolve:
                 n_lmivar=None) -> TriangulationResult:
         rep = point_report(X, self.cams, self.regions)
         raw = point_report(X_raw, self.cams, self.regions)
-        status, in_front = cheirality(status, rep.depths, self.opts.require_in_front)
+        msg = ""
         if gamma_lb is not None and rep.gamma is not None and np.isfinite(rep.gamma):
             gamma_lb = min(gamma_lb, rep.gamma)          # consistent in pixels too (decided in c units)
-        msg = "" if in_front or not optimal else \
-            "certified L2 optimum, but behind camera(s) " + ", ".join(str(i) for i in np.nonzero(~(rep.depths > 0))[0])
+            if optimal:                                  # the decision again, on the numbers reported
+                optimal = decide_reported(gamma_lb, rep.gamma, self.opts.tolerances, self.N, self.norm.scale,
+                                          self.norm.resolution)
+                if not optimal:
+                    status = Status.NOT_CERTIFIED
+                    msg = "the bounds met in normalised coordinates, but not at the estimate in world coordinates"
+        status, in_front = cheirality(status, rep.depths, self.opts.require_in_front)
+        if optimal and not in_front:
+            msg = "certified L2 optimum, but behind camera(s) " + \
+                ", ".join(str(i) for i in np.nonzero(~(rep.depths > 0))[0])
         return TriangulationResult(step.method.value, status, X=X, gamma_ub=rep.gamma, gamma_lb=gamma_lb,
                                    optimal=optimal, delta=step.delta, n_lmivar=n_lmivar, image_points=image_points,
                                    X_raw=X_raw, gamma_ub_raw=raw.gamma, certified_by=certified_by if optimal else None,

@@ -422,7 +422,8 @@ def minimize(f, eq=(), ineq=(), degree: int | None = None, multiplier="auto", *,
         raise ValueError(f"max_degree must be an integer >= the first degree {d0}, got {max_degree!r}")
     last = d0 if degree is not None else int(max_degree if max_degree is not None else d0 + 4)
     fn, eqn, ineqn, fscale = _normalised(f, eq, ineq)
-    run = _Run(f, eq, ineq, fn, eqn, ineqn, fscale, gens, tol, budget, deadline, refine, radius)
+    run = _Run(f, eq, ineq, fn=fn, eqn=eqn, ineqn=ineqn, fscale=fscale, gens=gens, tol=tol, budget=budget,
+               deadline=deadline, refine=refine, radius=radius)
     best = None
     for d in range(d0, last + 1, 2):
         for kind, low in _choose_sparsity(sparsity, fn, eqn, ineqn, d, multiplier, d + 2 > last):
@@ -461,7 +462,7 @@ def _finish(best: MinimizeResult, run: _Run, seconds: float) -> MinimizeResult:
 class _Run:
     """The state of one :func:`minimize` call: data, tolerances, budget, attempts so far."""
 
-    def __init__(self, f, eq, ineq, fn, eqn, ineqn, fscale, gens, tol, budget, deadline, refine, radius):
+    def __init__(self, f, eq, ineq, *, fn, eqn, ineqn, fscale, gens, tol, budget, deadline, refine, radius):
         self.f, self.eq, self.ineq = f, eq, ineq
         self.fn, self.eqn, self.ineqn, self.fscale = fn, eqn, ineqn, fscale
         self.gens, self.tol, self.budget, self.deadline = gens, tol, budget, deadline

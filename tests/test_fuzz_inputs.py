@@ -303,7 +303,7 @@ def test_polynomial_integer_exponent_types_still_work():
     assert p == x ** 2 * y + 2 * y ** 3
     assert all(type(k) is int for e in p.terms for k in e)
     # the internal constructor is unchecked by design: callers pass clean data
-    q = Polynomial._raw(("x",), {(1,): 2.0})
+    q = Polynomial.from_trusted_terms(("x",), {(1,): 2.0})
     assert q == 2 * x
     with pytest.raises(ValueError):
         x ** True

@@ -30,7 +30,7 @@ from .model.geometry import validate_cameras
 from .model.regions import Ellipse, EllipseBorder, Point, Polytope, Region, Segment, as_regions
 from .result import Status, TriangulationResult
 
-__all__ = ["figure3", "draw_region", "dataset_summary", "save_figure3_examples", "view_color",
+__all__ = ["figure3", "draw_region", "require_matplotlib", "dataset_summary", "save_figure3_examples", "view_color",
            "VIEW_COLORS", "IMAGE_POINT_MISMATCH_REL", "ELLIPSE_SAMPLES", "FIGURE3_DPI", "LOG_RANGE_RATIO"]
 
 #: Colours of views 1, 2, 3, 4 as in the paper's Figure 3 (red, green, blue, violet), then more.
@@ -49,7 +49,7 @@ _EXTRA_MSG = ("tritools.plot needs matplotlib, the optional extra 'plot': "
 
 
 # ----------------------------------------------------------------------------- matplotlib access
-def _matplotlib():
+def require_matplotlib():
     """Import matplotlib lazily; select the Agg backend when there is no display."""
     try:
         import matplotlib
@@ -63,7 +63,7 @@ def _matplotlib():
 
 
 def _new_figure(figsize):
-    _matplotlib()
+    require_matplotlib()
     from matplotlib.figure import Figure
 
     return Figure(figsize=figsize, layout="constrained")
@@ -225,7 +225,7 @@ def figure3(cameras, regions, result: TriangulationResult, ax=None, title: str |
         fig = _new_figure((8.4, 5.6))
         ax = fig.add_subplot()
     else:
-        _matplotlib()
+        require_matplotlib()
         fig = ax.figure
     N = len(C)
     proj = None
@@ -299,7 +299,7 @@ def save_figure3_examples(out_dir, examples: Sequence[int] = (2, 3, 4), *, metho
     from .scene import paper_example
     from .solve.triangulate import triangulate
 
-    _matplotlib()
+    require_matplotlib()
     examples = [int(k) for k in examples]
     for k in examples:
         if k not in (2, 3, 4):

@@ -89,6 +89,13 @@ class Polynomial:
         return cls._raw(gens, out)
 
     @classmethod
+    def from_trusted_terms(cls, gens: Sequence[str], terms: dict) -> Polynomial:
+        """A polynomial from data the caller guarantees clean -- distinct variable names, exponent tuples of
+        non-negative ints of the right length, finite non-zero float coefficients -- without the per-term
+        validation of the constructor (for generated constraint sets with thousands of terms)."""
+        return cls._raw(tuple(gens), dict(terms))
+
+    @classmethod
     def constant(cls, value: float, gens: Sequence[str] = ()) -> Polynomial:
         gens = tuple(gens)
         return cls(gens, {(0,) * len(gens): value})

@@ -57,9 +57,9 @@ def _plot_dataset(args) -> int:
     options = options_from_args(args)
     select_tracks((), args.limit, args.sample, args.seed)            # the flags checked before any data is read
     try:
-        from ..plot import _matplotlib
+        from ..plot import require_matplotlib
 
-        _matplotlib()
+        require_matplotlib()
     except ImportError as exc:
         return exit_invalid(str(exc))
     seq = load_oxford(args.name, args.data_dir, "plot-dataset")

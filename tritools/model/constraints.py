@@ -167,7 +167,7 @@ def theorem1_constraints(cameras: np.ndarray, gens, x_index) -> tuple[list[Polyn
     polys = []
     for row in M2:
         nz = np.nonzero(row)[0]
-        polys.append(Polynomial._raw(gens, dict(zip([exps[k] for k in nz], row[nz].tolist()))))
+        polys.append(Polynomial.from_trusted_terms(gens, dict(zip([exps[k] for k in nz], row[nz].tolist()))))
     return polys, {"N1": M1.shape[0], "N2": n2, "singular_values": S}
 
 

@@ -164,8 +164,9 @@ class _PointSolve:
                               tolerances=self.opts.tolerances)
             if b.certified[0]:
                 K = self.N * (self.N - 1) // 2
-                res = self._report(step, Status.OPTIMAL, True, b.gamma_lb[0], b.X[0], b.X[0], b.image_points[0],
-                                   "verification", n_lmivar=sospoly.n_lmivar_formula(2 * self.N, 2, [2] * K))
+                res = self._report(step, Status.OPTIMAL, True, b.gamma_lb[0], X=b.X[0], X_raw=b.X[0],
+                                   image_points=b.image_points[0], certified_by="verification",
+                                   n_lmivar=sospoly.n_lmivar_formula(2 * self.N, 2, [2] * K))
         else:
             res = self._verify_generic(step)
         self.timings["verify"] = time.perf_counter() - t
@@ -195,8 +196,9 @@ class _PointSolve:
         if not optimal:
             return None
         lb = gamma_from_c(c_lb, self.N, self.norm.scale)
-        return self._report(step, Status.OPTIMAL, True, lb, self.norm.world_point(Xn), self.norm.world_point(Xn),
-                            self.norm.image_points(v.reshape(self.N, 2)), "verification",
+        X = self.norm.world_point(Xn)
+        return self._report(step, Status.OPTIMAL, True, lb, X=X, X_raw=X,
+                            image_points=self.norm.image_points(v.reshape(self.N, 2)), certified_by="verification",
                             n_lmivar=sospoly.n_lmivar_formula(len(problem.gens), 2, [g.degree for g in problem.eq]))
 
     # ------------------------------------------------------------------ the SDP
@@ -318,8 +320,9 @@ class _PointSolve:
         if status == Status.NUMERICAL_FAILURE:
             msg = f"lower bound c={c:.10g} above c at the estimate {c_ub:.10g}: numerical failure, no certificate"
             gamma_lb = None                     # it contradicts a feasible value: not a valid bound
-        res = self._report(step, status, optimal, gamma_lb, self.norm.world_point(X_n), self.norm.world_point(X_raw_n),
-                           self.norm.image_points(x_star_n), "sdp" if optimal else None)
+        res = self._report(step, status, optimal, gamma_lb, X=self.norm.world_point(X_n),
+                           X_raw=self.norm.world_point(X_raw_n), image_points=self.norm.image_points(x_star_n),
+                           certified_by="sdp" if optimal else None)
         return _replace(res, message="; ".join(m for m in (msg, res.message) if m))
 
     @staticmethod
@@ -357,7 +360,7 @@ class _PointSolve:
         return best
 
     # ------------------------------------------------------------------ reporting
-    def _report(self, step: Step, status, optimal, gamma_lb, X, X_raw, image_points, certified_by,
+    def _report(self, step: Step, status, optimal, gamma_lb, *, X, X_raw, image_points, certified_by,
                 n_lmivar=None) -> TriangulationResult:
         rep = point_report(X, self.cams, self.regions)
         raw = point_report(X_raw, self.cams, self.regions)

@@ -117,7 +117,7 @@ class Operator:
         return dZ
 
 
-def stopping_rule(tol: Tolerances, pobj, dobj, rdx, pres, dres, pscale, dscale, xzinf):
+def stopping_rule(tol: Tolerances, pobj, dobj, *, rdx, pres, dres, pscale, dscale, xzinf):
     """(converged, diverged), on scalars or on (B,) arrays.
 
     |pobj - dobj| <= solver_gap_abs or <= solver_gap_rel min(|pobj|, |dobj|);
@@ -220,8 +220,9 @@ def mehrotra(op: Operator, q: np.ndarray, b: np.ndarray, lay: Layout, tol: Toler
         zinf = np.max([np.abs(v).max(axis=1) for v in svz] + ([np.abs(zE).max(axis=1)] if p else []), axis=0)
         pres = np.max([np.abs(r).max(axis=1) for r in rP] + ([np.abs(rE).max(axis=1)] if p else []), axis=0)
         dres = np.abs(rD).max(axis=1) if m else np.zeros(active.size)
-        ok, diverged = stopping_rule(tol, pobj, dobj, np.einsum("bm,bm->b", rD, x), pres, dres,
-                                     nb_inf[active] + xinf + sinf, nq_inf[active] + zinf, np.maximum(xinf, zinf))
+        ok, diverged = stopping_rule(tol, pobj, dobj, rdx=np.einsum("bm,bm->b", rD, x), pres=pres, dres=dres,
+                                     pscale=nb_inf[active] + xinf + sinf, dscale=nq_inf[active] + zinf,
+                                     xzinf=np.maximum(xinf, zinf))
         # stalled: the merit has not halved over the last 4 iterations (the iterates sit on a face from
         # which the Newton direction makes no progress): hand over to the fallback
         merit = np.abs(pobj - dobj) + pres + dres

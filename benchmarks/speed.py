@@ -167,7 +167,7 @@ def sdp_batch_example1(problems):
         res = tritools.triangulate_many(probs, "corollary1", 2, 2, path="sdp", executor=InlineExecutor(),
                                         progress=False)
         t = time.perf_counter() - t0
-        fb = sum(not (r.attempts and r.attempts[0][-1] == ("ipm-batch:converged",)) for r in res)
+        fb = sum(not (r.attempts and r.attempts[0].solver == ("ipm-batch:converged",)) for r in res)
         print(f"| {N} | {len(probs)} | {1000 * t / len(probs):.3f} | {sum(r.optimal for r in res)} | {fb} |")
     everything = [p for probs in problems.values() for p in probs]
     t0 = time.perf_counter()

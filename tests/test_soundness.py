@@ -35,7 +35,7 @@ from tests.reference.hartley_sturm import hartley_sturm
 from tests.reference.multistart import best_local_gamma
 from tests.reference.regions import region_and_spec as _region, region_reference
 from tritools import Status, TriangulationOptions
-from tritools.model.constraints import theorem1_constraints
+from tritools.model.constraints import corollary1_constraints, theorem1_constraints
 from tritools.model.normalize import normalization_for
 
 EPS = np.finfo(float).eps
@@ -288,8 +288,9 @@ def duplicated_scene(seed):
 def test_duplicated_views_against_hartley_sturm_on_midpoints(seed):
     """Views (P1, k P1, P2, P2) with four different points: sum ||Phi_i - x_i||^2 = 2 ||Phi_1 - m_1||^2 +
     2 ||Phi_2 - m_2||^2 + ||x_1 - x_1'||^2 / 2 + ||x_2 - x_2'||^2 / 2 (m the midpoints), so gamma*^2 =
-    (2 HS(m_1, m_2) + the constants) / 8.  Theorem 1 certifies it; Corollary 1 (no constraint between the
-    copies, the pair has no fundamental matrix) stays a valid lower bound."""
+    (2 HS(m_1, m_2) + the constants) / 8.  Theorem 1 certifies it; so does Corollary 1, whose copies (no
+    fundamental matrix) are tied by the homography constraints x~_j x (H x~_i) = 0 -- without them the pair
+    carried nothing and the bound was never tight."""
     rng, cams, X, x = duplicated_scene(seed)
     x1b, x2b = x[0] + 2.0 * rng.normal(size=2), x[1] + 2.0 * rng.normal(size=2)
     m1, m2 = (x[0] + x1b) / 2, (x[1] + x2b) / 2
@@ -301,8 +302,8 @@ def test_duplicated_views_against_hartley_sturm_on_midpoints(seed):
     assert_sound(res, g, xx, certified=True)
     assert_gap_documented(res, C, xx)
     res = tritools.triangulate(C, xx, "corollary1")
-    assert_sound(res, g, xx)
-    assert res.status in (Status.OPTIMAL, Status.NOT_CERTIFIED)
+    assert_sound(res, g, xx, certified=True)
+    assert_sound(tritools.triangulate(C, xx), g, xx, certified=True)          # the default plan
 
 
 @pytest.mark.parametrize("method", ["theorem1", "corollary1"])
@@ -323,7 +324,8 @@ def test_a_repeated_view_with_the_same_point(method):
 
 def test_camera_rotated_about_another_camera_centre():
     """Two cameras with one centre (a pure rotation and another focal length) and a third view: Theorem 1
-    certifies; Corollary 1 drops the pair (no F) and stays a lower bound."""
+    certifies; so does Corollary 1 (the pair's homography constraints instead of an epipolar one), and its
+    constraints vanish at exact projections."""
     rng = np.random.default_rng(8)
     C1, C3 = np.array([1.0, -2.0, -9.0]), np.array([8.0, 2.0, -5.0])
     R1 = look_at(C1)
@@ -335,7 +337,15 @@ def test_camera_rotated_about_another_camera_centre():
     ref = best_local_gamma(cams, x, [X, X + rng.normal(size=3)])
     res = tritools.triangulate(cams, x, "theorem1", delta=4)
     assert_sound(res, ref, x, certified=True)
-    assert_sound(tritools.triangulate(cams, x, "corollary1"), ref, x)
+    assert_sound(tritools.triangulate(cams, x, "corollary1", max_delta=4), ref, x, certified=True)
+    gens = sospoly.variables(" ".join(f"x{k}" for k in range(6)))[0].gens
+    polys, info = corollary1_constraints(cams, gens, np.arange(6))
+    assert info["homography"] == [(0, 1)] and info["skipped"] == [] and len(polys) == 3 + 2
+    for Xs in rng.uniform(-1, 1, (5, 3)):
+        v = np.concatenate([project(P, Xs) for P in cams])
+        for p in polys:
+            size = np.sum(np.abs(p.coefficients()) * np.prod(np.abs(v)[None, :] ** p.exponents(), axis=1))
+            assert abs(p(v)) <= 1e-9 * size
 
 
 @pytest.mark.parametrize("case", ["duplicated", "scaled", "rotated"])

@@ -201,9 +201,12 @@ def corollary1_constraints(cameras: np.ndarray, gens, x_index, pairs=None) -> tu
     """The epipolar constraints x~_i^T F_ij x~_j (SPEC §7) of the view pairs ``pairs`` (default all i < j),
     F_ij scaled to unit norm.
 
-    A pair whose camera centres coincide (a duplicated view) has no fundamental matrix and carries no
-    epipolar constraint: it is skipped (``info["skipped"]``; the other pairs still tie both views to the
-    point).  ``info["pairs"]`` lists the pairs kept, in the order of the returned polynomials."""
+    A pair whose camera centres coincide (a duplicated view, a rotation about the centre) has no fundamental
+    matrix: its views are related by the homography H = M_j M_i^-1 (M the left 3x3 blocks, P_j = H P_i), and
+    it carries the three bilinear constraints x~_j x (H x~_i) = 0 instead (rank 2; ``info["homography"]``).
+    Without them the pair would carry nothing and the relaxation would never be tight when the two views'
+    regions differ.  A pair with no constraint at all (centres at infinity) is ``info["skipped"]``.
+    ``info["pairs"]`` gives the pair of each returned polynomial, in order."""
     gens = tuple(gens)
     n = len(gens)
     N = cameras.shape[0]
@@ -216,12 +219,22 @@ def corollary1_constraints(cameras: np.ndarray, gens, x_index, pairs=None) -> tu
 
     one = Polynomial.constant(1.0, gens)
     xt = [[var(2 * i), var(2 * i + 1), one] for i in range(N)]
-    polys, kept, skipped = [], [], []
+    polys, kept, skipped, homography = [], [], [], []
     for i, j in pairs:
         try:
             F = fundamental_matrix(cameras[i], cameras[j])
         except ValueError:
-            skipped.append((i, j))
+            H = _pair_homography(cameras[i], cameras[j])
+            if H is None:
+                skipped.append((i, j))
+                continue
+            Hx = [sum((float(H[a, b]) * xt[i][b] for b in range(3) if H[a, b] != 0.0), Polynomial(gens, {}))
+                  for a in range(3)]
+            for a in range(3):                              # (x~_j x H x~_i)_a
+                b, c = (a + 1) % 3, (a + 2) % 3
+                polys.append(xt[j][b] * Hx[c] - xt[j][c] * Hx[b])
+                kept.append((i, j))
+            homography.append((i, j))
             continue
         F = F / np.linalg.norm(F)
         p = Polynomial(gens, {})
@@ -231,4 +244,16 @@ def corollary1_constraints(cameras: np.ndarray, gens, x_index, pairs=None) -> tu
                     p = p + float(F[a, b]) * xt[i][a] * xt[j][b]
         polys.append(p)
         kept.append((i, j))
-    return polys, {"N1": len(polys), "N2": len(polys), "pairs": kept, "skipped": skipped}
+    return polys, {"N1": len(polys), "N2": len(polys), "pairs": kept, "skipped": skipped, "homography": homography}
+
+
+def _pair_homography(Pi: np.ndarray, Pj: np.ndarray) -> np.ndarray | None:
+    """H with P_j = H P_i up to scale (unit Frobenius norm), for two cameras with the same finite centre; None
+    when the left 3x3 block of P_i is singular (centre at infinity) or P_j is not H P_i."""
+    Mi, Mj = Pi[:, :3], Pj[:, :3]
+    if np.linalg.cond(Mi) > 1e12:
+        return None
+    H = Mj @ np.linalg.inv(Mi)
+    if not np.all(np.isfinite(H)) or np.linalg.norm(H @ Pi - Pj) > 1e-8 * np.linalg.norm(Pj):
+        return None
+    return H / np.linalg.norm(H)

@@ -45,7 +45,7 @@ class Sparsity(str, enum.Enum):
     """The formulation of certificates above degree 2 (see :mod:`tritools.solve.plan`)."""
     AUTO = "auto"          #: dense where the program is small, view cliques where not
     NONE = "none"          #: the dense certificate (the paper's)
-    VIEWS = "views"        #: view cliques: chain of view triples + the dense degree-2 certificate
+    VIEWS = "views"        #: view cliques (band of view pairs; Theorem 1: chain of triples) + the dense degree 2
 
 
 class MethodChoice(str, enum.Enum):

@@ -9,7 +9,9 @@ With ``method="auto"`` (the default everywhere):
    *views* formulation (view cliques, :mod:`tritools.model.problem`): clique-wise degree-4 blocks over
    a cyclic band of view pairs (:func:`~tritools.model.problem.view_band`; Theorem 1: a chain of view
    triples) beside the dense degree-2 certificate, so it is never weaker than step 1 and its cost grows
-   linearly with N (benchmarks/manyview.py: N = 30 mixed regions in ~40 s).
+   linearly with N (benchmarks/manyview.py: N = 30 mixed regions in ~40 s); when the views step does not
+   certify and the dense Gram side is at most :data:`DENSE_FALLBACK_SIDE` (e.g. 5 views with point
+   regions, ~2 s), the dense certificate at the same degree follows (it contains the views one).
 
 With an explicit method, the degrees run from ``delta`` (default delta_min) to ``max_delta`` (default
 ``delta`` when given, else delta_min + 2) with that method; ``sparsity`` ("none" / "views") forces
@@ -25,10 +27,13 @@ from sospoly import sigma
 from ..model.constraints import THEOREM1_DENSE_MAX_VIEWS, Method
 from .options import Sparsity, TriangulationOptions
 
-__all__ = ["Step", "degree_plan", "DENSE_MAX_SIDE"]
+__all__ = ["Step", "degree_plan", "DENSE_MAX_SIDE", "DENSE_FALLBACK_SIDE"]
 
 #: ``sparsity="auto"``: dense certificates above degree 2 while the Gram side stays at most this (sigma(8, 2) = 45).
 DENSE_MAX_SIDE = 45
+#: ``sparsity="auto"``: a views step that does not certify is followed by the dense one up to this side
+#: (sigma(11, 2) = 78: 5 views with point regions, N_LMIVAR ~2400, ~2 s on one core).
+DENSE_FALLBACK_SIDE = 78
 
 
 @dataclass(frozen=True)
@@ -66,7 +71,14 @@ def degree_plan(options: TriangulationOptions, n_views: int, n_vars: int, delta_
             options.delta if options.delta is not None else delta_min + 2)
     if last < first:
         raise ValueError(f"max_delta ({last}) is below delta ({first})")
-    return [Step(method, d, _formulation(options, method, d, n_views, n_vars)) for d in range(first, last + 1, 2)]
+    steps = []
+    for d in range(first, last + 1, 2):
+        form = _formulation(options, method, d, n_views, n_vars)
+        steps.append(Step(method, d, form))
+        if form == "views" and options.sparsity == Sparsity.AUTO and sigma(n_vars, d // 2) <= DENSE_FALLBACK_SIDE \
+                and not (method == Method.THEOREM1 and n_views > THEOREM1_DENSE_MAX_VIEWS):
+            steps.append(Step(method, d, "dense"))
+    return steps
 
 
 

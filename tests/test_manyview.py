@@ -33,6 +33,20 @@ def test_view_band_is_a_cyclic_band_of_distinct_pairs():
     assert all(sum(v in p for p in band) == 6 for v in range(10))                         # every view: 6 pairs
 
 
+def test_default_plan_follows_an_uncertified_views_step_with_dense_only_where_it_is_small():
+    from tritools.model.constraints import Method
+    from tritools.solve.options import options_from
+    from tritools.solve.plan import DENSE_FALLBACK_SIDE, Step, degree_plan
+
+    opts = options_from(None)
+    assert degree_plan(opts, 5, 10, 2) == [Step(Method.COROLLARY1, 2, "dense"), Step(Method.COROLLARY1, 4, "views"),
+                                           Step(Method.COROLLARY1, 4, "dense")]      # sigma(10, 2) = 66
+    assert degree_plan(opts, 4, 8, 2)[1:] == [Step(Method.COROLLARY1, 4, "dense")]  # dense from the start
+    big = degree_plan(opts, 10, 20, 2)                                              # sigma(20, 2) = 231
+    assert [s.formulation for s in big] == ["dense", "views"] and DENSE_FALLBACK_SIDE < 231
+    assert [s.formulation for s in degree_plan(options_from(None, sparsity="views"), 5, 10, 2)] == ["dense", "views"]
+
+
 @pytest.mark.parametrize("seed", [3])
 def test_views_formulation_is_never_stronger_than_dense_and_both_are_sound(seed):
     # N = 3 mixed regions at degree 4: the views certificate (pair cliques beside the dense degree-2 block) is

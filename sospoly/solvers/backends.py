@@ -87,6 +87,11 @@ CLARABEL_RETRY_CHAIN = (
                      "static_regularization_constant": 1e-7, "max_iter": 1000}),
 )
 
+#: the retries' ``qdldl`` factorisation is used only while every PSD block has at most this side; beyond it
+#: the KKT fill-in makes one qdldl iteration take tens of seconds (one 77-sided block: 40 s, where the
+#: default faer factorisation takes 1 s), and no time limit can interrupt it, so the retries keep faer.
+QDLDL_MAX_PSD_SIDE = 40
+
 
 class ClarabelBackend:
     name = "clarabel"
@@ -131,6 +136,9 @@ class ClarabelBackend:
 
         n = problem.n_cols
         overrides = dict(overrides or {})
+        if overrides.get("direct_solve_method") == "qdldl" and \
+                max((c.size for c in problem.cones if c.kind == "psd"), default=0) > QDLDL_MAX_PSD_SIDE:
+            del overrides["direct_solve_method"]
         remaining = None if deadline is None else deadline.remaining()
         if remaining is not None:
             overrides["time_limit"] = max(remaining, 1e-3)

@@ -30,7 +30,7 @@ from sospoly import Polynomial
 from .geometry import fundamental_matrix
 
 __all__ = ["Method", "RANK_RTOL", "COEF_RTOL", "minors_matrix", "theorem1_constraints", "corollary1_constraints",
-           "triple_minor_constraints", "THEOREM1_DENSE_MAX_VIEWS", "centre_groups"]
+           "triple_minor_constraints", "THEOREM1_DENSE_MAX_VIEWS", "centre_groups", "HOMOGRAPHY_RTOL"]
 
 #: relative singular-value threshold for the numerical rank N2 of M1 (rows scaled to unit norm first).
 #: Directions below it are dropped: at an exactly feasible point their values are float
@@ -249,11 +249,24 @@ def corollary1_constraints(cameras: np.ndarray, gens, x_index, pairs=None) -> tu
 
 def _pair_homography(Pi: np.ndarray, Pj: np.ndarray) -> np.ndarray | None:
     """H with P_j = H P_i up to scale (unit Frobenius norm), for two cameras with the same finite centre; None
-    when the left 3x3 block of P_i is singular (centre at infinity) or P_j is not H P_i."""
+    when the left 3x3 block of P_i is singular (centre at infinity) or P_j is not H P_i to round-off.
+
+    The test is strict on purpose: the constraints hold only if the centres coincide, and a pair merely
+    *close* to coincident (a short baseline far from the world origin, where ``fundamental_matrix`` may
+    also give up) must not get them -- it keeps no constraint at all, which is weaker but sound.  The
+    residual H P_i - P_j = -M_j (C_j - C_i) ... is compared with the round-off of the product, ~eps
+    ||H|| ||P_i|| (``HOMOGRAPHY_RTOL``)."""
     Mi, Mj = Pi[:, :3], Pj[:, :3]
-    if np.linalg.cond(Mi) > 1e12:
+    if np.linalg.cond(Mi) > 1e8:
         return None
     H = Mj @ np.linalg.inv(Mi)
-    if not np.all(np.isfinite(H)) or np.linalg.norm(H @ Pi - Pj) > 1e-8 * np.linalg.norm(Pj):
+    if not np.all(np.isfinite(H)):
+        return None
+    if np.linalg.norm(H @ Pi - Pj) > HOMOGRAPHY_RTOL * np.linalg.norm(H) * np.linalg.norm(Pi):
         return None
     return H / np.linalg.norm(H)
+
+
+#: a pair's cameras are related by a homography (same centre) when ||H P_i - P_j|| is at most this times
+#: ||H|| ||P_i|| (round-off of the product is ~1e-16 of it; the fundamental matrix's tests are looser).
+HOMOGRAPHY_RTOL = 1e-12

@@ -36,8 +36,11 @@ __all__ = [
 ]
 
 # ----------------------------------------------------------------------------- tolerances
-#: ``Phi(X, P)`` is at infinity if ``|p3.X~| <= PROJECTION_DENOM_RTOL * ||p3|| * ||X~||``.
-PROJECTION_DENOM_RTOL = 1e-14
+#: ``Phi(X, P)`` is undefined (at infinity, or X at the camera centre) if
+#: ``|p3.X~| <= PROJECTION_DENOM_RTOL * ||p3|| * ||X~||``: the projection's relative round-off is about
+#: eps ||p3|| ||X~|| / |p3.X~|, so beyond this it would carry fewer than ~6 correct digits (a point at a
+#: shared camera centre, depth ~1e-13, used to get a round-off gamma reported as an upper bound).
+PROJECTION_DENOM_RTOL = 1e-10
 #: Two camera centres coincide (F undefined) if ``||F||_F <= SAME_CENTER_RTOL * ||P_i|| ||P_j||``
 #: (cameras divided by their largest entry first).
 SAME_CENTER_RTOL = 1e-10

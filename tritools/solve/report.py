@@ -10,7 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..model.geometry import depths as depths_of
-from ..model.geometry import depths_stack
+from ..model.geometry import depths_stack, project_homogeneous
 from ..model.regions import EllipseBorder, Point, Polytope, Segment
 from ..model.stacked import project_stack
 
@@ -28,15 +28,10 @@ def point_report(X, cameras, regions) -> PointReport:
     """gamma(X) (SPEC §1), per-view residuals and depths of ``X`` for validated cameras and regions."""
     if X is None or not np.all(np.isfinite(X)):
         return PointReport(None, None, None)
-    Xh = np.append(np.asarray(X, float), 1.0)
+    Xh = np.append(np.asarray(X, float), 1.0)[None]
     res = []
     for P, r in zip(cameras, regions):
-        h = P @ Xh
-        if not abs(h[2]) > 0:
-            res.append(np.inf)
-            continue
-        with np.errstate(over="ignore", invalid="ignore"):
-            x = h[:2] / h[2]
+        x = project_homogeneous(Xh, P)[0]                 # inf where undefined (the one rule of geometry)
         res.append(float(r.distance(x)) if np.all(np.isfinite(x)) else np.inf)
     res = np.array(res)
     gamma = float(np.sqrt(np.sum(res ** 2) / (2 * len(res)))) if np.all(np.isfinite(res)) else math.inf

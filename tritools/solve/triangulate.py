@@ -52,7 +52,7 @@ from .plan import Step, degree_plan
 from .report import point_report, solve_ball, solve_radius
 from .structures import STRUCTURE_CACHE, structure_key
 
-__all__ = ["triangulate", "MAX_FAMILY_DIM"]
+__all__ = ["triangulate", "MAX_FAMILY_DIM", "INACCURATE_RESOLVE_MAX_SECONDS"]
 
 #: kernel families of dimension up to this are searched for the best candidate.
 MAX_FAMILY_DIM = 3
@@ -86,6 +86,12 @@ def _delta_min(method: Method, n_views: int) -> int:
     """delta_min of a triangulation program: region polynomials and epipolar constraints are quadratic; Theorem
     1's minors are quadratic for two views and of degree 3-4 beyond (SPEC §3)."""
     return 2 if method == Method.COROLLARY1 or n_views == 2 else 4
+
+
+#: an "almost solved" iterate that does not certify is re-solved with the solver's full retry chain when
+#: its solve took at most this many seconds (measured: N = 30 mixed regions, delta = 2: 8 s per attempt,
+#: four more attempts all "almost solved"; N = 3: milliseconds, and the chain certifies gamma* = 0 data).
+INACCURATE_RESOLVE_MAX_SECONDS = 1.0
 
 
 class _PointSolve:
@@ -236,8 +242,10 @@ class _PointSolve:
         lb = self._solve_psatz(psatz, backend, form, tol)
         self.timings[f"solve_d{step.delta}"] = time.perf_counter() - t1
         res = self._finish(problem, step, psatz, lb, tol, label)
-        if lb.status == SolveStatus.INACCURATE and not res.optimal and not self._out_of_time():
-            # the inaccurate iterate did not certify through the rigorous bound: the full retry chain
+        if lb.status == SolveStatus.INACCURATE and not res.optimal and not self._out_of_time() and \
+                time.perf_counter() - t1 <= INACCURATE_RESOLVE_MAX_SECONDS:
+            # the inaccurate iterate did not certify through the rigorous bound: the full retry chain (only for
+            # quick programs -- on large ones the chain mostly repeats "almost solved" at 4x the cost)
             lb = self._solve_psatz(psatz, backend, form, dataclasses.replace(tol, accept_inaccurate=False))
             res = self._finish(problem, step, psatz, lb, tol, label)
             self.timings[f"solve_d{step.delta}"] = time.perf_counter() - t1
@@ -373,6 +381,10 @@ class _PointSolve:
                 if not optimal:
                     status = Status.NOT_CERTIFIED
                     msg = "the bounds met in normalised coordinates, but not at the estimate in world coordinates"
+        if optimal and (rep.gamma is None or not np.isfinite(rep.gamma)):
+            # e.g. views sharing one centre, where the extracted point is the centre itself: no upper bound
+            status, optimal = Status.NOT_CERTIFIED, False
+            msg = "the estimate's projection is undefined in some view (a point at a camera centre)"
         status, in_front = cheirality(status, rep.depths, self.opts.require_in_front)
         if optimal and not in_front:
             msg = "certified L2 optimum, but behind camera(s) " + \

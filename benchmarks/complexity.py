@@ -77,12 +77,14 @@ def main(argv=None):
                               f"minor matrix C(2N,4) = {sospoly.algebra.basis.comb(2 * N, 4)} rows: not computed |")
                         continue
                     if "formula" not in r:
-                        print(f"| {N} | {method} | {delta} | {'1 segment' if unc else 'points'} | {r['nv']} | | | | | {r['note']} |")
+                        print(f"| {N} | {method} | {delta} | {'1 segment' if unc else 'points'} | {r['nv']} "
+                              f"| | | | | {r['note']} |")
                         continue
                     if r["assembled"] is not None and r["assembled"] != r["formula"]:
                         mismatches += 1
                     print(f"| {N} | {method} | {delta} | {'1 segment' if unc else 'points'} | {r['nv']} | {r['N2']} | "
-                          f"{r['gram']} | {r['formula']} | {r['assembled'] if r['assembled'] is not None else '-'} | {r['note']} |")
+                          f"{r['gram']} | {r['formula']} | "
+                          f"{r['assembled'] if r['assembled'] is not None else '-'} | {r['note']} |")
     print(f"\nformula != assembled in {mismatches} rows")
     return mismatches
 

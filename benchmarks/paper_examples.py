@@ -58,7 +58,8 @@ def table_8_to_10(k: int) -> list[str]:
                      f"{'yes' if r.optimal else 'no'} | {r.n_lmivar} | {ct:.3f} | {fmt_x(p['X'])} | {p['gamma']:.3f} | "
                      f"{'yes' if p['optimal'] else 'no'} | {p['n_lmivar']} | {p['ct_s']} |")
         if r.X is not None and r.gamma_ub < r.gamma_ub_raw - 1e-9:
-            lines.append(f"| {method} d={delta} + local refinement | {fmt_x(r.X)} | {r.gamma_ub:.3f} | | | | | | | | | |")
+            lines.append(f"| {method} d={delta} + local refinement | {fmt_x(r.X)} | {r.gamma_ub:.3f} "
+                         f"| | | | | | | | | |")
     for name, fn in BASE:
         t = time.perf_counter()
         r = fn(cams, regions)
@@ -128,10 +129,12 @@ def example5(points: int, trials: int, seed: int, workers: int) -> list[str]:
                "nms": (0.195, 0.387, 0.553, 1.542), "pso": (3.393, 4.233, 8.844, 6.771),
                "sqp": (0.195, 0.387, 0.594, 1.932)}
     per = len(results) // len(thetas)
-    lines = [f"### Table 11 (Example 5: {points} points x {len(thetas)} theta x {trials} trials = {len(results)} cases, "
+    lines = [f"### Table 11 (Example 5: {points} points x {len(thetas)} theta x {trials} trials = "
+             f"{len(results)} cases, "
              f"{per} per theta, seed {seed}; wall {wall:.0f} s with {workers} worker(s))", "",
              "| method | non-optimal per theta " + " / ".join(f"{t:g}" for t in thetas) +
-             " | N_LMIVAR | ACT [s] | paper (of 250 per theta) | paper N_LMIVAR | paper ACT |", "|---|---|---|---|---|---|---|"]
+             " | N_LMIVAR | ACT [s] | paper (of 250 per theta) | paper N_LMIVAR | paper ACT |",
+             "|---|---|---|---|---|---|---|"]
     for n in names:
         p = paper11.get(n)
         lines.append(f"| {n} | " + " / ".join(str(nonopt[n][t]) for t in thetas) +
@@ -139,7 +142,8 @@ def example5(points: int, trials: int, seed: int, workers: int) -> list[str]:
                      (" / ".join(map(str, p[:4])) + f" | {p[4] or 'NA'} | {p[5]}" if p else "- | - | -") + " |")
     lines += ["", f"Theorem 1 (delta=4) not certified in {uncert} of {len(results)} cases.", "",
               "### Table 12 (average distance from X^ to X_obj)", "",
-              "| method | " + " | ".join(f"theta={t:g}" for t in thetas) + " | paper |", "|---|" + "---|" * len(thetas) + "---|"]
+              "| method | " + " | ".join(f"theta={t:g}" for t in thetas) + " | paper |",
+              "|---|" + "---|" * len(thetas) + "---|"]
     for n in names:
         p = paper12.get(n)
         lines.append(f"| {n} | " + " | ".join(f"{np.mean(dist[n][t]):.3f}" if dist[n][t] else "NA" for t in thetas) +

@@ -211,7 +211,8 @@ def test_pycolmap_multiview_baseline_when_installed():
         Q = K @ Rt
         # P = K [R | t] up to scale, R a rotation, K upper triangular with positive diagonal
         # parallel as vectors: |<Q, P>| = |Q| |P|
-        assert abs(abs(Q.ravel() @ P.ravel()) - np.linalg.norm(Q) * np.linalg.norm(P)) <= 1e-9 * np.linalg.norm(Q) * np.linalg.norm(P)
+        assert (abs(abs(Q.ravel() @ P.ravel()) - np.linalg.norm(Q) * np.linalg.norm(P))
+                <= 1e-9 * np.linalg.norm(Q) * np.linalg.norm(P))
         assert np.allclose(Rt[:, :3] @ Rt[:, :3].T, np.eye(3), atol=1e-10) and np.linalg.det(Rt[:, :3]) > 0
         assert np.allclose(np.tril(K, -1), 0) and np.all(np.diag(K) > 0)
     r = pycolmap_multiview(scene.cameras, scene.regions(0, noisy=False))

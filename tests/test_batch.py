@@ -102,7 +102,8 @@ def test_failed_executor_task_fails_its_items_only():
 
 
 def test_dask_local_cluster_gives_the_local_results():
-    distributed = pytest.importorskip("distributed", reason="dask.distributed not installed (pip install '.[distributed]')")
+    distributed = pytest.importorskip(
+        "distributed", reason="dask.distributed not installed (pip install '.[distributed]')")
     problems = _problems(4, n_views=2) + _problems(2, n_views=4, seed=3)
     local = tritools.triangulate_many(problems, "corollary1", 2, 2, path="sdp", progress=False)
     with distributed.LocalCluster(n_workers=1, threads_per_worker=2, processes=False, dashboard_address=None) as cl, \

@@ -303,7 +303,7 @@ def test_model_from_projections_reproduces_the_cameras():
     model0, truth = synthetic_model(n_points=6, seed=6, camera_ids=(2, 2, 2, 2, 2))
     Ps = [3.7 * projection_matrix(model0, i) for i in range(1, 6)]       # any scale
     tracks = []
-    for pid, X in truth.items():
+    for pid, _X in truth.items():
         tracks.append({iid - 1: model0.images[iid].points2D[idx][:2] for iid, idx in model0.points3D[pid].track})
     m = model_from_projections(Ps, (640, 480), tracks)
     for j, P in enumerate(Ps):

@@ -42,8 +42,10 @@ def test_two_blocks_and_equality_rows_against_clarabel():
     """max c1 + c2 s.t. A1 - c1 I >= 0, A2 - c2 I >= 0, c1 - c2 = 0.5 (a zero-cone row):
     optimum c2 = min(lambda_min(A1) - 0.5, lambda_min(A2)), c1 = c2 + 0.5."""
     rng = np.random.default_rng(5)
-    A1 = rng.standard_normal((4, 4)); A1 = A1 + A1.T
-    A2 = rng.standard_normal((3, 3)); A2 = A2 + A2.T
+    A1 = rng.standard_normal((4, 4))
+    A1 = A1 + A1.T
+    A2 = rng.standard_normal((3, 3))
+    A2 = A2 + A2.T
     L1, L2 = 10, 6
     Amat = np.zeros((1 + L1 + L2, 2))
     Amat[0] = [1.0, -1.0]
@@ -67,7 +69,8 @@ def test_trust_region_qcqp_bound_is_lambda_min_batched():
     insts = []
     lams = []
     for _ in range(12):
-        Q = rng.standard_normal((3, 3)); Q = Q + Q.T
+        Q = rng.standard_normal((3, 3))
+        Q = Q + Q.T
         f = sum(Q[i, j] * x[i] * x[j] for i in range(3) for j in range(3))
         insts.append((f, [1 - x[0] ** 2 - x[1] ** 2 - x[2] ** 2], []))
         lams.append(np.linalg.eigvalsh(Q)[0])
@@ -108,7 +111,8 @@ def test_bad_input_is_named():
     A, b, q, cones = _lmin_problem(np.eye(3)[None])
     with pytest.raises(ValueError, match="shape"):
         ipm_solve_batch(A[0], b, q, cones)
-    bad = b.copy(); bad[0, 0] = np.nan
+    bad = b.copy()
+    bad[0, 0] = np.nan
     with pytest.raises(ValueError, match="NaN"):
         ipm_solve_batch(A, bad, q, cones)
     with pytest.raises(ValueError, match="rows"):

@@ -112,7 +112,8 @@ def test_histograms_match_the_data_readme():
 
 
 def test_paper_corridor_point(corridor_point):
-    """§5.1: delta=2 gives 0.163 < 0.175 (not certified); delta=4 certifies 0.170 at (3.852, 4.721, 19.722) up to sign."""
+    """§5.1: delta=2 gives 0.163 < 0.175 (not certified); delta=4 certifies 0.170 at
+    (3.852, 4.721, 19.722) up to sign."""
     cams, pts = corridor_point          # track 513: nview-corners row 514 (1-based)
     np.testing.assert_allclose(pts, [[375.782, 130.811], [405.574, 129.657], [443.672, 125.769]], atol=1e-3)
     regions = [Point(p) for p in pts]

@@ -5,7 +5,17 @@ import numpy as np
 import pytest
 
 import sospoly as sp
-from sospoly import GramForm, Polynomial, SOSProgram, SolveStatus, build_psatz, n_lmivar_formula, sigma, solve_program, tau
+from sospoly import (
+    GramForm,
+    Polynomial,
+    SOSProgram,
+    SolveStatus,
+    build_psatz,
+    n_lmivar_formula,
+    sigma,
+    solve_program,
+    tau,
+)
 
 x, y = sp.variables("x y")
 CAMEL = 4 * x**2 - 2.1 * x**4 + x**6 / 3 + x * y - 4 * y**2 + 4 * y**4

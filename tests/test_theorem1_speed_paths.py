@@ -61,8 +61,10 @@ def test_reduction_applies_and_schur_matches_dense_formula(example4):
     ws = red.workspace(red.Fpad * e[red.Rpad])
     rng = np.random.default_rng(7)
     n = red.n
-    Z = rng.standard_normal((n, n)); Z = Z @ Z.T + n * np.eye(n)
-    R = rng.standard_normal((n, n)); R = R @ R.T + n * np.eye(n)
+    Z = rng.standard_normal((n, n))
+    Z = Z @ Z.T + n * np.eye(n)
+    R = rng.standard_normal((n, n))
+    R = R @ R.T + n * np.eye(n)
     M = red.schur(Z, R, ws)
     # dense reference: A_a = smat(E^T e_a), M_ab = tr(A_a Z A_b R) on a sample of columns
     cols = rng.choice(red.m2, 40, replace=False)
@@ -104,7 +106,8 @@ def test_not_reducible_falls_back_to_svec_kronecker_path():
     import scipy.sparse as sp
 
     rng = np.random.default_rng(1)
-    B = rng.standard_normal((5, 5)); B = B + B.T
+    B = rng.standard_normal((5, 5))
+    B = B + B.T
     A = sp.csr_matrix(svec(np.eye(5))[:, None])
     cones = (Cone("psd", 15, 5),)
     assert reduction_for(A, np.array([-1.0]), 5) is None

@@ -20,7 +20,7 @@ from tritools.model.normalize import normalization_for
 from tritools.scene import example5_cases
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _cases(seed):
     return example5_cases(seed)
 

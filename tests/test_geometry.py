@@ -241,3 +241,25 @@ def test_fundamental_matrix_same_centre():
         fundamental_matrix(np.eye(3), P)
     with pytest.raises(ValueError, match=r"cameras 0 and 1"):
         fundamental_matrices(np.array([P, H @ P, random_camera()]))
+
+
+def test_common_centre_and_points_on_its_rays():
+    """Views rotated about one centre: common_centre finds it (and nothing for distinct centres); a point of a
+    ray from it keeps its projections when moved along the ray (on_common_ray), away from the centre."""
+    from tritools.model.geometry import common_centre, on_common_ray, project
+
+    rng = np.random.default_rng(4)
+    C = np.array([1.0, -2.0, 3.0])
+    K = np.array([[800.0, 0.0, 320.0], [0.0, 800.0, 240.0], [0.0, 0.0, 1.0]])
+    Rs = [np.linalg.qr(rng.normal(size=(3, 3)))[0] for _ in range(3)]
+    cams = np.array([K @ np.c_[R, -R @ C] for R in Rs])
+    assert np.allclose(common_centre(cams), C, atol=1e-12)
+    other = cams.copy()
+    other[2] = K @ np.c_[Rs[2], -Rs[2] @ (C + [0.0, 0.0, 1e-3])]
+    assert common_centre(other) is None
+    X = C + 1e-3 * np.array([0.3, -0.2, 0.9])
+    Y = on_common_ray(X, C)
+    assert abs(np.linalg.norm(Y - C) - np.linalg.norm(C)) <= 1e-12 * np.linalg.norm(C)
+    far = C + 5.0 * np.array([0.3, -0.2, 0.9])
+    for P in cams:
+        assert np.allclose(project(Y, P), project(far, P), rtol=0, atol=1e-8)

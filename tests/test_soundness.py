@@ -348,13 +348,14 @@ def test_camera_rotated_about_another_camera_centre():
             assert abs(p(v)) <= 1e-9 * size
 
 
-@pytest.mark.parametrize("seed", [0, 10])
-def test_two_views_rotated_about_one_centre_are_never_falsely_certified(seed):
+@pytest.mark.parametrize("seed", [0, 9, 10])
+def test_two_views_rotated_about_one_centre_are_certified_at_the_true_optimum(seed):
     """The family where the independent review found a false certificate (its own camera construction): with
     every view at one centre the extracted point was the centre itself, where the projection is 0/0 and its
-    round-off 'gamma' was certified (0.57 for a true 0.60).  Now such a projection is undefined (inf), so no
-    certificate; the lower bound stays valid.  Reference: the problem over image points of view 1 mapped by
-    the homography (Nelder-Mead, many starts)."""
+    round-off 'gamma' was certified (0.57 for a true 0.60); then points slid along the ray to 6e-8 from the
+    centre, where gamma is off by 1e-6 px.  Now the point is placed on its ray at a distance (geometry.
+    on_common_ray) and the optimum is certified.  Reference: the problem over image points of view 1 mapped
+    by the homography (Nelder-Mead, many starts)."""
     from scipy.optimize import minimize
 
     rng = np.random.default_rng(seed)
@@ -377,6 +378,9 @@ def test_two_views_rotated_about_one_centre_are_never_falsely_certified(seed):
             assert res.gamma_lb <= ref * (1 + 1e-9)
         if res.optimal:
             assert abs(res.gamma_ub - ref) <= 1e-7 * ref
+        if method is None:
+            assert res.optimal, res.message                         # Corollary 1 with the pair's homography
+            assert np.min(np.abs(res.depths)) > 1e-4                # not at the centre
 
 
 @pytest.mark.parametrize("baseline", [1e-4, 1e-2])

@@ -139,6 +139,7 @@ class ClarabelBackend:
         if overrides.get("direct_solve_method") == "qdldl" and \
                 max((c.size for c in problem.cones if c.kind == "psd"), default=0) > QDLDL_MAX_PSD_SIDE:
             del overrides["direct_solve_method"]
+            label = f"{label}/faer"
         remaining = None if deadline is None else deadline.remaining()
         if remaining is not None:
             overrides["time_limit"] = max(remaining, 1e-3)

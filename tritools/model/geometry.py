@@ -188,11 +188,52 @@ def point_from_image_points(points2d, cameras) -> np.ndarray | None:
     -------
     ndarray (3,) or None
         ``None`` if ``|w4| <= POINT_AT_INFINITY_RTOL * ||w||`` (ill-posed; never divides by 0).
+
+    When every camera has one centre (views related by homographies only), that centre is in the null space
+    of ``M0`` for any image points and carries no information; the point is then taken on the ray of the
+    image points instead (:func:`_point_on_common_ray`), at a distance max(1, ||C||) from the centre C.
     """
+    cameras = np.asarray(cameras, float)
     w = _null_vector(M0(points2d, cameras))
     if abs(w[3]) <= POINT_AT_INFINITY_RTOL * np.linalg.norm(w):
         return None
-    return w[:3] / w[3]
+    C = common_centre(cameras)
+    if C is None:
+        return w[:3] / w[3]
+    X = w[:3] / w[3]
+    if _is_common_centre(w, cameras) or not np.linalg.norm(X - C) > 0:
+        return _point_on_common_ray(C, np.asarray(points2d, float).reshape(-1, 2), cameras)
+    return on_common_ray(X, C)
+
+
+def on_common_ray(X: np.ndarray, C: np.ndarray) -> np.ndarray:
+    """The point of the ray from the common centre C through X at distance max(1, ||C||) from C: every point
+    of the ray has the same projections, and near C they are round-off (1e-6 px at 6e-8 from it)."""
+    return C + max(1.0, float(np.linalg.norm(C))) * (X - C) / np.linalg.norm(X - C)
+
+
+def _is_common_centre(w: np.ndarray, cameras: np.ndarray) -> bool:
+    """Whether P_i w = 0 (to round-off, PROJECTION_DENOM_RTOL) for every camera."""
+    norms = np.linalg.norm(cameras, axis=(1, 2)) * np.linalg.norm(w)
+    return bool(np.all(np.linalg.norm(cameras @ w, axis=1) <= PROJECTION_DENOM_RTOL * norms))
+
+
+def _point_on_common_ray(C: np.ndarray, x: np.ndarray, cameras: np.ndarray) -> np.ndarray | None:
+    # (used when the SVD's point is the centre itself)
+    """C + t d with d the direction minimising sum_i ||x~_i x (M_i d)||^2 (|d| = 1, M_i = P_i[:, :3]), oriented in
+    front of the first camera, and t = max(1, ||C||): every point of that ray has the same projections."""
+    rows = []
+    for xi, P in zip(x, cameras):
+        xt = np.array([xi[0], xi[1], 1.0])
+        skew = np.array([[0.0, -xt[2], xt[1]], [xt[2], 0.0, -xt[0]], [-xt[1], xt[0], 0.0]])
+        M = P[:, :3]
+        rows.append(skew @ (M / np.linalg.norm(M)))
+    d = np.linalg.svd(np.vstack(rows))[2][-1]
+    M0_ = cameras[0][:, :3]
+    if (M0_ @ d)[2] * np.linalg.det(M0_) < 0:
+        d = -d
+    X = C + max(1.0, float(np.linalg.norm(C))) * d
+    return X if np.all(np.isfinite(X)) else None
 
 
 def _hartley_normalisation(x: np.ndarray) -> np.ndarray:
@@ -332,4 +373,22 @@ def refine_l2(X0, cameras, regions, *, xtol: float = 1e-15, ftol: float = 1e-15,
                             xtol=xtol, ftol=ftol, gtol=gtol, max_nfev=max_nfev)
     except (ValueError, np.linalg.LinAlgError):
         return None
-    return res.x if np.all(np.isfinite(res.x)) else None
+    X = res.x
+    if not np.all(np.isfinite(X)):
+        return None
+    C = common_centre(np.asarray(cameras, float))
+    if C is not None and np.linalg.norm(X - C) > 0:
+        X = on_common_ray(X, C)             # LM may slide along the ray towards the centre (on_common_ray)
+    return X
+
+
+def common_centre(cameras: np.ndarray) -> np.ndarray | None:
+    """The camera centre shared by every view (views related by homographies only), or None: P_i C~ = 0 to
+    round-off (``PROJECTION_DENOM_RTOL``) for every camera, with C~ the null vector of the first camera."""
+    cameras = np.asarray(cameras, float)
+    if cameras.ndim != 3 or len(cameras) < 2:
+        return None
+    w = _null_vector(cameras[0])
+    if abs(w[3]) <= POINT_AT_INFINITY_RTOL * np.linalg.norm(w) or not _is_common_centre(w, cameras):
+        return None
+    return w[:3] / w[3]

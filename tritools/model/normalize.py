@@ -49,13 +49,15 @@ from .geometry import POINT_AT_INFINITY_RTOL
 from .stacked import dlt_stack, null_vectors, pixel_scales, project_stack, refine_points_stack
 
 __all__ = ["Normalization", "NormalizationStack", "normalization_for", "normalization_stack", "unconstrained_reason",
-           "resolutions", "RHO_FLOOR_REL", "RESOLUTION_REL",
+           "resolutions", "RHO_FLOOR_REL", "RESOLUTION_REL", "DEPTH_FLOOR_REL",
            "SCALE_BOUNDS"]
 
 #: floor of the residual scale rho, relative to the median pixel scale (focal length) of the views.
 RHO_FLOOR_REL = 1e-5
 #: the resolution of the coordinates, relative to their magnitude (sqrt of the machine epsilon).
 RESOLUTION_REL = 1e-8
+#: floor of the world scale d, relative to max(1, |X0|) (the DLT point).
+DEPTH_FLOOR_REL = 1e-3
 #: the common image scale s is clipped to this range.
 SCALE_BOUNDS = (1e-8, 1e8)
 
@@ -171,7 +173,10 @@ def normalization_stack(C: np.ndarray, x: np.ndarray, ok: np.ndarray | None = No
     with np.errstate(over="ignore", invalid="ignore"):
         centres = a[..., :3] / np.where(affine, 1.0, a[..., 3])[..., None]
         d = np.median(np.linalg.norm(centres - X0[:, None], axis=2), axis=1)
-    d = np.where(np.isfinite(d) & (d > 0), d, 1.0)
+    # floored relative to |X0| (any d > 0 is an exact change of frame): when every view has one centre, the
+    # DLT point *is* that centre and d ~ 1e-15 would map every normalised point onto it
+    d = np.where(np.isfinite(d) & (d > 0), np.maximum(d, DEPTH_FLOOR_REL * np.maximum(1.0, np.linalg.norm(X0, axis=1))),
+                 1.0)
     # P_i' = T_i P_i H / ||.||_F with T_i = [[s, 0, -s t_i], [0, s, -s t_i'], [0, 0, 1]], H = [[d I, X0], [0, 1]]
     Xh = np.concatenate([X0, np.ones((M, 1))], axis=1)
     CH = C.copy()

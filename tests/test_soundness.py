@@ -383,6 +383,68 @@ def test_two_views_rotated_about_one_centre_are_certified_at_the_true_optimum(se
             assert np.min(np.abs(res.depths)) > 1e-4                # not at the centre
 
 
+@pytest.mark.parametrize("depth", [10.0, 100.0])
+def test_georeferenced_coordinates_are_well_defined(depth):
+    """Regression (second review): UTM-like world coordinates (|X| ~ 5e6) with the point 10-100 m from the
+    cameras were reported with undefined projections (the round-off test used ||p3|| ||X~||, not the
+    componentwise bound of the dot product) and never certified."""
+    rng = np.random.default_rng(1)
+    X = np.array([5e5, 5e6, 100.0]) + np.array([0.1, 0.2, 0.3])
+    centres = [X + depth * np.array(d) for d in ([0, 0, -1.0], [0.5, 0.1, -1.0], [-0.4, 0.3, -1.0])]
+    cams = np.array([camera(800.0, (320.0, 240.0), look_at(C, X + depth * 0.05 * rng.normal(size=3)), C)
+                     for C in centres])
+    x = np.array([project(P, X) for P in cams]) + rng.normal(size=(3, 2))
+    ref = best_local_gamma(cams, x, [X])
+    res = tritools.triangulate(cams, x)
+    assert np.isfinite(res.gamma_ub)
+    assert_sound(res, ref, x)
+    batch = tritools.triangulate_points(cams, x[None]).results()[0]
+    assert_sound(batch, ref, x, certified=True)
+
+
+@pytest.mark.parametrize("seed", [7, 10, 11])
+def test_views_sharing_one_centre_give_a_point_in_front(seed):
+    """Regression (second review): with every view at one centre the point was placed on whichever side of
+    the centre the SVD gave -- behind every camera in about half the cases (require_in_front then reported
+    behind_camera although the mirror point has the same projections and lies in front)."""
+    rng = np.random.default_rng(seed)
+    C = np.array([1.0, -2.0, 3.0])
+    X = C + np.array([0.2, -0.1, 5.0])
+    R0 = look_at(C, X)
+    cams = np.array([camera(800.0, (320.0, 240.0), R0, C)] +
+                    [camera(800.0, (320.0, 240.0), rotation(rng.normal(size=3), 0.3 * rng.uniform(0.2, 1)) @ R0, C)
+                     for _ in range(2)])
+    x = np.array([project(P, X) for P in cams]) + rng.normal(size=(3, 2))
+    res = tritools.triangulate(cams, x, require_in_front=True)
+    assert res.status == Status.OPTIMAL and res.in_front, (res.status, res.depths)
+
+
+def test_a_centre_off_by_round_off_size_gets_no_false_certificate():
+    """Regression (second review): two views rotated about C (|C| = 3e3) and a third whose centre is 3e-8 away
+    (1e-11 relative).  The normalisation magnified that baseline into a 'fundamental matrix' whose
+    constraints cut off the optimum (certified 0.73169 against an attained 0.70505).  Which views share a
+    centre is now decided on the raw cameras; such a pair keeps no constraint (a valid, weaker bound)."""
+    rng = np.random.default_rng(0)
+    Cc = 3e3 * np.array([0.6, 0.8, 0.0]) + np.array([0.0, 0.0, 1.0])
+    X = Cc + np.array([0.2, -0.1, 5.0])
+    R0 = look_at(Cc, X)
+    cams = [camera(800.0, (0.0, 0.0), R0, Cc)]
+    cams += [camera(800.0, (0.0, 0.0), rotation(rng.normal(size=3), 0.3 * rng.uniform(0.2, 1)) @ R0, Cc)
+             for _ in range(2)]
+    R2 = np.linalg.solve(np.diag([800.0, 800.0, 1.0]), cams[2][:, :3])              # its rotation
+    cams[2] = camera(800.0, (0.0, 0.0), R2, Cc + np.array([0.0, 0.0, 3e-8]))
+    cams = np.array(cams)
+    x = np.array([project(P, X) for P in cams]) + rng.normal(size=(3, 2))
+    starts = [X] + [Cc + t * v for t in np.logspace(-7, 1, 25) for v in rng.normal(size=(2, 3))]
+    ref = best_local_gamma(cams, x, starts)
+    for normalize in (True, False):
+        res = tritools.triangulate(cams, x, normalize=normalize)
+        if res.gamma_lb is not None:
+            assert res.gamma_lb <= ref * (1 + 1e-9), (normalize, res.gamma_lb, ref)
+        if res.optimal:
+            assert abs(res.gamma_ub - ref) <= 1e-6 * ref, (normalize, res.gamma_ub, ref)
+
+
 @pytest.mark.parametrize("baseline", [1e-4, 1e-2])
 def test_a_short_baseline_far_from_the_origin_gets_no_homography(baseline):
     """Regression (independent review): centres 1e-4 apart, 1e4 from the world origin, unit focal length and

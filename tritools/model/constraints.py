@@ -20,6 +20,7 @@ Both return plain :class:`sospoly.Polynomial` lists; the solver never appears he
 from __future__ import annotations
 
 import enum
+from dataclasses import dataclass
 from functools import lru_cache
 from itertools import combinations
 
@@ -30,7 +31,8 @@ from sospoly import Polynomial
 from .geometry import fundamental_matrix
 
 __all__ = ["Method", "RANK_RTOL", "COEF_RTOL", "minors_matrix", "theorem1_constraints", "corollary1_constraints",
-           "triple_minor_constraints", "THEOREM1_DENSE_MAX_VIEWS", "centre_groups", "HOMOGRAPHY_RTOL"]
+           "triple_minor_constraints", "THEOREM1_DENSE_MAX_VIEWS", "centre_groups", "HOMOGRAPHY_RTOL",
+           "CentreRelations", "centre_relations"]
 
 #: relative singular-value threshold for the numerical rank N2 of M1 (rows scaled to unit norm first).
 #: Directions below it are dropped: at an exactly feasible point their values are float
@@ -90,7 +92,7 @@ def _minor_structure(N: int):
     return arr[0], arr[1], arr[2], B1, n_minors
 
 
-def minors_matrix(cameras: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def minors_matrix(cameras: np.ndarray, groups=None) -> tuple[np.ndarray, np.ndarray]:
     """M1 and the exponent rows b1 over the 2N image variables (x_11, x_12, ..., x_N2).
 
     Returns ``(M1, B1)`` with ``m1 = M1 @ b1(x)``; B1 rows are 0/1 exponent vectors.  All
@@ -110,12 +112,31 @@ def minors_matrix(cameras: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     a, c, _ = _row_data(cameras)
     T, minor, mono, B1, n_minors = _minor_structure(cameras.shape[0])
     d = np.linalg.det(np.vstack([a, c])[T])
-    group = centre_groups(cameras)[(T % (2 * cameras.shape[0])) // 2]          # the centre of each term's rows
+    labels = centre_groups(cameras) if groups is None else np.asarray(groups)
+    group = labels[(T % (2 * cameras.shape[0])) // 2]                               # the centre of each term's rows
     d = np.where(np.all(group == group[:, :1], axis=1), 0.0, d)
     M1 = np.zeros((n_minors, B1.shape[0]))
     np.add.at(M1, (minor, mono), d)
     used = np.bincount(mono[d != 0.0], minlength=B1.shape[0]) > 0
     return M1[:, used], B1[used]
+
+
+@dataclass(frozen=True)
+class CentreRelations:
+    """Which views share a camera centre, decided once on the caller's (raw) cameras: ``groups`` one label per
+    view (:func:`centre_groups`), ``coincident`` the pairs (i < j) of one group whose cameras are related by a
+    homography to round-off (:func:`_pair_homography`): their centres really coincide."""
+    groups: np.ndarray
+    coincident: frozenset
+
+
+def centre_relations(cameras: np.ndarray) -> CentreRelations:
+    """:class:`CentreRelations` of ``cameras`` (N, 3, 4)."""
+    cameras = np.asarray(cameras, float)
+    groups = centre_groups(cameras)
+    pairs = frozenset((i, j) for i, j in combinations(range(len(cameras)), 2)
+                      if groups[i] == groups[j] and _pair_homography(cameras[i], cameras[j]) is not None)
+    return CentreRelations(groups, pairs)
 
 
 def centre_groups(cameras: np.ndarray) -> np.ndarray:
@@ -141,13 +162,14 @@ def _exponent_tuples(B1_bytes: bytes, shape: tuple, n: int, x_index: tuple) -> t
     return tuple(tuple(int(k) for k in row) for row in E)
 
 
-def theorem1_constraints(cameras: np.ndarray, gens, x_index) -> tuple[list[Polynomial], dict]:
+def theorem1_constraints(cameras: np.ndarray, gens, x_index, groups=None) -> tuple[list[Polynomial], dict]:
     """m2 of Theorem 1 as polynomials in ``gens``.
 
-    ``x_index[2i + k]`` is the position in ``gens`` of x_{i+1, k+1}.  Returns the list
-    and diagnostics (N1, N2, singular values).
+    ``x_index[2i + k]`` is the position in ``gens`` of x_{i+1, k+1}.  ``groups``: the views' centre labels
+    (:class:`CentreRelations`, decided on the caller's raw cameras; default: from ``cameras``).  Returns
+    the list and diagnostics (N1, N2, singular values).
     """
-    M1, B1 = minors_matrix(cameras)
+    M1, B1 = minors_matrix(cameras, groups)
     norms = np.linalg.norm(M1, axis=1)
     keep = norms > 0
     M1n = M1[keep] / norms[keep, None]
@@ -176,7 +198,8 @@ def theorem1_constraints(cameras: np.ndarray, gens, x_index) -> tuple[list[Polyn
 THEOREM1_DENSE_MAX_VIEWS = 8
 
 
-def triple_minor_constraints(cameras: np.ndarray, gens, x_index, triples) -> tuple[list[Polynomial], dict]:
+def triple_minor_constraints(cameras: np.ndarray, gens, x_index, triples, groups=None
+                             ) -> tuple[list[Polynomial], dict]:
     """Theorem 1's constraints restricted to view triples: for each triple (i, j, k) the 4x4 minors of the
     six rows of M0 of those views, reduced by SVD as in :func:`theorem1_constraints`.
 
@@ -189,7 +212,8 @@ def triple_minor_constraints(cameras: np.ndarray, gens, x_index, triples) -> tup
     for t in triples:
         t = tuple(int(i) for i in t)
         sub = np.concatenate([x_index[2 * i:2 * i + 2] for i in t])
-        p, info = theorem1_constraints(cameras[list(t)], gens, sub)
+        p, info = theorem1_constraints(cameras[list(t)], gens, sub,
+                                       None if groups is None else np.asarray(groups)[list(t)])
         polys += p
         views += [t] * len(p)
         n1 += info["N1"]
@@ -197,7 +221,8 @@ def triple_minor_constraints(cameras: np.ndarray, gens, x_index, triples) -> tup
     return polys, {"N1": n1, "N2": n2, "views": views}
 
 
-def corollary1_constraints(cameras: np.ndarray, gens, x_index, pairs=None) -> tuple[list[Polynomial], dict]:
+def corollary1_constraints(cameras: np.ndarray, gens, x_index, pairs=None, relations=None
+                           ) -> tuple[list[Polynomial], dict]:
     """The epipolar constraints x~_i^T F_ij x~_j (SPEC §7) of the view pairs ``pairs`` (default all i < j),
     F_ij scaled to unit norm.
 
@@ -206,7 +231,12 @@ def corollary1_constraints(cameras: np.ndarray, gens, x_index, pairs=None) -> tu
     it carries the three bilinear constraints x~_j x (H x~_i) = 0 instead (rank 2; ``info["homography"]``).
     Without them the pair would carry nothing and the relaxation would never be tight when the two views'
     regions differ.  A pair with no constraint at all (centres at infinity) is ``info["skipped"]``.
-    ``info["pairs"]`` gives the pair of each returned polynomial, in order."""
+    ``info["pairs"]`` gives the pair of each returned polynomial, in order.
+
+    ``relations`` (:func:`centre_relations` of the caller's *raw* cameras, when ``cameras`` are normalised
+    ones): which pairs share a centre is decided there, where it is exact -- a normalisation can magnify a
+    baseline of round-off size (1e-11 of |C|) into a "fundamental matrix" whose constraints cut off the
+    optimum.  Pairs with one centre by the raw test but no exact homography are skipped."""
     gens = tuple(gens)
     n = len(gens)
     N = cameras.shape[0]
@@ -222,9 +252,15 @@ def corollary1_constraints(cameras: np.ndarray, gens, x_index, pairs=None) -> tu
     polys, kept, skipped, homography = [], [], [], []
     for i, j in pairs:
         try:
+            if relations is not None and relations.groups[i] == relations.groups[j]:
+                raise ValueError("one centre (raw cameras)")
             F = fundamental_matrix(cameras[i], cameras[j])
         except ValueError:
-            H = _pair_homography(cameras[i], cameras[j])
+            if relations is None:
+                H = _pair_homography(cameras[i], cameras[j])
+            else:
+                H = _pair_homography(cameras[i], cameras[j], check=False) if (i, j) in relations.coincident \
+                    else None
             if H is None:
                 skipped.append((i, j))
                 continue
@@ -247,7 +283,7 @@ def corollary1_constraints(cameras: np.ndarray, gens, x_index, pairs=None) -> tu
     return polys, {"N1": len(polys), "N2": len(polys), "pairs": kept, "skipped": skipped, "homography": homography}
 
 
-def _pair_homography(Pi: np.ndarray, Pj: np.ndarray) -> np.ndarray | None:
+def _pair_homography(Pi: np.ndarray, Pj: np.ndarray, check: bool = True) -> np.ndarray | None:
     """H with P_j = H P_i up to scale (unit Frobenius norm), for two cameras with the same finite centre; None
     when the left 3x3 block of P_i is singular (centre at infinity) or P_j is not H P_i to round-off.
 
@@ -262,7 +298,7 @@ def _pair_homography(Pi: np.ndarray, Pj: np.ndarray) -> np.ndarray | None:
     H = Mj @ np.linalg.inv(Mi)
     if not np.all(np.isfinite(H)):
         return None
-    if np.linalg.norm(H @ Pi - Pj) > HOMOGRAPHY_RTOL * np.linalg.norm(H) * np.linalg.norm(Pi):
+    if check and np.any(np.abs(H @ Pi - Pj) > HOMOGRAPHY_RTOL * np.max(np.abs(H) @ np.abs(Pi))):
         return None
     return H / np.linalg.norm(H)
 

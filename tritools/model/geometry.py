@@ -30,17 +30,21 @@ __all__ = [
     "PointAtInfinityError", "validate_cameras", "validate_points2d", "project", "image_points",
     "camera_center", "depths", "gamma", "dlt", "fundamental_matrix", "fundamental_matrices",
     "M0", "point_from_image_points",
-    "CAMERA_RANK_RTOL", "SAME_CAMERA_RTOL", "PROJECTION_DENOM_RTOL", "POINT_AT_INFINITY_RTOL",
+    "CAMERA_RANK_RTOL", "SAME_CAMERA_RTOL", "PROJECTION_DENOM_RTOL", "POINT_AT_INFINITY_RTOL", "COMMON_CENTRE_RTOL",
     "SAME_CENTER_RTOL",
     "camera_problems", "CameraProblems", "CameraIssue", "camera_rank_ratio", "cameras_all_equal", "depths_stack",
 ]
 
 # ----------------------------------------------------------------------------- tolerances
 #: ``Phi(X, P)`` is undefined (at infinity, or X at the camera centre) if
-#: ``|p3.X~| <= PROJECTION_DENOM_RTOL * ||p3|| * ||X~||``: the projection's relative round-off is about
-#: eps ||p3|| ||X~|| / |p3.X~|, so beyond this it would carry fewer than ~6 correct digits (a point at a
-#: shared camera centre, depth ~1e-13, used to get a round-off gamma reported as an upper bound).
+#: ``|p3.X~| <= PROJECTION_DENOM_RTOL * sum_k |p3_k| |X~_k|``: that sum bounds the round-off of the dot
+#: product (times eps), so beyond this the projection would carry fewer than ~6 correct digits (a point at
+#: a shared camera centre, depth ~1e-13, used to get a round-off gamma reported as an upper bound).  The
+#: componentwise sum, not ||p3|| ||X~||: georeferenced scenes (|X| ~ 5e6, depth 10) are well defined.
 PROJECTION_DENOM_RTOL = 1e-10
+#: every view shares one centre C (:func:`common_centre`) if ``|P_i C~| <= COMMON_CENTRE_RTOL sum |P_i| |C~|``
+#: for every camera: round-off only (the pairwise homography test has the same tolerance).
+COMMON_CENTRE_RTOL = 1e-12
 #: Two camera centres coincide (F undefined) if ``||F||_F <= SAME_CENTER_RTOL * ||P_i|| ||P_j||``
 #: (cameras divided by their largest entry first).
 SAME_CENTER_RTOL = 1e-10
@@ -73,7 +77,7 @@ def project_homogeneous(Xh: np.ndarray, P: np.ndarray) -> np.ndarray:
     Ps = P / power2_scale(P, (0, 1))
     h = Xs @ Ps.T
     den = h[:, 2]
-    tiny = np.abs(den) <= PROJECTION_DENOM_RTOL * np.linalg.norm(Ps[2]) * np.linalg.norm(Xs, axis=1)
+    tiny = np.abs(den) <= PROJECTION_DENOM_RTOL * (np.abs(Xs) @ np.abs(Ps[2]))
     safe = np.where(tiny, 1.0, den)
     with np.errstate(over="ignore"):
         out = h[:, :2] / safe[:, None]
@@ -203,19 +207,26 @@ def point_from_image_points(points2d, cameras) -> np.ndarray | None:
     X = w[:3] / w[3]
     if _is_common_centre(w, cameras) or not np.linalg.norm(X - C) > 0:
         return _point_on_common_ray(C, np.asarray(points2d, float).reshape(-1, 2), cameras)
-    return on_common_ray(X, C)
+    return on_common_ray(X, C, cameras)
 
 
-def on_common_ray(X: np.ndarray, C: np.ndarray) -> np.ndarray:
-    """The point of the ray from the common centre C through X at distance max(1, ||C||) from C: every point
-    of the ray has the same projections, and near C they are round-off (1e-6 px at 6e-8 from it)."""
-    return C + max(1.0, float(np.linalg.norm(C))) * (X - C) / np.linalg.norm(X - C)
+def on_common_ray(X: np.ndarray, C: np.ndarray, cameras: np.ndarray | None = None) -> np.ndarray:
+    """The point of the line through the common centre C and X at distance max(1, ||C||) from C: every point
+    of the line has the same projections (C + t d and C - t d too), and near C they are round-off (1e-6 px
+    at 6e-8 from it).  With ``cameras``, the side in front of most of them (the first camera breaks ties)."""
+    d = (X - C) / np.linalg.norm(X - C)
+    Y = C + max(1.0, float(np.linalg.norm(C))) * d
+    if cameras is not None:
+        s = np.sign(depths(Y, cameras))
+        if np.sum(s) < 0 or (np.sum(s) == 0 and s[0] < 0):
+            Y = C - max(1.0, float(np.linalg.norm(C))) * d
+    return Y
 
 
 def _is_common_centre(w: np.ndarray, cameras: np.ndarray) -> bool:
-    """Whether P_i w = 0 (to round-off, PROJECTION_DENOM_RTOL) for every camera."""
-    norms = np.linalg.norm(cameras, axis=(1, 2)) * np.linalg.norm(w)
-    return bool(np.all(np.linalg.norm(cameras @ w, axis=1) <= PROJECTION_DENOM_RTOL * norms))
+    """Whether P_i w = 0 to round-off (``COMMON_CENTRE_RTOL``, componentwise) for every camera."""
+    scale = np.abs(cameras) @ np.abs(w)                       # (N, 3): bounds of each row's round-off / eps
+    return bool(np.all(np.abs(cameras @ w) <= COMMON_CENTRE_RTOL * np.max(scale, axis=1, keepdims=True)))
 
 
 def _point_on_common_ray(C: np.ndarray, x: np.ndarray, cameras: np.ndarray) -> np.ndarray | None:
@@ -378,13 +389,13 @@ def refine_l2(X0, cameras, regions, *, xtol: float = 1e-15, ftol: float = 1e-15,
         return None
     C = common_centre(np.asarray(cameras, float))
     if C is not None and np.linalg.norm(X - C) > 0:
-        X = on_common_ray(X, C)             # LM may slide along the ray towards the centre (on_common_ray)
+        X = on_common_ray(X, C, np.asarray(cameras, float))    # LM may slide along the ray towards the centre
     return X
 
 
 def common_centre(cameras: np.ndarray) -> np.ndarray | None:
     """The camera centre shared by every view (views related by homographies only), or None: P_i C~ = 0 to
-    round-off (``PROJECTION_DENOM_RTOL``) for every camera, with C~ the null vector of the first camera."""
+    round-off (``COMMON_CENTRE_RTOL``) for every camera, with C~ the null vector of the first camera."""
     cameras = np.asarray(cameras, float)
     if cameras.ndim != 3 or len(cameras) < 2:
         return None

@@ -45,7 +45,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .cameras import power2_scale
-from .geometry import POINT_AT_INFINITY_RTOL
+from .geometry import COMMON_CENTRE_RTOL, POINT_AT_INFINITY_RTOL, point_from_image_points
 from .stacked import dlt_stack, null_vectors, pixel_scales, project_stack, refine_points_stack
 
 __all__ = ["Normalization", "NormalizationStack", "normalization_for", "normalization_stack", "unconstrained_reason",
@@ -172,6 +172,8 @@ def normalization_stack(C: np.ndarray, x: np.ndarray, ok: np.ndarray | None = No
     ok &= ~np.any(affine, axis=1)
     with np.errstate(over="ignore", invalid="ignore"):
         centres = a[..., :3] / np.where(affine, 1.0, a[..., 3])[..., None]
+    X0 = _off_a_common_centre(C, x, a, X0, ok)
+    with np.errstate(over="ignore", invalid="ignore"):
         d = np.median(np.linalg.norm(centres - X0[:, None], axis=2), axis=1)
     # floored relative to |X0| (any d > 0 is an exact change of frame): when every view has one centre, the
     # DLT point *is* that centre and d ~ 1e-15 would map every normalised point onto it
@@ -200,6 +202,27 @@ def normalization_stack(C: np.ndarray, x: np.ndarray, ok: np.ndarray | None = No
     Cn /= np.linalg.norm(Cn, axis=(2, 3))[..., None, None]
     return NormalizationStack(s_new, x.copy(), X0, d, Cn, np.where(use[:, None], Xn, 0.0), ok,
                               resolutions(s_new, x))
+
+
+def _off_a_common_centre(C: np.ndarray, x: np.ndarray, a: np.ndarray, X0: np.ndarray, ok: np.ndarray) -> np.ndarray:
+    """X0 with the problems whose views all share one centre (a: the cameras' null vectors) moved off it: there
+    the DLT point *is* the centre, which makes the normalised frame degenerate (the frame's origin at the
+    centre leaves the normalised cameras' last column at round-off).  They get the point of the common ray
+    of the observations (:func:`tritools.model.geometry.point_from_image_points`) instead."""
+    if C.shape[1] < 2:
+        return X0
+    scale = np.einsum("mnij,mj->mni", np.abs(C), np.abs(a[:, 0]))
+    resid = np.abs(np.einsum("mnij,mj->mni", C, a[:, 0]))
+    with np.errstate(invalid="ignore"):
+        shared = ok & np.all(resid <= COMMON_CENTRE_RTOL * np.max(scale, axis=2, keepdims=True), axis=(1, 2))
+    if not np.any(shared):
+        return X0
+    X0 = X0.copy()
+    for m in np.nonzero(shared)[0]:
+        X = point_from_image_points(x[m], C[m])
+        if X is not None:
+            X0[m] = X
+    return X0
 
 
 def normalization_for(cameras: np.ndarray, regions, enabled: bool = True) -> Normalization:

@@ -84,8 +84,10 @@ def view_chain(n_views: int, width: int = 3) -> tuple:
 
 
 def build_problem(cameras: np.ndarray, regions, method: Method = Method.THEOREM1,
-                  formulation: str = "dense") -> TriangulationProblem:
-    """Assemble (f, g, h) for validated cameras (N, 3, 4) and regions (SPEC §2 table)."""
+                  formulation: str = "dense", relations=None) -> TriangulationProblem:
+    """Assemble (f, g, h) for validated cameras (N, 3, 4) and regions (SPEC §2 table).  ``relations``: which
+    views share a centre (:func:`~tritools.model.constraints.centre_relations` of the raw cameras when
+    ``cameras`` are normalised ones; default: decided on ``cameras``)."""
     method = Method(method)
     if formulation not in FORMULATIONS:
         raise ValueError(f"formulation must be one of {FORMULATIONS}, got {formulation!r}")
@@ -114,13 +116,14 @@ def build_problem(cameras: np.ndarray, regions, method: Method = Method.THEOREM1
         if N > THEOREM1_DENSE_MAX_VIEWS:
             raise ValueError(f"Theorem 1 with all minors is built for at most {THEOREM1_DENSE_MAX_VIEWS} views "
                              f"(C(2N, 4) = {_comb4(2 * N)} minors for N = {N}); use the 'views' formulation")
-        proj, info = theorem1_constraints(cameras, gens, x_index)
+        proj, info = theorem1_constraints(cameras, gens, x_index, None if relations is None else relations.groups)
         proj_views = [tuple(range(N))] * len(proj)
     else:
-        proj, info = corollary1_constraints(cameras, gens, x_index)
+        proj, info = corollary1_constraints(cameras, gens, x_index, relations=relations)
         proj_views = list(info["pairs"])
         if method == Method.THEOREM1:
-            minors, tinfo = triple_minor_constraints(cameras, gens, x_index, view_chain(N))
+            minors, tinfo = triple_minor_constraints(cameras, gens, x_index, view_chain(N),
+                                                     None if relations is None else relations.groups)
             proj, proj_views = proj + minors, proj_views + tinfo["views"]
             info = {**info, "N1": info["N1"] + tinfo["N1"], "N2": info["N2"] + tinfo["N2"], "triples": view_chain(N)}
     return TriangulationProblem(gens, x_index, f.with_gens(gens), tuple(eq) + tuple(proj), tuple(ineq), N,

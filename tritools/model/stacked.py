@@ -78,8 +78,7 @@ def project_stack(C: np.ndarray, X: np.ndarray) -> tuple[np.ndarray, np.ndarray,
     Xh = np.concatenate([X, np.ones((len(X), 1))], axis=1)
     h = np.einsum("mnij,mj->mni", C, Xh)
     den = h[..., 2]
-    tiny = np.abs(den) <= PROJECTION_DENOM_RTOL * np.linalg.norm(C[:, :, 2, :], axis=2) * \
-        np.linalg.norm(Xh, axis=1)[:, None]
+    tiny = np.abs(den) <= PROJECTION_DENOM_RTOL * np.einsum("mnj,mj->mn", np.abs(C[:, :, 2, :]), np.abs(Xh))
     with np.errstate(over="ignore", invalid="ignore"):
         x = h[..., :2] / np.where(tiny, 1.0, den)[..., None]
     ok = ~np.any(tiny, axis=1) & np.all(np.isfinite(x), axis=(1, 2))

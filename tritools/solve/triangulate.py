@@ -38,7 +38,7 @@ from sospoly.analysis.rigor import rigorous_psatz_bound
 from sospoly.analysis.verify import verify_quadratic
 from sospoly.budget import Deadline
 
-from ..model.constraints import Method
+from ..model.constraints import Method, centre_relations
 from ..model.geometry import (dlt, gamma as gamma_of, gamma_validated, point_from_image_points, project, refine_l2,
                               validate_cameras)
 from ..model.normalize import Normalization, normalization_for, unconstrained_reason
@@ -109,13 +109,16 @@ class _PointSolve:
         self.regs_n = self.norm.regions(regions)
         self.timings["normalise"] = time.perf_counter() - t
         self._problems: dict = {}
+        self._relations = None
 
     # ------------------------------------------------------------------ problems
     def problem(self, method: Method, formulation: str) -> TriangulationProblem:
         key = (method, formulation)
         if key not in self._problems:
             t = time.perf_counter()
-            self._problems[key] = build_problem(self.cams_n, self.regs_n, method, formulation)
+            if self._relations is None:
+                self._relations = centre_relations(self.cams)        # decided on the raw cameras
+            self._problems[key] = build_problem(self.cams_n, self.regs_n, method, formulation, self._relations)
             self.timings["build"] = self.timings.get("build", 0.0) + time.perf_counter() - t
         return self._problems[key]
 

@@ -104,6 +104,8 @@ def verify_points(cameras, points2d, *, tolerances: Tolerances = DEFAULT_TOLERAN
     ok &= fin
     v = np.where(ok[:, None], u.reshape(M, -1), 0.0)
     F, defined = fundamental_stack(Cn)
+    raw = fundamental_stack(C)[1]       # one centre or not: decided on the raw cameras (CentreRelations' rule)
+    F, defined = np.where(raw[..., None, None], F, 0.0), defined & raw
     ok &= np.any(defined, axis=1) if F.shape[1] else ok
     g0, g1, G2 = epipolar_quadratics(F, N)
     finite = np.isfinite(g0).all(axis=1) & np.isfinite(g1).all(axis=(1, 2)) & np.isfinite(G2.vals).all(axis=1)

@@ -90,6 +90,7 @@ def solve_corollary1_points(cameras, points2d, *, tolerances: Tolerances = DEFAU
     norm = normalization_stack(C, x, ok)
     Cn = norm.cameras_n
     F, defined = fundamental_stack(Cn)
+    defined &= fundamental_stack(C)[1]          # one centre or not: decided on the raw cameras
     good = norm.ok & np.all(defined, axis=1) & np.all(np.isfinite(F), axis=(1, 2, 3))
     for m in np.nonzero(ok & ~good)[0]:
         reason[m] = "normalisation or epipolar data undefined (e.g. coincident camera centres)"

@@ -419,6 +419,24 @@ def test_views_sharing_one_centre_give_a_point_in_front(seed):
     assert res.status == Status.OPTIMAL and res.in_front, (res.status, res.depths)
 
 
+def test_theorem1_with_every_view_at_one_centre_keeps_the_homographies():
+    """Third review: Theorem 1's minors vanish when every view has one centre, and it reported ill_posed where
+    Corollary 1 (homography constraints) certifies; the dense Theorem 1 problem now carries the coincident
+    pairs' homographies too: a valid bound, never above the reference."""
+    rng = np.random.default_rng(3)
+    C = np.array([1.0, -2.0, 3.0])
+    X = C + np.array([0.2, -0.1, 5.0])
+    R0 = look_at(C, X)
+    cams = np.array([camera(800.0, (320.0, 240.0), R0, C)] +
+                    [camera(800.0, (320.0, 240.0), rotation(rng.normal(size=3), 0.2) @ R0, C) for _ in range(2)])
+    x = np.array([project(P, X) for P in cams]) + rng.normal(size=(3, 2))
+    ref = best_local_gamma(cams, x, [X, X + 0.3 * rng.normal(size=3)])
+    res = tritools.triangulate(cams, x, "theorem1")
+    assert res.status != Status.ILL_POSED and res.gamma_lb is not None
+    assert_sound(res, ref, x)
+    assert_sound(tritools.triangulate(cams, x), ref, x, certified=True)
+
+
 def test_a_centre_off_by_round_off_size_gets_no_false_certificate():
     """Regression (second review): two views rotated about C (|C| = 3e3) and a third whose centre is 3e-8 away
     (1e-11 relative).  The normalisation magnified that baseline into a 'fundamental matrix' whose

@@ -28,8 +28,8 @@ import numpy as np
 
 from sospoly import Polynomial, variables
 
-from .constraints import (THEOREM1_DENSE_MAX_VIEWS, Method, corollary1_constraints, theorem1_constraints,
-                          triple_minor_constraints)
+from .constraints import (THEOREM1_DENSE_MAX_VIEWS, Method, centre_relations, corollary1_constraints,
+                          theorem1_constraints, triple_minor_constraints)
 
 __all__ = ["TriangulationProblem", "build_problem", "view_chain", "view_band", "FORMULATIONS"]
 
@@ -116,8 +116,14 @@ def build_problem(cameras: np.ndarray, regions, method: Method = Method.THEOREM1
         if N > THEOREM1_DENSE_MAX_VIEWS:
             raise ValueError(f"Theorem 1 with all minors is built for at most {THEOREM1_DENSE_MAX_VIEWS} views "
                              f"(C(2N, 4) = {_comb4(2 * N)} minors for N = {N}); use the 'views' formulation")
-        proj, info = theorem1_constraints(cameras, gens, x_index, None if relations is None else relations.groups)
+        rel = centre_relations(cameras) if relations is None else relations
+        proj, info = theorem1_constraints(cameras, gens, x_index, rel.groups)
         proj_views = [tuple(range(N))] * len(proj)
+        if rel.coincident:          # views with one centre: their minors vanish; the pair's homography instead
+            hom, hinfo = corollary1_constraints(cameras, gens, x_index, sorted(rel.coincident), relations=rel)
+            proj, proj_views = proj + hom, proj_views + list(hinfo["pairs"])
+            info = {**info, "N1": info["N1"] + hinfo["N1"], "N2": info["N2"] + hinfo["N2"],
+                    "homography": hinfo["homography"]}
     else:
         proj, info = corollary1_constraints(cameras, gens, x_index, relations=relations)
         proj_views = list(info["pairs"])

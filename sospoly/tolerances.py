@@ -169,6 +169,15 @@ class Tolerances:
             out = np.isfinite(up) & ~np.isnan(lo) & (up - lo <= self.gap_tolerance(up, scale))
         return _maybe_scalar(out)
 
+    def certified_relatively(self, lower, upper):
+        """Does the gap pass through the relative part of the rule alone (``upper - lower <= gap_rel |upper|``)?
+        Where it passes only through ``gap_abs`` (upper ~ 0), a caller may ask for more (tritools: the
+        coordinates' resolution).  Scalars give a bool, arrays an elementwise boolean array."""
+        lo, up = np.asarray(lower, float), np.asarray(upper, float)
+        with np.errstate(invalid="ignore"):
+            out = up - lo <= self.gap_rel * np.abs(up)
+        return _maybe_scalar(out)
+
     def contradicts(self, lower, upper, scale=1.0):
         """Is ``lower`` above ``upper`` by more than the tolerance (a numerical failure)?"""
         if lower is None or upper is None:

@@ -21,12 +21,13 @@ gamma* by two orders of magnitude; the unknowns are then ~1e-2 at the optimum, t
 q = (1 + ||v||^2)^(delta/2 - 1) is ~1 there and the delta = 4 relaxation loses most of its strength
 (measured on Example 5).
 
-The resolution: the certificate rule compares c_LB and c_UB with a tolerance that has an absolute part
-(``gap_abs``, for gamma* = 0: the solver's error in c is absolute) and a relative one.  In pixels the
-absolute part allows a gap of ~sqrt(gap_abs / 2N) / s, small whenever s is the scale of the residuals --
-but not when s could not be estimated (clipped to ``SCALE_BOUNDS``: points 1e10 px off-axis of
+The resolution: the certificate rule (``sospoly.Tolerances.certified``) compares c_LB and c_UB with a
+tolerance that has an absolute part (for gamma* = 0: the solver's error in c is absolute) and a relative
+one.  In pixels the absolute part allows a gap of ~sqrt(tol / 2N) / s, small whenever s is the scale of
+the residuals -- but not when s could not be estimated (clipped to ``SCALE_BOUNDS``: points 1e10 px off-axis of
 unit-focal cameras gave c ~ 1e-10 for a 460 px residual, "certified" against gamma_LB = 0).  So a gap
-that passes only through the absolute part must also be at most ``resolution`` in gamma:
+that passes only through the absolute part (not ``Tolerances.certified_relatively``) must also be at most
+``resolution`` in gamma:
 ``RESOLUTION_REL`` max(1, median |x|) pixels (sqrt(eps) of the coordinates' magnitude, the resolution of
 a least-squares optimum in floating point), stored in normalised units (times s).
 

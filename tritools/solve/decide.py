@@ -34,7 +34,7 @@ def decide(c_lower, c_upper, tolerances, n_views=None, resolution=None):
     if resolution is not None and n_views is not None:
         lo, up = np.asarray(c_lower, float), np.asarray(c_upper, float)
         with np.errstate(invalid="ignore"):
-            relative = up - lo <= tolerances.gap_rel * np.abs(up)
+            relative = np.asarray(tolerances.certified_relatively(lo, up), bool)
             n2 = 2 * np.asarray(n_views, float)
             gap = np.sqrt(np.maximum(up, 0.0) / n2) - np.sqrt(np.maximum(lo, 0.0) / n2)
             certified = certified & (relative | (gap <= np.asarray(resolution, float)))

@@ -25,7 +25,7 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
-from .model.geometry import image_points as _image_points
+from .model.geometry import image_points
 from .model.geometry import validate_cameras
 from .model.regions import Ellipse, EllipseBorder, Point, Polytope, Region, Segment, as_regions
 from .result import Status, TriangulationResult
@@ -230,7 +230,7 @@ def figure3(cameras, regions, result: TriangulationResult, ax=None, title: str |
     N = len(C)
     proj = None
     if result.X is not None and np.all(np.isfinite(result.X)):
-        proj = _image_points(result.X, C)
+        proj = image_points(result.X, C)
     view_handles = []
     extent_pts = [r.center for r in R]
     for i, region in enumerate(R):

@@ -13,6 +13,7 @@ import sys
 import numpy as np
 import pytest
 
+from tests.cli_util import run, write
 from tritools.cli import app as cli
 from tritools.model.geometry import image_points
 from tritools.io.problem_file import (ProblemFileError, parse_problem_text, parse_problems, problem_to_dict,
@@ -26,16 +27,8 @@ PAPER_ATOL = 5e-4 + 1e-9
 ZERO_GAMMA_ATOL = 1e-5
 
 
-def run(argv, capsys):
-    rc = cli.main([str(a) for a in argv])
-    out, err = capsys.readouterr()
-    return rc, out, err
 
 
-def write(tmp_path, doc, name="problems.json"):
-    p = tmp_path / name
-    p.write_text(doc if isinstance(doc, str) else json.dumps(doc))
-    return p
 
 
 def example4_doc(name="ex4", **overrides):

@@ -18,6 +18,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import tritools
+from tests.cli_util import run, write
 from tritools.cli import app as cli
 from tritools.io.problem_file import ProblemFileError, parse_problem_text
 from tritools.model.regions import Point
@@ -41,19 +42,8 @@ def cheap_doc(**fields):
     return {"name": "cheap", "cameras": CAMS.tolist(), "regions": exact_points().tolist(), **fields}
 
 
-def run(argv, capsys):
-    rc = cli.main([str(a) for a in argv])
-    out, err = capsys.readouterr()
-    return rc, out, err
 
 
-def write(tmp_path, doc, name="problems.json"):
-    p = tmp_path / name
-    if isinstance(doc, bytes):
-        p.write_bytes(doc)
-    else:
-        p.write_text(doc if isinstance(doc, str) else json.dumps(doc))
-    return p
 
 
 def assert_one_line_error(rc, out, err, *needles):

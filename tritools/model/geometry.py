@@ -184,7 +184,7 @@ def _null_vector(A: np.ndarray) -> np.ndarray:
     return np.linalg.svd(A)[2][-1]
 
 
-def point_from_image_points(points2d, cameras) -> np.ndarray | None:
+def point_from_image_points(points2d, cameras, *, centre=...) -> np.ndarray | None:
     """Scene point from image points via the SVD of ``M0`` (SPEC §6, paper eq. (53)):
     ``w`` = last right singular vector of ``M0(v*)``, ``X^ = w[:3] / w[3]``.
 
@@ -196,12 +196,14 @@ def point_from_image_points(points2d, cameras) -> np.ndarray | None:
     When every camera has one centre (views related by homographies only), that centre is in the null space
     of ``M0`` for any image points and carries no information; the point is then taken on the ray of the
     image points instead (:func:`_point_on_common_ray`), at a distance max(1, ||C||) from the centre C.
+    ``centre``: :func:`common_centre` of ``cameras`` when the caller already has it (None: there is none),
+    for loops over many image points of one problem; found here by default.
     """
     cameras = np.asarray(cameras, float)
     w = _null_vector(M0(points2d, cameras))
     if abs(w[3]) <= POINT_AT_INFINITY_RTOL * np.linalg.norm(w):
         return None
-    C = common_centre(cameras)
+    C = common_centre(cameras) if centre is ... else centre
     if C is None:
         return w[:3] / w[3]
     X = w[:3] / w[3]

@@ -39,8 +39,8 @@ from sospoly.analysis.verify import verify_quadratic
 from sospoly.budget import Deadline
 
 from ..model.constraints import Method, centre_relations
-from ..model.geometry import (dlt, gamma as gamma_of, gamma_validated, point_from_image_points, project, refine_l2,
-                              validate_cameras)
+from ..model.geometry import (common_centre, dlt, gamma as gamma_of, gamma_validated, point_from_image_points,
+                              project, refine_l2, validate_cameras)
 from ..model.normalize import Normalization, normalization_for, unconstrained_reason
 from ..model.problem import TriangulationProblem, build_problem, view_band, view_chain
 from ..model.regions import Point, as_regions
@@ -245,8 +245,8 @@ class _PointSolve:
         lb = self._solve_psatz(psatz, backend, form, tol)
         self.timings[f"solve_d{step.delta}"] = time.perf_counter() - t1
         res = self._finish(problem, step, psatz, lb, tol, label)
-        if lb.status == SolveStatus.INACCURATE and not res.optimal and not self._out_of_time() and \
-                time.perf_counter() - t1 <= INACCURATE_RESOLVE_MAX_SECONDS:
+        if lb.status == SolveStatus.INACCURATE and not res.optimal and not self.deadline.expired and \
+                self.timings[f"solve_d{step.delta}"] <= INACCURATE_RESOLVE_MAX_SECONDS:
             # the inaccurate iterate did not certify through the rigorous bound: the full retry chain (only for
             # quick programs -- on large ones the chain mostly repeats "almost solved" at 4x the cost)
             lb = self._solve_psatz(psatz, backend, form, dataclasses.replace(tol, accept_inaccurate=False))
@@ -259,9 +259,6 @@ class _PointSolve:
 
     def _solve_psatz(self, psatz, backend, form, tol):
         return sospoly.solve_psatz(psatz, backend=backend, form=form, tolerances=tol, deadline=self.deadline)
-
-    def _out_of_time(self) -> bool:
-        return self.deadline.expired
 
     def _shape(self, problem: TriangulationProblem, step: Step):
         """The certificate shape: dense, or view cliques beside the dense degree-2 certificate -- a cyclic band of
@@ -348,9 +345,11 @@ class _PointSolve:
         kernel vectors of the optimal Gram matrix, the moment matrices' (clique moments for sparse
         certificates), and -- when a dense kernel has dimension > 1 -- the member of the kernel's affine family
         v(t) with the smallest gamma(X^(v(t))) (every member is a legitimate v* of the paper's (51))."""
+        centre = common_centre(self.cams_n)                 # once for every candidate below
+
         def evaluate(v):
             xn = problem.image_points(v)
-            Xn = point_from_image_points(xn, self.cams_n)
+            Xn = point_from_image_points(xn, self.cams_n, centre=centre)
             if Xn is None:
                 return None
             g = gamma_validated(np.asarray(Xn, float)[None], self.cams_n, self.regs_n)[0]

@@ -75,9 +75,10 @@ def test_existing_output_is_replaced_only_when_complete(binary_in, tmp_path, mon
     assert sorted(os.listdir(out)) == ["cameras.txt"] and (out / "cameras.txt").read_text() == "precious\n"
     assert sorted(os.listdir(tmp_path)) == ["in", "out"]         # no temporary directory left behind
     monkeypatch.undo()
-    assert main(["colmap", str(binary_in), str(out)]) == 0      # now it is replaced as a whole
+    assert main(["colmap", str(binary_in), str(out)]) == 0      # now the model's files are written, nothing deleted
     assert sorted(os.listdir(out)) == sorted(["cameras.bin", "images.bin", "points3D.bin", CERTIFICATES_FILE,
-                                              "rigs.bin"])
+                                              "rigs.bin", "cameras.txt"])
+    assert (out / "cameras.txt").read_text() == "precious\n" and "kept as they were" in capsys.readouterr().out
 
 
 def test_exports_are_not_left_half_written(binary_in, tmp_path, monkeypatch, capsys):

@@ -28,6 +28,7 @@ import numpy as np
 from .model.geometry import image_points
 from .model.geometry import validate_cameras
 from .model.regions import Ellipse, EllipseBorder, Point, Polytope, Region, Segment, as_regions
+from .io.atomic import atomic_path
 from .result import Status, TriangulationResult
 
 __all__ = ["figure3", "draw_region", "require_matplotlib", "dataset_summary", "save_figure3_examples", "view_color",
@@ -315,7 +316,8 @@ def save_figure3_examples(out_dir, examples: Sequence[int] = (2, 3, 4), *, metho
             res = triangulate(cams, regions, method, delta=delta)
         fig = figure3(cams, regions, res, title=f"Figure 3 ({'abc'[k - 2]}): Example {k}")
         path = out / f"figure3_example{k}.png"
-        fig.savefig(path, dpi=dpi)
+        with atomic_path(path) as tmp:
+            fig.savefig(tmp, dpi=dpi)
         paths.append(path)
     return paths
 

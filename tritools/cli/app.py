@@ -33,6 +33,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from ..model.constraints import Method
+from ..io.atomic import atomic_open
 from ..io.problem_file import (ProblemFileError, ProblemSpec, jsonable, load_problem_file, parse_problem_bytes,
                                parse_problem_text, result_to_dict)
 from ..result import Status, TriangulationResult
@@ -154,7 +155,7 @@ def _emit(text: str, output: str | None) -> None:
         print(text)
         return
     try:
-        with open(output, "w", encoding="utf-8") as fh:
+        with atomic_open(output, "w", encoding="utf-8") as fh:
             fh.write(text + "\n")
     except OSError as exc:
         raise CLIError(f"cannot write {output}: {exc.strerror or exc}") from None
@@ -406,7 +407,7 @@ DATASET_CSV_COLUMNS = ("sequence", "track_id", "views", "N", "status", "X1", "X2
 
 def _write_dataset_csv(path, name, tracks, results, times) -> None:
     try:
-        with open(path, "w", newline="", encoding="utf-8") as fh:
+        with atomic_open(path, "w", newline="", encoding="utf-8") as fh:
             w = csv.writer(fh)
             w.writerow(DATASET_CSV_COLUMNS)
             for tr, r, (t, source) in zip(tracks, results, times):

@@ -3,8 +3,8 @@
 * ``colmap IN_DIR OUT_DIR``: read the COLMAP model in IN_DIR (binary ``*.bin`` or text ``*.txt``,
   detected), re-triangulate every 3D point with a certificate of global optimality, write the model
   (same format unless ``--output-type``), ``points3D_certificates.txt`` and copies of
-  ``rigs``/``frames`` files to OUT_DIR -- all into a temporary directory that replaces OUT_DIR
-  only once everything was written -- and print a summary (or JSON).
+  ``rigs``/``frames`` files to OUT_DIR -- staged, then each file renamed over its namesake once
+  everything was written; nothing else in OUT_DIR is touched -- and print a summary (or JSON).
 * ``colmap-from-oxford NAME OUT_DIR``: convert an Oxford VGG sequence to a COLMAP model.
 
 Exit codes: 0 success (whatever the points' statuses), 2 bad input, bad option or unusable output
@@ -32,16 +32,16 @@ def register(subparsers) -> None:
         "colmap", help="certified re-triangulation of a COLMAP model (binary or text)",
         description="Read the COLMAP model in IN_DIR (cameras/images/points3D as .bin or .txt), re-triangulate "
                     "every 3D point with a certificate of global optimality (cameras fixed), and write the model, "
-                    "points3D_certificates.txt and copies of rigs/frames files to OUT_DIR. Everything is written "
-                    "to a temporary directory next to OUT_DIR first; an existing OUT_DIR is replaced only after "
-                    "everything was written, and is left exactly as it was if anything fails. The solver flags and "
+                    "points3D_certificates.txt and copies of rigs/frames files to OUT_DIR. Everything is staged "
+                    "first; each file then replaces its namesake in OUT_DIR, nothing else in OUT_DIR is touched, "
+                    "and OUT_DIR is left exactly as it was if anything fails. The solver flags and "
                     "their defaults are those of 'tritools solve': method auto (Corollary 1 at delta = 2, then "
                     "delta = 4 for the points that does not certify), each point within --time-limit and "
                     "--memory-limit; --max-delta 2 keeps every point at delta = 2. --progress: a bar over all "
                     "points (by default only for models of 2000 points or more).")
     p.add_argument("in_dir", metavar="IN_DIR", help="folder of the input model (never modified)")
-    p.add_argument("out_dir", metavar="OUT_DIR", help="output folder (created, or replaced as a whole; must not be "
-                                                      "IN_DIR, contain IN_DIR, or be a file)")
+    p.add_argument("out_dir", metavar="OUT_DIR", help="output folder (created if needed; only the files written are "
+                                                      "replaced; must not be IN_DIR, contain IN_DIR, or be a file)")
     p.add_argument("--input-type", choices=("auto", "bin", "txt"), default="auto",
                    help="format of IN_DIR (default auto: binary if cameras.bin, images.bin, points3D.bin exist, "
                         "else text)")
@@ -70,7 +70,8 @@ def register(subparsers) -> None:
                               description="Convert an Oxford VGG sequence to a COLMAP model (PINHOLE cameras, DLT "
                                           "points), written atomically to OUT_DIR.")
     o.add_argument("name", metavar="NAME", help="sequence (library, merton1, merton2, merton3, wadham)")
-    o.add_argument("out_dir", metavar="OUT_DIR", help="output folder (created, or replaced as a whole)")
+    o.add_argument("out_dir", metavar="OUT_DIR", help="output folder (created if needed; only the model's files are "
+                                                          "replaced)")
     add_data_dir_option(o)
     o.add_argument("--max-tracks", type=int, default=None, metavar="M", help="keep the first M tracks")
     o.add_argument("--output-type", choices=("bin", "txt"), default="txt", help="model format (default txt)")

@@ -21,6 +21,7 @@ from pathlib import Path
 
 from .app import (METHODS, CLIError, add_data_dir_option, add_solver_options, add_track_options, exit_invalid,
                   load_oxford, options_from_args, select_tracks)
+from ..io.atomic import atomic_path
 from ..model.constraints import Method
 
 __all__ = ["register", "run_figure3", "run_plot_dataset"]
@@ -79,7 +80,8 @@ def _plot_dataset(args) -> int:
     out = Path(args.out) if args.out else Path(f"{seq.name}_summary.png")
     try:
         out.parent.mkdir(parents=True, exist_ok=True)
-        fig.savefig(out, dpi=120)
+        with atomic_path(out) as tmp:
+            fig.savefig(tmp, dpi=120)
     except OSError as exc:
         return exit_invalid(f"cannot write {out}: {exc}")
     n_cert = sum(bool(r.optimal) for r in results)

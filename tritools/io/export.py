@@ -17,13 +17,12 @@ into place, so an existing file is replaced only by a complete one.
 """
 from __future__ import annotations
 
-import os
-import uuid
 from pathlib import Path
 
 import numpy as np
 
 from ..result import Status
+from .atomic import atomic_path
 
 __all__ = ["write_ply", "read_ply", "write_npz", "read_npz", "export_points", "STATUS_LEGEND",
            "CERTIFIED_BY_LEGEND", "PLY_TYPES"]
@@ -41,15 +40,9 @@ _NP_TO_PLY = {np.dtype(v).str.lstrip("<|"): k for k, v in PLY_TYPES.items()}
 
 
 def _atomic(path, write) -> Path:
-    path = Path(path)
-    tmp = path.with_name(f".{path.name}.tmp-{uuid.uuid4().hex[:8]}")
-    try:
+    with atomic_path(path) as tmp:
         write(tmp)
-        os.replace(tmp, path)
-    finally:
-        if tmp.exists():
-            tmp.unlink()
-    return path
+    return Path(path)
 
 
 def _columns(xyz, rgb, fields) -> dict:

@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..io.atomic import atomic_open
 from ..io.colmap.model import ModelFormatError
 from ..result import Status
 from .certify import STATUS_LEGEND
@@ -65,7 +66,7 @@ class CertificateWriter:
     def close(self) -> Path:
         """Write the header, then the body; returns the sidecar path."""
         self.fh.close()
-        with open(self.path, "w", encoding="utf-8") as out, open(self.body_path, encoding="utf-8") as body:
+        with atomic_open(self.path, "w", encoding="utf-8") as out, open(self.body_path, encoding="utf-8") as body:
             out.write(_HEADER + f"# Number of points: {self.n_points}, certified: {self.n_certified}, "
                                 f"method: {self.method}, path: {self.solve_path}\n")
             shutil.copyfileobj(body, out, 1 << 22)

@@ -3,26 +3,26 @@
 :func:`retriangulate_folder` reads the cameras and images of IN (binary or text), streams the
 points in chunks (:meth:`tritools.io.colmap.formats.ModelSource.chunks`), processes each chunk
 (:func:`.pipeline.process_chunk`) and appends it to the output points file and the certificate
-sidecar; memory is the keypoints plus one chunk.  Everything -- the model, the sidecar, copies of
-``rigs``/``frames`` files -- is written into a temporary directory next to OUT, which then replaces
-OUT by renames (:func:`atomic_directory`): an existing OUT is replaced only after everything was
-written, and a failure at any point leaves it exactly as it was.  Exports (.ply/.npz) are written
-to temporary files and renamed into place after the model.
+sidecar; memory is the keypoints plus one chunk.  Everything -- the model, the sidecar, copies
+of ``rigs``/``frames`` files -- is written into a staging directory inside OUT; once everything
+was written each file replaces its namesake in OUT by one rename, under a lock on OUT
+(:func:`atomic_directory`).  Nothing else in OUT is touched (a user's notes, masks, subfolders
+stay), a failure at any point leaves OUT exactly as it was, and two runs writing to one OUT never
+mix their files.  Exports (.ply/.npz) are written to temporary files and renamed into place after
+the model.
 """
 from __future__ import annotations
 
 import contextlib
 import logging
-import os
 import shutil
-import tempfile
 import time
-import uuid
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
+from ..io.atomic import DirectoryInTheWay, atomic_path, staged_directory
 from ..io.colmap.formats import ModelWriter, open_model
 from .certificates import CertificateWriter
 from .pipeline import OptionError, RetriangulationOptions, prepare_geometry, process_chunk
@@ -41,39 +41,45 @@ class OutputError(ValueError):
     """An output path that cannot be used (a file where a folder is needed, OUT = IN, ...)."""
 
 
-def _umask() -> int:
-    mask = os.umask(0o22)
-    os.umask(mask)
-    return mask
-
-
 @contextlib.contextmanager
 def atomic_directory(target):
-    """Yield a fresh temporary directory next to ``target``; on success it replaces ``target``
-    (an existing directory is renamed away, the new one renamed in, the old one removed); on any
-    exception the temporary directory is removed and ``target`` is untouched."""
-    target = Path(target)
-    if target.exists() and not target.is_dir():
-        raise OutputError(f"{target}: exists and is not a directory")
-    target.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{target.name}.tmp-", dir=target.parent))
+    """Yield a staging directory inside the folder ``target`` (created if needed); on success each
+    file written into it replaces its namesake in ``target`` atomically, under a lock on ``target``;
+    every other file of ``target`` is kept (:func:`tritools.io.atomic.staged_directory`).  On any
+    exception ``target`` is as it was.  A name taken by a directory, or ``target`` a file:
+    :class:`OutputError`."""
     try:
-        os.chmod(tmp, 0o777 & ~_umask())
-        yield tmp
-        if target.exists():
-            old = target.with_name(f".{target.name}.old-{uuid.uuid4().hex[:8]}")
-            os.rename(target, old)
-            try:
-                os.rename(tmp, target)
-            except BaseException:
-                os.rename(old, target)
-                raise
-            shutil.rmtree(old, ignore_errors=True)
-        else:
-            os.rename(tmp, target)
-    finally:
-        if tmp.exists():
-            shutil.rmtree(tmp, ignore_errors=True)
+        with staged_directory(target) as stage:
+            yield stage
+    except (DirectoryInTheWay, NotADirectoryError) as exc:
+        if isinstance(exc, NotADirectoryError) and exc.filename != str(target):
+            raise
+        raise OutputError(f"{exc.filename}: {exc.strerror}") from None
+
+
+def _model_names(fmt: str) -> tuple:
+    return tuple(f"{stem}.{fmt}" for stem in ("cameras", "images", "points3D"))
+
+
+def _check_names(out_dir, fmt_out: str, in_dir) -> None:
+    """Refuse (:class:`OutputError`) before any work when a file the command writes into OUT is
+    the name of a directory there (it is never removed)."""
+    from .certificates import CERTIFICATES_FILE
+
+    out = Path(out_dir)
+    names = _model_names(fmt_out) + (CERTIFICATES_FILE,) + EXTRA_FILES[fmt_out]
+    for name in names:
+        if (out / name).is_dir() and (name not in EXTRA_FILES[fmt_out] or (Path(in_dir) / name).is_file()):
+            raise OutputError(f"{out / name}: is a directory (refusing to replace it with a file)")
+
+
+def _other_model_notes(out_dir, fmt_out: str) -> list:
+    """A note when OUT already holds a model of the other format (kept as it was: COLMAP and
+    :func:`~tritools.io.colmap.formats.open_model` read the binary files first)."""
+    other = "txt" if fmt_out == "bin" else "bin"
+    found = [n for n in _model_names(other) if (Path(out_dir) / n).is_file()]
+    return [f"{', '.join(found)} in {out_dir} kept as they were (a {other} model; COLMAP reads .bin files first)"] \
+        if found else []
 
 
 def _timed(iterator, timings: dict, key: str):
@@ -97,7 +103,7 @@ def check_output(in_dir, out_dir, exports=()) -> None:
     if dst == src:
         raise OutputError("OUT_DIR must differ from IN_DIR (the input model is never overwritten)")
     if dst in src.parents:
-        raise OutputError(f"OUT_DIR {out_dir} contains IN_DIR {in_dir}: replacing it would delete the input")
+        raise OutputError(f"OUT_DIR {out_dir} contains IN_DIR {in_dir}: outputs are kept out of the input's folders")
     for e in exports:
         p = Path(e)
         if p.suffix.lower() not in EXPORT_SUFFIXES:
@@ -146,9 +152,10 @@ def retriangulate_folder(in_dir, out_dir, options: RetriangulationOptions | None
     want = options.progress is True or (options.progress is None and has_tqdm())
     bar = progress_bar(src.count_points() if want else None, options.progress)
     ids, results, xyz, rgb = [], [], [], []
-    copied, notes, staged = [], [], []
+    copied, notes = [], _other_model_notes(out_dir, fmt_out)
+    _check_names(out_dir, fmt_out, src.folder)
     try:
-        with atomic_directory(out_dir) as tmp:
+        with contextlib.ExitStack() as staged_exports, atomic_directory(out_dir) as tmp:
             writer = ModelWriter(src.arrays, tmp, fmt_out)
             certs = CertificateWriter(tmp, options.method, options.path)
             try:
@@ -183,21 +190,15 @@ def retriangulate_folder(in_dir, out_dir, options: RetriangulationOptions | None
             report = RetriangulationReport.from_chunks(options, ids, results, skipped_cameras(src.arrays, geom))
             all_xyz = np.concatenate(xyz) if xyz else np.zeros((0, 3))
             all_rgb = np.concatenate(rgb) if rgb else np.zeros((0, 3), np.uint8)
-            for e in exports:
+            for e in exports:                  # renamed into place after the model (the stack closes last)
                 target = Path(e)
                 target.parent.mkdir(parents=True, exist_ok=True)
-                staged.append((target.with_name(f".{target.name}.tmp-{uuid.uuid4().hex[:8]}"), target))
-                export_points(staged[-1][0], all_xyz, all_rgb, report, fmt=target.suffix.lower()[1:])
+                staged = staged_exports.enter_context(atomic_path(target))
+                export_points(staged, all_xyz, all_rgb, report, fmt=target.suffix.lower()[1:])
             timings["write"] += time.perf_counter() - t0
-    except BaseException:
-        for t, _ in staged:
-            t.unlink(missing_ok=True)
-        raise
     finally:
         if bar is not None:
             bar.close()
-    for t, target in staged:
-        os.replace(t, target)
     timings["total"] = time.perf_counter() - t_start
     out = Path(out_dir)
     logger.info("re-triangulated %d points into %s in %.2f s", report.n_points, out, timings["total"])

@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from .camera_models import COLMAP_MODEL_IDS, COLMAP_MODEL_N_PARAMS, COLMAP_MODEL_NAMES
+from ..atomic import atomic_open
 from .model import ModelFormatError
 
 __all__ = ["read_cameras_binary", "read_images_binary", "BinaryPointsReader", "write_cameras_binary",
@@ -229,7 +230,8 @@ def write_cameras_binary(arrays, path) -> None:
         _check_id(cid, 32, "camera_id")
         parts.append(_CAM.pack(cid, COLMAP_MODEL_IDS[model], w, h))
         parts.append(np.asarray(params, "<f8").tobytes())
-    Path(path).write_bytes(b"".join(parts))
+    with atomic_open(path, "wb") as fh:
+        fh.write(b"".join(parts))
 
 
 def write_images_binary(arrays, path) -> None:
@@ -237,7 +239,7 @@ def write_images_binary(arrays, path) -> None:
     kp = np.empty(len(arrays.kp_point3D), KEYPOINT_DTYPE)
     kp["x"], kp["y"], kp["id"] = arrays.kp_xy[:, 0], arrays.kp_xy[:, 1], arrays.kp_point3D
     off = arrays.kp_offsets.tolist()
-    with open(path, "wb") as fh:
+    with atomic_open(path, "wb") as fh:
         fh.write(_U64.pack(arrays.n_images))
         for v, iid in enumerate(arrays.image_ids.tolist()):
             _check_id(iid, 32, "image_id")

@@ -221,14 +221,19 @@ class ModelWriter:
 
 
 def write_model_arrays(arrays: ModelArrays, folder, fmt: str = "bin") -> Path:
-    """Write a whole :class:`~.arrays.ModelArrays` (points in array order); returns the folder."""
-    w = ModelWriter(arrays, folder, fmt)
-    try:
-        w.write_points(arrays.points())
-    except BaseException:
-        w.abort()
-        raise
-    w.close()
+    """Write a whole :class:`~.arrays.ModelArrays` (points in array order); returns the folder.
+    The three files replace their namesakes atomically; nothing else in ``folder`` is touched
+    (:func:`tritools.io.atomic.staged_directory`)."""
+    from ..atomic import staged_directory
+
+    with staged_directory(folder) as stage:
+        w = ModelWriter(arrays, stage, fmt)
+        try:
+            w.write_points(arrays.points())
+        except BaseException:
+            w.abort()
+            raise
+        w.close()
     return Path(folder)
 
 

@@ -414,15 +414,21 @@ def _num(v: float) -> str:
 
 def write_text_model(model: Model, path) -> Path:
     """Write the model as COLMAP text files into the folder ``path`` (created if needed).
-    Records are written sorted by id.  Returns the folder."""
+    Records are written sorted by id, each file atomically (:mod:`tritools.io.atomic`).  Returns the folder."""
+    from ..atomic import atomic_open
+
     folder = Path(path)
     folder.mkdir(parents=True, exist_ok=True)
+
+    def write_text(name, text):
+        with atomic_open(folder / name, "w", encoding="utf-8", errors="surrogateescape") as fh:
+            fh.write(text)
     lines = ["# Camera list with one line of data per camera:",
              "#   CAMERA_ID, MODEL, WIDTH, HEIGHT, PARAMS[]",
              f"# Number of cameras: {len(model.cameras)}"]
     for c in sorted(model.cameras.values(), key=lambda c: c.id):
         lines.append(" ".join([str(c.id), c.model, str(c.width), str(c.height)] + [_num(p) for p in c.params]))
-    (folder / "cameras.txt").write_text("\n".join(lines) + "\n")
+    write_text("cameras.txt", "\n".join(lines) + "\n")
 
     n_obs = sum(p[2] != NO_POINT3D for im in model.images.values() for p in im.points2D)
     mean_obs = n_obs / len(model.images) if model.images else 0.0
@@ -433,7 +439,7 @@ def write_text_model(model: Model, path) -> Path:
     for im in sorted(model.images.values(), key=lambda i: i.id):
         lines.append(" ".join([str(im.id)] + [_num(v) for v in im.qvec + im.tvec] + [str(im.camera_id), im.name]))
         lines.append(" ".join(f"{_num(x)} {_num(y)} {pid}" for x, y, pid in im.points2D))
-    (folder / "images.txt").write_text("\n".join(lines) + "\n")
+    write_text("images.txt", "\n".join(lines) + "\n")
 
     mean_track = (sum(len(p.track) for p in model.points3D.values()) / len(model.points3D)
                   if model.points3D else 0.0)
@@ -443,5 +449,5 @@ def write_text_model(model: Model, path) -> Path:
     for p in sorted(model.points3D.values(), key=lambda p: p.id):
         lines.append(" ".join([str(p.id)] + [_num(v) for v in p.xyz] + [str(c) for c in p.rgb] + [_num(p.error)]
                               + [f"{i} {k}" for i, k in p.track]))
-    (folder / "points3D.txt").write_text("\n".join(lines) + "\n")
+    write_text("points3D.txt", "\n".join(lines) + "\n")
     return folder

@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..atomic import atomic_open
 from .model import (LineFields, read_camera_records, parse_image_header, parse_point,
                     parse_points2d)
 
@@ -193,7 +194,8 @@ def write_cameras_text(arrays, path) -> None:
     for cid, model, w, h, params in zip(arrays.camera_ids.tolist(), arrays.camera_models, arrays.camera_width.tolist(),
                                         arrays.camera_height.tolist(), arrays.camera_params):
         lines.append(" ".join([str(cid), model, str(w), str(h)] + [_num(p) for p in np.asarray(params).tolist()]))
-    Path(path).write_text("\n".join(lines) + "\n", encoding="utf-8", errors="surrogateescape")
+    with atomic_open(path, "w", encoding="utf-8", errors="surrogateescape") as fh:
+        fh.write("\n".join(lines) + "\n")
 
 
 def write_images_text(arrays, path) -> None:
@@ -202,7 +204,7 @@ def write_images_text(arrays, path) -> None:
     mean_obs = n_obs / arrays.n_images if arrays.n_images else 0.0
     off = arrays.kp_offsets.tolist()
     xs, ys, ps = arrays.kp_xy[:, 0].tolist(), arrays.kp_xy[:, 1].tolist(), arrays.kp_point3D.tolist()
-    with open(path, "w", encoding="utf-8", errors="surrogateescape") as fh:
+    with atomic_open(path, "w", encoding="utf-8", errors="surrogateescape") as fh:
         fh.write("# Image list with two lines of data per image:\n"
                  "#   IMAGE_ID, QW, QX, QY, QZ, TX, TY, TZ, CAMERA_ID, NAME\n"
                  "#   POINTS2D[] as (X, Y, POINT3D_ID)\n"
@@ -244,7 +246,7 @@ class TextPointsWriter:
         """Write the header, then the body, and remove the side file."""
         self.fh.close()
         mean = self.n_observations / self.n_points if self.n_points else 0.0
-        with open(self.path, "w", encoding="utf-8") as out, open(self.body_path, encoding="utf-8") as body:
+        with atomic_open(self.path, "w", encoding="utf-8") as out, open(self.body_path, encoding="utf-8") as body:
             out.write("# 3D point list with one line of data per point:\n"
                       "#   POINT3D_ID, X, Y, Z, R, G, B, ERROR, TRACK[] as (IMAGE_ID, POINT2D_IDX)\n"
                       f"# Number of points: {self.n_points}, mean track length: {mean:.6g}\n")

@@ -1,0 +1,165 @@
+"""Atomic file output: the one rule every tritools writer follows.
+
+A file is never written in place.  :func:`atomic_path` (for libraries that write to a path:
+``savefig``, ``np.save``) and :func:`atomic_open` (a file object) write to a temporary file in the
+target's own directory (``.tmp-<hex>-<name>``: same file system, same suffix), flush it to disk
+(``fsync``) and rename it over the target (``os.replace``, atomic on POSIX), then sync the
+directory.  A failure at any point (disk full, file-size limit, an interrupt) removes the temporary
+file and leaves the target exactly as it was; an OSError names the target, never the temporary file.
+
+:func:`staged_directory` writes several files into a folder the same way: the caller writes into a
+hidden staging directory inside the folder, and on success each file replaces its namesake in the
+folder by one rename, under an advisory lock on the folder (:func:`locked_directory`, ``fcntl.flock``)
+so that two writers to one folder never interleave their files.  Nothing else in the folder is touched.
+"""
+from __future__ import annotations
+
+import contextlib
+import os
+import shutil
+import tempfile
+import uuid
+from pathlib import Path
+
+__all__ = ["atomic_path", "atomic_open", "staged_directory", "locked_directory", "DirectoryInTheWay",
+           "TEMP_PREFIX", "STAGING_PREFIX"]
+
+#: prefix of the temporary file beside a target.
+TEMP_PREFIX = ".tmp-"
+#: prefix of the staging directory inside a folder written by :func:`staged_directory`.
+STAGING_PREFIX = ".tritools-staging-"
+
+
+class DirectoryInTheWay(IsADirectoryError):
+    """A file must be written where a directory of that name exists (never removed)."""
+
+    def __init__(self, path):
+        super().__init__(21, "is a directory (refusing to replace it with a file)", str(path))
+
+    def __str__(self) -> str:
+        return f"{self.filename}: {self.strerror}"
+
+
+def _temp_name(path: Path) -> Path:
+    return path.with_name(f"{TEMP_PREFIX}{uuid.uuid4().hex[:8]}-{path.name}")
+
+
+def _fsync_path(path, directory: bool = False) -> None:
+    try:
+        fd = os.open(path, os.O_RDONLY | (getattr(os, "O_DIRECTORY", 0) if directory else 0))
+    except OSError:
+        if directory:       # some file systems do not open directories: the rename is still atomic
+            return
+        raise
+    try:
+        os.fsync(fd)
+    except OSError:
+        if not directory:
+            raise
+    finally:
+        os.close(fd)
+
+
+def _rename_error(exc: OSError, temp, target) -> None:
+    """Make ``exc`` name ``target`` where it names the temporary ``temp`` (a file or a staging folder)."""
+    temp, target = str(temp), str(target)
+    for attr in ("filename", "filename2"):
+        name = getattr(exc, attr, None)
+        if isinstance(name, str) and name.startswith(temp):
+            setattr(exc, attr, target + name[len(temp):])
+
+
+def _check_not_directory(path: Path) -> None:
+    if path.is_dir():
+        raise DirectoryInTheWay(path)
+
+
+@contextlib.contextmanager
+def atomic_path(path):
+    """Yield a temporary path beside ``path``; on success it is synced and renamed over ``path``.
+
+    The caller writes the whole file to the yielded path.  On an exception the temporary file is
+    removed and ``path`` is untouched.  Refuses (:class:`DirectoryInTheWay`) when ``path`` is a directory.
+    """
+    path = Path(path)
+    _check_not_directory(path)
+    tmp = _temp_name(path)
+    try:
+        try:
+            yield tmp
+            _fsync_path(tmp)
+            _check_not_directory(path)
+            os.replace(tmp, path)
+        except OSError as exc:
+            _rename_error(exc, tmp, path)
+            raise
+        _fsync_path(path.parent, directory=True)
+    finally:
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(tmp)
+
+
+@contextlib.contextmanager
+def atomic_open(path, mode: str = "w", **kwargs):
+    """``open`` for writing, atomically (:func:`atomic_path`): yields the file object of the
+    temporary file; ``mode`` "w" or "wb" (plus ``encoding``, ``newline``, ... for text)."""
+    if mode not in ("w", "wb", "wt"):
+        raise ValueError(f"mode must be 'w', 'wt' or 'wb', got {mode!r}")
+    with atomic_path(path) as tmp:
+        with open(tmp, mode.replace("w", "x"), **kwargs) as fh:
+            yield fh
+
+
+@contextlib.contextmanager
+def locked_directory(folder):
+    """Hold an exclusive advisory lock (``flock``) on the directory ``folder`` itself (no lock file
+    is created); other writers using this lock wait.  Without ``fcntl`` it is a no-op."""
+    try:
+        import fcntl
+    except ImportError:         # pragma: no cover - not POSIX
+        yield
+        return
+    fd = os.open(folder, os.O_RDONLY | getattr(os, "O_DIRECTORY", 0))
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX)
+        yield
+    finally:
+        os.close(fd)            # releases the lock
+
+
+@contextlib.contextmanager
+def staged_directory(target):
+    """Yield a staging directory inside the folder ``target`` (created if needed).  On success each
+    file written into it replaces the file of the same name in ``target`` (one ``os.replace`` each,
+    under :func:`locked_directory`); files of ``target`` not written are kept, and nothing is ever
+    deleted.  On an exception the staging directory is removed, ``target`` is as it was (a folder
+    created for the call and still empty is removed again).  A name taken by a directory in
+    ``target`` raises :class:`DirectoryInTheWay` before anything is replaced."""
+    target = Path(target)
+    if target.exists() and not target.is_dir():
+        raise NotADirectoryError(20, "exists and is not a directory", str(target))
+    created = not target.exists()
+    target.mkdir(parents=True, exist_ok=True)
+    stage = Path(tempfile.mkdtemp(prefix=STAGING_PREFIX, dir=target))
+    try:
+        try:
+            yield stage
+            names = sorted(os.listdir(stage))
+            for name in names:
+                _fsync_path(stage / name)
+            with locked_directory(target):
+                for name in names:
+                    _check_not_directory(target / name)
+                for name in names:
+                    os.replace(stage / name, target / name)
+                _fsync_path(target, directory=True)
+        except OSError as exc:
+            _rename_error(exc, stage, target)
+            raise
+    except BaseException:
+        shutil.rmtree(stage, ignore_errors=True)
+        if created:
+            with contextlib.suppress(OSError):
+                target.rmdir()          # only when empty: another writer may be using it
+        raise
+    shutil.rmtree(stage, ignore_errors=True)

@@ -15,6 +15,8 @@ Layout (docs/architecture.md): :mod:`tritools.model` (the problem as data), :mod
 """
 import logging as _logging
 
+from . import _startup  # noqa: F401 - first: Ctrl-C while the command starts exits 130 with one line
+
 from .model.constraints import Method
 from .model.geometry import depths, dlt, fundamental_matrix, gamma, project, validate_cameras
 from .model.regions import Ellipse, EllipseBorder, Point, Polytope, Region, Segment, as_regions

@@ -1,11 +1,21 @@
 """``python -m tritools``: the command line of :mod:`tritools.cli.app` (``tritools --help``)."""
 from __future__ import annotations
 
+import signal
 import sys
 
-from .cli import main
+from ._startup import guard_startup, EXIT_INTERRUPTED
+
+guard_startup()                 # before the heavy imports (the package's __init__ installed it already)
+
+from .cli import main  # noqa: E402
 
 __all__ = ["main"]
 
 if __name__ == "__main__":
-    sys.exit(main())
+    try:
+        code = main()
+    except KeyboardInterrupt:          # between main's own handler and its return
+        code = EXIT_INTERRUPTED
+    signal.signal(signal.SIGINT, signal.SIG_IGN)      # the exit code is decided: the shutdown is not interrupted
+    sys.exit(code)

@@ -33,6 +33,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from ..model.constraints import Method
+from .._startup import EXIT_INTERRUPTED, INTERRUPTED_MESSAGE, end_startup
 from ..io.atomic import atomic_open
 from ..io.problem_file import (ProblemFileError, ProblemSpec, jsonable, load_problem_file, parse_problem_bytes,
                                parse_problem_text, result_to_dict)
@@ -554,6 +555,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     os.environ.setdefault("RUST_BACKTRACE", "0")
     try:
         args = build_parser().parse_args(argv)
+        end_startup()                   # from here on Ctrl-C is a KeyboardInterrupt: cleanups run, then 130
         if os.environ.get(DEBUG_ENV):
             return int(args.func(args) or EXIT_OK)
         # extreme but finite input (|x| ~ 1e308) overflows inside numpy: its RuntimeWarnings would add
@@ -566,8 +568,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     except SystemExit as exc:            # --help
         return exc.code if isinstance(exc.code, int) else EXIT_OK if exc.code is None else EXIT_INVALID
     except KeyboardInterrupt:
-        print("tritools: interrupted", file=sys.stderr)
-        return 130
+        print(INTERRUPTED_MESSAGE, file=sys.stderr)
+        return EXIT_INTERRUPTED
     except Exception as exc:  # noqa: BLE001 - one line instead of a traceback, unless debugging
         if os.environ.get(DEBUG_ENV):
             raise

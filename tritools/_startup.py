@@ -1,0 +1,50 @@
+"""Ctrl-C while the ``tritools`` command starts: one line and exit code 130, no traceback.
+
+Importing tritools (numpy, scipy, sospoly) takes about a second; an interrupt during it would print a
+long traceback and kill the process by the signal.  :func:`guard_startup` runs first in
+``tritools/__init__.py`` (stdlib only) and, only when this process *is* the command (``python -m
+tritools`` or the ``tritools`` script; a library import is never affected), handles SIGINT by
+printing ``tritools: interrupted`` and exiting 130.  :func:`end_startup` (called by the command's
+``main``) restores Python's handler, so that an interrupt while solving raises KeyboardInterrupt and
+every ``finally`` (staging directories, temporary files) runs before the same exit code.
+"""
+from __future__ import annotations
+
+import os
+import signal
+import sys
+
+__all__ = ["guard_startup", "end_startup", "is_command", "EXIT_INTERRUPTED", "INTERRUPTED_MESSAGE"]
+
+EXIT_INTERRUPTED = 130
+INTERRUPTED_MESSAGE = "tritools: interrupted"
+
+
+def is_command() -> bool:
+    """True when this process runs the tritools command line (``-m tritools`` or the script)."""
+    argv = list(getattr(sys, "orig_argv", ()) or ())
+    if "-m" in argv[:-1] and argv[argv.index("-m") + 1] in ("tritools", "tritools.__main__"):
+        return True
+    return bool(sys.argv) and os.path.basename(sys.argv[0] or "") in ("tritools", "tritools.exe")
+
+
+def _interrupted(signum, frame) -> None:      # pragma: no cover - runs in the subprocess of the test
+    try:
+        os.write(2, (INTERRUPTED_MESSAGE + "\n").encode())
+    finally:
+        os._exit(EXIT_INTERRUPTED)
+
+
+def guard_startup() -> None:
+    """Exit 130 with one line on SIGINT until :func:`end_startup` (only for the command)."""
+    if is_command() and signal.getsignal(signal.SIGINT) is signal.default_int_handler:
+        signal.signal(signal.SIGINT, _interrupted)
+
+
+def end_startup() -> None:
+    """Back to KeyboardInterrupt on SIGINT (the command's ``main`` turns it into exit 130)."""
+    if signal.getsignal(signal.SIGINT) is _interrupted:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+
+
+guard_startup()

@@ -177,7 +177,7 @@ def test_help_describes_every_argument(capsys):
                  "--min-track-length", "--max-track-length", "--behind", "--strict", "--export", "--chunk-points",
                  "--json", "--progress", "IN_DIR", "OUT_DIR"):
         assert flag in text
-    assert "replaced only after everything was written" in " ".join(text.split())
+    assert "nothing else in OUT_DIR is touched" in " ".join(text.split())
     import argparse
     from tritools.cli.colmap import register
     ap = argparse.ArgumentParser()

@@ -41,7 +41,7 @@ from ..result import Status, TriangulationResult
 from ..solve.options import TRIANGULATION_BUDGET, MethodChoice, SolvePath, Sparsity, TriangulationOptions
 
 __all__ = ["main", "build_parser", "CLIError", "exit_invalid", "add_solver_options", "options_from_args",
-           "add_data_dir_option", "add_track_options", "select_tracks",
+           "add_data_dir_option", "add_track_options", "select_tracks", "printable",
            "SUBCOMMAND_MODULES", "solve_problems", "format_table", "EXIT_OK", "EXIT_INTERNAL", "EXIT_INVALID"]
 
 #: modules adding subcommands through ``register(subparsers)``; skipped while they do not exist.
@@ -67,12 +67,22 @@ class CLIError(Exception):
     """Invalid usage or input: printed as one line, exit code 2."""
 
 
+def printable(text) -> str:
+    """``str(text)`` with every non-printable character (terminal escape sequences, other control
+    characters, bidirectional overrides) written as its Python escape (``\\x1b``), so that names and
+    messages from input files cannot drive the terminal; printable non-ASCII text is kept."""
+    text = str(text)
+    if text.isprintable():
+        return text
+    return "".join(ch if ch.isprintable() else repr(ch)[1:-1] for ch in text)
+
+
 def exit_invalid(message) -> int:
     """Print the one-line ``tritools: error: MESSAGE`` on stderr; returns :data:`EXIT_INVALID`.
 
     Subcommand handlers return it for bad input, missing data or a missing extra.
     """
-    text = " ".join(str(message).splitlines())          # one line, whatever the message holds
+    text = printable(" ".join(str(message).splitlines()))          # one line, whatever the message holds
     print(f"tritools: error: {text}", file=sys.stderr)
     return EXIT_INVALID
 
@@ -140,8 +150,9 @@ def _timed_solve(problems: list, options: TriangulationOptions, progress) -> tup
 
 
 def format_table(headers: Sequence[str], rows: Sequence[Sequence], right: Sequence[bool] | None = None) -> str:
-    """Plain-text table; cells are str()-ed; ``right[j]``: right-align column j (default: all but the first)."""
-    cells = [[str(c) for c in row] for row in rows]
+    """Plain-text table; cells are str()-ed with non-printable characters escaped (:func:`printable`);
+    ``right[j]``: right-align column j (default: all but the first)."""
+    cells = [[printable(c) for c in row] for row in rows]
     widths = [max([len(h)] + [len(r[j]) for r in cells]) for j, h in enumerate(headers)]
     right = right if right is not None else [j > 0 for j in range(len(headers))]
 
@@ -231,7 +242,7 @@ def _cmd_solve(args) -> int:
                      "NA" if r.delta is None else r.delta, "NA" if r.n_lmivar is None else r.n_lmivar,
                      ("~" if source == BATCH_SHARE and t is not None else "") + _sec(t)))
         if r.message:
-            notes.append(f"{name}: {r.status.value}: {r.message}")
+            notes.append(printable(f"{name}: {r.status.value}: {r.message}"))
     text = format_table(headers, rows, [False, True, False, False] + [True] * 6)
     if any(source == BATCH_SHARE for _, source in times):
         notes.insert(0, "time[s]: ~ marks a problem decided in a vectorised batch: its share of the batch's time")
@@ -389,7 +400,7 @@ def _cmd_dataset(args) -> int:
         _emit(_dumps({"sequence": seq.name, "method": args.method, "tracks": len(tracks), "per_N": summary,
                       "total": total}), None)
         return EXIT_OK
-    print(f"{seq.name}: {len(tracks)} tracks, method {args.method}")
+    print(printable(f"{seq.name}: {len(tracks)} tracks, method {args.method}"))
     rows = [(s["N"], s["cases"], s["certified"], _num(s["mean_gamma_ub"]), _num(s["std_gamma_ub"]),
              ",".join(map(str, s["n_lmivar"])) or "NA", _sec(s["mean_seconds"]))
             for s in summary + [{"N": "total", **total}]]

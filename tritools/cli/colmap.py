@@ -15,7 +15,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from .app import add_data_dir_option, add_solver_options, exit_invalid, options_from_args
+from .app import add_data_dir_option, add_solver_options, exit_invalid, options_from_args, printable
 from ..io.problem_file import jsonable
 
 __all__ = ["register", "run_colmap", "run_from_oxford", "MAX_LISTED"]
@@ -138,16 +138,16 @@ def _print_summary(report, result, summary) -> None:
           f"{report.n_behind} behind a camera ({report.method}, path {report.path}, delta {first}..{last})")
     print("status: " + (", ".join(f"{k} {v}" for k, v in summary["status"].items()) or "-"))
     for cid, model, reason, n_obs in report.skipped_cameras:
-        print(f"skipped camera {cid} ({model}): {reason}; {n_obs} observation(s) left out")
+        print(printable(f"skipped camera {cid} ({model}): {reason}; {n_obs} observation(s) left out"))
     bad = report.uncertified(MAX_LISTED)
     if bad:
         n_bad = report.n_points - report.n_certified
         print(f"not certified: {n_bad} point(s)" + (f", first {len(bad)}:" if n_bad > len(bad) else ":"))
         for r in bad:
-            print(f"  point3D {r.point3D_id} ({r.n_views} views): {r.status.value}"
-                  + ("" if r.in_front else ", behind a camera") + (f" -- {r.message}" if r.message else ""))
+            print(printable(f"  point3D {r.point3D_id} ({r.n_views} views): {r.status.value}"
+                  + ("" if r.in_front else ", behind a camera") + (f" -- {r.message}" if r.message else "")))
     for note in result.notes:
-        print(f"note: {note}")
+        print(printable(f"note: {note}"))
     print(f"model ({result.output_format}) written to {result.out_dir}, certificates to {result.certificates}")
     for e in result.exports:
         print(f"exported {e}")

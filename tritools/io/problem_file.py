@@ -319,7 +319,10 @@ def parse_problem_text(text: str, source: str = "<input>") -> list[ProblemSpec]:
         raise ProblemFileError(source, "empty file (expected a JSON problem, an array of problems or "
                                        "{\"problems\": [...]})")
     try:
-        data = json.loads(text, parse_constant=_NonFinite, parse_int=_json_int)
+        data = json.loads(text, parse_constant=_NonFinite, parse_int=_json_int, object_pairs_hook=_unique_keys)
+    except _DuplicateKey as exc:
+        raise ProblemFileError(f"{source}:{_duplicate_line(text, exc.key)}",
+                               f"duplicated key {exc.key!r} (each field may appear once)") from None
     except json.JSONDecodeError as exc:
         raise ProblemFileError(source, f"not valid JSON: {exc.msg} (line {exc.lineno}, column {exc.colno})") from None
     except RecursionError:
@@ -328,6 +331,47 @@ def parse_problem_text(text: str, source: str = "<input>") -> list[ProblemSpec]:
         return parse_problems(data)
     except RecursionError:                     # a region or shape nested far deeper than any schema field
         raise ProblemFileError(source, "nested too deeply for the problem-file schema") from None
+
+
+class _DuplicateKey(ValueError):
+    def __init__(self, key: str):
+        super().__init__(key)
+        self.key, self.pos = key, None
+
+
+def _unique_keys(pairs: list) -> dict:
+    """``object_pairs_hook``: the object, or :class:`_DuplicateKey` when a key repeats (json would
+    silently keep the last value: ``"delta": 3, "delta": 4``)."""
+    obj = dict(pairs)
+    if len(obj) != len(pairs):
+        seen: set = set()
+        raise _DuplicateKey(next(k for k, _ in pairs if k in seen or seen.add(k)))
+    return obj
+
+
+def _duplicate_line(text: str, key: str) -> int:
+    """The line of the repeated ``key``: the text is decoded again by json's pure-Python scanner
+    (error path only), which tells where the offending object starts; the key's second occurrence
+    after that start is the duplicate."""
+    def parse_object(s_and_end, *args):
+        try:
+            return json.decoder.JSONObject(s_and_end, *args)
+        except _DuplicateKey as exc:
+            exc.pos = s_and_end[1] if exc.pos is None else exc.pos      # the innermost object's start
+            raise
+    decoder = json.JSONDecoder(parse_constant=_NonFinite, parse_int=_json_int, object_pairs_hook=_unique_keys)
+    decoder.parse_object = parse_object
+    decoder.scan_once = json.scanner.py_make_scanner(decoder)
+    start = 0
+    try:
+        decoder.decode(text)
+    except _DuplicateKey as exc:
+        start = exc.pos or 0
+    except (ValueError, RecursionError):
+        pass
+    hits = [m.start() for m in re.finditer(re.escape(json.dumps(key)) + r"\s*:", text[start:])]
+    at = start + (hits[1] if len(hits) > 1 else hits[0] if hits else 0)
+    return text.count("\n", 0, at) + 1
 
 
 def load_problem_file(path: str | Path) -> list[ProblemSpec]:

@@ -241,13 +241,26 @@ def qvec_from_rotation(R) -> np.ndarray:
 
 
 # ----------------------------------------------------------------------------- reading
-def _data_lines(path: Path):
+def _data_lines(path: Path, strict: bool = False):
     """(line number, stripped text) of the non-comment lines; blank lines kept (images.txt
-    uses an empty POINTS2D line for an image without keypoints)."""
-    for lineno, line in enumerate(path.read_text().splitlines(), 1):
-        s = line.strip()
-        if not s.startswith("#"):
-            yield lineno, s
+    uses an empty POINTS2D line for an image without keypoints).  Bytes that are not UTF-8 are
+    kept as surrogates (an image NAME round-trips); ``strict``: refused, naming file:line."""
+    with open(path, encoding="utf-8", errors="surrogateescape") as fh:
+        for lineno, line in enumerate(fh, 1):
+            if strict and not line.isascii():
+                _check_utf8(path, lineno, line)
+            s = line.strip()
+            if not s.startswith("#"):
+                yield lineno, s
+
+
+def _check_utf8(path: Path, lineno: int, line: str) -> None:
+    try:
+        line.encode("utf-8")
+    except UnicodeEncodeError as exc:
+        byte = ord(line[exc.start]) - 0xDC00
+        raise ModelFormatError(f"{path.name}:{lineno}: not UTF-8 text (byte 0x{byte:02x} at column "
+                               f"{exc.start + 1})") from None
 
 
 class LineFields:
@@ -267,11 +280,15 @@ class LineFields:
             self.fail(f"expected {what} ({n} fields), got {len(self.tokens)} fields")
 
     def int(self, k: int, name: str) -> int:
-        """Field k as an integer."""
+        """Field k as an integer in the 64-bit range (COLMAP's widest integer type)."""
         try:
-            return int(self.tokens[k])
+            v = int(self.tokens[k])
         except ValueError:
-            self.fail(f"{name} must be an integer, got {self.tokens[k]!r}")
+            self.fail(f"{name} must be an integer, got {self.tokens[k][:40]!r}")
+        if not -2 ** 63 <= v < 2 ** 63:
+            self.fail(f"{name} {self.tokens[k][:24]}{'...' if len(self.tokens[k]) > 24 else ''} is beyond the "
+                      f"64-bit integer range")
+        return v
 
     def float(self, k: int, name: str) -> float:
         """Field k as a finite float."""
@@ -287,7 +304,7 @@ class LineFields:
 def read_camera_records(path: Path) -> tuple[dict, dict]:
     """Cameras of a ``cameras.txt`` and the file:line of each (ModelFormatError naming the line)."""
     cams, where = {}, {}
-    for lineno, text in _data_lines(path):
+    for lineno, text in _data_lines(path, strict=True):
         if not text:
             continue
         f = LineFields(path, lineno, text)

@@ -69,10 +69,38 @@ def real_array(value, name: str, what: str = "array") -> np.ndarray:
     except (TypeError, ValueError, OverflowError) as exc:
         raise ValueError(f"{name} must be a numeric {what}, got {_short_repr(value)}") from exc
     kind = arr.dtype.kind
-    if kind not in _REAL_KINDS:
+    if kind == "O":
+        arr = _big_integers(arr, name)
+    elif kind in _REAL_KINDS and isinstance(value, (list, tuple)) and _holds_bool(value):
+        kind = "b"                                # [True, 0] is an int array to numpy: refused like a bool array
+    if arr.dtype.kind not in _REAL_KINDS or kind == "b":
         raise ValueError(f"{name} must be real numbers, got {_KIND_NAMES.get(kind, arr.dtype.name)}")
     with np.errstate(over="ignore"):              # long double beyond float64: inf, refused by the finite checks
         return np.array(arr, dtype=float)
+
+
+def _holds_bool(value) -> bool:
+    """True when a nested list/tuple holds a boolean anywhere."""
+    if isinstance(value, (bool, np.bool_)):
+        return True
+    return isinstance(value, (list, tuple)) and any(_holds_bool(v) for v in value)
+
+
+def _big_integers(arr: np.ndarray, name: str) -> np.ndarray:
+    """An object array of Python numbers holding an integer beyond int64 as floats; an integer
+    beyond the float range is refused by name.  Other object arrays are returned as they are
+    (refused by the caller)."""
+    flat = arr.ravel().tolist()
+    if not all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in flat) or \
+            not any(isinstance(x, int) and not -2 ** 63 <= x < 2 ** 64 for x in flat):
+        return arr
+    try:
+        return np.array([float(x) for x in flat]).reshape(arr.shape)
+    except OverflowError:
+        big = next(x for x in flat if isinstance(x, int) and abs(x) >= 2 ** 1024)
+        digits = int(abs(big).bit_length() * 0.30103) + 1        # str() of a huge int is itself limited
+        raise ValueError(f"{name}: an integer of about {digits} digits is beyond the floating-point range "
+                         f"(|x| < 1.8e308)") from None
 
 
 def _short_repr(value, limit: int = 80) -> str:

@@ -11,6 +11,12 @@ rounded.  Coefficients must be finite real numbers: NaN or inf raise :class:`Val
 strings and booleans :class:`TypeError`.  Exponents must be non-negative integers
 (``int`` or a numpy integer): a float exponent (even ``2.0``), a boolean or a numpy float
 raises :class:`TypeError` naming the exponent instead of being truncated.
+
+Size guards (O(1) checks, so that no call runs for minutes or exhausts memory): a product whose
+term pairs exceed :data:`MAX_TERM_PRODUCTS`, and a power whose estimated size (the multinomial count
+``C(t + k - 1, k)`` of terms of ``p**k`` for ``t`` terms, exact for generic terms) would need more
+raise :class:`ValueError` naming the limit; :func:`variables` refuses more generators than
+:data:`MAX_VARIABLES` (exponent tuples are dense: ``n`` variables hold ``n**2`` entries).
 """
 from __future__ import annotations
 
@@ -20,9 +26,13 @@ from collections.abc import Iterable, Mapping, Sequence
 
 import numpy as np
 
-__all__ = ["Polynomial", "variables", "det", "as_polynomial"]
+__all__ = ["Polynomial", "variables", "det", "as_polynomial", "MAX_TERM_PRODUCTS", "MAX_VARIABLES"]
 
 Exponent = tuple  # tuple[int, ...]
+#: largest number of term pairs one polynomial product may form (about 10-20 s of pure-Python work).
+MAX_TERM_PRODUCTS = 20_000_000
+#: most variables :func:`variables` creates at once (dense exponents: n**2 tuple entries, 8 bytes each).
+MAX_VARIABLES = 16_384
 
 
 def _check_finite(value: float, what: str = "coefficient") -> float:
@@ -32,6 +42,10 @@ def _check_finite(value: float, what: str = "coefficient") -> float:
         value = float(value)
     except TypeError:
         raise TypeError(f"polynomial {what} must be a real number, got {type(value).__name__}") from None
+    except OverflowError:              # an int beyond the float range (10**400)
+        digits = int(abs(int(value)).bit_length() * 0.30103) + 1
+        raise ValueError(f"polynomial {what} must be finite, got an integer of about {digits} digits "
+                         f"(beyond the floating-point range)") from None
     if not math.isfinite(value):
         raise ValueError(f"polynomial {what} must be finite, got {value!r}")
     return value
@@ -216,6 +230,7 @@ class Polynomial:
         if not _is_operand(other):
             return NotImplemented
         other = as_polynomial(other, self.gens)
+        _check_product_size(len(self.terms) * len(other.terms))
         a, b = self._aligned(other)
         out: dict[Exponent, float] = {}
         for e1, c1 in a.terms.items():
@@ -236,9 +251,14 @@ class Polynomial:
     def __pow__(self, k: int) -> Polynomial:
         if isinstance(k, (bool, np.bool_)) or not isinstance(k, numbers.Integral) or k < 0:
             raise ValueError(f"only non-negative integer powers are supported, got {k!r}")
+        k = int(k)
+        if len(self.terms) == 1:           # a monomial: one term whatever k (the coefficient is checked)
+            (e, c), = self.terms.items()
+            return Polynomial._checked(self.gens, {tuple(p * k for p in e): _power(c, k)})
+        half = _power_terms(len(self.terms), k // 2)
+        _check_product_size(half * half, f"p**{k} with {len(self.terms)} terms")
         result = Polynomial.constant(1.0, self.gens)
         base = self
-        k = int(k)
         while k:
             if k & 1:
                 result = result * base
@@ -355,6 +375,28 @@ class Polynomial:
         return "Polynomial(" + " ".join(parts) + ")"
 
 
+def _power(c: float, k: int) -> float:
+    try:
+        return c ** k
+    except OverflowError:
+        return math.inf                  # refused by Polynomial._checked
+
+
+def _power_terms(t: int, k: int) -> float:
+    """Estimated number of terms of ``p**k`` for ``t`` terms: ``C(t + k - 1, k)`` (the monomials of
+    degree k in t symbols; exact when the terms' exponents are generic), as a float (log-gamma)."""
+    if t <= 1 or k <= 0:
+        return 1.0
+    log = math.lgamma(t + k) - math.lgamma(k + 1) - math.lgamma(t)
+    return math.exp(min(log, 700.0))
+
+
+def _check_product_size(pairs: float, what: str = "the product") -> None:
+    if pairs > MAX_TERM_PRODUCTS:
+        raise ValueError(f"{what} would form about {pairs:.3g} term pairs, more than the limit "
+                         f"sospoly.algebra.polynomial.MAX_TERM_PRODUCTS = {MAX_TERM_PRODUCTS:.3g}")
+
+
 def _exponent(e) -> tuple:
     """An exponent tuple of Python ints; TypeError naming it when it is not a sequence of integers (a float
     such as 1.5 used to be truncated by int() and the monomial silently changed)."""
@@ -408,7 +450,14 @@ def variables(names: str | Iterable[str], n: int | None = None) -> tuple[Polynom
     if not gens:
         raise ValueError("no variable names given")
     m = len(gens)
-    return tuple(Polynomial(gens, {tuple(int(j == k) for j in range(m)): 1.0}) for k in range(m))
+    if m > MAX_VARIABLES:
+        raise ValueError(f"{m} variables exceed the limit sospoly.algebra.polynomial.MAX_VARIABLES = "
+                         f"{MAX_VARIABLES} (exponents are dense: n variables hold n**2 entries)")
+    gens = tuple(str(g) for g in gens)
+    if len(set(gens)) != m:
+        raise ValueError(f"duplicate variable names in {gens[:20]}")
+    zero = (0,) * m                      # each exponent built by tuple slicing (C speed, no per-entry checks)
+    return tuple(Polynomial._raw(gens, {zero[:k] + (1,) + zero[k + 1:]: 1.0}) for k in range(m))
 
 
 def det(matrix: Sequence[Sequence[object]]) -> Polynomial:

@@ -24,8 +24,9 @@ __all__ = ["Polytope", "polytope_vertices", "POLYTOPE_RANK_RTOL", "POLYTOPE_VERT
 #: ``rank(B) < 2`` (an unbounded polytope) if ``sigma_2 <= POLYTOPE_RANK_RTOL * sigma_1`` for ``B``'s
 #: nonzero rows scaled to unit norm (the normals' directions; the slab widths do not matter).
 POLYTOPE_RANK_RTOL = 1e-12
-#: Relative to the polygon's diameter: vertices closer than this are merged, and a polygon
-#: thinner than this is reported as the segment (or point) it degenerates to.
+#: Relative to the diameter of a set found without interior (touching slabs): vertices closer
+#: than this are merged, and a set thinner than this is reported as the segment (or point) it
+#: degenerates to.  A polygon with interior is only merged within its floating-point slack.
 POLYTOPE_VERTEX_RTOL = 1e-9
 #: Floating-point slack of a boundary line ``B_k y + c_k = +-1``, relative to the magnitudes
 #: ``(1 + |c_k|) / ||B_k||`` and ``||y0||`` that place it: a set that is empty only by this
@@ -62,9 +63,11 @@ def polytope_vertices(B, c) -> np.ndarray:
        empty too the polytope is empty; otherwise the set has no interior (touching slabs: a
        segment or a point), and its vertices are the intersections of the enlarged cycle's
        consecutive lines at their original offsets.
-    5. Vertices closer than ``POLYTOPE_VERTEX_RTOL * diameter`` are merged, a polygon thinner
-       than that is reduced to its two extreme points (a segment) or one point, and the
-       vertices are returned ordered counter-clockwise by angle around their mean.
+    5. Vertices closer than the lines' floating-point slack are merged (for a set without
+       interior, found in step 4: closer than ``POLYTOPE_VERTEX_RTOL * diameter``), a polygon
+       thinner than that is reduced to its two extreme points (a segment) or one point, and the
+       vertices are returned ordered counter-clockwise by angle around their mean.  A polygon
+       with interior keeps its width whatever its aspect ratio.
 
     Returns
     -------
@@ -212,7 +215,8 @@ def _vertices(B: np.ndarray, c: np.ndarray) -> np.ndarray:
     N, b, slack, y0 = _halfplanes(B, c)
     cycle = _sweep(N, b)
     V = _corners(N, b, cycle) if cycle is not None else None
-    if V is None or not _consistent(V, N, b, slack, cycle):
+    interior = V is not None and _consistent(V, N, b, slack, cycle)
+    if not interior:
         cycle = _sweep(N, b + slack)
         if cycle is None:
             raise ValueError("polytope {y : ||B y + c||_inf <= 1} is empty")
@@ -221,7 +225,7 @@ def _vertices(B: np.ndarray, c: np.ndarray) -> np.ndarray:
             V = _corners(N, b + slack, cycle)
     if not np.all(np.isfinite(V)):
         raise ValueError("polytope vertices are beyond the floating-point range")
-    V = _simplify(V, 16.0 * float(np.max(slack[cycle])))
+    V = _simplify(V, 16.0 * float(np.max(slack[cycle])), relative=not interior)
     V = V + y0
     if not np.all(np.isfinite(V)):
         raise ValueError("polytope vertices are beyond the floating-point range")
@@ -229,14 +233,17 @@ def _vertices(B: np.ndarray, c: np.ndarray) -> np.ndarray:
     return V[np.argsort(np.arctan2(V[:, 1] - mean[1], V[:, 0] - mean[0]), kind="stable")]
 
 
-def _simplify(V: np.ndarray, floor: float) -> np.ndarray:
-    """Merge consecutive vertices (cyclic) closer than ``POLYTOPE_VERTEX_RTOL * diameter``
-    (at least ``floor``); reduce a polygon thinner than that to its extreme points."""
+def _simplify(V: np.ndarray, floor: float, relative: bool = True) -> np.ndarray:
+    """Merge consecutive vertices (cyclic) closer than ``tol``; reduce a polygon thinner than
+    ``tol`` to its extreme points.  ``tol`` is the floating-point slack ``floor`` of the lines; for
+    a set found without interior by the sweep (``relative``) at least ``POLYTOPE_VERTEX_RTOL *
+    diameter``.  A polygon with interior is never thinned by its aspect ratio: a 2 x 1e10 box keeps
+    its width, which decides distances of the order of the width (issue 24)."""
     centred = V - V.mean(axis=0)
     axis = np.linalg.svd(centred, full_matrices=False)[2][0] if len(V) > 1 else np.array([1.0, 0.0])
     proj = centred @ axis
     diam = float(np.ptp(proj)) if len(V) > 1 else 0.0
-    tol = max(POLYTOPE_VERTEX_RTOL * diam, floor)
+    tol = max(POLYTOPE_VERTEX_RTOL * diam, floor) if relative else floor
     if diam <= tol:
         return V[[int(np.argmin(np.hypot(*centred.T)))]]
     step = np.hypot(*(V[1:] - V[:-1]).T)                  # runs of coincident consecutive vertices -> one

@@ -422,6 +422,9 @@ def minimize(f, eq=(), ineq=(), degree: int | None = None, multiplier="auto", *,
         raise ValueError(f"max_degree must be an integer >= the first degree {d0}, got {max_degree!r}")
     last = d0 if degree is not None else int(max_degree if max_degree is not None else d0 + 4)
     fn, eqn, ineqn, fscale = _normalised(f, eq, ineq)
+    unbounded = _unbounded_below(fn, eqn, ineqn, gens, d0, fscale, time.perf_counter() - t0)
+    if unbounded is not None:
+        return unbounded
     run = _Run(f, eq, ineq, fn=fn, eqn=eqn, ineqn=ineqn, fscale=fscale, gens=gens, tol=tol, budget=budget,
                deadline=deadline, refine=refine, radius=radius)
     best = None
@@ -438,6 +441,21 @@ def minimize(f, eq=(), ineq=(), degree: int | None = None, multiplier="auto", *,
         if best.optimal or deadline.expired:
             break
     return _finish(best, run, time.perf_counter() - t0)
+
+
+def _unbounded_below(fn, eqn, ineqn, gens, degree, fscale, seconds) -> MinimizeResult | None:
+    """Status ``infeasible`` (no lower bound at any degree) when the unconstrained ``f`` has a direction
+    of decrease to -inf (:func:`sospoly.analysis.recession.recession_direction`): the SDP would be
+    infeasible only below its tolerance and could report a finite bound."""
+    from .analysis.recession import recession_direction
+
+    d = recession_direction(fn, eqn, ineqn)
+    if d is None:
+        return None
+    msg = (f"f is unbounded below: f(t*d) -> -inf as t -> inf along d = {np.round(d, 6).tolist()} "
+           f"(or bounded only far beyond floating-point resolution); no lower bound exists")
+    return MinimizeResult(SolveStatus.INFEASIBLE, None, None, (), False, 0, degree, "-", gens, message=msg,
+                          sparsity="-", scale=fscale, seconds=seconds)
 
 
 def _better(a: MinimizeResult, b: MinimizeResult) -> bool:

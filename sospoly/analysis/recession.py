@@ -1,0 +1,112 @@
+"""Unconstrained polynomials that are unbounded below, recognised before any SDP is solved.
+
+An SOS solver works to a tolerance: for ``f = x^2 - 1e-6 x y`` (indefinite, unbounded below) the
+program ``max c : f - c SOS`` is infeasible only by ~1e-13, below the solver's tolerance, and a
+"certified" finite lower bound was reported.  :func:`recession_direction` finds, for an unconstrained
+``f``, a direction ``d`` with ``f(t d) -> -inf`` when one of these certainly exists:
+
+* ``deg f`` odd: the top-degree form ``f_top`` is odd, so ``f_top(-d) = -f_top(d) < 0`` for some ``d``
+  (the coordinate axes and a few fixed directions are tried);
+* ``deg f = 2``, ``f = x' Q x + b' x + c``: ``Q`` has an eigenvalue below ``-tol`` (``tol`` =
+  :data:`EIG_RTOL` ``* n * ||Q||``: beyond the rounding of the eigen-decomposition), or ``Q`` is positive
+  semidefinite with eigenvalues within ``tol`` of zero along which ``b`` has a component
+  (``f(-t N N' b) = -t ||N'b||^2 + O(tol t^2)``): then ``f`` is unbounded below, or bounded only below
+  ``-||N'b||^2 / (4 tol)``, beyond what any floating-point certificate can resolve;
+* ``deg f`` even ``> 2``: ``f_top`` is negative at one of the tried directions, or at a local minimiser
+  of ``f_top`` on the unit sphere started from the three best (a sufficient test only).
+
+Each direction is confirmed by evaluating ``f_top(d) < 0`` (or the linear decrease) before it is
+returned.  ``None`` means no such direction was found, not that ``f`` is bounded below.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..algebra.polynomial import Polynomial
+
+__all__ = ["recession_direction", "EIG_RTOL", "LOCAL_SEARCH_MAX_VARS"]
+
+#: eigenvalues of the quadratic part within ``EIG_RTOL * n * ||Q||`` of zero are treated as zero.
+EIG_RTOL = 64 * float(np.finfo(float).eps)
+#: above this many variables only the fixed trial directions are tried for degrees above 2 (no local search).
+LOCAL_SEARCH_MAX_VARS = 40
+
+
+def _split(f: Polynomial) -> tuple[np.ndarray, np.ndarray, int]:
+    E, c = f.exponents(), f.coefficients()
+    deg = E.sum(axis=1)
+    return E, c, int(deg.max()) if len(deg) else 0
+
+
+def _top_form_value(E: np.ndarray, c: np.ndarray, top: int, d: np.ndarray) -> float:
+    rows = E.sum(axis=1) == top
+    return float(np.sum(c[rows] * np.prod(d[None, :] ** E[rows], axis=1)))
+
+
+def _trial_directions(n: int) -> np.ndarray:
+    rng = np.random.default_rng(0)
+    eye = np.eye(n)
+    return np.vstack([eye, -eye, rng.standard_normal((min(4 * n, 64), n))])
+
+
+def _quadratic(E: np.ndarray, c: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    Q, b = np.zeros((n, n)), np.zeros(n)
+    for e, v in zip(E, c):
+        nz = np.flatnonzero(e)
+        if e.sum() == 2:
+            i, j = (nz[0], nz[0]) if len(nz) == 1 else (nz[0], nz[1])
+            Q[i, j] += v / (1.0 if i == j else 2.0)
+            Q[j, i] = Q[i, j]
+        elif e.sum() == 1:
+            b[nz[0]] += v
+    return Q, b
+
+
+def _quadratic_direction(E, c, n) -> np.ndarray | None:
+    Q, b = _quadratic(E, c, n)
+    lam, V = np.linalg.eigh(Q)
+    tol = EIG_RTOL * n * max(float(np.max(np.abs(lam))), 0.0)
+    if lam[0] < -tol:
+        return V[:, 0]
+    null = V[:, np.abs(lam) <= tol]
+    if null.shape[1]:
+        d = -null @ (null.T @ b)
+        if float(b @ d) < -EIG_RTOL * n * float(np.linalg.norm(b)) * float(np.linalg.norm(d)) and np.any(d):
+            return d / np.linalg.norm(d)
+    return None
+
+
+def recession_direction(f: Polynomial, eq=(), ineq=()) -> np.ndarray | None:
+    """A unit direction along which the unconstrained ``f`` decreases to ``-inf`` (module docstring),
+    or None (also whenever there are constraints: the feasible set may be bounded)."""
+    if eq or ineq or f.nvars == 0:
+        return None
+    E, c, top = _split(f)
+    n = f.nvars
+    if top == 0:
+        return None
+    if top == 2:
+        return _quadratic_direction(E, c, n)
+    floor = EIG_RTOL * float(np.max(np.abs(c)))
+
+    def on_sphere(d):
+        d = np.asarray(d, float)
+        return _top_form_value(E, c, top, d / np.linalg.norm(d))
+
+    starts = sorted(_trial_directions(n), key=on_sphere)
+    for d in starts[:3] if n <= LOCAL_SEARCH_MAX_VARS else ():
+        d = _descend(on_sphere, d)
+        starts.insert(0, d)
+    for d in starts:
+        d = d / np.linalg.norm(d)
+        if _top_form_value(E, c, top, d) < -floor * np.sum(np.abs(d)) ** top:
+            return d
+    return None
+
+
+def _descend(fun, d0: np.ndarray) -> np.ndarray:
+    """A local minimiser of ``fun`` (the top form on the unit sphere) from ``d0`` (a few BFGS steps)."""
+    from scipy.optimize import minimize as local_min
+
+    res = local_min(fun, d0, method="BFGS", options={"maxiter": 50})
+    return res.x if np.all(np.isfinite(res.x)) and np.any(res.x) else d0

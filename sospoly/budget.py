@@ -21,13 +21,15 @@ Memory model (8-byte floats; an estimate, deliberately on the safe side):
 """
 from __future__ import annotations
 
+import contextlib
+import contextvars
 import math
 import numbers
 import time
 from dataclasses import dataclass
 
 __all__ = ["Budget", "DEFAULT_BUDGET", "UNLIMITED", "ProgramSize", "estimate_size", "BudgetExceeded", "Deadline",
-           "as_budget"]
+           "as_budget", "TimeLimitReached", "deadline_scope", "check_deadline"]
 
 
 @dataclass(frozen=True)
@@ -88,6 +90,37 @@ class Deadline:
     @property
     def expired(self) -> bool:
         return self.end is not None and time.monotonic() >= self.end
+
+
+class TimeLimitReached(RuntimeError):
+    """The active deadline (:func:`deadline_scope`) passed while a program was built, assembled or
+    sized; entry points turn it into status ``time_limit``."""
+
+
+_ACTIVE_DEADLINE: contextvars.ContextVar = contextvars.ContextVar("sospoly_deadline", default=None)
+
+
+@contextlib.contextmanager
+def deadline_scope(deadline: Deadline | None):
+    """Make ``deadline`` the one :func:`check_deadline` tests inside the block (an enclosing scope's
+    earlier deadline stays in force): the build loops of sospoly and tritools check it without every
+    function taking a ``deadline`` argument."""
+    outer = _ACTIVE_DEADLINE.get()
+    if deadline is None or deadline.end is None or (outer is not None and outer.end is not None
+                                                     and outer.end <= deadline.end):
+        deadline = outer
+    token = _ACTIVE_DEADLINE.set(deadline)
+    try:
+        yield deadline
+    finally:
+        _ACTIVE_DEADLINE.reset(token)
+
+
+def check_deadline(what: str = "building the program") -> None:
+    """Raise :class:`TimeLimitReached` when the active deadline has passed (O(1): one clock read)."""
+    d = _ACTIVE_DEADLINE.get()
+    if d is not None and d.end is not None and time.monotonic() >= d.end:
+        raise TimeLimitReached(f"time limit reached while {what}")
 
 
 @dataclass(frozen=True)

@@ -51,9 +51,10 @@ import numpy as np
 
 from .algebra.basis import MonomialIndex
 from .algebra.polynomial import Polynomial
+from .analysis.recession import unbounded_result
 from .analysis.extraction import Candidate, extract_from_gram, extract_from_moment
 from .analysis.sparse_extraction import extract_from_clique_moments
-from .budget import BudgetExceeded, as_budget
+from .budget import BudgetExceeded, TimeLimitReached, as_budget, deadline_scope
 from .certificates.program import SOSProgram
 from .certificates.psatz import Multiplier, PsatzProblem, as_multiplier, build_psatz, checked_inputs
 from .certificates.shape import SPARSITY_KINDS
@@ -422,8 +423,8 @@ def minimize(f, eq=(), ineq=(), degree: int | None = None, multiplier="auto", *,
         raise ValueError(f"max_degree must be an integer >= the first degree {d0}, got {max_degree!r}")
     last = d0 if degree is not None else int(max_degree if max_degree is not None else d0 + 4)
     fn, eqn, ineqn, fscale = _normalised(f, eq, ineq)
-    unbounded = _unbounded_below(fn, eqn, ineqn, gens, d0, fscale, time.perf_counter() - t0)
-    if unbounded is not None:
+    unbounded = unbounded_result(fn, eqn, ineqn, gens, d0, fscale, time.perf_counter() - t0)
+    if unbounded is not None:                 # no bound at any degree (the SDP could miss it by its tolerance)
         return unbounded
     run = _Run(f, eq, ineq, fn=fn, eqn=eqn, ineqn=ineqn, fscale=fscale, gens=gens, tol=tol, budget=budget,
                deadline=deadline, refine=refine, radius=radius)
@@ -441,21 +442,6 @@ def minimize(f, eq=(), ineq=(), degree: int | None = None, multiplier="auto", *,
         if best.optimal or deadline.expired:
             break
     return _finish(best, run, time.perf_counter() - t0)
-
-
-def _unbounded_below(fn, eqn, ineqn, gens, degree, fscale, seconds) -> MinimizeResult | None:
-    """Status ``infeasible`` (no lower bound at any degree) when the unconstrained ``f`` has a direction
-    of decrease to -inf (:func:`sospoly.analysis.recession.recession_direction`): the SDP would be
-    infeasible only below its tolerance and could report a finite bound."""
-    from .analysis.recession import recession_direction
-
-    d = recession_direction(fn, eqn, ineqn)
-    if d is None:
-        return None
-    msg = (f"f is unbounded below: f(t*d) -> -inf as t -> inf along d = {np.round(d, 6).tolist()} "
-           f"(or bounded only far beyond floating-point resolution); no lower bound exists")
-    return MinimizeResult(SolveStatus.INFEASIBLE, None, None, (), False, 0, degree, "-", gens, message=msg,
-                          sparsity="-", scale=fscale, seconds=seconds)
 
 
 def _better(a: MinimizeResult, b: MinimizeResult) -> bool:
@@ -492,6 +478,17 @@ class _Run:
                               message=message, sparsity=kind, scale=self.fscale)
 
     def solve(self, degree, mult, kind, low, form, backend) -> MinimizeResult:
+        """One step under the deadline: the build loops check it too (:func:`sospoly.budget.deadline_scope`)."""
+        try:
+            with deadline_scope(self.deadline):
+                return self._solve(degree, mult, kind, low, form, backend)
+        except TimeLimitReached as exc:
+            label = "dense" if kind == "none" else kind
+            self.attempts.append(SolveAttempt(degree, _name_of(mult), label, "-", "-", "time_limit", None, 0.0,
+                                              str(exc)))
+            return self._empty(SolveStatus.TIME_LIMIT, degree, mult, label, str(exc))
+
+    def _solve(self, degree, mult, kind, low, form, backend) -> MinimizeResult:
         label = "dense" if kind == "none" else kind
         try:
             shape = _shape_with_q(kind, self.fn, self.eqn, self.ineqn, degree, mult, self.budget.max_gram_side)

@@ -24,12 +24,16 @@ import numpy as np
 
 from ..algebra.polynomial import Polynomial
 
-__all__ = ["recession_direction", "EIG_RTOL", "LOCAL_SEARCH_MAX_VARS"]
+__all__ = ["recession_direction", "unbounded_result", "EIG_RTOL", "LOCAL_SEARCH_MAX_VARS", "MAX_TRIAL_ENTRIES"]
 
 #: eigenvalues of the quadratic part within ``EIG_RTOL * n * ||Q||`` of zero are treated as zero.
 EIG_RTOL = 64 * float(np.finfo(float).eps)
 #: above this many variables only the fixed trial directions are tried for degrees above 2 (no local search).
 LOCAL_SEARCH_MAX_VARS = 40
+#: work bound of the test (floats): trial directions x top-form entries (the check stays well below a second).
+MAX_TRIAL_ENTRIES = 20_000_000
+#: floats per evaluation block of the top form.
+MAX_EVAL_ENTRIES = 4_000_000
 
 
 def _split(f: Polynomial) -> tuple[np.ndarray, np.ndarray, int]:
@@ -38,15 +42,34 @@ def _split(f: Polynomial) -> tuple[np.ndarray, np.ndarray, int]:
     return E, c, int(deg.max()) if len(deg) else 0
 
 
-def _top_form_value(E: np.ndarray, c: np.ndarray, top: int, d: np.ndarray) -> float:
-    rows = E.sum(axis=1) == top
-    return float(np.sum(c[rows] * np.prod(d[None, :] ** E[rows], axis=1)))
+class _TopForm:
+    """The top-degree form of f, evaluated at many directions at once: each term has at most ``top``
+    variables, so a term is a product of ``top`` padded factors ``d[col] ** pow`` (pow 0 -> 1)."""
+
+    def __init__(self, E: np.ndarray, c: np.ndarray, top: int):
+        rows = E.sum(axis=1) == top
+        E, self.coef = E[rows], c[rows]
+        order = np.argsort(-E, axis=1, kind="stable")[:, :top]       # a term's (at most top) variables first
+        self.cols = order
+        self.pows = np.take_along_axis(E, order, axis=1)
+        self.top = top
+
+    def __call__(self, D: np.ndarray) -> np.ndarray:
+        """Values at the rows of ``D`` (K, n), in blocks bounding memory to ~MAX_EVAL_ENTRIES floats."""
+        D = np.atleast_2d(np.asarray(D, float))
+        out = np.empty(len(D))
+        step = max(1, MAX_EVAL_ENTRIES // max(1, self.cols.size))
+        for k in range(0, len(D), step):
+            V = D[k:k + step][:, self.cols] ** self.pows[None]
+            out[k:k + step] = np.prod(V, axis=2) @ self.coef
+        return out
 
 
-def _trial_directions(n: int) -> np.ndarray:
+def _trial_directions(n: int, budget: int) -> np.ndarray:
     rng = np.random.default_rng(0)
     eye = np.eye(n)
-    return np.vstack([eye, -eye, rng.standard_normal((min(4 * n, 64), n))])
+    D = np.vstack([eye, -eye, rng.standard_normal((min(4 * n, 64), n))])
+    return D[:max(2, budget)]
 
 
 def _quadratic(E: np.ndarray, c: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
@@ -88,20 +111,18 @@ def recession_direction(f: Polynomial, eq=(), ineq=()) -> np.ndarray | None:
     if top == 2:
         return _quadratic_direction(E, c, n)
     floor = EIG_RTOL * float(np.max(np.abs(c)))
-
-    def on_sphere(d):
-        d = np.asarray(d, float)
-        return _top_form_value(E, c, top, d / np.linalg.norm(d))
-
-    starts = sorted(_trial_directions(n), key=on_sphere)
-    for d in starts[:3] if n <= LOCAL_SEARCH_MAX_VARS else ():
-        d = _descend(on_sphere, d)
-        starts.insert(0, d)
-    for d in starts:
-        d = d / np.linalg.norm(d)
-        if _top_form_value(E, c, top, d) < -floor * np.sum(np.abs(d)) ** top:
-            return d
-    return None
+    form = _TopForm(E, c, top)
+    cost = max(1, form.cols.size)                    # entries per evaluation
+    D = _trial_directions(n, MAX_TRIAL_ENTRIES // cost)
+    D = D / np.linalg.norm(D, axis=1, keepdims=True)
+    values = form(D)
+    if n <= LOCAL_SEARCH_MAX_VARS and cost * n <= MAX_TRIAL_ENTRIES // 200:
+        starts = D[np.argsort(values)[:3]]
+        found = np.array([_descend(lambda d: float(form(d / np.linalg.norm(d))[0]), d) for d in starts])
+        D = np.vstack([found / np.linalg.norm(found, axis=1, keepdims=True), D])
+        values = np.concatenate([form(D[:len(found)]), values])
+    bad = np.flatnonzero(values < -floor * np.sum(np.abs(D), axis=1) ** top)
+    return D[bad[0]] if bad.size else None
 
 
 def _descend(fun, d0: np.ndarray) -> np.ndarray:
@@ -110,3 +131,18 @@ def _descend(fun, d0: np.ndarray) -> np.ndarray:
 
     res = local_min(fun, d0, method="BFGS", options={"maxiter": 50})
     return res.x if np.all(np.isfinite(res.x)) and np.any(res.x) else d0
+
+
+def unbounded_result(fn, eqn, ineqn, gens, degree, fscale, seconds):
+    """:func:`sospoly.minimize`'s result when the unconstrained ``fn`` has a direction of decrease to -inf:
+    status ``infeasible`` (no lower bound at any degree), the direction in the message; else None."""
+    from ..minimize import MinimizeResult
+    from ..status import SolveStatus
+
+    d = recession_direction(fn, eqn, ineqn)
+    if d is None:
+        return None
+    msg = (f"f is unbounded below: f(t*d) -> -inf as t -> inf along d = {np.round(d, 6).tolist()} "
+           f"(or bounded only far beyond floating-point resolution); no lower bound exists")
+    return MinimizeResult(SolveStatus.INFEASIBLE, None, None, (), False, 0, degree, "-", gens, message=msg,
+                          sparsity="-", scale=fscale, seconds=seconds)

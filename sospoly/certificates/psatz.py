@@ -47,7 +47,7 @@ import numpy as np
 from ..algebra.basis import MonomialIndex, monomials, sigma
 from ..algebra.linpoly import LinPoly
 from ..algebra.polynomial import Polynomial, as_polynomial
-from ..budget import BudgetExceeded
+from ..budget import BudgetExceeded, check_deadline
 from .program import SOSConstraint, SOSProgram
 from .shape import CertificateShape, correlative_shape, dense_shape, newton_shape, term_shape
 from .reduction import reduce_shape
@@ -181,6 +181,7 @@ def _fixed_q(multiplier, gens, degree: int, f: Polynomial, dense: bool) -> Polyn
 
 
 def _support(p: Polynomial) -> np.ndarray:
+    check_deadline("reading the data's supports")
     E = p.exponents()
     return E[np.lexsort(E.T[::-1])] if E.shape[0] else E
 
@@ -377,6 +378,7 @@ def psatz_structure(slots: DataSlots, degree: int, shape: CertificateShape, q: P
         params[f"f:{t}"] = mult_q * _mono(gens, e)
     n_slots = max([E.shape[0] for E in slots.supports[1:]], default=0)
     for t in range(n_slots):
+        check_deadline("assembling the certificate")
         # sum_k mult_k m_{k,t}: shifting a LinPoly's exponents by a monomial keeps its rows distinct,
         # so the parts are concatenated and merged once
         Es, cs, rs, cl, vs, off = [], [], [], [], [], 0
@@ -388,7 +390,9 @@ def psatz_structure(slots: DataSlots, degree: int, shape: CertificateShape, q: P
             off += M.E.shape[0]
         params[f"m:{t}"] = LinPoly(gens, np.vstack(Es).reshape(-1, n), np.concatenate(cs), np.concatenate(rs),
                                    np.concatenate(cl), np.concatenate(vs))
+    check_deadline("assembling the certificate")
     u = prog.add_sos(u0, name="u", param_terms=params, bases=shape.u_bases)
+    check_deadline("assembling the certificate")
     if q is not None:
         prog.maximize(c)
     qkey = None if q is None else tuple(sorted(q.terms.items()))

@@ -53,6 +53,7 @@ from dataclasses import replace
 import numpy as np
 
 from ..algebra.basis import MonomialIndex
+from ..budget import check_deadline
 from .shape import CertificateShape
 
 __all__ = ["diagonal_reduction", "ideal_reduction", "reduce_shape", "leading_monomial"]
@@ -69,6 +70,7 @@ def _minkowski(A: np.ndarray, B: np.ndarray) -> np.ndarray:
     n = A.shape[1]
     if not A.shape[0] or not B.shape[0]:
         return np.zeros((0, n), np.int64)
+    check_deadline("reducing the certificate's bases")
     return np.unique((A[:, None, :] + B[None, :, :]).reshape(-1, n), axis=0)
 
 
@@ -102,6 +104,7 @@ def diagonal_reduction(shape: CertificateShape, f_support, eq_supports=(), ineq_
     bases = [np.asarray(B, np.int64) for B in shape.u_bases]
     changed = False
     while True:
+        check_deadline("reducing the certificate's bases")
         offdiag = MonomialIndex(_rows(*[_pair_sums(B, False) for B in bases], n=n))
         candidates = _rows(*bases, n=n)
         if not candidates.shape[0]:
@@ -139,6 +142,7 @@ def ideal_reduction(shape: CertificateShape, eq_supports) -> CertificateShape:
     r_index = [MonomialIndex(_rows(R, n=n)) for R in shape.r_supports]
     bases, changed = [], False
     for B in shape.u_bases:
+        check_deadline("reducing the certificate's bases")
         B = np.asarray(B, np.int64)
         in_B = MonomialIndex(B)
         drop = np.zeros(B.shape[0], bool)

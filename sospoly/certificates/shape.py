@@ -36,7 +36,7 @@ from itertools import combinations
 import numpy as np
 
 from ..algebra.basis import monomials, sigma
-from ..budget import BudgetExceeded, ProgramSize, estimate_size
+from ..budget import BudgetExceeded, ProgramSize, check_deadline, estimate_size
 from .sparsity import correlative_sparsity, newton_reduce, term_sparsity_blocks, variables_of
 
 __all__ = ["CertificateShape", "dense_shape", "clique_shape", "correlative_shape", "term_shape", "newton_shape",
@@ -195,16 +195,19 @@ def clique_shape(n: int, degree: int, cliques, eq_variables=(), ineq_variables=(
         u.append(monomials(n, low_degree // 2))
         block_clique.append(-1)
     for k, c in enumerate(cliques):
+        check_deadline("sizing the certificate")
         u.append(clique_monomials(n, c, degree // 2))
         block_clique.append(k)
     r = []
     for vars_, d in zip(eq_variables, eq_degrees):
+        check_deadline("sizing the certificate")
         k = home(vars_)
         local = clique_monomials(n, cliques[k], degree - int(d)) if k >= 0 else empty
         low = monomials(n, low_degree - int(d)) if low_degree is not None and low_degree >= d else empty
         r.append(_union_rows(local, low, n=n))
     s = []
     for vars_, d in zip(ineq_variables, ineq_degrees):
+        check_deadline("sizing the certificate")
         k = home(vars_)
         local = clique_monomials(n, cliques[k], (degree - int(d)) // 2) if k >= 0 else empty
         low = monomials(n, (low_degree - int(d)) // 2) if low_degree is not None and low_degree >= d else empty

@@ -174,8 +174,11 @@ def maximal_cliques_chordal(G: nx.Graph) -> tuple[tuple[int, ...], ...]:
     Each clique is sorted and the cliques are sorted lexicographically.  ValueError when
     ``G`` is not chordal.
     """
-    if G.number_of_nodes() == 0:
+    n = G.number_of_nodes()
+    if n == 0:
         return ()
+    if not nx.number_of_selfloops(G) and G.number_of_edges() == n * (n - 1) // 2:
+        return (tuple(sorted(G.nodes)),)       # complete: one clique (networkx's tests are slow on dense graphs)
     if nx.number_of_selfloops(G) or not nx.is_chordal(G):
         raise ValueError("maximal_cliques_chordal needs a chordal graph without self-loops")
     return tuple(sorted(tuple(sorted(c)) for c in nx.chordal_graph_cliques(G)))

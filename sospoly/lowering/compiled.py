@@ -33,7 +33,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from ..budget import as_budget
+from ..budget import as_budget, check_deadline
 from ..certificates.psatz import (DataSlots, Multiplier, PsatzProblem, PsatzStructure, StructureMismatch, as_multiplier,
                                   certificate_shape, check_size, checked_inputs, fixed_q_for, psatz_structure)
 from ..solvers.backends import Attempt, ConicSolution, RawStatus, get_backend
@@ -127,6 +127,7 @@ class CompiledPsatz:
         slots = structure.slots
         prog = structure.program
         conic = lower(prog, self.form)
+        check_deadline("compiling the program")
         self._template = conic
         offsets = slots.offsets
         n_theta = slots.n_theta
@@ -152,6 +153,7 @@ class CompiledPsatz:
                 brows.append(nz), bvals.append(bk[nz])
                 bsrc.append(_param_source(name, col_owner, np.zeros(nz.size, np.int64), offsets, n_theta))
         rows, cols, vals, src = map(np.concatenate, (rows, cols, vals, src))
+        check_deadline("compiling the program")
         key = cols.astype(np.int64) * nrows + rows
         ukey, pos = np.unique(key, return_inverse=True)
         self._pat_rows = (ukey % nrows).astype(np.int64)

@@ -40,6 +40,7 @@ from ..algebra.basis import GramBlocks, MonomialIndex
 from ..algebra.linpoly import LinPoly
 from ..certificates.program import BlockKind, Sense, SOSProgram
 from ..algebra.svec import smat, svec_scale
+from ..budget import check_deadline
 
 __all__ = ["GramForm", "Cone", "ConicProblem", "lower", "gram_structure"]
 
@@ -251,6 +252,7 @@ def lower(program: SOSProgram, form: GramForm = GramForm.IMAGE) -> ConicProblem:
         asm.b.append((np.array([row]), eq.rhs))
         row += 1
     for con in program.sos_constraints:    # monomials of SOS expressions outside the Gram products: u_m = 0
+        check_deadline("lowering the program")
         missing = {}
         for _, expr in _terms(con):
             idx = con.gram.product_index.find(expr.E, missing_ok=True)
@@ -285,6 +287,7 @@ def lower(program: SOSProgram, form: GramForm = GramForm.IMAGE) -> ConicProblem:
         cones.append(Cone("psd", n, s))
         row += n
     for k, con in enumerate(program.sos_constraints):
+        check_deadline("lowering the program")
         gb = con.gram
         if form == GramForm.IMAGE:
             st = gram_structure(gb)

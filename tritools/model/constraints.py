@@ -27,6 +27,7 @@ from itertools import combinations
 import numpy as np
 
 from sospoly import Polynomial
+from sospoly.budget import check_deadline
 
 from .geometry import fundamental_matrix
 
@@ -145,6 +146,7 @@ def centre_groups(cameras: np.ndarray) -> np.ndarray:
     N = cameras.shape[0]
     label = np.arange(N)
     for i, j in combinations(range(N), 2):
+        check_deadline("comparing the camera centres")
         try:
             fundamental_matrix(cameras[i], cameras[j])
         except ValueError as exc:
@@ -188,6 +190,7 @@ def theorem1_constraints(cameras: np.ndarray, gens, x_index, groups=None) -> tup
     # polynomials are built without Polynomial's per-term validation (4000+ terms at N = 4)
     polys = []
     for row in M2:
+        check_deadline("building the minors")
         nz = np.nonzero(row)[0]
         polys.append(Polynomial.from_trusted_terms(gens, dict(zip([exps[k] for k in nz], row[nz].tolist()))))
     return polys, {"N1": M1.shape[0], "N2": n2, "singular_values": S}
@@ -210,6 +213,7 @@ def triple_minor_constraints(cameras: np.ndarray, gens, x_index, triples, groups
     x_index = np.asarray(x_index)
     polys, views, n1, n2 = [], [], 0, 0
     for t in triples:
+        check_deadline("building the minors")
         t = tuple(int(i) for i in t)
         sub = np.concatenate([x_index[2 * i:2 * i + 2] for i in t])
         p, info = theorem1_constraints(cameras[list(t)], gens, sub,
@@ -251,6 +255,7 @@ def corollary1_constraints(cameras: np.ndarray, gens, x_index, pairs=None, relat
     xt = [[var(2 * i), var(2 * i + 1), one] for i in range(N)]
     polys, kept, skipped, homography = [], [], [], []
     for i, j in pairs:
+        check_deadline("building the epipolar constraints")
         try:
             if relations is not None and relations.groups[i] == relations.groups[j]:
                 raise ValueError("one centre (raw cameras)")

@@ -36,7 +36,7 @@ from sospoly import BudgetExceeded, Multiplier, SolveStatus
 from sospoly.analysis.extraction import best_in_family, kernel_family
 from sospoly.analysis.rigor import rigorous_psatz_bound
 from sospoly.analysis.verify import verify_quadratic
-from sospoly.budget import Deadline
+from sospoly.budget import Deadline, TimeLimitReached, deadline_scope
 
 from ..model.constraints import Method, centre_relations
 from ..model.geometry import (common_centre, dlt, gamma as gamma_of, gamma_validated, point_from_image_points,
@@ -123,6 +123,12 @@ class _PointSolve:
         return self._problems[key]
 
     def run(self) -> TriangulationResult:
+        """The degree plan under the deadline: the build loops of sospoly check it too
+        (:func:`sospoly.budget.deadline_scope`), so building, assembling and sizing stop at the limit."""
+        with deadline_scope(self.deadline):
+            return self._run()
+
+    def _run(self) -> TriangulationResult:
         first_method = self.opts.explicit_method or Method.COROLLARY1
         n_vars = 2 * self.N + sum(r.n_aux for r in self.regions)
         steps = degree_plan(self.opts, self.N, n_vars, _delta_min(first_method, self.N))
@@ -219,6 +225,14 @@ class _PointSolve:
         sparsity = "dense" if step.formulation == "dense" else "views"
         common = dict(method=step.method.value, delta=step.delta, sparsity=sparsity)
         t = time.perf_counter()
+        try:
+            return self._solve_step(step, tol, label, common, t)
+        except TimeLimitReached as exc:               # building, assembling or compiling ran out of time
+            return self._failed(step, Status.TIME_LIMIT, f"delta={step.delta}: {exc}", label, t)
+
+    def _solve_step(self, step: Step, tol, label: str, common: dict, t: float) -> TriangulationResult:
+        opts = self.opts
+        sparsity = common["sparsity"]
         try:
             problem = self.problem(step.method, step.formulation)
         except ValueError as exc:                     # e.g. Theorem 1 with all minors for too many views

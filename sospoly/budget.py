@@ -13,11 +13,21 @@ running for minutes.
 Memory model (8-byte floats; an estimate, deliberately on the safe side):
 
 * Clarabel factorises a KKT system whose PSD-cone blocks are dense in svec space: a Gram block of
-  side s contributes L^2 entries, L = s (s + 1) / 2, besides a few copies of the constraint matrix.
+  side s contributes L^2 entries, L = s (s + 1) / 2, to the KKT matrix, to its LDL factor (values and
+  indices) and to the solver's work copies: :data:`CLARABEL_BYTES_PER_ENTRY` bytes per entry
+  (measured: Theorem 1, 3 views with ellipses at delta = 4, Gram side 91: 0.91 GB peak, 52 bytes per
+  L^2 entry), besides a few copies of the constraint matrix.
 * The batched interior-point method (:mod:`sospoly.solvers.ipm`) holds, per PSD block of side s,
   the m full s x s matrices of the columns (m = number of decision columns) and the m x m Schur
   complement.
-* The cheaper of the two is the program's estimate (the solver layer picks that back-end).
+* The estimate (:attr:`ProgramSize.bytes`) is the peak of what may run: Clarabel always (it is every
+  back-end's fallback), and the interior-point method too where the ``auto`` back-end picks it (one
+  Gram block, within its memory cap).
+
+The budget is bounded by the process's own limit too: under an address-space limit (``RLIMIT_AS``,
+``ulimit -v``) a native allocation beyond it aborts the interpreter, so :meth:`ProgramSize.exceeds`
+also compares the estimate with the address space left (:func:`address_space_available`), and the
+Clarabel back-end checks it again before it is called.
 """
 from __future__ import annotations
 
@@ -29,7 +39,8 @@ import time
 from dataclasses import dataclass
 
 __all__ = ["Budget", "DEFAULT_BUDGET", "UNLIMITED", "ProgramSize", "estimate_size", "BudgetExceeded", "Deadline",
-           "as_budget", "TimeLimitReached", "deadline_scope", "check_deadline"]
+           "as_budget", "TimeLimitReached", "deadline_scope", "check_deadline", "address_space_available",
+           "memory_room", "CLARABEL_BYTES_PER_ENTRY", "AUTO_IPM_MAX_BYTES", "ADDRESS_SPACE_SHARE"]
 
 
 @dataclass(frozen=True)
@@ -123,6 +134,41 @@ def check_deadline(what: str = "building the program") -> None:
         raise TimeLimitReached(f"time limit reached while {what}")
 
 
+#: bytes per KKT entry of a PSD block in Clarabel (KKT + LDL factor values and indices + work copies).
+CLARABEL_BYTES_PER_ENTRY = 56.0
+#: the interior-point method's working set above which the ``auto`` back-end goes to Clarabel directly
+#: (the rule of :class:`sospoly.solvers.backends.AutoBackend`).
+AUTO_IPM_MAX_BYTES = 1.5 * 2 ** 30
+#: share of the address space left under ``RLIMIT_AS`` that one program may use (the rest: the
+#: interpreter's own growth, solver work arrays, fragmentation).
+ADDRESS_SPACE_SHARE = 0.7
+
+
+def address_space_available() -> float | None:
+    """Bytes of address space left under the soft ``RLIMIT_AS`` (None without a limit or off Linux):
+    the limit minus the current virtual size (``/proc/self/statm``)."""
+    try:
+        import resource
+        soft = resource.getrlimit(resource.RLIMIT_AS)[0]
+        if soft == resource.RLIM_INFINITY or soft < 0:
+            return None
+        with open("/proc/self/statm", "rb") as fh:
+            pages = int(fh.read().split()[0])
+        return max(0.0, float(soft) - pages * float(resource.getpagesize()))
+    except (ImportError, OSError, ValueError, IndexError):
+        return None
+
+
+def memory_room(budget: Budget | None) -> tuple[float | None, str]:
+    """The most one program may use: the budget's ``max_bytes`` or, when smaller,
+    :data:`ADDRESS_SPACE_SHARE` of the address space left; with the name of the binding limit."""
+    limit = None if budget is None else budget.max_bytes
+    room = address_space_available()
+    if room is not None and (limit is None or ADDRESS_SPACE_SHARE * room < limit):
+        return ADDRESS_SPACE_SHARE * room, "the address space left under the process's limit (RLIMIT_AS)"
+    return limit, "the memory budget"
+
+
 @dataclass(frozen=True)
 class ProgramSize:
     """Estimated size of an SOS program (see the module docstring for the memory model)."""
@@ -139,7 +185,10 @@ class ProgramSize:
 
     @property
     def bytes(self) -> float:
-        return min(self.clarabel_bytes, self.ipm_bytes)
+        """Estimated peak: Clarabel's, or the interior-point method's where the ``auto`` back-end runs it
+        first (one Gram block within :data:`AUTO_IPM_MAX_BYTES`)."""
+        ipm_first = len(self.gram_sides) == 1 and self.ipm_bytes <= AUTO_IPM_MAX_BYTES
+        return max(self.clarabel_bytes, self.ipm_bytes) if ipm_first else self.clarabel_bytes
 
     def describe(self) -> str:
         sides = sorted(self.gram_sides, reverse=True)
@@ -152,8 +201,9 @@ class ProgramSize:
         if self.max_gram_side > budget.max_gram_side:
             return (f"a Gram matrix of side {self.max_gram_side} exceeds the limit {budget.max_gram_side} "
                     f"({self.describe()})")
-        if budget.max_bytes is not None and self.bytes > budget.max_bytes:
-            return f"{self.describe()} exceeds the memory budget {_human(budget.max_bytes)}"
+        room, what = memory_room(budget)
+        if room is not None and self.bytes > room:
+            return f"{self.describe()} exceeds {what} {_human(room)}"
         return None
 
 
@@ -175,7 +225,7 @@ def estimate_size(gram_sides, n_free: int = 0, n_equality_rows: int = 0) -> Prog
     n_cols = int(n_free) + sum(L)              # alphas/Gram entries: at most every svec entry
     n_rows = int(n_equality_rows) + sum(L)
     nnz = 3 * n_rows + 2 * n_cols
-    clarabel = 8.0 * (float(sum(x * x for x in L)) + 10.0 * nnz)
+    clarabel = CLARABEL_BYTES_PER_ENTRY * float(sum(x * x for x in L)) + 80.0 * nnz
     ipm = 8.0 * (2.0 * n_cols * float(sum(s * s for s in sides)) + float(n_cols) ** 2)
     return ProgramSize(sides, n_cols, n_rows, clarabel, ipm)
 

@@ -482,11 +482,12 @@ class _Run:
         try:
             with deadline_scope(self.deadline):
                 return self._solve(degree, mult, kind, low, form, backend)
-        except TimeLimitReached as exc:
+        except (TimeLimitReached, BudgetExceeded, MemoryError) as exc:     # the deadline, memory (no escape)
             label = "dense" if kind == "none" else kind
-            self.attempts.append(SolveAttempt(degree, _name_of(mult), label, "-", "-", "time_limit", None, 0.0,
-                                              str(exc)))
-            return self._empty(SolveStatus.TIME_LIMIT, degree, mult, label, str(exc))
+            status = SolveStatus.TIME_LIMIT if isinstance(exc, TimeLimitReached) else SolveStatus.BUDGET_EXCEEDED
+            why = str(exc) or "out of memory (MemoryError)"
+            self.attempts.append(SolveAttempt(degree, _name_of(mult), label, "-", "-", status.value, None, 0.0, why))
+            return self._empty(status, degree, mult, label, why)
 
     def _solve(self, degree, mult, kind, low, form, backend) -> MinimizeResult:
         label = "dense" if kind == "none" else kind

@@ -25,7 +25,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse as sp
 
-from ..budget import Deadline
+from ..budget import AUTO_IPM_MAX_BYTES as _AUTO_IPM_MAX_BYTES
+from ..budget import BudgetExceeded, Deadline, estimate_size, memory_room
 from ..lowering.conic import ConicProblem
 from ..algebra.svec import triu_pairs, svec_scale
 from ..tolerances import DEFAULT_TOLERANCES, Tolerances, as_tolerances
@@ -93,6 +94,22 @@ CLARABEL_RETRY_CHAIN = (
 QDLDL_MAX_PSD_SIDE = 40
 
 
+def _check_native_memory(problem: ConicProblem) -> None:
+    """:class:`~sospoly.budget.BudgetExceeded` when Clarabel's estimated memory for ``problem`` exceeds the
+    address space left under the process's limit: a failed allocation in native code aborts the
+    interpreter (no MemoryError), so the call is not made."""
+    room, what = memory_room(None)
+    if room is None:
+        return
+    psd = [c.size for c in problem.cones if c.kind == "psd"]
+    zero = sum(c.dim for c in problem.cones if c.kind == "zero")
+    size = estimate_size(psd, problem.n_cols, zero)
+    if size.clarabel_bytes > room:
+        raise BudgetExceeded(f"Clarabel would need about {size.clarabel_bytes / 2 ** 20:.0f} MiB ({size.describe()}), "
+                             f"more than {what} ({room / 2 ** 20:.0f} MiB)", size,
+                             "raise the limit (ulimit -v) or use a lower degree or a sparse certificate")
+
+
 class ClarabelBackend:
     name = "clarabel"
 
@@ -143,6 +160,7 @@ class ClarabelBackend:
         remaining = None if deadline is None else deadline.remaining()
         if remaining is not None:
             overrides["time_limit"] = max(remaining, 1e-3)
+        _check_native_memory(problem)
         P = sp.csc_matrix((n, n))
         t0 = time.perf_counter()
         try:
@@ -250,8 +268,8 @@ class IpmBackend:
 #: delta = 2 with N = 5 -> 6 ms Clarabel vs 21 ms IPM; N = 8 -> 42 ms vs 22 ms).
 AUTO_IPM_MIN_COST = 5e4
 #: the IPM's working set (~3 m sum_k n_k^2 + m^2 floats, see sospoly.budget) above which AutoBackend
-#: goes to Clarabel directly (whose memory grows with sum_k L_k^2 instead).
-AUTO_IPM_MAX_BYTES = 1.5 * 2 ** 30
+#: goes to Clarabel directly (whose memory grows with sum_k L_k^2 instead); one value with the budget's model.
+AUTO_IPM_MAX_BYTES = _AUTO_IPM_MAX_BYTES
 
 
 class AutoBackend:

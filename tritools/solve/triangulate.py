@@ -229,6 +229,9 @@ class _PointSolve:
             return self._solve_step(step, tol, label, common, t)
         except TimeLimitReached as exc:               # building, assembling or compiling ran out of time
             return self._failed(step, Status.TIME_LIMIT, f"delta={step.delta}: {exc}", label, t)
+        except (BudgetExceeded, MemoryError) as exc:  # the native-memory guard, or an allocation that failed
+            why = str(exc) or "out of memory (MemoryError)"
+            return self._failed(step, Status.BUDGET_EXCEEDED, f"delta={step.delta} ({sparsity}): {why}", label, t)
 
     def _solve_step(self, step: Step, tol, label: str, common: dict, t: float) -> TriangulationResult:
         opts = self.opts

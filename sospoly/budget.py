@@ -16,7 +16,7 @@ Memory model (8-byte floats; an estimate, deliberately on the safe side):
   side s contributes L^2 entries, L = s (s + 1) / 2, to the KKT matrix, to its LDL factor (values and
   indices) and to the solver's work copies: :data:`CLARABEL_BYTES_PER_ENTRY` bytes per entry
   (measured: Theorem 1, 3 views with ellipses at delta = 4, Gram side 91: 0.91 GB peak, 52 bytes per
-  L^2 entry), besides a few copies of the constraint matrix.
+  L^2 entry; 56 keeps a margin), besides a few copies of the constraint matrix.
 * The batched interior-point method (:mod:`sospoly.solvers.ipm`) holds, per PSD block of side s,
   the m full s x s matrices of the columns (m = number of decision columns) and the m x m Schur
   complement.

@@ -147,6 +147,35 @@ def test_colmap_under_a_file_size_limit_keeps_the_old_model(model_in, tmp_path):
     assert not any((out / n).exists() for n in ("cameras.txt", "images.txt", "points3D.txt"))
 
 
+_CSV = textwrap.dedent("""
+    import resource, sys
+    from types import SimpleNamespace
+    from tritools.cli.app import CLIError, _write_dataset_csv
+    from tritools.result import Status, TriangulationResult
+    resource.setrlimit(resource.RLIMIT_FSIZE, (int(sys.argv[2]), int(sys.argv[2])))
+    tracks = [SimpleNamespace(track_id=k, views=(0, 1, 2), n_views=3) for k in range(200)]
+    results = [TriangulationResult("theorem1", Status.OPTIMAL, message="m" * 40) for _ in tracks]
+    try:
+        _write_dataset_csv(sys.argv[1], "seq", tracks, results, [(0.1, "own")] * len(tracks))
+    except CLIError as exc:
+        print(exc)
+        sys.exit(2)
+""")
+
+
+def test_dataset_csv_under_a_file_size_limit_keeps_the_old_file(tmp_path):
+    out = tmp_path / "tracks.csv"
+    out.write_text("old,csv\n" * 100)
+    before = out.read_bytes()
+    proc = subprocess.run([sys.executable, "-c", _CSV, str(out), str(len(before) + 100)], env=_env(),
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2 and "cannot write" in proc.stdout and str(out) in proc.stdout, proc.stderr
+    assert out.read_bytes() == before and sorted(os.listdir(tmp_path)) == ["tracks.csv"]
+    proc = subprocess.run([sys.executable, "-c", _CSV, str(out), str(1 << 24)], env=_env(),
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0 and out.read_text().count("\n") == 201
+
+
 _WRITER = textwrap.dedent("""
     import sys
     from pathlib import Path

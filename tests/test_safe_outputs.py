@@ -213,3 +213,15 @@ def test_two_colmap_runs_into_one_out(model_in, tmp_path):
     assert [p.returncode for p in procs] == [0, 0], errs
     assert _hidden(tmp_path) == [] and read_model_arrays(out).n_points == 40
     assert all((out / n).read_text() == t for n, t in files.items())
+
+
+def test_colmap_from_oxford_keeps_everything_else_in_out(oxford_data, tmp_path, capsys):
+    out = tmp_path / "sparse"
+    files = _user_folder(out)
+    assert main(["colmap-from-oxford", "library", str(out), "--data-dir", str(oxford_data), "--max-tracks", "20"]) == 0
+    assert all((out / n).read_text() == t for n, t in files.items())   # was deleted with exit 0 before the fix
+    assert read_model_arrays(out).n_points == 20 and _hidden(tmp_path) == []
+    (out / "images.txt").unlink()
+    (out / "images.txt").mkdir()
+    assert main(["colmap-from-oxford", "library", str(out), "--data-dir", str(oxford_data)]) == 2
+    assert "images.txt: is a directory" in capsys.readouterr().err and _hidden(tmp_path) == []

@@ -13,10 +13,11 @@ running for minutes.
 Memory model (8-byte floats; an estimate, deliberately on the safe side):
 
 * Clarabel factorises a KKT system whose PSD-cone blocks are dense in svec space: a Gram block of
-  side s contributes L^2 entries, L = s (s + 1) / 2, to the KKT matrix, to its LDL factor (values and
-  indices) and to the solver's work copies: :data:`CLARABEL_BYTES_PER_ENTRY` bytes per entry
-  (measured: Theorem 1, 3 views with ellipses at delta = 4, Gram side 91: 0.91 GB peak, 52 bytes per
-  L^2 entry; 56 keeps a margin), besides a few copies of the constraint matrix.
+  side s contributes L^2 entries, L = s (s + 1) / 2, to the KKT matrix and its LDL factor (values and
+  indices), :data:`CLARABEL_ENTRY_COPIES` floats per entry, and the largest block once more to the
+  solver's dense work arrays, :data:`CLARABEL_LARGEST_BLOCK_COPIES` floats per entry, besides a few
+  copies of the constraint matrix.  Measured peaks (Theorem 1 with ellipses at delta = 4, Gram
+  blocks of side 91): 3 views 0.91 GB (estimate 0.98), 4 views 0.94 GB (1.33), 5 views 1.25 GB (1.68).
 * The batched interior-point method (:mod:`sospoly.solvers.ipm`) holds, per PSD block of side s,
   the m full s x s matrices of the columns (m = number of decision columns) and the m x m Schur
   complement.
@@ -40,7 +41,8 @@ from dataclasses import dataclass
 
 __all__ = ["Budget", "DEFAULT_BUDGET", "UNLIMITED", "ProgramSize", "estimate_size", "BudgetExceeded", "Deadline",
            "as_budget", "TimeLimitReached", "deadline_scope", "check_deadline", "address_space_available",
-           "memory_room", "CLARABEL_BYTES_PER_ENTRY", "AUTO_IPM_MAX_BYTES", "ADDRESS_SPACE_SHARE"]
+           "memory_room", "CLARABEL_ENTRY_COPIES", "CLARABEL_LARGEST_BLOCK_COPIES", "AUTO_IPM_MAX_BYTES",
+           "ADDRESS_SPACE_SHARE"]
 
 
 @dataclass(frozen=True)
@@ -134,8 +136,10 @@ def check_deadline(what: str = "building the program") -> None:
         raise TimeLimitReached(f"time limit reached while {what}")
 
 
-#: bytes per KKT entry of a PSD block in Clarabel (KKT + LDL factor values and indices + work copies).
-CLARABEL_BYTES_PER_ENTRY = 56.0
+#: floats per svec-entry pair (L^2) of every PSD block in Clarabel: the KKT block and its LDL factor.
+CLARABEL_ENTRY_COPIES = 2.5
+#: floats per svec-entry pair of the largest PSD block once more: Clarabel's dense work arrays.
+CLARABEL_LARGEST_BLOCK_COPIES = 4.5
 #: the interior-point method's working set above which the ``auto`` back-end goes to Clarabel directly
 #: (the rule of :class:`sospoly.solvers.backends.AutoBackend`).
 AUTO_IPM_MAX_BYTES = 1.5 * 2 ** 30
@@ -225,7 +229,8 @@ def estimate_size(gram_sides, n_free: int = 0, n_equality_rows: int = 0) -> Prog
     n_cols = int(n_free) + sum(L)              # alphas/Gram entries: at most every svec entry
     n_rows = int(n_equality_rows) + sum(L)
     nnz = 3 * n_rows + 2 * n_cols
-    clarabel = CLARABEL_BYTES_PER_ENTRY * float(sum(x * x for x in L)) + 80.0 * nnz
+    clarabel = 8.0 * (CLARABEL_ENTRY_COPIES * float(sum(x * x for x in L))
+                      + CLARABEL_LARGEST_BLOCK_COPIES * float(max(L, default=0)) ** 2) + 80.0 * nnz
     ipm = 8.0 * (2.0 * n_cols * float(sum(s * s for s in sides)) + float(n_cols) ** 2)
     return ProgramSize(sides, n_cols, n_rows, clarabel, ipm)
 

@@ -225,3 +225,27 @@ def test_colmap_from_oxford_keeps_everything_else_in_out(oxford_data, tmp_path, 
     (out / "images.txt").mkdir()
     assert main(["colmap-from-oxford", "library", str(out), "--data-dir", str(oxford_data)]) == 2
     assert "images.txt: is a directory" in capsys.readouterr().err and _hidden(tmp_path) == []
+
+
+def test_a_killed_writer_s_staging_directory_is_swept(tmp_path):
+    """A writer killed with SIGKILL cannot clean up: the next writer removes its stage (its lock is
+    free); the stage of a live writer (locked) is left alone."""
+    import fcntl
+
+    from tritools.io.atomic import STAGING_PREFIX
+
+    out = tmp_path / "out"
+    stale = out / f"{STAGING_PREFIX}dead"
+    live = out / f"{STAGING_PREFIX}live"
+    for d in (stale, live):
+        d.mkdir(parents=True)
+        (d / "points3D.bin").write_bytes(b"half")
+    fd = os.open(live, os.O_RDONLY)
+    fcntl.flock(fd, fcntl.LOCK_EX)
+    try:
+        with staged_directory(out) as stage:
+            (stage / "cameras.bin").write_bytes(b"new")
+        assert not stale.exists() and live.exists()
+        assert sorted(os.listdir(out)) == [live.name, "cameras.bin"]
+    finally:
+        os.close(fd)

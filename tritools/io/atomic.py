@@ -11,6 +11,8 @@ file and leaves the target exactly as it was; an OSError names the target, never
 hidden staging directory inside the folder, and on success each file replaces its namesake in the
 folder by one rename, under an advisory lock on the folder (:func:`locked_directory`, ``fcntl.flock``)
 so that two writers to one folder never interleave their files.  Nothing else in the folder is touched.
+Each writer holds a lock on its own stage; a stage whose lock is free was left by a writer that was
+killed (SIGKILL) and is removed by the next writer.
 """
 from __future__ import annotations
 
@@ -140,7 +142,10 @@ def staged_directory(target):
         raise NotADirectoryError(20, "exists and is not a directory", str(target))
     created = not target.exists()
     target.mkdir(parents=True, exist_ok=True)
-    stage = Path(tempfile.mkdtemp(prefix=STAGING_PREFIX, dir=target))
+    with locked_directory(target):       # a stage is created and locked, or swept, under the folder's lock
+        _sweep_stale_stages(target)
+        stage = Path(tempfile.mkdtemp(prefix=STAGING_PREFIX, dir=target))
+        held = _hold(stage)              # marks the stage as in use for the sweep of other writers
     try:
         try:
             yield stage
@@ -158,8 +163,52 @@ def staged_directory(target):
             raise
     except BaseException:
         shutil.rmtree(stage, ignore_errors=True)
+        _release(held)
         if created:
             with contextlib.suppress(OSError):
                 target.rmdir()          # only when empty: another writer may be using it
         raise
     shutil.rmtree(stage, ignore_errors=True)
+    _release(held)
+
+
+def _hold(folder: Path):
+    """An exclusive ``flock`` on ``folder`` for as long as the returned descriptor is open (None
+    without ``fcntl``)."""
+    try:
+        import fcntl
+    except ImportError:         # pragma: no cover - not POSIX
+        return None
+    fd = os.open(folder, os.O_RDONLY | getattr(os, "O_DIRECTORY", 0))
+    fcntl.flock(fd, fcntl.LOCK_EX)
+    return fd
+
+
+def _release(fd) -> None:
+    if fd is not None:
+        os.close(fd)
+
+
+def _sweep_stale_stages(target: Path) -> None:
+    """Remove staging directories left in ``target`` by a writer that was killed (SIGKILL, power
+    loss): a live writer holds a lock on its stage, a stale stage's lock is free."""
+    try:
+        import fcntl
+        names = [n for n in os.listdir(target) if n.startswith(STAGING_PREFIX)]
+    except (ImportError, OSError):
+        return
+    for name in names:
+        path = target / name
+        try:
+            fd = os.open(path, os.O_RDONLY | getattr(os, "O_DIRECTORY", 0))
+        except OSError:
+            continue
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            os.close(fd)        # in use by a running writer
+            continue
+        try:
+            shutil.rmtree(path, ignore_errors=True)
+        finally:
+            os.close(fd)

@@ -249,3 +249,9 @@ def test_a_killed_writer_s_staging_directory_is_swept(tmp_path):
         assert sorted(os.listdir(out)) == [live.name, "cameras.bin"]
     finally:
         os.close(fd)
+
+
+def test_special_files_are_written_directly(tmp_path, capsys):
+    problems = write(tmp_path, example4_doc())
+    assert main(["solve", str(problems), "--json", "-o", os.devnull]) == 0
+    assert sorted(os.listdir(tmp_path)) == ["problems.json"]

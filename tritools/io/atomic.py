@@ -81,10 +81,14 @@ def atomic_path(path):
     """Yield a temporary path beside ``path``; on success it is synced and renamed over ``path``.
 
     The caller writes the whole file to the yielded path.  On an exception the temporary file is
-    removed and ``path`` is untouched.  Refuses (:class:`DirectoryInTheWay`) when ``path`` is a directory.
+    removed and ``path`` is untouched.  Refuses (:class:`DirectoryInTheWay`) when ``path`` is a directory;
+    a special file (``/dev/stdout``, a FIFO) is written directly.
     """
     path = Path(path)
     _check_not_directory(path)
+    if path.exists() and not path.is_file():       # /dev/stdout, /dev/null, a FIFO: nothing to replace
+        yield path
+        return
     tmp = _temp_name(path)
     try:
         try:

@@ -112,7 +112,8 @@ def atomic_open(path, mode: str = "w", **kwargs):
     if mode not in ("w", "wb", "wt"):
         raise ValueError(f"mode must be 'w', 'wt' or 'wb', got {mode!r}")
     with atomic_path(path) as tmp:
-        with open(tmp, mode.replace("w", "x"), **kwargs) as fh:
+        fresh = Path(tmp) != Path(path)              # a temporary file; else a special file written directly
+        with open(tmp, mode.replace("w", "x") if fresh else mode, **kwargs) as fh:
             yield fh
 
 

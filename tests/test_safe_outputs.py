@@ -255,3 +255,15 @@ def test_special_files_are_written_directly(tmp_path, capsys):
     problems = write(tmp_path, example4_doc())
     assert main(["solve", str(problems), "--json", "-o", os.devnull]) == 0
     assert sorted(os.listdir(tmp_path)) == ["problems.json"]
+
+
+def test_a_folder_that_cannot_take_a_stage_is_named_not_the_stage(model_in, tmp_path, monkeypatch, capsys):
+    import tempfile
+
+    def read_only(prefix, dir):
+        raise PermissionError(13, "Permission denied", os.path.join(dir, prefix + "x1y2z3"))
+    monkeypatch.setattr(tempfile, "mkdtemp", read_only)
+    out = tmp_path / "out"
+    out.mkdir()
+    assert main(["colmap", str(model_in), str(out)]) == 2
+    assert capsys.readouterr().err == f"tritools: error: {out}: Permission denied\n"

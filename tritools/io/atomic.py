@@ -147,10 +147,18 @@ def staged_directory(target):
         raise NotADirectoryError(20, "exists and is not a directory", str(target))
     created = not target.exists()
     target.mkdir(parents=True, exist_ok=True)
-    with locked_directory(target):       # a stage is created and locked, or swept, under the folder's lock
-        _sweep_stale_stages(target)
-        stage = Path(tempfile.mkdtemp(prefix=STAGING_PREFIX, dir=target))
-        held = _hold(stage)              # marks the stage as in use for the sweep of other writers
+    try:
+        with locked_directory(target):   # a stage is created and locked, or swept, under the folder's lock
+            _sweep_stale_stages(target)
+            stage = Path(tempfile.mkdtemp(prefix=STAGING_PREFIX, dir=target))
+            held = _hold(stage)          # marks the stage as in use for the sweep of other writers
+    except OSError as exc:               # e.g. a read-only folder: name the folder, not the temporary name
+        if isinstance(exc.filename, str) and exc.filename.startswith(str(target / STAGING_PREFIX)):
+            exc.filename = str(target)
+        if created:
+            with contextlib.suppress(OSError):
+                target.rmdir()
+        raise
     try:
         try:
             yield stage

@@ -52,6 +52,7 @@ import numpy as np
 from .algebra.basis import MonomialIndex
 from .algebra.polynomial import Polynomial
 from .analysis.extraction import Candidate, extract_from_gram, extract_from_moment
+from .analysis.moments import moment_matrices_of
 from .analysis.sparse_extraction import extract_from_clique_moments
 from .budget import BudgetExceeded, as_budget
 from .certificates.program import SOSProgram
@@ -109,6 +110,7 @@ class MinimizeResult:
     sparsity: str = "dense"
     attempts: tuple = ()
     scale: float = 1.0
+    moment_matrices: tuple = ()     # MomentMatrix per Gram block of u (.basis, .matrix; sospoly.analysis.moments)
 
     @property
     def gap(self) -> float | None:
@@ -538,7 +540,8 @@ class _Run:
         minimizers = tuple(p for val, p in found if val <= upper + near) if upper is not None else ()
         return MinimizeResult(status, c * fs, None if upper is None else upper * fs, minimizers, optimal,
                               psatz.n_lmivar, degree, _name_of(mult), self.gens, bracket, lb.solution, 0.0, msg,
-                              tuple(p for _, p in found), label, scale=fs)
+                              tuple(p for _, p in found), label, scale=fs,
+                              moment_matrices=moment_matrices_of(psatz.u, lb.solution))
 
 
 # ----------------------------------------------------------------------------- is_sos

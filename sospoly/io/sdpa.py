@@ -99,10 +99,11 @@ def write_sdpa(problem, path) -> pathlib.Path:
     return path
 
 
-def _tokens(text: str, path):
-    """(token, line number) of the data lines: comments skipped, each line cut at its first non-number."""
+def _header_and_lines(text: str):
+    """(header tokens with line numbers, data lines with line numbers, sign, offset): comments skipped;
+    header lines (m, block count, block sizes, c) cut at their first non-number (``=mDIM``...)."""
     sign, offset = 1.0, 0.0
-    out = []
+    lines = []
     for n, line in enumerate(text.splitlines(), start=1):
         s = line.strip()
         if not s or s[0] in '"*':
@@ -110,50 +111,60 @@ def _tokens(text: str, path):
             if m:
                 sign, offset = float(m.group(1)), float(m.group(2))
             continue
-        for tok in re.split(r"[\s,{}()]+", s):
-            if not tok:
-                continue
-            try:
-                float(tok)
-            except ValueError:
-                break
-            out.append((tok, n))
-    return out, sign, offset
+        lines.append((n, [t for t in re.split(r"[\s,{}()]+", s) if t]))
+    return lines, sign, offset
 
 
-def _take(toks, pos, count, conv, path, what):
-    if pos + count > len(toks):
-        raise ValueError(f"{path}: truncated SDPA file: expected {what}")
-    out = []
-    for tok, n in toks[pos:pos + count]:
-        try:
-            v = conv(tok)
-        except ValueError:
-            raise ValueError(f"{path}:{n}: {what} must be {'an integer' if conv is int else 'a number'}, "
-                             f"got {tok!r}") from None
-        if conv is float and not math.isfinite(v):
-            raise ValueError(f"{path}:{n}: {what} is not finite: {tok!r}")
-        out.append(v)
-    return out, pos + count
+def _header(lines, path):
+    """m, block sizes, c and the index of the first entry line."""
+    toks, k = [], 0
 
+    def need(count, conv, what):
+        nonlocal k
+        while len(toks) < count and k < len(lines):
+            n, line = lines[k]
+            k += 1
+            for tok in line:
+                try:
+                    float(tok)
+                except ValueError:
+                    break
+                toks.append((tok, n))
+        if len(toks) < count:
+            raise ValueError(f"{path}: truncated SDPA file: expected {what}")
+        got = [_number(tok, n, conv, path, what) for tok, n in toks[:count]]
+        del toks[:count]
+        return got
 
-def read_sdpa(path):
-    """Read an SDPA sparse file into a :class:`~sospoly.lowering.conic.ConicProblem` (module docstring)."""
-    from ..lowering.conic import Cone, ConicProblem, PSDBlockMap
-
-    path = pathlib.Path(path)
-    toks, sign, offset = _tokens(path.read_text(), path)
-    (m,), pos = _take(toks, 0, 1, int, path, "the number of variables m")
-    (nb,), pos = _take(toks, pos, 1, int, path, "the number of blocks")
+    (m,) = need(1, int, "the number of variables m")
+    (nb,) = need(1, int, "the number of blocks")
     if m < 0 or nb < 0:
         raise ValueError(f"{path}: m and the number of blocks must be >= 0, got {m}, {nb}")
-    sizes, pos = _take(toks, pos, nb, int, path, "the block sizes")
-    c, pos = _take(toks, pos, m, float, path, "the objective vector c")
-    entries = {}                        # (block, i, j) -> {matno: value}
-    while pos < len(toks):
-        n = toks[pos][1]
-        (mat, blk, i, j), _ = _take(toks, pos, 4, int, path, "matno block i j")
-        (val,), pos = _take(toks, pos + 4, 1, float, path, "the entry value")
+    sizes = need(nb, int, "the block sizes")
+    c = need(m, float, "the objective vector c")
+    return m, sizes, c, k
+
+
+def _number(tok, n, conv, path, what):
+    try:
+        v = conv(tok)
+    except ValueError:
+        raise ValueError(f"{path}:{n}: {what} must be {'an integer' if conv is int else 'a number'}, "
+                         f"got {tok!r}") from None
+    if conv is float and not math.isfinite(v):
+        raise ValueError(f"{path}:{n}: {what} is not finite: {tok!r}")
+    return v
+
+
+def _entries(lines, sizes, m, path) -> dict:
+    """(block, i, j) -> {matno: value} of the entry lines ``matno block i j value`` (0-based, i <= j)."""
+    nb = len(sizes)
+    entries = {}
+    for n, toks in lines:
+        if len(toks) < 5:
+            raise ValueError(f"{path}:{n}: an entry line needs 'matno block i j value', got {' '.join(toks)!r}")
+        mat, blk, i, j = (_number(t, n, int, path, "matno block i j") for t in toks[:4])
+        val = _number(toks[4], n, float, path, "the entry value")
         if not (0 <= mat <= m and 1 <= blk <= nb):
             raise ValueError(f"{path}:{n}: matno {mat} or block {blk} out of range (m={m}, {nb} blocks)")
         side = abs(sizes[blk - 1])
@@ -162,6 +173,17 @@ def read_sdpa(path):
             raise ValueError(f"{path}:{n}: entry ({i}, {j}) outside block {blk} of size {sizes[blk - 1]}")
         d = entries.setdefault((blk - 1, i - 1, j - 1), {})
         d[mat] = d.get(mat, 0.0) + val
+    return entries
+
+
+def read_sdpa(path):
+    """Read an SDPA sparse file into a :class:`~sospoly.lowering.conic.ConicProblem` (module docstring)."""
+    from ..lowering.conic import Cone, ConicProblem, PSDBlockMap
+
+    path = pathlib.Path(path)
+    lines, sign, offset = _header_and_lines(path.read_text())
+    m, sizes, c, first = _header(lines, path)
+    entries = _entries(lines[first:], sizes, m, path)
     # rows: zero pairs, then LP, then PSD blocks
     zero_rows, lp_rows, psd = [], [], []
     for k, size in enumerate(sizes):

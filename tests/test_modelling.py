@@ -227,3 +227,44 @@ def test_bad_sdpa_files_name_the_line(text, needle, tmp_path):
     path.write_text(text)
     with pytest.raises(ValueError, match=needle):
         sp.ConicProblem.from_sdpa(path)
+
+
+@pytest.mark.parametrize("chain,expected", [(False, {"dsos": 0.5, "sdsos": 0.5, "sos": 1.0}),
+                                            (True, {"dsos": 0.5, "sdsos": 1 / math.sqrt(2), "sos": 1 / math.sqrt(2)})],
+                         ids=["all-pairs", "chain"])
+def test_dsos_sdsos_closed_forms(chain, expected):
+    """max c: x^2 + y^2 + z^2 + 2c (xy + yz [+ xz]) in the cone, basis (x, y, z).  Q = I + c E.
+    All pairs (E = J - I): PSD iff c <= 1; DD iff 2c <= 1; SDD: blocks [[a, c], [c, a]] with 2a = 1, so c <= 1/2.
+    Chain (E = path): PSD iff sqrt2 c <= 1; DD iff 2c <= 1; SDD with D = diag(1, sqrt2, 1): c <= 1/sqrt2."""
+    x1, x2, x3 = sp.variables("x y z")
+    B = np.eye(3, dtype=int)
+    for kind, ref in expected.items():
+        prog = sp.SOSProgram(("x", "y", "z"))
+        c = prog.scalar("c")
+        p = x1**2 + x2**2 + x3**2 + 2 * c * (x1 * x2 + x2 * x3 + (0 * x1 if chain else x1 * x3))
+        {"dsos": prog.add_dsos, "sdsos": prog.add_sdsos, "sos": lambda q, basis: prog.add_sos(q, bases=[basis])}[
+            kind](p, basis=B)
+        prog.maximize(c)
+        assert abs(_solve(prog).objective - ref) < 1e-6, kind
+
+
+def test_dsos_bound_is_valid_and_its_gram_is_diagonally_dominant():
+    p = x**4 + y**4 - 3 * x * y                      # min -9/8 (x = y = sqrt(3)/2)
+    bounds = {}
+    for kind in ("dsos", "sdsos", "sos"):
+        prog = sp.SOSProgram(("x", "y"))
+        c = prog.scalar("c")
+        con = getattr(prog, f"add_{kind}")(p - c, degree=4)
+        prog.maximize(c)
+        sol = _solve(prog)
+        bounds[kind] = sol.objective
+        if kind == "dsos":
+            Q = con.gram(prog, sol)
+            off = np.abs(Q).sum(axis=1) - np.abs(np.diag(Q))
+            assert np.all(np.diag(Q) - off >= -1e-7)
+            b = con.basis                           # b^T Q b reproduces p - c at random points
+            for pt in np.random.default_rng(1).normal(size=(5, 2)):
+                bv = np.prod(pt[None, :] ** b, axis=1)
+                assert abs(bv @ Q @ bv - (p(pt) - sol.objective)) < 1e-6 * max(1.0, abs(p(pt)))
+    assert bounds["dsos"] <= bounds["sdsos"] + 1e-7 <= bounds["sos"] + 2e-7
+    assert abs(bounds["sos"] + 9 / 8) < 1e-6 and bounds["dsos"] <= -9 / 8 + 1e-7

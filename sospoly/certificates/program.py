@@ -183,6 +183,14 @@ class SOSProgram:
         blk = self._new_block(name, BlockKind.SCALAR, 1)
         return LinPoly.variable_terms(self.gens, np.zeros((1, self.nvars_poly), np.int64), [blk.start])
 
+    def scalars(self, k: int, name: str | None = None) -> list:
+        """``k`` free scalars in one block (a list of scalar expressions)."""
+        if int(k) != k or k < 1:
+            raise ValueError(f"scalars count must be a positive integer, got {k!r}")
+        blk = self._new_block(name, BlockKind.SCALAR, int(k))
+        zero = np.zeros((1, self.nvars_poly), np.int64)
+        return [LinPoly.variable_terms(self.gens, zero, [blk.start + t]) for t in range(int(k))]
+
     def free_poly(self, degree: int, name: str | None = None, monomial_exponents=None) -> LinPoly:
         """A polynomial with free coefficients on all monomials of degree <= ``degree``."""
         if monomial_exponents is None:
@@ -315,6 +323,20 @@ class SOSProgram:
         from .matrix_sos import add_sos_matrix
 
         return add_sos_matrix(self, M, degree=degree, name=name, basis=basis)
+
+    def add_dsos(self, expr, degree: int | None = None, name: str | None = None, basis=None):
+        """Require ``expr`` to be DSOS: b^T Q b with Q diagonally dominant (an LP; Ahmadi-Majumdar 2019).
+        See :mod:`sospoly.certificates.dd`."""
+        from .dd import DDKind, add_dd
+
+        return add_dd(self, expr, DDKind.DSOS, degree=degree, name=name, basis=basis)
+
+    def add_sdsos(self, expr, degree: int | None = None, name: str | None = None, basis=None):
+        """Require ``expr`` to be SDSOS: b^T Q b with Q scaled diagonally dominant (a sum of 2x2 PSD
+        blocks: second-order cones).  See :mod:`sospoly.certificates.dd`."""
+        from .dd import DDKind, add_dd
+
+        return add_dd(self, expr, DDKind.SDSOS, degree=degree, name=name, basis=basis)
 
     def maximize(self, expr) -> None:
         self._set_objective(expr, Sense.MAXIMIZE)

@@ -28,7 +28,10 @@ The default strategy (each step recorded in ``attempts``):
    ``DENSE_AUTO_MAX_SIDE``) and fits the budget, the dense certificate of the same degree next (at
    degree 2, where it gives the same bound, only at the last degree).  A complete graph: dense.
    ``"none"``, ``"correlative"``, ``"term"`` and ``"newton"`` force a choice; ``result.sparsity`` says
-   which certificate gave the result.
+   which certificate gave the result.  An unconstrained f tries the Newton-polytope basis before the
+   dense one when it is smaller.  ``"term"`` walks the term-sparsity hierarchy
+   (:mod:`sospoly.certificates.term_hierarchy`) cheapest level first, up to the level whose bound is the
+   dense one for unconstrained programs; ``result.sparsity`` names the level (``"term:block:1"``...).
 4. **Multiplier** (``multiplier="auto"``): at each degree q = 1 first (Putinar's certificate, the
    strongest on compact sets: Floudas' test 4.10 is certified at degree 8), then, when that does not
    certify and the degree allows it, the paper's q = (1 + ||v||^2)^k (Reznick-type, for unconstrained
@@ -53,12 +56,14 @@ from .algebra.basis import MonomialIndex
 from .algebra.polynomial import Polynomial
 from .analysis.extraction import Candidate, extract_from_gram, extract_from_moment
 from .analysis.moments import moment_matrices_of
+from .analysis.term_extraction import second_moment_candidates
 from .analysis.sparse_extraction import extract_from_clique_moments
 from .budget import BudgetExceeded, as_budget
 from .certificates.program import SOSProgram
 from .certificates.psatz import Multiplier, PsatzProblem, as_multiplier, build_psatz, checked_inputs
 from .certificates.shape import SPARSITY_KINDS
 from .certificates.sparsity import correlative_sparsity
+from .certificates.term_hierarchy import newton_smaller, parse_term_kind, term_level_shape, term_levels
 from .lowering.conic import GramForm
 from .solvers.lower_bound import solve_psatz
 from .solvers.solve import LowerBound, ProgramSolution, solve_program
@@ -244,9 +249,11 @@ def candidates_of(psatz, sol: ProgramSolution, tol: Tolerances) -> list[Candidat
         for p in extract_from_clique_moments(moments, bases, cliques, n, tol, greedy=True):
             cands.append(Candidate(np.asarray(p, float), "clique-moments", 0.0))
     if partial:
-        p = _first_moments([(b.b, sol.moments.get(nm)) for nm, b in zip(names, u.gram.blocks)], n)
+        blocks = [(b.b, sol.moments.get(nm)) for nm, b in zip(names, u.gram.blocks)]
+        p = _first_moments(blocks, n)
         if p is not None:
             cands.append(Candidate(p, "first-moments", 0.0))
+        cands += [Candidate(q, "second-moments", 0.0) for q in second_moment_candidates(blocks, n)]
     return cands
 
 
@@ -340,13 +347,19 @@ def _choose_sparsity(sparsity, f, eq, ineq, degree: int, multiplier="auto", last
     low = 2 if degree > 2 and n + 1 <= LOW_BLOCK_MAX_SIDE and _low_block_helps(eq, ineq, multiplier) else None
     if sparsity == "correlative":
         return [("correlative", low)]
+    if sparsity == "term":                 # the TSSOS hierarchy, cheapest level first (certificates.term_hierarchy)
+        return [(k, None) for k in term_levels(_support(f), [_support(g) for g in eq], [_support(h) for h in ineq],
+                                               degree)]
     if sparsity != "auto":
         return [(sparsity, None)]
+    # unconstrained: the Newton-polytope basis before the dense one when it is smaller (the same bound for q = 1)
     cs = correlative_sparsity(n, _support(f), [_support(g) for g in eq], [_support(h) for h in ineq])
-    if cs.is_dense:
-        return [("none", None)]
-    steps = [("correlative", low)]
-    if sigma(n, degree // 2) <= DENSE_AUTO_MAX_SIDE and (degree > 2 or last or _low_block_helps(eq, ineq, multiplier)):
+    steps = [] if cs.is_dense else [("correlative", low)]
+    if cs.is_dense or (sigma(n, degree // 2) <= DENSE_AUTO_MAX_SIDE and
+                       (degree > 2 or last or _low_block_helps(eq, ineq, multiplier))):
+        if not eq and not ineq and isinstance(multiplier, str) and multiplier in ("auto", "putinar") and \
+                sigma(n, degree // 2) <= DENSE_AUTO_MAX_SIDE and newton_smaller(_support(f), degree):
+            steps.append(("newton", None))
         steps.append(("none", None))
     return steps
 
@@ -356,17 +369,18 @@ def _shape_with_q(kind, f, eq, ineq, degree: int, multiplier, max_gram_side: int
     shape built on the support of u = q (f - c) (supp(q f) and supp(q)): ``build_psatz`` builds
     those shapes from supp(f), whose basis cannot hold q f (Motzkin, q = 1 + x^2 + y^2, degree 8:
     infeasible on the 4 monomials of N(f)/2, certified at 0 on the 9 of N(q f)/2)."""
-    if kind not in ("newton", "term") or not (isinstance(multiplier, Polynomial) and multiplier.degree > 0):
+    if (kind != "newton" and parse_term_kind(kind) is None) or \
+            not (isinstance(multiplier, Polynomial) and multiplier.degree > 0):
         return kind
-    from .certificates.shape import newton_shape, term_shape
+    from .certificates.shape import newton_shape
 
     n = len(f.gens)
     qs, fs = _support(multiplier.with_gens(f.gens)), _support(f)
     if kind == "newton":
         return kind if eq or ineq else newton_shape(fs, degree, q_support=qs, max_gram_side=max_gram_side)
     u_support = np.unique(np.vstack([(qs[:, None, :] + fs[None, :, :]).reshape(-1, n), qs]), axis=0)
-    return term_shape(u_support, [_support(g) for g in eq], [_support(h) for h in ineq], degree,
-                      max_gram_side=max_gram_side)
+    return term_level_shape(u_support, [_support(g) for g in eq], [_support(h) for h in ineq], degree, kind,
+                            max_gram_side=max_gram_side)
 
 
 def _multipliers(multiplier, degree: int, deg_f: int, dense: bool) -> list:

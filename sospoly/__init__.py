@@ -31,6 +31,7 @@ from .certificates.shape import CertificateShape, clique_shape, correlative_shap
 from .certificates.reduction import diagonal_reduction, ideal_reduction, reduce_shape
 from .lowering.compiled import CompiledPsatz, PsatzCache, compile_psatz
 from .lowering.conic import ConicProblem, ConicResult, GramForm, lower
+from .ratios import RatioResult, minimize_ratios
 from .minimize import MinimizeResult, SolveAttempt, SOSResult, candidates_of, feasibility_violation, is_sos, minimize
 from .solvers.gevp import CompiledGevp, GevpResult, bisect
 from .solvers.lower_bound import solve_psatz
@@ -53,4 +54,5 @@ __all__ = [
     "solve_psatz", "LowerBound", "ProgramSolution", "check_certificate", "solve_program", "SolveStatus",
     "DEFAULT_TOLERANCES", "Tolerances",
     "MomentMatrix", "MatrixSOSConstraint", "DDConstraint", "DDKind", "QuadExpr", "ConicResult",
+    "RatioResult", "minimize_ratios",
 ]

@@ -31,14 +31,21 @@ from dataclasses import dataclass
 import numpy as np
 
 from .algebra.polynomial import Polynomial
+from .algebra.basis import sigma
 from .analysis.extraction import extract_from_moment
+from .budget import as_budget
 from .certificates.program import SOSProgram
 from .certificates.psatz import common_gens
+from .lowering.conic import GramForm
 from .solvers.solve import solve_program
 from .status import SolveStatus
 from .tolerances import Tolerances, as_tolerances
 
 __all__ = ["RatioResult", "minimize_ratios"]
+
+#: (Gram form, back-end) tried in turn while a solve ends numerically (as :func:`sospoly.minimize` does)
+_RETRIES = ((GramForm.IMAGE, "clarabel"), (GramForm.KERNEL, "clarabel"), (GramForm.IMAGE, "cvxpy"))
+_NUMERICAL = (SolveStatus.NUMERICAL_ERROR, SolveStatus.INACCURATE, SolveStatus.CHECK_FAILED)
 
 log = logging.getLogger(__name__)
 
@@ -84,6 +91,16 @@ def _check_terms(terms, eq, ineq, gens):
         if q.is_zero:
             raise ValueError(f"minimize_ratios terms[{k}].q is the zero polynomial")
     return pairs, tuple(conv[2 * m:2 * m + len(eq)]), tuple(conv[2 * m + len(eq):]), gens
+
+
+def _normalised(pairs, eq, ineq):
+    """Each (p_i, q_i) divided by max|coef q_i| (the ratio unchanged), then every p_i by F = the largest
+    remaining coefficient of the p_i (the objective / F), every constraint by its own largest coefficient."""
+    pairs = [(p * (1.0 / q.max_abs_coefficient()), q * (1.0 / q.max_abs_coefficient())) for p, q in pairs]
+    F = max(p.max_abs_coefficient() for p, _ in pairs) or 1.0
+    pairs = [(p * (1.0 / F), q) for p, q in pairs]
+    return (pairs, tuple(g * (1.0 / (g.max_abs_coefficient() or 1.0)) for g in eq),
+            tuple(h * (1.0 / (h.max_abs_coefficient() or 1.0)) for h in ineq), F)
 
 
 def _degree(pairs, eq, ineq, degree):
@@ -162,7 +179,7 @@ def _distinct(found, rtol: float = 1e-4):
     return out
 
 
-def _denominator_bounds(pairs, eq, ineq, gens, tol, backend):
+def _denominator_bounds(pairs, eq, ineq, gens, tol, backend, budget):
     """Certified lower bounds of every q_i on K (sospoly.minimize), or the index of one not certified > 0."""
     from .minimize import minimize
 
@@ -171,7 +188,7 @@ def _denominator_bounds(pairs, eq, ineq, gens, tol, backend):
         if q.degree <= 0:
             out.append(float(q.coefficient((0,) * len(gens))))
         else:
-            r = minimize(q, eq, ineq, gens=gens, tolerances=tol, backend=backend)
+            r = minimize(q, eq, ineq, gens=gens, tolerances=tol, backend=backend, budget=budget)
             out.append(r.lower_bound if r.lower_bound is not None else -np.inf)
         if not out[-1] > 0:
             return tuple(out), k
@@ -179,22 +196,34 @@ def _denominator_bounds(pairs, eq, ineq, gens, tol, backend):
 
 
 def minimize_ratios(terms, eq=(), ineq=(), degree: int | None = None, *, gens=None, backend=None,
-                    tolerances: Tolerances | None = None) -> RatioResult:
+                    tolerances: Tolerances | None = None, budget=None) -> RatioResult:
     """Certified lower bound (and minimisers) of sum_i p_i / q_i on {eq = 0, ineq >= 0} (module docstring).
 
     ``terms``: (p_i, q_i) pairs of Polynomials (numbers allowed); every q_i must be certified > 0 on the set.
+    The data are normalised (each ratio's q_i and the objective to unit largest coefficient, each constraint
+    to its own) and bounds reported in the caller's units.  ``budget`` (:class:`sospoly.Budget`): a Gram side
+    above ``max_gram_side`` is refused (status ``BUDGET_EXCEEDED``) and the solve stops at ``time_limit``.
     """
     t0 = time.perf_counter()
-    tol = as_tolerances(tolerances)
-    pairs, eq, ineq, gens = _check_terms(terms, eq, ineq, gens)
-    degree = _degree(pairs, eq, ineq, degree)
-    dbounds, bad = _denominator_bounds(pairs, eq, ineq, gens, tol, backend)
+    tol, budget = as_tolerances(tolerances), as_budget(budget)
+    pairs0, eq0, ineq0, gens = _check_terms(terms, eq, ineq, gens)
+    degree = _degree(pairs0, eq0, ineq0, degree)
+    pairs, eq, ineq, F = _normalised(pairs0, eq0, ineq0)
+    side = sigma(len(gens), degree // 2)
+    if side > budget.max_gram_side:
+        return RatioResult(SolveStatus.BUDGET_EXCEEDED, None, None, (), False, 0, degree, (), gens, None,
+                           time.perf_counter() - t0, f"Gram side {side} exceeds max_gram_side {budget.max_gram_side}")
+    dbounds, bad = _denominator_bounds(pairs0, eq0, ineq0, gens, tol, backend, budget)
     if bad is not None:
         return RatioResult(SolveStatus.INFEASIBLE, None, None, (), False, 0, degree, dbounds, gens, None,
                            time.perf_counter() - t0, f"denominator terms[{bad}].q is not certified positive on the "
                            f"set (certified lower bound {dbounds[bad]}): the sum-of-ratios bound needs q_i > 0")
     prog, names = _build(pairs, eq, ineq, gens, degree)
-    sol = solve_program(prog, backend, tolerances=tol)
+    deadline = budget.deadline()
+    for form, be in _RETRIES if backend is None else ((GramForm.IMAGE, backend),):
+        sol = solve_program(prog, be, form, tolerances=tol, deadline=deadline)
+        if sol.status not in _NUMERICAL or deadline.expired:
+            break
     if sol.status != SolveStatus.OPTIMAL:
         return RatioResult(sol.status, None, None, (), False, prog.n_lmivar(), degree, dbounds, gens, sol,
                            time.perf_counter() - t0, sol.message)
@@ -211,11 +240,11 @@ def minimize_ratios(terms, eq=(), ineq=(), degree: int | None = None, *, gens=No
     if upper is not None:
         scale = max(1.0, abs(upper))
         if tol.contradicts(lower, upper, scale):
-            status, msg = SolveStatus.INCONSISTENT, f"lower bound {lower:.10g} exceeds the objective {upper:.10g} " \
-                                                     "at a feasible point: numerical failure"
+            status, msg = SolveStatus.INCONSISTENT, f"lower bound {lower * F:.10g} exceeds the objective " \
+                                                     f"{upper * F:.10g} at a feasible point: numerical failure"
         else:
             optimal = bool(tol.certified(lower, upper, scale))
             lower = tol.consistent(lower, upper)
     mins = tuple(v for val, v in found if upper is not None and val <= upper + tol.gap_tolerance(upper))
-    return RatioResult(status, lower, upper, mins, optimal, prog.n_lmivar(), degree, dbounds, gens, sol,
-                       time.perf_counter() - t0, msg)
+    return RatioResult(status, lower * F, None if upper is None else upper * F, mins, optimal, prog.n_lmivar(),
+                       degree, dbounds, gens, sol, time.perf_counter() - t0, msg)

@@ -130,6 +130,7 @@ def test_moment_matrices_with_bases_and_atoms():
     assert mm.is_flat()
     atoms = sorted(float(p[0]) for p in mm.atoms())
     assert np.allclose(atoms, [-1, 1], atol=1e-4)
+    assert np.allclose([w for _, w in mm.measure()], [0.5, 0.5], atol=1e-4)     # the symmetric measure
 
 
 def test_moment_matrix_of_a_unique_minimiser():

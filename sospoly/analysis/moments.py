@@ -10,8 +10,9 @@ the constant monomial is in the basis, and the two ways to read the measure:
 * :meth:`MomentMatrix.is_flat` -- the flat-extension test of Curto & Fialkow: rank M_d =
   rank M_{d-1} (M_{d-1} the submatrix of the monomials of degree <= d - 1); then M is the
   moment matrix of a measure with rank M atoms;
-* :meth:`MomentMatrix.atoms` -- the atoms (Henrion & Lasserre 2005 extraction,
-  :func:`sospoly.analysis.extraction.extract_from_moment`).
+* :meth:`MomentMatrix.measure` / :meth:`MomentMatrix.atoms` -- the atoms and weights (Henrion & Lasserre
+  2005 extraction, :func:`sospoly.analysis.extraction.extract_from_moment`, then nonnegative weights
+  fitted to M; nothing is returned unless the atoms reproduce M).
 """
 from __future__ import annotations
 
@@ -76,18 +77,35 @@ class MomentMatrix:
         clique's for a correlative-sparsity block)."""
         return tuple(int(k) for k in np.nonzero(self.basis.max(axis=0) > 0)[0])
 
-    def atoms(self, tol: Tolerances = DEFAULT_TOLERANCES, span_tol: float = 1e-3) -> list:
-        """Atoms of the measure: distinct points over :attr:`variables` whose monomial vector b(p) lies in
-        the range of M to ``span_tol`` (Henrion-Lasserre extraction on M's range).  Needs 1 and every
-        such variable in the basis (ValueError otherwise)."""
+    def atoms(self, tol: Tolerances = DEFAULT_TOLERANCES, span_tol: float = 1e-3, fit_tol: float = 1e-3) -> list:
+        """Atoms of the measure: points over :attr:`variables` (the points of :meth:`measure`)."""
+        return [p for p, _ in self.measure(tol, span_tol, fit_tol)]
+
+    def measure(self, tol: Tolerances = DEFAULT_TOLERANCES, span_tol: float = 1e-3, fit_tol: float = 1e-3) -> list:
+        """(point, weight) pairs of an atomic measure whose moment matrix is M: candidate points from the
+        Henrion-Lasserre extraction on M's range (b(p) in the range to ``span_tol``), weights by nonnegative
+        least squares on sum_k w_k b(p_k) b(p_k)^T = M; [] unless that fit holds to ``fit_tol`` relative
+        (then M is, to that accuracy, the moment matrix of these atoms).  Needs 1 and every variable of
+        :attr:`variables` in the basis (ValueError otherwise)."""
+        from scipy.optimize import nnls
+
         cols = list(self.variables)
+        B = self.basis[:, cols]
         pts = []
-        for c in sorted(extract_from_moment(self.matrix, self.basis[:, cols], tol), key=lambda c: c.span_residual):
+        for c in sorted(extract_from_moment(self.matrix, B, tol), key=lambda c: c.span_residual):
             p = np.asarray(c.point, float)
-            if c.span_residual <= span_tol and all(np.linalg.norm(p - q) > 1e-4 * max(1.0, np.linalg.norm(q))
-                                                   for q in pts):
+            if c.span_residual <= span_tol and np.all(np.isfinite(p)) and \
+                    all(np.linalg.norm(p - q) > 1e-4 * max(1.0, np.linalg.norm(q)) for q in pts):
                 pts.append(p)
-        return pts
+        if not pts:
+            return []
+        V = np.array([np.prod(p[None, :] ** B, axis=1) for p in pts])           # b(p_k), one row each
+        A = np.stack([np.outer(v, v).ravel() for v in V], axis=1)
+        w, resid = nnls(A, self.matrix.ravel())
+        if resid > fit_tol * max(1.0, float(np.linalg.norm(self.matrix))):
+            return []
+        keep = w > fit_tol * max(float(w.max()), 1e-300)
+        return [(p, float(wk)) for p, wk, k in zip(pts, w, keep) if k]
 
 
 def _normalised(M: np.ndarray, basis: np.ndarray) -> np.ndarray:

@@ -28,10 +28,12 @@ The default strategy (each step recorded in ``attempts``):
    ``DENSE_AUTO_MAX_SIDE``) and fits the budget, the dense certificate of the same degree next (at
    degree 2, where it gives the same bound, only at the last degree).  A complete graph: dense.
    ``"none"``, ``"correlative"``, ``"term"`` and ``"newton"`` force a choice; ``result.sparsity`` says
-   which certificate gave the result.  An unconstrained f tries the Newton-polytope basis before the
-   dense one when it is smaller.  ``"term"`` walks the term-sparsity hierarchy
-   (:mod:`sospoly.certificates.term_hierarchy`) cheapest level first, up to the level whose bound is the
-   dense one for unconstrained programs; ``result.sparsity`` names the level (``"term:block:1"``...).
+   which certificate gave the result.  Before the dense certificate ``"auto"`` tries the cheapest
+   term-sparsity level when it has under 3/4 of the dense Gram entries, and for an unconstrained f the
+   Newton-polytope basis when it is smaller (benchmarks/sparsity_suite.py measures the choice).
+   ``"term"`` walks the term-sparsity hierarchy (:mod:`sospoly.certificates.term_hierarchy`) cheapest
+   level first, up to the level whose bound is the dense one for unconstrained programs;
+   ``result.sparsity`` names the level (``"term:block:1"``...).
 4. **Multiplier** (``multiplier="auto"``): at each degree q = 1 first (Putinar's certificate, the
    strongest on compact sets: Floudas' test 4.10 is certified at degree 8), then, when that does not
    certify and the degree allows it, the paper's q = (1 + ||v||^2)^k (Reznick-type, for unconstrained
@@ -63,7 +65,8 @@ from .certificates.program import SOSProgram
 from .certificates.psatz import Multiplier, PsatzProblem, as_multiplier, build_psatz, checked_inputs
 from .certificates.shape import SPARSITY_KINDS
 from .certificates.sparsity import correlative_sparsity
-from .certificates.term_hierarchy import newton_smaller, parse_term_kind, term_level_shape, term_levels
+from .certificates.term_hierarchy import (cheap_term_level, newton_smaller, parse_term_kind, term_level_shape,
+                                         term_levels)
 from .lowering.conic import GramForm
 from .solvers.lower_bound import solve_psatz
 from .solvers.solve import LowerBound, ProgramSolution, solve_program
@@ -357,6 +360,10 @@ def _choose_sparsity(sparsity, f, eq, ineq, degree: int, multiplier="auto", last
     steps = [] if cs.is_dense else [("correlative", low)]
     if cs.is_dense or (sigma(n, degree // 2) <= DENSE_AUTO_MAX_SIDE and
                        (degree > 2 or last or _low_block_helps(eq, ineq, multiplier))):
+        # the cheapest term-sparsity level first when it is clearly smaller than the dense certificate
+        term = cheap_term_level(_support(f), [_support(g) for g in eq], [_support(h) for h in ineq], degree) \
+            if sigma(n, degree // 2) <= DENSE_AUTO_MAX_SIDE and multiplier in ("auto", "putinar") else None
+        steps += [(term, None)] if term else []
         if not eq and not ineq and isinstance(multiplier, str) and multiplier in ("auto", "putinar") and \
                 sigma(n, degree // 2) <= DENSE_AUTO_MAX_SIDE and newton_smaller(_support(f), degree):
             steps.append(("newton", None))

@@ -27,7 +27,8 @@ import numpy as np
 from .shape import CertificateShape, Sparsity, _u_support, dense_shape
 from .sparsity import TERM_COMPLETIONS, newton_reduce, term_sparsity_iterate
 
-__all__ = ["parse_term_kind", "term_kind", "term_level_shape", "term_levels", "newton_smaller", "MAX_TERM_STEPS"]
+__all__ = ["parse_term_kind", "term_kind", "term_level_shape", "term_levels", "term_level_costs", "cheap_term_level",
+           "newton_smaller", "MAX_TERM_STEPS"]
 
 #: the hierarchy of one completion stops after this many steps even when not stable
 MAX_TERM_STEPS = 6
@@ -79,6 +80,22 @@ def term_level_shape(f_support, eq_supports, ineq_supports, degree: int, kind: s
 def term_levels(f_support, eq_supports, ineq_supports, degree: int, *, max_gram_side: int | None = None,
                 u_support=None) -> list[str]:
     """The distinct levels of the hierarchy, cheapest first (module docstring)."""
+    return [kind for kind, _ in term_level_costs(f_support, eq_supports, ineq_supports, degree,
+                                                 max_gram_side=max_gram_side, u_support=u_support)]
+
+
+def cheap_term_level(f_support, eq_supports, ineq_supports, degree: int, fraction: float = 0.75) -> str | None:
+    """The cheapest level when its Gram entries are below ``fraction`` of the dense basis' (else None): the
+    level ``sparsity="auto"`` tries before the dense certificate."""
+    f_support = np.asarray(f_support, dtype=np.int64)
+    s = dense_shape(f_support.shape[1], degree).u_bases[0].shape[0]
+    levels = term_level_costs(f_support, eq_supports, ineq_supports, degree)
+    return levels[0][0] if levels and levels[0][1] < fraction * s * (s + 1) // 2 else None
+
+
+def term_level_costs(f_support, eq_supports, ineq_supports, degree: int, *, max_gram_side: int | None = None,
+                     u_support=None) -> list[tuple[str, int]]:
+    """(kind, Gram entries) of the distinct levels, cheapest first (module docstring)."""
     _, u_support, basis = _base(f_support, eq_supports, ineq_supports, degree, max_gram_side, u_support)
     seen, out = set(), []
     for completion in TERM_COMPLETIONS:
@@ -91,7 +108,7 @@ def term_levels(f_support, eq_supports, ineq_supports, degree: int, *, max_gram_
                             term_kind(completion, ts.iterations)))
             if ts.stable or ts.iterations < steps:
                 break
-    return [kind for _, _, kind in sorted(out)]
+    return [(kind, cost) for cost, _, kind in sorted(out)]
 
 
 def newton_smaller(f_support, degree: int) -> bool:

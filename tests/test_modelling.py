@@ -269,3 +269,12 @@ def test_dsos_bound_is_valid_and_its_gram_is_diagonally_dominant():
                 assert abs(bv @ Q @ bv - (p(pt) - sol.objective)) < 1e-6 * max(1.0, abs(p(pt)))
     assert bounds["dsos"] <= bounds["sdsos"] + 1e-7 <= bounds["sos"] + 2e-7
     assert abs(bounds["sos"] + 9 / 8) < 1e-6 and bounds["dsos"] <= -9 / 8 + 1e-7
+
+
+def test_lowered_columns_equal_n_lmivar_with_every_new_constraint():
+    prog, _ = _mixed_program()
+    con = prog.add_sos_matrix([[1.0 + 0 * x, 0 * x], [0 * x, 1.0 + 0 * x]])
+    prog.add_dsos(x**2 + 1, degree=2)
+    assert con.m == 2
+    for form in (sp.GramForm.IMAGE,):
+        assert sp.lower(prog, form).n_cols == prog.n_lmivar()

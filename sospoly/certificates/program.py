@@ -377,9 +377,11 @@ class SOSProgram:
         """Independent scalar LMI variables of the image (U + L(alpha)) form (SPEC §8).
 
         = number of decision variables + sum over SOS constraints of tau, where
-        tau = (#Gram pairs) - (#distinct products) is the dimension of L(alpha).
+        tau = (#Gram pairs) - (#distinct products) is the dimension of L(alpha); plus the epigraph scalar of a
+        quadratic objective.
         """
-        return self.n_vars + sum(c.gram.n_pairs - c.gram.n_products for c in self.sos_constraints)
+        epigraph = 1 if self.objective_quadratic is not None and self.sense != Sense.FEASIBILITY else 0
+        return self.n_vars + epigraph + sum(c.gram.n_pairs - c.gram.n_products for c in self.sos_constraints)
 
     @property
     def has_conic_extras(self) -> bool:

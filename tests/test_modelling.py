@@ -278,3 +278,26 @@ def test_lowered_columns_equal_n_lmivar_with_every_new_constraint():
     assert con.m == 2
     for form in (sp.GramForm.IMAGE,):
         assert sp.lower(prog, form).n_cols == prog.n_lmivar()
+
+
+def test_bad_modelling_input_names_the_argument():
+    prog = sp.SOSProgram(("x", "y"))
+    a = prog.scalar("a")
+    with pytest.raises(ValueError, match="add_soc xs"):
+        prog.add_soc(a, [])
+    with pytest.raises(ValueError, match="add_soc t"):
+        prog.add_soc(a * x, [a])
+    with pytest.raises(TypeError, match="add_inequality"):
+        prog.add_inequality(a * a)
+    with pytest.raises(ValueError, match="add_sos_matrix M"):
+        prog.add_sos_matrix([[x, y], [x]])
+    with pytest.raises(ValueError, match="symmetric"):
+        prog.add_sos_matrix([[x, y], [x, y]])
+    with pytest.raises(ValueError, match="degree"):
+        prog.add_sos_matrix([[x**2, 0 * x], [0 * x, x**2]], degree=1)
+    with pytest.raises(ValueError, match="psd_matrix side"):
+        prog.psd_matrix(0)
+    with pytest.raises(ValueError, match="degree"):
+        sp.minimize_ratios([(x, 1 + x**2)], degree=3)
+    with pytest.raises(TypeError, match="quadratic expression can only be scaled"):
+        (a * a) * x

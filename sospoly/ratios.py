@@ -189,7 +189,8 @@ def _denominator_bounds(pairs, eq, ineq, gens, tol, backend, budget):
             out.append(float(q.coefficient((0,) * len(gens))))
         else:
             r = minimize(q, eq, ineq, gens=gens, tolerances=tol, backend=backend, budget=budget)
-            out.append(r.lower_bound if r.lower_bound is not None else -np.inf)
+            ok = r.status == SolveStatus.OPTIMAL and r.lower_bound is not None
+            out.append(r.lower_bound if ok else -np.inf)
         if not out[-1] > 0:
             return tuple(out), k
     return tuple(out), None

@@ -355,17 +355,18 @@ def _choose_sparsity(sparsity, f, eq, ineq, degree: int, multiplier="auto", last
                                                degree)]
     if sparsity != "auto":
         return [(sparsity, None)]
-    # unconstrained: the Newton-polytope basis before the dense one when it is smaller (the same bound for q = 1)
     cs = correlative_sparsity(n, _support(f), [_support(g) for g in eq], [_support(h) for h in ineq])
     steps = [] if cs.is_dense else [("correlative", low)]
     if cs.is_dense or (sigma(n, degree // 2) <= DENSE_AUTO_MAX_SIDE and
                        (degree > 2 or last or _low_block_helps(eq, ineq, multiplier))):
-        # the cheapest term-sparsity level first when it is clearly smaller than the dense certificate
+        # before the dense certificate (q = 1 only): the cheapest term-sparsity level when clearly smaller, and
+        # for an unconstrained f the Newton-polytope basis when smaller (the dense bound for q = 1)
+        q1 = isinstance(multiplier, str) and multiplier in ("auto", "putinar") and \
+            sigma(n, degree // 2) <= DENSE_AUTO_MAX_SIDE
         term = cheap_term_level(_support(f), [_support(g) for g in eq], [_support(h) for h in ineq], degree) \
-            if sigma(n, degree // 2) <= DENSE_AUTO_MAX_SIDE and multiplier in ("auto", "putinar") else None
+            if q1 else None
         steps += [(term, None)] if term else []
-        if not eq and not ineq and isinstance(multiplier, str) and multiplier in ("auto", "putinar") and \
-                sigma(n, degree // 2) <= DENSE_AUTO_MAX_SIDE and newton_smaller(_support(f), degree):
+        if q1 and not eq and not ineq and newton_smaller(_support(f), degree):
             steps.append(("newton", None))
         steps.append(("none", None))
     return steps

@@ -18,15 +18,20 @@ from .algebra.linpoly import LinPoly
 from .algebra.polynomial import Polynomial, as_polynomial, det, variables
 from .analysis.complexity import n_lmivar_formula, n_lmivar_shape
 from .analysis.extraction import Candidate, extract_from_gram, extract_from_moment
+from .analysis.moments import MomentMatrix
 from .analysis.rigor import ExactCheck, RigorousBound, exact_check, rigorous_psatz_bound
 from .budget import DEFAULT_BUDGET, UNLIMITED, Budget, BudgetExceeded, ProgramSize, estimate_size
 from .certificates.program import Sense, SOSProgram
+from .certificates.matrix_sos import MatrixSOSConstraint
+from .certificates.dd import DDConstraint, DDKind
+from .algebra.quadexpr import QuadExpr
 from .certificates.psatz import (DataSlots, Multiplier, PsatzProblem, PsatzStructure, StructureMismatch, build_psatz,
                                  default_q, delta_min)
 from .certificates.shape import CertificateShape, clique_shape, correlative_shape, dense_shape
 from .certificates.reduction import diagonal_reduction, ideal_reduction, reduce_shape
 from .lowering.compiled import CompiledPsatz, PsatzCache, compile_psatz
-from .lowering.conic import ConicProblem, GramForm, lower
+from .lowering.conic import ConicProblem, ConicResult, GramForm, lower
+from .ratios import RatioResult, minimize_ratios
 from .minimize import MinimizeResult, SolveAttempt, SOSResult, candidates_of, feasibility_violation, is_sos, minimize
 from .solvers.gevp import CompiledGevp, GevpResult, bisect
 from .solvers.lower_bound import solve_psatz
@@ -48,4 +53,6 @@ __all__ = [
     "candidates_of", "feasibility_violation", "is_sos", "minimize", "CompiledGevp", "GevpResult", "bisect",
     "solve_psatz", "LowerBound", "ProgramSolution", "check_certificate", "solve_program", "SolveStatus",
     "DEFAULT_TOLERANCES", "Tolerances",
+    "MomentMatrix", "MatrixSOSConstraint", "DDConstraint", "DDKind", "QuadExpr", "ConicResult",
+    "RatioResult", "minimize_ratios",
 ]

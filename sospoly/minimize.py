@@ -28,7 +28,12 @@ The default strategy (each step recorded in ``attempts``):
    ``DENSE_AUTO_MAX_SIDE``) and fits the budget, the dense certificate of the same degree next (at
    degree 2, where it gives the same bound, only at the last degree).  A complete graph: dense.
    ``"none"``, ``"correlative"``, ``"term"`` and ``"newton"`` force a choice; ``result.sparsity`` says
-   which certificate gave the result.
+   which certificate gave the result.  Before the dense certificate ``"auto"`` tries the cheapest
+   term-sparsity level when it has under 3/4 of the dense Gram entries, and for an unconstrained f the
+   Newton-polytope basis when it is smaller (benchmarks/sparsity_suite.py measures the choice).
+   ``"term"`` walks the term-sparsity hierarchy (:mod:`sospoly.certificates.term_hierarchy`) cheapest
+   level first, up to the level whose bound is the dense one for unconstrained programs;
+   ``result.sparsity`` names the level (``"term:block:1"``...).
 4. **Multiplier** (``multiplier="auto"``): at each degree q = 1 first (Putinar's certificate, the
    strongest on compact sets: Floudas' test 4.10 is certified at degree 8), then, when that does not
    certify and the degree allows it, the paper's q = (1 + ||v||^2)^k (Reznick-type, for unconstrained
@@ -53,12 +58,16 @@ from .algebra.basis import MonomialIndex
 from .algebra.polynomial import Polynomial
 from .analysis.recession import unbounded_result
 from .analysis.extraction import Candidate, extract_from_gram, extract_from_moment
+from .analysis.moments import moment_matrices_of
+from .analysis.term_extraction import second_moment_candidates
 from .analysis.sparse_extraction import extract_from_clique_moments
 from .budget import BudgetExceeded, TimeLimitReached, as_budget, deadline_scope
 from .certificates.program import SOSProgram
 from .certificates.psatz import Multiplier, PsatzProblem, as_multiplier, build_psatz, checked_inputs
 from .certificates.shape import SPARSITY_KINDS
 from .certificates.sparsity import correlative_sparsity
+from .certificates.term_hierarchy import (cheap_term_level, newton_smaller, parse_term_kind, term_level_shape,
+                                         term_levels)
 from .lowering.conic import GramForm
 from .solvers.lower_bound import solve_psatz
 from .solvers.solve import LowerBound, ProgramSolution, solve_program
@@ -110,6 +119,7 @@ class MinimizeResult:
     sparsity: str = "dense"
     attempts: tuple = ()
     scale: float = 1.0
+    moment_matrices: tuple = ()     # MomentMatrix per Gram block of u (.basis, .matrix; sospoly.analysis.moments)
 
     @property
     def gap(self) -> float | None:
@@ -243,9 +253,11 @@ def candidates_of(psatz, sol: ProgramSolution, tol: Tolerances) -> list[Candidat
         for p in extract_from_clique_moments(moments, bases, cliques, n, tol, greedy=True):
             cands.append(Candidate(np.asarray(p, float), "clique-moments", 0.0))
     if partial:
-        p = _first_moments([(b.b, sol.moments.get(nm)) for nm, b in zip(names, u.gram.blocks)], n)
+        blocks = [(b.b, sol.moments.get(nm)) for nm, b in zip(names, u.gram.blocks)]
+        p = _first_moments(blocks, n)
         if p is not None:
             cands.append(Candidate(p, "first-moments", 0.0))
+        cands += [Candidate(q, "second-moments", 0.0) for q in second_moment_candidates(blocks, n)]
     return cands
 
 
@@ -339,13 +351,24 @@ def _choose_sparsity(sparsity, f, eq, ineq, degree: int, multiplier="auto", last
     low = 2 if degree > 2 and n + 1 <= LOW_BLOCK_MAX_SIDE and _low_block_helps(eq, ineq, multiplier) else None
     if sparsity == "correlative":
         return [("correlative", low)]
+    if sparsity == "term":                 # the TSSOS hierarchy, cheapest level first (certificates.term_hierarchy)
+        return [(k, None) for k in term_levels(_support(f), [_support(g) for g in eq], [_support(h) for h in ineq],
+                                               degree)]
     if sparsity != "auto":
         return [(sparsity, None)]
     cs = correlative_sparsity(n, _support(f), [_support(g) for g in eq], [_support(h) for h in ineq])
-    if cs.is_dense:
-        return [("none", None)]
-    steps = [("correlative", low)]
-    if sigma(n, degree // 2) <= DENSE_AUTO_MAX_SIDE and (degree > 2 or last or _low_block_helps(eq, ineq, multiplier)):
+    steps = [] if cs.is_dense else [("correlative", low)]
+    if cs.is_dense or (sigma(n, degree // 2) <= DENSE_AUTO_MAX_SIDE and
+                       (degree > 2 or last or _low_block_helps(eq, ineq, multiplier))):
+        # before the dense certificate (q = 1 only): the cheapest term-sparsity level when clearly smaller, and
+        # for an unconstrained f the Newton-polytope basis when smaller (the dense bound for q = 1)
+        q1 = isinstance(multiplier, str) and multiplier in ("auto", "putinar") and \
+            sigma(n, degree // 2) <= DENSE_AUTO_MAX_SIDE
+        term = cheap_term_level(_support(f), [_support(g) for g in eq], [_support(h) for h in ineq], degree) \
+            if q1 else None
+        steps += [(term, None)] if term else []
+        if q1 and not eq and not ineq and newton_smaller(_support(f), degree):
+            steps.append(("newton", None))
         steps.append(("none", None))
     return steps
 
@@ -355,17 +378,18 @@ def _shape_with_q(kind, f, eq, ineq, degree: int, multiplier, max_gram_side: int
     shape built on the support of u = q (f - c) (supp(q f) and supp(q)): ``build_psatz`` builds
     those shapes from supp(f), whose basis cannot hold q f (Motzkin, q = 1 + x^2 + y^2, degree 8:
     infeasible on the 4 monomials of N(f)/2, certified at 0 on the 9 of N(q f)/2)."""
-    if kind not in ("newton", "term") or not (isinstance(multiplier, Polynomial) and multiplier.degree > 0):
+    if (kind != "newton" and parse_term_kind(kind) is None) or \
+            not (isinstance(multiplier, Polynomial) and multiplier.degree > 0):
         return kind
-    from .certificates.shape import newton_shape, term_shape
+    from .certificates.shape import newton_shape
 
     n = len(f.gens)
     qs, fs = _support(multiplier.with_gens(f.gens)), _support(f)
     if kind == "newton":
         return kind if eq or ineq else newton_shape(fs, degree, q_support=qs, max_gram_side=max_gram_side)
     u_support = np.unique(np.vstack([(qs[:, None, :] + fs[None, :, :]).reshape(-1, n), qs]), axis=0)
-    return term_shape(u_support, [_support(g) for g in eq], [_support(h) for h in ineq], degree,
-                      max_gram_side=max_gram_side)
+    return term_level_shape(u_support, [_support(g) for g in eq], [_support(h) for h in ineq], degree, kind,
+                            max_gram_side=max_gram_side)
 
 
 def _multipliers(multiplier, degree: int, deg_f: int, dense: bool) -> list:
@@ -554,7 +578,8 @@ class _Run:
         minimizers = tuple(p for val, p in found if val <= upper + near) if upper is not None else ()
         return MinimizeResult(status, c * fs, None if upper is None else upper * fs, minimizers, optimal,
                               psatz.n_lmivar, degree, _name_of(mult), self.gens, bracket, lb.solution, 0.0, msg,
-                              tuple(p for _, p in found), label, scale=fs)
+                              tuple(p for _, p in found), label, scale=fs,
+                              moment_matrices=moment_matrices_of(psatz.u, lb.solution))
 
 
 # ----------------------------------------------------------------------------- is_sos

@@ -111,7 +111,16 @@ def test_bad_programs():
     with pytest.raises(ValueError):
         prog.maximize(c * x)                          # objective must be scalar
     with pytest.raises(TypeError):
-        c * c                                         # bilinear in the decision variables
+        (c * x) * c                                   # bilinear in the decision variables
+    assert type(c * c).__name__ == "QuadExpr"        # scalar x scalar: a quadratic form (issue 25)
+    with pytest.raises(ValueError):
+        prog.maximize(c * c)                          # a maximised quadratic must be concave
+    with pytest.raises(ValueError):
+        prog.add_inequality(c * x)                    # inequalities are scalar
+    with pytest.raises(ValueError):
+        prog.add_lmi([[c, 1.0], [2.0, c]])            # not symmetric
+    with pytest.raises(ValueError):
+        prog.add_lmi([[c, 1.0]])                      # not square
     with pytest.raises(ValueError):
         SOSProgram(())
     with pytest.raises(ValueError):

@@ -233,7 +233,7 @@ def test_image_and_kernel_forms_give_same_minimum():
 
 
 def test_result_metadata():
-    res = sp.minimize(x + y, eq=[x**2 + y**2 - 1], degree=4)
+    res = sp.minimize(x + y, eq=[x**2 + y**2 - 1], degree=4, sparsity="none")   # the dense program's metadata
     assert res.degree == 4 and res.gens == ("x", "y")
     assert res.n_lmivar == sp.n_lmivar_formula(2, 4, (2,))
     assert res.solution is not None and "u" in res.solution.grams

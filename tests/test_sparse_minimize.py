@@ -282,7 +282,7 @@ def test_term_and_newton_bounds_are_valid(sparsity, f, fstar):
     """Valid bounds (<= f*, closed forms: Rosenbrock 0; camel; x^4 + y^4 + 1 - xy = 7/8 at x = y = +-1/2) and
     never a crash, whatever the blocks hold (a term-sparsity block may lack 1 or some x_i)."""
     res = sp.minimize(f, sparsity=sparsity)
-    assert res.sparsity == sparsity
+    assert res.sparsity.startswith(sparsity)
     assert res.lower_bound is not None and res.lower_bound <= fstar + 1e-6
     if res.upper_bound is not None:
         assert res.upper_bound >= fstar - 1e-9

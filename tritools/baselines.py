@@ -36,7 +36,7 @@ __all__ = [
     "pycolmap_multiview", "decompose_camera",
     "NEWTON_MAX_ITER", "NEWTON_GTOL", "PSO_SWARM_PER_DIM", "PSO_MAX_SWARM", "PSO_INERTIA_RANGE",
     "PSO_SELF_WEIGHT", "PSO_SOCIAL_WEIGHT", "PSO_MIN_NEIGHBORS_FRACTION", "PSO_MAX_STALL", "PSO_FTOL",
-    "BIG_COST",
+    "BIG_COST", "tpml",
 ]
 
 #: Newton: maximum iterations and gradient tolerance (relative to 1 + J).
@@ -398,3 +398,12 @@ BASELINES: dict[str, Callable[..., TriangulationResult]] = {
     "pso": particle_swarm,
     "sqp": sqp,
 }
+
+
+
+def tpml(cameras, regions, degree: int = 4, **options) -> TriangulationResult:
+    """The world-domain TPML-style baseline (:func:`tritools.tpml.tpml`: a sum-of-ratios SOS relaxation in the
+    scene point's coordinates; an estimate without certificate)."""
+    from .tpml import tpml as _tpml
+
+    return _tpml(cameras, regions, degree, **options)

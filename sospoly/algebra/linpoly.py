@@ -4,8 +4,9 @@
 constant coefficient per row and a sparse linear part in COO triplets
 ``(row, var, val)`` referring to the program's global decision-variable index.
 It supports + and - with LinPolys, Polynomials and numbers, and multiplication
-by a *numeric* Polynomial or number (the product of two LinPolys would be
-bilinear and is refused).  All operations are vectorised over terms.
+by a *numeric* Polynomial or number.  The product of two LinPolys is refused (it would be
+bilinear) unless both are scalars (degree 0): then it is a
+:class:`~sospoly.algebra.quadexpr.QuadExpr`.  All operations are vectorised over terms.
 """
 from __future__ import annotations
 
@@ -24,6 +25,10 @@ def _unique_rows(E: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         return E, np.zeros(0, dtype=np.int64)
     uniq, inv = np.unique(E, axis=0, return_inverse=True)
     return uniq, np.asarray(inv).ravel()
+
+
+def _is_quad(other) -> bool:
+    return type(other).__name__ == "QuadExpr"
 
 
 class LinPoly:
@@ -80,6 +85,8 @@ class LinPoly:
 
     # ------------------------------------------------------------------ arithmetic
     def __add__(self, other) -> LinPoly:
+        if _is_quad(other):
+            return NotImplemented
         o = self._coerce(other)
         m = self.E.shape[0]
         return LinPoly(self.gens, np.vstack([self.E, o.E]), np.concatenate([self.const, o.const]),
@@ -92,6 +99,8 @@ class LinPoly:
         return self * -1.0
 
     def __sub__(self, other) -> LinPoly:
+        if _is_quad(other):
+            return NotImplemented
         return self + (-self._coerce(other))
 
     def __rsub__(self, other) -> LinPoly:
@@ -99,7 +108,11 @@ class LinPoly:
 
     def __mul__(self, other) -> LinPoly:
         if isinstance(other, LinPoly):
-            raise TypeError("the product of two decision-dependent polynomials is not affine")
+            from .quadexpr import QuadExpr        # scalar x scalar: a quadratic form (else TypeError)
+
+            return QuadExpr.product(self, other)
+        if _is_quad(other):
+            return NotImplemented
         if isinstance(other, (numbers.Real, np.floating, np.integer)) and not isinstance(other, bool):
             s = float(other)
             if not np.isfinite(s):

@@ -9,9 +9,18 @@ named blocks:
 * ``sos_poly(degree)``: an SOS polynomial b_d(v)^T S b_d(v), S = S^T >= 0,
   parametrised by the upper-triangular entries of S (the multipliers s_k, q).
 
+* ``psd_matrix(side)``: a symmetric PSD matrix (upper-triangular entries, svec pair order); the
+  Gram matrix of a matrix SOS constraint (:mod:`sospoly.certificates.matrix_sos`).
+
 Constraints: ``add_sos(u)`` -- the polynomial u, affine in x, is SOS, with its
 Gram basis chosen from its degree; ``add_equality(expr, rhs)`` -- linear
-equalities on x.  An objective is a scalar (degree-0) affine expression.
+equalities on x; ``add_identity(expr)`` -- a polynomial identity expr = 0 (every coefficient);
+``add_inequality(expr)`` -- expr >= 0 for a scalar affine expr; ``add_soc(t, xs)`` --
+||xs||_2 <= t; ``add_lmi(M)`` -- a symmetric matrix of scalar affine expressions is PSD;
+``add_sos_matrix(M)`` -- a symmetric polynomial matrix is SOS (y^T M(v) y SOS in (v, y)).
+An objective is a scalar affine expression, or (minimised) a convex / (maximised) a concave
+quadratic :class:`~sospoly.algebra.quadexpr.QuadExpr` (lowered with an epigraph variable and a
+rotated second-order cone).
 
 Lowering to a conic problem lives in :mod:`sospoly.lowering.conic`; solving in
 :mod:`sospoly.solvers.solve`.  Nothing here imports a solver.
@@ -26,8 +35,11 @@ import numpy as np
 from ..algebra.basis import GramBasis, GramBlocks, monomials
 from ..algebra.linpoly import LinPoly
 from ..algebra.polynomial import Polynomial, as_polynomial
+from ..algebra.quadexpr import QuadExpr
+from ..algebra.svec import triu_pairs
 
-__all__ = ["SOSProgram", "Sense", "VarBlock", "SOSConstraint", "EqualityConstraint"]
+__all__ = ["SOSProgram", "Sense", "VarBlock", "SOSConstraint", "EqualityConstraint", "InequalityConstraint",
+           "SOCConstraint", "LMIConstraint", "IdentityConstraint"]
 
 
 class Sense(str, enum.Enum):
@@ -41,6 +53,7 @@ class BlockKind(str, enum.Enum):
     SCALAR = "scalar"
     FREE_POLY = "free_poly"
     SOS_POLY = "sos_poly"   # Gram entries (upper triangle, svec pair order); PSD-constrained
+    PSD_MATRIX = "psd_matrix"   # entries of a PSD matrix (upper triangle, svec pair order)
 
 
 @dataclass(frozen=True)
@@ -51,6 +64,7 @@ class VarBlock:
     size: int
     monomials: np.ndarray | None = None       # FREE_POLY: exponents; SOS_POLY: Gram basis b
     gram: GramBasis | None = None             # SOS_POLY only
+    side: int = 0                             # PSD_MATRIX only: the matrix side
 
     @property
     def slice(self) -> slice:
@@ -84,6 +98,47 @@ class EqualityConstraint:
     rhs: np.ndarray
 
 
+@dataclass(frozen=True)
+class InequalityConstraint:
+    """``expr >= 0`` for a scalar affine expression (a nonnegative-orthant row)."""
+    name: str
+    expr: LinPoly
+
+
+@dataclass(frozen=True)
+class SOCConstraint:
+    """``||(exprs[1], ..., exprs[k])||_2 <= exprs[0]`` (a second-order cone of dimension k + 1)."""
+    name: str
+    exprs: tuple
+
+
+@dataclass(frozen=True)
+class LMIConstraint:
+    """A symmetric matrix of scalar affine expressions is PSD; ``entries`` in svec pair order
+    (:func:`sospoly.algebra.svec.triu_pairs`)."""
+    name: str
+    side: int
+    entries: tuple
+
+
+@dataclass(frozen=True)
+class IdentityConstraint:
+    """The polynomial ``expr`` (affine in x) is identically zero: one equality per coefficient."""
+    name: str
+    expr: LinPoly
+
+
+def _square_entries(M, what: str) -> list:
+    """Rows of a square list-of-lists (TypeError / ValueError naming ``what``)."""
+    try:
+        rows = [list(r) for r in M]
+    except TypeError:
+        raise TypeError(f"{what} must be a square list of lists") from None
+    if not rows or any(len(r) != len(rows) for r in rows):
+        raise ValueError(f"{what} must be a non-empty square list of lists, got row lengths {[len(r) for r in rows]}")
+    return rows
+
+
 class SOSProgram:
     """A sum-of-squares program over the polynomial ring in ``gens``."""
 
@@ -96,7 +151,12 @@ class SOSProgram:
         self.blocks: list[VarBlock] = []
         self.sos_constraints: list[SOSConstraint] = []
         self.equalities: list[EqualityConstraint] = []
+        self.identities: list[IdentityConstraint] = []
+        self.inequalities: list[InequalityConstraint] = []
+        self.socs: list[SOCConstraint] = []
+        self.lmis: list[LMIConstraint] = []
         self.objective: LinPoly | None = None
+        self.objective_quadratic: QuadExpr | None = None   # the quadratic part when the objective is one
         self.sense: Sense = Sense.FEASIBILITY
 
     @property
@@ -122,6 +182,14 @@ class SOSProgram:
     def scalar(self, name: str | None = None) -> LinPoly:
         blk = self._new_block(name, BlockKind.SCALAR, 1)
         return LinPoly.variable_terms(self.gens, np.zeros((1, self.nvars_poly), np.int64), [blk.start])
+
+    def scalars(self, k: int, name: str | None = None) -> list:
+        """``k`` free scalars in one block (a list of scalar expressions)."""
+        if int(k) != k or k < 1:
+            raise ValueError(f"scalars count must be a positive integer, got {k!r}")
+        blk = self._new_block(name, BlockKind.SCALAR, int(k))
+        zero = np.zeros((1, self.nvars_poly), np.int64)
+        return [LinPoly.variable_terms(self.gens, zero, [blk.start + t]) for t in range(int(k))]
 
     def free_poly(self, degree: int, name: str | None = None, monomial_exponents=None) -> LinPoly:
         """A polynomial with free coefficients on all monomials of degree <= ``degree``."""
@@ -149,6 +217,19 @@ class SOSProgram:
         w = np.where(gb.pair_i == gb.pair_j, 1.0, 2.0)
         return LinPoly(self.gens, gb.products, np.zeros(gb.products.shape[0]),
                        gb.pair_monomial, np.arange(blk.start, blk.start + npairs), w)
+
+    def psd_matrix(self, side: int, name: str | None = None) -> list:
+        """A symmetric PSD matrix variable of the given side, as a list of lists of scalar expressions."""
+        if int(side) != side or side < 1:
+            raise ValueError(f"psd_matrix side must be a positive integer, got {side!r}")
+        side = int(side)
+        i, j = triu_pairs(side)
+        blk = self._new_block(name, BlockKind.PSD_MATRIX, i.size, side=side)
+        zero = np.zeros((1, self.nvars_poly), np.int64)
+        M = [[None] * side for _ in range(side)]
+        for t, (a, b) in enumerate(zip(i, j)):
+            M[a][b] = M[b][a] = LinPoly.variable_terms(self.gens, zero, [blk.start + t])
+        return M
 
     def gram_trace(self, block_name: str) -> LinPoly:
         """trace(S) of an SOS block, as a scalar expression."""
@@ -191,6 +272,72 @@ class SOSProgram:
         self.equalities.append(con)
         return con
 
+    def add_identity(self, expr, name: str | None = None) -> IdentityConstraint:
+        """Require the polynomial ``expr`` (affine in the decision variables) to vanish identically."""
+        con = IdentityConstraint(name or f"id{len(self.identities)}", self._as_linpoly(expr))
+        self.identities.append(con)
+        return con
+
+    def _scalar(self, expr, what: str) -> LinPoly:
+        if isinstance(expr, QuadExpr):
+            raise TypeError(f"{what} must be affine in the decision variables, got a quadratic expression")
+        e = self._as_linpoly(expr)
+        if e.degree > 0:
+            raise ValueError(f"{what} must be a scalar (degree-0) affine expression, got degree {e.degree} in "
+                             f"{self.gens}; use add_sos for polynomial nonnegativity")
+        return e
+
+    def add_inequality(self, expr, name: str | None = None) -> InequalityConstraint:
+        """Require ``expr >= 0`` for a scalar affine expression of the decision variables."""
+        con = InequalityConstraint(name or f"ineq{len(self.inequalities)}", self._scalar(expr, "add_inequality expr"))
+        self.inequalities.append(con)
+        return con
+
+    def add_soc(self, t, xs, name: str | None = None) -> SOCConstraint:
+        """Require ``||xs||_2 <= t`` (t and every entry of xs scalar affine expressions)."""
+        xs = list(xs)
+        if not xs:
+            raise ValueError("add_soc xs must be a non-empty sequence of scalar expressions")
+        exprs = (self._scalar(t, "add_soc t"),) + tuple(self._scalar(e, "add_soc xs entry") for e in xs)
+        con = SOCConstraint(name or f"soc{len(self.socs)}", exprs)
+        self.socs.append(con)
+        return con
+
+    def add_lmi(self, M, name: str | None = None) -> LMIConstraint:
+        """Require the symmetric matrix ``M`` (list of lists of scalar affine expressions) to be PSD."""
+        rows = _square_entries(M, "add_lmi M")
+        side = len(rows)
+        ent = [[self._scalar(v, f"add_lmi M[{a}][{b}]") for b, v in enumerate(r)] for a, r in enumerate(rows)]
+        i, j = triu_pairs(side)
+        for a, b in zip(i, j):
+            if a != b and not _same_affine(ent[a][b], ent[b][a], self.n_vars):
+                raise ValueError(f"add_lmi M must be symmetric: M[{a}][{b}] != M[{b}][{a}]")
+        con = LMIConstraint(name or f"lmi{len(self.lmis)}", side, tuple(ent[a][b] for a, b in zip(i, j)))
+        self.lmis.append(con)
+        return con
+
+    def add_sos_matrix(self, M, degree: int | None = None, name: str | None = None, basis=None):
+        """Require the symmetric polynomial matrix ``M`` to be SOS: M(v) = (I (x) b(v))^T G (I (x) b(v)) with
+        G PSD (see :mod:`sospoly.certificates.matrix_sos`).  Returns the
+        :class:`~sospoly.certificates.matrix_sos.MatrixSOSConstraint`."""
+        from .matrix_sos import add_sos_matrix
+
+        return add_sos_matrix(self, M, degree=degree, name=name, basis=basis)
+
+    def add_dsos(self, expr, degree: int | None = None, name: str | None = None, basis=None):
+        """Require ``expr`` to be DSOS: b^T Q b with Q diagonally dominant (an LP; Ahmadi-Majumdar 2019).
+        See :mod:`sospoly.certificates.dd`."""
+        from .dd import DDKind, add_dd
+
+        return add_dd(self, expr, DDKind.DSOS, degree=degree, name=name, basis=basis)
+
+    def add_sdsos(self, expr, degree: int | None = None, name: str | None = None, basis=None):
+        """Require ``expr`` to be SDSOS: b^T Q b with Q scaled diagonally dominant (a sum of 2x2 PSD
+        blocks: second-order cones).  See :mod:`sospoly.certificates.dd`."""
+        from .dd import DDKind, add_dd
+
+        return add_dd(self, expr, DDKind.SDSOS, degree=degree, name=name, basis=basis)
+
     def maximize(self, expr) -> None:
         self._set_objective(expr, Sense.MAXIMIZE)
 
@@ -198,10 +345,16 @@ class SOSProgram:
         self._set_objective(expr, Sense.MINIMIZE)
 
     def _set_objective(self, expr, sense):
+        quad = None
+        if isinstance(expr, QuadExpr):
+            quad, expr = expr, expr.affine
         expr = self._as_linpoly(expr)
         if expr.degree > 0:
-            raise ValueError("the objective must be a scalar affine expression in the decision variables")
-        self.objective, self.sense = expr, sense
+            raise ValueError("the objective must be a scalar affine or quadratic expression in the decision "
+                             "variables")
+        if quad is not None:
+            _check_curvature(quad, self.n_vars, sense)
+        self.objective, self.sense, self.objective_quadratic = expr, sense, quad
 
     def _as_linpoly(self, expr) -> LinPoly:
         if isinstance(expr, LinPoly):
@@ -212,14 +365,29 @@ class SOSProgram:
             return LinPoly.from_polynomial(expr, self.gens)
         return LinPoly.from_polynomial(as_polynomial(expr, self.gens), self.gens)
 
+    def objective_value(self, x) -> float:
+        """The objective (affine + quadratic part) at decision values ``x``."""
+        val = float(self.objective.value(x).coefficient((0,) * self.nvars_poly)) if self.objective is not None else 0.0
+        if self.objective_quadratic is not None:
+            val = self.objective_quadratic.value(x)
+        return val
+
     # ------------------------------------------------------------------ complexity
     def n_lmivar(self) -> int:
         """Independent scalar LMI variables of the image (U + L(alpha)) form (SPEC §8).
 
         = number of decision variables + sum over SOS constraints of tau, where
-        tau = (#Gram pairs) - (#distinct products) is the dimension of L(alpha).
+        tau = (#Gram pairs) - (#distinct products) is the dimension of L(alpha); plus the epigraph scalar of a
+        quadratic objective.
         """
-        return self.n_vars + sum(c.gram.n_pairs - c.gram.n_products for c in self.sos_constraints)
+        epigraph = 1 if self.objective_quadratic is not None and self.sense != Sense.FEASIBILITY else 0
+        return self.n_vars + epigraph + sum(c.gram.n_pairs - c.gram.n_products for c in self.sos_constraints)
+
+    @property
+    def has_conic_extras(self) -> bool:
+        """Does the program use cones beyond zero and PSD (inequalities, second-order cones, a quadratic
+        objective)?  Those the batched interior-point method does not handle; Clarabel and cvxpy do."""
+        return bool(self.inequalities or self.socs or self.objective_quadratic is not None)
 
     def summary(self) -> str:
         lines = [f"SOSProgram over {len(self.gens)} variables, {self.n_vars} decision scalars"]
@@ -229,3 +397,23 @@ class SOSProgram:
             lines.append(f"  SOS {c.name}: Gram blocks {' + '.join(f'{s}x{s}' for s in c.gram.sizes)}")
         lines.append(f"  N_LMIVAR = {self.n_lmivar()}")
         return "\n".join(lines)
+
+
+def _same_affine(a: LinPoly, b: LinPoly, n_vars: int) -> bool:
+    """Do two scalar affine expressions coincide (to round-off)?"""
+    d = a - b
+    lin = np.abs(d.linear_matrix(n_vars).toarray()).max(initial=0.0)
+    return lin <= 1e-12 * max(1.0, np.abs(a.vals).max(initial=0.0)) and abs(float(d.const.sum())) <= 1e-12 * max(
+        1.0, abs(float(a.const.sum())))
+
+
+def _check_curvature(quad: QuadExpr, n_vars: int, sense: Sense) -> None:
+    """A minimised quadratic must be convex, a maximised one concave (P PSD / NSD to round-off)."""
+    P = quad.matrix(n_vars) * (1.0 if sense == Sense.MINIMIZE else -1.0)
+    if not P.size:
+        return
+    lam = np.linalg.eigvalsh(P)
+    if lam[0] < -1e-10 * max(1.0, float(np.abs(lam).max())):
+        what = "convex" if sense == Sense.MINIMIZE else "concave"
+        raise ValueError(f"the quadratic objective must be {what} to be {sense.value}d "
+                         f"(its matrix has eigenvalue {lam[0] * (1 if sense == Sense.MINIMIZE else -1):.3g})")

@@ -49,7 +49,8 @@ from ..algebra.linpoly import LinPoly
 from ..algebra.polynomial import Polynomial, as_polynomial
 from ..budget import BudgetExceeded, check_deadline
 from .program import SOSConstraint, SOSProgram
-from .shape import CertificateShape, correlative_shape, dense_shape, newton_shape, term_shape
+from .shape import CertificateShape, correlative_shape, dense_shape, newton_shape
+from .term_hierarchy import parse_term_kind, term_level_shape
 from .reduction import reduce_shape
 
 __all__ = ["Multiplier", "DataSlots", "PsatzStructure", "PsatzProblem", "StructureMismatch", "build_psatz",
@@ -415,9 +416,9 @@ def certificate_shape(sparsity, gens, degree: int, f: Polynomial, eq=(), ineq=()
     if sparsity == "correlative":
         return correlative_shape(fs, [_support(g) for g in eq], [_support(h) for h in ineq], degree,
                                  low_degree=low_degree, max_gram_side=max_gram_side)
-    if sparsity == "term":
-        return term_shape(fs, [_support(g) for g in eq], [_support(h) for h in ineq], degree,
-                          max_gram_side=max_gram_side)
+    if parse_term_kind(sparsity) is not None:          # "term" or a level "term:<completion>:<steps>"
+        return term_level_shape(fs, [_support(g) for g in eq], [_support(h) for h in ineq], degree, sparsity,
+                                max_gram_side=max_gram_side)
     if sparsity == "newton":
         if eq or ineq:
             raise ValueError("sparsity='newton' (the Newton-polytope basis) applies to unconstrained programs only")

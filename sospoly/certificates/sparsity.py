@@ -47,6 +47,7 @@ __all__ = [
     "HEURISTICS", "CorrelativeSparsity", "TermSparsity", "assign_constraints", "chordal_extension", "clique_tree",
     "correlative_sparsity", "csp_graph", "has_running_intersection", "in_newton_polytope", "maximal_cliques_chordal",
     "newton_reduce", "term_sparsity_blocks", "term_sparsity_graph", "term_sparsity_iterate", "variables_of",
+    "TERM_COMPLETIONS",
 ]
 
 #: the chordal-extension heuristics understood by :func:`chordal_extension`.
@@ -448,22 +449,45 @@ class TermSparsity:
     stable: bool = False
 
 
-def term_sparsity_iterate(support, basis, steps: int, heuristic: str = "min_degree") -> TermSparsity:
+#: how a term-sparsity graph is completed: ``"chordal"`` (an approximately minimal chordal extension, TSSOS
+#: "MD"; SumOfSquares.jl's ``ChordalCompletion``) or ``"block"`` (every connected component made complete,
+#: TSSOS "block"; SumOfSquares.jl's ``ClusterCompletion``).
+TERM_COMPLETIONS = ("chordal", "block")
+
+
+def _complete(G: nx.Graph, completion: str, heuristic: str) -> nx.Graph:
+    if completion == "chordal":
+        return chordal_extension(G, heuristic)
+    if completion != "block":
+        raise ValueError(f"completion must be one of {TERM_COMPLETIONS}, got {completion!r}")
+    H = nx.Graph()
+    H.add_nodes_from(G.nodes)
+    for comp in nx.connected_components(G):
+        comp = sorted(comp)
+        H.add_edges_from((a, b) for k, a in enumerate(comp) for b in comp[k + 1:])
+    return H
+
+
+def term_sparsity_iterate(support, basis, steps: int, heuristic: str = "min_degree",
+                          completion: str = "chordal") -> TermSparsity:
     """Iterate the term-sparsity step at most ``steps`` times, support := support ∪
-    {basis[a] + basis[b] : (a, b) an edge of the previous chordal graph}, stopping early once
-    the chordal graph no longer changes.  The chordal graphs grow monotonically, so the
-    iteration always stabilises after at most s(s-1)/2 steps."""
+    {basis[a] + basis[b] : (a, b) an edge of the previous completed graph}, stopping early once
+    the completed graph no longer changes.  The completed graphs grow monotonically, so the
+    iteration always stabilises after at most s(s-1)/2 steps (the TSSOS hierarchy, Wang, Magron &
+    Lasserre 2021).  ``completion`` (:data:`TERM_COMPLETIONS`): ``"chordal"`` or ``"block"``; with
+    ``"block"`` the stable level of an unconstrained problem gives the dense bound (its blocks are
+    those of the sign symmetries, TSSOS Theorem 3.3)."""
     if int(steps) != steps or steps < 1:
         raise ValueError(f"steps must be a positive integer, got {steps!r}")
     S = _exponents(support, "support")
     B = _exponents(basis, "basis", S.shape[1])
     A = np.unique(np.vstack([S, 2 * B]), axis=0)
-    H = chordal_extension(term_sparsity_graph(A, B), heuristic)
+    H = _complete(term_sparsity_graph(A, B), completion, heuristic)
     done, stable = 1, False
     while done < steps:
         edges = np.array(sorted(H.edges), dtype=np.int64).reshape(-1, 2)
         A = np.unique(np.vstack([A, B[edges[:, 0]] + B[edges[:, 1]]]), axis=0)
-        H_next = chordal_extension(term_sparsity_graph(A, B), heuristic)
+        H_next = _complete(term_sparsity_graph(A, B), completion, heuristic)
         done += 1
         stable = _edge_set(H_next) == _edge_set(H)
         H = H_next

@@ -3,11 +3,19 @@
 Standard form (Clarabel's, with P = 0)::
 
     minimise    q^T x
-    subject to  A x + s = b,   s in K = {0}^z  x  S_+^{s_1}  x ... x  S_+^{s_k}
+    subject to  A x + s = b,   s in K = {0}^z  x  R_+^l  x  Q^{m_1} x ... x  Q^{m_r}
+                                        x  S_+^{s_1}  x ... x  S_+^{s_k}
 
-PSD blocks are in the svec convention of :mod:`sospoly.algebra.svec`.  Rows are ordered:
-all zero-cone rows first, then one PSD block per SOS-polynomial multiplier and
-one per SOS constraint.
+with Q^m = {(t, y) in R x R^{m-1} : ||y||_2 <= t} the second-order cone.  PSD blocks are in
+the svec convention of :mod:`sospoly.algebra.svec`.  Rows are ordered: all zero-cone rows first
+(linear equalities, polynomial identities, coefficient matching), then the nonnegative rows of
+scalar inequalities, the second-order cones (user cones, then the epigraph cone of a quadratic
+objective), then one PSD block per SOS-polynomial multiplier and PSD matrix variable, one per
+SOS constraint (per Gram block) and one per LMI.
+
+A convex quadratic objective x^T P x + l^T x (P = F^T F) is minimised as l^T x + t over one extra
+last column t with the rotated cone x^T P x <= t written as a second-order cone:
+||(t - 1, 2 F x)||_2 <= t + 1.
 
 Two Gram forms (SPEC §4):
 
@@ -42,7 +50,7 @@ from ..certificates.program import BlockKind, Sense, SOSProgram
 from ..algebra.svec import smat, svec_scale
 from ..budget import check_deadline
 
-__all__ = ["GramForm", "Cone", "ConicProblem", "lower", "gram_structure"]
+__all__ = ["GramForm", "Cone", "CONE_KINDS", "ConicProblem", "ConicResult", "lower", "gram_structure"]
 
 
 class GramForm(str, enum.Enum):
@@ -51,11 +59,19 @@ class GramForm(str, enum.Enum):
     KERNEL = "kernel"
 
 
+#: the cone kinds of the standard form (module docstring)
+CONE_KINDS = ("zero", "nonneg", "soc", "psd")
+
+
 @dataclass(frozen=True)
 class Cone:
-    kind: str      # "zero", "nonneg" or "psd"
+    kind: str      # one of CONE_KINDS: "zero", "nonneg", "soc" or "psd"
     dim: int       # number of rows
     size: int = 0  # matrix side for "psd"
+
+    def __post_init__(self):
+        if self.kind not in CONE_KINDS:
+            raise ValueError(f"Cone kind must be one of {CONE_KINDS}, got {self.kind!r}")
 
 
 @dataclass(frozen=True)
@@ -64,7 +80,7 @@ class PSDBlockMap:
     name: str
     row_start: int
     size: int                  # matrix side
-    source: str                # "constraint" or "multiplier"
+    source: str                # "constraint", "multiplier", "matrix" (a PSD matrix variable) or "lmi"
     var_start: int | None = None   # kernel form: first column of its Q variables
 
 
@@ -123,6 +139,48 @@ class ConicProblem:
         return ConicProblem(q, A, b, self.cones + (Cone("nonneg", 1),), self.n_program_vars, self.psd_blocks,
                             -1.0, 0.0, self.form, {})
 
+    # ------------------------------------------------------------------ files and solving
+    def to_sdpa(self, path):
+        """Write the problem as an SDPA sparse file (``.dat-s``; :mod:`sospoly.io.sdpa`)."""
+        from ..io.sdpa import write_sdpa
+
+        return write_sdpa(self, path)
+
+    @classmethod
+    def from_sdpa(cls, path) -> ConicProblem:
+        """Read an SDPA sparse file (:mod:`sospoly.io.sdpa`)."""
+        from ..io.sdpa import read_sdpa
+
+        return read_sdpa(path)
+
+    def to_cbf(self, path):
+        """Write the problem in the Conic Benchmark Format (``.cbf``; :mod:`sospoly.io.cbf`)."""
+        from ..io.cbf import write_cbf
+
+        return write_cbf(self, path)
+
+    @classmethod
+    def from_cbf(cls, path) -> ConicProblem:
+        """Read a CBF file of the subset :func:`sospoly.io.cbf.write_cbf` writes (:mod:`sospoly.io.cbf`)."""
+        from ..io.cbf import read_cbf
+
+        return read_cbf(path)
+
+    def solve(self, backend=None, tolerances=None):
+        """Solve with ``backend`` (default Clarabel) and check the answer a posteriori
+        (:func:`sospoly.solvers.solve.solve_conic`); a :class:`ConicResult` with the caller's objective
+        ``objective_sign * q^T x + objective_offset``."""
+        from ..solvers.solve import solve_conic
+        from ..tolerances import DEFAULT_TOLERANCES
+
+        if self.params:
+            raise ValueError("solve: instantiate the problem's parameters first (ConicProblem.instantiate)")
+        status, sol, _, resid, msg = solve_conic(self, backend, tolerances or DEFAULT_TOLERANCES)
+        obj = None
+        if status.ok and sol.x is not None:
+            obj = self.objective_sign * float(self.q @ sol.x) + self.objective_offset
+        return ConicResult(status, obj, sol.x, sol.z, sol.attempts, msg)
+
     def slack(self, x: np.ndarray) -> np.ndarray:
         """s = b - A x (exact, recomputed from x)."""
         return self.b - self.A @ x
@@ -142,6 +200,18 @@ class ConicProblem:
     def dual_matrices(self, z: np.ndarray) -> dict:
         return {blk.name: smat(z[blk.row_start:blk.row_start + blk.size * (blk.size + 1) // 2])
                 for blk in self.psd_blocks}
+
+
+@dataclass(frozen=True)
+class ConicResult:
+    """Outcome of :meth:`ConicProblem.solve`: the status (``SolveStatus``), the caller's objective (None
+    unless the status is ok), the primal x, the dual z, the solver attempts and a message."""
+    status: object
+    objective: float | None
+    x: np.ndarray | None
+    z: np.ndarray | None
+    attempts: tuple = ()
+    message: str = ""
 
 
 @dataclass(frozen=True)
@@ -235,14 +305,16 @@ def lower(program: SOSProgram, form: GramForm = GramForm.IMAGE) -> ConicProblem:
     form = GramForm(form)
     n0 = program.n_vars
     param_names = sorted({k for con in program.sos_constraints for k in con.param_terms})
+    epi = _epigraph_factor(program)
 
-    # ---- columns: program vars, then per-constraint extra vars (alpha or Q)
+    # ---- columns: program vars, then per-constraint extra vars (alpha or Q), then the epigraph t
     col = n0
     extra_start = []
     for con in program.sos_constraints:
         extra_start.append(col)
         col += con.gram.n_pairs - (con.gram.n_products if form == GramForm.IMAGE else 0)
-    ncols = col
+    t_col = col if epi is not None else None
+    ncols = col + (1 if epi is not None else 0)
     asm = _Assembly(param_names)
 
     # ---------------- zero-cone rows
@@ -251,6 +323,9 @@ def lower(program: SOSProgram, form: GramForm = GramForm.IMAGE) -> ConicProblem:
         asm.add_affine(None, eq.expr, np.full(eq.expr.E.shape[0], row, dtype=np.int64), -1.0)
         asm.b.append((np.array([row]), eq.rhs))
         row += 1
+    for ident in program.identities:       # polynomial identities: every coefficient = 0
+        asm.add_affine(None, ident.expr, row + np.arange(ident.expr.E.shape[0]), -1.0)
+        row += ident.expr.E.shape[0]
     for con in program.sos_constraints:    # monomials of SOS expressions outside the Gram products: u_m = 0
         check_deadline("lowering the program")
         missing = {}
@@ -274,16 +349,19 @@ def lower(program: SOSProgram, form: GramForm = GramForm.IMAGE) -> ConicProblem:
                 asm.add_affine(name, expr, np.where(idx >= 0, idx + row, -1), 1.0)
             row += gb.n_products
     n_zero = row
+    cones = [Cone("zero", n_zero)] if n_zero else []
+
+    # ---------------- nonnegative and second-order cone rows
+    row = _scalar_cone_rows(program, asm, row, cones, epi, t_col)
 
     # ---------------- PSD rows
     psd_blocks = []
-    cones = [Cone("zero", n_zero)] if n_zero else []
     for blk in program.blocks:
-        if blk.kind != BlockKind.SOS_POLY:
+        if blk.kind not in (BlockKind.SOS_POLY, BlockKind.PSD_MATRIX):
             continue
-        s, n = blk.gram.size, blk.size
+        s, n = (blk.gram.size if blk.kind == BlockKind.SOS_POLY else blk.side), blk.size
         asm.main.add(row + np.arange(n), blk.start + np.arange(n), -svec_scale(s))
-        psd_blocks.append(PSDBlockMap(blk.name, row, s, "multiplier"))
+        psd_blocks.append(PSDBlockMap(blk.name, row, s, "multiplier" if blk.kind == BlockKind.SOS_POLY else "matrix"))
         cones.append(Cone("psd", n, s))
         row += n
     for k, con in enumerate(program.sos_constraints):
@@ -308,6 +386,13 @@ def lower(program: SOSProgram, form: GramForm = GramForm.IMAGE) -> ConicProblem:
             psd_blocks.append(PSDBlockMap(bname, row + off, blk_basis.size, "constraint", var_start))
             cones.append(Cone("psd", blk_basis.n_pairs, blk_basis.size))
         row += gb.n_pairs
+    for lmi in program.lmis:               # s = svec(M(x))
+        scale = svec_scale(lmi.side)
+        for t, expr in enumerate(lmi.entries):
+            asm.add_affine(None, expr, np.full(expr.E.shape[0], row + t, np.int64), float(scale[t]))
+        psd_blocks.append(PSDBlockMap(lmi.name, row, lmi.side, "lmi"))
+        cones.append(Cone("psd", len(lmi.entries), lmi.side))
+        row += len(lmi.entries)
     nrows = row
     A, b, params = asm.finish(nrows, ncols)
 
@@ -323,4 +408,41 @@ def lower(program: SOSProgram, form: GramForm = GramForm.IMAGE) -> ConicProblem:
             sign = -1.0
         else:
             q[:n0] = lin
+        if t_col is not None:
+            q[t_col] = 1.0
     return ConicProblem(q, A, b, tuple(cones), n0, tuple(psd_blocks), sign, offset, form, params)
+
+
+def _epigraph_factor(program: SOSProgram) -> np.ndarray | None:
+    """F with F^T F = +-P of a quadratic objective (sign: + minimised, - maximised), or None."""
+    quad = program.objective_quadratic
+    if quad is None or program.sense == Sense.FEASIBILITY:
+        return None
+    P = quad.matrix(program.n_vars) * (1.0 if program.sense == Sense.MINIMIZE else -1.0)
+    lam, V = np.linalg.eigh(P)
+    keep = lam > 1e-14 * max(1.0, float(np.abs(lam).max(initial=0.0)))
+    return (np.sqrt(lam[keep])[:, None] * V[:, keep].T) if keep.any() else np.zeros((0, program.n_vars))
+
+
+def _scalar_cone_rows(program: SOSProgram, asm: _Assembly, row: int, cones: list, epi, t_col) -> int:
+    """Rows of scalar inequalities (s = expr >= 0), second-order cones (s = (t, xs)) and the epigraph
+    cone ||(t - 1, 2 F x)|| <= t + 1 of a quadratic objective; returns the next free row."""
+    for ineq in program.inequalities:
+        asm.add_affine(None, ineq.expr, np.full(ineq.expr.E.shape[0], row, np.int64), 1.0)
+        row += 1
+    if program.inequalities:
+        cones.append(Cone("nonneg", len(program.inequalities)))
+    for soc in program.socs:
+        for t, expr in enumerate(soc.exprs):
+            asm.add_affine(None, expr, np.full(expr.E.shape[0], row + t, np.int64), 1.0)
+        cones.append(Cone("soc", len(soc.exprs)))
+        row += len(soc.exprs)
+    if epi is not None:
+        k, n0 = epi.shape
+        asm.main.add([row, row + 1], [t_col, t_col], [-1.0, -1.0])
+        asm.b.append((np.array([row, row + 1]), np.array([1.0, -1.0])))
+        r, c = np.nonzero(epi)
+        asm.main.add(row + 2 + r, c, -2.0 * epi[r, c])
+        cones.append(Cone("soc", k + 2))
+        row += k + 2
+    return row

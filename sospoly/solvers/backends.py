@@ -142,6 +142,8 @@ class ClarabelBackend:
                 out.append(clarabel.ZeroConeT(c.dim))
             elif c.kind == "nonneg":
                 out.append(clarabel.NonnegativeConeT(c.dim))
+            elif c.kind == "soc":
+                out.append(clarabel.SecondOrderConeT(c.dim))
             elif c.kind == "psd":
                 out.append(clarabel.PSDTriangleConeT(c.size))
             else:  # pragma: no cover
@@ -342,6 +344,9 @@ class CvxpyBackend:
                 cons.append(Ar @ x == br)
             elif cone.kind == "nonneg":
                 cons.append(Ar @ x <= br)
+            elif cone.kind == "soc":
+                e = br - Ar @ x
+                cons.append(cp.SOC(e[0], e[1:]))
             else:
                 S = cp.Variable((cone.size, cone.size), symmetric=True)
                 cons.append(_svec_operator(cone.size) @ cp.vec(S, order="F") == br - Ar @ x)

@@ -75,6 +75,11 @@ def check_certificate(problem: ConicProblem, x: np.ndarray, tol: Tolerances) -> 
             ok = False
             msg.append(f"Gram {name}: lambda_min {lam:.3g} below the PSD margin "
                        f"({tol.psd_margin:g} * max(1, {scale:.3g}))")
+    for label, lam, scale in _scalar_cone_margins(problem, x):
+        mins[label] = lam
+        if not tol.psd_accepts(lam, scale):
+            ok = False
+            msg.append(f"{label}: violated by {-lam:.3g} (margin {tol.psd_margin:g} * max(1, {scale:.3g}))")
     # zero-cone rows
     resid = 0.0
     row = 0
@@ -88,6 +93,24 @@ def check_certificate(problem: ConicProblem, x: np.ndarray, tol: Tolerances) -> 
         ok = False
         msg.append(f"equality residual {resid:.3g} > {tol.identity_residual:g}")
     return ok, mins, resid, "; ".join(msg)
+
+
+def _scalar_cone_margins(problem: ConicProblem, x: np.ndarray) -> list:
+    """(label, margin, scale) of every nonnegative block (min slack) and second-order cone (t - ||y||),
+    recomputed from x: checked with the PSD rule of :meth:`~sospoly.Tolerances.psd_accepts`."""
+    out, row = [], 0
+    s = None
+    for k, cone in enumerate(problem.cones):
+        if cone.kind in ("nonneg", "soc") and cone.dim:
+            s = problem.slack(x) if s is None else s
+            v = s[row:row + cone.dim]
+            if cone.kind == "nonneg":
+                out.append((f"nonneg cone {k}", float(v.min()), float(np.abs(v).max())))
+            else:
+                norm = float(np.linalg.norm(v[1:]))
+                out.append((f"second-order cone {k}", float(v[0]) - norm, max(abs(float(v[0])), norm)))
+        row += cone.dim
+    return out
 
 
 def solve_conic(problem: ConicProblem, backend=None, tolerances: Tolerances = DEFAULT_TOLERANCES,

@@ -1,0 +1,251 @@
+"""Sum-of-ratios objectives: certified lower bounds of  sum_i p_i(v) / q_i(v)  on K = {g = 0, h >= 0}.
+
+Formulation (Bugarin, Henrion & Lasserre, "Minimizing the sum of many rational functions", Math. Prog.
+Comp. 2016; TSSOS's ``SumOfRatios``).  With q_i > 0 on K, for polynomials w_i with sum_i w_i = lambda
+(a constant) and p_i - w_i q_i >= 0 on K for every i,
+
+    sum_i p_i(v) / q_i(v)  >=  sum_i w_i(v)  =  lambda      for every v in K,
+
+so maximising lambda over such w_i gives a lower bound.  Nonnegativity on K is certified by Putinar
+certificates (an SOS polynomial and SOS / free multipliers of the constraints, each of degree
+``degree``): w_2, ..., w_m are free polynomials of degree ``degree - max deg q_i`` and
+w_1 = lambda - w_2 - ... - w_m.  Dually the i-th certificate's moment matrix is that of q_i^{-1} mu
+for one probability measure mu on K (the measures of the BHL moment formulation), so its atoms are
+minimisers.
+
+**Positive denominators.** The bound is only valid where every q_i > 0 on K, so each q_i is
+certified first: ``sospoly.minimize(q_i, eq, ineq)`` must return a lower bound > 0 (kept in
+``RatioResult.denominator_bounds``); otherwise the status is ``INFEASIBLE`` with a message naming
+the denominator and no bound is reported.
+
+The upper bound is the objective at feasible candidates (moment atoms and their local polish by SLSQP
+on the rational objective); ``optimal`` follows :meth:`sospoly.Tolerances.certified` at the scale of
+the objective's value.
+"""
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from .algebra.polynomial import Polynomial
+from .algebra.basis import sigma
+from .analysis.extraction import extract_from_moment
+from .budget import as_budget
+from .certificates.program import SOSProgram
+from .certificates.psatz import common_gens
+from .lowering.conic import GramForm
+from .solvers.solve import solve_program
+from .status import SolveStatus
+from .tolerances import Tolerances, as_tolerances
+
+__all__ = ["RatioResult", "minimize_ratios"]
+
+#: (Gram form, back-end) tried in turn while a solve ends numerically (as :func:`sospoly.minimize` does)
+_RETRIES = ((GramForm.IMAGE, "clarabel"), (GramForm.KERNEL, "clarabel"), (GramForm.IMAGE, "cvxpy"))
+_NUMERICAL = (SolveStatus.NUMERICAL_ERROR, SolveStatus.INACCURATE, SolveStatus.CHECK_FAILED)
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class RatioResult:
+    """Outcome of :func:`minimize_ratios`: bounds of min sum p_i/q_i on K, minimisers, the certified lower
+    bounds of every q_i on K, the program's size and the solution (Gram and moment matrices)."""
+    status: SolveStatus
+    lower_bound: float | None
+    upper_bound: float | None
+    minimizers: tuple
+    optimal: bool
+    n_lmivar: int
+    degree: int
+    denominator_bounds: tuple
+    gens: tuple
+    solution: object = None
+    seconds: float = 0.0
+    message: str = ""
+
+
+def _check_terms(terms, eq, ineq, gens):
+    terms = list(terms)
+    if not terms:
+        raise ValueError("minimize_ratios terms must hold at least one (p, q) pair")
+    for k, t in enumerate(terms):
+        if not (isinstance(t, (tuple, list)) and len(t) == 2):
+            raise TypeError(f"minimize_ratios terms[{k}] must be a (p, q) pair of polynomials")
+        for what, v in zip("pq", t):
+            if not isinstance(v, (Polynomial, int, float)) or isinstance(v, bool):
+                raise TypeError(f"minimize_ratios terms[{k}].{what} must be a Polynomial or a number, "
+                                f"got {type(v).__name__}")
+    polys = [Polynomial.constant(float(v)) if not isinstance(v, Polynomial) else v
+             for t in terms for v in t] + list(eq) + list(ineq)
+    gens = tuple(gens) if gens is not None else common_gens(*polys)
+    if not gens:
+        raise ValueError("minimize_ratios: the problem has no variables")
+    conv = [p.with_gens(gens) if isinstance(p, Polynomial) else Polynomial.constant(float(p), gens) for p in polys]
+    m = len(terms)
+    pairs = [(conv[2 * k], conv[2 * k + 1]) for k in range(m)]
+    for k, (_, q) in enumerate(pairs):
+        if q.is_zero:
+            raise ValueError(f"minimize_ratios terms[{k}].q is the zero polynomial")
+    return pairs, tuple(conv[2 * m:2 * m + len(eq)]), tuple(conv[2 * m + len(eq):]), gens
+
+
+def _normalised(pairs, eq, ineq):
+    """Each (p_i, q_i) divided by max|coef q_i| (the ratio unchanged), then every p_i by F = the largest
+    remaining coefficient of the p_i (the objective / F), every constraint by its own largest coefficient."""
+    pairs = [(p * (1.0 / q.max_abs_coefficient()), q * (1.0 / q.max_abs_coefficient())) for p, q in pairs]
+    F = max(p.max_abs_coefficient() for p, _ in pairs) or 1.0
+    pairs = [(p * (1.0 / F), q) for p, q in pairs]
+    return (pairs, tuple(g * (1.0 / (g.max_abs_coefficient() or 1.0)) for g in eq),
+            tuple(h * (1.0 / (h.max_abs_coefficient() or 1.0)) for h in ineq), F)
+
+
+def _degree(pairs, eq, ineq, degree):
+    need = max([max(p.degree, q.degree, 0) for p, q in pairs] + [g.degree for g in eq] + [h.degree for h in ineq])
+    need += need % 2
+    if degree is None:
+        return max(need, 2)
+    if int(degree) != degree or degree % 2 or degree < need:
+        raise ValueError(f"minimize_ratios degree must be an even integer >= {need}, got {degree!r}")
+    return int(degree)
+
+
+def _build(pairs, eq, ineq, gens, degree):
+    """The program of the module docstring: maximise lambda (block 'lambda')."""
+    prog = SOSProgram(gens)
+    lam = prog.scalar("lambda")
+    dw = degree - max(q.degree for _, q in pairs)
+    ws = [prog.free_poly(dw, name=f"w{k}") for k in range(1, len(pairs))]
+    w0 = lam - sum(ws[1:], ws[0]) if ws else lam * 1.0
+    names = []
+    for k, (p, q) in enumerate(pairs):
+        w = w0 if k == 0 else ws[k - 1]
+        expr = p - w * q
+        for j, g in enumerate(eq):
+            expr = expr - prog.free_poly(degree - g.degree, name=f"r{k}_{j}") * g
+        for j, h in enumerate(ineq):
+            expr = expr - prog.sos_poly(degree - h.degree, name=f"s{k}_{j}") * h
+        names.append(prog.add_sos(expr, degree=degree, name=f"u{k}").name)
+    prog.maximize(lam)
+    return prog, names
+
+
+def _objective(pairs):
+    def value(v):
+        return float(sum(p(v) / q(v) for p, q in pairs))
+    return value
+
+
+def _candidates(prog, names, sol, tol, n):
+    pts = []
+    for name in names:
+        M = sol.moments.get(name)
+        if M is None:
+            continue
+        basis = prog.sos_constraints[[c.name for c in prog.sos_constraints].index(name)].gram.blocks[0].b
+        try:
+            pts += [c.point for c in extract_from_moment(M, basis, tol) if c.point.shape == (n,)]
+        except ValueError:
+            continue
+    return pts
+
+
+def _polish(obj, eq, ineq, x0):
+    from scipy.optimize import minimize as sp_min
+
+    cons = [{"type": "eq", "fun": (lambda v, g=g: g(v))} for g in eq] + \
+        [{"type": "ineq", "fun": (lambda v, h=h: h(v))} for h in ineq]
+    try:
+        res = sp_min(obj, x0, method="SLSQP", constraints=cons, options={"ftol": 1e-14, "maxiter": 300})
+    except (ValueError, ZeroDivisionError, FloatingPointError):
+        return None
+    return np.asarray(res.x, float) if np.all(np.isfinite(res.x)) else None
+
+
+def _feasible(v, eq, ineq, pairs, tol) -> bool:
+    viol = max([abs(g(v)) / max(1.0, g.max_abs_coefficient()) for g in eq] +
+               [max(0.0, -h(v)) / max(1.0, h.max_abs_coefficient()) for h in ineq] + [0.0])
+    return bool(tol.feasible(viol)) and all(q(v) > 0 for _, q in pairs)
+
+
+def _distinct(found, rtol: float = 1e-4):
+    out = []
+    for val, v in found:
+        if all(np.linalg.norm(v - w) > rtol * max(1.0, np.linalg.norm(w)) for _, w in out):
+            out.append((val, v))
+    return out
+
+
+def _denominator_bounds(pairs, eq, ineq, gens, tol, backend, budget):
+    """Certified lower bounds of every q_i on K (sospoly.minimize), or the index of one not certified > 0."""
+    from .minimize import minimize
+
+    out = []
+    for k, (_, q) in enumerate(pairs):
+        if q.degree <= 0:
+            out.append(float(q.coefficient((0,) * len(gens))))
+        else:
+            r = minimize(q, eq, ineq, gens=gens, tolerances=tol, backend=backend, budget=budget)
+            ok = r.status == SolveStatus.OPTIMAL and r.lower_bound is not None
+            out.append(r.lower_bound if ok else -np.inf)
+        if not out[-1] > 0:
+            return tuple(out), k
+    return tuple(out), None
+
+
+def minimize_ratios(terms, eq=(), ineq=(), degree: int | None = None, *, gens=None, backend=None,
+                    tolerances: Tolerances | None = None, budget=None) -> RatioResult:
+    """Certified lower bound (and minimisers) of sum_i p_i / q_i on {eq = 0, ineq >= 0} (module docstring).
+
+    ``terms``: (p_i, q_i) pairs of Polynomials (numbers allowed); every q_i must be certified > 0 on the set.
+    The data are normalised (each ratio's q_i and the objective to unit largest coefficient, each constraint
+    to its own) and bounds reported in the caller's units.  ``budget`` (:class:`sospoly.Budget`): a Gram side
+    above ``max_gram_side`` is refused (status ``BUDGET_EXCEEDED``) and the solve stops at ``time_limit``.
+    """
+    t0 = time.perf_counter()
+    tol, budget = as_tolerances(tolerances), as_budget(budget)
+    pairs0, eq0, ineq0, gens = _check_terms(terms, eq, ineq, gens)
+    degree = _degree(pairs0, eq0, ineq0, degree)
+    pairs, eq, ineq, F = _normalised(pairs0, eq0, ineq0)
+    side = sigma(len(gens), degree // 2)
+    if side > budget.max_gram_side:
+        return RatioResult(SolveStatus.BUDGET_EXCEEDED, None, None, (), False, 0, degree, (), gens, None,
+                           time.perf_counter() - t0, f"Gram side {side} exceeds max_gram_side {budget.max_gram_side}")
+    dbounds, bad = _denominator_bounds(pairs0, eq0, ineq0, gens, tol, backend, budget)
+    if bad is not None:
+        return RatioResult(SolveStatus.INFEASIBLE, None, None, (), False, 0, degree, dbounds, gens, None,
+                           time.perf_counter() - t0, f"denominator terms[{bad}].q is not certified positive on the "
+                           f"set (certified lower bound {dbounds[bad]}): the sum-of-ratios bound needs q_i > 0")
+    prog, names = _build(pairs, eq, ineq, gens, degree)
+    deadline = budget.deadline()
+    for form, be in _RETRIES if backend is None else ((GramForm.IMAGE, backend),):
+        sol = solve_program(prog, be, form, tolerances=tol, deadline=deadline)
+        if sol.status not in _NUMERICAL or deadline.expired:
+            break
+    if sol.status != SolveStatus.OPTIMAL:
+        return RatioResult(sol.status, None, None, (), False, prog.n_lmivar(), degree, dbounds, gens, sol,
+                           time.perf_counter() - t0, sol.message)
+    lower = float(sol.objective)
+    obj = _objective(pairs)
+    found = []
+    for p in _candidates(prog, names, sol, tol, len(gens)):
+        for v in (p, _polish(obj, eq, ineq, p)):
+            if v is not None and _feasible(v, eq, ineq, pairs, tol):
+                found.append((obj(v), v))
+    found = _distinct(sorted(found, key=lambda t: t[0]))
+    upper = found[0][0] if found else None
+    status, optimal, msg = SolveStatus.OPTIMAL, False, ""
+    if upper is not None:
+        scale = max(1.0, abs(upper))
+        if tol.contradicts(lower, upper, scale):
+            status, msg = SolveStatus.INCONSISTENT, f"lower bound {lower * F:.10g} exceeds the objective " \
+                                                     f"{upper * F:.10g} at a feasible point: numerical failure"
+        else:
+            optimal = bool(tol.certified(lower, upper, scale))
+            lower = tol.consistent(lower, upper)
+    mins = tuple(v for val, v in found if upper is not None and val <= upper + tol.gap_tolerance(upper))
+    return RatioResult(status, lower * F, None if upper is None else upper * F, mins, optimal, prog.n_lmivar(),
+                       degree, dbounds, gens, sol, time.perf_counter() - t0, msg)

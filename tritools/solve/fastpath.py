@@ -32,14 +32,27 @@ import numpy as np
 
 from sospoly import DEFAULT_TOLERANCES, Tolerances
 from sospoly.analysis.verify import verify_quadratic_batch
+from sospoly.analysis.verify_sparse import verify_quadratic_banded_batch
 from sospoly.solvers.blas import with_single_threaded_blas
 
 from ..model.geometry import camera_problems
 from ..model.normalize import normalization_stack
-from ..model.stacked import epipolar_quadratics, fundamental_stack, project_stack, refine_points_stack
+from ..model.stacked import band_pairs, epipolar_quadratics, fundamental_stack, project_stack, refine_points_stack
 from .decide import decide, decide_reported, gamma_from_c
 
-__all__ = ["FastPathBatch", "verify_points", "stack_point_problems"]
+__all__ = ["FastPathBatch", "verify_points", "verify_checked", "stack_point_problems", "BAND_MIN_VIEWS",
+           "BAND_WIDTHS"]
+
+#: from this many views on, the certificate is first tried with the epipolar constraints of bands of view
+#: pairs (:func:`_band_bounds`, cost linear in N), of the widths ``BAND_WIDTHS`` in turn; problems no band
+#: certifies fall back to all N(N - 1)/2 pairs.  Measured (benchmarks/pointscale.py): the multipliers of a
+#: band carry the KKT residual along the chain of views, so they grow with N and the noise and the Lagrangian
+#: Hessian can lose definiteness; width 4 certifies 1 px tracks up to N = 200, width 8 most of the rest.
+BAND_MIN_VIEWS = 12
+#: the widths tried: pairs (i, i + d), 1 <= d <= width.
+BAND_WIDTHS = (4, 8)
+#: memory of one call of the all-pairs bound (the fallback is chunked to stay below it).
+ALL_PAIRS_CHUNK_BYTES = 256 * 2 ** 20
 
 
 @dataclass(frozen=True)
@@ -94,6 +107,15 @@ def verify_points(cameras, points2d, *, tolerances: Tolerances = DEFAULT_TOLERAN
         The certificate rule.
     """
     C, x, ok = stack_point_problems(cameras, points2d, "verify_points")
+    return verify_checked(C, x, ok, tolerances)
+
+
+@with_single_threaded_blas
+def verify_checked(C: np.ndarray, x: np.ndarray, ok: np.ndarray, tolerances: Tolerances) -> FastPathBatch:
+    """:func:`verify_points` on data already checked: float arrays C (M, N, 3, 4), x (M, N, 2) and the mask
+    ``ok`` of the problems with valid cameras and finite points (e.g. from
+    :func:`tritools.model.geometry.validate_cameras`: a single call does not check its cameras twice)."""
+    ok = np.array(ok, bool)
     M, N = x.shape[:2]
     norm = normalization_stack(C, x, ok)
     ok &= norm.ok
@@ -103,21 +125,22 @@ def verify_points(cameras, points2d, *, tolerances: Tolerances = DEFAULT_TOLERAN
     u, _, fin = project_stack(Cn, Xn)
     ok &= fin
     v = np.where(ok[:, None], u.reshape(M, -1), 0.0)
-    F, defined = fundamental_stack(Cn)
-    raw = fundamental_stack(C)[1]       # one centre or not: decided on the raw cameras (CentreRelations' rule)
-    F, defined = np.where(raw[..., None, None], F, 0.0), defined & raw
-    ok &= np.any(defined, axis=1) if F.shape[1] else ok
-    g0, g1, G2 = epipolar_quadratics(F, N)
-    finite = np.isfinite(g0).all(axis=1) & np.isfinite(g1).all(axis=(1, 2)) & np.isfinite(G2.vals).all(axis=1)
-    ok &= finite
-    g0, g1 = (np.where(ok.reshape((M,) + (1,) * (a.ndim - 1)), a, 0.0) for a in (g0, g1))
-    G2 = dataclasses.replace(G2, vals=np.where(ok[:, None], G2.vals, 0.0))
-    n = 2 * N
     # a minimiser v* has ||v*||^2 = f(v*) <= f(v^) = ||v^||^2 (observed points at the origin): the radius of the
     # rigorous margin of the Lagrangian bound
-    ver = verify_quadratic_batch(np.zeros(M), np.zeros((M, n)), np.broadcast_to(np.eye(n), (M, n, n)), g0, g1, G2,
-                                 v, tolerances=tolerances, radius=np.linalg.norm(v, axis=1))
-    status, optimal, c_lower = decide(ver.lower_bound, ver.upper_bound, tolerances, N, norm.resolution)
+    radius = np.linalg.norm(v, axis=1)
+    lower, upper = np.full(M, np.nan), np.einsum("mi,mi->m", v, v)
+    dense = np.arange(M)
+    for width in BAND_WIDTHS if N >= BAND_MIN_VIEWS else ():
+        if width >= N - 1 or not dense.size:
+            break
+        lower_b, ok_b = _band_bounds(C[dense], Cn[dense], v[dense], ok[dense], radius[dense], width, tolerances)
+        good = ok_b & decide(lower_b, upper[dense], tolerances, N, norm.resolution[dense])[1]
+        lower[dense[good]] = lower_b[good]
+        dense = dense[~good]
+    step = all_pairs_chunk(N)
+    for part in (dense[k:k + step] for k in range(0, dense.size, step)):
+        lower[part], ok[part] = _all_pairs_bounds(C[part], Cn[part], v[part], ok[part], radius[part], tolerances)
+    status, optimal, c_lower = decide(lower, upper, tolerances, N, norm.resolution)
     X = norm.world_points(Xn)
     uw, _, fin_w = project_stack(C, X)
     ok &= fin_w
@@ -125,4 +148,53 @@ def verify_points(cameras, points2d, *, tolerances: Tolerances = DEFAULT_TOLERAN
     gamma_lb = np.minimum(gamma_from_c(c_lower, N, norm.scale), gamma_ub)
     certified = ok & optimal & decide_reported(gamma_lb, gamma_ub, tolerances, N, norm.scale, norm.resolution)
     return FastPathBatch(certified, ok, X, gamma_lb, gamma_ub, x + u / norm.scale[:, None, None], c_lower,
-                         ver.upper_bound, norm.scale)
+                         upper, norm.scale)
+
+
+def all_pairs_chunk(n_views: int) -> int:
+    """Problems per call of the all-pairs bound: its arrays take ~8 (4 K n + 8 n^2) bytes per problem
+    (K = N(N-1)/2 pairs, n = 2N), kept under ALL_PAIRS_CHUNK_BYTES."""
+    K, n = n_views * (n_views - 1) // 2, 2 * n_views
+    return int(max(1, ALL_PAIRS_CHUNK_BYTES // (8 * (4 * K * n + 8 * n * n + 64))))
+
+
+def _all_pairs_bounds(C, Cn, v, ok, radius, tolerances) -> tuple[np.ndarray, np.ndarray]:
+    """(Lagrangian lower bound (NaN: none), ok) with the epipolar constraints of all N(N - 1)/2 view pairs,
+    vectorised over the stack (:func:`sospoly.analysis.verify.verify_quadratic_batch`)."""
+    M, N = C.shape[:2]
+    F, defined = fundamental_stack(Cn)
+    raw = fundamental_stack(C)[1]       # one centre or not: decided on the raw cameras (CentreRelations' rule)
+    F, defined = np.where(raw[..., None, None], F, 0.0), defined & raw
+    ok = ok & np.any(defined, axis=1) if F.shape[1] else ok
+    g0, g1, G2 = epipolar_quadratics(F, N)
+    finite = np.isfinite(g0).all(axis=1) & np.isfinite(g1).all(axis=(1, 2)) & np.isfinite(G2.vals).all(axis=1)
+    ok &= finite
+    g0, g1 = (np.where(ok.reshape((M,) + (1,) * (a.ndim - 1)), a, 0.0) for a in (g0, g1))
+    G2 = dataclasses.replace(G2, vals=np.where(ok[:, None], G2.vals, 0.0))
+    n = 2 * N
+    ver = verify_quadratic_batch(np.zeros(M), np.zeros((M, n)), np.broadcast_to(np.eye(n), (M, n, n)), g0, g1, G2,
+                                 v, tolerances=tolerances, radius=radius)
+    return ver.lower_bound, ok
+
+
+def _band_bounds(C, Cn, v, ok, radius, width, tolerances) -> tuple[np.ndarray, np.ndarray]:
+    """(Lagrangian lower bound (NaN: none), usable) with the epipolar constraints of a band of view pairs only
+    (:func:`tritools.model.stacked.band_pairs` of that ``width``): a subset of Corollary 1's constraints, so
+    the bound stays a valid lower bound of the all-pairs program (fewer constraints enlarge the feasible set,
+    :mod:`sospoly.analysis.verify_sparse`), at O(N) cost per problem instead of O(N^3).  A problem with an
+    undefined band pair (coincident centres) or non-finite data is not usable here (the caller falls back to
+    all pairs)."""
+    M, N = C.shape[:2]
+    pairs = band_pairs(N, width)
+    F, defined = fundamental_stack(Cn, pairs)
+    defined &= fundamental_stack(C, pairs)[1]
+    g0, g1, G2 = epipolar_quadratics(F, N, pairs)
+    use = ok & defined.all(axis=1) & np.isfinite(g0).all(axis=1) & np.isfinite(g1).all(axis=(1, 2)) \
+        & np.isfinite(G2.vals).all(axis=1)
+    g0, g1 = (np.where(use.reshape((M,) + (1,) * (a.ndim - 1)), a, 0.0) for a in (g0, g1))
+    G2 = dataclasses.replace(G2, vals=np.where(use[:, None], G2.vals, 0.0))
+    n = 2 * N
+    ver = verify_quadratic_banded_batch(np.zeros(M), np.zeros((M, n)), np.broadcast_to(np.eye(n), (M, n, n)), g0, g1,
+                                        G2, v, tolerances=tolerances, radius=radius)
+    lower = np.where(use, ver.lower_bound, np.nan)
+    return lower, use

@@ -123,6 +123,9 @@ class NormalizationStack:
     Xn: np.ndarray          # (M, 3)
     ok: np.ndarray          # (M,)
     resolution: np.ndarray  # (M,) the coordinates' resolution in normalised units (module docstring)
+    #: (M,) Xn is a converged local L2 minimiser (the step rule of the refinement; the image rescaling after it is
+    #: a similarity, which keeps the minimiser): polishing it again is a no-op
+    converged: np.ndarray | None = None
 
     def item(self, m: int) -> Normalization:
         return Normalization(float(self.scale[m]), self.shifts[m].copy(), self.origin[m].copy(), float(self.depth[m]),
@@ -204,7 +207,8 @@ def normalization_stack(C: np.ndarray, x: np.ndarray, ok: np.ndarray | None = No
     Cn = np.where(ok[:, None, None, None], Cn, np.eye(3, 4))
     # the scale from the residual of the locally refined estimate: refine from the DLT point (Xn = 0), then
     # the exact image similarity x' -> k x', k = s_new / s
-    Xn, ok_r = refine_points_stack(Cn, np.zeros((M, N, 2)), np.zeros((M, 3)), ok.copy())
+    Xn, ok_r, converged = refine_points_stack(Cn, np.zeros((M, N, 2)), np.zeros((M, 3)), ok.copy(),
+                                              return_converged=True)
     u, _, fin = project_stack(Cn, Xn)
     r = np.sqrt(np.mean(np.sum(np.where(fin[:, None, None], u, 0.0) ** 2, axis=2), axis=1)) / s
     use = ok_r & fin & np.isfinite(r)
@@ -213,7 +217,7 @@ def normalization_stack(C: np.ndarray, x: np.ndarray, ok: np.ndarray | None = No
     Cn[:, :, :2, :] *= (s_new / s)[:, None, None, None]
     Cn /= np.linalg.norm(Cn, axis=(2, 3))[..., None, None]
     return NormalizationStack(s_new, x.copy(), X0, d, Cn, np.where(use[:, None], Xn, 0.0), ok,
-                              resolutions(s_new, x))
+                              resolutions(s_new, x), use & converged)
 
 
 def _off_a_common_centre(C: np.ndarray, x: np.ndarray, a: np.ndarray, X0: np.ndarray, ok: np.ndarray) -> np.ndarray:

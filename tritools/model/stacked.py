@@ -90,11 +90,14 @@ def project_stack(C: np.ndarray, X: np.ndarray) -> tuple[np.ndarray, np.ndarray,
     return x, h, ok
 
 
-def refine_points_stack(C: np.ndarray, xhat: np.ndarray, X: np.ndarray, ok: np.ndarray
-                        ) -> tuple[np.ndarray, np.ndarray]:
+def refine_points_stack(C: np.ndarray, xhat: np.ndarray, X: np.ndarray, ok: np.ndarray, *,
+                        return_converged: bool = False) -> tuple:
     """Levenberg-Marquardt on sum_i ||Phi(X, P_i) - x^_i||^2 from X (M, 3), for the problems where ``ok``;
-    the twin of :func:`tritools.model.geometry.refine_l2` with point regions."""
+    the twin of :func:`tritools.model.geometry.refine_l2` with point regions.  (X, ok), and with
+    ``return_converged`` also the mask of the problems that stopped by the step rule (not stalled, not at
+    LM_MAX_ITER): another run from their X would stop after one step."""
     X = X.copy()
+    converged = np.zeros(len(X), bool)
     mu = np.full(len(X), 1e-3)
     u, h, fin = project_stack(C, X)
     cost = np.where(fin, np.sum((u - xhat) ** 2, axis=(1, 2)), np.inf)
@@ -127,8 +130,10 @@ def refine_points_stack(C: np.ndarray, xhat: np.ndarray, X: np.ndarray, ok: np.n
         X[acc], cost[acc], u[acc], h[acc] = Xt[better], ct[better], ut[better], ht[better]
         mu[active] = np.where(better, np.maximum(mu[active] / 10, 1e-12), mu[active] * 10)
         stalled = mu[active] > 1e12
-        active = active[~((better & small) | stalled | (~better & small))]
-    return X, ok & np.all(np.isfinite(X), axis=1)
+        converged[active[small & ~stalled]] = True
+        active = active[~(small | stalled)]
+    ok = ok & np.all(np.isfinite(X), axis=1)
+    return (X, ok, converged & ok) if return_converged else (X, ok)
 
 
 def band_pairs(N: int, width: int) -> tuple[np.ndarray, np.ndarray]:

@@ -121,7 +121,10 @@ def verify_checked(C: np.ndarray, x: np.ndarray, ok: np.ndarray, tolerances: Tol
     ok &= norm.ok
     Cn = norm.cameras_n
     xhat = np.zeros((M, N, 2))          # the observed points, normalised: s (x^_i - t_i) = 0
-    Xn, ok = refine_points_stack(Cn, xhat, norm.Xn, ok)
+    Xn = norm.Xn.copy()
+    polish = ~norm.converged                # the normalisation's refinement converged elsewhere
+    if polish.any():
+        Xn[polish], ok[polish] = refine_points_stack(Cn[polish], xhat[polish], norm.Xn[polish], ok[polish])
     u, _, fin = project_stack(Cn, Xn)
     ok &= fin
     v = np.where(ok[:, None], u.reshape(M, -1), 0.0)

@@ -15,6 +15,11 @@ Per N (seeded :func:`tritools.scene.random_scene`, cameras on a sphere, f = 800 
 * ``pycolmap``: ``pycolmap.triangulate_multi_view_point`` (linear, no certificate; cameras decomposed
   outside the timing), when installed.
 
+``--theorem1 DIR``: ``tritools.triangulate(cameras, points, "theorem1", time_limit=...)`` on ``--tracks`` tracks
+of 9-11 views of the Oxford corridor sequence in DIR (the default plan of an explicit Theorem 1 starts with the
+degree-2 step on the two-view minors, docs/triangulation.md): status, degree, wall time, and an independent
+reference (the best of multi-start LM from perturbed DLT starts) that gamma_LB must not exceed.
+
 Every gamma_LB of a certified point is checked against the attained value of scipy's LM solution
 (``lb<=lm``: the largest gamma_LB - gamma(X_lm), <= 0 up to round-off when sound).  Then the growth exponent
 a of the batch's per-track time ~ N^a over N = 20..100 (least squares in log-log).  Times are process CPU
@@ -44,13 +49,7 @@ SIZES = (2, 5, 10, 20, 40, 60, 100)
 
 def lm_point(C: np.ndarray, x: np.ndarray) -> np.ndarray:
     """scipy's Levenberg-Marquardt on the reprojection residuals, from the DLT point."""
-    from scipy.optimize import least_squares
-
-    def res(X):
-        h = C @ np.append(X, 1.0)
-        return (h[:, :2] / h[:, 2:] - x).ravel()
-
-    return least_squares(res, dlt(C, x), method="lm").x
+    return lm_from(C, x, dlt(C, x))
 
 
 def gamma(C: np.ndarray, x: np.ndarray, X: np.ndarray) -> float:
@@ -102,6 +101,41 @@ def row(N: int, n_points: int, noise: float, n_single: int, have_colmap: bool, s
     return out
 
 
+def theorem1_corridor(data_dir: str, n_tracks: int, time_limit: float) -> None:
+    from tritools.io.oxford import load_sequence
+
+    seq = load_sequence("corridor", data_dir)
+    long = [t for t in seq.tracks if 9 <= t.n_views <= 11]
+    pick = long[::max(1, len(long) // n_tracks)][:n_tracks]
+    print(f"\nTheorem 1 on corridor tracks with 9-11 views ({len(long)} such tracks; {len(pick)} evenly spaced), "
+          f"time_limit={time_limit:g} s\n")
+    print("| track | N | status | delta | certified by | gamma_LB | gamma_UB | reference | wall s |")
+    print("|---:|---:|---|---:|---|---:|---:|---:|---:|")
+    for t in pick:
+        C, x = seq.problem(t)
+        C, x = np.asarray(C), np.asarray(x)
+        t0 = time.perf_counter()
+        r = tritools.triangulate(C, x, "theorem1", time_limit=time_limit)
+        wall = time.perf_counter() - t0
+        rng = np.random.default_rng(0)
+        X0 = lm_point(C, x)
+        ref = min(gamma(C, x, X) for X in [X0] + [lm_from(C, x, X0 + 0.05 * np.linalg.norm(X0) * rng.normal(size=3))
+                                               for _ in range(8)])
+        assert r.gamma_lb is None or r.gamma_lb <= ref * (1 + 1e-9), "gamma_LB above an attained value"
+        print(f"| {t.track_id} | {t.n_views} | {r.status.value} | {r.delta} | {r.certified_by} | {r.gamma_lb:.6f} | "
+              f"{r.gamma_ub:.6f} | {ref:.6f} | {wall:.3f} |", flush=True)
+
+
+def lm_from(C: np.ndarray, x: np.ndarray, X0: np.ndarray) -> np.ndarray:
+    from scipy.optimize import least_squares
+
+    def res(X):
+        h = C @ np.append(X, 1.0)
+        return (h[:, :2] / h[:, 2:] - x).ravel()
+
+    return least_squares(res, X0, method="lm").x
+
+
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--sizes", type=int, nargs="+", default=list(SIZES))
@@ -109,6 +143,9 @@ def main(argv=None) -> None:
     ap.add_argument("--single", type=int, default=30, help="points timed through single triangulate() calls")
     ap.add_argument("--noise", type=float, nargs="+", default=[1.0])
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--theorem1", metavar="DIR", help="also run Theorem 1 on corridor tracks (Oxford data in DIR)")
+    ap.add_argument("--tracks", type=int, default=5)
+    ap.add_argument("--time-limit", type=float, default=180.0)
     args = ap.parse_args(argv)
     have_colmap = importlib.util.find_spec("pycolmap") is not None
     print("| noise px | N | batch ms/track | certified | single ms | single/batch | scipy-lm ms | pycolmap ms "
@@ -126,6 +163,8 @@ def main(argv=None) -> None:
         if len(fit) >= 2:
             a = np.polyfit(np.log([f[0] for f in fit]), np.log([f[1] for f in fit]), 1)[0]
             print(f"\nnoise {noise:g} px: batch time per track ~ N^{a:.2f} over N = {fit[0][0]}..{fit[-1][0]}\n")
+    if args.theorem1:
+        theorem1_corridor(args.theorem1, args.tracks, args.time_limit)
 
 
 if __name__ == "__main__":

@@ -38,9 +38,14 @@ DENSE_FALLBACK_SIDE = 78
 
 @dataclass(frozen=True)
 class Step:
-    method: Method
+    method: Method            # the formulation's constraints (Corollary 1: epipolar; Theorem 1: minors)
     delta: int
     formulation: str          # "dense" or "views"
+    reported: Method | None = None   # the method a result of this step is reported under (default: ``method``)
+
+    @property
+    def result_method(self) -> Method:
+        return self.reported or self.method
 
 
 def _formulation(options: TriangulationOptions, method: Method, delta: int, n_views: int, n_vars: int) -> str:
@@ -72,6 +77,11 @@ def degree_plan(options: TriangulationOptions, n_views: int, n_vars: int, delta_
     if last < first:
         raise ValueError(f"max_delta ({last}) is below delta ({first})")
     steps = []
+    if method == Method.THEOREM1 and options.delta is None and first > 2:
+        # Corollary 1's epipolar constraints are Theorem 1's two-view minors (up to a constant factor), so its
+        # degree-2 certificate is a Theorem 1 certificate at degree 2 (zero multipliers on the 3- and 4-view
+        # minors): tried first, in milliseconds, before the degree-4 programs
+        steps.append(Step(Method.COROLLARY1, 2, "dense", reported=Method.THEOREM1))
     for d in range(first, last + 1, 2):
         form = _formulation(options, method, d, n_views, n_vars)
         steps.append(Step(method, d, form))

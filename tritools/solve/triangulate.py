@@ -172,7 +172,7 @@ class _PointSolve:
         return _replace(best, timings=dict(self.timings), attempts=tuple(self.attempts))
 
     def _method_name(self, steps) -> str:
-        return steps[0].method.value if steps else (self.opts.explicit_method or Method.COROLLARY1).value
+        return steps[0].result_method.value if steps else (self.opts.explicit_method or Method.COROLLARY1).value
 
     # ------------------------------------------------------------------ certification by verification
     def verify(self, step: Step) -> TriangulationResult | None:
@@ -203,7 +203,7 @@ class _PointSolve:
         gamma, res, dep = points_report_stack(self.cams[None], self._centres()[None], X[None])
         status, in_front = cheirality(Status.OPTIMAL, dep[0], self.opts.require_in_front)
         K = self.N * (self.N - 1) // 2
-        return TriangulationResult(step.method.value, status, X=X, gamma_ub=float(gamma[0]),
+        return TriangulationResult(step.result_method.value, status, X=X, gamma_ub=float(gamma[0]),
                                    gamma_lb=float(min(b.gamma_lb[0], gamma[0])), optimal=True, delta=2,
                                    n_lmivar=sospoly.n_lmivar_formula(2 * self.N, 2, [2] * K),
                                    image_points=b.image_points[0], X_raw=X, gamma_ub_raw=float(gamma[0]),
@@ -246,7 +246,7 @@ class _PointSolve:
         tol = dataclasses.replace(tol, accept_inaccurate=True)     # made rigorous in _finish
         label = "tight" if tight else "sdp"
         sparsity = "dense" if step.formulation == "dense" else "views"
-        common = dict(method=step.method.value, delta=step.delta, sparsity=sparsity)
+        common = dict(method=step.result_method.value, delta=step.delta, sparsity=sparsity)
         t = time.perf_counter()
         try:
             problem = self.problem(step.method, step.formulation)
@@ -334,7 +334,7 @@ class _PointSolve:
             if iterate:
                 return self._unsolved(step, lb)
             lb_g = gamma_from_c(c, self.N, self.norm.scale)
-            return TriangulationResult(step.method.value, Status.ILL_POSED, gamma_lb=lb_g, optimal=False,
+            return TriangulationResult(step.result_method.value, Status.ILL_POSED, gamma_lb=lb_g, optimal=False,
                                        message="every extracted candidate has w4 ~ 0 (ill-posed: e.g. equal cameras)")
         g_raw_n, X_raw_n, x_star_n = best
         g_n, X_n = g_raw_n, X_raw_n
@@ -366,7 +366,7 @@ class _PointSolve:
     def _unsolved(step: Step, lb) -> TriangulationResult:
         status = {SolveStatus.TIME_LIMIT: Status.TIME_LIMIT, SolveStatus.BUDGET_EXCEEDED: Status.BUDGET_EXCEEDED}\
             .get(lb.status, Status.SOLVER_FAILED)
-        return TriangulationResult(step.method.value, status,
+        return TriangulationResult(step.result_method.value, status,
                                    message=f"SDP at delta={step.delta}: {lb.status.value} {lb.message}".strip())
 
     def _estimate(self, problem: TriangulationProblem, psatz, sol):
@@ -419,7 +419,7 @@ class _PointSolve:
         status, in_front = cheirality(status, rep.depths, self.opts.require_in_front)
         if optimal and not in_front:
             msg = behind_message(rep.depths)
-        return TriangulationResult(step.method.value, status, X=X, gamma_ub=rep.gamma, gamma_lb=gamma_lb,
+        return TriangulationResult(step.result_method.value, status, X=X, gamma_ub=rep.gamma, gamma_lb=gamma_lb,
                                    optimal=optimal, delta=step.delta, n_lmivar=n_lmivar, image_points=image_points,
                                    X_raw=X_raw, gamma_ub_raw=raw.gamma, certified_by=certified_by if optimal else None,
                                    message=msg, sparsity="dense" if step.formulation == "dense" else "views",
@@ -429,7 +429,8 @@ class _PointSolve:
         sparsity = "dense" if step.formulation == "dense" else "views"
         self.attempts.append(Attempt(step.method.value, step.delta, status.value, None, None, label, sparsity, (),
                                      time.perf_counter() - t))
-        return TriangulationResult(step.method.value, status, delta=step.delta, message=message, sparsity=sparsity)
+        return TriangulationResult(step.result_method.value, status, delta=step.delta, message=message,
+                                   sparsity=sparsity)
 
 
 def behind_message(depths) -> str:

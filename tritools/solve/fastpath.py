@@ -37,10 +37,12 @@ from sospoly.solvers.blas import with_single_threaded_blas
 
 from ..model.geometry import camera_problems
 from ..model.normalize import normalization_stack
-from ..model.stacked import band_pairs, epipolar_quadratics, fundamental_stack, project_stack, refine_points_stack
+from ..model.stacked import (band_pairs, epipolar_quadratics, fundamental_stack, project_stack, refine_points_stack,
+                             view_pairs)
 from .decide import decide, decide_reported, gamma_from_c
 
-__all__ = ["FastPathBatch", "verify_points", "verify_checked", "stack_point_problems", "BAND_MIN_VIEWS",
+__all__ = ["FastPathBatch", "verify_points", "verify_checked", "stack_point_problems", "lagrangian_bounds",
+           "BAND_MIN_VIEWS",
            "BAND_WIDTHS"]
 
 #: from this many views on, the certificate is first tried with the epipolar constraints of bands of view
@@ -130,19 +132,7 @@ def verify_checked(C: np.ndarray, x: np.ndarray, ok: np.ndarray, tolerances: Tol
     v = np.where(ok[:, None], u.reshape(M, -1), 0.0)
     # a minimiser v* has ||v*||^2 = f(v*) <= f(v^) = ||v^||^2 (observed points at the origin): the radius of the
     # rigorous margin of the Lagrangian bound
-    radius = np.linalg.norm(v, axis=1)
-    lower, upper = np.full(M, np.nan), np.einsum("mi,mi->m", v, v)
-    dense = np.arange(M)
-    for width in BAND_WIDTHS if N >= BAND_MIN_VIEWS else ():
-        if width >= N - 1 or not dense.size:
-            break
-        lower_b, ok_b = _band_bounds(C[dense], Cn[dense], v[dense], ok[dense], radius[dense], width, tolerances)
-        good = ok_b & decide(lower_b, upper[dense], tolerances, N, norm.resolution[dense])[1]
-        lower[dense[good]] = lower_b[good]
-        dense = dense[~good]
-    step = all_pairs_chunk(N)
-    for part in (dense[k:k + step] for k in range(0, dense.size, step)):
-        lower[part], ok[part] = _all_pairs_bounds(C[part], Cn[part], v[part], ok[part], radius[part], tolerances)
+    lower, upper, ok = lagrangian_bounds(C, Cn, v, ok, np.linalg.norm(v, axis=1), norm.resolution, tolerances)
     status, optimal, c_lower = decide(lower, upper, tolerances, N, norm.resolution)
     X = norm.world_points(Xn)
     uw, _, fin_w = project_stack(C, X)
@@ -154,6 +144,42 @@ def verify_checked(C: np.ndarray, x: np.ndarray, ok: np.ndarray, tolerances: Tol
                          upper, norm.scale)
 
 
+def lagrangian_bounds(C, Cn, v, ok, radius, resolution, tolerances, f0=None, weights=None, views=None):
+    """(lower bound (NaN: none), f(v^), ok) of the degree-2 certificate for M programs
+    min f(v) = f0 + sum_k weights_k v_k^2 s.t. the epipolar constraints of the normalised cameras Cn (pairs with
+    coincident centres decided on the raw cameras C), at the candidates v (M, 2N), ``radius`` bounding the
+    norm of a minimiser (defaults: f0 = 0, weights = 1, the point-region objective ||v||^2).  From
+    ``BAND_MIN_VIEWS`` views on the bands of ``BAND_WIDTHS`` are tried first, then all pairs.  ``views`` (M, N)
+    bool: only the constraints of pairs of these views are held (the others are dropped: fewer constraints,
+    a weaker but valid bound)."""
+    M, N = C.shape[:2]
+    n = 2 * N
+    f0 = np.zeros(M) if f0 is None else np.asarray(f0, float)
+    upper = f0 + (np.einsum("mi,mi->m", v, v) if weights is None else np.einsum("mi,mi,mi->m", weights, v, v))
+    lower = np.full(M, np.nan)
+    ok = ok.copy()
+    todo = np.arange(M)
+
+    def F2(idx):
+        if weights is None:
+            return np.broadcast_to(np.eye(n), (len(idx), n, n))
+        return weights[idx][:, :, None] * np.eye(n)
+
+    for width in BAND_WIDTHS if N >= BAND_MIN_VIEWS else ():
+        if width >= N - 1 or not todo.size:
+            break
+        lower_b, ok_b = _band_bounds(C[todo], Cn[todo], v[todo], ok[todo], radius[todo], width, tolerances,
+                                     f0[todo], F2(todo), None if views is None else views[todo])
+        good = ok_b & decide(lower_b, upper[todo], tolerances, N, resolution[todo])[1]
+        lower[todo[good]] = lower_b[good]
+        todo = todo[~good]
+    step = all_pairs_chunk(N)
+    for part in (todo[k:k + step] for k in range(0, todo.size, step)):
+        lower[part], ok[part] = _all_pairs_bounds(C[part], Cn[part], v[part], ok[part], radius[part], tolerances,
+                                                  f0[part], F2(part), None if views is None else views[part])
+    return lower, upper, ok
+
+
 def all_pairs_chunk(n_views: int) -> int:
     """Problems per call of the all-pairs bound: its arrays take ~8 (4 K n + 8 n^2) bytes per problem
     (K = N(N-1)/2 pairs, n = 2N), kept under ALL_PAIRS_CHUNK_BYTES."""
@@ -161,7 +187,15 @@ def all_pairs_chunk(n_views: int) -> int:
     return int(max(1, ALL_PAIRS_CHUNK_BYTES // (8 * (4 * K * n + 8 * n * n + 64))))
 
 
-def _all_pairs_bounds(C, Cn, v, ok, radius, tolerances) -> tuple[np.ndarray, np.ndarray]:
+def _held(F: np.ndarray, pairs, views) -> np.ndarray:
+    """F with the pairs not between two ``views`` zeroed (their constraints dropped)."""
+    if views is None:
+        return F
+    I, J = pairs
+    return np.where((views[:, I] & views[:, J])[..., None, None], F, 0.0)
+
+
+def _all_pairs_bounds(C, Cn, v, ok, radius, tolerances, f0, F2, views=None) -> tuple[np.ndarray, np.ndarray]:
     """(Lagrangian lower bound (NaN: none), ok) with the epipolar constraints of all N(N - 1)/2 view pairs,
     vectorised over the stack (:func:`sospoly.analysis.verify.verify_quadratic_batch`)."""
     M, N = C.shape[:2]
@@ -169,18 +203,17 @@ def _all_pairs_bounds(C, Cn, v, ok, radius, tolerances) -> tuple[np.ndarray, np.
     raw = fundamental_stack(C)[1]       # one centre or not: decided on the raw cameras (CentreRelations' rule)
     F, defined = np.where(raw[..., None, None], F, 0.0), defined & raw
     ok = ok & np.any(defined, axis=1) if F.shape[1] else ok
-    g0, g1, G2 = epipolar_quadratics(F, N)
+    g0, g1, G2 = epipolar_quadratics(_held(F, view_pairs(N), views), N)
     finite = np.isfinite(g0).all(axis=1) & np.isfinite(g1).all(axis=(1, 2)) & np.isfinite(G2.vals).all(axis=1)
     ok &= finite
     g0, g1 = (np.where(ok.reshape((M,) + (1,) * (a.ndim - 1)), a, 0.0) for a in (g0, g1))
     G2 = dataclasses.replace(G2, vals=np.where(ok[:, None], G2.vals, 0.0))
     n = 2 * N
-    ver = verify_quadratic_batch(np.zeros(M), np.zeros((M, n)), np.broadcast_to(np.eye(n), (M, n, n)), g0, g1, G2,
-                                 v, tolerances=tolerances, radius=radius)
+    ver = verify_quadratic_batch(f0, np.zeros((M, n)), F2, g0, g1, G2, v, tolerances=tolerances, radius=radius)
     return ver.lower_bound, ok
 
 
-def _band_bounds(C, Cn, v, ok, radius, width, tolerances) -> tuple[np.ndarray, np.ndarray]:
+def _band_bounds(C, Cn, v, ok, radius, width, tolerances, f0, F2, views=None) -> tuple[np.ndarray, np.ndarray]:
     """(Lagrangian lower bound (NaN: none), usable) with the epipolar constraints of a band of view pairs only
     (:func:`tritools.model.stacked.band_pairs` of that ``width``): a subset of Corollary 1's constraints, so
     the bound stays a valid lower bound of the all-pairs program (fewer constraints enlarge the feasible set,
@@ -191,13 +224,13 @@ def _band_bounds(C, Cn, v, ok, radius, width, tolerances) -> tuple[np.ndarray, n
     pairs = band_pairs(N, width)
     F, defined = fundamental_stack(Cn, pairs)
     defined &= fundamental_stack(C, pairs)[1]
-    g0, g1, G2 = epipolar_quadratics(F, N, pairs)
+    g0, g1, G2 = epipolar_quadratics(_held(F, pairs, views), N, pairs)
     use = ok & defined.all(axis=1) & np.isfinite(g0).all(axis=1) & np.isfinite(g1).all(axis=(1, 2)) \
         & np.isfinite(G2.vals).all(axis=1)
     g0, g1 = (np.where(use.reshape((M,) + (1,) * (a.ndim - 1)), a, 0.0) for a in (g0, g1))
     G2 = dataclasses.replace(G2, vals=np.where(use[:, None], G2.vals, 0.0))
     n = 2 * N
-    ver = verify_quadratic_banded_batch(np.zeros(M), np.zeros((M, n)), np.broadcast_to(np.eye(n), (M, n, n)), g0, g1,
-                                        G2, v, tolerances=tolerances, radius=radius)
+    ver = verify_quadratic_banded_batch(f0, np.zeros((M, n)), F2, g0, g1, G2, v, tolerances=tolerances,
+                                        radius=radius)
     lower = np.where(use, ver.lower_bound, np.nan)
     return lower, use

@@ -47,6 +47,7 @@ from ..model.problem import TriangulationProblem, build_problem, view_band, view
 from ..model.regions import Point, as_regions
 from ..result import Attempt, Status, TriangulationResult
 from .decide import cheirality, decide, decide_reported, gamma_from_c
+from .discs import disc_radius, verify_discs
 from .fastpath import verify_checked
 from .options import SolvePath, TriangulationOptions, options_from
 from .plan import Step, degree_plan
@@ -187,6 +188,15 @@ class _PointSolve:
             b = verify_checked(self.cams[None], x, np.isfinite(x).all(axis=(1, 2)), self.opts.tolerances)
             if b.certified[0]:
                 res = self._report_verified_points(step, b)
+        elif step.method == Method.COROLLARY1 and all(disc_radius(r) is not None for r in self.regions):
+            b = verify_discs(self.cams[None], self._centres()[None],
+                             np.array([[disc_radius(r) for r in self.regions]]), tolerances=self.opts.tolerances)
+            if b.certified[0]:
+                n_vars = 4 * self.N
+                K = self.N * (self.N - 1) // 2
+                res = self._report(step, Status.OPTIMAL, True, float(b.gamma_lb[0]), X=b.X[0], X_raw=b.X[0],
+                                   image_points=b.image_points[0], certified_by="verification",
+                                   n_lmivar=sospoly.n_lmivar_formula(n_vars, 2, [2] * K, [2] * self.N))
         else:
             res = self._verify_generic(step)
         self.timings["verify"] = time.perf_counter() - t

@@ -10,6 +10,9 @@ Per N (seeded :func:`tritools.scene.random_scene`, cameras on a sphere, f = 800 
   track, and the certified fraction;
 * ``single``: one ``tritools.triangulate(cameras, points)`` call per point (median ms over ``--single``
   points), and its ratio to the batch's per-track cost;
+* ``discs``: ``tritools.triangulate_many`` on the same keypoints as 1 px discs (uncertain keypoints, ``Ellipse(x,
+  I)``; certification by verification with region multipliers, tritools.solve.discs), ms per track, the
+  certified fraction, and the ratio to ``batch``;
 * ``scipy-lm``: ``scipy.optimize.least_squares(method="lm")`` on the reprojection residuals from the DLT
   point (no certificate);
 * ``pycolmap``: ``pycolmap.triangulate_multi_view_point`` (linear, no certificate; cameras decomposed
@@ -87,6 +90,12 @@ def row(N: int, n_points: int, noise: float, n_single: int, have_colmap: bool, s
     for j in range(min(n_single, n_points)):
         singles.append(cpu(lambda: tritools.triangulate(C, x[j])) * 1e3)
     out["single"] = statistics.median(singles)
+    from tritools import Ellipse
+
+    discs = [(C, [Ellipse(p, np.eye(2)) for p in x[j]]) for j in range(n_points)]
+    out["discs"] = cpu(lambda: box.setdefault("d", tritools.triangulate_many(discs, progress=False))) \
+        / n_points * 1e3
+    out["disc_cert"] = float(np.mean([r.optimal for r in box["d"]]))
     lm = []
     out["lm"] = cpu(lambda: lm.extend(lm_point(C, x[j]) for j in range(n_points))) / n_points * 1e3
     g_lm = np.array([gamma(C, x[j], X) for j, X in enumerate(lm)])
@@ -148,9 +157,9 @@ def main(argv=None) -> None:
     ap.add_argument("--time-limit", type=float, default=180.0)
     args = ap.parse_args(argv)
     have_colmap = importlib.util.find_spec("pycolmap") is not None
-    print("| noise px | N | batch ms/track | certified | single ms | single/batch | scipy-lm ms | pycolmap ms "
-          "| lb<=lm |")
-    print("|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
+    print("| noise px | N | batch ms/track | certified | single ms | single/batch | discs ms/track | discs certified "
+          "| discs/batch | scipy-lm ms | pycolmap ms | lb<=lm |")
+    print("|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
     for noise in args.noise:
         rows = []
         for N in args.sizes:
@@ -158,7 +167,8 @@ def main(argv=None) -> None:
             rows.append(r)
             colmap = f"{r['colmap']:.3f}" if "colmap" in r else "n/a"
             print(f"| {noise:g} | {N} | {r['batch']:.3f} | {r['cert']:.1%} | {r['single']:.2f} | "
-                  f"{r['single'] / r['batch']:.1f} | {r['lm']:.3f} | {colmap} | {r['lb<=lm']:.1e} |", flush=True)
+                  f"{r['single'] / r['batch']:.1f} | {r['discs']:.3f} | {r['disc_cert']:.1%} | "
+                  f"{r['discs'] / r['batch']:.1f} | {r['lm']:.3f} | {colmap} | {r['lb<=lm']:.1e} |", flush=True)
         fit = [(r["N"], r["batch"]) for r in rows if 20 <= r["N"] <= 100]
         if len(fit) >= 2:
             a = np.polyfit(np.log([f[0] for f in fit]), np.log([f[1] for f in fit]), 1)[0]

@@ -165,14 +165,17 @@ def lagrangian_bounds(C, Cn, v, ok, radius, resolution, tolerances, f0=None, wei
             return np.broadcast_to(np.eye(n), (len(idx), n, n))
         return weights[idx][:, :, None] * np.eye(n)
 
+    # a band with dropped pairs is a broken chain (its multipliers cannot carry the KKT residual): all pairs then
+    band = todo if views is None else todo[views.all(axis=1)]
     for width in BAND_WIDTHS if N >= BAND_MIN_VIEWS else ():
-        if width >= N - 1 or not todo.size:
+        if width >= N - 1 or not band.size:
             break
-        lower_b, ok_b = _band_bounds(C[todo], Cn[todo], v[todo], ok[todo], radius[todo], width, tolerances,
-                                     f0[todo], F2(todo), None if views is None else views[todo])
-        good = ok_b & decide(lower_b, upper[todo], tolerances, N, resolution[todo])[1]
-        lower[todo[good]] = lower_b[good]
-        todo = todo[~good]
+        lower_b, ok_b = _band_bounds(C[band], Cn[band], v[band], ok[band], radius[band], width, tolerances,
+                                     f0[band], F2(band), None)
+        good = ok_b & decide(lower_b, upper[band], tolerances, N, resolution[band])[1]
+        lower[band[good]] = lower_b[good]
+        band = band[~good]
+    todo = todo[np.isnan(lower[todo])]
     step = all_pairs_chunk(N)
     for part in (todo[k:k + step] for k in range(0, todo.size, step)):
         lower[part], ok[part] = _all_pairs_bounds(C[part], Cn[part], v[part], ok[part], radius[part], tolerances,
@@ -187,6 +190,14 @@ def all_pairs_chunk(n_views: int) -> int:
     return int(max(1, ALL_PAIRS_CHUNK_BYTES // (8 * (4 * K * n + 8 * n * n + 64))))
 
 
+def _fundamental_both(Cn, C, pairs=None):
+    """(F, defined) of the normalised cameras and ``defined`` of the raw ones -- one centre or not is decided on
+    the raw cameras (CentreRelations' rule) -- in one vectorised call."""
+    M = len(Cn)
+    F, defined = fundamental_stack(np.concatenate([Cn, C]), pairs)
+    return F[:M], defined[:M], defined[M:]
+
+
 def _held(F: np.ndarray, pairs, views) -> np.ndarray:
     """F with the pairs not between two ``views`` zeroed (their constraints dropped)."""
     if views is None:
@@ -199,8 +210,7 @@ def _all_pairs_bounds(C, Cn, v, ok, radius, tolerances, f0, F2, views=None) -> t
     """(Lagrangian lower bound (NaN: none), ok) with the epipolar constraints of all N(N - 1)/2 view pairs,
     vectorised over the stack (:func:`sospoly.analysis.verify.verify_quadratic_batch`)."""
     M, N = C.shape[:2]
-    F, defined = fundamental_stack(Cn)
-    raw = fundamental_stack(C)[1]       # one centre or not: decided on the raw cameras (CentreRelations' rule)
+    F, defined, raw = _fundamental_both(Cn, C)
     F, defined = np.where(raw[..., None, None], F, 0.0), defined & raw
     ok = ok & np.any(defined, axis=1) if F.shape[1] else ok
     g0, g1, G2 = epipolar_quadratics(_held(F, view_pairs(N), views), N)
@@ -222,8 +232,8 @@ def _band_bounds(C, Cn, v, ok, radius, width, tolerances, f0, F2, views=None) ->
     all pairs)."""
     M, N = C.shape[:2]
     pairs = band_pairs(N, width)
-    F, defined = fundamental_stack(Cn, pairs)
-    defined &= fundamental_stack(C, pairs)[1]
+    F, defined, raw = _fundamental_both(Cn, C, pairs)
+    defined &= raw
     g0, g1, G2 = epipolar_quadratics(_held(F, pairs, views), N, pairs)
     use = ok & defined.all(axis=1) & np.isfinite(g0).all(axis=1) & np.isfinite(g1).all(axis=(1, 2)) \
         & np.isfinite(G2.vals).all(axis=1)

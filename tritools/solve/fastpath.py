@@ -15,7 +15,10 @@ f and every g_ij quadratic.  For each problem this module, with numpy over the s
 3. builds the epipolar polynomials of the normalised cameras (pairs with coincident centres carry
    no constraint: their polynomial is zero);
 4. calls :func:`sospoly.analysis.verify.verify_quadratic_batch`: KKT multipliers by least squares,
-   PSD test of the Lagrangian Hessian, exact minimum c of the Lagrangian quadratic;
+   PSD test of the Lagrangian Hessian, exact minimum c of the Lagrangian quadratic (:func:`lagrangian_bounds`;
+   from ``BAND_MIN_VIEWS`` views first with the constraints of a band of view pairs only, by
+   :func:`sospoly.analysis.verify_sparse.verify_quadratic_banded_batch`: a subset of the constraints gives a
+   valid, possibly weaker bound at a cost linear in N; all pairs for what no band certifies);
 5. decides with :func:`tritools.solve.decide.decide` (the rule of every path).
 
 The lower bound comes from the polynomial data and the multipliers only; the local solver merely

@@ -86,3 +86,17 @@ def test_only_exact_discs_take_the_disc_path():
     regs = [Ellipse(c, np.diag([4.0, 1.0])) for c in sc.points2d[0]]     # ellipses: the SDP path as before
     r = tritools.triangulate_many([(sc.cameras, regs)], progress=False)[0]
     assert r.certified_by != "verification"
+
+
+@pytest.mark.parametrize("scale,shift", [(1e-3, 0.0), (1e3, 1e6)])
+def test_disc_certificates_follow_the_image_units(scale, shift):
+    """Pixel coordinates and radii scaled and shifted: gamma scales with the image, the decision is the same."""
+    sc = random_scene(4, 4, noise_px=2.0, seed=21)
+    C = np.asarray(sc.cameras)
+    T = np.array([[scale, 0, shift], [0, scale, shift], [0, 0, 1.0]])
+    C2 = np.einsum("ij,njk->nik", T, C)
+    ref = verify_discs(np.broadcast_to(C, (4,) + C.shape), sc.points2d, np.ones((4, 4)))
+    new = verify_discs(np.broadcast_to(C2, (4,) + C2.shape), scale * sc.points2d + shift, np.full((4, 4), scale))
+    assert ref.certified.all() and new.certified.all()
+    np.testing.assert_allclose(new.gamma_ub / scale, ref.gamma_ub, rtol=1e-6)
+    np.testing.assert_allclose(new.gamma_lb / scale, ref.gamma_lb, rtol=1e-5)

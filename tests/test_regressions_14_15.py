@@ -182,7 +182,10 @@ def test_duplicated_views_and_a_1e17_camera_give_a_status_not_a_memory_error():
     assert "exceeds the memory budget 2 GiB" in dense.message and elapsed < 10
     _assert_a_result(res)
     assert res.delta is not None and elapsed_plan < 2 + SLACK
-    assert [a.delta for a in res.attempts][:1] == [4]
+    # the plan starts low, never at the refused dense delta = 6: first the degree-2 step on Theorem 1's two-view
+    # minors (Corollary 1's epipolar constraints, docs/triangulation.md), then Theorem 1 from delta_min = 4
+    assert [(a.method, a.delta) for a in res.attempts][:1] == [("corollary1", 2)]
+    assert [a.delta for a in res.attempts if a.method == "theorem1"][:1] in ([], [4])
 
 
 def test_dense_40_variable_quartic_gives_budget_exceeded_by_default():

@@ -123,6 +123,9 @@ class NormalizationStack:
     Xn: np.ndarray          # (M, 3)
     ok: np.ndarray          # (M,)
     resolution: np.ndarray  # (M,) the coordinates' resolution in normalised units (module docstring)
+    #: (M,) Xn is a converged local L2 minimiser (the step rule of the refinement; the image rescaling after it is
+    #: a similarity, which keeps the minimiser): polishing it again is a no-op
+    converged: np.ndarray | None = None
 
     def item(self, m: int) -> Normalization:
         return Normalization(float(self.scale[m]), self.shifts[m].copy(), self.origin[m].copy(), float(self.depth[m]),
@@ -141,12 +144,23 @@ def resolutions(scale: np.ndarray, x: np.ndarray) -> np.ndarray:
     return np.where(np.isfinite(out) & (out > 0), out, np.inf)
 
 
+def _nanmedian_rows(a: np.ndarray) -> np.ndarray:
+    """``numpy.nanmedian(a, axis=1)`` for a 2-D array (NaN for an all-NaN row), without its per-call overhead:
+    NaNs sort last, so the median of row m is the mean of its middle non-NaN entries."""
+    s = np.sort(a, axis=1)
+    k = np.sum(~np.isnan(a), axis=1)
+    if s.shape[1] == 0:
+        return np.full(len(a), np.nan)
+    lo = np.take_along_axis(s, np.maximum((k - 1) // 2, 0)[:, None], axis=1)[:, 0]
+    hi = np.take_along_axis(s, (k // 2)[:, None], axis=1)[:, 0]         # k <= N, so k // 2 < N
+    return np.where(k > 0, (lo + hi) / 2, np.nan)
+
+
 def _rho_floor(C: np.ndarray, x: np.ndarray) -> np.ndarray:
     """RHO_FLOOR_REL * median pixel scale per problem (fallback: 1e-4 max(1, median |x|) where no view has a
     finite pixel scale)."""
     ps = pixel_scales(C, x)
-    with np.errstate(all="ignore"):
-        med = np.nanmedian(np.where(np.isfinite(ps) & (ps > 0), ps, np.nan), axis=1) if ps.size else ps
+    med = _nanmedian_rows(np.where(np.isfinite(ps) & (ps > 0), ps, np.nan))
     fallback = 1e-4 * np.maximum(1.0, np.median(np.abs(x.reshape(len(x), -1)), axis=1))
     return np.where(np.isfinite(med) & (med > 0), RHO_FLOOR_REL * med, fallback)
 
@@ -193,7 +207,8 @@ def normalization_stack(C: np.ndarray, x: np.ndarray, ok: np.ndarray | None = No
     Cn = np.where(ok[:, None, None, None], Cn, np.eye(3, 4))
     # the scale from the residual of the locally refined estimate: refine from the DLT point (Xn = 0), then
     # the exact image similarity x' -> k x', k = s_new / s
-    Xn, ok_r = refine_points_stack(Cn, np.zeros((M, N, 2)), np.zeros((M, 3)), ok.copy())
+    Xn, ok_r, converged = refine_points_stack(Cn, np.zeros((M, N, 2)), np.zeros((M, 3)), ok.copy(),
+                                              return_converged=True)
     u, _, fin = project_stack(Cn, Xn)
     r = np.sqrt(np.mean(np.sum(np.where(fin[:, None, None], u, 0.0) ** 2, axis=2), axis=1)) / s
     use = ok_r & fin & np.isfinite(r)
@@ -202,7 +217,7 @@ def normalization_stack(C: np.ndarray, x: np.ndarray, ok: np.ndarray | None = No
     Cn[:, :, :2, :] *= (s_new / s)[:, None, None, None]
     Cn /= np.linalg.norm(Cn, axis=(2, 3))[..., None, None]
     return NormalizationStack(s_new, x.copy(), X0, d, Cn, np.where(use[:, None], Xn, 0.0), ok,
-                              resolutions(s_new, x))
+                              resolutions(s_new, x), use & converged)
 
 
 def _off_a_common_centre(C: np.ndarray, x: np.ndarray, a: np.ndarray, X0: np.ndarray, ok: np.ndarray) -> np.ndarray:

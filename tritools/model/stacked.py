@@ -17,12 +17,14 @@ bad problem does not stop the stack.
 """
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 from .geometry import POINT_AT_INFINITY_RTOL, PROJECTION_DENOM_RTOL, SAME_CENTER_RTOL
 
 __all__ = ["null_vectors", "dlt_stack", "project_stack", "refine_points_stack", "fundamental_stack",
-           "epipolar_quadratics", "pixel_scales", "view_pairs", "LM_MAX_ITER", "LM_STEP_RTOL"]
+           "epipolar_quadratics", "pixel_scales", "view_pairs", "band_pairs", "LM_MAX_ITER", "LM_STEP_RTOL"]
 
 #: Levenberg-Marquardt iterations at most (from the DLT start it converges in ~5-10).
 LM_MAX_ITER = 100
@@ -30,9 +32,12 @@ LM_MAX_ITER = 100
 LM_STEP_RTOL = 1e-13
 
 
+@functools.lru_cache(maxsize=256)
 def view_pairs(N: int) -> tuple[np.ndarray, np.ndarray]:
-    """(I, J) of the view pairs i < j in the order of Corollary 1's constraints."""
-    return np.triu_indices(N, 1)
+    """(I, J) of the view pairs i < j in the order of Corollary 1's constraints (cached, read-only)."""
+    I, J = np.triu_indices(N, 1)
+    I.flags.writeable = J.flags.writeable = False
+    return I, J
 
 
 def null_vectors(P: np.ndarray) -> np.ndarray:
@@ -85,54 +90,68 @@ def project_stack(C: np.ndarray, X: np.ndarray) -> tuple[np.ndarray, np.ndarray,
     return x, h, ok
 
 
-def refine_points_stack(C: np.ndarray, xhat: np.ndarray, X: np.ndarray, ok: np.ndarray
-                        ) -> tuple[np.ndarray, np.ndarray]:
+def refine_points_stack(C: np.ndarray, xhat: np.ndarray, X: np.ndarray, ok: np.ndarray, *,
+                        return_converged: bool = False) -> tuple:
     """Levenberg-Marquardt on sum_i ||Phi(X, P_i) - x^_i||^2 from X (M, 3), for the problems where ``ok``;
-    the twin of :func:`tritools.model.geometry.refine_l2` with point regions."""
+    the twin of :func:`tritools.model.geometry.refine_l2` with point regions.  (X, ok), and with
+    ``return_converged`` also the mask of the problems that stopped by the step rule (not stalled, not at
+    LM_MAX_ITER): another run from their X would stop after one step."""
     X = X.copy()
+    converged = np.zeros(len(X), bool)
     mu = np.full(len(X), 1e-3)
-
-    def cost_of(Xc, Cc, xc):
-        u, _, fin = project_stack(Cc, Xc)
-        return np.where(fin, np.sum((u - xc) ** 2, axis=(1, 2)), np.inf), u, fin
-
-    cost, _, fin = cost_of(X, C, xhat)
+    u, h, fin = project_stack(C, X)
+    cost = np.where(fin, np.sum((u - xhat) ** 2, axis=(1, 2)), np.inf)
     ok = ok & fin
     active = np.nonzero(ok)[0]
+    eye3 = np.eye(3)
     for _ in range(LM_MAX_ITER):
         if active.size == 0:
             break
-        Ca, xa, Xa = C[active], xhat[active], X[active]
-        u, h, _ = project_stack(Ca, Xa)
+        whole = active.size == len(X)       # no copies while every problem is still iterating
+        Ca, xa, Xa = (C, xhat, X) if whole else (C[active], xhat[active], X[active])
+        ua, ha = (u, h) if whole else (u[active], h[active])      # the projections at X, kept from the last step
         # d Phi / d X = (P[:2, :3] - u P[2, :3]) / (P[2] . X~)
-        Jac = (Ca[..., :2, :3] - u[..., None] * Ca[..., 2:3, :3]) / h[..., 2][..., None, None]
+        Jac = (Ca[..., :2, :3] - ua[..., None] * Ca[..., 2:3, :3]) / ha[..., 2][..., None, None]
         Jac = Jac.reshape(len(active), -1, 3)
-        r = (u - xa).reshape(len(active), -1)
+        r = (ua - xa).reshape(len(active), -1)
         JtJ = np.einsum("mki,mkj->mij", Jac, Jac)
         g = np.einsum("mki,mk->mi", Jac, r)
-        A = JtJ + mu[active, None, None] * np.eye(3) * (1.0 + np.trace(JtJ, axis1=1, axis2=2))[:, None, None] / 3
+        A = JtJ + mu[active, None, None] * eye3 * (1.0 + np.trace(JtJ, axis1=1, axis2=2))[:, None, None] / 3
         try:
             step = -np.linalg.solve(A, g[..., None])[..., 0]
         except np.linalg.LinAlgError:
             step = -np.einsum("mij,mj->mi", np.linalg.pinv(A), g)
         Xt = Xa + step
-        ct, _, _ = cost_of(Xt, Ca, xa)
+        ut, ht, fint = project_stack(Ca, Xt)
+        ct = np.where(fint, np.sum((ut - xa) ** 2, axis=(1, 2)), np.inf)
         better = np.isfinite(ct) & (ct <= cost[active])
-        X[active[better]] = Xt[better]
-        cost[active[better]] = ct[better]
-        mu[active] = np.where(better, np.maximum(mu[active] / 10, 1e-12), mu[active] * 10)
         small = np.linalg.norm(step, axis=1) <= LM_STEP_RTOL * (1.0 + np.linalg.norm(Xa, axis=1))
+        acc = active[better]                # (Xa, ua may be views of X, u: updated only after their last use)
+        X[acc], cost[acc], u[acc], h[acc] = Xt[better], ct[better], ut[better], ht[better]
+        mu[active] = np.where(better, np.maximum(mu[active] / 10, 1e-12), mu[active] * 10)
         stalled = mu[active] > 1e12
-        active = active[~((better & small) | stalled | (~better & small))]
-    return X, ok & np.all(np.isfinite(X), axis=1)
+        converged[active[small & ~stalled]] = True
+        active = active[~(small | stalled)]
+    ok = ok & np.all(np.isfinite(X), axis=1)
+    return (X, ok, converged & ok) if return_converged else (X, ok)
 
 
-def fundamental_stack(C: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(F (M, K, 3, 3) unit Frobenius norm, defined (M, K)) for the view pairs of :func:`view_pairs`:
-    F_ij = [e]_x P_i P_j^+, e = P_i a_j, P_j a_j = 0 (SPEC §7); ``defined`` is False where the two camera
-    centres coincide (F vanishes; the twin of :func:`tritools.model.geometry.fundamental_matrix`'s error)."""
+def band_pairs(N: int, width: int) -> tuple[np.ndarray, np.ndarray]:
+    """(I, J) of the view pairs (i, i + d), 1 <= d <= width, ordered by i then d: a band of pairs whose
+    constraints couple only views at most ``width`` apart (for width >= 2 a chain of view triangles, 2N - 3
+    pairs at width 2, generically as many independent constraints as all N(N - 1)/2 pairs)."""
+    I = [i for i in range(N) for d in range(1, width + 1) if i + d < N]
+    J = [i + d for i in range(N) for d in range(1, width + 1) if i + d < N]
+    return np.array(I, dtype=int), np.array(J, dtype=int)
+
+
+def fundamental_stack(C: np.ndarray, pairs: tuple | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """(F (M, K, 3, 3) unit Frobenius norm, defined (M, K)) for the view pairs ``pairs`` = (I, J) (default: all,
+    :func:`view_pairs`): F_ij = [e]_x P_i P_j^+, e = P_i a_j, P_j a_j = 0 (SPEC §7); ``defined`` is False where
+    the two camera centres coincide (F vanishes; the twin of :func:`tritools.model.geometry.fundamental_matrix`'s
+    error)."""
     M, N = C.shape[:2]
-    I, J = view_pairs(N)
+    I, J = view_pairs(N) if pairs is None else pairs
     Pi, Pj = C[:, I], C[:, J]
     a = null_vectors(C)
     with np.errstate(over="ignore", invalid="ignore"):
@@ -154,14 +173,14 @@ def fundamental_stack(C: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return F, defined
 
 
-def epipolar_quadratics(F: np.ndarray, N: int):
+def epipolar_quadratics(F: np.ndarray, N: int, pairs: tuple | None = None):
     """Quadratic parts (g0 (M, K), g1 (M, K, 2N), G2) of g_ij(v) = x~_i^T F_ij x~_j over
-    v = (x_11, x_12, ..., x_N2), for F (M, K, 3, 3) in the order of :func:`view_pairs`; G2 as
+    v = (x_11, x_12, ..., x_N2), for F (M, K, 3, 3) in the order of ``pairs`` (default :func:`view_pairs`); G2 as
     :class:`sospoly.analysis.verify.SparseQuadratics` (8 entries per pair, so memory grows like N^2, not N^4)."""
     from sospoly.analysis.verify import SparseQuadratics
 
     M, K = F.shape[:2]
-    I, J = view_pairs(N)
+    I, J = view_pairs(N) if pairs is None else pairs
     n = 2 * N
     g0 = F[..., 2, 2]
     g1 = np.zeros((M, K, n))

@@ -36,7 +36,8 @@ import numpy as np
 from ..model.regions import Point
 from ..result import Attempt, Status, TriangulationResult
 from .options import TriangulationOptions, options_from
-from .points import PointStack
+from .discs import as_disc_problem, solve_disc_group
+from .points import PointStack, batch_steps
 from .triangulate import triangulate
 
 __all__ = ["triangulate_many", "safe_triangulate", "solve_point_problems", "solve_point_stack", "BatchOutcome",
@@ -256,6 +257,8 @@ def solve_point_problems(problems, opts: TriangulationOptions, *, executor=None,
     out = BatchOutcome(n)
     bar = _progress_bar(n, progress)
     groups: dict[int, list] = {}
+    disc_groups: dict[int, list] = {}                # uncertain keypoints: all regions discs
+    verify_discs_first = batch_steps(opts)[0]
     items = []                                       # (index, cameras, regions, options, prefix)
     for i, prob in enumerate(problems):
         try:
@@ -265,10 +268,17 @@ def solve_point_problems(problems, opts: TriangulationOptions, *, executor=None,
                                      f"problems[{i}] must be a (cameras, regions) pair, got {type(prob).__name__}")
             continue
         pp = _as_point_problem(cams, regions)
-        if pp is None:
+        dp = as_disc_problem(cams, regions) if pp is None and verify_discs_first else None
+        if dp is not None:
+            disc_groups.setdefault(len(regions), []).append((i, cams, dp[1], dp[2], regions))
+        elif pp is None:
             items.append((i, cams, regions, opts, ()))
         else:
             groups.setdefault(len(pp[1]), []).append((i, *pp))
+    for group in disc_groups.values():
+        done, rest = solve_disc_group(group, opts)
+        out.objects.update(done)
+        items.extend(rest)
     if bar is not None:
         bar.update(len(out.objects))
     for group in groups.values():

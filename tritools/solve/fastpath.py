@@ -15,7 +15,10 @@ f and every g_ij quadratic.  For each problem this module, with numpy over the s
 3. builds the epipolar polynomials of the normalised cameras (pairs with coincident centres carry
    no constraint: their polynomial is zero);
 4. calls :func:`sospoly.analysis.verify.verify_quadratic_batch`: KKT multipliers by least squares,
-   PSD test of the Lagrangian Hessian, exact minimum c of the Lagrangian quadratic;
+   PSD test of the Lagrangian Hessian, exact minimum c of the Lagrangian quadratic (:func:`lagrangian_bounds`;
+   from ``BAND_MIN_VIEWS`` views first with the constraints of a band of view pairs only, by
+   :func:`sospoly.analysis.verify_sparse.verify_quadratic_banded_batch`: a subset of the constraints gives a
+   valid, possibly weaker bound at a cost linear in N; all pairs for what no band certifies);
 5. decides with :func:`tritools.solve.decide.decide` (the rule of every path).
 
 The lower bound comes from the polynomial data and the multipliers only; the local solver merely
@@ -32,14 +35,29 @@ import numpy as np
 
 from sospoly import DEFAULT_TOLERANCES, Tolerances
 from sospoly.analysis.verify import verify_quadratic_batch
+from sospoly.analysis.verify_sparse import verify_quadratic_banded_batch
 from sospoly.solvers.blas import with_single_threaded_blas
 
 from ..model.geometry import camera_problems
 from ..model.normalize import normalization_stack
-from ..model.stacked import epipolar_quadratics, fundamental_stack, project_stack, refine_points_stack
+from ..model.stacked import (band_pairs, epipolar_quadratics, fundamental_stack, project_stack, refine_points_stack,
+                             view_pairs)
 from .decide import decide, decide_reported, gamma_from_c
 
-__all__ = ["FastPathBatch", "verify_points", "stack_point_problems"]
+__all__ = ["FastPathBatch", "verify_points", "verify_checked", "stack_point_problems", "lagrangian_bounds",
+           "BAND_MIN_VIEWS",
+           "BAND_WIDTHS"]
+
+#: from this many views on, the certificate is first tried with the epipolar constraints of bands of view
+#: pairs (:func:`_band_bounds`, cost linear in N), of the widths ``BAND_WIDTHS`` in turn; problems no band
+#: certifies fall back to all N(N - 1)/2 pairs.  Measured (benchmarks/pointscale.py): the multipliers of a
+#: band carry the KKT residual along the chain of views, so they grow with N and the noise and the Lagrangian
+#: Hessian can lose definiteness; width 4 certifies 1 px tracks up to N = 200, width 8 most of the rest.
+BAND_MIN_VIEWS = 12
+#: the widths tried: pairs (i, i + d), 1 <= d <= width.
+BAND_WIDTHS = (4, 8)
+#: memory of one call of the all-pairs bound (the fallback is chunked to stay below it).
+ALL_PAIRS_CHUNK_BYTES = 256 * 2 ** 20
 
 
 @dataclass(frozen=True)
@@ -94,30 +112,31 @@ def verify_points(cameras, points2d, *, tolerances: Tolerances = DEFAULT_TOLERAN
         The certificate rule.
     """
     C, x, ok = stack_point_problems(cameras, points2d, "verify_points")
+    return verify_checked(C, x, ok, tolerances)
+
+
+@with_single_threaded_blas
+def verify_checked(C: np.ndarray, x: np.ndarray, ok: np.ndarray, tolerances: Tolerances) -> FastPathBatch:
+    """:func:`verify_points` on data already checked: float arrays C (M, N, 3, 4), x (M, N, 2) and the mask
+    ``ok`` of the problems with valid cameras and finite points (e.g. from
+    :func:`tritools.model.geometry.validate_cameras`: a single call does not check its cameras twice)."""
+    ok = np.array(ok, bool)
     M, N = x.shape[:2]
     norm = normalization_stack(C, x, ok)
     ok &= norm.ok
     Cn = norm.cameras_n
     xhat = np.zeros((M, N, 2))          # the observed points, normalised: s (x^_i - t_i) = 0
-    Xn, ok = refine_points_stack(Cn, xhat, norm.Xn, ok)
+    Xn = norm.Xn.copy()
+    polish = ~norm.converged                # the normalisation's refinement converged elsewhere
+    if polish.any():
+        Xn[polish], ok[polish] = refine_points_stack(Cn[polish], xhat[polish], norm.Xn[polish], ok[polish])
     u, _, fin = project_stack(Cn, Xn)
     ok &= fin
     v = np.where(ok[:, None], u.reshape(M, -1), 0.0)
-    F, defined = fundamental_stack(Cn)
-    raw = fundamental_stack(C)[1]       # one centre or not: decided on the raw cameras (CentreRelations' rule)
-    F, defined = np.where(raw[..., None, None], F, 0.0), defined & raw
-    ok &= np.any(defined, axis=1) if F.shape[1] else ok
-    g0, g1, G2 = epipolar_quadratics(F, N)
-    finite = np.isfinite(g0).all(axis=1) & np.isfinite(g1).all(axis=(1, 2)) & np.isfinite(G2.vals).all(axis=1)
-    ok &= finite
-    g0, g1 = (np.where(ok.reshape((M,) + (1,) * (a.ndim - 1)), a, 0.0) for a in (g0, g1))
-    G2 = dataclasses.replace(G2, vals=np.where(ok[:, None], G2.vals, 0.0))
-    n = 2 * N
     # a minimiser v* has ||v*||^2 = f(v*) <= f(v^) = ||v^||^2 (observed points at the origin): the radius of the
     # rigorous margin of the Lagrangian bound
-    ver = verify_quadratic_batch(np.zeros(M), np.zeros((M, n)), np.broadcast_to(np.eye(n), (M, n, n)), g0, g1, G2,
-                                 v, tolerances=tolerances, radius=np.linalg.norm(v, axis=1))
-    status, optimal, c_lower = decide(ver.lower_bound, ver.upper_bound, tolerances, N, norm.resolution)
+    lower, upper, ok = lagrangian_bounds(C, Cn, v, ok, np.linalg.norm(v, axis=1), norm.resolution, tolerances)
+    status, optimal, c_lower = decide(lower, upper, tolerances, N, norm.resolution)
     X = norm.world_points(Xn)
     uw, _, fin_w = project_stack(C, X)
     ok &= fin_w
@@ -125,4 +144,106 @@ def verify_points(cameras, points2d, *, tolerances: Tolerances = DEFAULT_TOLERAN
     gamma_lb = np.minimum(gamma_from_c(c_lower, N, norm.scale), gamma_ub)
     certified = ok & optimal & decide_reported(gamma_lb, gamma_ub, tolerances, N, norm.scale, norm.resolution)
     return FastPathBatch(certified, ok, X, gamma_lb, gamma_ub, x + u / norm.scale[:, None, None], c_lower,
-                         ver.upper_bound, norm.scale)
+                         upper, norm.scale)
+
+
+def lagrangian_bounds(C, Cn, v, ok, radius, resolution, tolerances, f0=None, weights=None, views=None):
+    """(lower bound (NaN: none), f(v^), ok) of the degree-2 certificate for M programs
+    min f(v) = f0 + sum_k weights_k v_k^2 s.t. the epipolar constraints of the normalised cameras Cn (pairs with
+    coincident centres decided on the raw cameras C), at the candidates v (M, 2N), ``radius`` bounding the
+    norm of a minimiser (defaults: f0 = 0, weights = 1, the point-region objective ||v||^2).  From
+    ``BAND_MIN_VIEWS`` views on the bands of ``BAND_WIDTHS`` are tried first, then all pairs.  ``views`` (M, N)
+    bool: only the constraints of pairs of these views are held (the others are dropped: fewer constraints,
+    a weaker but valid bound)."""
+    M, N = C.shape[:2]
+    n = 2 * N
+    f0 = np.zeros(M) if f0 is None else np.asarray(f0, float)
+    upper = f0 + (np.einsum("mi,mi->m", v, v) if weights is None else np.einsum("mi,mi,mi->m", weights, v, v))
+    lower = np.full(M, np.nan)
+    ok = ok.copy()
+    todo = np.arange(M)
+
+    def F2(idx):
+        if weights is None:
+            return np.broadcast_to(np.eye(n), (len(idx), n, n))
+        return weights[idx][:, :, None] * np.eye(n)
+
+    # a band with dropped pairs is a broken chain (its multipliers cannot carry the KKT residual): all pairs then
+    band = todo if views is None else todo[views.all(axis=1)]
+    for width in BAND_WIDTHS if N >= BAND_MIN_VIEWS else ():
+        if width >= N - 1 or not band.size:
+            break
+        lower_b, ok_b = _band_bounds(C[band], Cn[band], v[band], ok[band], radius[band], width, tolerances,
+                                     f0[band], F2(band), None)
+        good = ok_b & decide(lower_b, upper[band], tolerances, N, resolution[band])[1]
+        lower[band[good]] = lower_b[good]
+        band = band[~good]
+    todo = todo[np.isnan(lower[todo])]
+    step = all_pairs_chunk(N)
+    for part in (todo[k:k + step] for k in range(0, todo.size, step)):
+        lower[part], ok[part] = _all_pairs_bounds(C[part], Cn[part], v[part], ok[part], radius[part], tolerances,
+                                                  f0[part], F2(part), None if views is None else views[part])
+    return lower, upper, ok
+
+
+def all_pairs_chunk(n_views: int) -> int:
+    """Problems per call of the all-pairs bound: its arrays take ~8 (4 K n + 8 n^2) bytes per problem
+    (K = N(N-1)/2 pairs, n = 2N), kept under ALL_PAIRS_CHUNK_BYTES."""
+    K, n = n_views * (n_views - 1) // 2, 2 * n_views
+    return int(max(1, ALL_PAIRS_CHUNK_BYTES // (8 * (4 * K * n + 8 * n * n + 64))))
+
+
+def _fundamental_both(Cn, C, pairs=None):
+    """(F, defined) of the normalised cameras and ``defined`` of the raw ones -- one centre or not is decided on
+    the raw cameras (CentreRelations' rule) -- in one vectorised call."""
+    M = len(Cn)
+    F, defined = fundamental_stack(np.concatenate([Cn, C]), pairs)
+    return F[:M], defined[:M], defined[M:]
+
+
+def _held(F: np.ndarray, pairs, views) -> np.ndarray:
+    """F with the pairs not between two ``views`` zeroed (their constraints dropped)."""
+    if views is None:
+        return F
+    I, J = pairs
+    return np.where((views[:, I] & views[:, J])[..., None, None], F, 0.0)
+
+
+def _all_pairs_bounds(C, Cn, v, ok, radius, tolerances, f0, F2, views=None) -> tuple[np.ndarray, np.ndarray]:
+    """(Lagrangian lower bound (NaN: none), ok) with the epipolar constraints of all N(N - 1)/2 view pairs,
+    vectorised over the stack (:func:`sospoly.analysis.verify.verify_quadratic_batch`)."""
+    M, N = C.shape[:2]
+    F, defined, raw = _fundamental_both(Cn, C)
+    F, defined = np.where(raw[..., None, None], F, 0.0), defined & raw
+    ok = ok & np.any(defined, axis=1) if F.shape[1] else ok
+    g0, g1, G2 = epipolar_quadratics(_held(F, view_pairs(N), views), N)
+    finite = np.isfinite(g0).all(axis=1) & np.isfinite(g1).all(axis=(1, 2)) & np.isfinite(G2.vals).all(axis=1)
+    ok &= finite
+    g0, g1 = (np.where(ok.reshape((M,) + (1,) * (a.ndim - 1)), a, 0.0) for a in (g0, g1))
+    G2 = dataclasses.replace(G2, vals=np.where(ok[:, None], G2.vals, 0.0))
+    n = 2 * N
+    ver = verify_quadratic_batch(f0, np.zeros((M, n)), F2, g0, g1, G2, v, tolerances=tolerances, radius=radius)
+    return ver.lower_bound, ok
+
+
+def _band_bounds(C, Cn, v, ok, radius, width, tolerances, f0, F2, views=None) -> tuple[np.ndarray, np.ndarray]:
+    """(Lagrangian lower bound (NaN: none), usable) with the epipolar constraints of a band of view pairs only
+    (:func:`tritools.model.stacked.band_pairs` of that ``width``): a subset of Corollary 1's constraints, so
+    the bound stays a valid lower bound of the all-pairs program (fewer constraints enlarge the feasible set,
+    :mod:`sospoly.analysis.verify_sparse`), at O(N) cost per problem instead of O(N^3).  A problem with an
+    undefined band pair (coincident centres) or non-finite data is not usable here (the caller falls back to
+    all pairs)."""
+    M, N = C.shape[:2]
+    pairs = band_pairs(N, width)
+    F, defined, raw = _fundamental_both(Cn, C, pairs)
+    defined &= raw
+    g0, g1, G2 = epipolar_quadratics(_held(F, pairs, views), N, pairs)
+    use = ok & defined.all(axis=1) & np.isfinite(g0).all(axis=1) & np.isfinite(g1).all(axis=(1, 2)) \
+        & np.isfinite(G2.vals).all(axis=1)
+    g0, g1 = (np.where(use.reshape((M,) + (1,) * (a.ndim - 1)), a, 0.0) for a in (g0, g1))
+    G2 = dataclasses.replace(G2, vals=np.where(use[:, None], G2.vals, 0.0))
+    n = 2 * N
+    ver = verify_quadratic_banded_batch(f0, np.zeros((M, n)), F2, g0, g1, G2, v, tolerances=tolerances,
+                                        radius=radius)
+    lower = np.where(use, ver.lower_bound, np.nan)
+    return lower, use

@@ -11,7 +11,8 @@ With ``method="auto"`` (the default everywhere):
    triples) beside the dense degree-2 certificate, so it is never weaker than step 1 and its cost grows
    linearly with N (benchmarks/manyview.py: N = 30 mixed regions in ~40 s); when the views step does not
    certify and the dense Gram side is at most :data:`DENSE_FALLBACK_SIDE` (e.g. 5 views with point
-   regions, ~2 s), the dense certificate at the same degree follows (it contains the views one).
+   regions, ~2 s) or the problem has three views, the dense certificate at the same degree follows (it
+   contains the views one).  Two views, and Theorem 1 with three (one clique holds every view), stay dense.
 
 With an explicit method, the degrees run from ``delta`` (default delta_min) to ``max_delta`` (default
 ``delta`` when given, else delta_min + 2) with that method; ``sparsity`` ("none" / "views") forces
@@ -38,9 +39,14 @@ DENSE_FALLBACK_SIDE = 78
 
 @dataclass(frozen=True)
 class Step:
-    method: Method
+    method: Method            # the formulation's constraints (Corollary 1: epipolar; Theorem 1: minors)
     delta: int
     formulation: str          # "dense" or "views"
+    reported: Method | None = None   # the method a result of this step is reported under (default: ``method``)
+
+    @property
+    def result_method(self) -> Method:
+        return self.reported or self.method
 
 
 def _formulation(options: TriangulationOptions, method: Method, delta: int, n_views: int, n_vars: int) -> str:
@@ -48,8 +54,11 @@ def _formulation(options: TriangulationOptions, method: Method, delta: int, n_vi
         return "dense"
     if options.sparsity == Sparsity.VIEWS:
         return "views"
-    if n_views <= 3:
-        return "dense"                              # the views hold little less than the dense certificate
+    if n_views <= 2 or (n_views == 3 and method == Method.THEOREM1):
+        return "dense"                              # one clique holds every view: the views add nothing
+    # Corollary 1 with three views: the band's cliques are view pairs, and the size rule decides (measured,
+    # benchmarks/RESULTS.md "issue #22": mixed 16 px regions, dense 5.3 s and 16.9 s, views 0.6 s and 1.2 s,
+    # same certified values)
     if method == Method.THEOREM1 and n_views > THEOREM1_DENSE_MAX_VIEWS:
         return "views"
     return "dense" if sigma(n_vars, delta // 2) <= DENSE_MAX_SIDE else "views"
@@ -72,10 +81,16 @@ def degree_plan(options: TriangulationOptions, n_views: int, n_vars: int, delta_
     if last < first:
         raise ValueError(f"max_delta ({last}) is below delta ({first})")
     steps = []
+    if method == Method.THEOREM1 and options.delta is None and first > 2:
+        # Corollary 1's epipolar constraints are Theorem 1's two-view minors (up to a constant factor), so its
+        # degree-2 certificate is a Theorem 1 certificate at degree 2 (zero multipliers on the 3- and 4-view
+        # minors): tried first, in milliseconds, before the degree-4 programs
+        steps.append(Step(Method.COROLLARY1, 2, "dense", reported=Method.THEOREM1))
     for d in range(first, last + 1, 2):
         form = _formulation(options, method, d, n_views, n_vars)
         steps.append(Step(method, d, form))
-        if form == "views" and options.sparsity == Sparsity.AUTO and sigma(n_vars, d // 2) <= DENSE_FALLBACK_SIDE \
+        small = sigma(n_vars, d // 2) <= DENSE_FALLBACK_SIDE or n_views <= 3   # three views: dense as before
+        if form == "views" and options.sparsity == Sparsity.AUTO and small \
                 and not (method == Method.THEOREM1 and n_views > THEOREM1_DENSE_MAX_VIEWS):
             steps.append(Step(method, d, "dense"))
     return steps

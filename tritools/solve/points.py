@@ -26,7 +26,7 @@ from ..model.constraints import Method
 from ..model.regions import Point, real_array
 from ..result import Attempt, Status, TriangulationResult
 from .decide import cheirality
-from .fastpath import verify_points
+from .fastpath import BAND_MIN_VIEWS, BAND_WIDTHS, verify_points
 from .options import MethodChoice, SolvePath, TriangulationOptions, options_from
 from .report import points_report_stack
 from .sdp_batch import solve_corollary1_points
@@ -39,10 +39,19 @@ FAST_CHUNK = 4096
 FAST_CHUNK_BYTES = 256 * 2 ** 20
 
 
-def chunk_for(n_views: int) -> int:
-    """Problems per vectorised call for N views (memory ~ 8 (4 K n + 8 n^2) bytes each, K = N(N-1)/2, n = 2N)."""
-    K, n = n_views * (n_views - 1) // 2, 2 * n_views
+def chunk_for(n_views: int, n_pairs: int | None = None) -> int:
+    """Problems per vectorised call for N views (memory ~ 8 (4 K n + 8 n^2) bytes each, n = 2N, K the view pairs
+    whose constraints are held: all N(N-1)/2 by default)."""
+    K, n = n_views * (n_views - 1) // 2 if n_pairs is None else n_pairs, 2 * n_views
     return int(max(1, min(FAST_CHUNK, FAST_CHUNK_BYTES // (8 * (4 * K * n + 8 * n * n + 64)))))
+
+
+def verify_chunk_for(n_views: int) -> int:
+    """Problems per call of the verification: its band paths hold ~max(BAND_WIDTHS) N pairs (the all-pairs
+    fallback chunks itself, :func:`tritools.solve.fastpath.verify_checked`)."""
+    if n_views < BAND_MIN_VIEWS:
+        return chunk_for(n_views)
+    return chunk_for(n_views, max(BAND_WIDTHS) * n_views)
 
 
 def batch_steps(opts: TriangulationOptions) -> tuple[bool, bool]:
@@ -92,13 +101,15 @@ class PointStack:
     def run(self) -> PointStack:
         verify, sdp = batch_steps(self.opts)
         left = np.arange(self.M)
-        step = chunk_for(self.N)
+        step = verify_chunk_for(self.N) if verify else chunk_for(self.N)
+        sdp_step = chunk_for(self.N)
         for start in range(0, self.M, step):
             part = left[start:start + step]
             if verify:
                 part = self._timed(part, self._verify)
             if sdp and part.size:
-                part = self._timed(part, self._sdp)
+                part = np.concatenate([self._timed(part[k:k + sdp_step], self._sdp)
+                                       for k in range(0, part.size, sdp_step)]).astype(int)
             for m in part:
                 self.todo.setdefault(int(m), self.opts.replace(path="sdp") if verify else self.opts)
         self._report()

@@ -27,6 +27,7 @@
 from __future__ import annotations
 
 import dataclasses
+import functools
 import time
 
 import numpy as np
@@ -46,10 +47,11 @@ from ..model.problem import TriangulationProblem, build_problem, view_band, view
 from ..model.regions import Point, as_regions
 from ..result import Attempt, Status, TriangulationResult
 from .decide import cheirality, decide, decide_reported, gamma_from_c
-from .fastpath import verify_points
+from .discs import disc_radius, verify_discs
+from .fastpath import verify_checked
 from .options import SolvePath, TriangulationOptions, options_from
 from .plan import Step, degree_plan
-from .report import point_report, solve_ball, solve_radius
+from .report import point_report, points_report_stack, solve_ball, solve_radius
 from .structures import STRUCTURE_CACHE, structure_key
 
 __all__ = ["triangulate", "MAX_FAMILY_DIM", "INACCURATE_RESOLVE_MAX_SECONDS"]
@@ -103,13 +105,26 @@ class _PointSolve:
         self.deadline: Deadline = opts.budget.deadline()
         self.timings: dict = {}
         self.attempts: list[Attempt] = []
-        t = time.perf_counter()
-        self.norm: Normalization = normalization_for(cams, regions, enabled=opts.normalize)
-        self.cams_n = self.norm.cameras(cams)
-        self.regs_n = self.norm.regions(regions)
-        self.timings["normalise"] = time.perf_counter() - t
         self._problems: dict = {}
         self._relations = None
+
+    # ------------------------------------------------------------------ the normalised data (when needed)
+    @functools.cached_property
+    def norm(self) -> Normalization:
+        """The normalisation (:mod:`tritools.model.normalize`), computed on first use: a point certified by the
+        vectorised verification never needs it here (that path normalises inside its stack of one)."""
+        t = time.perf_counter()
+        norm = normalization_for(self.cams, self.regions, enabled=self.opts.normalize)
+        self.timings["normalise"] = self.timings.get("normalise", 0.0) + time.perf_counter() - t
+        return norm
+
+    @functools.cached_property
+    def cams_n(self) -> np.ndarray:
+        return self.norm.cameras(self.cams)
+
+    @functools.cached_property
+    def regs_n(self) -> list:
+        return self.norm.regions(self.regions)
 
     # ------------------------------------------------------------------ problems
     def problem(self, method: Method, formulation: str) -> TriangulationProblem:
@@ -164,7 +179,7 @@ class _PointSolve:
         return _replace(best, timings=dict(self.timings), attempts=tuple(self.attempts))
 
     def _method_name(self, steps) -> str:
-        return steps[0].method.value if steps else (self.opts.explicit_method or Method.COROLLARY1).value
+        return steps[0].result_method.value if steps else (self.opts.explicit_method or Method.COROLLARY1).value
 
     # ------------------------------------------------------------------ certification by verification
     def verify(self, step: Step) -> TriangulationResult | None:
@@ -175,13 +190,19 @@ class _PointSolve:
         t = time.perf_counter()
         res = None
         if step.method == Method.COROLLARY1 and all(isinstance(r, Point) for r in self.regions):
-            b = verify_points(self.cams[None], np.array([r.center for r in self.regions])[None],
-                              tolerances=self.opts.tolerances)
+            x = self._centres()[None]
+            b = verify_checked(self.cams[None], x, np.isfinite(x).all(axis=(1, 2)), self.opts.tolerances)
             if b.certified[0]:
+                res = self._report_verified_points(step, b)
+        elif step.method == Method.COROLLARY1 and all(disc_radius(r) is not None for r in self.regions):
+            b = verify_discs(self.cams[None], self._centres()[None],
+                             np.array([[disc_radius(r) for r in self.regions]]), tolerances=self.opts.tolerances)
+            if b.certified[0]:
+                n_vars = 4 * self.N
                 K = self.N * (self.N - 1) // 2
-                res = self._report(step, Status.OPTIMAL, True, b.gamma_lb[0], X=b.X[0], X_raw=b.X[0],
+                res = self._report(step, Status.OPTIMAL, True, float(b.gamma_lb[0]), X=b.X[0], X_raw=b.X[0],
                                    image_points=b.image_points[0], certified_by="verification",
-                                   n_lmivar=sospoly.n_lmivar_formula(2 * self.N, 2, [2] * K))
+                                   n_lmivar=sospoly.n_lmivar_formula(n_vars, 2, [2] * K, [2] * self.N))
         else:
             res = self._verify_generic(step)
         self.timings["verify"] = time.perf_counter() - t
@@ -189,6 +210,24 @@ class _PointSolve:
                                      None if res is None else res.gamma_lb, None if res is None else res.gamma_ub,
                                      "verification", "dense", (), time.perf_counter() - t))
         return res
+
+    def _report_verified_points(self, step: Step, b) -> TriangulationResult:
+        """The result of a point problem certified by :func:`~tritools.solve.fastpath.verify_points` (a stack of
+        one): that function already decided the certificate on the reported numbers (gamma_LB <= gamma(X) in
+        pixels), so only the residuals, depths and cheirality are added (vectorised, no second decision)."""
+        X = b.X[0]
+        gamma, res, dep = points_report_stack(self.cams[None], self._centres()[None], X[None])
+        status, in_front = cheirality(Status.OPTIMAL, dep[0], self.opts.require_in_front)
+        K = self.N * (self.N - 1) // 2
+        return TriangulationResult(step.result_method.value, status, X=X, gamma_ub=float(gamma[0]),
+                                   gamma_lb=float(min(b.gamma_lb[0], gamma[0])), optimal=True, delta=2,
+                                   n_lmivar=sospoly.n_lmivar_formula(2 * self.N, 2, [2] * K),
+                                   image_points=b.image_points[0], X_raw=X, gamma_ub_raw=float(gamma[0]),
+                                   certified_by="verification", message="" if in_front else behind_message(dep[0]),
+                                   sparsity="dense", in_front=in_front, depths=dep[0], residuals=res[0])
+
+    def _centres(self) -> np.ndarray:
+        return np.array([r.center for r in self.regions], float)
 
     def _verify_generic(self, step: Step) -> TriangulationResult | None:
         problem = self.problem(step.method, "dense")
@@ -223,7 +262,7 @@ class _PointSolve:
         tol = dataclasses.replace(tol, accept_inaccurate=True)     # made rigorous in _finish
         label = "tight" if tight else "sdp"
         sparsity = "dense" if step.formulation == "dense" else "views"
-        common = dict(method=step.method.value, delta=step.delta, sparsity=sparsity)
+        common = dict(method=step.result_method.value, delta=step.delta, sparsity=sparsity)
         t = time.perf_counter()
         try:
             return self._solve_step(step, tol, label, common, t)
@@ -322,7 +361,7 @@ class _PointSolve:
             if iterate:
                 return self._unsolved(step, lb)
             lb_g = gamma_from_c(c, self.N, self.norm.scale)
-            return TriangulationResult(step.method.value, Status.ILL_POSED, gamma_lb=lb_g, optimal=False,
+            return TriangulationResult(step.result_method.value, Status.ILL_POSED, gamma_lb=lb_g, optimal=False,
                                        message="every extracted candidate has w4 ~ 0 (ill-posed: e.g. equal cameras)")
         g_raw_n, X_raw_n, x_star_n = best
         g_n, X_n = g_raw_n, X_raw_n
@@ -354,7 +393,7 @@ class _PointSolve:
     def _unsolved(step: Step, lb) -> TriangulationResult:
         status = {SolveStatus.TIME_LIMIT: Status.TIME_LIMIT, SolveStatus.BUDGET_EXCEEDED: Status.BUDGET_EXCEEDED}\
             .get(lb.status, Status.SOLVER_FAILED)
-        return TriangulationResult(step.method.value, status,
+        return TriangulationResult(step.result_method.value, status,
                                    message=f"SDP at delta={step.delta}: {lb.status.value} {lb.message}".strip())
 
     def _estimate(self, problem: TriangulationProblem, psatz, sol):
@@ -406,9 +445,8 @@ class _PointSolve:
             msg = "the estimate's projection is undefined in some view (a point at a camera centre)"
         status, in_front = cheirality(status, rep.depths, self.opts.require_in_front)
         if optimal and not in_front:
-            msg = "certified L2 optimum, but behind camera(s) " + \
-                ", ".join(str(i) for i in np.nonzero(~(rep.depths > 0))[0])
-        return TriangulationResult(step.method.value, status, X=X, gamma_ub=rep.gamma, gamma_lb=gamma_lb,
+            msg = behind_message(rep.depths)
+        return TriangulationResult(step.result_method.value, status, X=X, gamma_ub=rep.gamma, gamma_lb=gamma_lb,
                                    optimal=optimal, delta=step.delta, n_lmivar=n_lmivar, image_points=image_points,
                                    X_raw=X_raw, gamma_ub_raw=raw.gamma, certified_by=certified_by if optimal else None,
                                    message=msg, sparsity="dense" if step.formulation == "dense" else "views",
@@ -418,7 +456,14 @@ class _PointSolve:
         sparsity = "dense" if step.formulation == "dense" else "views"
         self.attempts.append(Attempt(step.method.value, step.delta, status.value, None, None, label, sparsity, (),
                                      time.perf_counter() - t))
-        return TriangulationResult(step.method.value, status, delta=step.delta, message=message, sparsity=sparsity)
+        return TriangulationResult(step.result_method.value, status, delta=step.delta, message=message,
+                                   sparsity=sparsity)
+
+
+def behind_message(depths) -> str:
+    """The message of a certified optimum behind some camera(s): which ones."""
+    return "certified L2 optimum, but behind camera(s) " + \
+        ", ".join(str(i) for i in np.nonzero(~(np.asarray(depths, float) > 0))[0])
 
 
 def _replace(res: TriangulationResult, **kw) -> TriangulationResult:

@@ -1,0 +1,226 @@
+"""Certification by verification for disc regions (uncertain keypoints), vectorised over a stack.
+
+A disc region of radius rho around the keypoint c (:class:`~tritools.model.regions.Ellipse` with D = rho^2 I)
+has, in the Corollary 1 program (SPEC §2, §7), variables x_i (the image point) and y_i (the region point),
+f = sum_i ||x_i - y_i||^2, the epipolar constraints g_ij(x) = 0 and h_i(y) = 1 - ||y_i - c_i||^2 / rho_i^2 >= 0.
+In the normalised frame (:mod:`tritools.model.normalize`, centres at the origin, radii rho_i' = s rho_i):
+
+* the local optimum: Levenberg-Marquardt on the distances to the discs, e_i = u_i max(0, 1 - rho_i / |u_i|)
+  with u_i = Phi(X, P_i) (:func:`refine_discs_stack`), from the point solution; y_i^ the closest disc point;
+* the degree-2 certificate with constant multipliers (the weak Positivstellensatz at delta = 2, SPEC §5):
+  L(x, y) = f + lambda^T g(x) - mu^T h(y) with mu >= 0 gives min L <= min {f : g = 0, h >= 0} (on that set
+  -mu^T h <= 0).  The KKT conditions in y give mu_i = rho_i' (|x_i| - rho_i') for a view outside its disc,
+  0 inside; for fixed x, L is a convex quadratic in y whose minimum is exact (Schur complement):
+
+      min_y L(x, y) = -sum_i mu_i + sum_i kappa_i |x_i|^2 + lambda^T g(x),  kappa_i = mu_i / (rho_i'^2 + mu_i),
+
+  (kappa_i = 1 - rho_i' / |x_i| at the candidate), i.e. the point-region bound of
+  :func:`tritools.solve.fastpath.lagrangian_bounds` with weights kappa (rounded down, so the reduced
+  Lagrangian is never above the exact one) and constant -sum mu.  Views inside their disc (kappa = 0) keep no
+  epipolar constraint (dropped: a weaker, valid bound; at a local optimum their constraints are inactive);
+* the decision of every path (:func:`tritools.solve.decide.decide`), in c = 2N gamma^2 units, and again on the
+  numbers reported in pixels.
+
+Problems it does not certify go to :func:`tritools.triangulate` (the SDP).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from sospoly import DEFAULT_TOLERANCES, Tolerances
+from sospoly.solvers.blas import with_single_threaded_blas
+
+from ..model.normalize import normalization_stack
+from ..model.regions import Ellipse
+from ..model.stacked import LM_MAX_ITER, LM_STEP_RTOL, project_stack
+from .decide import decide, decide_reported, gamma_from_c
+from .fastpath import lagrangian_bounds
+
+__all__ = ["DiscBatch", "disc_radius", "verify_discs", "refine_discs_stack"]
+
+_ROUND_DOWN = 1 - 8 * np.finfo(float).eps
+
+
+def disc_radius(region) -> float | None:
+    """rho when ``region`` is a filled disc (an :class:`Ellipse` with D = rho^2 I exactly), else None."""
+    if type(region) is not Ellipse:
+        return None
+    D = region.D
+    if D[0, 1] != 0 or D[1, 0] != 0 or D[0, 0] != D[1, 1]:
+        return None
+    return float(np.sqrt(D[0, 0]))
+
+
+@dataclass(frozen=True)
+class DiscBatch:
+    """Per-problem arrays of :func:`verify_discs` (first axis = problem): as
+    :class:`~tritools.solve.fastpath.FastPathBatch`; ``image_points`` are the projections of X (pixels)."""
+    certified: np.ndarray
+    ok: np.ndarray
+    X: np.ndarray
+    gamma_lb: np.ndarray
+    gamma_ub: np.ndarray
+    image_points: np.ndarray
+    residuals: np.ndarray
+
+
+def _disc_residual(u: np.ndarray, rho: np.ndarray):
+    """(e, |u|, outside) with e = u - (closest point of the disc of radius rho at the origin)."""
+    r = np.linalg.norm(u, axis=-1)
+    outside = r > rho
+    k = np.where(outside, 1.0 - rho / np.where(outside, r, 1.0), 0.0)
+    return u * k[..., None], r, outside
+
+
+def refine_discs_stack(C: np.ndarray, rho: np.ndarray, X: np.ndarray, ok: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Levenberg-Marquardt on sum_i dist(Phi(X, P_i), disc_i)^2 (discs of radii rho (M, N) at the origin) from
+    X (M, 3), for the problems where ``ok`` (the twin of :func:`tritools.model.stacked.refine_points_stack`)."""
+    X = X.copy()
+    M = len(X)
+    mu = np.full(M, 1e-3)
+
+    def cost_of(Xc, Cc, rc):
+        u, h, fin = project_stack(Cc, Xc)
+        e = _disc_residual(u, rc)[0]
+        return np.where(fin, np.sum(e ** 2, axis=(1, 2)), np.inf), u, h
+
+    cost, _, _ = cost_of(X, C, rho)
+    ok = ok & np.isfinite(cost)
+    active = np.nonzero(ok)[0]
+    eye2, eye3 = np.eye(2), np.eye(3)
+    for _ in range(LM_MAX_ITER):
+        if active.size == 0:
+            break
+        Ca, ra, Xa = C[active], rho[active], X[active]
+        u, h, _ = project_stack(Ca, Xa)
+        e, r, out = _disc_residual(u, ra)
+        # d e / d u = (1 - rho/|u|) I + rho u u^T / |u|^3 outside the disc, 0 inside
+        rs = np.where(out, r, 1.0)
+        De = np.where(out[..., None, None], (1 - ra / rs)[..., None, None] * eye2
+                      + (ra / rs ** 3)[..., None, None] * u[..., :, None] * u[..., None, :], 0.0)
+        Ju = (Ca[..., :2, :3] - u[..., None] * Ca[..., 2:3, :3]) / h[..., 2][..., None, None]
+        # Gauss-Newton on the distance: d^2/du^2 (|u| - rho)^2 / 2 = De (not De^2, which underweights the
+        # tangential direction by (1 - rho/|u|)^2 and converges only linearly), gradient Ju^T e
+        JtJ = np.einsum("mnai,mnab,mnbj->mij", Ju, De, Ju)
+        g = np.einsum("mnai,mna->mi", Ju, e)
+        A = JtJ + mu[active, None, None] * eye3 * (1.0 + np.trace(JtJ, axis1=1, axis2=2))[:, None, None] / 3
+        try:
+            step = -np.linalg.solve(A, g[..., None])[..., 0]
+        except np.linalg.LinAlgError:
+            step = -np.einsum("mij,mj->mi", np.linalg.pinv(A), g)
+        Xt = Xa + step
+        ct = cost_of(Xt, Ca, ra)[0]
+        better = np.isfinite(ct) & (ct <= cost[active])
+        X[active[better]] = Xt[better]
+        cost[active[better]] = ct[better]
+        mu[active] = np.where(better, np.maximum(mu[active] / 10, 1e-12), mu[active] * 10)
+        small = np.linalg.norm(step, axis=1) <= LM_STEP_RTOL * (1.0 + np.linalg.norm(Xa, axis=1))
+        done = (better & small) | (mu[active] > 1e12) | (cost[active] == 0)
+        active = active[~done]
+    return X, ok & np.all(np.isfinite(X), axis=1)
+
+
+@with_single_threaded_blas
+def verify_discs(cameras, centers, radii, *, tolerances: Tolerances = DEFAULT_TOLERANCES) -> DiscBatch:
+    """Vectorised certification by verification of M disc-region problems with N views each (module docstring):
+    cameras (M, N, 3, 4), disc centres (M, N, 2) and radii (M, N) in pixels, validated by the caller."""
+    C = np.asarray(cameras, float)
+    x = np.asarray(centers, float)
+    rho = np.asarray(radii, float)
+    M, N = x.shape[:2]
+    ok = np.all(np.isfinite(x), axis=(1, 2)) & np.all(np.isfinite(rho) & (rho > 0), axis=1)
+    norm = normalization_stack(C, x, ok)
+    ok &= norm.ok
+    Cn = norm.cameras_n
+    rho_n = rho * norm.scale[:, None]
+    Xn, ok = refine_discs_stack(Cn, rho_n, norm.Xn, ok)
+    u, _, fin = project_stack(Cn, Xn)
+    ok &= fin
+    u = np.where(ok[:, None, None], u, 0.0)
+    _, r, outside = _disc_residual(u, rho_n)
+    mu = np.where(outside, rho_n * (r - rho_n), 0.0)
+    kappa = np.where(outside, mu / (rho_n ** 2 + mu), 0.0) * _ROUND_DOWN
+    weights = np.repeat(kappa, 2, axis=1)                    # per coordinate of v = (x_11, x_12, ..., x_N2)
+    v = u.reshape(M, -1)
+    # a minimiser has |x_i| <= rho_i + |x_i - y_i|, so |x| <= |rho| + sqrt(f(v^)) (the rigorous margin's ball)
+    upper_f = np.sum(np.where(outside, (r - rho_n) ** 2, 0.0), axis=1)
+    radius = np.linalg.norm(rho_n, axis=1) + np.sqrt(upper_f)
+    lower, _, ok = lagrangian_bounds(C, Cn, v, ok, radius, norm.resolution, tolerances, f0=-np.sum(mu, axis=1),
+                                     weights=weights, views=outside)
+    status, optimal, c_lower = decide(lower, upper_f, tolerances, N, norm.resolution)
+    X = norm.world_points(Xn)
+    uw, _, fin_w = project_stack(C, X)
+    ok &= fin_w
+    dist = np.maximum(0.0, np.linalg.norm(uw - x, axis=2) - rho)
+    gamma_ub = np.where(fin_w, np.sqrt(np.sum(dist ** 2, axis=1) / (2 * N)), np.inf)
+    gamma_lb = np.minimum(gamma_from_c(np.maximum(c_lower, 0.0), N, norm.scale), gamma_ub)
+    certified = ok & optimal & decide_reported(gamma_lb, gamma_ub, tolerances, N, norm.scale, norm.resolution)
+    return DiscBatch(certified, ok, X, gamma_lb, gamma_ub, uw, dist)
+
+
+def as_disc_problem(cams, regions):
+    """(cameras (N, 3, 4) float, centres (N, 2), radii (N,)) when every region is a disc and the cameras are a
+    numeric (N, 3, 4) array, else None (the item then goes through :func:`tritools.triangulate`)."""
+    if not isinstance(regions, (list, tuple)) or len(regions) < 2:
+        return None
+    radii = [disc_radius(r) for r in regions]
+    if any(r is None for r in radii):
+        return None
+    try:
+        C = np.asarray(cams)
+        if not np.issubdtype(C.dtype, np.number) or np.iscomplexobj(C):
+            return None
+        C = C.astype(float)
+    except (TypeError, ValueError):
+        return None
+    if C.shape != (len(regions), 3, 4):
+        return None
+    return C, np.array([r.center for r in regions]), np.array(radii)
+
+
+def solve_disc_group(group, opts):
+    """Disc problems of one N (``group``: [(index, cameras, centres, radii, regions)]) through
+    :func:`verify_discs`: ({index: certified result}, [(index, cameras, regions, options, prefix)] for the
+    per-point path, which continues with the SDP)."""
+    import time
+
+    from ..model.cameras import camera_problems, depths_stack
+    from ..model.constraints import Method
+    from ..result import Attempt, Status, TriangulationResult
+    from .decide import cheirality
+
+    t0 = time.perf_counter()
+    C = np.array([g[1] for g in group])
+    x = np.array([g[2] for g in group])
+    rho = np.array([g[3] for g in group])
+    valid = camera_problems(C).valid
+    C = np.where(valid[:, None, None, None], C, np.eye(3, 4))
+    b = verify_discs(C, x, rho, tolerances=opts.tolerances)
+    cert = b.certified & valid
+    dep = depths_stack(C, b.X)
+    status, in_front = cheirality(np.where(cert, Status.OPTIMAL.value, None), dep, opts.require_in_front)
+    share = (time.perf_counter() - t0) / max(1, len(group))
+    N = C.shape[1]
+    n_lmivar = None
+    done, rest = {}, []
+    for k, (i, cams, _, _, regions) in enumerate(group):
+        if not cert[k]:
+            rest.append((i, cams, regions, opts.replace(path="sdp"),
+                         (Attempt("corollary1", 2, "verification_failed", None, None, "verification", "dense"),)))
+            continue
+        if n_lmivar is None:
+            from sospoly import n_lmivar_formula
+
+            n_lmivar = n_lmivar_formula(4 * N, 2, [2] * (N * (N - 1) // 2), [2] * N)
+        g_ub = float(b.gamma_ub[k])
+        msg = "" if in_front[k] else "certified L2 optimum, but behind camera(s) " + \
+            ", ".join(str(j) for j in np.nonzero(~(dep[k] > 0))[0])
+        done[i] = TriangulationResult(
+            Method.COROLLARY1.value, Status(status[k]), X=b.X[k], gamma_ub=g_ub, gamma_lb=float(b.gamma_lb[k]),
+            optimal=True, delta=2, n_lmivar=n_lmivar, image_points=b.image_points[k], X_raw=b.X[k], gamma_ub_raw=g_ub,
+            certified_by="verification", message=msg, timings={"batch_share": share},
+            attempts=(Attempt("corollary1", 2, "verified", float(b.gamma_lb[k]), g_ub, "verification", "dense"),),
+            sparsity="dense", in_front=bool(in_front[k]), depths=dep[k], residuals=b.residuals[k])
+    return done, rest

@@ -2,8 +2,12 @@
 
 :mod:`.sets` (the per-view set as conic constraints), :mod:`.solve` (stacked bound problems),
 :mod:`.rigour` (rigorous bounds from dual multipliers), :mod:`.api` (``uncertainty``,
-``uncertainty_many``), :mod:`.angle` (triangulation angles).
+``uncertainty_many``), :mod:`.discs` (array entry for disc regions), :mod:`.angle`
+(triangulation angles).
 """
+from .angle import triangulation_angle, triangulation_angles
 from .api import UncertaintyOptions, UncertaintyResult, UncertaintyStatus, uncertainty, uncertainty_many
+from .discs import uncertainty_discs
 
-__all__ = ["UncertaintyOptions", "UncertaintyResult", "UncertaintyStatus", "uncertainty", "uncertainty_many"]
+__all__ = ["UncertaintyOptions", "UncertaintyResult", "UncertaintyStatus", "uncertainty", "uncertainty_many",
+           "uncertainty_discs", "triangulation_angle", "triangulation_angles"]

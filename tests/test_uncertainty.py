@@ -5,7 +5,7 @@ import pytest
 
 import tritools
 from tritools.model.geometry import image_points
-from tritools.uncertainty import UncertaintyStatus, uncertainty, uncertainty_many
+from tritools import UncertaintyStatus, uncertainty, uncertainty_many
 
 
 def look_at(C, target=(0.0, 0.0, 0.0), f=800.0, pp=(320.0, 240.0)):

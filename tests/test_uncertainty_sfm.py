@@ -12,7 +12,7 @@ from tritools.io.export import read_npz, read_ply
 from tritools.sfm.pipeline import OptionError, prepare_geometry
 from tritools.sfm.quality import QUALITY_FILE, QualityOptions, drop_points, point_quality
 from tritools.sfm.synthetic import synthetic_arrays
-from tritools.uncertainty import triangulation_angle
+from tritools.uncertain import triangulation_angle
 
 
 def bounded_noise_model(R, seed=0, n_points=400, n_images=12):

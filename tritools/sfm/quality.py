@@ -4,7 +4,7 @@ For every point of a model (cameras and poses fixed, keypoints undistorted as in
 :mod:`.pipeline`):
 
 * ``angle_deg``: the largest angle between two of its usable viewing rays
-  (:func:`tritools.uncertainty.triangulation_angles`);
+  (:func:`tritools.uncertain.triangulation_angles`);
 * with a keypoint radius R (pixels, undistorted): the certified uncertainty of the point
   (docs/uncertainty.md): the set S of scene points whose projection lies within R of every
   observed keypoint and in front of the cameras -- ``radius`` bounds ``||X - xyz||`` over S
@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from ..io.colmap.arrays import ModelArrays
-from ..uncertainty import UncertaintyOptions, triangulation_angles, uncertainty_discs
+from ..uncertain import UncertaintyOptions, triangulation_angles, uncertainty_discs
 from .pipeline import ModelGeometry, OptionError
 
 __all__ = ["QualityOptions", "PointQuality", "point_quality", "drop_points", "write_quality", "apply_quality_folder",
@@ -82,7 +82,7 @@ class QualityOptions:
 @dataclass(frozen=True, eq=False)
 class PointQuality:
     """Per-point arrays (in the arrays' point order); ``status`` a string per point ("" without
-    a keypoint radius, else an :class:`tritools.uncertainty.UncertaintyStatus` value, "too_few_views")."""
+    a keypoint radius, else an :class:`tritools.UncertaintyStatus` value, "too_few_views")."""
     point_ids: np.ndarray
     n_views: np.ndarray
     angle_deg: np.ndarray

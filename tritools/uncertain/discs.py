@@ -1,6 +1,6 @@
 """Array entry for disc regions (uncertain keypoints): no Region objects, one stacked solve.
 
-``uncertainty_discs(cameras, centres, radii, estimates)`` is :func:`tritools.uncertainty.uncertainty_many`
+``uncertainty_discs(cameras, centres, radii, estimates)`` is :func:`tritools.uncertainty_many`
 for regions ``Ellipse.circle(centres[m, i], radii[m, i])`` (``D = r^2 I``), built directly as stacked
 :class:`~.sets.ViewBlock` arrays -- the SfM path (``tritools colmap --keypoint-radius``) calls it
 for every track length.

@@ -1,6 +1,6 @@
 """Rigorous outer bounds from dual multipliers (docs/uncertainty.md, "Rigour").
 
-Every dual point of a bound problem gives, through :func:`tritools.uncertainty.sets.view_coefficients`,
+Every dual point of a bound problem gives, through :func:`tritools.uncertain.sets.view_coefficients`,
 coefficients ``gamma_i`` with ``sum_i gamma_i . r_i X~ >= 0`` for every X of S (the ``r_i`` the exact
 signed camera rows).  With ``xi = X - X0`` this is ``a' xi + b >= 0``, and the floats ``a^, b^``
 computed here satisfy ``|a - a^| <= ae``, ``|b - b^| <= be`` componentwise (standard bounds

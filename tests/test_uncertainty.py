@@ -245,8 +245,10 @@ def test_bad_input():
         uncertainty(np.zeros((2, 3, 4)), regions)
     with pytest.raises(TypeError, match="options"):
         uncertainty(cams, regions, options={"dilation": 1})
-    with pytest.raises(NotImplementedError, match="level"):
-        uncertainty(cams, regions, level=1.0)
+    with pytest.raises(ValueError, match="level"):
+        uncertainty(cams, regions, level=-1.0)
+    with pytest.raises(ValueError, match="dilation"):
+        uncertainty(cams, regions, level=1.0, dilation=1.0)
     with pytest.raises(ValueError, match="one entry per point"):
         uncertainty_many([cams], [regions, regions])
 
@@ -271,3 +273,24 @@ def test_bounded_noise_coverage_batch():
     for r, c, X in zip(res, cams_list, Xs):
         assert r.status == UncertaintyStatus.BOUNDED
         check_covers(r, X, c)
+
+
+def test_level_set_relaxation_contains_the_level_set():
+    """Points with gamma <= tau (sampled around the L2 optimum) lie in the level-set bounds; witnesses kept
+    satisfy gamma <= tau."""
+    rng = np.random.default_rng(17)
+    cams, X = scene(rng, n_views=3)
+    x = image_points(X, cams) + rng.uniform(-0.5, 0.5, (3, 2))
+    regions = [tritools.Point(p) for p in x]
+    tau = 1.0
+    res = uncertainty(cams, regions, level=tau)
+    assert res.definition == "level_relaxed" and res.status == UncertaintyStatus.BOUNDED
+    P = X + rng.uniform(-1, 1, size=(20000, 3)) * (res.hi - res.lo)
+    g = tritools.gamma(P, cams, regions)
+    inside = P[g <= tau]
+    assert len(inside) > 10
+    for p in inside:
+        check_covers(res, p, cams)
+    for W in (res.witness_lo, res.witness_hi):
+        for w in W[np.all(np.isfinite(W), axis=1)]:
+            assert tritools.gamma(w, cams, regions) <= tau

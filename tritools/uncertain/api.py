@@ -137,8 +137,12 @@ def _scale(R, blocks, X0, depth_rows) -> np.ndarray:
     dep = np.abs(np.einsum("mnj,mj->mn", depth_rows[..., :3], X0) + depth_rows[..., 3])
     Xh = np.concatenate([X0, np.ones((len(X0), 1))], axis=1)
     h = np.einsum("mnij,mj->mni", R, Xh)
-    J = (R[..., :2, :3] - (h[..., :2] / h[..., 2:3])[..., None] * R[..., 2:3, :3]) / h[..., 2:3, None]
-    gain = np.linalg.norm(J, axis=(2, 3), ord=2)                      # px per world unit
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        J = (R[..., :2, :3] - (h[..., :2] / h[..., 2:3])[..., None] * R[..., 2:3, :3]) / h[..., 2:3, None]
+    good = np.all(np.isfinite(J), axis=(2, 3))
+    gain = np.zeros(good.shape)
+    if np.any(good):
+        gain[good] = np.linalg.norm(J[good], axis=(1, 2), ord=2)         # px per world unit
     rad = np.zeros(dep.shape)
     for i, b in enumerate(blocks):
         if b.kind == "ellipse":
@@ -150,7 +154,11 @@ def _scale(R, blocks, X0, depth_rows) -> np.ndarray:
     with np.errstate(divide="ignore", invalid="ignore"):
         lat = np.where((rad > 0) & (gain > 0), rad / gain, np.inf)
     sigma = lat.min(axis=1)
-    fallback = 1e-6 * np.maximum(dep.mean(axis=1), 1e-300)
+    w = np.linalg.svd(R.reshape(-1, 3, 4))[2][:, -1].reshape(R.shape[0], R.shape[1], 4)   # camera centres
+    with np.errstate(divide="ignore", invalid="ignore"):
+        far = np.linalg.norm(w[..., :3] / w[..., 3:] - X0[:, None, :], axis=2)
+    far = np.where(np.isfinite(far), far, 0.0).max(axis=1)
+    fallback = 1e-6 * np.maximum(np.maximum(dep.mean(axis=1), far), 1e-300)
     sigma = np.where(np.isfinite(sigma) & (sigma > 0), sigma, fallback)
     return np.where(np.isfinite(sigma) & (sigma > 0), sigma, 1.0)
 

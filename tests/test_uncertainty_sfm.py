@@ -128,3 +128,29 @@ def test_cli_bad_quality_flags(tmp_path, capsys, flags, expect):
     assert rc == 2
     assert expect in err and len(err.strip().splitlines()) == 1
     assert not (tmp_path / "out").exists()
+
+
+def _bench():
+    import importlib.util
+    import pathlib
+
+    path = pathlib.Path(__file__).resolve().parents[1] / "benchmarks" / "uncertainty.py"
+    spec = importlib.util.spec_from_file_location("bench_uncertainty", path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def test_benchmark_script_small(capsys):
+    total = _bench().main(["--points", "150", "--oxford-tracks", "0", "--colmap-points", "300"])
+    out = capsys.readouterr().out
+    assert total["misses"] == 0 and total["points"] == 150
+    assert "coverage 100.0000% (0 misses)" in out and "SfM path" in out
+
+
+@pytest.mark.slow
+def test_bounded_noise_coverage_many_points():
+    """6000 bounded-noise points over 2-4 views with angles from 0.01 to 40 degrees: no true point
+    outside its certified box or radius (the benchmark runs 10,000)."""
+    total = _bench().main(["--points", "6000", "--oxford-tracks", "0", "--colmap-points", "0", "--seed", "7"])
+    assert total["points"] == 6000 and total["misses"] == 0

@@ -294,3 +294,24 @@ def test_level_set_relaxation_contains_the_level_set():
     for W in (res.witness_lo, res.witness_hi):
         for w in W[np.all(np.isfinite(W), axis=1)]:
             assert tritools.gamma(w, cams, regions) <= tau
+
+
+def test_exact_points_with_roundoff_widening_hold_the_point():
+    rng = np.random.default_rng(41)
+    opts = tritools.UncertaintyOptions(widen_roundoff=True)
+    for f, offset in ((800.0, (0.0, 0.0, 0.0)), (1e6, (4.2e6, -1.3e6, 3e2))):
+        for _ in range(5):
+            cams, X = scene(rng, n_views=int(rng.integers(2, 5)), f=f, offset=offset)
+            res = uncertainty(cams, [tritools.Point(x) for x in image_points(X, cams)], options=opts)
+            assert res.status == UncertaintyStatus.BOUNDED
+            assert np.all(res.lo <= X) and np.all(X <= res.hi)
+
+
+def test_noisy_points_are_empty_and_small_dilation_recovers():
+    rng = np.random.default_rng(43)
+    for _ in range(10):
+        cams, X = scene(rng, n_views=int(rng.integers(2, 4)))
+        noisy = [tritools.Point(p + rng.uniform(-0.5, 0.5, 2)) for p in image_points(X, cams)]
+        assert uncertainty(cams, noisy).status == UncertaintyStatus.EMPTY
+        res = uncertainty(cams, noisy, dilation=0.75)
+        assert res.status == UncertaintyStatus.BOUNDED and np.all(res.lo <= X) and np.all(X <= res.hi)

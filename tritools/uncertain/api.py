@@ -18,7 +18,7 @@ from sospoly.solvers.stacked_conic import BlockStatus, StackedConicOptions
 
 from ..model.cameras import _depth_rows, power2_scale
 from ..model.geometry import validate_cameras
-from ..model.regions import EllipseBorder, Ellipse, as_regions
+from ..model.regions import Ellipse, EllipseBorder, Point, Segment, as_regions
 from .rigour import box_from_bounds, combine, lower_bounds, round_down, round_up
 from .sets import EPS, contains, dilate, structure_key, view_blocks, view_coefficients
 from .solve import objective_rows, solve_blocks
@@ -43,15 +43,21 @@ class UncertaintyOptions:
     :class:`sospoly.solvers.stacked_conic.StackedConicOptions`; ``witness_rtol``: relative slack of
     the feasibility test of witnesses in views without interior (points, segments); ``depth_bounds``:
     solve the 2N depth bound problems (True) or bound the depths over the certified box (False:
-    rigorous, looser, about (6 + 2N) / 6 times faster)."""
+    rigorous, looser, about (6 + 2N) / 6 times faster); ``widen_roundoff``: points and segments not
+    otherwise dilated are widened by the round-off of a computed projection (16 eps relative, see
+    :func:`_roundoff_radii`), so exact data give a tiny set holding the point instead of an empty or
+    degenerate one.  Off by default: such razor-thin cones are below the solver's resolution, and
+    emptiness of noisy points is then no longer detected reliably -- dilate noisy points instead."""
     dilation: float | tuple = 0.0
     solver: StackedConicOptions = field(default_factory=StackedConicOptions)
     witness_rtol: float = 1e-9
     depth_bounds: bool = True
+    widen_roundoff: bool = False
 
     def __post_init__(self) -> None:
-        if not isinstance(self.depth_bounds, (bool, np.bool_)):
-            raise TypeError(f"depth_bounds must be True or False, got {self.depth_bounds!r}")
+        for name in ("depth_bounds", "widen_roundoff"):
+            if not isinstance(getattr(self, name), (bool, np.bool_)):
+                raise TypeError(f"{name} must be True or False, got {getattr(self, name)!r}")
         d = np.atleast_1d(np.asarray(self.dilation, dtype=float)) if not isinstance(self.dilation, str) else None
         if d is None or d.ndim != 1 or not np.all(np.isfinite(d)) or np.any(d < 0):
             raise ValueError(f"dilation must be a finite number >= 0 or one per view, got {self.dilation!r}")
@@ -109,7 +115,7 @@ class UncertaintyResult:
 
 
 # ----------------------------------------------------------------------------- preparation
-def _prepare(cameras, regions, dilation):
+def _prepare(cameras, regions, dilation, widen=True):
     C = validate_cameras(cameras, min_views=1, require_distinct=False)
     regs = as_regions(regions, len(C))
     d = np.atleast_1d(np.asarray(dilation, float))
@@ -118,8 +124,27 @@ def _prepare(cameras, regions, dilation):
     if len(d) != len(C):
         raise ValueError(f"dilation must be a number or have one entry per view ({len(C)}), got {len(d)}")
     convexified = any(isinstance(r, EllipseBorder) and not isinstance(r, Ellipse) for r in regs)
+    thin = [isinstance(r, (Point, Segment)) and di == 0 for r, di in zip(regs, d)]
+    if widen and any(thin):
+        d = np.where(thin, _roundoff_radii(C, regs), d)
     regs = tuple(dilate(r, float(di)) for r, di in zip(regs, d))
     return C, regs, convexified
+
+
+def _roundoff_radii(C, regs) -> np.ndarray:
+    """Per view, 16 times the round-off of a computed projection near the DLT point of the region
+    centres, ``eps (|p1||X~| + |p2||X~| + (|x1| + |x2|) |p3||X~|) / |p3 X~|`` (pixels): points and
+    segments are widened by it, so that a scene point whose *computed* projection is on the region
+    belongs to S (without it, exact-looking data give an empty set in exact arithmetic)."""
+    X0 = _estimates(C[None], [regs])[0]
+    Xh = np.append(X0, 1.0)
+    h = C @ Xh
+    a = np.abs(C) @ np.abs(Xh)
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        x = np.abs(h[:, :2] / h[:, 2:3]).sum(axis=1)
+        e = 16 * EPS * (a[:, 0] + a[:, 1] + x * a[:, 2]) / np.abs(h[:, 2])
+    scale = np.array([1.0 + float(np.max(np.abs(r.center))) for r in regs])
+    return np.where(np.isfinite(e) & (e > 0), np.maximum(e, 16 * EPS * scale), 16 * EPS * scale)
 
 
 def _signed(C: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -410,7 +435,7 @@ def uncertainty(cameras, regions, *, level=None, estimate=None, options: Uncerta
     """
     opts = _options(options, dilation)
     if level is None:
-        C, regs, conv = _prepare(cameras, regions, opts.dilation)
+        C, regs, conv = _prepare(cameras, regions, opts.dilation, opts.widen_roundoff)
         Xe = _estimate_arg(estimate, C[None], [regs])
         return _group(C[None], [regs], Xe, Xe, conv, opts)[0]
     return _level_relaxation(cameras, regions, level, estimate, opts)
@@ -459,7 +484,7 @@ def uncertainty_many(cameras, regions, *, estimates=None, options: UncertaintyOp
     opts = _options(options, dilation)
     if len(cameras) != len(regions):
         raise ValueError(f"cameras and regions must have one entry per point, got {len(cameras)} and {len(regions)}")
-    prepared = [_prepare(c, r, opts.dilation) for c, r in zip(cameras, regions)]
+    prepared = [_prepare(c, r, opts.dilation, opts.widen_roundoff) for c, r in zip(cameras, regions)]
     E = None
     if estimates is not None:
         E = np.asarray(estimates, float)

@@ -289,9 +289,28 @@ def _group(C, regs_stack, X0, Xe, convexified, opts) -> list[UncertaintyResult]:
     return group_blocks(C, view_blocks(regs_stack), X0, Xe, convexified, opts)
 
 
+#: points per call of :func:`_group_chunk` (bounds the memory of the stacked arrays)
+GROUP_CHUNK = 2000
+
+
 def group_blocks(C, blocks, X0, Xe, convexified, opts) -> list[UncertaintyResult]:
     """Results for M problems of one structure: cameras C (M, N, 3, 4), per-view stacked regions
-    ``blocks`` (:class:`~.sets.ViewBlock`), solver centres X0 and distance references Xe (M, 3)."""
+    ``blocks`` (:class:`~.sets.ViewBlock`), solver centres X0 and distance references Xe (M, 3);
+    processed :data:`GROUP_CHUNK` points at a time."""
+    from dataclasses import replace
+
+    M = C.shape[0]
+    conv = np.broadcast_to(np.asarray(convexified, dtype=bool), (M,))
+    out = []
+    for a in range(0, M, GROUP_CHUNK):
+        s = slice(a, a + GROUP_CHUNK)
+        part = [replace(b, **{k: (None if getattr(b, k) is None else getattr(b, k)[s])
+                              for k in ("center", "D", "Dinv", "L", "B", "c", "d")}) for b in blocks]
+        out.extend(_group_chunk(C[s], part, X0[s], Xe[s], conv[s], opts))
+    return out
+
+
+def _group_chunk(C, blocks, X0, Xe, convexified, opts) -> list[UncertaintyResult]:
     M, N = C.shape[:2]
     R, drows = _signed(C)
     sigma = _scale(R, blocks, X0, drows)

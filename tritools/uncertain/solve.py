@@ -97,6 +97,27 @@ def _run(rows, q, layout, boxed, options):
     return sol.status.reshape(M, K), sol.x.reshape(M, K, 3), z, zbox, sol.solves
 
 
+#: a ray d (unit max-norm) is accepted when every cone residual is below this and ``q.d <= -RAY_DESCENT``
+RAY_TOL = 1e-7
+RAY_DESCENT = 1e-6
+
+
+def _is_ray(rows, q, d, layout) -> np.ndarray:
+    """Check the solver's unboundedness certificates: ``d`` is a recession direction of S (every row's
+    linear part maps it into its cone, to RAY_TOL on the unit-norm rows) along which ``q'd < 0``."""
+    n0, n1, n2 = layout
+    with np.errstate(invalid="ignore", divide="ignore"):
+        d = d / np.max(np.abs(d), axis=1, keepdims=True)
+        v = np.einsum("prj,pj->pr", rows[:, :, :3], d)
+        ok = np.all(np.isfinite(v), axis=1)
+        ok &= np.all(np.abs(v[:, :n0]) <= RAY_TOL, axis=1) & np.all(v[:, n0:n0 + n1] >= -RAY_TOL, axis=1)
+        if n2:
+            soc = v[:, n0 + n1:].reshape(len(d), n2, 3)
+            ok &= np.all(soc[:, :, 0] + RAY_TOL >= np.linalg.norm(soc[:, :, 1:], axis=2), axis=1)
+        ok &= np.einsum("pj,pj->p", q, d) <= -RAY_DESCENT * np.linalg.norm(q, axis=1)
+    return ok
+
+
 def solve_blocks(R, blocks, X0, sigma, targets, options: StackedConicOptions | None = None) -> Blocks:
     """Solve every (problem, target) bound problem: R (M, N, 3, 4) exact signed cameras, X0 (M, 3),
     sigma (M,), targets (M, K, 3) linear functions of xi to minimise."""
@@ -109,6 +130,9 @@ def solve_blocks(R, blocks, X0, sigma, targets, options: StackedConicOptions | N
     if np.any(redo):
         pm, ko = np.nonzero(redo)
         st2, eta2, z2, _, s2 = _run(rows[pm], q[pm, ko][:, None], layout, False, options)
-        status[pm, ko], eta[pm, ko], z[pm, ko] = st2[:, 0], eta2[:, 0], z2[:, 0]
+        st2 = st2[:, 0]
+        ray = st2 == BlockStatus.UNBOUNDED
+        st2[ray & ~_is_ray(rows[pm], q[pm, ko], eta2[:, 0], layout)] = BlockStatus.FAILED
+        status[pm, ko], eta[pm, ko], z[pm, ko] = st2, eta2[:, 0], z2[:, 0]
         solves += s2
     return Blocks(status, eta, z * scale[:, None, :], layout, solves)

@@ -154,3 +154,52 @@ def test_bounded_noise_coverage_many_points():
     outside its certified box or radius (the benchmark runs 10,000)."""
     total = _bench().main(["--points", "6000", "--oxford-tracks", "0", "--colmap-points", "0", "--seed", "7"])
     assert total["points"] == 6000 and total["misses"] == 0
+
+
+def _radii_file(a, path, r):
+    lines = ["# IMAGE_ID POINT2D_IDX RADIUS"]
+    for v, iid in enumerate(a.image_ids.tolist()):
+        for k in range(int(a.kp_offsets[v + 1] - a.kp_offsets[v])):
+            if a.kp_point3D[a.kp_offsets[v] + k] != -1:
+                lines.append(f"{iid} {k} {r}")
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def test_per_observation_radii_file_matches_uniform_radius(tmp_path):
+    a, X = bounded_noise_model(1.0, seed=8, n_points=80, n_images=8)
+    geom = prepare_geometry(a)
+    f = _radii_file(a, tmp_path / "radii.txt", 1.0)
+    q_file = point_quality(a, geom, QualityOptions(keypoint_radii=f))
+    q_one = point_quality(a, geom, QualityOptions(keypoint_radius=1.0))
+    assert np.array_equal(q_file.status, q_one.status)
+    fin = np.isfinite(q_one.radius)
+    assert np.allclose(q_file.radius[fin], q_one.radius[fin], rtol=1e-9)
+    err = np.linalg.norm(a.point_xyz - X, axis=1)
+    assert np.all(err[fin] <= q_file.radius[fin])
+    # a smaller radius for one image shrinks (never grows) the sets of its points
+    lines = f.read_text().splitlines()
+    first = int(a.image_ids[0])
+    f.write_text("\n".join(ln if not ln.startswith(f"{first} ") else ln.rsplit(" ", 1)[0] + " 2.0"
+                           for ln in lines) + "\n")
+    q_big = point_quality(a, geom, QualityOptions(keypoint_radii=f))
+    assert np.all(q_big.radius[fin] >= q_one.radius[fin] * (1 - 1e-9))
+
+
+def test_radii_file_errors(tmp_path, capsys):
+    a, _ = bounded_noise_model(1.0, seed=9, n_points=20, n_images=6)
+    write_model_arrays(a, tmp_path / "in", "bin")
+    bad = tmp_path / "bad.txt"
+    bad.write_text("# header\n1 0 0.5\n1 x 2\n")
+    rc, _, err = run(["colmap", tmp_path / "in", tmp_path / "out", "--keypoint-radii", bad], capsys)
+    assert rc == 2 and f"{bad}:3" in err and "--keypoint-radii" in err and not (tmp_path / "out").exists()
+    bad.write_text("1 0 -1\n")
+    rc, _, err = run(["colmap", tmp_path / "in", tmp_path / "out", "--keypoint-radii", bad], capsys)
+    assert rc == 2 and f"{bad}:1" in err
+    bad.write_text("99999 0 1.0\n")
+    with pytest.raises(ValueError, match="unknown IMAGE_ID"):
+        point_quality(a, prepare_geometry(a), QualityOptions(keypoint_radii=bad, keypoint_radius=1.0))
+    partial = tmp_path / "partial.txt"
+    partial.write_text(f"{int(a.image_ids[0])} 0 1.0\n")
+    with pytest.raises(ValueError, match="no radius"):
+        point_quality(a, prepare_geometry(a), QualityOptions(keypoint_radii=partial))

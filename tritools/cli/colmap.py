@@ -86,6 +86,9 @@ def _add_quality_options(p) -> None:
     g.add_argument("--keypoint-radius", type=float, default=None, metavar="R",
                    help="keypoints are uncertain within R undistorted pixels: certify each point's 3D uncertainty "
                         "(radius around the written point, depth interval) from discs of radius R")
+    g.add_argument("--keypoint-radii", default=None, metavar="FILE",
+                   help="per-observation radii: lines 'IMAGE_ID POINT2D_IDX RADIUS' (# comments); unlisted "
+                        "observations use --keypoint-radius")
     g.add_argument("--min-angle", type=float, default=None, metavar="DEG",
                    help=f"remove points whose largest triangulation angle is below DEG degrees (off by default; "
                         f"COLMAP's mapper uses {COLMAP_MIN_TRI_ANGLE})")
@@ -105,7 +108,7 @@ def _quality_options(args):
 
     return QualityOptions(keypoint_radius=args.keypoint_radius, min_angle=args.min_angle,
                           max_error=args.max_error, max_uncertainty=args.max_uncertainty,
-                          max_depth_ratio=args.max_depth_ratio)
+                          max_depth_ratio=args.max_depth_ratio, keypoint_radii=args.keypoint_radii)
 
 
 def _flag(name: str) -> str:

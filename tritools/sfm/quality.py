@@ -5,7 +5,8 @@ For every point of a model (cameras and poses fixed, keypoints undistorted as in
 
 * ``angle_deg``: the largest angle between two of its usable viewing rays
   (:func:`tritools.uncertain.triangulation_angles`);
-* with a keypoint radius R (pixels, undistorted): the certified uncertainty of the point
+* with a keypoint radius R (pixels, undistorted; or one per observation from a file of lines
+  ``IMAGE_ID POINT2D_IDX RADIUS``, :func:`read_keypoint_radii`): the certified uncertainty of the point
   (docs/uncertainty.md): the set S of scene points whose projection lies within R of every
   observed keypoint and in front of the cameras -- ``radius`` bounds ``||X - xyz||`` over S
   (inf when S is unbounded, NaN when it is empty: R is smaller than the observations' own
@@ -31,6 +32,7 @@ from ..uncertain import UncertaintyOptions, triangulation_angles, uncertainty_di
 from .pipeline import ModelGeometry, OptionError
 
 __all__ = ["QualityOptions", "PointQuality", "point_quality", "drop_points", "write_quality", "apply_quality_folder",
+           "read_keypoint_radii",
            "QUALITY_FILE",
            "COLMAP_MIN_TRI_ANGLE", "COLMAP_MAX_REPROJ_ERROR"]
 
@@ -53,10 +55,18 @@ class QualityOptions:
     max_uncertainty: float | None = None
     max_depth_ratio: float | None = None
     exact_depths: bool = False
+    keypoint_radii: str | Path | None = None
 
     def __post_init__(self):
         for f in fields(self):
             v = getattr(self, f.name)
+            if f.name == "keypoint_radii":
+                if v is not None:
+                    try:
+                        _parse_radii(v)
+                    except (OSError, ValueError) as exc:
+                        raise OptionError(f.name, str(exc)) from None
+                continue
             if f.name == "exact_depths":
                 if not isinstance(v, (bool, np.bool_)):
                     raise OptionError(f.name, f"must be True or False, got {v!r}")
@@ -70,13 +80,18 @@ class QualityOptions:
             if not low_ok:
                 raise OptionError(f.name, f"out of range, got {v!r}")
         for name in ("max_uncertainty", "max_depth_ratio"):
-            if getattr(self, name) is not None and self.keypoint_radius is None:
+            if getattr(self, name) is not None and self.keypoint_radius is None and self.keypoint_radii is None:
                 raise OptionError(name, "needs keypoint_radius (the uncertainty is that of keypoints within the "
                                         "radius)")
 
     @property
     def active(self) -> bool:
         return any(getattr(self, f.name) is not None for f in fields(self) if f.name != "exact_depths")
+
+    @property
+    def uncertain(self) -> bool:
+        """Keypoint radii are given (a default radius and/or a file)."""
+        return self.keypoint_radius is not None or self.keypoint_radii is not None
 
 
 @dataclass(frozen=True, eq=False)
@@ -113,9 +128,48 @@ def _usable(arrays: ModelArrays, geom: ModelGeometry):
     return owner[use], arrays.track_image[use], gk[use]
 
 
+def _parse_radii(path) -> list:
+    """[(file:line, image_id, point2D_idx, radius, text)] of a radii file (syntax and radius > 0 checked)."""
+    out = []
+    for n, line in enumerate(Path(path).read_text(encoding="utf-8").splitlines(), 1):
+        t = line.split("#", 1)[0].split()
+        if not t:
+            continue
+        where = f"{path}:{n}"
+        try:
+            if len(t) != 3:
+                raise ValueError
+            img, idx, r = int(t[0]), int(t[1]), float(t[2])
+        except ValueError:
+            raise ValueError(f"{where}: expected 'IMAGE_ID POINT2D_IDX RADIUS', got {line.strip()!r}") from None
+        if not (np.isfinite(r) and r > 0):
+            raise ValueError(f"{where}: RADIUS must be finite and > 0, got {t[2]}")
+        out.append((where, img, idx, r))
+    return out
+
+
+def read_keypoint_radii(path, arrays: ModelArrays, default: float | None) -> np.ndarray:
+    """Radius (pixels) of every keypoint row of ``arrays`` from a text file of lines
+    ``IMAGE_ID POINT2D_IDX RADIUS`` (``#`` comments); unlisted keypoints get ``default`` (NaN if None).
+    ValueError naming ``file:line`` for a malformed line, an unknown keypoint or a radius <= 0."""
+    out = np.full(len(arrays.kp_xy), np.nan if default is None else float(default))
+    index = {int(i): k for k, i in enumerate(arrays.image_ids.tolist())}
+    for where, img, idx, r in _parse_radii(path):
+        if img not in index:
+            raise ValueError(f"{where}: unknown IMAGE_ID {img}")
+        v = index[img]
+        if not 0 <= idx < arrays.kp_offsets[v + 1] - arrays.kp_offsets[v]:
+            raise ValueError(f"{where}: image {img} has no keypoint {idx}")
+        out[arrays.kp_offsets[v] + idx] = r
+    return out
+
+
 def point_quality(arrays: ModelArrays, geom: ModelGeometry, options: QualityOptions) -> PointQuality:
     """Angles, uncertainty and the filter decision of every point (module docstring)."""
     P = arrays.n_points
+    kp_r = None
+    if options.keypoint_radii is not None:
+        kp_r = read_keypoint_radii(options.keypoint_radii, arrays, options.keypoint_radius)
     own, img, gk = _usable(arrays, geom)
     n = np.bincount(own, minlength=P)
     centres = -np.einsum("vji,vj->vi", geom.R, geom.t)                    # C = -R' t
@@ -128,14 +182,19 @@ def point_quality(arrays: ModelArrays, geom: ModelGeometry, options: QualityOpti
     for k in np.unique(n):
         pts = np.nonzero(n == k)[0]
         if k < 2:
-            status[pts] = "too_few_views" if options.keypoint_radius is not None else ""
+            status[pts] = "too_few_views" if options.uncertain else ""
             continue
         rows = start[pts][:, None] + np.arange(k)[None, :]
         X = arrays.point_xyz[pts]
         angle[pts] = triangulation_angles(centres[img[rows]], X)
-        if options.keypoint_radius is None:
+        if not options.uncertain:
             continue
-        res = uncertainty_discs(geom.P[img[rows]], geom.xy_u[gk[rows]], float(options.keypoint_radius), X,
+        radii = float(options.keypoint_radius) if kp_r is None else kp_r[gk[rows]]
+        if kp_r is not None and np.any(np.isnan(radii)):
+            j = np.argwhere(np.isnan(radii))[0]
+            raise ValueError(f"{options.keypoint_radii}: no radius for point3D {int(arrays.point_ids[pts[j[0]]])}'s "
+                             f"observation {int(j[1])} and no default (--keypoint-radius)")
+        res = uncertainty_discs(geom.P[img[rows]], geom.xy_u[gk[rows]], radii, X,
                                 UncertaintyOptions(depth_bounds=bool(options.exact_depths)))
         for j, r in zip(pts, res):
             status[j] = r.status.value

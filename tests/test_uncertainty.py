@@ -315,3 +315,19 @@ def test_noisy_points_are_empty_and_small_dilation_recovers():
         assert uncertainty(cams, noisy).status == UncertaintyStatus.EMPTY
         res = uncertainty(cams, noisy, dilation=0.75)
         assert res.status == UncertaintyStatus.BOUNDED and np.all(res.lo <= X) and np.all(X <= res.hi)
+
+
+@pytest.mark.parametrize("kind", ["point", "ellipse", "polytope", "segment", "border"])
+def test_dilation_contains_the_r_neighbourhood(kind):
+    from tritools.uncertain.sets import dilate
+    rng = np.random.default_rng(51)
+    c = np.array([320.0, 240.0])
+    region = {"point": tritools.Point(c), "ellipse": tritools.Ellipse(c, np.array([[9.0, 2.0], [2.0, 4.0]])),
+              "polytope": random_region(rng, c, 3.0, "polytope"), "segment": tritools.Segment(c, [4.0, -1.0]),
+              "border": tritools.EllipseBorder(c, np.eye(2) * 4.0)}[kind]
+    r = 1.5
+    big = dilate(region, r)
+    P = c + rng.uniform(-12, 12, size=(20000, 2))
+    near = P[np.asarray(region.distance(P)) <= r]
+    assert len(near) > 100
+    assert np.all(np.asarray(big.distance(near)) == 0.0)

@@ -60,16 +60,25 @@ class ViewBlock:
 
 def dilate(region: Region, r: float) -> Region:
     """A region containing every point within ``r`` pixels of ``region`` (r >= 0; exact for a Point,
-    an outer bound otherwise): a point becomes the disc of radius r; an ellipse the ellipse with the
-    same axes lengthened by r; a polytope its slabs widened by ``r ||B_k||`` (a relative 1e-12 more,
-    for round-off); a segment the rectangle around it, r on each side."""
+    an outer bound otherwise): a point becomes the disc of radius r; an ellipse the coaxial ellipse
+    of semi-axes ``sqrt((1+t) a_k^2 + (1+1/t) r^2)`` (exact for a circle); a polytope its slabs
+    widened by ``r ||B_k||`` (a relative 1e-12 more, for round-off); a segment the rectangle around
+    it, r on each side."""
     if r == 0:
         return region
     grow = 1.0 + 1e-12
     if isinstance(region, Point):
         return Ellipse(region.x, (r * grow) ** 2 * np.eye(2))
     if isinstance(region, EllipseBorder):
-        axes = (region.semi_axes + r) * grow
+        # support functions: h(u) + r <= sqrt((1+t) h(u)^2 + (1+1/t) r^2) for any t > 0, so the ellipse of
+        # semi-axes sqrt((1+t) a^2 + (1+1/t) r^2) holds the r-neighbourhood; t of least area among three
+        a = region.semi_axes
+        best = None
+        for t in (r / a[0], r / a[1], r / np.sqrt(a[0] * a[1])):
+            ax = np.sqrt((1 + t) * a ** 2 + (1 + 1 / t) * r * r)
+            if best is None or ax[0] * ax[1] < best[0] * best[1]:
+                best = ax
+        axes = best * grow
         Q = region._Q
         return Ellipse(region.center_, (Q * axes ** 2) @ Q.T)
     if isinstance(region, Polytope):

@@ -298,7 +298,7 @@ def test_level_set_relaxation_contains_the_level_set():
 
 def test_exact_points_with_roundoff_widening_hold_the_point():
     rng = np.random.default_rng(41)
-    opts = tritools.UncertaintyOptions(widen_roundoff=True)
+    opts = tritools.UncertaintyOptions()                     # widen_roundoff=True, the default
     for f, offset in ((800.0, (0.0, 0.0, 0.0)), (1e6, (4.2e6, -1.3e6, 3e2))):
         for _ in range(5):
             cams, X = scene(rng, n_views=int(rng.integers(2, 5)), f=f, offset=offset)

@@ -46,13 +46,13 @@ class UncertaintyOptions:
     rigorous, looser, about (6 + 2N) / 6 times faster); ``widen_roundoff``: points and segments not
     otherwise dilated are widened by the round-off of a computed projection (16 eps relative, see
     :func:`_roundoff_radii`), so exact data give a tiny set holding the point instead of an empty or
-    degenerate one.  Off by default: such razor-thin cones are below the solver's resolution, and
-    emptiness of noisy points is then no longer detected reliably -- dilate noisy points instead."""
+    degenerate one; when such a widened set yields no feasible point at all, the regions as given are
+    solved too and their Farkas certificate, if any, reports the set empty."""
     dilation: float | tuple = 0.0
     solver: StackedConicOptions = field(default_factory=StackedConicOptions)
     witness_rtol: float = 1e-9
     depth_bounds: bool = True
-    widen_roundoff: bool = False
+    widen_roundoff: bool = True
 
     def __post_init__(self) -> None:
         for name in ("depth_bounds", "widen_roundoff"):
@@ -125,10 +125,28 @@ def _prepare(cameras, regions, dilation, widen=True):
         raise ValueError(f"dilation must be a number or have one entry per view ({len(C)}), got {len(d)}")
     convexified = any(isinstance(r, EllipseBorder) and not isinstance(r, Ellipse) for r in regs)
     thin = [isinstance(r, (Point, Segment)) and di == 0 for r, di in zip(regs, d)]
-    if widen and any(thin):
+    widened = bool(widen and any(thin))
+    if widened:
         d = np.where(thin, _roundoff_radii(C, regs), d)
     regs = tuple(dilate(r, float(di)) for r, di in zip(regs, d))
-    return C, regs, convexified
+    return C, regs, convexified, widened
+
+
+def _witnessless(res: UncertaintyResult) -> bool:
+    """Not empty, yet no feasible point was found (a widened thin set the solver cannot resolve)."""
+    return res.status != UncertaintyStatus.EMPTY and not np.isfinite(res.witness_lo).any() and \
+        not np.isfinite(res.witness_hi).any() and not np.isfinite(res.distance_witness).any()
+
+
+def _unwidened_if_empty(res, cameras, regions, estimate, opts):
+    """For a widened problem without any feasible witness: the regions as given, if their set is
+    certified empty (Farkas), else ``res``."""
+    from dataclasses import replace
+
+    if not _witnessless(res):
+        return res
+    alt = uncertainty(cameras, regions, estimate=estimate, options=replace(opts, widen_roundoff=False))
+    return alt if alt.status == UncertaintyStatus.EMPTY else res
 
 
 def _roundoff_radii(C, regs) -> np.ndarray:
@@ -157,8 +175,9 @@ def _signed(C: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _scale(R, blocks, X0, depth_rows) -> np.ndarray:
-    """Normalisation length sigma (M,): the smallest lateral size ``depth * radius / focal`` over views
-    with a radius, else 1e-6 of the mean depth (the solver works in (X - X0) / sigma)."""
+    """Normalisation length sigma (M,): the largest lateral size ``depth * radius / focal`` over views
+    with a radius (a thin view -- a widened point -- must not set it), else 1e-6 of the mean depth or of
+    the distance to the cameras (the solver works in (X - X0) / sigma)."""
     dep = np.abs(np.einsum("mnj,mj->mn", depth_rows[..., :3], X0) + depth_rows[..., 3])
     Xh = np.concatenate([X0, np.ones((len(X0), 1))], axis=1)
     h = np.einsum("mnij,mj->mni", R, Xh)
@@ -178,7 +197,7 @@ def _scale(R, blocks, X0, depth_rows) -> np.ndarray:
             rad[:, i] = np.linalg.norm(b.d, axis=1)
     with np.errstate(divide="ignore", invalid="ignore"):
         lat = np.where((rad > 0) & (gain > 0), rad / gain, np.inf)
-    sigma = lat.min(axis=1)
+    sigma = np.where(np.isfinite(lat), lat, 0.0).max(axis=1)      # the thickest view sets the scale
     w = np.linalg.svd(R.reshape(-1, 3, 4))[2][:, -1].reshape(R.shape[0], R.shape[1], 4)   # camera centres
     with np.errstate(divide="ignore", invalid="ignore"):
         far = np.linalg.norm(w[..., :3] / w[..., 3:] - X0[:, None, :], axis=2)
@@ -266,15 +285,28 @@ def _pull_inside(blocks, R, W, centre, rtol) -> np.ndarray:
     return out
 
 
-def _centres(blocks, R, W, X0, rtol):
-    """An interior candidate per problem: the mean of its finite witnesses, else X0."""
+def _centres(blocks, R, W, X0, dirs, sigma, rtol):
+    """An interior candidate per problem: the first feasible of the mean of its finite witnesses, X0,
+    and both moved along the mean ray direction (unbounded sets: into the recession cone) by
+    1..1e4 sigma; X0 where none is."""
     fin = np.isfinite(W)
     cnt = fin.sum(axis=1)
     with np.errstate(invalid="ignore", divide="ignore"):
         mean = np.where(fin, W, 0.0).sum(axis=1) / cnt
+        dbar = np.where(np.isfinite(dirs), dirs, 0.0).sum(axis=1)
+        dbar = dbar / np.linalg.norm(dbar, axis=1, keepdims=True)
     mean = np.where(np.isfinite(mean), mean, X0)
-    ok = _feasible(blocks, R, mean, rtol)
-    return np.where(ok[:, None], mean, X0)
+    dbar = np.where(np.isfinite(dbar), dbar, 0.0)
+    out = X0.copy()
+    todo = np.ones(len(X0), bool)
+    cands = [mean, X0] + [p + (t * sigma)[:, None] * dbar for t in (1.0, 10.0, 1e2, 1e3, 1e4) for p in (mean, X0)]
+    for c in cands:
+        ok = todo & _feasible(blocks, R, c, rtol)
+        out[ok] = c[ok]
+        todo &= ~ok
+        if not np.any(todo):
+            break
+    return out
 
 
 def _depth_offsets(depth_rows, X0):
@@ -328,8 +360,11 @@ def _group_chunk(C, blocks, X0, Xe, convexified, opts) -> list[UncertaintyResult
     empty = _empty(st, b.reshape(M, K), be.reshape(M, K), a.reshape(M, K, 3), ae.reshape(M, K, 3), sigma)
     witnesses = np.where(((st == BlockStatus.SOLVED))[:, :, None], X0[:, None, :] + sigma[:, None, None] * blk.eta,
                          np.nan)
-    centre = _centres(blocks, R, witnesses[:, :6], X0, opts.witness_rtol)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        dirs = np.where(ray[:, :, None], blk.eta / np.linalg.norm(blk.eta, axis=2, keepdims=True), np.nan)
+    centre = _centres(blocks, R, witnesses[:, :6], X0, dirs, sigma, opts.witness_rtol)
     witnesses = _pull_inside(blocks, R, witnesses, centre, opts.witness_rtol)
+    ray &= _rays_stay_inside(blocks, R, witnesses, centre, blk.eta, ray, opts.witness_rtol)
     q0, q0e = _depth_offsets(drows, X0)
     conv = np.broadcast_to(np.asarray(convexified, dtype=bool), (M,))
     out = []
@@ -337,6 +372,44 @@ def _group_chunk(C, blocks, X0, Xe, convexified, opts) -> list[UncertaintyResult
         out.append(_assemble(m, N, solved[m], ray[m], empty[m], beta[m], rho[m], witnesses[m], X0[m], Xe[m],
                              sigma[m], q0[m], q0e[m], bool(conv[m]), drows[m]))
     return out
+
+
+#: a ray is accepted when base + lambda d stays in S for lambda = scene scale times these factors
+RAY_REACH = (1e-3, 1.0, 1e3, 1e6)
+
+
+def _rays_stay_inside(blocks, R, W, centre, eta, ray, rtol) -> np.ndarray:
+    """(M, K) False where a ray certificate fails the exact membership test: from a feasible base point
+    (the interior candidate, else a feasible witness) the points ``base + lambda d`` must lie in S for
+    lambda up to 1e6 times the scene's scale (distance to the farthest camera centre).  A recession
+    direction of S passes; a direction that only nearly satisfies a thin cone (a widened point) leaves
+    it and is refused (the side is then not reported infinite: the problem is reported failed)."""
+    M, K, _ = W.shape
+    keep = np.ones((M, K), bool)
+    pm, ko = np.nonzero(ray)
+    if len(pm) == 0:
+        return keep
+    base = centre.copy()
+    ok = _feasible(blocks, R, base, rtol)
+    for k in range(K):                                  # a feasible witness where the centre is not
+        use = ~ok & np.all(np.isfinite(W[:, k]), axis=1)
+        base[use], ok[use] = W[use, k], True
+    w = np.linalg.svd(R.reshape(-1, 3, 4))[2][:, -1].reshape(M, -1, 4)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        scale = np.nanmax(np.linalg.norm(w[..., :3] / w[..., 3:] - base[:, None], axis=2), axis=1)
+    d = eta[pm, ko] / np.linalg.norm(eta[pm, ko], axis=1, keepdims=True)
+    good = ok[pm] & np.all(np.isfinite(d), axis=1) & np.isfinite(scale[pm])
+    sub = [_take(b, pm) for b in blocks]
+    for lam in RAY_REACH:
+        good &= _feasible(sub, R[pm], base[pm] + (lam * scale[pm])[:, None] * d, rtol)
+    keep[pm, ko] = good
+    return keep
+
+
+def _take(blk, idx):
+    from dataclasses import replace
+    return replace(blk, **{k: (None if getattr(blk, k) is None else getattr(blk, k)[idx])
+                           for k in ("center", "D", "Dinv", "L", "B", "c", "d")})
 
 
 def _empty(st, b, be, a, ae, sigma):
@@ -454,9 +527,10 @@ def uncertainty(cameras, regions, *, level=None, estimate=None, options: Uncerta
     """
     opts = _options(options, dilation)
     if level is None:
-        C, regs, conv = _prepare(cameras, regions, opts.dilation, opts.widen_roundoff)
+        C, regs, conv, widened = _prepare(cameras, regions, opts.dilation, opts.widen_roundoff)
         Xe = _estimate_arg(estimate, C[None], [regs])
-        return _group(C[None], [regs], Xe, Xe, conv, opts)[0]
+        res = _group(C[None], [regs], Xe, Xe, conv, opts)[0]
+        return _unwidened_if_empty(res, cameras, regions, estimate, opts) if widened else res
     return _level_relaxation(cameras, regions, level, estimate, opts)
 
 
@@ -510,7 +584,7 @@ def uncertainty_many(cameras, regions, *, estimates=None, options: UncertaintyOp
         if E.shape != (len(prepared), 3) or not np.all(np.isfinite(E)):
             raise ValueError(f"estimates must be a finite ({len(prepared)}, 3) array, got shape {E.shape}")
     groups: dict = {}
-    for m, (C, regs, _) in enumerate(prepared):
+    for m, (C, regs, _, _) in enumerate(prepared):
         groups.setdefault((len(C),) + structure_key(regs), []).append(m)
     out: list = [None] * len(prepared)
     for idx in groups.values():
@@ -520,6 +594,9 @@ def uncertainty_many(cameras, regions, *, estimates=None, options: UncertaintyOp
         res = _group(C, regs, Xe, Xe, np.array([prepared[m][2] for m in idx]), opts)
         for m, r in zip(idx, res):
             out[m] = r
+    for m, p in enumerate(prepared):
+        if p[3]:
+            out[m] = _unwidened_if_empty(out[m], cameras[m], regions[m], None if E is None else E[m], opts)
     return out
 
 

@@ -375,13 +375,13 @@ def _group_chunk(C, blocks, X0, Xe, convexified, opts) -> list[UncertaintyResult
 
 
 #: a ray is accepted when base + lambda d stays in S for lambda = scene scale times these factors
-RAY_REACH = (1e-3, 1.0, 1e3, 1e6)
+RAY_REACH = (1e-3, 1.0, 1e2)
 
 
 def _rays_stay_inside(blocks, R, W, centre, eta, ray, rtol) -> np.ndarray:
     """(M, K) False where a ray certificate fails the exact membership test: from a feasible base point
     (the interior candidate, else a feasible witness) the points ``base + lambda d`` must lie in S for
-    lambda up to 1e6 times the scene's scale (distance to the farthest camera centre).  A recession
+    lambda up to 1e2 times the scene's scale (distance to the farthest camera centre).  A recession
     direction of S passes; a direction that only nearly satisfies a thin cone (a widened point) leaves
     it and is refused (the side is then not reported infinite: the problem is reported failed)."""
     M, K, _ = W.shape

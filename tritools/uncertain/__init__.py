@@ -1,7 +1,8 @@
 """Certified 3D uncertainty of a triangulated point (docs/uncertainty.md).
 
 :mod:`.sets` (the per-view set as conic constraints), :mod:`.solve` (stacked bound problems),
-:mod:`.rigour` (rigorous bounds from dual multipliers), :mod:`.api` (``uncertainty``,
+:mod:`.rigour` (rigorous bounds from dual multipliers), :mod:`.witness` (feasible inner points,
+ray checks), :mod:`.api` (``uncertainty``,
 ``uncertainty_many``), :mod:`.discs` (array entry for disc regions), :mod:`.angle`
 (triangulation angles).
 """

@@ -20,8 +20,9 @@ from ..model.cameras import _depth_rows, power2_scale
 from ..model.geometry import validate_cameras
 from ..model.regions import Ellipse, EllipseBorder, Point, Segment, as_regions
 from .rigour import box_from_bounds, combine, lower_bounds, round_down, round_up
-from .sets import EPS, contains, dilate, structure_key, view_blocks, view_coefficients
+from .sets import EPS, dilate, structure_key, view_blocks, view_coefficients
 from .solve import objective_rows, solve_blocks
+from .witness import centres, pull_inside, rays_stay_inside, repeat_block
 
 __all__ = ["UncertaintyStatus", "UncertaintyOptions", "UncertaintyResult", "uncertainty", "uncertainty_many"]
 
@@ -238,7 +239,7 @@ def _inequalities(blocks, R, X0, z):
     flat = z.reshape(M * K, -1).astype(np.longdouble)
     gam, gerr = [], []
     for blk, (s0, s1, s2) in zip(blocks, _view_slices(blocks)):
-        rep = _repeat_block(blk, K, np.longdouble)
+        rep = repeat_block(blk, K, np.longdouble)
         g, e = view_coefficients(rep, flat[:, s0], flat[:, s1], flat[:, s2])
         gam.append(g)
         gerr.append(e)
@@ -246,67 +247,6 @@ def _inequalities(blocks, R, X0, z):
     gerr = np.stack(gerr, axis=1)
     Rk = np.repeat(R, K, axis=0)
     return combine(gamma, gerr, Rk, np.repeat(X0, K, axis=0))
-
-
-def _repeat_block(blk, K, dtype=float):
-    from dataclasses import replace
-    rep = {k: (None if v is None else np.repeat(v, K, axis=0).astype(dtype)) for k, v in
-           (("center", blk.center), ("D", blk.D), ("Dinv", blk.Dinv), ("L", blk.L), ("B", blk.B), ("c", blk.c),
-            ("d", blk.d))}
-    return replace(blk, **rep)
-
-
-def _feasible(blocks, R, X, rtol) -> np.ndarray:
-    """X (M, 3) in S for problem m (all views)."""
-    ok = np.all(np.isfinite(X), axis=1)
-    Xs = np.where(ok[:, None], X, 0.0)
-    for i, blk in enumerate(blocks):
-        tol = rtol if blk.kind in ("point", "segment") else 0.0
-        ok &= contains(blk, R[:, i], Xs, tol)
-    return ok
-
-
-def _pull_inside(blocks, R, W, centre, rtol) -> np.ndarray:
-    """Witnesses W (M, K, 3) moved the least step of a ladder towards ``centre`` (M, 3) that makes
-    them feasible; NaN where none does."""
-    M, K, _ = W.shape
-    out = np.full(W.shape, np.nan)
-    todo = np.all(np.isfinite(W), axis=2)
-    Rk = np.repeat(R, K, axis=0)
-    blk_rep = [_repeat_block(b, K) for b in blocks]
-    C = np.repeat(centre, K, axis=0).reshape(M, K, 3)
-    for theta in (0.0, 1e-12, 1e-10, 1e-8, 1e-6, 1e-4, 1e-3, 1e-2, 0.1, 0.5, 1.0):
-        cand = W + theta * (C - W)
-        ok = _feasible(blk_rep, Rk, cand.reshape(M * K, 3), rtol).reshape(M, K) & todo
-        out[ok] = cand[ok]
-        todo &= ~ok
-        if not np.any(todo):
-            break
-    return out
-
-
-def _centres(blocks, R, W, X0, dirs, sigma, rtol):
-    """An interior candidate per problem: the first feasible of the mean of its finite witnesses, X0,
-    and both moved along the mean ray direction (unbounded sets: into the recession cone) by
-    1..1e4 sigma; X0 where none is."""
-    fin = np.isfinite(W)
-    cnt = fin.sum(axis=1)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        mean = np.where(fin, W, 0.0).sum(axis=1) / cnt
-        dbar = np.where(np.isfinite(dirs), dirs, 0.0).sum(axis=1)
-        dbar = dbar / np.linalg.norm(dbar, axis=1, keepdims=True)
-    mean = np.where(np.isfinite(mean), mean, X0)
-    dbar = np.where(np.isfinite(dbar), dbar, 0.0)
-    out = X0.copy()
-    todo = np.ones(len(X0), bool)
-    cands = [mean, X0] + [p + (t * sigma)[:, None] * dbar for t in (1.0, 10.0, 1e2, 1e3, 1e4) for p in (mean, X0)]
-    for c in cands:
-        ok = todo & _feasible(blocks, R, c, rtol)
-        out[ok] = c[ok]
-        todo &= ~ok
-        if not np.any(todo):
-            break
-    return out
 
 
 def _depth_offsets(depth_rows, X0):
@@ -362,9 +302,9 @@ def _group_chunk(C, blocks, X0, Xe, convexified, opts) -> list[UncertaintyResult
                          np.nan)
     with np.errstate(invalid="ignore", divide="ignore"):
         dirs = np.where(ray[:, :, None], blk.eta / np.linalg.norm(blk.eta, axis=2, keepdims=True), np.nan)
-    centre = _centres(blocks, R, witnesses[:, :6], X0, dirs, sigma, opts.witness_rtol)
-    witnesses = _pull_inside(blocks, R, witnesses, centre, opts.witness_rtol)
-    ray &= _rays_stay_inside(blocks, R, witnesses, centre, blk.eta, ray, opts.witness_rtol)
+    centre = centres(blocks, R, witnesses[:, :6], X0, dirs, sigma, opts.witness_rtol)
+    witnesses = pull_inside(blocks, R, witnesses, centre, opts.witness_rtol)
+    ray &= rays_stay_inside(blocks, R, witnesses, centre, blk.eta, ray, opts.witness_rtol)
     q0, q0e = _depth_offsets(drows, X0)
     conv = np.broadcast_to(np.asarray(convexified, dtype=bool), (M,))
     out = []
@@ -372,44 +312,6 @@ def _group_chunk(C, blocks, X0, Xe, convexified, opts) -> list[UncertaintyResult
         out.append(_assemble(m, N, solved[m], ray[m], empty[m], beta[m], rho[m], witnesses[m], X0[m], Xe[m],
                              sigma[m], q0[m], q0e[m], bool(conv[m]), drows[m]))
     return out
-
-
-#: a ray is accepted when base + lambda d stays in S for lambda = scene scale times these factors
-RAY_REACH = (1e-3, 1.0, 1e2)
-
-
-def _rays_stay_inside(blocks, R, W, centre, eta, ray, rtol) -> np.ndarray:
-    """(M, K) False where a ray certificate fails the exact membership test: from a feasible base point
-    (the interior candidate, else a feasible witness) the points ``base + lambda d`` must lie in S for
-    lambda up to 1e2 times the scene's scale (distance to the farthest camera centre).  A recession
-    direction of S passes; a direction that only nearly satisfies a thin cone (a widened point) leaves
-    it and is refused (the side is then not reported infinite: the problem is reported failed)."""
-    M, K, _ = W.shape
-    keep = np.ones((M, K), bool)
-    pm, ko = np.nonzero(ray)
-    if len(pm) == 0:
-        return keep
-    base = centre.copy()
-    ok = _feasible(blocks, R, base, rtol)
-    for k in range(K):                                  # a feasible witness where the centre is not
-        use = ~ok & np.all(np.isfinite(W[:, k]), axis=1)
-        base[use], ok[use] = W[use, k], True
-    w = np.linalg.svd(R.reshape(-1, 3, 4))[2][:, -1].reshape(M, -1, 4)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        scale = np.nanmax(np.linalg.norm(w[..., :3] / w[..., 3:] - base[:, None], axis=2), axis=1)
-    d = eta[pm, ko] / np.linalg.norm(eta[pm, ko], axis=1, keepdims=True)
-    good = ok[pm] & np.all(np.isfinite(d), axis=1) & np.isfinite(scale[pm])
-    sub = [_take(b, pm) for b in blocks]
-    for lam in RAY_REACH:
-        good &= _feasible(sub, R[pm], base[pm] + (lam * scale[pm])[:, None] * d, rtol)
-    keep[pm, ko] = good
-    return keep
-
-
-def _take(blk, idx):
-    from dataclasses import replace
-    return replace(blk, **{k: (None if getattr(blk, k) is None else getattr(blk, k)[idx])
-                           for k in ("center", "D", "Dinv", "L", "B", "c", "d")})
 
 
 def _empty(st, b, be, a, ae, sigma):

@@ -203,3 +203,19 @@ def test_radii_file_errors(tmp_path, capsys):
     partial.write_text(f"{int(a.image_ids[0])} 0 1.0\n")
     with pytest.raises(ValueError, match="no radius"):
         point_quality(a, prepare_geometry(a), QualityOptions(keypoint_radii=partial))
+
+
+def test_cli_text_model_depth_ratio_and_error_filters(tmp_path, capsys):
+    a, _ = bounded_noise_model(1.0, seed=12, n_points=60, n_images=8)
+    write_model_arrays(a, tmp_path / "in", "txt")
+    out = tmp_path / "out"
+    rc, stdout, _ = run(["colmap", tmp_path / "in", out, "--max-delta", "2", "--keypoint-radius", "1.0",
+                         "--max-depth-ratio", "1.004", "--max-error", "0.9"], capsys)
+    assert rc == 0 and "quality:" in stdout
+    assert (out / "points3D.txt").is_file() and (out / QUALITY_FILE).is_file()
+    rows = [ln.split() for ln in (out / QUALITY_FILE).read_text().splitlines() if not ln.startswith("#")]
+    for r in rows:
+        kept = r[-1] == "1"
+        assert kept == (float(r[8]) <= 1.004 and float(r[3]) <= 0.9)
+    model = read_model_arrays(out)
+    assert model.n_points == sum(r[-1] == "1" for r in rows) < len(rows)

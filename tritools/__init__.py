@@ -26,6 +26,8 @@ from .solve.batch import triangulate_many
 from .solve.options import DEFAULT_OPTIONS, SolvePath, Sparsity, TriangulationOptions
 from .solve.points import PointsResult, triangulate_points
 from .solve.triangulate import triangulate
+from .uncertain import (UncertaintyOptions, UncertaintyResult, UncertaintyStatus, triangulation_angle, uncertainty,
+                        uncertainty_many)
 
 __version__ = "0.2.0"
 
@@ -34,4 +36,6 @@ _logging.getLogger(__name__).addHandler(_logging.NullHandler())
 __all__ = ["Method", "depths", "dlt", "fundamental_matrix", "gamma", "project", "validate_cameras", "Ellipse",
            "EllipseBorder", "Point", "Polytope", "Region", "Segment", "as_regions", "Attempt", "Status",
            "TriangulationResult", "paper_example", "triangulate_many", "DEFAULT_OPTIONS", "SolvePath", "Sparsity",
-           "TriangulationOptions", "PointsResult", "triangulate_points", "triangulate"]
+           "TriangulationOptions", "PointsResult", "triangulate_points", "triangulate",
+           "UncertaintyOptions", "UncertaintyResult", "UncertaintyStatus", "triangulation_angle", "uncertainty",
+           "uncertainty_many"]

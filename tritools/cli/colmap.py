@@ -64,6 +64,7 @@ def register(subparsers) -> None:
     p.add_argument("--chunk-points", type=int, default=100_000, metavar="N",
                    help="points processed at a time (bounds memory; default 100000)")
     p.add_argument("--json", action="store_true", help="print a JSON summary with one record per point")
+    _add_quality_options(p)
     p.set_defaults(func=run_colmap)
 
     o = subparsers.add_parser("colmap-from-oxford", help="convert an Oxford VGG sequence to a COLMAP model",
@@ -76,6 +77,39 @@ def register(subparsers) -> None:
     o.add_argument("--max-tracks", type=int, default=None, metavar="M", help="keep the first M tracks")
     o.add_argument("--output-type", choices=("bin", "txt"), default="txt", help="model format (default txt)")
     o.set_defaults(func=run_from_oxford)
+
+
+def _add_quality_options(p) -> None:
+    """Flags of :mod:`tritools.sfm.quality` (angle, certified uncertainty, filters; docs/uncertainty.md)."""
+    from ..sfm.quality import COLMAP_MAX_REPROJ_ERROR, COLMAP_MIN_TRI_ANGLE
+
+    g = p.add_argument_group("point quality (written to points3D_uncertainty.txt; filters remove points)")
+    g.add_argument("--keypoint-radius", type=float, default=None, metavar="R",
+                   help="keypoints are uncertain within R undistorted pixels: certify each point's 3D uncertainty "
+                        "(radius around the written point, depth interval) from discs of radius R")
+    g.add_argument("--keypoint-radii", default=None, metavar="FILE",
+                   help="per-observation radii: lines 'IMAGE_ID POINT2D_IDX RADIUS' (# comments); unlisted "
+                        "observations use --keypoint-radius")
+    g.add_argument("--min-angle", type=float, default=None, metavar="DEG",
+                   help=f"remove points whose largest triangulation angle is below DEG degrees (off by default; "
+                        f"COLMAP's mapper uses {COLMAP_MIN_TRI_ANGLE})")
+    g.add_argument("--max-error", type=float, default=None, metavar="PX",
+                   help=f"remove points whose mean reprojection error exceeds PX pixels (off by default; COLMAP's "
+                        f"mapper uses {COLMAP_MAX_REPROJ_ERROR})")
+    g.add_argument("--max-uncertainty", type=float, default=None, metavar="D",
+                   help="remove points whose certified uncertainty radius exceeds D world units, or is unbounded "
+                        "or empty (needs --keypoint-radius)")
+    g.add_argument("--max-depth-ratio", type=float, default=None, metavar="Q",
+                   help="remove points whose certified depth interval has depth_hi / depth_lo > Q in a view "
+                        "(needs --keypoint-radius)")
+
+
+def _quality_options(args):
+    from ..sfm.quality import QualityOptions
+
+    return QualityOptions(keypoint_radius=args.keypoint_radius, min_angle=args.min_angle,
+                          max_error=args.max_error, max_uncertainty=args.max_uncertainty,
+                          max_depth_ratio=args.max_depth_ratio, keypoint_radii=args.keypoint_radii)
 
 
 def _flag(name: str) -> str:
@@ -97,6 +131,7 @@ def run_colmap(args) -> int:
         options = RetriangulationOptions(solver=solver, min_track_length=args.min_track_length,
                                          max_track_length=args.max_track_length, behind=args.behind,
                                          strict=args.strict, chunk_points=args.chunk_points, progress=args.progress)
+        quality = _quality_options(args)
     except OptionError as exc:
         return exit_invalid(f"{_flag(exc.field)} {exc.detail}")
     try:
@@ -111,6 +146,15 @@ def run_colmap(args) -> int:
         return exit_invalid(_os_message(exc))
     except ValueError as exc:
         return exit_invalid(str(exc))
+    q = None
+    if quality.active:
+        from ..sfm.quality import apply_quality_folder
+        try:
+            q = apply_quality_folder(result.out_dir, quality, result.exports)
+        except (ModelFormatError, OutputError, ValueError) as exc:
+            return exit_invalid(str(exc))
+        except OSError as exc:
+            return exit_invalid(_os_message(exc))
     report = result.report
     summary = {"in_dir": str(args.in_dir), "out_dir": str(result.out_dir), "input_type": result.input_format,
                "output_type": result.output_format, "certificates": str(result.certificates),
@@ -124,10 +168,26 @@ def run_colmap(args) -> int:
                               "certified_by": r.certified_by, "delta": r.delta, "gamma_input": r.gamma_input,
                               "updated": r.updated, "in_front": r.in_front, "message": r.message}
                              for r in report.records]
+        if q is not None:
+            _add_quality_records(summary, q)
         print(json.dumps(jsonable(summary), indent=1, allow_nan=False))   # NaN/inf -> null, as tritools solve
         return 0
+    if q is not None:
+        summary["quality"] = q.summary()
     _print_summary(report, result, summary)
     return 0
+
+
+def _add_quality_records(summary, q) -> None:
+    """The quality summary and, per point record, angle, uncertainty radius, depth interval, kept."""
+    summary["quality"] = q.summary()
+    index = {int(p): i for i, p in enumerate(q.point_ids.tolist())}
+    for rec in summary["points"]:
+        i = index.get(int(rec["point3D_id"]))
+        if i is not None:
+            rec.update(angle_deg=float(q.angle_deg[i]), uncertainty_status=str(q.status[i]) or None,
+                       uncertainty_radius=float(q.radius[i]), depth_lo=float(q.depth_lo[i]),
+                       depth_hi=float(q.depth_hi[i]), depth_ratio=float(q.depth_ratio[i]), kept=bool(q.kept[i]))
 
 
 def _print_summary(report, result, summary) -> None:
@@ -151,6 +211,10 @@ def _print_summary(report, result, summary) -> None:
     print(f"model ({result.output_format}) written to {result.out_dir}, certificates to {result.certificates}")
     for e in result.exports:
         print(f"exported {e}")
+    if "quality" in summary:
+        qs = summary["quality"]
+        print(f"quality: {qs['n_kept']} of {qs['n_points']} points kept, median angle {qs['median_angle_deg']} deg, "
+              f"median certified radius {qs['median_radius']}; written to points3D_uncertainty.txt")
 
 
 def run_from_oxford(args) -> int:

@@ -1,0 +1,109 @@
+"""Witnesses of the per-view set: exact membership, interior candidates, feasible inner points and
+the membership check of ray certificates (used by :mod:`.api`)."""
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+
+from .sets import contains
+
+__all__ = ["repeat_block", "take", "feasible", "pull_inside", "centres", "rays_stay_inside", "RAY_REACH"]
+
+#: a ray is accepted when base + lambda d stays in S for lambda = scene scale times these factors
+RAY_REACH = (1e-3, 1.0, 1e2)
+
+
+def repeat_block(blk, K, dtype=float):
+    """The block with every problem repeated K times (one per objective), in ``dtype``."""
+    rep = {k: (None if v is None else np.repeat(v, K, axis=0).astype(dtype)) for k, v in
+           (("center", blk.center), ("D", blk.D), ("Dinv", blk.Dinv), ("L", blk.L), ("B", blk.B), ("c", blk.c),
+            ("d", blk.d))}
+    return replace(blk, **rep)
+
+
+def take(blk, idx):
+    """The block of the problems ``idx``."""
+    return replace(blk, **{k: (None if getattr(blk, k) is None else getattr(blk, k)[idx])
+                           for k in ("center", "D", "Dinv", "L", "B", "c", "d")})
+
+
+def feasible(blocks, R, X, rtol) -> np.ndarray:
+    """X (M, 3) in S for problem m (all views)."""
+    ok = np.all(np.isfinite(X), axis=1)
+    Xs = np.where(ok[:, None], X, 0.0)
+    for i, blk in enumerate(blocks):
+        tol = rtol if blk.kind in ("point", "segment") else 0.0
+        ok &= contains(blk, R[:, i], Xs, tol)
+    return ok
+
+
+def pull_inside(blocks, R, W, centre, rtol) -> np.ndarray:
+    """Witnesses W (M, K, 3) moved the least step of a ladder towards ``centre`` (M, 3) that makes
+    them feasible; NaN where none does."""
+    M, K, _ = W.shape
+    out = np.full(W.shape, np.nan)
+    todo = np.all(np.isfinite(W), axis=2)
+    Rk = np.repeat(R, K, axis=0)
+    blk_rep = [repeat_block(b, K) for b in blocks]
+    C = np.repeat(centre, K, axis=0).reshape(M, K, 3)
+    for theta in (0.0, 1e-12, 1e-10, 1e-8, 1e-6, 1e-4, 1e-3, 1e-2, 0.1, 0.5, 1.0):
+        cand = W + theta * (C - W)
+        ok = feasible(blk_rep, Rk, cand.reshape(M * K, 3), rtol).reshape(M, K) & todo
+        out[ok] = cand[ok]
+        todo &= ~ok
+        if not np.any(todo):
+            break
+    return out
+
+
+def centres(blocks, R, W, X0, dirs, sigma, rtol):
+    """An interior candidate per problem: the first feasible of the mean of its finite witnesses, X0,
+    and both moved along the mean ray direction (unbounded sets: into the recession cone) by
+    1..1e4 sigma; X0 where none is."""
+    fin = np.isfinite(W)
+    cnt = fin.sum(axis=1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        mean = np.where(fin, W, 0.0).sum(axis=1) / cnt
+        dbar = np.where(np.isfinite(dirs), dirs, 0.0).sum(axis=1)
+        dbar = dbar / np.linalg.norm(dbar, axis=1, keepdims=True)
+    mean = np.where(np.isfinite(mean), mean, X0)
+    dbar = np.where(np.isfinite(dbar), dbar, 0.0)
+    out = X0.copy()
+    todo = np.ones(len(X0), bool)
+    cands = [mean, X0] + [p + (t * sigma)[:, None] * dbar for t in (1.0, 10.0, 1e2, 1e3, 1e4) for p in (mean, X0)]
+    for c in cands:
+        ok = todo & feasible(blocks, R, c, rtol)
+        out[ok] = c[ok]
+        todo &= ~ok
+        if not np.any(todo):
+            break
+    return out
+
+
+def rays_stay_inside(blocks, R, W, centre, eta, ray, rtol) -> np.ndarray:
+    """(M, K) False where a ray certificate fails the exact membership test: from a feasible base point
+    (the interior candidate, else a feasible witness) the points ``base + lambda d`` must lie in S for
+    lambda up to 1e2 times the scene's scale (distance to the farthest camera centre).  A recession
+    direction of S passes; a direction that only nearly satisfies a thin cone (a widened point) leaves
+    it and is refused (the side is then not reported infinite: the problem is reported failed)."""
+    M, K, _ = W.shape
+    keep = np.ones((M, K), bool)
+    pm, ko = np.nonzero(ray)
+    if len(pm) == 0:
+        return keep
+    base = centre.copy()
+    ok = feasible(blocks, R, base, rtol)
+    for k in range(K):                                  # a feasible witness where the centre is not
+        use = ~ok & np.all(np.isfinite(W[:, k]), axis=1)
+        base[use], ok[use] = W[use, k], True
+    w = np.linalg.svd(R.reshape(-1, 3, 4))[2][:, -1].reshape(M, -1, 4)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        scale = np.nanmax(np.linalg.norm(w[..., :3] / w[..., 3:] - base[:, None], axis=2), axis=1)
+    d = eta[pm, ko] / np.linalg.norm(eta[pm, ko], axis=1, keepdims=True)
+    good = ok[pm] & np.all(np.isfinite(d), axis=1) & np.isfinite(scale[pm])
+    sub = [take(b, pm) for b in blocks]
+    for lam in RAY_REACH:
+        good &= feasible(sub, R[pm], base[pm] + (lam * scale[pm])[:, None] * d, rtol)
+    keep[pm, ko] = good
+    return keep

@@ -59,6 +59,7 @@ from .certificates.psatz import Multiplier, PsatzProblem, as_multiplier, build_p
 from .certificates.shape import SPARSITY_KINDS
 from .certificates.sparsity import correlative_sparsity
 from .lowering.conic import GramForm
+from .solvers.backends import cvxpy_available, get_backend
 from .solvers.lower_bound import solve_psatz
 from .solvers.solve import LowerBound, ProgramSolution, solve_program
 from .status import SolveStatus
@@ -388,7 +389,8 @@ def _retry_chain(form, backend, blocks: int = 1) -> list:
     where the interior-point method of the ``"auto"`` back-end forms a dense Schur complement over
     all decision columns (generalised Rosenbrock, n = 200: 0.3 s against 18 s)."""
     forms = [GramForm(form)] if form is not None else [GramForm.IMAGE, GramForm.KERNEL]
-    backends = [backend] if backend is not None else ["clarabel" if blocks > 1 else "auto", "cvxpy"]
+    backends = [backend] if backend is not None else ["clarabel" if blocks > 1 else "auto"] + (
+        ["cvxpy"] if cvxpy_available() else [])
     return [(fm, be) for be in backends for fm in forms]
 
 
@@ -408,6 +410,8 @@ def minimize(f, eq=(), ineq=(), degree: int | None = None, multiplier="auto", *,
     """
     t0 = time.perf_counter()
     tol, budget = as_tolerances(tolerances), as_budget(budget)
+    if backend is not None:
+        get_backend(backend, tol)        # an unknown or uninstalled solver is an error naming it, before any solve
     deadline = budget.deadline()
     if isinstance(multiplier, str) and multiplier != "auto":
         as_multiplier(multiplier)

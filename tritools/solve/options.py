@@ -28,6 +28,7 @@ from dataclasses import dataclass
 from sospoly import Budget, GramForm, Multiplier, Polynomial, Tolerances
 from sospoly.budget import as_budget
 from sospoly.tolerances import as_tolerances
+from sospoly.solvers.backends import get_backend
 
 from ..model.constraints import Method
 
@@ -150,6 +151,8 @@ class TriangulationOptions:
                                                                                     "cvxpy"):
             raise ValueError(f"backend must be 'clarabel', 'ipm', 'auto', 'cvxpy' or 'cvxpy:<SOLVER>', "
                              f"got {self.backend!r}")
+        if isinstance(self.backend, str):
+            get_backend(self.backend)    # ValueError / ImportError naming an unknown or uninstalled solver
 
     def replace(self, **changes) -> TriangulationOptions:
         """A copy with some fields changed (validated again); None values are ignored.

@@ -369,6 +369,7 @@ def _cmd_dataset(args) -> int:
     options = options_from_args(args)
     select_tracks((), args.limit, args.sample, args.seed)            # the flags checked before any data is read
     seq = load_oxford(args.name, args.data_dir, "dataset")
+    options = sequence_options(options, args, seq)
     tracks = select_tracks(seq.tracks, args.limit, args.sample, args.seed)
     specs = []
     for tr in tracks:
@@ -487,6 +488,22 @@ def add_track_options(p) -> None:
     p.add_argument("--seed", type=int, default=0, metavar="S", help="seed of --sample (default 0)")
 
 
+def add_world_frame_option(p) -> None:
+    """``--world-frame`` of the subcommands reading an Oxford sequence: the handedness in which ``in_front`` is
+    judged (:class:`tritools.model.cameras.WorldFrame`); ``auto`` reads it off the sequence's own tracks."""
+    p.add_argument("--world-frame", choices=("auto", "right_handed", "reflected"), default="auto",
+                   dest="world_frame",
+                   help="handedness of the cameras' world frame for in_front / --require-in-front: auto (read off "
+                        "the sequence's tracks: corridor and house are reflected), right_handed or reflected; "
+                        "default auto")
+
+
+def sequence_options(options: TriangulationOptions, args, seq) -> TriangulationOptions:
+    """``options`` with the world frame of ``--world-frame`` (``auto``: :attr:`Sequence.world_frame`)."""
+    frame = getattr(args, "world_frame", "auto")
+    return options.replace(world_frame=seq.world_frame if frame == "auto" else frame)
+
+
 def add_data_dir_option(p) -> None:
     """``--data-dir`` of the subcommands reading an Oxford sequence (:func:`tritools.io.oxford.load_sequence`)."""
     p.add_argument("--data-dir", default=None, dest="data_dir",
@@ -521,6 +538,7 @@ def register_builtin(sub) -> None:
     add_data_dir_option(p)
     add_track_options(p)
     add_solver_options(p)
+    add_world_frame_option(p)
     p.add_argument("--json", action="store_true", help="summary as JSON")
     p.add_argument("--csv", default=None, metavar="OUT", help="write per-track results to OUT")
     p.set_defaults(func=_cmd_dataset)

@@ -20,6 +20,7 @@ import sys
 from pathlib import Path
 
 from .app import (METHODS, CLIError, add_data_dir_option, add_solver_options, add_track_options, exit_invalid,
+                  add_world_frame_option, sequence_options,
                   load_oxford, options_from_args, select_tracks)
 from ..model.constraints import Method
 
@@ -63,6 +64,7 @@ def _plot_dataset(args) -> int:
     except ImportError as exc:
         return exit_invalid(str(exc))
     seq = load_oxford(args.name, args.data_dir, "plot-dataset")
+    options = sequence_options(options, args, seq)
     tracks = select_tracks(seq.tracks, args.limit, args.sample, args.seed)
     if not tracks:
         return exit_invalid(f"plot-dataset: sequence {seq.name!r} has no track seen in 2 views")
@@ -107,6 +109,7 @@ def register(subparsers) -> None:
     add_data_dir_option(pd)
     add_track_options(pd)
     add_solver_options(pd)
+    add_world_frame_option(pd)
     pd.add_argument("--out", default=None, help="output PNG (default: NAME_summary.png)")
     pd.set_defaults(func=run_plot_dataset)
 

@@ -23,7 +23,8 @@ import numpy as np
 
 from .cameras import (CAMERA_RANK_RTOL, POINT_AT_INFINITY_RTOL, SAME_CAMERA_RTOL, CameraIssue, CameraProblems,
                       camera_center, camera_problems, camera_rank_ratio, cameras_all_equal, check_camera, depths,
-                      depths_stack, points3d_array, power2_scale, unit_rows, validate_cameras)
+                      depths_stack, points3d_array, power2_scale, unit_rows, validate_cameras, WorldFrame,
+                      world_frame_of)
 from .regions.base import real_array
 
 __all__ = [
@@ -33,6 +34,7 @@ __all__ = [
     "CAMERA_RANK_RTOL", "SAME_CAMERA_RTOL", "PROJECTION_DENOM_RTOL", "POINT_AT_INFINITY_RTOL", "COMMON_CENTRE_RTOL",
     "SAME_CENTER_RTOL",
     "camera_problems", "CameraProblems", "CameraIssue", "camera_rank_ratio", "cameras_all_equal", "depths_stack",
+    "WorldFrame", "world_frame_of",
 ]
 
 # ----------------------------------------------------------------------------- tolerances

@@ -21,6 +21,7 @@ import numpy as np
 
 from ..io.colmap.arrays import ModelArrays, PointChunk
 from ..io.colmap.camera_models import camera_problem, distort_rows, distortion, intrinsics, undistorted_pixels
+from ..model.cameras import depths_stack
 from ..result import Status
 from ..solve.options import DEFAULT_OPTIONS, MethodChoice, SolvePath, TriangulationOptions
 from .certify import CertifyOptions, certify_stack, status_code
@@ -296,7 +297,9 @@ def process_chunk(arrays: ModelArrays, geom: ModelGeometry, chunk: PointChunk, o
     # estimate, or of the input point where there is none
     has_X = np.all(np.isfinite(X), axis=1)
     test = np.where(has_X[:, None], X, chunk.xyz)
-    depth = np.einsum("tj,tj->t", geom.R[obs_img, 2, :], test[owner]) + geom.t[obs_img, 2]
+    # (the one depth rule, tritools.model.cameras; a COLMAP frame is right-handed: [R | t] with det R = +1)
+    Rt = np.concatenate([geom.R, geom.t[:, :, None]], axis=2)
+    depth = depths_stack(Rt[obs_img][:, None], test[owner])[:, 0]
     behind = np.bincount(owner[~(depth > 0)], minlength=n) > 0
     r.in_front[:] = ~behind
     ub, g_in = r.gamma_ub, r.gamma_input

@@ -165,7 +165,7 @@ class PointStack:
         self.in_front = np.zeros(self.M, bool)
         if not d.size:
             return
-        g, res, dep = points_report_stack(self.C[d], self.x[d], self.X[d])
+        g, res, dep = points_report_stack(self.C[d], self.x[d], self.X[d], self.opts.world_frame)
         self.gamma_ub[d], self.residuals[d], self.depths[d] = g, res, dep
         self.gamma_ub_raw[d] = points_report_stack(self.C[d], self.x[d], self.X_raw[d])[0]
         self.status[d], self.in_front[d] = cheirality(self.status[d], dep, self.opts.require_in_front)

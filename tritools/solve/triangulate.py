@@ -372,7 +372,7 @@ class _PointSolve:
     # ------------------------------------------------------------------ reporting
     def _report(self, step: Step, status, optimal, gamma_lb, *, X, X_raw, image_points, certified_by,
                 n_lmivar=None) -> TriangulationResult:
-        rep = point_report(X, self.cams, self.regions)
+        rep = point_report(X, self.cams, self.regions, self.opts.world_frame)
         raw = point_report(X_raw, self.cams, self.regions)
         msg = ""
         if gamma_lb is not None and rep.gamma is not None and np.isfinite(rep.gamma):

@@ -8,20 +8,25 @@
 * ``colmap-from-oxford NAME OUT_DIR``: convert an Oxford VGG sequence to a COLMAP model.
 
 Exit codes: 0 success (whatever the points' statuses), 2 bad input, bad option or unusable output
-path -- one line ``tritools: error: ...`` naming the file and line/record, or the flag.
+path -- one line ``tritools: error: ...`` naming the file and line/record, or the flag; 3 the model was
+written but cameras that cannot be used (EQUIRECTANGULAR, a pycolmap-only model without pycolmap, focal
+<= 0) left observations out -- one line ``tritools: warning: ...`` with the counts on stderr.
 """
 from __future__ import annotations
 
 import json
+import sys
 from pathlib import Path
 
 from .app import add_data_dir_option, add_solver_options, exit_invalid, options_from_args
 from ..io.problem_file import jsonable
 
-__all__ = ["register", "run_colmap", "run_from_oxford", "MAX_LISTED"]
+__all__ = ["register", "run_colmap", "run_from_oxford", "MAX_LISTED", "EXIT_CAMERAS_SKIPPED"]
 
 #: uncertified points listed in the text summary.
 MAX_LISTED = 10
+#: exit status of ``tritools colmap`` when unusable cameras left observations out (the model is written).
+EXIT_CAMERAS_SKIPPED = 3
 
 
 def register(subparsers) -> None:
@@ -124,9 +129,21 @@ def run_colmap(args) -> int:
                               "updated": r.updated, "in_front": r.in_front, "message": r.message}
                              for r in report.records]
         print(json.dumps(jsonable(summary), indent=1, allow_nan=False))   # NaN/inf -> null, as tritools solve
-        return 0
+        return _skipped_status(report)
     _print_summary(report, result, summary)
-    return 0
+    return _skipped_status(report)
+
+
+def _skipped_status(report) -> int:
+    """0, or :data:`EXIT_CAMERAS_SKIPPED` with one warning line when unusable cameras left observations out."""
+    used = [c for c in report.skipped_cameras if c[3] > 0]
+    if not used:
+        return 0
+    models = sorted({c[1] for c in used})
+    n_obs = sum(c[3] for c in used)
+    print(f"tritools: warning: {len(used)} camera(s) could not be used ({', '.join(models)}): {n_obs} observation(s) "
+          f"left out, {report.n_certified} of {report.n_points} point(s) certified", file=sys.stderr)
+    return EXIT_CAMERAS_SKIPPED
 
 
 def _print_summary(report, result, summary) -> None:

@@ -3,7 +3,7 @@
 :func:`prepare_geometry` works per camera and per image, once per model: the pinhole matrices
 ``P = K [R | t]`` of every image, and every keypoint that belongs to a track undistorted with one
 numpy call per camera (:func:`tritools.io.colmap.camera_models.undistorted_pixels`).  A camera whose
-model tritools cannot undistort (fisheye models, FULL_OPENCV, ...) or whose parameters are invalid
+model tritools cannot undistort (EQUIRECTANGULAR; pycolmap-only models without pycolmap) or whose parameters are invalid
 (focal length <= 0) is *skipped*: its observations are left out of every track (a count and the
 camera's reason go to the report), unless ``strict`` (then :class:`CameraError`).
 
@@ -20,7 +20,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..io.colmap.arrays import ModelArrays, PointChunk
-from ..io.colmap.camera_models import camera_problem, distort_rows, distortion, intrinsics, undistorted_pixels
+from ..io.colmap.camera_models import (OPENCV_FAMILY, camera_problem, distort_rows, distortion, intrinsics,
+                                       pixels_from_camera, undistorted_pixels)
 from ..model.cameras import depths_stack
 from ..result import Status
 from ..solve.options import DEFAULT_OPTIONS, MethodChoice, SolvePath, TriangulationOptions
@@ -152,7 +153,7 @@ class ModelGeometry:
     P: np.ndarray                 # (V, 3, 4) K [R | t] (zeros for unusable cameras)
     focal: np.ndarray             # (V, 2) fx, fy of the image's camera
     centre: np.ndarray            # (V, 2) cx, cy
-    dist: np.ndarray              # (V, 4) k1, k2, p1, p2
+    dist: np.ndarray              # (V, 4) k1, k2, p1, p2 (OPENCV family; other models: zeros, unused)
     xy_u: np.ndarray              # (K, 2) undistorted keypoints (NaN where not computed)
     kp_ok: np.ndarray             # (K,) undistortion converged
 
@@ -182,7 +183,8 @@ def prepare_geometry(arrays: ModelArrays, strict: bool = False) -> ModelGeometry
     for k in range(C):
         if reasons[k] is None:
             Ks[k] = intrinsics(arrays.camera_models[k], arrays.camera_params[k])
-            dists[k] = distortion(arrays.camera_models[k], arrays.camera_params[k])
+            if arrays.camera_models[k] in OPENCV_FAMILY:          # other models: ERROR via their own map
+                dists[k] = distortion(arrays.camera_models[k], arrays.camera_params[k])
     R = rotations(arrays.image_qvec) if V else np.zeros((0, 3, 3))
     t = arrays.image_tvec
     Rt = np.concatenate([R, t[:, :, None]], axis=2)
@@ -253,9 +255,14 @@ def point_gammas(arrays: ModelArrays, geom: ModelGeometry, xyz: np.ndarray | Non
 def _colmap_error(arrays, geom, X, obs_img, gk, owner, n) -> np.ndarray:
     """COLMAP's ERROR: mean over the observations of |pi(X) - x| in recorded pixels (full camera model)."""
     Xc = np.einsum("tij,tj->ti", geom.R[obs_img], X[owner]) + geom.t[obs_img]
+    cam = arrays.image_camera[obs_img]
+    opencv = np.array([m in OPENCV_FAMILY for m in arrays.camera_models], bool)[cam]
     with np.errstate(all="ignore"):
         uv = distort_rows(Xc[:, :2] / Xc[:, 2:3], geom.dist[obs_img])
         px = geom.focal[obs_img] * uv + geom.centre[obs_img]
+        for k in np.unique(cam[~opencv]):                      # the other models: one call per camera
+            sel = cam == k
+            px[sel] = pixels_from_camera(arrays.camera_models[k], arrays.camera_params[k], Xc[sel])
         e = np.hypot(*(px - arrays.kp_xy[gk]).T)
     return np.bincount(owner, weights=e, minlength=n) / np.maximum(np.bincount(owner, minlength=n), 1)
 

@@ -71,7 +71,8 @@ def forward(model: str, extra: dict, uv: np.ndarray) -> np.ndarray:
     e = extra
     if model == "FULL_OPENCV":
         r2 = u * u + v * v
-        radial = (1 + r2 * (e["k1"] + r2 * (e["k2"] + r2 * e["k3"]))) / (1 + r2 * (e["k4"] + r2 * (e["k5"] + r2 * e["k6"])))
+        num = 1 + r2 * (e["k1"] + r2 * (e["k2"] + r2 * e["k3"]))
+        radial = num / (1 + r2 * (e["k4"] + r2 * (e["k5"] + r2 * e["k6"])))
         return np.column_stack([u * radial + 2 * e["p1"] * u * v + e["p2"] * (r2 + 2 * u * u),
                                 v * radial + 2 * e["p2"] * u * v + e["p1"] * (r2 + 2 * v * v)])
     if model == "FOV":

@@ -36,6 +36,7 @@ from ..model.constraints import Method
 from ..io.problem_file import (ProblemFileError, ProblemSpec, jsonable, load_problem_file, parse_problem_bytes,
                                parse_problem_text, result_to_dict)
 from ..result import Status, TriangulationResult
+from ..solve.batch import PROGRESS_MIN_ITEMS
 from ..solve.options import TRIANGULATION_BUDGET, MethodChoice, SolvePath, Sparsity, TriangulationOptions
 
 __all__ = ["main", "build_parser", "CLIError", "exit_invalid", "add_solver_options", "options_from_args",
@@ -77,7 +78,8 @@ def exit_invalid(message) -> int:
 
 class _Parser(argparse.ArgumentParser):
     def error(self, message):  # one line instead of usage + message, and no SystemExit
-        raise CLIError(f"{self.prog}: {message} (see '{self.prog} --help')")
+        sub = self.prog.partition(" ")[2]          # "tritools colmap" -> "colmap"; the program is named once
+        raise CLIError(f"{sub + ': ' if sub else ''}{message} (see '{self.prog} --help')")
 
     def parse_args(self, args=None, namespace=None):
         # unknown arguments are named even when the command is missing (argparse reports the missing
@@ -96,6 +98,64 @@ class _Parser(argparse.ArgumentParser):
             if self._subparsers is None or "required: COMMAND" not in str(exc) or not unknown:
                 raise
             self.error(f"unrecognized arguments: {' '.join(map(str, unknown))}")
+
+
+#: ``--log-level`` choices (``-v``: info, ``-vv``: debug, ``--quiet``: errors only; default: warnings).
+LOG_LEVELS = ("debug", "info", "warning", "error")
+
+
+def add_logging_options(p, top: bool = False) -> None:
+    """``-v/--verbose``, ``-q/--quiet``, ``--log-level`` (before or after the subcommand: the subcommands'
+    copies default to SUPPRESS, so they never overwrite a value given before it)."""
+    d = {} if top else {"default": argparse.SUPPRESS}
+    p.add_argument("-v", "--verbose", action="count", help="more log messages on stderr (-v info, -vv debug)",
+                   **({"default": 0} if top else d))
+    p.add_argument("-q", "--quiet", action="store_true", help="only errors on stderr (no warnings, no progress bar)",
+                   **({"default": False} if top else d))
+    p.add_argument("--log-level", choices=LOG_LEVELS, dest="log_level", help="log level (default warning)",
+                   **({"default": None} if top else d))
+
+
+def configure_logging(args) -> None:
+    """One stderr handler for the ``tritools`` and ``sospoly`` loggers at the level the flags ask for
+    (``tritools: <level>: message``)."""
+    import logging
+
+    level = getattr(args, "log_level", None)
+    if level is None:
+        level = "error" if getattr(args, "quiet", False) else \
+            {0: "warning", 1: "info"}.get(getattr(args, "verbose", 0) or 0, "debug")
+    handler = logging.StreamHandler(sys.stderr)
+    handler.setFormatter(_LowerLevelFormatter())
+    for name in ("tritools", "sospoly"):
+        lg = logging.getLogger(name)
+        for h in [h for h in lg.handlers if getattr(h, "_tritools_cli", False)]:
+            lg.removeHandler(h)
+        handler._tritools_cli = True
+        lg.addHandler(handler)
+        lg.setLevel(level.upper())
+        lg.propagate = False
+    if getattr(args, "quiet", False) and getattr(args, "progress", None) == "auto":
+        args.progress = False
+    if getattr(args, "progress", None) is True and not _has_tqdm():
+        logging.getLogger("tritools").warning("--progress needs tqdm (pip install 'sospoly-tritools[progress]'): "
+                                              "continuing without a progress bar")
+        args.progress = False                      # said once, here
+
+
+def _has_tqdm() -> bool:
+    try:
+        import tqdm  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+class _LowerLevelFormatter:
+    """``tritools: warning: message`` (logging's level names in lower case)."""
+
+    def format(self, record) -> str:
+        return f"tritools: {record.levelname.lower()}: {record.getMessage()}"
 
 
 # ----------------------------------------------------------------------------- formatting
@@ -420,7 +480,8 @@ def _write_dataset_csv(path, name, tracks, results, times) -> None:
 
 
 # ----------------------------------------------------------------------------- parser
-def add_solver_options(p, default_method: str = "auto", default_path: str = "auto") -> None:
+def add_solver_options(p, default_method: str = "auto", default_path: str = "auto",
+                       progress_help: str | None = None) -> None:
     """The solver flags of every subcommand that solves (``--method --delta --max-delta --path --sparsity
     --time-limit --memory-limit --require-in-front --progress``); :func:`options_from_args` validates them
     exactly like the fields of a problem file."""
@@ -443,9 +504,9 @@ def add_solver_options(p, default_method: str = "auto", default_path: str = "aut
     p.add_argument("--require-in-front", action="store_true", dest="require_in_front",
                    help="a certified point behind a camera gets status behind_camera (default: optimal, in_front "
                         "false)")
-    p.add_argument("--progress", action="store_true", default=None,
-                   help="progress bar on stderr (needs the 'progress' extra; default: only for batches of 1000 "
-                        "problems or more)")
+    p.add_argument("--progress", action="store_true", default="auto",
+                   help=progress_help or f"progress bar on stderr (needs the 'progress' extra, tqdm; default: only "
+                                         f"for batches of {PROGRESS_MIN_ITEMS} problems or more)")
 
 
 def options_from_args(args) -> TriangulationOptions:
@@ -528,8 +589,9 @@ def register_builtin(sub) -> None:
     p.add_argument("--points", type=int, default=5, help="Example 5: scene points (paper: 25)")
     p.add_argument("--trials", type=int, default=2, help="Example 5: trials per point and theta (paper: 10)")
     p.add_argument("--seed", type=int, default=0, help="Example 5: random seed")
-    p.add_argument("--progress", action="store_true", default=None,
-                   help="Example 5: progress bar on stderr (default: only for 1000 cases or more)")
+    p.add_argument("--progress", action="store_true", default="auto",
+                   help=f"Example 5: progress bar on stderr (needs tqdm; default: only for {PROGRESS_MIN_ITEMS} "
+                        f"cases or more)")
     p.set_defaults(func=_cmd_example)
 
     p = sub.add_parser("dataset", help="triangulate the tracks of an Oxford sequence (Example 1)",
@@ -559,11 +621,23 @@ def build_parser() -> argparse.ArgumentParser:
     ap = _Parser(prog="tritools", description="certified multiple-view L2 triangulation (Chesi 2026)")
     ap.add_argument("--version", action="version", version=f"tritools {__version__}",
                     help="print the version and exit")
+    add_logging_options(ap, top=True)
     sub = ap.add_subparsers(dest="command", required=True, metavar="COMMAND", help="the subcommand")
     register_builtin(sub)
     for module in _registered_modules():
         module.register(sub)
+    for p in sub.choices.values():
+        add_logging_options(p)
     return ap
+
+
+def _silence_stdout() -> None:
+    """Point stdout at /dev/null so that the interpreter's final flush does not fail again."""
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+    except (OSError, ValueError, AttributeError):   # stdout without a file descriptor (tests)
+        pass
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -571,6 +645,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     os.environ.setdefault("RUST_BACKTRACE", "0")
     try:
         args = build_parser().parse_args(argv)
+        configure_logging(args)
         if os.environ.get(DEBUG_ENV):
             return int(args.func(args) or EXIT_OK)
         # extreme but finite input (|x| ~ 1e308) overflows inside numpy: its RuntimeWarnings would add
@@ -585,6 +660,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("tritools: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:              # `tritools ... | head`: the reader is gone; stop quietly
+        _silence_stdout()
+        return EXIT_OK
     except Exception as exc:  # noqa: BLE001 - one line instead of a traceback, unless debugging
         if os.environ.get(DEBUG_ENV):
             raise

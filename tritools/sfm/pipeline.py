@@ -79,8 +79,9 @@ class RetriangulationOptions:
     strict
         Raise :class:`CameraError` for an unusable camera instead of skipping its observations.
     chunk_points, progress, executor
-        Points per chunk (bounds memory); a tqdm bar over the whole run (None: from
-        ``PROGRESS_MIN_POINTS`` points on, True: always, False: never); executor of the per-point SDPs.
+        Points per chunk (bounds memory); a tqdm bar over the whole run, moved per stack of equal track
+        lengths (None / False: never, the library's default; "auto": from ``PROGRESS_MIN_POINTS`` points on,
+        the command line's default; True: always); executor of the per-point SDPs.
     """
     method: str | None = None
     path: str | None = None
@@ -91,7 +92,7 @@ class RetriangulationOptions:
     behind: str = "keep-input"
     strict: bool = False
     chunk_points: int = 100_000
-    progress: bool | None = None
+    progress: bool | str | None = None
     executor: object = field(default=None, compare=False)
     solver: TriangulationOptions | None = None
 
@@ -135,8 +136,8 @@ class RetriangulationOptions:
         if self.behind not in BEHIND_CHOICES:
             raise OptionError("behind", f"must be one of {', '.join(BEHIND_CHOICES)}, got {self.behind!r}")
         _int_option("chunk_points", self.chunk_points, 1)
-        if self.progress is not None and not isinstance(self.progress, (bool, np.bool_)):
-            raise OptionError("progress", f"must be True, False or None, got {self.progress!r}")
+        if self.progress is not None and self.progress != "auto" and not isinstance(self.progress, (bool, np.bool_)):
+            raise OptionError("progress", f"must be True, False, None or 'auto', got {self.progress!r}")
 
     def certify_options(self) -> CertifyOptions:
         """The solver settings of :func:`.certify.certify_stack` (the ``solver`` options and the executor)."""

@@ -182,14 +182,17 @@ def has_tqdm() -> bool:
     return importlib.util.find_spec("tqdm") is not None
 
 
-def progress_bar(total: int | None, enabled: bool | None):
-    """A tqdm bar over points, or None: ``enabled`` False, tqdm missing, or ``enabled`` None (the default, as
-    in :func:`tritools.triangulate_many`) and fewer than PROGRESS_MIN_POINTS points (or an unknown total)."""
-    if enabled is False or (enabled is None and (total is None or total < PROGRESS_MIN_POINTS)):
+def progress_bar(total: int | None, enabled: bool | str | None):
+    """A tqdm bar over points (moved once per stack of equal track lengths), or None: ``enabled`` None / False
+    (the library's default: no bar unless asked), ``"auto"`` (the command line's default) with fewer than
+    PROGRESS_MIN_POINTS points or an unknown total, or tqdm missing (a warning when ``enabled`` is True)."""
+    if enabled is None or enabled is False or (enabled == "auto" and (total is None or total < PROGRESS_MIN_POINTS)):
         return None
     try:
         from tqdm import tqdm
     except ImportError:  # optional extra 'progress'
+        if enabled is True:
+            logger.warning("progress=True needs tqdm (pip install 'sospoly-tritools[progress]'): no progress bar")
         return None
     return tqdm(total=total, desc="re-triangulating", unit="pt", leave=False)
 

@@ -96,11 +96,15 @@ def _run_chunk(items, retries) -> list:
 
 
 def _progress_bar(total: int, progress):
-    if progress is False or (progress is None and total < PROGRESS_MIN_ITEMS):
+    """A tqdm bar, or None: ``progress`` None / False (a library call shows no bar unless asked), ``"auto"``
+    with fewer than PROGRESS_MIN_ITEMS problems, or tqdm missing (a warning when ``progress`` is True)."""
+    if progress is None or progress is False or (progress == "auto" and total < PROGRESS_MIN_ITEMS):
         return None
     try:
         from tqdm import tqdm
-    except ImportError:  # optional extra 'progress': silently no bar
+    except ImportError:  # optional extra 'progress'
+        if progress is True:
+            log.warning("progress=True needs tqdm (pip install 'sospoly-tritools[progress]'): no progress bar")
         return None
     return tqdm(total=total, desc="triangulating", leave=False)
 
@@ -311,7 +315,8 @@ def triangulate_many(problems: Iterable[Sequence], method=None, delta=None, max_
         certifies by verification first, vectorised over problems with the same structure)
     executor : None, a :class:`concurrent.futures.Executor`, or a ``dask.distributed.Client``
         (see the module docstring for the default)
-    progress : a tqdm bar: True, False, or None (default: only for batches of PROGRESS_MIN_ITEMS or more)
+    progress : a tqdm bar: True, False / None (the default: no bar), or "auto" (only for batches of
+        PROGRESS_MIN_ITEMS or more; what the command line does unless --progress)
     retries : (method, delta) steps tried in order on items the first call did not certify
         (e.g. ``[("corollary1", 4), ("theorem1", None)]``); the first certified result is kept, else the
         first call's.  Each result's ``attempts`` lists them all.

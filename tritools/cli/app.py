@@ -387,7 +387,9 @@ def _summary_row(rs: list[TriangulationResult], times: list) -> dict:
     secs = [t for t, _ in times if t is not None]
     return {"cases": len(rs), "certified": sum(r.status == Status.OPTIMAL for r in rs),
             "mean_gamma_ub": float(np.mean(gub)) if gub else None,
-            "std_gamma_ub": float(np.std(gub)) if gub else None,
+            # the sample standard deviation (ddof = 1), as the paper's Tables 1-6 and benchmarks/example1.py;
+            # 0 for a single case (the paper prints .000)
+            "std_gamma_ub": (float(np.std(gub, ddof=1)) if len(gub) > 1 else 0.0) if gub else None,
             "n_lmivar": sorted({r.n_lmivar for r in rs if r.n_lmivar is not None}),
             "mean_seconds": float(np.mean(secs)) if secs else None}
 

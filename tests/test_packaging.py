@@ -66,3 +66,19 @@ def test_sympy_converters_without_sympy_say_how_to_install(monkeypatch):
     with pytest.raises(ImportError, match=r"sospoly-tritools\[sympy\]"):
         (x + 1).to_sympy()
     assert (x**2 + 1)(2.0) == 5.0                                # the rest works without sympy
+
+
+def test_the_top_level_api_is_fully_annotated():
+    """Every function exported by ``tritools`` (and the pycolmap bridge) annotates all its parameters and return."""
+    import inspect
+
+    import tritools
+    import tritools.io.colmap.pycolmap_bridge as bridge
+
+    funcs = [getattr(tritools, n) for n in tritools.__all__ if inspect.isfunction(getattr(tritools, n))]
+    funcs += [bridge.from_pycolmap, bridge.to_pycolmap]
+    for f in funcs:
+        sig = inspect.signature(f)
+        missing = [p.name for p in sig.parameters.values()
+                   if p.annotation is inspect.Parameter.empty and p.kind not in (p.VAR_KEYWORD, p.VAR_POSITIONAL)]
+        assert not missing and sig.return_annotation is not inspect.Signature.empty, (f.__name__, missing)

@@ -45,6 +45,7 @@ import enum
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .regions.base import real_array
 
@@ -223,7 +224,7 @@ def check_camera(P: np.ndarray, name: str) -> None:
         raise ValueError(_rank_message(name, ratio))
 
 
-def validate_cameras(cameras, *, min_views: int = 2, require_distinct: bool = True) -> np.ndarray:
+def validate_cameras(cameras: ArrayLike, *, min_views: int = 2, require_distinct: bool = True) -> np.ndarray:
     """Check and convert projection matrices (the rule is in the module docstring).
 
     Parameters
@@ -356,7 +357,7 @@ def _depth_rows(C: np.ndarray) -> np.ndarray:
     return Cs[..., 2, :] * f[..., None]
 
 
-def depths(X, cameras, world_frame: WorldFrame | str = WorldFrame.RIGHT_HANDED) -> np.ndarray:
+def depths(X: ArrayLike, cameras: ArrayLike, world_frame: WorldFrame | str = WorldFrame.RIGHT_HANDED) -> np.ndarray:
     """Depth of ``X`` in each camera (Hartley & Zisserman eq. (6.15)):
     ``depth = h sign(det M) (p3.X~) / ||m3||``, ``M`` the left 3x3 block of ``P``,
     ``m3`` its third row, ``h = world_frame.sign`` (see the module docstring); invariant to
@@ -382,7 +383,8 @@ def depths(X, cameras, world_frame: WorldFrame | str = WorldFrame.RIGHT_HANDED) 
     return out[0] if single else out
 
 
-def depths_stack(cameras, X, world_frame: WorldFrame | str = WorldFrame.RIGHT_HANDED) -> np.ndarray:
+def depths_stack(cameras: ArrayLike, X: ArrayLike,
+                 world_frame: WorldFrame | str = WorldFrame.RIGHT_HANDED) -> np.ndarray:
     """:func:`depths` for M problems at once: cameras (M, N, 3, 4), X (M, 3) -> (M, N), the depth
     of ``X[m]`` in camera ``cameras[m, i]`` (same formula, numpy over the stack).
 
@@ -405,7 +407,7 @@ def depths_stack(cameras, X, world_frame: WorldFrame | str = WorldFrame.RIGHT_HA
         return h * np.einsum("mj,mnj->mn", Xh, _depth_rows(C))
 
 
-def world_frame_of(cameras, X) -> WorldFrame:
+def world_frame_of(cameras: ArrayLike, X: ArrayLike) -> WorldFrame:
     """The handedness of a reconstruction's world frame, read off its own points: REFLECTED when most
     finite right-handed depths (eq. (6.15)) of the pairs (``X[m]``, ``cameras[m, i]``) are negative (a real
     scene lies in front of the cameras that see it; only a mirrored frame puts it behind them).

@@ -26,6 +26,7 @@ from __future__ import annotations
 import enum
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .regions.base import real_array
 
@@ -56,7 +57,7 @@ def _fits(shape: tuple, V: int) -> list[PointsLayout]:
     return out
 
 
-def points_array(points2d, n_views: int, layout: PointsLayout | str = PointsLayout.AUTO,
+def points_array(points2d: ArrayLike, n_views: int, layout: PointsLayout | str = PointsLayout.AUTO,
                  name: str = "points2d") -> np.ndarray:
     """``points2d`` in tritools' (M, V, 2) layout (float64), from any layout of the module table.
 
@@ -94,7 +95,7 @@ def points_array(points2d, n_views: int, layout: PointsLayout | str = PointsLayo
     return x
 
 
-def rotation_from_rodrigues(rvec) -> np.ndarray:
+def rotation_from_rodrigues(rvec: ArrayLike) -> np.ndarray:
     """R = exp([r]_x) of Rodrigues vectors (..., 3) (``cv2.Rodrigues``): Rodrigues' formula
     ``I + sin(a) [k]_x + (1 - cos(a)) [k]_x^2`` with ``a = |r|``, ``k = r / a`` (I at a = 0)."""
     r = np.asarray(rvec, float)
@@ -107,7 +108,7 @@ def rotation_from_rodrigues(rvec) -> np.ndarray:
     return np.eye(3) + s * Kx + (1 - c) * (Kx @ Kx)
 
 
-def cameras_from_krt(K, R, t) -> np.ndarray:
+def cameras_from_krt(K: ArrayLike, R: ArrayLike, t: ArrayLike) -> np.ndarray:
     """``P = K [R | t]``: (3, 4) for one view, (V, 3, 4) for V views (K may be shared).
 
     Parameters

@@ -34,6 +34,7 @@ from collections.abc import Iterable, Sequence
 import numpy as np
 
 from ..model.regions import Point
+from ..model.constraints import Method
 from ..result import Attempt, Status, TriangulationResult
 from .options import TriangulationOptions, options_from
 from .points import PointStack
@@ -301,8 +302,9 @@ def solve_point_problems(problems, opts: TriangulationOptions, *, executor=None,
     return out
 
 
-def triangulate_many(problems: Iterable[Sequence], method=None, delta=None, max_delta=None, *,
-                     options: TriangulationOptions | None = None, executor=None, progress: bool | None = None,
+def triangulate_many(problems: Iterable[Sequence], method: str | Method | None = None, delta: int | None = None,
+                     max_delta: int | None = None, *, options: TriangulationOptions | None = None,
+                     executor: cf.Executor | object | None = None, progress: bool | str | None = None,
                      retries: Sequence[RetryStep] = (), chunk_size: int = DEFAULT_CHUNK_SIZE,
                      **overrides) -> list[TriangulationResult]:
     """Triangulate every (cameras, regions) pair; results in input order, one per input.

@@ -19,6 +19,7 @@ from __future__ import annotations
 import time
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from sospoly import GramForm, Multiplier, n_lmivar_formula
 
@@ -208,8 +209,9 @@ class PointsResult:
         return [self._results_of(m) for m in range(len(self))]
 
 
-def triangulate_points(cameras, points2d, visible=None, *, layout: PointsLayout | str = PointsLayout.AUTO,
-                       options: TriangulationOptions | None = None, executor=None, progress: bool | None = None,
+def triangulate_points(cameras: ArrayLike, points2d: ArrayLike, visible: ArrayLike | None = None, *,
+                       layout: PointsLayout | str = PointsLayout.AUTO, options: TriangulationOptions | None = None,
+                       executor: object | None = None, progress: bool | str | None = None,
                        **overrides) -> PointsResult:
     """Certified triangulation of M points observed in V views, as arrays (like ``cv2.triangulatePoints``).
 

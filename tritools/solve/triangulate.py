@@ -28,8 +28,10 @@ from __future__ import annotations
 
 import dataclasses
 import time
+from collections.abc import Sequence
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 import sospoly
 from sospoly import BudgetExceeded, Multiplier, SolveStatus
@@ -61,7 +63,8 @@ MAX_FAMILY_DIM = 3
 FAMILY_SEARCH_EVALS = 300
 
 
-def triangulate(cameras, regions, method=None, delta: int | None = None, max_delta: int | None = None, *,
+def triangulate(cameras: ArrayLike, regions: Sequence | ArrayLike, method: str | Method | None = None,
+                delta: int | None = None, max_delta: int | None = None, *,
                 options: TriangulationOptions | None = None, **overrides) -> TriangulationResult:
     """Certified triangulation of one scene point (see module docstring).
 

@@ -11,9 +11,14 @@ when called (ImportError naming the ``colmap`` extra otherwise).
 """
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 
 from .model import NO_POINT3D, Camera, Image, Model, Point3D
+
+if TYPE_CHECKING:                     # an optional dependency: never imported at run time here
+    import pycolmap
 
 __all__ = ["from_pycolmap", "to_pycolmap", "is_pycolmap_reconstruction", "import_pycolmap"]
 
@@ -28,7 +33,7 @@ def import_pycolmap():
     return pycolmap
 
 
-def is_pycolmap_reconstruction(obj) -> bool:
+def is_pycolmap_reconstruction(obj: object) -> bool:
     """Whether ``obj`` is a ``pycolmap.Reconstruction`` (checked without importing pycolmap)."""
     t = type(obj)
     return t.__name__ == "Reconstruction" and t.__module__.split(".")[0] == "pycolmap"
@@ -42,7 +47,7 @@ def _pose(image):
     return (w, x, y, z), tuple(float(v) for v in cfw.translation)
 
 
-def from_pycolmap(rec) -> Model:
+def from_pycolmap(rec: pycolmap.Reconstruction) -> Model:
     """A :class:`~.model.Model` of a ``pycolmap.Reconstruction`` (registered images only).
 
     Raises
@@ -76,7 +81,7 @@ def from_pycolmap(rec) -> Model:
     return Model(cams, images, points)
 
 
-def to_pycolmap(model: Model):
+def to_pycolmap(model: Model) -> pycolmap.Reconstruction:
     """A ``pycolmap.Reconstruction`` of a :class:`~.model.Model` (a trivial rig per camera, a trivial frame
     per image; ids, names, poses, keypoints, colours, errors and tracks as in ``model``)."""
     pycolmap = import_pycolmap()

@@ -123,3 +123,16 @@ def test_colmap_scheduler_address(tmp_path):
     r = run("colmap", src, tmp_path / "bad", "--scheduler", "tcp://127.0.0.1:9")   # nothing listens on port 9
     assert r.returncode == 2 and r.stderr.startswith("tritools: error: --scheduler tcp://127.0.0.1:9: cannot connect")
     assert not (tmp_path / "bad").exists()
+
+
+def test_library_calls_show_no_bar_unless_asked(capfd):
+    pytest.importorskip("tqdm")
+    import tritools
+
+    rng = np.random.default_rng(5)
+    P = np.array([[[1.0, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 1]], [[1.0, 0, 0, 1], [0, 1, 0, 0], [0, 0, 1, 1]]])
+    probs = [(P, rng.normal(scale=0.1, size=(2, 2))) for _ in range(1200)]       # above the CLI's threshold
+    tritools.triangulate_many(probs)
+    assert capfd.readouterr().err == ""
+    tritools.triangulate_many(probs, progress="auto")
+    assert "triangulating" in capfd.readouterr().err

@@ -120,7 +120,7 @@ def test_triangulate_judges_in_front_in_the_given_frame_on_both_paths():
     np.testing.assert_allclose(r.X, Xm, atol=1e-6)
     r = triangulate(-Pm, regions, require_in_front=True)                 # right-handed reading: behind
     assert r.status == Status.BEHIND_CAMERA and not r.in_front
-    pts = np.broadcast_to(x, (3,) + x.shape).copy()
+    pts = np.broadcast_to(x, (4,) + x.shape).copy()                     # (M=4, V=3, 2)
     out = triangulate_points(Pm, pts, require_in_front=True, world_frame="reflected")
     assert np.all(out.in_front) and np.all(out.status == Status.OPTIMAL.value)
     out = triangulate_points(Pm, pts, require_in_front=True)

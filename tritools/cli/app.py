@@ -20,6 +20,7 @@ not input errors: they get a result row with a status.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import csv
 import importlib
 import json
@@ -116,9 +117,11 @@ def add_logging_options(p, top: bool = False) -> None:
                    **({"default": None} if top else d))
 
 
-def configure_logging(args) -> None:
-    """One stderr handler for the ``tritools`` and ``sospoly`` loggers at the level the flags ask for
-    (``tritools: <level>: message``)."""
+@contextlib.contextmanager
+def cli_logging(args):
+    """For the duration of one command: a stderr handler on the ``tritools`` and ``sospoly`` loggers at the
+    level the flags ask for (``tritools: <level>: message``); the loggers are restored afterwards (``main`` may
+    run inside a host program or a test)."""
     import logging
 
     level = getattr(args, "log_level", None)
@@ -127,14 +130,27 @@ def configure_logging(args) -> None:
             {0: "warning", 1: "info"}.get(getattr(args, "verbose", 0) or 0, "debug")
     handler = logging.StreamHandler(sys.stderr)
     handler.setFormatter(_LowerLevelFormatter())
+    saved = []
     for name in ("tritools", "sospoly"):
         lg = logging.getLogger(name)
-        for h in [h for h in lg.handlers if getattr(h, "_tritools_cli", False)]:
-            lg.removeHandler(h)
-        handler._tritools_cli = True
+        saved.append((lg, lg.level, lg.propagate))
         lg.addHandler(handler)
         lg.setLevel(level.upper())
-        lg.propagate = False
+        lg.propagate = False                       # one line per message, whatever the host's root logger does
+    try:
+        _progress_flag(args)
+        yield
+    finally:
+        for lg, lvl, prop in saved:
+            lg.removeHandler(handler)
+            lg.setLevel(lvl)
+            lg.propagate = prop
+
+
+def _progress_flag(args) -> None:
+    """``--quiet`` turns the automatic bar off; ``--progress`` without tqdm says so once."""
+    import logging
+
     if getattr(args, "quiet", False) and getattr(args, "progress", None) == "auto":
         args.progress = False
     if getattr(args, "progress", None) is True and not _has_tqdm():
@@ -647,14 +663,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     os.environ.setdefault("RUST_BACKTRACE", "0")
     try:
         args = build_parser().parse_args(argv)
-        configure_logging(args)
-        if os.environ.get(DEBUG_ENV):
-            return int(args.func(args) or EXIT_OK)
-        # extreme but finite input (|x| ~ 1e308) overflows inside numpy: its RuntimeWarnings would add
-        # lines to the one-line error (the affected problems get their status rows or the one-line error)
-        with warnings.catch_warnings(), np.errstate(all="ignore"):
-            warnings.simplefilter("ignore", RuntimeWarning)
-            return int(args.func(args) or EXIT_OK)
+        with cli_logging(args):
+            if os.environ.get(DEBUG_ENV):
+                return int(args.func(args) or EXIT_OK)
+            # extreme but finite input (|x| ~ 1e308) overflows inside numpy: its RuntimeWarnings would add
+            # lines to the one-line error (the affected problems get their status rows or the one-line error)
+            with warnings.catch_warnings(), np.errstate(all="ignore"):
+                warnings.simplefilter("ignore", RuntimeWarning)
+                return int(args.func(args) or EXIT_OK)
     except (CLIError, ProblemFileError) as exc:
         return exit_invalid(exc)
     except SystemExit as exc:            # --help

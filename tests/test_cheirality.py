@@ -158,3 +158,25 @@ def test_cli_dataset_house_certifies_in_front(oxford_data):
                           "--world-frame", "right_handed", "--json", "--data-dir", str(data)], capture_output=True,
                          text=True, cwd=ROOT, env={**os.environ, "PYTHONPATH": str(ROOT)}, timeout=300)
     assert run.returncode == 0 and json.loads(run.stdout)["total"]["certified"] == 0
+
+
+def test_cli_solve_world_frame(tmp_path):
+    """`tritools solve --world-frame reflected` on a mirrored camera pair: certified in front; read as
+    right-handed (the default) the same point is behind both cameras."""
+    K = np.array([[800.0, 0, 320], [0, 800, 240], [0, 0, 1]])
+    pair = np.array([K @ np.c_[np.eye(3), [[1.0], [0], [0]]], K @ np.c_[np.eye(3), [[-1.0], [0], [0]]]])
+    X = np.array([0.3, 0.2, 5.0])
+    x = [(P[:2] @ np.append(X, 1) / (P[2] @ np.append(X, 1))).tolist() for P in pair]
+    reflected = -(pair @ np.diag([1.0, 1.0, -1.0, 1.0]))                 # any sign: the same cameras
+    path = tmp_path / "p.json"
+    path.write_text(json.dumps({"cameras": reflected.tolist(), "regions": x}))
+    out = {}
+    for frame in ("reflected", "right_handed"):
+        run = subprocess.run([sys.executable, "-m", "tritools", "solve", str(path), "--json", "--require-in-front",
+                              "--world-frame", frame], capture_output=True, text=True, cwd=ROOT,
+                             env={**os.environ, "PYTHONPATH": str(ROOT)}, timeout=300)
+        assert run.returncode == 0, run.stderr
+        doc = json.loads(run.stdout)
+        out[frame] = doc[0] if isinstance(doc, list) else doc
+    assert out["reflected"]["status"] == "optimal" and out["reflected"]["in_front"] is True
+    assert out["right_handed"]["status"] == "behind_camera" and out["right_handed"]["in_front"] is False

@@ -547,7 +547,9 @@ def options_from_args(args) -> TriangulationOptions:
     try:
         return TriangulationOptions(method=get("method", "auto"), delta=get("delta"), max_delta=get("max_delta"),
                                     path=get("path", "auto"), sparsity=get("sparsity", "auto"), budget=budget,
-                                    require_in_front=bool(get("require_in_front")))
+                                    require_in_front=bool(get("require_in_front")),
+                                    world_frame=get("world_frame") if get("world_frame") not in (None, "auto")
+                                    else "right_handed")
     except (ValueError, TypeError) as exc:
         msg = str(exc)
         field = msg.split()[0]
@@ -567,14 +569,20 @@ def add_track_options(p) -> None:
     p.add_argument("--seed", type=int, default=0, metavar="S", help="seed of --sample (default 0)")
 
 
-def add_world_frame_option(p) -> None:
-    """``--world-frame`` of the subcommands reading an Oxford sequence: the handedness in which ``in_front`` is
-    judged (:class:`tritools.model.cameras.WorldFrame`); ``auto`` reads it off the sequence's own tracks."""
-    p.add_argument("--world-frame", choices=("auto", "right_handed", "reflected"), default="auto",
-                   dest="world_frame",
-                   help="handedness of the cameras' world frame for in_front / --require-in-front: auto (read off "
-                        "the sequence's tracks: corridor and house are reflected), right_handed or reflected; "
-                        "default auto")
+def add_world_frame_option(p, sequence: bool = True) -> None:
+    """``--world-frame``: the handedness in which ``in_front`` is judged (:class:`tritools.model.cameras.WorldFrame`);
+    for the subcommands reading an Oxford sequence ``auto`` (their default) reads it off the sequence's tracks."""
+    if sequence:
+        p.add_argument("--world-frame", choices=("auto", "right_handed", "reflected"), default="auto",
+                       dest="world_frame",
+                       help="handedness of the cameras' world frame for in_front / --require-in-front: auto (read "
+                            "off the sequence's tracks: corridor and house are reflected), right_handed or "
+                            "reflected; default auto")
+    else:
+        p.add_argument("--world-frame", choices=("right_handed", "reflected"), default="right_handed",
+                       dest="world_frame",
+                       help="handedness of the cameras' world frame for in_front / --require-in-front (reflected: "
+                            "a mirrored reconstruction, every det M < 0); default right_handed")
 
 
 def sequence_options(options: TriangulationOptions, args, seq) -> TriangulationOptions:
@@ -596,6 +604,7 @@ def register_builtin(sub) -> None:
                                    "{\"problems\": [...]}; schema in docs/cli.md).")
     p.add_argument("file", metavar="FILE", help="problem file, or - for stdin")
     add_solver_options(p)
+    add_world_frame_option(p, sequence=False)
     p.add_argument("--json", action="store_true", help="one JSON object per problem, all result fields")
     p.add_argument("--output", "-o", default=None, metavar="OUT", help="write the output to OUT instead of stdout")
     p.set_defaults(func=_cmd_solve)

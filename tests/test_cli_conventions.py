@@ -101,11 +101,12 @@ def _certified(out):
 
 @pytest.mark.slow
 def test_colmap_workers_give_the_same_certificates(tmp_path):
-    src = _model(tmp_path)
-    base = run("colmap", src, tmp_path / "o0", "--max-delta", "4")
+    """Theorem 1 is solved point by point, so its SDPs go through the executor the flags choose."""
+    src = _model(tmp_path, 10)
+    base = run("colmap", src, tmp_path / "o0", "--method", "theorem1")
     assert base.returncode == 0, base.stderr
     for n in (1, 2):
-        r = run("colmap", src, tmp_path / f"o{n}", "--max-delta", "4", "--workers", n)
+        r = run("colmap", src, tmp_path / f"o{n}", "--method", "theorem1", "--workers", n)
         assert r.returncode == 0, r.stderr
         assert _certified(r) == _certified(base)
         a = (tmp_path / "o0" / "points3D_certificates.txt").read_text()
@@ -136,3 +137,19 @@ def test_library_calls_show_no_bar_unless_asked(capfd):
     assert capfd.readouterr().err == ""
     tritools.triangulate_many(probs, progress="auto")
     assert "triangulating" in capfd.readouterr().err
+
+
+@pytest.mark.slow
+def test_colmap_on_a_running_dask_scheduler(tmp_path):
+    distributed = pytest.importorskip("dask.distributed")
+    src = _model(tmp_path, 8)
+    base = run("colmap", src, tmp_path / "o0", "--method", "theorem1")
+    assert base.returncode == 0, base.stderr
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=False, protocol="tcp",
+                                  host="127.0.0.1", dashboard_address=None) as cluster:
+        r = run("colmap", src, tmp_path / "o1", "--method", "theorem1", "--scheduler", cluster.scheduler_address)
+        executed = sum(w.state.executed_count for w in cluster.workers.values())
+    assert executed > 0                                       # the per-point SDPs ran on the cluster
+    assert r.returncode == 0, r.stderr
+    assert (tmp_path / "o1" / "points3D_certificates.txt").read_text() == \
+        (tmp_path / "o0" / "points3D_certificates.txt").read_text()

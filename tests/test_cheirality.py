@@ -180,3 +180,23 @@ def test_cli_solve_world_frame(tmp_path):
         out[frame] = doc[0] if isinstance(doc, list) else doc
     assert out["reflected"]["status"] == "optimal" and out["reflected"]["in_front"] is True
     assert out["right_handed"]["status"] == "behind_camera" and out["right_handed"]["in_front"] is False
+
+
+def test_colmap_conversion_refuses_a_reflected_frame():
+    """COLMAP frames are right-handed: mirrored projections would give a model whose points are all behind
+    their cameras, so the conversion refuses them (and accepts the same scene unmirrored)."""
+    from tritools.io.colmap import model_from_projections, rotation_from_qvec
+
+    rng = np.random.default_rng(2)
+    K0 = np.array([[800.0, 0.0, 320.0], [0.0, 790.0, 240.0], [0.0, 0.0, 1.0]])      # COLMAP: no skew
+    P = np.array([K0 @ np.c_[rotation(rng), [0.2 * k, 0.1, 8.0]] for k in range(3)])
+    Xs = rng.normal(scale=0.5, size=(5, 3))
+    tracks = [{v: (P[v] @ np.append(X, 1))[:2] / (P[v] @ np.append(X, 1))[2] for v in range(3)} for X in Xs]
+    model = model_from_projections(P, (640, 480), tracks)
+    for im in model.images.values():                          # every point in front in COLMAP's own terms
+        R, t = rotation_from_qvec(np.array(im.qvec)), np.array(im.tvec)
+        for *_, pid in im.points2D:
+            assert (R @ np.array(model.points3D[pid].xyz) + t)[2] > 0
+    Pm = P @ np.diag([1.0, 1.0, -1.0, 1.0])
+    with pytest.raises(ValueError, match="reflected"):
+        model_from_projections(Pm, (640, 480), tracks)

@@ -153,3 +153,20 @@ def test_colmap_on_a_running_dask_scheduler(tmp_path):
     assert r.returncode == 0, r.stderr
     assert (tmp_path / "o1" / "points3D_certificates.txt").read_text() == \
         (tmp_path / "o0" / "points3D_certificates.txt").read_text()
+
+
+def test_progress_moves_per_stack_of_equal_track_lengths():
+    """One chunk of points with several track lengths: the bar moves once per stack, and by all the points."""
+    from tritools.sfm import RetriangulationOptions, prepare_geometry, process_chunk
+    from tritools.sfm.synthetic import synthetic_arrays
+
+    arrays, _ = synthetic_arrays(n_points=200, n_images=10, seed=4)
+    updates = []
+
+    class Bar:
+        def update(self, n):
+            updates.append(n)
+
+    process_chunk(arrays, prepare_geometry(arrays), arrays.points(0, 200), RetriangulationOptions(max_delta=2), Bar())
+    lengths = np.diff(arrays.track_offsets)
+    assert len(updates) >= len(np.unique(lengths)) > 3 and sum(updates) == 200

@@ -166,3 +166,14 @@ def test_every_model_round_trips_through_pycolmap_binary(tmp_path):
     (tmp_path / "b").mkdir()
     rec.write_binary(str(tmp_path / "b"))
     assert read_binary_model(tmp_path / "b").cameras == model.cameras
+
+
+@pytest.mark.parametrize("omega", [1e-9, 0.005, 0.5, 2.0])
+def test_fov_model_follows_colmap_branches(omega):
+    """COLMAP switches to series for small omega or small radius: ERROR must use the same map."""
+    p = (450.0, 455.0, 320.0, 240.0, omega)
+    cam = pycolmap.Camera(model="FOV", width=640, height=480, params=list(p))
+    X = np.vstack([np.column_stack([np.random.default_rng(1).uniform(-0.6, 0.6, (40, 2)), np.ones(40)]),
+                   [[1e-3, 2e-3, 1.0], [0.0, 0.0, 1.0]]])
+    np.testing.assert_allclose(pixels_from_camera("FOV", p, X), cam.img_from_cam(X), rtol=0, atol=1e-9)
+    assert undistorted_pixels("FOV", p, cam.img_from_cam(X))[1].all()

@@ -14,7 +14,8 @@ The maps ``D`` with own code here (COLMAP's ``src/colmap/sensor/models.h``; each
   + k4 theta^8)``;
 * THIN_PRISM_FISHEYE: the equidistant point ``(a, b) = (theta / r) (u, v)``, ``s = a^2 + b^2``, then
   ``a (1 + k1 s + k2 s^2 + k3 s^3 + k4 s^4) + 2 p1 a b + p2 (s + 2 a^2) + sx1 s`` and its twin for b;
-* FOV ``omega``: ``(u_d, v_d) = (atan(2 r tan(omega / 2)) / (omega r)) (u, v)``.
+* FOV ``omega``: ``(u_d, v_d) = (atan(2 r tan(omega / 2)) / (omega r)) (u, v)``, with COLMAP's series for
+  small omega or r (:func:`_fov_factor`), so that small-omega cameras match COLMAP to the last bit.
 
 The inverse ``D^-1`` is Newton's method with a central-difference Jacobian (its accuracy is decided by
 the forward residual, checked in pixels against ``UNDISTORT_TOL_PX``, not by the Jacobian).  The other
@@ -76,13 +77,7 @@ def forward(model: str, extra: dict, uv: np.ndarray) -> np.ndarray:
         return np.column_stack([u * radial + 2 * e["p1"] * u * v + e["p2"] * (r2 + 2 * u * u),
                                 v * radial + 2 * e["p2"] * u * v + e["p1"] * (r2 + 2 * v * v)])
     if model == "FOV":
-        w = e["omega"]
-        r = np.hypot(u, v)
-        if abs(w) < 1e-8:
-            return uv.copy()
-        t = 2 * np.tan(w / 2)
-        s = np.where(r > _EPS, np.arctan(r * t) / (w * np.where(r > _EPS, r, 1.0)), t / w)
-        return uv * s[:, None]
+        return uv * _fov_factor(e["omega"], u * u + v * v)[:, None]
     a, b, theta = _equidistant(u, v)
     if model in ("FISHEYE", "SIMPLE_FISHEYE"):
         return np.column_stack([a, b])
@@ -98,6 +93,23 @@ def forward(model: str, extra: dict, uv: np.ndarray) -> np.ndarray:
     for k in reversed(ks):
         poly = (poly + e[k]) * t2
     return np.column_stack([a, b]) * (1 + poly)[:, None]
+
+
+def _fov_factor(w: float, r2: np.ndarray) -> np.ndarray:
+    """The FOV model's radial factor, with COLMAP's own branches (so that ERROR is COLMAP's): its series in
+    omega^2 below :data:`FOV_EPS`, its series in r^2 below it, else ``atan(2 r tan(omega / 2)) / (omega r)``."""
+    w2 = w * w
+    if w2 < FOV_EPS:
+        return (w2 * r2) / 3 - w2 / 12 + 1
+    th = np.tan(w / 2)
+    small = r2 < FOV_EPS
+    r = np.sqrt(np.where(small, 1.0, r2))
+    exact = np.arctan(r * 2 * th) / (r * w)
+    return np.where(small, (-2 * th * (4 * r2 * th * th - 3)) / (3 * w), exact)
+
+
+#: COLMAP's switch between the FOV model's series and its closed form (``kEpsilon`` in models.h).
+FOV_EPS = 1e-4
 
 
 def inverse(fun, uv_d: np.ndarray, tol: float, max_iter: int) -> tuple[np.ndarray, np.ndarray]:

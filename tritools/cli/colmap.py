@@ -140,20 +140,23 @@ def run_colmap(args) -> int:
                               "updated": r.updated, "in_front": r.in_front, "message": r.message}
                              for r in report.records]
         print(json.dumps(jsonable(summary), indent=1, allow_nan=False))   # NaN/inf -> null, as tritools solve
-        return _skipped_status(report)
+        return _skipped_status(report, getattr(args, "quiet", False))
     _print_summary(report, result, summary)
-    return _skipped_status(report)
+    return _skipped_status(report, getattr(args, "quiet", False))
 
 
-def _skipped_status(report) -> int:
-    """0, or :data:`EXIT_CAMERAS_SKIPPED` with one warning line when unusable cameras left observations out."""
+def _skipped_status(report, quiet: bool = False) -> int:
+    """0, or :data:`EXIT_CAMERAS_SKIPPED` with one warning line (unless ``quiet``) when unusable cameras left
+    observations out."""
     used = [c for c in report.skipped_cameras if c[3] > 0]
     if not used:
         return 0
     models = sorted({c[1] for c in used})
     n_obs = sum(c[3] for c in used)
-    print(f"tritools: warning: {len(used)} camera(s) could not be used ({', '.join(models)}): {n_obs} observation(s) "
-          f"left out, {report.n_certified} of {report.n_points} point(s) certified", file=sys.stderr)
+    if not quiet:
+        print(f"tritools: warning: {len(used)} camera(s) could not be used ({', '.join(models)}): {n_obs} "
+              f"observation(s) left out, {report.n_certified} of {report.n_points} point(s) certified",
+              file=sys.stderr)
     return EXIT_CAMERAS_SKIPPED
 
 

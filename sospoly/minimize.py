@@ -45,6 +45,7 @@ The default strategy (each step recorded in ``attempts``):
 from __future__ import annotations
 
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -53,7 +54,7 @@ from .algebra.basis import MonomialIndex
 from .algebra.polynomial import Polynomial
 from .analysis.extraction import Candidate, extract_from_gram, extract_from_moment
 from .analysis.sparse_extraction import extract_from_clique_moments
-from .budget import BudgetExceeded, as_budget
+from .budget import Budget, BudgetExceeded, as_budget
 from .certificates.program import SOSProgram
 from .certificates.psatz import Multiplier, PsatzProblem, as_multiplier, build_psatz, checked_inputs
 from .certificates.shape import SPARSITY_KINDS
@@ -394,10 +395,12 @@ def _retry_chain(form, backend, blocks: int = 1) -> list:
     return [(fm, be) for be in backends for fm in forms]
 
 
-def minimize(f, eq=(), ineq=(), degree: int | None = None, multiplier="auto", *, sparsity="auto",
-             low_degree: int | None = None, max_degree: int | None = None, backend=None, form=None,
-             tolerances: Tolerances | None = None, budget=None, refine: bool = True, gens=None,
-             radius: float | None = None) -> MinimizeResult:
+def minimize(f: Polynomial | float, eq: Sequence[Polynomial | float] = (), ineq: Sequence[Polynomial | float] = (),
+             degree: int | None = None, multiplier: Multiplier | Polynomial | str | float = "auto", *,
+             sparsity: str = "auto", low_degree: int | None = None, max_degree: int | None = None,
+             backend: str | object | None = None, form: GramForm | str | None = None,
+             tolerances: Tolerances | None = None, budget: Budget | None = None, refine: bool = True,
+             gens: Sequence[str] | None = None, radius: float | None = None) -> MinimizeResult:
     """Certified lower bound and minimisers of ``f`` on ``{eq = 0, ineq >= 0}`` (see the module docstring
     for the strategy).
 
@@ -558,8 +561,8 @@ class SOSResult:
     message: str = ""
 
 
-def is_sos(p, *, backend=None, form: GramForm = GramForm.IMAGE,
-           tolerances: Tolerances = DEFAULT_TOLERANCES, budget=None) -> SOSResult:
+def is_sos(p: Polynomial | float, *, backend: str | object | None = None, form: GramForm = GramForm.IMAGE,
+           tolerances: Tolerances = DEFAULT_TOLERANCES, budget: Budget | None = None) -> SOSResult:
     """Decide whether ``p`` is a sum of squares (Gram matrix method, SPEC §4)."""
     from .algebra.basis import sigma
 

@@ -72,11 +72,12 @@ def test_the_top_level_api_is_fully_annotated():
     """Every function exported by ``tritools`` (and the pycolmap bridge) annotates all its parameters and return."""
     import inspect
 
+    import sospoly
     import tritools
     import tritools.io.colmap.pycolmap_bridge as bridge
 
     funcs = [getattr(tritools, n) for n in tritools.__all__ if inspect.isfunction(getattr(tritools, n))]
-    funcs += [bridge.from_pycolmap, bridge.to_pycolmap]
+    funcs += [bridge.from_pycolmap, bridge.to_pycolmap, sospoly.minimize, sospoly.is_sos]
     for f in funcs:
         sig = inspect.signature(f)
         missing = [p.name for p in sig.parameters.values()

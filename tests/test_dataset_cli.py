@@ -21,6 +21,7 @@ def test_dataset_house_reproduces_table_5_with_sample_std(oxford_data):
                          env={**os.environ, "PYTHONPATH": str(ROOT)}, timeout=600)
     assert run.returncode == 0, run.stderr
     doc = json.loads(run.stdout)
+    assert doc["world_frame"] == "reflected"                               # read off the tracks
     rows = {r["N"]: r for r in doc["per_N"]}
     assert set(rows) == set(PAPER_HOUSE)
     for n, (cases, mean, std) in PAPER_HOUSE.items():

@@ -464,7 +464,7 @@ def _cmd_dataset(args) -> int:
         _write_dataset_csv(args.csv, seq.name, tracks, results, times)
     if args.json:
         _emit(_dumps({"sequence": seq.name, "method": args.method, "tracks": len(tracks), "per_N": summary,
-                      "total": total}), None)
+                      "total": total, "world_frame": options.world_frame.value}), None)
         return EXIT_OK
     print(f"{seq.name}: {len(tracks)} tracks, method {args.method}")
     rows = [(s["N"], s["cases"], s["certified"], _num(s["mean_gamma_ub"]), _num(s["std_gamma_ub"]),

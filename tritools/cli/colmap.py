@@ -48,7 +48,8 @@ def register(subparsers) -> None:
                     "delta = 4 for the points that does not certify), each point within --time-limit and "
                     "--memory-limit; --max-delta 2 keeps every point at delta = 2. --progress: a bar over all "
                     f"points (by default only for models of {PROGRESS_MIN_POINTS} points or more). --workers N / "
-                    "--scheduler ADDRESS: where the per-point SDPs run.")
+                    "--scheduler ADDRESS: where the per-point SDPs run. Exit status 3 (after writing the model): "
+                    "cameras that cannot be used (EQUIRECTANGULAR, focal <= 0, ...) left observations out.")
     p.add_argument("in_dir", metavar="IN_DIR", help="folder of the input model (never modified)")
     p.add_argument("out_dir", metavar="OUT_DIR", help="output folder (created, or replaced as a whole; must not be "
                                                       "IN_DIR, contain IN_DIR, or be a file)")

@@ -20,7 +20,6 @@ not input errors: they get a result row with a status.
 from __future__ import annotations
 
 import argparse
-import contextlib
 import csv
 import importlib
 import json
@@ -39,6 +38,8 @@ from ..io.problem_file import (ProblemFileError, ProblemSpec, jsonable, load_pro
 from ..result import Status, TriangulationResult
 from ..solve.batch import PROGRESS_MIN_ITEMS
 from ..solve.options import TRIANGULATION_BUDGET, MethodChoice, SolvePath, Sparsity, TriangulationOptions
+from .conventions import (_silence_stdout, add_logging_options, add_world_frame_option, cli_logging,
+                          sequence_options)
 
 __all__ = ["main", "build_parser", "CLIError", "exit_invalid", "add_solver_options", "options_from_args",
            "add_data_dir_option", "add_track_options", "select_tracks",
@@ -99,79 +100,6 @@ class _Parser(argparse.ArgumentParser):
             if self._subparsers is None or "required: COMMAND" not in str(exc) or not unknown:
                 raise
             self.error(f"unrecognized arguments: {' '.join(map(str, unknown))}")
-
-
-#: ``--log-level`` choices (``-v``: info, ``-vv``: debug, ``--quiet``: errors only; default: warnings).
-LOG_LEVELS = ("debug", "info", "warning", "error")
-
-
-def add_logging_options(p, top: bool = False) -> None:
-    """``-v/--verbose``, ``-q/--quiet``, ``--log-level`` (before or after the subcommand: the subcommands'
-    copies default to SUPPRESS, so they never overwrite a value given before it)."""
-    d = {} if top else {"default": argparse.SUPPRESS}
-    p.add_argument("-v", "--verbose", action="count", help="more log messages on stderr (-v info, -vv debug)",
-                   **({"default": 0} if top else d))
-    p.add_argument("-q", "--quiet", action="store_true", help="only errors on stderr (no warnings, no progress bar)",
-                   **({"default": False} if top else d))
-    p.add_argument("--log-level", choices=LOG_LEVELS, dest="log_level", help="log level (default warning)",
-                   **({"default": None} if top else d))
-
-
-@contextlib.contextmanager
-def cli_logging(args):
-    """For the duration of one command: a stderr handler on the ``tritools`` and ``sospoly`` loggers at the
-    level the flags ask for (``tritools: <level>: message``); the loggers are restored afterwards (``main`` may
-    run inside a host program or a test)."""
-    import logging
-
-    level = getattr(args, "log_level", None)
-    if level is None:
-        level = "error" if getattr(args, "quiet", False) else \
-            {0: "warning", 1: "info"}.get(getattr(args, "verbose", 0) or 0, "debug")
-    handler = logging.StreamHandler(sys.stderr)
-    handler.setFormatter(_LowerLevelFormatter())
-    saved = []
-    for name in ("tritools", "sospoly"):
-        lg = logging.getLogger(name)
-        saved.append((lg, lg.level, lg.propagate))
-        lg.addHandler(handler)
-        lg.setLevel(level.upper())
-        lg.propagate = False                       # one line per message, whatever the host's root logger does
-    try:
-        _progress_flag(args)
-        yield
-    finally:
-        for lg, lvl, prop in saved:
-            lg.removeHandler(handler)
-            lg.setLevel(lvl)
-            lg.propagate = prop
-
-
-def _progress_flag(args) -> None:
-    """``--quiet`` turns the automatic bar off; ``--progress`` without tqdm says so once."""
-    import logging
-
-    if getattr(args, "quiet", False) and getattr(args, "progress", None) == "auto":
-        args.progress = False
-    if getattr(args, "progress", None) is True and not _has_tqdm():
-        logging.getLogger("tritools").warning("--progress needs tqdm (pip install 'sospoly-tritools[progress]'): "
-                                              "continuing without a progress bar")
-        args.progress = False                      # said once, here
-
-
-def _has_tqdm() -> bool:
-    try:
-        import tqdm  # noqa: F401
-    except ImportError:
-        return False
-    return True
-
-
-class _LowerLevelFormatter:
-    """``tritools: warning: message`` (logging's level names in lower case)."""
-
-    def format(self, record) -> str:
-        return f"tritools: {record.levelname.lower()}: {record.getMessage()}"
 
 
 # ----------------------------------------------------------------------------- formatting
@@ -569,28 +497,6 @@ def add_track_options(p) -> None:
     p.add_argument("--seed", type=int, default=0, metavar="S", help="seed of --sample (default 0)")
 
 
-def add_world_frame_option(p, sequence: bool = True) -> None:
-    """``--world-frame``: the handedness in which ``in_front`` is judged (:class:`tritools.model.cameras.WorldFrame`);
-    for the subcommands reading an Oxford sequence ``auto`` (their default) reads it off the sequence's tracks."""
-    if sequence:
-        p.add_argument("--world-frame", choices=("auto", "right_handed", "reflected"), default="auto",
-                       dest="world_frame",
-                       help="handedness of the cameras' world frame for in_front / --require-in-front: auto (read "
-                            "off the sequence's tracks: corridor and house are reflected), right_handed or "
-                            "reflected; default auto")
-    else:
-        p.add_argument("--world-frame", choices=("right_handed", "reflected"), default="right_handed",
-                       dest="world_frame",
-                       help="handedness of the cameras' world frame for in_front / --require-in-front (reflected: "
-                            "a mirrored reconstruction, every det M < 0); default right_handed")
-
-
-def sequence_options(options: TriangulationOptions, args, seq) -> TriangulationOptions:
-    """``options`` with the world frame of ``--world-frame`` (``auto``: :attr:`Sequence.world_frame`)."""
-    frame = getattr(args, "world_frame", "auto")
-    return options.replace(world_frame=seq.world_frame if frame == "auto" else frame)
-
-
 def add_data_dir_option(p) -> None:
     """``--data-dir`` of the subcommands reading an Oxford sequence (:func:`tritools.io.oxford.load_sequence`)."""
     p.add_argument("--data-dir", default=None, dest="data_dir",
@@ -656,15 +562,6 @@ def build_parser() -> argparse.ArgumentParser:
     for p in sub.choices.values():
         add_logging_options(p)
     return ap
-
-
-def _silence_stdout() -> None:
-    """Point stdout at /dev/null so that the interpreter's final flush does not fail again."""
-    try:
-        devnull = os.open(os.devnull, os.O_WRONLY)
-        os.dup2(devnull, sys.stdout.fileno())
-    except (OSError, ValueError, AttributeError):   # stdout without a file descriptor (tests)
-        pass
 
 
 def main(argv: Sequence[str] | None = None) -> int:

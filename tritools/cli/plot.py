@@ -20,8 +20,8 @@ import sys
 from pathlib import Path
 
 from .app import (METHODS, CLIError, add_data_dir_option, add_solver_options, add_track_options, exit_invalid,
-                  add_world_frame_option, sequence_options,
                   load_oxford, options_from_args, select_tracks)
+from .conventions import add_world_frame_option, sequence_options
 from ..model.constraints import Method
 
 __all__ = ["register", "run_figure3", "run_plot_dataset"]

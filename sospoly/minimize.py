@@ -50,6 +50,7 @@ The default strategy (each step recorded in ``attempts``):
 from __future__ import annotations
 
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -61,7 +62,7 @@ from .analysis.extraction import Candidate, extract_from_gram, extract_from_mome
 from .analysis.moments import moment_matrices_of
 from .analysis.term_extraction import second_moment_candidates
 from .analysis.sparse_extraction import extract_from_clique_moments
-from .budget import BudgetExceeded, TimeLimitReached, as_budget, deadline_scope
+from .budget import Budget, BudgetExceeded, TimeLimitReached, as_budget, deadline_scope
 from .certificates.program import SOSProgram
 from .certificates.psatz import Multiplier, PsatzProblem, as_multiplier, build_psatz, checked_inputs
 from .certificates.shape import SPARSITY_KINDS
@@ -69,6 +70,7 @@ from .certificates.sparsity import correlative_sparsity
 from .certificates.term_hierarchy import (cheap_term_level, newton_smaller, parse_term_kind, term_level_shape,
                                          term_levels)
 from .lowering.conic import GramForm
+from .solvers.backends import cvxpy_available, get_backend
 from .solvers.lower_bound import solve_psatz
 from .solvers.solve import LowerBound, ProgramSolution, solve_program
 from .status import SolveStatus
@@ -413,14 +415,17 @@ def _retry_chain(form, backend, blocks: int = 1) -> list:
     where the interior-point method of the ``"auto"`` back-end forms a dense Schur complement over
     all decision columns (generalised Rosenbrock, n = 200: 0.3 s against 18 s)."""
     forms = [GramForm(form)] if form is not None else [GramForm.IMAGE, GramForm.KERNEL]
-    backends = [backend] if backend is not None else ["clarabel" if blocks > 1 else "auto", "cvxpy"]
+    backends = [backend] if backend is not None else ["clarabel" if blocks > 1 else "auto"] + (
+        ["cvxpy"] if cvxpy_available() else [])
     return [(fm, be) for be in backends for fm in forms]
 
 
-def minimize(f, eq=(), ineq=(), degree: int | None = None, multiplier="auto", *, sparsity="auto",
-             low_degree: int | None = None, max_degree: int | None = None, backend=None, form=None,
-             tolerances: Tolerances | None = None, budget=None, refine: bool = True, gens=None,
-             radius: float | None = None) -> MinimizeResult:
+def minimize(f: Polynomial | float, eq: Sequence[Polynomial | float] = (), ineq: Sequence[Polynomial | float] = (),
+             degree: int | None = None, multiplier: Multiplier | Polynomial | str | float = "auto", *,
+             sparsity: str = "auto", low_degree: int | None = None, max_degree: int | None = None,
+             backend: str | object | None = None, form: GramForm | str | None = None,
+             tolerances: Tolerances | None = None, budget: Budget | None = None, refine: bool = True,
+             gens: Sequence[str] | None = None, radius: float | None = None) -> MinimizeResult:
     """Certified lower bound and minimisers of ``f`` on ``{eq = 0, ineq >= 0}`` (see the module docstring
     for the strategy).
 
@@ -433,6 +438,8 @@ def minimize(f, eq=(), ineq=(), degree: int | None = None, multiplier="auto", *,
     """
     t0 = time.perf_counter()
     tol, budget = as_tolerances(tolerances), as_budget(budget)
+    if backend is not None:
+        get_backend(backend, tol)        # an unknown or uninstalled solver is an error naming it, before any solve
     deadline = budget.deadline()
     if isinstance(multiplier, str) and multiplier != "auto":
         as_multiplier(multiplier)
@@ -595,8 +602,8 @@ class SOSResult:
     message: str = ""
 
 
-def is_sos(p, *, backend=None, form: GramForm = GramForm.IMAGE,
-           tolerances: Tolerances = DEFAULT_TOLERANCES, budget=None) -> SOSResult:
+def is_sos(p: Polynomial | float, *, backend: str | object | None = None, form: GramForm = GramForm.IMAGE,
+           tolerances: Tolerances = DEFAULT_TOLERANCES, budget: Budget | None = None) -> SOSResult:
     """Decide whether ``p`` is a sum of squares (Gram matrix method, SPEC §4)."""
     from .algebra.basis import sigma
 

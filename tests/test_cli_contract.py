@@ -415,7 +415,7 @@ def test_dataset_limit_sample_csv_seconds_and_no_progress_bar(tmp_path, capsys, 
     csv_path = tmp_path / "t.csv"
     rc, out, err = run(["dataset", "toy", "--data-dir", tmp_path, "--limit", "5", "--csv", csv_path], capsys)
     assert rc == 0 and err == "", err                        # no progress bar for 5 tracks
-    assert seen == [None]                                     # the library's default, not False/True
+    assert seen == ["auto"]                  # the command line's default (a bar for large batches), not False/True
     rows = list(csv.DictReader(csv_path.open()))
     assert [int(r["track_id"]) for r in rows] == [0, 1, 2, 3, 4]
     assert list(rows[0]) == list(cli.DATASET_CSV_COLUMNS)

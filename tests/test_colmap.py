@@ -196,17 +196,17 @@ def test_undistort_reports_non_convergence():
 
 def test_unsupported_model_is_skipped_or_refused_when_strict():
     cams = dict(CAMERAS)
-    cams[1] = Camera(1, "OPENCV_FISHEYE", 640, 480, (800, 800, 320, 240, 0, 0, 0, 0))
+    cams[1] = Camera(1, "EQUIRECTANGULAR", 640, 480, (640, 480))
     model, _ = synthetic_model(n_points=12)
     model = Model(cams, model.images, model.points3D)
-    with pytest.raises(CameraError, match="camera 1 \\(OPENCV_FISHEYE\\) cannot be used: camera model "
-                                          "'OPENCV_FISHEYE' is not supported.*OPENCV"):
+    with pytest.raises(CameraError, match="camera 1 \\(EQUIRECTANGULAR\\) cannot be used: camera model "
+                                          "'EQUIRECTANGULAR' is not supported.*spherical.*FULL_OPENCV"):
         retriangulate(model, strict=True)
-    with pytest.raises(UnsupportedCameraModelError, match="'OPENCV_FISHEYE' is not supported"):
-        intrinsics("OPENCV_FISHEYE", (800, 800, 320, 240, 0, 0, 0, 0))
+    with pytest.raises(UnsupportedCameraModelError, match="'EQUIRECTANGULAR' is not supported"):
+        intrinsics("EQUIRECTANGULAR", (640, 480))
     _, report = retriangulate(model)          # image 1 uses camera 1: its observations are left out
     (cid, name, reason, n_obs), = report.skipped_cameras
-    assert (cid, name) == (1, "OPENCV_FISHEYE") and "not supported" in reason and n_obs > 0
+    assert (cid, name) == (1, "EQUIRECTANGULAR") and "not supported" in reason and n_obs > 0
     assert report.n_skipped_observations == n_obs
     for r in report.records:
         track = model.points3D[r.point3D_id].track
@@ -376,13 +376,13 @@ def test_cli_bad_input_exits_2(tmp_path, capsys):
     assert _cli(["colmap-from-oxford", "no_such_sequence", str(tmp_path / "o")]) == 2
     assert "error:" in capsys.readouterr().err
     (tmp_path / "in" / "images.txt").write_text("1 1 0 0 0 0 0 0 1 a\n\n")
-    (tmp_path / "in" / "cameras.txt").write_text("1 OPENCV_FISHEYE 640 480 800 800 320 240 0 0 0 0\n")
+    (tmp_path / "in" / "cameras.txt").write_text("1 EQUIRECTANGULAR 640 480 640 480\n")
     (tmp_path / "in" / "points3D.txt").write_text("")
     assert _cli(["colmap", str(tmp_path / "in"), str(tmp_path / "out"), "--strict"]) == 2
-    assert "cameras.txt:1: camera 1 (OPENCV_FISHEYE) cannot be used: camera model 'OPENCV_FISHEYE' is not " \
+    assert "cameras.txt:1: camera 1 (EQUIRECTANGULAR) cannot be used: camera model 'EQUIRECTANGULAR' is not " \
            "supported" in capsys.readouterr().err
     assert _cli(["colmap", str(tmp_path / "in"), str(tmp_path / "out")]) == 0          # skipped, reported
-    assert "skipped camera 1 (OPENCV_FISHEYE)" in capsys.readouterr().out
+    assert "skipped camera 1 (EQUIRECTANGULAR)" in capsys.readouterr().out
 
 
 @pytest.mark.usefixtures("oxford_data")

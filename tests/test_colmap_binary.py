@@ -129,7 +129,7 @@ def test_corrupt_cameras_and_images_bin_are_refused_with_record_and_offset(model
     bad = bytearray(cams)
     bad[12:16] = struct.pack("<i", 99)                           # model id of the first camera
     assert _corrupt(f, "cameras.bin", bytes(bad), tmp_path) == \
-        "cameras.bin: record 0 (offset 8): camera 1: unknown camera model id 99 (known: 0..16)"
+        "cameras.bin: record 0 (offset 8): camera 1: unknown camera model id 99 (known: 0..17)"
     assert "1 unexpected bytes after the last of 5 cameras" in _corrupt(f, "cameras.bin", cams + b"\0", tmp_path)
     assert "too short for the number of cameras" in _corrupt(f, "cameras.bin", b"\1\0", tmp_path)
     ims = f["images.bin"]

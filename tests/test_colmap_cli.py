@@ -146,8 +146,10 @@ def test_cameras_are_skipped_or_refused_with_strict(tmp_path, capsys):
     cams = dict(model.cameras)
     cams[3] = Camera(3, "PINHOLE", 640, 480, (0.0, 800.0, 320.0, 240.0))      # focal 0: used by image 3
     write_binary_model(Model(cams, model.images, model.points3D), tmp_path / "in")
-    assert main(["colmap", str(tmp_path / "in"), str(tmp_path / "o"), "--json"]) == 0
-    out = json.loads(capsys.readouterr().out)
+    assert main(["colmap", str(tmp_path / "in"), str(tmp_path / "o"), "--json"]) == 3   # written, with a warning
+    captured = capsys.readouterr()
+    out = json.loads(captured.out)
+    assert "tritools: warning: 1 camera(s) could not be used (PINHOLE): 4 observation(s)" in captured.err
     (skip,) = out["skipped_cameras"]
     assert skip["camera_id"] == 3 and "focal length fx = 0.0 must be > 0" in skip["reason"]
     assert skip["reason"].startswith("cameras.bin: record 2 (offset ") and out["n_skipped_observations"] > 0

@@ -7,10 +7,11 @@ import math
 
 import numpy as np
 import pytest
-import sympy
 from hypothesis import given, settings, strategies as st
 
 from sospoly import Polynomial, det, variables
+
+sympy = pytest.importorskip("sympy")   # optional dependency (the 'sympy' / 'test' extras)
 
 GENS = ("x", "y", "z")
 SX, SY, SZ = sympy.symbols("x y z")

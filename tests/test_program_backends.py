@@ -100,6 +100,7 @@ def test_image_and_kernel_forms_agree(make):
 
 @pytest.mark.parametrize("make", PROGRAMS, ids=lambda f: f.__name__)
 def test_clarabel_and_cvxpy_backends_agree(make):
+    pytest.importorskip("cvxpy")
     prog, ref = make()
     a = solve_program(prog)                       # Clarabel called directly
     b = solve_program(prog, backend="cvxpy")      # same conic data through cvxpy
@@ -111,6 +112,7 @@ def test_clarabel_and_cvxpy_backends_agree(make):
 
 
 def test_backends_agree_on_minimize_bounds():
+    pytest.importorskip("cvxpy")
     for kw in (dict(f=CAMEL, degree=8), dict(f=x + y, eq=[x**2 + y**2 - 1], ineq=[x])):
         a = sp.minimize(**kw)
         b = sp.minimize(**kw, backend="cvxpy")
@@ -193,7 +195,8 @@ def test_is_sos_classics():
     # the kernel form and the cvxpy back-end agree on both answers
     assert not sp.is_sos(MOTZKIN, form="kernel").is_sos
     assert sp.is_sos(prod, form="kernel").is_sos
-    assert sp.is_sos(prod, backend="cvxpy").is_sos
+    if cvxpy_installed():
+        assert sp.is_sos(prod, backend="cvxpy").is_sos
 
 
 # ------------------------------------------------------------------ N_LMIVAR (SPEC §8)
@@ -236,3 +239,51 @@ def test_n_lmivar_paper_values():
     # Example 1 tables: points only, delta = 2: 1 + N(N-1)/2 = 2, 4, 7, 11, 16 for N = 2..6
     for N, ref in zip(range(2, 7), (2, 4, 7, 11, 16)):
         assert n_lmivar_formula(2 * N, 2, (2,) * (N * (N - 1) // 2)) == ref
+
+
+def cvxpy_installed() -> bool:
+    from sospoly.solvers.backends import cvxpy_available
+
+    return cvxpy_available()
+
+
+def test_unknown_or_uninstalled_solver_is_an_error_naming_it():
+    """An unknown cvxpy solver is a ValueError, a known one not installed an ImportError; both name it
+    and are raised before any solve (not a numerical_error after retries)."""
+    pytest.importorskip("cvxpy")
+    import cvxpy
+
+    with pytest.raises(ValueError, match="NOSUCH"):
+        sp.minimize(x**2 + 1, backend="cvxpy:NOSUCH")
+    with pytest.raises(ValueError, match="nosuch"):
+        sp.minimize(x**2 + 1, backend="nosuch")
+    missing = [s for s in ("MOSEK", "GUROBI", "COPT", "XPRESS") if s not in cvxpy.installed_solvers()]
+    if missing:
+        with pytest.raises(ImportError, match=missing[0]):
+            sp.minimize(x**2 + 1, backend=f"cvxpy:{missing[0]}")
+    from tritools.solve.options import TriangulationOptions
+
+    with pytest.raises(ValueError, match="NOSUCH"):
+        TriangulationOptions(backend="cvxpy:NOSUCH")
+
+
+def test_without_cvxpy_the_default_chain_skips_it_and_naming_it_says_how_to_install(monkeypatch):
+    import builtins
+    import importlib
+
+    mz = importlib.import_module("sospoly.minimize")
+    be = importlib.import_module("sospoly.solvers.backends")
+
+    real = builtins.__import__
+
+    def no_cvxpy(name, *a, **k):
+        if name == "cvxpy" or name.startswith("cvxpy."):
+            raise ImportError("No module named 'cvxpy'")
+        return real(name, *a, **k)
+
+    monkeypatch.setattr(builtins, "__import__", no_cvxpy)
+    monkeypatch.setattr(mz, "cvxpy_available", lambda: False)
+    assert all(b != "cvxpy" for _, b in mz._retry_chain(None, None))
+    with pytest.raises(ImportError, match=r"sospoly-tritools\[cvxpy\]"):
+        be.get_backend("cvxpy")
+    assert sp.minimize(x**2 + 1).status == SolveStatus.OPTIMAL

@@ -345,7 +345,8 @@ def test_solver_flags_are_refused_alike_by_solve_and_colmap(flags, expect, tmp_p
         out, err = capsys.readouterr()
         assert out == "" and err.count("\n") == 1 and expect in err, (argv, err)
         lines.append(err)
-    assert lines[0].replace("tritools solve", "tritools colmap") == lines[1]     # argparse names its command
+    assert lines[0].replace("tritools solve", "tritools colmap").replace("error: solve:", "error: colmap:") \
+        == lines[1]                                                               # argparse names its command
     assert not (tmp_path / "out").exists()
 
 
@@ -399,11 +400,12 @@ def test_no_progress_bar_for_tiny_batches(capsys):
     tritools.triangulate_points(CAMS, PTS[None])
     retriangulate(synthetic_model(n_points=4, seed=1)[0], max_delta=2)
     assert capsys.readouterr().err == ""
-    assert _progress_bar(1, None) is None and _progress_bar(PROGRESS_MIN_ITEMS - 1, None) is None
-    assert progress_bar(1, None) is None and progress_bar(PROGRESS_MIN_POINTS - 1, None) is None
-    assert progress_bar(None, None) is None and progress_bar(10 ** 6, False) is None
+    assert _progress_bar(1, "auto") is None and _progress_bar(PROGRESS_MIN_ITEMS - 1, "auto") is None
+    assert progress_bar(1, "auto") is None and progress_bar(PROGRESS_MIN_POINTS - 1, "auto") is None
+    assert progress_bar(None, "auto") is None and progress_bar(10 ** 6, False) is None
+    assert _progress_bar(10 ** 6, None) is None and progress_bar(10 ** 6, None) is None   # library: only if asked
     pytest.importorskip("tqdm", reason="tqdm not installed (pip install '.[progress]')")
-    for bar in (_progress_bar(PROGRESS_MIN_ITEMS, None), progress_bar(PROGRESS_MIN_POINTS, None),
+    for bar in (_progress_bar(PROGRESS_MIN_ITEMS, "auto"), progress_bar(PROGRESS_MIN_POINTS, "auto"),
                 progress_bar(3, True)):
         assert bar is not None
         bar.close()
@@ -459,7 +461,8 @@ def test_colmap_text_camera_with_focal_0_is_named_with_file_and_line(tmp_path, c
     write_text_model(Model(cams, model.images, model.points3D), tmp_path / "in")
     line = 1 + (tmp_path / "in" / "cameras.txt").read_text().splitlines().index("3 PINHOLE 640 480 0.0 800.0 320.0 "
                                                                                 "240.0")
-    assert main(["colmap", str(tmp_path / "in"), str(tmp_path / "o"), "--json", "--max-delta", "2"]) == 0
+    assert main(["colmap", str(tmp_path / "in"), str(tmp_path / "o"), "--json", "--max-delta", "2"]) == 3  # written,
+    # with exit 3: observations were left out (tritools.cli.colmap.EXIT_CAMERAS_SKIPPED)
     (skip,) = json.loads(capsys.readouterr().out)["skipped_cameras"]
     assert skip["reason"] == f"cameras.txt:{line}: focal length fx = 0.0 must be > 0"
     assert main(["colmap", str(tmp_path / "in"), str(tmp_path / "o2"), "--strict"]) == 2

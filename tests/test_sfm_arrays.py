@@ -18,11 +18,11 @@ from tritools.sfm.synthetic import synthetic_arrays
 
 
 def mixed_model(seed=3):
-    """The five supported camera models, plus image 2 on a FULL_OPENCV camera and image 4 on a
+    """The five OPENCV-family camera models, plus image 2 on an EQUIRECTANGULAR camera and image 4 on a
     PINHOLE camera with focal length 0: their observations must be left out."""
     model, truth = synthetic_model(n_points=40, noise_px=0.5, seed=seed)
     cams = dict(CAMERAS)
-    cams[6] = Camera(6, "FULL_OPENCV", 640, 480, (800, 800, 320, 240) + (0.0,) * 8)
+    cams[6] = Camera(6, "EQUIRECTANGULAR", 640, 480, (640, 480))
     cams[7] = Camera(7, "PINHOLE", 640, 480, (0.0, 800.0, 320.0, 240.0))
     images = dict(model.images)
     for iid, cid in ((2, 6), (4, 7)):

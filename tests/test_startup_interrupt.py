@@ -22,9 +22,14 @@ ROOT = Path(__file__).resolve().parents[1]
 @pytest.mark.parametrize("delay", [0.1, 0.25, 0.5, 0.8])
 def test_ctrl_c_during_start_up_exits_130_with_one_line(tmp_path, delay):
     problems = write(tmp_path, example4_doc())
-    proc = subprocess.Popen([sys.executable, "-m", "tritools", "solve", str(problems)], cwd=tmp_path,
+    # the delay counts from the end of the interpreter's own start-up (its `site` import is outside tritools'
+    # reach, and takes well over 0.1 s on a loaded machine): the child says "ready", then runs `python -m tritools`
+    code = ("import sys; print('ready', flush=True); import runpy; sys.argv = ['tritools', 'solve', sys.argv[1]]; "
+            "runpy.run_module('tritools', run_name='__main__', alter_sys=True)")
+    proc = subprocess.Popen([sys.executable, "-c", code, str(problems)], cwd=tmp_path,
                             env=dict(os.environ, PYTHONPATH=str(ROOT), OPENBLAS_NUM_THREADS="1"),
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    assert proc.stdout.readline() == "ready\n"
     time.sleep(delay)
     proc.send_signal(signal.SIGINT)
     out, err = proc.communicate(timeout=120)

@@ -19,6 +19,7 @@ from . import _startup  # noqa: F401 - first: Ctrl-C while the command starts ex
 
 from .model.constraints import Method
 from .model.geometry import depths, dlt, fundamental_matrix, gamma, project, validate_cameras
+from .model.opencv import PointsLayout, cameras_from_krt
 from .model.regions import Ellipse, EllipseBorder, Point, Polytope, Region, Segment, as_regions
 from .result import Attempt, Status, TriangulationResult
 from .scene import paper_example
@@ -36,6 +37,6 @@ _logging.getLogger(__name__).addHandler(_logging.NullHandler())
 __all__ = ["Method", "depths", "dlt", "fundamental_matrix", "gamma", "project", "validate_cameras", "Ellipse",
            "EllipseBorder", "Point", "Polytope", "Region", "Segment", "as_regions", "Attempt", "Status",
            "TriangulationResult", "paper_example", "triangulate_many", "DEFAULT_OPTIONS", "SolvePath", "Sparsity",
-           "TriangulationOptions", "PointsResult", "triangulate_points", "triangulate",
-           "UncertaintyOptions", "UncertaintyResult", "UncertaintyStatus", "triangulation_angle", "uncertainty",
-           "uncertainty_many"]
+           "TriangulationOptions", "PointsResult", "triangulate_points", "triangulate", "PointsLayout",
+           "cameras_from_krt", "UncertaintyOptions", "UncertaintyResult", "UncertaintyStatus", "triangulation_angle",
+           "uncertainty", "uncertainty_many"]

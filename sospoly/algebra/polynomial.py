@@ -51,6 +51,16 @@ def _check_finite(value: float, what: str = "coefficient") -> float:
     return value
 
 
+def _import_sympy():
+    """``import sympy`` (an optional dependency, used only by the sympy converters)."""
+    try:
+        import sympy
+    except ImportError as exc:
+        raise ImportError("the sympy converters need sympy, an optional dependency: "
+                          "pip install 'sospoly-tritools[sympy]'") from exc
+    return sympy
+
+
 class Polynomial:
     """A sparse real polynomial ``sum_e c_e * prod_k v_k**e_k``.
 
@@ -117,8 +127,7 @@ class Polynomial:
     @classmethod
     def from_sympy(cls, expr, gens: Sequence | None = None) -> Polynomial:
         """Convert a sympy expression (polynomial in ``gens``) to a Polynomial."""
-        import sympy
-
+        sympy = _import_sympy()
         expr = sympy.sympify(expr)
         if gens is None:
             syms = sorted(expr.free_symbols, key=lambda s: s.name)
@@ -351,8 +360,8 @@ class Polynomial:
 
     # ------------------------------------------------------------------ conversion
     def to_sympy(self):
-        import sympy
-
+        """This polynomial as a sympy expression (needs the optional sympy)."""
+        sympy = _import_sympy()
         syms = sympy.symbols(self.gens) if self.gens else ()
         if self.nvars == 1:
             syms = (syms,) if not isinstance(syms, tuple) else syms

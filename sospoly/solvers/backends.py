@@ -32,7 +32,39 @@ from ..algebra.svec import triu_pairs, svec_scale
 from ..tolerances import DEFAULT_TOLERANCES, Tolerances, as_tolerances
 
 __all__ = ["RawStatus", "Attempt", "ConicSolution", "ClarabelBackend", "CvxpyBackend", "IpmBackend", "AutoBackend",
-           "get_backend"]
+           "get_backend", "cvxpy_available", "import_cvxpy"]
+
+
+def cvxpy_available() -> bool:
+    """Whether the optional cvxpy back-end can be imported (``pip install sospoly-tritools[cvxpy]``)."""
+    import importlib.util
+
+    return importlib.util.find_spec("cvxpy") is not None
+
+
+def import_cvxpy():
+    """``import cvxpy``, or an ImportError saying how to install the optional back-end."""
+    try:
+        import cvxpy
+    except ImportError as exc:
+        raise ImportError("the 'cvxpy' back-end needs cvxpy, an optional dependency: "
+                          "pip install 'sospoly-tritools[cvxpy]' (or use backend='clarabel')") from exc
+    return cvxpy
+
+
+def _check_cvxpy_solver(solver: str | None) -> None:
+    """ValueError for a solver name cvxpy does not know, ImportError for a known one not installed."""
+    cp = import_cvxpy()
+    if solver is None:
+        return
+    import cvxpy.settings
+
+    if solver not in cvxpy.settings.SOLVERS:
+        raise ValueError(f"unknown cvxpy solver {solver!r} in backend 'cvxpy:{solver}': cvxpy knows "
+                         f"{', '.join(cvxpy.settings.SOLVERS)}")
+    if solver not in cp.installed_solvers():
+        raise ImportError(f"cvxpy solver {solver!r} (backend 'cvxpy:{solver}') is not installed; installed: "
+                          f"{', '.join(cp.installed_solvers())}")
 
 
 class RawStatus(str, enum.Enum):
@@ -330,8 +362,7 @@ class CvxpyBackend:
 
     def solve(self, problem: ConicProblem, accept=None, retry: bool = True,
               deadline: Deadline | None = None) -> ConicSolution:
-        import cvxpy as cp
-
+        cp = import_cvxpy()
         t0 = time.perf_counter()
         x = cp.Variable(problem.n_cols)
         cons = []
@@ -392,7 +423,15 @@ class CvxpyBackend:
 
 def get_backend(backend, tolerances: Tolerances = DEFAULT_TOLERANCES):
     """Resolve a back-end given by object, or by name ``"clarabel"`` / ``"ipm"`` / ``"auto"`` / ``"cvxpy"`` /
-    ``"cvxpy:SCS"``."""
+    ``"cvxpy:SCS"``.
+
+    Raises
+    ------
+    ValueError
+        An unknown back-end name, or a solver name cvxpy does not know (``"cvxpy:NOSUCH"``).
+    ImportError
+        cvxpy not installed, or a solver cvxpy knows but which is not installed (``"cvxpy:MOSEK"``).
+    """
     tolerances = as_tolerances(tolerances)
     if backend is None:
         return ClarabelBackend(tolerances)
@@ -401,6 +440,7 @@ def get_backend(backend, tolerances: Tolerances = DEFAULT_TOLERANCES):
         if name == "clarabel":
             return ClarabelBackend(tolerances)
         if name == "cvxpy":
+            _check_cvxpy_solver(solver or None)
             return CvxpyBackend(solver or None, tolerances)
         if name == "ipm":
             return IpmBackend(tolerances)

@@ -38,7 +38,10 @@ from ..io.atomic import atomic_open
 from ..io.problem_file import (ProblemFileError, ProblemSpec, jsonable, load_problem_file, parse_problem_bytes,
                                parse_problem_text, result_to_dict)
 from ..result import Status, TriangulationResult
+from ..solve.batch import PROGRESS_MIN_ITEMS
 from ..solve.options import TRIANGULATION_BUDGET, MethodChoice, SolvePath, Sparsity, TriangulationOptions
+from .conventions import (_silence_stdout, add_logging_options, add_world_frame_option, cli_logging,
+                          sequence_options)
 
 __all__ = ["main", "build_parser", "CLIError", "exit_invalid", "add_solver_options", "options_from_args",
            "add_data_dir_option", "add_track_options", "select_tracks", "printable",
@@ -89,7 +92,8 @@ def exit_invalid(message) -> int:
 
 class _Parser(argparse.ArgumentParser):
     def error(self, message):  # one line instead of usage + message, and no SystemExit
-        raise CLIError(f"{self.prog}: {message} (see '{self.prog} --help')")
+        sub = self.prog.partition(" ")[2]          # "tritools colmap" -> "colmap"; the program is named once
+        raise CLIError(f"{sub + ': ' if sub else ''}{message} (see '{self.prog} --help')")
 
     def parse_args(self, args=None, namespace=None):
         # unknown arguments are named even when the command is missing (argparse reports the missing
@@ -340,7 +344,9 @@ def _summary_row(rs: list[TriangulationResult], times: list) -> dict:
     secs = [t for t, _ in times if t is not None]
     return {"cases": len(rs), "certified": sum(r.status == Status.OPTIMAL for r in rs),
             "mean_gamma_ub": float(np.mean(gub)) if gub else None,
-            "std_gamma_ub": float(np.std(gub)) if gub else None,
+            # the sample standard deviation (ddof = 1), as the paper's Tables 1-6 and benchmarks/example1.py;
+            # 0 for a single case (the paper prints .000)
+            "std_gamma_ub": (float(np.std(gub, ddof=1)) if len(gub) > 1 else 0.0) if gub else None,
             "n_lmivar": sorted({r.n_lmivar for r in rs if r.n_lmivar is not None}),
             "mean_seconds": float(np.mean(secs)) if secs else None}
 
@@ -382,6 +388,7 @@ def _cmd_dataset(args) -> int:
     options = options_from_args(args)
     select_tracks((), args.limit, args.sample, args.seed)            # the flags checked before any data is read
     seq = load_oxford(args.name, args.data_dir, "dataset")
+    options = sequence_options(options, args, seq)
     tracks = select_tracks(seq.tracks, args.limit, args.sample, args.seed)
     specs = []
     for tr in tracks:
@@ -398,7 +405,7 @@ def _cmd_dataset(args) -> int:
         _write_dataset_csv(args.csv, seq.name, tracks, results, times)
     if args.json:
         _emit(_dumps({"sequence": seq.name, "method": args.method, "tracks": len(tracks), "per_N": summary,
-                      "total": total}), None)
+                      "total": total, "world_frame": options.world_frame.value}), None)
         return EXIT_OK
     print(printable(f"{seq.name}: {len(tracks)} tracks, method {args.method}"))
     rows = [(s["N"], s["cases"], s["certified"], _num(s["mean_gamma_ub"]), _num(s["std_gamma_ub"]),
@@ -432,7 +439,8 @@ def _write_dataset_csv(path, name, tracks, results, times) -> None:
 
 
 # ----------------------------------------------------------------------------- parser
-def add_solver_options(p, default_method: str = "auto", default_path: str = "auto") -> None:
+def add_solver_options(p, default_method: str = "auto", default_path: str = "auto",
+                       progress_help: str | None = None) -> None:
     """The solver flags of every subcommand that solves (``--method --delta --max-delta --path --sparsity
     --time-limit --memory-limit --require-in-front --progress``); :func:`options_from_args` validates them
     exactly like the fields of a problem file."""
@@ -455,9 +463,9 @@ def add_solver_options(p, default_method: str = "auto", default_path: str = "aut
     p.add_argument("--require-in-front", action="store_true", dest="require_in_front",
                    help="a certified point behind a camera gets status behind_camera (default: optimal, in_front "
                         "false)")
-    p.add_argument("--progress", action="store_true", default=None,
-                   help="progress bar on stderr (needs the 'progress' extra; default: only for batches of 1000 "
-                        "problems or more)")
+    p.add_argument("--progress", action="store_true", default="auto",
+                   help=progress_help or f"progress bar on stderr (needs the 'progress' extra, tqdm; default: only "
+                                         f"for batches of {PROGRESS_MIN_ITEMS} problems or more)")
 
 
 def options_from_args(args) -> TriangulationOptions:
@@ -480,7 +488,9 @@ def options_from_args(args) -> TriangulationOptions:
     try:
         return TriangulationOptions(method=get("method", "auto"), delta=get("delta"), max_delta=get("max_delta"),
                                     path=get("path", "auto"), sparsity=get("sparsity", "auto"), budget=budget,
-                                    require_in_front=bool(get("require_in_front")))
+                                    require_in_front=bool(get("require_in_front")),
+                                    world_frame=get("world_frame") if get("world_frame") not in (None, "auto")
+                                    else "right_handed")
     except (ValueError, TypeError) as exc:
         msg = str(exc)
         field = msg.split()[0]
@@ -513,6 +523,7 @@ def register_builtin(sub) -> None:
                                    "{\"problems\": [...]}; schema in docs/cli.md).")
     p.add_argument("file", metavar="FILE", help="problem file, or - for stdin")
     add_solver_options(p)
+    add_world_frame_option(p, sequence=False)
     p.add_argument("--json", action="store_true", help="one JSON object per problem, all result fields")
     p.add_argument("--output", "-o", default=None, metavar="OUT", help="write the output to OUT instead of stdout")
     p.set_defaults(func=_cmd_solve)
@@ -524,8 +535,9 @@ def register_builtin(sub) -> None:
     p.add_argument("--points", type=int, default=5, help="Example 5: scene points (paper: 25)")
     p.add_argument("--trials", type=int, default=2, help="Example 5: trials per point and theta (paper: 10)")
     p.add_argument("--seed", type=int, default=0, help="Example 5: random seed")
-    p.add_argument("--progress", action="store_true", default=None,
-                   help="Example 5: progress bar on stderr (default: only for 1000 cases or more)")
+    p.add_argument("--progress", action="store_true", default="auto",
+                   help=f"Example 5: progress bar on stderr (needs tqdm; default: only for {PROGRESS_MIN_ITEMS} "
+                        f"cases or more)")
     p.set_defaults(func=_cmd_example)
 
     p = sub.add_parser("dataset", help="triangulate the tracks of an Oxford sequence (Example 1)",
@@ -534,6 +546,7 @@ def register_builtin(sub) -> None:
     add_data_dir_option(p)
     add_track_options(p)
     add_solver_options(p)
+    add_world_frame_option(p)
     p.add_argument("--json", action="store_true", help="summary as JSON")
     p.add_argument("--csv", default=None, metavar="OUT", help="write per-track results to OUT")
     p.set_defaults(func=_cmd_dataset)
@@ -554,10 +567,13 @@ def build_parser() -> argparse.ArgumentParser:
     ap = _Parser(prog="tritools", description="certified multiple-view L2 triangulation (Chesi 2026)")
     ap.add_argument("--version", action="version", version=f"tritools {__version__}",
                     help="print the version and exit")
+    add_logging_options(ap, top=True)
     sub = ap.add_subparsers(dest="command", required=True, metavar="COMMAND", help="the subcommand")
     register_builtin(sub)
     for module in _registered_modules():
         module.register(sub)
+    for p in sub.choices.values():
+        add_logging_options(p)
     return ap
 
 
@@ -567,13 +583,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         args = build_parser().parse_args(argv)
         end_startup()                   # from here on Ctrl-C is a KeyboardInterrupt: cleanups run, then 130
-        if os.environ.get(DEBUG_ENV):
-            return int(args.func(args) or EXIT_OK)
-        # extreme but finite input (|x| ~ 1e308) overflows inside numpy: its RuntimeWarnings would add
-        # lines to the one-line error (the affected problems get their status rows or the one-line error)
-        with warnings.catch_warnings(), np.errstate(all="ignore"):
-            warnings.simplefilter("ignore", RuntimeWarning)
-            return int(args.func(args) or EXIT_OK)
+        with cli_logging(args):
+            if os.environ.get(DEBUG_ENV):
+                return int(args.func(args) or EXIT_OK)
+            # extreme but finite input (|x| ~ 1e308) overflows inside numpy: its RuntimeWarnings would add
+            # lines to the one-line error (the affected problems get their status rows or the one-line error)
+            with warnings.catch_warnings(), np.errstate(all="ignore"):
+                warnings.simplefilter("ignore", RuntimeWarning)
+                return int(args.func(args) or EXIT_OK)
     except (CLIError, ProblemFileError) as exc:
         return exit_invalid(exc)
     except SystemExit as exc:            # --help
@@ -581,6 +598,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         print(INTERRUPTED_MESSAGE, file=sys.stderr)
         return EXIT_INTERRUPTED
+    except BrokenPipeError:              # `tritools ... | head`: the reader is gone; stop quietly
+        _silence_stdout()
+        return EXIT_OK
     except Exception as exc:  # noqa: BLE001 - one line instead of a traceback, unless debugging
         if os.environ.get(DEBUG_ENV):
             raise

@@ -8,25 +8,34 @@
 * ``colmap-from-oxford NAME OUT_DIR``: convert an Oxford VGG sequence to a COLMAP model.
 
 Exit codes: 0 success (whatever the points' statuses), 2 bad input, bad option or unusable output
-path -- one line ``tritools: error: ...`` naming the file and line/record, or the flag.
+path -- one line ``tritools: error: ...`` naming the file and line/record, or the flag; 3 the model was
+written but cameras that cannot be used (EQUIRECTANGULAR, a pycolmap-only model without pycolmap, focal
+<= 0) left observations out -- one line ``tritools: warning: ...`` with the counts on stderr.
 """
 from __future__ import annotations
 
+import dataclasses
 import json
+import sys
 from pathlib import Path
 
-from .app import add_data_dir_option, add_solver_options, exit_invalid, options_from_args, printable
+from .app import CLIError, add_data_dir_option, add_solver_options, exit_invalid, options_from_args, printable
+from .workers import executor_from_args
 from ..io.problem_file import jsonable
 
-__all__ = ["register", "run_colmap", "run_from_oxford", "MAX_LISTED"]
+__all__ = ["register", "run_colmap", "run_from_oxford", "MAX_LISTED", "EXIT_CAMERAS_SKIPPED"]
 
 #: uncertified points listed in the text summary.
 MAX_LISTED = 10
+#: exit status of ``tritools colmap`` when unusable cameras left observations out (the model is written).
+EXIT_CAMERAS_SKIPPED = 3
 
 
 def register(subparsers) -> None:
     """Add the ``colmap`` and ``colmap-from-oxford`` subcommands."""
     from ..sfm.pipeline import BEHIND_CHOICES, DEFAULT_MAX_TRACK_LENGTH
+    from ..sfm.retriangulate import PROGRESS_MIN_POINTS
+    from .workers import add_worker_options
 
     p = subparsers.add_parser(
         "colmap", help="certified re-triangulation of a COLMAP model (binary or text)",
@@ -38,7 +47,9 @@ def register(subparsers) -> None:
                     "their defaults are those of 'tritools solve': method auto (Corollary 1 at delta = 2, then "
                     "delta = 4 for the points that does not certify), each point within --time-limit and "
                     "--memory-limit; --max-delta 2 keeps every point at delta = 2. --progress: a bar over all "
-                    "points (by default only for models of 2000 points or more).")
+                    f"points (by default only for models of {PROGRESS_MIN_POINTS} points or more). --workers N / "
+                    "--scheduler ADDRESS: where the per-point SDPs run. Exit status 3 (after writing the model): "
+                    "cameras that cannot be used (EQUIRECTANGULAR, focal <= 0, ...) left observations out.")
     p.add_argument("in_dir", metavar="IN_DIR", help="folder of the input model (never modified)")
     p.add_argument("out_dir", metavar="OUT_DIR", help="output folder (created if needed; only the files written are "
                                                       "replaced; must not be IN_DIR, contain IN_DIR, or be a file)")
@@ -47,7 +58,10 @@ def register(subparsers) -> None:
                         "else text)")
     p.add_argument("--output-type", choices=("bin", "txt"), default=None,
                    help="format of OUT_DIR (default: that of IN_DIR)")
-    add_solver_options(p)            # the flags and defaults of `tritools solve`: one TriangulationOptions
+    add_solver_options(p, progress_help=f"progress bar on stderr, moved per stack of equal track lengths (needs the "
+                                        f"'progress' extra, tqdm; default: only for models of {PROGRESS_MIN_POINTS} "
+                                        f"points or more)")   # the flags and defaults of `tritools solve`
+    add_worker_options(p)
     p.add_argument("--min-track-length", type=int, default=2, metavar="K",
                    help="do not solve points with fewer than K usable observations (default 2)")
     p.add_argument("--max-track-length", type=int, default=DEFAULT_MAX_TRACK_LENGTH, metavar="K",
@@ -135,9 +149,12 @@ def run_colmap(args) -> int:
     except OptionError as exc:
         return exit_invalid(f"{_flag(exc.field)} {exc.detail}")
     try:
-        result = retriangulate_folder(args.in_dir, args.out_dir, options,
-                                      input_format=None if args.input_type == "auto" else args.input_type,
-                                      output_format=args.output_type, exports=args.export)
+        with executor_from_args(args) as executor:
+            result = retriangulate_folder(args.in_dir, args.out_dir, dataclasses.replace(options, executor=executor),
+                                          input_format=None if args.input_type == "auto" else args.input_type,
+                                          output_format=args.output_type, exports=args.export)
+    except CLIError as exc:
+        return exit_invalid(exc)
     except OptionError as exc:
         return exit_invalid(f"{_flag(exc.field)} {exc.detail}")
     except (ModelFormatError, CameraError, OutputError) as exc:
@@ -171,11 +188,26 @@ def run_colmap(args) -> int:
         if q is not None:
             _add_quality_records(summary, q)
         print(json.dumps(jsonable(summary), indent=1, allow_nan=False))   # NaN/inf -> null, as tritools solve
-        return 0
+        return _skipped_status(report, getattr(args, "quiet", False))
     if q is not None:
         summary["quality"] = q.summary()
     _print_summary(report, result, summary)
-    return 0
+    return _skipped_status(report, getattr(args, "quiet", False))
+
+
+def _skipped_status(report, quiet: bool = False) -> int:
+    """0, or :data:`EXIT_CAMERAS_SKIPPED` with one warning line (unless ``quiet``) when unusable cameras left
+    observations out."""
+    used = [c for c in report.skipped_cameras if c[3] > 0]
+    if not used:
+        return 0
+    models = sorted({c[1] for c in used})
+    n_obs = sum(c[3] for c in used)
+    if not quiet:
+        print(f"tritools: warning: {len(used)} camera(s) could not be used ({', '.join(models)}): {n_obs} "
+              f"observation(s) left out, {report.n_certified} of {report.n_points} point(s) certified",
+              file=sys.stderr)
+    return EXIT_CAMERAS_SKIPPED
 
 
 def _add_quality_records(summary, q) -> None:

@@ -22,6 +22,7 @@ from pathlib import Path
 from .app import (METHODS, CLIError, add_data_dir_option, add_solver_options, add_track_options, exit_invalid,
                   load_oxford, options_from_args, select_tracks)
 from ..io.atomic import atomic_path
+from .conventions import add_world_frame_option, sequence_options
 from ..model.constraints import Method
 
 __all__ = ["register", "run_figure3", "run_plot_dataset"]
@@ -64,6 +65,7 @@ def _plot_dataset(args) -> int:
     except ImportError as exc:
         return exit_invalid(str(exc))
     seq = load_oxford(args.name, args.data_dir, "plot-dataset")
+    options = sequence_options(options, args, seq)
     tracks = select_tracks(seq.tracks, args.limit, args.sample, args.seed)
     if not tracks:
         return exit_invalid(f"plot-dataset: sequence {seq.name!r} has no track seen in 2 views")
@@ -109,6 +111,7 @@ def register(subparsers) -> None:
     add_data_dir_option(pd)
     add_track_options(pd)
     add_solver_options(pd)
+    add_world_frame_option(pd)
     pd.add_argument("--out", default=None, help="output PNG (default: NAME_summary.png)")
     pd.set_defaults(func=run_plot_dataset)
 

@@ -16,9 +16,16 @@ and to the repository.  The data are never part of the repository.
 A missing directory, sequence or file raises :class:`DataNotFoundError`; a file that cannot be
 read or does not follow its format raises :class:`ValueError` whose message starts with
 ``path:line:`` (or ``path:``), e.g. ``house.000.P:2: expected a number, got 'x'``.
+
+World frame: the corridor and house reconstructions are *reflected* (every camera has det M < 0
+and every track has w > 0: by Hartley & Zisserman's depth rule in a right-handed frame the whole
+scene would lie behind every camera); the colleges and the dinosaur are right-handed.
+:attr:`Sequence.world_frame` reads this off the tracks' own DLT points
+(:func:`tritools.model.cameras.world_frame_of`), and ``tritools dataset`` judges ``in_front`` in it.
 """
 from __future__ import annotations
 
+import functools
 import os
 import re
 from dataclasses import dataclass
@@ -33,6 +40,8 @@ DATA_ENV = "TRITOOLS_DATA"
 #: sequences of the paper's Example 1 (Tables 1-6), in its order.
 PAPER_SEQUENCES = ("corridor", "dinosaur", "house", "library", "merton3", "wadham")
 SEQUENCES = PAPER_SEQUENCES + ("merton1", "merton2")
+#: :attr:`Sequence.world_frame` reads the handedness off this many tracks (the first ones).
+FRAME_TRACKS = 500
 
 
 class DataNotFoundError(FileNotFoundError):
@@ -62,6 +71,26 @@ class Sequence:
     def problem(self, track: Track):
         """(cameras, points2d) of one track."""
         return self.cameras[list(track.views)], track.points2d
+
+    @functools.cached_property
+    def world_frame(self):
+        """The handedness of the sequence's world frame (:class:`~tritools.model.cameras.WorldFrame`), from the
+        depths of the DLT points of (at most) the first :data:`FRAME_TRACKS` tracks in their own views."""
+        from ..model.cameras import world_frame_of
+        from ..model.geometry import PointAtInfinityError, dlt
+
+        cams, pts = [], []                  # one (camera, point) pair per observation
+        for t in self.tracks[:FRAME_TRACKS]:
+            C = self.cameras[list(t.views)]
+            try:
+                X = dlt(C, t.points2d)
+            except (PointAtInfinityError, ValueError):
+                continue
+            cams.append(C)
+            pts.append(np.broadcast_to(X, (len(C), 3)))
+        if not cams:
+            raise ValueError(f"{self.name}: no track to read the world frame from")
+        return world_frame_of(np.concatenate(cams)[:, None], np.concatenate(pts))
 
     def histogram(self) -> dict:
         out: dict[int, int] = {}

@@ -23,6 +23,21 @@ vectorised functions (:func:`camera_rank_ratio`, :func:`cameras_all_equal`):
    one ill-posed configuration of the problem; each camera is divided by its largest
    entry before its Frobenius norm is taken, so no norm overflows.  Views sharing a centre
    (a repeated view, a camera rotated about its centre) are valid input.
+
+Depth and the world frame
+-------------------------
+:func:`depths` (and its vectorised twin :func:`depths_stack`, the same rows from
+:func:`_depth_rows`) is Hartley & Zisserman's eq. (6.15),
+``depth(X; P) = h sign(det M) w / (||m3|| T)`` for ``P X = w (x, y, 1)``, ``X = (X, Y, Z, T)``:
+invariant under ``P -> k P`` for every k != 0 (``P`` and ``-P`` are the same camera) and
+positive in front of the camera.  ``h`` is the handedness of the world frame,
+:class:`WorldFrame`: +1 for a right-handed frame (``P = K [R | t]``, det R = +1, every SfM
+package), -1 for a *reflected* one (det R = -1), in which every depth of eq. (6.15) changes
+sign.  The handedness is a property of the whole reconstruction, not of one camera: a
+reflected frame puts a real scene behind every camera by eq. (6.15) (the Oxford corridor and
+house sequences: every camera has det M < 0 and w > 0).  :func:`world_frame_of` reads it
+off a reconstruction's own points.  Every cheirality judgement (``in_front``, status
+``behind_camera``, the re-triangulation's keep-the-input rule) goes through these functions.
 """
 from __future__ import annotations
 
@@ -30,12 +45,35 @@ import enum
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .regions.base import real_array
 
 __all__ = ["CAMERA_RANK_RTOL", "SAME_CAMERA_RTOL", "POINT_AT_INFINITY_RTOL", "CameraIssue", "CameraProblems",
            "camera_rank_ratio", "cameras_all_equal", "check_camera", "validate_cameras", "camera_problems",
-           "camera_center", "depths", "depths_stack", "power2_scale", "points3d_array", "unit_rows"]
+           "camera_center", "depths", "depths_stack", "power2_scale", "points3d_array", "unit_rows", "WorldFrame",
+           "as_world_frame", "world_frame_of"]
+
+
+class WorldFrame(str, enum.Enum):
+    """Handedness of the world frame, the factor ``h`` of the depth ``h sign(det M) w / (||m3|| T)``."""
+
+    RIGHT_HANDED = "right_handed"      # h = +1: P = K [R | t] with det R = +1 (COLMAP, OpenCV, H&Z)
+    REFLECTED = "reflected"            # h = -1: a mirrored world (det R = -1), e.g. Oxford corridor / house
+
+    @property
+    def sign(self) -> float:
+        return -1.0 if self is WorldFrame.REFLECTED else 1.0
+
+
+def as_world_frame(value, name: str = "world_frame") -> WorldFrame:
+    """A :class:`WorldFrame` from itself or its value (``"right_handed"``, ``"reflected"``); ValueError naming
+    ``name`` otherwise."""
+    try:
+        return WorldFrame(getattr(value, "value", value))
+    except ValueError:
+        raise ValueError(f"{name} must be one of {', '.join(repr(w.value) for w in WorldFrame)}, "
+                         f"got {value!r}") from None
 
 
 #: A camera has rank < 3 if sigma_3 <= CAMERA_RANK_RTOL * sigma_1 for the conditioned camera
@@ -186,7 +224,7 @@ def check_camera(P: np.ndarray, name: str) -> None:
         raise ValueError(_rank_message(name, ratio))
 
 
-def validate_cameras(cameras, *, min_views: int = 2, require_distinct: bool = True) -> np.ndarray:
+def validate_cameras(cameras: ArrayLike, *, min_views: int = 2, require_distinct: bool = True) -> np.ndarray:
     """Check and convert projection matrices (the rule is in the module docstring).
 
     Parameters
@@ -319,11 +357,12 @@ def _depth_rows(C: np.ndarray) -> np.ndarray:
     return Cs[..., 2, :] * f[..., None]
 
 
-def depths(X, cameras) -> np.ndarray:
+def depths(X: ArrayLike, cameras: ArrayLike, world_frame: WorldFrame | str = WorldFrame.RIGHT_HANDED) -> np.ndarray:
     """Depth of ``X`` in each camera (Hartley & Zisserman eq. (6.15)):
-    ``depth = sign(det M) (p3.X~) / ||m3||``, ``M`` the left 3x3 block of ``P`` and
-    ``m3`` its third row; invariant to ``P -> k P``; positive in front of the camera.
-    For ``P = K [R | t]`` with ``det K > 0`` it is the third coordinate of ``R X + t``.
+    ``depth = h sign(det M) (p3.X~) / ||m3||``, ``M`` the left 3x3 block of ``P``,
+    ``m3`` its third row, ``h = world_frame.sign`` (see the module docstring); invariant to
+    ``P -> k P`` for every k != 0; positive in front of the camera.
+    For ``P = K [R | t]`` with ``det K > 0`` and ``det R = +1`` it is the third coordinate of ``R X + t``.
 
     Returns
     -------
@@ -335,15 +374,17 @@ def depths(X, cameras) -> np.ndarray:
     ValueError
         Bad ``X`` or cameras (:func:`validate_cameras` with ``min_views=1``, distinctness not required).
     """
+    h = as_world_frame(world_frame).sign
     A, single = points3d_array(X)
     C = validate_cameras(cameras, min_views=1, require_distinct=False)
     Xh = np.hstack([A, np.ones((len(A), 1))])
     with np.errstate(over="ignore", invalid="ignore"):
-        out = np.einsum("mj,nj->mn", Xh, _depth_rows(C))
+        out = h * np.einsum("mj,nj->mn", Xh, _depth_rows(C))
     return out[0] if single else out
 
 
-def depths_stack(cameras, X) -> np.ndarray:
+def depths_stack(cameras: ArrayLike, X: ArrayLike,
+                 world_frame: WorldFrame | str = WorldFrame.RIGHT_HANDED) -> np.ndarray:
     """:func:`depths` for M problems at once: cameras (M, N, 3, 4), X (M, 3) -> (M, N), the depth
     of ``X[m]`` in camera ``cameras[m, i]`` (same formula, numpy over the stack).
 
@@ -360,6 +401,22 @@ def depths_stack(cameras, X) -> np.ndarray:
         raise ValueError(f"cameras must have shape (M, N, 3, 4), got {C.shape}")
     if A.shape != (C.shape[0], 3):
         raise ValueError(f"X must have shape ({C.shape[0]}, 3), one point per problem, got {A.shape}")
+    h = as_world_frame(world_frame).sign
     Xh = np.concatenate([A, np.ones((len(A), 1))], axis=1)
     with np.errstate(over="ignore", invalid="ignore"):
-        return np.einsum("mj,mnj->mn", Xh, _depth_rows(C))
+        return h * np.einsum("mj,mnj->mn", Xh, _depth_rows(C))
+
+
+def world_frame_of(cameras: ArrayLike, X: ArrayLike) -> WorldFrame:
+    """The handedness of a reconstruction's world frame, read off its own points: REFLECTED when most
+    finite right-handed depths (eq. (6.15)) of the pairs (``X[m]``, ``cameras[m, i]``) are negative (a real
+    scene lies in front of the cameras that see it; only a mirrored frame puts it behind them).
+
+    ``cameras`` (M, N, 3, 4) and ``X`` (M, 3) as for :func:`depths_stack` (e.g. each track's cameras and
+    its DLT point); ValueError when no depth is finite and non-zero (nothing to decide from).
+    """
+    d = depths_stack(cameras, X)
+    d = d[np.isfinite(d) & (d != 0)]
+    if not d.size:
+        raise ValueError("world_frame_of: no finite non-zero depth to read the frame's handedness from")
+    return WorldFrame.REFLECTED if np.count_nonzero(d < 0) > d.size / 2 else WorldFrame.RIGHT_HANDED

@@ -20,10 +20,12 @@ import itertools
 from collections.abc import Sequence
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .cameras import (CAMERA_RANK_RTOL, POINT_AT_INFINITY_RTOL, SAME_CAMERA_RTOL, CameraIssue, CameraProblems,
                       camera_center, camera_problems, camera_rank_ratio, cameras_all_equal, check_camera, depths,
-                      depths_stack, points3d_array, power2_scale, unit_rows, validate_cameras)
+                      depths_stack, points3d_array, power2_scale, unit_rows, validate_cameras, WorldFrame,
+                      world_frame_of)
 from .regions.base import real_array
 
 __all__ = [
@@ -33,6 +35,7 @@ __all__ = [
     "CAMERA_RANK_RTOL", "SAME_CAMERA_RTOL", "PROJECTION_DENOM_RTOL", "POINT_AT_INFINITY_RTOL", "COMMON_CENTRE_RTOL",
     "SAME_CENTER_RTOL",
     "camera_problems", "CameraProblems", "CameraIssue", "camera_rank_ratio", "cameras_all_equal", "depths_stack",
+    "WorldFrame", "world_frame_of",
 ]
 
 # ----------------------------------------------------------------------------- tolerances
@@ -86,7 +89,7 @@ def project_homogeneous(Xh: np.ndarray, P: np.ndarray) -> np.ndarray:
     return out
 
 
-def project(X, P) -> np.ndarray:
+def project(X: ArrayLike, P: ArrayLike) -> np.ndarray:
     """``Phi(X, P)`` (paper eq. (4)).
 
     Parameters
@@ -136,7 +139,7 @@ def gamma_validated(Xs: np.ndarray, cameras: np.ndarray, regions: Sequence) -> n
     return out
 
 
-def gamma(X, cameras, regions) -> float | np.ndarray:
+def gamma(X: ArrayLike, cameras: ArrayLike, regions: Sequence | ArrayLike) -> float | np.ndarray:
     """RMS reprojection error (SPEC §1, paper eq. (6)):
     ``gamma(X) = sqrt( sum_i d(Phi(X, P_i), R_i)^2 / (2N) )`` with exact distances.
 
@@ -260,7 +263,7 @@ def _hartley_normalisation(x: np.ndarray) -> np.ndarray:
     return np.array([[s, 0.0, -s * c[0]], [0.0, s, -s * c[1]], [0.0, 0.0, 1.0]])
 
 
-def dlt(cameras, points2d) -> np.ndarray:
+def dlt(cameras: ArrayLike, points2d: ArrayLike) -> np.ndarray:
     """Linear (algebraic-error) triangulation, Hartley & Zisserman §12.2.
 
     Image points are normalised by one similarity ``T`` (centroid 0, mean distance
@@ -297,7 +300,7 @@ def _skew(e: np.ndarray) -> np.ndarray:
     return np.array([[0.0, -e[2], e[1]], [e[2], 0.0, -e[0]], [-e[1], e[0], 0.0]])
 
 
-def fundamental_matrix(P_i, P_j, normalize: bool = True) -> np.ndarray:
+def fundamental_matrix(P_i: ArrayLike, P_j: ArrayLike, normalize: bool = True) -> np.ndarray:
     """Fundamental matrix ``F_ij = [e]_x P_i P_j^+`` with ``e = P_i a_j``, ``P_j a_j = 0``,
     ``||a_j|| = 1`` (SPEC §7; Hartley & Zisserman eq. (9.1)).
 

@@ -1,8 +1,8 @@
 """Structure-from-motion workflows: certified re-triangulation of every 3D point of a COLMAP model,
 binary or text, and its certificate sidecar.  Model formats live in :mod:`tritools.io.colmap`.
 
-* :func:`retriangulate` (a :class:`~tritools.io.colmap.Model`) and :func:`retriangulate_arrays`
-  (a :class:`~tritools.io.colmap.ModelArrays`): in memory;
+* :func:`retriangulate` (a :class:`~tritools.io.colmap.Model` or a ``pycolmap.Reconstruction``, returned
+  as the same type) and :func:`retriangulate_arrays` (a :class:`~tritools.io.colmap.ModelArrays`): in memory;
 * :func:`retriangulate_folder`: folder to folder, streaming in chunks, written atomically;
 * :func:`certify_stack`: the single call into the solver (stacks of tracks of equal length);
 * :func:`write_certificates` / :func:`read_certificates`: the sidecar ``points3D_certificates.txt``.

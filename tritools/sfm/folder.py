@@ -149,7 +149,7 @@ def retriangulate_folder(in_dir, out_dir, options: RetriangulationOptions | None
     geom = prepare_geometry(src.arrays, options.strict)
     timings["geometry"] = time.perf_counter() - t0
     # the total only when a bar may be shown (a text model costs one quick pass over points3D.txt)
-    want = options.progress is True or (options.progress is None and has_tqdm())
+    want = options.progress is True or (options.progress == "auto" and has_tqdm())
     bar = progress_bar(src.count_points() if want else None, options.progress)
     ids, results, xyz, rgb = [], [], [], []
     copied, notes = [], _other_model_notes(out_dir, fmt_out)

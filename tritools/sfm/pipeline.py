@@ -3,7 +3,7 @@
 :func:`prepare_geometry` works per camera and per image, once per model: the pinhole matrices
 ``P = K [R | t]`` of every image, and every keypoint that belongs to a track undistorted with one
 numpy call per camera (:func:`tritools.io.colmap.camera_models.undistorted_pixels`).  A camera whose
-model tritools cannot undistort (fisheye models, FULL_OPENCV, ...) or whose parameters are invalid
+model tritools cannot undistort (EQUIRECTANGULAR; pycolmap-only models without pycolmap) or whose parameters are invalid
 (focal length <= 0) is *skipped*: its observations are left out of every track (a count and the
 camera's reason go to the report), unless ``strict`` (then :class:`CameraError`).
 
@@ -20,7 +20,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..io.colmap.arrays import ModelArrays, PointChunk
-from ..io.colmap.camera_models import camera_problem, distort_rows, distortion, intrinsics, undistorted_pixels
+from ..io.colmap.camera_models import (OPENCV_FAMILY, camera_problem, distort_rows, distortion, intrinsics,
+                                       pixels_from_camera, undistorted_pixels)
+from ..model.cameras import depths_stack
 from ..result import Status
 from ..solve.options import DEFAULT_OPTIONS, MethodChoice, SolvePath, TriangulationOptions
 from .certify import CertifyOptions, certify_stack, status_code
@@ -77,8 +79,9 @@ class RetriangulationOptions:
     strict
         Raise :class:`CameraError` for an unusable camera instead of skipping its observations.
     chunk_points, progress, executor
-        Points per chunk (bounds memory); a tqdm bar over the whole run (None: from
-        ``PROGRESS_MIN_POINTS`` points on, True: always, False: never); executor of the per-point SDPs.
+        Points per chunk (bounds memory); a tqdm bar over the whole run, moved per stack of equal track
+        lengths (None / False: never, the library's default; "auto": from ``PROGRESS_MIN_POINTS`` points on,
+        the command line's default; True: always); executor of the per-point SDPs.
     """
     method: str | None = None
     path: str | None = None
@@ -89,7 +92,7 @@ class RetriangulationOptions:
     behind: str = "keep-input"
     strict: bool = False
     chunk_points: int = 100_000
-    progress: bool | None = None
+    progress: bool | str | None = None
     executor: object = field(default=None, compare=False)
     solver: TriangulationOptions | None = None
 
@@ -133,8 +136,8 @@ class RetriangulationOptions:
         if self.behind not in BEHIND_CHOICES:
             raise OptionError("behind", f"must be one of {', '.join(BEHIND_CHOICES)}, got {self.behind!r}")
         _int_option("chunk_points", self.chunk_points, 1)
-        if self.progress is not None and not isinstance(self.progress, (bool, np.bool_)):
-            raise OptionError("progress", f"must be True, False or None, got {self.progress!r}")
+        if self.progress is not None and self.progress != "auto" and not isinstance(self.progress, (bool, np.bool_)):
+            raise OptionError("progress", f"must be True, False, None or 'auto', got {self.progress!r}")
 
     def certify_options(self) -> CertifyOptions:
         """The solver settings of :func:`.certify.certify_stack` (the ``solver`` options and the executor)."""
@@ -151,7 +154,7 @@ class ModelGeometry:
     P: np.ndarray                 # (V, 3, 4) K [R | t] (zeros for unusable cameras)
     focal: np.ndarray             # (V, 2) fx, fy of the image's camera
     centre: np.ndarray            # (V, 2) cx, cy
-    dist: np.ndarray              # (V, 4) k1, k2, p1, p2
+    dist: np.ndarray              # (V, 4) k1, k2, p1, p2 (OPENCV family; other models: zeros, unused)
     xy_u: np.ndarray              # (K, 2) undistorted keypoints (NaN where not computed)
     kp_ok: np.ndarray             # (K,) undistortion converged
 
@@ -181,7 +184,8 @@ def prepare_geometry(arrays: ModelArrays, strict: bool = False) -> ModelGeometry
     for k in range(C):
         if reasons[k] is None:
             Ks[k] = intrinsics(arrays.camera_models[k], arrays.camera_params[k])
-            dists[k] = distortion(arrays.camera_models[k], arrays.camera_params[k])
+            if arrays.camera_models[k] in OPENCV_FAMILY:          # other models: ERROR via their own map
+                dists[k] = distortion(arrays.camera_models[k], arrays.camera_params[k])
     R = rotations(arrays.image_qvec) if V else np.zeros((0, 3, 3))
     t = arrays.image_tvec
     Rt = np.concatenate([R, t[:, :, None]], axis=2)
@@ -252,9 +256,14 @@ def point_gammas(arrays: ModelArrays, geom: ModelGeometry, xyz: np.ndarray | Non
 def _colmap_error(arrays, geom, X, obs_img, gk, owner, n) -> np.ndarray:
     """COLMAP's ERROR: mean over the observations of |pi(X) - x| in recorded pixels (full camera model)."""
     Xc = np.einsum("tij,tj->ti", geom.R[obs_img], X[owner]) + geom.t[obs_img]
+    cam = arrays.image_camera[obs_img]
+    opencv = np.array([m in OPENCV_FAMILY for m in arrays.camera_models], bool)[cam]
     with np.errstate(all="ignore"):
         uv = distort_rows(Xc[:, :2] / Xc[:, 2:3], geom.dist[obs_img])
         px = geom.focal[obs_img] * uv + geom.centre[obs_img]
+        for k in np.unique(cam[~opencv]):                      # the other models: one call per camera
+            sel = cam == k
+            px[sel] = pixels_from_camera(arrays.camera_models[k], arrays.camera_params[k], Xc[sel])
         e = np.hypot(*(px - arrays.kp_xy[gk]).T)
     return np.bincount(owner, weights=e, minlength=n) / np.maximum(np.bincount(owner, minlength=n), 1)
 
@@ -296,7 +305,9 @@ def process_chunk(arrays: ModelArrays, geom: ModelGeometry, chunk: PointChunk, o
     # estimate, or of the input point where there is none
     has_X = np.all(np.isfinite(X), axis=1)
     test = np.where(has_X[:, None], X, chunk.xyz)
-    depth = np.einsum("tj,tj->t", geom.R[obs_img, 2, :], test[owner]) + geom.t[obs_img, 2]
+    # (the one depth rule, tritools.model.cameras; a COLMAP frame is right-handed: [R | t] with det R = +1)
+    Rt = np.concatenate([geom.R, geom.t[:, :, None]], axis=2)
+    depth = depths_stack(Rt[obs_img][:, None], test[owner])[:, 0]
     behind = np.bincount(owner[~(depth > 0)], minlength=n) > 0
     r.in_front[:] = ~behind
     ub, g_in = r.gamma_ub, r.gamma_input

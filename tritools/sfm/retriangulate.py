@@ -30,6 +30,7 @@ import numpy as np
 
 from ..io.colmap.arrays import ModelArrays
 from ..io.colmap.model import Model, Point3D
+from ..io.colmap.pycolmap_bridge import from_pycolmap, import_pycolmap, is_pycolmap_reconstruction
 from ..result import Status
 from .certify import STATUS_LEGEND, status_code
 from .pipeline import RetriangulationOptions, prepare_geometry, process_chunk
@@ -181,14 +182,17 @@ def has_tqdm() -> bool:
     return importlib.util.find_spec("tqdm") is not None
 
 
-def progress_bar(total: int | None, enabled: bool | None):
-    """A tqdm bar over points, or None: ``enabled`` False, tqdm missing, or ``enabled`` None (the default, as
-    in :func:`tritools.triangulate_many`) and fewer than PROGRESS_MIN_POINTS points (or an unknown total)."""
-    if enabled is False or (enabled is None and (total is None or total < PROGRESS_MIN_POINTS)):
+def progress_bar(total: int | None, enabled: bool | str | None):
+    """A tqdm bar over points (moved once per stack of equal track lengths), or None: ``enabled`` None / False
+    (the library's default: no bar unless asked), ``"auto"`` (the command line's default) with fewer than
+    PROGRESS_MIN_POINTS points or an unknown total, or tqdm missing (a warning when ``enabled`` is True)."""
+    if enabled is None or enabled is False or (enabled == "auto" and (total is None or total < PROGRESS_MIN_POINTS)):
         return None
     try:
         from tqdm import tqdm
     except ImportError:  # optional extra 'progress'
+        if enabled is True:
+            logger.warning("progress=True needs tqdm (pip install 'sospoly-tritools[progress]'): no progress bar")
         return None
     return tqdm(total=total, desc="re-triangulating", unit="pt", leave=False)
 
@@ -241,8 +245,15 @@ def retriangulate(model: Model, method: str | None = None, path: str | None = No
     delta = 4 for the points that does not certify, within the per-point budget); ``max_delta=2``
     keeps every point at delta = 2.
 
+    ``model`` may also be a ``pycolmap.Reconstruction`` (in memory, no disk): the result is then a new
+    ``pycolmap.Reconstruction``, a copy of the input whose updated points get the new xyz and ERROR
+    (rigs, frames, colours and tracks unchanged; :mod:`tritools.io.colmap.pycolmap_bridge`).
+
     Returns ``(new_model, report)``; ``report.records`` follow the point ids in increasing order.
     """
+    if is_pycolmap_reconstruction(model):
+        return _retriangulate_pycolmap(model, method, path, min_track_length, delta, max_delta, progress,
+                                       options=options, **kw)
     if options is None:
         options = RetriangulationOptions(method=method, path=path, min_track_length=min_track_length, delta=delta,
                                          max_delta=max_delta, progress=progress, **kw)
@@ -255,3 +266,15 @@ def retriangulate(model: Model, method: str | None = None, path: str | None = No
         points.append(Point3D(p.id, tuple(new.point_xyz[i].tolist()), p.rgb, float(new.point_error[i]), p.track))
     return model.replace_points(points), report
 
+
+
+def _retriangulate_pycolmap(rec, *args, **kw):
+    """:func:`retriangulate` of a ``pycolmap.Reconstruction``: a copy with the updated points changed."""
+    pycolmap = import_pycolmap()
+    new, report = retriangulate(from_pycolmap(rec), *args, **kw)
+    out = pycolmap.Reconstruction(rec)
+    for i in np.nonzero(report.updated)[0]:
+        pid = int(report.point_ids[i])
+        p, q = new.points3D[pid], out.points3D[pid]
+        q.xyz, q.error = np.asarray(p.xyz, float), float(p.error)
+    return out, report

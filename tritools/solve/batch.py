@@ -34,6 +34,7 @@ from collections.abc import Iterable, Sequence
 import numpy as np
 
 from ..model.regions import Point
+from ..model.constraints import Method
 from ..result import Attempt, Status, TriangulationResult
 from .options import TriangulationOptions, options_from
 from .discs import as_disc_problem, solve_disc_group
@@ -97,11 +98,15 @@ def _run_chunk(items, retries) -> list:
 
 
 def _progress_bar(total: int, progress):
-    if progress is False or (progress is None and total < PROGRESS_MIN_ITEMS):
+    """A tqdm bar, or None: ``progress`` None / False (a library call shows no bar unless asked), ``"auto"``
+    with fewer than PROGRESS_MIN_ITEMS problems, or tqdm missing (a warning when ``progress`` is True)."""
+    if progress is None or progress is False or (progress == "auto" and total < PROGRESS_MIN_ITEMS):
         return None
     try:
         from tqdm import tqdm
-    except ImportError:  # optional extra 'progress': silently no bar
+    except ImportError:  # optional extra 'progress'
+        if progress is True:
+            log.warning("progress=True needs tqdm (pip install 'sospoly-tritools[progress]'): no progress bar")
         return None
     return tqdm(total=total, desc="triangulating", leave=False)
 
@@ -307,8 +312,9 @@ def solve_point_problems(problems, opts: TriangulationOptions, *, executor=None,
     return out
 
 
-def triangulate_many(problems: Iterable[Sequence], method=None, delta=None, max_delta=None, *,
-                     options: TriangulationOptions | None = None, executor=None, progress: bool | None = None,
+def triangulate_many(problems: Iterable[Sequence], method: str | Method | None = None, delta: int | None = None,
+                     max_delta: int | None = None, *, options: TriangulationOptions | None = None,
+                     executor: cf.Executor | object | None = None, progress: bool | str | None = None,
                      retries: Sequence[RetryStep] = (), chunk_size: int = DEFAULT_CHUNK_SIZE,
                      **overrides) -> list[TriangulationResult]:
     """Triangulate every (cameras, regions) pair; results in input order, one per input.
@@ -321,7 +327,8 @@ def triangulate_many(problems: Iterable[Sequence], method=None, delta=None, max_
         certifies by verification first, vectorised over problems with the same structure)
     executor : None, a :class:`concurrent.futures.Executor`, or a ``dask.distributed.Client``
         (see the module docstring for the default)
-    progress : a tqdm bar: True, False, or None (default: only for batches of PROGRESS_MIN_ITEMS or more)
+    progress : a tqdm bar: True, False / None (the default: no bar), or "auto" (only for batches of
+        PROGRESS_MIN_ITEMS or more; what the command line does unless --progress)
     retries : (method, delta) steps tried in order on items the first call did not certify
         (e.g. ``[("corollary1", 4), ("theorem1", None)]``); the first certified result is kept, else the
         first call's.  Each result's ``attempts`` lists them all.

@@ -28,7 +28,9 @@ from dataclasses import dataclass
 from sospoly import Budget, GramForm, Multiplier, Polynomial, Tolerances
 from sospoly.budget import as_budget
 from sospoly.tolerances import as_tolerances
+from sospoly.solvers.backends import get_backend
 
+from ..model.cameras import WorldFrame, as_world_frame
 from ..model.constraints import Method
 
 __all__ = ["TriangulationOptions", "SolvePath", "Sparsity", "MethodChoice", "DEFAULT_OPTIONS", "TRIANGULATION_BUDGET",
@@ -107,6 +109,9 @@ class TriangulationOptions:
     budget : :class:`sospoly.Budget` for the whole call (time limit, memory per program)
     require_in_front : a certified minimiser behind a camera gets status ``behind_camera`` instead of
         ``optimal`` (by default it stays ``optimal`` with ``in_front=False`` and a message)
+    world_frame : handedness of the cameras' world frame, the sign rule of the depths that judge
+        ``in_front`` (:class:`tritools.model.cameras.WorldFrame`: ``"right_handed"``, the default, or
+        ``"reflected"`` for a mirrored reconstruction such as the Oxford corridor and house sequences)
     """
 
     method: MethodChoice | str = MethodChoice.AUTO
@@ -122,6 +127,7 @@ class TriangulationOptions:
     tolerances: Tolerances | None = None
     budget: Budget | None = None
     require_in_front: bool = False
+    world_frame: WorldFrame | str = WorldFrame.RIGHT_HANDED
 
     def __post_init__(self) -> None:
         set_ = object.__setattr__
@@ -129,6 +135,7 @@ class TriangulationOptions:
         set_(self, "path", _enum(SolvePath, self.path, "path"))
         set_(self, "sparsity", _enum(Sparsity, self.sparsity, "sparsity"))
         set_(self, "form", _enum(GramForm, self.form, "form"))
+        set_(self, "world_frame", as_world_frame(self.world_frame))
         set_(self, "delta", _degree(self.delta, "delta"))
         set_(self, "max_delta", _degree(self.max_delta, "max_delta"))
         if self.delta is not None and self.max_delta is not None and self.max_delta < self.delta:
@@ -150,6 +157,8 @@ class TriangulationOptions:
                                                                                     "cvxpy"):
             raise ValueError(f"backend must be 'clarabel', 'ipm', 'auto', 'cvxpy' or 'cvxpy:<SOLVER>', "
                              f"got {self.backend!r}")
+        if isinstance(self.backend, str):
+            get_backend(self.backend)    # ValueError / ImportError naming an unknown or uninstalled solver
 
     def replace(self, **changes) -> TriangulationOptions:
         """A copy with some fields changed (validated again); None values are ignored.

@@ -19,10 +19,12 @@ from __future__ import annotations
 import time
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from sospoly import GramForm, Multiplier, n_lmivar_formula
 
 from ..model.constraints import Method
+from ..model.opencv import PointsLayout, points_array
 from ..model.regions import Point, real_array
 from ..result import Attempt, Status, TriangulationResult
 from .decide import cheirality
@@ -176,7 +178,7 @@ class PointStack:
         self.in_front = np.zeros(self.M, bool)
         if not d.size:
             return
-        g, res, dep = points_report_stack(self.C[d], self.x[d], self.X[d])
+        g, res, dep = points_report_stack(self.C[d], self.x[d], self.X[d], self.opts.world_frame)
         self.gamma_ub[d], self.residuals[d], self.depths[d] = g, res, dep
         self.gamma_ub_raw[d] = points_report_stack(self.C[d], self.x[d], self.X_raw[d])[0]
         self.status[d], self.in_front[d] = cheirality(self.status[d], dep, self.opts.require_in_front)
@@ -218,18 +220,25 @@ class PointsResult:
         return [self._results_of(m) for m in range(len(self))]
 
 
-def triangulate_points(cameras, points2d, visible=None, *, options: TriangulationOptions | None = None,
-                       executor=None, progress: bool | None = None, **overrides) -> PointsResult:
+def triangulate_points(cameras: ArrayLike, points2d: ArrayLike, visible: ArrayLike | None = None, *,
+                       layout: PointsLayout | str = PointsLayout.AUTO, options: TriangulationOptions | None = None,
+                       executor: object | None = None, progress: bool | str | None = None,
+                       **overrides) -> PointsResult:
     """Certified triangulation of M points observed in V views, as arrays (like ``cv2.triangulatePoints``).
 
     Parameters
     ----------
     cameras : array (V, 3, 4)
-        One projection matrix per view, shared by all points.
-    points2d : array (M, V, 2)
-        Observed image points; entries of views that do not see a point are ignored.
+        One projection matrix per view, shared by all points (:func:`tritools.cameras_from_krt` builds
+        them from OpenCV's K, R / rvec, t).
+    points2d : array (M, V, 2), or OpenCV's (V, 2, M) / (V, M, 2) / (V, M, 1, 2), or a list of V per-view arrays
+        Observed image points (any real dtype, float32 included); entries of views that do not see a point
+        are ignored (NaN marks them by default).
     visible : bool array (M, V), optional
         Which views see which point (default: the finite entries of ``points2d``); each point needs >= 2.
+    layout : "auto" (default), "points_views", "views_xy_points" or "views_points"
+        Axis order of ``points2d`` (:mod:`tritools.model.opencv`); "auto" refuses a shape that fits several
+        layouts (two views and two points: (2, 2, 2)) with a ValueError asking for ``layout=``.
     options, overrides : :class:`~tritools.solve.options.TriangulationOptions` and its fields
     executor, progress : as :func:`tritools.triangulate_many`
     """
@@ -237,11 +246,9 @@ def triangulate_points(cameras, points2d, visible=None, *, options: Triangulatio
 
     opts = options_from(options, **overrides)
     C = real_array(cameras, "cameras")          # complex, object, string and boolean arrays refused by name
-    x = real_array(points2d, "points2d")
     if C.ndim != 3 or C.shape[1:] != (3, 4):
         raise ValueError(f"cameras must have shape (V, 3, 4), got {C.shape}")
-    if x.ndim != 3 or x.shape[1:] != (C.shape[0], 2):
-        raise ValueError(f"points2d must have shape (M, {C.shape[0]}, 2), got {x.shape}")
+    x = points_array(points2d, C.shape[0], layout, "points2d")
     vis = np.all(np.isfinite(x), axis=2) if visible is None else np.asarray(visible, bool)
     if vis.shape != x.shape[:2]:
         raise ValueError(f"visible must have shape {x.shape[:2]}, got {vis.shape}")

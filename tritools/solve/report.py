@@ -10,7 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..model.geometry import depths as depths_of
-from ..model.geometry import depths_stack, project_homogeneous
+from ..model.geometry import WorldFrame, depths_stack, project_homogeneous
 from ..model.regions import EllipseBorder, Point, Polytope, Segment
 from ..model.stacked import project_stack
 
@@ -24,8 +24,9 @@ class PointReport:
     depths: np.ndarray | None     # (N,)
 
 
-def point_report(X, cameras, regions) -> PointReport:
-    """gamma(X) (SPEC §1), per-view residuals and depths of ``X`` for validated cameras and regions."""
+def point_report(X, cameras, regions, world_frame=WorldFrame.RIGHT_HANDED) -> PointReport:
+    """gamma(X) (SPEC §1), per-view residuals and depths of ``X`` (in ``world_frame``) for validated cameras
+    and regions."""
     if X is None or not np.all(np.isfinite(X)):
         return PointReport(None, None, None)
     Xh = np.append(np.asarray(X, float), 1.0)[None]
@@ -35,16 +36,16 @@ def point_report(X, cameras, regions) -> PointReport:
         res.append(float(r.distance(x)) if np.all(np.isfinite(x)) else np.inf)
     res = np.array(res)
     gamma = float(np.sqrt(np.sum(res ** 2) / (2 * len(res)))) if np.all(np.isfinite(res)) else math.inf
-    return PointReport(gamma, res, np.asarray(depths_of(X, cameras), float))
+    return PointReport(gamma, res, np.asarray(depths_of(X, cameras, world_frame), float))
 
 
-def points_report_stack(C: np.ndarray, x: np.ndarray, X: np.ndarray):
+def points_report_stack(C: np.ndarray, x: np.ndarray, X: np.ndarray, world_frame=WorldFrame.RIGHT_HANDED):
     """The twin of :func:`point_report` for M point problems: (gamma (M,), residuals (M, N), depths (M, N));
     gamma is inf where a projection is at infinity."""
     u, _, fin = project_stack(C, X)
     res = np.where(fin[:, None], np.linalg.norm(u - x, axis=2), np.inf)
     gamma = np.where(fin, np.sqrt(np.sum(np.where(fin[:, None], res, 0.0) ** 2, axis=1) / (2 * x.shape[1])), np.inf)
-    return gamma, res, depths_stack(C, X)
+    return gamma, res, depths_stack(C, X, world_frame)
 
 
 def solve_ball(regions_n, c_upper: float) -> float | None:

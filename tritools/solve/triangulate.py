@@ -29,8 +29,10 @@ from __future__ import annotations
 import dataclasses
 import functools
 import time
+from collections.abc import Sequence
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 import sospoly
 from sospoly import BudgetExceeded, Multiplier, SolveStatus
@@ -63,7 +65,8 @@ MAX_FAMILY_DIM = 3
 FAMILY_SEARCH_EVALS = 300
 
 
-def triangulate(cameras, regions, method=None, delta: int | None = None, max_delta: int | None = None, *,
+def triangulate(cameras: ArrayLike, regions: Sequence | ArrayLike, method: str | Method | None = None,
+                delta: int | None = None, max_delta: int | None = None, *,
                 options: TriangulationOptions | None = None, **overrides) -> TriangulationResult:
     """Certified triangulation of one scene point (see module docstring).
 
@@ -428,7 +431,7 @@ class _PointSolve:
     # ------------------------------------------------------------------ reporting
     def _report(self, step: Step, status, optimal, gamma_lb, *, X, X_raw, image_points, certified_by,
                 n_lmivar=None) -> TriangulationResult:
-        rep = point_report(X, self.cams, self.regions)
+        rep = point_report(X, self.cams, self.regions, self.opts.world_frame)
         raw = point_report(X_raw, self.cams, self.regions)
         msg = ""
         if gamma_lb is not None and rep.gamma is not None and np.isfinite(rep.gamma):

@@ -21,6 +21,13 @@ RADIAL          f, cx, cy, k1, k2                p = 0
 OPENCV          fx, fy, cx, cy, k1, k2, p1, p2   itself
 =============== ================================ ======================
 
+and, beyond them, every other perspective COLMAP model: FULL_OPENCV, the fisheye models
+(OPENCV_FISHEYE, SIMPLE_RADIAL_FISHEYE, RADIAL_FISHEYE, THIN_PRISM_FISHEYE, FISHEYE,
+SIMPLE_FISHEYE) and FOV with own code (:mod:`.lens`), RAD_TAN_THIN_PRISM_FISHEYE,
+SIMPLE_DIVISION, DIVISION and EUCM through ``pycolmap.Camera.cam_from_img`` when pycolmap is
+installed.  EQUIRECTANGULAR (spherical) is read and written, but has no pinhole form: its
+cameras cannot be used for triangulation (:func:`camera_problem` says why).
+
 Triangulation (SPEC §1) needs pinhole cameras ``P = K [R | t]``, so observed pixels are
 first *undistorted*: ``(u, v) = D^-1(K^-1 (px, py))`` by Newton's method, and mapped back
 to pixels with the same K.  gamma is then measured in **undistorted pixel coordinates**
@@ -30,12 +37,16 @@ two agree to first order where the distortion is small.
 from __future__ import annotations
 
 import enum
+import functools
 
 import numpy as np
 
+from . import lens
+
 __all__ = ["CameraModel", "COLMAP_MODEL_N_PARAMS", "COLMAP_MODEL_IDS", "COLMAP_MODEL_NAMES", "UNDISTORT_TOL_PX",
            "UNDISTORT_MAX_ITER", "UnsupportedCameraModelError", "camera_model", "camera_problem", "intrinsics",
-           "distortion", "distort", "distort_rows", "undistort", "pixels_from_camera", "undistorted_pixels"]
+           "distortion", "distort", "distort_rows", "undistort", "pixels_from_camera", "undistorted_pixels",
+           "OPENCV_FAMILY", "usable_models"]
 
 #: Newton's iteration for D^-1 stops when the forward model reproduces the observed pixel
 #: to this many pixels (a few hundred ulps of a 1000 px coordinate, far below any
@@ -51,26 +62,53 @@ COLMAP_MODEL_N_PARAMS = {
     "SIMPLE_PINHOLE": 3, "PINHOLE": 4, "SIMPLE_RADIAL": 4, "RADIAL": 5, "OPENCV": 8, "OPENCV_FISHEYE": 8,
     "FULL_OPENCV": 12, "FOV": 5, "SIMPLE_RADIAL_FISHEYE": 4, "RADIAL_FISHEYE": 5, "THIN_PRISM_FISHEYE": 12,
     "RAD_TAN_THIN_PRISM_FISHEYE": 16, "SIMPLE_DIVISION": 4, "DIVISION": 5, "SIMPLE_FISHEYE": 3, "FISHEYE": 4,
-    "EUCM": 6,
+    "EUCM": 6, "EQUIRECTANGULAR": 2,
 }
 #: COLMAP's numeric model ids (``cameras.bin``; ``CameraModelId`` in COLMAP's sensor/models.h).
 COLMAP_MODEL_IDS = {
     "SIMPLE_PINHOLE": 0, "PINHOLE": 1, "SIMPLE_RADIAL": 2, "RADIAL": 3, "OPENCV": 4, "OPENCV_FISHEYE": 5,
     "FULL_OPENCV": 6, "FOV": 7, "SIMPLE_RADIAL_FISHEYE": 8, "RADIAL_FISHEYE": 9, "THIN_PRISM_FISHEYE": 10,
     "RAD_TAN_THIN_PRISM_FISHEYE": 11, "SIMPLE_DIVISION": 12, "DIVISION": 13, "SIMPLE_FISHEYE": 14, "FISHEYE": 15,
-    "EUCM": 16,
+    "EUCM": 16, "EQUIRECTANGULAR": 17,
 }
 #: model id -> name.
 COLMAP_MODEL_NAMES = {v: k for k, v in COLMAP_MODEL_IDS.items()}
 
 
 class CameraModel(str, enum.Enum):
-    """The COLMAP camera models tritools can undistort (see the module table)."""
+    """The COLMAP camera models tritools undistorts with its own code (the module table and :mod:`.lens`);
+    the models of :data:`.lens.PYCOLMAP_MODELS` are used through pycolmap when it is installed."""
     SIMPLE_PINHOLE = "SIMPLE_PINHOLE"
     PINHOLE = "PINHOLE"
     SIMPLE_RADIAL = "SIMPLE_RADIAL"
     RADIAL = "RADIAL"
     OPENCV = "OPENCV"
+    FULL_OPENCV = "FULL_OPENCV"
+    OPENCV_FISHEYE = "OPENCV_FISHEYE"
+    SIMPLE_RADIAL_FISHEYE = "SIMPLE_RADIAL_FISHEYE"
+    RADIAL_FISHEYE = "RADIAL_FISHEYE"
+    THIN_PRISM_FISHEYE = "THIN_PRISM_FISHEYE"
+    FOV = "FOV"
+    SIMPLE_FISHEYE = "SIMPLE_FISHEYE"
+    FISHEYE = "FISHEYE"
+
+
+#: the special cases of OPENCV (module table): (k1, k2, p1, p2) describe their distortion.
+OPENCV_FAMILY = ("SIMPLE_PINHOLE", "PINHOLE", "SIMPLE_RADIAL", "RADIAL", "OPENCV")
+
+
+@functools.lru_cache(maxsize=1)
+def _pycolmap_available() -> bool:
+    try:
+        import pycolmap  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+def usable_models() -> tuple[str, ...]:
+    """The COLMAP models usable for triangulation here (own code, plus pycolmap's when installed)."""
+    return tuple(m.value for m in CameraModel) + (lens.PYCOLMAP_MODELS if _pycolmap_available() else ())
 
 
 class UnsupportedCameraModelError(ValueError):
@@ -78,32 +116,39 @@ class UnsupportedCameraModelError(ValueError):
 
 
 def camera_model(name: str) -> CameraModel:
-    """The :class:`CameraModel` of a name, or UnsupportedCameraModelError naming it."""
+    """The :class:`CameraModel` of a name, or UnsupportedCameraModelError naming it (and why)."""
     try:
         return CameraModel(name)
     except ValueError:
-        raise UnsupportedCameraModelError(
-            f"camera model {name!r} is not supported for triangulation (supported: "
-            f"{', '.join(m.value for m in CameraModel)})") from None
+        pass
+    if name in lens.NON_PERSPECTIVE_MODELS:
+        why = "a spherical model: no pinhole camera K [R | t] sees its rays"
+    elif name in lens.PYCOLMAP_MODELS:
+        why = "it is used through pycolmap, which is not installed (pip install 'sospoly-tritools[colmap]')"
+    else:
+        why = "not a COLMAP camera model tritools knows"
+    raise UnsupportedCameraModelError(f"camera model {name!r} is not supported for triangulation ({why}; "
+                                      f"usable: {', '.join(usable_models())})")
 
 
 def camera_problem(model: str, params) -> str | None:
     """Why a camera cannot be used for triangulation (``None`` when it can): an unsupported
     model, a wrong number of parameters, non-finite parameters or a focal length <= 0."""
     try:
-        fx, fy, cx, cy, dist = _split(model, params)
+        c = _Lens(model, params)
     except ValueError as exc:
         return str(exc)
+    fx, fy = c.fx, c.fy
     bad = [name for name, v in (("fx", fx), ("fy", fy)) if not (np.isfinite(v) and v > 0)]
     if bad:
         return ", ".join(f"focal length {n} = {v!r} must be > 0" for n, v in (("fx", fx), ("fy", fy)) if n in bad)
-    if not (np.all(np.isfinite(dist)) and np.isfinite(cx) and np.isfinite(cy)):
+    if not np.all(np.isfinite([float(v) for v in params])):
         return "parameters must be finite"
     return None
 
 
 def _split(model: str, params) -> tuple[float, float, float, float, np.ndarray]:
-    """(fx, fy, cx, cy, [k1, k2, p1, p2]) of a supported model."""
+    """(fx, fy, cx, cy, [k1, k2, p1, p2]) of a model of :data:`OPENCV_FAMILY`."""
     m = camera_model(model)
     p = [float(v) for v in params]
     expected = COLMAP_MODEL_N_PARAMS[m.value]
@@ -121,18 +166,76 @@ def _split(model: str, params) -> tuple[float, float, float, float, np.ndarray]:
     if m == CameraModel.RADIAL:
         f, cx, cy, k1, k2 = p
         return f, f, cx, cy, np.array([k1, k2, 0.0, 0.0])
-    fx, fy, cx, cy, k1, k2, p1, p2 = p
-    return fx, fy, cx, cy, np.array([k1, k2, p1, p2])
+    if m == CameraModel.OPENCV:
+        fx, fy, cx, cy, k1, k2, p1, p2 = p
+        return fx, fy, cx, cy, np.array([k1, k2, p1, p2])
+    raise UnsupportedCameraModelError(f"camera model {model!r} has no OPENCV (k1, k2, p1, p2) form")
+
+
+class _Lens:
+    """One camera's K and its distortion map D on normalised coordinates, whatever the model."""
+
+    def __init__(self, model: str, params):
+        if model in OPENCV_FAMILY:
+            self.fx, self.fy, self.cx, self.cy, self.dist = _split(model, params)
+            self.D = lambda uv: distort(uv, self.dist)
+            self.camera = None
+            return
+        try:
+            camera_model(model)
+            own = True
+        except UnsupportedCameraModelError:
+            if model not in lens.PYCOLMAP_MODELS or not _pycolmap_available():
+                raise
+            own = False
+        n = COLMAP_MODEL_N_PARAMS[model]
+        if len(params) != n:
+            raise ValueError(f"camera model {model} needs {n} params, got {len(params)}")
+        if own:
+            self.fx, self.fy, self.cx, self.cy, extra = lens.split_params(model, params)
+            self.D = lambda uv: lens.forward(model, extra, uv)
+            self.camera = None
+        else:
+            c = self.camera = lens.pycolmap_camera(model, params)
+            self.fx, self.fy, self.cx, self.cy = (c.focal_length_x, c.focal_length_y, c.principal_point_x,
+                                                  c.principal_point_y)
+            self.D = None
+        self.dist = None
+
+    def pixels(self, X_cam: np.ndarray) -> np.ndarray:
+        if self.camera is not None:
+            with np.errstate(all="ignore"):
+                return np.asarray(self.camera.img_from_cam(np.ascontiguousarray(X_cam, float)), float)
+        uv = self.D(X_cam[:, :2] / X_cam[:, 2:3])
+        return np.column_stack([self.fx * uv[:, 0] + self.cx, self.fy * uv[:, 1] + self.cy])
+
+    def undistort(self, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Normalised (u, v) of observed pixels and whether D(u, v) reproduces them to UNDISTORT_TOL_PX."""
+        scale = max(abs(self.fx), abs(self.fy))
+        uv_d = np.column_stack([(xy[:, 0] - self.cx) / self.fx, (xy[:, 1] - self.cy) / self.fy])
+        if self.dist is not None:
+            return undistort(uv_d, self.dist, scale_px=scale)
+        if self.camera is None:
+            return lens.inverse(self.D, uv_d, UNDISTORT_TOL_PX / scale, UNDISTORT_MAX_ITER)
+        uv = np.asarray(self.camera.cam_from_img(np.ascontiguousarray(xy, float)), float).reshape(-1, 2)
+        back = self.pixels(np.column_stack([uv, np.ones(len(uv))]))       # the round trip decides
+        ok = np.all(np.isfinite(uv), axis=1) & np.all(np.abs(back - xy) <= PYCOLMAP_TOL_PX, axis=1)
+        return uv, ok
+
+
+#: pycolmap's own inverse stops at its tolerance: a pixel it unprojects must project back within this.
+PYCOLMAP_TOL_PX = 1e-6
 
 
 def intrinsics(model: str, params) -> np.ndarray:
-    """K = [[fx, 0, cx], [0, fy, cy], [0, 0, 1]] (COLMAP has no skew)."""
-    fx, fy, cx, cy, _ = _split(model, params)
-    return np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
+    """K = [[fx, 0, cx], [0, fy, cy], [0, 0, 1]] (COLMAP has no skew) of any usable model."""
+    c = _Lens(model, params)
+    return np.array([[c.fx, 0.0, c.cx], [0.0, c.fy, c.cy], [0.0, 0.0, 1.0]])
 
 
 def distortion(model: str, params) -> np.ndarray:
-    """(k1, k2, p1, p2) of the OPENCV form of the model (zeros for pinhole models)."""
+    """(k1, k2, p1, p2) of the OPENCV form of a model of :data:`OPENCV_FAMILY` (zeros for pinhole models);
+    UnsupportedCameraModelError for the other models, which have no such form."""
     return _split(model, params)[4]
 
 
@@ -203,20 +306,16 @@ def undistort(uv_d: np.ndarray, dist: np.ndarray, scale_px: float = 1.0) -> tupl
 
 
 def pixels_from_camera(model: str, params, X_cam: np.ndarray) -> np.ndarray:
-    """COLMAP's forward projection of (M, 3) camera-frame points to (distorted) pixels."""
-    fx, fy, cx, cy, dist = _split(model, params)
-    X_cam = np.asarray(X_cam, float).reshape(-1, 3)
-    uv = distort(X_cam[:, :2] / X_cam[:, 2:3], dist)
-    return np.column_stack([fx * uv[:, 0] + cx, fy * uv[:, 1] + cy])
+    """COLMAP's forward projection of (M, 3) camera-frame points to (distorted) pixels, any usable model."""
+    return _Lens(model, params).pixels(np.asarray(X_cam, float).reshape(-1, 3))
 
 
 def undistorted_pixels(model: str, params, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Observed pixels -> pixels of the ideal pinhole camera K (see module docstring).
+    """Observed pixels -> pixels of the ideal pinhole camera K (see module docstring), any usable model.
 
     Returns ``(xy_undistorted (M, 2), converged (M,))``.
     """
-    fx, fy, cx, cy, dist = _split(model, params)
+    c = _Lens(model, params)
     xy = np.asarray(xy, float).reshape(-1, 2)
-    uv_d = np.column_stack([(xy[:, 0] - cx) / fx, (xy[:, 1] - cy) / fy])
-    uv, ok = undistort(uv_d, dist, scale_px=max(abs(fx), abs(fy)))
-    return np.column_stack([fx * uv[:, 0] + cx, fy * uv[:, 1] + cy]), ok
+    uv, ok = c.undistort(xy)
+    return np.column_stack([c.fx * uv[:, 0] + c.cx, c.fy * uv[:, 1] + c.cy]), ok

@@ -11,6 +11,11 @@ house and dinosaur (skews up to 4% of the focal length) are refused.
 
 The pixel coordinates are kept as given (no half-pixel shift): the model reproduces the
 input projections exactly, in the input's pixel convention.
+
+COLMAP's world frame is right-handed (det R = +1).  Projections in a *reflected* frame (the scene
+in front of the cameras only when read with h = -1, :class:`tritools.model.cameras.WorldFrame`;
+e.g. the Oxford corridor and house sequences) would become a model whose every point lies behind
+its cameras, so they are refused with a ValueError saying how to mirror them first.
 """
 from __future__ import annotations
 
@@ -19,6 +24,7 @@ import math
 import numpy as np
 
 from ...baselines import decompose_camera
+from ...model.cameras import WorldFrame, world_frame_of
 from ...model.geometry import PointAtInfinityError, dlt, validate_cameras
 from .model import Camera, Image, Model, Point3D, qvec_from_rotation
 from .projection import reprojection_error
@@ -89,10 +95,23 @@ def model_from_projections(projections, image_sizes, tracks, names=None, *, rgb=
             entries.append((v + 1, len(keypoints[v])))
             keypoints[v].append((float(p[0]), float(p[1]), k + 1))
         points.append((k + 1, X, tuple(entries)))
+    _check_right_handed(Ps, points)
     images = {j + 1: Image(j + 1, tuple(q), tuple(t), j + 1, names[j], tuple(keypoints[j]))
               for j, (q, t) in enumerate(poses)}
     base = Model(cameras, images, {pid: Point3D(pid, X, rgb, 0.0, tr) for pid, X, tr in points})
     return base.replace_points([Point3D(pid, X, rgb, reprojection_error(base, X, tr), tr) for pid, X, tr in points])
+
+
+def _check_right_handed(Ps: np.ndarray, points) -> None:
+    """ValueError when the DLT points say the projections' world frame is reflected (module docstring)."""
+    if not points:
+        return
+    cams = np.concatenate([Ps[[v - 1 for v, _ in tr]] for _, _, tr in points])[:, None]
+    X = np.concatenate([np.broadcast_to(X, (len(tr), 3)) for _, X, tr in points])
+    if world_frame_of(cams, X) is WorldFrame.REFLECTED:
+        raise ValueError("the projections are in a reflected (mirrored) world frame: their points lie in front of "
+                         "the cameras only with world_frame='reflected', and COLMAP's frames are right-handed; "
+                         "mirror the world first (P @ diag(1, 1, -1, 1), points (x, y, -z))")
 
 
 def model_from_oxford(name: str, data_dir=None, max_tracks: int | None = None, min_views: int = 2) -> Model:

@@ -6,9 +6,10 @@ array of shape (N, 2) (N point regions, as the image points of ``cv2.triangulate
 """
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .base import Region, as_vector, real_array
 from .point import Point
@@ -57,7 +58,7 @@ def _short(obj, limit: int = 60) -> str:
     return text if len(text) <= limit else text[: limit - 3] + "..."
 
 
-def as_regions(regions, n_views: int | None = None) -> tuple[Region, ...]:
+def as_regions(regions: Sequence | ArrayLike, n_views: int | None = None) -> tuple[Region, ...]:
     """Coerce the regions of all views: a sequence whose entries :func:`as_region` accepts
     (Regions, ``to_dict`` mappings, 2-vectors), or a numeric array of shape (N, 2) (N
     :class:`Point` regions).  This is the coercion used wherever regions enter the library.

@@ -1,0 +1,147 @@
+"""Lens models of COLMAP beyond the OPENCV family: forward maps on normalised coordinates, a generic
+Newton inverse, and pycolmap for the models without own code.
+
+Every perspective COLMAP model maps a camera-frame point ``(x, y, z)``, ``z > 0``, to pixels as
+``(px, py) = (fx u_d + cx, fy v_d + cy)`` with ``(u_d, v_d) = D(u, v)``, ``(u, v) = (x / z, y / z)``.
+The maps ``D`` with own code here (COLMAP's ``src/colmap/sensor/models.h``; each is tested against
+``pycolmap.Camera.img_from_cam`` in tests/test_camera_models.py):
+
+* FULL_OPENCV ``k1..k6, p1, p2``: ``radial = (1 + k1 r^2 + k2 r^4 + k3 r^6) / (1 + k4 r^2 + k5 r^4 + k6 r^6)``,
+  ``u_d = u radial + 2 p1 u v + p2 (r^2 + 2 u^2)``, ``v_d = v radial + 2 p2 u v + p1 (r^2 + 2 v^2)``;
+* the equidistant fisheye family, ``theta = atan(r)``, ``(u_d, v_d) = (theta_d / r) (u, v)``:
+  FISHEYE / SIMPLE_FISHEYE ``theta_d = theta``; SIMPLE_RADIAL_FISHEYE ``theta (1 + k theta^2)``;
+  RADIAL_FISHEYE ``theta (1 + k1 theta^2 + k2 theta^4)``; OPENCV_FISHEYE ``theta (1 + k1 theta^2 + ...
+  + k4 theta^8)``;
+* THIN_PRISM_FISHEYE: the equidistant point ``(a, b) = (theta / r) (u, v)``, ``s = a^2 + b^2``, then
+  ``a (1 + k1 s + k2 s^2 + k3 s^3 + k4 s^4) + 2 p1 a b + p2 (s + 2 a^2) + sx1 s`` and its twin for b;
+* FOV ``omega``: ``(u_d, v_d) = (atan(2 r tan(omega / 2)) / (omega r)) (u, v)``, with COLMAP's series for
+  small omega or r (:func:`_fov_factor`), so that small-omega cameras match COLMAP to the last bit.
+
+The inverse ``D^-1`` is Newton's method with a central-difference Jacobian (its accuracy is decided by
+the forward residual, checked in pixels against ``UNDISTORT_TOL_PX``, not by the Jacobian).  The other
+perspective models (RAD_TAN_THIN_PRISM_FISHEYE, SIMPLE_DIVISION, DIVISION, EUCM, and any later one) go
+through ``pycolmap.Camera.cam_from_img`` / ``img_from_cam`` when pycolmap is installed, with the same
+round-trip check.  EQUIRECTANGULAR (a sphere, no pinhole ray for half the directions) cannot be used.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["OWN_MODELS", "PYCOLMAP_MODELS", "NON_PERSPECTIVE_MODELS", "split_params", "forward", "inverse",
+           "pycolmap_camera"]
+
+#: model -> (names of PARAMS[], focal layout) for the models with own code below; "f" = one focal.
+OWN_MODELS = {
+    "FULL_OPENCV": ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6"),
+    "OPENCV_FISHEYE": ("fx", "fy", "cx", "cy", "k1", "k2", "k3", "k4"),
+    "SIMPLE_RADIAL_FISHEYE": ("f", "cx", "cy", "k"),
+    "RADIAL_FISHEYE": ("f", "cx", "cy", "k1", "k2"),
+    "THIN_PRISM_FISHEYE": ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3", "k4", "sx1", "sy1"),
+    "FOV": ("fx", "fy", "cx", "cy", "omega"),
+    "SIMPLE_FISHEYE": ("f", "cx", "cy"),
+    "FISHEYE": ("fx", "fy", "cx", "cy"),
+}
+#: perspective models used through pycolmap (when installed).
+PYCOLMAP_MODELS = ("RAD_TAN_THIN_PRISM_FISHEYE", "SIMPLE_DIVISION", "DIVISION", "EUCM")
+#: models without a pinhole form: never usable for triangulation.
+NON_PERSPECTIVE_MODELS = ("EQUIRECTANGULAR",)
+
+_EPS = 1e-12          # below this r the fisheye maps are the identity to first order (their limit)
+
+
+def split_params(model: str, params) -> tuple[float, float, float, float, dict]:
+    """(fx, fy, cx, cy, {extra name: value}) of a model of :data:`OWN_MODELS`."""
+    names = OWN_MODELS[model]
+    p = dict(zip(names, (float(v) for v in params)))
+    f = p.pop("f", None)
+    fx, fy = (f, f) if f is not None else (p.pop("fx"), p.pop("fy"))
+    return fx, fy, p.pop("cx"), p.pop("cy"), p
+
+
+def _equidistant(u, v):
+    """(theta / r) (u, v) and theta, with the limit (u, v), r for r -> 0."""
+    r = np.hypot(u, v)
+    theta = np.arctan(r)
+    s = np.where(r > _EPS, theta / np.where(r > _EPS, r, 1.0), 1.0)
+    return u * s, v * s, theta
+
+
+def forward(model: str, extra: dict, uv: np.ndarray) -> np.ndarray:
+    """D(u, v) of ``model`` (module docstring) for (M, 2) normalised coordinates."""
+    u, v = uv[:, 0], uv[:, 1]
+    e = extra
+    if model == "FULL_OPENCV":
+        r2 = u * u + v * v
+        num = 1 + r2 * (e["k1"] + r2 * (e["k2"] + r2 * e["k3"]))
+        radial = num / (1 + r2 * (e["k4"] + r2 * (e["k5"] + r2 * e["k6"])))
+        return np.column_stack([u * radial + 2 * e["p1"] * u * v + e["p2"] * (r2 + 2 * u * u),
+                                v * radial + 2 * e["p2"] * u * v + e["p1"] * (r2 + 2 * v * v)])
+    if model == "FOV":
+        return uv * _fov_factor(e["omega"], u * u + v * v)[:, None]
+    a, b, theta = _equidistant(u, v)
+    if model in ("FISHEYE", "SIMPLE_FISHEYE"):
+        return np.column_stack([a, b])
+    if model == "THIN_PRISM_FISHEYE":
+        s = a * a + b * b
+        radial = 1 + s * (e["k1"] + s * (e["k2"] + s * (e["k3"] + s * e["k4"])))
+        return np.column_stack([a * radial + 2 * e["p1"] * a * b + e["p2"] * (s + 2 * a * a) + e["sx1"] * s,
+                                b * radial + 2 * e["p2"] * a * b + e["p1"] * (s + 2 * b * b) + e["sy1"] * s])
+    t2 = theta * theta
+    ks = {"SIMPLE_RADIAL_FISHEYE": ("k",), "RADIAL_FISHEYE": ("k1", "k2"),
+          "OPENCV_FISHEYE": ("k1", "k2", "k3", "k4")}[model]
+    poly = np.zeros_like(t2)
+    for k in reversed(ks):
+        poly = (poly + e[k]) * t2
+    return np.column_stack([a, b]) * (1 + poly)[:, None]
+
+
+def _fov_factor(w: float, r2: np.ndarray) -> np.ndarray:
+    """The FOV model's radial factor, with COLMAP's own branches (so that ERROR is COLMAP's): its series in
+    omega^2 below :data:`FOV_EPS`, its series in r^2 below it, else ``atan(2 r tan(omega / 2)) / (omega r)``."""
+    w2 = w * w
+    if w2 < FOV_EPS:
+        return (w2 * r2) / 3 - w2 / 12 + 1
+    th = np.tan(w / 2)
+    small = r2 < FOV_EPS
+    r = np.sqrt(np.where(small, 1.0, r2))
+    exact = np.arctan(r * 2 * th) / (r * w)
+    return np.where(small, (-2 * th * (4 * r2 * th * th - 3)) / (3 * w), exact)
+
+
+#: COLMAP's switch between the FOV model's series and its closed form (``kEpsilon`` in models.h).
+FOV_EPS = 1e-4
+
+
+def inverse(fun, uv_d: np.ndarray, tol: float, max_iter: int) -> tuple[np.ndarray, np.ndarray]:
+    """Solve ``fun(uv) = uv_d`` (fun: (M, 2) -> (M, 2)) by Newton's method from ``uv = uv_d`` with a
+    central-difference Jacobian; ``(uv, converged)`` with converged = ``|fun(uv) - uv_d|_inf <= tol``."""
+    uv = uv_d.copy()
+    active = np.ones(len(uv), bool)
+    with np.errstate(all="ignore"):
+        for _ in range(max_iter):
+            res = fun(uv) - uv_d
+            active &= ~np.all(np.abs(res) <= tol, axis=1)
+            if not active.any():
+                break
+            h = 1e-7 * np.maximum(1.0, np.abs(uv))
+            J = np.empty((len(uv), 2, 2))
+            for j in range(2):
+                d = np.zeros_like(uv)
+                d[:, j] = h[:, j]
+                J[:, :, j] = (fun(uv + d) - fun(uv - d)) / (2 * h[:, j:j + 1])
+            det = J[:, 0, 0] * J[:, 1, 1] - J[:, 0, 1] * J[:, 1, 0]
+            active &= np.isfinite(det) & (det != 0)
+            safe = np.where(active, det, 1.0)
+            step = np.column_stack([J[:, 1, 1] * res[:, 0] - J[:, 0, 1] * res[:, 1],
+                                    J[:, 0, 0] * res[:, 1] - J[:, 1, 0] * res[:, 0]]) / safe[:, None]
+            uv = np.where(active[:, None], uv - step, uv)
+        res = fun(uv) - uv_d
+    ok = np.all(np.isfinite(uv), axis=1) & np.all(np.abs(res) <= tol, axis=1)
+    return uv, ok
+
+
+def pycolmap_camera(model: str, params):
+    """A ``pycolmap.Camera`` of the model (ImportError when pycolmap is not installed)."""
+    import pycolmap
+
+    return pycolmap.Camera(model=model, width=1, height=1, params=[float(v) for v in params])

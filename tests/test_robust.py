@@ -211,3 +211,49 @@ def test_lookahead_bound_is_the_minimum():
         assert lookahead_bound(lo, hi, a, c2) == pytest.approx(g.min(), abs=1e-3)
         assert lookahead_bound(lo, hi, a, c2) <= g.min() + 1e-12
     assert lookahead_bound(2.0, 1.0, np.ones(2), np.ones(2)) == np.inf
+
+
+def test_triangulate_many_and_points():
+    probs, outs = [], []
+    for s in range(6):
+        cams, x, _, out = outlier_scene(5, s % 2, s, shift=(300, 500))
+        probs.append((cams, x))
+        outs.append(out)
+    many = tritools.triangulate_many(probs, robust=20.0)
+    for (cams, x), r, out in zip(probs, many, outs):
+        single = tritools.triangulate(cams, x, robust=20.0)
+        np.testing.assert_array_equal(r.inliers, single.inliers)
+        assert set(np.nonzero(~r.inliers)[0]) == set(out) and r.optimal
+        assert r.gamma_ub == pytest.approx(single.gamma_ub, rel=1e-6)
+    assert all(r.inliers is None for r in tritools.triangulate_many(probs[:2]))
+    with pytest.raises(ValueError, match="robust"):
+        tritools.triangulate_many(probs, robust=[1.0, 2.0])
+    # one camera set, points as arrays, one view hidden
+    cams = probs[0][0]
+    pts = np.stack([probs[0][1], probs[0][1] + 1.0])
+    pts[1, 0] = np.nan
+    res = tritools.triangulate_points(cams, pts, robust=20.0)
+    assert res.inliers.shape == (2, 5) and not res.inliers[1, 0]
+    np.testing.assert_array_equal(res.inliers[0], many[0].inliers)
+    assert res.optimal.all()
+    with pytest.raises(ValueError, match="robust"):
+        tritools.triangulate_points(cams, pts, robust=[1.0, 2.0])
+
+
+def test_cli_solve_robust(tmp_path, capsys):
+    from tests.cli_util import run, write
+
+    from tritools.io.problem_file import problem_to_dict, problems_to_json
+
+    cams, x, _, out = outlier_scene(5, 1, 7, shift=(300, 500))
+    f = write(tmp_path, problems_to_json([problem_to_dict(cams, [tritools.Point(p) for p in x], "p")]))
+    rc, stdout, _ = run(["solve", f, "--robust", "20", "--json"], capsys)
+    assert rc == 0
+    import json
+
+    rec = json.loads(stdout)[0]
+    assert rec["optimal"] and rec["inliers"] == [i not in out for i in range(5)]
+    rc, stdout, _ = run(["solve", f, "--robust", "20"], capsys)
+    assert rc == 0 and "4/5 inliers" in stdout
+    rc, _, err = run(["solve", f, "--robust", "-3"], capsys)
+    assert rc == 2 and "--robust" in err and len(err.strip().splitlines()) == 1

@@ -257,3 +257,46 @@ def test_cli_solve_robust(tmp_path, capsys):
     assert rc == 0 and "4/5 inliers" in stdout
     rc, _, err = run(["solve", f, "--robust", "-3"], capsys)
     assert rc == 2 and "--robust" in err and len(err.strip().splitlines()) == 1
+
+
+def test_cli_colmap_robust_round_trip(tmp_path, capsys):
+    """Injected wrong matches leave the tracks (POINT3D_ID -1), nothing else does, the points get closer to the
+    truth; the sidecar message and the JSON say how many observations went."""
+    import json
+
+    from tests.cli_util import run
+    from tritools.io.colmap import read_model_arrays
+    from tritools.io.colmap.formats import write_model_arrays
+    from tritools.sfm.synthetic import synthetic_arrays
+
+    a, truth = synthetic_arrays(n_points=16, n_images=8, camera="PINHOLE", seed=3, max_track=6)
+    rng = np.random.default_rng(0)
+    lens = np.diff(a.track_offsets)
+    bad = {}
+    for p in np.nonzero(lens >= 4)[0][:5]:
+        j = a.track_offsets[p] + rng.integers(lens[p])
+        g = a.kp_offsets[a.track_image[j]] + a.track_kp[j]
+        a.kp_xy[g] += rng.choice([-1, 1], 2) * 60.0
+        bad[int(p)] = int(g)
+    write_model_arrays(a, tmp_path / "in", "txt")
+    rc, out, err = run(["colmap", tmp_path / "in", tmp_path / "out", "--robust", "10", "--json"], capsys)
+    assert rc == 0, err
+    summary = json.loads(out)
+    b = read_model_arrays(tmp_path / "out")
+    for p in range(a.n_points):
+        s, e = b.track_offsets[p], b.track_offsets[p + 1]
+        kept = set((b.kp_offsets[b.track_image[s:e]] + b.track_kp[s:e]).tolist())
+        s0, e0 = a.track_offsets[p], a.track_offsets[p + 1]
+        before = set((a.kp_offsets[a.track_image[s0:e0]] + a.track_kp[s0:e0]).tolist())
+        expect = before - {bad[p]} if p in bad else before
+        assert kept == expect, p
+    removed = np.array(sorted(bad.values()))
+    assert np.all(b.kp_point3D[removed] == -1)
+    others = np.setdiff1d(np.nonzero(a.kp_point3D != -1)[0], removed)
+    np.testing.assert_array_equal(b.kp_point3D[others], a.kp_point3D[others])
+    err_out = np.linalg.norm(b.point_xyz - truth, axis=1)
+    assert np.all(err_out[list(bad)] < 0.05)
+    msgs = {r["point3D_id"]: r["message"] for r in summary["points"]}
+    assert all("1 outlier observation(s) removed" in msgs[int(a.point_ids[p])] for p in bad)
+    rc, _, err = run(["colmap", tmp_path / "in", tmp_path / "out2", "--robust", "0"], capsys)
+    assert rc == 2 and "--robust" in err

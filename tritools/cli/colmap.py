@@ -15,7 +15,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from .app import add_data_dir_option, add_solver_options, exit_invalid, options_from_args
+from .app import add_data_dir_option, add_robust_option, add_solver_options, exit_invalid, options_from_args
 from ..io.problem_file import jsonable
 
 __all__ = ["register", "run_colmap", "run_from_oxford", "MAX_LISTED"]
@@ -48,6 +48,7 @@ def register(subparsers) -> None:
     p.add_argument("--output-type", choices=("bin", "txt"), default=None,
                    help="format of OUT_DIR (default: that of IN_DIR)")
     add_solver_options(p)            # the flags and defaults of `tritools solve`: one TriangulationOptions
+    add_robust_option(p)             # --robust C: outlier observations leave the tracks (POINT3D_ID -1)
     p.add_argument("--min-track-length", type=int, default=2, metavar="K",
                    help="do not solve points with fewer than K usable observations (default 2)")
     p.add_argument("--max-track-length", type=int, default=DEFAULT_MAX_TRACK_LENGTH, metavar="K",
@@ -95,7 +96,8 @@ def run_colmap(args) -> int:
     try:
         options = RetriangulationOptions(solver=solver, min_track_length=args.min_track_length,
                                          max_track_length=args.max_track_length, behind=args.behind,
-                                         strict=args.strict, chunk_points=args.chunk_points, progress=args.progress)
+                                         strict=args.strict, chunk_points=args.chunk_points, progress=args.progress,
+                                         robust=args.robust)
     except OptionError as exc:
         return exit_invalid(f"{_flag(exc.field)} {exc.detail}")
     try:

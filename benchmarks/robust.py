@@ -203,7 +203,7 @@ def main(argv=None) -> int:
     ap.add_argument("--trials", type=int, default=3)
     ap.add_argument("--enumerate-max", type=int, default=7, dest="enumerate_max")
     ap.add_argument("--peer-max", type=int, default=7, dest="peer_max")
-    ap.add_argument("--time-limit", type=float, default=20.0, dest="time_limit")
+    ap.add_argument("--time-limit", type=float, default=10.0, dest="time_limit")
     ap.add_argument("--no-pycolmap", action="store_false", dest="pycolmap")
     ap.add_argument("--seed", type=int, default=0)
     args = ap.parse_args(argv)

@@ -145,10 +145,11 @@ class _Search:
         finite = self.c2[np.isfinite(self.c2)]
         self.scale = float(np.min(finite))           # the decision's scale: the smallest squared threshold
         self.tol = opts.tolerances
-        self.best_X, self.best_f = None, math.inf
+        self.best_X, self.best_f, self.best_S = None, math.inf, frozenset()
         self.points = self.bounds.points
         self.x = self.bounds.x
         self.nodes = 0
+        self.anchors, self.anchor_a = None, None     # see anchor_bounds
 
     # ------------------------------------------------------------------ costs and the upper bound
     def residuals(self, X) -> np.ndarray:
@@ -173,9 +174,11 @@ class _Search:
         lower than the best by more than round-off (ties keep the earlier one: the full L2 estimate first)."""
         if X is None or not np.all(np.isfinite(X)):
             return
-        f = tls_cost(self.residuals(X), self.c)
+        d = self.residuals(X)
+        f = tls_cost(d, self.c)
         if f < self.best_f * (1 - 1e-12) or (self.best_X is None and np.isfinite(f)):
             self.best_X, self.best_f = np.asarray(X, float), f
+            self.best_S = frozenset(int(i) for i in np.nonzero(d < self.c)[0])
 
     def offer_new(self) -> None:
         est = self.bounds.take_estimates()
@@ -184,7 +187,8 @@ class _Search:
         Xs = np.array([X for _, X in est])
         f = self.screen(Xs)
         for k in np.argsort(f)[:LO_STARTS]:
-            self.offer(Xs[k])
+            if f[k] < self.best_f * (1 + 1e-9):        # the screen is only a ranking: exact costs decide
+                self.offer(Xs[k])
 
     def inlier_set(self, X) -> frozenset:
         d = self.residuals(X)
@@ -233,30 +237,64 @@ class _Search:
         """f_TLS* >= min(L2LB(all views), min_i c_i^2) (module docstring)."""
         return min(self.bounds.bound(frozenset(range(self.N))), float(np.min(self.c2)))
 
-    def node_bound(self, I: frozenset, c2_out: float, U: list, lb_I: float, a: np.ndarray):
+    def node_bound(self, I: frozenset, c2_out: float, U: list, lb_I: float, a: np.ndarray, refine: bool = True):
         """(bound, lb_I, a) of a node (module docstring).  ``lb_I`` and ``a`` (N,) are inherited lower bounds of
-        L2*(I) and of L2*(I + {u}) (a parent's bound of a subset is one of every superset); the exact
-        sub-bounds are computed only where they can matter: a_u >= s_max + c_u^2 already gives the term c_u^2."""
-        if len(I) >= 2 and not self.meets(c2_out + lb_I):
+        L2*(I) and of L2*(I + {u}) (a parent's bound of a subset is one of every superset).  The bound is first
+        taken with them; only when it does not prune and ``refine`` are the exact sub-bounds computed, and only
+        where they can matter (a_u >= s_max + c_u^2 already gives the term c_u^2)."""
+        if len(I) >= 2 and self.bounds.known(I):
+            lb_I = max(lb_I, self.bounds.bound(I))
+        a = np.maximum(a, lb_I)
+        if self.anchors is not None and self.anchors <= I:
+            a = np.maximum(a, self.anchor_a)          # L2*(I + {u}) >= L2*(anchors + {u})
+        bound = self._bound(I, c2_out, U, lb_I, a)
+        if self.meets(bound) or not refine:
+            return bound, lb_I, a
+        if len(I) >= 2 and not self.bounds.known(I):
             self.bounds.compute([I])
             self.offer_new()
             lb_I = max(lb_I, self.bounds.bound(I))
-        base = c2_out + lb_I
-        if not I or not U or self.meets(base):
-            return min(self.best_f, base), lb_I, a
-        hi = min(float(np.sum(self.c2[list(I)])), self.best_f - c2_out)
-        a = np.maximum(a, lb_I)
-        Ua = np.array(U)
-        open_ = Ua[a[Ua] < hi + self.c2[Ua]]
-        if open_.size:
-            subsets = [I | {int(u)} for u in open_]
-            self.bounds.compute(subsets)
-            self.offer_new()
-            a = a.copy()
-            a[open_] = np.maximum(a[open_], [self.bounds.bound(S) for S in subsets])
+            a = np.maximum(a, lb_I)
+        if not I or not U or self.meets(c2_out + lb_I):
+            return self._bound(I, c2_out, U, lb_I, a), lb_I, a
+        # the views the best candidate calls outliers first (their terms c_u^2 usually prune), then the rest
+        best_S = self.best_S
+        for stage in (False, True):
             hi = min(float(np.sum(self.c2[list(I)])), self.best_f - c2_out)
+            Ua = np.array([u for u in U if (u in best_S) == stage])
+            open_ = Ua[a[Ua] < hi + self.c2[Ua]] if Ua.size else Ua
+            if open_.size:
+                subsets = [I | {int(u)} for u in open_]
+                self.bounds.compute(subsets)
+                self.offer_new()
+                a = a.copy()
+                a[open_] = np.maximum(a[open_], [self.bounds.bound(S) for S in subsets])
+            bound = self._bound(I, c2_out, U, lb_I, a)
+            if self.meets(bound):
+                break
+        return bound, lb_I, a
+
+    def anchor_bounds(self, order: np.ndarray) -> None:
+        """L2 bounds of the triples (first two views of the order) + {u}, one batch: every node whose I holds both
+        anchors inherits L2*(I + {u}) >= L2*(anchors + {u})."""
+        if self.N < 3:
+            return
+        anchors = frozenset(int(v) for v in order[:2])
+        triples = [anchors | {u} for u in range(self.N) if u not in anchors]
+        self.bounds.compute(triples)
+        self.offer_new()
+        self.anchors = anchors
+        self.anchor_a = np.array([0.0 if u in anchors else self.bounds.bound(anchors | {u}) for u in range(self.N)])
+
+    def _bound(self, I: frozenset, c2_out: float, U: list, lb_I: float, a: np.ndarray) -> float:
+        """The node bound from the given sub-bounds (no new sub-problems)."""
+        base = c2_out + lb_I
+        if not I or not U:
+            return min(self.best_f, base)
+        hi = min(float(np.sum(self.c2[list(I)])), self.best_f - c2_out)
+        Ua = np.array(U)
         g = lookahead_bound(lb_I, hi, a[Ua], self.c2[Ua])
-        return min(self.best_f, (c2_out + g) * ROUND_DOWN), lb_I, a
+        return min(self.best_f, max(base, (c2_out + g) * ROUND_DOWN))
 
     def child_bounds(self, v: int, lb_I: float, a: np.ndarray):
         """Inherited bounds of the child I + {v}: L2*(I + {v}) >= a_v, L2*(I + {v, u}) >= a_u and >= L2*({v, u})."""
@@ -266,8 +304,8 @@ class _Search:
 
     def search(self, order: np.ndarray) -> tuple[float, str | None]:
         """Depth-first branch and bound (module docstring): (global lower bound, why it stopped early or None)."""
-        # a node: (I, c^2(O), next view in the order, parent's bound, lower bound of L2*(I), of L2*(I + {u}))
-        stack = [(frozenset(), 0.0, 0, 0.0, 0.0, np.zeros(self.N))]
+        # a node: (I, O, c^2(O), next view in the order, parent's bound, lower bound of L2*(I), of L2*(I + {u}))
+        stack = [(frozenset(), frozenset(), 0.0, 0, 0.0, 0.0, np.zeros(self.N))]
         floor = math.inf                            # min bound of nodes pruned below UB / leaves left open
         stopped = None
         while stack:
@@ -277,13 +315,15 @@ class _Search:
             if self.deadline.expired:
                 stopped = "time limit"
                 break
-            I, c2_out, k, _, lb_I, a = stack.pop()
+            I, O, c2_out, k, _, lb_I, a = stack.pop()
             self.nodes += 1
             U = [int(u) for u in order[k:]]
             if not U and len(I) >= 2:
                 self.bounds.compute([I])
                 lb_I = max(lb_I, self.bounds.bound(I))
-            lb, lb_I, a = self.node_bound(I, c2_out, U, lb_I, a)
+            # a node holding the best candidate cannot be pruned before its leaf: no sub-problems for it
+            on_path = I <= self.best_S and not (O & self.best_S)
+            lb, lb_I, a = self.node_bound(I, c2_out, U, lb_I, a, refine=not on_path or not U)
             if self.meets(lb):
                 if lb < self.best_f:
                     floor = min(floor, lb)
@@ -296,9 +336,9 @@ class _Search:
                     floor = min(floor, lb)
                 continue
             u = U[0]
-            stack.append((I, c2_out + self.c2[u], k + 1, lb, lb_I, a))
-            stack.append((I | {u}, c2_out, k + 1, lb, *self.child_bounds(u, lb_I, a)))
-        open_lb = min((node[3] for node in stack), default=math.inf)
+            stack.append((I, O | {u}, c2_out + self.c2[u], k + 1, lb, lb_I, a))
+            stack.append((I | {u}, O, c2_out, k + 1, lb, *self.child_bounds(u, lb_I, a)))
+        open_lb = min((node[4] for node in stack), default=math.inf)
         return min(self.best_f, floor, open_lb), stopped
 
     # ------------------------------------------------------------------ the run
@@ -313,6 +353,7 @@ class _Search:
         lb, stopped = self.root_bound(), None
         if not self.meets(lb):
             order = branching_order(self.residuals(self.best_X) / self.c)
+            self.anchor_bounds(order)
             lb_bb, stopped = self.search(order)
             lb = max(lb, lb_bb)
         timings = {"candidates": t_cand, "total": time.perf_counter() - self.t0}

@@ -364,7 +364,7 @@ class _Search:
         X = self.best_X
         rep = point_report(X, self.C, self.regions)
         inliers = rep.residuals < self.c
-        certified = bool(self.tol.certified(lb, ub, self.scale)) and stopped is None
+        certified = bool(self.tol.certified(lb, ub, self.scale))     # lb is valid also when the search stopped
         contradicts = bool(self.tol.contradicts(lb, ub, self.scale))
         status = Status.NUMERICAL_FAILURE if contradicts else Status.OPTIMAL if certified else \
             Status.TIME_LIMIT if stopped == "time limit" else Status.NOT_CERTIFIED

@@ -300,3 +300,17 @@ def test_cli_colmap_robust_round_trip(tmp_path, capsys):
     assert all("1 outlier observation(s) removed" in msgs[int(a.point_ids[p])] for p in bad)
     rc, _, err = run(["colmap", tmp_path / "in", tmp_path / "out2", "--robust", "0"], capsys)
     assert rc == 2 and "--robust" in err
+
+
+def test_per_problem_thresholds_and_option_errors():
+    from tritools.sfm import OptionError, RetriangulationOptions
+
+    probs = [(outlier_scene(4, 1, s, shift=(300, 400))[:2]) for s in range(2)]
+    rs = tritools.triangulate_many(probs, robust=[[20.0] * 4, np.full(4, np.inf)])
+    assert rs[0].inliers.sum() == 3 and rs[1].inliers.all()
+    with pytest.raises(ValueError, match="robust"):
+        tritools.triangulate_many(probs, robust=[[20.0] * 4])
+    for bad in (-1.0, 0.0, "x", True):
+        with pytest.raises(OptionError, match="robust"):
+            RetriangulationOptions(robust=bad)
+    assert RetriangulationOptions(robust=5).robust == 5.0

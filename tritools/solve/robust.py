@@ -59,9 +59,9 @@ from ..model.regions import Point
 from ..result import Attempt, Status, TriangulationResult
 from .decide import cheirality
 from .report import point_report
-from .robust_bounds import ROUND_DOWN, SubsetBounds
+from .robust_bounds import ROUND_DOWN, SubsetBounds, compute_many
 
-__all__ = ["robust_thresholds", "triangulate_robust", "lookahead_bound", "tls_cost", "MAX_NODES", "MAX_PAIRS",
+__all__ = ["robust_thresholds", "triangulate_robust", "drive", "lookahead_bound", "tls_cost", "MAX_NODES", "MAX_PAIRS",
            "LO_ROUNDS"]
 
 log = logging.getLogger(__name__)
@@ -195,15 +195,22 @@ class _Search:
         return frozenset(int(i) for i in np.nonzero(d < self.c)[0])
 
     # ------------------------------------------------------------------ candidates
-    def candidates(self, rng) -> None:
+    def need(self, subsets):
+        """Generator: hand the subsets whose bounds are not cached yet to the driver (:func:`drive`), which fills
+        the cache -- batched with the requests of other problems -- and resumes."""
+        todo = [S for S in subsets if not self.bounds.known(S)]
+        if todo:
+            yield todo
+
+    def candidates(self, rng):
         full = frozenset(range(self.N))
-        self.bounds.compute([full])
+        yield from self.need([full])
         self.offer(self.bounds.estimate(full))
         pairs = list(itertools.combinations(range(self.N), 2))
         if len(pairs) > MAX_PAIRS:
             pairs = [pairs[k] for k in rng.choice(len(pairs), MAX_PAIRS, replace=False)]
         pairs = [frozenset(p) for p in pairs]
-        self.bounds.compute(pairs)
+        yield from self.need(pairs)
         est = self.bounds.take_estimates()
         starts = []
         if est:
@@ -213,16 +220,16 @@ class _Search:
             for X in starts:
                 self.offer(X)
         for X in starts + ([self.best_X] if self.best_X is not None else []):
-            self.local_optimisation(X)
+            yield from self.local_optimisation(X)
 
-    def local_optimisation(self, X) -> None:
+    def local_optimisation(self, X):
         seen = set()
         for _ in range(LO_ROUNDS):
             S = self.inlier_set(X)
             if len(S) < 2 or S in seen or self.deadline.expired:
                 return
             seen.add(S)
-            self.bounds.compute([S])
+            yield from self.need([S])
             X = self.bounds.estimate(S)
             self.offer(X)
             if X is None:
@@ -251,7 +258,7 @@ class _Search:
         if self.meets(bound) or not refine:
             return bound, lb_I, a
         if len(I) >= 2 and not self.bounds.known(I):
-            self.bounds.compute([I])
+            yield from self.need([I])
             self.offer_new()
             lb_I = max(lb_I, self.bounds.bound(I))
             a = np.maximum(a, lb_I)
@@ -265,7 +272,7 @@ class _Search:
             open_ = Ua[a[Ua] < hi + self.c2[Ua]] if Ua.size else Ua
             if open_.size:
                 subsets = [I | {int(u)} for u in open_]
-                self.bounds.compute(subsets)
+                yield from self.need(subsets)
                 self.offer_new()
                 a = a.copy()
                 a[open_] = np.maximum(a[open_], [self.bounds.bound(S) for S in subsets])
@@ -274,14 +281,14 @@ class _Search:
                 break
         return bound, lb_I, a
 
-    def anchor_bounds(self, order: np.ndarray) -> None:
+    def anchor_bounds(self, order: np.ndarray):
         """L2 bounds of the triples (first two views of the order) + {u}, one batch: every node whose I holds both
         anchors inherits L2*(I + {u}) >= L2*(anchors + {u})."""
         if self.N < 3:
             return
         anchors = frozenset(int(v) for v in order[:2])
         triples = [anchors | {u} for u in range(self.N) if u not in anchors]
-        self.bounds.compute(triples)
+        yield from self.need(triples)
         self.offer_new()
         self.anchors = anchors
         self.anchor_a = np.array([0.0 if u in anchors else self.bounds.bound(anchors | {u}) for u in range(self.N)])
@@ -302,7 +309,7 @@ class _Search:
                          for u in range(self.N)])
         return max(lb_I, a[v]), np.maximum(np.maximum(a, pair), a[v])
 
-    def search(self, order: np.ndarray) -> tuple[float, str | None]:
+    def search(self, order: np.ndarray):
         """Depth-first branch and bound (module docstring): (global lower bound, why it stopped early or None)."""
         # a node: (I, O, c^2(O), next view in the order, parent's bound, lower bound of L2*(I), of L2*(I + {u}))
         stack = [(frozenset(), frozenset(), 0.0, 0, 0.0, 0.0, np.zeros(self.N))]
@@ -319,11 +326,11 @@ class _Search:
             self.nodes += 1
             U = [int(u) for u in order[k:]]
             if not U and len(I) >= 2:
-                self.bounds.compute([I])
+                yield from self.need([I])
                 lb_I = max(lb_I, self.bounds.bound(I))
             # a node holding the best candidate cannot be pruned before its leaf: no sub-problems for it
             on_path = I <= self.best_S and not (O & self.best_S)
-            lb, lb_I, a = self.node_bound(I, c2_out, U, lb_I, a, refine=not on_path or not U)
+            lb, lb_I, a = yield from self.node_bound(I, c2_out, U, lb_I, a, refine=not on_path or not U)
             if self.meets(lb):
                 if lb < self.best_f:
                     floor = min(floor, lb)
@@ -342,10 +349,11 @@ class _Search:
         return min(self.best_f, floor, open_lb), stopped
 
     # ------------------------------------------------------------------ the run
-    def run(self) -> TriangulationResult:
+    def run(self):
+        """Generator (:func:`drive`): yields subset requests, returns the :class:`TriangulationResult`."""
         rng = np.random.default_rng(0)
         t = time.perf_counter()
-        self.candidates(rng)
+        yield from self.candidates(rng)
         t_cand = time.perf_counter() - t
         if self.best_X is None:
             return TriangulationResult("tls", Status.NUMERICAL_FAILURE, message="no finite candidate estimate found",
@@ -353,8 +361,8 @@ class _Search:
         lb, stopped = self.root_bound(), None
         if not self.meets(lb):
             order = branching_order(self.residuals(self.best_X) / self.c)
-            self.anchor_bounds(order)
-            lb_bb, stopped = self.search(order)
+            yield from self.anchor_bounds(order)
+            lb_bb, stopped = yield from self.search(order)
             lb = max(lb, lb_bb)
         timings = {"candidates": t_cand, "total": time.perf_counter() - self.t0}
         return self.result(lb, stopped, timings)
@@ -406,7 +414,35 @@ def triangulate_robust(cams: np.ndarray, regions, c: np.ndarray, opts, t0: float
         inl = None if res.residuals is None else np.ones(len(regions), bool)
         import dataclasses
         return dataclasses.replace(res, inliers=inl)
-    return _Search(cams, regions, c, opts, t0).run()
+    return drive([_Search(cams, regions, c, opts, t0)])[0]
+
+
+def drive(searches: list) -> list:
+    """Run TLS searches together: every round, the subset bounds all of them wait for are computed in one batch
+    per subset size (:func:`tritools.solve.robust_bounds.compute_many`).  A search that raises gets a
+    SOLVER_FAILED result (its message says why); results in input order."""
+    gens = [s.run() for s in searches]
+    results: list = [None] * len(gens)
+    pending: dict = {}
+
+    def step(i: int) -> None:
+        try:
+            pending[i] = gens[i].send(None)
+        except StopIteration as stop:
+            pending.pop(i, None)
+            results[i] = stop.value
+        except Exception as exc:  # noqa: BLE001 - one failing problem never stops the others
+            log.debug("robust search failed", exc_info=True)
+            pending.pop(i, None)
+            results[i] = TriangulationResult("tls", Status.SOLVER_FAILED, message=f"{type(exc).__name__}: {exc}")
+
+    for i in range(len(gens)):
+        step(i)
+    while pending:
+        compute_many([(searches[i].bounds, req) for i, req in pending.items()])
+        for i in list(pending):
+            step(i)
+    return results
 
 
 def _is_points(regions) -> bool:

@@ -6,14 +6,14 @@
    2N gamma_UB^2 <= min_i c_i^2 is certified for TLS by that certificate alone: any inlier set other than all
    views pays at least min_i c_i^2 >= f_TLS(X), so f_TLS* = L2* (:mod:`tritools.solve.robust`, the root bound).
    Its L2 result is returned as it is, with every view an inlier (clean tracks cost the L2 batch only).
-3. Every other problem is solved by :func:`tritools.solve.robust.triangulate_robust` (branch and bound), one by
-   one in this process; a failing item becomes a result with a status (INVALID_INPUT / SOLVER_FAILED), never
-   stopping the batch.
+3. Every other problem gets the branch and bound of :mod:`tritools.solve.robust`, in chunks of
+   :data:`ROBUST_CHUNK` searched together by :func:`tritools.solve.robust.drive` (their sub-bounds batched per
+   subset size across problems); a failing item becomes a result with a status (INVALID_INPUT / SOLVER_FAILED),
+   never stopping the batch.  ``timings["batch_share"]``: a problem's even share of its chunk's time.
 """
 from __future__ import annotations
 
 import dataclasses
-import logging
 import time
 
 import numpy as np
@@ -24,9 +24,6 @@ from ..result import Status, TriangulationResult
 from .robust import robust_thresholds, triangulate_robust
 
 __all__ = ["robust_many", "thresholds_for"]
-
-log = logging.getLogger(__name__)
-
 
 def thresholds_for(robust, problems) -> list:
     """The thresholds of each problem from ``robust=`` (a scalar, one array for problems of equal size, or a
@@ -50,30 +47,50 @@ def _l2_suffices(res: TriangulationResult, c: np.ndarray) -> bool:
     return bool(np.all(res.residuals < c) and 2 * n * res.gamma_ub ** 2 <= np.min(c * c))
 
 
-def _safe_robust(cameras, regions, c, opts) -> TriangulationResult:
+#: problems searched together by :func:`tritools.solve.robust.drive` (their sub-bounds batched per subset size);
+#: each keeps its own time budget, counted from the start of its chunk.
+ROBUST_CHUNK = 64
+
+
+def _search_or_failure(cameras, regions, c, opts):
+    """A :class:`tritools.solve.robust._Search` for one problem, or a failed result (bad input)."""
+    from .robust import _Search
+
     t0 = time.perf_counter()
     try:
         cams = validate_cameras(cameras)
-        return triangulate_robust(cams, as_regions(regions, cams.shape[0]), c, opts, t0)
+        return _Search(cams, as_regions(regions, cams.shape[0]), c, opts, t0)
     except (ValueError, TypeError) as exc:
-        status, msg = Status.INVALID_INPUT, f"{type(exc).__name__}: {exc}"
-    except Exception as exc:  # noqa: BLE001 - a batch records every failure
-        log.debug("robust triangulation failed", exc_info=True)
-        status, msg = Status.SOLVER_FAILED, f"{type(exc).__name__}: {exc}"
-    return TriangulationResult("tls", status, message=msg, timings={"total": time.perf_counter() - t0})
+        return TriangulationResult("tls", Status.INVALID_INPUT, message=f"{type(exc).__name__}: {exc}",
+                                   timings={"total": time.perf_counter() - t0})
 
 
 def robust_many(problems: list, robust, opts, *, executor=None, progress=None) -> list[TriangulationResult]:
     """One TLS result per problem, in input order (module docstring)."""
     from .batch import solve_point_problems
+    from .robust import drive
 
     thresholds = thresholds_for(robust, problems)
     first = solve_point_problems(problems, opts, executor=executor, progress=progress).results()
-    out = []
-    for (cams, regions), c, res in zip(problems, thresholds, first):
-        if _l2_suffices(res, c) or (res.status == Status.INVALID_INPUT):
-            out.append(dataclasses.replace(res, inliers=None if res.residuals is None
-                                           else np.ones(len(res.residuals), bool)))
+    out: list = [None] * len(problems)
+    searches = []
+    for i, ((cams, regions), c, res) in enumerate(zip(problems, thresholds, first)):
+        if res.status == Status.INVALID_INPUT or _l2_suffices(res, c):
+            out[i] = dataclasses.replace(res, inliers=None if res.residuals is None
+                                         else np.ones(len(res.residuals), bool))
+        elif not np.any(np.isfinite(c)):
+            out[i] = triangulate_robust(validate_cameras(cams), as_regions(regions, len(c)), c, opts)
         else:
-            out.append(_safe_robust(cams, regions, c, opts))
+            s = _search_or_failure(cams, regions, c, opts)
+            if isinstance(s, TriangulationResult):
+                out[i] = s
+            else:
+                searches.append((i, s))
+    for k in range(0, len(searches), ROBUST_CHUNK):
+        part = searches[k:k + ROBUST_CHUNK]
+        t0 = time.perf_counter()
+        results = drive([s for _, s in part])
+        share = (time.perf_counter() - t0) / len(part)
+        for (i, _), r in zip(part, results):
+            out[i] = dataclasses.replace(r, timings={**r.timings, "batch_share": share})
     return out

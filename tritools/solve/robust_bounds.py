@@ -26,7 +26,7 @@ from ..result import Status
 from .fastpath import verify_points
 from .sdp_batch import solve_corollary1_points
 
-__all__ = ["SubsetBounds", "ROUND_DOWN", "TRUSTED_LOWER_BOUND"]
+__all__ = ["SubsetBounds", "compute_many", "ROUND_DOWN", "TRUSTED_LOWER_BOUND"]
 
 #: f = 2 |S| gamma^2 is computed with a few roundings (and gamma came through a square root): multiplying by
 #: this factor keeps the product a lower bound by a wide margin (relative error ~1e-15 at most).
@@ -70,63 +70,7 @@ class SubsetBounds:
 
     def compute(self, subsets) -> None:
         """Fill the cache for every subset not known yet (duplicates and |S| <= 1 skipped)."""
-        todo = list(dict.fromkeys(S for S in subsets if not self.known(S)))
-        if not todo:
-            return
-        if self.points:
-            by_size = defaultdict(list)
-            for S in todo:
-                by_size[len(S)].append(S)
-            left = []
-            for size in sorted(by_size):
-                rest = self._verify_batch(by_size[size])
-                left += self._sdp_batch(rest) if rest else []
-            for S in left:                      # handed back by both batches (typically subsets with outliers):
-                self._store(S, 0.0, None)       # 0 for now (the caller keeps its inherited bounds);
-                self.weak.add(S)                # strengthen() solves them one by one where the search needs it
-            todo = []
-        for S in todo:
-            if self.deadline.expired:
-                self._store(S, 0.0, None)       # 0 is a valid bound; the search reports the time limit
-                continue
-            self._solve_one(S)
-
-    def _verify_batch(self, subsets: list) -> list:
-        """Vectorised verification of equal-size point sub-problems; returns the subsets it did not certify."""
-        idx = np.array([sorted(S) for S in subsets])
-        try:
-            b = verify_points(self.C[idx], self.x[idx], tolerances=self.opts.tolerances)
-        except (ValueError, np.linalg.LinAlgError, FloatingPointError):
-            return subsets
-        left = []
-        n = idx.shape[1]
-        for k, S in enumerate(subsets):
-            if b.certified[k] and np.isfinite(b.gamma_lb[k]):
-                self._store(S, 2 * n * float(b.gamma_lb[k]) ** 2 * ROUND_DOWN, b.X[k])
-            else:
-                left.append(S)
-        self.n_solved += len(subsets) - len(left)
-        return left
-
-    def _sdp_batch(self, subsets: list) -> list:
-        """The batched Corollary 1, delta = 2 SDP (:func:`tritools.solve.sdp_batch.solve_corollary1_points`) on
-        equal-size point sub-problems verification did not certify: its rigorous lower bound is kept when it
-        decided the problem (certified or not); returns the subsets it handed back."""
-        idx = np.array([sorted(S) for S in subsets])
-        try:
-            b = solve_corollary1_points(self.C[idx], self.x[idx], tolerances=self.opts.tolerances,
-                                        refine=self.opts.refine)
-        except (ValueError, np.linalg.LinAlgError, FloatingPointError):
-            return subsets
-        left = []
-        n = idx.shape[1]
-        for k, S in enumerate(subsets):
-            if b.done[k] and np.isfinite(b.gamma_lb[k]):
-                self._store(S, 2 * n * float(b.gamma_lb[k]) ** 2 * ROUND_DOWN, b.X[k])
-            else:
-                left.append(S)
-        self.n_solved += len(subsets) - len(left)
-        return left
+        compute_many([(self, subsets)])
 
     def strengthen(self, S: frozenset) -> bool:
         """Solve S again with the full degree plan when its bound came from a light (delta = 2) solve that did not
@@ -177,3 +121,64 @@ class SubsetBounds:
     def take_estimates(self) -> list:
         out, self.new_estimates = self.new_estimates, []
         return out
+
+
+def compute_many(requests) -> None:
+    """Fill the caches of several :class:`SubsetBounds` (``requests``: (cache, subsets) pairs) at once: point
+    sub-problems of equal size, from every cache, in one vectorised verification call (then one batched SDP call
+    for what it did not certify; what both hand back is bounded by 0 for now and marked weak); other regions one
+    by one through :func:`tritools.triangulate`."""
+    groups, single = defaultdict(list), []
+    for sb, subsets in requests:
+        for S in dict.fromkeys(subsets):
+            if not sb.known(S):
+                if sb.points:
+                    groups[(len(S), id(sb.opts))].append((sb, S))
+                else:
+                    single.append((sb, S))
+    for key in sorted(groups, key=lambda k: k[0]):
+        items = groups[key]
+        left = _batch(items, _verify_stack)
+        left = _batch(left, _sdp_stack) if left else []
+        for sb, S in left:                      # handed back by both batches (typically subsets with outliers):
+            sb._store(S, 0.0, None)             # 0 for now (the caller keeps its inherited bounds);
+            sb.weak.add(S)                      # strengthen() solves them one by one where the search needs it
+    for sb, S in single:
+        if sb.deadline.expired:
+            sb._store(S, 0.0, None)             # 0 is a valid bound; the search reports the time limit
+        else:
+            sb._solve_one(S)
+
+
+def _verify_stack(C, x, opts):
+    """(decided (M,), gamma_lb, X) of the vectorised verification: certified problems only."""
+    b = verify_points(C, x, tolerances=opts.tolerances)
+    return b.certified & np.isfinite(b.gamma_lb), b.gamma_lb, b.X
+
+
+def _sdp_stack(C, x, opts):
+    """(decided, gamma_lb, X) of the batched Corollary 1, delta = 2 SDP
+    (:func:`tritools.solve.sdp_batch.solve_corollary1_points`): its rigorous lower bound wherever it decided the
+    problem, certified or not."""
+    b = solve_corollary1_points(C, x, tolerances=opts.tolerances, refine=opts.refine)
+    return b.done & np.isfinite(b.gamma_lb), b.gamma_lb, b.X
+
+
+def _batch(items: list, step) -> list:
+    """Run ``step`` on the stacked equal-size point sub-problems of ``items`` ((cache, subset) pairs); store what
+    it decided, return the rest."""
+    C = np.stack([sb.C[sorted(S)] for sb, S in items])
+    x = np.stack([sb.x[sorted(S)] for sb, S in items])
+    try:
+        decided, gamma_lb, X = step(C, x, items[0][0].opts)
+    except (ValueError, np.linalg.LinAlgError, FloatingPointError):
+        return items
+    n = C.shape[1]
+    left = []
+    for k, (sb, S) in enumerate(items):
+        if decided[k]:
+            sb._store(S, 2 * n * float(gamma_lb[k]) ** 2 * ROUND_DOWN, X[k])
+            sb.n_solved += 1
+        else:
+            left.append((sb, S))
+    return left

@@ -35,10 +35,16 @@ f_TLS* >= min(L2LB(all), min_i c_i^2): tracks without outliers are certified by 
 Search: an upper bound first -- the full L2 estimate, the L2 estimate of every view pair (at most
 :data:`MAX_PAIRS`, sampled beyond) and local optimisation from the best few (inlier set -> L2 estimate
 of the set -> inlier set, :data:`LO_ROUNDS` rounds); every sub-problem solved on the way offers its
-estimate too.  Then depth first, views in the order of the best candidate's d_i / c_i (confident inliers
-first), the "inlier" child first.  A node is pruned when its bound meets UB under the certificate rule; the
-reported lower bound is the minimum of UB and of the bounds of every node pruned below UB or left open
-(a node budget :data:`MAX_NODES` or the time limit stops the search with valid bounds).
+estimate too.  Then depth first, views in :func:`branching_order` (confident inliers, then views near their
+threshold), the "inlier" child first.  Sub-bounds are inherited (a subset's bound holds for every superset:
+the parent's L2*(I + {u}), the pairs, the triples with two anchor views) and computed only where the
+inherited bound does not prune -- never on the path of the best candidate, whose nodes cannot be pruned
+before their leaf.  A node is pruned when its bound meets UB under the certificate rule; the reported lower
+bound is the minimum of UB and of the bounds of every node pruned below UB or left open (a node budget
+:data:`MAX_NODES` or the time limit stops the search with valid bounds, certified if they meet anyway).
+
+The search is a generator: it yields the subsets whose bounds it needs, and :func:`drive` computes those of
+many searches together, one vectorised call per subset size (:func:`tritools.solve.robust_bounds.compute_many`).
 
 Units and the decision.  The certificate rule of :class:`sospoly.Tolerances` (``certified`` /
 ``contradicts`` / ``consistent``) is applied to f_TLS in pixels^2 at the problem's own scale

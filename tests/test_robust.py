@@ -314,3 +314,20 @@ def test_per_problem_thresholds_and_option_errors():
         with pytest.raises(OptionError, match="robust"):
             RetriangulationOptions(robust=bad)
     assert RetriangulationOptions(robust=5).robust == 5.0
+
+
+def test_benchmark_script_smoke(capsys):
+    """benchmarks/robust.py end to end on a reduced grid: certified, reaches the reference, no lower bound above it,
+    and the Shor peer runs."""
+    import importlib.util
+    import pathlib
+
+    pytest.importorskip("cvxpy")
+    path = pathlib.Path(__file__).resolve().parents[1] / "benchmarks" / "robust.py"
+    spec = importlib.util.spec_from_file_location("robust_bench", path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    mod.main(["--sizes", "4", "--fractions", "0.25", "--noise", "1", "--trials", "1", "--peer-max", "4",
+              "--colmap-points", "0", "--oxford", "", "--no-pycolmap"])
+    row = [ln for ln in capsys.readouterr().out.splitlines() if ln.startswith("4 |")][0].split(" | ")
+    assert row[3] == "1/1" and row[6] == "1/1" and row[7] == "0" and row[12] in ("0/1", "1/1")

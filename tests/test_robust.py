@@ -331,3 +331,22 @@ def test_benchmark_script_smoke(capsys):
               "--colmap-points", "0", "--oxford", "", "--no-pycolmap"])
     row = [ln for ln in capsys.readouterr().out.splitlines() if ln.startswith("4 |")][0].split(" | ")
     assert row[3] == "1/1" and row[6] == "1/1" and row[7] == "0" and row[12] in ("0/1", "1/1")
+
+
+def test_node_budget_and_time_limit_give_valid_bounds(monkeypatch):
+    """A search stopped early reports not_certified / time_limit with bounds that still hold."""
+    import tritools.solve.robust as robust_mod
+
+    cams, x, X, _ = outlier_scene(6, 2, 21, noise=1.0, shift=(300, 500))
+    c = np.full(6, 20.0)
+    full = tritools.triangulate(cams, x, robust=c)
+    assert full.optimal and full.attempts[0].step == "branch-and-bound"
+    monkeypatch.setattr(robust_mod, "MAX_NODES", 1)
+    stopped = tritools.triangulate(cams, x, robust=c)
+    assert stopped.status == tritools.Status.NOT_CERTIFIED and not stopped.optimal
+    assert "node budget" in stopped.message
+    assert stopped.gamma_lb <= full.gamma_ub * (1 + 1e-9) and stopped.gamma_lb <= stopped.gamma_ub
+    monkeypatch.setattr(robust_mod, "MAX_NODES", 4000)
+    timed = tritools.triangulate(cams, x, robust=c, time_limit=1e-6)
+    assert timed.status == tritools.Status.TIME_LIMIT and "time limit" in timed.message
+    assert timed.gamma_lb <= full.gamma_ub * (1 + 1e-9) and timed.gamma_lb <= timed.gamma_ub

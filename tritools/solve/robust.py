@@ -61,7 +61,6 @@ import time
 import numpy as np
 
 from ..model.geometry import PROJECTION_DENOM_RTOL
-from ..model.regions import Point
 from ..result import Attempt, Status, TriangulationResult
 from .decide import cheirality
 from .report import point_report
@@ -451,7 +450,3 @@ def drive(searches: list) -> list:
         for i in list(pending):
             step(i)
     return results
-
-
-def _is_points(regions) -> bool:
-    return all(isinstance(r, Point) for r in regions)

@@ -350,3 +350,23 @@ def test_node_budget_and_time_limit_give_valid_bounds(monkeypatch):
     timed = tritools.triangulate(cams, x, robust=c, time_limit=1e-6)
     assert timed.status == tritools.Status.TIME_LIMIT and "time limit" in timed.message
     assert timed.gamma_lb <= full.gamma_ub * (1 + 1e-9) and timed.gamma_lb <= timed.gamma_ub
+
+
+def test_georeferenced_world_and_zero_noise():
+    cams, x, _, out = outlier_scene(6, 2, 3, noise=1.0, shift=(300, 500))
+    ref = tritools.triangulate(cams, x, robust=20.0)
+    t = np.array([5e6, -3e6, 1e5])
+    T = np.eye(4)
+    T[:3, 3] = -t                                   # the same scene in a georeferenced frame
+    geo = tritools.triangulate(cams @ T, x, robust=20.0)
+    assert ref.optimal and geo.optimal
+    np.testing.assert_array_equal(geo.inliers, ref.inliers)
+    assert geo.gamma_ub == pytest.approx(ref.gamma_ub, rel=1e-6)
+    np.testing.assert_allclose(geo.X, ref.X + t, rtol=0, atol=1e-6)
+    sc = random_scene(5, 1, noise_px=0.0, seed=6)
+    x0 = sc.points2d[0].copy()
+    x0[1] += [80.0, -60.0]
+    r = tritools.triangulate(sc.cameras, x0, robust=10.0)   # exact data but one view: f* = c^2 exactly
+    assert r.optimal and r.inliers.tolist() == [True, False, True, True, True]
+    assert r.gamma_ub == pytest.approx(np.sqrt(100.0 / 10)) and r.gamma_lb <= r.gamma_ub
+    assert np.linalg.norm(r.X - sc.points3d[0]) < 1e-9

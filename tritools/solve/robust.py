@@ -74,7 +74,7 @@ log = logging.getLogger(__name__)
 #: the search stops (status not_certified, valid bounds) after this many nodes.
 MAX_NODES = 4000
 #: view pairs whose L2 estimates seed the upper bound (all pairs up to this many; a random sample beyond).
-MAX_PAIRS = 300
+MAX_PAIRS = 500
 #: rounds of local optimisation (inlier set -> L2 estimate -> inlier set) from each of the best pair candidates.
 LO_ROUNDS = 5
 #: local optimisation starts from this many of the best pair candidates.

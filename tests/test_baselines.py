@@ -197,7 +197,7 @@ def test_triangulation_result_record():
     fields = [f for f in TriangulationResult.__dataclass_fields__]
     assert fields == ["method", "status", "X", "gamma_ub", "gamma_lb", "optimal", "delta", "n_lmivar",
                       "image_points", "X_raw", "gamma_ub_raw", "certified_by", "message", "timings", "attempts",
-                      "sparsity", "in_front", "depths", "residuals"]
+                      "sparsity", "in_front", "depths", "residuals", "inliers"]
 
 
 def test_pycolmap_multiview_baseline_when_installed():

@@ -139,6 +139,18 @@ def _opt_array(value, shape_tail: tuple, name: str) -> np.ndarray | None:
     return arr
 
 
+def _opt_bools(value, name: str) -> np.ndarray | None:
+    if value is None:
+        return None
+    arr = np.asarray(value)
+    boolean = arr.dtype == bool or (np.issubdtype(arr.dtype, np.integer) and bool(np.all((arr == 0) | (arr == 1))))
+    if arr.ndim != 1 or not boolean:
+        raise ValueError(f"{name} must be a boolean array of shape (N,), got {arr.dtype} {arr.shape}")
+    arr = arr.astype(bool)
+    arr.setflags(write=False)
+    return arr
+
+
 def _opt_float(value, name: str) -> float | None:
     if value is None:
         return None
@@ -193,6 +205,10 @@ class TriangulationResult:
         Depth of ``X`` in each camera (Hartley & Zisserman eq. (6.15); positive in front).
     residuals : ndarray, shape (N,), optional
         Per-view distance ``d(Phi(X, P_i), R_i)`` (pixels); ``gamma_ub`` is their RMS over 2N.
+    inliers : bool ndarray, shape (N,), optional
+        With ``robust=`` (truncated least squares, :mod:`tritools.solve.robust`): the views with
+        ``d_i(X) < c_i``; then ``gamma_lb`` / ``gamma_ub`` bound gamma_TLS = sqrt(sum_i min(d_i^2, c_i^2) / 2N).
+        ``None`` without ``robust=``.
     """
 
     method: str
@@ -214,6 +230,7 @@ class TriangulationResult:
     in_front: bool | None = None
     depths: np.ndarray | None = None
     residuals: np.ndarray | None = None
+    inliers: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         try:
@@ -228,6 +245,7 @@ class TriangulationResult:
         set_(self, "image_points", _opt_array(self.image_points, (None, 2), "image_points"))
         set_(self, "depths", _opt_array(self.depths, (None,), "depths"))
         set_(self, "residuals", _opt_array(self.residuals, (None,), "residuals"))
+        set_(self, "inliers", _opt_bools(self.inliers, "inliers"))
         for name in ("gamma_ub", "gamma_lb", "gamma_ub_raw"):
             set_(self, name, _opt_float(getattr(self, name), name))
         for name in ("optimal", "in_front"):

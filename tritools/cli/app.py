@@ -143,13 +143,13 @@ def _seconds(r: TriangulationResult):
 OWN, BATCH_SHARE = "own", "batch_share"
 
 
-def _timed_solve(problems: list, options: TriangulationOptions, progress) -> tuple[list, list]:
+def _timed_solve(problems: list, options: TriangulationOptions, progress, robust=None) -> tuple[list, list]:
     """:func:`triangulate_many` on ``problems`` and, per result, ``(seconds, source)``: the result's own
     ``timings["total"]`` (a per-problem solve), else its share of the vectorised batch that decided it
-    (``timings["batch_share"]``)."""
+    (``timings["batch_share"]``).  ``robust``: TLS thresholds (``--robust``)."""
     from ..solve.batch import triangulate_many
 
-    results = triangulate_many(problems, options=options, progress=progress)
+    results = triangulate_many(problems, options=options, progress=progress, robust=robust)
     return results, [(_seconds(r), OWN if "total" in r.timings else BATCH_SHARE) for r in results]
 
 
@@ -204,7 +204,7 @@ def solve_problems(specs: Sequence[ProblemSpec], options: TriangulationOptions |
     return _solve_specs(specs, options, progress)[0]
 
 
-def _solve_specs(specs, options, progress) -> tuple[list, list]:
+def _solve_specs(specs, options, progress, robust=None) -> tuple[list, list]:
     """(results, [(seconds, source)]) of :func:`solve_problems` (sources in :func:`_timed_solve`)."""
     options = options or TriangulationOptions()
     groups: dict = defaultdict(list)
@@ -216,7 +216,7 @@ def _solve_specs(specs, options, progress) -> tuple[list, list]:
     out: list = [None] * len(specs)
     times: list = [(None, OWN)] * len(specs)
     for opts, idx in groups.items():
-        res, tms = _timed_solve([(specs[i].cameras, specs[i].regions) for i in idx], opts, progress)
+        res, tms = _timed_solve([(specs[i].cameras, specs[i].regions) for i in idx], opts, progress, robust)
         for i, r, t in zip(idx, res, tms):
             out[i], times[i] = r, t
     return out, times
@@ -232,7 +232,7 @@ def _read_specs(file: str) -> list[ProblemSpec]:
 
 def _cmd_solve(args) -> int:
     specs = _read_specs(args.file)
-    results, times = _solve_specs(specs, options_from_args(args), args.progress)
+    results, times = _solve_specs(specs, options_from_args(args), args.progress, robust_from_args(args))
     if args.json:
         _emit(_dumps([result_to_dict(r, index=i, name=s.name, n_views=s.n_views)
                       for i, (s, r) in enumerate(zip(specs, results))]), args.output)
@@ -501,6 +501,21 @@ def options_from_args(args) -> TriangulationOptions:
         raise CLIError(f"{flag}: {msg}") from None
 
 
+def add_robust_option(p) -> None:
+    """``--robust C``: certified truncated least squares with threshold C pixels (:mod:`tritools.solve.robust`)."""
+    p.add_argument("--robust", type=float, default=None, metavar="C",
+                   help="certified outlier-robust triangulation: truncated least squares with threshold C pixels "
+                        "(views farther than C from the estimate are outliers; see docs/robust.md)")
+
+
+def robust_from_args(args):
+    """The ``--robust`` threshold (None when absent); CLIError naming the flag unless positive."""
+    c = getattr(args, "robust", None)
+    if c is not None and not c > 0:
+        raise CLIError(f"--robust: must be a positive threshold in pixels, got {c}")
+    return c
+
+
 def add_track_options(p) -> None:
     """``--limit K --sample K --seed S`` of the subcommands running an Oxford sequence (:func:`select_tracks`)."""
     p.add_argument("--limit", type=int, default=None, metavar="K",
@@ -524,6 +539,7 @@ def register_builtin(sub) -> None:
     p.add_argument("file", metavar="FILE", help="problem file, or - for stdin")
     add_solver_options(p)
     add_world_frame_option(p, sequence=False)
+    add_robust_option(p)
     p.add_argument("--json", action="store_true", help="one JSON object per problem, all result fields")
     p.add_argument("--output", "-o", default=None, metavar="OUT", help="write the output to OUT instead of stdout")
     p.set_defaults(func=_cmd_solve)

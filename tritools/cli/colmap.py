@@ -19,7 +19,8 @@ import json
 import sys
 from pathlib import Path
 
-from .app import CLIError, add_data_dir_option, add_solver_options, exit_invalid, options_from_args, printable
+from .app import CLIError, add_data_dir_option, add_robust_option, add_solver_options, exit_invalid, options_from_args
+from .app import printable
 from .workers import executor_from_args
 from ..io.problem_file import jsonable
 
@@ -61,6 +62,7 @@ def register(subparsers) -> None:
     add_solver_options(p, progress_help=f"progress bar on stderr, moved per stack of equal track lengths (needs the "
                                         f"'progress' extra, tqdm; default: only for models of {PROGRESS_MIN_POINTS} "
                                         f"points or more)")   # the flags and defaults of `tritools solve`
+    add_robust_option(p)             # --robust C: outlier observations leave the tracks (POINT3D_ID -1)
     add_worker_options(p)
     p.add_argument("--min-track-length", type=int, default=2, metavar="K",
                    help="do not solve points with fewer than K usable observations (default 2)")
@@ -144,7 +146,8 @@ def run_colmap(args) -> int:
     try:
         options = RetriangulationOptions(solver=solver, min_track_length=args.min_track_length,
                                          max_track_length=args.max_track_length, behind=args.behind,
-                                         strict=args.strict, chunk_points=args.chunk_points, progress=args.progress)
+                                         strict=args.strict, chunk_points=args.chunk_points, progress=args.progress,
+                                         robust=args.robust)
         quality = _quality_options(args)
     except OptionError as exc:
         return exit_invalid(f"{_flag(exc.field)} {exc.detail}")

@@ -33,7 +33,8 @@ class CertifyOptions:
     ``options``: the :class:`~tritools.solve.options.TriangulationOptions` of every problem (None: the
     defaults of ``tritools.triangulate`` -- method auto, path auto, the default per-point budget);
     ``method``, ``path``, ``delta``, ``max_delta``: shorthands for its fields (None: its value);
-    ``executor``: for the per-problem SDPs (see :func:`tritools.solve.batch.triangulate_many`).
+    ``executor``: for the per-problem SDPs (see :func:`tritools.solve.batch.triangulate_many`);
+    ``robust``: None, or the TLS threshold in pixels (:mod:`tritools.solve.robust_batch`).
     """
     method: str | None = None
     path: str | None = None
@@ -41,6 +42,7 @@ class CertifyOptions:
     max_delta: int | None = None
     executor: object = field(default=None, compare=False)
     options: object = None
+    robust: float | None = None
 
     def triangulation_options(self):
         """The :class:`~tritools.solve.options.TriangulationOptions` these settings stand for (validated)."""
@@ -65,6 +67,7 @@ class StackResult:
     certified_by: np.ndarray
     delta: np.ndarray
     message: np.ndarray
+    inliers: np.ndarray | None = None       # (M, N) with ``robust``: the views each estimate keeps
 
 
 def certify_stack(cameras, points2d, options=None) -> StackResult:
@@ -89,6 +92,8 @@ def certify_stack(cameras, points2d, options=None) -> StackResult:
                       np.full(M, "", object), np.full(M, -1, np.int16), np.full(M, "", object))
     if M == 0:
         return out
+    if options.robust is not None:
+        return _robust_stack(C, x, opts, options, out)
     arrays = solve_point_stack(C, x, opts, executor=options.executor).arrays()
     out.X[:] = arrays["X"]
     out.gamma_lb[:] = arrays["gamma_lb"]
@@ -99,3 +104,25 @@ def certify_stack(cameras, points2d, options=None) -> StackResult:
     out.delta[:] = arrays["delta"]
     out.message[:] = [m or "" for m in arrays["message"]]
     return out
+
+
+def _robust_stack(C, x, opts, options: CertifyOptions, out: StackResult) -> StackResult:
+    """``certify_stack`` with ``robust``: TLS results (:func:`tritools.solve.robust_batch.robust_many`)."""
+    import dataclasses
+
+    from ..solve.robust_batch import robust_many
+
+    results = robust_many([(C[m], x[m]) for m in range(len(C))], options.robust, opts, executor=options.executor)
+    inliers = np.zeros(x.shape[:2], bool)
+    for m, r in enumerate(results):
+        if r.X is not None:
+            out.X[m] = r.X
+        out.gamma_lb[m] = np.nan if r.gamma_lb is None else r.gamma_lb
+        out.gamma_ub[m] = np.nan if r.gamma_ub is None else r.gamma_ub
+        out.status[m] = _CODE[r.status.value]
+        out.optimal[m] = bool(r.optimal)
+        out.certified_by[m] = r.certified_by or ""
+        out.delta[m] = -1 if r.delta is None else r.delta
+        out.message[m] = r.message or ""
+        inliers[m] = True if r.inliers is None else r.inliers
+    return dataclasses.replace(out, inliers=inliers)

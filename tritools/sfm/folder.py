@@ -27,6 +27,7 @@ from ..io.colmap.formats import ModelWriter, open_model
 from .certificates import CertificateWriter
 from .pipeline import OptionError, RetriangulationOptions, prepare_geometry, process_chunk
 from .retriangulate import RetriangulationReport, has_tqdm, progress_bar, skipped_cameras
+from .robust_tracks import drop_observations, rewrite_images
 
 __all__ = ["OutputError", "atomic_directory", "check_output", "retriangulate_folder", "FolderResult",
            "EXTRA_FILES", "EXPORT_SUFFIXES"]
@@ -152,6 +153,7 @@ def retriangulate_folder(in_dir, out_dir, options: RetriangulationOptions | None
     want = options.progress is True or (options.progress == "auto" and has_tqdm())
     bar = progress_bar(src.count_points() if want else None, options.progress)
     ids, results, xyz, rgb = [], [], [], []
+    removed: list = []                      # global keypoint indices of observations removed as outliers
     copied, notes = [], _other_model_notes(out_dir, fmt_out)
     _check_names(out_dir, fmt_out, src.folder)
     try:
@@ -164,6 +166,8 @@ def retriangulate_folder(in_dir, out_dir, options: RetriangulationOptions | None
                     res = process_chunk(src.arrays, geom, chunk, options, bar)
                     timings["solve"] += time.perf_counter() - t0
                     t0 = time.perf_counter()
+                    if res.keep_obs is not None:
+                        chunk = drop_observations(src.arrays, chunk, res.keep_obs, removed)
                     writer.write_points(chunk, res.xyz, res.error)
                     certs.write(chunk.ids, res)
                     timings["write"] += time.perf_counter() - t0
@@ -174,6 +178,8 @@ def retriangulate_folder(in_dir, out_dir, options: RetriangulationOptions | None
                         rgb.append(chunk.rgb)
                 t0 = time.perf_counter()
                 writer.close()
+                if removed:
+                    rewrite_images(src.arrays, tmp, fmt_out, np.concatenate(removed))
                 sidecar = certs.close()
             except BaseException:
                 writer.abort()

@@ -15,7 +15,7 @@ error (full distortion model) are computed with numpy over the whole chunk.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -82,6 +82,10 @@ class RetriangulationOptions:
         Points per chunk (bounds memory); a tqdm bar over the whole run, moved per stack of equal track
         lengths (None / False: never, the library's default; "auto": from ``PROGRESS_MIN_POINTS`` points on,
         the command line's default; True: always); executor of the per-point SDPs.
+    robust
+        None, or a threshold in undistorted pixels: certified truncated least squares
+        (:mod:`tritools.solve.robust`); the outlier observations of every updated point are removed from its
+        track (and their keypoints' POINT3D_ID set to -1 by the writer).
     """
     method: str | None = None
     path: str | None = None
@@ -95,6 +99,7 @@ class RetriangulationOptions:
     progress: bool | str | None = None
     executor: object = field(default=None, compare=False)
     solver: TriangulationOptions | None = None
+    robust: float | None = None
 
     def __post_init__(self):
         base = DEFAULT_OPTIONS if self.solver is None else self.solver
@@ -138,10 +143,18 @@ class RetriangulationOptions:
         _int_option("chunk_points", self.chunk_points, 1)
         if self.progress is not None and self.progress != "auto" and not isinstance(self.progress, (bool, np.bool_)):
             raise OptionError("progress", f"must be True, False, None or 'auto', got {self.progress!r}")
+        if self.robust is not None:
+            try:
+                ok = float(self.robust) > 0 and not isinstance(self.robust, bool)
+            except (TypeError, ValueError):
+                ok = False
+            if not ok:
+                raise OptionError("robust", f"must be a positive threshold in pixels, got {self.robust!r}")
+            object.__setattr__(self, "robust", float(self.robust))
 
     def certify_options(self) -> CertifyOptions:
         """The solver settings of :func:`.certify.certify_stack` (the ``solver`` options and the executor)."""
-        return CertifyOptions(options=self.solver, executor=self.executor)
+        return CertifyOptions(options=self.solver, executor=self.executor, robust=self.robust)
 
 
 @dataclass(frozen=True, eq=False)
@@ -226,6 +239,8 @@ class ChunkResult:
     in_front: np.ndarray
     message: np.ndarray
     n_skipped_observations: int = 0
+    keep_obs: np.ndarray | None = None        # (chunk observations,) False: an outlier removed (``robust``)
+    n_inliers: np.ndarray | None = None       # (points,) inliers of the robust estimate (-1: not robust)
 
 
 def _gamma(C: np.ndarray, x: np.ndarray, X: np.ndarray) -> np.ndarray:
@@ -288,12 +303,17 @@ def process_chunk(arrays: ModelArrays, geom: ModelGeometry, chunk: PointChunk, o
     used_obs = np.nonzero(usable)[0]                 # CSR of the usable observations
     used_off = np.concatenate([[0], np.cumsum(n_used)])
     copts = options.certify_options()
+    outlier = np.zeros(len(obs_img), bool)
+    n_inl = np.full(n, -1, np.int32)
     for N in np.unique(n_used[solve]):
         pts = np.nonzero(solve & (n_used == N))[0]
         o = used_obs[used_off[pts][:, None] + np.arange(N)]
         C, x = geom.P[obs_img[o]], geom.xy_u[gk[o]]
         s = certify_stack(C, x, copts)
         X[pts] = s.X
+        if s.inliers is not None:
+            outlier[o[~s.inliers]] = True
+            n_inl[pts] = s.inliers.sum(axis=1)
         for name in ("gamma_lb", "gamma_ub", "status", "optimal", "certified_by", "delta", "message"):
             getattr(r, name)[pts] = getattr(s, name)
         with np.errstate(all="ignore"):
@@ -315,8 +335,17 @@ def process_chunk(arrays: ModelArrays, geom: ModelGeometry, chunk: PointChunk, o
     upd = better & (~behind | (options.behind == "write"))
     r.updated[:] = upd
     r.xyz[upd] = X[upd]
+    # outliers leave the tracks of the points written anew (when at least two inliers remain)
+    keep = ~(outlier & upd[owner] & (n_inl[owner] >= 2))
+    if options.robust is not None:
+        r = replace(r, keep_obs=keep, n_inliers=n_inl)
+        for p in np.nonzero(np.bincount(owner[~keep], minlength=n))[0]:
+            gone = np.nonzero(~keep & (owner == p))[0]
+            note = f"{len(gone)} outlier observation(s) removed (image ids " + \
+                ", ".join(str(int(arrays.image_ids[obs_img[j]])) for j in gone) + ")"
+            r.message[p] = f"{r.message[p]}; {note}" if r.message[p] else note
     if upd.any():
-        sel = upd[owner] & usable
+        sel = upd[owner] & usable & keep
         r.error[upd] = _colmap_error(arrays, geom, r.xyz, obs_img[sel], gk[sel], owner[sel], n)[upd]
     _messages(arrays, geom, chunk, r, dict(owner=owner, obs_img=obs_img, usable=usable, depth=depth, solve=solve,
                                            stuck=stuck, behind=behind, has_X=has_X, better=better), options)

@@ -315,7 +315,7 @@ def solve_point_problems(problems, opts: TriangulationOptions, *, executor=None,
 def triangulate_many(problems: Iterable[Sequence], method: str | Method | None = None, delta: int | None = None,
                      max_delta: int | None = None, *, options: TriangulationOptions | None = None,
                      executor: cf.Executor | object | None = None, progress: bool | str | None = None,
-                     retries: Sequence[RetryStep] = (), chunk_size: int = DEFAULT_CHUNK_SIZE,
+                     retries: Sequence[RetryStep] = (), chunk_size: int = DEFAULT_CHUNK_SIZE, robust=None,
                      **overrides) -> list[TriangulationResult]:
     """Triangulate every (cameras, regions) pair; results in input order, one per input.
 
@@ -333,6 +333,8 @@ def triangulate_many(problems: Iterable[Sequence], method: str | Method | None =
         (e.g. ``[("corollary1", 4), ("theorem1", None)]``); the first certified result is kept, else the
         first call's.  Each result's ``attempts`` lists them all.
     chunk_size : per-item problems per executor task
+    robust : None, or TLS thresholds in pixels (a scalar, one per view, or one entry per problem): certified
+        truncated least squares (:mod:`tritools.solve.robust_batch`; ``retries`` do not apply)
     """
     opts = options_from(options, method=method, delta=delta, max_delta=max_delta, **overrides)
     if isinstance(chunk_size, bool) or int(chunk_size) != chunk_size or chunk_size < 1:
@@ -341,5 +343,9 @@ def triangulate_many(problems: Iterable[Sequence], method: str | Method | None =
         if not (isinstance(step, (tuple, list)) and len(step) == 2):
             raise ValueError(f"retries must be (method, delta) pairs, got {step!r}")
         opts.replace(method=step[0], delta=step[1])           # validated like every option
+    if robust is not None:
+        from .robust_batch import robust_many
+
+        return robust_many(list(problems), robust, opts, executor=executor, progress=progress)
     return solve_point_problems(list(problems), opts, executor=executor, progress=progress, retries=retries,
                                 chunk_size=int(chunk_size)).results()

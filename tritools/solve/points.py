@@ -222,7 +222,7 @@ class PointsResult:
 
 def triangulate_points(cameras: ArrayLike, points2d: ArrayLike, visible: ArrayLike | None = None, *,
                        layout: PointsLayout | str = PointsLayout.AUTO, options: TriangulationOptions | None = None,
-                       executor: object | None = None, progress: bool | str | None = None,
+                       executor: object | None = None, progress: bool | str | None = None, robust=None,
                        **overrides) -> PointsResult:
     """Certified triangulation of M points observed in V views, as arrays (like ``cv2.triangulatePoints``).
 
@@ -241,6 +241,8 @@ def triangulate_points(cameras: ArrayLike, points2d: ArrayLike, visible: ArrayLi
         layouts (two views and two points: (2, 2, 2)) with a ValueError asking for ``layout=``.
     options, overrides : :class:`~tritools.solve.options.TriangulationOptions` and its fields
     executor, progress : as :func:`tritools.triangulate_many`
+    robust : None, or TLS thresholds in pixels (a scalar or one per view V): certified truncated least squares
+        (:mod:`tritools.solve.robust_batch`); the result then has ``inliers`` (M, V) (False where not visible)
     """
     from .batch import solve_point_problems
 
@@ -256,8 +258,37 @@ def triangulate_points(cameras: ArrayLike, points2d: ArrayLike, visible: ArrayLi
         bad = int(np.argmax(vis.sum(axis=1) < 2))
         raise ValueError(f"points2d[{bad}] is visible in fewer than 2 views")
     views = [np.nonzero(row)[0] for row in vis]
+    if robust is not None:
+        return _robust_points(C, x, vis, views, robust, opts, executor, progress)
     outcome = solve_point_problems([(C[v], x[m, v]) for m, v in enumerate(views)], opts, executor=executor,
                                    progress=progress)
     arrays = outcome.arrays()
     arrays["n_views"] = vis.sum(axis=1)
     return PointsResult(outcome.result, arrays)
+
+
+def _robust_points(C, x, vis, views, robust, opts, executor, progress) -> PointsResult:
+    """``triangulate_points(..., robust=c)``: per-point TLS results (:func:`tritools.solve.robust_batch.robust_many`),
+    thresholds taken per view of the shared cameras."""
+    from .robust import robust_thresholds
+    from .robust_batch import robust_many
+
+    c = robust_thresholds(robust, C.shape[0])
+    problems = [(C[v], x[m, v]) for m, v in enumerate(views)]
+    results = robust_many(problems, [c[v] for v in views], opts, executor=executor, progress=progress)
+    M, V = vis.shape
+    inliers = np.zeros((M, V), bool)
+    for m, (v, r) in enumerate(zip(views, results)):
+        if r.inliers is not None:
+            inliers[m, v] = r.inliers
+    arrays = {"X": np.array([np.full(3, np.nan) if r.X is None else r.X for r in results]).reshape(M, 3),
+              "gamma_lb": np.array([np.nan if r.gamma_lb is None else r.gamma_lb for r in results]),
+              "gamma_ub": np.array([np.nan if r.gamma_ub is None else r.gamma_ub for r in results]),
+              "status": np.array([r.status.value for r in results], dtype=object),
+              "optimal": np.array([bool(r.optimal) for r in results]),
+              "in_front": np.array([bool(r.in_front) for r in results]),
+              "delta": np.array([-1 if r.delta is None else r.delta for r in results]),
+              "certified_by": np.array([r.certified_by for r in results], dtype=object),
+              "message": np.array([r.message for r in results], dtype=object),
+              "n_views": vis.sum(axis=1), "inliers": inliers}
+    return PointsResult(lambda m: results[m], arrays)

@@ -67,7 +67,7 @@ FAMILY_SEARCH_EVALS = 300
 
 def triangulate(cameras: ArrayLike, regions: Sequence | ArrayLike, method: str | Method | None = None,
                 delta: int | None = None, max_delta: int | None = None, *,
-                options: TriangulationOptions | None = None, **overrides) -> TriangulationResult:
+                options: TriangulationOptions | None = None, robust=None, **overrides) -> TriangulationResult:
     """Certified triangulation of one scene point (see module docstring).
 
     Parameters
@@ -79,11 +79,18 @@ def triangulate(cameras: ArrayLike, regions: Sequence | ArrayLike, method: str |
     options : a :class:`~tritools.solve.options.TriangulationOptions`; keyword ``overrides`` (``path``,
         ``sparsity``, ``multiplier``, ``refine``, ``normalize``, ``backend``, ``form``, ``tolerances``,
         ``budget``) replace its fields
+    robust : None, or thresholds c in pixels (a positive scalar or one per view, ``inf`` allowed): certified
+        truncated least squares (:mod:`tritools.solve.robust`): the bounds are those of
+        gamma_TLS = sqrt(sum_i min(d_i^2, c_i^2) / 2N) and the result's ``inliers`` says which views count
     """
     t0 = time.perf_counter()
     opts = options_from(options, method=method, delta=delta, max_delta=max_delta, **overrides)
     cams = validate_cameras(cameras)
     regs = as_regions(regions, cams.shape[0])
+    if robust is not None:
+        from .robust import robust_thresholds, triangulate_robust
+
+        return triangulate_robust(cams, regs, robust_thresholds(robust, cams.shape[0]), opts, t0)
     return _PointSolve(cams, regs, opts, t0).run()
 
 

@@ -1,0 +1,452 @@
+"""Certified outlier-robust triangulation: truncated least squares (TLS) by branch and bound over inlier sets.
+
+The problem.  For thresholds c_i > 0 (pixels, the caller's image units; ``inf`` = always an inlier) and the
+distances d_i(X) = d(Phi(X, P_i), R_i) of the L2 problem (SPEC §1, any region type),
+
+    f_TLS(X) = sum_i min(d_i(X)^2, c_i^2),     gamma_TLS(X) = sqrt(f_TLS(X) / (2N)),
+
+in the units of gamma (with every c_i infinite it is the L2 problem exactly).  The reported inlier set of X
+is {i : d_i(X) < c_i}.
+
+The identity.  Writing T(X) = {i : d_i(X) < c_i},
+
+    min_X f_TLS(X) = min over subsets S of [ L2*(S) + sum_{i not in S} c_i^2 ],   L2*(S) = min_X sum_{i in S} d_i^2,
+
+so a certificate for TLS is a certificate over inlier sets whose pieces are the project's certified L2
+lower bounds of sub-problems (:mod:`tritools.solve.robust_bounds`: L2*(S) >= 2|S| gamma_LB(S)^2, rigorous
+under floating point for every region type; L2*(S) = 0 for |S| <= 1).
+
+The branch and bound.  A node fixes I (inliers), O (outliers) and leaves U undecided; it holds the X with
+I subset of T(X) and O disjoint from T(X).  For such X, with s = sum_{i in I} d_i(X)^2,
+
+    f_TLS(X) = c^2(O) + s + sum_{u in U} min(c_u^2, d_u(X)^2),
+    L2*(I) <= s <= sum_{i in I} c_i^2,      d_u(X)^2 >= L2*(I + {u}) - s,
+
+and an X that beats the best value UB found has s <= UB - c^2(O).  Hence the node bound
+
+    LB(node) = min( UB, c^2(O) + min_{s in [L2LB(I), min(c^2(I), UB - c^2(O))]}
+                                   [ s + sum_{u in U} min(c_u^2, max(0, a_u - s)) ] ),
+    a_u = max(L2LB(I), L2LB(I + {u})),
+
+a piecewise-linear minimum in s attained at the interval's ends or at a breakpoint a_u or a_u - c_u^2
+(:func:`lookahead_bound`).  At the root, every X with T(X) != all views pays at least min_i c_i^2, so
+f_TLS* >= min(L2LB(all), min_i c_i^2): tracks without outliers are certified by their L2 certificate alone.
+
+Search: an upper bound first -- the full L2 estimate, the L2 estimate of every view pair (at most
+:data:`MAX_PAIRS`, sampled beyond) and local optimisation from the best few (inlier set -> L2 estimate
+of the set -> inlier set, :data:`LO_ROUNDS` rounds); every sub-problem solved on the way offers its
+estimate too.  Then depth first, views in :func:`branching_order` (confident inliers, then views near their
+threshold), the "inlier" child first.  Sub-bounds are inherited (a subset's bound holds for every superset:
+the parent's L2*(I + {u}), the pairs, the triples with two anchor views) and computed only where the
+inherited bound does not prune -- never on the path of the best candidate, whose nodes cannot be pruned
+before their leaf.  A node is pruned when its bound meets UB under the certificate rule; the reported lower
+bound is the minimum of UB and of the bounds of every node pruned below UB or left open (a node budget
+:data:`MAX_NODES` or the time limit stops the search with valid bounds, certified if they meet anyway).
+
+The search is a generator: it yields the subsets whose bounds it needs, and :func:`drive` computes those of
+many searches together, one vectorised call per subset size (:func:`tritools.solve.robust_bounds.compute_many`).
+
+Units and the decision.  The certificate rule of :class:`sospoly.Tolerances` (``certified`` /
+``contradicts`` / ``consistent``) is applied to f_TLS in pixels^2 at the problem's own scale
+``min_i c_i^2`` (the smallest finite squared threshold): the absolute part allows ``gap_abs * min c^2``,
+the relative part ``gap_rel * max(min c^2, UB)``.  Bounds are reported as gamma = sqrt(f / 2N).
+"""
+from __future__ import annotations
+
+import itertools
+import logging
+import math
+import time
+
+import numpy as np
+
+from ..model.geometry import PROJECTION_DENOM_RTOL
+from ..result import Attempt, Status, TriangulationResult
+from .decide import cheirality
+from .report import point_report
+from .robust_bounds import ROUND_DOWN, SubsetBounds, compute_many
+
+__all__ = ["robust_thresholds", "triangulate_robust", "drive", "lookahead_bound", "tls_cost", "MAX_NODES", "MAX_PAIRS",
+           "LO_ROUNDS"]
+
+log = logging.getLogger(__name__)
+
+#: the search stops (status not_certified, valid bounds) after this many nodes.
+MAX_NODES = 4000
+#: view pairs whose L2 estimates seed the upper bound (all pairs up to this many; a random sample beyond).
+MAX_PAIRS = 500
+#: rounds of local optimisation (inlier set -> L2 estimate -> inlier set) from each of the best pair candidates.
+LO_ROUNDS = 5
+#: local optimisation starts from this many of the best pair candidates.
+LO_STARTS = 3
+#: branching order (:func:`branching_order`): this many confident inliers first, then the views whose d_i / c_i is
+#: within a factor AMBIGUOUS of 1.
+ANCHORS = 2
+AMBIGUOUS = 2.0
+
+
+def robust_thresholds(robust, n_views: int) -> np.ndarray:
+    """The thresholds c (N,) from ``robust=`` (a positive scalar or one per view, pixels; ``inf`` allowed).
+    ValueError naming ``robust`` otherwise."""
+    if isinstance(robust, (bool, np.bool_)) or isinstance(robust, (str, bytes)):
+        raise ValueError(f"robust must be a positive threshold in pixels (scalar or one per view), got {robust!r}")
+    try:
+        c = np.array(robust, dtype=float)
+    except (TypeError, ValueError):
+        raise ValueError(f"robust must be a positive threshold in pixels (scalar or one per view), "
+                         f"got {robust!r}") from None
+    if c.ndim == 0:
+        c = np.full(n_views, float(c))
+    if c.shape != (n_views,):
+        raise ValueError(f"robust must be a scalar or have one threshold per view ({n_views}), got shape {c.shape}")
+    if np.any(np.isnan(c)) or np.any(c <= 0):
+        raise ValueError(f"robust thresholds must be positive (inf allowed), got {c.tolist()}")
+    return c
+
+
+def tls_cost(residuals, c) -> float:
+    """f_TLS = sum_i min(d_i^2, c_i^2) (an undefined projection, d_i = inf, counts c_i^2)."""
+    d = np.asarray(residuals, float)
+    d2 = np.where(np.isfinite(d), d * d, np.inf)
+    return float(np.sum(np.minimum(d2, np.asarray(c, float) ** 2)))
+
+
+def lookahead_bound(s_lo: float, s_hi: float, a: np.ndarray, c2: np.ndarray) -> float:
+    """min over s in [s_lo, s_hi] of g(s) = s + sum_u min(c2_u, max(0, a_u - s)) (+inf for an empty interval).
+
+    g is piecewise linear and continuous with breakpoints at a_u and a_u - c2_u, so its minimum over the
+    interval is at an end or at a breakpoint inside it."""
+    if not s_hi >= s_lo:
+        return math.inf
+    a, c2 = np.asarray(a, float), np.asarray(c2, float)
+    cand = np.concatenate([[s_lo, s_hi], a, a - c2])
+    cand = cand[(cand >= s_lo) & (cand <= s_hi)]
+    g = cand + np.sum(np.minimum(c2[None, :], np.maximum(0.0, a[None, :] - cand[:, None])), axis=1)
+    return float(np.min(g))
+
+
+def branching_order(ratio: np.ndarray) -> np.ndarray:
+    """The views in branching order from r_i = d_i / c_i at the best candidate: the :data:`ANCHORS` most
+    confident inliers first (the lookahead needs inliers in I), then the ambiguous views (1/AMBIGUOUS < r_i <
+    AMBIGUOUS, closest to the threshold first: deciding them early keeps the rest of the tree a chain), then
+    the rest by r_i."""
+    r = np.where(np.isfinite(ratio), ratio, np.inf)
+    by_r = np.argsort(r, kind="stable")
+    head = [int(i) for i in by_r[:ANCHORS] if r[i] < 1]
+    rest = [int(i) for i in by_r if int(i) not in head]
+    amb = sorted((i for i in rest if 1 / AMBIGUOUS < r[i] < AMBIGUOUS), key=lambda i: abs(math.log(r[i])))
+    return np.array(head + amb + [i for i in rest if i not in amb], dtype=int)
+
+
+class _Search:
+    """One TLS problem: thresholds, the subset bounds, the best candidate, the branch and bound."""
+
+    def __init__(self, cams, regions, c, opts, t0):
+        self.C, self.regions, self.c, self.opts, self.t0 = cams, list(regions), c, opts, t0
+        self.N = len(regions)
+        self.c2 = c * c
+        self.deadline = opts.budget.deadline()
+        self.bounds = SubsetBounds(cams, regions, opts, self.deadline)
+        finite = self.c2[np.isfinite(self.c2)]
+        self.scale = float(np.min(finite))           # the decision's scale: the smallest squared threshold
+        self.tol = opts.tolerances
+        self.best_X, self.best_f, self.best_S = None, math.inf, frozenset()
+        self.points = self.bounds.points
+        self.x = self.bounds.x
+        self.nodes = 0
+        self.anchors, self.anchor_a = None, None     # see anchor_bounds
+
+    # ------------------------------------------------------------------ costs and the upper bound
+    def residuals(self, X) -> np.ndarray:
+        rep = point_report(X, self.C, self.regions)
+        return np.full(self.N, np.inf) if rep.residuals is None else rep.residuals
+
+    def screen(self, Xs: np.ndarray) -> np.ndarray:
+        """f_TLS of many candidates (M, 3) (point regions: vectorised; else one by one); only for ranking."""
+        if not self.points:
+            return np.array([tls_cost(self.residuals(X), self.c) for X in Xs])
+        Xh = np.concatenate([Xs, np.ones((len(Xs), 1))], axis=1)
+        u = np.einsum("nij,mj->mni", self.C, Xh)
+        denom = np.einsum("nj,mj->mn", np.abs(self.C[:, 2]), np.abs(Xh))
+        ok = np.abs(u[..., 2]) > PROJECTION_DENOM_RTOL * denom
+        with np.errstate(all="ignore"):
+            d2 = np.sum((u[..., :2] / u[..., 2:] - self.x[None]) ** 2, axis=2)
+        d2 = np.where(ok & np.isfinite(d2), d2, np.inf)
+        return np.sum(np.minimum(d2, self.c2[None]), axis=1)
+
+    def offer(self, X) -> None:
+        """A candidate: kept when its exact f_TLS (:func:`tritools.solve.report.point_report` distances) is
+        lower than the best by more than round-off (ties keep the earlier one: the full L2 estimate first)."""
+        if X is None or not np.all(np.isfinite(X)):
+            return
+        d = self.residuals(X)
+        f = tls_cost(d, self.c)
+        if f < self.best_f * (1 - 1e-12) or (self.best_X is None and np.isfinite(f)):
+            self.best_X, self.best_f = np.asarray(X, float), f
+            self.best_S = frozenset(int(i) for i in np.nonzero(d < self.c)[0])
+
+    def offer_new(self) -> None:
+        est = self.bounds.take_estimates()
+        if not est:
+            return
+        Xs = np.array([X for _, X in est])
+        f = self.screen(Xs)
+        for k in np.argsort(f)[:LO_STARTS]:
+            if f[k] < self.best_f * (1 + 1e-9):        # the screen is only a ranking: exact costs decide
+                self.offer(Xs[k])
+
+    def inlier_set(self, X) -> frozenset:
+        d = self.residuals(X)
+        return frozenset(int(i) for i in np.nonzero(d < self.c)[0])
+
+    # ------------------------------------------------------------------ candidates
+    def need(self, subsets):
+        """Generator: hand the subsets whose bounds are not cached yet to the driver (:func:`drive`), which fills
+        the cache -- batched with the requests of other problems -- and resumes."""
+        todo = [S for S in subsets if not self.bounds.known(S)]
+        if todo:
+            yield todo
+
+    def candidates(self, rng):
+        full = frozenset(range(self.N))
+        yield from self.need([full])
+        self.offer(self.bounds.estimate(full))
+        if self.best_X is not None and self.meets(self.root_bound()):
+            return                              # certified by the L2 certificate of all views: no search needed
+        pairs = list(itertools.combinations(range(self.N), 2))
+        if len(pairs) > MAX_PAIRS:
+            pairs = [pairs[k] for k in rng.choice(len(pairs), MAX_PAIRS, replace=False)]
+        pairs = [frozenset(p) for p in pairs]
+        yield from self.need(pairs)
+        est = self.bounds.take_estimates()
+        starts = []
+        if est:
+            Xs = np.array([X for _, X in est])
+            f = self.screen(Xs)
+            starts = [Xs[k] for k in np.argsort(f)[:LO_STARTS]]
+            for X in starts:
+                self.offer(X)
+        for X in starts + ([self.best_X] if self.best_X is not None else []):
+            yield from self.local_optimisation(X)
+
+    def local_optimisation(self, X):
+        seen = set()
+        for _ in range(LO_ROUNDS):
+            S = self.inlier_set(X)
+            if len(S) < 2 or S in seen or self.deadline.expired:
+                return
+            seen.add(S)
+            yield from self.need([S])
+            X = self.bounds.estimate(S)
+            self.offer(X)
+            if X is None:
+                return
+
+    # ------------------------------------------------------------------ bounds
+    def meets(self, lb: float) -> bool:
+        """Is a lower bound good enough to prune (it meets UB under the certificate rule, or exceeds it)?"""
+        return lb >= self.best_f or bool(self.tol.certified(lb, self.best_f, self.scale))
+
+    def root_bound(self) -> float:
+        """f_TLS* >= min(L2LB(all views), min_i c_i^2) (module docstring)."""
+        return min(self.bounds.bound(frozenset(range(self.N))), float(np.min(self.c2)))
+
+    def node_bound(self, I: frozenset, c2_out: float, U: list, lb_I: float, a: np.ndarray, refine: bool = True):
+        """(bound, lb_I, a) of a node (module docstring).  ``lb_I`` and ``a`` (N,) are inherited lower bounds of
+        L2*(I) and of L2*(I + {u}) (a parent's bound of a subset is one of every superset).  The bound is first
+        taken with them; only when it does not prune and ``refine`` are the exact sub-bounds computed, and only
+        where they can matter (a_u >= s_max + c_u^2 already gives the term c_u^2)."""
+        if len(I) >= 2 and self.bounds.known(I):
+            lb_I = max(lb_I, self.bounds.bound(I))
+        a = np.maximum(a, lb_I)
+        if self.anchors is not None and self.anchors <= I:
+            a = np.maximum(a, self.anchor_a)          # L2*(I + {u}) >= L2*(anchors + {u})
+        bound = self._bound(I, c2_out, U, lb_I, a)
+        if self.meets(bound) or not refine:
+            return bound, lb_I, a
+        if len(I) >= 2 and not self.bounds.known(I):
+            yield from self.need([I])
+            self.offer_new()
+            lb_I = max(lb_I, self.bounds.bound(I))
+            a = np.maximum(a, lb_I)
+        if not I or not U or self.meets(c2_out + lb_I):
+            return self._bound(I, c2_out, U, lb_I, a), lb_I, a
+        # the views the best candidate calls outliers first (their terms c_u^2 usually prune), then the rest
+        best_S = self.best_S
+        for stage in (False, True):
+            hi = min(float(np.sum(self.c2[list(I)])), self.best_f - c2_out)
+            Ua = np.array([u for u in U if (u in best_S) == stage])
+            open_ = Ua[a[Ua] < hi + self.c2[Ua]] if Ua.size else Ua
+            if open_.size:
+                subsets = [I | {int(u)} for u in open_]
+                yield from self.need(subsets)
+                self.offer_new()
+                a = a.copy()
+                a[open_] = np.maximum(a[open_], [self.bounds.bound(S) for S in subsets])
+            bound = self._bound(I, c2_out, U, lb_I, a)
+            if self.meets(bound):
+                break
+        return bound, lb_I, a
+
+    def anchor_bounds(self, order: np.ndarray):
+        """L2 bounds of the triples (first two views of the order) + {u}, one batch: every node whose I holds both
+        anchors inherits L2*(I + {u}) >= L2*(anchors + {u})."""
+        if self.N < 3:
+            return
+        anchors = frozenset(int(v) for v in order[:2])
+        triples = [anchors | {u} for u in range(self.N) if u not in anchors]
+        yield from self.need(triples)
+        self.offer_new()
+        self.anchors = anchors
+        self.anchor_a = np.array([0.0 if u in anchors else self.bounds.bound(anchors | {u}) for u in range(self.N)])
+
+    def _bound(self, I: frozenset, c2_out: float, U: list, lb_I: float, a: np.ndarray) -> float:
+        """The node bound from the given sub-bounds (no new sub-problems)."""
+        base = c2_out + lb_I
+        if not I or not U:
+            return min(self.best_f, base)
+        hi = min(float(np.sum(self.c2[list(I)])), self.best_f - c2_out)
+        Ua = np.array(U)
+        g = lookahead_bound(lb_I, hi, a[Ua], self.c2[Ua])
+        return min(self.best_f, max(base, (c2_out + g) * ROUND_DOWN))
+
+    def child_bounds(self, v: int, lb_I: float, a: np.ndarray):
+        """Inherited bounds of the child I + {v}: L2*(I + {v}) >= a_v, L2*(I + {v, u}) >= a_u and >= L2*({v, u})."""
+        pair = np.array([self.bounds.bound(frozenset((v, u))) if self.bounds.known(frozenset((v, u))) else 0.0
+                         for u in range(self.N)])
+        return max(lb_I, a[v]), np.maximum(np.maximum(a, pair), a[v])
+
+    def search(self, order: np.ndarray):
+        """Depth-first branch and bound (module docstring): (global lower bound, why it stopped early or None)."""
+        # a node: (I, O, c^2(O), next view in the order, parent's bound, lower bound of L2*(I), of L2*(I + {u}))
+        stack = [(frozenset(), frozenset(), 0.0, 0, 0.0, 0.0, np.zeros(self.N))]
+        floor = math.inf                            # min bound of nodes pruned below UB / leaves left open
+        stopped = None
+        while stack:
+            if self.nodes >= MAX_NODES:
+                stopped = "node budget"
+                break
+            if self.deadline.expired:
+                stopped = "time limit"
+                break
+            I, O, c2_out, k, _, lb_I, a = stack.pop()
+            self.nodes += 1
+            U = [int(u) for u in order[k:]]
+            if not U and len(I) >= 2:
+                yield from self.need([I])
+                lb_I = max(lb_I, self.bounds.bound(I))
+            # a node holding the best candidate cannot be pruned before its leaf: no sub-problems for it
+            on_path = I <= self.best_S and not (O & self.best_S)
+            lb, lb_I, a = yield from self.node_bound(I, c2_out, U, lb_I, a, refine=not on_path or not U)
+            if self.meets(lb):
+                if lb < self.best_f:
+                    floor = min(floor, lb)
+                continue
+            if not U:                                # a leaf whose L2 bound does not meet UB
+                if self.bounds.strengthen(I):
+                    lb = min(self.best_f, c2_out + self.bounds.bound(I))
+                    self.offer_new()
+                if not self.meets(lb) or lb < self.best_f:
+                    floor = min(floor, lb)
+                continue
+            u = U[0]
+            stack.append((I, O | {u}, c2_out + self.c2[u], k + 1, lb, lb_I, a))
+            stack.append((I | {u}, O, c2_out, k + 1, lb, *self.child_bounds(u, lb_I, a)))
+        open_lb = min((node[4] for node in stack), default=math.inf)
+        return min(self.best_f, floor, open_lb), stopped
+
+    # ------------------------------------------------------------------ the run
+    def run(self):
+        """Generator (:func:`drive`): yields subset requests, returns the :class:`TriangulationResult`."""
+        rng = np.random.default_rng(0)
+        t = time.perf_counter()
+        yield from self.candidates(rng)
+        t_cand = time.perf_counter() - t
+        if self.best_X is None:
+            return TriangulationResult("tls", Status.NUMERICAL_FAILURE, message="no finite candidate estimate found",
+                                       timings={"total": time.perf_counter() - self.t0})
+        lb, stopped = self.root_bound(), None
+        if not self.meets(lb):
+            order = branching_order(self.residuals(self.best_X) / self.c)
+            yield from self.anchor_bounds(order)
+            lb_bb, stopped = yield from self.search(order)
+            lb = max(lb, lb_bb)
+        timings = {"candidates": t_cand, "total": time.perf_counter() - self.t0}
+        return self.result(lb, stopped, timings)
+
+    def result(self, lb: float, stopped, timings) -> TriangulationResult:
+        ub = self.best_f
+        X = self.best_X
+        rep = point_report(X, self.C, self.regions)
+        inliers = rep.residuals < self.c
+        certified = bool(self.tol.certified(lb, ub, self.scale))     # lb is valid also when the search stopped
+        contradicts = bool(self.tol.contradicts(lb, ub, self.scale))
+        status = Status.NUMERICAL_FAILURE if contradicts else Status.OPTIMAL if certified else \
+            Status.TIME_LIMIT if stopped == "time limit" else Status.NOT_CERTIFIED
+        certified = certified and not contradicts
+        lb = float(self.tol.consistent(lb, ub))
+        g = 2 * self.N
+        gamma_ub, gamma_lb = math.sqrt(ub / g), math.sqrt(max(lb, 0.0) / g)
+        status, in_front = cheirality(status, rep.depths[inliers], self.opts.require_in_front)
+        msg = f"TLS: {int(inliers.sum())}/{self.N} inliers, {self.nodes} nodes, {self.bounds.n_solved} L2 " \
+              f"sub-problems"
+        if stopped:
+            msg += f"; stopped by the {stopped}"
+        image_points = np.array([np.full(2, np.nan) if not np.isfinite(r) else p for p, r in
+                                 zip(_projections(X, self.C), rep.residuals)])
+        attempt = Attempt("tls", None, status.value, gamma_lb, gamma_ub, "branch-and-bound", None, (),
+                          timings["total"])
+        return TriangulationResult("tls", status, X=X, gamma_ub=gamma_ub, gamma_lb=gamma_lb, optimal=certified,
+                                   image_points=image_points, certified_by="branch-and-bound" if certified else None,
+                                   message=msg, timings=timings, attempts=(attempt,), in_front=in_front,
+                                   depths=rep.depths, residuals=rep.residuals, inliers=inliers)
+
+
+def _projections(X, cameras) -> np.ndarray:
+    Xh = np.append(X, 1.0)
+    u = cameras @ Xh
+    with np.errstate(all="ignore"):
+        return u[:, :2] / u[:, 2:]
+
+
+def triangulate_robust(cams: np.ndarray, regions, c: np.ndarray, opts, t0: float | None = None) -> TriangulationResult:
+    """Certified TLS triangulation of one point (module docstring) for validated cameras and regions and the
+    thresholds of :func:`robust_thresholds`.  With every threshold infinite it is the L2 path (its result,
+    every view an inlier)."""
+    from .triangulate import triangulate
+
+    t0 = time.perf_counter() if t0 is None else t0
+    if not np.any(np.isfinite(c)):
+        res = triangulate(cams, regions, options=opts)
+        inl = None if res.residuals is None else np.ones(len(regions), bool)
+        import dataclasses
+        return dataclasses.replace(res, inliers=inl)
+    return drive([_Search(cams, regions, c, opts, t0)])[0]
+
+
+def drive(searches: list) -> list:
+    """Run TLS searches together: every round, the subset bounds all of them wait for are computed in one batch
+    per subset size (:func:`tritools.solve.robust_bounds.compute_many`).  A search that raises gets a
+    SOLVER_FAILED result (its message says why); results in input order."""
+    gens = [s.run() for s in searches]
+    results: list = [None] * len(gens)
+    pending: dict = {}
+
+    def step(i: int) -> None:
+        try:
+            pending[i] = gens[i].send(None)
+        except StopIteration as stop:
+            pending.pop(i, None)
+            results[i] = stop.value
+        except Exception as exc:  # noqa: BLE001 - one failing problem never stops the others
+            log.debug("robust search failed", exc_info=True)
+            pending.pop(i, None)
+            results[i] = TriangulationResult("tls", Status.SOLVER_FAILED, message=f"{type(exc).__name__}: {exc}")
+
+    for i in range(len(gens)):
+        step(i)
+    while pending:
+        compute_many([(searches[i].bounds, req) for i, req in pending.items()])
+        for i in list(pending):
+            step(i)
+    return results

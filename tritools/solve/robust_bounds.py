@@ -1,0 +1,184 @@
+"""Certified L2 lower bounds of view subsets, cached: the node bounds of the robust (TLS) search.
+
+For a subset S of the views, L2*(S) = min_X sum_{i in S} d_i(X)^2 (pixels^2, d_i the distance from
+Phi(X, P_i) to the region R_i) is bounded below by the project's certified L2 path on the sub-problem
+(cameras and regions of S): L2*(S) >= 2 |S| gamma_LB(S)^2, valid under floating point whether or not the
+sub-problem certified (every gamma_LB of :func:`tritools.triangulate` is a rigorous bound).  The product is
+rounded downward (:data:`ROUND_DOWN`).  Facts used for free:
+
+* |S| <= 1: L2*(S) = 0 (the projection of a point on the view's ray can sit anywhere in the region);
+* monotonicity: S subset of T gives L2*(S) <= L2*(T), so a caller may take the max with any subset's bound.
+
+Point regions go through the vectorised verification path (:func:`tritools.solve.fastpath.verify_points`),
+one numpy call per subset size; what it does not certify (and every other region type) through
+:func:`tritools.triangulate` on the sub-problem, within the caller's deadline.  Every sub-problem also yields
+an estimate X_S, which the search uses as a candidate for the TLS upper bound.
+"""
+from __future__ import annotations
+
+import math
+from collections import defaultdict
+
+import numpy as np
+
+from ..model.regions import Point
+from ..result import Status
+from .fastpath import verify_points
+from .sdp_batch import solve_corollary1_points
+
+__all__ = ["SubsetBounds", "compute_many", "ROUND_DOWN", "TRUSTED_LOWER_BOUND"]
+
+#: f = 2 |S| gamma^2 is computed with a few roundings (and gamma came through a square root): multiplying by
+#: this factor keeps the product a lower bound by a wide margin (relative error ~1e-15 at most).
+ROUND_DOWN = 1.0 - 1e-12
+#: statuses whose gamma_lb is a valid lower bound (a numerical failure's is not trusted; failures have none)
+TRUSTED_LOWER_BOUND = frozenset({Status.OPTIMAL, Status.BEHIND_CAMERA, Status.NOT_CERTIFIED, Status.TIME_LIMIT,
+                                 Status.BUDGET_EXCEEDED})
+#: time limit (seconds) of one sub-problem solved by :func:`tritools.triangulate` (capped by the caller's deadline)
+SUB_TIME_LIMIT = 10.0
+
+
+class SubsetBounds:
+    """Cache of certified L2 lower bounds (pixels^2) and estimates per view subset (a ``frozenset``).
+
+    ``bound(S)`` reads the cache; :meth:`compute` fills it for many subsets at once (batched by size for
+    point regions).  ``estimates`` collects every (subset, X) produced, for the caller's upper bound;
+    ``n_solved`` counts sub-problems solved."""
+
+    def __init__(self, cameras: np.ndarray, regions, options, deadline):
+        self.C = cameras
+        self.regions = list(regions)
+        self.opts = options
+        self.deadline = deadline
+        self.points = all(isinstance(r, Point) for r in self.regions)
+        self.x = np.array([r.center for r in self.regions], float) if self.points else None
+        self._lb: dict = {}
+        self._X: dict = {}
+        self.n_solved = 0
+        self.weak: set = set()                 # subsets bounded by a light solve that did not certify
+        self.new_estimates: list = []          # (subset, X) produced since the caller last read them
+
+    def known(self, S: frozenset) -> bool:
+        return len(S) <= 1 or S in self._lb
+
+    def bound(self, S: frozenset) -> float:
+        """The cached lower bound of L2*(S) (0 for |S| <= 1)."""
+        return 0.0 if len(S) <= 1 else self._lb[S]
+
+    def estimate(self, S: frozenset):
+        return self._X.get(S)
+
+    def compute(self, subsets) -> None:
+        """Fill the cache for every subset not known yet (duplicates and |S| <= 1 skipped)."""
+        compute_many([(self, subsets)])
+
+    def strengthen(self, S: frozenset) -> bool:
+        """Solve S again with the full degree plan when its bound came from a light (delta = 2) solve that did not
+        certify; True when the bound may have changed."""
+        if S not in self.weak or self.deadline.expired:
+            return False
+        self.weak.discard(S)
+        old = self._lb.pop(S)
+        self._solve_one(S, light=False)
+        self._lb[S] = max(self._lb[S], old)
+        return True
+
+    def _solve_one(self, S: frozenset, light: bool = True) -> None:
+        """One sub-problem through :func:`tritools.triangulate`: with ``light`` only its degree-2 steps (a sub-problem
+        with outliers needs a large bound, not a tight one; :meth:`strengthen` runs the full plan where the
+        search needs it)."""
+        from .triangulate import triangulate
+
+        views = sorted(S)
+        remaining = self.deadline.remaining()
+        limit = SUB_TIME_LIMIT if remaining is None else min(SUB_TIME_LIMIT, remaining)
+        opts = self.opts.replace(time_limit=max(1e-3, limit))
+        if light:
+            try:
+                opts = opts.replace(max_delta=2)
+            except ValueError:
+                light = False
+        try:
+            res = triangulate(self.C[views], [self.regions[i] for i in views], options=opts)
+        except (ValueError, TypeError, ArithmeticError, np.linalg.LinAlgError):
+            self._store(S, 0.0, None)           # e.g. coincident or duplicated cameras: 0 is a valid bound
+            return
+        self.n_solved += 1
+        lb = 0.0
+        if res.status in TRUSTED_LOWER_BOUND and res.gamma_lb is not None and math.isfinite(res.gamma_lb):
+            lb = 2 * len(views) * max(res.gamma_lb, 0.0) ** 2 * ROUND_DOWN
+        if light and not res.status.certified:
+            self.weak.add(S)
+        self._store(S, lb, res.X)
+
+    def _store(self, S: frozenset, lb: float, X) -> None:
+        self._lb[S] = max(lb, 0.0)
+        if X is not None and np.all(np.isfinite(X)):
+            X = np.asarray(X, float)
+            self._X[S] = X
+            self.new_estimates.append((S, X))
+
+    def take_estimates(self) -> list:
+        out, self.new_estimates = self.new_estimates, []
+        return out
+
+
+def compute_many(requests) -> None:
+    """Fill the caches of several :class:`SubsetBounds` (``requests``: (cache, subsets) pairs) at once: point
+    sub-problems of equal size, from every cache, in one vectorised verification call (then one batched SDP call
+    for what it did not certify; what both hand back is bounded by 0 for now and marked weak); other regions one
+    by one through :func:`tritools.triangulate`."""
+    groups, single = defaultdict(list), []
+    for sb, subsets in requests:
+        for S in dict.fromkeys(subsets):
+            if not sb.known(S):
+                if sb.points:
+                    groups[(len(S), id(sb.opts))].append((sb, S))
+                else:
+                    single.append((sb, S))
+    for key in sorted(groups, key=lambda k: k[0]):
+        items = groups[key]
+        left = _batch(items, _verify_stack)
+        left = _batch(left, _sdp_stack) if left else []
+        for sb, S in left:                      # handed back by both batches (typically subsets with outliers):
+            sb._store(S, 0.0, None)             # 0 for now (the caller keeps its inherited bounds);
+            sb.weak.add(S)                      # strengthen() solves them one by one where the search needs it
+    for sb, S in single:
+        if sb.deadline.expired:
+            sb._store(S, 0.0, None)             # 0 is a valid bound; the search reports the time limit
+        else:
+            sb._solve_one(S)
+
+
+def _verify_stack(C, x, opts):
+    """(decided (M,), gamma_lb, X) of the vectorised verification: certified problems only."""
+    b = verify_points(C, x, tolerances=opts.tolerances)
+    return b.certified & np.isfinite(b.gamma_lb), b.gamma_lb, b.X
+
+
+def _sdp_stack(C, x, opts):
+    """(decided, gamma_lb, X) of the batched Corollary 1, delta = 2 SDP
+    (:func:`tritools.solve.sdp_batch.solve_corollary1_points`): its rigorous lower bound wherever it decided the
+    problem, certified or not."""
+    b = solve_corollary1_points(C, x, tolerances=opts.tolerances, refine=opts.refine)
+    return b.done & np.isfinite(b.gamma_lb), b.gamma_lb, b.X
+
+
+def _batch(items: list, step) -> list:
+    """Run ``step`` on the stacked equal-size point sub-problems of ``items`` ((cache, subset) pairs); store what
+    it decided, return the rest."""
+    C = np.stack([sb.C[sorted(S)] for sb, S in items])
+    x = np.stack([sb.x[sorted(S)] for sb, S in items])
+    try:
+        decided, gamma_lb, X = step(C, x, items[0][0].opts)
+    except (ValueError, np.linalg.LinAlgError, FloatingPointError):
+        return items
+    n = C.shape[1]
+    left = []
+    for k, (sb, S) in enumerate(items):
+        if decided[k]:
+            sb._store(S, 2 * n * float(gamma_lb[k]) ** 2 * ROUND_DOWN, X[k])
+            sb.n_solved += 1
+        else:
+            left.append((sb, S))
+    return left

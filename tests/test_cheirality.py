@@ -200,3 +200,21 @@ def test_colmap_conversion_refuses_a_reflected_frame():
     Pm = P @ np.diag([1.0, 1.0, -1.0, 1.0])
     with pytest.raises(ValueError, match="reflected"):
         model_from_projections(Pm, (640, 480), tracks)
+
+
+@pytest.mark.parametrize("path", ["points", "discs", "robust"])
+def test_every_single_call_path_judges_in_front_in_the_given_frame(path):
+    """The single-call verification of points, the disc verification and the robust search report depths in
+    the world frame they are given (a mirrored scene is in front only when read as ``reflected``)."""
+    from tritools import Ellipse
+
+    rng = np.random.default_rng(5)
+    P, X, _ = scene(rng, 4)
+    Pm, Xm = mirrored(P, X)
+    x = np.array([(Q @ np.append(Xm, 1))[:2] / (Q @ np.append(Xm, 1))[2] for Q in Pm])
+    regions = [Ellipse(p, np.eye(2) / 4.0) for p in x] if path == "discs" else [Point(p) for p in x]
+    kw = {"robust": 5.0} if path == "robust" else {}
+    r = triangulate(Pm, regions, require_in_front=True, world_frame="reflected", **kw)
+    assert r.optimal and r.status == Status.OPTIMAL and r.in_front and np.all(r.depths > 0), (r.status, r.depths)
+    r = triangulate(Pm, regions, require_in_front=True, **kw)
+    assert r.status == Status.BEHIND_CAMERA and not r.in_front and np.all(r.depths < 0)

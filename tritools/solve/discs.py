@@ -199,7 +199,7 @@ def solve_disc_group(group, opts):
     C = np.where(valid[:, None, None, None], C, np.eye(3, 4))
     b = verify_discs(C, x, rho, tolerances=opts.tolerances)
     cert = b.certified & valid
-    dep = depths_stack(C, b.X)
+    dep = depths_stack(C, b.X, opts.world_frame)
     status, in_front = cheirality(np.where(cert, Status.OPTIMAL.value, None), dep, opts.require_in_front)
     share = (time.perf_counter() - t0) / max(1, len(group))
     N = C.shape[1]

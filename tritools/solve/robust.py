@@ -158,7 +158,7 @@ class _Search:
 
     # ------------------------------------------------------------------ costs and the upper bound
     def residuals(self, X) -> np.ndarray:
-        rep = point_report(X, self.C, self.regions)
+        rep = point_report(X, self.C, self.regions, self.opts.world_frame)
         return np.full(self.N, np.inf) if rep.residuals is None else rep.residuals
 
     def screen(self, Xs: np.ndarray) -> np.ndarray:
@@ -377,7 +377,7 @@ class _Search:
     def result(self, lb: float, stopped, timings) -> TriangulationResult:
         ub = self.best_f
         X = self.best_X
-        rep = point_report(X, self.C, self.regions)
+        rep = point_report(X, self.C, self.regions, self.opts.world_frame)
         inliers = rep.residuals < self.c
         certified = bool(self.tol.certified(lb, ub, self.scale))     # lb is valid also when the search stopped
         contradicts = bool(self.tol.contradicts(lb, ub, self.scale))

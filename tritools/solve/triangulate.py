@@ -226,7 +226,8 @@ class _PointSolve:
         one): that function already decided the certificate on the reported numbers (gamma_LB <= gamma(X) in
         pixels), so only the residuals, depths and cheirality are added (vectorised, no second decision)."""
         X = b.X[0]
-        gamma, res, dep = points_report_stack(self.cams[None], self._centres()[None], X[None])
+        gamma, res, dep = points_report_stack(self.cams[None], self._centres()[None], X[None],
+                                             self.opts.world_frame)
         status, in_front = cheirality(Status.OPTIMAL, dep[0], self.opts.require_in_front)
         K = self.N * (self.N - 1) // 2
         return TriangulationResult(step.result_method.value, status, X=X, gamma_ub=float(gamma[0]),

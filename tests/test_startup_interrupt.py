@@ -1,7 +1,7 @@
 """Issue 24, defect 10: Ctrl-C while ``tritools`` starts (importing numpy, scipy, sospoly) exits 130
 with the one line ``tritools: interrupted`` -- before the fix it printed a 13-57-line traceback and
-died by the signal.  An interrupt in the first ~30 ms (inside the interpreter's own ``site`` import,
-before any tritools code runs) is outside tritools' reach and is not tested."""
+died by the signal.  An interrupt inside the interpreter's own ``site`` import (the first ~30 ms, more
+on a loaded machine), before any tritools code runs, is outside tritools' reach and is skipped."""
 from __future__ import annotations
 
 import os
@@ -19,7 +19,7 @@ from tests.test_cli import example4_doc
 ROOT = Path(__file__).resolve().parents[1]
 
 
-@pytest.mark.parametrize("delay", [0.1, 0.25, 0.5, 0.8])
+@pytest.mark.parametrize("delay", [0.2, 0.4, 0.7, 1.0])
 def test_ctrl_c_during_start_up_exits_130_with_one_line(tmp_path, delay):
     problems = write(tmp_path, example4_doc())
     # the delay counts from the end of the interpreter's own start-up (its `site` import is outside tritools'
@@ -35,6 +35,8 @@ def test_ctrl_c_during_start_up_exits_130_with_one_line(tmp_path, delay):
     out, err = proc.communicate(timeout=120)
     if proc.returncode == 0:            # a very fast machine finished first: nothing to interrupt
         pytest.skip("the command finished before the interrupt")
+    if "init_import_site" in err:       # a loaded machine was still in the interpreter's own start-up
+        pytest.skip("the interrupt came during Python's site import, before any tritools code runs")
     assert proc.returncode == 130 and err == "tritools: interrupted\n", (proc.returncode, err)
 
 

@@ -62,7 +62,19 @@ def test_minimize_with_150_variables_stops_at_the_time_limit():
     t0 = time.perf_counter()
     res = sospoly.minimize(f, eq, ineq, budget=sospoly.Budget(time_limit=5.0))
     elapsed = time.perf_counter() - t0
-    assert elapsed < 5.0 + 2 * SLACK, elapsed               # 10.8 s before
+    assert elapsed < 5.0 + 3 * SLACK, elapsed               # 10.8 s before; ~5.1 s measured (load: margin)
     assert res.status in (sospoly.SolveStatus.TIME_LIMIT, sospoly.SolveStatus.OPTIMAL)
     if not res.optimal and res.lower_bound is not None:
         assert res.lower_bound <= 0.0 + 1e-6                  # chained singular: f* = 0 at the origin
+
+
+def test_the_verification_path_stops_at_the_time_limit():
+    """Corollary 1 with 100 segment regions: the delta = 2 verification builds the problem first; its
+    build stops at the limit and the result is time_limit (not an exception)."""
+    from tritools.model.regions import Segment
+
+    sc = random_scene(100, 1, seed=1)
+    regions = [Segment(p - 1, p + 1) for p in sc.points2d[0]]
+    t0 = time.perf_counter()
+    res = triangulate(sc.cameras, regions, "corollary1", budget=sospoly.Budget(time_limit=0.5))
+    assert res.status == tritools.Status.TIME_LIMIT and time.perf_counter() - t0 < 0.5 + SLACK

@@ -128,7 +128,8 @@ def locked_directory(folder):
         return
     fd = os.open(folder, os.O_RDONLY | getattr(os, "O_DIRECTORY", 0))
     try:
-        fcntl.flock(fd, fcntl.LOCK_EX)
+        with contextlib.suppress(OSError):      # a file system without flock (ENOLCK): renames stay atomic
+            fcntl.flock(fd, fcntl.LOCK_EX)
         yield
     finally:
         os.close(fd)            # releases the lock
@@ -193,7 +194,8 @@ def _hold(folder: Path):
     except ImportError:         # pragma: no cover - not POSIX
         return None
     fd = os.open(folder, os.O_RDONLY | getattr(os, "O_DIRECTORY", 0))
-    fcntl.flock(fd, fcntl.LOCK_EX)
+    with contextlib.suppress(OSError):          # no flock here: the stage is simply not protected from a sweep
+        fcntl.flock(fd, fcntl.LOCK_EX)
     return fd
 
 

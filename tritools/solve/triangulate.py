@@ -198,6 +198,17 @@ class _PointSolve:
         one (so batches decide exactly as this); other delta = 2 programs without inequalities or auxiliary
         variables: the generic test.  None when it does not certify."""
         t = time.perf_counter()
+        try:
+            res = self._verify(step)
+        except TimeLimitReached:          # building the problem ran out of time: the SDP step reports it
+            res = None
+        self.timings["verify"] = time.perf_counter() - t
+        self.attempts.append(Attempt(step.method.value, 2, "verified" if res is not None else "verification_failed",
+                                     None if res is None else res.gamma_lb, None if res is None else res.gamma_ub,
+                                     "verification", "dense", (), time.perf_counter() - t))
+        return res
+
+    def _verify(self, step: Step) -> TriangulationResult | None:
         res = None
         if step.method == Method.COROLLARY1 and all(isinstance(r, Point) for r in self.regions):
             x = self._centres()[None]
@@ -215,10 +226,6 @@ class _PointSolve:
                                    n_lmivar=sospoly.n_lmivar_formula(n_vars, 2, [2] * K, [2] * self.N))
         else:
             res = self._verify_generic(step)
-        self.timings["verify"] = time.perf_counter() - t
-        self.attempts.append(Attempt(step.method.value, 2, "verified" if res is not None else "verification_failed",
-                                     None if res is None else res.gamma_lb, None if res is None else res.gamma_ub,
-                                     "verification", "dense", (), time.perf_counter() - t))
         return res
 
     def _report_verified_points(self, step: Step, b) -> TriangulationResult:

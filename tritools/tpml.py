@@ -12,10 +12,12 @@ p_i the homogenisation of f_i in x_i by s_i (degree <= 2 in (u, s), so p_i has d
 Hence  2N gamma(X)^2 = min_y sum_i p_i / s_i^2  subject to the regions' g_i = 0, h_i >= 0.
 
 The ratios' denominators s_i^2 vanish on camera i's principal plane, so the relaxation is posed on
-the set where every |s_i| >= ``depth_min`` (away from every principal plane, either side) and X is
-within ``radius`` of the linear triangulation X0 of the region centres (variables X = X0 + radius Z,
-||Z|| <= 1, for O(1) data): there every s_i^2 >= depth_min^2 is certified, and the bound is a lower
-bound of gamma on that set only (not of gamma*); the estimate's gamma is exact, as for every baseline.
+the set where X is at least ``depth_min`` (world units) from every camera's principal plane, either
+side (|s_i| >= depth_min ||P_i[2, :3]||), and within ``radius`` of the linear triangulation X0 of the
+region centres (variables X = X0 + radius Z, ||Z|| <= 1, for O(1) data): there every s_i^2 is
+certified positive, and the bound is a lower bound of gamma on that set only (not of gamma*); the
+estimate's gamma is exact, as for every baseline.  Defaults: radius = 1 + ||X0||, depth_min =
+``TPML_DEPTH_FRACTION`` * radius.
 
 N_LMIVAR: the program of :func:`sospoly.minimize_ratios` -- one Gram matrix per view over all
 3 + sum n_i variables, free w_i, Putinar multipliers of the region and depth constraints -- not
@@ -36,8 +38,8 @@ from .result import Status, TriangulationResult
 
 __all__ = ["TpmlResult", "tpml", "tpml_bound", "TPML_DEPTH_FRACTION", "TPML_RADIUS_FACTOR"]
 
-#: default depth_min: this fraction of the smallest |s_i| at the linear start
-TPML_DEPTH_FRACTION = 0.25
+#: default depth_min: this fraction of the radius (world units from each principal plane)
+TPML_DEPTH_FRACTION = 0.02
 #: default radius: this factor times (1 + ||X_start||)
 TPML_RADIUS_FACTOR = 1.0
 
@@ -84,7 +86,8 @@ def _problem(C, R, X0, depth_min, radius):
             eq.append(_drop_u(g, ext, gens))
         for h in rp.ineq:
             ineq.append(_drop_u(h, ext, gens))
-        ineq.append(s * s - depth_min**2)          # |s_i| >= depth_min: q_i = s_i^2 certified positive
+        floor = depth_min * float(np.linalg.norm(P[2, :3]))
+        ineq.append(s * s - floor**2)              # |s_i| >= floor: q_i = s_i^2 certified positive
         off += n_aux[i]
     ineq.append(1.0 - V[0] ** 2 - V[1] ** 2 - V[2] ** 2)
     return terms, eq, ineq, gens
@@ -111,8 +114,8 @@ def tpml_bound(cameras, regions, degree: int = 4, *, depth_min: float | None = N
     if not np.all(s0 > 0):
         return TpmlResult(_finish("tpml", None, C, R, t0, "the linear start lies on a camera's principal plane",
                                   Status.ILL_POSED), None, None, 0)
-    depth_min = TPML_DEPTH_FRACTION * float(s0.min()) if depth_min is None else float(depth_min)
     radius = TPML_RADIUS_FACTOR * (1.0 + float(np.linalg.norm(X0))) if radius is None else float(radius)
+    depth_min = TPML_DEPTH_FRACTION * radius if depth_min is None else float(depth_min)
     if not (depth_min > 0 and np.isfinite(depth_min) and radius > 0 and np.isfinite(radius)):
         raise ValueError(f"depth_min and radius must be positive and finite, got {depth_min!r}, {radius!r}")
     terms, eq, ineq, gens = _problem(C, R, X0, depth_min, radius)

@@ -267,3 +267,27 @@ def test_a_folder_that_cannot_take_a_stage_is_named_not_the_stage(model_in, tmp_
     out.mkdir()
     assert main(["colmap", str(model_in), str(out)]) == 2
     assert capsys.readouterr().err == f"tritools: error: {out}: Permission denied\n"
+
+
+def test_a_model_written_inside_an_outer_stage_does_not_wait_for_its_own_lock(model_in, tmp_path):
+    """colmap-from-oxford writes the model (itself staged) into the stage of OUT: the inner writer must
+    use the outer stage, not lock it again (it held the outer writer's lock forever)."""
+    import threading
+
+    from tritools.sfm import atomic_directory
+
+    arrays = read_model_arrays(model_in)
+    out = tmp_path / "out"
+    done = []
+
+    def run():
+        with atomic_directory(out) as stage:
+            write_model_arrays(arrays, stage, "bin")
+        done.append(True)
+
+    t = threading.Thread(target=run, daemon=True)
+    t.start()
+    t.join(60)
+    assert done, "writing a model inside an atomic directory deadlocked"
+    assert sorted(p.name for p in out.iterdir()) == ["cameras.bin", "images.bin", "points3D.bin"]
+    assert read_model_arrays(out).equals(arrays)

@@ -144,6 +144,11 @@ def staged_directory(target):
     created for the call and still empty is removed again).  A name taken by a directory in
     ``target`` raises :class:`DirectoryInTheWay` before anything is replaced."""
     target = Path(target)
+    if target.name.startswith(STAGING_PREFIX) and target.is_dir():
+        # already the (locked) stage of an outer writer, which commits its files: a second stage and lock
+        # inside it would wait for the outer writer's own lock forever
+        yield target
+        return
     if target.exists() and not target.is_dir():
         raise NotADirectoryError(20, "exists and is not a directory", str(target))
     created = not target.exists()

@@ -291,9 +291,12 @@ def test_level_set_relaxation_contains_the_level_set():
     assert len(inside) > 10
     for p in inside:
         check_covers(res, p, cams)
-    for W in (res.witness_lo, res.witness_hi):
-        for w in W[np.all(np.isfinite(W), axis=1)]:
+    for W, bound in ((res.witness_lo, res.lo), (res.witness_hi, res.hi)):
+        assert np.all(np.isfinite(W))                          # local searches found points of L
+        for k, w in enumerate(W):
             assert tritools.gamma(w, cams, regions) <= tau
+            assert abs(w[k] - bound[k]) <= res.gap
+    assert 0 < res.gap_rel < 0.5                               # the relaxation's looseness, measured
 
 
 def test_exact_points_with_roundoff_widening_hold_the_point():

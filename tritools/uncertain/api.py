@@ -433,41 +433,8 @@ def uncertainty(cameras, regions, *, level=None, estimate=None, options: Uncerta
         Xe = _estimate_arg(estimate, C[None], [regs])
         res = _group(C[None], [regs], Xe, Xe, conv, opts)[0]
         return _unwidened_if_empty(res, cameras, regions, estimate, opts) if widened else res
-    return _level_relaxation(cameras, regions, level, estimate, opts)
-
-
-def _level_relaxation(cameras, regions, level, estimate, opts) -> UncertaintyResult:
-    """Outer bounds of ``L = {X : gamma(X) <= tau}``: ``gamma(X) <= tau`` implies
-    ``d(Phi(X, P_i), R_i) <= sqrt(2N) tau`` in every view, so L lies in the per-view set of the regions
-    dilated by ``sqrt(2N) tau`` (up to sqrt(2N) loose; the SOS tightening is not implemented).  Witnesses
-    are kept only where ``gamma(w) <= tau`` (else NaN, and ``gap`` is inf)."""
-    from dataclasses import replace
-
-    from ..model.geometry import gamma
-
-    if isinstance(level, bool) or not isinstance(level, (int, float, np.integer, np.floating)) or \
-            not np.isfinite(level) or level < 0:
-        raise ValueError(f"level must be a finite number >= 0 (a bound tau on gamma, pixels), got {level!r}")
-    if np.any(np.atleast_1d(np.asarray(opts.dilation, float)) != 0):
-        raise ValueError("dilation must be 0 with level (the level set is defined by the regions as given)")
-    C = validate_cameras(cameras, min_views=1, require_distinct=False)
-    regs = as_regions(regions, len(C))
-    r = float(np.sqrt(2 * len(C)) * level) * (1 + 1e-12)
-    out = uncertainty(C, regs, estimate=estimate, options=replace(opts, dilation=r))
-    def keep(W):
-        W = W.copy()
-        for k in range(len(W)):
-            if np.all(np.isfinite(W[k])) and float(gamma(W[k], C, regs)) > level:
-                W[k] = np.nan
-        return W
-    wl, wh = keep(out.witness_lo), keep(out.witness_hi)
-    gap = out.gap if np.array_equal(np.isnan(wl), np.isnan(out.witness_lo)) and \
-        np.array_equal(np.isnan(wh), np.isnan(out.witness_hi)) else np.inf
-    dw, inner = out.distance_witness, out.distance_inner
-    if np.all(np.isfinite(dw)) and float(gamma(dw, C, regs)) > level:
-        dw, inner = np.full(3, np.nan), np.nan
-    return replace(out, witness_lo=wl, witness_hi=wh, gap=gap, gap_rel=gap if not np.isfinite(gap) else out.gap_rel,
-                   distance_witness=dw, distance_inner=inner, convexified=True, definition="level_relaxed")
+    from .level import level_bounds
+    return level_bounds(cameras, regions, level, estimate, opts)
 
 
 def uncertainty_many(cameras, regions, *, estimates=None, options: UncertaintyOptions | None = None,

@@ -48,14 +48,19 @@ class UncertaintyOptions:
     otherwise dilated are widened by the round-off of a computed projection (16 eps relative, see
     :func:`_roundoff_radii`), so exact data give a tiny set holding the point instead of an empty or
     degenerate one; when such a widened set yields no feasible point at all, the regions as given are
-    solved too and their Farkas certificate, if any, reports the set empty."""
+    solved too and their Farkas certificate, if any, reports the set empty; ``level_degree``: relaxation
+    degree of the SOS bounds of a level set of point regions (None: the dilation relaxation only)."""
     dilation: float | tuple = 0.0
     solver: StackedConicOptions = field(default_factory=StackedConicOptions)
     witness_rtol: float = 1e-9
     depth_bounds: bool = True
     widen_roundoff: bool = True
+    level_degree: int | None = 2
 
     def __post_init__(self) -> None:
+        d = self.level_degree
+        if d is not None and (isinstance(d, bool) or not isinstance(d, (int, np.integer)) or d < 2 or d % 2):
+            raise ValueError(f"level_degree must be None or an even integer >= 2, got {d!r}")
         for name in ("depth_bounds", "widen_roundoff"):
             if not isinstance(getattr(self, name), (bool, np.bool_)):
                 raise TypeError(f"{name} must be True or False, got {getattr(self, name)!r}")

@@ -6,7 +6,8 @@ by ``sqrt(2N) tau``: its certified bounds (:func:`tritools.uncertainty`) are val
 up to sqrt(2N) loose.  Inner witnesses are points of L itself: for each side of the box a local
 search (SLSQP, ``min +-X_k s.t. gamma(X)^2 <= tau^2``, from the local L2 optimum) whose result is
 kept only if ``gamma(w) <= tau`` holds when re-evaluated; ``gap`` then measures the looseness of the
-relaxation against them.  An SOS bound of L with the rigour of gamma_LB is not implemented.
+bounds against them.  For point regions the box is tightened by certified SOS bounds
+(:func:`_sos_box`, ``sospoly.minimize`` with a radius: the rigour of gamma_LB).
 """
 from __future__ import annotations
 
@@ -15,7 +16,7 @@ from dataclasses import replace
 import numpy as np
 
 from ..model.geometry import dlt, gamma, gamma_validated, refine_l2, validate_cameras
-from ..model.regions import as_regions
+from ..model.regions import Point, as_regions
 
 __all__ = ["level_bounds"]
 
@@ -90,6 +91,44 @@ def _extreme(C, regs, tau, start, k, sign, scale):
     return None
 
 
+def _sos_box(C, regs, tau, lo, hi, degree):
+    """Tighter bounds of L for point regions through sospoly: with ``X = c + s u`` (the relaxation's box,
+    ``|u_k| <= 1``) and ``x_i = x^_i + sqrt(2N) tau v_i`` (``sum ||v_i||^2 <= 1`` is ``gamma <= tau``),
+    ``min +-u_k`` subject to the projection equalities ``x_i (p3_i . X~) = p12_i . X~`` (each row
+    scaled) is a polynomial program whose certified lower bound (``sospoly.minimize`` at ``degree``,
+    rigorous with ``radius = 2``: ``||(u, v)|| <= 2`` on the feasible set) bounds ``X_k``.  Returns
+    (lo, hi) intersected with the box, or None if a program gives no bound."""
+    import sospoly
+
+    from .rigour import round_down, round_up
+
+    N = len(C)
+    xs = np.array([r.x for r in regs])
+    c, s = lo / 2.0 + hi / 2.0, hi / 2.0 - lo / 2.0
+    tp = float(np.sqrt(2 * N) * tau)
+    V = sospoly.variables(" ".join([f"u{k}" for k in range(3)] + [f"v{i}_{j}" for i in range(N) for j in range(2)]))
+    u, v = V[:3], [V[3 + 2 * i:5 + 2 * i] for i in range(N)]
+    eqs = []
+    for i, P in enumerate(C):
+        Xt = [float(c[k]) + float(s[k]) * u[k] for k in range(3)]
+        h = [sum(float(P[r, k]) * Xt[k] for k in range(3)) + float(P[r, 3]) for r in range(3)]
+        for j in range(2):
+            scale = float(np.abs(P[j, :3]) @ np.abs(s) + abs(xs[i, j]) * (np.abs(P[2, :3]) @ np.abs(s)))
+            eqs.append(((float(xs[i, j]) + tp * v[i][j]) * h[2] - h[j]) * (1.0 / max(scale, 1e-300)))
+    ineq = [1 - sum(w[0] ** 2 + w[1] ** 2 for w in v)] + [1 - u[k] ** 2 for k in range(3)]
+    new_lo, new_hi = lo.copy(), hi.copy()
+    for k in range(3):
+        for sign in (1.0, -1.0):
+            res = sospoly.minimize(sign * u[k], eq=eqs, ineq=ineq, degree=degree, radius=2.0)
+            if res.lower_bound is None or not np.isfinite(res.lower_bound):
+                return None
+            if sign > 0:
+                new_lo[k] = max(lo[k], float(round_down(c[k] + s[k] * res.lower_bound)))
+            else:
+                new_hi[k] = min(hi[k], float(round_up(c[k] - s[k] * res.lower_bound)))
+    return new_lo, new_hi
+
+
 def level_bounds(cameras, regions, level, estimate, opts):
     """:func:`tritools.uncertainty` with ``level=tau`` (module docstring)."""
     from .api import uncertainty
@@ -101,6 +140,12 @@ def level_bounds(cameras, regions, level, estimate, opts):
     regs = as_regions(regions, len(C))
     r = float(np.sqrt(2 * len(C)) * tau) * (1 + 1e-12)
     out = uncertainty(C, regs, estimate=estimate, options=replace(opts, dilation=r, widen_roundoff=False))
+    definition = "level_relaxed"
+    if opts.level_degree and out.status.value == "bounded" and all(isinstance(g, Point) for g in regs):
+        box = _sos_box(C, regs, tau, out.lo, out.hi, opts.level_degree)
+        if box is not None:
+            out = _with_box(out, *box)
+            definition = "level_sos"
     nan = np.full((3, 3), np.nan)
     start = _start(C, regs, tau, estimate) if out.status.value in ("bounded", "unbounded") else None
     wl, wh = nan.copy(), nan.copy()
@@ -129,4 +174,13 @@ def level_bounds(cameras, regions, level, estimate, opts):
     else:
         dw, inner = np.full(3, np.nan), np.nan
     return replace(out, witness_lo=wl, witness_hi=wh, gap=gap, gap_rel=gap_rel, distance_witness=dw,
-                   distance_inner=inner, convexified=True, definition="level_relaxed")
+                   distance_inner=inner, convexified=definition == "level_relaxed", definition=definition)
+
+
+def _with_box(out, lo, hi):
+    """The result with a tighter box: the distance bound from its farthest corner (rounded up)."""
+    from .rigour import round_up
+
+    far = np.maximum(np.abs(lo - out.estimate), np.abs(hi - out.estimate))
+    dist = float(round_up(np.sqrt(np.sum(far * far)) * (1 + 1e-15)))
+    return replace(out, lo=lo, hi=hi, max_distance=min(out.max_distance, dist))

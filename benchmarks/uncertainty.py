@@ -216,7 +216,7 @@ def run_level(trials, seed):
             sampled += len(inL)
             outside += int(np.count_nonzero(~np.all((inL >= res.lo) & (inL <= res.hi), axis=1)))
         print(f"| {N} | {trials} | {1e3 * tl / trials:.1f} | {1e3 * tt / trials:.1f} | {tl / tt:.1f} | "
-              f"{np.median(gaps):.2f} | {sampled} | {outside} |")
+              f"{np.median(gaps):.1e} | {sampled} | {outside} |")
 
 
 def main(argv=None):

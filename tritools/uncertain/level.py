@@ -119,7 +119,7 @@ def _sos_box(C, regs, tau, lo, hi, degree):
     new_lo, new_hi = lo.copy(), hi.copy()
     for k in range(3):
         for sign in (1.0, -1.0):
-            res = sospoly.minimize(sign * u[k], eq=eqs, ineq=ineq, degree=degree, radius=2.0)
+            res = sospoly.minimize(sign * u[k], eq=eqs, ineq=ineq, degree=degree, radius=2.0, refine=False)
             if res.lower_bound is None or not np.isfinite(res.lower_bound):
                 return None
             if sign > 0:

@@ -350,3 +350,13 @@ def test_dilation_contains_the_r_neighbourhood(kind):
     near = P[np.asarray(region.distance(P)) <= r]
     assert len(near) > 100
     assert np.all(np.asarray(big.distance(near)) == 0.0)
+
+
+def test_result_carries_the_triangulation_angle():
+    K = np.diag([800.0, 800.0, 1.0])
+    cams = np.array([K @ np.hstack([np.eye(3), [[-b], [0.0], [0.0]]]) for b in (0.0, 1.0)])   # centres 0, (1,0,0)
+    X = np.array([0.5, 0.0, 10.0])
+    regions = [tritools.Ellipse.circle(tritools.project(X, P), 1.0) for P in cams]
+    res = uncertainty(cams, regions, estimate=X)
+    assert res.angle_deg == pytest.approx(np.degrees(2 * np.arctan(0.05)), rel=1e-9)
+    assert res.angle_deg == pytest.approx(tritools.triangulation_angle(cams, X), rel=1e-12)

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import enum
 import logging
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -19,6 +19,7 @@ from sospoly.solvers.stacked_conic import BlockStatus, StackedConicOptions
 from ..model.cameras import _depth_rows, power2_scale
 from ..model.geometry import validate_cameras
 from ..model.regions import Ellipse, EllipseBorder, Point, Segment, as_regions
+from .angle import triangulation_angles
 from .rigour import box_from_bounds, combine, lower_bounds, round_down, round_up
 from .sets import EPS, dilate, structure_key, view_blocks, view_coefficients
 from .solve import objective_rows, solve_blocks
@@ -86,7 +87,9 @@ class UncertaintyResult:
     ``convexified``: an EllipseBorder was replaced by its filled ellipse (outer bound only);
     ``rigorous``: the finite bounds are certified (False only for finite sides of an unbounded S,
     which are exact to the dual residual but not certified against points beyond 1/residual);
-    ``definition``: ``"per_view"`` or ``"level_relaxed"`` (the outer relaxation of a level set).
+    ``definition``: ``"per_view"``, ``"level_relaxed"`` (the outer relaxation of a level set) or
+    ``"level_sos"`` (tightened by SOS bounds); ``angle_deg``: the triangulation angle at the estimate
+    (largest angle between two viewing rays, :func:`tritools.triangulation_angle`).
     """
     status: UncertaintyStatus
     lo: np.ndarray
@@ -104,6 +107,7 @@ class UncertaintyResult:
     convexified: bool
     rigorous: bool
     definition: str = "per_view"
+    angle_deg: float = float("nan")
 
     @property
     def bounded(self) -> bool:
@@ -147,8 +151,6 @@ def _witnessless(res: UncertaintyResult) -> bool:
 def _unwidened_if_empty(res, cameras, regions, estimate, opts):
     """For a widened problem without any feasible witness: the regions as given, if their set is
     certified empty (Farkas), else ``res``."""
-    from dataclasses import replace
-
     if not _witnessless(res):
         return res
     alt = uncertainty(cameras, regions, estimate=estimate, options=replace(opts, widen_roundoff=False))
@@ -274,7 +276,6 @@ def group_blocks(C, blocks, X0, Xe, convexified, opts) -> list[UncertaintyResult
     """Results for M problems of one structure: cameras C (M, N, 3, 4), per-view stacked regions
     ``blocks`` (:class:`~.sets.ViewBlock`), solver centres X0 and distance references Xe (M, 3);
     processed :data:`GROUP_CHUNK` points at a time."""
-    from dataclasses import replace
 
     M = C.shape[0]
     conv = np.broadcast_to(np.asarray(convexified, dtype=bool), (M,))
@@ -312,11 +313,14 @@ def _group_chunk(C, blocks, X0, Xe, convexified, opts) -> list[UncertaintyResult
     ray &= rays_stay_inside(blocks, R, witnesses, centre, blk.eta, ray, opts.witness_rtol)
     q0, q0e = _depth_offsets(drows, X0)
     conv = np.broadcast_to(np.asarray(convexified, dtype=bool), (M,))
+    w = np.linalg.svd(R.reshape(-1, 3, 4))[2][:, -1].reshape(M, N, 4)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        angles = triangulation_angles(w[..., :3] / w[..., 3:], Xe)
     out = []
     for m in range(M):
         out.append(_assemble(m, N, solved[m], ray[m], empty[m], beta[m], rho[m], witnesses[m], X0[m], Xe[m],
                              sigma[m], q0[m], q0e[m], bool(conv[m]), drows[m]))
-    return out
+    return [replace(r, angle_deg=float(a)) for r, a in zip(out, angles)]
 
 
 def _empty(st, b, be, a, ae, sigma):

@@ -184,6 +184,41 @@ def run_colmap(n_points, r):
           f"the bounded points (not a coverage claim: the noise is Gaussian and the xyz is not an estimate)")
 
 
+def run_level(trials, seed):
+    """Level-set bounds (tau = gamma_UB + 0.5 px) against the certified point itself, per N."""
+    import tritools
+
+    rng = np.random.default_rng(seed)
+    print("\n### Level sets {X : gamma(X) <= gamma_UB + 0.5}: point regions, noise uniform in +-0.5 px\n")
+    print("| N | problems | level bounds [ms] | triangulate [ms] | ratio | median gap / width | "
+          "points of L sampled | outside the bounds |")
+    print("|---|---|---|---|---|---|---|---|")
+    for N in (2, 3, 4, 5):
+        tl = tt = 0.0
+        gaps, sampled, outside = [], 0, 0
+        for _ in range(trials):
+            cams, X = synthetic(rng, 1, N)
+            cams, X = cams[0], X[0]
+            b = 10 ** rng.uniform(-0.5, 0.5)                 # well-conditioned baselines here
+            cams = np.array([look_at(np.array([b * (i - (N - 1) / 2), 0.3 * i, -5.0]), X) for i in range(N)])
+            x = project_stack(cams[None], X[None])[0][0] + rng.uniform(-0.5, 0.5, (N, 2))
+            regs = [tritools.Point(p) for p in x]
+            t0 = time.perf_counter()
+            opt = tritools.triangulate(cams, regs)
+            tt += time.perf_counter() - t0
+            tau = opt.gamma_ub + 0.5
+            t0 = time.perf_counter()
+            res = tritools.uncertainty(cams, regs, level=tau, estimate=opt.X)
+            tl += time.perf_counter() - t0
+            gaps.append(res.gap_rel)
+            P = opt.X + rng.uniform(-1, 1, (4000, 3)) * (res.hi - res.lo)
+            inL = P[tritools.gamma(P, cams, regs) <= tau]
+            sampled += len(inL)
+            outside += int(np.count_nonzero(~np.all((inL >= res.lo) & (inL <= res.hi), axis=1)))
+        print(f"| {N} | {trials} | {1e3 * tl / trials:.1f} | {1e3 * tt / trials:.1f} | {tl / tt:.1f} | "
+              f"{np.median(gaps):.1e} | {sampled} | {outside} |")
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--points", type=int, default=10000, help="synthetic points (split over N = 2, 3, 4)")
@@ -192,6 +227,7 @@ def main(argv=None):
     ap.add_argument("--oxford-tracks", type=int, default=1500, help="tracks per sequence and N (0: skip)")
     ap.add_argument("--colmap-points", type=int, default=50000, help="points of the SfM timing (0: skip)")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--level-trials", type=int, default=8, help="level-set problems per N (0: skip)")
     ap.add_argument("--data-dir", default=None, help="Oxford data (default: $TRITOOLS_DATA, ../shared/data/oxford)")
     args = ap.parse_args(argv)
     total = {"points": 0, "misses": 0, "seconds": 0.0}
@@ -201,6 +237,8 @@ def main(argv=None):
               f"{total['seconds']:.1f} s")
     if args.oxford_tracks:
         run_oxford(args.oxford_tracks, args.radius, args.alpha, args.seed, args.data_dir)
+    if args.level_trials:
+        run_level(args.level_trials, args.seed)
     if args.colmap_points:
         run_colmap(args.colmap_points, 1.5)
     return total

@@ -275,25 +275,44 @@ def test_bounded_noise_coverage_batch():
         check_covers(r, X, c)
 
 
-def test_level_set_relaxation_contains_the_level_set():
-    """Points with gamma <= tau (sampled around the L2 optimum) lie in the level-set bounds; witnesses kept
-    satisfy gamma <= tau."""
+def _level_problem():
     rng = np.random.default_rng(17)
     cams, X = scene(rng, n_views=3)
     x = image_points(X, cams) + rng.uniform(-0.5, 0.5, (3, 2))
-    regions = [tritools.Point(p) for p in x]
-    tau = 1.0
-    res = uncertainty(cams, regions, level=tau)
-    assert res.definition == "level_relaxed" and res.status == UncertaintyStatus.BOUNDED
+    return rng, cams, X, [tritools.Point(p) for p in x]
+
+
+def _check_level(res, rng, cams, X, regions, tau):
+    """Points with gamma <= tau (sampled around X) lie in the bounds; witnesses are points of L near them."""
     P = X + rng.uniform(-1, 1, size=(20000, 3)) * (res.hi - res.lo)
-    g = tritools.gamma(P, cams, regions)
-    inside = P[g <= tau]
+    inside = P[tritools.gamma(P, cams, regions) <= tau]
     assert len(inside) > 10
     for p in inside:
         check_covers(res, p, cams)
-    for W in (res.witness_lo, res.witness_hi):
-        for w in W[np.all(np.isfinite(W), axis=1)]:
+    for W, bound in ((res.witness_lo, res.lo), (res.witness_hi, res.hi)):
+        assert np.all(np.isfinite(W))                          # local searches found points of L
+        for k, w in enumerate(W):
             assert tritools.gamma(w, cams, regions) <= tau
+            assert abs(w[k] - bound[k]) <= res.gap
+
+
+def test_level_set_relaxation_contains_the_level_set():
+    rng, cams, X, regions = _level_problem()
+    res = uncertainty(cams, regions, level=1.0, options=tritools.UncertaintyOptions(level_degree=None))
+    assert res.definition == "level_relaxed" and res.status == UncertaintyStatus.BOUNDED
+    assert 0 < res.gap_rel < 0.5                               # the relaxation's looseness, measured
+    _check_level(res, rng, cams, X, regions, 1.0)
+
+
+@pytest.mark.slow
+def test_level_set_sos_bounds_are_tight_and_valid():
+    rng, cams, X, regions = _level_problem()
+    relaxed = uncertainty(cams, regions, level=1.0, options=tritools.UncertaintyOptions(level_degree=None))
+    res = uncertainty(cams, regions, level=1.0)
+    assert res.definition == "level_sos" and res.status == UncertaintyStatus.BOUNDED
+    assert np.all(relaxed.lo <= res.lo) and np.all(res.hi <= relaxed.hi)
+    assert res.gap_rel < 1e-3                                  # the SOS bounds meet the local extremes
+    _check_level(res, rng, cams, X, regions, 1.0)
 
 
 def test_exact_points_with_roundoff_widening_hold_the_point():
@@ -331,3 +350,13 @@ def test_dilation_contains_the_r_neighbourhood(kind):
     near = P[np.asarray(region.distance(P)) <= r]
     assert len(near) > 100
     assert np.all(np.asarray(big.distance(near)) == 0.0)
+
+
+def test_result_carries_the_triangulation_angle():
+    K = np.diag([800.0, 800.0, 1.0])
+    cams = np.array([K @ np.hstack([np.eye(3), [[-b], [0.0], [0.0]]]) for b in (0.0, 1.0)])   # centres 0, (1,0,0)
+    X = np.array([0.5, 0.0, 10.0])
+    regions = [tritools.Ellipse.circle(tritools.project(X, P), 1.0) for P in cams]
+    res = uncertainty(cams, regions, estimate=X)
+    assert res.angle_deg == pytest.approx(np.degrees(2 * np.arctan(0.05)), rel=1e-9)
+    assert res.angle_deg == pytest.approx(tritools.triangulation_angle(cams, X), rel=1e-12)

@@ -142,7 +142,7 @@ def _bench():
 
 
 def test_benchmark_script_small(capsys):
-    total = _bench().main(["--points", "150", "--oxford-tracks", "0", "--colmap-points", "300"])
+    total = _bench().main(["--points", "150", "--oxford-tracks", "0", "--colmap-points", "300", "--level-trials", "0"])
     out = capsys.readouterr().out
     assert total["misses"] == 0 and total["points"] == 150
     assert "coverage 100.0000% (0 misses)" in out and "SfM path" in out
@@ -152,7 +152,8 @@ def test_benchmark_script_small(capsys):
 def test_bounded_noise_coverage_many_points():
     """6000 bounded-noise points over 2-4 views with angles from 0.01 to 40 degrees: no true point
     outside its certified box or radius (the benchmark runs 10,000)."""
-    total = _bench().main(["--points", "6000", "--oxford-tracks", "0", "--colmap-points", "0", "--seed", "7"])
+    total = _bench().main(["--points", "6000", "--oxford-tracks", "0", "--colmap-points", "0", "--seed", "7",
+                           "--level-trials", "0"])
     assert total["points"] == 6000 and total["misses"] == 0
 
 

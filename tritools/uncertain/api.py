@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import enum
 import logging
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -19,6 +19,7 @@ from sospoly.solvers.stacked_conic import BlockStatus, StackedConicOptions
 from ..model.cameras import _depth_rows, power2_scale
 from ..model.geometry import validate_cameras
 from ..model.regions import Ellipse, EllipseBorder, Point, Segment, as_regions
+from .angle import triangulation_angles
 from .rigour import box_from_bounds, combine, lower_bounds, round_down, round_up
 from .sets import EPS, dilate, structure_key, view_blocks, view_coefficients
 from .solve import objective_rows, solve_blocks
@@ -48,14 +49,19 @@ class UncertaintyOptions:
     otherwise dilated are widened by the round-off of a computed projection (16 eps relative, see
     :func:`_roundoff_radii`), so exact data give a tiny set holding the point instead of an empty or
     degenerate one; when such a widened set yields no feasible point at all, the regions as given are
-    solved too and their Farkas certificate, if any, reports the set empty."""
+    solved too and their Farkas certificate, if any, reports the set empty; ``level_degree``: relaxation
+    degree of the SOS bounds of a level set of point regions (None: the dilation relaxation only)."""
     dilation: float | tuple = 0.0
     solver: StackedConicOptions = field(default_factory=StackedConicOptions)
     witness_rtol: float = 1e-9
     depth_bounds: bool = True
     widen_roundoff: bool = True
+    level_degree: int | None = 2
 
     def __post_init__(self) -> None:
+        d = self.level_degree
+        if d is not None and (isinstance(d, bool) or not isinstance(d, (int, np.integer)) or d < 2 or d % 2):
+            raise ValueError(f"level_degree must be None or an even integer >= 2, got {d!r}")
         for name in ("depth_bounds", "widen_roundoff"):
             if not isinstance(getattr(self, name), (bool, np.bool_)):
                 raise TypeError(f"{name} must be True or False, got {getattr(self, name)!r}")
@@ -81,7 +87,9 @@ class UncertaintyResult:
     ``convexified``: an EllipseBorder was replaced by its filled ellipse (outer bound only);
     ``rigorous``: the finite bounds are certified (False only for finite sides of an unbounded S,
     which are exact to the dual residual but not certified against points beyond 1/residual);
-    ``definition``: ``"per_view"`` or ``"level_relaxed"`` (the outer relaxation of a level set).
+    ``definition``: ``"per_view"``, ``"level_relaxed"`` (the outer relaxation of a level set) or
+    ``"level_sos"`` (tightened by SOS bounds); ``angle_deg``: the triangulation angle at the estimate
+    (largest angle between two viewing rays, :func:`tritools.triangulation_angle`).
     """
     status: UncertaintyStatus
     lo: np.ndarray
@@ -99,6 +107,7 @@ class UncertaintyResult:
     convexified: bool
     rigorous: bool
     definition: str = "per_view"
+    angle_deg: float = float("nan")
 
     @property
     def bounded(self) -> bool:
@@ -142,8 +151,6 @@ def _witnessless(res: UncertaintyResult) -> bool:
 def _unwidened_if_empty(res, cameras, regions, estimate, opts):
     """For a widened problem without any feasible witness: the regions as given, if their set is
     certified empty (Farkas), else ``res``."""
-    from dataclasses import replace
-
     if not _witnessless(res):
         return res
     alt = uncertainty(cameras, regions, estimate=estimate, options=replace(opts, widen_roundoff=False))
@@ -269,7 +276,6 @@ def group_blocks(C, blocks, X0, Xe, convexified, opts) -> list[UncertaintyResult
     """Results for M problems of one structure: cameras C (M, N, 3, 4), per-view stacked regions
     ``blocks`` (:class:`~.sets.ViewBlock`), solver centres X0 and distance references Xe (M, 3);
     processed :data:`GROUP_CHUNK` points at a time."""
-    from dataclasses import replace
 
     M = C.shape[0]
     conv = np.broadcast_to(np.asarray(convexified, dtype=bool), (M,))
@@ -307,11 +313,14 @@ def _group_chunk(C, blocks, X0, Xe, convexified, opts) -> list[UncertaintyResult
     ray &= rays_stay_inside(blocks, R, witnesses, centre, blk.eta, ray, opts.witness_rtol)
     q0, q0e = _depth_offsets(drows, X0)
     conv = np.broadcast_to(np.asarray(convexified, dtype=bool), (M,))
+    w = np.linalg.svd(R.reshape(-1, 3, 4))[2][:, -1].reshape(M, N, 4)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        angles = triangulation_angles(w[..., :3] / w[..., 3:], Xe)
     out = []
     for m in range(M):
         out.append(_assemble(m, N, solved[m], ray[m], empty[m], beta[m], rho[m], witnesses[m], X0[m], Xe[m],
                              sigma[m], q0[m], q0e[m], bool(conv[m]), drows[m]))
-    return out
+    return [replace(r, angle_deg=float(a)) for r, a in zip(out, angles)]
 
 
 def _empty(st, b, be, a, ae, sigma):
@@ -433,41 +442,8 @@ def uncertainty(cameras, regions, *, level=None, estimate=None, options: Uncerta
         Xe = _estimate_arg(estimate, C[None], [regs])
         res = _group(C[None], [regs], Xe, Xe, conv, opts)[0]
         return _unwidened_if_empty(res, cameras, regions, estimate, opts) if widened else res
-    return _level_relaxation(cameras, regions, level, estimate, opts)
-
-
-def _level_relaxation(cameras, regions, level, estimate, opts) -> UncertaintyResult:
-    """Outer bounds of ``L = {X : gamma(X) <= tau}``: ``gamma(X) <= tau`` implies
-    ``d(Phi(X, P_i), R_i) <= sqrt(2N) tau`` in every view, so L lies in the per-view set of the regions
-    dilated by ``sqrt(2N) tau`` (up to sqrt(2N) loose; the SOS tightening is not implemented).  Witnesses
-    are kept only where ``gamma(w) <= tau`` (else NaN, and ``gap`` is inf)."""
-    from dataclasses import replace
-
-    from ..model.geometry import gamma
-
-    if isinstance(level, bool) or not isinstance(level, (int, float, np.integer, np.floating)) or \
-            not np.isfinite(level) or level < 0:
-        raise ValueError(f"level must be a finite number >= 0 (a bound tau on gamma, pixels), got {level!r}")
-    if np.any(np.atleast_1d(np.asarray(opts.dilation, float)) != 0):
-        raise ValueError("dilation must be 0 with level (the level set is defined by the regions as given)")
-    C = validate_cameras(cameras, min_views=1, require_distinct=False)
-    regs = as_regions(regions, len(C))
-    r = float(np.sqrt(2 * len(C)) * level) * (1 + 1e-12)
-    out = uncertainty(C, regs, estimate=estimate, options=replace(opts, dilation=r))
-    def keep(W):
-        W = W.copy()
-        for k in range(len(W)):
-            if np.all(np.isfinite(W[k])) and float(gamma(W[k], C, regs)) > level:
-                W[k] = np.nan
-        return W
-    wl, wh = keep(out.witness_lo), keep(out.witness_hi)
-    gap = out.gap if np.array_equal(np.isnan(wl), np.isnan(out.witness_lo)) and \
-        np.array_equal(np.isnan(wh), np.isnan(out.witness_hi)) else np.inf
-    dw, inner = out.distance_witness, out.distance_inner
-    if np.all(np.isfinite(dw)) and float(gamma(dw, C, regs)) > level:
-        dw, inner = np.full(3, np.nan), np.nan
-    return replace(out, witness_lo=wl, witness_hi=wh, gap=gap, gap_rel=gap if not np.isfinite(gap) else out.gap_rel,
-                   distance_witness=dw, distance_inner=inner, convexified=True, definition="level_relaxed")
+    from .level import level_bounds
+    return level_bounds(cameras, regions, level, estimate, opts)
 
 
 def uncertainty_many(cameras, regions, *, estimates=None, options: UncertaintyOptions | None = None,

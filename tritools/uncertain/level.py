@@ -1,0 +1,186 @@
+"""Outer bounds of the level set ``L(tau) = {X : gamma(X) <= tau}`` (docs/uncertainty.md, "The level set").
+
+``gamma(X) <= tau`` implies ``d(Phi(X, P_i), R_i) <= sqrt(2N) tau`` in every view (gamma^2 is the mean
+of the 2N squared coordinates of the distances), so L lies in the per-view set of the regions dilated
+by ``sqrt(2N) tau``: its certified bounds (:func:`tritools.uncertainty`) are valid outer bounds of L,
+up to sqrt(2N) loose.  Inner witnesses are points of L itself: for each side of the box a local
+search (SLSQP, ``min +-X_k s.t. gamma(X)^2 <= tau^2``, from the local L2 optimum) whose result is
+kept only if ``gamma(w) <= tau`` holds when re-evaluated; ``gap`` then measures the looseness of the
+bounds against them.  For point regions the box is tightened by certified SOS bounds
+(:func:`_sos_box`, ``sospoly.minimize`` with a radius: the rigour of gamma_LB).
+"""
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+
+from ..model.geometry import dlt, gamma, gamma_validated, refine_l2, validate_cameras
+from ..model.regions import Point, as_regions
+
+__all__ = ["level_bounds"]
+
+
+def _check_level(level) -> float:
+    if isinstance(level, bool) or not isinstance(level, (int, float, np.integer, np.floating)) or \
+            not np.isfinite(level) or level < 0:
+        raise ValueError(f"level must be a finite number >= 0 (a bound tau on gamma, pixels), got {level!r}")
+    return float(level)
+
+
+def _start(C, regs, tau, estimate):
+    """A point of L to start the local searches from: the estimate if it is in L, else the local L2
+    optimum from the DLT of the region centres; None when neither is."""
+    cands = [] if estimate is None else [np.asarray(estimate, float)]
+    try:
+        X0 = dlt(C, np.array([r.center for r in regs]))
+        X1 = refine_l2(X0, C, regs)
+        cands += [X for X in (X1, X0) if X is not None]
+    except ValueError:
+        pass
+    for X in cands:
+        if np.all(np.isfinite(X)) and float(gamma(X, C, regs)) <= tau:
+            return X
+    return None
+
+
+def _g2_function(C, regs, start, scale):
+    """``Y -> (gamma^2, gradient or None)`` at ``X = start + scale Y``: closed form with its gradient when
+    every region is a Point (the usual level-set case), else :func:`gamma_validated` (gradient by
+    finite differences)."""
+    from ..model.regions import Point
+
+    if all(isinstance(r, Point) for r in regs):
+        xs = np.array([r.x for r in regs])
+        n = 2 * len(regs)
+
+        def f(Y):
+            Xh = np.append(start + scale * Y, 1.0)
+            h = C @ Xh
+            u = h[:, :2] / h[:, 2:3]
+            e = u - xs
+            J = (C[:, :2, :3] - u[:, :, None] * C[:, 2:3, :3]) / h[:, 2:3, None]      # (N, 2, 3)
+            return float(np.sum(e * e)) / n, 2.0 * scale * np.einsum("ij,ijk->k", e, J) / n
+        return f
+    return lambda Y: (float(gamma_validated((start + scale * Y)[None], C, regs)[0]) ** 2, None)
+
+
+def _extreme(C, regs, tau, start, k, sign, scale):
+    """A point of L found by SLSQP minimising ``sign * X_k`` (in coordinates (X - start) / scale), moved
+    back towards ``start`` by the least step of a ladder that gives ``gamma <= tau`` (re-evaluated by
+    :func:`gamma_validated`); or None."""
+    from scipy.optimize import minimize
+
+    f = _g2_function(C, regs, start, scale)
+    t2 = max(tau * tau, 1e-300)
+    con = {"type": "ineq", "fun": lambda Y: (tau * tau - f(Y)[0]) / t2}
+    if f(np.zeros(3))[1] is not None:
+        con["jac"] = lambda Y: -f(Y)[1] / t2
+    try:
+        with np.errstate(all="ignore"):
+            res = minimize(lambda Y: sign * Y[k], np.zeros(3), jac=lambda Y: sign * np.eye(3)[k], method="SLSQP",
+                           constraints=[con], options={"maxiter": 60, "ftol": 1e-10})
+    except (ValueError, ArithmeticError):
+        return None
+    if not np.all(np.isfinite(res.x)):
+        return None
+    for theta in (1.0, 1 - 1e-9, 1 - 1e-6, 1 - 1e-4, 1 - 1e-2):
+        X = start + scale * theta * res.x
+        if float(gamma_validated(X[None], C, regs)[0]) <= tau:
+            return X
+    return None
+
+
+def _sos_box(C, regs, tau, lo, hi, degree):
+    """Tighter bounds of L for point regions through sospoly: with ``X = c + s u`` (the relaxation's box,
+    ``|u_k| <= 1``) and ``x_i = x^_i + sqrt(2N) tau v_i`` (``sum ||v_i||^2 <= 1`` is ``gamma <= tau``),
+    ``min +-u_k`` subject to the projection equalities ``x_i (p3_i . X~) = p12_i . X~`` (each row
+    scaled) is a polynomial program whose certified lower bound (``sospoly.minimize`` at ``degree``,
+    rigorous with ``radius = 2``: ``||(u, v)|| <= 2`` on the feasible set) bounds ``X_k``.  Returns
+    (lo, hi) intersected with the box, or None if a program gives no bound."""
+    import sospoly
+
+    from .rigour import round_down, round_up
+
+    N = len(C)
+    xs = np.array([r.x for r in regs])
+    c, s = lo / 2.0 + hi / 2.0, hi / 2.0 - lo / 2.0
+    tp = float(np.sqrt(2 * N) * tau)
+    V = sospoly.variables(" ".join([f"u{k}" for k in range(3)] + [f"v{i}_{j}" for i in range(N) for j in range(2)]))
+    u, v = V[:3], [V[3 + 2 * i:5 + 2 * i] for i in range(N)]
+    eqs = []
+    for i, P in enumerate(C):
+        Xt = [float(c[k]) + float(s[k]) * u[k] for k in range(3)]
+        h = [sum(float(P[r, k]) * Xt[k] for k in range(3)) + float(P[r, 3]) for r in range(3)]
+        for j in range(2):
+            scale = float(np.abs(P[j, :3]) @ np.abs(s) + abs(xs[i, j]) * (np.abs(P[2, :3]) @ np.abs(s)))
+            eqs.append(((float(xs[i, j]) + tp * v[i][j]) * h[2] - h[j]) * (1.0 / max(scale, 1e-300)))
+    ineq = [1 - sum(w[0] ** 2 + w[1] ** 2 for w in v)] + [1 - u[k] ** 2 for k in range(3)]
+    new_lo, new_hi = lo.copy(), hi.copy()
+    for k in range(3):
+        for sign in (1.0, -1.0):
+            res = sospoly.minimize(sign * u[k], eq=eqs, ineq=ineq, degree=degree, radius=2.0, refine=False)
+            if res.lower_bound is None or not np.isfinite(res.lower_bound):
+                return None
+            if sign > 0:
+                new_lo[k] = max(lo[k], float(round_down(c[k] + s[k] * res.lower_bound)))
+            else:
+                new_hi[k] = min(hi[k], float(round_up(c[k] - s[k] * res.lower_bound)))
+    return new_lo, new_hi
+
+
+def level_bounds(cameras, regions, level, estimate, opts):
+    """:func:`tritools.uncertainty` with ``level=tau`` (module docstring)."""
+    from .api import uncertainty
+
+    tau = _check_level(level)
+    if np.any(np.atleast_1d(np.asarray(opts.dilation, float)) != 0):
+        raise ValueError("dilation must be 0 with level (the level set is defined by the regions as given)")
+    C = validate_cameras(cameras, min_views=1, require_distinct=False)
+    regs = as_regions(regions, len(C))
+    r = float(np.sqrt(2 * len(C)) * tau) * (1 + 1e-12)
+    out = uncertainty(C, regs, estimate=estimate, options=replace(opts, dilation=r, widen_roundoff=False))
+    definition = "level_relaxed"
+    if opts.level_degree and out.status.value == "bounded" and all(isinstance(g, Point) for g in regs):
+        box = _sos_box(C, regs, tau, out.lo, out.hi, opts.level_degree)
+        if box is not None:
+            out = _with_box(out, *box)
+            definition = "level_sos"
+    nan = np.full((3, 3), np.nan)
+    start = _start(C, regs, tau, estimate) if out.status.value in ("bounded", "unbounded") else None
+    wl, wh = nan.copy(), nan.copy()
+    if start is not None:
+        width = np.where(np.isfinite(out.hi - out.lo), out.hi - out.lo, 0.0)
+        scale = float(np.max(width)) or 1.0
+        for k in range(3):
+            if np.isfinite(out.lo[k]):
+                w = _extreme(C, regs, tau, start, k, 1.0, scale)
+                wl[k] = np.nan if w is None else w
+            if np.isfinite(out.hi[k]):
+                w = _extreme(C, regs, tau, start, k, -1.0, scale)
+                wh[k] = np.nan if w is None else w
+    sides = [(wl[k, k] - out.lo[k]) for k in range(3) if np.isfinite(out.lo[k])] + \
+            [(out.hi[k] - wh[k, k]) for k in range(3) if np.isfinite(out.hi[k])]
+    gap = float(np.max(sides)) if sides else 0.0
+    gap = np.inf if np.isnan(gap) else gap
+    finite_width = np.max(out.hi - out.lo) if out.status.value == "bounded" else np.inf
+    gap_rel = gap / finite_width if finite_width > 0 and np.isfinite(finite_width) else (np.inf if gap else 0.0)
+    W = np.vstack([wl, wh])
+    W = W[np.all(np.isfinite(W), axis=1)]
+    if len(W):
+        d = np.linalg.norm(W - out.estimate, axis=1)
+        j = int(np.argmax(d))
+        dw, inner = W[j].copy(), float(d[j])
+    else:
+        dw, inner = np.full(3, np.nan), np.nan
+    return replace(out, witness_lo=wl, witness_hi=wh, gap=gap, gap_rel=gap_rel, distance_witness=dw,
+                   distance_inner=inner, convexified=definition == "level_relaxed", definition=definition)
+
+
+def _with_box(out, lo, hi):
+    """The result with a tighter box: the distance bound from its farthest corner (rounded up)."""
+    from .rigour import round_up
+
+    far = np.maximum(np.abs(lo - out.estimate), np.abs(hi - out.estimate))
+    dist = float(round_up(np.sqrt(np.sum(far * far)) * (1 + 1e-15)))
+    return replace(out, lo=lo, hi=hi, max_distance=min(out.max_distance, dist))

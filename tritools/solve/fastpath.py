@@ -16,7 +16,9 @@ f and every g_ij quadratic.  For each problem this module, with numpy over the s
    no constraint: their polynomial is zero);
 4. calls :func:`sospoly.analysis.verify.verify_quadratic_batch`: KKT multipliers by least squares,
    PSD test of the Lagrangian Hessian, exact minimum c of the Lagrangian quadratic;
-5. decides with :func:`tritools.solve.decide.decide` (the rule of every path).
+5. decides with :func:`tritools.solve.decide.decide` (the rule of every path); what the Lagrangian bound
+   does not certify is certified through the trivial bound 0 when gamma(X^) is within the tolerance of it
+   (:mod:`tritools.solve.trivial`).
 
 The lower bound comes from the polynomial data and the multipliers only; the local solver merely
 proposes v^.  Problems the vectorised code cannot handle (degenerate cameras, DLT at infinity,
@@ -38,6 +40,7 @@ from ..model.geometry import camera_problems
 from ..model.normalize import normalization_stack
 from ..model.stacked import epipolar_quadratics, fundamental_stack, project_stack, refine_points_stack
 from .decide import decide, decide_reported, gamma_from_c
+from .trivial import trivially_certified, trivially_certified_reported
 
 __all__ = ["FastPathBatch", "verify_points", "stack_point_problems"]
 
@@ -50,7 +53,8 @@ class FastPathBatch:
     ``X`` the world point, ``gamma_lb`` from the Lagrangian bound, ``gamma_ub`` = gamma(X) on the caller's
     data, ``image_points`` v^ in pixels,
     ``c_lower`` / ``c_upper`` the bounds in the normalised units where the certificate is decided,
-    ``scale`` the common image scale s.
+    ``scale`` the common image scale s; ``trivial[m]``: certified through the trivial bound 0
+    (:mod:`tritools.solve.trivial`; then ``gamma_lb`` is 0).
     """
     certified: np.ndarray
     ok: np.ndarray
@@ -61,6 +65,7 @@ class FastPathBatch:
     c_lower: np.ndarray
     c_upper: np.ndarray
     scale: np.ndarray
+    trivial: np.ndarray
 
 
 def stack_point_problems(cameras, points2d, caller: str):
@@ -124,5 +129,8 @@ def verify_points(cameras, points2d, *, tolerances: Tolerances = DEFAULT_TOLERAN
     gamma_ub = np.where(fin_w, np.sqrt(np.sum((uw - x) ** 2, axis=(1, 2)) / (2 * N)), np.inf)
     gamma_lb = np.minimum(gamma_from_c(c_lower, N, norm.scale), gamma_ub)
     certified = ok & optimal & decide_reported(gamma_lb, gamma_ub, tolerances, N, norm.scale, norm.resolution)
-    return FastPathBatch(certified, ok, X, gamma_lb, gamma_ub, x + u / norm.scale[:, None, None], c_lower,
-                         ver.upper_bound, norm.scale)
+    trivial = ok & ~certified & trivially_certified(ver.upper_bound, tolerances, N, norm.resolution) & \
+        trivially_certified_reported(gamma_ub, tolerances, N, norm.scale, norm.resolution)
+    gamma_lb = np.where(trivial, 0.0, gamma_lb)
+    return FastPathBatch(certified | trivial, ok, X, gamma_lb, gamma_ub, x + u / norm.scale[:, None, None],
+                         np.where(trivial, 0.0, c_lower), ver.upper_bound, norm.scale, trivial)

@@ -39,8 +39,8 @@ from sospoly.analysis.verify import verify_quadratic
 from sospoly.budget import Deadline
 
 from ..model.constraints import Method, centre_relations
-from ..model.geometry import (common_centre, dlt, gamma as gamma_of, gamma_validated, point_from_image_points,
-                              project, refine_l2, validate_cameras)
+from ..model.geometry import (common_centre, dlt, gamma as gamma_of, gamma_validated, image_points,
+                              point_from_image_points, project, refine_l2, validate_cameras)
 from ..model.normalize import Normalization, normalization_for, unconstrained_reason
 from ..model.problem import TriangulationProblem, build_problem, view_band, view_chain
 from ..model.regions import Point, as_regions
@@ -51,6 +51,7 @@ from .options import SolvePath, TriangulationOptions, options_from
 from .plan import Step, degree_plan
 from .report import point_report, solve_ball, solve_radius
 from .structures import STRUCTURE_CACHE, structure_key
+from .trivial import TRIVIAL_BOUND, local_estimate, trivially_certified, trivially_certified_reported
 
 __all__ = ["triangulate", "MAX_FAMILY_DIM", "INACCURATE_RESOLVE_MAX_SECONDS"]
 
@@ -110,6 +111,7 @@ class _PointSolve:
         self.timings["normalise"] = time.perf_counter() - t
         self._problems: dict = {}
         self._relations = None
+        self._local = _UNSET
 
     # ------------------------------------------------------------------ problems
     def problem(self, method: Method, formulation: str) -> TriangulationProblem:
@@ -131,7 +133,7 @@ class _PointSolve:
             if self.deadline.expired:
                 break
             if k == 0 and self.opts.path == SolvePath.AUTO and step.delta == 2:
-                res = self.verify(step)
+                res = self.verify(step) or self.trivial(step)
                 if res is not None:
                     best = res
                     break
@@ -154,6 +156,7 @@ class _PointSolve:
             # the best bounds so far, and why the plan stopped short of a certificate
             best = _replace(best, status=Status.BUDGET_EXCEEDED,
                             message="; ".join(m for m in (best.message, f"skipped {skipped.message}") if m))
+        best = self.settle(best, steps)
         self.timings["total"] = time.perf_counter() - self.t0
         return _replace(best, timings=dict(self.timings), attempts=tuple(self.attempts))
 
@@ -209,6 +212,64 @@ class _PointSolve:
         return self._report(step, Status.OPTIMAL, True, lb, X=X, X_raw=X,
                             image_points=self.norm.image_points(v.reshape(self.N, 2)), certified_by="verification",
                             n_lmivar=sospoly.n_lmivar_formula(len(problem.gens), 2, [g.degree for g in problem.eq]))
+
+    # ------------------------------------------------------------------ the trivial bound, the local estimate
+    def local(self) -> tuple[float, np.ndarray] | None:
+        """The local estimate (:func:`tritools.solve.trivial.local_estimate`), computed once."""
+        if self._local is _UNSET:
+            t = time.perf_counter()
+            try:
+                self._local = local_estimate(self.cams_n, self.regs_n)
+            except (ValueError, np.linalg.LinAlgError, FloatingPointError):
+                self._local = None
+            self.timings["local"] = time.perf_counter() - t
+        return self._local
+
+    def trivial(self, step: Step, X=None) -> TriangulationResult | None:
+        """A certificate through the trivial bound gamma* >= 0 (:mod:`tritools.solve.trivial`) at ``X`` (world
+        frame; default the local estimate), or None when gamma(X) is not within the tolerance of 0."""
+        t = time.perf_counter()
+        if X is None:
+            est = self.local()
+            if est is None or not trivially_certified(2 * self.N * est[0] ** 2, self.opts.tolerances, self.N,
+                                                      self.norm.resolution):
+                return None
+            X = self.norm.world_point(est[1])
+        rep = point_report(X, self.cams, self.regions)
+        if rep.gamma is None or not trivially_certified_reported(rep.gamma, self.opts.tolerances, self.N,
+                                                                 self.norm.scale, self.norm.resolution):
+            return None
+        with np.errstate(all="ignore"):
+            x = image_points(np.asarray(X, float), self.cams)
+        res = self._report(step, Status.OPTIMAL, True, 0.0, X=X, X_raw=X, image_points=x, certified_by=TRIVIAL_BOUND)
+        if not res.optimal:
+            return None
+        self.attempts.append(Attempt(step.method.value, step.delta, Status.OPTIMAL.value, 0.0, res.gamma_ub,
+                                     TRIVIAL_BOUND, res.sparsity, (), time.perf_counter() - t))
+        return _replace(res, message="; ".join(m for m in ("gamma_UB within the certificate tolerance of the "
+                                                            "trivial lower bound 0", res.message) if m))
+
+    def settle(self, best: TriangulationResult, steps) -> TriangulationResult:
+        """The final result: a certificate through the trivial bound at the best estimate (or the local one) when
+        one holds; otherwise ``best``, with the local estimate when it has none (every status but
+        ``invalid_input`` carries an estimate when one can be computed)."""
+        if best.status.certified or best.status == Status.INVALID_INPUT:
+            return best
+        step = _step_of(best, steps, self.opts)
+        cert = (self.trivial(step, best.X) if best.X is not None else None) or self.trivial(step)
+        if cert is not None:
+            why = f" (before: {best.status.value}{': ' + best.message if best.message else ''})"
+            return _replace(cert, n_lmivar=best.n_lmivar, message=cert.message + why)
+        est = self.local()
+        if best.X is not None or est is None:
+            return best
+        X = self.norm.world_point(est[1])
+        with np.errstate(all="ignore"):
+            x = image_points(X, self.cams)
+        rep = self._report(step, best.status, False, best.gamma_lb, X=X, X_raw=X, image_points=x, certified_by=None)
+        note = "X and gamma_UB from the local L2 refinement of the DLT point"
+        return _replace(rep, delta=best.delta, n_lmivar=best.n_lmivar, sparsity=best.sparsity,
+                        message="; ".join(m for m in (best.message, note) if m))
 
     # ------------------------------------------------------------------ the SDP
     def solve_step(self, step: Step, tight: bool = False) -> TriangulationResult:
@@ -404,10 +465,23 @@ class _PointSolve:
         return TriangulationResult(step.method.value, status, delta=step.delta, message=message, sparsity=sparsity)
 
 
-def _replace(res: TriangulationResult, **kw) -> TriangulationResult:
-    import dataclasses
+#: "not computed yet" (the local estimate may be None)
+_UNSET = object()
 
+
+def _replace(res: TriangulationResult, **kw) -> TriangulationResult:
     return dataclasses.replace(res, **kw)
+
+
+def _step_of(res: TriangulationResult, steps, opts: TriangulationOptions) -> Step:
+    """The plan step a result belongs to (for reporting an estimate under it)."""
+    first = steps[0] if steps else Step(opts.explicit_method or Method.COROLLARY1, 2, "dense")
+    try:
+        method = Method(res.method)
+    except ValueError:
+        method = first.method
+    return Step(method, res.delta if res.delta is not None else first.delta,
+                "views" if res.sparsity == "views" else "dense")
 
 
 def _better(a: TriangulationResult, b: TriangulationResult) -> bool:

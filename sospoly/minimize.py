@@ -331,7 +331,7 @@ class _Scaled:
     scaling: VariableScaling
     multiplier: object
     box: np.ndarray | None
-
+    ball: float | None = None           # ||w|| <= ball for the minimiser ``radius`` speaks of
 
 def _scaled_program(f, eq, ineq, multiplier, radius) -> _Scaled:
     """Strategy step 1, and the box of step 2 (``radius``'s ball and the constraints' box, intersected)."""
@@ -342,11 +342,11 @@ def _scaled_program(f, eq, ineq, multiplier, radius) -> _Scaled:
     fb, eqb, ineqb = sc.polynomial(f), tuple(sc.polynomial(g) for g in eq), tuple(sc.polynomial(h) for h in ineq)
     fn, eqn, ineqn, fs = _normalised(fb, eqb, ineqb)
     mult = sc.polynomial(multiplier.with_gens(f.gens)) if isinstance(multiplier, Polynomial) else multiplier
-    box = constraint_box(eqn, ineqn, n)
+    box, ball = constraint_box(eqn, ineqn, n), None
     if radius is not None:
         r = sc.radius(radius)
-        box = r if box is None else np.minimum(box, r)
-    return _Scaled(fn, eqn, ineqn, fs, sc, mult, box)
+        box, ball = (r if box is None else np.minimum(box, r)), float(np.max(r))
+    return _Scaled(fn, eqn, ineqn, fs, sc, mult, box, ball)
 
 
 def _support(p: Polynomial) -> np.ndarray:
@@ -513,7 +513,7 @@ class _Run:
     def __init__(self, f, eq, ineq, *, prog: _Scaled, gens, tol, budget, deadline, refine):
         self.f, self.eq, self.ineq = f, eq, ineq
         self.fn, self.eqn, self.ineqn, self.fscale = prog.fn, prog.eqn, prog.ineqn, prog.fscale
-        self.scaling, self.box = prog.scaling, prog.box
+        self.scaling, self.box, self.ball = prog.scaling, prog.box, prog.ball
         self.gens, self.tol, self.budget, self.deadline = gens, tol, budget, deadline
         self.refine = refine
         self.attempts: list[SolveAttempt] = []
@@ -630,7 +630,7 @@ class _Run:
         """(the largest proven lower bound of the normalised program from the certificate at level c, or -inf;
         how it was proven or why not) -- strategy step 2; ``upper`` f at a feasible point (normalised), for
         the sublevel box."""
-        from .analysis.proof import global_psatz_bound, sublevel_box
+        from .analysis.proof import WEAK_MARGINS, global_psatz_bound, sublevel_box
         from .analysis.rigor import rigorous_psatz_bound
 
         best, notes = -np.inf, []
@@ -639,11 +639,13 @@ class _Run:
         if sub is not None:
             box = sub if box is None else np.minimum(box, sub)
         if box is not None:
-            rb = rigorous_psatz_bound(psatz, sol, c, box)
+            rb = rigorous_psatz_bound(psatz, sol, c, box, ball=self.ball)
             if np.isfinite(rb.lower_bound):
                 best = rb.lower_bound
                 notes.append(f"proven on the box holding a minimiser (margin {rb.margin * self.fscale:.3g})")
         gb = global_psatz_bound(psatz, sol, c)
+        if not np.isfinite(best) and not np.isfinite(gb.lower_bound) and gb.q_min > 0:
+            gb = global_psatz_bound(psatz, sol, c, margins=WEAK_MARGINS)
         if gb.lower_bound > best:
             best = gb.lower_bound
             notes = [f"proven for every point by the shifted certificate (margin {gb.margin * self.fscale:.3g})"]

@@ -41,11 +41,14 @@ from ..algebra.polynomial import Polynomial
 from .rigor import _at_level, _pairs_of, _psd_defect, _u_terms, certificate_residual
 
 __all__ = ["GlobalBound", "global_psatz_bound", "constraint_box", "sublevel_box", "q_lower_bound",
-           "GLOBAL_MARGINS", "SHIFT_FRACTIONS"]
+           "GLOBAL_MARGINS", "WEAK_MARGINS", "SHIFT_FRACTIONS"]
 
 _EPS = np.finfo(float).eps
 #: margins m tried by :func:`global_psatz_bound`, relative to max(scale, |c|), smallest first
 GLOBAL_MARGINS = (1e-10, 1e-9, 1e-8, 1e-7)
+#: larger margins tried when none of GLOBAL_MARGINS proves a bound: a weaker bound, still proven (e.g. an infimum
+#: that is not attained, where the solver's level lies above it)
+WEAK_MARGINS = (1e-6, 1e-5, 1e-4, 1e-3, 1e-2, 1e-1)
 #: shifts t tried per margin, relative to m
 SHIFT_FRACTIONS = (1e-1, 1e-2, 1e-3, 0.0)
 #: box radii inflated by this relative amount (the rounding of a small linear solve, generously)

@@ -2,8 +2,9 @@
 
 ``triangulate(cameras, regions)`` with one :class:`~tritools.solve.options.TriangulationOptions`:
 
-1. validate (:func:`tritools.model.geometry.validate_cameras`, :func:`tritools.model.regions.as_regions`)
-   and normalise the data (:mod:`tritools.model.normalize`; the L2 problem is unchanged and every
+1. validate (:func:`tritools.model.geometry.validate_cameras`, :func:`tritools.model.regions.as_regions`),
+   move a far-away world origin to the cameras (:mod:`tritools.model.frame`: georeferenced scenes and
+   rescaled cameras give their twins' answers) and normalise the data (:mod:`tritools.model.normalize`; the L2 problem is unchanged and every
    number reported is in the caller's units);
 2. walk the degree plan (:func:`tritools.solve.plan.degree_plan`): at each step build (f, g, h) in the
    step's formulation (:mod:`tritools.model.problem`) and the certificate's structure -- dense, or view
@@ -39,6 +40,7 @@ from sospoly.analysis.verify import verify_quadratic
 from sospoly.budget import Deadline
 
 from ..model.constraints import Method, centre_relations
+from ..model.frame import WorldFrame, world_frame
 from ..model.geometry import (common_centre, dlt, gamma as gamma_of, gamma_validated, image_points,
                               point_from_image_points, project, refine_l2, validate_cameras)
 from ..model.normalize import Normalization, normalization_for, unconstrained_reason
@@ -99,6 +101,8 @@ class _PointSolve:
     """One triangulation: data, options, normalisation, the problems built so far, the attempts."""
 
     def __init__(self, cams, regions, opts: TriangulationOptions, t0: float):
+        self.frame: WorldFrame = world_frame(cams)          # georeferenced worlds, rescaled cameras
+        cams = self.frame.cameras(cams)
         self.cams, self.regions, self.opts, self.t0 = cams, regions, opts, t0
         self.N = cams.shape[0]
         self.deadline: Deadline = opts.budget.deadline()
@@ -158,7 +162,8 @@ class _PointSolve:
                             message="; ".join(m for m in (best.message, f"skipped {skipped.message}") if m))
         best = self.settle(best, steps)
         self.timings["total"] = time.perf_counter() - self.t0
-        return _replace(best, timings=dict(self.timings), attempts=tuple(self.attempts))
+        return _replace(best, X=self.frame.user_point(best.X), X_raw=self.frame.user_point(best.X_raw),
+                        timings=dict(self.timings), attempts=tuple(self.attempts))
 
     def _method_name(self, steps) -> str:
         return steps[0].method.value if steps else (self.opts.explicit_method or Method.COROLLARY1).value

@@ -4,8 +4,8 @@
 
 1. validate (:func:`tritools.model.geometry.validate_cameras`, :func:`tritools.model.regions.as_regions`),
    move a far-away world origin to the cameras (:mod:`tritools.model.frame`: georeferenced scenes and
-   rescaled cameras give their twins' answers) and normalise the data (:mod:`tritools.model.normalize`; the L2 problem is unchanged and every
-   number reported is in the caller's units);
+   rescaled cameras give their twins' answers) and normalise the data (:mod:`tritools.model.normalize`;
+   the L2 problem is unchanged and every number reported is in the caller's units);
 2. walk the degree plan (:func:`tritools.solve.plan.degree_plan`): at each step build (f, g, h) in the
    step's formulation (:mod:`tritools.model.problem`) and the certificate's structure -- dense, or view
    cliques beside the dense degree-2 block -- from :data:`~tritools.solve.structures.STRUCTURE_CACHE`,

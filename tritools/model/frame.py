@@ -4,7 +4,10 @@ A world frame and a camera's scale are the caller's choice; the L2 problem (SPEC
 either.  Camera centres 1e7 from the origin, about 10 apart, make every test that reads the cameras'
 entries -- which views share a centre, whether the normalised cameras still constrain the point -- see
 the centres' common offset instead of their separation.  So the per-point path first moves the world
-origin to the cameras' mean centre when it lies far outside their spread (X = origin + X'):
+origin to the cameras' mean centre when it lies far outside their spread (X = origin + X'; not when the
+spread is at the data's round-off).  Which views share a centre is decided in the new frame, views whose
+centres differ by less than the caller's round-off (``RESOLVED_SPREAD_RTOL`` |origin|) counting as one centre
+(:func:`frame_centre_groups`):
 P' = P [[I, origin], [0, 1]] (each camera divided by a power of two near its largest entry, an exact
 projective rescaling, so P and s P give the same numbers up to the rounding of s P itself).  The points
 it finds are moved back (X = origin + X'); gamma, residuals and depths are those of the re-centred
@@ -19,10 +22,13 @@ import numpy as np
 
 from .cameras import power2_scale
 
-__all__ = ["WorldFrame", "world_frame", "RECENTRE_RATIO"]
+__all__ = ["WorldFrame", "world_frame", "frame_centre_groups", "RECENTRE_RATIO", "RESOLVED_SPREAD_RTOL"]
 
-#: the origin moves to the cameras' mean centre when that is farther than this many times their spread.
+#: the origin moves to the cameras' mean centre when that is farther than this many times their spread ...
 RECENTRE_RATIO = 100.0
+#: ... and the spread is resolved by the data: above this fraction of the centres' distance to the origin (centres
+#: closer than that are one centre up to round-off, which the re-centred cameras would turn into a baseline).
+RESOLVED_SPREAD_RTOL = 1e-9
 
 
 @dataclass(frozen=True)
@@ -73,6 +79,27 @@ def world_frame(cameras) -> WorldFrame:
         return WorldFrame(np.zeros(3))
     mean = c.mean(axis=0)
     spread = float(np.max(np.linalg.norm(c - mean, axis=1)))
-    if not np.isfinite(spread) or np.linalg.norm(mean) <= RECENTRE_RATIO * spread:
+    far = float(np.linalg.norm(mean))
+    if not np.isfinite(spread) or far <= RECENTRE_RATIO * spread or spread <= RESOLVED_SPREAD_RTOL * far:
         return WorldFrame(np.zeros(3))
     return WorldFrame(mean)
+
+
+def frame_centre_groups(cameras_f: np.ndarray, frame: WorldFrame) -> np.ndarray:
+    """Which views share a centre, for cameras in ``frame``: the rule of
+    :func:`tritools.model.constraints.centre_groups` on them, and -- when the frame moved -- views whose centres
+    differ by at most ``RESOLVED_SPREAD_RTOL`` |origin| joined (a baseline at the caller's data's round-off, which
+    the re-centring cannot resolve)."""
+    from .constraints import centre_groups
+
+    label = centre_groups(cameras_f)
+    if not frame.moved:
+        return label
+    tol = RESOLVED_SPREAD_RTOL * float(np.linalg.norm(frame.origin))
+    N = len(cameras_f)
+    cs = [_centres(cameras_f[i:i + 1]) for i in range(N)]
+    for i in range(N):
+        for j in range(i + 1, N):
+            if len(cs[i]) and len(cs[j]) and np.linalg.norm(cs[i][0] - cs[j][0]) <= tol:
+                label[label == label[j]] = label[i]
+    return label

@@ -40,7 +40,7 @@ from sospoly.analysis.verify import verify_quadratic
 from sospoly.budget import Deadline
 
 from ..model.constraints import Method, centre_relations
-from ..model.frame import WorldFrame, world_frame
+from ..model.frame import WorldFrame, frame_centre_groups, world_frame
 from ..model.geometry import (common_centre, dlt, gamma as gamma_of, gamma_validated, image_points,
                               point_from_image_points, project, refine_l2, validate_cameras)
 from ..model.normalize import Normalization, normalization_for, unconstrained_reason
@@ -102,6 +102,7 @@ class _PointSolve:
 
     def __init__(self, cams, regions, opts: TriangulationOptions, t0: float):
         self.frame: WorldFrame = world_frame(cams)          # georeferenced worlds, rescaled cameras
+        self.cams_user = cams                               # the caller's: the final report is made on these
         cams = self.frame.cameras(cams)
         self.cams, self.regions, self.opts, self.t0 = cams, regions, opts, t0
         self.N = cams.shape[0]
@@ -123,7 +124,7 @@ class _PointSolve:
         if key not in self._problems:
             t = time.perf_counter()
             if self._relations is None:
-                self._relations = centre_relations(self.cams)        # decided on the raw cameras
+                self._relations = centre_relations(self.cams, frame_centre_groups(self.cams, self.frame))
             self._problems[key] = build_problem(self.cams_n, self.regs_n, method, formulation, self._relations)
             self.timings["build"] = self.timings.get("build", 0.0) + time.perf_counter() - t
         return self._problems[key]
@@ -162,8 +163,27 @@ class _PointSolve:
                             message="; ".join(m for m in (best.message, f"skipped {skipped.message}") if m))
         best = self.settle(best, steps)
         self.timings["total"] = time.perf_counter() - self.t0
-        return _replace(best, X=self.frame.user_point(best.X), X_raw=self.frame.user_point(best.X_raw),
-                        timings=dict(self.timings), attempts=tuple(self.attempts))
+        best = self.in_user_frame(best)
+        return _replace(best, timings=dict(self.timings), attempts=tuple(self.attempts))
+
+    def in_user_frame(self, res: TriangulationResult) -> TriangulationResult:
+        """``res`` with X moved back to the caller's world frame (:mod:`tritools.model.frame`) and gamma_UB,
+        residuals and depths evaluated there on the caller's cameras -- the numbers a user re-computes -- the
+        certificate confirmed on them (:func:`tritools.solve.decide.decide_reported`)."""
+        if not self.frame.moved or res.X is None:
+            return res
+        X, X_raw = self.frame.user_point(res.X), self.frame.user_point(res.X_raw)
+        rep = point_report(X, self.cams_user, self.regions)
+        kw = dict(X=X, X_raw=X_raw, gamma_ub=rep.gamma, residuals=rep.residuals, depths=rep.depths,
+                  gamma_ub_raw=point_report(X_raw, self.cams_user, self.regions).gamma)
+        if res.gamma_lb is not None and rep.gamma is not None and np.isfinite(rep.gamma):
+            kw["gamma_lb"] = min(res.gamma_lb, rep.gamma)
+            if res.optimal and not decide_reported(kw["gamma_lb"], rep.gamma, self.opts.tolerances, self.N,
+                                                   self.norm.scale, self.norm.resolution):
+                kw.update(status=Status.NOT_CERTIFIED, optimal=False, certified_by=None,
+                          message="; ".join(m for m in (res.message, "the bounds met in the re-centred frame, "
+                                                        "but not at the estimate in the caller's frame") if m))
+        return _replace(res, **kw)
 
     def _method_name(self, steps) -> str:
         return steps[0].method.value if steps else (self.opts.explicit_method or Method.COROLLARY1).value

@@ -85,6 +85,9 @@ __all__ = ["MinimizeResult", "SOSResult", "SolveAttempt", "LowerBound", "minimiz
 #: ``sparsity="auto"`` falls back from a sparse certificate that does not certify to the dense one of the same
 #: degree while the dense Gram matrix is at most this large.
 DENSE_AUTO_MAX_SIDE = 120
+#: a program whose retry chain ended without a solved answer is solved once more for an "almost solved" iterate (used
+#: through the proven bound only) when the chain took at most this many seconds.
+ITERATE_MAX_SECONDS = 2.0
 #: a certificate that could not be proven is solved again on the exactly reduced basis while its Gram side is at most
 #: this (the re-solve costs as much again).
 REDUCED_RETRY_MAX_SIDE = 60
@@ -553,6 +556,7 @@ class _Run:
         fixed_sol = c_hi = None
         found = []
         lb = None
+        n_before = len(self.attempts)
         for fm, be in _retry_chain(form, backend, len(psatz.shape.u_bases)):
             t1 = time.perf_counter()
             if psatz.multiplier == Multiplier.FREE and fixed_sol is None:
@@ -569,7 +573,9 @@ class _Run:
                                               time.perf_counter() - t1, lb.message))
             if lb.status not in _NUMERICAL or self.deadline.expired:
                 break
-        if lb.status in _NUMERICAL and psatz.multiplier != Multiplier.FREE and not self.deadline.expired:
+        spent = sum(a.seconds for a in self.attempts[n_before:])
+        if lb.status in _NUMERICAL and psatz.multiplier != Multiplier.FREE and not self.deadline.expired and \
+                spent <= ITERATE_MAX_SECONDS:
             lb = self._iterate(psatz, form, backend) or lb
         return self._evaluate(psatz, lb, found, degree, mult, label)
 

@@ -641,7 +641,9 @@ class _Run:
 
         best, notes = -np.inf, []
         box = self.box
-        sub = sublevel_box(self.fn, upper) if upper is not None else None
+        # the sublevel box needs a truly feasible point: unconstrained programs only (a candidate within the
+        # feasibility tolerance of the constraints may lie below the constrained minimum)
+        sub = sublevel_box(self.fn, upper) if upper is not None and not (self.eqn or self.ineqn) else None
         if sub is not None:
             box = sub if box is None else np.minimum(box, sub)
         if box is not None:

@@ -27,9 +27,10 @@ turn it into a bound valid in floating point:
 The kernel directions b(v*) of the solver's G (the minimisers) gain m q(v*) > 0 from the lowered level,
 which is what lets the projection stay PSD; the margin m and the shift t are tried small first.
 
-3. **A box from a sublevel set of f** (:func:`sublevel_box`): a minimiser satisfies f(v*) <= U = f at any
-   feasible point; with a separable minorant f(v) >= C + sum_i P_i(v_i^2) (mixed terms by weighted AM-GM)
-   whose P_i all grow, f(v) <= U confines every v_i to a bounded interval.  The box then serves as in item 1.
+3. **A box from a sublevel set of f** (:func:`sublevel_box`; used for unconstrained programs, where every
+   point is feasible): a minimiser satisfies f(v*) <= U = f at any point; with a separable minorant
+   f(v) >= C + sum_i P_i(v_i^2) (mixed terms by weighted AM-GM) whose P_i all grow, f(v) <= U confines every
+   v_i to a bounded interval.  The box then serves as in item 1.
 """
 from __future__ import annotations
 

@@ -495,8 +495,7 @@ def _better(a: MinimizeResult, b: MinimizeResult) -> bool:
         return a.optimal
     la, lb = a.lower_bound, b.lower_bound
     if la is None or not np.isfinite(la):
-        no_lb = lb is None or not np.isfinite(lb)
-        return no_lb and a.upper_bound is not None and (b.upper_bound is None or a.upper_bound < b.upper_bound)
+        return False
     return lb is None or not np.isfinite(lb) or la > lb or (
         la == lb and a.upper_bound is not None and (b.upper_bound is None or a.upper_bound < b.upper_bound))
 

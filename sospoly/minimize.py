@@ -69,11 +69,12 @@ from .analysis.extraction import Candidate, extract_from_gram, extract_from_mome
 from .analysis.sparse_extraction import extract_from_clique_moments
 from .budget import BudgetExceeded, as_budget
 from .certificates.program import SOSProgram
+from .analysis.proof import unsolved_claim
 from .certificates.psatz import Multiplier, PsatzProblem, as_multiplier, build_psatz, checked_inputs
 from .certificates.shape import SPARSITY_KINDS
 from .certificates.sparsity import correlative_sparsity
 from .lowering.conic import GramForm
-from .scaling import VariableScaling, balancing, power2_normalised
+from .scaling import ScaledProgram, scaled_program
 from .solvers.lower_bound import solve_psatz
 from .solvers.solve import LowerBound, ProgramSolution, solve_program
 from .status import SolveStatus
@@ -316,42 +317,6 @@ def _dedupe(found, rtol: float = 1e-4):
 
 
 # ----------------------------------------------------------------------------- strategy
-def _normalised(f, eq, ineq):
-    """f and every constraint divided by a power of two near its largest coefficient (exact; same feasible
-    set), and f's divisor."""
-    fn, fs = power2_normalised(f)
-    return fn, tuple(power2_normalised(g)[0] for g in eq), tuple(power2_normalised(h)[0] for h in ineq), fs
-
-
-@dataclass(frozen=True)
-class _Scaled:
-    """The program as solved (strategy step 1): balanced and normalised data, the variable scaling, the
-    multiplier in the scaled variables, and a box |w_i| <= box_i holding a minimiser (None: unknown)."""
-    fn: Polynomial
-    eqn: tuple
-    ineqn: tuple
-    fscale: float
-    scaling: VariableScaling
-    multiplier: object
-    box: np.ndarray | None
-    ball: float | None = None           # ||w|| <= ball for the minimiser ``radius`` speaks of
-
-def _scaled_program(f, eq, ineq, multiplier, radius) -> _Scaled:
-    """Strategy step 1, and the box of step 2 (``radius``'s ball and the constraints' box, intersected)."""
-    from .analysis.proof import constraint_box
-
-    n = f.nvars
-    sc = balancing([f, *eq, *ineq], n)
-    fb, eqb, ineqb = sc.polynomial(f), tuple(sc.polynomial(g) for g in eq), tuple(sc.polynomial(h) for h in ineq)
-    fn, eqn, ineqn, fs = _normalised(fb, eqb, ineqb)
-    mult = sc.polynomial(multiplier.with_gens(f.gens)) if isinstance(multiplier, Polynomial) else multiplier
-    box, ball = constraint_box(eqn, ineqn, n), None
-    if radius is not None:
-        r = sc.radius(radius)
-        box, ball = (r if box is None else np.minimum(box, r)), float(np.max(r))
-    return _Scaled(fn, eqn, ineqn, fs, sc, mult, box, ball)
-
-
 def _support(p: Polynomial) -> np.ndarray:
     return p.exponents() if p.terms else np.zeros((1, p.nvars), np.int64)
 
@@ -471,7 +436,7 @@ def minimize(f, eq=(), ineq=(), degree: int | None = None, multiplier="auto", *,
     if max_degree is not None and (int(max_degree) != max_degree or max_degree < d0):
         raise ValueError(f"max_degree must be an integer >= the first degree {d0}, got {max_degree!r}")
     last = d0 if degree is not None else int(max_degree if max_degree is not None else d0 + 4)
-    prog = _scaled_program(f, eq, ineq, multiplier, radius)
+    prog = scaled_program(f, eq, ineq, multiplier, radius)
     fn, eqn, ineqn, multiplier = prog.fn, prog.eqn, prog.ineqn, prog.multiplier
     run = _Run(f, eq, ineq, prog=prog, gens=gens, tol=tol, budget=budget, deadline=deadline, refine=refine)
     best = None
@@ -512,7 +477,7 @@ def _finish(best: MinimizeResult, run: _Run, seconds: float) -> MinimizeResult:
 class _Run:
     """The state of one :func:`minimize` call: data, tolerances, budget, attempts so far."""
 
-    def __init__(self, f, eq, ineq, *, prog: _Scaled, gens, tol, budget, deadline, refine):
+    def __init__(self, f, eq, ineq, *, prog: ScaledProgram, gens, tol, budget, deadline, refine):
         self.f, self.eq, self.ineq = f, eq, ineq
         self.fn, self.eqn, self.ineqn, self.fscale = prog.fn, prog.eqn, prog.ineqn, prog.fscale
         self.scaling, self.box, self.ball = prog.scaling, prog.box, prog.ball
@@ -600,7 +565,7 @@ class _Run:
         bracket = None if lb.bracket is None else tuple(None if b is None else b * fs for b in lb.bracket)
         solved = (SolveStatus.OPTIMAL, SolveStatus.TIME_LIMIT, SolveStatus.INACCURATE)
         if lb.status not in solved or lb.lower_bound is None or lb.solution is None:
-            status, lower, msg = _unsolved_claim(psatz, lb)
+            status, lower, msg = unsolved_claim(psatz, lb)
             return MinimizeResult(status, None if lower is None else lower * fs, None, (), False, psatz.n_lmivar,
                                   degree, _name_of(mult), self.gens, bracket, lb.solution, 0.0, msg, sparsity=label,
                                   scale=fs)
@@ -659,20 +624,6 @@ class _Run:
         elif not notes:
             notes.append(gb.message if self.box is None else gb.message + "; the box bound is not finite")
         return best, "; ".join(notes)
-
-
-def _unsolved_claim(psatz: PsatzProblem, lb: LowerBound) -> tuple:
-    """(status, lower bound, message) of a solve without a level: an unbounded level ("the set is empty") is a
-    claim only when the multiplier q is proven positive (:func:`sospoly.analysis.proof.q_lower_bound`)."""
-    from .analysis.proof import q_lower_bound
-
-    if lb.status == SolveStatus.UNBOUNDED:
-        st = psatz.structure
-        qmin = q_lower_bound(st, lb.solution) if not st.free or lb.solution is not None else 0.0
-        if not qmin > 0:
-            return SolveStatus.UNPROVEN, None, ("every level is feasible, but the multiplier q is not proven "
-                                                "positive: q may vanish on the set, so nothing is proven")
-    return lb.status, lb.lower_bound, lb.message
 
 
 # ----------------------------------------------------------------------------- is_sos

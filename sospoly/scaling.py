@@ -25,7 +25,8 @@ import numpy as np
 
 from .algebra.polynomial import Polynomial
 
-__all__ = ["VariableScaling", "balancing", "power2_normalised", "MIN_GAIN_BITS", "MAX_EXPONENT"]
+__all__ = ["VariableScaling", "ScaledProgram", "balancing", "power2_normalised", "scaled_program", "MIN_GAIN_BITS",
+           "MAX_EXPONENT"]
 
 #: the scaling is applied only when it narrows the largest log2-spread of the polynomials' coefficients by this.
 MIN_GAIN_BITS = 4.0
@@ -117,3 +118,40 @@ def power2_normalised(p: Polynomial) -> tuple[Polynomial, float]:
         return p, 1.0
     e = math.frexp(m)[1]
     return Polynomial(p.gens, {a: math.ldexp(float(c), -e) for a, c in p.terms.items()}), math.ldexp(1.0, e)
+
+
+def _normalised(f, eq, ineq):
+    """f and every constraint divided by a power of two near its largest coefficient (exact; same feasible
+    set), and f's divisor."""
+    fn, fs = power2_normalised(f)
+    return fn, tuple(power2_normalised(g)[0] for g in eq), tuple(power2_normalised(h)[0] for h in ineq), fs
+
+
+@dataclass(frozen=True)
+class ScaledProgram:
+    """The program as :func:`sospoly.minimize` solves it: balanced and normalised data, the variable scaling, the
+    multiplier in the scaled variables, and a box |w_i| <= box_i holding a minimiser (None: unknown)."""
+    fn: Polynomial
+    eqn: tuple
+    ineqn: tuple
+    fscale: float
+    scaling: VariableScaling
+    multiplier: object
+    box: np.ndarray | None
+    ball: float | None = None           # ||w|| <= ball for the minimiser ``radius`` speaks of
+
+def scaled_program(f, eq, ineq, multiplier, radius) -> ScaledProgram:
+    """Step 1 of :func:`sospoly.minimize`, and the box of its step 2 (``radius``'s ball and the constraints'
+    box, intersected)."""
+    from .analysis.proof import constraint_box
+
+    n = f.nvars
+    sc = balancing([f, *eq, *ineq], n)
+    fb, eqb, ineqb = sc.polynomial(f), tuple(sc.polynomial(g) for g in eq), tuple(sc.polynomial(h) for h in ineq)
+    fn, eqn, ineqn, fs = _normalised(fb, eqb, ineqb)
+    mult = sc.polynomial(multiplier.with_gens(f.gens)) if isinstance(multiplier, Polynomial) else multiplier
+    box, ball = constraint_box(eqn, ineqn, n), None
+    if radius is not None:
+        r = sc.radius(radius)
+        box, ball = (r if box is None else np.minimum(box, r)), float(np.max(r))
+    return ScaledProgram(fn, eqn, ineqn, fs, sc, mult, box, ball)

@@ -41,7 +41,7 @@ import numpy as np
 from ..algebra.polynomial import Polynomial
 from .rigor import _at_level, _pairs_of, _psd_defect, _u_terms, certificate_residual
 
-__all__ = ["GlobalBound", "global_psatz_bound", "constraint_box", "sublevel_box", "q_lower_bound",
+__all__ = ["GlobalBound", "global_psatz_bound", "constraint_box", "sublevel_box", "q_lower_bound", "unsolved_claim",
            "GLOBAL_MARGINS", "WEAK_MARGINS", "SHIFT_FRACTIONS"]
 
 _EPS = np.finfo(float).eps
@@ -384,3 +384,17 @@ def sublevel_box(f: Polynomial, upper: float) -> np.ndarray | None:
             return None
         r[i] = R
     return r
+
+
+def unsolved_claim(psatz, lb) -> tuple:
+    """(status, lower bound, message) of a solve without a level: an unbounded level ("the set is empty") is a
+    claim only when the multiplier q is proven positive (:func:`sospoly.analysis.proof.q_lower_bound`)."""
+    from ..status import SolveStatus
+
+    if lb.status == SolveStatus.UNBOUNDED:
+        st = psatz.structure
+        qmin = q_lower_bound(st, lb.solution) if not st.free or lb.solution is not None else 0.0
+        if not qmin > 0:
+            return SolveStatus.UNPROVEN, None, ("every level is feasible, but the multiplier q is not proven "
+                                                "positive: q may vanish on the set, so nothing is proven")
+    return lb.status, lb.lower_bound, lb.message

@@ -2,24 +2,38 @@
 
 ``minimize(f, eq, ineq)`` returns a :class:`MinimizeResult`:
 
-* ``lower_bound`` -- c* of a checked Positivstellensatz certificate (a valid lower bound of min f on
-  {g = 0, h >= 0}); with ``radius`` (a ball known to hold a minimiser) the PSD defect and the
-  identity residual of the returned certificate are subtracted (:mod:`sospoly.analysis.rigor`);
+* ``lower_bound`` -- a lower bound of min f on {g = 0, h >= 0} proven from a checked Positivstellensatz
+  certificate (strategy step 2: the PSD defect and the identity residual of the returned certificate
+  accounted for on a box holding a minimiser, or for every v by the shifted certificate);
 * ``minimizers`` / ``upper_bound`` -- extracted points (Gram kernel, moment matrices, clique moments
   for sparse certificates), polished locally, kept when feasible, sorted by f; ``upper_bound`` is f
   at the best one;
 * ``optimal`` -- ``Tolerances.certified(lower_bound, upper_bound, scale)`` with ``scale`` the
-  largest coefficient of f (the problem's own scale): a certificate of global optimality of
-  ``minimizers[0]`` within that tolerance.  A lower bound above the upper bound within the
+  largest coefficient of the balanced f (strategy step 1: the problem's own scale): a certificate of
+  global optimality of ``minimizers[0]`` within that tolerance.  A lower bound above the upper bound within the
   tolerance is reported equal to it; beyond it the status is ``INCONSISTENT``.
 
 The default strategy (each step recorded in ``attempts``):
 
-1. **Scaling.** f is divided by its largest coefficient and every constraint by its own, so the
-   solver sees O(1) data; bounds are reported in the caller's units.
-2. **Degrees.** ``degree`` given: that degree only.  Otherwise delta_min, delta_min + 2, ... up to
+1. **Scaling** (:mod:`sospoly.scaling`). The variables are scaled by powers of two that balance the
+   coefficients' magnitudes (v = 2^k w: M(s x, s y) becomes the Motzkin polynomial), then f and every
+   constraint are divided by a power of two near their largest coefficient.  Every step is exact in
+   floating point, so the scaled program *is* the caller's program: its certificate is one of the
+   caller's problem, points map back exactly, and the tolerances act at the problem's own scale (the
+   balanced objective's largest coefficient, ``scale``).  Bounds and points are reported in the
+   caller's units; ``upper_bound`` is the caller's f at the reported point.
+2. **A proven bound.** The solver's c* is reported only as far as it is proven
+   (:mod:`sospoly.analysis.proof`): on a box that holds a minimiser -- ``radius``, or the box the
+   constraints imply -- with the certificate's defects subtracted (:mod:`sospoly.analysis.rigor`), and
+   for every v through the shifted certificate (level lowered by a margin <= 1e-7 of the scale, Gram
+   matrices shifted, projected and checked PSD with every rounding bounded); the larger proven bound
+   is reported.  A multiplier q counts only where it is proven positive (a constant, 1 + even positive
+   terms, or a free q whose Gram matrix is positive definite).  Nothing proven: status
+   ``unproven_bound``, no lower bound, the relaxation's value in the message.  An "almost solved"
+   iterate that passes the a-posteriori checks is used the same way (its bound, when proven, is valid).
+3. **Degrees.** ``degree`` given: that degree only.  Otherwise delta_min, delta_min + 2, ... up to
    ``max_degree`` (default delta_min + 4), stopping at the first certified degree.
-3. **Sparsity** (``sparsity="auto"``): a correlative-sparsity certificate (cliques of a chordal
+4. **Sparsity** (``sparsity="auto"``): a correlative-sparsity certificate (cliques of a chordal
    extension of the variables' interaction graph; never weaker than the dense degree-2 certificate:
    a dense degree-2 block beside the cliques when it is small and can add strength -- a linear
    equality, a constant inequality or a non-constant user q; otherwise its Gram matrix has the
@@ -34,16 +48,16 @@ The default strategy (each step recorded in ``attempts``):
    ``"term"`` walks the term-sparsity hierarchy (:mod:`sospoly.certificates.term_hierarchy`) cheapest
    level first, up to the level whose bound is the dense one for unconstrained programs;
    ``result.sparsity`` names the level (``"term:block:1"``...).
-4. **Multiplier** (``multiplier="auto"``): at each degree q = 1 first (Putinar's certificate, the
+5. **Multiplier** (``multiplier="auto"``): at each degree q = 1 first (Putinar's certificate, the
    strongest on compact sets: Floudas' test 4.10 is certified at degree 8), then, when that does not
    certify and the degree allows it, the paper's q = (1 + ||v||^2)^k (Reznick-type, for unconstrained
    positive polynomials that are not SOS, e.g. Motzkin).  ``"fixed"``, ``"putinar"``, ``"free"``
    or a user q force one.
-5. **Numerical failures.** A solve that ends inaccurate, with a failed certificate check or a solver
+6. **Numerical failures.** A solve that ends inaccurate, with a failed certificate check or a solver
    error is retried in the kernel form and with cvxpy's back-end (unless ``form`` / ``backend`` were
    given) before the step is given up.  The first back-end is ``"auto"`` for one Gram block and
    Clarabel for several (clique or term blocks: its sparse factorisation keeps them apart).
-6. **Budget.** Every program is sized before it is built (:mod:`sospoly.budget`); one that does not fit
+7. **Budget.** Every program is sized before it is built (:mod:`sospoly.budget`); one that does not fit
    is skipped with status ``budget_exceeded``, and the whole call stops at ``budget.time_limit``
    (status ``time_limit``, with the best bounds found so far).
 """
@@ -64,6 +78,7 @@ from .analysis.term_extraction import second_moment_candidates
 from .analysis.sparse_extraction import extract_from_clique_moments
 from .budget import Budget, BudgetExceeded, TimeLimitReached, as_budget, deadline_scope
 from .certificates.program import SOSProgram
+from .analysis.proof import unsolved_claim
 from .certificates.psatz import Multiplier, PsatzProblem, as_multiplier, build_psatz, checked_inputs
 from .certificates.shape import SPARSITY_KINDS
 from .certificates.sparsity import correlative_sparsity
@@ -71,6 +86,7 @@ from .certificates.term_hierarchy import (cheap_term_level, newton_smaller, pars
                                          term_levels)
 from .lowering.conic import GramForm
 from .solvers.backends import cvxpy_available, get_backend
+from .scaling import ScaledProgram, scaled_program
 from .solvers.lower_bound import solve_psatz
 from .solvers.solve import LowerBound, ProgramSolution, solve_program
 from .status import SolveStatus
@@ -82,6 +98,12 @@ __all__ = ["MinimizeResult", "SOSResult", "SolveAttempt", "LowerBound", "minimiz
 #: ``sparsity="auto"`` falls back from a sparse certificate that does not certify to the dense one of the same
 #: degree while the dense Gram matrix is at most this large.
 DENSE_AUTO_MAX_SIDE = 120
+#: a program whose retry chain ended without a solved answer is solved once more for an "almost solved" iterate (used
+#: through the proven bound only) when the chain took at most this many seconds.
+ITERATE_MAX_SECONDS = 2.0
+#: a certificate that could not be proven is solved again on the exactly reduced basis while its Gram side is at most
+#: this (the re-solve costs as much again).
+REDUCED_RETRY_MAX_SIDE = 60
 #: the dense degree-2 block beside clique blocks is added while it stays this small (its side is n + 1).
 LOW_BLOCK_MAX_SIDE = 61
 _NUMERICAL = (SolveStatus.NUMERICAL_ERROR, SolveStatus.INACCURATE, SolveStatus.CHECK_FAILED)
@@ -310,13 +332,6 @@ def _dedupe(found, rtol: float = 1e-4):
 
 
 # ----------------------------------------------------------------------------- strategy
-def _normalised(f, eq, ineq):
-    """f / max|coef f| and every constraint over its own largest coefficient (same feasible set)."""
-    fs = f.max_abs_coefficient() or 1.0
-    return (f * (1.0 / fs), tuple(g * (1.0 / (g.max_abs_coefficient() or 1.0)) for g in eq),
-            tuple(h * (1.0 / (h.max_abs_coefficient() or 1.0)) for h in ineq), fs)
-
-
 def _support(p: Polynomial) -> np.ndarray:
     return p.exponents() if p.terms else np.zeros((1, p.nvars), np.int64)
 
@@ -433,8 +448,8 @@ def minimize(f: Polynomial | float, eq: Sequence[Polynomial | float] = (), ineq:
     (q a free SOS, GEVP by bisection), or a Polynomial / positive number used as q.  ``sparsity``:
     ``"auto"``, ``"none"``, ``"correlative"`` (``low_degree``: add the dense certificate of that degree),
     ``"term"``, ``"newton"``.  ``budget``: a :class:`sospoly.Budget` (time limit, memory).  ``radius``:
-    a bound on the norm of some global minimiser; the reported lower bound is then rigorous (PSD
-    defect and identity residual subtracted).
+    a bound on the norm of some global minimiser (a box for the proven bound of strategy step 2, beside
+    the box the constraints imply and the shifted certificate, which need none).
     """
     t0 = time.perf_counter()
     tol, budget = as_tolerances(tolerances), as_budget(budget)
@@ -453,12 +468,12 @@ def minimize(f: Polynomial | float, eq: Sequence[Polynomial | float] = (), ineq:
     if max_degree is not None and (int(max_degree) != max_degree or max_degree < d0):
         raise ValueError(f"max_degree must be an integer >= the first degree {d0}, got {max_degree!r}")
     last = d0 if degree is not None else int(max_degree if max_degree is not None else d0 + 4)
-    fn, eqn, ineqn, fscale = _normalised(f, eq, ineq)
-    unbounded = unbounded_result(fn, eqn, ineqn, gens, d0, fscale, time.perf_counter() - t0)
+    prog = scaled_program(f, eq, ineq, multiplier, radius)
+    fn, eqn, ineqn, multiplier = prog.fn, prog.eqn, prog.ineqn, prog.multiplier
+    unbounded = unbounded_result(fn, eqn, ineqn, gens, d0, prog.fscale, time.perf_counter() - t0)
     if unbounded is not None:                 # no bound at any degree (the SDP could miss it by its tolerance)
         return unbounded
-    run = _Run(f, eq, ineq, fn=fn, eqn=eqn, ineqn=ineqn, fscale=fscale, gens=gens, tol=tol, budget=budget,
-               deadline=deadline, refine=refine, radius=radius)
+    run = _Run(f, eq, ineq, prog=prog, gens=gens, tol=tol, budget=budget, deadline=deadline, refine=refine)
     best = None
     for d in range(d0, last + 1, 2):
         for kind, low in _choose_sparsity(sparsity, fn, eqn, ineqn, d, multiplier, d + 2 > last):
@@ -497,11 +512,12 @@ def _finish(best: MinimizeResult, run: _Run, seconds: float) -> MinimizeResult:
 class _Run:
     """The state of one :func:`minimize` call: data, tolerances, budget, attempts so far."""
 
-    def __init__(self, f, eq, ineq, *, fn, eqn, ineqn, fscale, gens, tol, budget, deadline, refine, radius):
+    def __init__(self, f, eq, ineq, *, prog: ScaledProgram, gens, tol, budget, deadline, refine):
         self.f, self.eq, self.ineq = f, eq, ineq
-        self.fn, self.eqn, self.ineqn, self.fscale = fn, eqn, ineqn, fscale
+        self.fn, self.eqn, self.ineqn, self.fscale = prog.fn, prog.eqn, prog.ineqn, prog.fscale
+        self.scaling, self.box, self.ball = prog.scaling, prog.box, prog.ball
         self.gens, self.tol, self.budget, self.deadline = gens, tol, budget, deadline
-        self.refine, self.radius = refine, radius
+        self.refine = refine
         self.attempts: list[SolveAttempt] = []
 
     def _empty(self, status, degree, mult, kind, message, n_lmivar=0) -> MinimizeResult:
@@ -521,9 +537,27 @@ class _Run:
             return self._empty(status, degree, mult, label, why)
 
     def _solve(self, degree, mult, kind, low, form, backend) -> MinimizeResult:
+        res = self._solve_shape(degree, mult, kind, low, form, backend, None)
+        small = res.solution is not None and \
+            max((G.shape[0] for G in res.solution.grams.values()), default=0) <= REDUCED_RETRY_MAX_SIDE
+        if res.status == SolveStatus.UNPROVEN and small and not self.deadline.expired:
+            # the solver's iterate sits near a face the identities force (rows of zeros); solved again on the
+            # exactly reduced basis (sospoly.certificates.reduction), its certificate can often be proven
+            again = self._solve_shape(degree, mult, kind, low, form, backend, "reduced")
+            if again is not None and _better(again, res):
+                return again
+        return res
+
+    def _solve_shape(self, degree, mult, kind, low, form, backend, reduce) -> MinimizeResult | None:
         label = "dense" if kind == "none" else kind
         try:
             shape = _shape_with_q(kind, self.fn, self.eqn, self.ineqn, degree, mult, self.budget.max_gram_side)
+            if reduce:
+                base = build_psatz(self.fn, self.eqn, self.ineqn, degree, mult, self.gens, sparsity=shape,
+                                   low_degree=low if kind == "correlative" else None, budget=self.budget).shape
+                if base.facial_reduction:
+                    return None
+                shape = base.reduced()
             psatz = build_psatz(self.fn, self.eqn, self.ineqn, degree, mult, self.gens, sparsity=shape,
                                 low_degree=low if kind == "correlative" else None, budget=self.budget)
         except BudgetExceeded as exc:
@@ -533,6 +567,7 @@ class _Run:
         fixed_sol = c_hi = None
         found = []
         lb = None
+        n_before = len(self.attempts)
         for fm, be in _retry_chain(form, backend, len(psatz.shape.u_bases)):
             t1 = time.perf_counter()
             if psatz.multiplier == Multiplier.FREE and fixed_sol is None:
@@ -549,7 +584,24 @@ class _Run:
                                               time.perf_counter() - t1, lb.message))
             if lb.status not in _NUMERICAL or self.deadline.expired:
                 break
+        spent = sum(a.seconds for a in self.attempts[n_before:])
+        if lb.status in _NUMERICAL and psatz.multiplier != Multiplier.FREE and not self.deadline.expired and \
+                spent <= ITERATE_MAX_SECONDS:
+            lb = self._iterate(psatz, form, backend) or lb
         return self._evaluate(psatz, lb, found, degree, mult, label)
+
+    def _iterate(self, psatz, form, backend) -> LowerBound | None:
+        """An "almost solved" iterate that passes the a-posteriori checks (``accept_inaccurate``), as a
+        LowerBound with status INACCURATE and the iterate's level: used only through the proven bound."""
+        import dataclasses
+
+        fm, be = _retry_chain(form, backend, len(psatz.shape.u_bases))[0]
+        tol = dataclasses.replace(self.tol, accept_inaccurate=True)
+        lb = solve_psatz(psatz, backend=be, form=fm, tolerances=tol, deadline=self.deadline)
+        sol = lb.solution
+        if lb.status != SolveStatus.INACCURATE or sol is None or sol.objective is None or not sol.grams:
+            return None
+        return LowerBound(SolveStatus.INACCURATE, float(sol.objective), sol, None, "inaccurate iterate")
 
     def _points(self, psatz, sol):
         return _feasible_points(self.fn, self.eqn, self.ineqn, candidates_of(psatz, sol, self.tol), self.tol,
@@ -558,35 +610,68 @@ class _Run:
     def _evaluate(self, psatz: PsatzProblem, lb: LowerBound, found, degree, mult, label) -> MinimizeResult:
         tol, fs = self.tol, self.fscale
         bracket = None if lb.bracket is None else tuple(None if b is None else b * fs for b in lb.bracket)
-        if lb.status not in (SolveStatus.OPTIMAL, SolveStatus.TIME_LIMIT) or lb.lower_bound is None \
-                or lb.solution is None:
-            lower = None if lb.lower_bound is None else lb.lower_bound * fs
-            return MinimizeResult(lb.status, lower, None, (), False, psatz.n_lmivar, degree, _name_of(mult), self.gens,
-                                  bracket, lb.solution, 0.0, lb.message, sparsity=label, scale=fs)
-        c = float(lb.lower_bound)
-        msg = lb.message
-        if self.radius is not None:
-            from .analysis.rigor import rigorous_psatz_bound
-
-            rb = rigorous_psatz_bound(psatz, lb.solution, c, self.radius)
-            c = rb.lower_bound
-            msg = (msg + "; " if msg else "") + f"rigorous margin {rb.margin:.3g} subtracted (radius {self.radius:g})"
+        solved = (SolveStatus.OPTIMAL, SolveStatus.TIME_LIMIT, SolveStatus.INACCURATE)
+        if lb.status not in solved or lb.lower_bound is None or lb.solution is None:
+            status, lower, msg = unsolved_claim(psatz, lb)
+            return MinimizeResult(status, None if lower is None else lower * fs, None, (), False, psatz.n_lmivar,
+                                  degree, _name_of(mult), self.gens, bracket, lb.solution, 0.0, msg, sparsity=label,
+                                  scale=fs)
+        c_relax = float(lb.lower_bound)
         found = _dedupe(sorted(found + self._points(psatz, lb.solution), key=lambda t: t[0]))
+        pts = [(float(self.f.evaluate(self.scaling.to_original(p))) / fs, p) for _, p in found]
+        found = sorted([(v, p) for v, p in pts if np.isfinite(v)], key=lambda t: t[0])
         upper = found[0][0] if found else None
+        c, note = self._proven(psatz, lb.solution, c_relax, upper)
+        msg = "; ".join(m for m in (lb.message, note) if m)
         status, optimal = lb.status, False
-        if upper is not None:
+        if not np.isfinite(c):
+            status = SolveStatus.UNPROVEN
+            msg = f"the relaxation's value {c_relax * fs:.10g} is not proven a lower bound ({note})"
+            c = None
+        elif upper is not None:
             if tol.contradicts(c, upper):
                 status = SolveStatus.INCONSISTENT
                 msg = f"lower bound {c * fs:.10g} exceeds f at a feasible point {upper * fs:.10g}: numerical failure"
             else:
-                optimal = bool(tol.certified(c, upper)) and status == SolveStatus.OPTIMAL
+                optimal = bool(tol.certified(c, upper)) and status in (SolveStatus.OPTIMAL, SolveStatus.INACCURATE)
+                status = SolveStatus.OPTIMAL if optimal else status
                 c = tol.consistent(c, upper)
         near = tol.gap_tolerance(upper) if upper is not None else 0.0
-        minimizers = tuple(p for val, p in found if val <= upper + near) if upper is not None else ()
-        return MinimizeResult(status, c * fs, None if upper is None else upper * fs, minimizers, optimal,
-                              psatz.n_lmivar, degree, _name_of(mult), self.gens, bracket, lb.solution, 0.0, msg,
-                              tuple(p for _, p in found), label, scale=fs,
+        back = self.scaling.to_original
+        minimizers = tuple(back(p) for val, p in found if val <= upper + near) if upper is not None else ()
+        return MinimizeResult(status, None if c is None else c * fs, None if upper is None else upper * fs, minimizers,
+                              optimal, psatz.n_lmivar, degree, _name_of(mult), self.gens, bracket, lb.solution, 0.0,
+                              msg, tuple(back(p) for _, p in found), label, scale=fs,
                               moment_matrices=moment_matrices_of(psatz.u, lb.solution))
+
+    def _proven(self, psatz: PsatzProblem, sol: ProgramSolution, c: float, upper) -> tuple[float, str]:
+        """(the largest proven lower bound of the normalised program from the certificate at level c, or -inf;
+        how it was proven or why not) -- strategy step 2; ``upper`` f at a feasible point (normalised), for
+        the sublevel box."""
+        from .analysis.proof import WEAK_MARGINS, global_psatz_bound, sublevel_box
+        from .analysis.rigor import rigorous_psatz_bound
+
+        best, notes = -np.inf, []
+        box = self.box
+        # the sublevel box needs a truly feasible point: unconstrained programs only (a candidate within the
+        # feasibility tolerance of the constraints may lie below the constrained minimum)
+        sub = sublevel_box(self.fn, upper) if upper is not None and not (self.eqn or self.ineqn) else None
+        if sub is not None:
+            box = sub if box is None else np.minimum(box, sub)
+        if box is not None:
+            rb = rigorous_psatz_bound(psatz, sol, c, box, ball=self.ball)
+            if np.isfinite(rb.lower_bound):
+                best = rb.lower_bound
+                notes.append(f"proven on the box holding a minimiser (margin {rb.margin * self.fscale:.3g})")
+        gb = global_psatz_bound(psatz, sol, c)
+        if not np.isfinite(best) and not np.isfinite(gb.lower_bound) and gb.q_min > 0:
+            gb = global_psatz_bound(psatz, sol, c, margins=WEAK_MARGINS)
+        if gb.lower_bound > best:
+            best = gb.lower_bound
+            notes = [f"proven for every point by the shifted certificate (margin {gb.margin * self.fscale:.3g})"]
+        elif not notes:
+            notes.append(gb.message if self.box is None else gb.message + "; the box bound is not finite")
+        return best, "; ".join(notes)
 
 
 # ----------------------------------------------------------------------------- is_sos

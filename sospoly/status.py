@@ -17,10 +17,11 @@ class SolveStatus(str, enum.Enum):
     FEASIBLE = "feasible"                  #: feasibility problem solved, certificate checked
     INFEASIBLE = "infeasible"              #: the conic program has no solution (no certificate at this degree)
     UNBOUNDED = "unbounded"                #: objective unbounded (e.g. the constraint set is empty)
-    INACCURATE = "inaccurate"              #: solver stopped at reduced accuracy: no bound is reported
+    INACCURATE = "inaccurate"              #: solver stopped at reduced accuracy: no bound unless proven rigorously
     CHECK_FAILED = "certificate_check_failed"  #: solver said solved, a-posteriori check rejected it
     NUMERICAL_ERROR = "numerical_error"    #: solver failed (error, panic, iteration limit)
     INCONSISTENT = "inconsistent_bounds"   #: lower bound above a feasible value: numerical failure
+    UNPROVEN = "unproven_bound"            #: a relaxation's value that could not be proven a bound: no claim
     TIME_LIMIT = "time_limit"              #: the time limit of the budget was reached first
     BUDGET_EXCEEDED = "budget_exceeded"    #: the program's estimated size exceeds the budget: not built
     NOT_SOLVED = "not_solved"

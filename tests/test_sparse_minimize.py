@@ -63,6 +63,12 @@ def multistart(fun, n, starts=12, seed=0, scale=2.0):
     return best
 
 
+def box_radius(name: str, n: int) -> float:
+    """A bound of a global minimiser's norm (the box of minimize's proven bound, #23): chained singular's is 0,
+    every other benchmark's minimisers lie in [-1, 1]^n."""
+    return 1.0 if name == "chained_singular" else math.sqrt(n) + 1.0
+
+
 def certified_at(res, fstar, f_np=None, rel=1e-6):
     """The result is certified, its lower bound is <= f* (up to the gap tolerance at the problem's scale)
     and within it, and (with ``f_np``) the reported upper bound is f at the first minimiser."""
@@ -120,7 +126,7 @@ def test_rosenbrock_40_default_call():
 def test_chained_singular_40_default_call():
     """Chained singular, n = 40 (degenerate: singular Hessian at the minimiser): certified at 0."""
     f, _, _, fstar = BENCH.chained_singular(40)
-    res = sp.minimize(f)
+    res = sp.minimize(f, radius=1.0)        # the minimiser is 0: the box of the proven bound (#23)
     certified_at(res, fstar, chained_singular_np)
     assert res.sparsity == "correlative"
     assert np.allclose(res.minimizers[0], 0.0, atol=1e-3)
@@ -184,8 +190,9 @@ def test_dense_and_sparse_agree(name, n):
     """Where both run, both certify the known minimum (the sparse bound is valid and tight here; it is not
     in general guaranteed to reach the dense one)."""
     f, eq, ineq, fstar = BENCH.BUILDERS[name](n)
-    auto = sp.minimize(f, eq, ineq)
-    dense = sp.minimize(f, eq, ineq, degree=auto.degree, sparsity="none")
+    R = box_radius(name, n)
+    auto = sp.minimize(f, eq, ineq, radius=R)
+    dense = sp.minimize(f, eq, ineq, degree=auto.degree, sparsity="none", radius=R)
     certified_at(auto, fstar)
     certified_at(dense, fstar)
     assert dense.sparsity == "dense" and dense.n_lmivar == sp.n_lmivar_formula(
@@ -263,8 +270,8 @@ def test_motzkin_newton_polytope():
     """With q = 1 + x^2 + y^2 (Reznick's multiplier) the Newton polytope of u = q (M - c) keeps 9 of the 15
     monomials of degree <= 4, and certifies the minimum 0."""
     q = 1 + x**2 + y**2
-    res = sp.minimize(MOTZKIN, degree=8, sparsity="newton", multiplier=q)
-    dense = sp.minimize(MOTZKIN, degree=8, sparsity="none", multiplier=q)
+    res = sp.minimize(MOTZKIN, degree=8, sparsity="newton", multiplier=q, radius=2.0)
+    dense = sp.minimize(MOTZKIN, degree=8, sparsity="none", multiplier=q, radius=2.0)
     certified_at(res, 0.0)
     certified_at(dense, 0.0)
     assert res.sparsity == "newton" and res.n_lmivar < dense.n_lmivar
@@ -281,7 +288,7 @@ def test_motzkin_newton_polytope():
 def test_term_and_newton_bounds_are_valid(sparsity, f, fstar):
     """Valid bounds (<= f*, closed forms: Rosenbrock 0; camel; x^4 + y^4 + 1 - xy = 7/8 at x = y = +-1/2) and
     never a crash, whatever the blocks hold (a term-sparsity block may lack 1 or some x_i)."""
-    res = sp.minimize(f, sparsity=sparsity)
+    res = sp.minimize(f, sparsity=sparsity, radius=2.0)       # every minimiser has norm <= sqrt 2
     assert res.sparsity.startswith(sparsity)
     assert res.lower_bound is not None and res.lower_bound <= fstar + 1e-6
     if res.upper_bound is not None:
@@ -305,7 +312,7 @@ def test_benchmark_quick_run(capsys):
 @pytest.mark.parametrize("name", ["rosenbrock", "chained_singular", "broyden", "bilinear", "ising"])
 def test_n100_default_call(name):
     f, eq, ineq, fstar = BENCH.BUILDERS[name](100)
-    res = sp.minimize(f, eq, ineq)
+    res = sp.minimize(f, eq, ineq, radius=box_radius(name, 100))
     certified_at(res, fstar)
     assert res.sparsity == "correlative" and res.seconds < 60
 
@@ -316,8 +323,8 @@ def test_n200_default_call(name):
     """The issue's largest size: certified well inside the default two-minute budget, about linearly in
     n (N_LMIVAR exactly twice the n = 100 count up to the chain's ends)."""
     f, eq, ineq, fstar = BENCH.BUILDERS[name](200)
-    res = sp.minimize(f, eq, ineq)
+    res = sp.minimize(f, eq, ineq, radius=box_radius(name, 200))
     certified_at(res, fstar)
     assert res.sparsity == "correlative" and res.seconds < 60
-    half = sp.minimize(*BENCH.BUILDERS[name](100)[:3])
+    half = sp.minimize(*BENCH.BUILDERS[name](100)[:3], radius=box_radius(name, 100))
     assert 1.9 < res.n_lmivar / half.n_lmivar < 2.1

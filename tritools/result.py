@@ -43,7 +43,8 @@ class Status(str, enum.Enum):
         The problem has no finite estimate (e.g. the extracted homogeneous point has ``w4 = 0``, all
         cameras share one centre).
     SOLVER_FAILED
-        The SDP solver or the local optimiser reported a failure.
+        The SDP solver or the local optimiser reported a failure (``X`` and ``gamma_ub`` are still the
+        best estimate found, e.g. the local L2 refinement of the linear estimate).
     NUMERICAL_FAILURE
         Results are not trustworthy (NaN, inconsistent bounds, ...).
     TIME_LIMIT
@@ -188,8 +189,10 @@ class TriangulationResult:
     X_raw, gamma_ub_raw : optional
         Extracted estimate before local refinement and its ``gamma``.
     certified_by : str, optional
-        ``"sdp"`` (the LMI of Theorem 1 / Corollary 1) or ``"verification"`` (KKT multipliers and the
-        Lagrangian bound of :mod:`sospoly.analysis.verify`); ``None`` when not certified.
+        ``"sdp"`` (the LMI of Theorem 1 / Corollary 1), ``"verification"`` (KKT multipliers and the
+        Lagrangian bound of :mod:`sospoly.analysis.verify`) or ``"trivial_bound"`` (gamma(X) within the
+        certificate tolerance of the lower bound 0, :mod:`tritools.solve.trivial`); ``None`` when not
+        certified.
     message : str
         Human readable details.
     timings : dict

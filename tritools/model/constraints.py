@@ -131,10 +131,11 @@ class CentreRelations:
     coincident: frozenset
 
 
-def centre_relations(cameras: np.ndarray) -> CentreRelations:
-    """:class:`CentreRelations` of ``cameras`` (N, 3, 4)."""
+def centre_relations(cameras: np.ndarray, groups=None) -> CentreRelations:
+    """:class:`CentreRelations` of ``cameras`` (N, 3, 4); ``groups`` the centre labels when already decided
+    (default :func:`centre_groups`)."""
     cameras = np.asarray(cameras, float)
-    groups = centre_groups(cameras)
+    groups = centre_groups(cameras) if groups is None else np.asarray(groups)
     pairs = frozenset((i, j) for i, j in combinations(range(len(cameras)), 2)
                       if groups[i] == groups[j] and _pair_homography(cameras[i], cameras[j]) is not None)
     return CentreRelations(groups, pairs)

@@ -19,7 +19,9 @@ f and every g_ij quadratic.  For each problem this module, with numpy over the s
    from ``BAND_MIN_VIEWS`` views first with the constraints of a band of view pairs only, by
    :func:`sospoly.analysis.verify_sparse.verify_quadratic_banded_batch`: a subset of the constraints gives a
    valid, possibly weaker bound at a cost linear in N; all pairs for what no band certifies);
-5. decides with :func:`tritools.solve.decide.decide` (the rule of every path).
+5. decides with :func:`tritools.solve.decide.decide` (the rule of every path); what the Lagrangian bound
+   does not certify is certified through the trivial bound 0 when gamma(X^) is within the tolerance of it
+   (:mod:`tritools.solve.trivial`).
 
 The lower bound comes from the polynomial data and the multipliers only; the local solver merely
 proposes v^.  Problems the vectorised code cannot handle (degenerate cameras, DLT at infinity,
@@ -43,6 +45,7 @@ from ..model.normalize import normalization_stack
 from ..model.stacked import (band_pairs, epipolar_quadratics, fundamental_stack, project_stack, refine_points_stack,
                              view_pairs)
 from .decide import decide, decide_reported, gamma_from_c
+from .trivial import trivially_certified, trivially_certified_reported
 
 __all__ = ["FastPathBatch", "verify_points", "verify_checked", "stack_point_problems", "lagrangian_bounds",
            "BAND_MIN_VIEWS",
@@ -68,7 +71,8 @@ class FastPathBatch:
     ``X`` the world point, ``gamma_lb`` from the Lagrangian bound, ``gamma_ub`` = gamma(X) on the caller's
     data, ``image_points`` v^ in pixels,
     ``c_lower`` / ``c_upper`` the bounds in the normalised units where the certificate is decided,
-    ``scale`` the common image scale s.
+    ``scale`` the common image scale s; ``trivial[m]``: certified through the trivial bound 0
+    (:mod:`tritools.solve.trivial`; then ``gamma_lb`` is 0).
     """
     certified: np.ndarray
     ok: np.ndarray
@@ -79,6 +83,7 @@ class FastPathBatch:
     c_lower: np.ndarray
     c_upper: np.ndarray
     scale: np.ndarray
+    trivial: np.ndarray
 
 
 def stack_point_problems(cameras, points2d, caller: str):
@@ -143,8 +148,11 @@ def verify_checked(C: np.ndarray, x: np.ndarray, ok: np.ndarray, tolerances: Tol
     gamma_ub = np.where(fin_w, np.sqrt(np.sum((uw - x) ** 2, axis=(1, 2)) / (2 * N)), np.inf)
     gamma_lb = np.minimum(gamma_from_c(c_lower, N, norm.scale), gamma_ub)
     certified = ok & optimal & decide_reported(gamma_lb, gamma_ub, tolerances, N, norm.scale, norm.resolution)
-    return FastPathBatch(certified, ok, X, gamma_lb, gamma_ub, x + u / norm.scale[:, None, None], c_lower,
-                         upper, norm.scale)
+    trivial = ok & ~certified & trivially_certified(upper, tolerances, N, norm.resolution) & \
+        trivially_certified_reported(gamma_ub, tolerances, N, norm.scale, norm.resolution)
+    gamma_lb = np.where(trivial, 0.0, gamma_lb)
+    return FastPathBatch(certified | trivial, ok, X, gamma_lb, gamma_ub, x + u / norm.scale[:, None, None],
+                         np.where(trivial, 0.0, c_lower), upper, norm.scale, trivial)
 
 
 def lagrangian_bounds(C, Cn, v, ok, radius, resolution, tolerances, f0=None, weights=None, views=None):

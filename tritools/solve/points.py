@@ -32,6 +32,7 @@ from .fastpath import BAND_MIN_VIEWS, BAND_WIDTHS, verify_points
 from .options import MethodChoice, SolvePath, TriangulationOptions, options_from
 from .report import points_report_stack
 from .sdp_batch import solve_corollary1_points
+from .trivial import TRIVIAL_BOUND
 
 __all__ = ["PointStack", "PointsResult", "triangulate_points", "FAST_CHUNK"]
 
@@ -137,7 +138,7 @@ class PointStack:
             return idx
         cert = b.certified
         self._store(idx[cert], b.X[cert], b.X[cert], b.gamma_lb[cert], b.image_points[cert], Status.OPTIMAL.value,
-                    True, "verification")
+                    True, np.where(b.trivial[cert], TRIVIAL_BOUND, "verification"))
         return idx[~cert]
 
     def _sdp(self, idx: np.ndarray) -> np.ndarray:
@@ -157,7 +158,7 @@ class PointStack:
                                        "dense", ("ipm-batch:converged",)),)
             if opt or final:
                 self._store(np.array([m]), b.X[k:k + 1], b.X_raw[k:k + 1], b.gamma_lb[k:k + 1],
-                            b.image_points[k:k + 1], str(b.status[k]), opt, "sdp" if opt else None)
+                            b.image_points[k:k + 1], str(b.status[k]), opt, b.certified_by[k] if opt else None)
             else:                       # delta = 2 decided, not certified: the per-point path continues at 4
                 self.todo[int(m)] = self.opts.replace(delta=4, path="sdp")
         return np.array(rest, dtype=int)

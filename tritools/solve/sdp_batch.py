@@ -16,7 +16,8 @@ i.e. the (2N+1)x(2N+1) LMI on the basis b(v) = (1, x_11, ..., x_N2).  With numpy
    (:meth:`sospoly.CompiledPsatz.batch_bounds`); gamma_LB from c* (the paper's (52));
 3. extract v* from the Gram kernel (dimension 1: :meth:`sospoly.Tolerances.kernel_dimension`), X^ from
    the SVD of M0(v*) (paper (53)), refine it with the vectorised Levenberg-Marquardt, and decide with
-   :func:`tritools.solve.decide.decide` (the rule of every path).
+   :func:`tritools.solve.decide.decide` (the rule of every path); what c_LB does not certify is certified
+   through the trivial bound 0 when gamma(X^) is within the tolerance of it (:mod:`tritools.solve.trivial`).
 
 A problem is *handed back* (``done = False``) whenever the batch cannot reproduce the per-point path's
 answer with this short route: invalid data, an IPM instance that did not converge (the per-point
@@ -42,6 +43,7 @@ from ..result import Status
 from .decide import decide, decide_reported, gamma_from_c
 from .fastpath import stack_point_problems
 from .structures import corollary1_point_structure
+from .trivial import TRIVIAL_BOUND, trivially_certified, trivially_certified_reported
 
 __all__ = ["SdpBatch", "solve_corollary1_points", "SDP_CHUNK_BYTES"]
 
@@ -56,7 +58,7 @@ class SdpBatch:
     ``done[m]``: the batch produced problem m's result (else it must go to the per-point path); where
     done: ``c_lower`` / ``c_upper`` (normalised units), ``status`` and ``optimal`` of the decision,
     ``X`` / ``X_raw`` the refined / extracted world points, ``gamma_lb``, ``image_points`` (pixels) of v*,
-    ``reason`` why a problem was handed back.
+    ``reason`` why a problem was handed back, ``certified_by`` (``"sdp"``, ``"trivial_bound"`` or None).
     """
     done: np.ndarray
     status: np.ndarray
@@ -70,6 +72,7 @@ class SdpBatch:
     n_lmivar: int
     iterations: np.ndarray
     reason: tuple
+    certified_by: np.ndarray
 
 
 def _chunk_size(N: int) -> int:
@@ -162,7 +165,12 @@ def solve_corollary1_points(cameras, points2d, *, tolerances: Tolerances = DEFAU
         reason[m] = "the bounds met in normalised coordinates, but not at the estimate in world coordinates"
     status = np.where(optimal & ~reported, Status.NOT_CERTIFIED.value, status)
     optimal = optimal & reported
+    trivial = ok & ~optimal & trivially_certified(c_ub, tol, N, norm.resolution) & \
+        trivially_certified_reported(g_ub, tol, N, norm.scale, norm.resolution)
+    status = np.where(trivial, Status.OPTIMAL.value, status)
+    optimal, c_rep, g_lb = optimal | trivial, np.where(trivial, 0.0, c_rep), np.where(trivial, 0.0, g_lb)
+    by = np.where(trivial, TRIVIAL_BOUND, np.where(optimal, "sdp", None))
     reason = tuple("" if done else r for done, r in zip(ok, reason))
     return SdpBatch(ok, status, optimal & ok, c_rep, c_ub, g_lb,
                     X_world, norm.world_points(X_raw_n), x + xn / norm.scale[:, None, None],
-                    comp.n_lmivar, iters, reason)
+                    comp.n_lmivar, iters, reason, by)

@@ -2,9 +2,10 @@
 
 ``triangulate(cameras, regions)`` with one :class:`~tritools.solve.options.TriangulationOptions`:
 
-1. validate (:func:`tritools.model.geometry.validate_cameras`, :func:`tritools.model.regions.as_regions`)
-   and normalise the data (:mod:`tritools.model.normalize`; the L2 problem is unchanged and every
-   number reported is in the caller's units);
+1. validate (:func:`tritools.model.geometry.validate_cameras`, :func:`tritools.model.regions.as_regions`),
+   move a far-away world origin to the cameras (:mod:`tritools.model.frame`: georeferenced scenes and
+   rescaled cameras give their twins' answers) and normalise the data (:mod:`tritools.model.normalize`;
+   the L2 problem is unchanged and every number reported is in the caller's units);
 2. walk the degree plan (:func:`tritools.solve.plan.degree_plan`): at each step build (f, g, h) in the
    step's formulation (:mod:`tritools.model.problem`) and the certificate's structure -- dense, or view
    cliques beside the dense degree-2 block -- from :data:`~tritools.solve.structures.STRUCTURE_CACHE`,
@@ -42,8 +43,9 @@ from sospoly.analysis.verify import verify_quadratic
 from sospoly.budget import Deadline, TimeLimitReached, deadline_scope
 
 from ..model.constraints import Method, centre_relations
-from ..model.geometry import (common_centre, dlt, gamma as gamma_of, gamma_validated, point_from_image_points,
-                              project, refine_l2, validate_cameras)
+from ..model.frame import WorldFrame, frame_centre_groups, world_frame
+from ..model.geometry import (common_centre, dlt, gamma as gamma_of, gamma_validated, image_points,
+                              point_from_image_points, project, refine_l2, validate_cameras)
 from ..model.normalize import Normalization, normalization_for, unconstrained_reason
 from ..model.problem import TriangulationProblem, build_problem, view_band, view_chain
 from ..model.regions import Point, as_regions
@@ -55,6 +57,7 @@ from .options import SolvePath, TriangulationOptions, options_from
 from .plan import Step, degree_plan
 from .report import point_report, points_report_stack, solve_ball, solve_radius
 from .structures import STRUCTURE_CACHE, structure_key
+from .trivial import TRIVIAL_BOUND, local_estimate, trivially_certified, trivially_certified_reported
 
 __all__ = ["triangulate", "MAX_FAMILY_DIM", "INACCURATE_RESOLVE_MAX_SECONDS"]
 
@@ -110,6 +113,9 @@ class _PointSolve:
     """One triangulation: data, options, normalisation, the problems built so far, the attempts."""
 
     def __init__(self, cams, regions, opts: TriangulationOptions, t0: float):
+        self.frame: WorldFrame = world_frame(cams)          # georeferenced worlds, rescaled cameras
+        self.cams_user = cams                               # the caller's: the final report is made on these
+        cams = self.frame.cameras(cams)
         self.cams, self.regions, self.opts, self.t0 = cams, regions, opts, t0
         self.N = cams.shape[0]
         self.deadline: Deadline = opts.budget.deadline()
@@ -117,6 +123,7 @@ class _PointSolve:
         self.attempts: list[Attempt] = []
         self._problems: dict = {}
         self._relations = None
+        self._local = _UNSET
 
     # ------------------------------------------------------------------ the normalised data (when needed)
     @functools.cached_property
@@ -142,7 +149,7 @@ class _PointSolve:
         if key not in self._problems:
             t = time.perf_counter()
             if self._relations is None:
-                self._relations = centre_relations(self.cams)        # decided on the raw cameras
+                self._relations = centre_relations(self.cams, frame_centre_groups(self.cams, self.frame))
             self._problems[key] = build_problem(self.cams_n, self.regs_n, method, formulation, self._relations)
             self.timings["build"] = self.timings.get("build", 0.0) + time.perf_counter() - t
         return self._problems[key]
@@ -162,7 +169,7 @@ class _PointSolve:
             if self.deadline.expired:
                 break
             if k == 0 and self.opts.path == SolvePath.AUTO and step.delta == 2:
-                res = self.verify(step)
+                res = self.verify(step) or self.trivial(step)
                 if res is not None:
                     best = res
                     break
@@ -185,8 +192,29 @@ class _PointSolve:
             # the best bounds so far, and why the plan stopped short of a certificate
             best = _replace(best, status=Status.BUDGET_EXCEEDED,
                             message="; ".join(m for m in (best.message, f"skipped {skipped.message}") if m))
+        best = self.settle(best, steps)
         self.timings["total"] = time.perf_counter() - self.t0
+        best = self.in_user_frame(best)
         return _replace(best, timings=dict(self.timings), attempts=tuple(self.attempts))
+
+    def in_user_frame(self, res: TriangulationResult) -> TriangulationResult:
+        """``res`` with X moved back to the caller's world frame (:mod:`tritools.model.frame`) and gamma_UB,
+        residuals and depths evaluated there on the caller's cameras -- the numbers a user re-computes -- the
+        certificate confirmed on them (:func:`tritools.solve.decide.decide_reported`)."""
+        if not self.frame.moved or res.X is None:
+            return res
+        X, X_raw = self.frame.user_point(res.X), self.frame.user_point(res.X_raw)
+        rep = point_report(X, self.cams_user, self.regions)
+        kw = dict(X=X, X_raw=X_raw, gamma_ub=rep.gamma, residuals=rep.residuals, depths=rep.depths,
+                  gamma_ub_raw=point_report(X_raw, self.cams_user, self.regions).gamma)
+        if res.gamma_lb is not None and rep.gamma is not None and np.isfinite(rep.gamma):
+            kw["gamma_lb"] = min(res.gamma_lb, rep.gamma)
+            if res.optimal and not decide_reported(kw["gamma_lb"], rep.gamma, self.opts.tolerances, self.N,
+                                                   self.norm.scale, self.norm.resolution):
+                kw.update(status=Status.NOT_CERTIFIED, optimal=False, certified_by=None,
+                          message="; ".join(m for m in (res.message, "the bounds met in the re-centred frame, "
+                                                        "but not at the estimate in the caller's frame") if m))
+        return _replace(res, **kw)
 
     def _method_name(self, steps) -> str:
         return steps[0].result_method.value if steps else (self.opts.explicit_method or Method.COROLLARY1).value
@@ -272,6 +300,64 @@ class _PointSolve:
         return self._report(step, Status.OPTIMAL, True, lb, X=X, X_raw=X,
                             image_points=self.norm.image_points(v.reshape(self.N, 2)), certified_by="verification",
                             n_lmivar=sospoly.n_lmivar_formula(len(problem.gens), 2, [g.degree for g in problem.eq]))
+
+    # ------------------------------------------------------------------ the trivial bound, the local estimate
+    def local(self) -> tuple[float, np.ndarray] | None:
+        """The local estimate (:func:`tritools.solve.trivial.local_estimate`), computed once."""
+        if self._local is _UNSET:
+            t = time.perf_counter()
+            try:
+                self._local = local_estimate(self.cams_n, self.regs_n)
+            except (ValueError, np.linalg.LinAlgError, FloatingPointError):
+                self._local = None
+            self.timings["local"] = time.perf_counter() - t
+        return self._local
+
+    def trivial(self, step: Step, X=None) -> TriangulationResult | None:
+        """A certificate through the trivial bound gamma* >= 0 (:mod:`tritools.solve.trivial`) at ``X`` (world
+        frame; default the local estimate), or None when gamma(X) is not within the tolerance of 0."""
+        t = time.perf_counter()
+        if X is None:
+            est = self.local()
+            if est is None or not trivially_certified(2 * self.N * est[0] ** 2, self.opts.tolerances, self.N,
+                                                      self.norm.resolution):
+                return None
+            X = self.norm.world_point(est[1])
+        rep = point_report(X, self.cams, self.regions)
+        if rep.gamma is None or not trivially_certified_reported(rep.gamma, self.opts.tolerances, self.N,
+                                                                 self.norm.scale, self.norm.resolution):
+            return None
+        with np.errstate(all="ignore"):
+            x = image_points(np.asarray(X, float), self.cams)
+        res = self._report(step, Status.OPTIMAL, True, 0.0, X=X, X_raw=X, image_points=x, certified_by=TRIVIAL_BOUND)
+        if not res.optimal:
+            return None
+        self.attempts.append(Attempt(step.method.value, step.delta, Status.OPTIMAL.value, 0.0, res.gamma_ub,
+                                     TRIVIAL_BOUND, res.sparsity, (), time.perf_counter() - t))
+        return _replace(res, message="; ".join(m for m in ("gamma_UB within the certificate tolerance of the "
+                                                            "trivial lower bound 0", res.message) if m))
+
+    def settle(self, best: TriangulationResult, steps) -> TriangulationResult:
+        """The final result: a certificate through the trivial bound at the best estimate (or the local one) when
+        one holds; otherwise ``best``, with the local estimate when it has none (every status but
+        ``invalid_input`` carries an estimate when one can be computed)."""
+        if best.status.certified or best.status == Status.INVALID_INPUT:
+            return best
+        step = _step_of(best, steps, self.opts)
+        cert = (self.trivial(step, best.X) if best.X is not None else None) or self.trivial(step)
+        if cert is not None:
+            why = f" (before: {best.status.value}{': ' + best.message if best.message else ''})"
+            return _replace(cert, n_lmivar=best.n_lmivar, message=cert.message + why)
+        est = self.local()
+        if best.X is not None or est is None:
+            return best
+        X = self.norm.world_point(est[1])
+        with np.errstate(all="ignore"):
+            x = image_points(X, self.cams)
+        rep = self._report(step, best.status, False, best.gamma_lb, X=X, X_raw=X, image_points=x, certified_by=None)
+        note = "X and gamma_UB from the local L2 refinement of the DLT point"
+        return _replace(rep, delta=best.delta, n_lmivar=best.n_lmivar, sparsity=best.sparsity,
+                        message="; ".join(m for m in (best.message, note) if m))
 
     # ------------------------------------------------------------------ the SDP
     def solve_step(self, step: Step, tight: bool = False) -> TriangulationResult:
@@ -484,10 +570,23 @@ def behind_message(depths) -> str:
         ", ".join(str(i) for i in np.nonzero(~(np.asarray(depths, float) > 0))[0])
 
 
-def _replace(res: TriangulationResult, **kw) -> TriangulationResult:
-    import dataclasses
+#: "not computed yet" (the local estimate may be None)
+_UNSET = object()
 
+
+def _replace(res: TriangulationResult, **kw) -> TriangulationResult:
     return dataclasses.replace(res, **kw)
+
+
+def _step_of(res: TriangulationResult, steps, opts: TriangulationOptions) -> Step:
+    """The plan step a result belongs to (for reporting an estimate under it)."""
+    first = steps[0] if steps else Step(opts.explicit_method or Method.COROLLARY1, 2, "dense")
+    try:
+        method = Method(res.method)
+    except ValueError:
+        method = first.method
+    return Step(method, res.delta if res.delta is not None else first.delta,
+                "views" if res.sparsity == "views" else "dense")
 
 
 def _better(a: TriangulationResult, b: TriangulationResult) -> bool:

@@ -1,0 +1,157 @@
+"""Exact scaling of a polynomial program before it is solved (used by :func:`sospoly.minimize`).
+
+Variables: v = D w with D = diag(2^k_1, ..., 2^k_n), k integers, so every coefficient c_a of a
+polynomial becomes c_a 2^(a . k) -- a multiplication by a power of two, *exact* in floating point
+(barring overflow and subnormals, which are refused).  The scaled program is therefore the same
+program, bit for bit: a certificate proven for it is a certificate of the caller's program, and points
+map back exactly (v = D w).  Objective and constraints are then divided by powers of two near their
+largest coefficients (exact too).
+
+The exponents k balance the coefficients: with one offset mu_j per polynomial, least squares on
+
+    a . k - mu_j  ~  -log2 |c_a|      (every term a of every polynomial j),
+
+rounded to integers.  f = M(s x, s y) (Motzkin) gives k = -log2 s (the Motzkin polynomial again); a
+disc x^2 + y^2 <= 4 / s^2 becomes the disc of radius 2.  The scaling is used only when it narrows the
+spread of the coefficients' magnitudes by at least ``MIN_GAIN_BITS`` (well-scaled programs stay as
+given).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from .algebra.polynomial import Polynomial
+
+__all__ = ["VariableScaling", "ScaledProgram", "balancing", "power2_normalised", "scaled_program", "MIN_GAIN_BITS",
+           "MAX_EXPONENT"]
+
+#: the scaling is applied only when it narrows the largest log2-spread of the polynomials' coefficients by this.
+MIN_GAIN_BITS = 4.0
+#: |k_i| is capped here (2^200 ~ 1.6e60).
+MAX_EXPONENT = 200
+
+
+@dataclass(frozen=True)
+class VariableScaling:
+    """v = 2^k w (elementwise): ``polynomial`` maps p(v) to p(2^k w) exactly; ``to_original`` /
+    ``to_scaled`` map points."""
+    k: np.ndarray
+
+    @classmethod
+    def identity(cls, n: int) -> VariableScaling:
+        return cls(np.zeros(n, np.int64))
+
+    @property
+    def is_identity(self) -> bool:
+        return not np.any(self.k)
+
+    def polynomial(self, p: Polynomial) -> Polynomial:
+        if self.is_identity or not p.terms:
+            return p
+        terms = {}
+        for e, c in p.terms.items():
+            terms[e] = math.ldexp(float(c), int(np.dot(e, self.k)))
+        return Polynomial(p.gens, terms)
+
+    def to_original(self, w) -> np.ndarray:
+        return np.ldexp(np.asarray(w, float), self.k)
+
+    def to_scaled(self, v) -> np.ndarray:
+        return np.ldexp(np.asarray(v, float), -self.k)
+
+    def radius(self, R: float) -> np.ndarray:
+        """|w_i| <= R 2^-k_i: the box in w of the ball ||v|| <= R."""
+        return np.ldexp(np.full(self.k.shape, float(R)), -self.k)
+
+
+def _spread(polys) -> float:
+    """The largest log2-spread max - min of |coefficients| over the polynomials."""
+    out = 0.0
+    for p in polys:
+        c = np.abs(p.coefficients()) if p.terms else np.zeros(0)
+        c = c[c > 0]
+        if c.size:
+            out = max(out, float(np.log2(c.max()) - np.log2(c.min())))
+    return out
+
+
+def balancing(polys, n: int) -> VariableScaling:
+    """The variable scaling of the module docstring for polynomials over n common variables (identity when
+    it gains less than ``MIN_GAIN_BITS`` or would overflow)."""
+    polys = [p for p in polys if p.terms]
+    rows, rhs = [], []
+    for j, p in enumerate(polys):
+        E, c = p.exponents(), np.abs(p.coefficients())
+        for a, cj in zip(E, c):
+            if cj > 0:
+                row = np.zeros(n + len(polys))
+                row[:n], row[n + j] = a, -1.0
+                rows.append(row)
+                rhs.append(-math.log2(cj))
+    ident = VariableScaling.identity(n)
+    if not rows:
+        return ident
+    A, b = np.array(rows), np.array(rhs)
+    sol = np.linalg.lstsq(A, b, rcond=None)[0]
+    k = np.clip(np.round(sol[:n]), -MAX_EXPONENT, MAX_EXPONENT).astype(np.int64)
+    if not np.any(k):
+        return ident
+    sc = VariableScaling(k)
+    try:
+        scaled = [sc.polynomial(p) for p in polys]
+    except (OverflowError, ValueError):
+        return ident
+    for p, q in zip(polys, scaled):
+        cq = np.abs(q.coefficients())
+        if not np.all(np.isfinite(cq)) or np.any(cq < np.finfo(float).tiny) or len(q.terms) != len(p.terms):
+            return ident
+    return sc if _spread(polys) - _spread(scaled) >= MIN_GAIN_BITS else ident
+
+
+def power2_normalised(p: Polynomial) -> tuple[Polynomial, float]:
+    """(p / 2^e, 2^e) with 2^e the power of two nearest above p's largest coefficient (exact division)."""
+    m = p.max_abs_coefficient()
+    if not m or not np.isfinite(m):
+        return p, 1.0
+    e = math.frexp(m)[1]
+    return Polynomial(p.gens, {a: math.ldexp(float(c), -e) for a, c in p.terms.items()}), math.ldexp(1.0, e)
+
+
+def _normalised(f, eq, ineq):
+    """f and every constraint divided by a power of two near its largest coefficient (exact; same feasible
+    set), and f's divisor."""
+    fn, fs = power2_normalised(f)
+    return fn, tuple(power2_normalised(g)[0] for g in eq), tuple(power2_normalised(h)[0] for h in ineq), fs
+
+
+@dataclass(frozen=True)
+class ScaledProgram:
+    """The program as :func:`sospoly.minimize` solves it: balanced and normalised data, the variable scaling, the
+    multiplier in the scaled variables, and a box |w_i| <= box_i holding a minimiser (None: unknown)."""
+    fn: Polynomial
+    eqn: tuple
+    ineqn: tuple
+    fscale: float
+    scaling: VariableScaling
+    multiplier: object
+    box: np.ndarray | None
+    ball: float | None = None           # ||w|| <= ball for the minimiser ``radius`` speaks of
+
+def scaled_program(f, eq, ineq, multiplier, radius) -> ScaledProgram:
+    """Step 1 of :func:`sospoly.minimize`, and the box of its step 2 (``radius``'s ball and the constraints'
+    box, intersected)."""
+    from .analysis.proof import constraint_box
+
+    n = f.nvars
+    sc = balancing([f, *eq, *ineq], n)
+    fb, eqb, ineqb = sc.polynomial(f), tuple(sc.polynomial(g) for g in eq), tuple(sc.polynomial(h) for h in ineq)
+    fn, eqn, ineqn, fs = _normalised(fb, eqb, ineqb)
+    mult = sc.polynomial(multiplier.with_gens(f.gens)) if isinstance(multiplier, Polynomial) else multiplier
+    box, ball = constraint_box(eqn, ineqn, n), None
+    if radius is not None:
+        r = sc.radius(radius)
+        box, ball = (r if box is None else np.minimum(box, r)), float(np.max(r))
+    return ScaledProgram(fn, eqn, ineqn, fs, sc, mult, box, ball)

@@ -642,7 +642,7 @@ class _Run:
         return MinimizeResult(status, None if c is None else c * fs, None if upper is None else upper * fs, minimizers,
                               optimal, psatz.n_lmivar, degree, _name_of(mult), self.gens, bracket, lb.solution, 0.0,
                               msg, tuple(back(p) for _, p in found), label, scale=fs,
-                              moment_matrices=moment_matrices_of(psatz.u, lb.solution))
+                              moment_matrices=moment_matrices_of(psatz.u, lb.solution, self.scaling.k))
 
     def _proven(self, psatz: PsatzProblem, sol: ProgramSolution, c: float, upper) -> tuple[float, str]:
         """(the largest proven lower bound of the normalised program from the certificate at level c, or -inf;

@@ -126,11 +126,22 @@ def test_moment_matrices_with_bases_and_atoms():
     (mm,) = res.moment_matrices
     assert mm.monomials() == ("1", "t", "t^2")
     assert mm.basis.shape == (3, 1) and mm.matrix.shape == (3, 3)
-    assert abs(mm.matrix[0, 0] - 1) < 1e-12 and abs(mm.moment((2,)) - 1) < 1e-5   # L(t^2) = 1 on {-1, 1}
+    assert abs(mm.matrix[0, 0] - 1) < 1e-12 and abs(mm.moment((2,)) - 1) < 1e-4   # L(t^2) = 1 on {-1, 1}
     assert mm.is_flat()
     atoms = sorted(float(p[0]) for p in mm.atoms())
     assert np.allclose(atoms, [-1, 1], atol=1e-4)
     assert np.allclose([w for _, w in mm.measure()], [0.5, 0.5], atol=1e-4)     # the symmetric measure
+
+
+@pytest.mark.parametrize("s", [1e-3, 1e3])
+def test_moment_matrices_are_in_the_user_s_variables_when_the_program_is_scaled(s):
+    """minimize solves a power-of-two rescaled program; the moments it returns are those of the caller's
+    variables (the minimiser of (x - s)^2 + (y + 2 s)^2 is (s, -2 s): L(x) = s, L(y^2) = 4 s^2)."""
+    f = (x - s) ** 2 + (y + 2 * s) ** 2
+    res = sp.minimize(f, degree=2, sparsity="none")               # one dense block over (1, x, y)
+    (mm,) = res.moment_matrices
+    assert np.allclose(mm.matrix[0, 1:], [s, -2 * s], rtol=1e-4)
+    assert mm.rank() == 1 and np.allclose(mm.atoms()[0], [s, -2 * s], rtol=1e-4)
 
 
 def test_moment_matrix_of_a_unique_minimiser():

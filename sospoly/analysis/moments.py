@@ -115,15 +115,20 @@ def _normalised(M: np.ndarray, basis: np.ndarray) -> np.ndarray:
     return M
 
 
-def moment_matrices_of(constraint, solution) -> tuple:
+def moment_matrices_of(constraint, solution, scale_exponents=None) -> tuple:
     """The moment matrices of an SOS constraint's Gram blocks in a solved program (one per block, basis
-    from the constraint's :class:`~sospoly.algebra.basis.GramBlocks`)."""
+    from the constraint's :class:`~sospoly.algebra.basis.GramBlocks`).  ``scale_exponents`` k (n,): the program
+    was solved in w with v = 2^k w (:class:`sospoly.scaling.VariableScaling`); the moments are returned in v,
+    L(v^a v^b) = 2^{(a + b) . k} L(w^a w^b) (exact powers of two)."""
     if solution is None or not solution.moments:
         return ()
     out = []
     for name, blk in zip(constraint.block_names(), constraint.gram.blocks):
         M = solution.moments.get(name)
         if M is not None and np.all(np.isfinite(M)):
-            out.append(MomentMatrix(name, np.asarray(blk.b), _normalised(np.asarray(M, float), blk.b),
-                                    tuple(constraint.expr.gens)))
+            M = np.asarray(M, float)
+            if scale_exponents is not None and np.any(scale_exponents):
+                e = np.asarray(blk.b, np.int64) @ np.asarray(scale_exponents, np.int64)
+                M = np.ldexp(M, e[:, None] + e[None, :])
+            out.append(MomentMatrix(name, np.asarray(blk.b), _normalised(M, blk.b), tuple(constraint.expr.gens)))
     return tuple(out)

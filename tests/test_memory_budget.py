@@ -57,7 +57,12 @@ def test_an_address_space_limit_gives_a_status_not_an_abort(scale):
     proc = _run(scale, 2 ** 30, 2 * 2 ** 30)
     assert proc.returncode == 0, (proc.returncode, proc.stderr[-300:])     # was 134: abort in native code
     status, _, _, message = proc.stdout.split(" ", 3)
-    assert status == "budget_exceeded" and "RLIMIT_AS" in message
+    if scale == 1e30:
+        # an ellipse of radius 1e15 holds every projection: gamma* = 0 is certified by the trivial bound
+        # before any program is built (tritools.solve.trivial); still no abort
+        assert status == "optimal", (status, message)
+    else:
+        assert status == "budget_exceeded" and "RLIMIT_AS" in message
 
 
 def test_the_estimate_is_clarabel_s_peak_not_the_cheaper_back_end():

@@ -7,6 +7,7 @@ default).  Computed with ``atan2(||u x v||, u . v)`` (accurate for tiny angles, 
 from __future__ import annotations
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from ..model.cameras import camera_center, validate_cameras
 
@@ -31,7 +32,7 @@ def triangulation_angles(centres: np.ndarray, X: np.ndarray) -> np.ndarray:
     return np.degrees(best)
 
 
-def triangulation_angle(cameras, X) -> float:
+def triangulation_angle(cameras: ArrayLike, X: ArrayLike) -> float:
     """Largest angle (degrees) between the viewing rays of ``X`` (3,) from the cameras' centres."""
     C = validate_cameras(cameras, min_views=1, require_distinct=False)
     X = np.asarray(X, float)

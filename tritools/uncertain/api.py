@@ -12,7 +12,10 @@ import enum
 import logging
 from dataclasses import dataclass, field, replace
 
+from collections.abc import Sequence
+
 import numpy as np
+from numpy.typing import ArrayLike
 
 from sospoly.solvers.stacked_conic import BlockStatus, StackedConicOptions
 
@@ -413,8 +416,9 @@ def _depth_bounds(N, solved, ray, beta, rho, Mx, q0, q0e, status):
 
 
 # ----------------------------------------------------------------------------- public API
-def uncertainty(cameras, regions, *, level=None, estimate=None, options: UncertaintyOptions | None = None,
-                dilation=None) -> UncertaintyResult:
+def uncertainty(cameras: ArrayLike, regions: Sequence | ArrayLike, *, level: float | None = None,
+                estimate: ArrayLike | None = None, options: UncertaintyOptions | None = None,
+                dilation: float | ArrayLike | None = None) -> UncertaintyResult:
     """Certified outer bounds of the set S of scene points consistent with the regions.
 
     Parameters
@@ -446,8 +450,9 @@ def uncertainty(cameras, regions, *, level=None, estimate=None, options: Uncerta
     return level_bounds(cameras, regions, level, estimate, opts)
 
 
-def uncertainty_many(cameras, regions, *, estimates=None, options: UncertaintyOptions | None = None,
-                     dilation=None) -> list[UncertaintyResult]:
+def uncertainty_many(cameras: Sequence | ArrayLike, regions: Sequence, *, estimates: Sequence | ArrayLike | None = None,
+                     options: UncertaintyOptions | None = None,
+                     dilation: float | ArrayLike | None = None) -> list[UncertaintyResult]:
     """:func:`uncertainty` for many points: ``cameras`` a sequence of (N_m, 3, 4) arrays (or one
     (M, N, 3, 4) array), ``regions`` a sequence of region lists, ``estimates`` (M, 3) optional.
     Problems of one structure (view count and region kinds) are solved together as stacked conic

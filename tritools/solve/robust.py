@@ -48,8 +48,9 @@ many searches together, one vectorised call per subset size (:func:`tritools.sol
 
 Units and the decision.  The certificate rule of :class:`sospoly.Tolerances` (``certified`` /
 ``contradicts`` / ``consistent``) is applied to f_TLS in pixels^2 at the problem's own scale
-``min_i c_i^2`` (the smallest finite squared threshold): the absolute part allows ``gap_abs * min c^2``,
-the relative part ``gap_rel * max(min c^2, UB)``.  Bounds are reported as gamma = sqrt(f / 2N).
+sigma = min(min_i c_i^2, 1 / s^2) (the smallest finite squared threshold, capped by the L2 path's scale, s the
+image scale of its normalisation: :func:`decision_scale`): the absolute part allows ``gap_abs * sigma``, the
+relative part ``gap_rel * max(sigma, UB)``.  Bounds are reported as gamma = sqrt(f / 2N).
 """
 from __future__ import annotations
 
@@ -138,6 +139,20 @@ def branching_order(ratio: np.ndarray) -> np.ndarray:
     return np.array(head + amb + [i for i in rest if i not in amb], dtype=int)
 
 
+def decision_scale(cams, regions, min_c2: float) -> float:
+    """The scale (pixels^2) of the TLS certificate rule: min(min_i c_i^2, 1 / s^2), s the image scale of the
+    L2 path's normalisation (:func:`tritools.model.normalize.normalization_for`; c = s^2 f there).  With
+    thresholds far above the residuals, min c^2 alone would let a gap of ``gap_abs * min c^2`` pixels^2
+    certify a point whose f is orders of magnitude below it (an uncertified L2 estimate reported optimal);
+    the L2 scale keeps the tolerance that of the L2 problem the thresholds do not truncate."""
+    from ..model.normalize import normalization_for
+
+    s = float(normalization_for(np.asarray(cams, float), regions).scale)
+    if not (math.isfinite(s) and s > 0):
+        return min_c2
+    return min(min_c2, 1.0 / (s * s))
+
+
 class _Search:
     """One TLS problem: thresholds, the subset bounds, the best candidate, the branch and bound."""
 
@@ -148,7 +163,7 @@ class _Search:
         self.deadline = opts.budget.deadline()
         self.bounds = SubsetBounds(cams, regions, opts, self.deadline)
         finite = self.c2[np.isfinite(self.c2)]
-        self.scale = float(np.min(finite))           # the decision's scale: the smallest squared threshold
+        self.scale = decision_scale(cams, self.regions, float(np.min(finite)))
         self.tol = opts.tolerances
         self.best_X, self.best_f, self.best_S = None, math.inf, frozenset()
         self.points = self.bounds.points

@@ -1,0 +1,63 @@
+"""Regression: the TLS certificate rule at the scale of the L2 problem, not only of the thresholds.
+
+With thresholds far above every residual (TLS = L2 there), the rule used to run at the scale min c^2
+alone: a gap of gap_abs * min c^2 pixels^2 (1e4 px^2 for c = 1e5 px) certified an L2 estimate whose own
+lower bound was 0 -- a false certificate on a problem with a strictly better point.
+"""
+import numpy as np
+import pytest
+
+import tritools
+from tritools import Ellipse, EllipseBorder, Polytope
+
+CAMS = np.array([
+    [[800.0, -46.894631397577, 316.545247233449, 1617.462288487323],
+     [0.0, 756.19214453544, 354.64551391903, 1213.096716365492],
+     [0.0, -0.146545723117, 0.989203897605, 5.054569651523]],
+    [[496.583111258457, 191.642298092106, 677.553277015799, 1997.909325520385],
+     [168.638428153819, 784.40143948154, -232.110883607593, 1498.431994140289],
+     [-0.470720263255, 0.598882181538, 0.647890859943, 6.243466642251]],
+    [[-57.09129021994, -4.72651146582, 859.719864066421, 1600.174559114147],
+     [-239.466613112202, 796.367846364674, 77.80741919034, 1200.13091933561],
+     [-0.950952767875, -0.014770348331, 0.30898328447, 5.000545497232]],
+    [[-547.914576388941, -49.324564810417, 663.141541668737, 1619.352670229212],
+     [-342.801857607663, 753.445881882585, -111.383075441958, 1214.514502671909],
+     [-0.939690565278, -0.154139265033, -0.305323973023, 5.060477094466]],
+    [[-833.195234947964, 47.79294116221, 214.246435758155, 1618.149243478848],
+     [-69.256264638932, 826.871865547076, -95.323070528393, 1213.611932609136],
+     [-0.581192623275, 0.149352941132, -0.799943018987, 5.056716385871]]])
+
+
+def _box(c, h):
+    B = np.diag(1.0 / np.asarray(h))
+    return Polytope(B, -B @ np.asarray(c))
+
+
+REGIONS = [Ellipse([354.0735177184939, 151.49573979264028], 7.945596428213318 ** 2 * np.eye(2)),
+           _box([322.45490484644125, 210.53454960409445], [1.689313032214169, 1.1198621372678577]),
+           Ellipse([289.6538914941885, 153.54065884708422], 2.3787340399553245 ** 2 * np.eye(2)),
+           EllipseBorder([270.96320217391366, 157.24198662590925], 3.779196544898891 ** 2 * np.eye(2)),
+           _box([269.6835160037032, 158.7636595234338], [1.108094344413118, 1.0852109534844268])]
+#: a point found by multi-start least squares on the exact distances (an independent reference)
+X_BETTER = np.array([0.20701274495340752, -0.5079592562986958, -0.23786695133141814])
+
+
+def test_decision_scale_is_capped_by_the_l2_scale():
+    from tritools.solve.robust import decision_scale
+
+    s2 = decision_scale(CAMS, REGIONS, 1e10)
+    assert s2 < 1.0                       # pixel data of a few hundred px: 1 / s^2 is well below 1 px^2
+    assert decision_scale(CAMS, REGIONS, 1e-6) == 1e-6     # small thresholds keep their own scale
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("c", [1e5, 1e3])
+def test_huge_thresholds_do_not_certify_a_worse_point(c):
+    g_better = float(tritools.gamma(X_BETTER, CAMS, REGIONS))
+    res = tritools.triangulate(CAMS, REGIONS, robust=c)
+    # every residual is far below c, so gamma_TLS = gamma (L2) and X_BETTER is strictly better than
+    # the L2 estimate this problem's local solver returns
+    assert g_better < 0.41
+    assert res.gamma_lb <= g_better * (1 + 1e-9)
+    if res.optimal:
+        assert res.gamma_ub <= g_better * (1 + 1e-5), (res.gamma_lb, res.gamma_ub, g_better)

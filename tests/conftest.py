@@ -28,3 +28,38 @@ def corridor_point(oxford_data):
     seq = load_sequence("corridor", oxford_data)
     track = seq.tracks[[t.track_id for t in seq.tracks].index(513)]
     return seq.problem(track)
+
+
+# ----------------------------------------------------------------------------------------------- test tiers
+#: The slow tier (`pytest -m slow`; `pytest -m "not slow"` is the ~2-minute loop of a developer, CI runs every
+#: tier): end-to-end runs of the command line in subprocesses, the docs' code blocks, the benchmark scripts, the
+#: fuzzers, and single tests measured above ~3 s on the 2-core machine.  One place: a test marked here needs no
+#: decorator of its own (``@pytest.mark.slow`` in a test file works as well).
+SLOW_TESTS = (
+    "tests/test_docs.py", "tests/test_benchmark_scripts.py", "tests/test_colmap_benchmark.py",
+    "tests/test_cli_conventions.py", "tests/test_fuzz_inputs.py", "tests/test_startup_interrupt.py",
+    "tests/test_packaging_sospoly.py", "tests/test_api_docs.py::test_generation_is_deterministic",
+    "tests/test_camera_models.py::test_cli_full_opencv_and_fisheye_models_certify_and_equirectangular_exits_3",
+    "tests/test_uncertainty_sfm.py::test_bounded_noise_coverage_many_points",
+    "tests/test_manyview.py::test_default_certifies_mixed_regions_through_the_views_formulation",
+    "tests/test_manyview.py::test_views_formulation_is_never_stronger_than_dense_and_both_are_sound",
+    "tests/test_cheirality.py::test_cli_", "tests/test_compiled.py::test_batched_ipm_agrees_with_clarabel",
+    "tests/test_cli.py::test_python_m_and_console_script_dispatch",
+    "tests/test_safe_outputs.py::test_two_writers_to_one_out", "tests/test_safe_outputs.py::test_two_colmap_runs",
+    "tests/test_fastpath.py::test_oxford_subset_fast_path_agrees_with_sdp",
+    "tests/test_sparse_minimize.py::test_n200_default_call", "tests/test_sparse_minimize.py::test_n100_default_call",
+    "tests/test_dataset_cli.py::test_dataset_house_reproduces_table_5",
+    "tests/test_example5_gaps.py", "tests/test_robust.py::test_points_bounds_against_enumeration_8_views",
+    "tests/test_robust.py::test_other_regions_bounds_against_enumeration",
+    "tests/test_baselines.py::test_hartley_sturm_matches_dense_multistart_nelder_mead",
+    "tests/test_regressions_14_15.py::test_regions_that_ran_for_minutes_return_within_the_time_limit",
+    "tests/test_triangulate.py::test_random_regions_bounds_are_consistent_with_local_search",
+    "tests/test_soundness.py::test_property_bounds_are_ordered_and_below_the_reference",
+    "tests/test_tpml.py", "tests/test_time_limits_build.py", "tests/test_cheirality.py::test_oxford_",
+)
+
+
+def pytest_collection_modifyitems(config, items):
+    for item in items:
+        if item.nodeid.startswith(SLOW_TESTS):
+            item.add_marker(pytest.mark.slow)

@@ -8,7 +8,9 @@ the way out, or a result with status ``budget_exceeded`` -- instead of letting a
 terabytes in native code.  Time is bounded the same way: ``Budget.time_limit`` becomes Clarabel's
 ``time_limit`` setting and a deadline checked between the iterations of the interior-point method
 and between the steps of a bisection, so a solve returns with status ``time_limit`` instead of
-running for minutes.
+running for minutes.  What Clarabel cannot interrupt -- its set-up and one iteration -- is predicted from
+the program's size (:class:`ClarabelTimeModel`): an attempt that cannot finish it before the deadline is
+not started, and Clarabel's ``time_limit`` is the time left less that start.
 
 Memory model (8-byte floats; an estimate, deliberately on the safe side):
 

@@ -64,6 +64,8 @@ def test_an_attempt_that_cannot_finish_its_first_iteration_is_not_started():
     out = be.solve(prob, deadline=Deadline.after(10.0))     # enough time: solved, the closed form
     assert out.raw_status == RawStatus.SOLVED
     assert -out.primal_objective == pytest.approx(lam, abs=1e-6)
+    made = out.attempts[0]
+    assert made.iterations > 0 and 0 < made.start_seconds <= made.seconds      # the measured start of a retry
 
 
 def test_the_retry_chain_starts_no_attempt_past_the_deadline(monkeypatch):

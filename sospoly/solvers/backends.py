@@ -80,11 +80,14 @@ class RawStatus(str, enum.Enum):
 
 @dataclass(frozen=True)
 class Attempt:
+    """One solver call.  ``start_seconds``: its measured uninterruptible start (set-up plus two iterations'
+    worth: the initial point and the first iteration), which bounds when a retry may still start."""
     label: str
     raw_status: RawStatus
     solver_status: str
     iterations: int
     seconds: float
+    start_seconds: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -227,7 +230,8 @@ class ClarabelBackend:
         CLARABEL_TIME_MODEL.observe(psd, problem.n_rows, t_setup, seconds - t_setup, int(sol.iterations))
         status_name = str(sol.status).split(".")[-1]
         raw = _CLARABEL_MAP.get(status_name, RawStatus.FAILED)
-        att = Attempt(label, raw, status_name, int(sol.iterations), seconds)
+        start = t_setup + 2.0 * (seconds - t_setup) / (int(sol.iterations) + 1)
+        att = Attempt(label, raw, status_name, int(sol.iterations), seconds, min(start, seconds))
         return sol, att
 
     def solve(self, problem: ConicProblem, accept=None, retry: bool = True,
@@ -254,8 +258,9 @@ class ClarabelBackend:
             if sol is None:
                 if att.raw_status == RawStatus.TIME_LIMIT:
                     return self._time_limit(last, attempts)
+                first_seconds = max(first_seconds, att.seconds)     # an exception: all of it was uninterruptible
                 continue
-            first_seconds = max(first_seconds, att.seconds * min(1.0, 2.0 / (att.iterations + 1)))
+            first_seconds = max(first_seconds, att.start_seconds)
             x, z = np.asarray(sol.x, float), np.asarray(sol.z, float)
             last = ConicSolution(att.raw_status, x, z, float(sol.obj_val), float(sol.obj_val_dual), tuple(attempts))
             if att.raw_status in (RawStatus.PRIMAL_INFEASIBLE, RawStatus.DUAL_INFEASIBLE, RawStatus.TIME_LIMIT):

@@ -26,7 +26,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..budget import AUTO_IPM_MAX_BYTES as _AUTO_IPM_MAX_BYTES
-from ..budget import BudgetExceeded, Deadline, estimate_size, memory_room
+from ..budget import CLARABEL_TIME_MODEL, BudgetExceeded, Deadline, estimate_size, memory_room
 from ..lowering.conic import ConicProblem
 from ..algebra.svec import triu_pairs, svec_scale
 from ..tolerances import DEFAULT_TOLERANCES, Tolerances, as_tolerances
@@ -80,11 +80,14 @@ class RawStatus(str, enum.Enum):
 
 @dataclass(frozen=True)
 class Attempt:
+    """One solver call.  ``start_seconds``: its measured uninterruptible start (set-up plus two iterations'
+    worth: the initial point and the first iteration), which bounds when a retry may still start."""
     label: str
     raw_status: RawStatus
     solver_status: str
     iterations: int
     seconds: float
+    start_seconds: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -182,18 +185,32 @@ class ClarabelBackend:
                 raise ValueError(f"unknown cone {c.kind}")
         return out
 
-    def solve_once(self, problem: ConicProblem, label="default", overrides=None, deadline: Deadline | None = None):
+    def solve_once(self, problem: ConicProblem, label="default", overrides=None, deadline: Deadline | None = None,
+                   first_seconds: float = 0.0):
+        """One Clarabel call: (solution or None, :class:`Attempt`).
+
+        With a ``deadline``, the call is not made when the time left is shorter than Clarabel's
+        uninterruptible start -- set-up, initial point and one iteration, predicted by
+        :data:`sospoly.budget.CLARABEL_TIME_MODEL` from the program's size, or ``first_seconds`` (what an
+        earlier attempt on the same program measured) when larger -- and Clarabel's ``time_limit`` is the
+        time left minus that start, so its last iteration ends before the deadline.  A call not made
+        returns (None, an attempt with status ``time_limit`` and 0 iterations)."""
         import clarabel
 
         n = problem.n_cols
         overrides = dict(overrides or {})
-        if overrides.get("direct_solve_method") == "qdldl" and \
-                max((c.size for c in problem.cones if c.kind == "psd"), default=0) > QDLDL_MAX_PSD_SIDE:
+        psd = [c.size for c in problem.cones if c.kind == "psd"]
+        if overrides.get("direct_solve_method") == "qdldl" and max(psd, default=0) > QDLDL_MAX_PSD_SIDE:
             del overrides["direct_solve_method"]
-            label = f"{label}/faer"
+            label = label if label.endswith("/faer") else f"{label}/faer"
         remaining = None if deadline is None else deadline.remaining()
         if remaining is not None:
-            overrides["time_limit"] = max(remaining, 1e-3)
+            first = max(CLARABEL_TIME_MODEL.first_iteration(psd, problem.n_rows), first_seconds)
+            if remaining < first:
+                return None, Attempt(label, RawStatus.TIME_LIMIT,
+                                     f"not started: {remaining:.3g} s left, set-up and one iteration take "
+                                     f"~{first:.3g} s", 0, 0.0)
+            overrides["time_limit"] = max(remaining - first, 1e-3)
         _check_native_memory(problem)
         P = sp.csc_matrix((n, n))
         t0 = time.perf_counter()
@@ -201,6 +218,7 @@ class ClarabelBackend:
             solver = clarabel.DefaultSolver(P, np.asarray(problem.q, float), sp.csc_matrix(problem.A),
                                             np.asarray(problem.b, float), self._cones(problem),
                                             self._settings(overrides))
+            t_setup = time.perf_counter() - t0
             sol = solver.solve()
         except (KeyboardInterrupt, SystemExit):
             raise
@@ -208,9 +226,12 @@ class ClarabelBackend:
             att = Attempt(label, RawStatus.FAILED, f"exception: {type(exc).__name__}: {exc}"[:200], 0,
                           time.perf_counter() - t0)
             return None, att
+        seconds = time.perf_counter() - t0
+        CLARABEL_TIME_MODEL.observe(psd, problem.n_rows, t_setup, seconds - t_setup, int(sol.iterations))
         status_name = str(sol.status).split(".")[-1]
         raw = _CLARABEL_MAP.get(status_name, RawStatus.FAILED)
-        att = Attempt(label, raw, status_name, int(sol.iterations), time.perf_counter() - t0)
+        start = t_setup + 2.0 * (seconds - t_setup) / (int(sol.iterations) + 1)
+        att = Attempt(label, raw, status_name, int(sol.iterations), seconds, min(start, seconds))
         return sol, att
 
     def solve(self, problem: ConicProblem, accept=None, retry: bool = True,
@@ -220,19 +241,26 @@ class ClarabelBackend:
         ``accept(x, z) -> bool`` is an optional a-posteriori check: a SOLVED attempt
         that fails it is treated like a numerical failure and the chain continues.
         ``retry=False`` makes a single attempt (bisection steps, where "unknown" is
-        simply treated as "not certified").  ``deadline`` becomes Clarabel's ``time_limit``;
-        the chain stops when it has passed.
+        simply treated as "not certified").  ``deadline`` becomes Clarabel's ``time_limit``
+        (less its uninterruptible start, see :meth:`solve_once`); no attempt starts that cannot
+        finish its first iteration before the deadline, and the chain then ends with status
+        ``time_limit`` and the last attempt's iterate (if any).
         """
         attempts = []
         last = None
-        for label, overrides in (self.retry_chain if retry else self.retry_chain[:1]):
+        first_seconds = 0.0          # the longest start (set-up + 2 iterations' worth) measured so far
+        for label, overrides in self._chain(problem, retry):
             if deadline is not None and deadline.expired:
                 attempts.append(Attempt(label, RawStatus.TIME_LIMIT, "time limit reached", 0, 0.0))
-                return ConicSolution(RawStatus.TIME_LIMIT, None, None, None, None, tuple(attempts))
-            sol, att = self.solve_once(problem, label, overrides, deadline)
+                return self._time_limit(last, attempts)
+            sol, att = self.solve_once(problem, label, overrides, deadline, first_seconds)
             attempts.append(att)
             if sol is None:
+                if att.raw_status == RawStatus.TIME_LIMIT:
+                    return self._time_limit(last, attempts)
+                first_seconds = max(first_seconds, att.seconds)     # an exception: all of it was uninterruptible
                 continue
+            first_seconds = max(first_seconds, att.start_seconds)
             x, z = np.asarray(sol.x, float), np.asarray(sol.z, float)
             last = ConicSolution(att.raw_status, x, z, float(sol.obj_val), float(sol.obj_val_dual), tuple(attempts))
             if att.raw_status in (RawStatus.PRIMAL_INFEASIBLE, RawStatus.DUAL_INFEASIBLE, RawStatus.TIME_LIMIT):
@@ -245,6 +273,30 @@ class ClarabelBackend:
         if last is None:
             return ConicSolution(RawStatus.FAILED, None, None, None, None, tuple(attempts))
         return ConicSolution(last.raw_status, last.x, last.z, last.primal_objective, last.dual_objective,
+                             tuple(attempts))
+
+    def _chain(self, problem: ConicProblem, retry: bool):
+        """The retry chain for ``problem``: qdldl dropped where a PSD block is too large for it
+        (:data:`QDLDL_MAX_PSD_SIDE`), and an attempt whose settings repeat an earlier one's skipped (it
+        would fail the same way at the same cost)."""
+        big = max((c.size for c in problem.cones if c.kind == "psd"), default=0) > QDLDL_MAX_PSD_SIDE
+        seen = []
+        for label, overrides in (self.retry_chain if retry else self.retry_chain[:1]):
+            overrides = dict(overrides)
+            if big and overrides.get("direct_solve_method") == "qdldl":
+                del overrides["direct_solve_method"]
+                label = f"{label}/faer"
+            if overrides in seen:
+                continue
+            seen.append(overrides)
+            yield label, overrides
+
+    @staticmethod
+    def _time_limit(last: ConicSolution | None, attempts: list) -> ConicSolution:
+        """Status ``time_limit`` with the last attempt's iterate (the caller judges what it certifies)."""
+        if last is None:
+            return ConicSolution(RawStatus.TIME_LIMIT, None, None, None, None, tuple(attempts))
+        return ConicSolution(RawStatus.TIME_LIMIT, last.x, last.z, last.primal_objective, last.dual_objective,
                              tuple(attempts))
 
 

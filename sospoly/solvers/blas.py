@@ -43,10 +43,18 @@ def single_threaded_blas():
         yield
 
 
-def with_single_threaded_blas(func):
-    """Decorator form of :func:`single_threaded_blas`."""
+def with_single_threaded_blas(func=None, *, min_stack: int = 0):
+    """Decorator form of :func:`single_threaded_blas`.  ``min_stack``: the limit is applied only when the
+    first argument (a stack of problems) has at least that many entries -- a stack of one (a single
+    ``tritools.triangulate`` call) makes only tiny BLAS calls, which OpenBLAS runs on one thread anyway,
+    and skips threadpoolctl's per-call query and restore of every BLAS library."""
+    if func is None:
+        return functools.partial(with_single_threaded_blas, min_stack=min_stack)
+
     @functools.wraps(func)
     def wrapper(*args, **kwargs):
+        if min_stack and args and hasattr(args[0], "__len__") and len(args[0]) < min_stack:
+            return func(*args, **kwargs)
         with single_threaded_blas():
             return func(*args, **kwargs)
     return wrapper

@@ -120,7 +120,7 @@ def verify_points(cameras, points2d, *, tolerances: Tolerances = DEFAULT_TOLERAN
     return verify_checked(C, x, ok, tolerances)
 
 
-@with_single_threaded_blas
+@with_single_threaded_blas(min_stack=2)
 def verify_checked(C: np.ndarray, x: np.ndarray, ok: np.ndarray, tolerances: Tolerances) -> FastPathBatch:
     """:func:`verify_points` on data already checked: float arrays C (M, N, 3, 4), x (M, N, 2) and the mask
     ``ok`` of the problems with valid cameras and finite points (e.g. from

@@ -54,7 +54,7 @@ def _l2_suffices(res: TriangulationResult, c: np.ndarray) -> bool:
 
 #: problems searched together by :func:`tritools.solve.robust.drive` (their sub-bounds batched per subset size);
 #: each keeps its own time budget, counted from the start of its chunk.
-ROBUST_CHUNK = 1024
+ROBUST_CHUNK = 512
 
 
 def _search_or_failure(cameras, regions, c, opts):

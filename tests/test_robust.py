@@ -370,3 +370,59 @@ def test_georeferenced_world_and_zero_noise():
     assert r.optimal and r.inliers.tolist() == [True, False, True, True, True]
     assert r.gamma_ub == pytest.approx(np.sqrt(100.0 / 10)) and r.gamma_lb <= r.gamma_ub
     assert np.linalg.norm(r.X - sc.points3d[0]) < 1e-9
+
+
+def test_batch_equals_single_and_reference():
+    """triangulate_many / triangulate_points with robust= (point problems go straight to the chunked search,
+    sub-bounds batched per subset size across problems) give the single-point result exactly -- inliers,
+    status, bounds -- on a mixed batch (2-6 views, clean tracks, 1-2 outliers, a threshold met by a residual),
+    and every bound holds against the subset enumeration."""
+    probs, truth = [], []
+    for s, (N, n_out) in enumerate([(2, 0), (3, 0), (3, 1), (4, 1), (5, 0), (5, 2), (6, 1), (4, 0)]):
+        cams, x, X, _ = outlier_scene(N, n_out, 40 + s, shift=(15.0, 400.0))
+        probs.append((cams, x))
+        truth.append(X)
+    many = tritools.triangulate_many(probs, robust=10.0)
+    for (cams, x), r, X in zip(probs, many, truth):
+        single = tritools.triangulate(cams, x, robust=10.0)
+        assert r.status == single.status and r.optimal == single.optimal
+        np.testing.assert_array_equal(r.inliers, single.inliers)
+        assert r.gamma_lb == pytest.approx(single.gamma_lb, rel=1e-9, abs=1e-12)
+        assert r.gamma_ub == pytest.approx(single.gamma_ub, rel=1e-9, abs=1e-12)
+        np.testing.assert_allclose(r.X, single.X, rtol=1e-8, atol=1e-10)
+        _check_against_reference(r, cams, [tritools.Point(p) for p in x], np.full(len(x), 10.0), X)
+    assert sum(r.optimal for r in many) >= 7
+    # the arrays API: shared cameras of the 6-view problem, three copies with different hidden views
+    cams, x = probs[6]
+    pts = np.stack([x, x, x])
+    pts[1, 0] = pts[2, 5] = np.nan
+    res = tritools.triangulate_points(cams, pts, robust=10.0)
+    for m in range(3):
+        v = np.isfinite(pts[m, :, 0])
+        single = tritools.triangulate(cams[v], pts[m, v], robust=10.0)
+        np.testing.assert_array_equal(res.inliers[m, v], single.inliers)
+        assert not res.inliers[m, ~v].any()
+        assert res.optimal[m] == single.optimal
+        assert res.gamma_ub[m] == pytest.approx(single.gamma_ub, rel=1e-9)
+        assert res.gamma_lb[m] == pytest.approx(single.gamma_lb, rel=1e-9, abs=1e-12)
+
+
+def test_point_distances_match_point_report():
+    """The vectorised residuals of the search (point regions) against the scalar point_report, including a
+    view whose projection is undefined (the point on its principal plane: inf in both)."""
+    from tritools.solve.report import point_report
+    from tritools.solve.robust import point_distances2
+
+    cams, x, X, _ = outlier_scene(5, 1, 3)
+    regions = [tritools.Point(p) for p in x]
+    rng = np.random.default_rng(1)
+    Xs = np.vstack([X, X + rng.normal(size=(5, 3))])
+    P = cams[2] / np.linalg.norm(cams[2][2, :3])
+    Xs = np.vstack([Xs, X - (P[2] @ np.append(X, 1.0)) * P[2, :3]])    # on the principal plane of view 2
+    d2 = point_distances2(cams, x, Xs)
+    for X_, row in zip(Xs, d2):
+        ref = point_report(X_, cams, regions).residuals
+        assert np.array_equal(np.isinf(row), np.isinf(ref))
+        fin = np.isfinite(ref)
+        np.testing.assert_allclose(np.sqrt(row[fin]), ref[fin], rtol=1e-12, atol=1e-9)
+    assert np.isinf(d2[-1, 2])

@@ -64,10 +64,12 @@ import numpy as np
 from ..model.geometry import PROJECTION_DENOM_RTOL
 from ..result import Attempt, Status, TriangulationResult
 from .decide import cheirality
-from .report import point_report
+from ..model.geometry import depths_stack
+from .report import PointReport, point_report
 from .robust_bounds import ROUND_DOWN, SubsetBounds, compute_many
 
-__all__ = ["robust_thresholds", "triangulate_robust", "drive", "lookahead_bound", "tls_cost", "MAX_NODES", "MAX_PAIRS",
+__all__ = ["robust_thresholds", "triangulate_robust", "drive", "lookahead_bound", "tls_cost", "point_distances2",
+           "MAX_NODES", "MAX_PAIRS",
            "LO_ROUNDS"]
 
 log = logging.getLogger(__name__)
@@ -173,6 +175,10 @@ class _Search:
 
     # ------------------------------------------------------------------ costs and the upper bound
     def residuals(self, X) -> np.ndarray:
+        """d_i(X) (N,), inf where the projection is undefined: :func:`point_distances2` for point regions (the
+        vectorised twin of :func:`tritools.solve.report.point_report`), else point_report."""
+        if self.points:
+            return np.sqrt(point_distances2(self.C, self.x, np.asarray(X, float)[None])[0])
         rep = point_report(X, self.C, self.regions, self.opts.world_frame)
         return np.full(self.N, np.inf) if rep.residuals is None else rep.residuals
 
@@ -180,14 +186,15 @@ class _Search:
         """f_TLS of many candidates (M, 3) (point regions: vectorised; else one by one); only for ranking."""
         if not self.points:
             return np.array([tls_cost(self.residuals(X), self.c) for X in Xs])
-        Xh = np.concatenate([Xs, np.ones((len(Xs), 1))], axis=1)
-        u = np.einsum("nij,mj->mni", self.C, Xh)
-        denom = np.einsum("nj,mj->mn", np.abs(self.C[:, 2]), np.abs(Xh))
-        ok = np.abs(u[..., 2]) > PROJECTION_DENOM_RTOL * denom
-        with np.errstate(all="ignore"):
-            d2 = np.sum((u[..., :2] / u[..., 2:] - self.x[None]) ** 2, axis=2)
-        d2 = np.where(ok & np.isfinite(d2), d2, np.inf)
-        return np.sum(np.minimum(d2, self.c2[None]), axis=1)
+        return np.sum(np.minimum(point_distances2(self.C, self.x, Xs), self.c2[None]), axis=1)
+
+    def report(self, X) -> PointReport:
+        """Residuals and depths of X: the vectorised twin for point regions, point_report otherwise."""
+        if not self.points:
+            return point_report(X, self.C, self.regions, self.opts.world_frame)
+        res = self.residuals(X)
+        return PointReport(None, res, depths_stack(self.C[None], np.asarray(X, float)[None],
+                                                   self.opts.world_frame)[0])
 
     def offer(self, X) -> None:
         """A candidate: kept when its exact f_TLS (:func:`tritools.solve.report.point_report` distances) is
@@ -392,7 +399,7 @@ class _Search:
     def result(self, lb: float, stopped, timings) -> TriangulationResult:
         ub = self.best_f
         X = self.best_X
-        rep = point_report(X, self.C, self.regions, self.opts.world_frame)
+        rep = self.report(X)
         inliers = rep.residuals < self.c
         certified = bool(self.tol.certified(lb, ub, self.scale))     # lb is valid also when the search stopped
         contradicts = bool(self.tol.contradicts(lb, ub, self.scale))
@@ -422,6 +429,19 @@ def _projections(X, cameras) -> np.ndarray:
     u = cameras @ Xh
     with np.errstate(all="ignore"):
         return u[:, :2] / u[:, 2:]
+
+
+def point_distances2(C: np.ndarray, x: np.ndarray, Xs: np.ndarray) -> np.ndarray:
+    """Squared distances ||Phi(X_m, P_i) - x_i||^2 (M, N) of candidates Xs (M, 3) to point regions x (N, 2); inf
+    for a view whose projection is undefined (denominator below PROJECTION_DENOM_RTOL of its scale, the rule of
+    :func:`tritools.model.geometry.project_homogeneous`) or not finite."""
+    Xh = np.concatenate([Xs, np.ones((len(Xs), 1))], axis=1)
+    u = np.einsum("nij,mj->mni", C, Xh)
+    denom = np.einsum("nj,mj->mn", np.abs(C[:, 2]), np.abs(Xh))
+    ok = np.abs(u[..., 2]) > PROJECTION_DENOM_RTOL * denom
+    with np.errstate(all="ignore"):
+        d2 = np.sum((u[..., :2] / u[..., 2:] - x[None]) ** 2, axis=2)
+    return np.where(ok & np.isfinite(d2), d2, np.inf)
 
 
 def triangulate_robust(cams: np.ndarray, regions, c: np.ndarray, opts, t0: float | None = None) -> TriangulationResult:

@@ -1,15 +1,20 @@
 """Batches of robust (TLS) problems: :func:`triangulate_many` and :func:`triangulate_points` with ``robust=``.
 
-1. Every problem first goes through the batched L2 path (:func:`tritools.solve.batch.solve_point_problems`:
-   vectorised verification for point regions, one call per number of views).
-2. A problem whose L2 result is certified with every residual below its threshold and
-   2N gamma_UB^2 <= min_i c_i^2 is certified for TLS by that certificate alone: any inlier set other than all
-   views pays at least min_i c_i^2 >= f_TLS(X), so f_TLS* = L2* (:mod:`tritools.solve.robust`, the root bound).
-   Its L2 result is returned as it is, with every view an inlier (clean tracks cost the L2 batch only).
-3. Every other problem gets the branch and bound of :mod:`tritools.solve.robust`, in chunks of
-   :data:`ROBUST_CHUNK` searched together by :func:`tritools.solve.robust.drive` (their sub-bounds batched per
-   subset size across problems); a failing item becomes a result with a status (INVALID_INPUT / SOLVER_FAILED),
-   never stopping the batch.  ``timings["batch_share"]``: a problem's even share of its chunk's time.
+1. Point-region problems (with a finite threshold) go straight to the branch and bound of
+   :mod:`tritools.solve.robust` -- exactly the search :func:`tritools.triangulate` runs for one of them -- in
+   chunks of :data:`ROBUST_CHUNK` searched together by :func:`tritools.solve.robust.drive`: every sub-bound
+   request of every search of a chunk (the full view set first, then the view pairs, the local optimisation's
+   inlier sets, the node sub-problems) is computed in one vectorised call per subset size across the chunk
+   (:func:`tritools.solve.robust_bounds.compute_many`: verification, then the batched delta = 2 SDP).  A clean
+   track is certified at the root by the L2 bound of all its views (f_TLS* >= min(L2LB(all), min_i c_i^2)), so
+   it costs one row of the first vectorised call; no per-point SDP runs before the search.
+2. Other problems (and point problems whose thresholds are all infinite) first go through the batched L2 path
+   (:func:`tritools.solve.batch.solve_point_problems`).  A result certified with every residual below its
+   threshold and 2N gamma_UB^2 <= min_i c_i^2 is certified for TLS by that certificate alone: any inlier set
+   other than all views pays at least min_i c_i^2 >= f_TLS(X), so f_TLS* = L2*.  It is returned as it is, every
+   view an inlier; every other problem gets the branch and bound, in chunks as in 1.
+3. A failing item becomes a result with a status (INVALID_INPUT / SOLVER_FAILED), never stopping the batch.
+   ``timings["batch_share"]``: a problem's even share of its chunk's time.
 """
 from __future__ import annotations
 
@@ -49,7 +54,7 @@ def _l2_suffices(res: TriangulationResult, c: np.ndarray) -> bool:
 
 #: problems searched together by :func:`tritools.solve.robust.drive` (their sub-bounds batched per subset size);
 #: each keeps its own time budget, counted from the start of its chunk.
-ROBUST_CHUNK = 64
+ROBUST_CHUNK = 512
 
 
 def _search_or_failure(cameras, regions, c, opts):
@@ -67,30 +72,53 @@ def _search_or_failure(cameras, regions, c, opts):
 
 def robust_many(problems: list, robust, opts, *, executor=None, progress=None) -> list[TriangulationResult]:
     """One TLS result per problem, in input order (module docstring)."""
-    from .batch import solve_point_problems
-    from .robust import drive
+    from .batch import _as_point_problem, solve_point_problems
 
     thresholds = thresholds_for(robust, problems)
-    first = solve_point_problems(problems, opts, executor=executor, progress=progress).results()
     out: list = [None] * len(problems)
-    searches = []
-    for i, ((cams, regions), c, res) in enumerate(zip(problems, thresholds, first)):
+    direct, l2_first = [], []
+    for i, (prob, c) in enumerate(zip(problems, thresholds)):
+        pp = _as_point_problem(*prob) if isinstance(prob, (list, tuple)) and len(prob) == 2 else None
+        (direct if pp is not None and np.any(np.isfinite(c)) else l2_first).append(i)
+    pending = direct
+    if l2_first:
+        first = solve_point_problems([problems[i] for i in l2_first], opts, executor=executor,
+                                     progress=progress).results()
+        pending = pending + _after_l2(problems, thresholds, opts, l2_first, first, out)
+    _drive_chunks(problems, thresholds, opts, sorted(pending), out)
+    return out
+
+
+def _after_l2(problems, thresholds, opts, idx, first, out) -> list:
+    """Fill ``out`` for the problems settled by their L2 result (module docstring, 2); the rest of ``idx``."""
+    rest = []
+    for i, res in zip(idx, first):
+        (cams, regions), c = problems[i], thresholds[i]
         if res.status == Status.INVALID_INPUT or _l2_suffices(res, c):
             out[i] = dataclasses.replace(res, inliers=None if res.residuals is None
                                          else np.ones(len(res.residuals), bool))
         elif not np.any(np.isfinite(c)):
             out[i] = triangulate_robust(validate_cameras(cams), as_regions(regions, len(c)), c, opts)
         else:
-            s = _search_or_failure(cams, regions, c, opts)
+            rest.append(i)
+    return rest
+
+
+def _drive_chunks(problems, thresholds, opts, idx, out) -> None:
+    """The branch and bound of the problems ``idx``, :data:`ROBUST_CHUNK` searched together at a time (each
+    search's time budget starts with its chunk)."""
+    from .robust import drive
+
+    for k in range(0, len(idx), ROBUST_CHUNK):
+        t0 = time.perf_counter()
+        searches = []
+        for i in idx[k:k + ROBUST_CHUNK]:
+            s = _search_or_failure(*problems[i], thresholds[i], opts)
             if isinstance(s, TriangulationResult):
                 out[i] = s
             else:
                 searches.append((i, s))
-    for k in range(0, len(searches), ROBUST_CHUNK):
-        part = searches[k:k + ROBUST_CHUNK]
-        t0 = time.perf_counter()
-        results = drive([s for _, s in part])
-        share = (time.perf_counter() - t0) / len(part)
-        for (i, _), r in zip(part, results):
+        results = drive([s for _, s in searches])
+        share = (time.perf_counter() - t0) / max(1, len(searches))
+        for (i, _), r in zip(searches, results):
             out[i] = dataclasses.replace(r, timings={**r.timings, "batch_share": share})
-    return out

@@ -151,17 +151,19 @@ def compute_many(requests) -> None:
 
 
 def _verify_stack(C, x, opts):
-    """(decided (M,), gamma_lb, X) of the vectorised verification: certified problems only."""
+    """(decided (M,), gamma_lb, X, certified (M,)) of the vectorised verification: certified problems only."""
     b = verify_points(C, x, tolerances=opts.tolerances)
-    return b.certified & np.isfinite(b.gamma_lb), b.gamma_lb, b.X
+    ok = b.certified & np.isfinite(b.gamma_lb)
+    return ok, b.gamma_lb, b.X, ok
 
 
 def _sdp_stack(C, x, opts):
-    """(decided, gamma_lb, X) of the batched Corollary 1, delta = 2 SDP
+    """(decided, gamma_lb, X, certified) of the batched Corollary 1, delta = 2 SDP
     (:func:`tritools.solve.sdp_batch.solve_corollary1_points`): its rigorous lower bound wherever it decided the
-    problem, certified or not."""
+    problem, certified or not (an uncertified one is marked weak: :meth:`SubsetBounds.strengthen` may solve it
+    with the full degree plan where the search needs it)."""
     b = solve_corollary1_points(C, x, tolerances=opts.tolerances, refine=opts.refine)
-    return b.done & np.isfinite(b.gamma_lb), b.gamma_lb, b.X
+    return b.done & np.isfinite(b.gamma_lb), b.gamma_lb, b.X, b.optimal
 
 
 def _batch(items: list, step) -> list:
@@ -170,7 +172,7 @@ def _batch(items: list, step) -> list:
     C = np.stack([sb.C[sorted(S)] for sb, S in items])
     x = np.stack([sb.x[sorted(S)] for sb, S in items])
     try:
-        decided, gamma_lb, X = step(C, x, items[0][0].opts)
+        decided, gamma_lb, X, certified = step(C, x, items[0][0].opts)
     except (ValueError, np.linalg.LinAlgError, FloatingPointError):
         return items
     n = C.shape[1]
@@ -179,6 +181,8 @@ def _batch(items: list, step) -> list:
         if decided[k]:
             sb._store(S, 2 * n * float(gamma_lb[k]) ** 2 * ROUND_DOWN, X[k])
             sb.n_solved += 1
+            if not certified[k]:            # a valid but loose delta = 2 bound: strengthen() may redo it
+                sb.weak.add(S)
         else:
             left.append((sb, S))
     return left

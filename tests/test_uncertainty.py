@@ -360,3 +360,30 @@ def test_result_carries_the_triangulation_angle():
     res = uncertainty(cams, regions, estimate=X)
     assert res.angle_deg == pytest.approx(np.degrees(2 * np.arctan(0.05)), rel=1e-9)
     assert res.angle_deg == pytest.approx(tritools.triangulation_angle(cams, X), rel=1e-12)
+
+
+def test_a_mirrored_reconstruction_in_its_own_world_frame():
+    """A mirrored world (z -> -z: every det M < 0) holds the same scene: read as ``reflected`` its set is the
+    mirror image of the original's (true point inside, positive depths); read as right-handed every
+    consistent point lies behind the cameras, so the set is empty.  The ``dilation`` shortcut keeps the
+    other options (it rebuilt them from defaults before)."""
+    from tritools.uncertain.api import UncertaintyOptions
+
+    rng = np.random.default_rng(8)
+    cams, X = scene(rng, n_views=3)
+    regions = [random_region(rng, x, 2.0, "ellipse") for x in image_points(X, cams)]
+    S = np.diag([1.0, 1.0, -1.0, 1.0])
+    mirrored = cams @ S                                     # P' = P S sees S X exactly where P sees X
+    a = uncertainty(cams, regions)
+    b = uncertainty(mirrored, regions, options=UncertaintyOptions(world_frame="reflected"))
+    assert a.status == b.status == UncertaintyStatus.BOUNDED
+    w = np.max(a.hi - a.lo)
+    assert np.allclose(b.lo, [a.lo[0], a.lo[1], -a.hi[2]], atol=1e-7 * w)
+    assert np.allclose(b.hi, [a.hi[0], a.hi[1], -a.lo[2]], atol=1e-7 * w)
+    assert np.allclose(b.depth_lo, a.depth_lo, rtol=1e-7) and np.all(b.depth_lo > 0)
+    c = uncertainty(mirrored, regions)
+    assert c.status == UncertaintyStatus.EMPTY
+    d = uncertainty(mirrored, regions, options=UncertaintyOptions(world_frame="reflected"), dilation=1.0)
+    assert d.status == UncertaintyStatus.BOUNDED and np.all(d.lo <= S[:3, :3] @ X) and np.all(S[:3, :3] @ X <= d.hi)
+    with pytest.raises(ValueError, match="world_frame"):
+        UncertaintyOptions(world_frame="left")

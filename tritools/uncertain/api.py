@@ -19,7 +19,7 @@ from numpy.typing import ArrayLike
 
 from sospoly.solvers.stacked_conic import BlockStatus, StackedConicOptions
 
-from ..model.cameras import _depth_rows, power2_scale
+from ..model.cameras import WorldFrame, _depth_rows, as_world_frame, power2_scale
 from ..model.geometry import validate_cameras
 from ..model.regions import Ellipse, EllipseBorder, Point, Segment, as_regions
 from .angle import triangulation_angles
@@ -53,15 +53,19 @@ class UncertaintyOptions:
     :func:`_roundoff_radii`), so exact data give a tiny set holding the point instead of an empty or
     degenerate one; when such a widened set yields no feasible point at all, the regions as given are
     solved too and their Farkas certificate, if any, reports the set empty; ``level_degree``: relaxation
-    degree of the SOS bounds of a level set of point regions (None: the dilation relaxation only)."""
+    degree of the SOS bounds of a level set of point regions (None: the dilation relaxation only);
+    ``world_frame``: the handedness in which "in front" (depth > 0) is judged, as
+    :class:`tritools.TriangulationOptions` (``"reflected"`` for a mirrored reconstruction)."""
     dilation: float | tuple = 0.0
     solver: StackedConicOptions = field(default_factory=StackedConicOptions)
     witness_rtol: float = 1e-9
     depth_bounds: bool = True
     widen_roundoff: bool = True
     level_degree: int | None = 2
+    world_frame: WorldFrame | str = WorldFrame.RIGHT_HANDED
 
     def __post_init__(self) -> None:
+        object.__setattr__(self, "world_frame", as_world_frame(self.world_frame))
         d = self.level_degree
         if d is not None and (isinstance(d, bool) or not isinstance(d, (int, np.integer)) or d < 2 or d % 2):
             raise ValueError(f"level_degree must be None or an even integer >= 2, got {d!r}")
@@ -176,10 +180,11 @@ def _roundoff_radii(C, regs) -> np.ndarray:
     return np.where(np.isfinite(e) & (e > 0), np.maximum(e, 16 * EPS * scale), 16 * EPS * scale)
 
 
-def _signed(C: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(exact signed cameras ``sign(det M) P / 2^k`` (M, N, 3, 4), depth rows (M, N, 4)): the sign is
-    read from :func:`tritools.model.cameras` depth rows (one sign rule, Hartley-Zisserman (6.15))."""
-    rows = _depth_rows(C)
+def _signed(C: np.ndarray, h: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    """(exact signed cameras ``h sign(det M) P / 2^k`` (M, N, 3, 4), depth rows (M, N, 4)): the sign is
+    read from :func:`tritools.model.cameras` depth rows (one sign rule, Hartley-Zisserman (6.15) times the
+    world frame's handedness ``h``)."""
+    rows = _depth_rows(C) * h
     sign = np.sign(np.einsum("...j,...j->...", rows[..., :3], C[..., 2, :3]))
     sign = np.where(sign == 0, 1.0, sign)
     return C / power2_scale(C, (-2, -1)) * sign[..., None, None], rows
@@ -293,7 +298,7 @@ def group_blocks(C, blocks, X0, Xe, convexified, opts) -> list[UncertaintyResult
 
 def _group_chunk(C, blocks, X0, Xe, convexified, opts) -> list[UncertaintyResult]:
     M, N = C.shape[:2]
-    R, drows = _signed(C)
+    R, drows = _signed(C, opts.world_frame.sign)
     sigma = _scale(R, blocks, X0, drows)
     targets = objective_rows(drows)
     if not opts.depth_bounds:
@@ -489,7 +494,7 @@ def _options(options, dilation) -> UncertaintyOptions:
     if not isinstance(options, UncertaintyOptions):
         raise TypeError(f"options must be an UncertaintyOptions, got {type(options).__name__}")
     if dilation is not None:
-        options = UncertaintyOptions(dilation=dilation, solver=options.solver, witness_rtol=options.witness_rtol)
+        options = replace(options, dilation=dilation)        # every other option kept
     return options
 
 

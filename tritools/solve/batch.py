@@ -144,7 +144,7 @@ def _as_point_problem(cams, regions):
         C = C.astype(float)
     except (TypeError, ValueError):
         return None
-    if C.ndim != 3 or C.shape[1:] != (3, 4) or C.shape[0] != len(x) or len(x) < 2:
+    if C.ndim != 3 or C.shape[1:] != (3, 4) or C.shape[0] != len(x) or len(x) < 2 or not np.all(np.isfinite(x)):
         return None
     return C, x
 

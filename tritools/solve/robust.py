@@ -48,8 +48,9 @@ many searches together, one vectorised call per subset size (:func:`tritools.sol
 
 Units and the decision.  The certificate rule of :class:`sospoly.Tolerances` (``certified`` /
 ``contradicts`` / ``consistent``) is applied to f_TLS in pixels^2 at the problem's own scale
-``min_i c_i^2`` (the smallest finite squared threshold): the absolute part allows ``gap_abs * min c^2``,
-the relative part ``gap_rel * max(min c^2, UB)``.  Bounds are reported as gamma = sqrt(f / 2N).
+``min(min_i c_i^2, rho^2)`` (the smallest finite squared threshold, capped by the squared residual scale rho
+of the L2 normalisation, :func:`decision_scale`): the absolute part allows ``gap_abs`` times that scale,
+the relative part ``gap_rel * max(scale, UB)``.  Bounds are reported as gamma = sqrt(f / 2N).
 """
 from __future__ import annotations
 
@@ -91,7 +92,10 @@ def robust_thresholds(robust, n_views: int) -> np.ndarray:
     if isinstance(robust, (bool, np.bool_)) or isinstance(robust, (str, bytes)):
         raise ValueError(f"robust must be a positive threshold in pixels (scalar or one per view), got {robust!r}")
     try:
-        c = np.array(robust, dtype=float)
+        raw = np.asarray(robust)
+        if raw.dtype.kind not in "iuf":                  # booleans, strings, objects (None), complex
+            raise TypeError
+        c = raw.astype(float)
     except (TypeError, ValueError):
         raise ValueError(f"robust must be a positive threshold in pixels (scalar or one per view), "
                          f"got {robust!r}") from None
@@ -107,8 +111,9 @@ def robust_thresholds(robust, n_views: int) -> np.ndarray:
 def tls_cost(residuals, c) -> float:
     """f_TLS = sum_i min(d_i^2, c_i^2) (an undefined projection, d_i = inf, counts c_i^2)."""
     d = np.asarray(residuals, float)
-    d2 = np.where(np.isfinite(d), d * d, np.inf)
-    return float(np.sum(np.minimum(d2, np.asarray(c, float) ** 2)))
+    with np.errstate(over="ignore"):                  # c or d above 1e154: c^2 = inf, as it should
+        d2 = np.where(np.isfinite(d), d * d, np.inf)
+        return float(np.sum(np.minimum(d2, np.asarray(c, float) ** 2)))
 
 
 def lookahead_bound(s_lo: float, s_hi: float, a: np.ndarray, c2: np.ndarray) -> float:
@@ -138,17 +143,31 @@ def branching_order(ratio: np.ndarray) -> np.ndarray:
     return np.array(head + amb + [i for i in rest if i not in amb], dtype=int)
 
 
+def decision_scale(cams, regions, c2: np.ndarray) -> float:
+    """The scale of the certificate rule on f_TLS (pixels^2): ``min(min_i c_i^2, rho^2)`` with rho = 1 / s the
+    residual scale of the L2 normalisation (:mod:`tritools.model.normalize`; an L2 certificate allows
+    ``gap_abs`` at c = s^2 f = 1).  Thresholds far above the residuals (or so large that c^2 overflows) thus
+    never loosen the rule beyond the L2 one: f_TLS = L2 there."""
+    from ..model.normalize import normalization_for
+
+    finite = c2[np.isfinite(c2) & (c2 > 0)]
+    s = normalization_for(cams, regions).scale
+    rho2 = 1.0 / (s * s) if np.isfinite(s) and s > 0 else math.inf
+    scale = min([rho2, *finite.tolist()])
+    return float(scale) if np.isfinite(scale) and scale > 0 else 1.0
+
+
 class _Search:
     """One TLS problem: thresholds, the subset bounds, the best candidate, the branch and bound."""
 
     def __init__(self, cams, regions, c, opts, t0):
         self.C, self.regions, self.c, self.opts, self.t0 = cams, list(regions), c, opts, t0
         self.N = len(regions)
-        self.c2 = c * c
+        with np.errstate(over="ignore"):
+            self.c2 = c * c                              # c above 1e154: c^2 = inf (no threshold in floats)
         self.deadline = opts.budget.deadline()
         self.bounds = SubsetBounds(cams, regions, opts, self.deadline)
-        finite = self.c2[np.isfinite(self.c2)]
-        self.scale = float(np.min(finite))           # the decision's scale: the smallest squared threshold
+        self.scale = decision_scale(cams, regions, self.c2)
         self.tol = opts.tolerances
         self.best_X, self.best_f, self.best_S = None, math.inf, frozenset()
         self.points = self.bounds.points

@@ -1,0 +1,87 @@
+"""Bad input on this wave's new public APIs (robust TLS thresholds, array layouts, batches, uncertainty,
+the colmap flags, the sospoly modelling layer): each case once broke the contract -- a ValueError /
+TypeError naming the argument, a batch that keeps every point, never a silently wrong certificate."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import tritools as tt
+from tritools import Status
+
+
+def _scene(n_views=4, noise=0.5, seed=0):
+    """n_views cameras on an arc looking at X = (0.1, -0.2, 5); noisy image points (pixels)."""
+    rng = np.random.default_rng(seed)
+    X = np.array([0.1, -0.2, 5.0, 1.0])
+    K = np.array([[500.0, 0, 320], [0, 500, 240], [0, 0, 1]])
+    cams = []
+    for i in range(n_views):
+        a = 0.3 * (i - n_views / 2)
+        R = np.array([[np.cos(a), 0, np.sin(a)], [0, 1, 0], [-np.sin(a), 0, np.cos(a)]])
+        C = np.array([2.0 * np.sin(a), 0.1 * i, -1.0])
+        cams.append(K @ np.hstack([R, (-R @ C)[:, None]]))
+    cams = np.array(cams)
+    u = np.einsum("nij,j->ni", cams, X)
+    x = u[:, :2] / u[:, 2:] + noise * rng.standard_normal((n_views, 2))
+    return cams, x
+
+
+# ----------------------------------------------------------------------------- robust thresholds
+@pytest.mark.parametrize("robust", [np.array([True] * 4), np.array(["1"] * 4), [1.0, None, 2.0, 3.0],
+                                    np.array([1 + 1j] * 4)], ids=["bool_array", "str_array", "none", "complex"])
+def test_robust_thresholds_of_the_wrong_type_are_refused_by_name(robust):
+    cams, x = _scene()
+    with pytest.raises(ValueError, match="robust"):
+        tt.triangulate(cams, x, robust=robust)
+    with pytest.raises(ValueError, match="robust"):
+        tt.triangulate_points(cams, x[None], robust=robust)
+
+
+@pytest.mark.parametrize("c", [1e5, 1e10, 1e160, 1e300])
+def test_threshold_far_above_the_residuals_is_the_l2_problem(c):
+    """Every view is an inlier, so f_TLS* = L2* (the L2 certificate is the independent reference): the TLS
+    certificate must not be loosened by the threshold's scale (it once certified gamma_lb = 0 with gamma_ub
+    25 % above the optimum for c = 1e5, and raised a numpy reduction error once c^2 overflowed)."""
+    cams, x = _scene()
+    x[0] += 80                                     # a gross error, still within c
+    ref = tt.triangulate(cams, x)
+    assert ref.optimal
+    r = tt.triangulate(cams, x, robust=c)
+    assert r.optimal and r.status == Status.OPTIMAL and r.inliers.all()
+    assert r.gamma_lb <= ref.gamma_ub * (1 + 1e-6) and r.gamma_ub <= ref.gamma_ub * (1 + 1e-6)
+    assert r.gamma_lb >= ref.gamma_lb * (1 - 1e-6)
+    assert np.allclose(r.X, ref.X, rtol=1e-5, atol=1e-6)
+
+
+def test_robust_batch_keeps_malformed_problems():
+    cams, x = _scene()
+    bad = np.full((4, 2), np.nan)
+    for robust in (None, 2.0):
+        res = tt.triangulate_many([(cams, x), ("not a pair", 1), (cams, bad), (cams, x)], robust=robust)
+        assert len(res) == 4
+        assert [r.status for r in res][1:3] == [Status.INVALID_INPUT, Status.INVALID_INPUT]
+        assert res[0].X is not None and res[3].X is not None
+
+
+# ----------------------------------------------------------------------------- triangulate_points inputs
+def test_visible_entry_that_is_not_finite_is_named():
+    cams, x = _scene()
+    pts = np.stack([x, x + 1.0])
+    pts[1, 2] = np.nan
+    for robust in (None, 2.0):
+        with pytest.raises(ValueError, match=r"points2d\[1, 2\].*visible\[1, 2\]"):
+            tt.triangulate_points(cams, pts, visible=np.ones((2, 4), bool), robust=robust)
+
+
+@pytest.mark.parametrize("visible", [np.full((2, 4), 0.5), np.full((2, 4), np.nan), np.full((2, 4), "y")])
+def test_visible_must_be_boolean(visible):
+    cams, x = _scene()
+    with pytest.raises(ValueError, match="visible"):
+        tt.triangulate_points(cams, np.stack([x, x + 1.0]), visible=visible)
+
+
+def test_ragged_per_view_list_is_named():
+    cams, _ = _scene()
+    with pytest.raises(ValueError, match="points2d"):
+        tt.triangulate_points(cams, [np.ones((2, 2)), np.ones((3, 2)), np.ones((2, 2)), np.ones((2, 2))])

@@ -85,3 +85,52 @@ def test_ragged_per_view_list_is_named():
     cams, _ = _scene()
     with pytest.raises(ValueError, match="points2d"):
         tt.triangulate_points(cams, [np.ones((2, 2)), np.ones((3, 2)), np.ones((2, 2)), np.ones((2, 2))])
+
+
+# ----------------------------------------------------------------------------- uncertainty
+def _discs(x, r=2.0):
+    return [tt.Ellipse(p, np.eye(2) * r * r) for p in x]
+
+
+def test_dilation_keyword_keeps_the_other_options():
+    """``dilation=`` used to rebuild the options and silently drop depth_bounds / widen_roundoff."""
+    from tritools.uncertain.api import _options
+
+    o = _options(tt.UncertaintyOptions(depth_bounds=False, widen_roundoff=False), 1.0)
+    assert o.dilation == 1.0 and o.depth_bounds is False and o.widen_roundoff is False
+
+
+@pytest.mark.parametrize("kw, field", [
+    (dict(estimate="abc"), "estimate"), (dict(estimate=object()), "estimate"), (dict(estimate=[True] * 3), "estimate"),
+    (dict(dilation=True), "dilation"), (dict(dilation=1j), "dilation"), (dict(dilation=object()), "dilation"),
+    (dict(dilation=1e300), "dilation"), (dict(level=1e300), "level")])
+def test_uncertainty_bad_arguments_are_named(kw, field):
+    cams, x = _scene()
+    regions = x if "level" in kw else _discs(x)
+    with pytest.raises(ValueError, match=field):
+        tt.uncertainty(cams, regions, **kw)
+
+
+@pytest.mark.parametrize("cameras, estimates, field", [
+    ((c for c in [0]), None, "cameras"), (5, None, "cameras"), (None, "abc", "estimates")])
+def test_uncertainty_many_bad_arguments_are_named(cameras, estimates, field):
+    cams, x = _scene()
+    with pytest.raises((TypeError, ValueError), match=field):
+        tt.uncertainty_many([cams] if cameras is None else cameras, [_discs(x)], estimates=estimates)
+
+
+@pytest.mark.parametrize("level", [1e-300, 1e-100, 1e-20])
+def test_tiny_level_is_a_superset_of_level_zero(level):
+    """{gamma <= tau} grows with tau: exact data give the true point at level 0 (round-off widening); a tiny
+    positive level once raised (its dilation squared underflowed) or reported the set empty (a dilation below
+    the round-off radius replaced the widening)."""
+    cams, _ = _scene(noise=0.0)
+    X = np.array([0.1, -0.2, 5.0, 1.0])
+    u = np.einsum("nij,j->ni", cams, X)
+    x = u[:, :2] / u[:, 2:]
+    for tau in (0.0, level):
+        r = tt.uncertainty(cams, x, level=tau)
+        assert r.status == tt.UncertaintyStatus.BOUNDED, (tau, r.status)
+        assert np.all(r.lo <= X[:3] + 1e-9) and np.all(X[:3] - 1e-9 <= r.hi), tau
+    r = tt.uncertainty(cams, x, dilation=level)
+    assert r.status == tt.UncertaintyStatus.BOUNDED

@@ -134,3 +134,30 @@ def test_tiny_level_is_a_superset_of_level_zero(level):
         assert np.all(r.lo <= X[:3] + 1e-9) and np.all(X[:3] - 1e-9 <= r.hi), tau
     r = tt.uncertainty(cams, x, dilation=level)
     assert r.status == tt.UncertaintyStatus.BOUNDED
+
+
+# ----------------------------------------------------------------------------- colmap quality flags
+def test_staged_write_into_a_held_stage_does_not_deadlock(tmp_path):
+    """``tritools colmap --max-error/--min-angle/--keypoint-radius`` wrote the filtered model into the stage of
+    its folder with another staged write: the second flock of the held stage blocked forever."""
+    from tritools.io.atomic import staged_directory
+
+    with staged_directory(tmp_path / "out") as stage:
+        with staged_directory(stage) as inner:
+            (inner / "a.txt").write_text("x")
+    assert (tmp_path / "out" / "a.txt").read_text() == "x"
+
+
+def test_colmap_quality_filter_finishes(tmp_path):
+    import subprocess
+    import sys
+
+    from tritools.io.colmap import write_model_arrays
+    from tritools.sfm.synthetic import synthetic_arrays
+
+    a, _ = synthetic_arrays(n_points=6, n_images=4, camera="PINHOLE", seed=3)
+    write_model_arrays(a, tmp_path / "in", "bin")
+    p = subprocess.run([sys.executable, "-m", "tritools", "colmap", str(tmp_path / "in"), str(tmp_path / "out"),
+                        "--max-error", "0", "--max-delta", "2"], capture_output=True, text=True, timeout=120)
+    assert p.returncode == 0, p.stderr
+    assert "0 of 6 points kept" in p.stdout

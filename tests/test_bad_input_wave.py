@@ -161,3 +161,48 @@ def test_colmap_quality_filter_finishes(tmp_path):
                         "--max-error", "0", "--max-delta", "2"], capture_output=True, text=True, timeout=120)
     assert p.returncode == 0, p.stderr
     assert "0 of 6 points kept" in p.stdout
+
+
+# ----------------------------------------------------------------------------- sospoly: CBF files
+def _good_cbf(tmp_path):
+    import sospoly as sp
+
+    prog = sp.SOSProgram(("x",))
+    a = prog.scalar("a")
+    prog.add_inequality(3 - a)
+    prog.add_lmi([[a, 1.0], [1.0, a]])
+    prog.minimize(a)
+    sp.lower(prog).to_cbf(tmp_path / "good.cbf")
+    return (tmp_path / "good.cbf").read_text().splitlines()
+
+
+@pytest.mark.parametrize("section, new_first_token, needle", [
+    ("VAR", "99999999999", "VAR count"), ("VAR", "-5", "VAR count"), ("PSDCON", "5", "PSDCON announces"),
+    ("CON", "7", "CON announces"), ("OBJACOORD", None, "out of range"), ("ACOORD", None, "out of range"),
+    ("BCOORD", None, "out of range"), ("HCOORD", None, "out of range"), ("DCOORD", None, "out of range")])
+def test_malformed_cbf_names_file_and_line(tmp_path, section, new_first_token, needle):
+    """Corrupt counts and indices once raised IndexError / MemoryError / numpy errors (or were read silently)."""
+    import sospoly as sp
+
+    lines = _good_cbf(tmp_path)
+    k = lines.index(section) + (1 if new_first_token is not None else 2)   # the header, or the first entry
+    toks = lines[k].split()
+    toks[0] = new_first_token if new_first_token is not None else "99999"
+    lines[k] = " ".join(toks)
+    (tmp_path / "bad.cbf").write_text("\n".join(lines) + "\n")
+    with pytest.raises(ValueError, match=rf"bad\.cbf:{k + 1}: .*{needle}"):
+        sp.ConicProblem.from_cbf(tmp_path / "bad.cbf")
+
+
+def test_cbf_short_entry_and_binary_file_are_named(tmp_path):
+    import sospoly as sp
+
+    lines = _good_cbf(tmp_path)
+    k = lines.index("ACOORD") + 2
+    lines[k] = lines[k].split()[0]
+    (tmp_path / "bad.cbf").write_text("\n".join(lines) + "\n")
+    with pytest.raises(ValueError, match=rf"bad\.cbf:{k + 1}: a ACOORD entry has 3 fields"):
+        sp.ConicProblem.from_cbf(tmp_path / "bad.cbf")
+    (tmp_path / "bin.cbf").write_bytes(b"\x00\xff\xfe")
+    with pytest.raises(ValueError, match=r"bin\.cbf: not a text"):
+        sp.ConicProblem.from_cbf(tmp_path / "bin.cbf")

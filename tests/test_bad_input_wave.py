@@ -206,3 +206,65 @@ def test_cbf_short_entry_and_binary_file_are_named(tmp_path):
     (tmp_path / "bin.cbf").write_bytes(b"\x00\xff\xfe")
     with pytest.raises(ValueError, match=r"bin\.cbf: not a text"):
         sp.ConicProblem.from_cbf(tmp_path / "bin.cbf")
+
+
+# ----------------------------------------------------------------------------- sospoly: modelling arguments
+def _prog():
+    import sospoly as sp
+
+    prog = sp.SOSProgram(("x", "y"))
+    return prog, prog.scalar("a")
+
+
+@pytest.mark.parametrize("call, needle", [
+    (lambda p, a: p.add_inequality("a"), "add_inequality expr"),
+    (lambda p, a: p.add_inequality(None), "add_inequality expr"),
+    (lambda p, a: p.add_soc(a, 5), "add_soc xs"),
+    (lambda p, a: p.add_soc(None, [a]), "add_soc t"),
+    (lambda p, a: p.add_lmi([[None, 0.0], [0.0, a]]), r"add_lmi M\[0\]\[0\]"),
+    (lambda p, a: p.minimize("a"), "the objective"),
+    (lambda p, a: p.add_dsos(object()), "add_dsos expr"),
+    (lambda p, a: p.add_sdsos([1.0]), "add_sdsos expr"),
+    (lambda p, a: p.add_dsos(1.0 + a, degree="2"), "degree"),
+    (lambda p, a: p.add_sos_matrix([[1.0, 0.0], [0.0, 1.0]], degree="2"), "add_sos_matrix degree"),
+    (lambda p, a: p.add_sos_matrix([[1.0, 0.0], [0.0, 1.0]], basis=[[1.5, 0]]), "add_sos_matrix basis"),
+    (lambda p, a: p.add_sos_matrix([[1.0, 0.0], [0.0, 1.0]], basis=[[-1, 0]]), "add_sos_matrix basis"),
+    (lambda p, a: p.add_sos_matrix([[1.0, 0.0], [0.0, 1.0]], basis=[[1, 0, 0]]), "add_sos_matrix basis"),
+    (lambda p, a: p.add_sos_matrix([[1.0, 0.0], [0.0, 1.0]], basis=np.zeros((0, 2), int)), "add_sos_matrix basis"),
+    (lambda p, a: p.add_sdsos(1.0 + a, basis="abc"), "basis"),
+])
+def test_modelling_arguments_are_named(call, needle):
+    """Once: the bare 'expected a Polynomial or a real number', numpy's reshape / int() messages, a string
+    formatting TypeError for degree='2', and float or negative basis exponents silently truncated / kept."""
+    prog, a = _prog()
+    with pytest.raises((TypeError, ValueError), match=needle):
+        call(prog, a)
+
+
+def test_minimize_ratios_constraints_and_moment_exponents_are_named():
+    import sospoly as sp
+
+    x, y = sp.variables("x y")
+    with pytest.raises(TypeError, match=r"minimize_ratios eq\[0\]"):
+        sp.minimize_ratios([(x**2 + 1, 1.0 + 0 * x)], eq=["x"])
+    with pytest.raises(TypeError, match="minimize_ratios ineq"):
+        sp.minimize_ratios([(x**2 + 1, 1.0 + 0 * x)], ineq=x)
+    (t,) = sp.variables("t")
+    res = sp.minimize((t**2 - 1) ** 2, degree=4)
+    (mm,) = res.moment_matrices
+    assert abs(mm.moment((2,)) - 1) < 1e-5
+    for bad in ((1.5,), (-1,), "a", (1, 2)):                  # (1.5,) was read as (1,)
+        with pytest.raises(ValueError, match="exponent"):
+            mm.moment(bad)
+    with pytest.raises(TypeError, match="tol"):
+        mm.atoms(-1)
+    with pytest.raises(ValueError, match="rel_tol"):
+        mm.is_flat(float("nan"))
+
+
+def test_min_angle_above_180_degrees_is_refused():
+    from tritools.sfm.quality import QualityOptions
+
+    with pytest.raises(ValueError, match=r"min_angle.*180"):
+        QualityOptions(min_angle=200.0)
+    assert QualityOptions(min_angle=180.0).min_angle == 180.0

@@ -268,3 +268,11 @@ def test_min_angle_above_180_degrees_is_refused():
     with pytest.raises(ValueError, match=r"min_angle.*180"):
         QualityOptions(min_angle=200.0)
     assert QualityOptions(min_angle=180.0).min_angle == 180.0
+
+
+@pytest.mark.parametrize("model", [None, "model", {}, [], 3, np.zeros(3)])
+def test_retriangulate_refuses_a_non_model_by_name(model):
+    from tritools.sfm import retriangulate
+
+    with pytest.raises(TypeError, match="model must be"):
+        retriangulate(model)

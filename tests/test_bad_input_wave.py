@@ -276,3 +276,14 @@ def test_retriangulate_refuses_a_non_model_by_name(model):
 
     with pytest.raises(TypeError, match="model must be"):
         retriangulate(model)
+
+
+@pytest.mark.parametrize("text, needle", [("1\n1\n100000000\n1\n", "at most"), ("1\n1\n0\n1\n", "non-zero"),
+                                          ("100000000000\n1\n2\n", r"\[0, ")])
+def test_sdpa_sizes_are_bounded(tmp_path, text, needle):
+    """A block of side 1e8 once ran for minutes (the svec index pairs of a 1e8 x 1e8 block)."""
+    import sospoly as sp
+
+    (tmp_path / "big.dat-s").write_text(text)
+    with pytest.raises(ValueError, match=needle):
+        sp.ConicProblem.from_sdpa(tmp_path / "big.dat-s")

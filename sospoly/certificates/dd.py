@@ -61,7 +61,7 @@ def add_dd(program, expr, kind: DDKind, degree: int | None = None, name: str | N
            basis=None) -> DDConstraint:
     """Require ``expr`` to be DSOS or SDSOS (module docstring)."""
     kind = DDKind(kind)
-    expr = program.as_linpoly_named(expr, f"add_{kind.value} expr")
+    expr = program._as_linpoly_named(expr, f"add_{kind.value} expr")
     b = _basis(program, expr, degree, basis)
     s = b.shape[0]
     i, j = triu_pairs(s)

@@ -281,7 +281,7 @@ class SOSProgram:
     def _scalar(self, expr, what: str) -> LinPoly:
         if isinstance(expr, QuadExpr):
             raise TypeError(f"{what} must be affine in the decision variables, got a quadratic expression")
-        e = self.as_linpoly_named(expr, what)
+        e = self._as_linpoly_named(expr, what)
         if e.degree > 0:
             raise ValueError(f"{what} must be a scalar (degree-0) affine expression, got degree {e.degree} in "
                              f"{self.gens}; use add_sos for polynomial nonnegativity")
@@ -350,7 +350,7 @@ class SOSProgram:
         quad = None
         if isinstance(expr, QuadExpr):
             quad, expr = expr, expr.affine
-        expr = self.as_linpoly_named(expr, "the objective")
+        expr = self._as_linpoly_named(expr, "the objective")
         if expr.degree > 0:
             raise ValueError("the objective must be a scalar affine or quadratic expression in the decision "
                              "variables")
@@ -358,7 +358,7 @@ class SOSProgram:
             _check_curvature(quad, self.n_vars, sense)
         self.objective, self.sense, self.objective_quadratic = expr, sense, quad
 
-    def as_linpoly_named(self, expr, what: str) -> LinPoly:
+    def _as_linpoly_named(self, expr, what: str) -> LinPoly:
         """:meth:`_as_linpoly`, its TypeError / ValueError prefixed with ``what`` (the argument's name)."""
         try:
             return self._as_linpoly(expr)

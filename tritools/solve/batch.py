@@ -315,7 +315,8 @@ def solve_point_problems(problems, opts: TriangulationOptions, *, executor=None,
 def triangulate_many(problems: Iterable[Sequence], method: str | Method | None = None, delta: int | None = None,
                      max_delta: int | None = None, *, options: TriangulationOptions | None = None,
                      executor: cf.Executor | object | None = None, progress: bool | str | None = None,
-                     retries: Sequence[RetryStep] = (), chunk_size: int = DEFAULT_CHUNK_SIZE, robust=None,
+                     retries: Sequence[RetryStep] = (), chunk_size: int = DEFAULT_CHUNK_SIZE,
+                     robust: float | Sequence | np.ndarray | None = None,
                      **overrides) -> list[TriangulationResult]:
     """Triangulate every (cameras, regions) pair; results in input order, one per input.
 

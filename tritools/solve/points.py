@@ -222,7 +222,8 @@ class PointsResult:
 
 def triangulate_points(cameras: ArrayLike, points2d: ArrayLike, visible: ArrayLike | None = None, *,
                        layout: PointsLayout | str = PointsLayout.AUTO, options: TriangulationOptions | None = None,
-                       executor: object | None = None, progress: bool | str | None = None, robust=None,
+                       executor: object | None = None, progress: bool | str | None = None,
+                       robust: ArrayLike | None = None,
                        **overrides) -> PointsResult:
     """Certified triangulation of M points observed in V views, as arrays (like ``cv2.triangulatePoints``).
 

@@ -67,7 +67,8 @@ FAMILY_SEARCH_EVALS = 300
 
 def triangulate(cameras: ArrayLike, regions: Sequence | ArrayLike, method: str | Method | None = None,
                 delta: int | None = None, max_delta: int | None = None, *,
-                options: TriangulationOptions | None = None, robust=None, **overrides) -> TriangulationResult:
+                options: TriangulationOptions | None = None, robust: ArrayLike | None = None,
+                **overrides) -> TriangulationResult:
     """Certified triangulation of one scene point (see module docstring).
 
     Parameters

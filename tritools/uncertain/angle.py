@@ -31,7 +31,7 @@ def triangulation_angles(centres: np.ndarray, X: np.ndarray) -> np.ndarray:
     return np.degrees(best)
 
 
-def triangulation_angle(cameras, X) -> float:
+def triangulation_angle(cameras: np.ndarray, X: np.ndarray) -> float:
     """Largest angle (degrees) between the viewing rays of ``X`` (3,) from the cameras' centres."""
     C = validate_cameras(cameras, min_views=1, require_distinct=False)
     X = np.asarray(X, float)

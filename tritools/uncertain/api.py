@@ -11,6 +11,7 @@ from __future__ import annotations
 import dataclasses
 import enum
 import logging
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -418,8 +419,9 @@ def _depth_bounds(N, solved, ray, beta, rho, Mx, q0, q0e, status):
 
 
 # ----------------------------------------------------------------------------- public API
-def uncertainty(cameras, regions, *, level=None, estimate=None, options: UncertaintyOptions | None = None,
-                dilation=None) -> UncertaintyResult:
+def uncertainty(cameras: np.ndarray, regions: Sequence, *, level: float | None = None,
+                estimate: np.ndarray | None = None, options: UncertaintyOptions | None = None,
+                dilation: float | Sequence | None = None) -> UncertaintyResult:
     """Certified outer bounds of the set S of scene points consistent with the regions.
 
     Parameters
@@ -487,8 +489,9 @@ def _level_relaxation(cameras, regions, level, estimate, opts) -> UncertaintyRes
                    distance_witness=dw, distance_inner=inner, convexified=True, definition="level_relaxed")
 
 
-def uncertainty_many(cameras, regions, *, estimates=None, options: UncertaintyOptions | None = None,
-                     dilation=None) -> list[UncertaintyResult]:
+def uncertainty_many(cameras: Sequence, regions: Sequence, *, estimates: np.ndarray | None = None,
+                     options: UncertaintyOptions | None = None,
+                     dilation: float | Sequence | None = None) -> list[UncertaintyResult]:
     """:func:`uncertainty` for many points: ``cameras`` a sequence of (N_m, 3, 4) arrays (or one
     (M, N, 3, 4) array), ``regions`` a sequence of region lists, ``estimates`` (M, 3) optional.
     Problems of one structure (view count and region kinds) are solved together as stacked conic

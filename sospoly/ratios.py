@@ -68,6 +68,17 @@ class RatioResult:
     message: str = ""
 
 
+def _constraint_list(seq, what: str) -> list:
+    """``eq`` / ``ineq`` as a list of Polynomials or real numbers (TypeError naming the entry otherwise)."""
+    if isinstance(seq, (str, bytes, Polynomial)) or not hasattr(seq, "__iter__"):
+        raise TypeError(f"minimize_ratios {what} must be a sequence of polynomials, got {type(seq).__name__}")
+    out = list(seq)
+    for k, v in enumerate(out):
+        if not isinstance(v, (Polynomial, int, float)) or isinstance(v, bool):
+            raise TypeError(f"minimize_ratios {what}[{k}] must be a Polynomial or a number, got {type(v).__name__}")
+    return out
+
+
 def _check_terms(terms, eq, ineq, gens):
     terms = list(terms)
     if not terms:
@@ -79,6 +90,7 @@ def _check_terms(terms, eq, ineq, gens):
             if not isinstance(v, (Polynomial, int, float)) or isinstance(v, bool):
                 raise TypeError(f"minimize_ratios terms[{k}].{what} must be a Polynomial or a number, "
                                 f"got {type(v).__name__}")
+    eq, ineq = _constraint_list(eq, "eq"), _constraint_list(ineq, "ineq")
     polys = [Polynomial.constant(float(v)) if not isinstance(v, Polynomial) else v
              for t in terms for v in t] + list(eq) + list(ineq)
     gens = tuple(gens) if gens is not None else common_gens(*polys)

@@ -45,9 +45,9 @@ X_BETTER = np.array([0.20701274495340752, -0.5079592562986958, -0.23786695133141
 def test_decision_scale_is_capped_by_the_l2_scale():
     from tritools.solve.robust import decision_scale
 
-    s2 = decision_scale(CAMS, REGIONS, 1e10)
+    s2 = decision_scale(CAMS, REGIONS, np.array([1e10]))
     assert s2 < 1.0                       # pixel data of a few hundred px: 1 / s^2 is well below 1 px^2
-    assert decision_scale(CAMS, REGIONS, 1e-6) == 1e-6     # small thresholds keep their own scale
+    assert decision_scale(CAMS, REGIONS, np.array([1e-6])) == 1e-6     # small thresholds keep their own scale
 
 
 @pytest.mark.slow

@@ -22,7 +22,29 @@ import numpy as np
 
 from .svec import triu_pairs
 
-__all__ = ["sigma", "tau", "monomials", "MonomialIndex", "GramBasis", "GramBlocks", "graded_order"]
+__all__ = ["sigma", "tau", "monomials", "MonomialIndex", "GramBasis", "GramBlocks", "graded_order",
+           "exponent_rows", "even_degree"]
+
+
+def exponent_rows(basis, n_vars: int, what: str) -> np.ndarray:
+    """A user's monomial basis as (s, n_vars) exponent rows: non-negative integers, at least one row
+    (ValueError naming ``what`` otherwise; a float exponent is never truncated silently)."""
+    try:
+        raw = np.asarray(basis)
+    except (TypeError, ValueError):
+        raw = np.asarray(None)
+    ok = raw.dtype.kind in "iu" or (raw.dtype.kind == "f" and np.all(np.isfinite(raw)) and np.all(raw == np.round(raw)))
+    if not ok or raw.ndim not in (1, 2) or raw.size == 0 or raw.shape[-1] != n_vars or np.any(raw < 0):
+        raise ValueError(f"{what} must be a non-empty array of exponent rows of {n_vars} non-negative integers, "
+                         f"got {basis!r}")
+    return raw.astype(np.int64).reshape(-1, n_vars)
+
+
+def even_degree(degree, low: int, what: str) -> int:
+    """``degree`` as an even integer >= ``low`` (ValueError naming ``what`` otherwise)."""
+    if isinstance(degree, bool) or not isinstance(degree, (int, np.integer)) or degree % 2 or degree < low:
+        raise ValueError(f"{what} must be an even integer >= {low}, got {degree!r}")
+    return int(degree)
 
 
 def sigma(n: int, k: int) -> int:

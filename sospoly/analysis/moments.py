@@ -48,7 +48,7 @@ class MomentMatrix:
 
     def moment(self, exponent) -> float:
         """L(v^exponent) read from an entry b_i b_j = exponent (KeyError when no entry has that product)."""
-        e = np.asarray(exponent, np.int64)
+        e = _exponent(exponent, self.basis.shape[1])
         for i, bi in enumerate(self.basis):
             rest = e - bi
             if np.all(rest >= 0):
@@ -59,6 +59,9 @@ class MomentMatrix:
 
     def rank(self, rel_tol: float = 1e-6) -> int:
         """Numerical rank: eigenvalues above ``rel_tol`` times the largest."""
+        if isinstance(rel_tol, bool) or not isinstance(rel_tol, (int, float, np.integer, np.floating)) or \
+                not 0 <= rel_tol < 1:
+            raise ValueError(f"rel_tol must be a number in [0, 1), got {rel_tol!r}")
         lam = np.linalg.eigvalsh(self.matrix)
         return int(np.sum(lam > rel_tol * max(float(lam[-1]), 1e-300)))
 
@@ -92,6 +95,8 @@ class MomentMatrix:
         cols = list(self.variables)
         B = self.basis[:, cols]
         pts = []
+        if not isinstance(tol, Tolerances):
+            raise TypeError(f"tol must be a sospoly.Tolerances, got {type(tol).__name__}")
         for c in sorted(extract_from_moment(self.matrix, B, tol), key=lambda c: c.span_residual):
             p = np.asarray(c.point, float)
             if c.span_residual <= span_tol and np.all(np.isfinite(p)) and \
@@ -113,6 +118,18 @@ def _normalised(M: np.ndarray, basis: np.ndarray) -> np.ndarray:
     if const >= 0 and M[const, const] > 0:
         return M / M[const, const]
     return M
+
+
+def _exponent(exponent, n_vars: int) -> np.ndarray:
+    """An exponent tuple of ``n_vars`` non-negative integers (ValueError naming ``exponent`` otherwise)."""
+    try:
+        raw = np.asarray(exponent)
+    except (TypeError, ValueError):
+        raw = np.asarray(None)
+    ok = raw.dtype.kind in "iu" or (raw.dtype.kind == "f" and np.all(np.isfinite(raw)) and np.all(raw == np.round(raw)))
+    if not ok or raw.shape != (n_vars,) or np.any(raw < 0):
+        raise ValueError(f"exponent must be {n_vars} non-negative integers, got {exponent!r}")
+    return raw.astype(np.int64)
 
 
 def moment_matrices_of(constraint, solution, scale_exponents=None) -> tuple:

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..algebra.basis import monomials
+from ..algebra.basis import even_degree, exponent_rows, monomials
 from ..algebra.linpoly import LinPoly
 from ..algebra.svec import smat, svec_scale, triu_pairs
 
@@ -51,11 +51,9 @@ class DDConstraint:
 
 def _basis(program, expr: LinPoly, degree, basis) -> np.ndarray:
     if basis is not None:
-        return np.asarray(basis, dtype=np.int64).reshape(-1, program.nvars_poly)
+        return exponent_rows(basis, program.nvars_poly, "basis")
     deg = max(expr.degree, 0)
-    degree = deg + deg % 2 if degree is None else degree
-    if degree % 2 or degree < deg:
-        raise ValueError(f"a DSOS/SDSOS constraint needs an even degree >= {deg}, got {degree}")
+    degree = deg + deg % 2 if degree is None else even_degree(degree, deg, "a DSOS/SDSOS constraint's degree")
     return monomials(program.nvars_poly, degree // 2)
 
 
@@ -63,7 +61,7 @@ def add_dd(program, expr, kind: DDKind, degree: int | None = None, name: str | N
            basis=None) -> DDConstraint:
     """Require ``expr`` to be DSOS or SDSOS (module docstring)."""
     kind = DDKind(kind)
-    expr = program._as_linpoly(expr)
+    expr = program._as_linpoly_named(expr, f"add_{kind.value} expr")
     b = _basis(program, expr, degree, basis)
     s = b.shape[0]
     i, j = triu_pairs(s)

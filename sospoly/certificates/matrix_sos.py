@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..algebra.basis import monomials
+from ..algebra.basis import even_degree, exponent_rows, monomials
 from ..algebra.linpoly import LinPoly
 from ..algebra.polynomial import Polynomial
 
@@ -89,12 +89,11 @@ def add_sos_matrix(program, M, degree: int | None = None, name: str | None = Non
                 raise ValueError(f"add_sos_matrix M must be symmetric: M[{k}][{l}] != M[{l}][{k}]")
     deg = max(e.degree for r in ent for e in r)
     if basis is not None:
-        b = np.asarray(basis, dtype=np.int64).reshape(-1, program.nvars_poly)
+        b = exponent_rows(basis, program.nvars_poly, "add_sos_matrix basis")
     else:
         if degree is None:
             degree = max(deg, 0) + (max(deg, 0) % 2)
-        if degree % 2 or degree < deg:
-            raise ValueError(f"add_sos_matrix degree must be even and >= the entries' degree {deg}, got {degree}")
+        degree = even_degree(degree, max(deg, 0), "add_sos_matrix degree (even, >= the entries' degree)")
         b = monomials(program.nvars_poly, degree // 2)
     s = b.shape[0]
     name = name or f"sosmat{len(program.blocks)}"

@@ -281,7 +281,7 @@ class SOSProgram:
     def _scalar(self, expr, what: str) -> LinPoly:
         if isinstance(expr, QuadExpr):
             raise TypeError(f"{what} must be affine in the decision variables, got a quadratic expression")
-        e = self._as_linpoly(expr)
+        e = self._as_linpoly_named(expr, what)
         if e.degree > 0:
             raise ValueError(f"{what} must be a scalar (degree-0) affine expression, got degree {e.degree} in "
                              f"{self.gens}; use add_sos for polynomial nonnegativity")
@@ -295,6 +295,8 @@ class SOSProgram:
 
     def add_soc(self, t, xs, name: str | None = None) -> SOCConstraint:
         """Require ``||xs||_2 <= t`` (t and every entry of xs scalar affine expressions)."""
+        if isinstance(xs, (str, bytes)) or not hasattr(xs, "__iter__"):
+            raise TypeError(f"add_soc xs must be a sequence of scalar expressions, got {type(xs).__name__}")
         xs = list(xs)
         if not xs:
             raise ValueError("add_soc xs must be a non-empty sequence of scalar expressions")
@@ -348,13 +350,20 @@ class SOSProgram:
         quad = None
         if isinstance(expr, QuadExpr):
             quad, expr = expr, expr.affine
-        expr = self._as_linpoly(expr)
+        expr = self._as_linpoly_named(expr, "the objective")
         if expr.degree > 0:
             raise ValueError("the objective must be a scalar affine or quadratic expression in the decision "
                              "variables")
         if quad is not None:
             _check_curvature(quad, self.n_vars, sense)
         self.objective, self.sense, self.objective_quadratic = expr, sense, quad
+
+    def _as_linpoly_named(self, expr, what: str) -> LinPoly:
+        """:meth:`_as_linpoly`, its TypeError / ValueError prefixed with ``what`` (the argument's name)."""
+        try:
+            return self._as_linpoly(expr)
+        except (TypeError, ValueError) as exc:
+            raise type(exc)(f"{what}: {exc}") from None
 
     def _as_linpoly(self, expr) -> LinPoly:
         if isinstance(expr, LinPoly):

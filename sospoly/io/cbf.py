@@ -77,7 +77,11 @@ def write_cbf(problem, path) -> pathlib.Path:
 def _sections(path: pathlib.Path) -> dict:
     """Keyword -> list of (line number, data line) following it."""
     secs, cur = {}, None
-    for n, line in enumerate(path.read_text().splitlines(), start=1):
+    try:
+        text = path.read_text()
+    except UnicodeDecodeError as exc:
+        raise ValueError(f"{path}: not a text (UTF-8) file: {exc.reason} at byte {exc.start}") from None
+    for n, line in enumerate(text.splitlines(), start=1):
         s = line.strip()
         if not s or s.startswith("#"):
             continue
@@ -99,15 +103,50 @@ def _num(tok, n, path, conv=float):
         raise ValueError(f"{path}:{n}: expected {'an integer' if conv is int else 'a number'}, got {tok!r}") from None
 
 
-def _list(secs, name, path):
-    """The entries of a coordinate section (its first line is the count)."""
+#: largest count or dimension a file may declare (a larger one is refused by file:line before anything is
+#: allocated: a corrupt header must not ask for terabytes)
+MAX_DIM = 10**7
+
+
+def _index(tok, n, path, size: int, what: str) -> int:
+    """An integer token in ``[0, size)`` (ValueError naming file:line otherwise)."""
+    v = _num(tok, n, path, int)
+    if not 0 <= v < size:
+        raise ValueError(f"{path}:{n}: {what} {v} out of range [0, {size})")
+    return v
+
+
+def _dim(tok, n, path, what: str, low: int = 0) -> int:
+    """A declared count or dimension in ``[low, MAX_DIM]``."""
+    v = _num(tok, n, path, int)
+    if not low <= v <= MAX_DIM:
+        raise ValueError(f"{path}:{n}: {what} {v} out of range [{low}, {MAX_DIM}]")
+    return v
+
+
+def _list(secs, name, path, arity: int | None = None):
+    """The entries of a coordinate section (its first line is the count), each of ``arity`` tokens."""
     lines = secs.get(name, [])
     if not lines:
         return []
     count = _num(lines[0][1][0], lines[0][0], path, int)
     if count != len(lines) - 1:
         raise ValueError(f"{path}:{lines[0][0]}: {name} announces {count} entries, has {len(lines) - 1}")
+    for ln, toks in lines[1:]:
+        if arity is not None and len(toks) != arity:
+            raise ValueError(f"{path}:{ln}: a {name} entry has {arity} fields, got {len(toks)}")
     return lines[1:]
+
+
+def _header(secs, name, path, arity: int = 1):
+    """The first line of section ``name`` (ValueError naming the file when it is missing or short)."""
+    lines = secs.get(name)
+    if not lines:
+        raise ValueError(f"{path}: section {name} has no data")
+    ln, toks = lines[0]
+    if len(toks) < arity:
+        raise ValueError(f"{path}:{ln}: {name} needs {arity} fields, got {len(toks)}")
+    return ln, toks
 
 
 def read_cbf(path):
@@ -119,42 +158,59 @@ def read_cbf(path):
     if "VAR" not in secs:
         raise ValueError(f"{path}: no VAR section")
     var = secs["VAR"]
-    n = _num(var[0][1][0], var[0][0], path, int)
+    ln0, toks0 = _header(secs, "VAR", path, 2)
+    n = _dim(toks0[0], ln0, path, "VAR count")
     if any(toks[0] != "F" for _, toks in var[1:]):
         raise ValueError(f"{path}:{var[1][0]}: only free variables (F) are supported")
-    sense = secs.get("OBJSENSE", [(0, ["MIN"])])[0][1][0]
+    sense = _header(secs, "OBJSENSE", path)[1][0] if "OBJSENSE" in secs else "MIN"
     sign = -1.0 if sense == "MAX" else 1.0
     q = np.zeros(n)
-    for ln, (j, v) in _list(secs, "OBJACOORD", path):
-        q[_num(j, ln, path, int)] += sign * _num(v, ln, path)
-    offset = _num(secs["OBJBCOORD"][0][1][0], secs["OBJBCOORD"][0][0], path) if "OBJBCOORD" in secs else 0.0
+    for ln, (j, v) in _list(secs, "OBJACOORD", path, 2):
+        q[_index(j, ln, path, n, "variable")] += sign * _num(v, ln, path)
+    offset = _num(_header(secs, "OBJBCOORD", path)[1][0], secs["OBJBCOORD"][0][0], path) \
+        if "OBJBCOORD" in secs else 0.0
     con = secs.get("CON", [])
     kinds = {v: k for k, v in _CBF_CONE.items()}
     cones, m = [], 0
-    for ln, (k, d) in (con[1:] if con else []):
+    for ln, toks in (con[1:] if con else []):
+        if len(toks) != 2:
+            raise ValueError(f"{path}:{ln}: a CON entry has 2 fields (cone, dimension), got {len(toks)}")
+        k, d = toks
         if k not in kinds:
             raise ValueError(f"{path}:{ln}: cone {k!r} not supported (L=, L+, Q)")
-        cones.append(Cone(kinds[k], _num(d, ln, path, int)))
+        cones.append(Cone(kinds[k], _dim(d, ln, path, "cone dimension", 1)))
         m += cones[-1].dim
-    psd_sizes = [_num(t[0], ln, path, int) for ln, t in secs.get("PSDCON", [])[1:]]
+    if con:
+        ln, toks = _header(secs, "CON", path, 2)
+        if (_num(toks[0], ln, path, int), _num(toks[1], ln, path, int)) != (m, len(cones)):
+            raise ValueError(f"{path}:{ln}: CON announces total dimension {toks[0]} in {toks[1]} cones, has "
+                             f"{m} in {len(cones)}")
+    psd = secs.get("PSDCON", [])
+    if psd and _num(_header(secs, "PSDCON", path)[1][0], psd[0][0], path, int) != len(psd) - 1:
+        raise ValueError(f"{path}:{psd[0][0]}: PSDCON announces {psd[0][1][0]} blocks, has {len(psd) - 1}")
+    psd_sizes = [_dim(t[0], ln, path, "PSDCON side", 1) for ln, t in psd[1:]]
     psd_start = np.cumsum([m] + [s * (s + 1) // 2 for s in psd_sizes])
     nrows = int(psd_start[-1])
+    if nrows > MAX_DIM:
+        raise ValueError(f"{path}: the cones declare {nrows} rows, more than MAX_DIM = {MAX_DIM}")
     rows, cols, vals, b = [], [], [], np.zeros(nrows)
-    for ln, (i, j, v) in _list(secs, "ACOORD", path):
-        rows.append(_num(i, ln, path, int)), cols.append(_num(j, ln, path, int)), vals.append(-_num(v, ln, path))
-    for ln, (i, v) in _list(secs, "BCOORD", path):
-        b[_num(i, ln, path, int)] += _num(v, ln, path)
+    for ln, (i, j, v) in _list(secs, "ACOORD", path, 3):
+        rows.append(_index(i, ln, path, m, "row")), cols.append(_index(j, ln, path, n, "variable"))
+        vals.append(-_num(v, ln, path))
+    for ln, (i, v) in _list(secs, "BCOORD", path, 2):
+        b[_index(i, ln, path, m, "row")] += _num(v, ln, path)
 
     def svec_row(p, a, c, ln):
-        a, c = _num(a, ln, path, int), _num(c, ln, path, int)
+        side = psd_sizes[p]
+        a, c = _index(a, ln, path, side, "PSD entry index"), _index(c, ln, path, side, "PSD entry index")
         lo, hi = min(a, c), max(a, c)
         return int(psd_start[p]) + hi * (hi + 1) // 2 + lo, (1.0 if lo == hi else np.sqrt(2.0))
 
-    for ln, (p, j, a, c, v) in _list(secs, "HCOORD", path):
-        r, sc = svec_row(_num(p, ln, path, int), a, c, ln)
-        rows.append(r), cols.append(_num(j, ln, path, int)), vals.append(-_num(v, ln, path) * sc)
-    for ln, (p, a, c, v) in _list(secs, "DCOORD", path):
-        r, sc = svec_row(_num(p, ln, path, int), a, c, ln)
+    for ln, (p, j, a, c, v) in _list(secs, "HCOORD", path, 5):
+        r, sc = svec_row(_index(p, ln, path, len(psd_sizes), "PSD block"), a, c, ln)
+        rows.append(r), cols.append(_index(j, ln, path, n, "variable")), vals.append(-_num(v, ln, path) * sc)
+    for ln, (p, a, c, v) in _list(secs, "DCOORD", path, 4):
+        r, sc = svec_row(_index(p, ln, path, len(psd_sizes), "PSD block"), a, c, ln)
         b[r] += _num(v, ln, path) * sc
     A = sp.csc_matrix((vals, (rows, cols)), shape=(nrows, n))
     blocks = tuple(PSDBlockMap(f"psd{p}", int(psd_start[p]), s, "constraint") for p, s in enumerate(psd_sizes))

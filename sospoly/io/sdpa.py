@@ -34,6 +34,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..algebra.svec import svec_scale, triu_pairs
+from .cbf import MAX_DIM
 
 __all__ = ["write_sdpa", "read_sdpa"]
 
@@ -138,9 +139,13 @@ def _header(lines, path):
 
     (m,) = need(1, int, "the number of variables m")
     (nb,) = need(1, int, "the number of blocks")
-    if m < 0 or nb < 0:
-        raise ValueError(f"{path}: m and the number of blocks must be >= 0, got {m}, {nb}")
+    if m < 0 or nb < 0 or m > MAX_DIM or nb > MAX_DIM:
+        raise ValueError(f"{path}: m and the number of blocks must be in [0, {MAX_DIM}], got {m}, {nb}")
     sizes = need(nb, int, "the block sizes")
+    rows = sum(abs(s) * (abs(s) + 1) // 2 if s > 0 else -s for s in sizes)
+    if any(s == 0 for s in sizes) or rows > MAX_DIM:
+        raise ValueError(f"{path}: block sizes must be non-zero and declare at most {MAX_DIM} rows, got {sizes} "
+                         f"({rows} rows)")
     c = need(m, float, "the objective vector c")
     return m, sizes, c, k
 

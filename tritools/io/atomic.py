@@ -20,6 +20,7 @@ import contextlib
 import os
 import shutil
 import tempfile
+import threading
 import uuid
 from pathlib import Path
 
@@ -128,8 +129,9 @@ def locked_directory(folder):
         return
     fd = os.open(folder, os.O_RDONLY | getattr(os, "O_DIRECTORY", 0))
     try:
-        with contextlib.suppress(OSError):      # a file system without flock (ENOLCK): renames stay atomic
-            fcntl.flock(fd, fcntl.LOCK_EX)
+        if _key(fd) not in _HELD:               # a stage this process holds (a stage written as a folder) is ours
+            with contextlib.suppress(OSError):  # a file system without flock (ENOLCK): renames stay atomic
+                fcntl.flock(fd, fcntl.LOCK_EX)
         yield
     finally:
         os.close(fd)            # releases the lock
@@ -201,12 +203,31 @@ def _hold(folder: Path):
     fd = os.open(folder, os.O_RDONLY | getattr(os, "O_DIRECTORY", 0))
     with contextlib.suppress(OSError):          # no flock here: the stage is simply not protected from a sweep
         fcntl.flock(fd, fcntl.LOCK_EX)
+    with _HELD_LOCK:
+        _HELD[_key(fd)] = _HELD.get(_key(fd), 0) + 1
     return fd
 
 
 def _release(fd) -> None:
     if fd is not None:
+        with _HELD_LOCK:
+            k = _key(fd)
+            _HELD[k] -= 1
+            if not _HELD[k]:
+                del _HELD[k]
         os.close(fd)
+
+
+#: stages this process holds (:func:`_hold`), by (device, inode): :func:`locked_directory` on one of them (a
+#: stage used as the target of another staged write, e.g. a model written into the stage of its folder) must
+#: not flock it again -- a second flock of the same directory through another descriptor blocks forever.
+_HELD: dict = {}
+_HELD_LOCK = threading.Lock()
+
+
+def _key(fd: int) -> tuple:
+    st = os.fstat(fd)
+    return st.st_dev, st.st_ino
 
 
 def _sweep_stale_stages(target: Path) -> None:

@@ -73,7 +73,11 @@ def points_array(points2d: ArrayLike, n_views: int, layout: PointsLayout | str =
         raise ValueError(f"layout must be one of {', '.join(repr(v.value) for v in PointsLayout)}, "
                          f"got {layout!r}") from None
     if isinstance(points2d, (list, tuple)) and points2d and all(np.ndim(p) >= 2 for p in points2d):
-        points2d = np.stack([real_array(p, f"{name}[{k}]") for k, p in enumerate(points2d)])
+        per_view = [real_array(p, f"{name}[{k}]") for k, p in enumerate(points2d)]
+        if len({p.shape for p in per_view}) > 1:
+            raise ValueError(f"{name} as a list of per-view arrays must have arrays of one shape, got "
+                             f"{[p.shape for p in per_view]}")
+        points2d = np.stack(per_view)
     x = real_array(points2d, name)
     fits = _fits(x.shape, n_views)
     if lay == PointsLayout.AUTO:

@@ -77,7 +77,9 @@ class QualityOptions:
                 raise OptionError(f.name, f"must be a finite number, got {v!r}")
             low_ok = v > 0 if f.name in ("keypoint_radius", "max_uncertainty") else \
                 v >= 1 if f.name == "max_depth_ratio" else v >= 0
-            if not low_ok:
+            if not low_ok or (f.name == "min_angle" and v > 180):      # an angle between rays is <= 180 deg
+                if f.name == "min_angle":
+                    raise OptionError(f.name, f"out of range [0, 180] degrees, got {v!r}")
                 raise OptionError(f.name, f"out of range, got {v!r}")
         for name in ("max_uncertainty", "max_depth_ratio"):
             if getattr(self, name) is not None and self.keypoint_radius is None and self.keypoint_radii is None:

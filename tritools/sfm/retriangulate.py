@@ -254,6 +254,9 @@ def retriangulate(model: Model, method: str | None = None, path: str | None = No
     if is_pycolmap_reconstruction(model):
         return _retriangulate_pycolmap(model, method, path, min_track_length, delta, max_delta, progress,
                                        options=options, **kw)
+    if not isinstance(model, Model):
+        raise TypeError(f"model must be a tritools.io.colmap.Model or a pycolmap.Reconstruction, got "
+                        f"{type(model).__name__}")
     if options is None:
         options = RetriangulationOptions(method=method, path=path, min_track_length=min_track_length, delta=delta,
                                          max_delta=max_delta, progress=progress, **kw)

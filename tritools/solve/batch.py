@@ -144,7 +144,7 @@ def _as_point_problem(cams, regions):
         C = C.astype(float)
     except (TypeError, ValueError):
         return None
-    if C.ndim != 3 or C.shape[1:] != (3, 4) or C.shape[0] != len(x) or len(x) < 2:
+    if C.ndim != 3 or C.shape[1:] != (3, 4) or C.shape[0] != len(x) or len(x) < 2 or not np.all(np.isfinite(x)):
         return None
     return C, x
 
@@ -316,7 +316,7 @@ def triangulate_many(problems: Iterable[Sequence], method: str | Method | None =
                      max_delta: int | None = None, *, options: TriangulationOptions | None = None,
                      executor: cf.Executor | object | None = None, progress: bool | str | None = None,
                      retries: Sequence[RetryStep] = (), chunk_size: int = DEFAULT_CHUNK_SIZE,
-                     robust: float | Sequence | None = None,
+                     robust: float | Sequence | np.ndarray | None = None,
                      **overrides) -> list[TriangulationResult]:
     """Triangulate every (cameras, regions) pair; results in input order, one per input.
 

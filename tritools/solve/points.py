@@ -253,9 +253,7 @@ def triangulate_points(cameras: ArrayLike, points2d: ArrayLike, visible: ArrayLi
     if C.ndim != 3 or C.shape[1:] != (3, 4):
         raise ValueError(f"cameras must have shape (V, 3, 4), got {C.shape}")
     x = points_array(points2d, C.shape[0], layout, "points2d")
-    vis = np.all(np.isfinite(x), axis=2) if visible is None else np.asarray(visible, bool)
-    if vis.shape != x.shape[:2]:
-        raise ValueError(f"visible must have shape {x.shape[:2]}, got {vis.shape}")
+    vis = np.all(np.isfinite(x), axis=2) if visible is None else _visible_mask(visible, x)
     if np.any(vis.sum(axis=1) < 2):
         bad = int(np.argmax(vis.sum(axis=1) < 2))
         raise ValueError(f"points2d[{bad}] is visible in fewer than 2 views")
@@ -267,6 +265,22 @@ def triangulate_points(cameras: ArrayLike, points2d: ArrayLike, visible: ArrayLi
     arrays = outcome.arrays()
     arrays["n_views"] = vis.sum(axis=1)
     return PointsResult(outcome.result, arrays)
+
+
+def _visible_mask(visible, x: np.ndarray) -> np.ndarray:
+    """``visible`` as a bool (M, V) mask: booleans or 0/1 numbers, and every visible entry of ``x`` finite
+    (ValueError naming ``visible`` / ``points2d[m, v]``)."""
+    raw = np.asarray(visible)
+    if raw.shape != x.shape[:2]:
+        raise ValueError(f"visible must have shape {x.shape[:2]}, got {raw.shape}")
+    if raw.dtype.kind not in "biu" and not (raw.dtype.kind == "f" and np.all((raw == 0) | (raw == 1))):
+        raise ValueError(f"visible must be booleans (or 0/1), got dtype {raw.dtype}")
+    vis = raw.astype(bool)
+    bad = vis & ~np.all(np.isfinite(x), axis=2)
+    if np.any(bad):
+        m, v = (int(i) for i in np.argwhere(bad)[0])
+        raise ValueError(f"points2d[{m}, {v}] is not finite but visible[{m}, {v}] is True")
+    return vis
 
 
 def _robust_points(C, x, vis, views, robust, opts, executor, progress) -> PointsResult:

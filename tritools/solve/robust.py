@@ -48,9 +48,9 @@ many searches together, one vectorised call per subset size (:func:`tritools.sol
 
 Units and the decision.  The certificate rule of :class:`sospoly.Tolerances` (``certified`` /
 ``contradicts`` / ``consistent``) is applied to f_TLS in pixels^2 at the problem's own scale
-sigma = min(min_i c_i^2, 1 / s^2) (the smallest finite squared threshold, capped by the L2 path's scale, s the
-image scale of its normalisation: :func:`decision_scale`): the absolute part allows ``gap_abs * sigma``, the
-relative part ``gap_rel * max(sigma, UB)``.  Bounds are reported as gamma = sqrt(f / 2N).
+``min(min_i c_i^2, rho^2)`` (the smallest finite squared threshold, capped by the squared residual scale rho
+of the L2 normalisation, :func:`decision_scale`): the absolute part allows ``gap_abs`` times that scale,
+the relative part ``gap_rel * max(scale, UB)``.  Bounds are reported as gamma = sqrt(f / 2N).
 """
 from __future__ import annotations
 
@@ -94,7 +94,10 @@ def robust_thresholds(robust, n_views: int) -> np.ndarray:
     if isinstance(robust, (bool, np.bool_)) or isinstance(robust, (str, bytes)):
         raise ValueError(f"robust must be a positive threshold in pixels (scalar or one per view), got {robust!r}")
     try:
-        c = np.array(robust, dtype=float)
+        raw = np.asarray(robust)
+        if raw.dtype.kind not in "iuf":                  # booleans, strings, objects (None), complex
+            raise TypeError
+        c = raw.astype(float)
     except (TypeError, ValueError):
         raise ValueError(f"robust must be a positive threshold in pixels (scalar or one per view), "
                          f"got {robust!r}") from None
@@ -110,8 +113,9 @@ def robust_thresholds(robust, n_views: int) -> np.ndarray:
 def tls_cost(residuals, c) -> float:
     """f_TLS = sum_i min(d_i^2, c_i^2) (an undefined projection, d_i = inf, counts c_i^2)."""
     d = np.asarray(residuals, float)
-    d2 = np.where(np.isfinite(d), d * d, np.inf)
-    return float(np.sum(np.minimum(d2, np.asarray(c, float) ** 2)))
+    with np.errstate(over="ignore"):                  # c or d above 1e154: c^2 = inf, as it should
+        d2 = np.where(np.isfinite(d), d * d, np.inf)
+        return float(np.sum(np.minimum(d2, np.asarray(c, float) ** 2)))
 
 
 def lookahead_bound(s_lo: float, s_hi: float, a: np.ndarray, c2: np.ndarray) -> float:
@@ -141,18 +145,18 @@ def branching_order(ratio: np.ndarray) -> np.ndarray:
     return np.array(head + amb + [i for i in rest if i not in amb], dtype=int)
 
 
-def decision_scale(cams, regions, min_c2: float) -> float:
-    """The scale (pixels^2) of the TLS certificate rule: min(min_i c_i^2, 1 / s^2), s the image scale of the
-    L2 path's normalisation (:func:`tritools.model.normalize.normalization_for`; c = s^2 f there).  With
-    thresholds far above the residuals, min c^2 alone would let a gap of ``gap_abs * min c^2`` pixels^2
-    certify a point whose f is orders of magnitude below it (an uncertified L2 estimate reported optimal);
-    the L2 scale keeps the tolerance that of the L2 problem the thresholds do not truncate."""
+def decision_scale(cams, regions, c2: np.ndarray) -> float:
+    """The scale of the certificate rule on f_TLS (pixels^2): ``min(min_i c_i^2, rho^2)`` with rho = 1 / s the
+    residual scale of the L2 normalisation (:mod:`tritools.model.normalize`; an L2 certificate allows
+    ``gap_abs`` at c = s^2 f = 1).  Thresholds far above the residuals (or so large that c^2 overflows) thus
+    never loosen the rule beyond the L2 one: f_TLS = L2 there."""
     from ..model.normalize import normalization_for
 
-    s = float(normalization_for(np.asarray(cams, float), regions).scale)
-    if not (math.isfinite(s) and s > 0):
-        return min_c2
-    return min(min_c2, 1.0 / (s * s))
+    finite = c2[np.isfinite(c2) & (c2 > 0)]
+    s = normalization_for(cams, regions).scale
+    rho2 = 1.0 / (s * s) if np.isfinite(s) and s > 0 else math.inf
+    scale = min([rho2, *finite.tolist()])
+    return float(scale) if np.isfinite(scale) and scale > 0 else 1.0
 
 
 class _Search:
@@ -161,11 +165,11 @@ class _Search:
     def __init__(self, cams, regions, c, opts, t0):
         self.C, self.regions, self.c, self.opts, self.t0 = cams, list(regions), c, opts, t0
         self.N = len(regions)
-        self.c2 = c * c
+        with np.errstate(over="ignore"):
+            self.c2 = c * c                              # c above 1e154: c^2 = inf (no threshold in floats)
         self.deadline = opts.budget.deadline()
         self.bounds = SubsetBounds(cams, regions, opts, self.deadline)
-        finite = self.c2[np.isfinite(self.c2)]
-        self.scale = decision_scale(cams, self.regions, float(np.min(finite)))
+        self.scale = decision_scale(cams, regions, self.c2)
         self.tol = opts.tolerances
         self.best_X, self.best_f, self.best_S = None, math.inf, frozenset()
         self.points = self.bounds.points

@@ -33,16 +33,27 @@ __all__ = ["robust_many", "thresholds_for"]
 def thresholds_for(robust, problems) -> list:
     """The thresholds of each problem from ``robust=`` (a scalar, one array for problems of equal size, or a
     sequence with one entry per problem); ValueError naming ``robust``."""
-    sizes = [len(p[1]) if not hasattr(p[1], "shape") else int(np.shape(p[1])[0]) for p in problems]
+    sizes = [_n_views(p) for p in problems]
     per_problem = (isinstance(robust, np.ndarray) and robust.ndim == 2) or (
         isinstance(robust, (list, tuple)) and len(robust) > 0
         and all(isinstance(e, (list, tuple, np.ndarray)) for e in robust))
     if not per_problem:
-        return [robust_thresholds(robust, n) for n in sizes]
+        return [robust_thresholds(robust, n) if n is not None else None for n in sizes]
     if len(robust) != len(problems):
         raise ValueError(f"robust must be a scalar, one threshold per view, or one entry per problem "
                          f"({len(problems)}), got {len(robust)} entries")
-    return [robust_thresholds(c, n) for c, n in zip(robust, sizes)]
+    return [robust_thresholds(c, n) if n is not None else None for c, n in zip(robust, sizes)]
+
+
+def _n_views(problem) -> int | None:
+    """The view count of a (cameras, regions) problem, or None when it has none (a malformed problem: the
+    batch gives it status ``invalid_input`` and its threshold is never used)."""
+    try:
+        _, regions = problem
+        n = int(np.shape(regions)[0]) if hasattr(regions, "shape") else len(regions)
+    except (TypeError, ValueError, IndexError):
+        return None
+    return n
 
 
 def _l2_suffices(res: TriangulationResult, c: np.ndarray) -> bool:

@@ -10,9 +10,8 @@ from __future__ import annotations
 
 import enum
 import logging
-from dataclasses import dataclass, field, replace
-
 from collections.abc import Sequence
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -41,6 +40,12 @@ class UncertaintyStatus(str, enum.Enum):
     FAILED = "failed"            #: no certificate (reported box: the whole space)
 
 
+#: dilations (pixels) are at most this (their squares stay finite) and, when positive, at least
+#: DILATION_MIN (their squares stay normal numbers; a larger dilation is still an outer bound).
+DILATION_MAX = 1e150
+DILATION_MIN = 1e-150
+
+
 @dataclass(frozen=True)
 class UncertaintyOptions:
     """``dilation``: pixels added around every region (a number or one per view; 0: regions as
@@ -49,7 +54,7 @@ class UncertaintyOptions:
     the feasibility test of witnesses in views without interior (points, segments); ``depth_bounds``:
     solve the 2N depth bound problems (True) or bound the depths over the certified box (False:
     rigorous, looser, about (6 + 2N) / 6 times faster); ``widen_roundoff``: points and segments not
-    otherwise dilated are widened by the round-off of a computed projection (16 eps relative, see
+    dilated by more are widened by the round-off of a computed projection (16 eps relative, see
     :func:`_roundoff_radii`), so exact data give a tiny set holding the point instead of an empty or
     degenerate one; when such a widened set yields no feasible point at all, the regions as given are
     solved too and their Farkas certificate, if any, reports the set empty; ``level_degree``: relaxation
@@ -72,9 +77,11 @@ class UncertaintyOptions:
         for name in ("depth_bounds", "widen_roundoff"):
             if not isinstance(getattr(self, name), (bool, np.bool_)):
                 raise TypeError(f"{name} must be True or False, got {getattr(self, name)!r}")
-        d = np.atleast_1d(np.asarray(self.dilation, dtype=float)) if not isinstance(self.dilation, str) else None
-        if d is None or d.ndim != 1 or not np.all(np.isfinite(d)) or np.any(d < 0):
-            raise ValueError(f"dilation must be a finite number >= 0 or one per view, got {self.dilation!r}")
+        raw = np.atleast_1d(np.asarray(self.dilation)) if not isinstance(self.dilation, (str, bool)) else None
+        d = raw.astype(float) if raw is not None and raw.dtype.kind in "iuf" else None
+        if d is None or d.ndim != 1 or not np.all(np.isfinite(d)) or np.any(d < 0) or np.any(d > DILATION_MAX):
+            raise ValueError(f"dilation must be a finite number in [0, {DILATION_MAX:g}] pixels or one per view, "
+                             f"got {self.dilation!r}")
         if not isinstance(self.solver, StackedConicOptions):
             raise TypeError(f"solver must be a StackedConicOptions, got {type(self.solver).__name__}")
         if not (isinstance(self.witness_rtol, (int, float)) and 0 <= self.witness_rtol < 1):
@@ -141,10 +148,15 @@ def _prepare(cameras, regions, dilation, widen=True):
     if len(d) != len(C):
         raise ValueError(f"dilation must be a number or have one entry per view ({len(C)}), got {len(d)}")
     convexified = any(isinstance(r, EllipseBorder) and not isinstance(r, Ellipse) for r in regs)
-    thin = [isinstance(r, (Point, Segment)) and di == 0 for r, di in zip(regs, d)]
-    widened = bool(widen and any(thin))
-    if widened:
-        d = np.where(thin, _roundoff_radii(C, regs), d)
+    thin = np.array([isinstance(r, (Point, Segment)) for r in regs])
+    if widen and thin.any():
+        # a dilation below the round-off radius is raised to it too: S then grows with the dilation (a
+        # dilation of 1e-100 once gave an empty set where dilation 0, widened, gave the point)
+        e = np.where(thin, _roundoff_radii(C, regs), 0.0)
+        thin = thin & (d < e)
+        d = np.where(thin, e, d)
+    widened = bool(widen and thin.any())
+    d = np.where(d > 0, np.maximum(d, DILATION_MIN), 0.0)
     regs = tuple(dilate(r, float(di)) for r, di in zip(regs, d))
     return C, regs, convexified, widened
 
@@ -463,14 +475,19 @@ def uncertainty_many(cameras: Sequence | ArrayLike, regions: Sequence, *, estima
     Problems of one structure (view count and region kinds) are solved together as stacked conic
     programs (:mod:`sospoly.solvers.stacked_conic`)."""
     opts = _options(options, dilation)
+    for name, seq in (("cameras", cameras), ("regions", regions)):
+        if not hasattr(seq, "__len__") or isinstance(seq, (str, bytes)):
+            raise TypeError(f"{name} must be a sequence with one entry per point (a list or array), "
+                            f"got {type(seq).__name__}")
     if len(cameras) != len(regions):
         raise ValueError(f"cameras and regions must have one entry per point, got {len(cameras)} and {len(regions)}")
     prepared = [_prepare(c, r, opts.dilation, opts.widen_roundoff) for c, r in zip(cameras, regions)]
     E = None
     if estimates is not None:
-        E = np.asarray(estimates, float)
-        if E.shape != (len(prepared), 3) or not np.all(np.isfinite(E)):
-            raise ValueError(f"estimates must be a finite ({len(prepared)}, 3) array, got shape {E.shape}")
+        E = _real_or_none(estimates)
+        if E is None or E.shape != (len(prepared), 3) or not np.all(np.isfinite(E)):
+            raise ValueError(f"estimates must be a finite ({len(prepared)}, 3) array, got "
+                             f"{'shape ' + str(E.shape) if E is not None else repr(estimates)}")
     groups: dict = {}
     for m, (C, regs, _, _) in enumerate(prepared):
         groups.setdefault((len(C),) + structure_key(regs), []).append(m)
@@ -498,10 +515,19 @@ def _options(options, dilation) -> UncertaintyOptions:
     return options
 
 
+def _real_or_none(a):
+    """``a`` as a float array when it holds real numbers (not booleans), else None."""
+    try:
+        raw = np.asarray(a)
+    except (TypeError, ValueError):
+        return None
+    return raw.astype(float) if raw.dtype.kind in "iuf" else None
+
+
 def _estimate_arg(estimate, C, regs):
     if estimate is None:
         return _estimates(C, regs)
-    X = np.asarray(estimate, float)
-    if X.shape != (3,) or not np.all(np.isfinite(X)):
+    X = _real_or_none(estimate)
+    if X is None or X.shape != (3,) or not np.all(np.isfinite(X)):
         raise ValueError(f"estimate must be a finite 3-vector, got {estimate!r}")
     return X[None]

@@ -131,7 +131,7 @@ def _sos_box(C, regs, tau, lo, hi, degree):
 
 def level_bounds(cameras, regions, level, estimate, opts):
     """:func:`tritools.uncertainty` with ``level=tau`` (module docstring)."""
-    from .api import uncertainty
+    from .api import DILATION_MAX, uncertainty
 
     tau = _check_level(level)
     if np.any(np.atleast_1d(np.asarray(opts.dilation, float)) != 0):
@@ -139,7 +139,12 @@ def level_bounds(cameras, regions, level, estimate, opts):
     C = validate_cameras(cameras, min_views=1, require_distinct=False)
     regs = as_regions(regions, len(C))
     r = float(np.sqrt(2 * len(C)) * tau) * (1 + 1e-12)
-    out = uncertainty(C, regs, estimate=estimate, options=replace(opts, dilation=r, widen_roundoff=False))
+    if r > DILATION_MAX:
+        raise ValueError(f"level must be at most {DILATION_MAX / np.sqrt(2 * len(C)):g} pixels for {len(C)} views "
+                         f"(the dilation sqrt(2N) level must stay below {DILATION_MAX:g}), got {level!r}")
+    # widening by the projections' round-off only enlarges the set (still an outer bound): a level far below
+    # the round-off must not report exact data's level set (which holds the true point) empty
+    out = uncertainty(C, regs, estimate=estimate, options=replace(opts, dilation=r))
     definition = "level_relaxed"
     if opts.level_degree and out.status.value == "bounded" and all(isinstance(g, Point) for g in regs):
         box = _sos_box(C, regs, tau, out.lo, out.hi, opts.level_degree)

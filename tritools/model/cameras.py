@@ -49,7 +49,8 @@ from numpy.typing import ArrayLike
 
 from .regions.base import real_array
 
-__all__ = ["CAMERA_RANK_RTOL", "SAME_CAMERA_RTOL", "POINT_AT_INFINITY_RTOL", "CameraIssue", "CameraProblems",
+__all__ = ["numeric_cameras", "CAMERA_RANK_RTOL",
+           "SAME_CAMERA_RTOL", "POINT_AT_INFINITY_RTOL", "CameraIssue", "CameraProblems",
            "camera_rank_ratio", "cameras_all_equal", "check_camera", "validate_cameras", "camera_problems",
            "camera_center", "depths", "depths_stack", "power2_scale", "points3d_array", "unit_rows", "WorldFrame",
            "as_world_frame", "world_frame_of"]
@@ -304,6 +305,19 @@ def camera_problems(cameras, *, require_distinct: bool = True) -> CameraProblems
     reason[any_finite] = CameraIssue.NOT_FINITE
     view = np.where(any_finite, np.argmax(bad_finite, axis=1), np.where(any_rank, np.argmax(bad_rank, axis=1), -1))
     return CameraProblems(valid=reason == CameraIssue.OK, reason=reason, view=view)
+
+
+def numeric_cameras(cams) -> np.ndarray | None:
+    """``cams`` as a float array when it holds real numbers (no complex, object or string data), else None:
+    the batch paths' test of whether an item can join a vectorised stack (anything else goes through the
+    per-point path and its named errors)."""
+    try:
+        C = np.asarray(cams)
+        if not np.issubdtype(C.dtype, np.number) or np.iscomplexobj(C):
+            return None
+        return C.astype(float)
+    except (TypeError, ValueError):
+        return None
 
 
 def points3d_array(X, name: str = "X") -> tuple[np.ndarray, bool]:

@@ -33,6 +33,7 @@ from collections.abc import Iterable, Sequence
 
 import numpy as np
 
+from ..model.cameras import numeric_cameras
 from ..model.regions import Point
 from ..model.constraints import Method
 from ..result import Attempt, Status, TriangulationResult
@@ -137,12 +138,8 @@ def _as_point_problem(cams, regions):
         x = np.array([r.x for r in regions])
     else:
         return None
-    try:
-        C = np.asarray(cams)
-        if not np.issubdtype(C.dtype, np.number) or np.iscomplexobj(C):
-            return None
-        C = C.astype(float)
-    except (TypeError, ValueError):
+    C = numeric_cameras(cams)
+    if C is None:
         return None
     if C.ndim != 3 or C.shape[1:] != (3, 4) or C.shape[0] != len(x) or len(x) < 2 or not np.all(np.isfinite(x)):
         return None

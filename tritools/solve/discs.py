@@ -32,6 +32,7 @@ import numpy as np
 from sospoly import DEFAULT_TOLERANCES, Tolerances
 from sospoly.solvers.blas import with_single_threaded_blas
 
+from ..model.cameras import numeric_cameras
 from ..model.normalize import normalization_stack
 from ..model.regions import Ellipse
 from ..model.stacked import LM_MAX_ITER, LM_STEP_RTOL, project_stack
@@ -168,12 +169,8 @@ def as_disc_problem(cams, regions):
     radii = [disc_radius(r) for r in regions]
     if any(r is None for r in radii):
         return None
-    try:
-        C = np.asarray(cams)
-        if not np.issubdtype(C.dtype, np.number) or np.iscomplexobj(C):
-            return None
-        C = C.astype(float)
-    except (TypeError, ValueError):
+    C = numeric_cameras(cams)
+    if C is None:
         return None
     if C.shape != (len(regions), 3, 4):
         return None

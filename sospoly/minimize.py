@@ -625,7 +625,7 @@ class _Run:
         msg = "; ".join(m for m in (lb.message, note) if m)
         status, optimal = lb.status, False
         if not np.isfinite(c):
-            status = SolveStatus.UNPROVEN
+            status = SolveStatus.TIME_LIMIT if self.deadline.expired else SolveStatus.UNPROVEN
             msg = f"the relaxation's value {c_relax * fs:.10g} is not proven a lower bound ({note})"
             c = None
         elif upper is not None:
@@ -663,9 +663,9 @@ class _Run:
             if np.isfinite(rb.lower_bound):
                 best = rb.lower_bound
                 notes.append(f"proven on the box holding a minimiser (margin {rb.margin * self.fscale:.3g})")
-        gb = global_psatz_bound(psatz, sol, c)
+        gb = global_psatz_bound(psatz, sol, c, deadline=self.deadline)
         if not np.isfinite(best) and not np.isfinite(gb.lower_bound) and gb.q_min > 0:
-            gb = global_psatz_bound(psatz, sol, c, margins=WEAK_MARGINS)
+            gb = global_psatz_bound(psatz, sol, c, margins=WEAK_MARGINS, deadline=self.deadline)
         if gb.lower_bound > best:
             best = gb.lower_bound
             notes = [f"proven for every point by the shifted certificate (margin {gb.margin * self.fscale:.3g})"]

@@ -63,7 +63,9 @@ def test_minimize_with_150_variables_stops_at_the_time_limit():
     res = sospoly.minimize(f, eq, ineq, budget=sospoly.Budget(time_limit=5.0))
     elapsed = time.perf_counter() - t0
     assert elapsed < 5.0 + 3 * SLACK, elapsed               # 10.8 s before; ~5.1 s measured (load: margin)
-    assert res.status in (sospoly.SolveStatus.TIME_LIMIT, sospoly.SolveStatus.OPTIMAL)
+    # a quiet machine may finish the degree-4 solve in time: without a radius its bound on this unconstrained
+    # program may be unprovable (unproven_bound, no claim) -- any of these, never a late return
+    assert res.status in (sospoly.SolveStatus.TIME_LIMIT, sospoly.SolveStatus.OPTIMAL, sospoly.SolveStatus.UNPROVEN)
     if not res.optimal and res.lower_bound is not None:
         assert res.lower_bound <= 0.0 + 1e-6                  # chained singular: f* = 0 at the origin
 

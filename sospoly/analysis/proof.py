@@ -125,9 +125,10 @@ def _ineq_shift_terms(psatz, structure, sol, n_products, gb):
 
 
 def global_psatz_bound(psatz, sol, c: float, scale: float = 1.0, margins=GLOBAL_MARGINS,
-                       shifts=SHIFT_FRACTIONS) -> GlobalBound:
+                       shifts=SHIFT_FRACTIONS, deadline=None) -> GlobalBound:
     """The shifted-certificate bound of the module docstring (item 2): the largest c - m (m in ``margins`` times
-    max(scale, |c|)) proven, or -inf."""
+    max(scale, |c|)) proven, or -inf.  ``deadline`` (a :class:`sospoly.budget.Deadline`): no further margin is
+    tried once it has expired (each trial costs a residual of the whole certificate)."""
     structure = psatz.structure
     qmin = q_lower_bound(structure, sol)
     if not qmin > 0:
@@ -148,6 +149,8 @@ def global_psatz_bound(psatz, sol, c: float, scale: float = 1.0, margins=GLOBAL_
         return GlobalBound(-np.inf, np.inf, np.nan, qmin, "an inequality multiplier's shift has monomials outside u")
     why = "no shifted certificate is PSD"
     for rel in margins:
+        if deadline is not None and deadline.expired:
+            return GlobalBound(-np.inf, np.inf, np.nan, qmin, "time limit reached before the every-point proof")
         m = rel * max(float(scale), abs(float(c)), 1e-300)
         level = float(c) - m
         E, e, rnd = certificate_residual(structure, theta, sol, level)

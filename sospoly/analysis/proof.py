@@ -39,7 +39,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..algebra.polynomial import Polynomial
-from .rigor import _at_level, _pairs_of, _psd_defect, _u_terms, certificate_residual
+from .rigor import solution_at_level, gram_pairs, psd_defect_of, u_terms, certificate_residual
 
 __all__ = ["GlobalBound", "global_psatz_bound", "constraint_box", "sublevel_box", "q_lower_bound", "unsolved_claim",
            "GLOBAL_MARGINS", "WEAK_MARGINS", "SHIFT_FRACTIONS"]
@@ -107,7 +107,7 @@ def _ineq_shift_terms(psatz, structure, sol, n_products, gb):
         S = np.zeros((blk.gram.size, blk.gram.size))
         S[blk.gram.pair_i, blk.gram.pair_j] = x[blk.slice]
         S[blk.gram.pair_j, blk.gram.pair_i] = x[blk.slice]
-        eta = _psd_defect(S)
+        eta = psd_defect_of(S)
         if eta == 0.0:
             continue
         h = ineq[k]
@@ -139,7 +139,7 @@ def global_psatz_bound(psatz, sol, c: float, scale: float = 1.0, margins=GLOBAL_
     names = u.block_names()
     if any(name not in sol.grams for name in names):
         return GlobalBound(-np.inf, np.inf, np.nan, qmin, "missing Gram matrices")
-    G = np.concatenate([_pairs_of(sol.grams[name], b.size) for name, b in zip(names, gb.blocks)])
+    G = np.concatenate([gram_pairs(sol.grams[name], b.size) for name, b in zip(names, gb.blocks)])
     w = np.where(gb.pair_diag, 1.0, 2.0)
     pm = gb.pair_monomial
     npr = gb.n_products
@@ -182,7 +182,7 @@ def global_psatz_bound(psatz, sol, c: float, scale: float = 1.0, margins=GLOBAL_
 
 def _structural_zeros(structure, theta, sol, level, gb, s_coef) -> np.ndarray:
     """Products whose coefficient in u' is exactly 0 (every contribution an exact zero)."""
-    E_u, v_u = _u_terms(structure, theta, _at_level(structure, sol.x, level), level)
+    E_u, v_u = u_terms(structure, theta, solution_at_level(structure, sol.x, level), level)
     idx = _product_index(gb, E_u)
     present = np.zeros(gb.n_products)
     ok = idx >= 0

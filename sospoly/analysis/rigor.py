@@ -44,7 +44,8 @@ from fractions import Fraction
 import numpy as np
 
 
-__all__ = ["RigorousBound", "rigorous_psatz_bound", "certificate_residual", "exact_check", "ExactCheck",
+__all__ = ["solution_at_level", "gram_pairs", "psd_defect_of", "u_terms",
+           "RigorousBound", "rigorous_psatz_bound", "certificate_residual", "exact_check", "ExactCheck",
            "image_form_stack_margin"]
 
 _EPS = np.finfo(float).eps
@@ -73,7 +74,7 @@ def _owner_offsets(structure) -> tuple[np.ndarray, np.ndarray]:
     return np.where(owner >= 0, offsets[np.maximum(owner, 0)], -1), owner >= 0
 
 
-def _u_terms(structure, theta, x, c_level):
+def u_terms(structure, theta, x, c_level):
     """Every contribution to u's coefficients: (exponent rows (T, n), values (T,), weight factors (T,)):
     the coefficient of monomial E[t] gets values[t] (computed in float); the triples let callers redo the
     sum exactly or bound its rounding."""
@@ -105,7 +106,7 @@ def _u_terms(structure, theta, x, c_level):
     return np.vstack(E), np.concatenate(vals)
 
 
-def _at_level(structure, x, c) -> np.ndarray:
+def solution_at_level(structure, x, c) -> np.ndarray:
     """A copy of the decision values ``x`` with a fixed multiplier's level column set to ``c`` (free
     multipliers take the level as a parameter instead)."""
     x = np.array(x, float)
@@ -118,11 +119,11 @@ def certificate_residual(structure, theta, sol, c_level=None):
     """(monomials (M, n), residual e_m, rounding bound of e_m) of e = u(x) - sum_j b_j^T G_j b_j, u at level
     ``c_level`` (for a fixed multiplier the level column of x is set to it; None: x's own level, 0 for a
     free multiplier)."""
-    x = _at_level(structure, sol.x, c_level)
-    E_u, v_u = _u_terms(structure, theta, x, 0.0 if c_level is None else c_level)
+    x = solution_at_level(structure, sol.x, c_level)
+    E_u, v_u = u_terms(structure, theta, x, 0.0 if c_level is None else c_level)
     u = structure.u
     gb = u.gram
-    G_all = np.concatenate([_pairs_of(sol.grams[name], b.size) for name, b in zip(u.block_names(), gb.blocks)])
+    G_all = np.concatenate([gram_pairs(sol.grams[name], b.size) for name, b in zip(u.block_names(), gb.blocks)])
     w = np.where(gb.pair_diag, 1.0, 2.0)
     E_g = gb.products[gb.pair_monomial]
     E = np.vstack([E_u, E_g])
@@ -138,7 +139,7 @@ def certificate_residual(structure, theta, sol, c_level=None):
     return uniq, e, rounding
 
 
-def _pairs_of(G: np.ndarray, s: int) -> np.ndarray:
+def gram_pairs(G: np.ndarray, s: int) -> np.ndarray:
     from ..algebra.svec import triu_pairs
 
     i, j = triu_pairs(s)
@@ -163,7 +164,7 @@ def _monomial_sup(E: np.ndarray, r: np.ndarray) -> np.ndarray:
         return np.prod(r[None, :] ** E, axis=1)
 
 
-def _psd_defect(G: np.ndarray) -> float:
+def psd_defect_of(G: np.ndarray) -> float:
     if G.size == 0:
         return 0.0
     lam = np.linalg.eigvalsh(0.5 * (G + G.T))
@@ -210,7 +211,7 @@ def rigorous_psatz_bound(psatz, sol, c: float, radius, ball: float | None = None
     psd = 0.0
     u = structure.u
     for name, blk in zip(u.block_names(), u.gram.blocks):
-        psd += _psd_defect(sol.grams[name]) * _block_weight(blk.b, r, ball, cap)
+        psd += psd_defect_of(sol.grams[name]) * _block_weight(blk.b, r, ball, cap)
     prog = structure.program
     x = np.asarray(sol.x, float)
     for k in range(structure.slots.n_ineq):
@@ -219,7 +220,7 @@ def rigorous_psatz_bound(psatz, sol, c: float, radius, ball: float | None = None
         S[blk.gram.pair_i, blk.gram.pair_j] = x[blk.slice]
         S[blk.gram.pair_j, blk.gram.pair_i] = x[blk.slice]
         h = psatz.ineq[k] if hasattr(psatz, "ineq") else structure.slots.polynomials(theta)[2][k]
-        psd += _psd_defect(S) * _block_weight(blk.gram.b, r, ball, cap) * _poly_sup(h, r)
+        psd += psd_defect_of(S) * _block_weight(blk.gram.b, r, ball, cap) * _poly_sup(h, r)
     qmin = _q_min(structure, sol, r)
     if not qmin > 0:
         return RigorousBound(-np.inf, np.inf, R, psd, resid, qmin)
@@ -304,7 +305,7 @@ def exact_check(psatz, sol, c: float, margin: float | None = None) -> ExactCheck
     if not (np.isfinite(c) and np.isfinite(margin) and margin >= 0):
         return ExactCheck(False, float(c), "c and margin must be finite, margin >= 0")
     theta = np.asarray(psatz.theta, float)
-    x = _at_level(structure, sol.x, c)
+    x = solution_at_level(structure, sol.x, c)
     prog = structure.program
     # the inequality multipliers: shift each by (twice) its PSD defect, then check them exactly
     S_all = []

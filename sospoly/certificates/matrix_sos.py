@@ -77,9 +77,9 @@ def add_sos_matrix(program, M, degree: int | None = None, name: str | None = Non
     """Require the symmetric polynomial matrix ``M`` (list of lists of Polynomials / LinPolys / numbers) to
     be SOS (module docstring).  ``degree``: the even degree of the certificate (default: the largest
     entry degree rounded up); ``basis``: the exponent rows of b instead."""
-    from .program import _square_entries
+    from .program import square_entries
 
-    rows = _square_entries(M, "add_sos_matrix M")
+    rows = square_entries(M, "add_sos_matrix M")
     m = len(rows)
     ent = [[program._as_linpoly(v) for v in r] for r in rows]
     for k in range(m):

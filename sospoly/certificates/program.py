@@ -38,7 +38,8 @@ from ..algebra.polynomial import Polynomial, as_polynomial
 from ..algebra.quadexpr import QuadExpr
 from ..algebra.svec import triu_pairs
 
-__all__ = ["SOSProgram", "Sense", "VarBlock", "SOSConstraint", "EqualityConstraint", "InequalityConstraint",
+__all__ = ["square_entries",
+           "SOSProgram", "Sense", "VarBlock", "SOSConstraint", "EqualityConstraint", "InequalityConstraint",
            "SOCConstraint", "LMIConstraint", "IdentityConstraint"]
 
 
@@ -128,7 +129,7 @@ class IdentityConstraint:
     expr: LinPoly
 
 
-def _square_entries(M, what: str) -> list:
+def square_entries(M, what: str) -> list:
     """Rows of a square list-of-lists (TypeError / ValueError naming ``what``)."""
     try:
         rows = [list(r) for r in M]
@@ -307,7 +308,7 @@ class SOSProgram:
 
     def add_lmi(self, M, name: str | None = None) -> LMIConstraint:
         """Require the symmetric matrix ``M`` (list of lists of scalar affine expressions) to be PSD."""
-        rows = _square_entries(M, "add_lmi M")
+        rows = square_entries(M, "add_lmi M")
         side = len(rows)
         ent = [[self._scalar(v, f"add_lmi M[{a}][{b}]") for b, v in enumerate(r)] for a, r in enumerate(rows)]
         i, j = triu_pairs(side)

@@ -39,7 +39,8 @@ from ..algebra.basis import monomials, sigma
 from ..budget import BudgetExceeded, ProgramSize, check_deadline, estimate_size
 from .sparsity import correlative_sparsity, newton_reduce, term_sparsity_blocks, variables_of
 
-__all__ = ["CertificateShape", "dense_shape", "clique_shape", "correlative_shape", "term_shape", "newton_shape",
+__all__ = ["u_support_of",
+           "CertificateShape", "dense_shape", "clique_shape", "correlative_shape", "term_shape", "newton_shape",
            "clique_monomials", "chain_cliques", "all_subsets_cliques", "Sparsity", "SPARSITY_KINDS"]
 
 #: the sparsity choices of :func:`sospoly.minimize` (``"auto"`` picks one, see there).
@@ -230,7 +231,7 @@ def correlative_shape(f_support, eq_supports, ineq_supports, degree: int, *, low
                         max_gram_side=max_gram_side, kind=Sparsity.CORRELATIVE)
 
 
-def _u_support(f_support: np.ndarray, eq_supports, ineq_supports, n: int) -> np.ndarray:
+def u_support_of(f_support: np.ndarray, eq_supports, ineq_supports, n: int) -> np.ndarray:
     """The monomials u is known to contain: f's, every constraint's and the constant."""
     return _union_rows(np.asarray(f_support, np.int64).reshape(-1, n), np.zeros((1, n), np.int64),
                        *[np.asarray(E, np.int64).reshape(-1, n) for E in (*eq_supports, *ineq_supports)], n=n)
@@ -245,7 +246,7 @@ def term_shape(f_support, eq_supports, ineq_supports, degree: int, *, max_gram_s
     dense = dense_shape(n, degree, [int(np.asarray(E).sum(axis=1).max(initial=0)) for E in eq_supports],
                         [int(np.asarray(E).sum(axis=1).max(initial=0)) for E in ineq_supports], max_gram_side)
     basis = dense.u_bases[0]
-    blocks = term_sparsity_blocks(_u_support(f_support, eq_supports, ineq_supports, n), basis)
+    blocks = term_sparsity_blocks(u_support_of(f_support, eq_supports, ineq_supports, n), basis)
     return CertificateShape(Sparsity.TERM, tuple(basis[b] for b in blocks), dense.r_supports, dense.s_bases)
 
 

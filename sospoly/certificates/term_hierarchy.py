@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .shape import CertificateShape, Sparsity, _u_support, dense_shape
+from .shape import CertificateShape, Sparsity, u_support_of, dense_shape
 from .sparsity import TERM_COMPLETIONS, newton_reduce, term_sparsity_iterate
 
 __all__ = ["parse_term_kind", "term_kind", "term_level_shape", "term_levels", "term_level_costs", "cheap_term_level",
@@ -60,7 +60,7 @@ def _base(f_support, eq_supports, ineq_supports, degree: int, max_gram_side, u_s
     n = f_support.shape[1]
     degs = [[int(np.asarray(E).sum(axis=1).max(initial=0)) for E in S] for S in (eq_supports, ineq_supports)]
     dense = dense_shape(n, degree, degs[0], degs[1], max_gram_side)
-    u_support = _u_support(f_support, eq_supports, ineq_supports, n) if u_support is None else u_support
+    u_support = u_support_of(f_support, eq_supports, ineq_supports, n) if u_support is None else u_support
     basis = dense.u_bases[0]
     if not len(eq_supports) and not len(ineq_supports):
         basis = newton_reduce(u_support, basis)        # Reznick: unconstrained u = f - c

@@ -27,7 +27,7 @@ vectorised functions (:func:`camera_rank_ratio`, :func:`cameras_all_equal`):
 Depth and the world frame
 -------------------------
 :func:`depths` (and its vectorised twin :func:`depths_stack`, the same rows from
-:func:`_depth_rows`) is Hartley & Zisserman's eq. (6.15),
+:func:`depth_rows`) is Hartley & Zisserman's eq. (6.15),
 ``depth(X; P) = h sign(det M) w / (||m3|| T)`` for ``P X = w (x, y, 1)``, ``X = (X, Y, Z, T)``:
 invariant under ``P -> k P`` for every k != 0 (``P`` and ``-P`` are the same camera) and
 positive in front of the camera.  ``h`` is the handedness of the world frame,
@@ -49,7 +49,8 @@ from numpy.typing import ArrayLike
 
 from .regions.base import real_array
 
-__all__ = ["numeric_cameras", "CAMERA_RANK_RTOL",
+__all__ = ["depth_rows", "numeric_cameras",
+           "CAMERA_RANK_RTOL",
            "SAME_CAMERA_RTOL", "POINT_AT_INFINITY_RTOL", "CameraIssue", "CameraProblems",
            "camera_rank_ratio", "cameras_all_equal", "check_camera", "validate_cameras", "camera_problems",
            "camera_center", "depths", "depths_stack", "power2_scale", "points3d_array", "unit_rows", "WorldFrame",
@@ -353,7 +354,7 @@ def camera_center(P, homogeneous: bool = False) -> np.ndarray:
     return a[:3] / a[3]
 
 
-def _depth_rows(C: np.ndarray) -> np.ndarray:
+def depth_rows(C: np.ndarray) -> np.ndarray:
     """``sign(det M) p3 / ||m3||`` for cameras (..., 3, 4) -> (..., 4), so that depth = row . X~.
 
     Each camera is divided by a power of two near its largest entry first (the depth does not
@@ -393,7 +394,7 @@ def depths(X: ArrayLike, cameras: ArrayLike, world_frame: WorldFrame | str = Wor
     C = validate_cameras(cameras, min_views=1, require_distinct=False)
     Xh = np.hstack([A, np.ones((len(A), 1))])
     with np.errstate(over="ignore", invalid="ignore"):
-        out = h * np.einsum("mj,nj->mn", Xh, _depth_rows(C))
+        out = h * np.einsum("mj,nj->mn", Xh, depth_rows(C))
     return out[0] if single else out
 
 
@@ -418,7 +419,7 @@ def depths_stack(cameras: ArrayLike, X: ArrayLike,
     h = as_world_frame(world_frame).sign
     Xh = np.concatenate([A, np.ones((len(A), 1))], axis=1)
     with np.errstate(over="ignore", invalid="ignore"):
-        return h * np.einsum("mj,mnj->mn", Xh, _depth_rows(C))
+        return h * np.einsum("mj,mnj->mn", Xh, depth_rows(C))
 
 
 def world_frame_of(cameras: ArrayLike, X: ArrayLike) -> WorldFrame:

@@ -18,7 +18,7 @@ from numpy.typing import ArrayLike
 
 from sospoly.solvers.stacked_conic import BlockStatus, StackedConicOptions
 
-from ..model.cameras import WorldFrame, _depth_rows, as_world_frame, power2_scale
+from ..model.cameras import WorldFrame, depth_rows, as_world_frame, power2_scale
 from ..model.geometry import validate_cameras
 from ..model.regions import Ellipse, EllipseBorder, Point, Segment, as_regions
 from .angle import triangulation_angles
@@ -196,7 +196,7 @@ def _signed(C: np.ndarray, h: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
     """(exact signed cameras ``h sign(det M) P / 2^k`` (M, N, 3, 4), depth rows (M, N, 4)): the sign is
     read from :func:`tritools.model.cameras` depth rows (one sign rule, Hartley-Zisserman (6.15) times the
     world frame's handedness ``h``)."""
-    rows = _depth_rows(C) * h
+    rows = depth_rows(C) * h
     sign = np.sign(np.einsum("...j,...j->...", rows[..., :3], C[..., 2, :3]))
     sign = np.where(sign == 0, 1.0, sign)
     return C / power2_scale(C, (-2, -1)) * sign[..., None, None], rows

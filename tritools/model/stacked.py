@@ -90,6 +90,16 @@ def project_stack(C: np.ndarray, X: np.ndarray) -> tuple[np.ndarray, np.ndarray,
     return x, h, ok
 
 
+def damped_step(JtJ: np.ndarray, g: np.ndarray, mu: np.ndarray) -> np.ndarray:
+    """The Levenberg-Marquardt step -(J^T J + mu (1 + tr J^T J) / 3 I)^{-1} g for a stack (M, 3, 3), (M, 3),
+    (M,), the damping scaled by (1 + tr J^T J) / 3; a pseudo-inverse where a system is singular."""
+    A = JtJ + mu[:, None, None] * np.eye(3) * (1.0 + np.trace(JtJ, axis1=1, axis2=2))[:, None, None] / 3
+    try:
+        return -np.linalg.solve(A, g[..., None])[..., 0]
+    except np.linalg.LinAlgError:
+        return -np.einsum("mij,mj->mi", np.linalg.pinv(A), g)
+
+
 def refine_points_stack(C: np.ndarray, xhat: np.ndarray, X: np.ndarray, ok: np.ndarray, *,
                         return_converged: bool = False) -> tuple:
     """Levenberg-Marquardt on sum_i ||Phi(X, P_i) - x^_i||^2 from X (M, 3), for the problems where ``ok``;
@@ -103,7 +113,6 @@ def refine_points_stack(C: np.ndarray, xhat: np.ndarray, X: np.ndarray, ok: np.n
     cost = np.where(fin, np.sum((u - xhat) ** 2, axis=(1, 2)), np.inf)
     ok = ok & fin
     active = np.nonzero(ok)[0]
-    eye3 = np.eye(3)
     for _ in range(LM_MAX_ITER):
         if active.size == 0:
             break
@@ -116,11 +125,7 @@ def refine_points_stack(C: np.ndarray, xhat: np.ndarray, X: np.ndarray, ok: np.n
         r = (ua - xa).reshape(len(active), -1)
         JtJ = np.einsum("mki,mkj->mij", Jac, Jac)
         g = np.einsum("mki,mk->mi", Jac, r)
-        A = JtJ + mu[active, None, None] * eye3 * (1.0 + np.trace(JtJ, axis1=1, axis2=2))[:, None, None] / 3
-        try:
-            step = -np.linalg.solve(A, g[..., None])[..., 0]
-        except np.linalg.LinAlgError:
-            step = -np.einsum("mij,mj->mi", np.linalg.pinv(A), g)
+        step = damped_step(JtJ, g, mu[active])
         Xt = Xa + step
         ut, ht, fint = project_stack(Ca, Xt)
         ct = np.where(fint, np.sum((ut - xa) ** 2, axis=(1, 2)), np.inf)

@@ -35,7 +35,7 @@ from sospoly.solvers.blas import with_single_threaded_blas
 from ..model.cameras import numeric_cameras
 from ..model.normalize import normalization_stack
 from ..model.regions import Ellipse
-from ..model.stacked import LM_MAX_ITER, LM_STEP_RTOL, project_stack
+from ..model.stacked import LM_MAX_ITER, LM_STEP_RTOL, damped_step, project_stack
 from .decide import decide, decide_reported, gamma_from_c
 from .fastpath import lagrangian_bounds
 
@@ -90,7 +90,7 @@ def refine_discs_stack(C: np.ndarray, rho: np.ndarray, X: np.ndarray, ok: np.nda
     cost, _, _ = cost_of(X, C, rho)
     ok = ok & np.isfinite(cost)
     active = np.nonzero(ok)[0]
-    eye2, eye3 = np.eye(2), np.eye(3)
+    eye2 = np.eye(2)
     for _ in range(LM_MAX_ITER):
         if active.size == 0:
             break
@@ -106,11 +106,7 @@ def refine_discs_stack(C: np.ndarray, rho: np.ndarray, X: np.ndarray, ok: np.nda
         # tangential direction by (1 - rho/|u|)^2 and converges only linearly), gradient Ju^T e
         JtJ = np.einsum("mnai,mnab,mnbj->mij", Ju, De, Ju)
         g = np.einsum("mnai,mna->mi", Ju, e)
-        A = JtJ + mu[active, None, None] * eye3 * (1.0 + np.trace(JtJ, axis1=1, axis2=2))[:, None, None] / 3
-        try:
-            step = -np.linalg.solve(A, g[..., None])[..., 0]
-        except np.linalg.LinAlgError:
-            step = -np.einsum("mij,mj->mi", np.linalg.pinv(A), g)
+        step = damped_step(JtJ, g, mu[active])
         Xt = Xa + step
         ct = cost_of(Xt, Ca, ra)[0]
         better = np.isfinite(ct) & (ct <= cost[active])

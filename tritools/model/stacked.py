@@ -182,7 +182,7 @@ def epipolar_quadratics(F: np.ndarray, N: int, pairs: tuple | None = None):
     """Quadratic parts (g0 (M, K), g1 (M, K, 2N), G2) of g_ij(v) = x~_i^T F_ij x~_j over
     v = (x_11, x_12, ..., x_N2), for F (M, K, 3, 3) in the order of ``pairs`` (default :func:`view_pairs`); G2 as
     :class:`sospoly.analysis.verify.SparseQuadratics` (8 entries per pair, so memory grows like N^2, not N^4)."""
-    from sospoly.analysis.verify import SparseQuadratics
+    from sospoly.analysis import SparseQuadratics
 
     M, K = F.shape[:2]
     I, J = view_pairs(N) if pairs is None else pairs

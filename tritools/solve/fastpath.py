@@ -36,9 +36,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from sospoly import DEFAULT_TOLERANCES, Tolerances
-from sospoly.analysis.verify import verify_quadratic_batch
-from sospoly.analysis.verify_sparse import verify_quadratic_banded_batch
-from sospoly.solvers.blas import with_single_threaded_blas
+from sospoly.analysis import verify_quadratic_batch
+from sospoly.analysis import verify_quadratic_banded_batch
+from sospoly.solvers import with_single_threaded_blas
 
 from ..model.geometry import camera_problems
 from ..model.normalize import normalization_stack

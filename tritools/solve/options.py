@@ -28,7 +28,7 @@ from dataclasses import dataclass
 from sospoly import Budget, GramForm, Multiplier, Polynomial, Tolerances
 from sospoly.budget import as_budget
 from sospoly.tolerances import as_tolerances
-from sospoly.solvers.backends import get_backend
+from sospoly.solvers import get_backend
 
 from ..model.cameras import WorldFrame, as_world_frame
 from ..model.constraints import Method

@@ -33,8 +33,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from sospoly import DEFAULT_TOLERANCES, Tolerances
-from sospoly.analysis.rigor import image_form_stack_margin
-from sospoly.solvers.blas import with_single_threaded_blas
+from sospoly.analysis import image_form_stack_margin
+from sospoly.solvers import with_single_threaded_blas
 
 from ..model.geometry import POINT_AT_INFINITY_RTOL
 from ..model.normalize import normalization_stack

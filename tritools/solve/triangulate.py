@@ -37,9 +37,9 @@ from numpy.typing import ArrayLike
 
 import sospoly
 from sospoly import BudgetExceeded, Multiplier, SolveStatus
-from sospoly.analysis.extraction import best_in_family, kernel_family
-from sospoly.analysis.rigor import rigorous_psatz_bound
-from sospoly.analysis.verify import verify_quadratic
+from sospoly.analysis import best_in_family, kernel_family
+from sospoly.analysis import rigorous_psatz_bound
+from sospoly.analysis import verify_quadratic
 from sospoly.budget import Deadline, TimeLimitReached, deadline_scope
 
 from ..model.constraints import Method, centre_relations

@@ -16,7 +16,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from numpy.typing import ArrayLike
 
-from sospoly.solvers.stacked_conic import BlockStatus, StackedConicOptions
+from sospoly.solvers import BlockStatus, StackedConicOptions
 
 from ..model.cameras import WorldFrame, depth_rows, as_world_frame, power2_scale
 from ..model.geometry import validate_cameras

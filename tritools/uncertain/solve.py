@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from sospoly.solvers.stacked_conic import BlockStatus, StackedConicOptions, solve_stacked
+from sospoly.solvers import BlockStatus, StackedConicOptions, solve_stacked
 
 from .sets import cone_layout, rows_of
 

@@ -41,7 +41,8 @@ import functools
 
 import numpy as np
 
-from . import lens
+from .lens import NON_PERSPECTIVE_MODELS, PYCOLMAP_MODELS, pycolmap_camera, split_params
+from .lens import forward as lens_forward, inverse as lens_inverse
 
 __all__ = ["CameraModel", "COLMAP_MODEL_N_PARAMS", "COLMAP_MODEL_IDS", "COLMAP_MODEL_NAMES", "UNDISTORT_TOL_PX",
            "UNDISTORT_MAX_ITER", "UnsupportedCameraModelError", "camera_model", "camera_problem", "intrinsics",
@@ -108,7 +109,7 @@ def _pycolmap_available() -> bool:
 
 def usable_models() -> tuple[str, ...]:
     """The COLMAP models usable for triangulation here (own code, plus pycolmap's when installed)."""
-    return tuple(m.value for m in CameraModel) + (lens.PYCOLMAP_MODELS if _pycolmap_available() else ())
+    return tuple(m.value for m in CameraModel) + (PYCOLMAP_MODELS if _pycolmap_available() else ())
 
 
 class UnsupportedCameraModelError(ValueError):
@@ -121,9 +122,9 @@ def camera_model(name: str) -> CameraModel:
         return CameraModel(name)
     except ValueError:
         pass
-    if name in lens.NON_PERSPECTIVE_MODELS:
+    if name in NON_PERSPECTIVE_MODELS:
         why = "a spherical model: no pinhole camera K [R | t] sees its rays"
-    elif name in lens.PYCOLMAP_MODELS:
+    elif name in PYCOLMAP_MODELS:
         why = "it is used through pycolmap, which is not installed (pip install 'sospoly-tritools[colmap]')"
     else:
         why = "not a COLMAP camera model tritools knows"
@@ -185,18 +186,18 @@ class _Lens:
             camera_model(model)
             own = True
         except UnsupportedCameraModelError:
-            if model not in lens.PYCOLMAP_MODELS or not _pycolmap_available():
+            if model not in PYCOLMAP_MODELS or not _pycolmap_available():
                 raise
             own = False
         n = COLMAP_MODEL_N_PARAMS[model]
         if len(params) != n:
             raise ValueError(f"camera model {model} needs {n} params, got {len(params)}")
         if own:
-            self.fx, self.fy, self.cx, self.cy, extra = lens.split_params(model, params)
-            self.D = lambda uv: lens.forward(model, extra, uv)
+            self.fx, self.fy, self.cx, self.cy, extra = split_params(model, params)
+            self.D = lambda uv: lens_forward(model, extra, uv)
             self.camera = None
         else:
-            c = self.camera = lens.pycolmap_camera(model, params)
+            c = self.camera = pycolmap_camera(model, params)
             self.fx, self.fy, self.cx, self.cy = (c.focal_length_x, c.focal_length_y, c.principal_point_x,
                                                   c.principal_point_y)
             self.D = None
@@ -216,7 +217,7 @@ class _Lens:
         if self.dist is not None:
             return undistort(uv_d, self.dist, scale_px=scale)
         if self.camera is None:
-            return lens.inverse(self.D, uv_d, UNDISTORT_TOL_PX / scale, UNDISTORT_MAX_ITER)
+            return lens_inverse(self.D, uv_d, UNDISTORT_TOL_PX / scale, UNDISTORT_MAX_ITER)
         uv = np.asarray(self.camera.cam_from_img(np.ascontiguousarray(xy, float)), float).reshape(-1, 2)
         back = self.pixels(np.column_stack([uv, np.ones(len(uv))]))       # the round trip decides
         ok = np.all(np.isfinite(uv), axis=1) & np.all(np.abs(back - xy) <= PYCOLMAP_TOL_PX, axis=1)

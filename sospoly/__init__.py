@@ -29,13 +29,14 @@ from .certificates.psatz import (DataSlots, Multiplier, PsatzProblem, PsatzStruc
                                  default_q, delta_min)
 from .certificates.shape import CertificateShape, clique_shape, correlative_shape, dense_shape
 from .certificates.reduction import diagonal_reduction, ideal_reduction, reduce_shape
-from .lowering.compiled import CompiledPsatz, PsatzCache, compile_psatz
-from .lowering.conic import ConicProblem, ConicResult, GramForm, lower
+from .lowering.conic import ConicProblem, GramForm, lower
 from .ratios import RatioResult, minimize_ratios
 from .minimize import MinimizeResult, SolveAttempt, SOSResult, candidates_of, feasibility_violation, is_sos, minimize
+from .solvers.compiled_solve import CompiledPsatz, PsatzCache, compile_psatz
 from .solvers.gevp import CompiledGevp, GevpResult, bisect
 from .solvers.lower_bound import solve_psatz
-from .solvers.solve import LowerBound, ProgramSolution, check_certificate, solve_program
+from .solvers.solve import (ConicResult, LowerBound, ProgramSolution, check_certificate, solve_conic_problem,
+                            solve_program)
 from .status import SolveStatus
 from .tolerances import DEFAULT_TOLERANCES, Tolerances
 
@@ -54,5 +55,5 @@ __all__ = [
     "solve_psatz", "LowerBound", "ProgramSolution", "check_certificate", "solve_program", "SolveStatus",
     "DEFAULT_TOLERANCES", "Tolerances",
     "MomentMatrix", "MatrixSOSConstraint", "DDConstraint", "DDKind", "QuadExpr", "ConicResult",
-    "RatioResult", "minimize_ratios",
+    "RatioResult", "minimize_ratios", "solve_conic_problem",
 ]

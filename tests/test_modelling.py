@@ -173,7 +173,7 @@ def test_sdpa_manual_example(tmp_path):
     """The SDPA manual's example1.dat-s: objective -41.9 at x = (-1.1, -2.7375, -0.55)."""
     path = tmp_path / "example1.dat-s"
     path.write_text(SDPA_MANUAL_EXAMPLE1)
-    res = sp.ConicProblem.from_sdpa(path).solve()
+    res = sp.solve_conic_problem(sp.ConicProblem.from_sdpa(path))
     assert res.status == SolveStatus.OPTIMAL
     assert abs(res.objective + 41.9) < 1e-6
     assert np.allclose(res.x, [-1.1, -2.7375, -0.55], atol=1e-5)
@@ -206,14 +206,14 @@ def _annulus_program():
 def test_sdpa_and_cbf_round_trip(make, tmp_path):
     prog, ref = make()
     P = sp.lower(prog)
-    direct = P.solve()
+    direct = sp.solve_conic_problem(P)
     assert direct.status == SolveStatus.OPTIMAL and abs(direct.objective - ref) < 1e-6
     P.to_sdpa(tmp_path / "p.dat-s")
     P.to_cbf(tmp_path / "p.cbf")
     for back in (sp.ConicProblem.from_sdpa(tmp_path / "p.dat-s"), sp.ConicProblem.from_cbf(tmp_path / "p.cbf")):
         assert back.n_cols == P.n_cols
         for backend in (None, "cvxpy"):
-            res = back.solve(backend=backend)
+            res = sp.solve_conic_problem(back, backend=backend)
             assert res.status == SolveStatus.OPTIMAL
             assert abs(res.objective - ref) < 1e-6
 

@@ -35,6 +35,9 @@ Both forms describe the same feasible set; tests check they give the same bounds
 A program may carry *parameters* (``param_terms`` of SOS constraints): the
 lowered data is then ``A + sum_k theta_k A_k``, ``b + sum_k theta_k b_k`` so a
 re-solve with new parameter values needs no re-assembly (compile once).
+
+This module only lowers: a solver consumes the lowered problem
+(:func:`sospoly.solve_conic_problem`, :mod:`sospoly.solvers`); nothing here imports a solver.
 """
 from __future__ import annotations
 
@@ -50,7 +53,7 @@ from ..certificates.program import BlockKind, Sense, SOSProgram
 from ..algebra.svec import smat, svec_scale
 from ..budget import check_deadline
 
-__all__ = ["GramForm", "Cone", "CONE_KINDS", "ConicProblem", "ConicResult", "lower", "gram_structure"]
+__all__ = ["GramForm", "Cone", "CONE_KINDS", "ConicProblem", "lower", "gram_structure"]
 
 
 class GramForm(str, enum.Enum):
@@ -139,7 +142,7 @@ class ConicProblem:
         return ConicProblem(q, A, b, self.cones + (Cone("nonneg", 1),), self.n_program_vars, self.psd_blocks,
                             -1.0, 0.0, self.form, {})
 
-    # ------------------------------------------------------------------ files and solving
+    # ------------------------------------------------------------------ files
     def to_sdpa(self, path):
         """Write the problem as an SDPA sparse file (``.dat-s``; :mod:`sospoly.io.sdpa`)."""
         from ..io.sdpa import write_sdpa
@@ -166,21 +169,6 @@ class ConicProblem:
 
         return read_cbf(path)
 
-    def solve(self, backend=None, tolerances=None):
-        """Solve with ``backend`` (default Clarabel) and check the answer a posteriori
-        (:func:`sospoly.solvers.solve.solve_conic`); a :class:`ConicResult` with the caller's objective
-        ``objective_sign * q^T x + objective_offset``."""
-        from ..solvers.solve import solve_conic
-        from ..tolerances import DEFAULT_TOLERANCES
-
-        if self.params:
-            raise ValueError("solve: instantiate the problem's parameters first (ConicProblem.instantiate)")
-        status, sol, _, resid, msg = solve_conic(self, backend, tolerances or DEFAULT_TOLERANCES)
-        obj = None
-        if status.ok and sol.x is not None:
-            obj = self.objective_sign * float(self.q @ sol.x) + self.objective_offset
-        return ConicResult(status, obj, sol.x, sol.z, sol.attempts, msg)
-
     def slack(self, x: np.ndarray) -> np.ndarray:
         """s = b - A x (exact, recomputed from x)."""
         return self.b - self.A @ x
@@ -200,18 +188,6 @@ class ConicProblem:
     def dual_matrices(self, z: np.ndarray) -> dict:
         return {blk.name: smat(z[blk.row_start:blk.row_start + blk.size * (blk.size + 1) // 2])
                 for blk in self.psd_blocks}
-
-
-@dataclass(frozen=True)
-class ConicResult:
-    """Outcome of :meth:`ConicProblem.solve`: the status (``SolveStatus``), the caller's objective (None
-    unless the status is ok), the primal x, the dual z, the solver attempts and a message."""
-    status: object
-    objective: float | None
-    x: np.ndarray | None
-    z: np.ndarray | None
-    attempts: tuple = ()
-    message: str = ""
 
 
 @dataclass(frozen=True)

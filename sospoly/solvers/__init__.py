@@ -1,12 +1,13 @@
 """Solving conic problems: back-ends (:mod:`.backends`: Clarabel, cvxpy, the batched interior-point method of
-:mod:`.ipm`), solve-and-check (:mod:`.solve`), GEVP bisection (:mod:`.gevp`) and BLAS threading (:mod:`.blas`)."""
+:mod:`.ipm`), solve-and-check (:mod:`.solve`), compiled structures solved (:mod:`.compiled_solve`), GEVP
+bisection (:mod:`.gevp`) and BLAS threading (:mod:`.blas`)."""
 
 # The package face: every public name of the modules below, imported on first use (PEP 562), so
 # importing the package costs nothing and creates no import cycle.  Callers outside sospoly import
 # from ``sospoly.solvers``, never from its modules.
 import importlib as _importlib
 
-_MODULES = ('backends', 'solve', 'lower_bound', 'gevp', 'blas', 'stacked_conic')
+_MODULES = ('backends', 'solve', 'compiled_solve', 'lower_bound', 'gevp', 'blas', 'stacked_conic')
 
 
 def _index() -> dict:

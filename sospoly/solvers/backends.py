@@ -361,7 +361,7 @@ AUTO_IPM_MAX_BYTES = _AUTO_IPM_MAX_BYTES
 class AutoBackend:
     """Clarabel for small single problems, :class:`IpmBackend` (with Clarabel fallback) above
     ``AUTO_IPM_MIN_COST``; batches of equal structure should use
-    :meth:`sospoly.lowering.compiled.CompiledPsatz.solve_batch` instead."""
+    :meth:`sospoly.solvers.compiled_solve.CompiledPsatz.solve_batch` instead."""
 
     name = "auto"
 

@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..certificates.psatz import Multiplier, PsatzProblem
-from ..lowering.compiled import CompiledPsatz
+from ..lowering.compiled import LoweredPsatz
 from ..lowering.conic import ConicProblem, GramForm
 from .solve import ProgramSolution, check_certificate, solve_conic
 from ..status import SolveStatus
@@ -63,7 +63,7 @@ class CompiledGevp:
         self.backend = backend
         self.tolerances = as_tolerances(tolerances)
         self.deadline = deadline
-        self.compiled = CompiledPsatz(psatz.structure, form)
+        self.compiled = LoweredPsatz(psatz.structure, form)
 
     def _acceptance(self, inst: ConicProblem, c: float):
         """Accept level c only if the original certificate checks out (see module docstring).

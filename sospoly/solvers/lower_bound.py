@@ -1,7 +1,7 @@
 """Lower bounds from Positivstellensatz programs: one SDP (fixed q) or the GEVP bisection (free q).
 
 :func:`solve_psatz` takes a :class:`~sospoly.certificates.psatz.PsatzProblem` (or a compiled
-instance), compiles its structure (:mod:`sospoly.lowering.compiled`), solves it within the
+instance), compiles its structure (:mod:`sospoly.solvers.compiled_solve`), solves it within the
 deadline, and returns a :class:`~sospoly.solvers.solve.LowerBound` whose ``lower_bound`` is c* only
 when the solver said solved *and* the certificate passed the a-posteriori checks.
 """
@@ -9,10 +9,11 @@ from __future__ import annotations
 
 from ..budget import Deadline
 from ..certificates.psatz import Multiplier, PsatzProblem, psatz_structure
-from ..lowering.compiled import CompiledInstance, CompiledPsatz
+from ..lowering.compiled import CompiledInstance
 from ..lowering.conic import GramForm
 from ..status import SolveStatus
 from ..tolerances import DEFAULT_TOLERANCES, Tolerances, as_tolerances
+from .compiled_solve import CompiledPsatz
 from .gevp import CompiledGevp, GevpResult, bisect
 from .solve import LowerBound, ProgramSolution
 

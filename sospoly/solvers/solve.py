@@ -25,7 +25,8 @@ from ..certificates.program import Sense, SOSProgram
 from ..status import SolveStatus
 from ..tolerances import DEFAULT_TOLERANCES, Tolerances, as_tolerances
 
-__all__ = ["ProgramSolution", "LowerBound", "lower_bound_of", "solve_program", "solve_conic", "check_certificate"]
+__all__ = ["ProgramSolution", "LowerBound", "lower_bound_of", "solve_program", "solve_conic", "check_certificate",
+           "ConicResult", "solve_conic_problem"]
 
 
 @dataclass(frozen=True)
@@ -167,6 +168,31 @@ def solve_conic(problem: ConicProblem, backend=None, tolerances: Tolerances = DE
         status = SolveStatus.NUMERICAL_ERROR
     detail = "; ".join(f"{a.label}: {a.solver_status}" for a in sol.attempts)
     return status, sol, {}, np.nan, detail
+
+
+@dataclass(frozen=True)
+class ConicResult:
+    """Outcome of :func:`solve_conic_problem`: the status (``SolveStatus``), the caller's objective (None
+    unless the status is ok), the primal x, the dual z, the solver attempts and a message."""
+    status: object
+    objective: float | None
+    x: np.ndarray | None
+    z: np.ndarray | None
+    attempts: tuple = ()
+    message: str = ""
+
+
+def solve_conic_problem(problem: ConicProblem, backend=None, tolerances=None) -> ConicResult:
+    """Solve a lowered (or read: SDPA, CBF) conic problem with ``backend`` (default Clarabel) and check the
+    answer a posteriori (:func:`solve_conic`); a :class:`ConicResult` with the caller's objective
+    ``objective_sign * q^T x + objective_offset``."""
+    if problem.params:
+        raise ValueError("solve: instantiate the problem's parameters first (ConicProblem.instantiate)")
+    status, sol, _, resid, msg = solve_conic(problem, backend, tolerances or DEFAULT_TOLERANCES)
+    obj = None
+    if status.ok and sol.x is not None:
+        obj = problem.objective_sign * float(problem.q @ sol.x) + problem.objective_offset
+    return ConicResult(status, obj, sol.x, sol.z, sol.attempts, msg)
 
 
 def solve_program(program: SOSProgram, backend=None, form: GramForm = GramForm.IMAGE,

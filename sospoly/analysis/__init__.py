@@ -1,5 +1,6 @@
 """Reading a solved certificate: minimiser extraction (:mod:`.extraction`, :mod:`.sparse_extraction`),
-certification by verification of quadratic programs (:mod:`.verify`) and complexity counts (:mod:`.complexity`)."""
+certification by verification of quadratic programs (:mod:`.verify`), complexity counts (:mod:`.complexity`) and
+the feasible candidates of :func:`sospoly.minimize` (:mod:`.candidates`)."""
 
 # The package face: every public name of the modules below, imported on first use (PEP 562), so
 # importing the package costs nothing and creates no import cycle.  Callers outside sospoly import
@@ -7,7 +8,7 @@ certification by verification of quadratic programs (:mod:`.verify`) and complex
 import importlib as _importlib
 
 _MODULES = ('extraction', 'sparse_extraction', 'term_extraction', 'moments', 'verify', 'verify_sparse',
-            'banded', 'rigor', 'proof', 'recession', 'complexity')
+            'banded', 'rigor', 'proof', 'recession', 'complexity', 'candidates')
 
 
 def _index() -> dict:

@@ -306,9 +306,30 @@ def exact_check(psatz, sol, c: float, margin: float | None = None) -> ExactCheck
         return ExactCheck(False, float(c), "c and margin must be finite, margin >= 0")
     theta = np.asarray(psatz.theta, float)
     x = solution_at_level(structure, sol.x, c)
+    why = _shift_multipliers(structure, x) or _exact_multipliers(structure, x)
+    if why:
+        return ExactCheck(False, float(c), why)
+    # the target coefficients p = u(x) + margin q, exactly
+    coef: dict = {}
+    _exact_u_terms(structure, theta, x, coef)
+    for e, cq in structure.q.terms.items():
+        coef[e] = coef.get(e, Fraction(0)) + Fraction(margin) * Fraction(cq)
+    u = structure.u
+    pairs = _gram_entries(u)
+    for m, val in coef.items():
+        if val != 0 and m not in pairs:
+            return ExactCheck(False, float(c), f"the residual has monomial {m} outside every Gram block")
+    live = _facial_reduction(u, pairs, coef)
+    if isinstance(live, str):
+        return ExactCheck(False, float(c), live)
+    return _proof_by_shifts([np.asarray(sol.grams[name], float) for name in u.block_names()], live, pairs, coef,
+                            c, margin)
+
+
+def _shift_multipliers(structure, x: np.ndarray) -> str | None:
+    """Shift each inequality multiplier s_k of ``x`` (in place) by twice its PSD defect on the diagonal (plus a
+    few ulps); the reason it cannot be used when its defect exceeds ``SHIFT_LIMIT`` of its scale."""
     prog = structure.program
-    # the inequality multipliers: shift each by (twice) its PSD defect, then check them exactly
-    S_all = []
     for k in range(structure.slots.n_ineq):
         blk = prog.block(f"s{k}")
         pi, pj = blk.gram.pair_i, blk.gram.pair_j
@@ -318,37 +339,43 @@ def exact_check(psatz, sol, c: float, margin: float | None = None) -> ExactCheck
         S[pj, pi] = vals
         lam = float(np.linalg.eigvalsh(S)[0]) if S.size else 0.0
         if lam < -SHIFT_LIMIT * max(1.0, float(np.abs(S).max())):
-            return ExactCheck(False, float(c), f"multiplier s{k} is not PSD (lambda_min {lam:.3g})")
+            return f"multiplier s{k} is not PSD (lambda_min {lam:.3g})"
         if lam < 0:
             x[blk.slice] = np.where(pi == pj, vals + 2.0 * (-lam) + _EPS * float(np.abs(S).max()), vals)
-        S_all.append((k, blk))
-    for k, blk in S_all:
+    return None
+
+
+def _exact_multipliers(structure, x: np.ndarray) -> str | None:
+    """The exact LDL^T test of every inequality multiplier's Gram matrix read from ``x`` as rationals; the
+    reason of the first that is not PSD."""
+    prog = structure.program
+    for k in range(structure.slots.n_ineq):
+        blk = prog.block(f"s{k}")
         s = blk.gram.size
         S = [[Fraction(0)] * s for _ in range(s)]
         for p, val in enumerate(x[blk.slice]):
             i, kk = int(blk.gram.pair_i[p]), int(blk.gram.pair_j[p])
             S[i][kk] = S[kk][i] = Fraction(float(val))
         if not _ldl_psd(S):
-            return ExactCheck(False, float(c), f"multiplier s{k} is not PSD")
-    # the target coefficients p = u(x) + margin q, exactly
-    u = structure.u
-    coef: dict = {}
-    _exact_u_terms(structure, theta, x, coef)
-    for e, cq in structure.q.terms.items():
-        coef[e] = coef.get(e, Fraction(0)) + Fraction(margin) * Fraction(cq)
-    # every Gram entry (block j, i <= k) with its monomial and weight (1 on the diagonal, 2 off it)
-    names = u.block_names()
+            return f"multiplier s{k} is not PSD"
+    return None
+
+
+def _gram_entries(u) -> dict:
+    """monomial -> every Gram entry (block j, i <= k) whose product b_i b_k it is."""
     pairs: dict = {}
     for j, blk in enumerate(u.gram.blocks):
         for p in range(blk.n_pairs):
             i, k = int(blk.pair_i[p]), int(blk.pair_j[p])
             m = tuple(int(t) for t in blk.products[blk.pair_monomial[p]])
             pairs.setdefault(m, []).append((j, i, k))
-    for m, val in coef.items():
-        if val != 0 and m not in pairs:
-            return ExactCheck(False, float(c), f"the residual has monomial {m} outside every Gram block")
-    # facial reduction: a monomial whose remaining entries are all diagonal and whose coefficient is 0
-    # forces those diagonal entries, hence their rows, to 0 (PSD); a negative one is infeasible
+    return pairs
+
+
+def _facial_reduction(u, pairs: dict, coef: dict) -> list | str:
+    """The live rows of each Gram block: a monomial whose remaining entries are all diagonal and whose
+    coefficient is 0 forces those diagonal entries, hence their rows, to 0 (PSD); a negative one is
+    infeasible (returned as the reason, a str)."""
     live = [np.ones(blk.size, bool) for blk in u.gram.blocks]
     changed = True
     while changed:
@@ -358,13 +385,17 @@ def exact_check(psatz, sol, c: float, margin: float | None = None) -> ExactCheck
             if alive and all(i == k for _, i, k in alive):
                 target = coef.get(m, Fraction(0))
                 if target < 0:
-                    return ExactCheck(False, float(c), f"monomial {m} has a negative coefficient and only "
-                                                       f"diagonal Gram entries")
+                    return f"monomial {m} has a negative coefficient and only diagonal Gram entries"
                 if target == 0:
                     for j, i, _ in alive:
                         live[j][i] = False
                     changed = True
-    G0 = [np.asarray(sol.grams[name], float) for name in names]
+    return live
+
+
+def _proof_by_shifts(G0: list, live: list, pairs: dict, coef: dict, c: float, margin: float) -> ExactCheck:
+    """Try the shifts t (4 x the live Gram matrices' defect, then ``margin * EXACT_SHIFTS``, largest first):
+    the first t whose projected G + t I is PSD proves f >= c - margin, reported rounded down to a float."""
     lam = min((float(np.linalg.eigvalsh(G[np.ix_(lv, lv)])[0]) for G, lv in zip(G0, live) if lv.any()),
               default=0.0)
     shifts = sorted({max(0.0, 4.0 * -lam)} | {margin * r for r in EXACT_SHIFTS}, reverse=True)

@@ -277,23 +277,42 @@ def _terms(con):
 
 
 def lower(program: SOSProgram, form: GramForm = GramForm.IMAGE) -> ConicProblem:
-    """Assemble the conic data of ``program`` (see module docstring)."""
+    """Assemble the conic data of ``program`` (see module docstring): columns, then the rows of the zero,
+    nonnegative and second-order, and PSD cones in that order, then the objective."""
     form = GramForm(form)
-    n0 = program.n_vars
     param_names = sorted({k for con in program.sos_constraints for k in con.param_terms})
     epi = _epigraph_factor(program)
+    extra_start, t_col, ncols = _columns(program, form, epi)
+    asm = _Assembly(param_names)
+    n_zero = _zero_rows(program, form, asm, extra_start)
+    cones = [Cone("zero", n_zero)] if n_zero else []
+    row = _scalar_cone_rows(program, asm, n_zero, cones, epi, t_col)
+    psd_blocks = []
+    row = _variable_psd_rows(program, asm, row, cones, psd_blocks)
+    row = _sos_psd_rows(program, form, asm, row, cones, psd_blocks, extra_start)
+    row = _lmi_rows(program, asm, row, cones, psd_blocks)
+    A, b, params = asm.finish(row, ncols)
+    q, sign, offset = _objective(program, ncols, t_col)
+    return ConicProblem(q, A, b, tuple(cones), program.n_vars, tuple(psd_blocks), sign, offset, form, params)
 
-    # ---- columns: program vars, then per-constraint extra vars (alpha or Q), then the epigraph t
-    col = n0
+
+def _columns(program: SOSProgram, form: GramForm, epi) -> tuple[list, int | None, int]:
+    """Columns: the program's variables, then per SOS constraint its extra variables (the tau alphas of the
+    image form, or the n_pairs Gram entries Q of the kernel form), then the epigraph t of a quadratic
+    objective.  Returns (first extra column per constraint, t's column or None, number of columns)."""
+    col = program.n_vars
     extra_start = []
     for con in program.sos_constraints:
         extra_start.append(col)
         col += con.gram.n_pairs - (con.gram.n_products if form == GramForm.IMAGE else 0)
     t_col = col if epi is not None else None
-    ncols = col + (1 if epi is not None else 0)
-    asm = _Assembly(param_names)
+    return extra_start, t_col, col + (1 if epi is not None else 0)
 
-    # ---------------- zero-cone rows
+
+def _zero_rows(program: SOSProgram, form: GramForm, asm: _Assembly, extra_start: list) -> int:
+    """The zero-cone rows: linear equalities (s = rhs - expr), polynomial identities (every coefficient),
+    the monomials of SOS expressions outside the Gram products (u_m = 0) and, in the kernel form, the
+    coefficient matching u_m - sum_{b_i b_j = m} w_ij Q_ij = 0.  Returns their number."""
     row = 0
     for eq in program.equalities:          # linear equalities: s = rhs - expr = 0
         asm.add_affine(None, eq.expr, np.full(eq.expr.E.shape[0], row, dtype=np.int64), -1.0)
@@ -303,18 +322,7 @@ def lower(program: SOSProgram, form: GramForm = GramForm.IMAGE) -> ConicProblem:
         asm.add_affine(None, ident.expr, row + np.arange(ident.expr.E.shape[0]), -1.0)
         row += ident.expr.E.shape[0]
     for con in program.sos_constraints:    # monomials of SOS expressions outside the Gram products: u_m = 0
-        check_deadline("lowering the program")
-        missing = {}
-        for _, expr in _terms(con):
-            idx = con.gram.product_index.find(expr.E, missing_ok=True)
-            for e in map(tuple, expr.E[idx < 0]):
-                missing.setdefault(e, None)
-        if missing:
-            mindex = MonomialIndex(np.array(list(missing), dtype=np.int64).reshape(-1, len(program.gens)))
-            for name, expr in _terms(con):
-                ridx = mindex.find(expr.E, missing_ok=True)
-                asm.add_affine(name, expr, np.where(ridx >= 0, ridx + row, -1), -1.0)
-            row += len(mindex)
+        row = _missing_monomial_rows(program, con, asm, row)
     if form == GramForm.KERNEL:            # coefficient matching rows  u_m - sum w Q = 0
         for k, con in enumerate(program.sos_constraints):
             gb = con.gram
@@ -324,14 +332,28 @@ def lower(program: SOSProgram, form: GramForm = GramForm.IMAGE) -> ConicProblem:
                 idx = gb.product_index.find(expr.E, missing_ok=True)
                 asm.add_affine(name, expr, np.where(idx >= 0, idx + row, -1), 1.0)
             row += gb.n_products
-    n_zero = row
-    cones = [Cone("zero", n_zero)] if n_zero else []
+    return row
 
-    # ---------------- nonnegative and second-order cone rows
-    row = _scalar_cone_rows(program, asm, row, cones, epi, t_col)
 
-    # ---------------- PSD rows
-    psd_blocks = []
+def _missing_monomial_rows(program: SOSProgram, con, asm: _Assembly, row: int) -> int:
+    """u_m = 0 for every monomial m of an SOS constraint's data that no Gram product b_i b_j gives."""
+    check_deadline("lowering the program")
+    missing = {}
+    for _, expr in _terms(con):
+        idx = con.gram.product_index.find(expr.E, missing_ok=True)
+        for e in map(tuple, expr.E[idx < 0]):
+            missing.setdefault(e, None)
+    if not missing:
+        return row
+    mindex = MonomialIndex(np.array(list(missing), dtype=np.int64).reshape(-1, len(program.gens)))
+    for name, expr in _terms(con):
+        ridx = mindex.find(expr.E, missing_ok=True)
+        asm.add_affine(name, expr, np.where(ridx >= 0, ridx + row, -1), -1.0)
+    return row + len(mindex)
+
+
+def _variable_psd_rows(program: SOSProgram, asm: _Assembly, row: int, cones: list, psd_blocks: list) -> int:
+    """One PSD block per SOS-polynomial multiplier and PSD matrix variable: s = svec(G) of its columns."""
     for blk in program.blocks:
         if blk.kind not in (BlockKind.SOS_POLY, BlockKind.PSD_MATRIX):
             continue
@@ -340,6 +362,14 @@ def lower(program: SOSProgram, form: GramForm = GramForm.IMAGE) -> ConicProblem:
         psd_blocks.append(PSDBlockMap(blk.name, row, s, "multiplier" if blk.kind == BlockKind.SOS_POLY else "matrix"))
         cones.append(Cone("psd", n, s))
         row += n
+    return row
+
+
+def _sos_psd_rows(program: SOSProgram, form: GramForm, asm: _Assembly, row: int, cones: list, psd_blocks: list,
+                  extra_start: list) -> int:
+    """One PSD block per Gram block of every SOS constraint: in the image form s = svec(U(x) + L(alpha))
+    (each coefficient on its canonical pair, +alpha / -alpha on the other pairs of its monomial); in the
+    kernel form s = svec(Q) of the constraint's Q columns."""
     for k, con in enumerate(program.sos_constraints):
         check_deadline("lowering the program")
         gb = con.gram
@@ -362,16 +392,25 @@ def lower(program: SOSProgram, form: GramForm = GramForm.IMAGE) -> ConicProblem:
             psd_blocks.append(PSDBlockMap(bname, row + off, blk_basis.size, "constraint", var_start))
             cones.append(Cone("psd", blk_basis.n_pairs, blk_basis.size))
         row += gb.n_pairs
-    for lmi in program.lmis:               # s = svec(M(x))
+    return row
+
+
+def _lmi_rows(program: SOSProgram, asm: _Assembly, row: int, cones: list, psd_blocks: list) -> int:
+    """One PSD block per LMI: s = svec(M(x))."""
+    for lmi in program.lmis:
         scale = svec_scale(lmi.side)
         for t, expr in enumerate(lmi.entries):
             asm.add_affine(None, expr, np.full(expr.E.shape[0], row + t, np.int64), float(scale[t]))
         psd_blocks.append(PSDBlockMap(lmi.name, row, lmi.side, "lmi"))
         cones.append(Cone("psd", len(lmi.entries), lmi.side))
         row += len(lmi.entries)
-    nrows = row
-    A, b, params = asm.finish(nrows, ncols)
+    return row
 
+
+def _objective(program: SOSProgram, ncols: int, t_col: int | None) -> tuple[np.ndarray, float, float]:
+    """(q, objective_sign, objective_offset): the user objective is objective_sign * q^T x + objective_offset
+    (a maximisation is minimised as -q; the epigraph t of a quadratic objective has cost 1)."""
+    n0 = program.n_vars
     q = np.zeros(ncols)
     sign, offset = 1.0, 0.0
     if program.objective is not None and program.sense != Sense.FEASIBILITY:
@@ -386,7 +425,7 @@ def lower(program: SOSProgram, form: GramForm = GramForm.IMAGE) -> ConicProblem:
             q[:n0] = lin
         if t_col is not None:
             q[t_col] = 1.0
-    return ConicProblem(q, A, b, tuple(cones), n0, tuple(psd_blocks), sign, offset, form, params)
+    return q, sign, offset
 
 
 def _epigraph_factor(program: SOSProgram) -> np.ndarray | None:

@@ -179,23 +179,142 @@ class Iterate:
     Z: list
 
 
+def _start(q: np.ndarray, b: np.ndarray, lay: Layout) -> Iterate:
+    """The infeasible start: x = 0, z_E = 0, S_k = max(1, ||b||_inf) I, Z_k = max(1, ||q||_inf) I."""
+    B, m = q.shape
+    scale_s = np.maximum(1.0, np.abs(b).max(axis=1))
+    scale_z = np.maximum(1.0, np.abs(q).max(axis=1))
+    return Iterate(np.zeros((B, m)), np.zeros((B, lay.p)), [scale_s[:, None, None] * np.eye(n) for n in lay.sizes],
+                   [scale_z[:, None, None] * np.eye(n) for n in lay.sizes])
+
+
+@dataclass(frozen=True)
+class _Residuals:
+    """Residuals and objectives of the active instances at one iterate:
+    rP_k = b_k - A_k x - svec(S_k),  rE = b_E - A_E x,  rD = q + A_E^T z_E + sum_k A_k^T svec(Z_k),
+    pobj = q^T x,  dobj = -(b_E^T z_E + sum_k b_k^T svec(Z_k)), with the infinity norms of the stopping rule."""
+    rP: list
+    rE: np.ndarray
+    rD: np.ndarray
+    pobj: np.ndarray
+    dobj: np.ndarray
+    xinf: np.ndarray
+    sinf: np.ndarray
+    zinf: np.ndarray
+    pres: np.ndarray
+    dres: np.ndarray
+
+
+def _residuals(sub: Operator, qa, ba, bka: list, x, zE, S: list, Z: list, lay: Layout) -> _Residuals:
+    """:class:`_Residuals` of the active instances (``qa``, ``ba``, ``bka``: their costs, right-hand sides and
+    per-block right-hand sides)."""
+    p, nb, m = lay.p, len(lay.sizes), x.shape[1]
+    svs, svz = [svec(Sk) for Sk in S], [svec(Zk) for Zk in Z]
+    rP = [bka[k] - sub.apply(k, x) - svs[k] for k in range(nb)]
+    rE = ba[:, :p] - sub.eq_apply(x) if p else np.zeros((x.shape[0], 0))
+    rD = qa + (sub.eq_adjoint(zE) if p else 0.0) + sum(sub.adjoint(k, svz[k]) for k in range(nb))
+    pobj = np.einsum("bm,bm->b", qa, x)
+    dobj = -(np.einsum("bp,bp->b", ba[:, :p], zE) + sum(np.einsum("bl,bl->b", bka[k], svz[k]) for k in range(nb)))
+    xinf = np.abs(x).max(axis=1) if m else np.zeros(x.shape[0])
+    sinf = np.max([np.abs(v).max(axis=1) for v in svs], axis=0)
+    zinf = np.max([np.abs(v).max(axis=1) for v in svz] + ([np.abs(zE).max(axis=1)] if p else []), axis=0)
+    pres = np.max([np.abs(r).max(axis=1) for r in rP] + ([np.abs(rE).max(axis=1)] if p else []), axis=0)
+    dres = np.abs(rD).max(axis=1) if m else np.zeros(x.shape[0])
+    return _Residuals(rP, rE, rD, pobj, dobj, xinf, sinf, zinf, pres, dres)
+
+
+class _Newton:
+    """The HKM Newton system of the active instances at one iterate (module docstring):
+    dZ = sym(K R) - Z - sym(Z dS R) with R = S^-1, dS = smat(rP - A dx), dx from the Schur complement."""
+
+    def __init__(self, sub: Operator, S: list, Z: list, r: _Residuals, lay: Layout):
+        self.LiS = [_inverse_cholesky(Sk) for Sk in S]
+        self.LiZ = [_inverse_cholesky(Zk) for Zk in Z]
+        self.R = [np.swapaxes(Li, -1, -2) @ Li for Li in self.LiS]
+        self.solve = sub.factor(Z, self.R)
+        self.sub, self.S, self.Z, self.r, self.lay = sub, S, Z, r, lay
+
+    def prepare(self) -> None:
+        """mu = sum_k <S_k, Z_k> / nu, and the parts of the right-hand side shared by both directions."""
+        S, Z, R, lay = self.S, self.Z, self.R, self.lay
+        self.mu = sum(np.einsum("bij,bij->b", Sk, Zk) for Sk, Zk in zip(S, Z)) / lay.nu
+        self.rPm = [smat(r, n) for r, n in zip(self.r.rP, lay.sizes)]
+        self.ZrR = [Z[k] @ self.rPm[k] @ R[k] for k in range(len(lay.sizes))]
+
+    def direction(self, Kmats):
+        """(dx, dz_E, dS, dZ) for the matrices K_k (None: K_k = 0, the affine predictor)."""
+        sub, Z, R, nb = self.sub, self.Z, self.R, len(self.lay.sizes)
+        rhs = -np.array(self.r.rD, dtype=float)
+        KR = [Kmats[k] @ R[k] if Kmats[k] is not None else 0.0 for k in range(nb)]
+        for k in range(nb):
+            rhs -= sub.adjoint(k, svec(KR[k] - Z[k] - self.ZrR[k]))
+        dx, dzE = self.solve(rhs, self.r.rE)
+        dS, dZ = [], []
+        for k in range(nb):
+            dSk = self.rPm[k] - smat(sub.apply(k, dx), self.lay.sizes[k])
+            dZk = KR[k] - Z[k] - Z[k] @ dSk @ R[k]
+            dS.append(dSk)
+            dZ.append(0.5 * (dZk + np.swapaxes(dZk, 1, 2)))
+        return dx, dzE, dS, sub.restore(dZ, self.r.rD, dzE)
+
+    def steps(self, dS, dZ):
+        """The largest primal and dual steps that keep S and Z positive semidefinite."""
+        nb = len(self.lay.sizes)
+        ap = np.min([_max_step(self.LiS[k], dS[k]) for k in range(nb)], axis=0)
+        ad = np.min([_max_step(self.LiZ[k], dZ[k]) for k in range(nb)], axis=0)
+        return ap, ad
+
+    def predictor_corrector(self):
+        """Mehrotra: the affine direction, sigma = (mu_aff / mu)^3, then the corrected direction with
+        K_k = sigma mu I - dZ_aff dS_aff; returns (dx, dz_E, dS, dZ, a_primal, a_dual) (steps unscaled)."""
+        S, Z, mu, lay = self.S, self.Z, self.mu, self.lay
+        dx, dzE, dS, dZ = self.direction([None] * len(lay.sizes))
+        ap, ad = self.steps(dS, dZ)
+        ap1, ad1 = np.minimum(1.0, ap), np.minimum(1.0, ad)
+        mu_aff = sum(np.einsum("bij,bij->b", S[k] + ap1[:, None, None] * dS[k], Z[k] + ad1[:, None, None] * dZ[k])
+                     for k in range(len(lay.sizes))) / lay.nu
+        sigma = np.clip((mu_aff / np.maximum(mu, 1e-300)) ** 3, 0.0, 1.0)
+        Kc = [sigma[:, None, None] * mu[:, None, None] * np.eye(n) - dZ[k] @ dS[k] for k, n in enumerate(lay.sizes)]
+        dx, dzE, dS, dZ = self.direction(Kc)
+        ap, ad = self.steps(dS, dZ)
+        return dx, dzE, dS, dZ, ap, ad
+
+
+def _take_step(it_: Iterate, active, x, zE, S, Z, step, frac: float) -> None:
+    """Move the active instances by ``frac`` of the largest steps (capped at 1)."""
+    dx, dzE, dS, dZ, ap, ad = step
+    ap = np.minimum(1.0, frac * ap)
+    ad = np.minimum(1.0, frac * ad)
+    it_.x[active] = x + ap[:, None] * dx
+    if zE.shape[1]:
+        it_.zE[active] = zE + ad[:, None] * dzE
+    for k in range(len(S)):
+        it_.S[k][active] = S[k] + ap[:, None, None] * dS[k]
+        it_.Z[k][active] = Z[k] + ad[:, None, None] * dZ[k]
+
+
+_SINGULAR = "singular Schur complement or lost positive definiteness"
+
+
+def _why(ok, diverged, stalled, timeout) -> str:
+    return "" if ok else "diverged (infeasible or unbounded?)" if diverged else \
+        "stalled" if stalled else "time limit" if timeout else "iteration limit"
+
+
 def mehrotra(op: Operator, q: np.ndarray, b: np.ndarray, lay: Layout, tol: Tolerances, deadline=None):
     """Run the predictor-corrector on a batch; returns (Iterate, converged, iterations, reasons).
 
     ``q`` (B, m) the costs, ``b`` (B, n_rows) the right-hand sides (zero rows first, then svec
-    blocks), ``op`` the operator of the whole batch (:meth:`Operator.subset` gives the active part)."""
-    B, m = q.shape
-    p, nb = lay.p, len(lay.sizes)
-    bk = [b[:, lay.block(k)] for k in range(nb)]
-    scale_s = np.maximum(1.0, np.abs(b).max(axis=1))
-    scale_z = np.maximum(1.0, np.abs(q).max(axis=1))
-    it_ = Iterate(np.zeros((B, m)), np.zeros((B, p)), [scale_s[:, None, None] * np.eye(n) for n in lay.sizes],
-                  [scale_z[:, None, None] * np.eye(n) for n in lay.sizes])
+    blocks), ``op`` the operator of the whole batch (:meth:`Operator.subset` gives the active part).
+    An instance stops at the stopping rule (:func:`stopping_rule`), when its merit |pobj - dobj| + pres + dres
+    has not halved over the last 4 iterations (stalled), at ``ipm_max_iter`` or at the deadline."""
+    B = q.shape[0]
+    bk = [b[:, lay.block(k)] for k in range(len(lay.sizes))]
+    it_ = _start(q, b, lay)
     nb_inf, nq_inf = np.abs(b).max(axis=1), np.abs(q).max(axis=1)
     converged, its, reason = np.zeros(B, bool), np.zeros(B, int), [""] * B
     active = np.arange(B)
     history = np.full((B, 5), np.inf)    # last merit values (gap + residuals) per instance
-    frac = tol.ipm_step_fraction
 
     def finish(idx, it, why):
         for g in idx:
@@ -205,27 +324,15 @@ def mehrotra(op: Operator, q: np.ndarray, b: np.ndarray, lay: Layout, tol: Toler
         if active.size == 0:
             break
         sub = op if active.size == B else op.subset(active)
-        qa, ba = q[active], b[active]
         x, zE = it_.x[active], it_.zE[active]
         S, Z = [Sk[active] for Sk in it_.S], [Zk[active] for Zk in it_.Z]
-        svs, svz = [svec(Sk) for Sk in S], [svec(Zk) for Zk in Z]
-        rP = [bk[k][active] - sub.apply(k, x) - svs[k] for k in range(nb)]
-        rE = ba[:, :p] - sub.eq_apply(x) if p else np.zeros((active.size, 0))
-        rD = qa + (sub.eq_adjoint(zE) if p else 0.0) + sum(sub.adjoint(k, svz[k]) for k in range(nb))
-        pobj = np.einsum("bm,bm->b", qa, x)
-        dobj = -(np.einsum("bp,bp->b", ba[:, :p], zE) + sum(np.einsum("bl,bl->b", bk[k][active], svz[k])
-                                                            for k in range(nb)))
-        xinf = np.abs(x).max(axis=1) if m else np.zeros(active.size)
-        sinf = np.max([np.abs(v).max(axis=1) for v in svs], axis=0)
-        zinf = np.max([np.abs(v).max(axis=1) for v in svz] + ([np.abs(zE).max(axis=1)] if p else []), axis=0)
-        pres = np.max([np.abs(r).max(axis=1) for r in rP] + ([np.abs(rE).max(axis=1)] if p else []), axis=0)
-        dres = np.abs(rD).max(axis=1) if m else np.zeros(active.size)
-        ok, diverged = stopping_rule(tol, pobj, dobj, rdx=np.einsum("bm,bm->b", rD, x), pres=pres, dres=dres,
-                                     pscale=nb_inf[active] + xinf + sinf, dscale=nq_inf[active] + zinf,
-                                     xzinf=np.maximum(xinf, zinf))
+        r = _residuals(sub, q[active], b[active], [bkk[active] for bkk in bk], x, zE, S, Z, lay)
+        ok, diverged = stopping_rule(tol, r.pobj, r.dobj, rdx=np.einsum("bm,bm->b", r.rD, x), pres=r.pres,
+                                     dres=r.dres, pscale=nb_inf[active] + r.xinf + r.sinf,
+                                     dscale=nq_inf[active] + r.zinf, xzinf=np.maximum(r.xinf, r.zinf))
         # stalled: the merit has not halved over the last 4 iterations (the iterates sit on a face from
         # which the Newton direction makes no progress): hand over to the fallback
-        merit = np.abs(pobj - dobj) + pres + dres
+        merit = np.abs(r.pobj - r.dobj) + r.pres + r.dres
         stalled = (it >= 8) & (merit > 0.5 * history[active, 0])
         history[active, :-1] = history[active, 1:]
         history[active, -1] = merit
@@ -233,67 +340,24 @@ def mehrotra(op: Operator, q: np.ndarray, b: np.ndarray, lay: Layout, tol: Toler
         done = ok | diverged | stalled | (it == tol.ipm_max_iter) | timeout
         for j in np.nonzero(done)[0]:
             converged[active[j]] = bool(ok[j])
-            finish([active[j]], it, "" if ok[j] else "diverged (infeasible or unbounded?)" if diverged[j] else
-                   "stalled" if stalled[j] else "time limit" if timeout else "iteration limit")
+            finish([active[j]], it, _why(ok[j], diverged[j], stalled[j], timeout))
         if done.all():
             break
         if done.any():
             active = active[~done]
             continue   # recompute on the compressed set (cheap) to keep the code single-path
-        # ---- Newton system
         try:
-            LiS = [_inverse_cholesky(Sk) for Sk in S]
-            LiZ = [_inverse_cholesky(Zk) for Zk in Z]
-            R = [np.swapaxes(Li, -1, -2) @ Li for Li in LiS]
-            solve = sub.factor(Z, R)
+            newton = _Newton(sub, S, Z, r, lay)
         except (np.linalg.LinAlgError, ValueError):
-            finish(active, it, "singular Schur complement or lost positive definiteness")
+            finish(active, it, _SINGULAR)
             break
-        mu = sum(np.einsum("bij,bij->b", Sk, Zk) for Sk, Zk in zip(S, Z)) / lay.nu
-        rPm = [smat(r, n) for r, n in zip(rP, lay.sizes)]
-        ZrR = [Z[k] @ rPm[k] @ R[k] for k in range(nb)]
-
-        def direction(Kmats):
-            # dZ = sym(K R) - Z - sym(Z dS R),  dS = smat(rP - A dx)
-            rhs = -np.array(rD, dtype=float)
-            KR = [Kmats[k] @ R[k] if Kmats[k] is not None else 0.0 for k in range(nb)]
-            for k in range(nb):
-                rhs -= sub.adjoint(k, svec(KR[k] - Z[k] - ZrR[k]))
-            dx, dzE = solve(rhs, rE)
-            dS, dZ = [], []
-            for k in range(nb):
-                dSk = rPm[k] - smat(sub.apply(k, dx), lay.sizes[k])
-                dZk = KR[k] - Z[k] - Z[k] @ dSk @ R[k]
-                dS.append(dSk)
-                dZ.append(0.5 * (dZk + np.swapaxes(dZk, 1, 2)))
-            return dx, dzE, dS, sub.restore(dZ, rD, dzE)
-
-        def steps(dS, dZ):
-            ap = np.min([_max_step(LiS[k], dS[k]) for k in range(nb)], axis=0)
-            ad = np.min([_max_step(LiZ[k], dZ[k]) for k in range(nb)], axis=0)
-            return ap, ad
-
+        newton.prepare()
         try:
-            dx, dzE, dS, dZ = direction([None] * nb)
-            ap, ad = steps(dS, dZ)
-            ap1, ad1 = np.minimum(1.0, ap), np.minimum(1.0, ad)
-            mu_aff = sum(np.einsum("bij,bij->b", S[k] + ap1[:, None, None] * dS[k], Z[k] + ad1[:, None, None] * dZ[k])
-                         for k in range(nb)) / lay.nu
-            sigma = np.clip((mu_aff / np.maximum(mu, 1e-300)) ** 3, 0.0, 1.0)
-            Kc = [sigma[:, None, None] * mu[:, None, None] * np.eye(n) - dZ[k] @ dS[k] for k, n in enumerate(lay.sizes)]
-            dx, dzE, dS, dZ = direction(Kc)
-            ap, ad = steps(dS, dZ)
+            step = newton.predictor_corrector()
         except (np.linalg.LinAlgError, ValueError):
-            finish(active, it, "singular Schur complement or lost positive definiteness")
+            finish(active, it, _SINGULAR)
             break
-        ap = np.minimum(1.0, frac * ap)
-        ad = np.minimum(1.0, frac * ad)
-        it_.x[active] = x + ap[:, None] * dx
-        if p:
-            it_.zE[active] = zE + ad[:, None] * dzE
-        for k in range(nb):
-            it_.S[k][active] = S[k] + ap[:, None, None] * dS[k]
-            it_.Z[k][active] = Z[k] + ad[:, None, None] * dZ[k]
+        _take_step(it_, active, x, zE, S, Z, step, tol.ipm_step_fraction)
     return it_, converged, its, tuple(reason)
 
 

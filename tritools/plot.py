@@ -228,59 +228,77 @@ def figure3(cameras, regions, result: TriangulationResult, ax=None, title: str |
     else:
         require_matplotlib()
         fig = ax.figure
-    N = len(C)
     proj = None
     if result.X is not None and np.all(np.isfinite(result.X)):
         proj = image_points(result.X, C)
     view_handles = []
     extent_pts = [r.center for r in R]
     for i, region in enumerate(R):
-        color = view_color(i)
-        label = f"view {i + 1}: {region.kind.replace('_', ' ')}"
-        view_handles.append(draw_region(region, ax, color, f"region-{i}", label=label))
-        c = region.center
-        ax.plot([c[0]], [c[1]], linestyle="none", marker="x", markersize=6, markeredgewidth=1.3, color=color,
-                gid=f"center-{i}", zorder=4)
-        if proj is None or not np.all(np.isfinite(proj[i])):
-            continue
-        x = proj[i]
-        q = region.closest_point(x)
-        extent_pts += [x, q]
-        ax.plot([x[0], q[0]], [x[1], q[1]], linestyle="--", linewidth=1.2, color=color, gid=f"residual-{i}",
-                zorder=3)
-        ax.plot([x[0]], [x[1]], linestyle="none", marker="o", markersize=7, color=color,
-                markeredgecolor="white", markeredgewidth=0.8, gid=f"projection-{i}", zorder=6)
-        ax.plot([q[0]], [q[1]], linestyle="none", marker="s", markersize=10, markerfacecolor="none",
-                markeredgecolor=color, markeredgewidth=1.6, color=color, gid=f"closest-{i}", zorder=5)
+        view_handles.append(_draw_view(ax, i, region, None if proj is None else proj[i], extent_pts))
     marker_handles = _marker_legend_handles()
     if proj is not None and result.image_points is not None:
-        pts = np.array(extent_pts)
-        span = float(np.max(np.ptp(pts, axis=0))) or 1.0
-        shown = False
-        for i in range(N):
-            v = result.image_points[i]
-            if np.all(np.isfinite(proj[i])) and np.linalg.norm(v - proj[i]) > IMAGE_POINT_MISMATCH_REL * span:
-                ax.plot([v[0]], [v[1]], linestyle="none", marker="^", markersize=7, markerfacecolor="none",
-                        markeredgecolor=view_color(i), color=view_color(i), gid=f"image-point-{i}", zorder=6)
-                shown = True
-        if shown:
-            from matplotlib.lines import Line2D
+        marker_handles += _draw_image_points(ax, result.image_points, proj, extent_pts)
+    _finish_axes(ax, _title(result, title), view_handles, marker_handles)
+    return fig
 
-            marker_handles.append(Line2D([], [], linestyle="none", marker="^", markerfacecolor="none",
-                                         color="0.25", label=r"$x_i^*$ read from $v^*$"))
+
+def _draw_view(ax, i: int, region: Region, x, extent_pts: list):
+    """View i of :func:`figure3`: its region and centre and, when its projection ``x`` = x_i* is finite, x_i*,
+    the closest point of the region and the residual segment between them (both appended to
+    ``extent_pts``).  Returns the region's legend handle."""
+    color = view_color(i)
+    label = f"view {i + 1}: {region.kind.replace('_', ' ')}"
+    handle = draw_region(region, ax, color, f"region-{i}", label=label)
+    c = region.center
+    ax.plot([c[0]], [c[1]], linestyle="none", marker="x", markersize=6, markeredgewidth=1.3, color=color,
+            gid=f"center-{i}", zorder=4)
+    if x is None or not np.all(np.isfinite(x)):
+        return handle
+    q = region.closest_point(x)
+    extent_pts += [x, q]
+    ax.plot([x[0], q[0]], [x[1], q[1]], linestyle="--", linewidth=1.2, color=color, gid=f"residual-{i}",
+            zorder=3)
+    ax.plot([x[0]], [x[1]], linestyle="none", marker="o", markersize=7, color=color,
+            markeredgecolor="white", markeredgewidth=0.8, gid=f"projection-{i}", zorder=6)
+    ax.plot([q[0]], [q[1]], linestyle="none", marker="s", markersize=10, markerfacecolor="none",
+            markeredgecolor=color, markeredgewidth=1.6, color=color, gid=f"closest-{i}", zorder=5)
+    return handle
+
+
+def _draw_image_points(ax, points, proj, extent_pts: list) -> list:
+    """The x_i* read from v* (``points``) that differ from Phi(X, P_i) (``proj``) by more than
+    ``IMAGE_POINT_MISMATCH_REL`` of the drawing's extent (triangles); their legend handle when any is drawn."""
+    pts = np.array(extent_pts)
+    span = float(np.max(np.ptp(pts, axis=0))) or 1.0
+    shown = False
+    for i in range(len(proj)):
+        v = points[i]
+        if np.all(np.isfinite(proj[i])) and np.linalg.norm(v - proj[i]) > IMAGE_POINT_MISMATCH_REL * span:
+            ax.plot([v[0]], [v[1]], linestyle="none", marker="^", markersize=7, markerfacecolor="none",
+                    markeredgecolor=view_color(i), color=view_color(i), gid=f"image-point-{i}", zorder=6)
+            shown = True
+    if not shown:
+        return []
+    from matplotlib.lines import Line2D
+
+    return [Line2D([], [], linestyle="none", marker="^", markerfacecolor="none", color="0.25",
+                   label=r"$x_i^*$ read from $v^*$")]
+
+
+def _finish_axes(ax, title: str, view_handles: list, marker_handles: list) -> None:
+    """Equal aspect, grid, labels, the title and the two legends (views, markers) right of the axes."""
     ax.set_aspect("equal", adjustable="datalim")
     ax.autoscale_view()
     ax.margins(0.08)
     ax.grid(True, linewidth=0.4, alpha=0.5)
     ax.set_xlabel("image coordinate 1")
     ax.set_ylabel("image coordinate 2")
-    ax.set_title(_title(result, title), fontsize=10)
+    ax.set_title(title, fontsize=10)
     leg_views = ax.legend(handles=view_handles, loc="upper left", bbox_to_anchor=(1.02, 1.0), fontsize=8,
                           title="views", title_fontsize=8, borderaxespad=0.0)
     ax.add_artist(leg_views)
     ax.legend(handles=marker_handles, loc="lower left", bbox_to_anchor=(1.02, 0.0), fontsize=8,
               title="markers", title_fontsize=8, borderaxespad=0.0)
-    return fig
 
 
 def save_figure3_examples(out_dir, examples: Sequence[int] = (2, 3, 4), *, method: str = "theorem1",

@@ -136,8 +136,6 @@ def retriangulate_folder(in_dir, out_dir, options: RetriangulationOptions | None
 
     ``input_format`` None detects it; ``output_format`` None keeps it; ``exports``: .ply / .npz
     paths written with the certificate fields (:mod:`tritools.io.export`)."""
-    from ..io.export import export_points
-
     options = options or RetriangulationOptions()
     t_start = time.perf_counter()
     check_output(in_dir, out_dir, exports)
@@ -185,22 +183,9 @@ def retriangulate_folder(in_dir, out_dir, options: RetriangulationOptions | None
                 writer.abort()
                 certs.abort()
                 raise
-            for fmt, names in EXTRA_FILES.items():
-                for name in names:
-                    if (src.folder / name).is_file():
-                        if fmt == fmt_out:
-                            shutil.copyfile(src.folder / name, tmp / name)
-                            copied.append(name)
-                        else:
-                            notes.append(f"{name} not copied: the output is a {fmt_out} model")
+            _copy_extra_files(src.folder, tmp, fmt_out, copied, notes)
             report = RetriangulationReport.from_chunks(options, ids, results, skipped_cameras(src.arrays, geom))
-            all_xyz = np.concatenate(xyz) if xyz else np.zeros((0, 3))
-            all_rgb = np.concatenate(rgb) if rgb else np.zeros((0, 3), np.uint8)
-            for e in exports:                  # renamed into place after the model (the stack closes last)
-                target = Path(e)
-                target.parent.mkdir(parents=True, exist_ok=True)
-                staged = staged_exports.enter_context(atomic_path(target))
-                export_points(staged, all_xyz, all_rgb, report, fmt=target.suffix.lower()[1:])
+            _stage_exports(staged_exports, exports, xyz, rgb, report)
             timings["write"] += time.perf_counter() - t0
     finally:
         if bar is not None:
@@ -210,3 +195,30 @@ def retriangulate_folder(in_dir, out_dir, options: RetriangulationOptions | None
     logger.info("re-triangulated %d points into %s in %.2f s", report.n_points, out, timings["total"])
     return FolderResult(report, out, src.format, fmt_out, out / sidecar.name, tuple(Path(e) for e in exports),
                         tuple(copied), tuple(notes), timings)
+
+
+def _copy_extra_files(folder: Path, tmp: Path, fmt_out: str, copied: list, notes: list) -> None:
+    """Copy the input model's extra files of the output format (:data:`EXTRA_FILES`) into the staged output;
+    a note for each one of the other format."""
+    for fmt, names in EXTRA_FILES.items():
+        for name in names:
+            if (folder / name).is_file():
+                if fmt == fmt_out:
+                    shutil.copyfile(folder / name, tmp / name)
+                    copied.append(name)
+                else:
+                    notes.append(f"{name} not copied: the output is a {fmt_out} model")
+
+
+def _stage_exports(stack: contextlib.ExitStack, exports, xyz: list, rgb: list, report) -> None:
+    """Write the .ply / .npz exports of the points (:mod:`tritools.io.export`) to staged paths of ``stack``:
+    renamed into place after the model (the stack closes last)."""
+    from ..io.export import export_points
+
+    all_xyz = np.concatenate(xyz) if xyz else np.zeros((0, 3))
+    all_rgb = np.concatenate(rgb) if rgb else np.zeros((0, 3), np.uint8)
+    for e in exports:
+        target = Path(e)
+        target.parent.mkdir(parents=True, exist_ok=True)
+        staged = stack.enter_context(atomic_path(target))
+        export_points(staged, all_xyz, all_rgb, report, fmt=target.suffix.lower()[1:])

@@ -162,3 +162,29 @@ def test_cache_reuses_and_grows_support():
     for f in (x ** 2 + y ** 2, x ** 2 + y ** 2 + x):
         _, ref = uncompiled(f, [x * y - 1], [], 2)
         assert close(c.solve(f, [x * y - 1], []).lower_bound, ref.lower_bound)
+
+
+def test_lowered_structure_is_solved_only_by_the_solver_layer():
+    """sospoly.lowering.compiled only lowers: its LoweredPsatz gives the same conic data as the solver's
+    CompiledPsatz (a subclass), and solve_psatz refuses an instance bound to a bare LoweredPsatz (TypeError
+    naming the argument) instead of failing with an AttributeError; the CompiledPsatz instance is solved
+    to the uncompiled bound."""
+    from sospoly.lowering.compiled import LoweredPsatz
+
+    x, y = sospoly.variables("x y")
+    ps, ref = uncompiled(x ** 2 + y ** 2 - x, [x * y - 1], [], 2)
+    lowered, comp = LoweredPsatz(ps.structure), sospoly.CompiledPsatz(ps.structure)
+    assert isinstance(comp, LoweredPsatz) and not hasattr(lowered, "solve_theta")
+    a, b = lowered.problem_from_theta(ps.theta), comp.problem_from_theta(ps.theta)
+    assert (a.A != b.A).nnz == 0 and np.array_equal(a.b, b.b) and np.array_equal(a.q, b.q)
+    with pytest.raises(TypeError, match="psatz"):
+        sospoly.solve_psatz(lowered.bind(ps.theta))
+    assert close(sospoly.solve_psatz(comp.bind(ps.theta)).lower_bound, ref.lower_bound)
+
+
+def test_conic_problem_with_parameters_is_refused_by_the_solver():
+    """sospoly.solve_conic_problem solves numbers only: a lowered problem with parameters left is a ValueError."""
+    x, y = sospoly.variables("x y")
+    lowered = sospoly.CompiledPsatz(sospoly.build_psatz(x ** 2 + y ** 2 - x, [x * y - 1], [], 2).structure)
+    with pytest.raises(ValueError, match="instantiate"):
+        sospoly.solve_conic_problem(lowered.template)

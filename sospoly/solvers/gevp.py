@@ -24,8 +24,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..certificates.psatz import Multiplier, PsatzProblem
-from ..lowering.compiled import LoweredPsatz
 from ..lowering.conic import ConicProblem, GramForm
+from .compiled_solve import CompiledPsatz
 from .solve import ProgramSolution, check_certificate, solve_conic
 from ..status import SolveStatus
 from ..tolerances import DEFAULT_TOLERANCES, Tolerances, as_tolerances
@@ -63,7 +63,7 @@ class CompiledGevp:
         self.backend = backend
         self.tolerances = as_tolerances(tolerances)
         self.deadline = deadline
-        self.compiled = LoweredPsatz(psatz.structure, form)
+        self.compiled = CompiledPsatz(psatz.structure, form)
 
     def _acceptance(self, inst: ConicProblem, c: float):
         """Accept level c only if the original certificate checks out (see module docstring).

@@ -44,6 +44,9 @@ def solve_psatz(psatz, *, backend=None, form: GramForm = GramForm.IMAGE,
     """
     tolerances = as_tolerances(tolerances)
     if isinstance(psatz, CompiledInstance):
+        if not isinstance(psatz.compiled, CompiledPsatz):
+            raise TypeError("psatz: an instance of a structure that was only lowered (LoweredPsatz); bind it "
+                            "with a sospoly.CompiledPsatz (sospoly.compile_psatz) to solve it")
         return psatz.compiled.solve_theta(psatz.theta, backend=backend, tolerances=tolerances, problem=psatz.problem,
                                           deadline=deadline)
     slots = psatz.structure.slots

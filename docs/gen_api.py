@@ -32,6 +32,7 @@ PACKAGES = ("sospoly", "tritools")
 #: public submodules whose ``__all__`` is documented too (missing ones are skipped).
 SUBMODULES = (
     "sospoly.analysis.verify",
+    "sospoly.testing",
     "tritools.model.regions",
     "tritools.model.geometry",
     "tritools.model.constraints",

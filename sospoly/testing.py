@@ -22,7 +22,8 @@ certificate relabelled with the canned status), or a function of the program suc
 a-posteriori checks of :func:`sospoly.solve_conic` and the rigorous bounds still judge the numbers; that is
 what these fakes let a test show.
 
-Example -- a solver that fails twice and then succeeds, under :func:`sospoly.minimize`'s retry chain::
+Example -- a solver error in the image form; :func:`sospoly.minimize` retries in the kernel form, where the
+fake returns a true certificate::
 
     import sospoly
     from sospoly.solvers import RawStatus
@@ -30,8 +31,8 @@ Example -- a solver that fails twice and then succeeds, under :func:`sospoly.min
 
     x, = sospoly.variables("x")
     fake = FakeBackend([Canned(RawStatus.FAILED), Canned(RawStatus.SOLVED, REFERENCE)])
-    res = sospoly.minimize((x - 1) ** 2 + 2, backend=fake, form="image")
-    assert len(fake.calls) == 2
+    res = sospoly.minimize((x - 1) ** 2 + 2, degree=2, backend=fake)
+    assert res.optimal and [c.problem.form.value for c in fake.calls] == ["image", "kernel"]
 """
 from __future__ import annotations
 
@@ -195,9 +196,9 @@ def _check(accept, x, z) -> bool | None:
 
 
 class FakeBackend:
-    """A back-end that answers from ``script`` (module docstring): one :class:`Canned` per ``solve`` call,
-    then ``then`` for every further call (default: an extra call raises :class:`ScriptExhausted`).
-    ``calls`` records every call (:class:`FakeCall`)."""
+    """A back-end that answers from ``script``: one :class:`Canned` per ``solve`` call (the back-end protocol of
+    :func:`sospoly.solvers.get_backend`), then ``then`` for every further call (default: an extra call raises
+    :class:`ScriptExhausted`).  ``calls`` records every call (:class:`FakeCall`)."""
 
     def __init__(self, script: Sequence[Canned | RawStatus | str] = (), *, then: Canned | None = None,
                  name: str = "fake"):

@@ -200,6 +200,20 @@ def test_degree_plan_walks_every_step_when_nothing_certifies(n, kind, options, p
     assert res.X is not None                                   # the local estimate is still reported
 
 
+def test_the_batch_entry_points_walk_the_same_plan_per_point_on_the_given_backend():
+    sc = random_scene(3, 4, noise_px=2.0, seed=1)
+    fake = FakeBackend(then=Canned(RawStatus.FAILED))
+    pts = tritools.triangulate_points(sc.cameras, sc.points2d, backend=fake, path="sdp", progress=False)
+    assert [str(s) for s in pts.status] == ["solver_failed"] * 4 and len(fake.calls) == 4 * 2
+    fake = FakeBackend(then=Canned(RawStatus.SOLVED, REFERENCE))
+    many = tritools.triangulate_many([(sc.cameras, x) for x in sc.points2d], backend=fake, path="sdp",
+                                     progress=False)
+    assert len(fake.calls) == 4 and all(r.optimal for r in many)
+    for r, x in zip(many, sc.points2d):
+        one = tritools.triangulate(sc.cameras, x, path="sdp")
+        assert r.gamma_ub == pytest.approx(one.gamma_ub, rel=1e-7) and r.gamma_lb <= one.gamma_ub
+
+
 def test_theorem1_steps_are_reported_under_theorem1():
     cams, x = _scene(3)
     fake = FakeBackend([Canned(RawStatus.SOLVED, REFERENCE)])

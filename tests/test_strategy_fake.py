@@ -357,11 +357,11 @@ def test_decide_at_the_edges_of_the_tolerance(upper):
 
 
 @pytest.mark.parametrize("n_views", [2, 50])
-@pytest.mark.parametrize("scale", [1e-3, 1e6])
+@pytest.mark.parametrize("scale", [1e-6, 1e-3, 1e3, 1e6])
 def test_decide_reported_is_the_same_rule_in_pixels_at_any_scale(n_views, scale):
-    """The decision in pixels (gamma at data scale 1/s) is the decision in c units, for N = 2 and 50 and
-    normalisation scales s = 1e-3 and 1e6; a resolution guard applies only where the gap passes through the
-    absolute part of the rule."""
+    """The decision in pixels is the decision in c units, for N = 2 and 50 and normalisation scales s (pixel
+    coordinates of magnitude ~1/s: 1e6 and 1e3 px, 1e-3 and 1e-6 px); a resolution guard applies only where the
+    gap passes through the absolute part of the rule."""
     for upper in (0.3, 2.0, 40.0):
         for factor, expected in ((0.9, True), (1.1, False)):
             lower = _edge(upper, factor)

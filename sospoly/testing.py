@@ -125,29 +125,30 @@ def reference_solution(problem: ConicProblem) -> ConicSolution:
 
 
 def _moved(by: float) -> Callable[[ConicProblem], np.ndarray]:
-    """The reference iterate moved along the objective q by ``by`` in the user's objective units."""
+    """The reference iterate moved along the cost vector q so that the conic objective q^T x (always minimised)
+    grows by ``by``: a worse objective for ``by > 0``, a better one than the optimum for ``by < 0``."""
     def iterate(problem: ConicProblem) -> np.ndarray:
         ref = reference_solution(problem)
         if ref.x is None:
             raise ValueError(f"no reference iterate to move: the reference solve ended {ref.raw_status.value}")
         q = np.asarray(problem.q, float)
-        # user objective = sign * q^T x + offset: x + t q changes it by sign * t * |q|^2
-        return ref.x + (by / (problem.objective_sign * float(q @ q))) * q
+        return ref.x + (by / float(q @ q)) * q
     return iterate
 
 
 def suboptimal(by: float) -> Callable[[ConicProblem], np.ndarray]:
-    """An iterate whose objective is ``by`` worse than the reference's (a lower bound smaller by ``by`` for
-    a maximised level c): for the Positivstellensatz programs, where c enters u = f - c q with q SOS, a
-    still-valid weaker certificate."""
-    return _moved(-abs(by))
+    """An iterate whose objective is ``|by|`` worse than the reference's (user units when the objective's
+    coefficient vector has unit norm, as the level c of a Positivstellensatz program, whose lower bound is then
+    smaller by ``|by|``).  There, c enters u = f - c q with q SOS, so the iterate is a still-valid weaker
+    certificate."""
+    return _moved(abs(by))
 
 
 def overstated(by: float) -> Callable[[ConicProblem], np.ndarray]:
-    """An iterate whose objective is ``by`` better than the optimum: a solver that lies.  Its Gram matrices
-    lose positive semidefiniteness by about ``by`` (the a-posteriori check or the rigorous margin must
-    catch it)."""
-    return _moved(abs(by))
+    """An iterate whose objective is ``|by|`` better than the optimum (as :func:`suboptimal`): a solver that
+    lies.  Its Gram matrices lose positive semidefiniteness by about ``|by|`` (the a-posteriori check or the
+    rigorous margin must catch it)."""
+    return _moved(-abs(by))
 
 
 class _Script:

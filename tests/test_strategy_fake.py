@@ -34,6 +34,24 @@ def _psatz():
     return sospoly.build_psatz(F, degree=2)
 
 
+# ============================================================================ the fakes themselves
+def test_canned_iterates_move_the_level_by_the_given_amount_and_bad_answers_are_refused():
+    ps = _psatz()
+    for canned, level in ((REFERENCE, F_MIN), (suboptimal(0.25), F_MIN - 0.25), (overstated(0.25), F_MIN + 0.25)):
+        fake = FakeBackend([Canned(RawStatus.SOLVED, canned)])
+        lb = sospoly.solve_psatz(ps, backend=fake, tolerances=Tolerances(psd_margin=1.0))   # the lie passes too
+        assert lb.solution.objective == pytest.approx(level, abs=1e-7)
+        assert fake.calls[0].accepted is True and fake.calls[0].deadline_left is None
+    with pytest.raises(TypeError, match="Canned.x"):
+        Canned(RawStatus.SOLVED, "reference")
+    with pytest.raises(ValueError, match="Canned.delay"):
+        Canned(RawStatus.SOLVED, delay=-1.0)
+    with pytest.raises(ValueError, match="canned iterate has shape"):
+        sospoly.solve_psatz(ps, backend=FakeBackend([Canned(RawStatus.SOLVED, np.zeros(99))]))
+    with pytest.raises(ScriptExhausted, match="called 1 times, its script has 0 answers"):
+        sospoly.solve_psatz(ps, backend=FakeBackend())
+
+
 # ============================================================================ sospoly: the status mapping
 @pytest.mark.parametrize("answer, status, bound", [
     (Canned(RawStatus.SOLVED, REFERENCE), SolveStatus.OPTIMAL, F_MIN),

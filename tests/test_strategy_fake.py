@@ -170,8 +170,8 @@ def test_minimize_uses_an_inaccurate_iterate_only_through_the_proven_bound(lie):
 
 def test_minimize_stops_at_the_deadline():
     fake = FakeBackend([Canned(RawStatus.TIME_LIMIT, delay=UNTIL_DEADLINE)])    # any later call would raise
-    res = sospoly.minimize(F, backend=fake, budget=Budget(time_limit=0.3))
-    assert res.status == SolveStatus.TIME_LIMIT and not res.optimal and len(fake.calls) == 1
+    res = sospoly.minimize(F, backend=fake, budget=Budget(time_limit=1.0))
+    assert res.status == SolveStatus.TIME_LIMIT and not res.optimal and len(fake.calls) <= 1    # 0: a slow build
 
 
 # ============================================================================ tritools: the degree plan
@@ -265,7 +265,7 @@ def test_an_inaccurate_certificate_is_used_through_the_rigorous_bound_without_a_
     fake = FakeBackend([Canned(RawStatus.ALMOST_SOLVED, REFERENCE)])
     res = tritools.triangulate(cams, x, backend=fake, path="sdp")
     assert res.optimal and res.certified_by == "sdp" and len(fake.calls) == 1
-    assert res.attempts[0].solver == ("fake:almost_solved",)
+    assert "almost_solved" in str(res.attempts[0].solver)
 
 
 def test_a_quick_inaccurate_answer_that_does_not_certify_is_resolved_with_the_full_chain():
@@ -349,7 +349,7 @@ def test_time_limit_reports_the_best_bounds_so_far():
     cams, x = _scene(3)
     ref = tritools.triangulate(cams, x, path="sdp")
     fake = FakeBackend([Canned(RawStatus.SOLVED, suboptimal(0.5)), Canned(RawStatus.TIME_LIMIT, delay=UNTIL_DEADLINE)])
-    res = tritools.triangulate(cams, x, backend=fake, path="sdp", time_limit=1.0)
+    res = tritools.triangulate(cams, x, backend=fake, path="sdp", time_limit=2.5)   # step 1 takes ~0.1 s
     assert res.status == Status.TIME_LIMIT and not res.optimal and "time limit" in res.message
     assert 0 < res.gamma_lb < ref.gamma_lb and res.gamma_ub == pytest.approx(ref.gamma_ub, rel=1e-6)
     assert res.attempts[0].status == "not_certified" and len(fake.calls) <= 2

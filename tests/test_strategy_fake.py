@@ -113,6 +113,16 @@ def test_clarabel_retry_chain_attempts_and_settings(script, tol, status, labels)
         assert settings[3]["static_regularization_constant"] == 1e-7 and settings[3]["max_iter"] == 1000
 
 
+def test_the_chain_starts_no_attempt_after_the_deadline():
+    from sospoly.budget import Deadline
+
+    fake = FakeClarabel([Canned(RawStatus.FAILED, delay=UNTIL_DEADLINE)])      # a second attempt would raise
+    lb = sospoly.solve_psatz(_psatz(), backend=fake, deadline=Deadline.after(0.2))
+    assert lb.status == SolveStatus.TIME_LIMIT and lb.lower_bound is None and _chain_of(fake) == ["default"]
+    assert [(a.label, a.raw_status) for a in lb.solution.attempts] == [("default", RawStatus.FAILED),
+                                                                       ("qdldl", RawStatus.TIME_LIMIT)]
+
+
 def test_retry_false_makes_one_attempt():
     comp = sospoly.CompiledPsatz(_psatz().structure)
     fake = FakeClarabel([RawStatus.FAILED])

@@ -2,10 +2,11 @@
 (:mod:`sospoly.testing`), against public behaviour only -- sospoly's status mapping and retry chains,
 tritools' degree plan, re-solves, budget and time limit, and the decision rule at its edges.
 
-No test here runs a real SDP of any size: a canned answer is either no iterate, or the certificate of
-a real solve of a tiny program (milliseconds) relabelled with the canned status, moved to a weaker
-(:func:`~sospoly.testing.suboptimal`) or a false (:func:`~sospoly.testing.overstated`) level.  The
-references are closed forms (min of (x - 1)^2 + 2 is 2) and real solves of the same data.
+The solver's word is always canned; the only real solves are of tiny programs (milliseconds): a canned
+iterate is either none, or the certificate of a real solve of the same program relabelled with the canned
+status, moved to a weaker (:func:`~sospoly.testing.suboptimal`) or a false
+(:func:`~sospoly.testing.overstated`) level.  The references are closed forms (min of (x - 1)^2 + 2 is 2)
+and real solves of the same data (3 to 5 views, degree 2).
 """
 from __future__ import annotations
 

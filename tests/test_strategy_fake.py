@@ -346,8 +346,6 @@ def test_budget_exceeded_stops_the_plan_with_the_bounds_so_far():
     assert 0 < res.gamma_lb < ref.gamma_lb and res.gamma_ub == pytest.approx(ref.gamma_ub, rel=1e-6)
 
 
-@pytest.mark.xfail(strict=True, reason="a STRUCTURE_CACHE hit (sospoly PsatzCache.get) skips the budget check: a "
-                                       "structure compiled under a larger budget is solved under a smaller one")
 def test_budget_is_checked_on_a_cached_structure_too():
     cams, x = _scene(3)
     tritools.triangulate(cams, x, path="sdp", method="corollary1", delta=4)      # compiles the delta = 4 structure

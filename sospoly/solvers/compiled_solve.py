@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..budget import as_budget
-from ..certificates.psatz import DataSlots, Multiplier, PsatzStructure, as_multiplier, checked_inputs
+from ..certificates.psatz import DataSlots, Multiplier, PsatzStructure, as_multiplier, check_size, checked_inputs
 from ..lowering.compiled import LoweredPsatz, structure_for
 from ..lowering.conic import ConicProblem, GramForm
 from ..status import SolveStatus
@@ -216,6 +216,9 @@ class PsatzCache:
             comp = self._store.get(k)
             if comp is not None:
                 if comp.slots.contains(slots):
+                    # a structure compiled under another budget is still sized against this call's
+                    st = comp.structure
+                    check_size(st.shape, as_budget(budget), st.free, len(gens), degree, f.degree)
                     self._store.move_to_end(k)
                     return comp, comp.theta(f, eq, ineq)
                 old = comp.slots

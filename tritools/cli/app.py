@@ -40,6 +40,7 @@ from ..io.problem_file import (ProblemFileError, ProblemSpec, jsonable, load_pro
                                parse_problem_text, result_to_dict)
 from ..result import Status, TriangulationResult
 from ..solve.batch import PROGRESS_MIN_ITEMS
+from ..solve.call_limit import call_limit
 from ..solve.options import TriangulationOptions
 from .flags import (METHODS, OPTION_FLAGS, PATHS, SPARSITIES, CLIError, add_data_dir_option,  # noqa: F401 - faces
                     add_robust_option, add_solver_options, add_track_options, option_flag_error, options_from_args,
@@ -211,10 +212,11 @@ def _solve_specs(specs, options, progress, robust=None) -> tuple[list, list]:
             raise CLIError(f"problem {s.name if s.name is not None else f'#{i}'}: {exc}") from None
     out: list = [None] * len(specs)
     times: list = [(None, OWN)] * len(specs)
-    for opts, idx in groups.items():
-        res, tms = _timed_solve([(specs[i].cameras, specs[i].regions) for i in idx], opts, progress, robust)
-        for i, r, t in zip(idx, res, tms):
-            out[i], times[i] = r, t
+    with call_limit(options.total_time_limit):       # --total-time-limit: one end for every group
+        for opts, idx in groups.items():
+            res, tms = _timed_solve([(specs[i].cameras, specs[i].regions) for i in idx], opts, progress, robust)
+            for i, r, t in zip(idx, res, tms):
+                out[i], times[i] = r, t
     return out, times
 
 

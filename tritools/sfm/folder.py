@@ -25,6 +25,7 @@ import numpy as np
 from ..io.atomic import DirectoryInTheWay, atomic_path, staged_directory
 from ..io.colmap.formats import ModelWriter, open_model
 from .certificates import CertificateWriter
+from ..solve.call_limit import call_limit
 from .pipeline import OptionError, RetriangulationOptions, prepare_geometry, process_chunk
 from .retriangulate import RetriangulationReport, has_tqdm, progress_bar, skipped_cameras
 from .robust_tracks import drop_observations, rewrite_images
@@ -157,7 +158,8 @@ def retriangulate_folder(in_dir, out_dir, options: RetriangulationOptions | None
     copied, notes = [], _other_model_notes(out_dir, fmt_out)
     _check_names(out_dir, fmt_out, src.folder)
     try:
-        with contextlib.ExitStack() as staged_exports, atomic_directory(out_dir) as tmp:
+        with call_limit(options.solver.total_time_limit), contextlib.ExitStack() as staged_exports, \
+                atomic_directory(out_dir) as tmp:
             writer = ModelWriter(src.arrays, tmp, fmt_out)
             certs = CertificateWriter(tmp, options.method, options.path)
             try:

@@ -145,6 +145,19 @@ def test_whole_call_limit_bounds_a_batch_of_sdps():
             assert r.gamma_lb <= r.gamma_ub * (1 + 1e-9)
 
 
+def test_robust_batches_take_the_whole_call_limit():
+    """TLS searches cut by the whole-call limit keep valid bounds (gamma_LB <= the certified TLS optimum)."""
+    cams, pts = paper_example(4)
+    x = np.array([p.x for p in pts])
+    x[1] += 3.0                                               # one gross outlier
+    cut = tritools.triangulate_many([(cams, x)] * 4, robust=1.0, total_time_limit=1e-9)
+    full = tritools.triangulate_many([(cams, x)], robust=1.0)[0]
+    assert full.optimal
+    for r in cut:
+        assert r.status == tritools.Status.TIME_LIMIT and CUT_MESSAGE in r.message and r.X is not None
+        assert r.gamma_lb <= full.gamma_ub * (1 + 1e-9) and full.gamma_lb <= r.gamma_ub * (1 + 1e-9)
+
+
 def test_triangulate_points_and_cli_take_the_whole_call_limit(tmp_path, capsys):
     cams, pts = paper_example(4)
     x = np.array([r.x for r in pts])

@@ -50,7 +50,7 @@ def add_solver_options(p, default_method: str = "auto", default_path: str = "aut
                         f"time_limit")
     p.add_argument("--total-time-limit", type=float, default=None, dest="total_time_limit", metavar="S",
                    help="seconds for the whole run (default: no limit); the points not finished by then get status "
-                        "time_limit, each still with its row (not with --robust: its points are bounded per point)")
+                        "time_limit, each still with its row")
     p.add_argument("--memory-limit", type=float, default=None, dest="memory_limit", metavar="GIB",
                    help="largest estimated program, GiB (default 2); larger ones give status budget_exceeded")
     p.add_argument("--require-in-front", action="store_true", dest="require_in_front",

@@ -375,7 +375,7 @@ def triangulate_many(problems: Iterable[Sequence], method: str | Method | None =
         :class:`~tritools.solve.options.TriangulationOptions` for the whole batch; the default path "auto"
         certifies by verification first, vectorised over problems with the same structure); the budget's
         ``time_limit`` is per problem, ``total_time_limit`` bounds the whole call (:mod:`.call_limit`: the
-        problems left when it expires get status ``time_limit`` with their estimate; not with ``robust``)
+        problems left when it expires get status ``time_limit`` with their estimate)
     executor : None, a :class:`concurrent.futures.Executor`, or a ``dask.distributed.Client``
         (see the module docstring for the default)
     progress : a tqdm bar: True, False / None (the default: no bar), or "auto" (only for batches of

@@ -171,9 +171,10 @@ def test_triangulate_points_and_cli_take_the_whole_call_limit(tmp_path, capsys):
     assert rc == 2 and err.count("\n") == 1 and "--total-time-limit: must be a positive number of seconds" in err
 
 
-def test_colmap_workflow_takes_the_whole_call_limit():
+def test_colmap_workflow_takes_the_whole_call_limit(tmp_path):
     from tests.test_colmap import synthetic_model
-    from tritools.sfm import retriangulate
+    from tritools.io.colmap import write_text_model
+    from tritools.sfm import retriangulate, retriangulate_folder
 
     model, _ = synthetic_model(n_points=10, seed=2)
     new, report = retriangulate(model, solver=DEFAULT_OPTIONS.replace(total_time_limit=1e-9))
@@ -181,3 +182,8 @@ def test_colmap_workflow_takes_the_whole_call_limit():
     assert {r.status.value for r in report.records} == {"time_limit"} and not any(r.certified for r in report.records)
     new, report = retriangulate(model)
     assert all(r.certified for r in report.records)
+    write_text_model(model, tmp_path / "in")
+    cut = RetriangulationOptions(solver=DEFAULT_OPTIONS.replace(total_time_limit=1e-9))
+    res = retriangulate_folder(tmp_path / "in", tmp_path / "out", cut)
+    assert [r.status.value for r in res.report.records] == ["time_limit"] * 10
+    assert retriangulate_folder(tmp_path / "in", tmp_path / "out2").report.n_certified == 10

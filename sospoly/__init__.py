@@ -20,14 +20,14 @@ from .analysis.complexity import n_lmivar_formula, n_lmivar_shape
 from .analysis.extraction import Candidate, extract_from_gram, extract_from_moment
 from .analysis.moments import MomentMatrix
 from .analysis.rigor import ExactCheck, RigorousBound, exact_check, rigorous_psatz_bound
-from .budget import DEFAULT_BUDGET, UNLIMITED, Budget, BudgetExceeded, ProgramSize, estimate_size
+from .budget import DEFAULT_BUDGET, DEFAULT_TIME_LIMIT, UNLIMITED, Budget, BudgetExceeded, ProgramSize, estimate_size
 from .certificates.program import Sense, SOSProgram
 from .certificates.matrix_sos import MatrixSOSConstraint
 from .certificates.dd import DDConstraint, DDKind
 from .algebra.quadexpr import QuadExpr
 from .certificates.psatz import (DataSlots, Multiplier, PsatzProblem, PsatzStructure, StructureMismatch, build_psatz,
                                  default_q, delta_min)
-from .certificates.shape import CertificateShape, clique_shape, correlative_shape, dense_shape
+from .certificates.shape import CertificateShape, Sparsity, clique_shape, correlative_shape, dense_shape
 from .certificates.reduction import diagonal_reduction, ideal_reduction, reduce_shape
 from .lowering.conic import ConicProblem, GramForm, lower
 from .ratios import RatioResult, minimize_ratios
@@ -55,5 +55,5 @@ __all__ = [
     "solve_psatz", "LowerBound", "ProgramSolution", "check_certificate", "solve_program", "SolveStatus",
     "DEFAULT_TOLERANCES", "Tolerances",
     "MomentMatrix", "MatrixSOSConstraint", "DDConstraint", "DDKind", "QuadExpr", "ConicResult",
-    "RatioResult", "minimize_ratios", "solve_conic_problem",
+    "RatioResult", "minimize_ratios", "solve_conic_problem", "DEFAULT_TIME_LIMIT", "Sparsity",
 ]

@@ -41,10 +41,18 @@ import numbers
 import time
 from dataclasses import dataclass
 
-__all__ = ["Budget", "DEFAULT_BUDGET", "UNLIMITED", "ProgramSize", "estimate_size", "BudgetExceeded", "Deadline",
+__all__ = ["Budget", "DEFAULT_TIME_LIMIT", "DEFAULT_BUDGET", "UNLIMITED", "ProgramSize", "estimate_size",
+           "BudgetExceeded", "Deadline",
            "as_budget", "TimeLimitReached", "deadline_scope", "check_deadline", "address_space_available",
            "memory_room", "CLARABEL_ENTRY_COPIES", "CLARABEL_LARGEST_BLOCK_COPIES", "AUTO_IPM_MAX_BYTES",
            "ADDRESS_SPACE_SHARE", "ClarabelTimeModel", "CLARABEL_TIME_MODEL"]
+
+
+#: the one default time limit of both packages, in seconds: of one :func:`sospoly.minimize` /
+#: :func:`sospoly.solve_psatz` call, and of one point in tritools (``time_limit`` is per point there, a batch's
+#: whole-call limit is the separate ``total_time_limit``).  One minute: long enough for every program within the
+#: default memory budget on a 2-core machine, short enough that no default call runs for minutes.
+DEFAULT_TIME_LIMIT = 60.0
 
 
 @dataclass(frozen=True)
@@ -56,7 +64,7 @@ class Budget:
     (a structural cap that also stops absurd degrees before any polynomial is expanded).
     """
 
-    time_limit: float | None = 120.0
+    time_limit: float | None = DEFAULT_TIME_LIMIT
     max_bytes: float | None = 4 * 2 ** 30
     max_gram_side: int = 5000
 
@@ -74,7 +82,7 @@ class Budget:
         return Deadline.after(self.time_limit)
 
 
-#: the default budget: two minutes and 4 GiB per solve, Gram matrices of side <= 5000.
+#: the default budget: :data:`DEFAULT_TIME_LIMIT` (one minute) and 4 GiB per solve, Gram matrices of side <= 5000.
 DEFAULT_BUDGET = Budget()
 #: no time or memory limit (the Gram side cap stays: it only refuses programs no machine holds).
 UNLIMITED = Budget(time_limit=None, max_bytes=None)

@@ -78,7 +78,7 @@ from .budget import Budget, BudgetExceeded, TimeLimitReached, as_budget, deadlin
 from .certificates.program import SOSProgram
 from .analysis.proof import unsolved_claim
 from .certificates.psatz import Multiplier, PsatzProblem, as_multiplier, build_psatz, checked_inputs
-from .certificates.shape import SPARSITY_KINDS
+from .certificates.shape import MINIMIZE_SPARSITIES, Sparsity
 from .certificates.sparsity import correlative_sparsity
 from .certificates.term_hierarchy import (cheap_term_level, newton_smaller, parse_term_kind, term_level_shape,
                                          term_levels)
@@ -181,8 +181,7 @@ def _choose_sparsity(sparsity, f, eq, ineq, degree: int, multiplier="auto", last
     Gram-kernel extraction separates two minimisers that degree-1 clique moments cannot)."""
     from .algebra.basis import sigma
 
-    if sparsity not in SPARSITY_KINDS:
-        raise ValueError(f"sparsity must be one of {', '.join(SPARSITY_KINDS)}, got {sparsity!r}")
+    sparsity = Sparsity.parse(sparsity, allowed=MINIMIZE_SPARSITIES)
     n = len(f.gens)
     low = 2 if degree > 2 and n + 1 <= LOW_BLOCK_MAX_SIDE and _low_block_helps(eq, ineq, multiplier) else None
     if sparsity == "correlative":
@@ -190,8 +189,8 @@ def _choose_sparsity(sparsity, f, eq, ineq, degree: int, multiplier="auto", last
     if sparsity == "term":                 # the TSSOS hierarchy, cheapest level first (certificates.term_hierarchy)
         return [(k, None) for k in term_levels(_support(f), [_support(g) for g in eq], [_support(h) for h in ineq],
                                                degree)]
-    if sparsity != "auto":
-        return [(sparsity, None)]
+    if sparsity != Sparsity.AUTO:              # the steps' kinds are plain strings ("none": the dense one)
+        return [("none" if sparsity == Sparsity.DENSE else sparsity.value, None)]
     cs = correlative_sparsity(n, _support(f), [_support(g) for g in eq], [_support(h) for h in ineq])
     steps = [] if cs.is_dense else [("correlative", low)]
     if cs.is_dense or (sigma(n, degree // 2) <= DENSE_AUTO_MAX_SIDE and
@@ -256,7 +255,7 @@ def _retry_chain(form, backend, blocks: int = 1) -> list:
 
 def minimize(f: Polynomial | float, eq: Sequence[Polynomial | float] = (), ineq: Sequence[Polynomial | float] = (),
              degree: int | None = None, multiplier: Multiplier | Polynomial | str | float = "auto", *,
-             sparsity: str = "auto", low_degree: int | None = None, max_degree: int | None = None,
+             sparsity: Sparsity | str = "auto", low_degree: int | None = None, max_degree: int | None = None,
              backend: str | object | None = None, form: GramForm | str | None = None,
              tolerances: Tolerances | None = None, budget: Budget | None = None, refine: bool = True,
              gens: Sequence[str] | None = None, radius: float | None = None) -> MinimizeResult:
@@ -265,8 +264,9 @@ def minimize(f: Polynomial | float, eq: Sequence[Polynomial | float] = (), ineq:
 
     ``multiplier``: ``"auto"`` (default), ``"fixed"`` (q = (1+||v||^2)^k), ``"putinar"`` (q = 1), ``"free"``
     (q a free SOS, GEVP by bisection), or a Polynomial / positive number used as q.  ``sparsity``:
-    ``"auto"``, ``"none"``, ``"correlative"`` (``low_degree``: add the dense certificate of that degree),
-    ``"term"``, ``"newton"``.  ``budget``: a :class:`sospoly.Budget` (time limit, memory).  ``radius``:
+    a :class:`sospoly.Sparsity` or its spelling: ``"auto"``, ``"none"`` (= ``"dense"``), ``"correlative"``
+    (``low_degree``: add the dense certificate of that degree), ``"term"``, ``"newton"``.  ``budget``: a
+    :class:`sospoly.Budget` (time limit, memory; default :data:`sospoly.budget.DEFAULT_TIME_LIMIT`).  ``radius``:
     a bound on the norm of some global minimiser (a box for the proven bound of strategy step 2, beside
     the box the constraints imply and the shifted certificate, which need none).
     """

@@ -24,7 +24,7 @@ from .model.regions import Ellipse, EllipseBorder, Point, Polytope, Region, Segm
 from .result import Attempt, Status, TriangulationResult
 from .scene import paper_example
 from .solve.batch import triangulate_many
-from .solve.options import DEFAULT_OPTIONS, SolvePath, Sparsity, TriangulationOptions
+from .solve.options import DEFAULT_OPTIONS, OptionError, SolvePath, Sparsity, TriangulationOptions
 from .solve.points import PointsResult, triangulate_points
 from .solve.triangulate import triangulate
 from .uncertain import (UncertaintyOptions, UncertaintyResult, UncertaintyStatus, triangulation_angle, uncertainty,
@@ -39,4 +39,4 @@ __all__ = ["Method", "depths", "dlt", "fundamental_matrix", "gamma", "project", 
            "TriangulationResult", "paper_example", "triangulate_many", "DEFAULT_OPTIONS", "SolvePath", "Sparsity",
            "TriangulationOptions", "PointsResult", "triangulate_points", "triangulate", "PointsLayout",
            "cameras_from_krt", "UncertaintyOptions", "UncertaintyResult", "UncertaintyStatus", "triangulation_angle",
-           "uncertainty", "uncertainty_many"]
+           "uncertainty", "uncertainty_many", "OptionError"]

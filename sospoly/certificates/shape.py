@@ -30,8 +30,8 @@ Sizes are computed in closed form before any basis is enumerated, and checked ag
 """
 from __future__ import annotations
 
+import enum
 from dataclasses import dataclass, field
-from itertools import combinations
 
 import numpy as np
 
@@ -41,19 +41,59 @@ from .sparsity import correlative_sparsity, newton_reduce, term_sparsity_blocks,
 
 __all__ = ["u_support_of",
            "CertificateShape", "dense_shape", "clique_shape", "correlative_shape", "term_shape", "newton_shape",
-           "clique_monomials", "chain_cliques", "all_subsets_cliques", "Sparsity", "SPARSITY_KINDS"]
+           "clique_monomials", "Sparsity", "SPARSITY_KINDS"]
 
-#: the sparsity choices of :func:`sospoly.minimize` (``"auto"`` picks one, see there).
+
+class Sparsity(str, enum.Enum):
+    """The sparsity of a certificate: the choices of ``sparsity=`` (:func:`sospoly.minimize`,
+    :func:`sospoly.build_psatz`, ``tritools.TriangulationOptions``) and the names of the certificate shapes
+    (``CertificateShape.kind``).  One enum for both packages; the old strings are accepted on input
+    (``Sparsity("none")`` is :attr:`DENSE`: ``"none"`` and ``"dense"`` are one choice, spelt two ways).
+    ``str()`` and ``format()`` give the value, as for :class:`enum.StrEnum`."""
+    AUTO = "auto"                  #: the caller picks (see :func:`sospoly.minimize`)
+    DENSE = "dense"                #: the dense certificate (one Gram block per SOS term)
+    CORRELATIVE = "correlative"    #: cliques of a chordal extension of the correlative-sparsity graph
+    CLIQUES = "cliques"            #: cliques given by the caller (:func:`clique_shape`)
+    TERM = "term"                  #: term sparsity (TSSOS)
+    NEWTON = "newton"              #: the Newton-polytope basis (unconstrained programs)
+    NONE = "dense"                 #: alias of :attr:`DENSE` (the spelling ``"none"``)
+
+    @classmethod
+    def _missing_(cls, value):
+        return cls.DENSE if value is None or value == "none" else None
+
+    def __str__(self) -> str:
+        return self.value
+
+    def __format__(self, spec: str) -> str:
+        return format(self.value, spec)
+
+    @classmethod
+    def parse(cls, value, name: str = "sparsity", allowed: tuple | None = None,
+              aliases: dict | None = None) -> Sparsity:
+        """``value`` -- a member, its value, ``"none"`` (:attr:`DENSE`) or a key of ``aliases`` (a caller's own
+        spelling of a member) -- as a member of ``allowed`` (default: every member); ValueError naming ``name`` and
+        the accepted spellings otherwise."""
+        allowed = tuple(cls) if allowed is None else tuple(allowed)
+        aliases = dict(aliases or {})
+        raw = getattr(value, "value", value)
+        member = aliases.get(raw) if isinstance(raw, str) else None
+        if member is None and isinstance(raw, str):
+            try:
+                member = cls(raw)
+            except ValueError:
+                member = None
+        if member is None or member not in allowed:
+            spelt = {m: k for k, m in reversed(list(aliases.items()))}
+            spellings = [spelt.get(m, "none" if m is cls.DENSE else m.value) for m in allowed]
+            raise ValueError(f"{name} must be one of {', '.join(spellings)}, got {value!r}")
+        return member
+
+
+#: the sparsity choices of :func:`sospoly.minimize` (``"auto"`` picks one, see there), as spelt there.
 SPARSITY_KINDS = ("auto", "none", "correlative", "term", "newton")
-
-
-class Sparsity:
-    """Names of the certificate shapes (``CertificateShape.kind``)."""
-    DENSE = "dense"
-    CORRELATIVE = "correlative"
-    CLIQUES = "cliques"
-    TERM = "term"
-    NEWTON = "newton"
+#: the members of :data:`SPARSITY_KINDS`.
+MINIMIZE_SPARSITIES = (Sparsity.AUTO, Sparsity.DENSE, Sparsity.CORRELATIVE, Sparsity.TERM, Sparsity.NEWTON)
 
 
 @dataclass(frozen=True)
@@ -262,19 +302,3 @@ def newton_shape(f_support, degree: int, *, q_support=None, max_gram_side: int |
     basis = newton_reduce(support, dense.u_bases[0])
     return CertificateShape(Sparsity.NEWTON, (basis,), (), ())
 
-
-def chain_cliques(blocks, width: int) -> tuple:
-    """Cliques of ``width`` consecutive blocks (each block a sequence of variable indices):
-    {B_0 .. B_{w-1}}, {B_1 .. B_w}, ... -- a chordal band whose clique tree is a path."""
-    blocks = [tuple(b) for b in blocks]
-    width = max(1, min(int(width), len(blocks)))
-    out = []
-    for k in range(len(blocks) - width + 1):
-        out.append(tuple(sorted(i for b in blocks[k:k + width] for i in b)))
-    return tuple(out)
-
-
-def all_subsets_cliques(blocks, width: int) -> tuple:
-    """Cliques of every ``width``-subset of the blocks (dense coupling: C(N, width) cliques)."""
-    blocks = [tuple(b) for b in blocks]
-    return tuple(tuple(sorted(i for b in sub for i in b)) for sub in combinations(blocks, min(width, len(blocks))))

@@ -6,6 +6,7 @@ Subcommands
 ``example K``        the paper's Example 2, 3, 4 (Tables 8-10) or a reduced Example 5 (Table 11)
 ``dataset NAME``     an Oxford sequence of the paper's Example 1 (Tables 1-6), summarised per N
 
+The solver and data flags and their validation are :mod:`tritools.cli.flags` (re-exported here).
 More subcommands come from the modules named in :data:`SUBCOMMAND_MODULES`: each exposes
 ``register(subparsers) -> None``, adding its parser with ``set_defaults(func=...)`` where
 ``func(args) -> int`` is the exit code.  A module that does not exist (yet) is skipped.
@@ -39,7 +40,11 @@ from ..io.problem_file import (ProblemFileError, ProblemSpec, jsonable, load_pro
                                parse_problem_text, result_to_dict)
 from ..result import Status, TriangulationResult
 from ..solve.batch import PROGRESS_MIN_ITEMS
-from ..solve.options import TRIANGULATION_BUDGET, MethodChoice, SolvePath, Sparsity, TriangulationOptions
+from ..solve.call_limit import call_limit
+from ..solve.options import TriangulationOptions
+from .flags import (METHODS, OPTION_FLAGS, PATHS, SPARSITIES, CLIError, add_data_dir_option,  # noqa: F401 - faces
+                    add_robust_option, add_solver_options, add_track_options, option_flag_error, options_from_args,
+                    robust_from_args, select_tracks)
 from .conventions import (_silence_stdout, add_logging_options, add_world_frame_option, cli_logging,
                           sequence_options)
 
@@ -60,14 +65,6 @@ EXAMPLE_NOTE = ("X_raw is the estimate extracted from the certificate (the X^ th
                 "X_raw after the local L2 refinement (the result's X), which can only lower gamma but, when the "
                 "relaxation is not tight, may run off to a far point; gamma is the point's RMS reprojection error "
                 "(gamma_UB), gamma_LB the certified lower bound")
-
-METHODS = tuple(m.value for m in MethodChoice)
-PATHS = tuple(p.value for p in SolvePath)
-SPARSITIES = tuple(x.value for x in Sparsity)
-
-
-class CLIError(Exception):
-    """Invalid usage or input: printed as one line, exit code 2."""
 
 
 def printable(text) -> str:
@@ -215,10 +212,11 @@ def _solve_specs(specs, options, progress, robust=None) -> tuple[list, list]:
             raise CLIError(f"problem {s.name if s.name is not None else f'#{i}'}: {exc}") from None
     out: list = [None] * len(specs)
     times: list = [(None, OWN)] * len(specs)
-    for opts, idx in groups.items():
-        res, tms = _timed_solve([(specs[i].cameras, specs[i].regions) for i in idx], opts, progress, robust)
-        for i, r, t in zip(idx, res, tms):
-            out[i], times[i] = r, t
+    with call_limit(options.total_time_limit):       # --total-time-limit: one end for every group
+        for opts, idx in groups.items():
+            res, tms = _timed_solve([(specs[i].cameras, specs[i].regions) for i in idx], opts, progress, robust)
+            for i, r, t in zip(idx, res, tms):
+                out[i], times[i] = r, t
     return out, times
 
 
@@ -367,21 +365,6 @@ def load_oxford(name: str, data_dir, command: str):
         raise CLIError(f"{command}: {exc}") from None
 
 
-def select_tracks(tracks: Sequence, limit: int | None = None, sample: int | None = None, seed: int = 0) -> list:
-    """The tracks of ``--limit K`` (the first K, in file order) then ``--sample K`` (K of those drawn at random
-    with ``--seed``, kept in file order); CLIError for a bad value."""
-    for flag, value in (("--limit", limit), ("--sample", sample)):
-        if value is not None and value < 1:
-            raise CLIError(f"{flag}: must be a positive integer, got {value}")
-    if seed < 0:
-        raise CLIError(f"--seed: must be a non-negative integer, got {seed}")
-    out = list(tracks[:limit] if limit is not None else tracks)
-    if sample is not None and sample < len(out):
-        idx = np.sort(np.random.default_rng(seed).choice(len(out), size=sample, replace=False))
-        out = [out[j] for j in idx]
-    return out
-
-
 def _cmd_dataset(args) -> int:
     from ..model.regions import Point
 
@@ -439,98 +422,6 @@ def _write_dataset_csv(path, name, tracks, results, times) -> None:
 
 
 # ----------------------------------------------------------------------------- parser
-def add_solver_options(p, default_method: str = "auto", default_path: str = "auto",
-                       progress_help: str | None = None) -> None:
-    """The solver flags of every subcommand that solves (``--method --delta --max-delta --path --sparsity
-    --time-limit --memory-limit --require-in-front --progress``); :func:`options_from_args` validates them
-    exactly like the fields of a problem file."""
-    p.add_argument("--method", choices=METHODS, default=default_method,
-                   help=f"auto (Corollary 1 at delta 2, then delta 4), theorem1 (4x4 minors) or corollary1 "
-                        f"(epipolar); default {default_method}")
-    p.add_argument("--delta", type=int, default=None, metavar="D",
-                   help="first relaxation degree (even >= 2; default delta_min)")
-    p.add_argument("--max-delta", type=int, default=None, dest="max_delta", metavar="D",
-                   help="last degree tried (even >= delta; default 4 for method auto, else delta or delta_min + 2)")
-    p.add_argument("--path", choices=PATHS, default=default_path,
-                   help=f"'auto' first tries certification by verification (delta 2, point regions); 'sdp' always "
-                        f"solves the SDP; default {default_path}")
-    p.add_argument("--sparsity", choices=SPARSITIES, default="auto",
-                   help="formulation above delta 2: auto (dense where small), none (dense), views (view cliques)")
-    p.add_argument("--time-limit", type=float, default=None, dest="time_limit", metavar="S",
-                   help="seconds per point (default 60); exceeding it gives status time_limit")
-    p.add_argument("--memory-limit", type=float, default=None, dest="memory_limit", metavar="GIB",
-                   help="largest estimated program, GiB (default 2); larger ones give status budget_exceeded")
-    p.add_argument("--require-in-front", action="store_true", dest="require_in_front",
-                   help="a certified point behind a camera gets status behind_camera (default: optimal, in_front "
-                        "false)")
-    p.add_argument("--progress", action="store_true", default="auto",
-                   help=progress_help or f"progress bar on stderr (needs the 'progress' extra, tqdm; default: only "
-                                         f"for batches of {PROGRESS_MIN_ITEMS} problems or more)")
-
-
-def options_from_args(args) -> TriangulationOptions:
-    """The :class:`TriangulationOptions` of parsed solver flags; a bad value is a :class:`CLIError` naming the flag
-    (the same rules as the problem-file fields)."""
-    from sospoly import Budget
-
-    base = TRIANGULATION_BUDGET
-    time_limit, memory = getattr(args, "time_limit", None), getattr(args, "memory_limit", None)
-    limits = {"time_limit": base.time_limit if time_limit is None else time_limit,
-              "max_bytes": base.max_bytes if memory is None else memory * 2 ** 30}
-    for flag, field, value, unit in (("--time-limit", "time_limit", time_limit, "seconds"),
-                                     ("--memory-limit", "max_bytes", memory, "GiB")):
-        try:                                   # sospoly.Budget is the one validation (inf: no limit)
-            Budget(**{field: limits[field]})
-        except ValueError:
-            raise CLIError(f"{flag}: must be a positive number of {unit}, got {value}") from None
-    budget = Budget(**limits)
-    get = vars(args).get                     # subcommands with only some of the flags (figure3: method, delta)
-    try:
-        return TriangulationOptions(method=get("method", "auto"), delta=get("delta"), max_delta=get("max_delta"),
-                                    path=get("path", "auto"), sparsity=get("sparsity", "auto"), budget=budget,
-                                    require_in_front=bool(get("require_in_front")),
-                                    world_frame=get("world_frame") if get("world_frame") not in (None, "auto")
-                                    else "right_handed")
-    except (ValueError, TypeError) as exc:
-        msg = str(exc)
-        field = msg.split()[0]
-        flag = "--" + field.replace("_", "-") if field in ("delta", "max_delta", "method", "path", "sparsity") \
-            else "options"
-        if msg.startswith("max_delta (") or msg.startswith("max_delta must be >="):
-            flag = "--max-delta"
-        raise CLIError(f"{flag}: {msg}") from None
-
-
-def add_robust_option(p) -> None:
-    """``--robust C``: certified truncated least squares with threshold C pixels (:mod:`tritools.solve.robust`)."""
-    p.add_argument("--robust", type=float, default=None, metavar="C",
-                   help="certified outlier-robust triangulation: truncated least squares with threshold C pixels "
-                        "(views farther than C from the estimate are outliers; see docs/robust.md)")
-
-
-def robust_from_args(args):
-    """The ``--robust`` threshold (None when absent); CLIError naming the flag unless positive."""
-    c = getattr(args, "robust", None)
-    if c is not None and not c > 0:
-        raise CLIError(f"--robust: must be a positive threshold in pixels, got {c}")
-    return c
-
-
-def add_track_options(p) -> None:
-    """``--limit K --sample K --seed S`` of the subcommands running an Oxford sequence (:func:`select_tracks`)."""
-    p.add_argument("--limit", type=int, default=None, metavar="K",
-                   help="only the first K tracks, in file order (default: all)")
-    p.add_argument("--sample", type=int, default=None, metavar="K",
-                   help="K tracks drawn at random (after --limit; kept in file order; default: no sampling)")
-    p.add_argument("--seed", type=int, default=0, metavar="S", help="seed of --sample (default 0)")
-
-
-def add_data_dir_option(p) -> None:
-    """``--data-dir`` of the subcommands reading an Oxford sequence (:func:`tritools.io.oxford.load_sequence`)."""
-    p.add_argument("--data-dir", default=None, dest="data_dir",
-                   help="Oxford data directory (default: $TRITOOLS_DATA, else ../shared/data/oxford)")
-
-
 def register_builtin(sub) -> None:
     """The built-in subcommands: solve, example, dataset."""
     p = sub.add_parser("solve", help="triangulate the problems of a JSON problem file",

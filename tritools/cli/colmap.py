@@ -180,7 +180,7 @@ def run_colmap(args) -> int:
                "output_type": result.output_format, "certificates": str(result.certificates),
                "exports": [str(e) for e in result.exports], "copied": list(result.copied), "notes": list(result.notes),
                "delta": solver.delta, "max_delta": solver.max_delta, "time_limit": solver.budget.time_limit,
-               "memory_limit_bytes": solver.budget.max_bytes,
+               "memory_limit_bytes": solver.budget.max_bytes, "total_time_limit": solver.total_time_limit,
                **report.summary()}
     if args.json:
         summary["points"] = [{"point3D_id": r.point3D_id, "n_views": r.n_views, "status": r.status.value,

@@ -43,7 +43,7 @@ import numpy as np
 
 from ..model.regions import Point, Region
 from ..result import TriangulationResult, jsonable
-from ..solve.options import MethodChoice, SolvePath, TriangulationOptions
+from ..solve.options import MethodChoice, OptionError, SolvePath, TriangulationOptions
 
 __all__ = ["ProblemFileError", "ProblemSpec", "PROBLEM_FIELDS", "region_types", "parse_problems",
            "parse_problem_text", "parse_problem_bytes", "load_problem_file", "problem_to_dict", "problems_to_json",
@@ -227,6 +227,15 @@ def _parse_region(value, loc: str) -> Region:
         raise ProblemFileError(loc, msg) from None
 
 
+def _shortened(text: str, given: Mapping) -> str:
+    """``text`` with the long values of ``given`` (a 300-digit delta) shortened, for a one-line message."""
+    for value in given.values():
+        for long in {repr(value), str(value)} | ({str(int(value))} if isinstance(value, float) else set()):
+            if len(long) > 60:
+                text = text.replace(long, _short(value))
+    return text
+
+
 def _parse_options(obj: Mapping, loc: str) -> dict:
     """The solver settings of a problem (``null`` = not given), validated by :class:`TriangulationOptions` --
     the one validation of the command-line flags too -- with the message placed at the field's location."""
@@ -239,17 +248,10 @@ def _parse_options(obj: Mapping, loc: str) -> dict:
                                                     f", got {_json_type(value)}")
     try:
         opts = TriangulationOptions(**given)
-    except (ValueError, TypeError) as exc:
-        msg = str(exc)
-        for value in given.values():          # long values (a 300-digit delta) shortened in the one-line message
-            for text in {repr(value), str(value)} | ({str(int(value))} if isinstance(value, float) else set()):
-                if len(text) > 60:
-                    msg = msg.replace(text, _short(value))
-        field = next((k for k in sorted(given, key=len, reverse=True) if msg.startswith(k)), None)
-        if field is None:                     # not a message about one field: the problem object itself
-            raise ProblemFileError(loc or "$", msg) from None
-        rest = msg[len(field):].lstrip()
-        raise ProblemFileError(_join(loc, field), rest if rest.startswith("must") else msg) from None
+    except OptionError as exc:                # the field it names, and its text, at the field's location
+        if exc.field not in given:            # not a message about one field: the problem object itself
+            raise ProblemFileError(loc or "$", _shortened(str(exc), given)) from None
+        raise ProblemFileError(_join(loc, exc.field), _shortened(exc.text, given)) from None
     return {k: getattr(opts, k) for k in given}
 
 

@@ -15,8 +15,10 @@ import numpy as np
 
 from ..io.export import STATUS_LEGEND
 from ..result import Status
+from ..solve.options import DEFAULT_OPTIONS, OptionError, OptionTypeError, TriangulationOptions
 
-__all__ = ["CertifyOptions", "StackResult", "certify_stack", "STATUS_LEGEND", "status_code"]
+__all__ = ["CertifyOptions", "StackResult", "certify_stack", "STATUS_LEGEND", "status_code", "solver_options",
+           "robust_threshold"]
 
 _CODE = {s: k for k, s in enumerate(STATUS_LEGEND)}
 
@@ -26,30 +28,61 @@ def status_code(status) -> int:
     return _CODE[Status(status).value]
 
 
-@dataclass(frozen=True)
+def solver_options(base, name: str, **shorthands) -> TriangulationOptions:
+    """``base`` (a :class:`TriangulationOptions`; None: :data:`DEFAULT_OPTIONS`) with the shorthands that are not
+    None (``method``, ``path``, ``delta``, ``max_delta``), validated once by :class:`TriangulationOptions`
+    (:class:`OptionError` naming the field); an ``OptionTypeError`` naming ``name`` when ``base`` is something
+    else."""
+    if base is not None and not isinstance(base, TriangulationOptions):
+        raise OptionTypeError(name, f"must be a tritools.TriangulationOptions, got {type(base).__name__}")
+    return (DEFAULT_OPTIONS if base is None else base).replace(**shorthands)
+
+
+def robust_threshold(value) -> float | None:
+    """None, or ``value`` as a positive threshold in pixels (:class:`OptionError` naming ``robust``)."""
+    if value is None:
+        return None
+    try:
+        ok = not isinstance(value, bool) and float(value) > 0
+    except (TypeError, ValueError):
+        ok = False
+    if not ok:
+        raise OptionError("robust", f"must be a positive threshold in pixels, got {value!r}")
+    return float(value)
+
+
+@dataclass(frozen=True, init=False)
 class CertifyOptions:
     """Solver settings of :func:`certify_stack`.
 
     ``options``: the :class:`~tritools.solve.options.TriangulationOptions` of every problem (None: the
     defaults of ``tritools.triangulate`` -- method auto, path auto, the default per-point budget);
-    ``method``, ``path``, ``delta``, ``max_delta``: shorthands for its fields (None: its value);
-    ``executor``: for the per-problem SDPs (see :func:`tritools.solve.batch.triangulate_many`);
-    ``robust``: None, or the TLS threshold in pixels (:mod:`tritools.solve.robust_batch`).
+    ``method``, ``path``, ``delta``, ``max_delta``: constructor shorthands for its fields (None: its value;
+    read back as properties); ``executor``: for the per-problem SDPs (see
+    :func:`tritools.solve.batch.triangulate_many`); ``robust``: None, or the TLS threshold in pixels
+    (:mod:`tritools.solve.robust_batch`).  Invalid values raise :class:`OptionError` naming the field.
     """
-    method: str | None = None
-    path: str | None = None
-    delta: int | None = None
-    max_delta: int | None = None
-    executor: object = field(default=None, compare=False)
-    options: object = None
-    robust: float | None = None
+    options: TriangulationOptions
+    executor: object = field(compare=False)
+    robust: float | None
 
-    def triangulation_options(self):
+    def __init__(self, method: str | None = None, path: str | None = None, delta: int | None = None,
+                 max_delta: int | None = None, executor: object = None, options: TriangulationOptions | None = None,
+                 robust: float | None = None):
+        set_ = object.__setattr__
+        set_(self, "options", solver_options(options, "options", method=method, path=path, delta=delta,
+                                             max_delta=max_delta))
+        set_(self, "executor", executor)
+        set_(self, "robust", robust_threshold(robust))
+
+    method = property(lambda self: self.options.method.value, doc="the options' method (a string)")
+    path = property(lambda self: self.options.path.value, doc="the options' path (a string)")
+    delta = property(lambda self: self.options.delta, doc="the options' first degree (None: delta_min)")
+    max_delta = property(lambda self: self.options.max_delta, doc="the options' last degree (None: the plan's)")
+
+    def triangulation_options(self) -> TriangulationOptions:
         """The :class:`~tritools.solve.options.TriangulationOptions` these settings stand for (validated)."""
-        from ..solve.options import options_from
-
-        return options_from(self.options, method=self.method, path=self.path, delta=self.delta,
-                            max_delta=self.max_delta)
+        return self.options
 
 
 @dataclass(frozen=True)
@@ -77,7 +110,6 @@ def certify_stack(cameras, points2d, options=None) -> StackResult:
     (the defaults of ``tritools.triangulate``)."""
     from ..model.regions import real_array
     from ..solve.batch import solve_point_stack
-    from ..solve.options import TriangulationOptions
 
     if options is None or isinstance(options, TriangulationOptions):
         options = CertifyOptions(options=options)

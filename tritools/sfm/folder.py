@@ -14,6 +14,7 @@ the model.
 from __future__ import annotations
 
 import contextlib
+import functools
 import logging
 import shutil
 import time
@@ -24,6 +25,7 @@ import numpy as np
 
 from ..io.atomic import DirectoryInTheWay, atomic_path, staged_directory
 from ..io.colmap.formats import ModelWriter, open_model
+from ..solve.call_limit import call_limit
 from .certificates import CertificateWriter
 from .pipeline import OptionError, RetriangulationOptions, prepare_geometry, process_chunk
 from .retriangulate import RetriangulationReport, has_tqdm, progress_bar, skipped_cameras
@@ -129,6 +131,17 @@ class FolderResult:
     timings: dict = field(default_factory=dict)
 
 
+def _within_total_limit(run):
+    """``run(in_dir, out_dir, options, ...)`` within ``options.solver.total_time_limit``, the whole run's limit
+    (:mod:`tritools.solve.call_limit`: the points not solved by then get status ``time_limit``)."""
+    @functools.wraps(run)
+    def limited(in_dir, out_dir, options: RetriangulationOptions | None = None, **kw):
+        with call_limit((options or RetriangulationOptions()).solver.total_time_limit):
+            return run(in_dir, out_dir, options, **kw)
+    return limited
+
+
+@_within_total_limit
 def retriangulate_folder(in_dir, out_dir, options: RetriangulationOptions | None = None, *,
                          input_format: str | None = None, output_format: str | None = None,
                          exports=()) -> FolderResult:

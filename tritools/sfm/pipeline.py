@@ -24,8 +24,8 @@ from ..io.colmap.camera_models import (OPENCV_FAMILY, camera_problem, distort_ro
                                        pixels_from_camera, undistorted_pixels)
 from ..model.cameras import depths_stack
 from ..result import Status
-from ..solve.options import DEFAULT_OPTIONS, MethodChoice, SolvePath, TriangulationOptions
-from .certify import CertifyOptions, certify_stack, status_code
+from ..solve.options import OptionError, TriangulationOptions
+from .certify import CertifyOptions, certify_stack, robust_threshold, solver_options, status_code
 
 __all__ = ["RetriangulationOptions", "OptionError", "CameraError", "ModelGeometry", "prepare_geometry",
            "ChunkResult", "process_chunk", "point_gammas", "rotations", "BEHIND_CHOICES", "DEFAULT_MAX_TRACK_LENGTH"]
@@ -34,15 +34,6 @@ BEHIND_CHOICES = ("keep-input", "write")
 #: tracks with more usable observations than this are not solved by default: the Corollary 1
 #: certificate has N(N-1)/2 constraints in 2N variables, so its cost grows as N^4.
 DEFAULT_MAX_TRACK_LENGTH = 50
-
-
-class OptionError(ValueError):
-    """An invalid option; ``field`` names it (the CLI turns ``max_delta`` into ``--max-delta``)."""
-
-    def __init__(self, field_name: str, message: str):
-        super().__init__(f"{field_name} {message}")
-        self.field = field_name
-        self.detail = message
 
 
 class CameraError(ValueError):
@@ -55,21 +46,23 @@ def _int_option(name, value, low):
         raise OptionError(name, f"must be an integer >= {low}, got {value!r}")
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, init=False)
 class RetriangulationOptions:
-    """Settings of the model path (all validated on construction, :class:`OptionError`).
+    """Settings of the model path (all validated on construction, :class:`OptionError` naming the field).
 
     solver
         The :class:`~tritools.solve.options.TriangulationOptions` of every point (None: the defaults of
         ``tritools.triangulate`` -- method auto, path auto, the default per-point budget of 60 s and
-        2 GiB); ``tritools colmap`` builds it from the same flags as ``tritools solve``.
+        2 GiB, no whole-call limit); ``tritools colmap`` builds it from the same flags as ``tritools solve``.
+        Its ``total_time_limit`` bounds the whole run: the points not solved when it expires get status
+        ``time_limit`` (and keep their input xyz).
     method, path, delta, max_delta
-        Shorthands for the solver's fields (None: the solver's value): method "auto" (Corollary 1 at
-        delta = 2, then delta = 4 for the points that does not certify), "corollary1" or "theorem1";
-        path "auto" (certification by verification first, the SDP for the rest) or "sdp"; first and
-        last relaxation degree (even, >= 2, ``max_delta >= delta``).  ``max_delta=2`` keeps every point
-        at delta = 2 (no escalation); higher degrees are bounded per point by the solver's budget
-        (status ``time_limit`` / ``budget_exceeded`` when they do not fit).
+        Constructor shorthands for the solver's fields (None: the solver's value; read back as properties
+        of ``solver``): method "auto" (Corollary 1 at delta = 2, then delta = 4 for the points that does
+        not certify), "corollary1" or "theorem1"; path "auto" (certification by verification first, the SDP
+        for the rest) or "sdp"; first and last relaxation degree (even, >= 2, ``max_delta >= delta``).
+        ``max_delta=2`` keeps every point at delta = 2 (no escalation); higher degrees are bounded per point
+        by the solver's budget (status ``time_limit`` / ``budget_exceeded`` when they do not fit).
     min_track_length, max_track_length
         Tracks with fewer / more usable observations are not solved (status invalid_input).
     behind
@@ -87,52 +80,31 @@ class RetriangulationOptions:
         (:mod:`tritools.solve.robust`); the outlier observations of every updated point are removed from its
         track (and their keypoints' POINT3D_ID set to -1 by the writer).
     """
-    method: str | None = None
-    path: str | None = None
-    delta: int | None = None
-    max_delta: int | None = None
-    min_track_length: int = 2
-    max_track_length: int = DEFAULT_MAX_TRACK_LENGTH
-    behind: str = "keep-input"
-    strict: bool = False
-    chunk_points: int = 100_000
-    progress: bool | str | None = None
-    executor: object = field(default=None, compare=False)
-    solver: TriangulationOptions | None = None
-    robust: float | None = None
+    solver: TriangulationOptions
+    min_track_length: int
+    max_track_length: int
+    behind: str
+    strict: bool
+    chunk_points: int
+    progress: bool | str | None
+    executor: object = field(compare=False)
+    robust: float | None
 
-    def __post_init__(self):
-        base = DEFAULT_OPTIONS if self.solver is None else self.solver
-        if not isinstance(base, TriangulationOptions):
-            raise OptionError("solver", f"must be a tritools.TriangulationOptions, got {type(base).__name__}")
-        for name, enum in (("method", MethodChoice), ("path", SolvePath)):
-            value = getattr(self, name)
-            if value is None:
-                continue
-            try:
-                enum(getattr(value, "value", value))
-            except ValueError:
-                raise OptionError(name, f"must be one of {', '.join(m.value for m in enum)}, got {value!r}") from None
-        for name in ("delta", "max_delta"):
-            v = getattr(self, name)
-            if v is not None and (isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 2 or v % 2):
-                raise OptionError(name, f"must be an even integer >= 2, got {v!r}")
-        first = self.delta if self.delta is not None else (base.delta or 2)
-        last = self.max_delta if self.max_delta is not None else base.max_delta
-        if last is not None and last < first:
-            raise OptionError("max_delta", f"must be >= delta ({first}), got {last}")
-        try:
-            solver = base.replace(method=self.method, path=self.path, delta=self.delta, max_delta=self.max_delta)
-        except (ValueError, TypeError) as exc:
-            name = str(exc).split()[0]
-            raise OptionError(name if name in ("delta", "max_delta") else "solver",
-                              str(exc)[len(name):].strip() if name in ("delta", "max_delta") else str(exc)) from None
+    def __init__(self, method: str | None = None, path: str | None = None, delta: int | None = None,
+                 max_delta: int | None = None, min_track_length: int = 2,
+                 max_track_length: int = DEFAULT_MAX_TRACK_LENGTH, behind: str = "keep-input", strict: bool = False,
+                 chunk_points: int = 100_000, progress: bool | str | None = None, executor: object = None,
+                 solver: TriangulationOptions | None = None, robust: float | None = None):
         set_ = object.__setattr__
-        set_(self, "solver", solver)
-        set_(self, "method", solver.method.value)
-        set_(self, "path", solver.path.value)
-        set_(self, "delta", solver.delta)
-        set_(self, "max_delta", solver.max_delta)
+        set_(self, "solver", solver_options(solver, "solver", method=method, path=path, delta=delta,
+                                            max_delta=max_delta))
+        for name, value in (("min_track_length", min_track_length), ("max_track_length", max_track_length),
+                            ("behind", behind), ("strict", strict), ("chunk_points", chunk_points),
+                            ("progress", progress), ("executor", executor), ("robust", robust)):
+            set_(self, name, value)
+        self._check()
+
+    def _check(self) -> None:
         _int_option("min_track_length", self.min_track_length, 2)
         _int_option("max_track_length", self.max_track_length, 2)
         if self.max_track_length < self.min_track_length:
@@ -143,14 +115,12 @@ class RetriangulationOptions:
         _int_option("chunk_points", self.chunk_points, 1)
         if self.progress is not None and self.progress != "auto" and not isinstance(self.progress, (bool, np.bool_)):
             raise OptionError("progress", f"must be True, False, None or 'auto', got {self.progress!r}")
-        if self.robust is not None:
-            try:
-                ok = float(self.robust) > 0 and not isinstance(self.robust, bool)
-            except (TypeError, ValueError):
-                ok = False
-            if not ok:
-                raise OptionError("robust", f"must be a positive threshold in pixels, got {self.robust!r}")
-            object.__setattr__(self, "robust", float(self.robust))
+        object.__setattr__(self, "robust", robust_threshold(self.robust))
+
+    method = property(lambda self: self.solver.method.value, doc="the solver's method (a string)")
+    path = property(lambda self: self.solver.path.value, doc="the solver's path (a string)")
+    delta = property(lambda self: self.solver.delta, doc="the solver's first degree (None: delta_min)")
+    max_delta = property(lambda self: self.solver.max_delta, doc="the solver's last degree (None: the plan's)")
 
     def certify_options(self) -> CertifyOptions:
         """The solver settings of :func:`.certify.certify_stack` (the ``solver`` options and the executor)."""

@@ -29,7 +29,8 @@ import numpy as np
 
 from ..io.colmap.arrays import ModelArrays
 from ..uncertain import UncertaintyOptions, triangulation_angles, uncertainty_discs
-from .pipeline import ModelGeometry, OptionError
+from ..solve.options import OptionError
+from .pipeline import ModelGeometry
 
 __all__ = ["QualityOptions", "PointQuality", "point_quality", "drop_points", "write_quality", "apply_quality_folder",
            "read_keypoint_radii",

@@ -32,6 +32,7 @@ from ..io.colmap.arrays import ModelArrays
 from ..io.colmap.model import Model, Point3D
 from ..io.colmap.pycolmap_bridge import from_pycolmap, import_pycolmap, is_pycolmap_reconstruction
 from ..result import Status
+from ..solve.call_limit import call_limit
 from .certify import STATUS_LEGEND, status_code
 from .pipeline import RetriangulationOptions, prepare_geometry, process_chunk
 
@@ -220,10 +221,11 @@ def retriangulate_arrays(arrays: ModelArrays, options: RetriangulationOptions | 
     bar = progress_bar(arrays.n_points, options.progress)
     ids, results = [], []
     try:
-        for a in range(0, arrays.n_points, options.chunk_points):
-            chunk = arrays.points(a, a + options.chunk_points)
-            results.append(process_chunk(arrays, geom, chunk, options, bar))
-            ids.append(chunk.ids)
+        with call_limit(options.solver.total_time_limit):          # the whole run within total_time_limit
+            for a in range(0, arrays.n_points, options.chunk_points):
+                chunk = arrays.points(a, a + options.chunk_points)
+                results.append(process_chunk(arrays, geom, chunk, options, bar))
+                ids.append(chunk.ids)
     finally:
         if bar is not None:
             bar.close()

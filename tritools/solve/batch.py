@@ -37,6 +37,7 @@ from ..model.cameras import numeric_cameras
 from ..model.regions import Point
 from ..model.constraints import Method
 from ..result import Attempt, Status, TriangulationResult
+from .call_limit import call_limit, expired, expired_points, mark_cut, within
 from .options import TriangulationOptions, options_from
 from .discs import as_disc_problem, solve_disc_group
 from .points import PointStack, batch_steps
@@ -77,25 +78,54 @@ def _failed(opts: TriangulationOptions, status: Status, message: str) -> Triangu
     return TriangulationResult(method=opts.method.value, status=status, message=message)
 
 
-def _solve_item(cams, regions, opts: TriangulationOptions, prefix: tuple, retries) -> TriangulationResult:
-    """One problem through :func:`safe_triangulate`, then the ``retries`` steps while not certified."""
-    res = safe_triangulate(cams, regions, opts)
+def _solve_item(cams, regions, opts: TriangulationOptions, prefix: tuple, retries, end=None) -> TriangulationResult:
+    """One problem through :func:`safe_triangulate`, then the ``retries`` steps while not certified; ``end``: the
+    whole call's end (:mod:`.call_limit`), which cuts the per-point time limit."""
+    run, cut = within(opts, end)
+    res = safe_triangulate(cams, regions, run)
     tried = list(prefix) + list(res.attempts)
     if res.status == Status.INVALID_INPUT:
         tried = list(res.attempts)          # the batch did not fail on it: it could not read the data
     if not res.status.certified:
         for m, d in retries:
-            r2 = safe_triangulate(cams, regions, opts.replace(method=m, delta=d, max_delta=d))
+            if expired(end):
+                break
+            run, cut_retry = within(opts.replace(method=m, delta=d, max_delta=d), end)
+            cut = cut or cut_retry
+            r2 = safe_triangulate(cams, regions, run)
             tried.append(Attempt(r2.method, r2.delta, r2.status.value, r2.gamma_lb, r2.gamma_ub, "retry", r2.sparsity))
             if r2.status.certified:
                 res = r2
                 break
-    return dataclasses.replace(res, attempts=tuple(tried))
+    res = dataclasses.replace(res, attempts=tuple(tried))
+    return mark_cut(res) if cut else res
 
 
-def _run_chunk(items, retries) -> list:
-    """Executor task: [(index, result)] for items [(index, cameras, regions, options, prefix)]."""
-    return [(i, _solve_item(c, r, o, pre, retries)) for i, c, r, o, pre in items]
+def _run_chunk(items, retries, end=None) -> list:
+    """Executor task: [(index, result)] for items [(index, cameras, regions, options, prefix)]; the items whose
+    turn comes after the whole call's ``end`` get their ``time_limit`` results at once (:func:`_expired_items`)."""
+    out = []
+    for k, (i, c, r, o, pre) in enumerate(items):
+        if expired(end):
+            return out + _expired_items(items[k:], retries, end)
+        out.append((i, _solve_item(c, r, o, pre, retries, end)))
+    return out
+
+
+def _expired_items(items, retries, end) -> list:
+    """``time_limit`` results of items not started before ``end``: point problems of equal size through
+    :func:`tritools.solve.call_limit.expired_points` (vectorised), the others one by one (their local estimate)."""
+    out, points = [], {}
+    for i, c, r, o, pre in items:
+        pp = _as_point_problem(c, r)
+        if pp is None:
+            out.append((i, _solve_item(c, r, o, pre, retries, end)))
+        else:
+            points.setdefault((len(pp[1]), o), []).append((i, *pp))
+    for (_, o), group in points.items():
+        res = expired_points(np.array([g[1] for g in group]), np.array([g[2] for g in group]), o)
+        out.extend(zip([g[0] for g in group], res))
+    return out
 
 
 def _progress_bar(total: int, progress):
@@ -190,7 +220,7 @@ class BatchOutcome:
         return out
 
 
-def _run_items(items, retries, executor, chunk_size: int, store) -> None:
+def _run_items(items, retries, executor, chunk_size: int, store, end=None) -> None:
     """Solve per-item problems in chunks through ``executor`` (see the module docstring)."""
     chunks = [items[k:k + chunk_size] for k in range(0, len(items), chunk_size)]
     if not chunks:
@@ -206,7 +236,7 @@ def _run_items(items, retries, executor, chunk_size: int, store) -> None:
         if ex is not None:
             futures = {}
             try:
-                futures = {ex.submit(_run_chunk, chunks[k], retries): k for k in pending}
+                futures = {ex.submit(_run_chunk, chunks[k], retries, end): k for k in pending}
                 for fut in cf.as_completed(futures):
                     k = futures[fut]
                     try:
@@ -223,7 +253,7 @@ def _run_items(items, retries, executor, chunk_size: int, store) -> None:
             except cf.BrokenExecutor as exc:       # a worker died: the unfinished chunks are retried here
                 log.warning("executor broke (%s); retrying %d chunk(s) in this process", exc, len(pending))
         for k in list(pending):
-            store(_run_chunk(chunks[k], retries))
+            store(_run_chunk(chunks[k], retries, end))
             pending.remove(k)
     finally:
         if own is not None:
@@ -234,27 +264,39 @@ def solve_point_stack(cameras: np.ndarray, points2d: np.ndarray, opts: Triangula
                       chunk_size: int = DEFAULT_CHUNK_SIZE) -> BatchOutcome:
     """M point problems of N views given as stacks (cameras (M, N, 3, 4), points2d (M, N, 2)): the vectorised
     paths of :class:`PointStack`, then the per-point path for the rest (no per-item parsing)."""
-    M = len(points2d)
-    out = BatchOutcome(M)
-    stack = PointStack(cameras, points2d, opts).run()
-    items = []
-    for m in range(M):
-        if stack.done[m]:
-            out.stacked[m] = (stack, m)
-        else:
-            items.append((m, *stack.item(m), stack.todo.get(m, opts), stack.prefix[m]))
+    with call_limit(opts.total_time_limit) as end:
+        M = len(points2d)
+        out = BatchOutcome(M)
+        if expired(end):                          # past the whole call's end: estimates only
+            out.objects.update(enumerate(expired_points(cameras, points2d, opts)))
+            return out
+        stack = PointStack(cameras, points2d, opts).run()
+        items = []
+        for m in range(M):
+            if stack.done[m]:
+                out.stacked[m] = (stack, m)
+            else:
+                items.append((m, *stack.item(m), stack.todo.get(m, opts), stack.prefix[m]))
 
-    def store(pairs):
-        for i, r in pairs:
-            out.objects[i] = r
+        def store(pairs):
+            for i, r in pairs:
+                out.objects[i] = r
 
-    _run_items(items, (), executor, chunk_size, store)
+        _run_items(items, (), executor, chunk_size, store, end)
     return out
+
 
 
 def solve_point_problems(problems, opts: TriangulationOptions, *, executor=None, progress=None, retries=(),
                          chunk_size: int = DEFAULT_CHUNK_SIZE) -> BatchOutcome:
     """The engine of :func:`triangulate_many` (module docstring); ``problems`` a sequence of (cameras, regions)."""
+    with call_limit(opts.total_time_limit) as end:
+        return _solve_problems(problems, opts, executor, progress, retries, chunk_size, end)
+
+
+def _solve_problems(problems, opts: TriangulationOptions, executor, progress, retries, chunk_size: int, end
+                    ) -> BatchOutcome:
+    """:func:`solve_point_problems` within the whole call's ``end`` (:mod:`.call_limit`)."""
     n = len(problems)
     out = BatchOutcome(n)
     bar = _progress_bar(n, progress)
@@ -278,6 +320,9 @@ def solve_point_problems(problems, opts: TriangulationOptions, *, executor=None,
         else:
             groups.setdefault(len(pp[1]), []).append((i, *pp))
     for group in disc_groups.values():
+        if expired(end):                              # past the whole call's end: the per-point path's result
+            items.extend((g[0], g[1], g[4], opts, ()) for g in group)
+            continue
         done, rest = solve_disc_group(group, opts)
         out.objects.update(done)
         items.extend(rest)
@@ -285,7 +330,13 @@ def solve_point_problems(problems, opts: TriangulationOptions, *, executor=None,
         bar.update(len(out.objects))
     for group in groups.values():
         idx = [g[0] for g in group]
-        stack = PointStack(np.array([g[1] for g in group]), np.array([g[2] for g in group]), opts).run()
+        C, x = np.array([g[1] for g in group]), np.array([g[2] for g in group])
+        if expired(end):                              # past the whole call's end: estimates only
+            out.objects.update(zip(idx, expired_points(C, x, opts)))
+            if bar is not None:
+                bar.update(len(idx))
+            continue
+        stack = PointStack(C, x, opts).run()
         for m, i in enumerate(idx):
             if stack.done[m]:
                 out.stacked[i] = (stack, m)
@@ -302,7 +353,7 @@ def solve_point_problems(problems, opts: TriangulationOptions, *, executor=None,
 
     items.sort(key=lambda it: it[0])
     try:
-        _run_items(items, tuple(retries), executor, chunk_size, store)
+        _run_items(items, tuple(retries), executor, chunk_size, store, end)
     finally:
         if bar is not None:
             bar.close()
@@ -322,7 +373,9 @@ def triangulate_many(problems: Iterable[Sequence], method: str | Method | None =
     problems : iterable of (cameras (N, 3, 4), regions) pairs; regions as for :func:`tritools.triangulate`
     method, delta, max_delta, options, overrides : as for :func:`tritools.triangulate` (one
         :class:`~tritools.solve.options.TriangulationOptions` for the whole batch; the default path "auto"
-        certifies by verification first, vectorised over problems with the same structure)
+        certifies by verification first, vectorised over problems with the same structure); the budget's
+        ``time_limit`` is per problem, ``total_time_limit`` bounds the whole call (:mod:`.call_limit`: the
+        problems left when it expires get status ``time_limit`` with their estimate)
     executor : None, a :class:`concurrent.futures.Executor`, or a ``dask.distributed.Client``
         (see the module docstring for the default)
     progress : a tqdm bar: True, False / None (the default: no bar), or "auto" (only for batches of

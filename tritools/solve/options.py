@@ -14,19 +14,28 @@ Defaults (the same everywhere):
 * ``path="auto"``: certification by verification before any SDP where it applies;
 * ``sparsity="auto"``: dense where small, view cliques (chain of view triples plus the dense
   degree-2 certificate) where not;
-* ``budget``: 60 s and 2 GiB per point; programs that do not fit are skipped with status
-  ``budget_exceeded``, a point that runs out of time gets ``time_limit`` (the keyword shorthands
-  ``time_limit=`` and ``max_bytes=`` of every entry point change one field of it).
+* ``budget``: :data:`sospoly.budget.DEFAULT_TIME_LIMIT` (60 s) and 2 GiB **per point** (``time_limit`` means
+  per point everywhere: each problem of a batch gets its own); programs that do not fit are skipped with
+  status ``budget_exceeded``, a point that runs out of time gets ``time_limit`` (the keyword shorthands
+  ``time_limit=`` and ``max_bytes=`` of every entry point change one field of it);
+* ``total_time_limit=None``: no limit on a whole batch call (``triangulate_many``, ``triangulate_points``,
+  the COLMAP workflow); with a number of seconds, the points not finished when it expires get status
+  ``time_limit`` -- every point still gets its row, with the estimate found so far.
+
+Every check raises :class:`OptionError` (a ValueError; :class:`OptionTypeError` where the type is wrong,
+also a TypeError) whose ``field`` names the option, so the command line and the problem-file reader place
+the message at the flag or field without parsing it.
 """
 from __future__ import annotations
 
 import dataclasses
 import enum
+import math
 import numbers
 from dataclasses import dataclass
 
-from sospoly import Budget, GramForm, Multiplier, Polynomial, Tolerances
-from sospoly.budget import as_budget
+from sospoly import Budget, GramForm, Multiplier, Polynomial, Sparsity, Tolerances
+from sospoly.budget import DEFAULT_TIME_LIMIT, as_budget
 from sospoly.tolerances import as_tolerances
 from sospoly.solvers import get_backend
 
@@ -34,7 +43,37 @@ from ..model.cameras import WorldFrame, as_world_frame
 from ..model.constraints import Method
 
 __all__ = ["TriangulationOptions", "SolvePath", "Sparsity", "MethodChoice", "DEFAULT_OPTIONS", "TRIANGULATION_BUDGET",
-           "options_from"]
+           "options_from", "OptionError", "OptionTypeError", "SPARSITY_CHOICES", "SPARSITY_SPELLINGS",
+           "DEFAULT_TIME_LIMIT"]
+
+
+class OptionError(ValueError):
+    """An invalid option: ``field`` names it, ``reason`` says what is wrong (``"must be ..."``).
+
+    ``str()`` is ``"<field> <reason>"`` unless a whole ``message`` is given (a sentence that reads better
+    than the two parts, e.g. ``"max_delta (2) must be >= delta (4)"``).  The command line turns ``field``
+    into its flag (``max_delta`` -> ``--max-delta``) and the problem-file reader into the field's location:
+    nothing parses the text.  ``detail`` is ``reason`` (its older name)."""
+
+    def __init__(self, field: str, reason: str, message: str | None = None):
+        super().__init__(message if message is not None else f"{field} {reason}")
+        self.field, self.reason, self.message = field, reason, message
+
+    @property
+    def detail(self) -> str:
+        return self.reason
+
+    @property
+    def text(self) -> str:
+        """What to print after the option's location: the whole ``message`` if one was given, else ``reason``."""
+        return self.message if self.message is not None else self.reason
+
+    def __reduce__(self):                   # picklable across processes (executors)
+        return type(self), (self.field, self.reason, self.message)
+
+
+class OptionTypeError(OptionError, TypeError):
+    """An option of the wrong type (an :class:`OptionError` that is also a TypeError)."""
 
 
 class SolvePath(str, enum.Enum):
@@ -43,11 +82,11 @@ class SolvePath(str, enum.Enum):
     AUTO = "auto"
 
 
-class Sparsity(str, enum.Enum):
-    """The formulation of certificates above degree 2 (see :mod:`tritools.solve.plan`)."""
-    AUTO = "auto"          #: dense where the program is small, view cliques where not
-    NONE = "none"          #: the dense certificate (the paper's)
-    VIEWS = "views"        #: view cliques (band of view pairs; Theorem 1: chain of triples) + the dense degree 2
+#: the ``sparsity`` choices of a triangulation (:class:`sospoly.Sparsity`): auto, dense (spelt ``"none"`` too) and
+#: the view cliques (the caller-given cliques of sospoly, spelt ``"views"``: chain of view triples + dense degree 2).
+SPARSITY_CHOICES = (Sparsity.AUTO, Sparsity.DENSE, Sparsity.CLIQUES)
+#: tritools' own spelling of a sparsity choice, accepted on input.
+SPARSITY_SPELLINGS = {"views": Sparsity.CLIQUES}
 
 
 class MethodChoice(str, enum.Enum):
@@ -57,8 +96,9 @@ class MethodChoice(str, enum.Enum):
     COROLLARY1 = "corollary1"
 
 
-#: the default budget of one triangulation (all its degrees together): 60 s, 2 GiB.
-TRIANGULATION_BUDGET = Budget(time_limit=60.0, max_bytes=2 * 2 ** 30)
+#: the default budget of one point (all its degrees together): :data:`sospoly.budget.DEFAULT_TIME_LIMIT` (60 s),
+#: 2 GiB.
+TRIANGULATION_BUDGET = Budget(time_limit=DEFAULT_TIME_LIMIT, max_bytes=2 * 2 ** 30)
 #: keyword shorthands of :meth:`TriangulationOptions.replace` (and so of ``triangulate(..., time_limit=5)``) for
 #: the fields of the budget.
 BUDGET_SHORTHANDS = ("time_limit", "max_bytes")
@@ -69,7 +109,14 @@ def _enum(cls, value, name):
         return cls(getattr(value, "value", value))
     except ValueError:
         allowed = ", ".join(repr(e.value) for e in cls)
-        raise ValueError(f"{name} must be one of {allowed}, got {value!r}") from None
+        raise OptionError(name, f"must be one of {allowed}, got {value!r}") from None
+
+
+def _sparsity(value) -> Sparsity:
+    try:
+        return Sparsity.parse(value, "sparsity", SPARSITY_CHOICES, SPARSITY_SPELLINGS)
+    except ValueError:
+        raise OptionError("sparsity", f"must be one of 'auto', 'none', 'views', got {value!r}") from None
 
 
 def _degree(value, name: str, minimum: int = 2):
@@ -79,12 +126,52 @@ def _degree(value, name: str, minimum: int = 2):
         if isinstance(value, float) and value.is_integer():
             value = int(value)
         else:
-            raise ValueError(f"{name} must be an even integer >= {minimum}, got {value!r}")
+            raise OptionError(name, f"must be an even integer >= {minimum}, got {value!r}")
     value = int(value)
     if value < minimum or value % 2:
-        raise ValueError(f"{name} must be an even integer >= {minimum}, got {value}")
+        raise OptionError(name, f"must be an even integer >= {minimum}, got {value}")
     if value > 1000:
-        raise ValueError(f"{name} = {value} is far beyond any solvable relaxation (at most 1000)")
+        raise OptionError(name, f"must be at most 1000, got {value}",
+                          f"{name} = {value} is far beyond any solvable relaxation (at most 1000)")
+    return value
+
+
+def _seconds(value, name: str):
+    """None, or a positive number of seconds (inf: no limit)."""
+    if value is None:
+        return None
+    if isinstance(value, bool) or not isinstance(value, numbers.Real) or math.isnan(value) or not value > 0:
+        raise OptionError(name, f"must be a positive number of seconds or None, got {value!r}")
+    return float(value)
+
+
+def _multiplier(m):
+    if isinstance(m, str) and not isinstance(m, Multiplier):
+        return _enum(Multiplier, m, "multiplier")
+    if not isinstance(m, (Multiplier, Polynomial)) and not (isinstance(m, numbers.Real) and not isinstance(m, bool)
+                                                            and m > 0):
+        raise OptionError("multiplier", f"must be 'fixed', 'putinar', 'free', a positive number or an SOS "
+                                        f"Polynomial, got {m!r}")
+    return m
+
+
+def _checked(name: str, check, value):
+    """``check(value)``, with its ValueError / TypeError as an :class:`OptionError` / :class:`OptionTypeError`
+    naming ``name`` (the checks of sospoly and of the camera model, which know no option names)."""
+    try:
+        return check(value)
+    except TypeError as exc:
+        raise OptionTypeError(name, f"is invalid: {exc}", str(exc)) from None
+    except ValueError as exc:
+        raise OptionError(name, f"is invalid: {exc}", str(exc)) from None
+
+
+def _backend(value):
+    if isinstance(value, str):
+        if value.partition(":")[0] not in ("clarabel", "ipm", "auto", "cvxpy"):
+            raise OptionError("backend", f"must be 'clarabel', 'ipm', 'auto', 'cvxpy' or 'cvxpy:<SOLVER>', "
+                                         f"got {value!r}")
+        _checked("backend", get_backend, value)     # an unknown or uninstalled solver, named
     return value
 
 
@@ -99,19 +186,26 @@ class TriangulationOptions:
     max_delta : last degree tried (default: 4 for ``method="auto"``; ``delta`` when given, else
         delta_min + 2, for an explicit method)
     path : "auto" (certification by verification first where it applies) or "sdp"
-    sparsity : "auto", "none" (dense) or "views" (view-clique formulation)
+    sparsity : :class:`sospoly.Sparsity` ``AUTO``, ``DENSE`` or ``CLIQUES`` (the view cliques), spelt
+        "auto", "none" (or "dense") and "views"
     multiplier : "fixed" (the paper's q = (1 + ||v||^2)^(delta/2 - 1); q = 1 for sparse formulations),
         "putinar" (q = 1), "free" (GEVP by bisection) or a positive number / SOS Polynomial
     refine : local L2 refinement of the extracted estimate (it can only lower gamma_UB)
     normalize : normalise the data (the L2 problem is unchanged, see :mod:`tritools.model.normalize`)
     backend, form : sospoly back-end (None: automatic) and Gram form
     tolerances : :class:`sospoly.Tolerances` (the certificate rule)
-    budget : :class:`sospoly.Budget` for the whole call (time limit, memory per program)
+    budget : :class:`sospoly.Budget` of *one point* (time limit, memory per program); every point of a batch
+        gets its own
+    total_time_limit : seconds for a whole batch call (None, the default: no limit); the points not finished
+        when it expires get status ``time_limit`` with the estimate found so far (a single ``triangulate``
+        call is bounded by ``budget.time_limit`` alone)
     require_in_front : a certified minimiser behind a camera gets status ``behind_camera`` instead of
         ``optimal`` (by default it stays ``optimal`` with ``in_front=False`` and a message)
     world_frame : handedness of the cameras' world frame, the sign rule of the depths that judge
         ``in_front`` (:class:`tritools.model.cameras.WorldFrame`: ``"right_handed"``, the default, or
         ``"reflected"`` for a mirrored reconstruction such as the Oxford corridor and house sequences)
+
+    Every invalid field raises :class:`OptionError` naming it.
     """
 
     method: MethodChoice | str = MethodChoice.AUTO
@@ -128,52 +222,48 @@ class TriangulationOptions:
     budget: Budget | None = None
     require_in_front: bool = False
     world_frame: WorldFrame | str = WorldFrame.RIGHT_HANDED
+    total_time_limit: float | None = None
 
     def __post_init__(self) -> None:
         set_ = object.__setattr__
         set_(self, "method", _enum(MethodChoice, self.method, "method"))
         set_(self, "path", _enum(SolvePath, self.path, "path"))
-        set_(self, "sparsity", _enum(Sparsity, self.sparsity, "sparsity"))
+        set_(self, "sparsity", _sparsity(self.sparsity))
         set_(self, "form", _enum(GramForm, self.form, "form"))
-        set_(self, "world_frame", as_world_frame(self.world_frame))
+        set_(self, "world_frame", _checked("world_frame", as_world_frame, self.world_frame))
         set_(self, "delta", _degree(self.delta, "delta"))
         set_(self, "max_delta", _degree(self.max_delta, "max_delta"))
         if self.delta is not None and self.max_delta is not None and self.max_delta < self.delta:
-            raise ValueError(f"max_delta ({self.max_delta}) must be >= delta ({self.delta})")
-        m = self.multiplier
-        if isinstance(m, str) and not isinstance(m, Multiplier):
-            set_(self, "multiplier", _enum(Multiplier, m, "multiplier"))
-        elif not isinstance(m, (Multiplier, Polynomial)) and not (isinstance(m, numbers.Real)
-                                                                 and not isinstance(m, bool) and m > 0):
-            raise ValueError(f"multiplier must be 'fixed', 'putinar', 'free', a positive number or an SOS "
-                             f"Polynomial, got {m!r}")
+            raise OptionError("max_delta", f"must be >= delta ({self.delta}), got {self.max_delta}",
+                              f"max_delta ({self.max_delta}) must be >= delta ({self.delta})")
+        set_(self, "multiplier", _multiplier(self.multiplier))
         for name in ("refine", "normalize", "require_in_front"):
             if not isinstance(getattr(self, name), (bool, int)) or isinstance(getattr(self, name), float):
-                raise TypeError(f"{name} must be True or False, got {getattr(self, name)!r}")
+                raise OptionTypeError(name, f"must be True or False, got {getattr(self, name)!r}")
             set_(self, name, bool(getattr(self, name)))
-        set_(self, "tolerances", as_tolerances(self.tolerances))
-        set_(self, "budget", TRIANGULATION_BUDGET if self.budget is None else as_budget(self.budget))
-        if isinstance(self.backend, str) and self.backend.partition(":")[0] not in ("clarabel", "ipm", "auto",
-                                                                                    "cvxpy"):
-            raise ValueError(f"backend must be 'clarabel', 'ipm', 'auto', 'cvxpy' or 'cvxpy:<SOLVER>', "
-                             f"got {self.backend!r}")
-        if isinstance(self.backend, str):
-            get_backend(self.backend)    # ValueError / ImportError naming an unknown or uninstalled solver
+        set_(self, "tolerances", _checked("tolerances", as_tolerances, self.tolerances))
+        set_(self, "budget", TRIANGULATION_BUDGET if self.budget is None else _checked("budget", as_budget,
+                                                                                        self.budget))
+        set_(self, "total_time_limit", _seconds(self.total_time_limit, "total_time_limit"))
+        _backend(self.backend)
 
     def replace(self, **changes) -> TriangulationOptions:
         """A copy with some fields changed (validated again); None values are ignored.
 
-        ``time_limit`` (seconds) and ``max_bytes`` are accepted as shorthands for the fields of the
+        ``time_limit`` (seconds per point) and ``max_bytes`` are accepted as shorthands for the fields of the
         budget: ``replace(time_limit=5)`` keeps the budget's memory limit (``budget=Budget(time_limit=5)``
         would take sospoly's default memory limit instead)."""
         changes = {k: v for k, v in changes.items() if v is not None}
         limits = {k: changes.pop(k) for k in BUDGET_SHORTHANDS if k in changes}
         if limits:
-            base = as_budget(changes["budget"]) if "budget" in changes else self.budget
-            changes["budget"] = dataclasses.replace(base, **limits)      # validated by Budget
+            base = _checked("budget", as_budget, changes["budget"]) if "budget" in changes else self.budget
+            for name, value in limits.items():         # validated by sospoly.Budget, named here
+                _checked(name, lambda v, n=name: Budget(**{n: v}), value)
+            changes["budget"] = dataclasses.replace(base, **limits)
         unknown = set(changes) - {f.name for f in dataclasses.fields(self)}
         if unknown:
-            raise TypeError(f"unknown triangulation option(s): {', '.join(sorted(unknown))}")
+            raise OptionTypeError(sorted(unknown)[0], "is not a triangulation option",
+                                  f"unknown triangulation option(s): {', '.join(sorted(unknown))}")
         return dataclasses.replace(self, **changes) if changes else self
 
     @property
@@ -188,5 +278,5 @@ def options_from(options: TriangulationOptions | None = None, **overrides) -> Tr
     """The options of a call: ``options`` (default :data:`DEFAULT_OPTIONS`) with the keyword overrides that
     are not None (the one place where the keyword arguments of the public functions are merged)."""
     if options is not None and not isinstance(options, TriangulationOptions):
-        raise TypeError(f"options must be a TriangulationOptions, got {type(options).__name__}")
+        raise OptionTypeError("options", f"must be a TriangulationOptions, got {type(options).__name__}")
     return (options or DEFAULT_OPTIONS).replace(**overrides)

@@ -50,9 +50,9 @@ class Step:
 
 
 def _formulation(options: TriangulationOptions, method: Method, delta: int, n_views: int, n_vars: int) -> str:
-    if delta <= 2 or options.sparsity == Sparsity.NONE:
+    if delta <= 2 or options.sparsity == Sparsity.DENSE:
         return "dense"
-    if options.sparsity == Sparsity.VIEWS:
+    if options.sparsity == Sparsity.CLIQUES:          # the view cliques ("views")
         return "views"
     if n_views <= 2 or (n_views == 3 and method == Method.THEOREM1):
         return "dense"                              # one clique holds every view: the views add nothing

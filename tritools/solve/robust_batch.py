@@ -26,6 +26,7 @@ import numpy as np
 from ..model.geometry import validate_cameras
 from ..model.regions import as_regions
 from ..result import Status, TriangulationResult
+from .call_limit import call_limit, current_end, mark_cut, within
 from .robust import robust_thresholds, triangulate_robust
 
 __all__ = ["robust_many", "thresholds_for"]
@@ -82,7 +83,13 @@ def _search_or_failure(cameras, regions, c, opts):
 
 
 def robust_many(problems: list, robust, opts, *, executor=None, progress=None) -> list[TriangulationResult]:
-    """One TLS result per problem, in input order (module docstring)."""
+    """One TLS result per problem, in input order (module docstring); ``opts.total_time_limit`` bounds the whole
+    call: each chunk's searches get at most the time left (:mod:`.call_limit`)."""
+    with call_limit(opts.total_time_limit):          # the whole call within total_time_limit (.call_limit)
+        return _robust_many(problems, robust, opts, executor, progress)
+
+
+def _robust_many(problems: list, robust, opts, executor, progress) -> list[TriangulationResult]:
     from .batch import _as_point_problem, solve_point_problems
 
     thresholds = thresholds_for(robust, problems)
@@ -123,8 +130,9 @@ def _drive_chunks(problems, thresholds, opts, idx, out) -> None:
     for k in range(0, len(idx), ROBUST_CHUNK):
         t0 = time.perf_counter()
         searches = []
+        run, cut = within(opts, current_end())
         for i in idx[k:k + ROBUST_CHUNK]:
-            s = _search_or_failure(*problems[i], thresholds[i], opts)
+            s = _search_or_failure(*problems[i], thresholds[i], run)
             if isinstance(s, TriangulationResult):
                 out[i] = s
             else:
@@ -132,4 +140,5 @@ def _drive_chunks(problems, thresholds, opts, idx, out) -> None:
         results = drive([s for _, s in searches])
         share = (time.perf_counter() - t0) / max(1, len(searches))
         for (i, _), r in zip(searches, results):
-            out[i] = dataclasses.replace(r, timings={**r.timings, "batch_share": share})
+            r = dataclasses.replace(r, timings={**r.timings, "batch_share": share})
+            out[i] = mark_cut(r) if cut else r

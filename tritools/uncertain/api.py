@@ -21,6 +21,7 @@ from sospoly.solvers import BlockStatus, StackedConicOptions
 from ..model.cameras import WorldFrame, depth_rows, as_world_frame, power2_scale
 from ..model.geometry import validate_cameras
 from ..model.regions import Ellipse, EllipseBorder, Point, Segment, as_regions
+from ..solve.options import OptionError, OptionTypeError
 from .angle import triangulation_angles
 from .rigour import box_from_bounds, combine, lower_bounds, round_down, round_up
 from .sets import EPS, dilate, structure_key, view_blocks, view_coefficients
@@ -70,22 +71,25 @@ class UncertaintyOptions:
     world_frame: WorldFrame | str = WorldFrame.RIGHT_HANDED
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "world_frame", as_world_frame(self.world_frame))
+        try:
+            object.__setattr__(self, "world_frame", as_world_frame(self.world_frame))
+        except ValueError as exc:
+            raise OptionError("world_frame", f"is invalid: {exc}", str(exc)) from None
         d = self.level_degree
         if d is not None and (isinstance(d, bool) or not isinstance(d, (int, np.integer)) or d < 2 or d % 2):
-            raise ValueError(f"level_degree must be None or an even integer >= 2, got {d!r}")
+            raise OptionError("level_degree", f"must be None or an even integer >= 2, got {d!r}")
         for name in ("depth_bounds", "widen_roundoff"):
             if not isinstance(getattr(self, name), (bool, np.bool_)):
-                raise TypeError(f"{name} must be True or False, got {getattr(self, name)!r}")
+                raise OptionTypeError(name, f"must be True or False, got {getattr(self, name)!r}")
         raw = np.atleast_1d(np.asarray(self.dilation)) if not isinstance(self.dilation, (str, bool)) else None
         d = raw.astype(float) if raw is not None and raw.dtype.kind in "iuf" else None
         if d is None or d.ndim != 1 or not np.all(np.isfinite(d)) or np.any(d < 0) or np.any(d > DILATION_MAX):
-            raise ValueError(f"dilation must be a finite number in [0, {DILATION_MAX:g}] pixels or one per view, "
-                             f"got {self.dilation!r}")
+            raise OptionError("dilation", f"must be a finite number in [0, {DILATION_MAX:g}] pixels or one per view, "
+                                          f"got {self.dilation!r}")
         if not isinstance(self.solver, StackedConicOptions):
-            raise TypeError(f"solver must be a StackedConicOptions, got {type(self.solver).__name__}")
+            raise OptionTypeError("solver", f"must be a StackedConicOptions, got {type(self.solver).__name__}")
         if not (isinstance(self.witness_rtol, (int, float)) and 0 <= self.witness_rtol < 1):
-            raise ValueError(f"witness_rtol must be in [0, 1), got {self.witness_rtol!r}")
+            raise OptionError("witness_rtol", f"must be in [0, 1), got {self.witness_rtol!r}")
 
 
 @dataclass(frozen=True)

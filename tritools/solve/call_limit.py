@@ -1,0 +1,111 @@
+"""The whole-call time limit of a batch: ``TriangulationOptions.total_time_limit``.
+
+``time_limit`` (the options' budget) bounds *one point*: every problem of a batch gets its own.  A batch
+call -- :func:`tritools.triangulate_many`, :func:`tritools.triangulate_points`, the COLMAP workflow,
+``tritools solve`` / ``dataset`` / ``colmap`` -- may also be bounded as a whole by ``total_time_limit``
+seconds (None, the default: no bound).  With an end E = (start of the call) + ``total_time_limit``:
+
+* a point solved one by one gets the per-point limit min(``time_limit``, E - now): it stops at E at the
+  latest, with the best valid bounds found so far (status ``time_limit``);
+* a point whose turn comes after E is not solved: it gets status ``time_limit`` with the estimate of last
+  resort -- the refined DLT point, X and gamma_UB = gamma(X), no lower bound: one per-point call
+  (:func:`tritools.solve.trivial.local_estimate`) for other regions, and for stacks of point problems
+  :func:`expired_points`, vectorised (the vectorised certification steps are skipped);
+* every point keeps its row, in input order, and the message of a point cut by E says so.
+
+E is the wall clock (``time.time()``), so that per-point work in other processes (the local pool, dask
+workers on the same clock) sees the same end.  Nested batch calls share the outermost end: :func:`call_limit`
+keeps an enclosing scope's earlier end (as :func:`sospoly.budget.deadline_scope` does for one solve).
+"""
+from __future__ import annotations
+
+import contextlib
+import contextvars
+import dataclasses
+import math
+import time
+
+import numpy as np
+
+from ..model.stacked import dlt_stack, refine_points_stack
+from ..result import Attempt, Status, TriangulationResult
+from .report import points_report_stack
+
+__all__ = ["call_limit", "current_end", "expired", "within", "mark_cut", "expired_points", "EXPIRED_SLICE",
+           "CUT_MESSAGE"]
+
+#: the per-point time limit of a point whose turn comes after the end: enough to return the local estimate only.
+EXPIRED_SLICE = 1e-9
+#: appended to the message of a point stopped by the whole-call limit.
+CUT_MESSAGE = "the whole call's time limit (total_time_limit) was reached"
+
+_END: contextvars.ContextVar = contextvars.ContextVar("tritools_call_end", default=None)
+
+
+@contextlib.contextmanager
+def call_limit(seconds: float | None):
+    """Make ``time.time() + seconds`` the end of the batch call inside the block (None or inf: none; an
+    enclosing scope's earlier end is kept); yields the end (None: no limit)."""
+    outer = _END.get()
+    end = None if seconds is None or math.isinf(seconds) else time.time() + float(seconds)
+    if outer is not None and (end is None or outer < end):
+        end = outer
+    token = _END.set(end)
+    try:
+        yield end
+    finally:
+        _END.reset(token)
+
+
+def current_end() -> float | None:
+    """The end of the enclosing :func:`call_limit` scope (None: no whole-call limit)."""
+    return _END.get()
+
+
+def expired(end: float | None) -> bool:
+    return end is not None and time.time() >= end
+
+
+def within(opts, end: float | None):
+    """(options, cut): ``opts`` with its per-point time limit cut to what is left before ``end`` (at least
+    :data:`EXPIRED_SLICE`), and whether it was cut."""
+    if end is None:
+        return opts, False
+    left = end - time.time()
+    per = opts.budget.time_limit
+    if per is not None and per <= left:
+        return opts, False
+    return opts.replace(time_limit=max(left, EXPIRED_SLICE)), True
+
+
+def mark_cut(result):
+    """``result`` with :data:`CUT_MESSAGE` added to its message when it stopped on time (status ``time_limit``)."""
+    if getattr(result.status, "value", result.status) != "time_limit" or CUT_MESSAGE in (result.message or ""):
+        return result
+    message = f"{result.message}; {CUT_MESSAGE}" if result.message else CUT_MESSAGE
+    return dataclasses.replace(result, message=message)
+
+
+def expired_points(C: np.ndarray, x: np.ndarray, opts) -> list[TriangulationResult]:
+    """``time_limit`` results of point problems (C (M, N, 3, 4), x (M, N, 2)) not solved before the end: the DLT
+    point refined by Levenberg-Marquardt (vectorised), gamma_UB = gamma(X) (a valid upper bound: the value of the
+    objective at a point), no lower bound, not optimal."""
+    t0 = time.perf_counter()
+    C, x = np.asarray(C, float), np.asarray(x, float)
+    with np.errstate(all="ignore"):
+        X0, ok = dlt_stack(C, x)
+        X, ok = refine_points_stack(C, x, X0, ok)
+        gamma, res, dep = points_report_stack(C, x, X, opts.world_frame)
+    share = (time.perf_counter() - t0) / max(len(x), 1)
+    out = []
+    for m in range(len(x)):
+        good = bool(ok[m]) and bool(np.isfinite(gamma[m]))
+        why = "the local L2 refinement of the DLT point" if good else "no estimate: the DLT point is at infinity"
+        out.append(TriangulationResult(
+            opts.method.value, Status.TIME_LIMIT, X=X[m] if good else None,
+            gamma_ub=float(gamma[m]) if good else None, optimal=False,
+            message=f"{CUT_MESSAGE} before this point was solved; X and gamma_UB from {why}",
+            timings={"batch_share": share}, in_front=bool(np.all(dep[m] > 0)) if good else None,
+            depths=dep[m] if good else None, residuals=res[m] if good else None,
+            attempts=(Attempt(opts.method.value, None, Status.TIME_LIMIT.value, step="call"),)))
+    return out

@@ -15,8 +15,8 @@ from typing import ClassVar
 
 import numpy as np
 
-from .base import (Region, RegionPolynomials, as_matrix, as_points, as_vector, check_xy, real_array, similarity_args,
-                   square)
+from .base import (ConeKind, ConicForm, Region, RegionExtent, RegionPolynomials, as_matrix, as_points, as_vector,
+                   check_xy, real_array, similarity_args, square)
 
 __all__ = ["Polytope", "polytope_vertices", "POLYTOPE_RANK_RTOL", "POLYTOPE_VERTEX_RTOL", "POLYTOPE_ROUNDOFF",
            "POLYTOPE_CHUNK"]
@@ -338,6 +338,15 @@ class Polytope(Region):
     def similarity(self, scale, shift) -> Polytope:
         s, t = similarity_args(scale, shift)
         return Polytope(self.B / s, self.c + self.B @ t)
+
+    def extent(self) -> RegionExtent:
+        """``(rho, rho)``, rho the largest vertex norm: the auxiliary ``y`` is a point of the polygon."""
+        rho = float(np.max(np.hypot(self.vertices[:, 0], self.vertices[:, 1])))
+        return RegionExtent.outward(rho, rho)
+
+    def conic_form(self) -> ConicForm:
+        """``(1 -+ c_k) s -+ B_k a >= 0``, k = 1..m."""
+        return ConicForm(ConeKind.POLYTOPE, self.center, B=self.B, c=self.c)
 
     @classmethod
     def box(cls, center, half_widths) -> Polytope:

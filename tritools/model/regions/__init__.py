@@ -31,8 +31,9 @@ attribute ``kind`` registers it for :meth:`Region.from_dict`.
 Layout: :mod:`.base` (the interface, the registry and the validation helpers),
 :mod:`.point` (Point, Segment), :mod:`.polytope` (Polytope and its vertices),
 :mod:`.ellipse` (EllipseBorder, Ellipse), :mod:`.coerce` (:func:`as_regions`, the one
-input boundary for regions), :mod:`.dilation` (:func:`dilate`, from the conic form).  Every public name is importable
-from this package.
+input boundary for regions), :mod:`.forms` (:class:`RegionExtent`, :class:`ConicForm`: what
+the solvers need of a region), :mod:`.dilation` (:func:`dilate`, from the conic form).  Every
+public name is importable from this package.
 """
 from __future__ import annotations
 
@@ -40,8 +41,9 @@ from __future__ import annotations
 # which tritools.io.problem_file lists in its messages): point, segment, polytope, ellipse_border,
 # ellipse.  Keep it; import sorters are told to leave this block alone.
 # isort: off
-from .base import (EXTENT_ROUND_UP, ConeKind, ConicForm, Region, RegionExtent, RegionPolynomials, as_matrix,
-                   as_points, as_vector, check_xy, positive_number, real_array, similarity_args, square)
+from .forms import EXTENT_ROUND_UP, ConeKind, ConicForm, RegionExtent
+from .base import (Region, RegionPolynomials, as_matrix, as_points, as_vector, check_xy, positive_number, real_array,
+                   similarity_args, square)
 from .point import Point, Segment
 from .polytope import (POLYTOPE_CHUNK, POLYTOPE_RANK_RTOL, POLYTOPE_ROUNDOFF, POLYTOPE_VERTEX_RTOL, Polytope,
                        polytope_vertices)

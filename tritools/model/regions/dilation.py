@@ -22,8 +22,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from .base import ConeKind, ConicForm, Region
+from .base import Region
 from .ellipse import Ellipse
+from .forms import ConeKind, ConicForm
 from .polytope import Polytope
 
 __all__ = ["dilate", "DILATION_GROW"]

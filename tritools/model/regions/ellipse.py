@@ -9,8 +9,9 @@ from typing import ClassVar
 
 import numpy as np
 
-from .base import (ConeKind, ConicForm, Region, RegionExtent, RegionPolynomials, as_matrix, as_points, as_vector,
-                   check_xy, positive_number, similarity_args, square)
+from .base import (Region, RegionPolynomials, as_matrix, as_points, as_vector, check_xy, positive_number,
+                   similarity_args, square)
+from .forms import ConeKind, ConicForm, RegionExtent
 
 __all__ = ["EllipseBorder", "Ellipse", "SYMMETRY_RTOL", "PD_RTOL", "ELLIPSE_MAX_ITER", "ELLIPSE_SCALAR_MAX"]
 

@@ -7,8 +7,8 @@ from typing import ClassVar
 
 import numpy as np
 
-from .base import (ConeKind, ConicForm, Region, RegionExtent, RegionPolynomials, as_points, as_vector, check_xy,
-                   similarity_args, square)
+from .base import Region, RegionPolynomials, as_points, as_vector, check_xy, similarity_args, square
+from .forms import ConeKind, ConicForm, RegionExtent
 
 __all__ = ["Point", "Segment"]
 

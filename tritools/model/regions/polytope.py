@@ -15,8 +15,9 @@ from typing import ClassVar
 
 import numpy as np
 
-from .base import (ConeKind, ConicForm, Region, RegionExtent, RegionPolynomials, as_matrix, as_points, as_vector,
-                   check_xy, real_array, similarity_args, square)
+from .base import (Region, RegionPolynomials, as_matrix, as_points, as_vector, check_xy, real_array, similarity_args,
+                   square)
+from .forms import ConeKind, ConicForm, RegionExtent
 
 __all__ = ["Polytope", "polytope_vertices", "POLYTOPE_RANK_RTOL", "POLYTOPE_VERTEX_RTOL", "POLYTOPE_ROUNDOFF",
            "POLYTOPE_CHUNK"]

@@ -255,6 +255,11 @@ class Region(abc.ABC):
     normalised coordinates).  Subclasses are frozen dataclasses declared with
     ``eq=False``; equality and hashing use :meth:`to_dict`.  A class attribute ``kind``
     registers the subclass for :meth:`from_dict`.
+
+    What the solvers need of a region is asked of the region, never inferred from its class:
+    :meth:`extent` (required by ``triangulate``: the box of the rigorous margin), :meth:`conic_form`
+    (required by ``uncertainty``), :attr:`is_point` and :attr:`disc_radius` (the fast paths; their
+    defaults are correct).  A missing ``extent`` or ``conic_form`` raises a TypeError naming it.
     """
 
     kind: ClassVar[str] = ""

@@ -56,6 +56,7 @@ class Point(Region):
 
     @property
     def is_point(self) -> bool:
+        """True: the region is the point ``x^`` (= :attr:`center`)."""
         return True
 
 

@@ -34,6 +34,7 @@ from sospoly.solvers import with_single_threaded_blas
 
 from ..model.cameras import numeric_cameras
 from ..model.normalize import normalization_stack
+from ..model.regions import Region
 from ..model.stacked import LM_MAX_ITER, LM_STEP_RTOL, damped_step, project_stack
 from .decide import decide, decide_reported, gamma_from_c
 from .fastpath import lagrangian_bounds
@@ -45,8 +46,9 @@ _ROUND_DOWN = 1 - 8 * np.finfo(float).eps
 
 def disc_radius(region) -> float | None:
     """rho when ``region`` is a filled disc of radius rho around its centre (the region's own
-    :attr:`~tritools.model.regions.Region.disc_radius`: an :class:`Ellipse` with D = rho^2 I exactly), else None."""
-    return region.disc_radius
+    :attr:`~tritools.model.regions.Region.disc_radius`: an ``Ellipse`` with D = rho^2 I exactly), else None (also
+    for anything that is not a Region: the batch paths ask before validating)."""
+    return region.disc_radius if isinstance(region, Region) else None
 
 
 @dataclass(frozen=True)

@@ -96,20 +96,29 @@ class ConicForm:
     convexified: bool = False
 
     def __post_init__(self) -> None:
-        try:
-            object.__setattr__(self, "kind", ConeKind(self.kind))
-        except ValueError:
-            raise ValueError(f"ConicForm.kind must be one of {[k.value for k in ConeKind]}, got {self.kind!r}") \
-                from None
-        need = {ConeKind.SEGMENT: {"direction": (2,)}, ConeKind.POLYTOPE: {"B": (-1, 2), "c": (-1,)},
-                ConeKind.ELLIPSE: {"D": (2, 2), "Dinv": (2, 2)}}.get(self.kind, {})
-        for name, shape in {"center": (2,), **need}.items():
-            arr = np.asarray(getattr(self, name), dtype=float) if getattr(self, name) is not None else None
-            if arr is None or arr.ndim != len(shape) or any(w not in (-1, a) for a, w in zip(arr.shape, shape)):
-                got = None if arr is None else arr.shape
-                raise ValueError(f"ConicForm.{name} of a {self.kind.value} must have shape {shape}, got {got}")
-            object.__setattr__(self, name, arr)
+        if type(self.kind) is not ConeKind:
+            try:
+                object.__setattr__(self, "kind", ConeKind(self.kind))
+            except ValueError:
+                raise ValueError(f"ConicForm.kind must be one of {[k.value for k in ConeKind]}, "
+                                 f"got {self.kind!r}") from None
+        for name in ("center",) + _NEEDS[self.kind]:
+            arr = getattr(self, name)
+            if type(arr) is not np.ndarray or arr.dtype != np.float64:
+                arr = None if arr is None else np.asarray(arr, dtype=float)
+                object.__setattr__(self, name, arr)
+            shape = _SHAPES[name]              # -1 (any length) only ever first
+            if arr is None or (arr.shape != shape and (shape[0] != -1 or arr.shape[1:] != shape[1:]
+                                                        or arr.ndim != len(shape))):
+                raise ValueError(f"ConicForm.{name} of a {self.kind.value} must have shape {shape}, "
+                                 f"got {None if arr is None else arr.shape}")
         if self.kind == ConeKind.POLYTOPE and self.B.shape[0] != self.c.shape[0]:
             raise ValueError(f"ConicForm.c must have one entry per row of B ({self.B.shape[0]}), got {self.c.shape}")
         if not isinstance(self.convexified, (bool, np.bool_)):
             raise TypeError(f"ConicForm.convexified must be True or False, got {self.convexified!r}")
+
+
+#: the fields each kind needs besides ``center``, and the shapes of all (-1: any length).
+_NEEDS = {ConeKind.POINT: (), ConeKind.SEGMENT: ("direction",), ConeKind.POLYTOPE: ("B", "c"),
+          ConeKind.ELLIPSE: ("D", "Dinv")}
+_SHAPES = {"center": (2,), "direction": (2,), "B": (-1, 2), "c": (-1,), "D": (2, 2), "Dinv": (2, 2)}

@@ -341,8 +341,15 @@ class Polytope(Region):
         return Polytope(self.B / s, self.c + self.B @ t)
 
     def extent(self) -> RegionExtent:
-        """``(rho, rho)``, rho the largest vertex norm: the auxiliary ``y`` is a point of the polygon."""
+        """``(rho, rho)``: the auxiliary ``y`` is a point of the polygon, and rho bounds its norm -- the largest
+        vertex norm, padded by what the computed vertices may lose (vertices merged or a thin set reduced
+        within ``POLYTOPE_VERTEX_RTOL`` of its size, lines placed within ``POLYTOPE_ROUNDOFF`` of their
+        magnitudes ``(1 + |c_k|) / ||B_k||``, see :func:`polytope_vertices`)."""
         rho = float(np.max(np.hypot(self.vertices[:, 0], self.vertices[:, 1])))
+        nrm = np.hypot(self.B[:, 0], self.B[:, 1])
+        with np.errstate(over="ignore"):
+            place = float(np.max((1.0 + np.abs(self.c[nrm > 0])) / nrm[nrm > 0]))
+        rho += 4.0 * POLYTOPE_VERTEX_RTOL * rho + 64.0 * POLYTOPE_ROUNDOFF * place
         return RegionExtent.outward(rho, rho)
 
     def conic_form(self) -> ConicForm:

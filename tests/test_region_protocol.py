@@ -186,7 +186,7 @@ def test_user_region_without_extent_is_refused_not_certified(margins):
         tritools.gamma(X, cams[:3], [Ellipse([0.6, 0.3], 0.0225 * np.eye(2)), regs[1], regs[2]]), rel=1e-12)
 
 
-def test_a_region_whose_extent_is_not_a_region_extent_is_refused():
+def test_an_extent_or_conic_form_of_the_wrong_type_is_refused():
     @dataclass(frozen=True, eq=False)
     class TupleExtent(Disc):
         kind = "test_tuple_extent"
@@ -196,6 +196,16 @@ def test_a_region_whose_extent_is_not_a_region_extent_is_refused():
 
     with pytest.raises(TypeError, match=r"TupleExtent.extent\(\) must return a RegionExtent, got tuple"):
         region_extent(TupleExtent(0.0, 0.0, 1.0))
+
+    @dataclass(frozen=True, eq=False)
+    class DictForm(Disc):
+        kind = "test_dict_form"
+
+        def conic_form(self):
+            return {"kind": "ellipse"}
+
+    with pytest.raises(TypeError, match=r"DictForm.conic_form\(\) must return a ConicForm, got dict"):
+        dilate(DictForm(0.0, 0.0, 1.0), 0.5)
 
 
 def test_region_extent_checks_its_fields():

@@ -11,7 +11,7 @@ import numpy as np
 
 from ..model.geometry import depths as depths_of
 from ..model.geometry import WorldFrame, depths_stack, project_homogeneous
-from ..model.regions import RegionExtent
+from ..model.regions import extent_of
 from ..model.stacked import project_stack
 
 __all__ = ["PointReport", "point_report", "points_report_stack", "solve_radius", "solve_ball", "region_extent"]
@@ -75,9 +75,7 @@ def region_extent(region) -> tuple[float, float]:
         The region type declares no ``extent()`` (or it returns something else than a RegionExtent): without
         it no rigorous margin can be computed, and the region is refused rather than certified without one.
     """
-    ext = region.extent()
-    if not isinstance(ext, RegionExtent):
-        raise TypeError(f"{type(region).__name__}.extent() must return a RegionExtent, got {type(ext).__name__}")
+    ext = extent_of(region)
     return ext.radius, ext.aux
 
 

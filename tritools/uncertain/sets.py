@@ -32,7 +32,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..model.regions import ConeKind, ConicForm, Region, dilate
+from ..model.regions import ConeKind, conic_form_of, dilate
 
 __all__ = ["ViewBlock", "dilate", "view_blocks", "rows_of", "view_coefficients", "cone_layout", "contains"]
 
@@ -66,15 +66,6 @@ class ViewBlock:
             self.kind, (0, 2 * (0 if self.B is None else self.B.shape[1]), 0))
 
 
-def _form(region: Region) -> ConicForm:
-    """The region's :meth:`~tritools.model.regions.Region.conic_form` (TypeError naming the method when the
-    region type declares none)."""
-    form = region.conic_form()
-    if not isinstance(form, ConicForm):
-        raise TypeError(f"{type(region).__name__}.conic_form() must return a ConicForm, got {type(form).__name__}")
-    return form
-
-
 def _eps(a) -> float:
     """Unit round-off bound of a's floating type (float64 or the platform's long double)."""
     return float(np.finfo(np.asarray(a).dtype).eps)
@@ -84,7 +75,7 @@ def structure_key(regions) -> tuple:
     """Regions of equal keys stack into one :class:`ViewBlock` per view."""
     out = []
     for r in regions:
-        form = _form(r)
+        form = conic_form_of(r)
         out.append((form.kind, len(form.c)) if form.kind == ConeKind.POLYTOPE else (form.kind,))
     return tuple(out)
 
@@ -94,7 +85,7 @@ def view_blocks(regions_stack) -> list[ViewBlock]:
     conic forms."""
     blocks = []
     for col in zip(*regions_stack):
-        forms = [_form(r) for r in col]
+        forms = [conic_form_of(r) for r in col]
         kind = forms[0].kind
         centers = np.array([f.center for f in forms])
         if kind == ConeKind.POINT:

@@ -41,7 +41,7 @@ from __future__ import annotations
 # which tritools.io.problem_file lists in its messages): point, segment, polytope, ellipse_border,
 # ellipse.  Keep it; import sorters are told to leave this block alone.
 # isort: off
-from .forms import EXTENT_ROUND_UP, ConeKind, ConicForm, RegionExtent
+from .forms import EXTENT_ROUND_UP, ConeKind, ConicForm, RegionExtent, conic_form_of, extent_of
 from .base import (Region, RegionPolynomials, as_matrix, as_points, as_vector, check_xy, positive_number, real_array,
                    similarity_args, square)
 from .point import Point, Segment
@@ -56,7 +56,7 @@ __all__ = [
     "Region", "RegionPolynomials", "Point", "Segment", "Polytope", "EllipseBorder", "Ellipse",
     "as_region", "as_regions",
     # what the solvers need of a region (issue 18): its extent, conic form and dilation
-    "RegionExtent", "ConeKind", "ConicForm", "dilate", "EXTENT_ROUND_UP", "DILATION_GROW",
+    "RegionExtent", "ConeKind", "ConicForm", "dilate", "EXTENT_ROUND_UP", "DILATION_GROW", "extent_of", "conic_form_of",
     # added with the package split
     "polytope_vertices", "positive_number", "real_array", "as_vector", "as_matrix", "as_points", "similarity_args",
     "check_xy", "square",

@@ -24,7 +24,7 @@ import numpy as np
 
 from .base import Region
 from .ellipse import Ellipse
-from .forms import ConeKind, ConicForm
+from .forms import ConeKind, ConicForm, conic_form_of
 from .polytope import Polytope
 
 __all__ = ["dilate", "DILATION_GROW"]
@@ -44,7 +44,7 @@ def dilate(region: Region, r: float) -> Region:
     """
     if r == 0:
         return region
-    form = region.conic_form()
+    form = conic_form_of(region)
     if form.kind == ConeKind.POINT:
         return Ellipse(form.center, (r * DILATION_GROW) ** 2 * np.eye(2))
     if form.kind == ConeKind.ELLIPSE:

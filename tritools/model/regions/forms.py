@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["RegionExtent", "ConeKind", "ConicForm", "EXTENT_ROUND_UP"]
+__all__ = ["RegionExtent", "ConeKind", "ConicForm", "EXTENT_ROUND_UP", "conic_form_of", "extent_of"]
 
 
 #: Outward rounding of the built-in extents: a norm computed in floating point is within a few ulps of the
@@ -122,3 +122,31 @@ class ConicForm:
 _NEEDS = {ConeKind.POINT: (), ConeKind.SEGMENT: ("direction",), ConeKind.POLYTOPE: ("B", "c"),
           ConeKind.ELLIPSE: ("D", "Dinv")}
 _SHAPES = {"center": (2,), "direction": (2,), "B": (-1, 2), "c": (-1,), "D": (2, 2), "Dinv": (2, 2)}
+
+
+def extent_of(region) -> RegionExtent:
+    """``region.extent()``, checked to be a :class:`RegionExtent`.
+
+    Raises
+    ------
+    TypeError
+        The region type declares no ``extent()`` (the message names it), or it returns something else.
+    """
+    ext = region.extent()
+    if not isinstance(ext, RegionExtent):
+        raise TypeError(f"{type(region).__name__}.extent() must return a RegionExtent, got {type(ext).__name__}")
+    return ext
+
+
+def conic_form_of(region) -> ConicForm:
+    """``region.conic_form()``, checked to be a :class:`ConicForm`.
+
+    Raises
+    ------
+    TypeError
+        The region type declares no ``conic_form()`` (the message names it), or it returns something else.
+    """
+    form = region.conic_form()
+    if not isinstance(form, ConicForm):
+        raise TypeError(f"{type(region).__name__}.conic_form() must return a ConicForm, got {type(form).__name__}")
+    return form

@@ -28,7 +28,7 @@ from scipy import optimize
 
 from .model.geometry import (PointAtInfinityError, gamma_validated, project_homogeneous, dlt, point_from_image_points,
                              validate_cameras)
-from .model.regions import Point, as_regions, positive_number
+from .model.regions import as_regions, positive_number
 from .result import Status, TriangulationResult
 
 __all__ = [
@@ -171,14 +171,14 @@ def newton(cameras, regions, *, max_iter: int = NEWTON_MAX_ITER, init: str = "al
     ``||g|| <= NEWTON_GTOL (1 + J)``, the step no longer changes ``X``, no decrease is
     found, or after ``max_iter`` iterations.
 
-    Returns status ``INVALID_INPUT`` if some region is not a :class:`Point`.
+    Returns status ``INVALID_INPUT`` if some region is not a single point (``Region.is_point``).
     """
     t0 = time.perf_counter()
     C, R = _prepare(cameras, regions)
-    if not all(isinstance(r, Point) for r in R):
+    if not all(r.is_point for r in R):
         return _finish("newton", None, C, R, t0, "Newton needs point regions (not applicable)",
                        Status.INVALID_INPUT)
-    x = np.array([r.x for r in R])
+    x = np.array([r.center for r in R])
     X, err = _start(C, R, _check_init(init))
     if X is None:
         return _finish("newton", None, C, R, t0, err, Status.ILL_POSED)

@@ -34,7 +34,7 @@ from collections.abc import Iterable, Sequence
 import numpy as np
 
 from ..model.cameras import numeric_cameras
-from ..model.regions import Point
+from ..model.regions import Region
 from ..model.constraints import Method
 from ..result import Attempt, Status, TriangulationResult
 from .call_limit import call_limit, expired, expired_points, mark_cut, within
@@ -164,8 +164,8 @@ def _as_point_problem(cams, regions):
         if x.ndim != 2 or x.shape[1] != 2 or not np.issubdtype(x.dtype, np.number) or np.iscomplexobj(x):
             return None
         x = x.astype(float)
-    elif isinstance(regions, (list, tuple)) and regions and all(isinstance(r, Point) for r in regions):
-        x = np.array([r.x for r in regions])
+    elif isinstance(regions, (list, tuple)) and regions and all(isinstance(r, Region) and r.is_point for r in regions):
+        x = np.array([r.center for r in regions])
     else:
         return None
     C = numeric_cameras(cams)

@@ -34,7 +34,7 @@ from sospoly.solvers import with_single_threaded_blas
 
 from ..model.cameras import numeric_cameras
 from ..model.normalize import normalization_stack
-from ..model.regions import Ellipse
+from ..model.regions import Region
 from ..model.stacked import LM_MAX_ITER, LM_STEP_RTOL, damped_step, project_stack
 from .decide import decide, decide_reported, gamma_from_c
 from .fastpath import lagrangian_bounds
@@ -45,13 +45,10 @@ _ROUND_DOWN = 1 - 8 * np.finfo(float).eps
 
 
 def disc_radius(region) -> float | None:
-    """rho when ``region`` is a filled disc (an :class:`Ellipse` with D = rho^2 I exactly), else None."""
-    if type(region) is not Ellipse:
-        return None
-    D = region.D
-    if D[0, 1] != 0 or D[1, 0] != 0 or D[0, 0] != D[1, 1]:
-        return None
-    return float(np.sqrt(D[0, 0]))
+    """rho when ``region`` is a filled disc of radius rho around its centre (the region's own
+    :attr:`~tritools.model.regions.Region.disc_radius`: an ``Ellipse`` with D = rho^2 I exactly), else None (also
+    for anything that is not a Region: the batch paths ask before validating)."""
+    return region.disc_radius if isinstance(region, Region) else None
 
 
 @dataclass(frozen=True)

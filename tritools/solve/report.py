@@ -11,7 +11,7 @@ import numpy as np
 
 from ..model.geometry import depths as depths_of
 from ..model.geometry import WorldFrame, depths_stack, project_homogeneous
-from ..model.regions import EllipseBorder, Point, Polytope, Segment
+from ..model.regions import extent_of
 from ..model.stacked import project_stack
 
 __all__ = ["PointReport", "point_report", "points_report_stack", "solve_radius", "solve_ball", "region_extent"]
@@ -65,20 +65,18 @@ def solve_ball(regions_n, c_upper: float) -> float | None:
     return math.sqrt((math.sqrt(rho2) + math.sqrt(max(c_upper, 0.0))) ** 2 + aux2)
 
 
-def region_extent(region) -> tuple[float, float] | None:
-    """(rho, a): every point of the region has norm <= rho, every feasible auxiliary vector y_i norm <= a; None
-    for a region type whose extent is not known here (then no rigorous margin is computed)."""
-    if isinstance(region, Point):
-        return float(np.linalg.norm(region.x)), 0.0
-    if isinstance(region, Segment):
-        return float(np.linalg.norm(region.center) + np.linalg.norm(region.direction)), 1.0
-    if isinstance(region, Polytope):
-        rho = float(np.max(np.linalg.norm(region.vertices, axis=1)))
-        return rho, rho
-    if isinstance(region, EllipseBorder):            # Ellipse too
-        rho = float(np.linalg.norm(region.center) + np.max(region.semi_axes))
-        return rho, rho
-    return None
+def region_extent(region) -> tuple[float, float]:
+    """(rho, a): every point of the region has norm <= rho, every feasible auxiliary variable |y_ik| <= a -- the
+    region's own :meth:`~tritools.model.regions.Region.extent` (a :class:`~tritools.model.regions.RegionExtent`).
+
+    Raises
+    ------
+    TypeError
+        The region type declares no ``extent()`` (or it returns something else than a RegionExtent): without
+        it no rigorous margin can be computed, and the region is refused rather than certified without one.
+    """
+    ext = extent_of(region)
+    return ext.radius, ext.aux
 
 
 def solve_radius(regions_n, c_upper: float) -> np.ndarray | None:

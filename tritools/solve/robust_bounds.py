@@ -21,7 +21,6 @@ from collections import defaultdict
 
 import numpy as np
 
-from ..model.regions import Point
 from ..result import Status
 from .fastpath import verify_points
 from .sdp_batch import solve_corollary1_points
@@ -50,7 +49,7 @@ class SubsetBounds:
         self.regions = list(regions)
         self.opts = options
         self.deadline = deadline
-        self.points = all(isinstance(r, Point) for r in self.regions)
+        self.points = all(r.is_point for r in self.regions)
         self.x = np.array([r.center for r in self.regions], float) if self.points else None
         self._lb: dict = {}
         self._X: dict = {}

@@ -48,7 +48,7 @@ from ..model.geometry import (common_centre, dlt, gamma as gamma_of, gamma_valid
                               point_from_image_points, project, refine_l2, validate_cameras)
 from ..model.normalize import Normalization, normalization_for, unconstrained_reason
 from ..model.problem import TriangulationProblem, build_problem, view_band, view_chain
-from ..model.regions import Point, as_regions
+from ..model.regions import as_regions
 from ..result import Attempt, Status, TriangulationResult
 from .decide import cheirality, decide, decide_reported, gamma_from_c
 from .discs import disc_radius, verify_discs
@@ -239,7 +239,7 @@ class _PointSolve:
 
     def _verify(self, step: Step) -> TriangulationResult | None:
         res = None
-        if step.method == Method.COROLLARY1 and all(isinstance(r, Point) for r in self.regions):
+        if step.method == Method.COROLLARY1 and all(r.is_point for r in self.regions):
             x = self._centres()[None]
             b = verify_checked(self.cams[None], x, np.isfinite(x).all(axis=(1, 2)), self.opts.tolerances)
             if b.certified[0]:

@@ -20,7 +20,7 @@ from sospoly.solvers import BlockStatus, StackedConicOptions
 
 from ..model.cameras import WorldFrame, depth_rows, as_world_frame, power2_scale
 from ..model.geometry import validate_cameras
-from ..model.regions import Ellipse, EllipseBorder, Point, Segment, as_regions
+from ..model.regions import ConeKind, as_regions, conic_form_of
 from ..solve.options import OptionError, OptionTypeError
 from .angle import triangulation_angles
 from .rigour import box_from_bounds, combine, lower_bounds, round_down, round_up
@@ -151,8 +151,9 @@ def _prepare(cameras, regions, dilation, widen=True):
         d = np.full(len(C), d[0])
     if len(d) != len(C):
         raise ValueError(f"dilation must be a number or have one entry per view ({len(C)}), got {len(d)}")
-    convexified = any(isinstance(r, EllipseBorder) and not isinstance(r, Ellipse) for r in regs)
-    thin = np.array([isinstance(r, (Point, Segment)) for r in regs])
+    forms = [conic_form_of(r) for r in regs]
+    convexified = any(f.convexified for f in forms)
+    thin = np.array([f.kind in (ConeKind.POINT, ConeKind.SEGMENT) for f in forms])
     if widen and thin.any():
         # a dilation below the round-off radius is raised to it too: S then grows with the dilation (a
         # dilation of 1e-100 once gave an empty set where dilation 0, widened, gave the point)

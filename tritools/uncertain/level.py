@@ -16,7 +16,7 @@ from dataclasses import replace
 import numpy as np
 
 from ..model.geometry import dlt, gamma, gamma_validated, refine_l2, validate_cameras
-from ..model.regions import Point, as_regions
+from ..model.regions import as_regions
 
 __all__ = ["level_bounds"]
 
@@ -46,12 +46,10 @@ def _start(C, regs, tau, estimate):
 
 def _g2_function(C, regs, start, scale):
     """``Y -> (gamma^2, gradient or None)`` at ``X = start + scale Y``: closed form with its gradient when
-    every region is a Point (the usual level-set case), else :func:`gamma_validated` (gradient by
-    finite differences)."""
-    from ..model.regions import Point
-
-    if all(isinstance(r, Point) for r in regs):
-        xs = np.array([r.x for r in regs])
+    every region is a single point (``is_point``, the usual level-set case), else :func:`gamma_validated`
+    (gradient by finite differences)."""
+    if all(r.is_point for r in regs):
+        xs = np.array([r.center for r in regs])
         n = 2 * len(regs)
 
         def f(Y):
@@ -103,7 +101,7 @@ def _sos_box(C, regs, tau, lo, hi, degree):
     from .rigour import round_down, round_up
 
     N = len(C)
-    xs = np.array([r.x for r in regs])
+    xs = np.array([r.center for r in regs])
     c, s = lo / 2.0 + hi / 2.0, hi / 2.0 - lo / 2.0
     tp = float(np.sqrt(2 * N) * tau)
     V = sospoly.variables(" ".join([f"u{k}" for k in range(3)] + [f"v{i}_{j}" for i in range(N) for j in range(2)]))
@@ -146,7 +144,7 @@ def level_bounds(cameras, regions, level, estimate, opts):
     # the round-off must not report exact data's level set (which holds the true point) empty
     out = uncertainty(C, regs, estimate=estimate, options=replace(opts, dilation=r))
     definition = "level_relaxed"
-    if opts.level_degree and out.status.value == "bounded" and all(isinstance(g, Point) for g in regs):
+    if opts.level_degree and out.status.value == "bounded" and all(g.is_point for g in regs):
         box = _sos_box(C, regs, tau, out.lo, out.hi, opts.level_degree)
         if box is not None:
             out = _with_box(out, *box)

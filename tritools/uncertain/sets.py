@@ -16,11 +16,15 @@ Ellipse (y-x^)'D^-1(..)<=1 ``||L'(a - x^ s)|| <= s``, ``D^-1 = L L'``         SO
 EllipseBorder              its convex hull, the filled ellipse (outer bound)  SOC(3)
 =========================  ================================================  =================
 
-(``n = (-d_2, d_1)``.)  A dual multiplier of these constraints is turned back into coefficients
-``gamma_i = (g_1, g_2, g_3)`` of the exact rows ``r_i1, r_i2, r_i3`` such that ``gamma_i . r_i X~ >= 0``
-on S (:func:`view_coefficients`); for an ellipse the multiplier ``(t, u)`` gives ``g_12 = L u`` and
-``t`` is raised, if needed, to a float above ``sqrt(g_12' D g_12)`` (then ``|g_12'(a - x^ s)| <= t s``
-exactly).  Each coefficient carries a bound on its own round-off.
+(``n = (-d_2, d_1)``.)  The table is each region's own
+:meth:`~tritools.model.regions.Region.conic_form` (a :class:`~tritools.model.regions.ConicForm`): this
+module reads the form, never the region type, so a new region type that declares its conic form gets the
+certified uncertainty, and one that does not is refused with a TypeError naming ``conic_form()``; a
+dilated region is :func:`tritools.model.regions.dilate` of it.  A dual multiplier of these constraints is
+turned back into coefficients ``gamma_i = (g_1, g_2, g_3)`` of the exact rows ``r_i1, r_i2, r_i3`` such
+that ``gamma_i . r_i X~ >= 0`` on S (:func:`view_coefficients`); for an ellipse the multiplier ``(t, u)``
+gives ``g_12 = L u`` and ``t`` is raised, if needed, to a float above ``sqrt(g_12' D g_12)`` (then
+``|g_12'(a - x^ s)| <= t s`` exactly).  Each coefficient carries a bound on its own round-off.
 """
 from __future__ import annotations
 
@@ -28,7 +32,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..model.regions import Ellipse, EllipseBorder, Point, Polytope, Region, Segment
+from ..model.regions import ConeKind, conic_form_of, dilate
 
 __all__ = ["ViewBlock", "dilate", "view_blocks", "rows_of", "view_coefficients", "cone_layout", "contains"]
 
@@ -39,10 +43,11 @@ EPS = float(np.finfo(float).eps)
 class ViewBlock:
     """One view's region for a stack of M problems (same kind in every problem).
 
-    ``kind`` is ``"point" | "segment" | "polytope" | "ellipse"``; ``center`` (M, 2); ``D`` / ``Dinv`` /
-    ``L`` (M, 2, 2) for ellipses; ``B`` (M, m, 2), ``c`` (M, m) for polytopes; ``d`` (M, 2) for segments.
+    ``kind`` a :class:`~tritools.model.regions.ConeKind` (its value string is accepted); ``center`` (M, 2);
+    ``D`` / ``Dinv`` / ``L`` (M, 2, 2) for ellipses; ``B`` (M, m, 2), ``c`` (M, m) for polytopes; ``d`` (M, 2)
+    for segments.
     """
-    kind: str
+    kind: ConeKind
     center: np.ndarray
     D: np.ndarray | None = None
     Dinv: np.ndarray | None = None
@@ -51,62 +56,14 @@ class ViewBlock:
     c: np.ndarray | None = None
     d: np.ndarray | None = None
 
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "kind", ConeKind(self.kind))
+
     @property
     def counts(self) -> tuple[int, int, int]:
         """(zero rows, nonneg rows, SOC(3) cones)."""
-        return {"point": (2, 1, 0), "segment": (1, 2, 0), "ellipse": (0, 0, 1)}.get(
+        return {ConeKind.POINT: (2, 1, 0), ConeKind.SEGMENT: (1, 2, 0), ConeKind.ELLIPSE: (0, 0, 1)}.get(
             self.kind, (0, 2 * (0 if self.B is None else self.B.shape[1]), 0))
-
-
-def dilate(region: Region, r: float) -> Region:
-    """A region containing every point within ``r`` pixels of ``region`` (r >= 0; exact for a Point,
-    an outer bound otherwise): a point becomes the disc of radius r; an ellipse the coaxial ellipse
-    of semi-axes ``sqrt((1+t) a_k^2 + (1+1/t) r^2)`` (exact for a circle); a polytope its slabs
-    widened by ``r ||B_k||`` (a relative 1e-12 more, for round-off); a segment the rectangle around
-    it, r on each side."""
-    if r == 0:
-        return region
-    grow = 1.0 + 1e-12
-    if isinstance(region, Point):
-        return Ellipse(region.x, (r * grow) ** 2 * np.eye(2))
-    if isinstance(region, EllipseBorder):
-        # support functions: h(u) + r <= sqrt((1+t) h(u)^2 + (1+1/t) r^2) for any t > 0, so the ellipse of
-        # semi-axes sqrt((1+t) a^2 + (1+1/t) r^2) holds the r-neighbourhood; t of least area among three
-        a = region.semi_axes
-        best = None
-        for t in (r / a[0], r / a[1], r / np.sqrt(a[0] * a[1])):
-            ax = np.sqrt((1 + t) * a ** 2 + (1 + 1 / t) * r * r)
-            if best is None or ax[0] * ax[1] < best[0] * best[1]:
-                best = ax
-        axes = best * grow
-        Q = region._Q
-        return Ellipse(region.center_, (Q * axes ** 2) @ Q.T)
-    if isinstance(region, Polytope):
-        f = (1.0 + r * np.linalg.norm(region.B, axis=1)) * grow + 1e-12 * np.abs(region.c)
-        return Polytope(region.B / f[:, None], region.c / f)
-    if isinstance(region, Segment):
-        d = region.direction
-        nd = float(np.linalg.norm(d))
-        if nd == 0:
-            return Ellipse(region.center_, (r * grow) ** 2 * np.eye(2))
-        u = d / nd
-        n = np.array([-u[1], u[0]])
-        half = np.array([nd + r, r]) * grow
-        B = np.array([u / half[0], n / half[1]])
-        return Polytope(B, -B @ region.center_)
-    raise TypeError(f"dilation is not defined for regions of type {type(region).__name__}")
-
-
-def _kind(region: Region) -> str:
-    if isinstance(region, Point):
-        return "point"
-    if isinstance(region, Segment):
-        return "point" if not np.any(region.direction) else "segment"
-    if isinstance(region, Polytope):
-        return "polytope"
-    if isinstance(region, EllipseBorder):          # Ellipse, and EllipseBorder through its hull
-        return "ellipse"
-    raise TypeError(f"the per-view uncertainty set is not defined for regions of type {type(region).__name__}")
 
 
 def _eps(a) -> float:
@@ -118,29 +75,29 @@ def structure_key(regions) -> tuple:
     """Regions of equal keys stack into one :class:`ViewBlock` per view."""
     out = []
     for r in regions:
-        k = _kind(r)
-        out.append((k, len(r.c)) if k == "polytope" else (k,))
+        form = conic_form_of(r)
+        out.append((form.kind, len(form.c)) if form.kind == ConeKind.POLYTOPE else (form.kind,))
     return tuple(out)
 
 
 def view_blocks(regions_stack) -> list[ViewBlock]:
-    """Per view, the stacked :class:`ViewBlock` of M problems' regions (all of one structure key)."""
+    """Per view, the stacked :class:`ViewBlock` of M problems' regions (all of one structure key), from their
+    conic forms."""
     blocks = []
     for col in zip(*regions_stack):
-        kind = _kind(col[0])
-        centers = np.array([r.center_ if hasattr(r, "center_") else r.center for r in col])
-        if kind == "point":
-            centers = np.array([r.x if isinstance(r, Point) else r.center_ for r in col])
-            blocks.append(ViewBlock("point", centers))
-        elif kind == "segment":
-            blocks.append(ViewBlock("segment", centers, d=np.array([r.direction for r in col])))
-        elif kind == "polytope":
-            blocks.append(ViewBlock("polytope", centers, B=np.array([r.B for r in col]),
-                                    c=np.array([r.c for r in col])))
+        forms = [conic_form_of(r) for r in col]
+        kind = forms[0].kind
+        centers = np.array([f.center for f in forms])
+        if kind == ConeKind.POINT:
+            blocks.append(ViewBlock(kind, centers))
+        elif kind == ConeKind.SEGMENT:
+            blocks.append(ViewBlock(kind, centers, d=np.array([f.direction for f in forms])))
+        elif kind == ConeKind.POLYTOPE:
+            blocks.append(ViewBlock(kind, centers, B=np.array([f.B for f in forms]), c=np.array([f.c for f in forms])))
         else:
-            D = np.array([r.D for r in col])
-            Dinv = np.array([r._Dinv for r in col])
-            blocks.append(ViewBlock("ellipse", centers, D=D, Dinv=Dinv, L=np.linalg.cholesky(Dinv)))
+            Dinv = np.array([f.Dinv for f in forms])
+            blocks.append(ViewBlock(kind, centers, D=np.array([f.D for f in forms]), Dinv=Dinv,
+                                    L=np.linalg.cholesky(Dinv)))
     return blocks
 
 
@@ -160,16 +117,16 @@ def rows_of(block: ViewBlock, R: np.ndarray) -> tuple[np.ndarray, np.ndarray, np
     a, s = R[:, :2, :], R[:, 2:3, :]
     v = a - block.center[:, :, None] * s                      # a - x^ s, (M, 2, 4)
     empty = np.zeros((M, 0, 4))
-    if block.kind == "point":
+    if block.kind == ConeKind.POINT:
         return v, s, empty
-    if block.kind == "segment":
+    if block.kind == ConeKind.SEGMENT:
         d = block.d
         n = np.stack([-d[:, 1], d[:, 0]], axis=1)
         eq = np.einsum("mk,mkj->mj", n, v)[:, None, :]
         dd = np.sum(d * d, axis=1)[:, None]
         dv = np.einsum("mk,mkj->mj", d, v)
         return eq, np.stack([dd * s[:, 0] - dv, dd * s[:, 0] + dv], axis=1), empty
-    if block.kind == "polytope":
+    if block.kind == ConeKind.POLYTOPE:
         Ba = np.einsum("mkl,mlj->mkj", block.B, a)             # (M, m, 4)
         cs = block.c[:, :, None] * s                          # (M, m, 4)
         lower = s - cs - Ba
@@ -191,11 +148,11 @@ def view_coefficients(block: ViewBlock, z0, z1, z2) -> tuple[np.ndarray, np.ndar
     clipped at 0, SOC: made feasible), so that ``gamma . r X~ >= 0`` for every X~ of the set."""
     x = block.center
     EPS = _eps(x)
-    if block.kind == "point":
+    if block.kind == ConeKind.POINT:
         nu, mu = z0, np.maximum(z1[:, 0], 0.0)
         g3, e3 = _sum_err(np.stack([mu, -nu[:, 0] * x[:, 0], -nu[:, 1] * x[:, 1]], axis=1), 1)
         return np.column_stack([nu, g3]), np.column_stack([np.zeros_like(nu), e3])
-    if block.kind == "segment":
+    if block.kind == ConeKind.SEGMENT:
         d = block.d
         n = np.stack([-d[:, 1], d[:, 0]], axis=1)
         nu = z0[:, 0]
@@ -210,7 +167,7 @@ def view_coefficients(block: ViewBlock, z0, z1, z2) -> tuple[np.ndarray, np.ndar
         g3, e3 = _sum_err(t3, 1)
         e3 = e3 + 2 * EPS * (np.abs(ms) + np.abs(dm)) * np.sum(np.abs(d) * (np.abs(d) + np.abs(x)), axis=1)
         return np.column_stack([g12, g3]), np.column_stack([e12, e3])
-    if block.kind == "polytope":
+    if block.kind == ConeKind.POLYTOPE:
         m = block.B.shape[1]
         mu_lo, mu_hi = np.maximum(z1[:, :m], 0.0), np.maximum(z1[:, m:], 0.0)
         dm = mu_hi - mu_lo                                                   # (M, m)
@@ -242,14 +199,14 @@ def contains(block: ViewBlock, R: np.ndarray, X: np.ndarray, rtol: float = 0.0) 
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         y = h[:, :2] / np.where(ok, s, 1.0)[:, None]
     scale = 1.0 + np.max(np.abs(block.center), axis=1)
-    if block.kind == "point":
+    if block.kind == ConeKind.POINT:
         return ok & (np.max(np.abs(y - block.center), axis=1) <= rtol * scale)
-    if block.kind == "segment":
+    if block.kind == ConeKind.SEGMENT:
         d = block.d
         dd = np.sum(d * d, axis=1)
         t = np.clip(np.einsum("mk,mk->m", y - block.center, d) / dd, -1, 1)
         return ok & (np.linalg.norm(y - block.center - t[:, None] * d, axis=1) <= rtol * scale)
-    if block.kind == "polytope":
+    if block.kind == ConeKind.POLYTOPE:
         val = np.abs(np.einsum("mkl,ml->mk", block.B, y) + block.c)
         return ok & np.all(val <= 1.0 + rtol, axis=1)
     u = y - block.center

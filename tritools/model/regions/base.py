@@ -25,6 +25,8 @@ from typing import Any, ClassVar
 
 import numpy as np
 
+from .forms import ConicForm, RegionExtent
+
 __all__ = [
     "Region", "RegionPolynomials", "real_array", "as_vector", "as_matrix", "as_points", "positive_number",
     "similarity_args", "check_xy", "square",
@@ -237,6 +239,12 @@ class RegionPolynomials:
         object.__setattr__(self, "ineq", tuple(self.ineq))
 
 
+def _not_declared(region, method: str, why: str) -> TypeError:
+    """The TypeError of a region type that does not declare ``method`` (docs/regions.md)."""
+    return TypeError(f"region type {type(region).__name__} does not declare {method}, which {why}; "
+                     f"define it on the class (docs/regions.md, 'A new region type')")
+
+
 @dataclass(frozen=True, eq=False)
 class Region(abc.ABC):
     """Abstract admissible region ``R_i`` of the image plane (SPEC §2).
@@ -247,6 +255,11 @@ class Region(abc.ABC):
     normalised coordinates).  Subclasses are frozen dataclasses declared with
     ``eq=False``; equality and hashing use :meth:`to_dict`.  A class attribute ``kind``
     registers the subclass for :meth:`from_dict`.
+
+    What the solvers need of a region is asked of the region, never inferred from its class:
+    :meth:`extent` (required by ``triangulate``: the box of the rigorous margin), :meth:`conic_form`
+    (required by ``uncertainty``), :attr:`is_point` and :attr:`disc_radius` (the fast paths; their
+    defaults are correct).  A missing ``extent`` or ``conic_form`` raises a TypeError naming it.
     """
 
     kind: ClassVar[str] = ""
@@ -278,6 +291,43 @@ class Region(abc.ABC):
     @abc.abstractmethod
     def similarity(self, scale: float, shift) -> Region:
         """The same region in the coordinates ``x' = scale * (x - shift)``."""
+
+    # -- what the solvers need (docs/regions.md) -----------------------------
+    def extent(self) -> RegionExtent:
+        """Bounds of the region's points and of its feasible auxiliary variables (:class:`RegionExtent`).
+
+        Required to triangulate with the SDP: the rigorous lower bound charges the certificate's PSD
+        defect on the box they give.  No generic default exists (a region may be unbounded).
+
+        Raises
+        ------
+        TypeError
+            The region type does not declare it.
+        """
+        raise _not_declared(self, "extent()", "the rigorous lower bound (the SDP's PSD-defect margin) needs")
+
+    def conic_form(self) -> ConicForm:
+        """The region (or its convex hull, flagged ``convexified``) as convex cones (:class:`ConicForm`),
+        for the certified 3D uncertainty (:mod:`tritools.uncertain`).
+
+        Raises
+        ------
+        TypeError
+            The region type does not declare it.
+        """
+        raise _not_declared(self, "conic_form()", "the certified uncertainty (tritools.uncertainty) needs")
+
+    @property
+    def is_point(self) -> bool:
+        """True when the region is exactly the single point :attr:`center` (the point-region fast paths then
+        apply).  Default False: always correct, only slower."""
+        return False
+
+    @property
+    def disc_radius(self) -> float | None:
+        """rho when the region is exactly the filled disc of radius rho around :attr:`center` (the disc
+        fast path, :mod:`tritools.solve.discs`, then applies), else None.  Default None: always correct."""
+        return None
 
     def _fields(self) -> dict[str, Any]:
         """Data fields for :meth:`to_dict`: by default the dataclass fields given to

@@ -11,6 +11,7 @@ import numpy as np
 
 from .base import (Region, RegionPolynomials, as_matrix, as_points, as_vector, check_xy, positive_number,
                    similarity_args, square)
+from .forms import ConeKind, ConicForm, RegionExtent
 
 __all__ = ["EllipseBorder", "Ellipse", "SYMMETRY_RTOL", "PD_RTOL", "ELLIPSE_MAX_ITER", "ELLIPSE_SCALAR_MAX"]
 
@@ -221,6 +222,17 @@ class EllipseBorder(Region):
         s, t = similarity_args(scale, shift)
         return type(self)(s * (self.center_ - t), s * s * self.D)
 
+    def extent(self) -> RegionExtent:
+        """``(rho, rho)`` with rho = ``||x^||`` + the largest semi-axis: the auxiliary ``y`` is a point of the
+        ellipse (its border, or the filled ellipse)."""
+        rho = math.hypot(*self.center_) + float(self._axes[0])
+        return RegionExtent.outward(rho, rho)
+
+    def conic_form(self) -> ConicForm:
+        """The filled ellipse ``||L'(a - x^ s)|| <= s`` (``D^-1 = L L'``): the convex hull of the border,
+        flagged ``convexified``."""
+        return ConicForm(ConeKind.ELLIPSE, self.center_, D=self.D, Dinv=self._Dinv, convexified=True)
+
     def _fields(self):
         return {"center": self.center_.tolist(), "D": self.D.tolist()}
 
@@ -245,6 +257,18 @@ class Ellipse(EllipseBorder):
         x, y = check_xy(x, y, 2)
         f = square(x[0] - y[0]) + square(x[1] - y[1])
         return RegionPolynomials(f, (), (self._quadratic(y),))
+
+    def conic_form(self) -> ConicForm:
+        """``||L'(a - x^ s)|| <= s`` with ``D^-1 = L L'``: the region itself."""
+        return ConicForm(ConeKind.ELLIPSE, self.center_, D=self.D, Dinv=self._Dinv)
+
+    @property
+    def disc_radius(self) -> float | None:
+        """rho when ``D = rho^2 I`` exactly (a disc), else None."""
+        D = self.D
+        if D[0, 1] != 0 or D[1, 0] != 0 or D[0, 0] != D[1, 1]:
+            return None
+        return float(np.sqrt(D[0, 0]))
 
     def closest_point(self, points) -> np.ndarray:
         P, single = as_points(points)

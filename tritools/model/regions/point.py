@@ -1,12 +1,14 @@
 """Cases I and II of SPEC §2: a point ``{x^}`` and a segment ``{x^ + t d^ : t in [-1, 1]}``."""
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import ClassVar
 
 import numpy as np
 
 from .base import Region, RegionPolynomials, as_points, as_vector, check_xy, similarity_args, square
+from .forms import ConeKind, ConicForm, RegionExtent
 
 __all__ = ["Point", "Segment"]
 
@@ -43,6 +45,19 @@ class Point(Region):
     def similarity(self, scale, shift) -> Point:
         s, t = similarity_args(scale, shift)
         return Point(s * (self.x - t))
+
+    def extent(self) -> RegionExtent:
+        """``(||x^||, 0)``: no auxiliary variable."""
+        return RegionExtent.outward(math.hypot(*self.x), 0.0)
+
+    def conic_form(self) -> ConicForm:
+        """``a - x^ s = 0``, ``s >= 0``."""
+        return ConicForm(ConeKind.POINT, self.x)
+
+    @property
+    def is_point(self) -> bool:
+        """True: the region is the point ``x^`` (= :attr:`center`)."""
+        return True
 
 
 # ----------------------------------------------------------------------------- II: segment
@@ -112,6 +127,16 @@ class Segment(Region):
     def similarity(self, scale, shift) -> Segment:
         s, t = similarity_args(scale, shift)
         return Segment(s * (self.center_ - t), s * self.direction)
+
+    def extent(self) -> RegionExtent:
+        """``(||x^|| + ||d^||, 1)``: the auxiliary ``y`` is the parameter ``t``, ``|t| <= 1``."""
+        return RegionExtent.outward(math.hypot(*self.center_) + math.hypot(*self.direction), 1.0)
+
+    def conic_form(self) -> ConicForm:
+        """A SEGMENT (``n'(a - x^ s) = 0``, ``|d^'(a - x^ s)| <= d^'d^ s``); a POINT for a zero direction."""
+        if not np.any(self.direction):
+            return ConicForm(ConeKind.POINT, self.center_)
+        return ConicForm(ConeKind.SEGMENT, self.center_, direction=self.direction)
 
     def _fields(self):
         return {"center": self.center_.tolist(), "direction": self.direction.tolist()}

@@ -17,6 +17,7 @@ import numpy as np
 
 from .base import (Region, RegionPolynomials, as_matrix, as_points, as_vector, check_xy, real_array, similarity_args,
                    square)
+from .forms import ConeKind, ConicForm, RegionExtent
 
 __all__ = ["Polytope", "polytope_vertices", "POLYTOPE_RANK_RTOL", "POLYTOPE_VERTEX_RTOL", "POLYTOPE_ROUNDOFF",
            "POLYTOPE_CHUNK"]
@@ -338,6 +339,22 @@ class Polytope(Region):
     def similarity(self, scale, shift) -> Polytope:
         s, t = similarity_args(scale, shift)
         return Polytope(self.B / s, self.c + self.B @ t)
+
+    def extent(self) -> RegionExtent:
+        """``(rho, rho)``: the auxiliary ``y`` is a point of the polygon, and rho bounds its norm -- the largest
+        vertex norm, padded by what the computed vertices may lose (vertices merged or a thin set reduced
+        within ``POLYTOPE_VERTEX_RTOL`` of its size, lines placed within ``POLYTOPE_ROUNDOFF`` of their
+        magnitudes ``(1 + |c_k|) / ||B_k||``, see :func:`polytope_vertices`)."""
+        rho = float(np.max(np.hypot(self.vertices[:, 0], self.vertices[:, 1])))
+        nrm = np.hypot(self.B[:, 0], self.B[:, 1])
+        with np.errstate(over="ignore"):
+            place = float(np.max((1.0 + np.abs(self.c[nrm > 0])) / nrm[nrm > 0]))
+        rho += 4.0 * POLYTOPE_VERTEX_RTOL * rho + 64.0 * POLYTOPE_ROUNDOFF * place
+        return RegionExtent.outward(rho, rho)
+
+    def conic_form(self) -> ConicForm:
+        """``(1 -+ c_k) s -+ B_k a >= 0``, k = 1..m."""
+        return ConicForm(ConeKind.POLYTOPE, self.center, B=self.B, c=self.c)
 
     @classmethod
     def box(cls, center, half_widths) -> Polytope:

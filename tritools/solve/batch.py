@@ -39,7 +39,8 @@ from ..model.constraints import Method
 from ..result import Attempt, Status, TriangulationResult
 from .options import TriangulationOptions, options_from
 from .discs import as_disc_problem, solve_disc_group
-from .points import PointStack, batch_steps
+from .plan import batch_steps
+from .points import PointStack
 from .triangulate import triangulate
 
 __all__ = ["triangulate_many", "safe_triangulate", "solve_point_problems", "solve_point_stack", "BatchOutcome",

@@ -35,8 +35,7 @@ def decide(c_lower, c_upper, tolerances, n_views=None, resolution=None):
         lo, up = np.asarray(c_lower, float), np.asarray(c_upper, float)
         with np.errstate(invalid="ignore"):
             relative = np.asarray(tolerances.certified_relatively(lo, up), bool)
-            n2 = 2 * np.asarray(n_views, float)
-            gap = np.sqrt(np.maximum(up, 0.0) / n2) - np.sqrt(np.maximum(lo, 0.0) / n2)
+            gap = gamma_from_c(up, n_views, 1.0) - gamma_from_c(lo, n_views, 1.0)
             certified = certified & (relative | (gap <= np.asarray(resolution, float)))
     contradicts = np.asarray(tolerances.contradicts(c_lower, c_upper), bool)
     code = np.where(contradicts, 2, np.where(certified, 1, 0))

@@ -106,7 +106,8 @@ class TriangulationOptions:
     normalize : normalise the data (the L2 problem is unchanged, see :mod:`tritools.model.normalize`)
     backend, form : sospoly back-end (None: automatic) and Gram form
     tolerances : :class:`sospoly.Tolerances` (the certificate rule)
-    budget : :class:`sospoly.Budget` for the whole call (time limit, memory per program)
+    budget : :class:`sospoly.Budget` per point: ``time_limit`` for each point, on every path (see
+        :mod:`tritools.solve.settings`), ``max_bytes`` for each program
     require_in_front : a certified minimiser behind a camera gets status ``behind_camera`` instead of
         ``optimal`` (by default it stays ``optimal`` with ``in_front=False`` and a message)
     world_frame : handedness of the cameras' world frame, the sign rule of the depths that judge

@@ -17,8 +17,8 @@ from tritools.solve.fastpath import verify_points
 from tritools.solve.options import TriangulationOptions, options_from
 from tritools.solve.sdp_batch import solve_corollary1_points
 from tritools.solve.settings import SolveSettings, stack_deadline
-from tritools.solve.stages import (FAST_ALL, POINT_STAGES, STEP_STAGES, AttemptStep, Stage, run_point,
-                                   with_stage)
+from tritools.solve.stages import (FAST_ALL, FAST_DEFAULT, POINT_STAGES, SDP_IMPLEMENTATIONS, STEP_STAGES,
+                                   VERIFY_IMPLEMENTATIONS, AttemptStep, Stage, run_point, with_stage)
 
 #: bounds of the same program by two implementations agree to the solver's accuracy in c = 2N gamma^2 units
 C_TOL = 1e-7
@@ -51,6 +51,9 @@ def _multistart_gamma(cams, regions, X0) -> float:
 def test_stage_lists_are_named_data():
     assert [s.name for s in POINT_STAGES] == ["plan", "verify", "trivial", "steps", "settle", "world_frame", "report"]
     assert [s.name for s in STEP_STAGES] == ["sdp", "estimate", "rigor", "decide", "resolve"]
+    assert [i.name for i in VERIFY_IMPLEMENTATIONS] == ["verify-points", "verify-discs", "generic"]
+    assert [i.name for i in SDP_IMPLEMENTATIONS] == ["sdp-points", "generic"]
+    assert FAST_DEFAULT < FAST_ALL and "sdp-points" not in FAST_DEFAULT      # a single call: the generic SDP
     extra = Stage("extra", lambda ctx: None)
     assert [s.name for s in with_stage(POINT_STAGES, extra, before="verify")][1:3] == ["extra", "verify"]
     with pytest.raises(ValueError, match="no stage named 'nope'"):

@@ -12,6 +12,7 @@ from __future__ import annotations
 import enum
 import functools
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -26,7 +27,7 @@ from ..plan import Step
 from ..settings import SolveSettings
 from ..trivial import local_estimate
 
-__all__ = ["AttemptStep", "PointContext", "StepState", "FAST_DEFAULT"]
+__all__ = ["AttemptStep", "Implementation", "PointContext", "StepState", "FAST_DEFAULT"]
 
 
 class AttemptStep(str, enum.Enum):
@@ -47,6 +48,20 @@ class AttemptStep(str, enum.Enum):
 #: :mod:`tritools.solve.stages.sdp`): the vectorised verification on a stack of one; the batched SDP is for
 #: stacks, and a single call keeps the generic SDP (the reference the batch is tested against).
 FAST_DEFAULT = frozenset({"verify-points", "verify-discs"})
+
+
+@dataclass(frozen=True)
+class Implementation:
+    """One implementation of a stage: ``applies(ctx, item)`` says whether it can run on the item (a plan
+    step for ``verify``, the step state for ``sdp``), ``run(ctx, item)`` gives the stage's answer.  ``fast``
+    implementations also need their name in ``ctx.fast``."""
+    name: str
+    applies: Callable
+    run: Callable
+    fast: bool = True
+
+    def usable(self, ctx: PointContext, item) -> bool:
+        return (not self.fast or self.name in ctx.fast) and self.applies(ctx, item)
 
 
 def sparsity_name(step: Step) -> str:

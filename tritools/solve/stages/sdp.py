@@ -32,10 +32,10 @@ from ...result import Attempt, Status, TriangulationResult
 from ..plan import Step
 from ..sdp_batch import solve_corollary1_points
 from ..structures import STRUCTURE_CACHE, structure_key
-from .context import AttemptStep, PointContext, StepState
+from .context import AttemptStep, Implementation, PointContext, StepState
 from .outcome import better, failed, replace, report_point
 
-__all__ = ["steps_stage", "run_step", "sdp_stage", "solve_psatz", "SDP_FAST_NAME"]
+__all__ = ["steps_stage", "run_step", "sdp_stage", "solve_psatz", "SDP_FAST_NAME", "SDP_IMPLEMENTATIONS"]
 
 #: the name of the batched delta = 2 SDP in ``fast`` (:class:`~tritools.solve.stages.context.PointContext`).
 SDP_FAST_NAME = "sdp-points"
@@ -87,15 +87,21 @@ def _fail(ctx: PointContext, st: StepState, status: Status, message: str) -> Non
 
 
 def sdp_stage(ctx: PointContext, st: StepState) -> None:
-    """The step's SDP (module docstring): the batched implementation where it applies and is allowed, else
-    build and solve."""
-    if _batched_applies(ctx, st) and _batched(ctx, st):
-        return
+    """The step's SDP (module docstring): the first usable implementation of :data:`SDP_IMPLEMENTATIONS` that
+    does not hand the step back."""
+    for impl in SDP_IMPLEMENTATIONS:
+        if impl.usable(ctx, st) and impl.run(ctx, st):
+            return
+
+
+def _generic(ctx: PointContext, st: StepState) -> bool:
+    """Build (or bind the compiled structure) and solve; the lower bound in ``st.lb`` (True: never hands back)."""
     if not _build(ctx, st):
-        return
+        return True
     t1 = st.t_solve = time.perf_counter()
     st.lb = solve_psatz(ctx, st.psatz, st.tol)
     ctx.timings[f"solve_d{st.step.delta}"] = time.perf_counter() - t1
+    return True
 
 
 def solve_psatz(ctx: PointContext, psatz, tol):
@@ -165,7 +171,7 @@ def _compiled(ctx: PointContext, problem: TriangulationProblem, step: Step):
 # ---------------------------------------------------------------------------------------------- the batched SDP
 def _batched_applies(ctx: PointContext, st: StepState) -> bool:
     step, o = st.step, ctx.opts
-    return SDP_FAST_NAME in ctx.fast and not st.tight and step.method == Method.COROLLARY1 and step.delta == 2 \
+    return not st.tight and step.method == Method.COROLLARY1 and step.delta == 2 \
         and step.formulation == "dense" and o.multiplier == Multiplier.FIXED and ctx.settings.auto_backend \
         and ctx.settings.form == sospoly.GramForm.IMAGE and o.normalize and all(r.kind == "point" for r in ctx.regions)
 
@@ -185,6 +191,13 @@ def _batched(ctx: PointContext, st: StepState) -> bool:
                                 time.perf_counter() - st.t0))
     st.result, st.final, st.recorded = res, True, True
     return True
+
+
+#: the implementations of the sdp stage, tried in order (module docstring).
+SDP_IMPLEMENTATIONS: tuple[Implementation, ...] = (
+    Implementation(SDP_FAST_NAME, _batched_applies, _batched),
+    Implementation("generic", lambda ctx, st: True, _generic, fast=False),
+)
 
 
 def resolve_chain(ctx: PointContext, st: StepState, after: str = "sdp", until: str = "resolve") -> None:

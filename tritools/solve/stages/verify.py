@@ -12,14 +12,13 @@ tried in order; the first that applies runs:
 * ``"generic"`` -- any delta = 2 program without inequalities or auxiliary variables:
   :func:`sospoly.analysis.verify_quadratic` on the built problem.
 
-The fast ones apply only when named in ``ctx.fast`` (:data:`~tritools.solve.stages.context.FAST_DEFAULT`);
+The fast ones (:class:`~tritools.solve.stages.context.Implementation`) apply only when named in
+``ctx.fast`` (:data:`~tritools.solve.stages.context.FAST_DEFAULT`);
 tests/test_stages.py checks that they and the generic one take the same decision with the same bounds.
 """
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
-from dataclasses import dataclass
 
 
 import numpy as np
@@ -37,25 +36,11 @@ from ..fastpath import verify_checked
 from ..options import SolvePath
 from ..plan import Step, degree_plan, delta_min
 from ..report import points_report_stack, solve_ball
-from .context import AttemptStep, PointContext
+from .context import AttemptStep, Implementation, PointContext
 from .outcome import behind_message, report_point, trivial_certificate
 
 __all__ = ["Implementation", "VERIFY_IMPLEMENTATIONS", "plan_stage", "verify_stage", "trivial_stage",
            "verification_step"]
-
-
-@dataclass(frozen=True)
-class Implementation:
-    """One implementation of a stage: ``applies(ctx, step)`` says whether it can run, ``run(ctx, step)``
-    returns the stage's answer (None: not certified here).  ``fast`` implementations also need their name in
-    ``ctx.fast``."""
-    name: str
-    applies: Callable
-    run: Callable
-    fast: bool = True
-
-    def usable(self, ctx: PointContext, step: Step) -> bool:
-        return (not self.fast or self.name in ctx.fast) and self.applies(ctx, step)
 
 
 def plan_stage(ctx: PointContext) -> None:

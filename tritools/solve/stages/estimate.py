@@ -29,12 +29,13 @@ from sospoly import SolveStatus
 from sospoly.analysis import best_in_family, kernel_family, rigorous_psatz_bound
 
 from ...model.geometry import common_centre, gamma as gamma_of, gamma_validated, point_from_image_points, refine_l2
-from ...result import Status
+from ...result import Status, TriangulationResult
 from ..decide import decide, gamma_from_c
+from ..plan import Step
 from ..report import solve_ball, solve_radius
 from .context import PointContext, StepState
 from .outcome import join, replace, report_point
-from .sdp import ill_posed_result, resolve_chain, solve_psatz, unsolved_result
+from .sdp import resolve_chain, solve_psatz
 
 __all__ = ["estimate_stage", "rigor_stage", "decide_stage", "resolve_stage", "MAX_FAMILY_DIM", "FAMILY_SEARCH_EVALS",
            "INACCURATE_RESOLVE_MAX_SECONDS"]
@@ -54,6 +55,19 @@ def _iterate(lb) -> bool:
     """An inaccurate iterate that passed the a-posteriori checks (``Tolerances.accept_inaccurate``): used only
     through the rigorous bound, which charges its PSD defect and identity residual."""
     return lb.status == SolveStatus.INACCURATE and lb.solution is not None and lb.solution.objective is not None
+
+
+def unsolved_result(step: Step, lb) -> TriangulationResult:
+    """The result of an SDP that returned no usable bound."""
+    status = {SolveStatus.TIME_LIMIT: Status.TIME_LIMIT, SolveStatus.BUDGET_EXCEEDED: Status.BUDGET_EXCEEDED}\
+        .get(lb.status, Status.SOLVER_FAILED)
+    return TriangulationResult(step.result_method.value, status,
+                               message=f"SDP at delta={step.delta}: {lb.status.value} {lb.message}".strip())
+
+
+def ill_posed_result(step: Step, gamma_lb) -> TriangulationResult:
+    return TriangulationResult(step.result_method.value, Status.ILL_POSED, gamma_lb=gamma_lb, optimal=False,
+                               message="every extracted candidate has w4 ~ 0 (ill-posed: e.g. equal cameras)")
 
 
 def _unsolved(st: StepState) -> None:

@@ -210,19 +210,3 @@ def resolve_chain(ctx: PointContext, st: StepState, after: str = "sdp", until: s
         if st.final:
             break
         stage.run(ctx, st)
-
-
-def unsolved_result(step: Step, lb) -> TriangulationResult:
-    """The result of an SDP that returned no usable bound."""
-    from sospoly import SolveStatus
-
-    status = {SolveStatus.TIME_LIMIT: Status.TIME_LIMIT, SolveStatus.BUDGET_EXCEEDED: Status.BUDGET_EXCEEDED}\
-        .get(lb.status, Status.SOLVER_FAILED)
-    return TriangulationResult(step.result_method.value, status,
-                               message=f"SDP at delta={step.delta}: {lb.status.value} {lb.message}".strip())
-
-
-def ill_posed_result(step: Step, gamma_lb) -> TriangulationResult:
-    return TriangulationResult(step.result_method.value, Status.ILL_POSED, gamma_lb=gamma_lb, optimal=False,
-                               message="every extracted candidate has w4 ~ 0 (ill-posed: e.g. equal cameras)")
-

@@ -18,7 +18,7 @@ from tritools.solve.options import TriangulationOptions, options_from
 from tritools.solve.sdp_batch import solve_corollary1_points
 from tritools.solve.settings import SolveSettings, stack_deadline
 from tritools.solve.stages import (FAST_ALL, FAST_DEFAULT, POINT_STAGES, SDP_IMPLEMENTATIONS, STEP_STAGES,
-                                   VERIFY_IMPLEMENTATIONS, AttemptStep, Stage, run_point, with_stage)
+                                   VERIFY_IMPLEMENTATIONS, AttemptStep, ImplName, Stage, run_point, with_stage)
 
 #: bounds of the same program by two implementations agree to the solver's accuracy in c = 2N gamma^2 units
 C_TOL = 1e-7
@@ -53,7 +53,11 @@ def test_stage_lists_are_named_data():
     assert [s.name for s in STEP_STAGES] == ["sdp", "estimate", "rigor", "decide", "resolve"]
     assert [i.name for i in VERIFY_IMPLEMENTATIONS] == ["verify-points", "verify-discs", "generic"]
     assert [i.name for i in SDP_IMPLEMENTATIONS] == ["sdp-points", "generic"]
-    assert FAST_DEFAULT < FAST_ALL and "sdp-points" not in FAST_DEFAULT      # a single call: the generic SDP
+    assert FAST_DEFAULT < FAST_ALL and ImplName.SDP_POINTS not in FAST_DEFAULT   # a single call: the generic SDP
+    assert "sdp-points" in FAST_ALL and AttemptStep.SDP in {"sdp"}               # members hash as their strings
+    with pytest.raises(ValueError, match="fast: unknown implementation 'sdp-fast'"):
+        cams, tracks = _tracks(2, 1, 1.0, seed=1)
+        run_point(cams, tracks[0], options_from(None), fast={"sdp-fast"})
     extra = Stage("extra", lambda ctx: None)
     assert [s.name for s in with_stage(POINT_STAGES, extra, before="verify")][1:3] == ["extra", "verify"]
     with pytest.raises(ValueError, match="no stage named 'nope'"):
@@ -130,6 +134,10 @@ def test_settings_one_object_backend_none_is_auto_on_every_path(monkeypatch):
     s = SolveSettings.from_options(TriangulationOptions())
     assert s.backend == "auto" and s.auto_backend and s.tolerances is TriangulationOptions().tolerances
     assert SolveSettings.from_options(TriangulationOptions(backend="clarabel")).backend == "clarabel"
+    with pytest.raises(TypeError, match="SolveSettings.backend"):
+        SolveSettings(None, s.form, s.tolerances, s.deadline)
+    with pytest.raises(TypeError, match="SolveSettings.tolerances must be a Tolerances"):
+        SolveSettings("auto", s.form, None, s.deadline)
     seen = []
     real = sospoly.solve_psatz
 

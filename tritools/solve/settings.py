@@ -38,6 +38,15 @@ class SolveSettings:
     tolerances: Tolerances
     deadline: Deadline
 
+    def __post_init__(self) -> None:
+        if self.backend is None:
+            raise TypeError("SolveSettings.backend must be a back-end or its name, not None (None means 'auto': "
+                            "build the settings with SolveSettings.from_options)")
+        for name, kind in (("form", GramForm), ("tolerances", Tolerances), ("deadline", Deadline)):
+            if not isinstance(getattr(self, name), kind):
+                raise TypeError(f"SolveSettings.{name} must be a {kind.__name__}, got "
+                                f"{type(getattr(self, name)).__name__}")
+
     @classmethod
     def from_options(cls, options, deadline: Deadline | None = None) -> SolveSettings:
         """The settings of one point under validated :class:`~tritools.solve.options.TriangulationOptions`

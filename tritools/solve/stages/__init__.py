@@ -29,15 +29,15 @@ from dataclasses import dataclass
 from sospoly.budget import deadline_scope
 
 from ...result import TriangulationResult
-from .context import FAST_DEFAULT, AttemptStep, Implementation, PointContext, StepState
+from .context import FAST_DEFAULT, AttemptStep, ImplName, Implementation, PointContext, StepState
 from .estimate import decide_stage, estimate_stage, resolve_stage, rigor_stage
 from .outcome import report_stage, settle_stage, world_frame_stage
 from .sdp import SDP_FAST_NAME, SDP_IMPLEMENTATIONS, run_step, sdp_stage, steps_stage
 from .verify import VERIFY_IMPLEMENTATIONS, plan_stage, trivial_stage, verify_stage
 
 __all__ = ["Stage", "POINT_STAGES", "STEP_STAGES", "with_stage", "run_point", "PointContext", "StepState",
-           "AttemptStep", "Implementation", "VERIFY_IMPLEMENTATIONS", "SDP_IMPLEMENTATIONS", "FAST_DEFAULT", "FAST_ALL",
-           "run_step"]
+           "AttemptStep", "ImplName", "Implementation", "VERIFY_IMPLEMENTATIONS", "SDP_IMPLEMENTATIONS", "FAST_DEFAULT",
+           "FAST_ALL", "run_step"]
 
 
 @dataclass(frozen=True)

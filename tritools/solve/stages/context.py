@@ -27,7 +27,7 @@ from ..plan import Step
 from ..settings import SolveSettings
 from ..trivial import local_estimate
 
-__all__ = ["AttemptStep", "Implementation", "PointContext", "StepState", "FAST_DEFAULT"]
+__all__ = ["AttemptStep", "ImplName", "Implementation", "PointContext", "StepState", "FAST_DEFAULT", "fast_names"]
 
 
 class AttemptStep(str, enum.Enum):
@@ -43,11 +43,40 @@ class AttemptStep(str, enum.Enum):
     def __str__(self) -> str:
         return self.value
 
+    def __hash__(self) -> int:          # equal to its string, so hashed like it (an Attempt read back from JSON)
+        return str.__hash__(self)
+
+
+class ImplName(str, enum.Enum):
+    """The names of the stage implementations (:class:`Implementation`); ``fast`` sets hold the fast ones."""
+    VERIFY_POINTS = "verify-points"     #: vectorised verification of point regions (:mod:`tritools.solve.fastpath`)
+    VERIFY_DISCS = "verify-discs"       #: vectorised verification of discs (:mod:`tritools.solve.discs`)
+    SDP_POINTS = "sdp-points"           #: the batched delta = 2 SDP of point regions (:mod:`tritools.solve.sdp_batch`)
+    GENERIC = "generic"                 #: the generic implementation of a stage
+
+    def __str__(self) -> str:
+        return self.value
+
+    def __hash__(self) -> int:
+        return str.__hash__(self)
+
 
 #: the fast implementations a single call uses by default (names of :mod:`tritools.solve.stages.verify` and
 #: :mod:`tritools.solve.stages.sdp`): the vectorised verification on a stack of one; the batched SDP is for
 #: stacks, and a single call keeps the generic SDP (the reference the batch is tested against).
-FAST_DEFAULT = frozenset({"verify-points", "verify-discs"})
+FAST_DEFAULT = frozenset({ImplName.VERIFY_POINTS, ImplName.VERIFY_DISCS})
+
+
+def fast_names(fast) -> frozenset:
+    """``fast`` (names or :class:`ImplName` members) as a set of members; ValueError naming ``fast`` otherwise."""
+    out = set()
+    for name in fast:
+        try:
+            out.add(ImplName(name))
+        except ValueError:
+            known = ", ".join(repr(n.value) for n in ImplName if n != ImplName.GENERIC)
+            raise ValueError(f"fast: unknown implementation {name!r}; known: {known}") from None
+    return frozenset(out)
 
 
 @dataclass(frozen=True)
@@ -55,7 +84,7 @@ class Implementation:
     """One implementation of a stage: ``applies(ctx, item)`` says whether it can run on the item (a plan
     step for ``verify``, the step state for ``sdp``), ``run(ctx, item)`` gives the stage's answer.  ``fast``
     implementations also need their name in ``ctx.fast``."""
-    name: str
+    name: ImplName
     applies: Callable
     run: Callable
     fast: bool = True
@@ -80,7 +109,7 @@ class PointContext:
         self.regions, self.opts, self.t0 = regions, opts, t0
         self.N = self.cams.shape[0]
         self.settings = SolveSettings.from_options(opts)
-        self.stages, self.step_stages, self.fast = tuple(stages), tuple(step_stages), frozenset(fast)
+        self.stages, self.step_stages, self.fast = tuple(stages), tuple(step_stages), fast_names(fast)
         self.timings: dict = {}
         self.attempts: list[Attempt] = []
         self.steps: list[Step] = []

@@ -32,13 +32,13 @@ from ...result import Attempt, Status, TriangulationResult
 from ..plan import Step
 from ..sdp_batch import solve_corollary1_points
 from ..structures import STRUCTURE_CACHE, structure_key
-from .context import AttemptStep, Implementation, PointContext, StepState
+from .context import AttemptStep, ImplName, Implementation, PointContext, StepState
 from .outcome import better, failed, replace, report_point
 
 __all__ = ["steps_stage", "run_step", "sdp_stage", "solve_psatz", "SDP_FAST_NAME", "SDP_IMPLEMENTATIONS"]
 
 #: the name of the batched delta = 2 SDP in ``fast`` (:class:`~tritools.solve.stages.context.PointContext`).
-SDP_FAST_NAME = "sdp-points"
+SDP_FAST_NAME = ImplName.SDP_POINTS
 
 
 def steps_stage(ctx: PointContext) -> None:
@@ -196,7 +196,7 @@ def _batched(ctx: PointContext, st: StepState) -> bool:
 #: the implementations of the sdp stage, tried in order (module docstring).
 SDP_IMPLEMENTATIONS: tuple[Implementation, ...] = (
     Implementation(SDP_FAST_NAME, _batched_applies, _batched),
-    Implementation("generic", lambda ctx, st: True, _generic, fast=False),
+    Implementation(ImplName.GENERIC, lambda ctx, st: True, _generic, fast=False),
 )
 
 

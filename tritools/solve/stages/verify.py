@@ -36,7 +36,7 @@ from ..fastpath import verify_checked
 from ..options import SolvePath
 from ..plan import Step, degree_plan, delta_min
 from ..report import points_report_stack, solve_ball
-from .context import AttemptStep, Implementation, PointContext
+from .context import AttemptStep, ImplName, Implementation, PointContext
 from .outcome import behind_message, report_point, trivial_certificate
 
 __all__ = ["Implementation", "VERIFY_IMPLEMENTATIONS", "plan_stage", "verify_stage", "trivial_stage",
@@ -163,7 +163,7 @@ def _verify_generic(ctx: PointContext, step: Step) -> TriangulationResult | None
 
 #: the implementations of the verify stage, tried in order (module docstring).
 VERIFY_IMPLEMENTATIONS: tuple[Implementation, ...] = (
-    Implementation("verify-points", _points_apply, _verify_points),
-    Implementation("verify-discs", _discs_apply, _verify_discs),
-    Implementation("generic", _generic_applies, _verify_generic, fast=False),
+    Implementation(ImplName.VERIFY_POINTS, _points_apply, _verify_points),
+    Implementation(ImplName.VERIFY_DISCS, _discs_apply, _verify_discs),
+    Implementation(ImplName.GENERIC, _generic_applies, _verify_generic, fast=False),
 )

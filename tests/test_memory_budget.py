@@ -99,12 +99,12 @@ def test_memory_errors_become_a_named_status(monkeypatch):
 
 
 def test_triangulate_turns_memory_errors_into_budget_exceeded(monkeypatch):
-    from tritools.solve import triangulate as mod
+    from tritools.solve.stages import sdp as mod         # the sdp stage's solve
     from tritools.scene import paper_example
 
     def boom(*a, **k):
         raise MemoryError()
-    monkeypatch.setattr(mod._PointSolve, "_solve_psatz", boom)
+    monkeypatch.setattr(mod, "solve_psatz", boom)
     cams, regions = paper_example(2)
     res = tritools.triangulate(cams, regions, "theorem1", path="sdp")
     assert res.status == tritools.Status.BUDGET_EXCEEDED and "MemoryError" in res.message

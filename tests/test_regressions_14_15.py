@@ -281,7 +281,7 @@ def test_defaults_agree(monkeypatch, tmp_path, capsys):
             return real(*args, **kwargs)
         monkeypatch.setattr(module, attr, wrapper)
 
-    spy("per point", tri, "_PointSolve", lambda a, k: a[2])
+    spy("per point", tri, "run_point", lambda a, k: a[2])
     spy("problems", batch, "solve_point_problems", lambda a, k: a[1])
     spy("stack", batch, "solve_point_stack", lambda a, k: a[2])
 

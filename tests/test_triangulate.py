@@ -222,7 +222,7 @@ def test_lower_bound_above_upper_bound_is_never_a_certificate(monkeypatch):
 
     import importlib
 
-    T = importlib.import_module("tritools.solve.triangulate")   # the module (the package exports a function)
+    T = importlib.import_module("tritools.solve.stages.estimate")   # the module of the rigor stage
 
     real = T.rigorous_psatz_bound
 

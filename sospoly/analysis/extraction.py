@@ -28,7 +28,11 @@ from ..tolerances import DEFAULT_TOLERANCES, Tolerances
 
 __all__ = ["Candidate", "CandidateFamily", "kernel_family", "best_in_family", "kernel_basis", "range_basis",
            "candidates_from_span", "extract_from_gram",
-           "extract_from_moment", "henrion_lasserre"]
+           "extract_from_moment", "henrion_lasserre", "has_constant_entry", "KERNEL_CONSTANT_RTOL"]
+
+#: a kernel vector w gives the candidate w[degree-1 rows] / w[0] only when |w[0]| > KERNEL_CONSTANT_RTOL max |w|
+#: (else its constant entry is numerically zero and the quotient meaningless).
+KERNEL_CONSTANT_RTOL = 1e-10
 
 
 @dataclass(frozen=True)
@@ -38,6 +42,14 @@ class Candidate:
     point: np.ndarray
     source: str             # "gram-kernel", "gram-hl", "moment", "moment-hl"
     span_residual: float    # ||b(v) - proj_W b(v)|| / ||b(v)||
+
+
+def has_constant_entry(w) -> np.ndarray | bool:
+    """Whether kernel vectors ``w`` (along the last axis; the first entry multiplies the monomial 1) have a
+    usable constant entry: |w_0| > KERNEL_CONSTANT_RTOL max_k |w_k| (vectorised over leading axes)."""
+    w = np.asarray(w, float)
+    out = np.abs(w[..., 0]) > KERNEL_CONSTANT_RTOL * np.maximum(np.max(np.abs(w), axis=-1), 1e-300)
+    return bool(out) if out.ndim == 0 else out
 
 
 def _degree1_rows(basis: np.ndarray) -> np.ndarray | None:
@@ -193,7 +205,7 @@ def candidates_from_span(W: np.ndarray, basis: np.ndarray, source: str) -> list[
         out += [Candidate(p, source + "-span", _span_residual(W, basis, p)) for p in span_search(W, basis, starts)]
     for k in range(W.shape[1]):
         w = W[:, k]
-        if abs(w[0]) > 1e-10 * max(np.max(np.abs(w)), 1e-300):
+        if has_constant_entry(w):
             p = w[deg1] / w[0]
             out.append(Candidate(p, source, _span_residual(W, basis, p)))
     if W.shape[1] > 1:

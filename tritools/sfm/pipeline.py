@@ -24,6 +24,7 @@ from ..io.colmap.camera_models import (OPENCV_FAMILY, camera_problem, distort_ro
                                        pixels_from_camera, undistorted_pixels)
 from ..model.cameras import depths_stack
 from ..result import Status
+from ..solve.decide import gamma_from_c
 from ..solve.options import OptionError, TriangulationOptions
 from .certify import CertifyOptions, certify_stack, robust_threshold, solver_options, status_code
 
@@ -219,7 +220,7 @@ def _gamma(C: np.ndarray, x: np.ndarray, X: np.ndarray) -> np.ndarray:
     den = h[..., 2]
     tiny = ~(np.abs(den) > 1e-300) | ~np.all(np.isfinite(h), axis=2)
     proj = h[..., :2] / np.where(tiny, 1.0, den)[..., None]
-    g = np.sqrt(np.sum((proj - x) ** 2, axis=(1, 2)) / (2 * x.shape[1]))
+    g = gamma_from_c(np.sum((proj - x) ** 2, axis=(1, 2)), x.shape[1], 1.0)
     return np.where(np.any(tiny, axis=1), np.inf, g)
 
 
@@ -235,7 +236,7 @@ def point_gammas(arrays: ModelArrays, geom: ModelGeometry, xyz: np.ndarray | Non
     with np.errstate(all="ignore"):
         r2 = np.sum((h[:, :2] / h[:, 2:3] - geom.xy_u[gk]) ** 2, axis=1)
         n = np.bincount(own, minlength=arrays.n_points)
-        return np.sqrt(np.bincount(own, weights=r2, minlength=arrays.n_points) / (2 * n))
+        return gamma_from_c(np.bincount(own, weights=r2, minlength=arrays.n_points), n, 1.0)
 
 
 def _colmap_error(arrays, geom, X, obs_img, gk, owner, n) -> np.ndarray:

@@ -40,7 +40,8 @@ from ..result import Attempt, Status, TriangulationResult
 from .call_limit import call_limit, expired, expired_points, mark_cut, within
 from .options import TriangulationOptions, options_from
 from .discs import as_disc_problem, solve_disc_group
-from .points import PointStack, batch_steps
+from .plan import batch_steps
+from .points import PointStack
 from .triangulate import triangulate
 
 __all__ = ["triangulate_many", "safe_triangulate", "solve_point_problems", "solve_point_stack", "BatchOutcome",

@@ -35,8 +35,7 @@ def decide(c_lower, c_upper, tolerances, n_views=None, resolution=None):
         lo, up = np.asarray(c_lower, float), np.asarray(c_upper, float)
         with np.errstate(invalid="ignore"):
             relative = np.asarray(tolerances.certified_relatively(lo, up), bool)
-            n2 = 2 * np.asarray(n_views, float)
-            gap = np.sqrt(np.maximum(up, 0.0) / n2) - np.sqrt(np.maximum(lo, 0.0) / n2)
+            gap = gamma_from_c(up, n_views, 1.0) - gamma_from_c(lo, n_views, 1.0)
             certified = certified & (relative | (gap <= np.asarray(resolution, float)))
     contradicts = np.asarray(tolerances.contradicts(c_lower, c_upper), bool)
     code = np.where(contradicts, 2, np.where(certified, 1, 0))
@@ -62,11 +61,16 @@ def decide_reported(gamma_lb, gamma_ub, tolerances, n_views, scale, resolution):
     return bool(out) if out.ndim == 0 else out
 
 
-def gamma_from_c(c, n_views, scale):
-    """gamma = sqrt(max(c, 0) / (2N)) / s: a bound in c units as an RMS error in the caller's pixels."""
-    c = np.asarray(c, float)
-    with np.errstate(invalid="ignore"):
-        out = np.sqrt(np.maximum(c, 0.0) / (2 * np.asarray(n_views, float))) / np.asarray(scale, float)
+def gamma_from_c(c, n_views, scale=1.0):
+    """gamma = sqrt(max(c, 0) / (2N)) / s (the paper's (52)): a bound in c units as an RMS error in the caller's
+    pixels; with s = 1 and c a sum of squared distances, the RMS error gamma of SPEC §1.  The one place this
+    formula is written (scalars or arrays; N = 0 gives NaN)."""
+    c = np.maximum(np.asarray(c, float), 0.0)
+    if isinstance(n_views, (int, np.integer)) and n_views > 0 and isinstance(scale, (int, float)) and scale > 0:
+        out = np.sqrt(c / (2.0 * n_views)) / scale          # no 0 / 0 possible: no error-state switch (hot path)
+    else:
+        with np.errstate(invalid="ignore"):
+            out = np.sqrt(c / (2 * np.asarray(n_views, float))) / np.asarray(scale, float)
     return out.item() if out.ndim == 0 else out
 
 

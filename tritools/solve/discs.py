@@ -30,6 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from sospoly import DEFAULT_TOLERANCES, Tolerances
+from sospoly.budget import Deadline
 from sospoly.solvers import with_single_threaded_blas
 
 from ..model.cameras import numeric_cameras
@@ -117,9 +118,11 @@ def refine_discs_stack(C: np.ndarray, rho: np.ndarray, X: np.ndarray, ok: np.nda
 
 
 @with_single_threaded_blas
-def verify_discs(cameras, centers, radii, *, tolerances: Tolerances = DEFAULT_TOLERANCES) -> DiscBatch:
+def verify_discs(cameras, centers, radii, *, tolerances: Tolerances = DEFAULT_TOLERANCES,
+                 deadline: Deadline | None = None) -> DiscBatch:
     """Vectorised certification by verification of M disc-region problems with N views each (module docstring):
-    cameras (M, N, 3, 4), disc centres (M, N, 2) and radii (M, N) in pixels, validated by the caller."""
+    cameras (M, N, 3, 4), disc centres (M, N, 2) and radii (M, N) in pixels, validated by the caller;
+    ``deadline`` is checked between the steps of the stack (:func:`~tritools.solve.fastpath.lagrangian_bounds`)."""
     C = np.asarray(cameras, float)
     x = np.asarray(centers, float)
     rho = np.asarray(radii, float)
@@ -142,13 +145,13 @@ def verify_discs(cameras, centers, radii, *, tolerances: Tolerances = DEFAULT_TO
     upper_f = np.sum(np.where(outside, (r - rho_n) ** 2, 0.0), axis=1)
     radius = np.linalg.norm(rho_n, axis=1) + np.sqrt(upper_f)
     lower, _, ok = lagrangian_bounds(C, Cn, v, ok, radius, norm.resolution, tolerances, f0=-np.sum(mu, axis=1),
-                                     weights=weights, views=outside)
+                                     weights=weights, views=outside, deadline=deadline)
     status, optimal, c_lower = decide(lower, upper_f, tolerances, N, norm.resolution)
     X = norm.world_points(Xn)
     uw, _, fin_w = project_stack(C, X)
     ok &= fin_w
     dist = np.maximum(0.0, np.linalg.norm(uw - x, axis=2) - rho)
-    gamma_ub = np.where(fin_w, np.sqrt(np.sum(dist ** 2, axis=1) / (2 * N)), np.inf)
+    gamma_ub = np.where(fin_w, gamma_from_c(np.sum(dist ** 2, axis=1), N, 1.0), np.inf)
     gamma_lb = np.minimum(gamma_from_c(np.maximum(c_lower, 0.0), N, norm.scale), gamma_ub)
     certified = ok & optimal & decide_reported(gamma_lb, gamma_ub, tolerances, N, norm.scale, norm.resolution)
     return DiscBatch(certified, ok, X, gamma_lb, gamma_ub, uw, dist)
@@ -180,6 +183,8 @@ def solve_disc_group(group, opts):
     from ..model.constraints import Method
     from ..result import Attempt, Status, TriangulationResult
     from .decide import cheirality
+    from .stages.context import AttemptStep
+    from .stages.outcome import behind_message
 
     t0 = time.perf_counter()
     C = np.array([g[1] for g in group])
@@ -187,7 +192,9 @@ def solve_disc_group(group, opts):
     rho = np.array([g[3] for g in group])
     valid = camera_problems(C).valid
     C = np.where(valid[:, None, None, None], C, np.eye(3, 4))
-    b = verify_discs(C, x, rho, tolerances=opts.tolerances)
+    from .settings import stack_deadline
+
+    b = verify_discs(C, x, rho, tolerances=opts.tolerances, deadline=stack_deadline(opts, len(group)))
     cert = b.certified & valid
     dep = depths_stack(C, b.X, opts.world_frame)
     status, in_front = cheirality(np.where(cert, Status.OPTIMAL.value, None), dep, opts.require_in_front)
@@ -198,19 +205,20 @@ def solve_disc_group(group, opts):
     for k, (i, cams, _, _, regions) in enumerate(group):
         if not cert[k]:
             rest.append((i, cams, regions, opts.replace(path="sdp"),
-                         (Attempt("corollary1", 2, "verification_failed", None, None, "verification", "dense"),)))
+                         (Attempt("corollary1", 2, "verification_failed", None, None, AttemptStep.VERIFICATION,
+                                   "dense"),)))
             continue
         if n_lmivar is None:
             from sospoly import n_lmivar_formula
 
             n_lmivar = n_lmivar_formula(4 * N, 2, [2] * (N * (N - 1) // 2), [2] * N)
         g_ub = float(b.gamma_ub[k])
-        msg = "" if in_front[k] else "certified L2 optimum, but behind camera(s) " + \
-            ", ".join(str(j) for j in np.nonzero(~(dep[k] > 0))[0])
+        msg = "" if in_front[k] else behind_message(dep[k])
         done[i] = TriangulationResult(
             Method.COROLLARY1.value, Status(status[k]), X=b.X[k], gamma_ub=g_ub, gamma_lb=float(b.gamma_lb[k]),
             optimal=True, delta=2, n_lmivar=n_lmivar, image_points=b.image_points[k], X_raw=b.X[k], gamma_ub_raw=g_ub,
             certified_by="verification", message=msg, timings={"batch_share": share},
-            attempts=(Attempt("corollary1", 2, "verified", float(b.gamma_lb[k]), g_ub, "verification", "dense"),),
+            attempts=(Attempt("corollary1", 2, "verified", float(b.gamma_lb[k]), g_ub, AttemptStep.VERIFICATION,
+                              "dense"),),
             sparsity="dense", in_front=bool(in_front[k]), depths=dep[k], residuals=b.residuals[k])
     return done, rest

@@ -36,6 +36,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from sospoly import DEFAULT_TOLERANCES, Tolerances
+from sospoly.budget import Deadline
 from sospoly.analysis import verify_quadratic_batch
 from sospoly.analysis import verify_quadratic_banded_batch
 from sospoly.solvers import with_single_threaded_blas
@@ -104,7 +105,8 @@ def stack_point_problems(cameras, points2d, caller: str):
 
 
 @with_single_threaded_blas
-def verify_points(cameras, points2d, *, tolerances: Tolerances = DEFAULT_TOLERANCES) -> FastPathBatch:
+def verify_points(cameras, points2d, *, tolerances: Tolerances = DEFAULT_TOLERANCES,
+                  deadline: Deadline | None = None) -> FastPathBatch:
     """Vectorised certification by verification of M point problems with N views each.
 
     Parameters
@@ -115,13 +117,17 @@ def verify_points(cameras, points2d, *, tolerances: Tolerances = DEFAULT_TOLERAN
         Observed image points (the point regions' centres).
     tolerances : sospoly.Tolerances
         The certificate rule.
+    deadline : sospoly.budget.Deadline, optional
+        Checked between the steps of the stack (:func:`lagrangian_bounds`); problems not reached by then are
+        not certified here.
     """
     C, x, ok = stack_point_problems(cameras, points2d, "verify_points")
-    return verify_checked(C, x, ok, tolerances)
+    return verify_checked(C, x, ok, tolerances, deadline=deadline)
 
 
 @with_single_threaded_blas(min_stack=2)
-def verify_checked(C: np.ndarray, x: np.ndarray, ok: np.ndarray, tolerances: Tolerances) -> FastPathBatch:
+def verify_checked(C: np.ndarray, x: np.ndarray, ok: np.ndarray, tolerances: Tolerances, *,
+                   deadline: Deadline | None = None) -> FastPathBatch:
     """:func:`verify_points` on data already checked: float arrays C (M, N, 3, 4), x (M, N, 2) and the mask
     ``ok`` of the problems with valid cameras and finite points (e.g. from
     :func:`tritools.model.geometry.validate_cameras`: a single call does not check its cameras twice)."""
@@ -140,12 +146,13 @@ def verify_checked(C: np.ndarray, x: np.ndarray, ok: np.ndarray, tolerances: Tol
     v = np.where(ok[:, None], u.reshape(M, -1), 0.0)
     # a minimiser v* has ||v*||^2 = f(v*) <= f(v^) = ||v^||^2 (observed points at the origin): the radius of the
     # rigorous margin of the Lagrangian bound
-    lower, upper, ok = lagrangian_bounds(C, Cn, v, ok, np.linalg.norm(v, axis=1), norm.resolution, tolerances)
+    lower, upper, ok = lagrangian_bounds(C, Cn, v, ok, np.linalg.norm(v, axis=1), norm.resolution, tolerances,
+                                         deadline=deadline)
     status, optimal, c_lower = decide(lower, upper, tolerances, N, norm.resolution)
     X = norm.world_points(Xn)
     uw, _, fin_w = project_stack(C, X)
     ok &= fin_w
-    gamma_ub = np.where(fin_w, np.sqrt(np.sum((uw - x) ** 2, axis=(1, 2)) / (2 * N)), np.inf)
+    gamma_ub = np.where(fin_w, gamma_from_c(np.sum((uw - x) ** 2, axis=(1, 2)), N, 1.0), np.inf)
     gamma_lb = np.minimum(gamma_from_c(c_lower, N, norm.scale), gamma_ub)
     certified = ok & optimal & decide_reported(gamma_lb, gamma_ub, tolerances, N, norm.scale, norm.resolution)
     trivial = ok & ~certified & trivially_certified(upper, tolerances, N, norm.resolution) & \
@@ -155,14 +162,16 @@ def verify_checked(C: np.ndarray, x: np.ndarray, ok: np.ndarray, tolerances: Tol
                          np.where(trivial, 0.0, c_lower), upper, norm.scale, trivial)
 
 
-def lagrangian_bounds(C, Cn, v, ok, radius, resolution, tolerances, f0=None, weights=None, views=None):
+def lagrangian_bounds(C, Cn, v, ok, radius, resolution, tolerances, f0=None, weights=None, views=None, *,
+                      deadline: Deadline | None = None):
     """(lower bound (NaN: none), f(v^), ok) of the degree-2 certificate for M programs
     min f(v) = f0 + sum_k weights_k v_k^2 s.t. the epipolar constraints of the normalised cameras Cn (pairs with
     coincident centres decided on the raw cameras C), at the candidates v (M, 2N), ``radius`` bounding the
     norm of a minimiser (defaults: f0 = 0, weights = 1, the point-region objective ||v||^2).  From
     ``BAND_MIN_VIEWS`` views on the bands of ``BAND_WIDTHS`` are tried first, then all pairs.  ``views`` (M, N)
     bool: only the constraints of pairs of these views are held (the others are dropped: fewer constraints,
-    a weaker but valid bound)."""
+    a weaker but valid bound).  ``deadline``: checked before every band width and every all-pairs chunk; the
+    problems not reached by then keep no lower bound (NaN)."""
     M, N = C.shape[:2]
     n = 2 * N
     f0 = np.zeros(M) if f0 is None else np.asarray(f0, float)
@@ -179,7 +188,7 @@ def lagrangian_bounds(C, Cn, v, ok, radius, resolution, tolerances, f0=None, wei
     # a band with dropped pairs is a broken chain (its multipliers cannot carry the KKT residual): all pairs then
     band = todo if views is None else todo[views.all(axis=1)]
     for width in BAND_WIDTHS if N >= BAND_MIN_VIEWS else ():
-        if width >= N - 1 or not band.size:
+        if width >= N - 1 or not band.size or expired(deadline):
             break
         lower_b, ok_b = _band_bounds(C[band], Cn[band], v[band], ok[band], radius[band], width, tolerances,
                                      f0[band], F2(band), None)
@@ -189,9 +198,16 @@ def lagrangian_bounds(C, Cn, v, ok, radius, resolution, tolerances, f0=None, wei
     todo = todo[np.isnan(lower[todo])]
     step = all_pairs_chunk(N)
     for part in (todo[k:k + step] for k in range(0, todo.size, step)):
+        if expired(deadline):
+            break
         lower[part], ok[part] = _all_pairs_bounds(C[part], Cn[part], v[part], ok[part], radius[part], tolerances,
                                                   f0[part], F2(part), None if views is None else views[part])
     return lower, upper, ok
+
+
+def expired(deadline: Deadline | None) -> bool:
+    """Has ``deadline`` (None: no limit) passed?"""
+    return deadline is not None and deadline.expired
 
 
 def all_pairs_chunk(n_views: int) -> int:

@@ -194,8 +194,8 @@ class TriangulationOptions:
     normalize : normalise the data (the L2 problem is unchanged, see :mod:`tritools.model.normalize`)
     backend, form : sospoly back-end (None: automatic) and Gram form
     tolerances : :class:`sospoly.Tolerances` (the certificate rule)
-    budget : :class:`sospoly.Budget` of *one point* (time limit, memory per program); every point of a batch
-        gets its own
+    budget : :class:`sospoly.Budget` per point: ``time_limit`` for each point, on every path (see
+        :mod:`tritools.solve.settings`), ``max_bytes`` for each program
     total_time_limit : seconds for a whole batch call (None, the default: no limit); the points not finished
         when it expires get status ``time_limit`` with the estimate found so far (a single ``triangulate``
         call is bounded by ``budget.time_limit`` alone)

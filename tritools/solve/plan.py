@@ -23,12 +23,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from sospoly import sigma
+from sospoly import GramForm, Multiplier, sigma
 
 from ..model.constraints import THEOREM1_DENSE_MAX_VIEWS, Method
-from .options import Sparsity, TriangulationOptions
+from .options import MethodChoice, SolvePath, Sparsity, TriangulationOptions
 
-__all__ = ["Step", "degree_plan", "DENSE_MAX_SIDE", "DENSE_FALLBACK_SIDE"]
+__all__ = ["Step", "degree_plan", "delta_min", "batch_steps", "last_delta", "DENSE_MAX_SIDE", "DENSE_FALLBACK_SIDE"]
 
 #: ``sparsity="auto"``: dense certificates above degree 2 while the Gram side stays at most this (sigma(8, 2) = 45).
 DENSE_MAX_SIDE = 45
@@ -96,4 +96,28 @@ def degree_plan(options: TriangulationOptions, n_views: int, n_vars: int, delta_
     return steps
 
 
+def delta_min(method: Method, n_views: int) -> int:
+    """delta_min of a triangulation program: region polynomials and epipolar constraints are quadratic; Theorem
+    1's minors are quadratic for two views and of degree 3-4 beyond (SPEC §3)."""
+    return 2 if method == Method.COROLLARY1 or n_views == 2 else 4
 
+
+def batch_steps(opts: TriangulationOptions) -> tuple[bool, bool]:
+    """(verification batch, delta = 2 SDP batch) applicable under these options: the plan starts with Corollary 1
+    (or auto) at delta = 2 with normalisation; the SDP batch also needs the default multiplier, the image form
+    and the automatic back-end (``backend=None`` or ``"auto"``: :mod:`tritools.solve.settings`)."""
+    first_is_cor1_d2 = opts.method in (MethodChoice.AUTO, MethodChoice.COROLLARY1) and opts.delta in (None, 2) \
+        and opts.normalize
+    verify = first_is_cor1_d2 and opts.path == SolvePath.AUTO
+    sdp = first_is_cor1_d2 and opts.multiplier == Multiplier.FIXED and opts.form == GramForm.IMAGE \
+        and opts.backend in (None, "auto")
+    return verify, sdp
+
+
+def last_delta(opts: TriangulationOptions) -> int:
+    """The last degree of the plan of a batch (:func:`degree_plan`'s rule without the problem's delta_min)."""
+    if opts.max_delta is not None:
+        return opts.max_delta
+    if opts.method == MethodChoice.AUTO:
+        return max(opts.delta or 2, 4)
+    return opts.delta if opts.delta is not None else 4

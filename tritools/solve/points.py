@@ -21,7 +21,7 @@ import time
 import numpy as np
 from numpy.typing import ArrayLike
 
-from sospoly import GramForm, Multiplier, n_lmivar_formula
+from sospoly import n_lmivar_formula
 
 from ..model.constraints import Method
 from ..model.opencv import PointsLayout, points_array
@@ -29,9 +29,11 @@ from ..model.regions import Point, real_array
 from ..result import Attempt, Status, TriangulationResult
 from .decide import cheirality
 from .fastpath import BAND_MIN_VIEWS, BAND_WIDTHS, verify_points
-from .options import MethodChoice, SolvePath, TriangulationOptions, options_from
+from .options import TriangulationOptions, options_from
+from .plan import batch_steps, last_delta as _last_delta  # noqa: F401 - the plan lives in plan.py
 from .report import points_report_stack
 from .sdp_batch import solve_corollary1_points
+from .settings import stack_deadline
 from .trivial import TRIVIAL_BOUND
 
 __all__ = ["PointStack", "PointsResult", "triangulate_points", "FAST_CHUNK"]
@@ -55,25 +57,6 @@ def verify_chunk_for(n_views: int) -> int:
     if n_views < BAND_MIN_VIEWS:
         return chunk_for(n_views)
     return chunk_for(n_views, max(BAND_WIDTHS) * n_views)
-
-
-def batch_steps(opts: TriangulationOptions) -> tuple[bool, bool]:
-    """(verification batch, delta = 2 SDP batch) applicable under these options: Corollary 1 (or auto) starting
-    at delta = 2 with normalisation; the SDP batch also needs the default multiplier, form and back-end."""
-    first_is_cor1_d2 = opts.method in (MethodChoice.AUTO, MethodChoice.COROLLARY1) and opts.delta in (None, 2) \
-        and opts.normalize
-    verify = first_is_cor1_d2 and opts.path == SolvePath.AUTO
-    sdp = first_is_cor1_d2 and opts.multiplier == Multiplier.FIXED and opts.form == GramForm.IMAGE \
-        and opts.backend is None
-    return verify, sdp
-
-
-def _last_delta(opts: TriangulationOptions) -> int:
-    if opts.max_delta is not None:
-        return opts.max_delta
-    if opts.method == MethodChoice.AUTO:
-        return max(opts.delta or 2, 4)
-    return opts.delta if opts.delta is not None else 4
 
 
 class PointStack:
@@ -127,7 +110,8 @@ class PointStack:
 
     def _verify(self, idx: np.ndarray) -> np.ndarray:
         try:
-            b = verify_points(self.C[idx], self.x[idx], tolerances=self.opts.tolerances)
+            b = verify_points(self.C[idx], self.x[idx], tolerances=self.opts.tolerances,
+                              deadline=stack_deadline(self.opts, idx.size))
         except (ValueError, np.linalg.LinAlgError, FloatingPointError):
             b = None
         for k, m in enumerate(idx):
@@ -144,7 +128,7 @@ class PointStack:
     def _sdp(self, idx: np.ndarray) -> np.ndarray:
         try:
             b = solve_corollary1_points(self.C[idx], self.x[idx], tolerances=self.opts.tolerances,
-                                        refine=self.opts.refine)
+                                        refine=self.opts.refine, deadline=stack_deadline(self.opts, idx.size))
         except (ValueError, np.linalg.LinAlgError, FloatingPointError):
             return idx
         final = _last_delta(self.opts) <= 2

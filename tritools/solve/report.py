@@ -13,6 +13,7 @@ from ..model.geometry import depths as depths_of
 from ..model.geometry import WorldFrame, depths_stack, project_homogeneous
 from ..model.regions import extent_of
 from ..model.stacked import project_stack
+from .decide import gamma_from_c
 
 __all__ = ["PointReport", "point_report", "points_report_stack", "solve_radius", "solve_ball", "region_extent"]
 
@@ -35,7 +36,7 @@ def point_report(X, cameras, regions, world_frame=WorldFrame.RIGHT_HANDED) -> Po
         x = project_homogeneous(Xh, P)[0]                 # inf where undefined (the one rule of geometry)
         res.append(float(r.distance(x)) if np.all(np.isfinite(x)) else np.inf)
     res = np.array(res)
-    gamma = float(np.sqrt(np.sum(res ** 2) / (2 * len(res)))) if np.all(np.isfinite(res)) else math.inf
+    gamma = float(gamma_from_c(np.sum(res ** 2), len(res), 1.0)) if np.all(np.isfinite(res)) else math.inf
     return PointReport(gamma, res, np.asarray(depths_of(X, cameras, world_frame), float))
 
 
@@ -44,7 +45,7 @@ def points_report_stack(C: np.ndarray, x: np.ndarray, X: np.ndarray, world_frame
     gamma is inf where a projection is at infinity."""
     u, _, fin = project_stack(C, X)
     res = np.where(fin[:, None], np.linalg.norm(u - x, axis=2), np.inf)
-    gamma = np.where(fin, np.sqrt(np.sum(np.where(fin[:, None], res, 0.0) ** 2, axis=1) / (2 * x.shape[1])), np.inf)
+    gamma = np.where(fin, gamma_from_c(np.sum(np.where(fin[:, None], res, 0.0) ** 2, axis=1), x.shape[1], 1.0), np.inf)
     return gamma, res, depths_stack(C, X, world_frame)
 
 

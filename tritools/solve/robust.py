@@ -63,7 +63,7 @@ import numpy as np
 
 from ..model.geometry import PROJECTION_DENOM_RTOL
 from ..result import Attempt, Status, TriangulationResult
-from .decide import cheirality
+from .decide import cheirality, gamma_from_c
 from ..model.geometry import depths_stack
 from .report import PointReport, point_report
 from .robust_bounds import ROUND_DOWN, SubsetBounds, compute_many
@@ -411,8 +411,7 @@ class _Search:
             Status.TIME_LIMIT if stopped == "time limit" else Status.NOT_CERTIFIED
         certified = certified and not contradicts
         lb = float(self.tol.consistent(lb, ub))
-        g = 2 * self.N
-        gamma_ub, gamma_lb = math.sqrt(ub / g), math.sqrt(max(lb, 0.0) / g)
+        gamma_ub, gamma_lb = gamma_from_c(ub, self.N, 1.0), gamma_from_c(lb, self.N, 1.0)
         status, in_front = cheirality(status, rep.depths[inliers], self.opts.require_in_front)
         msg = f"TLS: {int(inliers.sum())}/{self.N} inliers, {self.nodes} nodes, {self.bounds.n_solved} L2 " \
               f"sub-problems"

@@ -23,7 +23,13 @@ A problem is *handed back* (``done = False``) whenever the batch cannot reproduc
 answer with this short route: invalid data, an IPM instance that did not converge (the per-point
 path's Clarabel fallback), a failed check, a Gram kernel of dimension > 1 (the per-point
 kernel-family rule), w4 ~ 0 (ill-posed), contradicting bounds (the per-point tight re-solve).  The
-caller solves those with :func:`tritools.triangulate`, so a batch never loses a point.
+caller solves those with :func:`tritools.triangulate`, so a batch never loses a point.  A ``deadline``
+(:mod:`tritools.solve.settings`) is checked before the compilation and before every chunk of the IPM;
+the problems not reached by then are handed back ("time limit").
+
+This is the registered fast implementation of the ``sdp`` stage (:mod:`tritools.solve.stages.sdp`) for
+its case; the kernel test is sospoly's (:func:`sospoly.analysis.has_constant_entry`), gamma is
+:func:`tritools.solve.decide.gamma_from_c`.
 """
 from __future__ import annotations
 
@@ -32,8 +38,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from sospoly import DEFAULT_TOLERANCES, Tolerances
-from sospoly.analysis import image_form_stack_margin
+from sospoly import DEFAULT_TOLERANCES, Tolerances, n_lmivar_formula
+from sospoly.analysis import has_constant_entry, image_form_stack_margin
+from sospoly.budget import Deadline, TimeLimitReached, deadline_scope
 from sospoly.solvers import with_single_threaded_blas
 
 from ..model.geometry import POINT_AT_INFINITY_RTOL
@@ -41,7 +48,7 @@ from ..model.normalize import normalization_stack
 from ..model.stacked import fundamental_stack, project_stack, refine_points_stack
 from ..result import Status
 from .decide import decide, decide_reported, gamma_from_c
-from .fastpath import stack_point_problems
+from .fastpath import expired, stack_point_problems
 from .structures import corollary1_point_structure
 from .trivial import TRIVIAL_BOUND, trivially_certified, trivially_certified_reported
 
@@ -81,30 +88,58 @@ def _chunk_size(N: int) -> int:
     return max(1, SDP_CHUNK_BYTES // per)
 
 
+def _hand_back(ok: np.ndarray, bad: np.ndarray, reason: list, why) -> None:
+    """Mark the problems ``ok & bad`` as handed back with ``why`` (a string or a function of the index)."""
+    for m in np.nonzero(ok & bad)[0]:
+        reason[m] = why(m) if callable(why) else why
+    ok &= ~bad
+
+
 @with_single_threaded_blas
 def solve_corollary1_points(cameras, points2d, *, tolerances: Tolerances = DEFAULT_TOLERANCES,
-                            refine: bool = True) -> SdpBatch:
+                            refine: bool = True, deadline: Deadline | None = None) -> SdpBatch:
     """The delta = 2 SDP path (module docstring) for M point problems with N views: cameras (M, N, 3, 4)
     in pixels, points2d (M, N, 2) the point regions' centres."""
     C, x, ok = stack_point_problems(cameras, points2d, "solve_corollary1_points")
     M, N = x.shape[:2]
     reason = ["" if k else "invalid or degenerate data" for k in ok]
-    tol = tolerances
     norm = normalization_stack(C, x, ok)
     Cn = norm.cameras_n
     F, defined = fundamental_stack(Cn)
     defined &= fundamental_stack(C)[1]          # one centre or not: decided on the raw cameras
     good = norm.ok & np.all(defined, axis=1) & np.all(np.isfinite(F), axis=(1, 2, 3))
-    for m in np.nonzero(ok & ~good)[0]:
-        reason[m] = "normalisation or epipolar data undefined (e.g. coincident camera centres)"
-    ok &= good
-    ps = corollary1_point_structure(N)
-    comp = ps.compiled
+    _hand_back(ok, ~good, reason, "normalisation or epipolar data undefined (e.g. coincident camera centres)")
+    solved = _solve_stack(F, ok, N, tolerances, reason, deadline)
+    if solved is None:                          # the compilation ran out of time: every problem handed back
+        return _handed_back(C, x, reason)
+    c_lb, lam, V, gram_error, iters, comp = solved
+    X_raw_n, xn = _extract(V, lam, Cn, ok, reason, tolerances)
+    X_n, g_n = _refined(Cn, X_raw_n, ok, refine)
+    c_ub = 2 * N * g_n ** 2
+    # rigorous bound (sospoly.analysis.rigor): the observed points are the origin, so f(v) = ||v||^2 and a
+    # minimiser has ||v*||^2 = f(v*) <= c_ub; the basis is b = (1, v) (||b||^2 <= 1 + c_ub) and q = 1 (degree 2)
+    assert comp.structure.q.degree == 0
+    c_lb = c_lb - image_form_stack_margin(lam, gram_error, 1.0 + c_ub, q_min=float(comp.structure.q.coefficients()[0]))
+    return _decided(C, x, norm, ok, reason, tolerances, c_lb, c_ub, X_n, X_raw_n, xn, comp, iters)
+
+
+def _solve_stack(F, ok, N: int, tol: Tolerances, reason: list, deadline):
+    """(c* (M,), Gram eigenvalues (M, n), eigenvectors (M, n, n), Gram error (M,), IPM iterations (M,), compiled
+    structure): every SDP of the stack, in chunks below SDP_CHUNK_BYTES, the deadline checked before the
+    compilation and before every chunk; ``ok`` and ``reason`` updated in place.  None when the compilation
+    ran out of time."""
+    M = len(ok)
     n = 2 * N + 1
     c_lb = np.full(M, np.nan)
     lam, V = np.tile(np.ones(n), (M, 1)), np.tile(np.eye(n), (M, 1, 1))
-    gram_error = np.zeros(M)
-    iters = np.zeros(M, int)
+    gram_error, iters = np.zeros(M), np.zeros(M, int)
+    try:
+        with deadline_scope(deadline):
+            ps = corollary1_point_structure(N)
+    except TimeLimitReached:
+        _hand_back(ok, np.ones(M, bool), reason, "time limit reached while compiling the batched SDP")
+        return None
+    comp = ps.compiled
     idx = np.nonzero(ok)[0]
     th = ps.thetas(F[idx]) if idx.size else np.zeros((0, comp.n_theta))
     step = _chunk_size(N)
@@ -112,6 +147,11 @@ def solve_corollary1_points(cameras, points2d, *, tolerances: Tolerances = DEFAU
                                                                  tol.ipm_flat_face_dual_residual_gap))
     for start in range(0, idx.size, step):
         part = idx[start:start + step]
+        if expired(deadline):
+            late = np.zeros(M, bool)
+            late[idx[start:]] = True
+            _hand_back(ok, late, reason, "time limit reached before its SDP chunk")
+            break
         bb = comp.batch_bounds(th[start:start + step], ipm_tol)
         iters[part], c_lb[part], lam[part], V[part] = bb.iterations, bb.lower_bound, bb.eigenvalues, bb.eigenvectors
         gram_error[part] = bb.gram_error
@@ -119,47 +159,69 @@ def solve_corollary1_points(cameras, points2d, *, tolerances: Tolerances = DEFAU
             reason[part[j]] = bb.reason[j]
         ok[part[~bb.ok]] = False
     ok &= np.isfinite(c_lb)
-    # ---- extraction: kernel dimension 1, v* = kernel vector / its constant entry
+    return c_lb, lam, V, gram_error, iters, comp
+
+
+def _extract(V, lam, Cn, ok, reason: list, tol: Tolerances) -> tuple[np.ndarray, np.ndarray]:
+    """(X^, v* as (M, N, 2) image points) in the normalised frame, from the Gram kernel of dimension 1 (v* =
+    kernel vector / its constant entry, the kernel test of :func:`sospoly.analysis.has_constant_entry`) and
+    the SVD of M0(v*) (paper (53))."""
+    M = len(ok)
+    N = Cn.shape[1]
     kdim = tol.kernel_dimension(lam)
-    w0 = V[:, 0, 0]
-    single = (kdim == 1) & (np.abs(w0) > 1e-12)
-    for m in np.nonzero(ok & ~single)[0]:
-        reason[m] = f"Gram kernel of dimension {kdim[m]}: kernel-family rule of the per-point path"
-    ok &= single
-    v = V[:, 1:, 0] / np.where(ok, w0, 1.0)[:, None]
-    xn = v.reshape(M, N, 2)
+    single = (kdim == 1) & has_constant_entry(V[:, :, 0])
+    _hand_back(ok, ~single, reason, lambda m: f"Gram kernel of dimension {kdim[m]}: kernel-family rule of the "
+                                              f"per-point path")
+    xn = (V[:, 1:, 0] / np.where(ok, V[:, 0, 0], 1.0)[:, None]).reshape(M, N, 2)
     rows = (Cn[:, :, :2, :] - xn[..., None] * Cn[:, :, 2:3, :]).reshape(M, 2 * N, 4)
     rows = np.where(ok[:, None, None] & np.isfinite(rows), rows, 0.0)
     w = np.linalg.svd(rows)[2][:, -1, :]
     finite = np.abs(w[:, 3]) > POINT_AT_INFINITY_RTOL * np.linalg.norm(w, axis=1)
-    for m in np.nonzero(ok & ~finite)[0]:
-        reason[m] = "w4 ~ 0 (ill-posed)"
-    ok &= finite
-    X_raw_n = w[:, :3] / np.where(finite, w[:, 3], 1.0)[:, None]
-    u, _, fin = project_stack(Cn, X_raw_n)
-    g_raw = np.where(fin, np.sqrt(np.sum(u ** 2, axis=(1, 2)) / (2 * N)), np.inf)
+    _hand_back(ok, ~finite, reason, "w4 ~ 0 (ill-posed)")
+    return w[:, :3] / np.where(finite, w[:, 3], 1.0)[:, None], xn
+
+
+def _handed_back(C, x, reason: list) -> SdpBatch:
+    """Every problem handed back (nothing solved)."""
+    M, N = x.shape[:2]
+    nan = np.full(M, np.nan)
+    return SdpBatch(np.zeros(M, bool), np.full(M, None, dtype=object), np.zeros(M, bool), nan, nan.copy(),
+                    nan.copy(), np.full((M, 3), np.nan), np.full((M, 3), np.nan), np.full((M, N, 2), np.nan),
+                    n_lmivar_formula(2 * N, 2, [2] * (N * (N - 1) // 2)), np.zeros(M, int), tuple(reason),
+                    np.full(M, None, dtype=object))
+
+
+def _gamma_n(Cn, X, usable) -> np.ndarray:
+    """gamma of the normalised problems (observed points at the origin) at X; inf where not ``usable``."""
+    u, _, fin = project_stack(Cn, X)
+    return np.where(fin & usable, gamma_from_c(np.sum(u ** 2, axis=(1, 2)), Cn.shape[1], 1.0), np.inf)
+
+
+def _refined(Cn, X_raw_n, ok, refine: bool):
+    """(X_n, gamma_n): the extracted points, replaced by their Levenberg-Marquardt refinement where better."""
+    M, N = Cn.shape[:2]
+    g_raw = _gamma_n(Cn, X_raw_n, np.ones(M, bool))
     ok &= np.isfinite(g_raw)
     X_n, g_n = X_raw_n.copy(), g_raw.copy()
     if refine:
         Xr, okr = refine_points_stack(Cn, np.zeros((M, N, 2)), X_raw_n, ok.copy())
-        ur, _, finr = project_stack(Cn, Xr)
-        gr = np.where(finr & okr, np.sqrt(np.sum(ur ** 2, axis=(1, 2)) / (2 * N)), np.inf)
+        gr = _gamma_n(Cn, Xr, okr)
         better = gr < g_n
         X_n[better], g_n[better] = Xr[better], gr[better]
-    c_ub = 2 * N * g_n ** 2
-    # rigorous bound (sospoly.analysis.rigor): the observed points are the origin, so f(v) = ||v||^2 and a
-    # minimiser has ||v*||^2 = f(v*) <= c_ub; the basis is b = (1, v) (||b||^2 <= 1 + c_ub) and q = 1 (degree 2)
-    assert comp.structure.q.degree == 0
-    c_lb = c_lb - image_form_stack_margin(lam, gram_error, 1.0 + c_ub, q_min=float(comp.structure.q.coefficients()[0]))
+    return X_n, g_n
+
+
+def _decided(C, x, norm, ok, reason, tol, c_lb, c_ub, X_n, X_raw_n, xn, comp, iters) -> SdpBatch:
+    """The decision of every path (:func:`tritools.solve.decide.decide`), confirmed on the reported numbers,
+    then the trivial bound (:mod:`tritools.solve.trivial`)."""
+    N = x.shape[1]
     status, optimal, c_rep = decide(c_lb, c_ub, tol, N, norm.resolution)
-    above = ok & (status == Status.NUMERICAL_FAILURE.value)
-    for m in np.nonzero(above)[0]:
-        reason[m] = "lower bound above the upper bound: per-point tight re-solve"
-    ok &= ~above
+    _hand_back(ok, status == Status.NUMERICAL_FAILURE.value, reason,
+               "lower bound above the upper bound: per-point tight re-solve")
     X_world = norm.world_points(X_n)
     g_lb = gamma_from_c(c_rep, N, norm.scale)
     u_w, _, fin_w = project_stack(C, X_world)
-    g_ub = np.where(fin_w, np.sqrt(np.sum((u_w - x) ** 2, axis=(1, 2)) / (2 * N)), np.inf)
+    g_ub = np.where(fin_w, gamma_from_c(np.sum((u_w - x) ** 2, axis=(1, 2)), N, 1.0), np.inf)
     reported = decide_reported(g_lb, g_ub, tol, N, norm.scale, norm.resolution)
     for m in np.nonzero(ok & optimal & ~reported)[0]:
         reason[m] = "the bounds met in normalised coordinates, but not at the estimate in world coordinates"
@@ -171,6 +233,5 @@ def solve_corollary1_points(cameras, points2d, *, tolerances: Tolerances = DEFAU
     optimal, c_rep, g_lb = optimal | trivial, np.where(trivial, 0.0, c_rep), np.where(trivial, 0.0, g_lb)
     by = np.where(trivial, TRIVIAL_BOUND, np.where(optimal, "sdp", None))
     reason = tuple("" if done else r for done, r in zip(ok, reason))
-    return SdpBatch(ok, status, optimal & ok, c_rep, c_ub, g_lb,
-                    X_world, norm.world_points(X_raw_n), x + xn / norm.scale[:, None, None],
-                    comp.n_lmivar, iters, reason, by)
+    return SdpBatch(ok, status, optimal & ok, c_rep, c_ub, g_lb, X_world, norm.world_points(X_raw_n),
+                    x + xn / norm.scale[:, None, None], comp.n_lmivar, iters, reason, by)

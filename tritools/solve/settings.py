@@ -1,0 +1,77 @@
+"""The solver settings of one triangulation call: :class:`SolveSettings`, built once from the options.
+
+backend, Gram form, tolerances and deadline travel together from :class:`~tritools.solve.options.
+TriangulationOptions` down to every stage (:mod:`tritools.solve.stages`) and vectorised implementation
+(:mod:`tritools.solve.fastpath`, :mod:`tritools.solve.discs`, :mod:`tritools.solve.sdp_batch`), instead of
+four separate arguments.  Two rules live here and nowhere else:
+
+* ``backend=None`` means ``"auto"`` (:class:`sospoly.solvers.backends.AutoBackend`: the interior-point
+  method for small programs, Clarabel beyond) on every path: the compiled structures, the free and
+  user multipliers (GEVP bisection) and the batched degree-2 SDP alike;
+* ``time_limit`` (``options.budget.time_limit``) is **per point**: a single call gets one
+  :class:`sospoly.budget.Deadline` that every stage checks (building, compiling, solving, and the
+  vectorised verification between its steps); a stack of M points solved together by a vectorised
+  stage gets M times the per-point limit (:func:`stack_deadline`), and each point a later stage solves
+  alone gets its own.  A whole-call limit of a batch is a separate option of the batch.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from sospoly import GramForm, Tolerances
+from sospoly.budget import Deadline
+
+__all__ = ["SolveSettings", "AUTO_BACKEND", "stack_deadline", "no_deadline"]
+
+#: the back-end name ``backend=None`` stands for.
+AUTO_BACKEND = "auto"
+
+
+@dataclass(frozen=True)
+class SolveSettings:
+    """What every solver call of one point needs: ``backend`` (a sospoly back-end or its name; never None),
+    ``form`` (the Gram form of non-compiled programs), ``tolerances`` (the certificate rule) and ``deadline``
+    (the point's time limit, :mod:`sospoly.budget`)."""
+
+    backend: object
+    form: GramForm
+    tolerances: Tolerances
+    deadline: Deadline
+
+    def __post_init__(self) -> None:
+        if self.backend is None:
+            raise TypeError("SolveSettings.backend must be a back-end or its name, not None (None means 'auto': "
+                            "build the settings with SolveSettings.from_options)")
+        for name, kind in (("form", GramForm), ("tolerances", Tolerances), ("deadline", Deadline)):
+            if not isinstance(getattr(self, name), kind):
+                raise TypeError(f"SolveSettings.{name} must be a {kind.__name__}, got "
+                                f"{type(getattr(self, name)).__name__}")
+
+    @classmethod
+    def from_options(cls, options, deadline: Deadline | None = None) -> SolveSettings:
+        """The settings of one point under validated :class:`~tritools.solve.options.TriangulationOptions`
+        (its ``tolerances`` already checked by ``as_tolerances``); the deadline starts now unless given."""
+        backend = AUTO_BACKEND if options.backend is None else options.backend
+        return cls(backend, GramForm(options.form), options.tolerances,
+                   options.budget.deadline() if deadline is None else deadline)
+
+    @property
+    def auto_backend(self) -> bool:
+        """The default back-end (the batched interior-point SDP is its twin for stacks)."""
+        return isinstance(self.backend, str) and self.backend == AUTO_BACKEND
+
+    @property
+    def expired(self) -> bool:
+        return self.deadline.expired
+
+
+def stack_deadline(options, n_points: int) -> Deadline:
+    """The deadline of one vectorised call over ``n_points`` points: the per-point ``time_limit`` times the
+    number of points (no limit when the budget has none)."""
+    limit = options.budget.time_limit
+    return Deadline.after(None if limit is None else float(limit) * max(1, int(n_points)))
+
+
+def no_deadline() -> Deadline:
+    """A deadline that never passes (the default of the vectorised functions called directly)."""
+    return Deadline(None)

@@ -1,0 +1,178 @@
+"""The step stages after the SDP: ``estimate`` -> ``rigor`` -> ``decide`` -> ``resolve``.
+
+* ``estimate`` -- the candidates of the returned certificate: Henrion-Lasserre points and scaled kernel
+  vectors of the optimal Gram matrix, the moment matrices' (clique moments for sparse certificates), and
+  -- when a dense kernel has dimension > 1 -- the member of the kernel's affine family v(t) with the
+  smallest gamma(X^(v(t))) (every member is a legitimate v* of the paper's (51)); X^ from the SVD of
+  M0(v*) (the paper's (47)-(49)), the smallest exact gamma(X^), then the local L2 refinement (Theorem 1
+  holds for any X^, so it can only lower gamma_UB): c_UB = 2N gamma'(X^)^2;
+* ``rigor`` -- c_LB = c* minus the rigorous margin of the certificate (:func:`sospoly.analysis.
+  rigorous_psatz_bound`: its PSD defect and identity residual on the box / ball that holds a minimiser,
+  :func:`tritools.solve.report.solve_radius` / :func:`~tritools.solve.report.solve_ball`, derived from
+  c_UB -- so it follows the estimate);
+* ``decide`` -- :func:`tritools.solve.decide.decide` in c units, gamma_LB = sqrt(c_LB / 2N) / s (the paper's
+  (52), :func:`tritools.solve.decide.gamma_from_c`), the result of the estimate
+  (:func:`tritools.solve.stages.outcome.report_point`);
+* ``resolve`` -- an "almost solved" iterate that did not certify through the rigorous bound is re-solved
+  with the solver's full retry chain when its solve was quick (:data:`INACCURATE_RESOLVE_MAX_SECONDS`), and
+  the stages between ``sdp`` and ``resolve`` run again on it.
+"""
+from __future__ import annotations
+
+import dataclasses
+import time
+
+import numpy as np
+
+import sospoly
+from sospoly import SolveStatus
+from sospoly.analysis import best_in_family, kernel_family, rigorous_psatz_bound
+
+from ...model.geometry import common_centre, gamma as gamma_of, gamma_validated, point_from_image_points, refine_l2
+from ...result import Status, TriangulationResult
+from ..decide import decide, gamma_from_c
+from ..plan import Step
+from ..report import solve_ball, solve_radius
+from .context import PointContext, StepState
+from .outcome import join, replace, report_point
+from .sdp import resolve_chain, solve_psatz
+
+__all__ = ["estimate_stage", "rigor_stage", "decide_stage", "resolve_stage", "MAX_FAMILY_DIM", "FAMILY_SEARCH_EVALS",
+           "INACCURATE_RESOLVE_MAX_SECONDS"]
+
+#: kernel families of dimension up to this are searched for the best candidate.
+MAX_FAMILY_DIM = 3
+#: evaluations of gamma spent searching a Gram kernel's family for the best estimate (the local refinement
+#: that follows does the fine work)
+FAMILY_SEARCH_EVALS = 300
+#: an "almost solved" iterate that does not certify is re-solved with the solver's full retry chain when
+#: its solve took at most this many seconds (measured: N = 30 mixed regions, delta = 2: 8 s per attempt,
+#: four more attempts all "almost solved"; N = 3: milliseconds, and the chain certifies gamma* = 0 data).
+INACCURATE_RESOLVE_MAX_SECONDS = 1.0
+
+
+def _iterate(lb) -> bool:
+    """An inaccurate iterate that passed the a-posteriori checks (``Tolerances.accept_inaccurate``): used only
+    through the rigorous bound, which charges its PSD defect and identity residual."""
+    return lb.status == SolveStatus.INACCURATE and lb.solution is not None and lb.solution.objective is not None
+
+
+def unsolved_result(step: Step, lb) -> TriangulationResult:
+    """The result of an SDP that returned no usable bound."""
+    status = {SolveStatus.TIME_LIMIT: Status.TIME_LIMIT, SolveStatus.BUDGET_EXCEEDED: Status.BUDGET_EXCEEDED}\
+        .get(lb.status, Status.SOLVER_FAILED)
+    return TriangulationResult(step.result_method.value, status,
+                               message=f"SDP at delta={step.delta}: {lb.status.value} {lb.message}".strip())
+
+
+def ill_posed_result(step: Step, gamma_lb) -> TriangulationResult:
+    return TriangulationResult(step.result_method.value, Status.ILL_POSED, gamma_lb=gamma_lb, optimal=False,
+                               message="every extracted candidate has w4 ~ 0 (ill-posed: e.g. equal cameras)")
+
+
+def _unsolved(st: StepState) -> None:
+    st.result = unsolved_result(st.step, st.lb)        # decided; ``resolve`` may still re-solve it
+
+
+def estimate_stage(ctx: PointContext, st: StepState) -> None:
+    """The best candidate, refined (module docstring); c* in ``st.c_lower``."""
+    lb = st.lb
+    if st.result is not None:
+        return
+    if lb.solution is None or (lb.lower_bound is None and not _iterate(lb)) or \
+            lb.status not in (SolveStatus.OPTIMAL, SolveStatus.TIME_LIMIT, SolveStatus.INACCURATE):
+        return _unsolved(st)
+    t = time.perf_counter()
+    best = _best_candidate(ctx, st.problem, st.psatz, lb.solution)
+    ctx.timings[f"extract_d{st.step.delta}"] = time.perf_counter() - t
+    st.c_lower = float(lb.lower_bound if lb.lower_bound is not None else lb.solution.objective)
+    if best is None:
+        if _iterate(lb):
+            return _unsolved(st)
+        st.result = ill_posed_result(st.step, gamma_from_c(st.c_lower, ctx.N, ctx.norm.scale))
+        return
+    g_raw_n, X_raw_n, x_star_n = best
+    g_n, X_n = g_raw_n, X_raw_n
+    if ctx.opts.refine:
+        Xr = refine_l2(X_raw_n, ctx.cams_n, ctx.regs_n)
+        if Xr is not None:
+            gr = gamma_of(Xr, ctx.cams_n, ctx.regs_n)
+            if np.isfinite(gr) and gr < g_n:
+                g_n, X_n = float(gr), Xr
+    st.estimate = (g_n, X_n, X_raw_n, x_star_n)
+
+
+def _c_upper(ctx: PointContext, st: StepState) -> float:
+    return 2 * ctx.N * st.estimate[0] ** 2
+
+
+def rigor_stage(ctx: PointContext, st: StepState) -> None:
+    """c_LB = c* minus the certificate's rigorous margin on a set holding a minimiser (module docstring)."""
+    if st.result is not None:
+        return
+    c_ub = _c_upper(ctx, st)
+    R = solve_radius(ctx.regs_n, c_ub)
+    if R is not None:
+        st.c_lower = rigorous_psatz_bound(st.psatz, st.lb.solution, st.c_lower, R,
+                                          ball=solve_ball(ctx.regs_n, c_ub)).lower_bound
+    elif _iterate(st.lb):
+        _unsolved(st)
+
+
+def decide_stage(ctx: PointContext, st: StepState) -> None:
+    """The decision in c units and the result of the estimate (module docstring)."""
+    if st.result is not None:
+        return
+    c, c_ub = st.c_lower, _c_upper(ctx, st)
+    status, optimal, c_rep = decide(c, c_ub, st.tol, ctx.N, ctx.norm.resolution)
+    if st.lb.status == SolveStatus.TIME_LIMIT:
+        status, optimal = Status.TIME_LIMIT, False
+    msg, gamma_lb = "", gamma_from_c(c_rep, ctx.N, ctx.norm.scale) if np.isfinite(c_rep) else None
+    if status == Status.NUMERICAL_FAILURE:
+        msg = f"lower bound c={c:.10g} above c at the estimate {c_ub:.10g}: numerical failure, no certificate"
+        gamma_lb = None                     # it contradicts a feasible value: not a valid bound
+    _, X_n, X_raw_n, x_star_n = st.estimate
+    norm = ctx.norm
+    res = report_point(ctx, st.step, status, optimal, gamma_lb, X=norm.world_point(X_n),
+                       X_raw=norm.world_point(X_raw_n), image_points=norm.image_points(x_star_n),
+                       certified_by="sdp" if optimal else None)
+    st.result = replace(res, message=join(msg, res.message))
+
+
+def resolve_stage(ctx: PointContext, st: StepState) -> None:
+    """The full retry chain for a quick "almost solved" iterate that did not certify (module docstring)."""
+    key = f"solve_d{st.step.delta}"
+    if st.lb is None or st.result is None or st.lb.status != SolveStatus.INACCURATE or st.result.optimal or \
+            ctx.expired or ctx.timings.get(key, np.inf) > INACCURATE_RESOLVE_MAX_SECONDS:
+        return
+    st.lb = solve_psatz(ctx, st.psatz, dataclasses.replace(st.tol, accept_inaccurate=False))
+    st.result, st.estimate = None, None
+    resolve_chain(ctx, st)
+    ctx.timings[key] = time.perf_counter() - st.t_solve
+
+
+def _best_candidate(ctx: PointContext, problem, psatz, sol):
+    """Best (gamma_n, X_n, image points_n) over the extracted candidates (module docstring)."""
+    centre = common_centre(ctx.cams_n)                 # once for every candidate below
+
+    def evaluate(v):
+        xn = problem.image_points(v)
+        Xn = point_from_image_points(xn, ctx.cams_n, centre=centre)
+        if Xn is None:
+            return None
+        g = gamma_validated(np.asarray(Xn, float)[None], ctx.cams_n, ctx.regs_n)[0]
+        return (float(g), np.asarray(Xn, float), xn) if np.isfinite(g) else None
+
+    tol = ctx.tolerances
+    points = [c.point for c in sospoly.candidates_of(psatz, sol, tol) if c.point.shape == (len(problem.gens),)]
+    if len(psatz.u.block_names()) == 1 and "u" in sol.grams:
+        fam = kernel_family(sol.grams["u"], psatz.u.gram.b, tol)
+        if fam is not None and 0 < fam.dim <= MAX_FAMILY_DIM:
+            v, _ = best_in_family(fam, lambda v: (evaluate(v) or (np.inf,))[0], max_evals=FAMILY_SEARCH_EVALS)
+            points.append(v)
+    best = None
+    for v in points:
+        e = evaluate(v)
+        if e is not None and (best is None or e[0] < best[0]):
+            best = e
+    return best

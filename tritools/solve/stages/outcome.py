@@ -1,0 +1,200 @@
+"""The results of the stages: one point's report, the trivial bound, and the last three point stages.
+
+* :func:`report_point` -- the result of an estimate X (world frame, normalised problem's units decided)
+  with gamma_UB, residuals and depths on the cameras (:func:`tritools.solve.report.point_report`), the
+  decision confirmed on the numbers reported (:func:`tritools.solve.decide.decide_reported`) and
+  cheirality (:func:`tritools.solve.decide.cheirality`);
+* :func:`trivial_certificate` -- a certificate through gamma* >= 0 (:mod:`tritools.solve.trivial`);
+* the stages ``settle`` (the trivial bound at the best estimate, the local estimate when there is none,
+  TIME_LIMIT / BUDGET_EXCEEDED when the plan stopped short), ``world_frame`` (the estimate back in the
+  caller's frame, :mod:`tritools.model.frame`) and ``report`` (timings and attempts).
+"""
+from __future__ import annotations
+
+import dataclasses
+import time
+
+import numpy as np
+
+from ...model.constraints import Method
+from ...model.geometry import image_points
+from ...result import Attempt, Status, TriangulationResult
+from ..decide import cheirality, decide_reported
+from ..plan import Step
+from ..report import point_report
+from ..trivial import TRIVIAL_BOUND, trivially_certified, trivially_certified_reported
+from .context import AttemptStep, PointContext, sparsity_name
+
+__all__ = ["report_point", "trivial_certificate", "failed", "better", "behind_message", "replace",
+           "settle_stage", "world_frame_stage", "report_stage"]
+
+
+def replace(res: TriangulationResult, **kw) -> TriangulationResult:
+    return dataclasses.replace(res, **kw)
+
+
+def join(*messages: str) -> str:
+    return "; ".join(m for m in messages if m)
+
+
+def behind_message(depths) -> str:
+    """The message of a certified optimum behind some camera(s): which ones."""
+    return "certified L2 optimum, but behind camera(s) " + \
+        ", ".join(str(i) for i in np.nonzero(~(np.asarray(depths, float) > 0))[0])
+
+
+def report_point(ctx: PointContext, step: Step, status, optimal, gamma_lb, *, X, X_raw, image_points,
+                 certified_by, n_lmivar=None) -> TriangulationResult:
+    """The result of the estimate ``X`` under ``step`` (module docstring)."""
+    rep = point_report(X, ctx.cams, ctx.regions, ctx.opts.world_frame)
+    raw = point_report(X_raw, ctx.cams, ctx.regions)
+    msg = ""
+    if gamma_lb is not None and rep.gamma is not None and np.isfinite(rep.gamma):
+        gamma_lb = min(gamma_lb, rep.gamma)          # consistent in pixels too (decided in c units)
+        if optimal:                                  # the decision again, on the numbers reported
+            optimal = decide_reported(gamma_lb, rep.gamma, ctx.tolerances, ctx.N, ctx.norm.scale,
+                                      ctx.norm.resolution)
+            if not optimal:
+                status = Status.NOT_CERTIFIED
+                msg = "the bounds met in normalised coordinates, but not at the estimate in world coordinates"
+    if optimal and (rep.gamma is None or not np.isfinite(rep.gamma)):
+        # e.g. views sharing one centre, where the extracted point is the centre itself: no upper bound
+        status, optimal = Status.NOT_CERTIFIED, False
+        msg = "the estimate's projection is undefined in some view (a point at a camera centre)"
+    status, in_front = cheirality(status, rep.depths, ctx.opts.require_in_front)
+    if optimal and not in_front:
+        msg = behind_message(rep.depths)
+    return TriangulationResult(step.result_method.value, status, X=X, gamma_ub=rep.gamma, gamma_lb=gamma_lb,
+                               optimal=optimal, delta=step.delta, n_lmivar=n_lmivar, image_points=image_points,
+                               X_raw=X_raw, gamma_ub_raw=raw.gamma, certified_by=certified_by if optimal else None,
+                               message=msg, sparsity=sparsity_name(step), in_front=in_front, depths=rep.depths,
+                               residuals=rep.residuals)
+
+
+def failed(ctx: PointContext, step: Step, status: Status, message: str, label: AttemptStep,
+           t: float) -> TriangulationResult:
+    """A step that produced no bound (an attempt is recorded)."""
+    sparsity = sparsity_name(step)
+    ctx.attempts.append(Attempt(step.method.value, step.delta, status.value, None, None, label, sparsity, (),
+                                time.perf_counter() - t))
+    return TriangulationResult(step.result_method.value, status, delta=step.delta, message=message,
+                               sparsity=sparsity)
+
+
+def trivial_certificate(ctx: PointContext, step: Step, X=None) -> TriangulationResult | None:
+    """A certificate through the trivial bound gamma* >= 0 (:mod:`tritools.solve.trivial`) at ``X`` (world
+    frame; default the local estimate), or None when gamma(X) is not within the tolerance of 0."""
+    t = time.perf_counter()
+    if X is None:
+        est = ctx.local()
+        if est is None or not trivially_certified(2 * ctx.N * est[0] ** 2, ctx.tolerances, ctx.N,
+                                                  ctx.norm.resolution):
+            return None
+        X = ctx.norm.world_point(est[1])
+    rep = point_report(X, ctx.cams, ctx.regions)
+    if rep.gamma is None or not trivially_certified_reported(rep.gamma, ctx.tolerances, ctx.N, ctx.norm.scale,
+                                                             ctx.norm.resolution):
+        return None
+    with np.errstate(all="ignore"):
+        x = image_points(np.asarray(X, float), ctx.cams)
+    res = report_point(ctx, step, Status.OPTIMAL, True, 0.0, X=X, X_raw=X, image_points=x, certified_by=TRIVIAL_BOUND)
+    if not res.optimal:
+        return None
+    ctx.attempts.append(Attempt(step.method.value, step.delta, Status.OPTIMAL.value, 0.0, res.gamma_ub,
+                                AttemptStep.TRIVIAL_BOUND, res.sparsity, (), time.perf_counter() - t))
+    return replace(res, message=join("gamma_UB within the certificate tolerance of the trivial lower bound 0",
+                                     res.message))
+
+
+def better(a: TriangulationResult, b: TriangulationResult) -> bool:
+    """Is ``a`` a better result to report than ``b``: certified first, then any estimate with a lower bound
+    (the larger one), then any estimate."""
+    if a.status.certified != b.status.certified:
+        return a.status.certified
+    if (a.gamma_lb is not None) != (b.gamma_lb is not None):
+        return a.gamma_lb is not None
+    if a.gamma_lb is not None and b.gamma_lb is not None and a.gamma_lb != b.gamma_lb:
+        return a.gamma_lb > b.gamma_lb
+    return a.X is not None and b.X is None
+
+
+def step_of(res: TriangulationResult, ctx: PointContext) -> Step:
+    """The plan step a result belongs to (for reporting an estimate under it)."""
+    first = ctx.steps[0] if ctx.steps else Step(ctx.opts.explicit_method or Method.COROLLARY1, 2, "dense")
+    try:
+        method = Method(res.method)
+    except ValueError:
+        method = first.method
+    return Step(method, res.delta if res.delta is not None else first.delta,
+                "views" if res.sparsity == "views" else "dense")
+
+
+def _stopped_short(ctx: PointContext, best: TriangulationResult | None) -> TriangulationResult:
+    """``best`` with TIME_LIMIT / BUDGET_EXCEEDED when the plan stopped short of a certificate."""
+    if best is None:
+        method = ctx.steps[0].result_method.value if ctx.steps else \
+            (ctx.opts.explicit_method or Method.COROLLARY1).value
+        return TriangulationResult(method, Status.TIME_LIMIT,
+                                   message="time limit reached before any certificate was computed")
+    open_ = not best.status.certified and best.status != Status.ILL_POSED
+    if ctx.expired and open_:
+        return replace(best, status=Status.TIME_LIMIT, message=join(best.message, "time limit reached"))
+    if ctx.skipped is not None and ctx.skipped is not best and open_:
+        # the best bounds so far, and why the plan stopped short of a certificate
+        return replace(best, status=Status.BUDGET_EXCEEDED, message=join(best.message,
+                                                                         f"skipped {ctx.skipped.message}"))
+    return best
+
+
+def settle_stage(ctx: PointContext) -> None:
+    """The final result: the plan's outcome (:func:`_stopped_short`), then a certificate through the trivial
+    bound at the best estimate (or the local one) when one holds; otherwise the best result, with the local
+    estimate when it has none (every status but ``invalid_input`` carries an estimate when one exists)."""
+    best = _stopped_short(ctx, ctx.best)
+    if best.status.certified or best.status == Status.INVALID_INPUT:
+        ctx.best = best
+        return
+    step = step_of(best, ctx)
+    cert = (trivial_certificate(ctx, step, best.X) if best.X is not None else None) or trivial_certificate(ctx, step)
+    if cert is not None:
+        why = f" (before: {best.status.value}{': ' + best.message if best.message else ''})"
+        ctx.best = replace(cert, n_lmivar=best.n_lmivar, message=cert.message + why)
+        return
+    est = ctx.local()
+    if best.X is not None or est is None:
+        ctx.best = best
+        return
+    X = ctx.norm.world_point(est[1])
+    with np.errstate(all="ignore"):
+        x = image_points(X, ctx.cams)
+    rep = report_point(ctx, step, best.status, False, best.gamma_lb, X=X, X_raw=X, image_points=x, certified_by=None)
+    note = "X and gamma_UB from the local L2 refinement of the DLT point"
+    ctx.best = replace(rep, delta=best.delta, n_lmivar=best.n_lmivar, sparsity=best.sparsity,
+                       message=join(best.message, note))
+
+
+def world_frame_stage(ctx: PointContext) -> None:
+    """The result with X moved back to the caller's world frame (:mod:`tritools.model.frame`) and gamma_UB,
+    residuals and depths evaluated there on the caller's cameras -- the numbers a user re-computes -- the
+    certificate confirmed on them (:func:`tritools.solve.decide.decide_reported`)."""
+    res = ctx.best
+    if not ctx.frame.moved or res.X is None:
+        return
+    X, X_raw = ctx.frame.user_point(res.X), ctx.frame.user_point(res.X_raw)
+    rep = point_report(X, ctx.cams_user, ctx.regions)
+    kw = dict(X=X, X_raw=X_raw, gamma_ub=rep.gamma, residuals=rep.residuals, depths=rep.depths,
+              gamma_ub_raw=point_report(X_raw, ctx.cams_user, ctx.regions).gamma)
+    if res.gamma_lb is not None and rep.gamma is not None and np.isfinite(rep.gamma):
+        kw["gamma_lb"] = min(res.gamma_lb, rep.gamma)
+        if res.optimal and not decide_reported(kw["gamma_lb"], rep.gamma, ctx.tolerances, ctx.N, ctx.norm.scale,
+                                               ctx.norm.resolution):
+            kw.update(status=Status.NOT_CERTIFIED, optimal=False, certified_by=None,
+                      message=join(res.message, "the bounds met in the re-centred frame, but not at the estimate "
+                                                "in the caller's frame"))
+    ctx.best = replace(res, **kw)
+
+
+def report_stage(ctx: PointContext) -> None:
+    """Timings and every attempt into the result."""
+    ctx.timings["total"] = time.perf_counter() - ctx.t0
+    ctx.best = replace(ctx.best, timings=dict(ctx.timings), attempts=tuple(ctx.attempts))

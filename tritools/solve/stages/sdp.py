@@ -1,0 +1,212 @@
+"""The ``steps`` stage (the degree plan's SDPs, one after the other) and the ``sdp`` step stage.
+
+``steps`` walks the plan (:func:`tritools.solve.plan.degree_plan`) under the point's deadline: each step
+runs the step stages (:data:`tritools.solve.stages.STEP_STAGES`: sdp -> estimate -> rigor -> decide ->
+resolve); a step whose lower bound contradicts its upper bound (NUMERICAL_FAILURE) is re-solved once with
+100x tighter solver tolerances (``tight``); the walk stops at a certificate, an ill-posed problem, or a
+step beyond the budget (every later step is larger).
+
+``sdp`` builds the step's program -- (f, g, h) in the step's formulation (:mod:`tritools.model.problem`)
+and the certificate's shape: dense, or view cliques beside the dense degree-2 block -- compiled once per
+structure key (:data:`~tritools.solve.structures.STRUCTURE_CACHE`) and sized against the budget before
+anything is assembled, and solves it within the remaining time.  Its fast implementation, the batched
+delta = 2 SDP (:func:`tritools.solve.sdp_batch.solve_corollary1_points`, name ``"sdp-points"``), applies
+to point regions, Corollary 1, delta = 2, dense, the default multiplier, form and back-end, with
+normalisation; it decides the step itself, and what it hands back goes to the generic route.  A single
+call uses it only when asked (``fast``): batches run it on their stacks (:mod:`tritools.solve.points`),
+and tests/test_sdp_batch.py compares them against a single call's generic route.
+"""
+from __future__ import annotations
+
+import dataclasses
+import time
+
+import sospoly
+from sospoly import BudgetExceeded, Multiplier
+from sospoly.budget import TimeLimitReached
+
+from ...model.constraints import Method
+from ...model.normalize import unconstrained_reason
+from ...model.problem import TriangulationProblem, view_band, view_chain
+from ...result import Attempt, Status, TriangulationResult
+from ..plan import Step
+from ..sdp_batch import solve_corollary1_points
+from ..structures import STRUCTURE_CACHE, structure_key
+from .context import AttemptStep, ImplName, Implementation, PointContext, StepState
+from .outcome import better, failed, replace, report_point
+
+__all__ = ["steps_stage", "run_step", "sdp_stage", "solve_psatz", "SDP_FAST_NAME", "SDP_IMPLEMENTATIONS"]
+
+#: the name of the batched delta = 2 SDP in ``fast`` (:class:`~tritools.solve.stages.context.PointContext`).
+SDP_FAST_NAME = ImplName.SDP_POINTS
+
+
+def steps_stage(ctx: PointContext) -> None:
+    """Walk the degree plan (module docstring); ``ctx.best`` is the best result so far."""
+    for step in ctx.steps:
+        if ctx.finished or ctx.expired:
+            break
+        res = run_step(ctx, step)
+        if res.status == Status.NUMERICAL_FAILURE:
+            res = run_step(ctx, step, tight=True)
+        ctx.best = res if ctx.best is None or better(res, ctx.best) else ctx.best
+        if res.status == Status.BUDGET_EXCEEDED:
+            ctx.skipped = res
+        if res.status.certified or res.status in (Status.ILL_POSED, Status.BUDGET_EXCEEDED):
+            break                   # certified, hopeless, or every later (larger) step exceeds the budget too
+
+
+def run_step(ctx: PointContext, step: Step, tight: bool = False) -> TriangulationResult:
+    """One plan step through ``ctx.step_stages``; the attempt is recorded.  Running out of time or memory while
+    building, assembling, compiling or solving gives TIME_LIMIT / BUDGET_EXCEEDED."""
+    tol = ctx.tolerances.tightened() if tight else ctx.tolerances
+    st = StepState(step, tight, tol=dataclasses.replace(tol, accept_inaccurate=True))   # made rigorous later
+    try:
+        for stage in ctx.step_stages:
+            if st.final:
+                break
+            stage.run(ctx, st)
+    except TimeLimitReached as exc:
+        return failed(ctx, step, Status.TIME_LIMIT, f"delta={step.delta}: {exc}", st.label, st.t0)
+    except (BudgetExceeded, MemoryError) as exc:  # the native-memory guard, or an allocation that failed
+        why = str(exc) or "out of memory (MemoryError)"
+        return failed(ctx, step, Status.BUDGET_EXCEEDED, f"delta={step.delta} ({st.sparsity}): {why}", st.label,
+                      st.t0)
+    if st.recorded:
+        return st.result
+    res = st.result
+    solver = tuple(f"{a.label}:{a.solver_status}" for a in (st.lb.solution.attempts if st.lb.solution else ()))
+    ctx.attempts.append(Attempt(step.method.value, step.delta, res.status.value, res.gamma_lb, res.gamma_ub,
+                                st.label, st.sparsity, solver, time.perf_counter() - st.t0))
+    return replace(res, method=step.result_method.value, delta=step.delta, sparsity=st.sparsity,
+                   n_lmivar=st.psatz.n_lmivar)
+
+
+def _fail(ctx: PointContext, st: StepState, status: Status, message: str) -> None:
+    st.result, st.final, st.recorded = failed(ctx, st.step, status, message, st.label, st.t0), True, True
+
+
+def sdp_stage(ctx: PointContext, st: StepState) -> None:
+    """The step's SDP (module docstring): the first usable implementation of :data:`SDP_IMPLEMENTATIONS` that
+    does not hand the step back."""
+    for impl in SDP_IMPLEMENTATIONS:
+        if impl.usable(ctx, st) and impl.run(ctx, st):
+            return
+
+
+def _generic(ctx: PointContext, st: StepState) -> bool:
+    """Build (or bind the compiled structure) and solve; the lower bound in ``st.lb`` (True: never hands back)."""
+    if not _build(ctx, st):
+        return True
+    t1 = st.t_solve = time.perf_counter()
+    st.lb = solve_psatz(ctx, st.psatz, st.tol)
+    ctx.timings[f"solve_d{st.step.delta}"] = time.perf_counter() - t1
+    return True
+
+
+def solve_psatz(ctx: PointContext, psatz, tol):
+    """sospoly's solve of a bound compiled instance or a built program, under the point's settings."""
+    s = ctx.settings
+    return sospoly.solve_psatz(psatz, backend=s.backend, form=s.form, tolerances=tol, deadline=s.deadline)
+
+
+def _build(ctx: PointContext, st: StepState) -> bool:
+    """The step's program in ``st.psatz``; False (and ``st.result``) when it cannot be built."""
+    step, t = st.step, st.t0
+    try:
+        problem = st.problem = ctx.problem(step.method, step.formulation)
+    except ValueError as exc:                     # e.g. Theorem 1 with all minors for too many views
+        _fail(ctx, st, Status.BUDGET_EXCEEDED, str(exc))
+        return False
+    if not problem.projection:
+        status, why = unconstrained_reason(ctx.cams, ctx.regions)
+        _fail(ctx, st, Status(status), why)
+        return False
+    if sospoly.delta_min(problem.f, problem.eq, problem.ineq) > step.delta:
+        _fail(ctx, st, Status.INVALID_INPUT, f"delta {step.delta} is below delta_min of this problem")
+        return False
+    try:
+        comp, theta = _compiled(ctx, problem, step)
+    except BudgetExceeded as exc:
+        _fail(ctx, st, Status.BUDGET_EXCEEDED, f"delta={step.delta} ({st.sparsity}): {exc}")
+        return False
+    ctx.timings[f"assemble_d{step.delta}"] = time.perf_counter() - t
+    if comp is None:
+        st.psatz = sospoly.build_psatz(problem.f, problem.eq, problem.ineq, step.delta, ctx.opts.multiplier,
+                                       gens=problem.gens, sparsity=_shape(ctx, problem, step), budget=ctx.opts.budget)
+    else:
+        st.psatz = comp.bind(theta)
+    return True
+
+
+def _shape(ctx: PointContext, problem: TriangulationProblem, step: Step):
+    """The certificate shape: dense, or view cliques beside the dense degree-2 certificate -- a cyclic band of
+    view pairs (Corollary 1) or a chain of view triples (Theorem 1, whose minors need three views) -- with
+    sospoly's exact basis reductions (tritools only says which variables belong together)."""
+    if step.formulation == "dense":
+        return "none"
+    groups = view_chain(problem.n_views, 3) if step.method == Method.THEOREM1 else view_band(problem.n_views)
+    cliques = [sorted(problem.variables_of_views(t)) for t in groups]
+    n = len(problem.gens)
+    return sospoly.clique_shape(n, step.delta, cliques, [problem.variables_of_views(v) for v in problem.eq_views],
+                                [problem.variables_of_views(v) for v in problem.ineq_views],
+                                [g.degree for g in problem.eq], [h.degree for h in problem.ineq], low_degree=2,
+                                max_gram_side=ctx.opts.budget.max_gram_side).reduced()
+
+
+def _compiled(ctx: PointContext, problem: TriangulationProblem, step: Step):
+    """(compiled structure, theta) from the cache, or (None, None) for a free or user multiplier."""
+    m = ctx.opts.multiplier
+    if not (isinstance(m, Multiplier) and m != Multiplier.FREE):
+        return None, None
+    form = ctx.settings.form
+    key = structure_key(ctx.N, tuple(r.kind for r in ctx.regions), step.method, step.delta, step.formulation, form)
+    try:
+        return STRUCTURE_CACHE.get(problem.f, problem.eq, problem.ineq, step.delta, m, form, gens=problem.gens,
+                                   key=key, sparsity=_shape(ctx, problem, step), budget=ctx.opts.budget)
+    except sospoly.StructureMismatch:
+        return None, None
+
+
+# ---------------------------------------------------------------------------------------------- the batched SDP
+def _batched_applies(ctx: PointContext, st: StepState) -> bool:
+    step, o = st.step, ctx.opts
+    return not st.tight and step.method == Method.COROLLARY1 and step.delta == 2 \
+        and step.formulation == "dense" and o.multiplier == Multiplier.FIXED and ctx.settings.auto_backend \
+        and ctx.settings.form == sospoly.GramForm.IMAGE and o.normalize and all(r.is_point for r in ctx.regions)
+
+
+def _batched(ctx: PointContext, st: StepState) -> bool:
+    """The batched delta = 2 SDP on a stack of one; False when it hands the point back."""
+    b = solve_corollary1_points(ctx.cams[None], ctx.centres()[None], tolerances=ctx.tolerances,
+                                refine=ctx.opts.refine, deadline=ctx.settings.deadline)
+    if not b.done[0]:
+        return False
+    opt = bool(b.optimal[0])
+    res = report_point(ctx, st.step, Status(b.status[0]), opt, float(b.gamma_lb[0]), X=b.X[0], X_raw=b.X_raw[0],
+                       image_points=b.image_points[0], certified_by=b.certified_by[0] if opt else None,
+                       n_lmivar=b.n_lmivar)
+    ctx.attempts.append(Attempt(st.step.method.value, 2, res.status.value, res.gamma_lb, res.gamma_ub,
+                                AttemptStep.SDP_BATCH, "dense", ("ipm-batch:converged",),
+                                time.perf_counter() - st.t0))
+    st.result, st.final, st.recorded = res, True, True
+    return True
+
+
+#: the implementations of the sdp stage, tried in order (module docstring).
+SDP_IMPLEMENTATIONS: tuple[Implementation, ...] = (
+    Implementation(SDP_FAST_NAME, _batched_applies, _batched),
+    Implementation(ImplName.GENERIC, lambda ctx, st: True, _generic, fast=False),
+)
+
+
+def resolve_chain(ctx: PointContext, st: StepState, after: str = "sdp", until: str = "resolve") -> None:
+    """Re-run the step stages strictly between ``after`` and ``until`` (the estimate, rigor and decide of a
+    re-solved program, and any stage inserted among them)."""
+    names = [s.name for s in ctx.step_stages]
+    lo = names.index(after) + 1 if after in names else 0
+    hi = names.index(until) if until in names else len(names)
+    for stage in ctx.step_stages[lo:hi]:
+        if st.final:
+            break
+        stage.run(ctx, st)

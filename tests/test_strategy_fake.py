@@ -287,9 +287,6 @@ def test_a_quick_inaccurate_answer_that_does_not_certify_is_resolved_with_the_fu
     assert [c.problem.n_cols for c in fake.calls][0] == fake.calls[1].problem.n_cols    # the same program again
 
 
-@pytest.mark.xfail(strict=True, reason="the re-solve's result replaces the first one: a re-solve that ends 'almost "
-                                       "solved' or failed again discards the rigorous bounds of the first iterate "
-                                       "(solver_failed, gamma_lb None)")
 @pytest.mark.parametrize("again", [Canned(RawStatus.ALMOST_SOLVED, suboptimal(0.5)), Canned(RawStatus.FAILED)],
                          ids=lambda c: c.label)
 def test_a_resolve_that_does_not_help_keeps_the_bounds_of_the_first_iterate(again):

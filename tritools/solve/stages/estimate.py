@@ -34,7 +34,7 @@ from ..decide import decide, gamma_from_c
 from ..plan import Step
 from ..report import solve_ball, solve_radius
 from .context import PointContext, StepState
-from .outcome import join, replace, report_point
+from .outcome import better, join, replace, report_point
 from .sdp import resolve_chain, solve_psatz
 
 __all__ = ["estimate_stage", "rigor_stage", "decide_stage", "resolve_stage", "MAX_FAMILY_DIM", "FAMILY_SEARCH_EVALS",
@@ -145,9 +145,13 @@ def resolve_stage(ctx: PointContext, st: StepState) -> None:
     if st.lb is None or st.result is None or st.lb.status != SolveStatus.INACCURATE or st.result.optimal or \
             ctx.expired or ctx.timings.get(key, np.inf) > INACCURATE_RESOLVE_MAX_SECONDS:
         return
+    first = (st.lb, st.result, st.estimate)
     st.lb = solve_psatz(ctx, st.psatz, dataclasses.replace(st.tol, accept_inaccurate=False))
     st.result, st.estimate = None, None
     resolve_chain(ctx, st)
+    if st.result is None or not better(st.result, first[1]):
+        # the chain did not help (again "almost solved", or failed): the first iterate's rigorous bounds stand
+        st.lb, st.result, st.estimate = first
     ctx.timings[key] = time.perf_counter() - st.t_solve
 
 

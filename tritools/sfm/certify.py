@@ -63,42 +63,52 @@ class RecordColumns:
 
     @property
     def X(self) -> np.ndarray:
+        """(M, 3) estimates, NaN rows where none."""
         return self.results.X
 
     @property
     def gamma_lb(self) -> np.ndarray:
+        """(M,) lower bounds, NaN when absent."""
         return self.results.gamma_lb
 
     @property
     def gamma_ub(self) -> np.ndarray:
+        """(M,) upper bounds gamma(X), NaN when absent."""
         return self.results.gamma_ub
 
     @property
     def optimal(self) -> np.ndarray:
+        """(M,) certified by the solver."""
         return self.results.optimal
 
     @property
     def in_front(self) -> np.ndarray:
+        """(M,) positive depth in every camera."""
         return self.results.in_front
 
     @property
     def message(self) -> np.ndarray:
+        """(M,) per-point details."""
         return self.results.message
 
     @cached_property
     def n_views(self) -> np.ndarray:
+        """(M,) int32 views of each point."""
         return self.results.n_views.astype(np.int32)
 
     @cached_property
     def status(self) -> np.ndarray:
+        """(M,) int8 codes of STATUS_LEGEND."""
         return np.fromiter((_CODE[s.value] for s in self.results.status), np.int8, count=len(self.results))
 
     @cached_property
     def certified_by(self) -> np.ndarray:
+        """(M,) object: how each point was certified, "" where not."""
         return np.fromiter((c or "" for c in self.results.certified_by), object, count=len(self.results))
 
     @cached_property
     def delta(self) -> np.ndarray:
+        """(M,) int16 relaxation degree, -1 where none."""
         return self.results.delta.astype(np.int16)
 
 

@@ -64,34 +64,42 @@ class PointCertificate:
 
     @property
     def status(self) -> Status:
+        """The row's status."""
         return self.result.status
 
     @property
     def gamma_lb(self) -> float | None:
+        """Lower bound on gamma* (undistorted pixels), None when absent."""
         return self.result.gamma_lb
 
     @property
     def gamma_ub(self) -> float | None:
+        """Upper bound gamma(X^) (undistorted pixels), None when absent."""
         return self.result.gamma_ub
 
     @property
     def optimal(self) -> bool:
+        """The solver certified its estimate."""
         return bool(self.result.optimal)
 
     @property
     def certified_by(self) -> str | None:
+        """How: "verification", "sdp", ... or None."""
         return self.result.certified_by or None
 
     @property
     def delta(self) -> int | None:
+        """Relaxation degree of the certificate, None when none."""
         return self.result.delta
 
     @property
     def message(self) -> str:
+        """Details (skips, cheirality, outliers)."""
         return self.result.message
 
     @property
     def in_front(self) -> bool:
+        """The estimate (or the input point) has positive depth in every camera of the track."""
         return self.result.in_front is None or bool(self.result.in_front)
 
     @property

@@ -37,8 +37,7 @@ from .._startup import EXIT_INTERRUPTED, INTERRUPTED_MESSAGE, end_startup
 from ..io.atomic import atomic_open
 from ..io.problem_file import (ProblemFileError, ProblemSpec, jsonable, load_problem_file, parse_problem_bytes,
                                parse_problem_text)
-from ..records import TriangulationResults
-from ..result import Status, TriangulationResult
+from ..result import Status, TriangulationResult, TriangulationResults
 from ..solve.batch import PROGRESS_MIN_ITEMS
 from ..solve.options import TRIANGULATION_BUDGET, MethodChoice, SolvePath, Sparsity, TriangulationOptions
 from .conventions import (_silence_stdout, add_logging_options, add_world_frame_option, cli_logging,
@@ -235,9 +234,8 @@ def _cmd_solve(args) -> int:
     specs = _read_specs(args.file)
     results, times = _solve_specs(specs, options_from_args(args), args.progress, robust_from_args(args))
     if args.json:
-        rows = TriangulationResults.from_rows(results).to_dict()["results"]       # the record's one JSON form
-        _emit(_dumps([{**jsonable({"index": i, "name": s.name, "n_views": s.n_views}), **row}
-                      for i, (s, row) in enumerate(zip(specs, rows))]), args.output)
+        rows = enumerate(zip(specs, TriangulationResults.from_rows(results).to_dict()["results"]))  # its JSON form
+        _emit(_dumps([jsonable(dict(index=i, name=s.name, n_views=s.n_views)) | r for i, (s, r) in rows]), args.output)
         return EXIT_OK
     headers = ("name", "N", "status", "X", "gamma_LB", "gamma_UB", "optimal", "delta", "N_LMIVAR", "time[s]")
     rows, notes = [], []

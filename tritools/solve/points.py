@@ -28,7 +28,7 @@ from ..model.constraints import Method
 from ..model.opencv import PointsLayout, points_array
 from ..model.regions import Point, real_array
 from ..records import TriangulationResults
-from ..result import Attempt, Status, TriangulationResult
+from ..result import Attempt, Status
 from .decide import cheirality
 from .fastpath import BAND_MIN_VIEWS, BAND_WIDTHS, verify_points
 from .options import MethodChoice, SolvePath, TriangulationOptions, options_from
@@ -199,10 +199,6 @@ class PointStack:
             certified_by=self.certified_by[r], message=self.message[r], timings={"batch_share": self.seconds[r]},
             attempts=[self.prefix[m] for m in r], sparsity=["dense"] * k, in_front=self.in_front[r],
             n_views=np.full(k, self.N), depths=self.depths[r], residuals=self.residuals[r])
-
-    def result(self, m: int) -> TriangulationResult:
-        """The :class:`TriangulationResult` of a batch-decided problem (one row of :meth:`record`)."""
-        return self.record([m])[0]
 
     def item(self, m: int):
         """(cameras, regions) of problem m for the per-point path."""

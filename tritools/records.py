@@ -61,6 +61,10 @@ POINT_COLUMNS = ("X", "X_raw")
 VIEW_COLUMNS = {"image_points": ((2,), float, np.nan), "depths": ((), float, np.nan),
                 "residuals": ((), float, np.nan), "inliers": ((), bool, False)}
 _NULLABLE = BOOL_COLUMNS + tuple(VIEW_COLUMNS)
+#: the value of each scalar column in a row that does not have it
+_DEFAULTS = {**dict.fromkeys(POINT_COLUMNS + FLOAT_COLUMNS, np.nan), **dict.fromkeys(INT_COLUMNS, -1), "n_views": 0,
+             **dict.fromkeys(BOOL_COLUMNS, False), "certified_by": None, "sparsity": None, "message": "",
+             "attempts": ()}
 _STATUS = {**{s: s for s in Status}, **{s.value: s for s in Status}}
 
 
@@ -71,6 +75,22 @@ def _bad(name: str, what: str) -> ValueError:
 def _frozen(arr: np.ndarray) -> np.ndarray:
     arr.setflags(write=False)
     return arr
+
+
+def _absent(name: str, M: int) -> np.ndarray:
+    """An absent column: its default broadcast over the M rows (read-only, no memory per row)."""
+    value = _DEFAULTS[name]
+    if value is None or isinstance(value, (str, tuple)):
+        one = np.empty(1, object)
+        one[0] = value
+        return np.broadcast_to(one, (M,))
+    dtype = float if name in POINT_COLUMNS + FLOAT_COLUMNS else bool if name in BOOL_COLUMNS else int
+    return np.broadcast_to(np.array(value, dtype), (M, 3) if name in POINT_COLUMNS else (M,))
+
+
+def _is_absent(arr: np.ndarray) -> bool:
+    """``arr`` is an :func:`_absent` column (every stride 0: only those are built without a copy)."""
+    return arr.size > 0 and not any(arr.strides)
 
 
 def _objects(values, M: int, name: str) -> np.ndarray:
@@ -108,7 +128,9 @@ def _statuses(values, M: int) -> np.ndarray:
 
 
 def _texts(name: str, values, M: int, optional: bool) -> np.ndarray:
-    values = list(values) if values is not None else [None if optional else ""] * M
+    if values is None:
+        return _absent(name, M) if name != "method" else _objects([""] * M, M, name)
+    values = list(values)
     for v in values:
         if not (isinstance(v, str) or (optional and v is None)):
             raise _bad(name, f"must hold text{' or None' if optional else ''}, got {v!r}")
@@ -163,28 +185,20 @@ class TriangulationResults(Sequence):
             set_(self, name, _texts(name, getattr(self, name), M, optional=name != "method"))
         set_(self, "message", _texts("message", self.message, M, optional=False))
         self._check_numbers(M)
-        set_(self, "attempts", _objects((tuple(Attempt.from_dict(a) if isinstance(a, dict) else a for a in t)
-                                         for t in (self.attempts if self.attempts is not None else [()] * M)),
-                                        M, "attempts"))
+        set_(self, "attempts", _absent("attempts", M) if self.attempts is None else
+             _objects((tuple(Attempt.from_dict(a) if isinstance(a, dict) else a for a in t) for t in self.attempts),
+                      M, "attempts"))
         set_(self, "timings", {str(k): _numbers(f"timings[{k!r}]", v, (M,), float) for k, v in self.timings.items()})
         self._check_views(M)
         set_(self, "null", {k: self._null_mask(k, v, M) for k, v in self.null.items() if np.any(v)})
 
     def _check_numbers(self, M: int) -> None:
         set_ = object.__setattr__
-        for name in POINT_COLUMNS:
-            value = getattr(self, name)
-            set_(self, name, _numbers(name, np.full((M, 3), np.nan) if value is None else value, (M, 3), float))
-        for name in FLOAT_COLUMNS:
-            value = getattr(self, name)
-            set_(self, name, _numbers(name, np.full(M, np.nan) if value is None else value, (M,), float))
-        for name in INT_COLUMNS + ("n_views",):
-            value = getattr(self, name)
-            set_(self, name, _numbers(name, np.full(M, -1 if name != "n_views" else 0) if value is None else value,
-                                      (M,), int))
-        for name in BOOL_COLUMNS:
-            value = getattr(self, name)
-            set_(self, name, _numbers(name, np.zeros(M, bool) if value is None else value, (M,), bool))
+        for names, tail, dtype in ((POINT_COLUMNS, (3,), float), (FLOAT_COLUMNS, (), float),
+                                   (INT_COLUMNS + ("n_views",), (), int), (BOOL_COLUMNS, (), bool)):
+            for name in names:
+                value = getattr(self, name)
+                set_(self, name, _absent(name, M) if value is None else _numbers(name, value, (M,) + tail, dtype))
         if np.any(self.n_views < 0):
             raise _bad("n_views", "must be >= 0")
 
@@ -299,7 +313,10 @@ class TriangulationResults(Sequence):
     @classmethod
     def concat(cls, parts: Sequence[TriangulationResults]) -> TriangulationResults:
         """The rows of ``parts``, one after the other (per-view columns padded to the widest part)."""
-        return cls(**_concat_columns(list(parts)))
+        parts = list(parts)
+        if len(parts) == 1 and isinstance(parts[0], cls):
+            return parts[0]                     # immutable: no copy
+        return cls(**_concat_columns(parts))
 
     def take(self, index) -> TriangulationResults:
         """The rows at ``index`` (integer indices, in their order, or a boolean mask of length M)."""
@@ -312,7 +329,10 @@ class TriangulationResults(Sequence):
             idx = idx.astype(int)
         elif idx.dtype.kind not in "iu":
             raise TypeError(f"index must be integers or a boolean mask, got dtype {idx.dtype}")
-        return type(self)(**_taken_columns(self, idx.reshape(-1)))
+        idx = idx.reshape(-1)
+        if idx.size == len(self) and np.array_equal(idx, np.arange(len(self))):
+            return self                         # immutable: no copy
+        return type(self)(**_taken_columns(self, idx))
 
     def with_views(self, views) -> TriangulationResults:
         """The same rows with their per-view entries in the slots ``views`` (M, W') marks (e.g. the visibility
@@ -426,7 +446,7 @@ def _full_columns(rec: TriangulationResults, W: int, with_views: bool) -> dict:
     M, w0 = len(rec), rec.width
     names = TEXT_COLUMNS + POINT_COLUMNS + FLOAT_COLUMNS + INT_COLUMNS + BOOL_COLUMNS + \
         ("status", "message", "attempts", "n_views")
-    cols = {name: getattr(rec, name) for name in names}
+    cols = {name: None if _is_absent(getattr(rec, name)) else getattr(rec, name) for name in names}
     cols["timings"] = dict(rec.timings)
     null = {name: rec.null.get(name, np.zeros(M, bool)) for name in BOOL_COLUMNS}
     for name, (tail, dtype, fill) in VIEW_COLUMNS.items():
@@ -456,7 +476,9 @@ def _concat_columns(parts: list) -> dict:
     W = max(p.width for p in parts)
     with_views = any(p.views is not None for p in parts)
     full = [_full_columns(p, W, with_views) for p in parts]
-    out = {k: np.concatenate([f[k] for f in full]) for k in full[0] if k not in ("timings", "null", "views")}
+    out = {k: None if all(f[k] is None for f in full) else
+           np.concatenate([_absent(k, len(p)) if f[k] is None else f[k] for f, p in zip(full, parts)])
+           for k in full[0] if k not in ("timings", "null", "views")}
     out["views"] = np.concatenate([f["views"] for f in full]) if with_views else None
     out["null"] = {k: np.concatenate([f["null"][k] for f in full]) for k in full[0]["null"]}
     keys = list(dict.fromkeys(k for p in parts for k in p.timings))
@@ -466,7 +488,7 @@ def _concat_columns(parts: list) -> dict:
 
 def _taken_columns(rec: TriangulationResults, idx: np.ndarray) -> dict:
     cols = _full_columns(rec, rec.width, rec.views is not None)
-    out = {k: (v[idx] if isinstance(v, np.ndarray) else v) for k, v in cols.items() if k not in ("timings", "null")}
+    out = {k: (None if v is None else v[idx]) for k, v in cols.items() if k not in ("timings", "null")}
     out["timings"] = {k: v[idx] for k, v in rec.timings.items()}
     out["null"] = {k: v[idx] for k, v in cols["null"].items()}
     return _compact(out)

@@ -241,7 +241,8 @@ class ChunkResult(RecordColumns):
 
 
 #: columns of the solver's record a chunk does not keep (per-view arrays, steps): a model's report stays small.
-DROPPED_COLUMNS = ("image_points", "depths", "residuals", "inliers", "attempts", "timings", "X_raw")
+DROPPED_COLUMNS = ("image_points", "depths", "residuals", "inliers", "attempts", "timings", "X_raw", "gamma_ub_raw",
+                   "n_lmivar", "sparsity")
 
 
 def _gamma(C: np.ndarray, x: np.ndarray, X: np.ndarray) -> np.ndarray:

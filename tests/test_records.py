@@ -104,6 +104,8 @@ def test_with_views_places_per_view_entries_in_their_slots():
     (dict(status=["optimal", "great"]), "status"),
     (dict(X=np.zeros((3, 3))), "X"),
     (dict(gamma_ub=["a", "b"]), "gamma_ub"),
+    (dict(gamma_lb=["1.0", "2.0"]), "gamma_lb"),
+    (dict(n_lmivar=[True, False]), "n_lmivar"),
     (dict(optimal=[0.5, 1.0]), "optimal"),
     (dict(delta=[2.5, 2]), "delta"),
     (dict(method=["corollary1", 7]), "method"),
@@ -192,3 +194,16 @@ def test_sfm_results_carry_the_record():
     np.testing.assert_allclose(s.results.X, many.X, rtol=1e-9, atol=1e-12)
     np.testing.assert_array_equal(s.gamma_ub, s.results.gamma_ub)
     assert [STATUS_LEGEND[k] for k in s.status] == [v.value for v in many.status]
+
+
+def test_absent_columns_cost_no_memory_and_read_as_none():
+    M = 10 ** 6
+    t = TriangulationResults(method=["dlt"] * M, status=[Status.NO_CERTIFICATE] * M)
+    for col in (t.X, t.gamma_lb, t.delta, t.optimal, t.attempts, t.certified_by):
+        assert not any(col.strides)                            # one broadcast value, not M copies
+    c = TriangulationResults.concat([t.take(np.arange(3)), t.take([5])])
+    assert not any(c.X.strides) and len(c) == 4
+    r = c[3]
+    assert (r.X, r.gamma_lb, r.delta, r.optimal, r.attempts, r.certified_by) == (None, None, None, False, (), None)
+    mixed = TriangulationResults.concat([c, TriangulationResults.from_rows(_rows()[:1])])
+    assert mixed[0].X is None and mixed[4] == _rows()[0] and mixed[4].delta == 2

@@ -102,21 +102,22 @@ def _objects(values, M: int, name: str) -> np.ndarray:
 
 
 def _numbers(name: str, value, shape: tuple, dtype) -> np.ndarray:
-    """A copy of ``value`` as ``dtype`` with ``shape`` (ValueError naming the column)."""
+    """A copy of ``value`` as ``dtype`` (float, int or bool) with ``shape``; text, objects, non-integral numbers
+    for an integer column and numbers other than 0/1 for a boolean one are refused (ValueError naming the
+    column)."""
     try:
-        arr = np.array(value, dtype=float if dtype is not bool else None)
+        arr = np.array(value)
     except (TypeError, ValueError) as exc:
         raise _bad(name, f"must be a numeric array, got {type(value).__name__}") from exc
     if arr.shape != shape:
         raise _bad(name, f"must have shape {shape}, got {arr.shape}")
-    if dtype is bool:
-        if arr.dtype != bool and not (arr.dtype.kind in "iuf" and np.all((arr == 0) | (arr == 1))):
-            raise _bad(name, f"must be booleans, got dtype {arr.dtype}")
-    elif dtype is int:
-        if arr.dtype.kind not in "iu" and not np.all(np.isfinite(arr) & (arr == np.round(arr))):
-            raise _bad(name, "must be integers")
-    elif arr.dtype.kind not in "fiu":
-        raise _bad(name, f"must be real numbers, got dtype {arr.dtype}")
+    kind = arr.dtype.kind
+    if kind not in ("biuf" if dtype is bool else "iuf"):
+        raise _bad(name, f"must be {'booleans' if dtype is bool else 'real numbers'}, got dtype {arr.dtype}")
+    if dtype is bool and kind != "b" and not np.all((arr == 0) | (arr == 1)):
+        raise _bad(name, f"must be booleans, got dtype {arr.dtype}")
+    if dtype is int and kind == "f" and not np.all(np.isfinite(arr) & (arr == np.round(arr))):
+        raise _bad(name, "must be integers")
     return _frozen(arr.astype(dtype))
 
 
@@ -146,8 +147,9 @@ class TriangulationResults(Sequence):
     """Results of M triangulation problems as columns; a ``Sequence`` of
     :class:`~tritools.result.TriangulationResult` rows (see the module docstring for every column).
 
-    Only ``method`` and ``status`` are required; every other column defaults to "absent" (NaN, -1, ``False``
-    with ``null``, empty text).  Construction copies and checks every column (shape, dtype, status values) and
+    Only ``method`` and ``status`` are required; every other column defaults to "absent": its default (NaN, -1,
+    ``False`` -- ``None`` in a row only where ``null`` says so --, ``None`` or empty text, no attempts) broadcast
+    over the rows, which costs no memory per row and stays absent through :meth:`concat` and :meth:`take`.  Construction copies and checks every column (shape, dtype, status values) and
     raises ValueError naming the column."""
 
     method: Any

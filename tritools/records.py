@@ -149,8 +149,9 @@ class TriangulationResults(Sequence):
 
     Only ``method`` and ``status`` are required; every other column defaults to "absent": its default (NaN, -1,
     ``False`` -- ``None`` in a row only where ``null`` says so --, ``None`` or empty text, no attempts) broadcast
-    over the rows, which costs no memory per row and stays absent through :meth:`concat` and :meth:`take`.  Construction copies and checks every column (shape, dtype, status values) and
-    raises ValueError naming the column."""
+    over the rows, which costs no memory per row and stays absent through :meth:`concat` and :meth:`take`.
+    Construction copies and checks every column (shape, dtype, status values) and raises ValueError naming
+    the column."""
 
     method: Any
     status: Any

@@ -245,8 +245,10 @@ class TriangulationResults(Sequence):
         return np.arange(self.n_views[i])
 
     def _is_null(self, name: str, i: int) -> bool:
-        return getattr(self, name) is None if name in VIEW_COLUMNS and getattr(self, name) is None \
-            else bool(self.null[name][i]) if name in self.null else False
+        """Row i says ``None`` for the boolean or per-view column ``name``."""
+        if name in VIEW_COLUMNS and getattr(self, name) is None:
+            return True
+        return name in self.null and bool(self.null[name][i])
 
     def row(self, i: int) -> TriangulationResult:
         """The :class:`~tritools.result.TriangulationResult` of problem i."""

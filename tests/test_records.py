@@ -207,3 +207,21 @@ def test_absent_columns_cost_no_memory_and_read_as_none():
     assert (r.X, r.gamma_lb, r.delta, r.optimal, r.attempts, r.certified_by) == (None, None, None, False, (), None)
     mixed = TriangulationResults.concat([c, TriangulationResults.from_rows(_rows()[:1])])
     assert mixed[0].X is None and mixed[4] == _rows()[0] and mixed[4].delta == 2
+
+
+def test_replace_keeps_absent_columns_absent():
+    import dataclasses
+
+    t = TriangulationResults(method=["dlt"] * 5, status=["no_certificate"] * 5, gamma_ub=np.arange(5.0))
+    r = dataclasses.replace(t, message=["a", "b", "c", "d", "e"])
+    assert not any(r.X_raw.strides) and not any(r.attempts.strides) and r[4].message == "e"
+    np.testing.assert_array_equal(r.gamma_ub, np.arange(5.0))
+    const = TriangulationResults(method=["dlt"] * 3, status=["optimal"] * 3, delta=np.broadcast_to(4, (3,)))
+    assert [x.delta for x in const] == [4, 4, 4]              # a constant column that is not the default stays
+
+
+def test_an_empty_part_does_not_make_absent_columns_present():
+    empty = TriangulationResults(method=[], status=[])
+    t = TriangulationResults(method=["dlt"] * 2, status=["optimal"] * 2, gamma_ub=[1.0, 2.0])
+    c = TriangulationResults.concat([empty, t])
+    assert c == list(t) and not any(c.X_raw.strides) and not any(c.attempts.strides)

@@ -88,9 +88,16 @@ def _absent(name: str, M: int) -> np.ndarray:
     return np.broadcast_to(np.array(value, dtype), (M, 3) if name in POINT_COLUMNS else (M,))
 
 
-def _is_absent(arr: np.ndarray) -> bool:
-    """``arr`` is an :func:`_absent` column (every stride 0: only those are built without a copy)."""
-    return arr.size > 0 and not any(arr.strides)
+def _is_absent(name: str, arr) -> bool:
+    """``arr`` is column ``name`` absent: its default broadcast (every stride 0), as :func:`_absent` builds it."""
+    if not isinstance(arr, np.ndarray) or arr.size == 0 or any(arr.strides) or name not in _DEFAULTS:
+        return False
+    value, default = arr.flat[0], _DEFAULTS[name]
+    if isinstance(default, float):
+        return bool(np.isnan(value))
+    if default is None:
+        return value is None
+    return bool(value == default)
 
 
 def _objects(values, M: int, name: str) -> np.ndarray:
@@ -179,6 +186,9 @@ class TriangulationResults(Sequence):
 
     def __post_init__(self) -> None:
         set_ = object.__setattr__
+        for name in _DEFAULTS:                  # an absent column given back (dataclasses.replace) stays absent
+            if _is_absent(name, getattr(self, name)):
+                set_(self, name, None)
         status = list(self.status) if not isinstance(self.status, (str, Status)) else None
         if status is None:
             raise _bad("status", f"must be a sequence of Status values, got {self.status!r}")
@@ -451,7 +461,8 @@ def _full_columns(rec: TriangulationResults, W: int, with_views: bool) -> dict:
     M, w0 = len(rec), rec.width
     names = TEXT_COLUMNS + POINT_COLUMNS + FLOAT_COLUMNS + INT_COLUMNS + BOOL_COLUMNS + \
         ("status", "message", "attempts", "n_views")
-    cols = {name: None if _is_absent(getattr(rec, name)) else getattr(rec, name) for name in names}
+    cols = {name: None if name in _DEFAULTS and (M == 0 or _is_absent(name, getattr(rec, name))) else
+            getattr(rec, name) for name in names}
     cols["timings"] = dict(rec.timings)
     null = {name: rec.null.get(name, np.zeros(M, bool)) for name in BOOL_COLUMNS}
     for name, (tail, dtype, fill) in VIEW_COLUMNS.items():

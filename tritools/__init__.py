@@ -21,6 +21,7 @@ from .model.constraints import Method
 from .model.geometry import depths, dlt, fundamental_matrix, gamma, project, validate_cameras
 from .model.opencv import PointsLayout, cameras_from_krt
 from .model.regions import Ellipse, EllipseBorder, Point, Polytope, Region, Segment, as_regions
+from .records import TriangulationResults
 from .result import Attempt, Status, TriangulationResult
 from .scene import paper_example
 from .solve.batch import triangulate_many
@@ -39,4 +40,4 @@ __all__ = ["Method", "depths", "dlt", "fundamental_matrix", "gamma", "project", 
            "TriangulationResult", "paper_example", "triangulate_many", "DEFAULT_OPTIONS", "SolvePath", "Sparsity",
            "TriangulationOptions", "PointsResult", "triangulate_points", "triangulate", "PointsLayout",
            "cameras_from_krt", "UncertaintyOptions", "UncertaintyResult", "UncertaintyStatus", "triangulation_angle",
-           "uncertainty", "uncertainty_many", "OptionError"]
+           "uncertainty", "uncertainty_many", "OptionError", "TriangulationResults"]

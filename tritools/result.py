@@ -24,6 +24,16 @@ import numpy as np
 __all__ = ["Status", "Attempt", "TriangulationResult", "jsonable"]
 
 
+def __getattr__(name: str):
+    """``TriangulationResults`` (the batch record whose rows are :class:`TriangulationResult`) lives in
+    :mod:`tritools.records`; imported on first use (PEP 562: no import cycle)."""
+    if name == "TriangulationResults":
+        from .records import TriangulationResults
+
+        return TriangulationResults
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
 class Status(str, enum.Enum):
     """Outcome of a triangulation method.
 
@@ -163,7 +173,8 @@ def _opt_float(value, name: str) -> float | None:
 
 @dataclass(frozen=True)
 class TriangulationResult:
-    """Estimate of a scene point with optional optimality certificate.
+    """Estimate of a scene point with optional optimality certificate: one row of the batch record
+    :class:`tritools.records.TriangulationResults` (``results[i]``; its JSON form is the row of the record's).
 
     Parameters
     ----------
@@ -261,6 +272,12 @@ class TriangulationResult:
         set_(self, "timings", dict(self.timings))
         set_(self, "attempts", tuple(a if isinstance(a, Attempt) else Attempt.from_dict(a) if isinstance(a, dict)
                                      else a for a in self.attempts))
+
+    def __eq__(self, other) -> bool:
+        """Equal in the one JSON form (:meth:`to_dict`: every field; NaN and ``None`` alike)."""
+        if not isinstance(other, TriangulationResult):
+            return NotImplemented
+        return self.to_dict() == other.to_dict()
 
     @property
     def gap(self) -> float | None:

@@ -37,8 +37,8 @@ from ..model.constraints import Method
 from .._startup import EXIT_INTERRUPTED, INTERRUPTED_MESSAGE, end_startup
 from ..io.atomic import atomic_open
 from ..io.problem_file import (ProblemFileError, ProblemSpec, jsonable, load_problem_file, parse_problem_bytes,
-                               parse_problem_text, result_to_dict)
-from ..result import Status, TriangulationResult
+                               parse_problem_text)
+from ..result import Status, TriangulationResult, TriangulationResults
 from ..solve.batch import PROGRESS_MIN_ITEMS
 from ..solve.call_limit import call_limit
 from ..solve.options import TriangulationOptions
@@ -232,8 +232,8 @@ def _cmd_solve(args) -> int:
     specs = _read_specs(args.file)
     results, times = _solve_specs(specs, options_from_args(args), args.progress, robust_from_args(args))
     if args.json:
-        _emit(_dumps([result_to_dict(r, index=i, name=s.name, n_views=s.n_views)
-                      for i, (s, r) in enumerate(zip(specs, results))]), args.output)
+        rows = enumerate(zip(specs, TriangulationResults.from_rows(results).to_dict()["results"]))  # its JSON form
+        _emit(_dumps([jsonable(dict(index=i, name=s.name, n_views=s.n_views)) | r for i, (s, r) in rows]), args.output)
         return EXIT_OK
     headers = ("name", "N", "status", "X", "gamma_LB", "gamma_UB", "optimal", "delta", "N_LMIVAR", "time[s]")
     rows, notes = [], []

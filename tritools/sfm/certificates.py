@@ -20,7 +20,7 @@ import numpy as np
 
 from ..io.atomic import atomic_open
 from ..io.colmap.model import ModelFormatError
-from ..result import Status
+from ..result import Status, TriangulationResult
 from .certify import STATUS_LEGEND
 from .retriangulate import PointCertificate, RetriangulationReport
 
@@ -116,6 +116,8 @@ def read_certificates(folder) -> dict[int, PointCertificate]:
             # CERTIFIED = optimal and in front; a certified solver result behind a camera reads back
             # as optimal = (status == optimal) so that status, optimal and in_front round-trip
             optimal = cert or (status == Status.OPTIMAL and not front)
-            out[pid] = PointCertificate(pid, n, status, lb, ub, optimal, None if by == "-" else by,
-                                        None if delta < 0 else delta, g_in, upd, "" if msg == "-" else msg, front)
+            row = TriangulationResult("", status, gamma_lb=lb, gamma_ub=ub, optimal=optimal,
+                                      certified_by=None if by == "-" else by, delta=None if delta < 0 else delta,
+                                      message="" if msg == "-" else msg, in_front=front)
+            out[pid] = PointCertificate(pid, n, row, g_in, upd)
     return out

@@ -4,21 +4,23 @@
 problems with N views each through the library's stacked engine
 (:func:`tritools.solve.batch.solve_point_stack`: vectorised certification by verification, the batched
 degree-2 SDP, then the per-point path for the rest, with the degrees of ``options``) and returns
-arrays (:class:`StackResult`).  Everything else of the model path (undistortion, grouping, cheirality,
-writing) is numpy code outside this module.
+the batch record (:class:`StackResult`, columns in the SfM encodings).  Everything else of the
+model path (undistortion, grouping, cheirality, writing) is numpy code outside this module.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 
 from ..io.export import STATUS_LEGEND
+from ..records import TriangulationResults
 from ..result import Status
 from ..solve.options import DEFAULT_OPTIONS, OptionError, OptionTypeError, TriangulationOptions
 
-__all__ = ["CertifyOptions", "StackResult", "certify_stack", "STATUS_LEGEND", "status_code", "solver_options",
-           "robust_threshold"]
+__all__ = ["CertifyOptions", "RecordColumns", "StackResult", "certify_stack", "STATUS_LEGEND", "status_code",
+           "solver_options", "robust_threshold"]
 
 _CODE = {s: k for k, s in enumerate(STATUS_LEGEND)}
 
@@ -85,22 +87,81 @@ class CertifyOptions:
         return self.options
 
 
-@dataclass(frozen=True)
-class StackResult:
-    """Per-problem arrays of :func:`certify_stack` (first axis = problem).
+class RecordColumns:
+    """Per-point columns of an SfM result read from its batch record ``results``
+    (:class:`~tritools.records.TriangulationResults`) in the SfM encodings: ``status`` int8 codes of
+    :data:`STATUS_LEGEND`, ``certified_by`` ``""`` where none, ``delta`` int16 (-1 where none), ``n_views``
+    int32; ``X``, ``gamma_lb``, ``gamma_ub`` (NaN when absent), ``optimal``, ``in_front``, ``message`` as
+    the record has them."""
 
-    ``X`` (M, 3) NaN where no estimate; ``gamma_lb``/``gamma_ub`` NaN when absent; ``status``
-    codes of :data:`STATUS_LEGEND`; ``optimal`` bool; ``certified_by`` object array of
-    ``"verification"``/``"sdp"``/``""``; ``delta`` (-1 when none); ``message`` object array."""
-    X: np.ndarray
-    gamma_lb: np.ndarray
-    gamma_ub: np.ndarray
-    status: np.ndarray
-    optimal: np.ndarray
-    certified_by: np.ndarray
-    delta: np.ndarray
-    message: np.ndarray
-    inliers: np.ndarray | None = None       # (M, N) with ``robust``: the views each estimate keeps
+    @property
+    def X(self) -> np.ndarray:
+        """(M, 3) estimates, NaN rows where none."""
+        return self.results.X
+
+    @property
+    def gamma_lb(self) -> np.ndarray:
+        """(M,) lower bounds, NaN when absent."""
+        return self.results.gamma_lb
+
+    @property
+    def gamma_ub(self) -> np.ndarray:
+        """(M,) upper bounds gamma(X), NaN when absent."""
+        return self.results.gamma_ub
+
+    @property
+    def optimal(self) -> np.ndarray:
+        """(M,) certified by the solver."""
+        return self.results.optimal
+
+    @property
+    def in_front(self) -> np.ndarray:
+        """(M,) positive depth in every camera."""
+        return self.results.in_front
+
+    @property
+    def message(self) -> np.ndarray:
+        """(M,) per-point details."""
+        return self.results.message
+
+    @cached_property
+    def n_views(self) -> np.ndarray:
+        """(M,) int32 views of each point."""
+        return self.results.n_views.astype(np.int32)
+
+    @cached_property
+    def status(self) -> np.ndarray:
+        """(M,) int8 codes of STATUS_LEGEND."""
+        return np.fromiter((_CODE[s.value] for s in self.results.status), np.int8, count=len(self.results))
+
+    @cached_property
+    def certified_by(self) -> np.ndarray:
+        """(M,) object: how each point was certified, "" where not."""
+        return np.fromiter((c or "" for c in self.results.certified_by), object, count=len(self.results))
+
+    @cached_property
+    def delta(self) -> np.ndarray:
+        """(M,) int16 relaxation degree, -1 where none."""
+        return self.results.delta.astype(np.int16)
+
+
+@dataclass(frozen=True, eq=False)
+class StackResult(RecordColumns):
+    """Result of :func:`certify_stack`: the batch record ``results`` of the M problems, read as SfM columns
+    (:class:`RecordColumns`: ``X`` (M, 3), ``gamma_lb``/``gamma_ub``, ``status`` codes, ``optimal``,
+    ``certified_by``, ``delta``, ``message``); with ``robust``, ``inliers`` (M, N): the views each estimate keeps
+    (all of them where the solver gave no inlier set)."""
+    results: TriangulationResults
+    robust: bool = False
+
+    @property
+    def inliers(self) -> np.ndarray | None:
+        if not self.robust:
+            return None
+        r = self.results
+        if r.inliers is None:
+            return np.ones((len(r), r.width), bool)
+        return r.inliers | r.null.get("inliers", np.zeros(len(r), bool))[:, None]
 
 
 def certify_stack(cameras, points2d, options=None) -> StackResult:
@@ -119,42 +180,16 @@ def certify_stack(cameras, points2d, options=None) -> StackResult:
     C = real_array(cameras, "cameras")
     x = real_array(points2d, "points2d")
     M, N = x.shape[:2]
-    out = StackResult(np.full((M, 3), np.nan), np.full(M, np.nan), np.full(M, np.nan),
-                      np.full(M, _CODE[Status.SOLVER_FAILED.value], np.int8), np.zeros(M, bool),
-                      np.full(M, "", object), np.full(M, -1, np.int16), np.full(M, "", object))
     if M == 0:
-        return out
+        return StackResult(TriangulationResults(method=[], status=[]), robust=options.robust is not None)
     if options.robust is not None:
-        return _robust_stack(C, x, opts, options, out)
-    arrays = solve_point_stack(C, x, opts, executor=options.executor).arrays()
-    out.X[:] = arrays["X"]
-    out.gamma_lb[:] = arrays["gamma_lb"]
-    out.gamma_ub[:] = arrays["gamma_ub"]
-    out.status[:] = [_CODE[Status(s).value] for s in arrays["status"]]
-    out.optimal[:] = arrays["optimal"]
-    out.certified_by[:] = [c or "" for c in arrays["certified_by"]]
-    out.delta[:] = arrays["delta"]
-    out.message[:] = [m or "" for m in arrays["message"]]
-    return out
+        return _robust_stack(C, x, opts, options)
+    return StackResult(solve_point_stack(C, x, opts, executor=options.executor).record())
 
 
-def _robust_stack(C, x, opts, options: CertifyOptions, out: StackResult) -> StackResult:
+def _robust_stack(C, x, opts, options: CertifyOptions) -> StackResult:
     """``certify_stack`` with ``robust``: TLS results (:func:`tritools.solve.robust_batch.robust_many`)."""
-    import dataclasses
-
     from ..solve.robust_batch import robust_many
 
     results = robust_many([(C[m], x[m]) for m in range(len(C))], options.robust, opts, executor=options.executor)
-    inliers = np.zeros(x.shape[:2], bool)
-    for m, r in enumerate(results):
-        if r.X is not None:
-            out.X[m] = r.X
-        out.gamma_lb[m] = np.nan if r.gamma_lb is None else r.gamma_lb
-        out.gamma_ub[m] = np.nan if r.gamma_ub is None else r.gamma_ub
-        out.status[m] = _CODE[r.status.value]
-        out.optimal[m] = bool(r.optimal)
-        out.certified_by[m] = r.certified_by or ""
-        out.delta[m] = -1 if r.delta is None else r.delta
-        out.message[m] = r.message or ""
-        inliers[m] = True if r.inliers is None else r.inliers
-    return dataclasses.replace(out, inliers=inliers)
+    return StackResult(TriangulationResults.from_rows(results, np.full(len(C), x.shape[1])), robust=True)

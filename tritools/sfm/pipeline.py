@@ -16,6 +16,7 @@ error (full distortion model) are computed with numpy over the whole chunk.
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
+from types import SimpleNamespace
 
 import numpy as np
 
@@ -23,10 +24,11 @@ from ..io.colmap.arrays import ModelArrays, PointChunk
 from ..io.colmap.camera_models import (OPENCV_FAMILY, camera_problem, distort_rows, distortion, intrinsics,
                                        pixels_from_camera, undistorted_pixels)
 from ..model.cameras import depths_stack
+from ..records import TriangulationResults
 from ..result import Status
 from ..solve.decide import gamma_from_c
 from ..solve.options import OptionError, TriangulationOptions
-from .certify import CertifyOptions, certify_stack, robust_threshold, solver_options, status_code
+from .certify import CertifyOptions, RecordColumns, certify_stack, robust_threshold, solver_options
 
 __all__ = ["RetriangulationOptions", "OptionError", "CameraError", "ModelGeometry", "prepare_geometry",
            "ChunkResult", "process_chunk", "point_gammas", "rotations", "BEHIND_CHOICES", "DEFAULT_MAX_TRACK_LENGTH"]
@@ -194,24 +196,24 @@ def prepare_geometry(arrays: ModelArrays, strict: bool = False) -> ModelGeometry
 
 
 @dataclass(frozen=True, eq=False)
-class ChunkResult:
-    """Per-point arrays of one processed chunk (see :class:`~.retriangulate.RetriangulationReport`)."""
+class ChunkResult(RecordColumns):
+    """One processed chunk (see :class:`~.retriangulate.RetriangulationReport`): the solver's batch record
+    ``results`` of its points (status ``invalid_input`` for the tracks not solved, ``in_front`` the cheirality of
+    the written point, the messages; read as SfM columns through :class:`~.certify.RecordColumns`), and per point
+    the written ``xyz`` and ``error``, ``gamma_input`` and ``updated``."""
+    results: TriangulationResults
     xyz: np.ndarray
     error: np.ndarray
-    n_views: np.ndarray
-    status: np.ndarray
-    gamma_lb: np.ndarray
-    gamma_ub: np.ndarray
-    optimal: np.ndarray
-    certified_by: np.ndarray
-    delta: np.ndarray
     gamma_input: np.ndarray
     updated: np.ndarray
-    in_front: np.ndarray
-    message: np.ndarray
     n_skipped_observations: int = 0
     keep_obs: np.ndarray | None = None        # (chunk observations,) False: an outlier removed (``robust``)
     n_inliers: np.ndarray | None = None       # (points,) inliers of the robust estimate (-1: not robust)
+
+
+#: columns of the solver's record a chunk does not keep (per-view arrays, steps): a model's report stays small.
+DROPPED_COLUMNS = ("image_points", "depths", "residuals", "inliers", "attempts", "timings", "X_raw", "gamma_ub_raw",
+                   "n_lmivar", "sparsity")
 
 
 def _gamma(C: np.ndarray, x: np.ndarray, X: np.ndarray) -> np.ndarray:
@@ -254,44 +256,54 @@ def _colmap_error(arrays, geom, X, obs_img, gk, owner, n) -> np.ndarray:
     return np.bincount(owner, weights=e, minlength=n) / np.maximum(np.bincount(owner, minlength=n), 1)
 
 
+def _solve_stacks(geom: ModelGeometry, chunk: PointChunk, options: RetriangulationOptions, d: dict, progress):
+    """The solver's record of every point of the chunk (stacks of equal usable track length through
+    :func:`.certify.certify_stack`; ``invalid_input`` rows for the tracks not solved), the outlier observations,
+    the inlier counts (-1: not robust) and gamma of the input points."""
+    n, n_used, solve = len(chunk), d["n_used"], d["solve"]
+    used_obs = np.nonzero(d["usable"])[0]                 # CSR of the usable observations
+    used_off = np.concatenate([[0], np.cumsum(n_used)])
+    skip = np.nonzero(~solve)[0]
+    parts = [TriangulationResults(method=[options.solver.method.value] * skip.size,
+                                  status=[Status.INVALID_INPUT] * skip.size, n_views=n_used[skip])]
+    order = [skip]
+    outlier = np.zeros(len(d["obs_img"]), bool)
+    n_inl = np.full(n, -1, np.int32)
+    gamma_input = np.full(n, np.nan)
+    copts = options.certify_options()
+    for N in np.unique(n_used[solve]):
+        pts = np.nonzero(solve & (n_used == N))[0]
+        o = used_obs[used_off[pts][:, None] + np.arange(N)]
+        C, x = geom.P[d["obs_img"][o]], geom.xy_u[d["gk"][o]]
+        s = certify_stack(C, x, copts)
+        if s.inliers is not None:
+            outlier[o[~s.inliers]] = True
+            n_inl[pts] = s.inliers.sum(axis=1)
+        parts.append(s.results.drop(*DROPPED_COLUMNS))
+        order.append(pts)
+        with np.errstate(all="ignore"):
+            g = _gamma(C, x, chunk.xyz[pts])
+        gamma_input[pts] = np.where(np.isfinite(g), g, np.nan)
+        if progress is not None:
+            progress.update(len(pts))
+    rec = TriangulationResults.concat(parts).take(np.argsort(np.concatenate(order), kind="stable"))
+    return rec, outlier, n_inl, gamma_input
+
+
 def process_chunk(arrays: ModelArrays, geom: ModelGeometry, chunk: PointChunk, options: RetriangulationOptions,
                   progress=None) -> ChunkResult:
     """Re-triangulate the points of ``chunk`` (see the module docstring)."""
     n = len(chunk)
-    lens = chunk.track_lengths
-    owner = np.repeat(np.arange(n), lens)
+    owner = np.repeat(np.arange(n), chunk.track_lengths)
     obs_img = chunk.track_image
     gk = arrays.kp_offsets[obs_img] + chunk.track_kp
     usable = geom.image_ok[obs_img]
     n_used = np.bincount(owner[usable], minlength=n)
     stuck = np.bincount(owner[usable & ~geom.kp_ok[gk]], minlength=n) > 0
     solve = (n_used >= options.min_track_length) & (n_used <= options.max_track_length) & ~stuck
-    r = ChunkResult(chunk.xyz.copy(), chunk.error.copy(), n_used.astype(np.int32),
-                    np.full(n, status_code(Status.INVALID_INPUT), np.int8), np.full(n, np.nan), np.full(n, np.nan),
-                    np.zeros(n, bool), np.full(n, "", object), np.full(n, -1, np.int16), np.full(n, np.nan),
-                    np.zeros(n, bool), np.ones(n, bool), np.full(n, "", object), int(np.count_nonzero(~usable)))
-    X = np.full((n, 3), np.nan)
-    used_obs = np.nonzero(usable)[0]                 # CSR of the usable observations
-    used_off = np.concatenate([[0], np.cumsum(n_used)])
-    copts = options.certify_options()
-    outlier = np.zeros(len(obs_img), bool)
-    n_inl = np.full(n, -1, np.int32)
-    for N in np.unique(n_used[solve]):
-        pts = np.nonzero(solve & (n_used == N))[0]
-        o = used_obs[used_off[pts][:, None] + np.arange(N)]
-        C, x = geom.P[obs_img[o]], geom.xy_u[gk[o]]
-        s = certify_stack(C, x, copts)
-        X[pts] = s.X
-        if s.inliers is not None:
-            outlier[o[~s.inliers]] = True
-            n_inl[pts] = s.inliers.sum(axis=1)
-        for name in ("gamma_lb", "gamma_ub", "status", "optimal", "certified_by", "delta", "message"):
-            getattr(r, name)[pts] = getattr(s, name)
-        with np.errstate(all="ignore"):
-            g = _gamma(C, x, chunk.xyz[pts])
-        r.gamma_input[pts] = np.where(np.isfinite(g), g, np.nan)
-        if progress is not None:
-            progress.update(len(pts))
+    rec, outlier, n_inl, gamma_input = _solve_stacks(geom, chunk, options, dict(
+        n_used=n_used, solve=solve, usable=usable, obs_img=obs_img, gk=gk), progress)
+    X = rec.X
     # cheirality: depth of every observation of the track (skipped cameras included) of the
     # estimate, or of the input point where there is none
     has_X = np.all(np.isfinite(X), axis=1)
@@ -300,29 +312,36 @@ def process_chunk(arrays: ModelArrays, geom: ModelGeometry, chunk: PointChunk, o
     Rt = np.concatenate([geom.R, geom.t[:, :, None]], axis=2)
     depth = depths_stack(Rt[obs_img][:, None], test[owner])[:, 0]
     behind = np.bincount(owner[~(depth > 0)], minlength=n) > 0
-    r.in_front[:] = ~behind
-    ub, g_in = r.gamma_ub, r.gamma_input
-    better = has_X & np.isfinite(ub) & (r.optimal | ~np.isfinite(g_in) | (ub <= g_in))
+    ub, g_in = rec.gamma_ub, gamma_input
+    better = has_X & np.isfinite(ub) & (rec.optimal | ~np.isfinite(g_in) | (ub <= g_in))
     upd = better & (~behind | (options.behind == "write"))
-    r.updated[:] = upd
-    r.xyz[upd] = X[upd]
+    xyz, error = chunk.xyz.copy(), chunk.error.copy()
+    xyz[upd] = X[upd]
     # outliers leave the tracks of the points written anew (when at least two inliers remain)
     keep = ~(outlier & upd[owner] & (n_inl[owner] >= 2))
+    message = np.array(rec.message)
     if options.robust is not None:
-        r = replace(r, keep_obs=keep, n_inliers=n_inl)
-        for p in np.nonzero(np.bincount(owner[~keep], minlength=n))[0]:
-            gone = np.nonzero(~keep & (owner == p))[0]
-            note = f"{len(gone)} outlier observation(s) removed (image ids " + \
-                ", ".join(str(int(arrays.image_ids[obs_img[j]])) for j in gone) + ")"
-            r.message[p] = f"{r.message[p]}; {note}" if r.message[p] else note
+        _outlier_notes(arrays, obs_img, owner, keep, message)
     if upd.any():
         sel = upd[owner] & usable & keep
-        r.error[upd] = _colmap_error(arrays, geom, r.xyz, obs_img[sel], gk[sel], owner[sel], n)[upd]
-    _messages(arrays, geom, chunk, r, dict(owner=owner, obs_img=obs_img, usable=usable, depth=depth, solve=solve,
-                                           stuck=stuck, behind=behind, has_X=has_X, better=better), options)
+        error[upd] = _colmap_error(arrays, geom, xyz, obs_img[sel], gk[sel], owner[sel], n)[upd]
+    notes = SimpleNamespace(message=message, n_views=n_used, updated=upd)
+    _messages(arrays, geom, chunk, notes, dict(owner=owner, obs_img=obs_img, usable=usable, depth=depth, solve=solve,
+                                               stuck=stuck, behind=behind, has_X=has_X, better=better), options)
     if progress is not None:
         progress.update(int(np.count_nonzero(~solve)))
-    return r
+    robust = options.robust is not None
+    return ChunkResult(replace(rec, in_front=~behind, message=message), xyz, error, gamma_input, upd,
+                       int(np.count_nonzero(~usable)), keep if robust else None, n_inl if robust else None)
+
+
+def _outlier_notes(arrays, obs_img, owner, keep, message) -> None:
+    """A note on every point whose outlier observations are removed from its track (``robust``)."""
+    for p in np.nonzero(np.bincount(owner[~keep], minlength=len(message)))[0]:
+        gone = np.nonzero(~keep & (owner == p))[0]
+        note = f"{len(gone)} outlier observation(s) removed (image ids " + \
+            ", ".join(str(int(arrays.image_ids[obs_img[j]])) for j in gone) + ")"
+        message[p] = f"{message[p]}; {note}" if message[p] else note
 
 
 def _messages(arrays, geom, chunk, r, d, options) -> None:

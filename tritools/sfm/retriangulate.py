@@ -31,9 +31,10 @@ import numpy as np
 from ..io.colmap.arrays import ModelArrays
 from ..io.colmap.model import Model, Point3D
 from ..io.colmap.pycolmap_bridge import from_pycolmap, import_pycolmap, is_pycolmap_reconstruction
-from ..result import Status
+from ..records import TriangulationResults
+from ..result import Status, TriangulationResult
 from ..solve.call_limit import call_limit
-from .certify import STATUS_LEGEND, status_code
+from .certify import STATUS_LEGEND, RecordColumns, status_code
 from .pipeline import RetriangulationOptions, prepare_geometry, process_chunk
 
 __all__ = ["PointCertificate", "RetriangulationReport", "retriangulate", "retriangulate_arrays", "progress_bar",
@@ -49,26 +50,58 @@ REPORT_FIELDS = ("n_views", "status", "gamma_lb", "gamma_ub", "optimal", "certif
 
 @dataclass(frozen=True)
 class PointCertificate:
-    """Certificate of one re-triangulated point (gammas in undistorted pixels).
+    """Certificate of one re-triangulated point (gammas in undistorted pixels): its row ``result`` of the
+    report's record (:class:`~tritools.result.TriangulationResult`), its number of usable views, the gamma of
+    the input point and whether its xyz was replaced.
 
     ``optimal``: the solver certified its estimate; ``in_front``: the estimate (or, without one, the
     input point) has positive depth in every camera of the track; ``certified`` = both, with status
     ``optimal``: the *written* point is a certified global L2 minimiser in front of its cameras."""
     point3D_id: int
     n_views: int
-    status: Status
-    gamma_lb: float | None = None
-    gamma_ub: float | None = None
-    optimal: bool = False
-    certified_by: str | None = None
-    delta: int | None = None
+    result: TriangulationResult
     gamma_input: float | None = None
     updated: bool = False
-    message: str = ""
-    in_front: bool = True
 
-    def __post_init__(self):
-        object.__setattr__(self, "status", Status(self.status))
+    @property
+    def status(self) -> Status:
+        """The row's status."""
+        return self.result.status
+
+    @property
+    def gamma_lb(self) -> float | None:
+        """Lower bound on gamma* (undistorted pixels), None when absent."""
+        return self.result.gamma_lb
+
+    @property
+    def gamma_ub(self) -> float | None:
+        """Upper bound gamma(X^) (undistorted pixels), None when absent."""
+        return self.result.gamma_ub
+
+    @property
+    def optimal(self) -> bool:
+        """The solver certified its estimate."""
+        return bool(self.result.optimal)
+
+    @property
+    def certified_by(self) -> str | None:
+        """How: "verification", "sdp", ... or None."""
+        return self.result.certified_by or None
+
+    @property
+    def delta(self) -> int | None:
+        """Relaxation degree of the certificate, None when none."""
+        return self.result.delta
+
+    @property
+    def message(self) -> str:
+        """Details (skips, cheirality, outliers)."""
+        return self.result.message
+
+    @property
+    def in_front(self) -> bool:
+        """The estimate (or the input point) has positive depth in every camera of the track."""
+        return self.result.in_front is None or bool(self.result.in_front)
 
     @property
     def certified(self) -> bool:
@@ -82,25 +115,18 @@ def _opt(v) -> float | None:
 
 
 @dataclass(frozen=True, eq=False)
-class RetriangulationReport:
-    """Outcome of a re-triangulation: per-point arrays (``point_ids`` and :data:`REPORT_FIELDS`,
-    in the order of the points), the method and path, and the skipped cameras as
-    ``((camera_id, model, reason, n_observations), ...)``.  ``records`` gives one
+class RetriangulationReport(RecordColumns):
+    """Outcome of a re-triangulation: the solver's batch record ``results`` of every point (in the order of
+    the points; read as SfM columns through :class:`~.certify.RecordColumns`, so :data:`REPORT_FIELDS` are
+    per-point arrays), ``point_ids``, ``gamma_input`` and ``updated``, the method and path, and the skipped
+    cameras as ``((camera_id, model, reason, n_observations), ...)``.  ``records`` gives one
     :class:`PointCertificate` per point (built on first use)."""
     method: str
     path: str
     point_ids: np.ndarray
-    n_views: np.ndarray
-    status: np.ndarray
-    gamma_lb: np.ndarray
-    gamma_ub: np.ndarray
-    optimal: np.ndarray
-    certified_by: np.ndarray
-    delta: np.ndarray
+    results: TriangulationResults
     gamma_input: np.ndarray
     updated: np.ndarray
-    in_front: np.ndarray
-    message: np.ndarray
     skipped_cameras: tuple = ()
     n_skipped_observations: int = 0
 
@@ -111,13 +137,10 @@ class RetriangulationReport:
             """Concatenation of one field over the chunks."""
             parts = [getattr(r, name) for r in results]
             return np.concatenate(parts) if parts else np.zeros(0, dtype)
-        dtypes = dict(n_views=np.int32, status=np.int8, gamma_lb=float, gamma_ub=float, optimal=bool,
-                      certified_by=object, delta=np.int16, gamma_input=float, updated=bool, in_front=bool,
-                      message=object)
-        arrays = {k: cat(k, dtypes[k]) for k in REPORT_FIELDS}
         return cls(options.method, options.path, np.concatenate(ids) if ids else np.zeros(0, np.int64),
-                   skipped_cameras=tuple(skipped_cameras),
-                   n_skipped_observations=sum(r.n_skipped_observations for r in results), **arrays)
+                   TriangulationResults.concat([r.results for r in results]), cat("gamma_input", float),
+                   cat("updated", bool), skipped_cameras=tuple(skipped_cameras),
+                   n_skipped_observations=sum(r.n_skipped_observations for r in results))
 
     @property
     def n_points(self) -> int:
@@ -151,11 +174,8 @@ class RetriangulationReport:
 
     def record(self, i: int) -> PointCertificate:
         """The :class:`PointCertificate` of the i-th point."""
-        return PointCertificate(int(self.point_ids[i]), int(self.n_views[i]), STATUS_LEGEND[self.status[i]],
-                                _opt(self.gamma_lb[i]), _opt(self.gamma_ub[i]), bool(self.optimal[i]),
-                                self.certified_by[i] or None, None if self.delta[i] < 0 else int(self.delta[i]),
-                                _opt(self.gamma_input[i]), bool(self.updated[i]), str(self.message[i]),
-                                bool(self.in_front[i]))
+        return PointCertificate(int(self.point_ids[i]), int(self.n_views[i]), self.results[int(i)],
+                                _opt(self.gamma_input[i]), bool(self.updated[i]))
 
     @cached_property
     def records(self) -> tuple:

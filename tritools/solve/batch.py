@@ -36,6 +36,7 @@ import numpy as np
 from ..model.cameras import numeric_cameras
 from ..model.regions import Region
 from ..model.constraints import Method
+from ..records import TriangulationResults
 from ..result import Attempt, Status, TriangulationResult
 from .call_limit import call_limit, expired, expired_points, mark_cut, within
 from .options import TriangulationOptions, options_from
@@ -178,47 +179,31 @@ def _as_point_problem(cams, regions):
 
 
 class BatchOutcome:
-    """Results of a batch: vectorised ones kept in their :class:`PointStack` arrays, per-item ones as objects."""
+    """Results of a batch: vectorised ones kept in their :class:`PointStack` arrays, per-item ones as objects;
+    :meth:`record` puts them together, in input order."""
 
     def __init__(self, n: int):
         self.objects: dict[int, TriangulationResult] = {}
         self.stacked: dict[int, tuple] = {}         # index -> (stack, row)
         self.n = n
 
-    def result(self, i: int) -> TriangulationResult:
-        if i in self.objects:
-            return self.objects[i]
-        stack, m = self.stacked[i]
-        return stack.result(m)
-
-    def results(self) -> list[TriangulationResult]:
-        return [self.result(i) for i in range(self.n)]
-
-    def arrays(self) -> dict:
-        """X (n, 3), gamma_lb, gamma_ub, status, optimal, in_front, delta, certified_by as arrays (vectorised
-        results copied from their stacks, per-item ones read from their objects)."""
-        n = self.n
-        out = {"X": np.full((n, 3), np.nan), "gamma_lb": np.full(n, np.nan), "gamma_ub": np.full(n, np.nan),
-               "status": np.full(n, None, dtype=object), "optimal": np.zeros(n, bool),
-               "in_front": np.zeros(n, bool), "delta": np.full(n, -1), "certified_by": np.full(n, None, dtype=object),
-               "message": np.full(n, "", dtype=object)}
+    def record(self) -> TriangulationResults:
+        """The batch record: the stacks' rows copied column by column, the per-item objects as rows."""
         by_stack: dict[int, tuple] = {}
         for i, (stack, m) in self.stacked.items():
-            by_stack.setdefault(id(stack), (stack, [], []))[1].append(i)
-            by_stack[id(stack)][2].append(m)
-        for stack, idx, rows in by_stack.values():
-            idx, rows = np.array(idx), np.array(rows)
-            for name in out:
-                out[name][idx] = getattr(stack, name)[rows]
-        for i, r in self.objects.items():
-            out["status"][i] = r.status.value
-            for name in ("gamma_lb", "gamma_ub", "optimal", "in_front", "delta", "certified_by", "message"):
-                v = getattr(r, name)
-                if v is not None:
-                    out[name][i] = v
-            if r.X is not None:
-                out["X"][i] = r.X
-        return out
+            entry = by_stack.setdefault(id(stack), (stack, [], []))
+            entry[1].append(i)
+            entry[2].append(m)
+        idx = [np.array(ids, int) for _, ids, _ in by_stack.values()]
+        parts = [stack.record(rows) for stack, _, rows in by_stack.values()]
+        if self.objects:
+            keys = sorted(self.objects)
+            idx.append(np.array(keys, int))
+            parts.append(TriangulationResults.from_rows([self.objects[i] for i in keys]))
+        order = np.concatenate(idx) if idx else np.zeros(0, int)
+        if not np.array_equal(np.sort(order), np.arange(self.n)):
+            raise RuntimeError("a batch lost or duplicated a problem")       # an internal error, never expected
+        return TriangulationResults.concat(parts).take(np.argsort(order, kind="stable"))
 
 
 def _run_items(items, retries, executor, chunk_size: int, store, end=None) -> None:
@@ -366,8 +351,10 @@ def triangulate_many(problems: Iterable[Sequence], method: str | Method | None =
                      executor: cf.Executor | object | None = None, progress: bool | str | None = None,
                      retries: Sequence[RetryStep] = (), chunk_size: int = DEFAULT_CHUNK_SIZE,
                      robust: float | Sequence | np.ndarray | None = None,
-                     **overrides) -> list[TriangulationResult]:
-    """Triangulate every (cameras, regions) pair; results in input order, one per input.
+                     **overrides) -> TriangulationResults:
+    """Triangulate every (cameras, regions) pair; results in input order, one per input, as the batch record
+    :class:`~tritools.records.TriangulationResults` (a sequence of :class:`TriangulationResult` rows with
+    vectorised columns: ``results[i]``, ``results.gamma_ub``).
 
     Parameters
     ----------
@@ -398,6 +385,7 @@ def triangulate_many(problems: Iterable[Sequence], method: str | Method | None =
     if robust is not None:
         from .robust_batch import robust_many
 
-        return robust_many(list(problems), robust, opts, executor=executor, progress=progress)
+        return TriangulationResults.from_rows(robust_many(list(problems), robust, opts, executor=executor,
+                                                          progress=progress))
     return solve_point_problems(list(problems), opts, executor=executor, progress=progress, retries=retries,
-                                chunk_size=int(chunk_size)).results()
+                                chunk_size=int(chunk_size)).record()

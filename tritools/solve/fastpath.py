@@ -79,12 +79,18 @@ class FastPathBatch:
     ok: np.ndarray
     X: np.ndarray
     gamma_lb: np.ndarray
-    gamma_ub: np.ndarray
+    gamma_at_X: np.ndarray                 # gamma(X) on the caller's data: the upper bound
     image_points: np.ndarray
     c_lower: np.ndarray
     c_upper: np.ndarray
     scale: np.ndarray
     trivial: np.ndarray
+
+    @property
+    def gamma_ub(self) -> np.ndarray:
+        """The upper bound ``gamma_ub = gamma(X)`` (``gamma_at_X``; the batch record of a result is
+        :class:`tritools.records.TriangulationResults`)."""
+        return self.gamma_at_X
 
 
 def stack_point_problems(cameras, points2d, caller: str):

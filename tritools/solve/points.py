@@ -10,9 +10,10 @@ observed points (M, N, 2)), :class:`PointStack` runs, with numpy over each group
    one by one by :func:`tritools.triangulate` through the executor of :mod:`tritools.solve.batch`.
 
 Results of the vectorised steps stay in arrays (``X``, ``gamma_lb``, ``gamma_ub``, ``status``,
-``in_front`` ...) and become :class:`~tritools.result.TriangulationResult` objects only on request,
-so a million points cost arrays, not objects.  ``triangulate_points(cameras, points2d, visible)``
-is the arrays API (``cv2.triangulatePoints``-like: one camera per view, a visibility mask).
+``in_front`` ...) and go into the batch record :class:`~tritools.records.TriangulationResults` column by column
+(:meth:`PointStack.record`); :class:`~tritools.result.TriangulationResult` rows are built only on access, so a
+million points cost arrays, not objects.  ``triangulate_points(cameras, points2d, visible)`` is the arrays
+API (``cv2.triangulatePoints``-like: one camera per view, a visibility mask).
 """
 from __future__ import annotations
 
@@ -26,7 +27,8 @@ from sospoly import n_lmivar_formula
 from ..model.constraints import Method
 from ..model.opencv import PointsLayout, points_array
 from ..model.regions import Point, real_array
-from ..result import Attempt, Status, TriangulationResult
+from ..records import TriangulationResults
+from ..result import Attempt, Status
 from .decide import cheirality
 from .fastpath import BAND_MIN_VIEWS, BAND_WIDTHS, verify_points
 from .options import TriangulationOptions, options_from
@@ -170,46 +172,34 @@ class PointStack:
         self.message[d] = np.where(self.in_front[d] | ~self.optimal[d], "", "certified L2 optimum, but behind a camera")
         self.gamma_lb[d] = np.minimum(self.gamma_lb[d], self.gamma_ub[d])
 
-    def result(self, m: int) -> TriangulationResult:
-        """The :class:`TriangulationResult` of a batch-decided problem."""
-        st = Status(self.status[m])
-        msg = self.message[m]
-        return TriangulationResult(
-            Method.COROLLARY1.value, st, X=self.X[m], gamma_ub=float(self.gamma_ub[m]),
-            gamma_lb=float(self.gamma_lb[m]),
-            optimal=bool(self.optimal[m]), delta=2, n_lmivar=self.n_lmivar, image_points=self.image_points[m],
-            X_raw=self.X_raw[m], gamma_ub_raw=float(self.gamma_ub_raw[m]), certified_by=self.certified_by[m],
-            message=msg, timings={"batch_share": float(self.seconds[m])}, attempts=self.prefix[m], sparsity="dense",
-            in_front=bool(self.in_front[m]),
-            depths=self.depths[m], residuals=self.residuals[m])
+    def record(self, rows) -> TriangulationResults:
+        """The :class:`~tritools.records.TriangulationResults` of batch-decided problems ``rows`` (vectorised)."""
+        r = np.asarray(rows, int).reshape(-1)
+        k = r.size
+        return TriangulationResults(
+            method=[Method.COROLLARY1.value] * k, status=self.status[r], X=self.X[r], gamma_ub=self.gamma_ub[r],
+            gamma_lb=self.gamma_lb[r], optimal=self.optimal[r], delta=np.full(k, 2), n_lmivar=np.full(k, self.n_lmivar),
+            image_points=self.image_points[r], X_raw=self.X_raw[r], gamma_ub_raw=self.gamma_ub_raw[r],
+            certified_by=self.certified_by[r], message=self.message[r], timings={"batch_share": self.seconds[r]},
+            attempts=[self.prefix[m] for m in r], sparsity=["dense"] * k, in_front=self.in_front[r],
+            n_views=np.full(k, self.N), depths=self.depths[r], residuals=self.residuals[r])
 
     def item(self, m: int):
         """(cameras, regions) of problem m for the per-point path."""
         return self.C[m], [Point(p) for p in self.x[m]]
 
 
-class PointsResult:
-    """Arrays of a :func:`triangulate_points` call (first axis = point): ``X`` (M, 3), ``gamma_lb``,
-    ``gamma_ub``, ``status`` (status values), ``optimal``, ``in_front``, ``n_views``, ``delta``,
-    ``certified_by``; :meth:`results` gives the :class:`TriangulationResult` objects."""
-
-    def __init__(self, results_of, arrays: dict):
-        self._results_of = results_of
-        for k, v in arrays.items():
-            setattr(self, k, v)
-
-    def __len__(self) -> int:
-        return len(self.status)
-
-    def results(self) -> list[TriangulationResult]:
-        return [self._results_of(m) for m in range(len(self))]
+#: the arrays of :func:`triangulate_points`: the one batch record (``X``, ``gamma_lb``, ``gamma_ub``, ``status``,
+#: ``optimal``, ``in_front``, ``n_views``, ``delta``, ``certified_by``, ``message``, ``inliers`` ... as columns;
+#: ``results()`` / ``[m]`` give :class:`TriangulationResult` rows).
+PointsResult = TriangulationResults
 
 
 def triangulate_points(cameras: ArrayLike, points2d: ArrayLike, visible: ArrayLike | None = None, *,
                        layout: PointsLayout | str = PointsLayout.AUTO, options: TriangulationOptions | None = None,
                        executor: object | None = None, progress: bool | str | None = None,
                        robust: ArrayLike | None = None,
-                       **overrides) -> PointsResult:
+                       **overrides) -> TriangulationResults:
     """Certified triangulation of M points observed in V views, as arrays (like ``cv2.triangulatePoints``).
 
     Parameters
@@ -246,9 +236,7 @@ def triangulate_points(cameras: ArrayLike, points2d: ArrayLike, visible: ArrayLi
         return _robust_points(C, x, vis, views, robust, opts, executor, progress)
     outcome = solve_point_problems([(C[v], x[m, v]) for m, v in enumerate(views)], opts, executor=executor,
                                    progress=progress)
-    arrays = outcome.arrays()
-    arrays["n_views"] = vis.sum(axis=1)
-    return PointsResult(outcome.result, arrays)
+    return outcome.record().with_views(vis)
 
 
 def _visible_mask(visible, x: np.ndarray) -> np.ndarray:
@@ -267,28 +255,13 @@ def _visible_mask(visible, x: np.ndarray) -> np.ndarray:
     return vis
 
 
-def _robust_points(C, x, vis, views, robust, opts, executor, progress) -> PointsResult:
+def _robust_points(C, x, vis, views, robust, opts, executor, progress) -> TriangulationResults:
     """``triangulate_points(..., robust=c)``: per-point TLS results (:func:`tritools.solve.robust_batch.robust_many`),
-    thresholds taken per view of the shared cameras."""
+    thresholds taken per view of the shared cameras; ``inliers`` (M, V) False where not visible."""
     from .robust import robust_thresholds
     from .robust_batch import robust_many
 
     c = robust_thresholds(robust, C.shape[0])
     problems = [(C[v], x[m, v]) for m, v in enumerate(views)]
     results = robust_many(problems, [c[v] for v in views], opts, executor=executor, progress=progress)
-    M, V = vis.shape
-    inliers = np.zeros((M, V), bool)
-    for m, (v, r) in enumerate(zip(views, results)):
-        if r.inliers is not None:
-            inliers[m, v] = r.inliers
-    arrays = {"X": np.array([np.full(3, np.nan) if r.X is None else r.X for r in results]).reshape(M, 3),
-              "gamma_lb": np.array([np.nan if r.gamma_lb is None else r.gamma_lb for r in results]),
-              "gamma_ub": np.array([np.nan if r.gamma_ub is None else r.gamma_ub for r in results]),
-              "status": np.array([r.status.value for r in results], dtype=object),
-              "optimal": np.array([bool(r.optimal) for r in results]),
-              "in_front": np.array([bool(r.in_front) for r in results]),
-              "delta": np.array([-1 if r.delta is None else r.delta for r in results]),
-              "certified_by": np.array([r.certified_by for r in results], dtype=object),
-              "message": np.array([r.message for r in results], dtype=object),
-              "n_views": vis.sum(axis=1), "inliers": inliers}
-    return PointsResult(lambda m: results[m], arrays)
+    return TriangulationResults.from_rows(results).with_views(vis)

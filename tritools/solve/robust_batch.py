@@ -101,7 +101,7 @@ def _robust_many(problems: list, robust, opts, executor, progress) -> list[Trian
     pending = direct
     if l2_first:
         first = solve_point_problems([problems[i] for i in l2_first], opts, executor=executor,
-                                     progress=progress).results()
+                                     progress=progress).record()
         pending = pending + _after_l2(problems, thresholds, opts, l2_first, first, out)
     _drive_chunks(problems, thresholds, opts, sorted(pending), out)
     return out

@@ -43,10 +43,11 @@ from .options import TriangulationOptions, options_from
 from .discs import as_disc_problem, solve_disc_group
 from .plan import batch_steps
 from .points import PointStack
+from .stages import BATCH_STAGES
 from .triangulate import triangulate
 
 __all__ = ["triangulate_many", "safe_triangulate", "solve_point_problems", "solve_point_stack", "BatchOutcome",
-           "RetryStep", "LOCAL_PROCESS_MIN_ITEMS",
+           "RetryStep", "LOCAL_PROCESS_MIN_ITEMS", "per_point_runner",
            "DEFAULT_CHUNK_SIZE", "PROGRESS_MIN_ITEMS"]
 
 log = logging.getLogger(__name__)
@@ -206,6 +207,33 @@ class BatchOutcome:
         return TriangulationResults.concat(parts).take(np.argsort(order, kind="stable"))
 
 
+def per_point_runner(executor=None, chunk_size: int = DEFAULT_CHUNK_SIZE, end: float | None = None):
+    """The runner of the batch stage ``per_point`` (:mod:`tritools.solve.stages.batch`): items (row, cameras,
+    regions, options, attempts) solved by :func:`tritools.triangulate` in chunks through ``executor`` (the
+    module docstring's default: in this process below LOCAL_PROCESS_MIN_ITEMS items), within the whole call's
+    ``end``; gives [(row, result)]."""
+    def run(items) -> list:
+        pairs: list = []
+        _run_items(items, (), executor, chunk_size, pairs.extend, end)
+        return pairs
+    return run
+
+
+def _collect(stack: PointStack, idx, out: BatchOutcome) -> list:
+    """Rows of ``stack`` into ``out`` under the batch indices ``idx`` (closed by a batch stage: kept in the
+    stack; solved by its per_point stage: objects); the per-item items (index, cameras, regions, options,
+    attempts) of the rows still open."""
+    items = []
+    for m, i in enumerate(idx):
+        if m in stack.objects:
+            out.objects[i] = stack.objects[m]
+        elif stack.done[m]:
+            out.stacked[i] = (stack, m)
+        else:
+            items.append((i, *stack.item(m), stack.todo.get(m, stack.rest_opts), stack.prefix[m]))
+    return items
+
+
 def _run_items(items, retries, executor, chunk_size: int, store, end=None) -> None:
     """Solve per-item problems in chunks through ``executor`` (see the module docstring)."""
     chunks = [items[k:k + chunk_size] for k in range(0, len(items), chunk_size)]
@@ -247,41 +275,36 @@ def _run_items(items, retries, executor, chunk_size: int, store, end=None) -> No
 
 
 def solve_point_stack(cameras: np.ndarray, points2d: np.ndarray, opts: TriangulationOptions, *, executor=None,
-                      chunk_size: int = DEFAULT_CHUNK_SIZE) -> BatchOutcome:
-    """M point problems of N views given as stacks (cameras (M, N, 3, 4), points2d (M, N, 2)): the vectorised
-    paths of :class:`PointStack`, then the per-point path for the rest (no per-item parsing)."""
+                      chunk_size: int = DEFAULT_CHUNK_SIZE, stages=BATCH_STAGES) -> BatchOutcome:
+    """M point problems of N views given as stacks (cameras (M, N, 3, 4), points2d (M, N, 2)): the batch
+    ``stages`` (:data:`~tritools.solve.stages.BATCH_STAGES`) of :class:`PointStack`, whose ``per_point`` stage
+    runs the rows left open through ``executor`` (no per-item parsing); rows a stage list without
+    ``per_point`` leaves open are solved the same way after it."""
     with call_limit(opts.total_time_limit) as end:
         M = len(points2d)
         out = BatchOutcome(M)
         if expired(end):                          # past the whole call's end: estimates only
             out.objects.update(enumerate(expired_points(cameras, points2d, opts)))
             return out
-        stack = PointStack(cameras, points2d, opts).run()
-        items = []
-        for m in range(M):
-            if stack.done[m]:
-                out.stacked[m] = (stack, m)
-            else:
-                items.append((m, *stack.item(m), stack.todo.get(m, opts), stack.prefix[m]))
-
-        def store(pairs):
-            for i, r in pairs:
-                out.objects[i] = r
-
-        _run_items(items, (), executor, chunk_size, store, end)
+        runner = per_point_runner(executor, chunk_size, end)
+        stack = PointStack(cameras, points2d, opts, stages=stages, per_point=runner).run()
+        items = _collect(stack, range(M), out)
+        _run_items(items, (), executor, chunk_size, lambda pairs: out.objects.update(pairs), end)
     return out
 
 
 
 def solve_point_problems(problems, opts: TriangulationOptions, *, executor=None, progress=None, retries=(),
-                         chunk_size: int = DEFAULT_CHUNK_SIZE) -> BatchOutcome:
-    """The engine of :func:`triangulate_many` (module docstring); ``problems`` a sequence of (cameras, regions)."""
+                         chunk_size: int = DEFAULT_CHUNK_SIZE, stages=BATCH_STAGES) -> BatchOutcome:
+    """The engine of :func:`triangulate_many` (module docstring); ``problems`` a sequence of (cameras, regions);
+    ``stages``: the batch stages run on each group of point problems (their open rows, with every other
+    problem, then go through ``executor`` in one pass)."""
     with call_limit(opts.total_time_limit) as end:
-        return _solve_problems(problems, opts, executor, progress, retries, chunk_size, end)
+        return _solve_problems(problems, opts, executor, progress, retries, chunk_size, end, stages)
 
 
-def _solve_problems(problems, opts: TriangulationOptions, executor, progress, retries, chunk_size: int, end
-                    ) -> BatchOutcome:
+def _solve_problems(problems, opts: TriangulationOptions, executor, progress, retries, chunk_size: int, end,
+                    stages=BATCH_STAGES) -> BatchOutcome:
     """:func:`solve_point_problems` within the whole call's ``end`` (:mod:`.call_limit`)."""
     n = len(problems)
     out = BatchOutcome(n)
@@ -322,12 +345,8 @@ def _solve_problems(problems, opts: TriangulationOptions, executor, progress, re
             if bar is not None:
                 bar.update(len(idx))
             continue
-        stack = PointStack(C, x, opts).run()
-        for m, i in enumerate(idx):
-            if stack.done[m]:
-                out.stacked[i] = (stack, m)
-            else:
-                items.append((i, *stack.item(m), stack.todo.get(m, opts), stack.prefix[m]))
+        stack = PointStack(C, x, opts, stages=stages).run()    # no runner: the open rows join ``items``
+        items.extend(_collect(stack, idx, out))
         if bar is not None:
             bar.update(int(stack.done.sum()))
 

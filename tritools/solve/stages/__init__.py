@@ -16,7 +16,10 @@ stages of :data:`POINT_STAGES` in order, each a module-level function ``stage(ct
 data: :func:`with_stage` returns a list with one more stage before or after a named one, and
 ``run_point(..., stages=..., step_stages=...)`` runs it, so a stage (an inlier-set search before
 ``verify``, an uncertainty stage after ``settle``) is added without touching the others
-(docs/architecture.md, "Stages").  The fast implementations of ``verify`` and ``sdp`` (vectorised
+(docs/architecture.md, "Stages").  Batches of point problems run :data:`BATCH_STAGES` over a
+:class:`~tritools.solve.stages.batch.BatchContext` (a column record plus the mask of the rows still open;
+:func:`run_batch`): ``plan`` -> ``verify`` -> ``sdp`` -> ``per_point`` -> ``report``, the last but one
+the point stages on the rows still open.  The fast implementations of ``verify`` and ``sdp`` (vectorised
 verification of points and discs, the batched delta = 2 SDP) are registered in
 :mod:`tritools.solve.stages.verify` / :mod:`tritools.solve.stages.sdp` and chosen where they apply.
 """
@@ -29,6 +32,8 @@ from dataclasses import dataclass
 from sospoly.budget import deadline_scope
 
 from ...result import TriangulationResult
+from .batch import (BATCH_SDP_IMPLEMENTATIONS, BATCH_VERIFY_IMPLEMENTATIONS, BatchContext, per_point_batch_stage,
+                    plan_batch_stage, report_batch_stage, sdp_batch_stage, verify_batch_stage)
 from .context import FAST_DEFAULT, AttemptStep, ImplName, Implementation, PointContext, StepState
 from .estimate import decide_stage, estimate_stage, resolve_stage, rigor_stage
 from .outcome import report_stage, settle_stage, world_frame_stage
@@ -37,7 +42,8 @@ from .verify import VERIFY_IMPLEMENTATIONS, plan_stage, trivial_stage, verify_st
 
 __all__ = ["Stage", "POINT_STAGES", "STEP_STAGES", "with_stage", "run_point", "PointContext", "StepState",
            "AttemptStep", "ImplName", "Implementation", "VERIFY_IMPLEMENTATIONS", "SDP_IMPLEMENTATIONS", "FAST_DEFAULT",
-           "FAST_ALL", "run_step"]
+           "FAST_ALL", "run_step", "BATCH_STAGES", "BatchContext", "run_batch", "BATCH_VERIFY_IMPLEMENTATIONS",
+           "BATCH_SDP_IMPLEMENTATIONS"]
 
 
 @dataclass(frozen=True)
@@ -65,6 +71,15 @@ STEP_STAGES: tuple[Stage, ...] = (
     Stage("rigor", rigor_stage),
     Stage("decide", decide_stage),
     Stage("resolve", resolve_stage),
+)
+
+#: the stages of a batch of point problems, in order (:mod:`tritools.solve.stages.batch`).
+BATCH_STAGES: tuple[Stage, ...] = (
+    Stage("plan", plan_batch_stage),
+    Stage("verify", verify_batch_stage),
+    Stage("sdp", sdp_batch_stage),
+    Stage("per_point", per_point_batch_stage),
+    Stage("report", report_batch_stage),
 )
 
 #: every fast implementation (the batched delta = 2 SDP included).
@@ -97,3 +112,10 @@ def run_point(cams, regions, opts, t0: float | None = None, *, stages=POINT_STAG
         for stage in ctx.stages:
             stage.run(ctx)
     return ctx.best
+
+
+def run_batch(cameras, points2d, opts, *, stages=BATCH_STAGES, fast=FAST_ALL, per_point=None) -> BatchContext:
+    """The batch stages on M point problems of N views (cameras (M, N, 3, 4), points (M, N, 2)) under validated
+    options: the filled :class:`~tritools.solve.stages.batch.BatchContext`.  ``per_point`` runs the rows the
+    batch stages leave open (:mod:`tritools.solve.batch` gives the executor's); without it they stay open."""
+    return BatchContext(cameras, points2d, opts, stages=stages, fast=fast, per_point=per_point).run()

@@ -4,7 +4,8 @@
 
 1. every input is read as a ``(cameras, regions)`` pair; point-region problems (regions that are
    :class:`~tritools.model.regions.Point` objects or an (N, 2) array) are grouped by their number of
-   views and go through the vectorised paths of :class:`tritools.solve.points.PointStack`;
+   views and go through the batch stages of :class:`tritools.solve.points.PointStack`
+   (:data:`tritools.solve.stages.BATCH_STAGES`: the vectorised verification and delta = 2 SDP);
 2. everything else -- other regions, problems a vectorised path handed back, later degrees of the
    plan -- is solved one by one by :func:`tritools.triangulate` (plus the ``retries`` steps), in
    chunks of ``chunk_size`` submitted to an executor;

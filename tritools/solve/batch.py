@@ -224,11 +224,11 @@ def _collect(stack: PointStack, idx, out: BatchOutcome) -> list:
     """Rows of ``stack`` into ``out`` under the batch indices ``idx`` (closed by a batch stage: kept in the
     stack; solved by its per_point stage: objects); the per-item items (index, cameras, regions, options,
     attempts) of the rows still open."""
-    items = []
+    items, done = [], stack.done
     for m, i in enumerate(idx):
         if m in stack.objects:
             out.objects[i] = stack.objects[m]
-        elif stack.done[m]:
+        elif done[m]:
             out.stacked[i] = (stack, m)
         else:
             items.append((i, *stack.item(m), stack.todo.get(m, stack.rest_opts), stack.prefix[m]))

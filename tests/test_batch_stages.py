@@ -152,3 +152,26 @@ def test_a_batch_of_one_is_a_single_call(n_views, noise, seed):
 
 def test_point_stages_are_untouched_by_the_batch_list():
     assert [s.name for s in POINT_STAGES] == ["plan", "verify", "trivial", "steps", "settle", "world_frame", "report"]
+
+
+def test_triangulate_many_engine_runs_the_batch_stages_per_group():
+    """``solve_point_problems`` (the engine of ``triangulate_many``) with an inserted stage: groups of 2 and 3
+    views and a non-point problem, results in input order; the rule's rows closed, every other row equal to
+    ``triangulate_many``'s."""
+    from tritools.solve.batch import solve_point_problems
+
+    C2, x2 = _stack(2, 4, 1.0, seed=6)
+    C3, x3 = _stack(3, 4, 1.0, seed=7)
+    ell = (C3[0], [tritools.Ellipse(p, 4.0 * np.eye(2)) for p in x3[0]])
+    problems = [(C2[0], x2[0]), (C3[0], x3[0]), ell, (C2[1], x2[1] + 5e3), (C3[1], x3[1]), (C2[2], x2[2])]
+
+    def inside_image(ctx):
+        ctx.close(np.nonzero(ctx.open & (np.abs(ctx.x) > 4e3).any(axis=(1, 2)))[0], Status.INVALID_INPUT, "outside")
+
+    rule = Stage("inside_image", inside_image)
+    opts = TriangulationOptions()
+    rec = solve_point_problems(problems, opts, stages=with_stage(BATCH_STAGES, rule, before="verify")).record()
+    plain = tritools.triangulate_many(problems)
+    assert rec[3].status == Status.INVALID_INPUT and rec[3].message == "outside" and not plain[3].message
+    _assert_same_rows(plain, rec, [0, 1, 2, 4, 5])
+    assert rec.n_views.tolist() == [2, 3, 3, 2, 3, 2] and rec[2].optimal == plain[2].optimal

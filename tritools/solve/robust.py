@@ -152,8 +152,13 @@ def decision_scale(cams, regions, c2: np.ndarray) -> float:
     never loosen the rule beyond the L2 one: f_TLS = L2 there."""
     from ..model.normalize import normalization_for
 
+    return scale_from(normalization_for(cams, regions).scale, c2)
+
+
+def scale_from(s: float, c2: np.ndarray) -> float:
+    """:func:`decision_scale` from the L2 normalisation's image scale s (a batch computes s for many problems in
+    one :func:`tritools.model.normalize.normalization_stack` call)."""
     finite = c2[np.isfinite(c2) & (c2 > 0)]
-    s = normalization_for(cams, regions).scale
     rho2 = 1.0 / (s * s) if np.isfinite(s) and s > 0 else math.inf
     scale = min([rho2, *finite.tolist()])
     return float(scale) if np.isfinite(scale) and scale > 0 else 1.0
@@ -167,15 +172,28 @@ class _Search:
         self.N = len(regions)
         with np.errstate(over="ignore"):
             self.c2 = c * c                              # c above 1e154: c^2 = inf (no threshold in floats)
+        self.c2_max = float(np.max(self.c2))
         self.deadline = opts.budget.deadline()
         self.bounds = SubsetBounds(cams, regions, opts, self.deadline)
-        self.scale = decision_scale(cams, regions, self.c2)
+        self.bounds.c2 = self.c2
+        self._scale = None                               # decision_scale, computed when first needed
         self.tol = opts.tolerances
         self.best_X, self.best_f, self.best_S = None, math.inf, frozenset()
         self.points = self.bounds.points
         self.x = self.bounds.x
         self.nodes = 0
         self.anchors, self.anchor_a = None, None     # see anchor_bounds
+
+    @property
+    def scale(self) -> float:
+        """The scale of the certificate rule (:func:`decision_scale`)."""
+        if self._scale is None:
+            self._scale = decision_scale(self.C, self.regions, self.c2)
+        return self._scale
+
+    def set_normalization_scale(self, s: float) -> None:
+        """Give the L2 normalisation's image scale s of this problem, computed in a batch (:func:`scale_from`)."""
+        self._scale = scale_from(s, self.c2)
 
     # ------------------------------------------------------------------ costs and the upper bound
     def residuals(self, X) -> np.ndarray:
@@ -231,14 +249,29 @@ class _Search:
         the cache -- batched with the requests of other problems -- and resumes."""
         todo = [S for S in subsets if not self.bounds.known(S)]
         if todo:
+            # a bound >= UB + max c^2 saturates every use (node_bound: lb_I > s_hi, a_u >= s_hi + c_u^2)
+            self.bounds.enough = self.best_f + self.c2_max
+            if self.bounds.hint is not None:
+                self.bounds.hint = self.best_S
             yield todo
+
+    def verify_first(self, S: frozenset):
+        """Generator: the bound of S by verification only (left unknown when that does not certify it: a later
+        :meth:`need`, with a candidate known, may settle it by its pair packing instead of an SDP)."""
+        from . import robust_bounds
+
+        if not self.bounds.known(S):
+            if robust_bounds.PACKING:
+                self.bounds.defer.add(S)
+            yield from self.need([S])
 
     def candidates(self, rng):
         full = frozenset(range(self.N))
-        yield from self.need([full])
-        self.offer(self.bounds.estimate(full))
-        if self.best_X is not None and self.meets(self.root_bound()):
-            return                              # certified by the L2 certificate of all views: no search needed
+        yield from self.verify_first(full)
+        if self.bounds.known(full):
+            self.offer(self.bounds.estimate(full))
+            if self.best_X is not None and self.meets(self.root_bound()):
+                return                          # certified by the L2 certificate of all views: no search needed
         pairs = list(itertools.combinations(range(self.N), 2))
         if len(pairs) > MAX_PAIRS:
             pairs = [pairs[k] for k in rng.choice(len(pairs), MAX_PAIRS, replace=False)]
@@ -369,6 +402,14 @@ class _Search:
                     floor = min(floor, lb)
                 continue
             if not U:                                # a leaf whose L2 bound does not meet UB
+                if self.bounds.reopen(I):            # its packing bound only: verification / SDP now
+                    yield from self.need([I])        # lb_I already holds the packing bound
+                    self.offer_new()
+                    lb = min(self.best_f, c2_out + max(lb_I, self.bounds.bound(I)))
+                    if self.meets(lb):
+                        if lb < self.best_f:
+                            floor = min(floor, lb)
+                        continue
                 if self.bounds.strengthen(I):
                     lb = min(self.best_f, c2_out + self.bounds.bound(I))
                     self.offer_new()
@@ -391,8 +432,11 @@ class _Search:
         if self.best_X is None:
             return TriangulationResult("tls", Status.NUMERICAL_FAILURE, message="no finite candidate estimate found",
                                        timings={"total": time.perf_counter() - self.t0})
+        yield from self.need([frozenset(range(self.N))])
+        self.offer_new()
         lb, stopped = self.root_bound(), None
         if not self.meets(lb):
+            self.bounds.hint = self.best_S
             order = branching_order(self.residuals(self.best_X) / self.c)
             yield from self.anchor_bounds(order)
             lb_bb, stopped = yield from self.search(order)

@@ -129,7 +129,24 @@ def _drive_chunks(problems, thresholds, opts, idx, out) -> None:
                 out[i] = s
             else:
                 searches.append((i, s))
+        _normalization_scales([s for _, s in searches])
         results = drive([s for _, s in searches])
         share = (time.perf_counter() - t0) / max(1, len(searches))
         for (i, _), r in zip(searches, results):
             out[i] = dataclasses.replace(r, timings={**r.timings, "batch_share": share})
+
+
+def _normalization_scales(searches) -> None:
+    """The decision scales of point-region searches, grouped by view count, from one
+    :func:`tritools.model.normalize.normalization_stack` call per group: the same function
+    :func:`tritools.model.normalize.normalization_for` applies to a stack of one (scale 1 where it fails)."""
+    from ..model.normalize import normalization_stack
+
+    groups: dict = {}
+    for s in searches:
+        if s.points:
+            groups.setdefault(s.N, []).append(s)
+    for group in groups.values():
+        st = normalization_stack(np.stack([s.C for s in group]), np.stack([s.x for s in group]))
+        for k, s in enumerate(group):
+            s.set_normalization_scale(float(st.scale[k]) if st.ok[k] else 1.0)

@@ -285,21 +285,32 @@ class _Search:
             starts = [Xs[k] for k in np.argsort(f)[:LO_STARTS]]
             for X in starts:
                 self.offer(X)
-        for X in starts + ([self.best_X] if self.best_X is not None else []):
-            yield from self.local_optimisation(X)
+        yield from self.local_optimisation(starts + ([self.best_X] if self.best_X is not None else []))
 
-    def local_optimisation(self, X):
-        seen = set()
+    def local_optimisation(self, starts):
+        """Local optimisation (inlier set -> L2 estimate of the set -> inlier set, :data:`LO_ROUNDS` rounds) from
+        every start in lockstep: the sets of one round of all chains are one request."""
+        seen = [set() for _ in starts]
+        chains = list(range(len(starts)))
+        Xs = list(starts)
         for _ in range(LO_ROUNDS):
-            S = self.inlier_set(X)
-            if len(S) < 2 or S in seen or self.deadline.expired:
+            if self.deadline.expired:
                 return
-            seen.add(S)
-            yield from self.need([S])
-            X = self.bounds.estimate(S)
-            self.offer(X)
-            if X is None:
+            sets = {}
+            for k in chains:
+                S = self.inlier_set(Xs[k])
+                if len(S) >= 2 and S not in seen[k]:
+                    seen[k].add(S)
+                    sets[k] = S
+            if not sets:
                 return
+            yield from self.need(list(dict.fromkeys(sets.values())))
+            chains = []
+            for k, S in sets.items():
+                Xs[k] = self.bounds.estimate(S)
+                self.offer(Xs[k])
+                if Xs[k] is not None:
+                    chains.append(k)
 
     # ------------------------------------------------------------------ bounds
     def meets(self, lb: float) -> bool:

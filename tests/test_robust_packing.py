@@ -115,3 +115,24 @@ def test_cheap_paths_equal_the_plain_path_and_the_enumeration(seed, monkeypatch)
     for r in (fast, plain):
         assert 2 * N * r.gamma_lb ** 2 <= f_ref * (1 + 1e-9) + 1e-9
         assert 2 * N * r.gamma_ub ** 2 <= f_ref * (1 + 1e-6) + 1e-9
+
+
+@pytest.mark.parametrize("seed", [0, 2, 3])
+def test_leave_one_out_root_bound(seed, monkeypatch):
+    """A clean 7-view track whose L2 optimum costs more than c^2 (1 px noise, c = 3 px): the root bound
+    min(L2LB, c^2) cannot certify it, the leave-one-out bound does, with no branch and bound (0 nodes); same
+    inlier set and value as the plain path, every bound against the enumeration."""
+    cams, x, X = _scene(7, 0, seed)
+    c = np.full(7, 3.0)
+    fast = tritools.triangulate(cams, x, robust=c)
+    monkeypatch.setattr(rb, "PACKING", False)
+    plain = tritools.triangulate(cams, x, robust=c)
+    assert fast.optimal and plain.optimal
+    assert 2 * 7 * fast.gamma_ub ** 2 > 9.0                    # L2* > c^2: the root bound alone does not decide
+    assert "0 nodes" in fast.message and "0 nodes" not in plain.message
+    np.testing.assert_array_equal(fast.inliers, plain.inliers)
+    assert fast.inliers.all()
+    assert fast.gamma_ub == pytest.approx(plain.gamma_ub, rel=1e-9)
+    f_ref = _tls_reference(cams, x, c, [X, X + 0.3, X - 0.3])
+    assert 2 * 7 * fast.gamma_lb ** 2 <= f_ref * (1 + 1e-9) + 1e-9
+    assert 2 * 7 * fast.gamma_ub ** 2 <= f_ref * (1 + 1e-6) + 1e-9

@@ -66,6 +66,7 @@ from ..result import Attempt, Status, TriangulationResult
 from .decide import cheirality
 from ..model.geometry import depths_stack
 from .report import PointReport, point_report
+from . import robust_bounds
 from .robust_bounds import ROUND_DOWN, SubsetBounds, compute_many
 
 __all__ = ["robust_thresholds", "triangulate_robust", "drive", "lookahead_bound", "tls_cost", "point_distances2",
@@ -167,14 +168,17 @@ def scale_from(s: float, c2: np.ndarray) -> float:
 class _Search:
     """One TLS problem: thresholds, the subset bounds, the best candidate, the branch and bound."""
 
-    def __init__(self, cams, regions, c, opts, t0):
-        self.C, self.regions, self.c, self.opts, self.t0 = cams, list(regions), c, opts, t0
-        self.N = len(regions)
+    def __init__(self, cams, regions, c, opts, t0, points=None):
+        """``regions`` (a sequence of regions), or None with ``points`` (N, 2): point regions given by their
+        centres (a batch of validated point problems; the Point objects are built only if a path needs them)."""
+        self.C, self.c, self.opts, self.t0 = cams, c, opts, t0
+        self._regions = None if regions is None else list(regions)
+        self.N = len(regions) if regions is not None else len(points)
         with np.errstate(over="ignore"):
             self.c2 = c * c                              # c above 1e154: c^2 = inf (no threshold in floats)
         self.c2_max = float(np.max(self.c2))
         self.deadline = opts.budget.deadline()
-        self.bounds = SubsetBounds(cams, regions, opts, self.deadline)
+        self.bounds = SubsetBounds(cams, regions, opts, self.deadline, points=points)
         self.bounds.c2 = self.c2
         self._scale = None                               # decision_scale, computed when first needed
         self.tol = opts.tolerances
@@ -183,6 +187,11 @@ class _Search:
         self.x = self.bounds.x
         self.nodes = 0
         self.anchors, self.anchor_a = None, None     # see anchor_bounds
+        self.loo_lb = 0.0                            # leave_one_out_bound, where computed
+
+    @property
+    def regions(self) -> list:
+        return self.bounds.regions
 
     @property
     def scale(self) -> float:
@@ -255,15 +264,13 @@ class _Search:
                 self.bounds.hint = self.best_S
             yield todo
 
-    def verify_first(self, S: frozenset):
-        """Generator: the bound of S by verification only (left unknown when that does not certify it: a later
-        :meth:`need`, with a candidate known, may settle it by its pair packing instead of an SDP)."""
-        from . import robust_bounds
-
-        if not self.bounds.known(S):
-            if robust_bounds.PACKING:
-                self.bounds.defer.add(S)
-            yield from self.need([S])
+    def verify_first(self, *subsets):
+        """Generator: the bounds of the subsets by verification only (left unknown where that does not certify:
+        a later :meth:`need`, with a candidate known, may settle them by their pair packing instead of an SDP)."""
+        todo = [S for S in subsets if not self.bounds.known(S)]
+        if robust_bounds.PACKING:
+            self.bounds.defer.update(todo)
+        yield from self.need(todo)
 
     def candidates(self, rng):
         full = frozenset(range(self.N))
@@ -272,6 +279,12 @@ class _Search:
             self.offer(self.bounds.estimate(full))
             if self.best_X is not None and self.meets(self.root_bound()):
                 return                          # certified by the L2 certificate of all views: no search needed
+            if self.best_S == full and self.N >= 3 and robust_bounds.PACKING:
+                yield from self.verify_first(*[full - {j} for j in range(self.N)])
+                self.offer_new()
+                self.loo_lb = self.leave_one_out_bound()
+                if self.meets(self.loo_lb):
+                    return                      # every view an inlier, and dropping any costs at least as much
         pairs = list(itertools.combinations(range(self.N), 2))
         if len(pairs) > MAX_PAIRS:
             pairs = [pairs[k] for k in rng.choice(len(pairs), MAX_PAIRS, replace=False)]
@@ -316,6 +329,21 @@ class _Search:
     def meets(self, lb: float) -> bool:
         """Is a lower bound good enough to prune (it meets UB under the certificate rule, or exceeds it)?"""
         return lb >= self.best_f or bool(self.tol.certified(lb, self.best_f, self.scale))
+
+    def leave_one_out_bound(self) -> float:
+        """f_TLS* >= min(L2LB(V), min_j [c_j^2 + min(L2LB(V - j), min_{i != j} c_i^2)]) over the views V: an X
+        with every view an inlier costs L2*(V); otherwise some j is an outlier of X, which pays c_j^2 plus, on the
+        other views, at least the root bound of the problem without j (:meth:`root_bound`).  Unknown subset
+        bounds count 0; rounded down."""
+        full = frozenset(range(self.N))
+        c2 = self.c2
+        terms = [self.bounds.bound(full) if self.bounds.known(full) else 0.0]
+        for j in range(self.N):
+            S = full - {j}
+            lb = self.bounds.bound(S) if self.bounds.known(S) else 0.0
+            rest = float(np.min(np.delete(c2, j)))
+            terms.append((c2[j] + min(lb, rest)) * ROUND_DOWN)
+        return float(min(terms))
 
     def root_bound(self) -> float:
         """f_TLS* >= min(L2LB(all views), min_i c_i^2) (module docstring)."""
@@ -445,7 +473,7 @@ class _Search:
                                        timings={"total": time.perf_counter() - self.t0})
         yield from self.need([frozenset(range(self.N))])
         self.offer_new()
-        lb, stopped = self.root_bound(), None
+        lb, stopped = max(self.root_bound(), self.loo_lb), None
         if not self.meets(lb):
             self.bounds.hint = self.best_S
             order = branching_order(self.residuals(self.best_X) / self.c)

@@ -87,16 +87,18 @@ def robust_many(problems: list, robust, opts, *, executor=None, progress=None) -
 
     thresholds = thresholds_for(robust, problems)
     out: list = [None] * len(problems)
-    direct, l2_first = [], []
+    direct, l2_first, points = [], [], {}
     for i, (prob, c) in enumerate(zip(problems, thresholds)):
         pp = _as_point_problem(*prob) if isinstance(prob, (list, tuple)) and len(prob) == 2 else None
         (direct if pp is not None and np.any(np.isfinite(c)) else l2_first).append(i)
+        if pp is not None:
+            points[i] = pp
     pending = direct
     if l2_first:
         first = solve_point_problems([problems[i] for i in l2_first], opts, executor=executor,
                                      progress=progress).results()
         pending = pending + _after_l2(problems, thresholds, opts, l2_first, first, out)
-    _drive_chunks(problems, thresholds, opts, sorted(pending), out)
+    _drive_chunks(problems, thresholds, opts, sorted(pending), out, points)
     return out
 
 
@@ -115,20 +117,25 @@ def _after_l2(problems, thresholds, opts, idx, first, out) -> list:
     return rest
 
 
-def _drive_chunks(problems, thresholds, opts, idx, out) -> None:
+def _drive_chunks(problems, thresholds, opts, idx, out, points) -> None:
     """The branch and bound of the problems ``idx``, :data:`ROBUST_CHUNK` searched together at a time (each
-    search's time budget starts with its chunk)."""
+    search's time budget starts with its chunk).  ``points``: index -> (cameras, centres) of the point
+    problems (their cameras checked in one vectorised call per view count, :func:`_point_searches`)."""
     from .robust import drive
 
     for k in range(0, len(idx), ROBUST_CHUNK):
         t0 = time.perf_counter()
-        searches = []
-        for i in idx[k:k + ROBUST_CHUNK]:
+        chunk = idx[k:k + ROBUST_CHUNK]
+        searches = _point_searches([i for i in chunk if i in points], points, thresholds, opts, t0)
+        for i in chunk:
+            if i in searches:
+                continue
             s = _search_or_failure(*problems[i], thresholds[i], opts)
             if isinstance(s, TriangulationResult):
                 out[i] = s
             else:
-                searches.append((i, s))
+                searches[i] = s
+        searches = sorted(searches.items())
         _normalization_scales([s for _, s in searches])
         results = drive([s for _, s in searches])
         share = (time.perf_counter() - t0) / max(1, len(searches))
@@ -150,3 +157,27 @@ def _normalization_scales(searches) -> None:
         st = normalization_stack(np.stack([s.C for s in group]), np.stack([s.x for s in group]))
         for k, s in enumerate(group):
             s.set_normalization_scale(float(st.scale[k]) if st.ok[k] else 1.0)
+
+
+def _point_searches(idx, points, thresholds, opts, t0) -> dict:
+    """index -> search for the point problems ``idx`` whose cameras pass
+    :func:`tritools.model.cameras.camera_problems` (the vectorised twin of the per-problem
+    :func:`tritools.model.cameras.validate_cameras`), one call per view count; the others are left out (the
+    caller's per-problem path gives them their named error)."""
+    from ..model.cameras import camera_problems
+    from .robust import _Search
+
+    groups: dict = {}
+    for i in idx:
+        groups.setdefault(len(points[i][1]), []).append(i)
+    out = {}
+    for group in groups.values():
+        C = np.stack([points[i][0] for i in group])
+        try:
+            valid = camera_problems(C).valid
+        except ValueError:
+            continue
+        for k, i in enumerate(group):
+            if valid[k]:
+                out[i] = _Search(C[k].copy(), None, thresholds[i], opts, t0, points=points[i][1])
+    return out

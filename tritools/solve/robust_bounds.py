@@ -44,9 +44,9 @@ ROUND_DOWN = 1.0 - 1e-12
 #: statuses whose gamma_lb is a valid lower bound (a numerical failure's is not trusted; failures have none)
 TRUSTED_LOWER_BOUND = frozenset({Status.OPTIMAL, Status.BEHIND_CAMERA, Status.NOT_CERTIFIED, Status.TIME_LIMIT,
                                  Status.BUDGET_EXCEEDED})
-#: the cheap paths of :func:`compute_many` (pair packing bounds instead of SDPs, verification-only requests);
-#: False gives the plain path (every subset the verification does not certify goes to the batched SDP), which
-#: the tests compare against.
+#: the cheap paths (pair packing bounds instead of SDPs, verification-only requests, and the search's
+#: leave-one-out root bound, :meth:`tritools.solve.robust._Search.leave_one_out_bound`); False gives the plain
+#: path (every subset the verification does not certify goes to the batched SDP), which the tests compare against.
 PACKING = True
 #: time limit (seconds) of one sub-problem solved by :func:`tritools.triangulate` (capped by the caller's deadline)
 SUB_TIME_LIMIT = 10.0
@@ -59,13 +59,18 @@ class SubsetBounds:
     point regions).  ``estimates`` collects every (subset, X) produced, for the caller's upper bound;
     ``n_solved`` counts sub-problems solved."""
 
-    def __init__(self, cameras: np.ndarray, regions, options, deadline):
+    def __init__(self, cameras: np.ndarray, regions, options, deadline, points=None):
+        """``regions``, or None with ``points`` (N, 2): point regions by their centres (:attr:`regions` builds
+        the Point objects when first asked)."""
         self.C = cameras
-        self.regions = list(regions)
         self.opts = options
         self.deadline = deadline
-        self.points = all(isinstance(r, Point) for r in self.regions)
-        self.x = np.array([r.center for r in self.regions], float) if self.points else None
+        if regions is None:
+            self._regions, self.points, self.x = None, True, np.asarray(points, float)
+        else:
+            self._regions = list(regions)
+            self.points = all(isinstance(r, Point) for r in self._regions)
+            self.x = np.array([r.center for r in self._regions], float) if self.points else None
         self._lb: dict = {}
         self._X: dict = {}
         self.n_solved = 0
@@ -82,6 +87,12 @@ class SubsetBounds:
         self.hint = None
         self.cheap: set = set()
         self.retry: set = set()                # reopened subsets: the full treatment (verify, packing, SDP)
+
+    @property
+    def regions(self) -> list:
+        if self._regions is None:
+            self._regions = [Point(p) for p in self.x]
+        return self._regions
 
     def known(self, S: frozenset) -> bool:
         return len(S) <= 1 or S in self._lb

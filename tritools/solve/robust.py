@@ -31,6 +31,9 @@ and an X that beats the best value UB found has s <= UB - c^2(O).  Hence the nod
 a piecewise-linear minimum in s attained at the interval's ends or at a breakpoint a_u or a_u - c_u^2
 (:func:`lookahead_bound`).  At the root, every X with T(X) != all views pays at least min_i c_i^2, so
 f_TLS* >= min(L2LB(all), min_i c_i^2): tracks without outliers are certified by their L2 certificate alone.
+One level down (:meth:`_Search.leave_one_out_bound`), an X with an outlier j pays c_j^2 plus the root bound
+of the problem without j, so f_TLS* >= min(L2LB(V), min_j [c_j^2 + min(L2LB(V - j), min_{i != j} c_i^2)]):
+a clean track whose L2 optimum costs more than min c^2 is certified from its N leave-one-out sets.
 
 Search: an upper bound first -- the full L2 estimate, the L2 estimate of every view pair (at most
 :data:`MAX_PAIRS`, sampled beyond) and local optimisation from the best few (inlier set -> L2 estimate

@@ -71,7 +71,7 @@ def test_packing_bound_below_every_subset_optimum(seed):
 def _sphere_scene(N, n_out, rng):
     """The CVPR 2023 protocol (benchmarks/robust.py): cameras on a sphere of radius 2 looking at the origin, the
     point in [-0.5, 0.5]^3, 1 px noise, outliers uniform in the 2108 x 1162 image."""
-    K = np.array([[1012.0, 0, 1054], [0, 1012.0, 581], [0, 0, 1]])
+    K = np.array([[1012.0027, 0, 1054], [0, 1012.0027, 581], [0, 0, 1]])
     P = []
     for _ in range(N):
         c = rng.normal(size=3)

@@ -16,7 +16,9 @@ rounded downward (:data:`ROUND_DOWN`).  Facts used for free:
 A search only needs a bound up to the level where it stops mattering (``SubsetBounds.enough``: the best TLS
 value found plus the largest squared threshold -- a node bound saturates there, see
 :mod:`tritools.solve.robust`).  So a subset the verification does not certify first gets its packing bound;
-the batched degree-2 SDP runs only for those whose packing bound is below ``enough``.
+the batched degree-2 SDP runs only for those whose packing bound is below ``enough`` and that lie inside the
+caller's ``hint`` (its best inlier set); the others keep the packing bound (``cheap``) until the caller
+:meth:`SubsetBounds.reopen` s them, where that bound did not prune.
 
 Point regions go through the vectorised verification path (:func:`tritools.solve.fastpath.verify_points`),
 one numpy call per subset size; what it does not certify (and every other region type) through
@@ -87,6 +89,7 @@ class SubsetBounds:
         self.hint = None
         self.cheap: set = set()
         self.retry: set = set()                # reopened subsets: the full treatment (verify, packing, SDP)
+        self._floor: dict = {}                 # reopened subsets' packing bounds, kept by the next _store
 
     @property
     def regions(self) -> list:
@@ -146,7 +149,7 @@ class SubsetBounds:
         if S not in self.cheap:
             return False
         self.cheap.discard(S)
-        self._lb.pop(S, None)
+        self._floor[S] = self._lb.pop(S, 0.0)      # still a valid bound: the new one is never lower
         self.retry.add(S)
         return True
 
@@ -179,7 +182,7 @@ class SubsetBounds:
         self._store(S, lb, res.X)
 
     def _store(self, S: frozenset, lb: float, X) -> None:
-        self._lb[S] = max(lb, 0.0)
+        self._lb[S] = max(lb, 0.0, self._floor.pop(S, 0.0))
         if X is not None and np.all(np.isfinite(X)):
             X = np.asarray(X, float)
             self._X[S] = X

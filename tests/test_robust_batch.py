@@ -23,3 +23,27 @@ def test_bad_cameras_in_a_robust_batch_get_named_errors():
         assert many[k].status == single.status and many[k].optimal
         np.testing.assert_array_equal(many[k].inliers, single.inliers)
         assert many[k].gamma_ub == single.gamma_ub and many[k].gamma_lb == single.gamma_lb
+
+
+def test_batch_time_limits_are_per_problem():
+    """drive() charges each search its own steps and an even share of a round's batched calls: the rest of the
+    round moves its deadline on (one search: nothing moves)."""
+    from sospoly.budget import Deadline
+
+    from tritools.solve.robust import _credit
+
+    class Fake:
+        def __init__(self, end):
+            self.deadline = Deadline(end)
+
+        def set_deadline(self, d):
+            self.deadline = d
+
+    s = [Fake(100.0), Fake(100.0), Fake(None), Fake(50.0)]
+    _credit(s, {0: 1.0, 1: 3.0, 2: 0.5, 3: 0.5}, 2.0)          # round: 2 s batched + 5 s of steps
+    assert s[0].deadline.end == 100.0 + 7.0 - 1.0 - 0.5
+    assert s[1].deadline.end == 100.0 + 7.0 - 3.0 - 0.5
+    assert s[2].deadline.end is None and s[3].deadline.end == 50.0 + 7.0 - 0.5 - 0.5
+    one = [Fake(10.0)]
+    _credit(one, {0: 4.0}, 3.0)
+    assert one[0].deadline.end == 10.0

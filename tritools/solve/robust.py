@@ -196,6 +196,10 @@ class _Search:
     def regions(self) -> list:
         return self.bounds.regions
 
+    def set_deadline(self, deadline) -> None:
+        """The search's deadline, also its sub-bounds' (:func:`drive` moves it on in a batch)."""
+        self.deadline = self.bounds.deadline = deadline
+
     @property
     def scale(self) -> float:
         """The scale of the certificate rule (:func:`decision_scale`)."""
@@ -574,12 +578,17 @@ def triangulate_robust(cams: np.ndarray, regions, c: np.ndarray, opts, t0: float
 def drive(searches: list) -> list:
     """Run TLS searches together: every round, the subset bounds all of them wait for are computed in one batch
     per subset size (:func:`tritools.solve.robust_bounds.compute_many`).  A search that raises gets a
-    SOLVER_FAILED result (its message says why); results in input order."""
+    SOLVER_FAILED result (its message says why); results in input order.
+
+    Time limits stay per problem: each search is charged its own steps and an even share of the batched calls
+    of the rounds it takes part in; the rest of a round's time moves its deadline on (:func:`_credit`).  With
+    one search nothing moves."""
     gens = [s.run() for s in searches]
     results: list = [None] * len(gens)
     pending: dict = {}
 
-    def step(i: int) -> None:
+    def step(i: int) -> float:
+        t = time.monotonic()
         try:
             pending[i] = gens[i].send(None)
         except StopIteration as stop:
@@ -589,11 +598,27 @@ def drive(searches: list) -> list:
             log.debug("robust search failed", exc_info=True)
             pending.pop(i, None)
             results[i] = TriangulationResult("tls", Status.SOLVER_FAILED, message=f"{type(exc).__name__}: {exc}")
+        return time.monotonic() - t
 
-    for i in range(len(gens)):
-        step(i)
+    own = {i: step(i) for i in range(len(gens))}
+    _credit(searches, own, 0.0)
     while pending:
+        t = time.monotonic()
         compute_many([(searches[i].bounds, req) for i, req in pending.items()])
-        for i in list(pending):
-            step(i)
+        shared = time.monotonic() - t
+        own = {i: step(i) for i in list(pending)}
+        _credit(searches, own, shared)
     return results
+
+
+def _credit(searches: list, own: dict, shared: float) -> None:
+    """Move the deadline of every search of a round (``own``: its step time) on by the round's time it was not
+    charged: the batched calls' time ``shared`` minus its even share, and the other searches' steps."""
+    if len(own) < 2:
+        return
+    total = shared + sum(own.values())
+    for i, t in own.items():
+        s = searches[i]
+        end = s.deadline.end
+        if end is not None:
+            s.set_deadline(type(s.deadline)(end + total - t - shared / len(own)))

@@ -66,7 +66,8 @@ def _l2_suffices(res: TriangulationResult, c: np.ndarray) -> bool:
 
 
 #: problems searched together by :func:`tritools.solve.robust.drive` (their sub-bounds batched per subset size);
-#: each keeps its own time budget, counted from the start of its chunk.
+#: each keeps its own time budget, from the start of its chunk, charged with its own steps and an even share of
+#: the batched calls only.
 ROBUST_CHUNK = 512
 
 

@@ -391,29 +391,7 @@ class _Search:
             bound = self._bound(I, c2_out, U, lb_I, a)
             if self.meets(bound):
                 break
-        if not self.meets(bound):                   # packing-only sub-bounds did not prune: solve those
-            lb_I, a = yield from self.unpack(I, U, lb_I, a)
-            bound = self._bound(I, c2_out, U, lb_I, a)
         return bound, lb_I, a
-
-    def unpack(self, I: frozenset, U: list, lb_I: float, a: np.ndarray):
-        """Generator: (lb_I, a) with the packing-only bounds of I and of I + {u} (u in U) replaced by solved ones
-        (:meth:`tritools.solve.robust_bounds.SubsetBounds.reopen`: verification, packing when it saturates,
-        else the batched SDP) -- a cheap bound is a first try, never the last word where it does not prune."""
-        cheap = [S for S in [I] + [I | {u} for u in U] if S in self.bounds.cheap]
-        if not cheap:
-            return lb_I, a
-        for S in cheap:
-            self.bounds.reopen(S)
-        yield from self.need(cheap)
-        self.offer_new()
-        if I in cheap:
-            lb_I = max(lb_I, self.bounds.bound(I))
-        a = np.maximum(a, lb_I)
-        for u in U:
-            if I | {u} in cheap:
-                a[u] = max(a[u], self.bounds.bound(I | {u}))
-        return lb_I, a
 
     def anchor_bounds(self, order: np.ndarray):
         """L2 bounds of the triples (first two views of the order) + {u}, one batch: every node whose I holds both

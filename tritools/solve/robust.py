@@ -558,12 +558,15 @@ def drive(searches: list) -> list:
     per subset size (:func:`tritools.solve.robust_bounds.compute_many`).  A search that raises gets a
     SOLVER_FAILED result (its message says why); results in input order.
 
-    Time limits stay per problem: each search is charged its own steps and an even share of the batched calls
-    of the rounds it takes part in; the rest of a round's time moves its deadline on (:func:`_credit`).  With
-    one search nothing moves."""
+    Time limits stay per problem: each search's clock starts with the drive and is charged its own steps and
+    an even share of the batched calls of the rounds it takes part in; the rest of a round's time moves its
+    deadline on before it resumes (:func:`_credit`).  With one search nothing moves."""
     gens = [s.run() for s in searches]
     results: list = [None] * len(gens)
     pending: dict = {}
+    if len(searches) > 1:
+        for s in searches:
+            s.set_deadline(s.opts.budget.deadline())
 
     def step(i: int) -> float:
         t = time.monotonic()
@@ -578,25 +581,29 @@ def drive(searches: list) -> list:
             results[i] = TriangulationResult("tls", Status.SOLVER_FAILED, message=f"{type(exc).__name__}: {exc}")
         return time.monotonic() - t
 
-    own = {i: step(i) for i in range(len(gens))}
-    _credit(searches, own, 0.0)
+    def round_(active: list, shared: float) -> None:
+        """Step the active searches, each credited first with the time it waited for (the batched calls beyond
+        its share, the steps before it), then with the steps after it."""
+        own, extra, before = {}, shared - shared / len(active), 0.0
+        for i in active:
+            _credit(searches[i], extra + before)
+            own[i] = step(i)
+            before += own[i]
+        later = 0.0
+        for i in reversed(active):
+            _credit(searches[i], later)
+            later += own[i]
+
+    round_(list(range(len(gens))), 0.0)
     while pending:
         t = time.monotonic()
         compute_many([(searches[i].bounds, req) for i, req in pending.items()])
-        shared = time.monotonic() - t
-        own = {i: step(i) for i in list(pending)}
-        _credit(searches, own, shared)
+        round_(list(pending), time.monotonic() - t)
     return results
 
 
-def _credit(searches: list, own: dict, shared: float) -> None:
-    """Move the deadline of every search of a round (``own``: its step time) on by the round's time it was not
-    charged: the batched calls' time ``shared`` minus its even share, and the other searches' steps."""
-    if len(own) < 2:
-        return
-    total = shared + sum(own.values())
-    for i, t in own.items():
-        s = searches[i]
-        end = s.deadline.end
-        if end is not None:
-            s.set_deadline(type(s.deadline)(end + total - t - shared / len(own)))
+def _credit(search, seconds: float) -> None:
+    """Move a search's deadline (if any) on by ``seconds`` it was not charged."""
+    end = search.deadline.end
+    if end is not None and seconds > 0:
+        search.set_deadline(type(search.deadline)(end + seconds))

@@ -94,3 +94,36 @@ def test_batch_shares_no_clock():
     assert time.perf_counter() - t > limit                            # one shared clock would have run out
     assert all(r.status != tritools.Status.TIME_LIMIT for r in res)
     assert all(r.optimal for r in res)
+
+
+def test_an_uncertified_result_past_its_deadline_says_time_limit(monkeypatch):
+    """A leaf whose full-plan solve the deadline skipped (the search loop itself never saw the deadline pass)
+    leaves the result uncertified with status time_limit, not not_certified; its bounds still hold.  The
+    track: CVPR 2023 protocol, 5 views, one wrong match, whose search needs that solve."""
+    import importlib.util
+    import pathlib
+
+    from sospoly.budget import Deadline
+
+    import tritools.solve.robust_bounds as rb
+
+    path = pathlib.Path(__file__).resolve().parents[1] / "benchmarks" / "robust.py"
+    spec = importlib.util.spec_from_file_location("robust_bench", path)
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    rng = np.random.default_rng([2, 5, 1, 10])
+    cams, x = [bench.scene(5, 1, 1.0, rng)[:2] for _ in range(11)][10]
+    full = tritools.triangulate(cams, x, robust=200.0)
+    assert full.optimal
+    real = rb.SubsetBounds.strengthen
+    calls = []
+
+    def late(self, S):                          # the deadline passes just before the leaf's solve
+        calls.append(S)
+        self.deadline = Deadline(0.0)
+        return real(self, S)
+
+    monkeypatch.setattr(rb.SubsetBounds, "strengthen", late)
+    r = tritools.triangulate(cams, x, robust=200.0)
+    assert calls and not r.optimal and r.status == tritools.Status.TIME_LIMIT
+    assert r.gamma_lb <= full.gamma_ub * (1 + 1e-9) and r.gamma_lb <= r.gamma_ub

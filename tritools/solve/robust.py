@@ -496,6 +496,8 @@ class _Search:
         rep = self.report(X)
         inliers = rep.residuals < self.c
         certified = bool(self.tol.certified(lb, ub, self.scale))     # lb is valid also when the search stopped
+        if not certified and stopped is None and (self.deadline.expired or self.bounds.deadline.expired):
+            stopped = "time limit"              # the deadline cut the candidates or a leaf's solve short
         contradicts = bool(self.tol.contradicts(lb, ub, self.scale))
         status = Status.NUMERICAL_FAILURE if contradicts else Status.OPTIMAL if certified else \
             Status.TIME_LIMIT if stopped == "time limit" else Status.NOT_CERTIFIED

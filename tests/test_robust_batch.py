@@ -30,7 +30,7 @@ def test_batch_time_limits_are_per_problem(monkeypatch):
     """drive() charges each search its own steps and an even share of a round's batched calls; the rest of the
     round moves its deadline on, before it resumes: with a fake clock, two searches whose rounds take 1 s of
     batched calls and 0.1 s of own steps each are charged 0.6 s a round, not 1.2 s.  One search: nothing moves."""
-    import tritools.solve.robust as R
+    import tritools.solve.robust_drive as R
 
     clock = [0.0]
     monkeypatch.setattr(R.time, "monotonic", lambda: clock[0])
@@ -71,10 +71,10 @@ def test_batch_time_limits_are_per_problem(monkeypatch):
 
 
 def test_batch_shares_no_clock():
-    """60 ten-view tracks with two wrong matches (the CVPR 2023 protocol of benchmarks/robust.py) in one batch,
-    each allowed 3x the time of one of them solved alone: the batch as a whole takes longer than that limit,
-    each problem's share far less -- all certified, none stopped by the time limit (the problems of a chunk
-    had shared one clock started with the chunk)."""
+    """90 ten-view tracks with two wrong matches (the CVPR 2023 protocol of benchmarks/robust.py; all certified
+    with the default limit) in one batch, each allowed 6x the time of one of them solved alone: the batch as a
+    whole takes longer than that limit, each problem's share far less -- all certified, none stopped by the
+    time limit (the problems of a chunk had shared one clock started with the chunk)."""
     import importlib.util
     import pathlib
     import time
@@ -84,11 +84,11 @@ def test_batch_shares_no_clock():
     bench = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(bench)
     rng = np.random.default_rng(7)
-    probs = [bench.scene(10, 2, 1.0, rng)[:2] for _ in range(60)]
+    probs = [bench.scene(10, 2, 1.0, rng)[:2] for _ in range(90)]
     tritools.triangulate(*probs[0], robust=200.0)                     # imports and first compilations
     t = time.perf_counter()
     assert tritools.triangulate(*probs[1], robust=200.0).optimal
-    limit = 3 * (time.perf_counter() - t)
+    limit = 6 * (time.perf_counter() - t)
     t = time.perf_counter()
     res = tritools.triangulate_many(probs, robust=200.0, time_limit=limit)
     assert time.perf_counter() - t > limit                            # one shared clock would have run out

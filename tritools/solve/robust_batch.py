@@ -2,7 +2,7 @@
 
 1. Point-region problems (with a finite threshold) go straight to the branch and bound of
    :mod:`tritools.solve.robust` -- exactly the search :func:`tritools.triangulate` runs for one of them -- in
-   chunks of :data:`ROBUST_CHUNK` searched together by :func:`tritools.solve.robust.drive`: every sub-bound
+   chunks of :data:`ROBUST_CHUNK` searched together by :func:`tritools.solve.robust_drive.drive`: every sub-bound
    request of every search of a chunk (the full view set first, then the view pairs, the local optimisation's
    inlier sets, the node sub-problems) is computed in one vectorised call per subset size across the chunk
    (:func:`tritools.solve.robust_bounds.compute_many`: verification, then the batched delta = 2 SDP).  A clean
@@ -65,7 +65,7 @@ def _l2_suffices(res: TriangulationResult, c: np.ndarray) -> bool:
     return bool(np.all(res.residuals < c) and 2 * n * res.gamma_ub ** 2 <= np.min(c * c))
 
 
-#: problems searched together by :func:`tritools.solve.robust.drive` (their sub-bounds batched per subset size);
+#: problems searched together by :func:`tritools.solve.robust_drive.drive` (their sub-bounds batched per subset size);
 #: each keeps its own time budget, from the start of its chunk, charged with its own steps and an even share of
 #: the batched calls only.
 ROBUST_CHUNK = 512
@@ -124,7 +124,7 @@ def _drive_chunks(problems, thresholds, opts, idx, out, points) -> None:
     """The branch and bound of the problems ``idx``, :data:`ROBUST_CHUNK` searched together at a time (each
     search's time budget starts with its chunk).  ``points``: index -> (cameras, centres) of the point
     problems (their cameras checked in one vectorised call per view count, :func:`_point_searches`)."""
-    from .robust import drive
+    from .robust_drive import drive
 
     for k in range(0, len(idx), ROBUST_CHUNK):
         t0 = time.perf_counter()

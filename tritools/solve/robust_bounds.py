@@ -71,7 +71,7 @@ class SubsetBounds:
             self._regions, self.points, self.x = None, True, np.asarray(points, float)
         else:
             self._regions = list(regions)
-            self.points = all(isinstance(r, Point) for r in self._regions)
+            self.points = all(getattr(r, "kind", None) == Point.kind for r in self._regions)   # the regions say
             self.x = np.array([r.center for r in self._regions], float) if self.points else None
         self._lb: dict = {}
         self._X: dict = {}

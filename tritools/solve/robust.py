@@ -31,6 +31,9 @@ and an X that beats the best value UB found has s <= UB - c^2(O).  Hence the nod
 a piecewise-linear minimum in s attained at the interval's ends or at a breakpoint a_u or a_u - c_u^2
 (:func:`lookahead_bound`).  At the root, every X with T(X) != all views pays at least min_i c_i^2, so
 f_TLS* >= min(L2LB(all), min_i c_i^2): tracks without outliers are certified by their L2 certificate alone.
+One level down (:meth:`_Search.leave_one_out_bound`), an X with an outlier j pays c_j^2 plus the root bound
+of the problem without j, so f_TLS* >= min(L2LB(V), min_j [c_j^2 + min(L2LB(V - j), min_{i != j} c_i^2)]):
+a clean track whose L2 optimum costs more than min c^2 is certified from its N leave-one-out sets.
 
 Search: an upper bound first -- the full L2 estimate, the L2 estimate of every view pair (at most
 :data:`MAX_PAIRS`, sampled beyond) and local optimisation from the best few (inlier set -> L2 estimate
@@ -66,7 +69,9 @@ from ..result import Attempt, Status, TriangulationResult
 from .decide import cheirality, gamma_from_c
 from ..model.geometry import depths_stack
 from .report import PointReport, point_report
-from .robust_bounds import ROUND_DOWN, SubsetBounds, compute_many
+from . import robust_bounds
+from .robust_bounds import ROUND_DOWN, SubsetBounds
+from .robust_drive import drive
 
 __all__ = ["robust_thresholds", "triangulate_robust", "drive", "lookahead_bound", "tls_cost", "point_distances2",
            "MAX_NODES", "MAX_PAIRS",
@@ -152,8 +157,13 @@ def decision_scale(cams, regions, c2: np.ndarray) -> float:
     never loosen the rule beyond the L2 one: f_TLS = L2 there."""
     from ..model.normalize import normalization_for
 
+    return scale_from(normalization_for(cams, regions).scale, c2)
+
+
+def scale_from(s: float, c2: np.ndarray) -> float:
+    """:func:`decision_scale` from the L2 normalisation's image scale s (a batch computes s for many problems in
+    one :func:`tritools.model.normalize.normalization_stack` call)."""
     finite = c2[np.isfinite(c2) & (c2 > 0)]
-    s = normalization_for(cams, regions).scale
     rho2 = 1.0 / (s * s) if np.isfinite(s) and s > 0 else math.inf
     scale = min([rho2, *finite.tolist()])
     return float(scale) if np.isfinite(scale) and scale > 0 else 1.0
@@ -162,20 +172,45 @@ def decision_scale(cams, regions, c2: np.ndarray) -> float:
 class _Search:
     """One TLS problem: thresholds, the subset bounds, the best candidate, the branch and bound."""
 
-    def __init__(self, cams, regions, c, opts, t0):
-        self.C, self.regions, self.c, self.opts, self.t0 = cams, list(regions), c, opts, t0
-        self.N = len(regions)
+    def __init__(self, cams, regions, c, opts, t0, points=None):
+        """``regions`` (a sequence of regions), or None with ``points`` (N, 2): point regions given by their
+        centres (a batch of validated point problems; the Point objects are built only if a path needs them)."""
+        self.C, self.c, self.opts, self.t0 = cams, c, opts, t0
+        self._regions = None if regions is None else list(regions)
+        self.N = len(regions) if regions is not None else len(points)
         with np.errstate(over="ignore"):
             self.c2 = c * c                              # c above 1e154: c^2 = inf (no threshold in floats)
+        self.c2_max = float(np.max(self.c2))
         self.deadline = opts.budget.deadline()
-        self.bounds = SubsetBounds(cams, regions, opts, self.deadline)
-        self.scale = decision_scale(cams, regions, self.c2)
+        self.bounds = SubsetBounds(cams, regions, opts, self.deadline, points=points)
+        self.bounds.c2 = self.c2
+        self._scale = None                               # decision_scale, computed when first needed
         self.tol = opts.tolerances
         self.best_X, self.best_f, self.best_S = None, math.inf, frozenset()
         self.points = self.bounds.points
         self.x = self.bounds.x
         self.nodes = 0
         self.anchors, self.anchor_a = None, None     # see anchor_bounds
+        self.loo_lb = 0.0                            # leave_one_out_bound, where computed
+
+    @property
+    def regions(self) -> list:
+        return self.bounds.regions
+
+    def set_deadline(self, deadline) -> None:
+        """The search's deadline, also its sub-bounds' (:func:`drive` moves it on in a batch)."""
+        self.deadline = self.bounds.deadline = deadline
+
+    @property
+    def scale(self) -> float:
+        """The scale of the certificate rule (:func:`decision_scale`)."""
+        if self._scale is None:
+            self._scale = decision_scale(self.C, self.regions, self.c2)
+        return self._scale
+
+    def set_normalization_scale(self, s: float) -> None:
+        """Give the L2 normalisation's image scale s of this problem, computed in a batch (:func:`scale_from`)."""
+        self._scale = scale_from(s, self.c2)
 
     # ------------------------------------------------------------------ costs and the upper bound
     def residuals(self, X) -> np.ndarray:
@@ -231,14 +266,33 @@ class _Search:
         the cache -- batched with the requests of other problems -- and resumes."""
         todo = [S for S in subsets if not self.bounds.known(S)]
         if todo:
+            # a bound >= UB + max c^2 saturates every use (node_bound: lb_I > s_hi, a_u >= s_hi + c_u^2)
+            self.bounds.enough = self.best_f + self.c2_max
+            if self.bounds.hint is not None:
+                self.bounds.hint = self.best_S
             yield todo
+
+    def verify_first(self, *subsets):
+        """Generator: the bounds of the subsets by verification only (left unknown where that does not certify:
+        a later :meth:`need`, with a candidate known, may settle them by their pair packing instead of an SDP)."""
+        todo = [S for S in subsets if not self.bounds.known(S)]
+        if robust_bounds.PACKING:
+            self.bounds.defer.update(todo)
+        yield from self.need(todo)
 
     def candidates(self, rng):
         full = frozenset(range(self.N))
-        yield from self.need([full])
-        self.offer(self.bounds.estimate(full))
-        if self.best_X is not None and self.meets(self.root_bound()):
-            return                              # certified by the L2 certificate of all views: no search needed
+        yield from self.verify_first(full)
+        if self.bounds.known(full):
+            self.offer(self.bounds.estimate(full))
+            if self.best_X is not None and self.meets(self.root_bound()):
+                return                          # certified by the L2 certificate of all views: no search needed
+            if self.best_S == full and self.N >= 3 and robust_bounds.PACKING:
+                yield from self.verify_first(*[full - {j} for j in range(self.N)])
+                self.offer_new()
+                self.loo_lb = self.leave_one_out_bound()
+                if self.meets(self.loo_lb):
+                    return                      # every view an inlier, and dropping any costs at least as much
         pairs = list(itertools.combinations(range(self.N), 2))
         if len(pairs) > MAX_PAIRS:
             pairs = [pairs[k] for k in rng.choice(len(pairs), MAX_PAIRS, replace=False)]
@@ -252,26 +306,52 @@ class _Search:
             starts = [Xs[k] for k in np.argsort(f)[:LO_STARTS]]
             for X in starts:
                 self.offer(X)
-        for X in starts + ([self.best_X] if self.best_X is not None else []):
-            yield from self.local_optimisation(X)
+        yield from self.local_optimisation(starts + ([self.best_X] if self.best_X is not None else []))
 
-    def local_optimisation(self, X):
-        seen = set()
+    def local_optimisation(self, starts):
+        """Local optimisation (inlier set -> L2 estimate of the set -> inlier set, :data:`LO_ROUNDS` rounds) from
+        every start in lockstep: the sets of one round of all chains are one request."""
+        seen = [set() for _ in starts]
+        chains = list(range(len(starts)))
+        Xs = list(starts)
         for _ in range(LO_ROUNDS):
-            S = self.inlier_set(X)
-            if len(S) < 2 or S in seen or self.deadline.expired:
+            if self.deadline.expired:
                 return
-            seen.add(S)
-            yield from self.need([S])
-            X = self.bounds.estimate(S)
-            self.offer(X)
-            if X is None:
+            sets = {}
+            for k in chains:
+                S = self.inlier_set(Xs[k])
+                if len(S) >= 2 and S not in seen[k]:
+                    seen[k].add(S)
+                    sets[k] = S
+            if not sets:
                 return
+            yield from self.need(list(dict.fromkeys(sets.values())))
+            chains = []
+            for k, S in sets.items():
+                Xs[k] = self.bounds.estimate(S)
+                self.offer(Xs[k])
+                if Xs[k] is not None:
+                    chains.append(k)
 
     # ------------------------------------------------------------------ bounds
     def meets(self, lb: float) -> bool:
         """Is a lower bound good enough to prune (it meets UB under the certificate rule, or exceeds it)?"""
         return lb >= self.best_f or bool(self.tol.certified(lb, self.best_f, self.scale))
+
+    def leave_one_out_bound(self) -> float:
+        """f_TLS* >= min(L2LB(V), min_j [c_j^2 + min(L2LB(V - j), min_{i != j} c_i^2)]) over the views V: an X
+        with every view an inlier costs L2*(V); otherwise some j is an outlier of X, which pays c_j^2 plus, on the
+        other views, at least the root bound of the problem without j (:meth:`root_bound`).  Unknown subset
+        bounds count 0; rounded down."""
+        full = frozenset(range(self.N))
+        c2 = self.c2
+        terms = [self.bounds.bound(full) if self.bounds.known(full) else 0.0]
+        for j in range(self.N):
+            S = full - {j}
+            lb = self.bounds.bound(S) if self.bounds.known(S) else 0.0
+            rest = float(np.min(np.delete(c2, j)))
+            terms.append((c2[j] + min(lb, rest)) * ROUND_DOWN)
+        return float(min(terms))
 
     def root_bound(self) -> float:
         """f_TLS* >= min(L2LB(all views), min_i c_i^2) (module docstring)."""
@@ -369,6 +449,14 @@ class _Search:
                     floor = min(floor, lb)
                 continue
             if not U:                                # a leaf whose L2 bound does not meet UB
+                if self.bounds.reopen(I):            # its packing bound only: verification / SDP now
+                    yield from self.need([I])        # lb_I already holds the packing bound
+                    self.offer_new()
+                    lb = min(self.best_f, c2_out + max(lb_I, self.bounds.bound(I)))
+                    if self.meets(lb):
+                        if lb < self.best_f:
+                            floor = min(floor, lb)
+                        continue
                 if self.bounds.strengthen(I):
                     lb = min(self.best_f, c2_out + self.bounds.bound(I))
                     self.offer_new()
@@ -391,8 +479,11 @@ class _Search:
         if self.best_X is None:
             return TriangulationResult("tls", Status.NUMERICAL_FAILURE, message="no finite candidate estimate found",
                                        timings={"total": time.perf_counter() - self.t0})
-        lb, stopped = self.root_bound(), None
+        yield from self.need([frozenset(range(self.N))])
+        self.offer_new()
+        lb, stopped = max(self.root_bound(), self.loo_lb), None
         if not self.meets(lb):
+            self.bounds.hint = self.best_S
             order = branching_order(self.residuals(self.best_X) / self.c)
             yield from self.anchor_bounds(order)
             lb_bb, stopped = yield from self.search(order)
@@ -406,6 +497,8 @@ class _Search:
         rep = self.report(X)
         inliers = rep.residuals < self.c
         certified = bool(self.tol.certified(lb, ub, self.scale))     # lb is valid also when the search stopped
+        if not certified and stopped is None and (self.deadline.expired or self.bounds.deadline.expired):
+            stopped = "time limit"              # the deadline cut the candidates or a leaf's solve short
         contradicts = bool(self.tol.contradicts(lb, ub, self.scale))
         status = Status.NUMERICAL_FAILURE if contradicts else Status.OPTIMAL if certified else \
             Status.TIME_LIMIT if stopped == "time limit" else Status.NOT_CERTIFIED
@@ -460,31 +553,3 @@ def triangulate_robust(cams: np.ndarray, regions, c: np.ndarray, opts, t0: float
         import dataclasses
         return dataclasses.replace(res, inliers=inl)
     return drive([_Search(cams, regions, c, opts, t0)])[0]
-
-
-def drive(searches: list) -> list:
-    """Run TLS searches together: every round, the subset bounds all of them wait for are computed in one batch
-    per subset size (:func:`tritools.solve.robust_bounds.compute_many`).  A search that raises gets a
-    SOLVER_FAILED result (its message says why); results in input order."""
-    gens = [s.run() for s in searches]
-    results: list = [None] * len(gens)
-    pending: dict = {}
-
-    def step(i: int) -> None:
-        try:
-            pending[i] = gens[i].send(None)
-        except StopIteration as stop:
-            pending.pop(i, None)
-            results[i] = stop.value
-        except Exception as exc:  # noqa: BLE001 - one failing problem never stops the others
-            log.debug("robust search failed", exc_info=True)
-            pending.pop(i, None)
-            results[i] = TriangulationResult("tls", Status.SOLVER_FAILED, message=f"{type(exc).__name__}: {exc}")
-
-    for i in range(len(gens)):
-        step(i)
-    while pending:
-        compute_many([(searches[i].bounds, req) for i, req in pending.items()])
-        for i in list(pending):
-            step(i)
-    return results

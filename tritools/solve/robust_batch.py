@@ -2,12 +2,14 @@
 
 1. Point-region problems (with a finite threshold) go straight to the branch and bound of
    :mod:`tritools.solve.robust` -- exactly the search :func:`tritools.triangulate` runs for one of them -- in
-   chunks of :data:`ROBUST_CHUNK` searched together by :func:`tritools.solve.robust.drive`: every sub-bound
+   chunks of :data:`ROBUST_CHUNK` searched together by :func:`tritools.solve.robust_drive.drive`: every sub-bound
    request of every search of a chunk (the full view set first, then the view pairs, the local optimisation's
    inlier sets, the node sub-problems) is computed in one vectorised call per subset size across the chunk
    (:func:`tritools.solve.robust_bounds.compute_many`: verification, then the batched delta = 2 SDP).  A clean
    track is certified at the root by the L2 bound of all its views (f_TLS* >= min(L2LB(all), min_i c_i^2)), so
-   it costs one row of the first vectorised call; no per-point SDP runs before the search.
+   it costs one row of the first vectorised call; no per-point SDP runs before the search.  Their cameras
+   are checked in one :func:`tritools.model.cameras.camera_problems` call per view count (a problem that fails
+   it takes the per-problem path below, whose :func:`tritools.model.cameras.validate_cameras` names the error).
 2. Other problems (and point problems whose thresholds are all infinite) first go through the batched L2 path
    (:func:`tritools.solve.batch.solve_point_problems`).  A result certified with every residual below its
    threshold and 2N gamma_UB^2 <= min_i c_i^2 is certified for TLS by that certificate alone: any inlier set
@@ -64,8 +66,9 @@ def _l2_suffices(res: TriangulationResult, c: np.ndarray) -> bool:
     return bool(np.all(res.residuals < c) and 2 * n * res.gamma_ub ** 2 <= np.min(c * c))
 
 
-#: problems searched together by :func:`tritools.solve.robust.drive` (their sub-bounds batched per subset size);
-#: each keeps its own time budget, counted from the start of its chunk.
+#: problems searched together by :func:`tritools.solve.robust_drive.drive` (their sub-bounds batched per subset size);
+#: each keeps its own time budget, from the start of its chunk, charged with its own steps and an even share of
+#: the batched calls only.
 ROBUST_CHUNK = 512
 
 
@@ -94,16 +97,18 @@ def _robust_many(problems: list, robust, opts, executor, progress) -> list[Trian
 
     thresholds = thresholds_for(robust, problems)
     out: list = [None] * len(problems)
-    direct, l2_first = [], []
+    direct, l2_first, points = [], [], {}
     for i, (prob, c) in enumerate(zip(problems, thresholds)):
         pp = _as_point_problem(*prob) if isinstance(prob, (list, tuple)) and len(prob) == 2 else None
         (direct if pp is not None and np.any(np.isfinite(c)) else l2_first).append(i)
+        if pp is not None:
+            points[i] = pp
     pending = direct
     if l2_first:
         first = solve_point_problems([problems[i] for i in l2_first], opts, executor=executor,
                                      progress=progress).record()
         pending = pending + _after_l2(problems, thresholds, opts, l2_first, first, out)
-    _drive_chunks(problems, thresholds, opts, sorted(pending), out)
+    _drive_chunks(problems, thresholds, opts, sorted(pending), out, points)
     return out
 
 
@@ -122,23 +127,69 @@ def _after_l2(problems, thresholds, opts, idx, first, out) -> list:
     return rest
 
 
-def _drive_chunks(problems, thresholds, opts, idx, out) -> None:
+def _drive_chunks(problems, thresholds, opts, idx, out, points) -> None:
     """The branch and bound of the problems ``idx``, :data:`ROBUST_CHUNK` searched together at a time (each
-    search's time budget starts with its chunk)."""
-    from .robust import drive
+    search's time budget starts with its chunk).  ``points``: index -> (cameras, centres) of the point
+    problems (their cameras checked in one vectorised call per view count, :func:`_point_searches`)."""
+    from .robust_drive import drive
 
     for k in range(0, len(idx), ROBUST_CHUNK):
         t0 = time.perf_counter()
-        searches = []
+        chunk = idx[k:k + ROBUST_CHUNK]
         run, cut = within(opts, current_end())
-        for i in idx[k:k + ROBUST_CHUNK]:
+        searches = _point_searches([i for i in chunk if i in points], points, thresholds, run, t0)
+        for i in chunk:
+            if i in searches:
+                continue
             s = _search_or_failure(*problems[i], thresholds[i], run)
             if isinstance(s, TriangulationResult):
                 out[i] = s
             else:
-                searches.append((i, s))
+                searches[i] = s
+        searches = sorted(searches.items())
+        _normalization_scales([s for _, s in searches])
         results = drive([s for _, s in searches])
         share = (time.perf_counter() - t0) / max(1, len(searches))
         for (i, _), r in zip(searches, results):
             r = dataclasses.replace(r, timings={**r.timings, "batch_share": share})
             out[i] = mark_cut(r) if cut else r
+
+
+def _normalization_scales(searches) -> None:
+    """The decision scales of point-region searches, grouped by view count, from one
+    :func:`tritools.model.normalize.normalization_stack` call per group: the same function
+    :func:`tritools.model.normalize.normalization_for` applies to a stack of one (scale 1 where it fails)."""
+    from ..model.normalize import normalization_stack
+
+    groups: dict = {}
+    for s in searches:
+        if s.points:
+            groups.setdefault(s.N, []).append(s)
+    for group in groups.values():
+        st = normalization_stack(np.stack([s.C for s in group]), np.stack([s.x for s in group]))
+        for k, s in enumerate(group):
+            s.set_normalization_scale(float(st.scale[k]) if st.ok[k] else 1.0)
+
+
+def _point_searches(idx, points, thresholds, opts, t0) -> dict:
+    """index -> search for the point problems ``idx`` whose cameras pass
+    :func:`tritools.model.cameras.camera_problems` (the vectorised twin of the per-problem
+    :func:`tritools.model.cameras.validate_cameras`), one call per view count; the others are left out (the
+    caller's per-problem path gives them their named error)."""
+    from ..model.cameras import camera_problems
+    from .robust import _Search
+
+    groups: dict = {}
+    for i in idx:
+        groups.setdefault(len(points[i][1]), []).append(i)
+    out = {}
+    for group in groups.values():
+        C = np.stack([points[i][0] for i in group])
+        try:
+            valid = camera_problems(C).valid
+        except ValueError:
+            continue
+        for k, i in enumerate(group):
+            if valid[k]:
+                out[i] = _Search(C[k].copy(), None, thresholds[i], opts, t0, points=points[i][1])
+    return out

@@ -7,7 +7,18 @@ sub-problem certified (every gamma_LB of :func:`tritools.triangulate` is a rigor
 rounded downward (:data:`ROUND_DOWN`).  Facts used for free:
 
 * |S| <= 1: L2*(S) = 0 (the projection of a point on the view's ray can sit anywhere in the region);
-* monotonicity: S subset of T gives L2*(S) <= L2*(T), so a caller may take the max with any subset's bound.
+* monotonicity: S subset of T gives L2*(S) <= L2*(T), so a caller may take the max with any subset's bound;
+* superadditivity: for disjoint S_1, ..., S_k inside S, L2*(S) >= sum_k L2*(S_k) (each term of the sum over
+  S is a term of exactly one S_k, and each L2*(S_k) is a minimum over X).  :meth:`SubsetBounds.packing_bound`
+  takes a greedy packing of the cached view pairs: a subset holding a wrong match w inherits the large
+  L2*({w, v}) of its pairs, with no solve.
+
+A search only needs a bound up to the level where it stops mattering (``SubsetBounds.enough``: the best TLS
+value found plus the largest squared threshold -- a node bound saturates there, see
+:mod:`tritools.solve.robust`).  So a subset the verification does not certify first gets its packing bound;
+the batched degree-2 SDP runs only for those whose packing bound is below ``enough`` and that lie inside the
+caller's ``hint`` (its best inlier set); the others keep the packing bound (``cheap``) until the caller
+:meth:`SubsetBounds.reopen` s them, where that bound did not prune.
 
 Point regions go through the vectorised verification path (:func:`tritools.solve.fastpath.verify_points`),
 one numpy call per subset size; what it does not certify (and every other region type) through
@@ -16,16 +27,18 @@ an estimate X_S, which the search uses as a candidate for the TLS upper bound.
 """
 from __future__ import annotations
 
+import itertools
 import math
 from collections import defaultdict
 
 import numpy as np
 
+from ..model.regions import Point
 from ..result import Status
 from .fastpath import verify_points
 from .sdp_batch import solve_corollary1_points
 
-__all__ = ["SubsetBounds", "compute_many", "ROUND_DOWN", "TRUSTED_LOWER_BOUND"]
+__all__ = ["SubsetBounds", "compute_many", "ROUND_DOWN", "TRUSTED_LOWER_BOUND", "PACKING"]
 
 #: f = 2 |S| gamma^2 is computed with a few roundings (and gamma came through a square root): multiplying by
 #: this factor keeps the product a lower bound by a wide margin (relative error ~1e-15 at most).
@@ -33,6 +46,10 @@ ROUND_DOWN = 1.0 - 1e-12
 #: statuses whose gamma_lb is a valid lower bound (a numerical failure's is not trusted; failures have none)
 TRUSTED_LOWER_BOUND = frozenset({Status.OPTIMAL, Status.BEHIND_CAMERA, Status.NOT_CERTIFIED, Status.TIME_LIMIT,
                                  Status.BUDGET_EXCEEDED})
+#: the cheap paths (pair packing bounds instead of SDPs, verification-only requests, and the search's
+#: leave-one-out root bound, :meth:`tritools.solve.robust._Search.leave_one_out_bound`); False gives the plain
+#: path (every subset the verification does not certify goes to the batched SDP), which the tests compare against.
+PACKING = True
 #: time limit (seconds) of one sub-problem solved by :func:`tritools.triangulate` (capped by the caller's deadline)
 SUB_TIME_LIMIT = 10.0
 
@@ -44,18 +61,41 @@ class SubsetBounds:
     point regions).  ``estimates`` collects every (subset, X) produced, for the caller's upper bound;
     ``n_solved`` counts sub-problems solved."""
 
-    def __init__(self, cameras: np.ndarray, regions, options, deadline):
+    def __init__(self, cameras: np.ndarray, regions, options, deadline, points=None):
+        """``regions``, or None with ``points`` (N, 2): point regions by their centres (:attr:`regions` builds
+        the Point objects when first asked)."""
         self.C = cameras
-        self.regions = list(regions)
         self.opts = options
         self.deadline = deadline
-        self.points = all(r.is_point for r in self.regions)
-        self.x = np.array([r.center for r in self.regions], float) if self.points else None
+        if regions is None:
+            self._regions, self.points, self.x = None, True, np.asarray(points, float)
+        else:
+            self._regions = list(regions)
+            self.points = all(r.is_point for r in self._regions)             # the regions say
+            self.x = np.array([r.center for r in self._regions], float) if self.points else None
         self._lb: dict = {}
         self._X: dict = {}
         self.n_solved = 0
         self.weak: set = set()                 # subsets bounded by a light solve that did not certify
         self.new_estimates: list = []          # (subset, X) produced since the caller last read them
+        #: a lower bound at or above this value serves the caller as well as any larger one (module docstring)
+        self.enough = math.inf
+        self.c2 = None                         # the caller's squared thresholds (N,), for saturation()
+        self.defer: set = set()                # subsets to verify only: not certified -> left unknown, in unverified
+        self.unverified: set = set()           # subsets the verification did not certify (not verified again)
+        self.n_packed = 0                      # subsets bounded by their pair packing alone
+        #: the caller's best inlier set: a subset of >= 3 views not inside it (it holds a view the best candidate
+        #: calls an outlier) gets its pair packing bound only, no solve (``cheap``), until :meth:`reopen`
+        self.hint = None
+        self.cheap: set = set()
+        self.retry: set = set()                # reopened subsets: the full treatment (verify, packing, SDP)
+        self._floor: dict = {}                 # reopened subsets' packing bounds, kept by the next _store
+
+    @property
+    def regions(self) -> list:
+        if self._regions is None:
+            self._regions = [Point(p) for p in self.x]
+        return self._regions
 
     def known(self, S: frozenset) -> bool:
         return len(S) <= 1 or S in self._lb
@@ -66,6 +106,27 @@ class SubsetBounds:
 
     def estimate(self, S: frozenset):
         return self._X.get(S)
+
+    def saturation(self, S: frozenset) -> float:
+        """A bound of L2*(S) above this level serves the caller as well as any larger one: ``enough``, or the sum of
+        the squared thresholds of S (``c2``, set by the caller) if lower (module docstring)."""
+        if self.c2 is None:
+            return self.enough
+        with np.errstate(over="ignore"):
+            return min(self.enough, float(np.sum(self.c2[sorted(S)])))
+
+    def packing_bound(self, S: frozenset) -> float:
+        """sum of the cached bounds of disjoint view pairs inside S, picked greedily by size (module docstring:
+        superadditivity), rounded down; 0 when no pair of S is cached."""
+        pairs = [(self._lb[P], P) for P in map(frozenset, itertools.combinations(sorted(S), 2))
+                 if P in self._lb and self._lb[P] > 0]
+        pairs.sort(key=lambda bp: bp[0], reverse=True)
+        used, total = set(), 0.0
+        for b, P in pairs:
+            if not (P & used):
+                total += b
+                used |= P
+        return total * ROUND_DOWN
 
     def compute(self, subsets) -> None:
         """Fill the cache for every subset not known yet (duplicates and |S| <= 1 skipped)."""
@@ -80,6 +141,16 @@ class SubsetBounds:
         old = self._lb.pop(S)
         self._solve_one(S, light=False)
         self._lb[S] = max(self._lb[S], old)
+        return True
+
+    def reopen(self, S: frozenset) -> bool:
+        """Forget the packing-only bound of S (in ``cheap``) so that the next request gives it the full treatment;
+        False when S has none."""
+        if S not in self.cheap:
+            return False
+        self.cheap.discard(S)
+        self._floor[S] = self._lb.pop(S, 0.0)      # still a valid bound: the new one is never lower
+        self.retry.add(S)
         return True
 
     def _solve_one(self, S: frozenset, light: bool = True) -> None:
@@ -111,7 +182,7 @@ class SubsetBounds:
         self._store(S, lb, res.X)
 
     def _store(self, S: frozenset, lb: float, X) -> None:
-        self._lb[S] = max(lb, 0.0)
+        self._lb[S] = max(lb, 0.0, self._floor.pop(S, 0.0))
         if X is not None and np.all(np.isfinite(X)):
             X = np.asarray(X, float)
             self._X[S] = X
@@ -124,9 +195,11 @@ class SubsetBounds:
 
 def compute_many(requests) -> None:
     """Fill the caches of several :class:`SubsetBounds` (``requests``: (cache, subsets) pairs) at once: point
-    sub-problems of equal size, from every cache, in one vectorised verification call (then one batched SDP call
-    for what it did not certify; what both hand back is bounded by 0 for now and marked weak); other regions one
-    by one through :func:`tritools.triangulate`."""
+    sub-problems of equal size, from every cache, in one vectorised verification call; what it does not certify
+    gets its pair packing bound (:meth:`SubsetBounds.packing_bound`) when that reaches the cache's ``enough``,
+    else one batched SDP call (what that hands back too is bounded by 0 for now and marked weak); other regions
+    one by one through :func:`tritools.triangulate`.  A subset in a cache's ``defer`` set is only verified: not
+    certified, it is left unknown (and not verified again)."""
     groups, single = defaultdict(list), []
     for sb, subsets in requests:
         for S in dict.fromkeys(subsets):
@@ -137,7 +210,10 @@ def compute_many(requests) -> None:
                     single.append((sb, S))
     for key in sorted(groups, key=lambda k: k[0]):
         items = groups[key]
-        left = _batch(items, _verify_stack)
+        fresh = [(sb, S) for sb, S in items if S not in sb.unverified]
+        left = (_batch(fresh, _verify_stack) if fresh else []) + [(sb, S) for sb, S in items if S in sb.unverified]
+        if PACKING:
+            left = _hinted(_packed(_deferred(left)))
         left = _batch(left, _sdp_stack) if left else []
         for sb, S in left:                      # handed back by both batches (typically subsets with outliers):
             sb._store(S, 0.0, None)             # 0 for now (the caller keeps its inherited bounds);
@@ -147,6 +223,47 @@ def compute_many(requests) -> None:
             sb._store(S, 0.0, None)             # 0 is a valid bound; the search reports the time limit
         else:
             sb._solve_one(S)
+
+
+def _hinted(items: list) -> list:
+    """Store the packing bound of the subsets of >= 3 views outside their cache's ``hint`` (in ``cheap``): the
+    verification did not certify them, and a subset holding a likely outlier needs a large bound, rarely a
+    tight one (the batched SDP costs ~10-100x the verification and often decides nothing there); the rest."""
+    left = []
+    for sb, S in items:
+        if sb.hint is not None and len(S) >= 3 and S not in sb.retry and not S <= sb.hint:
+            sb._store(S, sb.packing_bound(S), None)
+            sb.cheap.add(S)
+            sb.n_packed += 1
+        else:
+            left.append((sb, S))
+    return left
+
+
+def _deferred(items: list) -> list:
+    """The items not deferred; the deferred ones (verification only) are marked unverified and left unknown."""
+    left = []
+    for sb, S in items:
+        sb.unverified.add(S)
+        if S in sb.defer:
+            sb.defer.discard(S)
+        else:
+            left.append((sb, S))
+    return left
+
+
+def _packed(items: list) -> list:
+    """Store the packing bound of the items where it reaches their cache's ``enough``; the rest."""
+    left = []
+    for sb, S in items:
+        level = sb.saturation(S)
+        b = sb.packing_bound(S) if math.isfinite(level) else 0.0
+        if b > level:
+            sb._store(S, b, None)
+            sb.n_packed += 1
+        else:
+            left.append((sb, S))
+    return left
 
 
 def _verify_stack(C, x, opts):

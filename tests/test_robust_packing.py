@@ -1,0 +1,138 @@
+"""The cheap sub-bounds of the robust (TLS) search (:mod:`tritools.solve.robust_bounds`): the pair packing bound
+(superadditivity of L2* over disjoint view sets) against an independent multi-start L2 minimum of every subset,
+and the search with the cheap paths against the plain path (every uncertified subset through the batched SDP)
+and against the subset enumeration."""
+import itertools
+
+import numpy as np
+import pytest
+from scipy.optimize import least_squares
+
+import tritools
+import tritools.solve.robust_bounds as rb
+from tritools.model.regions import Point
+from tritools.scene import random_scene
+from tritools.solve.robust import tls_cost
+
+
+def _scene(N, n_out, seed, noise=1.0):
+    sc = random_scene(N, 1, noise_px=noise, seed=seed)
+    rng = np.random.default_rng(seed + 7)
+    x = sc.points2d[0].copy()
+    out = rng.choice(N, n_out, replace=False)
+    ang = rng.uniform(0, 2 * np.pi, n_out)
+    x[out] += rng.uniform(40.0, 400.0, n_out)[:, None] * np.stack([np.cos(ang), np.sin(ang)], 1)
+    return sc.cameras, x, sc.points3d[0]
+
+
+def _l2_min(cams, x, starts) -> float:
+    """Smallest sum of squared reprojection errors over multi-start scipy least squares (>= L2*)."""
+    def res(X):
+        u = np.einsum("nij,j->ni", cams, np.append(X, 1.0))
+        return (u[:, :2] / u[:, 2:] - x).ravel()
+    return min(float(np.sum(least_squares(res, X0, xtol=1e-14, ftol=1e-14, gtol=1e-14).fun ** 2)) for X0 in starts)
+
+
+def _tls_reference(cams, x, c, starts) -> float:
+    """min over inlier sets S (|S| >= 2) of f_TLS at a multi-start local L2 minimiser of S: >= the TLS optimum."""
+    N, best = len(x), np.inf
+    for k in range(2, N + 1):
+        for S in itertools.combinations(range(N), k):
+            S = list(S)
+            for X0 in starts:
+                def res(X, S=S):
+                    u = np.einsum("nij,j->ni", cams[S], np.append(X, 1.0))
+                    return (u[:, :2] / u[:, 2:] - x[S]).ravel()
+                X = least_squares(res, X0, xtol=1e-12, ftol=1e-12).x
+                u = np.einsum("nij,j->ni", cams, np.append(X, 1.0))
+                best = min(best, tls_cost(np.linalg.norm(u[:, :2] / u[:, 2:] - x, axis=1), c))
+    return best
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_packing_bound_below_every_subset_optimum(seed):
+    """packing_bound(S) <= L2*(S) for every subset of >= 3 views of a 6-view track with two wrong matches (the
+    reference an attained multi-start value, so the check can only fail if the bound is too high), and it is
+    above 0 on the subsets holding a wrong match (the bound has content)."""
+    cams, x, X = _scene(6, 2, seed)
+    opts = tritools.TriangulationOptions()
+    sb = rb.SubsetBounds(cams, [Point(p) for p in x], opts, opts.budget.deadline())
+    sb.compute([frozenset(p) for p in itertools.combinations(range(6), 2)])
+    starts = [X, X + 0.3, X - 0.3]
+    positive = 0
+    for k in range(3, 7):
+        for S in itertools.combinations(range(6), k):
+            b = sb.packing_bound(frozenset(S))
+            assert b <= _l2_min(cams[list(S)], x[list(S)], starts) * (1 + 1e-9) + 1e-9
+            positive += b > 1.0
+    assert positive > 10
+
+
+def _sphere_scene(N, n_out, rng):
+    """The CVPR 2023 protocol (benchmarks/robust.py): cameras on a sphere of radius 2 looking at the origin, the
+    point in [-0.5, 0.5]^3, 1 px noise, outliers uniform in the 2108 x 1162 image."""
+    K = np.array([[1012.0027, 0, 1054], [0, 1012.0027, 581], [0, 0, 1]])
+    P = []
+    for _ in range(N):
+        c = rng.normal(size=3)
+        c *= 2.0 / np.linalg.norm(c)
+        z = -c / 2.0
+        up = np.array([0.0, 0.0, 1.0]) if abs(z[2]) < 0.9 else np.array([1.0, 0.0, 0.0])
+        ax = np.cross(up, z)
+        ax /= np.linalg.norm(ax)
+        R = np.stack([ax, np.cross(z, ax), z])
+        P.append(K @ np.hstack([R, -R @ c[:, None]]))
+    P = np.array(P)
+    X = rng.uniform(-0.5, 0.5, 3)
+    h = P @ np.append(X, 1.0)
+    x = h[:, :2] / h[:, 2:] + rng.normal(size=(N, 2))
+    out = rng.choice(N, n_out, replace=False)
+    x[out] = rng.uniform([0, 0], [2108, 1162], size=(n_out, 2))
+    return P, x, X
+
+
+@pytest.mark.parametrize("seed", [100, 103, 108])
+def test_cheap_paths_equal_the_plain_path_and_the_enumeration(seed, monkeypatch):
+    """The search with the cheap sub-bounds (packing, verification-only requests) gives the plain path's
+    certificate, inlier set and estimate on the same points with fewer SDP rows; no lower bound above the
+    enumerated TLS optimum, and the certified value reaches it."""
+    N = 8
+    cams, x, X = _sphere_scene(N, 3, np.random.default_rng(seed))
+    c = np.full(N, 200.0)
+    sdp_rows = []
+    real = rb._sdp_stack
+    monkeypatch.setattr(rb, "_sdp_stack", lambda C, x_, o: sdp_rows.append(len(C)) or real(C, x_, o))
+    fast = tritools.triangulate(cams, x, robust=c)
+    n_fast, sdp_rows[:] = sum(sdp_rows), []
+    monkeypatch.setattr(rb, "PACKING", False)
+    plain = tritools.triangulate(cams, x, robust=c)
+    assert fast.optimal and plain.optimal
+    np.testing.assert_array_equal(fast.inliers, plain.inliers)
+    assert fast.gamma_ub == pytest.approx(plain.gamma_ub, rel=1e-6)
+    np.testing.assert_allclose(fast.X, plain.X, rtol=1e-5, atol=1e-8)
+    assert n_fast < sum(sdp_rows)                              # the cheap paths replaced SDP rows
+    f_ref = _tls_reference(cams, x, c, [X, X + 0.3, X - 0.3])
+    for r in (fast, plain):
+        assert 2 * N * r.gamma_lb ** 2 <= f_ref * (1 + 1e-9) + 1e-9
+        assert 2 * N * r.gamma_ub ** 2 <= f_ref * (1 + 1e-6) + 1e-9
+
+
+@pytest.mark.parametrize("seed", [0, 2, 3])
+def test_leave_one_out_root_bound(seed, monkeypatch):
+    """A clean 7-view track whose L2 optimum costs more than c^2 (1 px noise, c = 3 px): the root bound
+    min(L2LB, c^2) cannot certify it, the leave-one-out bound does, with no branch and bound (0 nodes); same
+    inlier set and value as the plain path, every bound against the enumeration."""
+    cams, x, X = _scene(7, 0, seed)
+    c = np.full(7, 3.0)
+    fast = tritools.triangulate(cams, x, robust=c)
+    monkeypatch.setattr(rb, "PACKING", False)
+    plain = tritools.triangulate(cams, x, robust=c)
+    assert fast.optimal and plain.optimal
+    assert 2 * 7 * fast.gamma_ub ** 2 > 9.0                    # L2* > c^2: the root bound alone does not decide
+    assert "0 nodes" in fast.message and "0 nodes" not in plain.message
+    np.testing.assert_array_equal(fast.inliers, plain.inliers)
+    assert fast.inliers.all()
+    assert fast.gamma_ub == pytest.approx(plain.gamma_ub, rel=1e-9)
+    f_ref = _tls_reference(cams, x, c, [X, X + 0.3, X - 0.3])
+    assert 2 * 7 * fast.gamma_lb ** 2 <= f_ref * (1 + 1e-9) + 1e-9
+    assert 2 * 7 * fast.gamma_ub ** 2 <= f_ref * (1 + 1e-6) + 1e-9

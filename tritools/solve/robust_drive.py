@@ -1,0 +1,75 @@
+"""Many robust (TLS) searches run together (:func:`drive`): their sub-bound requests batched per round.
+
+Each :class:`tritools.solve.robust._Search` is a generator that yields the view subsets whose certified L2
+lower bounds it needs; :func:`drive` collects the requests of every open search, computes them in one
+vectorised call per subset size (:func:`tritools.solve.robust_bounds.compute_many`) and resumes them.  A clean
+track thus costs one row of the first call, and the search of a track with outliers shares every call with
+the other searches of its batch.
+"""
+from __future__ import annotations
+
+import logging
+import time
+
+from ..result import Status, TriangulationResult
+from .robust_bounds import compute_many
+
+__all__ = ["drive"]
+
+log = logging.getLogger(__name__)
+
+
+def drive(searches: list) -> list:
+    """Run TLS searches together: every round, the subset bounds all of them wait for are computed in one batch
+    per subset size (:func:`tritools.solve.robust_bounds.compute_many`).  A search that raises gets a
+    SOLVER_FAILED result (its message says why); results in input order.
+
+    Time limits stay per problem: each search's clock starts with the drive and is charged its own steps and
+    an even share of the batched calls of the rounds it takes part in; the rest of a round's time moves its
+    deadline on before it resumes (:func:`_credit`).  With one search nothing moves."""
+    gens = [s.run() for s in searches]
+    results: list = [None] * len(gens)
+    pending: dict = {}
+    if len(searches) > 1:
+        for s in searches:
+            s.set_deadline(s.opts.budget.deadline())
+
+    def step(i: int) -> float:
+        t = time.monotonic()
+        try:
+            pending[i] = gens[i].send(None)
+        except StopIteration as stop:
+            pending.pop(i, None)
+            results[i] = stop.value
+        except Exception as exc:  # noqa: BLE001 - one failing problem never stops the others
+            log.debug("robust search failed", exc_info=True)
+            pending.pop(i, None)
+            results[i] = TriangulationResult("tls", Status.SOLVER_FAILED, message=f"{type(exc).__name__}: {exc}")
+        return time.monotonic() - t
+
+    def round_(active: list, shared: float) -> None:
+        """Step the active searches, each credited first with the time it waited for (the batched calls beyond
+        its share, the steps before it), then with the steps after it."""
+        own, extra, before = {}, shared - shared / len(active), 0.0
+        for i in active:
+            _credit(searches[i], extra + before)
+            own[i] = step(i)
+            before += own[i]
+        later = 0.0
+        for i in reversed(active):
+            _credit(searches[i], later)
+            later += own[i]
+
+    round_(list(range(len(gens))), 0.0)
+    while pending:
+        t = time.monotonic()
+        compute_many([(searches[i].bounds, req) for i, req in pending.items()])
+        round_(list(pending), time.monotonic() - t)
+    return results
+
+
+def _credit(search, seconds: float) -> None:
+    """Move a search's deadline (if any) on by ``seconds`` it was not charged."""
+    end = search.deadline.end
+    if end is not None and seconds > 0:
+        search.set_deadline(type(search.deadline)(end + seconds))

@@ -124,8 +124,9 @@ def test_expired_call_gives_every_point_a_row_with_its_estimate():
 
 @pytest.mark.slow
 def test_whole_call_limit_bounds_a_batch_of_sdps():
-    """Ellipse regions go through the per-point SDP path: 30 of them take several seconds unbounded; with
-    total_time_limit = 1 s the call ends soon after, every row present, certified rows still valid."""
+    """Ellipse regions go through the per-point SDP path: 30 of them take ~0.3-3 s unbounded (~10-100 ms each,
+    by machine load); with total_time_limit = 0.03 s the call ends soon after, every row present, certified rows
+    still valid."""
     cams, _ = paper_example(4)
     rng = np.random.default_rng(3)
     probs = []
@@ -135,7 +136,7 @@ def test_whole_call_limit_bounds_a_batch_of_sdps():
         x = h[:, :2] / h[:, 2:3] + rng.normal(scale=0.05, size=(len(cams), 2))
         probs.append((cams, [tritools.Ellipse(c, np.eye(2) * 1e-6) for c in x]))
     t0 = time.perf_counter()
-    out = tritools.triangulate_many(probs, total_time_limit=1.0, path="sdp", method="theorem1", executor=None)
+    out = tritools.triangulate_many(probs, total_time_limit=0.03, path="sdp", method="theorem1", executor=None)
     took = time.perf_counter() - t0
     assert len(out) == 30 and took < 15, took
     assert any(r.status == tritools.Status.TIME_LIMIT for r in out)

@@ -41,6 +41,7 @@ from collections.abc import Iterable
 
 import numpy as np
 
+from ..errors import MISSING, FieldError
 from ..model.regions import Point, Region
 from ..result import TriangulationResult, jsonable
 from ..solve.options import MethodChoice, OptionError, SolvePath, TriangulationOptions
@@ -199,9 +200,6 @@ def region_types() -> tuple[str, ...]:
     return tuple(out)
 
 
-_MISSING = re.compile(r"missing the field '(\w+)'")
-
-
 def _parse_region(value, loc: str) -> Region:
     if isinstance(value, (list, tuple)):          # shorthand: [u, v] is a point region
         return Point(_numeric(value, loc, (2,)))
@@ -215,16 +213,15 @@ def _parse_region(value, loc: str) -> Region:
                                f"unknown region type {_short(value['type'])} (expected {', '.join(kinds)})")
     try:
         return Region.from_dict(value)
-    except (ValueError, TypeError) as exc:
-        msg = str(exc)
-        m = _MISSING.search(msg)
-        if m:
-            raise ProblemFileError(_join(loc, m.group(1)),
+    except FieldError as exc:                       # the region names its field: its location in the file
+        if exc.reason == MISSING:
+            raise ProblemFileError(_join(loc, exc.field),
                                    f"missing required field of a {_short(value['type'])} region") from None
-        head, _, rest = msg.partition(" ")
-        if head in value and head != "type":        # region messages start with the field's name
-            raise ProblemFileError(_join(loc, head), rest) from None
-        raise ProblemFileError(loc, msg) from None
+        if exc.field in value and exc.field != "type":
+            raise ProblemFileError(_join(loc, exc.field), exc.text) from None
+        raise ProblemFileError(loc, str(exc)) from None
+    except (ValueError, TypeError) as exc:
+        raise ProblemFileError(loc, str(exc)) from None
 
 
 def _shortened(text: str, given: Mapping) -> str:

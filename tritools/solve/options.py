@@ -39,6 +39,7 @@ from sospoly.budget import DEFAULT_TIME_LIMIT, as_budget
 from sospoly.tolerances import as_tolerances
 from sospoly.solvers import get_backend
 
+from ..errors import FieldError
 from ..model.cameras import WorldFrame, as_world_frame
 from ..model.constraints import Method
 
@@ -47,29 +48,17 @@ __all__ = ["TriangulationOptions", "SolvePath", "Sparsity", "MethodChoice", "DEF
            "DEFAULT_TIME_LIMIT"]
 
 
-class OptionError(ValueError):
+class OptionError(FieldError):
     """An invalid option: ``field`` names it, ``reason`` says what is wrong (``"must be ..."``).
 
     ``str()`` is ``"<field> <reason>"`` unless a whole ``message`` is given (a sentence that reads better
     than the two parts, e.g. ``"max_delta (2) must be >= delta (4)"``).  The command line turns ``field``
     into its flag (``max_delta`` -> ``--max-delta``) and the problem-file reader into the field's location:
-    nothing parses the text.  ``detail`` is ``reason`` (its older name)."""
-
-    def __init__(self, field: str, reason: str, message: str | None = None):
-        super().__init__(message if message is not None else f"{field} {reason}")
-        self.field, self.reason, self.message = field, reason, message
+    nothing parses the text (:class:`tritools.errors.FieldError`).  ``detail`` is ``reason`` (its older name)."""
 
     @property
     def detail(self) -> str:
         return self.reason
-
-    @property
-    def text(self) -> str:
-        """What to print after the option's location: the whole ``message`` if one was given, else ``reason``."""
-        return self.message if self.message is not None else self.reason
-
-    def __reduce__(self):                   # picklable across processes (executors)
-        return type(self), (self.field, self.reason, self.message)
 
 
 class OptionTypeError(OptionError, TypeError):

@@ -25,6 +25,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
+from ...errors import MISSING, FieldError
 from .forms import ConicForm, RegionExtent
 
 __all__ = [
@@ -69,14 +70,14 @@ def real_array(value, name: str, what: str = "array") -> np.ndarray:
     try:
         arr = np.asarray(value)
     except (TypeError, ValueError, OverflowError) as exc:
-        raise ValueError(f"{name} must be a numeric {what}, got {_short_repr(value)}") from exc
+        raise FieldError(name, f"must be a numeric {what}, got {_short_repr(value)}") from exc
     kind = arr.dtype.kind
     if kind == "O":
         arr = _big_integers(arr, name)
     elif kind in _REAL_KINDS and isinstance(value, (list, tuple)) and _holds_bool(value):
         kind = "b"                                # [True, 0] is an int array to numpy: refused like a bool array
     if arr.dtype.kind not in _REAL_KINDS or kind == "b":
-        raise ValueError(f"{name} must be real numbers, got {_KIND_NAMES.get(kind, arr.dtype.name)}")
+        raise FieldError(name, f"must be real numbers, got {_KIND_NAMES.get(kind, arr.dtype.name)}")
     with np.errstate(over="ignore"):              # long double beyond float64: inf, refused by the finite checks
         return np.array(arr, dtype=float)
 
@@ -101,8 +102,8 @@ def _big_integers(arr: np.ndarray, name: str) -> np.ndarray:
     except OverflowError:
         big = next(x for x in flat if isinstance(x, int) and abs(x) >= 2 ** 1024)
         digits = int(abs(big).bit_length() * 0.30103) + 1        # str() of a huge int is itself limited
-        raise ValueError(f"{name}: an integer of about {digits} digits is beyond the floating-point range "
-                         f"(|x| < 1.8e308)") from None
+        why = f"an integer of about {digits} digits is beyond the floating-point range (|x| < 1.8e308)"
+        raise FieldError(name, why, message=f"{name}: {why}") from None
 
 
 def _short_repr(value, limit: int = 80) -> str:
@@ -113,7 +114,7 @@ def _short_repr(value, limit: int = 80) -> str:
 def _check_finite(arr: np.ndarray, name: str) -> None:
     if not np.all(np.isfinite(arr)):
         shown = arr.tolist() if arr.size <= 8 else "an array with NaN or inf entries"
-        raise ValueError(f"{name} must be finite (no NaN/inf), got {shown}")
+        raise FieldError(name, f"must be finite (no NaN/inf), got {shown}")
 
 
 def as_vector(value, name: str, size: int = 2) -> np.ndarray:
@@ -128,7 +129,7 @@ def as_vector(value, name: str, size: int = 2) -> np.ndarray:
     """
     arr = real_array(value, name, f"vector of length {size}")
     if arr.shape != (size,):
-        raise ValueError(f"{name} must have shape ({size},), got {arr.shape}")
+        raise FieldError(name, f"must have shape ({size},), got {arr.shape}")
     _check_finite(arr, name)
     arr.setflags(write=False)
     return arr
@@ -146,7 +147,7 @@ def as_matrix(value, name: str, shape: tuple) -> np.ndarray:
     arr = real_array(value, name, "matrix")
     if arr.ndim != 2 or any(s is not None and a != s for a, s in zip(arr.shape, shape)):
         want = "x".join("m" if s is None else str(s) for s in shape)
-        raise ValueError(f"{name} must be a {want} matrix, got shape {arr.shape}")
+        raise FieldError(name, f"must be a {want} matrix, got shape {arr.shape}")
     _check_finite(arr, name)
     arr.setflags(write=False)
     return arr
@@ -165,7 +166,7 @@ def as_points(points, name: str = "points") -> tuple[np.ndarray, bool]:
     if arr.shape == (2,) or (arr.ndim == 2 and arr.shape[1] == 2):
         _check_finite(arr, name)
         return (arr[None, :], True) if arr.ndim == 1 else (arr, False)
-    raise ValueError(f"{name} must have shape (2,) or (m, 2), got {arr.shape}")
+    raise FieldError(name, f"must have shape (2,) or (m, 2), got {arr.shape}")
 
 
 def positive_number(value, name: str) -> float:
@@ -179,12 +180,12 @@ def positive_number(value, name: str) -> float:
     try:
         arr = real_array(value, name)
     except ValueError as exc:
-        raise ValueError(f"{name} must be a positive real number, got {_short_repr(value)}") from exc
+        raise FieldError(name, f"must be a positive real number, got {_short_repr(value)}") from exc
     if arr.shape != ():
-        raise ValueError(f"{name} must be a positive real number, got an array of shape {arr.shape}")
+        raise FieldError(name, f"must be a positive real number, got an array of shape {arr.shape}")
     v = float(arr)
     if not (math.isfinite(v) and v > 0):
-        raise ValueError(f"{name} must be a positive finite number, got {_short_repr(value)}")
+        raise FieldError(name, f"must be a positive finite number, got {_short_repr(value)}")
     return v
 
 
@@ -385,7 +386,7 @@ class Region(abc.ABC):
         kwargs = {}
         for name in cls._required():
             if name not in d:
-                raise ValueError(f"region of type {cls.kind!r} is missing the field {name!r}")
+                raise FieldError(name, MISSING, message=f"region of type {cls.kind!r} is missing the field {name!r}")
             kwargs[name] = d[name]
         return cls(**kwargs)
 

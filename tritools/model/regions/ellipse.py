@@ -9,6 +9,7 @@ from typing import ClassVar
 
 import numpy as np
 
+from ...errors import FieldError
 from .base import (Region, RegionPolynomials, as_matrix, as_points, as_vector, check_xy, positive_number,
                    similarity_args, square)
 from .forms import ConeKind, ConicForm, RegionExtent
@@ -154,11 +155,11 @@ class EllipseBorder(Region):
         D = as_matrix(D, "D", (2, 2))
         scale = float(np.max(np.abs(D)))
         if np.max(np.abs(D - D.T)) > SYMMETRY_RTOL * max(scale, 1e-300):
-            raise ValueError(f"D must be symmetric, got {D.tolist()}")
+            raise FieldError("D", f"must be symmetric, got {D.tolist()}")
         D = 0.5 * D + 0.5 * D.T                  # (not 0.5 (D + D^T): that overflows for entries near 1e308)
         lam, Q = np.linalg.eigh(D)
         if not (lam[1] > 0 and lam[0] > PD_RTOL * lam[1]):
-            raise ValueError(f"D must be positive definite, got eigenvalues {lam.tolist()}")
+            raise FieldError("D", f"must be positive definite, got eigenvalues {lam.tolist()}")
         D.setflags(write=False)
         object.__setattr__(self, "D", D)
         object.__setattr__(self, "_axes", np.sqrt(lam[::-1]))
@@ -166,7 +167,7 @@ class EllipseBorder(Region):
         Dinv = np.linalg.inv(D)
         Dinv = 0.5 * (Dinv + Dinv.T)
         if not np.all(np.isfinite(Dinv)):
-            raise ValueError(f"D is too close to singular for floating point (its inverse overflows), "
+            raise FieldError("D", f"is too close to singular for floating point (its inverse overflows), "
                              f"got eigenvalues {lam.tolist()}")
         object.__setattr__(self, "_Dinv", Dinv)
 

@@ -15,6 +15,7 @@ from typing import ClassVar
 
 import numpy as np
 
+from ...errors import FieldError
 from .base import (Region, RegionPolynomials, as_matrix, as_points, as_vector, check_xy, real_array, similarity_args,
                    square)
 from .forms import ConeKind, ConicForm, RegionExtent
@@ -90,17 +91,17 @@ def _check_bc(B, c) -> tuple[np.ndarray, np.ndarray]:
     B = as_matrix(B, "B", (None, 2))
     m = B.shape[0]
     if m < 2:
-        raise ValueError(f"B must have at least 2 rows for a bounded polytope, got shape {B.shape}")
+        raise FieldError("B", f"must have at least 2 rows for a bounded polytope, got shape {B.shape}")
     c_arr = real_array(c, "c")
     if c_arr.shape != (m,):
-        raise ValueError(f"c must have shape ({m},) to match B {B.shape}, got {c_arr.shape}")
+        raise FieldError("c", f"must have shape ({m},) to match B {B.shape}, got {c_arr.shape}")
     c = as_vector(c_arr, "c", m)
     nrm = np.hypot(B[:, 0], B[:, 1])
     U = B[nrm > 0] / nrm[nrm > 0, None]
     sv = np.linalg.svd(U, compute_uv=False) if len(U) else np.zeros(2)
     if len(sv) < 2 or sv[0] == 0 or sv[-1] <= POLYTOPE_RANK_RTOL * sv[0]:
-        raise ValueError(f"B has rank < 2 (singular values of its rows scaled to unit norm: {sv.tolist()}): "
-                         f"the polytope is unbounded")
+        raise FieldError("B", f"has rank < 2 (singular values of its rows scaled to unit norm: {sv.tolist()}): "
+                              f"the polytope is unbounded")
     return B, c
 
 
@@ -362,7 +363,7 @@ class Polytope(Region):
         c0 = as_vector(center, "center")
         w = as_vector(half_widths, "half_widths")
         if np.any(w <= 0):
-            raise ValueError(f"half_widths must be positive, got {w.tolist()}")
+            raise FieldError("half_widths", f"must be positive, got {w.tolist()}")
         B = np.diag(1.0 / w)
         return cls(B, -B @ c0)
 

@@ -35,7 +35,7 @@ from collections.abc import Iterable, Sequence
 import numpy as np
 
 from ..model.cameras import numeric_cameras
-from ..model.regions import Region
+from ..model.regions import Region, declares_extent
 from ..model.constraints import Method
 from ..records import TriangulationResults
 from ..result import Attempt, Status, TriangulationResult
@@ -168,7 +168,8 @@ def _as_point_problem(cams, regions):
         if x.ndim != 2 or x.shape[1] != 2 or not np.issubdtype(x.dtype, np.number) or np.iscomplexobj(x):
             return None
         x = x.astype(float)
-    elif isinstance(regions, (list, tuple)) and regions and all(isinstance(r, Region) and r.is_point for r in regions):
+    elif isinstance(regions, (list, tuple)) and regions and \
+            all(isinstance(r, Region) and r.is_point and declares_extent(r) for r in regions):
         x = np.array([r.center for r in regions])
     else:
         return None

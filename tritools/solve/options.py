@@ -138,9 +138,9 @@ def _multiplier(m):
     if isinstance(m, str) and not isinstance(m, Multiplier):
         return _enum(Multiplier, m, "multiplier")
     if not isinstance(m, (Multiplier, Polynomial)) and not (isinstance(m, numbers.Real) and not isinstance(m, bool)
-                                                            and m > 0):
-        raise OptionError("multiplier", f"must be 'fixed', 'putinar', 'free', a positive number or an SOS "
-                                        f"Polynomial, got {m!r}")
+                                                            and math.isfinite(m) and m > 0):
+        raise OptionError("multiplier", f"must be 'fixed', 'putinar', 'free', a positive finite number or an "
+                                        f"SOS Polynomial, got {m!r}")
     return m
 
 
@@ -161,6 +161,8 @@ def _backend(value):
             raise OptionError("backend", f"must be 'clarabel', 'ipm', 'auto', 'cvxpy' or 'cvxpy:<SOLVER>', "
                                          f"got {value!r}")
         _checked("backend", get_backend, value)     # an unknown or uninstalled solver, named
+    elif value is not None:
+        _checked("backend", get_backend, value)     # an object: sospoly's back-end protocol (a solve method)
     return value
 
 

@@ -64,7 +64,7 @@ import time
 
 import numpy as np
 
-from ..model.geometry import PROJECTION_DENOM_RTOL
+from ..model.geometry import PROJECTION_DENOM_RTOL, dlt, refine_l2
 from ..result import Attempt, Status, TriangulationResult
 from .decide import cheirality, gamma_from_c
 from ..model.geometry import depths_stack
@@ -245,6 +245,16 @@ class _Search:
         if f < self.best_f * (1 - 1e-12) or (self.best_X is None and np.isfinite(f)):
             self.best_X, self.best_f = np.asarray(X, float), f
             self.best_S = frozenset(int(i) for i in np.nonzero(d < self.c)[0])
+
+    def local_estimate(self):
+        """The local L2 refinement of the DLT point of the regions' centres (every view), or None: the estimate
+        of last resort, so that a search stopped before any candidate still reports X and gamma_UB."""
+        try:
+            X0 = dlt(self.C, np.array([r.center for r in self.regions], float))
+            X = refine_l2(X0, self.C, self.regions)
+        except (ValueError, np.linalg.LinAlgError, FloatingPointError):
+            return None
+        return X0 if X is None else X
 
     def offer_new(self) -> None:
         est = self.bounds.take_estimates()
@@ -476,6 +486,8 @@ class _Search:
         t = time.perf_counter()
         yield from self.candidates(rng)
         t_cand = time.perf_counter() - t
+        if self.best_X is None:                 # candidates cut short (deadline) or none finite: a local estimate
+            self.offer(self.local_estimate())
         if self.best_X is None:
             return TriangulationResult("tls", Status.NUMERICAL_FAILURE, message="no finite candidate estimate found",
                                        timings={"total": time.perf_counter() - self.t0})

@@ -26,7 +26,7 @@ import time
 import numpy as np
 
 from ..model.geometry import validate_cameras
-from ..model.regions import as_regions
+from ..model.regions import as_regions, require_extent
 from ..result import Status, TriangulationResult
 from .call_limit import call_limit, current_end, mark_cut, within
 from .robust import robust_thresholds, triangulate_robust
@@ -79,7 +79,9 @@ def _search_or_failure(cameras, regions, c, opts):
     t0 = time.perf_counter()
     try:
         cams = validate_cameras(cameras)
-        return _Search(cams, as_regions(regions, cams.shape[0]), c, opts, t0)
+        regs = as_regions(regions, cams.shape[0])
+        require_extent(regs)
+        return _Search(cams, regs, c, opts, t0)
     except (ValueError, TypeError) as exc:
         return TriangulationResult("tls", Status.INVALID_INPUT, message=f"{type(exc).__name__}: {exc}",
                                    timings={"total": time.perf_counter() - t0})
@@ -121,7 +123,9 @@ def _after_l2(problems, thresholds, opts, idx, first, out) -> list:
             out[i] = dataclasses.replace(res, inliers=None if res.residuals is None
                                          else np.ones(len(res.residuals), bool))
         elif not np.any(np.isfinite(c)):
-            out[i] = triangulate_robust(validate_cameras(cams), as_regions(regions, len(c)), c, opts)
+            regs = as_regions(regions, len(c))
+            require_extent(regs)
+            out[i] = triangulate_robust(validate_cameras(cams), regs, c, opts)
         else:
             rest.append(i)
     return rest

@@ -38,7 +38,7 @@ from sospoly.analysis import rigorous_psatz_bound  # noqa: F401 - re-exported (t
 
 from ..model.constraints import Method
 from ..model.geometry import validate_cameras
-from ..model.regions import as_regions
+from ..model.regions import as_regions, require_extent
 from ..result import TriangulationResult
 from .options import TriangulationOptions, options_from
 from .stages import run_point
@@ -73,6 +73,7 @@ def triangulate(cameras: ArrayLike, regions: Sequence | ArrayLike, method: str |
     opts = options_from(options, method=method, delta=delta, max_delta=max_delta, **overrides)
     cams = validate_cameras(cameras)
     regs = as_regions(regions, cams.shape[0])
+    require_extent(regs)                  # every path needs it (docs/regions.md): refused alike everywhere
     if robust is not None:
         from .robust import robust_thresholds, triangulate_robust
 

@@ -42,8 +42,8 @@ from __future__ import annotations
 # ellipse.  Keep it; import sorters are told to leave this block alone.
 # isort: off
 from .forms import EXTENT_ROUND_UP, ConeKind, ConicForm, RegionExtent, conic_form_of, extent_of
-from .base import (Region, RegionPolynomials, as_matrix, as_points, as_vector, check_xy, positive_number, real_array,
-                   similarity_args, square)
+from .base import (Region, RegionPolynomials, as_matrix, as_points, as_vector, check_xy, declares_extent,
+                   positive_number, real_array, require_extent, similarity_args, square)
 from .point import Point, Segment
 from .polytope import (POLYTOPE_CHUNK, POLYTOPE_RANK_RTOL, POLYTOPE_ROUNDOFF, POLYTOPE_VERTEX_RTOL, Polytope,
                        polytope_vertices)
@@ -57,6 +57,7 @@ __all__ = [
     "as_region", "as_regions",
     # what the solvers need of a region (issue 18): its extent, conic form and dilation
     "RegionExtent", "ConeKind", "ConicForm", "dilate", "EXTENT_ROUND_UP", "DILATION_GROW", "extent_of", "conic_form_of",
+    "declares_extent", "require_extent",
     # added with the package split
     "polytope_vertices", "positive_number", "real_array", "as_vector", "as_matrix", "as_points", "similarity_args",
     "check_xy", "square",

@@ -30,7 +30,7 @@ from .forms import ConicForm, RegionExtent
 
 __all__ = [
     "Region", "RegionPolynomials", "real_array", "as_vector", "as_matrix", "as_points", "positive_number",
-    "similarity_args", "check_xy", "square",
+    "similarity_args", "check_xy", "square", "declares_extent", "require_extent",
 ]
 
 #: ``Region`` subclasses by ``kind`` (filled by ``Region.__init_subclass__``).
@@ -397,3 +397,19 @@ class Region(abc.ABC):
 
     def __hash__(self) -> int:
         return hash(json.dumps(self.to_dict(), sort_keys=True))
+
+
+def declares_extent(region) -> bool:
+    """Does the region's type declare :meth:`Region.extent` (a class-level test: nothing is computed)."""
+    return type(region).extent is not Region.extent
+
+
+def require_extent(regions) -> None:
+    """The TypeError naming ``extent()`` for the first region whose type does not declare it.
+
+    Triangulation requires ``extent()`` of every region on every path -- single calls, batches, robust, the
+    point fast paths alike -- so a region type is refused the same way wherever it enters (docs/regions.md),
+    even where a particular path would not need the margin."""
+    for r in regions:
+        if not declares_extent(r):
+            raise _not_declared(r, "extent()", "the rigorous lower bound (the SDP's PSD-defect margin) needs")

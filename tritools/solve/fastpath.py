@@ -43,8 +43,8 @@ from sospoly.solvers import with_single_threaded_blas
 
 from ..model.geometry import camera_problems
 from ..model.normalize import normalization_stack
-from ..model.stacked import (band_pairs, epipolar_quadratics, fundamental_stack, project_stack, refine_points_stack,
-                             view_pairs)
+from ..model.stacked import (band_pairs, epipolar_quadratics, fundamental_stack, norms, project_stack,
+                             refine_points_stack, view_pairs)
 from .decide import decide, decide_reported, gamma_from_c
 from .trivial import trivially_certified, trivially_certified_reported
 
@@ -152,7 +152,7 @@ def verify_checked(C: np.ndarray, x: np.ndarray, ok: np.ndarray, tolerances: Tol
     v = np.where(ok[:, None], u.reshape(M, -1), 0.0)
     # a minimiser v* has ||v*||^2 = f(v*) <= f(v^) = ||v^||^2 (observed points at the origin): the radius of the
     # rigorous margin of the Lagrangian bound
-    lower, upper, ok = lagrangian_bounds(C, Cn, v, ok, np.linalg.norm(v, axis=1), norm.resolution, tolerances,
+    lower, upper, ok = lagrangian_bounds(C, Cn, v, ok, norms(v, axis=1), norm.resolution, tolerances,
                                          deadline=deadline)
     status, optimal, c_lower = decide(lower, upper, tolerances, N, norm.resolution)
     X = norm.world_points(Xn)

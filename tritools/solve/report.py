@@ -12,7 +12,7 @@ import numpy as np
 from ..model.geometry import depths as depths_of
 from ..model.geometry import WorldFrame, depths_stack, project_homogeneous
 from ..model.regions import extent_of
-from ..model.stacked import project_stack
+from ..model.stacked import norms, project_stack
 from .decide import gamma_from_c
 
 __all__ = ["PointReport", "point_report", "points_report_stack", "solve_radius", "solve_ball", "region_extent"]
@@ -44,7 +44,7 @@ def points_report_stack(C: np.ndarray, x: np.ndarray, X: np.ndarray, world_frame
     """The twin of :func:`point_report` for M point problems: (gamma (M,), residuals (M, N), depths (M, N));
     gamma is inf where a projection is at infinity."""
     u, _, fin = project_stack(C, X)
-    res = np.where(fin[:, None], np.linalg.norm(u - x, axis=2), np.inf)
+    res = np.where(fin[:, None], norms(u - x, axis=2), np.inf)
     gamma = np.where(fin, gamma_from_c(np.sum(np.where(fin[:, None], res, 0.0) ** 2, axis=1), x.shape[1], 1.0), np.inf)
     return gamma, res, depths_stack(C, X, world_frame)
 

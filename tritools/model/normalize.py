@@ -165,11 +165,38 @@ def _rho_floor(C: np.ndarray, x: np.ndarray) -> np.ndarray:
     return np.where(np.isfinite(med) & (med > 0), RHO_FLOOR_REL * med, fallback)
 
 
+#: the last stack of one normalised, (key, NormalizationStack): a single call whose stages normalise the same data
+#: twice (the vectorised disc verification, then the report) computes it once.  Replaced, never mutated (a reader
+#: sees the old or the new pair); hits are returned as copies, so no caller can change what another one gets.
+_LAST_SINGLE: list = [None]
+
+
 def normalization_stack(C: np.ndarray, x: np.ndarray, ok: np.ndarray | None = None) -> NormalizationStack:
     """The normalisation of the module docstring for M problems: cameras C (M, N, 3, 4), points x (M, N, 2)
-    (the regions' centres)."""
-    M, N = x.shape[:2]
+    (the regions' centres).  A stack of one is remembered (``_LAST_SINGLE``): the function is deterministic, so
+    the same data give a copy of the same arrays."""
+    M = x.shape[0]
     ok = np.ones(M, bool) if ok is None else ok.copy()
+    if M != 1:
+        return _normalization_stack(C, x, ok)
+    key = (C.dtype.str, C.shape, C.tobytes(), x.dtype.str, x.shape, x.tobytes(), ok.tobytes())
+    last = _LAST_SINGLE[0]
+    if last is not None and last[0] == key:
+        return _copied(last[1])
+    st = _normalization_stack(C, x, ok)
+    _LAST_SINGLE[0] = (key, _copied(st))
+    return st
+
+
+def _copied(st: NormalizationStack) -> NormalizationStack:
+    return NormalizationStack(*(None if a is None else a.copy() for a in
+                                (st.scale, st.shifts, st.origin, st.depth, st.cameras_n, st.Xn, st.ok, st.resolution,
+                                 st.converged)))
+
+
+def _normalization_stack(C: np.ndarray, x: np.ndarray, ok: np.ndarray) -> NormalizationStack:
+    """:func:`normalization_stack` computed (``ok`` a copy the function may change)."""
+    M, N = x.shape[:2]
     C = C / power2_scale(C, (2, 3))     # each camera by a power of two near its largest entry: exact, projectively
     X0, ok_dlt = dlt_stack(C, x)        # the same camera, and no product below overflows (cameras x 1e300)
     ok &= ok_dlt

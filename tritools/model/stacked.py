@@ -169,15 +169,19 @@ def _lm_iteration(C, xhat, X, u, h, cost, mu, converged, active: np.ndarray) -> 
     r = (ua - xa).reshape(len(active), -1)
     JtJ = np.einsum("mki,mkj->mij", Jac, Jac)
     g = np.einsum("mki,mk->mi", Jac, r)
-    mu_a = mu[active]
+    mu_a = mu if whole else mu[active]
     step = damped_step(JtJ, g, mu_a)
     Xt = Xa + step
     ut, ht, fint = _project(Ca, Xt)
     ct = np.where(fint, np.add.reduce((ut - xa) ** 2, axis=(1, 2)), np.inf)
-    better = np.isfinite(ct) & (ct <= cost[active])
+    better = np.isfinite(ct) & (ct <= (cost if whole else cost[active]))
     small = norms(step, axis=1) <= LM_STEP_RTOL * (1.0 + norms(Xa, axis=1))
-    acc = active[better]                # (Xa, ua may be views of X, u: updated only after their last use)
-    X[acc], cost[acc], u[acc], h[acc] = Xt[better], ct[better], ut[better], ht[better]
+    # (Xa, ua may be views of X, u: updated only after their last use)
+    if whole and better.all():          # every problem accepts its step: whole arrays, no fancy indexing
+        X[...], cost[...], u[...], h[...] = Xt, ct, ut, ht
+    else:
+        acc = active[better]
+        X[acc], cost[acc], u[acc], h[acc] = Xt[better], ct[better], ut[better], ht[better]
     mu_a = np.where(better, np.maximum(mu_a / 10, 1e-12), mu_a * 10)
     mu[active] = mu_a
     stalled = mu_a > 1e12

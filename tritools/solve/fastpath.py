@@ -239,6 +239,15 @@ def _held(F: np.ndarray, pairs, views) -> np.ndarray:
     return np.where((views[:, I] & views[:, J])[..., None, None], F, 0.0)
 
 
+def _zero_rows(g0, g1, G2, keep: np.ndarray) -> tuple:
+    """The constraint data (g0, g1, G2) with the problems not in ``keep`` zeroed (harmless numbers for the
+    stack).  Always new arrays, also when every problem is kept: their memory layout decides the summation
+    order downstream, so the bounds' last bits."""
+    M = len(keep)
+    g0, g1 = (np.where(keep.reshape((M,) + (1,) * (a.ndim - 1)), a, 0.0) for a in (g0, g1))
+    return g0, g1, dataclasses.replace(G2, vals=np.where(keep[:, None], G2.vals, 0.0))
+
+
 def _all_pairs_bounds(C, Cn, v, ok, radius, tolerances, f0, F2, views=None) -> tuple[np.ndarray, np.ndarray]:
     """(Lagrangian lower bound (NaN: none), ok) with the epipolar constraints of all N(N - 1)/2 view pairs,
     vectorised over the stack (:func:`sospoly.analysis.verify.verify_quadratic_batch`)."""
@@ -249,8 +258,7 @@ def _all_pairs_bounds(C, Cn, v, ok, radius, tolerances, f0, F2, views=None) -> t
     g0, g1, G2 = epipolar_quadratics(_held(F, view_pairs(N), views), N)
     finite = np.isfinite(g0).all(axis=1) & np.isfinite(g1).all(axis=(1, 2)) & np.isfinite(G2.vals).all(axis=1)
     ok &= finite
-    g0, g1 = (np.where(ok.reshape((M,) + (1,) * (a.ndim - 1)), a, 0.0) for a in (g0, g1))
-    G2 = dataclasses.replace(G2, vals=np.where(ok[:, None], G2.vals, 0.0))
+    g0, g1, G2 = _zero_rows(g0, g1, G2, ok)
     n = 2 * N
     ver = verify_quadratic_batch(f0, np.zeros((M, n)), F2, g0, g1, G2, v, tolerances=tolerances, radius=radius)
     return ver.lower_bound, ok
@@ -270,8 +278,7 @@ def _band_bounds(C, Cn, v, ok, radius, width, tolerances, f0, F2, views=None) ->
     g0, g1, G2 = epipolar_quadratics(_held(F, pairs, views), N, pairs)
     use = ok & defined.all(axis=1) & np.isfinite(g0).all(axis=1) & np.isfinite(g1).all(axis=(1, 2)) \
         & np.isfinite(G2.vals).all(axis=1)
-    g0, g1 = (np.where(use.reshape((M,) + (1,) * (a.ndim - 1)), a, 0.0) for a in (g0, g1))
-    G2 = dataclasses.replace(G2, vals=np.where(use[:, None], G2.vals, 0.0))
+    g0, g1, G2 = _zero_rows(g0, g1, G2, use)
     n = 2 * N
     ver = verify_quadratic_banded_batch(f0, np.zeros((M, n)), F2, g0, g1, G2, v, tolerances=tolerances,
                                         radius=radius)

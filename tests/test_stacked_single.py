@@ -136,3 +136,29 @@ def test_lm_of_one_equals_lm_in_a_stack(name, C, x):
                                              return_converged=True)
         assert np.array_equal(X1[0], X[m], equal_nan=True)
         assert ok1[0] == ok[m] and conv1[0] == conv[m]
+
+
+@pytest.mark.parametrize("name, C, x", SCENES, ids=[s[0] for s in SCENES])
+def test_point_report_equals_its_per_view_reference(name, C, x):
+    """The report projects with the point scaled once and takes the depths of validated cameras without a second
+    check: the same numbers as project_homogeneous per view and geometry.depths (which validates)."""
+    from tritools import Ellipse, Point
+    from tritools.model.geometry import depths, gamma, project_homogeneous
+    from tritools.solve.report import point_report
+
+    rng = np.random.default_rng(len(x))
+    for m in range(len(x)):
+        for regions in ([Point(p) for p in x[m]], [Ellipse(p, np.diag([4.0, 1.0])) for p in x[m]]):
+            for X in (rng.normal(size=3), np.array([0.0, 0.0, 1e-9]), rng.normal(size=3) * 1e7):
+                rep = point_report(X, C, regions)
+                Xh = np.append(X, 1.0)[None]
+                ref = []
+                for P, r in zip(C, regions):
+                    u = project_homogeneous(Xh, P)[0]
+                    ref.append(float(r.distance(u)) if np.all(np.isfinite(u)) else np.inf)
+                assert np.array_equal(rep.residuals, np.array(ref))
+                assert np.array_equal(rep.depths, depths(X, C), equal_nan=True)
+                assert np.array_equal(point_report(X, C, regions, "reflected").depths, depths(X, C, "reflected"),
+                                      equal_nan=True)
+                if np.all(np.isfinite(ref)):
+                    assert rep.gamma == pytest.approx(gamma(X, C, regions), rel=1e-12)

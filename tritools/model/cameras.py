@@ -410,6 +410,16 @@ def depths(X: ArrayLike, cameras: ArrayLike, world_frame: WorldFrame | str = Wor
     return out[0] if single else out
 
 
+def depths_validated(X: np.ndarray, cameras: np.ndarray, world_frame: WorldFrame | str = WorldFrame.RIGHT_HANDED
+                     ) -> np.ndarray:
+    """:func:`depths` of one point X (3,) for cameras (N, 3, 4) already validated (:func:`validate_cameras`) and
+    converted to float: the same numbers without checking the cameras again."""
+    h = as_world_frame(world_frame).sign
+    Xh = np.hstack([np.asarray(X, float)[None], np.ones((1, 1))])
+    with np.errstate(over="ignore", invalid="ignore"):
+        return (h * np.einsum("mj,nj->mn", Xh, depth_rows(cameras)))[0]
+
+
 def depths_stack(cameras: ArrayLike, X: ArrayLike,
                  world_frame: WorldFrame | str = WorldFrame.RIGHT_HANDED) -> np.ndarray:
     """:func:`depths` for M problems at once: cameras (M, N, 3, 4), X (M, 3) -> (M, N), the depth

@@ -9,8 +9,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..model.geometry import depths as depths_of
-from ..model.geometry import WorldFrame, depths_stack, project_homogeneous
+from ..model.cameras import depths_validated
+from ..model.geometry import WorldFrame, depths_stack, project_views
 from ..model.regions import extent_of
 from ..model.stacked import norms, project_stack
 from .decide import gamma_from_c
@@ -31,13 +31,14 @@ def point_report(X, cameras, regions, world_frame=WorldFrame.RIGHT_HANDED) -> Po
     if X is None or not np.all(np.isfinite(X)):
         return PointReport(None, None, None)
     Xh = np.append(np.asarray(X, float), 1.0)[None]
+    C = np.asarray(cameras, float)
     res = []
-    for P, r in zip(cameras, regions):
-        x = project_homogeneous(Xh, P)[0]                 # inf where undefined (the one rule of geometry)
-        res.append(float(r.distance(x)) if np.all(np.isfinite(x)) else np.inf)
+    for x, r in zip(project_views(Xh, C), regions):     # inf where undefined (the one rule of geometry)
+        x = x[0]
+        res.append(float(r.distance(x)) if np.isfinite(x).all() else np.inf)
     res = np.array(res)
-    gamma = float(gamma_from_c(np.sum(res ** 2), len(res), 1.0)) if np.all(np.isfinite(res)) else math.inf
-    return PointReport(gamma, res, np.asarray(depths_of(X, cameras, world_frame), float))
+    gamma = float(gamma_from_c(np.sum(res ** 2), len(res), 1.0)) if np.isfinite(res).all() else math.inf
+    return PointReport(gamma, res, depths_validated(X, C, world_frame))
 
 
 def points_report_stack(C: np.ndarray, x: np.ndarray, X: np.ndarray, world_frame=WorldFrame.RIGHT_HANDED):

@@ -438,8 +438,15 @@ def depths_stack(cameras: ArrayLike, X: ArrayLike,
         raise ValueError(f"cameras must have shape (M, N, 3, 4), got {C.shape}")
     if A.shape != (C.shape[0], 3):
         raise ValueError(f"X must have shape ({C.shape[0]}, 3), one point per problem, got {A.shape}")
+    return depths_stack_arrays(C, A, world_frame)
+
+
+def depths_stack_arrays(C: np.ndarray, X: np.ndarray, world_frame: WorldFrame | str = WorldFrame.RIGHT_HANDED
+                        ) -> np.ndarray:
+    """:func:`depths_stack` of float arrays C (M, N, 3, 4) and X (M, 3) whose shapes are known to be right (the
+    vectorised report): the formula without the checks."""
     h = as_world_frame(world_frame).sign
-    Xh = np.concatenate([A, np.ones((len(A), 1))], axis=1)
+    Xh = np.concatenate([X, np.ones((len(X), 1))], axis=1)
     with np.errstate(over="ignore", invalid="ignore"):
         return h * np.einsum("mj,mnj->mn", Xh, depth_rows(C))
 

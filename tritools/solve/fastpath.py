@@ -161,8 +161,10 @@ def verify_checked(C: np.ndarray, x: np.ndarray, ok: np.ndarray, tolerances: Tol
     gamma_ub = np.where(fin_w, gamma_from_c(np.sum((uw - x) ** 2, axis=(1, 2)), N, 1.0), np.inf)
     gamma_lb = np.minimum(gamma_from_c(c_lower, N, norm.scale), gamma_ub)
     certified = ok & optimal & decide_reported(gamma_lb, gamma_ub, tolerances, N, norm.scale, norm.resolution)
-    trivial = ok & ~certified & trivially_certified(upper, tolerances, N, norm.resolution) & \
-        trivially_certified_reported(gamma_ub, tolerances, N, norm.scale, norm.resolution)
+    trivial = ok & ~certified
+    if trivial.any():               # (a stack of certified problems skips the trivial rule: no change)
+        trivial &= trivially_certified(upper, tolerances, N, norm.resolution) & \
+            trivially_certified_reported(gamma_ub, tolerances, N, norm.scale, norm.resolution)
     gamma_lb = np.where(trivial, 0.0, gamma_lb)
     return FastPathBatch(certified | trivial, ok, X, gamma_lb, gamma_ub, x + u / norm.scale[:, None, None],
                          np.where(trivial, 0.0, c_lower), upper, norm.scale, trivial)

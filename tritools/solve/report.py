@@ -9,8 +9,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..model.cameras import depths_validated
-from ..model.geometry import WorldFrame, depths_stack, project_views
+from ..model.cameras import depths_stack_arrays, depths_validated
+from ..model.geometry import WorldFrame, project_views
 from ..model.regions import extent_of
 from ..model.stacked import norms, project_stack
 from .decide import gamma_from_c
@@ -47,7 +47,7 @@ def points_report_stack(C: np.ndarray, x: np.ndarray, X: np.ndarray, world_frame
     u, _, fin = project_stack(C, X)
     res = np.where(fin[:, None], norms(u - x, axis=2), np.inf)
     gamma = np.where(fin, gamma_from_c(np.sum(np.where(fin[:, None], res, 0.0) ** 2, axis=1), x.shape[1], 1.0), np.inf)
-    return gamma, res, depths_stack(C, X, world_frame)
+    return gamma, res, depths_stack_arrays(np.asarray(C, float), np.asarray(X, float), world_frame)
 
 
 def solve_ball(regions_n, c_upper: float) -> float | None:

@@ -70,9 +70,11 @@ def view_pairs(N: int) -> tuple[np.ndarray, np.ndarray]:
 def null_vectors(P: np.ndarray) -> np.ndarray:
     """Null vectors a (P a = 0) of a stack of 3x4 matrices (..., 3, 4), from the signed 3x3 minors
     (a_k = (-1)^k det P[:, columns != k]); ||a||^2 = det(P P^T) (Cauchy-Binet), 0 iff rank P < 3."""
-    def det3(c0, c1, c2):           # the minor of columns c0, c1, c2 (entries read in place, no stacked copy)
+    E = [[P[..., r, c] for c in range(4)] for r in range(3)]     # the 12 entries, each read once
+
+    def det3(c0, c1, c2):           # the minor of columns c0, c1, c2
         def e(r, k):
-            return P[..., r, (c0, c1, c2)[k]]
+            return E[r][(c0, c1, c2)[k]]
         return (e(0, 0) * (e(1, 1) * e(2, 2) - e(1, 2) * e(2, 1))
                 - e(0, 1) * (e(1, 0) * e(2, 2) - e(1, 2) * e(2, 0))
                 + e(0, 2) * (e(1, 0) * e(2, 1) - e(1, 1) * e(2, 0)))
@@ -113,13 +115,15 @@ def project_stack(C: np.ndarray, X: np.ndarray) -> tuple[np.ndarray, np.ndarray,
         return _project(C, X)
 
 
-def _project(C: np.ndarray, X: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _project(C: np.ndarray, X: np.ndarray, absC2: np.ndarray | None = None) -> tuple:
     """:func:`project_stack` for a caller that already ignores overflow and invalid operations (one
-    ``np.errstate`` around a loop instead of one per projection)."""
+    ``np.errstate`` around a loop instead of one per projection); ``absC2``: |C[:, :, 2, :]| when the caller
+    has it (the cameras of a loop do not change)."""
     Xh = np.concatenate([X, np.ones((len(X), 1))], axis=1)
     h = np.einsum("mnij,mj->mni", C, Xh)
     den = h[..., 2]
-    tiny = np.abs(den) <= PROJECTION_DENOM_RTOL * np.einsum("mnj,mj->mn", np.abs(C[:, :, 2, :]), np.abs(Xh))
+    absC2 = np.abs(C[:, :, 2, :]) if absC2 is None else absC2
+    tiny = np.abs(den) <= PROJECTION_DENOM_RTOL * np.einsum("mnj,mj->mn", absC2, np.abs(Xh))
     x = h[..., :2] / np.where(tiny, 1.0, den)[..., None]
     ok = ~tiny.any(axis=1) & np.isfinite(x).all(axis=(1, 2))
     return x, h, ok
@@ -145,23 +149,24 @@ def refine_points_stack(C: np.ndarray, xhat: np.ndarray, X: np.ndarray, ok: np.n
     converged = np.zeros(len(X), bool)
     mu = np.full(len(X), 1e-3)
     with np.errstate(over="ignore", invalid="ignore"):      # once, not once per projection
-        u, h, fin = _project(C, X)
+        absC2 = np.abs(C[:, :, 2, :])
+        u, h, fin = _project(C, X, absC2)
         cost = np.where(fin, np.add.reduce((u - xhat) ** 2, axis=(1, 2)), np.inf)
         ok = ok & fin
         active = np.nonzero(ok)[0]
         for _ in range(LM_MAX_ITER):
             if active.size == 0:
                 break
-            active = _lm_iteration(C, xhat, X, u, h, cost, mu, converged, active)
+            active = _lm_iteration(C, absC2, xhat, X, u, h, cost, mu, converged, active)
     ok = ok & np.isfinite(X).all(axis=1)
     return (X, ok, converged & ok) if return_converged else (X, ok)
 
 
-def _lm_iteration(C, xhat, X, u, h, cost, mu, converged, active: np.ndarray) -> np.ndarray:
+def _lm_iteration(C, absC2, xhat, X, u, h, cost, mu, converged, active: np.ndarray) -> np.ndarray:
     """One Levenberg-Marquardt iteration of :func:`refine_points_stack` on the ``active`` problems: X, u, h, cost,
     mu and converged updated in place; the problems still iterating returned."""
     whole = active.size == len(X)       # no copies while every problem is still iterating
-    Ca, xa, Xa = (C, xhat, X) if whole else (C[active], xhat[active], X[active])
+    Ca, xa, Xa, absCa = (C, xhat, X, absC2) if whole else (C[active], xhat[active], X[active], absC2[active])
     ua, ha = (u, h) if whole else (u[active], h[active])      # the projections at X, kept from the last step
     # d Phi / d X = (P[:2, :3] - u P[2, :3]) / (P[2] . X~)
     Jac = (Ca[..., :2, :3] - ua[..., None] * Ca[..., 2:3, :3]) / ha[..., 2][..., None, None]
@@ -172,7 +177,7 @@ def _lm_iteration(C, xhat, X, u, h, cost, mu, converged, active: np.ndarray) -> 
     mu_a = mu if whole else mu[active]
     step = damped_step(JtJ, g, mu_a)
     Xt = Xa + step
-    ut, ht, fint = _project(Ca, Xt)
+    ut, ht, fint = _project(Ca, Xt, absCa)
     ct = np.where(fint, np.add.reduce((ut - xa) ** 2, axis=(1, 2)), np.inf)
     better = np.isfinite(ct) & (ct <= (cost if whole else cost[active]))
     small = norms(step, axis=1) <= LM_STEP_RTOL * (1.0 + norms(Xa, axis=1))

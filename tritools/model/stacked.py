@@ -238,24 +238,41 @@ def epipolar_quadratics(F: np.ndarray, N: int, pairs: tuple | None = None):
     from sospoly.analysis import SparseQuadratics
 
     M, K = F.shape[:2]
-    I, J = view_pairs(N) if pairs is None else pairs
-    n = 2 * N
+    k, lin, ks, ii, jj = _quadratic_index(N) if pairs is None else _quadratic_index_of(*pairs)
     g0 = F[..., 2, 2]
-    g1 = np.zeros((M, K, n))
-    k = np.arange(K)
-    ks, ii, jj, vals = [], [], [], []
+    g1 = np.zeros((M, K, 2 * N))
+    vals = []
     for a_ in range(2):
-        g1[:, k, 2 * I + a_] = F[:, :, a_, 2]
-        g1[:, k, 2 * J + a_] = F[:, :, 2, a_]
+        g1[:, k, lin[0][a_]] = F[:, :, a_, 2]
+        g1[:, k, lin[1][a_]] = F[:, :, 2, a_]
         for b_ in range(2):
             half = F[:, :, a_, b_] / 2
-            ks += [k, k]
-            ii += [2 * I + a_, 2 * J + b_]
-            jj += [2 * J + b_, 2 * I + a_]
             vals += [half, half]
-    G2 = SparseQuadratics(np.concatenate(ks), np.concatenate(ii), np.concatenate(jj),
-                          np.concatenate(vals, axis=1) if vals else np.zeros((M, 0)))
+    G2 = SparseQuadratics(ks, ii, jj, np.concatenate(vals, axis=1))
     return g0, g1, G2
+
+
+@functools.lru_cache(maxsize=64)
+def _quadratic_index(N: int) -> tuple:
+    """:func:`_quadratic_index_of` the pairs of :func:`view_pairs` (cached, read-only: they depend on N only)."""
+    out = _quadratic_index_of(*view_pairs(N))
+    for a in (out[0], *out[1][0], *out[1][1], *out[2:]):
+        a.flags.writeable = False
+    return out
+
+
+def _quadratic_index_of(I: np.ndarray, J: np.ndarray) -> tuple:
+    """The indices of :func:`epipolar_quadratics` for the pairs (I, J): (k, ((2I, 2I + 1), (2J, 2J + 1)), and the
+    pair, row and column of the 8 entries per pair of G2, in the order of its values)."""
+    k = np.arange(len(I))
+    lin = ((2 * I, 2 * I + 1), (2 * J, 2 * J + 1))
+    ks, ii, jj = [], [], []
+    for a_ in range(2):
+        for b_ in range(2):
+            ks += [k, k]
+            ii += [lin[0][a_], lin[1][b_]]
+            jj += [lin[1][b_], lin[0][a_]]
+    return k, lin, np.concatenate(ks), np.concatenate(ii), np.concatenate(jj)
 
 
 def pixel_scales(C: np.ndarray, x: np.ndarray) -> np.ndarray:

@@ -73,11 +73,10 @@ def null_vectors(P: np.ndarray) -> np.ndarray:
     E = [[P[..., r, c] for c in range(4)] for r in range(3)]     # the 12 entries, each read once
 
     def det3(c0, c1, c2):           # the minor of columns c0, c1, c2
-        def e(r, k):
-            return E[r][(c0, c1, c2)[k]]
-        return (e(0, 0) * (e(1, 1) * e(2, 2) - e(1, 2) * e(2, 1))
-                - e(0, 1) * (e(1, 0) * e(2, 2) - e(1, 2) * e(2, 0))
-                + e(0, 2) * (e(1, 0) * e(2, 1) - e(1, 1) * e(2, 0)))
+        (a00, a01, a02), (a10, a11, a12), (a20, a21, a22) = ((row[c0], row[c1], row[c2]) for row in E)
+        return (a00 * (a11 * a22 - a12 * a21)
+                - a01 * (a10 * a22 - a12 * a20)
+                + a02 * (a10 * a21 - a11 * a20))
     return np.stack([det3(1, 2, 3), -det3(0, 2, 3), det3(0, 1, 3), -det3(0, 1, 2)], axis=-1)
 
 

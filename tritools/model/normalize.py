@@ -161,8 +161,11 @@ def _rho_floor(C: np.ndarray, x: np.ndarray) -> np.ndarray:
     finite pixel scale)."""
     ps = pixel_scales(C, x)
     med = _nanmedian_rows(np.where(np.isfinite(ps) & (ps > 0), ps, np.nan))
+    good = np.isfinite(med) & (med > 0)
+    if good.all():                  # (the fallback would not be used)
+        return RHO_FLOOR_REL * med
     fallback = 1e-4 * np.maximum(1.0, median_rows(np.abs(x.reshape(len(x), -1))))
-    return np.where(np.isfinite(med) & (med > 0), RHO_FLOOR_REL * med, fallback)
+    return np.where(good, RHO_FLOOR_REL * med, fallback)
 
 
 #: the last stack of one normalised, (key, NormalizationStack): a single call whose stages normalise the same data

@@ -12,6 +12,8 @@ duplicated views, zero noise.
 """
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pytest
 
@@ -162,3 +164,17 @@ def test_point_report_equals_its_per_view_reference(name, C, x):
                                       equal_nan=True)
                 if np.all(np.isfinite(ref)):
                     assert rep.gamma == pytest.approx(gamma(X, C, regions), rel=1e-12)
+
+
+@pytest.mark.parametrize("n", [1, 2, 3, 4, 7])
+def test_nanmedian_rows_equals_numpy(n):
+    rng = np.random.default_rng(10 + n)
+    for k in range(200):
+        a = _arrays(rng, (5, n)) if k % 2 else rng.normal(size=(5, n))
+        a[rng.random((5, n)) < 0.3] = np.nan
+        if k % 3 == 0:
+            a[k % 5] = np.nan                                       # an all-NaN row now and then
+        with warnings.catch_warnings(), np.errstate(all="ignore"):
+            warnings.simplefilter("ignore", RuntimeWarning)         # numpy warns on an all-NaN row
+            ref = np.nanmedian(a, axis=1)
+        assert np.array_equal(NZ._nanmedian_rows(a), ref, equal_nan=True)

@@ -151,8 +151,9 @@ def _nanmedian_rows(a: np.ndarray) -> np.ndarray:
     k = np.sum(~np.isnan(a), axis=1)
     if s.shape[1] == 0:
         return np.full(len(a), np.nan)
-    lo = np.take_along_axis(s, np.maximum((k - 1) // 2, 0)[:, None], axis=1)[:, 0]
-    hi = np.take_along_axis(s, (k // 2)[:, None], axis=1)[:, 0]         # k <= N, so k // 2 < N
+    rows = np.arange(len(a))
+    lo = s[rows, np.maximum((k - 1) // 2, 0)]
+    hi = s[rows, k // 2]                                             # k <= N, so k // 2 < N
     return np.where(k > 0, (lo + hi) / 2, np.nan)
 
 

@@ -178,3 +178,10 @@ def test_nanmedian_rows_equals_numpy(n):
             warnings.simplefilter("ignore", RuntimeWarning)         # numpy warns on an all-NaN row
             ref = np.nanmedian(a, axis=1)
         assert np.array_equal(NZ._nanmedian_rows(a), ref, equal_nan=True)
+
+
+def test_clip_scale_equals_numpy_clip():
+    rng = np.random.default_rng(5)
+    s = np.concatenate([10.0 ** rng.uniform(-12, 12, 500), [0.0, -0.0, np.inf, -np.inf, np.nan, 1e-8, 1e8]])
+    assert np.array_equal(NZ._clip_scale(s), np.clip(s, *NZ.SCALE_BOUNDS), equal_nan=True)
+    assert np.array_equal(np.signbit(NZ._clip_scale(s)), np.signbit(np.clip(s, *NZ.SCALE_BOUNDS)))

@@ -217,11 +217,17 @@ def _normalization_stack(C: np.ndarray, x: np.ndarray, ok: np.ndarray) -> Normal
     r = np.sqrt(np.add.reduce(np.add.reduce(np.where(fin[:, None, None], u, 0.0) ** 2, axis=2), axis=1) / N) / s
     use = ok_r & fin & np.isfinite(r)
     rho_ref = np.where(use, np.maximum(np.minimum(r, rho), rho_floor), rho)
-    s_new = np.clip(1.0 / rho_ref, *SCALE_BOUNDS)
+    s_new = _clip_scale(1.0 / rho_ref)
     Cn[:, :, :2, :] *= (s_new / s)[:, None, None, None]
     Cn /= norms(Cn, axis=(2, 3))[..., None, None]
     return NormalizationStack(s_new, x.copy(), X0, d, Cn, np.where(use[:, None], Xn, 0.0), ok,
                               resolutions(s_new, x), use & converged)
+
+
+def _clip_scale(s: np.ndarray) -> np.ndarray:
+    """``np.clip(s, *SCALE_BOUNDS)`` as the two ufuncs it is made of (max, then min; NaN stays NaN), without
+    clip's per-call overhead."""
+    return np.minimum(np.maximum(s, SCALE_BOUNDS[0]), SCALE_BOUNDS[1])
 
 
 def _frames(C: np.ndarray, x: np.ndarray, X0: np.ndarray, ok: np.ndarray, rho_floor: np.ndarray) -> tuple:
@@ -233,7 +239,7 @@ def _frames(C: np.ndarray, x: np.ndarray, X0: np.ndarray, ok: np.ndarray, rho_fl
     res = np.where(fin0[:, None], norms(u0 - x, axis=2), np.inf)
     rho = np.where(fin0, np.sqrt(np.add.reduce(np.where(fin0[:, None], res, 0.0) ** 2, axis=1) / N), 1.0)
     rho = np.maximum(rho, rho_floor)
-    s = np.clip(1.0 / rho, *SCALE_BOUNDS)
+    s = _clip_scale(1.0 / rho)
     a = null_vectors(C)
     a = a / norms(a, axis=2, keepdims=True)
     affine = ~(np.abs(a[..., 3]) > POINT_AT_INFINITY_RTOL)

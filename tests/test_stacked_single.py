@@ -185,3 +185,23 @@ def test_clip_scale_equals_numpy_clip():
     s = np.concatenate([10.0 ** rng.uniform(-12, 12, 500), [0.0, -0.0, np.inf, -np.inf, np.nan, 1e-8, 1e8]])
     assert np.array_equal(NZ._clip_scale(s), np.clip(s, *NZ.SCALE_BOUNDS), equal_nan=True)
     assert np.array_equal(np.signbit(NZ._clip_scale(s)), np.signbit(np.clip(s, *NZ.SCALE_BOUNDS)))
+
+
+@pytest.mark.slow
+def test_singlecall_benchmark_script_runs(capsys):
+    """benchmarks/singlecall.py (issue #22's figures) on reduced sizes: one row per track kind, positive times, and
+    the ratio column their quotient."""
+    import importlib.util
+    import pathlib
+
+    path = pathlib.Path(__file__).resolve().parents[1] / "benchmarks" / "singlecall.py"
+    spec = importlib.util.spec_from_file_location("singlecall", path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    mod.main(["--points", "4", "--repeats", "1", "--calls"])
+    rows = [r for r in capsys.readouterr().out.splitlines() if r.startswith("| points") or r.startswith("| 1 px")]
+    assert len(rows) == 4
+    for r in rows:
+        single, many, ratio, calls = (float(c) for c in r.strip("|").split("|")[1:])
+        assert single > 0 and many > 0 and calls > 100
+        assert ratio == pytest.approx(single / many, rel=0.05, abs=0.2)      # (printed rounded)

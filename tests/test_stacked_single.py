@@ -187,7 +187,6 @@ def test_clip_scale_equals_numpy_clip():
     assert np.array_equal(np.signbit(NZ._clip_scale(s)), np.signbit(np.clip(s, *NZ.SCALE_BOUNDS)))
 
 
-@pytest.mark.slow
 def test_singlecall_benchmark_script_runs(capsys):
     """benchmarks/singlecall.py (issue #22's figures) on reduced sizes: one row per track kind, positive times, and
     the ratio column their quotient."""

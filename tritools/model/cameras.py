@@ -124,7 +124,7 @@ def power2_scale(A: np.ndarray, axes: tuple) -> np.ndarray:
     """The power of two at or just above the largest absolute entry over ``axes`` (kept as size-1
     axes), 1 where that entry is 0 or not finite.  Dividing by it is exact (barring underflow) and
     brings the entries into [-1, 1], so that later products and norms cannot overflow."""
-    m = np.max(np.abs(A), axis=axes, keepdims=True)
+    m = np.abs(A).max(axis=axes, keepdims=True)
     ok = (m > 0) & np.isfinite(m)
     return np.where(ok, np.ldexp(1.0, np.frexp(np.where(ok, m, 1.0))[1]), 1.0)
 
@@ -163,17 +163,24 @@ def camera_rank_ratio(cameras) -> np.ndarray:
     C = real_array(cameras, "cameras")
     if C.ndim < 2 or C.shape[-2:] != (3, 4):
         raise ValueError(f"cameras must have shape (..., 3, 4), got {C.shape}")
-    finite = np.all(np.isfinite(C), axis=(-2, -1))
+    return _rank_ratio(C)
+
+
+def _rank_ratio(C: np.ndarray) -> np.ndarray:
+    """:func:`camera_rank_ratio` of a float array (..., 3, 4) already checked (the three rows scaled to unit norm
+    in one :func:`unit_rows` call: the same operations, row by row)."""
+    finite = np.isfinite(C).all(axis=(-2, -1))
     C = np.where(finite[..., None, None], C, 0.0)
     C = C / power2_scale(C, (-2, -1))
-    u3, has3 = unit_rows(C[..., 2, :])
-    q, ok = [], has3
+    rows, nonzero = unit_rows(C)
+    u3, ok = rows[..., 2, :], nonzero[..., 2]
+    q = []
     for k in (0, 1):
-        r, nonzero = unit_rows(C[..., k, :])
+        r = rows[..., k, :]
         p = r - np.sum(r * u3, axis=-1, keepdims=True) * u3
         p = p - np.sum(p * u3, axis=-1, keepdims=True) * u3          # twice is enough
         pn = np.sqrt(np.sum(p * p, axis=-1))
-        ok = ok & nonzero & (pn > CAMERA_RANK_RTOL)
+        ok = ok & nonzero[..., k] & (pn > CAMERA_RANK_RTOL)
         q.append(p / np.where(pn > 0, pn, 1.0)[..., None])
     s = np.where(np.sum(q[0] * q[1], axis=-1) < 0, -1.0, 1.0)[..., None]
     num = np.sqrt(np.sum((q[0] - s * q[1]) ** 2, axis=-1))
@@ -201,6 +208,11 @@ def cameras_all_equal(cameras) -> np.ndarray:
     C = real_array(cameras, "cameras")
     if C.ndim < 3 or C.shape[-2:] != (3, 4):
         raise ValueError(f"cameras must have shape (..., N, 3, 4), got {C.shape}")
+    return _all_equal(C)
+
+
+def _all_equal(C: np.ndarray) -> np.ndarray:
+    """:func:`cameras_all_equal` of a finite float array (..., N, 3, 4) already checked."""
     U = C / power2_scale(C, (-2, -1))
     n = np.sqrt(np.sum(U * U, axis=(-2, -1), keepdims=True))
     U = U / np.where(n > 0, n, 1.0)
@@ -257,14 +269,14 @@ def validate_cameras(cameras: ArrayLike, *, min_views: int = 2, require_distinct
         raise ValueError(f"cameras must have shape (N, 3, 4), got {C.shape}")
     if C.shape[0] < min_views:
         raise ValueError(f"cameras: at least {min_views} views are needed, got {C.shape[0]}")
-    finite = np.all(np.isfinite(C), axis=(1, 2))
-    if not np.all(finite):
+    finite = np.isfinite(C).all(axis=(1, 2))
+    if not finite.all():
         raise ValueError(f"cameras[{int(np.argmin(finite))}] contains NaN or inf")
-    ratio = camera_rank_ratio(C)
+    ratio = _rank_ratio(C)
     for i, r in enumerate(ratio):
         if not r > CAMERA_RANK_RTOL:
             raise ValueError(_rank_message(f"cameras[{i}]", float(r)))
-    if require_distinct and C.shape[0] >= 2 and cameras_all_equal(C):
+    if require_distinct and C.shape[0] >= 2 and _all_equal(C):
         raise ValueError("cameras are all equal up to scale: the triangulation is ill-posed")
     return C
 
@@ -398,6 +410,16 @@ def depths(X: ArrayLike, cameras: ArrayLike, world_frame: WorldFrame | str = Wor
     return out[0] if single else out
 
 
+def depths_validated(X: np.ndarray, cameras: np.ndarray, world_frame: WorldFrame | str = WorldFrame.RIGHT_HANDED
+                     ) -> np.ndarray:
+    """:func:`depths` of one point X (3,) for cameras (N, 3, 4) already validated (:func:`validate_cameras`) and
+    converted to float: the same numbers without checking the cameras again."""
+    h = as_world_frame(world_frame).sign
+    Xh = np.hstack([np.asarray(X, float)[None], np.ones((1, 1))])
+    with np.errstate(over="ignore", invalid="ignore"):
+        return (h * np.einsum("mj,nj->mn", Xh, depth_rows(cameras)))[0]
+
+
 def depths_stack(cameras: ArrayLike, X: ArrayLike,
                  world_frame: WorldFrame | str = WorldFrame.RIGHT_HANDED) -> np.ndarray:
     """:func:`depths` for M problems at once: cameras (M, N, 3, 4), X (M, 3) -> (M, N), the depth
@@ -416,8 +438,15 @@ def depths_stack(cameras: ArrayLike, X: ArrayLike,
         raise ValueError(f"cameras must have shape (M, N, 3, 4), got {C.shape}")
     if A.shape != (C.shape[0], 3):
         raise ValueError(f"X must have shape ({C.shape[0]}, 3), one point per problem, got {A.shape}")
+    return depths_stack_arrays(C, A, world_frame)
+
+
+def depths_stack_arrays(C: np.ndarray, X: np.ndarray, world_frame: WorldFrame | str = WorldFrame.RIGHT_HANDED
+                        ) -> np.ndarray:
+    """:func:`depths_stack` of float arrays C (M, N, 3, 4) and X (M, 3) whose shapes are known to be right (the
+    vectorised report): the formula without the checks."""
     h = as_world_frame(world_frame).sign
-    Xh = np.concatenate([A, np.ones((len(A), 1))], axis=1)
+    Xh = np.concatenate([X, np.ones((len(X), 1))], axis=1)
     with np.errstate(over="ignore", invalid="ignore"):
         return h * np.einsum("mj,mnj->mn", Xh, depth_rows(C))
 

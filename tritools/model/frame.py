@@ -21,6 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .cameras import power2_scale
+from .stacked import norms
 
 __all__ = ["WorldFrame", "world_frame", "frame_centre_groups", "RECENTRE_RATIO", "RESOLVED_SPREAD_RTOL"]
 
@@ -56,7 +57,23 @@ class WorldFrame:
 
 
 def _centres(cameras: np.ndarray) -> np.ndarray:
-    """Finite camera centres (K, 3) from the null vectors of the cameras (rows scaled to unit norm)."""
+    """Finite camera centres (K, 3) from the null vectors of the cameras (rows scaled to unit norm): one batched
+    SVD of the stack (the same LAPACK routine per camera as a loop of single SVDs, so the same numbers), a loop
+    only when the batch fails (:func:`_centres_loop`)."""
+    C = np.asarray(cameras, float)
+    with np.errstate(all="ignore"):
+        A = C / np.maximum(norms(C, axis=2, keepdims=True), 1e-300)
+        try:
+            w = np.linalg.svd(A)[2][:, -1]
+        except np.linalg.LinAlgError:
+            return _centres_loop(C)
+        keep = (np.abs(w[:, 3]) > 1e-300) & np.isfinite(w).all(axis=1)
+        c = w[keep, :3] / w[keep, 3:]
+    return c[np.isfinite(c).all(axis=1)].reshape(-1, 3)
+
+
+def _centres_loop(cameras: np.ndarray) -> np.ndarray:
+    """:func:`_centres` camera by camera (a camera whose SVD fails is skipped)."""
     out = []
     for P in np.asarray(cameras, float):
         with np.errstate(all="ignore"):
@@ -78,7 +95,7 @@ def world_frame(cameras) -> WorldFrame:
     if len(c) < 2:
         return WorldFrame(np.zeros(3))
     mean = c.mean(axis=0)
-    spread = float(np.max(np.linalg.norm(c - mean, axis=1)))
+    spread = float(np.max(norms(c - mean, axis=1)))
     far = float(np.linalg.norm(mean))
     if not np.isfinite(spread) or far <= RECENTRE_RATIO * spread or spread <= RESOLVED_SPREAD_RTOL * far:
         return WorldFrame(np.zeros(3))

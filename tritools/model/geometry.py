@@ -74,9 +74,25 @@ def project_homogeneous(Xh: np.ndarray, P: np.ndarray) -> np.ndarray:
     non-finite points.  ``P`` and each ``Xh`` row are first divided by a power of two near their
     largest entry (``Phi`` does not depend on either scale; the result is the same to the last
     bit unless a product would have overflowed)."""
-    finite = np.all(np.isfinite(Xh), axis=1)
+    return _project_scaled(*_scaled_points(Xh), P)
+
+
+def project_views(Xh: np.ndarray, cameras) -> list:
+    """``[project_homogeneous(Xh, P) for P in cameras]`` with the points scaled once (the same operations per
+    camera, so the same numbers)."""
+    Xs, finite = _scaled_points(Xh)
+    return [_project_scaled(Xs, finite, P) for P in cameras]
+
+
+def _scaled_points(Xh: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(Xh's finite rows divided by a power of two near their largest entry, 0 elsewhere; the finite mask)."""
+    finite = np.isfinite(Xh).all(axis=1)
     Xs = np.where(finite[:, None], Xh, 0.0)
-    Xs = Xs / power2_scale(Xs, (1,))
+    return Xs / power2_scale(Xs, (1,)), finite
+
+
+def _project_scaled(Xs: np.ndarray, finite: np.ndarray, P: np.ndarray) -> np.ndarray:
+    """:func:`project_homogeneous` of the scaled points of :func:`_scaled_points`."""
     Ps = P / power2_scale(P, (0, 1))
     h = Xs @ Ps.T
     den = h[:, 2]

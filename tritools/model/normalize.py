@@ -47,7 +47,7 @@ import numpy as np
 
 from .cameras import power2_scale
 from .geometry import COMMON_CENTRE_RTOL, POINT_AT_INFINITY_RTOL, point_from_image_points
-from .stacked import dlt_stack, null_vectors, pixel_scales, project_stack, refine_points_stack
+from .stacked import dlt_stack, median_rows, norms, null_vectors, pixel_scales, project_stack, refine_points_stack
 
 __all__ = ["Normalization", "NormalizationStack", "normalization_for", "normalization_stack", "unconstrained_reason",
            "resolutions", "RHO_FLOOR_REL", "RESOLUTION_REL", "DEPTH_FLOOR_REL",
@@ -139,7 +139,7 @@ def resolutions(scale: np.ndarray, x: np.ndarray) -> np.ndarray:
     """s RESOLUTION_REL max(1, median |x|) per problem (x (M, N, 2)): the coordinates' resolution in normalised
     units (module docstring)."""
     with np.errstate(all="ignore"):
-        mag = np.median(np.abs(x.reshape(len(x), -1)), axis=1) if x.size else np.ones(len(x))
+        mag = median_rows(np.abs(x.reshape(len(x), -1))) if x.size else np.ones(len(x))
         out = np.asarray(scale, float) * RESOLUTION_REL * np.maximum(1.0, np.where(np.isfinite(mag), mag, 1.0))
     return np.where(np.isfinite(out) & (out > 0), out, np.inf)
 
@@ -151,8 +151,9 @@ def _nanmedian_rows(a: np.ndarray) -> np.ndarray:
     k = np.sum(~np.isnan(a), axis=1)
     if s.shape[1] == 0:
         return np.full(len(a), np.nan)
-    lo = np.take_along_axis(s, np.maximum((k - 1) // 2, 0)[:, None], axis=1)[:, 0]
-    hi = np.take_along_axis(s, (k // 2)[:, None], axis=1)[:, 0]         # k <= N, so k // 2 < N
+    rows = np.arange(len(a))
+    lo = s[rows, np.maximum((k - 1) // 2, 0)]
+    hi = s[rows, k // 2]                                             # k <= N, so k // 2 < N
     return np.where(k > 0, (lo + hi) / 2, np.nan)
 
 
@@ -161,39 +162,94 @@ def _rho_floor(C: np.ndarray, x: np.ndarray) -> np.ndarray:
     finite pixel scale)."""
     ps = pixel_scales(C, x)
     med = _nanmedian_rows(np.where(np.isfinite(ps) & (ps > 0), ps, np.nan))
-    fallback = 1e-4 * np.maximum(1.0, np.median(np.abs(x.reshape(len(x), -1)), axis=1))
-    return np.where(np.isfinite(med) & (med > 0), RHO_FLOOR_REL * med, fallback)
+    good = np.isfinite(med) & (med > 0)
+    if good.all():                  # (the fallback would not be used)
+        return RHO_FLOOR_REL * med
+    fallback = 1e-4 * np.maximum(1.0, median_rows(np.abs(x.reshape(len(x), -1))))
+    return np.where(good, RHO_FLOOR_REL * med, fallback)
+
+
+#: the last stack of one normalised, (key, NormalizationStack): a single call whose stages normalise the same data
+#: twice (the vectorised disc verification, then the report) computes it once.  Replaced, never mutated (a reader
+#: sees the old or the new pair); hits are returned as copies, so no caller can change what another one gets.
+_LAST_SINGLE: list = [None]
 
 
 def normalization_stack(C: np.ndarray, x: np.ndarray, ok: np.ndarray | None = None) -> NormalizationStack:
     """The normalisation of the module docstring for M problems: cameras C (M, N, 3, 4), points x (M, N, 2)
-    (the regions' centres)."""
-    M, N = x.shape[:2]
+    (the regions' centres).  A stack of one is remembered (``_LAST_SINGLE``): the function is deterministic, so
+    the same data give a copy of the same arrays."""
+    M = x.shape[0]
     ok = np.ones(M, bool) if ok is None else ok.copy()
+    if M != 1:
+        return _normalization_stack(C, x, ok)
+    key = (C.dtype.str, C.shape, C.tobytes(), x.dtype.str, x.shape, x.tobytes(), ok.tobytes())
+    last = _LAST_SINGLE[0]
+    if last is not None and last[0] == key:
+        return _copied(last[1])
+    st = _normalization_stack(C, x, ok)
+    _LAST_SINGLE[0] = (key, _copied(st))
+    return st
+
+
+def _copied(st: NormalizationStack) -> NormalizationStack:
+    return NormalizationStack(*(None if a is None else a.copy() for a in
+                                (st.scale, st.shifts, st.origin, st.depth, st.cameras_n, st.Xn, st.ok, st.resolution,
+                                 st.converged)))
+
+
+def _normalization_stack(C: np.ndarray, x: np.ndarray, ok: np.ndarray) -> NormalizationStack:
+    """:func:`normalization_stack` computed (``ok`` a copy the function may change)."""
+    M, N = x.shape[:2]
     C = C / power2_scale(C, (2, 3))     # each camera by a power of two near its largest entry: exact, projectively
     X0, ok_dlt = dlt_stack(C, x)        # the same camera, and no product below overflows (cameras x 1e300)
     ok &= ok_dlt
     rho_floor = _rho_floor(C, x)
+    with np.errstate(over="ignore", invalid="ignore"):
+        s, rho, X0, d, Cn = _frames(C, x, X0, ok, rho_floor)
+    ok &= np.isfinite(Cn).all(axis=(1, 2, 3))
+    Cn = np.where(ok[:, None, None, None], Cn, np.eye(3, 4))
+    # the scale from the residual of the locally refined estimate: refine from the DLT point (Xn = 0), then
+    # the exact image similarity x' -> k x', k = s_new / s
+    Xn, ok_r, converged = refine_points_stack(Cn, np.zeros((M, N, 2)), np.zeros((M, 3)), ok.copy(),
+                                              return_converged=True)
+    u, _, fin = project_stack(Cn, Xn)
+    r = np.sqrt(np.add.reduce(np.add.reduce(np.where(fin[:, None, None], u, 0.0) ** 2, axis=2), axis=1) / N) / s
+    use = ok_r & fin & np.isfinite(r)
+    rho_ref = np.where(use, np.maximum(np.minimum(r, rho), rho_floor), rho)
+    s_new = _clip_scale(1.0 / rho_ref)
+    Cn[:, :, :2, :] *= (s_new / s)[:, None, None, None]
+    Cn /= norms(Cn, axis=(2, 3))[..., None, None]
+    return NormalizationStack(s_new, x.copy(), X0, d, Cn, np.where(use[:, None], Xn, 0.0), ok,
+                              resolutions(s_new, x), use & converged)
+
+
+def _clip_scale(s: np.ndarray) -> np.ndarray:
+    """``np.clip(s, *SCALE_BOUNDS)`` as the two ufuncs it is made of (max, then min; NaN stays NaN), without
+    clip's per-call overhead."""
+    return np.minimum(np.maximum(s, SCALE_BOUNDS[0]), SCALE_BOUNDS[1])
+
+
+def _frames(C: np.ndarray, x: np.ndarray, X0: np.ndarray, ok: np.ndarray, rho_floor: np.ndarray) -> tuple:
+    """(s, rho, X0, d, Cn) of :func:`normalization_stack` from the DLT points X0 (``ok`` updated in place): the
+    image scale s = 1 / rho from the DLT residual, the world frame (origin X0, scale d) and the normalised cameras
+    P_i' = T_i P_i H / ||.||_F.  Run under ``np.errstate(over="ignore", invalid="ignore")``."""
+    M, N = x.shape[:2]
     u0, _, fin0 = project_stack(C, X0)
-    with np.errstate(over="ignore", invalid="ignore"):
-        res = np.where(fin0[:, None], np.linalg.norm(u0 - x, axis=2), np.inf)
-        rho = np.where(fin0, np.sqrt(np.mean(np.where(fin0[:, None], res, 0.0) ** 2, axis=1)), 1.0)
+    res = np.where(fin0[:, None], norms(u0 - x, axis=2), np.inf)
+    rho = np.where(fin0, np.sqrt(np.add.reduce(np.where(fin0[:, None], res, 0.0) ** 2, axis=1) / N), 1.0)
     rho = np.maximum(rho, rho_floor)
-    s = np.clip(1.0 / rho, *SCALE_BOUNDS)
+    s = _clip_scale(1.0 / rho)
     a = null_vectors(C)
-    with np.errstate(over="ignore", invalid="ignore"):
-        a = a / np.linalg.norm(a, axis=2, keepdims=True)
+    a = a / norms(a, axis=2, keepdims=True)
     affine = ~(np.abs(a[..., 3]) > POINT_AT_INFINITY_RTOL)
-    ok &= ~np.any(affine, axis=1)
-    with np.errstate(over="ignore", invalid="ignore"):
-        centres = a[..., :3] / np.where(affine, 1.0, a[..., 3])[..., None]
+    ok &= ~affine.any(axis=1)
+    centres = a[..., :3] / np.where(affine, 1.0, a[..., 3])[..., None]
     X0 = _off_a_common_centre(C, x, a, X0, ok)
-    with np.errstate(over="ignore", invalid="ignore"):
-        d = np.median(np.linalg.norm(centres - X0[:, None], axis=2), axis=1)
+    d = median_rows(norms(centres - X0[:, None], axis=2))
     # floored relative to |X0| (any d > 0 is an exact change of frame): when every view has one centre, the
     # DLT point *is* that centre and d ~ 1e-15 would map every normalised point onto it
-    d = np.where(np.isfinite(d) & (d > 0), np.maximum(d, DEPTH_FLOOR_REL * np.maximum(1.0, np.linalg.norm(X0, axis=1))),
-                 1.0)
+    d = np.where(np.isfinite(d) & (d > 0), np.maximum(d, DEPTH_FLOOR_REL * np.maximum(1.0, norms(X0, axis=1))), 1.0)
     # P_i' = T_i P_i H / ||.||_F with T_i = [[s, 0, -s t_i], [0, s, -s t_i'], [0, 0, 1]], H = [[d I, X0], [0, 1]]
     Xh = np.concatenate([X0, np.ones((M, 1))], axis=1)
     CH = C.copy()
@@ -201,23 +257,8 @@ def normalization_stack(C: np.ndarray, x: np.ndarray, ok: np.ndarray | None = No
     CH[..., 3] = np.einsum("mnij,mj->mni", C, Xh)
     Cn = CH.copy()
     Cn[:, :, :2, :] = s[:, None, None, None] * (CH[:, :, :2, :] - x[..., None] * CH[:, :, 2:3, :])
-    with np.errstate(over="ignore", invalid="ignore"):
-        Cn /= np.linalg.norm(Cn, axis=(2, 3))[..., None, None]
-    ok &= np.all(np.isfinite(Cn), axis=(1, 2, 3))
-    Cn = np.where(ok[:, None, None, None], Cn, np.eye(3, 4))
-    # the scale from the residual of the locally refined estimate: refine from the DLT point (Xn = 0), then
-    # the exact image similarity x' -> k x', k = s_new / s
-    Xn, ok_r, converged = refine_points_stack(Cn, np.zeros((M, N, 2)), np.zeros((M, 3)), ok.copy(),
-                                              return_converged=True)
-    u, _, fin = project_stack(Cn, Xn)
-    r = np.sqrt(np.mean(np.sum(np.where(fin[:, None, None], u, 0.0) ** 2, axis=2), axis=1)) / s
-    use = ok_r & fin & np.isfinite(r)
-    rho_ref = np.where(use, np.maximum(np.minimum(r, rho), rho_floor), rho)
-    s_new = np.clip(1.0 / rho_ref, *SCALE_BOUNDS)
-    Cn[:, :, :2, :] *= (s_new / s)[:, None, None, None]
-    Cn /= np.linalg.norm(Cn, axis=(2, 3))[..., None, None]
-    return NormalizationStack(s_new, x.copy(), X0, d, Cn, np.where(use[:, None], Xn, 0.0), ok,
-                              resolutions(s_new, x), use & converged)
+    Cn /= norms(Cn, axis=(2, 3))[..., None, None]
+    return s, rho, X0, d, Cn
 
 
 def _off_a_common_centre(C: np.ndarray, x: np.ndarray, a: np.ndarray, X0: np.ndarray, ok: np.ndarray) -> np.ndarray:

@@ -24,12 +24,39 @@ import numpy as np
 from .geometry import POINT_AT_INFINITY_RTOL, PROJECTION_DENOM_RTOL, SAME_CENTER_RTOL
 
 __all__ = ["null_vectors", "dlt_stack", "project_stack", "refine_points_stack", "fundamental_stack",
-           "epipolar_quadratics", "pixel_scales", "view_pairs", "band_pairs", "LM_MAX_ITER", "LM_STEP_RTOL"]
+           "epipolar_quadratics", "pixel_scales", "view_pairs", "band_pairs", "norms", "median_rows", "LM_MAX_ITER",
+           "LM_STEP_RTOL"]
 
 #: Levenberg-Marquardt iterations at most (from the DLT start it converges in ~5-10).
 LM_MAX_ITER = 100
 #: a problem's iteration stops when its step is below LM_STEP_RTOL * (1 + ||X||) (normalised units, X ~ 1).
 LM_STEP_RTOL = 1e-13
+
+
+#: the 3x3 identity of the damped step (read-only: one array, not one per iteration).
+_EYE3 = np.eye(3)
+_EYE3.flags.writeable = False
+
+
+def norms(a: np.ndarray, axis, keepdims: bool = False) -> np.ndarray:
+    """``numpy.linalg.norm(a, axis=axis, keepdims=keepdims)`` (2-norm of vectors, Frobenius of matrices) of a real
+    float array, without its per-call overhead: the same operations, sqrt(add.reduce(a * a)), so bit-identical
+    (tests/test_stacked_single.py)."""
+    return np.sqrt(np.add.reduce(a * a, axis=axis, keepdims=keepdims))
+
+
+def median_rows(a: np.ndarray) -> np.ndarray:
+    """``numpy.median(a, axis=1)`` of a 2-D float array, without its per-call overhead (3 numpy calls instead of
+    ~30): the middle order statistic(s) of each row, (lo + hi) / 2 as numpy's mean of the two middle ones (lo / 1
+    for an odd length), NaN for a row holding a NaN (NaNs sort last) or an empty row; bit-identical
+    (tests/test_stacked_single.py)."""
+    M, n = a.shape
+    if n == 0:
+        return np.full(M, np.nan)
+    s = np.sort(a, axis=1)
+    lo, hi = s[:, (n - 1) // 2], s[:, n // 2]
+    med = lo if n % 2 else (lo + hi) / 2
+    return np.where(np.isnan(s[:, -1]), np.nan, med)
 
 
 @functools.lru_cache(maxsize=256)
@@ -43,11 +70,13 @@ def view_pairs(N: int) -> tuple[np.ndarray, np.ndarray]:
 def null_vectors(P: np.ndarray) -> np.ndarray:
     """Null vectors a (P a = 0) of a stack of 3x4 matrices (..., 3, 4), from the signed 3x3 minors
     (a_k = (-1)^k det P[:, columns != k]); ||a||^2 = det(P P^T) (Cauchy-Binet), 0 iff rank P < 3."""
-    def det3(c0, c1, c2):
-        A = np.stack([P[..., :, c0], P[..., :, c1], P[..., :, c2]], axis=-1)
-        return (A[..., 0, 0] * (A[..., 1, 1] * A[..., 2, 2] - A[..., 1, 2] * A[..., 2, 1])
-                - A[..., 0, 1] * (A[..., 1, 0] * A[..., 2, 2] - A[..., 1, 2] * A[..., 2, 0])
-                + A[..., 0, 2] * (A[..., 1, 0] * A[..., 2, 1] - A[..., 1, 1] * A[..., 2, 0]))
+    E = [[P[..., r, c] for c in range(4)] for r in range(3)]     # the 12 entries, each read once
+
+    def det3(c0, c1, c2):           # the minor of columns c0, c1, c2
+        (a00, a01, a02), (a10, a11, a12), (a20, a21, a22) = ((row[c0], row[c1], row[c2]) for row in E)
+        return (a00 * (a11 * a22 - a12 * a21)
+                - a01 * (a10 * a22 - a12 * a20)
+                + a02 * (a10 * a21 - a11 * a20))
     return np.stack([det3(1, 2, 3), -det3(0, 2, 3), det3(0, 1, 3), -det3(0, 1, 2)], axis=-1)
 
 
@@ -59,8 +88,9 @@ def _smallest_eigvec(A: np.ndarray) -> np.ndarray:
 
 def dlt_stack(C: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """:func:`tritools.model.geometry.dlt` for a stack: C (M, N, 3, 4), x (M, N, 2) -> (X (M, 3), ok (M,))."""
-    c = x.mean(axis=1)
-    dist = np.linalg.norm(x - c[:, None], axis=2).mean(axis=1)
+    N = x.shape[1]
+    c = np.add.reduce(x, axis=1) / N                            # x.mean(axis=1), the same operations
+    dist = np.add.reduce(norms(x - c[:, None], axis=2), axis=1) / N
     cmax = np.abs(c).max(axis=1)
     small = dist <= 1e-12 * (1.0 + cmax)
     s = np.where(small, 1.0 / (1.0 + cmax), np.sqrt(2.0) / np.where(small, 1.0, dist))
@@ -71,8 +101,8 @@ def dlt_stack(C: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     xn = s[:, None, None] * (x - c[:, None])
     Cn = np.einsum("mab,mnbc->mnac", T, C)
     A = (Cn[:, :, :2, :] - xn[..., None] * Cn[:, :, 2:3, :]).reshape(len(x), -1, 4)
-    norms = np.linalg.norm(A, axis=2, keepdims=True)
-    A = A / np.where(norms > 0, norms, 1.0)
+    nA = norms(A, axis=2, keepdims=True)
+    A = A / np.where(nA > 0, nA, 1.0)
     w = _smallest_eigvec(A)
     ok = np.abs(w[:, 3]) > POINT_AT_INFINITY_RTOL
     return w[:, :3] / np.where(ok, w[:, 3], 1.0)[:, None], ok
@@ -80,20 +110,28 @@ def dlt_stack(C: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 def project_stack(C: np.ndarray, X: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Projections Phi(X_m, P_mi) (M, N, 2), homogeneous images (M, N, 3) and a finite mask (M,)."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        return _project(C, X)
+
+
+def _project(C: np.ndarray, X: np.ndarray, absC2: np.ndarray | None = None) -> tuple:
+    """:func:`project_stack` for a caller that already ignores overflow and invalid operations (one
+    ``np.errstate`` around a loop instead of one per projection); ``absC2``: |C[:, :, 2, :]| when the caller
+    has it (the cameras of a loop do not change)."""
     Xh = np.concatenate([X, np.ones((len(X), 1))], axis=1)
     h = np.einsum("mnij,mj->mni", C, Xh)
     den = h[..., 2]
-    tiny = np.abs(den) <= PROJECTION_DENOM_RTOL * np.einsum("mnj,mj->mn", np.abs(C[:, :, 2, :]), np.abs(Xh))
-    with np.errstate(over="ignore", invalid="ignore"):
-        x = h[..., :2] / np.where(tiny, 1.0, den)[..., None]
-    ok = ~np.any(tiny, axis=1) & np.all(np.isfinite(x), axis=(1, 2))
+    absC2 = np.abs(C[:, :, 2, :]) if absC2 is None else absC2
+    tiny = np.abs(den) <= PROJECTION_DENOM_RTOL * np.einsum("mnj,mj->mn", absC2, np.abs(Xh))
+    x = h[..., :2] / np.where(tiny, 1.0, den)[..., None]
+    ok = ~tiny.any(axis=1) & np.isfinite(x).all(axis=(1, 2))
     return x, h, ok
 
 
 def damped_step(JtJ: np.ndarray, g: np.ndarray, mu: np.ndarray) -> np.ndarray:
     """The Levenberg-Marquardt step -(J^T J + mu (1 + tr J^T J) / 3 I)^{-1} g for a stack (M, 3, 3), (M, 3),
     (M,), the damping scaled by (1 + tr J^T J) / 3; a pseudo-inverse where a system is singular."""
-    A = JtJ + mu[:, None, None] * np.eye(3) * (1.0 + np.trace(JtJ, axis1=1, axis2=2))[:, None, None] / 3
+    A = JtJ + mu[:, None, None] * _EYE3 * (1.0 + np.trace(JtJ, axis1=1, axis2=2))[:, None, None] / 3
     try:
         return -np.linalg.solve(A, g[..., None])[..., 0]
     except np.linalg.LinAlgError:
@@ -109,36 +147,50 @@ def refine_points_stack(C: np.ndarray, xhat: np.ndarray, X: np.ndarray, ok: np.n
     X = X.copy()
     converged = np.zeros(len(X), bool)
     mu = np.full(len(X), 1e-3)
-    u, h, fin = project_stack(C, X)
-    cost = np.where(fin, np.sum((u - xhat) ** 2, axis=(1, 2)), np.inf)
-    ok = ok & fin
-    active = np.nonzero(ok)[0]
-    for _ in range(LM_MAX_ITER):
-        if active.size == 0:
-            break
-        whole = active.size == len(X)       # no copies while every problem is still iterating
-        Ca, xa, Xa = (C, xhat, X) if whole else (C[active], xhat[active], X[active])
-        ua, ha = (u, h) if whole else (u[active], h[active])      # the projections at X, kept from the last step
-        # d Phi / d X = (P[:2, :3] - u P[2, :3]) / (P[2] . X~)
-        Jac = (Ca[..., :2, :3] - ua[..., None] * Ca[..., 2:3, :3]) / ha[..., 2][..., None, None]
-        Jac = Jac.reshape(len(active), -1, 3)
-        r = (ua - xa).reshape(len(active), -1)
-        JtJ = np.einsum("mki,mkj->mij", Jac, Jac)
-        g = np.einsum("mki,mk->mi", Jac, r)
-        step = damped_step(JtJ, g, mu[active])
-        Xt = Xa + step
-        ut, ht, fint = project_stack(Ca, Xt)
-        ct = np.where(fint, np.sum((ut - xa) ** 2, axis=(1, 2)), np.inf)
-        better = np.isfinite(ct) & (ct <= cost[active])
-        small = np.linalg.norm(step, axis=1) <= LM_STEP_RTOL * (1.0 + np.linalg.norm(Xa, axis=1))
-        acc = active[better]                # (Xa, ua may be views of X, u: updated only after their last use)
-        X[acc], cost[acc], u[acc], h[acc] = Xt[better], ct[better], ut[better], ht[better]
-        mu[active] = np.where(better, np.maximum(mu[active] / 10, 1e-12), mu[active] * 10)
-        stalled = mu[active] > 1e12
-        converged[active[small & ~stalled]] = True
-        active = active[~(small | stalled)]
-    ok = ok & np.all(np.isfinite(X), axis=1)
+    with np.errstate(over="ignore", invalid="ignore"):      # once, not once per projection
+        absC2 = np.abs(C[:, :, 2, :])
+        u, h, fin = _project(C, X, absC2)
+        cost = np.where(fin, np.add.reduce((u - xhat) ** 2, axis=(1, 2)), np.inf)
+        ok = ok & fin
+        active = np.nonzero(ok)[0]
+        for _ in range(LM_MAX_ITER):
+            if active.size == 0:
+                break
+            active = _lm_iteration(C, absC2, xhat, X, u, h, cost, mu, converged, active)
+    ok = ok & np.isfinite(X).all(axis=1)
     return (X, ok, converged & ok) if return_converged else (X, ok)
+
+
+def _lm_iteration(C, absC2, xhat, X, u, h, cost, mu, converged, active: np.ndarray) -> np.ndarray:
+    """One Levenberg-Marquardt iteration of :func:`refine_points_stack` on the ``active`` problems: X, u, h, cost,
+    mu and converged updated in place; the problems still iterating returned."""
+    whole = active.size == len(X)       # no copies while every problem is still iterating
+    Ca, xa, Xa, absCa = (C, xhat, X, absC2) if whole else (C[active], xhat[active], X[active], absC2[active])
+    ua, ha = (u, h) if whole else (u[active], h[active])      # the projections at X, kept from the last step
+    # d Phi / d X = (P[:2, :3] - u P[2, :3]) / (P[2] . X~)
+    Jac = (Ca[..., :2, :3] - ua[..., None] * Ca[..., 2:3, :3]) / ha[..., 2][..., None, None]
+    Jac = Jac.reshape(len(active), -1, 3)
+    r = (ua - xa).reshape(len(active), -1)
+    JtJ = np.einsum("mki,mkj->mij", Jac, Jac)
+    g = np.einsum("mki,mk->mi", Jac, r)
+    mu_a = mu if whole else mu[active]
+    step = damped_step(JtJ, g, mu_a)
+    Xt = Xa + step
+    ut, ht, fint = _project(Ca, Xt, absCa)
+    ct = np.where(fint, np.add.reduce((ut - xa) ** 2, axis=(1, 2)), np.inf)
+    better = np.isfinite(ct) & (ct <= (cost if whole else cost[active]))
+    small = norms(step, axis=1) <= LM_STEP_RTOL * (1.0 + norms(Xa, axis=1))
+    # (Xa, ua may be views of X, u: updated only after their last use)
+    if whole and better.all():          # every problem accepts its step: whole arrays, no fancy indexing
+        X[...], cost[...], u[...], h[...] = Xt, ct, ut, ht
+    else:
+        acc = active[better]
+        X[acc], cost[acc], u[acc], h[acc] = Xt[better], ct[better], ut[better], ht[better]
+    mu_a = np.where(better, np.maximum(mu_a / 10, 1e-12), mu_a * 10)
+    mu[active] = mu_a
+    stalled = mu_a > 1e12
+    converged[active[small & ~stalled]] = True
+    return active[~(small | stalled)]
 
 
 def band_pairs(N: int, width: int) -> tuple[np.ndarray, np.ndarray]:
@@ -171,8 +223,8 @@ def fundamental_stack(C: np.ndarray, pairs: tuple | None = None) -> tuple[np.nda
     ex[..., 0, 1], ex[..., 0, 2], ex[..., 1, 2] = -e[..., 2], e[..., 1], -e[..., 0]
     ex[..., 1, 0], ex[..., 2, 0], ex[..., 2, 1] = e[..., 2], -e[..., 1], e[..., 0]
     F = ex @ Pi @ pinv[:, J]
-    nrm = np.linalg.norm(F, axis=(2, 3))
-    defined = nrm > SAME_CENTER_RTOL * np.linalg.norm(Pi, axis=(2, 3)) * np.linalg.norm(Pj, axis=(2, 3))
+    nrm = norms(F, axis=(2, 3))
+    defined = nrm > SAME_CENTER_RTOL * norms(Pi, axis=(2, 3)) * norms(Pj, axis=(2, 3))
     defined &= np.isfinite(nrm)
     F = np.where(defined[..., None, None], F / np.where(nrm > 0, nrm, 1.0)[..., None, None], 0.0)
     return F, defined
@@ -185,24 +237,41 @@ def epipolar_quadratics(F: np.ndarray, N: int, pairs: tuple | None = None):
     from sospoly.analysis import SparseQuadratics
 
     M, K = F.shape[:2]
-    I, J = view_pairs(N) if pairs is None else pairs
-    n = 2 * N
+    k, lin, ks, ii, jj = _quadratic_index(N) if pairs is None else _quadratic_index_of(*pairs)
     g0 = F[..., 2, 2]
-    g1 = np.zeros((M, K, n))
-    k = np.arange(K)
-    ks, ii, jj, vals = [], [], [], []
+    g1 = np.zeros((M, K, 2 * N))
+    vals = []
     for a_ in range(2):
-        g1[:, k, 2 * I + a_] = F[:, :, a_, 2]
-        g1[:, k, 2 * J + a_] = F[:, :, 2, a_]
+        g1[:, k, lin[0][a_]] = F[:, :, a_, 2]
+        g1[:, k, lin[1][a_]] = F[:, :, 2, a_]
         for b_ in range(2):
             half = F[:, :, a_, b_] / 2
-            ks += [k, k]
-            ii += [2 * I + a_, 2 * J + b_]
-            jj += [2 * J + b_, 2 * I + a_]
             vals += [half, half]
-    G2 = SparseQuadratics(np.concatenate(ks), np.concatenate(ii), np.concatenate(jj),
-                          np.concatenate(vals, axis=1) if vals else np.zeros((M, 0)))
+    G2 = SparseQuadratics(ks, ii, jj, np.concatenate(vals, axis=1))
     return g0, g1, G2
+
+
+@functools.lru_cache(maxsize=64)
+def _quadratic_index(N: int) -> tuple:
+    """:func:`_quadratic_index_of` the pairs of :func:`view_pairs` (cached, read-only: they depend on N only)."""
+    out = _quadratic_index_of(*view_pairs(N))
+    for a in (out[0], *out[1][0], *out[1][1], *out[2:]):
+        a.flags.writeable = False
+    return out
+
+
+def _quadratic_index_of(I: np.ndarray, J: np.ndarray) -> tuple:
+    """The indices of :func:`epipolar_quadratics` for the pairs (I, J): (k, ((2I, 2I + 1), (2J, 2J + 1)), and the
+    pair, row and column of the 8 entries per pair of G2, in the order of its values)."""
+    k = np.arange(len(I))
+    lin = ((2 * I, 2 * I + 1), (2 * J, 2 * J + 1))
+    ks, ii, jj = [], [], []
+    for a_ in range(2):
+        for b_ in range(2):
+            ks += [k, k]
+            ii += [lin[0][a_], lin[1][b_]]
+            jj += [lin[1][b_], lin[0][a_]]
+    return k, lin, np.concatenate(ks), np.concatenate(ii), np.concatenate(jj)
 
 
 def pixel_scales(C: np.ndarray, x: np.ndarray) -> np.ndarray:
@@ -212,6 +281,6 @@ def pixel_scales(C: np.ndarray, x: np.ndarray) -> np.ndarray:
     camera has no finite depth direction (||P[2, :3]|| = 0)."""
     B = C[..., :2, :3] - x[..., :, None] * C[..., 2:3, :3]
     s = np.linalg.svd(B, compute_uv=False)[..., 0]
-    d = np.linalg.norm(C[..., 2, :3], axis=-1)
+    d = norms(C[..., 2, :3], axis=-1)
     with np.errstate(divide="ignore", invalid="ignore"):
         return np.where(d > 0, s / d, np.nan)

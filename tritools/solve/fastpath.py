@@ -43,8 +43,8 @@ from sospoly.solvers import with_single_threaded_blas
 
 from ..model.geometry import camera_problems
 from ..model.normalize import normalization_stack
-from ..model.stacked import (band_pairs, epipolar_quadratics, fundamental_stack, project_stack, refine_points_stack,
-                             view_pairs)
+from ..model.stacked import (band_pairs, epipolar_quadratics, fundamental_stack, norms, project_stack,
+                             refine_points_stack, view_pairs)
 from .decide import decide, decide_reported, gamma_from_c
 from .trivial import trivially_certified, trivially_certified_reported
 
@@ -152,7 +152,7 @@ def verify_checked(C: np.ndarray, x: np.ndarray, ok: np.ndarray, tolerances: Tol
     v = np.where(ok[:, None], u.reshape(M, -1), 0.0)
     # a minimiser v* has ||v*||^2 = f(v*) <= f(v^) = ||v^||^2 (observed points at the origin): the radius of the
     # rigorous margin of the Lagrangian bound
-    lower, upper, ok = lagrangian_bounds(C, Cn, v, ok, np.linalg.norm(v, axis=1), norm.resolution, tolerances,
+    lower, upper, ok = lagrangian_bounds(C, Cn, v, ok, norms(v, axis=1), norm.resolution, tolerances,
                                          deadline=deadline)
     status, optimal, c_lower = decide(lower, upper, tolerances, N, norm.resolution)
     X = norm.world_points(Xn)
@@ -161,8 +161,10 @@ def verify_checked(C: np.ndarray, x: np.ndarray, ok: np.ndarray, tolerances: Tol
     gamma_ub = np.where(fin_w, gamma_from_c(np.sum((uw - x) ** 2, axis=(1, 2)), N, 1.0), np.inf)
     gamma_lb = np.minimum(gamma_from_c(c_lower, N, norm.scale), gamma_ub)
     certified = ok & optimal & decide_reported(gamma_lb, gamma_ub, tolerances, N, norm.scale, norm.resolution)
-    trivial = ok & ~certified & trivially_certified(upper, tolerances, N, norm.resolution) & \
-        trivially_certified_reported(gamma_ub, tolerances, N, norm.scale, norm.resolution)
+    trivial = ok & ~certified
+    if trivial.any():               # (a stack of certified problems skips the trivial rule: no change)
+        trivial &= trivially_certified(upper, tolerances, N, norm.resolution) & \
+            trivially_certified_reported(gamma_ub, tolerances, N, norm.scale, norm.resolution)
     gamma_lb = np.where(trivial, 0.0, gamma_lb)
     return FastPathBatch(certified | trivial, ok, X, gamma_lb, gamma_ub, x + u / norm.scale[:, None, None],
                          np.where(trivial, 0.0, c_lower), upper, norm.scale, trivial)
@@ -239,6 +241,15 @@ def _held(F: np.ndarray, pairs, views) -> np.ndarray:
     return np.where((views[:, I] & views[:, J])[..., None, None], F, 0.0)
 
 
+def _zero_rows(g0, g1, G2, keep: np.ndarray) -> tuple:
+    """The constraint data (g0, g1, G2) with the problems not in ``keep`` zeroed (harmless numbers for the
+    stack).  Always new arrays, also when every problem is kept: their memory layout decides the summation
+    order downstream, so the bounds' last bits."""
+    M = len(keep)
+    g0, g1 = (np.where(keep.reshape((M,) + (1,) * (a.ndim - 1)), a, 0.0) for a in (g0, g1))
+    return g0, g1, dataclasses.replace(G2, vals=np.where(keep[:, None], G2.vals, 0.0))
+
+
 def _all_pairs_bounds(C, Cn, v, ok, radius, tolerances, f0, F2, views=None) -> tuple[np.ndarray, np.ndarray]:
     """(Lagrangian lower bound (NaN: none), ok) with the epipolar constraints of all N(N - 1)/2 view pairs,
     vectorised over the stack (:func:`sospoly.analysis.verify.verify_quadratic_batch`)."""
@@ -249,8 +260,7 @@ def _all_pairs_bounds(C, Cn, v, ok, radius, tolerances, f0, F2, views=None) -> t
     g0, g1, G2 = epipolar_quadratics(_held(F, view_pairs(N), views), N)
     finite = np.isfinite(g0).all(axis=1) & np.isfinite(g1).all(axis=(1, 2)) & np.isfinite(G2.vals).all(axis=1)
     ok &= finite
-    g0, g1 = (np.where(ok.reshape((M,) + (1,) * (a.ndim - 1)), a, 0.0) for a in (g0, g1))
-    G2 = dataclasses.replace(G2, vals=np.where(ok[:, None], G2.vals, 0.0))
+    g0, g1, G2 = _zero_rows(g0, g1, G2, ok)
     n = 2 * N
     ver = verify_quadratic_batch(f0, np.zeros((M, n)), F2, g0, g1, G2, v, tolerances=tolerances, radius=radius)
     return ver.lower_bound, ok
@@ -270,8 +280,7 @@ def _band_bounds(C, Cn, v, ok, radius, width, tolerances, f0, F2, views=None) ->
     g0, g1, G2 = epipolar_quadratics(_held(F, pairs, views), N, pairs)
     use = ok & defined.all(axis=1) & np.isfinite(g0).all(axis=1) & np.isfinite(g1).all(axis=(1, 2)) \
         & np.isfinite(G2.vals).all(axis=1)
-    g0, g1 = (np.where(use.reshape((M,) + (1,) * (a.ndim - 1)), a, 0.0) for a in (g0, g1))
-    G2 = dataclasses.replace(G2, vals=np.where(use[:, None], G2.vals, 0.0))
+    g0, g1, G2 = _zero_rows(g0, g1, G2, use)
     n = 2 * N
     ver = verify_quadratic_banded_batch(f0, np.zeros((M, n)), F2, g0, g1, G2, v, tolerances=tolerances,
                                         radius=radius)

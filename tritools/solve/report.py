@@ -9,10 +9,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..model.geometry import depths as depths_of
-from ..model.geometry import WorldFrame, depths_stack, project_homogeneous
+from ..model.cameras import depths_stack_arrays, depths_validated
+from ..model.geometry import WorldFrame, project_views
 from ..model.regions import extent_of
-from ..model.stacked import project_stack
+from ..model.stacked import norms, project_stack
 from .decide import gamma_from_c
 
 __all__ = ["PointReport", "point_report", "points_report_stack", "solve_radius", "solve_ball", "region_extent"]
@@ -31,22 +31,23 @@ def point_report(X, cameras, regions, world_frame=WorldFrame.RIGHT_HANDED) -> Po
     if X is None or not np.all(np.isfinite(X)):
         return PointReport(None, None, None)
     Xh = np.append(np.asarray(X, float), 1.0)[None]
+    C = np.asarray(cameras, float)
     res = []
-    for P, r in zip(cameras, regions):
-        x = project_homogeneous(Xh, P)[0]                 # inf where undefined (the one rule of geometry)
-        res.append(float(r.distance(x)) if np.all(np.isfinite(x)) else np.inf)
+    for x, r in zip(project_views(Xh, C), regions):     # inf where undefined (the one rule of geometry)
+        x = x[0]
+        res.append(float(r.distance(x)) if np.isfinite(x).all() else np.inf)
     res = np.array(res)
-    gamma = float(gamma_from_c(np.sum(res ** 2), len(res), 1.0)) if np.all(np.isfinite(res)) else math.inf
-    return PointReport(gamma, res, np.asarray(depths_of(X, cameras, world_frame), float))
+    gamma = float(gamma_from_c(np.sum(res ** 2), len(res), 1.0)) if np.isfinite(res).all() else math.inf
+    return PointReport(gamma, res, depths_validated(X, C, world_frame))
 
 
 def points_report_stack(C: np.ndarray, x: np.ndarray, X: np.ndarray, world_frame=WorldFrame.RIGHT_HANDED):
     """The twin of :func:`point_report` for M point problems: (gamma (M,), residuals (M, N), depths (M, N));
     gamma is inf where a projection is at infinity."""
     u, _, fin = project_stack(C, X)
-    res = np.where(fin[:, None], np.linalg.norm(u - x, axis=2), np.inf)
+    res = np.where(fin[:, None], norms(u - x, axis=2), np.inf)
     gamma = np.where(fin, gamma_from_c(np.sum(np.where(fin[:, None], res, 0.0) ** 2, axis=1), x.shape[1], 1.0), np.inf)
-    return gamma, res, depths_stack(C, X, world_frame)
+    return gamma, res, depths_stack_arrays(np.asarray(C, float), np.asarray(X, float), world_frame)
 
 
 def solve_ball(regions_n, c_upper: float) -> float | None:

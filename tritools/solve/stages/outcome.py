@@ -47,7 +47,8 @@ def report_point(ctx: PointContext, step: Step, status, optimal, gamma_lb, *, X,
                  certified_by, n_lmivar=None) -> TriangulationResult:
     """The result of the estimate ``X`` under ``step`` (module docstring)."""
     rep = point_report(X, ctx.cams, ctx.regions, ctx.opts.world_frame)
-    raw = point_report(X_raw, ctx.cams, ctx.regions)
+    same = X_raw is X or (X_raw is not None and X is not None and np.array_equal(X_raw, X))
+    raw = rep if same else point_report(X_raw, ctx.cams, ctx.regions)     # gamma only: the frame is irrelevant
     msg = ""
     if gamma_lb is not None and rep.gamma is not None and np.isfinite(rep.gamma):
         gamma_lb = min(gamma_lb, rep.gamma)          # consistent in pixels too (decided in c units)

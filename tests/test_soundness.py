@@ -25,7 +25,7 @@ import dataclasses
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
 import sospoly
@@ -563,6 +563,7 @@ KINDS = ["point", "segment", "ellipse", "border", "box"]
 
 
 @settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@example(seed=1048039, n_views=3, points_only=False, kinds=['point', 'ellipse', 'ellipse', 'point'], noise=1.0)
 @given(seed=st.integers(0, 2 ** 31), n_views=st.integers(2, 4), points_only=st.booleans(),
        kinds=st.lists(st.sampled_from(KINDS), min_size=4, max_size=4), noise=st.sampled_from([0.0, 1.0, 3.0]))
 def test_property_bounds_are_ordered_and_below_the_reference(seed, n_views, points_only, kinds, noise):
@@ -597,7 +598,9 @@ def test_property_bounds_are_ordered_and_below_the_reference(seed, n_views, poin
         assert res.gamma_lb <= res.gamma_ub
     assert res.gamma_lb is None or res.gamma_lb <= ref * (1 + 1e-9) + ulp(x)
     if res.optimal:
-        assert res.gamma_ub <= ref * (1 + 1e-7) + 1e-9
+        # at the coordinates' scale: gamma* = 0 certifies through the trivial bound with gamma_UB within the rule's
+        # tolerance of 0 (seed 1048039: 4.7e-9 px at ~300 px coordinates)
+        assert res.gamma_ub <= ref * (1 + 1e-7) + 1e-9 * max(1.0, float(np.max(np.abs(x))))
 
 
 # ----------------------------------------------------------------------------- 6. sospoly: rigor, exact check

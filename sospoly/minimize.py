@@ -72,7 +72,7 @@ import numpy as np
 from .algebra.polynomial import Polynomial
 from .analysis.recession import unbounded_result
 from .analysis.candidates import candidates_of, dedupe_points, feasibility_violation, feasible_points
-from .analysis.candidates import support_of as _support
+from .analysis.candidates import support_of
 from .analysis.moments import moment_matrices_of
 from .budget import Budget, BudgetExceeded, TimeLimitReached, as_budget, deadline_scope
 from .certificates.program import SOSProgram
@@ -186,12 +186,12 @@ def _choose_sparsity(sparsity, f, eq, ineq, degree: int, multiplier="auto", last
     low = 2 if degree > 2 and n + 1 <= LOW_BLOCK_MAX_SIDE and _low_block_helps(eq, ineq, multiplier) else None
     if sparsity == "correlative":
         return [("correlative", low)]
+    supports = (support_of(f), [support_of(g) for g in eq], [support_of(h) for h in ineq])
     if sparsity == "term":                 # the TSSOS hierarchy, cheapest level first (certificates.term_hierarchy)
-        return [(k, None) for k in term_levels(_support(f), [_support(g) for g in eq], [_support(h) for h in ineq],
-                                               degree)]
+        return [(k, None) for k in term_levels(*supports, degree)]
     if sparsity != Sparsity.AUTO:              # the steps' kinds are plain strings ("none": the dense one)
         return [("none" if sparsity == Sparsity.DENSE else sparsity.value, None)]
-    cs = correlative_sparsity(n, _support(f), [_support(g) for g in eq], [_support(h) for h in ineq])
+    cs = correlative_sparsity(n, *supports)
     steps = [] if cs.is_dense else [("correlative", low)]
     if cs.is_dense or (sigma(n, degree // 2) <= DENSE_AUTO_MAX_SIDE and
                        (degree > 2 or last or _low_block_helps(eq, ineq, multiplier))):
@@ -199,10 +199,9 @@ def _choose_sparsity(sparsity, f, eq, ineq, degree: int, multiplier="auto", last
         # for an unconstrained f the Newton-polytope basis when smaller (the dense bound for q = 1)
         q1 = isinstance(multiplier, str) and multiplier in ("auto", "putinar") and \
             sigma(n, degree // 2) <= DENSE_AUTO_MAX_SIDE
-        term = cheap_term_level(_support(f), [_support(g) for g in eq], [_support(h) for h in ineq], degree) \
-            if q1 else None
+        term = cheap_term_level(*supports, degree) if q1 else None
         steps += [(term, None)] if term else []
-        if q1 and not eq and not ineq and newton_smaller(_support(f), degree):
+        if q1 and not eq and not ineq and newton_smaller(supports[0], degree):
             steps.append(("newton", None))
         steps.append(("none", None))
     return steps
@@ -219,11 +218,11 @@ def _shape_with_q(kind, f, eq, ineq, degree: int, multiplier, max_gram_side: int
     from .certificates.shape import newton_shape
 
     n = len(f.gens)
-    qs, fs = _support(multiplier.with_gens(f.gens)), _support(f)
+    qs, fs = support_of(multiplier.with_gens(f.gens)), support_of(f)
     if kind == "newton":
         return kind if eq or ineq else newton_shape(fs, degree, q_support=qs, max_gram_side=max_gram_side)
     u_support = np.unique(np.vstack([(qs[:, None, :] + fs[None, :, :]).reshape(-1, n), qs]), axis=0)
-    return term_level_shape(u_support, [_support(g) for g in eq], [_support(h) for h in ineq], degree, kind,
+    return term_level_shape(u_support, [support_of(g) for g in eq], [support_of(h) for h in ineq], degree, kind,
                             max_gram_side=max_gram_side)
 
 

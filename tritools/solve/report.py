@@ -54,16 +54,15 @@ def solve_ball(regions_n, c_upper: float) -> float | None:
     """A bound of ||v|| for a minimiser v* of the normalised program, valid with :func:`solve_radius`'s box:
     sum_i ||x_i - y_i||^2 <= c_upper and ||y_i|| <= rho_i give ||x|| <= ||rho|| + sqrt(c_upper) (triangle
     inequality), and the auxiliary variables add sum a_i^2 (one per auxiliary variable).  Much smaller than
-    the box's diagonal with many views.  None as for :func:`solve_radius`."""
+    the box's diagonal with many views.  None when c_upper is not finite; a region type without
+    ``extent()`` raises the TypeError of :func:`region_extent`."""
     if not np.isfinite(c_upper):
         return None
     rho2, aux2 = 0.0, 0.0
     for r in regions_n:
-        ext = region_extent(r)
-        if ext is None:
-            return None
-        rho2 += ext[0] ** 2
-        aux2 += r.n_aux * ext[1] ** 2
+        rho, a = region_extent(r)
+        rho2 += rho ** 2
+        aux2 += r.n_aux * a ** 2
     return math.sqrt((math.sqrt(rho2) + math.sqrt(max(c_upper, 0.0))) ** 2 + aux2)
 
 
@@ -86,15 +85,13 @@ def solve_radius(regions_n, c_upper: float) -> np.ndarray | None:
     :func:`tritools.model.problem.build_problem` (x_11, x_12, ..., then every view's auxiliary variables):
     f(v*) <= f(v^) = c_upper gives ||x_i - y_i|| <= sqrt(c_upper) (y_i the closest region point), so
     |x_ik| <= rho_i + sqrt(c_upper), and the auxiliary variables are bounded by the regions
-    (:func:`region_extent`).  None when a region's extent is unknown or c_upper is not finite."""
+    (:func:`region_extent`).  None when c_upper is not finite; a region type without ``extent()`` raises
+    the TypeError of :func:`region_extent`."""
     if not np.isfinite(c_upper):
         return None
     xs, aux = [], []
     for r in regions_n:
-        ext = region_extent(r)
-        if ext is None:
-            return None
-        rho, a = ext
+        rho, a = region_extent(r)
         xs += [rho + math.sqrt(max(c_upper, 0.0))] * 2
         aux += [a] * r.n_aux
     return np.array(xs + aux)

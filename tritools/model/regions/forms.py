@@ -124,6 +124,14 @@ _NEEDS = {ConeKind.POINT: (), ConeKind.SEGMENT: ("direction",), ConeKind.POLYTOP
 _SHAPES = {"center": (2,), "direction": (2,), "B": (-1, 2), "c": (-1,), "D": (2, 2), "Dinv": (2, 2)}
 
 
+def _declared(region, method: str, kind: type):
+    """``region.<method>()``, checked to be a ``kind`` (TypeError naming the method otherwise)."""
+    value = getattr(region, method)()
+    if not isinstance(value, kind):
+        raise TypeError(f"{type(region).__name__}.{method}() must return a {kind.__name__}, got {type(value).__name__}")
+    return value
+
+
 def extent_of(region) -> RegionExtent:
     """``region.extent()``, checked to be a :class:`RegionExtent`.
 
@@ -132,10 +140,7 @@ def extent_of(region) -> RegionExtent:
     TypeError
         The region type declares no ``extent()`` (the message names it), or it returns something else.
     """
-    ext = region.extent()
-    if not isinstance(ext, RegionExtent):
-        raise TypeError(f"{type(region).__name__}.extent() must return a RegionExtent, got {type(ext).__name__}")
-    return ext
+    return _declared(region, "extent", RegionExtent)
 
 
 def conic_form_of(region) -> ConicForm:
@@ -146,7 +151,4 @@ def conic_form_of(region) -> ConicForm:
     TypeError
         The region type declares no ``conic_form()`` (the message names it), or it returns something else.
     """
-    form = region.conic_form()
-    if not isinstance(form, ConicForm):
-        raise TypeError(f"{type(region).__name__}.conic_form() must return a ConicForm, got {type(form).__name__}")
-    return form
+    return _declared(region, "conic_form", ConicForm)

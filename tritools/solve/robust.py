@@ -31,7 +31,7 @@ and an X that beats the best value UB found has s <= UB - c^2(O).  Hence the nod
 a piecewise-linear minimum in s attained at the interval's ends or at a breakpoint a_u or a_u - c_u^2
 (:func:`lookahead_bound`).  At the root, every X with T(X) != all views pays at least min_i c_i^2, so
 f_TLS* >= min(L2LB(all), min_i c_i^2): tracks without outliers are certified by their L2 certificate alone.
-One level down (:meth:`_Search.leave_one_out_bound`), an X with an outlier j pays c_j^2 plus the root bound
+One level down (:meth:`TlsSearch.leave_one_out_bound`), an X with an outlier j pays c_j^2 plus the root bound
 of the problem without j, so f_TLS* >= min(L2LB(V), min_j [c_j^2 + min(L2LB(V - j), min_{i != j} c_i^2)]):
 a clean track whose L2 optimum costs more than min c^2 is certified from its N leave-one-out sets.
 
@@ -64,18 +64,20 @@ import time
 
 import numpy as np
 
-from ..model.geometry import PROJECTION_DENOM_RTOL, dlt, refine_l2
+from ..model.geometry import PROJECTION_DENOM_RTOL
+from ..model.normalize import normalization_for
 from ..result import Attempt, Status, TriangulationResult
 from .decide import cheirality, gamma_from_c
 from ..model.geometry import depths_stack
 from .report import PointReport, point_report
+from .trivial import local_estimate
 from . import robust_bounds
 from .robust_bounds import ROUND_DOWN, SubsetBounds
 from .robust_drive import drive
 
 __all__ = ["robust_thresholds", "triangulate_robust", "drive", "lookahead_bound", "tls_cost", "point_distances2",
            "MAX_NODES", "MAX_PAIRS",
-           "LO_ROUNDS"]
+           "LO_ROUNDS", "TlsSearch"]
 
 log = logging.getLogger(__name__)
 
@@ -169,7 +171,7 @@ def scale_from(s: float, c2: np.ndarray) -> float:
     return float(scale) if np.isfinite(scale) and scale > 0 else 1.0
 
 
-class _Search:
+class TlsSearch:
     """One TLS problem: thresholds, the subset bounds, the best candidate, the branch and bound."""
 
     def __init__(self, cams, regions, c, opts, t0, points=None):
@@ -246,15 +248,16 @@ class _Search:
             self.best_X, self.best_f = np.asarray(X, float), f
             self.best_S = frozenset(int(i) for i in np.nonzero(d < self.c)[0])
 
-    def local_estimate(self):
-        """The local L2 refinement of the DLT point of the regions' centres (every view), or None: the estimate
-        of last resort, so that a search stopped before any candidate still reports X and gamma_UB."""
+    def fallback_estimate(self):
+        """The local L2 estimate of every view (:func:`tritools.solve.trivial.local_estimate`, in the normalised
+        frame), or None: the estimate of last resort, so that a search stopped before any candidate still
+        reports X and gamma_UB."""
         try:
-            X0 = dlt(self.C, np.array([r.center for r in self.regions], float))
-            X = refine_l2(X0, self.C, self.regions)
+            norm = normalization_for(self.C, self.regions)
+            est = local_estimate(norm.cameras(self.C), norm.regions(self.regions))
         except (ValueError, np.linalg.LinAlgError, FloatingPointError):
             return None
-        return X0 if X is None else X
+        return None if est is None else norm.world_point(est[1])
 
     def offer_new(self) -> None:
         est = self.bounds.take_estimates()
@@ -487,7 +490,7 @@ class _Search:
         yield from self.candidates(rng)
         t_cand = time.perf_counter() - t
         if self.best_X is None:                 # candidates cut short (deadline) or none finite: a local estimate
-            self.offer(self.local_estimate())
+            self.offer(self.fallback_estimate())
         if self.best_X is None:
             return TriangulationResult("tls", Status.NUMERICAL_FAILURE, message="no finite candidate estimate found",
                                        timings={"total": time.perf_counter() - self.t0})
@@ -564,4 +567,4 @@ def triangulate_robust(cams: np.ndarray, regions, c: np.ndarray, opts, t0: float
         inl = None if res.residuals is None else np.ones(len(regions), bool)
         import dataclasses
         return dataclasses.replace(res, inliers=inl)
-    return drive([_Search(cams, regions, c, opts, t0)])[0]
+    return drive([TlsSearch(cams, regions, c, opts, t0)])[0]

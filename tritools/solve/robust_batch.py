@@ -73,15 +73,15 @@ ROBUST_CHUNK = 512
 
 
 def _search_or_failure(cameras, regions, c, opts):
-    """A :class:`tritools.solve.robust._Search` for one problem, or a failed result (bad input)."""
-    from .robust import _Search
+    """A :class:`tritools.solve.robust.TlsSearch` for one problem, or a failed result (bad input)."""
+    from .robust import TlsSearch
 
     t0 = time.perf_counter()
     try:
         cams = validate_cameras(cameras)
         regs = as_regions(regions, cams.shape[0])
         require_extent(regs)
-        return _Search(cams, regs, c, opts, t0)
+        return TlsSearch(cams, regs, c, opts, t0)
     except (ValueError, TypeError) as exc:
         return TriangulationResult("tls", Status.INVALID_INPUT, message=f"{type(exc).__name__}: {exc}",
                                    timings={"total": time.perf_counter() - t0})
@@ -181,7 +181,7 @@ def _point_searches(idx, points, thresholds, opts, t0) -> dict:
     :func:`tritools.model.cameras.validate_cameras`), one call per view count; the others are left out (the
     caller's per-problem path gives them their named error)."""
     from ..model.cameras import camera_problems
-    from .robust import _Search
+    from .robust import TlsSearch
 
     groups: dict = {}
     for i in idx:
@@ -195,5 +195,5 @@ def _point_searches(idx, points, thresholds, opts, t0) -> dict:
             continue
         for k, i in enumerate(group):
             if valid[k]:
-                out[i] = _Search(C[k].copy(), None, thresholds[i], opts, t0, points=points[i][1])
+                out[i] = TlsSearch(C[k].copy(), None, thresholds[i], opts, t0, points=points[i][1])
     return out

@@ -47,7 +47,7 @@ ROUND_DOWN = 1.0 - 1e-12
 TRUSTED_LOWER_BOUND = frozenset({Status.OPTIMAL, Status.BEHIND_CAMERA, Status.NOT_CERTIFIED, Status.TIME_LIMIT,
                                  Status.BUDGET_EXCEEDED})
 #: the cheap paths (pair packing bounds instead of SDPs, verification-only requests, and the search's
-#: leave-one-out root bound, :meth:`tritools.solve.robust._Search.leave_one_out_bound`); False gives the plain
+#: leave-one-out root bound, :meth:`tritools.solve.robust.TlsSearch.leave_one_out_bound`); False gives the plain
 #: path (every subset the verification does not certify goes to the batched SDP), which the tests compare against.
 PACKING = True
 #: time limit (seconds) of one sub-problem solved by :func:`tritools.triangulate` (capped by the caller's deadline)

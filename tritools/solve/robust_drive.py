@@ -1,6 +1,6 @@
 """Many robust (TLS) searches run together (:func:`drive`): their sub-bound requests batched per round.
 
-Each :class:`tritools.solve.robust._Search` is a generator that yields the view subsets whose certified L2
+Each :class:`tritools.solve.robust.TlsSearch` is a generator that yields the view subsets whose certified L2
 lower bounds it needs; :func:`drive` collects the requests of every open search, computes them in one
 vectorised call per subset size (:func:`tritools.solve.robust_bounds.compute_many`) and resumes them.  A clean
 track thus costs one row of the first call, and the search of a track with outliers shares every call with

@@ -59,7 +59,7 @@ BIG_COST = 1e10
 
 
 # ----------------------------------------------------------------------------- common
-def _prepare(cameras, regions):
+def prepare_baseline(cameras, regions):
     C = validate_cameras(cameras)
     R = as_regions(regions, len(C))
     return C, R
@@ -78,7 +78,7 @@ def _check_init(init: str) -> str:
     return init
 
 
-def _start(C, R, init: str = "algebraic"):
+def start_baseline(C, R, init: str = "algebraic"):
     """Linear triangulation of the region centres, or ``(None, message)``.
 
     ``"algebraic"``: the minimiser of the algebraic error ``||M0 X~||`` over unit
@@ -98,7 +98,7 @@ def _start(C, R, init: str = "algebraic"):
     return X, None
 
 
-def _finish(method: str, X, C, R, t0: float, message: str = "", status: Status = Status.NO_CERTIFICATE,
+def finish_baseline(method: str, X, C, R, t0: float, message: str = "", status: Status = Status.NO_CERTIFICATE,
             **extra) -> TriangulationResult:
     total = time.perf_counter() - t0
     if X is None:
@@ -119,11 +119,11 @@ def dlt_baseline(cameras, regions, *, init: str = "algebraic") -> TriangulationR
     """Linear triangulation of the region centres (Hartley & Zisserman §12.2): the
     starting point of the other methods (see ``init`` in the module notes)."""
     t0 = time.perf_counter()
-    C, R = _prepare(cameras, regions)
-    X, err = _start(C, R, _check_init(init))
+    C, R = prepare_baseline(cameras, regions)
+    X, err = start_baseline(C, R, _check_init(init))
     if X is None:
-        return _finish("dlt", None, C, R, t0, err, Status.ILL_POSED)
-    return _finish("dlt", X, C, R, t0)
+        return finish_baseline("dlt", None, C, R, t0, err, Status.ILL_POSED)
+    return finish_baseline("dlt", X, C, R, t0)
 
 
 # ----------------------------------------------------------------------------- Newton
@@ -174,14 +174,14 @@ def newton(cameras, regions, *, max_iter: int = NEWTON_MAX_ITER, init: str = "al
     Returns status ``INVALID_INPUT`` if some region is not a single point (``Region.is_point``).
     """
     t0 = time.perf_counter()
-    C, R = _prepare(cameras, regions)
+    C, R = prepare_baseline(cameras, regions)
     if not all(r.is_point for r in R):
-        return _finish("newton", None, C, R, t0, "Newton needs point regions (not applicable)",
+        return finish_baseline("newton", None, C, R, t0, "Newton needs point regions (not applicable)",
                        Status.INVALID_INPUT)
     x = np.array([r.center for r in R])
-    X, err = _start(C, R, _check_init(init))
+    X, err = start_baseline(C, R, _check_init(init))
     if X is None:
-        return _finish("newton", None, C, R, t0, err, Status.ILL_POSED)
+        return finish_baseline("newton", None, C, R, t0, err, Status.ILL_POSED)
     J, g, H = point_cost_derivatives(X, C, x)
     msg = f"max_iter={max_iter} reached"
     for it in range(max_iter):
@@ -222,7 +222,7 @@ def newton(cameras, regions, *, max_iter: int = NEWTON_MAX_ITER, init: str = "al
             break
         X = Xn
         J, g, H = point_cost_derivatives(X, C, x)
-    return _finish("newton", X, C, R, t0, msg)
+    return finish_baseline("newton", X, C, R, t0, msg)
 
 
 # ----------------------------------------------------------------------------- Nelder-Mead
@@ -232,12 +232,12 @@ def nelder_mead(cameras, regions, *, init: str = "algebraic", **options) -> Tria
     simplex 5% perturbations) on ``gamma(X)`` with exact distances, started at DLT.
     ``options`` are passed to scipy."""
     t0 = time.perf_counter()
-    C, R = _prepare(cameras, regions)
-    X0, err = _start(C, R, _check_init(init))
+    C, R = prepare_baseline(cameras, regions)
+    X0, err = start_baseline(C, R, _check_init(init))
     if X0 is None:
-        return _finish("nms", None, C, R, t0, err, Status.ILL_POSED)
+        return finish_baseline("nms", None, C, R, t0, err, Status.ILL_POSED)
     res = optimize.minimize(lambda X: _gamma1(X, C, R), X0, method="Nelder-Mead", options=options or None)
-    return _finish("nms", res.x, C, R, t0, f"{res.message} (nfev={res.nfev})")
+    return finish_baseline("nms", res.x, C, R, t0, f"{res.message} (nfev={res.nfev})")
 
 
 # ----------------------------------------------------------------------------- SQP
@@ -246,11 +246,11 @@ def sqp(cameras, regions, *, bounds: float = 100.0, init: str = "algebraic", **o
     gradients) on ``gamma(X)`` in the box ``[-bounds, bounds]^3``, started at the DLT
     estimate clipped to the box."""
     t0 = time.perf_counter()
-    C, R = _prepare(cameras, regions)
+    C, R = prepare_baseline(cameras, regions)
     b = _check_bounds(bounds)
-    X0, err = _start(C, R, _check_init(init))
+    X0, err = start_baseline(C, R, _check_init(init))
     if X0 is None:
-        return _finish("sqp", None, C, R, t0, err, Status.ILL_POSED)
+        return finish_baseline("sqp", None, C, R, t0, err, Status.ILL_POSED)
 
     def fun(X):
         v = _gamma1(X, C, R)
@@ -259,7 +259,7 @@ def sqp(cameras, regions, *, bounds: float = 100.0, init: str = "algebraic", **o
     res = optimize.minimize(fun, np.clip(X0, -b, b), method="SLSQP", bounds=[(-b, b)] * 3,
                             options=options or None)
     status = Status.NO_CERTIFICATE if res.success or np.isfinite(fun(res.x)) else Status.SOLVER_FAILED
-    return _finish("sqp", res.x, C, R, t0, f"{res.message} (nit={res.nit})", status)
+    return finish_baseline("sqp", res.x, C, R, t0, f"{res.message} (nit={res.nit})", status)
 
 
 def _check_bounds(bounds) -> float:
@@ -345,13 +345,13 @@ def particle_swarm(cameras, regions, *, seed=0, bounds: float = 100.0, max_iter:
     (``include_dlt=False``).
     """
     t0 = time.perf_counter()
-    C, R = _prepare(cameras, regions)
+    C, R = prepare_baseline(cameras, regions)
     b = _check_bounds(bounds)
     rng = np.random.default_rng(seed)
-    X0 = _start(C, R, _check_init(init))[0] if include_dlt else None
+    X0 = start_baseline(C, R, _check_init(init))[0] if include_dlt else None
     X, fbest, it, msg = _pso(lambda Xs: gamma_validated(Xs, C, R), np.full(3, -b), np.full(3, b), rng,
                              max_iter, X0)
-    return _finish("pso", X, C, R, t0, f"{msg} (iterations={it})")
+    return finish_baseline("pso", X, C, R, t0, f"{msg} (iterations={it})")
 
 
 # ----------------------------------------------------------------------------- pycolmap (optional)
@@ -378,7 +378,7 @@ def pycolmap_multiview(cameras, regions) -> TriangulationResult:
     import pycolmap
 
     t0 = time.perf_counter()
-    C, R = _prepare(cameras, regions)
+    C, R = prepare_baseline(cameras, regions)
     cams, rays = [], []
     for P, reg in zip(C, R):
         K, Rt = decompose_camera(P)
@@ -387,8 +387,8 @@ def pycolmap_multiview(cameras, regions) -> TriangulationResult:
         rays.append(ray / np.linalg.norm(ray))
     X = pycolmap.triangulate_multi_view_point(cams, np.array(rays))
     if X is None:
-        return _finish("pycolmap", None, C, R, t0, "pycolmap found no point", Status.ILL_POSED)
-    return _finish("pycolmap", np.asarray(X, float).ravel(), C, R, t0)
+        return finish_baseline("pycolmap", None, C, R, t0, "pycolmap found no point", Status.ILL_POSED)
+    return finish_baseline("pycolmap", np.asarray(X, float).ravel(), C, R, t0)
 
 
 BASELINES: dict[str, Callable[..., TriangulationResult]] = {

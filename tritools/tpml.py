@@ -33,7 +33,7 @@ import numpy as np
 import sospoly as sp
 from sospoly.budget import as_budget
 
-from .baselines import _finish, _prepare, _start
+from .baselines import finish_baseline, prepare_baseline, start_baseline
 from .result import Status, TriangulationResult
 
 __all__ = ["TpmlResult", "tpml", "tpml_bound", "TPML_DEPTH_FRACTION", "TPML_RADIUS_FACTOR"]
@@ -104,15 +104,15 @@ def tpml_bound(cameras, regions, degree: int = 4, *, depth_min: float | None = N
                budget=None) -> TpmlResult:
     """The world-domain sum-of-ratios relaxation (module docstring) at even ``degree``."""
     t0 = time.perf_counter()
-    C, R = _prepare(cameras, regions)
+    C, R = prepare_baseline(cameras, regions)
     if int(degree) != degree or degree < 4 or degree % 2:
         raise ValueError(f"degree must be an even integer >= 4, got {degree!r}")
-    X0, err = _start(C, R)
+    X0, err = start_baseline(C, R)
     if X0 is None:
-        return TpmlResult(_finish("tpml", None, C, R, t0, err, Status.ILL_POSED), None, None, 0)
+        return TpmlResult(finish_baseline("tpml", None, C, R, t0, err, Status.ILL_POSED), None, None, 0)
     s0 = np.array([abs(float(P[2] @ np.append(X0, 1.0))) for P in C])
     if not np.all(s0 > 0):
-        return TpmlResult(_finish("tpml", None, C, R, t0, "the linear start lies on a camera's principal plane",
+        return TpmlResult(finish_baseline("tpml", None, C, R, t0, "the linear start lies on a camera's principal plane",
                                   Status.ILL_POSED), None, None, 0)
     radius = TPML_RADIUS_FACTOR * (1.0 + float(np.linalg.norm(X0))) if radius is None else float(radius)
     depth_min = TPML_DEPTH_FRACTION * radius if depth_min is None else float(depth_min)
@@ -123,7 +123,7 @@ def tpml_bound(cameras, regions, degree: int = 4, *, depth_min: float | None = N
     max_side = as_budget(budget).max_gram_side
     if size > max_side:
         msg = f"Gram side {size} exceeds the budget's max_gram_side {max_side}"
-        return TpmlResult(_finish("tpml", None, C, R, t0, msg, Status.BUDGET_EXCEEDED, delta=int(degree)), None,
+        return TpmlResult(finish_baseline("tpml", None, C, R, t0, msg, Status.BUDGET_EXCEEDED, delta=int(degree)), None,
                           None, 0)
     res = sp.minimize_ratios(terms, eq, ineq, degree=int(degree), gens=gens, budget=budget)
     bound = None if res.lower_bound is None else float(np.sqrt(max(res.lower_bound, 0.0) / (2 * len(C))))
@@ -131,7 +131,7 @@ def tpml_bound(cameras, regions, degree: int = 4, *, depth_min: float | None = N
     msg = (f"sum-of-ratios bound {res.lower_bound!r} (gamma >= {bound!r} for depths >= {depth_min:.3g}, "
            f"||X - X0|| <= {radius:.3g}); {res.status.value}")
     status = Status.NO_CERTIFICATE if X is not None else Status.SOLVER_FAILED
-    out = _finish("tpml", X, C, R, t0, msg, status, delta=int(degree), n_lmivar=res.n_lmivar)
+    out = finish_baseline("tpml", X, C, R, t0, msg, status, delta=int(degree), n_lmivar=res.n_lmivar)
     return TpmlResult(out, res, bound, res.n_lmivar)
 
 

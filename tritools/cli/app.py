@@ -45,7 +45,7 @@ from ..solve.options import TriangulationOptions
 from .flags import (METHODS, OPTION_FLAGS, PATHS, SPARSITIES, CLIError, add_data_dir_option,  # noqa: F401 - faces
                     add_robust_option, add_solver_options, add_track_options, option_flag_error, options_from_args,
                     robust_from_args, select_tracks)
-from .conventions import (_silence_stdout, add_logging_options, add_world_frame_option, cli_logging,
+from .conventions import (silence_stdout, add_logging_options, add_world_frame_option, cli_logging,
                           sequence_options)
 
 __all__ = ["main", "build_parser", "CLIError", "exit_invalid", "add_solver_options", "options_from_args",
@@ -506,7 +506,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(INTERRUPTED_MESSAGE, file=sys.stderr)
         return EXIT_INTERRUPTED
     except BrokenPipeError:              # `tritools ... | head`: the reader is gone; stop quietly
-        _silence_stdout()
+        silence_stdout()
         return EXIT_OK
     except Exception as exc:  # noqa: BLE001 - one line instead of a traceback, unless debugging
         if os.environ.get(DEBUG_ENV):

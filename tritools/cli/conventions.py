@@ -108,7 +108,7 @@ def sequence_options(options: TriangulationOptions, args, seq) -> TriangulationO
     return options.replace(world_frame=seq.world_frame if frame == "auto" else frame)
 
 
-def _silence_stdout() -> None:
+def silence_stdout() -> None:
     """Point stdout at /dev/null so that the interpreter's final flush does not fail again."""
     try:
         devnull = os.open(os.devnull, os.O_WRONLY)

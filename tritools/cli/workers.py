@@ -73,8 +73,8 @@ def executor_from_args(args):
     else:
         import multiprocessing
 
-        from ..solve.batch import _worker_init
+        from ..solve.batch import worker_init
 
         with cf.ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
-                                    initializer=_worker_init) as ex:
+                                    initializer=worker_init) as ex:
             yield ex

@@ -153,10 +153,10 @@ def _local_executor(n_items: int, n_chunks: int):
     import multiprocessing
 
     return cf.ProcessPoolExecutor(max_workers=min(cpus, n_chunks), mp_context=multiprocessing.get_context("spawn"),
-                                  initializer=_worker_init)
+                                  initializer=worker_init)
 
 
-def _worker_init() -> None:
+def worker_init() -> None:
     os.environ["RUST_BACKTRACE"] = "0"   # Clarabel panics are caught and reported; no backtrace noise
 
 

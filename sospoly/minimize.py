@@ -8,8 +8,9 @@
 * ``minimizers`` / ``upper_bound`` -- extracted points (Gram kernel, moment matrices, clique moments
   for sparse certificates), polished locally, kept when feasible, sorted by f; ``upper_bound`` is f
   at the best one;
-* ``optimal`` -- ``Tolerances.certified(lower_bound, upper_bound, scale)`` with ``scale`` the
-  largest coefficient of the balanced f (strategy step 1: the problem's own scale): a certificate of
+* ``optimal`` -- ``Tolerances.certified(lower_bound, upper_bound, scale)`` with ``scale`` the largest
+  coefficient of the balanced f expanded at the origin, or at the minimiser when the program solved there gave
+  the result (strategy steps 1 and 8: the problem's own scale, ``result.scale``): a certificate of
   global optimality of ``minimizers[0]`` within that tolerance.  A lower bound above the upper bound within the
   tolerance is reported equal to it; beyond it the status is ``INCONSISTENT``.
 
@@ -60,6 +61,10 @@ The default strategy (each step recorded in ``attempts``):
 7. **Budget.** Every program is sized before it is built (:mod:`sospoly.budget`); one that does not fit
    is skipped with status ``budget_exceeded``, and the whole call stops at ``budget.time_limit``
    (status ``time_limit``, with the best bounds found so far).
+8. **Re-centring** (:mod:`sospoly.recentre`). When f expanded at the minimiser has a scale smaller than at
+   the origin by ``CANCELLATION_BITS`` (coefficients that cancel there: (v - 1000)^4 - 3 (v - 1000)^2 + 1), f is
+   valued exactly at the points and the program translated exactly to the minimiser is solved too, decided at
+   its own scale; the better result is kept.
 """
 from __future__ import annotations
 
@@ -286,6 +291,19 @@ def minimize(f: Polynomial | float, eq: Sequence[Polynomial | float] = (), ineq:
     if max_degree is not None and (int(max_degree) != max_degree or max_degree < d0):
         raise ValueError(f"max_degree must be an integer >= the first degree {d0}, got {max_degree!r}")
     last = d0 if degree is not None else int(max_degree if max_degree is not None else d0 + 4)
+
+    def solve(f, eq, ineq, multiplier, radius) -> MinimizeResult:
+        return _strategy(f, eq, ineq, multiplier, radius, gens=gens, d0=d0, last=last, sparsity=sparsity,
+                         low_degree=low_degree, form=form, backend=backend, tol=tol, budget=budget,
+                         deadline=deadline, refine=refine, t0=t0)
+
+    best = solve(f, eq, ineq, multiplier, radius)
+    return _recentred(best, f, eq, ineq, multiplier, radius, solve, tol, deadline, t0)
+
+
+def _strategy(f, eq, ineq, multiplier, radius, *, gens, d0, last, sparsity, low_degree, form, backend, tol, budget,
+              deadline, refine, t0) -> MinimizeResult:
+    """Strategy steps 1-5 of the module docstring on checked data."""
     prog = scaled_program(f, eq, ineq, multiplier, radius)
     fn, eqn, ineqn, multiplier = prog.fn, prog.eqn, prog.ineqn, prog.multiplier
     unbounded = unbounded_result(fn, eqn, ineqn, gens, d0, prog.fscale, time.perf_counter() - t0)
@@ -306,6 +324,35 @@ def minimize(f: Polynomial | float, eq: Sequence[Polynomial | float] = (), ineq:
         if best.optimal or deadline.expired:
             break
     return _finish(best, run, time.perf_counter() - t0)
+
+
+def _recentred(best: MinimizeResult, f, eq, ineq, multiplier, radius, solve, tol: Tolerances, deadline,
+               t0: float) -> MinimizeResult:
+    """Strategy step 6 (:mod:`sospoly.recentre`): decide at the minimiser's scale, and solve the program
+    translated to the minimiser when the scale there is smaller and the translation is exact."""
+    import dataclasses
+
+    from .recentre import (cancellation_scale, result_in_original, translated_program, with_exact_values,
+                           worth_translating)
+
+    if not best.minimizers:
+        return best
+    s0, st, t = cancellation_scale(f, best.minimizers[0])
+    if not worth_translating(s0, st):
+        return best
+    cands, note = [best], f"scale {s0:.3g} at the origin, {st:.3g} at the minimiser"
+    prog = None if deadline.expired else translated_program(t, f, eq, ineq, multiplier, radius)
+    if prog is not None:
+        other = result_in_original(solve(*prog), t)
+        cands.append(dataclasses.replace(other, attempts=best.attempts + other.attempts))
+    else:
+        note += "; the translation to it is not exact in floating point (not solved there)"
+    out = [with_exact_values(r, f, tol, r.scale) for r in cands]
+    moved = len(out) > 1 and _better(out[1], out[0])
+    chosen = out[1] if moved else out[0]
+    note = f"{'re-centred at the minimiser' if moved else 'not re-centred'} ({note})"
+    chosen = dataclasses.replace(chosen, message="; ".join(m for m in (chosen.message, note) if m))
+    return dataclasses.replace(chosen, seconds=time.perf_counter() - t0)
 
 
 def _better(a: MinimizeResult, b: MinimizeResult) -> bool:

@@ -1,0 +1,210 @@
+"""Re-centring a polynomial program at a candidate minimiser (strategy step 6 of :func:`sospoly.minimize`).
+
+The certificate rule (:mod:`sospoly.tolerances`) measures a gap at the problem's own scale, the largest
+coefficient of the balanced objective.  Expanded at the origin, a translated problem such as
+
+    f(v) = (v - 1000)^4 - 3 (v - 1000)^2 + 1          (minimum -1.25 at v = 1000 +- sqrt(1.5))
+
+has coefficients up to 1e12 while its values near the minimiser are O(1): the scale at the origin is the
+size of a cancellation, not of the problem, and a gap of 1e-6 of it (1e6 here) says nothing about the
+minimum.  The problem's scale *at the minimiser* is that of f(y + t) for t near the minimiser:
+
+    scale_t(f) = the power of two above the largest coefficient of the balanced f(y + t)
+                 (:func:`sospoly.scaling.scaled_program`, the same step 1 of ``minimize``).
+
+When scale_t is below scale_0 by more than ``CANCELLATION_BITS`` (:func:`cancellation_scale`), ``minimize``
+values f exactly at the points (:func:`with_exact_values`: a floating-point value errs by eps times the
+cancelled terms), solves the translated program as well, decides it at its own scale, and keeps the better
+of the two results (certified first, then the larger proven lower bound)
+(:func:`translated_program`, :func:`result_in_original`):
+
+* **exact.** t has at most ``T_BITS`` significant bits and the coefficients of p(y + t) are computed in
+  rational arithmetic (every float is a dyadic rational, ``fractions.Fraction``); the translation is used
+  only when every coefficient of every polynomial is exactly a float, so the translated program *is* the
+  caller's program and its certificate is one of the caller's problem (integer and short-mantissa data,
+  the case of the textbook problems, translate exactly; other data keep the first solve, decided at the
+  scale above: a gap that is large at the minimiser's scale is then not a certificate);
+* **inverse.** points map back by v = y + t (then f is evaluated at the mapped point in the caller's
+  form), a ball ||v|| <= R holding a minimiser becomes ||y|| <= R + ||t||, and the moment matrices map by
+  the basis change v^a = sum_{c <= a} binom(a, c) t^(a - c) y^c (a basis closed under divisors; a block
+  whose basis is not is dropped).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+from fractions import Fraction
+from itertools import product
+
+import numpy as np
+
+from .algebra.polynomial import Polynomial
+from .scaling import scaled_program
+
+__all__ = ["T_BITS", "MAX_TERMS", "translation_point", "translated", "cancellation_scale", "translated_program",
+           "result_in_original", "exact_value", "with_exact_values"]
+
+#: significant bits kept of each coordinate of the translation t.
+T_BITS = 12
+#: re-centre when the scale at the minimiser is this many bits below the origin's (a cancellation of more than
+#: 4 decimal digits; smaller differences are the measure's own spread: the balancing of a polynomial whose value and
+#: gradient vanish at t has no constant term to anchor it).
+CANCELLATION_BITS = 16
+#: a translation shorter than this in the balanced variables is none (the minimiser is at the origin).
+NEGLIGIBLE_SHIFT = 2.0 ** -20
+#: a translated coefficient below this fraction of the magnitudes that cancel in it is round-off (64 ulps).
+CANCELLED = 64 * float(np.finfo(float).eps)
+#: candidates re-valued exactly per result.
+MAX_CANDIDATES = 20
+#: a translation that would expand to more terms than this is not attempted (its cost would dominate).
+MAX_TERMS = 5000
+
+
+def translation_point(x) -> np.ndarray:
+    """x rounded to ``T_BITS`` significant bits per coordinate (0 stays 0)."""
+    x = np.asarray(x, float)
+    m, e = np.frexp(x)
+    return np.ldexp(np.round(np.ldexp(m, T_BITS)), e - T_BITS)
+
+
+def _expanded_terms(p: Polynomial) -> int:
+    return sum(math.prod(int(a) + 1 for a in e) for e in p.terms)
+
+
+def _translated_sums(p: Polynomial, t) -> tuple[dict, dict]:
+    """(exact coefficients of p(y + t), the sums of the absolute values of their contributions), by exponent."""
+    t = [Fraction(float(ti)) for ti in np.asarray(t, float)]
+    acc: dict = {}
+    mag: dict = {}
+    for a, c in p.terms.items():
+        cf = Fraction(float(c))
+        per_var = [[(b, math.comb(ai, b) * ti ** (ai - b)) for b in range(ai + 1)] for ai, ti in zip(a, t)]
+        for combo in product(*per_var):
+            w = cf
+            for _, coef in combo:
+                w *= coef
+            if w:
+                key = tuple(b for b, _ in combo)
+                acc[key] = acc.get(key, 0) + w
+                mag[key] = mag.get(key, 0) + abs(w)
+    return acc, mag
+
+
+def translated(p: Polynomial, t, exact: bool = True) -> Polynomial | None:
+    """p(y + t) over p's generators: computed in rational arithmetic, then each coefficient as a float.
+    ``exact``: None unless every coefficient is exactly a float (else rounded to nearest)."""
+    acc, _ = _translated_sums(p, t)
+    terms = {}
+    for key, w in acc.items():
+        if w == 0:
+            continue
+        fw = float(w)
+        if exact and Fraction(fw) != w:
+            return None
+        terms[key] = fw
+    return Polynomial(p.gens, terms)
+
+
+def _significant_part(p: Polynomial, t) -> Polynomial:
+    """p(y + t) without the coefficients that are round-off of a cancellation (below ``CANCELLED`` times the sum
+    of the magnitudes they cancel from): the data's own rounding, not structure, so not a scale."""
+    acc, mag = _translated_sums(p, t)
+    return Polynomial(p.gens, {k: float(w) for k, w in acc.items() if w and abs(w) > CANCELLED * mag[k]})
+
+
+def exact_value(p: Polynomial, x) -> float:
+    """p(x) evaluated in rational arithmetic and rounded up to a float (a valid upper bound of p(x): where
+    coefficients cancel, a floating-point evaluation at a point far from the origin errs by
+    eps * sum_a |c_a| |x^a|, far above the gap being decided)."""
+    xs = [Fraction(float(v)) for v in np.asarray(x, float)]
+    total = Fraction(0)
+    for a, c in p.terms.items():
+        term = Fraction(float(c))
+        for xi, ai in zip(xs, a):
+            if ai:
+                term *= xi ** int(ai)
+        total += term
+    v = float(total)
+    return float(np.nextafter(v, np.inf)) if Fraction(v) < total else v
+
+
+def with_exact_values(res, f: Polynomial, tol, scale: float):
+    """``res`` with its candidates re-valued exactly (:func:`exact_value`), the upper bound f at the best, and the
+    decision of :mod:`sospoly.tolerances` made again at ``scale`` on those numbers."""
+    pts = [np.asarray(p, float) for p in (res.candidates or res.minimizers)][:MAX_CANDIDATES]
+    vals = sorted(((exact_value(f, p), p) for p in pts if np.all(np.isfinite(p))), key=lambda vp: vp[0])
+    vals = [(v, p) for v, p in vals if np.isfinite(v)]
+    upper = vals[0][0] if vals else None
+    lower, optimal, status = res.lower_bound, res.optimal, res.status
+    if lower is not None and upper is not None:
+        if tol.contradicts(lower, upper, scale):
+            optimal, status = False, type(status).INCONSISTENT
+        else:
+            optimal = optimal and bool(tol.certified(lower, upper, scale))
+            lower = tol.consistent(lower, upper)
+    else:
+        optimal = False
+    near = tol.gap_tolerance(upper, scale) if upper is not None else 0.0
+    mins = tuple(p for v, p in vals if v <= upper + near) if upper is not None else ()
+    return replace(res, lower_bound=lower, upper_bound=upper, minimizers=mins, candidates=tuple(p for _, p in vals),
+                   optimal=optimal, status=status, scale=scale)
+
+
+def cancellation_scale(f: Polynomial, x) -> tuple[float, float, np.ndarray]:
+    """(scale at the origin, scale at t, t) for the translation point t of x: the ``fscale`` of
+    :func:`sospoly.scaling.scaled_program` of f and of the significant part of f(y + t) (a measure, not a
+    certificate)."""
+    t = translation_point(x)
+    p0 = scaled_program(f, (), (), "fixed", None)
+    s0 = p0.fscale
+    if np.max(np.abs(p0.scaling.to_scaled(t)), initial=0.0) < NEGLIGIBLE_SHIFT or _expanded_terms(f) > MAX_TERMS:
+        return s0, s0, t
+    ft = _significant_part(f, t)
+    st = scaled_program(ft, (), (), "fixed", None).fscale if ft.terms else s0
+    return s0, min(s0, st), t
+
+
+def worth_translating(s0: float, st: float) -> bool:
+    """The translation narrows the scale by at least ``CANCELLATION_BITS``."""
+    return st > 0 and math.log2(s0 / st) >= CANCELLATION_BITS
+
+
+def translated_program(t, f, eq, ineq, multiplier, radius):
+    """(f_t, eq_t, ineq_t, multiplier_t, radius_t) of the module docstring, or None when a translation is not
+    exact (or too large to expand)."""
+    polys = [f, *eq, *ineq] + ([multiplier] if isinstance(multiplier, Polynomial) else [])
+    if sum(_expanded_terms(p) for p in polys) > MAX_TERMS:
+        return None
+    out = [translated(p, t) for p in polys]
+    if any(q is None for q in out):
+        return None
+    ft, rest = out[0], out[1:]
+    eqt, ineqt = tuple(rest[:len(eq)]), tuple(rest[len(eq):len(eq) + len(ineq)])
+    mult = rest[-1] if isinstance(multiplier, Polynomial) else multiplier
+    rt = None
+    if radius is not None:
+        rt = float(np.nextafter(float(radius) + float(np.linalg.norm(t)) * (1 + 1e-15), np.inf))
+    return ft, eqt, ineqt, mult, rt
+
+
+def _moments_in_original(mm, t):
+    """A moment matrix of y mapped to v = y + t (None when its basis is not closed under divisors)."""
+    B = np.asarray(mm.basis, np.int64)
+    index = {tuple(int(v) for v in row): i for i, row in enumerate(B)}
+    T = np.zeros((len(B), len(B)))
+    for i, a in enumerate(B):
+        for c in product(*[range(int(ai) + 1) for ai in a]):
+            j = index.get(tuple(c))
+            if j is None:
+                return None
+            T[i, j] = math.prod(math.comb(int(ai), ci) * float(ti) ** (int(ai) - ci) for ai, ci, ti in zip(a, c, t))
+    return replace(mm, matrix=T @ mm.matrix @ T.T)
+
+
+def result_in_original(res, t):
+    """The translated program's result in the caller's variables: points + t and the moment matrices mapped (the
+    bounds are the same program's; :func:`with_exact_values` then values the points in the caller's form)."""
+    t = np.asarray(t, float)
+    mms = tuple(m for m in (_moments_in_original(mm, t) for mm in res.moment_matrices) if m is not None)
+    return replace(res, minimizers=tuple(np.asarray(p, float) + t for p in res.minimizers),
+                   candidates=tuple(np.asarray(p, float) + t for p in res.candidates), moment_matrices=mms)

@@ -9,8 +9,8 @@
   for sparse certificates), polished locally, kept when feasible, sorted by f; ``upper_bound`` is f
   at the best one;
 * ``optimal`` -- ``Tolerances.certified(lower_bound, upper_bound, scale)`` with ``scale`` the largest
-  coefficient of the balanced f expanded at the origin, or at the minimiser when the program solved there gave
-  the result (strategy steps 1 and 8: the problem's own scale, ``result.scale``): a certificate of
+  coefficient of the balanced f expanded at the origin, or at the minimiser where that is 16 bits smaller
+  (strategy steps 1 and 8: the problem's own scale, ``result.scale``): a certificate of
   global optimality of ``minimizers[0]`` within that tolerance.  A lower bound above the upper bound within the
   tolerance is reported equal to it; beyond it the status is ``INCONSISTENT``.
 
@@ -63,8 +63,8 @@ The default strategy (each step recorded in ``attempts``):
    (status ``time_limit``, with the best bounds found so far).
 8. **Re-centring** (:mod:`sospoly.recentre`). When f expanded at the minimiser has a scale smaller than at
    the origin by ``CANCELLATION_BITS`` (coefficients that cancel there: (v - 1000)^4 - 3 (v - 1000)^2 + 1), f is
-   valued exactly at the points and the program translated exactly to the minimiser is solved too, decided at
-   its own scale; the better result is kept.
+   valued exactly at the points, the first result is decided at the minimiser's scale, and the program translated
+   exactly to the minimiser is solved too (decided at its own scale); the better result is kept.
 """
 from __future__ import annotations
 
@@ -347,7 +347,7 @@ def _recentred(best: MinimizeResult, f, eq, ineq, multiplier, radius, solve, tol
         cands.append(dataclasses.replace(other, attempts=best.attempts + other.attempts))
     else:
         note += "; the translation to it is not exact in floating point (not solved there)"
-    out = [with_exact_values(r, f, tol, r.scale) for r in cands]
+    out = [with_exact_values(r, f, tol, st if r is best else r.scale) for r in cands]
     moved = len(out) > 1 and _better(out[1], out[0])
     chosen = out[1] if moved else out[0]
     note = f"{'re-centred at the minimiser' if moved else 'not re-centred'} ({note})"

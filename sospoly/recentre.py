@@ -14,8 +14,8 @@ minimum.  The problem's scale *at the minimiser* is that of f(y + t) for t near 
 
 When scale_t is below scale_0 by more than ``CANCELLATION_BITS`` (:func:`cancellation_scale`), ``minimize``
 values f exactly at the points (:func:`with_exact_values`: a floating-point value errs by eps times the
-cancelled terms), solves the translated program as well, decides it at its own scale, and keeps the better
-of the two results (certified first, then the larger proven lower bound)
+cancelled terms), decides its result at scale_t, solves the translated program as well (decided at its own
+scale), and keeps the better of the two results (certified first, then the larger proven lower bound)
 (:func:`translated_program`, :func:`result_in_original`):
 
 * **exact.** t has at most ``T_BITS`` significant bits and the coefficients of p(y + t) are computed in

@@ -80,3 +80,19 @@ def test_no_re_centring_where_nothing_cancels():
     assert not worth_translating(*cancellation_scale(m, [1e-9, -1e-9])[:2])
     f = (x - 1000) ** 4 - 3 * (x - 1000) ** 2 + 1
     assert worth_translating(*cancellation_scale(f + 0 * y, [998.8, 0.0])[:2])
+
+
+@pytest.mark.parametrize("s, a", [(1.0, 1e3), (1e6, 1e3), (1.0, 1e4), (1.0, 1e5)])
+def test_translated_family_against_the_given_polynomial(s, a):
+    """The review's family s (((x - a)^2 - 1)^2 + (y - a)^2).  Expanded in floating point its coefficients are
+    rounded (at a = 1e5 the constant by ~1e4), so the reference is the *given* polynomial valued exactly on a
+    grid around (a +- 1, a); the bounds must hold for it and the upper bound is its exact value."""
+    f = s * (((x - a) ** 2 - 1) ** 2 + (y - a) ** 2)
+    res = sospoly.minimize(f)
+    assert res.lower_bound is not None and res.upper_bound is not None
+    assert res.upper_bound == exact_value(f, res.minimizers[0])
+    grid = min(exact_value(f, [a + dx, a + dy]) for dx in np.linspace(-1.5, 1.5, 61) for dy in (-0.1, 0.0, 0.1))
+    assert res.lower_bound <= grid
+    assert res.lower_bound <= res.upper_bound
+    if res.optimal:
+        assert res.upper_bound - res.lower_bound <= sospoly.DEFAULT_TOLERANCES.gap_tolerance(res.upper_bound, res.scale)

@@ -63,8 +63,9 @@ The default strategy (each step recorded in ``attempts``):
    (status ``time_limit``, with the best bounds found so far).
 8. **Re-centring** (:mod:`sospoly.recentre`). When f expanded at the minimiser has a scale smaller than at
    the origin by ``CANCELLATION_BITS`` (coefficients that cancel there: (v - 1000)^4 - 3 (v - 1000)^2 + 1), f is
-   valued exactly at the points, the first result is decided at the minimiser's scale, and the program translated
-   exactly to the minimiser is solved too (decided at its own scale); the better result is kept.
+   valued exactly at the points, the first result is decided at the minimiser's scale (where f there anchors
+   it), and the program translated exactly to the minimiser is solved too (decided at its own scale); the
+   better result is kept.
 """
 from __future__ import annotations
 
@@ -332,22 +333,21 @@ def _recentred(best: MinimizeResult, f, eq, ineq, multiplier, radius, solve, tol
     translated to the minimiser when the scale there is smaller and the translation is exact."""
     import dataclasses
 
-    from .recentre import (cancellation_scale, result_in_original, translated_program, with_exact_values,
-                           worth_translating)
+    from .recentre import cancellation_scale, result_in_original, translated_program, with_exact_values
 
     if not best.minimizers:
         return best
-    s0, st, t = cancellation_scale(f, best.minimizers[0])
-    if not worth_translating(s0, st):
+    cut = cancellation_scale(f, best.minimizers[0])
+    if not cut.worth_translating:
         return best
-    cands, note = [best], f"scale {s0:.3g} at the origin, {st:.3g} at the minimiser"
-    prog = None if deadline.expired else translated_program(t, f, eq, ineq, multiplier, radius)
+    cands, note = [best], f"scale {cut.s0:.3g} at the origin, {cut.st:.3g} at the minimiser"
+    prog = None if deadline.expired else translated_program(cut.t, f, eq, ineq, multiplier, radius)
     if prog is not None:
-        other = result_in_original(solve(*prog), t)
+        other = result_in_original(solve(*prog), cut.t)
         cands.append(dataclasses.replace(other, attempts=best.attempts + other.attempts))
     else:
         note += "; the translation to it is not exact in floating point (not solved there)"
-    out = [with_exact_values(r, f, tol, st if r is best else r.scale) for r in cands]
+    out = [with_exact_values(r, f, tol, cut.decision_scale if r is best else r.scale) for r in cands]
     moved = len(out) > 1 and _better(out[1], out[0])
     chosen = out[1] if moved else out[0]
     note = f"{'re-centred at the minimiser' if moved else 'not re-centred'} ({note})"

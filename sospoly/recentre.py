@@ -14,9 +14,10 @@ minimum.  The problem's scale *at the minimiser* is that of f(y + t) for t near 
 
 When scale_t is below scale_0 by more than ``CANCELLATION_BITS`` (:func:`cancellation_scale`), ``minimize``
 values f exactly at the points (:func:`with_exact_values`: a floating-point value errs by eps times the
-cancelled terms), decides its result at scale_t, solves the translated program as well (decided at its own
-scale), and keeps the better of the two results (certified first, then the larger proven lower bound)
-(:func:`translated_program`, :func:`result_in_original`):
+cancelled terms), decides its result at scale_t where f(t) anchors that measure (a minimum value of 0
+leaves the balancing of f(y + t) free, and then the origin's scale stays), solves the translated program as
+well (decided at its own scale), and keeps the better of the two results (certified first, then the larger
+proven lower bound) (:func:`translated_program`, :func:`result_in_original`):
 
 * **exact.** t has at most ``T_BITS`` significant bits and the coefficients of p(y + t) are computed in
   rational arithmetic (every float is a dyadic rational, ``fractions.Fraction``); the translation is used
@@ -32,7 +33,7 @@ scale), and keeps the better of the two results (certified first, then the large
 from __future__ import annotations
 
 import math
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from fractions import Fraction
 from itertools import product
 
@@ -41,8 +42,8 @@ import numpy as np
 from .algebra.polynomial import Polynomial
 from .scaling import scaled_program
 
-__all__ = ["T_BITS", "MAX_TERMS", "translation_point", "translated", "cancellation_scale", "translated_program",
-           "result_in_original", "exact_value", "with_exact_values"]
+__all__ = ["Cancellation", "T_BITS", "MAX_TERMS", "translation_point", "translated", "cancellation_scale",
+           "translated_program", "result_in_original", "exact_value", "with_exact_values"]
 
 #: significant bits kept of each coordinate of the translation t.
 T_BITS = 12
@@ -50,7 +51,10 @@ T_BITS = 12
 #: 4 decimal digits; smaller differences are the measure's own spread: the balancing of a polynomial whose value and
 #: gradient vanish at t has no constant term to anchor it).
 CANCELLATION_BITS = 16
-#: a translation shorter than this in the balanced variables is none (the minimiser is at the origin).
+#: f(t) anchors the measure at t when at least this fraction of the scale there.
+ANCHOR = 2.0 ** -8
+#: a coordinate of the translation shorter than this in the balanced variables is 0 (the minimiser is at the origin
+#: in it: 1e-27 there would add terms of 1e-27 that skew the balancing of the measure).
 NEGLIGIBLE_SHIFT = 2.0 ** -20
 #: a translated coefficient below this fraction of the magnitudes that cancel in it is round-off (64 ulps).
 CANCELLED = 64 * float(np.finfo(float).eps)
@@ -150,18 +154,40 @@ def with_exact_values(res, f: Polynomial, tol, scale: float):
                    optimal=optimal, status=status, scale=scale)
 
 
-def cancellation_scale(f: Polynomial, x) -> tuple[float, float, np.ndarray]:
-    """(scale at the origin, scale at t, t) for the translation point t of x: the ``fscale`` of
+@dataclass(frozen=True)
+class Cancellation:
+    """The measure of :func:`cancellation_scale`: ``s0`` the scale at the origin, ``st`` at the translation point
+    ``t`` (<= s0), ``anchored``: f(t) is not negligible beside ``st`` (>= ``ANCHOR`` st).  Without that anchor
+    (a minimum value 0) the balancing of f(y + t) has no constant term to hold it, and st is no scale."""
+    s0: float
+    st: float
+    t: np.ndarray
+    anchored: bool
+
+    @property
+    def worth_translating(self) -> bool:
+        return worth_translating(self.s0, self.st)
+
+    @property
+    def decision_scale(self) -> float:
+        """The scale to decide the first result at: st where the measure is anchored and worth it, else s0."""
+        return self.st if self.anchored and self.worth_translating else self.s0
+
+
+def cancellation_scale(f: Polynomial, x) -> Cancellation:
+    """The scale at the origin and at the translation point t of x: the ``fscale`` of
     :func:`sospoly.scaling.scaled_program` of f and of the significant part of f(y + t) (a measure, not a
     certificate)."""
-    t = translation_point(x)
     p0 = scaled_program(f, (), (), "fixed", None)
+    t = translation_point(x)
+    t = np.where(np.abs(p0.scaling.to_scaled(t)) < NEGLIGIBLE_SHIFT, 0.0, t)      # coordinates already at the origin
     s0 = p0.fscale
-    if np.max(np.abs(p0.scaling.to_scaled(t)), initial=0.0) < NEGLIGIBLE_SHIFT or _expanded_terms(f) > MAX_TERMS:
-        return s0, s0, t
+    if not np.any(t) or _expanded_terms(f) > MAX_TERMS:
+        return Cancellation(s0, s0, t, False)
     ft = _significant_part(f, t)
-    st = scaled_program(ft, (), (), "fixed", None).fscale if ft.terms else s0
-    return s0, min(s0, st), t
+    st = min(s0, scaled_program(ft, (), (), "fixed", None).fscale) if ft.terms else s0
+    const = abs(ft.terms.get((0,) * f.nvars, 0.0))
+    return Cancellation(s0, st, t, const >= ANCHOR * st)
 
 
 def worth_translating(s0: float, st: float) -> bool:

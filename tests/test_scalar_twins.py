@@ -9,6 +9,8 @@ it cannot give the same bits as the vectorised code; these tests state how close
   paths) and X within 1e-6 max(1, |X|) (the minimiser's conditioning: the cost is flat along the depth);
 * :func:`tritools.model.stacked.damped_step_one` vs :func:`tritools.model.stacked.damped_step` (relative 1e-9 of
   the step, singular systems through the pseudo-inverse alike);
+* :func:`sospoly.analysis.verify_quadratic_batch` on a stack of one (its scalar twin) vs the same program in a
+  stack of two (the stacked code): the same reason and decision, bounds within 1e-9 relative (or 1e-12 of f(v^));
 * the normalisation of a stack of one vs the same problem in a stack of many;
 * one ``triangulate()`` vs the same track in ``triangulate_many``: the same status and certificate, bounds
   within 1e-9 relative.
@@ -23,6 +25,7 @@ import pytest
 
 import tritools
 from tritools.model import normalize as NZ
+from sospoly.analysis import SparseQuadratics, verify_quadratic_batch
 from tritools.model.stacked import damped_step, damped_step_one, refine_point, refine_points_stack
 from tritools.scene import random_scene
 
@@ -147,3 +150,59 @@ def test_one_call_decides_as_the_batch(N, noise, seed):
             assert a.gamma_lb == pytest.approx(b.gamma_lb, rel=1e-9, abs=1e-12 * pix)
             assert a.gamma_lb <= a.gamma_ub
             assert np.allclose(a.X, b.X, rtol=1e-6, atol=1e-6 * max(1.0, float(np.max(np.abs(b.X)))))
+
+
+def _programs():
+    """(f0, f1, F2, g0, g1, G2 sparse, v, radius) of one program each: the epipolar programs of the scenes at their
+    refined points (certified, the common case), the same at perturbed points (gaps, indefinite Hessians), and
+    random dense quadratic programs."""
+    from tritools.model.stacked import epipolar_quadratics, fundamental_stack, project_stack
+
+    out = []
+    for _name, C, x in SCENES[::3]:
+        st = NZ.normalization_stack(np.broadcast_to(C, (len(x),) + C.shape).copy(), x)
+        u, _, _ = project_stack(st.cameras_n, st.Xn)
+        F, _ = fundamental_stack(st.cameras_n)
+        N = C.shape[0]
+        g0, g1, G2 = epipolar_quadratics(F, N)
+        for m in range(len(x)):
+            for shift in (0.0, 0.05):
+                v = u[m].ravel() + shift
+                one = SparseQuadratics(G2.k, G2.i, G2.j, G2.vals[m:m + 1])
+                out.append((0.0, np.zeros(2 * N), np.eye(2 * N), g0[m], g1[m], one, v, 1.0 + np.linalg.norm(v)))
+    rng = np.random.default_rng(11)
+    for k in range(40):
+        n, K = 2 + k % 6, k % 4
+        A = rng.normal(size=(n, n))
+        F2 = A @ A.T if k % 3 else A + A.T
+        G = rng.normal(size=(1, K, n, n))
+        G = (G + np.swapaxes(G, 2, 3)) / 2
+        out.append((rng.normal(), rng.normal(size=n), F2, rng.normal(size=K), rng.normal(size=(K, n)),
+                    SparseQuadratics.from_dense(G), rng.normal(size=n), None if k % 2 else 3.0))
+    return out
+
+
+def test_scalar_lagrangian_bound_equals_the_stacked_one():
+    from sospoly import DEFAULT_TOLERANCES
+
+    reasons = set()
+    for f0, f1, F2, g0, g1, G2, v, radius in _programs():
+        two = SparseQuadratics(G2.k, G2.i, G2.j, np.concatenate([G2.vals, G2.vals]))
+        rad2 = None if radius is None else np.array([radius, radius])
+        ref = verify_quadratic_batch(np.array([f0, f0]), np.array([f1, f1]), np.array([F2, F2]), np.array([g0, g0]),
+                                     np.array([g1, g1]), two, np.array([v, v]), radius=rad2)
+        got = verify_quadratic_batch(np.array([f0]), f1[None], F2[None], g0[None], g1[None], G2, v[None],
+                                     radius=None if radius is None else np.array([radius]))
+        assert len(got) == 1 and got.multipliers.shape == (1, len(g0))
+        assert got.reason[0] == ref.reason[0] and got.certified[0] == ref.certified[0]
+        reasons.add(int(ref.reason[0]))
+        assert got.upper_bound[0] == pytest.approx(ref.upper_bound[0], rel=1e-12, abs=1e-300)
+        if ref.reason[0] == 0:
+            assert got.lower_bound[0] == pytest.approx(ref.lower_bound[0], rel=1e-9,
+                                                       abs=1e-12 * max(1.0, abs(ref.upper_bound[0])))
+            assert DEFAULT_TOLERANCES.certified(got.lower_bound[0], got.upper_bound[0]) == got.certified[0]
+        else:
+            assert np.isnan(got.lower_bound[0]) and np.isnan(ref.lower_bound[0])
+        np.testing.assert_allclose(got.multipliers[0], ref.multipliers[0], rtol=1e-7,
+                                   atol=1e-9 * max(1.0, float(np.abs(ref.multipliers).max(initial=0.0))))
+    assert reasons >= {0, 1}                                    # bounded and rejected programs both compared

@@ -206,3 +206,22 @@ def test_scalar_lagrangian_bound_equals_the_stacked_one():
         np.testing.assert_allclose(got.multipliers[0], ref.multipliers[0], rtol=1e-7,
                                    atol=1e-9 * max(1.0, float(np.abs(ref.multipliers).max(initial=0.0))))
     assert reasons >= {0, 1}                                    # bounded and rejected programs both compared
+
+
+def test_null_vectors_are_the_signed_minors_bit_for_bit():
+    """The four minors at once (one gather) give the bits of the cofactor expansion minor by minor (the code they
+    replace), and a_k = (-1)^k det(P without column k) as LAPACK's determinant to 1e-12."""
+    from tritools.model.stacked import null_vectors
+
+    def det3(P, cols):
+        (a00, a01, a02), (a10, a11, a12), (a20, a21, a22) = ([P[..., r, c] for c in cols] for r in range(3))
+        return a00 * (a11 * a22 - a12 * a21) - a01 * (a10 * a22 - a12 * a20) + a02 * (a10 * a21 - a11 * a20)
+
+    rng = np.random.default_rng(5)
+    for shape in ((3, 4), (6, 3, 4), (4, 5, 3, 4)):
+        P = rng.normal(size=shape) * 10.0 ** rng.uniform(-80, 80, size=shape[:-2] + (1, 1))
+        a = null_vectors(P)
+        ref = np.stack([det3(P, (1, 2, 3)), -det3(P, (0, 2, 3)), det3(P, (0, 1, 3)), -det3(P, (0, 1, 2))], axis=-1)
+        assert np.array_equal(a, ref)
+        dets = np.stack([np.linalg.det(np.delete(P, k, axis=-1)) * (-1) ** k for k in range(4)], axis=-1)
+        assert np.allclose(a, dets, rtol=1e-12, atol=0)

@@ -68,17 +68,21 @@ def view_pairs(N: int) -> tuple[np.ndarray, np.ndarray]:
     return I, J
 
 
+#: the columns of the four 3x3 minors of a 3x4 matrix (column k left out) and their cofactor signs (-1)^k.
+_MINOR_COLUMNS = np.array([[1, 2, 3], [0, 2, 3], [0, 1, 3], [0, 1, 2]])
+_MINOR_SIGNS = np.array([1.0, -1.0, 1.0, -1.0])
+
+
 def null_vectors(P: np.ndarray) -> np.ndarray:
     """Null vectors a (P a = 0) of a stack of 3x4 matrices (..., 3, 4), from the signed 3x3 minors
-    (a_k = (-1)^k det P[:, columns != k]); ||a||^2 = det(P P^T) (Cauchy-Binet), 0 iff rank P < 3."""
-    E = [[P[..., r, c] for c in range(4)] for r in range(3)]     # the 12 entries, each read once
-
-    def det3(c0, c1, c2):           # the minor of columns c0, c1, c2
-        (a00, a01, a02), (a10, a11, a12), (a20, a21, a22) = ((row[c0], row[c1], row[c2]) for row in E)
-        return (a00 * (a11 * a22 - a12 * a21)
-                - a01 * (a10 * a22 - a12 * a20)
-                + a02 * (a10 * a21 - a11 * a20))
-    return np.stack([det3(1, 2, 3), -det3(0, 2, 3), det3(0, 1, 3), -det3(0, 1, 2)], axis=-1)
+    (a_k = (-1)^k det P[:, columns != k]); ||a||^2 = det(P P^T) (Cauchy-Binet), 0 iff rank P < 3.  The four
+    minors at once (one gather, the cofactor expansion along the first row on (..., 4) arrays)."""
+    S = P[..., _MINOR_COLUMNS]                                   # (..., 3 rows, 4 minors, 3 columns)
+    (a00, a01, a02), (a10, a11, a12), (a20, a21, a22) = [[S[..., r, :, c] for c in range(3)] for r in range(3)]
+    det = (a00 * (a11 * a22 - a12 * a21)
+           - a01 * (a10 * a22 - a12 * a20)
+           + a02 * (a10 * a21 - a11 * a20))
+    return det * _MINOR_SIGNS
 
 
 def _smallest_eigvec(A: np.ndarray) -> np.ndarray:

@@ -172,6 +172,9 @@ def verify_quadratic_batch(f0, f1, F2, g0, g1, G2, points, *,
     against the accepted round-off: with eps = max(0, -lambda_min(L2)) and the stationarity residual
     r = 2 L2 w + L1, L(v) >= L(w) - eps ||v - w||^2 - ||r|| ||v - w|| for every v, so on the ball
     c - eps (R + ||w||)^2 - ||r|| (R + ||w||) - 8 eps_mach (|L0| + |L1.w| + |w^T L2 w|) is a lower bound.
+
+    A stack of one (M = 1) runs the scalar twin of these steps (plain arrays, matrix products instead of the
+    stack's einsum, the same margin): equal to the stacked code up to round-off, not bit for bit.
     """
     f0 = np.asarray(f0, float)
     f1 = np.asarray(f1, float)
@@ -228,6 +231,18 @@ def verify_quadratic_batch(f0, f1, F2, g0, g1, G2, points, *,
     return VerificationBatch(lower, fv, certified, lam, eig[:, 0], reason)
 
 
+def _lstsq_one(A: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The scalar twin of :func:`_lstsq_stack`: the minimum-norm least-squares solution of A x = b (p, q), the
+    same cut-off of the singular values."""
+    p, q = A.shape
+    if p == 0 or q == 0:
+        return np.zeros(q)
+    U, S, Vt = np.linalg.svd(A, full_matrices=False)
+    cut = np.finfo(float).eps * max(p, q) * S[0]
+    inv = np.where(S > cut, 1.0 / np.where(S > cut, S, 1.0), 0.0)
+    return (inv * (b @ U)) @ Vt
+
+
 def _verify_one(f0: float, f1, F2, g0, g1, G2: SparseQuadratics, v, tolerances: Tolerances,
                 radius: float | None) -> VerificationBatch:
     """The scalar (M = 1) twin of :func:`verify_quadratic_batch`: the same steps on one program with plain
@@ -236,16 +251,13 @@ def _verify_one(f0: float, f1, F2, g0, g1, G2: SparseQuadratics, v, tolerances: 
     n, K = len(v), len(g0)
     fv = f0 + f1 @ v + v @ F2 @ v
     grad_f = f1 + 2 * (F2 @ v)
-    if K:
-        J = np.zeros((K, n))                                            # rows: grad g_k(v)
-        np.add.at(J, (G2.k, G2.i), G2.vals[0] * v[G2.j])
-        J = g1 + 2 * J
-        lam = _lstsq_stack(J.T[None], -grad_f[None])[0]
+    if K:                                   # rows: grad g_k(v) (sums of the sparse entries by bincount)
+        J = g1 + 2 * np.bincount(G2.k * n + G2.i, G2.vals[0] * v[G2.j], K * n).reshape(K, n)
+        lam = _lstsq_one(J.T, -grad_f)
     else:
         lam = np.zeros(0)
     L0, L1 = f0 + lam @ g0, f1 + lam @ g1
-    L2 = F2.copy()
-    np.add.at(L2, (G2.i, G2.j), G2.vals[0] * lam[G2.k])
+    L2 = F2 + np.bincount(G2.i * n + G2.j, G2.vals[0] * lam[G2.k], n * n).reshape(n, n)
     eig, Q = np.linalg.eigh(L2)
     psd = bool(eig[0] >= -ROUNDOFF * np.maximum(1.0, np.max(np.abs(L2))))        # (NaN: not PSD)
     s = 2 * eig

@@ -244,7 +244,10 @@ def _solve3(A: list, g: list) -> list | None:
     algorithm on plain floats); None for an exactly singular A (gesv's LinAlgError)."""
     A = [A[0][:] + [g[0]], A[1][:] + [g[1]], A[2][:] + [g[2]]]
     for k in range(3):
-        p = max(range(k, 3), key=lambda i: abs(A[i][k]))
+        p = k                               # the first row of the largest |A[i][k]|, i >= k (gesv's pivot)
+        for i in range(k + 1, 3):
+            if abs(A[i][k]) > abs(A[p][k]):
+                p = i
         if A[p][k] == 0.0:
             return None
         A[k], A[p] = A[p], A[k]
@@ -296,7 +299,8 @@ def _lm_loop(cams: _View, xhat: np.ndarray, X: np.ndarray, at: tuple) -> bool:
     mu = 1e-3
     for _ in range(LM_MAX_ITER):
         J = ((cams.A01 - u[:, :, None] * cams.A2) / den[:, None, None]).reshape(-1, 3)
-        step = damped_step_one(J.T @ J, J.T @ r, mu)
+        Jt = J.T
+        step = damped_step_one(Jt @ J, Jt @ r, mu)
         Xt = X + step
         trial = cams.project(Xt, xhat)
         better = trial is not None and math.isfinite(trial[2]) and trial[2] <= cost

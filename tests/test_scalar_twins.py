@@ -209,8 +209,8 @@ def test_scalar_lagrangian_bound_equals_the_stacked_one():
 
 
 def test_null_vectors_are_the_signed_minors_bit_for_bit():
-    """The four minors at once (one gather) give the bits of the cofactor expansion minor by minor (the code they
-    replace), and a_k = (-1)^k det(P without column k) as LAPACK's determinant to 1e-12."""
+    """The four minors at once (one gather, small stacks) and minor by minor (large stacks) give the bits of the
+    cofactor expansion written out, and a_k = (-1)^k det(P without column k) as LAPACK's determinant to 1e-12."""
     from tritools.model.stacked import null_vectors
 
     def det3(P, cols):
@@ -218,7 +218,7 @@ def test_null_vectors_are_the_signed_minors_bit_for_bit():
         return a00 * (a11 * a22 - a12 * a21) - a01 * (a10 * a22 - a12 * a20) + a02 * (a10 * a21 - a11 * a20)
 
     rng = np.random.default_rng(5)
-    for shape in ((3, 4), (6, 3, 4), (4, 5, 3, 4)):
+    for shape in ((3, 4), (6, 3, 4), (4, 5, 3, 4), (300, 2, 3, 4)):       # (the last: minor by minor)
         P = rng.normal(size=shape) * 10.0 ** rng.uniform(-80, 80, size=shape[:-2] + (1, 1))
         a = null_vectors(P)
         ref = np.stack([det3(P, (1, 2, 3)), -det3(P, (0, 2, 3)), det3(P, (0, 1, 3)), -det3(P, (0, 1, 2))], axis=-1)

@@ -21,8 +21,8 @@ SDP would certify it; otherwise the caller falls back to the SDP.
 
 :func:`verify_quadratic_batch` runs the same test on a stack of M programs with one
 structure (n variables, K equalities), every step vectorised with numpy over the
-stack; :func:`verify_quadratic` is that function applied to a stack of one (a stack of one
-runs its scalar twin :func:`_verify_one`: the same steps on plain arrays, equal up to round-off).
+stack; :func:`verify_quadratic` is that function applied to a stack of one (which runs the
+scalar twin of the same steps on plain arrays: the same decision rule, equal up to round-off).
 """
 from __future__ import annotations
 

@@ -71,18 +71,29 @@ def view_pairs(N: int) -> tuple[np.ndarray, np.ndarray]:
 #: the columns of the four 3x3 minors of a 3x4 matrix (column k left out) and their cofactor signs (-1)^k.
 _MINOR_COLUMNS = np.array([[1, 2, 3], [0, 2, 3], [0, 1, 3], [0, 1, 2]])
 _MINOR_SIGNS = np.array([1.0, -1.0, 1.0, -1.0])
+#: up to this many matrices the four minors are computed at once (one gather: fewer numpy calls, the cost of a
+#: small stack); above it minor by minor (no gathered copy: the cost of a large stack).  The same bits either way.
+_GATHER_MAX = 512
 
 
 def null_vectors(P: np.ndarray) -> np.ndarray:
     """Null vectors a (P a = 0) of a stack of 3x4 matrices (..., 3, 4), from the signed 3x3 minors
-    (a_k = (-1)^k det P[:, columns != k]); ||a||^2 = det(P P^T) (Cauchy-Binet), 0 iff rank P < 3.  The four
-    minors at once (one gather, the cofactor expansion along the first row on (..., 4) arrays)."""
-    S = P[..., _MINOR_COLUMNS]                                   # (..., 3 rows, 4 minors, 3 columns)
-    (a00, a01, a02), (a10, a11, a12), (a20, a21, a22) = [[S[..., r, :, c] for c in range(3)] for r in range(3)]
-    det = (a00 * (a11 * a22 - a12 * a21)
-           - a01 * (a10 * a22 - a12 * a20)
-           + a02 * (a10 * a21 - a11 * a20))
-    return det * _MINOR_SIGNS
+    (a_k = (-1)^k det P[:, columns != k], the cofactor expansion along the first row); ||a||^2 = det(P P^T)
+    (Cauchy-Binet), 0 iff rank P < 3."""
+    if P.size <= 12 * _GATHER_MAX:
+        S = P[..., _MINOR_COLUMNS]                               # (..., 3 rows, 4 minors, 3 columns)
+        return _det3([[S[..., r, :, c] for c in range(3)] for r in range(3)]) * _MINOR_SIGNS
+    E = [[P[..., r, c] for c in range(4)] for r in range(3)]     # the 12 entries, each read once
+    minors = [_det3([[row[c] for c in cols] for row in E]) for cols in _MINOR_COLUMNS.tolist()]
+    return np.stack([minors[0], -minors[1], minors[2], -minors[3]], axis=-1)
+
+
+def _det3(a: list) -> np.ndarray:
+    """det of 3x3 matrices given entry by entry (a[r][c] arrays), expanded along the first row."""
+    (a00, a01, a02), (a10, a11, a12), (a20, a21, a22) = a
+    return (a00 * (a11 * a22 - a12 * a21)
+            - a01 * (a10 * a22 - a12 * a20)
+            + a02 * (a10 * a21 - a11 * a20))
 
 
 def _smallest_eigvec(A: np.ndarray) -> np.ndarray:

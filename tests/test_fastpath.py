@@ -120,8 +120,10 @@ def test_single_triangulate_and_batch_decide_alike():
             assert single.certified_by != "verification"
         else:
             assert single.certified_by == "verification"
-            np.testing.assert_allclose(single.X, fast.X[j], rtol=1e-12, atol=1e-12)
-            assert single.gamma_lb == pytest.approx(fast.gamma_lb[j], rel=1e-12)
+            # a single call refines with the scalar LM twin (tritools.model.stacked.refine_point): the same local
+            # minimiser up to round-off -- a cost resolved to eps places X to ~sqrt(eps) (tests/test_scalar_twins.py)
+            np.testing.assert_allclose(single.X, fast.X[j], rtol=1e-7, atol=1e-7)
+            assert single.gamma_lb == pytest.approx(fast.gamma_lb[j], rel=1e-9)
 
 
 def test_degenerate_problems_are_not_certified():

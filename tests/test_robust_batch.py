@@ -23,7 +23,9 @@ def test_bad_cameras_in_a_robust_batch_get_named_errors():
         single = tritools.triangulate(*probs[k], robust=5.0)
         assert many[k].status == single.status and many[k].optimal
         np.testing.assert_array_equal(many[k].inliers, single.inliers)
-        assert many[k].gamma_ub == single.gamma_ub and many[k].gamma_lb == single.gamma_lb
+        # (a single call's normalisation refines with the scalar LM twin: the same numbers up to round-off)
+        assert many[k].gamma_ub == pytest.approx(single.gamma_ub, rel=1e-9)
+        assert many[k].gamma_lb == pytest.approx(single.gamma_lb, rel=1e-9)
 
 
 def test_batch_time_limits_are_per_problem(monkeypatch):

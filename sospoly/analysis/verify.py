@@ -21,11 +21,12 @@ SDP would certify it; otherwise the caller falls back to the SDP.
 
 :func:`verify_quadratic_batch` runs the same test on a stack of M programs with one
 structure (n variables, K equalities), every step vectorised with numpy over the
-stack; :func:`verify_quadratic` is that function applied to a stack of one, so the
-single and the batched decisions are the same code.
+stack; :func:`verify_quadratic` is that function applied to a stack of one (which runs the
+scalar twin of the same steps on plain arrays: the same decision rule, equal up to round-off).
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -171,6 +172,9 @@ def verify_quadratic_batch(f0, f1, F2, g0, g1, G2, points, *,
     against the accepted round-off: with eps = max(0, -lambda_min(L2)) and the stationarity residual
     r = 2 L2 w + L1, L(v) >= L(w) - eps ||v - w||^2 - ||r|| ||v - w|| for every v, so on the ball
     c - eps (R + ||w||)^2 - ||r|| (R + ||w||) - 8 eps_mach (|L0| + |L1.w| + |w^T L2 w|) is a lower bound.
+
+    A stack of one (M = 1) runs the scalar twin of these steps (plain arrays, matrix products instead of the
+    stack's einsum, the same margin): equal to the stacked code up to round-off, not bit for bit.
     """
     f0 = np.asarray(f0, float)
     f1 = np.asarray(f1, float)
@@ -188,6 +192,9 @@ def verify_quadratic_batch(f0, f1, F2, g0, g1, G2, points, *,
                          f"g0 {g0.shape}, g1 {g1.shape}, "
                          f"G2 {G2.vals.shape if isinstance(G2, SparseQuadratics) else np.shape(G2)}, "
                          f"points {v.shape}")
+    if M == 1:
+        return _verify_one(f0[0], f1[0], F2[0], g0[0], g1[0], G2, v[0], tolerances,
+                           None if radius is None else float(np.broadcast_to(np.asarray(radius, float), (1,))[0]))
     fv = f0 + np.einsum("mi,mi->m", f1, v) + np.einsum("mi,mij,mj->m", v, F2, v)
     grad_f = f1 + 2 * np.einsum("mij,mj->mi", F2, v)
     if K:
@@ -222,6 +229,54 @@ def verify_quadratic_batch(f0, f1, F2, g0, g1, G2, points, *,
     lower = np.where(bounded, c, np.nan)
     certified = bounded & np.asarray(tolerances.certified(lower, fv), bool)
     return VerificationBatch(lower, fv, certified, lam, eig[:, 0], reason)
+
+
+def _lstsq_one(A: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The scalar twin of :func:`_lstsq_stack`: the minimum-norm least-squares solution of A x = b (p, q), the
+    same cut-off of the singular values."""
+    p, q = A.shape
+    if p == 0 or q == 0:
+        return np.zeros(q)
+    U, S, Vt = np.linalg.svd(A, full_matrices=False)
+    cut = np.finfo(float).eps * max(p, q) * S[0]
+    inv = np.where(S > cut, 1.0 / np.where(S > cut, S, 1.0), 0.0)
+    return (inv * (b @ U)) @ Vt
+
+
+def _verify_one(f0: float, f1, F2, g0, g1, G2: SparseQuadratics, v, tolerances: Tolerances,
+                radius: float | None) -> VerificationBatch:
+    """The scalar (M = 1) twin of :func:`verify_quadratic_batch`: the same steps on one program with plain
+    (n,), (K, n), (n, n) arrays and matrix products instead of the stack's einsum; equal to it up to round-off
+    (tests/test_scalar_twins.py), the same rigorous margin.  Returns a :class:`VerificationBatch` of one."""
+    n, K = len(v), len(g0)
+    fv = f0 + f1 @ v + v @ F2 @ v
+    grad_f = f1 + 2 * (F2 @ v)
+    if K:                                   # rows: grad g_k(v) (sums of the sparse entries by bincount)
+        J = g1 + 2 * np.bincount(G2.k * n + G2.i, G2.vals[0] * v[G2.j], K * n).reshape(K, n)
+        lam = _lstsq_one(J.T, -grad_f)
+    else:
+        lam = np.zeros(0)
+    L0, L1 = f0 + lam @ g0, f1 + lam @ g1
+    L2 = F2 + np.bincount(G2.i * n + G2.j, G2.vals[0] * lam[G2.k], n * n).reshape(n, n)
+    eig, Q = np.linalg.eigh(L2)
+    psd = bool(eig[0] >= -ROUNDOFF * np.maximum(1.0, np.max(np.abs(L2))))        # (NaN: not PSD)
+    s = 2 * eig
+    cut = np.finfo(float).eps * n * np.max(np.abs(s))
+    inv = np.where(np.abs(s) > cut, 1.0 / np.where(np.abs(s) > cut, s, 1.0), 0.0)
+    w = -(Q @ (inv * (L1 @ Q)))
+    r_abs = math.sqrt(float(np.sum((2 * (L2 @ w) + L1) ** 2)))
+    in_range = r_abs / max(1.0, math.sqrt(float(L1 @ L1))) <= tolerances.identity_residual
+    t1, t2 = float(L1 @ w), float(w @ L2 @ w)
+    c = L0 + t1 + t2
+    if radius is not None:
+        reach = radius + math.sqrt(float(w @ w))
+        c = c - max(0.0, -float(eig[0])) * reach ** 2 - r_abs * reach \
+            - 8 * np.finfo(float).eps * (abs(L0) + abs(t1) + abs(t2))
+    reason = 1 if not psd else 2 if not in_range else 0
+    lower = np.array([c if reason == 0 else np.nan])
+    fv = np.array([fv])
+    certified = (reason == 0) & np.asarray(tolerances.certified(lower, fv), bool)
+    return VerificationBatch(lower, fv, certified, lam[None], eig[:1].copy(), np.array([reason]))
 
 
 def verify_quadratic(f: Polynomial, eq, point, *, gens=None,

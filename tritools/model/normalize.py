@@ -37,7 +37,8 @@ P_i' = T_i P_i H, each scaled to unit Frobenius norm.
 
 :func:`normalization_stack` computes all of this for a stack of problems with numpy;
 :func:`normalization_for` is that function applied to a stack of one (the regions' centres as the
-points), so the single-point and the batched paths normalise identically.
+points), so the single-point and the batched paths normalise by the same rule (a stack of one refines
+with the scalar twin :func:`tritools.model.stacked.refine_point`: equal up to round-off).
 """
 from __future__ import annotations
 

@@ -205,6 +205,10 @@ def lagrangian_bounds(C, Cn, v, ok, radius, resolution, tolerances, f0=None, wei
         band = band[~good]
     todo = todo[np.isnan(lower[todo])]
     step = all_pairs_chunk(N)
+    if todo.size == M == 1:             # a single call: its arrays as they are (no copies by index)
+        if not expired(deadline):
+            lower, ok = _all_pairs_bounds(C, Cn, v, ok, radius, tolerances, f0, F2(todo), views)
+        return lower, upper, ok
     for part in (todo[k:k + step] for k in range(0, todo.size, step)):
         if expired(deadline):
             break

@@ -6,8 +6,8 @@ local L2 optimum v^, KKT multipliers, the Lagrangian bound (:mod:`sospoly.analys
 tried in order; the first that applies runs:
 
 * ``"verify-points"`` -- point regions, Corollary 1: the vectorised verification
-  (:func:`tritools.solve.fastpath.verify_checked`) on a stack of one, so batches decide exactly as a
-  single call;
+  (:func:`tritools.solve.fastpath.verify_checked`) on a stack of one, so batches decide as a single call
+  (the same rule; a stack of one runs the scalar twins of the LM and of the bound, equal up to round-off);
 * ``"verify-discs"`` -- filled discs (uncertain keypoints), Corollary 1: :func:`tritools.solve.discs.verify_discs`;
 * ``"generic"`` -- any delta = 2 program without inequalities or auxiliary variables:
   :func:`sospoly.analysis.verify_quadratic` on the built problem.

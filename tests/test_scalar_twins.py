@@ -1,0 +1,246 @@
+"""The scalar (M = 1) twins of the single-call path (issue #22) against the stacked code they stand in for.
+
+A twin runs the same mathematics on one problem with plain small arrays (no einsum, no stacked broadcasting), so
+it cannot give the same bits as the vectorised code; these tests state how close it must be:
+
+* :func:`tritools.model.stacked.refine_point` vs :func:`tritools.model.stacked.refine_points_stack` (forced
+  vectorised): the same ``ok`` / ``converged`` flags, the same L2 cost at the end (relative 1e-10, or the
+  round-off of the coordinates at zero noise: both are local minimisers, reached along differently rounded
+  paths) and X within 1e-6 max(1, |X|) (the minimiser's conditioning: the cost is flat along the depth);
+* :func:`tritools.model.stacked.damped_step_one` vs :func:`tritools.model.stacked.damped_step` (relative 1e-9 of
+  the step, singular systems through the pseudo-inverse alike);
+* :func:`sospoly.analysis.verify_quadratic_batch` on a stack of one (its scalar twin) vs the same program in a
+  stack of two (the stacked code): the same reason and decision, bounds within 1e-9 relative (or 1e-12 of f(v^));
+* the normalisation of a stack of one vs the same problem in a stack of many;
+* one ``triangulate()`` vs the same track in ``triangulate_many``: the same status and certificate, bounds
+  within 1e-9 relative.
+
+On the adversarial scenes of the project (pixel scales 1e-3..1e6, georeferenced worlds, rescaled cameras,
+duplicated views, zero noise, points behind cameras) and bad numbers (inf/NaN refused the same way).
+"""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import tritools
+from tritools.model import normalize as NZ
+from sospoly.analysis import SparseQuadratics, verify_quadratic_batch
+from tritools.model.stacked import damped_step, damped_step_one, refine_point, refine_points_stack
+from tritools.scene import random_scene
+
+from .test_stacked_single import SCENES, _fields
+
+
+def _cost(C, xhat, X):
+    """sum_i ||Phi(X, P_i) - x^_i||^2 computed independently (homogeneous division, no shared code)."""
+    h = np.einsum("nij,j->ni", C, np.append(X, 1.0))
+    return float(np.sum((h[:, :2] / h[:, 2:] - xhat) ** 2))
+
+
+def _starts(M):
+    rng = np.random.default_rng(M)
+    return [np.zeros((M, 3)), np.full((M, 3), 0.3), rng.normal(scale=2.0, size=(M, 3))]
+
+
+def _behind(C, x):
+    """The same data with the cameras of views 0 negated: the same projections, every depth of view 0 negative."""
+    C = C.copy()
+    C[0] *= -1.0
+    return C, x
+
+
+CASES = SCENES + [(name + "-behind", *_behind(C, x)) for name, C, x in SCENES[:6]]
+
+
+@pytest.mark.parametrize("name, C, x", CASES, ids=[s[0] for s in CASES])
+def test_scalar_lm_equals_the_stacked_lm(name, C, x):
+    M = len(x)
+    Cs = np.broadcast_to(C / np.abs(C).max(), (M,) + C.shape).copy()
+    for X0 in _starts(M):
+        X, ok, conv = refine_points_stack(Cs, x, X0, np.ones(M, bool), return_converged=True, scalar=False)
+        for m in range(M):
+            X1, ok1, conv1 = refine_point(Cs[m], x[m], X0[m])
+            assert (ok1, conv1) == (ok[m], conv[m]), (m, X0[m])
+            if ok[m]:
+                c, c1 = _cost(Cs[m], x[m], X[m]), _cost(Cs[m], x[m], X1)
+                floor = 2 * len(x[m]) * (64 * np.finfo(float).eps * max(1.0, np.abs(x[m]).max())) ** 2     # round-off
+                assert c1 == pytest.approx(c, rel=1e-10, abs=floor)
+                assert np.linalg.norm(X1 - X[m]) <= 1e-6 * max(1.0, np.linalg.norm(X[m]))
+            # the stack of one dispatches to the twin by default, with the stack's shapes
+            Xd, okd, convd = refine_points_stack(Cs[m:m + 1], x[m:m + 1], X0[m:m + 1], np.ones(1, bool),
+                                                 return_converged=True)
+            assert Xd.shape == (1, 3) and np.array_equal(Xd[0], X1) and (okd[0], convd[0]) == (ok1, conv1)
+
+
+def test_scalar_lm_refuses_bad_numbers_like_the_stack():
+    sc = random_scene(3, 1, noise_px=1.0, seed=1)
+    C, x = np.asarray(sc.cameras) / 1e3, np.asarray(sc.points2d)[0]
+    centre = np.linalg.svd(C[0])[2][-1]
+    bad = [("nan camera", np.where(np.arange(12).reshape(3, 4) == 5, np.nan, 1.0) * C, x, np.zeros(3)),
+           ("inf point", C, np.where([[True, False], [False, False], [False, False]], np.inf, x), np.zeros(3)),
+           ("nan start", C, x, np.array([np.nan, 0.0, 0.0])),
+           ("start at a centre", C, x, centre[:3] / centre[3]),
+           ("not ok", C, x, np.zeros(3))]
+    for name, Cb, xb, X0 in bad:
+        ok_in = name != "not ok"
+        with np.errstate(all="ignore"):
+            X, ok, conv = refine_points_stack(Cb[None], xb[None], X0[None], np.array([ok_in]), return_converged=True,
+                                              scalar=False)
+            X1, ok1, conv1 = refine_point(Cb, xb, X0, ok_in)
+        assert (ok1, conv1) == (ok[0], conv[0]), name
+        assert ok1 == (name == "inf point"), name       # (an infinite target: no step is ever accepted, X stays)
+        if ok1:
+            assert np.array_equal(X1, X[0]) and np.array_equal(X1, X0), name
+
+
+def test_scalar_damped_step_equals_the_batched_solve():
+    rng = np.random.default_rng(7)
+    for k in range(300):
+        J = rng.normal(size=(2 * (2 + k % 9), 3)) * 10.0 ** rng.uniform(-6, 6)
+        if k % 10 == 0:
+            J[:, 2] = J[:, 0]                              # rank-deficient J^T J (the damping keeps it regular)
+        JtJ, g, mu = J.T @ J, J.T @ rng.normal(size=len(J)), 10.0 ** rng.uniform(-12, 12)
+        ref = damped_step(JtJ[None], g[None], np.array([mu]))[0]
+        got = damped_step_one(JtJ, g, mu)
+        assert np.linalg.norm(got - ref) <= 1e-9 * np.linalg.norm(ref) + 1e-300, k
+    zero = damped_step_one(np.zeros((3, 3)), np.ones(3), 0.0)       # exactly singular: the pseudo-inverse (0)
+    ref = damped_step(np.zeros((1, 3, 3)), np.ones((1, 3)), np.zeros(1))[0]
+    assert np.array_equal(zero, ref) and np.all(zero == 0)
+
+
+@pytest.mark.parametrize("name, C, x", SCENES, ids=[s[0] for s in SCENES])
+def test_stack_of_one_normalises_as_a_stack_of_many_up_to_round_off(name, C, x):
+    """The stack of one runs the scalar LM: every field of the normalisation as in a stack of many, the masks
+    exactly, the numbers within 1e-7 relative (the image scale comes from the refined point's residual); the
+    refined point Xn itself at the same cost (relative 1e-7) and within 1e-4: on a georeferenced world normalised
+    without re-centring (the per-point path re-centres first) both LMs stop by the step rule on a flat valley
+    short of the minimum (another run lowers the cost by up to 6%, the stacked code's behaviour, not the twin's),
+    at points 1e-6 apart."""
+    M = len(x)
+    many = NZ.normalization_stack(np.broadcast_to(C, (M,) + C.shape).copy(), x)
+    for m in range(M):
+        NZ._LAST_SINGLE[0] = None
+        one = NZ.normalization_stack(C[None].copy(), x[m:m + 1].copy())
+        for name_, a, b in zip(("scale", "shifts", "origin", "depth", "cameras_n", "Xn", "ok", "resolution",
+                                "converged"), _fields(one), _fields(many, slice(m, m + 1))):
+            if a.dtype == bool:
+                assert np.array_equal(a, b), name_
+            elif name_ == "Xn":
+                assert np.allclose(a, b, rtol=1e-4, atol=1e-4), name_
+                if one.ok[0]:
+                    c1, c = (_cost(st.cameras_n[0], np.zeros((C.shape[0], 2)), a[0]) for st, a in ((one, a), (one, b)))
+                    assert c1 == pytest.approx(c, rel=1e-7, abs=1e-24)
+            else:
+                assert np.allclose(a, b, rtol=1e-7, atol=1e-7 * max(1.0, float(np.max(np.abs(b))))), name_
+
+
+def _variants(C, x):
+    """(cameras, points, pixel scale, rtol of the bounds) of one scene at pixel scales 1e-3..1e6, in a georeferenced
+    world, with a duplicated view and with view 0's camera negated (every depth in it negative: the optimum behind
+    that camera).  Georeferenced: rtol 1e-5 and the certificate's path not compared, as on main before the twins
+    (a single call re-centres the world frame and certifies by verification, the batch verifies in the caller's
+    frame, falls back to its SDP, and gamma's round-off at |origin| 5e6 differs by ~2e-6, ~1e-8 px at zero noise)."""
+    out = []
+    for pix in (1.0, 1e-3 / 800, 1e6 / 800):
+        S = np.diag([pix, pix, 1.0])
+        out.append((S @ C, x * pix, pix, 1e-9))
+    T = np.eye(4)
+    T[:3, 3] = [4e6, -3e6, 1e5]
+    out.append((C @ np.linalg.inv(T), x, 1.0, 1e-5))
+    out.append((np.concatenate([C, C[:1]]), np.concatenate([x, x[:, :1]], axis=1), 1.0, 1e-9))
+    out.append((*_behind(C, x), 1.0, 1e-9))
+    return out
+
+
+@pytest.mark.parametrize("N, noise, seed", [(2, 1.0, 0), (3, 0.0, 1), (5, 1.0, 2), (5, 30.0, 3), (10, 1.0, 4)])
+def test_one_call_decides_as_the_batch(N, noise, seed):
+    sc = random_scene(N, 12, noise_px=noise, seed=seed)
+    C, x = np.asarray(sc.cameras), np.asarray(sc.points2d)
+    for Cp, xp, pix, rtol in _variants(C, x):
+        geo = rtol > 1e-9
+        many = tritools.triangulate_many([(Cp, xp[j]) for j in range(len(xp))], progress=False)
+        for j, b in enumerate(many):
+            a = tritools.triangulate(Cp, xp[j])
+            assert (a.status, a.optimal, a.in_front) == (b.status, b.optimal, b.in_front)
+            assert a.certified_by == b.certified_by or geo
+            floor = (1e-7 if geo else 1e-12) * pix         # (geo: the projections' round-off at |origin| 5e6)
+            assert a.gamma_ub == pytest.approx(b.gamma_ub, rel=rtol, abs=floor)
+            assert a.gamma_lb == pytest.approx(b.gamma_lb, rel=rtol, abs=floor)
+            assert a.gamma_lb <= a.gamma_ub
+            assert np.allclose(a.X, b.X, rtol=1e-6, atol=1e-6 * max(1.0, float(np.max(np.abs(b.X)))))
+
+
+def _programs():
+    """(f0, f1, F2, g0, g1, G2 sparse, v, radius) of one program each: the epipolar programs of the scenes at their
+    refined points (certified, the common case), the same at perturbed points (gaps, indefinite Hessians), and
+    random dense quadratic programs."""
+    from tritools.model.stacked import epipolar_quadratics, fundamental_stack, project_stack
+
+    out = []
+    for _name, C, x in SCENES[::3]:
+        st = NZ.normalization_stack(np.broadcast_to(C, (len(x),) + C.shape).copy(), x)
+        u, _, _ = project_stack(st.cameras_n, st.Xn)
+        F, _ = fundamental_stack(st.cameras_n)
+        N = C.shape[0]
+        g0, g1, G2 = epipolar_quadratics(F, N)
+        for m in range(len(x)):
+            for shift in (0.0, 0.05):
+                v = u[m].ravel() + shift
+                one = SparseQuadratics(G2.k, G2.i, G2.j, G2.vals[m:m + 1])
+                out.append((0.0, np.zeros(2 * N), np.eye(2 * N), g0[m], g1[m], one, v, 1.0 + np.linalg.norm(v)))
+    rng = np.random.default_rng(11)
+    for k in range(40):
+        n, K = 2 + k % 6, k % 4
+        A = rng.normal(size=(n, n))
+        F2 = A @ A.T if k % 3 else A + A.T
+        G = rng.normal(size=(1, K, n, n))
+        G = (G + np.swapaxes(G, 2, 3)) / 2
+        out.append((rng.normal(), rng.normal(size=n), F2, rng.normal(size=K), rng.normal(size=(K, n)),
+                    SparseQuadratics.from_dense(G), rng.normal(size=n), None if k % 2 else 3.0))
+    return out
+
+
+def test_scalar_lagrangian_bound_equals_the_stacked_one():
+    from sospoly import DEFAULT_TOLERANCES
+
+    reasons = set()
+    for f0, f1, F2, g0, g1, G2, v, radius in _programs():
+        two = SparseQuadratics(G2.k, G2.i, G2.j, np.concatenate([G2.vals, G2.vals]))
+        rad2 = None if radius is None else np.array([radius, radius])
+        ref = verify_quadratic_batch(np.array([f0, f0]), np.array([f1, f1]), np.array([F2, F2]), np.array([g0, g0]),
+                                     np.array([g1, g1]), two, np.array([v, v]), radius=rad2)
+        got = verify_quadratic_batch(np.array([f0]), f1[None], F2[None], g0[None], g1[None], G2, v[None],
+                                     radius=None if radius is None else np.array([radius]))
+        assert len(got) == 1 and got.multipliers.shape == (1, len(g0))
+        assert got.reason[0] == ref.reason[0] and got.certified[0] == ref.certified[0]
+        reasons.add(int(ref.reason[0]))
+        assert got.upper_bound[0] == pytest.approx(ref.upper_bound[0], rel=1e-12, abs=1e-300)
+        if ref.reason[0] == 0:
+            assert got.lower_bound[0] == pytest.approx(ref.lower_bound[0], rel=1e-9,
+                                                       abs=1e-12 * max(1.0, abs(ref.upper_bound[0])))
+            assert DEFAULT_TOLERANCES.certified(got.lower_bound[0], got.upper_bound[0]) == got.certified[0]
+        else:
+            assert np.isnan(got.lower_bound[0]) and np.isnan(ref.lower_bound[0])
+        np.testing.assert_allclose(got.multipliers[0], ref.multipliers[0], rtol=1e-7,
+                                   atol=1e-9 * max(1.0, float(np.abs(ref.multipliers).max(initial=0.0))))
+    assert reasons >= {0, 1}                                    # bounded and rejected programs both compared
+
+
+def test_null_vectors_are_the_signed_minors_bit_for_bit():
+    """The four minors at once (one gather, small stacks) and minor by minor (large stacks) give the bits of the
+    cofactor expansion written out, and a_k = (-1)^k det(P without column k) as LAPACK's determinant to 1e-12."""
+    from tritools.model.stacked import null_vectors
+
+    def det3(P, cols):
+        (a00, a01, a02), (a10, a11, a12), (a20, a21, a22) = ([P[..., r, c] for c in cols] for r in range(3))
+        return a00 * (a11 * a22 - a12 * a21) - a01 * (a10 * a22 - a12 * a20) + a02 * (a10 * a21 - a11 * a20)
+
+    rng = np.random.default_rng(5)
+    for shape in ((3, 4), (6, 3, 4), (4, 5, 3, 4), (300, 2, 3, 4)):       # (the last: minor by minor)
+        P = rng.normal(size=shape) * 10.0 ** rng.uniform(-80, 80, size=shape[:-2] + (1, 1))
+        a = null_vectors(P)
+        ref = np.stack([det3(P, (1, 2, 3)), -det3(P, (0, 2, 3)), det3(P, (0, 1, 3)), -det3(P, (0, 1, 2))], axis=-1)
+        assert np.array_equal(a, ref)
+        dets = np.stack([np.linalg.det(np.delete(P, k, axis=-1)) * (-1) ** k for k in range(4)], axis=-1)
+        assert np.allclose(a, dets, rtol=1e-12, atol=0)

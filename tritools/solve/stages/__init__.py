@@ -60,7 +60,7 @@ POINT_STAGES: tuple[Stage, ...] = (
     Stage("verify", verify_stage),
     Stage("trivial", trivial_stage),
     Stage("steps", steps_stage),
-    Stage("exact_variety", exact_variety_stage),        # the plan left the point uncertified: Theorem 1, delta 4
+    Stage("exact_variety", exact_variety_stage),        # the plan left it uncertified: Theorem 1, delta 4
     Stage("settle", settle_stage),
     Stage("world_frame", world_frame_stage),
     Stage("report", report_stage),

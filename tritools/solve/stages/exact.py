@@ -1,12 +1,12 @@
 """The ``exact_variety`` point stage: one more certificate for a point the degree plan left uncertified.
 
-Corollary 1's epipolar constraints admit image points no scene point projects to (spurious points at the
-epipoles, :mod:`tritools.solve.plan`), so for observations far from every projection its bound can stop below
-the L2 optimum at every degree.  This stage, between ``steps`` and ``settle``, runs
-:func:`tritools.solve.plan.exact_variety_step` -- Theorem 1 at delta = 4, whose minors vanish exactly on the image
-points of scene points -- through the step stages like any plan step (:func:`tritools.solve.stages.sdp.run_step`:
-the same rigorous lower bound and the one decision rule), and keeps its result where it is better
-(:func:`~tritools.solve.stages.outcome.better`).
+Corollary 1's epipolar constraints admit image points no scene point projects to (with coplanar camera centres --
+always with three views -- every view's point on the image line of the centres' plane, :mod:`tritools.solve.plan`),
+so for observations far from every projection its bound can stop below the L2 optimum at every degree.  This
+stage, between ``steps`` and ``settle``, runs :func:`tritools.solve.plan.exact_variety_step` -- Theorem 1 at
+delta = 4, dense, whose minors vanish exactly on the image points of scene points -- through the step stages like
+any plan step (:func:`tritools.solve.stages.sdp.run_step`: the same rigorous lower bound and the one decision
+rule), and keeps its result where it is better (:func:`~tritools.solve.stages.outcome.better`).
 
 It runs only when the plan ended NOT_CERTIFIED (not after a certificate, an ill-posed problem, a skipped step or
 a contradiction) and time remains; running out of time gives TIME_LIMIT (``settle``), a program beyond the budget

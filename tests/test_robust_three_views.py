@@ -464,3 +464,23 @@ def test_the_leaf_estimate_is_a_candidate():
     assert 10 * r.gamma_lb ** 2 <= f_ref * (1 + 1e-9)
     assert 10 * r.gamma_ub ** 2 <= f_ref * (1 + 1e-7)
     assert r.inliers.tolist() == [True, False, True, True, True]
+
+
+@pytest.mark.parametrize("variant", ["duplicated view, other observation", "duplicated view and observation",
+                                     "camera sign flipped"])
+def test_duplicated_views_and_flipped_cameras(variant):
+    """Four views from three (a duplicated camera: the exact-variety step at its size limit) and a camera given
+    as -P (the same projection, the point behind it in that camera's sign): certified at the reference."""
+    P, x = _case("n_out=1 noise=5 scene=45")
+    if variant == "duplicated view, other observation":
+        P, x = P[[0, 0, 1, 2]], np.vstack([x[0], x[0] + [30.0, -40.0], x[1], x[2]])
+    elif variant == "duplicated view and observation":
+        P, x = P[[0, 1, 2, 2]], x[[0, 1, 2, 2]]
+    else:
+        P = np.array([P[0], P[1], -P[2]])
+    n = len(P)
+    c_ref, _ = l2_reference(P, x)
+    r = tritools.triangulate(P, x)
+    assert r.optimal and r.method == "theorem1"
+    assert r.gamma_lb <= _gamma(c_ref, n) * (1 + 1e-9)
+    assert r.gamma_ub <= _gamma(c_ref, n) * (1 + 1e-7)

@@ -14,6 +14,23 @@ With ``method="auto"`` (the default everywhere):
    regions, ~2 s) or the problem has three views, the dense certificate at the same degree follows (it
    contains the views one).  Two views, and Theorem 1 with three (one clique holds every view), stay dense.
 
+After the plan, for the problems it leaves uncertified, the point stage ``exact_variety``
+(:mod:`tritools.solve.stages.exact`) runs one more step, :func:`exact_variety_step`: Theorem 1 at delta = 4, dense
+(with ``method="auto"``, a plan reaching delta = 4, at least 3 views and a dense Gram side of at most
+:data:`EXACT_VARIETY_MAX_SIDE`: 3 or 4 views with point regions).  Corollary 1's constraints -- the epipolar
+relations of the view pairs -- say that the back-projected rays meet pairwise; rays that meet pairwise meet in one
+point *or lie in one plane*, and that plane holds every camera centre.  So when the centres are coplanar (always
+with three views: the trifocal plane; with more, a planar camera path) the epipolar variety has a second
+component: every view's image point on the image line of that plane, whatever the others.  When the observations
+lie far from every projection (tens to hundreds of px: a wrong match kept as an inlier under a robust threshold of
+200 px) and the scene point lies near that plane, moving each observation to its line alone costs less than the L2
+optimum, and Corollary 1's bound stops at that cost at every degree (measured: the same bound at delta = 2, 4 and
+6, equal to the sum of the squared distances to those lines, e.g. 44.9 px against the optimum 57.4 px).  Theorem
+1's minors (SPEC §3; the three- and four-view minors among them) vanish exactly on the image points of scene
+points, and its dense degree-4 certificate closes the gap (benchmarks/RESULTS.md, "Robust": the 3-view misses,
+0.05-0.4 s each; 4 views with coplanar centres, 0.4-0.9 s).  Its view-clique formulation did not (5-6 views:
+solver failures), and the dense one at 5 views costs ~7 s: neither is tried.
+
 With an explicit method, the degrees run from ``delta`` (default delta_min) to ``max_delta`` (default
 ``delta`` when given, else delta_min + 2) with that method; ``sparsity`` ("none" / "views") forces
 the formulation of the steps above delta = 2.  Theorem 1's dense formulation holds all C(2N, 4)
@@ -28,13 +45,18 @@ from sospoly import GramForm, Multiplier, sigma
 from ..model.constraints import THEOREM1_DENSE_MAX_VIEWS, Method
 from .options import MethodChoice, SolvePath, Sparsity, TriangulationOptions
 
-__all__ = ["Step", "degree_plan", "delta_min", "batch_steps", "last_delta", "DENSE_MAX_SIDE", "DENSE_FALLBACK_SIDE"]
+__all__ = ["Step", "degree_plan", "delta_min", "batch_steps", "last_delta", "DENSE_MAX_SIDE", "DENSE_FALLBACK_SIDE",
+           "EXACT_VARIETY_MAX_SIDE", "exact_variety_step"]
 
 #: ``sparsity="auto"``: dense certificates above degree 2 while the Gram side stays at most this (sigma(8, 2) = 45).
 DENSE_MAX_SIDE = 45
 #: ``sparsity="auto"``: a views step that does not certify is followed by the dense one up to this side
 #: (sigma(11, 2) = 78: 5 views with point regions, N_LMIVAR ~2400, ~2 s on one core).
 DENSE_FALLBACK_SIDE = 78
+#: ``method="auto"``: the exact-variety step (:func:`exact_variety_step`) while its dense Gram side is at most this
+#: (sigma(8, 2) = 45: 4 views with point regions; measured on one CPU: 0.1 s at 3 views, 0.3-0.9 s at 4; it runs only
+#: where the plan did not certify, within the point's time limit).
+EXACT_VARIETY_MAX_SIDE = DENSE_MAX_SIDE
 
 
 @dataclass(frozen=True)
@@ -94,6 +116,18 @@ def degree_plan(options: TriangulationOptions, n_views: int, n_vars: int, delta_
                 and not (method == Method.THEOREM1 and n_views > THEOREM1_DENSE_MAX_VIEWS):
             steps.append(Step(method, d, "dense"))
     return steps
+
+
+def exact_variety_step(options: TriangulationOptions, n_views: int, n_vars: int, plan: list[Step]) -> Step | None:
+    """The step after an uncertified ``plan`` (module docstring): Theorem 1 at delta = 4, dense, with
+    ``method="auto"`` and ``sparsity`` auto or dense, when the plan reaches delta = 4, the problem has at least 3
+    views (two views: Corollary 1's one epipolar relation is Theorem 1's only minor, up to a constant) and the dense
+    Gram side sigma(n_vars, 2) is at most :data:`EXACT_VARIETY_MAX_SIDE`; None otherwise."""
+    if options.explicit_method is not None or options.sparsity == Sparsity.CLIQUES or n_views < 3:
+        return None
+    if not plan or max(s.delta for s in plan) < 4 or sigma(n_vars, 2) > EXACT_VARIETY_MAX_SIDE:
+        return None
+    return Step(Method.THEOREM1, 4, "dense")
 
 
 def delta_min(method: Method, n_views: int) -> int:

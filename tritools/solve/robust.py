@@ -453,6 +453,7 @@ class TlsSearch:
             U = [int(u) for u in order[k:]]
             if not U and len(I) >= 2:
                 yield from self.need([I])
+                self.offer_new()                    # the leaf's own L2 estimate may be the TLS optimum
                 lb_I = max(lb_I, self.bounds.bound(I))
             # a node holding the best candidate cannot be pruned before its leaf: no sub-problems for it
             on_path = I <= self.best_S and not (O & self.best_S)

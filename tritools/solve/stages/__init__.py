@@ -5,7 +5,7 @@
 :class:`~tritools.solve.settings.SolveSettings`, problems built so far, attempts, timings -- and runs the
 stages of :data:`POINT_STAGES` in order, each a module-level function ``stage(ctx) -> None``:
 
-``plan`` -> ``verify`` -> ``trivial`` -> ``steps`` -> ``settle`` -> ``world_frame`` -> ``report``
+``plan`` -> ``verify`` -> ``trivial`` -> ``steps`` -> ``exact_variety`` -> ``settle`` -> ``world_frame`` -> ``report``
 
 ``steps`` walks the degree plan; each plan step runs :data:`STEP_STAGES`, functions
 ``stage(ctx, step_state) -> None``:
@@ -36,6 +36,7 @@ from .batch import (BATCH_SDP_IMPLEMENTATIONS, BATCH_VERIFY_IMPLEMENTATIONS, Bat
                     plan_batch_stage, report_batch_stage, sdp_batch_stage, verify_batch_stage)
 from .context import FAST_DEFAULT, AttemptStep, ImplName, Implementation, PointContext, StepState
 from .estimate import decide_stage, estimate_stage, resolve_stage, rigor_stage
+from .exact import exact_variety_stage
 from .outcome import report_stage, settle_stage, world_frame_stage
 from .sdp import SDP_FAST_NAME, SDP_IMPLEMENTATIONS, run_step, sdp_stage, steps_stage
 from .verify import VERIFY_IMPLEMENTATIONS, plan_stage, trivial_stage, verify_stage
@@ -59,6 +60,7 @@ POINT_STAGES: tuple[Stage, ...] = (
     Stage("verify", verify_stage),
     Stage("trivial", trivial_stage),
     Stage("steps", steps_stage),
+    Stage("exact_variety", exact_variety_stage),        # the plan left it uncertified: Theorem 1, delta 4
     Stage("settle", settle_stage),
     Stage("world_frame", world_frame_stage),
     Stage("report", report_stage),

@@ -17,7 +17,10 @@ In the normalised frame (:mod:`tritools.model.normalize`, centres at the origin,
   (kappa_i = 1 - rho_i' / |x_i| at the candidate), i.e. the point-region bound of
   :func:`tritools.solve.fastpath.lagrangian_bounds` with weights kappa (rounded down, so the reduced
   Lagrangian is never above the exact one) and constant -sum mu.  Views inside their disc (kappa = 0) keep no
-  epipolar constraint (dropped: a weaker, valid bound; at a local optimum their constraints are inactive);
+  epipolar constraint (dropped: a weaker, valid bound; at a local optimum their constraints are inactive); the
+  views outside are gathered into a compact stack (:func:`tritools.solve.regions_verify.compact_bounds`), so
+  from ``BAND_MIN_VIEWS`` of them on the bands of view pairs apply (cost linear in N), all pairs only for what
+  no band certifies;
 * the decision of every path (:func:`tritools.solve.decide.decide`), in c = 2N gamma^2 units, and again on the
   numbers reported in pixels.
 
@@ -38,7 +41,7 @@ from ..model.normalize import normalization_stack
 from ..model.regions import Region
 from ..model.stacked import LM_MAX_ITER, LM_STEP_RTOL, damped_step, project_stack
 from .decide import decide, decide_reported, gamma_from_c
-from .fastpath import lagrangian_bounds
+from .regions_verify import compact_bounds
 
 __all__ = ["DiscBatch", "disc_radius", "verify_discs", "refine_discs_stack"]
 
@@ -145,13 +148,13 @@ def verify_discs(cameras, centers, radii, *, tolerances: Tolerances = DEFAULT_TO
     _, r, outside = _disc_residual(u, rho_n)
     mu = np.where(outside, rho_n * (r - rho_n), 0.0)
     kappa = np.where(outside, mu / (rho_n ** 2 + mu), 0.0) * _ROUND_DOWN
-    weights = np.repeat(kappa, 2, axis=1)                    # per coordinate of v = (x_11, x_12, ..., x_N2)
-    v = u.reshape(M, -1)
+    weights = np.repeat(kappa[..., None], 2, axis=2)         # per coordinate of x_i
     # a minimiser has |x_i| <= rho_i + |x_i - y_i|, so |x| <= |rho| + sqrt(f(v^)) (the rigorous margin's ball)
     upper_f = np.sum(np.where(outside, (r - rho_n) ** 2, 0.0), axis=1)
     radius = np.linalg.norm(rho_n, axis=1) + np.sqrt(upper_f)
-    lower, _, ok = lagrangian_bounds(C, Cn, v, ok, radius, norm.resolution, tolerances, f0=-np.sum(mu, axis=1),
-                                     weights=weights, views=outside, deadline=deadline)
+    lower, ok_b = compact_bounds(C, Cn, u, weights, -mu, outside & ok[:, None], radius, norm.resolution,
+                                 tolerances, deadline=deadline)
+    ok &= ok_b
     status, optimal, c_lower = decide(lower, upper_f, tolerances, N, norm.resolution)
     X = norm.world_points(Xn)
     uw, _, fin_w = project_stack(C, X)

@@ -9,6 +9,8 @@ tried in order; the first that applies runs:
   (:func:`tritools.solve.fastpath.verify_checked`) on a stack of one, so batches decide exactly as a
   single call;
 * ``"verify-discs"`` -- filled discs (uncertain keypoints), Corollary 1: :func:`tritools.solve.discs.verify_discs`;
+* ``"verify-regions"`` -- every other mix of points, segments, polytopes, filled ellipses and ellipse borders,
+  Corollary 1: the region multipliers eliminated exactly view by view (:mod:`tritools.solve.regions_verify`);
 * ``"generic"`` -- any delta = 2 program without inequalities or auxiliary variables:
   :func:`sospoly.analysis.verify_quadratic` on the built problem.
 
@@ -34,6 +36,7 @@ from ..decide import cheirality, decide, gamma_from_c
 from ..discs import disc_radius, verify_discs
 from ..fastpath import verify_checked
 from ..options import SolvePath
+from ..regions_verify import constraint_counts, region_bound, supported_region
 from ..plan import Step, degree_plan, delta_min
 from ..report import points_report_stack, solve_ball
 from .context import AttemptStep, ImplName, Implementation, PointContext
@@ -132,6 +135,33 @@ def _verify_discs(ctx: PointContext, step: Step) -> TriangulationResult | None:
                         n_lmivar=sospoly.n_lmivar_formula(4 * ctx.N, 2, [2] * K, [2] * ctx.N))
 
 
+def _regions_apply(ctx: PointContext, step: Step) -> bool:
+    return _cor1(step) and all(supported_region(r) for r in ctx.regions)
+
+
+def _verify_regions(ctx: PointContext, step: Step) -> TriangulationResult | None:
+    """The degree-2 certificate with the region multipliers (:func:`tritools.solve.regions_verify.region_bound`)
+    at the local estimate of the normalised problem, decided by the rule of every path."""
+    local = ctx.local()
+    if local is None:
+        return None
+    Xn = local[1]
+    extents = [r.extent().radius for r in ctx.regs_n]
+    c_lb, c_ub, u = region_bound(ctx.cams, ctx.cams_n, ctx.regs_n, Xn, extents, tolerances=ctx.tolerances,
+                                 resolution=ctx.norm.resolution, deadline=ctx.settings.deadline)
+    status, optimal, c_lb = decide(c_lb, c_ub, ctx.tolerances, ctx.N, ctx.norm.resolution)
+    if not optimal:
+        return None
+    X = ctx.norm.world_point(Xn)
+    K = ctx.N * (ctx.N - 1) // 2
+    n_eq, n_ineq = constraint_counts(ctx.regions)
+    eq, ineq = [2] * (K + n_eq), [2] * n_ineq
+    n_vars = 2 * ctx.N + sum(r.n_aux for r in ctx.regions)
+    return report_point(ctx, step, Status.OPTIMAL, True, gamma_from_c(c_lb, ctx.N, ctx.norm.scale), X=X, X_raw=X,
+                        image_points=ctx.norm.image_points(u), certified_by="verification",
+                        n_lmivar=sospoly.n_lmivar_formula(n_vars, 2, eq, ineq))
+
+
 def _generic_applies(ctx: PointContext, step: Step) -> bool:
     return True
 
@@ -165,5 +195,6 @@ def _verify_generic(ctx: PointContext, step: Step) -> TriangulationResult | None
 VERIFY_IMPLEMENTATIONS: tuple[Implementation, ...] = (
     Implementation(ImplName.VERIFY_POINTS, _points_apply, _verify_points),
     Implementation(ImplName.VERIFY_DISCS, _discs_apply, _verify_discs),
+    Implementation(ImplName.VERIFY_REGIONS, _regions_apply, _verify_regions),
     Implementation(ImplName.GENERIC, _generic_applies, _verify_generic, fast=False),
 )

@@ -38,7 +38,7 @@ from sospoly.solvers import with_single_threaded_blas
 
 from ..model.cameras import numeric_cameras
 from ..model.normalize import normalization_stack
-from ..model.regions import Region
+from ..model.regions import Ellipse, Region
 from ..model.stacked import LM_MAX_ITER, LM_STEP_RTOL, damped_step, project_stack
 from .decide import decide, decide_reported, gamma_from_c
 from .regions_verify import compact_bounds
@@ -167,13 +167,17 @@ def verify_discs(cameras, centers, radii, *, tolerances: Tolerances = DEFAULT_TO
 
 
 def as_disc_problem(cams, regions):
-    """(cameras (N, 3, 4) float, centres (N, 2), radii (N,)) when every region is a disc and the cameras are a
-    numeric (N, 3, 4) array, else None (the item then goes through :func:`tritools.triangulate`)."""
+    """(cameras (N, 3, 4) float, centres (N, 2), radii (N,)) when every region is a disc, (cameras, centres,
+    D (N, 2, 2)) when every region is a filled :class:`~tritools.model.regions.Ellipse` (not all discs: the
+    vectorised ellipse path, :mod:`tritools.solve.ellipses`), and the cameras are a numeric (N, 3, 4) array, else
+    None (the item then goes through :func:`tritools.triangulate`)."""
     if not isinstance(regions, (list, tuple)) or len(regions) < 2:
         return None
     radii = [disc_radius(r) for r in regions]
     if any(r is None for r in radii):
-        return None
+        if not all(type(r) is Ellipse for r in regions):
+            return None
+        radii = [r.D for r in regions]
     C = numeric_cameras(cams)
     if C is None:
         return None
@@ -183,15 +187,30 @@ def as_disc_problem(cams, regions):
 
 
 def solve_disc_group(group, opts):
-    """Disc problems of one N (``group``: [(index, cameras, centres, radii, regions)]) through
-    :func:`verify_discs`: ({index: certified result}, [(index, cameras, regions, options, prefix)] for the
-    per-point path, which continues with the SDP)."""
+    """Disc or ellipse problems of one N (``group``: [(index, cameras, centres, radii or D, regions)]) through
+    :func:`verify_discs` / :func:`tritools.solve.ellipses.verify_ellipses`: ({index: certified result},
+    [(index, cameras, regions, options, prefix)] for the per-point path, which continues with the SDP)."""
+    from .ellipses import verify_ellipses
+
+    done, rest = {}, []
+    for part, verify in (([g for g in group if np.ndim(g[3]) == 1], verify_discs),
+                         ([g for g in group if np.ndim(g[3]) == 3], verify_ellipses)):
+        if part:
+            d, r = _solve_group(part, opts, verify)
+            done.update(d)
+            rest.extend(r)
+    return done, rest
+
+
+def _solve_group(group, opts, verify):
+    """:func:`solve_disc_group` on items of one kind, verified by ``verify`` (a :class:`DiscBatch`)."""
     import time
 
     from ..model.cameras import camera_problems, depths_stack
     from ..model.constraints import Method
     from ..result import Attempt, Status, TriangulationResult
     from .decide import cheirality
+    from .settings import stack_deadline
     from .stages.context import AttemptStep
     from .stages.outcome import behind_message
 
@@ -201,9 +220,7 @@ def solve_disc_group(group, opts):
     rho = np.array([g[3] for g in group])
     valid = camera_problems(C).valid
     C = np.where(valid[:, None, None, None], C, np.eye(3, 4))
-    from .settings import stack_deadline
-
-    b = verify_discs(C, x, rho, tolerances=opts.tolerances, deadline=stack_deadline(opts, len(group)))
+    b = verify(C, x, rho, tolerances=opts.tolerances, deadline=stack_deadline(opts, len(group)))
     cert = b.certified & valid
     dep = depths_stack(C, b.X, opts.world_frame)
     status, in_front = cheirality(np.where(cert, Status.OPTIMAL.value, None), dep, opts.require_in_front)

@@ -234,3 +234,22 @@ def test_dlt_reference_is_independent():
     cams, regions = _problems("ellipse", 3, 1, 1.0, 3)[0]
     X0 = dlt(cams, np.array([r.center for r in regions]))
     assert np.isfinite(_multistart(cams, regions, X0))
+
+
+def test_vectorised_mixed_points_discs_ellipses_equal_the_single_path():
+    """Problems mixing points, discs and ellipses go through the vectorised ellipse group (D = 0 for a point);
+    each equals the single call (``verify-regions``, an independent implementation: per-view closest points of
+    the regions, scipy LM) in decision and bounds, and stays below the multi-start reference."""
+    sc = random_scene(6, 6, noise_px=1.5, seed=12)
+    cams = validate_cameras(sc.cameras)
+    rng = np.random.default_rng(5)
+    kinds = (lambda p: Point(p), lambda p: Ellipse(p, np.eye(2)), lambda p: _region("ellipse", p, rng))
+    probs = [(cams, [kinds[(i + j) % 3](p) for i, p in enumerate(sc.points2d[j])]) for j in range(6)]
+    many = tritools.triangulate_many(probs, progress=False)
+    assert sum(r.optimal for r in many) >= 5
+    for (c, regs), r in zip(probs, many):
+        one = tritools.triangulate(c, regs)
+        assert "batch_share" in r.timings and r.optimal == one.optimal
+        assert abs(_c(r.gamma_lb, 6) - _c(one.gamma_lb, 6)) <= C_TOL * max(1.0, _c(one.gamma_ub, 6))
+        assert r.gamma_ub == pytest.approx(one.gamma_ub, rel=1e-6, abs=1e-9)
+        assert r.gamma_lb <= _multistart(c, regs, r.X, starts=4) * (1 + 1e-9) + 1e-12

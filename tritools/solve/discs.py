@@ -38,7 +38,7 @@ from sospoly.solvers import with_single_threaded_blas
 
 from ..model.cameras import numeric_cameras
 from ..model.normalize import normalization_stack
-from ..model.regions import Ellipse, Region
+from ..model.regions import Ellipse, Point, Region
 from ..model.stacked import LM_MAX_ITER, LM_STEP_RTOL, damped_step, project_stack
 from .decide import decide, decide_reported, gamma_from_c
 from .regions_verify import compact_bounds
@@ -168,16 +168,16 @@ def verify_discs(cameras, centers, radii, *, tolerances: Tolerances = DEFAULT_TO
 
 def as_disc_problem(cams, regions):
     """(cameras (N, 3, 4) float, centres (N, 2), radii (N,)) when every region is a disc, (cameras, centres,
-    D (N, 2, 2)) when every region is a filled :class:`~tritools.model.regions.Ellipse` (not all discs: the
-    vectorised ellipse path, :mod:`tritools.solve.ellipses`), and the cameras are a numeric (N, 3, 4) array, else
+    D (N, 2, 2)) when every region is a filled :class:`~tritools.model.regions.Ellipse` or a point (D = 0), not all
+    discs nor all points (the vectorised ellipse path, :mod:`tritools.solve.ellipses`), and the cameras are a numeric (N, 3, 4) array, else
     None (the item then goes through :func:`tritools.triangulate`)."""
     if not isinstance(regions, (list, tuple)) or len(regions) < 2:
         return None
     radii = [disc_radius(r) for r in regions]
     if any(r is None for r in radii):
-        if not all(type(r) is Ellipse for r in regions):
+        if not all(type(r) in (Ellipse, Point) for r in regions) or all(type(r) is Point for r in regions):
             return None
-        radii = [r.D for r in regions]
+        radii = [r.D if type(r) is Ellipse else np.zeros((2, 2)) for r in regions]
     C = numeric_cameras(cams)
     if C is None:
         return None

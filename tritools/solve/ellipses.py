@@ -74,19 +74,23 @@ def closest_on_ellipses(U: np.ndarray, sigma: np.ndarray) -> tuple[np.ndarray, n
 
 def _local_residual(u, R, sigma):
     """(e = u - y, y, t, outside) of the projections u (M, N, 2) on the ellipses (axes R, sigma), t the multiplier
-    of u - y = t A y (0 inside); e in the global frame, y in the ellipses' axes."""
+    of u - y = t A y (0 inside); e in the global frame, y in the ellipses' axes.  A point region (sigma = 0) has
+    y = 0, e = u and is always ``outside`` (its t is unused)."""
+    pt = sigma[..., 1] == 0
     ul = np.einsum("...ji,...j->...i", R, u)
-    yl, t = closest_on_ellipses(ul, sigma)
+    yl, t = closest_on_ellipses(ul, np.where(pt[..., None], 1.0, sigma))
+    yl = np.where(pt[..., None], 0.0, yl)
     el = ul - yl
-    outside = t > 0
+    outside = (t > 0) | pt
     back = np.einsum("...ij,...j->...i", R, el)
-    return back, yl, t, outside
+    return back, yl, np.where(pt, 0.0, t), outside
 
 
 def _hessian(yl, t, R, sigma, outside):
-    """I - dy/du (module docstring) in the global frame, 0 inside."""
-    alpha = 1.0 / sigma ** 2
-    G = 1.0 / (1.0 + t[..., None] * alpha)
+    """I - dy/du (module docstring) in the global frame, 0 inside, I for a point region."""
+    pt = sigma[..., 1] == 0
+    alpha = 1.0 / np.where(pt[..., None], 1.0, sigma) ** 2
+    G = np.where(pt[..., None], 0.0, 1.0 / (1.0 + t[..., None] * alpha))
     n = G * alpha * yl
     den = np.sum(yl * alpha * n, axis=-1)
     den = np.where(outside & (den > 0), den, 1.0)
@@ -145,11 +149,13 @@ def verify_ellipses(cameras, centers, D, *, tolerances: Tolerances = DEFAULT_TOL
                     deadline: Deadline | None = None) -> DiscBatch:
     """Vectorised certification by verification of M filled-ellipse problems with N views each (module
     docstring): cameras (M, N, 3, 4), centres (M, N, 2) and shape matrices D (M, N, 2, 2) positive definite, in
-    pixels, validated by the caller.  The result is a :class:`tritools.solve.discs.DiscBatch`."""
+    pixels, validated by the caller; D = 0 is a point region (weight 1, no region variable).  The result is a
+    :class:`tritools.solve.discs.DiscBatch`."""
     C, x, D = (np.asarray(a, float) for a in (cameras, centers, D))
     M, N = x.shape[:2]
     R, sigma = ellipse_axes(D)
-    ok = np.all(np.isfinite(x), axis=(1, 2)) & np.all(np.isfinite(sigma) & (sigma > 0), axis=(1, 2))
+    ok = np.all(np.isfinite(x), axis=(1, 2)) & np.all(np.isfinite(sigma), axis=(1, 2)) \
+        & np.all((sigma[..., 1] > 0) | ~np.any(D, axis=(2, 3)), axis=1)
     norm = normalization_stack(C, x, ok)
     ok &= norm.ok
     Cn = norm.cameras_n
@@ -159,8 +165,10 @@ def verify_ellipses(cameras, centers, D, *, tolerances: Tolerances = DEFAULT_TOL
     ok &= fin
     u = np.where(ok[:, None, None], u, 0.0)
     e, _, t, outside = _local_residual(u, R, sig_n)
-    alpha = 1.0 / sig_n ** 2
+    pt = sig_n[..., 1] == 0                              # point regions: weight 1, no multiplier
+    alpha = 1.0 / np.where(pt[..., None], 1.0, sig_n) ** 2
     omega = np.where(outside[..., None], t[..., None] * alpha / (1.0 + t[..., None] * alpha), 0.0) * _ROUND_DOWN
+    omega = np.where(pt[..., None], 1.0, omega)
     upper_f = np.sum(e ** 2, axis=(1, 2))
     radius = np.linalg.norm(sig_n[..., 0], axis=1) + np.sqrt(upper_f)
     z = np.einsum("mnji,mnj->mni", R, u)

@@ -27,6 +27,10 @@ of 9-11 views of the Oxford corridor sequence in DIR (the default plan of an exp
 degree-2 step on the two-view minors, docs/triangulation.md): status, degree, wall time, and an independent
 reference (the best of multi-start LM from perturbed DLT starts) that gamma_LB must not exceed.
 
+``--sfm P``: the tracks of a seeded synthetic COLMAP model of P points (:func:`tritools.sfm.synthetic.
+synthetic_arrays`, 30 images, tracks of 2-12 views, keypoints undistorted) through ``triangulate_many`` as points
+and as 1 px discs (the SfM shape of uncertain keypoints), CPU seconds, certified fractions and their ratio.
+
 Every gamma_LB of a certified point is checked against the attained value of scipy's LM solution
 (``lb<=lm``: the largest gamma_LB - gamma(X_lm), <= 0 up to round-off when sound).  Then the growth exponent
 a of the batch's per-track time ~ N^a over N = 20..100 (least squares in log-log).  Times are process CPU
@@ -133,6 +137,30 @@ def region_columns(C: np.ndarray, x: np.ndarray, seed: int) -> dict:
     return {"ellipses": ell, "mixed": mixed}
 
 
+def sfm_discs(n_points: int, seed: int) -> None:
+    """The ``--sfm`` table (module docstring)."""
+    from tritools import Ellipse
+    from tritools.sfm.pipeline import prepare_geometry
+    from tritools.sfm.synthetic import synthetic_arrays
+
+    a, _ = synthetic_arrays(n_points, 30, "PINHOLE", 0.5, seed)
+    geom = prepare_geometry(a)
+    pts, discs = [], []
+    for p in range(a.n_points):
+        s, e = a.track_offsets[p], a.track_offsets[p + 1]
+        im = a.track_image[s:e]
+        C, x = geom.P[im], geom.xy_u[a.kp_offsets[im] + a.track_kp[s:e]]
+        pts.append((C, x))
+        discs.append((C, [Ellipse(q, np.eye(2)) for q in x]))
+    box = {}
+    t_pts = cpu(lambda: box.setdefault("p", tritools.triangulate_many(pts, progress=False)))
+    t_discs = cpu(lambda: box.setdefault("d", tritools.triangulate_many(discs, progress=False)))
+    cp = np.mean([r.optimal for r in box["p"]])
+    cd = np.mean([r.optimal for r in box["d"]])
+    print(f"\nSynthetic SfM model, {a.n_points} tracks (2-12 views): points {t_pts:.1f} s CPU ({cp:.2%} certified), "
+          f"1 px discs {t_discs:.1f} s CPU ({cd:.2%} certified), discs/points {t_discs / t_pts:.1f}\n")
+
+
 def theorem1_corridor(data_dir: str, n_tracks: int, time_limit: float) -> None:
     from tritools.io.oxford import load_sequence
 
@@ -177,6 +205,7 @@ def main(argv=None) -> None:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--theorem1", metavar="DIR", help="also run Theorem 1 on corridor tracks (Oxford data in DIR)")
     ap.add_argument("--tracks", type=int, default=5)
+    ap.add_argument("--sfm", type=int, default=0, metavar="P", help="also a synthetic SfM model of P points (discs)")
     ap.add_argument("--time-limit", type=float, default=180.0)
     args = ap.parse_args(argv)
     have_colmap = importlib.util.find_spec("pycolmap") is not None
@@ -199,6 +228,8 @@ def main(argv=None) -> None:
         if len(fit) >= 2:
             a = np.polyfit(np.log([f[0] for f in fit]), np.log([f[1] for f in fit]), 1)[0]
             print(f"\nnoise {noise:g} px: batch time per track ~ N^{a:.2f} over N = {fit[0][0]}..{fit[-1][0]}\n")
+    if args.sfm:
+        sfm_discs(args.sfm, args.seed)
     if args.theorem1:
         theorem1_corridor(args.theorem1, args.tracks, args.time_limit)
 

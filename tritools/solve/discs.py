@@ -38,10 +38,10 @@ from sospoly.solvers import with_single_threaded_blas
 
 from ..model.cameras import numeric_cameras
 from ..model.normalize import normalization_stack
-from ..model.regions import Ellipse, Point, Region
+from ..model.regions import ConeKind, Region
 from ..model.stacked import LM_MAX_ITER, LM_STEP_RTOL, damped_step, project_stack
 from .decide import decide, decide_reported, gamma_from_c
-from .regions_verify import compact_bounds
+from .regions_verify import compact_bounds, region_forms
 
 __all__ = ["DiscBatch", "disc_radius", "verify_discs", "refine_discs_stack"]
 
@@ -168,22 +168,37 @@ def verify_discs(cameras, centers, radii, *, tolerances: Tolerances = DEFAULT_TO
 
 def as_disc_problem(cams, regions):
     """(cameras (N, 3, 4) float, centres (N, 2), radii (N,)) when every region is a disc, (cameras, centres,
-    D (N, 2, 2)) when every region is a filled :class:`~tritools.model.regions.Ellipse` or a point (D = 0), not all
-    discs nor all points (the vectorised ellipse path, :mod:`tritools.solve.ellipses`), and the cameras are a numeric (N, 3, 4) array, else
-    None (the item then goes through :func:`tritools.triangulate`)."""
+    D (N, 2, 2)) when every region is a filled ellipse or a point (D = 0) by its conic form, not all discs nor all
+    points (the vectorised ellipse path, :mod:`tritools.solve.ellipses`), and the cameras are a numeric
+    (N, 3, 4) array, else None (the item then goes through :func:`tritools.triangulate`)."""
     if not isinstance(regions, (list, tuple)) or len(regions) < 2:
         return None
     radii = [disc_radius(r) for r in regions]
     if any(r is None for r in radii):
-        if not all(type(r) in (Ellipse, Point) for r in regions) or all(type(r) is Point for r in regions):
+        radii = _ellipse_shapes(regions)
+        if radii is None:
             return None
-        radii = [r.D if type(r) is Ellipse else np.zeros((2, 2)) for r in regions]
     C = numeric_cameras(cams)
     if C is None:
         return None
     if C.shape != (len(regions), 3, 4):
         return None
     return C, np.array([r.center for r in regions]), np.array(radii)
+
+
+def _ellipse_shapes(regions) -> list | None:
+    """D of every region when each is exactly a filled ellipse centred on its ``center`` or a point there (D = 0)
+    by its conic form, not all points; else None."""
+    forms = region_forms(regions)
+    if forms is None or all(f.kind == ConeKind.POINT for f in forms):
+        return None
+    out = []
+    for f, r in zip(forms, regions):
+        exact = f.kind in (ConeKind.POINT, ConeKind.ELLIPSE) and not f.convexified
+        if not exact or not np.array_equal(f.center, r.center):
+            return None
+        out.append(f.D if f.kind == ConeKind.ELLIPSE else np.zeros((2, 2)))
+    return out
 
 
 def solve_disc_group(group, opts):

@@ -6,7 +6,8 @@ sigma_ik = alpha_ik^-1/2).  In the normalised frame (:mod:`tritools.model.normal
 D_i' = s^2 D_i), in each view's own axes (u_i^loc = R_i^T u_i):
 
 * the local optimum: Levenberg-Marquardt on the distances to the ellipses (:func:`refine_ellipses_stack`), with
-  the exact Hessian of d^2 / 2 in u: for the closest point y = G u, G = (I + t A)^-1, t >= 0 the multiplier of
+  the exact Hessian of d^2 / 2 in u: for the closest point y = G u
+  (:func:`tritools.solve.regions_verify.closest_on_ellipses`), G = (I + t A)^-1, t >= 0 the multiplier of
   u - y = t A y, it is  I - dy/du = (I - G) + n n^T / (y^T A n),  n = G A y;
 * the degree-2 certificate with constant multipliers (:mod:`tritools.solve.regions_verify`): mu_i = t_i (0 inside),
   min_y L = sum_i (omega_i . (R_i^T x_i)^2 - mu_i) + lambda^T g(x), omega_ik = mu_i alpha_ik / (1 + mu_i alpha_ik)
@@ -27,49 +28,11 @@ from ..model.normalize import normalization_stack
 from ..model.stacked import LM_MAX_ITER, LM_STEP_RTOL, damped_step, project_stack
 from .decide import decide, decide_reported, gamma_from_c
 from .discs import DiscBatch
-from .regions_verify import compact_bounds
+from .regions_verify import closest_on_ellipses, compact_bounds, ellipse_axes
 
-__all__ = ["ellipse_axes", "closest_on_ellipses", "refine_ellipses_stack", "verify_ellipses"]
+__all__ = ["refine_ellipses_stack", "verify_ellipses"]
 
 _ROUND_DOWN = 1 - 8 * np.finfo(float).eps
-#: Newton iterations of the secular equation of the closest ellipse point (quadratic convergence: < 10 in
-#: practice; rows still moving after this many keep their last iterate, slightly inside the border).
-ELLIPSE_NEWTON_ITER = 60
-
-
-def ellipse_axes(D: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(R (..., 2, 2), sigma (..., 2)): D = R diag(sigma^2) R^T, largest semi-axis first."""
-    lam, R = np.linalg.eigh(D)
-    return R[..., ::-1], np.sqrt(np.maximum(lam[..., ::-1], 0.0))
-
-
-def closest_on_ellipses(U: np.ndarray, sigma: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(closest points Y, multipliers t) of the filled ellipses sum_k x_k^2 / sigma_k^2 <= 1 (per row) to the points
-    U (..., 2) in the ellipses' own axes: Y = U inside (t = 0), else y_k = u_k / (1 + t alpha_k) with t > 0 the
-    root of the secular equation r(t)^2 = sum_k alpha_k u_k^2 / (1 + t alpha_k)^2 = 1 (alpha = sigma^-2).
-    Newton on K(t) = 1 / r(t) - 1, increasing and concave in t (as in More and Sorensen's trust-region
-    iteration), from t = 0: the iterates rise monotonically to the root, quadratically near it (exact in one
-    step for a disc)."""
-    alpha = 1.0 / sigma ** 2
-    level = np.sum(alpha * U * U, axis=-1)
-    out = level > 1.0
-    t = np.zeros(level.shape)
-    active = out.copy()
-    for _ in range(ELLIPSE_NEWTON_ITER):
-        if not active.any():
-            break
-        q = 1.0 / (1.0 + t[..., None] * alpha)
-        r2 = np.sum(alpha * (U * q) ** 2, axis=-1)
-        dr2 = -2.0 * np.sum(alpha ** 2 * U ** 2 * q ** 3, axis=-1)          # d r^2 / dt
-        r2 = np.where(active, r2, 1.0)
-        K = 1.0 / np.sqrt(r2) - 1.0
-        dK = -0.5 * dr2 / np.where(active, r2 ** 1.5, 1.0)
-        step = np.where(active & (dK > 0), -K / np.where(dK > 0, dK, 1.0), 0.0)
-        t_new = np.maximum(t + step, t)                                     # monotone from the left
-        active &= t_new - t > 4 * np.finfo(float).eps * np.maximum(t_new, np.finfo(float).tiny)
-        t = t_new
-    Y = np.where(out[..., None], U / (1.0 + t[..., None] * alpha), U)
-    return Y, t
 
 
 def _local_residual(u, R, sigma):

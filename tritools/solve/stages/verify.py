@@ -9,8 +9,9 @@ tried in order; the first that applies runs:
   (:func:`tritools.solve.fastpath.verify_checked`) on a stack of one, so batches decide exactly as a
   single call;
 * ``"verify-discs"`` -- filled discs (uncertain keypoints), Corollary 1: :func:`tritools.solve.discs.verify_discs`;
-* ``"verify-regions"`` -- every other mix of points, segments, polytopes, filled ellipses and ellipse borders,
-  Corollary 1: the region multipliers eliminated exactly view by view (:mod:`tritools.solve.regions_verify`);
+* ``"verify-regions"`` -- every other mix of regions with a conic form (points, segments, polytopes, filled
+  ellipses, ellipse borders through their filled ellipse), Corollary 1: the region multipliers eliminated
+  exactly view by view (:mod:`tritools.solve.regions_verify`);
 * ``"generic"`` -- any delta = 2 program without inequalities or auxiliary variables:
   :func:`sospoly.analysis.verify_quadratic` on the built problem.
 
@@ -36,7 +37,7 @@ from ..decide import cheirality, decide, gamma_from_c
 from ..discs import disc_radius, verify_discs
 from ..fastpath import verify_checked
 from ..options import SolvePath
-from ..regions_verify import constraint_counts, region_bound, supported_region
+from ..regions_verify import constraint_counts, region_bound, region_forms
 from ..plan import Step, degree_plan, delta_min
 from ..report import points_report_stack, solve_ball
 from .context import AttemptStep, ImplName, Implementation, PointContext
@@ -136,7 +137,7 @@ def _verify_discs(ctx: PointContext, step: Step) -> TriangulationResult | None:
 
 
 def _regions_apply(ctx: PointContext, step: Step) -> bool:
-    return _cor1(step) and all(supported_region(r) for r in ctx.regions)
+    return _cor1(step) and region_forms(ctx.regions) is not None
 
 
 def _verify_regions(ctx: PointContext, step: Step) -> TriangulationResult | None:
@@ -147,14 +148,18 @@ def _verify_regions(ctx: PointContext, step: Step) -> TriangulationResult | None
         return None
     Xn = local[1]
     extents = [r.extent().radius for r in ctx.regs_n]
-    c_lb, c_ub, u = region_bound(ctx.cams, ctx.cams_n, ctx.regs_n, Xn, extents, tolerances=ctx.tolerances,
-                                 resolution=ctx.norm.resolution, deadline=ctx.settings.deadline)
+    forms = region_forms(ctx.regs_n)
+    if forms is None:
+        return None
+    c_lb, c_ub, u = region_bound(ctx.cams, ctx.cams_n, ctx.regs_n, Xn, extents, forms=forms,
+                                 tolerances=ctx.tolerances, resolution=ctx.norm.resolution,
+                                 deadline=ctx.settings.deadline)
     status, optimal, c_lb = decide(c_lb, c_ub, ctx.tolerances, ctx.N, ctx.norm.resolution)
     if not optimal:
         return None
     X = ctx.norm.world_point(Xn)
     K = ctx.N * (ctx.N - 1) // 2
-    n_eq, n_ineq = constraint_counts(ctx.regions)
+    n_eq, n_ineq = constraint_counts(forms)
     eq, ineq = [2] * (K + n_eq), [2] * n_ineq
     n_vars = 2 * ctx.N + sum(r.n_aux for r in ctx.regions)
     return report_point(ctx, step, Status.OPTIMAL, True, gamma_from_c(c_lb, ctx.N, ctx.norm.scale), X=X, X_raw=X,

@@ -16,6 +16,7 @@ from tritools.solve.ellipses import verify_ellipses
 from tritools.solve.options import options_from
 from tritools.solve.regions_verify import (closest_on_ellipses, reduce_views, region_bound, region_forms,
                                            view_quadratics)
+from tritools.solve.stages import FAST_DEFAULT, ImplName, run_point
 from tritools.solve.stages.context import PointContext
 
 #: bounds of one program by two methods agree to the solver's accuracy in c = 2N gamma^2 units
@@ -239,8 +240,9 @@ def test_dlt_reference_is_independent():
 
 def test_vectorised_mixed_points_discs_ellipses_equal_the_single_path():
     """Problems mixing points, discs and ellipses go through the vectorised ellipse group (D = 0 for a point);
-    each equals the single call (``verify-regions``, an independent implementation: per-view closest points of
-    the regions, scipy LM) in decision and bounds, and stays below the multi-start reference."""
+    a single call takes the same path on a stack of one (the same numbers); each equals ``verify-regions`` (an
+    independent implementation: the regions' own closest points, scipy LM) in decision and bounds, and stays
+    below the multi-start reference."""
     sc = random_scene(6, 6, noise_px=1.5, seed=12)
     cams = validate_cameras(sc.cameras)
     rng = np.random.default_rng(5)
@@ -248,8 +250,12 @@ def test_vectorised_mixed_points_discs_ellipses_equal_the_single_path():
     probs = [(cams, [kinds[(i + j) % 3](p) for i, p in enumerate(sc.points2d[j])]) for j in range(6)]
     many = tritools.triangulate_many(probs, progress=False)
     assert sum(r.optimal for r in many) >= 5
+    regions_only = FAST_DEFAULT - {ImplName.VERIFY_ELLIPSES}
     for (c, regs), r in zip(probs, many):
-        one = tritools.triangulate(c, regs)
+        one = run_point(c, regs, options_from(None), fast=regions_only)
+        same = tritools.triangulate(c, regs)                 # the vectorised path on a stack of one
+        assert [a.step for a in same.attempts] == ["verification"] and same.optimal == r.optimal
+        assert same.gamma_lb == pytest.approx(r.gamma_lb, rel=1e-12, abs=1e-15)
         assert "batch_share" in r.timings and r.optimal == one.optimal
         assert abs(_c(r.gamma_lb, 6) - _c(one.gamma_lb, 6)) <= C_TOL * max(1.0, _c(one.gamma_ub, 6))
         assert r.gamma_ub == pytest.approx(one.gamma_ub, rel=1e-6, abs=1e-9)

@@ -43,7 +43,7 @@ from ..model.stacked import LM_MAX_ITER, LM_STEP_RTOL, damped_step, project_stac
 from .decide import decide, decide_reported, gamma_from_c
 from .regions_verify import compact_bounds, region_forms
 
-__all__ = ["DiscBatch", "disc_radius", "verify_discs", "refine_discs_stack"]
+__all__ = ["DiscBatch", "disc_radius", "verify_discs", "refine_discs_stack", "ellipse_shapes"]
 
 _ROUND_DOWN = 1 - 8 * np.finfo(float).eps
 
@@ -175,7 +175,7 @@ def as_disc_problem(cams, regions):
         return None
     radii = [disc_radius(r) for r in regions]
     if any(r is None for r in radii):
-        radii = _ellipse_shapes(regions)
+        radii = ellipse_shapes(regions)
         if radii is None:
             return None
     C = numeric_cameras(cams)
@@ -186,7 +186,7 @@ def as_disc_problem(cams, regions):
     return C, np.array([r.center for r in regions]), np.array(radii)
 
 
-def _ellipse_shapes(regions) -> list | None:
+def ellipse_shapes(regions) -> list | None:
     """D of every region when each is exactly a filled ellipse centred on its ``center`` or a point there (D = 0)
     by its conic form, not all points; else None."""
     forms = region_forms(regions)

@@ -89,7 +89,7 @@ def region_forms(regions) -> list[ConicForm] | None:
         forms = [conic_form_of(r) for r in regions]
         for r in regions:
             extent_of(r)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, AttributeError, NotImplementedError):
         return None
     if any(f.convexified and f.kind != ConeKind.ELLIPSE for f in forms):
         return None

@@ -260,3 +260,22 @@ def test_vectorised_mixed_points_discs_ellipses_equal_the_single_path():
         assert abs(_c(r.gamma_lb, 6) - _c(one.gamma_lb, 6)) <= C_TOL * max(1.0, _c(one.gamma_ub, 6))
         assert r.gamma_ub == pytest.approx(one.gamma_ub, rel=1e-6, abs=1e-9)
         assert r.gamma_lb <= _multistart(c, regs, r.X, starts=4) * (1 + 1e-9) + 1e-12
+
+
+def test_zero_noise_and_duplicated_views():
+    """Vectorised ellipses at 14 views: zero noise (every view inside its region: no view kept, gamma* = 0), and
+    a duplicated view (coincident centres: that pair carries no constraint) with noise."""
+    sc = random_scene(14, 3, noise_px=0.0, seed=17)
+    C = np.asarray(sc.cameras)
+    rng = np.random.default_rng(1)
+    D = [(R := _rotation(rng)) @ np.diag([1.0, 0.3]) @ R.T for _ in range(14)]
+    exact = [(C, [Ellipse(p, d) for p, d in zip(sc.points2d[j], D)]) for j in range(3)]
+    for r in tritools.triangulate_many(exact, progress=False):
+        assert r.optimal and r.gamma_ub == pytest.approx(0.0, abs=1e-9) and r.gamma_lb == 0.0
+    noisy = random_scene(14, 3, noise_px=2.0, seed=17)
+    Cd = np.concatenate([C, C[:1]])
+    dup = [(Cd, [Ellipse(p, d) for p, d in zip(np.vstack([q, q[:1] + [0.5, -0.5]]), D + D[:1])])
+           for q in noisy.points2d]
+    for (c, regs), r in zip(dup, tritools.triangulate_many(dup, progress=False)):
+        assert r.gamma_lb <= r.gamma_ub and r.gamma_lb <= _multistart(c, regs, r.X, starts=3) * (1 + 1e-9) + 1e-12
+        assert r.optimal

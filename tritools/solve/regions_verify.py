@@ -165,7 +165,8 @@ def _from_y_quadratic(H, b, k0):
     G = (G + np.swapaxes(G, -1, -2)) / 2
     W = np.eye(2) - G
     w = np.einsum("...ij,...j->...i", G, b)
-    q0 = k0 - np.einsum("...i,...i->...", b, w)
+    bw = np.einsum("...i,...i->...", b, w)
+    q0 = k0 - bw - 16 * np.finfo(float).eps * (np.abs(k0) + np.abs(bw))     # rounded down
     return W, w, q0, ok & np.isfinite(q0)
 
 

@@ -279,3 +279,33 @@ def test_zero_noise_and_duplicated_views():
     for (c, regs), r in zip(dup, tritools.triangulate_many(dup, progress=False)):
         assert r.gamma_lb <= r.gamma_ub and r.gamma_lb <= _multistart(c, regs, r.X, starts=3) * (1 + 1e-9) + 1e-12
         assert r.optimal
+
+
+@pytest.mark.parametrize("scale,shift", [(1e-3, 0.0), (1e3, 0.0), (3.0, -3e5)])
+def test_region_bounds_follow_the_image_units(scale, shift):
+    """verify-regions on segments, corners of boxes and ellipses: the same problem in image units scaled by
+    1e-3..1e3 and shifted (coordinates up to ~1e6 px) gives the same decision and gamma bounds scaled by the
+    same factor."""
+    rng = np.random.default_rng(8)
+    sc = random_scene(4, 2, noise_px=2.0, seed=23)
+    cams = validate_cameras(sc.cameras)
+    T = np.array([[scale, 0, -scale * shift], [0, scale, -scale * shift], [0, 0, 1.0]])
+    kinds = ("ellipse", "segment", "ellipse", "box")
+    for j in range(2):
+        regs = [_region(k, p, rng, 0.2 if k == "segment" else 1.0) for k, p in zip(kinds, sc.points2d[j])]
+        out = []
+        for C, R in ((cams, regs), (np.einsum("ij,njk->nik", T, cams), [r.similarity(scale, [shift, shift])
+                                                                          for r in regs])):
+            ctx = _ctx(C, R)
+            lo, up, _ = region_bound(ctx.cams, ctx.cams_n, ctx.regs_n, ctx.local()[1],
+                                     [r.extent().radius for r in ctx.regs_n], resolution=ctx.norm.resolution)
+            g = tritools.solve.decide.gamma_from_c
+            out.append((g(lo, 4, ctx.norm.scale) if np.isfinite(lo) else np.nan, g(up, 4, ctx.norm.scale)))
+        (lo0, up0), (lo1, up1) = out
+        assert up1 == pytest.approx(scale * up0, rel=1e-6)
+        met0, met1 = (bool(np.isfinite(lo) and lo >= up * (1 - 1e-6)) for lo, up in out)
+        assert met0 == met1                            # the same decision (bounds meet or not)
+        if met0:
+            assert lo1 == pytest.approx(scale * lo0, rel=1e-5)
+        for lo, up in out:                             # never above the attained value
+            assert not lo > up * (1 + 1e-9)

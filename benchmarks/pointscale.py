@@ -13,6 +13,10 @@ Per N (seeded :func:`tritools.scene.random_scene`, cameras on a sphere, f = 800 
 * ``discs``: ``tritools.triangulate_many`` on the same keypoints as 1 px discs (uncertain keypoints, ``Ellipse(x,
   I)``; certification by verification with region multipliers, tritools.solve.discs), ms per track, the
   certified fraction, and the ratio to ``batch``;
+* ``ellipses``: the same with non-circular ellipses (semi-axes 1 and 0.5 px, seeded random orientations;
+  tritools.solve.ellipses), ms per track, certified fraction, ratio to ``batch``;
+* ``mixed``: views cycling through a point, a 1 px disc and such an ellipse (the vectorised ellipse group with
+  D = 0 for points), ms per track, certified fraction, ratio to ``batch``;
 * ``scipy-lm``: ``scipy.optimize.least_squares(method="lm")`` on the reprojection residuals from the DLT
   point (no certificate);
 * ``pycolmap``: ``pycolmap.triangulate_multi_view_point`` (linear, no certificate; cameras decomposed
@@ -22,6 +26,10 @@ Per N (seeded :func:`tritools.scene.random_scene`, cameras on a sphere, f = 800 
 of 9-11 views of the Oxford corridor sequence in DIR (the default plan of an explicit Theorem 1 starts with the
 degree-2 step on the two-view minors, docs/triangulation.md): status, degree, wall time, and an independent
 reference (the best of multi-start LM from perturbed DLT starts) that gamma_LB must not exceed.
+
+``--sfm P``: the tracks of a seeded synthetic COLMAP model of P points (:func:`tritools.sfm.synthetic.
+synthetic_arrays`, 30 images, tracks of 2-12 views, keypoints undistorted) through ``triangulate_many`` as points
+and as 1 px discs (the SfM shape of uncertain keypoints), CPU seconds, certified fractions and their ratio.
 
 Every gamma_LB of a certified point is checked against the attained value of scipy's LM solution
 (``lb<=lm``: the largest gamma_LB - gamma(X_lm), <= 0 up to round-off when sound).  Then the growth exponent
@@ -96,6 +104,10 @@ def row(N: int, n_points: int, noise: float, n_single: int, have_colmap: bool, s
     out["discs"] = cpu(lambda: box.setdefault("d", tritools.triangulate_many(discs, progress=False))) \
         / n_points * 1e3
     out["disc_cert"] = float(np.mean([r.optimal for r in box["d"]]))
+    for name, probs in region_columns(C, x, seed + N).items():
+        out[name] = cpu(lambda: box.__setitem__(name, tritools.triangulate_many(probs, progress=False))) \
+            / n_points * 1e3
+        out[name + "_cert"] = float(np.mean([r.optimal for r in box[name]]))
     lm = []
     out["lm"] = cpu(lambda: lm.extend(lm_point(C, x[j]) for j in range(n_points))) / n_points * 1e3
     g_lm = np.array([gamma(C, x[j], X) for j, X in enumerate(lm)])
@@ -108,6 +120,45 @@ def row(N: int, n_points: int, noise: float, n_single: int, have_colmap: bool, s
         out["colmap"] = cpu(lambda: [pycolmap.triangulate_multi_view_point(c, r) for c, r in setups]) \
             / n_points * 1e3
     return out
+
+
+def region_columns(C: np.ndarray, x: np.ndarray, seed: int) -> dict:
+    """The problems of the ``ellipses`` and ``mixed`` columns (module docstring)."""
+    from tritools import Ellipse, Point
+
+    rng = np.random.default_rng(seed)
+    angles = rng.uniform(0, np.pi, size=x.shape[:2])
+    R = np.stack([np.stack([np.cos(angles), -np.sin(angles)], -1), np.stack([np.sin(angles), np.cos(angles)], -1)],
+                 -2)
+    D = R @ np.diag([1.0, 0.25]) @ np.swapaxes(R, -1, -2)
+    ell = [(C, [Ellipse(p, d) for p, d in zip(x[j], D[j])]) for j in range(len(x))]
+    kinds = (lambda p, d: Point(p), lambda p, d: Ellipse(p, np.eye(2)), lambda p, d: Ellipse(p, d))
+    mixed = [(C, [kinds[(i + j) % 3](p, d) for i, (p, d) in enumerate(zip(x[j], D[j]))]) for j in range(len(x))]
+    return {"ellipses": ell, "mixed": mixed}
+
+
+def sfm_discs(n_points: int, seed: int) -> None:
+    """The ``--sfm`` table (module docstring)."""
+    from tritools import Ellipse
+    from tritools.sfm.pipeline import prepare_geometry
+    from tritools.sfm.synthetic import synthetic_arrays
+
+    a, _ = synthetic_arrays(n_points, 30, "PINHOLE", 0.5, seed)
+    geom = prepare_geometry(a)
+    pts, discs = [], []
+    for p in range(a.n_points):
+        s, e = a.track_offsets[p], a.track_offsets[p + 1]
+        im = a.track_image[s:e]
+        C, x = geom.P[im], geom.xy_u[a.kp_offsets[im] + a.track_kp[s:e]]
+        pts.append((C, x))
+        discs.append((C, [Ellipse(q, np.eye(2)) for q in x]))
+    box = {}
+    t_pts = cpu(lambda: box.setdefault("p", tritools.triangulate_many(pts, progress=False)))
+    t_discs = cpu(lambda: box.setdefault("d", tritools.triangulate_many(discs, progress=False)))
+    cp = np.mean([r.optimal for r in box["p"]])
+    cd = np.mean([r.optimal for r in box["d"]])
+    print(f"\nSynthetic SfM model, {a.n_points} tracks (2-12 views): points {t_pts:.1f} s CPU ({cp:.2%} certified), "
+          f"1 px discs {t_discs:.1f} s CPU ({cd:.2%} certified), discs/points {t_discs / t_pts:.1f}\n")
 
 
 def theorem1_corridor(data_dir: str, n_tracks: int, time_limit: float) -> None:
@@ -154,12 +205,14 @@ def main(argv=None) -> None:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--theorem1", metavar="DIR", help="also run Theorem 1 on corridor tracks (Oxford data in DIR)")
     ap.add_argument("--tracks", type=int, default=5)
+    ap.add_argument("--sfm", type=int, default=0, metavar="P", help="also a synthetic SfM model of P points (discs)")
     ap.add_argument("--time-limit", type=float, default=180.0)
     args = ap.parse_args(argv)
     have_colmap = importlib.util.find_spec("pycolmap") is not None
     print("| noise px | N | batch ms/track | certified | single ms | single/batch | discs ms/track | discs certified "
-          "| discs/batch | scipy-lm ms | pycolmap ms | lb<=lm |")
-    print("|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
+          "| discs/batch | ellipses ms | ell. certified | ell./batch | mixed ms | mixed certified | mixed/batch "
+          "| scipy-lm ms | pycolmap ms | lb<=lm |")
+    print("|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
     for noise in args.noise:
         rows = []
         for N in args.sizes:
@@ -168,11 +221,15 @@ def main(argv=None) -> None:
             colmap = f"{r['colmap']:.3f}" if "colmap" in r else "n/a"
             print(f"| {noise:g} | {N} | {r['batch']:.3f} | {r['cert']:.1%} | {r['single']:.2f} | "
                   f"{r['single'] / r['batch']:.1f} | {r['discs']:.3f} | {r['disc_cert']:.1%} | "
-                  f"{r['discs'] / r['batch']:.1f} | {r['lm']:.3f} | {colmap} | {r['lb<=lm']:.1e} |", flush=True)
+                  f"{r['discs'] / r['batch']:.1f} | {r['ellipses']:.3f} | {r['ellipses_cert']:.1%} | "
+                  f"{r['ellipses'] / r['batch']:.1f} | {r['mixed']:.3f} | {r['mixed_cert']:.1%} | "
+                  f"{r['mixed'] / r['batch']:.1f} | {r['lm']:.3f} | {colmap} | {r['lb<=lm']:.1e} |", flush=True)
         fit = [(r["N"], r["batch"]) for r in rows if 20 <= r["N"] <= 100]
         if len(fit) >= 2:
             a = np.polyfit(np.log([f[0] for f in fit]), np.log([f[1] for f in fit]), 1)[0]
             print(f"\nnoise {noise:g} px: batch time per track ~ N^{a:.2f} over N = {fit[0][0]}..{fit[-1][0]}\n")
+    if args.sfm:
+        sfm_discs(args.sfm, args.seed)
     if args.theorem1:
         theorem1_corridor(args.theorem1, args.tracks, args.time_limit)
 

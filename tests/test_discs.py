@@ -8,10 +8,10 @@ import pytest
 from scipy.optimize import least_squares
 
 import tritools
-from tritools import Ellipse, Point
+from tritools import Ellipse, Point, Segment
 from tritools.model.geometry import dlt
 from tritools.scene import random_scene
-from tritools.solve.discs import disc_radius, verify_discs
+from tritools.solve.discs import as_disc_problem, disc_radius, verify_discs
 
 
 def _discs(centres, rho):
@@ -83,9 +83,12 @@ def test_only_exact_discs_take_the_disc_path():
     assert disc_radius(Ellipse([1.0, 2.0], np.diag([4.0, 1.0]))) is None
     assert disc_radius(Point([1.0, 2.0])) is None
     sc = random_scene(3, 1, noise_px=1.0, seed=3)
-    regs = [Ellipse(c, np.diag([4.0, 1.0])) for c in sc.points2d[0]]     # ellipses: the SDP path as before
-    r = tritools.triangulate_many([(sc.cameras, regs)], progress=False)[0]
-    assert r.certified_by != "verification"
+    regs = [Ellipse(c, np.diag([4.0, 1.0])) for c in sc.points2d[0]]     # ellipses: the vectorised ellipse path
+    assert np.shape(as_disc_problem(sc.cameras, regs)[2]) == (3, 2, 2)
+    mixed = as_disc_problem(sc.cameras, regs[:2] + [Point(sc.points2d[0][2])])       # a point: D = 0
+    assert mixed is not None and not np.any(mixed[2][2])
+    assert as_disc_problem(sc.cameras, regs[:2] + [Segment(sc.points2d[0][2], [1.0, 0.0])]) is None
+    assert as_disc_problem(sc.cameras, [Point(p) for p in sc.points2d[0]]) is None    # all points: point path
 
 
 @pytest.mark.parametrize("scale,shift", [(1e-3, 0.0), (1e3, 1e6)])

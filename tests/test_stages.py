@@ -52,7 +52,8 @@ def test_stage_lists_are_named_data():
     assert [s.name for s in POINT_STAGES] == ["plan", "verify", "trivial", "steps", "exact_variety", "settle",
                                               "world_frame", "report"]
     assert [s.name for s in STEP_STAGES] == ["sdp", "estimate", "rigor", "decide", "resolve"]
-    assert [i.name for i in VERIFY_IMPLEMENTATIONS] == ["verify-points", "verify-discs", "generic"]
+    assert [i.name for i in VERIFY_IMPLEMENTATIONS] == ["verify-points", "verify-discs", "verify-ellipses",
+                                                        "verify-regions", "generic"]
     assert [i.name for i in SDP_IMPLEMENTATIONS] == ["sdp-points", "generic"]
     assert FAST_DEFAULT < FAST_ALL and ImplName.SDP_POINTS not in FAST_DEFAULT   # a single call: the generic SDP
     assert "sdp-points" in FAST_ALL and AttemptStep.SDP in {"sdp"}               # members hash as their strings

@@ -17,7 +17,10 @@ In the normalised frame (:mod:`tritools.model.normalize`, centres at the origin,
   (kappa_i = 1 - rho_i' / |x_i| at the candidate), i.e. the point-region bound of
   :func:`tritools.solve.fastpath.lagrangian_bounds` with weights kappa (rounded down, so the reduced
   Lagrangian is never above the exact one) and constant -sum mu.  Views inside their disc (kappa = 0) keep no
-  epipolar constraint (dropped: a weaker, valid bound; at a local optimum their constraints are inactive);
+  epipolar constraint (dropped: a weaker, valid bound; at a local optimum their constraints are inactive); the
+  views outside are gathered into a compact stack (:func:`tritools.solve.regions_verify.compact_bounds`), so
+  from ``BAND_MIN_VIEWS`` of them on the bands of view pairs apply (cost linear in N), all pairs only for what
+  no band certifies;
 * the decision of every path (:func:`tritools.solve.decide.decide`), in c = 2N gamma^2 units, and again on the
   numbers reported in pixels.
 
@@ -35,12 +38,12 @@ from sospoly.solvers import with_single_threaded_blas
 
 from ..model.cameras import numeric_cameras
 from ..model.normalize import normalization_stack
-from ..model.regions import Region
+from ..model.regions import ConeKind, Region
 from ..model.stacked import LM_MAX_ITER, LM_STEP_RTOL, damped_step, project_stack
 from .decide import decide, decide_reported, gamma_from_c
-from .fastpath import lagrangian_bounds
+from .regions_verify import compact_bounds, region_forms
 
-__all__ = ["DiscBatch", "disc_radius", "verify_discs", "refine_discs_stack"]
+__all__ = ["DiscBatch", "disc_radius", "verify_discs", "refine_discs_stack", "ellipse_shapes"]
 
 _ROUND_DOWN = 1 - 8 * np.finfo(float).eps
 
@@ -145,13 +148,13 @@ def verify_discs(cameras, centers, radii, *, tolerances: Tolerances = DEFAULT_TO
     _, r, outside = _disc_residual(u, rho_n)
     mu = np.where(outside, rho_n * (r - rho_n), 0.0)
     kappa = np.where(outside, mu / (rho_n ** 2 + mu), 0.0) * _ROUND_DOWN
-    weights = np.repeat(kappa, 2, axis=1)                    # per coordinate of v = (x_11, x_12, ..., x_N2)
-    v = u.reshape(M, -1)
+    weights = np.repeat(kappa[..., None], 2, axis=2)         # per coordinate of x_i
     # a minimiser has |x_i| <= rho_i + |x_i - y_i|, so |x| <= |rho| + sqrt(f(v^)) (the rigorous margin's ball)
     upper_f = np.sum(np.where(outside, (r - rho_n) ** 2, 0.0), axis=1)
     radius = np.linalg.norm(rho_n, axis=1) + np.sqrt(upper_f)
-    lower, _, ok = lagrangian_bounds(C, Cn, v, ok, radius, norm.resolution, tolerances, f0=-np.sum(mu, axis=1),
-                                     weights=weights, views=outside, deadline=deadline)
+    lower, ok_b = compact_bounds(C, Cn, u, weights, -mu, outside & ok[:, None], radius, norm.resolution,
+                                 tolerances, deadline=deadline)
+    ok &= ok_b
     status, optimal, c_lower = decide(lower, upper_f, tolerances, N, norm.resolution)
     X = norm.world_points(Xn)
     uw, _, fin_w = project_stack(C, X)
@@ -164,13 +167,17 @@ def verify_discs(cameras, centers, radii, *, tolerances: Tolerances = DEFAULT_TO
 
 
 def as_disc_problem(cams, regions):
-    """(cameras (N, 3, 4) float, centres (N, 2), radii (N,)) when every region is a disc and the cameras are a
-    numeric (N, 3, 4) array, else None (the item then goes through :func:`tritools.triangulate`)."""
+    """(cameras (N, 3, 4) float, centres (N, 2), radii (N,)) when every region is a disc, (cameras, centres,
+    D (N, 2, 2)) when every region is a filled ellipse or a point (D = 0) by its conic form, not all discs nor all
+    points (the vectorised ellipse path, :mod:`tritools.solve.ellipses`), and the cameras are a numeric
+    (N, 3, 4) array, else None (the item then goes through :func:`tritools.triangulate`)."""
     if not isinstance(regions, (list, tuple)) or len(regions) < 2:
         return None
     radii = [disc_radius(r) for r in regions]
     if any(r is None for r in radii):
-        return None
+        radii = ellipse_shapes(regions)
+        if radii is None:
+            return None
     C = numeric_cameras(cams)
     if C is None:
         return None
@@ -179,16 +186,46 @@ def as_disc_problem(cams, regions):
     return C, np.array([r.center for r in regions]), np.array(radii)
 
 
+def ellipse_shapes(regions) -> list | None:
+    """D of every region when each is exactly a filled ellipse centred on its ``center`` or a point there (D = 0)
+    by its conic form, not all points; else None."""
+    forms = region_forms(regions)
+    if forms is None or all(f.kind == ConeKind.POINT for f in forms):
+        return None
+    out = []
+    for f, r in zip(forms, regions):
+        exact = f.kind in (ConeKind.POINT, ConeKind.ELLIPSE) and not f.convexified
+        if not exact or not np.array_equal(f.center, r.center):
+            return None
+        out.append(f.D if f.kind == ConeKind.ELLIPSE else np.zeros((2, 2)))
+    return out
+
+
 def solve_disc_group(group, opts):
-    """Disc problems of one N (``group``: [(index, cameras, centres, radii, regions)]) through
-    :func:`verify_discs`: ({index: certified result}, [(index, cameras, regions, options, prefix)] for the
-    per-point path, which continues with the SDP)."""
+    """Disc or ellipse problems of one N (``group``: [(index, cameras, centres, radii or D, regions)]) through
+    :func:`verify_discs` / :func:`tritools.solve.ellipses.verify_ellipses`: ({index: certified result},
+    [(index, cameras, regions, options, prefix)] for the per-point path, which continues with the SDP)."""
+    from .ellipses import verify_ellipses
+
+    done, rest = {}, []
+    for part, verify in (([g for g in group if np.ndim(g[3]) == 1], verify_discs),
+                         ([g for g in group if np.ndim(g[3]) == 3], verify_ellipses)):
+        if part:
+            d, r = _solve_group(part, opts, verify)
+            done.update(d)
+            rest.extend(r)
+    return done, rest
+
+
+def _solve_group(group, opts, verify):
+    """:func:`solve_disc_group` on items of one kind, verified by ``verify`` (a :class:`DiscBatch`)."""
     import time
 
     from ..model.cameras import camera_problems, depths_stack
     from ..model.constraints import Method
     from ..result import Attempt, Status, TriangulationResult
     from .decide import cheirality
+    from .settings import stack_deadline
     from .stages.context import AttemptStep
     from .stages.outcome import behind_message
 
@@ -198,9 +235,7 @@ def solve_disc_group(group, opts):
     rho = np.array([g[3] for g in group])
     valid = camera_problems(C).valid
     C = np.where(valid[:, None, None, None], C, np.eye(3, 4))
-    from .settings import stack_deadline
-
-    b = verify_discs(C, x, rho, tolerances=opts.tolerances, deadline=stack_deadline(opts, len(group)))
+    b = verify(C, x, rho, tolerances=opts.tolerances, deadline=stack_deadline(opts, len(group)))
     cert = b.certified & valid
     dep = depths_stack(C, b.X, opts.world_frame)
     status, in_front = cheirality(np.where(cert, Status.OPTIMAL.value, None), dep, opts.require_in_front)

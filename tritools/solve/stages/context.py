@@ -51,6 +51,8 @@ class ImplName(str, enum.Enum):
     """The names of the stage implementations (:class:`Implementation`); ``fast`` sets hold the fast ones."""
     VERIFY_POINTS = "verify-points"     #: vectorised verification of point regions (:mod:`tritools.solve.fastpath`)
     VERIFY_DISCS = "verify-discs"       #: vectorised verification of discs (:mod:`tritools.solve.discs`)
+    VERIFY_ELLIPSES = "verify-ellipses"  #: vectorised verification of filled ellipses (:mod:`tritools.solve.ellipses`)
+    VERIFY_REGIONS = "verify-regions"   #: verification of every region type (:mod:`tritools.solve.regions_verify`)
     SDP_POINTS = "sdp-points"           #: the batched delta = 2 SDP of point regions (:mod:`tritools.solve.sdp_batch`)
     GENERIC = "generic"                 #: the generic implementation of a stage
 
@@ -64,7 +66,8 @@ class ImplName(str, enum.Enum):
 #: the fast implementations a single call uses by default (names of :mod:`tritools.solve.stages.verify` and
 #: :mod:`tritools.solve.stages.sdp`): the vectorised verification on a stack of one; the batched SDP is for
 #: stacks, and a single call keeps the generic SDP (the reference the batch is tested against).
-FAST_DEFAULT = frozenset({ImplName.VERIFY_POINTS, ImplName.VERIFY_DISCS})
+FAST_DEFAULT = frozenset({ImplName.VERIFY_POINTS, ImplName.VERIFY_DISCS, ImplName.VERIFY_ELLIPSES,
+                          ImplName.VERIFY_REGIONS})
 
 
 def fast_names(fast) -> frozenset:

@@ -9,6 +9,11 @@ tried in order; the first that applies runs:
   (:func:`tritools.solve.fastpath.verify_checked`) on a stack of one, so batches decide as a single call
   (the same rule; a stack of one runs the scalar twins of the LM and of the bound, equal up to round-off);
 * ``"verify-discs"`` -- filled discs (uncertain keypoints), Corollary 1: :func:`tritools.solve.discs.verify_discs`;
+* ``"verify-ellipses"`` -- filled ellipses, points among them: :func:`tritools.solve.ellipses.verify_ellipses`
+  on a stack of one (as ``triangulate_many``);
+* ``"verify-regions"`` -- every other mix of regions with a conic form (points, segments, polytopes, filled
+  ellipses, ellipse borders through their filled ellipse), Corollary 1: the region multipliers eliminated
+  exactly view by view (:mod:`tritools.solve.regions_verify`);
 * ``"generic"`` -- any delta = 2 program without inequalities or auxiliary variables:
   :func:`sospoly.analysis.verify_quadratic` on the built problem.
 
@@ -31,9 +36,11 @@ from ...model.constraints import Method
 from ...model.geometry import dlt, gamma as gamma_of, project, refine_l2
 from ...result import Attempt, Status, TriangulationResult
 from ..decide import cheirality, decide, gamma_from_c
-from ..discs import disc_radius, verify_discs
+from ..discs import disc_radius, ellipse_shapes, verify_discs
+from ..ellipses import verify_ellipses
 from ..fastpath import verify_checked
 from ..options import SolvePath
+from ..regions_verify import constraint_counts, region_bound, region_forms
 from ..plan import Step, degree_plan, delta_min
 from ..report import points_report_stack, solve_ball
 from .context import AttemptStep, ImplName, Implementation, PointContext
@@ -132,6 +139,56 @@ def _verify_discs(ctx: PointContext, step: Step) -> TriangulationResult | None:
                         n_lmivar=sospoly.n_lmivar_formula(4 * ctx.N, 2, [2] * K, [2] * ctx.N))
 
 
+def _ellipses_apply(ctx: PointContext, step: Step) -> bool:
+    return _cor1(step) and ellipse_shapes(ctx.regions) is not None
+
+
+def _verify_ellipses(ctx: PointContext, step: Step) -> TriangulationResult | None:
+    """Filled ellipses (and points among them, D = 0): the vectorised verification on a stack of one, so a single
+    call decides exactly as ``triangulate_many``."""
+    D = np.array([ellipse_shapes(ctx.regions)])
+    b = verify_ellipses(ctx.cams[None], ctx.centres()[None], D, tolerances=ctx.tolerances,
+                        deadline=ctx.settings.deadline)
+    if not b.certified[0]:
+        return None
+    K = ctx.N * (ctx.N - 1) // 2
+    n_ell = int(np.count_nonzero(np.any(D[0], axis=(1, 2))))
+    return report_point(ctx, step, Status.OPTIMAL, True, float(b.gamma_lb[0]), X=b.X[0], X_raw=b.X[0],
+                        image_points=b.image_points[0], certified_by="verification",
+                        n_lmivar=sospoly.n_lmivar_formula(2 * ctx.N + 2 * n_ell, 2, [2] * K, [2] * n_ell))
+
+
+def _regions_apply(ctx: PointContext, step: Step) -> bool:
+    return _cor1(step) and region_forms(ctx.regions) is not None
+
+
+def _verify_regions(ctx: PointContext, step: Step) -> TriangulationResult | None:
+    """The degree-2 certificate with the region multipliers (:func:`tritools.solve.regions_verify.region_bound`)
+    at the local estimate of the normalised problem, decided by the rule of every path."""
+    local = ctx.local()
+    if local is None:
+        return None
+    Xn = local[1]
+    extents = [r.extent().radius for r in ctx.regs_n]
+    forms = region_forms(ctx.regs_n)
+    if forms is None:
+        return None
+    c_lb, c_ub, u = region_bound(ctx.cams, ctx.cams_n, ctx.regs_n, Xn, extents, forms=forms,
+                                 tolerances=ctx.tolerances, resolution=ctx.norm.resolution,
+                                 deadline=ctx.settings.deadline)
+    status, optimal, c_lb = decide(c_lb, c_ub, ctx.tolerances, ctx.N, ctx.norm.resolution)
+    if not optimal:
+        return None
+    X = ctx.norm.world_point(Xn)
+    K = ctx.N * (ctx.N - 1) // 2
+    n_eq, n_ineq = constraint_counts(forms)
+    eq, ineq = [2] * (K + n_eq), [2] * n_ineq
+    n_vars = 2 * ctx.N + sum(r.n_aux for r in ctx.regions)
+    return report_point(ctx, step, Status.OPTIMAL, True, gamma_from_c(c_lb, ctx.N, ctx.norm.scale), X=X, X_raw=X,
+                        image_points=ctx.norm.image_points(u), certified_by="verification",
+                        n_lmivar=sospoly.n_lmivar_formula(n_vars, 2, eq, ineq))
+
+
 def _generic_applies(ctx: PointContext, step: Step) -> bool:
     return True
 
@@ -165,5 +222,7 @@ def _verify_generic(ctx: PointContext, step: Step) -> TriangulationResult | None
 VERIFY_IMPLEMENTATIONS: tuple[Implementation, ...] = (
     Implementation(ImplName.VERIFY_POINTS, _points_apply, _verify_points),
     Implementation(ImplName.VERIFY_DISCS, _discs_apply, _verify_discs),
+    Implementation(ImplName.VERIFY_ELLIPSES, _ellipses_apply, _verify_ellipses),
+    Implementation(ImplName.VERIFY_REGIONS, _regions_apply, _verify_regions),
     Implementation(ImplName.GENERIC, _generic_applies, _verify_generic, fast=False),
 )

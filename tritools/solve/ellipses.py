@@ -1,0 +1,150 @@
+"""Certification by verification for filled ellipses (uncertain keypoints with a covariance), vectorised over a
+stack: the ellipse twin of :mod:`tritools.solve.discs`.
+
+View i's region is {y : (y - c_i)^T A_i (y - c_i) <= 1}, A_i = D_i^-1 = R_i diag(alpha_i) R_i^T (semi-axes
+sigma_ik = alpha_ik^-1/2).  In the normalised frame (:mod:`tritools.model.normalize`, centres at the origin,
+D_i' = s^2 D_i), in each view's own axes (u_i^loc = R_i^T u_i):
+
+* the local optimum: Levenberg-Marquardt on the distances to the ellipses (:func:`refine_ellipses_stack`), with
+  the exact Hessian of d^2 / 2 in u: for the closest point y = G u
+  (:func:`tritools.solve.regions_verify.closest_on_ellipses`), G = (I + t A)^-1, t >= 0 the multiplier of
+  u - y = t A y, it is  I - dy/du = (I - G) + n n^T / (y^T A n),  n = G A y;
+* the degree-2 certificate with constant multipliers (:mod:`tritools.solve.regions_verify`): mu_i = t_i (0 inside),
+  min_y L = sum_i (omega_i . (R_i^T x_i)^2 - mu_i) + lambda^T g(x), omega_ik = mu_i alpha_ik / (1 + mu_i alpha_ik)
+  (rounded down): the point-region bound in the rotated frames, cameras [R_i^T 0; 0 1] P_i, views inside their
+  ellipse dropped, the kept views compacted (:func:`tritools.solve.regions_verify.compact_bounds`: bands of view
+  pairs from ``BAND_MIN_VIEWS`` kept views);
+* the decision of every path (:func:`tritools.solve.decide.decide`), again on the numbers reported in pixels.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from sospoly import DEFAULT_TOLERANCES, Tolerances
+from sospoly.budget import Deadline
+from sospoly.solvers import with_single_threaded_blas
+
+from ..model.normalize import normalization_stack
+from ..model.stacked import LM_MAX_ITER, LM_STEP_RTOL, damped_step, project_stack
+from .decide import decide, decide_reported, gamma_from_c
+from .discs import DiscBatch
+from .regions_verify import closest_on_ellipses, compact_bounds, ellipse_axes
+
+__all__ = ["refine_ellipses_stack", "verify_ellipses"]
+
+_ROUND_DOWN = 1 - 8 * np.finfo(float).eps
+
+
+def _local_residual(u, R, sigma):
+    """(e = u - y, y, t, outside) of the projections u (M, N, 2) on the ellipses (axes R, sigma), t the multiplier
+    of u - y = t A y (0 inside); e in the global frame, y in the ellipses' axes.  A point region (sigma = 0) has
+    y = 0, e = u and is always ``outside`` (its t is unused)."""
+    pt = sigma[..., 1] == 0
+    ul = np.einsum("...ji,...j->...i", R, u)
+    yl, t = closest_on_ellipses(ul, np.where(pt[..., None], 1.0, sigma))
+    yl = np.where(pt[..., None], 0.0, yl)
+    el = ul - yl
+    outside = (t > 0) | pt
+    back = np.einsum("...ij,...j->...i", R, el)
+    return back, yl, np.where(pt, 0.0, t), outside
+
+
+def _hessian(yl, t, R, sigma, outside):
+    """I - dy/du (module docstring) in the global frame, 0 inside, I for a point region."""
+    pt = sigma[..., 1] == 0
+    alpha = 1.0 / np.where(pt[..., None], 1.0, sigma) ** 2
+    G = np.where(pt[..., None], 0.0, 1.0 / (1.0 + t[..., None] * alpha))
+    n = G * alpha * yl
+    den = np.sum(yl * alpha * n, axis=-1)
+    den = np.where(outside & (den > 0), den, 1.0)
+    H = (1.0 - G)[..., :, None] * np.eye(2) + n[..., :, None] * n[..., None, :] / den[..., None, None]
+    H = np.einsum("...ij,...jk,...lk->...il", R, H, R)
+    return np.where(outside[..., None, None], H, 0.0)
+
+
+def refine_ellipses_stack(C, R, sigma, X, ok):
+    """Levenberg-Marquardt on sum_i dist(Phi(X, P_i), E_i)^2 (ellipses at the origin, axes R, sigma (M, N, ...))
+    from X (M, 3), for the problems where ``ok`` (the twin of :func:`tritools.solve.discs.refine_discs_stack`)."""
+    X = X.copy()
+    mu = np.full(len(X), 1e-3)
+
+    def cost_of(Xc, Cc, Rc, sc):
+        u, h, fin = project_stack(Cc, Xc)
+        e = _local_residual(np.where(fin[:, None, None], u, 0.0), Rc, sc)[0]
+        return np.where(fin, np.sum(e ** 2, axis=(1, 2)), np.inf)
+
+    cost = cost_of(X, C, R, sigma)
+    ok = ok & np.isfinite(cost)
+    active = np.nonzero(ok)[0]
+    for _ in range(LM_MAX_ITER):
+        if active.size == 0:
+            break
+        Ca, Ra, sa, Xa = C[active], R[active], sigma[active], X[active]
+        u, h, _ = project_stack(Ca, Xa)
+        e, yl, t, out = _local_residual(u, Ra, sa)
+        De = _hessian(yl, t, Ra, sa, out)
+        Ju = (Ca[..., :2, :3] - u[..., None] * Ca[..., 2:3, :3]) / h[..., 2][..., None, None]
+        JtJ = np.einsum("mnai,mnab,mnbj->mij", Ju, De, Ju)
+        g = np.einsum("mnai,mna->mi", Ju, e)
+        step = damped_step(JtJ, g, mu[active])
+        Xt = Xa + step
+        ct = cost_of(Xt, Ca, Ra, sa)
+        better = np.isfinite(ct) & (ct <= cost[active])
+        X[active[better]] = Xt[better]
+        cost[active[better]] = ct[better]
+        mu[active] = np.where(better, np.maximum(mu[active] / 10, 1e-12), mu[active] * 10)
+        small = np.linalg.norm(step, axis=1) <= LM_STEP_RTOL * (1.0 + np.linalg.norm(Xa, axis=1))
+        done = (better & small) | (mu[active] > 1e12) | (cost[active] == 0)
+        active = active[~done]
+    return X, ok & np.all(np.isfinite(X), axis=1)
+
+
+def _rotated(Cn, R):
+    """The cameras of the ellipses' frames: [R^T 0; 0 1] P per view."""
+    T = np.zeros(R.shape[:-2] + (3, 3))
+    T[..., :2, :2] = np.swapaxes(R, -1, -2)
+    T[..., 2, 2] = 1.0
+    return np.einsum("...ij,...jk->...ik", T, Cn)
+
+
+@with_single_threaded_blas
+def verify_ellipses(cameras, centers, D, *, tolerances: Tolerances = DEFAULT_TOLERANCES,
+                    deadline: Deadline | None = None) -> DiscBatch:
+    """Vectorised certification by verification of M filled-ellipse problems with N views each (module
+    docstring): cameras (M, N, 3, 4), centres (M, N, 2) and shape matrices D (M, N, 2, 2) positive definite, in
+    pixels, validated by the caller; D = 0 is a point region (weight 1, no region variable).  The result is a
+    :class:`tritools.solve.discs.DiscBatch`."""
+    C, x, D = (np.asarray(a, float) for a in (cameras, centers, D))
+    M, N = x.shape[:2]
+    R, sigma = ellipse_axes(D)
+    ok = np.all(np.isfinite(x), axis=(1, 2)) & np.all(np.isfinite(sigma), axis=(1, 2)) \
+        & np.all((sigma[..., 1] > 0) | ~np.any(D, axis=(2, 3)), axis=1)
+    norm = normalization_stack(C, x, ok)
+    ok &= norm.ok
+    Cn = norm.cameras_n
+    sig_n = sigma * norm.scale[:, None, None]
+    Xn, ok = refine_ellipses_stack(Cn, R, sig_n, norm.Xn, ok)
+    u, _, fin = project_stack(Cn, Xn)
+    ok &= fin
+    u = np.where(ok[:, None, None], u, 0.0)
+    e, _, t, outside = _local_residual(u, R, sig_n)
+    pt = sig_n[..., 1] == 0                              # point regions: weight 1, no multiplier
+    alpha = 1.0 / np.where(pt[..., None], 1.0, sig_n) ** 2
+    omega = np.where(outside[..., None], t[..., None] * alpha / (1.0 + t[..., None] * alpha), 0.0) * _ROUND_DOWN
+    omega = np.where(pt[..., None], 1.0, omega)
+    upper_f = np.sum(e ** 2, axis=(1, 2))
+    radius = np.linalg.norm(sig_n[..., 0], axis=1) + np.sqrt(upper_f)
+    z = np.einsum("mnji,mnj->mni", R, u)
+    lower, ok_b = compact_bounds(C, _rotated(Cn, R), z, omega, -t, outside & ok[:, None], radius, norm.resolution,
+                                 tolerances, deadline=deadline)
+    ok &= ok_b
+    _, optimal, c_lower = decide(lower, upper_f, tolerances, N, norm.resolution)
+    X = norm.world_points(Xn)
+    uw, _, fin_w = project_stack(C, X)
+    ok &= fin_w
+    ew = _local_residual(np.where(fin_w[:, None, None], uw - x, 0.0), R, sigma)[0]
+    dist = np.linalg.norm(ew, axis=2)
+    gamma_ub = np.where(fin_w, gamma_from_c(np.sum(dist ** 2, axis=1), N, 1.0), np.inf)
+    gamma_lb = np.minimum(gamma_from_c(np.maximum(c_lower, 0.0), N, norm.scale), gamma_ub)
+    certified = ok & optimal & decide_reported(gamma_lb, gamma_ub, tolerances, N, norm.scale, norm.resolution)
+    return DiscBatch(certified, ok, X, gamma_lb, gamma_ub, uw, dist)

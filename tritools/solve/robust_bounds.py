@@ -36,6 +36,7 @@ import numpy as np
 from ..model.regions import Point
 from ..result import Status
 from .fastpath import verify_points
+from .robust_verify import parent_frames, verify_in_parent
 from .sdp_batch import solve_corollary1_points
 
 __all__ = ["SubsetBounds", "compute_many", "ROUND_DOWN", "TRUSTED_LOWER_BOUND", "PACKING"]
@@ -50,6 +51,10 @@ TRUSTED_LOWER_BOUND = frozenset({Status.OPTIMAL, Status.BEHIND_CAMERA, Status.NO
 #: leave-one-out root bound, :meth:`tritools.solve.robust.TlsSearch.leave_one_out_bound`); False gives the plain
 #: path (every subset the verification does not certify goes to the batched SDP), which the tests compare against.
 PACKING = True
+#: proper subsets of point problems are first verified in their parent's normalised frame
+#: (:func:`tritools.solve.robust_verify.verify_in_parent`: no normalisation per subset); False gives the
+#: per-subset path only (the tests compare the two).
+IN_PARENT = True
 #: time limit (seconds) of one sub-problem solved by :func:`tritools.triangulate` (capped by the caller's deadline)
 SUB_TIME_LIMIT = 10.0
 
@@ -90,6 +95,18 @@ class SubsetBounds:
         self.cheap: set = set()
         self.retry: set = set()                # reopened subsets: the full treatment (verify, packing, SDP)
         self._floor: dict = {}                 # reopened subsets' packing bounds, kept by the next _store
+        self._frame = None                     # the parent's normalised frame (robust_verify.ParentFrame), or False
+        self.n_in_parent = 0                   # subsets bounded in the parent's frame
+
+    def frame(self):
+        """The parent problem's :class:`tritools.solve.robust_verify.ParentFrame` (point regions; computed when first
+        asked unless a batch set it), or None where the normalisation failed or the regions are not points."""
+        if self._frame is None:
+            self._frame = (parent_frames(self.C[None], self.x[None])[0] if self.points else None) or False
+        return self._frame or None
+
+    def set_frame(self, frame) -> None:
+        self._frame = frame or False
 
     @property
     def regions(self) -> list:
@@ -211,7 +228,11 @@ def compute_many(requests) -> None:
     for key in sorted(groups, key=lambda k: k[0]):
         items = groups[key]
         fresh = [(sb, S) for sb, S in items if S not in sb.unverified]
-        left = (_batch(fresh, _verify_stack) if fresh else []) + [(sb, S) for sb, S in items if S in sb.unverified]
+        verified = []                           # whole problems verified in their own frame: not again below
+        if IN_PARENT and fresh:
+            fresh, verified = _in_parent(fresh)
+        left = (_batch(fresh, _verify_stack) if fresh else []) + verified + \
+            [(sb, S) for sb, S in items if S in sb.unverified]
         if PACKING:
             left = _hinted(_packed(_deferred(left)))
         left = _batch(left, _sdp_stack) if left else []
@@ -223,6 +244,39 @@ def compute_many(requests) -> None:
             sb._store(S, 0.0, None)             # 0 is a valid bound; the search reports the time limit
         else:
             sb._solve_one(S)
+
+
+def _in_parent(items: list) -> list:
+    """Store the bounds of the subsets that :func:`tritools.solve.robust_verify.verify_in_parent` accepts
+    (equal-size point subsets, verified in their parent's normalised frame, one vectorised call; a whole problem
+    only where a batch gave its frame); (the proper subsets left, the whole problems left).  A whole problem's
+    frame is the one :func:`tritools.solve.fastpath.verify_points` would build for it, so its verification is
+    not repeated there."""
+    use, rest = [], []
+    for sb, S in items:
+        # the whole problem too where a batch gave the frame (a single call's own verification caches its frame)
+        proper = len(S) < len(sb.x) or sb._frame is not None
+        (use if proper and sb.frame() is not None else rest).append((sb, S))
+    if not use:
+        return rest, []
+    estimates = [[] if len(S) < 3 else [sb._X[T] for T in (S - {v} for v in S) if T in sb._X][:2]
+                 for sb, S in use]
+    enough = np.array([sb.saturation(S) for sb, S in use])
+    try:
+        good, lb, X = verify_in_parent([sb.C for sb, _ in use], [sb.frame() for sb, _ in use],
+                                       [np.array(sorted(S)) for _, S in use], estimates, use[0][0].opts.tolerances,
+                                       enough)
+    except (ValueError, np.linalg.LinAlgError, FloatingPointError):
+        return items, []
+    whole = []
+    for k, (sb, S) in enumerate(use):
+        if good[k]:
+            sb._store(S, float(lb[k]), X[k])
+            sb.n_solved += 1
+            sb.n_in_parent += 1
+        else:
+            (whole if len(S) == len(sb.x) else rest).append((sb, S))
+    return rest, whole
 
 
 def _hinted(items: list) -> list:

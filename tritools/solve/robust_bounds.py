@@ -248,15 +248,13 @@ def compute_many(requests) -> None:
 
 def _in_parent(items: list) -> list:
     """Store the bounds of the subsets that :func:`tritools.solve.robust_verify.verify_in_parent` accepts
-    (equal-size point subsets, verified in their parent's normalised frame, one vectorised call; a whole problem
-    only where a batch gave its frame); (the proper subsets left, the whole problems left).  A whole problem's
+    (equal-size point subsets, verified in their parent's normalised frame, one vectorised call, the whole
+    problem included); (the proper subsets left, the whole problems left).  A whole problem's
     frame is the one :func:`tritools.solve.fastpath.verify_points` would build for it, so its verification is
     not repeated there."""
     use, rest = [], []
     for sb, S in items:
-        # the whole problem too where a batch gave the frame (a single call's own verification caches its frame)
-        proper = len(S) < len(sb.x) or sb._frame is not None
-        (use if proper and sb.frame() is not None else rest).append((sb, S))
+        (use if sb.frame() is not None else rest).append((sb, S))
     if not use:
         return rest, []
     estimates = [[] if len(S) < 3 else [sb._X[T] for T in (S - {v} for v in S) if T in sb._X][:2]

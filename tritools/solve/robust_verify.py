@@ -37,10 +37,12 @@ from ..model.normalize import normalization_stack
 from ..model.stacked import damped_step, dlt_stack, project_stack
 from .fastpath import lagrangian_bounds
 
-__all__ = ["ParentFrame", "parent_frames", "frames_of", "verify_in_parent", "LM_STEPS"]
+__all__ = ["ParentFrame", "parent_frames", "frames_of", "verify_in_parent", "LM_STEPS", "LM_MORE"]
 
 #: damped Gauss-Newton steps polishing the start of each subset (a warm start rarely needs more than 3-4).
 LM_STEPS = 6
+#: further steps for the subsets whose first bound was not accepted.
+LM_MORE = 24
 #: a bound is rounded down by this factor (one division by s^2 on top of the certificate's own margin).
 _ROUND_DOWN = 1.0 - 1e-12
 
@@ -85,14 +87,14 @@ def _cost(Cn: np.ndarray, X: np.ndarray) -> np.ndarray:
     return np.where(fin, np.sum(u * u, axis=(1, 2)), np.inf)
 
 
-def _polish(Cn: np.ndarray, X: np.ndarray) -> np.ndarray:
-    """:data:`LM_STEPS` Levenberg-Marquardt steps on sum_i ||Phi(X, P'_i)||^2 (observed points at the origin),
+def _polish(Cn: np.ndarray, X: np.ndarray, steps: int) -> np.ndarray:
+    """``steps`` Levenberg-Marquardt steps on sum_i ||Phi(X, P'_i)||^2 (observed points at the origin),
     a step kept only where it lowers the cost."""
     mu = np.full(len(X), 1e-3)
     with np.errstate(all="ignore"):
         u, h, fin = project_stack(Cn, X)
         cost = np.where(fin, np.sum(u * u, axis=(1, 2)), np.inf)
-        for _ in range(LM_STEPS):
+        for _ in range(steps):
             J = (Cn[..., :2, :3] - u[..., None] * Cn[..., 2:3, :3]) / h[..., 2][..., None, None]
             J = J.reshape(len(X), -1, 3)
             r = u.reshape(len(X), -1)
@@ -130,23 +132,37 @@ def verify_in_parent(C: np.ndarray, frames: list, subsets: list, estimates: list
 
     Returns (accepted (M,) bool, bound (M,) pixels^2, X (M, 3) world estimates): a bound is accepted where it
     meets the candidate's value under the certificate rule at the subset's residual scale, or where it reaches
-    ``enough`` (M,) (pixels^2: the level above which the caller has no use for a larger bound)."""
-    M, k = len(subsets), len(subsets[0])
+    ``enough`` (M,) (pixels^2: the level above which the caller has no use for a larger bound).  The subsets not
+    accepted after :data:`LM_STEPS` steps get :data:`LM_MORE` more (large residuals converge slowly) and a second
+    bound."""
+    M = len(subsets)
     Cn = np.stack([f.cameras_n[S] for f, S in zip(frames, subsets)])
     Craw = np.stack([c[S] for c, S in zip(C, subsets)])
-    Xn = _polish(Cn, _starts(frames, subsets, Cn, estimates))
+    res = np.array([f.resolution for f in frames])
+    s2 = np.array([f.scale for f in frames]) ** 2
+    enough = np.full(M, np.inf) if enough is None else np.asarray(enough, float)
+    Xn = _polish(Cn, _starts(frames, subsets, Cn, estimates), LM_STEPS)
+    good, lb = _bounds(Craw, Cn, Xn, res, s2, enough, tolerances)
+    again = np.nonzero(~good & np.isfinite(Xn).all(axis=1))[0]
+    if again.size:
+        Xn[again] = _polish(Cn[again], Xn[again], LM_MORE)
+        good[again], lb[again] = _bounds(Craw[again], Cn[again], Xn[again], res[again], s2[again], enough[again],
+                                         tolerances)
+    X = np.array([f.origin for f in frames]) + np.array([f.depth for f in frames])[:, None] * Xn
+    return good, np.where(good, lb, 0.0), X
+
+
+def _bounds(Craw, Cn, Xn, res, s2, enough, tolerances) -> tuple:
+    """(accepted, bound in pixels^2) of :func:`verify_in_parent` at the normalised candidates Xn."""
+    M, k = Cn.shape[:2]
     u, _, fin = project_stack(Cn, Xn)
     fin &= np.isfinite(Xn).all(axis=1)
     v = np.where(fin[:, None], u.reshape(M, -1), 0.0)
     radius = np.sqrt(np.sum(v * v, axis=1))
-    res = np.array([f.resolution for f in frames])
     lower, upper, ok = lagrangian_bounds(Craw, Cn, v, fin.copy(), radius, res, tolerances)
-    s2 = np.array([f.scale for f in frames]) ** 2
     with np.errstate(invalid="ignore", over="ignore"):
         lb = np.maximum(np.minimum(lower, upper), 0.0) / s2 * _ROUND_DOWN
         ub = upper / s2
         good = ok & fin & np.isfinite(lb) & np.isfinite(ub)
-        tight = np.asarray(tolerances.certified(lb, ub, ub / k), bool)
-        good &= tight if enough is None else tight | (lb >= enough)
-    X = np.array([f.to_world(p) for f, p in zip(frames, Xn)])
-    return good, np.where(good, lb, 0.0), X
+        good &= np.asarray(tolerances.certified(lb, ub, ub / k), bool) | (lb >= enough)
+    return good, np.where(good, lb, 0.0)

@@ -494,11 +494,13 @@ class TlsSearch:
         if self.best_X is None:
             return TriangulationResult("tls", Status.NUMERICAL_FAILURE, message="no finite candidate estimate found",
                                        timings={"total": time.perf_counter() - self.t0})
+        # with the hint set, a whole problem holding a likely outlier gets its pair packing bound, no SDP: the root
+        # bound uses it only up to min c^2, and the search reopens it if its leaf is not pruned by it
+        self.bounds.hint = self.best_S
         yield from self.need([frozenset(range(self.N))])
         self.offer_new()
         lb, stopped = max(self.root_bound(), self.loo_lb), None
         if not self.meets(lb):
-            self.bounds.hint = self.best_S
             order = branching_order(self.residuals(self.best_X) / self.c)
             yield from self.anchor_bounds(order)
             lb_bb, stopped = yield from self.search(order)

@@ -86,6 +86,7 @@ class SubsetBounds:
         #: a lower bound at or above this value serves the caller as well as any larger one (module docstring)
         self.enough = math.inf
         self.c2 = None                         # the caller's squared thresholds (N,), for saturation()
+        self._c2_list = None                   # c2 as floats (saturation's sums)
         self.defer: set = set()                # subsets to verify only: not certified -> left unknown, in unverified
         self.unverified: set = set()           # subsets the verification did not certify (not verified again)
         self.n_packed = 0                      # subsets bounded by their pair packing alone
@@ -129,8 +130,9 @@ class SubsetBounds:
         the squared thresholds of S (``c2``, set by the caller) if lower (module docstring)."""
         if self.c2 is None:
             return self.enough
-        with np.errstate(over="ignore"):
-            return min(self.enough, float(np.sum(self.c2[sorted(S)])))
+        if self._c2_list is None:
+            self._c2_list = [float(v) for v in self.c2]
+        return min(self.enough, sum(self._c2_list[i] for i in S))    # float sums overflow to inf, as they should
 
     def packing_bound(self, S: frozenset) -> float:
         """sum of the cached bounds of disjoint view pairs inside S, picked greedily by size (module docstring:

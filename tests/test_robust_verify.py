@@ -164,3 +164,25 @@ def test_every_view_an_outlier():
     x = x + np.random.default_rng(3).uniform(-300, 300, x.shape)
     res, many = _check_against_enumeration(cams, x, np.full(5, 2.0), [X, X + 0.2, X - 0.2])
     assert res.inliers.sum() <= 2
+
+
+@pytest.mark.parametrize("offset,cam_scale", [(1e6, 1.0), (0.0, 1e8), (1e5, 1e-6)])
+def test_georeferenced_world_and_rescaled_cameras(offset, cam_scale, monkeypatch):
+    """The world moved by 1e5..1e6 (georeferenced) and the camera matrices multiplied by 1e-6..1e8 (the same
+    cameras projectively): the same inlier set and value as the per-subset path, bounds below the enumeration."""
+    cams, x, X, out = _track(6, 2, 12)
+    T = np.eye(4)
+    T[:3, 3] = -offset                                       # X_world = X + offset: P' = P T
+    cams = cam_scale * (cams @ T)
+    X = X + offset
+    c = np.full(6, 20.0)
+    fast = tritools.triangulate(cams, x, robust=c)
+    monkeypatch.setattr(rb, "IN_PARENT", False)
+    plain = tritools.triangulate(cams, x, robust=c)
+    assert fast.optimal
+    np.testing.assert_array_equal(fast.inliers, plain.inliers)
+    assert not fast.inliers[out].any()
+    assert fast.gamma_ub == pytest.approx(plain.gamma_ub, rel=1e-6)
+    f_ref = _tls_reference(cams, x, c, [X, X + 0.3, X - 0.3])
+    assert 2 * 6 * fast.gamma_lb ** 2 <= f_ref * (1 + 1e-9) + 1e-9
+    assert 2 * 6 * fast.gamma_ub ** 2 <= f_ref * (1 + 1e-6) + 1e-9

@@ -186,3 +186,56 @@ def test_georeferenced_world_and_rescaled_cameras(offset, cam_scale, monkeypatch
     f_ref = _tls_reference(cams, x, c, [X, X + 0.3, X - 0.3])
     assert 2 * 6 * fast.gamma_lb ** 2 <= f_ref * (1 + 1e-9) + 1e-9
     assert 2 * 6 * fast.gamma_ub ** 2 <= f_ref * (1 + 1e-6) + 1e-9
+
+
+def _protocol_scene(N, n_out, noise, rng):
+    """benchmarks/robust.py's scene (the CVPR 2023 protocol), the same random stream."""
+    K = np.array([[1012.0027, 0, 1054], [0, 1012.0027, 581], [0, 0, 1.0]])
+    P = []
+    for _ in range(N):
+        c = rng.normal(size=3)
+        c *= 2.0 / np.linalg.norm(c)
+        z = -c / 2.0
+        up = np.array([0.0, 0.0, 1.0]) if abs(z[2]) < 0.9 else np.array([1.0, 0.0, 0.0])
+        ax = np.cross(up, z)
+        ax /= np.linalg.norm(ax)
+        R = np.stack([ax, np.cross(z, ax), z])
+        P.append(K @ np.hstack([R, -R @ c[:, None]]))
+    P = np.array(P)
+    X = rng.uniform(-0.5, 0.5, 3)
+    h = P @ np.append(X, 1.0)
+    obs = h[:, :2] / h[:, 2:] + noise * rng.normal(size=(N, 2))
+    out = np.zeros(N, bool)
+    out[rng.choice(N, n_out, replace=False)] = True
+    obs[out] = rng.uniform([0, 0], [2108, 1162], size=(n_out, 2))
+    return P, obs, X, out
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("k", [4, 24])
+def test_split_bound_replaces_the_whole_problem_solve(k, monkeypatch):
+    """Two 5-view tracks with one wrong match whose leaf 'every view an inlier' is not pruned by the packing and
+    delta = 2 bounds (benchmarks/robust.py, batch cell N = 5, 20%, 1 px): the split bound L2LB(T) + L2LB(S - T)
+    over triples T holding the wrong match prunes it with no full-plan solve of the 5 views; the same inlier set and
+    value as the full-plan path (``SPLIT_TRIES = 0``), bounds below the enumeration."""
+    rng = np.random.default_rng([3, 5, 1, 10])
+    for _ in range(k + 1):
+        P, x, X, out = _protocol_scene(5, 1, 1.0, rng)
+    sizes = []
+    real = rb.SubsetBounds._solve_one
+    monkeypatch.setattr(rb.SubsetBounds, "_solve_one",
+                        lambda self, S, light=True: sizes.append((len(S), light)) or real(self, S, light))
+    split = tritools.triangulate(P, x, robust=200.0)
+    assert (5, False) not in sizes and (3, False) in sizes
+    sizes.clear()
+    monkeypatch.setattr(rb, "SPLIT_TRIES", 0)
+    whole = tritools.triangulate(P, x, robust=200.0)
+    assert (5, False) in sizes                                  # the case does need more than delta = 2 there
+    assert split.optimal and whole.optimal
+    np.testing.assert_array_equal(split.inliers, whole.inliers)
+    np.testing.assert_array_equal(split.inliers, ~out)
+    assert split.gamma_ub == pytest.approx(whole.gamma_ub, rel=1e-9)
+    f_ref = _tls_reference(P, x, np.full(5, 200.0), [X, X + 0.1, X - 0.1])
+    for r in (split, whole):
+        assert 2 * 5 * r.gamma_lb ** 2 <= f_ref * (1 + 1e-9) + 1e-9
+        assert 2 * 5 * r.gamma_ub ** 2 <= f_ref * (1 + 1e-6) + 1e-9

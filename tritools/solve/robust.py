@@ -473,7 +473,7 @@ class TlsSearch:
                         if lb < self.best_f:
                             floor = min(floor, lb)
                         continue
-                if self.bounds.strengthen(I):
+                if self.bounds.strengthen(I, (self.best_f - c2_out) / ROUND_DOWN):
                     lb = min(self.best_f, c2_out + self.bounds.bound(I))
                     self.offer_new()
                 if not self.meets(lb) or lb < self.best_f:

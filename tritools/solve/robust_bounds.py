@@ -55,6 +55,8 @@ PACKING = True
 #: (:func:`tritools.solve.robust_verify.verify_in_parent`: no normalisation per subset); False gives the
 #: per-subset path only (the tests compare the two).
 IN_PARENT = True
+#: triples tried by :meth:`SubsetBounds.split_bound` before a full-plan solve of a whole subset (0: none).
+SPLIT_TRIES = 6
 #: time limit (seconds) of one sub-problem solved by :func:`tritools.triangulate` (capped by the caller's deadline)
 SUB_TIME_LIMIT = 10.0
 
@@ -151,16 +153,61 @@ class SubsetBounds:
         """Fill the cache for every subset not known yet (duplicates and |S| <= 1 skipped)."""
         compute_many([(self, subsets)])
 
-    def strengthen(self, S: frozenset) -> bool:
-        """Solve S again with the full degree plan when its bound came from a light (delta = 2) solve that did not
-        certify; True when the bound may have changed."""
+    def strengthen(self, S: frozenset, need: float = math.inf) -> bool:
+        """A better bound of S when its bound came from a light (delta = 2) solve that did not certify; True when
+        the bound may have changed.  First by superadditivity over a split (:meth:`split_bound`), which stops once
+        it reaches ``need`` (the level the caller's node must reach); else by solving S with the full degree plan."""
         if S not in self.weak or self.deadline.expired:
             return False
         self.weak.discard(S)
-        old = self._lb.pop(S)
+        old = self._lb[S]
+        split = self.split_bound(S, need)
+        if split >= need:
+            self._lb[S] = max(old, split)
+            return True
+        self._lb.pop(S)
         self._solve_one(S, light=False)
-        self._lb[S] = max(self._lb[S], old)
+        self._lb[S] = max(self._lb[S], old, split)
         return True
+
+    def split_bound(self, S: frozenset, need: float) -> float:
+        """max over tried triples T of S holding a view outside the caller's ``hint`` (a likely wrong match w) of
+        L2LB(T) + L2LB(S - T), rounded down: L2*(S) >= L2*(T) + L2*(S - T) (superadditivity, module docstring).
+        A triple's L2 problem is solved in full (:meth:`_full_bound`, typically 1-200 ms against seconds for a
+        whole problem with a wrong match); the rest's bound is its cached one, a full solve of up to 3 views, or its
+        pair packing.  At most :data:`SPLIT_TRIES` triples, the views paired with w by the largest cached pair
+        bounds first; stops at ``need``.  0 when S has fewer than 4 views or no suspect."""
+        if len(S) < 4 or self.hint is None or SPLIT_TRIES <= 0:
+            return 0.0
+        best, tried = 0.0, 0
+        for w in sorted(S - self.hint):
+            pair = {v: self._lb.get(frozenset((w, v)), 0.0) for v in S if v != w}
+            others = sorted(pair, key=lambda v: -pair[v])
+            for a, b in itertools.combinations(others, 2):
+                if tried >= SPLIT_TRIES or self.deadline.expired:
+                    return best
+                tried += 1
+                T = frozenset((w, a, b))
+                R = S - T
+                rest = self._full_bound(R) if len(R) <= 3 or R in self._lb else self.packing_bound(R)
+                best = max(best, (self._full_bound(T) + rest) * ROUND_DOWN)
+                if best >= need:
+                    return best
+        return best
+
+    def _full_bound(self, T: frozenset) -> float:
+        """The bound of T, solved with the full degree plan unless cached from a solve that was not light (a weak
+        or packing-only bound is solved again; |T| <= 1: 0)."""
+        if len(T) <= 1:
+            return 0.0
+        if T in self._lb and T not in self.weak and T not in self.cheap:
+            return self._lb[T]
+        old = self._lb.pop(T, 0.0)
+        self.weak.discard(T)
+        self.cheap.discard(T)
+        self._solve_one(T, light=False)
+        self._lb[T] = max(self._lb[T], old)
+        return self._lb[T]
 
     def reopen(self, S: frozenset) -> bool:
         """Forget the packing-only bound of S (in ``cheap``) so that the next request gives it the full treatment;

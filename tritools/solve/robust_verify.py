@@ -22,10 +22,12 @@ The degree-2 certificate (Corollary 1 at delta = 2, SPEC §7) of the normalised 
     L2*(S) >= min(c', ||v^||^2) / s^2  (rounded down),
 
 valid for any v^.  The candidate only decides how tight it is: X' is the best of the subset's DLT, the
-parent's estimate and the cached estimates of S minus one view, polished by :data:`LM_STEPS` damped Gauss-Newton
-steps (a warm start converges in a few).  A bound is *accepted* (stored as the subset's bound) only where it
-meets the candidate's value under the certificate rule at the sub-problem's own residual scale (the scale
-of the per-subset verification, ||v^||^2 / (s^2 |S|) pixels^2); the other subsets go on to the per-subset path.
+parent's estimate and the cached estimates of S minus one view, polished by :data:`LM_STEPS` Levenberg-Marquardt
+steps (a warm start converges in a few; view pairs not accepted get :data:`LM_MORE` more).  A bound is *accepted*
+(stored as the subset's bound) where it meets the candidate's value under the certificate rule at the
+sub-problem's own residual scale (the scale of the per-subset verification, ||v^||^2 / (s^2 |S|) pixels^2), or
+where it is above the level at which the caller has no use for a larger one; the other subsets go on to the pair
+packing bound / the batched SDP (:mod:`tritools.solve.robust_bounds`).
 """
 from __future__ import annotations
 

@@ -189,7 +189,7 @@ class SubsetBounds:
                 tried += 1
                 T = frozenset((w, a, b))
                 R = S - T
-                rest = self._full_bound(R) if len(R) <= 3 or R in self._lb else self.packing_bound(R)
+                rest = self._full_bound(R) if len(R) <= 3 else self._lb.get(R, self.packing_bound(R))
                 best = max(best, (self._full_bound(T) + rest) * ROUND_DOWN)
                 if best >= need:
                     return best

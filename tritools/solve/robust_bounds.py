@@ -56,7 +56,7 @@ PACKING = True
 #: per-subset path only (the tests compare the two).
 IN_PARENT = True
 #: triples tried by :meth:`SubsetBounds.split_bound` before a full-plan solve of a whole subset (0: none).
-SPLIT_TRIES = 3
+SPLIT_TRIES = 6
 #: time limit (seconds) of one sub-problem solved by :func:`tritools.triangulate` (capped by the caller's deadline)
 SUB_TIME_LIMIT = 10.0
 

@@ -120,10 +120,10 @@ def test_an_uncertified_result_past_its_deadline_says_time_limit(monkeypatch):
     real = rb.SubsetBounds.strengthen
     calls = []
 
-    def late(self, S):                          # the deadline passes just before the leaf's solve
+    def late(self, S, *need):                   # the deadline passes just before the leaf's solve
         calls.append(S)
         self.deadline = Deadline(0.0)
-        return real(self, S)
+        return real(self, S, *need)
 
     monkeypatch.setattr(rb.SubsetBounds, "strengthen", late)
     r = tritools.triangulate(cams, x, robust=200.0)

@@ -194,6 +194,7 @@ class TlsSearch:
         self.nodes = 0
         self.anchors, self.anchor_a = None, None     # see anchor_bounds
         self.loo_lb = 0.0                            # leave_one_out_bound, where computed
+        self._absC2 = None                           # |third rows| of the cameras (point_distances2_one)
 
     @property
     def regions(self) -> list:
@@ -219,7 +220,9 @@ class TlsSearch:
         """d_i(X) (N,), inf where the projection is undefined: :func:`point_distances2` for point regions (the
         vectorised twin of :func:`tritools.solve.report.point_report`), else point_report."""
         if self.points:
-            return np.sqrt(point_distances2(self.C, self.x, np.asarray(X, float)[None])[0])
+            if self._absC2 is None:
+                self._absC2 = np.abs(self.C[:, 2])
+            return np.sqrt(point_distances2_one(self.C, self._absC2, self.x, X))
         rep = point_report(X, self.C, self.regions, self.opts.world_frame)
         return np.full(self.N, np.inf) if rep.residuals is None else rep.residuals
 
@@ -471,7 +474,7 @@ class TlsSearch:
                         if lb < self.best_f:
                             floor = min(floor, lb)
                         continue
-                if self.bounds.strengthen(I):
+                if self.bounds.strengthen(I, (self.best_f - c2_out) / ROUND_DOWN):
                     lb = min(self.best_f, c2_out + self.bounds.bound(I))
                     self.offer_new()
                 if not self.meets(lb) or lb < self.best_f:
@@ -495,11 +498,13 @@ class TlsSearch:
         if self.best_X is None:
             return TriangulationResult("tls", Status.NUMERICAL_FAILURE, message="no finite candidate estimate found",
                                        timings={"total": time.perf_counter() - self.t0})
+        # with the hint set, a whole problem holding a likely outlier gets its pair packing bound, no SDP: the root
+        # bound uses it only up to min c^2, and the search reopens it if its leaf is not pruned by it
+        self.bounds.hint = self.best_S
         yield from self.need([frozenset(range(self.N))])
         self.offer_new()
         lb, stopped = max(self.root_bound(), self.loo_lb), None
         if not self.meets(lb):
-            self.bounds.hint = self.best_S
             order = branching_order(self.residuals(self.best_X) / self.c)
             yield from self.anchor_bounds(order)
             lb_bb, stopped = yield from self.search(order)
@@ -553,6 +558,17 @@ def point_distances2(C: np.ndarray, x: np.ndarray, Xs: np.ndarray) -> np.ndarray
     ok = np.abs(u[..., 2]) > PROJECTION_DENOM_RTOL * denom
     with np.errstate(all="ignore"):
         d2 = np.sum((u[..., :2] / u[..., 2:] - x[None]) ** 2, axis=2)
+    return np.where(ok & np.isfinite(d2), d2, np.inf)
+
+
+def point_distances2_one(C: np.ndarray, absC2: np.ndarray, x: np.ndarray, X) -> np.ndarray:
+    """:func:`point_distances2` for one candidate X (3,): (N,), the same rule; ``absC2`` = |C[:, 2, :]|."""
+    Xh = np.array([X[0], X[1], X[2], 1.0], float)
+    u = C @ Xh
+    ok = np.abs(u[:, 2]) > PROJECTION_DENOM_RTOL * (absC2 @ np.abs(Xh))
+    with np.errstate(all="ignore"):
+        d = u[:, :2] / u[:, 2:] - x
+        d2 = d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1]
     return np.where(ok & np.isfinite(d2), d2, np.inf)
 
 

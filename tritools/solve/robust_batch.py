@@ -164,6 +164,7 @@ def _normalization_scales(searches) -> None:
     :func:`tritools.model.normalize.normalization_stack` call per group: the same function
     :func:`tritools.model.normalize.normalization_for` applies to a stack of one (scale 1 where it fails)."""
     from ..model.normalize import normalization_stack
+    from .robust_verify import frames_of
 
     groups: dict = {}
     for s in searches:
@@ -171,8 +172,9 @@ def _normalization_scales(searches) -> None:
             groups.setdefault(s.N, []).append(s)
     for group in groups.values():
         st = normalization_stack(np.stack([s.C for s in group]), np.stack([s.x for s in group]))
-        for k, s in enumerate(group):
+        for k, (s, frame) in enumerate(zip(group, frames_of(st))):
             s.set_normalization_scale(float(st.scale[k]) if st.ok[k] else 1.0)
+            s.bounds.set_frame(frame)           # the sub-problems are verified in this frame (.robust_verify)
 
 
 def _point_searches(idx, points, thresholds, opts, t0) -> dict:

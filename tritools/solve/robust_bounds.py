@@ -36,6 +36,7 @@ import numpy as np
 from ..model.regions import Point
 from ..result import Status
 from .fastpath import verify_points
+from .robust_verify import parent_frames, verify_in_parent
 from .sdp_batch import solve_corollary1_points
 
 __all__ = ["SubsetBounds", "compute_many", "ROUND_DOWN", "TRUSTED_LOWER_BOUND", "PACKING"]
@@ -50,6 +51,12 @@ TRUSTED_LOWER_BOUND = frozenset({Status.OPTIMAL, Status.BEHIND_CAMERA, Status.NO
 #: leave-one-out root bound, :meth:`tritools.solve.robust.TlsSearch.leave_one_out_bound`); False gives the plain
 #: path (every subset the verification does not certify goes to the batched SDP), which the tests compare against.
 PACKING = True
+#: proper subsets of point problems are first verified in their parent's normalised frame
+#: (:func:`tritools.solve.robust_verify.verify_in_parent`: no normalisation per subset); False gives the
+#: per-subset path only (the tests compare the two).
+IN_PARENT = True
+#: triples tried by :meth:`SubsetBounds.split_bound` before a full-plan solve of a whole subset (0: none).
+SPLIT_TRIES = 6
 #: time limit (seconds) of one sub-problem solved by :func:`tritools.triangulate` (capped by the caller's deadline)
 SUB_TIME_LIMIT = 10.0
 
@@ -81,6 +88,7 @@ class SubsetBounds:
         #: a lower bound at or above this value serves the caller as well as any larger one (module docstring)
         self.enough = math.inf
         self.c2 = None                         # the caller's squared thresholds (N,), for saturation()
+        self._c2_list = None                   # c2 as floats (saturation's sums)
         self.defer: set = set()                # subsets to verify only: not certified -> left unknown, in unverified
         self.unverified: set = set()           # subsets the verification did not certify (not verified again)
         self.n_packed = 0                      # subsets bounded by their pair packing alone
@@ -90,6 +98,18 @@ class SubsetBounds:
         self.cheap: set = set()
         self.retry: set = set()                # reopened subsets: the full treatment (verify, packing, SDP)
         self._floor: dict = {}                 # reopened subsets' packing bounds, kept by the next _store
+        self._frame = None                     # the parent's normalised frame (robust_verify.ParentFrame), or False
+        self.n_in_parent = 0                   # subsets bounded in the parent's frame
+
+    def frame(self):
+        """The parent problem's :class:`tritools.solve.robust_verify.ParentFrame` (point regions; computed when first
+        asked unless a batch set it), or None where the normalisation failed or the regions are not points."""
+        if self._frame is None:
+            self._frame = (parent_frames(self.C[None], self.x[None])[0] if self.points else None) or False
+        return self._frame or None
+
+    def set_frame(self, frame) -> None:
+        self._frame = frame or False
 
     @property
     def regions(self) -> list:
@@ -112,8 +132,9 @@ class SubsetBounds:
         the squared thresholds of S (``c2``, set by the caller) if lower (module docstring)."""
         if self.c2 is None:
             return self.enough
-        with np.errstate(over="ignore"):
-            return min(self.enough, float(np.sum(self.c2[sorted(S)])))
+        if self._c2_list is None:
+            self._c2_list = [float(v) for v in self.c2]
+        return min(self.enough, sum(self._c2_list[i] for i in S))    # float sums overflow to inf, as they should
 
     def packing_bound(self, S: frozenset) -> float:
         """sum of the cached bounds of disjoint view pairs inside S, picked greedily by size (module docstring:
@@ -132,16 +153,61 @@ class SubsetBounds:
         """Fill the cache for every subset not known yet (duplicates and |S| <= 1 skipped)."""
         compute_many([(self, subsets)])
 
-    def strengthen(self, S: frozenset) -> bool:
-        """Solve S again with the full degree plan when its bound came from a light (delta = 2) solve that did not
-        certify; True when the bound may have changed."""
+    def strengthen(self, S: frozenset, need: float = math.inf) -> bool:
+        """A better bound of S when its bound came from a light (delta = 2) solve that did not certify; True when
+        the bound may have changed.  First by superadditivity over a split (:meth:`split_bound`), which stops once
+        it reaches ``need`` (the level the caller's node must reach); else by solving S with the full degree plan."""
         if S not in self.weak or self.deadline.expired:
             return False
         self.weak.discard(S)
-        old = self._lb.pop(S)
+        old = self._lb[S]
+        split = self.split_bound(S, need)
+        if split >= need:
+            self._lb[S] = max(old, split)
+            return True
+        self._lb.pop(S)
         self._solve_one(S, light=False)
-        self._lb[S] = max(self._lb[S], old)
+        self._lb[S] = max(self._lb[S], old, split)
         return True
+
+    def split_bound(self, S: frozenset, need: float) -> float:
+        """max over tried triples T of S holding a view outside the caller's ``hint`` (a likely wrong match w) of
+        L2LB(T) + L2LB(S - T), rounded down: L2*(S) >= L2*(T) + L2*(S - T) (superadditivity, module docstring).
+        A triple's L2 problem is solved in full (:meth:`_full_bound`, typically 1-200 ms against seconds for a
+        whole problem with a wrong match); the rest's bound is its cached one, a full solve of up to 3 views, or its
+        pair packing.  At most :data:`SPLIT_TRIES` triples, the views paired with w by the largest cached pair
+        bounds first; stops at ``need``.  0 when S has fewer than 4 views or no suspect."""
+        if len(S) < 4 or self.hint is None or SPLIT_TRIES <= 0:
+            return 0.0
+        best, tried = 0.0, 0
+        for w in sorted(S - self.hint):
+            pair = {v: self._lb.get(frozenset((w, v)), 0.0) for v in S if v != w}
+            others = sorted(pair, key=lambda v: -pair[v])
+            for a, b in itertools.combinations(others, 2):
+                if tried >= SPLIT_TRIES or self.deadline.expired:
+                    return best
+                tried += 1
+                T = frozenset((w, a, b))
+                R = S - T
+                rest = self._full_bound(R) if len(R) <= 3 else self._lb.get(R, self.packing_bound(R))
+                best = max(best, (self._full_bound(T) + rest) * ROUND_DOWN)
+                if best >= need:
+                    return best
+        return best
+
+    def _full_bound(self, T: frozenset) -> float:
+        """The bound of T, solved with the full degree plan unless cached from a solve that was not light (a weak
+        or packing-only bound is solved again; |T| <= 1: 0)."""
+        if len(T) <= 1:
+            return 0.0
+        if T in self._lb and T not in self.weak and T not in self.cheap:
+            return self._lb[T]
+        old = self._lb.pop(T, 0.0)
+        self.weak.discard(T)
+        self.cheap.discard(T)
+        self._solve_one(T, light=False)
+        self._lb[T] = max(self._lb[T], old)
+        return self._lb[T]
 
     def reopen(self, S: frozenset) -> bool:
         """Forget the packing-only bound of S (in ``cheap``) so that the next request gives it the full treatment;
@@ -211,7 +277,11 @@ def compute_many(requests) -> None:
     for key in sorted(groups, key=lambda k: k[0]):
         items = groups[key]
         fresh = [(sb, S) for sb, S in items if S not in sb.unverified]
-        left = (_batch(fresh, _verify_stack) if fresh else []) + [(sb, S) for sb, S in items if S in sb.unverified]
+        verified = []                           # verified in their parent's frame: not again below
+        if IN_PARENT and fresh:
+            fresh, verified = _in_parent(fresh)
+        left = (_batch(fresh, _verify_stack) if fresh else []) + verified + \
+            [(sb, S) for sb, S in items if S in sb.unverified]
         if PACKING:
             left = _hinted(_packed(_deferred(left)))
         left = _batch(left, _sdp_stack) if left else []
@@ -223,6 +293,37 @@ def compute_many(requests) -> None:
             sb._store(S, 0.0, None)             # 0 is a valid bound; the search reports the time limit
         else:
             sb._solve_one(S)
+
+
+def _in_parent(items: list) -> tuple:
+    """Store the bounds of the subsets that :func:`tritools.solve.robust_verify.verify_in_parent` accepts
+    (equal-size point subsets, verified in their parent's normalised frame, one vectorised call, the whole
+    problem included); (the subsets without a frame, left for the per-subset verification; the subsets verified
+    here but not accepted, which go on to the packing bound / SDP: a second verification in their own frame
+    decided none of 94 such triples in benchmarks/robust_speed.py, at the cost of a normalisation each)."""
+    use, rest = [], []
+    for sb, S in items:
+        (use if sb.frame() is not None else rest).append((sb, S))
+    if not use:
+        return rest, []
+    estimates = [[] if len(S) < 3 else [sb._X[T] for T in (S - {v} for v in S) if T in sb._X][:2]
+                 for sb, S in use]
+    enough = np.array([sb.saturation(S) for sb, S in use])
+    try:
+        good, lb, X = verify_in_parent([sb.C for sb, _ in use], [sb.frame() for sb, _ in use],
+                                       [np.array(sorted(S)) for _, S in use], estimates, use[0][0].opts.tolerances,
+                                       enough)
+    except (ValueError, np.linalg.LinAlgError, FloatingPointError):
+        return items, []
+    verified = []
+    for k, (sb, S) in enumerate(use):
+        if good[k]:
+            sb._store(S, float(lb[k]), X[k])
+            sb.n_solved += 1
+            sb.n_in_parent += 1
+        else:
+            verified.append((sb, S))
+    return rest, verified
 
 
 def _hinted(items: list) -> list:

@@ -1,0 +1,171 @@
+"""Verification of view subsets in the frame of their parent problem (the robust search's cheap sub-bounds).
+
+A TLS search (:mod:`tritools.solve.robust`) needs certified lower bounds of L2*(S) = min_X sum_{i in S} d_i(X)^2
+for many view subsets S of one point problem.  :func:`tritools.solve.fastpath.verify_points` on the
+sub-problem normalises it afresh (DLT, then Levenberg-Marquardt from the DLT point to the tolerance 1e-13):
+a fixed cost per subset that dominated the search.  Here the parent's normalisation is reused.
+
+The frame.  The normalisation of the parent (:func:`tritools.model.normalize.normalization_stack`) maps the
+image of view i by the similarity x' = s (x - x_i) (one scale s for every view) and the world by
+X = X_0 + d X'; the normalised cameras P'_i reproduce it, Phi(X', P'_i) = s (Phi(X, P_i) - x_i).  A subset S of
+the views, with the cameras P'_S and the observed points at the origin, is therefore the sub-problem of S in
+normalised units: for every X,
+
+    sum_{i in S} ||Phi(X', P'_i)||^2 = s^2 sum_{i in S} d_i(X)^2,      so   L2*(S) = L2'*(S) / s^2
+
+exactly (SPEC §7; the same identity :func:`tritools.solve.fastpath.verify_checked` uses for the whole problem).
+The degree-2 certificate (Corollary 1 at delta = 2, SPEC §7) of the normalised sub-problem,
+:func:`tritools.solve.fastpath.lagrangian_bounds`, gives a rigorous lower bound c' <= L2'*(S) at any candidate v^
+(the multipliers only propose; the bound comes from the polynomial data, with the margin of ``radius`` =
+||v^||, which bounds every minimiser's norm since f(v*) = ||v*||^2 <= ||v^||^2).  Hence
+
+    L2*(S) >= min(c', ||v^||^2) / s^2  (rounded down),
+
+valid for any v^.  The candidate only decides how tight it is: X' is the best of the subset's DLT, the
+parent's estimate and the cached estimates of S minus one view, polished by :data:`LM_STEPS` Levenberg-Marquardt
+steps (a warm start converges in a few; view pairs not accepted get :data:`LM_MORE` more).  A bound is *accepted*
+(stored as the subset's bound) where it meets the candidate's value under the certificate rule at the
+sub-problem's own residual scale (the scale of the per-subset verification, ||v^||^2 / (s^2 |S|) pixels^2), or
+where it is above the level at which the caller has no use for a larger one; the other subsets go on to the pair
+packing bound / the batched SDP (:mod:`tritools.solve.robust_bounds`).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..model.normalize import normalization_stack
+from ..model.stacked import damped_step, dlt_stack, project_stack
+from .fastpath import lagrangian_bounds
+
+__all__ = ["ParentFrame", "parent_frames", "frames_of", "verify_in_parent", "LM_STEPS", "LM_MORE"]
+
+#: damped Gauss-Newton steps polishing the start of each subset (a warm start rarely needs more than 3-4).
+LM_STEPS = 6
+#: further steps for the view pairs whose first bound was not accepted.
+LM_MORE = 24
+#: a bound is rounded down by this factor (one division by s^2 on top of the certificate's own margin).
+_ROUND_DOWN = 1.0 - 1e-12
+
+
+@dataclass(frozen=True)
+class ParentFrame:
+    """The normalisation of one point problem (module docstring): normalised cameras (N, 3, 4), the parent's
+    refined estimate Xn (3,) in the normalised world, the world frame (origin (3,), depth d) and the image scale
+    s, with the coordinates' resolution (normalised units)."""
+    cameras_n: np.ndarray
+    Xn: np.ndarray
+    origin: np.ndarray
+    depth: float
+    scale: float
+    resolution: float
+
+    def to_normalized(self, X: np.ndarray) -> np.ndarray:
+        return (np.asarray(X, float) - self.origin) / self.depth
+
+    def to_world(self, Xn: np.ndarray) -> np.ndarray:
+        return self.origin + self.depth * Xn
+
+
+def parent_frames(C: np.ndarray, x: np.ndarray) -> list:
+    """The :class:`ParentFrame` of each of M point problems (C (M, N, 3, 4), x (M, N, 2)) from one
+    :func:`tritools.model.normalize.normalization_stack` call; None where the normalisation failed."""
+    return frames_of(normalization_stack(C, x))
+
+
+def frames_of(st) -> list:
+    """The :class:`ParentFrame` s of a :class:`tritools.model.normalize.NormalizationStack` (None where it failed)."""
+    out = []
+    for m in range(len(st.scale)):
+        good = bool(st.ok[m]) and np.isfinite(st.scale[m]) and st.scale[m] > 0 and np.isfinite(st.depth[m])
+        out.append(ParentFrame(st.cameras_n[m], st.Xn[m].copy(), st.origin[m].copy(), float(st.depth[m]),
+                               float(st.scale[m]), float(st.resolution[m])) if good else None)
+    return out
+
+
+def _cost(Cn: np.ndarray, X: np.ndarray) -> np.ndarray:
+    u, _, fin = project_stack(Cn, X)
+    return np.where(fin, np.sum(u * u, axis=(1, 2)), np.inf)
+
+
+def _polish(Cn: np.ndarray, X: np.ndarray, steps: int) -> np.ndarray:
+    """``steps`` Levenberg-Marquardt steps on sum_i ||Phi(X, P'_i)||^2 (observed points at the origin),
+    a step kept only where it lowers the cost."""
+    mu = np.full(len(X), 1e-3)
+    with np.errstate(all="ignore"):
+        u, h, fin = project_stack(Cn, X)
+        cost = np.where(fin, np.sum(u * u, axis=(1, 2)), np.inf)
+        for _ in range(steps):
+            J = (Cn[..., :2, :3] - u[..., None] * Cn[..., 2:3, :3]) / h[..., 2][..., None, None]
+            J = J.reshape(len(X), -1, 3)
+            r = u.reshape(len(X), -1)
+            step = damped_step(np.einsum("mki,mkj->mij", J, J), np.einsum("mki,mk->mi", J, r), mu)
+            Xt = X + np.where(np.isfinite(step), step, 0.0)
+            ut, ht, fint = project_stack(Cn, Xt)
+            ct = np.where(fint, np.sum(ut * ut, axis=(1, 2)), np.inf)
+            better = ct <= cost
+            X = np.where(better[:, None], Xt, X)
+            u, h = np.where(better[:, None, None], ut, u), np.where(better[:, None, None], ht, h)
+            cost = np.where(better, ct, cost)
+            mu = np.where(better, np.maximum(mu / 10, 1e-12), mu * 10)
+    return X
+
+
+def _starts(frames: list, subsets: list, Cn: np.ndarray, estimates: list) -> np.ndarray:
+    """The best start (M, 3) per subset among its DLT, the parent's estimate and ``estimates`` (per subset, a list
+    of world points, e.g. cached estimates of S minus one view), by the cost on the subset."""
+    M, k = Cn.shape[:2]
+    dlt, ok = dlt_stack(Cn, np.zeros((M, k, 2)))
+    cands = [np.where(ok[:, None] & np.isfinite(dlt), dlt, 0.0), np.array([f.Xn for f in frames])]
+    width = max((len(e) for e in estimates), default=0)
+    for j in range(width):
+        cands.append(np.array([f.to_normalized(e[j]) if j < len(e) else f.Xn
+                               for f, e in zip(frames, estimates)]))
+    costs = np.stack([_cost(Cn, X) for X in cands])
+    best = np.argmin(np.where(np.isfinite(costs), costs, np.inf), axis=0)
+    return np.stack(cands)[best, np.arange(M)]
+
+
+def verify_in_parent(C: np.ndarray, frames: list, subsets: list, estimates: list, tolerances,
+                     enough: np.ndarray | None = None) -> tuple:
+    """Lower bounds (pixels^2) of L2*(S) for equal-size subsets S (sorted index arrays, one per problem) of the
+    problems with raw cameras C (list of (N_m, 3, 4)) and :class:`ParentFrame` s ``frames`` (module docstring).
+
+    Returns (accepted (M,) bool, bound (M,) pixels^2, X (M, 3) world estimates): a bound is accepted where it
+    meets the candidate's value under the certificate rule at the subset's residual scale, or where it reaches
+    ``enough`` (M,) (pixels^2: the level above which the caller has no use for a larger bound).  View pairs not
+    accepted after :data:`LM_STEPS` steps get :data:`LM_MORE` more (large residuals converge slowly) and a second
+    bound (measured in benchmarks/robust_speed.py: the second pass accepted 15 of 17 such pairs and 1 of 300
+    larger subsets, so only pairs get it)."""
+    M = len(subsets)
+    Cn = np.stack([f.cameras_n[S] for f, S in zip(frames, subsets)])
+    Craw = np.stack([c[S] for c, S in zip(C, subsets)])
+    res = np.array([f.resolution for f in frames])
+    s2 = np.array([f.scale for f in frames]) ** 2
+    enough = np.full(M, np.inf) if enough is None else np.asarray(enough, float)
+    Xn = _polish(Cn, _starts(frames, subsets, Cn, estimates), LM_STEPS)
+    good, lb = _bounds(Craw, Cn, Xn, res, s2, enough, tolerances)
+    again = np.nonzero(~good & np.isfinite(Xn).all(axis=1))[0]
+    if again.size and len(subsets[0]) == 2:
+        Xn[again] = _polish(Cn[again], Xn[again], LM_MORE)
+        good[again], lb[again] = _bounds(Craw[again], Cn[again], Xn[again], res[again], s2[again], enough[again],
+                                         tolerances)
+    X = np.array([f.origin for f in frames]) + np.array([f.depth for f in frames])[:, None] * Xn
+    return good, np.where(good, lb, 0.0), X
+
+
+def _bounds(Craw, Cn, Xn, res, s2, enough, tolerances) -> tuple:
+    """(accepted, bound in pixels^2) of :func:`verify_in_parent` at the normalised candidates Xn."""
+    M, k = Cn.shape[:2]
+    u, _, fin = project_stack(Cn, Xn)
+    fin &= np.isfinite(Xn).all(axis=1)
+    v = np.where(fin[:, None], u.reshape(M, -1), 0.0)
+    radius = np.sqrt(np.sum(v * v, axis=1))
+    lower, upper, ok = lagrangian_bounds(Craw, Cn, v, fin.copy(), radius, res, tolerances)
+    with np.errstate(invalid="ignore", over="ignore"):
+        lb = np.maximum(np.minimum(lower, upper), 0.0) / s2 * _ROUND_DOWN
+        ub = upper / s2
+        good = ok & fin & np.isfinite(lb) & np.isfinite(ub)
+        good &= np.asarray(tolerances.certified(lb, ub, ub / k), bool) | (lb >= enough)
+    return good, np.where(good, lb, 0.0)

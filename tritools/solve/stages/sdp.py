@@ -24,6 +24,7 @@ import time
 import sospoly
 from sospoly import BudgetExceeded, Multiplier
 from sospoly.budget import TimeLimitReached
+from sospoly.solvers import CLARABEL_FAST_CHAIN, AutoBackend
 
 from ...model.constraints import Method
 from ...model.normalize import unconstrained_reason
@@ -99,15 +100,25 @@ def _generic(ctx: PointContext, st: StepState) -> bool:
     if not _build(ctx, st):
         return True
     t1 = st.t_solve = time.perf_counter()
-    st.lb = solve_psatz(ctx, st.psatz, st.tol)
+    st.lb = solve_psatz(ctx, st.psatz, st.tol, fast_chain=_fast_chain(ctx, st.step))
     ctx.timings[f"solve_d{st.step.delta}"] = time.perf_counter() - t1
     return True
 
 
-def solve_psatz(ctx: PointContext, psatz, tol):
-    """sospoly's solve of a bound compiled instance or a built program, under the point's settings."""
+def solve_psatz(ctx: PointContext, psatz, tol, fast_chain: bool = False):
+    """sospoly's solve of a bound compiled instance or a built program, under the point's settings;
+    ``fast_chain``: the default back-end with Clarabel's :data:`~sospoly.solvers.CLARABEL_FAST_CHAIN`."""
     s = ctx.settings
-    return sospoly.solve_psatz(psatz, backend=s.backend, form=s.form, tolerances=tol, deadline=s.deadline)
+    backend = AutoBackend(tol, clarabel_chain=CLARABEL_FAST_CHAIN) if fast_chain and s.auto_backend else s.backend
+    return sospoly.solve_psatz(psatz, backend=backend, form=s.form, tolerances=tol, deadline=s.deadline)
+
+
+def _fast_chain(ctx: PointContext, step: Step) -> bool:
+    """Clarabel's first attempt without iterative refinement (only its SOLVED answers are taken: the certificate
+    and its rigorous bound are those of every attempt) for the programs of many PSD blocks -- view cliques, or
+    uncertain regions (their multipliers' blocks) -- where the refinement costs as much as the factorisation
+    (benchmarks/RESULTS.md, issue #22); point regions keep the default chain."""
+    return step.formulation == "views" or not all(r.is_point for r in ctx.regions)
 
 
 def _build(ctx: PointContext, st: StepState) -> bool:

@@ -9,7 +9,8 @@ step beyond the budget (every later step is larger).
 ``sdp`` builds the step's program -- (f, g, h) in the step's formulation (:mod:`tritools.model.problem`)
 and the certificate's shape: dense, or view cliques beside the dense degree-2 block -- compiled once per
 structure key (:data:`~tritools.solve.structures.STRUCTURE_CACHE`) and sized against the budget before
-anything is assembled, and solves it within the remaining time.  Its fast implementation, the batched
+anything is assembled, and solves it within the remaining time (programs of uncertain regions or view
+cliques with Clarabel's fast chain, :func:`_fast_chain`).  Its fast implementation, the batched
 delta = 2 SDP (:func:`tritools.solve.sdp_batch.solve_corollary1_points`, name ``"sdp-points"``), applies
 to point regions, Corollary 1, delta = 2, dense, the default multiplier, form and back-end, with
 normalisation; it decides the step itself, and what it hands back goes to the generic route.  A single

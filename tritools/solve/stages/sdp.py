@@ -9,8 +9,8 @@ step beyond the budget (every later step is larger).
 ``sdp`` builds the step's program -- (f, g, h) in the step's formulation (:mod:`tritools.model.problem`)
 and the certificate's shape: dense, or view cliques beside the dense degree-2 block -- compiled once per
 structure key (:data:`~tritools.solve.structures.STRUCTURE_CACHE`) and sized against the budget before
-anything is assembled, and solves it within the remaining time (programs of uncertain regions or view
-cliques with Clarabel's fast chain, :func:`_fast_chain`).  Its fast implementation, the batched
+anything is assembled, and solves it within the remaining time (the view-clique programs with Clarabel's
+fast chain, :func:`_fast_chain`).  Its fast implementation, the batched
 delta = 2 SDP (:func:`tritools.solve.sdp_batch.solve_corollary1_points`, name ``"sdp-points"``), applies
 to point regions, Corollary 1, delta = 2, dense, the default multiplier, form and back-end, with
 normalisation; it decides the step itself, and what it hands back goes to the generic route.  A single
@@ -116,10 +116,11 @@ def solve_psatz(ctx: PointContext, psatz, tol, fast_chain: bool = False):
 
 def _fast_chain(ctx: PointContext, step: Step) -> bool:
     """Clarabel's first attempt without iterative refinement (only its SOLVED answers are taken: the certificate
-    and its rigorous bound are those of every attempt) for the programs of many PSD blocks -- view cliques, or
-    uncertain regions (their multipliers' blocks) -- where the refinement costs as much as the factorisation
-    (benchmarks/RESULTS.md, issue #22); point regions keep the default chain."""
-    return step.formulation == "views" or not all(r.is_point for r in ctx.regions)
+    and its rigorous bound are those of every attempt) for the view-clique programs (many PSD blocks), where the
+    refinement costs as much as the factorisation and the attempt ends SOLVED (benchmarks/RESULTS.md, issue #22).
+    Dense programs keep the default chain: with regions their degree-2 program often ends "almost solved"
+    either way, and the provisional attempt would only double its cost."""
+    return step.formulation == "views"
 
 
 def _build(ctx: PointContext, st: StepState) -> bool:

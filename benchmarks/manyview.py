@@ -18,8 +18,10 @@ Columns per (setting, kinds, N), over the seeds:
 * ``default``: ``tritools.triangulate(cameras, regions)`` with every default (method auto: Corollary 1 at
   degree 2, then degree 4 dense while the Gram side is at most 45, else the views formulation -- a cyclic
   band of view pairs beside the dense degree-2 certificate; 60 s / 2 GiB budget per point): certified
-  fraction, median and max wall time, max peak RSS of the process, median N_LMIVAR of the last step;
-* ``deg-2``: the fraction the degree-2 certificate alone certifies (the default's first step);
+  fraction, median and max wall time, median and max process CPU time (``time.process_time``: the figure
+  to compare on a loaded machine), max peak RSS of the process, median N_LMIVAR of the last step;
+* ``deg-2``: the fraction the degree-2 certificate alone certifies (the default's first step; ``--no-deg2``
+  skips it);
 * ``dense-4``: Corollary 1 at degree 4 with the dense (paper's) certificate under the same budget and a
   ``--dense-time`` limit, run while N <= ``--dense-max`` (above it "not run": the program is sized in
   closed form and exceeds the budget or the time limit by far): certified fraction, median time, and the
@@ -95,16 +97,18 @@ def run_one(job: dict) -> dict:
 
     kinds = "point" if job["kinds"] == "points" else "mixed"
     cams, regs, X = uncertain_problem(job["n"], job["seed"], kinds=kinds, **SETTINGS[job["setting"]])
-    t = time.perf_counter()
+    t, cpu = time.perf_counter(), time.process_time()
     if job["variant"] == "default":
-        r = tritools.triangulate(cams, regs)
+        r = tritools.triangulate(cams, regs, **({} if job.get("time_limit") is None else
+                                                {"time_limit": job["time_limit"]}))
     elif job["variant"] == "deg2":
         r = tritools.triangulate(cams, regs, "corollary1", delta=2)
     else:
         r = tritools.triangulate(cams, regs, "corollary1", delta=4, sparsity="none", time_limit=job["dense_time"])
-    secs = time.perf_counter() - t
+    secs, cpu = time.perf_counter() - t, time.process_time() - cpu
     out = dict(job, status=r.status.value, optimal=bool(r.optimal), gamma_lb=r.gamma_lb, gamma_ub=r.gamma_ub,
-               seconds=secs, rss_mb=_peak_rss_mb(), n_lmivar=r.n_lmivar, delta=r.delta, sparsity=r.sparsity)
+               seconds=secs, cpu_seconds=cpu, rss_mb=_peak_rss_mb(), n_lmivar=r.n_lmivar, delta=r.delta,
+               sparsity=r.sparsity)
     if job["variant"] == "default" and r.gamma_lb is not None:
         out["reference"] = min(reference_gamma(cams, regs, X), r.gamma_ub if r.gamma_ub is not None else np.inf)
     return out
@@ -116,9 +120,9 @@ def _fmt(v, spec=".1f", none="-"):
 
 
 def scene_table(rows: list[dict], sizes, settings, kinds_list, dense_max: int) -> list[str]:
-    out = ["| setting | regions | N | default certified | median s | max s | peak RSS MB | N_LMIVAR | "
-           "deg-2 certified | dense-4 certified | dense-4 median s | dense-4 other | max lb-ref (px) |",
-           "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|---:|"]
+    out = ["| setting | regions | N | default certified | median s | max s | median CPU s | max CPU s | peak RSS MB | "
+           "N_LMIVAR | deg-2 certified | dense-4 certified | dense-4 median s | dense-4 other | max lb-ref (px) |",
+           "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|---:|"]
     for setting in settings:
         for kinds in kinds_list:
             for n in sizes:
@@ -128,7 +132,7 @@ def scene_table(rows: list[dict], sizes, settings, kinds_list, dense_max: int) -
                     continue
                 d2 = [r for r in sel if r["variant"] == "deg2"]
                 dn = [r for r in sel if r["variant"] == "dense4"]
-                secs = [r["seconds"] for r in d]
+                secs, cpus = [r["seconds"] for r in d], [r["cpu_seconds"] for r in d]
                 lmi = [r["n_lmivar"] for r in d if r["n_lmivar"]]
                 gaps = [r["gamma_lb"] - r["reference"] for r in d if r.get("reference") is not None
                         and np.isfinite(r["reference"])]
@@ -136,28 +140,40 @@ def scene_table(rows: list[dict], sizes, settings, kinds_list, dense_max: int) -
                 dense_cert = f"{sum(r['optimal'] for r in dn)}/{len(dn)}" if dn else \
                     ("not run" if n > dense_max else "-")
                 out.append(f"| {setting} | {kinds} | {n} | {sum(r['optimal'] for r in d)}/{len(d)} | "
-                           f"{np.median(secs):.1f} | {max(secs):.1f} | {max(r['rss_mb'] for r in d):.0f} | "
+                           f"{np.median(secs):.1f} | {max(secs):.1f} | {np.median(cpus):.1f} | {max(cpus):.1f} | "
+                           f"{max(r['rss_mb'] for r in d):.0f} | "
                            f"{int(np.median(lmi)) if lmi else '-'} | "
-                           f"{sum(r['optimal'] for r in d2)}/{len(d2)} | {dense_cert} | "
+                           f"{_fmt_share(d2)} | {dense_cert} | "
                            f"{_fmt(float(np.median([r['seconds'] for r in dn])) if dn else None)} | "
                            f"{', '.join(other) or '-'} | {_fmt(max(gaps) if gaps else None, '.1e')} |")
     return out
 
 
+def _exponent(rows: list[dict], setting: str, kinds: str, key: str):
+    """(a, N_min, N_max) of the least-squares fit log(median ``key``) ~ a log N over N >= 6, or None."""
+    pts = {}
+    for r in rows:
+        if r["variant"] == "default" and r["setting"] == setting and r["kinds"] == kinds and r["n"] >= 6:
+            pts.setdefault(r["n"], []).append(r[key])
+    if len(pts) < 2:
+        return None
+    ns = np.array(sorted(pts))
+    ts = np.array([np.median(pts[n]) for n in ns])
+    return np.polyfit(np.log(ns), np.log(np.maximum(ts, 1e-3)), 1)[0], ns[0], ns[-1]
+
+
 def fit_table(rows: list[dict]) -> list[str]:
-    out = ["| setting | regions | time ~ N^a (default, median per N) |", "|---|---|---:|"]
+    out = ["| setting | regions | time ~ N^a (default, median wall s per N) | CPU s ~ N^a |", "|---|---|---:|---:|"]
     keys = sorted({(r["setting"], r["kinds"]) for r in rows if r["variant"] == "default"})
     for setting, kinds in keys:
-        pts = {}
-        for r in rows:
-            if r["variant"] == "default" and r["setting"] == setting and r["kinds"] == kinds and r["n"] >= 6:
-                pts.setdefault(r["n"], []).append(r["seconds"])
-        if len(pts) >= 2:
-            ns = np.array(sorted(pts))
-            ts = np.array([np.median(pts[n]) for n in ns])
-            a = np.polyfit(np.log(ns), np.log(np.maximum(ts, 1e-3)), 1)[0]
-            out.append(f"| {setting} | {kinds} | {a:.2f} (N = {ns[0]}..{ns[-1]}) |")
+        wall, cpu = _exponent(rows, setting, kinds, "seconds"), _exponent(rows, setting, kinds, "cpu_seconds")
+        if wall is not None:
+            out.append(f"| {setting} | {kinds} | {wall[0]:.2f} (N = {wall[1]}..{wall[2]}) | {cpu[0]:.2f} |")
     return out
+
+
+def _fmt_share(rows: list[dict]) -> str:
+    return f"{sum(r['optimal'] for r in rows)}/{len(rows)}" if rows else "not run"
 
 
 def paper_examples_table(example5_cases_n: int) -> list[str]:
@@ -201,6 +217,10 @@ def main(argv=None) -> int:
     ap.add_argument("--dense-max", type=int, default=4, help="run dense degree 4 up to this N (default 4)")
     ap.add_argument("--dense-time", type=float, default=300.0,
                     help="time limit of one dense degree-4 solve in seconds (default 300)")
+    ap.add_argument("--time-limit", type=float, default=None,
+                    help="time limit of the default per problem in (wall) seconds (default: the default, 60 s); "
+                         "on a loaded machine a larger one lets the CPU column show the cost of a whole solve")
+    ap.add_argument("--no-deg2", action="store_true", help="skip the degree-2-only column (halves the run)")
     ap.add_argument("--jobs", type=int, default=1, help="worker processes (default 1: timings on one core)")
     ap.add_argument("--example5", type=int, default=100, help="Example 5 cases through the default (default 100)")
     args = ap.parse_args(argv)
@@ -213,9 +233,11 @@ def main(argv=None) -> int:
         for kinds in args.kinds:
             for n in sizes:
                 for seed in range(seeds):
-                    base = dict(setting=setting, kinds=kinds, n=n, seed=seed, dense_time=args.dense_time)
+                    base = dict(setting=setting, kinds=kinds, n=n, seed=seed, dense_time=args.dense_time,
+                                time_limit=args.time_limit)
                     jobs.append(dict(base, variant="default"))
-                    jobs.append(dict(base, variant="deg2"))
+                    if not args.no_deg2:
+                        jobs.append(dict(base, variant="deg2"))
                     if n <= dense_max:
                         jobs.append(dict(base, variant="dense4"))
     t0 = time.perf_counter()

@@ -214,13 +214,14 @@ def rigorous_psatz_bound(psatz, sol, c: float, radius, ball: float | None = None
         psd += psd_defect_of(sol.grams[name]) * _block_weight(blk.b, r, ball, cap)
     prog = structure.program
     x = np.asarray(sol.x, float)
+    ineq = psatz.ineq if hasattr(psatz, "ineq") else \
+        (structure.slots.polynomials(theta)[2] if structure.slots.n_ineq else ())   # built once, not per k
     for k in range(structure.slots.n_ineq):
         blk = prog.block(f"s{k}")
         S = np.zeros((blk.gram.size, blk.gram.size))
         S[blk.gram.pair_i, blk.gram.pair_j] = x[blk.slice]
         S[blk.gram.pair_j, blk.gram.pair_i] = x[blk.slice]
-        h = psatz.ineq[k] if hasattr(psatz, "ineq") else structure.slots.polynomials(theta)[2][k]
-        psd += psd_defect_of(S) * _block_weight(blk.gram.b, r, ball, cap) * _poly_sup(h, r)
+        psd += psd_defect_of(S) * _block_weight(blk.gram.b, r, ball, cap) * _poly_sup(ineq[k], r)
     qmin = _q_min(structure, sol, r)
     if not qmin > 0:
         return RigorousBound(-np.inf, np.inf, R, psd, resid, qmin)

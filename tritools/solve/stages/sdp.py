@@ -9,7 +9,8 @@ step beyond the budget (every later step is larger).
 ``sdp`` builds the step's program -- (f, g, h) in the step's formulation (:mod:`tritools.model.problem`)
 and the certificate's shape: dense, or view cliques beside the dense degree-2 block -- compiled once per
 structure key (:data:`~tritools.solve.structures.STRUCTURE_CACHE`) and sized against the budget before
-anything is assembled, and solves it within the remaining time.  Its fast implementation, the batched
+anything is assembled, and solves it within the remaining time (the view-clique programs with Clarabel's
+fast chain, :func:`_fast_chain`).  Its fast implementation, the batched
 delta = 2 SDP (:func:`tritools.solve.sdp_batch.solve_corollary1_points`, name ``"sdp-points"``), applies
 to point regions, Corollary 1, delta = 2, dense, the default multiplier, form and back-end, with
 normalisation; it decides the step itself, and what it hands back goes to the generic route.  A single
@@ -24,6 +25,7 @@ import time
 import sospoly
 from sospoly import BudgetExceeded, Multiplier
 from sospoly.budget import TimeLimitReached
+from sospoly.solvers import CLARABEL_FAST_CHAIN, AutoBackend
 
 from ...model.constraints import Method
 from ...model.normalize import unconstrained_reason
@@ -99,15 +101,26 @@ def _generic(ctx: PointContext, st: StepState) -> bool:
     if not _build(ctx, st):
         return True
     t1 = st.t_solve = time.perf_counter()
-    st.lb = solve_psatz(ctx, st.psatz, st.tol)
+    st.lb = solve_psatz(ctx, st.psatz, st.tol, fast_chain=_fast_chain(ctx, st.step))
     ctx.timings[f"solve_d{st.step.delta}"] = time.perf_counter() - t1
     return True
 
 
-def solve_psatz(ctx: PointContext, psatz, tol):
-    """sospoly's solve of a bound compiled instance or a built program, under the point's settings."""
+def solve_psatz(ctx: PointContext, psatz, tol, fast_chain: bool = False):
+    """sospoly's solve of a bound compiled instance or a built program, under the point's settings;
+    ``fast_chain``: the default back-end with Clarabel's :data:`~sospoly.solvers.CLARABEL_FAST_CHAIN`."""
     s = ctx.settings
-    return sospoly.solve_psatz(psatz, backend=s.backend, form=s.form, tolerances=tol, deadline=s.deadline)
+    backend = AutoBackend(tol, clarabel_chain=CLARABEL_FAST_CHAIN) if fast_chain and s.auto_backend else s.backend
+    return sospoly.solve_psatz(psatz, backend=backend, form=s.form, tolerances=tol, deadline=s.deadline)
+
+
+def _fast_chain(ctx: PointContext, step: Step) -> bool:
+    """Clarabel's first attempt without iterative refinement (only its SOLVED answers are taken: the certificate
+    and its rigorous bound are those of every attempt) for the view-clique programs (many PSD blocks), where the
+    refinement costs as much as the factorisation and the attempt ends SOLVED (benchmarks/RESULTS.md, issue #22).
+    Dense programs keep the default chain: with regions their degree-2 program often ends "almost solved"
+    either way, and the provisional attempt would only double its cost."""
+    return step.formulation == "views"
 
 
 def _build(ctx: PointContext, st: StepState) -> bool:

@@ -74,6 +74,7 @@ from .trivial import local_estimate
 from . import robust_bounds
 from .robust_bounds import ROUND_DOWN, SubsetBounds
 from .robust_drive import drive
+from .robust_rays import ray_candidates
 
 __all__ = ["robust_thresholds", "triangulate_robust", "drive", "lookahead_bound", "tls_cost", "point_distances2",
            "MAX_NODES", "MAX_PAIRS",
@@ -320,6 +321,8 @@ class TlsSearch:
             for X in starts:
                 self.offer(X)
         yield from self.local_optimisation(starts + ([self.best_X] if self.best_X is not None else []))
+        for X in ray_candidates(self):          # |S| = 1: a point on one view's ray (tritools.solve.robust_rays)
+            self.offer(X)
 
     def local_optimisation(self, starts):
         """Local optimisation (inlier set -> L2 estimate of the set -> inlier set, :data:`LO_ROUNDS` rounds) from

@@ -77,7 +77,7 @@ from .robust_drive import drive
 from .robust_rays import ray_candidates
 
 __all__ = ["robust_thresholds", "triangulate_robust", "drive", "lookahead_bound", "tls_cost", "point_distances2",
-           "MAX_NODES", "MAX_PAIRS",
+           "MAX_NODES", "MAX_PAIRS", "MIN_THRESHOLD",
            "LO_ROUNDS", "TlsSearch"]
 
 log = logging.getLogger(__name__)
@@ -94,6 +94,9 @@ LO_STARTS = 3
 #: within a factor AMBIGUOUS of 1.
 ANCHORS = 2
 AMBIGUOUS = 2.0
+#: the smallest threshold accepted (pixels): below it c^2 leaves the normal floats (review finding F3).  Above
+#: ~1.3e154, c^2 = inf: min(d^2, c^2) = d^2 for every finite d, which is f_TLS exactly (no threshold in floats).
+MIN_THRESHOLD = 1.5e-154
 
 
 def robust_thresholds(robust, n_views: int) -> np.ndarray:
@@ -115,6 +118,9 @@ def robust_thresholds(robust, n_views: int) -> np.ndarray:
         raise ValueError(f"robust must be a scalar or have one threshold per view ({n_views}), got shape {c.shape}")
     if np.any(np.isnan(c)) or np.any(c <= 0):
         raise ValueError(f"robust thresholds must be positive (inf allowed), got {c.tolist()}")
+    if np.any(c < MIN_THRESHOLD):
+        raise ValueError(f"robust thresholds must be at least {MIN_THRESHOLD:g} pixels (c^2 underflows below), "
+                         f"got {float(np.min(c))!r}")
     return c
 
 

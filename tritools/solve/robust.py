@@ -327,7 +327,7 @@ class TlsSearch:
             for X in starts:
                 self.offer(X)
         yield from self.local_optimisation(starts + ([self.best_X] if self.best_X is not None else []))
-        for X in ray_candidates(self):          # |S| = 1: a point on one view's ray (tritools.solve.robust_rays)
+        for X in [] if self.deadline.expired else ray_candidates(self):   # |S| = 1: on one view's ray (robust_rays)
             self.offer(X)
 
     def local_optimisation(self, starts):

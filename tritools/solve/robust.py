@@ -285,6 +285,10 @@ class TlsSearch:
         """Generator: hand the subsets whose bounds are not cached yet to the driver (:func:`drive`), which fills
         the cache -- batched with the requests of other problems -- and resumes."""
         todo = [S for S in subsets if not self.bounds.known(S)]
+        if todo and self.deadline.expired:   # past the deadline (its own or the whole call's): the valid bound 0,
+            for S in todo:                   # no solve; the search then stops with its time limit (finding F4)
+                self.bounds._store(S, 0.0, None)
+            return
         if todo:
             # a bound >= UB + max c^2 saturates every use (node_bound: lb_I > s_hi, a_u >= s_hi + c_u^2)
             self.bounds.enough = self.best_f + self.c2_max

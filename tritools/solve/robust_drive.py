@@ -64,7 +64,7 @@ def drive(searches: list) -> list:
     round_(list(range(len(gens))), 0.0)
     while pending:
         t = time.monotonic()
-        compute_many([(searches[i].bounds, req) for i, req in pending.items() if not _expired(searches[i], req)])
+        compute_many([(searches[i].bounds, req) for i, req in pending.items()])
         round_(list(pending), time.monotonic() - t)
     return results
 
@@ -81,13 +81,3 @@ def _credit(search, seconds: float) -> None:
             new = min(new, time.monotonic() + (call_end - time.time()))
         search.set_deadline(type(search.deadline)(max(end, new)))
 
-
-def _expired(search, subsets) -> bool:
-    """True (and the bound 0 stored for each unknown subset: valid, the search then reports its time limit) when
-    the search's deadline has passed: no batched solve for it (as compute_many does for a single solve)."""
-    if not search.deadline.expired:
-        return False
-    for S in subsets:
-        if not search.bounds.known(S):
-            search.bounds._store(S, 0.0, None)
-    return True

@@ -11,7 +11,8 @@ upper bound that never visits the rays cannot meet that lower bound (review find
 For each view i, with camera centre C_i (P_i = [M_i | p_i], C_i = -M_i^-1 p_i) and unit direction u_i =
 M_i^-1 (x_i, 1) (sign: positive depth in view i), the 1-D problem min_t f_TLS(C_i + t u_i) over t > 0 is
 searched by the depths t that come closest to every other view's ray, a geometric sweep of depths in units of
-the camera baseline, and golden-section refinement (in log t) around the best of them, all rays together.
+the camera baseline (one screen call for all rays), and golden-section refinement (in log t) around the best
+of them, all rays together, for the rays whose best sampled value already beats the search's best candidate.
 x_i is the region's point closest to its centre (a point of R_i for every region type).  The values are only
 a ranking: the caller keeps a candidate by its exact f_TLS (:meth:`tritools.solve.robust.TlsSearch.offer`).
 """
@@ -84,17 +85,19 @@ def ray_candidates(search) -> list:
         return []
     base = _baseline(centres[ok])
     sweep = base * np.logspace(-3, 3, SWEEP)
-    best_t, lo, hi = [], [], []
-    for i in views:
-        t = np.unique(np.concatenate([sweep, _closest_depths(centres[ok], dirs[ok], int(np.sum(ok[:i])))]))
-        f = search.screen(centres[i] + t[:, None] * dirs[i])
-        f = np.where(np.isnan(f), np.inf, f)
-        k = int(np.argmin(f))
-        best_t.append(t[k])
-        lo.append(t[max(k - 1, 0)] if k > 0 else t[0] / 10)
-        hi.append(t[min(k + 1, len(t) - 1)] if k < len(t) - 1 else t[-1] * 10)
-    out = [centres[i] + t * dirs[i] for i, t in zip(views, best_t)]
-    out += _golden(search, centres[views], dirs[views], np.log(lo), np.log(hi))
+    ts = [np.unique(np.concatenate([sweep, _closest_depths(centres[ok], dirs[ok], int(np.sum(ok[:i])))]))
+          for i in views]
+    f = search.screen(np.concatenate([centres[i] + t[:, None] * dirs[i] for i, t in zip(views, ts)]))
+    f = np.where(np.isnan(f), np.inf, f)
+    out, refine = [], []
+    for i, t, fi in zip(views, ts, np.split(f, np.cumsum([len(t) for t in ts])[:-1])):
+        k = int(np.argmin(fi))
+        out.append(centres[i] + t[k] * dirs[i])
+        if fi[k] < search.best_f:          # refine only the rays that already beat the best candidate
+            refine.append((i, t[k - 1] if k > 0 else t[0] / 10, t[k + 1] if k < len(t) - 1 else t[-1] * 10))
+    if refine:
+        r, lo, hi = (np.array(v) for v in zip(*refine))
+        out += _golden(search, centres[r], dirs[r], np.log(lo), np.log(hi))
     return out
 
 

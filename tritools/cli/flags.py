@@ -108,6 +108,9 @@ def robust_from_args(args):
     c = getattr(args, "robust", None)
     if c is not None and not c > 0:
         raise CLIError(f"--robust: must be a positive threshold in pixels, got {c}")
+    from ..solve.robust import MIN_THRESHOLD
+    if c is not None and c < MIN_THRESHOLD:
+        raise CLIError(f"--robust: must be at least {MIN_THRESHOLD:g} pixels (its square underflows), got {c}")
     return c
 
 

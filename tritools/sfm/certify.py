@@ -50,6 +50,10 @@ def robust_threshold(value) -> float | None:
         ok = False
     if not ok:
         raise OptionError("robust", f"must be a positive threshold in pixels, got {value!r}")
+    from ..solve.robust import MIN_THRESHOLD
+    if float(value) < MIN_THRESHOLD:
+        raise OptionError("robust", f"must be at least {MIN_THRESHOLD:g} pixels (its square underflows), "
+                                    f"got {value!r}")
     return float(value)
 
 

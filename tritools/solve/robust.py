@@ -74,9 +74,10 @@ from .trivial import local_estimate
 from . import robust_bounds
 from .robust_bounds import ROUND_DOWN, SubsetBounds
 from .robust_drive import drive
+from .robust_rays import ray_candidates
 
 __all__ = ["robust_thresholds", "triangulate_robust", "drive", "lookahead_bound", "tls_cost", "point_distances2",
-           "MAX_NODES", "MAX_PAIRS",
+           "MAX_NODES", "MAX_PAIRS", "MIN_THRESHOLD",
            "LO_ROUNDS", "TlsSearch"]
 
 log = logging.getLogger(__name__)
@@ -93,6 +94,9 @@ LO_STARTS = 3
 #: within a factor AMBIGUOUS of 1.
 ANCHORS = 2
 AMBIGUOUS = 2.0
+#: the smallest threshold accepted (pixels): below it c^2 leaves the normal floats (review finding F3).  Above
+#: ~1.3e154, c^2 = inf: min(d^2, c^2) = d^2 for every finite d, which is f_TLS exactly (no threshold in floats).
+MIN_THRESHOLD = 1.5e-154
 
 
 def robust_thresholds(robust, n_views: int) -> np.ndarray:
@@ -114,6 +118,9 @@ def robust_thresholds(robust, n_views: int) -> np.ndarray:
         raise ValueError(f"robust must be a scalar or have one threshold per view ({n_views}), got shape {c.shape}")
     if np.any(np.isnan(c)) or np.any(c <= 0):
         raise ValueError(f"robust thresholds must be positive (inf allowed), got {c.tolist()}")
+    if np.any(c < MIN_THRESHOLD):
+        raise ValueError(f"robust thresholds must be at least {MIN_THRESHOLD:g} pixels (c^2 underflows below), "
+                         f"got {float(np.min(c))!r}")
     return c
 
 
@@ -281,6 +288,10 @@ class TlsSearch:
         """Generator: hand the subsets whose bounds are not cached yet to the driver (:func:`drive`), which fills
         the cache -- batched with the requests of other problems -- and resumes."""
         todo = [S for S in subsets if not self.bounds.known(S)]
+        if todo and self.deadline.expired:   # past the deadline (its own or the whole call's): the valid bound 0,
+            for S in todo:                   # no solve; the search then stops with its time limit (finding F4)
+                self.bounds._store(S, 0.0, None)
+            return
         if todo:
             # a bound >= UB + max c^2 saturates every use (node_bound: lb_I > s_hi, a_u >= s_hi + c_u^2)
             self.bounds.enough = self.best_f + self.c2_max
@@ -323,6 +334,8 @@ class TlsSearch:
             for X in starts:
                 self.offer(X)
         yield from self.local_optimisation(starts + ([self.best_X] if self.best_X is not None else []))
+        for X in [] if self.deadline.expired else ray_candidates(self):   # |S| = 1: on one view's ray (robust_rays)
+            self.offer(X)
 
     def local_optimisation(self, starts):
         """Local optimisation (inlier set -> L2 estimate of the set -> inlier set, :data:`LO_ROUNDS` rounds) from

@@ -117,12 +117,15 @@ def _robust_many(problems: list, robust, opts, executor, progress) -> list[Trian
 def _after_l2(problems, thresholds, opts, idx, first, out) -> list:
     """Fill ``out`` for the problems settled by their L2 result (module docstring, 2); the rest of ``idx``."""
     rest = []
-    for i, res in zip(idx, first):
-        (cams, regions), c = problems[i], thresholds[i]
-        if res.status == Status.INVALID_INPUT or _l2_suffices(res, c):
+    for k, (i, res) in enumerate(zip(idx, first)):
+        c = thresholds[i]                        # None: a malformed entry, invalid_input from the L2 stage
+        if res.status == Status.INVALID_INPUT and res.message:     # the L2 stage saw problems[k]: the caller's i
+            res = dataclasses.replace(res, message=res.message.replace(f"problems[{k}]", f"problems[{i}]", 1))
+        if res.status == Status.INVALID_INPUT or c is None or _l2_suffices(res, c):
             out[i] = dataclasses.replace(res, inliers=None if res.residuals is None
                                          else np.ones(len(res.residuals), bool))
         elif not np.any(np.isfinite(c)):
+            cams, regions = problems[i]
             regs = as_regions(regions, len(c))
             require_extent(regs)
             out[i] = triangulate_robust(validate_cameras(cams), regs, c, opts)

@@ -12,6 +12,7 @@ import logging
 import time
 
 from ..result import Status, TriangulationResult
+from .call_limit import current_end
 from .robust_bounds import compute_many
 
 __all__ = ["drive"]
@@ -69,7 +70,14 @@ def drive(searches: list) -> list:
 
 
 def _credit(search, seconds: float) -> None:
-    """Move a search's deadline (if any) on by ``seconds`` it was not charged."""
+    """Move a search's deadline (if any) on by ``seconds`` it was not charged, never past the end of the whole
+    call (``total_time_limit``, :func:`tritools.solve.call_limit.current_end`, wall clock): the searches of a
+    batch together stop there (review finding F4)."""
     end = search.deadline.end
     if end is not None and seconds > 0:
-        search.set_deadline(type(search.deadline)(end + seconds))
+        new = end + seconds
+        call_end = current_end()
+        if call_end is not None:                  # the wall-clock end in the deadline's (monotonic) clock
+            new = min(new, time.monotonic() + (call_end - time.time()))
+        search.set_deadline(type(search.deadline)(max(end, new)))
+

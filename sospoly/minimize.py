@@ -9,8 +9,8 @@
   for sparse certificates), polished locally, kept when feasible, sorted by f; ``upper_bound`` is f
   at the best one;
 * ``optimal`` -- ``Tolerances.certified(lower_bound, upper_bound, scale)`` with ``scale`` the largest
-  coefficient of the balanced f expanded at the origin, or at the minimiser where that is 16 bits smaller
-  (strategy steps 1 and 8: the problem's own scale, ``result.scale``): a certificate of
+  coefficient of the balanced f expanded at the origin or at the minimiser, the smaller (strategy steps 1 and
+  8: the problem's own scale, ``result.scale``): a certificate of
   global optimality of ``minimizers[0]`` within that tolerance.  A lower bound above the upper bound within the
   tolerance is reported equal to it; beyond it the status is ``INCONSISTENT``.
 
@@ -61,11 +61,11 @@ The default strategy (each step recorded in ``attempts``):
 7. **Budget.** Every program is sized before it is built (:mod:`sospoly.budget`); one that does not fit
    is skipped with status ``budget_exceeded``, and the whole call stops at ``budget.time_limit``
    (status ``time_limit``, with the best bounds found so far).
-8. **Re-centring** (:mod:`sospoly.recentre`). When f expanded at the minimiser has a scale smaller than at
-   the origin by ``CANCELLATION_BITS`` (coefficients that cancel there: (v - 1000)^4 - 3 (v - 1000)^2 + 1), f is
-   valued exactly at the points, the first result is decided at the minimiser's scale (where f there anchors
-   it), and the program translated exactly to the minimiser is solved too (decided at its own scale); the
-   better result is kept.
+8. **Re-centring** (:mod:`sospoly.recentre`). The decision is made at the smaller of the scales of f at the
+   origin and at the minimiser (coefficients that cancel there: (v - 1000)^4 - 3 (v - 1000)^2 + 1), with f valued
+   exactly at the points; where the minimiser's scale is ``CANCELLATION_BITS`` smaller, the program translated
+   exactly to the minimiser is solved too (decided at the smaller of its own scale and that) and the better
+   result is kept.
 """
 from __future__ import annotations
 
@@ -333,24 +333,27 @@ def _recentred(best: MinimizeResult, f, eq, ineq, multiplier, radius, solve, tol
     translated to the minimiser when the scale there is smaller and the translation is exact."""
     import dataclasses
 
-    from .recentre import cancellation_scale, result_in_original, translated_program, with_exact_values
+    from .recentre import (cancellation_scale, result_in_original, scale_of_result, translated_program,
+                           with_exact_values)
 
     if not best.minimizers:
         return best
     cut = cancellation_scale(f, best.minimizers[0])
-    if not cut.worth_translating:
+    if cut.st >= cut.s0:
         return best
     cands, note = [best], f"scale {cut.s0:.3g} at the origin, {cut.st:.3g} at the minimiser"
-    prog = None if deadline.expired else translated_program(cut.t, f, eq, ineq, multiplier, radius)
+    prog = None
+    if cut.worth_translating and not deadline.expired:
+        prog = translated_program(cut.t, f, eq, ineq, multiplier, radius)
+        if prog is None:
+            note += "; the translation to it is not exact in floating point (not solved there)"
     if prog is not None:
         other = result_in_original(solve(*prog), cut.t)
         cands.append(dataclasses.replace(other, attempts=best.attempts + other.attempts))
-    else:
-        note += "; the translation to it is not exact in floating point (not solved there)"
-    out = [with_exact_values(r, f, tol, cut.decision_scale if r is best else r.scale) for r in cands]
+    out = [with_exact_values(r, f, tol, scale_of_result(r, f, cut)) for r in cands]
     moved = len(out) > 1 and _better(out[1], out[0])
     chosen = out[1] if moved else out[0]
-    note = f"{'re-centred at the minimiser' if moved else 'not re-centred'} ({note})"
+    note = f"{'re-centred at the minimiser' if moved else 'decided at the minimiser scale'} ({note})"
     chosen = dataclasses.replace(chosen, message="; ".join(m for m in (chosen.message, note) if m))
     return dataclasses.replace(chosen, seconds=time.perf_counter() - t0)
 

@@ -12,12 +12,12 @@ minimum.  The problem's scale *at the minimiser* is that of f(y + t) for t near 
     scale_t(f) = the power of two above the largest coefficient of the balanced f(y + t)
                  (:func:`sospoly.scaling.scaled_program`, the same step 1 of ``minimize``).
 
-When scale_t is below scale_0 by more than ``CANCELLATION_BITS`` (:func:`cancellation_scale`), ``minimize``
-values f exactly at the points (:func:`with_exact_values`: a floating-point value errs by eps times the
-cancelled terms), decides its result at scale_t where f(t) anchors that measure (a minimum value of 0
-leaves the balancing of f(y + t) free, and then the origin's scale stays), solves the translated program as
-well (decided at its own scale), and keeps the better of the two results (certified first, then the larger
-proven lower bound) (:func:`translated_program`, :func:`result_in_original`):
+``minimize`` decides at min(scale_0, scale_t) (:func:`cancellation_scale`; scale_t in the units that balance
+f(y + t)'s terms of degree >= 2, which a minimum value 0 cannot unsettle), values f exactly at the points
+(:func:`with_exact_values`: a floating-point value errs by eps times the cancelled terms), and when scale_t is
+below scale_0 by ``CANCELLATION_BITS`` or more it solves the translated program as well (decided at its own
+scale) and keeps the better of the two results (certified first, then the larger proven lower bound)
+(:func:`translated_program`, :func:`result_in_original`):
 
 * **exact.** t has at most ``T_BITS`` significant bits and the coefficients of p(y + t) are computed in
   rational arithmetic (every float is a dyadic rational, ``fractions.Fraction``); the translation is used
@@ -40,19 +40,16 @@ from itertools import product
 import numpy as np
 
 from .algebra.polynomial import Polynomial
-from .scaling import scaled_program
+from .scaling import MAX_EXPONENT, scaled_program
 
-__all__ = ["Cancellation", "T_BITS", "MAX_TERMS", "translation_point", "translated", "cancellation_scale",
-           "translated_program", "result_in_original", "exact_value", "with_exact_values"]
+__all__ = ["Cancellation", "CANCELLATION_BITS", "T_BITS", "MAX_TERMS", "translation_point", "translated",
+           "cancellation_scale", "scale_of_result", "translated_program", "result_in_original", "exact_value",
+           "with_exact_values"]
 
 #: significant bits kept of each coordinate of the translation t.
 T_BITS = 12
-#: re-centre when the scale at the minimiser is this many bits below the origin's (a cancellation of more than
-#: 4 decimal digits; smaller differences are the measure's own spread: the balancing of a polynomial whose value and
-#: gradient vanish at t has no constant term to anchor it).
-CANCELLATION_BITS = 16
-#: f(t) anchors the measure at t when at least this fraction of the scale there.
-ANCHOR = 2.0 ** -8
+#: solve the translated program too when the scale at the minimiser is this many bits below the origin's.
+CANCELLATION_BITS = 8
 #: a coordinate of the translation shorter than this in the balanced variables is 0 (the minimiser is at the origin
 #: in it: 1e-27 there would add terms of 1e-27 that skew the balancing of the measure).
 NEGLIGIBLE_SHIFT = 2.0 ** -20
@@ -156,13 +153,11 @@ def with_exact_values(res, f: Polynomial, tol, scale: float):
 
 @dataclass(frozen=True)
 class Cancellation:
-    """The measure of :func:`cancellation_scale`: ``s0`` the scale at the origin, ``st`` at the translation point
-    ``t`` (<= s0), ``anchored``: f(t) is not negligible beside ``st`` (>= ``ANCHOR`` st).  Without that anchor
-    (a minimum value 0) the balancing of f(y + t) has no constant term to hold it, and st is no scale."""
+    """The measure of :func:`cancellation_scale`: ``s0`` the scale at the origin, ``st`` the scale at the
+    translation point ``t`` (<= s0)."""
     s0: float
     st: float
     t: np.ndarray
-    anchored: bool
 
     @property
     def worth_translating(self) -> bool:
@@ -170,28 +165,53 @@ class Cancellation:
 
     @property
     def decision_scale(self) -> float:
-        """The scale to decide the first result at: st where the measure is anchored and worth it, else s0."""
-        return self.st if self.anchored and self.worth_translating else self.s0
+        """The problem's own scale for the decision: the smaller of the two."""
+        return self.st
+
+
+def _structure_scale(ft: Polynomial) -> float | None:
+    """The power of two above the largest coefficient of ft in the variable units that balance its terms of
+    degree >= 2 (least squares on a . k - mu ~ -log2 |c_a|, k rounded).  The terms of degree 0 and 1 (where t is
+    and the slope there) take no part in the fit: at a minimiser they vanish or nearly, and would let the units
+    drift (a minimum value 0 leaves nothing to hold them); they count in the maximum."""
+    high = [(a, c) for a, c in ft.terms.items() if sum(a) >= 2 and c]
+    if not high:
+        return None
+    E = np.array([a for a, _ in high], float)
+    A = np.hstack([E, -np.ones((len(E), 1))])
+    b = -np.log2(np.abs(np.array([c for _, c in high], float)))
+    k = np.clip(np.round(np.linalg.lstsq(A, b, rcond=None)[0][:-1]), -MAX_EXPONENT, MAX_EXPONENT)
+    with np.errstate(over="ignore", under="ignore"):
+        mags = [abs(float(c)) * 2.0 ** float(np.dot(a, k)) for a, c in ft.terms.items()]
+    top = max(mags)
+    if not (np.isfinite(top) and top > 0):
+        return None
+    return math.ldexp(1.0, math.frexp(top)[1])
 
 
 def cancellation_scale(f: Polynomial, x) -> Cancellation:
-    """The scale at the origin and at the translation point t of x: the ``fscale`` of
-    :func:`sospoly.scaling.scaled_program` of f and of the significant part of f(y + t) (a measure, not a
-    certificate)."""
+    """The scale at the origin (the ``fscale`` of :func:`sospoly.scaling.scaled_program`) and at the translation
+    point t of x (:func:`_structure_scale` of the significant part of f(y + t)): a measure, not a certificate."""
     p0 = scaled_program(f, (), (), "fixed", None)
     t = translation_point(x)
     t = np.where(np.abs(p0.scaling.to_scaled(t)) < NEGLIGIBLE_SHIFT, 0.0, t)      # coordinates already at the origin
     s0 = p0.fscale
     if not np.any(t) or _expanded_terms(f) > MAX_TERMS:
-        return Cancellation(s0, s0, t, False)
-    ft = _significant_part(f, t)
-    st = min(s0, scaled_program(ft, (), (), "fixed", None).fscale) if ft.terms else s0
-    const = abs(ft.terms.get((0,) * f.nvars, 0.0))
-    return Cancellation(s0, st, t, const >= ANCHOR * st)
+        return Cancellation(s0, s0, t)
+    st = _structure_scale(_significant_part(f, t))
+    return Cancellation(s0, s0 if st is None else min(s0, st), t)
+
+
+def scale_of_result(res, f: Polynomial, cut: Cancellation) -> float:
+    """The decision scale of a result of step 8: the smallest of its program's scale and the scales at the first
+    minimiser (``cut``) and at its own best point."""
+    own = cancellation_scale(f, res.minimizers[0]).st if res.minimizers else np.inf
+    return float(min(cut.decision_scale, res.scale, own))
 
 
 def worth_translating(s0: float, st: float) -> bool:
-    """The translation narrows the scale by at least ``CANCELLATION_BITS``."""
+    """The translation narrows the scale by at least ``CANCELLATION_BITS`` (then the translated program is solved
+    too)."""
     return st > 0 and math.log2(s0 / st) >= CANCELLATION_BITS
 
 

@@ -96,3 +96,19 @@ def test_translated_family_against_the_given_polynomial(s, a):
     assert res.lower_bound <= res.upper_bound
     if res.optimal:
         assert res.upper_bound - res.lower_bound <= sospoly.DEFAULT_TOLERANCES.gap_tolerance(res.upper_bound, res.scale)
+
+
+def test_the_decision_is_at_the_minimisers_scale_also_without_a_constant_there():
+    """Review 5, F1: translated polynomials whose minimum value is 0 (nothing anchors a balancing of f(y + t)) were
+    decided at the origin's scale (up to 3e20) and certified points far from the minimum.  a = 1e5: the given float
+    polynomial's constant is rounded by ~1e4, its minimum 9215 is inside that noise, and the bounds (valid) do not
+    meet at the minimiser's scale."""
+    a = 1e5
+    f = ((x - a) ** 2 - 1) ** 2 + (y - a) ** 2
+    res = sospoly.minimize(f)
+    cut = cancellation_scale(f, [a + 1.0, a])
+    assert cut.st <= 64 < cut.s0
+    assert res.scale <= 64
+    assert res.lower_bound <= 9215.0 <= res.upper_bound
+    assert not res.optimal or res.upper_bound - res.lower_bound <= \
+        sospoly.DEFAULT_TOLERANCES.gap_tolerance(res.upper_bound, res.scale)

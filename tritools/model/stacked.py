@@ -25,8 +25,8 @@ import numpy as np
 from .geometry import POINT_AT_INFINITY_RTOL, PROJECTION_DENOM_RTOL, SAME_CENTER_RTOL
 
 __all__ = ["null_vectors", "dlt_stack", "project_stack", "refine_points_stack", "fundamental_stack",
-           "epipolar_quadratics", "pixel_scales", "view_pairs", "band_pairs", "norms", "median_rows", "LM_MAX_ITER",
-           "LM_STEP_RTOL"]
+           "epipolar_quadratics", "pixel_scales", "distinct_centres", "view_pairs", "band_pairs", "norms",
+           "median_rows", "LM_MAX_ITER", "LM_STEP_RTOL"]
 
 #: Levenberg-Marquardt iterations at most (from the DLT start it converges in ~5-10).
 LM_MAX_ITER = 100
@@ -335,14 +335,35 @@ def band_pairs(N: int, width: int) -> tuple[np.ndarray, np.ndarray]:
     return np.array(I, dtype=int), np.array(J, dtype=int)
 
 
+def distinct_centres(a_i: np.ndarray, a_j: np.ndarray) -> np.ndarray:
+    """Do the camera centres a_i, a_j (homogeneous null vectors (..., 4), any scale) differ?  True where
+    sin(angle(a_i, a_j)) = ||a_i ^ a_j|| / (||a_i|| ||a_j||) > SAME_CENTER_RTOL, with
+    ||a_i ^ a_j||^2 = sum_{k<l} (a_ik a_jl - a_il a_jk)^2 (the Plucker coordinates of the baseline; all zero iff
+    the centres coincide).
+
+    Invariant to the scale of each camera (a_i scales by k^3 and cancels) and to any image homography (it does not
+    change the null vector), unlike a threshold on ||F_ij||: F = [P_i a_j]_x P_i P_j^+ scales like
+    |P_i|^2 |a_j| |P_j^+| and, for cameras with pixel coordinates ~1e6 (principal point far from the focal length),
+    a bound ``||F|| > rtol |P_i| |P_j|`` both dropped distinct pairs and kept coincident ones depending on the cameras'
+    scales (tests/test_centres.py).  Exactly duplicated views have a_i = a_j bit for bit, so sin = 0: always
+    coincident.  Limit: the null vectors themselves are only as accurate as the cameras' conditioning allows
+    (a principal point at 1e6 px with a focal length of ~1 px leaves them uncertain at ~1e-5)."""
+    ni, nj = norms(a_i, axis=-1), norms(a_j, axis=-1)
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        u, w = a_i / ni[..., None], a_j / nj[..., None]
+        W = u[..., :, None] * w[..., None, :]
+        wedge = norms(W - np.swapaxes(W, -1, -2), axis=(-2, -1)) / math.sqrt(2.0)
+        return (wedge > SAME_CENTER_RTOL) & (ni > 0) & (nj > 0)
+
+
 def fundamental_stack(C: np.ndarray, pairs: tuple | None = None) -> tuple[np.ndarray, np.ndarray]:
     """(F (M, K, 3, 3) unit Frobenius norm, defined (M, K)) for the view pairs ``pairs`` = (I, J) (default: all,
     :func:`view_pairs`): F_ij = [e]_x P_i P_j^+, e = P_i a_j, P_j a_j = 0 (SPEC §7); ``defined`` is False where
-    the two camera centres coincide (F vanishes; the twin of :func:`tritools.model.geometry.fundamental_matrix`'s
-    error)."""
+    the two camera centres coincide (:func:`distinct_centres`, invariant to the cameras' scales and image
+    homographies) or F is not finite or vanishes."""
     M, N = C.shape[:2]
     I, J = view_pairs(N) if pairs is None else pairs
-    Pi, Pj = C[:, I], C[:, J]
+    Pi = C[:, I]
     a = null_vectors(C)
     with np.errstate(over="ignore", invalid="ignore"):
         CCt = C @ np.swapaxes(C, 2, 3)
@@ -357,8 +378,7 @@ def fundamental_stack(C: np.ndarray, pairs: tuple | None = None) -> tuple[np.nda
     ex[..., 1, 0], ex[..., 2, 0], ex[..., 2, 1] = e[..., 2], -e[..., 1], e[..., 0]
     F = ex @ Pi @ pinv[:, J]
     nrm = norms(F, axis=(2, 3))
-    defined = nrm > SAME_CENTER_RTOL * norms(Pi, axis=(2, 3)) * norms(Pj, axis=(2, 3))
-    defined &= np.isfinite(nrm)
+    defined = distinct_centres(a[:, I], a[:, J]) & np.isfinite(nrm) & (nrm > 0)
     F = np.where(defined[..., None, None], F / np.where(nrm > 0, nrm, 1.0)[..., None, None], 0.0)
     return F, defined
 

@@ -339,7 +339,7 @@ def distinct_centres(a_i: np.ndarray, a_j: np.ndarray) -> np.ndarray:
     """Do the camera centres a_i, a_j (homogeneous null vectors (..., 4), any scale) differ?  True where
     sin(angle(a_i, a_j)) = ||a_i ^ a_j|| / (||a_i|| ||a_j||) > SAME_CENTER_RTOL, with
     ||a_i ^ a_j||^2 = sum_{k<l} (a_ik a_jl - a_il a_jk)^2 (the Plucker coordinates of the baseline; all zero iff
-    the centres coincide).
+    the centres coincide), evaluated as ||u - (u . w) w|| for the unit vectors u, w (absolute error ~1e-16).
 
     Invariant to the scale of each camera (a_i scales by k^3 and cancels) and to any image homography (it does not
     change the null vector), unlike a threshold on ||F_ij||: F = [P_i a_j]_x P_i P_j^+ scales like
@@ -348,12 +348,12 @@ def distinct_centres(a_i: np.ndarray, a_j: np.ndarray) -> np.ndarray:
     scales (tests/test_centres.py).  Exactly duplicated views have a_i = a_j bit for bit, so sin = 0: always
     coincident.  Limit: the null vectors themselves are only as accurate as the cameras' conditioning allows
     (a principal point at 1e6 px with a focal length of ~1 px leaves them uncertain at ~1e-5)."""
-    ni, nj = norms(a_i, axis=-1), norms(a_j, axis=-1)
+    ni, nj = norms(a_i, axis=-1, keepdims=True), norms(a_j, axis=-1, keepdims=True)
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-        u, w = a_i / ni[..., None], a_j / nj[..., None]
-        W = u[..., :, None] * w[..., None, :]
-        wedge = norms(W - np.swapaxes(W, -1, -2), axis=(-2, -1)) / math.sqrt(2.0)
-        return (wedge > SAME_CENTER_RTOL) & (ni > 0) & (nj > 0)
+        u, w = a_i / ni, a_j / nj
+        # ||u ^ w|| = ||u - (u . w) w|| for unit u, w (the component of u off w: no cancellation in 1 - (u . w)^2)
+        sin = norms(u - np.add.reduce(u * w, axis=-1, keepdims=True) * w, axis=-1)
+        return (sin > SAME_CENTER_RTOL) & (ni[..., 0] > 0) & (nj[..., 0] > 0)
 
 
 def fundamental_stack(C: np.ndarray, pairs: tuple | None = None) -> tuple[np.ndarray, np.ndarray]:

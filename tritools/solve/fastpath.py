@@ -43,8 +43,8 @@ from sospoly.solvers import with_single_threaded_blas
 
 from ..model.geometry import camera_problems
 from ..model.normalize import normalization_stack
-from ..model.stacked import (band_pairs, epipolar_quadratics, fundamental_stack, norms, project_stack,
-                             refine_points_stack, view_pairs)
+from ..model.stacked import (band_pairs, epipolar_quadratics, fundamental_stack, gauss_newton_polish, norms,
+                             project_stack, refine_points_stack, view_pairs)
 from .decide import decide, decide_reported, gamma_from_c
 from .trivial import trivially_certified, trivially_certified_reported
 
@@ -150,6 +150,7 @@ def verify_checked(C: np.ndarray, x: np.ndarray, ok: np.ndarray, tolerances: Tol
     polish = ~norm.converged                # the normalisation's refinement converged elsewhere
     if polish.any():
         Xn[polish], ok[polish] = refine_points_stack(Cn[polish], xhat[polish], norm.Xn[polish], ok[polish])
+    Xn = gauss_newton_polish(Cn, xhat, Xn, ok)      # a weak direction the damped LM left (tiny baselines)
     u, _, fin = project_stack(Cn, Xn)
     ok &= fin
     v = np.where(ok[:, None], u.reshape(M, -1), 0.0)

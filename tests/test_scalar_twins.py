@@ -324,3 +324,30 @@ def test_report_stage_record_equals_replace():
     assert res.timings != {"total": 1.0}                        # the original is untouched
     mixed = with_record(res, {}, (dataclasses.asdict(att[0]),))  # a dict attempt: the validating path
     assert mixed.attempts == (att[0],)
+
+
+@pytest.mark.parametrize("name, C, x", SCENES, ids=[s[0] for s in SCENES])
+def test_gauss_newton_polish_one_equals_the_stack(name, C, x):
+    """The polish of a stack of one (scalar twin) against the stacked step, on the normalised data of the verification
+    from a perturbed refined point: the cost after it within 1e-8 relative (one step of a system of condition up to
+    ~1e13 from 1e-6 off the minimiser, georeferenced; or the coordinates' round-off), never
+    above the cost before, and X within 1e-6 max(1, |X|)."""
+    from tritools.model.stacked import gauss_newton_polish
+
+    M = len(x)
+    st = NZ.normalization_stack(np.broadcast_to(C, (M,) + C.shape).copy(), x)     # the data the polish sees
+    Cs, x = st.cameras_n, np.zeros_like(x)
+    X0 = st.Xn + 1e-6 * np.random.default_rng(M).normal(size=(M, 3))
+    # (in raw georeferenced cameras the normalised point can sit ~1e9 out, a system conditioned beyond comparison
+    # of two roundings: compared where |X| is O(1), as in the re-centred frame of a single call)
+    ok = st.ok & (np.abs(X0).max(axis=1) < 1e3)
+    stacked = gauss_newton_polish(Cs, x, X0, ok)
+    for m in range(M):
+        one = gauss_newton_polish(Cs[m:m + 1], x[m:m + 1], X0[m:m + 1], ok[m:m + 1])[0]
+        if not ok[m]:
+            continue
+        c0, c1, c2 = _cost(Cs[m], x[m], X0[m]), _cost(Cs[m], x[m], one), _cost(Cs[m], x[m], stacked[m])
+        floor = 1e-20 * max(1.0, float(np.abs(x[m]).max())) ** 2
+        assert c1 <= c0 * (1 + 1e-12) + floor and c2 <= c0 * (1 + 1e-12) + floor
+        assert c1 == pytest.approx(c2, rel=1e-8, abs=floor)
+        np.testing.assert_allclose(one, stacked[m], rtol=1e-6, atol=1e-6 * max(1.0, float(np.abs(stacked[m]).max())))

@@ -215,6 +215,8 @@ def gauss_newton_polish(C: np.ndarray, xhat: np.ndarray, X: np.ndarray, ok: np.n
     1e-12 (1 + tr J^T J) / 3; a direction of J^T J weaker than that (a tiny baseline: the depth, eigenvalues ~1e-13
     of the largest at zero noise) is then crossed only by halves and the step rule stops it early, at a cost far
     above round-off.  One exact step finishes that direction; where it does not help, nothing changes."""
+    if len(X) == 1:                             # a stack of one: the scalar twin (tests/test_scalar_twins.py)
+        return _gauss_newton_one(C[0], xhat[0], X[0])[None] if ok[0] else X.copy()
     act = np.nonzero(ok)[0]
     X = X.copy()
     if act.size == 0:
@@ -233,6 +235,24 @@ def gauss_newton_polish(C: np.ndarray, xhat: np.ndarray, X: np.ndarray, ok: np.n
         ct = np.where(fint, np.add.reduce((ut - xa) ** 2, axis=(1, 2)), np.inf)
     better = fin & np.isfinite(ct) & (ct < cost) & np.isfinite(Xt).all(axis=1)
     X[act[better]] = Xt[better]
+    return X
+
+
+def _gauss_newton_one(C: np.ndarray, xhat: np.ndarray, X: np.ndarray) -> np.ndarray:
+    """:func:`gauss_newton_polish` of one problem on plain arrays (:class:`_View`, :func:`damped_step_one` with
+    mu = 0): equal to the stacked step up to round-off."""
+    cams = _View(C)
+    X = np.array(X, float)
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+        at = cams.project(X, xhat)
+        if at is None or not math.isfinite(at[2]):
+            return X
+        u, den, cost, r = at
+        J = ((cams.A01 - u[:, :, None] * cams.A2) / den[:, None, None]).reshape(-1, 3)
+        Xt = X + damped_step_one(J.T @ J, J.T @ r, 0.0)
+        trial = cams.project(Xt, xhat)
+    if trial is not None and math.isfinite(trial[2]) and trial[2] < cost and np.isfinite(Xt).all():
+        return Xt
     return X
 
 

@@ -123,3 +123,4 @@ def test_triangulate_at_1e6_px_rescaled_cameras_and_duplicated_view():
     assert dup.gamma_lb <= gamma_local * (1 + 1e-9)
     assert abs(dup.gamma_ub - gamma_local) <= 1e-6 * gamma_local
     np.testing.assert_allclose(dup.X, sol.x, rtol=1e-5, atol=1e-7)
+

@@ -25,8 +25,8 @@ import numpy as np
 from .geometry import POINT_AT_INFINITY_RTOL, PROJECTION_DENOM_RTOL, SAME_CENTER_RTOL
 
 __all__ = ["null_vectors", "dlt_stack", "project_stack", "refine_points_stack", "fundamental_stack",
-           "epipolar_quadratics", "pixel_scales", "distinct_centres", "view_pairs", "band_pairs", "norms",
-           "median_rows", "gauss_newton_polish", "LM_MAX_ITER", "LM_STEP_RTOL"]
+           "epipolar_quadratics", "pixel_scales", "distinct_centres", "centre_vectors", "view_pairs", "band_pairs",
+           "norms", "median_rows", "gauss_newton_polish", "LM_MAX_ITER", "LM_STEP_RTOL"]
 
 #: Levenberg-Marquardt iterations at most (from the DLT start it converges in ~5-10).
 LM_MAX_ITER = 100
@@ -376,6 +376,24 @@ def band_pairs(N: int, width: int) -> tuple[np.ndarray, np.ndarray]:
     return np.array(I, dtype=int), np.array(J, dtype=int)
 
 
+def centre_vectors(C: np.ndarray) -> np.ndarray:
+    """Null vectors (..., 4) of cameras (..., 3, 4) for deciding which centres coincide: the signed minors
+    (:func:`null_vectors`) of the camera with rows 1 and 2 made orthogonal to row 3 (twice) -- an image homography,
+    so the same null space, but a matrix whose rows are no longer nearly parallel when the principal point is far
+    from the focal length (1e6 px): the minors then carry ~1e-13 instead of ~1e-10 relative error.  Each camera is
+    divided by its largest entry and row 3 scaled to unit norm first (exact in what it decides)."""
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        m = np.maximum.reduce(np.abs(C).reshape(C.shape[:-2] + (12,)), axis=-1)[..., None, None]
+        C = C / np.where(m > 0, m, 1.0)
+        r3 = C[..., 2:3, :]
+        n3 = norms(r3, axis=-1, keepdims=True)
+        u3 = r3 / np.where(n3 > 0, n3, 1.0)
+        r = C[..., :2, :]
+        r = r - np.add.reduce(r * u3, axis=-1, keepdims=True) * u3
+        r = r - np.add.reduce(r * u3, axis=-1, keepdims=True) * u3
+        return null_vectors(np.concatenate([r, u3], axis=-2))
+
+
 def distinct_centres(a_i: np.ndarray, a_j: np.ndarray) -> np.ndarray:
     """Do the camera centres a_i, a_j (homogeneous null vectors (..., 4), any scale) differ?  True where
     sin(angle(a_i, a_j)) = ||a_i ^ a_j|| / (||a_i|| ||a_j||) > SAME_CENTER_RTOL, with
@@ -400,8 +418,8 @@ def distinct_centres(a_i: np.ndarray, a_j: np.ndarray) -> np.ndarray:
 def fundamental_stack(C: np.ndarray, pairs: tuple | None = None) -> tuple[np.ndarray, np.ndarray]:
     """(F (M, K, 3, 3) unit Frobenius norm, defined (M, K)) for the view pairs ``pairs`` = (I, J) (default: all,
     :func:`view_pairs`): F_ij = [e]_x P_i P_j^+, e = P_i a_j, P_j a_j = 0 (SPEC §7); ``defined`` is False where
-    the two camera centres coincide (:func:`distinct_centres`, invariant to the cameras' scales and image
-    homographies) or F is not finite or vanishes."""
+    the two camera centres coincide (:func:`distinct_centres` of :func:`centre_vectors`, invariant to the cameras'
+    scales and image homographies) or F is not finite or vanishes."""
     M, N = C.shape[:2]
     I, J = view_pairs(N) if pairs is None else pairs
     Pi = C[:, I]
@@ -419,7 +437,8 @@ def fundamental_stack(C: np.ndarray, pairs: tuple | None = None) -> tuple[np.nda
     ex[..., 1, 0], ex[..., 2, 0], ex[..., 2, 1] = e[..., 2], -e[..., 1], e[..., 0]
     F = ex @ Pi @ pinv[:, J]
     nrm = norms(F, axis=(2, 3))
-    defined = distinct_centres(a[:, I], a[:, J]) & np.isfinite(nrm) & (nrm > 0)
+    c = centre_vectors(C)
+    defined = distinct_centres(c[:, I], c[:, J]) & np.isfinite(nrm) & (nrm > 0)
     F = np.where(defined[..., None, None], F / np.where(nrm > 0, nrm, 1.0)[..., None, None], 0.0)
     return F, defined
 

@@ -173,18 +173,18 @@ def _rank_ratio(C: np.ndarray) -> np.ndarray:
     C = np.where(finite[..., None, None], C, 0.0)
     C = C / power2_scale(C, (-2, -1))
     rows, nonzero = unit_rows(C)
-    u3, ok = rows[..., 2, :], nonzero[..., 2]
-    q = []
-    for k in (0, 1):
-        r = rows[..., k, :]
-        p = r - np.sum(r * u3, axis=-1, keepdims=True) * u3
-        p = p - np.sum(p * u3, axis=-1, keepdims=True) * u3          # twice is enough
-        pn = np.sqrt(np.sum(p * p, axis=-1))
-        ok = ok & nonzero[..., k] & (pn > CAMERA_RANK_RTOL)
-        q.append(p / np.where(pn > 0, pn, 1.0)[..., None])
-    s = np.where(np.sum(q[0] * q[1], axis=-1) < 0, -1.0, 1.0)[..., None]
-    num = np.sqrt(np.sum((q[0] - s * q[1]) ** 2, axis=-1))
-    den = np.sqrt(np.sum((q[0] + s * q[1]) ** 2, axis=-1))
+    u3 = rows[..., 2:3, :]
+    # rows 1 and 2 at once (elementwise operations and sums along the last axis: the numbers of a row-by-row loop)
+    r = rows[..., :2, :]
+    p = r - np.add.reduce(r * u3, axis=-1, keepdims=True) * u3
+    p = p - np.add.reduce(p * u3, axis=-1, keepdims=True) * u3           # twice is enough
+    pn = np.sqrt(np.add.reduce(p * p, axis=-1))
+    ok = nonzero[..., 2] & (nonzero[..., :2] & (pn > CAMERA_RANK_RTOL)).all(axis=-1)
+    q = p / np.where(pn > 0, pn, 1.0)[..., None]
+    q0, q1 = q[..., 0, :], q[..., 1, :]
+    s = np.where(np.add.reduce(q0 * q1, axis=-1) < 0, -1.0, 1.0)[..., None]
+    num = np.sqrt(np.add.reduce((q0 - s * q1) ** 2, axis=-1))
+    den = np.sqrt(np.add.reduce((q0 + s * q1) ** 2, axis=-1))
     ratio = np.where(ok, num / np.where(den > 0, den, 1.0), 0.0)
     return np.where(finite, ratio, np.nan)
 

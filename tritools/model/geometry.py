@@ -49,7 +49,9 @@ PROJECTION_DENOM_RTOL = 1e-10
 #: for every camera: round-off only (the pairwise homography test has the same tolerance).
 COMMON_CENTRE_RTOL = 1e-12
 #: Two camera centres coincide (F undefined) if ``||F||_F <= SAME_CENTER_RTOL * ||P_i|| ||P_j||``
-#: (cameras divided by their largest entry first).
+#: (cameras divided by their largest entry first) in :func:`fundamental_matrix`; the vectorised
+#: :func:`tritools.model.stacked.fundamental_stack` uses the same constant on sin(angle) of the two
+#: null vectors (:func:`tritools.model.stacked.distinct_centres`: invariant to the cameras' scales).
 SAME_CENTER_RTOL = 1e-10
 
 

@@ -48,7 +48,8 @@ import numpy as np
 
 from .cameras import power2_scale
 from .geometry import COMMON_CENTRE_RTOL, POINT_AT_INFINITY_RTOL, point_from_image_points
-from .stacked import dlt_stack, median_rows, norms, null_vectors, pixel_scales, project_stack, refine_points_stack
+from .stacked import (_project, dlt_stack, median_rows, norms, null_vectors, pixel_scales, project_stack,
+                      refine_points_stack)
 
 __all__ = ["Normalization", "NormalizationStack", "normalization_for", "normalization_stack", "unconstrained_reason",
            "resolutions", "RHO_FLOOR_REL", "RESOLUTION_REL", "DEPTH_FLOOR_REL",
@@ -236,7 +237,7 @@ def _frames(C: np.ndarray, x: np.ndarray, X0: np.ndarray, ok: np.ndarray, rho_fl
     image scale s = 1 / rho from the DLT residual, the world frame (origin X0, scale d) and the normalised cameras
     P_i' = T_i P_i H / ||.||_F.  Run under ``np.errstate(over="ignore", invalid="ignore")``."""
     M, N = x.shape[:2]
-    u0, _, fin0 = project_stack(C, X0)
+    u0, _, fin0 = _project(C, X0)                  # (already under errstate)
     res = np.where(fin0[:, None], norms(u0 - x, axis=2), np.inf)
     rho = np.where(fin0, np.sqrt(np.add.reduce(np.where(fin0[:, None], res, 0.0) ** 2, axis=1) / N), 1.0)
     rho = np.maximum(rho, rho_floor)
@@ -271,9 +272,10 @@ def _off_a_common_centre(C: np.ndarray, x: np.ndarray, a: np.ndarray, X0: np.nda
         return X0
     scale = np.einsum("mnij,mj->mni", np.abs(C), np.abs(a[:, 0]))
     resid = np.abs(np.einsum("mnij,mj->mni", C, a[:, 0]))
-    with np.errstate(invalid="ignore"):
-        shared = ok & np.all(resid <= COMMON_CENTRE_RTOL * np.max(scale, axis=2, keepdims=True), axis=(1, 2))
-    if not np.any(shared):
+    # (run under the caller's errstate; ufunc reductions, not their numpy wrappers: the same numbers)
+    within = resid <= COMMON_CENTRE_RTOL * np.maximum.reduce(scale, axis=2, keepdims=True)
+    shared = ok & np.logical_and.reduce(within.reshape(len(C), 3 * C.shape[1]), axis=1)
+    if not shared.any():
         return X0
     X0 = X0.copy()
     for m in np.nonzero(shared)[0]:

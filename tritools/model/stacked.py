@@ -25,8 +25,8 @@ import numpy as np
 from .geometry import POINT_AT_INFINITY_RTOL, PROJECTION_DENOM_RTOL, SAME_CENTER_RTOL
 
 __all__ = ["null_vectors", "dlt_stack", "project_stack", "refine_points_stack", "fundamental_stack",
-           "epipolar_quadratics", "pixel_scales", "view_pairs", "band_pairs", "norms", "median_rows", "LM_MAX_ITER",
-           "LM_STEP_RTOL"]
+           "epipolar_quadratics", "pixel_scales", "distinct_centres", "centre_vectors", "view_pairs", "band_pairs",
+           "norms", "median_rows", "gauss_newton_polish", "LM_MAX_ITER", "LM_STEP_RTOL"]
 
 #: Levenberg-Marquardt iterations at most (from the DLT start it converges in ~5-10).
 LM_MAX_ITER = 100
@@ -103,20 +103,14 @@ def _smallest_eigvec(A: np.ndarray) -> np.ndarray:
 
 
 def dlt_stack(C: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`tritools.model.geometry.dlt` for a stack: C (M, N, 3, 4), x (M, N, 2) -> (X (M, 3), ok (M,))."""
-    N = x.shape[1]
-    c = np.add.reduce(x, axis=1) / N                            # x.mean(axis=1), the same operations
-    dist = np.add.reduce(norms(x - c[:, None], axis=2), axis=1) / N
-    cmax = np.abs(c).max(axis=1)
-    small = dist <= 1e-12 * (1.0 + cmax)
-    s = np.where(small, 1.0 / (1.0 + cmax), np.sqrt(2.0) / np.where(small, 1.0, dist))
-    T = np.zeros((len(x), 3, 3))
-    T[:, 0, 0] = T[:, 1, 1] = s
-    T[:, :2, 2] = -s[:, None] * c
-    T[:, 2, 2] = 1.0
-    xn = s[:, None, None] * (x - c[:, None])
-    Cn = np.einsum("mab,mnbc->mnac", T, C)
-    A = (Cn[:, :, :2, :] - xn[..., None] * Cn[:, :, 2:3, :]).reshape(len(x), -1, 4)
+    """:func:`tritools.model.geometry.dlt` for a stack: C (M, N, 3, 4), x (M, N, 2) -> (X (M, 3), ok (M,)).
+
+    The rows of M0 are P_i[k] - x_ik P_i[2] (k = 1, 2), each scaled to unit norm, and X~ is the eigenvector of the
+    smallest eigenvalue of A^T A.  Hartley's similarity x' = s (x - c) (:func:`~tritools.model.geometry.dlt`)
+    changes nothing here: its rows are s (P_i[k] - x_ik P_i[2]), the same rows up to the factor s that the unit
+    scaling removes, so they are formed directly (fewer operations, and no cancellation of the translation
+    c against x)."""
+    A = (C[:, :, :2, :] - x[..., None] * C[:, :, 2:3, :]).reshape(len(x), -1, 4)
     nA = norms(A, axis=2, keepdims=True)
     A = A / np.where(nA > 0, nA, 1.0)
     w = _smallest_eigvec(A)
@@ -213,6 +207,53 @@ def _lm_iteration(C, absC2, xhat, X, u, h, cost, mu, converged, active: np.ndarr
     stalled = mu_a > 1e12
     converged[active[small & ~stalled]] = True
     return active[~(small | stalled)]
+
+
+def gauss_newton_polish(C: np.ndarray, xhat: np.ndarray, X: np.ndarray, ok: np.ndarray) -> np.ndarray:
+    """X (M, 3) after one undamped Gauss-Newton step on sum_i ||Phi(X, P_i) - x^_i||^2, kept only where it lowers
+    the cost strictly (elsewhere X unchanged).  The Levenberg-Marquardt iteration damps every step by at least
+    1e-12 (1 + tr J^T J) / 3; a direction of J^T J weaker than that (a tiny baseline: the depth, eigenvalues ~1e-13
+    of the largest at zero noise) is then crossed only by halves and the step rule stops it early, at a cost far
+    above round-off.  One exact step finishes that direction; where it does not help, nothing changes."""
+    if len(X) == 1:                             # a stack of one: the scalar twin (tests/test_scalar_twins.py)
+        return _gauss_newton_one(C[0], xhat[0], X[0])[None] if ok[0] else X.copy()
+    act = np.nonzero(ok)[0]
+    X = X.copy()
+    if act.size == 0:
+        return X
+    Ca, xa, Xa = C[act], xhat[act], X[act]
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+        u, h, fin = _project(Ca, Xa)
+        cost = np.where(fin, np.add.reduce((u - xa) ** 2, axis=(1, 2)), np.inf)
+        Jac = (Ca[..., :2, :3] - u[..., None] * Ca[..., 2:3, :3]) / h[..., 2][..., None, None]
+        Jac = Jac.reshape(len(act), -1, 3)
+        r = (u - xa).reshape(len(act), -1)
+        JtJ = np.einsum("mki,mkj->mij", Jac, Jac)
+        step = damped_step(JtJ, np.einsum("mki,mk->mi", Jac, r), np.zeros(len(act)))
+        Xt = Xa + step
+        ut, _, fint = _project(Ca, Xt)
+        ct = np.where(fint, np.add.reduce((ut - xa) ** 2, axis=(1, 2)), np.inf)
+    better = fin & np.isfinite(ct) & (ct < cost) & np.isfinite(Xt).all(axis=1)
+    X[act[better]] = Xt[better]
+    return X
+
+
+def _gauss_newton_one(C: np.ndarray, xhat: np.ndarray, X: np.ndarray) -> np.ndarray:
+    """:func:`gauss_newton_polish` of one problem on plain arrays (:class:`_View`, :func:`damped_step_one` with
+    mu = 0): equal to the stacked step up to round-off."""
+    cams = _View(C)
+    X = np.array(X, float)
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+        at = cams.project(X, xhat)
+        if at is None or not math.isfinite(at[2]):
+            return X
+        u, den, cost, r = at
+        J = ((cams.A01 - u[:, :, None] * cams.A2) / den[:, None, None]).reshape(-1, 3)
+        Xt = X + damped_step_one(J.T @ J, J.T @ r, 0.0)
+        trial = cams.project(Xt, xhat)
+    if trial is not None and math.isfinite(trial[2]) and trial[2] < cost and np.isfinite(Xt).all():
+        return Xt
+    return X
 
 
 def _refine_one_as_stack(C, xhat, X, ok, return_converged: bool) -> tuple:
@@ -335,14 +376,53 @@ def band_pairs(N: int, width: int) -> tuple[np.ndarray, np.ndarray]:
     return np.array(I, dtype=int), np.array(J, dtype=int)
 
 
+def centre_vectors(C: np.ndarray) -> np.ndarray:
+    """Null vectors (..., 4) of cameras (..., 3, 4) for deciding which centres coincide: the signed minors
+    (:func:`null_vectors`) of the camera with rows 1 and 2 made orthogonal to row 3 (twice) -- an image homography,
+    so the same null space, but a matrix whose rows are no longer nearly parallel when the principal point is far
+    from the focal length (1e6 px): the minors then carry ~1e-13 instead of ~1e-10 relative error.  Each camera is
+    divided by its largest entry and row 3 scaled to unit norm first (exact in what it decides)."""
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        m = np.maximum.reduce(np.abs(C).reshape(C.shape[:-2] + (12,)), axis=-1)[..., None, None]
+        C = C / np.where(m > 0, m, 1.0)
+        r3 = C[..., 2:3, :]
+        n3 = norms(r3, axis=-1, keepdims=True)
+        u3 = r3 / np.where(n3 > 0, n3, 1.0)
+        r = C[..., :2, :]
+        r = r - np.add.reduce(r * u3, axis=-1, keepdims=True) * u3
+        r = r - np.add.reduce(r * u3, axis=-1, keepdims=True) * u3
+        return null_vectors(np.concatenate([r, u3], axis=-2))
+
+
+def distinct_centres(a_i: np.ndarray, a_j: np.ndarray) -> np.ndarray:
+    """Do the camera centres a_i, a_j (homogeneous null vectors (..., 4), any scale) differ?  True where
+    sin(angle(a_i, a_j)) = ||a_i ^ a_j|| / (||a_i|| ||a_j||) > SAME_CENTER_RTOL, with
+    ||a_i ^ a_j||^2 = sum_{k<l} (a_ik a_jl - a_il a_jk)^2 (the Plucker coordinates of the baseline; all zero iff
+    the centres coincide), evaluated as ||u - (u . w) w|| for the unit vectors u, w (absolute error ~1e-16).
+
+    Invariant to the scale of each camera (a_i scales by k^3 and cancels) and to any image homography (it does not
+    change the null vector), unlike a threshold on ||F_ij||: F = [P_i a_j]_x P_i P_j^+ scales like
+    |P_i|^2 |a_j| |P_j^+| and, for cameras with pixel coordinates ~1e6 (principal point far from the focal length),
+    a bound ``||F|| > rtol |P_i| |P_j|`` both dropped distinct pairs and kept coincident ones depending on the cameras'
+    scales (tests/test_centres.py).  Exactly duplicated views have a_i = a_j bit for bit, so sin = 0: always
+    coincident.  Limit: the null vectors themselves are only as accurate as the cameras' conditioning allows
+    (a principal point at 1e6 px with a focal length of ~1 px leaves them uncertain at ~1e-5)."""
+    ni, nj = norms(a_i, axis=-1, keepdims=True), norms(a_j, axis=-1, keepdims=True)
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        u, w = a_i / ni, a_j / nj
+        # ||u ^ w|| = ||u - (u . w) w|| for unit u, w (the component of u off w: no cancellation in 1 - (u . w)^2)
+        sin = norms(u - np.add.reduce(u * w, axis=-1, keepdims=True) * w, axis=-1)
+        return (sin > SAME_CENTER_RTOL) & (ni[..., 0] > 0) & (nj[..., 0] > 0)
+
+
 def fundamental_stack(C: np.ndarray, pairs: tuple | None = None) -> tuple[np.ndarray, np.ndarray]:
     """(F (M, K, 3, 3) unit Frobenius norm, defined (M, K)) for the view pairs ``pairs`` = (I, J) (default: all,
     :func:`view_pairs`): F_ij = [e]_x P_i P_j^+, e = P_i a_j, P_j a_j = 0 (SPEC §7); ``defined`` is False where
-    the two camera centres coincide (F vanishes; the twin of :func:`tritools.model.geometry.fundamental_matrix`'s
-    error)."""
+    the two camera centres coincide (:func:`distinct_centres` of :func:`centre_vectors`, invariant to the cameras'
+    scales and image homographies) or F is not finite or vanishes."""
     M, N = C.shape[:2]
     I, J = view_pairs(N) if pairs is None else pairs
-    Pi, Pj = C[:, I], C[:, J]
+    Pi = C[:, I]
     a = null_vectors(C)
     with np.errstate(over="ignore", invalid="ignore"):
         CCt = C @ np.swapaxes(C, 2, 3)
@@ -357,8 +437,8 @@ def fundamental_stack(C: np.ndarray, pairs: tuple | None = None) -> tuple[np.nda
     ex[..., 1, 0], ex[..., 2, 0], ex[..., 2, 1] = e[..., 2], -e[..., 1], e[..., 0]
     F = ex @ Pi @ pinv[:, J]
     nrm = norms(F, axis=(2, 3))
-    defined = nrm > SAME_CENTER_RTOL * norms(Pi, axis=(2, 3)) * norms(Pj, axis=(2, 3))
-    defined &= np.isfinite(nrm)
+    c = centre_vectors(C)
+    defined = distinct_centres(c[:, I], c[:, J]) & np.isfinite(nrm) & (nrm > 0)
     F = np.where(defined[..., None, None], F / np.where(nrm > 0, nrm, 1.0)[..., None, None], 0.0)
     return F, defined
 
@@ -413,7 +493,21 @@ def pixel_scales(C: np.ndarray, x: np.ndarray) -> np.ndarray:
     Invariant to the camera's scale, image translations and similarities of the world frame; NaN where the
     camera has no finite depth direction (||P[2, :3]|| = 0)."""
     B = C[..., :2, :3] - x[..., :, None] * C[..., 2:3, :3]
-    s = np.linalg.svd(B, compute_uv=False)[..., 0]
     d = norms(C[..., 2, :3], axis=-1)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        return np.where(d > 0, s / d, np.nan)
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        return np.where(d > 0, sigma_max_2x3(B) / d, np.nan)
+
+
+def sigma_max_2x3(B: np.ndarray) -> np.ndarray:
+    """The largest singular value of 2x3 matrices (..., 2, 3) in closed form: sigma_max^2 is the largest eigenvalue
+    of B B^T = [[p, q], [q, r]], (p + r) / 2 + sqrt(((p - r) / 2)^2 + q^2) -- a sum of non-negative terms, so
+    relatively accurate to a few ulps (tests/test_scalar_twins.py checks it against ``numpy.linalg.svd``) at a
+    fraction of the cost of a batched SVD call.  Each matrix is divided by a power of two near its largest entry
+    first (exact), so nothing overflows or underflows; NaN / inf propagate (the SVD would raise)."""
+    m = np.maximum.reduce(np.abs(B).reshape(B.shape[:-2] + (6,)), axis=-1)
+    k = np.ldexp(1.0, np.frexp(np.where(np.isfinite(m) & (m > 0), m, 1.0))[1])
+    B = B / k[..., None, None]
+    b0, b1 = B[..., 0, :], B[..., 1, :]
+    p, r, q = np.add.reduce(b0 * b0, axis=-1), np.add.reduce(b1 * b1, axis=-1), np.add.reduce(b0 * b1, axis=-1)
+    h = (p - r) / 2
+    return k * np.sqrt((p + r) / 2 + np.sqrt(h * h + q * q))

@@ -43,8 +43,8 @@ from sospoly.solvers import with_single_threaded_blas
 
 from ..model.geometry import camera_problems
 from ..model.normalize import normalization_stack
-from ..model.stacked import (band_pairs, epipolar_quadratics, fundamental_stack, norms, project_stack,
-                             refine_points_stack, view_pairs)
+from ..model.stacked import (band_pairs, epipolar_quadratics, fundamental_stack, gauss_newton_polish, norms,
+                             project_stack, refine_points_stack, view_pairs)
 from .decide import decide, decide_reported, gamma_from_c
 from .trivial import trivially_certified, trivially_certified_reported
 
@@ -85,6 +85,9 @@ class FastPathBatch:
     c_upper: np.ndarray
     scale: np.ndarray
     trivial: np.ndarray
+    #: (M, N) the distances ||Phi(X, P_i) - x_i|| on the caller's data (inf where a projection is not finite),
+    #: the residuals of the report (:func:`tritools.solve.report.points_report_stack`, the same formula)
+    residuals: np.ndarray | None = None
 
     @property
     def gamma_ub(self) -> np.ndarray:
@@ -147,6 +150,7 @@ def verify_checked(C: np.ndarray, x: np.ndarray, ok: np.ndarray, tolerances: Tol
     polish = ~norm.converged                # the normalisation's refinement converged elsewhere
     if polish.any():
         Xn[polish], ok[polish] = refine_points_stack(Cn[polish], xhat[polish], norm.Xn[polish], ok[polish])
+    Xn = gauss_newton_polish(Cn, xhat, Xn, ok)      # a weak direction the damped LM left (tiny baselines)
     u, _, fin = project_stack(Cn, Xn)
     ok &= fin
     v = np.where(ok[:, None], u.reshape(M, -1), 0.0)
@@ -158,7 +162,11 @@ def verify_checked(C: np.ndarray, x: np.ndarray, ok: np.ndarray, tolerances: Tol
     X = norm.world_points(Xn)
     uw, _, fin_w = project_stack(C, X)
     ok &= fin_w
-    gamma_ub = np.where(fin_w, gamma_from_c(np.sum((uw - x) ** 2, axis=(1, 2)), N, 1.0), np.inf)
+    # the residuals and gamma(X) by the formulas of the report (tritools.solve.report.points_report_stack): the
+    # same numbers, so a single call reports these without projecting again
+    residuals = np.where(fin_w[:, None], norms(uw - x, axis=2), np.inf)
+    gamma_ub = np.where(fin_w, gamma_from_c(np.sum(np.where(fin_w[:, None], residuals, 0.0) ** 2, axis=1), N, 1.0),
+                        np.inf)
     gamma_lb = np.minimum(gamma_from_c(c_lower, N, norm.scale), gamma_ub)
     certified = ok & optimal & decide_reported(gamma_lb, gamma_ub, tolerances, N, norm.scale, norm.resolution)
     trivial = ok & ~certified
@@ -167,7 +175,7 @@ def verify_checked(C: np.ndarray, x: np.ndarray, ok: np.ndarray, tolerances: Tol
             trivially_certified_reported(gamma_ub, tolerances, N, norm.scale, norm.resolution)
     gamma_lb = np.where(trivial, 0.0, gamma_lb)
     return FastPathBatch(certified | trivial, ok, X, gamma_lb, gamma_ub, x + u / norm.scale[:, None, None],
-                         np.where(trivial, 0.0, c_lower), upper, norm.scale, trivial)
+                         np.where(trivial, 0.0, c_lower), upper, norm.scale, trivial, residuals)
 
 
 def lagrangian_bounds(C, Cn, v, ok, radius, resolution, tolerances, f0=None, weights=None, views=None, *,

@@ -72,6 +72,8 @@ FAST_DEFAULT = frozenset({ImplName.VERIFY_POINTS, ImplName.VERIFY_DISCS, ImplNam
 
 def fast_names(fast) -> frozenset:
     """``fast`` (names or :class:`ImplName` members) as a set of members; ValueError naming ``fast`` otherwise."""
+    if fast is FAST_DEFAULT:            # (every single call: members already)
+        return fast
     out = set()
     for name in fast:
         try:

@@ -11,6 +11,7 @@
 """
 from __future__ import annotations
 
+import copy
 import dataclasses
 import time
 
@@ -198,4 +199,16 @@ def world_frame_stage(ctx: PointContext) -> None:
 def report_stage(ctx: PointContext) -> None:
     """Timings and every attempt into the result."""
     ctx.timings["total"] = time.perf_counter() - ctx.t0
-    ctx.best = replace(ctx.best, timings=dict(ctx.timings), attempts=tuple(ctx.attempts))
+    ctx.best = with_record(ctx.best, dict(ctx.timings), tuple(ctx.attempts))
+
+
+def with_record(res: TriangulationResult, timings: dict, attempts: tuple) -> TriangulationResult:
+    """``replace(res, timings=timings, attempts=attempts)`` without validating the other fields again: they were
+    validated when ``res`` was made, and a fresh dict and a tuple of :class:`~tritools.result.Attempt` are what
+    ``__post_init__`` would store (anything else takes the validating path)."""
+    if type(res) is not TriangulationResult or not all(type(a) is Attempt for a in attempts):
+        return replace(res, timings=timings, attempts=attempts)
+    out = copy.copy(res)
+    object.__setattr__(out, "timings", timings)
+    object.__setattr__(out, "attempts", attempts)
+    return out

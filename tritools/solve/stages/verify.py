@@ -32,6 +32,7 @@ import sospoly
 from sospoly.analysis import verify_quadratic
 from sospoly.budget import TimeLimitReached
 
+from ...model.cameras import depths_stack_arrays
 from ...model.constraints import Method
 from ...model.geometry import dlt, gamma as gamma_of, project, refine_l2
 from ...result import Attempt, Status, TriangulationResult
@@ -42,7 +43,7 @@ from ..fastpath import verify_checked
 from ..options import SolvePath
 from ..regions_verify import constraint_counts, region_bound, region_forms
 from ..plan import Step, degree_plan, delta_min
-from ..report import points_report_stack, solve_ball
+from ..report import solve_ball
 from .context import AttemptStep, ImplName, Implementation, PointContext
 from .outcome import behind_message, report_point, trivial_certificate
 
@@ -112,15 +113,18 @@ def _verify_points(ctx: PointContext, step: Step) -> TriangulationResult | None:
     if not b.certified[0]:
         return None
     X = b.X[0]
-    gamma, res, dep = points_report_stack(ctx.cams[None], x, X[None], ctx.opts.world_frame)
-    status, in_front = cheirality(Status.OPTIMAL, dep[0], ctx.opts.require_in_front)
+    # gamma(X) and the residuals as points_report_stack computes them (verify_checked uses its formulas on the
+    # same cameras and X): only the depths are left
+    gamma, res = float(b.gamma_at_X[0]), b.residuals[0]
+    dep = depths_stack_arrays(ctx.cams[None], X[None], ctx.opts.world_frame)[0]
+    status, in_front = cheirality(Status.OPTIMAL, dep, ctx.opts.require_in_front)
     K = ctx.N * (ctx.N - 1) // 2
-    return TriangulationResult(step.result_method.value, status, X=X, gamma_ub=float(gamma[0]),
-                               gamma_lb=float(min(b.gamma_lb[0], gamma[0])), optimal=True, delta=2,
+    return TriangulationResult(step.result_method.value, status, X=X, gamma_ub=gamma,
+                               gamma_lb=float(min(b.gamma_lb[0], gamma)), optimal=True, delta=2,
                                n_lmivar=sospoly.n_lmivar_formula(2 * ctx.N, 2, [2] * K),
-                               image_points=b.image_points[0], X_raw=X, gamma_ub_raw=float(gamma[0]),
-                               certified_by="verification", message="" if in_front else behind_message(dep[0]),
-                               sparsity="dense", in_front=in_front, depths=dep[0], residuals=res[0])
+                               image_points=b.image_points[0], X_raw=X, gamma_ub_raw=gamma,
+                               certified_by="verification", message="" if in_front else behind_message(dep),
+                               sparsity="dense", in_front=in_front, depths=dep, residuals=res)
 
 
 def _discs_apply(ctx: PointContext, step: Step) -> bool:

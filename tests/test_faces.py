@@ -1,0 +1,104 @@
+"""Issue #22: verification of views whose candidate lies inside a segment or on one face of a polytope
+(tritools.solve.faces: a positive multiplier on the inactive constraints, priced within the tolerance).
+
+References are independent of the code under test: multi-start Levenberg-Marquardt on the exact distances to
+the regions (an attained value: gamma_LB never above it) and the delta = 2 SDP of the same program (a
+certificate by verification is one of the SDP's, at the same value)."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import tritools
+from sospoly import DEFAULT_TOLERANCES as tol
+from tritools.model.regions import Polytope, Segment
+from tritools.solve import faces
+from tritools.solve.decide import gamma_from_c
+from tritools.solve.options import options_from
+from tritools.solve.regions_verify import region_bound
+from tritools.solve.stages.context import PointContext
+
+from tests.test_region_verification import C_TOL, _c, _multistart, _problems
+
+
+def _bounds(cams, regions):
+    """(c_lower, c_upper, tolerance) of region_bound at the local optimum, with the context's normalisation."""
+    ctx = PointContext(cams, regions, options_from(None), 0.0)
+    Xn = ctx.local()[1]
+    lo, up, _ = region_bound(ctx.cams, ctx.cams_n, ctx.regs_n, Xn, [r.extent().radius for r in ctx.regs_n],
+                             resolution=ctx.norm.resolution)
+    return lo, up, ctx
+
+
+def test_face_multipliers_certify_what_the_kkt_multipliers_do_not(monkeypatch):
+    """On small boxes and segments some problems certify only with the face multiplier (the KKT ones leave a zero
+    weight along the face); every such bound is below the multi-start reference."""
+    gained = 0
+    for kind, size, n_views, seed in (("box", 0.3, 4, 3), ("segment", 0.2, 4, 3)):
+        for cams, regions in _problems(kind, n_views, 4, 2.0, seed, size):
+            lo, up, ctx = _bounds(cams, regions)
+            with monkeypatch.context() as m:
+                m.setattr(faces, "FACE_MU_FRACTIONS", ())
+                lo0, up0, _ = _bounds(cams, regions)
+            assert up == up0
+            assert not (lo < lo0)                         # the KKT bound is one of those tried: never lower
+            if np.isfinite(lo):
+                ref = _multistart(cams, regions, ctx.norm.world_point(ctx.local()[1]))
+                assert gamma_from_c(lo, n_views, ctx.norm.scale) <= ref * (1 + 1e-9) + 1e-12
+            gained += bool(tol.certified(lo, up)) and not bool(np.isfinite(lo0) and tol.certified(lo0, up0))
+    assert gained >= 2
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("kind,size", [("box", 0.3), ("segment", 0.2)])
+def test_face_certificates_are_ones_of_the_delta2_sdp(kind, size):
+    n_cert = 0
+    for n_views, seed in ((5, 2), (4, 3)):
+        for cams, regions in _problems(kind, n_views, 4, 2.0, seed, size):
+            r = tritools.triangulate(cams, regions)
+            assert r.gamma_lb <= _multistart(cams, regions, r.X) * (1 + 1e-9) + 1e-12
+            if r.certified_by != "verification":
+                continue
+            n_cert += 1
+            sdp = tritools.triangulate(cams, regions, path="sdp", method="corollary1", delta=2, max_delta=2)
+            assert sdp.optimal
+            N = len(regions)
+            assert abs(_c(sdp.gamma_lb, N) - _c(r.gamma_lb, N)) <= C_TOL * max(1.0, _c(r.gamma_ub, N))
+    assert n_cert >= 4
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("k", [1e-3, 1.0, 1e6])
+def test_pixel_scale_does_not_change_the_verdict_or_break_the_bound(k):
+    """Image coordinates scaled by k (cameras K -> diag(k, k, 1) K, regions scaled about the origin): gamma scales
+    by k, the bounds stay below the scaled reference, a certificate stays a certificate."""
+    S = np.diag([k, k, 1.0])
+    for cams, regions in _problems("box", 5, 3, 2.0, 2, 0.3) + _problems("segment", 4, 3, 2.0, 3, 0.2):
+        base = tritools.triangulate(cams, regions)
+        sc_regions = [Polytope(r.B / k, r.c) if isinstance(r, Polytope) else Segment(k * r.center, k * r.direction)
+                      for r in regions]
+        r = tritools.triangulate(np.einsum("ij,njk->nik", S, cams), sc_regions)
+        ref = _multistart(cams, regions, base.X)
+        assert r.gamma_lb <= k * ref * (1 + 1e-8) + 1e-12 * k
+        assert r.gamma_lb <= r.gamma_ub
+        assert r.optimal == base.optimal
+        if r.optimal:
+            assert r.gamma_ub == pytest.approx(k * base.gamma_ub, rel=1e-5, abs=1e-9 * k)
+
+
+def test_degenerate_segment_and_segment_end():
+    """A zero-length segment is its point (same verdict and value); a segment whose end is the optimum's
+    projection (the rest of it pointing away) keeps a valid bound and certifies with its end multiplier."""
+    (cams, regions), = _problems("point", 4, 1, 2.0, 5)
+    pts = tritools.triangulate(cams, regions)
+    zero = tritools.triangulate(cams, [Segment(regions[0].center, [0.0, 0.0])] + regions[1:])
+    assert zero.optimal == pts.optimal and zero.gamma_ub == pytest.approx(pts.gamma_ub, rel=1e-9)
+    u0 = pts.image_points[0]
+    away = u0 - regions[0].center                          # from the observed point towards the projection
+    d = 3.0 * away / np.linalg.norm(away)
+    end = [Segment(u0 + d, d)] + regions[1:]               # t = -1 at the optimum's projection u0
+    r = tritools.triangulate(cams, end)
+    ref = _multistart(cams, end, r.X)
+    assert r.gamma_lb <= ref * (1 + 1e-9) + 1e-12
+    assert r.optimal
+    assert r.gamma_ub <= pts.gamma_ub * (1 + 1e-9)          # the segment holds the point's optimum projection

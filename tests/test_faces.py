@@ -131,3 +131,31 @@ def test_thin_boxes_keep_valid_bounds():
                 if sdp.optimal:
                     assert abs(_c(sdp.gamma_lb, n_views) - _c(r.gamma_lb, n_views)) <= gap
     assert n_cert >= 2
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("kind,size", [("segment", 0.2), ("box", 0.3)])
+def test_many_duplicated_and_georeferenced_views(kind, size):
+    """14 views (the band of view pairs on the kept views), a duplicated view, and the world moved 1e6 units
+    away: gamma_LB never above the multi-start reference (the untranslated problem's, to 1e-7), and
+    the face multipliers still certify by verification."""
+    n_ver = 0
+    for cams, regions in _problems(kind, 14, 2, 2.0, 9, size):
+        r = tritools.triangulate(cams, regions)
+        assert r.gamma_lb <= _multistart(cams, regions, r.X) * (1 + 1e-9) + 1e-12
+        n_ver += r.certified_by == "verification"
+    for cams, regions in _problems(kind, 4, 2, 2.0, 3, size):
+        dup_c, dup_r = np.concatenate([cams, cams[:1]]), regions + regions[:1]
+        r = tritools.triangulate(dup_c, dup_r)
+        assert r.gamma_lb <= _multistart(dup_c, dup_r, r.X) * (1 + 1e-9) + 1e-12
+        n_ver += r.certified_by == "verification"
+        T = np.eye(4)
+        T[:3, 3] = -np.array([1e6, 2e6, 3e5])
+        base = tritools.triangulate(cams, regions)
+        geo = tritools.triangulate(np.einsum("nij,jk->nik", cams, T), regions)
+        # C T rounds the cameras (entries ~1e9 in the last column) and gamma at |X| ~ 1e6 is evaluated with
+        # ~1e-9 relative error, so the translated problem is the original one only to ~1e-8 (main: the same)
+        assert geo.gamma_lb <= _multistart(cams, regions, base.X) * (1 + 1e-7)
+        assert geo.optimal == base.optimal
+        n_ver += geo.certified_by == "verification"
+    assert n_ver >= 4

@@ -27,6 +27,11 @@ of 9-11 views of the Oxford corridor sequence in DIR (the default plan of an exp
 degree-2 step on the two-view minors, docs/triangulation.md): status, degree, wall time, and an independent
 reference (the best of multi-start LM from perturbed DLT starts) that gamma_LB must not exceed.
 
+``--faces P``: P points per N as 0.4 px segments and as 0.6 x 0.2 px boxes (seeded orientations) through
+``triangulate_many`` (the single path per problem): CPU ms per track, certified fraction and the share
+certified by verification (tritools.solve.regions_verify with the face multipliers of tritools.solve.faces),
+the rest by the SDP.
+
 ``--sfm P``: the tracks of a seeded synthetic COLMAP model of P points (:func:`tritools.sfm.synthetic.
 synthetic_arrays`, 30 images, tracks of 2-12 views, keypoints undistorted) through ``triangulate_many`` as points
 and as 1 px discs (the SfM shape of uncertain keypoints), CPU seconds, certified fractions and their ratio.
@@ -137,6 +142,40 @@ def region_columns(C: np.ndarray, x: np.ndarray, seed: int) -> dict:
     return {"ellipses": ell, "mixed": mixed}
 
 
+def face_regions(C: np.ndarray, x: np.ndarray, seed: int) -> dict:
+    """The problems of the ``--faces`` table (module docstring): 0.4 px segments and 0.6 x 0.2 px boxes."""
+    from tritools import Polytope, Segment
+
+    rng = np.random.default_rng(seed)
+    a = rng.uniform(0, np.pi, size=x.shape[:2])
+    u = np.stack([np.cos(a), np.sin(a)], -1)
+    seg = [(C, [Segment(p, 0.2 * d) for p, d in zip(x[j], u[j])]) for j in range(len(x))]
+
+    def box(p, d):
+        B = np.array([[d[0], d[1]], [-d[1], d[0]]]) / np.array([[0.3], [0.1]])
+        return Polytope(B, -B @ p)
+
+    boxes = [(C, [box(p, d) for p, d in zip(x[j], u[j])]) for j in range(len(x))]
+    return {"segments": seg, "boxes": boxes}
+
+
+def faces_table(sizes, n_points: int, noise: float, seed: int) -> None:
+    """The ``--faces`` table (module docstring)."""
+    print(f"\nSegments and boxes ({n_points} points per N, {noise:g} px noise), triangulate_many\n")
+    print("| N | region | ms/track | certified | by verification |")
+    print("|---:|---|---:|---:|---:|")
+    for N in sizes:
+        sc = random_scene(N, n_points, noise_px=noise, seed=seed + N)
+        C, x = np.asarray(sc.cameras), np.asarray(sc.points2d)
+        for name, probs in face_regions(C, x, seed + N).items():
+            box = {}
+            t = cpu(lambda: box.setdefault("r", tritools.triangulate_many(probs, progress=False))) / n_points * 1e3
+            res = box["r"]
+            cert = np.mean([r.optimal for r in res])
+            ver = np.mean([r.certified_by == "verification" for r in res])
+            print(f"| {N} | {name} | {t:.2f} | {cert:.1%} | {ver:.1%} |", flush=True)
+
+
 def sfm_discs(n_points: int, seed: int) -> None:
     """The ``--sfm`` table (module docstring)."""
     from tritools import Ellipse
@@ -207,8 +246,15 @@ def main(argv=None) -> None:
     ap.add_argument("--tracks", type=int, default=5)
     ap.add_argument("--sfm", type=int, default=0, metavar="P", help="also a synthetic SfM model of P points (discs)")
     ap.add_argument("--time-limit", type=float, default=180.0)
+    ap.add_argument("--faces", type=int, default=0, metavar="P", help="also segments and boxes, P points per N")
+    ap.add_argument("--faces-only", action="store_true", help="only the --faces table")
     args = ap.parse_args(argv)
     have_colmap = importlib.util.find_spec("pycolmap") is not None
+    if args.faces:
+        for noise in args.noise:
+            faces_table(args.sizes, args.faces, noise, args.seed)
+        if args.faces_only:
+            return
     print("| noise px | N | batch ms/track | certified | single ms | single/batch | discs ms/track | discs certified "
           "| discs/batch | ellipses ms | ell. certified | ell./batch | mixed ms | mixed certified | mixed/batch "
           "| scipy-lm ms | pycolmap ms | lb<=lm |")

@@ -17,9 +17,14 @@ Memory model (8-byte floats; an estimate, deliberately on the safe side):
 * Clarabel factorises a KKT system whose PSD-cone blocks are dense in svec space: a Gram block of
   side s contributes L^2 entries, L = s (s + 1) / 2, to the KKT matrix and its LDL factor (values and
   indices), :data:`CLARABEL_ENTRY_COPIES` floats per entry, and the largest block once more to the
-  solver's dense work arrays, :data:`CLARABEL_LARGEST_BLOCK_COPIES` floats per entry, besides a few
-  copies of the constraint matrix.  Measured peaks (Theorem 1 with ellipses at delta = 4, Gram
-  blocks of side 91): 3 views 0.91 GB (estimate 0.98), 4 views 0.94 GB (1.33), 5 views 1.25 GB (1.68).
+  solver's dense work arrays, :data:`CLARABEL_LARGEST_BLOCK_COPIES` floats per entry weighted by that
+  block's share w = L_max^2 / sum_k L_k^2 of all entries, besides a few copies of the constraint matrix.
+  Measured peaks (Theorem 1 with ellipses at delta = 4, Gram blocks of side 91, w ~ 1): 3 views 0.91 GB
+  (estimate 0.98), 4 views 0.94 GB (1.33), 5 views 1.25 GB (1.68).  Programs of many blocks (the views
+  sparsity of benchmarks/manyview.py, large setting, seed 2; Clarabel's peak RSS above its start, issue
+  #22): N = 16 / 20 / 24 / 30 used 336 / 446 / 639 / 827 MiB, 1.6-1.7 floats per entry of the estimate's
+  blocks; the unweighted largest-block term estimated 588 / 871 / 1408 / 2223 MiB (1.7-2.7x, N = 30 refused
+  by the 2 GiB default), the weighted one 524 / 718 / 1099 / 1679 MiB (1.6-2.0x, still above every peak).
 * The batched interior-point method (:mod:`sospoly.solvers.ipm`) holds, per PSD block of side s,
   the m full s x s matrices of the columns (m = number of decision columns) and the m x m Schur
   complement.
@@ -148,7 +153,8 @@ def check_deadline(what: str = "building the program") -> None:
 
 #: floats per svec-entry pair (L^2) of every PSD block in Clarabel: the KKT block and its LDL factor.
 CLARABEL_ENTRY_COPIES = 2.5
-#: floats per svec-entry pair of the largest PSD block once more: Clarabel's dense work arrays.
+#: floats per svec-entry pair of the largest PSD block once more, weighted by its share of all entries:
+#: Clarabel's dense work arrays (module docstring).
 CLARABEL_LARGEST_BLOCK_COPIES = 4.5
 #: the interior-point method's working set above which the ``auto`` back-end goes to Clarabel directly
 #: (the rule of :class:`sospoly.solvers.backends.AutoBackend`).
@@ -239,8 +245,11 @@ def estimate_size(gram_sides, n_free: int = 0, n_equality_rows: int = 0) -> Prog
     n_cols = int(n_free) + sum(L)              # alphas/Gram entries: at most every svec entry
     n_rows = int(n_equality_rows) + sum(L)
     nnz = 3 * n_rows + 2 * n_cols
-    clarabel = 8.0 * (CLARABEL_ENTRY_COPIES * float(sum(x * x for x in L))
-                      + CLARABEL_LARGEST_BLOCK_COPIES * float(max(L, default=0)) ** 2) + 80.0 * nnz
+    entries = float(sum(x * x for x in L))
+    largest = float(max(L, default=0)) ** 2
+    share = largest / entries if entries > 0 else 0.0        # the largest block's share w (module docstring)
+    clarabel = 8.0 * (CLARABEL_ENTRY_COPIES * entries + CLARABEL_LARGEST_BLOCK_COPIES * largest * share) \
+        + 80.0 * nnz
     ipm = 8.0 * (2.0 * n_cols * float(sum(s * s for s in sides)) + float(n_cols) ** 2)
     return ProgramSize(sides, n_cols, n_rows, clarabel, ipm)
 

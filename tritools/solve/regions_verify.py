@@ -47,8 +47,10 @@ unbounded below: no claim.  The kept views of each problem are gathered into a c
 whatever views lie inside their regions.
 
 Polytope faces are quadratic slabs here, so L is strictly convex in y (the |x - y|^2 term); a single active
-face leaves omega = 0 along the face, which the PSD test of the Lagrangian rejects unless the epipolar
-multipliers vanish there: such problems go to the SDP, which decides the same at delta = 2.
+face (or a candidate inside a segment) leaves omega = 0 along the face, which the PSD test of the Lagrangian
+rejects unless the epipolar multipliers vanish there: :mod:`tritools.solve.faces` then tries a positive
+multiplier on the inactive constraints, priced within the tolerance (``face_mu``); what that does not certify
+goes to the SDP, which decides at delta = 2 with the best multipliers.
 """
 from __future__ import annotations
 
@@ -178,8 +180,9 @@ def _ellipse(form: ConicForm, u):
     return _from_y_quadratic(mu * A, -mu * (A @ c), mu * (float(c @ A @ c) - 1.0))
 
 
-def _polytope(form: ConicForm, u, y):
-    """(W, w, q0, ok) of a polytope ||B y + c||_inf <= 1 (faces h_k = 1 - (B_k y + c_k)^2), y the closest point."""
+def _polytope(form: ConicForm, u, y, face_mu: float = 0.0):
+    """(W, w, q0, ok) of a polytope ||B y + c||_inf <= 1 (faces h_k = 1 - (B_k y + c_k)^2), y the closest point;
+    ``face_mu`` > 0: on a single active slab, that multiplier on every inactive slab (:mod:`tritools.solve.faces`)."""
     B, c = form.B, form.c
     s = B @ y + c
     e = u - y
@@ -189,36 +192,40 @@ def _polytope(form: ConicForm, u, y):
         J = (B[act] * s[act, None]).T                     # 2 x n_active: columns s_k B_k
         sol = np.linalg.lstsq(J, e, rcond=None)[0]
         mu[act] = np.maximum(sol, 0.0)
+        if face_mu > 0 and act.sum() == 1:
+            mu[~act] = face_mu / max(1, int((~act).sum()))
     H = (B.T * mu) @ B
     return _from_y_quadratic(H, B.T @ (mu * c), float(mu @ (c * c) - mu.sum()))
 
 
-def _segment(form: ConicForm, u):
-    """(W, w, q0, ok) of a segment {c + t d : |t| <= 1} (h = 1 - t^2)."""
+def _segment(form: ConicForm, u, face_mu: float = 0.0):
+    """(W, w, q0, ok) of a segment {c + t d : |t| <= 1} (h = 1 - t^2); ``face_mu``: the multiplier of h where
+    the closest point is inside the segment (KKT: 0; :mod:`tritools.solve.faces`)."""
     c, d = form.center, form.direction
     dd = float(d @ d)
     t = float(np.clip(d @ (u - c) / dd, -1.0, 1.0)) if dd > 0 else 0.0
     e = u - c - t * d
-    mu = max(float(d @ e) / t, 0.0) if abs(t) >= 1.0 else 0.0
+    mu = max(float(d @ e) / t, 0.0) if abs(t) >= 1.0 else max(float(face_mu), 0.0)
     den = dd + mu
     W = np.eye(2) - (np.outer(d, d) / den if den > 0 else 0.0)
     w = -W @ c
     return W, w, float(c @ W @ c) - mu, np.isfinite(den)
 
 
-def view_quadratics(forms, regions_n, u: np.ndarray) -> ViewQuadratics:
+def view_quadratics(forms, regions_n, u: np.ndarray, face_mu: float = 0.0) -> ViewQuadratics:
     """:class:`ViewQuadratics` of one problem (M = 1): the conic forms of the normalised regions
     (:func:`region_forms`), the regions (asked for a polytope's closest point) and the candidate projections
-    u (N, 2)."""
+    u (N, 2); ``face_mu`` >= 0 the multiplier given to the inactive constraints of a view whose closest point lies
+    inside a segment or on one face of a polytope (0: the KKT multipliers; :mod:`tritools.solve.faces`)."""
     N = len(forms)
     W, w, q0, valid = np.zeros((1, N, 2, 2)), np.zeros((1, N, 2)), np.zeros((1, N)), np.zeros((1, N), bool)
     for i, (f, r, ui) in enumerate(zip(forms, regions_n, u)):
         if f.kind == ConeKind.POINT:
             out = (np.eye(2), -f.center, float(f.center @ f.center), True)
         elif f.kind == ConeKind.SEGMENT:
-            out = _segment(f, ui)
+            out = _segment(f, ui, face_mu)
         elif f.kind == ConeKind.POLYTOPE:
-            out = _polytope(f, ui, r.closest_point(ui))
+            out = _polytope(f, ui, r.closest_point(ui), face_mu)
         else:
             out = _ellipse(f, ui)
         W[0, i], w[0, i], q0[0, i], valid[0, i] = out
@@ -301,12 +308,22 @@ def region_bound(C, Cn, regions_n, Xn, extents, *, forms=None, tolerances: Toler
         return np.nan, np.inf, u
     y = np.array([r.closest_point(ui) for r, ui in zip(regions_n, u)])
     c_upper = float(np.sum((u - y) ** 2))
-    omega, Q, a, const, bounded = reduce_views(view_quadratics(forms, regions_n, u))
+    from .faces import face_bound
+
+    lower = face_bound(lambda mu: _bound_at(C, Cn, forms, regions_n, u, extents, c_upper, mu, tolerances,
+                                            resolution, deadline), forms, c_upper, tolerances,
+                       deadline=deadline)
+    return lower, c_upper, u
+
+
+def _bound_at(C, Cn, forms, regions_n, u, extents, c_upper, face_mu, tolerances, resolution, deadline) -> float:
+    """The lower bound (NaN: none) of :func:`region_bound` with the face multiplier ``face_mu``."""
+    omega, Q, a, const, bounded = reduce_views(view_quadratics(forms, regions_n, u, face_mu))
     if not bounded.all():
-        return np.nan, c_upper, u
+        return np.nan
     kept = np.any(omega != 0, axis=-1)
     z = np.einsum("mnji,mnj->mni", Q, u[None] - a)
     radius = np.array([np.linalg.norm(np.asarray(extents) + np.linalg.norm(a[0], axis=1)) + np.sqrt(c_upper)])
     lower, ok = compact_bounds(np.asarray(C, float)[None], _frame_cameras(Cn[None], Q, a), z, omega, const, kept,
                                radius, np.array([resolution]), tolerances, deadline=deadline)
-    return (float(lower[0]) if ok[0] else np.nan), c_upper, u
+    return float(lower[0]) if ok[0] else np.nan

@@ -64,11 +64,10 @@ import time
 
 import numpy as np
 
-from ..model.geometry import PROJECTION_DENOM_RTOL
+from ..model.geometry import PROJECTION_DENOM_RTOL, depths_stack
 from ..model.normalize import normalization_for
 from ..result import Attempt, Status, TriangulationResult
 from .decide import cheirality, gamma_from_c
-from ..model.geometry import depths_stack
 from .report import PointReport, point_report
 from .trivial import local_estimate
 from . import robust_bounds
@@ -531,11 +530,12 @@ class TlsSearch:
         rep = self.report(X)
         inliers = rep.residuals < self.c
         certified = bool(self.tol.certified(lb, ub, self.scale))     # lb is valid also when the search stopped
-        if not certified and stopped is None and (self.deadline.expired or self.bounds.deadline.expired):
-            stopped = "time limit"              # the deadline cut the candidates or a leaf's solve short
+        if not certified and stopped is None:   # the deadline cut a step short, or a sub-problem hit the memory budget
+            stopped = "time limit" if self.deadline.expired or self.bounds.deadline.expired else \
+                "memory budget" if self.bounds.budget_exceeded else None
         contradicts = bool(self.tol.contradicts(lb, ub, self.scale))
         status = Status.NUMERICAL_FAILURE if contradicts else Status.OPTIMAL if certified else \
-            Status.TIME_LIMIT if stopped == "time limit" else Status.NOT_CERTIFIED
+            {"time limit": Status.TIME_LIMIT, "memory budget": Status.BUDGET_EXCEEDED}.get(stopped,Status.NOT_CERTIFIED)
         certified = certified and not contradicts
         lb = float(self.tol.consistent(lb, ub))
         gamma_ub, gamma_lb = gamma_from_c(ub, self.N, 1.0), gamma_from_c(lb, self.N, 1.0)

@@ -100,6 +100,7 @@ class SubsetBounds:
         self._floor: dict = {}                 # reopened subsets' packing bounds, kept by the next _store
         self._frame = None                     # the parent's normalised frame (robust_verify.ParentFrame), or False
         self.n_in_parent = 0                   # subsets bounded in the parent's frame
+        self.budget_exceeded = False           # a sub-problem stopped at the memory budget (the caller's status)
 
     def frame(self):
         """The parent problem's :class:`tritools.solve.robust_verify.ParentFrame` (point regions; computed when first
@@ -240,6 +241,7 @@ class SubsetBounds:
             self._store(S, 0.0, None)           # e.g. coincident or duplicated cameras: 0 is a valid bound
             return
         self.n_solved += 1
+        self.budget_exceeded |= res.status == Status.BUDGET_EXCEEDED
         lb = 0.0
         if res.status in TRUSTED_LOWER_BOUND and res.gamma_lb is not None and math.isfinite(res.gamma_lb):
             lb = 2 * len(views) * max(res.gamma_lb, 0.0) ** 2 * ROUND_DOWN

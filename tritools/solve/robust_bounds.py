@@ -380,7 +380,24 @@ def _sdp_stack(C, x, opts):
     problem, certified or not (an uncertified one is marked weak: :meth:`SubsetBounds.strengthen` may solve it
     with the full degree plan where the search needs it)."""
     b = solve_corollary1_points(C, x, tolerances=opts.tolerances, refine=opts.refine)
-    return b.done & np.isfinite(b.gamma_lb), b.gamma_lb, b.X, b.optimal
+    kernel = _kernel_hand_backs(b)
+    X = np.where(kernel[:, None], np.nan, b.X)          # no estimate from a point the extraction did not give
+    return (b.done | kernel) & np.isfinite(b.gamma_lb), b.gamma_lb, X, b.optimal & b.done
+
+
+#: the reason :func:`tritools.solve.sdp_batch.solve_corollary1_points` gives when only its point extraction failed
+KERNEL_HAND_BACK = "Gram kernel of dimension"
+
+
+def _kernel_hand_backs(b) -> np.ndarray:
+    """The rows of an :class:`tritools.solve.sdp_batch.SdpBatch` handed back only because the Gram kernel is not
+    one-dimensional (no point to extract): their lower bound is still rigorous -- the margin of
+    :func:`sospoly.analysis.rigor` holds for any Gram matrix and any upper bound c_ub >= f*, and c_ub there is
+    the cost at an actual (extracted or fallback) point -- and a TLS search needs the bound, not the point.
+    Only rows whose decision is not a contradiction (NOT_CERTIFIED or OPTIMAL) count."""
+    fine = {Status.NOT_CERTIFIED.value, Status.OPTIMAL.value}
+    return np.array([not d and r.startswith(KERNEL_HAND_BACK) and st in fine
+                     for d, r, st in zip(b.done, b.reason, b.status)], bool)
 
 
 def _batch(items: list, step) -> list:

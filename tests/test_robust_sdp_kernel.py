@@ -1,6 +1,7 @@
 """The batched delta = 2 SDP's lower bounds on rows handed back only for their Gram kernel
 (tritools.solve.robust_bounds._sdp_stack): still below the L2 optimum, found by dense multi-start."""
 import numpy as np
+import pytest
 from scipy.optimize import least_squares
 
 import tritools
@@ -75,3 +76,41 @@ def test_kernel_rule_ignores_other_hand_backs():
     b = solve_corollary1_points(P[None], obs[None])
     assert not b.done[0]
     assert not rb._kernel_hand_backs(b)[0]
+
+
+@pytest.mark.slow
+def test_strengthen_from_delta4_is_a_valid_tight_bound(monkeypatch):
+    """A weak 3-view subset holding a wrong match, strengthened with the plan from delta = 4 (its delta = 2 bound
+    known): below the multi-start L2 minimum, within 1e-6 of it (these problems certify), and the sub-solve
+    started at delta = 4."""
+    from tritools import Point, triangulate
+    from tritools.solve import triangulate as tri_mod
+
+    rng = np.random.default_rng(0)
+    scenes = [_scene(rng) for _ in range(40)]
+    opts = tritools.TriangulationOptions()
+    seen = []
+    real = tri_mod.triangulate
+
+    def spy(cams, regions, options=None, **kw):
+        res = real(cams, regions, options=options, **kw)
+        seen.append(res.attempts[0].delta if res.attempts else None)
+        return res
+
+    monkeypatch.setattr(tri_mod, "triangulate", spy)
+    ref_rng = np.random.default_rng(3)
+    done = 0
+    for P, obs in scenes[:8]:
+        sb = rb.SubsetBounds(P, [Point(p) for p in obs], opts, opts.budget.deadline())
+        S = frozenset(range(3))
+        sb._store(S, 0.0, None)
+        sb.weak.add(S)                          # as after a batched delta = 2 SDP that did not certify
+        assert sb.strengthen(S)
+        ref = _l2_min(P, obs, ref_rng)
+        assert sb.bound(S) <= ref * (1 + 1e-9)
+        full = triangulate(P, [Point(p) for p in obs], options=opts)
+        if full.optimal:
+            assert sb.bound(S) >= ref * (1 - 1e-6)
+            done += 1
+    assert done >= 4
+    assert len(seen) == 8 and all(d == rb.FULL_FROM_DELTA for d in seen)

@@ -57,6 +57,9 @@ PACKING = True
 IN_PARENT = True
 #: triples tried by :meth:`SubsetBounds.split_bound` before a full-plan solve of a whole subset (0: none).
 SPLIT_TRIES = 6
+#: :meth:`SubsetBounds.strengthen` solves a weak subset (its delta = 2 bound known) with the degree plan from this
+#: degree on: the verification and delta = 2 steps again cost 2-8x the delta = 4 step and decide nothing new.
+FULL_FROM_DELTA = 4
 #: time limit (seconds) of one sub-problem solved by :func:`tritools.triangulate` (capped by the caller's deadline)
 SUB_TIME_LIMIT = 10.0
 
@@ -166,7 +169,7 @@ class SubsetBounds:
             self._lb[S] = max(old, split)
             return True
         self._lb.pop(S)
-        self._solve_one(S, light=False)
+        self._solve_one(S, light=False, from_delta=FULL_FROM_DELTA)
         self._lb[S] = max(self._lb[S], old, split)
         return True
 
@@ -203,9 +206,10 @@ class SubsetBounds:
         if T in self._lb and T not in self.weak and T not in self.cheap:
             return self._lb[T]
         old = self._lb.pop(T, 0.0)
+        weak = T in self.weak                      # its delta = 2 bound is known: the plan from FULL_FROM_DELTA
         self.weak.discard(T)
         self.cheap.discard(T)
-        self._solve_one(T, light=False)
+        self._solve_one(T, light=False, from_delta=FULL_FROM_DELTA if weak else None)
         self._lb[T] = max(self._lb[T], old)
         return self._lb[T]
 
@@ -219,10 +223,11 @@ class SubsetBounds:
         self.retry.add(S)
         return True
 
-    def _solve_one(self, S: frozenset, light: bool = True) -> None:
+    def _solve_one(self, S: frozenset, light: bool = True, from_delta: int | None = None) -> None:
         """One sub-problem through :func:`tritools.triangulate`: with ``light`` only its degree-2 steps (a sub-problem
         with outliers needs a large bound, not a tight one; :meth:`strengthen` runs the full plan where the
-        search needs it)."""
+        search needs it).  ``from_delta``: the plan starts at that degree (its verification and delta = 2 steps
+        skipped: a weak subset's delta = 2 bound is known already); the default plan where the options refuse it."""
         from .triangulate import triangulate
 
         views = sorted(S)
@@ -234,6 +239,11 @@ class SubsetBounds:
                 opts = opts.replace(max_delta=2)
             except ValueError:
                 light = False
+        elif from_delta is not None:
+            try:
+                opts = opts.replace(delta=from_delta)
+            except ValueError:
+                pass
         try:
             res = triangulate(self.C[views], [self.regions[i] for i in views], options=opts)
         except (ValueError, TypeError, ArithmeticError, np.linalg.LinAlgError):

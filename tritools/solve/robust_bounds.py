@@ -241,7 +241,7 @@ class SubsetBounds:
                 light = False
         elif from_delta is not None:
             try:
-                opts = opts.replace(delta=from_delta)
+                opts = opts.replace(delta=max(from_delta, opts.delta or 0))     # never below the caller's
             except ValueError:
                 pass
         try:

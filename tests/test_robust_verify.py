@@ -217,14 +217,20 @@ def test_split_bound_replaces_the_whole_problem_solve(k, monkeypatch):
     """Two 5-view tracks with one wrong match whose leaf 'every view an inlier' is not pruned by the packing and
     delta = 2 bounds (benchmarks/robust.py, batch cell N = 5, 20%, 1 px): the split bound L2LB(T) + L2LB(S - T)
     over triples T holding the wrong match prunes it with no full-plan solve of the 5 views; the same inlier set and
-    value as the full-plan path (``SPLIT_TRIES = 0``), bounds below the enumeration."""
+    value as the full-plan path (``SPLIT_TRIES = 0``), bounds below the enumeration.  Since the batched SDP's
+    bounds on rows handed back for their Gram kernel are kept, these leaves need no solve at all (asserted first);
+    the split is then exercised with those bounds dropped (as before)."""
     rng = np.random.default_rng([3, 5, 1, 10])
     for _ in range(k + 1):
         P, x, X, out = _protocol_scene(5, 1, 1.0, rng)
     sizes = []
     real = rb.SubsetBounds._solve_one
     monkeypatch.setattr(rb.SubsetBounds, "_solve_one",
-                        lambda self, S, light=True: sizes.append((len(S), light)) or real(self, S, light))
+                        lambda self, S, light=True, **kw: sizes.append((len(S), light)) or real(self, S, light, **kw))
+    kept = tritools.triangulate(P, x, robust=200.0)
+    assert kept.optimal and not any(size >= 3 and not light for size, light in sizes)
+    monkeypatch.setattr(rb, "_kernel_hand_backs", lambda b: np.zeros(len(b.done), bool))
+    sizes.clear()
     split = tritools.triangulate(P, x, robust=200.0)
     assert (5, False) not in sizes and (3, False) in sizes
     sizes.clear()
@@ -233,9 +239,33 @@ def test_split_bound_replaces_the_whole_problem_solve(k, monkeypatch):
     assert (5, False) in sizes                                  # the case does need more than delta = 2 there
     assert split.optimal and whole.optimal
     np.testing.assert_array_equal(split.inliers, whole.inliers)
+    np.testing.assert_array_equal(kept.inliers, whole.inliers)
     np.testing.assert_array_equal(split.inliers, ~out)
     assert split.gamma_ub == pytest.approx(whole.gamma_ub, rel=1e-9)
+    assert kept.gamma_ub == pytest.approx(whole.gamma_ub, rel=1e-9)
     f_ref = _tls_reference(P, x, np.full(5, 200.0), [X, X + 0.1, X - 0.1])
-    for r in (split, whole):
+    for r in (kept, split, whole):
         assert 2 * 5 * r.gamma_lb ** 2 <= f_ref * (1 + 1e-9) + 1e-9
         assert 2 * 5 * r.gamma_ub ** 2 <= f_ref * (1 + 1e-6) + 1e-9
+
+
+def test_polish_early_stop_reaches_the_local_minimum():
+    """_polish stops once no row's cost moves by 1e-13 of it: from warm starts it ends at the local minimum that
+    scipy's Levenberg-Marquardt reaches from the same start (cost within 1e-9), with a stack of rows that
+    converge at different speeds (clean tracks and tracks with a wrong match)."""
+    from tritools.solve.robust_verify import _cost, _polish
+
+    rng = np.random.default_rng(11)
+    scenes = [_protocol_scene(4, k % 2, 1.0, rng) for k in range(6)]
+    frames = parent_frames(np.array([P for P, *_ in scenes]), np.array([x for _, x, *_ in scenes]))
+    Cn = np.array([f.cameras_n for f in frames])
+    X0 = np.array([f.Xn for f in frames]) + 1e-3 * rng.normal(size=(6, 3))
+    got = _cost(Cn, _polish(Cn, X0, 50))
+    for m in range(6):
+        def res(X, m=m):
+            h = Cn[m] @ np.append(X, 1.0)
+            return (h[:, :2] / h[:, 2:]).ravel()
+
+        ref = least_squares(res, X0[m], method="lm", xtol=1e-15, ftol=1e-15, gtol=1e-15)
+        assert got[m] <= 2 * ref.cost * (1 + 1e-9) + 1e-300
+    assert np.all(_cost(Cn, _polish(Cn, X0, 6)) <= _cost(Cn, X0))

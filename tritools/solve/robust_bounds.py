@@ -57,6 +57,9 @@ PACKING = True
 IN_PARENT = True
 #: triples tried by :meth:`SubsetBounds.split_bound` before a full-plan solve of a whole subset (0: none).
 SPLIT_TRIES = 6
+#: :meth:`SubsetBounds.strengthen` solves a weak subset (its delta = 2 bound known) with the degree plan from this
+#: degree on: the verification and delta = 2 steps again cost 2-8x the delta = 4 step and decide nothing new.
+FULL_FROM_DELTA = 4
 #: time limit (seconds) of one sub-problem solved by :func:`tritools.triangulate` (capped by the caller's deadline)
 SUB_TIME_LIMIT = 10.0
 
@@ -167,7 +170,7 @@ class SubsetBounds:
             self._lb[S] = max(old, split)
             return True
         self._lb.pop(S)
-        self._solve_one(S, light=False)
+        self._solve_one(S, light=False, from_delta=FULL_FROM_DELTA)
         self._lb[S] = max(self._lb[S], old, split)
         return True
 
@@ -204,9 +207,10 @@ class SubsetBounds:
         if T in self._lb and T not in self.weak and T not in self.cheap:
             return self._lb[T]
         old = self._lb.pop(T, 0.0)
+        weak = T in self.weak                      # its delta = 2 bound is known: the plan from FULL_FROM_DELTA
         self.weak.discard(T)
         self.cheap.discard(T)
-        self._solve_one(T, light=False)
+        self._solve_one(T, light=False, from_delta=FULL_FROM_DELTA if weak else None)
         self._lb[T] = max(self._lb[T], old)
         return self._lb[T]
 
@@ -220,10 +224,11 @@ class SubsetBounds:
         self.retry.add(S)
         return True
 
-    def _solve_one(self, S: frozenset, light: bool = True) -> None:
+    def _solve_one(self, S: frozenset, light: bool = True, from_delta: int | None = None) -> None:
         """One sub-problem through :func:`tritools.triangulate`: with ``light`` only its degree-2 steps (a sub-problem
         with outliers needs a large bound, not a tight one; :meth:`strengthen` runs the full plan where the
-        search needs it)."""
+        search needs it).  ``from_delta``: the plan starts at that degree (its verification and delta = 2 steps
+        skipped: a weak subset's delta = 2 bound is known already); the default plan where the options refuse it."""
         from .triangulate import triangulate
 
         views = sorted(S)
@@ -235,6 +240,11 @@ class SubsetBounds:
                 opts = opts.replace(max_delta=2)
             except ValueError:
                 light = False
+        elif from_delta is not None:
+            try:
+                opts = opts.replace(delta=max(from_delta, opts.delta or 0))     # never below the caller's
+            except ValueError:
+                pass
         try:
             res = triangulate(self.C[views], [self.regions[i] for i in views], options=opts)
         except (ValueError, TypeError, ArithmeticError, np.linalg.LinAlgError):
@@ -382,7 +392,24 @@ def _sdp_stack(C, x, opts):
     problem, certified or not (an uncertified one is marked weak: :meth:`SubsetBounds.strengthen` may solve it
     with the full degree plan where the search needs it)."""
     b = solve_corollary1_points(C, x, tolerances=opts.tolerances, refine=opts.refine)
-    return b.done & np.isfinite(b.gamma_lb), b.gamma_lb, b.X, b.optimal
+    kernel = _kernel_hand_backs(b)
+    X = np.where(kernel[:, None], np.nan, b.X)          # no estimate from a point the extraction did not give
+    return (b.done | kernel) & np.isfinite(b.gamma_lb), b.gamma_lb, X, b.optimal & b.done
+
+
+#: the reason :func:`tritools.solve.sdp_batch.solve_corollary1_points` gives when only its point extraction failed
+KERNEL_HAND_BACK = "Gram kernel of dimension"
+
+
+def _kernel_hand_backs(b) -> np.ndarray:
+    """The rows of an :class:`tritools.solve.sdp_batch.SdpBatch` handed back only because the Gram kernel is not
+    one-dimensional (no point to extract): their lower bound is still rigorous -- the margin of
+    :func:`sospoly.analysis.rigor` holds for any Gram matrix and any upper bound c_ub >= f*, and c_ub there is
+    the cost at an actual (extracted or fallback) point -- and a TLS search needs the bound, not the point.
+    Only rows whose decision is not a contradiction (NOT_CERTIFIED or OPTIMAL) count."""
+    fine = {Status.NOT_CERTIFIED.value, Status.OPTIMAL.value}
+    return np.array([not d and r.startswith(KERNEL_HAND_BACK) and st in fine
+                     for d, r, st in zip(b.done, b.reason, b.status)], bool)
 
 
 def _batch(items: list, step) -> list:

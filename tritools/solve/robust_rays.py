@@ -25,15 +25,32 @@ import numpy as np
 __all__ = ["ray_candidates", "SWEEP", "GOLDEN_STEPS"]
 
 #: depths of the geometric sweep along each ray: baseline * 10^k, k in [-3, 3] (this many).
-SWEEP = 25
+SWEEP = 13
 #: golden-section steps (in log depth) around the best depth of each ray.
-GOLDEN_STEPS = 30
+GOLDEN_STEPS = 20
 _GOLD = (math.sqrt(5.0) - 1.0) / 2.0
 
 
 def _rays(C: np.ndarray, pts: np.ndarray):
     """Centres (N, 3), unit directions (N, 3) towards positive depth, and a mask of views whose M_i is
-    invertible (others give no ray)."""
+    invertible (others give no ray).  One stacked solve; view by view where a stack member is singular."""
+    M, p = C[:, :, :3], C[:, :, 3]
+    rhs = np.stack([-p, np.concatenate([pts, np.ones((len(C), 1))], axis=1)], axis=2)      # (N, 3, 2)
+    try:
+        with np.errstate(all="ignore"):
+            sol = np.linalg.solve(M, rhs)
+    except np.linalg.LinAlgError:
+        return _rays_one_by_one(C, pts)
+    with np.errstate(all="ignore"):
+        c, d = sol[..., 0], sol[..., 1]
+        n = np.linalg.norm(d, axis=1)
+        ok = np.isfinite(c).all(axis=1) & np.isfinite(n) & (n > 0)
+        dirs = np.where(ok[:, None], d / np.where(ok, n, 1.0)[:, None] * np.sign(np.linalg.det(M))[:, None], 0.0)
+    return np.where(ok[:, None], c, 0.0), dirs, ok
+
+
+def _rays_one_by_one(C: np.ndarray, pts: np.ndarray):
+    """:func:`_rays` view by view (a singular M_i gives no ray)."""
     N = len(C)
     centres, dirs, ok = np.zeros((N, 3)), np.zeros((N, 3)), np.zeros(N, bool)
     for i in range(N):
@@ -50,20 +67,17 @@ def _rays(C: np.ndarray, pts: np.ndarray):
     return centres, dirs, ok
 
 
-def _closest_depths(centres, dirs, i: int) -> list:
-    """Depths t > 0 on ray i of its points closest to every other (non-parallel) ray j."""
-    out = []
-    for j in range(len(centres)):
-        if j == i:
-            continue
-        b = centres[j] - centres[i]
-        k = float(dirs[i] @ dirs[j])
-        den = 1.0 - k * k
-        if den > 1e-12:
-            t = (float(b @ dirs[i]) - k * float(b @ dirs[j])) / den
-            if np.isfinite(t) and t > 0:
-                out.append(t)
-    return out
+def _closest_depths_all(centres, dirs) -> list:
+    """For each ray i (unit directions u), the depths t > 0 of its points closest to every other, non-parallel
+    ray j: with b = C_j - C_i and k = u_i . u_j, t = (b . u_i - k b . u_j) / (1 - k^2) (all pairs at once)."""
+    b = centres[None, :, :] - centres[:, None, :]                  # b[i, j] = C_j - C_i
+    k = dirs @ dirs.T
+    den = 1.0 - k * k
+    with np.errstate(all="ignore"):
+        t = (np.einsum("ijk,ik->ij", b, dirs) - k * np.einsum("ijk,jk->ij", b, dirs)) / den
+    good = (den > 1e-12) & np.isfinite(t) & (t > 0)
+    np.fill_diagonal(good, False)
+    return [t[i, good[i]] for i in range(len(centres))]
 
 
 def _baseline(centres: np.ndarray) -> float:
@@ -71,7 +85,10 @@ def _baseline(centres: np.ndarray) -> float:
     d = np.linalg.norm(centres[:, None] - centres[None], axis=2)
     d = d[np.triu_indices(len(centres), 1)]
     d = d[np.isfinite(d) & (d > 0)]
-    return float(np.median(d)) if d.size else max(1.0, float(np.max(np.linalg.norm(centres, axis=1))))
+    if not d.size:
+        return max(1.0, float(np.max(np.linalg.norm(centres, axis=1))))
+    d = np.sort(d)                                   # the median without np.median's per-call overhead
+    return float((d[(d.size - 1) // 2] + d[d.size // 2]) / 2)
 
 
 def ray_candidates(search) -> list:
@@ -85,12 +102,14 @@ def ray_candidates(search) -> list:
         return []
     base = _baseline(centres[ok])
     sweep = base * np.logspace(-3, 3, SWEEP)
-    ts = [np.unique(np.concatenate([sweep, _closest_depths(centres[ok], dirs[ok], int(np.sum(ok[:i])))]))
-          for i in views]
+    closest = _closest_depths_all(centres[ok], dirs[ok])
+    ts = [np.unique(np.concatenate([sweep, t])) for t in closest]
     f = search.screen(np.concatenate([centres[i] + t[:, None] * dirs[i] for i, t in zip(views, ts)]))
     f = np.where(np.isnan(f), np.inf, f)
     out, refine = [], []
-    for i, t, fi in zip(views, ts, np.split(f, np.cumsum([len(t) for t in ts])[:-1])):
+    ends = np.cumsum([len(t) for t in ts]).tolist()
+    for i, t, lo, hi in zip(views, ts, [0] + ends[:-1], ends):
+        fi = f[lo:hi]
         k = int(np.argmin(fi))
         out.append(centres[i] + t[k] * dirs[i])
         if fi[k] < search.best_f:          # refine only the rays that already beat the best candidate

@@ -340,7 +340,7 @@ def _recentred(best: MinimizeResult, f, eq, ineq, multiplier, radius, solve, tol
         return best
     cut = cancellation_scale(f, best.minimizers[0])
     if cut.st >= cut.s0:
-        return best
+        return with_exact_values(best, f, tol, best.scale)       # an upper bound f(v^) never below f(v^)
     cands, note = [best], f"scale {cut.s0:.3g} at the origin, {cut.st:.3g} at the minimiser"
     prog = None
     if cut.worth_translating and not deadline.expired:

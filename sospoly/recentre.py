@@ -132,6 +132,8 @@ def exact_value(p: Polynomial, x) -> float:
 def with_exact_values(res, f: Polynomial, tol, scale: float):
     """``res`` with its candidates re-valued exactly (:func:`exact_value`), the upper bound f at the best, and the
     decision of :mod:`sospoly.tolerances` made again at ``scale`` on those numbers."""
+    if _expanded_terms(f) > MAX_TERMS:
+        return res
     pts = [np.asarray(p, float) for p in (res.candidates or res.minimizers)][:MAX_CANDIDATES]
     vals = sorted(((exact_value(f, p), p) for p in pts if np.all(np.isfinite(p))), key=lambda vp: vp[0])
     vals = [(v, p) for v, p in vals if np.isfinite(v)]

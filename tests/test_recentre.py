@@ -112,3 +112,12 @@ def test_the_decision_is_at_the_minimisers_scale_also_without_a_constant_there()
     assert res.lower_bound <= 9215.0 <= res.upper_bound
     assert not res.optimal or res.upper_bound - res.lower_bound <= \
         sospoly.DEFAULT_TOLERANCES.gap_tolerance(res.upper_bound, res.scale)
+
+
+def test_upper_bound_is_the_exact_value_at_the_point_everywhere():
+    """Review 5, F3: without re-centring the upper bound was a floating-point value, 4e-11 below the exact minimum
+    of a convex quadratic.  Now it is f at the point in rational arithmetic, rounded up."""
+    f = 3.3 * (x - 0.7) ** 2 + 1.9 * (y + 0.35) ** 2 - 2.537912372204689 + 0.1 * x * y
+    res = sospoly.minimize(f)
+    assert res.upper_bound == exact_value(f, res.minimizers[0])
+    assert res.lower_bound <= res.upper_bound

@@ -48,7 +48,7 @@ import numpy as np
 
 from .cameras import power2_scale
 from .geometry import COMMON_CENTRE_RTOL, POINT_AT_INFINITY_RTOL, point_from_image_points
-from .stacked import (_project, dlt_stack, median_rows, norms, null_vectors, pixel_scales, project_stack,
+from .stacked import (dlt_stack, median_rows, norms, null_vectors, pixel_scales, project_quiet, project_stack,
                       refine_points_stack)
 
 __all__ = ["Normalization", "NormalizationStack", "normalization_for", "normalization_stack", "unconstrained_reason",
@@ -237,7 +237,7 @@ def _frames(C: np.ndarray, x: np.ndarray, X0: np.ndarray, ok: np.ndarray, rho_fl
     image scale s = 1 / rho from the DLT residual, the world frame (origin X0, scale d) and the normalised cameras
     P_i' = T_i P_i H / ||.||_F.  Run under ``np.errstate(over="ignore", invalid="ignore")``."""
     M, N = x.shape[:2]
-    u0, _, fin0 = _project(C, X0)                  # (already under errstate)
+    u0, _, fin0 = project_quiet(C, X0)                  # (already under errstate)
     res = np.where(fin0[:, None], norms(u0 - x, axis=2), np.inf)
     rho = np.where(fin0, np.sqrt(np.add.reduce(np.where(fin0[:, None], res, 0.0) ** 2, axis=1) / N), 1.0)
     rho = np.maximum(rho, rho_floor)

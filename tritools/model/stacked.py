@@ -26,7 +26,8 @@ from .geometry import POINT_AT_INFINITY_RTOL, PROJECTION_DENOM_RTOL, SAME_CENTER
 
 __all__ = ["null_vectors", "dlt_stack", "project_stack", "refine_points_stack", "fundamental_stack",
            "epipolar_quadratics", "pixel_scales", "distinct_centres", "centre_vectors", "view_pairs", "band_pairs",
-           "norms", "median_rows", "gauss_newton_polish", "LM_MAX_ITER", "LM_STEP_RTOL"]
+           "norms", "median_rows", "gauss_newton_polish", "project_quiet", "next_damping", "lm_accept", "LM_MAX_ITER",
+           "LM_STEP_RTOL"]
 
 #: Levenberg-Marquardt iterations at most (from the DLT start it converges in ~5-10).
 LM_MAX_ITER = 100
@@ -121,10 +122,10 @@ def dlt_stack(C: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 def project_stack(C: np.ndarray, X: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Projections Phi(X_m, P_mi) (M, N, 2), homogeneous images (M, N, 3) and a finite mask (M,)."""
     with np.errstate(over="ignore", invalid="ignore"):
-        return _project(C, X)
+        return project_quiet(C, X)
 
 
-def _project(C: np.ndarray, X: np.ndarray, absC2: np.ndarray | None = None) -> tuple:
+def project_quiet(C: np.ndarray, X: np.ndarray, absC2: np.ndarray | None = None) -> tuple:
     """:func:`project_stack` for a caller that already ignores overflow and invalid operations (one
     ``np.errstate`` around a loop instead of one per projection); ``absC2``: |C[:, :, 2, :]| when the caller
     has it (the cameras of a loop do not change)."""
@@ -165,7 +166,7 @@ def refine_points_stack(C: np.ndarray, xhat: np.ndarray, X: np.ndarray, ok: np.n
     mu = np.full(len(X), 1e-3)
     with np.errstate(over="ignore", invalid="ignore"):      # once, not once per projection
         absC2 = np.abs(C[:, :, 2, :])
-        u, h, fin = _project(C, X, absC2)
+        u, h, fin = project_quiet(C, X, absC2)
         cost = np.where(fin, np.add.reduce((u - xhat) ** 2, axis=(1, 2)), np.inf)
         ok = ok & fin
         active = np.nonzero(ok)[0]
@@ -192,7 +193,7 @@ def _lm_iteration(C, absC2, xhat, X, u, h, cost, mu, converged, active: np.ndarr
     mu_a = mu if whole else mu[active]
     step = damped_step(JtJ, g, mu_a)
     Xt = Xa + step
-    ut, ht, fint = _project(Ca, Xt, absCa)
+    ut, ht, fint = project_quiet(Ca, Xt, absCa)
     ct = np.where(fint, np.add.reduce((ut - xa) ** 2, axis=(1, 2)), np.inf)
     better = np.isfinite(ct) & (ct <= (cost if whole else cost[active]))
     small = norms(step, axis=1) <= LM_STEP_RTOL * (1.0 + norms(Xa, axis=1))
@@ -202,11 +203,32 @@ def _lm_iteration(C, absC2, xhat, X, u, h, cost, mu, converged, active: np.ndarr
     else:
         acc = active[better]
         X[acc], cost[acc], u[acc], h[acc] = Xt[better], ct[better], ut[better], ht[better]
-    mu_a = np.where(better, np.maximum(mu_a / 10, 1e-12), mu_a * 10)
+    mu_a = next_damping(mu_a, better)
     mu[active] = mu_a
     stalled = mu_a > 1e12
     converged[active[small & ~stalled]] = True
     return active[~(small | stalled)]
+
+
+def next_damping(mu: np.ndarray, better: np.ndarray) -> np.ndarray:
+    """The Levenberg-Marquardt damping after a step: divided by 10 (floor 1e-12) where it was accepted, times 10
+    where not -- the one rule of every LM loop in tritools."""
+    return np.where(better, np.maximum(mu / 10, 1e-12), mu * 10)
+
+
+def lm_accept(X: np.ndarray, cost: np.ndarray, mu: np.ndarray, active: np.ndarray, Xa: np.ndarray, step: np.ndarray,
+              Xt: np.ndarray, ct: np.ndarray) -> np.ndarray:
+    """Accept the trial points ``Xt`` (cost ``ct``) of the ``active`` problems where they do not raise the cost, update
+    the damping (:func:`next_damping`), and return the problems still active: not converged (a step below
+    ``LM_STEP_RTOL`` of |X| after an accepted step), not stalled (damping above 1e12) and not at cost 0.  ``X``,
+    ``cost`` and ``mu`` are updated in place (the region LM loops of :mod:`tritools.solve.discs` / ``ellipses``)."""
+    better = np.isfinite(ct) & (ct <= cost[active])
+    X[active[better]] = Xt[better]
+    cost[active[better]] = ct[better]
+    mu[active] = next_damping(mu[active], better)
+    small = np.linalg.norm(step, axis=1) <= LM_STEP_RTOL * (1.0 + np.linalg.norm(Xa, axis=1))
+    done = (better & small) | (mu[active] > 1e12) | (cost[active] == 0)
+    return active[~done]
 
 
 def gauss_newton_polish(C: np.ndarray, xhat: np.ndarray, X: np.ndarray, ok: np.ndarray) -> np.ndarray:
@@ -223,7 +245,7 @@ def gauss_newton_polish(C: np.ndarray, xhat: np.ndarray, X: np.ndarray, ok: np.n
         return X
     Ca, xa, Xa = C[act], xhat[act], X[act]
     with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
-        u, h, fin = _project(Ca, Xa)
+        u, h, fin = project_quiet(Ca, Xa)
         cost = np.where(fin, np.add.reduce((u - xa) ** 2, axis=(1, 2)), np.inf)
         Jac = (Ca[..., :2, :3] - u[..., None] * Ca[..., 2:3, :3]) / h[..., 2][..., None, None]
         Jac = Jac.reshape(len(act), -1, 3)
@@ -231,7 +253,7 @@ def gauss_newton_polish(C: np.ndarray, xhat: np.ndarray, X: np.ndarray, ok: np.n
         JtJ = np.einsum("mki,mkj->mij", Jac, Jac)
         step = damped_step(JtJ, np.einsum("mki,mk->mi", Jac, r), np.zeros(len(act)))
         Xt = Xa + step
-        ut, _, fint = _project(Ca, Xt)
+        ut, _, fint = project_quiet(Ca, Xt)
         ct = np.where(fint, np.add.reduce((ut - xa) ** 2, axis=(1, 2)), np.inf)
     better = fin & np.isfinite(ct) & (ct < cost) & np.isfinite(Xt).all(axis=1)
     X[act[better]] = Xt[better]

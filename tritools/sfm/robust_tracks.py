@@ -14,7 +14,7 @@ import numpy as np
 
 from ..io.colmap.arrays import ModelArrays, PointChunk
 from ..io.colmap.binary import write_images_binary
-from ..io.colmap.formats import _files
+from ..io.colmap.formats import model_files
 from ..io.colmap.text_arrays import write_images_text
 
 __all__ = ["drop_observations", "rewrite_images"]
@@ -42,6 +42,6 @@ def rewrite_images(arrays: ModelArrays, folder, fmt: str, removed_kp: np.ndarray
     kp[np.asarray(removed_kp, np.int64)] = -1
     fields = {k: getattr(arrays, k) for k in arrays.__dataclass_fields__}
     fields["kp_point3D"] = kp
-    path = Path(folder) / _files(fmt)[1]
+    path = Path(folder) / model_files(fmt)[1]
     (write_images_binary if fmt == "bin" else write_images_text)(ModelArrays(**fields), path)
     return path

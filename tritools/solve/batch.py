@@ -121,7 +121,7 @@ def _expired_items(items, retries, end) -> list:
     :func:`tritools.solve.call_limit.expired_points` (vectorised), the others one by one (their local estimate)."""
     out, points = [], {}
     for i, c, r, o, pre in items:
-        pp = _as_point_problem(c, r)
+        pp = as_point_problem(c, r)
         if pp is None:
             out.append((i, _solve_item(c, r, o, pre, retries, end)))
         else:
@@ -160,7 +160,7 @@ def worker_init() -> None:
     os.environ["RUST_BACKTRACE"] = "0"   # Clarabel panics are caught and reported; no backtrace noise
 
 
-def _as_point_problem(cams, regions):
+def as_point_problem(cams, regions):
     """(cameras (N, 3, 4), points (N, 2)) when the item is a well-shaped point-region problem, else None
     (the item then goes through :func:`triangulate`, whose validation reports any problem)."""
     if isinstance(regions, np.ndarray):
@@ -322,7 +322,7 @@ def _solve_problems(problems, opts: TriangulationOptions, executor, progress, re
             out.objects[i] = _failed(opts, Status.INVALID_INPUT,
                                      f"problems[{i}] must be a (cameras, regions) pair, got {type(prob).__name__}")
             continue
-        pp = _as_point_problem(cams, regions)
+        pp = as_point_problem(cams, regions)
         dp = as_disc_problem(cams, regions) if pp is None and verify_discs_first else None
         if dp is not None:
             disc_groups.setdefault(len(regions), []).append((i, cams, dp[1], dp[2], regions))

@@ -39,7 +39,7 @@ from sospoly.solvers import with_single_threaded_blas
 from ..model.cameras import numeric_cameras
 from ..model.normalize import normalization_stack
 from ..model.regions import ConeKind, Region
-from ..model.stacked import LM_MAX_ITER, LM_STEP_RTOL, damped_step, project_stack
+from ..model.stacked import LM_MAX_ITER, damped_step, lm_accept, project_stack
 from .decide import decide, decide_reported, gamma_from_c
 from .regions_verify import compact_bounds, region_forms
 
@@ -116,13 +116,7 @@ def refine_discs_stack(C: np.ndarray, rho: np.ndarray, X: np.ndarray, ok: np.nda
         step = damped_step(JtJ, g, mu[active])
         Xt = Xa + step
         ct = cost_of(Xt, Ca, ra)[0]
-        better = np.isfinite(ct) & (ct <= cost[active])
-        X[active[better]] = Xt[better]
-        cost[active[better]] = ct[better]
-        mu[active] = np.where(better, np.maximum(mu[active] / 10, 1e-12), mu[active] * 10)
-        small = np.linalg.norm(step, axis=1) <= LM_STEP_RTOL * (1.0 + np.linalg.norm(Xa, axis=1))
-        done = (better & small) | (mu[active] > 1e12) | (cost[active] == 0)
-        active = active[~done]
+        active = lm_accept(X, cost, mu, active, Xa, step, Xt, ct)
     return X, ok & np.all(np.isfinite(X), axis=1)
 
 

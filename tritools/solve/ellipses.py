@@ -25,7 +25,7 @@ from sospoly.budget import Deadline
 from sospoly.solvers import with_single_threaded_blas
 
 from ..model.normalize import normalization_stack
-from ..model.stacked import LM_MAX_ITER, LM_STEP_RTOL, damped_step, project_stack
+from ..model.stacked import LM_MAX_ITER, damped_step, lm_accept, project_stack
 from .decide import decide, decide_reported, gamma_from_c
 from .discs import DiscBatch
 from .regions_verify import closest_on_ellipses, compact_bounds, ellipse_axes
@@ -89,13 +89,7 @@ def refine_ellipses_stack(C, R, sigma, X, ok):
         step = damped_step(JtJ, g, mu[active])
         Xt = Xa + step
         ct = cost_of(Xt, Ca, Ra, sa)
-        better = np.isfinite(ct) & (ct <= cost[active])
-        X[active[better]] = Xt[better]
-        cost[active[better]] = ct[better]
-        mu[active] = np.where(better, np.maximum(mu[active] / 10, 1e-12), mu[active] * 10)
-        small = np.linalg.norm(step, axis=1) <= LM_STEP_RTOL * (1.0 + np.linalg.norm(Xa, axis=1))
-        done = (better & small) | (mu[active] > 1e12) | (cost[active] == 0)
-        active = active[~done]
+        active = lm_accept(X, cost, mu, active, Xa, step, Xt, ct)
     return X, ok & np.all(np.isfinite(X), axis=1)
 
 

@@ -95,13 +95,13 @@ def robust_many(problems: list, robust, opts, *, executor=None, progress=None) -
 
 
 def _robust_many(problems: list, robust, opts, executor, progress) -> list[TriangulationResult]:
-    from .batch import _as_point_problem, solve_point_problems
+    from .batch import as_point_problem, solve_point_problems
 
     thresholds = thresholds_for(robust, problems)
     out: list = [None] * len(problems)
     direct, l2_first, points = [], [], {}
     for i, (prob, c) in enumerate(zip(problems, thresholds)):
-        pp = _as_point_problem(*prob) if isinstance(prob, (list, tuple)) and len(prob) == 2 else None
+        pp = as_point_problem(*prob) if isinstance(prob, (list, tuple)) and len(prob) == 2 else None
         (direct if pp is not None and np.any(np.isfinite(c)) else l2_first).append(i)
         if pp is not None:
             points[i] = pp

@@ -36,7 +36,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..model.normalize import normalization_stack
-from ..model.stacked import damped_step, dlt_stack, project_stack
+from ..model.stacked import damped_step, dlt_stack, next_damping, project_stack
 from .fastpath import lagrangian_bounds
 
 __all__ = ["ParentFrame", "parent_frames", "frames_of", "verify_in_parent", "LM_STEPS", "LM_MORE"]
@@ -115,7 +115,7 @@ def _polish(Cn: np.ndarray, X: np.ndarray, steps: int) -> np.ndarray:
             X = np.where(better[:, None], Xt, X)
             u, h = np.where(better[:, None, None], ut, u), np.where(better[:, None, None], ht, h)
             cost = np.where(better, ct, cost)
-            mu = np.where(better, np.maximum(mu / 10, 1e-12), mu * 10)
+            mu = next_damping(mu, better)
     return X
 
 

@@ -39,7 +39,7 @@ FORMATS = ("bin", "txt")
 DEFAULT_CHUNK_POINTS = 100_000
 
 
-def _files(fmt: str) -> tuple:
+def model_files(fmt: str) -> tuple:
     return BINARY_FILES if fmt == "bin" else TEXT_FILES
 
 
@@ -51,15 +51,15 @@ def detect_format(folder) -> str:
     if not folder.is_dir():
         raise FileNotFoundError(f"{folder}: no such directory")
     for fmt in FORMATS:
-        if all((folder / f).is_file() for f in _files(fmt)):
+        if all((folder / f).is_file() for f in model_files(fmt)):
             return fmt
     for fmt in FORMATS:
-        have = [f for f in _files(fmt) if (folder / f).is_file()]
+        have = [f for f in model_files(fmt) if (folder / f).is_file()]
         if have:
-            missing = next(f for f in _files(fmt) if f not in have)
+            missing = next(f for f in model_files(fmt) if f not in have)
             kind = "binary" if fmt == "bin" else "text"
             raise FileNotFoundError(f"{folder / missing}: missing (a COLMAP {kind} model has "
-                                    f"{', '.join(_files(fmt))})")
+                                    f"{', '.join(model_files(fmt))})")
     raise FileNotFoundError(f"{folder}: no COLMAP model ({', '.join(BINARY_FILES)} or {', '.join(TEXT_FILES)})")
 
 
@@ -146,10 +146,10 @@ def open_model(folder, fmt: str | None = None) -> ModelSource:
     elif fmt not in FORMATS:
         raise ValueError(f"model format must be one of {FORMATS}, got {fmt!r}")
     else:
-        for f in _files(fmt):
+        for f in model_files(fmt):
             if not (folder / f).is_file():
                 raise FileNotFoundError(f"{folder / f}: missing")
-    names = _files(fmt)
+    names = model_files(fmt)
     if fmt == "bin":
         cams = read_cameras_binary(folder / names[0])
         ims = read_images_binary(folder / names[1], np.array(cams["ids"], np.int64))
@@ -200,7 +200,7 @@ class ModelWriter:
         self.arrays = arrays
         self.folder = Path(folder)
         self.folder.mkdir(parents=True, exist_ok=True)
-        names = _files(fmt)
+        names = model_files(fmt)
         (write_cameras_binary if fmt == "bin" else write_cameras_text)(arrays, self.folder / names[0])
         (write_images_binary if fmt == "bin" else write_images_text)(arrays, self.folder / names[1])
         self.points = (BinaryPointsWriter if fmt == "bin" else TextPointsWriter)(self.folder / names[2])

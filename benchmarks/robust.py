@@ -43,31 +43,17 @@ import numpy as np
 
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
 
-K = np.array([[1012.0027, 0, 1054], [0, 1012.0027, 581], [0, 0, 1.0]])
-WIDTH, HEIGHT = 2108, 1162
+from tritools.scene import PROTOCOL_IMAGE, PROTOCOL_K, robust_protocol_scene  # noqa: E402
+
+K = PROTOCOL_K
+WIDTH, HEIGHT = PROTOCOL_IMAGE
 THRESHOLD = 200.0
 
 
 def scene(N: int, n_out: int, noise: float, rng):
-    """Cameras (N, 3, 4), observations (N, 2), the true point, the outlier mask."""
-    P = []
-    for _ in range(N):
-        c = rng.normal(size=3)
-        c *= 2.0 / np.linalg.norm(c)
-        z = -c / 2.0
-        up = np.array([0.0, 0.0, 1.0]) if abs(z[2]) < 0.9 else np.array([1.0, 0.0, 0.0])
-        x = np.cross(up, z)
-        x /= np.linalg.norm(x)
-        R = np.stack([x, np.cross(z, x), z])
-        P.append(K @ np.hstack([R, -R @ c[:, None]]))
-    P = np.array(P)
-    X = rng.uniform(-0.5, 0.5, 3)
-    h = P @ np.append(X, 1.0)
-    obs = h[:, :2] / h[:, 2:] + noise * rng.normal(size=(N, 2))
-    out = np.zeros(N, bool)
-    out[rng.choice(N, n_out, replace=False)] = True
-    obs[out] = rng.uniform([0, 0], [WIDTH, HEIGHT], size=(n_out, 2))
-    return P, obs, X, out
+    """Cameras (N, 3, 4), observations (N, 2), the true point, the outlier mask
+    (:func:`tritools.scene.robust_protocol_scene`)."""
+    return robust_protocol_scene(N, n_out, noise, rng)
 
 
 def residuals(X, P, obs):

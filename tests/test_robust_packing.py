@@ -11,7 +11,7 @@ from scipy.optimize import least_squares
 import tritools
 import tritools.solve.robust_bounds as rb
 from tritools.model.regions import Point
-from tritools.scene import random_scene
+from tritools.scene import random_scene, sphere_cameras
 from tritools.solve.robust import tls_cost
 
 
@@ -71,18 +71,7 @@ def test_packing_bound_below_every_subset_optimum(seed):
 def _sphere_scene(N, n_out, rng):
     """The CVPR 2023 protocol (benchmarks/robust.py): cameras on a sphere of radius 2 looking at the origin, the
     point in [-0.5, 0.5]^3, 1 px noise, outliers uniform in the 2108 x 1162 image."""
-    K = np.array([[1012.0027, 0, 1054], [0, 1012.0027, 581], [0, 0, 1]])
-    P = []
-    for _ in range(N):
-        c = rng.normal(size=3)
-        c *= 2.0 / np.linalg.norm(c)
-        z = -c / 2.0
-        up = np.array([0.0, 0.0, 1.0]) if abs(z[2]) < 0.9 else np.array([1.0, 0.0, 0.0])
-        ax = np.cross(up, z)
-        ax /= np.linalg.norm(ax)
-        R = np.stack([ax, np.cross(z, ax), z])
-        P.append(K @ np.hstack([R, -R @ c[:, None]]))
-    P = np.array(P)
+    P = sphere_cameras(N, rng)
     X = rng.uniform(-0.5, 0.5, 3)
     h = P @ np.append(X, 1.0)
     x = h[:, :2] / h[:, 2:] + rng.normal(size=(N, 2))

@@ -5,6 +5,7 @@ import pytest
 from scipy.optimize import least_squares
 
 import tritools
+from tritools.scene import sphere_cameras
 from tritools.solve import robust_bounds as rb
 from tritools.solve.sdp_batch import solve_corollary1_points
 
@@ -14,17 +15,7 @@ K = np.array([[1012.0, 0, 1054], [0, 1012.0, 581], [0, 0, 1.0]])
 def _scene(rng, N=3):
     """The CVPR 2023 protocol (benchmarks/robust.py): cameras on a sphere of radius 2 looking at the origin, one
     observation replaced by a uniform image point."""
-    P = []
-    for _ in range(N):
-        c = rng.normal(size=3)
-        c *= 2.0 / np.linalg.norm(c)
-        z = -c / 2.0
-        up = np.array([0.0, 0.0, 1.0]) if abs(z[2]) < 0.9 else np.array([1.0, 0.0, 0.0])
-        x = np.cross(up, z)
-        x /= np.linalg.norm(x)
-        R = np.stack([x, np.cross(z, x), z])
-        P.append(K @ np.hstack([R, -R @ c[:, None]]))
-    P = np.array(P)
+    P = sphere_cameras(N, rng, K)
     h = P @ np.append(rng.uniform(-0.5, 0.5, 3), 1.0)
     obs = h[:, :2] / h[:, 2:] + rng.normal(size=(N, 2))
     obs[rng.integers(N)] = rng.uniform([0, 0], [2108, 1162])

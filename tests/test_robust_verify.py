@@ -10,7 +10,7 @@ from scipy.optimize import least_squares
 
 import tritools
 import tritools.solve.robust_bounds as rb
-from tritools.scene import random_scene
+from tritools.scene import random_scene, robust_protocol_scene
 from tritools.solve.robust import tls_cost
 from tritools.solve.robust_verify import parent_frames, verify_in_parent
 
@@ -188,29 +188,6 @@ def test_georeferenced_world_and_rescaled_cameras(offset, cam_scale, monkeypatch
     assert 2 * 6 * fast.gamma_ub ** 2 <= f_ref * (1 + 1e-6) + 1e-9
 
 
-def _protocol_scene(N, n_out, noise, rng):
-    """benchmarks/robust.py's scene (the CVPR 2023 protocol), the same random stream."""
-    K = np.array([[1012.0027, 0, 1054], [0, 1012.0027, 581], [0, 0, 1.0]])
-    P = []
-    for _ in range(N):
-        c = rng.normal(size=3)
-        c *= 2.0 / np.linalg.norm(c)
-        z = -c / 2.0
-        up = np.array([0.0, 0.0, 1.0]) if abs(z[2]) < 0.9 else np.array([1.0, 0.0, 0.0])
-        ax = np.cross(up, z)
-        ax /= np.linalg.norm(ax)
-        R = np.stack([ax, np.cross(z, ax), z])
-        P.append(K @ np.hstack([R, -R @ c[:, None]]))
-    P = np.array(P)
-    X = rng.uniform(-0.5, 0.5, 3)
-    h = P @ np.append(X, 1.0)
-    obs = h[:, :2] / h[:, 2:] + noise * rng.normal(size=(N, 2))
-    out = np.zeros(N, bool)
-    out[rng.choice(N, n_out, replace=False)] = True
-    obs[out] = rng.uniform([0, 0], [2108, 1162], size=(n_out, 2))
-    return P, obs, X, out
-
-
 @pytest.mark.slow
 @pytest.mark.parametrize("k", [4, 24])
 def test_split_bound_replaces_the_whole_problem_solve(k, monkeypatch):
@@ -222,7 +199,7 @@ def test_split_bound_replaces_the_whole_problem_solve(k, monkeypatch):
     the split is then exercised with those bounds dropped (as before)."""
     rng = np.random.default_rng([3, 5, 1, 10])
     for _ in range(k + 1):
-        P, x, X, out = _protocol_scene(5, 1, 1.0, rng)
+        P, x, X, out = robust_protocol_scene(5, 1, 1.0, rng)
     sizes = []
     real = rb.SubsetBounds._solve_one
     monkeypatch.setattr(rb.SubsetBounds, "_solve_one",
@@ -256,7 +233,7 @@ def test_polish_early_stop_reaches_the_local_minimum():
     from tritools.solve.robust_verify import _cost, _polish
 
     rng = np.random.default_rng(11)
-    scenes = [_protocol_scene(4, k % 2, 1.0, rng) for k in range(6)]
+    scenes = [robust_protocol_scene(4, k % 2, 1.0, rng) for k in range(6)]
     frames = parent_frames(np.array([P for P, *_ in scenes]), np.array([x for _, x, *_ in scenes]))
     Cn = np.array([f.cameras_n for f in frames])
     X0 = np.array([f.Xn for f in frames]) + 1e-3 * rng.normal(size=(6, 3))

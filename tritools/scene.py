@@ -361,3 +361,42 @@ def uncertain_problem(n_views: int, seed=0, *, noise_px: float = 1.0, size_px: f
 
 
 __all__ += ["uncertain_problem", "UNCERTAIN_KINDS"]
+
+
+# ----------------------------------------------------------------------------- the robust-triangulation protocol
+#: intrinsics and image size of the CVPR 2023 robust-triangulation protocol (Haerenstam-Nielsen et al.).
+PROTOCOL_K = np.array([[1012.0027, 0, 1054], [0, 1012.0027, 581], [0, 0, 1.0]])
+PROTOCOL_IMAGE = (2108, 1162)
+
+
+def sphere_cameras(N: int, rng: np.random.Generator, K: np.ndarray = PROTOCOL_K) -> np.ndarray:
+    """N cameras (N, 3, 4) K [R | -R c] with centres c uniform on the sphere of radius 2, each looking at the
+    origin (the protocol's cameras; ``rng`` drawn 3 normals per camera)."""
+    P = []
+    for _ in range(N):
+        c = rng.normal(size=3)
+        c *= 2.0 / np.linalg.norm(c)
+        z = -c / 2.0
+        up = np.array([0.0, 0.0, 1.0]) if abs(z[2]) < 0.9 else np.array([1.0, 0.0, 0.0])
+        ax = np.cross(up, z)
+        ax /= np.linalg.norm(ax)
+        R = np.stack([ax, np.cross(z, ax), z])
+        P.append(K @ np.hstack([R, -R @ c[:, None]]))
+    return np.array(P)
+
+
+def robust_protocol_scene(N: int, n_out: int, noise: float, rng: np.random.Generator):
+    """(cameras (N, 3, 4), observations (N, 2), the true point, the outlier mask (N,)) of the protocol:
+    :func:`sphere_cameras`, the point uniform in [-0.5, 0.5]^3, Gaussian noise of ``noise`` px, ``n_out``
+    observations replaced by uniform points of the image."""
+    P = sphere_cameras(N, rng)
+    X = rng.uniform(-0.5, 0.5, 3)
+    h = P @ np.append(X, 1.0)
+    obs = h[:, :2] / h[:, 2:] + noise * rng.normal(size=(N, 2))
+    out = np.zeros(N, bool)
+    out[rng.choice(N, n_out, replace=False)] = True
+    obs[out] = rng.uniform([0, 0], PROTOCOL_IMAGE, size=(n_out, 2))
+    return P, obs, X, out
+
+
+__all__ += ["PROTOCOL_K", "PROTOCOL_IMAGE", "sphere_cameras", "robust_protocol_scene"]

@@ -26,7 +26,7 @@ from .angle import triangulation_angles
 from .rigour import box_from_bounds, combine, lower_bounds, round_down, round_up
 from .sets import EPS, dilate, structure_key, view_blocks, view_coefficients
 from .solve import objective_rows, solve_blocks
-from .witness import centres, pull_inside, rays_stay_inside, repeat_block
+from .witness import centres, pull_inside, rays_stay_inside, repeat_block, witness_gap
 
 __all__ = ["UncertaintyStatus", "UncertaintyOptions", "UncertaintyResult", "uncertainty", "uncertainty_many"]
 
@@ -388,23 +388,10 @@ def _assemble(m, N, solved, ray, empty, beta, rho, W, X0, Xe, sigma, q0, q0e, co
         dlo, dhi = _box_depths(lo, hi, drows, X0, q0, q0e, status)
     wl = np.where(np.isfinite(lo_w)[:, None], W[:3], np.nan)
     wh = np.where(np.isfinite(hi_w)[:, None], W[3:6], np.nan)
-    gaps = np.concatenate([np.diag(wl) - lo_w, hi_w - np.diag(wh)])
-    gaps = gaps[np.isfinite(lo_w.tolist() + hi_w.tolist())]
-    gap = float(np.max(gaps)) if len(gaps) else 0.0
-    if np.isnan(gap):
-        gap = np.inf
-    width = np.max(hi_w - lo_w) if status == UncertaintyStatus.BOUNDED else np.inf
-    gap_rel = gap / width if width > 0 else (0.0 if gap == 0 else np.inf)
+    gap, gap_rel, inner, dw = witness_gap(lo_w, hi_w, wl, wh, Xe, status == UncertaintyStatus.BOUNDED, W)
     far = np.maximum(np.abs(lo_w - Xe), np.abs(hi_w - Xe))
     with np.errstate(over="ignore", invalid="ignore"):
         dist = float(round_up(np.sqrt(np.sum(far * far)) * (1 + 8 * EPS))) if np.all(np.isfinite(far)) else np.inf
-    fin = W[np.all(np.isfinite(W), axis=1)]
-    if len(fin):
-        dd = np.linalg.norm(fin - Xe, axis=1)
-        j = int(np.argmax(dd))
-        inner, dw = float(round_down(dd[j] * (1 - 8 * EPS))), fin[j].copy()
-    else:
-        inner, dw = np.nan, np.full(3, np.nan)
     if status == UncertaintyStatus.FAILED:
         wl, wh, gap, gap_rel = nanw, nanw.copy(), np.inf, np.inf
     return UncertaintyResult(status, lo_w, hi_w, dlo, dhi, dist, inner, dw, Xe.copy(), wl, wh, gap, gap_rel,

@@ -17,6 +17,7 @@ import numpy as np
 
 from ..model.geometry import dlt, gamma, gamma_validated, refine_l2, validate_cameras
 from ..model.regions import as_regions
+from .witness import witness_gap
 
 __all__ = ["level_bounds"]
 
@@ -162,20 +163,7 @@ def level_bounds(cameras, regions, level, estimate, opts):
             if np.isfinite(out.hi[k]):
                 w = _extreme(C, regs, tau, start, k, -1.0, scale)
                 wh[k] = np.nan if w is None else w
-    sides = [(wl[k, k] - out.lo[k]) for k in range(3) if np.isfinite(out.lo[k])] + \
-            [(out.hi[k] - wh[k, k]) for k in range(3) if np.isfinite(out.hi[k])]
-    gap = float(np.max(sides)) if sides else 0.0
-    gap = np.inf if np.isnan(gap) else gap
-    finite_width = np.max(out.hi - out.lo) if out.status.value == "bounded" else np.inf
-    gap_rel = gap / finite_width if finite_width > 0 and np.isfinite(finite_width) else (np.inf if gap else 0.0)
-    W = np.vstack([wl, wh])
-    W = W[np.all(np.isfinite(W), axis=1)]
-    if len(W):
-        d = np.linalg.norm(W - out.estimate, axis=1)
-        j = int(np.argmax(d))
-        dw, inner = W[j].copy(), float(d[j])
-    else:
-        dw, inner = np.full(3, np.nan), np.nan
+    gap, gap_rel, inner, dw = witness_gap(out.lo, out.hi, wl, wh, out.estimate, out.status.value == "bounded")
     return replace(out, witness_lo=wl, witness_hi=wh, gap=gap, gap_rel=gap_rel, distance_witness=dw,
                    distance_inner=inner, convexified=definition == "level_relaxed", definition=definition)
 

@@ -8,7 +8,8 @@ import numpy as np
 
 from .sets import contains
 
-__all__ = ["repeat_block", "take", "feasible", "pull_inside", "centres", "rays_stay_inside", "RAY_REACH"]
+__all__ = ["repeat_block", "take", "feasible", "pull_inside", "centres", "rays_stay_inside", "RAY_REACH",
+           "witness_gap"]
 
 #: a ray is accepted when base + lambda d stays in S for lambda = scene scale times these factors
 RAY_REACH = (1e-3, 1.0, 1e2)
@@ -107,3 +108,31 @@ def rays_stay_inside(blocks, R, W, centre, eta, ray, rtol) -> np.ndarray:
         good &= feasible(sub, R[pm], base[pm] + (lam * scale[pm])[:, None] * d, rtol)
     keep[pm, ko] = good
     return keep
+
+
+def witness_gap(lo, hi, wl, wh, estimate, bounded: bool, points=None):
+    """How tight a box [lo, hi] is, from its witnesses (the one rule of :mod:`.api` and :mod:`.level`).
+
+    ``wl[k]`` / ``wh[k]`` (3, 3) are points of the set whose k-th coordinate is near ``lo[k]`` / ``hi[k]`` (NaN
+    rows: none found).  Returns (gap, gap_rel, inner, dw): ``gap`` the largest distance of a finite side to its
+    witness (inf when a finite side has none; 0 when no side is finite), ``gap_rel`` gap over the box's largest
+    width (finite widths only: an unbounded box gives inf unless gap is 0), ``inner`` the largest distance of a
+    witness (of ``points``, rows of points of the set; default wl and wh) from ``estimate``, rounded down (a
+    lower bound on the set's reach), and ``dw`` that witness."""
+    from .rigour import round_down
+    from .sets import EPS
+
+    lo, hi = np.asarray(lo, float), np.asarray(hi, float)
+    sides = [wl[k, k] - lo[k] for k in range(3) if np.isfinite(lo[k])] + \
+            [hi[k] - wh[k, k] for k in range(3) if np.isfinite(hi[k])]
+    gap = float(np.max(sides)) if sides else 0.0
+    gap = np.inf if np.isnan(gap) else gap
+    width = float(np.max(hi - lo)) if bounded else np.inf
+    gap_rel = gap / width if 0 < width < np.inf else (0.0 if gap == 0 else np.inf)
+    W = np.vstack([wl, wh]) if points is None else np.asarray(points, float)
+    W = W[np.all(np.isfinite(W), axis=1)]
+    if not len(W):
+        return gap, gap_rel, np.nan, np.full(3, np.nan)
+    d = np.linalg.norm(W - estimate, axis=1)
+    j = int(np.argmax(d))
+    return gap, gap_rel, max(float(round_down(d[j] * (1 - 8 * EPS))), 0.0), W[j].copy()

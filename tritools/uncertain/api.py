@@ -101,7 +101,8 @@ class UncertaintyResult:
     ``||X - estimate||`` over S, ``distance_witness`` a point of S at ``distance_inner`` from it;
     ``witness_lo``, ``witness_hi`` (3, 3): row k a point of S with ``X_k`` within ``gap`` of
     ``lo_k`` / ``hi_k`` (NaN rows where no point attains it: unbounded side, empty set);
-    ``gap``: largest such distance (world units), ``gap_rel`` the same over the box's largest width;
+    ``gap``: largest such distance (world units), ``gap_rel`` the same over the box's largest width
+    (inf for an unbounded box with a loose finite side; :func:`.witness.witness_gap`);
     ``convexified``: an EllipseBorder was replaced by its filled ellipse (outer bound only);
     ``rigorous``: the finite bounds are certified (False only for finite sides of an unbounded S,
     which are exact to the dual residual but not certified against points beyond 1/residual);

@@ -22,6 +22,7 @@ invert, are not solved and left unchanged (status ``invalid_input`` with a messa
 """
 from __future__ import annotations
 
+import dataclasses
 import logging
 from dataclasses import dataclass
 from functools import cached_property
@@ -29,13 +30,14 @@ from functools import cached_property
 import numpy as np
 
 from ..io.colmap.arrays import ModelArrays
-from ..io.colmap.model import Model, Point3D
+from ..io.colmap.model import NO_POINT3D, Model, Point3D
 from ..io.colmap.pycolmap_bridge import from_pycolmap, import_pycolmap, is_pycolmap_reconstruction
 from ..records import TriangulationResults
 from ..result import Status, TriangulationResult
 from ..solve.call_limit import call_limit
 from .certify import STATUS_LEGEND, RecordColumns, status_code
 from .pipeline import RetriangulationOptions, prepare_geometry, process_chunk
+from .robust_tracks import removed_observations, without_observations
 
 __all__ = ["PointCertificate", "RetriangulationReport", "retriangulate", "retriangulate_arrays", "progress_bar",
            "has_tqdm", "skipped_cameras", "PROGRESS_MIN_POINTS", "REPORT_FIELDS"]
@@ -235,7 +237,8 @@ def retriangulate_arrays(arrays: ModelArrays, options: RetriangulationOptions | 
                          ) -> tuple[ModelArrays, RetriangulationReport]:
     """Re-triangulate every point of ``arrays`` (in chunks of ``options.chunk_points``).
 
-    Returns the model with new xyz/errors and the report (points in the arrays' order)."""
+    Returns the model with new xyz/errors (with ``robust``, the outlier observations out of the tracks:
+    :func:`.robust_tracks.without_observations`) and the report (points in the arrays' order)."""
     options = options or RetriangulationOptions()
     geom = prepare_geometry(arrays, options.strict)
     bar = progress_bar(arrays.n_points, options.progress)
@@ -252,7 +255,11 @@ def retriangulate_arrays(arrays: ModelArrays, options: RetriangulationOptions | 
     report = RetriangulationReport.from_chunks(options, ids, results, skipped_cameras(arrays, geom))
     xyz = np.concatenate([r.xyz for r in results]) if results else arrays.point_xyz
     err = np.concatenate([r.error for r in results]) if results else arrays.point_error
-    return arrays.with_points(xyz, err), report
+    new = arrays.with_points(xyz, err)
+    if options.robust is not None and results:
+        # outlier observations leave their tracks, as `tritools colmap --robust` writes them (robust_tracks)
+        new = without_observations(new, np.concatenate([r.keep_obs for r in results]))
+    return new, report
 
 
 def retriangulate(model: Model, method: str | None = None, path: str | None = None, min_track_length: int = 2,
@@ -269,7 +276,9 @@ def retriangulate(model: Model, method: str | None = None, path: str | None = No
 
     ``model`` may also be a ``pycolmap.Reconstruction`` (in memory, no disk): the result is then a new
     ``pycolmap.Reconstruction``, a copy of the input whose updated points get the new xyz and ERROR
-    (rigs, frames, colours and tracks unchanged; :mod:`tritools.io.colmap.pycolmap_bridge`).
+    (rigs, frames, colours and tracks unchanged; :mod:`tritools.io.colmap.pycolmap_bridge`).  With ``robust``,
+    the outlier observations of every updated point leave its track and their keypoints get POINT3D_ID -1, in
+    memory as on disk (``tritools colmap --robust``; :mod:`.robust_tracks`).
 
     Returns ``(new_model, report)``; ``report.records`` follow the point ids in increasing order.
     """
@@ -285,21 +294,43 @@ def retriangulate(model: Model, method: str | None = None, path: str | None = No
     arrays = ModelArrays.from_model(model)
     new, report = retriangulate_arrays(arrays, options)
     changed = np.nonzero(report.updated)[0]
+    gone = set(removed_observations(arrays, new))
     points = []
     for i in changed:
         p = model.points3D[int(arrays.point_ids[i])]
-        points.append(Point3D(p.id, tuple(new.point_xyz[i].tolist()), p.rgb, float(new.point_error[i]), p.track))
-    return model.replace_points(points), report
+        track = tuple(e for e in p.track if e not in gone) if gone else p.track
+        points.append(Point3D(p.id, tuple(new.point_xyz[i].tolist()), p.rgb, float(new.point_error[i]), track))
+    if not gone:
+        return model.replace_points(points), report
+    return _without_observations(model, gone, points), report
+
+
+def _without_observations(model: Model, gone: set, points: list) -> Model:
+    """``model`` with the Point3D records ``points`` (their tracks already without ``gone``) and the keypoints
+    ``gone`` ((image id, keypoint index), ...) without a 3D point (POINT3D_ID -1): one construction, which
+    checks the cross references of both."""
+    images = dict(model.images)
+    for img in {i for i, _ in gone}:
+        im = images[img]
+        pts = tuple((x, y, NO_POINT3D if (img, k) in gone else pid) for k, (x, y, pid) in enumerate(im.points2D))
+        images[img] = dataclasses.replace(im, points2D=pts)
+    new_points = dict(model.points3D)
+    new_points.update({p.id: p for p in points})
+    return Model(model.cameras, images, new_points)
 
 
 
 def _retriangulate_pycolmap(rec, *args, **kw):
     """:func:`retriangulate` of a ``pycolmap.Reconstruction``: a copy with the updated points changed."""
     pycolmap = import_pycolmap()
-    new, report = retriangulate(from_pycolmap(rec), *args, **kw)
+    model = from_pycolmap(rec)
+    new, report = retriangulate(model, *args, **kw)
     out = pycolmap.Reconstruction(rec)
     for i in np.nonzero(report.updated)[0]:
         pid = int(report.point_ids[i])
-        p, q = new.points3D[pid], out.points3D[pid]
+        p = new.points3D[pid]
+        for image_id, idx in set(model.points3D[pid].track) - set(p.track):
+            out.delete_observation(image_id, idx)          # an outlier (robust): >= 2 inliers stay in the track
+        q = out.points3D[pid]
         q.xyz, q.error = np.asarray(p.xyz, float), float(p.error)
     return out, report

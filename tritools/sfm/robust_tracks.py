@@ -17,7 +17,7 @@ from ..io.colmap.binary import write_images_binary
 from ..io.colmap.formats import model_files
 from ..io.colmap.text_arrays import write_images_text
 
-__all__ = ["drop_observations", "rewrite_images"]
+__all__ = ["drop_observations", "rewrite_images", "without_observations", "removed_observations"]
 
 
 def drop_observations(arrays: ModelArrays, chunk: PointChunk, keep: np.ndarray, removed: list) -> PointChunk:
@@ -35,13 +35,42 @@ def drop_observations(arrays: ModelArrays, chunk: PointChunk, keep: np.ndarray, 
                                track_kp=chunk.track_kp[keep])
 
 
+def _unlinked(arrays: ModelArrays, removed_kp: np.ndarray, **fields) -> ModelArrays:
+    """``arrays`` with the keypoints ``removed_kp`` (global indices) without a 3D point (POINT3D_ID -1) and the
+    other ``fields`` replaced."""
+    kp = arrays.kp_point3D.copy()
+    kp[np.asarray(removed_kp, np.int64)] = -1
+    out = {k: getattr(arrays, k) for k in arrays.__dataclass_fields__}
+    out.update(fields, kp_point3D=kp)
+    return ModelArrays(**out)
+
+
 def rewrite_images(arrays: ModelArrays, folder, fmt: str, removed_kp: np.ndarray) -> Path:
     """Write the images file of ``arrays`` into ``folder`` again, the keypoints ``removed_kp`` (global indices)
     without a 3D point (POINT3D_ID -1)."""
-    kp = arrays.kp_point3D.copy()
-    kp[np.asarray(removed_kp, np.int64)] = -1
-    fields = {k: getattr(arrays, k) for k in arrays.__dataclass_fields__}
-    fields["kp_point3D"] = kp
     path = Path(folder) / model_files(fmt)[1]
-    (write_images_binary if fmt == "bin" else write_images_text)(ModelArrays(**fields), path)
+    (write_images_binary if fmt == "bin" else write_images_text)(_unlinked(arrays, removed_kp), path)
     return path
+
+
+def without_observations(arrays: ModelArrays, keep: np.ndarray) -> ModelArrays:
+    """The model in memory with the track elements where ``keep`` (one flag per observation, the arrays'
+    track order) is False left out of their tracks and their keypoints unlinked (POINT3D_ID -1): what
+    :func:`drop_observations` and :func:`rewrite_images` write to disk."""
+    keep = np.asarray(keep, bool)
+    if keep.all():
+        return arrays
+    gone = ~keep
+    owner = np.repeat(np.arange(arrays.n_points), np.diff(arrays.track_offsets))
+    lengths = np.bincount(owner[keep], minlength=arrays.n_points)
+    offsets = np.concatenate([[0], np.cumsum(lengths)]).astype(arrays.track_offsets.dtype)
+    removed = arrays.kp_offsets[arrays.track_image[gone]] + arrays.track_kp[gone]
+    return _unlinked(arrays, removed, track_offsets=offsets, track_image=arrays.track_image[keep],
+                     track_kp=arrays.track_kp[keep])
+
+
+def removed_observations(before: ModelArrays, after: ModelArrays) -> list[tuple[int, int]]:
+    """(image id, keypoint index) of every keypoint linked to a 3D point in ``before`` and not in ``after``."""
+    gone = np.nonzero((before.kp_point3D != -1) & (after.kp_point3D == -1))[0]
+    img = np.searchsorted(before.kp_offsets, gone, side="right") - 1
+    return [(int(before.image_ids[i]), int(g - before.kp_offsets[i])) for i, g in zip(img, gone)]

@@ -23,7 +23,8 @@ import numpy as np
 from .cameras import power2_scale
 from .stacked import norms
 
-__all__ = ["WorldFrame", "world_frame", "frame_centre_groups", "RECENTRE_RATIO", "RESOLVED_SPREAD_RTOL"]
+__all__ = ["WorldFrame", "world_frame", "world_origins", "moved_cameras", "frame_centre_groups", "RECENTRE_RATIO",
+           "RESOLVED_SPREAD_RTOL"]
 
 #: the origin moves to the cameras' mean centre when that is farther than this many times their spread ...
 RECENTRE_RATIO = 100.0
@@ -42,15 +43,9 @@ class WorldFrame:
         return bool(np.any(self.origin != 0))
 
     def cameras(self, cameras: np.ndarray) -> np.ndarray:
-        """The cameras in this frame, each divided by a power of two near its largest entry."""
-        C = np.asarray(cameras, float)
-        with np.errstate(all="ignore"):
-            C = C / power2_scale(C, (1, 2))
-            if self.moved:
-                C = C.copy()
-                C[:, :, 3] = C[:, :, :3] @ self.origin + C[:, :, 3]
-                C = C / power2_scale(C, (1, 2))
-        return C
+        """The cameras in this frame, each divided by a power of two near its largest entry
+        (:func:`moved_cameras` of a stack of one)."""
+        return moved_cameras(np.asarray(cameras, float)[None], self.origin[None])[0]
 
     def user_point(self, X):
         return None if X is None else self.origin + np.asarray(X, float)
@@ -90,16 +85,84 @@ def _centres_loop(cameras: np.ndarray) -> np.ndarray:
 
 
 def world_frame(cameras) -> WorldFrame:
-    """The frame of the module docstring for validated cameras (N, 3, 4)."""
-    c = _centres(cameras)
-    if len(c) < 2:
-        return WorldFrame(np.zeros(3))
-    mean = c.mean(axis=0)
-    spread = float(np.max(norms(c - mean, axis=1)))
-    far = float(np.linalg.norm(mean))
-    if not np.isfinite(spread) or far <= RECENTRE_RATIO * spread or spread <= RESOLVED_SPREAD_RTOL * far:
-        return WorldFrame(np.zeros(3))
-    return WorldFrame(mean)
+    """The frame of the module docstring for validated cameras (N, 3, 4) (:func:`world_origins` of a stack of
+    one)."""
+    return WorldFrame(world_origins(np.asarray(cameras, float)[None])[0])
+
+
+def world_origins(C: np.ndarray) -> np.ndarray:
+    """The origin of the frame of the module docstring for each problem of a stack of validated cameras
+    (M, N, 3, 4): the mean of its finite camera centres where that lies farther than ``RECENTRE_RATIO`` times
+    their spread from the origin and the spread is resolved (above ``RESOLVED_SPREAD_RTOL`` times that
+    distance); 0 elsewhere (fewer than two finite centres included).  The centres are the cameras' null
+    vectors (:func:`tritools.model.stacked.null_vectors` of each camera divided by a power of two: exact)."""
+    from .stacked import null_vectors
+
+    C = np.asarray(C, float)
+    M = C.shape[0]
+    with np.errstate(all="ignore"):
+        a = null_vectors(C / power2_scale(C, (2, 3)))
+        a = a / power2_scale(a, (2,))
+        c = a[..., :3] / a[..., 3:]
+        fin = np.all(np.isfinite(c), axis=2) & (a[..., 3] != 0)
+        k = fin.sum(axis=1)
+        mean = np.where(fin[..., None], c, 0.0).sum(axis=1) / np.maximum(k, 1)[:, None]
+        dev = np.where(fin, norms(c - mean[:, None], axis=2), 0.0)
+        spread = np.max(dev, axis=1, initial=0.0)
+        far = norms(mean, axis=1)
+        move = (k >= 2) & np.isfinite(spread) & np.isfinite(far) & (far > RECENTRE_RATIO * spread) & \
+            (spread > RESOLVED_SPREAD_RTOL * far)
+    return np.where(move[:, None], mean, 0.0) if M else np.zeros((0, 3))
+
+
+def moved_cameras(C: np.ndarray, origins: np.ndarray) -> np.ndarray:
+    """The cameras (M, N, 3, 4) in the frames X = origin_m + X' (``origins`` (M, 3), 0: not moved):
+    P' = P [[I, origin], [0, 1]], each camera divided by a power of two near its largest entry before and after
+    (exact).  The new last column P[:, :3] origin + P[:, 3] cancels ~log10(|origin| / spread) digits, so it is
+    evaluated with error-free transformations (:func:`_dot2`: as if in twice the working precision, then rounded
+    once): the moved cameras are then the caller's problem up to one rounding of each entry, as the caller's
+    cameras are."""
+    C = np.asarray(C, float)
+    o = np.asarray(origins, float)
+    with np.errstate(all="ignore"):
+        C = C / power2_scale(C, (2, 3))
+        moved = np.any(o != 0, axis=1)
+        if not moved.any():
+            return C
+        C = C.copy()
+        Cm = C[moved]
+        Cm[..., 3] = _dot2(Cm[..., :3], o[moved][:, None, None, :], Cm[..., 3])
+        C[moved] = Cm / power2_scale(Cm, (2, 3))
+    return C
+
+
+def _two_sum(a, b):
+    """(s, e) with s = fl(a + b) and a + b = s + e exactly (Knuth)."""
+    s = a + b
+    bb = s - a
+    return s, (a - (s - bb)) + (b - bb)
+
+
+def _two_prod(a, b):
+    """(p, e) with p = fl(a b) and a b = p + e exactly (Dekker's splitting; no fused multiply-add in numpy)."""
+    p = a * b
+    ca, cb = 134217729.0 * a, 134217729.0 * b             # 2^27 + 1
+    ah, bh = ca - (ca - a), cb - (cb - b)
+    al, bl = a - ah, b - bh
+    return p, al * bl - (((p - ah * bh) - al * bh) - ah * bl)
+
+
+def _dot2(A: np.ndarray, x: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """sum_k A[..., k] x[..., k] + b, accurate as if computed in twice the working precision (Ogita, Rump and
+    Oishi's Dot2); the plain sum where the splitting overflows."""
+    s, c = b, np.zeros_like(b)
+    for k in range(A.shape[-1]):
+        p, ep = _two_prod(A[..., k], x[..., k])
+        s, es = _two_sum(s, p)
+        c = c + (ep + es)
+    out = s + c
+    plain = np.einsum("...k,...k->...", A, x) + b
+    return np.where(np.isfinite(out), out, plain)
 
 
 def frame_centre_groups(cameras_f: np.ndarray, frame: WorldFrame) -> np.ndarray:

@@ -65,7 +65,8 @@ class SdpBatch:
     ``done[m]``: the batch produced problem m's result (else it must go to the per-point path); where
     done: ``c_lower`` / ``c_upper`` (normalised units), ``status`` and ``optimal`` of the decision,
     ``X`` / ``X_raw`` the refined / extracted world points, ``gamma_lb``, ``image_points`` (pixels) of v*,
-    ``reason`` why a problem was handed back, ``certified_by`` (``"sdp"``, ``"trivial_bound"`` or None).
+    ``reason`` why a problem was handed back, ``certified_by`` (``"sdp"``, ``"trivial_bound"`` or None),
+    ``scale`` the normalisation's image scale s.
     """
     done: np.ndarray
     status: np.ndarray
@@ -80,6 +81,7 @@ class SdpBatch:
     iterations: np.ndarray
     reason: tuple
     certified_by: np.ndarray
+    scale: np.ndarray | None = None
 
 
 def _chunk_size(N: int) -> int:
@@ -234,4 +236,4 @@ def _decided(C, x, norm, ok, reason, tol, c_lb, c_ub, X_n, X_raw_n, xn, comp, it
     by = np.where(trivial, TRIVIAL_BOUND, np.where(optimal, "sdp", None))
     reason = tuple("" if done else r for done, r in zip(ok, reason))
     return SdpBatch(ok, status, optimal & ok, c_rep, c_ub, g_lb, X_world, norm.world_points(X_raw_n),
-                    x + xn / norm.scale[:, None, None], comp.n_lmivar, iters, reason, by)
+                    x + xn / norm.scale[:, None, None], comp.n_lmivar, iters, reason, by, norm.scale)

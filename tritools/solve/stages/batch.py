@@ -43,10 +43,12 @@ import numpy as np
 from sospoly import n_lmivar_formula
 
 from ...model.constraints import Method
+from ...model.frame import moved_cameras, world_origins
+from ...model.normalize import resolutions
 from ...model.regions import Point
 from ...records import TriangulationResults
 from ...result import Attempt, Status
-from ..decide import cheirality
+from ..decide import cheirality, decide_reported
 from ..fastpath import BAND_MIN_VIEWS, BAND_WIDTHS, verify_points
 from ..options import TriangulationOptions
 from ..plan import batch_steps, last_delta
@@ -103,6 +105,11 @@ class BatchContext:
                  stages=(), fast=None, per_point: Callable | None = None):
         self.C, self.x, self.opts = np.asarray(cameras, float), np.asarray(points2d, float), opts
         M, N = self.x.shape[:2]
+        # georeferenced worlds: the batch stages solve in each problem's re-centred frame, like the point stages
+        # (tritools.model.frame); X is stored there and moved back by the report stage
+        self.origin = world_origins(self.C) if M else np.zeros((0, 3))
+        self.Cw = moved_cameras(self.C, self.origin) if np.any(self.origin) else self.C
+        self.scale = np.full(M, np.nan)         # the normalisation's image scale of each row a batch stage solved
         self.M, self.N = M, N
         self.stages, self.per_point = tuple(stages), per_point
         self.fast = frozenset(ImplName) if fast is None else fast_names(fast)
@@ -151,9 +158,11 @@ class BatchContext:
         return out
 
     # ------------------------------------------------------------------------------------------ closing rows
-    def store(self, idx, X, X_raw, gamma_lb, image_points, status, optimal, certified_by) -> None:
-        """Close rows ``idx`` solved at delta = 2 by a batch stage (``report`` completes them)."""
+    def store(self, idx, X, X_raw, gamma_lb, image_points, status, optimal, certified_by, scale) -> None:
+        """Close rows ``idx`` solved at delta = 2 by a batch stage (``report`` completes them); X, X_raw in the
+        rows' re-centred frames, ``scale`` the normalisation's image scale."""
         self.X[idx], self.X_raw[idx], self.gamma_lb[idx], self.image_points[idx] = X, X_raw, gamma_lb, image_points
+        self.scale[idx] = scale
         self.status[idx], self.optimal[idx], self.certified_by[idx] = status, optimal, certified_by
         self.method[idx] = Method.COROLLARY1.value
         self.delta[idx] = 2
@@ -185,12 +194,28 @@ class BatchContext:
         self.in_front = np.zeros(M, bool)
         if not d.size:
             return
+        self.X[d] += self.origin[d]             # back to the caller's frame (0 where not moved)
+        self.X_raw[d] += self.origin[d]
         g, res, dep = points_report_stack(self.C[d], self.x[d], self.X[d], self.opts.world_frame)
         self.gamma_ub[d], self.residuals[d], self.depths[d] = g, res, dep
         self.gamma_ub_raw[d] = points_report_stack(self.C[d], self.x[d], self.X_raw[d])[0]
         self.status[d], self.in_front[d] = cheirality(self.status[d], dep, self.opts.require_in_front)
         self.message[d] = np.where(self.in_front[d] | ~self.optimal[d], "", BEHIND_MESSAGE)
         self.gamma_lb[d] = np.minimum(self.gamma_lb[d], self.gamma_ub[d])
+        self._confirm_moved(d)
+
+    def _confirm_moved(self, d: np.ndarray) -> None:
+        """The certificates of rows solved in a moved frame, confirmed on the caller's cameras at the moved-back
+        estimate (:func:`tritools.solve.decide.decide_reported`: the rule of the point stage ``world_frame``)."""
+        m = d[np.any(self.origin[d] != 0, axis=1) & self.optimal[d] & (self.certified_by[d] != TRIVIAL_BOUND)]
+        if not m.size:
+            return
+        res = resolutions(self.scale[m], self.x[m])
+        ok = decide_reported(self.gamma_lb[m], self.gamma_ub[m], self.opts.tolerances, self.N, self.scale[m], res)
+        lost = m[~ok]
+        self.optimal[lost], self.certified_by[lost] = False, None
+        self.status[lost] = Status.NOT_CERTIFIED.value
+        self.message[lost] = "the bounds met in the re-centred frame, but not at the estimate in the caller's frame"
 
     def record(self, rows) -> TriangulationResults:
         """The :class:`~tritools.records.TriangulationResults` of rows ``rows`` closed by a batch stage."""
@@ -253,7 +278,7 @@ def _verify_points(idx: np.ndarray, ctx: BatchContext) -> None:
     """``"verify-points"`` on rows ``idx``: certified rows closed, an attempt for each row."""
     ctx.rest_opts = ctx.opts.replace(path="sdp")         # verification was tried: the per-point path skips it
     try:
-        b = verify_points(ctx.C[idx], ctx.x[idx], tolerances=ctx.opts.tolerances,
+        b = verify_points(ctx.Cw[idx], ctx.x[idx], tolerances=ctx.opts.tolerances,
                           deadline=stack_deadline(ctx.opts, idx.size))
     except (ValueError, np.linalg.LinAlgError, FloatingPointError):
         b = None
@@ -266,13 +291,13 @@ def _verify_points(idx: np.ndarray, ctx: BatchContext) -> None:
         return
     cert = b.certified
     ctx.store(idx[cert], b.X[cert], b.X[cert], b.gamma_lb[cert], b.image_points[cert], Status.OPTIMAL.value,
-              True, np.where(b.trivial[cert], TRIVIAL_BOUND, "verification"))
+              True, np.where(b.trivial[cert], TRIVIAL_BOUND, "verification"), b.scale[cert])
 
 
 def _sdp_points(idx: np.ndarray, ctx: BatchContext) -> None:
     """``"sdp-points"`` on rows ``idx``: decided rows closed (or continued at delta = 4), handed-back ones open."""
     try:
-        b = solve_corollary1_points(ctx.C[idx], ctx.x[idx], tolerances=ctx.opts.tolerances, refine=ctx.opts.refine,
+        b = solve_corollary1_points(ctx.Cw[idx], ctx.x[idx], tolerances=ctx.opts.tolerances, refine=ctx.opts.refine,
                                     deadline=stack_deadline(ctx.opts, idx.size))
     except (ValueError, np.linalg.LinAlgError, FloatingPointError):
         return
@@ -283,7 +308,7 @@ def _sdp_points(idx: np.ndarray, ctx: BatchContext) -> None:
                                   AttemptStep.SDP_BATCH.value, "dense", ("ipm-batch:converged",)),)
         if opt or final:
             ctx.store(np.array([m]), b.X[k:k + 1], b.X_raw[k:k + 1], b.gamma_lb[k:k + 1], b.image_points[k:k + 1],
-                      str(b.status[k]), opt, b.certified_by[k] if opt else None)
+                      str(b.status[k]), opt, b.certified_by[k] if opt else None, b.scale[k])
         else:                       # delta = 2 decided, not certified: the per-point path continues at 4
             ctx.todo[int(m)] = ctx.opts.replace(delta=4, path="sdp")
 

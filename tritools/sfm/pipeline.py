@@ -311,17 +311,26 @@ def process_chunk(arrays: ModelArrays, geom: ModelGeometry, chunk: PointChunk, o
     # (the one depth rule, tritools.model.cameras; a COLMAP frame is right-handed: [R | t] with det R = +1)
     Rt = np.concatenate([geom.R, geom.t[:, :, None]], axis=2)
     depth = depths_stack(Rt[obs_img][:, None], test[owner])[:, 0]
-    behind = np.bincount(owner[~(depth > 0)], minlength=n) > 0
+    # cheirality on the observations the estimate keeps: a robust estimate's outliers may lie "behind" their
+    # camera (docs/robust.md), as triangulate(..., robust=c) judges in_front
+    behind = np.bincount(owner[~(depth > 0) & ~outlier], minlength=n) > 0
     ub, g_in = rec.gamma_ub, gamma_input
     better = has_X & np.isfinite(ub) & (rec.optimal | ~np.isfinite(g_in) | (ub <= g_in))
-    upd = better & (~behind | (options.behind == "write"))
+    # a robust estimate that keeps fewer than two observations does not determine the point (any point of one
+    # ray costs the same): the input point and its track stay
+    undetermined = has_X & (n_inl >= 0) & (n_inl < 2)
+    upd = better & (~behind | (options.behind == "write")) & ~undetermined
     xyz, error = chunk.xyz.copy(), chunk.error.copy()
     xyz[upd] = X[upd]
-    # outliers leave the tracks of the points written anew (when at least two inliers remain)
-    keep = ~(outlier & upd[owner] & (n_inl[owner] >= 2))
+    # outliers leave the tracks of the points written anew (at least two inliers remain: ``undetermined``)
+    keep = ~(outlier & upd[owner])
     message = np.array(rec.message)
     if options.robust is not None:
         _outlier_notes(arrays, obs_img, owner, keep, message)
+        for p in np.nonzero(undetermined)[0]:
+            note = (f"the robust estimate keeps {int(n_inl[p])} of {int(n_used[p])} observations: the point is not "
+                    "determined; the input point and its track are kept")
+            message[p] = f"{message[p]}; {note}" if message[p] else note
     if upd.any():
         sel = upd[owner] & usable & keep
         error[upd] = _colmap_error(arrays, geom, xyz, obs_img[sel], gk[sel], owner[sel], n)[upd]

@@ -2,6 +2,8 @@
 keeps, and an estimate that keeps fewer than two observations does not move the point."""
 import numpy as np
 
+import tritools
+
 from tritools.io.colmap import model_from_projections
 from tritools.sfm import retriangulate
 
@@ -56,3 +58,48 @@ def test_two_view_track_keeping_one_observation_is_not_moved():
     assert new.points3D[pid].xyz == m.points3D[pid].xyz and new.points3D[pid].track == m.points3D[pid].track
     assert "not determined" in rep.records[0].message
     assert rng is not None
+
+
+def _tls_gamma(model, xyz, track, c):
+    """TLS gamma of xyz over a track (PINHOLE cameras, own projection)."""
+    from tritools.io.colmap.model import rotation_from_qvec
+
+    d2 = []
+    for img, kp in track:
+        im = model.images[img]
+        fx, fy, cx, cy = model.cameras[im.camera_id].params
+        x = rotation_from_qvec(im.qvec) @ np.asarray(xyz) + np.asarray(im.tvec)
+        u = (fx * x[0] / x[2] + cx, fy * x[1] / x[2] + cy)
+        d2.append(min((u[0] - im.points2D[kp][0]) ** 2 + (u[1] - im.points2D[kp][1]) ** 2, c * c))
+    return float(np.sqrt(np.sum(d2) / (2 * len(track))))
+
+
+def test_uncertified_robust_estimates_are_written_only_where_no_worse_in_tls(tmp_path):
+    """GAMMA_INPUT is the input point's TLS gamma with the same threshold, so an uncertified robust estimate
+    replaces the input only where its TLS gamma is no larger (review 6 F4: it was compared with the input's L2
+    gamma, wrong matches included, and all-outlier estimates replaced inputs)."""
+    from tests.test_robust_inmemory import _model_with_wrong_matches
+
+    m, _ = _model_with_wrong_matches(tmp_path, seed=2)
+    new, rep = retriangulate(m, robust=5.0, solver=tritools.TriangulationOptions().replace(time_limit=1e-4))
+    c = 5.0
+    checked = 0
+    for pid, upd, rec in zip(rep.point_ids, rep.updated, rep.records):
+        old = m.points3D[int(pid)]
+        g_in = _tls_gamma(m, old.xyz, old.track, c)
+        assert abs(rec.gamma_input - g_in) <= 1e-6 * max(1.0, g_in)
+        if upd and not rec.certified:
+            checked += 1
+            assert _tls_gamma(m, new.points3D[int(pid)].xyz, old.track, c) <= g_in * (1 + 1e-9)
+    assert checked > 0
+
+
+def test_robust_option_refuses_text():
+    import pytest
+
+    from tritools.sfm import OptionError, RetriangulationOptions
+
+    for bad in ("5", b"5", [5.0]):
+        with pytest.raises(OptionError, match="robust"):
+            RetriangulationOptions(robust=bad)
+    assert RetriangulationOptions(robust=np.float32(2.5)).robust == 2.5

@@ -4,7 +4,8 @@
 
     POINT3D_ID N_VIEWS GAMMA_LB GAMMA_UB CERTIFIED STATUS DELTA CERTIFIED_BY GAMMA_INPUT UPDATED IN_FRONT MESSAGE
 
-GAMMA_* in undistorted pixels (``nan`` when absent, floats as ``repr``: exact), CERTIFIED, UPDATED
+GAMMA_* in undistorted pixels (``nan`` when absent, floats as ``repr``: exact; with ``--robust`` all three are
+TLS gammas with the run's threshold, GAMMA_INPUT that of the input point), CERTIFIED, UPDATED
 and IN_FRONT ``0``/``1``, STATUS a :class:`tritools.Status` value, DELTA the relaxation degree
 (``-1`` when none), CERTIFIED_BY ``sdp``/``verification``/``-``, MESSAGE the rest of the line
 (spaces allowed, line breaks replaced by spaces, ``-`` when empty).  :func:`read_certificates`

@@ -44,9 +44,10 @@ def robust_threshold(value) -> float | None:
     """None, or ``value`` as a positive threshold in pixels (:class:`OptionError` naming ``robust``)."""
     if value is None:
         return None
-    try:
-        ok = not isinstance(value, bool) and float(value) > 0
-    except (TypeError, ValueError):
+    try:      # a number, not its text (tritools.triangulate's rule; the CLI parses its flag itself)
+        ok = isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool) and \
+            float(value) > 0
+    except (TypeError, ValueError, OverflowError):
         ok = False
     if not ok:
         raise OptionError("robust", f"must be a positive threshold in pixels, got {value!r}")

@@ -216,13 +216,19 @@ DROPPED_COLUMNS = ("image_points", "depths", "residuals", "inliers", "attempts",
                    "n_lmivar", "sparsity")
 
 
-def _gamma(C: np.ndarray, x: np.ndarray, X: np.ndarray) -> np.ndarray:
-    """gamma (SPEC §1) of points X (M, 3) for stacks C (M, N, 3, 4), x (M, N, 2); inf at infinity."""
+def _gamma(C: np.ndarray, x: np.ndarray, X: np.ndarray, c: float | None = None) -> np.ndarray:
+    """gamma (SPEC §1) of points X (M, 3) for stacks C (M, N, 3, 4), x (M, N, 2); inf at infinity.  With a
+    threshold ``c`` (pixels), the TLS gamma sqrt(sum_i min(d_i^2, c^2) / 2N) of :mod:`tritools.solve.robust`
+    instead: the number a robust estimate's gamma_UB is compared with (a view at infinity then costs c^2)."""
     h = np.einsum("mnij,mj->mni", C, np.concatenate([X, np.ones((len(X), 1))], axis=1))
     den = h[..., 2]
     tiny = ~(np.abs(den) > 1e-300) | ~np.all(np.isfinite(h), axis=2)
     proj = h[..., :2] / np.where(tiny, 1.0, den)[..., None]
-    g = gamma_from_c(np.sum((proj - x) ** 2, axis=(1, 2)), x.shape[1], 1.0)
+    d2 = np.sum((proj - x) ** 2, axis=2)
+    if c is not None:
+        d2 = np.where(tiny, c * c, np.minimum(d2, c * c))
+        return gamma_from_c(np.sum(d2, axis=1), x.shape[1], 1.0)
+    g = gamma_from_c(np.sum(d2, axis=1), x.shape[1], 1.0)
     return np.where(np.any(tiny, axis=1), np.inf, g)
 
 
@@ -282,7 +288,7 @@ def _solve_stacks(geom: ModelGeometry, chunk: PointChunk, options: Retriangulati
         parts.append(s.results.drop(*DROPPED_COLUMNS))
         order.append(pts)
         with np.errstate(all="ignore"):
-            g = _gamma(C, x, chunk.xyz[pts])
+            g = _gamma(C, x, chunk.xyz[pts], options.robust)      # TLS gamma with robust: comparable
         gamma_input[pts] = np.where(np.isfinite(g), g, np.nan)
         if progress is not None:
             progress.update(len(pts))

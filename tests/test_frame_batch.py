@@ -83,3 +83,22 @@ def test_points_api_in_a_georeferenced_world_moves_x_back():
     truth = np.asarray(sc.points3d) + SHIFT
     assert np.max(np.linalg.norm(res.X - truth, axis=1)) < 1.0
     assert np.all(res.in_front)
+
+
+@pytest.mark.parametrize("shape", ["disc", "ellipse"])
+def test_disc_and_ellipse_batches_verify_georeferenced_tracks_like_single_calls(shape):
+    from tritools.model.regions import Ellipse
+
+    tr = []
+    for k in range(9):
+        sc = random_scene(2 + k, 1, noise_px=1.0, seed=k)
+        regs = [Ellipse(c, np.array([[1.0, 0.3], [0.3, 0.5]])) if shape == "ellipse" else Ellipse.circle(c, 1.0)
+                for c in sc.points2d[0]]
+        tr.append((_geo(np.array(sc.cameras, float)), regs))
+    many = tritools.triangulate_many(tr)
+    single = [tritools.triangulate(P, r) for P, r in tr]
+    assert [r.certified_by for r in many] == [s.certified_by for s in single]
+    assert sum(r.certified_by == "verification" for r in many) >= 8
+    for r, s in zip(many, single):
+        assert r.optimal == s.optimal
+        assert np.linalg.norm(np.asarray(r.X) - np.asarray(s.X)) < 1e-6

@@ -23,7 +23,8 @@ import numpy as np
 from .cameras import power2_scale
 from .stacked import norms
 
-__all__ = ["WorldFrame", "world_frame", "world_origins", "moved_cameras", "frame_centre_groups", "RECENTRE_RATIO",
+__all__ = ["WorldFrame", "world_frame", "world_origins", "moved_cameras", "recentred", "frame_centre_groups",
+           "RECENTRE_RATIO",
            "RESOLVED_SPREAD_RTOL"]
 
 #: the origin moves to the cameras' mean centre when that is farther than this many times their spread ...
@@ -134,6 +135,14 @@ def moved_cameras(C: np.ndarray, origins: np.ndarray) -> np.ndarray:
         Cm[..., 3] = _dot2(Cm[..., :3], o[moved][:, None, None, :], Cm[..., 3])
         C[moved] = Cm / power2_scale(Cm, (2, 3))
     return C
+
+
+def recentred(C: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(cameras in their re-centred frames, origins (M, 3)) of a stack (M, N, 3, 4): :func:`world_origins`
+    and :func:`moved_cameras`; a point X' found in the frame is X = origin + X' (the stack itself, each camera
+    divided by a power of two, where no problem moves)."""
+    o = world_origins(C)
+    return moved_cameras(C, o), o
 
 
 def _two_sum(a, b):

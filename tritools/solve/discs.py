@@ -37,6 +37,7 @@ from sospoly.budget import Deadline
 from sospoly.solvers import with_single_threaded_blas
 
 from ..model.cameras import numeric_cameras
+from ..model.frame import recentred
 from ..model.normalize import normalization_stack
 from ..model.regions import ConeKind, Region
 from ..model.stacked import LM_MAX_ITER, damped_step, lm_accept, project_stack
@@ -131,7 +132,8 @@ def verify_discs(cameras, centers, radii, *, tolerances: Tolerances = DEFAULT_TO
     rho = np.asarray(radii, float)
     M, N = x.shape[:2]
     ok = np.all(np.isfinite(x), axis=(1, 2)) & np.all(np.isfinite(rho) & (rho > 0), axis=1)
-    norm = normalization_stack(C, x, ok)
+    Cw, origin = recentred(C)          # georeferenced worlds: solved in re-centred frames
+    norm = normalization_stack(Cw, x, ok)
     ok &= norm.ok
     Cn = norm.cameras_n
     rho_n = rho * norm.scale[:, None]
@@ -146,11 +148,11 @@ def verify_discs(cameras, centers, radii, *, tolerances: Tolerances = DEFAULT_TO
     # a minimiser has |x_i| <= rho_i + |x_i - y_i|, so |x| <= |rho| + sqrt(f(v^)) (the rigorous margin's ball)
     upper_f = np.sum(np.where(outside, (r - rho_n) ** 2, 0.0), axis=1)
     radius = np.linalg.norm(rho_n, axis=1) + np.sqrt(upper_f)
-    lower, ok_b = compact_bounds(C, Cn, u, weights, -mu, outside & ok[:, None], radius, norm.resolution,
+    lower, ok_b = compact_bounds(Cw, Cn, u, weights, -mu, outside & ok[:, None], radius, norm.resolution,
                                  tolerances, deadline=deadline)
     ok &= ok_b
     status, optimal, c_lower = decide(lower, upper_f, tolerances, N, norm.resolution)
-    X = norm.world_points(Xn)
+    X = norm.world_points(Xn) + origin
     uw, _, fin_w = project_stack(C, X)
     ok &= fin_w
     dist = np.maximum(0.0, np.linalg.norm(uw - x, axis=2) - rho)

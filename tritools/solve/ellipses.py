@@ -24,6 +24,7 @@ from sospoly import DEFAULT_TOLERANCES, Tolerances
 from sospoly.budget import Deadline
 from sospoly.solvers import with_single_threaded_blas
 
+from ..model.frame import recentred
 from ..model.normalize import normalization_stack
 from ..model.stacked import LM_MAX_ITER, damped_step, lm_accept, project_stack
 from .decide import decide, decide_reported, gamma_from_c
@@ -113,7 +114,8 @@ def verify_ellipses(cameras, centers, D, *, tolerances: Tolerances = DEFAULT_TOL
     R, sigma = ellipse_axes(D)
     ok = np.all(np.isfinite(x), axis=(1, 2)) & np.all(np.isfinite(sigma), axis=(1, 2)) \
         & np.all((sigma[..., 1] > 0) | ~np.any(D, axis=(2, 3)), axis=1)
-    norm = normalization_stack(C, x, ok)
+    Cw, origin = recentred(C)          # georeferenced worlds: solved in re-centred frames
+    norm = normalization_stack(Cw, x, ok)
     ok &= norm.ok
     Cn = norm.cameras_n
     sig_n = sigma * norm.scale[:, None, None]
@@ -129,11 +131,11 @@ def verify_ellipses(cameras, centers, D, *, tolerances: Tolerances = DEFAULT_TOL
     upper_f = np.sum(e ** 2, axis=(1, 2))
     radius = np.linalg.norm(sig_n[..., 0], axis=1) + np.sqrt(upper_f)
     z = np.einsum("mnji,mnj->mni", R, u)
-    lower, ok_b = compact_bounds(C, _rotated(Cn, R), z, omega, -t, outside & ok[:, None], radius, norm.resolution,
+    lower, ok_b = compact_bounds(Cw, _rotated(Cn, R), z, omega, -t, outside & ok[:, None], radius, norm.resolution,
                                  tolerances, deadline=deadline)
     ok &= ok_b
     _, optimal, c_lower = decide(lower, upper_f, tolerances, N, norm.resolution)
-    X = norm.world_points(Xn)
+    X = norm.world_points(Xn) + origin
     uw, _, fin_w = project_stack(C, X)
     ok &= fin_w
     ew = _local_residual(np.where(fin_w[:, None, None], uw - x, 0.0), R, sigma)[0]

@@ -46,6 +46,7 @@ from ..model.geometry import camera_problems
 from ..model.normalize import normalization_stack
 from ..model.stacked import (band_pairs, epipolar_quadratics, fundamental_stack, gauss_newton_polish, norms,
                              project_one, project_stack, refine_point, refine_points_stack, view_pairs)
+from .fastpath_cameras import raw_pairs_defined
 from .decide import decide, decide_one, decide_reported, decide_reported_one, gamma_from_c
 from .trivial import trivially_certified, trivially_certified_reported
 
@@ -145,7 +146,7 @@ def verify_checked(C: np.ndarray, x: np.ndarray, ok: np.ndarray, tolerances: Tol
     code throughout; None (default): the twin exactly when M = 1."""
     ok = np.array(ok, bool)
     M, N = x.shape[:2]
-    if M == 1 and scalar is not False and ok[0] and N < BAND_MIN_VIEWS and type(tolerances) is Tolerances:
+    if M == 1 and scalar is not False and ok[0]:
         one = verify_one(C[0], x[0], tolerances, deadline=deadline)
         if one is not None:
             return one
@@ -195,8 +196,13 @@ def verify_one(C: np.ndarray, x: np.ndarray, tolerances: Tolerances, *,
     (:func:`tritools.solve.report.points_report_stack`) on the same arrays, so they are its bits.  A
     :class:`FastPathBatch` of one, or None where the data leave the common path (the normalisation or the
     refinement failed, a projection at round-off, no defined or a non-finite epipolar constraint, the deadline
-    passed): the stacked code decides those."""
+    passed, points not finite), from ``BAND_MIN_VIEWS`` views (the stack tries bands of pairs first) and for
+    tolerances other than :class:`sospoly.Tolerances` itself (a subclass may change the rule :func:`decide_one`
+    writes out): the stacked code decides those.  The raw cameras' side of the epipolar constraints is remembered
+    for the last cameras (:func:`tritools.solve.fastpath_cameras.raw_pairs_defined`)."""
     N = len(x)
+    if N >= BAND_MIN_VIEWS or type(tolerances) is not Tolerances or not np.isfinite(x).all():
+        return None
     norm = normalization_stack(C[None], x[None], np.ones(1, bool))
     if not norm.ok[0] or expired(deadline):
         return None
@@ -238,7 +244,8 @@ def _lagrangian_one(C: np.ndarray, Cn: np.ndarray, v: np.ndarray, radius: float,
     normalised Cn (N, 3, 4), the candidate v (2N,)), or None where that function would flag the problem (no
     defined pair, non-finite constraints).  Pairs with coincident centres carry no constraint, as there."""
     N = len(C)
-    F, defined, raw = _fundamental_both(Cn[None], C[None])
+    F, defined = fundamental_stack(Cn[None])
+    raw = raw_pairs_defined(C)[None]
     if not raw.all():
         F, defined = np.where(raw[..., None, None], F, 0.0), defined & raw
     if not defined.any():

@@ -244,6 +244,7 @@ def _lagrangian_one(C: np.ndarray, Cn: np.ndarray, v: np.ndarray, radius: float,
     normalised Cn (N, 3, 4), the candidate v (2N,)), or None where that function would flag the problem (no
     defined pair, non-finite constraints).  Pairs with coincident centres carry no constraint, as there."""
     N = len(C)
+    # (the normalised cameras alone, remembered or not: the same bits whatever the call before)
     F, defined = fundamental_stack(Cn[None])
     raw = raw_pairs_defined(C)[None]
     if not raw.all():

@@ -1,7 +1,7 @@
 """The camera-only work a single call remembers for the last cameras (tritools.solve.fastpath_cameras, issue #22).
 
 Independent references: the functions it stands in for, called directly on the same data (validate_cameras,
-world_frame + WorldFrame.cameras, fundamental_stack's mask, depths_stack_arrays) -- the same bits for a hit and
+world_frame + WorldFrame.cameras, depths_stack_arrays) -- the same bits for a hit and
 a miss, on the adversarial scenes (pixel scales 1e-3..1e6, georeferenced, rescaled, duplicated views), for
 cameras seen in turn (A, B, A); bad cameras still raise the ValueError naming the field right after good ones
 with the same shape, and nothing a caller does to the arrays it got changes the next call's numbers.
@@ -14,7 +14,6 @@ import pytest
 import tritools
 from tritools.model.cameras import depths_stack_arrays, validate_cameras
 from tritools.model.frame import world_frame
-from tritools.model.stacked import fundamental_stack
 from tritools.scene import random_scene
 from tritools.solve import fastpath_cameras as FC
 
@@ -22,7 +21,7 @@ from .test_stacked_single import SCENES
 
 
 def _forget():
-    for memo in (FC._LAST_VALID, FC._LAST_FRAME, FC._LAST_PAIRS, FC._LAST_ROWS):
+    for memo in (FC._LAST_VALID, FC._LAST_FRAME, FC._LAST_ROWS):
         memo[0] = None
 
 
@@ -31,15 +30,14 @@ def _direct(C):
     frame = world_frame(cams)
     cams_f = frame.cameras(cams)
     X = np.array([0.3, -0.2, 7.0])
-    return (cams, frame.origin, cams_f, fundamental_stack(cams_f[None])[1][0],
-            depths_stack_arrays(cams_f[None], X[None], "reflected")[0])
+    return (cams, frame.origin, cams_f, depths_stack_arrays(cams_f[None], X[None], "reflected")[0])
 
 
 def _remembered(C):
     cams = FC.validated_cameras(C)
     frame, cams_f = FC.framed_cameras(cams)
     X = np.array([0.3, -0.2, 7.0])
-    return cams, frame.origin, cams_f, FC.raw_pairs_defined(cams_f), FC.depths_one(cams_f, X, "reflected")
+    return cams, frame.origin, cams_f, FC.depths_one(cams_f, X, "reflected")
 
 
 @pytest.mark.parametrize("name, C, x", SCENES, ids=[s[0] for s in SCENES])
@@ -83,8 +81,6 @@ def test_callers_cannot_change_the_remembered_numbers():
     cams_f[...] = 0.0
     with pytest.raises(ValueError):
         frame.origin[...] = 1.0                         # (read-only)
-    with pytest.raises(ValueError):
-        FC.raw_pairs_defined(ref[2])[...] = False
     for a, b in zip(_remembered(C), ref):               # ... does not change the next call's numbers
         assert np.array_equal(a, b, equal_nan=True)
 

@@ -46,7 +46,6 @@ from ..model.geometry import camera_problems
 from ..model.normalize import normalization_stack
 from ..model.stacked import (band_pairs, epipolar_quadratics, fundamental_stack, gauss_newton_polish, norms,
                              project_one, project_stack, refine_point, refine_points_stack, view_pairs)
-from .fastpath_cameras import raw_pairs_defined
 from .decide import decide, decide_one, decide_reported, decide_reported_one, gamma_from_c
 from .trivial import trivially_certified, trivially_certified_reported
 
@@ -198,8 +197,7 @@ def verify_one(C: np.ndarray, x: np.ndarray, tolerances: Tolerances, *,
     refinement failed, a projection at round-off, no defined or a non-finite epipolar constraint, the deadline
     passed, points not finite), from ``BAND_MIN_VIEWS`` views (the stack tries bands of pairs first) and for
     tolerances other than :class:`sospoly.Tolerances` itself (a subclass may change the rule :func:`decide_one`
-    writes out): the stacked code decides those.  The raw cameras' side of the epipolar constraints is remembered
-    for the last cameras (:func:`tritools.solve.fastpath_cameras.raw_pairs_defined`)."""
+    writes out): the stacked code decides those."""
     N = len(x)
     if N >= BAND_MIN_VIEWS or type(tolerances) is not Tolerances or not np.isfinite(x).all():
         return None
@@ -244,9 +242,7 @@ def _lagrangian_one(C: np.ndarray, Cn: np.ndarray, v: np.ndarray, radius: float,
     normalised Cn (N, 3, 4), the candidate v (2N,)), or None where that function would flag the problem (no
     defined pair, non-finite constraints).  Pairs with coincident centres carry no constraint, as there."""
     N = len(C)
-    # (the normalised cameras alone, remembered or not: the same bits whatever the call before)
-    F, defined = fundamental_stack(Cn[None])
-    raw = raw_pairs_defined(C)[None]
+    F, defined, raw = _fundamental_both(Cn[None], C[None])      # (one call for both, as the stack)
     if not raw.all():
         F, defined = np.where(raw[..., None, None], F, 0.0), defined & raw
     if not defined.any():

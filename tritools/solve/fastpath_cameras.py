@@ -8,9 +8,6 @@ the cameras alone:
   equal);
 * the world frame (:func:`tritools.model.frame.world_frame`) and the cameras re-centred in it
   (:meth:`tritools.model.frame.WorldFrame.cameras`);
-* which view pairs have distinct centres and a finite, non-zero fundamental matrix on those cameras (the
-  ``defined`` mask of :func:`tritools.model.stacked.fundamental_stack`, the raw side of the Lagrangian bound:
-  :func:`tritools.solve.fastpath.verify_one`);
 * the depth rows sign(det M) p3 / ||m3|| (:func:`tritools.model.cameras.depth_rows`).
 
 Each is a deterministic function of the cameras' numbers, so the result for the last cameras seen is remembered,
@@ -29,14 +26,12 @@ from ..model.cameras import WorldFrame as Handedness
 from ..model.cameras import as_world_frame, depth_rows, validate_cameras
 from ..model.frame import WorldFrame, world_frame
 from ..model.regions.base import real_array
-from ..model.stacked import fundamental_stack
 
-__all__ = ["validated_cameras", "framed_cameras", "raw_pairs_defined", "depths_one"]
+__all__ = ["validated_cameras", "framed_cameras", "depths_one"]
 
 #: the last entry of each function: (key, value) or None.
 _LAST_VALID: list = [None]
 _LAST_FRAME: list = [None]
-_LAST_PAIRS: list = [None]
 _LAST_ROWS: list = [None]
 
 
@@ -74,17 +69,6 @@ def framed_cameras(cams: np.ndarray) -> tuple[WorldFrame, np.ndarray]:
         _LAST_FRAME[0] = last
     frame, cams_f = last[1]
     return frame, cams_f.copy()
-
-
-def raw_pairs_defined(C: np.ndarray) -> np.ndarray:
-    """The ``defined`` mask (K,) of :func:`tritools.model.stacked.fundamental_stack` for the cameras C (N, 3, 4)
-    alone, all pairs (read-only)."""
-    key = _key(C)
-    last = _LAST_PAIRS[0]
-    if last is None or last[0] != key:
-        last = (key, _read_only(fundamental_stack(C[None])[1][0]))
-        _LAST_PAIRS[0] = last
-    return last[1]
 
 
 def depths_one(C: np.ndarray, X: np.ndarray, world_frame: Handedness | str = Handedness.RIGHT_HANDED) -> np.ndarray:

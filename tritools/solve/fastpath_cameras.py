@@ -12,7 +12,7 @@ the cameras alone:
 
 Each is a deterministic function of the cameras' numbers, so the result for the last cameras seen is remembered,
 keyed by their exact bytes and shape (after the conversion to float64 that the check itself does), and given back
-for the same bytes: the same numbers as computing it again (tests/test_scalar_twins.py), and nothing skipped for
+for the same bytes: the same numbers as computing it again (tests/test_fastpath_cameras.py), and nothing skipped for
 other data -- a miss computes and checks everything, and a camera array that fails the check raises its
 ValueError as before and is never remembered.  One entry per function (memory: one camera set), replaced and
 never mutated, so a concurrent reader sees the old or the new pair; remembered arrays are read-only and the

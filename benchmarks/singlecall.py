@@ -5,9 +5,12 @@
     python benchmarks/singlecall.py --calls                       # + Python-level calls per call (cProfile)
 
 Synthetic rows: seeded ``random_scene(N, points, 1 px)`` point tracks (N = 2, 5, 10) and the same keypoints of a
-5-view scene as 1 px discs; ``single`` is the 10th percentile of the CPU time of one call (``time.process_time``,
-one BLAS thread: the low percentile is the least disturbed by other jobs on a shared machine), ``many`` the best
-per-track CPU time of ``triangulate_many`` over the repeats.  Times on a shared machine are noisy: compare runs of
+5-view scene as 1 px discs; "own cameras" rows give every track its own camera array (the scene's cameras times
+1 + j/1000 for track j: the same projections, other bytes), so a single call cannot reuse the camera-only work
+it remembers for the last cameras (:mod:`tritools.solve.fastpath_cameras`), as on Oxford tracks.  ``single`` is
+the 10th percentile of the CPU time of one call (``time.process_time``, one BLAS thread: the low percentile is the
+least disturbed by other jobs on a shared machine), ``many`` the best per-track CPU time of ``triangulate_many``
+over the repeats.  Times on a shared machine are noisy: compare runs of
 two branches interleaved.
 """
 from __future__ import annotations
@@ -31,12 +34,15 @@ from tritools.scene import random_scene  # noqa: E402
 
 
 def synthetic_tracks(n_points: int) -> dict:
-    """{name: (cameras, [regions of one track, ...])}."""
+    """{name: (cameras or a list of one camera array per track, [regions of one track, ...])}."""
     out = {}
     for N in (2, 5, 10):
         sc = random_scene(N, n_points, noise_px=1.0, seed=N)
         C, x = np.asarray(sc.cameras), np.asarray(sc.points2d)
         out[f"points N = {N}"] = (C, [x[j] for j in range(n_points)])
+        if N < 10:
+            out[f"points N = {N}, own cameras"] = ([C * (1 + j / 1000) for j in range(n_points)],
+                                                   [x[j] for j in range(n_points)])
     sc = random_scene(5, n_points, noise_px=1.0, seed=55)
     C, x = np.asarray(sc.cameras), np.asarray(sc.points2d)
     out["1 px discs N = 5"] = (C, [[Ellipse(p, np.eye(2)) for p in x[j]] for j in range(n_points)])
@@ -49,23 +55,29 @@ def cpu_of(fn) -> float:
     return time.process_time() - t
 
 
+def _cameras_of(C, n: int) -> list:
+    return C if isinstance(C, list) else [C] * n
+
+
 def single_and_many(C, tracks, repeats: int) -> tuple[float, float]:
     """(10th percentile of one call, best per-track time of triangulate_many), CPU ms."""
-    for r in tracks[:3]:                                    # imports and first-call costs are not timed
-        tritools.triangulate(C, r)
-    singles = [cpu_of(lambda: tritools.triangulate(C, r)) for _ in range(repeats) for r in tracks]
-    probs = [(C, r) for r in tracks]
+    cams = _cameras_of(C, len(tracks))
+    for c, r in zip(cams[:3], tracks[:3]):                  # imports and first-call costs are not timed
+        tritools.triangulate(c, r)
+    singles = [cpu_of(lambda: tritools.triangulate(c, r)) for _ in range(repeats) for c, r in zip(cams, tracks)]
+    probs = list(zip(cams, tracks))
     many = min(cpu_of(lambda: tritools.triangulate_many(probs, progress=False)) for _ in range(repeats))
     return float(np.percentile(singles, 10)) * 1e3, many / len(probs) * 1e3
 
 
 def calls_per_call(C, tracks) -> float:
     """Python-level function calls (cProfile) per triangulate(): a measure of the fixed cost that load does not move."""
-    tritools.triangulate(C, tracks[0])
+    cams = _cameras_of(C, len(tracks))
+    tritools.triangulate(cams[-1], tracks[-1])
     pr = cProfile.Profile()
     pr.enable()
-    for r in tracks:
-        tritools.triangulate(C, r)
+    for c, r in zip(cams, tracks):
+        tritools.triangulate(c, r)
     pr.disable()
     return pstats.Stats(pr).total_calls / len(tracks)
 

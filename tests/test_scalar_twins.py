@@ -351,3 +351,110 @@ def test_gauss_newton_polish_one_equals_the_stack(name, C, x):
         assert c1 <= c0 * (1 + 1e-12) + floor and c2 <= c0 * (1 + 1e-12) + floor
         assert c1 == pytest.approx(c2, rel=1e-8, abs=floor)
         np.testing.assert_allclose(one, stacked[m], rtol=1e-6, atol=1e-6 * max(1.0, float(np.abs(stacked[m]).max())))
+
+
+def _decide_values():
+    """c values around the rule's edges: zero, signed zero, round-off, the gap tolerance, large, negative, NaN, inf."""
+    base = [0.0, -0.0, 1e-300, 1e-12, 1e-7, 1e-6, 9.99e-7, 1.000001e-6, 2e-6, 0.5, 1.0, 1.0 + 1e-6, 1.0 - 1e-6, 3.0,
+            1e6, 1e300, -1e-9, -1.0, np.nan, np.inf, -np.inf]
+    rng = np.random.default_rng(3)
+    return base + list(rng.normal(size=12) * 10.0 ** rng.uniform(-10, 3, size=12))
+
+
+def test_decide_one_equals_decide_bit_for_bit():
+    """The scalar decision rule against the vectorised one (the reference of every path): the same status, the same
+    flag and the same reported lower bound (bits, NaN alike), over every pair of edge values, two tolerance settings,
+    resolutions 0..inf and NaN and several view counts; likewise the decision on the reported numbers."""
+    from sospoly import DEFAULT_TOLERANCES, Tolerances
+    from tritools.solve.decide import decide, decide_one, decide_reported, decide_reported_one
+
+    vals = _decide_values()
+    lo = np.repeat(vals, len(vals))
+    up = np.tile(vals, len(vals))
+    for tol in (DEFAULT_TOLERANCES, Tolerances(gap_abs=1e-9, gap_rel=1e-4)):
+        for N in (2, 5, 13):
+            for res in (0.0, 1e-10, 1e-8, 0.3, np.inf, np.nan):
+                status, optimal, lower = decide(lo, up, tol, N, np.full(len(lo), res))
+                for k in range(len(lo)):
+                    s1, o1, l1 = decide_one(lo[k], up[k], tol, N, res)
+                    assert (s1.value, o1) == (status[k], optimal[k]), (lo[k], up[k], tol, N, res)
+                    assert np.array_equal(l1, lower[k], equal_nan=True), (lo[k], up[k])
+                for scale in (1.0, 3e-4, 2e5):
+                    g_lo, g_up = np.abs(lo) / 7, np.abs(up) / 7
+                    with np.errstate(over="ignore"):            # (c of gamma 1e300: inf, as in the scalar twin)
+                        rep = decide_reported(g_lo, g_up, tol, N, scale, res)
+                    for k in range(0, len(lo), 3):
+                        assert decide_reported_one(g_lo[k], g_up[k], tol, N, scale, res) == rep[k], (g_lo[k], g_up[k])
+
+
+def _batch_row(b, m):
+    return {f: np.asarray(getattr(b, f))[m] for f in ("certified", "ok", "X", "gamma_lb", "gamma_at_X", "image_points",
+                                                      "c_lower", "c_upper", "scale", "trivial", "residuals")}
+
+
+@pytest.mark.parametrize("name, C, x", CASES, ids=[s[0] for s in CASES])
+def test_verify_one_equals_the_stacked_verification(name, C, x):
+    """The scalar verification of one problem (:func:`tritools.solve.fastpath.verify_one`) against the stacked code
+    on the same problem inside a stack of many (the batch path): the same flags (certified, trivial, ok), bounds and
+    gamma(X) within 1e-9 relative (or 1e-12 of the pixel scale's round-off), the world point within 1e-6, the
+    residuals and image points within 1e-9 relative.  The twin must take the common path on these scenes (it is
+    None only where the stacked code would flag the problem), and a stack of one dispatches to it by default."""
+    from sospoly import DEFAULT_TOLERANCES
+    from tritools.model.geometry import validate_cameras
+    from tritools.solve.fastpath import stack_point_problems, verify_checked, verify_one
+
+    geo = "-geo" in name
+    Cv = validate_cameras(C)
+    M = len(x)
+    Cs, xs, ok = stack_point_problems(np.broadcast_to(Cv, (M,) + Cv.shape), x, "test")
+    ref = verify_checked(Cs, xs, ok, DEFAULT_TOLERANCES)
+    used = 0
+    for m in range(M):
+        NZ._LAST_SINGLE[0] = None
+        one = verify_one(Cv, x[m], DEFAULT_TOLERANCES)
+        if one is None:
+            continue
+        used += 1
+        a, b = _batch_row(one, 0), _batch_row(ref, m)
+        for f in ("certified", "ok", "trivial"):
+            assert a[f] == b[f] or geo, (f, m)
+        if geo:               # raw georeferenced cameras (a single call re-centres first): valid bounds only
+            assert a["gamma_lb"] <= a["gamma_at_X"] or np.isnan(a["gamma_lb"])
+            continue
+        scale_px = 1e-12 * max(1.0, float(np.abs(x[m]).max()))
+        for f in ("gamma_lb", "gamma_at_X"):
+            assert a[f] == pytest.approx(b[f], rel=1e-9, abs=scale_px, nan_ok=True), (f, m)
+        assert a["gamma_lb"] <= a["gamma_at_X"] or np.isnan(a["gamma_lb"])
+        for f in ("residuals", "image_points"):
+            np.testing.assert_allclose(a[f], b[f], rtol=1e-9, atol=scale_px)
+        np.testing.assert_allclose(a["X"], b["X"], rtol=1e-6, atol=1e-6 * max(1.0, float(np.abs(b["X"]).max())))
+        NZ._LAST_SINGLE[0] = None
+        d = verify_checked(Cs[m:m + 1], xs[m:m + 1], ok[m:m + 1], DEFAULT_TOLERANCES)
+        NZ._LAST_SINGLE[0] = None
+        again = verify_one(Cv, x[m], DEFAULT_TOLERANCES)
+        assert all(np.array_equal(_batch_row(d, 0)[f], _batch_row(again, 0)[f], equal_nan=True) for f in a)
+    from tritools.solve.fastpath import BAND_MIN_VIEWS
+
+    assert used >= (M + 1) // 2 or geo if C.shape[0] < BAND_MIN_VIEWS else used == 0, used
+
+
+def test_verify_one_leaves_the_special_cases_to_the_stacked_code():
+    """Off the common path the twin gives None and the stack of one decides with the stacked code: all views at one
+    centre (a rotating camera), the DLT point at infinity (parallel rays), non-finite numbers, an expired deadline."""
+    from sospoly import DEFAULT_TOLERANCES
+    from sospoly.budget import Deadline
+    from tritools.solve.fastpath import verify_checked, verify_one
+
+    sc = random_scene(3, 1, noise_px=1.0, seed=4)
+    C, x = np.asarray(sc.cameras), np.asarray(sc.points2d)[0]
+    R = np.array([[np.cos(0.2), -np.sin(0.2), 0], [np.sin(0.2), np.cos(0.2), 0], [0, 0, 1]])
+    rot = np.array([C[0], R @ C[0], R.T @ C[0]])                      # one centre, three views
+    assert verify_one(rot, x, DEFAULT_TOLERANCES) is None
+    NZ._LAST_SINGLE[0] = None
+    b = verify_checked(rot[None], x[None], np.ones(1, bool), DEFAULT_TOLERANCES)
+    NZ._LAST_SINGLE[0] = None
+    ref = verify_checked(rot[None], x[None], np.ones(1, bool), DEFAULT_TOLERANCES, scalar=False)
+    assert all(np.array_equal(_batch_row(b, 0)[f], _batch_row(ref, 0)[f], equal_nan=True) for f in _batch_row(b, 0))
+    with np.errstate(all="ignore"):
+        assert verify_one(C, np.where(np.arange(6).reshape(3, 2) == 1, np.nan, x), DEFAULT_TOLERANCES) is None
+    assert verify_one(C, x, DEFAULT_TOLERANCES, deadline=Deadline.after(0.0)) is None

@@ -199,7 +199,7 @@ def test_singlecall_benchmark_script_runs(capsys):
     spec.loader.exec_module(mod)
     mod.main(["--points", "4", "--repeats", "1", "--calls"])
     rows = [r for r in capsys.readouterr().out.splitlines() if r.startswith("| points") or r.startswith("| 1 px")]
-    assert len(rows) == 4
+    assert len(rows) == 6                   # points N = 2, 5 (shared and own cameras), 10; discs
     for r in rows:
         single, many, ratio, calls = (float(c) for c in r.strip("|").split("|")[1:])
         assert single > 0 and many > 0 and calls > 100

@@ -42,14 +42,15 @@ with the scalar twin :func:`tritools.model.stacked.refine_point`: equal up to ro
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
 from .cameras import power2_scale
 from .geometry import COMMON_CENTRE_RTOL, POINT_AT_INFINITY_RTOL, point_from_image_points
-from .stacked import (dlt_stack, median_rows, norms, null_vectors, pixel_scales, project_quiet, project_stack,
-                      refine_points_stack)
+from .stacked import (dlt_stack, median_rows, norms, null_vectors, pixel_scales, project_one, project_quiet,
+                      project_stack, refine_point, refine_points_stack)
 
 __all__ = ["Normalization", "NormalizationStack", "normalization_for", "normalization_stack", "unconstrained_reason",
            "resolutions", "RHO_FLOOR_REL", "RESOLUTION_REL", "DEPTH_FLOOR_REL",
@@ -177,19 +178,23 @@ def _rho_floor(C: np.ndarray, x: np.ndarray) -> np.ndarray:
 _LAST_SINGLE: list = [None]
 
 
-def normalization_stack(C: np.ndarray, x: np.ndarray, ok: np.ndarray | None = None) -> NormalizationStack:
+def normalization_stack(C: np.ndarray, x: np.ndarray, ok: np.ndarray | None = None, *,
+                        scalar: bool | None = None) -> NormalizationStack:
     """The normalisation of the module docstring for M problems: cameras C (M, N, 3, 4), points x (M, N, 2)
     (the regions' centres).  A stack of one is remembered (``_LAST_SINGLE``): the function is deterministic, so
-    the same data give a copy of the same arrays."""
+    the same data give a copy of the same arrays.  ``scalar``: a stack of one runs the scalar twin
+    :func:`_normalization_one` where its data are on the common path (equal to the stacked code up to round-off,
+    tests/test_scalar_twins.py); None (default): exactly when M = 1."""
     M = x.shape[0]
     ok = np.ones(M, bool) if ok is None else ok.copy()
     if M != 1:
         return _normalization_stack(C, x, ok)
-    key = (C.dtype.str, C.shape, C.tobytes(), x.dtype.str, x.shape, x.tobytes(), ok.tobytes())
+    key = (C.dtype.str, C.shape, C.tobytes(), x.dtype.str, x.shape, x.tobytes(), ok.tobytes(), scalar is False)
     last = _LAST_SINGLE[0]
     if last is not None and last[0] == key:
         return _copied(last[1])
-    st = _normalization_stack(C, x, ok)
+    st = _normalization_one(C[0], x, ok) if scalar is not False else None
+    st = _normalization_stack(C, x, ok) if st is None else st
     _LAST_SINGLE[0] = (key, _copied(st))
     return st
 
@@ -224,6 +229,85 @@ def _normalization_stack(C: np.ndarray, x: np.ndarray, ok: np.ndarray) -> Normal
     Cn /= norms(Cn, axis=(2, 3))[..., None, None]
     return NormalizationStack(s_new, x.copy(), X0, d, Cn, np.where(use[:, None], Xn, 0.0), ok,
                               resolutions(s_new, x), use & converged)
+
+
+def _normalization_one(C: np.ndarray, x: np.ndarray, ok: np.ndarray) -> NormalizationStack | None:
+    """The scalar (M = 1) twin of :func:`_normalization_stack` for cameras C (N, 3, 4) and points x (1, N, 2): the
+    same steps on plain (N, ...) arrays and floats -- DLT (eigenvector of A^T A), the rho floor from the median pixel
+    scale, the DLT residual rho, the world frame (X0, d = median distance to the centres, floored), the normalised
+    cameras, the refinement (:func:`tritools.model.stacked.refine_point`) and the rescaling by its residual -- so
+    equal to the stacked code up to round-off.  None where the data leave the common path (``ok`` False, the DLT
+    point or a camera centre at infinity, no finite pixel scale, all centres shared, a projection at
+    round-off, non-finite numbers): the caller runs the stacked code there, with its exact numbers."""
+    if not ok[0]:
+        return None
+    xi = x[0]
+    N = len(xi)
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+        P = C / power2_scale(C, (1, 2))
+        X0, ok_dlt = dlt_stack(P[None], x)          # (the stacked DLT: its bits, the frame's origin)
+        if not ok_dlt[0]:
+            return None
+        X0 = X0[0]
+        frame = _frame_one(P, xi, X0)
+        if frame is None:
+            return None
+        s, rho, rho_floor, d, Cn = frame
+        Xn, ok_r, converged = refine_point(Cn, np.zeros((N, 2)), np.zeros(3), True)
+        u, _, fin = project_one(Cn, Xn)
+        r = math.sqrt(float(np.add.reduce(np.add.reduce(u * u, axis=1))) / N) / s if fin else math.nan
+        use = ok_r and fin and math.isfinite(r)
+        s_new = float(_clip_scale(1.0 / (max(min(r, rho), rho_floor) if use else rho)))
+        Cn[:, :2, :] *= s_new / s
+        Cn /= norms(Cn, axis=(1, 2))[:, None, None]
+    s_arr = np.array([s_new])
+    return NormalizationStack(s_arr, x.copy(), X0[None], np.array([d]), Cn[None], (Xn if use else np.zeros(3))[None],
+                              np.ones(1, bool), resolutions(s_arr, x), np.array([use and converged]))
+
+
+def _median(values: list) -> float:
+    """The median of a non-empty list of floats without NaN: the middle one, or the mean of the middle two as
+    (lo + hi) / 2 (:func:`median_rows`' formula)."""
+    v = sorted(values)
+    n = len(v)
+    return v[n // 2] if n % 2 else (v[n // 2 - 1] + v[n // 2]) / 2
+
+
+def _frame_one(P: np.ndarray, xi: np.ndarray, X0: np.ndarray) -> tuple | None:
+    """(s, rho, rho_floor, d, Cn) of :func:`_frames` and :func:`_rho_floor` for one problem (cameras P (N, 3, 4)
+    scaled by powers of two, points xi (N, 2), the DLT point X0), or None off the common path
+    (:func:`_normalization_one`)."""
+    N = len(xi)
+    ps = [p for p in pixel_scales(P, xi).tolist() if 0.0 < p < math.inf]
+    if not ps:
+        return None
+    rho_floor = RHO_FLOOR_REL * _median(ps)
+    u0, _, fin0 = project_one(P, X0)
+    if not fin0 or not rho_floor > 0:
+        return None
+    rho = max(math.sqrt(float(np.add.reduce(np.add.reduce((u0 - xi) ** 2, axis=1))) / N), rho_floor)
+    s = float(_clip_scale(1.0 / rho))
+    a = null_vectors(P)
+    a = a / norms(a, axis=1, keepdims=True)
+    if not (np.abs(a[:, 3]) > POINT_AT_INFINITY_RTOL).all():
+        return None
+    a0 = a[0]
+    if (np.abs(P @ a0) <= COMMON_CENTRE_RTOL * np.maximum.reduce(np.abs(P) @ np.abs(a0), axis=1)[:, None]).all():
+        return None                                      # every view has one centre: the stacked code's special case
+    dist = norms(a[:, :3] / a[:, 3:] - X0, axis=1).tolist()
+    if not all(math.isfinite(t) for t in dist):
+        return None
+    d = _median(dist)
+    d = max(d, DEPTH_FLOOR_REL * max(1.0, math.sqrt(float(X0 @ X0)))) if d > 0 else 1.0
+    CH = P.copy()
+    CH[..., :3] *= d
+    CH[..., 3] = P @ np.append(X0, 1.0)
+    Cn = CH.copy()
+    Cn[:, :2, :] = s * (CH[:, :2, :] - xi[..., None] * CH[:, 2:3, :])
+    Cn /= norms(Cn, axis=(1, 2))[:, None, None]
+    if not np.isfinite(Cn).all():
+        return None
+    return s, rho, rho_floor, d, Cn
 
 
 def _clip_scale(s: np.ndarray) -> np.ndarray:

@@ -26,8 +26,8 @@ from .geometry import POINT_AT_INFINITY_RTOL, PROJECTION_DENOM_RTOL, SAME_CENTER
 
 __all__ = ["null_vectors", "dlt_stack", "project_stack", "refine_points_stack", "fundamental_stack",
            "epipolar_quadratics", "pixel_scales", "distinct_centres", "centre_vectors", "view_pairs", "band_pairs",
-           "norms", "median_rows", "gauss_newton_polish", "project_quiet", "next_damping", "lm_accept", "LM_MAX_ITER",
-           "LM_STEP_RTOL"]
+           "norms", "median_rows", "gauss_newton_polish", "project_quiet", "project_one", "next_damping", "lm_accept",
+           "LM_MAX_ITER", "LM_STEP_RTOL"]
 
 #: Levenberg-Marquardt iterations at most (from the DLT start it converges in ~5-10).
 LM_MAX_ITER = 100
@@ -137,6 +137,20 @@ def project_quiet(C: np.ndarray, X: np.ndarray, absC2: np.ndarray | None = None)
     x = h[..., :2] / np.where(tiny, 1.0, den)[..., None]
     ok = ~tiny.any(axis=1) & np.isfinite(x).all(axis=(1, 2))
     return x, h, ok
+
+
+def project_one(C: np.ndarray, X: np.ndarray) -> tuple:
+    """The scalar twin of :func:`project_quiet` for one problem: (u (N, 2), h (N, 3), finite) for cameras C (N, 3, 4)
+    and a point X (3,), the same rule (a denominator at round-off, |P_3 . X~| <= PROJECTION_DENOM_RTOL |P_3| . |X~|,
+    or a non-finite projection: not finite).  Run under the caller's ``np.errstate(over="ignore",
+    invalid="ignore")``."""
+    Xh = np.append(X, 1.0)
+    h = C @ Xh
+    den = h[:, 2]
+    if (np.abs(den) <= PROJECTION_DENOM_RTOL * (np.abs(C[:, 2, :]) @ np.abs(Xh))).any():
+        return h[:, :2], h, False
+    u = h[:, :2] / den[:, None]
+    return u, h, bool(np.isfinite(u).all())
 
 
 def damped_step(JtJ: np.ndarray, g: np.ndarray, mu: np.ndarray) -> np.ndarray:

@@ -8,15 +8,20 @@ c_LB and an upper bound c_UB = 2N gamma'(X^)^2 in the normalised units where c =
 An error dc in c moves gamma by about dc / (4 N gamma), so comparing gammas relatively would fail
 for tiny residuals; comparing c does not.  Then :func:`cheirality` tells whether the estimate lies in
 front of every camera (and, with ``require_in_front``, turns a certified minimiser behind a camera into
-``BEHIND_CAMERA``).  Both take scalars or arrays.
+``BEHIND_CAMERA``).  Both take scalars or arrays.  :func:`decide_one` / :func:`decide_reported_one` are their
+scalar twins for one problem on Python floats (the single call's verification): the same operations in the same
+order, so the same decisions and bits (tests/test_scalar_twins.py).
 """
 from __future__ import annotations
+
+import math
 
 import numpy as np
 
 from ..result import Status
 
-__all__ = ["decide", "decide_reported", "gamma_from_c", "c_from_gamma", "cheirality"]
+__all__ = ["decide", "decide_reported", "gamma_from_c", "c_from_gamma", "cheirality", "decide_one",
+           "decide_reported_one"]
 
 _CODES = np.array([Status.NOT_CERTIFIED.value, Status.OPTIMAL.value, Status.NUMERICAL_FAILURE.value], dtype=object)
 
@@ -59,6 +64,35 @@ def decide_reported(gamma_lb, gamma_ub, tolerances, n_views, scale, resolution):
                            tolerances, n_views, resolution)
     out = np.asarray(optimal, bool) & known
     return bool(out) if out.ndim == 0 else out
+
+
+def decide_one(c_lower: float, c_upper: float, tolerances, n_views: int, resolution: float) -> tuple:
+    """The scalar twin of :func:`decide` for one problem: Python floats, ``n_views`` an int > 0, ``tolerances`` a
+    :class:`sospoly.Tolerances` (not a subclass: its rule is written out here, gap_tol(u) = gap_abs + gap_rel
+    max(1, |u|)).  (status, optimal, reported lower bound) with the numbers of :func:`decide`: every comparison
+    is on values whose NaN / inf cases are settled first (Python's ``max`` would drop a NaN)."""
+    lo, up = float(c_lower), float(c_upper)
+    fin_up, fin_lo = math.isfinite(up), math.isfinite(lo)
+    tol = tolerances.gap_abs + tolerances.gap_rel * max(1.0, abs(up)) if fin_up else math.nan
+    certified = fin_up and not math.isnan(lo) and up - lo <= tol
+    if certified and not up - lo <= tolerances.gap_rel * abs(up):      # only through the absolute part
+        two_n = 2.0 * n_views
+        gap = math.sqrt(max(up, 0.0) / two_n) - math.sqrt(max(lo, 0.0) / two_n)
+        certified = gap <= resolution
+    contradicts = fin_lo and fin_up and lo - up > tol
+    status = Status.NUMERICAL_FAILURE if contradicts else Status.OPTIMAL if certified else Status.NOT_CERTIFIED
+    return status, certified and not contradicts, up if fin_up and lo > up else lo
+
+
+def decide_reported_one(gamma_lb: float, gamma_ub: float, tolerances, n_views: int, scale: float,
+                        resolution: float) -> bool:
+    """The scalar twin of :func:`decide_reported` (Python floats; :func:`decide_one`'s conditions)."""
+    lo, up = float(gamma_lb), float(gamma_ub)
+    if not (math.isfinite(lo) and math.isfinite(up)):
+        return False
+    two_n = 2.0 * n_views
+    g_lo, g_up = min(lo, up) * scale, up * scale
+    return decide_one(two_n * g_lo * g_lo, two_n * g_up * g_up, tolerances, n_views, resolution)[1]
 
 
 def gamma_from_c(c, n_views, scale=1.0):

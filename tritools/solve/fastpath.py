@@ -31,6 +31,7 @@ overflow, LM failure) are simply not certified here: callers send them through
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -44,13 +45,12 @@ from sospoly.solvers import with_single_threaded_blas
 from ..model.geometry import camera_problems
 from ..model.normalize import normalization_stack
 from ..model.stacked import (band_pairs, epipolar_quadratics, fundamental_stack, gauss_newton_polish, norms,
-                             project_stack, refine_points_stack, view_pairs)
-from .decide import decide, decide_reported, gamma_from_c
+                             project_one, project_stack, refine_point, refine_points_stack, view_pairs)
+from .decide import decide, decide_one, decide_reported, decide_reported_one, gamma_from_c
 from .trivial import trivially_certified, trivially_certified_reported
 
-__all__ = ["FastPathBatch", "verify_points", "verify_checked", "stack_point_problems", "lagrangian_bounds",
-           "BAND_MIN_VIEWS",
-           "BAND_WIDTHS"]
+__all__ = ["FastPathBatch", "verify_points", "verify_checked", "verify_one", "stack_point_problems",
+           "lagrangian_bounds", "BAND_MIN_VIEWS", "BAND_WIDTHS"]
 
 #: from this many views on, the certificate is first tried with the epipolar constraints of bands of view
 #: pairs (:func:`_band_bounds`, cost linear in N), of the widths ``BAND_WIDTHS`` in turn; problems no band
@@ -136,13 +136,20 @@ def verify_points(cameras, points2d, *, tolerances: Tolerances = DEFAULT_TOLERAN
 
 @with_single_threaded_blas(min_stack=2)
 def verify_checked(C: np.ndarray, x: np.ndarray, ok: np.ndarray, tolerances: Tolerances, *,
-                   deadline: Deadline | None = None) -> FastPathBatch:
+                   deadline: Deadline | None = None, scalar: bool | None = None) -> FastPathBatch:
     """:func:`verify_points` on data already checked: float arrays C (M, N, 3, 4), x (M, N, 2) and the mask
     ``ok`` of the problems with valid cameras and finite points (e.g. from
-    :func:`tritools.model.geometry.validate_cameras`: a single call does not check its cameras twice)."""
+    :func:`tritools.model.geometry.validate_cameras`: a single call does not check its cameras twice).
+    ``scalar``: a stack of one runs the scalar twin :func:`verify_one` (all pairs, below ``BAND_MIN_VIEWS`` views,
+    the default :class:`sospoly.Tolerances` rule) and the stacked code where the twin leaves it; False: the stacked
+    code throughout; None (default): the twin exactly when M = 1."""
     ok = np.array(ok, bool)
     M, N = x.shape[:2]
-    norm = normalization_stack(C, x, ok)
+    if M == 1 and scalar is not False and ok[0]:
+        one = verify_one(C[0], x[0], tolerances, deadline=deadline)
+        if one is not None:
+            return one
+    norm = normalization_stack(C, x, ok, scalar=scalar)
     ok &= norm.ok
     Cn = norm.cameras_n
     xhat = np.zeros((M, N, 2))          # the observed points, normalised: s (x^_i - t_i) = 0
@@ -176,6 +183,77 @@ def verify_checked(C: np.ndarray, x: np.ndarray, ok: np.ndarray, tolerances: Tol
     gamma_lb = np.where(trivial, 0.0, gamma_lb)
     return FastPathBatch(certified | trivial, ok, X, gamma_lb, gamma_ub, x + u / norm.scale[:, None, None],
                          np.where(trivial, 0.0, c_lower), upper, norm.scale, trivial, residuals)
+
+
+def verify_one(C: np.ndarray, x: np.ndarray, tolerances: Tolerances, *,
+               deadline: Deadline | None = None) -> FastPathBatch | None:
+    """The scalar (M = 1) twin of :func:`verify_checked` for one problem with valid cameras C (N, 3, 4) and finite
+    points x (N, 2): the same steps (normalisation, refinement, polish, Lagrangian bound with all pairs, the
+    decision of :func:`tritools.solve.decide.decide_one` in c units and on the reported numbers, the trivial rule),
+    on plain arrays and floats where the stack had einsum and masks -- equal to the stacked code up to round-off
+    (tests/test_scalar_twins.py).  gamma(X) and the residuals use the formulas of the report
+    (:func:`tritools.solve.report.points_report_stack`) on the same arrays, so they are its bits.  A
+    :class:`FastPathBatch` of one, or None where the data leave the common path (the normalisation or the
+    refinement failed, a projection at round-off, no defined or a non-finite epipolar constraint, the deadline
+    passed, points not finite), from ``BAND_MIN_VIEWS`` views (the stack tries bands of pairs first) and for
+    tolerances other than :class:`sospoly.Tolerances` itself (a subclass may change the rule :func:`decide_one`
+    writes out): the stacked code decides those."""
+    N = len(x)
+    if N >= BAND_MIN_VIEWS or type(tolerances) is not Tolerances or not np.isfinite(x).all():
+        return None
+    norm = normalization_stack(C[None], x[None], np.ones(1, bool))
+    if not norm.ok[0] or expired(deadline):
+        return None
+    Cn, xhat, Xn = norm.cameras_n[0], np.zeros((N, 2)), norm.Xn[0]
+    if not norm.converged[0]:
+        Xn, ok_r, _ = refine_point(Cn, xhat, Xn)
+        if not ok_r:
+            return None
+    Xn = gauss_newton_polish(Cn[None], xhat[None], Xn[None], np.ones(1, bool))[0]
+    with np.errstate(over="ignore", invalid="ignore"):
+        u, _, fin = project_one(Cn, Xn)
+    v = u.ravel()
+    upper = float(v @ v)
+    lower = _lagrangian_one(C, Cn, v, math.sqrt(upper), tolerances) if fin else None
+    if lower is None:
+        return None
+    scale, res = float(norm.scale[0]), float(norm.resolution[0])
+    _, optimal, c_lower = decide_one(lower, upper, tolerances, N, res)
+    X = norm.world_points(Xn[None])
+    uw, _, fin_w = project_stack(C[None], X)
+    if not fin_w[0]:
+        return None
+    residuals = norms(uw - x, axis=2)             # (the report's formulas: points_report_stack)
+    gamma_ub = gamma_from_c(np.sum(residuals ** 2, axis=1), N, 1.0)
+    g_ub = float(gamma_ub[0])
+    gamma_lb = min(math.sqrt(max(c_lower, 0.0) / (2.0 * N)) / scale, g_ub)
+    certified = optimal and decide_reported_one(gamma_lb, g_ub, tolerances, N, scale, res)
+    trivial = not certified and decide_one(0.0, upper, tolerances, N, res)[1] and math.isfinite(upper) and \
+        decide_reported_one(0.0, g_ub, tolerances, N, scale, res)
+    return FastPathBatch(np.array([certified or trivial]), np.ones(1, bool), X,
+                         np.array([0.0 if trivial else gamma_lb]), gamma_ub, (x + u / scale)[None],
+                         np.array([0.0 if trivial else c_lower]), np.array([upper]), norm.scale, np.array([trivial]),
+                         residuals)
+
+
+def _lagrangian_one(C: np.ndarray, Cn: np.ndarray, v: np.ndarray, radius: float, tolerances: Tolerances
+                    ) -> float | None:
+    """The Lagrangian lower bound (NaN: none) of :func:`_all_pairs_bounds` for one problem (raw cameras C and
+    normalised Cn (N, 3, 4), the candidate v (2N,)), or None where that function would flag the problem (no
+    defined pair, non-finite constraints).  Pairs with coincident centres carry no constraint, as there."""
+    N = len(C)
+    F, defined, raw = _fundamental_both(Cn[None], C[None])      # (one call for both, as the stack)
+    if not raw.all():
+        F, defined = np.where(raw[..., None, None], F, 0.0), defined & raw
+    if not defined.any():
+        return None
+    g0, g1, G2 = epipolar_quadratics(F, N)
+    if not (np.isfinite(g0).all() and np.isfinite(g1).all() and np.isfinite(G2.vals).all()):
+        return None
+    n = 2 * N
+    ver = verify_quadratic_batch(np.zeros(1), np.zeros((1, n)), np.eye(n)[None], g0, g1, G2, v[None],
+                                 tolerances=tolerances, radius=np.array([radius]))
+    return float(ver.lower_bound[0])
 
 
 def lagrangian_bounds(C, Cn, v, ok, radius, resolution, tolerances, f0=None, weights=None, views=None, *,

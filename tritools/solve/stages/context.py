@@ -18,10 +18,11 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ...model.constraints import centre_relations
-from ...model.frame import WorldFrame, frame_centre_groups, world_frame
+from ...model.frame import WorldFrame, frame_centre_groups
 from ...model.normalize import Normalization, normalization_for
 from ...model.problem import TriangulationProblem, build_problem
 from ...result import Attempt, TriangulationResult
+from ..fastpath_cameras import framed_cameras
 from ..options import TriangulationOptions
 from ..plan import Step
 from ..settings import SolveSettings
@@ -108,9 +109,9 @@ class PointContext:
 
     def __init__(self, cams, regions, opts: TriangulationOptions, t0: float, *, stages=(), step_stages=(),
                  fast=FAST_DEFAULT):
-        self.frame: WorldFrame = world_frame(cams)          # georeferenced worlds, rescaled cameras
+        self.frame: WorldFrame                              # georeferenced worlds, rescaled cameras
+        self.frame, self.cams = framed_cameras(cams)        # (remembered for the last cameras)
         self.cams_user = cams                               # the caller's: the final report is made on these
-        self.cams = self.frame.cameras(cams)
         self.regions, self.opts, self.t0 = regions, opts, t0
         self.N = self.cams.shape[0]
         self.settings = SolveSettings.from_options(opts)

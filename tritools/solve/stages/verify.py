@@ -32,7 +32,6 @@ import sospoly
 from sospoly.analysis import verify_quadratic
 from sospoly.budget import TimeLimitReached
 
-from ...model.cameras import depths_stack_arrays
 from ...model.constraints import Method
 from ...model.geometry import dlt, gamma as gamma_of, project, refine_l2
 from ...result import Attempt, Status, TriangulationResult
@@ -40,6 +39,7 @@ from ..decide import cheirality, decide, gamma_from_c
 from ..discs import disc_radius, ellipse_shapes, verify_discs
 from ..ellipses import verify_ellipses
 from ..fastpath import verify_checked
+from ..fastpath_cameras import depths_one
 from ..options import SolvePath
 from ..regions_verify import constraint_counts, region_bound, region_forms
 from ..plan import Step, degree_plan, delta_min
@@ -116,7 +116,7 @@ def _verify_points(ctx: PointContext, step: Step) -> TriangulationResult | None:
     # gamma(X) and the residuals as points_report_stack computes them (verify_checked uses its formulas on the
     # same cameras and X): only the depths are left
     gamma, res = float(b.gamma_at_X[0]), b.residuals[0]
-    dep = depths_stack_arrays(ctx.cams[None], X[None], ctx.opts.world_frame)[0]
+    dep = depths_one(ctx.cams, X, ctx.opts.world_frame)
     status, in_front = cheirality(Status.OPTIMAL, dep, ctx.opts.require_in_front)
     K = ctx.N * (ctx.N - 1) // 2
     return TriangulationResult(step.result_method.value, status, X=X, gamma_ub=gamma,

@@ -64,16 +64,17 @@ import time
 
 import numpy as np
 
-from ..model.geometry import PROJECTION_DENOM_RTOL, depths_stack
+from ..model.geometry import depths_stack
 from ..model.normalize import normalization_for
 from ..result import Attempt, Status, TriangulationResult
 from .decide import cheirality, gamma_from_c
 from .report import PointReport, point_report
 from .trivial import local_estimate
-from . import robust_bounds
+from . import robust_bounds, robust_suspects
 from .robust_bounds import ROUND_DOWN, SubsetBounds
 from .robust_drive import drive
 from .robust_rays import ray_candidates
+from .robust_costs import point_distances2, point_distances2_one, projections
 
 __all__ = ["robust_thresholds", "triangulate_robust", "drive", "lookahead_bound", "tls_cost", "point_distances2",
            "MAX_NODES", "MAX_PAIRS", "MIN_THRESHOLD",
@@ -319,6 +320,10 @@ class TlsSearch:
                 self.loo_lb = self.leave_one_out_bound()
                 if self.meets(self.loo_lb):
                     return                      # every view an inlier, and dropping any costs at least as much
+        if robust_suspects.ENABLED and robust_bounds.PACKING:           # a few wrong matches: O(N) sub-problems
+            self.loo_lb = max(self.loo_lb, (yield from robust_suspects.suspect_bound(self)))
+            if self.meets(self.loo_lb):
+                return
         pairs = list(itertools.combinations(range(self.N), 2))
         if len(pairs) > MAX_PAIRS:
             pairs = [pairs[k] for k in rng.choice(len(pairs), MAX_PAIRS, replace=False)]
@@ -545,44 +550,13 @@ class TlsSearch:
         if stopped:
             msg += f"; stopped by the {stopped}"
         image_points = np.array([np.full(2, np.nan) if not np.isfinite(r) else p for p, r in
-                                 zip(_projections(X, self.C), rep.residuals)])
+                                 zip(projections(X, self.C), rep.residuals)])
         attempt = Attempt("tls", None, status.value, gamma_lb, gamma_ub, "branch-and-bound", None, (),
                           timings["total"])
         return TriangulationResult("tls", status, X=X, gamma_ub=gamma_ub, gamma_lb=gamma_lb, optimal=certified,
                                    image_points=image_points, certified_by="branch-and-bound" if certified else None,
                                    message=msg, timings=timings, attempts=(attempt,), in_front=in_front,
                                    depths=rep.depths, residuals=rep.residuals, inliers=inliers)
-
-
-def _projections(X, cameras) -> np.ndarray:
-    Xh = np.append(X, 1.0)
-    u = cameras @ Xh
-    with np.errstate(all="ignore"):
-        return u[:, :2] / u[:, 2:]
-
-
-def point_distances2(C: np.ndarray, x: np.ndarray, Xs: np.ndarray) -> np.ndarray:
-    """Squared distances ||Phi(X_m, P_i) - x_i||^2 (M, N) of candidates Xs (M, 3) to point regions x (N, 2); inf
-    for a view whose projection is undefined (denominator below PROJECTION_DENOM_RTOL of its scale, the rule of
-    :func:`tritools.model.geometry.project_homogeneous`) or not finite."""
-    Xh = np.concatenate([Xs, np.ones((len(Xs), 1))], axis=1)
-    u = np.einsum("nij,mj->mni", C, Xh)
-    denom = np.einsum("nj,mj->mn", np.abs(C[:, 2]), np.abs(Xh))
-    ok = np.abs(u[..., 2]) > PROJECTION_DENOM_RTOL * denom
-    with np.errstate(all="ignore"):
-        d2 = np.sum((u[..., :2] / u[..., 2:] - x[None]) ** 2, axis=2)
-    return np.where(ok & np.isfinite(d2), d2, np.inf)
-
-
-def point_distances2_one(C: np.ndarray, absC2: np.ndarray, x: np.ndarray, X) -> np.ndarray:
-    """:func:`point_distances2` for one candidate X (3,): (N,), the same rule; ``absC2`` = |C[:, 2, :]|."""
-    Xh = np.array([X[0], X[1], X[2], 1.0], float)
-    u = C @ Xh
-    ok = np.abs(u[:, 2]) > PROJECTION_DENOM_RTOL * (absC2 @ np.abs(Xh))
-    with np.errstate(all="ignore"):
-        d = u[:, :2] / u[:, 2:] - x
-        d2 = d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1]
-    return np.where(ok & np.isfinite(d2), d2, np.inf)
 
 
 def triangulate_robust(cams: np.ndarray, regions, c: np.ndarray, opts, t0: float | None = None) -> TriangulationResult:

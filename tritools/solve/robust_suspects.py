@@ -1,0 +1,137 @@
+"""The TLS search's suspect-set stage: a track with a few wrong matches certified from O(N) sub-problems.
+
+A track whose L2 estimate of all views V leaves views over their thresholds usually holds one or two wrong
+matches, and the full branch and bound of :mod:`tritools.solve.robust` reaches their certificate only after
+every view pair (N(N-1)/2 sub-problems), the local optimisation and a few dozen nodes.  This stage tries a
+two-node cover of the inlier sets first.
+
+The suspects.  Starting from the best candidate (the L2 estimate of V), O is the set of views it calls
+outliers; W = V - O is verified, its estimate offered, and O re-read from the best candidate, for at most
+:data:`ROUNDS` rounds (it stops when O is stable).  Only |O| <= :data:`MAX_SUSPECTS` goes on.
+
+The bound.  For *any* set O of views, every X either keeps some j in O an inlier (d_j(X) < c_j) or has every
+view of O as an outlier, so
+
+    f_TLS* >= min( min_{j in O} LB(node I = {j}),   c^2(O) + TLS*(W) ),
+
+where LB(node I = {j}) is the module docstring's node bound of :mod:`tritools.solve.robust` with I = {j},
+O = {} and U = V - {j} (s = d_j^2 in [0, min(c_j^2, UB)], a_u = L2LB({j, u}): the view pairs holding j only,
+N - 1 of them, not N(N-1)/2), and TLS*(W), the TLS optimum of the views W alone, is bounded below by the root
+bound of W, min(L2LB(W), min_{i in W} c_i^2), or, when that is not enough and L2LB(W) is, by the leave-one-out
+bound of W (the |W| sets W - k),
+
+    TLS*(W) >= min( L2LB(W), min_{k in W} [ c_k^2 + min(L2LB(W - k), min_{i in W - k} c_i^2) ] ),
+
+the argument of :meth:`tritools.solve.robust.TlsSearch.leave_one_out_bound` on W (an X with an outlier k in W
+pays c_k^2 plus the root bound of W - k).  Sub-bounds the verification does not certify count 0 (valid, only
+weaker): the stage never solves an SDP; a track it does not certify goes on to the full search, which reuses
+every sub-bound cached here.  The result is rounded down (:data:`tritools.solve.robust_bounds.ROUND_DOWN`).
+The validity does not depend on how O was chosen: O only decides how tight the bound is.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .robust_bounds import ROUND_DOWN
+
+__all__ = ["suspect_bound", "ENABLED", "MAX_SUSPECTS", "ROUNDS"]
+
+#: False skips the stage (the tests compare the two).
+ENABLED = True
+#: the stage runs only for tracks whose best candidate has at most this many outlier views.
+MAX_SUSPECTS = 2
+#: rounds of (verify W = V - O, offer its estimate, re-read O) before the bound.
+ROUNDS = 3
+
+
+def suspect_bound(search):
+    """Generator (:meth:`tritools.solve.robust.TlsSearch.need` requests): a lower bound of f_TLS* (pixels^2) by
+    the suspect-set cover (module docstring); 0.0 where the stage does not apply."""
+    N = search.N
+    full = frozenset(range(N))
+    if N < 3:
+        return 0.0
+    if search.best_X is None and search.bounds.frame() is not None:     # all views not verified: the parent's
+        frame = search.bounds.frame()                                    # L2 estimate (its normalisation's)
+        search.offer(frame.to_world(frame.Xn))
+    O = yield from _suspects(search)
+    if O is None:
+        return 0.0
+    W = full - O
+    yield from search.verify_first(*[frozenset((j, u)) for j in sorted(O) for u in range(N) if u != j])
+    search.offer_new()
+    inside = min(_inlier_node(search, j) for j in O)
+    if not search.meets(inside):
+        return 0.0
+    c2_out = float(np.sum(search.c2[sorted(O)]))
+    outside = yield from _outside(search, W, c2_out)
+    return min(inside, outside)
+
+
+def _suspects(search):
+    """Generator: the suspect set O (module docstring), or None.  O starts as the best candidate's outlier views,
+    or, where that holds more than :data:`MAX_SUSPECTS` (a wrong match pulls the L2 estimate of all views away
+    from every view), as its worst view by d_i / c_i; each round verifies W = V - O, offers W's estimate and
+    takes the best candidate's outliers if they are few, else adds W's worst view by its estimate (verified or
+    only polished, ``SubsetBounds.trial``).  O is returned once the best candidate's outliers are exactly O."""
+    full = frozenset(range(search.N))
+    if search.best_X is None:
+        return None
+    O = full - search.best_S
+    if len(O) > MAX_SUSPECTS:
+        O = frozenset((_worst(search, search.best_X, full),))
+    for _ in range(ROUNDS):
+        if not O or len(O) > MAX_SUSPECTS or search.N - len(O) < 2:
+            return None
+        W = full - O
+        yield from search.verify_first(W)
+        if search.bounds.known(W):
+            search.offer(search.bounds.estimate(W))
+        now = full - search.best_S
+        if now == O and search.bounds.known(W):
+            return O
+        X = search.bounds.estimate(W) if search.bounds.known(W) else search.bounds.trial.get(W)
+        if 0 < len(now) <= MAX_SUSPECTS:
+            O = now
+        elif X is not None:
+            O = O | {_worst(search, X, W)}
+        else:
+            return None
+    return None
+
+
+def _worst(search, X, views: frozenset) -> int:
+    """The view of ``views`` with the largest d_i(X) / c_i (an undefined projection counts as infinite)."""
+    r = search.residuals(X) / search.c
+    idx = sorted(views)
+    return int(idx[int(np.argmax(np.where(np.isnan(r[idx]), np.inf, r[idx])))])
+
+
+def _inlier_node(search, j: int) -> float:
+    """LB(node I = {j}) (module docstring) from the cached pair bounds L2LB({j, u}) (unknown: 0)."""
+    a = np.zeros(search.N)
+    for u in range(search.N):
+        P = frozenset((j, u))
+        if u != j and search.bounds.known(P):
+            a[u] = search.bounds.bound(P)
+    U = [u for u in range(search.N) if u != j]
+    return search._bound(frozenset((j,)), 0.0, U, 0.0, a)
+
+
+def _outside(search, W: frozenset, c2_out: float):
+    """Generator: c^2(O) + a lower bound of TLS*(W) (module docstring): the root bound of W, else its
+    leave-one-out bound where L2LB(W) alone would meet the best value."""
+    b = search.bounds
+    c2 = search.c2
+    lw = b.bound(W) if b.known(W) else 0.0
+    root = (c2_out + min(lw, float(np.min(c2[sorted(W)])))) * ROUND_DOWN
+    if search.meets(root) or len(W) < 3 or not search.meets((c2_out + lw) * ROUND_DOWN):
+        return root
+    yield from search.verify_first(*[W - {k} for k in sorted(W)])
+    search.offer_new()
+    terms = [lw]
+    for k in sorted(W):
+        S = W - {k}
+        rest = float(np.min(c2[sorted(S)]))
+        terms.append(c2[k] + min(b.bound(S) if b.known(S) else 0.0, rest))
+    return (c2_out + min(terms)) * ROUND_DOWN

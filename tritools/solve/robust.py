@@ -64,7 +64,7 @@ import time
 
 import numpy as np
 
-from ..model.geometry import depths_stack
+from ..model.cameras import as_world_frame, depth_rows
 from ..model.normalize import normalization_for
 from ..result import Attempt, Status, TriangulationResult
 from .decide import cheirality, gamma_from_c
@@ -200,8 +200,9 @@ class TlsSearch:
         self.x = self.bounds.x
         self.nodes = 0
         self.anchors, self.anchor_a = None, None     # see anchor_bounds
-        self.loo_lb = 0.0                            # leave_one_out_bound, where computed
+        self.loo_lb = 0.0                            # leave_one_out / suspect bound (candidates), where computed
         self._absC2 = None                           # |third rows| of the cameras (point_distances2_one)
+        self.drows = None                           # depth rows of the cameras (report; a batch sets them)
 
     @property
     def regions(self) -> list:
@@ -243,9 +244,12 @@ class TlsSearch:
         """Residuals and depths of X: the vectorised twin for point regions, point_report otherwise."""
         if not self.points:
             return point_report(X, self.C, self.regions, self.opts.world_frame)
-        res = self.residuals(X)
-        return PointReport(None, res, depths_stack(self.C[None], np.asarray(X, float)[None],
-                                                   self.opts.world_frame)[0])
+        if self.drows is None:                          # depth = h row_i . X~ (depths_stack's rows), once
+            self.drows = depth_rows(self.C)
+        Xh = np.array([X[0], X[1], X[2], 1.0], float)
+        with np.errstate(over="ignore", invalid="ignore"):
+            depths = as_world_frame(self.opts.world_frame).sign * (self.drows @ Xh)
+        return PointReport(None, self.residuals(X), depths)
 
     def offer(self, X) -> None:
         """A candidate: kept when its exact f_TLS (:func:`tritools.solve.report.point_report` distances) is
@@ -309,7 +313,8 @@ class TlsSearch:
 
     def candidates(self, rng):
         full = frozenset(range(self.N))
-        yield from self.verify_first(full)
+        if not robust_suspects.skip_full(self):           # all views verified unless a view is over its threshold
+            yield from self.verify_first(full)
         if self.bounds.known(full):
             self.offer(self.bounds.estimate(full))
             if self.best_X is not None and self.meets(self.root_bound()):
@@ -518,9 +523,11 @@ class TlsSearch:
         # with the hint set, a whole problem holding a likely outlier gets its pair packing bound, no SDP: the root
         # bound uses it only up to min c^2, and the search reopens it if its leaf is not pruned by it
         self.bounds.hint = self.best_S
-        yield from self.need([frozenset(range(self.N))])
-        self.offer_new()
-        lb, stopped = max(self.root_bound(), self.loo_lb), None
+        if not self.meets(self.loo_lb):                 # certified by the candidate stage: no root bound needed
+            yield from self.need([frozenset(range(self.N))])
+            self.offer_new()
+        lb, stopped = max(self.root_bound() if self.bounds.known(frozenset(range(self.N))) else 0.0,
+                          self.loo_lb), None
         if not self.meets(lb):
             order = branching_order(self.residuals(self.best_X) / self.c)
             yield from self.anchor_bounds(order)
@@ -549,8 +556,7 @@ class TlsSearch:
               f"sub-problems"
         if stopped:
             msg += f"; stopped by the {stopped}"
-        image_points = np.array([np.full(2, np.nan) if not np.isfinite(r) else p for p, r in
-                                 zip(projections(X, self.C), rep.residuals)])
+        image_points = np.where(np.isfinite(rep.residuals)[:, None], projections(X, self.C), np.nan)
         attempt = Attempt("tls", None, status.value, gamma_lb, gamma_ub, "branch-and-bound", None, (),
                           timings["total"])
         return TriangulationResult("tls", status, X=X, gamma_ub=gamma_ub, gamma_lb=gamma_lb, optimal=certified,

@@ -185,7 +185,7 @@ def _point_searches(idx, points, thresholds, opts, t0) -> dict:
     :func:`tritools.model.cameras.camera_problems` (the vectorised twin of the per-problem
     :func:`tritools.model.cameras.validate_cameras`), one call per view count; the others are left out (the
     caller's per-problem path gives them their named error)."""
-    from ..model.cameras import camera_problems
+    from ..model.cameras import camera_problems, depth_rows
     from .robust import TlsSearch
 
     groups: dict = {}
@@ -198,7 +198,9 @@ def _point_searches(idx, points, thresholds, opts, t0) -> dict:
             valid = camera_problems(C).valid
         except ValueError:
             continue
+        rows = depth_rows(C)                    # the depth rows of every search's report, in one call
         for k, i in enumerate(group):
             if valid[k]:
                 out[i] = TlsSearch(C[k].copy(), None, thresholds[i], opts, t0, points=points[i][1])
+                out[i].drows = rows[k]
     return out

@@ -32,9 +32,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from . import robust_bounds
 from .robust_bounds import ROUND_DOWN
 
-__all__ = ["suspect_bound", "ENABLED", "MAX_SUSPECTS", "ROUNDS"]
+__all__ = ["skip_full", "suspect_bound", "ENABLED", "MAX_SUSPECTS", "ROUNDS"]
 
 #: False skips the stage (the tests compare the two).
 ENABLED = True
@@ -42,6 +43,22 @@ ENABLED = True
 MAX_SUSPECTS = 2
 #: rounds of (verify W = V - O, offer its estimate, re-read O) before the bound.
 ROUNDS = 3
+
+
+def skip_full(search) -> bool:
+    """Is the verification of all views V skipped at the start of the search?  Where the parent's L2 estimate
+    X_V (its normalisation's, point regions) has a view over its threshold, the root bound min(L2LB(V),
+    min c^2) cannot certify it (a view with d_i(X_V) >= c_i leaves f_TLS(X_V) below L2*(V), and UB <= c^2 would be
+    needed), and the verification of a track with a wrong match rarely succeeds: X_V is offered instead and the
+    suspect stage starts from it.  L2LB(V) is computed later where the search still needs it."""
+    frame = search.bounds.frame() if ENABLED and robust_bounds.PACKING and search.N >= 3 else None
+    if frame is None:
+        return False
+    X = frame.to_world(frame.Xn)
+    if np.all(search.residuals(X) < search.c):
+        return False
+    search.offer(X)
+    return search.best_X is not None
 
 
 def suspect_bound(search):

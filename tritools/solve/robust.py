@@ -73,6 +73,7 @@ from .trivial import local_estimate
 from . import robust_bounds, robust_suspects
 from .robust_bounds import ROUND_DOWN, SubsetBounds
 from .robust_drive import drive
+from .robust_loo import leave_one_out
 from .robust_rays import ray_candidates
 from .robust_costs import point_distances2, point_distances2_one, projections
 
@@ -228,11 +229,15 @@ class TlsSearch:
         """d_i(X) (N,), inf where the projection is undefined: :func:`point_distances2` for point regions (the
         vectorised twin of :func:`tritools.solve.report.point_report`), else point_report."""
         if self.points:
-            if self._absC2 is None:
-                self._absC2 = np.abs(self.C[:, 2])
-            return np.sqrt(point_distances2_one(self.C, self._absC2, self.x, X))
+            return np.sqrt(self.sq_distances(X))
         rep = point_report(X, self.C, self.regions, self.opts.world_frame)
         return np.full(self.N, np.inf) if rep.residuals is None else rep.residuals
+
+    def sq_distances(self, X) -> np.ndarray:
+        """d_i(X)^2 (N,) of point regions (:func:`tritools.solve.robust_costs.point_distances2_one`)."""
+        if self._absC2 is None:
+            self._absC2 = np.abs(self.C[:, 2])
+        return point_distances2_one(self.C, self._absC2, self.x, X)
 
     def screen(self, Xs: np.ndarray) -> np.ndarray:
         """f_TLS of many candidates (M, 3) (point regions: vectorised; else one by one); only for ranking."""
@@ -256,8 +261,12 @@ class TlsSearch:
         lower than the best by more than round-off (ties keep the earlier one: the full L2 estimate first)."""
         if X is None or not np.all(np.isfinite(X)):
             return
-        d = self.residuals(X)
-        f = tls_cost(d, self.c)
+        if self.points:                                 # tls_cost from the squared distances (inf: c^2)
+            d2 = self.sq_distances(X)
+            d, f = np.sqrt(d2), float(np.minimum(d2, self.c2).sum())
+        else:
+            d = self.residuals(X)
+            f = tls_cost(d, self.c)
         if f < self.best_f * (1 - 1e-12) or (self.best_X is None and np.isfinite(f)):
             self.best_X, self.best_f = np.asarray(X, float), f
             self.best_S = frozenset(int(i) for i in np.nonzero(d < self.c)[0])
@@ -319,7 +328,9 @@ class TlsSearch:
             self.offer(self.bounds.estimate(full))
             if self.best_X is not None and self.meets(self.root_bound()):
                 return                          # certified by the L2 certificate of all views: no search needed
-            if self.best_S == full and self.N >= 3 and robust_bounds.PACKING:
+            if self.best_S == full and self.N >= 3 and robust_bounds.PACKING and robust_suspects.ENABLED:
+                self.loo_lb = yield from leave_one_out(self, full, 0.0)       # its sub-bounds from halves first
+            elif self.best_S == full and self.N >= 3 and robust_bounds.PACKING:
                 yield from self.verify_first(*[full - {j} for j in range(self.N)])
                 self.offer_new()
                 self.loo_lb = self.leave_one_out_bound()

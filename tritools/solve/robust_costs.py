@@ -39,6 +39,10 @@ def point_distances2_one(C: np.ndarray, absC2: np.ndarray, x: np.ndarray, X) -> 
     Xh = np.array([X[0], X[1], X[2], 1.0], float)
     u = C @ Xh
     ok = np.abs(u[:, 2]) > PROJECTION_DENOM_RTOL * (absC2 @ np.abs(Xh))
+    if ok.all() and np.isfinite(u).all():            # the common case, without np.errstate (its cost dominates):
+        d = u[:, :2] / u[:, 2:] - x                   # |u_3| > 1e-10 |p_3| |X~| bounds the quotient
+        if np.abs(d).max() < 1e150:                   # no overflow in the squares
+            return d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1]
     with np.errstate(all="ignore"):
         d = u[:, :2] / u[:, 2:] - x
         d2 = d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1]

@@ -16,9 +16,10 @@ view of O as an outlier, so
 
 where LB(node I = {j}) is the module docstring's node bound of :mod:`tritools.solve.robust` with I = {j},
 O = {} and U = V - {j} (s = d_j^2 in [0, min(c_j^2, UB)], a_u = L2LB({j, u}): the view pairs holding j only,
-N - 1 of them, not N(N-1)/2), and TLS*(W), the TLS optimum of the views W alone, is bounded below by the root
-bound of W, min(L2LB(W), min_{i in W} c_i^2), or, when that is not enough and L2LB(W) is, by the leave-one-out
-bound of W (the |W| sets W - k),
+at most N - 1 of them, not N(N-1)/2: first the :data:`PAIRS_FIRST` with W's most confident inliers, the rest
+only where these do not prune the node; an unknown a_u counts 0), and TLS*(W), the TLS optimum of the views W
+alone, is bounded below by the root bound of W, min(L2LB(W), min_{i in W} c_i^2), or, when that is not enough and
+L2LB(W) is, by the leave-one-out bound of W (sub-bounds from two halves first, :mod:`tritools.solve.robust_loo`),
 
     TLS*(W) >= min( L2LB(W), min_{k in W} [ c_k^2 + min(L2LB(W - k), min_{i in W - k} c_i^2) ] ),
 
@@ -34,13 +35,16 @@ import numpy as np
 
 from . import robust_bounds
 from .robust_bounds import ROUND_DOWN
+from .robust_loo import leave_one_out
 
-__all__ = ["skip_full", "suspect_bound", "ENABLED", "MAX_SUSPECTS", "ROUNDS"]
+__all__ = ["skip_full", "suspect_bound", "ENABLED", "MAX_SUSPECTS", "PAIRS_FIRST", "ROUNDS"]
 
 #: False skips the stage (the tests compare the two).
 ENABLED = True
 #: the stage runs only for tracks whose best candidate has at most this many outlier views.
 MAX_SUSPECTS = 2
+#: view pairs {j, u} per suspect j requested first (the rest only where these do not bound the node {j}).
+PAIRS_FIRST = 3
 #: rounds of (verify W = V - O, offer its estimate, re-read O) before the bound.
 ROUNDS = 3
 
@@ -75,9 +79,14 @@ def suspect_bound(search):
     if O is None:
         return 0.0
     W = full - O
-    yield from search.verify_first(*[frozenset((j, u)) for j in sorted(O) for u in range(N) if u != j])
-    search.offer_new()
-    inside = min(_inlier_node(search, j) for j in O)
+    r = search.residuals(search.best_X) / search.c             # partners: W's most confident inliers first
+    order = sorted(W, key=lambda u: (r[u] if np.isfinite(r[u]) else np.inf, u)) + sorted(O)
+    for part in (order[:PAIRS_FIRST], order[PAIRS_FIRST:]):
+        yield from search.verify_first(*[frozenset((j, u)) for j in sorted(O) for u in part if u != j])
+        search.offer_new()
+        inside = min(_inlier_node(search, j) for j in O)
+        if search.meets(inside):
+            break
     if not search.meets(inside):
         return 0.0
     c2_out = float(np.sum(search.c2[sorted(O)]))
@@ -144,11 +153,4 @@ def _outside(search, W: frozenset, c2_out: float):
     root = (c2_out + min(lw, float(np.min(c2[sorted(W)])))) * ROUND_DOWN
     if search.meets(root) or len(W) < 3 or not search.meets((c2_out + lw) * ROUND_DOWN):
         return root
-    yield from search.verify_first(*[W - {k} for k in sorted(W)])
-    search.offer_new()
-    terms = [lw]
-    for k in sorted(W):
-        S = W - {k}
-        rest = float(np.min(c2[sorted(S)]))
-        terms.append(c2[k] + min(b.bound(S) if b.known(S) else 0.0, rest))
-    return (c2_out + min(terms)) * ROUND_DOWN
+    return (yield from leave_one_out(search, W, c2_out))

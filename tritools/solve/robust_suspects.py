@@ -67,7 +67,8 @@ def skip_full(search) -> bool:
 
 def suspect_bound(search):
     """Generator (:meth:`tritools.solve.robust.TlsSearch.need` requests): a lower bound of f_TLS* (pixels^2) by
-    the suspect-set cover (module docstring); 0.0 where the stage does not apply."""
+    the suspect-set cover (module docstring); 0.0 where the stage does not apply.  The pairs' estimates (two-view
+    fits, rarely good TLS candidates) are not screened here: they stay queued for the full search, if it runs."""
     N = search.N
     full = frozenset(range(N))
     if N < 3:
@@ -83,7 +84,6 @@ def suspect_bound(search):
     order = sorted(W, key=lambda u: (r[u] if np.isfinite(r[u]) else np.inf, u)) + sorted(O)
     for part in (order[:PAIRS_FIRST], order[PAIRS_FIRST:]):
         yield from search.verify_first(*[frozenset((j, u)) for j in sorted(O) for u in part if u != j])
-        search.offer_new()
         inside = min(_inlier_node(search, j) for j in O)
         if search.meets(inside):
             break

@@ -162,3 +162,28 @@ def test_duplicated_wrong_match_and_two_views():
     assert 2 * 5 * res.gamma_lb ** 2 <= f_ref * (1 + 1e-9) + 1e-9
     two = tritools.triangulate(cams[1:3], x[1:3], robust=8.0)
     assert two.optimal and two.inliers.all()
+
+
+def test_drive_restores_the_garbage_collector(monkeypatch):
+    """A drive of many searches pauses the cyclic collector and restores its state after (enabled or not), also
+    when a search fails."""
+    import gc
+
+    import tritools.solve.robust_drive as rd
+
+    monkeypatch.setattr(rd, "GC_PAUSE_FROM", 2)
+    cams, x, _, _ = _scene(4, 1, 14)
+    probs = [(cams, x), (cams, x[:3]), (cams, x)]            # the middle one is malformed: invalid_input
+    seen = []
+    real = rd.compute_many
+    monkeypatch.setattr(rd, "compute_many", lambda req: seen.append(gc.isenabled()) or real(req))
+    assert gc.isenabled()
+    res = tritools.triangulate_many(probs, robust=10.0)
+    assert gc.isenabled() and seen and not any(seen)
+    assert res[1].status == tritools.Status.INVALID_INPUT and res[0].optimal and res[2].optimal
+    gc.disable()
+    try:
+        tritools.triangulate_many(probs, robust=10.0)
+        assert not gc.isenabled()
+    finally:
+        gc.enable()

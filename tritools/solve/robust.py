@@ -34,7 +34,7 @@ f_TLS* >= min(L2LB(all), min_i c_i^2): tracks without outliers are certified by 
 One level down (:meth:`TlsSearch.leave_one_out_bound`), an X with an outlier j pays c_j^2 plus the root bound
 of the problem without j, so f_TLS* >= min(L2LB(V), min_j [c_j^2 + min(L2LB(V - j), min_{i != j} c_i^2)]):
 a clean track whose L2 optimum costs more than min c^2 is certified from its N leave-one-out sets (their bounds
-from two halves first, :mod:`tritools.solve.robust_loo`).  A track with one or two wrong matches O is first tried
+from two halves first, :mod:`tritools.solve.robust_loo`).  A track with up to three wrong matches O is first tried
 by the cover f_TLS* >= min(min_{j in O} LB(node {j}), c^2(O) + TLS*(V - O)) (:mod:`tritools.solve.robust_suspects`,
 valid for any O), from the pairs holding O and V - O's own bounds, before the pairs and the search.
 

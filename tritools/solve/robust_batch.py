@@ -7,8 +7,8 @@
    inlier sets, the node sub-problems) is computed in one vectorised call per subset size across the chunk
    (:func:`tritools.solve.robust_bounds.compute_many`: verification, then the batched delta = 2 SDP).  A clean
    track is certified at the root by the L2 bound of all its views (f_TLS* >= min(L2LB(all), min_i c_i^2)), so
-   it costs one row of the first vectorised call; no per-point SDP runs before the search.  A track with one or
-   two wrong matches is usually certified by the suspect stage (:mod:`tritools.solve.robust_suspects`) from about
+   it costs one row of the first vectorised call; no per-point SDP runs before the search.  A track with one to
+   three wrong matches is usually certified by the suspect stage (:mod:`tritools.solve.robust_suspects`) from about
    N + 3 rows, before the view pairs and the branch and bound; the searches left are the rare hard ones.  Their cameras
    are checked in one :func:`tritools.model.cameras.camera_problems` call per view count (a problem that fails
    it takes the per-problem path below, whose :func:`tritools.model.cameras.validate_cameras` names the error).

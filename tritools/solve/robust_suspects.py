@@ -1,6 +1,6 @@
 """The TLS search's suspect-set stage: a track with a few wrong matches certified from O(N) sub-problems.
 
-A track whose L2 estimate of all views V leaves views over their thresholds usually holds one or two wrong
+A track whose L2 estimate of all views V leaves views over their thresholds usually holds one to three wrong
 matches, and the full branch and bound of :mod:`tritools.solve.robust` reaches their certificate only after
 every view pair (N(N-1)/2 sub-problems), the local optimisation and a few dozen nodes.  This stage tries a
 two-node cover of the inlier sets first.
@@ -37,12 +37,15 @@ from . import robust_bounds
 from .robust_bounds import ROUND_DOWN
 from .robust_loo import leave_one_out
 
-__all__ = ["skip_full", "suspect_bound", "ENABLED", "MAX_SUSPECTS", "PAIRS_FIRST", "ROUNDS"]
+__all__ = ["skip_full", "suspect_bound", "ENABLED", "MAX_SUSPECTS", "PAIRS_FIRST", "ROUNDS", "SMALL_N"]
 
 #: False skips the stage (the tests compare the two).
 ENABLED = True
 #: the stage runs only for tracks whose best candidate has at most this many outlier views.
-MAX_SUSPECTS = 2
+MAX_SUSPECTS = 3
+#: up to this many views, a track whose rounds found no suspect set tries every leave-one-out fit (with few views
+#: the worst view of the L2 fit is often a clean one).
+SMALL_N = 4
 #: view pairs {j, u} per suspect j requested first (the rest only where these do not bound the node {j}).
 PAIRS_FIRST = 3
 #: rounds of (verify W = V - O, offer its estimate, re-read O) before the bound.
@@ -99,11 +102,27 @@ def _suspects(search):
     or, where that holds more than :data:`MAX_SUSPECTS` (a wrong match pulls the L2 estimate of all views away
     from every view), as its worst view by d_i / c_i; each round verifies W = V - O, offers W's estimate and
     takes the best candidate's outliers if they are few, else adds W's worst view by its estimate (verified or
-    only polished, ``SubsetBounds.trial``).  O is returned once the best candidate's outliers are exactly O."""
+    only polished, ``SubsetBounds.trial``).  O is returned once the best candidate's outliers are exactly O.  Where
+    the rounds find none and N <= :data:`SMALL_N`, every fit of V - j is offered and O read off the best one."""
     full = frozenset(range(search.N))
     if search.best_X is None:
         return None
-    O = full - search.best_S
+    O = yield from _refit(search, full - search.best_S)
+    if O is None and search.N <= SMALL_N:                    # every leave-one-out fit (a few small rows)
+        drops = [full - {j} for j in range(search.N)]
+        yield from search.verify_first(*drops)
+        for W in drops:
+            search.offer(search.bounds.estimate(W) if search.bounds.known(W) else search.bounds.trial.get(W))
+        O = full - search.best_S
+        if 0 < len(O) <= MAX_SUSPECTS and search.bounds.known(full - O):
+            return O
+        return None
+    return O
+
+
+def _refit(search, O: frozenset):
+    """Generator: :func:`_suspects`' rounds from the outlier set O of the best candidate."""
+    full = frozenset(range(search.N))
     if len(O) > MAX_SUSPECTS:
         O = frozenset((_worst(search, search.best_X, full),))
     for _ in range(ROUNDS):

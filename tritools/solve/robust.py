@@ -33,7 +33,10 @@ a piecewise-linear minimum in s attained at the interval's ends or at a breakpoi
 f_TLS* >= min(L2LB(all), min_i c_i^2): tracks without outliers are certified by their L2 certificate alone.
 One level down (:meth:`TlsSearch.leave_one_out_bound`), an X with an outlier j pays c_j^2 plus the root bound
 of the problem without j, so f_TLS* >= min(L2LB(V), min_j [c_j^2 + min(L2LB(V - j), min_{i != j} c_i^2)]):
-a clean track whose L2 optimum costs more than min c^2 is certified from its N leave-one-out sets.
+a clean track whose L2 optimum costs more than min c^2 is certified from its N leave-one-out sets (their bounds
+from two halves first, :mod:`tritools.solve.robust_loo`).  A track with up to three wrong matches O is first tried
+by the cover f_TLS* >= min(min_{j in O} LB(node {j}), c^2(O) + TLS*(V - O)) (:mod:`tritools.solve.robust_suspects`,
+valid for any O), from the pairs holding O and V - O's own bounds, before the pairs and the search.
 
 Search: an upper bound first -- the full L2 estimate, the L2 estimate of every view pair (at most
 :data:`MAX_PAIRS`, sampled beyond) and local optimisation from the best few (inlier set -> L2 estimate
@@ -64,16 +67,19 @@ import time
 
 import numpy as np
 
-from ..model.geometry import PROJECTION_DENOM_RTOL, depths_stack
+from ..model.cameras import as_world_frame, depth_rows
 from ..model.normalize import normalization_for
 from ..result import Attempt, Status, TriangulationResult
 from .decide import cheirality, gamma_from_c
 from .report import PointReport, point_report
 from .trivial import local_estimate
-from . import robust_bounds
+from . import robust_bounds, robust_suspects
 from .robust_bounds import ROUND_DOWN, SubsetBounds
 from .robust_drive import drive
+from .robust_loo import leave_one_out
+from .robust_nodes import NodeBounds, lookahead_bound
 from .robust_rays import ray_candidates
+from .robust_costs import point_distances2, point_distances2_one, projections
 
 __all__ = ["robust_thresholds", "triangulate_robust", "drive", "lookahead_bound", "tls_cost", "point_distances2",
            "MAX_NODES", "MAX_PAIRS", "MIN_THRESHOLD",
@@ -131,20 +137,6 @@ def tls_cost(residuals, c) -> float:
         return float(np.sum(np.minimum(d2, np.asarray(c, float) ** 2)))
 
 
-def lookahead_bound(s_lo: float, s_hi: float, a: np.ndarray, c2: np.ndarray) -> float:
-    """min over s in [s_lo, s_hi] of g(s) = s + sum_u min(c2_u, max(0, a_u - s)) (+inf for an empty interval).
-
-    g is piecewise linear and continuous with breakpoints at a_u and a_u - c2_u, so its minimum over the
-    interval is at an end or at a breakpoint inside it."""
-    if not s_hi >= s_lo:
-        return math.inf
-    a, c2 = np.asarray(a, float), np.asarray(c2, float)
-    cand = np.concatenate([[s_lo, s_hi], a, a - c2])
-    cand = cand[(cand >= s_lo) & (cand <= s_hi)]
-    g = cand + np.sum(np.minimum(c2[None, :], np.maximum(0.0, a[None, :] - cand[:, None])), axis=1)
-    return float(np.min(g))
-
-
 def branching_order(ratio: np.ndarray) -> np.ndarray:
     """The views in branching order from r_i = d_i / c_i at the best candidate: the :data:`ANCHORS` most
     confident inliers first (the lookahead needs inliers in I), then the ambiguous views (1/AMBIGUOUS < r_i <
@@ -177,7 +169,7 @@ def scale_from(s: float, c2: np.ndarray) -> float:
     return float(scale) if np.isfinite(scale) and scale > 0 else 1.0
 
 
-class TlsSearch:
+class TlsSearch(NodeBounds):
     """One TLS problem: thresholds, the subset bounds, the best candidate, the branch and bound."""
 
     def __init__(self, cams, regions, c, opts, t0, points=None):
@@ -199,8 +191,9 @@ class TlsSearch:
         self.x = self.bounds.x
         self.nodes = 0
         self.anchors, self.anchor_a = None, None     # see anchor_bounds
-        self.loo_lb = 0.0                            # leave_one_out_bound, where computed
+        self.loo_lb = 0.0                            # leave_one_out / suspect bound (candidates), where computed
         self._absC2 = None                           # |third rows| of the cameras (point_distances2_one)
+        self.drows = None                           # depth rows of the cameras (report; a batch sets them)
 
     @property
     def regions(self) -> list:
@@ -226,11 +219,15 @@ class TlsSearch:
         """d_i(X) (N,), inf where the projection is undefined: :func:`point_distances2` for point regions (the
         vectorised twin of :func:`tritools.solve.report.point_report`), else point_report."""
         if self.points:
-            if self._absC2 is None:
-                self._absC2 = np.abs(self.C[:, 2])
-            return np.sqrt(point_distances2_one(self.C, self._absC2, self.x, X))
+            return np.sqrt(self.sq_distances(X))
         rep = point_report(X, self.C, self.regions, self.opts.world_frame)
         return np.full(self.N, np.inf) if rep.residuals is None else rep.residuals
+
+    def sq_distances(self, X) -> np.ndarray:
+        """d_i(X)^2 (N,) of point regions (:func:`tritools.solve.robust_costs.point_distances2_one`)."""
+        if self._absC2 is None:
+            self._absC2 = np.abs(self.C[:, 2])
+        return point_distances2_one(self.C, self._absC2, self.x, X)
 
     def screen(self, Xs: np.ndarray) -> np.ndarray:
         """f_TLS of many candidates (M, 3) (point regions: vectorised; else one by one); only for ranking."""
@@ -242,17 +239,24 @@ class TlsSearch:
         """Residuals and depths of X: the vectorised twin for point regions, point_report otherwise."""
         if not self.points:
             return point_report(X, self.C, self.regions, self.opts.world_frame)
-        res = self.residuals(X)
-        return PointReport(None, res, depths_stack(self.C[None], np.asarray(X, float)[None],
-                                                   self.opts.world_frame)[0])
+        if self.drows is None:                          # depth = h row_i . X~ (depths_stack's rows), once
+            self.drows = depth_rows(self.C)
+        Xh = np.array([X[0], X[1], X[2], 1.0], float)
+        with np.errstate(over="ignore", invalid="ignore"):
+            depths = as_world_frame(self.opts.world_frame).sign * (self.drows @ Xh)
+        return PointReport(None, self.residuals(X), depths)
 
     def offer(self, X) -> None:
         """A candidate: kept when its exact f_TLS (:func:`tritools.solve.report.point_report` distances) is
         lower than the best by more than round-off (ties keep the earlier one: the full L2 estimate first)."""
         if X is None or not np.all(np.isfinite(X)):
             return
-        d = self.residuals(X)
-        f = tls_cost(d, self.c)
+        if self.points:                                 # tls_cost from the squared distances (inf: c^2)
+            d2 = self.sq_distances(X)
+            d, f = np.sqrt(d2), float(np.minimum(d2, self.c2).sum())
+        else:
+            d = self.residuals(X)
+            f = tls_cost(d, self.c)
         if f < self.best_f * (1 - 1e-12) or (self.best_X is None and np.isfinite(f)):
             self.best_X, self.best_f = np.asarray(X, float), f
             self.best_S = frozenset(int(i) for i in np.nonzero(d < self.c)[0])
@@ -308,17 +312,24 @@ class TlsSearch:
 
     def candidates(self, rng):
         full = frozenset(range(self.N))
-        yield from self.verify_first(full)
+        if not robust_suspects.skip_full(self):           # all views verified unless a view is over its threshold
+            yield from self.verify_first(full)
         if self.bounds.known(full):
             self.offer(self.bounds.estimate(full))
             if self.best_X is not None and self.meets(self.root_bound()):
                 return                          # certified by the L2 certificate of all views: no search needed
-            if self.best_S == full and self.N >= 3 and robust_bounds.PACKING:
+            if self.best_S == full and self.N >= 3 and robust_bounds.PACKING and robust_suspects.ENABLED:
+                self.loo_lb = yield from leave_one_out(self, full, 0.0)       # its sub-bounds from halves first
+            elif self.best_S == full and self.N >= 3 and robust_bounds.PACKING:
                 yield from self.verify_first(*[full - {j} for j in range(self.N)])
                 self.offer_new()
                 self.loo_lb = self.leave_one_out_bound()
                 if self.meets(self.loo_lb):
                     return                      # every view an inlier, and dropping any costs at least as much
+        if robust_suspects.ENABLED and robust_bounds.PACKING:           # a few wrong matches: O(N) sub-problems
+            self.loo_lb = max(self.loo_lb, (yield from robust_suspects.suspect_bound(self)))
+            if self.meets(self.loo_lb):
+                return
         pairs = list(itertools.combinations(range(self.N), 2))
         if len(pairs) > MAX_PAIRS:
             pairs = [pairs[k] for k in rng.choice(len(pairs), MAX_PAIRS, replace=False)]
@@ -365,90 +376,6 @@ class TlsSearch:
     def meets(self, lb: float) -> bool:
         """Is a lower bound good enough to prune (it meets UB under the certificate rule, or exceeds it)?"""
         return lb >= self.best_f or bool(self.tol.certified(lb, self.best_f, self.scale))
-
-    def leave_one_out_bound(self) -> float:
-        """f_TLS* >= min(L2LB(V), min_j [c_j^2 + min(L2LB(V - j), min_{i != j} c_i^2)]) over the views V: an X
-        with every view an inlier costs L2*(V); otherwise some j is an outlier of X, which pays c_j^2 plus, on the
-        other views, at least the root bound of the problem without j (:meth:`root_bound`).  Unknown subset
-        bounds count 0; rounded down."""
-        full = frozenset(range(self.N))
-        c2 = self.c2
-        terms = [self.bounds.bound(full) if self.bounds.known(full) else 0.0]
-        for j in range(self.N):
-            S = full - {j}
-            lb = self.bounds.bound(S) if self.bounds.known(S) else 0.0
-            rest = float(np.min(np.delete(c2, j)))
-            terms.append((c2[j] + min(lb, rest)) * ROUND_DOWN)
-        return float(min(terms))
-
-    def root_bound(self) -> float:
-        """f_TLS* >= min(L2LB(all views), min_i c_i^2) (module docstring)."""
-        return min(self.bounds.bound(frozenset(range(self.N))), float(np.min(self.c2)))
-
-    def node_bound(self, I: frozenset, c2_out: float, U: list, lb_I: float, a: np.ndarray, refine: bool = True):
-        """(bound, lb_I, a) of a node (module docstring).  ``lb_I`` and ``a`` (N,) are inherited lower bounds of
-        L2*(I) and of L2*(I + {u}) (a parent's bound of a subset is one of every superset).  The bound is first
-        taken with them; only when it does not prune and ``refine`` are the exact sub-bounds computed, and only
-        where they can matter (a_u >= s_max + c_u^2 already gives the term c_u^2)."""
-        if len(I) >= 2 and self.bounds.known(I):
-            lb_I = max(lb_I, self.bounds.bound(I))
-        a = np.maximum(a, lb_I)
-        if self.anchors is not None and self.anchors <= I:
-            a = np.maximum(a, self.anchor_a)          # L2*(I + {u}) >= L2*(anchors + {u})
-        bound = self._bound(I, c2_out, U, lb_I, a)
-        if self.meets(bound) or not refine:
-            return bound, lb_I, a
-        if len(I) >= 2 and not self.bounds.known(I):
-            yield from self.need([I])
-            self.offer_new()
-            lb_I = max(lb_I, self.bounds.bound(I))
-            a = np.maximum(a, lb_I)
-        if not I or not U or self.meets(c2_out + lb_I):
-            return self._bound(I, c2_out, U, lb_I, a), lb_I, a
-        # the views the best candidate calls outliers first (their terms c_u^2 usually prune), then the rest
-        best_S = self.best_S
-        for stage in (False, True):
-            hi = min(float(np.sum(self.c2[list(I)])), self.best_f - c2_out)
-            Ua = np.array([u for u in U if (u in best_S) == stage])
-            open_ = Ua[a[Ua] < hi + self.c2[Ua]] if Ua.size else Ua
-            if open_.size:
-                subsets = [I | {int(u)} for u in open_]
-                yield from self.need(subsets)
-                self.offer_new()
-                a = a.copy()
-                a[open_] = np.maximum(a[open_], [self.bounds.bound(S) for S in subsets])
-            bound = self._bound(I, c2_out, U, lb_I, a)
-            if self.meets(bound):
-                break
-        return bound, lb_I, a
-
-    def anchor_bounds(self, order: np.ndarray):
-        """L2 bounds of the triples (first two views of the order) + {u}, one batch: every node whose I holds both
-        anchors inherits L2*(I + {u}) >= L2*(anchors + {u})."""
-        if self.N < 3:
-            return
-        anchors = frozenset(int(v) for v in order[:2])
-        triples = [anchors | {u} for u in range(self.N) if u not in anchors]
-        yield from self.need(triples)
-        self.offer_new()
-        self.anchors = anchors
-        self.anchor_a = np.array([0.0 if u in anchors else self.bounds.bound(anchors | {u}) for u in range(self.N)])
-
-    def _bound(self, I: frozenset, c2_out: float, U: list, lb_I: float, a: np.ndarray) -> float:
-        """The node bound from the given sub-bounds (no new sub-problems)."""
-        base = c2_out + lb_I
-        if not I or not U:
-            return min(self.best_f, base)
-        hi = min(float(np.sum(self.c2[list(I)])), self.best_f - c2_out)
-        Ua = np.array(U)
-        g = lookahead_bound(lb_I, hi, a[Ua], self.c2[Ua])
-        return min(self.best_f, max(base, (c2_out + g) * ROUND_DOWN))
-
-    def child_bounds(self, v: int, lb_I: float, a: np.ndarray):
-        """Inherited bounds of the child I + {v}: L2*(I + {v}) >= a_v, L2*(I + {v, u}) >= a_u and >= L2*({v, u})."""
-        pair = np.array([self.bounds.bound(frozenset((v, u))) if self.bounds.known(frozenset((v, u))) else 0.0
-                         for u in range(self.N)])
-        return max(lb_I, a[v]), np.maximum(np.maximum(a, pair), a[v])
 
     def search(self, order: np.ndarray):
         """Depth-first branch and bound (module docstring): (global lower bound, why it stopped early or None)."""
@@ -513,9 +440,11 @@ class TlsSearch:
         # with the hint set, a whole problem holding a likely outlier gets its pair packing bound, no SDP: the root
         # bound uses it only up to min c^2, and the search reopens it if its leaf is not pruned by it
         self.bounds.hint = self.best_S
-        yield from self.need([frozenset(range(self.N))])
-        self.offer_new()
-        lb, stopped = max(self.root_bound(), self.loo_lb), None
+        if not self.meets(self.loo_lb):                 # certified by the candidate stage: no root bound needed
+            yield from self.need([frozenset(range(self.N))])
+            self.offer_new()
+        lb, stopped = max(self.root_bound() if self.bounds.known(frozenset(range(self.N))) else 0.0,
+                          self.loo_lb), None
         if not self.meets(lb):
             order = branching_order(self.residuals(self.best_X) / self.c)
             yield from self.anchor_bounds(order)
@@ -544,45 +473,13 @@ class TlsSearch:
               f"sub-problems"
         if stopped:
             msg += f"; stopped by the {stopped}"
-        image_points = np.array([np.full(2, np.nan) if not np.isfinite(r) else p for p, r in
-                                 zip(_projections(X, self.C), rep.residuals)])
+        image_points = np.where(np.isfinite(rep.residuals)[:, None], projections(X, self.C), np.nan)
         attempt = Attempt("tls", None, status.value, gamma_lb, gamma_ub, "branch-and-bound", None, (),
                           timings["total"])
         return TriangulationResult("tls", status, X=X, gamma_ub=gamma_ub, gamma_lb=gamma_lb, optimal=certified,
                                    image_points=image_points, certified_by="branch-and-bound" if certified else None,
                                    message=msg, timings=timings, attempts=(attempt,), in_front=in_front,
                                    depths=rep.depths, residuals=rep.residuals, inliers=inliers)
-
-
-def _projections(X, cameras) -> np.ndarray:
-    Xh = np.append(X, 1.0)
-    u = cameras @ Xh
-    with np.errstate(all="ignore"):
-        return u[:, :2] / u[:, 2:]
-
-
-def point_distances2(C: np.ndarray, x: np.ndarray, Xs: np.ndarray) -> np.ndarray:
-    """Squared distances ||Phi(X_m, P_i) - x_i||^2 (M, N) of candidates Xs (M, 3) to point regions x (N, 2); inf
-    for a view whose projection is undefined (denominator below PROJECTION_DENOM_RTOL of its scale, the rule of
-    :func:`tritools.model.geometry.project_homogeneous`) or not finite."""
-    Xh = np.concatenate([Xs, np.ones((len(Xs), 1))], axis=1)
-    u = np.einsum("nij,mj->mni", C, Xh)
-    denom = np.einsum("nj,mj->mn", np.abs(C[:, 2]), np.abs(Xh))
-    ok = np.abs(u[..., 2]) > PROJECTION_DENOM_RTOL * denom
-    with np.errstate(all="ignore"):
-        d2 = np.sum((u[..., :2] / u[..., 2:] - x[None]) ** 2, axis=2)
-    return np.where(ok & np.isfinite(d2), d2, np.inf)
-
-
-def point_distances2_one(C: np.ndarray, absC2: np.ndarray, x: np.ndarray, X) -> np.ndarray:
-    """:func:`point_distances2` for one candidate X (3,): (N,), the same rule; ``absC2`` = |C[:, 2, :]|."""
-    Xh = np.array([X[0], X[1], X[2], 1.0], float)
-    u = C @ Xh
-    ok = np.abs(u[:, 2]) > PROJECTION_DENOM_RTOL * (absC2 @ np.abs(Xh))
-    with np.errstate(all="ignore"):
-        d = u[:, :2] / u[:, 2:] - x
-        d2 = d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1]
-    return np.where(ok & np.isfinite(d2), d2, np.inf)
 
 
 def triangulate_robust(cams: np.ndarray, regions, c: np.ndarray, opts, t0: float | None = None) -> TriangulationResult:

@@ -7,7 +7,9 @@
    inlier sets, the node sub-problems) is computed in one vectorised call per subset size across the chunk
    (:func:`tritools.solve.robust_bounds.compute_many`: verification, then the batched delta = 2 SDP).  A clean
    track is certified at the root by the L2 bound of all its views (f_TLS* >= min(L2LB(all), min_i c_i^2)), so
-   it costs one row of the first vectorised call; no per-point SDP runs before the search.  Their cameras
+   it costs one row of the first vectorised call; no per-point SDP runs before the search.  A track with one to
+   three wrong matches is usually certified by the suspect stage (:mod:`tritools.solve.robust_suspects`) from about
+   N + 3 rows, before the view pairs and the branch and bound; the searches left are the rare hard ones.  Their cameras
    are checked in one :func:`tritools.model.cameras.camera_problems` call per view count (a problem that fails
    it takes the per-problem path below, whose :func:`tritools.model.cameras.validate_cameras` names the error).
 2. Other problems (and point problems whose thresholds are all infinite) first go through the batched L2 path
@@ -185,7 +187,7 @@ def _point_searches(idx, points, thresholds, opts, t0) -> dict:
     :func:`tritools.model.cameras.camera_problems` (the vectorised twin of the per-problem
     :func:`tritools.model.cameras.validate_cameras`), one call per view count; the others are left out (the
     caller's per-problem path gives them their named error)."""
-    from ..model.cameras import camera_problems
+    from ..model.cameras import camera_problems, depth_rows
     from .robust import TlsSearch
 
     groups: dict = {}
@@ -198,7 +200,9 @@ def _point_searches(idx, points, thresholds, opts, t0) -> dict:
             valid = camera_problems(C).valid
         except ValueError:
             continue
+        rows = depth_rows(C)                    # the depth rows of every search's report, in one call
         for k, i in enumerate(group):
             if valid[k]:
                 out[i] = TlsSearch(C[k].copy(), None, thresholds[i], opts, t0, points=points[i][1])
+                out[i].drows = rows[k]
     return out

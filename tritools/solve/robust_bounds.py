@@ -104,6 +104,8 @@ class SubsetBounds:
         self._frame = None                     # the parent's normalised frame (robust_verify.ParentFrame), or False
         self.n_in_parent = 0                   # subsets bounded in the parent's frame
         self.budget_exceeded = False           # a sub-problem stopped at the memory budget (the caller's status)
+        self.trial: dict = {}                  # subsets verified in the parent frame but not accepted: their
+        #                                        polished estimate (a candidate only, no bound)
 
     def frame(self):
         """The parent problem's :class:`tritools.solve.robust_verify.ParentFrame` (point regions; computed when first
@@ -335,6 +337,8 @@ def _in_parent(items: list) -> tuple:
             sb.n_in_parent += 1
         else:
             verified.append((sb, S))
+            if np.all(np.isfinite(X[k])):
+                sb.trial[S] = X[k]
     return rest, verified
 
 

@@ -1,0 +1,49 @@
+"""Costs of TLS candidates for point regions: squared image distances of candidates to the observed points.
+
+d_i(X)^2 = ||Phi(X, P_i) - x_i||^2 with Phi the projection (SPEC §1), +inf where the projection is undefined (the
+denominator below :data:`tritools.model.geometry.PROJECTION_DENOM_RTOL` of its scale, the rule of
+:func:`tritools.model.geometry.project_homogeneous`): an outlier view then costs c_i^2 in f_TLS, as it should.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..model.geometry import PROJECTION_DENOM_RTOL
+
+__all__ = ["point_distances2", "point_distances2_one", "projections"]
+
+
+def projections(X, cameras) -> np.ndarray:
+    """Phi(X, P_i) (N, 2) of one point X (3,) in every camera (inf / nan where the depth is 0)."""
+    Xh = np.append(X, 1.0)
+    u = cameras @ Xh
+    with np.errstate(all="ignore"):
+        return u[:, :2] / u[:, 2:]
+
+
+def point_distances2(C: np.ndarray, x: np.ndarray, Xs: np.ndarray) -> np.ndarray:
+    """Squared distances ||Phi(X_m, P_i) - x_i||^2 (M, N) of candidates Xs (M, 3) to point regions x (N, 2); inf
+    for a view whose projection is undefined (denominator below PROJECTION_DENOM_RTOL of its scale, the rule of
+    :func:`tritools.model.geometry.project_homogeneous`) or not finite."""
+    Xh = np.concatenate([Xs, np.ones((len(Xs), 1))], axis=1)
+    u = np.einsum("nij,mj->mni", C, Xh)
+    denom = np.einsum("nj,mj->mn", np.abs(C[:, 2]), np.abs(Xh))
+    ok = np.abs(u[..., 2]) > PROJECTION_DENOM_RTOL * denom
+    with np.errstate(all="ignore"):
+        d2 = np.sum((u[..., :2] / u[..., 2:] - x[None]) ** 2, axis=2)
+    return np.where(ok & np.isfinite(d2), d2, np.inf)
+
+
+def point_distances2_one(C: np.ndarray, absC2: np.ndarray, x: np.ndarray, X) -> np.ndarray:
+    """:func:`point_distances2` for one candidate X (3,): (N,), the same rule; ``absC2`` = |C[:, 2, :]|."""
+    Xh = np.array([X[0], X[1], X[2], 1.0], float)
+    u = C @ Xh
+    ok = np.abs(u[:, 2]) > PROJECTION_DENOM_RTOL * (absC2 @ np.abs(Xh))
+    if ok.all() and np.isfinite(u).all():            # the common case, without np.errstate (its cost dominates):
+        d = u[:, :2] / u[:, 2:] - x                   # |u_3| > 1e-10 |p_3| |X~| bounds the quotient
+        if np.abs(d).max() < 1e150:                   # no overflow in the squares
+            return d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1]
+    with np.errstate(all="ignore"):
+        d = u[:, :2] / u[:, 2:] - x
+        d2 = d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1]
+    return np.where(ok & np.isfinite(d2), d2, np.inf)

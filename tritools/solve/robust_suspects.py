@@ -1,0 +1,175 @@
+"""The TLS search's suspect-set stage: a track with a few wrong matches certified from O(N) sub-problems.
+
+A track whose L2 estimate of all views V leaves views over their thresholds usually holds one to three wrong
+matches, and the full branch and bound of :mod:`tritools.solve.robust` reaches their certificate only after
+every view pair (N(N-1)/2 sub-problems), the local optimisation and a few dozen nodes.  This stage tries a
+two-node cover of the inlier sets first.
+
+The suspects.  Starting from the best candidate (the L2 estimate of V), O is the set of views it calls
+outliers; W = V - O is verified, its estimate offered, and O re-read from the best candidate, for at most
+:data:`ROUNDS` rounds (it stops when O is stable).  Only |O| <= :data:`MAX_SUSPECTS` goes on.
+
+The bound.  For *any* set O of views, every X either keeps some j in O an inlier (d_j(X) < c_j) or has every
+view of O as an outlier, so
+
+    f_TLS* >= min( min_{j in O} LB(node I = {j}),   c^2(O) + TLS*(W) ),
+
+where LB(node I = {j}) is the module docstring's node bound of :mod:`tritools.solve.robust` with I = {j},
+O = {} and U = V - {j} (s = d_j^2 in [0, min(c_j^2, UB)], a_u = L2LB({j, u}): the view pairs holding j only,
+at most N - 1 of them, not N(N-1)/2: first the :data:`PAIRS_FIRST` with W's most confident inliers, the rest
+only where these do not prune the node; an unknown a_u counts 0), and TLS*(W), the TLS optimum of the views W
+alone, is bounded below by the root bound of W, min(L2LB(W), min_{i in W} c_i^2), or, when that is not enough and
+L2LB(W) is, by the leave-one-out bound of W (sub-bounds from two halves first, :mod:`tritools.solve.robust_loo`),
+
+    TLS*(W) >= min( L2LB(W), min_{k in W} [ c_k^2 + min(L2LB(W - k), min_{i in W - k} c_i^2) ] ),
+
+the argument of :meth:`tritools.solve.robust.TlsSearch.leave_one_out_bound` on W (an X with an outlier k in W
+pays c_k^2 plus the root bound of W - k).  Sub-bounds the verification does not certify count 0 (valid, only
+weaker): the stage never solves an SDP; a track it does not certify goes on to the full search, which reuses
+every sub-bound cached here.  The result is rounded down (:data:`tritools.solve.robust_bounds.ROUND_DOWN`).
+The validity does not depend on how O was chosen: O only decides how tight the bound is.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from . import robust_bounds
+from .robust_bounds import ROUND_DOWN
+from .robust_loo import leave_one_out
+
+__all__ = ["skip_full", "suspect_bound", "ENABLED", "MAX_SUSPECTS", "PAIRS_FIRST", "ROUNDS", "SMALL_N"]
+
+#: False skips the stage (the tests compare the two).
+ENABLED = True
+#: the stage runs only for tracks whose best candidate has at most this many outlier views.
+MAX_SUSPECTS = 3
+#: up to this many views, a track whose rounds found no suspect set tries every leave-one-out fit (with few views
+#: the worst view of the L2 fit is often a clean one).
+SMALL_N = 4
+#: view pairs {j, u} per suspect j requested first (the rest only where these do not bound the node {j}).
+PAIRS_FIRST = 3
+#: rounds of (verify W = V - O, offer its estimate, re-read O) before the bound.
+ROUNDS = 3
+
+
+def skip_full(search) -> bool:
+    """Is the verification of all views V skipped at the start of the search?  Where the parent's L2 estimate
+    X_V (its normalisation's, point regions) has a view over its threshold, the root bound min(L2LB(V),
+    min c^2) cannot certify it (a view with d_i(X_V) >= c_i leaves f_TLS(X_V) below L2*(V), and UB <= c^2 would be
+    needed), and the verification of a track with a wrong match rarely succeeds: X_V is offered instead and the
+    suspect stage starts from it.  L2LB(V) is computed later where the search still needs it."""
+    frame = search.bounds.frame() if ENABLED and robust_bounds.PACKING and search.N >= 3 else None
+    if frame is None:
+        return False
+    X = frame.to_world(frame.Xn)
+    if np.all(search.residuals(X) < search.c):
+        return False
+    search.offer(X)
+    return search.best_X is not None
+
+
+def suspect_bound(search):
+    """Generator (:meth:`tritools.solve.robust.TlsSearch.need` requests): a lower bound of f_TLS* (pixels^2) by
+    the suspect-set cover (module docstring); 0.0 where the stage does not apply.  The pairs' estimates (two-view
+    fits, rarely good TLS candidates) are not screened here: they stay queued for the full search, if it runs."""
+    N = search.N
+    full = frozenset(range(N))
+    if N < 3:
+        return 0.0
+    if search.best_X is None and search.bounds.frame() is not None:     # all views not verified: the parent's
+        frame = search.bounds.frame()                                    # L2 estimate (its normalisation's)
+        search.offer(frame.to_world(frame.Xn))
+    O = yield from _suspects(search)
+    if O is None:
+        return 0.0
+    W = full - O
+    r = search.residuals(search.best_X) / search.c             # partners: W's most confident inliers first
+    order = sorted(W, key=lambda u: (r[u] if np.isfinite(r[u]) else np.inf, u)) + sorted(O)
+    for part in (order[:PAIRS_FIRST], order[PAIRS_FIRST:]):
+        yield from search.verify_first(*[frozenset((j, u)) for j in sorted(O) for u in part if u != j])
+        inside = min(_inlier_node(search, j) for j in O)
+        if search.meets(inside):
+            break
+    if not search.meets(inside):
+        return 0.0
+    c2_out = float(np.sum(search.c2[sorted(O)]))
+    outside = yield from _outside(search, W, c2_out)
+    return min(inside, outside)
+
+
+def _suspects(search):
+    """Generator: the suspect set O (module docstring), or None.  O starts as the best candidate's outlier views,
+    or, where that holds more than :data:`MAX_SUSPECTS` (a wrong match pulls the L2 estimate of all views away
+    from every view), as its worst view by d_i / c_i; each round verifies W = V - O, offers W's estimate and
+    takes the best candidate's outliers if they are few, else adds W's worst view by its estimate (verified or
+    only polished, ``SubsetBounds.trial``).  O is returned once the best candidate's outliers are exactly O.  Where
+    the rounds find none and N <= :data:`SMALL_N`, every fit of V - j is offered and O read off the best one."""
+    full = frozenset(range(search.N))
+    if search.best_X is None:
+        return None
+    O = yield from _refit(search, full - search.best_S)
+    if O is None and search.N <= SMALL_N:                    # every leave-one-out fit (a few small rows)
+        drops = [full - {j} for j in range(search.N)]
+        yield from search.verify_first(*drops)
+        for W in drops:
+            search.offer(search.bounds.estimate(W) if search.bounds.known(W) else search.bounds.trial.get(W))
+        O = full - search.best_S
+        if 0 < len(O) <= MAX_SUSPECTS and search.bounds.known(full - O):
+            return O
+        return None
+    return O
+
+
+def _refit(search, O: frozenset):
+    """Generator: :func:`_suspects`' rounds from the outlier set O of the best candidate."""
+    full = frozenset(range(search.N))
+    if len(O) > MAX_SUSPECTS:
+        O = frozenset((_worst(search, search.best_X, full),))
+    for _ in range(ROUNDS):
+        if not O or len(O) > MAX_SUSPECTS or search.N - len(O) < 2:
+            return None
+        W = full - O
+        yield from search.verify_first(W)
+        if search.bounds.known(W):
+            search.offer(search.bounds.estimate(W))
+        now = full - search.best_S
+        if now == O and search.bounds.known(W):
+            return O
+        X = search.bounds.estimate(W) if search.bounds.known(W) else search.bounds.trial.get(W)
+        if 0 < len(now) <= MAX_SUSPECTS:
+            O = now
+        elif X is not None:
+            O = O | {_worst(search, X, W)}
+        else:
+            return None
+    return None
+
+
+def _worst(search, X, views: frozenset) -> int:
+    """The view of ``views`` with the largest d_i(X) / c_i (an undefined projection counts as infinite)."""
+    r = search.residuals(X) / search.c
+    idx = sorted(views)
+    return int(idx[int(np.argmax(np.where(np.isnan(r[idx]), np.inf, r[idx])))])
+
+
+def _inlier_node(search, j: int) -> float:
+    """LB(node I = {j}) (module docstring) from the cached pair bounds L2LB({j, u}) (unknown: 0)."""
+    a = np.zeros(search.N)
+    for u in range(search.N):
+        P = frozenset((j, u))
+        if u != j and search.bounds.known(P):
+            a[u] = search.bounds.bound(P)
+    U = [u for u in range(search.N) if u != j]
+    return search._bound(frozenset((j,)), 0.0, U, 0.0, a)
+
+
+def _outside(search, W: frozenset, c2_out: float):
+    """Generator: c^2(O) + a lower bound of TLS*(W) (module docstring): the root bound of W, else its
+    leave-one-out bound where L2LB(W) alone would meet the best value."""
+    b = search.bounds
+    c2 = search.c2
+    lw = b.bound(W) if b.known(W) else 0.0
+    root = (c2_out + min(lw, float(np.min(c2[sorted(W)])))) * ROUND_DOWN
+    if search.meets(root) or len(W) < 3 or not search.meets((c2_out + lw) * ROUND_DOWN):
+        return root
+    return (yield from leave_one_out(search, W, c2_out))

@@ -44,6 +44,7 @@ elsewhere is the documented scale computed.
 """
 from __future__ import annotations
 
+import dataclasses
 import functools
 import itertools
 import math
@@ -59,7 +60,7 @@ from ..model.stacked import (damped_step, dlt_stack, epipolar_quadratics, fundam
 from .robust_bounds import ROUND_DOWN
 
 __all__ = ["enumerate_tls", "enum_frame", "subset_masks", "closure", "enum_bounds", "ENUM_MAX_VIEWS",
-           "POLISH_STEPS", "MASKED_CAMERA"]
+           "POLISH_STEPS", "MASKED_CAMERA", "ENUMERATED"]
 
 #: the enumeration runs for point problems with at most this many views (the branch and bound beyond).
 ENUM_MAX_VIEWS = 7
@@ -67,6 +68,8 @@ ENUM_MAX_VIEWS = 7
 POLISH_STEPS = 8
 #: a masked view's camera: Phi(X, P) = (0, 0) for every X (module docstring).
 MASKED_CAMERA = np.array([[0.0, 0.0, 0.0, 0.0], [0.0, 0.0, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0]])
+#: the result's message says this when the enumeration decided it.
+ENUMERATED = "every inlier set enumerated"
 #: :func:`_polish` stops when no row's cost changes by more than this fraction in a step.
 POLISH_RTOL = 1e-13
 
@@ -278,4 +281,5 @@ def enumerate_tls(search):
         return None
     search.bounds.n_solved += int(need.sum())
     t = time.perf_counter() - search.t0
-    return search.result(lb_all, None, {"enumeration": t, "total": t})
+    res = search.result(lb_all, None, {"enumeration": t, "total": t})
+    return dataclasses.replace(res, message=res.message + f"; {ENUMERATED} ({len(W)} sets of >= 2 views)")

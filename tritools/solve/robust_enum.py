@@ -65,7 +65,7 @@ __all__ = ["enumerate_tls", "enum_frame", "subset_masks", "closure", "enum_bound
 #: the enumeration runs for point problems with at most this many views (the branch and bound beyond).
 ENUM_MAX_VIEWS = 7
 #: Levenberg-Marquardt steps polishing each row's DLT start.
-POLISH_STEPS = 8
+POLISH_STEPS = 5
 #: a masked view's camera: Phi(X, P) = (0, 0) for every X (module docstring).
 MASKED_CAMERA = np.array([[0.0, 0.0, 0.0, 0.0], [0.0, 0.0, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0]])
 #: the result's message says this when the enumeration decided it.
@@ -118,22 +118,28 @@ def closure(N: int, lb_by_bits: np.ndarray) -> np.ndarray:
 
 def enum_frame(C: np.ndarray, x: np.ndarray):
     """A normalisation of the whole point problem (cameras C (N, 3, 4), points x (N, 2)) without the local
-    refinement of :func:`tritools.model.normalize.normalization_for`: X_0 the DLT point, d the median distance
+    refinement of :func:`tritools.model.normalize.normalization_for`: X_0 the DLT point (solved in a world translated
+to the mean camera centre), d the median distance
     to the camera centres, s = 1 / rho with rho the RMS residual of X_0 (floored at ``RHO_FLOOR_REL`` times the
     median pixel scale, s clipped to ``SCALE_BOUNDS``).  Any frame gives exact identities (module docstring);
     this one only conditions the numbers.  None where it cannot be formed (the caller runs the search, whose
     normalisation handles degenerate data)."""
     C = C / norms(C, axis=(1, 2))[:, None, None]
-    X0, ok = dlt_stack(C[None], x[None])
+    a = null_vectors(C)
+    if np.any(np.abs(a[:, 3]) <= 1e-12 * norms(a, axis=1)):
+        return None                                        # a centre at infinity
+    centres = a[:, :3] / a[:, 3:]
+    c0 = np.mean(centres, axis=0)                          # the DLT in a world centred on the cameras: georeferenced
+    Cc = C.copy()                                          # coordinates (1e6 m) would drown its linear system
+    Cc[..., 3] += C[..., :3] @ c0
+    X0, ok = dlt_stack(Cc[None], x[None])
     if not ok[0] or not np.all(np.isfinite(X0)):
         return None
     X0 = X0[0]
-    u, _, fin = project_stack(C[None], X0[None])
-    a = null_vectors(C)
-    if not fin[0] or np.any(np.abs(a[:, 3]) <= 1e-12 * norms(a, axis=1)):
+    u, _, fin = project_stack(Cc[None], X0[None])
+    d = float(np.median(norms(centres - c0 - X0, axis=1)))
+    if not fin[0]:
         return None
-    centres = a[:, :3] / a[:, 3:]
-    d = float(np.median(norms(centres - X0, axis=1)))
     ps = pixel_scales(C[None], x[None])[0]
     ps = ps[np.isfinite(ps) & (ps > 0)]
     rho = math.sqrt(float(np.sum((u[0] - x) ** 2)) / len(x))
@@ -141,8 +147,12 @@ def enum_frame(C: np.ndarray, x: np.ndarray):
     if not (math.isfinite(d) and d > 0 and math.isfinite(rho) and rho > 0):
         return None
     s = min(max(1.0 / rho, SCALE_BOUNDS[0]), SCALE_BOUNDS[1])
-    norm = Normalization(s, x, X0, d)
-    Cn = norm.cameras(C)
+    norm = Normalization(s, x, c0 + X0, d)
+    # P'_i = T_i P_i H / ||.||_F (Normalization.cameras, vectorised): T_i = [[s, 0, -s x_i], [0, s, -s y_i], [0, 0, 1]]
+    CH = np.concatenate([C[..., :3] * d, (Cc @ np.append(X0, 1.0))[..., None]], axis=2)
+    Cn = CH.copy()
+    Cn[:, :2] = s * (CH[:, :2] - x[..., None] * CH[:, 2:3])
+    Cn /= norms(Cn, axis=(1, 2))[:, None, None]
     return (norm, Cn) if np.all(np.isfinite(Cn)) else None
 
 
@@ -173,21 +183,15 @@ def _polish(Cm: np.ndarray, X: np.ndarray, steps: int) -> np.ndarray:
     return X
 
 
-def enum_candidates(C: np.ndarray, x: np.ndarray):
-    """(frame, Cn, masks (M, N), normalised candidates Xn (M, 3), finite (M,)) of every subset with >= 2 views:
-    the DLT of the subset polished by :data:`POLISH_STEPS` Levenberg-Marquardt steps, all in one masked stack
-    (module docstring); None where :func:`enum_frame` fails."""
-    fr = enum_frame(C, x)
-    if fr is None:
-        return None
-    norm, Cn = fr
-    N = len(C)
-    W = subset_masks(N)
-    M = len(W)
+def enum_candidates(Cn: np.ndarray, W: np.ndarray) -> np.ndarray:
+    """Normalised candidates Xn (M, 3) (NaN where not finite) of the subsets ``W`` (M, N) of the views of the
+    normalised cameras Cn (N, 3, 4): the DLT of each subset polished by :data:`POLISH_STEPS` Levenberg-Marquardt
+    steps, all in one masked stack (module docstring)."""
+    M, N = W.shape
     Cm = np.where(W[:, :, None, None], Cn[None], MASKED_CAMERA)
     X0, ok = dlt_stack(Cm, np.zeros((M, N, 2)))
     Xn = _polish(Cm, np.where(ok[:, None] & np.isfinite(X0), X0, 0.0), POLISH_STEPS)
-    return norm, Cn, W, Xn, np.isfinite(Xn).all(axis=1)
+    return np.where(np.isfinite(Xn).all(axis=1)[:, None], Xn, np.nan)
 
 
 def enum_bounds(C: np.ndarray, Cn: np.ndarray, W: np.ndarray, Xn: np.ndarray, s: float, tolerances):
@@ -219,16 +223,39 @@ def enum_bounds(C: np.ndarray, Cn: np.ndarray, W: np.ndarray, Xn: np.ndarray, s:
     return lb, accepted
 
 
-def _refined(search, norm, Cn: np.ndarray, X: np.ndarray):
-    """The candidate X refined to convergence on its inlier set (:func:`tritools.model.stacked.refine_points_stack`
-    in the frame; a row's few polish steps leave the L2 optimum of a set holding a large residual ~1e-6 short in
-    X, though not in f): the estimate reported.  None where the set has < 2 views or the refinement fails."""
+def _refined(search, norm, Cn: np.ndarray, X: np.ndarray) -> tuple:
+    """(S, the candidate X refined to convergence on its inlier set S, normalised) by
+    :func:`tritools.model.stacked.refine_points_stack` in the frame (a row's few polish steps leave the L2
+    optimum of a set short by ~1e-6 in X, though not in f); (S, None) where S has < 2 views or it fails."""
     S = sorted(search.inlier_set(X))
     if len(S) < 2:
-        return None
+        return S, None
     Xn, ok = refine_points_stack(Cn[S][None], np.zeros((1, len(S), 2)), norm.normalized_point(X)[None],
                                  np.ones(1, bool))
-    return norm.world_point(Xn[0]) if ok[0] else None
+    return S, (Xn[0] if ok[0] and np.all(np.isfinite(Xn[0])) else None)
+
+
+def _offer_rows(search, norm, Cn: np.ndarray, Xn: np.ndarray) -> None:
+    """Offer the best row candidate (world frame) to the search, refined first (ties keep the refined point),
+    and put the refined point in the row of its inlier set (whose bound is then taken at the L2 optimum)."""
+    rows = np.nonzero(np.isfinite(Xn).all(axis=1))[0]
+    if not rows.size:
+        return
+    k = rows[int(np.argmin(search.screen(norm.origin + norm.depth * Xn[rows])))]
+    S, Xr = _refined(search, norm, Cn, norm.world_point(Xn[k]))
+    if Xr is not None:
+        search.offer(norm.world_point(Xr))
+        Xn[_row_of(len(Cn))[sum(1 << i for i in S)]] = Xr
+    search.offer(norm.world_point(Xn[k]))
+
+
+@functools.lru_cache(maxsize=16)
+def _row_of(N: int) -> np.ndarray:
+    """The row of :func:`subset_masks` of each subset by bit mask (-1 for |S| <= 1; read-only)."""
+    out = np.full(1 << N, -1)
+    out[subset_masks(N).astype(np.int64) @ (1 << np.arange(N))] = np.arange(len(subset_masks(N)))
+    out.flags.writeable = False
+    return out
 
 
 def enumerate_tls(search):
@@ -236,38 +263,67 @@ def enumerate_tls(search):
     :data:`ENUM_MAX_VIEWS` views by enumeration (module docstring), or None (the caller runs the search, which has
     been offered the best candidates found here).
 
-    Steps: the candidates of every subset (one masked stack) give UB; the subsets whose c^2(V - S) alone does not
-    meet UB under the rule, and the view pairs (their bounds feed the closure), get their Lagrangian bound (one
-    stacked call); the others keep the bound 0 (their term c^2(V - S) already meets UB)."""
-    from .robust import scale_from
-
+    Steps: the candidates of the view pairs and of all views (one masked stack) give a first UB; the subsets whose
+    c^2(V - S) alone does not meet it get their candidates (a second stack), which may lower UB; then the
+    subsets whose c^2(V - S) does not meet UB get their Lagrangian bound in one stacked call, with the view pairs
+    when the best candidate has an outlier (their bounds feed the closure of the sets holding it); the others keep
+    the bound 0 (their term c^2(V - S) meets UB already).  Where LB does not meet UB then, every other subset gets
+    its candidate and bound too (a second stacked call) before the closure is taken again."""
     N = search.N
     if not search.points or not 3 <= N <= ENUM_MAX_VIEWS or search.deadline.expired:
         return None
     try:
-        cand = enum_candidates(search.C, search.x)
-        if cand is None:
+        fr = enum_frame(search.C, search.x)
+        if fr is None:
             return None
-        norm, Cn, W, Xn, fin = cand
-        X = norm.origin + norm.depth * Xn[fin]
-        if X.size:
-            order = np.argsort(search.screen(X))[:3]
-            search.offer(_refined(search, norm, Cn, X[order[0]]))       # first: ties keep the refined point
-            for k in order:
-                search.offer(X[k])
+        norm, Cn = fr
+        W = subset_masks(N)
+        size = W.sum(axis=1)
+        Xn = np.full((len(W), 3), np.nan)
+        first = (size == 2) | (size == N)
+        Xn[first] = enum_candidates(Cn, W[first])
+        _offer_rows(search, norm, Cn, Xn)
         if search.best_X is None:
             return None
-        c2, ub = search.c2, search.best_f
-        floor = scale_from(SCALE_BOUNDS[1], c2)
         with np.errstate(over="ignore", invalid="ignore"):
-            rest = np.sum(np.where(W, 0.0, c2[None]), axis=1) * ROUND_DOWN        # c^2(V - S); inf where c_i = inf
-        need = (W.sum(axis=1) == 2) | ~((rest >= ub) | np.asarray(search.tol.certified(rest, ub, floor), bool))
-        need &= np.isfinite(rest)
+            rest = np.sum(np.where(W, 0.0, search.c2[None]), axis=1) * ROUND_DOWN   # c^2(V - S); inf: c_i = inf
+        later = _open(search, rest) & ~first
+        if later.any():
+            Xn[later] = enum_candidates(Cn, W[later])
+            _offer_rows(search, norm, Cn, Xn)
+        need = _open(search, rest) | ((size == 2) & (search.best_f > float(np.min(search.c2))))
         lb = np.zeros(len(W))
         if need.any():
             lb[need], _ = enum_bounds(search.C, Cn, W[need], Xn[need], norm.scale, search.tol)
+        res = _decide(search, W, lb, rest, int(need.sum()), final=False)
+        more = ~need & np.isfinite(rest)
+        if res is not None or not more.any():
+            return res if res is not None else _decide(search, W, lb, rest, int(need.sum()))
+        # not met: every other subset too (its own bound feeds the closure of the sets holding it)
+        todo = more & ~np.isfinite(Xn).all(axis=1)
+        if todo.any():
+            Xn[todo] = enum_candidates(Cn, W[todo])
+        lb[more], _ = enum_bounds(search.C, Cn, W[more], Xn[more], norm.scale, search.tol)
     except (ValueError, np.linalg.LinAlgError, FloatingPointError):
         return None
+    return _decide(search, W, lb, rest, int(np.isfinite(rest).sum()))
+
+
+def _open(search, rest: np.ndarray) -> np.ndarray:
+    """The subsets whose term c^2(V - S) alone does not meet UB under the rule at the floor scale (finite only)."""
+    from .robust import scale_from
+
+    ub = search.best_f
+    met = (rest >= ub) | np.asarray(search.tol.certified(rest, ub, scale_from(SCALE_BOUNDS[1], search.c2)), bool)
+    return ~met & np.isfinite(rest)
+
+
+def _decide(search, W: np.ndarray, lb: np.ndarray, rest: np.ndarray, n_bounded: int, final: bool = True):
+    """LB from the closed subset bounds (module docstring) and the result where it meets UB, else None (not
+    ``final``: decided at the floor scale only, without the normalisation)."""
+    from .robust import scale_from
+
+    N, c2, ub = search.N, search.c2, search.best_f
     bits = W.astype(np.int64) @ (1 << np.arange(N))
     table = np.zeros(1 << N)
     table[bits] = lb
@@ -275,11 +331,12 @@ def enumerate_tls(search):
         terms = (closure(N, table)[bits] + rest) * ROUND_DOWN
         small = [float(np.sum(c2))] + [float(np.sum(np.delete(c2, i))) for i in range(N)]   # |S| <= 1: exact
     lb_all = min([ub, float(np.min(terms))] + [v * ROUND_DOWN for v in small])
+    floor = scale_from(SCALE_BOUNDS[1], c2)
     if search.tol.certified(lb_all, ub, floor) and not search.tol.contradicts(lb_all, ub, floor):
         search.set_normalization_scale(SCALE_BOUNDS[1])        # met at the floor: met at the documented scale
-    elif not search.tol.certified(lb_all, ub, search.scale):
+    elif not final or not search.tol.certified(lb_all, ub, search.scale):
         return None
-    search.bounds.n_solved += int(need.sum())
+    search.bounds.n_solved += n_bounded
     t = time.perf_counter() - search.t0
     res = search.result(lb_all, None, {"enumeration": t, "total": t})
     return dataclasses.replace(res, message=res.message + f"; {ENUMERATED} ({len(W)} sets of >= 2 views)")

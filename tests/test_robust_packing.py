@@ -114,7 +114,7 @@ def test_leave_one_out_root_bound(seed, monkeypatch):
     inlier set and value as the plain path, every bound against the enumeration."""
     cams, x, X = _scene(7, 0, seed)
     c = np.full(7, 3.0)
-    monkeypatch.setattr(enum_mod, "ENUM_MAX_VIEWS", 0)         # the branch and bound's root (robust_enum: N <= 7)
+    monkeypatch.setattr(enum_mod, "ENUM_MAX_VIEWS", 0)         # the branch and bound's root (robust_enum: N <= 8)
     fast = tritools.triangulate(cams, x, robust=c)
     monkeypatch.setattr(rb, "PACKING", False)
     plain = tritools.triangulate(cams, x, robust=c)

@@ -143,10 +143,16 @@ to the mean camera centre), d the median distance
     d = float(np.median(norms(centres - c0 - X0, axis=1)))
     if not fin[0]:
         return None
-    ps = pixel_scales(C[None], x[None])[0]
-    ps = ps[np.isfinite(ps) & (ps > 0)]
     rho = math.sqrt(float(np.sum((u[0] - x) ** 2)) / len(x))
-    rho = max(rho, RHO_FLOOR_REL * float(np.median(ps)) if ps.size else 0.0)
+    # the floor (zero noise): pixel scales are at most ||P[:2, :3] - x P[2, :3]||_F / ||P[2, :3]||, computed only
+    # where that bound does not already put the floor below rho
+    B = C[:, :2, :3] - x[:, :, None] * C[:, 2:3, :3]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        top = norms(B, axis=(1, 2)) / norms(C[:, 2, :3], axis=1)
+    if not rho > RHO_FLOOR_REL * float(np.max(top)):
+        ps = pixel_scales(C[None], x[None])[0]
+        ps = ps[np.isfinite(ps) & (ps > 0)]
+        rho = max(rho, RHO_FLOOR_REL * float(np.median(ps)) if ps.size else 0.0)
     if not (math.isfinite(d) and d > 0 and math.isfinite(rho) and rho > 0):
         return None
     s = min(max(1.0 / rho, SCALE_BOUNDS[0]), SCALE_BOUNDS[1])
@@ -332,8 +338,8 @@ def _decide(search, W: np.ndarray, lb: np.ndarray, rest: np.ndarray, n_bounded: 
     table[bits] = lb
     with np.errstate(over="ignore", invalid="ignore"):
         terms = (closure(N, table)[bits] + rest) * ROUND_DOWN
-        small = [float(np.sum(c2))] + [float(np.sum(np.delete(c2, i))) for i in range(N)]   # |S| <= 1: exact
-    lb_all = min([ub, float(np.min(terms))] + [v * ROUND_DOWN for v in small])
+        small = np.sum(np.where(np.eye(N, dtype=bool), 0.0, c2[None]), axis=1)    # |S| = 1: c^2(V - i) exactly
+    lb_all = min(ub, float(np.min(terms)), float(np.min(small)) * ROUND_DOWN, float(np.sum(c2)) * ROUND_DOWN)
     floor = scale_from(SCALE_BOUNDS[1], c2)
     if search.tol.certified(lb_all, ub, floor) and not search.tol.contradicts(lb_all, ub, floor):
         search.set_normalization_scale(SCALE_BOUNDS[1])        # met at the floor: met at the documented scale

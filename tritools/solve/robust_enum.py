@@ -5,17 +5,19 @@ For thresholds c_i and point regions (:mod:`tritools.solve.robust`),
     f*_TLS = min over subsets S of [ L2*(S) + c^2(V - S) ],     L2*(S) = min_X sum_{i in S} d_i(X)^2,
 
 with L2*(S) = 0 for |S| <= 1.  For N <= :data:`ENUM_MAX_VIEWS` views there are at most 2^N - N - 1 subsets
-with |S| >= 2 (N = 3: 4; N = 5: 26; N = 8: 247), few enough to bound *every* one in a single vectorised call
-instead of a branch and bound with several rounds of sub-problems.  Each subset is one row of a stack of
-N-view problems in one normalised frame of the whole problem (:func:`enum_frame`: x' = s (x - x_i),
+with |S| >= 2 (N = 3: 4; N = 5: 26; N = 8: 247), few enough to bound *every* one in one or two stacked calls
+(:func:`enumerate_tls`) instead of a branch and bound with several rounds of sub-problems.  Each subset is one
+row of a stack of N-view problems in one normalised frame of the whole problem (:func:`enum_frame`: x' = s (x - x_i),
 X = X_0 + d X'); a view outside S is masked:
 
 * its camera is replaced by ``MASKED_CAMERA`` = [[0, 0, 0, 0], [0, 0, 0, 0], [0, 0, 0, 1]] for the candidate
   (its projection is the origin for every X, where its observation sits: residual and Jacobian 0), so the
   DLT of the row is the DLT of S and the Levenberg-Marquardt polish (:data:`POLISH_STEPS`) minimises
   sum_{i in S} ||Phi(X', P'_i)||^2 only;
-* for the bound, its epipolar constraints are dropped (``views`` of
-  :func:`tritools.solve.fastpath.lagrangian_bounds`) and its image variables are set to 0 in the candidate:
+* for the bound (:func:`enum_bounds`: the fundamental matrices of the N views computed once, then
+  :func:`sospoly.analysis.verify_quadratic_batch`, the Lagrangian bound of
+  :func:`tritools.solve.fastpath.lagrangian_bounds`), its epipolar constraints are dropped (their F set to 0,
+  as ``views`` does there) and its image variables are set to 0 in the candidate:
   they are then free and unconstrained in min sum_k v_k^2, whose minimiser has them at 0, so the program is
   the degree-2 program of S (Corollary 1 at delta = 2, SPEC §7) and its Lagrangian bound c'(S) is rigorous at
   any candidate, with the radius ||v^|| (v^ is the projection of a point: feasible, f(v*) <= ||v^||^2).
@@ -52,9 +54,9 @@ import time
 
 import numpy as np
 
-from ..model.normalize import RHO_FLOOR_REL, SCALE_BOUNDS, Normalization
 from sospoly.analysis import verify_quadratic_batch
 
+from ..model.normalize import RHO_FLOOR_REL, SCALE_BOUNDS, Normalization
 from ..model.stacked import (damped_step, dlt_stack, epipolar_quadratics, fundamental_stack, next_damping, norms,
                              null_vectors, pixel_scales, project_stack, refine_points_stack, view_pairs)
 from .robust_bounds import ROUND_DOWN

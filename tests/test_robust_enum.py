@@ -225,3 +225,30 @@ def test_time_limit_and_degenerate_data_go_to_the_search():
     assert timed.gamma_lb <= timed.gamma_ub
     two = tritools.triangulate(P[:2], x[:2], robust=200.0)
     assert enum_mod.ENUMERATED not in two.message
+
+
+@pytest.mark.parametrize("baseline", [1e-2, 1e-4])
+def test_tiny_baselines(baseline, monkeypatch):
+    """Camera centres within ``baseline`` (the point ~2 away) and one wrong match: the enumeration's bounds and
+    the branch and bound's cross-check (neither lower bound above the other's value), both certified, and the
+    enumeration's value within 1e-9 of the search's (its estimate finished by an undamped Gauss-Newton step)."""
+    from tritools.scene import PROTOCOL_K
+
+    rng = np.random.default_rng(7)
+    for N in (3, 5, 7):
+        c0 = np.array([0.0, 0.0, -2.0])
+        P = np.array([PROTOCOL_K @ np.hstack([np.eye(3), -(c0 + baseline * rng.normal(size=3))[:, None]])
+                      for _ in range(N)])
+        X = rng.uniform(-0.5, 0.5, 3)
+        h = P @ np.append(X, 1.0)
+        x = h[:, :2] / h[:, 2:] + 0.1 * rng.normal(size=(N, 2))
+        x[0] += [150.0, 80.0]
+        res = tritools.triangulate(P, x, robust=20.0)
+        monkeypatch.setattr(enum_mod, "ENUM_MAX_VIEWS", 0)
+        bb = tritools.triangulate(P, x, robust=20.0)
+        monkeypatch.undo()
+        assert enum_mod.ENUMERATED in res.message and res.optimal and bb.optimal
+        assert res.gamma_lb <= bb.gamma_ub * (1 + 1e-12) and bb.gamma_lb <= res.gamma_ub * (1 + 1e-12)
+        assert res.gamma_ub == pytest.approx(bb.gamma_ub, rel=1e-9)
+        np.testing.assert_array_equal(res.inliers, bb.inliers)
+        assert not res.inliers[0]

@@ -57,7 +57,8 @@ import numpy as np
 from sospoly.analysis import verify_quadratic_batch
 
 from ..model.normalize import RHO_FLOOR_REL, SCALE_BOUNDS, Normalization
-from ..model.stacked import (damped_step, dlt_stack, epipolar_quadratics, fundamental_stack, next_damping, norms,
+from ..model.stacked import (damped_step, dlt_stack, epipolar_quadratics, fundamental_stack, gauss_newton_polish,
+                             next_damping, norms,
                              null_vectors, pixel_scales, project_stack, refine_points_stack, view_pairs)
 from .robust_bounds import ROUND_DOWN
 
@@ -241,8 +242,9 @@ def _refined(search, norm, Cn: np.ndarray, X: np.ndarray) -> tuple:
     S = sorted(search.inlier_set(X))
     if len(S) < 2:
         return S, None
-    Xn, ok = refine_points_stack(Cn[S][None], np.zeros((1, len(S), 2)), norm.normalized_point(X)[None],
-                                 np.ones(1, bool))
+    zeros = np.zeros((1, len(S), 2))
+    Xn, ok = refine_points_stack(Cn[S][None], zeros, norm.normalized_point(X)[None], np.ones(1, bool))
+    Xn = gauss_newton_polish(Cn[S][None], zeros, Xn, ok)     # a weak direction the damped LM left (tiny baselines)
     return S, (Xn[0] if ok[0] and np.all(np.isfinite(Xn[0])) else None)
 
 

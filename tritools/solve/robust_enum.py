@@ -249,17 +249,19 @@ def _refined(search, norm, Cn: np.ndarray, X: np.ndarray) -> tuple:
 
 
 def _offer_rows(search, norm, Cn: np.ndarray, Xn: np.ndarray) -> None:
-    """Offer the best row candidate (world frame) to the search, refined first (ties keep the refined point),
-    and put the refined point in the row of its inlier set (whose bound is then taken at the L2 optimum)."""
+    """Offer the best row candidate (world frame) to the search, refined (:func:`_refined`: its f_TLS is at most
+    the candidate's, whose inlier set it minimises over), and put the refined point in the row of its inlier set
+    (whose bound is then taken at the L2 optimum); the candidate itself where the refinement fails."""
     rows = np.nonzero(np.isfinite(Xn).all(axis=1))[0]
     if not rows.size:
         return
     k = rows[int(np.argmin(search.screen(norm.origin + norm.depth * Xn[rows])))]
     S, Xr = _refined(search, norm, Cn, norm.world_point(Xn[k]))
-    if Xr is not None:
-        search.offer(norm.world_point(Xr))
-        Xn[_row_of(len(Cn))[sum(1 << i for i in S)]] = Xr
-    search.offer(norm.world_point(Xn[k]))
+    if Xr is None:
+        search.offer(norm.world_point(Xn[k]))
+        return
+    search.offer(norm.world_point(Xr))
+    Xn[_row_of(len(Cn))[sum(1 << i for i in S)]] = Xr
 
 
 @functools.lru_cache(maxsize=16)

@@ -311,7 +311,7 @@ def enumerate_tls(search):
         if need.any():
             lb[need], _ = enum_bounds(search.C, Cn, W[need], Xn[need], norm.scale, search.tol)
         res = _decide(search, W, lb, rest, int(need.sum()), final=False)
-        more = ~need & np.isfinite(rest)
+        more = ~need                     # (a set missing a view of infinite c still feeds the closure)
         if res is not None or not more.any():
             return res if res is not None else _decide(search, W, lb, rest, int(need.sum()))
         # not met: every other subset too (its own bound feeds the closure of the sets holding it)
@@ -321,7 +321,7 @@ def enumerate_tls(search):
         lb[more], _ = enum_bounds(search.C, Cn, W[more], Xn[more], norm.scale, search.tol)
     except (ValueError, np.linalg.LinAlgError, FloatingPointError):
         return None
-    return _decide(search, W, lb, rest, int(np.isfinite(rest).sum()))
+    return _decide(search, W, lb, rest, len(W))
 
 
 def _open(search, rest: np.ndarray) -> np.ndarray:

@@ -252,3 +252,20 @@ def test_tiny_baselines(baseline, monkeypatch):
         assert res.gamma_ub == pytest.approx(bb.gamma_ub, rel=1e-9)
         np.testing.assert_array_equal(res.inliers, bb.inliers)
         assert not res.inliers[0]
+
+
+def test_deadline_between_the_stacks(monkeypatch):
+    """A deadline that passes during the enumeration (the first candidate stack made slow): no enumerated result,
+    the search's time_limit status, the enumeration's candidate as the estimate and valid bounds."""
+    import time as _time
+
+    rng = np.random.default_rng(71)
+    P, x, X, out = robust_protocol_scene(5, 1, 1.0, rng)
+    full = tritools.triangulate(P, x, robust=200.0)
+    real = enum_mod.enum_candidates
+    monkeypatch.setattr(enum_mod, "enum_candidates", lambda Cn, W: _time.sleep(0.3) or real(Cn, W))
+    res = tritools.triangulate(P, x, robust=200.0, time_limit=0.2)
+    assert res.status == tritools.Status.TIME_LIMIT and not res.optimal
+    assert enum_mod.ENUMERATED not in res.message
+    assert res.gamma_lb <= full.gamma_ub * (1 + 1e-9) and res.gamma_lb <= res.gamma_ub
+    assert res.gamma_ub == pytest.approx(full.gamma_ub, rel=1e-6)     # the candidate found before the deadline

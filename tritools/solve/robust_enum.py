@@ -283,7 +283,9 @@ def enumerate_tls(search):
     subsets whose c^2(V - S) does not meet UB get their Lagrangian bound in one stacked call, with the view pairs
     when the best candidate has an outlier (their bounds feed the closure of the sets holding it); the others keep
     the bound 0 (their term c^2(V - S) meets UB already).  Where LB does not meet UB then, every other subset gets
-    its candidate and bound too (a second stacked call) before the closure is taken again."""
+    its candidate and bound too (a second stacked call) before the closure is taken again.  The deadline is
+    checked between the stacks: once it has passed, None (the search then reports the time limit, with the
+    candidates offered here and valid bounds)."""
     N = search.N
     if not search.points or not 3 <= N <= ENUM_MAX_VIEWS or search.deadline.expired:
         return None
@@ -298,7 +300,7 @@ def enumerate_tls(search):
         first = (size == 2) | (size == N)
         Xn[first] = enum_candidates(Cn, W[first])
         _offer_rows(search, norm, Cn, Xn)
-        if search.best_X is None:
+        if search.best_X is None or search.deadline.expired:     # the search reports its time limit
             return None
         with np.errstate(over="ignore", invalid="ignore"):
             rest = np.sum(np.where(W, 0.0, search.c2[None]), axis=1) * ROUND_DOWN   # c^2(V - S); inf: c_i = inf
@@ -306,14 +308,17 @@ def enumerate_tls(search):
         if later.any():
             Xn[later] = enum_candidates(Cn, W[later])
             _offer_rows(search, norm, Cn, Xn)
+            if search.deadline.expired:
+                return None
         need = _open(search, rest) | ((size == 2) & (search.best_f > float(np.min(search.c2))))
         lb = np.zeros(len(W))
         if need.any():
             lb[need], _ = enum_bounds(search.C, Cn, W[need], Xn[need], norm.scale, search.tol)
         res = _decide(search, W, lb, rest, int(need.sum()), final=False)
         more = ~need                     # (a set missing a view of infinite c still feeds the closure)
-        if res is not None or not more.any():
-            return res if res is not None else _decide(search, W, lb, rest, int(need.sum()))
+        if res is not None or not more.any() or search.deadline.expired:
+            return res if res is not None or search.deadline.expired else _decide(search, W, lb, rest,
+                                                                                 int(need.sum()))
         # not met: every other subset too (its own bound feeds the closure of the sets holding it)
         todo = more & ~np.isfinite(Xn).all(axis=1)
         if todo.any():

@@ -269,3 +269,22 @@ def test_deadline_between_the_stacks(monkeypatch):
     assert enum_mod.ENUMERATED not in res.message
     assert res.gamma_lb <= full.gamma_ub * (1 + 1e-9) and res.gamma_lb <= res.gamma_ub
     assert res.gamma_ub == pytest.approx(full.gamma_ub, rel=1e-6)     # the candidate found before the deadline
+
+
+def test_floor_scale_never_above_the_decision_scale():
+    """The enumeration decides at robust.scale_from(SCALE_BOUNDS[1], c^2) and relies on its being at most the
+    documented decision_scale (the normalisation clips its image scale to SCALE_BOUNDS): checked on zero-noise,
+    1e-3 and 1e6 pixel-scale, georeferenced and clean/outlier scenes, scalar and per-view thresholds."""
+    from tritools.model.normalize import SCALE_BOUNDS
+    from tritools.model.regions import Point
+    from tritools.solve.robust import decision_scale, scale_from
+
+    rng = np.random.default_rng(81)
+    T = np.eye(4)
+    T[:3, 3] = -np.array([5e6, -3e6, 1e5])
+    for N, n_out, noise in [(3, 0, 0.0), (5, 1, 1.0), (7, 3, 5.0)]:
+        P, x, X, out = robust_protocol_scene(N, n_out, noise, rng)
+        for cams, pts in [(P, x), _rescaled(P, x, 1e-3), _rescaled(P, x, 1e6), (P @ T, x)]:
+            for c in (np.full(N, 200.0), np.geomspace(1e-3, 1e4, N), np.append(np.full(N - 1, np.inf), 2.0)):
+                c2 = c * c
+                assert scale_from(SCALE_BOUNDS[1], c2) <= decision_scale(cams, [Point(p) for p in pts], c2)

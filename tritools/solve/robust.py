@@ -592,11 +592,9 @@ def triangulate_robust(cams: np.ndarray, regions, c: np.ndarray, opts, t0: float
     import dataclasses
     from .robust_enum import enumerate_tls
     from .triangulate import triangulate
-
     t0 = time.perf_counter() if t0 is None else t0
     if not np.any(np.isfinite(c)):
         res = triangulate(cams, regions, options=opts)
         return dataclasses.replace(res, inliers=None if res.residuals is None else np.ones(len(regions), bool))
-    search = TlsSearch(cams, regions, c, opts, t0)
-    res = enumerate_tls(search)                 # a few views: every inlier set in one stack (robust_enum)
-    return res if res is not None else drive([search])[0]
+    search = TlsSearch(cams, regions, c, opts, t0)      # a few views: every inlier set enumerated (robust_enum)
+    return enumerate_tls(search) or drive([search])[0]

@@ -334,9 +334,13 @@ def test_benchmark_script_smoke(capsys):
 
 
 def test_node_budget_and_time_limit_give_valid_bounds(monkeypatch):
-    """A search stopped early reports not_certified / time_limit with bounds that still hold."""
+    """A search stopped early reports not_certified / time_limit with bounds that still hold (the branch and
+    bound itself: the enumeration of few-view problems, which has no nodes, is switched off)."""
     import tritools.solve.robust as robust_mod
+    import tritools.solve.robust_enum as enum_mod
     import tritools.solve.robust_suspects as suspects
+
+    monkeypatch.setattr(enum_mod, "ENUM_MAX_VIEWS", 0)
 
     monkeypatch.setattr(suspects, "ENABLED", False)      # the suspect stage certifies this scene without nodes
     cams, x, X, _ = outlier_scene(6, 2, 21, noise=1.0, shift=(300, 500))

@@ -10,6 +10,7 @@ from scipy.optimize import least_squares
 
 import tritools
 import tritools.solve.robust_bounds as rb
+import tritools.solve.robust_enum as enum_mod
 from tritools.scene import random_scene, robust_protocol_scene
 from tritools.solve.robust import tls_cost
 from tritools.solve.robust_verify import parent_frames, verify_in_parent
@@ -200,6 +201,7 @@ def test_split_bound_replaces_the_whole_problem_solve(k, monkeypatch):
     rng = np.random.default_rng([3, 5, 1, 10])
     for _ in range(k + 1):
         P, x, X, out = robust_protocol_scene(5, 1, 1.0, rng)
+    monkeypatch.setattr(enum_mod, "ENUM_MAX_VIEWS", 0)         # the branch and bound's leaves (robust_enum: N <= 8)
     sizes = []
     real = rb.SubsetBounds._solve_one
     monkeypatch.setattr(rb.SubsetBounds, "_solve_one",

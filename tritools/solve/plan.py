@@ -46,7 +46,7 @@ from ..model.constraints import THEOREM1_DENSE_MAX_VIEWS, Method
 from .options import MethodChoice, SolvePath, Sparsity, TriangulationOptions
 
 __all__ = ["Step", "degree_plan", "delta_min", "batch_steps", "last_delta", "DENSE_MAX_SIDE", "DENSE_FALLBACK_SIDE",
-           "EXACT_VARIETY_MAX_SIDE", "exact_variety_step"]
+           "EXACT_VARIETY_MAX_SIDE", "exact_variety_step", "exact_variety_applies"]
 
 #: ``sparsity="auto"``: dense certificates above degree 2 while the Gram side stays at most this (sigma(8, 2) = 45).
 DENSE_MAX_SIDE = 45
@@ -123,11 +123,16 @@ def exact_variety_step(options: TriangulationOptions, n_views: int, n_vars: int,
     ``method="auto"`` and ``sparsity`` auto or dense, when the plan reaches delta = 4, the problem has at least 3
     views (two views: Corollary 1's one epipolar relation is Theorem 1's only minor, up to a constant) and the dense
     Gram side sigma(n_vars, 2) is at most :data:`EXACT_VARIETY_MAX_SIDE`; None otherwise."""
-    if options.explicit_method is not None or options.sparsity == Sparsity.CLIQUES or n_views < 3:
-        return None
-    if not plan or max(s.delta for s in plan) < 4 or sigma(n_vars, 2) > EXACT_VARIETY_MAX_SIDE:
+    if not plan or max(s.delta for s in plan) < 4 or not exact_variety_applies(options, n_views, n_vars):
         return None
     return Step(Method.THEOREM1, 4, "dense")
+
+
+def exact_variety_applies(options: TriangulationOptions, n_views: int, n_vars: int) -> bool:
+    """Whether :func:`exact_variety_step` may run on such a problem (its rule without the plan's degrees)."""
+    if options.explicit_method is not None or options.sparsity == Sparsity.CLIQUES or n_views < 3:
+        return False
+    return sigma(n_vars, 2) <= EXACT_VARIETY_MAX_SIDE
 
 
 def delta_min(method: Method, n_views: int) -> int:

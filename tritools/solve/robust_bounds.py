@@ -35,6 +35,8 @@ import numpy as np
 
 from ..model.regions import Point
 from ..result import Status
+from .coplanar import COPLANAR_BUDGET_NAME, subset_futile
+from .coplanar import node_budget as coplanar_node_budget
 from .fastpath import verify_points
 from .robust_verify import parent_frames, verify_in_parent
 from .sdp_batch import solve_corollary1_points
@@ -104,6 +106,8 @@ class SubsetBounds:
         self._frame = None                     # the parent's normalised frame (robust_verify.ParentFrame), or False
         self.n_in_parent = 0                   # subsets bounded in the parent's frame
         self.budget_exceeded = False           # a sub-problem stopped at the memory budget (the caller's status)
+        self._node_budget = None               # node_budget: the coplanar cap, or False (none), when decided
+        self.node_budget_name = "node budget"
 
     def frame(self):
         """The parent problem's :class:`tritools.solve.robust_verify.ParentFrame` (point regions; computed when first
@@ -153,6 +157,15 @@ class SubsetBounds:
                 used |= P
         return total * ROUND_DOWN
 
+    def node_budget(self, default: int) -> int:
+        """The search's node budget: ``default``, or :data:`tritools.solve.coplanar.COPLANAR_MAX_NODES` where the
+        centres are coplanar beyond the exact-variety step's reach (:func:`tritools.solve.coplanar.node_budget`)."""
+        if self._node_budget is None:
+            self._node_budget = coplanar_node_budget(self.C, len(self.x) if self.points else len(self.regions),
+                                                     self.opts)
+        self.node_budget_name = "node budget" if self._node_budget is False else COPLANAR_BUDGET_NAME
+        return default if self._node_budget is False else min(default, self._node_budget)
+
     def compute(self, subsets) -> None:
         """Fill the cache for every subset not known yet (duplicates and |S| <= 1 skipped)."""
         compute_many([(self, subsets)])
@@ -169,6 +182,10 @@ class SubsetBounds:
         if split >= need:
             self._lb[S] = max(old, split)
             return True
+        views = sorted(S)                 # coplanar centres: no Corollary 1 degree can certify (solve.coplanar)
+        if subset_futile(self.C[views], [self.regions[i] for i in views], self.opts, old, self._X.get(S)):
+            self._lb[S] = max(old, split)
+            return split > old
         self._lb.pop(S)
         self._solve_one(S, light=False, from_delta=FULL_FROM_DELTA)
         self._lb[S] = max(self._lb[S], old, split)

@@ -1,0 +1,175 @@
+"""Coplanar camera centres: the ceiling of Corollary 1's bound, and when escalating it is futile.
+
+The spurious component.  Let the finite camera centres C_1, ..., C_N (N >= 3, not collinear) lie in one plane
+pi (pi^T C_i = 0; with three views always: the trifocal plane), and let l_i be the image of pi in view i (the
+line with P_i^T l_i ~ pi).  For x_i on l_i and x_j on l_j the back-projected rays both lie in pi, so they meet
+(projectively): x_i^T F_ij x_j = 0 for every pair.  Every tuple (x_1, ..., x_N) with x_i on l_i therefore
+satisfies all of Corollary 1's constraints (SPEC §7, the paper's epipolar form of m2 = 0), whether or not the rays
+meet in one point.  With point regions x^_i, the cheapest such tuple costs
+
+    s_pi = sum_i dist(x^_i, l_i)^2,
+
+and since the feasible set of Corollary 1's program contains it, **every** Corollary 1 lower bound, at every
+relaxation degree delta and in every formulation, satisfies
+
+    f_LB(Corollary 1, delta) <= min over the epipolar variety of f <= s_pi.                         (C)
+
+When the scene point lies in or near pi with noisy observations, s_pi is the out-of-plane part of the residuals
+only (about half of the L2 optimum f* with isotropic noise: N of the 2N - 3 residual degrees of freedom), so
+Corollary 1 cannot certify at any degree.  Theorem 1's minors (the trilinear relations among them) vanish only on
+the images of scene points and are not bounded by (C) (:func:`tritools.solve.plan.exact_variety_step`).
+
+The futility rule (:func:`corollary1_futile`).  After a Corollary 1 step with lower bound f_lb and upper bound f_ub
+(pixels^2), escalating Corollary 1 to a higher degree can raise the lower bound by at most s_pi - f_lb, and it
+cannot certify unless f_ub (or a better upper bound it finds) comes within the certificate tolerance of s_pi.  So
+the remaining Corollary 1 steps are skipped when
+
+    * the centres are coplanar (:func:`centre_plane`: the smallest singular value of the centred centres is at
+      most :data:`COPLANAR_RTOL` times the largest, the second one above it -- collinear centres have no unique
+      plane), every region is a point and no two centres coincide (a pair with one centre carries a homography
+      instead of an epipolar relation, which the spurious tuple need not satisfy);
+    * the step's bound already sits on the spurious component: f_lb >= (1 - :data:`SITS_RTOL`) s_pi;
+    * and the upper bound is clearly above it: s_pi <= (1 - :data:`GAP_RTOL`) f_ub.
+
+The first two make (C) say that higher degrees add at most SITS_RTOL s_pi to the bound; the third that the gap
+left is a thousand times the certificate tolerance.  Skipping a step never changes a reported bound's validity
+(each reported bound is a step's rigorous bound); it only spends no time where a certificate cannot come from.
+The rule uses the step's upper bound as a stand-in for f*: where the estimate is far from the optimum and the
+optimum sits on s_pi (a point exactly in pi without noise gives f* = s_pi = 0 and is certified at delta = 2
+already), the skipped step could in principle have certified; measured, this does not occur on the turntable
+cases of tests/test_coplanar.py.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..model.regions.point import Point
+from ..model.stacked import centre_vectors
+
+__all__ = ["centre_plane", "plane_lines", "spurious_cost", "corollary1_futile", "COPLANAR_RTOL", "SITS_RTOL",
+           "GAP_RTOL", "FUTILE_MESSAGE", "futile_after", "subset_futile", "node_budget", "COPLANAR_MAX_NODES",
+           "COPLANAR_BUDGET_NAME"]
+
+#: centres are coplanar when the smallest singular value of the centred centres is at most this times the largest
+COPLANAR_RTOL = 1e-9
+#: Corollary 1's bound "sits on" the spurious component when it is at least (1 - SITS_RTOL) s_pi
+SITS_RTOL = 1e-3
+#: ... and escalating is futile when s_pi is at most (1 - GAP_RTOL) times the upper bound
+GAP_RTOL = 1e-3
+#: the robust search's node budget with coplanar centres beyond the exact-variety step (:func:`node_budget`; the
+#: turntable cases of tests/test_coplanar.py use at most ~45 nodes where they certify or settle)
+COPLANAR_MAX_NODES = 100
+#: the reason a robust search stopped at that budget (its result's message: "stopped by the ...")
+COPLANAR_BUDGET_NAME = "node budget of coplanar camera centres (Corollary 1 cannot exclude the trifocal plane)"
+#: the message of a point whose Corollary 1 steps were stopped by the futility rule
+FUTILE_MESSAGE = ("coplanar camera centres: Corollary 1's bound sits on the spurious epipolar component "
+                  "(s_pi = {s:.6g} px^2 < f_ub = {ub:.6g} px^2), higher degrees cannot certify")
+
+
+def centre_plane(cameras: np.ndarray) -> np.ndarray | None:
+    """The plane pi (unit homogeneous 4-vector, pi^T C_i = 0) of the cameras' centres when they are finite, at
+    least three, not collinear, pairwise distinct and coplanar within :data:`COPLANAR_RTOL`; None otherwise."""
+    cams = np.asarray(cameras, float)
+    if cams.ndim != 3 or cams.shape[0] < 3:
+        return None
+    a = centre_vectors(cams)
+    w = a[:, 3]
+    scale = np.max(np.abs(a[:, :3]), axis=1)
+    if not np.all(np.isfinite(a)) or np.any(np.abs(w) <= 1e-12 * np.maximum(scale, 1e-300)):
+        return None                                         # a centre at (or near) infinity
+    C = a[:, :3] / w[:, None]
+    mean = C.mean(axis=0)
+    D = C - mean
+    _, s, Vt = np.linalg.svd(D, full_matrices=False)
+    if s[0] == 0.0 or s[1] <= COPLANAR_RTOL * s[0] or s[2] > COPLANAR_RTOL * s[0]:
+        return None
+    gaps = np.linalg.norm(C[:, None, :] - C[None, :, :], axis=-1) + np.eye(len(C)) * s[0]
+    if np.min(gaps) <= 1e-9 * s[0]:
+        return None                                         # coinciding centres: a homography pair
+    n = Vt[2]
+    pi = np.append(n, -n @ mean)
+    return pi / np.linalg.norm(pi)
+
+
+def plane_lines(cameras: np.ndarray, pi: np.ndarray) -> np.ndarray:
+    """(N, 3) image lines l_i of the plane ``pi``: P_i^T l_i ~ pi (least squares; pi holds the centre, so it lies
+    in the column space of P_i^T), each scaled to ||(l_1, l_2)|| = 1 (a signed point-line distance is l . (x, 1))."""
+    lines = np.array([np.linalg.lstsq(P.T, pi, rcond=None)[0] for P in np.asarray(cameras, float)])
+    return lines / np.linalg.norm(lines[:, :2], axis=1, keepdims=True)
+
+
+def spurious_cost(cameras: np.ndarray, regions) -> float | None:
+    """s_pi = sum_i dist(x^_i, l_i)^2 (pixels^2, module docstring) for point regions and coplanar centres; None
+    when the centres are not coplanar (:func:`centre_plane`) or a region is not a point."""
+    if not all(isinstance(r, Point) for r in regions):
+        return None
+    pi = centre_plane(cameras)
+    if pi is None:
+        return None
+    lines = plane_lines(cameras, pi)
+    x = np.array([np.append(r.x, 1.0) for r in regions])
+    d = np.einsum("ij,ij->i", lines, x)
+    s = float(np.sum(d * d))
+    return s if math.isfinite(s) else None
+
+
+def corollary1_futile(cameras: np.ndarray, regions, f_lb: float | None, f_ub: float | None) -> str | None:
+    """The reason (:data:`FUTILE_MESSAGE`) why no Corollary 1 step of a higher degree can certify, after a step
+    with bounds ``f_lb`` <= ``f_ub`` (pixels^2; module docstring's rule); None when the rule does not apply."""
+    if f_lb is None or f_ub is None or not (math.isfinite(f_lb) and math.isfinite(f_ub)):
+        return None
+    s = spurious_cost(cameras, regions)
+    if s is None or f_lb < (1.0 - SITS_RTOL) * s or s > (1.0 - GAP_RTOL) * f_ub:
+        return None
+    return FUTILE_MESSAGE.format(s=s, ub=f_ub)
+
+
+def futile_after(cameras: np.ndarray, regions, steps, res) -> str | None:
+    """After a NOT_CERTIFIED plan step's result ``res`` (gamma bounds in pixels), the reason to skip the rest of a
+    plan ``steps`` made of Corollary 1 steps only (:func:`corollary1_futile` on f = 2N gamma^2); None otherwise."""
+    from ..model.constraints import Method
+    from ..result import Status
+
+    if res.status != Status.NOT_CERTIFIED or any(s.method != Method.COROLLARY1 for s in steps):
+        return None
+    if res.gamma_lb is None or res.gamma_ub is None:
+        return None
+    n2 = 2 * len(regions)
+    return corollary1_futile(cameras, regions, n2 * res.gamma_lb ** 2, n2 * res.gamma_ub ** 2)
+
+
+def subset_futile(cameras: np.ndarray, regions, options, f_lb: float, X) -> str | None:
+    """For the robust search's subsets (:meth:`tritools.solve.robust_bounds.SubsetBounds.strengthen`): the reason
+    why solving this sub-problem with the full degree plan cannot certify it -- :func:`corollary1_futile` with the
+    upper bound f(X) of its estimate ``X`` (world point, pixels^2) -- when the plan would hold Corollary 1 steps
+    only (no exact-variety step, :func:`tritools.solve.plan.exact_variety_applies`); None otherwise."""
+    from .plan import exact_variety_applies
+
+    if X is None or not all(isinstance(r, Point) for r in regions):
+        return None
+    if exact_variety_applies(options, len(regions), 2 * len(regions)):
+        return None
+    h = np.asarray(cameras, float) @ np.append(np.asarray(X, float), 1.0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        r = h[:, :2] / h[:, 2:] - np.array([p.x for p in regions])
+    f_ub = float(np.sum(r * r))
+    return corollary1_futile(cameras, regions, f_lb, f_ub)
+
+
+def node_budget(cameras: np.ndarray, n_views: int, options) -> int | bool:
+    """The robust search's node budget (:mod:`tritools.solve.robust`) on cameras whose centres are coplanar
+    (:func:`centre_plane`) and too many for the exact-variety step on point regions
+    (:func:`tritools.solve.plan.exact_variety_applies`): :data:`COPLANAR_MAX_NODES`; False otherwise.
+
+    Why: every subset of at least five views then has a Corollary 1 bound of at most its spurious cost (C), and the
+    node bounds of the inlier sets near the optimum stay below the best TLS value whatever the search does (measured
+    at N = 20, clean, c = 4 px: 647 nodes, 1924 sub-problems, 25 s CPU, not certified).  The cap keeps the call
+    bounded; the bounds stay valid (the search's lower bound covers the nodes left open) and the status is
+    not_certified with the reason :data:`COPLANAR_BUDGET_NAME` in the message."""
+    from .plan import exact_variety_applies
+
+    if exact_variety_applies(options, n_views, 2 * n_views) or centre_plane(cameras) is None:
+        return False
+    return COPLANAR_MAX_NODES

@@ -49,8 +49,8 @@ from ..model.regions.point import Point
 from ..model.stacked import centre_vectors
 
 __all__ = ["centre_plane", "plane_lines", "spurious_cost", "corollary1_futile", "COPLANAR_RTOL", "SITS_RTOL",
-           "GAP_RTOL", "FUTILE_MESSAGE", "futile_after", "subset_futile", "node_budget", "COPLANAR_MAX_NODES",
-           "COPLANAR_BUDGET_NAME"]
+           "GAP_RTOL", "FUTILE_MESSAGE", "futile_after", "subset_futile", "node_budget", "COPLANAR_NODE_WORK",
+           "COPLANAR_MIN_NODES", "COPLANAR_BUDGET_NAME"]
 
 #: centres are coplanar when the smallest singular value of the centred centres is at most this times the largest
 COPLANAR_RTOL = 1e-9
@@ -58,9 +58,10 @@ COPLANAR_RTOL = 1e-9
 SITS_RTOL = 1e-3
 #: ... and escalating is futile when s_pi is at most (1 - GAP_RTOL) times the upper bound
 GAP_RTOL = 1e-3
-#: the robust search's node budget with coplanar centres beyond the exact-variety step (:func:`node_budget`; the
-#: turntable cases of tests/test_coplanar.py use at most ~45 nodes where they certify or settle)
-COPLANAR_MAX_NODES = 100
+#: the robust search's node budget with coplanar centres beyond the exact-variety step is this divided by N^2 (a
+#: node's sub-problems cost ~N^2: ~N subsets of ~N views; :func:`node_budget`), at least :data:`COPLANAR_MIN_NODES`
+COPLANAR_NODE_WORK = 16000
+COPLANAR_MIN_NODES = 10
 #: the reason a robust search stopped at that budget (its result's message: "stopped by the ...")
 COPLANAR_BUDGET_NAME = "node budget of coplanar camera centres (Corollary 1 cannot exclude the trifocal plane)"
 #: the message of a point whose Corollary 1 steps were stopped by the futility rule
@@ -161,7 +162,8 @@ def subset_futile(cameras: np.ndarray, regions, options, f_lb: float, X) -> str 
 def node_budget(cameras: np.ndarray, n_views: int, options) -> int | bool:
     """The robust search's node budget (:mod:`tritools.solve.robust`) on cameras whose centres are coplanar
     (:func:`centre_plane`) and too many for the exact-variety step on point regions
-    (:func:`tritools.solve.plan.exact_variety_applies`): :data:`COPLANAR_MAX_NODES`; False otherwise.
+    (:func:`tritools.solve.plan.exact_variety_applies`): max(:data:`COPLANAR_MIN_NODES`, :data:`COPLANAR_NODE_WORK` /
+    N^2) (N = 6: 444, 10: 160, 20: 40, 30: 17); False otherwise.
 
     Why: every subset of at least five views then has a Corollary 1 bound of at most its spurious cost (C), and the
     node bounds of the inlier sets near the optimum stay below the best TLS value whatever the search does (measured
@@ -172,4 +174,4 @@ def node_budget(cameras: np.ndarray, n_views: int, options) -> int | bool:
 
     if exact_variety_applies(options, n_views, 2 * n_views) or centre_plane(cameras) is None:
         return False
-    return COPLANAR_MAX_NODES
+    return max(COPLANAR_MIN_NODES, COPLANAR_NODE_WORK // (n_views * n_views))

@@ -31,6 +31,11 @@ points, and its dense degree-4 certificate closes the gap (benchmarks/RESULTS.md
 0.05-0.4 s each; 4 views with coplanar centres, 0.4-0.9 s).  Its view-clique formulation did not (5-6 views:
 solver failures), and the dense one at 5 views costs ~7 s: neither is tried.
 
+The same component also caps Corollary 1 with ordinary noise when the point lies in or near the centres' plane
+(a turntable): its bound is at most s_pi = sum_i dist(x^_i, l_i)^2 at every degree, so the ``steps`` stage stops
+the plan after a Corollary 1 step whose bound sits on s_pi below the upper bound
+(:func:`tritools.solve.coplanar.futile_after`; the exact-variety step still follows where it applies).
+
 With an explicit method, the degrees run from ``delta`` (default delta_min) to ``max_delta`` (default
 ``delta`` when given, else delta_min + 2) with that method; ``sparsity`` ("none" / "views") forces
 the formulation of the steps above delta = 2.  Theorem 1's dense formulation holds all C(2N, 4)

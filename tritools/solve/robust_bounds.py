@@ -158,8 +158,8 @@ class SubsetBounds:
         return total * ROUND_DOWN
 
     def node_budget(self, default: int) -> int:
-        """The search's node budget: ``default``, or :data:`tritools.solve.coplanar.COPLANAR_MAX_NODES` where the
-        centres are coplanar beyond the exact-variety step's reach (:func:`tritools.solve.coplanar.node_budget`)."""
+        """The search's node budget: ``default``, or :func:`tritools.solve.coplanar.node_budget` where the
+        centres are coplanar beyond the exact-variety step's reach."""
         if self._node_budget is None:
             self._node_budget = coplanar_node_budget(self.C, len(self.x) if self.points else len(self.regions),
                                                      self.opts)

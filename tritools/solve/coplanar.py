@@ -49,8 +49,9 @@ from ..model.regions.point import Point
 from ..model.stacked import centre_vectors
 
 __all__ = ["centre_plane", "plane_lines", "spurious_cost", "corollary1_futile", "COPLANAR_RTOL", "SITS_RTOL",
-           "GAP_RTOL", "FUTILE_MESSAGE", "futile_after", "subset_futile", "node_budget", "COPLANAR_NODE_WORK",
-           "COPLANAR_MIN_NODES", "COPLANAR_BUDGET_NAME"]
+           "GAP_RTOL", "FUTILE_MESSAGE", "futile_after", "subset_futile", "plane_distances2", "sits_on_ceiling",
+           "COPLANAR_MAX_CEILING", "hopeless_subset",
+           "CEILING_MIN_VIEWS", "COPLANAR_BUDGET_NAME"]
 
 #: centres are coplanar when the smallest singular value of the centred centres is at most this times the largest
 COPLANAR_RTOL = 1e-9
@@ -58,12 +59,15 @@ COPLANAR_RTOL = 1e-9
 SITS_RTOL = 1e-3
 #: ... and escalating is futile when s_pi is at most (1 - GAP_RTOL) times the upper bound
 GAP_RTOL = 1e-3
-#: the robust search's node budget with coplanar centres beyond the exact-variety step is this divided by N^2 (a
-#: node's sub-problems cost ~N^2: ~N subsets of ~N views; :func:`node_budget`), at least :data:`COPLANAR_MIN_NODES`
-COPLANAR_NODE_WORK = 16000
-COPLANAR_MIN_NODES = 10
+#: the robust search stops (:meth:`tritools.solve.robust_bounds.SubsetBounds.node_budget`) once this many subsets of
+#: at least :data:`CEILING_MIN_VIEWS` views got an uncertified delta = 2 bound sitting on their ceiling s_pi(S)
+#: (:func:`sits_on_ceiling`): their bounds cannot rise at any degree, so the search cannot prune with them
+COPLANAR_MAX_CEILING = 40
+#: the smallest subsets counted: smaller ones get the exact-variety step (Theorem 1) when strengthened
+CEILING_MIN_VIEWS = 5
 #: the reason a robust search stopped at that budget (its result's message: "stopped by the ...")
-COPLANAR_BUDGET_NAME = "node budget of coplanar camera centres (Corollary 1 cannot exclude the trifocal plane)"
+COPLANAR_BUDGET_NAME = ("ceiling of coplanar camera centres (Corollary 1's subset bounds cannot exceed the cost of the "
+                        "centres' plane component)")
 #: the message of a point whose Corollary 1 steps were stopped by the futility rule
 FUTILE_MESSAGE = ("coplanar camera centres: Corollary 1's bound sits on the spurious epipolar component "
                   "(s_pi = {s:.6g} px^2 < f_ub = {ub:.6g} px^2), higher degrees cannot certify")
@@ -101,19 +105,34 @@ def plane_lines(cameras: np.ndarray, pi: np.ndarray) -> np.ndarray:
     return lines / np.linalg.norm(lines[:, :2], axis=1, keepdims=True)
 
 
+def plane_distances2(cameras: np.ndarray, points) -> np.ndarray | None:
+    """(N,) squared distances dist(x^_i, l_i)^2 (pixels^2) of image points (N, 2) to the image lines of the
+    centres' plane; None when the centres are not coplanar (:func:`centre_plane`).  For any subset S of the views,
+    sum_{i in S} of them is a ceiling s_pi(S) of Corollary 1's bound of S (the tuple on the lines of this plane
+    is feasible for S's epipolar relations too, whichever other planes S's centres lie in)."""
+    pi = centre_plane(cameras)
+    if pi is None:
+        return None
+    x = np.column_stack([np.asarray(points, float), np.ones(len(points))])
+    d = np.einsum("ij,ij->i", plane_lines(cameras, pi), x)
+    return d * d
+
+
 def spurious_cost(cameras: np.ndarray, regions) -> float | None:
     """s_pi = sum_i dist(x^_i, l_i)^2 (pixels^2, module docstring) for point regions and coplanar centres; None
     when the centres are not coplanar (:func:`centre_plane`) or a region is not a point."""
     if not all(isinstance(r, Point) for r in regions):
         return None
-    pi = centre_plane(cameras)
-    if pi is None:
-        return None
-    lines = plane_lines(cameras, pi)
-    x = np.array([np.append(r.x, 1.0) for r in regions])
-    d = np.einsum("ij,ij->i", lines, x)
-    s = float(np.sum(d * d))
-    return s if math.isfinite(s) else None
+    d2 = plane_distances2(cameras, [r.x for r in regions])
+    s = None if d2 is None else float(np.sum(d2))
+    return s if s is not None and math.isfinite(s) else None
+
+
+def sits_on_ceiling(f_lb: float, d2: np.ndarray) -> bool:
+    """Whether a Corollary 1 bound ``f_lb`` (pixels^2) of a subset sits on its ceiling s_pi(S) = sum ``d2``
+    (within :data:`SITS_RTOL`): no Corollary 1 degree can raise it further than that."""
+    s = float(np.sum(d2))
+    return math.isfinite(s) and math.isfinite(f_lb) and f_lb >= (1.0 - SITS_RTOL) * s
 
 
 def corollary1_futile(cameras: np.ndarray, regions, f_lb: float | None, f_ub: float | None) -> str | None:
@@ -122,7 +141,7 @@ def corollary1_futile(cameras: np.ndarray, regions, f_lb: float | None, f_ub: fl
     if f_lb is None or f_ub is None or not (math.isfinite(f_lb) and math.isfinite(f_ub)):
         return None
     s = spurious_cost(cameras, regions)
-    if s is None or f_lb < (1.0 - SITS_RTOL) * s or s > (1.0 - GAP_RTOL) * f_ub:
+    if s is None or not sits_on_ceiling(f_lb, np.array([s])) or s > (1.0 - GAP_RTOL) * f_ub:
         return None
     return FUTILE_MESSAGE.format(s=s, ub=f_ub)
 
@@ -159,19 +178,15 @@ def subset_futile(cameras: np.ndarray, regions, options, f_lb: float, X) -> str 
     return corollary1_futile(cameras, regions, f_lb, f_ub)
 
 
-def node_budget(cameras: np.ndarray, n_views: int, options) -> int | bool:
-    """The robust search's node budget (:mod:`tritools.solve.robust`) on cameras whose centres are coplanar
-    (:func:`centre_plane`) and too many for the exact-variety step on point regions
-    (:func:`tritools.solve.plan.exact_variety_applies`): max(:data:`COPLANAR_MIN_NODES`, :data:`COPLANAR_NODE_WORK` /
-    N^2) (N = 6: 444, 10: 160, 20: 40, 30: 17); False otherwise.
 
-    Why: every subset of at least five views then has a Corollary 1 bound of at most its spurious cost (C), and the
-    node bounds of the inlier sets near the optimum stay below the best TLS value whatever the search does (measured
-    at N = 20, clean, c = 4 px: 647 nodes, 1924 sub-problems, 25 s CPU, not certified).  The cap keeps the call
-    bounded; the bounds stay valid (the search's lower bound covers the nodes left open) and the status is
-    not_certified with the reason :data:`COPLANAR_BUDGET_NAME` in the message."""
-    from .plan import exact_variety_applies
-
-    if exact_variety_applies(options, n_views, 2 * n_views) or centre_plane(cameras) is None:
-        return False
-    return max(COPLANAR_MIN_NODES, COPLANAR_NODE_WORK // (n_views * n_views))
+def hopeless_subset(cameras: np.ndarray, points: np.ndarray, d2: np.ndarray, X) -> bool:
+    """Whether the ceiling s_pi(S) = sum ``d2`` of a view subset S is at most (1 - :data:`GAP_RTOL`) times the cost
+    of the estimate ``X`` on S (pixels^2).  Used on the robust search's best inlier set S* when its bound already
+    sits on the ceiling (:func:`sits_on_ceiling`): the TLS certificate needs the leaf of S* pruned, i.e. a bound of
+    L2*(S*) within the tolerance of the L2 part of the best value, and Corollary 1 gives at most s_pi(S*) < that."""
+    h = np.asarray(cameras, float) @ np.append(np.asarray(X, float), 1.0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        r = h[:, :2] / h[:, 2:] - np.asarray(points, float)
+    f_ub = float(np.sum(r * r))
+    s = float(np.sum(d2))
+    return math.isfinite(f_ub) and math.isfinite(s) and s <= (1.0 - GAP_RTOL) * f_ub

@@ -35,8 +35,9 @@ import numpy as np
 
 from ..model.regions import Point
 from ..result import Status
-from .coplanar import COPLANAR_BUDGET_NAME, subset_futile
-from .coplanar import node_budget as coplanar_node_budget
+from .coplanar import (CEILING_MIN_VIEWS, COPLANAR_BUDGET_NAME, COPLANAR_MAX_CEILING, hopeless_subset,
+                       plane_distances2,
+                       sits_on_ceiling, subset_futile)
 from .fastpath import verify_points
 from .robust_verify import parent_frames, verify_in_parent
 from .sdp_batch import solve_corollary1_points
@@ -106,7 +107,9 @@ class SubsetBounds:
         self._frame = None                     # the parent's normalised frame (robust_verify.ParentFrame), or False
         self.n_in_parent = 0                   # subsets bounded in the parent's frame
         self.budget_exceeded = False           # a sub-problem stopped at the memory budget (the caller's status)
-        self._node_budget = None               # node_budget: the coplanar cap, or False (none), when decided
+        self._plane_d2 = None                  # note_weak: dist(x_i, l_i)^2 of coplanar centres' lines, or False
+        self.n_ceiling = 0                     # weak subsets whose bound sits on that ceiling (node_budget)
+        self.on_ceiling: set = set()           # ... and which they are
         self.node_budget_name = "node budget"
 
     def frame(self):
@@ -158,13 +161,33 @@ class SubsetBounds:
         return total * ROUND_DOWN
 
     def node_budget(self, default: int) -> int:
-        """The search's node budget: ``default``, or :func:`tritools.solve.coplanar.node_budget` where the
-        centres are coplanar beyond the exact-variety step's reach."""
-        if self._node_budget is None:
-            self._node_budget = coplanar_node_budget(self.C, len(self.x) if self.points else len(self.regions),
-                                                     self.opts)
-        self.node_budget_name = "node budget" if self._node_budget is False else COPLANAR_BUDGET_NAME
-        return default if self._node_budget is False else min(default, self._node_budget)
+        """The search's node budget: ``default``, or 0 (stop, :attr:`node_budget_name` says why) once
+        :data:`~tritools.solve.coplanar.COPLANAR_MAX_CEILING` subsets got a delta = 2 bound that sits on the ceiling
+        of coplanar centres (:func:`tritools.solve.coplanar.sits_on_ceiling`: no degree can raise them)."""
+        if self.n_ceiling < COPLANAR_MAX_CEILING and not self._hint_on_ceiling():
+            return default
+        self.node_budget_name = COPLANAR_BUDGET_NAME
+        return 0
+
+    def _hint_on_ceiling(self) -> bool:
+        """The caller's best inlier set (``hint``) has a bound on its ceiling s_pi clearly below the cost of its own
+        estimate (:func:`tritools.solve.coplanar.hopeless_subset`): the leaf of the best candidate cannot be pruned,
+        so no search over these bounds can certify."""
+        if self.hint is None or self.hint not in self.on_ceiling or self.hint not in self._X:
+            return False
+        views = sorted(self.hint)
+        return hopeless_subset(self.C[views], self.x[views], self._plane_d2[views], self._X[self.hint])
+
+    def note_weak(self, S: frozenset) -> None:
+        """Mark S weak (its delta = 2 bound, stored, did not certify) and count it when it sits on its ceiling."""
+        self.weak.add(S)
+        if self._plane_d2 is None:
+            self._plane_d2 = (plane_distances2(self.C, self.x) if self.points else None) if len(self.C) > 2 else None
+            self._plane_d2 = False if self._plane_d2 is None else self._plane_d2
+        if self._plane_d2 is not False and len(S) >= CEILING_MIN_VIEWS \
+                and sits_on_ceiling(self._lb[S], self._plane_d2[sorted(S)]):
+            self.n_ceiling += 1
+            self.on_ceiling.add(S)
 
     def compute(self, subsets) -> None:
         """Fill the cache for every subset not known yet (duplicates and |S| <= 1 skipped)."""
@@ -445,7 +468,7 @@ def _batch(items: list, step) -> list:
             sb._store(S, 2 * n * float(gamma_lb[k]) ** 2 * ROUND_DOWN, X[k])
             sb.n_solved += 1
             if not certified[k]:            # a valid but loose delta = 2 bound: strengthen() may redo it
-                sb.weak.add(S)
+                sb.note_weak(S)
         else:
             left.append((sb, S))
     return left

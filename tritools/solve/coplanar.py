@@ -34,6 +34,14 @@ the remaining Corollary 1 steps are skipped when
 The first two make (C) say that higher degrees add at most SITS_RTOL s_pi to the bound; the third that the gap
 left is a thousand times the certificate tolerance.  Skipping a step never changes a reported bound's validity
 (each reported bound is a step's rigorous bound); it only spends no time where a certificate cannot come from.
+The robust search (:mod:`tritools.solve.robust`, :class:`tritools.solve.robust_bounds.SubsetBounds`) applies (C) to
+view subsets S, whose ceiling is s_pi(S) = sum_{i in S} dist(x^_i, l_i)^2 (:func:`plane_distances2`; the lines of
+the plane of all centres serve every subset): a weak subset's full-plan solve is skipped where (C) makes it futile
+(:func:`subset_futile`), and the search stops (status not_certified, :data:`COPLANAR_BUDGET_NAME`) when the best
+inlier set S* (at least :data:`CEILING_MIN_VIEWS` views) has a delta = 2 bound on its ceiling clearly below the cost
+of its estimate (:func:`hopeless_subset`: the leaf of S* must be pruned for a certificate, which needs a bound of
+L2*(S*) within the tolerance), or after :data:`COPLANAR_MAX_CEILING` subsets bounded on their ceilings.
+
 The rule uses the step's upper bound as a stand-in for f*: where the estimate is far from the optimum and the
 optimum sits on s_pi (a point exactly in pi without noise gives f* = s_pi = 0 and is certified at delta = 2
 already), the skipped step could in principle have certified; measured, this does not occur on the turntable

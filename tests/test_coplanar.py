@@ -157,6 +157,8 @@ def test_robust_clean_in_plane_stops_at_the_ceiling(N, scale):
     res = tritools.triangulate(P, obs, robust=c)
     assert res.status == tritools.Status.NOT_CERTIFIED and COPLANAR_BUDGET_NAME in res.message
     assert n_nodes(res) == 0
+    n_sub = int(re.search(r"(\d+) L2 sub-problems", res.message).group(1))
+    assert n_sub <= N * (N - 1) // 2 + 3 * N          # the candidates' view pairs and the root (base: 1924 at N = 20)
     f_ref, X_ref = reference_l2(P, obs, X, starts=10)
     tls_ref = tls_of(P, obs, X_ref, c * c)
     assert 2 * N * res.gamma_lb ** 2 <= tls_ref * (1 + 1e-9)

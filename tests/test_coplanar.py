@@ -94,19 +94,25 @@ def test_centre_plane_detection():
 
 @pytest.mark.parametrize("N,seed", [(6, 0), (10, 1), (20, 2)])
 def test_plain_l2_stops_at_the_ceiling(N, seed):
-    """z = 0, clean: Corollary 1's bound equals s_pi (closed form), stays below the multi-start reference, and the
-    plan stops after delta = 2 with the reason named (one SDP attempt instead of a delta = 4 one)."""
+    """z = 0, clean: Corollary 1's bound equals s_pi (closed form), the reported bound stays below the multi-start
+    reference, and the plan stops after delta = 2 with the reason named (no Corollary 1 delta = 4 attempt); with at
+    most 8 views one Theorem 1 view-clique step follows."""
     P, obs, X = scene(N, seed)
     res = tritools.triangulate(P, obs)
     f_ref, _ = reference_l2(P, obs, X, starts=20)
     s_pi = spurious_cost(P, [Point(o) for o in obs])
     f_lb, f_ub = 2 * N * res.gamma_lb ** 2, 2 * N * res.gamma_ub ** 2
     assert f_lb <= f_ref * (1 + 1e-9) and f_ref <= f_ub * (1 + 1e-9)
-    assert not res.optimal and res.status == tritools.Status.NOT_CERTIFIED
     assert s_pi < 0.9 * f_ref                                # the spurious component is cheaper than the optimum
-    assert f_lb == pytest.approx(s_pi, rel=1e-6)             # ... and the bound sits on it
-    assert "coplanar camera centres" in res.message
-    assert max(a.delta or 0 for a in res.attempts) == 2      # no futile delta = 4 step
+    d2 = [a for a in res.attempts if a.method == "corollary1" and a.gamma_lb is not None]
+    assert 2 * N * d2[-1].gamma_lb ** 2 == pytest.approx(s_pi, rel=1e-6)     # Corollary 1's bound sits on it
+    assert f_lb >= s_pi * (1 - 1e-6)
+    assert all(a.delta == 2 for a in res.attempts if a.method == "corollary1")   # no futile delta = 4 step
+    extra = [a for a in res.attempts if a.method == "theorem1"]
+    if N <= 8:                                               # the exact-variety step in its view-clique form
+        assert [(a.delta, a.sparsity) for a in extra] == [(4, "views")]
+    else:
+        assert not extra and not res.optimal and "coplanar camera centres" in res.message
 
 
 @pytest.mark.parametrize("scale", [1e-3, 1.0, 1e3, 1e6])
@@ -132,7 +138,9 @@ def test_plain_rescaled_world_keeps_the_rule():
     res = tritools.triangulate(P2, obs)
     f_ref, _ = reference_l2(P, obs, X, starts=20)
     assert 16 * res.gamma_lb ** 2 <= f_ref * (1 + 1e-7)
-    assert not res.optimal and "coplanar camera centres" in res.message
+    assert 16 * res.gamma_ub ** 2 == pytest.approx(f_ref, rel=1e-6)
+    assert res.optimal or "coplanar camera centres" in res.message
+    assert all(a.delta == 2 for a in res.attempts if a.method == "corollary1")
 
 
 def n_nodes(res) -> int:

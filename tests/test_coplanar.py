@@ -253,3 +253,21 @@ def test_views_theorem1_certificate_at_pixel_scales(scale):
     assert res.optimal, res.message
     assert res.method == "theorem1" and res.sparsity == "views"
     assert 12 * res.gamma_ub ** 2 == pytest.approx(f_ref, rel=1e-9)
+
+
+@pytest.mark.parametrize("jitter,fires", [(1e-6, True), (1e-3, False)])
+def test_nearly_coplanar_centres(jitter, fires):
+    """Centre heights jittered by 1e-6 (of the radius 2): still treated as coplanar, the rule stops Corollary 1;
+    by 1e-3: the component is broken, Corollary 1's bound is far above the fitted plane's s_pi and the rule stays
+    off.  Either way the lower bound stays below the multi-start reference."""
+    rng = np.random.default_rng(0)
+    P = circle_cameras(10, rng, jitter=jitter)
+    X = np.append(rng.uniform(-0.5, 0.5, 2), 0.0)
+    h = P @ np.append(X, 1.0)
+    obs = h[:, :2] / h[:, 2:] + rng.normal(size=(10, 2))
+    res = tritools.triangulate(P, obs)
+    f_ref, _ = reference_l2(P, obs, X, starts=10)
+    assert 20 * res.gamma_lb ** 2 <= f_ref * (1 + 1e-9)
+    assert ("coplanar camera centres" in res.message) == fires
+    if fires:
+        assert centre_plane(P) is not None

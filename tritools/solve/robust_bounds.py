@@ -181,10 +181,17 @@ class SubsetBounds:
     def note_weak(self, S: frozenset) -> None:
         """Mark S weak (its delta = 2 bound, stored, did not certify) and count it when it sits on its ceiling."""
         self.weak.add(S)
+        self._count_ceiling(S)
+
+    def _coplanar(self) -> bool:
+        """Whether the views' centres are coplanar (point regions): ``_plane_d2`` holds dist(x_i, l_i)^2 then."""
         if self._plane_d2 is None:
             self._plane_d2 = (plane_distances2(self.C, self.x) if self.points else None) if len(self.C) > 2 else None
             self._plane_d2 = False if self._plane_d2 is None else self._plane_d2
-        if self._plane_d2 is not False and len(S) >= CEILING_MIN_VIEWS \
+        return self._plane_d2 is not False
+
+    def _count_ceiling(self, S: frozenset) -> None:
+        if self._coplanar() and len(S) >= CEILING_MIN_VIEWS and S not in self.on_ceiling \
                 and sits_on_ceiling(self._lb[S], self._plane_d2[sorted(S)]):
             self.n_ceiling += 1
             self.on_ceiling.add(S)
@@ -210,8 +217,12 @@ class SubsetBounds:
             self._lb[S] = max(old, split)
             return split > old
         self._lb.pop(S)
-        self._solve_one(S, light=False, from_delta=FULL_FROM_DELTA)
+        # a batched SDP that handed S back left no delta = 2 bound: with coplanar centres the plan from delta = 2,
+        # whose ceiling rule (solve.coplanar.futile_after) stops it there, instead of the delta = 4 step
+        fresh = old <= 0.0 and self._coplanar()
+        self._solve_one(S, light=False, from_delta=None if fresh else FULL_FROM_DELTA)
         self._lb[S] = max(self._lb[S], old, split)
+        self._count_ceiling(S)
         return True
 
     def split_bound(self, S: frozenset, need: float) -> float:

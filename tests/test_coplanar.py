@@ -271,3 +271,21 @@ def test_nearly_coplanar_centres(jitter, fires):
     assert ("coplanar camera centres" in res.message) == fires
     if fires:
         assert centre_plane(P) is not None
+
+
+def test_robust_nearly_coplanar_handed_back_subsets_stay_cheap():
+    """Heights jittered by 1e-6, N = 20, clean, c = 4 px: the batched SDP hands the large subsets back (no delta = 2
+    bound); they are solved from delta = 2 where the ceiling rule stops them (was: the delta = 4 step on each,
+    45-57 s CPU and the time limit).  Bounded sub-problem count, the reason named, the bound below the reference."""
+    N = 20
+    rng = np.random.default_rng(0)
+    P = circle_cameras(N, rng, jitter=1e-6)
+    X = np.append(rng.uniform(-0.5, 0.5, 2), 0.0)
+    h = P @ np.append(X, 1.0)
+    obs = h[:, :2] / h[:, 2:] + rng.normal(size=(N, 2))
+    res = tritools.triangulate(P, obs, robust=4.0)
+    assert res.status == tritools.Status.NOT_CERTIFIED and COPLANAR_BUDGET_NAME in res.message
+    assert int(re.search(r"(\d+) L2 sub-problems", res.message).group(1)) <= N * (N - 1) // 2 + 3 * N
+    assert n_nodes(res) <= 40
+    _, X_ref = reference_l2(P, obs, X, starts=5)
+    assert 2 * N * res.gamma_lb ** 2 <= tls_of(P, obs, X_ref, 16.0) * (1 + 1e-9)

@@ -34,7 +34,9 @@ solver failures), and the dense one at 5 views costs ~7 s: neither is tried.
 The same component also caps Corollary 1 with ordinary noise when the point lies in or near the centres' plane
 (a turntable): its bound is at most s_pi = sum_i dist(x^_i, l_i)^2 at every degree, so the ``steps`` stage stops
 the plan after a Corollary 1 step whose bound sits on s_pi below the upper bound
-(:func:`tritools.solve.coplanar.futile_after`; the exact-variety step still follows where it applies).
+(:func:`tritools.solve.coplanar.futile_after`; the exact-variety step still follows where it applies, and with 5 to
+:data:`EXACT_VARIETY_VIEWS_MAX` views its view-clique form, :func:`exact_variety_views_step`, cheap but certifying
+only some of them).
 
 With an explicit method, the degrees run from ``delta`` (default delta_min) to ``max_delta`` (default
 ``delta`` when given, else delta_min + 2) with that method; ``sparsity`` ("none" / "views") forces

@@ -53,13 +53,15 @@ import math
 
 import numpy as np
 
+from ..model.constraints import Method
 from ..model.regions.point import Point
 from ..model.stacked import centre_vectors
+from ..result import Status
+from .plan import exact_variety_applies
 
 __all__ = ["centre_plane", "plane_lines", "spurious_cost", "corollary1_futile", "COPLANAR_RTOL", "SITS_RTOL",
            "GAP_RTOL", "FUTILE_MESSAGE", "futile_after", "subset_futile", "plane_distances2", "sits_on_ceiling",
-           "COPLANAR_MAX_CEILING", "hopeless_subset",
-           "CEILING_MIN_VIEWS", "COPLANAR_BUDGET_NAME"]
+           "COPLANAR_MAX_CEILING", "hopeless_subset", "CEILING_MIN_VIEWS", "COPLANAR_BUDGET_NAME"]
 
 #: centres are coplanar when the smallest singular value of the centred centres is at most this times the largest.
 #: Not exact on purpose: the rule also needs the bound to sit on s_pi of the fitted plane, which a configuration far
@@ -160,9 +162,6 @@ def corollary1_futile(cameras: np.ndarray, regions, f_lb: float | None, f_ub: fl
 def futile_after(cameras: np.ndarray, regions, steps, res) -> str | None:
     """After a NOT_CERTIFIED plan step's result ``res`` (gamma bounds in pixels), the reason to skip the rest of a
     plan ``steps`` made of Corollary 1 steps only (:func:`corollary1_futile` on f = 2N gamma^2); None otherwise."""
-    from ..model.constraints import Method
-    from ..result import Status
-
     if res.status != Status.NOT_CERTIFIED or any(s.method != Method.COROLLARY1 for s in steps):
         return None
     if res.gamma_lb is None or res.gamma_ub is None:
@@ -176,8 +175,6 @@ def subset_futile(cameras: np.ndarray, regions, options, f_lb: float, X) -> str 
     why solving this sub-problem with the full degree plan cannot certify it -- :func:`corollary1_futile` with the
     upper bound f(X) of its estimate ``X`` (world point, pixels^2) -- when the plan would hold Corollary 1 steps
     only (no exact-variety step, :func:`tritools.solve.plan.exact_variety_applies`); None otherwise."""
-    from .plan import exact_variety_applies
-
     if X is None or not all(isinstance(r, Point) for r in regions):
         return None
     if exact_variety_applies(options, len(regions), 2 * len(regions)):

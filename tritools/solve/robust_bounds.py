@@ -36,8 +36,7 @@ import numpy as np
 from ..model.regions import Point
 from ..result import Status
 from .coplanar import (CEILING_MIN_VIEWS, COPLANAR_BUDGET_NAME, COPLANAR_MAX_CEILING, hopeless_subset,
-                       plane_distances2,
-                       sits_on_ceiling, subset_futile)
+                       plane_distances2, sits_on_ceiling, subset_futile)
 from .fastpath import verify_points
 from .robust_verify import parent_frames, verify_in_parent
 from .sdp_batch import solve_corollary1_points

@@ -31,6 +31,13 @@ points, and its dense degree-4 certificate closes the gap (benchmarks/RESULTS.md
 0.05-0.4 s each; 4 views with coplanar centres, 0.4-0.9 s).  Its view-clique formulation did not (5-6 views:
 solver failures), and the dense one at 5 views costs ~7 s: neither is tried.
 
+The same component also caps Corollary 1 with ordinary noise when the point lies in or near the centres' plane
+(a turntable): its bound is at most s_pi = sum_i dist(x^_i, l_i)^2 at every degree, so the ``steps`` stage stops
+the plan after a Corollary 1 step whose bound sits on s_pi below the upper bound
+(:func:`tritools.solve.coplanar.futile_after`; the exact-variety step still follows where it applies, and with 5 to
+:data:`EXACT_VARIETY_VIEWS_MAX` views its view-clique form, :func:`exact_variety_views_step`, cheap but certifying
+only some of them).
+
 With an explicit method, the degrees run from ``delta`` (default delta_min) to ``max_delta`` (default
 ``delta`` when given, else delta_min + 2) with that method; ``sparsity`` ("none" / "views") forces
 the formulation of the steps above delta = 2.  Theorem 1's dense formulation holds all C(2N, 4)
@@ -46,7 +53,8 @@ from ..model.constraints import THEOREM1_DENSE_MAX_VIEWS, Method
 from .options import MethodChoice, SolvePath, Sparsity, TriangulationOptions
 
 __all__ = ["Step", "degree_plan", "delta_min", "batch_steps", "last_delta", "DENSE_MAX_SIDE", "DENSE_FALLBACK_SIDE",
-           "EXACT_VARIETY_MAX_SIDE", "exact_variety_step"]
+           "EXACT_VARIETY_MAX_SIDE", "exact_variety_step", "exact_variety_applies",
+           "exact_variety_views_step", "EXACT_VARIETY_VIEWS_MAX"]
 
 #: ``sparsity="auto"``: dense certificates above degree 2 while the Gram side stays at most this (sigma(8, 2) = 45).
 DENSE_MAX_SIDE = 45
@@ -57,6 +65,8 @@ DENSE_FALLBACK_SIDE = 78
 #: (sigma(8, 2) = 45: 4 views with point regions; measured on one CPU: 0.1 s at 3 views, 0.3-0.9 s at 4; it runs only
 #: where the plan did not certify, within the point's time limit).
 EXACT_VARIETY_MAX_SIDE = DENSE_MAX_SIDE
+#: :func:`exact_variety_views_step` up to this many views (it certified none of five in-plane points at N = 10)
+EXACT_VARIETY_VIEWS_MAX = 8
 
 
 @dataclass(frozen=True)
@@ -123,11 +133,31 @@ def exact_variety_step(options: TriangulationOptions, n_views: int, n_vars: int,
     ``method="auto"`` and ``sparsity`` auto or dense, when the plan reaches delta = 4, the problem has at least 3
     views (two views: Corollary 1's one epipolar relation is Theorem 1's only minor, up to a constant) and the dense
     Gram side sigma(n_vars, 2) is at most :data:`EXACT_VARIETY_MAX_SIDE`; None otherwise."""
-    if options.explicit_method is not None or options.sparsity == Sparsity.CLIQUES or n_views < 3:
-        return None
-    if not plan or max(s.delta for s in plan) < 4 or sigma(n_vars, 2) > EXACT_VARIETY_MAX_SIDE:
+    if not plan or max(s.delta for s in plan) < 4 or not exact_variety_applies(options, n_views, n_vars):
         return None
     return Step(Method.THEOREM1, 4, "dense")
+
+
+def exact_variety_views_step(options: TriangulationOptions, n_views: int, n_vars: int) -> Step | None:
+    """The exact-variety step beyond the dense one's reach, for a point whose Corollary 1 plan stopped at the
+    ceiling of coplanar centres (:func:`tritools.solve.coplanar.futile_after`): Theorem 1 at delta = 4 in the view
+    clique form (epipolar pairs + the minors of a chain of view triples, whose trilinear relations exclude the
+    plane's component) for 5 to :data:`EXACT_VARIETY_VIEWS_MAX` views with point regions (n_vars = 2N), with
+    ``method="auto"`` and ``sparsity="auto"``; None otherwise.  Cheap (0.3-0.9 s) but numerically fragile there:
+    certified about one point in five, the others stay not_certified with their valid bounds
+    (benchmarks/RESULTS.md, "Coplanar camera centres")."""
+    if options.explicit_method is not None or options.sparsity != Sparsity.AUTO or n_vars != 2 * n_views:
+        return None
+    if not 5 <= n_views <= EXACT_VARIETY_VIEWS_MAX or options.max_delta is not None and options.max_delta < 4:
+        return None
+    return Step(Method.THEOREM1, 4, "views")
+
+
+def exact_variety_applies(options: TriangulationOptions, n_views: int, n_vars: int) -> bool:
+    """Whether :func:`exact_variety_step` may run on such a problem (its rule without the plan's degrees)."""
+    if options.explicit_method is not None or options.sparsity == Sparsity.CLIQUES or n_views < 3:
+        return False
+    return sigma(n_vars, 2) <= EXACT_VARIETY_MAX_SIDE
 
 
 def delta_min(method: Method, n_views: int) -> int:

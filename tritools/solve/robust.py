@@ -384,8 +384,8 @@ class TlsSearch(NodeBounds):
         floor = math.inf                            # min bound of nodes pruned below UB / leaves left open
         stopped = None
         while stack:
-            if self.nodes >= MAX_NODES:
-                stopped = "node budget"
+            if self.nodes >= self.bounds.node_budget(MAX_NODES):      # smaller with coplanar centres
+                stopped = self.bounds.node_budget_name
                 break
             if self.deadline.expired:
                 stopped = "time limit"

@@ -35,6 +35,8 @@ import numpy as np
 
 from ..model.regions import Point
 from ..result import Status
+from .coplanar import (CEILING_MIN_VIEWS, COPLANAR_BUDGET_NAME, COPLANAR_MAX_CEILING, hopeless_subset,
+                       plane_distances2, sits_on_ceiling, subset_futile)
 from .fastpath import verify_points
 from .robust_verify import parent_frames, verify_in_parent
 from .sdp_batch import solve_corollary1_points
@@ -106,6 +108,10 @@ class SubsetBounds:
         self.budget_exceeded = False           # a sub-problem stopped at the memory budget (the caller's status)
         self.trial: dict = {}                  # subsets verified in the parent frame but not accepted: their
         #                                        polished estimate (a candidate only, no bound)
+        self._plane_d2 = None                  # note_weak: dist(x_i, l_i)^2 of coplanar centres' lines, or False
+        self.n_ceiling = 0                     # weak subsets whose bound sits on that ceiling (node_budget)
+        self.on_ceiling: set = set()           # ... and which they are
+        self.node_budget_name = "node budget"
 
     def frame(self):
         """The parent problem's :class:`tritools.solve.robust_verify.ParentFrame` (point regions; computed when first
@@ -155,6 +161,42 @@ class SubsetBounds:
                 used |= P
         return total * ROUND_DOWN
 
+    def node_budget(self, default: int) -> int:
+        """The search's node budget: ``default``, or 0 (stop, :attr:`node_budget_name` says why) once
+        :data:`~tritools.solve.coplanar.COPLANAR_MAX_CEILING` subsets got a delta = 2 bound that sits on the ceiling
+        of coplanar centres (:func:`tritools.solve.coplanar.sits_on_ceiling`: no degree can raise them)."""
+        if self.n_ceiling < COPLANAR_MAX_CEILING and not self._hint_on_ceiling():
+            return default
+        self.node_budget_name = COPLANAR_BUDGET_NAME
+        return 0
+
+    def _hint_on_ceiling(self) -> bool:
+        """The caller's best inlier set (``hint``) has a bound on its ceiling s_pi clearly below the cost of its own
+        estimate (:func:`tritools.solve.coplanar.hopeless_subset`): the leaf of the best candidate cannot be pruned,
+        so no search over these bounds can certify."""
+        if self.hint is None or self.hint not in self.on_ceiling or self.hint not in self._X:
+            return False
+        views = sorted(self.hint)
+        return hopeless_subset(self.C[views], self.x[views], self._plane_d2[views], self._X[self.hint])
+
+    def note_weak(self, S: frozenset) -> None:
+        """Mark S weak (its delta = 2 bound, stored, did not certify) and count it when it sits on its ceiling."""
+        self.weak.add(S)
+        self._count_ceiling(S)
+
+    def _coplanar(self) -> bool:
+        """Whether the views' centres are coplanar (point regions): ``_plane_d2`` holds dist(x_i, l_i)^2 then."""
+        if self._plane_d2 is None:
+            self._plane_d2 = (plane_distances2(self.C, self.x) if self.points else None) if len(self.C) > 2 else None
+            self._plane_d2 = False if self._plane_d2 is None else self._plane_d2
+        return self._plane_d2 is not False
+
+    def _count_ceiling(self, S: frozenset) -> None:
+        if self._coplanar() and len(S) >= CEILING_MIN_VIEWS and S not in self.on_ceiling \
+                and sits_on_ceiling(self._lb[S], self._plane_d2[sorted(S)]):
+            self.n_ceiling += 1
+            self.on_ceiling.add(S)
+
     def compute(self, subsets) -> None:
         """Fill the cache for every subset not known yet (duplicates and |S| <= 1 skipped)."""
         compute_many([(self, subsets)])
@@ -171,9 +213,17 @@ class SubsetBounds:
         if split >= need:
             self._lb[S] = max(old, split)
             return True
+        views = sorted(S)                 # coplanar centres: no Corollary 1 degree can certify (solve.coplanar)
+        if subset_futile(self.C[views], [self.regions[i] for i in views], self.opts, old, self._X.get(S)):
+            self._lb[S] = max(old, split)
+            return split > old
         self._lb.pop(S)
-        self._solve_one(S, light=False, from_delta=FULL_FROM_DELTA)
+        # a batched SDP that handed S back left no delta = 2 bound: with coplanar centres the plan from delta = 2,
+        # whose ceiling rule (solve.coplanar.futile_after) stops it there, instead of the delta = 4 step
+        fresh = old <= 0.0 and self._coplanar()
+        self._solve_one(S, light=False, from_delta=None if fresh else FULL_FROM_DELTA)
         self._lb[S] = max(self._lb[S], old, split)
+        self._count_ceiling(S)
         return True
 
     def split_bound(self, S: frozenset, need: float) -> float:
@@ -432,7 +482,7 @@ def _batch(items: list, step) -> list:
             sb._store(S, 2 * n * float(gamma_lb[k]) ** 2 * ROUND_DOWN, X[k])
             sb.n_solved += 1
             if not certified[k]:            # a valid but loose delta = 2 bound: strengthen() may redo it
-                sb.weak.add(S)
+                sb.note_weak(S)
         else:
             left.append((sb, S))
     return left

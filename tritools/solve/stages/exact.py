@@ -12,13 +12,19 @@ It runs only when the plan ended NOT_CERTIFIED (not after a certificate, an ill-
 a contradiction) and time remains; running out of time gives TIME_LIMIT (``settle``), a program beyond the budget
 BUDGET_EXCEEDED, and a step that does not certify leaves NOT_CERTIFIED with the larger of the two lower bounds.
 The attempt is recorded like any other (``method="theorem1"``, ``delta=4``).
+
+Beyond the dense step's reach, a point whose Corollary 1 plan stopped at the ceiling of coplanar centres
+(:func:`tritools.solve.coplanar.futile_after`: its bound equals the cost of the centres' plane component) gets
+:func:`tritools.solve.plan.exact_variety_views_step` instead (Theorem 1, delta = 4, view cliques, 5-8 views; no
+tight re-solve: its numerical failures are the formulation's, not the tolerances').
 """
 from __future__ import annotations
 
 from ...result import Status
-from ..plan import exact_variety_step
+from ..coplanar import futile_after
+from ..plan import exact_variety_step, exact_variety_views_step
 from .context import PointContext
-from .outcome import better
+from .outcome import better, join, replace
 from .sdp import run_step
 
 __all__ = ["exact_variety_stage"]
@@ -30,13 +36,17 @@ def exact_variety_stage(ctx: PointContext) -> None:
     if ctx.finished or ctx.expired or ctx.skipped is not None or best is None \
             or best.status != Status.NOT_CERTIFIED:
         return
-    step = exact_variety_step(ctx.opts, ctx.N, 2 * ctx.N + sum(r.n_aux for r in ctx.regions), ctx.steps)
+    n_vars = 2 * ctx.N + sum(r.n_aux for r in ctx.regions)
+    step = exact_variety_step(ctx.opts, ctx.N, n_vars, ctx.steps)
+    why = futile_after(ctx.cams, ctx.regions, ctx.steps, best) if step is None else None
+    if why is not None:
+        step = exact_variety_views_step(ctx.opts, ctx.N, n_vars)        # coplanar centres, 5-8 views
     if step is None:
         return
     res = run_step(ctx, step)
-    if res.status == Status.NUMERICAL_FAILURE:
+    if res.status == Status.NUMERICAL_FAILURE and step.formulation == "dense":
         res = run_step(ctx, step, tight=True)
     if res.status == Status.BUDGET_EXCEEDED:
         ctx.skipped = res
     if better(res, best):
-        ctx.best = res
+        ctx.best = res if why is None or res.status.certified else replace(res, message=join(res.message, why))

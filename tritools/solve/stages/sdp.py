@@ -32,10 +32,11 @@ from ...model.normalize import unconstrained_reason
 from ...model.problem import TriangulationProblem, view_band, view_chain
 from ...result import Attempt, Status, TriangulationResult
 from ..plan import Step
+from ..coplanar import futile_after
 from ..sdp_batch import solve_corollary1_points
 from ..structures import STRUCTURE_CACHE, structure_key
 from .context import AttemptStep, ImplName, Implementation, PointContext, StepState
-from .outcome import better, failed, replace, report_point
+from .outcome import better, failed, join, replace, report_point
 
 __all__ = ["steps_stage", "run_step", "sdp_stage", "solve_psatz", "SDP_FAST_NAME", "SDP_IMPLEMENTATIONS"]
 
@@ -56,6 +57,10 @@ def steps_stage(ctx: PointContext) -> None:
             ctx.skipped = res
         if res.status.certified or res.status in (Status.ILL_POSED, Status.BUDGET_EXCEEDED):
             break                   # certified, hopeless, or every later (larger) step exceeds the budget too
+        why = futile_after(ctx.cams, ctx.regions, ctx.steps, res)      # coplanar centres: Corollary 1's ceiling
+        if why is not None and step is not ctx.steps[-1]:
+            ctx.best = replace(ctx.best, message=join(ctx.best.message, why))
+            break
 
 
 def run_step(ctx: PointContext, step: Step, tight: bool = False) -> TriangulationResult:

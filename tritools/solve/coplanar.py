@@ -1,0 +1,200 @@
+"""Coplanar camera centres: the ceiling of Corollary 1's bound, and when escalating it is futile.
+
+The spurious component.  Let the finite camera centres C_1, ..., C_N (N >= 3, not collinear) lie in one plane
+pi (pi^T C_i = 0; with three views always: the trifocal plane), and let l_i be the image of pi in view i (the
+line with P_i^T l_i ~ pi).  For x_i on l_i and x_j on l_j the back-projected rays both lie in pi, so they meet
+(projectively): x_i^T F_ij x_j = 0 for every pair.  Every tuple (x_1, ..., x_N) with x_i on l_i therefore
+satisfies all of Corollary 1's constraints (SPEC §7, the paper's epipolar form of m2 = 0), whether or not the rays
+meet in one point.  With point regions x^_i, the cheapest such tuple costs
+
+    s_pi = sum_i dist(x^_i, l_i)^2,
+
+and since the feasible set of Corollary 1's program contains it, **every** Corollary 1 lower bound, at every
+relaxation degree delta and in every formulation, satisfies
+
+    f_LB(Corollary 1, delta) <= min over the epipolar variety of f <= s_pi.                         (C)
+
+When the scene point lies in or near pi with noisy observations, s_pi is the out-of-plane part of the residuals
+only (about half of the L2 optimum f* with isotropic noise: N of the 2N - 3 residual degrees of freedom), so
+Corollary 1 cannot certify at any degree.  Theorem 1's minors (the trilinear relations among them) vanish only on
+the images of scene points and are not bounded by (C) (:func:`tritools.solve.plan.exact_variety_step`).
+
+The futility rule (:func:`corollary1_futile`).  After a Corollary 1 step with lower bound f_lb and upper bound f_ub
+(pixels^2), escalating Corollary 1 to a higher degree can raise the lower bound by at most s_pi - f_lb, and it
+cannot certify unless f_ub (or a better upper bound it finds) comes within the certificate tolerance of s_pi.  So
+the remaining Corollary 1 steps are skipped when
+
+    * the centres are coplanar (:func:`centre_plane`: the smallest singular value of the centred centres is at
+      most :data:`COPLANAR_RTOL` times the largest, the second one above it -- collinear centres have no unique
+      plane), every region is a point and no two centres coincide (a pair with one centre carries a homography
+      instead of an epipolar relation, which the spurious tuple need not satisfy);
+    * the step's bound already sits on the spurious component: f_lb >= (1 - :data:`SITS_RTOL`) s_pi;
+    * and the upper bound is clearly above it: s_pi <= (1 - :data:`GAP_RTOL`) f_ub.
+
+The first two make (C) say that higher degrees add at most SITS_RTOL s_pi to the bound; the third that the gap
+left is a thousand times the certificate tolerance.  Skipping a step never changes a reported bound's validity
+(each reported bound is a step's rigorous bound); it only spends no time where a certificate cannot come from.
+The robust search (:mod:`tritools.solve.robust`, :class:`tritools.solve.robust_bounds.SubsetBounds`) applies (C) to
+view subsets S, whose ceiling is s_pi(S) = sum_{i in S} dist(x^_i, l_i)^2 (:func:`plane_distances2`; the lines of
+the plane of all centres serve every subset): a weak subset's full-plan solve is skipped where (C) makes it futile
+(:func:`subset_futile`), and the search stops (status not_certified, :data:`COPLANAR_BUDGET_NAME`) when the best
+inlier set S* (at least :data:`CEILING_MIN_VIEWS` views) has a delta = 2 bound on its ceiling clearly below the cost
+of its estimate (:func:`hopeless_subset`: the leaf of S* must be pruned for a certificate, which needs a bound of
+L2*(S*) within the tolerance), or after :data:`COPLANAR_MAX_CEILING` subsets bounded on their ceilings.
+
+The rule uses the step's upper bound as a stand-in for f*: where the estimate is far from the optimum and the
+optimum sits on s_pi (a point exactly in pi without noise gives f* = s_pi = 0 and is certified at delta = 2
+already), the skipped step could in principle have certified; measured, this does not occur on the turntable
+cases of tests/test_coplanar.py.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..model.constraints import Method
+from ..model.regions.point import Point
+from ..model.stacked import centre_vectors
+from ..result import Status
+from .plan import exact_variety_applies
+
+__all__ = ["centre_plane", "plane_lines", "spurious_cost", "corollary1_futile", "COPLANAR_RTOL", "SITS_RTOL",
+           "GAP_RTOL", "FUTILE_MESSAGE", "futile_after", "subset_futile", "plane_distances2", "sits_on_ceiling",
+           "COPLANAR_MAX_CEILING", "hopeless_subset", "CEILING_MIN_VIEWS", "COPLANAR_BUDGET_NAME"]
+
+#: centres are coplanar when the smallest singular value of the centred centres is at most this times the largest.
+#: Not exact on purpose: the rule also needs the bound to sit on s_pi of the fitted plane, which a configuration far
+#: from coplanar does not give (measured, N = 10 turntable, height jitter 1e-6 of the radius 2: delta = 4 bounds
+#: equal to delta = 2 to 1e-4, the rule fires; jitter 1e-3: the delta = 2 bound is far above s_pi, it does not)
+COPLANAR_RTOL = 1e-6
+#: Corollary 1's bound "sits on" the spurious component when it is at least (1 - SITS_RTOL) s_pi
+SITS_RTOL = 1e-3
+#: ... and escalating is futile when s_pi is at most (1 - GAP_RTOL) times the upper bound
+GAP_RTOL = 1e-3
+#: the robust search stops (:meth:`tritools.solve.robust_bounds.SubsetBounds.node_budget`) once this many subsets of
+#: at least :data:`CEILING_MIN_VIEWS` views got an uncertified delta = 2 bound sitting on their ceiling s_pi(S)
+#: (:func:`sits_on_ceiling`): their bounds cannot rise at any degree, so the search cannot prune with them
+COPLANAR_MAX_CEILING = 40
+#: the smallest subsets counted: smaller ones get the exact-variety step (Theorem 1) when strengthened
+CEILING_MIN_VIEWS = 5
+#: the reason a robust search stopped at that budget (its result's message: "stopped by the ...")
+COPLANAR_BUDGET_NAME = ("ceiling of coplanar camera centres (Corollary 1's subset bounds cannot exceed the cost of the "
+                        "centres' plane component)")
+#: the message of a point whose Corollary 1 steps were stopped by the futility rule
+FUTILE_MESSAGE = ("coplanar camera centres: Corollary 1's bound sits on the spurious epipolar component "
+                  "(s_pi = {s:.6g} px^2 < f_ub = {ub:.6g} px^2), higher degrees cannot certify")
+
+
+def centre_plane(cameras: np.ndarray) -> np.ndarray | None:
+    """The plane pi (unit homogeneous 4-vector, pi^T C_i = 0) of the cameras' centres when they are finite, at
+    least three, not collinear, pairwise distinct and coplanar within :data:`COPLANAR_RTOL`; None otherwise."""
+    cams = np.asarray(cameras, float)
+    if cams.ndim != 3 or cams.shape[0] < 3:
+        return None
+    a = centre_vectors(cams)
+    w = a[:, 3]
+    scale = np.max(np.abs(a[:, :3]), axis=1)
+    if not np.all(np.isfinite(a)) or np.any(np.abs(w) <= 1e-12 * np.maximum(scale, 1e-300)):
+        return None                                         # a centre at (or near) infinity
+    C = a[:, :3] / w[:, None]
+    mean = C.mean(axis=0)
+    D = C - mean
+    _, s, Vt = np.linalg.svd(D, full_matrices=False)
+    if s[0] == 0.0 or s[1] <= COPLANAR_RTOL * s[0] or s[2] > COPLANAR_RTOL * s[0]:
+        return None
+    gaps = np.linalg.norm(C[:, None, :] - C[None, :, :], axis=-1) + np.eye(len(C)) * s[0]
+    if np.min(gaps) <= 1e-9 * s[0]:
+        return None                                         # coinciding centres: a homography pair
+    n = Vt[2]
+    pi = np.append(n, -n @ mean)
+    return pi / np.linalg.norm(pi)
+
+
+def plane_lines(cameras: np.ndarray, pi: np.ndarray) -> np.ndarray:
+    """(N, 3) image lines l_i of the plane ``pi``: P_i^T l_i ~ pi (least squares; pi holds the centre, so it lies
+    in the column space of P_i^T), each scaled to ||(l_1, l_2)|| = 1 (a signed point-line distance is l . (x, 1))."""
+    lines = np.array([np.linalg.lstsq(P.T, pi, rcond=None)[0] for P in np.asarray(cameras, float)])
+    return lines / np.linalg.norm(lines[:, :2], axis=1, keepdims=True)
+
+
+def plane_distances2(cameras: np.ndarray, points) -> np.ndarray | None:
+    """(N,) squared distances dist(x^_i, l_i)^2 (pixels^2) of image points (N, 2) to the image lines of the
+    centres' plane; None when the centres are not coplanar (:func:`centre_plane`).  For any subset S of the views,
+    sum_{i in S} of them is a ceiling s_pi(S) of Corollary 1's bound of S (the tuple on the lines of this plane
+    is feasible for S's epipolar relations too, whichever other planes S's centres lie in)."""
+    pi = centre_plane(cameras)
+    if pi is None:
+        return None
+    x = np.column_stack([np.asarray(points, float), np.ones(len(points))])
+    d = np.einsum("ij,ij->i", plane_lines(cameras, pi), x)
+    return d * d
+
+
+def spurious_cost(cameras: np.ndarray, regions) -> float | None:
+    """s_pi = sum_i dist(x^_i, l_i)^2 (pixels^2, module docstring) for point regions and coplanar centres; None
+    when the centres are not coplanar (:func:`centre_plane`) or a region is not a point."""
+    if not all(isinstance(r, Point) for r in regions):
+        return None
+    d2 = plane_distances2(cameras, [r.x for r in regions])
+    s = None if d2 is None else float(np.sum(d2))
+    return s if s is not None and math.isfinite(s) else None
+
+
+def sits_on_ceiling(f_lb: float, d2: np.ndarray) -> bool:
+    """Whether a Corollary 1 bound ``f_lb`` (pixels^2) of a subset sits on its ceiling s_pi(S) = sum ``d2``
+    (within :data:`SITS_RTOL`): no Corollary 1 degree can raise it further than that."""
+    s = float(np.sum(d2))
+    return math.isfinite(s) and math.isfinite(f_lb) and f_lb >= (1.0 - SITS_RTOL) * s
+
+
+def corollary1_futile(cameras: np.ndarray, regions, f_lb: float | None, f_ub: float | None) -> str | None:
+    """The reason (:data:`FUTILE_MESSAGE`) why no Corollary 1 step of a higher degree can certify, after a step
+    with bounds ``f_lb`` <= ``f_ub`` (pixels^2; module docstring's rule); None when the rule does not apply."""
+    if f_lb is None or f_ub is None or not (math.isfinite(f_lb) and math.isfinite(f_ub)):
+        return None
+    s = spurious_cost(cameras, regions)
+    if s is None or not sits_on_ceiling(f_lb, np.array([s])) or s > (1.0 - GAP_RTOL) * f_ub:
+        return None
+    return FUTILE_MESSAGE.format(s=s, ub=f_ub)
+
+
+def futile_after(cameras: np.ndarray, regions, steps, res) -> str | None:
+    """After a NOT_CERTIFIED plan step's result ``res`` (gamma bounds in pixels), the reason to skip the rest of a
+    plan ``steps`` made of Corollary 1 steps only (:func:`corollary1_futile` on f = 2N gamma^2); None otherwise."""
+    if res.status != Status.NOT_CERTIFIED or any(s.method != Method.COROLLARY1 for s in steps):
+        return None
+    if res.gamma_lb is None or res.gamma_ub is None:
+        return None
+    n2 = 2 * len(regions)
+    return corollary1_futile(cameras, regions, n2 * res.gamma_lb ** 2, n2 * res.gamma_ub ** 2)
+
+
+def subset_futile(cameras: np.ndarray, regions, options, f_lb: float, X) -> str | None:
+    """For the robust search's subsets (:meth:`tritools.solve.robust_bounds.SubsetBounds.strengthen`): the reason
+    why solving this sub-problem with the full degree plan cannot certify it -- :func:`corollary1_futile` with the
+    upper bound f(X) of its estimate ``X`` (world point, pixels^2) -- when the plan would hold Corollary 1 steps
+    only (no exact-variety step, :func:`tritools.solve.plan.exact_variety_applies`); None otherwise."""
+    if X is None or not all(isinstance(r, Point) for r in regions):
+        return None
+    if exact_variety_applies(options, len(regions), 2 * len(regions)):
+        return None
+    h = np.asarray(cameras, float) @ np.append(np.asarray(X, float), 1.0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        r = h[:, :2] / h[:, 2:] - np.array([p.x for p in regions])
+    f_ub = float(np.sum(r * r))
+    return corollary1_futile(cameras, regions, f_lb, f_ub)
+
+
+
+def hopeless_subset(cameras: np.ndarray, points: np.ndarray, d2: np.ndarray, X) -> bool:
+    """Whether the ceiling s_pi(S) = sum ``d2`` of a view subset S is at most (1 - :data:`GAP_RTOL`) times the cost
+    of the estimate ``X`` on S (pixels^2).  Used on the robust search's best inlier set S* when its bound already
+    sits on the ceiling (:func:`sits_on_ceiling`): the TLS certificate needs the leaf of S* pruned, i.e. a bound of
+    L2*(S*) within the tolerance of the L2 part of the best value, and Corollary 1 gives at most s_pi(S*) < that."""
+    h = np.asarray(cameras, float) @ np.append(np.asarray(X, float), 1.0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        r = h[:, :2] / h[:, 2:] - np.asarray(points, float)
+    f_ub = float(np.sum(r * r))
+    s = float(np.sum(d2))
+    return math.isfinite(f_ub) and math.isfinite(s) and s <= (1.0 - GAP_RTOL) * f_ub

@@ -54,7 +54,6 @@ import math
 import numpy as np
 
 from ..model.constraints import Method
-from ..model.regions.point import Point
 from ..model.stacked import centre_vectors
 from ..result import Status
 from .plan import exact_variety_applies
@@ -134,9 +133,9 @@ def plane_distances2(cameras: np.ndarray, points) -> np.ndarray | None:
 def spurious_cost(cameras: np.ndarray, regions) -> float | None:
     """s_pi = sum_i dist(x^_i, l_i)^2 (pixels^2, module docstring) for point regions and coplanar centres; None
     when the centres are not coplanar (:func:`centre_plane`) or a region is not a point."""
-    if not all(isinstance(r, Point) for r in regions):
+    if not all(r.is_point for r in regions):
         return None
-    d2 = plane_distances2(cameras, [r.x for r in regions])
+    d2 = plane_distances2(cameras, [r.center for r in regions])
     s = None if d2 is None else float(np.sum(d2))
     return s if s is not None and math.isfinite(s) else None
 
@@ -175,13 +174,13 @@ def subset_futile(cameras: np.ndarray, regions, options, f_lb: float, X) -> str 
     why solving this sub-problem with the full degree plan cannot certify it -- :func:`corollary1_futile` with the
     upper bound f(X) of its estimate ``X`` (world point, pixels^2) -- when the plan would hold Corollary 1 steps
     only (no exact-variety step, :func:`tritools.solve.plan.exact_variety_applies`); None otherwise."""
-    if X is None or not all(isinstance(r, Point) for r in regions):
+    if X is None or not all(r.is_point for r in regions):
         return None
     if exact_variety_applies(options, len(regions), 2 * len(regions)):
         return None
     h = np.asarray(cameras, float) @ np.append(np.asarray(X, float), 1.0)
     with np.errstate(divide="ignore", invalid="ignore"):
-        r = h[:, :2] / h[:, 2:] - np.array([p.x for p in regions])
+        r = h[:, :2] / h[:, 2:] - np.array([p.center for p in regions])
     f_ub = float(np.sum(r * r))
     return corollary1_futile(cameras, regions, f_lb, f_ub)
 

@@ -114,7 +114,8 @@ def plane_lines(cameras: np.ndarray, pi: np.ndarray) -> np.ndarray:
     """(N, 3) image lines l_i of the plane ``pi``: P_i^T l_i ~ pi (least squares; pi holds the centre, so it lies
     in the column space of P_i^T), each scaled to ||(l_1, l_2)|| = 1 (a signed point-line distance is l . (x, 1))."""
     lines = np.array([np.linalg.lstsq(P.T, pi, rcond=None)[0] for P in np.asarray(cameras, float)])
-    return lines / np.linalg.norm(lines[:, :2], axis=1, keepdims=True)
+    with np.errstate(divide="ignore", invalid="ignore"):    # a line at infinity: inf / NaN, no finite s_pi
+        return lines / np.linalg.norm(lines[:, :2], axis=1, keepdims=True)
 
 
 def plane_distances2(cameras: np.ndarray, points) -> np.ndarray | None:

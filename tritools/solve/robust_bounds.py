@@ -185,9 +185,10 @@ class SubsetBounds:
         self._count_ceiling(S)
 
     def _coplanar(self) -> bool:
-        """Whether the views' centres are coplanar (point regions): ``_plane_d2`` holds dist(x_i, l_i)^2 then."""
+        """Whether the views' centres are coplanar (point regions, >= 4 views: three centres always are, and a
+        3-view problem has the exact-variety step): ``_plane_d2`` holds dist(x_i, l_i)^2 then."""
         if self._plane_d2 is None:
-            self._plane_d2 = (plane_distances2(self.C, self.x) if self.points else None) if len(self.C) > 2 else None
+            self._plane_d2 = (plane_distances2(self.C, self.x) if self.points else None) if len(self.C) > 3 else None
             self._plane_d2 = False if self._plane_d2 is None else self._plane_d2
         return self._plane_d2 is not False
 

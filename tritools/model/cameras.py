@@ -42,6 +42,7 @@ off a reconstruction's own points.  Every cheirality judgement (``in_front``, st
 from __future__ import annotations
 
 import enum
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -272,13 +273,76 @@ def validate_cameras(cameras: ArrayLike, *, min_views: int = 2, require_distinct
     finite = np.isfinite(C).all(axis=(1, 2))
     if not finite.all():
         raise ValueError(f"cameras[{int(np.argmin(finite))}] contains NaN or inf")
-    ratio = _rank_ratio(C)
+    few = C.shape[0] <= SCALAR_MAX_VIEWS          # a single call's few cameras: the scalar twins (plain floats)
+    ratio = _rank_ratio_scalar(C) if few else _rank_ratio(C)
     for i, r in enumerate(ratio):
         if not r > CAMERA_RANK_RTOL:
             raise ValueError(_rank_message(f"cameras[{i}]", float(r)))
-    if require_distinct and C.shape[0] >= 2 and _all_equal(C):
+    if require_distinct and C.shape[0] >= 2 and (_all_equal_scalar(C) if few else _all_equal(C)):
         raise ValueError("cameras are all equal up to scale: the triangulation is ill-posed")
     return C
+
+
+#: :func:`validate_cameras` checks up to this many cameras with the scalar twins of the rank and equality rules.
+SCALAR_MAX_VIEWS = 8
+
+
+def _p2(m: float) -> float:
+    """:func:`power2_scale` of one magnitude: the power of two at or just above ``m`` (1 for 0 / non-finite)."""
+    return math.ldexp(1.0, math.frexp(m)[1]) if m > 0 and math.isfinite(m) else 1.0
+
+
+def _rank_ratio_scalar(C: np.ndarray) -> list:
+    """The scalar twin of :func:`_rank_ratio` for finite cameras (N, 3, 4): the same steps on Python floats
+    (tests/test_cameras_scalar.py: equal to the vectorised rule within round-off)."""
+    out = []
+    for P in C.tolist():
+        k = _p2(max(abs(v) for row in P for v in row))
+        rows, nonzero = [], []
+        for row in P:
+            row = [v / k for v in row]
+            sr = _p2(max(abs(v) for v in row))
+            row = [v / sr for v in row]
+            n = math.sqrt(sum(v * v for v in row))
+            rows.append([v / n for v in row] if n > 0 else row)
+            nonzero.append(n > 0)
+        u3 = rows[2]
+        ps, pns = [], []
+        for r in rows[:2]:
+            d = sum(a * b for a, b in zip(r, u3))
+            p = [a - d * b for a, b in zip(r, u3)]
+            d = sum(a * b for a, b in zip(p, u3))
+            p = [a - d * b for a, b in zip(p, u3)]
+            pn = math.sqrt(sum(v * v for v in p))
+            ps.append([v / pn for v in p] if pn > 0 else p)
+            pns.append(pn)
+        ok = nonzero[2] and all(nz and pn > CAMERA_RANK_RTOL for nz, pn in zip(nonzero[:2], pns))
+        q0, q1 = ps
+        sg = -1.0 if sum(a * b for a, b in zip(q0, q1)) < 0 else 1.0
+        num = math.sqrt(sum((a - sg * b) ** 2 for a, b in zip(q0, q1)))
+        den = math.sqrt(sum((a + sg * b) ** 2 for a, b in zip(q0, q1)))
+        out.append(num / (den if den > 0 else 1.0) if ok else 0.0)
+    return out
+
+
+def _all_equal_scalar(C: np.ndarray) -> bool:
+    """The scalar twin of :func:`_all_equal` for one problem's finite cameras (N, 3, 4), stopping at the first
+    camera that differs from the first."""
+    units = []
+    for P in C.tolist():
+        flat = [v for row in P for v in row]
+        k = _p2(max(abs(v) for v in flat))
+        flat = [v / k for v in flat]
+        n = math.sqrt(sum(v * v for v in flat))
+        U = [v / n for v in flat] if n > 0 else flat
+        if units:
+            U0 = units[0]
+            minus = math.sqrt(sum((a - b) ** 2 for a, b in zip(U, U0)))
+            plus = math.sqrt(sum((a + b) ** 2 for a, b in zip(U, U0)))
+            if not min(minus, plus) <= SAME_CAMERA_RTOL:
+                return False
+        units.append(U)
+    return True
 
 
 def camera_problems(cameras, *, require_distinct: bool = True) -> CameraProblems:

@@ -96,14 +96,15 @@ def world_origins(C: np.ndarray) -> np.ndarray:
     (M, N, 3, 4): the mean of its finite camera centres where that lies farther than ``RECENTRE_RATIO`` times
     their spread from the origin and the spread is resolved (above ``RESOLVED_SPREAD_RTOL`` times that
     distance); 0 elsewhere (fewer than two finite centres included).  The centres are the cameras' null
-    vectors (:func:`tritools.model.stacked.null_vectors` of each camera divided by a power of two: exact)."""
+    vectors (:func:`tritools.model.stacked.null_vectors` of each camera divided by its largest entry)."""
     from .stacked import null_vectors
 
     C = np.asarray(C, float)
     M = C.shape[0]
     with np.errstate(all="ignore"):
-        a = null_vectors(C / power2_scale(C, (2, 3)))
-        a = a / power2_scale(a, (2,))
+        # each camera divided by its largest entry (|entries| <= 1, so the minors are <= 6: nothing overflows;
+        # a centre is a ratio of minors, invariant to the camera's scale)
+        a = null_vectors(C / np.maximum.reduce(np.abs(C).reshape(C.shape[:2] + (12,)), axis=2)[..., None, None])
         c = a[..., :3] / a[..., 3:]
         fin = np.all(np.isfinite(c), axis=2) & (a[..., 3] != 0)
         k = fin.sum(axis=1)

@@ -81,8 +81,8 @@ def _other_model_notes(out_dir, fmt_out: str) -> list:
     :func:`~tritools.io.colmap.formats.open_model` read the binary files first)."""
     other = "txt" if fmt_out == "bin" else "bin"
     found = [n for n in _model_names(other) if (Path(out_dir) / n).is_file()]
-    return [f"{', '.join(found)} in {out_dir} kept as they were (a {other} model; COLMAP reads .bin files first)"] \
-        if found else []
+    return [f"{', '.join(found)} in {out_dir} kept as they were (a {other} model; COLMAP reads .bin files first; "
+            f"points3D_certificates.txt there now describes the new {fmt_out} model, not them)"] if found else []
 
 
 def _timed(iterator, timings: dict, key: str):

@@ -159,6 +159,15 @@ class Tolerances:
         scale = np.asarray(scale, float)
         return _maybe_scalar(self.gap_abs * scale + self.gap_rel * np.maximum(scale, np.abs(upper)))
 
+    def gap_tolerance_one(self, upper: float, scale: float = 1.0) -> float:
+        """The scalar twin of :meth:`gap_tolerance` for one finite float ``upper`` (plain Python arithmetic, the
+        same operations: a single call's decision without numpy)."""
+        return self.gap_abs * scale + self.gap_rel * max(scale, abs(upper))
+
+    def certified_relatively_one(self, lower: float, upper: float) -> bool:
+        """The scalar twin of :meth:`certified_relatively` for floats."""
+        return upper - lower <= self.gap_rel * abs(upper)
+
     def certified(self, lower, upper, scale=1.0):
         """Do ``lower`` and ``upper`` meet (``upper - lower <= gap_tolerance``)?  False where either
         is None or NaN.  Scalars give a bool, arrays an elementwise boolean array."""

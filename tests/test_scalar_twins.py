@@ -458,3 +458,16 @@ def test_verify_one_leaves_the_special_cases_to_the_stacked_code():
     with np.errstate(all="ignore"):
         assert verify_one(C, np.where(np.arange(6).reshape(3, 2) == 1, np.nan, x), DEFAULT_TOLERANCES) is None
     assert verify_one(C, x, DEFAULT_TOLERANCES, deadline=Deadline.after(0.0)) is None
+
+
+def test_tolerances_scalar_rule_equals_the_vectorised_rule():
+    """sospoly.Tolerances.gap_tolerance_one / certified_relatively_one: the one certificate rule, scalar twins."""
+    from sospoly import DEFAULT_TOLERANCES, Tolerances
+
+    rng = np.random.default_rng(5)
+    for tol in (DEFAULT_TOLERANCES, Tolerances(gap_abs=1e-3, gap_rel=1e-4)):
+        for up in [0.0, -0.0, 1e-300, 0.5, 1.0, -3.0, 1e300, *rng.normal(size=20) * 10.0 ** rng.integers(-9, 9, 20)]:
+            for scale in (1.0, 0.25, 1024.0):
+                assert tol.gap_tolerance_one(up, scale) == float(tol.gap_tolerance(up, scale))
+            lo = up - tol.gap_rel * abs(up) * rng.choice([0.5, 1.0, 2.0])
+            assert tol.certified_relatively_one(lo, up) == bool(tol.certified_relatively(lo, up))

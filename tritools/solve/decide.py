@@ -68,14 +68,15 @@ def decide_reported(gamma_lb, gamma_ub, tolerances, n_views, scale, resolution):
 
 def decide_one(c_lower: float, c_upper: float, tolerances, n_views: int, resolution: float) -> tuple:
     """The scalar twin of :func:`decide` for one problem: Python floats, ``n_views`` an int > 0, ``tolerances`` a
-    :class:`sospoly.Tolerances` (not a subclass: its rule is written out here, gap_tol(u) = gap_abs + gap_rel
-    max(1, |u|)).  (status, optimal, reported lower bound) with the numbers of :func:`decide`: every comparison
-    is on values whose NaN / inf cases are settled first (Python's ``max`` would drop a NaN)."""
+    :class:`sospoly.Tolerances` (not a subclass: its scalar twins ``gap_tolerance_one`` /
+    ``certified_relatively_one`` are the rule here).  (status, optimal, reported lower bound) with the numbers of
+    :func:`decide`: every comparison is on values whose NaN / inf cases are settled first (Python's ``max`` would
+    drop a NaN)."""
     lo, up = float(c_lower), float(c_upper)
     fin_up, fin_lo = math.isfinite(up), math.isfinite(lo)
-    tol = tolerances.gap_abs + tolerances.gap_rel * max(1.0, abs(up)) if fin_up else math.nan
+    tol = tolerances.gap_tolerance_one(up) if fin_up else math.nan
     certified = fin_up and not math.isnan(lo) and up - lo <= tol
-    if certified and not up - lo <= tolerances.gap_rel * abs(up):      # only through the absolute part
+    if certified and not tolerances.certified_relatively_one(lo, up):      # only through the absolute part
         two_n = 2.0 * n_views
         gap = math.sqrt(max(up, 0.0) / two_n) - math.sqrt(max(lo, 0.0) / two_n)
         certified = gap <= resolution

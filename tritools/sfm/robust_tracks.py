@@ -26,13 +26,18 @@ def drop_observations(arrays: ModelArrays, chunk: PointChunk, keep: np.ndarray, 
     keep = np.asarray(keep, bool)
     if keep.all():
         return chunk
-    gone = ~keep
-    removed.append(arrays.kp_offsets[chunk.track_image[gone]] + chunk.track_kp[gone])
-    owner = np.repeat(np.arange(len(chunk)), chunk.track_lengths)
-    lengths = np.bincount(owner[keep], minlength=len(chunk))
-    offsets = np.concatenate([[0], np.cumsum(lengths)]).astype(chunk.track_offsets.dtype)
-    return dataclasses.replace(chunk, track_offsets=offsets, track_image=chunk.track_image[keep],
-                               track_kp=chunk.track_kp[keep])
+    removed.append(arrays.kp_offsets[chunk.track_image[~keep]] + chunk.track_kp[~keep])
+    return dataclasses.replace(chunk, **_kept_tracks(chunk.track_offsets, chunk.track_image, chunk.track_kp, keep))
+
+
+def _kept_tracks(offsets: np.ndarray, image: np.ndarray, kp: np.ndarray, keep: np.ndarray) -> dict:
+    """The CSR tracks (``track_offsets``, ``track_image``, ``track_kp``) with the elements where ``keep`` is False
+    left out."""
+    n = len(offsets) - 1
+    owner = np.repeat(np.arange(n), np.diff(offsets))
+    lengths = np.bincount(owner[keep], minlength=n)
+    return dict(track_offsets=np.concatenate([[0], np.cumsum(lengths)]).astype(offsets.dtype),
+                track_image=image[keep], track_kp=kp[keep])
 
 
 def _unlinked(arrays: ModelArrays, removed_kp: np.ndarray, **fields) -> ModelArrays:
@@ -60,13 +65,8 @@ def without_observations(arrays: ModelArrays, keep: np.ndarray) -> ModelArrays:
     keep = np.asarray(keep, bool)
     if keep.all():
         return arrays
-    gone = ~keep
-    owner = np.repeat(np.arange(arrays.n_points), np.diff(arrays.track_offsets))
-    lengths = np.bincount(owner[keep], minlength=arrays.n_points)
-    offsets = np.concatenate([[0], np.cumsum(lengths)]).astype(arrays.track_offsets.dtype)
-    removed = arrays.kp_offsets[arrays.track_image[gone]] + arrays.track_kp[gone]
-    return _unlinked(arrays, removed, track_offsets=offsets, track_image=arrays.track_image[keep],
-                     track_kp=arrays.track_kp[keep])
+    removed = arrays.kp_offsets[arrays.track_image[~keep]] + arrays.track_kp[~keep]
+    return _unlinked(arrays, removed, **_kept_tracks(arrays.track_offsets, arrays.track_image, arrays.track_kp, keep))
 
 
 def removed_observations(before: ModelArrays, after: ModelArrays) -> list[tuple[int, int]]:

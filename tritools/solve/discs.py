@@ -156,6 +156,14 @@ def verify_discs(cameras, centers, radii, *, tolerances: Tolerances = DEFAULT_TO
     uw, _, fin_w = project_stack(C, X)
     ok &= fin_w
     dist = np.maximum(0.0, np.linalg.norm(uw - x, axis=2) - rho)
+    return reported_batch(ok, optimal, c_lower, X, uw, fin_w, dist, norm, tolerances)
+
+
+def reported_batch(ok, optimal, c_lower, X, uw, fin_w, dist, norm, tolerances) -> DiscBatch:
+    """The :class:`DiscBatch` of a region verification from the world points X, their projections ``uw`` (finite
+    where ``fin_w``) and distances ``dist`` (M, N) to the regions: gamma_UB at X, gamma_LB from the certified
+    ``c_lower`` (normalised units, ``norm``'s scale), the decision confirmed on these reported numbers."""
+    N = dist.shape[1]
     gamma_ub = np.where(fin_w, gamma_from_c(np.sum(dist ** 2, axis=1), N, 1.0), np.inf)
     gamma_lb = np.minimum(gamma_from_c(np.maximum(c_lower, 0.0), N, norm.scale), gamma_ub)
     certified = ok & optimal & decide_reported(gamma_lb, gamma_ub, tolerances, N, norm.scale, norm.resolution)

@@ -27,8 +27,8 @@ from sospoly.solvers import with_single_threaded_blas
 from ..model.frame import recentred
 from ..model.normalize import normalization_stack
 from ..model.stacked import LM_MAX_ITER, damped_step, lm_accept, project_stack
-from .decide import decide, decide_reported, gamma_from_c
-from .discs import DiscBatch
+from .decide import decide
+from .discs import DiscBatch, reported_batch
 from .regions_verify import closest_on_ellipses, compact_bounds, ellipse_axes
 
 __all__ = ["refine_ellipses_stack", "verify_ellipses"]
@@ -139,8 +139,4 @@ def verify_ellipses(cameras, centers, D, *, tolerances: Tolerances = DEFAULT_TOL
     uw, _, fin_w = project_stack(C, X)
     ok &= fin_w
     ew = _local_residual(np.where(fin_w[:, None, None], uw - x, 0.0), R, sigma)[0]
-    dist = np.linalg.norm(ew, axis=2)
-    gamma_ub = np.where(fin_w, gamma_from_c(np.sum(dist ** 2, axis=1), N, 1.0), np.inf)
-    gamma_lb = np.minimum(gamma_from_c(np.maximum(c_lower, 0.0), N, norm.scale), gamma_ub)
-    certified = ok & optimal & decide_reported(gamma_lb, gamma_ub, tolerances, N, norm.scale, norm.resolution)
-    return DiscBatch(certified, ok, X, gamma_lb, gamma_ub, uw, dist)
+    return reported_batch(ok, optimal, c_lower, X, uw, fin_w, np.linalg.norm(ew, axis=2), norm, tolerances)

@@ -2,50 +2,16 @@
 against an independent multi-start L2 minimum of every W - k, the whole bound against the enumerated TLS optimum
 on clean tracks whose L2 cost exceeds min c^2 (the root bound cannot certify them), and the search with it against
 the search without it."""
-import itertools
 
 import numpy as np
 import pytest
-from scipy.optimize import least_squares
 
 import tritools
 import tritools.solve.robust_suspects as rs
 from tritools.scene import random_scene
-from tritools.solve.robust import TlsSearch, tls_cost
-from tritools.solve.robust_bounds import compute_many
+from tritools.solve.robust import TlsSearch
+from tests.robust_refs import drive_one, l2_min, tls_by_subsets
 from tritools.solve.robust_loo import _split, halves, leave_one_out
-
-
-def _l2_min(cams, x, starts) -> float:
-    def res(X):
-        u = np.einsum("nij,j->ni", cams, np.append(X, 1.0))
-        return (u[:, :2] / u[:, 2:] - x).ravel()
-    return min(float(np.sum(least_squares(res, X0, xtol=1e-14, ftol=1e-14, gtol=1e-14).fun ** 2)) for X0 in starts)
-
-
-def _tls_enumerated(cams, x, c, starts) -> float:
-    N = len(x)
-    best = float(np.sum(np.sort(c ** 2)[:-1]))
-    for k in range(2, N + 1):
-        for S in map(list, itertools.combinations(range(N), k)):
-            for X0 in starts:
-                def res(X, S=S):
-                    u = np.einsum("nij,j->ni", cams[S], np.append(X, 1.0))
-                    return (u[:, :2] / u[:, 2:] - x[S]).ravel()
-                X = least_squares(res, X0, xtol=1e-12, ftol=1e-12).x
-                u = np.einsum("nij,j->ni", cams, np.append(X, 1.0))
-                best = min(best, tls_cost(np.linalg.norm(u[:, :2] / u[:, 2:] - x, axis=1), c))
-    return best
-
-
-def _drive(gen, bounds):
-    try:
-        req = next(gen)
-        while True:
-            compute_many([(bounds, req)])
-            req = gen.send(None)
-    except StopIteration as stop:
-        return stop.value
 
 
 @pytest.mark.parametrize("seed,N", [(0, 6), (1, 7), (2, 8)])
@@ -58,11 +24,11 @@ def test_split_sub_bounds_below_every_leave_one_out_minimum(seed, N):
     W = frozenset(range(N))
     A, B = halves(W)
     assert A | B == W and not A & B
-    _drive(s.verify_first(A, B, *[A - {k} for k in A], *[B - {k} for k in B]), s.bounds)
+    drive_one(s.verify_first(A, B, *[A - {k} for k in A], *[B - {k} for k in B]), s.bounds)
     for k in range(N):
         split = _split(s.bounds, A - {k}, B) if k in A else _split(s.bounds, A, B - {k})
         rest = [i for i in range(N) if i != k]
-        ref = _l2_min(cams[rest], x[rest], [X, X + 0.2])
+        ref = l2_min(cams[rest], x[rest], [X, X + 0.2])
         assert split <= ref * (1 + 1e-9) + 1e-9
         assert split >= ref - 12.0                       # six fitted coordinates instead of three, 1 px noise
 
@@ -74,12 +40,12 @@ def test_clean_track_bound_below_the_enumeration(seed, N, cval, monkeypatch):
     sc = random_scene(N, 1, noise_px=1.0, seed=seed)
     cams, x, X = sc.cameras, sc.points2d[0], sc.points3d[0]
     c = np.full(N, cval)
-    f_ref = _tls_enumerated(cams, x, c, [X, X + 0.3, X - 0.3])
+    f_ref = tls_by_subsets(cams, x, c, [X, X + 0.3, X - 0.3])
     s = TlsSearch(cams, None, c, tritools.TriangulationOptions(), 0.0, points=x)
     s.offer(X)
     full = frozenset(range(N))
-    _drive(s.verify_first(full), s.bounds)
-    lb = _drive(leave_one_out(s, full, 0.0), s.bounds)
+    drive_one(s.verify_first(full), s.bounds)
+    lb = drive_one(leave_one_out(s, full, 0.0), s.bounds)
     assert lb <= f_ref * (1 + 1e-9) + 1e-9
     fast = tritools.triangulate(cams, x, robust=c)
     monkeypatch.setattr(rs, "ENABLED", False)

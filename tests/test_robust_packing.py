@@ -6,48 +6,21 @@ import itertools
 
 import numpy as np
 import pytest
-from scipy.optimize import least_squares
 
 import tritools
 import tritools.solve.robust_bounds as rb
 import tritools.solve.robust_enum as enum_mod
 from tritools.model.regions import Point
-from tritools.scene import random_scene, sphere_cameras
-from tritools.solve.robust import tls_cost
+from tritools.scene import sphere_cameras
+from tests.robust_refs import l2_min, outlier_track, tls_by_subsets
 
 
 def _scene(N, n_out, seed, noise=1.0):
-    sc = random_scene(N, 1, noise_px=noise, seed=seed)
-    rng = np.random.default_rng(seed + 7)
-    x = sc.points2d[0].copy()
-    out = rng.choice(N, n_out, replace=False)
-    ang = rng.uniform(0, 2 * np.pi, n_out)
-    x[out] += rng.uniform(40.0, 400.0, n_out)[:, None] * np.stack([np.cos(ang), np.sin(ang)], 1)
-    return sc.cameras, x, sc.points3d[0]
-
-
-def _l2_min(cams, x, starts) -> float:
-    """Smallest sum of squared reprojection errors over multi-start scipy least squares (>= L2*)."""
-    def res(X):
-        u = np.einsum("nij,j->ni", cams, np.append(X, 1.0))
-        return (u[:, :2] / u[:, 2:] - x).ravel()
-    return min(float(np.sum(least_squares(res, X0, xtol=1e-14, ftol=1e-14, gtol=1e-14).fun ** 2)) for X0 in starts)
+    return outlier_track(N, n_out, seed, noise, seed_offset=7)[:3]
 
 
 def _tls_reference(cams, x, c, starts) -> float:
-    """min over inlier sets S (|S| >= 2) of f_TLS at a multi-start local L2 minimiser of S: >= the TLS optimum."""
-    N, best = len(x), np.inf
-    for k in range(2, N + 1):
-        for S in itertools.combinations(range(N), k):
-            S = list(S)
-            for X0 in starts:
-                def res(X, S=S):
-                    u = np.einsum("nij,j->ni", cams[S], np.append(X, 1.0))
-                    return (u[:, :2] / u[:, 2:] - x[S]).ravel()
-                X = least_squares(res, X0, xtol=1e-12, ftol=1e-12).x
-                u = np.einsum("nij,j->ni", cams, np.append(X, 1.0))
-                best = min(best, tls_cost(np.linalg.norm(u[:, :2] / u[:, 2:] - x, axis=1), c))
-    return best
+    return tls_by_subsets(cams, x, c, starts, with_ray=False)
 
 
 @pytest.mark.parametrize("seed", range(3))
@@ -64,7 +37,7 @@ def test_packing_bound_below_every_subset_optimum(seed):
     for k in range(3, 7):
         for S in itertools.combinations(range(6), k):
             b = sb.packing_bound(frozenset(S))
-            assert b <= _l2_min(cams[list(S)], x[list(S)], starts) * (1 + 1e-9) + 1e-9
+            assert b <= l2_min(cams[list(S)], x[list(S)], starts) * (1 + 1e-9) + 1e-9
             positive += b > 1.0
     assert positive > 10
 

@@ -13,19 +13,12 @@ from scipy.optimize import least_squares
 
 import tritools
 import tritools.solve.robust_suspects as rs
-from tritools.scene import random_scene
 from tritools.solve.robust import TlsSearch, tls_cost
-from tritools.solve.robust_bounds import compute_many
+from tests.robust_refs import drive_one, outlier_track
 
 
 def _scene(N, n_out, seed, noise=1.0):
-    sc = random_scene(N, 1, noise_px=noise, seed=seed)
-    rng = np.random.default_rng(seed + 77)
-    x = sc.points2d[0].copy()
-    out = rng.choice(N, n_out, replace=False)
-    ang = rng.uniform(0, 2 * np.pi, n_out)
-    x[out] += rng.uniform(60.0, 500.0, n_out)[:, None] * np.stack([np.cos(ang), np.sin(ang)], 1)
-    return sc.cameras, x, sc.points3d[0], out
+    return outlier_track(N, n_out, seed, noise, seed_offset=77, shift=(60.0, 500.0))
 
 
 def _dist(cams, x, X):
@@ -50,17 +43,6 @@ def _enumerated(cams, x, c, X_true) -> float:
     return best
 
 
-def _run(gen, bounds):
-    """Drive one generator of subset requests to its return value (what robust_drive.drive does for many)."""
-    try:
-        req = next(gen)
-        while True:
-            compute_many([(bounds, req)])
-            req = gen.send(None)
-    except StopIteration as stop:
-        return stop.value
-
-
 def _search(cams, x, c):
     return TlsSearch(cams, None, np.asarray(c, float), tritools.TriangulationOptions(), 0.0, points=x)
 
@@ -79,9 +61,9 @@ def test_cover_bound_below_the_enumeration_for_any_suspect_set(seed, N, n_out):
                 s = _search(cams, x, c)
                 s.offer(X)
                 W = frozenset(range(N)) - O
-                _run(s.verify_first(W, *[frozenset((j, u)) for j in O for u in range(N) if u != j]), s.bounds)
+                drive_one(s.verify_first(W, *[frozenset((j, u)) for j in O for u in range(N) if u != j]), s.bounds)
                 inside = min(rs._inlier_node(s, j) for j in O)
-                outside = _run(rs._outside(s, W, float(np.sum(c[sorted(O)] ** 2))), s.bounds)
+                outside = drive_one(rs._outside(s, W, float(np.sum(c[sorted(O)] ** 2))), s.bounds)
                 lb = min(inside, outside)
                 assert lb <= f_ref * (1 + 1e-9) + 1e-9, (O, lb, f_ref)
                 if O == frozenset(out.tolist()) and cval == 20.0:

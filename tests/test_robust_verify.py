@@ -11,42 +11,9 @@ from scipy.optimize import least_squares
 import tritools
 import tritools.solve.robust_bounds as rb
 import tritools.solve.robust_enum as enum_mod
-from tritools.scene import random_scene, robust_protocol_scene
-from tritools.solve.robust import tls_cost
+from tritools.scene import robust_protocol_scene
+from tests.robust_refs import l2_min, outlier_track, tls_by_subsets
 from tritools.solve.robust_verify import parent_frames, verify_in_parent
-
-
-def _track(N, n_out, seed, noise=1.0):
-    sc = random_scene(N, 1, noise_px=noise, seed=seed)
-    rng = np.random.default_rng(seed + 11)
-    x = sc.points2d[0].copy()
-    out = rng.choice(N, n_out, replace=False)
-    ang = rng.uniform(0, 2 * np.pi, n_out)
-    x[out] += rng.uniform(40.0, 400.0, n_out)[:, None] * np.stack([np.cos(ang), np.sin(ang)], 1)
-    return sc.cameras, x, sc.points3d[0], out
-
-
-def _l2_min(cams, x, starts) -> float:
-    """Smallest sum of squared reprojection errors over multi-start scipy least squares (an attained value >= L2*)."""
-    def res(X):
-        u = np.einsum("nij,j->ni", cams, np.append(X, 1.0))
-        return (u[:, :2] / u[:, 2:] - x).ravel()
-    return min(float(np.sum(least_squares(res, X0, xtol=1e-15, ftol=1e-15, gtol=1e-15).fun ** 2)) for X0 in starts)
-
-
-def _tls_reference(cams, x, c, starts) -> float:
-    """min over inlier sets S (|S| >= 2) of f_TLS at a multi-start local L2 minimiser of S: >= the TLS optimum."""
-    N, best = len(x), float(np.sum(np.sort(np.asarray(c) ** 2)[:-1]))
-    for k in range(2, N + 1):
-        for S in map(list, itertools.combinations(range(N), k)):
-            for X0 in starts:
-                def res(X, S=S):
-                    u = np.einsum("nij,j->ni", cams[S], np.append(X, 1.0))
-                    return (u[:, :2] / u[:, 2:] - x[S]).ravel()
-                X = least_squares(res, X0, xtol=1e-12, ftol=1e-12).x
-                u = np.einsum("nij,j->ni", cams, np.append(X, 1.0))
-                best = min(best, tls_cost(np.linalg.norm(u[:, :2] / u[:, 2:] - x, axis=1), c))
-    return best
 
 
 def _subset_bounds(cams, x, k):
@@ -58,6 +25,10 @@ def _subset_bounds(cams, x, k):
     return subsets, good, lb, X
 
 
+def l2_min_15(cams, x, starts) -> float:
+    return l2_min(cams, x, starts, tol=1e-15)
+
+
 @pytest.mark.parametrize("seed", range(2))
 @pytest.mark.parametrize("pixel_scale", [1e-3, 1.0, 1e6])
 def test_bounds_below_every_subset_optimum_at_every_pixel_scale(seed, pixel_scale):
@@ -65,7 +36,7 @@ def test_bounds_below_every_subset_optimum_at_every_pixel_scale(seed, pixel_scal
     is too high), for every subset of 2..6 views of a 6-view track with two wrong matches whose pixel units are
     rescaled by 1e-3..1e6 (cameras and points alike: L2* scales by the square); the clean subsets are accepted
     and tight (within 1e-6 relative of the reference)."""
-    cams, x, X, out = _track(6, 2, seed)
+    cams, x, X, out = outlier_track(6, 2, seed)
     A = np.diag([pixel_scale, pixel_scale, 1.0])
     cams, x = A @ cams, x * pixel_scale
     starts = [X, X + 0.3, X - 0.3]
@@ -75,7 +46,7 @@ def test_bounds_below_every_subset_optimum_at_every_pixel_scale(seed, pixel_scal
         for S, g, b in zip(subsets, good, lb):
             if not g:
                 continue
-            ref = _l2_min(cams[S], x[S], starts)
+            ref = l2_min_15(cams[S], x[S], starts)
             assert b <= ref * (1 + 1e-9) + 1e-12 * pixel_scale ** 2
             if not set(S) & set(out):
                 assert b >= ref * (1 - 1e-6) - 1e-9 * pixel_scale ** 2
@@ -85,10 +56,10 @@ def test_bounds_below_every_subset_optimum_at_every_pixel_scale(seed, pixel_scal
 
 def test_outlier_pairs_bounded_above_the_threshold():
     """A pair holding a wrong match gets a bound that matters (above c^2 for c = 4 px) where its L2* is large."""
-    cams, x, X, out = _track(5, 1, 3)
+    cams, x, X, out = outlier_track(5, 1, 3)
     subsets, good, lb, _ = _subset_bounds(cams, x, 2)
     big = [b for S, g, b in zip(subsets, good, lb) if g and out[0] in S]
-    refs = [_l2_min(cams[S], x[S], [X]) for S in subsets if out[0] in S]
+    refs = [l2_min_15(cams[S], x[S], [X]) for S in subsets if out[0] in S]
     assert sum(b > 16.0 for b in big) >= sum(r > 32.0 for r in refs) - 1 >= 1
 
 
@@ -97,7 +68,7 @@ def test_search_equals_the_per_subset_path_and_the_enumeration(seed, N, n_out, m
     """The search with the parent-frame sub-bounds gives the per-subset path's certificate, inlier set and value on
     the same points, single and batched; no lower bound above the enumerated TLS optimum, and the certified
     value reaches it."""
-    cams, x, X, out = _track(N, n_out, seed)
+    cams, x, X, out = outlier_track(N, n_out, seed)
     c = np.full(N, 20.0)
     accepted = []
     real = rb.verify_in_parent
@@ -114,7 +85,7 @@ def test_search_equals_the_per_subset_path_and_the_enumeration(seed, N, n_out, m
         np.testing.assert_array_equal(r.inliers, plain.inliers)
         assert r.gamma_ub == pytest.approx(plain.gamma_ub, rel=1e-6)
     assert not fast.inliers[out].any()
-    f_ref = _tls_reference(cams, x, c, [X, X + 0.3, X - 0.3])
+    f_ref = tls_by_subsets(cams, x, c, [X, X + 0.3, X - 0.3])
     for r in (fast, plain, *fast_many):
         assert 2 * N * r.gamma_lb ** 2 <= f_ref * (1 + 1e-9) + 1e-9
         assert 2 * N * r.gamma_ub ** 2 <= f_ref * (1 + 1e-6) + 1e-9
@@ -122,7 +93,7 @@ def test_search_equals_the_per_subset_path_and_the_enumeration(seed, N, n_out, m
 
 def _check_against_enumeration(cams, x, c, starts):
     N = len(x)
-    f_ref = _tls_reference(cams, x, c, starts)
+    f_ref = tls_by_subsets(cams, x, c, starts)
     res = tritools.triangulate(cams, x, robust=c)
     many = tritools.triangulate_many([(cams, x)], robust=c)[0]
     for r in (res, many):
@@ -137,7 +108,7 @@ def _check_against_enumeration(cams, x, c, starts):
 
 def test_duplicated_views():
     """Two copies of each of three views (coincident centres inside the sub-problems) and one wrong match (twice)."""
-    cams, x, X, out = _track(3, 0, 5)
+    cams, x, X, out = outlier_track(3, 0, 5)
     x[2] += [150.0, -90.0]
     cams, x = np.concatenate([cams, cams]), np.concatenate([x, x])
     res, many = _check_against_enumeration(cams, x, np.full(6, 10.0), [X, X + 0.2])
@@ -145,7 +116,7 @@ def test_duplicated_views():
 
 
 def test_zero_noise():
-    cams, x, X, out = _track(6, 2, 8, noise=0.0)
+    cams, x, X, out = outlier_track(6, 2, 8, noise=0.0)
     res, many = _check_against_enumeration(cams, x, np.full(6, 5.0), [X, X + 0.2])
     assert res.optimal and many.optimal
     assert np.linalg.norm(res.X - X) < 1e-6 * (1 + np.linalg.norm(X))
@@ -153,7 +124,7 @@ def test_zero_noise():
 
 def test_every_threshold_huge():
     """c far above every residual: the TLS problem is the L2 problem (every view an inlier)."""
-    cams, x, X, out = _track(5, 1, 9)
+    cams, x, X, out = outlier_track(5, 1, 9)
     res, many = _check_against_enumeration(cams, x, np.full(5, 1e7), [X, X + 0.2])
     l2 = tritools.triangulate(cams, x)
     assert res.inliers.all() and res.gamma_ub == pytest.approx(l2.gamma_ub, rel=1e-6)
@@ -161,7 +132,7 @@ def test_every_threshold_huge():
 
 def test_every_view_an_outlier():
     """Random image points in every view, a small threshold: the bounds still hold against the enumeration."""
-    cams, x, X, out = _track(5, 0, 10)
+    cams, x, X, out = outlier_track(5, 0, 10)
     x = x + np.random.default_rng(3).uniform(-300, 300, x.shape)
     res, many = _check_against_enumeration(cams, x, np.full(5, 2.0), [X, X + 0.2, X - 0.2])
     assert res.inliers.sum() <= 2
@@ -171,7 +142,7 @@ def test_every_view_an_outlier():
 def test_georeferenced_world_and_rescaled_cameras(offset, cam_scale, monkeypatch):
     """The world moved by 1e5..1e6 (georeferenced) and the camera matrices multiplied by 1e-6..1e8 (the same
     cameras projectively): the same inlier set and value as the per-subset path, bounds below the enumeration."""
-    cams, x, X, out = _track(6, 2, 12)
+    cams, x, X, out = outlier_track(6, 2, 12)
     T = np.eye(4)
     T[:3, 3] = -offset                                       # X_world = X + offset: P' = P T
     cams = cam_scale * (cams @ T)
@@ -184,7 +155,7 @@ def test_georeferenced_world_and_rescaled_cameras(offset, cam_scale, monkeypatch
     np.testing.assert_array_equal(fast.inliers, plain.inliers)
     assert not fast.inliers[out].any()
     assert fast.gamma_ub == pytest.approx(plain.gamma_ub, rel=1e-6)
-    f_ref = _tls_reference(cams, x, c, [X, X + 0.3, X - 0.3])
+    f_ref = tls_by_subsets(cams, x, c, [X, X + 0.3, X - 0.3])
     assert 2 * 6 * fast.gamma_lb ** 2 <= f_ref * (1 + 1e-9) + 1e-9
     assert 2 * 6 * fast.gamma_ub ** 2 <= f_ref * (1 + 1e-6) + 1e-9
 
@@ -222,7 +193,7 @@ def test_split_bound_replaces_the_whole_problem_solve(k, monkeypatch):
     np.testing.assert_array_equal(split.inliers, ~out)
     assert split.gamma_ub == pytest.approx(whole.gamma_ub, rel=1e-9)
     assert kept.gamma_ub == pytest.approx(whole.gamma_ub, rel=1e-9)
-    f_ref = _tls_reference(P, x, np.full(5, 200.0), [X, X + 0.1, X - 0.1])
+    f_ref = tls_by_subsets(P, x, np.full(5, 200.0), [X, X + 0.1, X - 0.1])
     for r in (kept, split, whole):
         assert 2 * 5 * r.gamma_lb ** 2 <= f_ref * (1 + 1e-9) + 1e-9
         assert 2 * 5 * r.gamma_ub ** 2 <= f_ref * (1 + 1e-6) + 1e-9

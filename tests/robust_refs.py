@@ -1,0 +1,60 @@
+"""Independent references of the robust (TLS) tests: multi-start scipy least squares over the 3D point, the TLS
+value by inlier-set enumeration, seeded tracks with wrong matches, and a driver of one search's subset requests."""
+import itertools
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from tritools.scene import random_scene
+from tritools.solve.robust import tls_cost
+from tritools.solve.robust_bounds import compute_many
+
+
+def outlier_track(N, n_out, seed, noise=1.0, *, seed_offset=11, shift=(40.0, 400.0)):
+    """(cameras, points, true X, outlier views): a random_scene track with ``n_out`` observations moved by
+    ``shift`` px in random directions (the wrong matches; rng seeded ``seed + seed_offset``)."""
+    sc = random_scene(N, 1, noise_px=noise, seed=seed)
+    rng = np.random.default_rng(seed + seed_offset)
+    x = sc.points2d[0].copy()
+    out = rng.choice(N, n_out, replace=False)
+    ang = rng.uniform(0, 2 * np.pi, n_out)
+    x[out] += rng.uniform(*shift, n_out)[:, None] * np.stack([np.cos(ang), np.sin(ang)], 1)
+    return sc.cameras, x, sc.points3d[0], out
+
+
+def _residuals(cams, x):
+    def res(X):
+        u = np.einsum("nij,j->ni", cams, np.append(X, 1.0))
+        return (u[:, :2] / u[:, 2:] - x).ravel()
+    return res
+
+
+def l2_min(cams, x, starts, tol=1e-14) -> float:
+    """Smallest sum of squared reprojection errors over multi-start scipy least squares (an attained value >= L2*)."""
+    res = _residuals(cams, x)
+    return min(float(np.sum(least_squares(res, X0, xtol=tol, ftol=tol, gtol=tol).fun ** 2)) for X0 in starts)
+
+
+def tls_by_subsets(cams, x, c, starts, tol=1e-12, with_ray=True) -> float:
+    """min over inlier sets S (|S| >= 2) of f_TLS at S's local L2 minimisers from ``starts`` (and, ``with_ray``,
+    the value sum of all but the largest c^2 of a point on one view's ray): an attained value, >= the TLS optimum."""
+    N = len(x)
+    best = float(np.sum(np.sort(np.asarray(c, float) ** 2)[:-1])) if with_ray else np.inf
+    for k in range(2, N + 1):
+        for S in map(list, itertools.combinations(range(N), k)):
+            for X0 in starts:
+                X = least_squares(_residuals(cams[S], x[S]), X0, xtol=tol, ftol=tol).x
+                u = np.einsum("nij,j->ni", cams, np.append(X, 1.0))
+                best = min(best, tls_cost(np.linalg.norm(u[:, :2] / u[:, 2:] - x, axis=1), c))
+    return best
+
+
+def drive_one(gen, bounds):
+    """Drive one generator of subset requests to its return value (what robust_drive.drive does for many)."""
+    try:
+        req = next(gen)
+        while True:
+            compute_many([(bounds, req)])
+            req = gen.send(None)
+    except StopIteration as stop:
+        return stop.value

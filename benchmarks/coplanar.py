@@ -25,6 +25,8 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
 def circle_cameras(N, rng, K):
+    """``tritools.scene.turntable_cameras`` without the jitter draw, written out here so that a ``--base`` tree
+    older than that generator gets the same cameras as this tree."""
     P = []
     for k in range(N):
         a = 2 * np.pi * k / N + rng.uniform(-0.2, 0.2)

@@ -16,27 +16,13 @@ from scipy.optimize import least_squares
 import tritools
 from tritools.model.constraints import fundamental_matrix
 from tritools.model.regions.point import Point
-from tritools.scene import PROTOCOL_K
+from tritools.scene import PROTOCOL_K, turntable_cameras
 from tritools.solve.coplanar import COPLANAR_BUDGET_NAME, centre_plane, plane_lines, spurious_cost
-
-
-def circle_cameras(N, rng, height=0.0, jitter=0.0, K=PROTOCOL_K):
-    """The probe's turntable: N cameras on a horizontal circle of radius 2 looking at the origin."""
-    P = []
-    for k in range(N):
-        a = 2 * np.pi * k / N + rng.uniform(-0.2, 0.2)
-        c = np.array([2 * np.cos(a), 2 * np.sin(a), height + jitter * rng.normal()])
-        z = -c / np.linalg.norm(c)
-        ax = np.cross([0.0, 0.0, 1.0], z)
-        ax /= np.linalg.norm(ax)
-        R = np.stack([ax, np.cross(z, ax), z])
-        P.append(K @ np.hstack([R, -R @ c[:, None]]))
-    return np.array(P)
 
 
 def scene(N, seed, z=0.0, noise=1.0, K=PROTOCOL_K):
     rng = np.random.default_rng(seed)
-    P = circle_cameras(N, rng, K=K)
+    P = turntable_cameras(N, rng, K=K)
     X = rng.uniform(-0.5, 0.5, 3)
     X[2] = rng.uniform(-z, z)
     h = P @ np.append(X, 1.0)
@@ -85,9 +71,9 @@ def test_spurious_tuples_satisfy_every_epipolar_relation():
 
 def test_centre_plane_detection():
     rng = np.random.default_rng(0)
-    assert centre_plane(circle_cameras(6, rng)) is not None
-    assert centre_plane(circle_cameras(6, rng, jitter=0.05)) is None            # off the plane
-    P = circle_cameras(4, rng)
+    assert centre_plane(turntable_cameras(6, rng)) is not None
+    assert centre_plane(turntable_cameras(6, rng, jitter=0.05)) is None            # off the plane
+    P = turntable_cameras(4, rng)
     assert centre_plane(np.concatenate([P, P[:1]])) is None                     # a duplicated view
     assert centre_plane(P[:2]) is None                                          # two centres: no unique plane
 
@@ -261,7 +247,7 @@ def test_nearly_coplanar_centres(jitter, fires):
     by 1e-3: the component is broken, Corollary 1's bound is far above the fitted plane's s_pi and the rule stays
     off.  Either way the lower bound stays below the multi-start reference."""
     rng = np.random.default_rng(0)
-    P = circle_cameras(10, rng, jitter=jitter)
+    P = turntable_cameras(10, rng, jitter=jitter)
     X = np.append(rng.uniform(-0.5, 0.5, 2), 0.0)
     h = P @ np.append(X, 1.0)
     obs = h[:, :2] / h[:, 2:] + rng.normal(size=(10, 2))
@@ -279,7 +265,7 @@ def test_robust_nearly_coplanar_handed_back_subsets_stay_cheap():
     45-57 s CPU and the time limit).  Bounded sub-problem count, the reason named, the bound below the reference."""
     N = 20
     rng = np.random.default_rng(0)
-    P = circle_cameras(N, rng, jitter=1e-6)
+    P = turntable_cameras(N, rng, jitter=1e-6)
     X = np.append(rng.uniform(-0.5, 0.5, 2), 0.0)
     h = P @ np.append(X, 1.0)
     obs = h[:, :2] / h[:, 2:] + rng.normal(size=(N, 2))

@@ -8,7 +8,7 @@ import pytest
 from tritools.model.geometry import camera_center, depths, gamma, image_points
 from tritools.model.regions import EllipseBorder, Point, Segment
 from tritools.scene import (EXAMPLE5_MIN_DEPTH, SyntheticScene, example5_cameras, example5_cases, paper_data,
-                            paper_example, paper_table, random_cameras, random_scene)
+                            paper_example, paper_table, random_cameras, random_scene, turntable_cameras)
 
 
 # ---------------------------------------------------------------- random scenes
@@ -59,6 +59,22 @@ def test_scene_validators():
         random_scene(2, 3, noise_px=-1.0)
     with pytest.raises(ValueError, match="point_radius"):
         random_scene(2, 3, point_radius=20.0)
+
+
+def test_turntable_cameras_coplanar_centres_looking_at_origin():
+    C = turntable_cameras(7, 3, radius=2.0)
+    centres = np.array([camera_center(P) for P in C])
+    assert np.allclose(centres[:, 2], 0.0, atol=1e-12)                        # one horizontal plane
+    assert np.allclose(np.linalg.norm(centres[:, :2], axis=1), 2.0)
+    assert np.all(depths(np.zeros(3), C) > 0)
+    assert np.allclose(image_points(np.zeros(3), C), [1054.0, 581.0])       # the origin at the principal point
+    assert np.array_equal(C, turntable_cameras(7, 3))                        # seeded
+    lifted = np.array([camera_center(P) for P in turntable_cameras(7, 3, height=0.5, jitter=0.01)])
+    assert 0.4 < lifted[:, 2].mean() < 0.6 and lifted[:, 2].std() > 0
+    for bad in (dict(N=1), dict(N=2.5), dict(N=4, jitter=-1.0), dict(N=4, radius=0.0),
+                dict(N=4, height=np.nan)):
+        with pytest.raises(ValueError, match=next(iter(k for k in bad if k != "N"), "N")):
+            turntable_cameras(rng=0, **bad)
 
 
 # ---------------------------------------------------------------- paper data

@@ -400,3 +400,36 @@ def robust_protocol_scene(N: int, n_out: int, noise: float, rng: np.random.Gener
 
 
 __all__ += ["PROTOCOL_K", "PROTOCOL_IMAGE", "sphere_cameras", "robust_protocol_scene"]
+
+
+def turntable_cameras(N: int, rng, *, height: float = 0.0, jitter: float = 0.0, radius: float = 2.0,
+                      K: np.ndarray = PROTOCOL_K) -> np.ndarray:
+    """N cameras (N, 3, 4) ``K [R | -R c]`` on a horizontal circle of ``radius`` at ``height`` (a turntable),
+    camera k at angle ``2 pi k / N`` + uniform(-0.2, 0.2) rad, each looking at the origin with its x axis
+    horizontal; ``jitter`` adds Gaussian noise of that standard deviation to each centre's height.
+
+    The centres are coplanar (for ``jitter == 0``), the case where Corollary 1's bound stops at the trifocal-plane
+    ceiling for points in or near that plane (``tritools.solve.coplanar``).  ``rng`` (a seed or a
+    ``numpy.random.Generator``) draws, per camera, one uniform then one normal, whatever ``jitter`` is.
+    """
+    if int(N) != N or N < 2:
+        raise ValueError(f"N must be an integer >= 2, got {N!r}")
+    for name, v in (("height", height), ("jitter", jitter), ("radius", radius)):
+        if not np.isfinite(v):
+            raise ValueError(f"{name} must be finite, got {v!r}")
+    if jitter < 0 or radius <= 0:
+        raise ValueError(f"jitter must be >= 0 and radius > 0, got jitter={jitter!r}, radius={radius!r}")
+    rng = _rng(rng)
+    P = []
+    for k in range(int(N)):
+        a = 2 * np.pi * k / N + rng.uniform(-0.2, 0.2)
+        c = np.array([radius * np.cos(a), radius * np.sin(a), height + jitter * rng.normal()])
+        z = -c / np.linalg.norm(c)
+        ax = np.cross([0.0, 0.0, 1.0], z)
+        ax /= np.linalg.norm(ax)
+        R = np.stack([ax, np.cross(z, ax), z])
+        P.append(K @ np.hstack([R, -R @ c[:, None]]))
+    return np.array(P)
+
+
+__all__ += ["turntable_cameras"]

@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 import tritools
-from tritools.model.frame import _dot2, moved_cameras, world_frame, world_origins
+from tritools.model.exact import dot2 as _dot2
+from tritools.model.frame import moved_cameras, world_frame, world_origins
 from tritools.scene import random_scene
 
 SHIFT = np.array([1e6, -2e6, 5e5])

@@ -21,10 +21,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from .cameras import power2_scale
-from .stacked import norms
+from .exact import CANCELLATION_RATIO, accurate_homogeneous, dot2 as _dot2
+from .stacked import norms, project_quiet
 
-__all__ = ["WorldFrame", "world_frame", "world_origins", "moved_cameras", "recentred", "frame_centre_groups",
-           "RECENTRE_RATIO",
+__all__ = ["WorldFrame", "world_frame", "world_origins", "moved_cameras", "recentred", "project_world",
+           "frame_centre_groups", "RECENTRE_RATIO",
            "RESOLVED_SPREAD_RTOL"]
 
 #: the origin moves to the cameras' mean centre when that is farther than this many times their spread ...
@@ -146,33 +147,22 @@ def recentred(C: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return moved_cameras(C, o), o
 
 
-def _two_sum(a, b):
-    """(s, e) with s = fl(a + b) and a + b = s + e exactly (Knuth)."""
-    s = a + b
-    bb = s - a
-    return s, (a - (s - bb)) + (b - bb)
-
-
-def _two_prod(a, b):
-    """(p, e) with p = fl(a b) and a b = p + e exactly (Dekker's splitting; no fused multiply-add in numpy)."""
-    p = a * b
-    ca, cb = 134217729.0 * a, 134217729.0 * b             # 2^27 + 1
-    ah, bh = ca - (ca - a), cb - (cb - b)
-    al, bl = a - ah, b - bh
-    return p, al * bl - (((p - ah * bh) - al * bh) - ah * bl)
-
-
-def _dot2(A: np.ndarray, x: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """sum_k A[..., k] x[..., k] + b, accurate as if computed in twice the working precision (Ogita, Rump and
-    Oishi's Dot2); the plain sum where the splitting overflows."""
-    s, c = b, np.zeros_like(b)
-    for k in range(A.shape[-1]):
-        p, ep = _two_prod(A[..., k], x[..., k])
-        s, es = _two_sum(s, p)
-        c = c + (ep + es)
-    out = s + c
-    plain = np.einsum("...k,...k->...", A, x) + b
-    return np.where(np.isfinite(out), out, plain)
+def project_world(C: np.ndarray, X: np.ndarray) -> tuple:
+    """:func:`tritools.model.stacked.project_stack` for evaluating estimates in the caller's frame: the
+    homogeneous images P_i (X, 1) (M, N, 3) of a stack C (M, N, 3, 4), X (M, 3), recomputed by the compensated
+    dot product (:func:`tritools.model.exact.dot2`) in the views where the plain sum cancels (a georeferenced
+    world loses ~log10(|X| / depth) digits there), so each is accurate to a few units of round-off; decided per
+    view, as :func:`tritools.model.geometry.project_homogeneous` does, so a problem gets the same numbers in any
+    batch.  Then the same rule: (u (M, N, 2), h, finite (M,)).  The reported gamma_UB rests on it
+    (:func:`tritools.solve.report.gamma_upper`)."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        Xh = np.concatenate([X, np.ones((len(X), 1))], axis=1)
+        h = np.einsum("mnij,mj->mni", C, Xh)
+        mag = np.einsum("mnij,mj->mni", np.abs(C), np.abs(Xh))
+        m, n = np.nonzero(~np.all(mag <= CANCELLATION_RATIO * np.abs(h), axis=2))   # per view of a problem
+        if m.size:
+            h[m, n] = accurate_homogeneous(C[m, n], Xh[m][:, None, :])
+        return project_quiet(C, X, h=h)
 
 
 def frame_centre_groups(cameras_f: np.ndarray, frame: WorldFrame) -> np.ndarray:

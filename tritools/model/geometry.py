@@ -26,6 +26,7 @@ from .cameras import (CAMERA_RANK_RTOL, POINT_AT_INFINITY_RTOL, SAME_CAMERA_RTOL
                       camera_center, camera_problems, camera_rank_ratio, cameras_all_equal, check_camera, depths,
                       depths_stack, points3d_array, power2_scale, unit_rows, validate_cameras, WorldFrame,
                       world_frame_of)
+from .exact import CANCELLATION_RATIO, accurate_homogeneous
 from .regions.base import real_array
 
 __all__ = [
@@ -97,6 +98,9 @@ def _project_scaled(Xs: np.ndarray, finite: np.ndarray, P: np.ndarray) -> np.nda
     """:func:`project_homogeneous` of the scaled points of :func:`_scaled_points`."""
     Ps = P / power2_scale(P, (0, 1))
     h = Xs @ Ps.T
+    rows = np.nonzero(~np.all(np.abs(Xs) @ np.abs(Ps).T <= CANCELLATION_RATIO * np.abs(h), axis=1))[0]
+    if rows.size:                     # cancellation (a georeferenced world): compensated, per point
+        h[rows] = accurate_homogeneous(np.broadcast_to(Ps, (rows.size, 3, 4)), Xs[rows][:, None, :])
     den = h[:, 2]
     tiny = np.abs(den) <= PROJECTION_DENOM_RTOL * (np.abs(Xs) @ np.abs(Ps[2]))
     safe = np.where(tiny, 1.0, den)

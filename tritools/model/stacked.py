@@ -125,12 +125,14 @@ def project_stack(C: np.ndarray, X: np.ndarray) -> tuple[np.ndarray, np.ndarray,
         return project_quiet(C, X)
 
 
-def project_quiet(C: np.ndarray, X: np.ndarray, absC2: np.ndarray | None = None) -> tuple:
+def project_quiet(C: np.ndarray, X: np.ndarray, absC2: np.ndarray | None = None, h: np.ndarray | None = None) -> tuple:
     """:func:`project_stack` for a caller that already ignores overflow and invalid operations (one
     ``np.errstate`` around a loop instead of one per projection); ``absC2``: |C[:, :, 2, :]| when the caller
-    has it (the cameras of a loop do not change)."""
+    has it (the cameras of a loop do not change); ``h``: the homogeneous images when the caller computed them
+    (more accurately: :func:`tritools.model.frame.project_world`)."""
     Xh = np.concatenate([X, np.ones((len(X), 1))], axis=1)
-    h = np.einsum("mnij,mj->mni", C, Xh)
+    if h is None:
+        h = np.einsum("mnij,mj->mni", C, Xh)
     den = h[..., 2]
     absC2 = np.abs(C[:, :, 2, :]) if absC2 is None else absC2
     tiny = np.abs(den) <= PROJECTION_DENOM_RTOL * np.einsum("mnj,mj->mn", absC2, np.abs(Xh))

@@ -21,7 +21,11 @@ import numpy as np
 from ..result import Status
 
 __all__ = ["decide", "decide_reported", "gamma_from_c", "c_from_gamma", "cheirality", "decide_one",
-           "decide_reported_one"]
+           "decide_reported_one", "gamma_lower", "LB_ROUNDOFF_ULPS"]
+
+#: gamma_LB is lowered by this many units of round-off of the coordinates' magnitude (:func:`gamma_lower`).
+LB_ROUNDOFF_ULPS = 64.0
+_U = 2.0 ** -53
 
 _CODES = np.array([Status.NOT_CERTIFIED.value, Status.OPTIMAL.value, Status.NUMERICAL_FAILURE.value], dtype=object)
 
@@ -106,6 +110,28 @@ def gamma_from_c(c, n_views, scale=1.0):
     else:
         with np.errstate(invalid="ignore"):
             out = np.sqrt(c / (2 * np.asarray(n_views, float))) / np.asarray(scale, float)
+    return out.item() if out.ndim == 0 else out
+
+
+def gamma_lower(gamma_lb, gamma_ub, scale, resolution):
+    """gamma_LB of the caller's float data from gamma_LB of the normalised data: lowered by
+    ``LB_ROUNDOFF_ULPS`` u (A + gamma_UB), A = max(1, median |x_i|) the coordinates' magnitude in pixels
+    (``resolution / (scale RESOLUTION_REL)``, :mod:`tritools.model.normalize`), never below 0.
+
+    Why: the certificate holds for the normalised cameras and points, which are the caller's up to a few
+    roundings per entry; each distance d_i(X) then moves by a few u (|x_i| + |u_i|) (|u_i| <= |x_i| + d_i), so
+    the optimum's ||d|| / sqrt(2N) by at most ~u (A + gamma) times a small constant (measured excess of the
+    unlowered bound over the exact optimum: <= 4e-14 px at ~300 px; the slack is ~2e-12 px there).  Scalars or
+    arrays; where gamma_UB is not finite, gamma_LB itself stands in for it."""
+    from ..model.normalize import RESOLUTION_REL
+
+    g = np.asarray(gamma_lb, float)
+    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+        A = np.asarray(resolution, float) / (np.asarray(scale, float) * RESOLUTION_REL)
+        A = np.where(np.isfinite(A), A, 1.0)
+        ub = np.asarray(gamma_ub, float)
+        out = np.maximum(0.0, g - LB_ROUNDOFF_ULPS * _U * (A + np.where(np.isfinite(ub), ub, g)))
+    out = np.where(np.isnan(g), g, out)
     return out.item() if out.ndim == 0 else out
 
 

@@ -37,11 +37,12 @@ from sospoly.budget import Deadline
 from sospoly.solvers import with_single_threaded_blas
 
 from ..model.cameras import numeric_cameras
-from ..model.frame import recentred
+from ..model.frame import project_world, recentred
 from ..model.normalize import normalization_stack
 from ..model.regions import ConeKind, Region
-from ..model.stacked import LM_MAX_ITER, damped_step, lm_accept, project_stack
-from .decide import decide, decide_reported, gamma_from_c
+from ..model.stacked import LM_MAX_ITER, damped_step, lm_accept, norms, project_stack
+from .decide import decide, decide_reported, gamma_from_c, gamma_lower
+from .report import gamma_upper
 from .regions_verify import compact_bounds, region_forms
 
 __all__ = ["DiscBatch", "disc_radius", "verify_discs", "refine_discs_stack", "ellipse_shapes"]
@@ -153,7 +154,7 @@ def verify_discs(cameras, centers, radii, *, tolerances: Tolerances = DEFAULT_TO
     ok &= ok_b
     status, optimal, c_lower = decide(lower, upper_f, tolerances, N, norm.resolution)
     X = norm.world_points(Xn) + origin
-    uw, _, fin_w = project_stack(C, X)
+    uw, _, fin_w = project_world(C, X)
     ok &= fin_w
     dist = np.maximum(0.0, np.linalg.norm(uw - x, axis=2) - rho)
     return reported_batch(ok, optimal, c_lower, X, uw, fin_w, dist, norm, tolerances)
@@ -164,8 +165,9 @@ def reported_batch(ok, optimal, c_lower, X, uw, fin_w, dist, norm, tolerances) -
     where ``fin_w``) and distances ``dist`` (M, N) to the regions: gamma_UB at X, gamma_LB from the certified
     ``c_lower`` (normalised units, ``norm``'s scale), the decision confirmed on these reported numbers."""
     N = dist.shape[1]
-    gamma_ub = np.where(fin_w, gamma_from_c(np.sum(dist ** 2, axis=1), N, 1.0), np.inf)
-    gamma_lb = np.minimum(gamma_from_c(np.maximum(c_lower, 0.0), N, norm.scale), gamma_ub)
+    gamma_ub = np.where(fin_w, gamma_upper(dist, norms(uw, axis=2)), np.inf)
+    gamma_lb = np.minimum(gamma_lower(gamma_from_c(np.maximum(c_lower, 0.0), N, norm.scale), gamma_ub, norm.scale,
+                                      norm.resolution), gamma_ub)
     certified = ok & optimal & decide_reported(gamma_lb, gamma_ub, tolerances, N, norm.scale, norm.resolution)
     return DiscBatch(certified, ok, X, gamma_lb, gamma_ub, uw, dist)
 

@@ -42,11 +42,13 @@ from sospoly.analysis import verify_quadratic_batch
 from sospoly.analysis import verify_quadratic_banded_batch
 from sospoly.solvers import with_single_threaded_blas
 
+from ..model.frame import project_world
 from ..model.geometry import camera_problems
 from ..model.normalize import normalization_stack
 from ..model.stacked import (band_pairs, epipolar_quadratics, fundamental_stack, gauss_newton_polish, norms,
                              project_one, project_stack, refine_point, refine_points_stack, view_pairs)
-from .decide import decide, decide_one, decide_reported, decide_reported_one, gamma_from_c
+from .decide import decide, decide_one, decide_reported, decide_reported_one, gamma_from_c, gamma_lower
+from .report import gamma_upper
 from .trivial import trivially_certified, trivially_certified_reported
 
 __all__ = ["FastPathBatch", "verify_points", "verify_checked", "verify_one", "stack_point_problems",
@@ -167,14 +169,14 @@ def verify_checked(C: np.ndarray, x: np.ndarray, ok: np.ndarray, tolerances: Tol
                                          deadline=deadline)
     status, optimal, c_lower = decide(lower, upper, tolerances, N, norm.resolution)
     X = norm.world_points(Xn)
-    uw, _, fin_w = project_stack(C, X)
+    uw, _, fin_w = project_world(C, X)
     ok &= fin_w
     # the residuals and gamma(X) by the formulas of the report (tritools.solve.report.points_report_stack): the
     # same numbers, so a single call reports these without projecting again
     residuals = np.where(fin_w[:, None], norms(uw - x, axis=2), np.inf)
-    gamma_ub = np.where(fin_w, gamma_from_c(np.sum(np.where(fin_w[:, None], residuals, 0.0) ** 2, axis=1), N, 1.0),
-                        np.inf)
-    gamma_lb = np.minimum(gamma_from_c(c_lower, N, norm.scale), gamma_ub)
+    gamma_ub = np.where(fin_w, gamma_upper(np.where(fin_w[:, None], residuals, 0.0), norms(uw, axis=2)), np.inf)
+    gamma_lb = np.minimum(gamma_lower(gamma_from_c(c_lower, N, norm.scale), gamma_ub, norm.scale, norm.resolution),
+                          gamma_ub)
     certified = ok & optimal & decide_reported(gamma_lb, gamma_ub, tolerances, N, norm.scale, norm.resolution)
     trivial = ok & ~certified
     if trivial.any():               # (a stack of certified problems skips the trivial rule: no change)
@@ -220,13 +222,13 @@ def verify_one(C: np.ndarray, x: np.ndarray, tolerances: Tolerances, *,
     scale, res = float(norm.scale[0]), float(norm.resolution[0])
     _, optimal, c_lower = decide_one(lower, upper, tolerances, N, res)
     X = norm.world_points(Xn[None])
-    uw, _, fin_w = project_stack(C[None], X)
+    uw, _, fin_w = project_world(C[None], X)
     if not fin_w[0]:
         return None
     residuals = norms(uw - x, axis=2)             # (the report's formulas: points_report_stack)
-    gamma_ub = gamma_from_c(np.sum(residuals ** 2, axis=1), N, 1.0)
+    gamma_ub = gamma_upper(residuals, norms(uw, axis=2))
     g_ub = float(gamma_ub[0])
-    gamma_lb = min(math.sqrt(max(c_lower, 0.0) / (2.0 * N)) / scale, g_ub)
+    gamma_lb = min(gamma_lower(math.sqrt(max(c_lower, 0.0) / (2.0 * N)) / scale, g_ub, scale, res), g_ub)
     certified = optimal and decide_reported_one(gamma_lb, g_ub, tolerances, N, scale, res)
     trivial = not certified and decide_one(0.0, upper, tolerances, N, res)[1] and math.isfinite(upper) and \
         decide_reported_one(0.0, g_ub, tolerances, N, scale, res)

@@ -10,12 +10,33 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..model.cameras import depths_stack_arrays, depths_validated
+from ..model.frame import project_world
 from ..model.geometry import WorldFrame, project_views
 from ..model.regions import extent_of
-from ..model.stacked import norms, project_stack
-from .decide import gamma_from_c
+from ..model.stacked import norms
 
-__all__ = ["PointReport", "point_report", "points_report_stack", "solve_radius", "solve_ball", "region_extent"]
+__all__ = ["PointReport", "point_report", "points_report_stack", "solve_radius", "solve_ball", "region_extent",
+           "gamma_upper"]
+
+_U = 2.0 ** -53                   # the unit round-off of float64
+
+
+def gamma_upper(res, u_norm):
+    """gamma_UB: gamma of the exact distances at the float estimate X, rounded up -- the distances ``res`` (..., N)
+    computed from projections u_i of norm ``u_norm`` (..., N) whose homogeneous images are accurate to a few units
+    of round-off (:func:`tritools.model.frame.project_world`).  The quotient u_i = h_i / h_i3 and the difference
+    u_i - x_i then err by at most ~5 u |u_i| + u d_i, a distance to a region is 1-Lipschitz in u_i, and the norm adds
+    2 u relative: d_i <= d~_i (1 + 4u) + 6u |u_i|; the sum of N squares and the square root are rounded up by
+    (1 + (N + 4) u) and (1 + 4u).  So gamma(X) <= gamma_UB for the exact distances of the float data (point regions;
+    for other regions up to their own distance round-off).  A distance computed as 0 (a projection inside its
+    region) stays 0: it is exact up to the projection's ~6u |u_i|.  inf where a distance is not finite."""
+    res = np.asarray(res, float)
+    n = res.shape[-1]
+    with np.errstate(invalid="ignore", over="ignore"):
+        d = np.where(res > 0, res * (1.0 + 4 * _U) + 6 * _U * np.asarray(u_norm, float), res)
+        f = np.sum(d * d, axis=-1) * (1.0 + (n + 4) * _U)
+        g = np.where(np.isfinite(f), np.sqrt(f / (2.0 * n)) * (1.0 + 4 * _U), np.inf)
+    return g.item() if g.ndim == 0 else g
 
 
 @dataclass(frozen=True)
@@ -32,21 +53,22 @@ def point_report(X, cameras, regions, world_frame=WorldFrame.RIGHT_HANDED) -> Po
         return PointReport(None, None, None)
     Xh = np.append(np.asarray(X, float), 1.0)[None]
     C = np.asarray(cameras, float)
-    res = []
+    res, un = [], []
     for x, r in zip(project_views(Xh, C), regions):     # inf where undefined (the one rule of geometry)
         x = x[0]
         res.append(float(r.distance(x)) if np.isfinite(x).all() else np.inf)
+        un.append(float(np.hypot(x[0], x[1])))
     res = np.array(res)
-    gamma = float(gamma_from_c(np.sum(res ** 2), len(res), 1.0)) if np.isfinite(res).all() else math.inf
+    gamma = float(gamma_upper(res, np.array(un))) if np.isfinite(res).all() else math.inf
     return PointReport(gamma, res, depths_validated(X, C, world_frame))
 
 
 def points_report_stack(C: np.ndarray, x: np.ndarray, X: np.ndarray, world_frame=WorldFrame.RIGHT_HANDED):
     """The twin of :func:`point_report` for M point problems: (gamma (M,), residuals (M, N), depths (M, N));
     gamma is inf where a projection is at infinity."""
-    u, _, fin = project_stack(C, X)
+    u, _, fin = project_world(C, X)
     res = np.where(fin[:, None], norms(u - x, axis=2), np.inf)
-    gamma = np.where(fin, gamma_from_c(np.sum(np.where(fin[:, None], res, 0.0) ** 2, axis=1), x.shape[1], 1.0), np.inf)
+    gamma = np.where(fin, gamma_upper(np.where(fin[:, None], res, 0.0), norms(u, axis=2)), np.inf)
     return gamma, res, depths_stack_arrays(np.asarray(C, float), np.asarray(X, float), world_frame)
 
 

@@ -43,11 +43,13 @@ from sospoly.analysis import has_constant_entry, image_form_stack_margin
 from sospoly.budget import Deadline, TimeLimitReached, deadline_scope
 from sospoly.solvers import with_single_threaded_blas
 
+from ..model.frame import project_world
 from ..model.geometry import POINT_AT_INFINITY_RTOL
 from ..model.normalize import normalization_stack
-from ..model.stacked import fundamental_stack, project_stack, refine_points_stack
+from ..model.stacked import fundamental_stack, norms, project_stack, refine_points_stack
 from ..result import Status
-from .decide import decide, decide_reported, gamma_from_c
+from .decide import decide, decide_reported, gamma_from_c, gamma_lower
+from .report import gamma_upper
 from .fastpath import expired, stack_point_problems
 from .structures import corollary1_point_structure
 from .trivial import TRIVIAL_BOUND, trivially_certified, trivially_certified_reported
@@ -221,9 +223,9 @@ def _decided(C, x, norm, ok, reason, tol, c_lb, c_ub, X_n, X_raw_n, xn, comp, it
     _hand_back(ok, status == Status.NUMERICAL_FAILURE.value, reason,
                "lower bound above the upper bound: per-point tight re-solve")
     X_world = norm.world_points(X_n)
-    g_lb = gamma_from_c(c_rep, N, norm.scale)
-    u_w, _, fin_w = project_stack(C, X_world)
-    g_ub = np.where(fin_w, gamma_from_c(np.sum((u_w - x) ** 2, axis=(1, 2)), N, 1.0), np.inf)
+    u_w, _, fin_w = project_world(C, X_world)
+    g_ub = np.where(fin_w, gamma_upper(norms(u_w - x, axis=2), norms(u_w, axis=2)), np.inf)
+    g_lb = gamma_lower(gamma_from_c(c_rep, N, norm.scale), g_ub, norm.scale, norm.resolution)
     reported = decide_reported(g_lb, g_ub, tol, N, norm.scale, norm.resolution)
     for m in np.nonzero(ok & optimal & ~reported)[0]:
         reason[m] = "the bounds met in normalised coordinates, but not at the estimate in world coordinates"

@@ -20,7 +20,7 @@ import numpy as np
 from ...model.constraints import Method
 from ...model.geometry import image_points
 from ...result import Attempt, Status, TriangulationResult
-from ..decide import cheirality, decide_reported
+from ..decide import cheirality, decide_reported, gamma_lower
 from ..plan import Step
 from ..report import point_report
 from ..trivial import TRIVIAL_BOUND, trivially_certified, trivially_certified_reported
@@ -52,7 +52,8 @@ def report_point(ctx: PointContext, step: Step, status, optimal, gamma_lb, *, X,
     raw = rep if same else point_report(X_raw, ctx.cams, ctx.regions)     # gamma only: the frame is irrelevant
     msg = ""
     if gamma_lb is not None and rep.gamma is not None and np.isfinite(rep.gamma):
-        gamma_lb = min(gamma_lb, rep.gamma)          # consistent in pixels too (decided in c units)
+        # of the caller's float data (the normalisation's round-off), never above the reported upper bound
+        gamma_lb = min(gamma_lower(gamma_lb, rep.gamma, ctx.norm.scale, ctx.norm.resolution), rep.gamma)
         if optimal:                                  # the decision again, on the numbers reported
             optimal = decide_reported(gamma_lb, rep.gamma, ctx.tolerances, ctx.N, ctx.norm.scale,
                                       ctx.norm.resolution)

@@ -16,12 +16,12 @@ from ..model.regions import extent_of
 from ..model.stacked import norms
 
 __all__ = ["PointReport", "point_report", "points_report_stack", "solve_radius", "solve_ball", "region_extent",
-           "gamma_upper"]
+           "gamma_upper", "rounding_spread"]
 
 _U = 2.0 ** -53                   # the unit round-off of float64
 
 
-def gamma_upper(res, u_norm):
+def gamma_upper(res, u_norm, cap=None):
     """gamma_UB: gamma of the exact distances at the float estimate X, rounded up -- the distances ``res`` (..., N)
     computed from projections u_i of norm ``u_norm`` (..., N) whose homogeneous images are accurate to a few units
     of round-off (:func:`tritools.model.frame.project_world`).  The quotient u_i = h_i / h_i3 and the difference
@@ -29,14 +29,32 @@ def gamma_upper(res, u_norm):
     2 u relative: d_i <= d~_i (1 + 4u) + 6u |u_i|; the sum of N squares and the square root are rounded up by
     (1 + (N + 4) u) and (1 + 4u).  So gamma(X) <= gamma_UB for the exact distances of the float data (point regions;
     for other regions up to their own distance round-off).  A distance computed as 0 (a projection inside its
-    region) stays 0: it is exact up to the projection's ~6u |u_i|.  inf where a distance is not finite."""
+    region) stays 0: it is exact up to the projection's ~6u |u_i|.  inf where a distance is not finite.
+    ``cap`` (N,): truncated distances min(d_i, c_i) (the TLS cost of issue #19; inf: not truncated)."""
     res = np.asarray(res, float)
     n = res.shape[-1]
     with np.errstate(invalid="ignore", over="ignore"):
         d = np.where(res > 0, res * (1.0 + 4 * _U) + 6 * _U * np.asarray(u_norm, float), res)
+        if cap is not None:
+            d = np.minimum(d, cap)
         f = np.sum(d * d, axis=-1) * (1.0 + (n + 4) * _U)
         g = np.where(np.isfinite(f), np.sqrt(f / (2.0 * n)) * (1.0 + 4 * _U), np.inf)
     return g.item() if g.ndim == 0 else g
+
+
+def rounding_spread(C: np.ndarray, X: np.ndarray) -> float:
+    """How far the projections move when the float estimate X moves by one unit in the last place of each
+    coordinate, as an RMS error: sqrt(sum_i max_k |u_i(X + ulp(X_k) e_k) - u_i(X)|^2 / (2N)) (pixels; compensated
+    projections, :func:`tritools.model.frame.project_world`).  No float estimate locates the optimum better than
+    this, so a certificate whose bounds are finer than it says nothing about the caller's problem (a point near
+    the cameras' principal planes seen 1e8 px off-axis: ~0.5 px)."""
+    X = np.asarray(X, float)
+    Xs = np.vstack([X, X + np.diag(np.spacing(np.abs(X)))])
+    u, _, fin = project_world(np.broadcast_to(C, (4,) + C.shape), Xs)
+    if not fin.all():
+        return math.inf
+    d2 = np.max(np.sum((u[1:] - u[0]) ** 2, axis=2), axis=0)
+    return float(np.sqrt(np.sum(d2) / (2 * len(C))))
 
 
 @dataclass(frozen=True)

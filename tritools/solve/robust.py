@@ -70,7 +70,7 @@ import numpy as np
 from ..model.cameras import as_world_frame, depth_rows
 from ..model.normalize import normalization_for
 from ..result import Attempt, Status, TriangulationResult
-from .decide import cheirality, gamma_from_c
+from .decide import cheirality
 from .report import PointReport, point_report
 from .trivial import local_estimate
 from . import robust_bounds, robust_suspects
@@ -80,6 +80,7 @@ from .robust_loo import leave_one_out
 from .robust_nodes import NodeBounds, lookahead_bound
 from .robust_rays import ray_candidates
 from .robust_costs import point_distances2, point_distances2_one, projections
+from .robust_report import tls_reported
 
 __all__ = ["robust_thresholds", "triangulate_robust", "drive", "lookahead_bound", "tls_cost", "point_distances2",
            "MAX_NODES", "MAX_PAIRS", "MIN_THRESHOLD",
@@ -457,8 +458,10 @@ class TlsSearch(NodeBounds):
         ub = self.best_f
         X = self.best_X
         rep = self.report(X)
-        inliers = rep.residuals < self.c
         certified = bool(self.tol.certified(lb, ub, self.scale))     # lb is valid also when the search stopped
+        told = tls_reported(self.C, self.x if self.points else np.array([r.center for r in self.regions]),
+                            None if self.points else rep.residuals, X, self.c, lb, self.tol, self.scale, certified)
+        inliers = told.inliers
         if not certified and stopped is None:   # the deadline cut a step short, or a sub-problem hit the memory budget
             stopped = "time limit" if self.deadline.expired or self.bounds.deadline.expired else \
                 "memory budget" if self.bounds.budget_exceeded else None
@@ -466,20 +469,23 @@ class TlsSearch(NodeBounds):
         status = Status.NUMERICAL_FAILURE if contradicts else Status.OPTIMAL if certified else \
             {"time limit": Status.TIME_LIMIT, "memory budget": Status.BUDGET_EXCEEDED}.get(stopped,Status.NOT_CERTIFIED)
         certified = certified and not contradicts
-        lb = float(self.tol.consistent(lb, ub))
-        gamma_ub, gamma_lb = gamma_from_c(ub, self.N, 1.0), gamma_from_c(lb, self.N, 1.0)
+        if certified and not told.holds:                # the reported numbers' checks (robust_report)
+            status, certified = Status.NOT_CERTIFIED, False
+        gamma_ub, gamma_lb = told.gamma_ub, told.gamma_lb
         status, in_front = cheirality(status, rep.depths[inliers], self.opts.require_in_front)
         msg = f"TLS: {int(inliers.sum())}/{self.N} inliers, {self.nodes} nodes, {self.bounds.n_solved} L2 " \
               f"sub-problems"
         if stopped:
             msg += f"; stopped by the {stopped}"
-        image_points = np.where(np.isfinite(rep.residuals)[:, None], projections(X, self.C), np.nan)
+        if told.reason and not certified:
+            msg += f"; {told.reason}"
+        image_points = np.where(np.isfinite(told.residuals)[:, None], projections(X, self.C), np.nan)
         attempt = Attempt("tls", None, status.value, gamma_lb, gamma_ub, "branch-and-bound", None, (),
                           timings["total"])
         return TriangulationResult("tls", status, X=X, gamma_ub=gamma_ub, gamma_lb=gamma_lb, optimal=certified,
                                    image_points=image_points, certified_by="branch-and-bound" if certified else None,
                                    message=msg, timings=timings, attempts=(attempt,), in_front=in_front,
-                                   depths=rep.depths, residuals=rep.residuals, inliers=inliers)
+                                   depths=rep.depths, residuals=told.residuals, inliers=inliers)
 
 
 def triangulate_robust(cams: np.ndarray, regions, c: np.ndarray, opts, t0: float | None = None) -> TriangulationResult:

@@ -56,6 +56,8 @@ import numpy as np
 
 from sospoly.analysis import verify_quadratic_batch
 
+from ..model.cameras import power2_scale
+from ..model.exact import dot2
 from ..model.normalize import RHO_FLOOR_REL, SCALE_BOUNDS, Normalization
 from ..model.stacked import (damped_step, dlt_stack, epipolar_quadratics, fundamental_stack, gauss_newton_polish,
                              next_damping, norms,
@@ -130,14 +132,14 @@ to the mean camera centre), d the median distance
     median pixel scale, s clipped to ``SCALE_BOUNDS``).  Any frame gives exact identities (module docstring);
     this one only conditions the numbers.  None where it cannot be formed (the caller runs the search, whose
     normalisation handles degenerate data)."""
-    C = C / norms(C, axis=(1, 2))[:, None, None]
+    C = C / power2_scale(C, (1, 2))                        # exact: a georeferenced centre stays where it is
     a = null_vectors(C)
     if np.any(np.abs(a[:, 3]) <= 1e-12 * norms(a, axis=1)):
         return None                                        # a centre at infinity
     centres = a[:, :3] / a[:, 3:]
     c0 = np.mean(centres, axis=0)                          # the DLT in a world centred on the cameras: georeferenced
-    Cc = C.copy()                                          # coordinates (1e6 m) would drown its linear system
-    Cc[..., 3] += C[..., :3] @ c0
+    Cc = C.copy()                                          # coordinates (1e6 m) would drown its linear system;
+    Cc[..., 3] = dot2(C[..., :3], np.broadcast_to(c0, (len(C), 3, 3)), C[..., 3])   # exact up to one rounding
     X0, ok = dlt_stack(Cc[None], x[None])
     if not ok[0] or not np.all(np.isfinite(X0)):
         return None

@@ -45,15 +45,18 @@ def behind_message(depths) -> str:
 
 
 def report_point(ctx: PointContext, step: Step, status, optimal, gamma_lb, *, X, X_raw, image_points,
-                 certified_by, n_lmivar=None) -> TriangulationResult:
-    """The result of the estimate ``X`` under ``step`` (module docstring)."""
+                 certified_by, n_lmivar=None, lowered: bool = False) -> TriangulationResult:
+    """The result of the estimate ``X`` under ``step`` (module docstring); ``lowered``: ``gamma_lb`` is already a
+    bound of the caller's data (:func:`tritools.solve.decide.gamma_lower`, done by the batch paths)."""
     rep = point_report(X, ctx.cams, ctx.regions, ctx.opts.world_frame)
     same = X_raw is X or (X_raw is not None and X is not None and np.array_equal(X_raw, X))
     raw = rep if same else point_report(X_raw, ctx.cams, ctx.regions)     # gamma only: the frame is irrelevant
     msg = ""
     if gamma_lb is not None and rep.gamma is not None and np.isfinite(rep.gamma):
         # of the caller's float data (the normalisation's round-off), never above the reported upper bound
-        gamma_lb = min(gamma_lower(gamma_lb, rep.gamma, ctx.norm.scale, ctx.norm.resolution), rep.gamma)
+        if not lowered:
+            gamma_lb = gamma_lower(gamma_lb, rep.gamma, ctx.norm.scale, ctx.norm.resolution)
+        gamma_lb = min(gamma_lb, rep.gamma)
         if optimal:                                  # the decision again, on the numbers reported
             optimal = decide_reported(gamma_lb, rep.gamma, ctx.tolerances, ctx.N, ctx.norm.scale,
                                       ctx.norm.resolution)

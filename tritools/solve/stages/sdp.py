@@ -201,9 +201,9 @@ def _batched(ctx: PointContext, st: StepState) -> bool:
     if not b.done[0]:
         return False
     opt = bool(b.optimal[0])
-    res = report_point(ctx, st.step, Status(b.status[0]), opt, float(b.gamma_lb[0]), X=b.X[0], X_raw=b.X_raw[0],
-                       image_points=b.image_points[0], certified_by=b.certified_by[0] if opt else None,
-                       n_lmivar=b.n_lmivar)
+    res = report_point(ctx, st.step, Status(b.status[0]), opt, float(b.gamma_lb[0]), lowered=True, X=b.X[0],
+                       X_raw=b.X_raw[0], image_points=b.image_points[0],
+                       certified_by=b.certified_by[0] if opt else None, n_lmivar=b.n_lmivar)
     ctx.attempts.append(Attempt(st.step.method.value, 2, res.status.value, res.gamma_lb, res.gamma_ub,
                                 AttemptStep.SDP_BATCH, "dense", ("ipm-batch:converged",),
                                 time.perf_counter() - st.t0))

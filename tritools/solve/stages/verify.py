@@ -138,7 +138,7 @@ def _verify_discs(ctx: PointContext, step: Step) -> TriangulationResult | None:
     if not b.certified[0]:
         return None
     K = ctx.N * (ctx.N - 1) // 2
-    return report_point(ctx, step, Status.OPTIMAL, True, float(b.gamma_lb[0]), X=b.X[0], X_raw=b.X[0],
+    return report_point(ctx, step, Status.OPTIMAL, True, float(b.gamma_lb[0]), lowered=True, X=b.X[0], X_raw=b.X[0],
                         image_points=b.image_points[0], certified_by="verification",
                         n_lmivar=sospoly.n_lmivar_formula(4 * ctx.N, 2, [2] * K, [2] * ctx.N))
 
@@ -157,7 +157,7 @@ def _verify_ellipses(ctx: PointContext, step: Step) -> TriangulationResult | Non
         return None
     K = ctx.N * (ctx.N - 1) // 2
     n_ell = int(np.count_nonzero(np.any(D[0], axis=(1, 2))))
-    return report_point(ctx, step, Status.OPTIMAL, True, float(b.gamma_lb[0]), X=b.X[0], X_raw=b.X[0],
+    return report_point(ctx, step, Status.OPTIMAL, True, float(b.gamma_lb[0]), lowered=True, X=b.X[0], X_raw=b.X[0],
                         image_points=b.image_points[0], certified_by="verification",
                         n_lmivar=sospoly.n_lmivar_formula(2 * ctx.N + 2 * n_ell, 2, [2] * K, [2] * n_ell))
 

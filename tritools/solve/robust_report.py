@@ -1,0 +1,75 @@
+"""The numbers a TLS result reports, and the last checks of its certificate (issue #19, review 7 F1/F2).
+
+Every TLS path (the enumeration of :mod:`tritools.solve.robust_enum`, the branch and bound of
+:mod:`tritools.solve.robust`, single calls and batches) ends in :meth:`TlsSearch.result`, which takes these from
+here, in the caller's frame and units, by the L2 path's rules (:mod:`tritools.solve.report`,
+:func:`tritools.solve.decide.decide_reported`):
+
+* gamma_UB = sqrt(f_TLS(X) / 2N) at the float estimate X, with f_TLS = sum_i min(d_i(X), c_i)^2 from compensated
+  projections, each distance enlarged by its round-off bound before truncation and the sum rounded up
+  (:func:`tritools.solve.report.gamma_upper`): an upper bound of gamma*_TLS of the given float data.
+* gamma_LB from the search's bound in pixels^2, lowered by the normalisation's round-off
+  (:func:`tritools.solve.decide.gamma_lower`), never above gamma_UB.
+* The certificate, decided by the search in c units on its scale S = min(c^2, rho^2), must also pass on these
+  numbers (the same rule) and the L2 path's two guards: a gap that passes only through the absolute part of the
+  rule must be within
+  the coordinates' resolution (``RESOLUTION_REL`` max(1, median |x_i|) pixels; thresholds far above the
+  residuals make S = c^2 large, and without it a 250 px gap at 1e10 px coordinates certified), and the estimate's
+  own rounding must not move the projections by more than that resolution
+  (:func:`tritools.solve.report.rounding_spread`; a point near the cameras' principal planes seen 1e8 px off-axis
+  moves 0.5 px per unit in the last place, and bounds from a normalised frame then describe another problem:
+  gamma_LB is then reported as 0).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..model.frame import project_world
+from ..model.normalize import RESOLUTION_REL
+from ..model.stacked import norms
+from .decide import gamma_from_c, gamma_lower
+from .report import gamma_upper, rounding_spread
+
+__all__ = ["TlsReported", "tls_reported"]
+
+
+@dataclass(frozen=True)
+class TlsReported:
+    gamma_lb: float
+    gamma_ub: float
+    residuals: np.ndarray          # (N,) d_i(X), inf where the projection is undefined
+    inliers: np.ndarray            # (N,) d_i(X) < c_i
+    holds: bool                    # the certificate passes on the reported numbers (module docstring)
+    reason: str                    # why not, when it does not
+
+
+def tls_reported(C: np.ndarray, centres: np.ndarray, residuals, X, c: np.ndarray, lb: float, tolerances,
+                 scale: float, certified: bool) -> TlsReported:
+    """The reported bounds and checks of a TLS result at X (module docstring): cameras C (N, 3, 4), the regions'
+    centres (N, 2) (their magnitude sets the resolution), ``residuals`` the distances d_i(X) or None for point
+    regions (computed here from compensated projections; ``centres`` are then the points), ``lb`` the search's
+    bound of f*_TLS (pixels^2), ``scale`` the rule's scale S, ``certified`` its decision."""
+    N = len(C)
+    u, _, fin = project_world(np.asarray(C, float)[None], np.asarray(X, float)[None])
+    u = u[0] if fin[0] else np.full((N, 2), np.inf)
+    if residuals is None:
+        residuals = norms(u - centres, axis=1)
+    res = np.where(np.isfinite(residuals), residuals, np.inf)
+    g_ub = float(gamma_upper(np.where(np.isfinite(res), res, c), norms(np.where(np.isfinite(u), u, 0.0), axis=1),
+                             cap=c))
+    resolution = RESOLUTION_REL * max(1.0, float(np.median(np.abs(centres))))
+    g_lb = min(float(gamma_lower(gamma_from_c(max(lb, 0.0), N, 1.0), g_ub, 1.0, resolution)), g_ub)
+    holds, reason = certified, ""
+    f_lb, f_ub = 2.0 * N * g_lb * g_lb, 2.0 * N * g_ub * g_ub
+    if not rounding_spread(C, X) <= resolution:         # no bound from a normalised frame is known to hold
+        holds, g_lb = False, 0.0
+        reason = "the estimate's own rounding moves its projections by more than the coordinates' resolution " \
+                 f"({resolution:.3g} px): the float data cannot certify this optimum"
+    elif certified and not (tolerances.certified(f_lb, f_ub, scale) and
+                            (tolerances.certified_relatively(f_lb, f_ub) or g_ub - g_lb <= resolution)):
+        holds, reason = False, "the bounds met on the search's scale, but their gap exceeds the coordinates' " \
+                               f"resolution ({resolution:.3g} px)"
+    return TlsReported(g_lb, g_ub if math.isfinite(g_ub) else math.inf, residuals, res < c, holds, reason)

@@ -116,7 +116,7 @@ def test_stack_of_one_normalises_as_a_stack_of_many_up_to_round_off(name, C, x):
     refined point Xn itself at the same cost (relative 1e-7) and within 1e-4: on a georeferenced world normalised
     without re-centring (the per-point path re-centres first) both LMs stop by the step rule on a flat valley
     short of the minimum (another run lowers the cost by up to 6%, the stacked code's behaviour, not the twin's),
-    at points 1e-6 apart."""
+    at points 1e-6 apart, and whether each calls that converged may differ there."""
     M = len(x)
     many = NZ.normalization_stack(np.broadcast_to(C, (M,) + C.shape).copy(), x)
     for m in range(M):
@@ -124,6 +124,8 @@ def test_stack_of_one_normalises_as_a_stack_of_many_up_to_round_off(name, C, x):
         one = NZ.normalization_stack(C[None].copy(), x[m:m + 1].copy())
         for name_, a, b in zip(("scale", "shifts", "origin", "depth", "cameras_n", "Xn", "ok", "resolution",
                                 "converged"), _fields(one), _fields(many, slice(m, m + 1))):
+            if name_ == "converged" and "geo" in name:
+                continue        # LM's step rule on the flat valley of a world normalised without re-centring
             if a.dtype == bool:
                 assert np.array_equal(a, b), name_
             elif name_ == "Xn":

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["two_sum", "two_prod", "dot2", "accurate_homogeneous", "CANCELLATION_RATIO"]
+__all__ = ["two_sum", "two_prod", "dot2", "accurate_homogeneous", "homogeneous_images", "CANCELLATION_RATIO"]
 
 #: a sum of products is recomputed by :func:`dot2` when the sum of its terms' magnitudes exceeds this many times
 #: its magnitude (more than ~3 bits lost to cancellation).
@@ -47,3 +47,17 @@ def accurate_homogeneous(P: np.ndarray, Xh: np.ndarray) -> np.ndarray:
     :func:`dot2` (each row a compensated dot product)."""
     Xb = np.broadcast_to(Xh, P.shape)
     return dot2(P, Xb, np.zeros(P.shape[:-1]))
+
+
+def homogeneous_images(C: np.ndarray, Xh: np.ndarray) -> np.ndarray:
+    """P_i X~ (..., N, 3) for cameras C (..., N, 3, 4) and homogeneous points Xh (..., 4): the plain sum, recomputed
+    by :func:`dot2` in the views where it cancels (|P_i| |X~| > CANCELLATION_RATIO |P_i X~| in some row; a
+    georeferenced world), decided per view so that a problem gets the same numbers alone or in a stack."""
+    h = np.einsum("...nij,...j->...ni", C, Xh)
+    mag = np.einsum("...nij,...j->...ni", np.abs(C), np.abs(Xh))
+    with np.errstate(invalid="ignore"):
+        idx = np.nonzero(~np.all(mag <= CANCELLATION_RATIO * np.abs(h), axis=-1))
+    if idx[0].size:
+        Xb = np.broadcast_to(Xh[..., None, :], C.shape[:-2] + (4,))
+        h[idx] = accurate_homogeneous(C[idx], Xb[idx][..., None, :])
+    return h

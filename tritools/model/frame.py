@@ -21,7 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .cameras import power2_scale
-from .exact import CANCELLATION_RATIO, accurate_homogeneous, dot2 as _dot2
+from .exact import dot2 as _dot2, homogeneous_images
 from .stacked import norms, project_quiet
 
 __all__ = ["WorldFrame", "world_frame", "world_origins", "moved_cameras", "recentred", "project_world",
@@ -156,12 +156,7 @@ def project_world(C: np.ndarray, X: np.ndarray) -> tuple:
     batch.  Then the same rule: (u (M, N, 2), h, finite (M,)).  The reported gamma_UB rests on it
     (:func:`tritools.solve.report.gamma_upper`)."""
     with np.errstate(over="ignore", invalid="ignore"):
-        Xh = np.concatenate([X, np.ones((len(X), 1))], axis=1)
-        h = np.einsum("mnij,mj->mni", C, Xh)
-        mag = np.einsum("mnij,mj->mni", np.abs(C), np.abs(Xh))
-        m, n = np.nonzero(~np.all(mag <= CANCELLATION_RATIO * np.abs(h), axis=2))   # per view of a problem
-        if m.size:
-            h[m, n] = accurate_homogeneous(C[m, n], Xh[m][:, None, :])
+        h = homogeneous_images(C, np.concatenate([X, np.ones((len(X), 1))], axis=1))
         return project_quiet(C, X, h=h)
 
 

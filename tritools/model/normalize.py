@@ -47,6 +47,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .exact import homogeneous_images
 from .cameras import power2_scale
 from .geometry import COMMON_CENTRE_RTOL, POINT_AT_INFINITY_RTOL, point_from_image_points
 from .stacked import (dlt_stack, median_rows, norms, null_vectors, pixel_scales, project_one, project_quiet,
@@ -301,7 +302,7 @@ def _frame_one(P: np.ndarray, xi: np.ndarray, X0: np.ndarray) -> tuple | None:
     d = max(d, DEPTH_FLOOR_REL * max(1.0, math.sqrt(float(X0 @ X0)))) if d > 0 else 1.0
     CH = P.copy()
     CH[..., :3] *= d
-    CH[..., 3] = P @ np.append(X0, 1.0)
+    CH[..., 3] = homogeneous_images(P, np.append(X0, 1.0))
     Cn = CH.copy()
     Cn[:, :2, :] = s * (CH[:, :2, :] - xi[..., None] * CH[:, 2:3, :])
     Cn /= norms(Cn, axis=(1, 2))[:, None, None]
@@ -340,7 +341,7 @@ def _frames(C: np.ndarray, x: np.ndarray, X0: np.ndarray, ok: np.ndarray, rho_fl
     Xh = np.concatenate([X0, np.ones((M, 1))], axis=1)
     CH = C.copy()
     CH[..., :3] *= d[:, None, None, None]
-    CH[..., 3] = np.einsum("mnij,mj->mni", C, Xh)
+    CH[..., 3] = homogeneous_images(C, Xh)             # compensated where it cancels: an exact change of frame
     Cn = CH.copy()
     Cn[:, :, :2, :] = s[:, None, None, None] * (CH[:, :, :2, :] - x[..., None] * CH[:, :, 2:3, :])
     Cn /= norms(Cn, axis=(2, 3))[..., None, None]

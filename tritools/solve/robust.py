@@ -73,7 +73,7 @@ from ..result import Attempt, Status, TriangulationResult
 from .decide import cheirality, gamma_from_c
 from .report import PointReport, point_report
 from .trivial import local_estimate
-from . import robust_bounds, robust_suspects
+from . import robust_bounds, robust_futile, robust_suspects
 from .robust_bounds import ROUND_DOWN, SubsetBounds
 from .robust_drive import drive
 from .robust_loo import leave_one_out
@@ -194,6 +194,7 @@ class TlsSearch(NodeBounds):
         self.loo_lb = 0.0                            # leave_one_out / suspect bound (candidates), where computed
         self._absC2 = None                           # |third rows| of the cameras (point_distances2_one)
         self.drows = None                           # depth rows of the cameras (report; a batch sets them)
+        self.futile_leaf = None                     # (inlier set, its leaf bound) that fired the rule
 
     @property
     def regions(self) -> list:
@@ -318,7 +319,9 @@ class TlsSearch(NodeBounds):
             self.offer(self.bounds.estimate(full))
             if self.best_X is not None and self.meets(self.root_bound()):
                 return                          # certified by the L2 certificate of all views: no search needed
-            if self.best_S == full and self.N >= 3 and robust_bounds.PACKING and robust_suspects.ENABLED:
+            if robust_futile.settle_best_set(self):
+                pass                            # its own L2 path gives up on the best inlier set: candidates only
+            elif self.best_S == full and self.N >= 3 and robust_bounds.PACKING and robust_suspects.ENABLED:
                 self.loo_lb = yield from leave_one_out(self, full, 0.0)       # its sub-bounds from halves first
             elif self.best_S == full and self.N >= 3 and robust_bounds.PACKING:
                 yield from self.verify_first(*[full - {j} for j in range(self.N)])
@@ -326,7 +329,7 @@ class TlsSearch(NodeBounds):
                 self.loo_lb = self.leave_one_out_bound()
                 if self.meets(self.loo_lb):
                     return                      # every view an inlier, and dropping any costs at least as much
-        if robust_suspects.ENABLED and robust_bounds.PACKING:           # a few wrong matches: O(N) sub-problems
+        if robust_suspects.ENABLED and robust_bounds.PACKING and self.futile_leaf is None:  # a few wrong matches
             self.loo_lb = max(self.loo_lb, (yield from robust_suspects.suspect_bound(self)))
             if self.meets(self.loo_lb):
                 return
@@ -418,6 +421,9 @@ class TlsSearch(NodeBounds):
                     self.offer_new()
                 if not self.meets(lb) or lb < self.best_f:
                     floor = min(floor, lb)
+                if robust_futile.leaf_futile(self, I, lb):
+                    stopped = robust_futile.FUTILE
+                    break
                 continue
             u = U[0]
             stack.append((I, O | {u}, c2_out + self.c2[u], k + 1, lb, lb_I, a))
@@ -445,7 +451,9 @@ class TlsSearch(NodeBounds):
             self.offer_new()
         lb, stopped = max(self.root_bound() if self.bounds.known(frozenset(range(self.N))) else 0.0,
                           self.loo_lb), None
-        if not self.meets(lb):
+        if not self.meets(lb) and robust_futile.blocks(self):
+            stopped = robust_futile.FUTILE          # lb (root / leave-one-out) stays valid
+        elif not self.meets(lb):
             order = branching_order(self.residuals(self.best_X) / self.c)
             yield from self.anchor_bounds(order)
             lb_bb, stopped = yield from self.search(order)
@@ -471,7 +479,9 @@ class TlsSearch(NodeBounds):
         status, in_front = cheirality(status, rep.depths[inliers], self.opts.require_in_front)
         msg = f"TLS: {int(inliers.sum())}/{self.N} inliers, {self.nodes} nodes, {self.bounds.n_solved} L2 " \
               f"sub-problems"
-        if stopped:
+        if stopped == robust_futile.FUTILE:
+            msg += f"; {robust_futile.futile_message(self)}"
+        elif stopped:
             msg += f"; stopped by the {stopped}"
         image_points = np.where(np.isfinite(rep.residuals)[:, None], projections(X, self.C), np.nan)
         attempt = Attempt("tls", None, status.value, gamma_lb, gamma_ub, "branch-and-bound", None, (),

@@ -62,6 +62,9 @@ SPLIT_TRIES = 6
 #: :meth:`SubsetBounds.strengthen` solves a weak subset (its delta = 2 bound known) with the degree plan from this
 #: degree on: the verification and delta = 2 steps again cost 2-8x the delta = 4 step and decide nothing new.
 FULL_FROM_DELTA = 4
+#: statuses of a full-plan sub-problem whose bound no later solve raises (``SubsetBounds.exhausted``): the plan ran
+#: out of degrees or its solver failed at the top one, not a time or memory limit
+EXHAUSTED = frozenset({Status.NOT_CERTIFIED, Status.SOLVER_FAILED, Status.NUMERICAL_FAILURE})
 #: time limit (seconds) of one sub-problem solved by :func:`tritools.triangulate` (capped by the caller's deadline)
 SUB_TIME_LIMIT = 10.0
 
@@ -89,6 +92,9 @@ class SubsetBounds:
         self._X: dict = {}
         self.n_solved = 0
         self.weak: set = set()                 # subsets bounded by a light solve that did not certify
+        #: subsets whose bound is the L2 path's last word (:mod:`tritools.solve.robust_futile`): the full degree plan
+        #: ended not_certified, or no Corollary 1 degree can raise the bound (coplanar centres)
+        self.exhausted: set = set()
         self.new_estimates: list = []          # (subset, X) produced since the caller last read them
         #: a lower bound at or above this value serves the caller as well as any larger one (module docstring)
         self.enough = math.inf
@@ -217,6 +223,7 @@ class SubsetBounds:
         views = sorted(S)                 # coplanar centres: no Corollary 1 degree can certify (solve.coplanar)
         if subset_futile(self.C[views], [self.regions[i] for i in views], self.opts, old, self._X.get(S)):
             self._lb[S] = max(old, split)
+            self.exhausted.add(S)
             return split > old
         self._lb.pop(S)
         # a batched SDP that handed S back left no delta = 2 bound: with coplanar centres the plan from delta = 2,
@@ -310,6 +317,8 @@ class SubsetBounds:
             lb = 2 * len(views) * max(res.gamma_lb, 0.0) ** 2 * ROUND_DOWN
         if light and not res.status.certified:
             self.weak.add(S)
+        if not light and res.status in EXHAUSTED:    # the plan ran out, not at a time or memory limit
+            self.exhausted.add(S)
         self._store(S, lb, res.X)
 
     def _store(self, S: frozenset, lb: float, X) -> None:

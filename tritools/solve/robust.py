@@ -195,6 +195,7 @@ class TlsSearch(NodeBounds):
         self._absC2 = None                           # |third rows| of the cameras (point_distances2_one)
         self.drows = None                           # depth rows of the cameras (report; a batch sets them)
         self.futile_leaf = None                     # (inlier set, its leaf bound) that fired the rule
+        self.covered = set()                        # suspect sets O whose cover bound was taken (robust_suspects)
 
     @property
     def regions(self) -> list:
@@ -449,6 +450,8 @@ class TlsSearch(NodeBounds):
         if not self.meets(self.loo_lb):                 # certified by the candidate stage: no root bound needed
             yield from self.need([frozenset(range(self.N))])
             self.offer_new()
+        if not self.meets(self.loo_lb) and robust_suspects.ENABLED and robust_bounds.PACKING:
+            self.loo_lb = max(self.loo_lb, (yield from robust_suspects.cover_bound(self)))   # many wrong matches
         lb, stopped = max(self.root_bound() if self.bounds.known(frozenset(range(self.N))) else 0.0,
                           self.loo_lb), None
         if not self.meets(lb) and robust_futile.blocks(self):

@@ -17,14 +17,45 @@ with the cube of its size, so these are several times cheaper than the |W| sets 
 degrees of freedom of the fit (the two halves are fitted separately), which matters only where the term is tight;
 the sets W - k whose split term does not meet the best value are then verified themselves, and the larger bound
 kept.  Sub-bounds the verification does not certify count 0; the result is rounded down.
+
+Groups (review 6, finding F5).  The term above caps what an X with an outlier k pays on the rest at min c^2 (the
+root bound of W - k): once L2*(W) exceeds about 2 min c^2 -- long tracks, thresholds a few times the noise -- it
+cannot reach L2LB(W).  The *group bound* charges every outlier of W instead.  Split W into disjoint groups
+G_1, ..., G_m.  For an X with outlier set K = W - T(X) (K != {}), f_W(X) = sum_g f_G(X) with
+f_G(X) = sum_{i in G} min(d_i(X)^2, c_i^2), and for each group
+
+    K n G = {}:        f_G(X) = sum_G d_i^2                    >= in_G  = L2LB(G),
+    K n G = {k}:       f_G(X) = c_k^2 + sum_{G - k} d_i^2      >= c_k^2 + L2LB(G - k),
+    |K n G| >= 2:      f_G(X) >= c^2(K n G)                    >= the two smallest c_i^2 of G,
+
+so with e_G = min(min_k [c_k^2 + L2LB(G - k)], two smallest c_i^2 of G) (a group holding an outlier) and the
+nonempty set H of the groups K meets (the views outside the groups of H are all inliers of X),
+
+    TLS*(W) >= min( L2LB(W),  min_{H != {}} [ sum_{g in H} e_g + max(L2LB(W - G_H), sum_{g not in H} in_g) ] ),
+
+G_H the union of the groups of H.  The complements W - G_H are asked for |H| = 1 and 2 only (m and m(m - 1)/2
+sets); for |H| >= 3 the sum of in_g stands, and the minimum over those H takes every group with e_g < in_g,
+completed to three groups by the smallest e_g - in_g.  It needs the m groups, the |W| sets G - k of about
+|W| / m views and the complements.  Splitting costs about three squared noise
+units per group (each group fits its own point), so m = 2 comes first (the halves above: the same sub-bounds,
+and never weaker than their split term), then m = 4, 8, 16 where that does not meet the best value
+(:func:`group_counts`: fewer groups lose less to the split, more groups keep each group's cost below 2 min c^2,
+where a second outlier in it is charged).
 """
 from __future__ import annotations
+
+import itertools
 
 import numpy as np
 
 from .robust_bounds import ROUND_DOWN
 
-__all__ = ["leave_one_out", "halves"]
+__all__ = ["leave_one_out", "halves", "groups", "group_bound", "group_counts", "MAX_GROUPS", "GROUPS"]
+
+#: the group bound tries at most this many groups (module docstring)
+MAX_GROUPS = 16
+#: False: no group bound, the halves' leave-one-out term only (the tests compare the two)
+GROUPS = True
 
 
 def halves(W: frozenset) -> tuple:
@@ -41,6 +72,13 @@ def leave_one_out(search, W: frozenset, c2_out: float):
     A, B = halves(W)
     yield from search.verify_first(A, B, *[A - {k} for k in sorted(A)], *[B - {k} for k in sorted(B)])
     sub = {k: _split(b, A - {k}, B) if k in A else _split(b, A, B - {k}) for k in W}
+    grouped = (c2_out + min(lw, _groups_term(search, (A, B), W))) * ROUND_DOWN if GROUPS else 0.0
+    if search.meets(grouped):
+        return grouped
+    for m in group_counts(search, W) if GROUPS else ():
+        grouped = max(grouped, (yield from group_bound(search, W, c2_out, m)))
+        if search.meets(grouped):
+            return grouped
     weak = [k for k in sorted(W) if not search.meets(_term(search, W, k, sub[k], c2_out))]
     if weak:
         yield from search.verify_first(*[W - {k} for k in weak])
@@ -49,7 +87,80 @@ def leave_one_out(search, W: frozenset, c2_out: float):
             if b.known(W - {k}):
                 sub[k] = max(sub[k], b.bound(W - {k}))
     terms = [c2_out + lw] + [_term(search, W, k, sub[k], c2_out) for k in sorted(W)]
-    return min(terms) * ROUND_DOWN
+    return max(min(terms) * ROUND_DOWN, grouped)
+
+
+def groups(search, W: frozenset, m: int) -> tuple:
+    """W split into m disjoint groups of about equal cost at the best candidate: the views by decreasing
+    d_i^2 (capped at c_i^2), dealt in a snake order (0, 1, ..., m - 1, m - 1, ..., 0, ...)."""
+    d2 = np.minimum(search.residuals(search.best_X) ** 2, search.c2) if search.best_X is not None else \
+        np.zeros(search.N)
+    idx = sorted(W, key=lambda i: (-d2[i] if np.isfinite(d2[i]) else -np.inf, i))
+    out = [[] for _ in range(m)]
+    for r, i in enumerate(idx):
+        lap, pos = divmod(r, m)
+        out[pos if lap % 2 == 0 else m - 1 - pos].append(i)
+    return tuple(frozenset(g) for g in out if g)
+
+
+def group_counts(search, W: frozenset) -> list:
+    """The group counts m > 2 that :func:`group_bound` tries, in order (module docstring): 4, 8, ... while the
+    groups keep at least three views, up to :data:`MAX_GROUPS`, and only where the best candidate's cost on W,
+    sum of min(d_i^2, c_i^2), exceeds the smallest c_i^2 of W (else the halves, m = 2, are the right split)."""
+    if search.best_X is None or len(W) < 12:
+        return []
+    idx = sorted(W)
+    d2 = np.minimum(search.residuals(search.best_X)[idx] ** 2, search.c2[idx])
+    c2_min = float(np.min(search.c2[idx]))
+    if not (np.all(np.isfinite(d2)) and np.isfinite(c2_min) and float(np.sum(d2)) > c2_min):
+        return []
+    return [m for m in (4, 8, 16) if m <= MAX_GROUPS and 3 * m <= len(W)]
+
+
+def group_bound(search, W: frozenset, c2_out: float, m: int):
+    """Generator (:meth:`tritools.solve.robust.TlsSearch.need` requests): c2_out + the group bound of TLS*(W) with
+    m groups (module docstring), rounded down; verification only (unknown sub-bounds count 0)."""
+    b = search.bounds
+    parts = groups(search, W, m)
+    yield from search.verify_first(*parts, *[G - {k} for G in parts for k in sorted(G)],
+                                   *([W - G for G in parts] if m > 2 else []))
+    search.offer_new()
+    lw = b.bound(W) if b.known(W) else 0.0
+    bound = (c2_out + min(lw, _groups_term(search, parts, W))) * ROUND_DOWN
+    if m > 3 and not search.meets(bound):          # two groups hit: the complements of every pair of groups
+        yield from search.verify_first(*[W - (G | H) for G, H in itertools.combinations(parts, 2)])
+        bound = max(bound, (c2_out + min(lw, _groups_term(search, parts, W))) * ROUND_DOWN)
+    return bound
+
+
+def _groups_term(search, parts: tuple, W: frozenset | None = None) -> float:
+    """min over the nonempty sets H of groups of the bound of an X whose outliers in W meet exactly the groups H
+    (module docstring), from the cached bounds (unknown: 0); not rounded.  One or two groups hit: sum_{g in H} e_g
+    plus the larger of L2LB(W - union of H) (the complement, where cached) and sum of in_g over the other groups;
+    three or more: sum_{g in H} e_g + sum_{g not in H} in_g, smallest for the groups with e_g < in_g, completed to
+    three groups by the smallest e_g - in_g."""
+    b = search.bounds
+    inside, hit = [], []
+    for G in parts:
+        inside.append(b.bound(G) if b.known(G) else 0.0)
+        one = min(float(search.c2[k]) + (b.bound(G - {k}) if b.known(G - {k}) else 0.0) for k in G)
+        two = float(np.sum(np.sort(search.c2[sorted(G)])[:2])) if len(G) >= 2 else np.inf
+        hit.append(min(one, two))
+    m = len(parts)
+    terms = []
+    for H in itertools.chain(itertools.combinations(range(m), 1), itertools.combinations(range(m), 2)):
+        rest = sum(inside[g] for g in range(m) if g not in H)
+        union = frozenset().union(*(parts[g] for g in H))
+        if W is not None and b.known(W - union):
+            rest = max(rest, b.bound(W - union))
+        terms.append(sum(hit[g] for g in H) + rest)
+    if m >= 3:
+        with np.errstate(invalid="ignore"):
+            delta = np.array(hit) - np.array(inside)      # only to choose H (inf - finite = inf)
+        order = [int(g) for g in np.argsort(delta, kind="stable")]
+        H = {g for g in order if delta[g] < 0} | set(order[:3])
+        terms.append(sum(hit[g] if g in H else inside[g] for g in range(m)))     # sums of terms >= 0
+    return float(min(terms))
 
 
 def _split(b, P: frozenset, Q: frozenset) -> float:

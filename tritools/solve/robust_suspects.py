@@ -37,7 +37,8 @@ from . import robust_bounds
 from .robust_bounds import ROUND_DOWN
 from .robust_loo import leave_one_out
 
-__all__ = ["skip_full", "suspect_bound", "ENABLED", "MAX_SUSPECTS", "PAIRS_FIRST", "ROUNDS", "SMALL_N"]
+__all__ = ["skip_full", "suspect_bound", "cover_bound", "cover", "ENABLED", "MAX_SUSPECTS", "PAIRS_FIRST", "ROUNDS",
+           "SMALL_N"]
 
 #: False skips the stage (the tests compare the two).
 ENABLED = True
@@ -73,7 +74,6 @@ def suspect_bound(search):
     the suspect-set cover (module docstring); 0.0 where the stage does not apply.  The pairs' estimates (two-view
     fits, rarely good TLS candidates) are not screened here: they stay queued for the full search, if it runs."""
     N = search.N
-    full = frozenset(range(N))
     if N < 3:
         return 0.0
     if search.best_X is None and search.bounds.frame() is not None:     # all views not verified: the parent's
@@ -82,7 +82,29 @@ def suspect_bound(search):
     O = yield from _suspects(search)
     if O is None:
         return 0.0
-    W = full - O
+    return (yield from cover(search, O))
+
+
+def cover_bound(search):
+    """Generator: the cover bound (module docstring) with O the best candidate's outlier views, of any number
+    (review 6, finding F5: long tracks with many wrong matches, after the pairs and the local optimisation found
+    the candidate); 0.0 where O is empty, already covered, or leaves fewer than two views.  W = V - O is verified
+    first (its full treatment if that does not certify: it is the best inlier set, whose leaf any certificate
+    needs)."""
+    O = frozenset(range(search.N)) - search.best_S
+    if not O or search.N - len(O) < 2 or O in search.covered:
+        return 0.0
+    W = search.best_S
+    yield from search.verify_first(W)
+    if not search.bounds.known(W):
+        yield from search.need([W])
+    return (yield from cover(search, O))
+
+
+def cover(search, O: frozenset):
+    """Generator: min(min_{j in O} LB(node {j}), c^2(O) + TLS*(V - O)) (module docstring) for the suspects O."""
+    search.covered.add(O)
+    W = frozenset(range(search.N)) - O
     r = search.residuals(search.best_X) / search.c             # partners: W's most confident inliers first
     order = sorted(W, key=lambda u: (r[u] if np.isfinite(r[u]) else np.inf, u)) + sorted(O)
     for part in (order[:PAIRS_FIRST], order[PAIRS_FIRST:]):

@@ -33,27 +33,33 @@ nonempty set H of the groups K meets (the views outside the groups of H are all 
 
     TLS*(W) >= min( L2LB(W),  min_{H != {}} [ sum_{g in H} e_g + max(L2LB(W - G_H), sum_{g not in H} in_g) ] ),
 
-G_H the union of the groups of H.  The complements W - G_H are asked for |H| = 1 and 2 only (m and m(m - 1)/2
-sets); for |H| >= 3 the sum of in_g stands, and the minimum over those H takes every group with e_g < in_g,
-completed to three groups by the smallest e_g - in_g.  It needs the m groups, the |W| sets G - k of about
-|W| / m views and the complements.  Splitting costs about three squared noise
-units per group (each group fits its own point), so m = 2 comes first (the halves above: the same sub-bounds,
-and never weaker than their split term), then m = 4, 8, 16 where that does not meet the best value
+G_H the union of the groups of H; where one group holds exactly one outlier k, also c_k^2 + L2LB(W - k) (asked
+for the views k whose term the groups leave open).  The complements W - G_H are asked for |H| = 1, 2, ..., h
+while there are at most :data:`MAX_COMPLEMENTS` of them (m = 4: h = 4; m = 8: h = 3; m = 16: h = 2); for
+|H| > h the sum of in_g stands, and the minimum over those H takes every group with e_g < in_g, completed to
+h + 1 groups by the smallest e_g - in_g.  It needs the m groups, the |W| sets G - k of about |W| / m views and
+the complements, asked level by level while the bound does not meet the best value.  Splitting costs about three
+squared noise units per group (each group fits its own point), so m = 2 comes first (the halves above: the same
+sub-bounds, and never weaker than their split term), then m = 4, 8, 16 where that does not meet the best value
 (:func:`group_counts`: fewer groups lose less to the split, more groups keep each group's cost below 2 min c^2,
 where a second outlier in it is charged).
 """
 from __future__ import annotations
 
 import itertools
+import math
 
 import numpy as np
 
 from .robust_bounds import ROUND_DOWN
 
-__all__ = ["leave_one_out", "halves", "groups", "group_bound", "group_counts", "MAX_GROUPS", "GROUPS"]
+__all__ = ["leave_one_out", "halves", "groups", "group_bound", "group_counts", "MAX_GROUPS", "MAX_COMPLEMENTS",
+           "GROUPS"]
 
 #: the group bound tries at most this many groups (module docstring)
 MAX_GROUPS = 16
+#: the group bound asks for the complements W - G_H of the sets H of h hit groups while there are at most this many
+MAX_COMPLEMENTS = 128
 #: False: no group bound, the halves' leave-one-out term only (the tests compare the two)
 GROUPS = True
 
@@ -66,19 +72,35 @@ def halves(W: frozenset) -> tuple:
 
 def leave_one_out(search, W: frozenset, c2_out: float):
     """Generator (:meth:`tritools.solve.robust.TlsSearch.need` requests): c2_out + the leave-one-out lower bound
-    of TLS*(W) (module docstring), rounded down; L2LB(W) is the cached bound of W (0 if unknown)."""
+    of TLS*(W) (module docstring), rounded down; L2LB(W) is the cached bound of W (0 if unknown).  With
+    :data:`GROUPS` the group bound (halves first, then more groups), whose single-outlier terms take L2LB(W - k)
+    where the groups do not suffice; else the halves' leave-one-out terms."""
     b = search.bounds
     lw = b.bound(W) if b.known(W) else 0.0
     A, B = halves(W)
     yield from search.verify_first(A, B, *[A - {k} for k in sorted(A)], *[B - {k} for k in sorted(B)])
-    sub = {k: _split(b, A - {k}, B) if k in A else _split(b, A, B - {k}) for k in W}
-    grouped = (c2_out + min(lw, _groups_term(search, (A, B), W))) * ROUND_DOWN if GROUPS else 0.0
-    if search.meets(grouped):
-        return grouped
-    for m in group_counts(search, W) if GROUPS else ():
-        grouped = max(grouped, (yield from group_bound(search, W, c2_out, m)))
+    if not GROUPS:
+        return (yield from _halves_only(search, W, c2_out, lw, A, B))
+    parts, grouped = (A, B), (c2_out + min(lw, _groups_term(search, (A, B), W))) * ROUND_DOWN
+    for m in group_counts(search, W):
         if search.meets(grouped):
             return grouped
+        bound, more = yield from _group_bound(search, W, c2_out, m)
+        if bound > grouped:
+            parts, grouped = more, bound
+    if search.meets(grouped):
+        return grouped
+    weak = [k for k in sorted(W) if not search.meets(c2_out + _single(search, parts, W, k))]
+    if weak:                                         # the single-outlier terms the groups leave open: W - k itself
+        yield from search.verify_first(*[W - {k} for k in weak])
+        search.offer_new()
+    return max(grouped, (c2_out + min(lw, _groups_term(search, parts, W))) * ROUND_DOWN)
+
+
+def _halves_only(search, W: frozenset, c2_out: float, lw: float, A: frozenset, B: frozenset):
+    """Generator: the halves' leave-one-out bound alone (no groups; the tests compare the two)."""
+    b = search.bounds
+    sub = {k: _split(b, A - {k}, B) if k in A else _split(b, A, B - {k}) for k in W}
     weak = [k for k in sorted(W) if not search.meets(_term(search, W, k, sub[k], c2_out))]
     if weak:
         yield from search.verify_first(*[W - {k} for k in weak])
@@ -87,7 +109,7 @@ def leave_one_out(search, W: frozenset, c2_out: float):
             if b.known(W - {k}):
                 sub[k] = max(sub[k], b.bound(W - {k}))
     terms = [c2_out + lw] + [_term(search, W, k, sub[k], c2_out) for k in sorted(W)]
-    return max(min(terms) * ROUND_DOWN, grouped)
+    return min(terms) * ROUND_DOWN
 
 
 def groups(search, W: frozenset, m: int) -> tuple:
@@ -120,6 +142,12 @@ def group_counts(search, W: frozenset) -> list:
 def group_bound(search, W: frozenset, c2_out: float, m: int):
     """Generator (:meth:`tritools.solve.robust.TlsSearch.need` requests): c2_out + the group bound of TLS*(W) with
     m groups (module docstring), rounded down; verification only (unknown sub-bounds count 0)."""
+    bound, _ = yield from _group_bound(search, W, c2_out, m)
+    return bound
+
+
+def _group_bound(search, W: frozenset, c2_out: float, m: int):
+    """Generator: (:func:`group_bound`, the groups it used)."""
     b = search.bounds
     parts = groups(search, W, m)
     yield from search.verify_first(*parts, *[G - {k} for G in parts for k in sorted(G)],
@@ -127,18 +155,49 @@ def group_bound(search, W: frozenset, c2_out: float, m: int):
     search.offer_new()
     lw = b.bound(W) if b.known(W) else 0.0
     bound = (c2_out + min(lw, _groups_term(search, parts, W))) * ROUND_DOWN
-    if m > 3 and not search.meets(bound):          # two groups hit: the complements of every pair of groups
-        yield from search.verify_first(*[W - (G | H) for G, H in itertools.combinations(parts, 2)])
+    for h in range(2, _most_hit(m) + 1):           # h groups hit: the complements of every h groups
+        if search.meets(bound) or h >= m - 1:
+            break
+        yield from search.verify_first(*[W - frozenset().union(*H) for H in itertools.combinations(parts, h)])
         bound = max(bound, (c2_out + min(lw, _groups_term(search, parts, W))) * ROUND_DOWN)
-    return bound
+    return bound, parts
+
+
+def _most_hit(m: int) -> int:
+    """The largest number h of hit groups whose complements are asked (:data:`MAX_COMPLEMENTS` sets at most)."""
+    h = 1
+    while h < m and math.comb(m, h + 1) <= MAX_COMPLEMENTS:
+        h += 1
+    return h
+
+
+def _rest(b, parts: tuple, inside: list, W, g: int) -> float:
+    """A lower bound of L2*(W - G_g): the larger of its cached bound and the sum of the other groups' bounds."""
+    rest = sum(inside[h] for h in range(len(parts)) if h != g)
+    if W is not None and b.known(W - parts[g]):
+        rest = max(rest, b.bound(W - parts[g]))
+    return rest
+
+
+def _single(search, parts: tuple, W, k: int) -> float:
+    """The bound of an X whose only outlier in W is k (not rounded): c_k^2 + the larger of L2LB(G - k) +
+    L2LB(W - G) (G the group of k, :func:`_rest`) and L2LB(W - k) where cached."""
+    b = search.bounds
+    inside = [b.bound(G) if b.known(G) else 0.0 for G in parts]
+    g = next(h for h, G in enumerate(parts) if k in G)
+    G = parts[g]
+    split = (b.bound(G - {k}) if b.known(G - {k}) else 0.0) + _rest(b, parts, inside, W, g)
+    whole = b.bound(W - {k}) if W is not None and b.known(W - {k}) else 0.0
+    return float(search.c2[k]) + max(split, whole)
 
 
 def _groups_term(search, parts: tuple, W: frozenset | None = None) -> float:
     """min over the nonempty sets H of groups of the bound of an X whose outliers in W meet exactly the groups H
-    (module docstring), from the cached bounds (unknown: 0); not rounded.  One or two groups hit: sum_{g in H} e_g
-    plus the larger of L2LB(W - union of H) (the complement, where cached) and sum of in_g over the other groups;
-    three or more: sum_{g in H} e_g + sum_{g not in H} in_g, smallest for the groups with e_g < in_g, completed to
-    three groups by the smallest e_g - in_g."""
+    (module docstring), from the cached bounds (unknown: 0); not rounded.  One group hit by one outlier k:
+    :func:`_single`; one or two groups hit: sum_{g in H} e_g plus the larger of L2LB(W - union of H) (the
+    complement, where cached) and sum of in_g over the other groups; three or more: sum_{g in H} e_g +
+    sum_{g not in H} in_g, smallest for the groups with e_g < in_g, completed to three groups by the smallest
+    e_g - in_g."""
     b = search.bounds
     inside, hit = [], []
     for G in parts:
@@ -148,17 +207,25 @@ def _groups_term(search, parts: tuple, W: frozenset | None = None) -> float:
         hit.append(min(one, two))
     m = len(parts)
     terms = []
-    for H in itertools.chain(itertools.combinations(range(m), 1), itertools.combinations(range(m), 2)):
+    for g, G in enumerate(parts):                   # one group hit by one outlier k: c_k^2 + a bound of L2*(W - k)
+        whole = [b.bound(W - {k}) if W is not None and b.known(W - {k}) else 0.0 for k in sorted(G)]
+        rest = _rest(b, parts, inside, W, g)
+        ones = [float(search.c2[k]) + max((b.bound(G - {k}) if b.known(G - {k}) else 0.0) + rest, w)
+                for k, w in zip(sorted(G), whole)]
+        two = float(np.sum(np.sort(search.c2[sorted(G)])[:2])) if len(G) >= 2 else np.inf
+        terms.append(min(min(ones), two + rest))         # two or more outliers in G: c^2 of two of them at least
+    top = max(2, min(_most_hit(m), m))
+    for H in itertools.chain.from_iterable(itertools.combinations(range(m), h) for h in range(2, top + 1)):
         rest = sum(inside[g] for g in range(m) if g not in H)
         union = frozenset().union(*(parts[g] for g in H))
         if W is not None and b.known(W - union):
             rest = max(rest, b.bound(W - union))
         terms.append(sum(hit[g] for g in H) + rest)
-    if m >= 3:
+    if m > top:
         with np.errstate(invalid="ignore"):
             delta = np.array(hit) - np.array(inside)      # only to choose H (inf - finite = inf)
         order = [int(g) for g in np.argsort(delta, kind="stable")]
-        H = {g for g in order if delta[g] < 0} | set(order[:3])
+        H = {g for g in order if delta[g] < 0} | set(order[:top + 1])
         terms.append(sum(hit[g] if g in H else inside[g] for g in range(m)))     # sums of terms >= 0
     return float(min(terms))
 

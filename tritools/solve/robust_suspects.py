@@ -51,6 +51,8 @@ SMALL_N = 4
 PAIRS_FIRST = 3
 #: rounds of (verify W = V - O, offer its estimate, re-read O) before the bound.
 ROUNDS = 3
+#: :func:`cover_bound`: a candidate outlier j with d_j / c_j below this stays with the inliers in a second try
+AMBIGUOUS = 2.0
 
 
 def skip_full(search) -> bool:
@@ -98,7 +100,14 @@ def cover_bound(search):
     yield from search.verify_first(W)
     if not search.bounds.known(W):
         yield from search.need([W])
-    return (yield from cover(search, O))
+    lb = yield from cover(search, O)
+    r = search.residuals(search.best_X) / search.c
+    far = frozenset(j for j in O if not r[j] < AMBIGUOUS)     # the clear outliers (nan / inf: far)
+    if search.meets(lb) or not far or far == O or far in search.covered:
+        return lb
+    # a view just over its threshold would be a suspect whose node {j} never prunes: it stays with W - far,
+    # whose leave-one-out / group bound charges it (its term c_j^2 + L2LB(W - far - j), the best inlier set)
+    return max(lb, (yield from cover(search, far)))
 
 
 def cover(search, O: frozenset):

@@ -139,3 +139,38 @@ def test_with_and_without_groups_the_same_result(seed, N, n_out, cval, monkeypat
     f_att = tls_cost(_dist(cams, x, _fit(cams, x, list(inl), fast.X)), c)
     for r in (fast, plain):
         assert 2 * N * r.gamma_lb ** 2 <= f_att * (1 + 1e-9) + 1e-9
+
+
+def test_batch_of_long_tracks_equals_single_calls():
+    """triangulate_many shares the searches: long tracks with many wrong matches are certified there too, with the
+    single calls' inlier sets and values."""
+    probs, outs = [], []
+    for N, seed in [(60, 0), (20, 3)]:
+        P, x, X, out = robust_protocol_scene(N, int(round(0.3 * N)), 1.0, np.random.default_rng(seed))
+        probs.append((P, x))
+        outs.append(out)
+    many = tritools.triangulate_many(probs, robust=5.0)
+    for (P, x), out, r in zip(probs, outs, many):
+        one = tritools.triangulate(P, x, robust=5.0)
+        assert r.optimal and one.optimal
+        np.testing.assert_array_equal(r.inliers, ~out)
+        np.testing.assert_array_equal(one.inliers, r.inliers)
+        assert r.gamma_ub == pytest.approx(one.gamma_ub, rel=1e-9)
+
+
+@pytest.mark.slow
+def test_benchmark_script_runs(caplog):
+    """benchmarks/robust_long.py end to end on a reduced run (this checkout only)."""
+    import importlib.util
+    import logging
+    import pathlib
+
+    path = pathlib.Path(__file__).resolve().parents[1] / "benchmarks" / "robust_long.py"
+    spec = importlib.util.spec_from_file_location("robust_long", path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    with caplog.at_level(logging.INFO, logger="robust_long"):
+        assert mod.main(["--sizes", "40", "--seeds", "1", "--time-limit", "30"]) == 0
+    text = caplog.text
+    assert "| N=40, 30% wrong, noise 1, c=5, seed 0 | optimal |" in text
+    assert "F6 region problem, robust=c | not_certified |" in text

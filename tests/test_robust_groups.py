@@ -7,6 +7,7 @@ starts on every subset: an attained value, so a bound above it would be a bound 
 group counts, on clean tracks and on tracks holding a wrong match; the long protocol tracks against the known
 inlier set's multi-start L2 minimum plus c^2 per outlier (an attained value) and against a dense multi-start over
 random view triples refined on their inlier sets (every value attained, none may lie below the lower bound)."""
+import itertools
 import time
 
 import numpy as np
@@ -174,3 +175,73 @@ def test_benchmark_script_runs(caplog):
     text = caplog.text
     assert "| N=40, 30% wrong, noise 1, c=5, seed 0 | optimal |" in text
     assert "F6 region problem, robust=c | not_certified |" in text
+
+
+def _near_threshold_track(N, seed, cval, factor=1.15):
+    """A clean track with two wrong matches (views 0, 1) and view 2 moved to factor * c from the others' fit (just over
+    its threshold): (cameras, points, true X)."""
+    cams, x, X, _ = outlier_track(N, 0, seed)
+    rng = np.random.default_rng(seed)
+    for j in (0, 1):
+        ang = rng.uniform(0, 2 * np.pi)
+        x[j] += rng.uniform(60, 200) * np.array([np.cos(ang), np.sin(ang)])
+    rest = [i for i in range(N) if i != 2 and i > 1]
+    Xr = _fit(cams, x, rest, X)
+    u = cams[2] @ np.append(Xr, 1.0)
+    p = u[:2] / u[2]
+    v = x[2] - p
+    x[2] = p + factor * cval * (v / np.linalg.norm(v) if np.linalg.norm(v) > 0 else np.array([1.0, 0.0]))
+    return cams, x, X
+
+
+@pytest.mark.parametrize("seed,N,cval,factor", [(11, 7, 3.0, 1.15)] + [
+    pytest.param(*case, marks=pytest.mark.slow) for case in [(17, 9, 3.0, 1.3), (12, 10, 3.0, 1.5)]])
+def test_kept_bound_and_near_cover_below_the_enumeration(seed, N, cval, factor):
+    """kept_bound(W, {a}) <= f_W at every local L2 minimiser of a subset holding a that keeps a an inlier (attained
+    values of the constrained problem), and > 0; the cover of the best candidate's outliers (two wrong matches and
+    view 2 at factor * c, which takes the retry with the clear outliers and the near cover) <= the enumerated TLS
+    optimum; the single call's bounds too."""
+    import tritools.solve.robust_suspects as rs
+
+    cams, x, X = _near_threshold_track(N, seed, cval, factor)
+    c = np.full(N, cval)
+    starts = [X, X + 0.3, X - 0.3]
+    f_ref = tls_by_subsets(cams, x, c, starts)
+    s = TlsSearch(cams, None, c, tritools.TriangulationOptions(), 0.0, points=x)
+    s.offer(X)
+    a, W = 2, frozenset(range(N))
+    kept = drive_one(rl.kept_bound(s, W, frozenset((a,)), 0.0), s.bounds)
+    feasible = []
+    for k in range(2, N + 1):
+        for S in itertools.combinations(range(N), k):
+            if a not in S:
+                continue
+            for X0 in starts:
+                Xs = _fit(cams, x, list(S), X0)
+                d = _dist(cams, x, Xs)
+                if d[a] < c[a]:
+                    feasible.append(tls_cost(d, c))
+    assert feasible and 0 < kept <= min(feasible) * (1 + 1e-9) + 1e-9, (kept, min(feasible))
+    s2 = TlsSearch(cams, None, c, tritools.TriangulationOptions(), 0.0, points=x)
+    s2.offer(_fit(cams, x, list(range(3, N)), X))        # the candidate: views 0-2 outliers
+    lb = drive_one(rs.cover_bound(s2), s2.bounds)
+    assert lb <= f_ref * (1 + 1e-9) + 1e-9, (lb, f_ref)
+    r = tritools.triangulate(cams, x, robust=c)
+    assert 2 * N * r.gamma_lb ** 2 <= f_ref * (1 + 1e-9) + 1e-9
+    if r.optimal:
+        assert 2 * N * r.gamma_ub ** 2 <= f_ref * (1 + 1e-6) + 1e-9
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", [0, 2])
+def test_sixty_percent_wrong_with_a_view_over_its_threshold(seed):
+    """N = 100, 60% wrong matches, noise 5 px, c = 15 px (3 sigma): an inlier just over its threshold at the optimum
+    (the near cover); certified, and the bound below every attained value of a dense multi-start."""
+    P, x, X, out = robust_protocol_scene(100, 60, 5.0, np.random.default_rng(seed))
+    c = np.full(100, 15.0)
+    r = tritools.triangulate(P, x, robust=15.0)
+    assert r.optimal, r.message
+    f_lb = 200 * r.gamma_lb ** 2
+    vals = _multistart_values(P, x, c, X, 60, seed)
+    assert np.all(f_lb <= vals * (1 + 1e-9)), (f_lb, vals.min())
+    assert not r.inliers[out].any()

@@ -53,8 +53,8 @@ import numpy as np
 
 from .robust_bounds import ROUND_DOWN
 
-__all__ = ["leave_one_out", "halves", "groups", "group_bound", "group_counts", "MAX_GROUPS", "MAX_COMPLEMENTS",
-           "GROUPS"]
+__all__ = ["leave_one_out", "halves", "groups", "group_bound", "kept_bound", "group_counts", "MAX_GROUPS",
+           "MAX_COMPLEMENTS", "GROUPS"]
 
 #: the group bound tries at most this many groups (module docstring)
 MAX_GROUPS = 16
@@ -146,20 +146,21 @@ def group_bound(search, W: frozenset, c2_out: float, m: int):
     return bound
 
 
-def _group_bound(search, W: frozenset, c2_out: float, m: int):
-    """Generator: (:func:`group_bound`, the groups it used)."""
+def _group_bound(search, W: frozenset, c2_out: float, m: int, keep: frozenset = frozenset()):
+    """Generator: (:func:`group_bound`, the groups it used); the views of ``keep`` never outliers
+    (:func:`kept_bound`)."""
     b = search.bounds
     parts = groups(search, W, m)
-    yield from search.verify_first(*parts, *[G - {k} for G in parts for k in sorted(G)],
+    yield from search.verify_first(*parts, *[G - {k} for G in parts for k in sorted(G - keep)],
                                    *([W - G for G in parts] if m > 2 else []))
     search.offer_new()
     lw = b.bound(W) if b.known(W) else 0.0
-    bound = (c2_out + min(lw, _groups_term(search, parts, W))) * ROUND_DOWN
+    bound = (c2_out + min(lw, _groups_term(search, parts, W, keep))) * ROUND_DOWN
     for h in range(2, _most_hit(m) + 1):           # h groups hit: the complements of every h groups
         if search.meets(bound) or h >= m - 1:
             break
         yield from search.verify_first(*[W - frozenset().union(*H) for H in itertools.combinations(parts, h)])
-        bound = max(bound, (c2_out + min(lw, _groups_term(search, parts, W))) * ROUND_DOWN)
+        bound = max(bound, (c2_out + min(lw, _groups_term(search, parts, W, keep))) * ROUND_DOWN)
     return bound, parts
 
 
@@ -191,29 +192,29 @@ def _single(search, parts: tuple, W, k: int) -> float:
     return float(search.c2[k]) + max(split, whole)
 
 
-def _groups_term(search, parts: tuple, W: frozenset | None = None) -> float:
+def _groups_term(search, parts: tuple, W: frozenset | None = None, keep: frozenset = frozenset()) -> float:
     """min over the nonempty sets H of groups of the bound of an X whose outliers in W meet exactly the groups H
     (module docstring), from the cached bounds (unknown: 0); not rounded.  One group hit by one outlier k:
     :func:`_single`; one or two groups hit: sum_{g in H} e_g plus the larger of L2LB(W - union of H) (the
     complement, where cached) and sum of in_g over the other groups; three or more: sum_{g in H} e_g +
     sum_{g not in H} in_g, smallest for the groups with e_g < in_g, completed to three groups by the smallest
-    e_g - in_g."""
+    e_g - in_g.  The views of ``keep`` are inliers of every X considered (never in K)."""
     b = search.bounds
-    inside, hit = [], []
+    c2 = search.c2
+    inside, hit, terms = [], [], []
     for G in parts:
         inside.append(b.bound(G) if b.known(G) else 0.0)
-        one = min(float(search.c2[k]) + (b.bound(G - {k}) if b.known(G - {k}) else 0.0) for k in G)
-        two = float(np.sum(np.sort(search.c2[sorted(G)])[:2])) if len(G) >= 2 else np.inf
-        hit.append(min(one, two))
+        free = sorted(G - keep)                     # the views of G that may be outliers
+        one = min((float(c2[k]) + (b.bound(G - {k}) if b.known(G - {k}) else 0.0) for k in free), default=np.inf)
+        hit.append(min(one, float(np.sum(np.sort(c2[free])[:2])) if len(free) >= 2 else np.inf))
     m = len(parts)
-    terms = []
     for g, G in enumerate(parts):                   # one group hit by one outlier k: c_k^2 + a bound of L2*(W - k)
-        whole = [b.bound(W - {k}) if W is not None and b.known(W - {k}) else 0.0 for k in sorted(G)]
+        free = sorted(G - keep)
         rest = _rest(b, parts, inside, W, g)
-        ones = [float(search.c2[k]) + max((b.bound(G - {k}) if b.known(G - {k}) else 0.0) + rest, w)
-                for k, w in zip(sorted(G), whole)]
-        two = float(np.sum(np.sort(search.c2[sorted(G)])[:2])) if len(G) >= 2 else np.inf
-        terms.append(min(min(ones), two + rest))         # two or more outliers in G: c^2 of two of them at least
+        ones = [float(c2[k]) + max((b.bound(G - {k}) if b.known(G - {k}) else 0.0) + rest,
+                                   b.bound(W - {k}) if W is not None and b.known(W - {k}) else 0.0) for k in free]
+        two = float(np.sum(np.sort(c2[free])[:2])) if len(free) >= 2 else np.inf
+        terms.append(min(ones + [two + rest]))          # two or more outliers in G: c^2 of two of them at least
     top = max(2, min(_most_hit(m), m))
     for H in itertools.chain.from_iterable(itertools.combinations(range(m), h) for h in range(2, top + 1)):
         rest = sum(inside[g] for g in range(m) if g not in H)
@@ -228,6 +229,20 @@ def _groups_term(search, parts: tuple, W: frozenset | None = None) -> float:
         H = {g for g in order if delta[g] < 0} | set(order[:top + 1])
         terms.append(sum(hit[g] if g in H else inside[g] for g in range(m)))     # sums of terms >= 0
     return float(min(terms))
+
+
+def kept_bound(search, W: frozenset, keep: frozenset, c2_out: float):
+    """Generator: c2_out + a lower bound of min f_W(X) over the X that keep every view of ``keep`` an inlier:
+    min(L2LB(W), the group terms with K disjoint from ``keep``) (module docstring), with m = 2 and then the
+    groups of :func:`group_counts`, rounded down; verification only."""
+    yield from search.verify_first(W)
+    best = 0.0
+    for m in [2] + group_counts(search, W):
+        bound, _ = yield from _group_bound(search, W, c2_out, m, keep)
+        best = max(best, bound)
+        if search.meets(best):
+            break
+    return best
 
 
 def _split(b, P: frozenset, Q: frozenset) -> float:

@@ -35,7 +35,7 @@ import numpy as np
 
 from . import robust_bounds
 from .robust_bounds import ROUND_DOWN
-from .robust_loo import leave_one_out
+from .robust_loo import kept_bound, leave_one_out
 
 __all__ = ["skip_full", "suspect_bound", "cover_bound", "cover", "ENABLED", "MAX_SUSPECTS", "PAIRS_FIRST", "ROUNDS",
            "SMALL_N"]
@@ -107,12 +107,36 @@ def cover_bound(search):
         return lb
     # a view just over its threshold would be a suspect whose node {j} never prunes: it stays with W - far,
     # whose leave-one-out / group bound charges it (its term c_j^2 + L2LB(W - far - j), the best inlier set)
-    return max(lb, (yield from cover(search, far)))
+    lb = max(lb, (yield from cover(search, far)))
+    if search.meets(lb) or len(O - far) > MAX_SUSPECTS:
+        return lb
+    return max(lb, (yield from _near_cover(search, far, O - far)))
 
 
-def cover(search, O: frozenset):
-    """Generator: min(min_{j in O} LB(node {j}), c^2(O) + TLS*(V - O)) (module docstring) for the suspects O."""
-    search.covered.add(O)
+def _near_cover(search, far: frozenset, near: frozenset):
+    """Generator: the cover with the clear outliers ``far`` and the views ``near`` just over their thresholds at the
+    best candidate (S* = V - far - near its inlier set): every X keeps some j of far an inlier (node {j}), or has
+    far and near all outliers (c^2(far + near) + TLS*(S*)), or far all outliers and some a of near an inlier
+    (c^2(far) + the group bound of V - far over the X that keep a, :func:`tritools.solve.robust_loo.kept_bound`)."""
+    inside = yield from _inside(search, far)
+    if not search.meets(inside):
+        return 0.0
+    S = frozenset(range(search.N)) - far - near
+    both = yield from _outside(search, S, float(np.sum(search.c2[sorted(far | near)])))
+    if not search.meets(both):
+        return 0.0
+    c2_far = float(np.sum(search.c2[sorted(far)]))
+    kept = []
+    for a in sorted(near):
+        kept.append((yield from kept_bound(search, S | near, frozenset((a,)), c2_far)))
+        if not search.meets(kept[-1]):
+            return 0.0
+    return min([inside, both] + kept)
+
+
+def _inside(search, O: frozenset):
+    """Generator: min_{j in O} LB(node {j}) (module docstring), from the view pairs holding j (the first
+    :data:`PAIRS_FIRST` partners, W's most confident inliers, then the rest where those do not prune)."""
     W = frozenset(range(search.N)) - O
     r = search.residuals(search.best_X) / search.c             # partners: W's most confident inliers first
     order = sorted(W, key=lambda u: (r[u] if np.isfinite(r[u]) else np.inf, u)) + sorted(O)
@@ -121,8 +145,16 @@ def cover(search, O: frozenset):
         inside = min(_inlier_node(search, j) for j in O)
         if search.meets(inside):
             break
+    return inside
+
+
+def cover(search, O: frozenset):
+    """Generator: min(min_{j in O} LB(node {j}), c^2(O) + TLS*(V - O)) (module docstring) for the suspects O."""
+    search.covered.add(O)
+    inside = yield from _inside(search, O)
     if not search.meets(inside):
         return 0.0
+    W = frozenset(range(search.N)) - O
     c2_out = float(np.sum(search.c2[sorted(O)]))
     outside = yield from _outside(search, W, c2_out)
     return min(inside, outside)

@@ -36,7 +36,10 @@ of the problem without j, so f_TLS* >= min(L2LB(V), min_j [c_j^2 + min(L2LB(V - 
 a clean track whose L2 optimum costs more than min c^2 is certified from its N leave-one-out sets (their bounds
 from two halves first, :mod:`tritools.solve.robust_loo`).  A track with up to three wrong matches O is first tried
 by the cover f_TLS* >= min(min_{j in O} LB(node {j}), c^2(O) + TLS*(V - O)) (:mod:`tritools.solve.robust_suspects`,
-valid for any O), from the pairs holding O and V - O's own bounds, before the pairs and the search.
+valid for any O), from the pairs holding O and V - O's own bounds, before the pairs and the search; after the
+candidate stage the same cover is taken with O the best candidate's outliers, of any number, and V - O bounded by
+the group bound (:mod:`tritools.solve.robust_loo`: every outlier of V - O charged).  The search stops early when a
+leaf's bound is exhausted below UB (:mod:`tritools.solve.robust_futile`: certification out of reach).
 
 Search: an upper bound first -- the full L2 estimate, the L2 estimate of every view pair (at most
 :data:`MAX_PAIRS`, sampled beyond) and local optimisation from the best few (inlier set -> L2 estimate

@@ -23,6 +23,7 @@ F6_DATA = HERE / "tests" / "data" / "robust_regions_futile.json"
 #: one call, run in a subprocess: prints a JSON line (status, cpu seconds, gamma bounds, inliers right or None)
 CALL = r"""
 import json, math, sys, time
+import tritools as _t
 import numpy as np
 import tritools
 from tritools.scene import robust_protocol_scene
@@ -43,15 +44,16 @@ else:
     r = tritools.triangulate(np.array(d["cameras"]), d["regions"], robust=None if kind == "plain" else c,
                              time_limit=tl)
     cpu = time.process_time() - t
-print(json.dumps({"status": r.status.value, "cpu": cpu, "lb": r.gamma_lb, "ub": r.gamma_ub, "right": right}))
+print(json.dumps({"status": r.status.value, "cpu": cpu, "lb": r.gamma_lb, "ub": r.gamma_ub, "right": right,
+                  "module": _t.__file__}))
 """
 
 
 def run(tree: str, kind: str, arg: str, seed: int, time_limit: float) -> dict:
     """One call in a subprocess importing tritools from ``tree``."""
     env = dict(os.environ, PYTHONPATH=tree, OPENBLAS_NUM_THREADS="1")
-    out = subprocess.run([sys.executable, "-c", CALL, kind, arg, str(seed), str(time_limit)], env=env,
-                         capture_output=True, text=True, timeout=time_limit * 3 + 120)
+    out = subprocess.run([sys.executable, "-c", CALL, kind, arg, str(seed), str(time_limit)], env=env, cwd=tree,
+                         capture_output=True, text=True, timeout=time_limit * 3 + 120)   # cwd: "" leads sys.path
     if out.returncode != 0:
         return {"status": f"error: {out.stderr.strip().splitlines()[-1:]}", "cpu": float("nan")}
     return json.loads(out.stdout.strip().splitlines()[-1])
@@ -75,10 +77,15 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(message)s")
     trees = [("this", str(HERE))] + ([("other", args.other)] if args.other else [])
-    log.info("| case | " + " | ".join(f"{n} status | {n} CPU s" for n, _ in trees) + " | inliers right |")
-    log.info("|---|" + "---|---|" * len(trees) + "---|")
-    for kind, arg, seed, name in cases(args):
+    header = ["| case | " + " | ".join(f"{n} status | {n} CPU s" for n, _ in trees) + " | inliers right |",
+              "|---|" + "---|---|" * len(trees) + "---|"]
+    for n, (kind, arg, seed, name) in enumerate(cases(args)):
         res = [run(tree, kind, arg, seed, args.time_limit) for _, tree in trees]    # interleaved per case
+        if n == 0:
+            log.info("tritools imported from: " + ", ".join(f"{t}: {r.get('module')}" for (t, _), r in
+                                                              zip(trees, res)))
+            for line in header:
+                log.info(line)
         cols = " | ".join(f"{r['status']} | {r['cpu']:.2f}" for r in res)
         log.info(f"| {name} | {cols} | {res[0].get('right')} |")
     return 0

@@ -324,7 +324,7 @@ class TlsSearch(NodeBounds):
             if self.best_X is not None and self.meets(self.root_bound()):
                 return                          # certified by the L2 certificate of all views: no search needed
             if robust_futile.settle_best_set(self):
-                pass                            # its own L2 path gives up on the best inlier set: candidates only
+                pass                            # L2LB(V) exhausted below UB: the leave-one-out bound (<= it) is moot
             elif self.best_S == full and self.N >= 3 and robust_bounds.PACKING and robust_suspects.ENABLED:
                 self.loo_lb = yield from leave_one_out(self, full, 0.0)       # its sub-bounds from halves first
             elif self.best_S == full and self.N >= 3 and robust_bounds.PACKING:
@@ -333,7 +333,7 @@ class TlsSearch(NodeBounds):
                 self.loo_lb = self.leave_one_out_bound()
                 if self.meets(self.loo_lb):
                     return                      # every view an inlier, and dropping any costs at least as much
-        if robust_suspects.ENABLED and robust_bounds.PACKING and self.futile_leaf is None:  # a few wrong matches
+        if robust_suspects.ENABLED and robust_bounds.PACKING:           # a few wrong matches: O(N) sub-problems
             self.loo_lb = max(self.loo_lb, (yield from robust_suspects.suspect_bound(self)))
             if self.meets(self.loo_lb):
                 return

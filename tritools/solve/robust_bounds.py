@@ -208,7 +208,7 @@ class SubsetBounds:
         """Fill the cache for every subset not known yet (duplicates and |S| <= 1 skipped)."""
         compute_many([(self, subsets)])
 
-    def strengthen(self, S: frozenset, need: float = math.inf) -> bool:
+    def strengthen(self, S: frozenset, need: float = math.inf, limit: float = SUB_TIME_LIMIT) -> bool:
         """A better bound of S when its bound came from a light (delta = 2) solve that did not certify; True when
         the bound may have changed.  First by superadditivity over a split (:meth:`split_bound`), which stops once
         it reaches ``need`` (the level the caller's node must reach); else by solving S with the full degree plan."""
@@ -229,7 +229,7 @@ class SubsetBounds:
         # a batched SDP that handed S back left no delta = 2 bound: with coplanar centres the plan from delta = 2,
         # whose ceiling rule (solve.coplanar.futile_after) stops it there, instead of the delta = 4 step
         fresh = old <= 0.0 and self._coplanar()
-        self._solve_one(S, light=False, from_delta=None if fresh else FULL_FROM_DELTA)
+        self._solve_one(S, light=False, from_delta=None if fresh else FULL_FROM_DELTA, limit=limit)
         self._lb[S] = max(self._lb[S], old, split)
         self._count_ceiling(S)
         return True
@@ -284,17 +284,19 @@ class SubsetBounds:
         self.retry.add(S)
         return True
 
-    def _solve_one(self, S: frozenset, light: bool = True, from_delta: int | None = None) -> None:
+    def _solve_one(self, S: frozenset, light: bool = True, from_delta: int | None = None,
+                   limit: float = SUB_TIME_LIMIT) -> None:
         """One sub-problem through :func:`tritools.triangulate`: with ``light`` only its degree-2 steps (a sub-problem
         with outliers needs a large bound, not a tight one; :meth:`strengthen` runs the full plan where the
         search needs it).  ``from_delta``: the plan starts at that degree (its verification and delta = 2 steps
-        skipped: a weak subset's delta = 2 bound is known already); the default plan where the options refuse it."""
+        skipped: a weak subset's delta = 2 bound is known already); the default plan where the options refuse it.
+        ``limit``: seconds (capped by the deadline; :data:`SUB_TIME_LIMIT` by default, inf: the deadline alone)."""
         from .triangulate import triangulate
 
         views = sorted(S)
         remaining = self.deadline.remaining()
-        limit = SUB_TIME_LIMIT if remaining is None else min(SUB_TIME_LIMIT, remaining)
-        opts = self.opts.replace(time_limit=max(1e-3, limit))
+        limit = limit if remaining is None else min(limit, remaining)      # inf, no deadline: the options' budget
+        opts = self.opts.replace(time_limit=max(1e-3, limit)) if math.isfinite(limit) else self.opts
         if light:
             try:
                 opts = opts.replace(max_delta=2)

@@ -15,23 +15,30 @@ spent the leaf's bound is final: L2LB(I) is *exhausted* (``SubsetBounds.exhauste
 :func:`tritools.solve.coplanar.subset_futile`).
 
 The rule.  When a leaf I with an exhausted bound does not meet the best value UB under the certificate rule
-(``Tolerances.certified`` at the search's scale), then with the current UB no certificate is possible, whatever
-the rest of the search does: the final lower bound stays at or below LB(leaf I) < UB - tol.  A certificate would
-need a candidate better than UB by more than the rest of the gap -- down to within the tolerance of a bound that
-the L2 path's own full plan on I could not raise to its own estimate.  The search stops there with status
+(``Tolerances.certified`` at the search's scale), then with the current UB the branch and bound cannot certify,
+whatever it does next: its lower bound stays at or below LB(leaf I) < UB - tol (the stages before it -- the root,
+leave-one-out and cover bounds -- did not meet UB either, or there would be no search).  A certificate would need a
+candidate better than UB by more than the rest of the gap -- down to within the tolerance of a bound that the L2
+path's own full plan on I could not raise to its own estimate.  The search stops there with status
 ``not_certified``, its valid bounds (the leaf's bound is one of them), the best estimate and its inlier set, and a
 message naming the leaf.  The leaf of the best candidate's inlier set S* holds the best candidate itself, so it
 cannot be pruned by exceeding UB, only by meeting it: :func:`settle_best_set` examines it first, right after the
-candidate of all views, with the full plan if its light bound does not meet UB (every certificate with S* = V
-needs L2LB(V) to meet UB: the root, leave-one-out and node bounds all contain L2LB(V) as a term), so that a
-problem whose own L2 path gives up costs about one plain L2 call, not a search over its subsets.
+candidate of all views, with the full plan if its light bound does not meet UB (for S* = V within the search's
+deadline, as the plain call, not :data:`~tritools.solve.robust_bounds.SUB_TIME_LIMIT`), so that a problem whose
+own L2 path gives up costs about one plain L2 call, not a search over its subsets.  Where it fires there with S* = V the
+leave-one-out bound is skipped (it is at most L2LB(V)); the suspect stage, the pairs, the local optimisation and the
+cover of the candidate's outliers still run (they may change the candidate, or certify by another route), and the
+rule is applied again before the search (:func:`blocks`).
 
 :data:`ENABLED` = False turns the rule off (the tests compare the two).
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
+from . import robust_bounds
 from .robust_bounds import ROUND_DOWN
 
 __all__ = ["ENABLED", "FUTILE", "blocks", "leaf_bound", "leaf_futile", "settle_best_set", "futile_message"]
@@ -75,7 +82,9 @@ def settle_best_set(search) -> bool:
     if search.meets(lb):
         return False
     c2_out = float(np.sum(search.c2[[v for v in range(search.N) if v not in S]]))
-    if S in search.bounds.weak and search.bounds.strengthen(S, (search.best_f - c2_out) / ROUND_DOWN):
+    whole = len(S) == search.N                  # the whole problem: its full plan gets the deadline, as a plain call
+    limit = math.inf if whole else robust_bounds.SUB_TIME_LIMIT
+    if S in search.bounds.weak and search.bounds.strengthen(S, (search.best_f - c2_out) / ROUND_DOWN, limit):
         search.offer_new()
         if search.best_S != S:                  # the full solve's estimate changed the best inlier set
             return False

@@ -245,3 +245,26 @@ def test_sixty_percent_wrong_with_a_view_over_its_threshold(seed):
     vals = _multistart_values(P, x, c, X, 60, seed)
     assert np.all(f_lb <= vals * (1 + 1e-9)), (f_lb, vals.min())
     assert not r.inliers[out].any()
+
+
+@pytest.mark.parametrize("case", ["pix_small", "pix_big", "geo", "dup"])
+def test_long_track_adversarial_frames(case):
+    """N = 60 with 30% wrong matches in pixel units 1e-3 and 1e5 (thresholds scaled), in a georeferenced world
+    (translated by 1e6) and with a duplicated view: certified with the true inlier set, and the lower bound below
+    f_TLS at the multi-start L2 fit of the known inliers (an attained value)."""
+    P, x, X, out = robust_protocol_scene(60, 18, 1.0, np.random.default_rng(0))
+    s = {"pix_small": 1e-3, "pix_big": 1e5}.get(case, 1.0)
+    P, x, c = np.einsum("ij,njk->nik", np.diag([s, s, 1.0]), P), x * s, 5.0 * s
+    if case == "geo":
+        M = np.eye(4)
+        M[:3, 3] = -np.array([1e6, -2e6, 5e5])
+        P, X = P @ M, X + np.array([1e6, -2e6, 5e5])
+    if case == "dup":
+        P, x, out = np.concatenate([P, P[:1]]), np.concatenate([x, x[:1]]), np.concatenate([out, out[:1]])
+    r = tritools.triangulate(P, x, robust=c)
+    assert r.optimal, r.message
+    np.testing.assert_array_equal(r.inliers, ~out)
+    inl = list(np.nonzero(~out)[0])
+    N = len(x)
+    f_att = tls_cost(_dist(P, x, _fit(P, x, inl, r.X)), np.full(N, c))
+    assert 2 * N * r.gamma_lb ** 2 <= f_att * (1 + 1e-9)

@@ -32,7 +32,7 @@ def _stub(best_f, exhausted, expired=False):
     """A search stand-in: 4 views, c^2 = 1 each, the leaf {0, 1, 2} (outlier 3) with the cached bound 0.5."""
     S = frozenset((0, 1, 2))
     bounds = SimpleNamespace(exhausted={S} if exhausted else set(), known=lambda T: True,
-                             bound=lambda T: 0.5 if T == S else 0.0)
+                             bound=lambda T: 0.5 if T == S else 0.0, inherited=lambda T: 0.5 if T == S else 0.0)
     tol = tritools.TriangulationOptions().tolerances
     s = SimpleNamespace(N=4, c2=np.ones(4), bounds=bounds, deadline=_Deadline(expired), best_f=best_f,
                         futile_leaf=None)
@@ -109,3 +109,20 @@ def test_certifiable_region_problems_unchanged_by_the_rule(N, seed, kinds, monke
     assert on.gamma_ub == pytest.approx(off.gamma_ub, rel=1e-6)
     if off.optimal:
         assert on.optimal
+
+
+def test_leaf_bound_takes_the_subsets_bounds():
+    """leaf_bound(I) = c^2(V - I) + the largest cached bound of I and of its subsets (rounded down): a subset's
+    bound holds for I (monotonicity)."""
+    cams, x, X, out = outlier_track(6, 1, 3)
+    from tritools.solve.robust import TlsSearch
+    from tests.robust_refs import drive_one
+
+    s = TlsSearch(cams, None, np.full(6, 4.0), tritools.TriangulationOptions(), 0.0, points=x)
+    I = frozenset(range(5))
+    T = frozenset((0, 1, 2))
+    drive_one(s.need([T]), s.bounds)
+    s.bounds._store(I, 0.0, None)                      # a weak bound of I itself
+    assert rf.leaf_bound(s, I) == pytest.approx(16.0 + s.bounds.bound(T), rel=1e-9)
+    assert rf.leaf_bound(s, I) <= 16.0 + s.bounds.bound(T)
+    assert s.bounds.bound(T) > 0

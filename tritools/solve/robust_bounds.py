@@ -142,6 +142,10 @@ class SubsetBounds:
         """The cached lower bound of L2*(S) (0 for |S| <= 1)."""
         return 0.0 if len(S) <= 1 else self._lb[S]
 
+    def inherited(self, S: frozenset) -> float:
+        """The largest cached bound of S and of its subsets (monotonicity: a lower bound of L2*(S)); 0 if none."""
+        return max([0.0] + [v for T, v in self._lb.items() if T <= S])
+
     def estimate(self, S: frozenset):
         return self._X.get(S)
 

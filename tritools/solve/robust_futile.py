@@ -28,7 +28,12 @@ deadline, as the plain call, not :data:`~tritools.solve.robust_bounds.SUB_TIME_L
 own L2 path gives up costs about one plain L2 call, not a search over its subsets.  Where it fires there with S* = V the
 leave-one-out bound is skipped (it is at most L2LB(V)); the suspect stage, the pairs, the local optimisation and the
 cover of the candidate's outliers still run (they may change the candidate, or certify by another route), and the
-rule is applied again before the search (:func:`blocks`).
+rule is applied again before the search (:func:`blocks`).  Before the search the rule takes S*'s leaf bound with
+the cached bounds of S* and its subsets (what the nodes on S*'s path inherit), not the lookahead sums of
+increments L2LB(I + u) - L2LB(I) those nodes also use: a certificate through them alone -- a sum of sub-bounds
+meeting UB within the tolerance where S*'s own full plan does not -- is possible in principle; no case of the
+campaigns showed one (benchmarks/RESULTS.md: robust protocol cells and mixed-region campaigns, no certificate
+lost).  In the search (:func:`leaf_futile`) the leaf has been reached, so the search's bound holds it.
 
 :data:`ENABLED` = False turns the rule off (the tests compare the two).
 """
@@ -50,9 +55,10 @@ FUTILE = "certification out of reach"
 
 
 def leaf_bound(search, I: frozenset) -> float:
-    """LB(leaf I) = c^2(V - I) + L2LB(I) from the cached bound of I (0 when unknown or |I| <= 1), rounded down."""
+    """LB(leaf I) = c^2(V - I) + L2LB(I), L2LB(I) the largest cached bound of I and of its subsets (monotonicity:
+    what the nodes on I's path inherit; 0 when none is known or |I| <= 1), rounded down."""
     out = [v for v in range(search.N) if v not in I]
-    lb = search.bounds.bound(I) if search.bounds.known(I) else 0.0
+    lb = search.bounds.inherited(I)
     return float((float(np.sum(search.c2[out])) + lb) * ROUND_DOWN)
 
 

@@ -36,7 +36,10 @@ of the problem without j, so f_TLS* >= min(L2LB(V), min_j [c_j^2 + min(L2LB(V - 
 a clean track whose L2 optimum costs more than min c^2 is certified from its N leave-one-out sets (their bounds
 from two halves first, :mod:`tritools.solve.robust_loo`).  A track with up to three wrong matches O is first tried
 by the cover f_TLS* >= min(min_{j in O} LB(node {j}), c^2(O) + TLS*(V - O)) (:mod:`tritools.solve.robust_suspects`,
-valid for any O), from the pairs holding O and V - O's own bounds, before the pairs and the search.
+valid for any O), from the pairs holding O and V - O's own bounds, before the pairs and the search; after the
+candidate stage the same cover is taken with O the best candidate's outliers, of any number, and V - O bounded by
+the group bound (:mod:`tritools.solve.robust_loo`: every outlier of V - O charged).  The search stops early when a
+leaf's bound is exhausted below UB (:mod:`tritools.solve.robust_futile`: certification out of reach).
 
 Search: an upper bound first -- the full L2 estimate, the L2 estimate of every view pair (at most
 :data:`MAX_PAIRS`, sampled beyond) and local optimisation from the best few (inlier set -> L2 estimate
@@ -73,7 +76,7 @@ from ..result import Attempt, Status, TriangulationResult
 from .decide import cheirality
 from .report import PointReport, point_report
 from .trivial import local_estimate
-from . import robust_bounds, robust_suspects
+from . import robust_bounds, robust_futile, robust_suspects
 from .robust_bounds import ROUND_DOWN, SubsetBounds
 from .robust_drive import drive
 from .robust_loo import leave_one_out
@@ -195,6 +198,8 @@ class TlsSearch(NodeBounds):
         self.loo_lb = 0.0                            # leave_one_out / suspect bound (candidates), where computed
         self._absC2 = None                           # |third rows| of the cameras (point_distances2_one)
         self.drows = None                           # depth rows of the cameras (report; a batch sets them)
+        self.futile_leaf = None                     # (inlier set, its leaf bound) that fired the rule
+        self.covered = set()                        # suspect sets O whose cover bound was taken (robust_suspects)
 
     @property
     def regions(self) -> list:
@@ -319,7 +324,9 @@ class TlsSearch(NodeBounds):
             self.offer(self.bounds.estimate(full))
             if self.best_X is not None and self.meets(self.root_bound()):
                 return                          # certified by the L2 certificate of all views: no search needed
-            if self.best_S == full and self.N >= 3 and robust_bounds.PACKING and robust_suspects.ENABLED:
+            if robust_futile.settle_best_set(self):
+                pass                            # L2LB(V) exhausted below UB: the leave-one-out bound (<= it) is moot
+            elif self.best_S == full and self.N >= 3 and robust_bounds.PACKING and robust_suspects.ENABLED:
                 self.loo_lb = yield from leave_one_out(self, full, 0.0)       # its sub-bounds from halves first
             elif self.best_S == full and self.N >= 3 and robust_bounds.PACKING:
                 yield from self.verify_first(*[full - {j} for j in range(self.N)])
@@ -419,6 +426,9 @@ class TlsSearch(NodeBounds):
                     self.offer_new()
                 if not self.meets(lb) or lb < self.best_f:
                     floor = min(floor, lb)
+                if robust_futile.leaf_futile(self, I, lb):
+                    stopped = robust_futile.FUTILE
+                    break
                 continue
             u = U[0]
             stack.append((I, O | {u}, c2_out + self.c2[u], k + 1, lb, lb_I, a))
@@ -444,9 +454,13 @@ class TlsSearch(NodeBounds):
         if not self.meets(self.loo_lb):                 # certified by the candidate stage: no root bound needed
             yield from self.need([frozenset(range(self.N))])
             self.offer_new()
+        if not self.meets(self.loo_lb) and robust_suspects.ENABLED and robust_bounds.PACKING:
+            self.loo_lb = max(self.loo_lb, (yield from robust_suspects.cover_bound(self)))   # many wrong matches
         lb, stopped = max(self.root_bound() if self.bounds.known(frozenset(range(self.N))) else 0.0,
                           self.loo_lb), None
-        if not self.meets(lb):
+        if not self.meets(lb) and robust_futile.blocks(self):
+            stopped = robust_futile.FUTILE          # lb (root / leave-one-out) stays valid
+        elif not self.meets(lb):
             order = branching_order(self.residuals(self.best_X) / self.c)
             yield from self.anchor_bounds(order)
             lb_bb, stopped = yield from self.search(order)
@@ -475,7 +489,9 @@ class TlsSearch(NodeBounds):
         status, in_front = cheirality(status, rep.depths[inliers], self.opts.require_in_front)
         msg = f"TLS: {int(inliers.sum())}/{self.N} inliers, {self.nodes} nodes, {self.bounds.n_solved} L2 " \
               f"sub-problems"
-        if stopped:
+        if stopped == robust_futile.FUTILE:
+            msg += f"; {robust_futile.futile_message(self)}"
+        elif stopped:
             msg += f"; stopped by the {stopped}"
         if told.reason and not certified:
             msg += f"; {told.reason}"

@@ -62,6 +62,9 @@ SPLIT_TRIES = 6
 #: :meth:`SubsetBounds.strengthen` solves a weak subset (its delta = 2 bound known) with the degree plan from this
 #: degree on: the verification and delta = 2 steps again cost 2-8x the delta = 4 step and decide nothing new.
 FULL_FROM_DELTA = 4
+#: statuses of a full-plan sub-problem whose bound no later solve raises (``SubsetBounds.exhausted``): the plan ran
+#: out of degrees or its solver failed at the top one, not a time or memory limit
+EXHAUSTED = frozenset({Status.NOT_CERTIFIED, Status.SOLVER_FAILED, Status.NUMERICAL_FAILURE})
 #: time limit (seconds) of one sub-problem solved by :func:`tritools.triangulate` (capped by the caller's deadline)
 SUB_TIME_LIMIT = 10.0
 
@@ -89,6 +92,9 @@ class SubsetBounds:
         self._X: dict = {}
         self.n_solved = 0
         self.weak: set = set()                 # subsets bounded by a light solve that did not certify
+        #: subsets whose bound is the L2 path's last word (:mod:`tritools.solve.robust_futile`): the full degree plan
+        #: ended not_certified, or no Corollary 1 degree can raise the bound (coplanar centres)
+        self.exhausted: set = set()
         self.new_estimates: list = []          # (subset, X) produced since the caller last read them
         #: a lower bound at or above this value serves the caller as well as any larger one (module docstring)
         self.enough = math.inf
@@ -135,6 +141,10 @@ class SubsetBounds:
     def bound(self, S: frozenset) -> float:
         """The cached lower bound of L2*(S) (0 for |S| <= 1)."""
         return 0.0 if len(S) <= 1 else self._lb[S]
+
+    def inherited(self, S: frozenset) -> float:
+        """The largest cached bound of S and of its subsets (monotonicity: a lower bound of L2*(S)); 0 if none."""
+        return max([0.0] + [v for T, v in self._lb.items() if T <= S])
 
     def estimate(self, S: frozenset):
         return self._X.get(S)
@@ -202,7 +212,7 @@ class SubsetBounds:
         """Fill the cache for every subset not known yet (duplicates and |S| <= 1 skipped)."""
         compute_many([(self, subsets)])
 
-    def strengthen(self, S: frozenset, need: float = math.inf) -> bool:
+    def strengthen(self, S: frozenset, need: float = math.inf, limit: float = SUB_TIME_LIMIT) -> bool:
         """A better bound of S when its bound came from a light (delta = 2) solve that did not certify; True when
         the bound may have changed.  First by superadditivity over a split (:meth:`split_bound`), which stops once
         it reaches ``need`` (the level the caller's node must reach); else by solving S with the full degree plan."""
@@ -217,12 +227,13 @@ class SubsetBounds:
         views = sorted(S)                 # coplanar centres: no Corollary 1 degree can certify (solve.coplanar)
         if subset_futile(self.C[views], [self.regions[i] for i in views], self.opts, old, self._X.get(S)):
             self._lb[S] = max(old, split)
+            self.exhausted.add(S)
             return split > old
         self._lb.pop(S)
         # a batched SDP that handed S back left no delta = 2 bound: with coplanar centres the plan from delta = 2,
         # whose ceiling rule (solve.coplanar.futile_after) stops it there, instead of the delta = 4 step
         fresh = old <= 0.0 and self._coplanar()
-        self._solve_one(S, light=False, from_delta=None if fresh else FULL_FROM_DELTA)
+        self._solve_one(S, light=False, from_delta=None if fresh else FULL_FROM_DELTA, limit=limit)
         self._lb[S] = max(self._lb[S], old, split)
         self._count_ceiling(S)
         return True
@@ -277,17 +288,19 @@ class SubsetBounds:
         self.retry.add(S)
         return True
 
-    def _solve_one(self, S: frozenset, light: bool = True, from_delta: int | None = None) -> None:
+    def _solve_one(self, S: frozenset, light: bool = True, from_delta: int | None = None,
+                   limit: float = SUB_TIME_LIMIT) -> None:
         """One sub-problem through :func:`tritools.triangulate`: with ``light`` only its degree-2 steps (a sub-problem
         with outliers needs a large bound, not a tight one; :meth:`strengthen` runs the full plan where the
         search needs it).  ``from_delta``: the plan starts at that degree (its verification and delta = 2 steps
-        skipped: a weak subset's delta = 2 bound is known already); the default plan where the options refuse it."""
+        skipped: a weak subset's delta = 2 bound is known already); the default plan where the options refuse it.
+        ``limit``: seconds (capped by the deadline; :data:`SUB_TIME_LIMIT` by default, inf: the deadline alone)."""
         from .triangulate import triangulate
 
         views = sorted(S)
         remaining = self.deadline.remaining()
-        limit = SUB_TIME_LIMIT if remaining is None else min(SUB_TIME_LIMIT, remaining)
-        opts = self.opts.replace(time_limit=max(1e-3, limit))
+        limit = limit if remaining is None else min(limit, remaining)      # inf, no deadline: the options' budget
+        opts = self.opts.replace(time_limit=max(1e-3, limit)) if math.isfinite(limit) else self.opts
         if light:
             try:
                 opts = opts.replace(max_delta=2)
@@ -310,6 +323,8 @@ class SubsetBounds:
             lb = 2 * len(views) * max(res.gamma_lb, 0.0) ** 2 * ROUND_DOWN
         if light and not res.status.certified:
             self.weak.add(S)
+        if not light and res.status in EXHAUSTED:    # the plan ran out, not at a time or memory limit
+            self.exhausted.add(S)
         self._store(S, lb, res.X)
 
     def _store(self, S: frozenset, lb: float, X) -> None:

@@ -35,9 +35,10 @@ import numpy as np
 
 from . import robust_bounds
 from .robust_bounds import ROUND_DOWN
-from .robust_loo import leave_one_out
+from .robust_loo import kept_bound, leave_one_out
 
-__all__ = ["skip_full", "suspect_bound", "ENABLED", "MAX_SUSPECTS", "PAIRS_FIRST", "ROUNDS", "SMALL_N"]
+__all__ = ["skip_full", "suspect_bound", "cover_bound", "cover", "ENABLED", "MAX_SUSPECTS", "PAIRS_FIRST", "ROUNDS",
+           "SMALL_N"]
 
 #: False skips the stage (the tests compare the two).
 ENABLED = True
@@ -50,6 +51,8 @@ SMALL_N = 4
 PAIRS_FIRST = 3
 #: rounds of (verify W = V - O, offer its estimate, re-read O) before the bound.
 ROUNDS = 3
+#: :func:`cover_bound`: a candidate outlier j with d_j / c_j below this stays with the inliers in a second try
+AMBIGUOUS = 2.0
 
 
 def skip_full(search) -> bool:
@@ -73,7 +76,6 @@ def suspect_bound(search):
     the suspect-set cover (module docstring); 0.0 where the stage does not apply.  The pairs' estimates (two-view
     fits, rarely good TLS candidates) are not screened here: they stay queued for the full search, if it runs."""
     N = search.N
-    full = frozenset(range(N))
     if N < 3:
         return 0.0
     if search.best_X is None and search.bounds.frame() is not None:     # all views not verified: the parent's
@@ -82,7 +84,60 @@ def suspect_bound(search):
     O = yield from _suspects(search)
     if O is None:
         return 0.0
-    W = full - O
+    return (yield from cover(search, O))
+
+
+def cover_bound(search):
+    """Generator: the cover bound (module docstring) with O the best candidate's outlier views, of any number
+    (review 6, finding F5: long tracks with many wrong matches, after the pairs and the local optimisation found
+    the candidate); 0.0 where O is empty, already covered, or leaves fewer than two views.  W = V - O is verified
+    first (its full treatment if that does not certify: it is the best inlier set, whose leaf any certificate
+    needs)."""
+    O = frozenset(range(search.N)) - search.best_S
+    if not O or search.N - len(O) < 2 or O in search.covered:
+        return 0.0
+    W = search.best_S
+    yield from search.verify_first(W)
+    if not search.bounds.known(W):
+        yield from search.need([W])
+    lb = yield from cover(search, O)
+    r = search.residuals(search.best_X) / search.c
+    far = frozenset(j for j in O if not r[j] < AMBIGUOUS)     # the clear outliers (nan / inf: far)
+    if search.meets(lb) or not far or far == O or far in search.covered:
+        return lb
+    # a view just over its threshold would be a suspect whose node {j} never prunes: it stays with W - far,
+    # whose leave-one-out / group bound charges it (its term c_j^2 + L2LB(W - far - j), the best inlier set)
+    lb = max(lb, (yield from cover(search, far)))
+    if search.meets(lb) or len(O - far) > MAX_SUSPECTS:
+        return lb
+    return max(lb, (yield from _near_cover(search, far, O - far)))
+
+
+def _near_cover(search, far: frozenset, near: frozenset):
+    """Generator: the cover with the clear outliers ``far`` and the views ``near`` just over their thresholds at the
+    best candidate (S* = V - far - near its inlier set): every X keeps some j of far an inlier (node {j}), or has
+    far and near all outliers (c^2(far + near) + TLS*(S*)), or far all outliers and some a of near an inlier
+    (c^2(far) + the group bound of V - far over the X that keep a, :func:`tritools.solve.robust_loo.kept_bound`)."""
+    inside = yield from _inside(search, far)
+    if not search.meets(inside):
+        return 0.0
+    S = frozenset(range(search.N)) - far - near
+    both = yield from _outside(search, S, float(np.sum(search.c2[sorted(far | near)])))
+    if not search.meets(both):
+        return 0.0
+    c2_far = float(np.sum(search.c2[sorted(far)]))
+    kept = []
+    for a in sorted(near):
+        kept.append((yield from kept_bound(search, S | near, frozenset((a,)), c2_far)))
+        if not search.meets(kept[-1]):
+            return 0.0
+    return min([inside, both] + kept)
+
+
+def _inside(search, O: frozenset):
+    """Generator: min_{j in O} LB(node {j}) (module docstring), from the view pairs holding j (the first
+    :data:`PAIRS_FIRST` partners, W's most confident inliers, then the rest where those do not prune)."""
+    W = frozenset(range(search.N)) - O
     r = search.residuals(search.best_X) / search.c             # partners: W's most confident inliers first
     order = sorted(W, key=lambda u: (r[u] if np.isfinite(r[u]) else np.inf, u)) + sorted(O)
     for part in (order[:PAIRS_FIRST], order[PAIRS_FIRST:]):
@@ -90,8 +145,16 @@ def suspect_bound(search):
         inside = min(_inlier_node(search, j) for j in O)
         if search.meets(inside):
             break
+    return inside
+
+
+def cover(search, O: frozenset):
+    """Generator: min(min_{j in O} LB(node {j}), c^2(O) + TLS*(V - O)) (module docstring) for the suspects O."""
+    search.covered.add(O)
+    inside = yield from _inside(search, O)
     if not search.meets(inside):
         return 0.0
+    W = frozenset(range(search.N)) - O
     c2_out = float(np.sum(search.c2[sorted(O)]))
     outside = yield from _outside(search, W, c2_out)
     return min(inside, outside)

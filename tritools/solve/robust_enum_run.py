@@ -1,0 +1,289 @@
+"""The enumeration of every inlier set (:mod:`tritools.solve.robust_enum`) run over many TLS searches at once.
+
+:func:`enumerate_many` takes :class:`tritools.solve.robust.TlsSearch` objects of point problems with 3 to
+:data:`~tritools.solve.robust_enum.ENUM_MAX_VIEWS` views and, per view count N, stacks the rows of every problem
+(each row a masked N-view problem in its own problem's normalised frame) into one call per step; a single call
+(:func:`enumerate_tls`) is the batch of one.  Per problem the maths is exactly that of the module docstring of
+:mod:`tritools.solve.robust_enum` -- only the stacking is shared:
+
+1. the frames of all problems (:func:`~tritools.solve.robust_enum.enum_frames`), then the candidates of the view
+   pairs and of all views (one masked stack over every problem); the best row of each problem refined to
+   convergence on its inlier set (one stack) and offered (UB);
+2. the candidates of the sets whose c^2(V - S) alone does not meet UB (one stack), offered again;
+3. the Lagrangian bounds of the sets that matter (one stacked verification over every problem; the fundamental
+   matrices of each problem computed once), closed under superadditivity, LB against UB at the floor of the
+   decision scale (:func:`_decide`);
+4. for the problems still open: every other set's candidate and bound (one stack each), the closure again, the
+   decision at the floor scale and else at the documented ``decision_scale`` (a batch gives it for all of them
+   in one call: ``scales``).
+
+A problem not decided (or whose deadline passed between the stacks) gets None: the caller runs its branch and
+bound, which starts from the candidates offered here.  The lower bound is rounded down at every sum, the
+decision is the one rule of :meth:`tritools.solve.robust.TlsSearch.result`: the rigour of one problem does not
+depend on the others of its stack (each row's numbers are its own problem's).
+"""
+from __future__ import annotations
+
+import dataclasses
+import time
+
+import numpy as np
+
+from ..model.normalize import SCALE_BOUNDS
+from ..model.stacked import gauss_newton_polish, refine_points_stack
+from . import robust_enum as enum
+from .robust_bounds import ROUND_DOWN
+from .robust_costs import point_distances2_stack
+
+__all__ = ["enumerate_tls", "enumerate_many", "eligible", "ENUM_CHUNK"]
+
+#: at most this many problems share one stack (their rows: up to 247 per problem at N = 8).
+ENUM_CHUNK = 256
+
+
+def eligible(search) -> bool:
+    """Does the enumeration run for this search (point regions, 3 to ENUM_MAX_VIEWS views, time left)?"""
+    return bool(search.points and 3 <= search.N <= enum.ENUM_MAX_VIEWS and not search.deadline.expired)
+
+
+def enumerate_tls(search):
+    """The TLS result of one :class:`tritools.solve.robust.TlsSearch` by enumeration, or None (the caller runs the
+    search, which has been offered the best candidates found here): :func:`enumerate_many` of one."""
+    return enumerate_many([search])[0]
+
+
+def enumerate_many(searches: list, scales=None) -> list:
+    """A result or None per search (module docstring), in input order; searches that are not :func:`eligible` get
+    None.  ``scales(list of searches)``: sets the documented decision scale of the searches that need it (a batch:
+    one normalisation stack); None: each search computes its own when asked."""
+    out: list = [None] * len(searches)
+    groups: dict = {}
+    for k, s in enumerate(searches):
+        if eligible(s):
+            groups.setdefault((s.N, id(s.tol)), []).append(k)
+    for idx in groups.values():
+        for a in range(0, len(idx), ENUM_CHUNK):
+            part = idx[a:a + ENUM_CHUNK]
+            for k, r in zip(part, _run([searches[k] for k in part], scales)):
+                out[k] = r
+    return out
+
+
+def _run(group: list, scales) -> list:
+    """:meth:`_Group.run`; where a stack fails on degenerate data, each problem alone (so that one problem never
+    decides another's path); None for a problem that fails alone (its search runs)."""
+    try:
+        return _Group(group, scales).run()
+    except (ValueError, np.linalg.LinAlgError, FloatingPointError):
+        if len(group) == 1:
+            return [None]
+    return [_run([s], scales)[0] for s in group]
+
+
+class _Group:
+    """P searches of one view count N enumerated together: row (p, m) is subset m of problem p."""
+
+    def __init__(self, group: list, scales):
+        self.group, self.scales = group, scales
+        self.N = N = group[0].N
+        self.tol = group[0].tol
+        self.C = np.stack([s.C for s in group])
+        self.x = np.stack([s.x for s in group])
+        self.c2 = np.stack([s.c2 for s in group])
+        self.W = enum.subset_masks(N)
+        self.size = self.W.sum(axis=1)
+        self.Xn = np.full((len(group), len(self.W), 3), np.nan)
+        self.n_bounded = np.zeros(len(group), int)
+        self.results: list = [None] * len(group)
+        self._fundamentals = self._floor = None
+
+    def run(self) -> list:
+        """The results (module docstring, steps 1-4); None where not decided."""
+        frames, self.Cn = enum.enum_frames(self.C, self.x)
+        self.frames = frames
+        live = np.array([f is not None for f in frames])
+        W, size = self.W, self.size
+        first = live[:, None] & ((size == 2) | (size == self.N))[None]
+        self._candidates(first)
+        live &= self._offer(live)
+        with np.errstate(over="ignore", invalid="ignore"):      # c^2(V - S); inf: c_i = inf
+            self.rest = np.sum(np.where(W[None], 0.0, self.c2[:, None, :]), axis=2) * ROUND_DOWN
+        later = self._open() & ~first & live[:, None]
+        if later.any():
+            self._candidates(later)
+            live &= self._offer(later.any(axis=1)) | ~later.any(axis=1)
+        # the pairs holding a view outside the best inlier set (their bounds feed the closure of the sets holding
+        # it; every pair where that set is all views) and the sets inside it first (their own bounds are the tight
+        # ones); then the other sets in need only where the closure of those does not meet UB (a set holding a
+        # wrong match usually inherits enough from its pairs: its own Lagrangian bound is weak)
+        best = np.array([[i in s.best_S for i in range(self.N)] for s in self.group])
+        inside = ~(W[None] & ~best[:, None, :]).any(axis=2)
+        pairs = (size == 2)[None] & (self._ub() > np.min(self.c2, axis=1))[:, None] & \
+            (~inside | best.all(axis=1)[:, None])
+        need = (self._open() | pairs) & live[:, None]
+        self.lb = np.zeros(need.shape)
+        early = need & (inside | pairs)
+        self._bounds(early)
+        late = need & ~early & self._failing()
+        self._bounds(late)
+        self.n_bounded += early.sum(axis=1) + late.sum(axis=1)
+        need = early | late
+        open_ = self._decide(np.nonzero(live)[0], final=False)
+        more = ~need & live[:, None] & self._feeding()
+        more[[p for p in range(len(self.group)) if p not in open_]] = False
+        done_now = [p for p in open_ if not more[p].any() and not self.group[p].deadline.expired]
+        more[[p for p in open_ if self.group[p].deadline.expired]] = False
+        if more.any():
+            self._candidates(more & ~np.isfinite(self.Xn).all(axis=2))
+            self._bounds(more)
+            self.n_bounded += more.sum(axis=1)
+        self._decide(done_now + list(np.nonzero(more.any(axis=1))[0]), final=True)
+        return self.results
+
+    # ------------------------------------------------------------------ steps
+    def _ub(self) -> np.ndarray:
+        return np.array([s.best_f for s in self.group])
+
+    def _candidates(self, rows: np.ndarray) -> None:
+        """The candidates of the rows (P, M) (:func:`~tritools.solve.robust_enum.enum_candidates`, one stack)."""
+        pp, mm = np.nonzero(rows)
+        if pp.size:
+            self.Xn[pp, mm] = enum.enum_candidates(self.Cn[pp], self.W[mm])
+
+    def _offer(self, probs: np.ndarray) -> np.ndarray:
+        """Offer each problem of ``probs`` (P,) the best of its row candidates (world frame), refined to convergence
+        on its inlier set S (:func:`_refine`: its f_TLS is at most the candidate's), and put the refined point in
+        the row of S (whose bound is then taken at the L2 optimum); the candidate itself where that fails.  The
+        problems that may go on: a candidate and time left."""
+        P = np.nonzero(probs)[0]
+        world = np.stack([self.frames[p].origin for p in P])[:, None] + \
+            np.array([self.frames[p].depth for p in P])[:, None, None] * self.Xn[P]       # (P', M, 3), NaN rows
+        with np.errstate(invalid="ignore"):
+            d2 = point_distances2_stack(self.C[P], self.x[P], np.where(np.isfinite(world), world, 0.0))
+            f = np.where(np.isfinite(world).all(axis=2), np.sum(np.minimum(d2, self.c2[P][:, None]), axis=2), np.nan)
+        picks = []                                      # (f_TLS only ranks here: offer() computes it exactly)
+        for r, p in enumerate(P):
+            if np.isnan(f[r]).all():
+                continue
+            k = int(np.nanargmin(f[r]))
+            picks.append((p, world[r, k], np.nonzero(d2[r, k] < self.c2[p])[0].tolist()))
+        refined = self._refine([(p, X, S) for p, X, S in picks if len(S) >= 2])
+        for p, X, S in picks:
+            s, Xr = self.group[p], refined.get(p)
+            if Xr is None:
+                s.offer(X)
+                continue
+            s.offer(self.frames[p].world_point(Xr))
+            self.Xn[p, enum.row_of(self.N)[sum(1 << i for i in S)]] = Xr
+        return np.array([s.best_X is not None and not s.deadline.expired for s in self.group])
+
+    def _refine(self, picks: list) -> dict:
+        """problem -> the candidate refined to convergence on its inlier set S (normalised) by
+        :func:`tritools.model.stacked.refine_points_stack` and one Gauss-Newton step (a row's few polish steps leave
+        the L2 optimum of a set short by ~1e-6 in X, though not in f; the step finishes a weak direction the damped
+        LM left, tiny baselines), the views outside S masked; absent where it fails."""
+        if not picks:
+            return {}
+        P = np.array([p for p, _, _ in picks])
+        inS = np.zeros((len(picks), self.N), bool)
+        for r, (_, _, S) in enumerate(picks):
+            inS[r, S] = True
+        Cm = np.where(inS[:, :, None, None], self.Cn[P], enum.MASKED_CAMERA)
+        X0 = np.array([self.frames[p].normalized_point(X) for p, X, _ in picks])
+        zeros = np.zeros((len(picks), self.N, 2))
+        Xn, ok = refine_points_stack(Cm, zeros, X0, np.ones(len(picks), bool))
+        Xn = gauss_newton_polish(Cm, zeros, Xn, ok)
+        ok &= np.isfinite(Xn).all(axis=1)
+        return {int(p): Xn[r] for r, p in enumerate(P) if ok[r]}
+
+    def _bounds(self, rows: np.ndarray) -> None:
+        """The Lagrangian bounds of the rows (P, M) (:func:`~tritools.solve.robust_enum.enum_bounds_rows`, one
+        stacked verification)."""
+        pp, mm = np.nonzero(rows)
+        if not pp.size:
+            return
+        if self._fundamentals is None:                 # once per problem, of the problems with frames
+            F = np.zeros(self.Cn.shape[:1] + (len(enum.view_pairs(self.N)[0]), 3, 3))
+            defined = np.zeros(F.shape[:2], bool)
+            has = np.array([f is not None for f in self.frames])
+            F[has], defined[has] = enum.fundamentals(self.C[has], self.Cn[has])
+            self._fundamentals = F, defined
+        F, defined = self._fundamentals
+        s = np.array([f.scale if f is not None else 1.0 for f in self.frames])
+        self.lb[pp, mm], _ = enum.enum_bounds_rows(self.Cn[pp], F[pp], defined[pp], self.W[mm], self.Xn[pp, mm],
+                                                   s[pp], self.tol)
+
+    def _floors(self) -> np.ndarray:
+        """The floor of each problem's decision scale (:mod:`tritools.solve.robust_enum`, "The decision scale")."""
+        from .robust import scale_from
+
+        if self._floor is None:
+            self._floor = np.array([scale_from(SCALE_BOUNDS[1], s.c2) for s in self.group])
+        return self._floor
+
+    def _open(self) -> np.ndarray:
+        """The rows (P, M) whose term c^2(V - S) alone does not meet UB under the rule at the floor scale (finite
+        only)."""
+        ub = self._ub()[:, None]
+        met = (self.rest >= ub) | np.asarray(self.tol.certified(self.rest, ub, self._floors()[:, None]), bool)
+        return ~met & np.isfinite(self.rest)
+
+    def _terms(self) -> np.ndarray:
+        """The terms L2LB(S) + c^2(V - S) (P, M) of every set, its bound closed (module docstring of
+        :mod:`tritools.solve.robust_enum`), rounded down."""
+        bits = self.W.astype(np.int64) @ (1 << np.arange(self.N))
+        table = np.zeros((len(self.c2), 1 << self.N))
+        table[:, bits] = self.lb
+        with np.errstate(over="ignore", invalid="ignore"):
+            return (enum.closure(self.N, table)[:, bits] + self.rest) * ROUND_DOWN
+
+    def _lower_bounds(self) -> np.ndarray:
+        """LB (P,): the least term, the exact terms of |S| <= 1 and UB (module docstring of
+        :mod:`tritools.solve.robust_enum`)."""
+        N, c2 = self.N, self.c2
+        with np.errstate(over="ignore", invalid="ignore"):
+            small = np.sum(np.where(np.eye(N, dtype=bool)[None], 0.0, c2[:, None, :]), axis=2)   # |S| = 1: exact
+            return np.minimum.reduce([self._ub(), np.min(self._terms(), axis=1), np.min(small, axis=1) * ROUND_DOWN,
+                                      np.sum(c2, axis=1) * ROUND_DOWN])
+
+    def _failing(self) -> np.ndarray:
+        """The sets (P, M) whose term does not meet UB at the floor scale."""
+        terms, ub = self._terms(), self._ub()[:, None]
+        return (terms < ub) & ~np.asarray(self.tol.certified(terms, ub, self._floors()[:, None]), bool)
+
+    def _feeding(self) -> np.ndarray:
+        """The sets (P, M) inside a set whose term does not meet UB at the floor scale: only their bounds can raise
+        a term that matters (the closure of S reads S's subsets only; a term that meets UB already meets it)."""
+        return (self._failing().astype(np.int32) @ enum.subset_of(self.N).T.astype(np.int32)) > 0
+
+    def _decide(self, probs, final: bool) -> list:
+        """Decide the problems ``probs`` where LB meets UB (at the floor scale: the documented rule then holds too;
+        ``final``: else at the documented scale, ``scales`` asked once for all of them); the problems left open."""
+        if not len(probs):
+            return []
+        lb_all, floors = self._lower_bounds(), self._floors()
+        late = []
+        for p in probs:
+            s, lb, ub = self.group[p], float(lb_all[p]), self.group[p].best_f
+            if s.tol.certified(lb, ub, floors[p]) and not s.tol.contradicts(lb, ub, floors[p]):
+                s.set_normalization_scale(SCALE_BOUNDS[1])       # met at the floor: met at the documented scale
+                self._result(p, lb)
+            else:
+                late.append(p)
+        if not final:
+            return late
+        if self.scales is not None:
+            self.scales([self.group[p] for p in late])
+        for p in late:
+            s = self.group[p]
+            if s.tol.certified(float(lb_all[p]), s.best_f, s.scale):
+                self._result(p, float(lb_all[p]))
+        return [p for p in late if self.results[p] is None]
+
+    def _result(self, p: int, lb: float) -> None:
+        s = self.group[p]
+        s.bounds.n_solved += int(self.n_bounded[p])
+        t = time.perf_counter() - s.t0
+        res = s.result(lb, None, {"enumeration": t, "total": t})
+        self.results[p] = dataclasses.replace(
+            res, message=res.message + f"; {enum.ENUMERATED} ({len(self.W)} sets of >= 2 views)")

@@ -25,6 +25,7 @@ depend on the others of its stack (each row's numbers are its own problem's).
 from __future__ import annotations
 
 import dataclasses
+import logging
 import time
 
 import numpy as np
@@ -36,6 +37,8 @@ from .robust_bounds import ROUND_DOWN
 from .robust_costs import point_distances2_stack
 
 __all__ = ["enumerate_tls", "enumerate_many", "eligible", "ENUM_CHUNK"]
+
+log = logging.getLogger(__name__)
 
 #: at most this many problems share one stack (their rows: up to 247 per problem at N = 8).
 ENUM_CHUNK = 256
@@ -75,6 +78,7 @@ def _run(group: list, scales) -> list:
     try:
         return _Group(group, scales).run()
     except (ValueError, np.linalg.LinAlgError, FloatingPointError):
+        log.debug("enumeration of %d problems failed", len(group), exc_info=True)
         if len(group) == 1:
             return [None]
     return [_run([s], scales)[0] for s in group]
@@ -93,52 +97,79 @@ class _Group:
         self.W = enum.subset_masks(N)
         self.size = self.W.sum(axis=1)
         self.Xn = np.full((len(group), len(self.W), 3), np.nan)
-        self.n_bounded = np.zeros(len(group), int)
         self.results: list = [None] * len(group)
         self._fundamentals = self._floor = None
 
     def run(self) -> list:
         """The results (module docstring, steps 1-4); None where not decided."""
-        frames, self.Cn = enum.enum_frames(self.C, self.x)
-        self.frames = frames
-        live = np.array([f is not None for f in frames])
-        W, size = self.W, self.size
-        first = live[:, None] & ((size == 2) | (size == self.N))[None]
-        self._candidates(first)
-        live &= self._offer(live)
+        self.frames, self.Cn = enum.enum_frames(self.C, self.x)
+        live = np.array([f is not None for f in self.frames])
         with np.errstate(over="ignore", invalid="ignore"):      # c^2(V - S); inf: c_i = inf
-            self.rest = np.sum(np.where(W[None], 0.0, self.c2[:, None, :]), axis=2) * ROUND_DOWN
-        later = self._open() & ~first & live[:, None]
+            self.rest = np.sum(np.where(self.W[None], 0.0, self.c2[:, None, :]), axis=2) * ROUND_DOWN
+        self.lb = np.zeros(self.rest.shape)
+        self.bounded = np.zeros(self.rest.shape, bool)
+        if len(self.group) > 1:
+            live = self._all_views_first(live)
+        live = self._upper_bounds(live)
+        self._second_round(self._first_round(live), live)
+        return self.results
+
+    def _all_views_first(self, live: np.ndarray) -> np.ndarray:
+        """A stack of several problems: the candidate and the bound of all views first.  A track whose best inlier
+        set is all views with UB <= min c^2 is then decided where L2LB(V) meets UB (every other term has
+        c^2(V - S) >= min c^2 >= UB): one row per clean track instead of the pairs' stack.  The problems left."""
+        full = live[:, None] & (self.size == self.N)[None]
+        self._candidates(full)
+        live = live & self._offer(full)
+        clean = np.array([len(s.best_S) == self.N for s in self.group]) & (self._ub() <= np.min(self.c2, axis=1))
+        quick = live & clean
+        self._bound(quick[:, None] & full)
+        self._decide(np.nonzero(quick)[0], final=False)
+        return live & np.array([r is None for r in self.results])
+
+    def _upper_bounds(self, live: np.ndarray) -> np.ndarray:
+        """Steps 1-2: the candidates of the pairs and of all views, then of the sets whose c^2(V - S) alone does not
+        meet UB, each stack's best offered; the problems with a candidate and time left."""
+        todo = lambda rows: rows & live[:, None] & ~np.isfinite(self.Xn).all(axis=2)     # noqa: E731
+        pairs = np.broadcast_to((self.size == 2)[None], self.Xn.shape[:2])
+        if len(self.group) > 1:       # after the candidate of all views: with one view outside its inlier set, the
+            out = np.array([[i not in s.best_S for i in range(self.N)] for s in self.group])   # pairs holding it
+            one = (out.sum(axis=1) == 1)[:, None]
+            pairs = pairs & (~one | (self.W[None] & out[:, None, :]).any(axis=2))
+        first = todo(pairs | (self.size == self.N)[None])
+        self._candidates(first)
+        live = live & (self._offer(first) | ~first.any(axis=1))
+        later = todo(self._open())
         if later.any():
             self._candidates(later)
-            live &= self._offer(later.any(axis=1)) | ~later.any(axis=1)
-        # the pairs holding a view outside the best inlier set (their bounds feed the closure of the sets holding
-        # it; every pair where that set is all views) and the sets inside it first (their own bounds are the tight
-        # ones); then the other sets in need only where the closure of those does not meet UB (a set holding a
-        # wrong match usually inherits enough from its pairs: its own Lagrangian bound is weak)
+            live = live & (self._offer(later) | ~later.any(axis=1))
+        return live
+
+    def _first_round(self, live: np.ndarray) -> list:
+        """Step 3: the bounds of the sets in need -- the pairs holding a view outside the best inlier set (they feed
+        the closure of the sets holding it) and the sets inside it first (their own bounds are the tight ones), then
+        the other sets whose c^2(V - S) does not meet UB only where the closure of those does not meet it (a set
+        holding a wrong match usually inherits enough from its pairs: its own Lagrangian bound is weak) -- and
+        the decision at the floor scale; the problems left open."""
+        W, size = self.W, self.size
         best = np.array([[i in s.best_S for i in range(self.N)] for s in self.group])
         inside = ~(W[None] & ~best[:, None, :]).any(axis=2)
-        pairs = (size == 2)[None] & (self._ub() > np.min(self.c2, axis=1))[:, None] & \
-            (~inside | best.all(axis=1)[:, None])
+        pairs = (size == 2)[None] & ~inside & (self._ub() > np.min(self.c2, axis=1))[:, None]
         need = (self._open() | pairs) & live[:, None]
-        self.lb = np.zeros(need.shape)
-        early = need & (inside | pairs)
-        self._bounds(early)
-        late = need & ~early & self._failing()
-        self._bounds(late)
-        self.n_bounded += early.sum(axis=1) + late.sum(axis=1)
-        need = early | late
-        open_ = self._decide(np.nonzero(live)[0], final=False)
-        more = ~need & live[:, None] & self._feeding()
-        more[[p for p in range(len(self.group)) if p not in open_]] = False
-        done_now = [p for p in open_ if not more[p].any() and not self.group[p].deadline.expired]
-        more[[p for p in open_ if self.group[p].deadline.expired]] = False
+        self._bound(need & (inside | pairs))
+        self._bound(need & ~self.bounded & self._failing())
+        return self._decide(np.nonzero(live)[0], final=False)
+
+    def _second_round(self, open_: list, live: np.ndarray) -> None:
+        """Step 4: for the problems left open with time left, the candidates and bounds of the sets inside a set
+        whose term does not meet UB (:meth:`_feeding`), the closure again; the final decision."""
+        more = ~self.bounded & live[:, None] & self._feeding()
+        keep = np.zeros(len(self.group), bool)
+        keep[[p for p in open_ if not self.group[p].deadline.expired]] = True
+        more &= keep[:, None]
         if more.any():
-            self._candidates(more & ~np.isfinite(self.Xn).all(axis=2))
-            self._bounds(more)
-            self.n_bounded += more.sum(axis=1)
-        self._decide(done_now + list(np.nonzero(more.any(axis=1))[0]), final=True)
-        return self.results
+            self._bound(more)
+        self._decide(np.nonzero(keep)[0], final=True)
 
     # ------------------------------------------------------------------ steps
     def _ub(self) -> np.ndarray:
@@ -150,23 +181,25 @@ class _Group:
         if pp.size:
             self.Xn[pp, mm] = enum.enum_candidates(self.Cn[pp], self.W[mm])
 
-    def _offer(self, probs: np.ndarray) -> np.ndarray:
-        """Offer each problem of ``probs`` (P,) the best of its row candidates (world frame), refined to convergence
-        on its inlier set S (:func:`_refine`: its f_TLS is at most the candidate's), and put the refined point in
-        the row of S (whose bound is then taken at the L2 optimum); the candidate itself where that fails.  The
-        problems that may go on: a candidate and time left."""
-        P = np.nonzero(probs)[0]
-        world = np.stack([self.frames[p].origin for p in P])[:, None] + \
-            np.array([self.frames[p].depth for p in P])[:, None, None] * self.Xn[P]       # (P', M, 3), NaN rows
-        with np.errstate(invalid="ignore"):
-            d2 = point_distances2_stack(self.C[P], self.x[P], np.where(np.isfinite(world), world, 0.0))
-            f = np.where(np.isfinite(world).all(axis=2), np.sum(np.minimum(d2, self.c2[P][:, None]), axis=2), np.nan)
-        picks = []                                      # (f_TLS only ranks here: offer() computes it exactly)
-        for r, p in enumerate(P):
-            if np.isnan(f[r]).all():
-                continue
-            k = int(np.nanargmin(f[r]))
-            picks.append((p, world[r, k], np.nonzero(d2[r, k] < self.c2[p])[0].tolist()))
+    def _offer(self, rows: np.ndarray) -> np.ndarray:
+        """Offer each problem the best of its candidates in ``rows`` (P, M) (world frame, ranked by f_TLS in one
+        stacked evaluation), refined to convergence on its inlier set S (:func:`_refine`: its f_TLS is at most the
+        candidate's), and put the refined point in the row of S (whose bound is then taken at the L2 optimum); the
+        candidate itself where that fails.  The problems that may go on: a candidate and time left."""
+        pp, mm = np.nonzero(rows & np.isfinite(self.Xn).all(axis=2))
+        picks = []
+        if pp.size:
+            origin = np.array([self.frames[p].origin if self.frames[p] is not None else np.zeros(3)
+                               for p in range(len(self.group))])
+            depth = np.array([self.frames[p].depth if self.frames[p] is not None else 1.0
+                              for p in range(len(self.group))])
+            world = origin[pp] + depth[pp, None] * self.Xn[pp, mm]
+            d2 = point_distances2_stack(self.C[pp], self.x[pp], world[:, None])[:, 0]           # (R, N)
+            f = np.sum(np.minimum(d2, self.c2[pp]), axis=1)       # (only ranks: offer() computes it exactly)
+            order = np.lexsort((f, pp))
+            _, first = np.unique(pp[order], return_index=True)
+            for r in order[first]:
+                picks.append((int(pp[r]), world[r], np.nonzero(d2[r] < self.c2[pp[r]])[0].tolist()))
         refined = self._refine([(p, X, S) for p, X, S in picks if len(S) >= 2])
         for p, X, S in picks:
             s, Xr = self.group[p], refined.get(p)
@@ -196,9 +229,12 @@ class _Group:
         ok &= np.isfinite(Xn).all(axis=1)
         return {int(p): Xn[r] for r, p in enumerate(P) if ok[r]}
 
-    def _bounds(self, rows: np.ndarray) -> None:
-        """The Lagrangian bounds of the rows (P, M) (:func:`~tritools.solve.robust_enum.enum_bounds_rows`, one
-        stacked verification)."""
+    def _bound(self, rows: np.ndarray) -> None:
+        """The Lagrangian bounds of the rows (P, M) not bounded yet (:func:`~tritools.solve.robust_enum.enum_bounds_rows`,
+        one stacked verification)."""
+        rows = rows & ~self.bounded
+        self.bounded |= rows
+        self._candidates(rows & ~np.isfinite(self.Xn).all(axis=2))
         pp, mm = np.nonzero(rows)
         if not pp.size:
             return
@@ -282,7 +318,7 @@ class _Group:
 
     def _result(self, p: int, lb: float) -> None:
         s = self.group[p]
-        s.bounds.n_solved += int(self.n_bounded[p])
+        s.bounds.n_solved += int(self.bounded[p].sum())
         t = time.perf_counter() - s.t0
         res = s.result(lb, None, {"enumeration": t, "total": t})
         self.results[p] = dataclasses.replace(

@@ -42,6 +42,8 @@ log = logging.getLogger(__name__)
 
 #: at most this many problems share one stack (their rows: up to 247 per problem at N = 8).
 ENUM_CHUNK = 256
+#: rounds of local optimisation of the best candidate of a stack (inlier set -> its L2 optimum -> inlier set).
+LO_ROUNDS = 3
 
 
 def eligible(search) -> bool:
@@ -132,15 +134,18 @@ class _Group:
         meet UB, each stack's best offered; the problems with a candidate and time left."""
         todo = lambda rows: rows & live[:, None] & ~np.isfinite(self.Xn).all(axis=2)     # noqa: E731
         pairs = np.broadcast_to((self.size == 2)[None], self.Xn.shape[:2])
-        if len(self.group) > 1:       # after the candidate of all views: with one view outside its inlier set, the
-            out = np.array([[i not in s.best_S for i in range(self.N)] for s in self.group])   # pairs holding it
+        if len(self.group) > 1:       # a batch: the sets of all views but one next; where the best then has one view
+            loo = todo((self.size == self.N - 1)[None])        # outside its inlier set, only the pairs holding it
+            self._candidates(loo)
+            live = live & (self._offer(loo) | ~loo.any(axis=1))
+            out = np.array([[i not in s.best_S for i in range(self.N)] for s in self.group])
             one = (out.sum(axis=1) == 1)[:, None]
             pairs = pairs & (~one | (self.W[None] & out[:, None, :]).any(axis=2))
         first = todo(pairs | (self.size == self.N)[None])
         self._candidates(first)
         live = live & (self._offer(first) | ~first.any(axis=1))
         later = todo(self._open())
-        if later.any():
+        if later.any() and len(self.group) == 1:
             self._candidates(later)
             live = live & (self._offer(later) | ~later.any(axis=1))
         return live
@@ -200,14 +205,21 @@ class _Group:
             _, first = np.unique(pp[order], return_index=True)
             for r in order[first]:
                 picks.append((int(pp[r]), world[r], np.nonzero(d2[r] < self.c2[pp[r]])[0].tolist()))
-        refined = self._refine([(p, X, S) for p, X, S in picks if len(S) >= 2])
-        for p, X, S in picks:
-            s, Xr = self.group[p], refined.get(p)
-            if Xr is None:
-                s.offer(X)
-                continue
-            s.offer(self.frames[p].world_point(Xr))
-            self.Xn[p, enum.row_of(self.N)[sum(1 << i for i in S)]] = Xr
+        for p, X, _ in picks:
+            self.group[p].offer(X)
+        for _ in range(LO_ROUNDS):                      # inlier set -> its L2 optimum -> inlier set
+            picks = [(p, X, S) for p, X, S in picks if len(S) >= 2]
+            refined = self._refine(picks)
+            again = []
+            for p, X, S in picks:
+                s, Xr = self.group[p], refined.get(p)
+                if Xr is None:
+                    continue
+                s.offer(self.frames[p].world_point(Xr))
+                self.Xn[p, enum.row_of(self.N)[sum(1 << i for i in S)]] = Xr
+                if s.best_S != frozenset(S) and np.array_equal(s.best_X, self.frames[p].world_point(Xr)):
+                    again.append((p, s.best_X, sorted(s.best_S)))          # a new best with another inlier set
+            picks = again
         return np.array([s.best_X is not None and not s.deadline.expired for s in self.group])
 
     def _refine(self, picks: list) -> dict:

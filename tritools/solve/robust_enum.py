@@ -55,7 +55,7 @@ from sospoly.analysis import verify_quadratic_batch
 
 from ..model.normalize import RHO_FLOOR_REL, SCALE_BOUNDS, Normalization
 from ..model.stacked import (damped_step, dlt_stack, epipolar_quadratics, fundamental_stack, next_damping, norms,
-                             null_vectors, pixel_scales, project_stack, view_pairs)
+                             null_vectors, pixel_scales, project_quiet, project_stack, view_pairs)
 from .robust_bounds import ROUND_DOWN
 
 __all__ = ["enum_frame", "enum_frames", "subset_masks", "closure", "enum_candidates", "enum_bounds",
@@ -180,7 +180,8 @@ def _polish(Cm: np.ndarray, X: np.ndarray, steps: int) -> np.ndarray:
     row's cost moves by POLISH_RTOL of it.  Any candidate gives a valid bound: this only tightens it."""
     mu = np.full(len(X), 1e-3)
     with np.errstate(all="ignore"):
-        u, h, fin = project_stack(Cm, X)
+        absC2 = np.abs(Cm[:, :, 2, :])
+        u, h, fin = project_quiet(Cm, X, absC2)
         cost = np.where(fin, np.sum(u * u, axis=(1, 2)), np.inf)
         for _ in range(steps):
             den = np.where(h[..., 2] == 0, 1.0, h[..., 2])
@@ -189,7 +190,7 @@ def _polish(Cm: np.ndarray, X: np.ndarray, steps: int) -> np.ndarray:
             Jt = np.swapaxes(J, 1, 2)                      # (batched matmul: ~3x faster than einsum here)
             step = damped_step(Jt @ J, (Jt @ r[..., None])[..., 0], mu)
             Xt = X + np.where(np.isfinite(step), step, 0.0)
-            ut, ht, fint = project_stack(Cm, Xt)
+            ut, ht, fint = project_quiet(Cm, Xt, absC2)
             ct = np.where(fint, np.sum(ut * ut, axis=(1, 2)), np.inf)
             better = ct <= cost
             settled = np.all(np.isfinite(cost) & (np.abs(ct - cost) <= POLISH_RTOL * cost))

@@ -42,6 +42,12 @@ log = logging.getLogger(__name__)
 
 #: at most this many problems share one stack (their rows: up to 247 per problem at N = 8).
 ENUM_CHUNK = 256
+#: stacks of at least this many problems take the staged order (all views first, then all views but one, the pairs
+#: only where they matter: fewer rows); a single problem takes one stack of the pairs and all views (fewer calls).
+#: Measured on single calls, the two orders interleaved (median CPU ms, 30 tracks per cell, loaded machine): one
+#: stack 2.2 / 3.3 / 4.8 against staged 2.7 / 4.3 / 5.4 on protocol tracks with outliers at N = 3 / 5 / 7, equal on
+#: clean tracks; in batches the staged order is the cheaper one (benchmarks/RESULTS.md, wave 7).
+STAGED_FROM = 2
 #: rounds of local optimisation of the best candidate of a stack (inlier set -> its L2 optimum -> inlier set).
 LO_ROUNDS = 3
 
@@ -100,7 +106,8 @@ class _Group:
         self.size = self.W.sum(axis=1)
         self.Xn = np.full((len(group), len(self.W), 3), np.nan)
         self.results: list = [None] * len(group)
-        self._fundamentals = self._floor = None
+        self._fundamentals = self._floor = self._terms_cache = None
+        self.staged = len(group) >= STAGED_FROM
 
     def run(self) -> list:
         """The results (module docstring, steps 1-4); None where not decided."""
@@ -110,7 +117,7 @@ class _Group:
             self.rest = np.sum(np.where(self.W[None], 0.0, self.c2[:, None, :]), axis=2) * ROUND_DOWN
         self.lb = np.zeros(self.rest.shape)
         self.bounded = np.zeros(self.rest.shape, bool)
-        if len(self.group) > 1:
+        if self.staged:
             live = self._all_views_first(live)
         live = self._upper_bounds(live)
         self._second_round(self._first_round(live), live)
@@ -134,7 +141,7 @@ class _Group:
         meet UB, each stack's best offered; the problems with a candidate and time left."""
         todo = lambda rows: rows & live[:, None] & ~np.isfinite(self.Xn).all(axis=2)     # noqa: E731
         pairs = np.broadcast_to((self.size == 2)[None], self.Xn.shape[:2])
-        if len(self.group) > 1:       # a batch: the sets of all views but one next; where the best then has one view
+        if self.staged:               # a batch: the sets of all views but one next; where the best then has one view
             loo = todo((self.size == self.N - 1)[None])        # outside its inlier set, only the pairs holding it
             self._candidates(loo)
             live = live & (self._offer(loo) | ~loo.any(axis=1))
@@ -145,7 +152,7 @@ class _Group:
         self._candidates(first)
         live = live & (self._offer(first) | ~first.any(axis=1))
         later = todo(self._open())
-        if later.any() and len(self.group) == 1:
+        if later.any() and not self.staged:
             self._candidates(later)
             live = live & (self._offer(later) | ~later.any(axis=1))
         return live
@@ -258,6 +265,7 @@ class _Group:
             self._fundamentals = F, defined
         F, defined = self._fundamentals
         s = np.array([f.scale if f is not None else 1.0 for f in self.frames])
+        self._terms_cache = None
         self.lb[pp, mm], _ = enum.enum_bounds_rows(self.Cn[pp], F[pp], defined[pp], self.W[mm], self.Xn[pp, mm],
                                                    s[pp], self.tol)
 
@@ -278,7 +286,12 @@ class _Group:
 
     def _terms(self) -> np.ndarray:
         """The terms L2LB(S) + c^2(V - S) (P, M) of every set, its bound closed (module docstring of
-        :mod:`tritools.solve.robust_enum`), rounded down."""
+        :mod:`tritools.solve.robust_enum`), rounded down; computed again only after new bounds."""
+        if self._terms_cache is None:
+            self._terms_cache = self._closed_terms()
+        return self._terms_cache
+
+    def _closed_terms(self) -> np.ndarray:
         bits = self.W.astype(np.int64) @ (1 << np.arange(self.N))
         table = np.zeros((len(self.c2), 1 << self.N))
         table[:, bits] = self.lb

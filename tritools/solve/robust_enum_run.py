@@ -113,6 +113,8 @@ class _Group:
         """The results (module docstring, steps 1-4); None where not decided."""
         self.frames, self.Cn = enum.enum_frames(self.C, self.x)
         live = np.array([f is not None for f in self.frames])
+        self.origin = np.array([f.origin if f is not None else np.zeros(3) for f in self.frames])
+        self.depth = np.array([f.depth if f is not None else 1.0 for f in self.frames])
         with np.errstate(over="ignore", invalid="ignore"):      # c^2(V - S); inf: c_i = inf
             self.rest = np.sum(np.where(self.W[None], 0.0, self.c2[:, None, :]), axis=2) * ROUND_DOWN
         self.lb = np.zeros(self.rest.shape)
@@ -169,16 +171,19 @@ class _Group:
         pairs = (size == 2)[None] & ~inside & (self._ub() > np.min(self.c2, axis=1))[:, None]
         need = (self._open() | pairs) & live[:, None]
         self._bound(need & (inside | pairs))
-        self._bound(need & ~self.bounded & self._failing())
+        rest = need & ~self.bounded
+        if rest.any():
+            self._bound(rest & self._failing())
         return self._decide(np.nonzero(live)[0], final=False)
 
     def _second_round(self, open_: list, live: np.ndarray) -> None:
         """Step 4: for the problems left open with time left, the candidates and bounds of the sets inside a set
         whose term does not meet UB (:meth:`_feeding`), the closure again; the final decision."""
-        more = ~self.bounded & live[:, None] & self._feeding()
         keep = np.zeros(len(self.group), bool)
         keep[[p for p in open_ if not self.group[p].deadline.expired]] = True
-        more &= keep[:, None]
+        if not keep.any():
+            return
+        more = ~self.bounded & (live & keep)[:, None] & self._feeding()
         if more.any():
             self._bound(more)
         self._decide(np.nonzero(keep)[0], final=True)
@@ -201,11 +206,7 @@ class _Group:
         pp, mm = np.nonzero(rows & np.isfinite(self.Xn).all(axis=2))
         picks = []
         if pp.size:
-            origin = np.array([self.frames[p].origin if self.frames[p] is not None else np.zeros(3)
-                               for p in range(len(self.group))])
-            depth = np.array([self.frames[p].depth if self.frames[p] is not None else 1.0
-                              for p in range(len(self.group))])
-            world = origin[pp] + depth[pp, None] * self.Xn[pp, mm]
+            world = self.origin[pp] + self.depth[pp, None] * self.Xn[pp, mm]
             d2 = point_distances2_stack(self.C[pp], self.x[pp], world[:, None])[:, 0]           # (R, N)
             f = np.sum(np.minimum(d2, self.c2[pp]), axis=1)       # (only ranks: offer() computes it exactly)
             order = np.lexsort((f, pp))

@@ -1,6 +1,8 @@
 """Batches of robust (TLS) problems: :func:`triangulate_many` and :func:`triangulate_points` with ``robust=``.
 
-1. Point-region problems (with a finite threshold) go straight to the branch and bound of
+1. Point-region problems (with a finite threshold) of 3 to ``ENUM_MAX_VIEWS`` views first go through the
+   enumeration of every inlier set, stacked across problems (:func:`tritools.solve.robust_enum_run.enumerate_many`,
+   the single call's path).  The others, and those it does not decide, go to the branch and bound of
    :mod:`tritools.solve.robust` -- exactly the search :func:`tritools.triangulate` runs for one of them -- in
    chunks of :data:`ROBUST_CHUNK` searched together by :func:`tritools.solve.robust_drive.drive`: every sub-bound
    request of every search of a chunk (the full view set first, then the view pairs, the local optimisation's

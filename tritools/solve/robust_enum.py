@@ -1,14 +1,18 @@
-"""Certified TLS for a few views by subset enumeration: one stacked verification of every inlier set.
+"""Certified TLS for a few views by subset enumeration: the maths of one stacked verification of every inlier set.
+
+This module holds the pieces, each stacked over rows (and problems): the frames (:func:`enum_frames`), the masked
+candidates (:func:`enum_candidates`), the bounds (:func:`enum_bounds_rows`) and the superadditive closure
+(:func:`closure`); :mod:`tritools.solve.robust_enum_run` runs them for one search or a batch of them.
 
 For thresholds c_i and point regions (:mod:`tritools.solve.robust`),
 
     f*_TLS = min over subsets S of [ L2*(S) + c^2(V - S) ],     L2*(S) = min_X sum_{i in S} d_i(X)^2,
 
 with L2*(S) = 0 for |S| <= 1.  For N <= :data:`ENUM_MAX_VIEWS` views there are at most 2^N - N - 1 subsets
-with |S| >= 2 (N = 3: 4; N = 5: 26; N = 8: 247), few enough to bound *every* one in one or two stacked calls
-(:func:`enumerate_tls`) instead of a branch and bound with several rounds of sub-problems.  Each subset is one
-row of a stack of N-view problems in one normalised frame of the whole problem (:func:`enum_frame`: x' = s (x - x_i),
-X = X_0 + d X'); a view outside S is masked:
+with |S| >= 2 (N = 3: 4; N = 5: 26; N = 8: 247), few enough to bound *every* one in a few stacked calls
+(:mod:`tritools.solve.robust_enum_run`) instead of a branch and bound with several rounds of sub-problems.  Each
+subset is one row of a stack of N-view problems in one normalised frame of the whole problem (:func:`enum_frames`:
+x' = s (x - x_i), X = X_0 + d X'); a view outside S is masked:
 
 * its camera is replaced by ``MASKED_CAMERA`` = [[0, 0, 0, 0], [0, 0, 0, 0], [0, 0, 0, 1]] for the candidate
   (its projection is the origin for every X, where its observation sits: residual and Jacobian 0), so the
@@ -34,7 +38,7 @@ is valid under floating point (every sum rounded down).  The upper bound UB is t
 candidate X_S (world frame).  Where LB and UB meet under the certificate rule of :mod:`tritools.solve.robust`
 (:meth:`TlsSearch.result`, the one decision rule: ``sospoly.Tolerances`` at ``robust.decision_scale``) the
 result is returned; elsewhere (a weak bound that no split repairs, an optimum on a single view's ray, degenerate
-data) :func:`enumerate_tls` returns None and the caller runs the branch and bound, which starts from the best
+data) the run returns None and the caller runs the branch and bound, which starts from the best
 candidate found here.
 
 The decision scale.  ``decision_scale`` needs the L2 normalisation of the whole problem (a Levenberg-Marquardt
@@ -162,7 +166,8 @@ def enum_frames(C: np.ndarray, x: np.ndarray) -> tuple:
             rho[p] = max(rho[p], RHO_FLOOR_REL * float(np.median(ps)) if ps.size else 0.0)
         ok &= np.isfinite(d) & (d > 0) & np.isfinite(rho) & (rho > 0)
         s = np.minimum(np.maximum(1.0 / rho, SCALE_BOUNDS[0]), SCALE_BOUNDS[1])
-        # P'_i = T_i P_i H / ||.||_F (Normalization.cameras, vectorised): T_i = [[s, 0, -s x_i], [0, s, -s y_i], [0, 0, 1]]
+        # P'_i = T_i P_i H / ||.||_F (Normalization.cameras, vectorised):
+        # T_i = [[s, 0, -s x_i], [0, s, -s y_i], [0, 0, 1]]
         Xh = np.concatenate([X0, np.ones((P, 1))], axis=1)
         CH = np.concatenate([C[..., :3] * d[:, None, None, None],
                              np.einsum("pnij,pj->pni", Cc, Xh)[..., None]], axis=3)

@@ -219,7 +219,7 @@ class _Group:
             picks = [(p, X, S) for p, X, S in picks if len(S) >= 2]
             refined = self._refine(picks)
             again = []
-            for p, X, S in picks:
+            for p, _, S in picks:
                 s, Xr = self.group[p], refined.get(p)
                 if Xr is None:
                     continue
@@ -250,8 +250,8 @@ class _Group:
         return {int(p): Xn[r] for r, p in enumerate(P) if ok[r]}
 
     def _bound(self, rows: np.ndarray) -> None:
-        """The Lagrangian bounds of the rows (P, M) not bounded yet (:func:`~tritools.solve.robust_enum.enum_bounds_rows`,
-        one stacked verification)."""
+        """The Lagrangian bounds of the rows (P, M) not bounded yet (one stacked verification,
+        :func:`~tritools.solve.robust_enum.enum_bounds_rows`), their candidates first where missing."""
         rows = rows & ~self.bounded
         self.bounded |= rows
         self._candidates(rows & ~np.isfinite(self.Xn).all(axis=2))

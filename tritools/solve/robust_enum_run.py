@@ -36,12 +36,14 @@ from . import robust_enum as enum
 from .robust_bounds import ROUND_DOWN
 from .robust_costs import point_distances2_stack
 
-__all__ = ["enumerate_tls", "enumerate_many", "eligible", "ENUM_CHUNK"]
+__all__ = ["enumerate_tls", "enumerate_many", "eligible", "ENUM_CHUNK", "ENUM_ROWS"]
 
 log = logging.getLogger(__name__)
 
-#: at most this many problems share one stack (their rows: up to 247 per problem at N = 8).
+#: at most this many problems share one stack, and at most ENUM_ROWS subset rows (247 per problem at N = 8): a
+#: stacked verification of R rows of N views holds ~R N^3 floats (8192 rows at N = 8: ~30 MB).
 ENUM_CHUNK = 256
+ENUM_ROWS = 8192
 #: stacks of at least this many problems take the staged order (all views first, then all views but one, the pairs
 #: only where they matter: fewer rows); a single problem takes one stack of the pairs and all views (fewer calls).
 #: Measured on single calls, the two orders interleaved (median CPU ms, 30 tracks per cell, loaded machine): one
@@ -72,9 +74,10 @@ def enumerate_many(searches: list, scales=None) -> list:
     for k, s in enumerate(searches):
         if eligible(s):
             groups.setdefault((s.N, id(s.tol)), []).append(k)
-    for idx in groups.values():
-        for a in range(0, len(idx), ENUM_CHUNK):
-            part = idx[a:a + ENUM_CHUNK]
+    for (N, _), idx in groups.items():
+        step = min(ENUM_CHUNK, max(1, ENUM_ROWS // len(enum.subset_masks(N))))
+        for a in range(0, len(idx), step):
+            part = idx[a:a + step]
             for k, r in zip(part, _run([searches[k] for k in part], scales)):
                 out[k] = r
     return out

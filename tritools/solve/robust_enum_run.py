@@ -134,7 +134,8 @@ class _Group:
         c^2(V - S) >= min c^2 >= UB): one row per clean track instead of the pairs' stack.  The problems left."""
         full = live[:, None] & (self.size == self.N)[None]
         self._candidates(full)
-        live = live & self._offer(full)
+        self._offer(full)                   # (a problem without a finite candidate here goes on to the pairs)
+        live = live & np.array([not s.deadline.expired for s in self.group])
         clean = np.array([len(s.best_S) == self.N for s in self.group]) & (self._ub() <= np.min(self.c2, axis=1))
         quick = live & clean
         self._bound(quick[:, None] & full)

@@ -111,6 +111,7 @@ class _Group:
         self.results: list = [None] * len(group)
         self._fundamentals = self._floor = self._terms_cache = None
         self.staged = len(group) >= STAGED_FROM
+        self.refined: list = [set() for _ in group]     # the inlier sets refined to convergence, per problem
 
     def run(self) -> list:
         """The results (module docstring, steps 1-4); None where not decided."""
@@ -220,7 +221,9 @@ class _Group:
         for p, X, _ in picks:
             self.group[p].offer(X)
         for _ in range(LO_ROUNDS):                      # inlier set -> its L2 optimum -> inlier set
-            picks = [(p, X, S) for p, X, S in picks if len(S) >= 2]
+            picks = [(p, X, S) for p, X, S in picks if len(S) >= 2 and frozenset(S) not in self.refined[p]]
+            for p, _, S in picks:                       # (a set refined before: its optimum was offered then)
+                self.refined[p].add(frozenset(S))
             refined = self._refine(picks)
             again = []
             for p, _, S in picks:

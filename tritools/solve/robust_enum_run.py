@@ -50,6 +50,12 @@ ENUM_ROWS = 8192
 #: stack 2.2 / 3.3 / 4.8 against staged 2.7 / 4.3 / 5.4 on protocol tracks with outliers at N = 3 / 5 / 7, equal on
 #: clean tracks; in batches the staged order is the cheaper one (benchmarks/RESULTS.md, wave 7).
 STAGED_FROM = 2
+#: a single call computes the candidates of the sets whose c^2(V - S) does not meet UB (they may lower it) only when
+#: its best inlier set leaves out at least this many views.  Measured (protocol scenes, 40 per cell, 0 and 3
+#: interleaved in one process, median CPU): N = 5 with one or two wrong matches 1.9-2.1 ms against 2.3-2.7, N = 8
+#: with two 2.7 against 3.4, the same certificates and values; without them at every count, N = 7 with three left 3
+#: of 40 scenes to the branch and bound (with LATER_FROM = 3: none), N = 7 with two 1 of 40 (mean CPU unchanged).
+LATER_FROM = 3
 #: rounds of local optimisation of the best candidate of a stack (inlier set -> its L2 optimum -> inlier set).
 LO_ROUNDS = 3
 
@@ -158,7 +164,10 @@ class _Group:
         first = todo(pairs | (self.size == self.N)[None])
         self._candidates(first)
         live = live & (self._offer(first) | ~first.any(axis=1))
-        later = todo(self._open())
+        # the open sets' candidates (they may lower UB) where local optimisation from the pairs is least reliable:
+        # a best inlier set that leaves out LATER_FROM views or more (one problem; a batch relies on its LO rounds)
+        few = np.array([self.N - len(s.best_S) < LATER_FROM for s in self.group])
+        later = todo(self._open()) & ~few[:, None]
         if later.any() and not self.staged:
             self._candidates(later)
             live = live & (self._offer(later) | ~later.any(axis=1))

@@ -191,3 +191,26 @@ def test_one_failing_stack_never_decides_another_problem(monkeypatch):
     monkeypatch.setattr(run_mod._Group, "run", run)
     res = tritools.triangulate_many(probs, robust=200.0)
     assert all(r.optimal and enum_mod.ENUMERATED in r.message for r in res)
+
+
+def test_the_orders_decide_alike(monkeypatch):
+    """The staged order (batches) on single calls, and the open sets' candidates always computed (LATER_FROM = 0):
+    the same certificates, inlier sets and values as the default single call, no lower bound above another
+    order's value."""
+    import tritools.solve.robust_enum_run as run_mod
+
+    rng = np.random.default_rng(37)
+    for N, k, noise in [(3, 1, 1.0), (4, 2, 5.0), (5, 2, 1.0), (6, 1, 5.0), (7, 3, 1.0), (8, 2, 1.0)]:
+        P, x, _, _ = robust_protocol_scene(N, k, noise, rng)
+        runs = [tritools.triangulate(P, x, robust=200.0)]
+        for name, value in (("STAGED_FROM", 1), ("LATER_FROM", 0)):
+            monkeypatch.setattr(run_mod, name, value)
+            runs.append(tritools.triangulate(P, x, robust=200.0))
+            monkeypatch.undo()
+        for r in runs[1:]:
+            assert r.optimal == runs[0].optimal
+            np.testing.assert_array_equal(r.inliers, runs[0].inliers)
+            assert r.gamma_ub == pytest.approx(runs[0].gamma_ub, rel=1e-6)
+        assert all(a.gamma_lb <= b.gamma_ub * (1 + 1e-9) for a in runs for b in runs)
+        assert runs[0].optimal               # (a random "outlier" within c of the projection is an inlier)
+        np.testing.assert_array_equal(runs[0].inliers, runs[0].residuals < 200.0)

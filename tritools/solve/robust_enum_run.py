@@ -6,16 +6,21 @@
 (:func:`enumerate_tls`) is the batch of one.  Per problem the maths is exactly that of the module docstring of
 :mod:`tritools.solve.robust_enum` -- only the stacking is shared:
 
-1. the frames of all problems (:func:`~tritools.solve.robust_enum.enum_frames`), then the candidates of the view
-   pairs and of all views (one masked stack over every problem); the best row of each problem refined to
-   convergence on its inlier set (one stack) and offered (UB);
-2. the candidates of the sets whose c^2(V - S) alone does not meet UB (one stack), offered again;
-3. the Lagrangian bounds of the sets that matter (one stacked verification over every problem; the fundamental
-   matrices of each problem computed once), closed under superadditivity, LB against UB at the floor of the
-   decision scale (:func:`_decide`);
-4. for the problems still open: every other set's candidate and bound (one stack each), the closure again, the
-   decision at the floor scale and else at the documented ``decision_scale`` (a batch gives it for all of them
-   in one call: ``scales``).
+1. the frames of all problems (:func:`~tritools.solve.robust_enum.enum_frames`), then the candidates (masked
+   stacks over every problem), each stack's best refined on its inlier set by local optimisation (inlier set ->
+   its L2 optimum -> inlier set) and offered (UB).  One problem: the pairs and all views in one stack, then the
+   sets whose c^2(V - S) alone does not meet UB where the best set leaves out :data:`LATER_FROM` views or more.
+   Several problems (the staged order, fewer rows): all views first -- a clean track with UB <= min c^2 is decided
+   by that one row's bound --, then all views but one, then the pairs (only those holding the view outside the
+   inlier set when there is exactly one);
+2. the Lagrangian bounds where they matter (one stacked verification over every problem, the fundamental
+   matrices of each problem computed once; a row's candidate computed first where missing): the pairs holding a
+   view outside the best inlier set and the sets inside it, then the other sets whose c^2(V - S) does not meet UB
+   only where the closure of those does not meet it; closed under superadditivity, LB against UB at the floor of
+   the decision scale (:meth:`_Group._decide`);
+3. for the problems still open: the bounds of the sets inside a set whose term does not meet UB (only they feed
+   its closure), the closure again, the decision at the floor scale and else at the documented
+   ``decision_scale`` (a batch gives it for all of them in one call: ``scales``).
 
 A problem not decided (or whose deadline passed between the stacks) gets None: the caller runs its branch and
 bound, which starts from the candidates offered here.  The lower bound is rounded down at every sum, the
@@ -120,7 +125,7 @@ class _Group:
         self.refined: list = [set() for _ in group]     # the inlier sets refined to convergence, per problem
 
     def run(self) -> list:
-        """The results (module docstring, steps 1-4); None where not decided."""
+        """The results (module docstring, steps 1-3); None where not decided."""
         self.frames, self.Cn = enum.enum_frames(self.C, self.x)
         live = np.array([f is not None for f in self.frames])
         self.origin = np.array([f.origin if f is not None else np.zeros(3) for f in self.frames])
@@ -150,8 +155,9 @@ class _Group:
         return live & np.array([r is None for r in self.results])
 
     def _upper_bounds(self, live: np.ndarray) -> np.ndarray:
-        """Steps 1-2: the candidates of the pairs and of all views, then of the sets whose c^2(V - S) alone does not
-        meet UB, each stack's best offered; the problems with a candidate and time left."""
+        """Step 1 (after :meth:`_all_views_first` in a batch): the candidates of the pairs and of all views, then of
+        the open sets where the best inlier set leaves out LATER_FROM views or more (one problem), each stack's best
+        offered; the problems with a candidate and time left."""
         todo = lambda rows: rows & live[:, None] & ~np.isfinite(self.Xn).all(axis=2)     # noqa: E731
         pairs = np.broadcast_to((self.size == 2)[None], self.Xn.shape[:2])
         if self.staged:               # a batch: the sets of all views but one next; where the best then has one view
@@ -174,7 +180,7 @@ class _Group:
         return live
 
     def _first_round(self, live: np.ndarray) -> list:
-        """Step 3: the bounds of the sets in need -- the pairs holding a view outside the best inlier set (they feed
+        """Step 2: the bounds of the sets in need -- the pairs holding a view outside the best inlier set (they feed
         the closure of the sets holding it) and the sets inside it first (their own bounds are the tight ones), then
         the other sets whose c^2(V - S) does not meet UB only where the closure of those does not meet it (a set
         holding a wrong match usually inherits enough from its pairs: its own Lagrangian bound is weak) -- and
@@ -191,7 +197,7 @@ class _Group:
         return self._decide(np.nonzero(live)[0], final=False)
 
     def _second_round(self, open_: list, live: np.ndarray) -> None:
-        """Step 4: for the problems left open with time left, the candidates and bounds of the sets inside a set
+        """Step 3: for the problems left open with time left, the candidates and bounds of the sets inside a set
         whose term does not meet UB (:meth:`_feeding`), the closure again; the final decision."""
         keep = np.zeros(len(self.group), bool)
         keep[[p for p in open_ if not self.group[p].deadline.expired]] = True

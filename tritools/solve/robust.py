@@ -509,11 +509,11 @@ def triangulate_robust(cams: np.ndarray, regions, c: np.ndarray, opts, t0: float
     thresholds of :func:`robust_thresholds`.  With every threshold infinite it is the L2 path (its result,
     every view an inlier)."""
     import dataclasses
-    from .robust_enum import enumerate_tls
+    from .robust_enum_run import enumerate_tls
     from .triangulate import triangulate
     t0 = time.perf_counter() if t0 is None else t0
     if not np.any(np.isfinite(c)):
         res = triangulate(cams, regions, options=opts)
         return dataclasses.replace(res, inliers=None if res.residuals is None else np.ones(len(regions), bool))
-    search = TlsSearch(cams, regions, c, opts, t0)      # a few views: every inlier set enumerated (robust_enum)
+    search = TlsSearch(cams, regions, c, opts, t0)      # a few views: every inlier set enumerated (robust_enum_run)
     return enumerate_tls(search) or drive([search])[0]

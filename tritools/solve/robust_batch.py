@@ -1,6 +1,8 @@
 """Batches of robust (TLS) problems: :func:`triangulate_many` and :func:`triangulate_points` with ``robust=``.
 
-1. Point-region problems (with a finite threshold) go straight to the branch and bound of
+1. Point-region problems (with a finite threshold) of 3 to ``ENUM_MAX_VIEWS`` views first go through the
+   enumeration of every inlier set, stacked across problems (:func:`tritools.solve.robust_enum_run.enumerate_many`,
+   the single call's path).  The others, and those it does not decide, go to the branch and bound of
    :mod:`tritools.solve.robust` -- exactly the search :func:`tritools.triangulate` runs for one of them -- in
    chunks of :data:`ROBUST_CHUNK` searched together by :func:`tritools.solve.robust_drive.drive`: every sub-bound
    request of every search of a chunk (the full view set first, then the view pairs, the local optimisation's
@@ -137,11 +139,9 @@ def _after_l2(problems, thresholds, opts, idx, first, out) -> list:
 
 
 def _drive_chunks(problems, thresholds, opts, idx, out, points) -> None:
-    """The branch and bound of the problems ``idx``, :data:`ROBUST_CHUNK` searched together at a time (each
-    search's time budget starts with its chunk).  ``points``: index -> (cameras, centres) of the point
+    """The TLS results of the problems ``idx`` (:func:`_enumerated_then_searched`), :data:`ROBUST_CHUNK` together at
+    a time (each search's time budget starts with its chunk).  ``points``: index -> (cameras, centres) of the point
     problems (their cameras checked in one vectorised call per view count, :func:`_point_searches`)."""
-    from .robust_drive import drive
-
     for k in range(0, len(idx), ROBUST_CHUNK):
         t0 = time.perf_counter()
         chunk = idx[k:k + ROBUST_CHUNK]
@@ -156,12 +156,34 @@ def _drive_chunks(problems, thresholds, opts, idx, out, points) -> None:
             else:
                 searches[i] = s
         searches = sorted(searches.items())
-        _normalization_scales([s for _, s in searches])
-        results = drive([s for _, s in searches])
+        results = _enumerated_then_searched([s for _, s in searches])
         share = (time.perf_counter() - t0) / max(1, len(searches))
         for (i, _), r in zip(searches, results):
             r = dataclasses.replace(r, timings={**r.timings, "batch_share": share})
             out[i] = mark_cut(r) if cut else r
+
+
+def _enumerated_then_searched(searches: list) -> list:
+    """The results of the searches: point problems of 3 to ENUM_MAX_VIEWS views by the enumeration of every inlier
+    set, stacked across problems (:func:`tritools.solve.robust_enum_run.enumerate_many`, the single call's path),
+    the others and those it leaves open by the branch and bound (:func:`tritools.solve.robust_drive.drive`).  The
+    decision scales come from one normalisation stack per view count (:func:`_normalization_scales`), computed only
+    for the searches that need them."""
+    from .robust_drive import drive
+    from .robust_enum_run import enumerate_many
+
+    normalised: set = set()
+
+    def scales(group) -> None:
+        _normalization_scales(group)
+        normalised.update(map(id, group))
+
+    results = enumerate_many(searches, scales=scales)
+    left = [k for k, r in enumerate(results) if r is None]
+    _normalization_scales([searches[k] for k in left if id(searches[k]) not in normalised])
+    for k, r in zip(left, drive([searches[k] for k in left]) if left else []):
+        results[k] = r
+    return results
 
 
 def _normalization_scales(searches) -> None:

@@ -10,7 +10,7 @@ import numpy as np
 
 from ..model.geometry import PROJECTION_DENOM_RTOL
 
-__all__ = ["point_distances2", "point_distances2_one", "projections"]
+__all__ = ["point_distances2", "point_distances2_one", "point_distances2_stack", "projections"]
 
 
 def projections(X, cameras) -> np.ndarray:
@@ -31,6 +31,19 @@ def point_distances2(C: np.ndarray, x: np.ndarray, Xs: np.ndarray) -> np.ndarray
     ok = np.abs(u[..., 2]) > PROJECTION_DENOM_RTOL * denom
     with np.errstate(all="ignore"):
         d2 = np.sum((u[..., :2] / u[..., 2:] - x[None]) ** 2, axis=2)
+    return np.where(ok & np.isfinite(d2), d2, np.inf)
+
+
+def point_distances2_stack(C: np.ndarray, x: np.ndarray, Xs: np.ndarray) -> np.ndarray:
+    """:func:`point_distances2` of P problems at once: cameras C (P, N, 3, 4), points x (P, N, 2), candidates
+    Xs (P, M, 3) -> (P, M, N), the same rule."""
+    P, N, M = C.shape[0], C.shape[1], Xs.shape[1]
+    Xh = np.concatenate([Xs, np.ones(Xs.shape[:2] + (1,))], axis=2)
+    u = (Xh @ np.swapaxes(C.reshape(P, N * 3, 4), 1, 2)).reshape(P, M, N, 3)       # (batched matmul, not einsum)
+    denom = np.abs(Xh) @ np.swapaxes(np.abs(C[:, :, 2]), 1, 2)
+    ok = np.abs(u[..., 2]) > PROJECTION_DENOM_RTOL * denom
+    with np.errstate(all="ignore"):
+        d2 = np.sum((u[..., :2] / u[..., 2:] - x[:, None]) ** 2, axis=3)
     return np.where(ok & np.isfinite(d2), d2, np.inf)
 
 

@@ -1,0 +1,373 @@
+"""The enumeration of every inlier set (:mod:`tritools.solve.robust_enum`) run over many TLS searches at once.
+
+:func:`enumerate_many` takes :class:`tritools.solve.robust.TlsSearch` objects of point problems with 3 to
+:data:`~tritools.solve.robust_enum.ENUM_MAX_VIEWS` views and, per view count N, stacks the rows of every problem
+(each row a masked N-view problem in its own problem's normalised frame) into one call per step; a single call
+(:func:`enumerate_tls`) is the batch of one.  Per problem the maths is exactly that of the module docstring of
+:mod:`tritools.solve.robust_enum` -- only the stacking is shared:
+
+1. the frames of all problems (:func:`~tritools.solve.robust_enum.enum_frames`), then the candidates (masked
+   stacks over every problem), each stack's best refined on its inlier set by local optimisation (inlier set ->
+   its L2 optimum -> inlier set) and offered (UB).  One problem: the pairs and all views in one stack, then the
+   sets whose c^2(V - S) alone does not meet UB where the best set leaves out :data:`LATER_FROM` views or more.
+   Several problems (the staged order, fewer rows): all views first -- a clean track with UB <= min c^2 is decided
+   by that one row's bound --, then all views but one, then the pairs (only those holding the view outside the
+   inlier set when there is exactly one);
+2. the Lagrangian bounds where they matter (one stacked verification over every problem, the fundamental
+   matrices of each problem computed once; a row's candidate computed first where missing): the pairs holding a
+   view outside the best inlier set and the sets inside it, then the other sets whose c^2(V - S) does not meet UB
+   only where the closure of those does not meet it; closed under superadditivity, LB against UB at the floor of
+   the decision scale (:meth:`_Group._decide`);
+3. for the problems still open: the bounds of the sets inside a set whose term does not meet UB (only they feed
+   its closure), the closure again, the decision at the floor scale and else at the documented
+   ``decision_scale`` (a batch gives it for all of them in one call: ``scales``).
+
+A problem not decided (or whose deadline passed between the stacks) gets None: the caller runs its branch and
+bound, which starts from the candidates offered here.  The lower bound is rounded down at every sum, the
+decision is the one rule of :meth:`tritools.solve.robust.TlsSearch.result`: the rigour of one problem does not
+depend on the others of its stack (each row's numbers are its own problem's).
+"""
+from __future__ import annotations
+
+import dataclasses
+import logging
+import time
+
+import numpy as np
+
+from ..model.normalize import SCALE_BOUNDS
+from ..model.stacked import gauss_newton_polish, refine_points_stack
+from . import robust_enum as enum
+from .robust_bounds import ROUND_DOWN
+from .robust_costs import point_distances2_stack
+
+__all__ = ["enumerate_tls", "enumerate_many", "eligible", "ENUM_CHUNK", "ENUM_ROWS"]
+
+log = logging.getLogger(__name__)
+
+#: at most this many problems share one stack, and at most ENUM_ROWS subset rows (247 per problem at N = 8): a
+#: stacked verification of R rows of N views holds ~R N^3 floats (8192 rows at N = 8: ~30 MB).
+ENUM_CHUNK = 256
+ENUM_ROWS = 8192
+#: stacks of at least this many problems take the staged order (all views first, then all views but one, the pairs
+#: only where they matter: fewer rows); a single problem takes one stack of the pairs and all views (fewer calls).
+#: Measured on single calls, the two orders interleaved (median CPU ms, 30 tracks per cell, loaded machine): one
+#: stack 2.2 / 3.3 / 4.8 against staged 2.7 / 4.3 / 5.4 on protocol tracks with outliers at N = 3 / 5 / 7, equal on
+#: clean tracks; in batches the staged order is the cheaper one (benchmarks/RESULTS.md, wave 7).
+STAGED_FROM = 2
+#: a single call computes the candidates of the sets whose c^2(V - S) does not meet UB (they may lower it) only when
+#: its best inlier set leaves out at least this many views.  Measured (protocol scenes, 40 per cell, 0 and 3
+#: interleaved in one process, median CPU): N = 5 with one or two wrong matches 1.9-2.1 ms against 2.3-2.7, N = 8
+#: with two 2.7 against 3.4, the same certificates and values; without them at every count, N = 7 with three left 3
+#: of 40 scenes to the branch and bound (with LATER_FROM = 3: none), N = 7 with two 1 of 40 (mean CPU unchanged).
+LATER_FROM = 3
+#: rounds of local optimisation of the best candidate of a stack (inlier set -> its L2 optimum -> inlier set).
+LO_ROUNDS = 3
+
+
+def eligible(search) -> bool:
+    """Does the enumeration run for this search (point regions, 3 to ENUM_MAX_VIEWS views, time left)?"""
+    return bool(search.points and 3 <= search.N <= enum.ENUM_MAX_VIEWS and not search.deadline.expired)
+
+
+def enumerate_tls(search):
+    """The TLS result of one :class:`tritools.solve.robust.TlsSearch` by enumeration, or None (the caller runs the
+    search, which has been offered the best candidates found here): :func:`enumerate_many` of one."""
+    return enumerate_many([search])[0]
+
+
+def enumerate_many(searches: list, scales=None) -> list:
+    """A result or None per search (module docstring), in input order; searches that are not :func:`eligible` get
+    None.  ``scales(list of searches)``: sets the documented decision scale of the searches that need it (a batch:
+    one normalisation stack); None: each search computes its own when asked."""
+    out: list = [None] * len(searches)
+    groups: dict = {}
+    for k, s in enumerate(searches):
+        if eligible(s):
+            groups.setdefault((s.N, id(s.tol)), []).append(k)
+    for (N, _), idx in groups.items():
+        step = min(ENUM_CHUNK, max(1, ENUM_ROWS // len(enum.subset_masks(N))))
+        for a in range(0, len(idx), step):
+            part = idx[a:a + step]
+            for k, r in zip(part, _run([searches[k] for k in part], scales)):
+                out[k] = r
+    return out
+
+
+def _run(group: list, scales) -> list:
+    """:meth:`_Group.run`; where a stack fails on degenerate data, each problem alone (so that one problem never
+    decides another's path); None for a problem that fails alone (its search runs)."""
+    try:
+        return _Group(group, scales).run()
+    except (ValueError, np.linalg.LinAlgError, FloatingPointError):
+        log.debug("enumeration of %d problems failed", len(group), exc_info=True)
+        if len(group) == 1:
+            return [None]
+    return [_run([s], scales)[0] for s in group]
+
+
+class _Group:
+    """P searches of one view count N enumerated together: row (p, m) is subset m of problem p."""
+
+    def __init__(self, group: list, scales):
+        self.group, self.scales = group, scales
+        self.N = N = group[0].N
+        self.tol = group[0].tol
+        self.C = np.stack([s.C for s in group])
+        self.x = np.stack([s.x for s in group])
+        self.c2 = np.stack([s.c2 for s in group])
+        self.W = enum.subset_masks(N)
+        self.size = self.W.sum(axis=1)
+        self.Xn = np.full((len(group), len(self.W), 3), np.nan)
+        self.results: list = [None] * len(group)
+        self._fundamentals = self._floor = self._terms_cache = None
+        self.staged = len(group) >= STAGED_FROM
+        self.refined: list = [set() for _ in group]     # the inlier sets refined to convergence, per problem
+
+    def run(self) -> list:
+        """The results (module docstring, steps 1-3); None where not decided."""
+        self.frames, self.Cn = enum.enum_frames(self.C, self.x)
+        live = np.array([f is not None for f in self.frames])
+        self.origin = np.array([f.origin if f is not None else np.zeros(3) for f in self.frames])
+        self.depth = np.array([f.depth if f is not None else 1.0 for f in self.frames])
+        with np.errstate(over="ignore", invalid="ignore"):      # c^2(V - S); inf: c_i = inf
+            self.rest = np.sum(np.where(self.W[None], 0.0, self.c2[:, None, :]), axis=2) * ROUND_DOWN
+        self.lb = np.zeros(self.rest.shape)
+        self.bounded = np.zeros(self.rest.shape, bool)
+        if self.staged:
+            live = self._all_views_first(live)
+        live = self._upper_bounds(live)
+        self._second_round(self._first_round(live), live)
+        return self.results
+
+    def _all_views_first(self, live: np.ndarray) -> np.ndarray:
+        """A stack of several problems: the candidate and the bound of all views first.  A track whose best inlier
+        set is all views with UB <= min c^2 is then decided where L2LB(V) meets UB (every other term has
+        c^2(V - S) >= min c^2 >= UB): one row per clean track instead of the pairs' stack.  The problems left."""
+        full = live[:, None] & (self.size == self.N)[None]
+        self._candidates(full)
+        self._offer(full)                   # (a problem without a finite candidate here goes on to the pairs)
+        live = live & np.array([not s.deadline.expired for s in self.group])
+        clean = np.array([len(s.best_S) == self.N for s in self.group]) & (self._ub() <= np.min(self.c2, axis=1))
+        quick = live & clean
+        self._bound(quick[:, None] & full)
+        self._decide(np.nonzero(quick)[0], final=False)
+        return live & np.array([r is None for r in self.results])
+
+    def _upper_bounds(self, live: np.ndarray) -> np.ndarray:
+        """Step 1 (after :meth:`_all_views_first` in a batch): the candidates of the pairs and of all views, then of
+        the open sets where the best inlier set leaves out LATER_FROM views or more (one problem), each stack's best
+        offered; the problems with a candidate and time left."""
+        todo = lambda rows: rows & live[:, None] & ~np.isfinite(self.Xn).all(axis=2)     # noqa: E731
+        pairs = np.broadcast_to((self.size == 2)[None], self.Xn.shape[:2])
+        if self.staged:               # a batch: the sets of all views but one next; where the best then has one view
+            loo = todo((self.size == self.N - 1)[None])        # outside its inlier set, only the pairs holding it
+            self._candidates(loo)
+            live = live & (self._offer(loo) | ~loo.any(axis=1))
+            out = np.array([[i not in s.best_S for i in range(self.N)] for s in self.group])
+            one = (out.sum(axis=1) == 1)[:, None]
+            pairs = pairs & (~one | (self.W[None] & out[:, None, :]).any(axis=2))
+        first = todo(pairs | (self.size == self.N)[None])
+        self._candidates(first)
+        live = live & (self._offer(first) | ~first.any(axis=1))
+        # the open sets' candidates (they may lower UB) where local optimisation from the pairs is least reliable:
+        # a best inlier set that leaves out LATER_FROM views or more (one problem; a batch relies on its LO rounds)
+        few = np.array([self.N - len(s.best_S) < LATER_FROM for s in self.group])
+        later = todo(self._open()) & ~few[:, None]
+        if later.any() and not self.staged:
+            self._candidates(later)
+            live = live & (self._offer(later) | ~later.any(axis=1))
+        return live
+
+    def _first_round(self, live: np.ndarray) -> list:
+        """Step 2: the bounds of the sets in need -- the pairs holding a view outside the best inlier set (they feed
+        the closure of the sets holding it) and the sets inside it first (their own bounds are the tight ones), then
+        the other sets whose c^2(V - S) does not meet UB only where the closure of those does not meet it (a set
+        holding a wrong match usually inherits enough from its pairs: its own Lagrangian bound is weak) -- and
+        the decision at the floor scale; the problems left open."""
+        W, size = self.W, self.size
+        best = np.array([[i in s.best_S for i in range(self.N)] for s in self.group])
+        inside = ~(W[None] & ~best[:, None, :]).any(axis=2)
+        pairs = (size == 2)[None] & ~inside & (self._ub() > np.min(self.c2, axis=1))[:, None]
+        need = (self._open() | pairs) & live[:, None]
+        self._bound(need & (inside | pairs))
+        rest = need & ~self.bounded
+        if rest.any():
+            self._bound(rest & self._failing())
+        return self._decide(np.nonzero(live)[0], final=False)
+
+    def _second_round(self, open_: list, live: np.ndarray) -> None:
+        """Step 3: for the problems left open with time left, the candidates and bounds of the sets inside a set
+        whose term does not meet UB (:meth:`_feeding`), the closure again; the final decision."""
+        keep = np.zeros(len(self.group), bool)
+        keep[[p for p in open_ if not self.group[p].deadline.expired]] = True
+        if not keep.any():
+            return
+        more = ~self.bounded & (live & keep)[:, None] & self._feeding()
+        if more.any():
+            self._bound(more)
+        self._decide(np.nonzero(keep)[0], final=True)
+
+    # ------------------------------------------------------------------ steps
+    def _ub(self) -> np.ndarray:
+        return np.array([s.best_f for s in self.group])
+
+    def _candidates(self, rows: np.ndarray) -> None:
+        """The candidates of the rows (P, M) (:func:`~tritools.solve.robust_enum.enum_candidates`, one stack)."""
+        pp, mm = np.nonzero(rows)
+        if pp.size:
+            self.Xn[pp, mm] = enum.enum_candidates(self.Cn[pp], self.W[mm])
+
+    def _offer(self, rows: np.ndarray) -> np.ndarray:
+        """Offer each problem the best of its candidates in ``rows`` (P, M) (world frame, ranked by f_TLS in one
+        stacked evaluation), refined to convergence on its inlier set S (:func:`_refine`: its f_TLS is at most the
+        candidate's), and put the refined point in the row of S (whose bound is then taken at the L2 optimum); the
+        candidate itself where that fails.  The problems that may go on: a candidate and time left."""
+        pp, mm = np.nonzero(rows & np.isfinite(self.Xn).all(axis=2))
+        picks = []
+        if pp.size:
+            world = self.origin[pp] + self.depth[pp, None] * self.Xn[pp, mm]
+            d2 = point_distances2_stack(self.C[pp], self.x[pp], world[:, None])[:, 0]           # (R, N)
+            f = np.sum(np.minimum(d2, self.c2[pp]), axis=1)       # (only ranks: offer() computes it exactly)
+            order = np.lexsort((f, pp))
+            _, first = np.unique(pp[order], return_index=True)
+            for r in order[first]:
+                picks.append((int(pp[r]), world[r], np.nonzero(d2[r] < self.c2[pp[r]])[0].tolist()))
+        for p, X, _ in picks:
+            self.group[p].offer(X)
+        for _ in range(LO_ROUNDS):                      # inlier set -> its L2 optimum -> inlier set
+            picks = [(p, X, S) for p, X, S in picks if len(S) >= 2 and frozenset(S) not in self.refined[p]]
+            for p, _, S in picks:                       # (a set refined before: its optimum was offered then)
+                self.refined[p].add(frozenset(S))
+            refined = self._refine(picks)
+            again = []
+            for p, _, S in picks:
+                s, Xr = self.group[p], refined.get(p)
+                if Xr is None:
+                    continue
+                s.offer(self.frames[p].world_point(Xr))
+                self.Xn[p, enum.row_of(self.N)[sum(1 << i for i in S)]] = Xr
+                if s.best_S != frozenset(S) and np.array_equal(s.best_X, self.frames[p].world_point(Xr)):
+                    again.append((p, s.best_X, sorted(s.best_S)))          # a new best with another inlier set
+            picks = again
+        return np.array([s.best_X is not None and not s.deadline.expired for s in self.group])
+
+    def _refine(self, picks: list) -> dict:
+        """problem -> the candidate refined to convergence on its inlier set S (normalised) by
+        :func:`tritools.model.stacked.refine_points_stack` and one Gauss-Newton step (a row's few polish steps leave
+        the L2 optimum of a set short by ~1e-6 in X, though not in f; the step finishes a weak direction the damped
+        LM left, tiny baselines), the views outside S masked; absent where it fails."""
+        if not picks:
+            return {}
+        P = np.array([p for p, _, _ in picks])
+        inS = np.zeros((len(picks), self.N), bool)
+        for r, (_, _, S) in enumerate(picks):
+            inS[r, S] = True
+        Cm = np.where(inS[:, :, None, None], self.Cn[P], enum.MASKED_CAMERA)
+        X0 = np.array([self.frames[p].normalized_point(X) for p, X, _ in picks])
+        zeros = np.zeros((len(picks), self.N, 2))
+        Xn, ok = refine_points_stack(Cm, zeros, X0, np.ones(len(picks), bool))
+        Xn = gauss_newton_polish(Cm, zeros, Xn, ok)
+        ok &= np.isfinite(Xn).all(axis=1)
+        return {int(p): Xn[r] for r, p in enumerate(P) if ok[r]}
+
+    def _bound(self, rows: np.ndarray) -> None:
+        """The Lagrangian bounds of the rows (P, M) not bounded yet (one stacked verification,
+        :func:`~tritools.solve.robust_enum.enum_bounds_rows`), their candidates first where missing."""
+        rows = rows & ~self.bounded
+        self.bounded |= rows
+        self._candidates(rows & ~np.isfinite(self.Xn).all(axis=2))
+        pp, mm = np.nonzero(rows)
+        if not pp.size:
+            return
+        if self._fundamentals is None:                 # once per problem, of the problems with frames
+            F = np.zeros(self.Cn.shape[:1] + (len(enum.view_pairs(self.N)[0]), 3, 3))
+            defined = np.zeros(F.shape[:2], bool)
+            has = np.array([f is not None for f in self.frames])
+            F[has], defined[has] = enum.fundamentals(self.C[has], self.Cn[has])
+            self._fundamentals = F, defined
+        F, defined = self._fundamentals
+        s = np.array([f.scale if f is not None else 1.0 for f in self.frames])
+        self._terms_cache = None
+        self.lb[pp, mm], _ = enum.enum_bounds_rows(self.Cn[pp], F[pp], defined[pp], self.W[mm], self.Xn[pp, mm],
+                                                   s[pp], self.tol)
+
+    def _floors(self) -> np.ndarray:
+        """The floor of each problem's decision scale (:mod:`tritools.solve.robust_enum`, "The decision scale")."""
+        from .robust import scale_from
+
+        if self._floor is None:
+            self._floor = np.array([scale_from(SCALE_BOUNDS[1], s.c2) for s in self.group])
+        return self._floor
+
+    def _open(self) -> np.ndarray:
+        """The rows (P, M) whose term c^2(V - S) alone does not meet UB under the rule at the floor scale (finite
+        only)."""
+        ub = self._ub()[:, None]
+        met = (self.rest >= ub) | np.asarray(self.tol.certified(self.rest, ub, self._floors()[:, None]), bool)
+        return ~met & np.isfinite(self.rest)
+
+    def _terms(self) -> np.ndarray:
+        """The terms L2LB(S) + c^2(V - S) (P, M) of every set, its bound closed (module docstring of
+        :mod:`tritools.solve.robust_enum`), rounded down; computed again only after new bounds."""
+        if self._terms_cache is None:
+            self._terms_cache = self._closed_terms()
+        return self._terms_cache
+
+    def _closed_terms(self) -> np.ndarray:
+        bits = self.W.astype(np.int64) @ (1 << np.arange(self.N))
+        table = np.zeros((len(self.c2), 1 << self.N))
+        table[:, bits] = self.lb
+        with np.errstate(over="ignore", invalid="ignore"):
+            return (enum.closure(self.N, table)[:, bits] + self.rest) * ROUND_DOWN
+
+    def _lower_bounds(self) -> np.ndarray:
+        """LB (P,): the least term, the exact terms of |S| <= 1 and UB (module docstring of
+        :mod:`tritools.solve.robust_enum`)."""
+        N, c2 = self.N, self.c2
+        with np.errstate(over="ignore", invalid="ignore"):
+            small = np.sum(np.where(np.eye(N, dtype=bool)[None], 0.0, c2[:, None, :]), axis=2)   # |S| = 1: exact
+            return np.minimum.reduce([self._ub(), np.min(self._terms(), axis=1), np.min(small, axis=1) * ROUND_DOWN,
+                                      np.sum(c2, axis=1) * ROUND_DOWN])
+
+    def _failing(self) -> np.ndarray:
+        """The sets (P, M) whose term does not meet UB at the floor scale."""
+        terms, ub = self._terms(), self._ub()[:, None]
+        return (terms < ub) & ~np.asarray(self.tol.certified(terms, ub, self._floors()[:, None]), bool)
+
+    def _feeding(self) -> np.ndarray:
+        """The sets (P, M) inside a set whose term does not meet UB at the floor scale: only their bounds can raise
+        a term that matters (the closure of S reads S's subsets only; a term that meets UB already meets it)."""
+        return (self._failing().astype(np.int32) @ enum.subset_of(self.N).T.astype(np.int32)) > 0
+
+    def _decide(self, probs, final: bool) -> list:
+        """Decide the problems ``probs`` where LB meets UB (at the floor scale: the documented rule then holds too;
+        ``final``: else at the documented scale, ``scales`` asked once for all of them); the problems left open."""
+        if not len(probs):
+            return []
+        lb_all, floors = self._lower_bounds(), self._floors()
+        late = []
+        for p in probs:
+            s, lb, ub = self.group[p], float(lb_all[p]), self.group[p].best_f
+            if s.tol.certified(lb, ub, floors[p]) and not s.tol.contradicts(lb, ub, floors[p]):
+                s.set_normalization_scale(SCALE_BOUNDS[1])       # met at the floor: met at the documented scale
+                self._result(p, lb)
+            else:
+                late.append(p)
+        if not final:
+            return late
+        if self.scales is not None:
+            self.scales([self.group[p] for p in late])
+        for p in late:
+            s = self.group[p]
+            if s.tol.certified(float(lb_all[p]), s.best_f, s.scale):
+                self._result(p, float(lb_all[p]))
+        return [p for p in late if self.results[p] is None]
+
+    def _result(self, p: int, lb: float) -> None:
+        s = self.group[p]
+        s.bounds.n_solved += int(self.bounded[p].sum())
+        t = time.perf_counter() - s.t0
+        res = s.result(lb, None, {"enumeration": t, "total": t})
+        self.results[p] = dataclasses.replace(
+            res, message=res.message + f"; {enum.ENUMERATED} ({len(self.W)} sets of >= 2 views)")

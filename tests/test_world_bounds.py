@@ -68,7 +68,7 @@ def test_disc_batches_gamma_ub_above_the_exact_value(offset):
     probs = [(P, [tritools.Ellipse(p, 0.25 * np.eye(2)) for p in sc.points2d[m]]) for m in range(6)]
     for m, r in enumerate(tritools.triangulate_many(probs, progress=False)):
         f = _f_exact(P, sc.points2d[m], r.X, radii=np.full(4, 0.5))
-        assert r.gamma_ub == 0.0 or _ub_holds(r.gamma_ub, f, 4), (m, r.gamma_ub, float(f))
+        assert _ub_holds(r.gamma_ub, f, 4), (m, r.gamma_ub, float(f))
         assert r.gamma_lb <= r.gamma_ub
 
 
@@ -111,7 +111,7 @@ def test_gamma_upper_rounding():
     g = gamma_upper(res, un)
     plain = np.sqrt(np.sum(res ** 2) / 6)
     assert plain < g < plain * (1 + 1e-11)
-    assert gamma_upper(np.zeros(3), un) == 0.0                         # inside every region: exactly 0
+    assert 0.0 < gamma_upper(np.zeros(3), un) < 1e-12                 # a zero distance keeps its round-off margin
     assert gamma_upper(np.array([0.3, np.inf]), np.ones(2)) == np.inf
     assert np.array_equal(gamma_upper(np.stack([res, 2 * res]), np.stack([un, un])),
                           [gamma_upper(res, un), gamma_upper(2 * res, un)])

@@ -28,13 +28,14 @@ def gamma_upper(res, u_norm, cap=None):
     u_i - x_i then err by at most ~5 u |u_i| + u d_i, a distance to a region is 1-Lipschitz in u_i, and the norm adds
     2 u relative: d_i <= d~_i (1 + 4u) + 6u |u_i|; the sum of N squares and the square root are rounded up by
     (1 + (N + 4) u) and (1 + 4u).  So gamma(X) <= gamma_UB for the exact distances of the float data (point regions;
-    for other regions up to their own distance round-off).  A distance computed as 0 (a projection inside its
-    region) stays 0: it is exact up to the projection's ~6u |u_i|.  inf where a distance is not finite.
+    for other regions up to their own distance round-off).  A distance computed as 0 gets the margin too (a float
+    projection on its observed point may be ~6u |u_i| from the exact one), so gamma_UB > 0 even at zero noise.
+    inf where a distance is not finite.
     ``cap`` (N,): truncated distances min(d_i, c_i) (the TLS cost of issue #19; inf: not truncated)."""
     res = np.asarray(res, float)
     n = res.shape[-1]
     with np.errstate(invalid="ignore", over="ignore"):
-        d = np.where(res > 0, res * (1.0 + 4 * _U) + 6 * _U * np.asarray(u_norm, float), res)
+        d = res * (1.0 + 4 * _U) + 6 * _U * np.asarray(u_norm, float)
         if cap is not None:
             d = np.minimum(d, cap)
         f = np.sum(d * d, axis=-1) * (1.0 + (n + 4) * _U)

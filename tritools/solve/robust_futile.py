@@ -44,6 +44,7 @@ import math
 import numpy as np
 
 from . import robust_bounds
+from .coplanar import COPLANAR_BUDGET_NAME
 from .robust_bounds import ROUND_DOWN
 
 __all__ = ["ENABLED", "FUTILE", "blocks", "leaf_bound", "leaf_futile", "settle_best_set", "futile_message"]
@@ -112,6 +113,8 @@ def futile_message(search) -> str:
     leaf = getattr(search, "futile_leaf", None)
     if leaf is None:
         return f"stopped: {FUTILE}"
+    on_ceiling = leaf[0] in getattr(search.bounds, "on_ceiling", ())
+    ceiling = f"; its bound sits on the {COPLANAR_BUDGET_NAME}" if on_ceiling else ""
     return (f"stopped: {FUTILE} (the leaf of the inlier set of {len(leaf[0])} views keeps the bound {leaf[1]:.6g} "
             f"px^2 after the full degree plan on its L2 sub-problem, below the best value {search.best_f:.6g} px^2 "
-            f"by more than the tolerance)")
+            f"by more than the tolerance{ceiling})")

@@ -16,7 +16,7 @@ from ..model.regions import extent_of
 from ..model.stacked import norms
 
 __all__ = ["PointReport", "point_report", "points_report_stack", "solve_radius", "solve_ball", "region_extent",
-           "gamma_upper", "rounding_spread"]
+           "gamma_upper", "rounding_spread", "projections_and_spread"]
 
 _U = 2.0 ** -53                   # the unit round-off of float64
 
@@ -49,13 +49,18 @@ def rounding_spread(C: np.ndarray, X: np.ndarray) -> float:
     projections, :func:`tritools.model.frame.project_world`).  No float estimate locates the optimum better than
     this, so a certificate whose bounds are finer than it says nothing about the caller's problem (a point near
     the cameras' principal planes seen 1e8 px off-axis: ~0.5 px)."""
+    return projections_and_spread(C, X)[2]
+
+
+def projections_and_spread(C: np.ndarray, X: np.ndarray) -> tuple:
+    """(u (N, 2) the compensated projections of X, finite, :func:`rounding_spread`) from one stacked projection."""
     X = np.asarray(X, float)
     Xs = np.vstack([X, X + np.diag(np.spacing(np.abs(X)))])
     u, _, fin = project_world(np.broadcast_to(C, (4,) + C.shape), Xs)
     if not fin.all():
-        return math.inf
+        return u[0], bool(fin[0]), math.inf
     d2 = np.max(np.sum((u[1:] - u[0]) ** 2, axis=2), axis=0)
-    return float(np.sqrt(np.sum(d2) / (2 * len(C))))
+    return u[0], True, float(np.sqrt(np.sum(d2) / (2 * len(C))))
 
 
 @dataclass(frozen=True)

@@ -27,11 +27,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..model.frame import project_world
 from ..model.normalize import RESOLUTION_REL
 from ..model.stacked import norms
 from .decide import gamma_from_c, gamma_lower
-from .report import gamma_upper, rounding_spread
+from .report import gamma_upper, projections_and_spread
 
 __all__ = ["TlsReported", "tls_reported"]
 
@@ -53,18 +52,19 @@ def tls_reported(C: np.ndarray, centres: np.ndarray, residuals, X, c: np.ndarray
     regions (computed here from compensated projections; ``centres`` are then the points), ``lb`` the search's
     bound of f*_TLS (pixels^2), ``scale`` the rule's scale S, ``certified`` its decision."""
     N = len(C)
-    u, _, fin = project_world(np.asarray(C, float)[None], np.asarray(X, float)[None])
-    u = u[0] if fin[0] else np.full((N, 2), np.inf)
+    u, fin, spread = projections_and_spread(np.asarray(C, float), X)
+    u = u if fin else np.full((N, 2), np.inf)
     if residuals is None:
         residuals = norms(u - centres, axis=1)
     res = np.where(np.isfinite(residuals), residuals, np.inf)
     g_ub = float(gamma_upper(np.where(np.isfinite(res), res, c), norms(np.where(np.isfinite(u), u, 0.0), axis=1),
                              cap=c))
-    resolution = RESOLUTION_REL * max(1.0, float(np.median(np.abs(centres))))
+    a = np.sort(np.abs(centres), axis=None)
+    resolution = RESOLUTION_REL * max(1.0, float(0.5 * (a[(a.size - 1) // 2] + a[a.size // 2])))   # median
     g_lb = min(float(gamma_lower(gamma_from_c(max(lb, 0.0), N, 1.0), g_ub, 1.0, resolution)), g_ub)
     holds, reason = certified, ""
     f_lb, f_ub = 2.0 * N * g_lb * g_lb, 2.0 * N * g_ub * g_ub
-    if not rounding_spread(C, X) <= resolution:         # no bound from a normalised frame is known to hold
+    if not spread <= resolution:         # no bound from a normalised frame is known to hold
         holds, g_lb = False, 0.0
         reason = "the estimate's own rounding moves its projections by more than the coordinates' resolution " \
                  f"({resolution:.3g} px): the float data cannot certify this optimum"

@@ -111,11 +111,17 @@ def _generic(ctx: PointContext, st: StepState) -> bool:
     return True
 
 
-def solve_psatz(ctx: PointContext, psatz, tol, fast_chain: bool = False):
+def solve_psatz(ctx: PointContext, psatz, tol, fast_chain: bool = False, tried: tuple = ()):
     """sospoly's solve of a bound compiled instance or a built program, under the point's settings;
-    ``fast_chain``: the default back-end with Clarabel's :data:`~sospoly.solvers.CLARABEL_FAST_CHAIN`."""
+    ``fast_chain``: the default back-end with Clarabel's :data:`~sospoly.solvers.CLARABEL_FAST_CHAIN`;
+    ``tried``: solver attempts already made on this very program (``label:status``), whose settings the default
+    back-end's retry chain skips (a deterministic solver repeats their answer at their cost)."""
     s = ctx.settings
-    backend = AutoBackend(tol, clarabel_chain=CLARABEL_FAST_CHAIN) if fast_chain and s.auto_backend else s.backend
+    backend = s.backend
+    if fast_chain and s.auto_backend:
+        backend = AutoBackend(tol, clarabel_chain=CLARABEL_FAST_CHAIN)
+    elif tried and s.auto_backend:
+        backend = AutoBackend(tol, skip=tuple(t.split(":")[0] for t in tried))
     return sospoly.solve_psatz(psatz, backend=backend, form=s.form, tolerances=tol, deadline=s.deadline)
 
 

@@ -6,6 +6,11 @@
   smallest gamma(X^(v(t))) (every member is a legitimate v* of the paper's (51)); X^ from the SVD of
   M0(v*) (the paper's (47)-(49)), the smallest exact gamma(X^), then the local L2 refinement (Theorem 1
   holds for any X^, so it can only lower gamma_UB): c_UB = 2N gamma'(X^)^2;
+  When an earlier step left an estimate (``PointContext.estimate_n``) whose c_UB the solved certificate's c*
+  already meets by the decision rule, that estimate is taken and the extraction is skipped (it found the
+  same point in every measured case and cost ~10% of a views step: benchmarks/RESULTS.md, issue #22); if
+  the step's rigorous decision then does not certify, the extraction runs after all and ``rigor`` and
+  ``decide`` follow again on its estimate, so nothing is decided on the shortcut alone;
 * ``rigor`` -- c_LB = c* minus the rigorous margin of the certificate (:func:`sospoly.analysis.
   rigorous_psatz_bound`: its PSD defect and identity residual on the box / ball that holds a minimiser,
   :func:`tritools.solve.report.solve_radius` / :func:`~tritools.solve.report.solve_ball`, derived from
@@ -84,10 +89,13 @@ def estimate_stage(ctx: PointContext, st: StepState) -> None:
     if lb.solution is None or (lb.lower_bound is None and not _iterate(lb)) or \
             lb.status not in (SolveStatus.OPTIMAL, SolveStatus.TIME_LIMIT, SolveStatus.INACCURATE):
         return _unsolved(st)
+    st.c_lower = float(lb.lower_bound if lb.lower_bound is not None else lb.solution.objective)
+    if _known_estimate_meets(ctx, st):
+        st.estimate, st.shortcut = ctx.estimate_n, True
+        return
     t = time.perf_counter()
     best = _best_candidate(ctx, st.problem, st.psatz, lb.solution)
     ctx.timings[f"extract_d{st.step.delta}"] = time.perf_counter() - t
-    st.c_lower = float(lb.lower_bound if lb.lower_bound is not None else lb.solution.objective)
     if best is None:
         if _iterate(lb):
             return _unsolved(st)
@@ -102,6 +110,27 @@ def estimate_stage(ctx: PointContext, st: StepState) -> None:
             if np.isfinite(gr) and gr < g_n:
                 g_n, X_n = float(gr), Xr
     st.estimate = (g_n, X_n, X_raw_n, x_star_n)
+    if ctx.estimate_n is None or g_n < ctx.estimate_n[0]:
+        ctx.estimate_n = st.estimate
+
+
+def _known_estimate_meets(ctx: PointContext, st: StepState) -> bool:
+    """Whether the earlier steps' estimate may stand in for this step's extraction: a solved certificate
+    (not an inaccurate iterate: those go through the full path) whose c* already meets that estimate's
+    c_UB by the decision rule, and no shortcut tried on this step yet (module docstring)."""
+    known = ctx.estimate_n
+    if known is None or st.shortcut is not None or st.lb.lower_bound is None or not np.isfinite(known[0]):
+        return False
+    _, optimal, _ = decide(st.c_lower, 2 * ctx.N * known[0] ** 2, st.tol, ctx.N, ctx.norm.resolution)
+    return bool(optimal)
+
+
+def _after_shortcut(ctx: PointContext, st: StepState) -> None:
+    """A step decided on the earlier estimate that did not certify: the extraction after all, then ``rigor``
+    and ``decide`` again on its estimate (module docstring)."""
+    st.shortcut = False                                # spent: the re-run extracts
+    st.result, st.estimate = None, None
+    resolve_chain(ctx, st, after="sdp", until="resolve")
 
 
 def _c_upper(ctx: PointContext, st: StepState) -> float:
@@ -139,6 +168,8 @@ def decide_stage(ctx: PointContext, st: StepState) -> None:
                        X_raw=norm.world_point(X_raw_n), image_points=norm.image_points(x_star_n),
                        certified_by="sdp" if optimal else None)
     st.result = replace(res, message=join(msg, res.message))
+    if st.shortcut and not optimal:
+        _after_shortcut(ctx, st)
 
 
 def resolve_stage(ctx: PointContext, st: StepState) -> None:

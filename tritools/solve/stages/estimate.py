@@ -6,9 +6,10 @@
   smallest gamma(X^(v(t))) (every member is a legitimate v* of the paper's (51)); X^ from the SVD of
   M0(v*) (the paper's (47)-(49)), the smallest exact gamma(X^), then the local L2 refinement (Theorem 1
   holds for any X^, so it can only lower gamma_UB): c_UB = 2N gamma'(X^)^2;
-  When an earlier step left an estimate (``PointContext.estimate_n``) whose c_UB the solved certificate's c*
-  already meets by the decision rule, that estimate is taken and the extraction is skipped (it found the
-  same point in every measured case and cost ~10% of a views step: benchmarks/RESULTS.md, issue #22); if
+  When an earlier step left an estimate (``PointContext.estimate_n``; before the first, the local estimate)
+  whose c_UB the solved certificate's c* already meets by the decision rule, that estimate is taken and the
+  extraction is skipped (it found the same point in every measured case and cost ~10% of a views step and
+  up to 80% of a certifying degree-2 step with regions: benchmarks/RESULTS.md, issue #22); if
   the step's rigorous decision then does not certify, the extraction runs after all and ``rigor`` and
   ``decide`` follow again on its estimate, so nothing is decided on the shortcut alone;
 * ``rigor`` -- c_LB = c* minus the rigorous margin of the certificate (:func:`sospoly.analysis.
@@ -115,14 +116,33 @@ def estimate_stage(ctx: PointContext, st: StepState) -> None:
 
 
 def _known_estimate_meets(ctx: PointContext, st: StepState) -> bool:
-    """Whether the earlier steps' estimate may stand in for this step's extraction: a solved certificate
-    (not an inaccurate iterate: those go through the full path) whose c* already meets that estimate's
-    c_UB by the decision rule, and no shortcut tried on this step yet (module docstring)."""
+    """Whether the earlier steps' estimate may stand in for this step's extraction: a certificate (or an
+    inaccurate iterate, which ``rigor`` charges as always) whose c* already meets that estimate's c_UB by the
+    decision rule, and no shortcut tried on this step yet (module docstring)."""
+    if st.shortcut is not None or (st.lb.lower_bound is None and not _iterate(st.lb)):
+        return False
+    if ctx.estimate_n is None:
+        ctx.estimate_n = _local_seed(ctx)
     known = ctx.estimate_n
-    if known is None or st.shortcut is not None or st.lb.lower_bound is None or not np.isfinite(known[0]):
+    if known is None or not np.isfinite(known[0]):
         return False
     _, optimal, _ = decide(st.c_lower, 2 * ctx.N * known[0] ** 2, st.tol, ctx.N, ctx.norm.resolution)
     return bool(optimal)
+
+
+def _local_seed(ctx: PointContext) -> tuple | None:
+    """The local estimate (:meth:`PointContext.local`: L2 refinement from the frame's origin) as an estimate
+    tuple, its image points the regions' points closest to its projections; None without one."""
+    loc = ctx.local()
+    if loc is None:
+        return None
+    g, X = loc
+    h = ctx.cams_n @ np.append(X, 1.0)
+    if not np.all(np.isfinite(h)) or np.any(h[:, 2] == 0):
+        return None
+    p = h[:, :2] / h[:, 2:]
+    x = np.array([np.asarray(r.closest_point(p[i]), float).reshape(2) for i, r in enumerate(ctx.regs_n)])
+    return (float(g), np.asarray(X, float), np.asarray(X, float), x)
 
 
 def _after_shortcut(ctx: PointContext, st: StepState) -> None:

@@ -12,6 +12,9 @@ import pytest
 from sospoly.lowering.conic import Cone
 from sospoly.solvers import backends
 from sospoly.solvers.backends import ClarabelBackend
+from tritools.model.constraints import Method
+from tritools.solve.plan import Step
+from tritools.solve.stages import estimate
 
 
 def _labels(side: int, skip=(), retry: bool = True):
@@ -51,6 +54,7 @@ def test_resolve_of_a_mixed_problem_repeats_no_attempt(monkeypatch):
         return orig(self, problem, label, overrides, *a, **kw)
 
     monkeypatch.setattr(ClarabelBackend, "solve_once", spy)
+    monkeypatch.setattr(estimate, "INACCURATE_RESOLVE_CONTAINED_SECONDS", 10.0)     # a loaded machine: resolve anyway
     cams, regs, X = uncertain_problem(10, 0, kinds="mixed", noise_px=16.0, size_px=16.0)
     r = tritools.triangulate(cams, regs, time_limit=120)
     per_program = {}
@@ -63,3 +67,16 @@ def test_resolve_of_a_mixed_problem_repeats_no_attempt(monkeypatch):
     ref = region_reference(cams, [spec_of(g) for g in regs], [X, r.X], np.random.default_rng(0))
     assert np.isfinite(r.gamma_lb) and r.gamma_lb <= ref * (1 + 1e-9)
     assert r.gamma_ub <= ref * (1 + 1e-6)
+
+
+def test_resolve_limit_is_short_only_when_a_later_step_contains_the_program():
+    d2, views, dense4 = Step(Method.COROLLARY1, 2, "dense"), Step(Method.COROLLARY1, 4, "views"), \
+        Step(Method.COROLLARY1, 4, "dense")
+    limit = estimate._resolve_limit
+    assert limit(SimpleNamespace(steps=[d2, views, dense4]), d2) == estimate.INACCURATE_RESOLVE_CONTAINED_SECONDS
+    assert limit(SimpleNamespace(steps=[d2, dense4]), d2) == estimate.INACCURATE_RESOLVE_MAX_SECONDS
+    assert limit(SimpleNamespace(steps=[d2]), d2) == estimate.INACCURATE_RESOLVE_MAX_SECONDS
+    assert limit(SimpleNamespace(steps=[d2, views]), views) == estimate.INACCURATE_RESOLVE_MAX_SECONDS
+    t1 = Step(Method.COROLLARY1, 2, "dense", reported=Method.THEOREM1)
+    assert limit(SimpleNamespace(steps=[t1, Step(Method.THEOREM1, 4, "views")]), t1) == \
+        estimate.INACCURATE_RESOLVE_MAX_SECONDS                  # another method's program: not contained

@@ -20,7 +20,8 @@
   (52), :func:`tritools.solve.decide.gamma_from_c`), the result of the estimate
   (:func:`tritools.solve.stages.outcome.report_point`);
 * ``resolve`` -- an "almost solved" iterate that did not certify through the rigorous bound is re-solved
-  with the solver's full retry chain when its solve was quick (:data:`INACCURATE_RESOLVE_MAX_SECONDS`), and
+  with the solver's full retry chain when its solve was quick (:data:`INACCURATE_RESOLVE_MAX_SECONDS`; when a
+  later plan step contains the program, :data:`INACCURATE_RESOLVE_CONTAINED_SECONDS`), and
   the stages between ``sdp`` and ``resolve`` run again on it; the chain skips the settings of the attempts
   already made on the program (with the default back-end: Clarabel is deterministic, a repeat gives the same
   iterate -- it was a quarter of the degree-2 step at 16 views with mixed regions).
@@ -57,6 +58,11 @@ FAMILY_SEARCH_EVALS = 300
 #: its solve took at most this many seconds (measured: N = 30 mixed regions, delta = 2: 8 s per attempt,
 #: four more attempts all "almost solved"; N = 3: milliseconds, and the chain certifies gamma* = 0 data).
 INACCURATE_RESOLVE_MAX_SECONDS = 1.0
+#: the same when a later plan step's program contains this one's (a views step holds the dense degree-2
+#: certificate): a certificate the chain would find is found there too, so only a cheap chain is worth its
+#: time (measured, mixed 16 px regions: the chain certified none at 16 views, 0.2-0.3 s per attempt; at
+#: <= 10 views an attempt takes < 0.05 s)
+INACCURATE_RESOLVE_CONTAINED_SECONDS = 0.1
 
 
 def _iterate(lb) -> bool:
@@ -196,7 +202,7 @@ def resolve_stage(ctx: PointContext, st: StepState) -> None:
     """The full retry chain for a quick "almost solved" iterate that did not certify (module docstring)."""
     key = f"solve_d{st.step.delta}"
     if st.lb is None or st.result is None or st.lb.status != SolveStatus.INACCURATE or st.result.optimal or \
-            ctx.expired or ctx.timings.get(key, np.inf) > INACCURATE_RESOLVE_MAX_SECONDS:
+            ctx.expired or ctx.timings.get(key, np.inf) > _resolve_limit(ctx, st.step):
         return
     first = (st.lb, st.result, st.estimate)
     tried = tuple(f"{a.label}:{a.solver_status}" for a in (st.lb.solution.attempts if st.lb.solution else ()))
@@ -207,6 +213,15 @@ def resolve_stage(ctx: PointContext, st: StepState) -> None:
         # the chain did not help (again "almost solved", or failed): the first iterate's rigorous bounds stand
         st.lb, st.result, st.estimate = first
     ctx.timings[key] = time.perf_counter() - st.t_solve
+
+
+def _resolve_limit(ctx: PointContext, step: Step) -> float:
+    """The longest first solve that is re-solved with the full chain (:data:`INACCURATE_RESOLVE_MAX_SECONDS`, or
+    :data:`INACCURATE_RESOLVE_CONTAINED_SECONDS` when a later step of the plan contains this step's program)."""
+    later = ctx.steps[ctx.steps.index(step) + 1:] if step in ctx.steps else []
+    contained = step.delta == 2 and step.formulation == "dense" and any(
+        s.method == step.method and s.formulation == "views" and s.delta > step.delta for s in later)
+    return INACCURATE_RESOLVE_CONTAINED_SECONDS if contained else INACCURATE_RESOLVE_MAX_SECONDS
 
 
 def _best_candidate(ctx: PointContext, problem, psatz, sol):

@@ -14,7 +14,8 @@ from sospoly.solvers import backends
 from sospoly.solvers.backends import ClarabelBackend
 from tritools.model.constraints import Method
 from tritools.solve.plan import Step
-from tritools.solve.stages import estimate
+from sospoly.solvers import CLARABEL_FAST_CHAIN
+from tritools.solve.stages import estimate, sdp
 
 
 def _labels(side: int, skip=(), retry: bool = True):
@@ -55,6 +56,8 @@ def test_resolve_of_a_mixed_problem_repeats_no_attempt(monkeypatch):
 
     monkeypatch.setattr(ClarabelBackend, "solve_once", spy)
     monkeypatch.setattr(estimate, "INACCURATE_RESOLVE_CONTAINED_SECONDS", 10.0)     # a loaded machine: resolve anyway
+    # the default chain on the degree-2 program (it ends "almost solved" there; the split-cliques chain solves it)
+    monkeypatch.setattr(sdp, "_chain", lambda ctx, step: CLARABEL_FAST_CHAIN if step.formulation == "views" else None)
     cams, regs, X = uncertain_problem(10, 0, kinds="mixed", noise_px=16.0, size_px=16.0)
     r = tritools.triangulate(cams, regs, time_limit=120)
     per_program = {}
@@ -80,3 +83,34 @@ def test_resolve_limit_is_short_only_when_a_later_step_contains_the_program():
     t1 = Step(Method.COROLLARY1, 2, "dense", reported=Method.THEOREM1)
     assert limit(SimpleNamespace(steps=[t1, Step(Method.THEOREM1, 4, "views")]), t1) == \
         estimate.INACCURATE_RESOLVE_MAX_SECONDS                  # another method's program: not contained
+
+
+def test_chain_choice_per_step():
+    """Views programs: the fast chain; dense degree-2 programs with regions: the split-cliques chain (measured on
+    those only, benchmarks/RESULTS.md); point regions and higher dense degrees: the default."""
+    from sospoly.solvers import CLARABEL_SPLIT_CHAIN
+    from tritools.model.regions import as_regions
+    from tritools.scene import uncertain_problem
+
+    pts = as_regions(np.zeros((3, 2)))
+    mixed = [*pts[:2], uncertain_problem(4, 0, kinds="mixed")[1][0]]          # an ellipse
+    for regions, d2 in ((pts, None), (mixed, CLARABEL_SPLIT_CHAIN)):
+        ctx = SimpleNamespace(regions=regions)
+        assert sdp._chain(ctx, Step(Method.COROLLARY1, 2, "dense")) == d2
+        assert sdp._chain(ctx, Step(Method.COROLLARY1, 4, "dense")) is None
+        assert sdp._chain(ctx, Step(Method.COROLLARY1, 4, "views")) == CLARABEL_FAST_CHAIN
+
+
+@pytest.mark.slow
+def test_mixed_degree2_step_runs_the_split_chain_and_stays_sound():
+    import tritools
+    from tests.reference.regions import region_reference, spec_of
+    from tritools.scene import uncertain_problem
+
+    for seed in (0, 1):
+        cams, regs, X = uncertain_problem(8, seed, kinds="mixed", noise_px=16.0, size_px=16.0)
+        r = tritools.triangulate(cams, regs, time_limit=120)
+        d2 = [a for a in r.attempts if a.step == "sdp" and a.delta == 2]
+        assert d2 and d2[0].solver[0].startswith("split-cliques:")
+        ref = region_reference(cams, [spec_of(g) for g in regs], [X, r.X], np.random.default_rng(0))
+        assert r.optimal and r.gamma_lb <= ref * (1 + 1e-9) and r.gamma_ub <= ref * (1 + 1e-6)

@@ -140,7 +140,7 @@ def scene_table(rows: list[dict], sizes, settings, kinds_list, dense_max: int) -
                 dense_cert = f"{sum(r['optimal'] for r in dn)}/{len(dn)}" if dn else \
                     ("not run" if n > dense_max else "-")
                 out.append(f"| {setting} | {kinds} | {n} | {sum(r['optimal'] for r in d)}/{len(d)} | "
-                           f"{np.median(secs):.1f} | {max(secs):.1f} | {np.median(cpus):.1f} | {max(cpus):.1f} | "
+                           f"{np.median(secs):.1f} | {max(secs):.1f} | {np.median(cpus):.2f} | {max(cpus):.2f} | "
                            f"{max(r['rss_mb'] for r in d):.0f} | "
                            f"{int(np.median(lmi)) if lmi else '-'} | "
                            f"{_fmt_share(d2)} | {dense_cert} | "

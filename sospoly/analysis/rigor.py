@@ -43,6 +43,8 @@ from fractions import Fraction
 
 import numpy as np
 
+from ..algebra.basis import unique_rows
+
 
 __all__ = ["solution_at_level", "gram_pairs", "psd_defect_of", "u_terms",
            "RigorousBound", "rigorous_psatz_bound", "certificate_residual", "exact_check", "ExactCheck",
@@ -128,8 +130,7 @@ def certificate_residual(structure, theta, sol, c_level=None):
     E_g = gb.products[gb.pair_monomial]
     E = np.vstack([E_u, E_g])
     vals = np.concatenate([v_u, -w * G_all])
-    uniq, inv = np.unique(E, axis=0, return_inverse=True)
-    inv = np.asarray(inv).ravel()
+    uniq, inv = unique_rows(E, return_inverse=True)
     e = np.zeros(uniq.shape[0])
     np.add.at(e, inv, vals)
     a = np.zeros(uniq.shape[0])

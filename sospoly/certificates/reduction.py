@@ -52,7 +52,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..algebra.basis import MonomialIndex
+from ..algebra.basis import MonomialIndex, unique_rows
 from ..budget import check_deadline
 from .shape import CertificateShape
 
@@ -62,7 +62,7 @@ __all__ = ["diagonal_reduction", "ideal_reduction", "reduce_shape", "leading_mon
 def _rows(*arrays, n: int) -> np.ndarray:
     arrs = [np.asarray(a, np.int64).reshape(-1, n) for a in arrays]
     arrs = [a for a in arrs if a.shape[0]]
-    return np.unique(np.vstack(arrs), axis=0) if arrs else np.zeros((0, n), np.int64)
+    return unique_rows(np.vstack(arrs)) if arrs else np.zeros((0, n), np.int64)
 
 
 def _minkowski(A: np.ndarray, B: np.ndarray) -> np.ndarray:
@@ -71,7 +71,7 @@ def _minkowski(A: np.ndarray, B: np.ndarray) -> np.ndarray:
     if not A.shape[0] or not B.shape[0]:
         return np.zeros((0, n), np.int64)
     check_deadline("reducing the certificate's bases")
-    return np.unique((A[:, None, :] + B[None, :, :]).reshape(-1, n), axis=0)
+    return unique_rows((A[:, None, :] + B[None, :, :]).reshape(-1, n))
 
 
 def _pair_sums(B: np.ndarray, diagonal: bool) -> np.ndarray:
@@ -91,14 +91,14 @@ def diagonal_reduction(shape: CertificateShape, f_support, eq_supports=(), ineq_
     F = np.asarray(f_support, np.int64)
     n = F.shape[1]
     if q_basis is not None:
-        Q = np.unique(_pair_sums(np.asarray(q_basis, np.int64).reshape(-1, n), True), axis=0)
+        Q = unique_rows(_pair_sums(np.asarray(q_basis, np.int64).reshape(-1, n), True))
     else:
         Q = np.zeros((1, n), np.int64) if q_support is None else _rows(q_support, n=n)
     reached = [Q, _minkowski(Q, _rows(F, n=n))]
     for R, G in zip(shape.r_supports, eq_supports):
         reached.append(_minkowski(R, _rows(G, n=n)))
     for B, H in zip(shape.s_bases, ineq_supports):
-        reached.append(_minkowski(np.unique(_pair_sums(B, True), axis=0), _rows(H, n=n)))
+        reached.append(_minkowski(unique_rows(_pair_sums(B, True)), _rows(H, n=n)))
     reachable = MonomialIndex(_rows(*reached, n=n))
 
     bases = [np.asarray(B, np.int64) for B in shape.u_bases]
@@ -139,23 +139,27 @@ def ideal_reduction(shape: CertificateShape, eq_supports) -> CertificateShape:
         return shape
     n = shape.u_bases[0].shape[1]
     leads = [leading_monomial(G) if G.shape[0] else None for G in eqs]
-    r_index = [MonomialIndex(_rows(R, n=n)) for R in shape.r_supports]
+    lead_vars = [None if L is None else frozenset(np.flatnonzero(L).tolist()) for L in leads]
+    r_index: dict = {}                 # built on first use: most equalities divide no block (other cliques)
     bases, changed = [], False
     for B in shape.u_bases:
         check_deadline("reducing the certificate's bases")
         B = np.asarray(B, np.int64)
         in_B = MonomialIndex(B)
+        block_vars = frozenset(np.flatnonzero(B.any(axis=0)).tolist())
         drop = np.zeros(B.shape[0], bool)
-        for G, L, R in zip(eqs, leads, r_index):
-            if L is None or L.sum() < 2:
-                continue
+        for k, (G, L) in enumerate(zip(eqs, leads)):
+            if L is None or L.sum() < 2 or not lead_vars[k] <= block_vars:
+                continue                 # no monomial of B is a multiple of L
             divisible = np.all(B >= L, axis=1) & (B.sum(axis=1) >= 2)
             if not divisible.any():
                 continue
             Q = B[divisible] - L
             if np.any(in_B.find(_minkowski(Q, G), missing_ok=True) < 0):      # (i)
                 continue
-            if np.any(R.find(_minkowski(Q, B), missing_ok=True) < 0):         # (ii)
+            if k not in r_index:
+                r_index[k] = MonomialIndex(_rows(shape.r_supports[k], n=n))
+            if np.any(r_index[k].find(_minkowski(Q, B), missing_ok=True) < 0):   # (ii)
                 continue
             drop |= divisible
         changed |= bool(drop.any())

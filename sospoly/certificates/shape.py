@@ -180,9 +180,9 @@ def _union_rows(*arrays: np.ndarray, n: int) -> np.ndarray:
     arrs = [a for a in arrays if a.shape[0]]
     if not arrs:
         return np.zeros((0, n), np.int64)
-    from ..algebra.basis import graded_order
+    from ..algebra.basis import graded_order, unique_rows
 
-    u = np.unique(np.vstack(arrs), axis=0)
+    u = unique_rows(np.vstack(arrs))
     return u[graded_order(u)]
 
 

@@ -9,6 +9,7 @@ Positivstellensatz program, lower bound, estimate, result).
 """
 from __future__ import annotations
 
+import dataclasses
 import enum
 import functools
 import time
@@ -17,7 +18,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ...model.constraints import centre_relations
+from ...model.constraints import Method, centre_relations
 from ...model.frame import WorldFrame, frame_centre_groups
 from ...model.normalize import Normalization, normalization_for
 from ...model.problem import TriangulationProblem, build_problem
@@ -122,6 +123,7 @@ class PointContext:
         self.best: TriangulationResult | None = None
         self.skipped: TriangulationResult | None = None     # a step that exceeded the budget
         self.finished = False                               # a stage decided the point: the walk stops
+        self.estimate_n: tuple | None = None                # the steps' best (gamma_n, X_n, X_raw_n, x*_n)
         self._problems: dict = {}
         self._relations = None
         self._local = _UNSET
@@ -163,9 +165,13 @@ class PointContext:
         key = (method, formulation)
         if key not in self._problems:
             t = time.perf_counter()
-            if self._relations is None:
-                self._relations = centre_relations(self.cams, frame_centre_groups(self.cams, self.frame))
-            self._problems[key] = build_problem(self.cams_n, self.regs_n, method, formulation, self._relations)
+            twin = next((p for (m, _), p in self._problems.items() if m == method == Method.COROLLARY1), None)
+            if twin is not None:            # Corollary 1's polynomials do not depend on the formulation
+                self._problems[key] = dataclasses.replace(twin, formulation=formulation)
+            else:
+                if self._relations is None:
+                    self._relations = centre_relations(self.cams, frame_centre_groups(self.cams, self.frame))
+                self._problems[key] = build_problem(self.cams_n, self.regs_n, method, formulation, self._relations)
             self.tick("build", t)
         return self._problems[key]
 
@@ -195,6 +201,7 @@ class StepState:
     t_solve: float = 0.0                # when the solve started (for the timings)
     c_lower: float | None = None        # c_LB in normalised units (made rigorous by the rigor stage)
     estimate: tuple | None = None       # (gamma_n, X_n, X_raw_n, image points_n) of the best candidate
+    shortcut: bool | None = None        # the estimate is an earlier step's (True), spent (False), not tried (None)
     result: TriangulationResult | None = None
     final: bool = False                 # the step is decided: the remaining step stages are skipped
     recorded: bool = False              # its attempt is recorded already (a step that failed early)

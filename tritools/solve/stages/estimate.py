@@ -6,6 +6,12 @@
   smallest gamma(X^(v(t))) (every member is a legitimate v* of the paper's (51)); X^ from the SVD of
   M0(v*) (the paper's (47)-(49)), the smallest exact gamma(X^), then the local L2 refinement (Theorem 1
   holds for any X^, so it can only lower gamma_UB): c_UB = 2N gamma'(X^)^2;
+  When an earlier step left an estimate (``PointContext.estimate_n``; before the first, the local estimate)
+  whose c_UB the solved certificate's c* already meets by the decision rule, that estimate is taken and the
+  extraction is skipped (it found the same point in every measured case and cost ~10% of a views step and
+  up to 80% of a certifying degree-2 step with regions: benchmarks/RESULTS.md, issue #22); if
+  the step's rigorous decision then does not certify, the extraction runs after all and ``rigor`` and
+  ``decide`` follow again on its estimate, so nothing is decided on the shortcut alone;
 * ``rigor`` -- c_LB = c* minus the rigorous margin of the certificate (:func:`sospoly.analysis.
   rigorous_psatz_bound`: its PSD defect and identity residual on the box / ball that holds a minimiser,
   :func:`tritools.solve.report.solve_radius` / :func:`~tritools.solve.report.solve_ball`, derived from
@@ -14,8 +20,11 @@
   (52), :func:`tritools.solve.decide.gamma_from_c`), the result of the estimate
   (:func:`tritools.solve.stages.outcome.report_point`);
 * ``resolve`` -- an "almost solved" iterate that did not certify through the rigorous bound is re-solved
-  with the solver's full retry chain when its solve was quick (:data:`INACCURATE_RESOLVE_MAX_SECONDS`), and
-  the stages between ``sdp`` and ``resolve`` run again on it.
+  with the solver's full retry chain when its solve was quick (:data:`INACCURATE_RESOLVE_MAX_SECONDS`; when a
+  later plan step contains the program, :data:`INACCURATE_RESOLVE_CONTAINED_SECONDS`), and
+  the stages between ``sdp`` and ``resolve`` run again on it; the chain skips the settings of the attempts
+  already made on the program (with the default back-end: Clarabel is deterministic, a repeat gives the same
+  iterate -- it was a quarter of the degree-2 step at 16 views with mixed regions).
 """
 from __future__ import annotations
 
@@ -49,6 +58,11 @@ FAMILY_SEARCH_EVALS = 300
 #: its solve took at most this many seconds (measured: N = 30 mixed regions, delta = 2: 8 s per attempt,
 #: four more attempts all "almost solved"; N = 3: milliseconds, and the chain certifies gamma* = 0 data).
 INACCURATE_RESOLVE_MAX_SECONDS = 1.0
+#: the same when a later plan step's program contains this one's (a views step holds the dense degree-2
+#: certificate): a certificate the chain would find is found there too, so only a cheap chain is worth its
+#: time (measured, mixed 16 px regions: the chain certified none at 16 views, 0.2-0.3 s per attempt; at
+#: <= 10 views an attempt takes < 0.05 s)
+INACCURATE_RESOLVE_CONTAINED_SECONDS = 0.1
 
 
 def _iterate(lb) -> bool:
@@ -82,10 +96,13 @@ def estimate_stage(ctx: PointContext, st: StepState) -> None:
     if lb.solution is None or (lb.lower_bound is None and not _iterate(lb)) or \
             lb.status not in (SolveStatus.OPTIMAL, SolveStatus.TIME_LIMIT, SolveStatus.INACCURATE):
         return _unsolved(st)
+    st.c_lower = float(lb.lower_bound if lb.lower_bound is not None else lb.solution.objective)
+    if _known_estimate_meets(ctx, st):
+        st.estimate, st.shortcut = ctx.estimate_n, True
+        return
     t = time.perf_counter()
     best = _best_candidate(ctx, st.problem, st.psatz, lb.solution)
     ctx.timings[f"extract_d{st.step.delta}"] = time.perf_counter() - t
-    st.c_lower = float(lb.lower_bound if lb.lower_bound is not None else lb.solution.objective)
     if best is None:
         if _iterate(lb):
             return _unsolved(st)
@@ -100,6 +117,46 @@ def estimate_stage(ctx: PointContext, st: StepState) -> None:
             if np.isfinite(gr) and gr < g_n:
                 g_n, X_n = float(gr), Xr
     st.estimate = (g_n, X_n, X_raw_n, x_star_n)
+    if ctx.estimate_n is None or g_n < ctx.estimate_n[0]:
+        ctx.estimate_n = st.estimate
+
+
+def _known_estimate_meets(ctx: PointContext, st: StepState) -> bool:
+    """Whether the earlier steps' estimate may stand in for this step's extraction: a certificate (or an
+    inaccurate iterate, which ``rigor`` charges as always) whose c* already meets that estimate's c_UB by the
+    decision rule, and no shortcut tried on this step yet (module docstring)."""
+    if st.shortcut is not None or (st.lb.lower_bound is None and not _iterate(st.lb)):
+        return False
+    if ctx.estimate_n is None:
+        ctx.estimate_n = _local_seed(ctx)
+    known = ctx.estimate_n
+    if known is None or not np.isfinite(known[0]):
+        return False
+    _, optimal, _ = decide(st.c_lower, 2 * ctx.N * known[0] ** 2, st.tol, ctx.N, ctx.norm.resolution)
+    return bool(optimal)
+
+
+def _local_seed(ctx: PointContext) -> tuple | None:
+    """The local estimate (:meth:`PointContext.local`: L2 refinement from the frame's origin) as an estimate
+    tuple, its image points the regions' points closest to its projections; None without one."""
+    loc = ctx.local()
+    if loc is None:
+        return None
+    g, X = loc
+    h = ctx.cams_n @ np.append(X, 1.0)
+    if not np.all(np.isfinite(h)) or np.any(h[:, 2] == 0):
+        return None
+    p = h[:, :2] / h[:, 2:]
+    x = np.array([np.asarray(r.closest_point(p[i]), float).reshape(2) for i, r in enumerate(ctx.regs_n)])
+    return (float(g), np.asarray(X, float), np.asarray(X, float), x)
+
+
+def _after_shortcut(ctx: PointContext, st: StepState) -> None:
+    """A step decided on the earlier estimate that did not certify: the extraction after all, then ``rigor``
+    and ``decide`` again on its estimate (module docstring)."""
+    st.shortcut = False                                # spent: the re-run extracts
+    st.result, st.estimate = None, None
+    resolve_chain(ctx, st, after="sdp", until="resolve")
 
 
 def _c_upper(ctx: PointContext, st: StepState) -> float:
@@ -137,22 +194,34 @@ def decide_stage(ctx: PointContext, st: StepState) -> None:
                        X_raw=norm.world_point(X_raw_n), image_points=norm.image_points(x_star_n),
                        certified_by="sdp" if optimal else None)
     st.result = replace(res, message=join(msg, res.message))
+    if st.shortcut and not optimal:
+        _after_shortcut(ctx, st)
 
 
 def resolve_stage(ctx: PointContext, st: StepState) -> None:
     """The full retry chain for a quick "almost solved" iterate that did not certify (module docstring)."""
     key = f"solve_d{st.step.delta}"
     if st.lb is None or st.result is None or st.lb.status != SolveStatus.INACCURATE or st.result.optimal or \
-            ctx.expired or ctx.timings.get(key, np.inf) > INACCURATE_RESOLVE_MAX_SECONDS:
+            ctx.expired or ctx.timings.get(key, np.inf) > _resolve_limit(ctx, st.step):
         return
     first = (st.lb, st.result, st.estimate)
-    st.lb = solve_psatz(ctx, st.psatz, dataclasses.replace(st.tol, accept_inaccurate=False))
+    tried = tuple(f"{a.label}:{a.solver_status}" for a in (st.lb.solution.attempts if st.lb.solution else ()))
+    st.lb = solve_psatz(ctx, st.psatz, dataclasses.replace(st.tol, accept_inaccurate=False), tried=tried)
     st.result, st.estimate = None, None
     resolve_chain(ctx, st)
     if st.result is None or not better(st.result, first[1]):
         # the chain did not help (again "almost solved", or failed): the first iterate's rigorous bounds stand
         st.lb, st.result, st.estimate = first
     ctx.timings[key] = time.perf_counter() - st.t_solve
+
+
+def _resolve_limit(ctx: PointContext, step: Step) -> float:
+    """The longest first solve that is re-solved with the full chain (:data:`INACCURATE_RESOLVE_MAX_SECONDS`, or
+    :data:`INACCURATE_RESOLVE_CONTAINED_SECONDS` when a later step of the plan contains this step's program)."""
+    later = ctx.steps[ctx.steps.index(step) + 1:] if step in ctx.steps else []
+    contained = step.delta == 2 and step.formulation == "dense" and any(
+        s.method == step.method and s.formulation == "views" and s.delta > step.delta for s in later)
+    return INACCURATE_RESOLVE_CONTAINED_SECONDS if contained else INACCURATE_RESOLVE_MAX_SECONDS
 
 
 def _best_candidate(ctx: PointContext, problem, psatz, sol):

@@ -10,12 +10,12 @@ step beyond the budget (every later step is larger).
 and the certificate's shape: dense, or view cliques beside the dense degree-2 block -- compiled once per
 structure key (:data:`~tritools.solve.structures.STRUCTURE_CACHE`) and sized against the budget before
 anything is assembled, and solves it within the remaining time (the view-clique programs with Clarabel's
-fast chain, :func:`_fast_chain`).  Its fast implementation, the batched
-delta = 2 SDP (:func:`tritools.solve.sdp_batch.solve_corollary1_points`, name ``"sdp-points"``), applies
-to point regions, Corollary 1, delta = 2, dense, the default multiplier, form and back-end, with
-normalisation; it decides the step itself, and what it hands back goes to the generic route.  A single
-call uses it only when asked (``fast``): batches run it on their stacks (:mod:`tritools.solve.points`),
-and tests/test_sdp_batch.py compares them against a single call's generic route.
+fast chain, dense degree-2 programs with regions with the split-cliques chain: :func:`_chain`).  Its fast
+implementation, the batched delta = 2 SDP (:func:`tritools.solve.sdp_batch.solve_corollary1_points`, name
+``"sdp-points"``), applies to point regions, Corollary 1, delta = 2, dense, the default multiplier, form
+and back-end, with normalisation; it decides the step itself, and what it hands back goes to the generic
+route.  A single call uses it only when asked (``fast``): batches run it on their stacks
+(:mod:`tritools.solve.points`), and tests/test_sdp_batch.py compares them against a single call's generic route.
 """
 from __future__ import annotations
 
@@ -25,7 +25,7 @@ import time
 import sospoly
 from sospoly import BudgetExceeded, Multiplier
 from sospoly.budget import TimeLimitReached
-from sospoly.solvers import CLARABEL_FAST_CHAIN, AutoBackend
+from sospoly.solvers import CLARABEL_FAST_CHAIN, CLARABEL_SPLIT_CHAIN, AutoBackend
 
 from ...model.constraints import Method
 from ...model.normalize import unconstrained_reason
@@ -106,26 +106,38 @@ def _generic(ctx: PointContext, st: StepState) -> bool:
     if not _build(ctx, st):
         return True
     t1 = st.t_solve = time.perf_counter()
-    st.lb = solve_psatz(ctx, st.psatz, st.tol, fast_chain=_fast_chain(ctx, st.step))
+    st.lb = solve_psatz(ctx, st.psatz, st.tol, chain=_chain(ctx, st.step))
     ctx.timings[f"solve_d{st.step.delta}"] = time.perf_counter() - t1
     return True
 
 
-def solve_psatz(ctx: PointContext, psatz, tol, fast_chain: bool = False):
+def solve_psatz(ctx: PointContext, psatz, tol, chain: tuple | None = None, tried: tuple = ()):
     """sospoly's solve of a bound compiled instance or a built program, under the point's settings;
-    ``fast_chain``: the default back-end with Clarabel's :data:`~sospoly.solvers.CLARABEL_FAST_CHAIN`."""
+    ``chain``: the default back-end with this Clarabel retry chain (:func:`_chain`); ``tried``: solver attempts
+    already made on this very program (``label:status``), whose settings the default back-end's retry chain
+    skips (a deterministic solver repeats their answer at their cost)."""
     s = ctx.settings
-    backend = AutoBackend(tol, clarabel_chain=CLARABEL_FAST_CHAIN) if fast_chain and s.auto_backend else s.backend
+    backend = s.backend
+    if chain is not None and s.auto_backend:
+        backend = AutoBackend(tol, clarabel_chain=chain)
+    elif tried and s.auto_backend:
+        backend = AutoBackend(tol, skip=tuple(t.split(":")[0] for t in tried))
     return sospoly.solve_psatz(psatz, backend=backend, form=s.form, tolerances=tol, deadline=s.deadline)
 
 
-def _fast_chain(ctx: PointContext, step: Step) -> bool:
-    """Clarabel's first attempt without iterative refinement (only its SOLVED answers are taken: the certificate
-    and its rigorous bound are those of every attempt) for the view-clique programs (many PSD blocks), where the
-    refinement costs as much as the factorisation and the attempt ends SOLVED (benchmarks/RESULTS.md, issue #22).
-    Dense programs keep the default chain: with regions their degree-2 program often ends "almost solved"
-    either way, and the provisional attempt would only double its cost."""
-    return step.formulation == "views"
+def _chain(ctx: PointContext, step: Step) -> tuple | None:
+    """Clarabel's retry chain for the step (None: the default).  The view-clique programs (many PSD blocks):
+    :data:`~sospoly.solvers.CLARABEL_FAST_CHAIN`, a first attempt without iterative refinement (only its SOLVED
+    answers are taken: the certificate and its rigorous bound are those of every attempt), where the refinement
+    costs as much as the factorisation and the attempt ends SOLVED (benchmarks/RESULTS.md, issue #22).  Dense
+    degree-2 programs with regions other than points (one large block): :data:`~sospoly.solvers.
+    CLARABEL_SPLIT_CHAIN` (fewer iterations, "solved" more often; measured there).  Other dense programs keep the
+    default chain."""
+    if step.formulation == "views":
+        return CLARABEL_FAST_CHAIN
+    if step.delta == 2 and not all(r.is_point for r in ctx.regions):
+        return CLARABEL_SPLIT_CHAIN
+    return None
 
 
 def _build(ctx: PointContext, st: StepState) -> bool:

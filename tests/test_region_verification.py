@@ -207,7 +207,7 @@ def test_adversarial_regions():
         assert r.gamma_lb is None or r.gamma_lb <= r.gamma_ub
         assert r.gamma_lb <= _multistart(c, regs, r.X) * (1 + 1e-9) + 1e-12
     huge = tritools.triangulate(cams, cases[2])
-    assert huge.optimal and huge.gamma_ub < 1e-12          # 0 up to the projections' round-off margin
+    assert huge.optimal and huge.gamma_ub < 1e-10          # 0 up to the projections' round-off margin
     # a georeferenced world: the same problem translated by 1e6 m
     H = np.eye(4)
     H[:3, 3] = -1e6

@@ -110,8 +110,8 @@ def test_gamma_upper_rounding():
     un = np.array([1e3, 2e3, 5e2])
     g = gamma_upper(res, un)
     plain = np.sqrt(np.sum(res ** 2) / 6)
-    assert plain < g < plain * (1 + 1e-11)
-    assert 0.0 < gamma_upper(np.zeros(3), un) < 1e-12                 # a zero distance keeps its round-off margin
+    assert plain < g < plain * (1 + 1e-9)
+    assert 0.0 < gamma_upper(np.zeros(3), un) < 1e-10                 # a zero distance keeps its round-off margin
     assert gamma_upper(np.array([0.3, np.inf]), np.ones(2)) == np.inf
     assert np.array_equal(gamma_upper(np.stack([res, 2 * res]), np.stack([un, un])),
                           [gamma_upper(res, un), gamma_upper(2 * res, un)])

@@ -6,11 +6,15 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["two_sum", "two_prod", "dot2", "accurate_homogeneous", "homogeneous_images", "CANCELLATION_RATIO"]
+__all__ = ["two_sum", "two_prod", "dot2", "accurate_homogeneous", "homogeneous_images", "CANCELLATION_RATIO",
+           "HOMOGENEOUS_RTOL"]
 
 #: a sum of products is recomputed by :func:`dot2` when the sum of its terms' magnitudes exceeds this many times
-#: its magnitude (more than ~3 bits lost to cancellation).
-CANCELLATION_RATIO = 8.0
+#: its magnitude (more than 6 bits lost to cancellation); below, the plain sum of 4 products errs by at most
+#: 4u |terms| <= 4u CANCELLATION_RATIO |sum| (:data:`HOMOGENEOUS_RTOL`).
+CANCELLATION_RATIO = 64.0
+#: the relative error of a homogeneous image P_i X~ from :func:`homogeneous_images` (either branch).
+HOMOGENEOUS_RTOL = 4 * CANCELLATION_RATIO * 2.0 ** -53
 
 
 def two_sum(a, b):

@@ -10,6 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..model.cameras import depths_stack_arrays, depths_validated
+from ..model.exact import HOMOGENEOUS_RTOL
 from ..model.frame import project_world
 from ..model.geometry import WorldFrame, project_views
 from ..model.regions import extent_of
@@ -19,23 +20,28 @@ __all__ = ["PointReport", "point_report", "points_report_stack", "solve_radius",
            "gamma_upper", "rounding_spread", "projections_and_spread"]
 
 _U = 2.0 ** -53                   # the unit round-off of float64
+#: |u~_i - u_i| <= _PROJ_ABS |u_i|: the quotient of two homogeneous coordinates with relative error HOMOGENEOUS_RTOL
+#: each, then rounded, then the difference with x_i (its own rounding is in the (1 + 4u) factor)
+_PROJ_ABS = 2 * HOMOGENEOUS_RTOL + 4 * _U
 
 
 def gamma_upper(res, u_norm, cap=None):
     """gamma_UB: gamma of the exact distances at the float estimate X, rounded up -- the distances ``res`` (..., N)
-    computed from projections u_i of norm ``u_norm`` (..., N) whose homogeneous images are accurate to a few units
-    of round-off (:func:`tritools.model.frame.project_world`).  The quotient u_i = h_i / h_i3 and the difference
-    u_i - x_i then err by at most ~5 u |u_i| + u d_i, a distance to a region is 1-Lipschitz in u_i, and the norm adds
-    2 u relative: d_i <= d~_i (1 + 4u) + 6u |u_i|; the sum of N squares and the square root are rounded up by
+    computed from projections u_i of norm ``u_norm`` (..., N) whose homogeneous images err by at most
+    ``HOMOGENEOUS_RTOL`` relative (:func:`tritools.model.exact.homogeneous_images`, used by
+    :func:`tritools.model.frame.project_world` and :func:`tritools.model.geometry.project_homogeneous`).  The
+    quotient u_i = h_i / h_i3 and the difference u_i - x_i then err by at most ``_PROJ_ABS`` |u_i| + u d_i
+    (_PROJ_ABS = 2 HOMOGENEOUS_RTOL + 4u, ~6e-14), a distance to a region is 1-Lipschitz in u_i, and the norm adds
+    2u relative: d_i <= d~_i (1 + 4u) + _PROJ_ABS |u_i|; the sum of N squares and the square root are rounded up by
     (1 + (N + 4) u) and (1 + 4u).  So gamma(X) <= gamma_UB for the exact distances of the float data (point regions;
-    for other regions up to their own distance round-off).  A distance computed as 0 gets the margin too (a float
-    projection on its observed point may be ~6u |u_i| from the exact one), so gamma_UB > 0 even at zero noise.
-    inf where a distance is not finite.
+    for other regions up to their own distance round-off): ~6e-11 px above the float value at 1000 px coordinates.
+    A distance computed as 0 gets the margin too (a float projection on its observed point may be that far from
+    the exact one), so gamma_UB > 0 even at zero noise.  inf where a distance is not finite.
     ``cap`` (N,): truncated distances min(d_i, c_i) (the TLS cost of issue #19; inf: not truncated)."""
     res = np.asarray(res, float)
     n = res.shape[-1]
     with np.errstate(invalid="ignore", over="ignore"):
-        d = res * (1.0 + 4 * _U) + 6 * _U * np.asarray(u_norm, float)
+        d = res * (1.0 + 4 * _U) + _PROJ_ABS * np.asarray(u_norm, float)
         if cap is not None:
             d = np.minimum(d, cap)
         f = np.sum(d * d, axis=-1) * (1.0 + (n + 4) * _U)

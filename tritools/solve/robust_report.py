@@ -11,8 +11,7 @@ here, in the caller's frame and units, by the L2 path's rules (:mod:`tritools.so
 * gamma_LB from the search's bound in pixels^2, lowered by the normalisation's round-off
   (:func:`tritools.solve.decide.gamma_lower`), never above gamma_UB.
 * The certificate, decided by the search in c units on its scale S = min(c^2, rho^2), must also pass on these
-  numbers (the same rule) and the L2 path's two guards: a gap that passes only through the absolute part of the
-  rule must be within
+  numbers the L2 path's two guards: a gap that does not pass through the relative part of the rule must be within
   the coordinates' resolution (``RESOLUTION_REL`` max(1, median |x_i|) pixels; thresholds far above the
   residuals make S = c^2 large, and without it a 250 px gap at 1e10 px coordinates certified), and the estimate's
   own rounding must not move the projections by more than that resolution
@@ -46,11 +45,11 @@ class TlsReported:
 
 
 def tls_reported(C: np.ndarray, centres: np.ndarray, residuals, X, c: np.ndarray, lb: float, tolerances,
-                 scale: float, certified: bool) -> TlsReported:
+                 certified: bool) -> TlsReported:
     """The reported bounds and checks of a TLS result at X (module docstring): cameras C (N, 3, 4), the regions'
     centres (N, 2) (their magnitude sets the resolution), ``residuals`` the distances d_i(X) or None for point
     regions (computed here from compensated projections; ``centres`` are then the points), ``lb`` the search's
-    bound of f*_TLS (pixels^2), ``scale`` the rule's scale S, ``certified`` its decision."""
+    bound of f*_TLS (pixels^2), ``certified`` the search's decision (on its scale S)."""
     N = len(C)
     u, fin, spread = projections_and_spread(np.asarray(C, float), X)
     u = u if fin else np.full((N, 2), np.inf)
@@ -68,8 +67,7 @@ def tls_reported(C: np.ndarray, centres: np.ndarray, residuals, X, c: np.ndarray
         holds, g_lb = False, 0.0
         reason = "the estimate's own rounding moves its projections by more than the coordinates' resolution " \
                  f"({resolution:.3g} px): the float data cannot certify this optimum"
-    elif certified and not (tolerances.certified(f_lb, f_ub, scale) and
-                            (tolerances.certified_relatively(f_lb, f_ub) or g_ub - g_lb <= resolution)):
+    elif certified and not (tolerances.certified_relatively(f_lb, f_ub) or g_ub - g_lb <= resolution):
         holds, reason = False, "the bounds met on the search's scale, but their gap exceeds the coordinates' " \
                                f"resolution ({resolution:.3g} px)"
     return TlsReported(g_lb, g_ub if math.isfinite(g_ub) else math.inf, residuals, res < c, holds, reason)

@@ -81,3 +81,30 @@ def test_rounding_spread_is_tiny_on_ordinary_data_and_large_off_axis():
     K = np.diag([k, k, 1.0])
     X = tritools.triangulate(CAMS, k * h[:, :2] / h[:, 2:], robust=1e6).X
     assert rounding_spread(K @ CAMS, X) > 1e-3 * k * 1e-8         # moves by a good share of the resolution
+
+
+def test_bounds_hold_within_the_rounding_spread_far_off_axis():
+    """Review 7's probe seed 93: six f = 800 cameras sharing a principal plane, the point 1e-6 from it (|x| ~ 4.5e8 px,
+    resolution 4.5 px).  The enumeration's frame bound sat 7e-4 px above an achievable value (the plain L2 estimate,
+    valued exactly); gamma_LB is lowered by the estimate's rounding spread (0.06 px) and stays below it."""
+    rng = np.random.default_rng(93)
+    N, f = int(rng.integers(3, 7)), float(rng.choice([1.0, 800.0]))
+    eps, sigma = float(rng.choice([1e-4, 1e-6, 1e-8])), float(rng.choice([0.0, 1.0]))
+    cams = []
+    for _ in range(N):
+        C = np.array([rng.uniform(-1, 1), rng.uniform(-1, 1), -1.0])
+        P = np.array([[f, 0, 0, 0], [0, f, 0, 0], [0, 0, 1, 1.0]])
+        P[:2, 3] = -f * C[:2]
+        cams.append(P)
+    cams = np.array(cams)
+    X = np.array([rng.uniform(-0.3, 0.3), rng.uniform(-0.3, 0.3), -1.0 + eps])
+    h = cams @ np.append(X, 1.0)
+    x = h[:, :2] / h[:, 2:] + sigma * rng.normal(size=(N, 2))
+    c = float(rng.choice([5.0, 1e6, 1e12]))
+    assert (N, f, eps) == (6, 800.0, 1e-6)                      # the probe's case
+    plain = tritools.triangulate(cams, x)
+    g_ach = float(np.sqrt(float(_f_tls_exact(cams, x, np.full(N, c), plain.X)) / (2 * N)))
+    for r in (tritools.triangulate(cams, x, robust=c), tritools.triangulate_many([(cams, x)], robust=c,
+                                                                                progress=False)[0]):
+        assert r.gamma_lb <= g_ach, (r.gamma_lb, g_ach)
+        assert r.gamma_lb <= r.gamma_ub

@@ -9,7 +9,7 @@ here, in the caller's frame and units, by the L2 path's rules (:mod:`tritools.so
   projections, each distance enlarged by its round-off bound before truncation and the sum rounded up
   (:func:`tritools.solve.report.gamma_upper`): an upper bound of gamma*_TLS of the given float data.
 * gamma_LB from the search's bound in pixels^2, lowered by the normalisation's round-off
-  (:func:`tritools.solve.decide.gamma_lower`), never above gamma_UB.
+  (:func:`tritools.solve.decide.gamma_lower`) and by the estimate's rounding spread (below), never above gamma_UB.
 * The certificate, decided by the search in c units on its scale S = min(c^2, rho^2), must also pass on these
   numbers the L2 path's two guards: a gap that does not pass through the relative part of the rule must be within
   the coordinates' resolution (``RESOLUTION_REL`` max(1, median |x_i|) pixels; thresholds far above the
@@ -60,7 +60,11 @@ def tls_reported(C: np.ndarray, centres: np.ndarray, residuals, X, c: np.ndarray
                              cap=c))
     a = np.sort(np.abs(centres), axis=None)
     resolution = RESOLUTION_REL * max(1.0, float(0.5 * (a[(a.size - 1) // 2] + a[a.size // 2])))   # median
-    g_lb = min(float(gamma_lower(gamma_from_c(max(lb, 0.0), N, 1.0), g_ub, 1.0, resolution)), g_ub)
+    # lowered by the normalisation's round-off and by the estimate's rounding spread: bounds from a normalised frame
+    # describe the caller's float problem only to that spread (a 6-view track 4.5e8 px off-axis: spread 0.06 px,
+    # the frame's bound 7e-4 px above an achievable value)
+    g_lb = max(0.0, float(gamma_lower(gamma_from_c(max(lb, 0.0), N, 1.0), g_ub, 1.0, resolution)) - spread)
+    g_lb = min(g_lb, g_ub)
     holds, reason = certified, ""
     f_lb, f_ub = 2.0 * N * g_lb * g_lb, 2.0 * N * g_ub * g_ub
     if not spread <= resolution:         # no bound from a normalised frame is known to hold

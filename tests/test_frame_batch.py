@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 import tritools
-from tritools.model.exact import dot2 as _dot2
+from tritools.model.exact import dot2
 from tritools.model.frame import moved_cameras, world_frame, world_origins
 from tritools.scene import random_scene
 
@@ -43,7 +43,7 @@ def test_dot2_is_the_correctly_rounded_column():
     C = rng.normal(size=(4, 5, 3, 4))
     o = rng.normal(size=(4, 3)) * 1e7
     C[..., 3] = -np.einsum("mnij,mj->mni", C[..., :3], o) + rng.normal(size=(4, 5, 3))
-    got = _dot2(C[..., :3], o[:, None, None, :], C[..., 3])
+    got = dot2(C[..., :3], o[:, None, None, :], C[..., 3])
     for idx in np.ndindex(4, 5, 3):
         m = idx[0]
         exact = sum(Fraction(C[idx][k]) * Fraction(o[m, k]) for k in range(3)) + Fraction(C[idx][3])

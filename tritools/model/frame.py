@@ -21,7 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .cameras import power2_scale
-from .exact import dot2 as _dot2, homogeneous_images
+from .exact import dot2, homogeneous_images
 from .stacked import norms, project_quiet
 
 __all__ = ["WorldFrame", "world_frame", "world_origins", "moved_cameras", "recentred", "project_world",
@@ -122,9 +122,9 @@ def moved_cameras(C: np.ndarray, origins: np.ndarray) -> np.ndarray:
     """The cameras (M, N, 3, 4) in the frames X = origin_m + X' (``origins`` (M, 3), 0: not moved):
     P' = P [[I, origin], [0, 1]], each camera divided by a power of two near its largest entry before and after
     (exact).  The new last column P[:, :3] origin + P[:, 3] cancels ~log10(|origin| / spread) digits, so it is
-    evaluated with error-free transformations (:func:`_dot2`: as if in twice the working precision, then rounded
-    once): the moved cameras are then the caller's problem up to one rounding of each entry, as the caller's
-    cameras are."""
+    evaluated with error-free transformations (:func:`tritools.model.exact.dot2`: as if in twice the working
+    precision, then rounded once): the moved cameras are then the caller's problem up to one rounding of each
+    entry, as the caller's cameras are."""
     C = np.asarray(C, float)
     o = np.asarray(origins, float)
     with np.errstate(all="ignore"):
@@ -134,7 +134,7 @@ def moved_cameras(C: np.ndarray, origins: np.ndarray) -> np.ndarray:
             return C
         C = C.copy()
         Cm = C[moved]
-        Cm[..., 3] = _dot2(Cm[..., :3], o[moved][:, None, None, :], Cm[..., 3])
+        Cm[..., 3] = dot2(Cm[..., :3], o[moved][:, None, None, :], Cm[..., 3])
         C[moved] = Cm / power2_scale(Cm, (2, 3))
     return C
 

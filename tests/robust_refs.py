@@ -58,3 +58,29 @@ def drive_one(gen, bounds):
             req = gen.send(None)
     except StopIteration as stop:
         return stop.value
+
+
+def primed_search(cams, x, c, X):
+    """A ``TlsSearch`` over (cams, x, c) offered the candidate X, its full view set W verified first: (search, W),
+    the state every sub-bound test starts from."""
+    import tritools
+    from tritools.solve.robust import TlsSearch
+
+    s = TlsSearch(cams, None, c, tritools.TriangulationOptions(), 0.0, points=x)
+    s.offer(X)
+    W = frozenset(range(len(x)))
+    drive_one(s.verify_first(W), s.bounds)
+    return s, W
+
+
+def assert_same_tls(a, b, rel=1e-6):
+    """Two TLS results of one problem agree: status, inlier set and gamma_UB (to ``rel``)."""
+    assert a.status == b.status, (a.status, b.status)
+    np.testing.assert_array_equal(a.inliers, b.inliers)
+    assert abs(a.gamma_ub - b.gamma_ub) <= rel * max(abs(a.gamma_ub), abs(b.gamma_ub)) + 1e-12, (a.gamma_ub, b.gamma_ub)
+
+
+def assert_lb_below(results, N, f_ref):
+    """Every result's TLS lower bound (gamma units: f = 2 N gamma^2) is at most the attained reference value f_ref."""
+    for r in results:
+        assert 2 * N * r.gamma_lb ** 2 <= f_ref * (1 + 1e-9) + 1e-9, (r.gamma_lb, f_ref)

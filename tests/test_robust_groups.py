@@ -18,7 +18,7 @@ import tritools
 import tritools.solve.robust_loo as rl
 from tritools.scene import random_scene, robust_protocol_scene
 from tritools.solve.robust import TlsSearch, tls_cost
-from tests.robust_refs import drive_one, l2_min, outlier_track, tls_by_subsets
+from tests.robust_refs import assert_lb_below, assert_same_tls, drive_one, l2_min, outlier_track, primed_search, tls_by_subsets
 
 
 def _dist(cams, x, X):
@@ -60,10 +60,7 @@ def test_group_bound_below_the_enumeration(seed, N, n_out, cval):
     cams, x, X, out = outlier_track(N, n_out, seed, shift=(30.0, 200.0))
     c = np.full(N, cval)
     f_ref = tls_by_subsets(cams, x, c, [X, X + 0.3, X - 0.3])
-    s = TlsSearch(cams, None, c, tritools.TriangulationOptions(), 0.0, points=x)
-    s.offer(X)
-    W = frozenset(range(N))
-    drive_one(s.verify_first(W), s.bounds)
+    s, W = primed_search(cams, x, c, X)
     for m in (2, 3, 4):
         lb = drive_one(rl.group_bound(s, W, 0.0, m), s.bounds)
         assert lb <= f_ref * (1 + 1e-9) + 1e-9, (m, lb, f_ref)
@@ -133,13 +130,9 @@ def test_with_and_without_groups_the_same_result(seed, N, n_out, cval, monkeypat
     fast = tritools.triangulate(cams, x, robust=c)
     monkeypatch.setattr(rl, "GROUPS", False)
     plain = tritools.triangulate(cams, x, robust=c)
-    assert fast.status == plain.status
-    np.testing.assert_array_equal(fast.inliers, plain.inliers)
-    assert fast.gamma_ub == pytest.approx(plain.gamma_ub, rel=1e-6)
+    assert_same_tls(fast, plain)
     inl = np.nonzero(fast.inliers)[0]
-    f_att = tls_cost(_dist(cams, x, _fit(cams, x, list(inl), fast.X)), c)
-    for r in (fast, plain):
-        assert 2 * N * r.gamma_lb ** 2 <= f_att * (1 + 1e-9) + 1e-9
+    assert_lb_below((fast, plain), N, tls_cost(_dist(cams, x, _fit(cams, x, list(inl), fast.X)), c))
 
 
 def test_batch_of_long_tracks_equals_single_calls():

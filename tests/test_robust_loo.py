@@ -10,7 +10,7 @@ import tritools
 import tritools.solve.robust_suspects as rs
 from tritools.scene import random_scene
 from tritools.solve.robust import TlsSearch
-from tests.robust_refs import drive_one, l2_min, tls_by_subsets
+from tests.robust_refs import assert_lb_below, assert_same_tls, drive_one, l2_min, primed_search, tls_by_subsets
 from tritools.solve.robust_loo import _split, halves, leave_one_out
 
 
@@ -41,17 +41,12 @@ def test_clean_track_bound_below_the_enumeration(seed, N, cval, monkeypatch):
     cams, x, X = sc.cameras, sc.points2d[0], sc.points3d[0]
     c = np.full(N, cval)
     f_ref = tls_by_subsets(cams, x, c, [X, X + 0.3, X - 0.3])
-    s = TlsSearch(cams, None, c, tritools.TriangulationOptions(), 0.0, points=x)
-    s.offer(X)
-    full = frozenset(range(N))
-    drive_one(s.verify_first(full), s.bounds)
+    s, full = primed_search(cams, x, c, X)
     lb = drive_one(leave_one_out(s, full, 0.0), s.bounds)
     assert lb <= f_ref * (1 + 1e-9) + 1e-9
     fast = tritools.triangulate(cams, x, robust=c)
     monkeypatch.setattr(rs, "ENABLED", False)
     plain = tritools.triangulate(cams, x, robust=c)
-    assert fast.optimal and " 0 nodes" in fast.message and fast.status == plain.status
-    np.testing.assert_array_equal(fast.inliers, plain.inliers)
-    assert fast.gamma_ub == pytest.approx(plain.gamma_ub, rel=1e-6)
-    for r in (fast, plain):
-        assert 2 * N * r.gamma_lb ** 2 <= f_ref * (1 + 1e-9) + 1e-9
+    assert fast.optimal and " 0 nodes" in fast.message
+    assert_same_tls(fast, plain)
+    assert_lb_below((fast, plain), N, f_ref)

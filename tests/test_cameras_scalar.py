@@ -14,6 +14,7 @@ def _cases():
     yield rng.normal(size=(8, 3, 4))
     K = np.array([[1000.0, 0, 1e6], [0, 1000.0, 1e6], [0, 0, 1]])         # principal point at 1e6 px
     yield np.array([K @ np.hstack([np.eye(3), rng.normal(size=(3, 1))]) for _ in range(3)])
+    yield np.array([K @ np.hstack([np.eye(3), -4e7 + rng.normal(size=(3, 1))]) for _ in range(3)])   # georeferenced
     for e in (-150, -20, 20, 150):                                          # any camera scale
         yield np.array(random_scene(4, 1, seed=2).cameras, float) * 10.0 ** e
     A = rng.normal(size=(3, 3, 4))

@@ -7,7 +7,9 @@ Camera check
 vectorised functions (:func:`camera_rank_ratio`, :func:`cameras_all_equal`):
 
 1. every entry is finite;
-2. every camera has rank 3, tested on a conditioned copy (:func:`camera_rank_ratio`):
+2. every camera has rank 3, tested on a conditioned copy (:func:`camera_rank_ratio`) and on its conditioned
+   left 3 x 3 block (rank 3 there is sufficient; it is what a georeferenced camera, whose fourth column
+   dominates every row, passes):
    the camera is divided by its largest absolute entry (no overflow, whatever its scale),
    rows 1 and 2 are replaced by their components orthogonal to row 3 (left multiplication
    by an image translation ``[[1, 0, -a], [0, 1, -b], [0, 0, 1]]``), and each row is scaled
@@ -16,7 +18,7 @@ vectorised functions (:func:`camera_rank_ratio`, :func:`cameras_all_equal`):
    and scaled).  They remove what makes a perfectly good pixel camera look nearly singular:
    ``K = [[1e3, 0, 1e6], [0, 1e3, 1e6], [0, 0, 1]]`` gives rows 1 and 2 that are ~1e3 times
    row 3 plus a small part, and sigma_3 / sigma_1 ~ 5e-11 before conditioning, ~1 after.
-   The rank is 3 iff ``sigma_3 / sigma_1 > CAMERA_RANK_RTOL`` of the conditioned matrix;
+   The rank is 3 iff ``sigma_3 / sigma_1 > CAMERA_RANK_RTOL`` of the conditioned matrix or of its block;
    a row whose component orthogonal to row 3 is at most ``CAMERA_RANK_RTOL`` of its norm
    counts as zero (it is a multiple of row 3 to that precision);
 3. (optional) the cameras are not all equal up to a (possibly negative) scale factor, the
@@ -139,7 +141,10 @@ def unit_rows(R: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def camera_rank_ratio(cameras) -> np.ndarray:
-    """``sigma_3 / sigma_1`` of the conditioned camera(s), the quantity of the rank rule.
+    """``sigma_3 / sigma_1`` of the conditioned camera(s), the quantity of the rank rule: the larger of the
+    conditioned camera's and of its conditioned left 3 x 3 block's (the same conditioning on the block's rows; the
+    camera has rank 3 if the block has).  The block matters for georeferenced cameras: a world translation of
+    ~1e7 makes every row's fourth entry dominate, and the rows look parallel to ``CAMERA_RANK_RTOL``.
 
     For ``P`` with rows ``r1, r2, r3`` (after division by ``max |P_ij|``): ``u3 = r3 / ||r3||``,
     ``q_k = (r_k - (r_k.u3) u3) / ||.||`` (k = 1, 2, orthogonalised twice against ``u3``, ``r_k``
@@ -168,7 +173,14 @@ def camera_rank_ratio(cameras) -> np.ndarray:
 
 
 def _rank_ratio(C: np.ndarray) -> np.ndarray:
-    """:func:`camera_rank_ratio` of a float array (..., 3, 4) already checked (the three rows scaled to unit norm
+    """:func:`camera_rank_ratio` of a float array (..., 3, 4) already checked: the larger of the conditioned
+    camera's ratio and its conditioned left 3 x 3 block's (:func:`_conditioned_ratio` of both; NaN where an entry
+    is not finite)."""
+    return np.fmax(_conditioned_ratio(C), _conditioned_ratio(C[..., :3]))
+
+
+def _conditioned_ratio(C: np.ndarray) -> np.ndarray:
+    """sigma_3 / sigma_1 of the conditioned rows of C (..., 3, k), k = 3 or 4 (the three rows scaled to unit norm
     in one :func:`unit_rows` call: the same operations, row by row)."""
     finite = np.isfinite(C).all(axis=(-2, -1))
     C = np.where(finite[..., None, None], C, 0.0)
@@ -295,34 +307,36 @@ def _p2(m: float) -> float:
 def _rank_ratio_scalar(C: np.ndarray) -> list:
     """The scalar twin of :func:`_rank_ratio` for finite cameras (N, 3, 4): the same steps on Python floats
     (tests/test_cameras_scalar.py: equal to the vectorised rule within round-off)."""
-    out = []
-    for P in C.tolist():
-        k = _p2(max(abs(v) for row in P for v in row))
-        rows, nonzero = [], []
-        for row in P:
-            row = [v / k for v in row]
-            sr = _p2(max(abs(v) for v in row))
-            row = [v / sr for v in row]
-            n = math.sqrt(sum(v * v for v in row))
-            rows.append([v / n for v in row] if n > 0 else row)
-            nonzero.append(n > 0)
-        u3 = rows[2]
-        ps, pns = [], []
-        for r in rows[:2]:
-            d = sum(a * b for a, b in zip(r, u3))
-            p = [a - d * b for a, b in zip(r, u3)]
-            d = sum(a * b for a, b in zip(p, u3))
-            p = [a - d * b for a, b in zip(p, u3)]
-            pn = math.sqrt(sum(v * v for v in p))
-            ps.append([v / pn for v in p] if pn > 0 else p)
-            pns.append(pn)
-        ok = nonzero[2] and all(nz and pn > CAMERA_RANK_RTOL for nz, pn in zip(nonzero[:2], pns))
-        q0, q1 = ps
-        sg = -1.0 if sum(a * b for a, b in zip(q0, q1)) < 0 else 1.0
-        num = math.sqrt(sum((a - sg * b) ** 2 for a, b in zip(q0, q1)))
-        den = math.sqrt(sum((a + sg * b) ** 2 for a, b in zip(q0, q1)))
-        out.append(num / (den if den > 0 else 1.0) if ok else 0.0)
-    return out
+    return [max(_conditioned_ratio_one(P), _conditioned_ratio_one([row[:3] for row in P])) for P in C.tolist()]
+
+
+def _conditioned_ratio_one(P: list) -> float:
+    """The scalar twin of :func:`_conditioned_ratio` for one finite camera or left block (three rows of floats)."""
+    k = _p2(max(abs(v) for row in P for v in row))
+    rows, nonzero = [], []
+    for row in P:
+        row = [v / k for v in row]
+        sr = _p2(max(abs(v) for v in row))
+        row = [v / sr for v in row]
+        n = math.sqrt(sum(v * v for v in row))
+        rows.append([v / n for v in row] if n > 0 else row)
+        nonzero.append(n > 0)
+    u3 = rows[2]
+    ps, pns = [], []
+    for r in rows[:2]:
+        d = sum(a * b for a, b in zip(r, u3))
+        p = [a - d * b for a, b in zip(r, u3)]
+        d = sum(a * b for a, b in zip(p, u3))
+        p = [a - d * b for a, b in zip(p, u3)]
+        pn = math.sqrt(sum(v * v for v in p))
+        ps.append([v / pn for v in p] if pn > 0 else p)
+        pns.append(pn)
+    ok = nonzero[2] and all(nz and pn > CAMERA_RANK_RTOL for nz, pn in zip(nonzero[:2], pns))
+    q0, q1 = ps
+    sg = -1.0 if sum(a * b for a, b in zip(q0, q1)) < 0 else 1.0
+    num = math.sqrt(sum((a - sg * b) ** 2 for a, b in zip(q0, q1)))
+    den = math.sqrt(sum((a + sg * b) ** 2 for a, b in zip(q0, q1)))
+    return num / (den if den > 0 else 1.0) if ok else 0.0
 
 
 def _all_equal_scalar(C: np.ndarray) -> bool:

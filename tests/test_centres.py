@@ -122,5 +122,8 @@ def test_triangulate_at_1e6_px_rescaled_cameras_and_duplicated_view():
     gamma_local = np.linalg.norm(sol.fun) / np.sqrt(2 * len(Cd))          # the RMS error of SPEC §1
     assert dup.gamma_lb <= gamma_local * (1 + 1e-9)
     assert abs(dup.gamma_ub - gamma_local) <= 1e-6 * gamma_local
-    np.testing.assert_allclose(dup.X, sol.x, rtol=1e-5, atol=1e-7)
+    # the certified point is at least as good as the local solve (scipy's LM may stop ~1e-6 short along the flat
+    # depth direction, depending on its version), and close to it
+    assert np.sum(residuals(dup.X) ** 2) <= np.sum(sol.fun ** 2) * (1 + 1e-9)
+    np.testing.assert_allclose(dup.X, sol.x, rtol=1e-4, atol=1e-6)
 

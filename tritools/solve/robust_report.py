@@ -29,7 +29,7 @@ import numpy as np
 from ..model.normalize import RESOLUTION_REL
 from ..model.stacked import norms
 from .decide import gamma_from_c, gamma_lower
-from .report import gamma_upper, projections_and_spread
+from .report import _PROJ_ABS, _U, gamma_upper, projections_and_spread
 
 __all__ = ["TlsReported", "tls_reported"]
 
@@ -39,7 +39,7 @@ class TlsReported:
     gamma_lb: float
     gamma_ub: float
     residuals: np.ndarray          # (N,) d_i(X), inf where the projection is undefined
-    inliers: np.ndarray            # (N,) d_i(X) < c_i
+    inliers: np.ndarray            # (N,) d_i(X) < c_i (exactly, for point regions: :func:`inlier_mask`)
     holds: bool                    # the certificate passes on the reported numbers (module docstring)
     reason: str                    # why not, when it does not
 
@@ -53,7 +53,8 @@ def tls_reported(C: np.ndarray, centres: np.ndarray, residuals, X, c: np.ndarray
     N = len(C)
     u, fin, spread = projections_and_spread(np.asarray(C, float), X)
     u = u if fin else np.full((N, 2), np.inf)
-    if residuals is None:
+    points_given = residuals is None
+    if points_given:
         residuals = norms(u - centres, axis=1)
     res = np.where(np.isfinite(residuals), residuals, np.inf)
     g_ub = float(gamma_upper(np.where(np.isfinite(res), res, c), norms(np.where(np.isfinite(u), u, 0.0), axis=1),
@@ -67,11 +68,55 @@ def tls_reported(C: np.ndarray, centres: np.ndarray, residuals, X, c: np.ndarray
     g_lb = min(g_lb, g_ub)
     holds, reason = certified, ""
     f_lb, f_ub = 2.0 * N * g_lb * g_lb, 2.0 * N * g_ub * g_ub
+    resolved = min(resolution, threshold_resolution(c, N, tolerances))
     if not spread <= resolution:         # no bound from a normalised frame is known to hold
         holds, g_lb = False, 0.0
         reason = "the estimate's own rounding moves its projections by more than the coordinates' resolution " \
                  f"({resolution:.3g} px): the float data cannot certify this optimum"
-    elif certified and not (tolerances.certified_relatively(f_lb, f_ub) or g_ub - g_lb <= resolution):
+    elif certified and not (tolerances.certified_relatively(f_lb, f_ub) or g_ub - g_lb <= resolved):
         holds, reason = False, "the bounds met on the search's scale, but their gap exceeds the coordinates' " \
-                               f"resolution ({resolution:.3g} px)"
-    return TlsReported(g_lb, g_ub if math.isfinite(g_ub) else math.inf, residuals, res < c, holds, reason)
+                               f"resolution ({resolved:.3g} px, at most the thresholds' own scale)"
+    inliers = inlier_mask(C, X, centres, res, c, u, exact=points_given)
+    return TlsReported(g_lb, g_ub if math.isfinite(g_ub) else math.inf, residuals, inliers, holds, reason)
+
+
+def threshold_resolution(c: np.ndarray, N: int, tolerances) -> float:
+    """The largest gamma gap that the thresholds' own scale lets pass as "within resolution": the gap of a zero
+    lower bound whose f-gap is ``gap_abs`` c_min^2, i.e. c_min sqrt(gap_abs / 2N) (inf without a finite
+    threshold).  With thresholds below the coordinates' resolution (c = 1e-9 px at 300 px coordinates) the
+    resolution clause would certify any value in [0, c] (review 8 F2); this caps it at the search's own absolute
+    tolerance on the scale c^2."""
+    fin = np.asarray(c, float)[np.isfinite(c)]
+    if fin.size == 0:
+        return math.inf
+    return float(fin.min()) * math.sqrt(tolerances.gap_abs / (2.0 * N))
+
+
+def inlier_mask(C: np.ndarray, X, points: np.ndarray, res: np.ndarray, c: np.ndarray, u: np.ndarray,
+                exact: bool) -> np.ndarray:
+    """(N,) bool, d_i(X) < c_i.  The float distances ``res`` err by at most ``res 4u + _PROJ_ABS |u_i|``
+    (:func:`tritools.solve.report.gamma_upper`); where |res_i - c_i| is within that margin and the regions are
+    points (``exact``), the comparison is made exactly in rational arithmetic on the float data and X (rare: a
+    distance at the threshold to ~1e-13 relative, or thresholds below the round-off, review 8 F2).  Other regions
+    keep the float comparison there."""
+    inl = res < c
+    if not exact:
+        return inl
+    with np.errstate(invalid="ignore", over="ignore"):
+        margin = res * (4 * _U) + _PROJ_ABS * np.linalg.norm(np.where(np.isfinite(u), u, 0.0), axis=1)
+        ambiguous = np.isfinite(res) & np.isfinite(c) & (np.abs(res - c) <= margin)
+    for i in np.flatnonzero(ambiguous):
+        inl[i] = _exact_below(C[i], X, points[i], float(c[i]))
+    return inl
+
+
+def _exact_below(P: np.ndarray, X, x: np.ndarray, c: float) -> bool:
+    """|pi(P (X, 1)) - x| < c in exact rational arithmetic (False where the projection is undefined)."""
+    from fractions import Fraction
+
+    Xh = [Fraction(float(v)) for v in X] + [Fraction(1)]
+    h = [sum(Fraction(float(P[r, k])) * Xh[k] for k in range(4)) for r in range(3)]
+    if h[2] == 0:
+        return False
+    dx, dy = h[0] / h[2] - Fraction(float(x[0])), h[1] / h[2] - Fraction(float(x[1]))
+    return dx * dx + dy * dy < Fraction(c) ** 2

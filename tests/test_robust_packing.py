@@ -65,7 +65,7 @@ def test_cheap_paths_equal_the_plain_path_and_the_enumeration(seed, monkeypatch)
     monkeypatch.setattr(enum_mod, "ENUM_MAX_VIEWS", 0)         # the branch and bound's sub-bounds (robust_enum: N <= 8)
     sdp_rows = []
     real = rb._sdp_stack
-    monkeypatch.setattr(rb, "_sdp_stack", lambda C, x_, o: sdp_rows.append(len(C)) or real(C, x_, o))
+    monkeypatch.setattr(rb, "_sdp_stack", lambda C, x_, o, d=None: sdp_rows.append(len(C)) or real(C, x_, o, d))
     fast = tritools.triangulate(cams, x, robust=c)
     n_fast, sdp_rows[:] = sum(sdp_rows), []
     monkeypatch.setattr(rb, "PACKING", False)

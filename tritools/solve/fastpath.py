@@ -64,6 +64,9 @@ BAND_MIN_VIEWS = 12
 BAND_WIDTHS = (4, 8)
 #: memory of one call of the all-pairs bound (the fallback is chunked to stay below it).
 ALL_PAIRS_CHUNK_BYTES = 256 * 2 ** 20
+#: flops per second at which :func:`all_pairs_seconds` counts the all-pairs bound (measured ~2e9 n^2 K per second
+#: on the 2-core machine at N = 200; half of it, so the estimate errs long).
+ALL_PAIRS_FLOPS = 1e9
 
 
 @dataclass(frozen=True)
@@ -294,11 +297,11 @@ def lagrangian_bounds(C, Cn, v, ok, radius, resolution, tolerances, f0=None, wei
     todo = todo[np.isnan(lower[todo])]
     step = all_pairs_chunk(N)
     if todo.size == M == 1:             # a single call: its arrays as they are (no copies by index)
-        if not expired(deadline):
+        if fits(deadline, N, 1):
             lower, ok = _all_pairs_bounds(C, Cn, v, ok, radius, tolerances, f0, F2(todo), views)
         return lower, upper, ok
     for part in (todo[k:k + step] for k in range(0, todo.size, step)):
-        if expired(deadline):
+        if not fits(deadline, N, len(part)):
             break
         lower[part], ok[part] = _all_pairs_bounds(C[part], Cn[part], v[part], ok[part], radius[part], tolerances,
                                                   f0[part], F2(part), None if views is None else views[part])
@@ -308,6 +311,24 @@ def lagrangian_bounds(C, Cn, v, ok, radius, resolution, tolerances, f0=None, wei
 def expired(deadline: Deadline | None) -> bool:
     """Has ``deadline`` (None: no limit) passed?"""
     return deadline is not None and deadline.expired
+
+
+def all_pairs_seconds(n_views: int, problems: int = 1) -> float:
+    """Estimated seconds of the all-pairs bound of ``problems`` problems of ``n_views`` views: its least squares
+    over K = N(N - 1)/2 multipliers with n = 2N rows costs ~n^2 K flops per problem, counted at
+    :data:`ALL_PAIRS_FLOPS` (review 8 F1: one 200-view problem, 19,900 pairs, took 1.5 s in one uninterruptible
+    call and ran a 1 s time limit to 2.1-2.7 s)."""
+    n, K = 2 * n_views, n_views * (n_views - 1) // 2
+    return problems * n * n * K / ALL_PAIRS_FLOPS
+
+
+def fits(deadline: Deadline | None, n_views: int, problems: int = 1) -> bool:
+    """Does the all-pairs bound of ``problems`` problems fit in what is left of ``deadline`` (None: always)?
+    The problems it does not fit keep no lower bound (NaN), which is valid."""
+    if deadline is None:
+        return True
+    remaining = deadline.remaining()
+    return remaining is None or (remaining > 0 and all_pairs_seconds(n_views, problems) <= remaining)
 
 
 def all_pairs_chunk(n_views: int) -> int:

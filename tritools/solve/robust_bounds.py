@@ -360,11 +360,13 @@ def compute_many(requests) -> None:
         verified = []                           # verified in their parent's frame: not again below
         if IN_PARENT and fresh:
             fresh, verified = _in_parent(fresh)
-        left = (_batch(fresh, _verify_stack) if fresh else []) + verified + \
+        deadline = _earliest([sb.deadline for sb, _ in items])
+        left = (_batch(fresh, lambda C, x, opts: _verify_stack(C, x, opts, deadline)) if fresh else []) + verified + \
             [(sb, S) for sb, S in items if S in sb.unverified]
         if PACKING:
             left = _hinted(_packed(_deferred(left)))
-        left = _batch(left, _sdp_stack) if left else []
+        if left and key[0] <= SDP_STACK_MAX_VIEWS:
+            left = _batch(left, lambda C, x, opts: _sdp_stack(C, x, opts, deadline))
         for sb, S in left:                      # handed back by both batches (typically subsets with outliers):
             sb._store(S, 0.0, None)             # 0 for now (the caller keeps its inherited bounds);
             sb.weak.add(S)                      # strengthen() solves them one by one where the search needs it
@@ -373,6 +375,12 @@ def compute_many(requests) -> None:
             sb._store(S, 0.0, None)             # 0 is a valid bound; the search reports the time limit
         else:
             sb._solve_one(S)
+
+
+def _earliest(deadlines: list):
+    """The earliest of the searches' deadlines (one vectorised verification serves them all), None without any."""
+    ends = [d.end for d in deadlines if d is not None and d.end is not None]
+    return type(deadlines[0])(min(ends)) if ends else None
 
 
 def _in_parent(items: list) -> tuple:
@@ -392,7 +400,7 @@ def _in_parent(items: list) -> tuple:
     try:
         good, lb, X = verify_in_parent([sb.C for sb, _ in use], [sb.frame() for sb, _ in use],
                                        [np.array(sorted(S)) for _, S in use], estimates, use[0][0].opts.tolerances,
-                                       enough)
+                                       enough, _earliest([sb.deadline for sb, _ in use]))
     except (ValueError, np.linalg.LinAlgError, FloatingPointError):
         return items, []
     verified = []
@@ -449,23 +457,28 @@ def _packed(items: list) -> list:
     return left
 
 
-def _verify_stack(C, x, opts):
+def _verify_stack(C, x, opts, deadline=None):
     """(decided (M,), gamma_lb, X, certified (M,)) of the vectorised verification: certified problems only."""
-    b = verify_points(C, x, tolerances=opts.tolerances)
+    b = verify_points(C, x, tolerances=opts.tolerances, deadline=deadline)
     ok = b.certified & np.isfinite(b.gamma_lb)
     return ok, b.gamma_lb, b.X, ok
 
 
-def _sdp_stack(C, x, opts):
+def _sdp_stack(C, x, opts, deadline=None):
     """(decided, gamma_lb, X, certified) of the batched Corollary 1, delta = 2 SDP
     (:func:`tritools.solve.sdp_batch.solve_corollary1_points`): its rigorous lower bound wherever it decided the
     problem, certified or not (an uncertified one is marked weak: :meth:`SubsetBounds.strengthen` may solve it
     with the full degree plan where the search needs it)."""
-    b = solve_corollary1_points(C, x, tolerances=opts.tolerances, refine=opts.refine)
+    b = solve_corollary1_points(C, x, tolerances=opts.tolerances, refine=opts.refine, deadline=deadline)
     kernel = _kernel_hand_backs(b)
     X = np.where(kernel[:, None], np.nan, b.X)          # no estimate from a point the extraction did not give
     return (b.done | kernel) & np.isfinite(b.gamma_lb), b.gamma_lb, X, b.optimal & b.done
 
+
+#: the largest subsets (views) sent to the batched dense Corollary 1 SDP (its structure and program grow ~N^4: 1.3 s
+#: at 30 views, minutes at 140, review 8 F1); larger ones keep the bound 0, marked weak, for
+#: :meth:`SubsetBounds.strengthen` (the full degree plan, which takes the sparse formulations at that size)
+SDP_STACK_MAX_VIEWS = 32
 
 #: the reason :func:`tritools.solve.sdp_batch.solve_corollary1_points` gives when only its point extraction failed
 KERNEL_HAND_BACK = "Gram kernel of dimension"

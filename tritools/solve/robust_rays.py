@@ -22,12 +22,17 @@ import math
 
 import numpy as np
 
-__all__ = ["ray_candidates", "SWEEP", "GOLDEN_STEPS"]
+__all__ = ["ray_candidates", "SWEEP", "GOLDEN_STEPS", "MAX_RAYS"]
 
 #: depths of the geometric sweep along each ray: baseline * 10^k, k in [-3, 3] (this many).
 SWEEP = 13
 #: golden-section steps (in log depth) around the best depth of each ray.
 GOLDEN_STEPS = 20
+#: at most this many rays, each met by at most this many others (review 8 F1: all N rays, each at the depths
+#: closest to all N - 1 others, screened against N views, is ~N^3 work -- 2-3 s at N = 200, not interruptible).
+#: Above it the rays of the views nearest the search's best candidate are kept (the likely inliers), so the work
+#: is linear in N; the candidates are only a ranking, every bound stays valid.
+MAX_RAYS = 64
 _GOLD = (math.sqrt(5.0) - 1.0) / 2.0
 
 
@@ -97,12 +102,12 @@ def ray_candidates(search) -> list:
     C = search.C
     pts = search.x if search.points else np.array([r.closest_point(r.center) for r in search.regions], float)
     centres, dirs, ok = _rays(C, pts)
-    views = np.nonzero(ok)[0]
+    views = _kept_views(search, ok)
     if views.size == 0:
         return []
-    base = _baseline(centres[ok])
+    base = _baseline(centres[views])
     sweep = base * np.logspace(-3, 3, SWEEP)
-    closest = _closest_depths_all(centres[ok], dirs[ok])
+    closest = _closest_depths_all(centres[views], dirs[views])
     ts = [np.unique(np.concatenate([sweep, t])) for t in closest]
     f = search.screen(np.concatenate([centres[i] + t[:, None] * dirs[i] for i, t in zip(views, ts)]))
     f = np.where(np.isnan(f), np.inf, f)
@@ -118,6 +123,18 @@ def ray_candidates(search) -> list:
         r, lo, hi = (np.array(v) for v in zip(*refine))
         out += _golden(search, centres[r], dirs[r], np.log(lo), np.log(hi))
     return out
+
+
+def _kept_views(search, ok: np.ndarray) -> np.ndarray:
+    """The views whose rays are searched: every view with a ray up to :data:`MAX_RAYS`, else the :data:`MAX_RAYS`
+    of them with the smallest distances at the search's best candidate (evenly spaced views without one)."""
+    views = np.nonzero(ok)[0]
+    if views.size <= MAX_RAYS:
+        return views
+    if search.best_X is None:
+        return views[np.linspace(0, views.size - 1, MAX_RAYS).astype(int)]
+    d = np.asarray(search.residuals(search.best_X), float)[views]
+    return np.sort(views[np.argsort(np.where(np.isfinite(d), d, np.inf), kind="stable")[:MAX_RAYS]])
 
 
 def _golden(search, centres, dirs, a, b) -> list:

@@ -135,7 +135,7 @@ def _starts(frames: list, subsets: list, Cn: np.ndarray, estimates: list) -> np.
 
 
 def verify_in_parent(C: np.ndarray, frames: list, subsets: list, estimates: list, tolerances,
-                     enough: np.ndarray | None = None) -> tuple:
+                     enough: np.ndarray | None = None, deadline=None) -> tuple:
     """Lower bounds (pixels^2) of L2*(S) for equal-size subsets S (sorted index arrays, one per problem) of the
     problems with raw cameras C (list of (N_m, 3, 4)) and :class:`ParentFrame` s ``frames`` (module docstring).
 
@@ -144,7 +144,8 @@ def verify_in_parent(C: np.ndarray, frames: list, subsets: list, estimates: list
     ``enough`` (M,) (pixels^2: the level above which the caller has no use for a larger bound).  View pairs not
     accepted after :data:`LM_STEPS` steps get :data:`LM_MORE` more (large residuals converge slowly) and a second
     bound (measured in benchmarks/robust_speed.py: the second pass accepted 15 of 17 such pairs and 1 of 300
-    larger subsets, so only pairs get it)."""
+    larger subsets, so only pairs get it).  ``deadline`` (:class:`sospoly.budget.Deadline`): the all-pairs bound of
+    a subset is not started where it would not fit (:func:`tritools.solve.fastpath.fits`; no bound there)."""
     M = len(subsets)
     Cn = np.stack([f.cameras_n[S] for f, S in zip(frames, subsets)])
     Craw = np.stack([c[S] for c, S in zip(C, subsets)])
@@ -152,24 +153,24 @@ def verify_in_parent(C: np.ndarray, frames: list, subsets: list, estimates: list
     s2 = np.array([f.scale for f in frames]) ** 2
     enough = np.full(M, np.inf) if enough is None else np.asarray(enough, float)
     Xn = _polish(Cn, _starts(frames, subsets, Cn, estimates), LM_STEPS)
-    good, lb = _bounds(Craw, Cn, Xn, res, s2, enough, tolerances)
+    good, lb = _bounds(Craw, Cn, Xn, res, s2, enough, tolerances, deadline)
     again = np.nonzero(~good & np.isfinite(Xn).all(axis=1))[0]
     if again.size and len(subsets[0]) == 2:
         Xn[again] = _polish(Cn[again], Xn[again], LM_MORE)
         good[again], lb[again] = _bounds(Craw[again], Cn[again], Xn[again], res[again], s2[again], enough[again],
-                                         tolerances)
+                                         tolerances, deadline)
     X = np.array([f.origin for f in frames]) + np.array([f.depth for f in frames])[:, None] * Xn
     return good, np.where(good, lb, 0.0), X
 
 
-def _bounds(Craw, Cn, Xn, res, s2, enough, tolerances) -> tuple:
+def _bounds(Craw, Cn, Xn, res, s2, enough, tolerances, deadline=None) -> tuple:
     """(accepted, bound in pixels^2) of :func:`verify_in_parent` at the normalised candidates Xn."""
     M, k = Cn.shape[:2]
     u, _, fin = project_stack(Cn, Xn)
     fin &= np.isfinite(Xn).all(axis=1)
     v = np.where(fin[:, None], u.reshape(M, -1), 0.0)
     radius = np.sqrt(np.sum(v * v, axis=1))
-    lower, upper, ok = lagrangian_bounds(Craw, Cn, v, fin.copy(), radius, res, tolerances)
+    lower, upper, ok = lagrangian_bounds(Craw, Cn, v, fin.copy(), radius, res, tolerances, deadline=deadline)
     with np.errstate(invalid="ignore", over="ignore"):
         lb = np.maximum(np.minimum(lower, upper), 0.0) / s2 * _ROUND_DOWN
         ub = upper / s2

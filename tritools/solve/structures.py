@@ -16,6 +16,7 @@ import numpy as np
 
 import sospoly
 from sospoly import GramForm, Multiplier, Polynomial, variables
+from sospoly.budget import check_deadline
 
 from ..model.constraints import Method
 from ..model.stacked import view_pairs
@@ -70,6 +71,8 @@ def corollary1_point_structure(N: int) -> PointStructure:
     exps = np.zeros((len(I), 3, 3, n), np.int64)
     eq = []
     for k, (i, j) in enumerate(zip(I, J)):
+        if k % 64 == 0:                     # N(N - 1)/2 pairs: a long build at large N stops at the active deadline
+            check_deadline("building the batched Corollary 1 structure")
         for a in range(3):
             for b in range(3):
                 exps[k, a, b] = mono(*(([2 * i + a] if a < 2 else []) + ([2 * j + b] if b < 2 else [])))

@@ -129,3 +129,47 @@ def test_an_uncertified_result_past_its_deadline_says_time_limit(monkeypatch):
     r = tritools.triangulate(cams, x, robust=200.0)
     assert calls and not r.optimal and r.status == tritools.Status.TIME_LIMIT
     assert r.gamma_lb <= full.gamma_ub * (1 + 1e-9) and r.gamma_lb <= r.gamma_ub
+
+
+def test_per_problem_scalar_thresholds_and_named_errors():
+    """Review 8 F6: M scalars for M problems of other view counts are one threshold per problem (each result equal to
+    its single call); a list mixing scalars and per-view arrays works; a bad entry is named ``robust[k]`` in a short
+    message."""
+    from tritools.scene import robust_protocol_scene
+
+    rng = np.random.default_rng(0)
+    probs = [robust_protocol_scene(n, 1, 1.0, rng)[:2] for n in (4, 5, 6)]
+    cs = [5.0, 10.0, 20.0]
+    many = tritools.triangulate_many(probs, robust=cs, progress=False)
+    for r, (P, x), c in zip(many, probs, cs):
+        single = tritools.triangulate(P, x, robust=c)
+        assert r.status == single.status and np.array_equal(r.inliers, single.inliers)
+        assert r.gamma_ub == pytest.approx(single.gamma_ub, rel=1e-9)
+    mixed = tritools.triangulate_many(probs, robust=[5.0, np.full(5, 10.0), 20.0], progress=False)
+    assert [r.status for r in mixed] == [r.status for r in many]
+    with pytest.raises(ValueError, match=r"robust\[1\] \(problem 1\)") as exc:
+        tritools.triangulate_many(probs, robust=[5.0, np.full(4, 10.0), 20.0], progress=False)
+    assert len(str(exc.value)) < 200
+    with pytest.raises(ValueError) as exc:
+        tritools.triangulate_many(probs, robust=[5.0, np.full(5, -1.0), 20.0], progress=False)
+    assert "robust[1]" in str(exc.value) and len(str(exc.value)) < 200
+
+
+def test_batch_settled_by_its_l2_result_reads_as_the_single_call():
+    """Review 8 F8: a region problem whose batched L2 certificate settles the TLS problem (every residual below c,
+    f <= min c^2) is reported as the single call reports it: method tls, certified by the branch and bound's root,
+    the same message and bounds."""
+    rng = np.random.default_rng(3)
+    cams = random_scene(4, 1, noise_px=0.5, seed=3).cameras
+    X = np.array([0.1, -0.2, 0.05])
+    h = np.einsum("nij,j->ni", cams, np.append(X, 1.0))
+    x = h[:, :2] / h[:, 2:] + rng.normal(size=(4, 2)) * 0.5
+    regions = [tritools.Ellipse(p, np.eye(2) * 0.25) for p in x]
+    batch = tritools.triangulate_many([(cams, regions)], robust=5.0, progress=False)[0]
+    single = tritools.triangulate(cams, regions, robust=5.0)
+    assert single.optimal and batch.optimal
+    for name in ("method", "certified_by", "message", "status"):
+        assert getattr(batch, name) == getattr(single, name), name
+    np.testing.assert_array_equal(batch.inliers, single.inliers)
+    assert batch.gamma_ub == pytest.approx(single.gamma_ub, rel=1e-9)
+    assert batch.gamma_lb == pytest.approx(single.gamma_lb, rel=1e-9)

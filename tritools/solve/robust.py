@@ -112,7 +112,7 @@ def robust_thresholds(robust, n_views: int) -> np.ndarray:
     """The thresholds c (N,) from ``robust=`` (a positive scalar or one per view, pixels; ``inf`` allowed).
     ValueError naming ``robust`` otherwise."""
     if isinstance(robust, (bool, np.bool_)) or isinstance(robust, (str, bytes)):
-        raise ValueError(f"robust must be a positive threshold in pixels (scalar or one per view), got {robust!r}")
+        raise ValueError(f"robust must be a positive threshold in pixels (scalar or one per view), got {_short(robust)}")
     try:
         raw = np.asarray(robust)
         if raw.dtype.kind not in "iuf":                  # booleans, strings, objects (None), complex
@@ -120,17 +120,23 @@ def robust_thresholds(robust, n_views: int) -> np.ndarray:
         c = raw.astype(float)
     except (TypeError, ValueError):
         raise ValueError(f"robust must be a positive threshold in pixels (scalar or one per view), "
-                         f"got {robust!r}") from None
+                         f"got {_short(robust)}") from None
     if c.ndim == 0:
         c = np.full(n_views, float(c))
     if c.shape != (n_views,):
         raise ValueError(f"robust must be a scalar or have one threshold per view ({n_views}), got shape {c.shape}")
     if np.any(np.isnan(c)) or np.any(c <= 0):
-        raise ValueError(f"robust thresholds must be positive (inf allowed), got {c.tolist()}")
+        raise ValueError(f"robust thresholds must be positive (inf allowed), got {_short(c.tolist())}")
     if np.any(c < MIN_THRESHOLD):
         raise ValueError(f"robust thresholds must be at least {MIN_THRESHOLD:g} pixels (c^2 underflows below), "
                          f"got {float(np.min(c))!r}")
     return c
+
+
+def _short(value, limit: int = 120) -> str:
+    """repr(value), cut to ``limit`` characters (a bad entry in a long list stays a one-line message)."""
+    text = repr(value)
+    return text if len(text) <= limit else text[:limit - 5] + " ...]"
 
 
 def tls_cost(residuals, c) -> float:

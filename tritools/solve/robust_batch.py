@@ -38,18 +38,35 @@ from .robust import robust_thresholds, triangulate_robust
 __all__ = ["robust_many", "thresholds_for"]
 
 def thresholds_for(robust, problems) -> list:
-    """The thresholds of each problem from ``robust=`` (a scalar, one array for problems of equal size, or a
-    sequence with one entry per problem); ValueError naming ``robust``."""
+    """The thresholds of each problem from ``robust=``: a scalar; one array of per-view thresholds for problems of
+    equal size; or a sequence with one entry per problem, each a scalar or a per-view array (a 2-D array; a list
+    holding an array; or a list of M scalars for M problems that cannot be per-view thresholds because some problem
+    has another view count -- M scalars for M problems of M views each read as per-view thresholds).  ValueError
+    naming ``robust`` (and the problem, ``robust[k]``)."""
     sizes = [_n_views(p) for p in problems]
-    per_problem = (isinstance(robust, np.ndarray) and robust.ndim == 2) or (
-        isinstance(robust, (list, tuple)) and len(robust) > 0
-        and all(isinstance(e, (list, tuple, np.ndarray)) for e in robust))
-    if not per_problem:
+    if not _per_problem(robust, sizes):
         return [robust_thresholds(robust, n) if n is not None else None for n in sizes]
     if len(robust) != len(problems):
         raise ValueError(f"robust must be a scalar, one threshold per view, or one entry per problem "
                          f"({len(problems)}), got {len(robust)} entries")
-    return [robust_thresholds(c, n) if n is not None else None for c, n in zip(robust, sizes)]
+    out = []
+    for k, (c, n) in enumerate(zip(robust, sizes)):
+        try:
+            out.append(robust_thresholds(c, n) if n is not None else None)
+        except ValueError as exc:
+            raise ValueError(f"robust[{k}] (problem {k}): {exc}") from None
+    return out
+
+
+def _per_problem(robust, sizes: list) -> bool:
+    """Is ``robust`` one entry per problem (:func:`thresholds_for`) rather than one value or one per-view array?"""
+    if isinstance(robust, np.ndarray):
+        return robust.ndim == 2
+    if not isinstance(robust, (list, tuple)) or len(robust) == 0:
+        return False
+    if any(isinstance(e, (list, tuple, np.ndarray)) and np.ndim(e) > 0 for e in robust):
+        return True
+    return len(robust) == len(sizes) and any(n is not None and n != len(robust) for n in sizes)
 
 
 def _n_views(problem) -> int | None:
@@ -61,6 +78,20 @@ def _n_views(problem) -> int | None:
     except (TypeError, ValueError, IndexError):
         return None
     return n
+
+
+def settled_by_l2(res: TriangulationResult) -> TriangulationResult:
+    """An L2 result that settles the TLS problem (module docstring, 2) in the TLS result's form, as the single call
+    gives it for the same problem (its root bound, the L2 bound of all views, settles it the same way, review 8 F8):
+    method ``tls``, every view an inlier, certified by the branch and bound's root (0 nodes), one TLS attempt.  The
+    numbers are the L2 certificate's (f_TLS = f_L2 at X, and TLS* = L2* there)."""
+    from ..result import Attempt
+
+    n = len(res.residuals)
+    total = float(res.timings.get("total", 0.0)) if res.timings else 0.0
+    attempt = Attempt("tls", None, res.status.value, res.gamma_lb, res.gamma_ub, "branch-and-bound", None, (), total)
+    return dataclasses.replace(res, method="tls", certified_by="branch-and-bound", inliers=np.ones(n, bool),
+                               message=f"TLS: {n}/{n} inliers, 0 nodes, 1 L2 sub-problems", attempts=(attempt,))
 
 
 def _l2_suffices(res: TriangulationResult, c: np.ndarray) -> bool:
@@ -125,9 +156,11 @@ def _after_l2(problems, thresholds, opts, idx, first, out) -> list:
         c = thresholds[i]                        # None: a malformed entry, invalid_input from the L2 stage
         if res.status == Status.INVALID_INPUT and res.message:     # the L2 stage saw problems[k]: the caller's i
             res = dataclasses.replace(res, message=res.message.replace(f"problems[{k}]", f"problems[{i}]", 1))
-        if res.status == Status.INVALID_INPUT or c is None or _l2_suffices(res, c):
+        if res.status == Status.INVALID_INPUT or c is None:
             out[i] = dataclasses.replace(res, inliers=None if res.residuals is None
                                          else np.ones(len(res.residuals), bool))
+        elif _l2_suffices(res, c):
+            out[i] = settled_by_l2(res)
         elif not np.any(np.isfinite(c)):
             cams, regions = problems[i]
             regs = as_regions(regions, len(c))

@@ -61,3 +61,22 @@ def test_huge_thresholds_do_not_certify_a_worse_point(c):
     assert res.gamma_lb <= g_better * (1 + 1e-9)
     if res.optimal:
         assert res.gamma_ub <= g_better * (1 + 1e-5), (res.gamma_lb, res.gamma_ub, g_better)
+
+
+@pytest.mark.parametrize("k", [1e200, 1e-200, -1e150])
+def test_rescaled_cameras_raise_no_runtime_warnings(k):
+    """Review 8 F7: P -> k P with k = 1e+-200 over/underflows in intermediate products that are checked for
+    finiteness; the robust paths are certified with the same value as unscaled, and numpy's warnings do not leak."""
+    import warnings
+
+    from tritools.scene import robust_protocol_scene
+
+    P, x, *_ = robust_protocol_scene(5, 1, 1.0, np.random.default_rng(2))
+    ref = tritools.triangulate(P, x, robust=5.0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        runs = [tritools.triangulate(k * P, x, robust=5.0),
+                tritools.triangulate_many([(k * P, x)], robust=5.0, progress=False)[0]]
+    for r in runs:
+        assert r.optimal == ref.optimal and np.array_equal(r.inliers, ref.inliers)
+        assert r.gamma_ub == pytest.approx(ref.gamma_ub, rel=1e-6)

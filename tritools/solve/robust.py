@@ -521,5 +521,6 @@ def triangulate_robust(cams: np.ndarray, regions, c: np.ndarray, opts, t0: float
     if not np.any(np.isfinite(c)):
         res = triangulate(cams, regions, options=opts)
         return dataclasses.replace(res, inliers=None if res.residuals is None else np.ones(len(regions), bool))
-    search = TlsSearch(cams, regions, c, opts, t0)      # a few views: every inlier set enumerated (robust_enum_run)
-    return enumerate_tls(search) or drive([search])[0]
+    with np.errstate(all="ignore"):     # as in robust_batch.robust_many: finiteness is checked, warnings are noise
+        search = TlsSearch(cams, regions, c, opts, t0)      # a few views: every inlier set enumerated (robust_enum_run)
+        return enumerate_tls(search) or drive([search])[0]

@@ -125,7 +125,9 @@ def _search_or_failure(cameras, regions, c, opts):
 def robust_many(problems: list, robust, opts, *, executor=None, progress=None) -> list[TriangulationResult]:
     """One TLS result per problem, in input order (module docstring); ``opts.total_time_limit`` bounds the whole
     call: each chunk's searches get at most the time left (:mod:`.call_limit`)."""
-    with call_limit(opts.total_time_limit):          # the whole call within total_time_limit (.call_limit)
+    # cameras scaled by 1e+-200 over- and underflow in intermediate products that every step checks for finiteness
+    # (review 8 F7: numpy's RuntimeWarnings leaked, and raised under -W error); the results are unaffected
+    with call_limit(opts.total_time_limit), np.errstate(all="ignore"):
         return _robust_many(problems, robust, opts, executor, progress)
 
 

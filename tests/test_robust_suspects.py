@@ -15,6 +15,7 @@ import tritools
 import tritools.solve.robust_suspects as rs
 from tritools.solve.robust import TlsSearch, tls_cost
 from tests.robust_refs import drive_one, outlier_track
+from tritools.scene import random_scene
 
 
 def _scene(N, n_out, seed, noise=1.0):
@@ -170,3 +171,26 @@ def test_drive_restores_the_garbage_collector(monkeypatch):
         assert not gc.isenabled()
     finally:
         gc.enable()
+
+
+@pytest.mark.parametrize("seed,N", [(700, 30), (701, 40)])
+def test_one_view_with_a_far_lower_threshold_is_settled_by_the_suspect_stage(seed, N):
+    """Review 8 F4: a clean track, c = 5 px, but one view's threshold at half its own L2 residual (so it is the
+    optimum's one outlier).  The pairs cannot bound "that view kept an inlier" (the root is capped at its c_j^2);
+    the group bound of all views over the X that keep it does.  Certified at the root (0 nodes) with the value of
+    the independent reference: c_j^2 + the multi-start L2 minimum of the other views (an attained value)."""
+    from tests.robust_refs import l2_min
+
+    sc = random_scene(N, 1, noise_px=1.0, seed=seed)
+    cams, x, X = sc.cameras, sc.points2d[0], sc.points3d[0]
+    l2 = tritools.triangulate(cams, x)
+    j = int(np.argsort(l2.residuals)[N // 2])
+    c = np.full(N, 5.0)
+    c[j] = 0.5 * l2.residuals[j]
+    r = tritools.triangulate(cams, x, robust=c, time_limit=30)
+    rest = [i for i in range(N) if i != j]
+    f_ref = c[j] ** 2 + l2_min(cams[rest], x[rest], [X, l2.X])
+    assert r.optimal and " 0 nodes" in r.message, r.message
+    assert not r.inliers[j] and r.inliers.sum() == N - 1
+    assert 2 * N * r.gamma_lb ** 2 <= f_ref * (1 + 1e-9)
+    assert 2 * N * r.gamma_ub ** 2 == pytest.approx(f_ref, rel=1e-6)

@@ -147,7 +147,29 @@ def _inside(search, O: frozenset):
         inside = _min_inlier_nodes(search, O)
         if search.meets(inside):
             break
-    return inside
+    if search.meets(inside) or len(O) > MAX_SUSPECTS:
+        return inside
+    return max(inside, (yield from _kept_nodes(search, O)))
+
+
+def _kept_nodes(search, O: frozenset):
+    """Generator: min_{j in O} LB(node {j}) with each node's pair bound raised by the group bound of all views over
+    the X that keep j an inlier (:func:`tritools.solve.robust_loo.kept_bound`: min(L2LB(V), the group terms that
+    leave j in)).  The pairs alone cannot bound a suspect whose own threshold is far below the others' (review 8
+    F4: one view at c_j = half its L2 residual on a clean 30-view track): keeping j in costs the L2 of all views,
+    which the pairs do not see; 0 where the deadline cut it short."""
+    V = frozenset(range(search.N))
+    best = math.inf
+    for j in sorted(O):
+        if search.deadline.expired:
+            return 0.0
+        node = _inlier_node(search, j)
+        if not search.meets(node):
+            node = max(node, (yield from kept_bound(search, V, frozenset((j,)), 0.0)))
+        best = min(best, node)
+        if not search.meets(best):
+            break
+    return best
 
 
 def _min_inlier_nodes(search, O: frozenset) -> float:

@@ -33,6 +33,8 @@ GOLDEN_STEPS = 20
 #: Above it the rays of the views nearest the search's best candidate are kept (the likely inliers), so the work
 #: is linear in N; the candidates are only a ranking, every bound stays valid.
 MAX_RAYS = 64
+#: values of f_TLS along a ray within this relative distance of its minimum count as equal (:func:`_best_depth`)
+TIE_REL = 1e-10
 _GOLD = (math.sqrt(5.0) - 1.0) / 2.0
 
 
@@ -108,14 +110,14 @@ def ray_candidates(search) -> list:
     base = _baseline(centres[views])
     sweep = base * np.logspace(-3, 3, SWEEP)
     closest = _closest_depths_all(centres[views], dirs[views])
-    ts = [np.unique(np.concatenate([sweep, t])) for t in closest]
+    ts = [np.unique(np.concatenate([sweep, t, [np.median(t)] if t.size else []])) for t in closest]
     f = search.screen(np.concatenate([centres[i] + t[:, None] * dirs[i] for i, t in zip(views, ts)]))
     f = np.where(np.isnan(f), np.inf, f)
     out, refine = [], []
     ends = np.cumsum([len(t) for t in ts]).tolist()
-    for i, t, lo, hi in zip(views, ts, [0] + ends[:-1], ends):
+    for i, t, near, lo, hi in zip(views, ts, closest, [0] + ends[:-1], ends):
         fi = f[lo:hi]
-        k = int(np.argmin(fi))
+        k = _best_depth(fi, t, near, base)
         out.append(centres[i] + t[k] * dirs[i])
         if fi[k] < search.best_f:          # refine only the rays that already beat the best candidate
             refine.append((i, t[k - 1] if k > 0 else t[0] / 10, t[k + 1] if k < len(t) - 1 else t[-1] * 10))
@@ -123,6 +125,21 @@ def ray_candidates(search) -> list:
         r, lo, hi = (np.array(v) for v in zip(*refine))
         out += _golden(search, centres[r], dirs[r], np.log(lo), np.log(hi))
     return out
+
+
+def _best_depth(fi: np.ndarray, t: np.ndarray, near: np.ndarray, base: float) -> int:
+    """The index of the smallest value in ``fi`` (f_TLS at the depths ``t`` of one ray); among smallest values equal to
+    :data:`TIE_REL` (the ray's own d_i^2 is round-off, ~1e-16 of f, in a georeferenced world)
+    (every other view capped at c^2: the whole ray is optimal) the depth nearest, in log depth, to the median depth
+    at which the ray meets the others (``near``; the baseline without any), so a free optimum is placed in the scene
+    and not next to the camera centre, where rounding X moves the projections (review 8 F3: a georeferenced ray
+    optimum lost its certificate to the rounding-spread guard)."""
+    k = int(np.argmin(fi))
+    ties = np.flatnonzero(fi <= fi[k] * (1 + TIE_REL))
+    if ties.size < 2:
+        return k
+    ref = math.log(float(np.median(near)) if near.size else base)
+    return int(ties[np.argmin(np.abs(np.log(t[ties]) - ref))])
 
 
 def _kept_views(search, ok: np.ndarray) -> np.ndarray:

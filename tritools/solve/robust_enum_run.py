@@ -41,7 +41,8 @@ from . import robust_enum as enum
 from .robust_bounds import ROUND_DOWN
 from .robust_costs import point_distances2_stack
 
-__all__ = ["enumerate_tls", "enumerate_many", "eligible", "ENUM_CHUNK", "ENUM_ROWS"]
+__all__ = ["enumerate_tls", "enumerate_many", "eligible", "closed_terms", "lower_bounds", "refine_rows",
+           "enumerated_result", "ENUM_CHUNK", "ENUM_ROWS"]
 
 log = logging.getLogger(__name__)
 
@@ -61,6 +62,8 @@ STAGED_FROM = 2
 #: with two 2.7 against 3.4, the same certificates and values; without them at every count, N = 7 with three left 3
 #: of 40 scenes to the branch and bound (with LATER_FROM = 3: none), N = 7 with two 1 of 40 (mean CPU unchanged).
 LATER_FROM = 3
+#: single calls of three views take :mod:`tritools.solve.robust_three` (False: the stack of one; the tests compare).
+THREE_VIEW_PATH = True
 #: rounds of local optimisation of the best candidate of a stack (inlier set -> its L2 optimum -> inlier set).
 LO_ROUNDS = 3
 
@@ -72,7 +75,13 @@ def eligible(search) -> bool:
 
 def enumerate_tls(search):
     """The TLS result of one :class:`tritools.solve.robust.TlsSearch` by enumeration, or None (the caller runs the
-    search, which has been offered the best candidates found here): :func:`enumerate_many` of one."""
+    search, which has been offered the best candidates found here): :func:`enumerate_many` of one, or for three views
+    :func:`tritools.solve.robust_three.three_view_tls` (the same steps without a stack's bookkeeping) where
+    :data:`THREE_VIEW_PATH`."""
+    if THREE_VIEW_PATH and search.N == 3:
+        from .robust_three import three_view_tls
+
+        return three_view_tls(search)
     return enumerate_many([search])[0]
 
 
@@ -104,6 +113,50 @@ def _run(group: list, scales) -> list:
         if len(group) == 1:
             return [None]
     return [_run([s], scales)[0] for s in group]
+
+
+def closed_terms(N: int, W: np.ndarray, lb: np.ndarray, rest: np.ndarray) -> np.ndarray:
+    """The terms L2LB(S) + c^2(V - S) (P, M) of the sets ``W`` (M, N) of P problems, each bound ``lb`` (P, M) closed
+    under superadditivity (:func:`~tritools.solve.robust_enum.closure`), ``rest`` = c^2(V - S) (P, M), rounded
+    down (module docstring of :mod:`tritools.solve.robust_enum`)."""
+    bits = W.astype(np.int64) @ (1 << np.arange(N))
+    table = np.zeros((len(lb), 1 << N))
+    table[:, bits] = lb
+    with np.errstate(over="ignore", invalid="ignore"):
+        return (enum.closure(N, table)[:, bits] + rest) * ROUND_DOWN
+
+
+def lower_bounds(ub: np.ndarray, terms: np.ndarray, c2: np.ndarray) -> np.ndarray:
+    """LB (P,): the least of UB (P,), the closed terms (P, M) (:func:`closed_terms`), the exact terms of the sets of
+    one view (c^2 of the others) and of the empty set (c^2(V)), c2 (P, N) the squared thresholds (module docstring of
+    :mod:`tritools.solve.robust_enum`)."""
+    N = c2.shape[1]
+    with np.errstate(over="ignore", invalid="ignore"):
+        small = np.sum(np.where(np.eye(N, dtype=bool)[None], 0.0, c2[:, None, :]), axis=2)   # |S| = 1: exact
+        return np.minimum.reduce([ub, np.min(terms, axis=1), np.min(small, axis=1) * ROUND_DOWN,
+                                  np.sum(c2, axis=1) * ROUND_DOWN])
+
+
+def refine_rows(Cn: np.ndarray, X0: np.ndarray, inS: np.ndarray) -> tuple:
+    """(Xn (R, 3), ok (R,)): normalised candidates X0 (R, 3) refined to convergence on their inlier sets ``inS``
+    (R, N) by :func:`tritools.model.stacked.refine_points_stack` and one Gauss-Newton step (a row's few polish
+    steps leave the L2 optimum of a set short by ~1e-6 in X, though not in f; the step finishes a weak direction
+    the damped LM left, tiny baselines), the views outside the set masked; Cn (R, N, 3, 4) each row's normalised
+    cameras (observations at the origin)."""
+    Cm = np.where(inS[:, :, None, None], Cn, enum.MASKED_CAMERA)
+    zeros = np.zeros(inS.shape + (2,))
+    Xn, ok = refine_points_stack(Cm, zeros, X0, np.ones(len(X0), bool))
+    Xn = gauss_newton_polish(Cm, zeros, Xn, ok)
+    return Xn, ok & np.isfinite(Xn).all(axis=1)
+
+
+def enumerated_result(search, lb: float, n_bounded: int, n_sets: int):
+    """The result of a search decided by the enumeration (:meth:`tritools.solve.robust.TlsSearch.result` at the lower
+    bound ``lb``, pixels^2), its message saying so; ``n_bounded`` subsets were bounded."""
+    search.bounds.n_solved += int(n_bounded)
+    t = time.perf_counter() - search.t0
+    res = search.result(lb, None, {"enumeration": t, "total": t})
+    return dataclasses.replace(res, message=res.message + f"; {enum.ENUMERATED} ({n_sets} sets of >= 2 views)")
 
 
 class _Group:
@@ -253,22 +306,16 @@ class _Group:
         return np.array([s.best_X is not None and not s.deadline.expired for s in self.group])
 
     def _refine(self, picks: list) -> dict:
-        """problem -> the candidate refined to convergence on its inlier set S (normalised) by
-        :func:`tritools.model.stacked.refine_points_stack` and one Gauss-Newton step (a row's few polish steps leave
-        the L2 optimum of a set short by ~1e-6 in X, though not in f; the step finishes a weak direction the damped
-        LM left, tiny baselines), the views outside S masked; absent where it fails."""
+        """problem -> the candidate refined on its inlier set S (normalised, :func:`refine_rows`); absent where it
+        fails."""
         if not picks:
             return {}
         P = np.array([p for p, _, _ in picks])
         inS = np.zeros((len(picks), self.N), bool)
         for r, (_, _, S) in enumerate(picks):
             inS[r, S] = True
-        Cm = np.where(inS[:, :, None, None], self.Cn[P], enum.MASKED_CAMERA)
         X0 = np.array([self.frames[p].normalized_point(X) for p, X, _ in picks])
-        zeros = np.zeros((len(picks), self.N, 2))
-        Xn, ok = refine_points_stack(Cm, zeros, X0, np.ones(len(picks), bool))
-        Xn = gauss_newton_polish(Cm, zeros, Xn, ok)
-        ok &= np.isfinite(Xn).all(axis=1)
+        Xn, ok = refine_rows(self.Cn[P], X0, inS)
         return {int(p): Xn[r] for r, p in enumerate(P) if ok[r]}
 
     def _bound(self, rows: np.ndarray) -> None:
@@ -315,20 +362,11 @@ class _Group:
         return self._terms_cache
 
     def _closed_terms(self) -> np.ndarray:
-        bits = self.W.astype(np.int64) @ (1 << np.arange(self.N))
-        table = np.zeros((len(self.c2), 1 << self.N))
-        table[:, bits] = self.lb
-        with np.errstate(over="ignore", invalid="ignore"):
-            return (enum.closure(self.N, table)[:, bits] + self.rest) * ROUND_DOWN
+        return closed_terms(self.N, self.W, self.lb, self.rest)
 
     def _lower_bounds(self) -> np.ndarray:
-        """LB (P,): the least term, the exact terms of |S| <= 1 and UB (module docstring of
-        :mod:`tritools.solve.robust_enum`)."""
-        N, c2 = self.N, self.c2
-        with np.errstate(over="ignore", invalid="ignore"):
-            small = np.sum(np.where(np.eye(N, dtype=bool)[None], 0.0, c2[:, None, :]), axis=2)   # |S| = 1: exact
-            return np.minimum.reduce([self._ub(), np.min(self._terms(), axis=1), np.min(small, axis=1) * ROUND_DOWN,
-                                      np.sum(c2, axis=1) * ROUND_DOWN])
+        """LB (P,) (:func:`lower_bounds`)."""
+        return lower_bounds(self._ub(), self._terms(), self.c2)
 
     def _failing(self) -> np.ndarray:
         """The sets (P, M) whose term does not meet UB at the floor scale."""
@@ -365,9 +403,4 @@ class _Group:
         return [p for p in late if self.results[p] is None]
 
     def _result(self, p: int, lb: float) -> None:
-        s = self.group[p]
-        s.bounds.n_solved += int(self.bounded[p].sum())
-        t = time.perf_counter() - s.t0
-        res = s.result(lb, None, {"enumeration": t, "total": t})
-        self.results[p] = dataclasses.replace(
-            res, message=res.message + f"; {enum.ENUMERATED} ({len(self.W)} sets of >= 2 views)")
+        self.results[p] = enumerated_result(self.group[p], lb, self.bounded[p].sum(), len(self.W))

@@ -114,9 +114,10 @@ def test_georeferenced_zero_noise_duplicated_views_and_infinite_thresholds():
 
 
 def test_refined_rows_rescue_a_weak_polish(monkeypatch):
-    """With the rows' polish cut to one step, the candidates of some sets stop short of their optimum and their
-    Lagrangian bounds fail: the path refines the failing rows on their own sets and bounds them again, so it decides
-    more of these scenes than the stack of one, and its answers stay below the reference."""
+    """With the rows' polish cut to one step (the path's own setting, here the stack's too), the candidates of some
+    sets stop short of their optimum and their Lagrangian bounds fail: the path refines the failing rows on their own
+    sets and bounds them again, so it decides more of these scenes than the stack of one, and its answers stay below
+    the reference."""
     monkeypatch.setattr(enum_mod, "POLISH_STEPS", 1)
     rng = np.random.default_rng(3)
     decided = {True: 0, False: 0}

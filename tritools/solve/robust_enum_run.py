@@ -18,8 +18,10 @@
    view outside the best inlier set and the sets inside it, then the other sets whose c^2(V - S) does not meet UB
    only where the closure of those does not meet it; closed under superadditivity, LB against UB at the floor of
    the decision scale (:meth:`_Group._decide`);
-3. for the problems still open: the bounds of the sets inside a set whose term does not meet UB (only they feed
-   its closure), the closure again, the decision at the floor scale and else at the documented
+3. for the problems still open: the bounded rows whose term does not meet UB refined to convergence on their own
+   sets, offered and bounded again (:meth:`_Group._second_chance`: a row's polish may stop short of its set's
+   optimum), the bounds of the sets inside a set whose term does not meet UB (only they feed its closure), the
+   closure again, the decision at the floor scale and else at the documented
    ``decision_scale`` (a batch gives it for all of them in one call: ``scales``).
 
 A problem not decided (or whose deadline passed between the stacks) gets None: the caller runs its branch and

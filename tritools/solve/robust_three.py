@@ -15,12 +15,14 @@ inlier set, at most :data:`~tritools.solve.robust_enum_run.LO_ROUNDS` rounds), t
 the pairs holding a view outside the best inlier set (one stacked verification: the whole set's bound with them,
 where the stack of many problems waits for the closure first), LB by
 :func:`~tritools.solve.robust_enum_run.lower_bounds`, the decision at the floor of the decision scale and else,
-after the bounds of the sets inside a term that does not meet UB, at the documented scale -- without the
+after the failing rows are refined on their own sets and bounded again (:meth:`_ThreeViews._second_chance`) and the
+sets inside a term that does not meet UB are bounded, at the documented scale -- without the
 bookkeeping that a stack of many problems needs (masks over problems, ranking across them, the staged order).
-Measured against the stacked code on single calls: see benchmarks/RESULTS.md (wave 8, single calls at N = 3).
+Measured against the stack of one: benchmarks/RESULTS.md (wave 8, single robust calls at N = 3-7).
 
 Returns None where the enumeration does not decide (the caller runs the branch and bound, which starts from the
-candidates offered here), exactly where the stacked code would.
+candidates offered here): wherever the stack of one decides, this path decides too (it bounds the same rows or more,
+tests/test_robust_three_path.py).  Every bound is the stack's (the same functions), so the rigour is the stack's.
 """
 from __future__ import annotations
 

@@ -303,7 +303,8 @@ class _Group:
         problem's rows polished by :data:`SINGLE_POLISH_STEPS`)."""
         pp, mm = np.nonzero(rows)
         if pp.size:
-            self.Xn[pp, mm] = enum.enum_candidates(self.Cn[pp], self.W[mm], None if self.staged else SINGLE_POLISH_STEPS)
+            steps = None if self.staged else SINGLE_POLISH_STEPS
+            self.Xn[pp, mm] = enum.enum_candidates(self.Cn[pp], self.W[mm], steps)
 
     def _offer(self, rows: np.ndarray) -> np.ndarray:
         """Offer each problem the best of its candidates in ``rows`` (P, M) (world frame, ranked by f_TLS in one

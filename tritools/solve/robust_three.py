@@ -90,27 +90,33 @@ class _ThreeViews:
         self._offer()
         if s.best_X is None or s.deadline.expired:
             return None
-        best = np.array([i in s.best_S for i in range(VIEWS)])
-        inside = ~(self.W & ~best[None]).any(axis=1)
-        pairs = (self.size == 2) & ~inside & (s.best_f > np.min(s.c2))
-        self._bound(self._open() | pairs)
+        self._bound(self._open() | self._outside_pairs())
         lb = self._lower_bound()
-        if s.tol.certified(lb, s.best_f, self.floor) and not s.tol.contradicts(lb, s.best_f, self.floor):
+        if not self._meets_at_floor(lb) and not s.deadline.expired:
+            lb = self._second_chance(lb)
+        if self._meets_at_floor(lb):
             s.set_normalization_scale(SCALE_BOUNDS[1])       # met at the floor: met at the documented scale
             return self._result(lb)
         if s.deadline.expired:
             return None
-        lb = self._second_chance(lb)
-        if s.tol.certified(lb, s.best_f, self.floor) and not s.tol.contradicts(lb, s.best_f, self.floor):
-            s.set_normalization_scale(SCALE_BOUNDS[1])
-            return self._result(lb)
         more = ~self.bounded & self._feeding()
         if more.any():
             self._bound(more)
             lb = self._lower_bound()
-        if s.tol.certified(lb, s.best_f, s.scale):
-            return self._result(lb)
-        return None
+        return self._result(lb) if s.tol.certified(lb, s.best_f, s.scale) else None
+
+    def _meets_at_floor(self, lb: float) -> bool:
+        """LB meets UB under the rule at the floor of the decision scale, without contradicting it there."""
+        s = self.s
+        return bool(s.tol.certified(lb, s.best_f, self.floor)) and not s.tol.contradicts(lb, s.best_f, self.floor)
+
+    def _outside_pairs(self) -> np.ndarray:
+        """The pairs holding a view outside the best inlier set, where UB exceeds min c^2 (they feed the closure of
+        the sets holding that view)."""
+        s = self.s
+        best = np.array([i in s.best_S for i in range(VIEWS)])
+        inside = ~(self.W & ~best[None]).any(axis=1)
+        return (self.size == 2) & ~inside & (s.best_f > np.min(s.c2))
 
     # ------------------------------------------------------------------ steps
     def _offer(self) -> None:

@@ -263,7 +263,7 @@ def test_deadline_between_the_stacks(monkeypatch):
     P, x, X, out = robust_protocol_scene(5, 1, 1.0, rng)
     full = tritools.triangulate(P, x, robust=200.0)
     real = enum_mod.enum_candidates
-    monkeypatch.setattr(enum_mod, "enum_candidates", lambda Cn, W: _time.sleep(0.3) or real(Cn, W))
+    monkeypatch.setattr(enum_mod, "enum_candidates", lambda Cn, W, steps=None: _time.sleep(0.3) or real(Cn, W, steps))
     res = tritools.triangulate(P, x, robust=200.0, time_limit=0.2)
     assert res.status == tritools.Status.TIME_LIMIT and not res.optimal
     assert enum_mod.ENUMERATED not in res.message

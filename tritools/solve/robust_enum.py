@@ -211,15 +211,15 @@ def _polish(Cm: np.ndarray, X: np.ndarray, steps: int) -> np.ndarray:
     return X
 
 
-def enum_candidates(Cn: np.ndarray, W: np.ndarray) -> np.ndarray:
+def enum_candidates(Cn: np.ndarray, W: np.ndarray, steps: int | None = None) -> np.ndarray:
     """Normalised candidates Xn (M, 3) (NaN where not finite) of the subsets ``W`` (M, N) of the views of the
     normalised cameras Cn ((N, 3, 4) shared by every row, or (M, N, 3, 4): each row its own problem's): the DLT of
-    each subset polished by :data:`POLISH_STEPS` Levenberg-Marquardt steps, all in one masked stack (module
-    docstring)."""
+    each subset polished by ``steps`` (default :data:`POLISH_STEPS`) Levenberg-Marquardt steps, all in one masked
+    stack (module docstring)."""
     M, N = W.shape
     Cm = np.where(W[:, :, None, None], Cn, MASKED_CAMERA)
     X0, ok = dlt_stack(Cm, np.zeros((M, N, 2)))
-    Xn = _polish(Cm, np.where(ok[:, None] & np.isfinite(X0), X0, 0.0), POLISH_STEPS)
+    Xn = _polish(Cm, np.where(ok[:, None] & np.isfinite(X0), X0, 0.0), POLISH_STEPS if steps is None else steps)
     return np.where(np.isfinite(Xn).all(axis=1)[:, None], Xn, np.nan)
 
 

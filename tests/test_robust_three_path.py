@@ -1,0 +1,148 @@
+"""Single robust calls of three point views (tritools.solve.robust_three): the enumeration without a stack.
+
+Compared with the stacked enumeration of one problem (``robust_enum_run.THREE_VIEW_PATH = False``, the code the path
+replaces for single calls) and with independent references: the TLS optimum by inlier-set enumeration with
+multi-start scipy least squares (tests/robust_refs.py, an attained value: no lower bound may exceed it, a certified
+upper bound must reach it)."""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pytest
+
+import tritools
+import tritools.solve.robust_enum as enum_mod
+import tritools.solve.robust_enum_run as run_mod
+from tests.robust_refs import tls_by_subsets
+from tritools.model.regions import Ellipse
+from tritools.scene import robust_protocol_scene
+from tritools.solve import robust_three
+from tritools.solve.options import options_from
+from tritools.solve.robust import TlsSearch, robust_thresholds, tls_cost
+
+C = 200.0
+
+
+def _enumerated(P, x, c=C, three=True, monkeypatch=None):
+    """The enumeration's result (or None) of one search, by the three-view path or the stack of one."""
+    monkeypatch.setattr(run_mod, "THREE_VIEW_PATH", three)
+    search = TlsSearch(P, None, robust_thresholds(c, len(P)), options_from(None), time.perf_counter(), points=x)
+    return run_mod.enumerate_tls(search), search
+
+
+def _check_against_reference(res, P, x, c, X_true):
+    """gamma_lb below the reference optimum, gamma_ub the exact f_TLS of X, the optimum reached when certified."""
+    N = len(x)
+    c = np.broadcast_to(np.asarray(c, float), (N,))
+    f_ref = tls_by_subsets(P, x, c, [X_true, X_true + 0.2, X_true - 0.2, res.X])
+    f_lb, f_ub = 2 * N * res.gamma_lb ** 2, 2 * N * res.gamma_ub ** 2
+    assert f_lb <= f_ref * (1 + 1e-9) + 1e-300, (f_lb, f_ref)
+    u = np.einsum("nij,j->ni", P, np.append(res.X, 1.0))
+    d = np.linalg.norm(u[:, :2] / u[:, 2:] - x, axis=1)
+    assert f_ub == pytest.approx(tls_cost(d, c), rel=1e-6)          # (gamma_ub: rounded up, at 5e6 m offsets too)
+    np.testing.assert_array_equal(res.inliers, d < c)
+    if res.optimal:
+        assert f_ub <= f_ref * (1 + 1e-6), (f_ub, f_ref)
+
+
+@pytest.mark.parametrize("n_out, noise", [(0, 1.0), (1, 1.0), (1, 5.0), (2, 5.0)])
+def test_decides_where_the_stack_decides_with_the_same_answer(n_out, noise, monkeypatch):
+    """Protocol scenes: wherever the stack of one decides, the three-view path decides too (it bounds the same rows
+    or more, and refines the rows that fail), with the same inlier set, gamma_ub and certificate; its lower bound
+    is never below the stack's by more than round-off."""
+    rng = np.random.default_rng([n_out, int(noise), 8])
+    decided = {True: 0, False: 0}
+    for _ in range(12):
+        P, x, _, _ = robust_protocol_scene(3, n_out, noise, rng)
+        three, s3 = _enumerated(P, x, three=True, monkeypatch=monkeypatch)
+        stack, s1 = _enumerated(P, x, three=False, monkeypatch=monkeypatch)
+        decided[True] += three is not None
+        decided[False] += stack is not None
+        if stack is None:
+            continue
+        assert three is not None
+        assert enum_mod.ENUMERATED in three.message
+        assert three.optimal == stack.optimal
+        np.testing.assert_array_equal(three.inliers, stack.inliers)
+        assert three.gamma_ub == pytest.approx(stack.gamma_ub, rel=1e-9)
+        assert three.gamma_lb >= stack.gamma_lb * (1 - 1e-9)
+    assert decided[True] >= decided[False] >= 6
+
+
+@pytest.mark.parametrize("pixel_scale", [1e-3, 1.0, 1e6])
+def test_bounds_below_the_reference_at_every_pixel_scale(pixel_scale):
+    """The same scenes in image units times 1e-3..1e6 (thresholds alike) through tritools.triangulate: the lower
+    bound below the independent reference, certified results at the reference optimum, the ground-truth inliers."""
+    rng = np.random.default_rng([17, int(np.log10(pixel_scale)) + 5])
+    A = np.diag([pixel_scale, pixel_scale, 1.0])
+    for n_out in (0, 1):
+        P, obs, X, out = robust_protocol_scene(3, n_out, 1.0, rng)
+        cams, x = np.einsum("ij,njk->nik", A, P), obs * pixel_scale
+        res = tritools.triangulate(cams, x, robust=C * pixel_scale)
+        _check_against_reference(res, cams, x, C * pixel_scale, X)
+        if res.optimal:
+            np.testing.assert_array_equal(res.inliers, ~out)
+
+
+def test_georeferenced_zero_noise_duplicated_views_and_infinite_thresholds():
+    """A georeferenced world (5e6 m offset), exact data with one wrong match (f* = c^2 exactly), a duplicated view,
+    and per-view thresholds with one infinite: no lower bound above the reference, certificates at it."""
+    rng = np.random.default_rng(29)
+    P, x, X, out = robust_protocol_scene(3, 1, 1.0, rng)
+    T = np.eye(4)
+    T[:3, 3] = -np.array([5e6, -3e6, 1e3])                      # world moved by +offset: P' = P T
+    Xg = X + np.array([5e6, -3e6, 1e3])
+    res = tritools.triangulate(P @ T, x, robust=C)
+    _check_against_reference(res, P @ T, x, C, Xg)
+    assert res.gamma_ub == pytest.approx(tritools.triangulate(P, x, robust=C).gamma_ub, rel=1e-6)
+
+    P0, x0, X0, out0 = robust_protocol_scene(3, 1, 0.0, rng)   # zero noise: the inliers' pair costs 0
+    res = tritools.triangulate(P0, x0, robust=C)
+    _check_against_reference(res, P0, x0, C, X0)
+    if res.optimal:
+        assert 6 * res.gamma_ub ** 2 == pytest.approx(C * C, rel=1e-9)
+
+    P2, x2, X2, _ = robust_protocol_scene(2, 0, 1.0, rng)        # a duplicated view: its pair has no epipolar line
+    Pd, xd = np.concatenate([P2, P2[:1]]), np.concatenate([x2, x2[:1]])
+    res = tritools.triangulate(Pd, xd, robust=C)
+    _check_against_reference(res, Pd, xd, C, X2)
+
+    c = np.array([C, np.inf, 50.0])
+    res = tritools.triangulate(P, x, robust=c)
+    _check_against_reference(res, P, x, c, X)
+
+
+@pytest.mark.parametrize("N, n_out, three", [(3, 1, True), (7, 2, False)])
+def test_refined_rows_rescue_failing_bounds(N, n_out, three, monkeypatch):
+    """Rows polished by one LM step (robust_three.POLISH_STEPS, robust_enum_run.SINGLE_POLISH_STEPS) may stop short of
+    their set's optimum, and a Lagrangian bound taken there fails: the path refines the failing rows on their own sets
+    and bounds them again (``_second_chance``), deciding scenes that otherwise go to the branch and bound, with answers
+    below the reference.  Switched off, fewer scenes are decided."""
+    rng = np.random.default_rng(3)
+    scenes = [robust_protocol_scene(N, n_out, 1.0, rng) for _ in range(30 if three else 20)]
+    decided = {}
+    for on in (True, False):
+        if not on:
+            monkeypatch.setattr(robust_three._ThreeViews, "_second_chance", lambda self, lb: lb)
+            monkeypatch.setattr(run_mod._Group, "_second_chance", lambda self, probs: None)
+        out = [_enumerated(P, x, three=three, monkeypatch=monkeypatch)[0] for P, x, _, _ in scenes]
+        decided[on] = [r is not None for r in out]
+        if on:
+            rescued = out
+    assert sum(decided[True]) > sum(decided[False])
+    for (P, x, X, _), r, off in zip(scenes, rescued, decided[False]):
+        if r is not None and not off:
+            _check_against_reference(r, P, x, C, X)
+
+
+def test_other_view_counts_and_regions_are_not_taken():
+    """Only searches of three point views: others get None (the stacked enumeration or the search runs)."""
+    rng = np.random.default_rng(5)
+    P, x, _, _ = robust_protocol_scene(4, 1, 1.0, rng)
+    s = TlsSearch(P, None, robust_thresholds(C, 4), options_from(None), time.perf_counter(), points=x)
+    assert robust_three.three_view_tls(s) is None
+    P3, x3 = P[:3], x[:3]
+    regions = [Ellipse(p, np.eye(2) / 4.0) for p in x3]
+    s = TlsSearch(P3, regions, robust_thresholds(C, 3), options_from(None), time.perf_counter())
+    assert not s.points and robust_three.three_view_tls(s) is None

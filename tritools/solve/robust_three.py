@@ -1,0 +1,215 @@
+"""Single robust calls of three point views: the enumeration of every inlier set in one pass, no stack of problems.
+
+With N = 3 views the inlier sets of at least two views are the three pairs and all views, so (the identity of
+:mod:`tritools.solve.robust`, the terms of :mod:`tritools.solve.robust_enum`)
+
+    f*_TLS = min( L2*(V),  min_k [L2*(V - k) + c_k^2],  min_i c^2(V - i),  c^2(V) ),
+
+and the superadditive closure of L2LB(V) is its maximum with the largest pair bound (V = pair + one view, whose
+L2* is 0).  :func:`three_view_tls` takes the steps of :class:`tritools.solve.robust_enum_run._Group` for one
+problem with the same functions and rules -- the frame (:func:`~tritools.solve.robust_enum.enum_frame`), the four
+candidates in one masked stack (:func:`~tritools.solve.robust_enum.enum_candidates`), the best of them offered and
+refined on its inlier set (:func:`~tritools.solve.robust_enum_run.refine_rows`, inlier set -> its L2 optimum ->
+inlier set, at most :data:`~tritools.solve.robust_enum_run.LO_ROUNDS` rounds), the Lagrangian bounds
+(:func:`~tritools.solve.robust_enum.enum_bounds_rows`) of the sets whose c^2(V - S) alone does not meet UB and of
+the pairs holding a view outside the best inlier set (one stacked verification: the whole set's bound with them,
+where the stack of many problems waits for the closure first), LB by
+:func:`~tritools.solve.robust_enum_run.lower_bounds`, the decision at the floor of the decision scale and else,
+after the failing rows are refined on their own sets and bounded again (:meth:`_ThreeViews._second_chance`) and the
+sets inside a term that does not meet UB are bounded, at the documented scale -- without the
+bookkeeping that a stack of many problems needs (masks over problems, ranking across them, the staged order).
+Measured against the stack of one: benchmarks/RESULTS.md (wave 8, single robust calls at N = 3-7).
+
+Returns None where the enumeration does not decide (the caller runs the branch and bound, which starts from the
+candidates offered here): wherever the stack of one decides, this path decides too (it bounds the same rows or more,
+tests/test_robust_three_path.py).  Every bound is the stack's (the same functions), so the rigour is the stack's.
+"""
+from __future__ import annotations
+
+import logging
+
+import numpy as np
+
+from ..model.normalize import SCALE_BOUNDS
+from . import robust_enum as enum
+from .robust_bounds import ROUND_DOWN
+from .robust_costs import point_distances2
+from .robust_enum_run import LO_ROUNDS, closed_terms, eligible, enumerated_result, lower_bounds, refine_rows
+
+__all__ = ["three_view_tls", "VIEWS", "POLISH_STEPS"]
+
+log = logging.getLogger(__name__)
+
+#: the view count of this path.
+VIEWS = 3
+#: Levenberg-Marquardt steps polishing each row's DLT start (the stack's POLISH_STEPS is 5): the best row is then
+#: refined to convergence on its inlier set and every row whose bound fails on its own set (:meth:`_second_chance`),
+#: so the other rows' polish only has to rank them.  Measured (protocol scenes, one wrong match, 1 and 5 px, 300
+#: single calls per setting, median CPU, settings interleaved): 5 steps 2.48-2.52 ms, 2 steps 2.31-2.34, 1 step
+#: 2.18-2.25, 0 steps 2.22-2.25; scenes left to the branch and bound 23 / 21 / 21 / 22 of 300; every one certified.
+POLISH_STEPS = 1
+
+
+def three_view_tls(search):
+    """The TLS result of one :class:`tritools.solve.robust.TlsSearch` of three point views (module docstring), or
+    None (the caller runs the search).  Searches of other view counts or regions get None too."""
+    if search.N != VIEWS or not eligible(search):
+        return None
+    try:
+        return _ThreeViews(search).run()
+    except (ValueError, np.linalg.LinAlgError, FloatingPointError):
+        log.debug("three-view enumeration failed", exc_info=True)
+        return None
+
+
+class _ThreeViews:
+    """One search's rows: the sets of :func:`~tritools.solve.robust_enum.subset_masks` (3) -- the pairs, then all
+    views."""
+
+    def __init__(self, search):
+        self.s = search
+        self.W = enum.subset_masks(VIEWS)
+        self.size = self.W.sum(axis=1)
+        with np.errstate(over="ignore", invalid="ignore"):       # c^2(V - S); inf: c_i = inf
+            self.rest = np.sum(np.where(self.W, 0.0, search.c2[None]), axis=1) * ROUND_DOWN
+        self.lb = np.zeros(len(self.W))
+        self.bounded = np.zeros(len(self.W), bool)
+        self.F = None
+        self.refined = np.zeros(len(self.W), bool)     # rows whose candidate was refined on its own set
+        from .robust import scale_from
+
+        self.floor = scale_from(SCALE_BOUNDS[1], search.c2)
+
+    def run(self):
+        s = self.s
+        framed = enum.enum_frame(s.C, s.x)
+        if framed is None:
+            return None
+        self.frame, self.Cn = framed
+        self.Xn = enum.enum_candidates(self.Cn, self.W, POLISH_STEPS)
+        self._offer()
+        if s.best_X is None or s.deadline.expired:
+            return None
+        self._bound(self._open() | self._outside_pairs())
+        lb = self._lower_bound()
+        if not self._meets_at_floor(lb) and not s.deadline.expired:
+            lb = self._second_chance(lb)
+        if self._meets_at_floor(lb):
+            s.set_normalization_scale(SCALE_BOUNDS[1])       # met at the floor: met at the documented scale
+            return self._result(lb)
+        if s.deadline.expired:
+            return None
+        more = ~self.bounded & self._feeding()
+        if more.any():
+            self._bound(more)
+            lb = self._lower_bound()
+        return self._result(lb) if s.tol.certified(lb, s.best_f, s.scale) else None
+
+    def _meets_at_floor(self, lb: float) -> bool:
+        """LB meets UB under the rule at the floor of the decision scale, without contradicting it there."""
+        s = self.s
+        return bool(s.tol.certified(lb, s.best_f, self.floor)) and not s.tol.contradicts(lb, s.best_f, self.floor)
+
+    def _outside_pairs(self) -> np.ndarray:
+        """The pairs holding a view outside the best inlier set, where UB exceeds min c^2 (they feed the closure of
+        the sets holding that view)."""
+        s = self.s
+        best = np.array([i in s.best_S for i in range(VIEWS)])
+        inside = ~(self.W & ~best[None]).any(axis=1)
+        return (self.size == 2) & ~inside & (s.best_f > np.min(s.c2))
+
+    # ------------------------------------------------------------------ steps
+    def _offer(self) -> None:
+        """Offer the best candidate (ranked by f_TLS), refined on its inlier set S, its refined point put in the row
+        of S; again from a new best with another inlier set (:meth:`_Group._offer` for one problem)."""
+        s, fr = self.s, self.frame
+        rows = np.nonzero(np.isfinite(self.Xn).all(axis=1))[0]
+        if not rows.size:
+            return
+        world = fr.origin + fr.depth * self.Xn[rows]
+        d2 = point_distances2(s.C, s.x, world)
+        r = int(np.argmin(np.sum(np.minimum(d2, s.c2[None]), axis=1)))      # (ties: the first, as the stack)
+        X, S = world[r], np.nonzero(d2[r] < s.c2)[0].tolist()
+        s.offer(X)
+        refined = set()
+        for _ in range(LO_ROUNDS):                      # inlier set -> its L2 optimum -> inlier set
+            if len(S) < 2 or frozenset(S) in refined:
+                return
+            refined.add(frozenset(S))
+            inS = np.zeros((1, VIEWS), bool)
+            inS[0, S] = True
+            Xr, ok = refine_rows(self.Cn[None], fr.normalized_point(X)[None], inS)
+            if not ok[0]:
+                return
+            Xw = fr.world_point(Xr[0])
+            s.offer(Xw)
+            row = enum.row_of(VIEWS)[sum(1 << i for i in S)]
+            self.Xn[row], self.refined[row] = Xr[0], True
+            if s.best_S == frozenset(S) or not np.array_equal(s.best_X, Xw):
+                return
+            X, S = s.best_X, sorted(s.best_S)                # a new best with another inlier set
+
+    def _second_chance(self, lb: float) -> float:
+        """The rows whose term does not meet UB, refined to convergence on their own sets (their polished candidate
+        may be short of the set's L2 optimum, and a Lagrangian bound taken there fails or falls short), offered
+        (UB may fall: a set's optimum the polish did not reach) and bounded again; LB after."""
+        s = self.s
+        failing = self._failing() & ~self.refined
+        if not failing.any():
+            return lb
+        m = np.nonzero(failing & np.isfinite(self.Xn).all(axis=1))[0]
+        self.refined[failing] = True
+        if not m.size:
+            return lb
+        Xr, ok = refine_rows(np.broadcast_to(self.Cn, (len(m),) + self.Cn.shape), self.Xn[m], self.W[m])
+        for r, row in enumerate(m):
+            if ok[r]:
+                self.Xn[row] = Xr[r]
+                s.offer(self.frame.world_point(Xr[r]))
+        again = np.zeros(len(self.W), bool)
+        again[m[ok]] = True
+        old = self.lb.copy()
+        self.bounded &= ~again
+        self._bound(again)
+        self.lb = np.maximum(self.lb, old)             # both bounds are valid: the larger
+        return self._lower_bound()
+
+    def _failing(self) -> np.ndarray:
+        terms, ub = self._terms(), self.s.best_f
+        return (terms < ub) & ~np.asarray(self.s.tol.certified(terms, ub, self.floor), bool)
+
+    def _bound(self, rows: np.ndarray) -> None:
+        """The Lagrangian bounds of the rows not bounded yet, one stacked verification (the fundamental matrices
+        once)."""
+        rows = rows & ~self.bounded
+        if not rows.any():
+            return
+        self.bounded |= rows
+        if self.F is None:
+            F, defined = enum.fundamentals(self.s.C[None], self.Cn[None])
+            self.F, self.defined = F[0], defined[0]
+        m = np.nonzero(rows)[0]
+        R = len(m)
+        self.lb[m], _ = enum.enum_bounds_rows(
+            np.broadcast_to(self.Cn, (R,) + self.Cn.shape), np.broadcast_to(self.F, (R,) + self.F.shape),
+            np.broadcast_to(self.defined, (R,) + self.defined.shape), self.W[m], self.Xn[m],
+            np.full(R, self.frame.scale), self.s.tol)
+
+    def _terms(self) -> np.ndarray:
+        return closed_terms(VIEWS, self.W, self.lb[None], self.rest[None])[0]
+
+    def _lower_bound(self) -> float:
+        return float(lower_bounds(np.array([self.s.best_f]), self._terms()[None], self.s.c2[None])[0])
+
+    def _open(self) -> np.ndarray:
+        """The rows whose term c^2(V - S) alone does not meet UB at the floor scale (finite only)."""
+        ub = self.s.best_f
+        met = (self.rest >= ub) | np.asarray(self.s.tol.certified(self.rest, ub, self.floor), bool)
+        return ~met & np.isfinite(self.rest)
+
+    def _feeding(self) -> np.ndarray:
+        """The rows inside a row whose term does not meet UB at the floor scale."""
+        return (enum.subset_of(VIEWS) & self._failing()[None]).any(axis=1)
+
+    def _result(self, lb: float):
+        return enumerated_result(self.s, lb, self.bounded.sum(), len(self.W))

@@ -152,3 +152,27 @@ def test_inlier_decision_at_the_threshold_is_exact():
             got = inlier_mask(P, X, x, res, c, u, exact=True)
             want = [_exact_d2(Pi, xi, X) < Fraction(ci) ** 2 for Pi, xi, ci in zip(P, x, c)]
             np.testing.assert_array_equal(got, want)
+
+
+def _exact_segment_d2(P, x, d, X) -> Fraction:
+    """Squared distance of the projection of the float X to the segment {x + t d, |t| <= 1}, in rationals."""
+    Xh = [Fraction(float(v)) for v in X] + [Fraction(1)]
+    h = [sum(Fraction(float(P[a, b])) * Xh[b] for b in range(4)) for a in range(3)]
+    u = (h[0] / h[2] - Fraction(float(x[0])), h[1] / h[2] - Fraction(float(x[1])))
+    dd = (Fraction(float(d[0])), Fraction(float(d[1])))
+    t = max(Fraction(-1), min(Fraction(1), (u[0] * dd[0] + u[1] * dd[1]) / (dd[0] ** 2 + dd[1] ** 2)))
+    return (u[0] - t * dd[0]) ** 2 + (u[1] - t * dd[1]) ** 2
+
+
+@pytest.mark.parametrize("c", [1e-150, 1e-30])
+def test_tiny_thresholds_on_segments_keep_inliers_consistent_with_the_bounds(c):
+    """Review 8 F1b: Segment regions at c far below the distances' round-off: a view whose float distance is 0 but
+    whose exact distance is ~1e-14 px is not an inlier (gamma_UB counts it c^2); the flags equal the exact
+    comparison with an independent rational distance to the segment."""
+    P, x, _, _ = robust_protocol_scene(5, 1, 1.0, np.random.default_rng(5))
+    dirs = np.random.default_rng(6).normal(size=(5, 2)) * 2
+    regions = [tritools.Segment(p, d) for p, d in zip(x, dirs)]
+    r = tritools.triangulate(P, regions, robust=c)
+    exact = np.array([_exact_segment_d2(Pi, xi, d, r.X) < Fraction(c) ** 2 for Pi, xi, d in zip(P, x, dirs)])
+    np.testing.assert_array_equal(r.inliers, exact)
+    assert not r.optimal or r.gamma_ub - r.gamma_lb <= 1e-6 * r.gamma_ub

@@ -97,14 +97,15 @@ def inlier_mask(C: np.ndarray, X, points: np.ndarray, res: np.ndarray, c: np.nda
     """(N,) bool, d_i(X) < c_i.  The float distances ``res`` err by at most ``res 4u + _PROJ_ABS |u_i|``
     (:func:`tritools.solve.report.gamma_upper`); where |res_i - c_i| is within that margin and the regions are
     points (``exact``), the comparison is made exactly in rational arithmetic on the float data and X (rare: a
-    distance at the threshold to ~1e-13 relative, or thresholds below the round-off, review 8 F2).  Other regions
-    keep the float comparison there."""
+    distance at the threshold to ~1e-13 relative, or thresholds below the round-off, review 8 F2).  For other regions
+    such a view is an outlier (gamma_UB counts it c_i^2; review 8 F1b: Segments at c = 1e-150 px were inliers by
+    float distances of 0 whose exact values are ~1e-14 px)."""
     inl = res < c
-    if not exact:
-        return inl
     with np.errstate(invalid="ignore", over="ignore"):
         margin = res * (4 * _U) + _PROJ_ABS * np.linalg.norm(np.where(np.isfinite(u), u, 0.0), axis=1)
         ambiguous = np.isfinite(res) & np.isfinite(c) & (np.abs(res - c) <= margin)
+    if not exact:                       # other regions: an undecided view is an outlier, as gamma_UB counts it
+        return inl & ~ambiguous
     for i in np.flatnonzero(ambiguous):
         inl[i] = _exact_below(C[i], X, points[i], float(c[i]))
     return inl

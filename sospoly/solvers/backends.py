@@ -368,7 +368,7 @@ class IpmBackend:
             x, z = res.x[0], res.z[0]
             raw = RawStatus.SOLVED if ok else RawStatus.FAILED
             if not ok and take_stalled and self.tolerances.accept_inaccurate and res.reason[0] == IPM_STALLED \
-                    and ipm_almost_solved(problem, res):
+                    and ipm_almost_solved(problem, res, self.tolerances):
                 ok, raw = True, RawStatus.ALMOST_SOLVED          # the caller makes the bound rigorous
             if ok and accept is not None and not accept(x, z):
                 ok, why = False, "certificate check failed"
@@ -388,19 +388,22 @@ class IpmBackend:
 IPM_LABEL = "ipm"
 IPM_STALLED = "stalled"
 #: a stalled IPM iterate counts as "almost solved" (:data:`RawStatus.ALMOST_SOLVED`, taken only with
-#: ``Tolerances.accept_inaccurate``, whose callers make the bound rigorous) when it meets Clarabel's own "almost
-#: solved" rule: relative gap and residuals within Clarabel's ``reduced_tol_gap_rel`` / ``reduced_tol_feas``
-#: defaults.  Measured on dense degree-2 programs with mixed regions (N = 16 / 30, one Gram block of side 59-105
-#: beside the regions' scalar multipliers): the IPM stalls at relative gaps of 1e-8..1e-7, 2-3x faster than
-#: Clarabel's chordal solve (benchmarks/RESULTS.md, issue #22, wave 8).
-IPM_ALMOST_GAP_REL = 5e-5
-IPM_ALMOST_FEAS = 1e-4
+#: ``Tolerances.accept_inaccurate``, whose callers make the bound rigorous) when its relative gap is at most
+#: ``Tolerances.gap_rel / IPM_ALMOST_GAP_SHARE`` (the solver's gap takes at most a tenth of what the certificate
+#: rule allows, so it does not cost a certificate Clarabel's 1e-9 answer would give) and its relative residuals
+#: at most IPM_ALMOST_FEAS.  Measured on dense degree-2 programs with mixed regions (N = 6..30, one Gram block of
+#: side 20-105 beside the regions' scalar multipliers): the IPM stalls at gaps of 4e-9..3e-8 from N = 10 (2.6e-6
+#: on one 6-view program), primal residuals ~1e-15, dual ~1.5e-8, 2-3x faster than Clarabel from N = 16
+#: (benchmarks/RESULTS.md, issue #22, wave 8).
+IPM_ALMOST_GAP_SHARE = 10.0
+IPM_ALMOST_FEAS = 1e-6
 
 
-def ipm_almost_solved(problem: ConicProblem, res) -> bool:
-    """Clarabel's "almost solved" test on the IPM's (first) iterate ``res`` (:class:`~sospoly.solvers.ipm.IpmResult`)
-    of ``problem``: |p - d| <= IPM_ALMOST_GAP_REL max(1, min(|p|, |d|)) for the primal and dual objectives p, d;
-    ||b - A x - s||_inf <= IPM_ALMOST_FEAS (1 + ||b||_inf) and ||A^T z + q||_inf <= IPM_ALMOST_FEAS (1 + ||q||_inf)."""
+def ipm_almost_solved(problem: ConicProblem, res, tolerances: Tolerances = DEFAULT_TOLERANCES) -> bool:
+    """Is the IPM's (first) iterate ``res`` (:class:`~sospoly.solvers.ipm.IpmResult`) of ``problem`` "almost
+    solved": |p - d| <= (gap_rel / IPM_ALMOST_GAP_SHARE) max(1, min(|p|, |d|)) for the primal and dual objectives
+    p, d, and ||b - A x - s||_inf <= IPM_ALMOST_FEAS (1 + ||b||_inf), ||A^T z + q||_inf <= IPM_ALMOST_FEAS
+    (1 + ||q||_inf)?"""
     x, z, s = res.x[0], res.z[0], res.s[0]
     p, d = float(res.primal_objective[0]), float(res.dual_objective[0])
     if not (np.all(np.isfinite(x)) and np.all(np.isfinite(z)) and np.isfinite(p) and np.isfinite(d)):
@@ -409,7 +412,7 @@ def ipm_almost_solved(problem: ConicProblem, res) -> bool:
     r_p = np.max(np.abs(b - problem.A @ x - s), initial=0.0) / (1.0 + np.max(np.abs(b), initial=0.0))
     r_d = np.max(np.abs(problem.A.T @ z + q), initial=0.0) / (1.0 + np.max(np.abs(q), initial=0.0))
     gap = abs(p - d) / max(1.0, min(abs(p), abs(d)))
-    return bool(gap <= IPM_ALMOST_GAP_REL and r_p <= IPM_ALMOST_FEAS and r_d <= IPM_ALMOST_FEAS)
+    return bool(gap <= tolerances.gap_rel / IPM_ALMOST_GAP_SHARE and r_p <= IPM_ALMOST_FEAS and r_d <= IPM_ALMOST_FEAS)
 
 
 #: below this estimated IPM cost (sum over PSD blocks of m n^3) one Clarabel call is faster

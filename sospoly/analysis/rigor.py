@@ -216,7 +216,7 @@ def rigorous_psatz_bound(psatz, sol, c: float, radius, ball: float | None = None
     prog = structure.program
     x = np.asarray(sol.x, float)
     ineq = psatz.ineq if hasattr(psatz, "ineq") else \
-        (structure.slots.polynomials(theta)[2] if structure.slots.n_ineq else ())   # built once, not per k
+        (structure.slots.ineq_polynomials(theta) if structure.slots.n_ineq else ())   # built once, not per k
     for k in range(structure.slots.n_ineq):
         blk = prog.block(f"s{k}")
         S = np.zeros((blk.gram.size, blk.gram.size))

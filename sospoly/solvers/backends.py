@@ -345,7 +345,9 @@ class IpmBackend:
         self.fallback = fallback if fallback is not None else ClarabelBackend(self.tolerances)
 
     def solve(self, problem: ConicProblem, accept=None, retry: bool = True,
-              deadline: Deadline | None = None) -> ConicSolution:
+              deadline: Deadline | None = None, *, take_stalled: bool = False) -> ConicSolution:
+        """``take_stalled``: a stalled iterate that meets :func:`ipm_almost_solved` is the answer (status
+        ALMOST_SOLVED, only with ``Tolerances.accept_inaccurate``) instead of a fall-back."""
         from .ipm import ipm_solve_batch, ipm_solve_sparse, layout_of
 
         t0 = time.perf_counter()
@@ -364,13 +366,17 @@ class IpmBackend:
                                        deadline=deadline)
             ok = bool(res.converged[0])
             x, z = res.x[0], res.z[0]
+            raw = RawStatus.SOLVED if ok else RawStatus.FAILED
+            if not ok and take_stalled and self.tolerances.accept_inaccurate and res.reason[0] == IPM_STALLED \
+                    and ipm_almost_solved(problem, res, self.tolerances):
+                ok, raw = True, RawStatus.ALMOST_SOLVED          # the caller makes the bound rigorous
             if ok and accept is not None and not accept(x, z):
                 ok, why = False, "certificate check failed"
             else:
-                why = "converged" if ok else res.reason[0]
-            att = Attempt("ipm", RawStatus.SOLVED if ok else RawStatus.FAILED, why, int(res.iterations[0]),
+                why = ("converged" if raw == RawStatus.SOLVED else res.reason[0]) if ok else res.reason[0]
+            att = Attempt(IPM_LABEL, raw if ok else RawStatus.FAILED, why, int(res.iterations[0]),
                           time.perf_counter() - t0)
-            sol = ConicSolution(RawStatus.SOLVED, x, z, float(res.primal_objective[0]),
+            sol = ConicSolution(raw, x, z, float(res.primal_objective[0]),
                                 float(res.dual_objective[0]), (att,)) if ok else None
         if sol is not None:
             return sol
@@ -378,10 +384,46 @@ class IpmBackend:
         return dataclasses.replace(fb, attempts=(att,) + tuple(fb.attempts))
 
 
+#: the label of the interior-point attempts (:class:`Attempt`), and its reason for an iterate that stopped improving.
+IPM_LABEL = "ipm"
+IPM_STALLED = "stalled"
+#: a stalled IPM iterate counts as "almost solved" (:data:`RawStatus.ALMOST_SOLVED`, taken only with
+#: ``Tolerances.accept_inaccurate``, whose callers make the bound rigorous) when its relative gap is at most
+#: ``Tolerances.gap_rel / IPM_ALMOST_GAP_SHARE`` (the solver's gap takes at most a tenth of what the certificate
+#: rule allows, so it does not cost a certificate Clarabel's 1e-9 answer would give) and its relative residuals
+#: at most IPM_ALMOST_FEAS.  Measured on dense degree-2 programs with mixed regions (N = 6..30, one Gram block of
+#: side 20-105 beside the regions' scalar multipliers): the IPM stalls at gaps of 4e-9..3e-8 from N = 10 (2.6e-6
+#: on one 6-view program), primal residuals ~1e-15, dual ~1.5e-8, 2-3x faster than Clarabel from N = 16
+#: (benchmarks/RESULTS.md, issue #22, wave 8).
+IPM_ALMOST_GAP_SHARE = 10.0
+IPM_ALMOST_FEAS = 1e-6
+
+
+def ipm_almost_solved(problem: ConicProblem, res, tolerances: Tolerances = DEFAULT_TOLERANCES) -> bool:
+    """Is the IPM's (first) iterate ``res`` (:class:`~sospoly.solvers.ipm.IpmResult`) of ``problem`` "almost
+    solved": |p - d| <= (gap_rel / IPM_ALMOST_GAP_SHARE) max(1, min(|p|, |d|)) for the primal and dual objectives
+    p, d, and ||b - A x - s||_inf <= IPM_ALMOST_FEAS (1 + ||b||_inf), ||A^T z + q||_inf <= IPM_ALMOST_FEAS
+    (1 + ||q||_inf)?"""
+    x, z, s = res.x[0], res.z[0], res.s[0]
+    p, d = float(res.primal_objective[0]), float(res.dual_objective[0])
+    if not (np.all(np.isfinite(x)) and np.all(np.isfinite(z)) and np.isfinite(p) and np.isfinite(d)):
+        return False
+    b, q = np.asarray(problem.b, float), np.asarray(problem.q, float)
+    r_p = np.max(np.abs(b - problem.A @ x - s), initial=0.0) / (1.0 + np.max(np.abs(b), initial=0.0))
+    r_d = np.max(np.abs(problem.A.T @ z + q), initial=0.0) / (1.0 + np.max(np.abs(q), initial=0.0))
+    gap = abs(p - d) / max(1.0, min(abs(p), abs(d)))
+    return bool(gap <= tolerances.gap_rel / IPM_ALMOST_GAP_SHARE and r_p <= IPM_ALMOST_FEAS and r_d <= IPM_ALMOST_FEAS)
+
+
 #: below this estimated IPM cost (sum over PSD blocks of m n^3) one Clarabel call is faster
 #: than the IPM's per-iteration Python overhead (measured crossover ~5e4: Corollary 1 at
 #: delta = 2 with N = 5 -> 6 ms Clarabel vs 21 ms IPM; N = 8 -> 42 ms vs 22 ms).
 AUTO_IPM_MIN_COST = 5e4
+#: the same crossover for one Gram block beside scalar blocks (no moment form: the IPM's sparse Schur operator).
+#: Measured on Corollary 1's degree-2 programs with mixed regions (CPU, one thread; Clarabel's split-cliques
+#: chain against the IPM): N = 6 (cost 1.7e5) 0.01 vs 0.03 s, N = 10 (2.4e6) 0.06 vs 0.08 s, N = 16 (2.9e7)
+#: 0.34 vs 0.17 s, N = 30 (3.9e8) 3.7-5.3 vs 1.4-1.9 s.
+AUTO_IPM_MIN_COST_SCALARS = 1e7
 #: the IPM's working set (~3 m sum_k n_k^2 + m^2 floats, see sospoly.budget) above which AutoBackend
 #: goes to Clarabel directly (whose memory grows with sum_k L_k^2 instead); one value with the budget's model.
 AUTO_IPM_MAX_BYTES = _AUTO_IPM_MAX_BYTES
@@ -395,7 +437,8 @@ def _provisional(overrides: dict) -> bool:
 class AutoBackend:
     """Clarabel for small single problems, :class:`IpmBackend` (with Clarabel fallback) above
     ``AUTO_IPM_MIN_COST``; ``clarabel_chain`` the retry chain of both (e.g. :data:`CLARABEL_FAST_CHAIN`),
-    ``skip`` the labels of Clarabel attempts already made on the program (:class:`ClarabelBackend`);
+    ``skip`` the labels of attempts already made on the program (Clarabel's: :class:`ClarabelBackend`; ``"ipm"``:
+    straight to Clarabel);
     batches of equal structure should use
     :meth:`sospoly.solvers.compiled_solve.CompiledPsatz.solve_batch` instead."""
 
@@ -405,6 +448,7 @@ class AutoBackend:
                  skip=()):
         self.clarabel = ClarabelBackend(as_tolerances(tolerances), retry_chain=clarabel_chain, skip=skip)
         self.ipm = IpmBackend(self.clarabel.tolerances, fallback=self.clarabel)
+        self.skip_ipm = IPM_LABEL in {str(label).split("/")[0] for label in skip}   # it repeats its answer
 
     def solve(self, problem: ConicProblem, accept=None, retry: bool = True,
               deadline: Deadline | None = None) -> ConicSolution:
@@ -418,10 +462,16 @@ class AutoBackend:
         cost = sum(m * n ** 3 for n in lay.sizes)
         ipm_bytes = 8.0 * (3.0 * m * sum(n * n for n in lay.sizes) + float(m) ** 2)
         # the IPM's Schur complement is dense over every column: it pays off for one dominant Gram block (the
-        # moment form), not for programs of many blocks, whose sparsity Clarabel's factorisation keeps
-        single = len(lay.sizes) == 1
-        be = self.ipm if single and AUTO_IPM_MIN_COST <= cost and ipm_bytes <= AUTO_IPM_MAX_BYTES else self.clarabel
-        return be.solve(problem, accept=accept, retry=retry, deadline=deadline)
+        # moment form; beside it only scalar blocks, e.g. the constant multipliers of a degree-2 certificate's
+        # inequalities), not for programs of many blocks, whose sparsity Clarabel's factorisation keeps
+        # beside scalar blocks the IPM's iterates stall short of its own stopping rule (measured: every degree-2
+        # program with regions): only worth it where an "almost solved" answer is taken (accept_inaccurate)
+        scalars = len(lay.sizes) > 1
+        single = not scalars or (sum(1 for n in lay.sizes if n > 1) == 1 and self.clarabel.tolerances.accept_inaccurate)
+        least = AUTO_IPM_MIN_COST_SCALARS if scalars else AUTO_IPM_MIN_COST
+        if single and not self.skip_ipm and least <= cost and ipm_bytes <= AUTO_IPM_MAX_BYTES:
+            return self.ipm.solve(problem, accept=accept, retry=retry, deadline=deadline, take_stalled=scalars)
+        return self.clarabel.solve(problem, accept=accept, retry=retry, deadline=deadline)
 
 
 def _svec_operator(s: int) -> sp.csr_matrix:

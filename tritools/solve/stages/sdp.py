@@ -131,8 +131,10 @@ def _chain(ctx: PointContext, step: Step) -> tuple | None:
     answers are taken: the certificate and its rigorous bound are those of every attempt), where the refinement
     costs as much as the factorisation and the attempt ends SOLVED (benchmarks/RESULTS.md, issue #22).  Dense
     degree-2 programs with regions other than points (one large block): :data:`~sospoly.solvers.
-    CLARABEL_SPLIT_CHAIN` (fewer iterations, "solved" more often; measured there).  Other dense programs keep the
-    default chain."""
+    CLARABEL_SPLIT_CHAIN` (fewer iterations, "solved" more often; measured there); from ~12 views the default
+    back-end tries sospoly's interior-point method on them first (one Gram block beside the regions' scalar
+    multipliers, :data:`~sospoly.solvers.backends.AUTO_IPM_MIN_COST_SCALARS`; its stalled "almost solved" iterate
+    is made rigorous like Clarabel's).  Other dense programs keep the default chain."""
     if step.formulation == "views":
         return CLARABEL_FAST_CHAIN
     if step.delta == 2 and not all(r.is_point for r in ctx.regions):

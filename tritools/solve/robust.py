@@ -480,7 +480,8 @@ class TlsSearch(NodeBounds):
         rep = self.report(X)
         certified = bool(self.tol.certified(lb, ub, self.scale))     # lb is valid also when the search stopped
         told = tls_reported(self.C, self.x if self.points else np.array([r.center for r in self.regions]),
-                            None if self.points else rep.residuals, X, self.c, lb, self.tol, certified)
+                            None if self.points else rep.residuals, X, self.c, lb, self.tol, certified, ub,
+                            None if self.points else self.regions)
         inliers = told.inliers
         if not certified and stopped is None:   # the deadline cut a step short, or a sub-problem hit the memory budget
             stopped = "time limit" if self.deadline.expired or self.bounds.deadline.expired else \

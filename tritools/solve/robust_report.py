@@ -45,7 +45,7 @@ class TlsReported:
 
 
 def tls_reported(C: np.ndarray, centres: np.ndarray, residuals, X, c: np.ndarray, lb: float, tolerances,
-                 certified: bool) -> TlsReported:
+                 certified: bool, f_search: float | None = None, regions=None) -> TlsReported:
     """The reported bounds and checks of a TLS result at X (module docstring): cameras C (N, 3, 4), the regions'
     centres (N, 2) (their magnitude sets the resolution), ``residuals`` the distances d_i(X) or None for point
     regions (computed here from compensated projections; ``centres`` are then the points), ``lb`` the search's
@@ -69,15 +69,41 @@ def tls_reported(C: np.ndarray, centres: np.ndarray, residuals, X, c: np.ndarray
     holds, reason = certified, ""
     f_lb, f_ub = 2.0 * N * g_lb * g_lb, 2.0 * N * g_ub * g_ub
     resolved = min(resolution, threshold_resolution(c, N, tolerances))
+    drift = search_drift(res, c, f_search, f_ub)
     if not spread <= resolution:         # no bound from a normalised frame is known to hold
         holds, g_lb = False, 0.0
         reason = "the estimate's own rounding moves its projections by more than the coordinates' resolution " \
                  f"({resolution:.3g} px): the float data cannot certify this optimum"
+    elif not drift <= SEARCH_DRIFT_REL * tolerances.gap_rel:
+        holds, g_lb = False, 0.0
+        reason = f"the search's own value at its estimate differs from the compensated one by {drift:.2g} (relative): " \
+                 "its arithmetic lost digits to cancellation (a georeferenced or rescaled frame), so its bounds are " \
+                 "not trusted"
     elif certified and not (tolerances.certified_relatively(f_lb, f_ub) or g_ub - g_lb <= resolved):
         holds, reason = False, "the bounds met on the search's scale, but their gap exceeds the coordinates' " \
                                f"resolution ({resolved:.3g} px, at most the thresholds' own scale)"
-    inliers = inlier_mask(C, X, centres, res, c, u, exact=points_given)
+    inliers = inlier_mask(C, X, centres, res, c, u, exact=points_given, regions=regions)
     return TlsReported(g_lb, g_ub if math.isfinite(g_ub) else math.inf, residuals, inliers, holds, reason)
+
+
+#: the search's value at its estimate may differ from the compensated f_TLS by at most this fraction of the decision
+#: rule's gap_rel (relative to f_TLS) before its bounds are distrusted (:func:`search_drift`)
+SEARCH_DRIFT_REL = 0.1
+
+
+def search_drift(res: np.ndarray, c: np.ndarray, f_search: float | None, f_ub: float) -> float:
+    """|f_search - f_TLS(X)| / max(f_TLS(X), tiny): how far the search's own (plain-arithmetic) value of its estimate
+    is from the value of the compensated distances ``res`` (0 without ``f_search``).  The search bounds f_TLS by the
+    same arithmetic; where that lost digits to cancellation (a 3e7 georeferenced world seen by cameras scaled by
+    1e-6 with 1e5 px offsets: 0.6% off, its bound 1.3e-4 above an attained value, review 8b F2) its bounds are not
+    trusted."""
+    if f_search is None or not math.isfinite(f_search):
+        return 0.0
+    with np.errstate(over="ignore", invalid="ignore"):
+        f_comp = float(np.sum(np.minimum(np.where(np.isfinite(res), res * res, np.inf), c * c)))
+    if not math.isfinite(f_comp):
+        return 0.0
+    return abs(f_search - f_comp) / max(f_comp, 1e-300)
 
 
 def threshold_resolution(c: np.ndarray, N: int, tolerances) -> float:
@@ -93,7 +119,7 @@ def threshold_resolution(c: np.ndarray, N: int, tolerances) -> float:
 
 
 def inlier_mask(C: np.ndarray, X, points: np.ndarray, res: np.ndarray, c: np.ndarray, u: np.ndarray,
-                exact: bool) -> np.ndarray:
+                exact: bool, regions=None) -> np.ndarray:
     """(N,) bool, d_i(X) < c_i.  The float distances ``res`` err by at most ``res 4u + _PROJ_ABS |u_i|``
     (:func:`tritools.solve.report.gamma_upper`); where |res_i - c_i| is within that margin and the regions are
     points (``exact``), the comparison is made exactly in rational arithmetic on the float data and X (rare: a
@@ -104,11 +130,25 @@ def inlier_mask(C: np.ndarray, X, points: np.ndarray, res: np.ndarray, c: np.nda
     with np.errstate(invalid="ignore", over="ignore"):
         margin = res * (4 * _U) + _PROJ_ABS * np.linalg.norm(np.where(np.isfinite(u), u, 0.0), axis=1)
         ambiguous = np.isfinite(res) & np.isfinite(c) & (np.abs(res - c) <= margin)
-    if not exact:                       # other regions: an undecided view is an outlier, as gamma_UB counts it
-        return inl & ~ambiguous
+    if not exact:                       # other regions: an undecided view is an outlier, as gamma_UB counts it,
+        inl &= ~ambiguous               # unless the projection is inside its region with all of its margin
+        for i in np.flatnonzero(ambiguous & (res == 0)) if regions is not None else ():
+            inl[i] = _deep_inside(regions[i], u[i], float(margin[i]))
+        return inl
     for i in np.flatnonzero(ambiguous):
         inl[i] = _exact_below(C[i], X, points[i], float(c[i]))
     return inl
+
+
+def _deep_inside(region, p: np.ndarray, margin: float) -> bool:
+    """Is the square of half-side ``margin`` around the float projection p inside the (convex) region: its four
+    corners at distance 0?  Then the exact projection is inside too, d_i = 0 < c_i (review 8b F4: a box region at
+    c = 1e-12 px reported an outlier with its projection well inside)."""
+    corners = p[None, :] + margin * np.array([[1.0, 1.0], [1.0, -1.0], [-1.0, 1.0], [-1.0, -1.0]])
+    try:
+        return bool(np.all(np.asarray(region.distance(corners), float) == 0.0))
+    except (ValueError, TypeError):
+        return False
 
 
 def _exact_below(P: np.ndarray, X, x: np.ndarray, c: float) -> bool:

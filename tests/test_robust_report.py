@@ -176,3 +176,27 @@ def test_tiny_thresholds_on_segments_keep_inliers_consistent_with_the_bounds(c):
     exact = np.array([_exact_segment_d2(Pi, xi, d, r.X) < Fraction(c) ** 2 for Pi, xi, d in zip(P, x, dirs)])
     np.testing.assert_array_equal(r.inliers, exact)
     assert not r.optimal or r.gamma_ub - r.gamma_lb <= 1e-6 * r.gamma_ub
+
+
+def test_search_drift_distrusts_a_search_whose_own_value_is_off():
+    """search_drift: 0 without the search's value or where it matches the compensated f_TLS; the relative difference
+    otherwise.  tls_reported then withholds the certificate (gamma_LB = 0) beyond SEARCH_DRIFT_REL gap_rel (review
+    8b F2: the search's plain arithmetic 0.6% off in a rescaled georeferenced frame certified a bound 1.3e-7 above an
+    attained value)."""
+    from tritools.solve.robust_report import SEARCH_DRIFT_REL, search_drift, tls_reported
+
+    res, c = np.array([0.5, 1.0, 3.0]), np.array([2.0, 2.0, 2.0])
+    f = 0.25 + 1.0 + 4.0
+    assert search_drift(res, c, None, f) == 0.0 and search_drift(res, c, f, f) == 0.0
+    assert search_drift(res, c, f * 1.006, f) == pytest.approx(0.006)
+    P = CAMS
+    X = np.array([0.1, 0.2, 3.0])
+    h = P @ np.append(X, 1.0)
+    x = h[:, :2] / h[:, 2:] + np.array([[0.3, 0.0], [0.0, 0.4], [5.0, 0.0]])
+    tol = tritools.TriangulationOptions().tolerances
+    cth = np.full(3, 1.0)
+    f_true = float(_f_tls_exact(P, x, cth, X))
+    ok = tls_reported(P, x, None, X, cth, f_true * (1 - 1e-9), tol, True, f_true)
+    assert ok.holds and ok.gamma_lb > 0
+    off = tls_reported(P, x, None, X, cth, f_true * (1 - 1e-9), tol, True, f_true * (1 + 20 * SEARCH_DRIFT_REL * tol.gap_rel))
+    assert not off.holds and off.gamma_lb == 0.0 and "cancellation" in off.reason

@@ -314,3 +314,20 @@ def test_projection_and_fundamental_matrix_at_extreme_scales():
     F0 = fundamental_matrix(P, Q, normalize=False)
     F1 = fundamental_matrix(4.0 * P, 2.0 * Q, normalize=False)
     assert min(np.abs(F1 - 8 * F0).max(), np.abs(F1 + 8 * F0).max()) <= 1e-12 * np.abs(F1).max()
+
+
+def test_exactly_rank_2_cameras_whose_conditioning_lifts_the_ratio_are_refused():
+    """Review 8b F3: row 3 = 4 row 2 + row 1 with integer entries < 2^53 (exactly rank 2 as floats): the
+    conditioning lifts sigma3/sigma1 to ~5e-8 by round-off; below EXACT_RANK_BELOW the rank is decided in rationals."""
+    from tritools.model.cameras import exactly_rank_deficient
+
+    r1 = np.array([3.0, -6.0, 7.0, 4.0])
+    r2 = np.array([3695536540.0, -1252677480.0, 3378079560.0, 3334729820.0])
+    bad = np.stack([r1, r2, 4 * r2 + r1])
+    assert exactly_rank_deficient(bad) and not exactly_rank_deficient(pixel_camera())
+    assert camera_rank_ratio(bad) == 0.0 and camera_rank_ratio(bad[None])[0] == 0.0
+    msg = error_of(lambda: validate_cameras([pixel_camera(), bad]))
+    assert msg is not None and msg.startswith("cameras[1] has rank < 3"), msg
+    near = bad.copy()
+    near[2, 3] += 1.0                                   # rank 3 exactly (if badly conditioned): kept as computed
+    assert not exactly_rank_deficient(near)

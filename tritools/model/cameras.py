@@ -176,7 +176,35 @@ def _rank_ratio(C: np.ndarray) -> np.ndarray:
     """:func:`camera_rank_ratio` of a float array (..., 3, 4) already checked: the larger of the conditioned
     camera's ratio and its conditioned left 3 x 3 block's (:func:`_conditioned_ratio` of both; NaN where an entry
     is not finite)."""
-    return np.fmax(_conditioned_ratio(C), _conditioned_ratio(C[..., :3]))
+    ratio = np.fmax(_conditioned_ratio(C), _conditioned_ratio(C[..., :3]))
+    flat, cams = np.atleast_1d(ratio).reshape(-1), C.reshape(-1, 3, 4)
+    for k in np.flatnonzero((flat > 0) & (flat < EXACT_RANK_BELOW)):
+        if exactly_rank_deficient(cams[k]):
+            flat[k] = 0.0
+    return flat.reshape(ratio.shape)
+
+
+#: below this conditioned ratio the rank is also decided exactly (:func:`exactly_rank_deficient`): the conditioning
+#: itself can lift an exactly rank-2 camera to ~1e-8 (review 8b F3: row 3 = 4 row 2 + row 1 in integers < 2^53)
+EXACT_RANK_BELOW = 1e-4
+
+
+def exactly_rank_deficient(P) -> bool:
+    """Is the float 3 x 4 matrix P of rank < 3 in exact rational arithmetic (Gaussian elimination on Fractions)?"""
+    from fractions import Fraction
+
+    rows = [[Fraction(float(v)) for v in row] for row in np.asarray(P, float).tolist()]
+    rank, col = 0, 0
+    while rank < 3 and col < 4:
+        pivot = next((r for r in range(rank, 3) if rows[r][col] != 0), None)
+        if pivot is not None:
+            rows[rank], rows[pivot] = rows[pivot], rows[rank]
+            for r in range(rank + 1, 3):
+                k = rows[r][col] / rows[rank][col]
+                rows[r] = [a - k * b for a, b in zip(rows[r], rows[rank])]
+            rank += 1
+        col += 1
+    return rank < 3
 
 
 def _conditioned_ratio(C: np.ndarray) -> np.ndarray:
@@ -307,7 +335,8 @@ def _p2(m: float) -> float:
 def _rank_ratio_scalar(C: np.ndarray) -> list:
     """The scalar twin of :func:`_rank_ratio` for finite cameras (N, 3, 4): the same steps on Python floats
     (tests/test_cameras_scalar.py: equal to the vectorised rule within round-off)."""
-    return [max(_conditioned_ratio_one(P), _conditioned_ratio_one([row[:3] for row in P])) for P in C.tolist()]
+    out = [max(_conditioned_ratio_one(P), _conditioned_ratio_one([row[:3] for row in P])) for P in C.tolist()]
+    return [0.0 if 0 < r < EXACT_RANK_BELOW and exactly_rank_deficient(P) else r for r, P in zip(out, C)]
 
 
 def _conditioned_ratio_one(P: list) -> float:

@@ -145,6 +145,8 @@ def test_per_problem_scalar_thresholds_and_named_errors():
         single = tritools.triangulate(P, x, robust=c)
         assert r.status == single.status and np.array_equal(r.inliers, single.inliers)
         assert r.gamma_ub == pytest.approx(single.gamma_ub, rel=1e-9)
+    arr = tritools.triangulate_many(probs, robust=np.array(cs), progress=False)     # a 1-D array: the same rule
+    assert [r.gamma_ub for r in arr] == [r.gamma_ub for r in many]
     mixed = tritools.triangulate_many(probs, robust=[5.0, np.full(5, 10.0), 20.0], progress=False)
     assert [r.status for r in mixed] == [r.status for r in many]
     with pytest.raises(ValueError, match=r"robust\[1\] \(problem 1\)") as exc:

@@ -200,3 +200,16 @@ def test_search_drift_distrusts_a_search_whose_own_value_is_off():
     assert ok.holds and ok.gamma_lb > 0
     off = tls_reported(P, x, None, X, cth, f_true * (1 - 1e-9), tol, True, f_true * (1 + 20 * SEARCH_DRIFT_REL * tol.gap_rel))
     assert not off.holds and off.gamma_lb == 0.0 and "cancellation" in off.reason
+
+
+@pytest.mark.parametrize("status", ["ill_posed", "numerical_failure", "solver_failed"])
+def test_untrusted_statuses_carry_no_lower_bound(status):
+    """Review 8b F6: results whose status means "no trustworthy bound" (docs/getting-started.md) carried a finite
+    gamma_lb (340 px for a 1.3 px optimum in a 1e13-shifted world); they carry None, also through to_dict/from_dict,
+    while gamma_ub (the value at an actual X) stays."""
+    r = tritools.TriangulationResult("corollary1", status, X=np.zeros(3), gamma_lb=340.0, gamma_ub=3496.0)
+    assert r.gamma_lb is None and r.gamma_ub == 3496.0 and not r.optimal
+    back = tritools.TriangulationResult.from_dict(r.to_dict())
+    assert back.gamma_lb is None
+    ok = tritools.TriangulationResult("corollary1", "not_certified", X=np.zeros(3), gamma_lb=1.0, gamma_ub=2.0)
+    assert ok.gamma_lb == 1.0

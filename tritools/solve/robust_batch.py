@@ -61,7 +61,9 @@ def thresholds_for(robust, problems) -> list:
 def _per_problem(robust, sizes: list) -> bool:
     """Is ``robust`` one entry per problem (:func:`thresholds_for`) rather than one value or one per-view array?"""
     if isinstance(robust, np.ndarray):
-        return robust.ndim == 2
+        if robust.ndim != 1:
+            return robust.ndim == 2
+        robust = list(robust)           # a 1-D array of scalars: the list's rule (review 8b F5)
     if not isinstance(robust, (list, tuple)) or len(robust) == 0:
         return False
     if any(isinstance(e, (list, tuple, np.ndarray)) and np.ndim(e) > 0 for e in robust):

@@ -76,7 +76,7 @@ from ..result import Attempt, Status, TriangulationResult
 from .decide import cheirality
 from .report import PointReport, point_report
 from .trivial import local_estimate
-from . import robust_bounds, robust_futile, robust_suspects
+from . import robust_bounds, robust_cells, robust_futile, robust_suspects
 from .robust_bounds import ROUND_DOWN, SubsetBounds
 from .robust_drive import drive
 from .robust_loo import leave_one_out
@@ -458,6 +458,8 @@ class TlsSearch(NodeBounds):
             self.loo_lb = max(self.loo_lb, (yield from robust_suspects.cover_bound(self)))   # many wrong matches
         lb, stopped = max(self.root_bound() if self.bounds.known(frozenset(range(self.N))) else 0.0,
                           self.loo_lb), None
+        if not self.meets(lb):                   # point regions: the cells of candidate points (robust_cells)
+            lb = max(lb, robust_cells.search_bound(self))
         if not self.meets(lb) and robust_futile.blocks(self):
             stopped = robust_futile.FUTILE          # lb (root / leave-one-out) stays valid
         elif not self.meets(lb):

@@ -39,7 +39,10 @@ by the cover f_TLS* >= min(min_{j in O} LB(node {j}), c^2(O) + TLS*(V - O)) (:mo
 valid for any O), from the pairs holding O and V - O's own bounds, before the pairs and the search; after the
 candidate stage the same cover is taken with O the best candidate's outliers, of any number, and V - O bounded by
 the group bound (:mod:`tritools.solve.robust_loo`: every outlier of V - O charged).  The search stops early when a
-leaf's bound is exhausted below UB (:mod:`tritools.solve.robust_futile`: certification out of reach).
+leaf's bound is exhausted below UB (:mod:`tritools.solve.robust_futile`: certification out of reach).  Before the search over inlier
+sets, point problems try the branch and bound over cells of candidate points (:mod:`tritools.solve.robust_cells`:
+patterns of the first two inliers, a second-order bound per cell), which closes where thresholds of 2-3 sigma
+leave many near-optimal inlier sets.
 
 Search: an upper bound first -- the full L2 estimate, the L2 estimate of every view pair (at most
 :data:`MAX_PAIRS`, sampled beyond) and local optimisation from the best few (inlier set -> L2 estimate

@@ -49,6 +49,8 @@ import math
 
 import numpy as np
 
+from ..model.normalize import RESOLUTION_REL
+
 __all__ = ["search_bound", "cell_lower_bound", "frame", "w_bound", "evaluate_cells", "MAX_CELLS", "BATCH", "ENABLED"]
 
 log = logging.getLogger(__name__)
@@ -63,6 +65,8 @@ BATCH = 64
 MARGIN_REL = 1.0 - 1e-9
 #: the frame is refused when the best candidate's sum of d_i^2 from it differs by more than this (relative).
 FRAME_CHECK_REL = 1e-9
+#: the cells prune within this fraction of the report's guards (:func:`_strict_rule`).
+STRICT = 0.5
 #: coordinate-descent passes of the box least squares (:func:`_box_ls`).
 CD_PASSES = 2
 
@@ -310,6 +314,24 @@ def search_bound(search) -> float:
     with np.errstate(all="ignore"):
         ratio = np.sqrt(search.sq_distances(search.best_X)) / search.c
     order = np.argsort(np.where(np.isfinite(ratio), ratio, np.inf), kind="stable")
-    lb = cell_lower_bound(search.C, search.x, search.c2, search.best_X, order, lambda: search.best_f, search.meets,
-                          search.offer, search.deadline)
+    lb = cell_lower_bound(search.C, search.x, search.c2, search.best_X, order, lambda: search.best_f,
+                          _strict_rule(search), search.offer, search.deadline)
     return 0.0 if lb is None else float(lb)
+
+
+def _strict_rule(search):
+    """The pruning rule of the cells: the search's rule, and the gap within :data:`STRICT` of the report's own guards
+    (relative gap_rel, or the coordinates' resolution in gamma, :mod:`tritools.solve.robust_report`): a bound that
+    met only the search's absolute part would be refused there."""
+    a = np.sort(np.abs(search.x), axis=None)
+    resolution = RESOLUTION_REL * max(1.0, float(0.5 * (a[(a.size - 1) // 2] + a[a.size // 2])))
+    rel, two_n = STRICT * search.tol.gap_rel, 2.0 * search.N
+
+    def meets(lb: float) -> bool:
+        ub = search.best_f
+        if lb >= ub:
+            return True
+        if not search.meets(lb):
+            return False
+        return ub - lb <= rel * ub or math.sqrt(ub / two_n) - math.sqrt(max(lb, 0.0) / two_n) <= STRICT * resolution
+    return meets

@@ -47,8 +47,7 @@ def test_cell_bound_never_above_f_tls_at_points_of_the_cell(seed, image_scale):
     order = np.arange(6)
     pats = RC._Patterns(C, x, c2, Xt, order, math.inf, lambda lb: False)
     assert pats.ok and len(pats.roots) == 15
-    index = {(pats.ref[p], int(np.nonzero(pats.need[p] & (np.arange(6) != pats.ref[p]))[0][0])): p
-             for p in range(len(pats.roots))}
+    index = {frozenset(np.nonzero(pats.need[p])[0].tolist()): p for p in range(len(pats.roots))}
     rng = np.random.default_rng(seed)
     checked, seen = 0, set()
     for X in Xt + rng.standard_normal((400, 3)) * rng.choice([1e-4, 1e-3, 1e-2, 3e-2], (400, 1)):
@@ -56,8 +55,8 @@ def test_cell_bound_never_above_f_tls_at_points_of_the_cell(seed, image_scale):
         ab = pattern_of(d, c, order)
         if ab is None:
             continue
-        p = index[ab]
-        T = pats.frames[ab[0]][1]
+        p = index[frozenset(ab)]
+        T = pats.frames[pats.ref[p]][1]
         q = np.linalg.solve(T, np.append(X - Xt, 1.0))
         q = np.array([q[0], q[1], q[3]]) / q[2]
         r = np.abs(q) * rng.choice([1e-6, 1e-3, 1e-1]) * rng.uniform(0.1, 1.0, 3) + 1e-12

@@ -179,6 +179,7 @@ class _Patterns:
         self.forced, self.need, self.roots = [], [], []
         self.floor = math.inf                         # bound of the skipped patterns (forced cost meets UB)
         self.ok = True
+        self._K = self._slot = None
         for pb in range(1, self.N):
             for pa in range(pb):
                 cost = float(np.sum(pos_c2[:pb]) - pos_c2[pa])
@@ -186,29 +187,41 @@ class _Patterns:
                     self.floor = min(self.floor, cost * MARGIN_REL)
                     continue
                 a, b = int(order[pa]), int(order[pb])
-                if a not in self.frames:
-                    fr = frame(C, x, X0, a)
-                    if fr is None:
-                        self.ok = False
-                        return
-                    self.frames[a] = fr
-                W = w_bound(self.frames[a][0][b], c[b], c[a])
-                if not math.isfinite(W) or not math.isfinite(c[a]):
+                ref = self._reference(C, x, c, X0, a, b)
+                if ref is None:
                     self.ok = False
                     return
+                a, W = ref
                 f = np.zeros(self.N, bool)
                 f[order[:pb]] = True
                 f[a] = False
                 n = np.zeros(self.N, bool)
-                n[[a, b]] = True
+                n[[int(order[pa]), b]] = True
                 self.ref.append(a)
                 self.forced.append(f)
                 self.need.append(n)
                 self.roots.append((np.zeros(3), np.array([c[a], c[a], W])))
         self.forced, self.need = np.array(self.forced).reshape(-1, self.N), np.array(self.need).reshape(-1, self.N)
 
+    def _reference(self, C, x, c, X0, a: int, b: int):
+        """(reference view, W) of the pattern of inliers a, b: a with w bounded by b, else b with w bounded by a
+        (module docstring); None when neither bounds w (both centres project within c of the other's point)."""
+        for ref, other in ((a, b), (b, a)):
+            if ref not in self.frames:
+                self.frames[ref] = frame(C, x, X0, ref)
+            if self.frames[ref] is None or not math.isfinite(c[ref]):
+                continue
+            W = w_bound(self.frames[ref][0][other], c[other], c[ref])
+            if math.isfinite(W):
+                return ref, W
+        return None
+
     def evaluate(self, pat: np.ndarray, qc: np.ndarray, r: np.ndarray, c2: np.ndarray):
-        K = np.stack([self.frames[self.ref[p]][0] for p in pat])
+        if self._K is None:                           # the frames stacked once, indexed per cell
+            refs = sorted(set(self.ref))
+            self._K = np.stack([self.frames[a][0] for a in refs])
+            self._slot = np.array([refs.index(a) for a in self.ref], dtype=int)
+        K = self._K[self._slot[pat]]
         return evaluate_cells(K, c2, self.forced[pat], self.need[pat], qc, r)
 
     def world(self, p: int, qc: np.ndarray, X0: np.ndarray):
@@ -249,28 +262,30 @@ def cell_lower_bound(C, x, c2, X0, order, ub_fn, meets, offer, deadline, max_cel
         P0 = np.einsum("nij,j->ni", C, np.append(X0, 1.0))
         d2_direct = np.sum((P0[:, :2] / P0[:, 2:] - x) ** 2, axis=1)
     if not frame_agrees(C, x, X0, d2_direct, int(order[0])):
+        log.debug("cell search refused: the frame of view %d disagrees with the direct distances", int(order[0]))
         return None
     pats = _Patterns(C, x, c2, X0, order, ub_fn(), meets)
     if not pats.ok:
+        log.debug("cell search refused: a pattern's inverse depth is unbounded (or its reference singular)")
         return None
     floor = min(pats.floor, float(np.sum(c2) - np.max(c2)) * MARGIN_REL)   # X with at most one inlier
+    rule = _Threshold(meets, ub_fn)
     heap, tick = [], 0
     n_pat = len(pats.roots)
     if n_pat:
         pat = np.arange(n_pat)
         qc = np.array([q for q, _ in pats.roots])
         r = np.array([rr for _, rr in pats.roots])
-        bound, fc, dim = pats.evaluate(pat, qc, r, c2)
-        floor, tick = _push(heap, tick, floor, pat, qc, r, bound, dim, meets, ub_fn)
+        bound, _, dim = pats.evaluate(pat, qc, r, c2)
+        floor, tick = _push(heap, tick, floor, pat, qc, r, bound, dim, rule)
     cells = n_pat
     while heap:
         if cells >= max_cells or deadline.expired:
             break
+        t, ub = rule.threshold(), ub_fn()
         batch = [heapq.heappop(heap) for _ in range(min(BATCH, len(heap)))]
-        keep = [it for it in batch if not meets(it[0])]
-        for it in batch:
-            if meets(it[0]) and it[0] < ub_fn():
-                floor = min(floor, it[0])
+        keep = [it for it in batch if it[0] < t]
+        floor = min([floor] + [it[0] for it in batch if t <= it[0] < ub])
         if not keep:
             continue
         pat = np.repeat([it[2] for it in keep], 2)
@@ -283,25 +298,51 @@ def cell_lower_bound(C, x, c2, X0, order, ub_fn, meets, offer, deadline, max_cel
         bound, fc, dim = pats.evaluate(pat, qc, r, c2)
         cells += len(pat)
         best = int(np.argmin(fc))
-        if fc[best] < ub_fn() * (1 - 1e-9):
+        if fc[best] < ub * (1 - 1e-9):
             offer(pats.world(int(pat[best]), qc[best], X0))
-        floor, tick = _push(heap, tick, floor, pat, qc, r, bound, dim, meets, ub_fn)
+        floor, tick = _push(heap, tick, floor, pat, qc, r, bound, dim, rule)
     open_lb = heap[0][0] if heap else math.inf
     log.debug("cell search: %d cells, %d open, floor %.6g, open %.6g, UB %.6g", cells, len(heap), floor, open_lb,
               ub_fn())
     return min(ub_fn(), floor, open_lb)
 
 
-def _push(heap, tick, floor, pat, qc, r, bound, dim, meets, ub_fn):
+class _Threshold:
+    """The pruning rule as a threshold: ``meets`` is monotone in the bound for a fixed UB, so the least bound that
+    meets (bisection, cached per UB) decides every cell with one comparison."""
+
+    def __init__(self, meets, ub_fn):
+        self.meets, self.ub_fn, self.ub, self.t = meets, ub_fn, None, math.inf
+
+    def threshold(self) -> float:
+        ub = self.ub_fn()
+        if ub != self.ub:
+            self.ub, self.t = ub, self._search(ub)
+        return self.t
+
+    def _search(self, ub: float) -> float:
+        if not math.isfinite(ub):
+            return math.inf
+        if self.meets(0.0):
+            return 0.0
+        lo, hi = 0.0, ub                                  # meets(lo) False, meets(hi) True (lb >= UB)
+        for _ in range(80):
+            mid = 0.5 * (lo + hi)
+            if not lo < mid < hi:
+                break
+            lo, hi = (lo, mid) if self.meets(mid) else (mid, hi)
+        return hi
+
+
+def _push(heap, tick, floor, pat, qc, r, bound, dim, rule):
     """Push the cells that do not meet UB; the others lower the floor (if below UB)."""
-    ub = ub_fn()
-    for j in range(len(pat)):
-        b = float(bound[j])
-        if meets(b):
-            if b < ub:
-                floor = min(floor, b)
-            continue
-        heapq.heappush(heap, (b, tick, int(pat[j]), qc[j].copy(), r[j].copy(), int(dim[j])))
+    t, ub = rule.threshold(), rule.ub_fn()
+    met = bound >= t
+    below = met & (bound < ub)
+    if np.any(below):
+        floor = min(floor, float(np.min(bound[below])))
+    for j in np.nonzero(~met)[0]:
+        heapq.heappush(heap, (float(bound[j]), tick, int(pat[j]), qc[j], r[j], int(dim[j])))
         tick += 1
     return floor, tick
 

@@ -106,9 +106,10 @@ def test_cell_lower_bound_below_enumerated_optimum(seed, image_scale, shift):
                 best[0] = min(best[0], f_tls(C, x, c, X)[0])
 
         order = np.argsort(f_tls(C, x, c, X0)[1] / c)
-        lb = RC.cell_lower_bound(C, x, c * c, X0, order, lambda: best[0], lambda lb: lb >= best[0], offer,
-                                 Deadline.after(60))
-        assert lb is not None
+        res = RC.cell_lower_bound(C, x, c * c, X0, order, lambda: best[0], lambda lb: lb >= best[0] * (1 - 1e-7), offer,
+                                  Deadline.after(60))
+        assert res is not None and not res.exhausted and res.cells > 0
+        lb = res.lb
         assert lb <= ref * (1 + 1e-12)
         assert lb <= best[0]                            # an offered value is attained (the reference's
         #                                                 scipy minimiser is coarse at georeferenced coordinates)
@@ -163,3 +164,24 @@ def test_cells_off_is_the_inlier_set_search(monkeypatch):
     assert on.optimal and 40 * on.gamma_lb ** 2 <= ref * (1 + 1e-12)
     assert 40 * off.gamma_lb ** 2 <= ref * (1 + 1e-12)
     assert off.gamma_lb <= on.gamma_lb
+
+
+def test_exhausted_cell_budget_stops_with_valid_bounds(monkeypatch):
+    """A cell search cut by its budget stops the call (not_certified, 'cell budget', no inlier-set nodes) with a
+    lower bound still below the attained reference."""
+    rng = np.random.default_rng(7)
+    P, obs, _, _ = robust_protocol_scene(25, 0, 1.0, rng)
+    monkeypatch.setattr(RC, "MAX_CELLS", 300)
+    monkeypatch.setattr(RC, "cell_lower_bound", _with_budget(RC.cell_lower_bound))
+    r = tritools.triangulate(P, obs, robust=2.0, time_limit=60)
+    assert not r.optimal and r.status == tritools.Status.NOT_CERTIFIED
+    assert "cell budget" in r.message and ", 0 nodes" in r.message
+    ref = _multistart(P, obs, 2.0, r.X, np.random.default_rng(2))
+    assert 50 * r.gamma_lb ** 2 <= ref * (1 + 1e-12) and r.gamma_lb <= r.gamma_ub
+
+
+def _with_budget(fn):
+    def call(*args, **kw):
+        kw["max_cells"] = RC.MAX_CELLS
+        return fn(*args, **kw)
+    return call

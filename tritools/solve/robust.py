@@ -461,9 +461,11 @@ class TlsSearch(NodeBounds):
             self.loo_lb = max(self.loo_lb, (yield from robust_suspects.cover_bound(self)))   # many wrong matches
         lb, stopped = max(self.root_bound() if self.bounds.known(frozenset(range(self.N))) else 0.0,
                           self.loo_lb), None
-        if not self.meets(lb):                   # point regions: the cells of candidate points (robust_cells)
-            lb = max(lb, robust_cells.search_bound(self))
-        if not self.meets(lb) and robust_futile.blocks(self):
+        cells = None if self.meets(lb) else robust_cells.search_bound(self)    # point regions (robust_cells)
+        lb = lb if cells is None else max(lb, cells.lb)
+        if not self.meets(lb) and cells is not None and cells.exhausted:
+            stopped = robust_cells.BUDGET_NAME        # lb (root / leave-one-out / cells) stays valid
+        elif not self.meets(lb) and robust_futile.blocks(self):
             stopped = robust_futile.FUTILE          # lb (root / leave-one-out) stays valid
         elif not self.meets(lb):
             order = branching_order(self.residuals(self.best_X) / self.c)

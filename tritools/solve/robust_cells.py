@@ -46,12 +46,13 @@ from __future__ import annotations
 import heapq
 import logging
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
 from ..model.normalize import RESOLUTION_REL
 
-__all__ = ["search_bound", "cell_lower_bound", "frame", "w_bound", "evaluate_cells", "MAX_CELLS", "BATCH", "ENABLED"]
+__all__ = ["search_bound", "cell_lower_bound", "CellBound", "BUDGET_NAME", "frame", "w_bound", "evaluate_cells", "MAX_CELLS", "BATCH", "ENABLED"]
 
 log = logging.getLogger(__name__)
 
@@ -59,6 +60,9 @@ log = logging.getLogger(__name__)
 ENABLED = True
 #: cells evaluated at most per call (a failing search stops there: not_certified, valid bounds).
 MAX_CELLS = 60000
+#: the name of that stop in a result's message ("stopped by the cell budget"): the inlier-set search is then not
+#: tried (where the cells cannot close it has not closed either in any measured case, at 8-12 s a call).
+BUDGET_NAME = "cell budget"
 #: cells split per vectorised step.
 BATCH = 64
 #: every cell bound is multiplied by this (the frame's and the evaluation's round-off, ~1e-13 relative).
@@ -252,7 +256,8 @@ def frame_agrees(C, x, X0, d2_direct: np.ndarray, a: int) -> bool:
 
 
 def cell_lower_bound(C, x, c2, X0, order, ub_fn, meets, offer, deadline, max_cells: int = MAX_CELLS):
-    """A valid lower bound of f_TLS* (module docstring), or None where the patterns cannot be bounded.
+    """A valid lower bound of f_TLS* (module docstring) as a :class:`CellBound`, or None where the patterns cannot be
+    bounded.
 
     ``ub_fn()`` gives the current best value, ``meets(lb)`` the caller's pruning rule, ``offer(X)`` takes a candidate
     (it may lower ub_fn()), ``deadline`` stops the search (bound then from the open cells)."""
@@ -304,7 +309,16 @@ def cell_lower_bound(C, x, c2, X0, order, ub_fn, meets, offer, deadline, max_cel
     open_lb = heap[0][0] if heap else math.inf
     log.debug("cell search: %d cells, %d open, floor %.6g, open %.6g, UB %.6g", cells, len(heap), floor, open_lb,
               ub_fn())
-    return min(ub_fn(), floor, open_lb)
+    return CellBound(min(ub_fn(), floor, open_lb), cells, bool(heap) and cells >= max_cells)
+
+
+@dataclass(frozen=True)
+class CellBound:
+    """The cell search's outcome: its lower bound of f_TLS*, the cells evaluated, and whether it stopped at
+    :data:`MAX_CELLS` with cells open (the search then cannot close with its budget)."""
+    lb: float
+    cells: int
+    exhausted: bool
 
 
 class _Threshold:
@@ -347,17 +361,17 @@ def _push(heap, tick, floor, pat, qc, r, bound, dim, rule):
     return floor, tick
 
 
-def search_bound(search) -> float:
-    """The cell bound of a :class:`tritools.solve.robust.TlsSearch` with point regions (0.0 where it does not apply:
+def search_bound(search) -> CellBound | None:
+    """The cell bound of a :class:`tritools.solve.robust.TlsSearch` with point regions (None where it does not apply:
     other regions, :data:`ENABLED` off, no candidate, or patterns that cannot be bounded)."""
     if not (ENABLED and search.points and search.best_X is not None and search.N >= 3):
-        return 0.0
+        return None
     with np.errstate(all="ignore"):
         ratio = np.sqrt(search.sq_distances(search.best_X)) / search.c
     order = np.argsort(np.where(np.isfinite(ratio), ratio, np.inf), kind="stable")
     lb = cell_lower_bound(search.C, search.x, search.c2, search.best_X, order, lambda: search.best_f,
                           _strict_rule(search), search.offer, search.deadline)
-    return 0.0 if lb is None else float(lb)
+    return lb
 
 
 def _strict_rule(search):

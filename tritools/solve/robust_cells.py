@@ -185,6 +185,10 @@ class _Patterns:
         self.ok = True
         self._K = self._slot = None
         for pb in range(1, self.N):
+            least = float(np.sum(pos_c2[:pb]) - np.max(pos_c2[:pb]))     # no pattern from pb on costs less
+            if meets(least * MARGIN_REL):
+                self.floor = min(self.floor, least * MARGIN_REL)
+                break
             for pa in range(pb):
                 cost = float(np.sum(pos_c2[:pb]) - pos_c2[pa])
                 if meets(cost * MARGIN_REL):

@@ -50,6 +50,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..model.exact import homogeneous_images
 from ..model.normalize import RESOLUTION_REL
 
 __all__ = ["search_bound", "cell_lower_bound", "CellBound", "BUDGET_NAME", "frame", "w_bound", "evaluate_cells", "MAX_CELLS", "BATCH", "ENABLED"]
@@ -79,8 +80,8 @@ def frame(C: np.ndarray, x: np.ndarray, X0: np.ndarray, a: int):
     """(K (N, 3, 4), T (4, 4)) of reference view a (module docstring): h_i = K_i (u, v, 1, w) in images translated to
     x_i = 0, and X~ - (X0, 0) w = T (u, v, 1, w) in the world translated to X0.  None if M_a is singular."""
     Pt = C.copy()
-    Pt[:, :2, :] -= x[:, :, None] * C[:, 2:3, :]            # P'_i: image translated to x_i = 0
-    Pt[:, :, 3] += Pt[:, :, :3] @ X0                        # world translated to X0
+    Pt[:, :, 3] = homogeneous_images(C, np.append(X0, 1.0))  # world translated to X0 (compensated: georeferenced)
+    Pt[:, :2, :] -= x[:, :, None] * Pt[:, 2:3, :]           # P'_i: image translated to x_i = 0
     M = Pt[a, :, :3]
     try:
         Minv = np.linalg.inv(M)
@@ -268,7 +269,7 @@ def cell_lower_bound(C, x, c2, X0, order, ub_fn, meets, offer, deadline, max_cel
     C, x, c2, X0 = np.asarray(C, float), np.asarray(x, float), np.asarray(c2, float), np.asarray(X0, float)
     N = len(C)
     with np.errstate(all="ignore"):
-        P0 = np.einsum("nij,j->ni", C, np.append(X0, 1.0))
+        P0 = homogeneous_images(C, np.append(X0, 1.0))
         d2_direct = np.sum((P0[:, :2] / P0[:, 2:] - x) ** 2, axis=1)
     if not frame_agrees(C, x, X0, d2_direct, int(order[0])):
         log.debug("cell search refused: the frame of view %d disagrees with the direct distances", int(order[0]))

@@ -23,6 +23,7 @@ CELL = r"""
 import json, sys, time
 import numpy as np
 import tritools
+assert tritools.__file__.startswith(sys.argv[2]), (tritools.__file__, sys.argv[2])
 from tritools.scene import robust_protocol_scene
 N, n_out, noise, c, trials, limit = json.loads(sys.argv[1])
 rng = np.random.default_rng(7)
@@ -39,7 +40,8 @@ print(json.dumps(out))
 def run_cell(tree: str, N: int, frac: float, noise: float, c: float, trials: int, limit: float) -> list:
     env = dict(os.environ, PYTHONPATH=os.path.abspath(tree), OPENBLAS_NUM_THREADS="1")
     arg = json.dumps([N, int(round(frac * N)), noise, c, trials, limit])
-    res = subprocess.run([sys.executable, "-c", CELL, arg], env=env, capture_output=True, text=True, check=True)
+    res = subprocess.run([sys.executable, "-c", CELL, arg, os.path.abspath(tree)], env=env, capture_output=True, text=True, check=True,
+                         cwd=os.path.abspath(tree))              # sys.path[0] = cwd: the tree, not the caller's
     return json.loads(res.stdout.strip().splitlines()[-1])
 
 

@@ -119,7 +119,10 @@ def _box_ls(a: np.ndarray, L: np.ndarray, m: np.ndarray, r: np.ndarray) -> np.nd
     g = np.einsum("bnjk,bnj->bk", Lm, am)
     reg = 1e-12 * (np.trace(A, axis1=1, axis2=2) + 1e-300)
     with np.errstate(all="ignore"):
-        d = -np.linalg.solve(A + reg[:, None, None] * np.eye(3), g[..., None])[..., 0]
+        try:                                             # any delta gives a valid bound: this one is near the best
+            d = -np.linalg.solve(A + reg[:, None, None] * np.eye(3), g[..., None])[..., 0]
+        except np.linalg.LinAlgError:
+            d = np.zeros_like(g)
         d = np.where(np.isfinite(d), d, 0.0)
         d = np.clip(d, -r, r)
         diag = np.einsum("bkk->bk", A)

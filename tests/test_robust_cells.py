@@ -188,3 +188,15 @@ def _with_budget(fn):
         kw["max_cells"] = RC.MAX_CELLS
         return fn(*args, **kw)
     return call
+
+
+def test_batch_certifies_tight_tracks_like_single_calls():
+    rng = np.random.default_rng(3)
+    probs = [robust_protocol_scene(25, 2, 1.0, rng)[:2] for _ in range(2)]
+    many = tritools.triangulate_many(probs, robust=2.0, progress=False)
+    for (P, obs), r in zip(probs, many):
+        one = tritools.triangulate(P, obs, robust=2.0)
+        assert r.optimal and one.optimal
+        assert r.gamma_ub == pytest.approx(one.gamma_ub, rel=1e-9)
+        np.testing.assert_array_equal(r.inliers, one.inliers)
+        assert 50 * r.gamma_lb ** 2 <= _multistart(P, obs, 2.0, r.X, np.random.default_rng(3)) * (1 + 1e-12)

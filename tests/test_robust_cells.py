@@ -200,3 +200,15 @@ def test_batch_certifies_tight_tracks_like_single_calls():
         assert r.gamma_ub == pytest.approx(one.gamma_ub, rel=1e-9)
         np.testing.assert_array_equal(r.inliers, one.inliers)
         assert 50 * r.gamma_lb ** 2 <= _multistart(P, obs, 2.0, r.X, np.random.default_rng(3)) * (1 + 1e-12)
+
+
+def test_frame_check_accepts_the_frame_and_rejects_other_distances():
+    C, x, Xt, _ = outlier_track(6, 1, 9)
+    from tritools.model.exact import homogeneous_images
+    h = homogeneous_images(C, np.append(Xt, 1.0))
+    d2 = np.sum((h[:, :2] / h[:, 2:] - x) ** 2, axis=1)
+    fr = RC.frame(C, x, Xt, 2)
+    assert RC.frame_agrees(fr, d2)
+    assert not RC.frame_agrees(fr, d2 * (1 + 1e-6))
+    K, _ = fr
+    np.testing.assert_allclose(K[2, :, :3], np.eye(3), atol=1e-12)     # the reference's image is (u, v, 1)

@@ -33,8 +33,9 @@ from the clipped least-squares solution; exact at the box minimiser).  The bound
 cell size where the inlier set is decided, so cells close around a non-degenerate optimum.
 
 Floating point.  The frame is built once in float64; the bound is multiplied by :data:`MARGIN_REL` and the frame
-is checked on the best candidate (its d_i^2 from K against the direct ones, :data:`FRAME_CHECK_REL`): a frame
-that disagrees refuses the bound.  The reported gamma_LB is lowered further by the report's round-off rule
+of every reference view is checked on the best candidate (its d_i^2 from K against the direct, compensated
+ones, :data:`FRAME_CHECK_REL`): a frame that disagrees is not used (its patterns try the other view, else the bound
+is refused).  The reported gamma_LB is lowered further by the report's round-off rule
 (:mod:`tritools.solve.robust_report`).
 
 The search is best first, :data:`BATCH` cells split per vectorised step, within :data:`MAX_CELLS` cells and the
@@ -179,8 +180,9 @@ def evaluate_cells(K: np.ndarray, c2: np.ndarray, forced: np.ndarray, need: np.n
 class _Patterns:
     """The patterns (a, b) of one problem (module docstring): frames, forced outliers, root cells."""
 
-    def __init__(self, C, x, c2, X0, order, ub, meets):
+    def __init__(self, C, x, c2, X0, order, ub, meets, d2_direct=None):
         self.N = len(C)
+        self.d2_direct = d2_direct                    # the frames' check (frame_agrees), None: unchecked
         c = np.sqrt(c2)
         pos_c2 = c2[order]
         self.frames, self.ref = {}, []
@@ -220,7 +222,11 @@ class _Patterns:
         (module docstring); None when neither bounds w (both centres project within c of the other's point)."""
         for ref, other in ((a, b), (b, a)):
             if ref not in self.frames:
-                self.frames[ref] = frame(C, x, X0, ref)
+                fr = frame(C, x, X0, ref)
+                ok = fr is not None and (self.d2_direct is None or frame_agrees(fr, self.d2_direct))
+                if fr is not None and not ok:
+                    log.debug("cell search: the frame of view %d disagrees with the direct distances", ref)
+                self.frames[ref] = fr if ok else None
             if self.frames[ref] is None or not math.isfinite(c[ref]):
                 continue
             W = w_bound(self.frames[ref][0][other], c[other], c[ref])
@@ -246,11 +252,9 @@ class _Patterns:
         return X if np.all(np.isfinite(X)) else None
 
 
-def frame_agrees(C, x, X0, d2_direct: np.ndarray, a: int) -> bool:
-    """The frame of view a reproduces sum_i d_i^2 at the best candidate (q = (u0, v0, 1, 1/lambda))."""
-    fr = frame(C, x, X0, a)
-    if fr is None:
-        return False
+def frame_agrees(fr, d2_direct: np.ndarray) -> bool:
+    """A frame (K, T) reproduces sum_i d_i^2 at the best candidate X0 (q = T^-1 (0, 0, 0, 1)) within
+    :data:`FRAME_CHECK_REL` of the direct (compensated) distances."""
     K, T = fr
     q = np.linalg.solve(T, np.array([0.0, 0.0, 0.0, 1.0]))      # X0 itself: X~ - X0 w = (0, 0, 0, w)
     if not abs(q[2]) > 0:
@@ -274,12 +278,9 @@ def cell_lower_bound(C, x, c2, X0, order, ub_fn, meets, offer, deadline, max_cel
     with np.errstate(all="ignore"):
         P0 = homogeneous_images(C, np.append(X0, 1.0))
         d2_direct = np.sum((P0[:, :2] / P0[:, 2:] - x) ** 2, axis=1)
-    if not frame_agrees(C, x, X0, d2_direct, int(order[0])):
-        log.debug("cell search refused: the frame of view %d disagrees with the direct distances", int(order[0]))
-        return None
-    pats = _Patterns(C, x, c2, X0, order, ub_fn(), meets)
+    pats = _Patterns(C, x, c2, X0, order, ub_fn(), meets, d2_direct)
     if not pats.ok:
-        log.debug("cell search refused: a pattern's inverse depth is unbounded (or its reference singular)")
+        log.debug("cell search refused: a pattern's inverse depth is unbounded (or its frames fail)")
         return None
     floor = min(pats.floor, float(np.sum(c2) - np.max(c2)) * MARGIN_REL)   # X with at most one inlier
     rule = _Threshold(meets, ub_fn)

@@ -169,16 +169,17 @@ def test_cells_off_is_the_inlier_set_search(monkeypatch):
     assert off.gamma_lb <= on.gamma_lb
 
 
-def test_exhausted_cell_budget_stops_with_valid_bounds(monkeypatch):
-    """A cell search cut by its budget stops the call (not_certified, 'cell budget', no inlier-set nodes) with a
-    lower bound still below the attained reference."""
+def test_exhausted_cell_budget_leaves_a_short_inlier_set_search(monkeypatch):
+    """A cell search cut by its budget leaves the inlier-set search FALLBACK_NODES nodes (not MAX_NODES): the call
+    stops by the node budget, not_certified, with a lower bound still below the attained reference."""
     rng = np.random.default_rng(7)
     P, obs, _, _ = robust_protocol_scene(25, 0, 1.0, rng)
     monkeypatch.setattr(RC, "MAX_CELLS", 300)
+    monkeypatch.setattr(RC, "FALLBACK_NODES", 20)
     monkeypatch.setattr(RC, "cell_lower_bound", _with_budget(RC.cell_lower_bound))
     r = tritools.triangulate(P, obs, robust=2.0, time_limit=60)
     assert not r.optimal and r.status == tritools.Status.NOT_CERTIFIED
-    assert "cell budget" in r.message and ", 0 nodes" in r.message
+    assert "node budget" in r.message and ", 20 nodes" in r.message
     ref = _multistart(P, obs, 2.0, r.X, np.random.default_rng(2))
     assert 50 * r.gamma_lb ** 2 <= ref * (1 + 1e-12) and r.gamma_lb <= r.gamma_ub
 
@@ -212,3 +213,24 @@ def test_frame_check_accepts_the_frame_and_rejects_other_distances():
     assert not RC.frame_agrees(fr, d2 * (1 + 1e-6))
     K, _ = fr
     np.testing.assert_allclose(K[2, :, :3], np.eye(3), atol=1e-12)     # the reference's image is (u, v, 1)
+
+
+def test_patterns_force_every_view_before_the_second_inlier_but_the_first():
+    """Also where the pattern's reference is swapped to its second inlier (the paper's 4-view example: view 2's
+    w range is unbounded by view 1, so view 1 is the reference of the pattern of first inliers 2, 1)."""
+    cams, regs = tritools.paper_example(4)
+    x = np.array([r.x for r in regs])
+    X0 = tritools.triangulate(cams, regs, robust=1.0).X
+    h = np.einsum("nij,j->ni", cams, np.append(X0, 1.0))
+    order = np.argsort(np.linalg.norm(h[:, :2] / h[:, 2:] - x, axis=1))
+    pats = RC._Patterns(cams, x, np.ones(4), X0, order, 2.2, lambda lb: lb >= 2.2)
+    pos = {int(v): k for k, v in enumerate(order)}
+    swapped = 0
+    for p in range(len(pats.roots)):
+        a, b = sorted(np.nonzero(pats.need[p])[0].tolist(), key=pos.get)
+        expect = np.zeros(4, bool)
+        expect[[v for v in order[:pos[b]] if v != a]] = True
+        np.testing.assert_array_equal(pats.forced[p], expect)
+        assert pats.ref[p] in (a, b)
+        swapped += pats.ref[p] == b
+    assert swapped >= 1

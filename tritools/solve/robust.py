@@ -202,6 +202,7 @@ class TlsSearch(NodeBounds):
         self._absC2 = None                           # |third rows| of the cameras (point_distances2_one)
         self.drows = None                           # depth rows of the cameras (report; a batch sets them)
         self.futile_leaf = None                     # (inlier set, its leaf bound) that fired the rule
+        self.max_nodes = MAX_NODES                  # the search's node budget (smaller after an exhausted cell search)
         self.covered = set()                        # suspect sets O whose cover bound was taken (robust_suspects)
 
     @property
@@ -395,7 +396,7 @@ class TlsSearch(NodeBounds):
         floor = math.inf                            # min bound of nodes pruned below UB / leaves left open
         stopped = None
         while stack:
-            if self.nodes >= self.bounds.node_budget(MAX_NODES):      # smaller with coplanar centres
+            if self.nodes >= self.bounds.node_budget(self.max_nodes):  # smaller with coplanar centres
                 stopped = self.bounds.node_budget_name
                 break
             if self.deadline.expired:
@@ -463,9 +464,9 @@ class TlsSearch(NodeBounds):
                           self.loo_lb), None
         cells = None if self.meets(lb) else robust_cells.search_bound(self)    # point regions (robust_cells)
         lb = lb if cells is None else max(lb, cells.lb)
-        if not self.meets(lb) and cells is not None and cells.exhausted:
-            stopped = robust_cells.BUDGET_NAME        # lb (root / leave-one-out / cells) stays valid
-        elif not self.meets(lb) and robust_futile.blocks(self):
+        # where the cells could not close, the inlier-set search gets a short budget (it closes small cases they miss)
+        self.max_nodes = robust_cells.FALLBACK_NODES if cells is not None and cells.exhausted else MAX_NODES
+        if not self.meets(lb) and robust_futile.blocks(self):
             stopped = robust_futile.FUTILE          # lb (root / leave-one-out) stays valid
         elif not self.meets(lb):
             order = branching_order(self.residuals(self.best_X) / self.c)

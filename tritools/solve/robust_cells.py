@@ -54,7 +54,7 @@ import numpy as np
 from ..model.exact import homogeneous_images
 from ..model.normalize import RESOLUTION_REL
 
-__all__ = ["search_bound", "cell_lower_bound", "CellBound", "BUDGET_NAME", "frame", "w_bound", "evaluate_cells", "MAX_CELLS", "BATCH", "ENABLED"]
+__all__ = ["search_bound", "cell_lower_bound", "CellBound", "FALLBACK_NODES", "frame", "w_bound", "evaluate_cells", "MAX_CELLS", "BATCH", "ENABLED"]
 
 log = logging.getLogger(__name__)
 
@@ -62,9 +62,10 @@ log = logging.getLogger(__name__)
 ENABLED = True
 #: cells evaluated at most per call (a failing search stops there: not_certified, valid bounds).
 MAX_CELLS = 60000
-#: the name of that stop in a result's message ("stopped by the cell budget"): the inlier-set search is then not
-#: tried (where the cells cannot close it has not closed either in any measured case, at 8-12 s a call).
-BUDGET_NAME = "cell budget"
+#: after a cell search stopped by :data:`MAX_CELLS`, the inlier-set search runs with this node budget (instead of
+#: :data:`tritools.solve.robust.MAX_NODES`): it closes some small problems the cells miss (the paper's 4-view example
+#: at c = 1 px: 15 nodes), while a tight long track it cannot close fails in about a second, not 8-12 s.
+FALLBACK_NODES = 300
 #: cells split per vectorised step.
 BATCH = 64
 #: every cell bound is multiplied by this (the frame's and the evaluation's round-off, ~1e-13 relative).
@@ -205,16 +206,16 @@ class _Patterns:
                 if ref is None:
                     self.ok = False
                     return
-                a, W = ref
+                view, W = ref                           # the reference: a, or b where only b bounds w
                 f = np.zeros(self.N, bool)
                 f[order[:pb]] = True
-                f[a] = False
+                f[a] = False                            # the forced outliers: every view before b but a
                 n = np.zeros(self.N, bool)
-                n[[int(order[pa]), b]] = True
-                self.ref.append(a)
+                n[[a, b]] = True
+                self.ref.append(view)
                 self.forced.append(f)
                 self.need.append(n)
-                self.roots.append((np.zeros(3), np.array([c[a], c[a], W])))
+                self.roots.append((np.zeros(3), np.array([c[view], c[view], W])))
         self.forced, self.need = np.array(self.forced).reshape(-1, self.N), np.array(self.need).reshape(-1, self.N)
 
     def _reference(self, C, x, c, X0, a: int, b: int):

@@ -275,7 +275,6 @@ def cell_lower_bound(C, x, c2, X0, order, ub_fn, meets, offer, deadline, max_cel
     ``ub_fn()`` gives the current best value, ``meets(lb)`` the caller's pruning rule, ``offer(X)`` takes a candidate
     (it may lower ub_fn()), ``deadline`` stops the search (bound then from the open cells)."""
     C, x, c2, X0 = np.asarray(C, float), np.asarray(x, float), np.asarray(c2, float), np.asarray(X0, float)
-    N = len(C)
     with np.errstate(all="ignore"):
         P0 = homogeneous_images(C, np.append(X0, 1.0))
         d2_direct = np.sum((P0[:, :2] / P0[:, 2:] - x) ** 2, axis=1)

@@ -170,8 +170,9 @@ def test_cells_off_is_the_inlier_set_search(monkeypatch):
 
 
 def test_exhausted_cell_budget_leaves_a_short_inlier_set_search(monkeypatch):
-    """A cell search cut by its budget leaves the inlier-set search FALLBACK_NODES nodes (not MAX_NODES): the call
-    stops by the node budget, not_certified, with a lower bound still below the attained reference."""
+    """A cell search cut by its budget leaves the inlier-set search FALLBACK_NODES nodes (not MAX_NODES) up to
+    FALLBACK_MAX_VIEWS views and none beyond: the call stops by the node budget, not_certified, with a lower bound
+    still below the attained reference."""
     rng = np.random.default_rng(7)
     P, obs, _, _ = robust_protocol_scene(25, 0, 1.0, rng)
     monkeypatch.setattr(RC, "MAX_CELLS", 300)
@@ -179,7 +180,10 @@ def test_exhausted_cell_budget_leaves_a_short_inlier_set_search(monkeypatch):
     monkeypatch.setattr(RC, "cell_lower_bound", _with_budget(RC.cell_lower_bound))
     r = tritools.triangulate(P, obs, robust=2.0, time_limit=60)
     assert not r.optimal and r.status == tritools.Status.NOT_CERTIFIED
-    assert "node budget" in r.message and ", 20 nodes" in r.message
+    assert "node budget" in r.message and ", 0 nodes" in r.message          # 25 views: no fallback search
+    monkeypatch.setattr(RC, "FALLBACK_MAX_VIEWS", 30)
+    r = tritools.triangulate(P, obs, robust=2.0, time_limit=60)
+    assert not r.optimal and "node budget" in r.message and ", 20 nodes" in r.message
     ref = _multistart(P, obs, 2.0, r.X, np.random.default_rng(2))
     assert 50 * r.gamma_lb ** 2 <= ref * (1 + 1e-12) and r.gamma_lb <= r.gamma_ub
 

@@ -465,7 +465,7 @@ class TlsSearch(NodeBounds):
         cells = None if self.meets(lb) else robust_cells.search_bound(self)    # point regions (robust_cells)
         lb = lb if cells is None else max(lb, cells.lb)
         # where the cells could not close, the inlier-set search gets a short budget (it closes small cases they miss)
-        self.max_nodes = robust_cells.FALLBACK_NODES if cells is not None and cells.exhausted else MAX_NODES
+        self.max_nodes = robust_cells.fallback_nodes(self.N) if cells is not None and cells.exhausted else MAX_NODES
         if not self.meets(lb) and robust_futile.blocks(self):
             stopped = robust_futile.FUTILE          # lb (root / leave-one-out) stays valid
         elif not self.meets(lb):

@@ -54,7 +54,7 @@ import numpy as np
 from ..model.exact import homogeneous_images
 from ..model.normalize import RESOLUTION_REL
 
-__all__ = ["search_bound", "cell_lower_bound", "CellBound", "FALLBACK_NODES", "frame", "w_bound", "evaluate_cells", "MAX_CELLS", "BATCH", "ENABLED"]
+__all__ = ["search_bound", "cell_lower_bound", "CellBound", "FALLBACK_NODES", "fallback_nodes", "frame", "w_bound", "evaluate_cells", "MAX_CELLS", "BATCH", "ENABLED"]
 
 log = logging.getLogger(__name__)
 
@@ -62,10 +62,19 @@ log = logging.getLogger(__name__)
 ENABLED = True
 #: cells evaluated at most per call (a failing search stops there: not_certified, valid bounds).
 MAX_CELLS = 60000
-#: after a cell search stopped by :data:`MAX_CELLS`, the inlier-set search runs with this node budget (instead of
-#: :data:`tritools.solve.robust.MAX_NODES`): it closes some small problems the cells miss (the paper's 4-view example
-#: at c = 1 px: 15 nodes), while a tight long track it cannot close fails in about a second, not 8-12 s.
+#: and at most this many view-cells (cells times views), so that a long track fails in about the same time.
+MAX_VIEW_CELLS = 2_400_000
+#: after a cell search stopped by its budget, the inlier-set search runs with this node budget (instead of
+#: :data:`tritools.solve.robust.MAX_NODES`) on problems of at most :data:`FALLBACK_MAX_VIEWS` views, with none beyond:
+#: it closes some small problems the cells miss (the paper's 4-view example at c = 1 px: 15 nodes), while a tight long
+#: track it cannot close fails in a second or two, not 8-12 s (N = 100, c = 2 sigma: 300 nodes took 4 s more).
 FALLBACK_NODES = 300
+FALLBACK_MAX_VIEWS = 12
+
+
+def fallback_nodes(n_views: int) -> int:
+    """The inlier-set search's node budget after an exhausted cell search (:data:`FALLBACK_NODES`)."""
+    return FALLBACK_NODES if n_views <= FALLBACK_MAX_VIEWS else 0
 #: cells split per vectorised step.
 BATCH = 64
 #: every cell bound is multiplied by this (the frame's and the evaluation's round-off, ~1e-13 relative).
@@ -379,7 +388,8 @@ def search_bound(search) -> CellBound | None:
         ratio = np.sqrt(search.sq_distances(search.best_X)) / search.c
     order = np.argsort(np.where(np.isfinite(ratio), ratio, np.inf), kind="stable")
     lb = cell_lower_bound(search.C, search.x, search.c2, search.best_X, order, lambda: search.best_f,
-                          _strict_rule(search), search.offer, search.deadline)
+                          _strict_rule(search), search.offer, search.deadline,
+                          max_cells=min(MAX_CELLS, MAX_VIEW_CELLS // max(search.N, 1)))
     return lb
 
 

@@ -140,14 +140,19 @@ def tls_of(P, obs, X, c2):
 
 
 @pytest.mark.parametrize("N,scale", [(10, 1.0), (20, 1.0), (10, 1e-3), (10, 1e3)])
-def test_robust_clean_in_plane_stops_at_the_ceiling(N, scale):
+def test_robust_clean_in_plane_stops_at_the_ceiling(N, scale, monkeypatch):
     """Robust c = 4 px, clean, z = 0 (N = 20 was 647 nodes, ~1900 sub-problems, 25-73 s CPU): the best inlier set's
-    bound sits on its ceiling, so the search stops before its first node; status not_certified with the reason, the
-    lower bound below the TLS cost of the multi-start reference point, the estimate as good as the reference.  The
-    same at pixel scales 1e-3 and 1e3 (K, noise and threshold scaled together)."""
+    bound sits on its ceiling, so the search over inlier sets stops before its first node; status not_certified with
+    the reason, the lower bound below the TLS cost of the multi-start reference point, the estimate as good as the
+    reference.  The same at pixel scales 1e-3 and 1e3 (K, noise and threshold scaled together).  The cells of
+    candidate points (tritools.solve.robust_cells: no L2 relaxation, so no ceiling) certify the same tracks, their
+    bound below the reference."""
     K = np.diag([scale, scale, 1.0]) @ PROTOCOL_K
     P, obs, X = scene(N, 6, K=K, noise=scale)
     c = 4.0 * scale
+    cells = tritools.triangulate(P, obs, robust=c)
+    from tritools.solve import robust_cells
+    monkeypatch.setattr(robust_cells, "ENABLED", False)
     res = tritools.triangulate(P, obs, robust=c)
     assert res.status == tritools.Status.NOT_CERTIFIED and COPLANAR_BUDGET_NAME in res.message
     assert n_nodes(res) == 0
@@ -157,6 +162,9 @@ def test_robust_clean_in_plane_stops_at_the_ceiling(N, scale):
     tls_ref = tls_of(P, obs, X_ref, c * c)
     assert 2 * N * res.gamma_lb ** 2 <= tls_ref * (1 + 1e-9)
     assert 2 * N * res.gamma_ub ** 2 <= tls_ref * (1 + 1e-6)
+    assert cells.optimal, cells.message
+    assert 2 * N * cells.gamma_lb ** 2 <= tls_ref * (1 + 1e-9)
+    assert 2 * N * cells.gamma_ub ** 2 <= tls_ref * (1 + 1e-6)
 
 
 @pytest.mark.parametrize("seed", range(2))
@@ -259,10 +267,13 @@ def test_nearly_coplanar_centres(jitter, fires):
         assert centre_plane(P) is not None
 
 
-def test_robust_nearly_coplanar_handed_back_subsets_stay_cheap():
+def test_robust_nearly_coplanar_handed_back_subsets_stay_cheap(monkeypatch):
     """Heights jittered by 1e-6, N = 20, clean, c = 4 px: the batched SDP hands the large subsets back (no delta = 2
     bound); they are solved from delta = 2 where the ceiling rule stops them (was: the delta = 4 step on each,
-    45-57 s CPU and the time limit).  Bounded sub-problem count, the reason named, the bound below the reference."""
+    45-57 s CPU and the time limit).  Bounded sub-problem count, the reason named, the bound below the reference.
+    (The inlier-set search itself: the cells, tritools.solve.robust_cells, switched off.)"""
+    from tritools.solve import robust_cells
+    monkeypatch.setattr(robust_cells, "ENABLED", False)
     N = 20
     rng = np.random.default_rng(0)
     P = turntable_cameras(N, rng, jitter=1e-6)

@@ -39,7 +39,10 @@ by the cover f_TLS* >= min(min_{j in O} LB(node {j}), c^2(O) + TLS*(V - O)) (:mo
 valid for any O), from the pairs holding O and V - O's own bounds, before the pairs and the search; after the
 candidate stage the same cover is taken with O the best candidate's outliers, of any number, and V - O bounded by
 the group bound (:mod:`tritools.solve.robust_loo`: every outlier of V - O charged).  The search stops early when a
-leaf's bound is exhausted below UB (:mod:`tritools.solve.robust_futile`: certification out of reach).
+leaf's bound is exhausted below UB (:mod:`tritools.solve.robust_futile`: certification out of reach).  Before the search over inlier
+sets, point problems try the branch and bound over cells of candidate points (:mod:`tritools.solve.robust_cells`:
+patterns of the first two inliers, a second-order bound per cell), which closes where thresholds of 2-3 sigma
+leave many near-optimal inlier sets.
 
 Search: an upper bound first -- the full L2 estimate, the L2 estimate of every view pair (at most
 :data:`MAX_PAIRS`, sampled beyond) and local optimisation from the best few (inlier set -> L2 estimate
@@ -76,7 +79,7 @@ from ..result import Attempt, Status, TriangulationResult
 from .decide import cheirality
 from .report import PointReport, point_report
 from .trivial import local_estimate
-from . import robust_bounds, robust_futile, robust_suspects
+from . import robust_bounds, robust_cells, robust_futile, robust_suspects
 from .robust_bounds import ROUND_DOWN, SubsetBounds
 from .robust_drive import drive
 from .robust_loo import leave_one_out
@@ -205,6 +208,7 @@ class TlsSearch(NodeBounds):
         self._absC2 = None                           # |third rows| of the cameras (point_distances2_one)
         self.drows = None                           # depth rows of the cameras (report; a batch sets them)
         self.futile_leaf = None                     # (inlier set, its leaf bound) that fired the rule
+        self.max_nodes = MAX_NODES                  # the search's node budget (smaller after an exhausted cell search)
         self.covered = set()                        # suspect sets O whose cover bound was taken (robust_suspects)
 
     @property
@@ -398,7 +402,7 @@ class TlsSearch(NodeBounds):
         floor = math.inf                            # min bound of nodes pruned below UB / leaves left open
         stopped = None
         while stack:
-            if self.nodes >= self.bounds.node_budget(MAX_NODES):      # smaller with coplanar centres
+            if self.nodes >= self.bounds.node_budget(self.max_nodes):  # smaller with coplanar centres
                 stopped = self.bounds.node_budget_name
                 break
             if self.deadline.expired:
@@ -464,6 +468,10 @@ class TlsSearch(NodeBounds):
             self.loo_lb = max(self.loo_lb, (yield from robust_suspects.cover_bound(self)))   # many wrong matches
         lb, stopped = max(self.root_bound() if self.bounds.known(frozenset(range(self.N))) else 0.0,
                           self.loo_lb), None
+        cells = None if self.meets(lb) else robust_cells.search_bound(self)    # point regions (robust_cells)
+        lb = lb if cells is None else max(lb, cells.lb)
+        # where the cells could not close, the inlier-set search gets a short budget (it closes small cases they miss)
+        self.max_nodes = robust_cells.fallback_nodes(self.N) if cells is not None and cells.exhausted else MAX_NODES
         if not self.meets(lb) and robust_futile.blocks(self):
             stopped = robust_futile.FUTILE          # lb (root / leave-one-out) stays valid
         elif not self.meets(lb):

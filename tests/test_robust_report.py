@@ -73,7 +73,7 @@ def test_far_off_axis_points_are_not_certified_and_keep_valid_bounds():
         g_best = float(np.sqrt(float(f_best) / 6))              # achievable: >= gamma*
         for c, r in runs:
             assert not r.optimal, (k, c, r.status, r.gamma_lb, r.gamma_ub)
-            assert r.gamma_lb <= g_best, (k, c, r.gamma_lb, g_best)
+            assert r.gamma_lb is None or r.gamma_lb <= g_best, (k, c, r.gamma_lb, g_best)
             assert "cannot certify" in r.message or r.status != tritools.Status.OPTIMAL
 
 

@@ -60,6 +60,14 @@ log = logging.getLogger(__name__)
 
 #: the cell search is tried (False: the inlier-set search alone; the tests compare the two).
 ENABLED = True
+#: the cells run from this many views: below it every inlier set is enumerated first (tritools.solve.robust_enum_run,
+#: up to 8 views) and the scenes the branch and bound still gets are those whose L2 sub-bounds are weak (trifocal
+#: planes), where the cells' box bounds do not close either and cost ~0.35 s each (measured: batches of 3-view
+#: tracks at 5 px, 9.9 ms per point with the cells against 1.1 ms without, every point certified either way)
+MIN_VIEWS = 9
+#: ... and up to this many: the patterns' set-up and their root cells cost ~N^3 before the first deadline check (a
+#: 200-view track spent 3 s past a 1 s limit there), and from ~100 views the cell budget runs out anyway
+MAX_VIEWS = 100
 #: cells evaluated at most per call (a failing search stops there: not_certified, valid bounds).
 MAX_CELLS = 60000
 #: and at most this many view-cells (cells times views), so that a long track fails in about the same time.
@@ -288,6 +296,8 @@ def cell_lower_bound(C, x, c2, X0, order, ub_fn, meets, offer, deadline, max_cel
         P0 = homogeneous_images(C, np.append(X0, 1.0))
         d2_direct = np.sum((P0[:, :2] / P0[:, 2:] - x) ** 2, axis=1)
     pats = _Patterns(C, x, c2, X0, order, ub_fn(), meets, d2_direct)
+    if deadline.expired:
+        return None
     if not pats.ok:
         log.debug("cell search refused: a pattern's inverse depth is unbounded (or its frames fail)")
         return None
@@ -382,7 +392,8 @@ def _push(heap, tick, floor, pat, qc, r, bound, dim, rule):
 def search_bound(search) -> CellBound | None:
     """The cell bound of a :class:`tritools.solve.robust.TlsSearch` with point regions (None where it does not apply:
     other regions, :data:`ENABLED` off, no candidate, or patterns that cannot be bounded)."""
-    if not (ENABLED and search.points and search.best_X is not None and search.N >= 3):
+    if not (ENABLED and search.points and search.best_X is not None and MIN_VIEWS <= search.N <= MAX_VIEWS) \
+            or search.deadline.expired:
         return None
     with np.errstate(all="ignore"):
         ratio = np.sqrt(search.sq_distances(search.best_X)) / search.c

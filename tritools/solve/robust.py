@@ -200,6 +200,7 @@ class TlsSearch(NodeBounds):
         self._scale = None                               # decision_scale, computed when first needed
         self.tol = opts.tolerances
         self.best_X, self.best_f, self.best_S = None, math.inf, frozenset()
+        self.cells_decided = False              # the certificate rests on the compensated cells (run)
         self.points = self.bounds.points
         self.x = self.bounds.x
         self.nodes = 0
@@ -469,6 +470,9 @@ class TlsSearch(NodeBounds):
         lb, stopped = max(self.root_bound() if self.bounds.known(frozenset(range(self.N))) else 0.0,
                           self.loo_lb), None
         cells = None if self.meets(lb) else robust_cells.search_bound(self)    # point regions (robust_cells)
+        # the cells' bound comes from compensated frames (robust_cells.frame): a certificate resting on it is not
+        # judged by the search's own plain-arithmetic value (robust_report.search_drift)
+        self.cells_decided = cells is not None and cells.lb > lb and self.meets(cells.lb)
         lb = lb if cells is None else max(lb, cells.lb)
         # where the cells could not close, the inlier-set search gets a short budget (it closes small cases they miss)
         self.max_nodes = robust_cells.fallback_nodes(self.N) if cells is not None and cells.exhausted else MAX_NODES
@@ -488,7 +492,8 @@ class TlsSearch(NodeBounds):
         rep = self.report(X)
         certified = bool(self.tol.certified(lb, ub, self.scale))     # lb is valid also when the search stopped
         told = tls_reported(self.C, self.x if self.points else np.array([r.center for r in self.regions]),
-                            None if self.points else rep.residuals, X, self.c, lb, self.tol, certified, ub,
+                            None if self.points else rep.residuals, X, self.c, lb, self.tol, certified,
+                            None if self.cells_decided else ub,
                             None if self.points else self.regions)
         inliers = told.inliers
         if not certified and stopped is None:   # the deadline cut a step short, or a sub-problem hit the memory budget

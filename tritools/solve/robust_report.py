@@ -88,7 +88,7 @@ def tls_reported(C: np.ndarray, centres: np.ndarray, residuals, X, c: np.ndarray
 
 #: the search's value at its estimate may differ from the compensated f_TLS by at most this fraction of the decision
 #: rule's gap_rel (relative to f_TLS) before its bounds are distrusted (:func:`search_drift`)
-SEARCH_DRIFT_REL = 10.0
+SEARCH_DRIFT_REL = 0.1
 
 
 def search_drift(res: np.ndarray, c: np.ndarray, f_search: float | None, f_ub: float) -> float:

@@ -54,6 +54,6 @@ def test_robust_time_limit_on_a_200_view_track_with_wrong_matches(monkeypatch):
     r = tritools.triangulate(Ps, xs, robust=2.0, time_limit=limit)
     cpu = time.process_time() - c0
     assert r.status == tritools.Status.TIME_LIMIT, (r.status, r.message)
-    assert cpu <= 1.1 * limit + 0.8, cpu        # 0.6 s measured; 2.6 s before (an estimate of the steps, not a timing)
+    assert cpu <= 1.1 * limit + 1.5, cpu        # 1.2 s alone, 2.1 s in a loaded full run; 20+ s with a 140-view SDP
     assert 0.0 <= r.gamma_lb <= r.gamma_ub
     assert all(n <= rb.SDP_STACK_MAX_VIEWS for n in sizes), sizes

@@ -41,12 +41,18 @@ def gamma_upper(res, u_norm, cap=None):
     res = np.asarray(res, float)
     n = res.shape[-1]
     with np.errstate(invalid="ignore", over="ignore"):
-        d = res * (1.0 + 4 * _U) + _PROJ_ABS * np.asarray(u_norm, float)
+        d = enlarged_distances(res, u_norm)
         if cap is not None:
             d = np.minimum(d, cap)
         f = np.sum(d * d, axis=-1) * (1.0 + (n + 4) * _U)
         g = np.where(np.isfinite(f), np.sqrt(f / (2.0 * n)) * (1.0 + 4 * _U), np.inf)
     return g.item() if g.ndim == 0 else g
+
+
+def enlarged_distances(res, u_norm) -> np.ndarray:
+    """Upper bounds of the exact distances: the float distances ``res`` (..., N) enlarged by their round-off bound,
+    ``res (1 + 4u) + _PROJ_ABS |u_i|`` (:func:`gamma_upper`'s rule; ``u_norm`` the projections' norms)."""
+    return np.asarray(res, float) * (1.0 + 4 * _U) + _PROJ_ABS * np.asarray(u_norm, float)
 
 
 def rounding_spread(C: np.ndarray, X: np.ndarray) -> float:

@@ -52,9 +52,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..model.exact import homogeneous_images
-from ..model.normalize import RESOLUTION_REL
+from .robust_report import coordinate_resolution, guards_pass, threshold_resolution
 
-__all__ = ["search_bound", "cell_lower_bound", "CellBound", "FALLBACK_NODES", "fallback_nodes", "frame", "w_bound", "evaluate_cells", "MAX_CELLS", "BATCH", "ENABLED"]
+__all__ = ["search_bound", "cell_lower_bound", "CellBound", "FALLBACK_NODES", "fallback_nodes", "frame", "w_bound",
+           "evaluate_cells", "MAX_CELLS", "BATCH", "ENABLED", "MIN_VIEWS", "MAX_VIEWS"]
 
 log = logging.getLogger(__name__)
 
@@ -408,9 +409,8 @@ def _strict_rule(search):
     """The pruning rule of the cells: the search's rule, and the gap within :data:`STRICT` of the report's own guards
     (relative gap_rel, or the coordinates' resolution in gamma, :mod:`tritools.solve.robust_report`): a bound that
     met only the search's absolute part would be refused there."""
-    a = np.sort(np.abs(search.x), axis=None)
-    resolution = RESOLUTION_REL * max(1.0, float(0.5 * (a[(a.size - 1) // 2] + a[a.size // 2])))
-    rel, two_n = STRICT * search.tol.gap_rel, 2.0 * search.N
+    N, tol = search.N, search.tol
+    resolved = min(coordinate_resolution(search.x), threshold_resolution(search.c, N, tol))
 
     def meets(lb: float) -> bool:
         ub = search.best_f
@@ -418,5 +418,5 @@ def _strict_rule(search):
             return True
         if not search.meets(lb):
             return False
-        return ub - lb <= rel * ub or math.sqrt(ub / two_n) - math.sqrt(max(lb, 0.0) / two_n) <= STRICT * resolution
+        return guards_pass(math.sqrt(max(lb, 0.0) / (2 * N)), math.sqrt(ub / (2 * N)), N, tol, resolved, STRICT)
     return meets

@@ -29,7 +29,7 @@ import numpy as np
 from ..model.normalize import RESOLUTION_REL
 from ..model.stacked import norms
 from .decide import gamma_from_c, gamma_lower
-from .report import _PROJ_ABS, _U, gamma_upper, projections_and_spread
+from .report import enlarged_distances, gamma_upper, projections_and_spread
 
 __all__ = ["TlsReported", "tls_reported"]
 
@@ -59,15 +59,14 @@ def tls_reported(C: np.ndarray, centres: np.ndarray, residuals, X, c: np.ndarray
     res = np.where(np.isfinite(residuals), residuals, np.inf)
     g_ub = float(gamma_upper(np.where(np.isfinite(res), res, c), norms(np.where(np.isfinite(u), u, 0.0), axis=1),
                              cap=c))
-    a = np.sort(np.abs(centres), axis=None)
-    resolution = RESOLUTION_REL * max(1.0, float(0.5 * (a[(a.size - 1) // 2] + a[a.size // 2])))   # median
+    resolution = coordinate_resolution(centres)
     # lowered by the normalisation's round-off and by the estimate's rounding spread: bounds from a normalised frame
     # describe the caller's float problem only to that spread (a 6-view track 4.5e8 px off-axis: spread 0.06 px,
     # the frame's bound 7e-4 px above an achievable value)
     g_lb = max(0.0, float(gamma_lower(gamma_from_c(max(lb, 0.0), N, 1.0), g_ub, 1.0, resolution)) - spread)
     g_lb = min(g_lb, g_ub)
     holds, reason = certified, ""
-    f_lb, f_ub = 2.0 * N * g_lb * g_lb, 2.0 * N * g_ub * g_ub
+    f_ub = 2.0 * N * g_ub * g_ub
     resolved = min(resolution, threshold_resolution(c, N, tolerances))
     drift = search_drift(res, c, f_search, f_ub)
     if not spread <= resolution:         # no bound from a normalised frame is known to hold
@@ -76,14 +75,28 @@ def tls_reported(C: np.ndarray, centres: np.ndarray, residuals, X, c: np.ndarray
                  f"({resolution:.3g} px): the float data cannot certify this optimum"
     elif not drift <= SEARCH_DRIFT_REL * tolerances.gap_rel:
         holds, g_lb = False, 0.0
-        reason = f"the search's own value at its estimate differs from the compensated one by {drift:.2g} (relative): " \
-                 "its arithmetic lost digits to cancellation (a georeferenced or rescaled frame), so its bounds are " \
-                 "not trusted"
-    elif certified and not (tolerances.certified_relatively(f_lb, f_ub) or g_ub - g_lb <= resolved):
+        reason = f"the search's own value at its estimate differs from the compensated one by {drift:.2g} " \
+                 "(relative): its arithmetic lost digits to cancellation (a georeferenced or rescaled frame), so its " \
+                 "bounds are not trusted"
+    elif certified and not guards_pass(g_lb, g_ub, N, tolerances, resolved):
         holds, reason = False, "the bounds met on the search's scale, but their gap exceeds the coordinates' " \
                                f"resolution ({resolved:.3g} px, at most the thresholds' own scale)"
     inliers = inlier_mask(C, X, centres, res, c, u, exact=points_given, regions=regions)
     return TlsReported(g_lb, g_ub if math.isfinite(g_ub) else math.inf, residuals, inliers, holds, reason)
+
+
+def coordinate_resolution(centres: np.ndarray) -> float:
+    """The coordinates' resolution in pixels: ``RESOLUTION_REL`` max(1, median |x|) over the centres' coordinates."""
+    a = np.sort(np.abs(centres), axis=None)
+    return RESOLUTION_REL * max(1.0, float(0.5 * (a[(a.size - 1) // 2] + a[a.size // 2])))
+
+
+def guards_pass(g_lb: float, g_ub: float, N: int, tolerances, resolved: float, share: float = 1.0) -> bool:
+    """The reported numbers' gap guard (module docstring), within ``share`` of it: the relative part of the rule on
+    f = 2N gamma^2, or a gamma gap within ``resolved`` (the coordinates' resolution capped by the thresholds' scale,
+    :func:`threshold_resolution`).  The cells prune with a share of it (:mod:`tritools.solve.robust_cells`)."""
+    f_lb, f_ub = 2.0 * N * g_lb * g_lb, 2.0 * N * g_ub * g_ub
+    return f_ub - f_lb <= share * tolerances.gap_rel * abs(f_ub) or g_ub - g_lb <= share * resolved
 
 
 #: the search's value at its estimate may differ from the compensated f_TLS by at most this fraction of the decision
@@ -120,15 +133,15 @@ def threshold_resolution(c: np.ndarray, N: int, tolerances) -> float:
 
 def inlier_mask(C: np.ndarray, X, points: np.ndarray, res: np.ndarray, c: np.ndarray, u: np.ndarray,
                 exact: bool, regions=None) -> np.ndarray:
-    """(N,) bool, d_i(X) < c_i.  The float distances ``res`` err by at most ``res 4u + _PROJ_ABS |u_i|``
-    (:func:`tritools.solve.report.gamma_upper`); where |res_i - c_i| is within that margin and the regions are
+    """(N,) bool, d_i(X) < c_i.  The float distances ``res`` err by at most their enlargement in
+    :func:`tritools.solve.report.enlarged_distances`; where |res_i - c_i| is within that margin and the regions are
     points (``exact``), the comparison is made exactly in rational arithmetic on the float data and X (rare: a
     distance at the threshold to ~1e-13 relative, or thresholds below the round-off, review 8 F2).  For other regions
     such a view is an outlier (gamma_UB counts it c_i^2; review 8 F1b: Segments at c = 1e-150 px were inliers by
     float distances of 0 whose exact values are ~1e-14 px)."""
     inl = res < c
     with np.errstate(invalid="ignore", over="ignore"):
-        margin = res * (4 * _U) + _PROJ_ABS * np.linalg.norm(np.where(np.isfinite(u), u, 0.0), axis=1)
+        margin = enlarged_distances(res, np.linalg.norm(np.where(np.isfinite(u), u, 0.0), axis=1)) - res
         ambiguous = np.isfinite(res) & np.isfinite(c) & (np.abs(res - c) <= margin)
     if not exact:                       # other regions: an undecided view is an outlier, as gamma_UB counts it,
         inl &= ~ambiguous               # unless the projection is inside its region with all of its margin

@@ -144,26 +144,27 @@ def _inside(search, O: frozenset):
     order = sorted(W, key=lambda u: (r[u] if np.isfinite(r[u]) else np.inf, u)) + sorted(O)
     for part in (order[:PAIRS_FIRST], order[PAIRS_FIRST:]):
         yield from search.verify_first(*[frozenset((j, u)) for j in sorted(O) for u in part if u != j])
-        inside = _min_inlier_nodes(search, O)
+        nodes = _inlier_nodes(search, O)
+        inside = min(nodes.values()) if nodes is not None else 0.0
         if search.meets(inside):
             break
-    if search.meets(inside) or len(O) > MAX_SUSPECTS:
+    if search.meets(inside) or len(O) > MAX_SUSPECTS or nodes is None:
         return inside
-    return max(inside, (yield from _kept_nodes(search, O)))
+    return max(inside, (yield from _kept_nodes(search, nodes)))
 
 
-def _kept_nodes(search, O: frozenset):
-    """Generator: min_{j in O} LB(node {j}) with each node's pair bound raised by the group bound of all views over
-    the X that keep j an inlier (:func:`tritools.solve.robust_loo.kept_bound`: min(L2LB(V), the group terms that
-    leave j in)).  The pairs alone cannot bound a suspect whose own threshold is far below the others' (review 8
-    F4: one view at c_j = half its L2 residual on a clean 30-view track): keeping j in costs the L2 of all views,
-    which the pairs do not see; 0 where the deadline cut it short."""
+def _kept_nodes(search, nodes: dict):
+    """Generator: min_{j} LB(node {j}) over the suspects' pair bounds ``nodes`` (j -> bound), each one that does not
+    meet raised by the group bound of all views over the X that keep j an inlier
+    (:func:`tritools.solve.robust_loo.kept_bound`: min(L2LB(V), the group terms that leave j in)).  The pairs alone
+    cannot bound a suspect whose own threshold is far below the others' (review 8 F4: one view at c_j = half its L2
+    residual on a clean 30-view track): keeping j in costs the L2 of all views, which the pairs do not see; 0 where
+    the deadline cut it short."""
     V = frozenset(range(search.N))
     best = math.inf
-    for j in sorted(O):
+    for j, node in sorted(nodes.items()):
         if search.deadline.expired:
             return 0.0
-        node = _inlier_node(search, j)
         if not search.meets(node):
             node = max(node, (yield from kept_bound(search, V, frozenset((j,)), 0.0)))
         best = min(best, node)
@@ -172,15 +173,15 @@ def _kept_nodes(search, O: frozenset):
     return best
 
 
-def _min_inlier_nodes(search, O: frozenset) -> float:
-    """min_{j in O} LB(node {j}); 0 (valid) once the search's deadline has passed (each node bound looks at the
-    pairs of j: ~N^2 work over the suspects, seconds at N = 200 with many suspects, review 8 F1)."""
-    best = math.inf
+def _inlier_nodes(search, O: frozenset) -> dict | None:
+    """{j: LB(node {j})} for the suspects O; None once the search's deadline has passed (each node bound looks at
+    the pairs of j: ~N^2 work over the suspects, seconds at N = 200 with many suspects, review 8 F1)."""
+    nodes = {}
     for j in sorted(O):
         if search.deadline.expired:
-            return 0.0
-        best = min(best, _inlier_node(search, j))
-    return best
+            return None
+        nodes[j] = _inlier_node(search, j)
+    return nodes
 
 
 def cover(search, O: frozenset):

@@ -5,10 +5,11 @@ it meets Clarabel's own "almost solved" rule (``ipm_almost_solved``); the refere
 Clarabel on the same conic program, and a multi-start bounded least squares over X for the optimum.
 """
 import dataclasses
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
-from scipy.optimize import least_squares
 
 import sospoly
 import tritools
@@ -22,21 +23,13 @@ INACCURATE = dataclasses.replace(sospoly.DEFAULT_TOLERANCES, accept_inaccurate=T
 GAP = INACCURATE.gap_rel / IPM_ALMOST_GAP_SHARE      # the IPM's gap when its stalled iterate is taken
 
 
-def _reference_gamma(cams, regions, X0, starts=12, seed=0):
-    """An attained gamma (>= the optimum): least squares over X with exact distances to the regions."""
-    rng = np.random.default_rng(seed)
+def _reference_gamma(cams, regions, X0):
+    """An attained gamma (>= the optimum): the manyview benchmark's multi-start least squares over X with exact
+    distances to the regions (benchmarks/manyview.py:reference_gamma), 12 starts."""
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+    import manyview
 
-    def residuals(X):
-        h = cams @ np.append(X, 1.0)
-        p = h[:, :2] / h[:, 2:]
-        return np.concatenate([p[i] - regions[i].closest_point(p[i]) for i in range(len(regions))])
-
-    best = np.inf
-    for k in range(starts):
-        r = least_squares(residuals, np.asarray(X0, float) + rng.normal(scale=0.02 * (1 + k), size=3), xtol=1e-14,
-                          ftol=1e-14, gtol=1e-14, max_nfev=400)
-        best = min(best, float(np.sqrt(np.mean(r.fun ** 2))))
-    return best
+    return manyview.reference_gamma(cams, regions, X0, starts=12)
 
 
 @pytest.fixture(scope="module")

@@ -3,6 +3,7 @@ import numpy as np
 import pytest
 
 import tritools
+from tritools.scene import random_cameras
 from tritools.solve import robust_rays as rr
 
 
@@ -80,20 +81,6 @@ def test_two_views_tls_optimum_is_min_of_l2_and_thresholds():
     assert int(np.sum(res.inliers)) == 1
 
 
-def _look_at(n, rng, radius=10.0, focal=800.0):
-    Ps = []
-    for _ in range(n):
-        v = rng.normal(size=3)
-        v /= np.linalg.norm(v)
-        z = -v
-        x = np.cross(rng.normal(size=3), z)
-        x /= np.linalg.norm(x)
-        R = np.stack([x, np.cross(z, x), z])
-        K = np.array([[focal, 0, 320.0], [0, focal, 240.0], [0, 0, 1.0]])
-        Ps.append(K @ np.hstack([R, (-R @ (radius * v))[:, None]]))
-    return np.array(Ps)
-
-
 @pytest.mark.parametrize("seed", [0, 1, 2, 3])
 def test_a_free_ray_optimum_in_a_georeferenced_world_is_placed_in_the_scene(seed):
     """Review 8 F3: c below the noise, so the optimum is any point of one view's ray (value 2 c^2); a world shifted by
@@ -101,7 +88,7 @@ def test_a_free_ray_optimum_in_a_georeferenced_world_is_placed_in_the_scene(seed
     projection beyond the coordinates' resolution).  Among equal values the depth nearest the scene is taken: the
     shifted problem certifies the origin problem's value."""
     rng = np.random.default_rng(seed)
-    Ps = _look_at(3, rng)
+    Ps = random_cameras(3, rng)
     X = rng.normal(size=3)
     h = np.einsum("nij,j->ni", Ps, np.append(X, 1.0))
     xs = h[:, :2] / h[:, 2:] + rng.normal(size=(3, 2))

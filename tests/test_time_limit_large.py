@@ -9,22 +9,13 @@ import numpy as np
 import tritools
 import tritools.solve.robust_bounds as rb
 from sospoly.budget import Deadline
+from tritools.scene import random_cameras
 from tritools.solve.fastpath import all_pairs_seconds, fits
 
 
 def _long_track(N=200, wrong=60, seed=4):
     rng = np.random.default_rng(seed)
-    Ps = []
-    for _ in range(N):
-        v = rng.normal(size=3)
-        v /= np.linalg.norm(v)
-        z = -v
-        x = np.cross(rng.normal(size=3), z)
-        x /= np.linalg.norm(x)
-        R = np.stack([x, np.cross(z, x), z])
-        K = np.array([[800.0, 0, 320.0], [0, 800.0, 240.0], [0, 0, 1]])
-        Ps.append(K @ np.hstack([R, (-R @ (10 * v))[:, None]]))
-    Ps = np.array(Ps)
+    Ps = random_cameras(N, rng)
     X = rng.normal(size=3)
     h = np.einsum("nij,j->ni", Ps, np.append(X, 1.0))
     xs = h[:, :2] / h[:, 2:] + rng.normal(size=(N, 2))

@@ -137,7 +137,8 @@ def _multistart(P, obs, c, X_extra, rng):
     return best
 
 
-@pytest.mark.parametrize("N,c,n_out,shift", [(25, 2.0, 0, 0.0), (25, 2.0, 3, 0.0), (20, 3.0, 4, 0.0), (20, 2.0, 0, 1e8)])
+@pytest.mark.parametrize("N,c,n_out,shift", [(25, 2.0, 0, 0.0), (25, 2.0, 3, 0.0), (20, 3.0, 4, 0.0),
+                                             (20, 2.0, 0, 1e8)])
 def test_tight_threshold_long_track_certified(N, c, n_out, shift):
     """Also in a georeferenced world (shift 1e8): the same problem, its reference from the local frame."""
     rng = np.random.default_rng(7)

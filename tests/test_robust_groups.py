@@ -18,7 +18,8 @@ import tritools
 import tritools.solve.robust_loo as rl
 from tritools.scene import random_scene, robust_protocol_scene
 from tritools.solve.robust import TlsSearch, tls_cost
-from tests.robust_refs import assert_lb_below, assert_same_tls, drive_one, l2_min, outlier_track, primed_search, tls_by_subsets
+from tests.robust_refs import (assert_lb_below, assert_same_tls, drive_one, l2_min, outlier_track, primed_search,
+                               tls_by_subsets)
 
 
 def _dist(cams, x, X):

@@ -63,8 +63,8 @@ def test_cheap_paths_equal_the_plain_path_and_the_enumeration(seed, monkeypatch)
     N = 8
     cams, x, X = _sphere_scene(N, 3, np.random.default_rng(seed))
     c = np.full(N, 200.0)
-    monkeypatch.setattr(enum_mod, "ENUM_MAX_VIEWS", 0)
-    monkeypatch.setattr(robust_cells, "ENABLED", False)      # the inlier-set search itself (robust_cells)         # the branch and bound's sub-bounds (robust_enum: N <= 8)
+    monkeypatch.setattr(enum_mod, "ENUM_MAX_VIEWS", 0)         # the branch and bound's sub-bounds (robust_enum: N <= 8)
+    monkeypatch.setattr(robust_cells, "ENABLED", False)      # the inlier-set search itself (robust_cells)
     sdp_rows = []
     real = rb._sdp_stack
     monkeypatch.setattr(rb, "_sdp_stack", lambda C, x_, o, d=None: sdp_rows.append(len(C)) or real(C, x_, o, d))
@@ -90,8 +90,8 @@ def test_leave_one_out_root_bound(seed, monkeypatch):
     inlier set and value as the plain path, every bound against the enumeration."""
     cams, x, X = _scene(7, 0, seed)
     c = np.full(7, 3.0)
-    monkeypatch.setattr(enum_mod, "ENUM_MAX_VIEWS", 0)
-    monkeypatch.setattr(robust_cells, "ENABLED", False)      # the inlier-set search itself (robust_cells)         # the branch and bound's root (robust_enum: N <= 8)
+    monkeypatch.setattr(enum_mod, "ENUM_MAX_VIEWS", 0)         # the branch and bound's root (robust_enum: N <= 8)
+    monkeypatch.setattr(robust_cells, "ENABLED", False)      # the inlier-set search itself (robust_cells)
     fast = tritools.triangulate(cams, x, robust=c)
     monkeypatch.setattr(rb, "PACKING", False)
     plain = tritools.triangulate(cams, x, robust=c)

@@ -198,7 +198,8 @@ def test_search_drift_distrusts_a_search_whose_own_value_is_off():
     f_true = float(_f_tls_exact(P, x, cth, X))
     ok = tls_reported(P, x, None, X, cth, f_true * (1 - 1e-9), tol, True, f_true)
     assert ok.holds and ok.gamma_lb > 0
-    off = tls_reported(P, x, None, X, cth, f_true * (1 - 1e-9), tol, True, f_true * (1 + 20 * SEARCH_DRIFT_REL * tol.gap_rel))
+    drifted = f_true * (1 + 20 * SEARCH_DRIFT_REL * tol.gap_rel)
+    off = tls_reported(P, x, None, X, cth, f_true * (1 - 1e-9), tol, True, drifted)
     assert not off.holds and off.gamma_lb == 0.0 and "cancellation" in off.reason
 
 

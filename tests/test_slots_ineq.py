@@ -1,7 +1,5 @@
 """DataSlots.ineq_polynomials: the inequalities of DataSlots.polynomials without building every equality (the
 rigorous bound of a 30-view program read its few inequalities by rebuilding ~450 polynomials)."""
-import numpy as np
-
 import sospoly
 from sospoly import variables
 

@@ -171,8 +171,8 @@ def _opt_float(value, name: str) -> float | None:
         raise ValueError(f"{name} must be a real number or None, got {value!r}") from exc
 
 
-#: statuses whose lower bound is not trusted: a result with one of them carries gamma_lb = None (docs/getting-started.md:
-#: "no trustworthy bound at all"); gamma_ub, the value at an actual X, stays
+#: statuses whose lower bound is not trusted: a result with one of them carries gamma_lb = None
+#: (docs/getting-started.md: "no trustworthy bound at all"); gamma_ub, the value at an actual X, stays
 UNTRUSTED_LOWER = frozenset({Status.SOLVER_FAILED, Status.NUMERICAL_FAILURE, Status.ILL_POSED})
 
 
@@ -268,7 +268,7 @@ class TriangulationResult:
         for name in ("gamma_ub", "gamma_lb", "gamma_ub_raw"):
             set_(self, name, _opt_float(getattr(self, name), name))
         if status in UNTRUSTED_LOWER and self.gamma_lb is not None:
-            set_(self, "gamma_lb", None)    # no trustworthy bound (review 8b F6: ill_posed carried 340 px for a 1.3 px optimum)
+            set_(self, "gamma_lb", None)    # no trustworthy bound (review 8b F6: 340 px for a 1.3 px optimum)
         for name in ("optimal", "in_front"):
             if getattr(self, name) is not None:
                 set_(self, name, bool(getattr(self, name)))

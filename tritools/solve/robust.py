@@ -39,10 +39,10 @@ by the cover f_TLS* >= min(min_{j in O} LB(node {j}), c^2(O) + TLS*(V - O)) (:mo
 valid for any O), from the pairs holding O and V - O's own bounds, before the pairs and the search; after the
 candidate stage the same cover is taken with O the best candidate's outliers, of any number, and V - O bounded by
 the group bound (:mod:`tritools.solve.robust_loo`: every outlier of V - O charged).  The search stops early when a
-leaf's bound is exhausted below UB (:mod:`tritools.solve.robust_futile`: certification out of reach).  Before the search over inlier
-sets, point problems try the branch and bound over cells of candidate points (:mod:`tritools.solve.robust_cells`:
-patterns of the first two inliers, a second-order bound per cell), which closes where thresholds of 2-3 sigma
-leave many near-optimal inlier sets.
+leaf's bound is exhausted below UB (:mod:`tritools.solve.robust_futile`: certification out of reach).  Before the
+search over inlier sets, point problems try the branch and bound over cells of candidate points
+(:mod:`tritools.solve.robust_cells`: patterns of the first two inliers, a second-order bound per cell), which closes
+where thresholds of 2-3 sigma leave many near-optimal inlier sets.
 
 Search: an upper bound first -- the full L2 estimate, the L2 estimate of every view pair (at most
 :data:`MAX_PAIRS`, sampled beyond) and local optimisation from the best few (inlier set -> L2 estimate
@@ -115,7 +115,8 @@ def robust_thresholds(robust, n_views: int) -> np.ndarray:
     """The thresholds c (N,) from ``robust=`` (a positive scalar or one per view, pixels; ``inf`` allowed).
     ValueError naming ``robust`` otherwise."""
     if isinstance(robust, (bool, np.bool_)) or isinstance(robust, (str, bytes)):
-        raise ValueError(f"robust must be a positive threshold in pixels (scalar or one per view), got {_short(robust)}")
+        raise ValueError("robust must be a positive threshold in pixels (scalar or one per view), "
+                         f"got {_short(robust)}")
     try:
         raw = np.asarray(robust)
         if raw.dtype.kind not in "iuf":                  # booleans, strings, objects (None), complex

@@ -31,7 +31,7 @@ import numpy as np
 
 from ..model.geometry import validate_cameras
 from ..model.regions import as_regions, require_extent
-from ..result import Status, TriangulationResult
+from ..result import Attempt, Status, TriangulationResult
 from .call_limit import call_limit, current_end, mark_cut, within
 from .robust import robust_thresholds, triangulate_robust
 
@@ -87,8 +87,6 @@ def settled_by_l2(res: TriangulationResult) -> TriangulationResult:
     gives it for the same problem (its root bound, the L2 bound of all views, settles it the same way, review 8 F8):
     method ``tls``, every view an inlier, certified by the branch and bound's root (0 nodes), one TLS attempt.  The
     numbers are the L2 certificate's (f_TLS = f_L2 at X, and TLS* = L2* there)."""
-    from ..result import Attempt
-
     n = len(res.residuals)
     total = float(res.timings.get("total", 0.0)) if res.timings else 0.0
     attempt = Attempt("tls", None, res.status.value, res.gamma_lb, res.gamma_ub, "branch-and-bound", None, (), total)

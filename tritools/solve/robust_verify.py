@@ -39,11 +39,11 @@ from ..model.normalize import normalization_stack
 from ..model.stacked import damped_step, dlt_stack, next_damping, project_stack
 from .fastpath import lagrangian_bounds
 
+__all__ = ["ParentFrame", "parent_frames", "frames_of", "verify_in_parent", "LM_STEPS", "LM_MORE"]
+
 #: subsets x views verified in one stacked call when a deadline is set (a 200-view track's leave-one-out subsets,
 #: 40,000 view rows, polished for 0.3 s past a 1 s limit in one call)
 CHUNK_VIEW_ROWS = 4096
-
-__all__ = ["ParentFrame", "parent_frames", "frames_of", "verify_in_parent", "LM_STEPS", "LM_MORE"]
 
 #: damped Gauss-Newton steps polishing the start of each subset (a warm start rarely needs more than 3-4).
 LM_STEPS = 6

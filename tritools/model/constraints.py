@@ -29,10 +29,11 @@ import numpy as np
 from sospoly import Polynomial
 from sospoly.budget import check_deadline
 
+from .exact import same_exact_centre
 from .geometry import fundamental_matrix
 
 __all__ = ["Method", "RANK_RTOL", "COEF_RTOL", "minors_matrix", "theorem1_constraints", "corollary1_constraints",
-           "triple_minor_constraints", "THEOREM1_DENSE_MAX_VIEWS", "centre_groups", "HOMOGRAPHY_RTOL",
+           "triple_minor_constraints", "THEOREM1_DENSE_MAX_VIEWS", "centre_groups",
            "CentreRelations", "centre_relations"]
 
 #: relative singular-value threshold for the numerical rank N2 of M1 (rows scaled to unit norm first).
@@ -125,19 +126,23 @@ def minors_matrix(cameras: np.ndarray, groups=None) -> tuple[np.ndarray, np.ndar
 @dataclass(frozen=True)
 class CentreRelations:
     """Which views share a camera centre, decided once on the caller's (raw) cameras: ``groups`` one label per
-    view (:func:`centre_groups`), ``coincident`` the pairs (i < j) of one group whose cameras are related by a
-    homography to round-off (:func:`_pair_homography`): their centres really coincide."""
+    view (:func:`centre_groups`), ``coincident`` the pairs (i < j) of one group whose centres coincide in exact
+    arithmetic or are admitted (:func:`centre_relations`); the other pairs of a group keep no constraint."""
     groups: np.ndarray
     coincident: frozenset
 
 
-def centre_relations(cameras: np.ndarray, groups=None) -> CentreRelations:
+def centre_relations(cameras: np.ndarray, groups=None, *, raw=None, admitted=frozenset()) -> CentreRelations:
     """:class:`CentreRelations` of ``cameras`` (N, 3, 4); ``groups`` the centre labels when already decided
-    (default :func:`centre_groups`)."""
+    (default :func:`centre_groups`).  A pair of one group is coincident when the caller's float cameras ``raw``
+    (default ``cameras``) share its centre exactly, or when it is in ``admitted`` (a round-off pair whose
+    micro-baseline ball is excluded, :func:`tritools.model.micro_baseline.admitted_pairs`)."""
     cameras = np.asarray(cameras, float)
+    raw = cameras if raw is None else np.asarray(raw, float)
     groups = centre_groups(cameras) if groups is None else np.asarray(groups)
     pairs = frozenset((i, j) for i, j in combinations(range(len(cameras)), 2)
-                      if groups[i] == groups[j] and _pair_homography(cameras[i], cameras[j]) is not None)
+                      if groups[i] == groups[j] and _pair_homography(cameras[i], cameras[j], check=False) is not None
+                      and ((i, j) in admitted or same_exact_centre(raw[i], raw[j])))
     return CentreRelations(groups, pairs)
 
 
@@ -291,24 +296,21 @@ def corollary1_constraints(cameras: np.ndarray, gens, x_index, pairs=None, relat
 
 def _pair_homography(Pi: np.ndarray, Pj: np.ndarray, check: bool = True) -> np.ndarray | None:
     """H with P_j = H P_i up to scale (unit Frobenius norm), for two cameras with the same finite centre; None
-    when the left 3x3 block of P_i is singular (centre at infinity) or P_j is not H P_i to round-off.
+    when the left 3x3 block of P_i is singular (centre at infinity) or (``check``) the two float cameras do not
+    have one centre in exact arithmetic (:func:`tritools.model.exact.same_exact_centre`).
 
-    The test is strict on purpose: the constraints hold only if the centres coincide, and a pair merely
-    *close* to coincident (a short baseline far from the world origin, where ``fundamental_matrix`` may
-    also give up) must not get them -- it keeps no constraint at all, which is weaker but sound.  The
-    residual H P_i - P_j = -M_j (C_j - C_i) ... is compared with the round-off of the product, ~eps
-    ||H|| ||P_i|| (``HOMOGRAPHY_RTOL``)."""
+    The test is exact on purpose: the constraints hold only if the centres coincide.  A pair whose centres agree
+    to round-off only (a rig built as K R [I | -C] in floats: ~1e-16 of |C| apart) has a micro-baseline, and
+    next to the centres the exact problem has parallax and lower costs than any point the homography admits
+    (review 8b: certified 4.353 where a float point 3e-9 from the centres has exact cost 4.007); such a pair
+    keeps no constraint at all, which is weaker but sound.  ``check=False``: the caller decided coincidence on
+    the raw cameras (``cameras`` are normalised ones, whose rounding broke the exact relation)."""
     Mi, Mj = Pi[:, :3], Pj[:, :3]
     if np.linalg.cond(Mi) > 1e8:
+        return None
+    if check and not same_exact_centre(Pi, Pj):
         return None
     H = Mj @ np.linalg.inv(Mi)
     if not np.all(np.isfinite(H)):
         return None
-    if check and np.any(np.abs(H @ Pi - Pj) > HOMOGRAPHY_RTOL * np.max(np.abs(H) @ np.abs(Pi))):
-        return None
     return H / np.linalg.norm(H)
-
-
-#: a pair's cameras are related by a homography (same centre) when ||H P_i - P_j|| is at most this times
-#: ||H|| ||P_i|| (round-off of the product is ~1e-16 of it; the fundamental matrix's tests are looser).
-HOMOGRAPHY_RTOL = 1e-12

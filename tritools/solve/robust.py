@@ -74,6 +74,7 @@ import time
 import numpy as np
 
 from ..model.cameras import as_world_frame, depth_rows
+from ..model.frame import WorldFrame, world_frame
 from ..model.normalize import normalization_for
 from ..result import Attempt, Status, TriangulationResult
 from .decide import cheirality
@@ -186,9 +187,19 @@ def scale_from(s: float, c2: np.ndarray) -> float:
 class TlsSearch(NodeBounds):
     """One TLS problem: thresholds, the subset bounds, the best candidate, the branch and bound."""
 
-    def __init__(self, cams, regions, c, opts, t0, points=None):
+    def __init__(self, cams, regions, c, opts, t0, points=None, origin=None):
         """``regions`` (a sequence of regions), or None with ``points`` (N, 2): point regions given by their
-        centres (a batch of validated point problems; the Point objects are built only if a path needs them)."""
+        centres (a batch of validated point problems; the Point objects are built only if a path needs them).
+
+        The search runs in the world frame of :mod:`tritools.model.frame` (``origin``: its origin when the caller
+        computed it for a stack, :func:`tritools.model.frame.world_origins`): in a georeferenced world (centres
+        1e6-1e8 from the origin) its plain arithmetic would drift by 1e-7..1e-3 of the cost and the report's drift
+        test withhold the certificate.  ``C`` are the cameras in that frame, ``C_user`` the caller's: the result
+        (X, gamma_UB, residuals, depths, inliers) is reported on these, at the point moved back (:meth:`result`)."""
+        self.C_user = cams
+        self.frame = world_frame(cams) if origin is None else WorldFrame(np.asarray(origin, float))
+        if self.frame.moved:
+            cams = self.frame.cameras(cams)
         self.C, self.c, self.opts, self.t0 = cams, c, opts, t0
         self._regions = None if regions is None else list(regions)
         self.N = len(regions) if regions is not None else len(points)
@@ -254,15 +265,19 @@ class TlsSearch(NodeBounds):
         return np.sum(np.minimum(point_distances2(self.C, self.x, Xs), self.c2[None]), axis=1)
 
     def report(self, X) -> PointReport:
-        """Residuals and depths of X: the vectorised twin for point regions, point_report otherwise."""
+        """Residuals and depths of X in the caller's frame (X a user point; the caller's cameras ``C_user``): the
+        vectorised twin for point regions, point_report otherwise."""
         if not self.points:
-            return point_report(X, self.C, self.regions, self.opts.world_frame)
+            return point_report(X, self.C_user, self.regions, self.opts.world_frame)
         if self.drows is None:                          # depth = h row_i . X~ (depths_stack's rows), once
-            self.drows = depth_rows(self.C)
+            self.drows = depth_rows(self.C_user)
         Xh = np.array([X[0], X[1], X[2], 1.0], float)
         with np.errstate(over="ignore", invalid="ignore"):
             depths = as_world_frame(self.opts.world_frame).sign * (self.drows @ Xh)
-        return PointReport(None, self.residuals(X), depths)
+        if self.C_user is self.C:
+            return PointReport(None, self.residuals(X), depths)
+        d2 = point_distances2_one(self.C_user, np.abs(self.C_user[:, 2]), self.x, X)
+        return PointReport(None, np.sqrt(d2), depths)
 
     def offer(self, X) -> None:
         """A candidate: kept when its exact f_TLS (:func:`tritools.solve.report.point_report` distances) is
@@ -489,10 +504,10 @@ class TlsSearch(NodeBounds):
 
     def result(self, lb: float, stopped, timings) -> TriangulationResult:
         ub = self.best_f
-        X = self.best_X
+        X = self.frame.user_point(self.best_X) if self.frame.moved else self.best_X
         rep = self.report(X)
         certified = bool(self.tol.certified(lb, ub, self.scale))     # lb is valid also when the search stopped
-        told = tls_reported(self.C, self.x if self.points else np.array([r.center for r in self.regions]),
+        told = tls_reported(self.C_user, self.x if self.points else np.array([r.center for r in self.regions]),
                             None if self.points else rep.residuals, X, self.c, lb, self.tol, certified,
                             None if self.cells_decided else ub,
                             None if self.points else self.regions)
@@ -516,7 +531,7 @@ class TlsSearch(NodeBounds):
             msg += f"; stopped by the {stopped}"
         if told.reason and not certified:
             msg += f"; {told.reason}"
-        image_points = np.where(np.isfinite(told.residuals)[:, None], projections(X, self.C), np.nan)
+        image_points = np.where(np.isfinite(told.residuals)[:, None], projections(X, self.C_user), np.nan)
         attempt = Attempt("tls", None, status.value, gamma_lb, gamma_ub, "branch-and-bound", None, (),
                           timings["total"])
         return TriangulationResult("tls", status, X=X, gamma_ub=gamma_ub, gamma_lb=gamma_lb, optimal=certified,

@@ -113,3 +113,52 @@ def test_rotation_rig_built_in_floats_gets_no_one_centre_certificate(sep):
     P0[:, :, 3] = 0.0
     x0 = np.array([_project(P, X - C0) for P in P0]) + rng.normal(size=(4, 2))
     assert tritools.triangulate(P0, x0).optimal
+
+
+def test_minors_touching_an_untied_pair_are_dropped():
+    """Review 9 F2: Theorem 1's minors with rows of both views of a round-off pair imply the pair's homography to
+    round-off.  With the pair untied, every remaining minor vanishes at image points consistent pairwise with view 2
+    but not related by the pair's homography (x1 from another point on view 2's ray); with it tied, some do not."""
+    import sospoly
+    from tritools.model.constraints import centre_relations, theorem1_constraints
+
+    rng = np.random.default_rng(5)
+    C1, C2 = np.array([1.0, -2.0, 3.0]), np.array([6.0, 1.0, -2.0])
+    X = np.array([0.1, 0.2, -0.3])
+    P0, P2 = _cam(C1, X - C1, rng), _cam(C2, X - C2, rng)
+    cams = np.array([P0, 3.0 * P0, P2])
+    rel = centre_relations(cams)
+    assert rel.coincident == frozenset() and rel.untied == ((0, 1),)
+    X2 = C2 + 0.7 * (X - C2)                                # on view 2's ray: the same x2, another x1
+    v = np.concatenate([_project(cams[0], X), _project(cams[1], X2), _project(cams[2], X)])
+    gens = sospoly.variables(" ".join(f"x{k}" for k in range(6)))[0].gens
+
+    def worst(untied):
+        polys, _ = theorem1_constraints(cams, gens, np.arange(6), rel.groups, untied)
+        return max(abs(p(v)) / np.sum(np.abs(p.coefficients()) * np.prod(np.abs(v) ** p.exponents(), axis=1))
+                   for p in polys)
+
+    assert worst(rel.untied) <= 1e-12
+    assert worst(()) > 1e-6
+
+
+def test_georeferenced_point_next_to_a_camera_is_never_certified_without_an_upper_bound():
+    """Review 9 F1: three cameras ~10 apart at |C| ~ 3e7, the point 1e-6 in front of camera 0: the bounds met in the
+    re-centred frame, but in the caller's frame view 0's projection is undefined (gamma_UB = inf).  The world-frame
+    stage now applies report_point's rule: no finite gamma_UB, no certificate; single and batch agree."""
+    Ps = np.array([[[-786.834059157399, -209.33209902332564, -281.90820432967064, 4807105649.093748],
+                    [-2.4502513556330485, 521.2226212002481, -652.6262141666062, -25897118880.729],
+                    [0.038971986539985716, -0.5683882873060232, -0.8218369297606751, -11296929.95915724]],
+                   [[373.0711992146758, -656.5802649902789, 414.8737590422161, 18328163752.999397],
+                    [-603.734472058473, -100.95010860266053, 568.2550156588043, 22660605488.263573],
+                    [-0.4459212090961804, -0.8710086011242234, -0.20615113884192826, 14905834.910279652]],
+                   [[105.0073193843348, -780.9657219162183, 348.5197326803697, 21666669961.391346],
+                    [491.9616215062423, 247.95999641834064, 627.7655638382574, 6442777376.792823],
+                    [-0.5312615088246834, -0.10607534764610276, 0.840541034015044, 28940695.738261502]]])
+    xs = np.array([[353.4113106651477, 548.2311759737928], [833.7594095232242, 2036.2842210055446],
+                   [51.81567794092531, 601.3804016344617]])
+    results = [tritools.triangulate(Ps, xs), tritools.triangulate_many([(Ps, xs)])[0],
+               tritools.triangulate_points(Ps, xs[None])[0]]
+    for r in results:
+        assert not (r.optimal and not np.isfinite(r.gamma_ub)), (r.status, r.gamma_ub)
+    assert results[0].status == results[1].status == results[2].status

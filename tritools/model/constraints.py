@@ -94,7 +94,7 @@ def _minor_structure(N: int):
     return arr[0], arr[1], arr[2], B1, n_minors
 
 
-def minors_matrix(cameras: np.ndarray, groups=None) -> tuple[np.ndarray, np.ndarray]:
+def minors_matrix(cameras: np.ndarray, groups=None, untied=()) -> tuple[np.ndarray, np.ndarray]:
     """M1 and the exponent rows b1 over the 2N image variables (x_11, x_12, ..., x_N2).
 
     Returns ``(M1, B1)`` with ``m1 = M1 @ b1(x)``; B1 rows are 0/1 exponent vectors.  All
@@ -109,14 +109,23 @@ def minors_matrix(cameras: np.ndarray, groups=None) -> tuple[np.ndarray, np.ndar
     constraint the true image points violate (a duplicated view gave c_LB = 6.4 above c = 4 at a
     feasible point).  A threshold on the determinants' size would not do: near-consistent data make
     genuine terms just as small.
+
+    ``untied``: pairs (i, j) of one group whose centres agree only to round-off and are not admitted
+    (:attr:`CentreRelations.untied`).  Every minor with rows of both views is dropped (all its terms set to 0):
+    its float coefficients cannot see the pair's micro-baseline, so such minors together imply the pair's
+    homography to round-off -- the constraint withheld from the pair (review 9 F2).  A term's rows are the
+    minor's rows, so zeroing by term drops whole minors: a relaxation, the bound stays valid.
     """
     cameras = np.asarray(cameras, float)
     a, c, _ = _row_data(cameras)
     T, minor, mono, B1, n_minors = _minor_structure(cameras.shape[0])
     d = np.linalg.det(np.vstack([a, c])[T])
     labels = centre_groups(cameras) if groups is None else np.asarray(groups)
-    group = labels[(T % (2 * cameras.shape[0])) // 2]                               # the centre of each term's rows
+    views = (T % (2 * cameras.shape[0])) // 2                                       # the view of each term's rows
+    group = labels[views]                                                           # the centre of each term's rows
     d = np.where(np.all(group == group[:, :1], axis=1), 0.0, d)
+    for i, j in untied:
+        d = np.where(np.any(views == i, axis=1) & np.any(views == j, axis=1), 0.0, d)
     M1 = np.zeros((n_minors, B1.shape[0]))
     np.add.at(M1, (minor, mono), d)
     used = np.bincount(mono[d != 0.0], minlength=B1.shape[0]) > 0
@@ -130,6 +139,13 @@ class CentreRelations:
     arithmetic or are admitted (:func:`centre_relations`); the other pairs of a group keep no constraint."""
     groups: np.ndarray
     coincident: frozenset
+
+    @property
+    def untied(self) -> tuple:
+        """The pairs (i < j) of one group that are not coincident: their centres agree to round-off only."""
+        g = self.groups
+        return tuple((i, j) for i, j in combinations(range(len(g)), 2)
+                     if g[i] == g[j] and (i, j) not in self.coincident)
 
 
 def centre_relations(cameras: np.ndarray, groups=None, *, raw=None, admitted=frozenset()) -> CentreRelations:
@@ -170,14 +186,15 @@ def _exponent_tuples(B1_bytes: bytes, shape: tuple, n: int, x_index: tuple) -> t
     return tuple(tuple(int(k) for k in row) for row in E)
 
 
-def theorem1_constraints(cameras: np.ndarray, gens, x_index, groups=None) -> tuple[list[Polynomial], dict]:
+def theorem1_constraints(cameras: np.ndarray, gens, x_index, groups=None, untied=()
+                         ) -> tuple[list[Polynomial], dict]:
     """m2 of Theorem 1 as polynomials in ``gens``.
 
     ``x_index[2i + k]`` is the position in ``gens`` of x_{i+1, k+1}.  ``groups``: the views' centre labels
     (:class:`CentreRelations`, decided on the caller's raw cameras; default: from ``cameras``).  Returns
     the list and diagnostics (N1, N2, singular values).
     """
-    M1, B1 = minors_matrix(cameras, groups)
+    M1, B1 = minors_matrix(cameras, groups, untied)
     norms = np.linalg.norm(M1, axis=1)
     keep = norms > 0
     M1n = M1[keep] / norms[keep, None]
@@ -207,7 +224,7 @@ def theorem1_constraints(cameras: np.ndarray, gens, x_index, groups=None) -> tup
 THEOREM1_DENSE_MAX_VIEWS = 8
 
 
-def triple_minor_constraints(cameras: np.ndarray, gens, x_index, triples, groups=None
+def triple_minor_constraints(cameras: np.ndarray, gens, x_index, triples, groups=None, untied=()
                              ) -> tuple[list[Polynomial], dict]:
     """Theorem 1's constraints restricted to view triples: for each triple (i, j, k) the 4x4 minors of the
     six rows of M0 of those views, reduced by SVD as in :func:`theorem1_constraints`.
@@ -222,8 +239,9 @@ def triple_minor_constraints(cameras: np.ndarray, gens, x_index, triples, groups
         check_deadline("building the minors")
         t = tuple(int(i) for i in t)
         sub = np.concatenate([x_index[2 * i:2 * i + 2] for i in t])
+        local = [(t.index(i), t.index(j)) for i, j in untied if i in t and j in t]
         p, info = theorem1_constraints(cameras[list(t)], gens, sub,
-                                       None if groups is None else np.asarray(groups)[list(t)])
+                                       None if groups is None else np.asarray(groups)[list(t)], local)
         polys += p
         views += [t] * len(p)
         n1 += info["N1"]

@@ -363,6 +363,9 @@ def compute_many(requests) -> None:
         deadline = _earliest([sb.deadline for sb, _ in items])
         left = (_batch(fresh, lambda C, x, opts: _verify_stack(C, x, opts, deadline)) if fresh else []) + verified + \
             [(sb, S) for sb, S in items if S in sb.unverified]
+        if deadline is not None and deadline.expired:
+            _expired(left)
+            continue
         if PACKING:
             left = _hinted(_packed(_deferred(left)))
         if left and key[0] <= SDP_STACK_MAX_VIEWS:
@@ -375,6 +378,19 @@ def compute_many(requests) -> None:
             sb._store(S, 0.0, None)             # 0 is a valid bound; the search reports the time limit
         else:
             sb._solve_one(S)
+
+
+def _expired(items: list) -> None:
+    """The items left once the deadline has passed: the bound 0 (valid; the search then stops with its time limit),
+    deferred ones (verification only) left unknown as :func:`_deferred` leaves them.  No packing bound (O(|S|^2)
+    per subset: seconds for a few hundred large subsets) and no SDP after the deadline."""
+    for sb, S in items:
+        sb.unverified.add(S)
+        if S in sb.defer:
+            sb.defer.discard(S)
+        else:
+            sb._store(S, 0.0, None)
+            sb.weak.add(S)
 
 
 def _earliest(deadlines: list):
@@ -392,18 +408,20 @@ def _in_parent(items: list) -> tuple:
     use, rest = [], []
     for sb, S in items:
         (use if sb.frame() is not None else rest).append((sb, S))
-    if not use:
-        return rest, []
-    estimates = [[] if len(S) < 3 else [sb._X[T] for T in (S - {v} for v in S) if T in sb._X][:2]
-                 for sb, S in use]
+    deadline = _earliest([sb.deadline for sb, _ in use])
+    if not use or (deadline is not None and deadline.expired):   # past it: verified, none accepted (no O(M) work)
+        return rest, use
+    estimates = [[] if len(S) < 3 else list(itertools.islice((sb._X[T] for T in (S - {v} for v in S) if T in sb._X),
+                                                            2)) for sb, S in use]
     enough = np.array([sb.saturation(S) for sb, S in use])
     try:
         good, lb, X = verify_in_parent([sb.C for sb, _ in use], [sb.frame() for sb, _ in use],
                                        [np.array(sorted(S)) for _, S in use], estimates, use[0][0].opts.tolerances,
-                                       enough, _earliest([sb.deadline for sb, _ in use]))
+                                       enough, deadline)
     except (ValueError, np.linalg.LinAlgError, FloatingPointError):
         return items, []
     verified = []
+    finite = np.isfinite(X).all(axis=1)             # (a subset past the deadline has none: O(1) per item then)
     for k, (sb, S) in enumerate(use):
         if good[k]:
             sb._store(S, float(lb[k]), X[k])
@@ -411,7 +429,7 @@ def _in_parent(items: list) -> tuple:
             sb.n_in_parent += 1
         else:
             verified.append((sb, S))
-            if np.all(np.isfinite(X[k])):
+            if finite[k]:
                 sb.trial[S] = X[k]
     return rest, verified
 

@@ -85,7 +85,7 @@ from .robust_drive import drive
 from .robust_loo import leave_one_out
 from .robust_nodes import NodeBounds, lookahead_bound
 from .robust_rays import ray_candidates
-from .robust_costs import point_distances2, point_distances2_one, projections
+from .robust_costs import disc_distances2, disc_shapes, point_distances2, point_distances2_one, projections
 from .robust_report import tls_reported
 
 __all__ = ["robust_thresholds", "triangulate_robust", "drive", "lookahead_bound", "tls_cost", "point_distances2",
@@ -208,6 +208,7 @@ class TlsSearch(NodeBounds):
         self.anchors, self.anchor_a = None, None     # see anchor_bounds
         self.loo_lb = 0.0                            # leave_one_out / suspect bound (candidates), where computed
         self._absC2 = None                           # |third rows| of the cameras (point_distances2_one)
+        self._discs = None                           # (centres, radii) of disc regions, or False (screen)
         self.drows = None                           # depth rows of the cameras (report; a batch sets them)
         self.futile_leaf = None                     # (inlier set, its leaf bound) that fired the rule
         self.max_nodes = MAX_NODES                  # the search's node budget (smaller after an exhausted cell search)
@@ -235,9 +236,12 @@ class TlsSearch(NodeBounds):
     # ------------------------------------------------------------------ costs and the upper bound
     def residuals(self, X) -> np.ndarray:
         """d_i(X) (N,), inf where the projection is undefined: :func:`point_distances2` for point regions (the
-        vectorised twin of :func:`tritools.solve.report.point_report`), else point_report."""
+        vectorised twin of :func:`tritools.solve.report.point_report`), :func:`disc_distances2` for discs, else
+        point_report (the reported numbers always come from point_report, :meth:`report`)."""
         if self.points:
             return np.sqrt(self.sq_distances(X))
+        if self.discs():
+            return np.sqrt(disc_distances2(self.C, *self.discs(), np.asarray(X, float)[None])[0])
         rep = point_report(X, self.C, self.regions, self.opts.world_frame)
         return np.full(self.N, np.inf) if rep.residuals is None else rep.residuals
 
@@ -248,10 +252,25 @@ class TlsSearch(NodeBounds):
         return point_distances2_one(self.C, self._absC2, self.x, X)
 
     def screen(self, Xs: np.ndarray) -> np.ndarray:
-        """f_TLS of many candidates (M, 3) (point regions: vectorised; else one by one); only for ranking."""
-        if not self.points:
-            return np.array([tls_cost(self.residuals(X), self.c) for X in Xs])
-        return np.sum(np.minimum(point_distances2(self.C, self.x, Xs), self.c2[None]), axis=1)
+        """f_TLS of many candidates (M, 3), only for ranking: vectorised for point and disc regions
+        (:func:`tritools.solve.robust_costs.disc_distances2`), else one by one until the deadline (the candidates
+        not reached rank last, inf: an M x N loop of exact distances ran seconds past a limit)."""
+        if self.points:
+            return np.sum(np.minimum(point_distances2(self.C, self.x, Xs), self.c2[None]), axis=1)
+        if self.discs():
+            return np.sum(np.minimum(disc_distances2(self.C, *self.discs(), Xs), self.c2[None]), axis=1)
+        f = np.full(len(Xs), np.inf)
+        for k, X in enumerate(Xs):
+            if self.deadline.expired:
+                break
+            f[k] = tls_cost(self.residuals(X), self.c)
+        return f
+
+    def discs(self) -> tuple | None:
+        """(centres, radii) when every region is a disc or a point (:func:`disc_shapes`), else None; computed once."""
+        if self._discs is None:
+            self._discs = disc_shapes(self.regions) or False
+        return self._discs or None
 
     def report(self, X) -> PointReport:
         """Residuals and depths of X: the vectorised twin for point regions, point_report otherwise."""

@@ -48,7 +48,8 @@ from dataclasses import dataclass
 
 __all__ = ["Budget", "DEFAULT_TIME_LIMIT", "DEFAULT_BUDGET", "UNLIMITED", "ProgramSize", "estimate_size",
            "BudgetExceeded", "Deadline",
-           "as_budget", "TimeLimitReached", "deadline_scope", "check_deadline", "address_space_available",
+           "as_budget", "TimeLimitReached", "deadline_scope", "check_deadline", "active_deadline",
+           "address_space_available",
            "memory_room", "CLARABEL_ENTRY_COPIES", "CLARABEL_LARGEST_BLOCK_COPIES", "AUTO_IPM_MAX_BYTES",
            "ADDRESS_SPACE_SHARE", "ClarabelTimeModel", "CLARABEL_TIME_MODEL"]
 
@@ -142,6 +143,11 @@ def deadline_scope(deadline: Deadline | None):
         yield deadline
     finally:
         _ACTIVE_DEADLINE.reset(token)
+
+
+def active_deadline() -> Deadline | None:
+    """The deadline :func:`check_deadline` tests (the innermost :func:`deadline_scope`'s), None outside any."""
+    return _ACTIVE_DEADLINE.get()
 
 
 def check_deadline(what: str = "building the program") -> None:

@@ -9,6 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..model.geometry import PROJECTION_DENOM_RTOL
+from ..model.refine import disc_shapes
 
 __all__ = ["point_distances2", "point_distances2_one", "point_distances2_stack", "projections", "disc_distances2",
            "disc_shapes"]
@@ -61,18 +62,6 @@ def point_distances2_one(C: np.ndarray, absC2: np.ndarray, x: np.ndarray, X) -> 
         d = u[:, :2] / u[:, 2:] - x
         d2 = d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1]
     return np.where(ok & np.isfinite(d2), d2, np.inf)
-
-
-def disc_shapes(regions) -> tuple | None:
-    """(centres (N, 2), radii (N,)) where every region is a point (radius 0) or a filled disc
-    (:attr:`~tritools.model.regions.Region.disc_radius`), else None."""
-    radii = []
-    for r in regions:
-        rho = 0.0 if r.is_point else r.disc_radius
-        if rho is None:
-            return None
-        radii.append(float(rho))
-    return np.array([r.center for r in regions], float), np.array(radii)
 
 
 def disc_distances2(C: np.ndarray, centres: np.ndarray, radii: np.ndarray, Xs: np.ndarray) -> np.ndarray:

@@ -183,3 +183,27 @@ def test_robust_disc_screen_matches_the_exact_costs(kind):
     exact = [point_report(Y, P, regs).residuals for Y in Xs]
     np.testing.assert_allclose(search.screen(Xs), [tls_cost(d, c) for d in exact], rtol=1e-12)
     np.testing.assert_allclose(search.residuals(X), exact[0], rtol=1e-12, atol=1e-12)
+
+
+def test_no_band_bound_started_where_its_estimate_does_not_fit(monkeypatch):
+    """The band bound of a width is started only where band_seconds fits in what is left of the deadline (one band
+    call at N = 400 takes 0.08-0.22 s); the all pairs, estimated to fit, still bound the 20-view problem validly."""
+    import tritools.solve.fastpath as fp
+
+    assert fp.band_seconds(400, 8) > fp.band_seconds(400, 4) > fp.band_seconds(100, 4)
+    assert fp.band_seconds(100, 4, 3) == pytest.approx(3 * fp.band_seconds(100, 4))
+    P, x, X, _ = robust_protocol_scene(20, 0, 1.0, np.random.default_rng(6))
+
+    class Short:
+        end, expired = 0.0, False
+
+        @staticmethod
+        def remaining():
+            return 0.5 * fp.band_seconds(20, fp.BAND_WIDTHS[0])
+
+    assert fp.all_pairs_seconds(20) < Short.remaining()
+    free = fp.verify_points(P[None], x[None])
+    monkeypatch.setattr(fp, "_band_bounds", lambda *a, **k: pytest.fail("band started past its estimate"))
+    b = fp.verify_points(P[None], x[None], deadline=Short())
+    assert b.ok[0] and np.isfinite(b.gamma_lb[0])
+    assert b.gamma_lb[0] <= free.gamma_ub[0] * (1 + 1e-9)

@@ -203,7 +203,42 @@ def test_no_band_bound_started_where_its_estimate_does_not_fit(monkeypatch):
 
     assert fp.all_pairs_seconds(20) < Short.remaining()
     free = fp.verify_points(P[None], x[None])
+    monkeypatch.setattr(fp, "cpu_share", lambda: 1.0)                 # a quiet machine
     monkeypatch.setattr(fp, "_band_bounds", lambda *a, **k: pytest.fail("band started past its estimate"))
     b = fp.verify_points(P[None], x[None], deadline=Short())
     assert b.ok[0] and np.isfinite(b.gamma_lb[0])
     assert b.gamma_lb[0] <= free.gamma_ub[0] * (1 + 1e-9)
+
+
+def test_cpu_share_from_the_load_average(monkeypatch):
+    """Wall-clock deadlines: on an over-committed machine a step's wall time is its CPU time over the share of a
+    core the process gets (cores / load), never below MIN_CPU_SHARE; 1 on a quiet machine or without a load
+    average.  The bounds' time estimates are divided by it (a band that fits a quiet machine does not fit under
+    load)."""
+    import os
+
+    import sospoly.budget as budget
+    import tritools.solve.fastpath as fp
+
+    cores = os.cpu_count() or 1
+    for load, share in [(0.0, 1.0), (cores, 1.0), (4.0 * cores, 0.25), (1e6, budget.MIN_CPU_SHARE)]:
+        monkeypatch.setattr(os, "getloadavg", lambda load=load: (load, load, load))
+        assert budget.cpu_share() == pytest.approx(share)
+
+    def unavailable():
+        raise OSError
+
+    monkeypatch.setattr(os, "getloadavg", unavailable)
+    assert budget.cpu_share() == 1.0
+
+    class Left:
+        end, expired = 0.0, False
+
+        @staticmethod
+        def remaining():
+            return 1.5 * fp.band_seconds(100, 4)
+
+    monkeypatch.setattr(fp, "cpu_share", lambda: 1.0)
+    assert fp._fits(Left(), fp.band_seconds(100, 4))
+    monkeypatch.setattr(fp, "cpu_share", lambda: 0.5)
+    assert not fp._fits(Left(), fp.band_seconds(100, 4))

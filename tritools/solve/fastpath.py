@@ -37,7 +37,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from sospoly import DEFAULT_TOLERANCES, Tolerances
-from sospoly.budget import Deadline
+from sospoly.budget import Deadline, cpu_share
 from sospoly.analysis import verify_quadratic_batch
 from sospoly.analysis import verify_quadratic_banded_batch
 from sospoly.solvers import with_single_threaded_blas
@@ -341,12 +341,13 @@ def fits(deadline: Deadline | None, n_views: int, problems: int = 1) -> bool:
 
 
 def _fits(deadline: Deadline | None, seconds: float) -> bool:
-    """Is more than ``seconds`` left of ``deadline`` (None: no limit)?  The one rule of the bounds not started
-    where they would end past the deadline."""
+    """Is more than ``seconds`` of CPU time left of ``deadline`` (None: no limit), a wall-clock deadline, at the
+    share of a core the process can expect (:func:`sospoly.budget.cpu_share`)?  The one rule of the bounds not
+    started where they would end past the deadline."""
     if deadline is None:
         return True
     remaining = deadline.remaining()
-    return remaining is None or (remaining > 0 and seconds <= remaining)
+    return remaining is None or (remaining > 0 and seconds <= remaining * cpu_share())
 
 
 def all_pairs_chunk(n_views: int) -> int:

@@ -248,3 +248,25 @@ def test_cpu_share_from_the_load_average(monkeypatch):
     assert fp._fits(Left(), fp.band_seconds(100, 4))
     monkeypatch.setattr(fp, "cpu_share", lambda: 0.5)
     assert not fp._fits(Left(), fp.band_seconds(100, 4))
+
+
+@pytest.mark.parametrize("kind", ["points", "discs"])
+def test_screen_past_the_deadline_ranks_only_its_first_block(kind, monkeypatch):
+    """The screen of many candidates runs in blocks of SCREEN_BLOCK candidate-views; past the deadline only the
+    first block is screened and the rest rank last (inf); before it, every candidate gets its f_TLS."""
+    import tritools.solve.robust as robust
+
+    P, x, X, _ = robust_protocol_scene(40, 8, 1.0, np.random.default_rng(9))
+    regs = None if kind == "points" else _regions(x, kind)
+    search = TlsSearch(P, regs, np.full(40, 2.0), tritools.TriangulationOptions(), 0.0,
+                       points=x if kind == "points" else None)
+    monkeypatch.setattr(robust, "SCREEN_BLOCK", 400)                  # 10 candidates per block
+    Xs = X + np.random.default_rng(0).normal(scale=0.1, size=(35, 3))
+    full = search.screen(Xs)
+    assert np.isfinite(full).all()
+    d = np.array([_distances(P, x, Y, kind) for Y in Xs])
+    np.testing.assert_allclose(full, np.sum(np.minimum(d * d, 4.0), axis=1), rtol=1e-9)
+    search.set_deadline(Deadline.after(0.0))
+    late = search.screen(Xs)
+    np.testing.assert_array_equal(late[:10], full[:10])
+    assert np.isinf(late[10:]).all()

@@ -270,3 +270,22 @@ def test_screen_past_the_deadline_ranks_only_its_first_block(kind, monkeypatch):
     late = search.screen(Xs)
     np.testing.assert_array_equal(late[:10], full[:10])
     assert np.isinf(late[10:]).all()
+
+
+def test_expired_cache_in_a_shared_batch_leaves_the_others_their_packing_bounds(monkeypatch):
+    """compute_many serves several searches at once (a robust batch): the items of a search whose deadline has passed
+    get 0 and no packing bound, those of a search with time left still get theirs."""
+    P, x, X, _ = robust_protocol_scene(30, 9, 1.0, np.random.default_rng(1))
+    opts = tritools.TriangulationOptions()
+    late, live = (TlsSearch(P, None, np.full(30, 2.0), opts, 0.0, points=x) for _ in range(2))
+    pairs = [frozenset((i, j)) for i in range(30) for j in range(i + 1, 30)]
+    rb.compute_many([(late.bounds, pairs), (live.bounds, pairs)])
+    late.set_deadline(Deadline.after(0.0))
+    packed = []
+    real = rb.SubsetBounds.packing_bound
+    monkeypatch.setattr(rb.SubsetBounds, "packing_bound", lambda self, S: packed.append(self) or real(self, S))
+    big = [frozenset(range(30)) - {j} for j in range(30)]
+    rb.compute_many([(late.bounds, big), (live.bounds, big)])
+    assert packed and all(sb is live.bounds for sb in packed)
+    assert all(late.bounds.bound(S) == 0.0 for S in big)
+    assert all(live.bounds.known(S) for S in big)

@@ -363,11 +363,9 @@ def compute_many(requests) -> None:
         deadline = _earliest([sb.deadline for sb, _ in items])
         left = (_batch(fresh, lambda C, x, opts: _verify_stack(C, x, opts, deadline)) if fresh else []) + verified + \
             [(sb, S) for sb, S in items if S in sb.unverified]
-        if deadline is not None and deadline.expired:
-            _expired(left)
-            continue
+        left = _expired(left)                  # the items whose own search's deadline has passed: 0, nothing more
         if PACKING:
-            left = _hinted(_packed(_deferred(left), deadline), deadline)
+            left = _hinted(_packed(_deferred(left)))
         if left and key[0] <= SDP_STACK_MAX_VIEWS:
             left = _batch(left, lambda C, x, opts: _sdp_stack(C, x, opts, deadline))
         for sb, S in left:                      # handed back by both batches (typically subsets with outliers):
@@ -380,17 +378,23 @@ def compute_many(requests) -> None:
             sb._solve_one(S)
 
 
-def _expired(items: list) -> None:
-    """The items left once the deadline has passed: the bound 0 (valid; the search then stops with its time limit),
-    deferred ones (verification only) left unknown as :func:`_deferred` leaves them.  No packing bound (O(|S|^2)
-    per subset: seconds for a few hundred large subsets) and no SDP after the deadline."""
+def _expired(items: list) -> list:
+    """Settle the items whose cache's deadline has passed: the bound 0 (valid; the search then stops with its time
+    limit), deferred ones (verification only) left unknown as :func:`_deferred` leaves them -- no pair packing bound
+    (O(|S|^2) per subset: 80,000 pair look-ups, ~10 ms, for a 400-view subset; seconds for a few hundred) and no
+    SDP after the deadline; the other items."""
+    left = []
     for sb, S in items:
+        if not sb.deadline.expired:
+            left.append((sb, S))
+            continue
         sb.unverified.add(S)
         if S in sb.defer:
             sb.defer.discard(S)
         else:
             sb._store(S, 0.0, None)
             sb.weak.add(S)
+    return left
 
 
 def _earliest(deadlines: list):
@@ -434,14 +438,14 @@ def _in_parent(items: list) -> tuple:
     return rest, verified
 
 
-def _hinted(items: list, deadline=None) -> list:
+def _hinted(items: list) -> list:
     """Store the packing bound of the subsets of >= 3 views outside their cache's ``hint`` (in ``cheap``): the
     verification did not certify them, and a subset holding a likely outlier needs a large bound, rarely a
     tight one (the batched SDP costs ~10-100x the verification and often decides nothing there); the rest.
-    Once ``deadline`` has passed no more packing bounds (O(|S|^2) each): the rest are returned."""
+    Once a cache's deadline has passed no more packing bounds for it (O(|S|^2) each): its items are returned."""
     left = []
     for sb, S in items:
-        if deadline is not None and deadline.expired:
+        if sb.deadline.expired:
             left.append((sb, S))
         elif sb.hint is not None and len(S) >= 3 and S not in sb.retry and not S <= sb.hint:
             sb._store(S, sb.packing_bound(S), None)
@@ -464,13 +468,13 @@ def _deferred(items: list) -> list:
     return left
 
 
-def _packed(items: list, deadline=None) -> list:
-    """Store the packing bound of the items where it reaches their cache's ``enough``; the rest.  Once ``deadline``
-    has passed no more packing bounds (O(|S|^2) each: 80,000 pair look-ups for a 400-view subset, ~10 ms)."""
+def _packed(items: list) -> list:
+    """Store the packing bound of the items where it reaches their cache's ``enough``; the rest.  Once a cache's
+    deadline has passed no more packing bounds for it (O(|S|^2) each, :func:`_expired`)."""
     left = []
     for sb, S in items:
         level = sb.saturation(S)
-        b = sb.packing_bound(S) if math.isfinite(level) and not (deadline is not None and deadline.expired) else 0.0
+        b = sb.packing_bound(S) if math.isfinite(level) and not sb.deadline.expired else 0.0
         if b > level:
             sb._store(S, b, None)
             sb.n_packed += 1

@@ -43,8 +43,8 @@ from .fastpath import lagrangian_bounds
 __all__ = ["ParentFrame", "parent_frames", "frames_of", "verify_in_parent", "LM_STEPS", "LM_MORE"]
 
 #: subsets x views verified in one stacked call when a deadline is set (a 200-view track's leave-one-out subsets,
-#: 40,000 view rows, polished for 0.3 s past a 1 s limit in one call; a chunk of 4096 rows took ~60 ms, the step by
-#: which a call could overrun its deadline, wave 9: 1024 rows, ~15 ms, the per-chunk overhead below 2%)
+#: 40,000 view rows, polished for 0.3 s past a 1 s limit in one call; wave 9: a chunk of 4096 view pairs took ~60 ms,
+#: the step by which a call could overrun its deadline, hence 1024)
 CHUNK_VIEW_ROWS = 1024
 
 #: damped Gauss-Newton steps polishing the start of each subset (a warm start rarely needs more than 3-4).

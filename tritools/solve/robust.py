@@ -85,7 +85,7 @@ from .robust_drive import drive
 from .robust_loo import leave_one_out
 from .robust_nodes import NodeBounds, lookahead_bound
 from .robust_rays import ray_candidates
-from .robust_costs import point_distances2, point_distances2_one, projections
+from .robust_costs import point_distances2, point_distances2_one
 from .robust_report import tls_reported
 
 __all__ = ["robust_thresholds", "triangulate_robust", "drive", "lookahead_bound", "tls_cost", "point_distances2",
@@ -254,7 +254,8 @@ class TlsSearch(NodeBounds):
         return np.sum(np.minimum(point_distances2(self.C, self.x, Xs), self.c2[None]), axis=1)
 
     def report(self, X) -> PointReport:
-        """Residuals and depths of X: the vectorised twin for point regions, point_report otherwise."""
+        """Residuals and depths of X: point_report for other regions; for point regions only the depths (the
+        reported residuals are :func:`tritools.solve.robust_report.tls_reported`'s, from compensated projections)."""
         if not self.points:
             return point_report(X, self.C, self.regions, self.opts.world_frame)
         if self.drows is None:                          # depth = h row_i . X~ (depths_stack's rows), once
@@ -262,7 +263,7 @@ class TlsSearch(NodeBounds):
         Xh = np.array([X[0], X[1], X[2], 1.0], float)
         with np.errstate(over="ignore", invalid="ignore"):
             depths = as_world_frame(self.opts.world_frame).sign * (self.drows @ Xh)
-        return PointReport(None, self.residuals(X), depths)
+        return PointReport(None, None, depths)
 
     def offer(self, X) -> None:
         """A candidate: kept when its exact f_TLS (:func:`tritools.solve.report.point_report` distances) is
@@ -395,7 +396,7 @@ class TlsSearch(NodeBounds):
     # ------------------------------------------------------------------ bounds
     def meets(self, lb: float) -> bool:
         """Is a lower bound good enough to prune (it meets UB under the certificate rule, or exceeds it)?"""
-        return lb >= self.best_f or bool(self.tol.certified(lb, self.best_f, self.scale))
+        return lb >= self.best_f or self.tol.certified_one(lb, self.best_f, self.scale)
 
     def search(self, order: np.ndarray):
         """Depth-first branch and bound (module docstring): (global lower bound, why it stopped early or None)."""
@@ -487,11 +488,14 @@ class TlsSearch(NodeBounds):
         timings = {"candidates": t_cand, "total": time.perf_counter() - self.t0}
         return self.result(lb, stopped, timings)
 
-    def result(self, lb: float, stopped, timings) -> TriangulationResult:
+    def result(self, lb: float, stopped, timings, note: str = "") -> TriangulationResult:
+        """The result at the search's lower bound ``lb`` (pixels^2): the decision by the one rule on this search's
+        scale, the reported numbers and their checks (:func:`tritools.solve.robust_report.tls_reported`), the
+        message (``note`` appended: the path that decided)."""
         ub = self.best_f
         X = self.best_X
         rep = self.report(X)
-        certified = bool(self.tol.certified(lb, ub, self.scale))     # lb is valid also when the search stopped
+        certified = self.tol.certified_one(lb, ub, self.scale)     # lb is valid also when the search stopped
         told = tls_reported(self.C, self.x if self.points else np.array([r.center for r in self.regions]),
                             None if self.points else rep.residuals, X, self.c, lb, self.tol, certified,
                             None if self.cells_decided else ub,
@@ -500,7 +504,7 @@ class TlsSearch(NodeBounds):
         if not certified and stopped is None:   # the deadline cut a step short, or a sub-problem hit the memory budget
             stopped = "time limit" if self.deadline.expired or self.bounds.deadline.expired else \
                 "memory budget" if self.bounds.budget_exceeded else None
-        contradicts = bool(self.tol.contradicts(lb, ub, self.scale))
+        contradicts = self.tol.contradicts_one(lb, ub, self.scale)
         status = Status.NUMERICAL_FAILURE if contradicts else Status.OPTIMAL if certified else \
             {"time limit": Status.TIME_LIMIT, "memory budget": Status.BUDGET_EXCEEDED}.get(stopped,Status.NOT_CERTIFIED)
         certified = certified and not contradicts
@@ -516,12 +520,12 @@ class TlsSearch(NodeBounds):
             msg += f"; stopped by the {stopped}"
         if told.reason and not certified:
             msg += f"; {told.reason}"
-        image_points = np.where(np.isfinite(told.residuals)[:, None], projections(X, self.C), np.nan)
         attempt = Attempt("tls", None, status.value, gamma_lb, gamma_ub, "branch-and-bound", None, (),
                           timings["total"])
         return TriangulationResult("tls", status, X=X, gamma_ub=gamma_ub, gamma_lb=gamma_lb, optimal=certified,
-                                   image_points=image_points, certified_by="branch-and-bound" if certified else None,
-                                   message=msg, timings=timings, attempts=(attempt,), in_front=in_front,
+                                   image_points=told.image_points, message=msg + note,
+                                   certified_by="branch-and-bound" if certified else None,
+                                   timings=timings, attempts=(attempt,), in_front=in_front,
                                    depths=rep.depths, residuals=told.residuals, inliers=inliers)
 
 

@@ -60,8 +60,8 @@ from sospoly.analysis import verify_quadratic_batch
 from ..model.cameras import power2_scale
 from ..model.exact import dot2, homogeneous_images
 from ..model.normalize import RHO_FLOOR_REL, SCALE_BOUNDS, Normalization
-from ..model.stacked import (damped_step, dlt_stack, epipolar_quadratics, fundamental_stack, next_damping, norms,
-                             null_vectors, pixel_scales, project_quiet, project_stack, view_pairs)
+from ..model.stacked import (damped_step, dlt_stack, epipolar_quadratics, fundamental_stack, median_rows, next_damping,
+                             norms, null_vectors, pixel_scales, project_quiet, project_stack, view_pairs)
 from .robust_bounds import ROUND_DOWN
 
 __all__ = ["enum_frame", "enum_frames", "subset_masks", "closure", "enum_candidates", "enum_bounds",
@@ -148,7 +148,8 @@ def enum_frames(C: np.ndarray, x: np.ndarray) -> tuple:
         a = null_vectors(C)
         ok = ~np.any(np.abs(a[..., 3]) <= 1e-12 * norms(a, axis=2), axis=1)     # no centre at infinity
         centres = a[..., :3] / a[..., 3:]
-        c0 = np.mean(centres, axis=1)                   # the DLT in a world centred on the cameras: georeferenced
+        # the DLT in a world centred on the cameras (c0 their mean, np.mean's operations): georeferenced
+        c0 = np.add.reduce(centres, axis=1) / N
         Cc = C.copy()                                   # coordinates (1e6 m) would drown its linear system;
         c0b = np.broadcast_to(np.where(ok[:, None], c0, 0.0)[:, None, None, :], C.shape[:3] + (3,))
         Cc[..., 3] = dot2(C[..., :3], c0b, C[..., 3])   # compensated: the frame is the caller's problem exactly
@@ -157,7 +158,7 @@ def enum_frames(C: np.ndarray, x: np.ndarray) -> tuple:
         X0 = np.where(ok[:, None], X0, 0.0)
         u, _, fin = project_stack(Cc, X0)
         ok &= fin
-        d = np.median(norms(centres - c0[:, None] - X0[:, None], axis=2), axis=1)
+        d = median_rows(norms(centres - c0[:, None] - X0[:, None], axis=2))
         rho = np.sqrt(np.sum((u - x) ** 2, axis=(1, 2)) / N)
         # the floor (zero noise): pixel scales are at most ||P[:2, :3] - x P[2, :3]||_F / ||P[2, :3]||, computed
         # only where that bound does not already put the floor below rho

@@ -31,7 +31,6 @@ depend on the others of its stack (each row's numbers are its own problem's).
 """
 from __future__ import annotations
 
-import dataclasses
 import logging
 import time
 
@@ -163,8 +162,7 @@ def enumerated_result(search, lb: float, n_bounded: int, n_sets: int):
     bound ``lb``, pixels^2), its message saying so; ``n_bounded`` subsets were bounded."""
     search.bounds.n_solved += int(n_bounded)
     t = time.perf_counter() - search.t0
-    res = search.result(lb, None, {"enumeration": t, "total": t})
-    return dataclasses.replace(res, message=res.message + f"; {enum.ENUMERATED} ({n_sets} sets of >= 2 views)")
+    return search.result(lb, None, {"enumeration": t, "total": t}, f"; {enum.ENUMERATED} ({n_sets} sets of >= 2 views)")
 
 
 class _Group:

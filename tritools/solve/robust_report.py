@@ -42,6 +42,7 @@ class TlsReported:
     inliers: np.ndarray            # (N,) d_i(X) < c_i (exactly, for point regions: :func:`inlier_mask`)
     holds: bool                    # the certificate passes on the reported numbers (module docstring)
     reason: str                    # why not, when it does not
+    image_points: np.ndarray       # (N, 2) the compensated projections of X, NaN where d_i(X) is not finite
 
 
 def tls_reported(C: np.ndarray, centres: np.ndarray, residuals, X, c: np.ndarray, lb: float, tolerances,
@@ -82,7 +83,8 @@ def tls_reported(C: np.ndarray, centres: np.ndarray, residuals, X, c: np.ndarray
         holds, reason = False, "the bounds met on the search's scale, but their gap exceeds the coordinates' " \
                                f"resolution ({resolved:.3g} px, at most the thresholds' own scale)"
     inliers = inlier_mask(C, X, centres, res, c, u, exact=points_given, regions=regions)
-    return TlsReported(g_lb, g_ub if math.isfinite(g_ub) else math.inf, residuals, inliers, holds, reason)
+    image_points = np.where(np.isfinite(res)[:, None] & np.isfinite(u), u, np.nan)
+    return TlsReported(g_lb, g_ub if math.isfinite(g_ub) else math.inf, residuals, inliers, holds, reason, image_points)
 
 
 def coordinate_resolution(centres: np.ndarray) -> float:

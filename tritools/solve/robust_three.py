@@ -103,12 +103,12 @@ class _ThreeViews:
         if more.any():
             self._bound(more)
             lb = self._lower_bound()
-        return self._result(lb) if s.tol.certified(lb, s.best_f, s.scale) else None
+        return self._result(lb) if s.tol.certified_one(lb, s.best_f, s.scale) else None
 
     def _meets_at_floor(self, lb: float) -> bool:
         """LB meets UB under the rule at the floor of the decision scale, without contradicting it there."""
         s = self.s
-        return bool(s.tol.certified(lb, s.best_f, self.floor)) and not s.tol.contradicts(lb, s.best_f, self.floor)
+        return s.tol.certified_one(lb, s.best_f, self.floor) and not s.tol.contradicts_one(lb, s.best_f, self.floor)
 
     def _outside_pairs(self) -> np.ndarray:
         """The pairs holding a view outside the best inlier set, where UB exceeds min c^2 (they feed the closure of

@@ -22,6 +22,8 @@ import math
 
 import numpy as np
 
+from sospoly.analysis import SparseQuadratics
+
 from .geometry import POINT_AT_INFINITY_RTOL, PROJECTION_DENOM_RTOL, SAME_CENTER_RTOL
 
 __all__ = ["null_vectors", "dlt_stack", "project_stack", "refine_points_stack", "fundamental_stack",
@@ -498,8 +500,6 @@ def epipolar_quadratics(F: np.ndarray, N: int, pairs: tuple | None = None):
     """Quadratic parts (g0 (M, K), g1 (M, K, 2N), G2) of g_ij(v) = x~_i^T F_ij x~_j over
     v = (x_11, x_12, ..., x_N2), for F (M, K, 3, 3) in the order of ``pairs`` (default :func:`view_pairs`); G2 as
     :class:`sospoly.analysis.verify.SparseQuadratics` (8 entries per pair, so memory grows like N^2, not N^4)."""
-    from sospoly.analysis import SparseQuadratics
-
     M, K = F.shape[:2]
     k, lin, ks, ii, jj = _quadratic_index(N) if pairs is None else _quadratic_index_of(*pairs)
     g0 = F[..., 2, 2]

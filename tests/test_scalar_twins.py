@@ -538,3 +538,23 @@ def test_tolerances_certified_one_and_contradicts_one_equal_the_vectorised_rule(
                     assert tol.certified_one(lo, up, scale) == bool(tol.certified(lo, up, scale)), (lo, up, scale)
                     assert tol.contradicts_one(lo, up, scale) == bool(tol.contradicts(lo, up, scale)), (lo, up, scale)
         assert tol.certified_one(None, 1.0) is False and tol.contradicts_one(1.0, None) is False
+
+
+def test_gamma_lower_one_equals_gamma_lower_bit_for_bit():
+    """tritools.solve.decide.gamma_lower_one (a single robust result's report) gives gamma_lower's numbers exactly:
+    bounds and resolutions over 600 orders of magnitude, gamma_UB infinite or NaN, non-finite or zero scales."""
+    from tritools.solve.decide import gamma_lower, gamma_lower_one
+
+    rng = np.random.default_rng(12)
+    inf, nan = math.inf, math.nan
+    vals = [0.0, 1e-300, 1e-12, 0.5, 3.0, 1e10, 1e300, inf, nan]
+    for _ in range(3000):
+        g = float(rng.choice(vals)) if rng.random() < 0.2 else float(rng.random() * 10.0 ** rng.integers(-300, 300))
+        up = float(rng.choice(vals)) if rng.random() < 0.3 else g * float(1 + rng.random())
+        sc = float(rng.choice([1.0, 1.0, 0.0, 2.5, 1e-200, inf]))
+        res = float(rng.choice(vals)) if rng.random() < 0.3 else float(rng.random() * 10.0 ** rng.integers(-20, 20))
+        with np.errstate(all="ignore"):
+            ref = float(gamma_lower(g, up, sc, res))
+        got = gamma_lower_one(g, up, sc, res)
+        assert (got == ref and math.copysign(1, got) == math.copysign(1, ref)) or (math.isnan(got) and math.isnan(ref)), \
+            (g, up, sc, res, got, ref)

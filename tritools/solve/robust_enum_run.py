@@ -157,6 +157,14 @@ def refine_rows(Cn: np.ndarray, X0: np.ndarray, inS: np.ndarray) -> tuple:
     return Xn, ok & np.isfinite(Xn).all(axis=1)
 
 
+def _first_of_runs(sorted_keys: np.ndarray) -> np.ndarray:
+    """The index of the first entry of each run of equal keys in a sorted 1-D integer array: ``np.unique``'s
+    ``return_index`` for sorted input (its result here), without its per-call overhead."""
+    if sorted_keys.size == 0:
+        return np.zeros(0, int)
+    return np.flatnonzero(np.concatenate(([True], sorted_keys[1:] != sorted_keys[:-1])))
+
+
 def enumerated_result(search, lb: float, n_bounded: int, n_sets: int):
     """The result of a search decided by the enumeration (:meth:`tritools.solve.robust.TlsSearch.result` at the lower
     bound ``lb``, pixels^2), its message saying so; ``n_bounded`` subsets were bounded."""
@@ -316,7 +324,7 @@ class _Group:
             d2 = point_distances2_stack(self.C[pp], self.x[pp], world[:, None])[:, 0]           # (R, N)
             f = np.sum(np.minimum(d2, self.c2[pp]), axis=1)       # (only ranks: offer() computes it exactly)
             order = np.lexsort((f, pp))
-            _, first = np.unique(pp[order], return_index=True)
+            first = _first_of_runs(pp[order])
             for r in order[first]:
                 picks.append((int(pp[r]), world[r], np.nonzero(d2[r] < self.c2[pp[r]])[0].tolist()))
         for p, X, _ in picks:
@@ -420,7 +428,7 @@ class _Group:
         late = []
         for p in probs:
             s, lb, ub = self.group[p], float(lb_all[p]), self.group[p].best_f
-            if s.tol.certified(lb, ub, floors[p]) and not s.tol.contradicts(lb, ub, floors[p]):
+            if s.tol.certified_one(lb, ub, floors[p]) and not s.tol.contradicts_one(lb, ub, floors[p]):
                 s.set_normalization_scale(SCALE_BOUNDS[1])       # met at the floor: met at the documented scale
                 self._result(p, lb)
             else:
@@ -431,7 +439,7 @@ class _Group:
             self.scales([self.group[p] for p in late])
         for p in late:
             s = self.group[p]
-            if s.tol.certified(float(lb_all[p]), s.best_f, s.scale):
+            if s.tol.certified_one(float(lb_all[p]), s.best_f, s.scale):
                 self._result(p, float(lb_all[p]))
         return [p for p in late if self.results[p] is None]
 

@@ -28,7 +28,7 @@ import numpy as np
 
 from ..model.normalize import RESOLUTION_REL
 from ..model.stacked import norms
-from .decide import gamma_from_c, gamma_lower
+from .decide import gamma_from_c, gamma_lower_one
 from .report import enlarged_distances, gamma_upper, projections_and_spread
 
 __all__ = ["TlsReported", "tls_reported"]
@@ -64,7 +64,7 @@ def tls_reported(C: np.ndarray, centres: np.ndarray, residuals, X, c: np.ndarray
     # lowered by the normalisation's round-off and by the estimate's rounding spread: bounds from a normalised frame
     # describe the caller's float problem only to that spread (a 6-view track 4.5e8 px off-axis: spread 0.06 px,
     # the frame's bound 7e-4 px above an achievable value)
-    g_lb = max(0.0, float(gamma_lower(gamma_from_c(max(lb, 0.0), N, 1.0), g_ub, 1.0, resolution)) - spread)
+    g_lb = max(0.0, gamma_lower_one(gamma_from_c(max(lb, 0.0), N, 1.0), g_ub, 1.0, resolution) - spread)
     g_lb = min(g_lb, g_ub)
     holds, reason = certified, ""
     f_ub = 2.0 * N * g_ub * g_ub

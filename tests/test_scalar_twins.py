@@ -529,7 +529,8 @@ def test_tolerances_certified_one_and_contradicts_one_equal_the_vectorised_rule(
     rng = np.random.default_rng(6)
     inf, nan = math.inf, math.nan
     for tol in (DEFAULT_TOLERANCES, Tolerances(gap_abs=1e-3, gap_rel=1e-4)):
-        ups = [0.0, 1e-300, 0.5, 1.0, -3.0, 1e300, inf, -inf, nan, *rng.normal(size=20) * 10.0 ** rng.integers(-9, 9, 20)]
+        ups = [0.0, 1e-300, 0.5, 1.0, -3.0, 1e300, inf, -inf, nan,
+               *rng.normal(size=20) * 10.0 ** rng.integers(-9, 9, 20)]
         for up in ups:
             for scale in (1.0, 0.25, 1024.0, 4e4):
                 gap = tol.gap_tolerance_one(up, scale) if math.isfinite(up) else 1.0
@@ -556,5 +557,5 @@ def test_gamma_lower_one_equals_gamma_lower_bit_for_bit():
         with np.errstate(all="ignore"):
             ref = float(gamma_lower(g, up, sc, res))
         got = gamma_lower_one(g, up, sc, res)
-        assert (got == ref and math.copysign(1, got) == math.copysign(1, ref)) or (math.isnan(got) and math.isnan(ref)), \
-            (g, up, sc, res, got, ref)
+        same = got == ref and math.copysign(1, got) == math.copysign(1, ref)
+        assert same or (math.isnan(got) and math.isnan(ref)), (g, up, sc, res, got, ref)

@@ -114,6 +114,8 @@ MIN_THRESHOLD = 1.5e-154
 def robust_thresholds(robust, n_views: int) -> np.ndarray:
     """The thresholds c (N,) from ``robust=`` (a positive scalar or one per view, pixels; ``inf`` allowed).
     ValueError naming ``robust`` otherwise."""
+    if type(robust) is float and robust >= MIN_THRESHOLD:      # the common case, a valid float (NaN fails >=)
+        return np.full(n_views, robust)
     if isinstance(robust, (bool, np.bool_)) or isinstance(robust, (str, bytes)):
         raise ValueError("robust must be a positive threshold in pixels (scalar or one per view), "
                          f"got {_short(robust)}")

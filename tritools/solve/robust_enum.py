@@ -192,7 +192,7 @@ def _polish(Cm: np.ndarray, X: np.ndarray, steps: int) -> np.ndarray:
         absC2 = np.abs(Cm[:, :, 2, :])
         u, h, fin = project_quiet(Cm, X, absC2)
         cost = np.where(fin, np.sum(u * u, axis=(1, 2)), np.inf)
-        for _ in range(steps):
+        for step_no in range(steps):
             den = np.where(h[..., 2] == 0, 1.0, h[..., 2])
             J = ((Cm[..., :2, :3] - u[..., None] * Cm[..., 2:3, :3]) / den[..., None, None]).reshape(len(X), -1, 3)
             r = u.reshape(len(X), -1)
@@ -204,7 +204,7 @@ def _polish(Cm: np.ndarray, X: np.ndarray, steps: int) -> np.ndarray:
             better = ct <= cost
             settled = np.all(np.isfinite(cost) & (np.abs(ct - cost) <= POLISH_RTOL * cost))
             X = np.where(better[:, None], Xt, X)
-            if settled:
+            if settled or step_no == steps - 1:         # (the last step: its state is not read again)
                 break
             u, h = np.where(better[:, None, None], ut, u), np.where(better[:, None, None], ht, h)
             cost = np.where(better, ct, cost)

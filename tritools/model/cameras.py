@@ -127,7 +127,7 @@ def power2_scale(A: np.ndarray, axes: tuple) -> np.ndarray:
     """The power of two at or just above the largest absolute entry over ``axes`` (kept as size-1
     axes), 1 where that entry is 0 or not finite.  Dividing by it is exact (barring underflow) and
     brings the entries into [-1, 1], so that later products and norms cannot overflow."""
-    m = np.abs(A).max(axis=axes, keepdims=True)
+    m = np.maximum.reduce(np.abs(A), axis=axes, keepdims=True)      # (ndarray.max's ufunc, without its wrapper)
     ok = (m > 0) & np.isfinite(m)
     return np.where(ok, np.ldexp(1.0, np.frexp(np.where(ok, m, 1.0))[1]), 1.0)
 

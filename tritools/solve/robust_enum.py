@@ -242,13 +242,14 @@ def enum_bounds(C: np.ndarray, Cn: np.ndarray, W: np.ndarray, Xn: np.ndarray, s:
                             np.broadcast_to(defined[0], (M,) + defined.shape[1:]), W, Xn, np.full(M, s), tolerances)
 
 
-def enum_bounds_rows(Cn, F, defined, W: np.ndarray, Xn: np.ndarray, s: np.ndarray, tolerances):
+def enum_bounds_rows(Cn, F, defined, W: np.ndarray, Xn: np.ndarray, s: np.ndarray, tolerances, accepted: bool = True):
     """(L2 lower bounds (M,) pixels^2, accepted (M,)) of the subsets ``W`` (M, N) at the normalised candidates Xn
     (M, 3), each row with its problem's normalised cameras Cn (M, N, 3, 4), fundamental matrices F (M, K, 3, 3) and
     ``defined`` (M, K) (:func:`fundamentals`) and frame scale s (M,) (module docstring): the Lagrangian bound of
     the degree-2 program of each subset, the epipolar constraints of its view pairs only.  ``accepted``: the bound
     meets the candidate's value under the certificate rule at the subset's residual scale (as
-    :func:`tritools.solve.robust_verify.verify_in_parent` accepts a bound)."""
+    :func:`tritools.solve.robust_verify.verify_in_parent` accepts a bound); None with ``accepted=False`` (the
+    enumeration reads the bounds only)."""
     M, N = W.shape
     u, _, fin = project_stack(Cn, Xn)
     fin &= np.isfinite(Xn).all(axis=1)
@@ -265,9 +266,10 @@ def enum_bounds_rows(Cn, F, defined, W: np.ndarray, Xn: np.ndarray, s: np.ndarra
         lb = np.maximum(np.minimum(ver.lower_bound, radius ** 2), 0.0) / (s * s) * ROUND_DOWN
         good &= np.isfinite(lb)
         lb = np.where(good, lb, 0.0)
+        if not accepted:
+            return lb, None
         ub = radius ** 2 / (s * s)
-        accepted = good & np.asarray(tolerances.certified(lb, ub, ub / W.sum(axis=1)), bool)
-    return lb, accepted
+        return lb, good & np.asarray(tolerances.certified(lb, ub, ub / W.sum(axis=1)), bool)
 
 
 @functools.lru_cache(maxsize=16)

@@ -378,7 +378,7 @@ class _Group:
         s = np.array([f.scale if f is not None else 1.0 for f in self.frames])
         self._terms_cache = None
         self.lb[pp, mm], _ = enum.enum_bounds_rows(self.Cn[pp], F[pp], defined[pp], self.W[mm], self.Xn[pp, mm],
-                                                   s[pp], self.tol)
+                                                   s[pp], self.tol, accepted=False)
 
     def _floors(self) -> np.ndarray:
         """The floor of each problem's decision scale (:mod:`tritools.solve.robust_enum`, "The decision scale")."""

@@ -194,7 +194,7 @@ class _ThreeViews:
         self.lb[m], _ = enum.enum_bounds_rows(
             np.broadcast_to(self.Cn, (R,) + self.Cn.shape), np.broadcast_to(self.F, (R,) + self.F.shape),
             np.broadcast_to(self.defined, (R,) + self.defined.shape), self.W[m], self.Xn[m],
-            np.full(R, self.frame.scale), self.s.tol)
+            np.full(R, self.frame.scale), self.s.tol, accepted=False)
 
     def _terms(self) -> list:
         return three_terms(self.lb.tolist(), self.rest.tolist())

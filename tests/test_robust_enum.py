@@ -81,6 +81,13 @@ def test_subset_bounds_below_every_subset_optimum(N, n_out, pixel_scale):
     W = enum_mod.subset_masks(N)
     Xn = enum_mod.enum_candidates(Cn, W)
     lb, accepted = enum_mod.enum_bounds(cams, Cn, W, Xn, norm.scale, TOL)
+    F, defined = enum_mod.fundamentals(cams[None], Cn[None])
+    M = len(W)
+    only, none = enum_mod.enum_bounds_rows(np.broadcast_to(Cn, (M,) + Cn.shape),
+                                           np.broadcast_to(F[0], (M,) + F.shape[1:]),
+                                           np.broadcast_to(defined[0], (M,) + defined.shape[1:]), W, Xn,
+                                           np.full(M, norm.scale), TOL, accepted=False)
+    assert none is None and np.array_equal(only, lb)          # the enumeration's call: the same bounds
     bits = W.astype(np.int64) @ (1 << np.arange(N))
     table = np.zeros(1 << N)
     table[bits] = lb

@@ -35,7 +35,7 @@ from tests.reference.hartley_sturm import hartley_sturm
 from tests.reference.multistart import best_local_gamma
 from tests.reference.regions import region_and_spec as _region, region_reference
 from tritools import Status, TriangulationOptions
-from tritools.model.constraints import corollary1_constraints, theorem1_constraints
+from tritools.model.constraints import centre_relations, corollary1_constraints, theorem1_constraints
 from tritools.model.normalize import normalization_for
 
 EPS = np.finfo(float).eps
@@ -340,6 +340,9 @@ def test_camera_rotated_about_another_camera_centre():
     assert_sound(tritools.triangulate(cams, x, "corollary1", max_delta=4), ref, x, certified=True)
     gens = sospoly.variables(" ".join(f"x{k}" for k in range(6)))[0].gens
     polys, info = corollary1_constraints(cams, gens, np.arange(6))
+    assert info["homography"] == [] and info["skipped"] == [(0, 1)]     # one centre to round-off only
+    rel = centre_relations(cams, admitted=frozenset({(0, 1)}))         # admitted (the ball is excluded)
+    polys, info = corollary1_constraints(cams, gens, np.arange(6), relations=rel)
     assert info["homography"] == [(0, 1)] and info["skipped"] == [] and len(polys) == 3 + 2
     for Xs in rng.uniform(-1, 1, (5, 3)):
         v = np.concatenate([project(P, Xs) for P in cams])
@@ -359,8 +362,8 @@ def test_two_views_rotated_about_one_centre_are_certified_at_the_true_optimum(se
     from scipy.optimize import minimize
 
     rng = np.random.default_rng(seed)
-    C1, X = np.array([0.0, 0.0, -5.0]), np.array([0.1, -0.2, 0.3])
-    R1 = look_at(C1)
+    C1, X = np.zeros(3), np.array([0.1, -0.2, 5.3])          # one exact centre: the world origin at it
+    R1 = look_at(C1, X - np.array([0.1, -0.2, 0.3]))
     cams = np.array([camera(800.0, (320.0, 240.0), R1, C1),
                      camera(800.0, (320.0, 240.0), rotation(np.array([0.0, 1.0, 0.0]), 0.1) @ R1, C1)])
     x = np.array([project(P, X) for P in cams]) + 3.0 * rng.normal(size=(2, 2))
@@ -408,7 +411,7 @@ def test_views_sharing_one_centre_give_a_point_in_front(seed):
     the centre the SVD gave -- behind every camera in about half the cases (require_in_front then reported
     behind_camera although the mirror point has the same projections and lies in front)."""
     rng = np.random.default_rng(seed)
-    C = np.array([1.0, -2.0, 3.0])
+    C = np.zeros(3)                                  # one exact centre (see test_rotation_rig_built_in_floats...)
     X = C + np.array([0.2, -0.1, 5.0])
     R0 = look_at(C, X)
     cams = np.array([camera(800.0, (320.0, 240.0), R0, C)] +
@@ -424,7 +427,7 @@ def test_theorem1_with_every_view_at_one_centre_keeps_the_homographies():
     Corollary 1 (homography constraints) certifies; the dense Theorem 1 problem now carries the coincident
     pairs' homographies too: a valid bound, never above the reference."""
     rng = np.random.default_rng(3)
-    C = np.array([1.0, -2.0, 3.0])
+    C = np.zeros(3)                                  # one exact centre
     X = C + np.array([0.2, -0.1, 5.0])
     R0 = look_at(C, X)
     cams = np.array([camera(800.0, (320.0, 240.0), R0, C)] +

@@ -29,10 +29,11 @@ import numpy as np
 from sospoly import Polynomial
 from sospoly.budget import check_deadline
 
+from .exact import same_exact_centre
 from .geometry import fundamental_matrix
 
 __all__ = ["Method", "RANK_RTOL", "COEF_RTOL", "minors_matrix", "theorem1_constraints", "corollary1_constraints",
-           "triple_minor_constraints", "THEOREM1_DENSE_MAX_VIEWS", "centre_groups", "HOMOGRAPHY_RTOL",
+           "triple_minor_constraints", "THEOREM1_DENSE_MAX_VIEWS", "centre_groups",
            "CentreRelations", "centre_relations"]
 
 #: relative singular-value threshold for the numerical rank N2 of M1 (rows scaled to unit norm first).
@@ -93,7 +94,7 @@ def _minor_structure(N: int):
     return arr[0], arr[1], arr[2], B1, n_minors
 
 
-def minors_matrix(cameras: np.ndarray, groups=None) -> tuple[np.ndarray, np.ndarray]:
+def minors_matrix(cameras: np.ndarray, groups=None, untied=()) -> tuple[np.ndarray, np.ndarray]:
     """M1 and the exponent rows b1 over the 2N image variables (x_11, x_12, ..., x_N2).
 
     Returns ``(M1, B1)`` with ``m1 = M1 @ b1(x)``; B1 rows are 0/1 exponent vectors.  All
@@ -108,14 +109,23 @@ def minors_matrix(cameras: np.ndarray, groups=None) -> tuple[np.ndarray, np.ndar
     constraint the true image points violate (a duplicated view gave c_LB = 6.4 above c = 4 at a
     feasible point).  A threshold on the determinants' size would not do: near-consistent data make
     genuine terms just as small.
+
+    ``untied``: pairs (i, j) of one group whose centres agree only to round-off and are not admitted
+    (:attr:`CentreRelations.untied`).  Every minor with rows of both views is dropped (all its terms set to 0):
+    its float coefficients cannot see the pair's micro-baseline, so such minors together imply the pair's
+    homography to round-off -- the constraint withheld from the pair (review 9 F2).  A term's rows are the
+    minor's rows, so zeroing by term drops whole minors: a relaxation, the bound stays valid.
     """
     cameras = np.asarray(cameras, float)
     a, c, _ = _row_data(cameras)
     T, minor, mono, B1, n_minors = _minor_structure(cameras.shape[0])
     d = np.linalg.det(np.vstack([a, c])[T])
     labels = centre_groups(cameras) if groups is None else np.asarray(groups)
-    group = labels[(T % (2 * cameras.shape[0])) // 2]                               # the centre of each term's rows
+    views = (T % (2 * cameras.shape[0])) // 2                                       # the view of each term's rows
+    group = labels[views]                                                           # the centre of each term's rows
     d = np.where(np.all(group == group[:, :1], axis=1), 0.0, d)
+    for i, j in untied:
+        d = np.where(np.any(views == i, axis=1) & np.any(views == j, axis=1), 0.0, d)
     M1 = np.zeros((n_minors, B1.shape[0]))
     np.add.at(M1, (minor, mono), d)
     used = np.bincount(mono[d != 0.0], minlength=B1.shape[0]) > 0
@@ -125,19 +135,30 @@ def minors_matrix(cameras: np.ndarray, groups=None) -> tuple[np.ndarray, np.ndar
 @dataclass(frozen=True)
 class CentreRelations:
     """Which views share a camera centre, decided once on the caller's (raw) cameras: ``groups`` one label per
-    view (:func:`centre_groups`), ``coincident`` the pairs (i < j) of one group whose cameras are related by a
-    homography to round-off (:func:`_pair_homography`): their centres really coincide."""
+    view (:func:`centre_groups`), ``coincident`` the pairs (i < j) of one group whose centres coincide in exact
+    arithmetic or are admitted (:func:`centre_relations`); the other pairs of a group keep no constraint."""
     groups: np.ndarray
     coincident: frozenset
 
+    @property
+    def untied(self) -> tuple:
+        """The pairs (i < j) of one group that are not coincident: their centres agree to round-off only."""
+        g = self.groups
+        return tuple((i, j) for i, j in combinations(range(len(g)), 2)
+                     if g[i] == g[j] and (i, j) not in self.coincident)
 
-def centre_relations(cameras: np.ndarray, groups=None) -> CentreRelations:
+
+def centre_relations(cameras: np.ndarray, groups=None, *, raw=None, admitted=frozenset()) -> CentreRelations:
     """:class:`CentreRelations` of ``cameras`` (N, 3, 4); ``groups`` the centre labels when already decided
-    (default :func:`centre_groups`)."""
+    (default :func:`centre_groups`).  A pair of one group is coincident when the caller's float cameras ``raw``
+    (default ``cameras``) share its centre exactly, or when it is in ``admitted`` (a round-off pair whose
+    micro-baseline ball is excluded, :func:`tritools.model.micro_baseline.admitted_pairs`)."""
     cameras = np.asarray(cameras, float)
+    raw = cameras if raw is None else np.asarray(raw, float)
     groups = centre_groups(cameras) if groups is None else np.asarray(groups)
     pairs = frozenset((i, j) for i, j in combinations(range(len(cameras)), 2)
-                      if groups[i] == groups[j] and _pair_homography(cameras[i], cameras[j]) is not None)
+                      if groups[i] == groups[j] and _pair_homography(cameras[i], cameras[j], check=False) is not None
+                      and ((i, j) in admitted or same_exact_centre(raw[i], raw[j])))
     return CentreRelations(groups, pairs)
 
 
@@ -165,14 +186,15 @@ def _exponent_tuples(B1_bytes: bytes, shape: tuple, n: int, x_index: tuple) -> t
     return tuple(tuple(int(k) for k in row) for row in E)
 
 
-def theorem1_constraints(cameras: np.ndarray, gens, x_index, groups=None) -> tuple[list[Polynomial], dict]:
+def theorem1_constraints(cameras: np.ndarray, gens, x_index, groups=None, untied=()
+                         ) -> tuple[list[Polynomial], dict]:
     """m2 of Theorem 1 as polynomials in ``gens``.
 
     ``x_index[2i + k]`` is the position in ``gens`` of x_{i+1, k+1}.  ``groups``: the views' centre labels
     (:class:`CentreRelations`, decided on the caller's raw cameras; default: from ``cameras``).  Returns
     the list and diagnostics (N1, N2, singular values).
     """
-    M1, B1 = minors_matrix(cameras, groups)
+    M1, B1 = minors_matrix(cameras, groups, untied)
     norms = np.linalg.norm(M1, axis=1)
     keep = norms > 0
     M1n = M1[keep] / norms[keep, None]
@@ -202,7 +224,7 @@ def theorem1_constraints(cameras: np.ndarray, gens, x_index, groups=None) -> tup
 THEOREM1_DENSE_MAX_VIEWS = 8
 
 
-def triple_minor_constraints(cameras: np.ndarray, gens, x_index, triples, groups=None
+def triple_minor_constraints(cameras: np.ndarray, gens, x_index, triples, groups=None, untied=()
                              ) -> tuple[list[Polynomial], dict]:
     """Theorem 1's constraints restricted to view triples: for each triple (i, j, k) the 4x4 minors of the
     six rows of M0 of those views, reduced by SVD as in :func:`theorem1_constraints`.
@@ -217,8 +239,9 @@ def triple_minor_constraints(cameras: np.ndarray, gens, x_index, triples, groups
         check_deadline("building the minors")
         t = tuple(int(i) for i in t)
         sub = np.concatenate([x_index[2 * i:2 * i + 2] for i in t])
+        local = [(t.index(i), t.index(j)) for i, j in untied if i in t and j in t]
         p, info = theorem1_constraints(cameras[list(t)], gens, sub,
-                                       None if groups is None else np.asarray(groups)[list(t)])
+                                       None if groups is None else np.asarray(groups)[list(t)], local)
         polys += p
         views += [t] * len(p)
         n1 += info["N1"]
@@ -291,24 +314,21 @@ def corollary1_constraints(cameras: np.ndarray, gens, x_index, pairs=None, relat
 
 def _pair_homography(Pi: np.ndarray, Pj: np.ndarray, check: bool = True) -> np.ndarray | None:
     """H with P_j = H P_i up to scale (unit Frobenius norm), for two cameras with the same finite centre; None
-    when the left 3x3 block of P_i is singular (centre at infinity) or P_j is not H P_i to round-off.
+    when the left 3x3 block of P_i is singular (centre at infinity) or (``check``) the two float cameras do not
+    have one centre in exact arithmetic (:func:`tritools.model.exact.same_exact_centre`).
 
-    The test is strict on purpose: the constraints hold only if the centres coincide, and a pair merely
-    *close* to coincident (a short baseline far from the world origin, where ``fundamental_matrix`` may
-    also give up) must not get them -- it keeps no constraint at all, which is weaker but sound.  The
-    residual H P_i - P_j = -M_j (C_j - C_i) ... is compared with the round-off of the product, ~eps
-    ||H|| ||P_i|| (``HOMOGRAPHY_RTOL``)."""
+    The test is exact on purpose: the constraints hold only if the centres coincide.  A pair whose centres agree
+    to round-off only (a rig built as K R [I | -C] in floats: ~1e-16 of |C| apart) has a micro-baseline, and
+    next to the centres the exact problem has parallax and lower costs than any point the homography admits
+    (review 8b: certified 4.353 where a float point 3e-9 from the centres has exact cost 4.007); such a pair
+    keeps no constraint at all, which is weaker but sound.  ``check=False``: the caller decided coincidence on
+    the raw cameras (``cameras`` are normalised ones, whose rounding broke the exact relation)."""
     Mi, Mj = Pi[:, :3], Pj[:, :3]
     if np.linalg.cond(Mi) > 1e8:
+        return None
+    if check and not same_exact_centre(Pi, Pj):
         return None
     H = Mj @ np.linalg.inv(Mi)
     if not np.all(np.isfinite(H)):
         return None
-    if check and np.any(np.abs(H @ Pi - Pj) > HOMOGRAPHY_RTOL * np.max(np.abs(H) @ np.abs(Pi))):
-        return None
     return H / np.linalg.norm(H)
-
-
-#: a pair's cameras are related by a homography (same centre) when ||H P_i - P_j|| is at most this times
-#: ||H|| ||P_i|| (round-off of the product is ~1e-16 of it; the fundamental matrix's tests are looser).
-HOMOGRAPHY_RTOL = 1e-12

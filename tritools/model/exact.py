@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 __all__ = ["two_sum", "two_prod", "dot2", "accurate_homogeneous", "homogeneous_images", "CANCELLATION_RATIO",
-           "HOMOGENEOUS_RTOL"]
+           "HOMOGENEOUS_RTOL", "exact_centre", "same_exact_centre"]
 
 #: a sum of products is recomputed by :func:`dot2` when the sum of its terms' magnitudes exceeds this many times
 #: its magnitude (more than 6 bits lost to cancellation); below, the plain sum of 4 products errs by at most
@@ -65,3 +65,28 @@ def homogeneous_images(C: np.ndarray, Xh: np.ndarray) -> np.ndarray:
         Xb = np.broadcast_to(Xh[..., None, :], C.shape[:-2] + (4,))
         h[idx] = accurate_homogeneous(C[idx], Xb[idx][..., None, :])
     return h
+
+
+def exact_centre(P) -> tuple:
+    """The null vector of the float 3 x 4 camera P in exact integer arithmetic: the signed 3 x 3 cofactors
+    C_k = (-1)^k det(P without column k) of P scaled to integers (every float is m 2^e), a tuple of 4 Python ints
+    (all 0 when P has rank < 3).  The camera centre of the caller's data, with no round-off."""
+    ratios = [float(v).as_integer_ratio() for v in np.asarray(P, float).ravel()]
+    den = max(d for _, d in ratios)
+    M = [[n * (den // d) for n, d in ratios[4 * r:4 * r + 4]] for r in range(3)]
+
+    def det3(cols):
+        (a, b, c), (d, e, f), (g, h, i) = ([M[r][k] for k in cols] for r in range(3))
+        return a * (e * i - f * h) - b * (d * i - f * g) + c * (d * h - e * g)
+
+    return tuple((-1) ** k * det3([m for m in range(4) if m != k]) for k in range(4))
+
+
+def same_exact_centre(Pi, Pj) -> bool:
+    """Do the float cameras P_i and P_j have one centre in exact arithmetic (their :func:`exact_centre` null vectors
+    proportional, neither zero)?  A pair whose centres agree only to round-off has a micro-baseline: next to the
+    centres the exact problem sees parallax, so the one-centre constraints (a homography) would cut off points."""
+    a, b = exact_centre(Pi), exact_centre(Pj)
+    if not any(a) or not any(b):
+        return False
+    return all(a[p] * b[q] == a[q] * b[p] for p in range(4) for q in range(p + 1, 4))

@@ -402,7 +402,15 @@ def unconstrained_reason(cameras: np.ndarray, regions) -> tuple:
         except ValueError:
             pairs = {}
     if not pairs:
-        return "ill_posed", "all camera centres coincide: no view pair constrains the point (its depth is undetermined)"
+        from .exact import same_exact_centre
+
+        raw = np.asarray(cameras, float)
+        if all(same_exact_centre(raw[0], P) for P in raw[1:]):
+            return "ill_posed", ("all camera centres coincide: no view pair constrains the point (its depth is "
+                                 "undetermined)")
+        return "ill_posed", ("the camera centres coincide to round-off but not exactly: next to the centres the exact "
+                             "problem sees their round-off baseline, so no one-centre bound is valid (give the views "
+                             "one exact centre, e.g. the world origin at it, to have them certified as a rotation rig)")
     centers = np.array([r.center for r in regions], float)
     with np.errstate(all="ignore"):
         big = float(np.max(np.abs(centers))) if centers.size else float("nan")

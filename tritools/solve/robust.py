@@ -74,6 +74,7 @@ import time
 import numpy as np
 
 from ..model.cameras import as_world_frame, depth_rows
+from ..model.frame import WorldFrame, world_frame
 from ..model.normalize import normalization_for
 from ..result import Attempt, Status, TriangulationResult
 from .decide import cheirality
@@ -188,9 +189,19 @@ def scale_from(s: float, c2: np.ndarray) -> float:
 class TlsSearch(NodeBounds):
     """One TLS problem: thresholds, the subset bounds, the best candidate, the branch and bound."""
 
-    def __init__(self, cams, regions, c, opts, t0, points=None):
+    def __init__(self, cams, regions, c, opts, t0, points=None, origin=None):
         """``regions`` (a sequence of regions), or None with ``points`` (N, 2): point regions given by their
-        centres (a batch of validated point problems; the Point objects are built only if a path needs them)."""
+        centres (a batch of validated point problems; the Point objects are built only if a path needs them).
+
+        The search runs in the world frame of :mod:`tritools.model.frame` (``origin``: its origin when the caller
+        computed it for a stack, :func:`tritools.model.frame.world_origins`): in a georeferenced world (centres
+        1e6-1e8 from the origin) its plain arithmetic would drift by 1e-7..1e-3 of the cost and the report's drift
+        test withhold the certificate.  ``C`` are the cameras in that frame, ``C_user`` the caller's: the result
+        (X, gamma_UB, residuals, depths, inliers) is reported on these, at the point moved back (:meth:`result`)."""
+        self.C_user = cams
+        self.frame = world_frame(cams) if origin is None else WorldFrame(np.asarray(origin, float))
+        if self.frame.moved:
+            cams = self.frame.cameras(cams)
         self.C, self.c, self.opts, self.t0 = cams, c, opts, t0
         self._regions = None if regions is None else list(regions)
         self.N = len(regions) if regions is not None else len(points)
@@ -256,12 +267,13 @@ class TlsSearch(NodeBounds):
         return np.sum(np.minimum(point_distances2(self.C, self.x, Xs), self.c2[None]), axis=1)
 
     def report(self, X) -> PointReport:
-        """Residuals and depths of X: point_report for other regions; for point regions only the depths (the
-        reported residuals are :func:`tritools.solve.robust_report.tls_reported`'s, from compensated projections)."""
+        """Residuals and depths of X in the caller's frame (X a user point; the caller's cameras ``C_user``):
+        point_report for other regions; for point regions only the depths (the reported residuals are
+        :func:`tritools.solve.robust_report.tls_reported`'s, from compensated projections on ``C_user``)."""
         if not self.points:
-            return point_report(X, self.C, self.regions, self.opts.world_frame)
+            return point_report(X, self.C_user, self.regions, self.opts.world_frame)
         if self.drows is None:                          # depth = h row_i . X~ (depths_stack's rows), once
-            self.drows = depth_rows(self.C)
+            self.drows = depth_rows(self.C_user)
         Xh = np.array([X[0], X[1], X[2], 1.0], float)
         with np.errstate(over="ignore", invalid="ignore"):
             depths = as_world_frame(self.opts.world_frame).sign * (self.drows @ Xh)
@@ -495,10 +507,10 @@ class TlsSearch(NodeBounds):
         scale, the reported numbers and their checks (:func:`tritools.solve.robust_report.tls_reported`), the
         message (``note`` appended: the path that decided)."""
         ub = self.best_f
-        X = self.best_X
+        X = self.frame.user_point(self.best_X) if self.frame.moved else self.best_X
         rep = self.report(X)
         certified = self.tol.certified_one(lb, ub, self.scale)     # lb is valid also when the search stopped
-        told = tls_reported(self.C, self.x if self.points else np.array([r.center for r in self.regions]),
+        told = tls_reported(self.C_user, self.x if self.points else np.array([r.center for r in self.regions]),
                             None if self.points else rep.residuals, X, self.c, lb, self.tol, certified,
                             None if self.cells_decided else ub,
                             None if self.points else self.regions)

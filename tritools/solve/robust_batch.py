@@ -245,6 +245,7 @@ def _point_searches(idx, points, thresholds, opts, t0) -> dict:
     :func:`tritools.model.cameras.validate_cameras`), one call per view count; the others are left out (the
     caller's per-problem path gives them their named error)."""
     from ..model.cameras import camera_problems, depth_rows
+    from ..model.frame import world_origins
     from .robust import TlsSearch
 
     groups: dict = {}
@@ -258,8 +259,10 @@ def _point_searches(idx, points, thresholds, opts, t0) -> dict:
         except ValueError:
             continue
         rows = depth_rows(C)                    # the depth rows of every search's report, in one call
+        origins = world_origins(C)              # each search's world frame (TlsSearch), in one call
         for k, i in enumerate(group):
             if valid[k]:
-                out[i] = TlsSearch(C[k].copy(), None, thresholds[i], opts, t0, points=points[i][1])
+                out[i] = TlsSearch(C[k].copy(), None, thresholds[i], opts, t0, points=points[i][1],
+                                   origin=origins[k])
                 out[i].drows = rows[k]
     return out

@@ -20,6 +20,8 @@ import numpy as np
 
 from ...model.constraints import Method, centre_relations
 from ...model.frame import WorldFrame, frame_centre_groups
+from ...model.geometry import gamma as gamma_of
+from ...model.micro_baseline import admitted_pairs, round_off_pairs
 from ...model.normalize import Normalization, normalization_for
 from ...model.problem import TriangulationProblem, build_problem
 from ...result import Attempt, TriangulationResult
@@ -170,10 +172,27 @@ class PointContext:
                 self._problems[key] = dataclasses.replace(twin, formulation=formulation)
             else:
                 if self._relations is None:
-                    self._relations = centre_relations(self.cams, frame_centre_groups(self.cams, self.frame))
+                    self._relations = self._centre_relations()
                 self._problems[key] = build_problem(self.cams_n, self.regs_n, method, formulation, self._relations)
             self.tick("build", t)
         return self._problems[key]
+
+    def _centre_relations(self):
+        """Which views share a centre (:func:`~tritools.model.constraints.centre_relations`): exactly on the caller's
+        cameras, or to round-off where the micro-baseline's ball is excluded by the local estimate's cost
+        (:mod:`tritools.model.micro_baseline`)."""
+        groups = frame_centre_groups(self.cams, self.frame)
+        raw = np.asarray(self.cams_user, float)
+        admitted = frozenset()
+        if round_off_pairs(raw, groups):
+            local = self.local()
+            f_upper = None
+            if local is not None:
+                g = float(gamma_of(self.norm.world_point(local[1]), self.cams, self.regions))
+                f_upper = 2 * self.N * g * g
+            floor = 8 * np.finfo(float).eps * float(np.linalg.norm(self.frame.origin))
+            admitted = admitted_pairs(raw, self.cams, self.regions, groups, f_upper, floor)
+        return centre_relations(self.cams, groups, raw=raw, admitted=admitted)
 
     def local(self) -> tuple[float, np.ndarray] | None:
         """The local estimate (:func:`tritools.solve.trivial.local_estimate`), computed once."""

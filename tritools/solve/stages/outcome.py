@@ -44,6 +44,16 @@ def behind_message(depths) -> str:
         ", ".join(str(i) for i in np.nonzero(~(np.asarray(depths, float) > 0))[0])
 
 
+#: why a result whose bounds met is not certified when its estimate has no finite gamma_UB.
+UNDEFINED_MESSAGE = "the estimate's projection is undefined in some view (a point at a camera centre)"
+
+
+def has_upper(rep) -> bool:
+    """Whether a point report gives a finite gamma_UB: without one there is no certificate (e.g. views sharing one
+    centre, where the extracted point is the centre itself; a georeferenced point 1e-7 from a camera centre)."""
+    return rep.gamma is not None and bool(np.isfinite(rep.gamma))
+
+
 def report_point(ctx: PointContext, step: Step, status, optimal, gamma_lb, *, X, X_raw, image_points,
                  certified_by, n_lmivar=None, lowered: bool = False) -> TriangulationResult:
     """The result of the estimate ``X`` under ``step`` (module docstring); ``lowered``: ``gamma_lb`` is already a
@@ -63,10 +73,8 @@ def report_point(ctx: PointContext, step: Step, status, optimal, gamma_lb, *, X,
             if not optimal:
                 status = Status.NOT_CERTIFIED
                 msg = "the bounds met in normalised coordinates, but not at the estimate in world coordinates"
-    if optimal and (rep.gamma is None or not np.isfinite(rep.gamma)):
-        # e.g. views sharing one centre, where the extracted point is the centre itself: no upper bound
-        status, optimal = Status.NOT_CERTIFIED, False
-        msg = "the estimate's projection is undefined in some view (a point at a camera centre)"
+    if optimal and not has_upper(rep):
+        status, optimal, msg = Status.NOT_CERTIFIED, False, UNDEFINED_MESSAGE
     status, in_front = cheirality(status, rep.depths, ctx.opts.require_in_front)
     if optimal and not in_front:
         msg = behind_message(rep.depths)
@@ -197,6 +205,9 @@ def world_frame_stage(ctx: PointContext) -> None:
             kw.update(status=Status.NOT_CERTIFIED, optimal=False, certified_by=None,
                       message=join(res.message, "the bounds met in the re-centred frame, but not at the estimate "
                                                 "in the caller's frame"))
+    if res.optimal and not has_upper(rep):                     # report_point's rule, on the caller's numbers
+        kw.update(status=Status.NOT_CERTIFIED, optimal=False, certified_by=None,
+                  message=UNDEFINED_MESSAGE + " in the caller's frame")
     ctx.best = replace(res, **kw)
 
 

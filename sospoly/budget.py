@@ -43,12 +43,14 @@ import contextlib
 import contextvars
 import math
 import numbers
+import os
 import time
 from dataclasses import dataclass
 
 __all__ = ["Budget", "DEFAULT_TIME_LIMIT", "DEFAULT_BUDGET", "UNLIMITED", "ProgramSize", "estimate_size",
            "BudgetExceeded", "Deadline",
-           "as_budget", "TimeLimitReached", "deadline_scope", "check_deadline", "address_space_available",
+           "as_budget", "TimeLimitReached", "deadline_scope", "check_deadline", "active_deadline",
+           "cpu_share", "MIN_CPU_SHARE", "address_space_available",
            "memory_room", "CLARABEL_ENTRY_COPIES", "CLARABEL_LARGEST_BLOCK_COPIES", "AUTO_IPM_MAX_BYTES",
            "ADDRESS_SPACE_SHARE", "ClarabelTimeModel", "CLARABEL_TIME_MODEL"]
 
@@ -142,6 +144,28 @@ def deadline_scope(deadline: Deadline | None):
         yield deadline
     finally:
         _ACTIVE_DEADLINE.reset(token)
+
+
+#: the smallest share of a core :func:`cpu_share` reports (a load average above 16x the cores is not extrapolated)
+MIN_CPU_SHARE = 1.0 / 16
+
+
+def cpu_share() -> float:
+    """The share of one core this process can expect now: cores / the 1-minute load average when the machine is
+    over-committed, else 1 (and 1 where the load average is not available).  Deadlines are wall-clock: a step that
+    cannot be interrupted takes its CPU time over this share in wall time, which the callers that predict a step's
+    time before starting it (e.g. :func:`tritools.solve.fastpath.fits`) divide by."""
+    try:
+        load = os.getloadavg()[0]
+    except (OSError, AttributeError):
+        return 1.0
+    cores = os.cpu_count() or 1
+    return 1.0 if not load > cores else max(MIN_CPU_SHARE, cores / load)
+
+
+def active_deadline() -> Deadline | None:
+    """The deadline :func:`check_deadline` tests (the innermost :func:`deadline_scope`'s), None outside any."""
+    return _ACTIVE_DEADLINE.get()
 
 
 def check_deadline(what: str = "building the program") -> None:

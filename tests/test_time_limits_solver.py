@@ -169,3 +169,25 @@ def test_theorem1_eleven_view_point_track_at_delta_6():
     2.6 GB program take ~12 s, so Clarabel is not started with 12 s left."""
     res, elapsed = _timed_theorem1(11, 6, 15.0, seed=2, kinds="point", max_bytes=4 * 2 ** 30)
     _check(res, elapsed, 15.0)
+
+
+def test_a_step_cut_by_its_solver_time_limit_makes_the_result_time_limit():
+    """A plan step whose solver stopped at its own time limit (MaxTime, a little before the call's deadline) left
+    the earlier step's not_certified as the result: a robust search then took that sub-problem's bound as final
+    ("certification out of reach", test_coplanar's five-view test under load).  Now any attempt ended by the time
+    limit makes an uncertified result TIME_LIMIT, also while the deadline has not quite passed."""
+    from types import SimpleNamespace
+
+    from tritools.result import Attempt, Status, TriangulationResult
+    from tritools.solve.stages.outcome import _stopped_short
+
+    best = TriangulationResult("corollary1", Status.NOT_CERTIFIED, X=np.zeros(3), gamma_ub=1.0, gamma_lb=0.5,
+                               optimal=False)
+    ctx = SimpleNamespace(expired=False, skipped=None, steps=[], opts=None,
+                          attempts=[Attempt("corollary1", 4, "not_certified"), Attempt("theorem1", 4, "time_limit")])
+    assert _stopped_short(ctx, best).status == Status.TIME_LIMIT
+    ctx.attempts = ctx.attempts[:1]
+    assert _stopped_short(ctx, best).status == Status.NOT_CERTIFIED
+    done = TriangulationResult("theorem1", Status.OPTIMAL, X=np.zeros(3), gamma_ub=1.0, gamma_lb=1.0, optimal=True)
+    ctx.attempts = [Attempt("corollary1", 4, "time_limit")]
+    assert _stopped_short(ctx, done).status == Status.OPTIMAL

@@ -94,7 +94,7 @@ def _minor_structure(N: int):
     return arr[0], arr[1], arr[2], B1, n_minors
 
 
-def minors_matrix(cameras: np.ndarray, groups=None, untied=()) -> tuple[np.ndarray, np.ndarray]:
+def minors_matrix(cameras: np.ndarray, groups=None, loose=()) -> tuple[np.ndarray, np.ndarray]:
     """M1 and the exponent rows b1 over the 2N image variables (x_11, x_12, ..., x_N2).
 
     Returns ``(M1, B1)`` with ``m1 = M1 @ b1(x)``; B1 rows are 0/1 exponent vectors.  All
@@ -110,11 +110,11 @@ def minors_matrix(cameras: np.ndarray, groups=None, untied=()) -> tuple[np.ndarr
     feasible point).  A threshold on the determinants' size would not do: near-consistent data make
     genuine terms just as small.
 
-    ``untied``: pairs (i, j) of one group whose centres agree only to round-off and are not admitted
-    (:attr:`CentreRelations.untied`).  Every minor with rows of both views is dropped (all its terms set to 0):
-    its float coefficients cannot see the pair's micro-baseline, so such minors together imply the pair's
-    homography to round-off -- the constraint withheld from the pair (review 9 F2).  A term's rows are the
-    minor's rows, so zeroing by term drops whole minors: a relaxation, the bound stays valid.
+    ``loose``: views of a centre group whose centres agree only to round-off and are not admitted
+    (:attr:`CentreRelations.loose`).  Every minor with a row of such a view is dropped (all its terms set to 0): its
+    float coefficients cannot see the micro-baseline, so minors with rows of two views of the group imply their
+    homography to round-off -- the constraint withheld from them (review 9 F2).  A term's rows are the minor's
+    rows, so zeroing by term drops whole minors: a relaxation, the bound stays valid.
     """
     cameras = np.asarray(cameras, float)
     a, c, _ = _row_data(cameras)
@@ -124,8 +124,8 @@ def minors_matrix(cameras: np.ndarray, groups=None, untied=()) -> tuple[np.ndarr
     views = (T % (2 * cameras.shape[0])) // 2                                       # the view of each term's rows
     group = labels[views]                                                           # the centre of each term's rows
     d = np.where(np.all(group == group[:, :1], axis=1), 0.0, d)
-    for i, j in untied:
-        d = np.where(np.any(views == i, axis=1) & np.any(views == j, axis=1), 0.0, d)
+    if len(loose):
+        d = np.where(np.isin(views, list(loose)).any(axis=1), 0.0, d)
     M1 = np.zeros((n_minors, B1.shape[0]))
     np.add.at(M1, (minor, mono), d)
     used = np.bincount(mono[d != 0.0], minlength=B1.shape[0]) > 0
@@ -146,6 +146,20 @@ class CentreRelations:
         g = self.groups
         return tuple((i, j) for i, j in combinations(range(len(g)), 2)
                      if g[i] == g[j] and (i, j) not in self.coincident)
+
+    @property
+    def loose(self) -> frozenset:
+        """Views that keep no projection constraint at all: in a group with untied pairs, every view outside the
+        class (views tied by ``coincident``) of the group's first view.  Two views of such a group constrained with
+        a common third view would fix their relation to round-off -- the homography the exact data do not have
+        next to the centre (review 9 F2: epipolar constraints with one outside view whose two epipoles are 1e-14 px
+        apart) -- so one class of the group stays and the others are left free: a valid, weaker bound."""
+        out = set()
+        for g in {int(self.groups[i]) for i, _ in self.untied}:
+            views = [int(v) for v in np.flatnonzero(self.groups == g)]
+            first = views[0]                            # its class: coincident is exact here, so transitive
+            out |= {v for v in views[1:] if (first, v) not in self.coincident}
+        return frozenset(out)
 
 
 def centre_relations(cameras: np.ndarray, groups=None, *, raw=None, admitted=frozenset()) -> CentreRelations:
@@ -186,7 +200,7 @@ def _exponent_tuples(B1_bytes: bytes, shape: tuple, n: int, x_index: tuple) -> t
     return tuple(tuple(int(k) for k in row) for row in E)
 
 
-def theorem1_constraints(cameras: np.ndarray, gens, x_index, groups=None, untied=()
+def theorem1_constraints(cameras: np.ndarray, gens, x_index, groups=None, loose=()
                          ) -> tuple[list[Polynomial], dict]:
     """m2 of Theorem 1 as polynomials in ``gens``.
 
@@ -194,7 +208,7 @@ def theorem1_constraints(cameras: np.ndarray, gens, x_index, groups=None, untied
     (:class:`CentreRelations`, decided on the caller's raw cameras; default: from ``cameras``).  Returns
     the list and diagnostics (N1, N2, singular values).
     """
-    M1, B1 = minors_matrix(cameras, groups, untied)
+    M1, B1 = minors_matrix(cameras, groups, loose)
     norms = np.linalg.norm(M1, axis=1)
     keep = norms > 0
     M1n = M1[keep] / norms[keep, None]
@@ -224,7 +238,7 @@ def theorem1_constraints(cameras: np.ndarray, gens, x_index, groups=None, untied
 THEOREM1_DENSE_MAX_VIEWS = 8
 
 
-def triple_minor_constraints(cameras: np.ndarray, gens, x_index, triples, groups=None, untied=()
+def triple_minor_constraints(cameras: np.ndarray, gens, x_index, triples, groups=None, loose=()
                              ) -> tuple[list[Polynomial], dict]:
     """Theorem 1's constraints restricted to view triples: for each triple (i, j, k) the 4x4 minors of the
     six rows of M0 of those views, reduced by SVD as in :func:`theorem1_constraints`.
@@ -239,7 +253,7 @@ def triple_minor_constraints(cameras: np.ndarray, gens, x_index, triples, groups
         check_deadline("building the minors")
         t = tuple(int(i) for i in t)
         sub = np.concatenate([x_index[2 * i:2 * i + 2] for i in t])
-        local = [(t.index(i), t.index(j)) for i, j in untied if i in t and j in t]
+        local = [t.index(i) for i in loose if i in t]
         p, info = theorem1_constraints(cameras[list(t)], gens, sub,
                                        None if groups is None else np.asarray(groups)[list(t)], local)
         polys += p
@@ -278,8 +292,12 @@ def corollary1_constraints(cameras: np.ndarray, gens, x_index, pairs=None, relat
     one = Polynomial.constant(1.0, gens)
     xt = [[var(2 * i), var(2 * i + 1), one] for i in range(N)]
     polys, kept, skipped, homography = [], [], [], []
+    loose = relations.loose if relations is not None else frozenset()
     for i, j in pairs:
         check_deadline("building the epipolar constraints")
+        if i in loose or j in loose:                    # CentreRelations.loose: no constraint at all
+            skipped.append((i, j))
+            continue
         try:
             if relations is not None and relations.groups[i] == relations.groups[j]:
                 raise ValueError("one centre (raw cameras)")

@@ -27,6 +27,8 @@ from .cameras import (CAMERA_RANK_RTOL, POINT_AT_INFINITY_RTOL, SAME_CAMERA_RTOL
                       depths_stack, points3d_array, power2_scale, unit_rows, validate_cameras, WorldFrame,
                       world_frame_of)
 from .exact import CANCELLATION_RATIO, accurate_homogeneous
+from .refine import (EvaluationGuard, RefinementStopped, disc_shapes, evaluations_after, gamma_discs,
+                     residual_function)
 from .regions.base import real_array
 
 __all__ = [
@@ -144,7 +146,11 @@ def image_points(X, cameras) -> np.ndarray:
 
 # ----------------------------------------------------------------------------- cost
 def gamma_validated(Xs: np.ndarray, cameras: np.ndarray, regions: Sequence) -> np.ndarray:
-    """gamma for validated inputs; Xs (m, 3) -> (m,). inf where a projection is at infinity."""
+    """gamma for validated inputs; Xs (m, 3) -> (m,). inf where a projection is at infinity.  Point and disc
+    regions: one stacked expression (:func:`tritools.model.refine.gamma_discs`), else a loop over the views."""
+    shapes = disc_shapes(regions)
+    if shapes is not None and len(Xs):
+        return gamma_discs(Xs, np.asarray(cameras, float), *shapes)
     m = len(Xs)
     Xh = np.hstack([Xs, np.ones((m, 1))])
     total = np.zeros(m)
@@ -386,33 +392,25 @@ def fundamental_matrices(cameras, normalize: bool = True, *,
     return out
 
 
-def _region_residuals(X, cameras, regions) -> np.ndarray:
-    """Stacked x_i - closest point of R_i to x_i, x_i = Phi(X, P_i) (huge where a projection is at infinity)."""
-    Xh = np.append(X, 1.0)
-    out = []
-    for P, r in zip(cameras, regions):
-        p = P @ Xh
-        if abs(p[2]) < 1e-300:
-            return np.full(2 * len(regions), 1e150)
-        x = p[:2] / p[2]
-        out.append(x - r.closest_point(x))
-    return np.concatenate(out)
-
-
 def refine_l2(X0, cameras, regions, *, xtol: float = 1e-15, ftol: float = 1e-15, gtol: float = 1e-15,
               max_nfev: int = 400) -> np.ndarray | None:
     """Local minimisation of gamma (SPEC §1) from X0 by Levenberg-Marquardt on the residuals
-    x_i - closest point of R_i (scipy's least_squares with these stopping tolerances); None
-    when the solver fails or leaves the finite numbers."""
+    x_i - closest point of R_i (scipy's least_squares with these stopping tolerances; the residuals vectorised
+    for point and disc regions, :mod:`tritools.model.refine`); None when the solver fails or leaves the finite
+    numbers.  Past the active deadline it makes at most :func:`tritools.model.refine.evaluations_after` more
+    evaluations, then returns its best iterate (any X is a valid estimate)."""
     from scipy.optimize import least_squares
 
+    fun, vectorised = residual_function(cameras, regions)
+    guard = EvaluationGuard(fun, evaluations_after(len(regions), vectorised))
     try:
-        res = least_squares(_region_residuals, np.asarray(X0, float), args=(cameras, regions), method="lm",
-                            xtol=xtol, ftol=ftol, gtol=gtol, max_nfev=max_nfev)
+        X = least_squares(guard, np.asarray(X0, float), method="lm", xtol=xtol, ftol=ftol, gtol=gtol,
+                          max_nfev=max_nfev).x
+    except RefinementStopped:
+        X = guard.best_X
     except (ValueError, np.linalg.LinAlgError):
         return None
-    X = res.x
-    if not np.all(np.isfinite(X)):
+    if X is None or not np.all(np.isfinite(X)):
         return None
     C = common_centre(np.asarray(cameras, float))
     if C is not None and np.linalg.norm(X - C) > 0:

@@ -117,7 +117,7 @@ def build_problem(cameras: np.ndarray, regions, method: Method = Method.THEOREM1
             raise ValueError(f"Theorem 1 with all minors is built for at most {THEOREM1_DENSE_MAX_VIEWS} views "
                              f"(C(2N, 4) = {_comb4(2 * N)} minors for N = {N}); use the 'views' formulation")
         rel = centre_relations(cameras) if relations is None else relations
-        proj, info = theorem1_constraints(cameras, gens, x_index, rel.groups, rel.untied)
+        proj, info = theorem1_constraints(cameras, gens, x_index, rel.groups, rel.loose)
         proj_views = [tuple(range(N))] * len(proj)
         if rel.coincident:          # views with one centre: their minors vanish; the pair's homography instead
             hom, hinfo = corollary1_constraints(cameras, gens, x_index, sorted(rel.coincident), relations=rel)
@@ -130,7 +130,7 @@ def build_problem(cameras: np.ndarray, regions, method: Method = Method.THEOREM1
         if method == Method.THEOREM1:
             minors, tinfo = triple_minor_constraints(cameras, gens, x_index, view_chain(N),
                                                      None if relations is None else relations.groups,
-                                                     () if relations is None else relations.untied)
+                                                     () if relations is None else relations.loose)
             proj, proj_views = proj + minors, proj_views + tinfo["views"]
             info = {**info, "N1": info["N1"] + tinfo["N1"], "N2": info["N2"] + tinfo["N2"], "triples": view_chain(N)}
     return TriangulationProblem(gens, x_index, f.with_gens(gens), tuple(eq) + tuple(proj), tuple(ineq), N,

@@ -37,7 +37,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from sospoly import DEFAULT_TOLERANCES, Tolerances
-from sospoly.budget import Deadline
+from sospoly.budget import Deadline, cpu_share
 from sospoly.analysis import verify_quadratic_batch
 from sospoly.analysis import verify_quadratic_banded_batch
 from sospoly.solvers import with_single_threaded_blas
@@ -52,7 +52,8 @@ from .report import gamma_upper
 from .trivial import trivially_certified, trivially_certified_reported
 
 __all__ = ["FastPathBatch", "verify_points", "verify_checked", "verify_one", "stack_point_problems",
-           "lagrangian_bounds", "BAND_MIN_VIEWS", "BAND_WIDTHS"]
+           "lagrangian_bounds", "BAND_MIN_VIEWS", "BAND_WIDTHS",
+           "band_seconds", "BAND_SECONDS"]
 
 #: from this many views on, the certificate is first tried with the epipolar constraints of bands of view
 #: pairs (:func:`_band_bounds`, cost linear in N), of the widths ``BAND_WIDTHS`` in turn; problems no band
@@ -67,6 +68,9 @@ ALL_PAIRS_CHUNK_BYTES = 256 * 2 ** 20
 #: flops per second at which :func:`all_pairs_seconds` counts the all-pairs bound (measured ~2e9 n^2 K per second
 #: on the 2-core machine at N = 200; half of it, so the estimate errs long).
 ALL_PAIRS_FLOPS = 1e9
+#: seconds per view and squared width at which :func:`band_seconds` counts a band bound (measured on the 2-core
+#: machine, one problem of N = 100-400 views: 12.5e-6 at width 4, 8.5e-6 at width 8; the larger, so it errs long)
+BAND_SECONDS = 12.5e-6
 
 
 @dataclass(frozen=True)
@@ -269,8 +273,9 @@ def lagrangian_bounds(C, Cn, v, ok, radius, resolution, tolerances, f0=None, wei
     norm of a minimiser (defaults: f0 = 0, weights = 1, the point-region objective ||v||^2).  From
     ``BAND_MIN_VIEWS`` views on the bands of ``BAND_WIDTHS`` are tried first, then all pairs.  ``views`` (M, N)
     bool: only the constraints of pairs of these views are held (the others are dropped: fewer constraints,
-    a weaker but valid bound).  ``deadline``: checked before every band width and every all-pairs chunk; the
-    problems not reached by then keep no lower bound (NaN)."""
+    a weaker but valid bound).  ``deadline``: a band width or an all-pairs chunk is started only where its
+    estimated time (:func:`band_seconds`, :func:`all_pairs_seconds`) fits in what is left of it; the problems not
+    reached by then keep no lower bound (NaN)."""
     M, N = C.shape[:2]
     n = 2 * N
     f0 = np.zeros(M) if f0 is None else np.asarray(f0, float)
@@ -287,7 +292,7 @@ def lagrangian_bounds(C, Cn, v, ok, radius, resolution, tolerances, f0=None, wei
     # a band with dropped pairs is a broken chain (its multipliers cannot carry the KKT residual): all pairs then
     band = todo if views is None else todo[views.all(axis=1)]
     for width in BAND_WIDTHS if N >= BAND_MIN_VIEWS else ():
-        if width >= N - 1 or not band.size or expired(deadline):
+        if width >= N - 1 or not band.size or not _fits(deadline, band_seconds(N, width, band.size)):
             break
         lower_b, ok_b = _band_bounds(C[band], Cn[band], v[band], ok[band], radius[band], width, tolerances,
                                      f0[band], F2(band), None)
@@ -322,13 +327,27 @@ def all_pairs_seconds(n_views: int, problems: int = 1) -> float:
     return problems * n * n * K / ALL_PAIRS_FLOPS
 
 
+def band_seconds(n_views: int, width: int, problems: int = 1) -> float:
+    """Estimated seconds of the band bound of ``width`` (:func:`_band_bounds`) on ``problems`` problems of
+    ``n_views`` views: linear in N, ~quadratic in the width, at :data:`BAND_SECONDS` (one band call at N = 400 takes
+    0.08-0.22 s, which a call started just before its deadline would overrun it by)."""
+    return problems * n_views * width * width * BAND_SECONDS
+
+
 def fits(deadline: Deadline | None, n_views: int, problems: int = 1) -> bool:
     """Does the all-pairs bound of ``problems`` problems fit in what is left of ``deadline`` (None: always)?
     The problems it does not fit keep no lower bound (NaN), which is valid."""
+    return _fits(deadline, all_pairs_seconds(n_views, problems))
+
+
+def _fits(deadline: Deadline | None, seconds: float) -> bool:
+    """Is more than ``seconds`` of CPU time left of ``deadline`` (None: no limit), a wall-clock deadline, at the
+    share of a core the process can expect (:func:`sospoly.budget.cpu_share`)?  The one rule of the bounds not
+    started where they would end past the deadline."""
     if deadline is None:
         return True
     remaining = deadline.remaining()
-    return remaining is None or (remaining > 0 and all_pairs_seconds(n_views, problems) <= remaining)
+    return remaining is None or (remaining > 0 and seconds <= remaining * cpu_share())
 
 
 def all_pairs_chunk(n_views: int) -> int:

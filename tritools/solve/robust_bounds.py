@@ -363,6 +363,7 @@ def compute_many(requests) -> None:
         deadline = _earliest([sb.deadline for sb, _ in items])
         left = (_batch(fresh, lambda C, x, opts: _verify_stack(C, x, opts, deadline)) if fresh else []) + verified + \
             [(sb, S) for sb, S in items if S in sb.unverified]
+        left = _expired(left)                  # the items whose own search's deadline has passed: 0, nothing more
         if PACKING:
             left = _hinted(_packed(_deferred(left)))
         if left and key[0] <= SDP_STACK_MAX_VIEWS:
@@ -375,6 +376,25 @@ def compute_many(requests) -> None:
             sb._store(S, 0.0, None)             # 0 is a valid bound; the search reports the time limit
         else:
             sb._solve_one(S)
+
+
+def _expired(items: list) -> list:
+    """Settle the items whose cache's deadline has passed: the bound 0 (valid; the search then stops with its time
+    limit), deferred ones (verification only) left unknown as :func:`_deferred` leaves them -- no pair packing bound
+    (O(|S|^2) per subset: 80,000 pair look-ups, ~10 ms, for a 400-view subset; seconds for a few hundred) and no
+    SDP after the deadline; the other items."""
+    left = []
+    for sb, S in items:
+        if not sb.deadline.expired:
+            left.append((sb, S))
+            continue
+        sb.unverified.add(S)
+        if S in sb.defer:
+            sb.defer.discard(S)
+        else:
+            sb._store(S, 0.0, None)
+            sb.weak.add(S)
+    return left
 
 
 def _earliest(deadlines: list):
@@ -392,18 +412,20 @@ def _in_parent(items: list) -> tuple:
     use, rest = [], []
     for sb, S in items:
         (use if sb.frame() is not None else rest).append((sb, S))
-    if not use:
-        return rest, []
-    estimates = [[] if len(S) < 3 else [sb._X[T] for T in (S - {v} for v in S) if T in sb._X][:2]
-                 for sb, S in use]
+    deadline = _earliest([sb.deadline for sb, _ in use])
+    if not use or (deadline is not None and deadline.expired):   # past it: verified, none accepted (no O(M) work)
+        return rest, use
+    estimates = [[] if len(S) < 3 else list(itertools.islice((sb._X[T] for T in (S - {v} for v in S) if T in sb._X),
+                                                            2)) for sb, S in use]
     enough = np.array([sb.saturation(S) for sb, S in use])
     try:
         good, lb, X = verify_in_parent([sb.C for sb, _ in use], [sb.frame() for sb, _ in use],
                                        [np.array(sorted(S)) for _, S in use], estimates, use[0][0].opts.tolerances,
-                                       enough, _earliest([sb.deadline for sb, _ in use]))
+                                       enough, deadline)
     except (ValueError, np.linalg.LinAlgError, FloatingPointError):
         return items, []
     verified = []
+    finite = np.isfinite(X).all(axis=1)             # (a subset past the deadline has none: O(1) per item then)
     for k, (sb, S) in enumerate(use):
         if good[k]:
             sb._store(S, float(lb[k]), X[k])
@@ -411,7 +433,7 @@ def _in_parent(items: list) -> tuple:
             sb.n_in_parent += 1
         else:
             verified.append((sb, S))
-            if np.all(np.isfinite(X[k])):
+            if finite[k]:
                 sb.trial[S] = X[k]
     return rest, verified
 
@@ -419,10 +441,13 @@ def _in_parent(items: list) -> tuple:
 def _hinted(items: list) -> list:
     """Store the packing bound of the subsets of >= 3 views outside their cache's ``hint`` (in ``cheap``): the
     verification did not certify them, and a subset holding a likely outlier needs a large bound, rarely a
-    tight one (the batched SDP costs ~10-100x the verification and often decides nothing there); the rest."""
+    tight one (the batched SDP costs ~10-100x the verification and often decides nothing there); the rest.
+    Once a cache's deadline has passed no more packing bounds for it (O(|S|^2) each): its items are returned."""
     left = []
     for sb, S in items:
-        if sb.hint is not None and len(S) >= 3 and S not in sb.retry and not S <= sb.hint:
+        if sb.deadline.expired:
+            left.append((sb, S))
+        elif sb.hint is not None and len(S) >= 3 and S not in sb.retry and not S <= sb.hint:
             sb._store(S, sb.packing_bound(S), None)
             sb.cheap.add(S)
             sb.n_packed += 1
@@ -444,11 +469,12 @@ def _deferred(items: list) -> list:
 
 
 def _packed(items: list) -> list:
-    """Store the packing bound of the items where it reaches their cache's ``enough``; the rest."""
+    """Store the packing bound of the items where it reaches their cache's ``enough``; the rest.  Once a cache's
+    deadline has passed no more packing bounds for it (O(|S|^2) each, :func:`_expired`)."""
     left = []
     for sb, S in items:
         level = sb.saturation(S)
-        b = sb.packing_bound(S) if math.isfinite(level) else 0.0
+        b = sb.packing_bound(S) if math.isfinite(level) and not sb.deadline.expired else 0.0
         if b > level:
             sb._store(S, b, None)
             sb.n_packed += 1

@@ -9,8 +9,10 @@ from __future__ import annotations
 import numpy as np
 
 from ..model.geometry import PROJECTION_DENOM_RTOL
+from ..model.refine import disc_shapes
 
-__all__ = ["point_distances2", "point_distances2_one", "point_distances2_stack", "projections"]
+__all__ = ["point_distances2", "point_distances2_one", "point_distances2_stack", "projections", "disc_distances2",
+           "disc_shapes"]
 
 
 def projections(X, cameras) -> np.ndarray:
@@ -60,3 +62,15 @@ def point_distances2_one(C: np.ndarray, absC2: np.ndarray, x: np.ndarray, X) -> 
         d = u[:, :2] / u[:, 2:] - x
         d2 = d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1]
     return np.where(ok & np.isfinite(d2), d2, np.inf)
+
+
+def disc_distances2(C: np.ndarray, centres: np.ndarray, radii: np.ndarray, Xs: np.ndarray) -> np.ndarray:
+    """Squared distances (M, N) of the projections of candidates Xs (M, 3) to discs (centres (N, 2), radii (N,)):
+    d = max(0, ||Phi(X_m, P_i) - c_i|| - rho_i) (the rule of :func:`point_distances2` for undefined projections:
+    inf).  Plain arithmetic: for ranking candidates (exact costs decide, :func:`tritools.solve.report.point_report`)."""
+    d2 = point_distances2(C, centres, Xs)
+    if not np.any(radii):
+        return d2
+    with np.errstate(invalid="ignore"):
+        d = np.maximum(np.sqrt(d2) - radii[None], 0.0)
+    return np.where(np.isfinite(d2), d * d, np.inf)

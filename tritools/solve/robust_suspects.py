@@ -96,7 +96,7 @@ def cover_bound(search):
     first (its full treatment if that does not certify: it is the best inlier set, whose leaf any certificate
     needs)."""
     O = frozenset(range(search.N)) - search.best_S
-    if not O or search.N - len(O) < 2 or O in search.covered:
+    if not O or search.N - len(O) < 2 or O in search.covered or search.deadline.expired:
         return 0.0
     W = search.best_S
     yield from search.verify_first(W)
@@ -142,7 +142,10 @@ def _inside(search, O: frozenset):
     W = frozenset(range(search.N)) - O
     r = search.residuals(search.best_X) / search.c             # partners: W's most confident inliers first
     order = sorted(W, key=lambda u: (r[u] if np.isfinite(r[u]) else np.inf, u)) + sorted(O)
+    inside = 0.0
     for part in (order[:PAIRS_FIRST], order[PAIRS_FIRST:]):
+        if search.deadline.expired:          # |O| (N - 1) pairs: not even built past the deadline (0 is valid)
+            return inside
         yield from search.verify_first(*[frozenset((j, u)) for j in sorted(O) for u in part if u != j])
         nodes = _inlier_nodes(search, O)
         inside = min(nodes.values()) if nodes is not None else 0.0

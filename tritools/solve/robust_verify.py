@@ -31,6 +31,7 @@ packing bound / the batched SDP (:mod:`tritools.solve.robust_bounds`).
 """
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -42,8 +43,9 @@ from .fastpath import lagrangian_bounds
 __all__ = ["ParentFrame", "parent_frames", "frames_of", "verify_in_parent", "LM_STEPS", "LM_MORE"]
 
 #: subsets x views verified in one stacked call when a deadline is set (a 200-view track's leave-one-out subsets,
-#: 40,000 view rows, polished for 0.3 s past a 1 s limit in one call)
-CHUNK_VIEW_ROWS = 4096
+#: 40,000 view rows, polished for 0.3 s past a 1 s limit in one call; wave 9: a chunk of 4096 view pairs took ~60 ms,
+#: the step by which a call could overrun its deadline, hence 1024)
+CHUNK_VIEW_ROWS = 1024
 
 #: damped Gauss-Newton steps polishing the start of each subset (a warm start rarely needs more than 3-4).
 LM_STEPS = 6
@@ -155,10 +157,7 @@ def verify_in_parent(C: np.ndarray, frames: list, subsets: list, estimates: list
         return np.zeros(M, bool), np.zeros(M), np.full((M, 3), np.nan)
     step = max(1, CHUNK_VIEW_ROWS // max(1, len(subsets[0])))
     if deadline is not None and M > step:                  # in chunks, the deadline checked between them
-        parts = [verify_in_parent(C[k:k + step], frames[k:k + step], subsets[k:k + step], estimates[k:k + step],
-                                  tolerances, None if enough is None else np.asarray(enough)[k:k + step], deadline)
-                 for k in range(0, M, step)]
-        return tuple(np.concatenate(a) for a in zip(*parts))
+        return _chunked(C, frames, subsets, estimates, tolerances, enough, deadline, step)
     Cn = np.stack([f.cameras_n[S] for f, S in zip(frames, subsets)])
     Craw = np.stack([c[S] for c, S in zip(C, subsets)])
     res = np.array([f.resolution for f in frames])
@@ -173,6 +172,27 @@ def verify_in_parent(C: np.ndarray, frames: list, subsets: list, estimates: list
                                          tolerances, deadline)
     X = np.array([f.origin for f in frames]) + np.array([f.depth for f in frames])[:, None] * Xn
     return good, np.where(good, lb, 0.0), X
+
+
+def _chunked(C, frames, subsets, estimates, tolerances, enough, deadline, step: int) -> tuple:
+    """:func:`verify_in_parent` in chunks of ``step`` subsets.  A chunk is started only where it is predicted to end
+    before the deadline, at the wall time per subset of the chunks before (equal-size subsets cost alike; the first
+    chunk is not predicted): a chunk of large subsets (banded bounds of 400 views) takes ~0.1-0.5 s, which a call
+    would otherwise overrun its limit by.  The subsets not reached are not accepted (bound 0, no estimate)."""
+    M = len(subsets)
+    good, lb, X = np.zeros(M, bool), np.zeros(M), np.full((M, 3), np.nan)
+    per_subset = 0.0
+    for k in range(0, M, step):
+        stop = min(M, k + step)
+        remaining = deadline.remaining()
+        if remaining is not None and (remaining <= 0.0 or per_subset * (stop - k) > remaining):
+            break
+        t = time.monotonic()
+        good[k:stop], lb[k:stop], X[k:stop] = verify_in_parent(
+            C[k:stop], frames[k:stop], subsets[k:stop], estimates[k:stop], tolerances,
+            None if enough is None else np.asarray(enough)[k:stop], deadline)
+        per_subset = max(per_subset, (time.monotonic() - t) / (stop - k))
+    return good, lb, X
 
 
 def _bounds(Craw, Cn, Xn, res, s2, enough, tolerances, deadline=None) -> tuple:

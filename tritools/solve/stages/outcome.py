@@ -151,7 +151,10 @@ def _stopped_short(ctx: PointContext, best: TriangulationResult | None) -> Trian
         return TriangulationResult(method, Status.TIME_LIMIT,
                                    message="time limit reached before any certificate was computed")
     open_ = not best.status.certified and best.status != Status.ILL_POSED
-    if ctx.expired and open_:
+    # a step cut by its solver's time limit (MaxTime a little before the deadline) stopped the plan short too: its
+    # result is not the plan's last word (a robust search would take a not_certified sub-problem as exhausted)
+    timed_out = ctx.expired or any(a.status == Status.TIME_LIMIT.value for a in ctx.attempts)
+    if timed_out and open_:
         return replace(best, status=Status.TIME_LIMIT, message=join(best.message, "time limit reached"))
     if ctx.skipped is not None and ctx.skipped is not best and open_:
         # the best bounds so far, and why the plan stopped short of a certificate

@@ -1,0 +1,291 @@
+"""What runs after a time limit has passed (issue #22: no call exceeds its limit by more than 10%; wave 9).
+
+No timings: the tests assert which work is skipped or bounded once the deadline has passed, that the results stay
+valid (bounds against independent references), and that the vectorised point / disc evaluations that replace
+per-view loops give the loops' numbers."""
+import numpy as np
+import pytest
+from scipy.optimize import least_squares
+
+import tritools
+import tritools.model.geometry as geometry
+import tritools.model.refine as refine
+import tritools.solve.robust_bounds as rb
+import tritools.solve.robust_suspects as rs
+from sospoly.budget import Deadline, deadline_scope
+from tritools.model.regions import Ellipse, Point, Segment
+from tritools.scene import robust_protocol_scene
+from tritools.solve.robust import TlsSearch
+from tritools.solve.robust_verify import parent_frames, verify_in_parent
+
+
+def _regions(x, kind, radius=1.0):
+    return [Point(p) for p in x] if kind == "points" else [Ellipse(p, radius ** 2 * np.eye(2)) for p in x]
+
+
+def _distances(P, x, X, kind, radius=1.0):
+    h = P @ np.append(X, 1.0)
+    d = np.linalg.norm(h[:, :2] / h[:, 2:] - x, axis=1)
+    return d if kind == "points" else np.maximum(d - radius, 0.0)
+
+
+# ----------------------------------------------------------------------------- vectorised points and discs
+@pytest.mark.parametrize("kind", ["points", "discs"])
+def test_vectorised_residuals_and_gamma_match_the_region_loop(kind):
+    """The stacked residuals of the refinement and gamma of point / disc regions equal the per-view loop over the
+    regions' own closest points (the generic path), also at pixel scales 1e-3 and 1e6 and inside the discs."""
+    for seed, scale in [(0, 1.0), (1, 1e-3), (2, 1e6)]:
+        P, x, X, _ = robust_protocol_scene(30, 5, 1.0, np.random.default_rng(seed))
+        A = np.diag([scale, scale, 1.0])
+        P, x = A @ P, x * scale
+        regs = _regions(x, kind, 3.0 * scale)
+        fun, vectorised = refine.residual_function(P, regs)
+        assert vectorised
+        for Y in (X, X + 0.05, X - 0.2):
+            np.testing.assert_allclose(fun(Y), refine._looped_residuals(Y, P, regs), rtol=1e-12,
+                                       atol=1e-12 * scale)
+        Xs = np.array([X, X + 0.05, [np.nan, 0.0, 0.0]])
+        loop = np.array([np.sqrt(sum(float(r.distance(geometry.project(Y, Pi))) ** 2 for Pi, r in zip(P, regs))
+                                 / (2 * len(P))) if np.isfinite(Y).all() else np.inf for Y in Xs])
+        got = geometry.gamma_validated(Xs, P, regs)
+        assert np.isinf(got[2]) and np.isinf(loop[2])
+        np.testing.assert_allclose(got[:2], loop[:2], rtol=1e-12)
+
+
+def test_other_regions_keep_the_loop():
+    P, x, X, _ = robust_protocol_scene(5, 0, 1.0, np.random.default_rng(3))
+    regs = [Segment(p - 1, p + 1) for p in x]
+    assert refine.disc_shapes(regs) is None and not refine.residual_function(P, regs)[1]
+
+
+# ----------------------------------------------------------------------------- the refinement past the deadline
+@pytest.mark.parametrize("kind", ["points", "discs"])
+def test_refinement_after_the_deadline_is_bounded_and_returns_its_best_iterate(kind, monkeypatch):
+    """Past the active deadline, refine_l2 evaluates the residuals at most evaluations_after(N) times (counted),
+    and its estimate is no worse than the start (any X is a valid estimate; gamma_UB only less tight)."""
+    P, x, X, _ = robust_protocol_scene(400, 0, 1.0, np.random.default_rng(5))
+    regs = _regions(x, kind)
+    calls = []
+    real = refine.residual_function
+
+    def counted(cameras, regions):
+        fun, vec = real(cameras, regions)
+        return (lambda Y: calls.append(1) or fun(Y)), vec
+
+    monkeypatch.setattr(geometry, "residual_function", counted)
+    X0 = X + np.array([0.3, -0.2, 0.1])
+    monkeypatch.setattr(refine, "MIN_EVALS_AFTER_DEADLINE", 5)
+    monkeypatch.setattr(refine, "VIEW_EVALS_AFTER_DEADLINE", 5)
+    with deadline_scope(Deadline.after(0.0)):
+        Xr = geometry.refine_l2(X0, P, regs)
+    assert len(calls) == 5                                    # stopped by the guard, not by convergence
+    assert Xr is not None and np.all(np.isfinite(Xr))
+    g = lambda Y: geometry.gamma_validated(np.asarray(Y, float)[None], P, regs)[0]   # noqa: E731
+    assert g(Xr) <= g(X0)
+    calls.clear()
+    free = geometry.refine_l2(X0, P, regs)                    # no deadline: runs to convergence
+    assert len(calls) > 5 and g(free) <= g(Xr) * (1 + 1e-12)
+    ref = least_squares(lambda Y: _distances(P, x, Y, kind), X0, method="lm", xtol=1e-15, ftol=1e-15).x
+    assert g(free) <= g(ref) * (1 + 1e-9)                     # an independent local minimum
+
+
+def test_the_guard_allows_many_evaluations_to_small_problems():
+    """The trivial bound after a time limit needs the local estimate to converge: a 12-view problem keeps scipy's
+    whole budget (400 evaluations) past the deadline, a 400-view looped one only MIN_EVALS_AFTER_DEADLINE."""
+    assert refine.evaluations_after(12, vectorised=False) >= 400
+    assert refine.evaluations_after(400, vectorised=False) == refine.MIN_EVALS_AFTER_DEADLINE
+    assert refine.evaluations_after(400, vectorised=True) >= 400
+
+
+# ----------------------------------------------------------------------------- the robust search past the deadline
+class _Almost:
+    """A deadline that has not passed, with 1 ms left whenever asked."""
+    end = 0.0
+    expired = False
+
+    @staticmethod
+    def remaining():
+        return 1e-3
+
+
+class _SlowClock:
+    """robust_verify's clock: every reading one second later (a chunk then takes 1 s)."""
+    t = 0.0
+
+    @classmethod
+    def monotonic(cls):
+        cls.t += 1.0
+        return cls.t
+
+
+def test_parent_verification_starts_no_chunk_predicted_past_the_deadline(monkeypatch):
+    """In chunks, after the first one (not predicted), a chunk that the time per subset so far says would end past
+    the deadline is not started: its subsets are not accepted (bound 0, no estimate)."""
+    import tritools.solve.robust_verify as rv
+
+    P, x, X, _ = robust_protocol_scene(12, 0, 1.0, np.random.default_rng(2))
+    frame = parent_frames(P[None], x[None])[0]
+    subsets = [np.array(sorted(set(range(12)) - {j})) for j in range(12)]
+    monkeypatch.setattr(rv, "CHUNK_VIEW_ROWS", 33)           # 3 subsets of 11 views per chunk
+    monkeypatch.setattr(rv, "time", _SlowClock)
+    args = ([P] * 12, [frame] * 12, subsets, [[]] * 12, tritools.TriangulationOptions().tolerances)
+    good, lb, Xs = verify_in_parent(*args, deadline=_Almost())
+    full, lb_full, _ = verify_in_parent(*args)
+    assert full.all() and good[:3].all() and not good[3:].any()
+    assert np.all(lb[3:] == 0.0) and np.isnan(Xs[3:]).all()
+    np.testing.assert_array_equal(lb[:3], lb_full[:3])
+
+
+def test_compute_many_past_the_deadline_stores_zero_without_packing(monkeypatch):
+    """Past the deadline the sub-bounds requested get 0 (valid) and no pair packing bound (O(|S|^2) per subset)."""
+    P, x, X, _ = robust_protocol_scene(40, 12, 1.0, np.random.default_rng(1))
+    search = TlsSearch(P, None, np.full(40, 2.0), tritools.TriangulationOptions(), 0.0, points=x)
+    search.bounds.compute([frozenset((0, 1)), frozenset((2, 3))])
+    search.set_deadline(Deadline.after(0.0))
+    monkeypatch.setattr(rb.SubsetBounds, "packing_bound", lambda self, S: pytest.fail("packing after the deadline"))
+    big = [frozenset(range(40)) - {j} for j in range(40)]
+    search.bounds.compute(big)
+    assert all(search.bounds.known(S) and search.bounds.bound(S) == 0.0 for S in big)
+
+
+def test_suspect_cover_past_the_deadline_builds_no_pairs(monkeypatch):
+    """Past the deadline the suspects' cover requests no view pairs (|O| (N - 1) of them: 15,000 frozensets at
+    N = 200 with 30% wrong matches, ~0.1 s after a limit) and gives the valid bound 0."""
+    P, x, X, out = robust_protocol_scene(120, 36, 1.0, np.random.default_rng(8))
+    search = TlsSearch(P, None, np.full(120, 2.0), tritools.TriangulationOptions(), 0.0, points=x)
+    search.offer(X)
+    O = frozenset(range(120)) - search.best_S
+    assert len(O) > 10
+    search.set_deadline(Deadline.after(0.0))
+    monkeypatch.setattr(TlsSearch, "verify_first", lambda self, *S: pytest.fail(f"{len(S)} subsets requested"))
+    gen = rs.cover(search, O)
+    with pytest.raises(StopIteration) as stop:
+        next(gen)
+    assert stop.value.value == 0.0
+
+
+def test_robust_call_with_an_early_limit_keeps_valid_bounds():
+    """A 120-view track with 30% wrong matches and a limit that passes early: status time_limit, bounds below the
+    TLS cost at the true point (an upper bound of the optimum computed outside tritools)."""
+    P, x, X, out = robust_protocol_scene(120, 36, 1.0, np.random.default_rng(8))
+    r = tritools.triangulate(P, x, robust=2.0, time_limit=0.05)
+    assert r.status == tritools.Status.TIME_LIMIT
+    d = _distances(P, x, X, "points")
+    ref = np.sqrt(np.sum(np.minimum(d * d, 4.0)) / (2 * len(d)))
+    assert 0.0 <= r.gamma_lb <= ref * (1 + 1e-9) and r.gamma_lb <= r.gamma_ub
+
+
+@pytest.mark.parametrize("kind", ["discs"])
+def test_robust_disc_screen_matches_the_exact_costs(kind):
+    """The TLS screen and residuals of disc regions (vectorised) equal the exact per-region costs of point_report."""
+    from tritools.solve.report import point_report
+    from tritools.solve.robust import tls_cost
+
+    P, x, X, _ = robust_protocol_scene(25, 5, 1.0, np.random.default_rng(4))
+    regs = _regions(x, kind)
+    c = np.full(25, 2.0)
+    search = TlsSearch(P, regs, c, tritools.TriangulationOptions(), 0.0)
+    Xs = np.array([X, X + 0.1, X - 0.3])
+    exact = [point_report(Y, P, regs).residuals for Y in Xs]
+    np.testing.assert_allclose(search.screen(Xs), [tls_cost(d, c) for d in exact], rtol=1e-12)
+    np.testing.assert_allclose(search.residuals(X), exact[0], rtol=1e-12, atol=1e-12)
+
+
+def test_no_band_bound_started_where_its_estimate_does_not_fit(monkeypatch):
+    """The band bound of a width is started only where band_seconds fits in what is left of the deadline (one band
+    call at N = 400 takes 0.08-0.22 s); the all pairs, estimated to fit, still bound the 20-view problem validly."""
+    import tritools.solve.fastpath as fp
+
+    assert fp.band_seconds(400, 8) > fp.band_seconds(400, 4) > fp.band_seconds(100, 4)
+    assert fp.band_seconds(100, 4, 3) == pytest.approx(3 * fp.band_seconds(100, 4))
+    P, x, X, _ = robust_protocol_scene(20, 0, 1.0, np.random.default_rng(6))
+
+    class Short:
+        end, expired = 0.0, False
+
+        @staticmethod
+        def remaining():
+            return 0.5 * fp.band_seconds(20, fp.BAND_WIDTHS[0])
+
+    assert fp.all_pairs_seconds(20) < Short.remaining()
+    free = fp.verify_points(P[None], x[None])
+    monkeypatch.setattr(fp, "cpu_share", lambda: 1.0)                 # a quiet machine
+    monkeypatch.setattr(fp, "_band_bounds", lambda *a, **k: pytest.fail("band started past its estimate"))
+    b = fp.verify_points(P[None], x[None], deadline=Short())
+    assert b.ok[0] and np.isfinite(b.gamma_lb[0])
+    assert b.gamma_lb[0] <= free.gamma_ub[0] * (1 + 1e-9)
+
+
+def test_cpu_share_from_the_load_average(monkeypatch):
+    """Wall-clock deadlines: on an over-committed machine a step's wall time is its CPU time over the share of a
+    core the process gets (cores / load), never below MIN_CPU_SHARE; 1 on a quiet machine or without a load
+    average.  The bounds' time estimates are divided by it (a band that fits a quiet machine does not fit under
+    load)."""
+    import os
+
+    import sospoly.budget as budget
+    import tritools.solve.fastpath as fp
+
+    cores = os.cpu_count() or 1
+    for load, share in [(0.0, 1.0), (cores, 1.0), (4.0 * cores, 0.25), (1e6, budget.MIN_CPU_SHARE)]:
+        monkeypatch.setattr(os, "getloadavg", lambda load=load: (load, load, load))
+        assert budget.cpu_share() == pytest.approx(share)
+
+    def unavailable():
+        raise OSError
+
+    monkeypatch.setattr(os, "getloadavg", unavailable)
+    assert budget.cpu_share() == 1.0
+
+    class Left:
+        end, expired = 0.0, False
+
+        @staticmethod
+        def remaining():
+            return 1.5 * fp.band_seconds(100, 4)
+
+    monkeypatch.setattr(fp, "cpu_share", lambda: 1.0)
+    assert fp._fits(Left(), fp.band_seconds(100, 4))
+    monkeypatch.setattr(fp, "cpu_share", lambda: 0.5)
+    assert not fp._fits(Left(), fp.band_seconds(100, 4))
+
+
+@pytest.mark.parametrize("kind", ["points", "discs"])
+def test_screen_past_the_deadline_ranks_only_its_first_block(kind, monkeypatch):
+    """The screen of many candidates runs in blocks of SCREEN_BLOCK candidate-views; past the deadline only the
+    first block is screened and the rest rank last (inf); before it, every candidate gets its f_TLS."""
+    import tritools.solve.robust as robust
+
+    P, x, X, _ = robust_protocol_scene(40, 8, 1.0, np.random.default_rng(9))
+    regs = None if kind == "points" else _regions(x, kind)
+    search = TlsSearch(P, regs, np.full(40, 2.0), tritools.TriangulationOptions(), 0.0,
+                       points=x if kind == "points" else None)
+    monkeypatch.setattr(robust, "SCREEN_BLOCK", 400)                  # 10 candidates per block
+    Xs = X + np.random.default_rng(0).normal(scale=0.1, size=(35, 3))
+    full = search.screen(Xs)
+    assert np.isfinite(full).all()
+    d = np.array([_distances(P, x, Y, kind) for Y in Xs])
+    np.testing.assert_allclose(full, np.sum(np.minimum(d * d, 4.0), axis=1), rtol=1e-9)
+    search.set_deadline(Deadline.after(0.0))
+    late = search.screen(Xs)
+    np.testing.assert_array_equal(late[:10], full[:10])
+    assert np.isinf(late[10:]).all()
+
+
+def test_expired_cache_in_a_shared_batch_leaves_the_others_their_packing_bounds(monkeypatch):
+    """compute_many serves several searches at once (a robust batch): the items of a search whose deadline has passed
+    get 0 and no packing bound, those of a search with time left still get theirs."""
+    P, x, X, _ = robust_protocol_scene(30, 9, 1.0, np.random.default_rng(1))
+    opts = tritools.TriangulationOptions()
+    late, live = (TlsSearch(P, None, np.full(30, 2.0), opts, 0.0, points=x) for _ in range(2))
+    pairs = [frozenset((i, j)) for i in range(30) for j in range(i + 1, 30)]
+    rb.compute_many([(late.bounds, pairs), (live.bounds, pairs)])
+    late.set_deadline(Deadline.after(0.0))
+    packed = []
+    real = rb.SubsetBounds.packing_bound
+    monkeypatch.setattr(rb.SubsetBounds, "packing_bound", lambda self, S: packed.append(self) or real(self, S))
+    big = [frozenset(range(30)) - {j} for j in range(30)]
+    rb.compute_many([(late.bounds, big), (live.bounds, big)])
+    assert packed and all(sb is live.bounds for sb in packed)
+    assert all(late.bounds.bound(S) == 0.0 for S in big)
+    assert all(live.bounds.known(S) for S in big)

@@ -1,0 +1,137 @@
+"""The residuals of the local L2 refinement (:func:`tritools.model.geometry.refine_l2`) and its cost bound.
+
+The refinement minimises gamma(X)^2 = sum_i ||x_i - y_i||^2 / 2N (SPEC §1) by Levenberg-Marquardt on the residuals
+r_i(X) = x_i - y_i, x_i = Phi(X, P_i) and y_i the closest point of the region R_i to x_i.  For a point region
+y_i = c_i; for a filled disc of radius rho_i around c_i, y_i = c_i + rho_i e_i / |e_i| outside it (e_i = x_i - c_i)
+and x_i inside, so
+
+    r_i = e_i max(0, 1 - rho_i / |e_i|),
+
+one numpy expression for all views (:func:`disc_residuals`; other regions: a loop over their ``closest_point``);
+gamma itself likewise (:func:`gamma_discs`, used by :func:`tritools.model.geometry.gamma_validated`): at N = 400 the
+loops cost ~30 ms per evaluation, the stacked expressions well under 1 ms.
+
+The cost bound.  The refinement also runs after a time limit has passed: the estimate of last resort, which the
+trivial bound gamma* >= 0 may certify (:mod:`tritools.solve.trivial`), comes from it.  Past the active deadline
+(:func:`sospoly.budget.active_deadline`) it may evaluate the residuals at most :func:`evaluations_after` more times
+(work in proportion to N views, about :data:`VIEW_EVALS_AFTER_DEADLINE` region distances, never fewer than
+:data:`MIN_EVALS_AFTER_DEADLINE` evaluations); it then stops with the best iterate so far.  Any X is a valid
+estimate (gamma(X) >= gamma*), so stopping early only makes gamma_UB less tight.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from sospoly.budget import active_deadline
+
+__all__ = ["residual_function", "disc_residuals", "disc_shapes", "gamma_discs", "EvaluationGuard",
+           "RefinementStopped", "evaluations_after", "MIN_EVALS_AFTER_DEADLINE", "VIEW_EVALS_AFTER_DEADLINE",
+           "FAR_RESIDUAL"]
+
+#: the residual of every view where a projection is at infinity (its denominator below 1e-300)
+FAR_RESIDUAL = 1e150
+#: evaluations of the residuals the refinement may still make once the deadline has passed, at least (three
+#: parameters: four evaluations per Levenberg-Marquardt iteration, so six iterations)
+MIN_EVALS_AFTER_DEADLINE = 24
+#: ... and in region distances (views x evaluations): 400 evaluations (scipy's default max_nfev) up to 20 views
+VIEW_EVALS_AFTER_DEADLINE = 8000
+
+
+def disc_residuals(X, cameras: np.ndarray, centres: np.ndarray, radii: np.ndarray) -> np.ndarray:
+    """r_i (module docstring) stacked (2N,) for point (radius 0) and disc regions; :data:`FAR_RESIDUAL` everywhere
+    where a projection is at infinity."""
+    h = cameras @ np.append(np.asarray(X, float), 1.0)
+    if np.any(np.abs(h[:, 2]) < 1e-300):
+        return np.full(2 * len(cameras), FAR_RESIDUAL)
+    e = h[:, :2] / h[:, 2:] - centres
+    if np.any(radii):
+        n = np.hypot(e[:, 0], e[:, 1])
+        with np.errstate(divide="ignore", invalid="ignore"):
+            e = e * np.where(n > radii, 1.0 - radii / n, 0.0)[:, None]
+    return e.ravel()
+
+
+def _looped_residuals(X, cameras, regions) -> np.ndarray:
+    """r_i stacked (2N,) through each region's ``closest_point``; :data:`FAR_RESIDUAL` where a projection is at
+    infinity."""
+    Xh = np.append(X, 1.0)
+    out = []
+    for P, r in zip(cameras, regions):
+        p = P @ Xh
+        if abs(p[2]) < 1e-300:
+            return np.full(2 * len(regions), FAR_RESIDUAL)
+        x = p[:2] / p[2]
+        out.append(x - r.closest_point(x))
+    return np.concatenate(out)
+
+
+def disc_shapes(regions) -> tuple | None:
+    """(centres (N, 2), radii (N,)) where every region is a point (radius 0) or a filled disc
+    (:attr:`~tritools.model.regions.Region.disc_radius`), else None."""
+    radii = []
+    for r in regions:
+        rho = 0.0 if r.is_point else r.disc_radius
+        if rho is None:
+            return None
+        radii.append(float(rho))
+    return np.array([r.center for r in regions], float), np.array(radii)
+
+
+def residual_function(cameras, regions) -> tuple:
+    """(f(X) -> the stacked residuals (2N,), vectorised: whether f is one numpy expression) for these regions."""
+    cameras = np.asarray(cameras, float)
+    shapes = disc_shapes(regions)
+    if shapes is None:
+        return (lambda X: _looped_residuals(X, cameras, regions)), False
+    return (lambda X: disc_residuals(X, cameras, *shapes)), True
+
+
+def gamma_discs(Xs: np.ndarray, cameras: np.ndarray, centres: np.ndarray, radii: np.ndarray) -> np.ndarray:
+    """gamma (SPEC §1) of candidates Xs (m, 3) for point / disc regions, (m,): the projections of
+    :func:`tritools.model.frame.project_world` (compensated where the plain sum cancels), d_i = max(0,
+    |x_i - c_i| - rho_i); inf where a projection is at infinity or X is not finite (the rule of
+    :func:`tritools.model.geometry.gamma_validated`, whose loop over the views this replaces for these regions)."""
+    from .frame import project_world
+
+    Xs = np.asarray(Xs, float)
+    fin = np.isfinite(Xs).all(axis=1)
+    with np.errstate(all="ignore"):
+        u, _, ok = project_world(np.broadcast_to(cameras, (len(Xs),) + cameras.shape), np.where(fin[:, None], Xs, 0.0))
+        e = u - centres
+        d = np.hypot(e[..., 0], e[..., 1])
+        if np.any(radii):
+            d = np.maximum(d - radii, 0.0)
+        out = np.sqrt(np.sum(d * d, axis=1) / (2 * cameras.shape[0]))
+    return np.where(fin & ok & np.isfinite(out), out, np.inf)
+
+
+def evaluations_after(n_views: int, vectorised: bool) -> int:
+    """Evaluations allowed once the deadline has passed (module docstring); a vectorised evaluation counts as one
+    region distance."""
+    return max(MIN_EVALS_AFTER_DEADLINE, VIEW_EVALS_AFTER_DEADLINE // (1 if vectorised else max(1, n_views)))
+
+
+class RefinementStopped(Exception):
+    """The refinement used up its evaluations after the deadline (:class:`EvaluationGuard`)."""
+
+
+class EvaluationGuard:
+    """Wraps the residual function: remembers the best iterate (least sum of squares) and raises
+    :class:`RefinementStopped` once ``allowed`` evaluations were made after the active deadline passed."""
+
+    def __init__(self, fun, allowed: int):
+        self.fun, self.allowed = fun, allowed
+        self.deadline = active_deadline()
+        self.after = 0
+        self.best_X, self.best_cost = None, np.inf
+
+    def __call__(self, X) -> np.ndarray:
+        if self.deadline is not None and self.deadline.expired:
+            if self.after >= self.allowed:
+                raise RefinementStopped
+            self.after += 1
+        r = self.fun(X)
+        cost = float(r @ r)
+        if cost < self.best_cost:                  # (nan never is)
+            self.best_X, self.best_cost = np.array(X, float), cost
+        return r

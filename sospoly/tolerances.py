@@ -168,6 +168,21 @@ class Tolerances:
         """The scalar twin of :meth:`certified_relatively` for floats."""
         return upper - lower <= self.gap_rel * abs(upper)
 
+    def certified_one(self, lower, upper, scale: float = 1.0) -> bool:
+        """The scalar twin of :meth:`certified` for one pair of floats (plain Python arithmetic, the same rule: a
+        single call's decision without numpy)."""
+        if lower is None or upper is None:
+            return False
+        lo, up = float(lower), float(upper)
+        return math.isfinite(up) and not math.isnan(lo) and up - lo <= self.gap_tolerance_one(up, float(scale))
+
+    def contradicts_one(self, lower, upper, scale: float = 1.0) -> bool:
+        """The scalar twin of :meth:`contradicts` for one pair of floats."""
+        if lower is None or upper is None:
+            return False
+        lo, up = float(lower), float(upper)
+        return math.isfinite(lo) and math.isfinite(up) and lo - up > self.gap_tolerance_one(up, float(scale))
+
     def certified(self, lower, upper, scale=1.0):
         """Do ``lower`` and ``upper`` meet (``upper - lower <= gap_tolerance``)?  False where either
         is None or NaN.  Scalars give a bool, arrays an elementwise boolean array."""

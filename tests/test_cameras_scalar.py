@@ -31,6 +31,9 @@ def test_rank_ratio_scalar_equals_the_vectorised_rule(C):
     a, b = np.array(_rank_ratio_scalar(C)), _rank_ratio(C)
     assert np.allclose(a, b, rtol=1e-12, atol=1e-15)
     assert np.array_equal(a > CAMERA_RANK_RTOL, b > CAMERA_RANK_RTOL)
+    d = np.array(_rank_ratio_scalar(C, decide_only=True))       # validate_cameras' form: the same decisions
+    assert np.array_equal(d > CAMERA_RANK_RTOL, b > CAMERA_RANK_RTOL) and np.all(d <= a)
+    assert np.array_equal(d[a <= CAMERA_RANK_RTOL], a[a <= CAMERA_RANK_RTOL])     # a failing camera's value: the rule's
 
 
 def test_all_equal_scalar_equals_the_vectorised_rule():

@@ -187,3 +187,23 @@ def test_huge_and_tiny_finite_values_are_allowed():
     assert e.distance([1e300, 0.0]) == pytest.approx(1e150)
     assert Ellipse([0, 0], 1e300 * np.eye(2)).distance([0.0, 2e150]) == pytest.approx(1e150)
     assert Region.from_dict(p.to_dict()) == p
+
+
+def test_points_from_an_array_equal_points_built_one_by_one():
+    """as_regions of an (N, 2) array (Point.from_checked_rows, no per-row checks): the Points of Point(row), each
+    x a read-only float64 copy (the caller's array is not shared), the same refusals of bad arrays."""
+    import numpy as np
+
+    from tritools.model.regions import Point, as_regions
+
+    X = np.array([[1.5, -2.0], [-0.0, 3e300], [7, 8]])
+    got = as_regions(X)
+    ref = tuple(Point(row) for row in X)
+    for p, q in zip(got, ref):
+        assert type(p) is Point and p == q and p.x.dtype == np.float64 and p.x.shape == (2,)
+        assert np.array_equal(p.x, q.x) and np.array_equal(np.signbit(p.x), np.signbit(q.x))
+        assert not p.x.flags.writeable and not np.shares_memory(p.x, X)
+    assert as_regions(np.array([[1, 2], [3, 4]]))[1] == Point([3.0, 4.0])         # integers: floats
+    for bad in (np.array([[1.0, np.nan]]), np.array([[1.0, 2.0, 3.0]]), np.array([[1 + 1j, 2]])):
+        with pytest.raises(ValueError):
+            as_regions(bad)

@@ -3,6 +3,7 @@ bad input.  The reference TLS value enumerates every inlier set S and evaluates 
 minimiser of S (scipy, independent of tritools' solvers): an *upper* bound of the TLS optimum, so no reported
 lower bound may exceed it and a certified value must reach it."""
 import itertools
+import math
 
 import numpy as np
 import pytest
@@ -435,3 +436,18 @@ def test_point_distances_match_point_report():
         fin = np.isfinite(ref)
         np.testing.assert_allclose(np.sqrt(row[fin]), ref[fin], rtol=1e-12, atol=1e-9)
     assert np.isinf(d2[-1, 2])
+
+
+def test_robust_thresholds_of_a_float_equal_the_general_path():
+    """A plain float threshold (the fast path) gives the array of the general path (a numpy scalar, a list); the
+    edges (MIN_THRESHOLD itself, inf) are accepted and below it, NaN, 0 and negatives refused alike."""
+    from tritools.solve.robust import MIN_THRESHOLD
+
+    for c in (200.0, 1e-3, 1e300, math.inf, MIN_THRESHOLD):
+        got = robust_thresholds(c, 4)
+        assert got.dtype == float and got.shape == (4,)
+        assert np.array_equal(got, robust_thresholds(np.float64(c), 4))
+        assert np.array_equal(got, robust_thresholds([c] * 4, 4))
+    for bad in (MIN_THRESHOLD / 2, math.nan, 0.0, -0.0, -1.0, -math.inf):
+        with pytest.raises(ValueError, match="robust"):
+            robust_thresholds(bad, 3)

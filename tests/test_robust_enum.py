@@ -81,6 +81,13 @@ def test_subset_bounds_below_every_subset_optimum(N, n_out, pixel_scale):
     W = enum_mod.subset_masks(N)
     Xn = enum_mod.enum_candidates(Cn, W)
     lb, accepted = enum_mod.enum_bounds(cams, Cn, W, Xn, norm.scale, TOL)
+    F, defined = enum_mod.fundamentals(cams[None], Cn[None])
+    M = len(W)
+    only, none = enum_mod.enum_bounds_rows(np.broadcast_to(Cn, (M,) + Cn.shape),
+                                           np.broadcast_to(F[0], (M,) + F.shape[1:]),
+                                           np.broadcast_to(defined[0], (M,) + defined.shape[1:]), W, Xn,
+                                           np.full(M, norm.scale), TOL, accepted=False)
+    assert none is None and np.array_equal(only, lb)          # the enumeration's call: the same bounds
     bits = W.astype(np.int64) @ (1 << np.arange(N))
     table = np.zeros(1 << N)
     table[bits] = lb
@@ -288,3 +295,16 @@ def test_floor_scale_never_above_the_decision_scale():
             for c in (np.full(N, 200.0), np.geomspace(1e-3, 1e4, N), np.append(np.full(N - 1, np.inf), 2.0)):
                 c2 = c * c
                 assert scale_from(SCALE_BOUNDS[1], c2) <= decision_scale(cams, [Point(p) for p in pts], c2)
+
+
+def test_first_of_runs_equals_numpy_unique_on_sorted_keys():
+    """robust_enum_run._first_of_runs (the best row of each problem in a stack): np.unique's return_index on sorted
+    keys, empty and single-run arrays included."""
+    import numpy as np
+
+    from tritools.solve.robust_enum_run import _first_of_runs
+
+    rng = np.random.default_rng(0)
+    for _ in range(500):
+        a = np.sort(rng.integers(0, rng.integers(1, 10), size=rng.integers(0, 30)))
+        assert np.array_equal(_first_of_runs(a), np.unique(a, return_index=True)[1])

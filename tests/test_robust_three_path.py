@@ -146,3 +146,22 @@ def test_other_view_counts_and_regions_are_not_taken():
     regions = [Ellipse(p, np.eye(2) / 4.0) for p in x3]
     s = TlsSearch(P3, regions, robust_thresholds(C, 3), options_from(None), time.perf_counter())
     assert not s.points and robust_three.three_view_tls(s) is None
+
+
+def test_three_view_terms_and_lower_bound_equal_the_stacked_rule_bit_for_bit():
+    """robust_three's scalar twins (three_terms, exact_terms, three_lower_bound) give closed_terms' and lower_bounds'
+    numbers exactly: bounds from 0 to 1e300, infinite thresholds, pairs whose bound exceeds the whole set's own."""
+    W = enum_mod.subset_masks(3)
+    rng = np.random.default_rng(23)
+    for k in range(3000):
+        lb = np.where(rng.random(4) < 0.2, 0.0, rng.random(4) * 10.0 ** rng.integers(-5, 300, 4))
+        c2 = (rng.random(3) * 10.0 ** rng.integers(-3, 150, 3)) ** 2
+        c2[rng.random(3) < 0.1] = np.inf
+        with np.errstate(over="ignore", invalid="ignore"):
+            rest = np.sum(np.where(W, 0.0, c2[None]), axis=1) * enum_mod.ROUND_DOWN
+        ub = float(rng.choice([np.inf, rng.random() * 10.0 ** rng.integers(-3, 300)]))
+        ref_terms = run_mod.closed_terms(3, W, lb[None], rest[None])[0]
+        got_terms = robust_three.three_terms(lb.tolist(), rest.tolist())
+        assert np.array_equal(np.array(got_terms), ref_terms), (lb, rest)
+        ref = float(run_mod.lower_bounds(np.array([ub]), ref_terms[None], c2[None])[0])
+        assert robust_three.three_lower_bound(ub, got_terms, robust_three.exact_terms(c2)) == ref, (lb, c2, ub)

@@ -20,6 +20,8 @@ duplicated views, zero noise, points behind cameras) and bad numbers (inf/NaN re
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 
@@ -110,6 +112,47 @@ def test_scalar_damped_step_equals_the_batched_solve():
     zero = damped_step_one(np.zeros((3, 3)), np.ones(3), 0.0)       # exactly singular: the pseudo-inverse (0)
     ref = damped_step(np.zeros((1, 3, 3)), np.ones((1, 3)), np.zeros(1))[0]
     assert np.array_equal(zero, ref) and np.all(zero == 0)
+
+
+def _solve3_loop(A, g):
+    """The loop form of tritools.model.stacked._solve3 (whole rows eliminated): the reference of the unrolled code."""
+    A = [list(A[0]) + [g[0]], list(A[1]) + [g[1]], list(A[2]) + [g[2]]]
+    for k in range(3):
+        p = k
+        for i in range(k + 1, 3):
+            if abs(A[i][k]) > abs(A[p][k]):
+                p = i
+        if A[p][k] == 0.0:
+            return None
+        A[k], A[p] = A[p], A[k]
+        for i in range(k + 1, 3):
+            f = A[i][k] / A[k][k]
+            A[i] = [a - f * b for a, b in zip(A[i], A[k])]
+    x2 = A[2][3] / A[2][2]
+    x1 = (A[1][3] - A[1][2] * x2) / A[1][1]
+    return [(A[0][3] - A[0][1] * x1 - A[0][2] * x2) / A[0][0], x1, x2]
+
+
+def test_unrolled_solve3_equals_the_elimination_loop_bit_for_bit():
+    """_solve3 (unrolled, only the entries later steps read) gives the loop's numbers exactly: every pivot order
+    (ties keep the first row), zero pivots at each column (None), random scales."""
+    from tritools.model.stacked import _solve3
+
+    rng = np.random.default_rng(11)
+    cases = [np.diag([1.0, 2.0, 3.0]), np.ones((3, 3)), np.zeros((3, 3)), np.array([[0, 1, 0], [1, 0, 0], [0, 0, 1.0]]),
+             np.array([[1.0, 2, 3], [1.0, 5, 1], [-1.0, 2, 0]]), np.array([[0.0, 0, 1], [0.0, 1, 0], [0.0, 1, 1]]),
+             np.array([[2.0, 1, 1], [4.0, 2, 2], [1.0, 0, 1]]), np.array([[1.0, 1, 1], [1.0, 1, 1], [1.0, 1, 2]])]
+    for k in range(2000):
+        A = rng.normal(size=(3, 3)) * 10.0 ** rng.uniform(-8, 8, size=(3, 1))
+        if k % 7 == 0:
+            A[rng.integers(3)] = A[rng.integers(3)] * rng.choice([1.0, -1.0])      # equal magnitudes: tied pivots
+        cases.append(np.round(A, int(rng.integers(0, 3))) if k % 5 == 0 else A)
+    for A in cases:
+        g = rng.normal(size=3)
+        got, ref = _solve3(A.tolist(), g.tolist()), _solve3_loop(A.tolist(), g.tolist())
+        assert (got is None) == (ref is None), A
+        if ref is not None:
+            assert np.array_equal(np.array(got), np.array(ref), equal_nan=True), A
 
 
 @pytest.mark.parametrize("name, C, x", SCENES, ids=[s[0] for s in SCENES])
@@ -476,3 +519,43 @@ def test_tolerances_scalar_rule_equals_the_vectorised_rule():
                 assert tol.gap_tolerance_one(up, scale) == float(tol.gap_tolerance(up, scale))
             lo = up - tol.gap_rel * abs(up) * rng.choice([0.5, 1.0, 2.0])
             assert tol.certified_relatively_one(lo, up) == bool(tol.certified_relatively(lo, up))
+
+
+def test_tolerances_certified_one_and_contradicts_one_equal_the_vectorised_rule():
+    """sospoly.Tolerances.certified_one / contradicts_one (a single robust call's decision): equal to certified /
+    contradicts on every pair, at the gap's edge, with inf, NaN and None."""
+    from sospoly import DEFAULT_TOLERANCES, Tolerances
+
+    rng = np.random.default_rng(6)
+    inf, nan = math.inf, math.nan
+    for tol in (DEFAULT_TOLERANCES, Tolerances(gap_abs=1e-3, gap_rel=1e-4)):
+        ups = [0.0, 1e-300, 0.5, 1.0, -3.0, 1e300, inf, -inf, nan,
+               *rng.normal(size=20) * 10.0 ** rng.integers(-9, 9, 20)]
+        for up in ups:
+            for scale in (1.0, 0.25, 1024.0, 4e4):
+                gap = tol.gap_tolerance_one(up, scale) if math.isfinite(up) else 1.0
+                for lo in (up, up - gap, up - 2 * gap, up + gap, up + 2 * gap, np.nextafter(up - gap, -inf),
+                           -inf, inf, nan, 0.0):
+                    assert tol.certified_one(lo, up, scale) == bool(tol.certified(lo, up, scale)), (lo, up, scale)
+                    assert tol.contradicts_one(lo, up, scale) == bool(tol.contradicts(lo, up, scale)), (lo, up, scale)
+        assert tol.certified_one(None, 1.0) is False and tol.contradicts_one(1.0, None) is False
+
+
+def test_gamma_lower_one_equals_gamma_lower_bit_for_bit():
+    """tritools.solve.decide.gamma_lower_one (a single robust result's report) gives gamma_lower's numbers exactly:
+    bounds and resolutions over 600 orders of magnitude, gamma_UB infinite or NaN, non-finite or zero scales."""
+    from tritools.solve.decide import gamma_lower, gamma_lower_one
+
+    rng = np.random.default_rng(12)
+    inf, nan = math.inf, math.nan
+    vals = [0.0, 1e-300, 1e-12, 0.5, 3.0, 1e10, 1e300, inf, nan]
+    for _ in range(3000):
+        g = float(rng.choice(vals)) if rng.random() < 0.2 else float(rng.random() * 10.0 ** rng.integers(-300, 300))
+        up = float(rng.choice(vals)) if rng.random() < 0.3 else g * float(1 + rng.random())
+        sc = float(rng.choice([1.0, 1.0, 0.0, 2.5, 1e-200, inf]))
+        res = float(rng.choice(vals)) if rng.random() < 0.3 else float(rng.random() * 10.0 ** rng.integers(-20, 20))
+        with np.errstate(all="ignore"):
+            ref = float(gamma_lower(g, up, sc, res))
+        got = gamma_lower_one(g, up, sc, res)
+        same = got == ref and math.copysign(1, got) == math.copysign(1, ref)
+        assert same or (math.isnan(got) and math.isnan(ref)), (g, up, sc, res, got, ref)

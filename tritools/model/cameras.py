@@ -127,7 +127,7 @@ def power2_scale(A: np.ndarray, axes: tuple) -> np.ndarray:
     """The power of two at or just above the largest absolute entry over ``axes`` (kept as size-1
     axes), 1 where that entry is 0 or not finite.  Dividing by it is exact (barring underflow) and
     brings the entries into [-1, 1], so that later products and norms cannot overflow."""
-    m = np.abs(A).max(axis=axes, keepdims=True)
+    m = np.maximum.reduce(np.abs(A), axis=axes, keepdims=True)      # (ndarray.max's ufunc, without its wrapper)
     ok = (m > 0) & np.isfinite(m)
     return np.where(ok, np.ldexp(1.0, np.frexp(np.where(ok, m, 1.0))[1]), 1.0)
 
@@ -314,7 +314,7 @@ def validate_cameras(cameras: ArrayLike, *, min_views: int = 2, require_distinct
     if not finite.all():
         raise ValueError(f"cameras[{int(np.argmin(finite))}] contains NaN or inf")
     few = C.shape[0] <= SCALAR_MAX_VIEWS          # a single call's few cameras: the scalar twins (plain floats)
-    ratio = _rank_ratio_scalar(C) if few else _rank_ratio(C)
+    ratio = _rank_ratio_scalar(C, decide_only=True) if few else _rank_ratio(C)
     for i, r in enumerate(ratio):
         if not r > CAMERA_RANK_RTOL:
             raise ValueError(_rank_message(f"cameras[{i}]", float(r)))
@@ -332,10 +332,18 @@ def _p2(m: float) -> float:
     return math.ldexp(1.0, math.frexp(m)[1]) if m > 0 and math.isfinite(m) else 1.0
 
 
-def _rank_ratio_scalar(C: np.ndarray) -> list:
+def _rank_ratio_scalar(C: np.ndarray, decide_only: bool = False) -> list:
     """The scalar twin of :func:`_rank_ratio` for finite cameras (N, 3, 4): the same steps on Python floats
-    (tests/test_cameras_scalar.py: equal to the vectorised rule within round-off)."""
-    out = [max(_conditioned_ratio_one(P), _conditioned_ratio_one([row[:3] for row in P])) for P in C.tolist()]
+    (tests/test_cameras_scalar.py: equal to the vectorised rule within round-off).  ``decide_only``: a camera whose
+    own conditioned ratio is at least ``EXACT_RANK_BELOW`` keeps that value without its left block's (the rule's
+    value is the larger of the two, so it passes the rank test either way and needs no exact check): the same
+    decisions, and the same value wherever the test fails, for half the work on ordinary cameras."""
+    out = []
+    for P in C.tolist():
+        r = _conditioned_ratio_one(P)
+        if not (decide_only and r >= EXACT_RANK_BELOW):
+            r = max(r, _conditioned_ratio_one([row[:3] for row in P]))
+        out.append(r)
     return [0.0 if 0 < r < EXACT_RANK_BELOW and exactly_rank_deficient(P) else r for r, P in zip(out, C)]
 
 

@@ -36,11 +36,11 @@ def two_prod(a, b):
 def dot2(A: np.ndarray, x: np.ndarray, b: np.ndarray) -> np.ndarray:
     """sum_k A[..., k] x[..., k] + b, accurate as if computed in twice the working precision (Ogita, Rump and
     Oishi's Dot2); the plain sum where the splitting overflows."""
+    P, EP = two_prod(A, x)                  # every product at once (elementwise: the same numbers as one by one)
     s, c = b, np.zeros_like(b)
     for k in range(A.shape[-1]):
-        p, ep = two_prod(A[..., k], x[..., k])
-        s, es = two_sum(s, p)
-        c = c + (ep + es)
+        s, es = two_sum(s, P[..., k])
+        c = c + (EP[..., k] + es)
     out = s + c
     plain = np.einsum("...k,...k->...", A, x) + b
     return np.where(np.isfinite(out), out, plain)

@@ -22,6 +22,8 @@ import math
 
 import numpy as np
 
+from sospoly.analysis import SparseQuadratics
+
 from .geometry import POINT_AT_INFINITY_RTOL, PROJECTION_DENOM_RTOL, SAME_CENTER_RTOL
 
 __all__ = ["null_vectors", "dlt_stack", "project_stack", "refine_points_stack", "fundamental_stack",
@@ -331,22 +333,35 @@ class _View:
 
 def _solve3(A: list, g: list) -> list | None:
     """x with A x = g for a 3x3 matrix (lists), Gaussian elimination with partial pivoting (LAPACK gesv's
-    algorithm on plain floats); None for an exactly singular A (gesv's LinAlgError)."""
-    A = [A[0][:] + [g[0]], A[1][:] + [g[1]], A[2][:] + [g[2]]]
-    for k in range(3):
-        p = k                               # the first row of the largest |A[i][k]|, i >= k (gesv's pivot)
-        for i in range(k + 1, 3):
-            if abs(A[i][k]) > abs(A[p][k]):
-                p = i
-        if A[p][k] == 0.0:
-            return None
-        A[k], A[p] = A[p], A[k]
-        for i in range(k + 1, 3):
-            f = A[i][k] / A[k][k]
-            A[i] = [a - f * b for a, b in zip(A[i], A[k])]
-    x2 = A[2][3] / A[2][2]
-    x1 = (A[1][3] - A[1][2] * x2) / A[1][1]
-    return [(A[0][3] - A[0][1] * x1 - A[0][2] * x2) / A[0][0], x1, x2]
+    algorithm on plain floats, unrolled: the pivot is the first row of the largest |A[i][k]|, i >= k, and each
+    elimination computes only the entries that later steps read, the same operations as the loop over whole rows,
+    bit for bit, tests/test_scalar_twins.py); None for an exactly singular A (gesv's LinAlgError)."""
+    r0, r1, r2 = (A[0][0], A[0][1], A[0][2], g[0]), (A[1][0], A[1][1], A[1][2], g[1]), (A[2][0], A[2][1], A[2][2], g[2])
+    if abs(r1[0]) > abs(r0[0]):                             # column 0: the pivot row swapped with row 0
+        if abs(r2[0]) > abs(r1[0]):
+            r0, r2 = r2, r0
+        else:
+            r0, r1 = r1, r0
+    elif abs(r2[0]) > abs(r0[0]):
+        r0, r2 = r2, r0
+    p0 = r0[0]
+    if p0 == 0.0:
+        return None
+    f = r1[0] / p0
+    s1 = (r1[1] - f * r0[1], r1[2] - f * r0[2], r1[3] - f * r0[3])       # rows 1, 2 from column 1 on
+    f = r2[0] / p0
+    s2 = (r2[1] - f * r0[1], r2[2] - f * r0[2], r2[3] - f * r0[3])
+    if abs(s2[0]) > abs(s1[0]):                             # column 1
+        s1, s2 = s2, s1
+    if s1[0] == 0.0:
+        return None
+    f = s2[0] / s1[0]
+    t2 = (s2[1] - f * s1[1], s2[2] - f * s1[2])                           # row 2 from column 2 on
+    if t2[0] == 0.0:
+        return None
+    x2 = t2[1] / t2[0]
+    x1 = (s1[2] - s1[1] * x2) / s1[0]
+    return [(r0[3] - r0[1] * x1 - r0[2] * x2) / r0[0], x1, x2]
 
 
 def damped_step_one(JtJ: np.ndarray, g: np.ndarray, mu: float) -> np.ndarray:
@@ -485,8 +500,6 @@ def epipolar_quadratics(F: np.ndarray, N: int, pairs: tuple | None = None):
     """Quadratic parts (g0 (M, K), g1 (M, K, 2N), G2) of g_ij(v) = x~_i^T F_ij x~_j over
     v = (x_11, x_12, ..., x_N2), for F (M, K, 3, 3) in the order of ``pairs`` (default :func:`view_pairs`); G2 as
     :class:`sospoly.analysis.verify.SparseQuadratics` (8 entries per pair, so memory grows like N^2, not N^4)."""
-    from sospoly.analysis import SparseQuadratics
-
     M, K = F.shape[:2]
     k, lin, ks, ii, jj = _quadratic_index(N) if pairs is None else _quadratic_index_of(*pairs)
     g0 = F[..., 2, 2]

@@ -20,7 +20,7 @@ import numpy as np
 
 from ..result import Status
 
-__all__ = ["decide", "decide_reported", "gamma_from_c", "c_from_gamma", "cheirality", "decide_one",
+__all__ = ["decide", "decide_reported", "gamma_from_c", "c_from_gamma", "cheirality", "decide_one", "gamma_lower_one",
            "decide_reported_one", "gamma_lower", "LB_ROUNDOFF_ULPS"]
 
 #: gamma_LB is lowered by this many units of round-off of the coordinates' magnitude (:func:`gamma_lower`).
@@ -133,6 +133,19 @@ def gamma_lower(gamma_lb, gamma_ub, scale, resolution):
         out = np.maximum(0.0, g - LB_ROUNDOFF_ULPS * _U * (A + np.where(np.isfinite(ub), ub, g)))
     out = np.where(np.isnan(g), g, out)
     return out.item() if out.ndim == 0 else out
+
+
+def gamma_lower_one(gamma_lb: float, gamma_ub: float, scale: float, resolution: float) -> float:
+    """The scalar twin of :func:`gamma_lower` for floats (a single result's report: plain Python arithmetic, the same
+    operations, equal bit for bit, tests/test_scalar_twins.py); non-finite inputs take :func:`gamma_lower` itself."""
+    from ..model.normalize import RESOLUTION_REL
+
+    g, up, sc, res = float(gamma_lb), float(gamma_ub), float(scale), float(resolution)
+    if not (math.isfinite(g) and math.isfinite(sc) and sc > 0 and math.isfinite(res)):
+        return float(gamma_lower(g, up, sc, res))
+    A = res / (sc * RESOLUTION_REL)
+    A = A if math.isfinite(A) else 1.0
+    return max(0.0, g - LB_ROUNDOFF_ULPS * _U * (A + (up if math.isfinite(up) else g)))
 
 
 def c_from_gamma(gamma, n_views, scale):

@@ -86,7 +86,7 @@ from .robust_drive import drive
 from .robust_loo import leave_one_out
 from .robust_nodes import NodeBounds, lookahead_bound
 from .robust_rays import ray_candidates
-from .robust_costs import disc_distances2, disc_shapes, point_distances2, point_distances2_one, projections
+from .robust_costs import disc_distances2, disc_shapes, point_distances2, point_distances2_one
 from .robust_report import tls_reported
 
 __all__ = ["robust_thresholds", "triangulate_robust", "drive", "lookahead_bound", "tls_cost", "point_distances2",
@@ -117,6 +117,8 @@ MIN_THRESHOLD = 1.5e-154
 def robust_thresholds(robust, n_views: int) -> np.ndarray:
     """The thresholds c (N,) from ``robust=`` (a positive scalar or one per view, pixels; ``inf`` allowed).
     ValueError naming ``robust`` otherwise."""
+    if type(robust) is float and robust >= MIN_THRESHOLD:      # the common case, a valid float (NaN fails >=)
+        return np.full(n_views, robust)
     if isinstance(robust, (bool, np.bool_)) or isinstance(robust, (str, bytes)):
         raise ValueError("robust must be a positive threshold in pixels (scalar or one per view), "
                          f"got {_short(robust)}")
@@ -293,8 +295,9 @@ class TlsSearch(NodeBounds):
         return self._discs or None
 
     def report(self, X) -> PointReport:
-        """Residuals and depths of X in the caller's frame (X a user point; the caller's cameras ``C_user``): the
-        vectorised twin for point regions, point_report otherwise."""
+        """Residuals and depths of X in the caller's frame (X a user point; the caller's cameras ``C_user``):
+        point_report for other regions; for point regions only the depths (the reported residuals are
+        :func:`tritools.solve.robust_report.tls_reported`'s, from compensated projections on ``C_user``)."""
         if not self.points:
             return point_report(X, self.C_user, self.regions, self.opts.world_frame)
         if self.drows is None:                          # depth = h row_i . X~ (depths_stack's rows), once
@@ -302,10 +305,7 @@ class TlsSearch(NodeBounds):
         Xh = np.array([X[0], X[1], X[2], 1.0], float)
         with np.errstate(over="ignore", invalid="ignore"):
             depths = as_world_frame(self.opts.world_frame).sign * (self.drows @ Xh)
-        if self.C_user is self.C:
-            return PointReport(None, self.residuals(X), depths)
-        d2 = point_distances2_one(self.C_user, np.abs(self.C_user[:, 2]), self.x, X)
-        return PointReport(None, np.sqrt(d2), depths)
+        return PointReport(None, None, depths)
 
     def offer(self, X) -> None:
         """A candidate: kept when its exact f_TLS (:func:`tritools.solve.report.point_report` distances) is
@@ -438,7 +438,7 @@ class TlsSearch(NodeBounds):
     # ------------------------------------------------------------------ bounds
     def meets(self, lb: float) -> bool:
         """Is a lower bound good enough to prune (it meets UB under the certificate rule, or exceeds it)?"""
-        return lb >= self.best_f or bool(self.tol.certified(lb, self.best_f, self.scale))
+        return lb >= self.best_f or self.tol.certified_one(lb, self.best_f, self.scale)
 
     def search(self, order: np.ndarray):
         """Depth-first branch and bound (module docstring): (global lower bound, why it stopped early or None)."""
@@ -530,11 +530,14 @@ class TlsSearch(NodeBounds):
         timings = {"candidates": t_cand, "total": time.perf_counter() - self.t0}
         return self.result(lb, stopped, timings)
 
-    def result(self, lb: float, stopped, timings) -> TriangulationResult:
+    def result(self, lb: float, stopped, timings, note: str = "") -> TriangulationResult:
+        """The result at the search's lower bound ``lb`` (pixels^2): the decision by the one rule on this search's
+        scale, the reported numbers and their checks (:func:`tritools.solve.robust_report.tls_reported`), the
+        message (``note`` appended: the path that decided)."""
         ub = self.best_f
         X = self.frame.user_point(self.best_X) if self.frame.moved else self.best_X
         rep = self.report(X)
-        certified = bool(self.tol.certified(lb, ub, self.scale))     # lb is valid also when the search stopped
+        certified = self.tol.certified_one(lb, ub, self.scale)     # lb is valid also when the search stopped
         told = tls_reported(self.C_user, self.x if self.points else np.array([r.center for r in self.regions]),
                             None if self.points else rep.residuals, X, self.c, lb, self.tol, certified,
                             None if self.cells_decided else ub,
@@ -543,7 +546,7 @@ class TlsSearch(NodeBounds):
         if not certified and stopped is None:   # the deadline cut a step short, or a sub-problem hit the memory budget
             stopped = "time limit" if self.deadline.expired or self.bounds.deadline.expired else \
                 "memory budget" if self.bounds.budget_exceeded else None
-        contradicts = bool(self.tol.contradicts(lb, ub, self.scale))
+        contradicts = self.tol.contradicts_one(lb, ub, self.scale)
         status = Status.NUMERICAL_FAILURE if contradicts else Status.OPTIMAL if certified else \
             {"time limit": Status.TIME_LIMIT, "memory budget": Status.BUDGET_EXCEEDED}.get(stopped,Status.NOT_CERTIFIED)
         certified = certified and not contradicts
@@ -559,12 +562,12 @@ class TlsSearch(NodeBounds):
             msg += f"; stopped by the {stopped}"
         if told.reason and not certified:
             msg += f"; {told.reason}"
-        image_points = np.where(np.isfinite(told.residuals)[:, None], projections(X, self.C_user), np.nan)
         attempt = Attempt("tls", None, status.value, gamma_lb, gamma_ub, "branch-and-bound", None, (),
                           timings["total"])
         return TriangulationResult("tls", status, X=X, gamma_ub=gamma_ub, gamma_lb=gamma_lb, optimal=certified,
-                                   image_points=image_points, certified_by="branch-and-bound" if certified else None,
-                                   message=msg, timings=timings, attempts=(attempt,), in_front=in_front,
+                                   image_points=told.image_points, message=msg + note,
+                                   certified_by="branch-and-bound" if certified else None,
+                                   timings=timings, attempts=(attempt,), in_front=in_front,
                                    depths=rep.depths, residuals=told.residuals, inliers=inliers)
 
 

@@ -60,8 +60,8 @@ from sospoly.analysis import verify_quadratic_batch
 from ..model.cameras import power2_scale
 from ..model.exact import dot2, homogeneous_images
 from ..model.normalize import RHO_FLOOR_REL, SCALE_BOUNDS, Normalization
-from ..model.stacked import (damped_step, dlt_stack, epipolar_quadratics, fundamental_stack, next_damping, norms,
-                             null_vectors, pixel_scales, project_quiet, project_stack, view_pairs)
+from ..model.stacked import (damped_step, dlt_stack, epipolar_quadratics, fundamental_stack, median_rows, next_damping,
+                             norms, null_vectors, pixel_scales, project_quiet, project_stack, view_pairs)
 from .robust_bounds import ROUND_DOWN
 
 __all__ = ["enum_frame", "enum_frames", "subset_masks", "closure", "enum_candidates", "enum_bounds",
@@ -148,7 +148,8 @@ def enum_frames(C: np.ndarray, x: np.ndarray) -> tuple:
         a = null_vectors(C)
         ok = ~np.any(np.abs(a[..., 3]) <= 1e-12 * norms(a, axis=2), axis=1)     # no centre at infinity
         centres = a[..., :3] / a[..., 3:]
-        c0 = np.mean(centres, axis=1)                   # the DLT in a world centred on the cameras: georeferenced
+        # the DLT in a world centred on the cameras (c0 their mean, np.mean's operations): georeferenced
+        c0 = np.add.reduce(centres, axis=1) / N
         Cc = C.copy()                                   # coordinates (1e6 m) would drown its linear system;
         c0b = np.broadcast_to(np.where(ok[:, None], c0, 0.0)[:, None, None, :], C.shape[:3] + (3,))
         Cc[..., 3] = dot2(C[..., :3], c0b, C[..., 3])   # compensated: the frame is the caller's problem exactly
@@ -157,7 +158,7 @@ def enum_frames(C: np.ndarray, x: np.ndarray) -> tuple:
         X0 = np.where(ok[:, None], X0, 0.0)
         u, _, fin = project_stack(Cc, X0)
         ok &= fin
-        d = np.median(norms(centres - c0[:, None] - X0[:, None], axis=2), axis=1)
+        d = median_rows(norms(centres - c0[:, None] - X0[:, None], axis=2))
         rho = np.sqrt(np.sum((u - x) ** 2, axis=(1, 2)) / N)
         # the floor (zero noise): pixel scales are at most ||P[:2, :3] - x P[2, :3]||_F / ||P[2, :3]||, computed
         # only where that bound does not already put the floor below rho
@@ -191,7 +192,7 @@ def _polish(Cm: np.ndarray, X: np.ndarray, steps: int) -> np.ndarray:
         absC2 = np.abs(Cm[:, :, 2, :])
         u, h, fin = project_quiet(Cm, X, absC2)
         cost = np.where(fin, np.sum(u * u, axis=(1, 2)), np.inf)
-        for _ in range(steps):
+        for step_no in range(steps):
             den = np.where(h[..., 2] == 0, 1.0, h[..., 2])
             J = ((Cm[..., :2, :3] - u[..., None] * Cm[..., 2:3, :3]) / den[..., None, None]).reshape(len(X), -1, 3)
             r = u.reshape(len(X), -1)
@@ -203,7 +204,7 @@ def _polish(Cm: np.ndarray, X: np.ndarray, steps: int) -> np.ndarray:
             better = ct <= cost
             settled = np.all(np.isfinite(cost) & (np.abs(ct - cost) <= POLISH_RTOL * cost))
             X = np.where(better[:, None], Xt, X)
-            if settled:
+            if settled or step_no == steps - 1:         # (the last step: its state is not read again)
                 break
             u, h = np.where(better[:, None, None], ut, u), np.where(better[:, None, None], ht, h)
             cost = np.where(better, ct, cost)
@@ -241,13 +242,14 @@ def enum_bounds(C: np.ndarray, Cn: np.ndarray, W: np.ndarray, Xn: np.ndarray, s:
                             np.broadcast_to(defined[0], (M,) + defined.shape[1:]), W, Xn, np.full(M, s), tolerances)
 
 
-def enum_bounds_rows(Cn, F, defined, W: np.ndarray, Xn: np.ndarray, s: np.ndarray, tolerances):
+def enum_bounds_rows(Cn, F, defined, W: np.ndarray, Xn: np.ndarray, s: np.ndarray, tolerances, accepted: bool = True):
     """(L2 lower bounds (M,) pixels^2, accepted (M,)) of the subsets ``W`` (M, N) at the normalised candidates Xn
     (M, 3), each row with its problem's normalised cameras Cn (M, N, 3, 4), fundamental matrices F (M, K, 3, 3) and
     ``defined`` (M, K) (:func:`fundamentals`) and frame scale s (M,) (module docstring): the Lagrangian bound of
     the degree-2 program of each subset, the epipolar constraints of its view pairs only.  ``accepted``: the bound
     meets the candidate's value under the certificate rule at the subset's residual scale (as
-    :func:`tritools.solve.robust_verify.verify_in_parent` accepts a bound)."""
+    :func:`tritools.solve.robust_verify.verify_in_parent` accepts a bound); None with ``accepted=False`` (the
+    enumeration reads the bounds only)."""
     M, N = W.shape
     u, _, fin = project_stack(Cn, Xn)
     fin &= np.isfinite(Xn).all(axis=1)
@@ -264,9 +266,10 @@ def enum_bounds_rows(Cn, F, defined, W: np.ndarray, Xn: np.ndarray, s: np.ndarra
         lb = np.maximum(np.minimum(ver.lower_bound, radius ** 2), 0.0) / (s * s) * ROUND_DOWN
         good &= np.isfinite(lb)
         lb = np.where(good, lb, 0.0)
+        if not accepted:
+            return lb, None
         ub = radius ** 2 / (s * s)
-        accepted = good & np.asarray(tolerances.certified(lb, ub, ub / W.sum(axis=1)), bool)
-    return lb, accepted
+        return lb, good & np.asarray(tolerances.certified(lb, ub, ub / W.sum(axis=1)), bool)
 
 
 @functools.lru_cache(maxsize=16)

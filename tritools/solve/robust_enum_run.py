@@ -31,7 +31,6 @@ depend on the others of its stack (each row's numbers are its own problem's).
 """
 from __future__ import annotations
 
-import dataclasses
 import logging
 import time
 
@@ -158,13 +157,20 @@ def refine_rows(Cn: np.ndarray, X0: np.ndarray, inS: np.ndarray) -> tuple:
     return Xn, ok & np.isfinite(Xn).all(axis=1)
 
 
+def _first_of_runs(sorted_keys: np.ndarray) -> np.ndarray:
+    """The index of the first entry of each run of equal keys in a sorted 1-D integer array: ``np.unique``'s
+    ``return_index`` for sorted input (its result here), without its per-call overhead."""
+    if sorted_keys.size == 0:
+        return np.zeros(0, int)
+    return np.flatnonzero(np.concatenate(([True], sorted_keys[1:] != sorted_keys[:-1])))
+
+
 def enumerated_result(search, lb: float, n_bounded: int, n_sets: int):
     """The result of a search decided by the enumeration (:meth:`tritools.solve.robust.TlsSearch.result` at the lower
     bound ``lb``, pixels^2), its message saying so; ``n_bounded`` subsets were bounded."""
     search.bounds.n_solved += int(n_bounded)
     t = time.perf_counter() - search.t0
-    res = search.result(lb, None, {"enumeration": t, "total": t})
-    return dataclasses.replace(res, message=res.message + f"; {enum.ENUMERATED} ({n_sets} sets of >= 2 views)")
+    return search.result(lb, None, {"enumeration": t, "total": t}, f"; {enum.ENUMERATED} ({n_sets} sets of >= 2 views)")
 
 
 class _Group:
@@ -318,7 +324,7 @@ class _Group:
             d2 = point_distances2_stack(self.C[pp], self.x[pp], world[:, None])[:, 0]           # (R, N)
             f = np.sum(np.minimum(d2, self.c2[pp]), axis=1)       # (only ranks: offer() computes it exactly)
             order = np.lexsort((f, pp))
-            _, first = np.unique(pp[order], return_index=True)
+            first = _first_of_runs(pp[order])
             for r in order[first]:
                 picks.append((int(pp[r]), world[r], np.nonzero(d2[r] < self.c2[pp[r]])[0].tolist()))
         for p, X, _ in picks:
@@ -372,7 +378,7 @@ class _Group:
         s = np.array([f.scale if f is not None else 1.0 for f in self.frames])
         self._terms_cache = None
         self.lb[pp, mm], _ = enum.enum_bounds_rows(self.Cn[pp], F[pp], defined[pp], self.W[mm], self.Xn[pp, mm],
-                                                   s[pp], self.tol)
+                                                   s[pp], self.tol, accepted=False)
 
     def _floors(self) -> np.ndarray:
         """The floor of each problem's decision scale (:mod:`tritools.solve.robust_enum`, "The decision scale")."""
@@ -422,7 +428,7 @@ class _Group:
         late = []
         for p in probs:
             s, lb, ub = self.group[p], float(lb_all[p]), self.group[p].best_f
-            if s.tol.certified(lb, ub, floors[p]) and not s.tol.contradicts(lb, ub, floors[p]):
+            if s.tol.certified_one(lb, ub, floors[p]) and not s.tol.contradicts_one(lb, ub, floors[p]):
                 s.set_normalization_scale(SCALE_BOUNDS[1])       # met at the floor: met at the documented scale
                 self._result(p, lb)
             else:
@@ -433,7 +439,7 @@ class _Group:
             self.scales([self.group[p] for p in late])
         for p in late:
             s = self.group[p]
-            if s.tol.certified(float(lb_all[p]), s.best_f, s.scale):
+            if s.tol.certified_one(float(lb_all[p]), s.best_f, s.scale):
                 self._result(p, float(lb_all[p]))
         return [p for p in late if self.results[p] is None]
 

@@ -28,7 +28,7 @@ import numpy as np
 
 from ..model.normalize import RESOLUTION_REL
 from ..model.stacked import norms
-from .decide import gamma_from_c, gamma_lower
+from .decide import gamma_from_c, gamma_lower_one
 from .report import enlarged_distances, gamma_upper, projections_and_spread
 
 __all__ = ["TlsReported", "tls_reported"]
@@ -42,6 +42,7 @@ class TlsReported:
     inliers: np.ndarray            # (N,) d_i(X) < c_i (exactly, for point regions: :func:`inlier_mask`)
     holds: bool                    # the certificate passes on the reported numbers (module docstring)
     reason: str                    # why not, when it does not
+    image_points: np.ndarray       # (N, 2) the compensated projections of X, NaN where d_i(X) is not finite
 
 
 def tls_reported(C: np.ndarray, centres: np.ndarray, residuals, X, c: np.ndarray, lb: float, tolerances,
@@ -63,7 +64,7 @@ def tls_reported(C: np.ndarray, centres: np.ndarray, residuals, X, c: np.ndarray
     # lowered by the normalisation's round-off and by the estimate's rounding spread: bounds from a normalised frame
     # describe the caller's float problem only to that spread (a 6-view track 4.5e8 px off-axis: spread 0.06 px,
     # the frame's bound 7e-4 px above an achievable value)
-    g_lb = max(0.0, float(gamma_lower(gamma_from_c(max(lb, 0.0), N, 1.0), g_ub, 1.0, resolution)) - spread)
+    g_lb = max(0.0, gamma_lower_one(gamma_from_c(max(lb, 0.0), N, 1.0), g_ub, 1.0, resolution) - spread)
     g_lb = min(g_lb, g_ub)
     holds, reason = certified, ""
     f_ub = 2.0 * N * g_ub * g_ub
@@ -82,7 +83,8 @@ def tls_reported(C: np.ndarray, centres: np.ndarray, residuals, X, c: np.ndarray
         holds, reason = False, "the bounds met on the search's scale, but their gap exceeds the coordinates' " \
                                f"resolution ({resolved:.3g} px, at most the thresholds' own scale)"
     inliers = inlier_mask(C, X, centres, res, c, u, exact=points_given, regions=regions)
-    return TlsReported(g_lb, g_ub if math.isfinite(g_ub) else math.inf, residuals, inliers, holds, reason)
+    image_points = np.where(np.isfinite(res)[:, None] & np.isfinite(u), u, np.nan)
+    return TlsReported(g_lb, g_ub if math.isfinite(g_ub) else math.inf, residuals, inliers, holds, reason, image_points)
 
 
 def coordinate_resolution(centres: np.ndarray) -> float:

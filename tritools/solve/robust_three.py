@@ -34,9 +34,9 @@ from ..model.normalize import SCALE_BOUNDS
 from . import robust_enum as enum
 from .robust_bounds import ROUND_DOWN
 from .robust_costs import point_distances2
-from .robust_enum_run import LO_ROUNDS, closed_terms, eligible, enumerated_result, lower_bounds, refine_rows
+from .robust_enum_run import LO_ROUNDS, eligible, enumerated_result, lower_bounds, refine_rows
 
-__all__ = ["three_view_tls", "VIEWS", "POLISH_STEPS"]
+__all__ = ["three_view_tls", "three_terms", "three_lower_bound", "exact_terms", "VIEWS", "POLISH_STEPS"]
 
 log = logging.getLogger(__name__)
 
@@ -79,6 +79,7 @@ class _ThreeViews:
         from .robust import scale_from
 
         self.floor = scale_from(SCALE_BOUNDS[1], search.c2)
+        self.exact = exact_terms(search.c2)           # the terms of |S| <= 1 (they do not change)
 
     def run(self):
         s = self.s
@@ -103,12 +104,12 @@ class _ThreeViews:
         if more.any():
             self._bound(more)
             lb = self._lower_bound()
-        return self._result(lb) if s.tol.certified(lb, s.best_f, s.scale) else None
+        return self._result(lb) if s.tol.certified_one(lb, s.best_f, s.scale) else None
 
     def _meets_at_floor(self, lb: float) -> bool:
         """LB meets UB under the rule at the floor of the decision scale, without contradicting it there."""
         s = self.s
-        return bool(s.tol.certified(lb, s.best_f, self.floor)) and not s.tol.contradicts(lb, s.best_f, self.floor)
+        return s.tol.certified_one(lb, s.best_f, self.floor) and not s.tol.contradicts_one(lb, s.best_f, self.floor)
 
     def _outside_pairs(self) -> np.ndarray:
         """The pairs holding a view outside the best inlier set, where UB exceeds min c^2 (they feed the closure of
@@ -175,8 +176,8 @@ class _ThreeViews:
         return self._lower_bound()
 
     def _failing(self) -> np.ndarray:
-        terms, ub = self._terms(), self.s.best_f
-        return (terms < ub) & ~np.asarray(self.s.tol.certified(terms, ub, self.floor), bool)
+        ub, tol = self.s.best_f, self.s.tol
+        return np.array([t < ub and not tol.certified_one(t, ub, self.floor) for t in self._terms()])
 
     def _bound(self, rows: np.ndarray) -> None:
         """The Lagrangian bounds of the rows not bounded yet, one stacked verification (the fundamental matrices
@@ -193,13 +194,13 @@ class _ThreeViews:
         self.lb[m], _ = enum.enum_bounds_rows(
             np.broadcast_to(self.Cn, (R,) + self.Cn.shape), np.broadcast_to(self.F, (R,) + self.F.shape),
             np.broadcast_to(self.defined, (R,) + self.defined.shape), self.W[m], self.Xn[m],
-            np.full(R, self.frame.scale), self.s.tol)
+            np.full(R, self.frame.scale), self.s.tol, accepted=False)
 
-    def _terms(self) -> np.ndarray:
-        return closed_terms(VIEWS, self.W, self.lb[None], self.rest[None])[0]
+    def _terms(self) -> list:
+        return three_terms(self.lb.tolist(), self.rest.tolist())
 
     def _lower_bound(self) -> float:
-        return float(lower_bounds(np.array([self.s.best_f]), self._terms()[None], self.s.c2[None])[0])
+        return three_lower_bound(self.s.best_f, self._terms(), self.exact)
 
     def _open(self) -> np.ndarray:
         """The rows whose term c^2(V - S) alone does not meet UB at the floor scale (finite only)."""
@@ -213,3 +214,29 @@ class _ThreeViews:
 
     def _result(self, lb: float):
         return enumerated_result(self.s, lb, self.bounded.sum(), len(self.W))
+
+
+def three_terms(lb: list, rest: list) -> list:
+    """The scalar twin of :func:`~tritools.solve.robust_enum_run.closed_terms` for one problem of three views, on
+    floats, bit for bit (tests/test_robust_three_path.py): the rows of :func:`~tritools.solve.robust_enum.subset_masks`
+    (the pairs {0, 1}, {0, 2}, {1, 2}, then all views) with their bounds ``lb`` (>= 0) and c^2(V - S) ``rest``.  The
+    closure of a pair is its own bound (its parts are single views, L2* = 0); that of all views is the largest of its
+    own and of its splits {0} + {1, 2}, {0, 1} + {2}, {0, 2} + {1} (:func:`~tritools.solve.robust_enum.closure`'s order
+    and operations); each term (L2LB(S) + c^2(V - S)) rounded down."""
+    l01, l02, l12, l_all = lb
+    closed_all = max(l_all, (0.0 + l12) * ROUND_DOWN, (l01 + 0.0) * ROUND_DOWN, (l02 + 0.0) * ROUND_DOWN)
+    return [(l01 + rest[0]) * ROUND_DOWN, (l02 + rest[1]) * ROUND_DOWN, (l12 + rest[2]) * ROUND_DOWN,
+            (closed_all + rest[3]) * ROUND_DOWN]
+
+
+def exact_terms(c2: np.ndarray) -> float:
+    """The least of the exact terms of the sets of at most one view (c^2 of the others, rounded down), by
+    :func:`~tritools.solve.robust_enum_run.lower_bounds` itself (its sums, once per problem)."""
+    return float(lower_bounds(np.array([np.inf]), np.full((1, 1), np.inf), c2[None])[0])
+
+
+def three_lower_bound(ub: float, terms: list, exact: float) -> float:
+    """The scalar twin of :func:`~tritools.solve.robust_enum_run.lower_bounds` for one problem: the least of UB, the
+    closed terms (:func:`three_terms`) and the exact terms (:func:`exact_terms`); NaN-free inputs (bounds and sums of
+    squared thresholds), so the minimum of floats is numpy's."""
+    return min(ub, min(terms), exact)

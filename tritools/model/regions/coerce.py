@@ -110,4 +110,4 @@ def _points_from_array(regions) -> tuple[Region, ...]:
     if bad.size:
         k = int(bad[0])
         raise ValueError(f"regions[{k}] must be finite (no NaN/inf), got {X[k].tolist()}")
-    return tuple(Point(row) for row in X)
+    return Point.from_checked_rows(X)           # (X: a new float64 array, every entry checked finite above)

@@ -24,6 +24,20 @@ class Point(Region):
     def __post_init__(self) -> None:
         object.__setattr__(self, "x", as_vector(self.x, "x"))
 
+    @classmethod
+    def from_checked_rows(cls, X: np.ndarray) -> tuple:
+        """One Point per row of a float64 array (N, 2) whose entries the caller has checked finite (the coercion
+        of an array of points, :func:`tritools.model.regions.as_regions`): each ``x`` a read-only copy of its row,
+        as :func:`as_vector` makes it, without repeating its checks row by row."""
+        out = []
+        for row in X:
+            p = object.__new__(cls)
+            x = row.copy()
+            x.setflags(write=False)
+            object.__setattr__(p, "x", x)
+            out.append(p)
+        return tuple(out)
+
     @property
     def n_aux(self) -> int:
         return 0

@@ -153,7 +153,7 @@ def test_three_view_terms_and_lower_bound_equal_the_stacked_rule_bit_for_bit():
     numbers exactly: bounds from 0 to 1e300, infinite thresholds, pairs whose bound exceeds the whole set's own."""
     W = enum_mod.subset_masks(3)
     rng = np.random.default_rng(23)
-    for k in range(3000):
+    for _ in range(3000):
         lb = np.where(rng.random(4) < 0.2, 0.0, rng.random(4) * 10.0 ** rng.integers(-5, 300, 4))
         c2 = (rng.random(3) * 10.0 ** rng.integers(-3, 150, 3)) ** 2
         c2[rng.random(3) < 0.1] = np.inf

@@ -107,6 +107,13 @@ def _l2_suffices(res: TriangulationResult, c: np.ndarray) -> bool:
 ROBUST_CHUNK = 512
 
 
+#: batches enumerate every inlier set of point problems up to this many views (single calls: up to
+#: :data:`tritools.solve.robust_enum.ENUM_MAX_VIEWS`), the branch and bound beyond.  In a stack of many problems the
+#: enumeration's rows are shared (benchmarks/RESULTS.md, "Wave 9 robust batches at N = 7-10"): at 9-10 views with
+#: three or four wrong matches it costs about half the search's time.
+BATCH_ENUM_MAX_VIEWS = 10
+
+
 def _search_or_failure(cameras, regions, c, opts):
     """A :class:`tritools.solve.robust.TlsSearch` for one problem, or a failed result (bad input)."""
     from .robust import TlsSearch
@@ -213,7 +220,7 @@ def _enumerated_then_searched(searches: list) -> list:
         _normalization_scales(group)
         normalised.update(map(id, group))
 
-    results = enumerate_many(searches, scales=scales)
+    results = enumerate_many(searches, scales=scales, max_views=BATCH_ENUM_MAX_VIEWS)
     left = [k for k, r in enumerate(results) if r is None]
     _normalization_scales([searches[k] for k in left if id(searches[k]) not in normalised])
     for k, r in zip(left, drive([searches[k] for k in left]) if left else []):

@@ -258,10 +258,12 @@ def enum_bounds(C: np.ndarray, Cn: np.ndarray, W: np.ndarray, Xn: np.ndarray, s:
                             np.broadcast_to(defined[0], (M,) + defined.shape[1:]), W, Xn, np.full(M, s), tolerances)
 
 
-def enum_bounds_rows(Cn, F, defined, W: np.ndarray, Xn: np.ndarray, s: np.ndarray, tolerances):
+def enum_bounds_rows(Cn, F, defined, W: np.ndarray, Xn: np.ndarray, s: np.ndarray, tolerances, problem=None):
     """(L2 lower bounds (M,) pixels^2, accepted (M,)) of the subsets ``W`` (M, N) at the normalised candidates Xn
     (M, 3), each row with its problem's normalised cameras Cn (M, N, 3, 4), fundamental matrices F (M, K, 3, 3) and
-    ``defined`` (M, K) (:func:`fundamentals`) and frame scale s (M,) (module docstring): the Lagrangian bound of
+    ``defined`` (M, K) (:func:`fundamentals`; with ``problem`` (M,): F (P, K, 3, 3) and ``defined`` (P, K) per
+    problem, row m's problem ``problem[m]``, so that only its subset's pairs are gathered) and frame scale s (M,)
+    (module docstring): the Lagrangian bound of
     the degree-2 program of each subset, the epipolar constraints of its view pairs only.  ``accepted``: the bound
     meets the candidate's value under the certificate rule at the subset's residual scale (as
     :func:`tritools.solve.robust_verify.verify_in_parent` accepts a bound).
@@ -277,8 +279,9 @@ def enum_bounds_rows(Cn, F, defined, W: np.ndarray, Xn: np.ndarray, s: np.ndarra
         views = np.nonzero(W[r])[1].reshape(len(r), k)       # each row's views, ascending
         Ik, Jk = view_pairs(int(k))
         pair = _pair_index(N)[views[:, Ik], views[:, Jk]]     # (R, k(k-1)/2): their pairs' rows of F
-        lb[r], accepted[r] = _subset_bounds(Cn[r[:, None], views], F[r[:, None], pair], defined[r[:, None], pair],
-                                            Xn[r], s[r], tolerances)
+        owner = (r if problem is None else problem[r])[:, None]
+        lb[r], accepted[r] = _subset_bounds(Cn[r[:, None], views], F[owner, pair], defined[owner, pair], Xn[r], s[r],
+                                            tolerances)
     return lb, accepted
 
 

@@ -403,8 +403,9 @@ class _Group:
         F, defined = self._fundamentals
         s = np.array([f.scale if f is not None else 1.0 for f in self.frames])
         self._terms_cache = None
-        self.lb[pp, mm], _ = _by_rows(lambda *a: enum.enum_bounds_rows(*a, self.tol), pp.size, self.Cn[pp], F[pp],
-                                      defined[pp], self.W[mm], self.Xn[pp, mm], s[pp])
+        self.lb[pp, mm], _ = _by_rows(lambda C, W, X, sc, p: enum.enum_bounds_rows(C, F, defined, W, X, sc, self.tol,
+                                                                                  problem=p),
+                                      pp.size, self.Cn[pp], self.W[mm], self.Xn[pp, mm], s[pp], pp)
 
     def _floors(self) -> np.ndarray:
         """The floor of each problem's decision scale (:mod:`tritools.solve.robust_enum`, "The decision scale")."""

@@ -222,12 +222,19 @@ def _polish(Cm: np.ndarray, X: np.ndarray, steps: int) -> np.ndarray:
     return X
 
 
-def enum_candidates(Cn: np.ndarray, W: np.ndarray, steps: int | None = None) -> np.ndarray:
+def enum_candidates(Cn: np.ndarray, W: np.ndarray, steps: int | None = None, by_size: bool = False) -> np.ndarray:
     """Normalised candidates Xn (M, 3) (NaN where not finite) of the subsets ``W`` (M, N) of the views of the
     normalised cameras Cn ((N, 3, 4) shared by every row, or (M, N, 3, 4): each row its own problem's): the DLT of
     each subset polished by ``steps`` (default :data:`POLISH_STEPS`) Levenberg-Marquardt steps, all in one masked
-    stack (module docstring)."""
+    stack (module docstring); ``by_size`` (stacks of many rows): one stack per subset size on the subsets' own views
+    (the same programs, k / N of the cost)."""
     M, N = W.shape
+    steps = POLISH_STEPS if steps is None else steps
+    if not by_size:
+        Cm = np.where(W[:, :, None, None], Cn, MASKED_CAMERA)
+        X0, ok = dlt_stack(Cm, np.zeros((M, N, 2)))
+        Xn = _polish(Cm, np.where(ok[:, None] & np.isfinite(X0), X0, 0.0), steps)
+        return np.where(np.isfinite(Xn).all(axis=1)[:, None], Xn, np.nan)
     Cb = np.broadcast_to(Cn, (M,) + Cn.shape[-3:])
     size = W.sum(axis=1)
     out = np.full((M, 3), np.nan)
@@ -235,7 +242,7 @@ def enum_candidates(Cn: np.ndarray, W: np.ndarray, steps: int | None = None) -> 
         r = np.nonzero(size == k)[0]        # DLT row, residual and Jacobian (module docstring), so this is the
         Cm = Cb[r[:, None], np.nonzero(W[r])[1].reshape(len(r), k)]     # masked stack's program at k / N the cost
         X0, ok = dlt_stack(Cm, np.zeros((len(r), k, 2)))
-        Xn = _polish(Cm, np.where(ok[:, None] & np.isfinite(X0), X0, 0.0), POLISH_STEPS if steps is None else steps)
+        Xn = _polish(Cm, np.where(ok[:, None] & np.isfinite(X0), X0, 0.0), steps)
         out[r] = np.where(np.isfinite(Xn).all(axis=1)[:, None], Xn, np.nan)
     return out
 
@@ -258,7 +265,8 @@ def enum_bounds(C: np.ndarray, Cn: np.ndarray, W: np.ndarray, Xn: np.ndarray, s:
                             np.broadcast_to(defined[0], (M,) + defined.shape[1:]), W, Xn, np.full(M, s), tolerances)
 
 
-def enum_bounds_rows(Cn, F, defined, W: np.ndarray, Xn: np.ndarray, s: np.ndarray, tolerances, problem=None):
+def enum_bounds_rows(Cn, F, defined, W: np.ndarray, Xn: np.ndarray, s: np.ndarray, tolerances, problem=None,
+                     by_size: bool = False):
     """(L2 lower bounds (M,) pixels^2, accepted (M,)) of the subsets ``W`` (M, N) at the normalised candidates Xn
     (M, 3), each row with its problem's normalised cameras Cn (M, N, 3, 4), fundamental matrices F (M, K, 3, 3) and
     ``defined`` (M, K) (:func:`fundamentals`; with ``problem`` (M,): F (P, K, 3, 3) and ``defined`` (P, K) per
@@ -268,10 +276,15 @@ def enum_bounds_rows(Cn, F, defined, W: np.ndarray, Xn: np.ndarray, s: np.ndarra
     meets the candidate's value under the certificate rule at the subset's residual scale (as
     :func:`tritools.solve.robust_verify.verify_in_parent` accepts a bound).
 
-    The rows are bounded per subset size k on the k views of their subsets only (:func:`_subset_bounds`): the
-    masked views' image variables are free in sum_k v_k^2 and in no constraint, so the program of a row is the
-    k-view program exactly (a pair: 4 variables and 1 constraint instead of 2N and N(N-1)/2)."""
+    ``by_size`` (stacks of many rows): the rows are bounded per subset size k on the k views of their subsets only
+    (:func:`_subset_bounds`): the masked views' image variables are free in sum_k v_k^2 and in no constraint, so
+    the program of a row is the k-view program exactly (a pair: 4 variables and 1 constraint instead of 2N and
+    N(N-1)/2).  Else one masked stack of N views (fewer calls: a single problem's few rows)."""
     M, N = W.shape
+    if not by_size:
+        if problem is not None:
+            F, defined = F[problem], defined[problem]
+        return _masked_bounds(Cn, F, defined, W, Xn, s, tolerances)
     size = W.sum(axis=1)
     lb, accepted = np.zeros(M), np.zeros(M, bool)
     for k in np.unique(size):
@@ -295,14 +308,23 @@ def _pair_index(N: int) -> np.ndarray:
     return out
 
 
-def _subset_bounds(Cn, F, defined, Xn: np.ndarray, s: np.ndarray, tolerances):
-    """:func:`enum_bounds_rows` of rows holding all their k views: cameras Cn (M, k, 3, 4), F (M, k(k-1)/2, 3, 3)
-    and ``defined`` of the pairs of :func:`view_pairs` (k)."""
-    M, N = Cn.shape[:2]
+def _masked_bounds(Cn, F, defined, W: np.ndarray, Xn: np.ndarray, s: np.ndarray, tolerances):
+    """:func:`enum_bounds_rows` in one masked stack of N views (a view outside a row's subset: its image variables
+    0 in the candidate, its epipolar constraints dropped)."""
+    M, N = W.shape
     u, _, fin = project_stack(Cn, Xn)
     fin &= np.isfinite(Xn).all(axis=1)
-    v = np.where(fin[:, None, None], u, 0.0).reshape(M, -1)
-    g0, g1, G2 = epipolar_quadratics(np.where(defined[..., None, None], F, 0.0), N)
+    v = np.where(W[:, :, None] & fin[:, None, None], u, 0.0).reshape(M, -1)
+    I, J = view_pairs(N)
+    held = W[:, I] & W[:, J] & defined
+    return _verified(v, fin, np.where(held[..., None, None], F, 0.0), N, s, tolerances, W.sum(axis=1))
+
+
+def _verified(v, fin, F, N: int, s, tolerances, size):
+    """The bounds and acceptance of :func:`enum_bounds_rows` from the rows' image candidates v (M, 2N), finiteness
+    ``fin`` and the fundamental matrices F (M, N(N-1)/2, 3, 3) of the constraints they hold (0: dropped)."""
+    M = len(v)
+    g0, g1, G2 = epipolar_quadratics(F, N)
     good = fin & np.isfinite(g0).all(axis=1) & np.isfinite(g1).all(axis=(1, 2))
     n = 2 * N
     radius = np.sqrt(np.einsum("mi,mi->m", v, v))
@@ -313,8 +335,18 @@ def _subset_bounds(Cn, F, defined, Xn: np.ndarray, s: np.ndarray, tolerances):
         good &= np.isfinite(lb)
         lb = np.where(good, lb, 0.0)
         ub = radius ** 2 / (s * s)
-        accepted = good & np.asarray(tolerances.certified(lb, ub, ub / N), bool)
+        accepted = good & np.asarray(tolerances.certified(lb, ub, ub / size), bool)
     return lb, accepted
+
+
+def _subset_bounds(Cn, F, defined, Xn: np.ndarray, s: np.ndarray, tolerances):
+    """:func:`enum_bounds_rows` of rows holding all their k views: cameras Cn (M, k, 3, 4), F (M, k(k-1)/2, 3, 3)
+    and ``defined`` of the pairs of :func:`view_pairs` (k)."""
+    M, N = Cn.shape[:2]
+    u, _, fin = project_stack(Cn, Xn)
+    fin &= np.isfinite(Xn).all(axis=1)
+    v = np.where(fin[:, None, None], u, 0.0).reshape(M, -1)
+    return _verified(v, fin, np.where(defined[..., None, None], F, 0.0), N, s, tolerances, N)
 
 
 @functools.lru_cache(maxsize=16)

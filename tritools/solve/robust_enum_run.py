@@ -335,8 +335,8 @@ class _Group:
         pp, mm = np.nonzero(rows)
         if pp.size:
             steps = None if self.staged else SINGLE_POLISH_STEPS
-            self.Xn[pp, mm] = _by_rows(lambda C, W: enum.enum_candidates(C, W, steps), pp.size, self.Cn[pp],
-                                       self.W[mm])
+            self.Xn[pp, mm] = _by_rows(lambda C, W: enum.enum_candidates(C, W, steps, by_size=self.staged), pp.size,
+                                       self.Cn[pp], self.W[mm])
 
     def _offer(self, rows: np.ndarray) -> np.ndarray:
         """Offer each problem the best of its candidates in ``rows`` (P, M) (world frame, ranked by f_TLS in one
@@ -404,7 +404,7 @@ class _Group:
         s = np.array([f.scale if f is not None else 1.0 for f in self.frames])
         self._terms_cache = None
         self.lb[pp, mm], _ = _by_rows(lambda C, W, X, sc, p: enum.enum_bounds_rows(C, F, defined, W, X, sc, self.tol,
-                                                                                  problem=p),
+                                                                                  problem=p, by_size=self.staged),
                                       pp.size, self.Cn[pp], self.W[mm], self.Xn[pp, mm], s[pp], pp)
 
     def _floors(self) -> np.ndarray:

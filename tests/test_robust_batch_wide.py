@@ -179,3 +179,27 @@ def test_row_chunks_give_the_same_results(monkeypatch):
         np.testing.assert_array_equal(a.inliers, b.inliers)
         assert b.gamma_ub == pytest.approx(a.gamma_ub, rel=1e-9)
         assert b.gamma_lb == pytest.approx(a.gamma_lb, rel=1e-6)
+
+
+def test_outside_sums_with_infinite_thresholds():
+    """c^2(V - S) by one matrix product where every c_i is finite, by the masked sum where one is infinite (inf
+    where that view is outside S, never NaN); a batch with an infinite per-view threshold stays below the
+    reference and keeps that view."""
+    W = enum_mod.subset_masks(4)
+    c2 = np.array([[1.0, 4.0, 9.0, 16.0], [1.0, np.inf, 9.0, 16.0]])
+    got = run_mod._outside_sums(c2, W)
+    want = np.array([[sum(c2[p, i] for i in range(4) if not row[i]) for row in W] for p in range(2)]) * ROUND_DOWN
+    np.testing.assert_array_equal(got, want)
+    assert not np.isnan(got).any()
+    rng = np.random.default_rng(53)
+    probs, cs, truth = [], [], []
+    for N, k in [(5, 2), (6, 1)]:
+        P, obs, X, _ = robust_protocol_scene(N, k, 1.0, rng)
+        probs.append((P, obs))
+        truth.append(X)
+        cs.append(np.full(N, 200.0))
+    cs[0][0] = np.inf
+    res = tritools.triangulate_many(probs, robust=cs)
+    assert res[0].inliers[0]
+    for (cams, x), c, X, r in zip(probs, cs, truth, res):
+        _assert_valid(r, cams, x, c, X)

@@ -1,7 +1,8 @@
 """The enumeration of every inlier set (:mod:`tritools.solve.robust_enum`) run over many TLS searches at once.
 
 :func:`enumerate_many` takes :class:`tritools.solve.robust.TlsSearch` objects of point problems with 3 to
-:data:`~tritools.solve.robust_enum.ENUM_MAX_VIEWS` views and, per view count N, stacks the rows of every problem
+:data:`~tritools.solve.robust_enum.ENUM_MAX_VIEWS` views (a batch: up to ``max_views``,
+:data:`tritools.solve.robust_batch.BATCH_ENUM_MAX_VIEWS`) and, per view count N, stacks the rows of every problem
 (each row a masked N-view problem in its own problem's normalised frame) into one call per step; a single call
 (:func:`enumerate_tls`) is the batch of one.  Per problem the maths is exactly that of the module docstring of
 :mod:`tritools.solve.robust_enum` -- only the stacking is shared:

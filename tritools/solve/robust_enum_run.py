@@ -332,12 +332,14 @@ class _Group:
 
     def _candidates(self, rows: np.ndarray) -> None:
         """The candidates of the rows (P, M) (:func:`~tritools.solve.robust_enum.enum_candidates`, one stack; a single
-        problem's rows polished by :data:`SINGLE_POLISH_STEPS`)."""
+        problem's rows polished by :data:`SINGLE_POLISH_STEPS` in one masked stack, a batch's per subset size)."""
         pp, mm = np.nonzero(rows)
         if pp.size:
-            steps = None if self.staged else SINGLE_POLISH_STEPS
-            self.Xn[pp, mm] = _by_rows(lambda C, W: enum.enum_candidates(C, W, steps, by_size=self.staged), pp.size,
-                                       self.Cn[pp], self.W[mm])
+            if self.staged:
+                fn = lambda C, W: enum.enum_candidates(C, W, None, by_size=True)        # noqa: E731
+            else:
+                fn = lambda C, W: enum.enum_candidates(C, W, SINGLE_POLISH_STEPS)       # noqa: E731
+            self.Xn[pp, mm] = _by_rows(fn, pp.size, self.Cn[pp], self.W[mm])
 
     def _offer(self, rows: np.ndarray) -> np.ndarray:
         """Offer each problem the best of its candidates in ``rows`` (P, M) (world frame, ranked by f_TLS in one

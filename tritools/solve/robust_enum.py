@@ -51,7 +51,6 @@ elsewhere is the documented scale computed.
 from __future__ import annotations
 
 import functools
-import itertools
 
 import numpy as np
 

@@ -43,6 +43,7 @@ from ..model.stacked import gauss_newton_polish, refine_points_stack
 from . import robust_enum as enum
 from .robust_bounds import ROUND_DOWN
 from .robust_costs import point_distances2_stack
+from .robust_drive import _credit as credit     # (the drive's rule: per-problem time limits)
 
 __all__ = ["enumerate_tls", "enumerate_many", "eligible", "closed_terms", "lower_bounds", "refine_rows",
            "enumerated_result", "ENUM_CHUNK", "ENUM_ROWS", "SINGLE_POLISH_STEPS", "THREE_VIEW_PATH"]
@@ -112,9 +113,19 @@ def enumerate_many(searches: list, scales=None, max_views: int | None = None) ->
     for (N, _), idx in groups.items():
         for a in range(0, len(idx), ENUM_CHUNK):
             part = idx[a:a + ENUM_CHUNK]
+            t = time.monotonic()
             for k, r in zip(part, _run([searches[k] for k in part], scales)):
                 out[k] = r
+            _credit_others(searches, set(part), time.monotonic() - t)
     return out
+
+
+def _credit_others(searches: list, ran: set, seconds: float) -> None:
+    """Time limits stay per problem (as in :func:`tritools.solve.robust_drive.drive`): the searches outside the
+    stack that just ran waited for it, and their deadlines move on by its time (within the whole call's end)."""
+    for k, s in enumerate(searches):
+        if k not in ran:
+            credit(s, seconds)
 
 
 def _run(group: list, scales) -> list:
@@ -215,6 +226,7 @@ class _Group:
         self._fundamentals = self._floor = self._terms_cache = None
         self.staged = len(group) >= STAGED_FROM
         self.refined: list = [set() for _ in group]     # the inlier sets refined to convergence, per problem
+        self._clock = time.monotonic()                   # the stack's time is shared (:meth:`_expired`)
 
     def run(self) -> list:
         """The results (module docstring, steps 1-3); None where not decided."""
@@ -240,7 +252,7 @@ class _Group:
         full = live[:, None] & (self.size == self.N)[None]
         self._candidates(full)
         self._offer(full)                   # (a problem without a finite candidate here goes on to the pairs)
-        live = live & np.array([not s.deadline.expired for s in self.group])
+        live = live & ~self._expired()
         clean = np.array([len(s.best_S) == self.N for s in self.group]) & (self._ub() <= np.min(self.c2, axis=1))
         quick = live & clean
         self._bound(quick[:, None] & full)
@@ -293,7 +305,8 @@ class _Group:
         """Step 3: for the problems left open with time left, the candidates and bounds of the sets inside a set
         whose term does not meet UB (:meth:`_feeding`), the closure again; the final decision."""
         keep = np.zeros(len(self.group), bool)
-        keep[[p for p in open_ if not self.group[p].deadline.expired]] = True
+        expired = self._expired()
+        keep[[p for p in open_ if not expired[p]]] = True
         if not keep.any():
             return
         self._second_chance(live & keep)
@@ -327,6 +340,18 @@ class _Group:
         self._terms_cache = None
 
     # ------------------------------------------------------------------ steps
+    def _expired(self) -> np.ndarray:
+        """(P,) each search's deadline passed, each charged its even share of the stack's time since the last
+        check: the rest moves its deadline on (as :func:`tritools.solve.robust_drive.drive` does; one problem:
+        nothing moves)."""
+        now = time.monotonic()
+        waited = (now - self._clock) * (1.0 - 1.0 / len(self.group))
+        self._clock = now
+        if waited > 0:
+            for s in self.group:
+                credit(s, waited)
+        return np.array([s.deadline.expired for s in self.group])
+
     def _ub(self) -> np.ndarray:
         return np.array([s.best_f for s in self.group])
 
@@ -373,7 +398,7 @@ class _Group:
                 if s.best_S != frozenset(S) and np.array_equal(s.best_X, self.frames[p].world_point(Xr)):
                     again.append((p, s.best_X, sorted(s.best_S)))          # a new best with another inlier set
             picks = again
-        return np.array([s.best_X is not None and not s.deadline.expired for s in self.group])
+        return np.array([s.best_X is not None for s in self.group]) & ~self._expired()
 
     def _refine(self, picks: list) -> dict:
         """problem -> the candidate refined on its inlier set S (normalised, :func:`refine_rows`); absent where it

@@ -156,6 +156,7 @@ def test_drive_restores_the_garbage_collector(monkeypatch):
 
     monkeypatch.setattr(rd, "GC_PAUSE_FROM", 2)
     monkeypatch.setattr("tritools.solve.robust_enum.ENUM_MAX_VIEWS", 0)     # batches of few views enumerate first
+    monkeypatch.setattr("tritools.solve.robust_batch.BATCH_ENUM_MAX_VIEWS", 0)
     cams, x, _, _ = _scene(4, 1, 14)
     probs = [(cams, x), (cams, x[:3]), (cams, x)]            # the middle one is malformed: invalid_input
     seen = []

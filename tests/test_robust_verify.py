@@ -71,6 +71,7 @@ def test_search_equals_the_per_subset_path_and_the_enumeration(seed, N, n_out, m
     cams, x, X, out = outlier_track(N, n_out, seed)
     c = np.full(N, 20.0)
     monkeypatch.setattr(enum_mod, "ENUM_MAX_VIEWS", 0)    # the search's sub-bounds (single calls and batches enumerate)
+    monkeypatch.setattr("tritools.solve.robust_batch.BATCH_ENUM_MAX_VIEWS", 0)
     accepted = []
     real = rb.verify_in_parent
     monkeypatch.setattr(rb, "verify_in_parent", lambda *a: (lambda r: accepted.append(int(r[0].sum())) or r)(real(*a)))

@@ -1,6 +1,6 @@
 """Batches of robust (TLS) problems: :func:`triangulate_many` and :func:`triangulate_points` with ``robust=``.
 
-1. Point-region problems (with a finite threshold) of 3 to ``ENUM_MAX_VIEWS`` views first go through the
+1. Point-region problems (with a finite threshold) of 3 to :data:`BATCH_ENUM_MAX_VIEWS` views first go through the
    enumeration of every inlier set, stacked across problems (:func:`tritools.solve.robust_enum_run.enumerate_many`,
    the single call's path).  The others, and those it does not decide, go to the branch and bound of
    :mod:`tritools.solve.robust` -- exactly the search :func:`tritools.triangulate` runs for one of them -- in
@@ -107,6 +107,13 @@ def _l2_suffices(res: TriangulationResult, c: np.ndarray) -> bool:
 ROBUST_CHUNK = 512
 
 
+#: batches enumerate every inlier set of point problems up to this many views (single calls: up to
+#: :data:`tritools.solve.robust_enum.ENUM_MAX_VIEWS`), the branch and bound beyond.  In a stack of many problems the
+#: enumeration's rows are shared (benchmarks/RESULTS.md, "Wave 9 robust batches at N = 7-10"): at 9-10 views with
+#: three or four wrong matches it costs about half the search's time.
+BATCH_ENUM_MAX_VIEWS = 10
+
+
 def _search_or_failure(cameras, regions, c, opts):
     """A :class:`tritools.solve.robust.TlsSearch` for one problem, or a failed result (bad input)."""
     from .robust import TlsSearch
@@ -199,7 +206,7 @@ def _drive_chunks(problems, thresholds, opts, idx, out, points) -> None:
 
 
 def _enumerated_then_searched(searches: list) -> list:
-    """The results of the searches: point problems of 3 to ENUM_MAX_VIEWS views by the enumeration of every inlier
+    """The results of the searches: point problems of 3 to BATCH_ENUM_MAX_VIEWS views by the enumeration of every inlier
     set, stacked across problems (:func:`tritools.solve.robust_enum_run.enumerate_many`, the single call's path),
     the others and those it leaves open by the branch and bound (:func:`tritools.solve.robust_drive.drive`).  The
     decision scales come from one normalisation stack per view count (:func:`_normalization_scales`), computed only
@@ -213,7 +220,7 @@ def _enumerated_then_searched(searches: list) -> list:
         _normalization_scales(group)
         normalised.update(map(id, group))
 
-    results = enumerate_many(searches, scales=scales)
+    results = enumerate_many(searches, scales=scales, max_views=BATCH_ENUM_MAX_VIEWS)
     left = [k for k, r in enumerate(results) if r is None]
     _normalization_scales([searches[k] for k in left if id(searches[k]) not in normalised])
     for k, r in zip(left, drive([searches[k] for k in left]) if left else []):

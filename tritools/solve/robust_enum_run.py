@@ -1,7 +1,8 @@
 """The enumeration of every inlier set (:mod:`tritools.solve.robust_enum`) run over many TLS searches at once.
 
 :func:`enumerate_many` takes :class:`tritools.solve.robust.TlsSearch` objects of point problems with 3 to
-:data:`~tritools.solve.robust_enum.ENUM_MAX_VIEWS` views and, per view count N, stacks the rows of every problem
+:data:`~tritools.solve.robust_enum.ENUM_MAX_VIEWS` views (a batch: up to ``max_views``,
+:data:`tritools.solve.robust_batch.BATCH_ENUM_MAX_VIEWS`) and, per view count N, stacks the rows of every problem
 (each row a masked N-view problem in its own problem's normalised frame) into one call per step; a single call
 (:func:`enumerate_tls`) is the batch of one.  Per problem the maths is exactly that of the module docstring of
 :mod:`tritools.solve.robust_enum` -- only the stacking is shared:
@@ -41,14 +42,18 @@ from ..model.stacked import gauss_newton_polish, refine_points_stack
 from . import robust_enum as enum
 from .robust_bounds import ROUND_DOWN
 from .robust_costs import point_distances2_stack
+from .robust_drive import _credit as credit     # (the drive's rule: per-problem time limits)
 
 __all__ = ["enumerate_tls", "enumerate_many", "eligible", "closed_terms", "lower_bounds", "refine_rows",
            "enumerated_result", "ENUM_CHUNK", "ENUM_ROWS", "SINGLE_POLISH_STEPS", "THREE_VIEW_PATH"]
 
 log = logging.getLogger(__name__)
 
-#: at most this many problems share one stack, and at most ENUM_ROWS subset rows (247 per problem at N = 8): a
-#: stacked verification of R rows of N views holds ~R N^3 floats (8192 rows at N = 8: ~30 MB).
+#: at most this many problems share one stack; each stacked candidate, verification or refinement call takes at most
+#: ENUM_ROWS of its rows (a stacked verification of R rows of N views holds ~R N^3 floats: 8192 rows at N = 10,
+#: ~60 MB), the rows of a stack in turn (:func:`_by_rows`).  A stack of many problems bounds few of its 2^N - N - 1
+#: rows per problem (the staged order), so the stack's size is not tied to the number of subsets: small stacks at
+#: 9-10 views (8 problems of 1013 rows) spent more on each stack's fixed steps than on the rows (wave 9).
 ENUM_CHUNK = 256
 ENUM_ROWS = 8192
 #: stacks of at least this many problems take the staged order (all views first, then all views but one, the pairs
@@ -75,9 +80,11 @@ THREE_VIEW_PATH = True
 LO_ROUNDS = 3
 
 
-def eligible(search) -> bool:
-    """Does the enumeration run for this search (point regions, 3 to ENUM_MAX_VIEWS views, time left)?"""
-    return bool(search.points and 3 <= search.N <= enum.ENUM_MAX_VIEWS and not search.deadline.expired)
+def eligible(search, max_views: int | None = None) -> bool:
+    """Does the enumeration run for this search (point regions, 3 to ``max_views`` views -- None: ENUM_MAX_VIEWS --,
+    time left)?"""
+    top = enum.ENUM_MAX_VIEWS if max_views is None else max_views
+    return bool(search.points and 3 <= search.N <= top and not search.deadline.expired)
 
 
 def enumerate_tls(search):
@@ -92,22 +99,32 @@ def enumerate_tls(search):
     return enumerate_many([search])[0]
 
 
-def enumerate_many(searches: list, scales=None) -> list:
-    """A result or None per search (module docstring), in input order; searches that are not :func:`eligible` get
-    None.  ``scales(list of searches)``: sets the documented decision scale of the searches that need it (a batch:
-    one normalisation stack); None: each search computes its own when asked."""
+def enumerate_many(searches: list, scales=None, max_views: int | None = None) -> list:
+    """A result or None per search (module docstring), in input order; searches that are not :func:`eligible` (up
+    to ``max_views`` views; None: ENUM_MAX_VIEWS) get None.  ``scales(list of searches)``: sets the documented
+    decision scale of the searches that need it (a batch: one normalisation stack); None: each search computes its
+    own when asked."""
     out: list = [None] * len(searches)
     groups: dict = {}
     for k, s in enumerate(searches):
-        if eligible(s):
+        if eligible(s, max_views):
             groups.setdefault((s.N, id(s.tol)), []).append(k)
-    for (N, _), idx in groups.items():
-        step = min(ENUM_CHUNK, max(1, ENUM_ROWS // len(enum.subset_masks(N))))
-        for a in range(0, len(idx), step):
-            part = idx[a:a + step]
+    for _key, idx in groups.items():
+        for a in range(0, len(idx), ENUM_CHUNK):
+            part = idx[a:a + ENUM_CHUNK]
+            t = time.monotonic()
             for k, r in zip(part, _run([searches[k] for k in part], scales)):
                 out[k] = r
+            _credit_others(searches, set(part), time.monotonic() - t)
     return out
+
+
+def _credit_others(searches: list, ran: set, seconds: float) -> None:
+    """Time limits stay per problem (as in :func:`tritools.solve.robust_drive.drive`): the searches outside the
+    stack that just ran waited for it, and their deadlines move on by its time (within the whole call's end)."""
+    for k, s in enumerate(searches):
+        if k not in ran:
+            credit(s, seconds)
 
 
 def _run(group: list, scales) -> list:
@@ -122,6 +139,17 @@ def _run(group: list, scales) -> list:
     return [_run([s], scales)[0] for s in group]
 
 
+def _by_rows(fn, n: int, *arrays) -> tuple:
+    """``fn(*(a[chunk] for a in arrays))`` over chunks of at most :data:`ENUM_ROWS` of the ``n`` rows, each output
+    (a tuple of arrays, or one array) concatenated along the rows: one call where n <= ENUM_ROWS."""
+    if n <= ENUM_ROWS:
+        return fn(*arrays)
+    parts = [fn(*(a[k:k + ENUM_ROWS] for a in arrays)) for k in range(0, n, ENUM_ROWS)]
+    if isinstance(parts[0], tuple):
+        return tuple(np.concatenate(col) for col in zip(*parts))
+    return np.concatenate(parts)
+
+
 def closed_terms(N: int, W: np.ndarray, lb: np.ndarray, rest: np.ndarray) -> np.ndarray:
     """The terms L2LB(S) + c^2(V - S) (P, M) of the sets ``W`` (M, N) of P problems, each bound ``lb`` (P, M) closed
     under superadditivity (:func:`~tritools.solve.robust_enum.closure`), ``rest`` = c^2(V - S) (P, M), rounded
@@ -129,8 +157,13 @@ def closed_terms(N: int, W: np.ndarray, lb: np.ndarray, rest: np.ndarray) -> np.
     bits = W.astype(np.int64) @ (1 << np.arange(N))
     table = np.zeros((len(lb), 1 << N))
     table[:, bits] = lb
+    # a problem whose bounds are 0 but for all views' (a clean track's first row) is closed already: no split of a
+    # set sums two non-zero parts, and no set holds all views but the set of all views
+    split = np.any(table[:, :-1] != 0, axis=1)
+    if split.any():
+        table[split] = enum.closure(N, table[split])
     with np.errstate(over="ignore", invalid="ignore"):
-        return (enum.closure(N, table)[:, bits] + rest) * ROUND_DOWN
+        return (table[:, bits] + rest) * ROUND_DOWN
 
 
 def lower_bounds(ub: np.ndarray, terms: np.ndarray, c2: np.ndarray) -> np.ndarray:
@@ -173,6 +206,15 @@ def enumerated_result(search, lb: float, n_bounded: int, n_sets: int):
     return search.result(lb, None, {"enumeration": t, "total": t}, f"; {enum.ENUMERATED} ({n_sets} sets of >= 2 views)")
 
 
+def _outside_sums(c2: np.ndarray, W: np.ndarray) -> np.ndarray:
+    """c^2(V - S) (P, M) of the sets ``W`` (M, N), c2 (P, N), rounded down (inf where a view outside S has c_i =
+    inf): one matrix product where every c_i is finite (0 * inf would be NaN there)."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        if np.isfinite(c2).all():
+            return (c2 @ (~W).T.astype(float)) * ROUND_DOWN
+        return np.sum(np.where(W[None], 0.0, c2[:, None, :]), axis=2) * ROUND_DOWN
+
+
 class _Group:
     """P searches of one view count N enumerated together: row (p, m) is subset m of problem p."""
 
@@ -190,6 +232,7 @@ class _Group:
         self._fundamentals = self._floor = self._terms_cache = None
         self.staged = len(group) >= STAGED_FROM
         self.refined: list = [set() for _ in group]     # the inlier sets refined to convergence, per problem
+        self._clock = time.monotonic()                   # the stack's time is shared (:meth:`_expired`)
 
     def run(self) -> list:
         """The results (module docstring, steps 1-3); None where not decided."""
@@ -197,12 +240,13 @@ class _Group:
         live = np.array([f is not None for f in self.frames])
         self.origin = np.array([f.origin if f is not None else np.zeros(3) for f in self.frames])
         self.depth = np.array([f.depth if f is not None else 1.0 for f in self.frames])
-        with np.errstate(over="ignore", invalid="ignore"):      # c^2(V - S); inf: c_i = inf
-            self.rest = np.sum(np.where(self.W[None], 0.0, self.c2[:, None, :]), axis=2) * ROUND_DOWN
+        self.rest = _outside_sums(self.c2, self.W)
         self.lb = np.zeros(self.rest.shape)
         self.bounded = np.zeros(self.rest.shape, bool)
         if self.staged:
             live = self._all_views_first(live)
+            if not live.any():              # every clean track decided (the rest have no frame: their search runs)
+                return self.results
         live = self._upper_bounds(live)
         self._second_round(self._first_round(live), live)
         return self.results
@@ -214,7 +258,7 @@ class _Group:
         full = live[:, None] & (self.size == self.N)[None]
         self._candidates(full)
         self._offer(full)                   # (a problem without a finite candidate here goes on to the pairs)
-        live = live & np.array([not s.deadline.expired for s in self.group])
+        live = live & ~self._expired()
         clean = np.array([len(s.best_S) == self.N for s in self.group]) & (self._ub() <= np.min(self.c2, axis=1))
         quick = live & clean
         self._bound(quick[:, None] & full)
@@ -267,7 +311,8 @@ class _Group:
         """Step 3: for the problems left open with time left, the candidates and bounds of the sets inside a set
         whose term does not meet UB (:meth:`_feeding`), the closure again; the final decision."""
         keep = np.zeros(len(self.group), bool)
-        keep[[p for p in open_ if not self.group[p].deadline.expired]] = True
+        expired = self._expired()
+        keep[[p for p in open_ if not expired[p]]] = True
         if not keep.any():
             return
         self._second_chance(live & keep)
@@ -285,7 +330,7 @@ class _Group:
         pp, mm = np.nonzero(rows)
         if not pp.size:
             return
-        Xr, ok = refine_rows(self.Cn[pp], self.Xn[pp, mm], self.W[mm])
+        Xr, ok = _by_rows(refine_rows, len(pp), self.Cn[pp], self.Xn[pp, mm], self.W[mm])
         pp, mm, Xr = pp[ok], mm[ok], Xr[ok]
         if not pp.size:
             return
@@ -301,16 +346,31 @@ class _Group:
         self._terms_cache = None
 
     # ------------------------------------------------------------------ steps
+    def _expired(self) -> np.ndarray:
+        """(P,) each search's deadline passed, each charged its even share of the stack's time since the last
+        check: the rest moves its deadline on (as :func:`tritools.solve.robust_drive.drive` does; one problem:
+        nothing moves)."""
+        now = time.monotonic()
+        waited = (now - self._clock) * (1.0 - 1.0 / len(self.group))
+        self._clock = now
+        if waited > 0:
+            for s in self.group:
+                credit(s, waited)
+        return np.array([s.deadline.expired for s in self.group])
+
     def _ub(self) -> np.ndarray:
         return np.array([s.best_f for s in self.group])
 
     def _candidates(self, rows: np.ndarray) -> None:
         """The candidates of the rows (P, M) (:func:`~tritools.solve.robust_enum.enum_candidates`, one stack; a single
-        problem's rows polished by :data:`SINGLE_POLISH_STEPS`)."""
+        problem's rows polished by :data:`SINGLE_POLISH_STEPS` in one masked stack, a batch's per subset size)."""
         pp, mm = np.nonzero(rows)
         if pp.size:
-            steps = None if self.staged else SINGLE_POLISH_STEPS
-            self.Xn[pp, mm] = enum.enum_candidates(self.Cn[pp], self.W[mm], steps)
+            if self.staged:
+                fn = lambda C, W: enum.enum_candidates(C, W, None, by_size=True)        # noqa: E731
+            else:
+                fn = lambda C, W: enum.enum_candidates(C, W, SINGLE_POLISH_STEPS)       # noqa: E731
+            self.Xn[pp, mm] = _by_rows(fn, pp.size, self.Cn[pp], self.W[mm])
 
     def _offer(self, rows: np.ndarray) -> np.ndarray:
         """Offer each problem the best of its candidates in ``rows`` (P, M) (world frame, ranked by f_TLS in one
@@ -344,7 +404,7 @@ class _Group:
                 if s.best_S != frozenset(S) and np.array_equal(s.best_X, self.frames[p].world_point(Xr)):
                     again.append((p, s.best_X, sorted(s.best_S)))          # a new best with another inlier set
             picks = again
-        return np.array([s.best_X is not None and not s.deadline.expired for s in self.group])
+        return np.array([s.best_X is not None for s in self.group]) & ~self._expired()
 
     def _refine(self, picks: list) -> dict:
         """problem -> the candidate refined on its inlier set S (normalised, :func:`refine_rows`); absent where it
@@ -377,8 +437,9 @@ class _Group:
         F, defined = self._fundamentals
         s = np.array([f.scale if f is not None else 1.0 for f in self.frames])
         self._terms_cache = None
-        self.lb[pp, mm], _ = enum.enum_bounds_rows(self.Cn[pp], F[pp], defined[pp], self.W[mm], self.Xn[pp, mm],
-                                                   s[pp], self.tol, accepted=False)
+        self.lb[pp, mm] = _by_rows(lambda C, W, X, sc, p: enum.enum_bounds_rows(
+            C, F, defined, W, X, sc, self.tol, problem=p, by_size=self.staged, accepted=False)[0],
+            pp.size, self.Cn[pp], self.W[mm], self.Xn[pp, mm], s[pp], pp)
 
     def _floors(self) -> np.ndarray:
         """The floor of each problem's decision scale (:mod:`tritools.solve.robust_enum`, "The decision scale")."""
@@ -403,7 +464,14 @@ class _Group:
         return self._terms_cache
 
     def _closed_terms(self) -> np.ndarray:
-        return closed_terms(self.N, self.W, self.lb, self.rest)
+        """:func:`closed_terms` of the problems not decided yet; a decided problem's terms (never read again) are
+        its bounds unclosed plus c^2(V - S), rounded down (still valid, without the closure's cost)."""
+        open_ = np.array([r is None for r in self.results])
+        with np.errstate(over="ignore", invalid="ignore"):
+            terms = (self.lb + self.rest) * ROUND_DOWN
+        if open_.any():
+            terms[open_] = closed_terms(self.N, self.W, self.lb[open_], self.rest[open_])
+        return terms
 
     def _lower_bounds(self) -> np.ndarray:
         """LB (P,) (:func:`lower_bounds`)."""
@@ -417,7 +485,9 @@ class _Group:
     def _feeding(self) -> np.ndarray:
         """The sets (P, M) inside a set whose term does not meet UB at the floor scale: only their bounds can raise
         a term that matters (the closure of S reads S's subsets only; a term that meets UB already meets it)."""
-        return (self._failing().astype(np.int32) @ enum.subset_of(self.N).T.astype(np.int32)) > 0
+        # (float32 counts, exact below 2^24: BLAS, where an integer product of a stack of 256 problems at N = 10
+        # took ~0.3 s)
+        return (self._failing().astype(np.float32) @ enum.subset_of(self.N).T.astype(np.float32)) > 0
 
     def _decide(self, probs, final: bool) -> list:
         """Decide the problems ``probs`` where LB meets UB (at the floor scale: the documented rule then holds too;

@@ -163,3 +163,17 @@ def test_georeferenced_point_next_to_a_camera_is_never_certified_without_an_uppe
     for r in results:
         assert not (r.optimal and not np.isfinite(r.gamma_ub)), (r.status, r.gamma_ub)
     assert results[0].status == results[1].status == results[2].status
+
+
+def test_centres_too_close_to_resolve_are_named_not_the_image_data():
+    """Review 8b: ordinary 300 px data with centres 1e-11 apart ended in numerical_failure "the image data (|x| up to
+    329) are too large ...": the message now names the centres' separation (image data up to 1e12 px are ordinary)."""
+    rng = np.random.default_rng(501)
+    N = int(rng.integers(3, 6))
+    C0 = rng.normal(size=3) * 10
+    X = rng.normal(size=3)
+    Ps = np.array([_cam(C0 + rng.normal(size=3) * 1e-11, X - C0 + rng.normal(size=3) * 0.05, rng) for _ in range(N)])
+    xs = np.array([_project(P, X) for P in Ps]) + rng.normal(size=(N, 2))
+    res = tritools.triangulate(Ps, xs)
+    assert not res.optimal and res.gamma_lb is None
+    assert "too large" not in res.message and ("too close" in res.message or "round-off" in res.message), res.message

@@ -385,13 +385,19 @@ def normalization_for(cameras: np.ndarray, regions, enabled: bool = True) -> Nor
 
 
 
+#: image coordinates up to this magnitude are not blamed when the normalised pairs are lost
+#: (:func:`unconstrained_reason`): the centres' separation is (review 8b: 300 px data with centres 1e-11 apart).
+ORDINARY_IMAGE_DATA = 1e12
+
+
 def unconstrained_reason(cameras: np.ndarray, regions) -> tuple:
     """(status value, message) for a problem whose normalised data leave no view pair that constrains the point.
 
     Either the camera centres really coincide (``ill_posed``), or the pairs were lost in floating point: image
     coordinates so far from the cameras' image scale (points at 1e20 px and more) that the normalised cameras
     are numerically rank-deficient (``numerical_failure``, and the message says so instead of blaming the
-    cameras)."""
+    cameras), or -- with ordinary image data (|x| <= ``ORDINARY_IMAGE_DATA``) -- centres so close to each other
+    that the normalised cameras cannot resolve them (``numerical_failure``, and the message names the centres)."""
     from .geometry import fundamental_matrices
 
     C = np.asarray(cameras, float)
@@ -414,6 +420,11 @@ def unconstrained_reason(cameras: np.ndarray, regions) -> tuple:
     centers = np.array([r.center for r in regions], float)
     with np.errstate(all="ignore"):
         big = float(np.max(np.abs(centers))) if centers.size else float("nan")
+    if big <= ORDINARY_IMAGE_DATA:
+        return "numerical_failure", (f"no view pair constrains the point after normalisation although the cameras' "
+                                     f"centres are distinct: they are too close to each other (a baseline near the "
+                                     f"data's round-off) for the normalised cameras to resolve them (|x| up to "
+                                     f"{big:.3g} px is ordinary image data)")
     return "numerical_failure", (f"the image data (|x| up to {big:.3g}) are too large for the cameras' image scale "
                                  f"to be represented in floating point: no view pair constrains the point after "
                                  f"normalisation (the cameras' centres are distinct)")

@@ -272,7 +272,7 @@ def test_credit_never_passes_the_whole_call_end():
     the whole call (fake search: only the deadline)."""
     from sospoly.budget import Deadline
     from tritools.solve.call_limit import call_limit
-    from tritools.solve.robust_drive import _credit
+    from tritools.solve.robust_drive import credit
 
     class Fake:
         def __init__(self):
@@ -282,11 +282,11 @@ def test_credit_never_passes_the_whole_call_end():
             self.deadline = d
 
     s = Fake()
-    _credit(s, 100.0)
+    credit(s, 100.0)
     assert s.deadline.remaining() > 99                      # no whole-call limit: the full credit
     s = Fake()
     with call_limit(0.5):
-        _credit(s, 100.0)
+        credit(s, 100.0)
     assert 0.1 <= s.deadline.remaining() <= 0.5 + 1e-3
 
 

@@ -17,7 +17,7 @@ from ..result import Status, TriangulationResult
 from .call_limit import current_end
 from .robust_bounds import compute_many
 
-__all__ = ["drive"]
+__all__ = ["drive", "credit"]
 
 log = logging.getLogger(__name__)
 
@@ -29,7 +29,7 @@ def drive(searches: list) -> list:
 
     Time limits stay per problem: each search's clock starts with the drive and is charged its own steps and
     an even share of the batched calls of the rounds it takes part in; the rest of a round's time moves its
-    deadline on before it resumes (:func:`_credit`).  With one search nothing moves."""
+    deadline on before it resumes (:func:`credit`).  With one search nothing moves."""
     gens = [s.run() for s in searches]
     results: list = [None] * len(gens)
     pending: dict = {}
@@ -55,12 +55,12 @@ def drive(searches: list) -> list:
         its share, the steps before it), then with the steps after it."""
         own, extra, before = {}, shared - shared / len(active), 0.0
         for i in active:
-            _credit(searches[i], extra + before)
+            credit(searches[i], extra + before)
             own[i] = step(i)
             before += own[i]
         later = 0.0
         for i in reversed(active):
-            _credit(searches[i], later)
+            credit(searches[i], later)
             later += own[i]
 
     with _collector_paused(len(searches)):
@@ -93,7 +93,7 @@ def _collector_paused(n_searches: int):
             gc.enable()
 
 
-def _credit(search, seconds: float) -> None:
+def credit(search, seconds: float) -> None:
     """Move a search's deadline (if any) on by ``seconds`` it was not charged, never past the end of the whole
     call (``total_time_limit``, :func:`tritools.solve.call_limit.current_end`, wall clock): the searches of a
     batch together stop there (review finding F4)."""

@@ -42,7 +42,7 @@ from ..model.stacked import gauss_newton_polish, refine_points_stack
 from . import robust_enum as enum
 from .robust_bounds import ROUND_DOWN
 from .robust_costs import point_distances2_stack
-from .robust_drive import _credit as credit     # (the drive's rule: per-problem time limits)
+from .robust_drive import credit     # (the drive's rule: per-problem time limits)
 
 __all__ = ["enumerate_tls", "enumerate_many", "eligible", "closed_terms", "lower_bounds", "refine_rows",
            "enumerated_result", "ENUM_CHUNK", "ENUM_ROWS", "SINGLE_POLISH_STEPS", "THREE_VIEW_PATH"]

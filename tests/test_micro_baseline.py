@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 import tritools
+from tritools.model.constraints import centre_relations
 from tritools.model.exact import exact_centre, same_exact_centre
 from tritools.model.micro_baseline import BALL_RATIO, admitted_pairs, ball_lower_cost, group_ball
 from tritools.model.regions import as_regions
@@ -79,10 +80,12 @@ def test_a_rescaled_duplicate_is_admitted_only_when_its_ball_is_excluded():
     x = np.array([_project(P, X) for P in cams]) + rng.normal(size=(3, 2))
     regs = as_regions(x)
     groups = np.array([0, 0, 2])
+    untied = centre_relations(cams, groups).untied
+    assert untied == ((0, 1),)
     assert group_ball(cams, [0, 1]) < BALL_RATIO * 1e-14
-    assert admitted_pairs(cams, cams, regs, groups, 10.0) == {(0, 1)}
-    assert admitted_pairs(cams, cams, regs, groups, 1e12) == frozenset()          # not excluded by that bound
-    assert admitted_pairs(cams, cams, regs, groups, None) == frozenset()
+    assert admitted_pairs(cams, cams, regs, groups, 10.0, pairs=untied) == {(0, 1)}
+    assert admitted_pairs(cams, cams, regs, groups, 1e12, pairs=untied) == frozenset()      # not excluded
+    assert admitted_pairs(cams, cams, regs, groups, None, pairs=untied) == frozenset()
     res = tritools.triangulate(cams, x)
     assert res.optimal, res.message
 

@@ -23,23 +23,15 @@ from fractions import Fraction
 
 import numpy as np
 
-from .exact import accurate_homogeneous, exact_centre, same_exact_centre
+from .exact import accurate_homogeneous, exact_centre
 
-__all__ = ["BALL_RATIO", "round_off_pairs", "group_ball", "ball_lower_cost", "admitted_pairs"]
+__all__ = ["BALL_RATIO", "group_ball", "ball_lower_cost", "admitted_pairs"]
 
 #: the excluded ball's radius over the group's exact micro-baseline: outside it the homography errs by at most
 #: 1 / BALL_RATIO rad.
 BALL_RATIO = 1e12
 #: relative safety margin on the ball's lower bound (round-off of the projections, distances and the upper bound).
 MARGIN_RTOL = 1e-8
-
-
-def round_off_pairs(raw: np.ndarray, groups) -> list:
-    """The pairs (i < j) of one centre group whose float cameras ``raw`` do not share a centre exactly."""
-    groups = np.asarray(groups)
-    N = len(raw)
-    return [(i, j) for i in range(N) for j in range(i + 1, N)
-            if groups[i] == groups[j] and not same_exact_centre(raw[i], raw[j])]
 
 
 def _exact_point(P) -> tuple | None:
@@ -85,12 +77,12 @@ def ball_lower_cost(cams: np.ndarray, regions, outside, centre: np.ndarray, rho:
 
 
 def admitted_pairs(raw: np.ndarray, cams: np.ndarray, regions, groups, f_upper: float | None,
-                   floor: float = 0.0) -> frozenset:
-    """The round-off pairs (:func:`round_off_pairs`) whose group's ball is excluded by ``f_upper`` (an upper bound
-    of the optimum's sum of squared distances): every point of the ball costs more in the other views.  ``raw``
-    the caller's cameras (exactness), ``cams`` the same in the solver's world frame (the ball's centre; ``floor``
-    the frame move's round-off), ``regions`` in pixels."""
-    pairs = round_off_pairs(raw, groups)
+                   floor: float = 0.0, pairs=()) -> frozenset:
+    """The ``pairs`` of one centre group whose centres agree to round-off only
+    (:attr:`tritools.model.constraints.CentreRelations.untied`) whose group's ball is excluded by ``f_upper`` (an
+    upper bound of the optimum's sum of squared distances): every point of the ball costs more in the other views.
+    ``raw`` the caller's cameras (exactness), ``cams`` the same in the solver's world frame (the ball's centre;
+    ``floor`` the frame move's round-off), ``regions`` in pixels."""
     if not pairs or f_upper is None or not np.isfinite(f_upper):
         return frozenset()
     groups = np.asarray(groups)

@@ -21,7 +21,7 @@ import numpy as np
 from ...model.constraints import Method, centre_relations
 from ...model.frame import WorldFrame, frame_centre_groups
 from ...model.geometry import gamma as gamma_of
-from ...model.micro_baseline import admitted_pairs, round_off_pairs
+from ...model.micro_baseline import admitted_pairs
 from ...model.normalize import Normalization, normalization_for
 from ...model.problem import TriangulationProblem, build_problem
 from ...result import Attempt, TriangulationResult
@@ -183,16 +183,17 @@ class PointContext:
         (:mod:`tritools.model.micro_baseline`)."""
         groups = frame_centre_groups(self.cams, self.frame)
         raw = np.asarray(self.cams_user, float)
-        admitted = frozenset()
-        if round_off_pairs(raw, groups):
-            local = self.local()
-            f_upper = None
-            if local is not None:
-                g = float(gamma_of(self.norm.world_point(local[1]), self.cams, self.regions))
-                f_upper = 2 * self.N * g * g
-            floor = 8 * np.finfo(float).eps * float(np.linalg.norm(self.frame.origin))
-            admitted = admitted_pairs(raw, self.cams, self.regions, groups, f_upper, floor)
-        return centre_relations(self.cams, groups, raw=raw, admitted=admitted)
+        rel = centre_relations(self.cams, groups, raw=raw)
+        if not rel.untied:
+            return rel
+        local = self.local()
+        f_upper = None
+        if local is not None:
+            g = float(gamma_of(self.norm.world_point(local[1]), self.cams, self.regions))
+            f_upper = 2 * self.N * g * g
+        floor = 8 * np.finfo(float).eps * float(np.linalg.norm(self.frame.origin))
+        admitted = admitted_pairs(raw, self.cams, self.regions, groups, f_upper, floor, rel.untied)
+        return centre_relations(self.cams, groups, raw=raw, admitted=admitted) if admitted else rel
 
     def local(self) -> tuple[float, np.ndarray] | None:
         """The local estimate (:func:`tritools.solve.trivial.local_estimate`), computed once."""

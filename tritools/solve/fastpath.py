@@ -53,7 +53,7 @@ from .trivial import trivially_certified, trivially_certified_reported
 
 __all__ = ["FastPathBatch", "verify_points", "verify_checked", "verify_one", "stack_point_problems",
            "lagrangian_bounds", "BAND_MIN_VIEWS", "BAND_WIDTHS",
-           "band_seconds", "BAND_SECONDS"]
+           "band_seconds", "BAND_SECONDS", "BAND_SECONDS_PER_VIEW"]
 
 #: from this many views on, the certificate is first tried with the epipolar constraints of bands of view
 #: pairs (:func:`_band_bounds`, cost linear in N), of the widths ``BAND_WIDTHS`` in turn; problems no band
@@ -68,9 +68,12 @@ ALL_PAIRS_CHUNK_BYTES = 256 * 2 ** 20
 #: flops per second at which :func:`all_pairs_seconds` counts the all-pairs bound (measured ~2e9 n^2 K per second
 #: on the 2-core machine at N = 200; half of it, so the estimate errs long).
 ALL_PAIRS_FLOPS = 1e9
-#: seconds per view and squared width at which :func:`band_seconds` counts a band bound (measured on the 2-core
-#: machine, one problem of N = 100-400 views: 12.5e-6 at width 4, 8.5e-6 at width 8; the larger, so it errs long)
-BAND_SECONDS = 12.5e-6
+#: seconds per view at which :func:`band_seconds` counts a band bound: a fixed part per view plus a part per view
+#: and squared width (measured on the 2-core machine, quiet, one problem of 400 views with disc regions: 0.13 s at
+#: width 4 and 0.29 s at width 8, i.e. ~2.0e-4 + 8.3e-6 w^2 per view; wave 9's single 12.5e-6 w^2 counted 0.08 s at
+#: width 4 and let a band started 0.1 s before a 0.2 s limit run 60% past it).  Rounded up, so the estimate errs long.
+BAND_SECONDS_PER_VIEW = 2.2e-4
+BAND_SECONDS = 1.0e-5
 
 
 @dataclass(frozen=True)
@@ -329,9 +332,10 @@ def all_pairs_seconds(n_views: int, problems: int = 1) -> float:
 
 def band_seconds(n_views: int, width: int, problems: int = 1) -> float:
     """Estimated seconds of the band bound of ``width`` (:func:`_band_bounds`) on ``problems`` problems of
-    ``n_views`` views: linear in N, ~quadratic in the width, at :data:`BAND_SECONDS` (one band call at N = 400 takes
-    0.08-0.22 s, which a call started just before its deadline would overrun it by)."""
-    return problems * n_views * width * width * BAND_SECONDS
+    ``n_views`` views: linear in N, a fixed part and a part quadratic in the width per view
+    (:data:`BAND_SECONDS_PER_VIEW` + :data:`BAND_SECONDS` width^2; one band call at N = 400 takes 0.13-0.29 s, which a
+    call started just before its deadline would overrun it by)."""
+    return problems * n_views * (BAND_SECONDS_PER_VIEW + width * width * BAND_SECONDS)
 
 
 def fits(deadline: Deadline | None, n_views: int, problems: int = 1) -> bool:

@@ -12,7 +12,8 @@ import numpy as np
 from ..model.cameras import depths_stack_arrays, depths_validated
 from ..model.exact import HOMOGENEOUS_RTOL
 from ..model.frame import project_world
-from ..model.geometry import WorldFrame, project_views
+from ..model.geometry import WorldFrame, project_point_views
+from ..model.refine import disc_shapes
 from ..model.regions import extent_of
 from ..model.stacked import norms
 
@@ -89,14 +90,25 @@ def point_report(X, cameras, regions, world_frame=WorldFrame.RIGHT_HANDED) -> Po
         return PointReport(None, None, None)
     Xh = np.append(np.asarray(X, float), 1.0)[None]
     C = np.asarray(cameras, float)
-    res, un = [], []
-    for x, r in zip(project_views(Xh, C), regions):     # inf where undefined (the one rule of geometry)
-        x = x[0]
-        res.append(float(r.distance(x)) if np.isfinite(x).all() else np.inf)
-        un.append(float(np.hypot(x[0], x[1])))
-    res = np.array(res)
-    gamma = float(gamma_upper(res, np.array(un))) if np.isfinite(res).all() else math.inf
+    u = project_point_views(Xh, C)                      # inf where undefined (the one rule of geometry)
+    fin = np.isfinite(u).all(axis=1)
+    shapes = disc_shapes(regions)
+    if shapes is not None:
+        res = np.where(fin, disc_distances(u, *shapes), np.inf)
+    else:
+        res = np.array([float(r.distance(x)) if ok else np.inf for x, r, ok in zip(u, regions, fin)])
+    un = np.hypot(u[:, 0], u[:, 1])
+    gamma = float(gamma_upper(res, un)) if np.isfinite(res).all() else math.inf
     return PointReport(gamma, res, depths_validated(X, C, world_frame))
+
+
+def disc_distances(u: np.ndarray, centres: np.ndarray, radii: np.ndarray) -> np.ndarray:
+    """Distances (N,) of image points u (N, 2) to point / disc regions (centres (N, 2), radii (N,): 0 for a point):
+    ||u_i - c_i|| for a point (its :meth:`~tritools.model.regions.Region.distance`, the same numbers), max(0,
+    ||u_i - c_i|| - rho_i) for a disc (closed form: within a few ulps of the region's closest-point distance, and
+    no further from the exact one).  NaN / inf where u is not finite."""
+    d = np.hypot(u[:, 0] - centres[:, 0], u[:, 1] - centres[:, 1])
+    return np.where(radii > 0, np.maximum(d - radii, 0.0), d)
 
 
 def points_report_stack(C: np.ndarray, x: np.ndarray, X: np.ndarray, world_frame=WorldFrame.RIGHT_HANDED):

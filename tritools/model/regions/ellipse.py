@@ -132,6 +132,29 @@ def _ellipse_closest_local(e0: float, e1: float, Y: np.ndarray) -> np.ndarray:
     return np.column_stack([x0, x1]) * sgn
 
 
+def _shape_fields(D: np.ndarray) -> tuple:
+    """The constructor's rule for the shape fields of stacked matrices D (M, 2, 2), symmetric to round-off:
+    (D symmetrised, semi-axes sqrt(eig D) descending, the matching axis directions (columns), D^-1 symmetrised,
+    the eigenvalues ascending); the caller checks positive definiteness and a finite inverse."""
+    D = 0.5 * D + 0.5 * np.swapaxes(D, 1, 2)        # (not 0.5 (D + D^T): that overflows for entries near 1e308)
+    with np.errstate(all="ignore"):
+        lam, Q = np.linalg.eigh(D)
+        axes = np.sqrt(lam[:, ::-1])
+        try:
+            Dinv = np.linalg.inv(D)
+        except np.linalg.LinAlgError:               # a singular matrix in the stack: one by one, NaN where singular
+            Dinv = np.array([_inv_or_nan(d) for d in D])
+    Dinv = 0.5 * (Dinv + np.swapaxes(Dinv, 1, 2))
+    return D, axes, Q[:, :, ::-1], Dinv, lam
+
+
+def _inv_or_nan(d: np.ndarray) -> np.ndarray:
+    try:
+        return np.linalg.inv(d)
+    except np.linalg.LinAlgError:
+        return np.full((2, 2), np.nan)
+
+
 @dataclass(frozen=True, eq=False)
 class EllipseBorder(Region):
     """Case IV: ``R = {y : (y - x^)' D^-1 (y - x^) = 1}``, ``D`` symmetric positive
@@ -156,20 +179,45 @@ class EllipseBorder(Region):
         scale = float(np.max(np.abs(D)))
         if np.max(np.abs(D - D.T)) > SYMMETRY_RTOL * max(scale, 1e-300):
             raise FieldError("D", f"must be symmetric, got {D.tolist()}")
-        D = 0.5 * D + 0.5 * D.T                  # (not 0.5 (D + D^T): that overflows for entries near 1e308)
-        lam, Q = np.linalg.eigh(D)
-        if not (lam[1] > 0 and lam[0] > PD_RTOL * lam[1]):
-            raise FieldError("D", f"must be positive definite, got eigenvalues {lam.tolist()}")
-        D.setflags(write=False)
-        object.__setattr__(self, "D", D)
-        object.__setattr__(self, "_axes", np.sqrt(lam[::-1]))
-        object.__setattr__(self, "_Q", Q[:, ::-1].copy())
-        Dinv = np.linalg.inv(D)
-        Dinv = 0.5 * (Dinv + Dinv.T)
+        D, axes, Q, Dinv, lam = _shape_fields(D[None])
+        if not (lam[0, 1] > 0 and lam[0, 0] > PD_RTOL * lam[0, 1]):
+            raise FieldError("D", f"must be positive definite, got eigenvalues {lam[0].tolist()}")
         if not np.all(np.isfinite(Dinv)):
             raise FieldError("D", f"is too close to singular for floating point (its inverse overflows), "
-                             f"got eigenvalues {lam.tolist()}")
-        object.__setattr__(self, "_Dinv", Dinv)
+                             f"got eigenvalues {lam[0].tolist()}")
+        self._set_fields(self.center_, D[0], axes[0].copy(), Q[0].copy(), Dinv[0])
+
+    def _set_fields(self, center, D, axes, Q, Dinv) -> None:
+        D.setflags(write=False)
+        for name, value in (("center_", center), ("D", D), ("_axes", axes), ("_Q", Q), ("_Dinv", Dinv)):
+            object.__setattr__(self, name, value)
+
+    @classmethod
+    def similarity_many(cls, regions, scale, shifts) -> list:
+        """``[r.similarity(scale, shifts[i]) for i, r in enumerate(regions)]`` for regions of this very class, with
+        the shape fields of all of them computed in one stacked call of the constructor's rule
+        (:func:`_shape_fields`: the same LAPACK routine per matrix, so the same numbers, tested equal); any region
+        the stacked rule does not accept (non-finite, not positive definite after scaling) is built one by one,
+        which raises the constructor's error.  The normalisation of N views' regions in a few numpy calls."""
+        s = positive_number(scale, "scale")
+        T = np.asarray(shifts, float).reshape(len(regions), 2)
+        if not np.all(np.isfinite(T)) or any(type(r) is not cls for r in regions):
+            return [r.similarity(s, T[i]) for i, r in enumerate(regions)]
+        centres = s * (np.array([r.center_ for r in regions]) - T)
+        D, axes, Q, Dinv, lam = _shape_fields(s * s * np.array([r.D for r in regions]))
+        good = np.isfinite(centres).all(axis=1) & np.isfinite(D).all(axis=(1, 2)) & (lam[:, 1] > 0) \
+            & (lam[:, 0] > PD_RTOL * lam[:, 1]) & np.isfinite(Dinv).all(axis=(1, 2))
+        out = []
+        for i, r in enumerate(regions):
+            if not good[i]:
+                out.append(r.similarity(s, T[i]))
+                continue
+            new = object.__new__(cls)
+            centre = centres[i].copy()
+            centre.setflags(write=False)
+            new._set_fields(centre, D[i].copy(), axes[i].copy(), Q[i].copy(), Dinv[i].copy())
+            out.append(new)
+        return out
 
     @classmethod
     def circle(cls, center, radius) -> EllipseBorder:

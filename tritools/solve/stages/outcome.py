@@ -18,7 +18,7 @@ import time
 import numpy as np
 
 from ...model.constraints import Method
-from ...model.geometry import image_points
+from ...model.geometry import project_point_views
 from ...result import Attempt, Status, TriangulationResult
 from ..decide import cheirality, decide_reported, gamma_lower
 from ..plan import Step
@@ -110,7 +110,7 @@ def trivial_certificate(ctx: PointContext, step: Step, X=None) -> TriangulationR
                                                              ctx.norm.resolution):
         return None
     with np.errstate(all="ignore"):
-        x = image_points(np.asarray(X, float), ctx.cams)
+        x = _projections(X, ctx.cams)
     res = report_point(ctx, step, Status.OPTIMAL, True, 0.0, X=X, X_raw=X, image_points=x, certified_by=TRIVIAL_BOUND)
     if not res.optimal:
         return None
@@ -118,6 +118,13 @@ def trivial_certificate(ctx: PointContext, step: Step, X=None) -> TriangulationR
                                 AttemptStep.TRIVIAL_BOUND, res.sparsity, (), time.perf_counter() - t))
     return replace(res, message=join("gamma_UB within the certificate tolerance of the trivial lower bound 0",
                                      res.message))
+
+
+def _projections(X, cams: np.ndarray) -> np.ndarray:
+    """The projections (N, 2) of the world point X by the validated cameras: those of
+    :func:`tritools.model.geometry.image_points` (the same numbers), without validating the cameras again and in
+    one stacked expression (a 400-view report past a time limit: ~1 ms, not ~30)."""
+    return project_point_views(np.append(np.asarray(X, float), 1.0)[None], cams)
 
 
 def better(a: TriangulationResult, b: TriangulationResult) -> bool:
@@ -183,7 +190,7 @@ def settle_stage(ctx: PointContext) -> None:
         return
     X = ctx.norm.world_point(est[1])
     with np.errstate(all="ignore"):
-        x = image_points(X, ctx.cams)
+        x = _projections(X, ctx.cams)
     rep = report_point(ctx, step, best.status, False, best.gamma_lb, X=X, X_raw=X, image_points=x, certified_by=None)
     note = "X and gamma_UB from the local L2 refinement of the DLT point"
     ctx.best = replace(rep, delta=best.delta, n_lmivar=best.n_lmivar, sparsity=best.sparsity,

@@ -289,3 +289,44 @@ def test_expired_cache_in_a_shared_batch_leaves_the_others_their_packing_bounds(
     assert packed and all(sb is live.bounds for sb in packed)
     assert all(late.bounds.bound(S) == 0.0 for S in big)
     assert all(live.bounds.known(S) for S in big)
+
+
+def test_banded_loops_stop_at_the_active_deadline():
+    """The banded Cholesky and solves read the active deadline in their column loops: past it they raise
+    TimeLimitReached (a 400-view band takes 0.1-0.3 s, past a short limit); without one, the same factor as LAPACK's."""
+    import scipy.linalg
+
+    from sospoly.analysis.banded import band_cholesky, band_from_dense, band_solve
+    from sospoly.budget import TimeLimitReached
+
+    rng = np.random.default_rng(0)
+    n, b = 200, 3
+    A = np.zeros((n, n))
+    for d in range(b + 1):
+        A += np.diag(rng.uniform(-0.2, 0.2, n - d), -d) + (np.diag(rng.uniform(-0.2, 0.2, n - d), d) if d else 0)
+    A = 0.5 * (A + A.T) + 4.0 * np.eye(n)
+    ab = band_from_dense(A[None], b)
+    R, ok = band_cholesky(ab)
+    assert ok[0]
+    np.testing.assert_allclose(R[0], scipy.linalg.cholesky_banded(ab[0], lower=True), rtol=1e-12, atol=1e-12)
+    rhs = rng.normal(size=(1, n))
+    np.testing.assert_allclose(A @ band_solve(R, rhs)[0], rhs[0], atol=1e-10)
+    with deadline_scope(Deadline(0.0)):
+        with pytest.raises(TimeLimitReached):
+            band_cholesky(ab)
+        with pytest.raises(TimeLimitReached):
+            band_solve(R, rhs)
+
+
+def test_band_bound_interrupted_by_the_deadline_leaves_no_bound(monkeypatch):
+    """A band bound whose column loops meet the active deadline gives no lower bound (NaN, valid) instead of
+    raising or running on: the 60-view track is then left to the caller's time limit."""
+    import tritools.solve.fastpath as fp
+
+    P, x, X, _ = robust_protocol_scene(60, 0, 1.0, np.random.default_rng(8))
+    free = fp.verify_points(P[None], x[None])
+    assert free.certified[0]
+    monkeypatch.setattr(fp, "_fits", lambda deadline, seconds: True)     # started however little time is left
+    with deadline_scope(Deadline(0.0)):
+        b = fp.verify_points(P[None], x[None], deadline=Deadline(None))
+    assert not b.certified[0] and np.isnan(b.gamma_lb[0])

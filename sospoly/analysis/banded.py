@@ -10,14 +10,22 @@ routines take one matrix per call).
 satisfies A + E = R^T R with |E| <= gamma_{b+2} |R^T| |R| (Higham, *Accuracy and Stability of Numerical
 Algorithms*, Thm 10.5, inner products of at most b + 1 terms), so ||E||_2 <= gamma_{b+2} ||R||_F^2 and
 lambda_min(A) >= -gamma_{b+2} ||R||_F^2 whenever the factorisation succeeds (every pivot positive).
+
+The column loops read the active deadline (:func:`sospoly.budget.check_deadline`) every :data:`DEADLINE_COLUMNS`
+columns and raise :class:`sospoly.budget.TimeLimitReached` once it has passed: a factorisation of a few thousand
+columns takes a sizeable share of a short time limit, and its caller treats the interrupted bound as not computed.
 """
 from __future__ import annotations
 
 import numpy as np
 
+from ..budget import check_deadline
+
 __all__ = ["band_from_dense", "band_cholesky", "band_solve", "band_matvec", "cholesky_backward_error"]
 
 _U = np.finfo(float).eps / 2        # unit round-off
+#: columns between two reads of the active deadline in the column loops (one clock read: ~0.1 us)
+DEADLINE_COLUMNS = 32
 
 
 def band_from_dense(A: np.ndarray, b: int) -> np.ndarray:
@@ -42,6 +50,8 @@ def band_cholesky(ab: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     rows = d1 - d2
     with np.errstate(all="ignore"):            # a failed problem's numbers may overflow: it is flagged, not used
         for j in range(n):
+            if j % DEADLINE_COLUMNS == 0:
+                check_deadline("factoring a banded matrix")
             ljj = np.sqrt(A[:, 0, j])              # NaN for a negative pivot, 0 for a zero one: flagged below
             A[:, 0, j] = ljj
             if b:
@@ -75,10 +85,14 @@ def band_solve(R: np.ndarray, rhs: np.ndarray) -> np.ndarray:
     diag = R[:, 0]
     y = np.zeros((M, n + b))                    # y[:, b + c] is y_c (zero padding in front)
     for j in range(n):                          # forward: L y = rhs
+        if j % DEADLINE_COLUMNS == 0:
+            check_deadline("solving a banded system")
         y[:, b + j] = (rhs[:, j] - np.einsum("mt,mt->m", Lrow[:, j], y[:, j:j + b])) / diag[:, j]
     x = np.zeros((M, n + b))                    # x[:, c] is x_c (zero padding at the end)
     below = R[:, 1:]
     for j in range(n - 1, -1, -1):              # backward: L^T x = y, L[j + d, j] = R[d, j]
+        if j % DEADLINE_COLUMNS == 0:
+            check_deadline("solving a banded system")
         x[:, j] = (y[:, b + j] - np.einsum("md,md->m", below[:, :, j], x[:, j + 1:j + 1 + b])) / diag[:, j]
     return x[:, :n]
 

@@ -94,7 +94,9 @@ def verify_quadratic_banded_batch(f0, f1, F2, g0, g1, G2: SparseQuadratics, poin
     Shapes as for :func:`~sospoly.analysis.verify.verify_quadratic_batch`: f0 (M,), f1 (M, n), F2 (M, n, n)
     (may be a broadcast view), g0 (M, K), g1 (M, K, n), G2 a :class:`~sospoly.analysis.verify.SparseQuadratics`,
     points (M, n); ``radius`` (scalar or (M,)) bounds the norm of a minimiser.  ``min_hessian_eigenvalue`` of the
-    result is the certified lower bound -eps of lambda_min(L2) (NaN where the factorisation failed).
+    result is the certified lower bound -eps of lambda_min(L2) (NaN where the factorisation failed).  Under an
+    active deadline (:func:`sospoly.budget.deadline_scope`) the banded column loops raise
+    :class:`sospoly.budget.TimeLimitReached` once it has passed (:mod:`sospoly.analysis.banded`).
     """
     f0, f1, g0, g1, v = (np.asarray(a, float) for a in (f0, f1, g0, g1, points))
     M, n = f1.shape

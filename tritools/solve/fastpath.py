@@ -37,7 +37,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from sospoly import DEFAULT_TOLERANCES, Tolerances
-from sospoly.budget import Deadline, cpu_share
+from sospoly.budget import Deadline, TimeLimitReached, cpu_share
 from sospoly.analysis import verify_quadratic_batch
 from sospoly.analysis import verify_quadratic_banded_batch
 from sospoly.solvers import with_single_threaded_blas
@@ -297,8 +297,11 @@ def lagrangian_bounds(C, Cn, v, ok, radius, resolution, tolerances, f0=None, wei
     for width in BAND_WIDTHS if N >= BAND_MIN_VIEWS else ():
         if width >= N - 1 or not band.size or not _fits(deadline, band_seconds(N, width, band.size)):
             break
-        lower_b, ok_b = _band_bounds(C[band], Cn[band], v[band], ok[band], radius[band], width, tolerances,
-                                     f0[band], F2(band), None)
+        try:
+            lower_b, ok_b = _band_bounds(C[band], Cn[band], v[band], ok[band], radius[band], width, tolerances,
+                                         f0[band], F2(band), None)
+        except TimeLimitReached:        # the active deadline passed inside the band's column loops: no bound
+            return lower, upper, ok
         good = ok_b & decide(lower_b, upper[band], tolerances, N, resolution[band])[1]
         lower[band[good]] = lower_b[good]
         band = band[~good]

@@ -330,3 +330,27 @@ def test_band_bound_interrupted_by_the_deadline_leaves_no_bound(monkeypatch):
     with deadline_scope(Deadline(0.0)):
         b = fp.verify_points(P[None], x[None], deadline=Deadline(None))
     assert not b.certified[0] and np.isnan(b.gamma_lb[0])
+
+
+def test_time_limit_counts_from_the_call_entry(monkeypatch):
+    """A call's time limit counts from its entry (the input checks are inside it): the point stages and the robust
+    search see a deadline at most time_limit after the call started, however long the checks before them took."""
+    import time
+
+    import tritools.solve.settings as settings
+    from sospoly.budget import Budget
+    from tritools import TriangulationOptions
+    from tritools.solve.stages.context import PointContext
+
+    P, x, X, _ = robust_protocol_scene(6, 0, 1.0, np.random.default_rng(2))
+    opts = TriangulationOptions(budget=Budget(time_limit=0.5))
+    t0 = time.perf_counter() - 0.3                       # the call started 0.3 s ago (slow input checks)
+    ctx = PointContext(P, [Point(p) for p in x], opts, t0)
+    assert ctx.settings.deadline.remaining() <= 0.2 + 1e-3
+    assert settings.call_deadline(opts, time.perf_counter() - 1.0).expired
+    assert settings.call_deadline(TriangulationOptions(budget=Budget(time_limit=None)), 0.0).end is None
+    seen = []
+    monkeypatch.setattr(tritools.solve.robust.TlsSearch, "set_deadline",
+                        lambda self, d: seen.append(d.remaining()) or setattr(self, "deadline", d))
+    tritools.triangulate(P, x, robust=2.0, time_limit=0.5)
+    assert seen and seen[0] <= 0.5

@@ -83,6 +83,7 @@ from .trivial import local_estimate
 from . import robust_bounds, robust_cells, robust_futile, robust_suspects
 from .robust_bounds import ROUND_DOWN, SubsetBounds
 from .robust_drive import drive
+from .settings import call_deadline
 from .robust_loo import leave_one_out
 from .robust_nodes import NodeBounds, lookahead_bound
 from .robust_rays import ray_candidates
@@ -584,4 +585,5 @@ def triangulate_robust(cams: np.ndarray, regions, c: np.ndarray, opts, t0: float
         return dataclasses.replace(res, inliers=None if res.residuals is None else np.ones(len(regions), bool))
     with np.errstate(all="ignore"):     # as in robust_batch.robust_many: finiteness is checked, warnings are noise
         search = TlsSearch(cams, regions, c, opts, t0)      # a few views: every inlier set enumerated (robust_enum_run)
+        search.set_deadline(call_deadline(opts, t0))        # the time limit counts from the call's entry
         return enumerate_tls(search) or drive([search])[0]

@@ -28,7 +28,7 @@ from ...result import Attempt, TriangulationResult
 from ..fastpath_cameras import framed_cameras
 from ..options import TriangulationOptions
 from ..plan import Step
-from ..settings import SolveSettings
+from ..settings import SolveSettings, call_deadline
 from ..trivial import local_estimate
 
 __all__ = ["AttemptStep", "ImplName", "Implementation", "PointContext", "StepState", "FAST_DEFAULT", "fast_names"]
@@ -117,7 +117,7 @@ class PointContext:
         self.cams_user = cams                               # the caller's: the final report is made on these
         self.regions, self.opts, self.t0 = regions, opts, t0
         self.N = self.cams.shape[0]
-        self.settings = SolveSettings.from_options(opts)
+        self.settings = SolveSettings.from_options(opts, call_deadline(opts, t0))   # the limit counts from t0
         self.stages, self.step_stages, self.fast = tuple(stages), tuple(step_stages), fast_names(fast)
         self.timings: dict = {}
         self.attempts: list[Attempt] = []

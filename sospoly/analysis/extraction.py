@@ -266,18 +266,33 @@ def kernel_family(G: np.ndarray, basis: np.ndarray, tol: Tolerances = DEFAULT_TO
     return CandidateFamily(W, deg1, a0, Z)
 
 
-def best_in_family(family: CandidateFamily, objective, max_evals: int = 400) -> tuple[np.ndarray, float]:
+_OBJECTIVE_ERRORS = (ValueError, FloatingPointError, np.linalg.LinAlgError)
+
+
+def best_in_family(family: CandidateFamily, objective, max_evals: int = 400,
+                   objective_many=None) -> tuple[np.ndarray, float]:
     """Minimise ``objective(v)`` over the family (Nelder-Mead from several starts), with at most about
     ``max_evals`` evaluations of ``objective`` in all (a third for the scan of a one-parameter family, the
-    rest shared by the starts)."""
+    rest shared by the starts).  ``objective_many``: the vectorised twin of ``objective`` (points (m, n) ->
+    values (m,), the same numbers), used for the scan; an evaluation that raises (ValueError,
+    FloatingPointError, LinAlgError) or is not finite counts as +inf either way."""
     from scipy.optimize import minimize as sp_min
 
     def obj_t(t):
         try:
             val = float(objective(family.point(t)))
-        except (ValueError, FloatingPointError, np.linalg.LinAlgError):
+        except _OBJECTIVE_ERRORS:
             return np.inf
         return val if np.isfinite(val) else np.inf
+
+    def scan(grid):
+        if objective_many is not None:
+            try:
+                vals = np.asarray(objective_many(np.array([family.point([t]) for t in grid])), float)
+                return np.where(np.isfinite(vals), vals, np.inf)
+            except _OBJECTIVE_ERRORS:
+                pass
+        return np.array([obj_t([t]) for t in grid])
 
     starts = [np.zeros(family.dim)]
     for k in range(family.W.shape[1]):
@@ -291,7 +306,7 @@ def best_in_family(family: CandidateFamily, objective, max_evals: int = 400) -> 
     if family.dim == 1:
         # a one-parameter family: scan it whole (t = tan(theta) reaches both ends) first
         grid = np.tan(np.linspace(-np.pi / 2, np.pi / 2, max(8, max_evals // 3) + 2)[1:-1])
-        vals = np.array([obj_t([t]) for t in grid])
+        vals = scan(grid)
         starts += [np.array([grid[k]]) for k in np.argsort(vals)[:3]]
         max_evals -= grid.size
     per_start = max(10, max_evals // len(starts))

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import tritools
-from sospoly.analysis.extraction import CandidateFamily, best_in_family
+from sospoly.analysis.extraction import CandidateFamily, best_in_family, lowered_exponents, monomial_jacobian
 from tritools.model.geometry import gamma_validated, point_from_image_points, points_from_validated, \
     point_from_validated, image_points
 from tritools.model.regions import Ellipse, Point
@@ -139,3 +139,16 @@ def test_triangulations_bit_identical_to_the_plain_evaluation(monkeypatch, k):
     assert (new.status, new.optimal, new.gamma_lb, new.gamma_ub) == (old.status, old.optimal, old.gamma_lb,
                                                                    old.gamma_ub)
     assert np.array_equal(new.X, old.X) and [a.gamma_lb for a in new.attempts] == [a.gamma_lb for a in old.attempts]
+
+
+def test_monomial_jacobian_equals_the_column_loop():
+    """The span search's Jacobian (one stacked expression) bit for bit as the column loop it replaced."""
+    rng = np.random.default_rng(7)
+    n = 6
+    E = np.array([e for d in range(4) for e in np.ndindex(*(4,) * n) if sum(e) == d], np.int64)
+    L = lowered_exponents(E)
+    for _ in range(300):
+        v = rng.standard_normal(n) * 10.0 ** rng.uniform(-4, 4)
+        v[rng.integers(n)] = 0.0 if rng.random() < 0.2 else v[0]
+        loop = np.stack([E[:, j] * np.prod(v[None, :] ** L[j], axis=1) for j in range(n)], axis=1)
+        assert np.array_equal(monomial_jacobian(v, E, L), loop)

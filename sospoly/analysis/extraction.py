@@ -28,7 +28,8 @@ from ..tolerances import DEFAULT_TOLERANCES, Tolerances
 
 __all__ = ["Candidate", "CandidateFamily", "kernel_family", "best_in_family", "kernel_basis", "range_basis",
            "candidates_from_span", "extract_from_gram",
-           "extract_from_moment", "henrion_lasserre", "has_constant_entry", "KERNEL_CONSTANT_RTOL"]
+           "extract_from_moment", "henrion_lasserre", "has_constant_entry", "KERNEL_CONSTANT_RTOL", "lowered_exponents",
+           "monomial_jacobian"]
 
 #: a kernel vector w gives the candidate w[degree-1 rows] / w[0] only when |w[0]| > KERNEL_CONSTANT_RTOL max |w|
 #: (else its constant entry is numerically zero and the quotient meaningless).
@@ -144,6 +145,19 @@ SPAN_SEARCH_STARTS = 8
 SPAN_SEARCH_EVALS = 60
 
 
+def lowered_exponents(E: np.ndarray) -> np.ndarray:
+    """L (n, s, n) with L[j] = E with column j lowered by one (0 stays 0): the exponents of d b / d v_j."""
+    n = E.shape[1]
+    return np.stack([np.where(np.arange(n)[None, :] == j, np.maximum(E - 1, 0), E) for j in range(n)])
+
+
+def monomial_jacobian(v: np.ndarray, E: np.ndarray, lowered: np.ndarray) -> np.ndarray:
+    """D (s, n), D_ij = d b_i / d v_j = E_ij v^(E_i - e_j) for the monomials b_i = v^(E_i) (``lowered`` from
+    :func:`lowered_exponents`): one stacked expression, equal bit for bit to the column loop
+    ``E[:, j] * prod(v ** lowered[j], axis=1)`` (the same products in the same order; tests/test_candidate_cost.py)."""
+    return (E.T * np.prod(v ** lowered, axis=2)).T
+
+
 def span_search(W: np.ndarray, basis: np.ndarray, starts, seed: int = 0) -> list[np.ndarray]:
     """Points v with b(v) in span(W), found by minimising the relative span residual
     ||(I - Q Q^T) b(v)|| / ||b(v)|| (Q an orthonormal basis of span W) from the given starts and a few
@@ -166,12 +180,12 @@ def span_search(W: np.ndarray, basis: np.ndarray, starts, seed: int = 0) -> list
         return np.where(np.isfinite(r), r, 1e6)
 
     # analytic Jacobian: d b_i / d v_j = E_ij v^(E_i - e_j); r = P b / |b| with P = I - Q Q^T
-    lowered = [np.where(np.arange(n)[None, :] == j, np.maximum(E - 1, 0), E) for j in range(n)]
+    lowered = lowered_exponents(E)
 
     def jac(v):
         with np.errstate(over="ignore", invalid="ignore"):
             bv = np.prod(v[None, :] ** E, axis=1)
-            D = np.stack([E[:, j] * np.prod(v[None, :] ** lowered[j], axis=1) for j in range(n)], axis=1)
+            D = monomial_jacobian(v, E, lowered)
             nb = max(np.linalg.norm(bv), 1e-300)
             J = D / nb - np.outer(bv, bv @ D) / nb ** 3
             J = J - Q @ (Q.T @ J)

@@ -98,3 +98,19 @@ def test_robust_calls_keep_their_decisions_and_valid_bounds(monkeypatch, N, n_ou
         assert not r.optimal or 2 * N * r.gamma_ub ** 2 <= ref * (1 + 1e-6)
     assert new.optimal == old.optimal and np.array_equal(new.inliers, old.inliers)
     assert new.gamma_ub == pytest.approx(old.gamma_ub, rel=1e-9)
+
+
+def test_a_callers_level_is_not_passed_to_the_sub_problems(monkeypatch):
+    """A caller's ``lower_bound_stop`` (a level of the whole problem) does not reach the sub-problems: a full-plan
+    sub-solve without a need of its own runs its whole plan (else it would stop after Corollary 1 delta 4 and be
+    taken as exhausted), and the robust call decides as without it."""
+    monkeypatch.setattr(rs, "THEOREM1_FIRST", False)
+    P, obs, X, _ = _scene(3, 1, 14)
+    opts = TriangulationOptions(lower_bound_stop=1.0)
+    out = rs.solve_subproblem(P, [Point(p) for p in obs], opts, light=False, from_delta=4, limit=np.inf,
+                              need=np.inf, points=True)
+    assert out.certified and out.lb > 42000.0 and not out.exhausted and not out.stopped
+    plain = tritools.triangulate(P, obs, robust=C)
+    low = tritools.triangulate(P, obs, robust=C, options=opts)
+    assert plain.optimal and low.optimal and np.array_equal(plain.inliers, low.inliers)
+    assert (low.gamma_lb, low.gamma_ub) == (plain.gamma_lb, plain.gamma_ub)

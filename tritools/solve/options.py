@@ -209,7 +209,8 @@ class TriangulationOptions:
         without a certificate -- like a MIP solver's best-bound stop: a caller that only needs
         ``gamma* >= level`` (the robust search's subset bounds) skips the steps that would tighten the bound
         further.  Such a result is never optimal: status ``not_certified``, its ``gamma_lb`` the rigorous bound
-        reached, and a message saying the plan stopped there (:data:`tritools.solve.stages.sdp.BOUND_STOP`)
+        reached, and a message saying the plan stopped there (:data:`tritools.solve.stages.sdp.BOUND_STOP`).
+        Robust calls do not pass it to their sub-problems (:mod:`tritools.solve.robust_subsolve` sets their own)
 
     Every invalid field raises :class:`OptionError` naming it.
     """

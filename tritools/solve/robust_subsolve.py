@@ -9,7 +9,8 @@ degree plan for three views.
 * ``need`` (pixels^2, finite): the search's node needs L2*(S) >= need; the plan stops once its rigorous bound
   reaches it (the options' ``lower_bound_stop`` at :func:`stop_level`, like a MIP solver's best-bound stop).  Such
   a result is not certified and the plan did not run out: the subset stays weak (a later, larger need solves it
-  again) and is never exhausted (:attr:`SubSolve.stopped`);
+  again) and is never exhausted (:attr:`SubSolve.stopped`).  A caller's own ``lower_bound_stop`` (a level of the
+  whole problem) is not passed on;
 * three views from ``from_delta``, point regions, ``method="auto"``: Theorem 1 at delta = 4 first
   (:data:`THEOREM1_FIRST`).  Three camera centres are always coplanar, so Corollary 1's epipolar constraints admit
   image points on the centres' plane lines and its delta = 4 bound often stops below L2* (the plan then ends with
@@ -21,6 +22,7 @@ degree plan for three views.
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -89,8 +91,8 @@ def solve_subproblem(cameras, regions, opts, *, light: bool, from_delta: int | N
         except ValueError:
             pass
     stop = None if light or not BOUND_STOP else stop_level(need, len(cameras))
-    if stop is not None:
-        opts = opts.replace(lower_bound_stop=stop)
+    if stop is not None or opts.lower_bound_stop is not None:      # the sub-problem's own level, or none
+        opts = dataclasses.replace(opts, lower_bound_stop=stop)
     first = None
     if THEOREM1_FIRST and not light and from_delta is not None and len(cameras) == 3 and points \
             and opts.method == MethodChoice.AUTO:

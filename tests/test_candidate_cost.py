@@ -152,3 +152,18 @@ def test_monomial_jacobian_equals_the_column_loop():
         v[rng.integers(n)] = 0.0 if rng.random() < 0.2 else v[0]
         loop = np.stack([E[:, j] * np.prod(v[None, :] ** L[j], axis=1) for j in range(n)], axis=1)
         assert np.array_equal(monomial_jacobian(v, E, L), loop)
+
+
+def test_refused_cameras_raise_as_the_per_candidate_check_did():
+    """Normalised cameras that fail the camera check (rank lost in extreme data): :meth:`one` raises its
+    ValueError as the per-candidate check did, the family search sees +inf, the stacked scan too."""
+    sc = random_scene(3, 1, noise_px=1.0, seed=2)
+    cams = sc.cameras.copy()
+    cams[0] = np.outer([1.0, 2.0, 3.0], [1.0, 0.0, 0.0, 1.0])             # rank 1
+    cost = CandidateCost(_problem(), cams, [Point(p) for p in sc.points2d[0]])
+    v = sc.points2d[0].ravel()
+    with pytest.raises(ValueError, match="rank"):
+        cost.one(v)
+    with pytest.raises(ValueError, match="rank"):
+        point_from_image_points(sc.points2d[0], cams)
+    assert np.all(np.isinf(cost.many(np.stack([v, v + 1.0]))))

@@ -38,7 +38,7 @@ from sospoly import SolveStatus
 from sospoly.analysis import best_in_family, kernel_family, rigorous_psatz_bound
 
 from ...model.geometry import (common_centre, gamma as gamma_of, gamma_validated, point_from_validated,
-                               points_from_validated, refine_l2)
+                               points_from_validated, refine_l2, validate_cameras)
 from ...model.refine import disc_shapes
 from ...result import Status, TriangulationResult
 from ..decide import decide, gamma_from_c
@@ -228,8 +228,9 @@ def _resolve_limit(ctx: PointContext, step: Step) -> float:
 
 class CandidateCost:
     """gamma of the scene point of a candidate v (image points ``problem.image_points(v)`` -> X^ by the SVD of
-    M0, :func:`tritools.model.geometry.point_from_validated`) for one problem's validated normalised cameras: the
-    common centre and the regions' disc shapes found once, the cameras not checked again.  :meth:`one` gives
+    M0, :func:`tritools.model.geometry.point_from_validated`) for one problem's normalised cameras: the common
+    centre, the regions' disc shapes and the cameras' check (:func:`validate_cameras`: a refusal raises its
+    ValueError from every :meth:`one`, as the per-candidate check did) done once.  :meth:`one` gives
     (gamma, X^, image points) or None (no finite point or gamma); :meth:`many` the gammas of many candidates (the
     same numbers: tests/test_candidate_cost.py; stacked for point and disc regions), +inf where :meth:`one` gives
     None."""
@@ -238,8 +239,15 @@ class CandidateCost:
         self.problem, self.cams, self.regs = problem, cams, regs
         self.centre = common_centre(cams)
         self.shapes = disc_shapes(regs)
+        try:            # once: normalised cameras can lose rank in extreme data (a point at 1e308 px)
+            validate_cameras(cams, min_views=1, require_distinct=False)
+            self.refused = None
+        except ValueError as exc:
+            self.refused = str(exc)
 
     def one(self, v):
+        if self.refused is not None:            # as the per-candidate check raised (best_in_family: +inf)
+            raise ValueError(self.refused)
         xn = self.problem.image_points(v)
         Xn = point_from_validated(xn, self.cams, centre=self.centre)
         if Xn is None:
@@ -257,7 +265,7 @@ class CandidateCost:
             return np.inf
 
     def many(self, V: np.ndarray) -> np.ndarray:
-        if self.shapes is None:               # other regions: gamma's loop over the views, point by point
+        if self.shapes is None or self.refused is not None:     # other regions: gamma's loop, point by point
             return np.array([self._value_or_inf(v) for v in V])
         xs = np.stack([self.problem.image_points(v) for v in V])
         Xs = points_from_validated(xs, self.cams, centre=self.centre)

@@ -28,7 +28,8 @@ from ..tolerances import DEFAULT_TOLERANCES, Tolerances
 
 __all__ = ["Candidate", "CandidateFamily", "kernel_family", "best_in_family", "kernel_basis", "range_basis",
            "candidates_from_span", "extract_from_gram",
-           "extract_from_moment", "henrion_lasserre", "has_constant_entry", "KERNEL_CONSTANT_RTOL"]
+           "extract_from_moment", "henrion_lasserre", "has_constant_entry", "KERNEL_CONSTANT_RTOL", "lowered_exponents",
+           "monomial_jacobian"]
 
 #: a kernel vector w gives the candidate w[degree-1 rows] / w[0] only when |w[0]| > KERNEL_CONSTANT_RTOL max |w|
 #: (else its constant entry is numerically zero and the quotient meaningless).
@@ -144,6 +145,19 @@ SPAN_SEARCH_STARTS = 8
 SPAN_SEARCH_EVALS = 60
 
 
+def lowered_exponents(E: np.ndarray) -> np.ndarray:
+    """L (n, s, n) with L[j] = E with column j lowered by one (0 stays 0): the exponents of d b / d v_j."""
+    n = E.shape[1]
+    return np.stack([np.where(np.arange(n)[None, :] == j, np.maximum(E - 1, 0), E) for j in range(n)])
+
+
+def monomial_jacobian(v: np.ndarray, E: np.ndarray, lowered: np.ndarray) -> np.ndarray:
+    """D (s, n), D_ij = d b_i / d v_j = E_ij v^(E_i - e_j) for the monomials b_i = v^(E_i) (``lowered`` from
+    :func:`lowered_exponents`): one stacked expression, equal bit for bit to the column loop
+    ``E[:, j] * prod(v ** lowered[j], axis=1)`` (the same products in the same order; tests/test_candidate_cost.py)."""
+    return (E.T * np.prod(v ** lowered, axis=2)).T
+
+
 def span_search(W: np.ndarray, basis: np.ndarray, starts, seed: int = 0) -> list[np.ndarray]:
     """Points v with b(v) in span(W), found by minimising the relative span residual
     ||(I - Q Q^T) b(v)|| / ||b(v)|| (Q an orthonormal basis of span W) from the given starts and a few
@@ -166,12 +180,12 @@ def span_search(W: np.ndarray, basis: np.ndarray, starts, seed: int = 0) -> list
         return np.where(np.isfinite(r), r, 1e6)
 
     # analytic Jacobian: d b_i / d v_j = E_ij v^(E_i - e_j); r = P b / |b| with P = I - Q Q^T
-    lowered = [np.where(np.arange(n)[None, :] == j, np.maximum(E - 1, 0), E) for j in range(n)]
+    lowered = lowered_exponents(E)
 
     def jac(v):
         with np.errstate(over="ignore", invalid="ignore"):
             bv = np.prod(v[None, :] ** E, axis=1)
-            D = np.stack([E[:, j] * np.prod(v[None, :] ** lowered[j], axis=1) for j in range(n)], axis=1)
+            D = monomial_jacobian(v, E, lowered)
             nb = max(np.linalg.norm(bv), 1e-300)
             J = D / nb - np.outer(bv, bv @ D) / nb ** 3
             J = J - Q @ (Q.T @ J)
@@ -266,18 +280,33 @@ def kernel_family(G: np.ndarray, basis: np.ndarray, tol: Tolerances = DEFAULT_TO
     return CandidateFamily(W, deg1, a0, Z)
 
 
-def best_in_family(family: CandidateFamily, objective, max_evals: int = 400) -> tuple[np.ndarray, float]:
+_OBJECTIVE_ERRORS = (ValueError, FloatingPointError, np.linalg.LinAlgError)
+
+
+def best_in_family(family: CandidateFamily, objective, max_evals: int = 400,
+                   objective_many=None) -> tuple[np.ndarray, float]:
     """Minimise ``objective(v)`` over the family (Nelder-Mead from several starts), with at most about
     ``max_evals`` evaluations of ``objective`` in all (a third for the scan of a one-parameter family, the
-    rest shared by the starts)."""
+    rest shared by the starts).  ``objective_many``: the vectorised twin of ``objective`` (points (m, n) ->
+    values (m,), the same numbers), used for the scan; an evaluation that raises (ValueError,
+    FloatingPointError, LinAlgError) or is not finite counts as +inf either way."""
     from scipy.optimize import minimize as sp_min
 
     def obj_t(t):
         try:
             val = float(objective(family.point(t)))
-        except (ValueError, FloatingPointError, np.linalg.LinAlgError):
+        except _OBJECTIVE_ERRORS:
             return np.inf
         return val if np.isfinite(val) else np.inf
+
+    def scan(grid):
+        if objective_many is not None:
+            try:
+                vals = np.asarray(objective_many(np.array([family.point([t]) for t in grid])), float)
+                return np.where(np.isfinite(vals), vals, np.inf)
+            except _OBJECTIVE_ERRORS:
+                pass
+        return np.array([obj_t([t]) for t in grid])
 
     starts = [np.zeros(family.dim)]
     for k in range(family.W.shape[1]):
@@ -291,7 +320,7 @@ def best_in_family(family: CandidateFamily, objective, max_evals: int = 400) -> 
     if family.dim == 1:
         # a one-parameter family: scan it whole (t = tan(theta) reaches both ends) first
         grid = np.tan(np.linspace(-np.pi / 2, np.pi / 2, max(8, max_evals // 3) + 2)[1:-1])
-        vals = np.array([obj_t([t]) for t in grid])
+        vals = scan(grid)
         starts += [np.array([grid[k]]) for k in np.argsort(vals)[:3]]
         max_evals -= grid.size
     per_start = max(10, max_evals // len(starts))

@@ -34,7 +34,7 @@ from .regions.base import real_array
 __all__ = [
     "PointAtInfinityError", "validate_cameras", "validate_points2d", "project", "image_points",
     "camera_center", "depths", "gamma", "dlt", "fundamental_matrix", "fundamental_matrices",
-    "M0", "point_from_image_points",
+    "M0", "m0_validated", "m0_stack", "point_from_image_points", "point_from_validated", "points_from_validated",
     "CAMERA_RANK_RTOL", "SAME_CAMERA_RTOL", "PROJECTION_DENOM_RTOL", "POINT_AT_INFINITY_RTOL", "COMMON_CENTRE_RTOL",
     "SAME_CENTER_RTOL",
     "camera_problems", "CameraProblems", "CameraIssue", "camera_rank_ratio", "cameras_all_equal", "depths_stack",
@@ -168,10 +168,12 @@ def image_points(X, cameras) -> np.ndarray:
 
 
 # ----------------------------------------------------------------------------- cost
-def gamma_validated(Xs: np.ndarray, cameras: np.ndarray, regions: Sequence) -> np.ndarray:
+def gamma_validated(Xs: np.ndarray, cameras: np.ndarray, regions: Sequence, *, shapes=...) -> np.ndarray:
     """gamma for validated inputs; Xs (m, 3) -> (m,). inf where a projection is at infinity.  Point and disc
-    regions: one stacked expression (:func:`tritools.model.refine.gamma_discs`), else a loop over the views."""
-    shapes = disc_shapes(regions)
+    regions: one stacked expression (:func:`tritools.model.refine.gamma_discs`), else a loop over the views.
+    ``shapes``: :func:`tritools.model.refine.disc_shapes` of ``regions`` when the caller has it (a loop over many
+    points of one problem); found here by default."""
+    shapes = disc_shapes(regions) if shapes is ... else shapes
     if shapes is not None and len(Xs):
         return gamma_discs(Xs, np.asarray(cameras, float), *shapes)
     m = len(Xs)
@@ -228,9 +230,22 @@ def M0(points2d, cameras) -> np.ndarray:
         ``M0 X~ = 0`` iff the ``x_i`` are exact projections of ``X`` (for finite ``X``).
     """
     C = validate_cameras(cameras, min_views=1, require_distinct=False)
-    x = validate_points2d(points2d, len(C))
-    rows = C[:, :2, :] - x[:, :, None] * C[:, 2:3, :]
-    return rows.reshape(2 * len(C), 4)
+    return m0_validated(points2d, C)
+
+
+def m0_validated(points2d, cameras: np.ndarray) -> np.ndarray:
+    """:func:`M0` for validated cameras (N, 3, 4) (the image points are still checked: shape, finite)."""
+    x = validate_points2d(points2d, len(cameras))
+    rows = cameras[:, :2, :] - x[:, :, None] * cameras[:, 2:3, :]
+    return rows.reshape(2 * len(cameras), 4)
+
+
+def m0_stack(points2d: np.ndarray, cameras: np.ndarray) -> np.ndarray:
+    """The vectorised twin of :func:`m0_validated`: M0 of many image-point sets (m, N, 2) of one camera set,
+    (m, 2N, 4) (the same operations per set, so the same numbers; finite points expected)."""
+    x = np.asarray(points2d, float)
+    rows = cameras[None, :, :2, :] - x[..., None] * cameras[None, :, 2:3, :]
+    return rows.reshape(len(x), 2 * len(cameras), 4)
 
 
 def _null_vector(A: np.ndarray) -> np.ndarray:
@@ -253,8 +268,40 @@ def point_from_image_points(points2d, cameras, *, centre=...) -> np.ndarray | No
     ``centre``: :func:`common_centre` of ``cameras`` when the caller already has it (None: there is none),
     for loops over many image points of one problem; found here by default.
     """
-    cameras = np.asarray(cameras, float)
-    w = _null_vector(M0(points2d, cameras))
+    cameras = validate_cameras(cameras, min_views=1, require_distinct=False)
+    return point_from_validated(points2d, cameras, centre=centre)
+
+
+def point_from_validated(points2d, cameras: np.ndarray, *, centre=...) -> np.ndarray | None:
+    """:func:`point_from_image_points` for validated cameras (N, 3, 4) (a loop over many image points of one
+    problem: the cameras are not checked again)."""
+    w = _null_vector(m0_validated(points2d, cameras))
+    return _point_from_null(w, points2d, cameras, centre)
+
+
+def points_from_validated(points2d: np.ndarray, cameras: np.ndarray, *, centre=...) -> np.ndarray:
+    """The vectorised twin of :func:`point_from_validated`: points (m, 3) of image-point sets (m, N, 2), a row of
+    NaN where it gives None or the set is not finite (one stacked SVD; the rows are the scalar path's numbers)."""
+    x = np.asarray(points2d, float)
+    out = np.full((len(x), 3), np.nan)
+    fin = np.nonzero(np.isfinite(x).all(axis=(1, 2)))[0]
+    with np.errstate(over="ignore", invalid="ignore"):
+        M = m0_stack(x[fin], cameras)
+    keep = np.isfinite(M).all(axis=(1, 2))           # (an overflowing M0: the scalar SVD raises, no point)
+    fin, M = fin[keep], M[keep]
+    if not fin.size:
+        return out
+    W = np.linalg.svd(M)[2][:, -1]
+    C = common_centre(cameras) if centre is ... else centre
+    for k, w in zip(fin, W):
+        X = _point_from_null(w, x[k], cameras, C)
+        if X is not None:
+            out[k] = X
+    return out
+
+
+def _point_from_null(w: np.ndarray, points2d, cameras: np.ndarray, centre) -> np.ndarray | None:
+    """The point of :func:`point_from_image_points` from the null vector ``w`` of M0 (its docstring)."""
     if abs(w[3]) <= POINT_AT_INFINITY_RTOL * np.linalg.norm(w):
         return None
     C = common_centre(cameras) if centre is ... else centre

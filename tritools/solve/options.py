@@ -134,6 +134,15 @@ def _seconds(value, name: str):
     return float(value)
 
 
+def _level(value, name: str):
+    """None, or a finite non-negative number."""
+    if value is None:
+        return None
+    if isinstance(value, bool) or not isinstance(value, numbers.Real) or not math.isfinite(value) or value < 0:
+        raise OptionError(name, f"must be a finite non-negative number or None, got {value!r}")
+    return float(value)
+
+
 def _multiplier(m):
     if isinstance(m, str) and not isinstance(m, Multiplier):
         return _enum(Multiplier, m, "multiplier")
@@ -195,6 +204,13 @@ class TriangulationOptions:
     world_frame : handedness of the cameras' world frame, the sign rule of the depths that judge
         ``in_front`` (:class:`tritools.model.cameras.WorldFrame`: ``"right_handed"``, the default, or
         ``"reflected"`` for a mirrored reconstruction such as the Oxford corridor and house sequences)
+    lower_bound_stop : a level of gamma (pixels, the caller's units; None, the default: no stop).  The degree
+        plan (and the exact-variety step) stops as soon as the best rigorous ``gamma_lb`` so far reaches it
+        without a certificate -- like a MIP solver's best-bound stop: a caller that only needs
+        ``gamma* >= level`` (the robust search's subset bounds) skips the steps that would tighten the bound
+        further.  Such a result is never optimal: status ``not_certified``, its ``gamma_lb`` the rigorous bound
+        reached, and a message saying the plan stopped there (:data:`tritools.solve.stages.sdp.BOUND_STOP`).
+        Robust calls do not pass it to their sub-problems (:mod:`tritools.solve.robust_subsolve` sets their own)
 
     Every invalid field raises :class:`OptionError` naming it.
     """
@@ -214,6 +230,7 @@ class TriangulationOptions:
     require_in_front: bool = False
     world_frame: WorldFrame | str = WorldFrame.RIGHT_HANDED
     total_time_limit: float | None = None
+    lower_bound_stop: float | None = None
 
     def __post_init__(self) -> None:
         set_ = object.__setattr__
@@ -236,6 +253,7 @@ class TriangulationOptions:
         set_(self, "budget", TRIANGULATION_BUDGET if self.budget is None else _checked("budget", as_budget,
                                                                                         self.budget))
         set_(self, "total_time_limit", _seconds(self.total_time_limit, "total_time_limit"))
+        set_(self, "lower_bound_stop", _level(self.lower_bound_stop, "lower_bound_stop"))
         _backend(self.backend)
 
     def replace(self, **changes) -> TriangulationOptions:

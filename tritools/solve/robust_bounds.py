@@ -38,17 +38,12 @@ from ..result import Status
 from .coplanar import (CEILING_MIN_VIEWS, COPLANAR_BUDGET_NAME, COPLANAR_MAX_CEILING, hopeless_subset,
                        plane_distances2, sits_on_ceiling, subset_futile)
 from .fastpath import verify_points
+from .robust_subsolve import EXHAUSTED, ROUND_DOWN, TRUSTED_LOWER_BOUND, solve_subproblem
 from .robust_verify import parent_frames, verify_in_parent
 from .sdp_batch import solve_corollary1_points
 
-__all__ = ["SubsetBounds", "compute_many", "ROUND_DOWN", "TRUSTED_LOWER_BOUND", "PACKING"]
+__all__ = ["SubsetBounds", "compute_many", "ROUND_DOWN", "TRUSTED_LOWER_BOUND", "EXHAUSTED", "PACKING"]
 
-#: f = 2 |S| gamma^2 is computed with a few roundings (and gamma came through a square root): multiplying by
-#: this factor keeps the product a lower bound by a wide margin (relative error ~1e-15 at most).
-ROUND_DOWN = 1.0 - 1e-12
-#: statuses whose gamma_lb is a valid lower bound (a numerical failure's is not trusted; failures have none)
-TRUSTED_LOWER_BOUND = frozenset({Status.OPTIMAL, Status.BEHIND_CAMERA, Status.NOT_CERTIFIED, Status.TIME_LIMIT,
-                                 Status.BUDGET_EXCEEDED})
 #: the cheap paths (pair packing bounds instead of SDPs, verification-only requests, and the search's
 #: leave-one-out root bound, :meth:`tritools.solve.robust.TlsSearch.leave_one_out_bound`); False gives the plain
 #: path (every subset the verification does not certify goes to the batched SDP), which the tests compare against.
@@ -62,9 +57,6 @@ SPLIT_TRIES = 6
 #: :meth:`SubsetBounds.strengthen` solves a weak subset (its delta = 2 bound known) with the degree plan from this
 #: degree on: the verification and delta = 2 steps again cost 2-8x the delta = 4 step and decide nothing new.
 FULL_FROM_DELTA = 4
-#: statuses of a full-plan sub-problem whose bound no later solve raises (``SubsetBounds.exhausted``): the plan ran
-#: out of degrees or its solver failed at the top one, not a time or memory limit
-EXHAUSTED = frozenset({Status.NOT_CERTIFIED, Status.SOLVER_FAILED, Status.NUMERICAL_FAILURE})
 #: time limit (seconds) of one sub-problem solved by :func:`tritools.triangulate` (capped by the caller's deadline)
 SUB_TIME_LIMIT = 10.0
 
@@ -215,7 +207,8 @@ class SubsetBounds:
     def strengthen(self, S: frozenset, need: float = math.inf, limit: float = SUB_TIME_LIMIT) -> bool:
         """A better bound of S when its bound came from a light (delta = 2) solve that did not certify; True when
         the bound may have changed.  First by superadditivity over a split (:meth:`split_bound`), which stops once
-        it reaches ``need`` (the level the caller's node must reach); else by solving S with the full degree plan."""
+        it reaches ``need`` (the level the caller's node must reach); else by solving S with the full degree plan,
+        which stops once its rigorous bound reaches ``need`` (:mod:`~tritools.solve.robust_subsolve`; S stays weak)."""
         if S not in self.weak or self.deadline.expired:
             return False
         self.weak.discard(S)
@@ -233,7 +226,7 @@ class SubsetBounds:
         # a batched SDP that handed S back left no delta = 2 bound: with coplanar centres the plan from delta = 2,
         # whose ceiling rule (solve.coplanar.futile_after) stops it there, instead of the delta = 4 step
         fresh = old <= 0.0 and self._coplanar()
-        self._solve_one(S, light=False, from_delta=None if fresh else FULL_FROM_DELTA, limit=limit)
+        self._solve_one(S, light=False, from_delta=None if fresh else FULL_FROM_DELTA, limit=limit, need=need)
         self._lb[S] = max(self._lb[S], old, split)
         self._count_ceiling(S)
         return True
@@ -289,43 +282,27 @@ class SubsetBounds:
         return True
 
     def _solve_one(self, S: frozenset, light: bool = True, from_delta: int | None = None,
-                   limit: float = SUB_TIME_LIMIT) -> None:
-        """One sub-problem through :func:`tritools.triangulate`: with ``light`` only its degree-2 steps (a sub-problem
-        with outliers needs a large bound, not a tight one; :meth:`strengthen` runs the full plan where the
-        search needs it).  ``from_delta``: the plan starts at that degree (its verification and delta = 2 steps
-        skipped: a weak subset's delta = 2 bound is known already); the default plan where the options refuse it.
-        ``limit``: seconds (capped by the deadline; :data:`SUB_TIME_LIMIT` by default, inf: the deadline alone)."""
-        from .triangulate import triangulate
-
+                   limit: float = SUB_TIME_LIMIT, need: float = math.inf) -> None:
+        """One sub-problem through :func:`tritools.solve.robust_subsolve.solve_subproblem`: with ``light`` only its
+        degree-2 steps (:meth:`strengthen` runs the full plan where the search needs it), ``from_delta`` the plan's
+        first degree, ``need`` the level the caller's node needs (the full plan stops there: S stays weak, never
+        exhausted).  ``limit``: seconds (capped by the deadline; :data:`SUB_TIME_LIMIT` by default, inf: the
+        deadline alone)."""
         views = sorted(S)
         remaining = self.deadline.remaining()
         limit = limit if remaining is None else min(limit, remaining)      # inf, no deadline: the options' budget
-        opts = self.opts.replace(time_limit=max(1e-3, limit)) if math.isfinite(limit) else self.opts
-        if light:
-            try:
-                opts = opts.replace(max_delta=2)
-            except ValueError:
-                light = False
-        elif from_delta is not None:
-            try:
-                opts = opts.replace(delta=max(from_delta, opts.delta or 0))     # never below the caller's
-            except ValueError:
-                pass
-        try:
-            res = triangulate(self.C[views], [self.regions[i] for i in views], options=opts)
-        except (ValueError, TypeError, ArithmeticError, np.linalg.LinAlgError):
+        out = solve_subproblem(self.C[views], [self.regions[i] for i in views], self.opts, light=light,
+                               from_delta=from_delta, limit=limit, need=need, points=self.points)
+        if out is None:
             self._store(S, 0.0, None)           # e.g. coincident or duplicated cameras: 0 is a valid bound
             return
         self.n_solved += 1
-        self.budget_exceeded |= res.status == Status.BUDGET_EXCEEDED
-        lb = 0.0
-        if res.status in TRUSTED_LOWER_BOUND and res.gamma_lb is not None and math.isfinite(res.gamma_lb):
-            lb = 2 * len(views) * max(res.gamma_lb, 0.0) ** 2 * ROUND_DOWN
-        if light and not res.status.certified:
+        self.budget_exceeded |= out.budget_exceeded
+        if (light or out.stopped) and not out.certified:
             self.weak.add(S)
-        if not light and res.status in EXHAUSTED:    # the plan ran out, not at a time or memory limit
+        if out.exhausted:                       # the plan ran out, not at a time or memory limit nor at ``need``
             self.exhausted.add(S)
-        self._store(S, lb, res.X)
+        self._store(S, out.lb, out.X)
 
     def _store(self, S: frozenset, lb: float, X) -> None:
         self._lb[S] = max(lb, 0.0, self._floor.pop(S, 0.0))

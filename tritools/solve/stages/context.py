@@ -135,6 +135,14 @@ class PointContext:
         return self.settings.tolerances
 
     @property
+    def bound_reached(self) -> bool:
+        """Whether the best result so far is uncertified with a rigorous gamma_lb at the options'
+        ``lower_bound_stop`` (no more steps then: :mod:`tritools.solve.stages.sdp`)."""
+        stop, best = self.opts.lower_bound_stop, self.best
+        return stop is not None and best is not None and not best.status.certified and \
+            best.gamma_lb is not None and best.gamma_lb >= stop
+
+    @property
     def expired(self) -> bool:
         return self.settings.deadline.expired
 

@@ -37,7 +37,9 @@ import sospoly
 from sospoly import SolveStatus
 from sospoly.analysis import best_in_family, kernel_family, rigorous_psatz_bound
 
-from ...model.geometry import common_centre, gamma as gamma_of, gamma_validated, point_from_image_points, refine_l2
+from ...model.geometry import (common_centre, gamma as gamma_of, gamma_validated, point_from_validated,
+                               points_from_validated, refine_l2, validate_cameras)
+from ...model.refine import disc_shapes
 from ...result import Status, TriangulationResult
 from ..decide import decide, gamma_from_c
 from ..plan import Step
@@ -224,28 +226,69 @@ def _resolve_limit(ctx: PointContext, step: Step) -> float:
     return INACCURATE_RESOLVE_CONTAINED_SECONDS if contained else INACCURATE_RESOLVE_MAX_SECONDS
 
 
-def _best_candidate(ctx: PointContext, problem, psatz, sol):
-    """Best (gamma_n, X_n, image points_n) over the extracted candidates (module docstring)."""
-    centre = common_centre(ctx.cams_n)                 # once for every candidate below
+class CandidateCost:
+    """gamma of the scene point of a candidate v (image points ``problem.image_points(v)`` -> X^ by the SVD of
+    M0, :func:`tritools.model.geometry.point_from_validated`) for one problem's normalised cameras: the common
+    centre, the regions' disc shapes and the cameras' check (:func:`validate_cameras`: a refusal raises its
+    ValueError from every :meth:`one`, as the per-candidate check did) done once.  :meth:`one` gives
+    (gamma, X^, image points) or None (no finite point or gamma); :meth:`many` the gammas of many candidates (the
+    same numbers: tests/test_candidate_cost.py; stacked for point and disc regions), +inf where :meth:`one` gives
+    None."""
 
-    def evaluate(v):
-        xn = problem.image_points(v)
-        Xn = point_from_image_points(xn, ctx.cams_n, centre=centre)
+    def __init__(self, problem, cams: np.ndarray, regs):
+        self.problem, self.cams, self.regs = problem, cams, regs
+        self.centre = common_centre(cams)
+        self.shapes = disc_shapes(regs)
+        try:            # once: normalised cameras can lose rank in extreme data (a point at 1e308 px)
+            validate_cameras(cams, min_views=1, require_distinct=False)
+            self.refused = None
+        except ValueError as exc:
+            self.refused = str(exc)
+
+    def one(self, v):
+        if self.refused is not None:            # as the per-candidate check raised (best_in_family: +inf)
+            raise ValueError(self.refused)
+        xn = self.problem.image_points(v)
+        Xn = point_from_validated(xn, self.cams, centre=self.centre)
         if Xn is None:
             return None
-        g = gamma_validated(np.asarray(Xn, float)[None], ctx.cams_n, ctx.regs_n)[0]
+        g = gamma_validated(np.asarray(Xn, float)[None], self.cams, self.regs, shapes=self.shapes)[0]
         return (float(g), np.asarray(Xn, float), xn) if np.isfinite(g) else None
 
+    def value(self, v) -> float:
+        return (self.one(v) or (np.inf,))[0]
+
+    def _value_or_inf(self, v) -> float:
+        try:
+            return self.value(v)
+        except (ValueError, FloatingPointError, np.linalg.LinAlgError):     # (best_in_family's rule)
+            return np.inf
+
+    def many(self, V: np.ndarray) -> np.ndarray:
+        if self.shapes is None or self.refused is not None:     # other regions: gamma's loop, point by point
+            return np.array([self._value_or_inf(v) for v in V])
+        xs = np.stack([self.problem.image_points(v) for v in V])
+        Xs = points_from_validated(xs, self.cams, centre=self.centre)
+        ok = np.isfinite(Xs).all(axis=1)
+        g = np.full(len(V), np.inf)
+        if ok.any():
+            g[ok] = gamma_validated(Xs[ok], self.cams, self.regs, shapes=self.shapes)
+        return np.where(np.isfinite(g), g, np.inf)
+
+
+def _best_candidate(ctx: PointContext, problem, psatz, sol):
+    """Best (gamma_n, X_n, image points_n) over the extracted candidates (module docstring)."""
+    cost = CandidateCost(problem, ctx.cams_n, ctx.regs_n)
     tol = ctx.tolerances
     points = [c.point for c in sospoly.candidates_of(psatz, sol, tol) if c.point.shape == (len(problem.gens),)]
     if len(psatz.u.block_names()) == 1 and "u" in sol.grams:
         fam = kernel_family(sol.grams["u"], psatz.u.gram.b, tol)
         if fam is not None and 0 < fam.dim <= MAX_FAMILY_DIM:
-            v, _ = best_in_family(fam, lambda v: (evaluate(v) or (np.inf,))[0], max_evals=FAMILY_SEARCH_EVALS)
+            v, _ = best_in_family(fam, cost.value, max_evals=FAMILY_SEARCH_EVALS, objective_many=cost.many)
             points.append(v)
     best = None
     for v in points:
-        e = evaluate(v)
+        e = cost.one(v)
         if e is not None and (best is None or e[0] < best[0]):
             best = e
     return best

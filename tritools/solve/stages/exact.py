@@ -9,9 +9,9 @@ any plan step (:func:`tritools.solve.stages.sdp.run_step`: the same rigorous low
 rule), and keeps its result where it is better (:func:`~tritools.solve.stages.outcome.better`).
 
 It runs only when the plan ended NOT_CERTIFIED (not after a certificate, an ill-posed problem, a skipped step or
-a contradiction) and time remains; running out of time gives TIME_LIMIT (``settle``), a program beyond the budget
-BUDGET_EXCEEDED, and a step that does not certify leaves NOT_CERTIFIED with the larger of the two lower bounds.
-The attempt is recorded like any other (``method="theorem1"``, ``delta=4``).
+a contradiction), below the options' ``lower_bound_stop``, and time remains; running out of time gives TIME_LIMIT
+(``settle``), a program beyond the budget BUDGET_EXCEEDED, and a step that does not certify leaves NOT_CERTIFIED
+with the larger of the two lower bounds.  The attempt is recorded like any other (``method="theorem1"``, ``delta=4``).
 
 Beyond the dense step's reach, a point whose Corollary 1 plan stopped at the ceiling of coplanar centres
 (:func:`tritools.solve.coplanar.futile_after`: its bound equals the cost of the centres' plane component) gets
@@ -34,7 +34,7 @@ def exact_variety_stage(ctx: PointContext) -> None:
     """The exact-variety step on a point the plan left NOT_CERTIFIED (module docstring)."""
     best = ctx.best
     if ctx.finished or ctx.expired or ctx.skipped is not None or best is None \
-            or best.status != Status.NOT_CERTIFIED:
+            or best.status != Status.NOT_CERTIFIED or ctx.bound_reached:
         return
     n_vars = 2 * ctx.N + sum(r.n_aux for r in ctx.regions)
     step = exact_variety_step(ctx.opts, ctx.N, n_vars, ctx.steps)

@@ -3,8 +3,9 @@
 ``steps`` walks the plan (:func:`tritools.solve.plan.degree_plan`) under the point's deadline: each step
 runs the step stages (:data:`tritools.solve.stages.STEP_STAGES`: sdp -> estimate -> rigor -> decide ->
 resolve); a step whose lower bound contradicts its upper bound (NUMERICAL_FAILURE) is re-solved once with
-100x tighter solver tolerances (``tight``); the walk stops at a certificate, an ill-posed problem, or a
-step beyond the budget (every later step is larger).
+100x tighter solver tolerances (``tight``); the walk stops at a certificate, an ill-posed problem, a
+step beyond the budget (every later step is larger), or -- with the options' ``lower_bound_stop`` -- once the
+best uncertified rigorous gamma_lb reaches that level (:data:`BOUND_STOP`; the exact-variety step is skipped too).
 
 ``sdp`` builds the step's program -- (f, g, h) in the step's formulation (:mod:`tritools.model.problem`)
 and the certificate's shape: dense, or view cliques beside the dense degree-2 block -- compiled once per
@@ -38,10 +39,14 @@ from ..structures import STRUCTURE_CACHE, structure_key
 from .context import AttemptStep, ImplName, Implementation, PointContext, StepState
 from .outcome import better, failed, join, replace, report_point
 
-__all__ = ["steps_stage", "run_step", "sdp_stage", "solve_psatz", "SDP_FAST_NAME", "SDP_IMPLEMENTATIONS"]
+__all__ = ["BOUND_STOP", "steps_stage", "run_step", "sdp_stage", "solve_psatz", "SDP_FAST_NAME", "SDP_IMPLEMENTATIONS"]
 
 #: the name of the batched delta = 2 SDP in ``fast`` (:class:`~tritools.solve.stages.context.PointContext`).
 SDP_FAST_NAME = ImplName.SDP_POINTS
+
+
+#: the message of a point whose plan stopped at the options' ``lower_bound_stop`` (``PointContext.bound_reached``)
+BOUND_STOP = "stopped: gamma_lb reached lower_bound_stop (not certified)"
 
 
 def steps_stage(ctx: PointContext) -> None:
@@ -57,6 +62,9 @@ def steps_stage(ctx: PointContext) -> None:
             ctx.skipped = res
         if res.status.certified or res.status in (Status.ILL_POSED, Status.BUDGET_EXCEEDED):
             break                   # certified, hopeless, or every later (larger) step exceeds the budget too
+        if ctx.bound_reached:       # the caller's level: no later step (nor the exact-variety step)
+            ctx.best = replace(ctx.best, message=join(ctx.best.message, BOUND_STOP))
+            break
         why = futile_after(ctx.cams, ctx.regions, ctx.steps, res)      # coplanar centres: Corollary 1's ceiling
         if why is not None and step is not ctx.steps[-1]:
             ctx.best = replace(ctx.best, message=join(ctx.best.message, why))

@@ -532,16 +532,27 @@ class TlsSearch(NodeBounds):
 
     def result(self, lb: float, stopped, timings, note: str = "") -> TriangulationResult:
         """The result at the search's lower bound ``lb`` (pixels^2): the decision by the one rule on this search's
-        scale, the reported numbers and their checks (:func:`tritools.solve.robust_report.tls_reported`), the
+        scale, the reported numbers and their checks (:func:`tritools.solve.robust_report.tls_reported`; a stack of
+        point searches: :func:`~tritools.solve.robust_report.tls_reported_stack`, then :meth:`finish`), the
         message (``note`` appended: the path that decided)."""
-        ub = self.best_f
-        X = self.frame.user_point(self.best_X) if self.frame.moved else self.best_X
+        X = self.user_estimate()
         rep = self.report(X)
-        certified = self.tol.certified_one(lb, ub, self.scale)     # lb is valid also when the search stopped
         told = tls_reported(self.C_user, self.x if self.points else np.array([r.center for r in self.regions]),
-                            None if self.points else rep.residuals, X, self.c, lb, self.tol, certified,
-                            None if self.cells_decided else ub,
+                            None if self.points else rep.residuals, X, self.c, lb, self.tol,
+                            self.tol.certified_one(lb, self.best_f, self.scale),    # lb valid also when stopped
+                            None if self.cells_decided else self.best_f,
                             None if self.points else self.regions)
+        return self.finish(X, rep, told, lb, stopped, timings, note)
+
+    def user_estimate(self):
+        """The best estimate in the caller's frame (None: no candidate)."""
+        return self.frame.user_point(self.best_X) if self.frame.moved else self.best_X
+
+    def finish(self, X, rep: PointReport, told, lb: float, stopped, timings, note: str = "") -> TriangulationResult:
+        """:meth:`result` from the reported numbers ``told`` of X (:mod:`tritools.solve.robust_report`) and its
+        :meth:`report` ``rep``: status, certificate, message."""
+        ub = self.best_f
+        certified = self.tol.certified_one(lb, ub, self.scale)
         inliers = told.inliers
         if not certified and stopped is None:   # the deadline cut a step short, or a sub-problem hit the memory budget
             stopped = "time limit" if self.deadline.expired or self.bounds.deadline.expired else \

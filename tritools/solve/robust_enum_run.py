@@ -45,7 +45,8 @@ from .robust_costs import point_distances2_stack
 from .robust_drive import credit     # (the drive's rule: per-problem time limits)
 
 __all__ = ["enumerate_tls", "enumerate_many", "eligible", "closed_terms", "lower_bounds", "refine_rows",
-           "enumerated_result", "ENUM_CHUNK", "ENUM_ROWS", "SINGLE_POLISH_STEPS", "THREE_VIEW_PATH"]
+           "enumerated_result", "enumerated_results", "ENUM_CHUNK", "ENUM_ROWS", "SINGLE_POLISH_STEPS",
+           "THREE_VIEW_PATH"]
 
 log = logging.getLogger(__name__)
 
@@ -201,9 +202,41 @@ def _first_of_runs(sorted_keys: np.ndarray) -> np.ndarray:
 def enumerated_result(search, lb: float, n_bounded: int, n_sets: int):
     """The result of a search decided by the enumeration (:meth:`tritools.solve.robust.TlsSearch.result` at the lower
     bound ``lb``, pixels^2), its message saying so; ``n_bounded`` subsets were bounded."""
-    search.bounds.n_solved += int(n_bounded)
-    t = time.perf_counter() - search.t0
-    return search.result(lb, None, {"enumeration": t, "total": t}, f"; {enum.ENUMERATED} ({n_sets} sets of >= 2 views)")
+    return enumerated_results([search], [lb], [n_bounded], n_sets)[0]
+
+
+def enumerated_results(searches: list, lbs, n_bounded, n_sets: int) -> list:
+    """:func:`enumerated_result` of point searches of one view count at once: their reported numbers from one
+    :func:`tritools.solve.robust_report.tls_reported_stack` (the twin of :meth:`TlsSearch.result`'s
+    :func:`~tritools.solve.robust_report.tls_reported`, equal bit for bit), then each search's
+    :meth:`~tritools.solve.robust.TlsSearch.finish`; a search without an estimate (or not of points) takes
+    :meth:`~tritools.solve.robust.TlsSearch.result` itself."""
+    from .robust_report import tls_reported_stack
+
+    note = f"; {enum.ENUMERATED} ({n_sets} sets of >= 2 views)"
+    timings = []
+    for s, n in zip(searches, n_bounded):
+        s.bounds.n_solved += int(n)
+        t = time.perf_counter() - s.t0
+        timings.append({"enumeration": t, "total": t})
+    first = searches[0]
+    stack = [k for k, s in enumerate(searches) if s.points and s.best_X is not None and not s.cells_decided
+             and s.N == first.N and s.tol is first.tol]
+    out = [None] * len(searches)
+    if len(stack) > 1:
+        group = [searches[k] for k in stack]
+        X = np.array([s.user_estimate() for s in group])
+        lb = np.array([float(lbs[k]) for k in stack])
+        certified = [s.tol.certified_one(float(b), s.best_f, s.scale) for s, b in zip(group, lb)]
+        told = tls_reported_stack(np.stack([s.C_user for s in group]), np.stack([s.x for s in group]), X,
+                                  np.stack([s.c for s in group]), lb, first.tol, certified,
+                                  np.array([s.best_f for s in group]))
+        for k, s, Xk, t, b in zip(stack, group, X, told, lb):
+            out[k] = s.finish(Xk.copy(), s.report(Xk), t, float(b), None, timings[k], note)
+    for k, s in enumerate(searches):
+        if out[k] is None:
+            out[k] = s.result(float(lbs[k]), None, timings[k], note)
+    return out
 
 
 def _outside_sums(c2: np.ndarray, W: np.ndarray) -> np.ndarray:
@@ -495,23 +528,27 @@ class _Group:
         if not len(probs):
             return []
         lb_all, floors = self._lower_bounds(), self._floors()
-        late = []
+        late, met = [], []
         for p in probs:
             s, lb, ub = self.group[p], float(lb_all[p]), self.group[p].best_f
             if s.tol.certified_one(lb, ub, floors[p]) and not s.tol.contradicts_one(lb, ub, floors[p]):
                 s.set_normalization_scale(SCALE_BOUNDS[1])       # met at the floor: met at the documented scale
-                self._result(p, lb)
+                met.append(p)
             else:
                 late.append(p)
+        self._results(met, lb_all)
         if not final:
             return late
         if self.scales is not None:
             self.scales([self.group[p] for p in late])
-        for p in late:
-            s = self.group[p]
-            if s.tol.certified_one(float(lb_all[p]), s.best_f, s.scale):
-                self._result(p, float(lb_all[p]))
+        self._results([p for p in late if self.group[p].tol.certified_one(float(lb_all[p]), self.group[p].best_f,
+                                                                          self.group[p].scale)], lb_all)
         return [p for p in late if self.results[p] is None]
 
-    def _result(self, p: int, lb: float) -> None:
-        self.results[p] = enumerated_result(self.group[p], lb, self.bounded[p].sum(), len(self.W))
+    def _results(self, probs: list, lb_all: np.ndarray) -> None:
+        """The results of the decided problems ``probs`` at their lower bounds (:func:`enumerated_results`)."""
+        if probs:
+            done = enumerated_results([self.group[p] for p in probs], lb_all[probs], self.bounded[probs].sum(axis=1),
+                                      len(self.W))
+            for p, r in zip(probs, done):
+                self.results[p] = r

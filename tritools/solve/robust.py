@@ -307,13 +307,14 @@ class TlsSearch(NodeBounds):
             depths = as_world_frame(self.opts.world_frame).sign * (self.drows @ Xh)
         return PointReport(None, None, depths)
 
-    def offer(self, X) -> None:
+    def offer(self, X, d2=None) -> None:
         """A candidate: kept when its exact f_TLS (:func:`tritools.solve.report.point_report` distances) is
-        lower than the best by more than round-off (ties keep the earlier one: the full L2 estimate first)."""
+        lower than the best by more than round-off (ties keep the earlier one: the full L2 estimate first).  ``d2``:
+        its :meth:`sq_distances`, where a stack computed them (:func:`~.robust_costs.point_distances2_rows`)."""
         if X is None or not np.all(np.isfinite(X)):
             return
         if self.points:                                 # tls_cost from the squared distances (inf: c^2)
-            d2 = self.sq_distances(X)
+            d2 = self.sq_distances(X) if d2 is None else d2
             d, f = np.sqrt(d2), float(np.minimum(d2, self.c2).sum())
         else:
             d = self.residuals(X)

@@ -41,7 +41,7 @@ from ..model.normalize import SCALE_BOUNDS
 from ..model.stacked import gauss_newton_polish, refine_points_stack
 from . import robust_enum as enum
 from .robust_bounds import ROUND_DOWN
-from .robust_costs import point_distances2_stack
+from .robust_costs import point_distances2_rows, point_distances2_stack
 from .robust_drive import credit     # (the drive's rule: per-problem time limits)
 
 __all__ = ["enumerate_tls", "enumerate_many", "eligible", "closed_terms", "lower_bounds", "refine_rows",
@@ -369,8 +369,7 @@ class _Group:
         if not pp.size:
             return
         self._put(pp, mm, Xr)
-        for p, X in zip(pp, Xr):
-            self.group[p].offer(self.frames[p].world_point(X))
+        self._offer_each([(p, self.frames[p].world_point(X)) for p, X in zip(pp, Xr)])
         old = self.lb.copy()
         self.bounded[pp, mm] = False
         again = np.zeros_like(self.bounded)
@@ -427,24 +426,33 @@ class _Group:
             first = _first_of_runs(pp[order])
             for r in order[first]:
                 picks.append((int(pp[r]), world[r], np.nonzero(d2[r] < self.c2[pp[r]])[0].tolist()))
-        for p, X, _ in picks:
-            self.group[p].offer(X)
+        self._offer_each([(p, X) for p, X, _ in picks])
         for _ in range(LO_ROUNDS):                      # inlier set -> its L2 optimum -> inlier set
             picks = [(p, X, S) for p, X, S in picks if len(S) >= 2 and frozenset(S) not in self.refined[p]]
             for p, _, S in picks:                       # (a set refined before: its optimum was offered then)
                 self.refined[p].add(frozenset(S))
             refined = self._refine(picks)
+            picks = [(p, S, refined[p], self.frames[p].world_point(refined[p])) for p, _, S in picks if p in refined]
+            self._offer_each([(p, Xw) for p, _, _, Xw in picks])
             again = []
-            for p, _, S in picks:
-                s, Xr = self.group[p], refined.get(p)
-                if Xr is None:
-                    continue
-                s.offer(self.frames[p].world_point(Xr))
+            for p, S, Xr, Xw in picks:
+                s = self.group[p]
                 self._put(p, enum.row_of(self.N)[sum(1 << i for i in S)], Xr)
-                if s.best_S != frozenset(S) and np.array_equal(s.best_X, self.frames[p].world_point(Xr)):
+                if s.best_S != frozenset(S) and np.array_equal(s.best_X, Xw):
                     again.append((p, s.best_X, sorted(s.best_S)))          # a new best with another inlier set
             picks = again
         return np.array([s.best_X is not None for s in self.group]) & ~self._expired()
+
+    def _offer_each(self, offers: list) -> None:
+        """Offer each (problem, world point) in turn (:meth:`TlsSearch.offer`), their squared distances from one
+        :func:`~tritools.solve.robust_costs.point_distances2_rows` (the twin of the search's own)."""
+        finite = [(p, X) for p, X in offers if np.isfinite(X).all()]
+        if not finite:
+            return
+        P = np.array([p for p, _ in finite])
+        d2 = point_distances2_rows(self.C[P], self.x[P], np.array([X for _, X in finite]))
+        for (p, X), d in zip(finite, d2):
+            self.group[p].offer(X, d)
 
     def _refine(self, picks: list) -> dict:
         """problem -> the candidate refined on its inlier set S (normalised, :func:`refine_rows`); absent where it

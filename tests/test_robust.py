@@ -451,3 +451,30 @@ def test_robust_thresholds_of_a_float_equal_the_general_path():
     for bad in (MIN_THRESHOLD / 2, math.nan, 0.0, -0.0, -1.0, -math.inf):
         with pytest.raises(ValueError, match="robust"):
             robust_thresholds(bad, 3)
+
+
+def test_point_distances_of_rows_equal_the_single_candidate_twin():
+    """point_distances2_rows (one candidate per problem, the enumeration stack's offers) equals point_distances2_one
+    bit for bit, over cameras and points from 1e-6 to 1e6 in scale, candidates near and far, a candidate on a
+    principal plane (inf) and one at 1e305 (overflowing projections: inf); and the finite values match
+    point_report's residuals."""
+    from tritools.solve.report import point_report
+    from tritools.solve.robust_costs import point_distances2_one, point_distances2_rows
+
+    rng = np.random.default_rng(11)
+    for N in (3, 7, 10):
+        R = 40
+        C = rng.normal(size=(R, N, 3, 4)) * 10.0 ** rng.uniform(-6, 6, size=(R, 1, 1, 1))
+        x = rng.normal(size=(R, N, 2)) * 10.0 ** rng.uniform(-3, 6, size=(R, 1, 1))
+        X = rng.normal(size=(R, 3)) * 10.0 ** rng.uniform(-3, 7, size=(R, 1))
+        X[0] = X[0] - (C[0, 1, 2, :3] @ X[0] + C[0, 1, 2, 3]) / (C[0, 1, 2, :3] @ C[0, 1, 2, :3]) * C[0, 1, 2, :3]
+        X[1], C[1] = 1e305, C[1] * 1e10                          # overflowing products
+        got = point_distances2_rows(C, x, X)
+        for r in range(R):
+            with np.errstate(all="ignore"):                      # (the scalar's overflowing products warn)
+                want = point_distances2_one(C[r], np.abs(C[r, :, 2]), x[r], X[r])
+            assert want.dtype == got.dtype and np.array_equal(want, got[r])
+        assert np.isinf(got[0, 1]) and np.isinf(got[1]).all()
+        ref = point_report(X[5], C[5], [tritools.Point(p) for p in x[5]]).residuals
+        fin = np.isfinite(ref)
+        np.testing.assert_allclose(np.sqrt(got[5][fin]), ref[fin], rtol=1e-9)

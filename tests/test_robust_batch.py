@@ -177,3 +177,43 @@ def test_batch_settled_by_its_l2_result_reads_as_the_single_call():
     np.testing.assert_array_equal(batch.inliers, single.inliers)
     assert batch.gamma_ub == pytest.approx(single.gamma_ub, rel=1e-9)
     assert batch.gamma_lb == pytest.approx(single.gamma_lb, rel=1e-9)
+
+
+def test_stacked_enumeration_results_equal_one_by_one():
+    """enumerated_results (the batch's decided problems of one stack, one stacked report) gives each search exactly
+    the result enumerated_result gives it alone (the scalar report, TlsSearch.result): status, bounds, X, inliers,
+    image points, residuals, depths, message -- over pixel scales 1e-3 / 1 / 1e6, a georeferenced world, per-view
+    thresholds, decided and undecided lower bounds."""
+    import copy
+
+    from tritools.scene import robust_protocol_scene
+    from tritools.solve.robust import TlsSearch
+    from tritools.solve.robust_enum_run import enumerated_result, enumerated_results
+
+    rng = np.random.default_rng(5)
+    opts = tritools.TriangulationOptions()
+    searches, lbs = [], []
+    for k in range(18):
+        P, x, X, _ = robust_protocol_scene(6, k % 3, 2.0, rng)
+        s = [1e-3, 1.0, 1e6][k % 3]
+        P, x = np.diag([s, s, 1.0]) @ P, x * s
+        if k % 4 == 1:
+            shift = rng.uniform(-1, 1, 3) * 1e7
+            T = np.eye(4)
+            T[:3, 3] = -shift
+            P, X = P @ T, X + shift
+        c = 200.0 * s * rng.uniform(0.7, 1.4, 6)
+        search = TlsSearch(P, None, c, opts, 0.0, points=x)
+        search.offer(X)
+        searches.append(search)
+        lbs.append(search.best_f * [1 - 1e-9, 0.5, 0.0][k % 3])
+    n = [3 + k for k in range(len(searches))]
+    alone = [enumerated_result(copy.deepcopy(s), lb, m, 57) for s, lb, m in zip(searches, lbs, n)]
+    stacked = enumerated_results(searches, lbs, n, 57)
+    assert {r.optimal for r in alone} == {True, False}
+    for a, b in zip(alone, stacked):
+        da, db = a.to_dict(), b.to_dict()
+        da.pop("timings"), db.pop("timings")
+        for att in da["attempts"] + db["attempts"]:
+            att.pop("seconds")
+        assert da == db

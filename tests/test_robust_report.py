@@ -214,3 +214,58 @@ def test_untrusted_statuses_carry_no_lower_bound(status):
     assert back.gamma_lb is None
     ok = tritools.TriangulationResult("corollary1", "not_certified", X=np.zeros(3), gamma_lb=1.0, gamma_ub=2.0)
     assert ok.gamma_lb == 1.0
+
+
+def _twin_cases(rng, N):
+    """Varied point problems of N views with an estimate near their optimum: pixel scales 1e-3..1e6, georeferenced
+    worlds, thresholds at a view's float distance (the exact inlier test), points near a principal plane (a large
+    rounding spread), a projection at infinity, a drifted search value, uncertified decisions."""
+    out = []
+    for k in range(24):
+        P, x, X, _ = robust_protocol_scene(N, k % 3, 1.0 + 4 * (k % 2), rng)
+        s = [1e-3, 1.0, 1e6][k % 3]
+        P, x = np.diag([s, s, 1.0]) @ P, x * s
+        if k % 4 == 1:
+            shift = rng.uniform(-1, 1, 3) * 1e7
+            P, X = _geo(P, shift), X + shift
+        c = 200.0 * s * rng.uniform(0.5, 1.5, N)
+        X = X + rng.normal(scale=1e-3, size=3)
+        if k % 5 == 2:                                           # a threshold at a view's float distance
+            h = np.einsum("nij,j->ni", P, np.append(X, 1.0))
+            c[0] = np.linalg.norm(h[0, :2] / h[0, 2] - x[0])
+        if k % 7 == 3:                                           # X in the first camera's principal plane
+            r = P[0, 2]
+            X = X - (r[:3] @ X + r[3]) / (r[:3] @ r[:3]) * r[:3]
+        h = np.einsum("nij,j->ni", P, np.append(X, 1.0))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            f = float(np.sum(np.minimum(np.sum((h[:, :2] / h[:, 2:] - x) ** 2, axis=1), c * c)))
+        lb = f * [1 - 1e-9, 0.5, 1 - 1e-5, 0.0][k % 4]           # met, open, near, none
+        f_search = [np.nan, f, f * 1.01][k % 3]                  # none, its own value, drifted
+        out.append((P, x, X, c, lb, k % 8 != 4, f_search))
+    return out
+
+
+@pytest.mark.parametrize("N", [3, 5, 10])
+def test_stacked_report_equals_the_scalar_report(N):
+    """tls_reported_stack (the batch's report, one stacked call) equals tls_reported problem by problem, bit for
+    bit: gamma_LB, gamma_UB, residuals, inliers, image points, holds and reason (and projections_and_spread_stack
+    equals projections_and_spread)."""
+    from tritools.solve.report import projections_and_spread, projections_and_spread_stack
+    from tritools.solve.robust_report import tls_reported, tls_reported_stack
+
+    cases = _twin_cases(np.random.default_rng([7, N]), N)
+    tol = tritools.TriangulationOptions().tolerances
+    C, x, X, c, lb, cert, fs = (np.array([case[i] for case in cases]) for i in range(7))
+    got = tls_reported_stack(C, x, X, c, lb, tol, cert, fs)
+    u, fin, spread = projections_and_spread_stack(C, X)
+    seen = set()
+    for k, (P, xk, Xk, ck, lbk, ck_cert, fk) in enumerate(cases):
+        want = tls_reported(P, xk, None, Xk, ck, lbk, tol, ck_cert, None if np.isnan(fk) else fk)
+        g = got[k]
+        assert (g.gamma_lb, g.gamma_ub, g.holds, g.reason) == (want.gamma_lb, want.gamma_ub, want.holds, want.reason)
+        for a, b in ((g.residuals, want.residuals), (g.inliers, want.inliers), (g.image_points, want.image_points)):
+            assert a.dtype == b.dtype and np.array_equal(a, b, equal_nan=True)
+        u1, fin1, spread1 = projections_and_spread(P, Xk)
+        assert fin1 == fin[k] and spread1 == spread[k] and np.array_equal(u1, u[k], equal_nan=True)
+        seen.add((want.holds, bool(want.reason), bool(want.inliers.all())))
+    assert len(seen) >= 4                  # the cases reach certified, withheld and outlier-holding reports

@@ -18,7 +18,7 @@ from ..model.regions import extent_of
 from ..model.stacked import norms
 
 __all__ = ["PointReport", "point_report", "points_report_stack", "solve_radius", "solve_ball", "region_extent",
-           "gamma_upper", "rounding_spread", "projections_and_spread"]
+           "gamma_upper", "rounding_spread", "projections_and_spread", "projections_and_spread_stack"]
 
 _U = 2.0 ** -53                   # the unit round-off of float64
 #: |u~_i - u_i| <= _PROJ_ABS |u_i|: the quotient of two homogeneous coordinates with relative error HOMOGENEOUS_RTOL
@@ -74,6 +74,23 @@ def projections_and_spread(C: np.ndarray, X: np.ndarray) -> tuple:
         return u[0], bool(fin[0]), math.inf
     d2 = np.max(np.sum((u[1:] - u[0]) ** 2, axis=2), axis=0)
     return u[0], True, float(np.sqrt(np.sum(d2) / (2 * len(C))))
+
+
+def projections_and_spread_stack(C: np.ndarray, X: np.ndarray) -> tuple:
+    """The twin of :func:`projections_and_spread` for M problems of N views (tested equal, bit for bit): C (M, N, 3,
+    4), X (M, 3) -> (u (M, N, 2), finite (M,), spread (M,)), one stacked projection of the 4 M points X and
+    X + ulp(X_k) e_k (spread inf where a projection is not finite; u of X as projected there)."""
+    X = np.asarray(X, float)
+    M, N = C.shape[:2]
+    eye = np.eye(3, dtype=bool)[None]
+    Xs = np.concatenate([X[:, None], X[:, None] + np.where(eye, np.spacing(np.abs(X))[:, None, :], 0.0)], axis=1)
+    Cs = np.broadcast_to(np.asarray(C, float)[:, None], (M, 4) + C.shape[1:]).reshape((4 * M,) + C.shape[1:])
+    u, _, fin = project_world(Cs, Xs.reshape(4 * M, 3))
+    u, fin = u.reshape(M, 4, N, 2), fin.reshape(M, 4)
+    with np.errstate(invalid="ignore", over="ignore"):
+        d2 = np.max(np.sum((u[:, 1:] - u[:, :1]) ** 2, axis=3), axis=1)
+        spread = np.sqrt(np.sum(d2, axis=1) / (2 * N))
+    return u[:, 0], fin[:, 0], np.where(fin.all(axis=1), spread, np.inf)
 
 
 @dataclass(frozen=True)

@@ -308,13 +308,14 @@ class TlsSearch(NodeBounds):
             depths = as_world_frame(self.opts.world_frame).sign * (self.drows @ Xh)
         return PointReport(None, None, depths)
 
-    def offer(self, X) -> None:
+    def offer(self, X, d2=None) -> None:
         """A candidate: kept when its exact f_TLS (:func:`tritools.solve.report.point_report` distances) is
-        lower than the best by more than round-off (ties keep the earlier one: the full L2 estimate first)."""
+        lower than the best by more than round-off (ties keep the earlier one: the full L2 estimate first).  ``d2``:
+        its :meth:`sq_distances`, where a stack computed them (:func:`~.robust_costs.point_distances2_rows`)."""
         if X is None or not np.all(np.isfinite(X)):
             return
         if self.points:                                 # tls_cost from the squared distances (inf: c^2)
-            d2 = self.sq_distances(X)
+            d2 = self.sq_distances(X) if d2 is None else d2
             d, f = np.sqrt(d2), float(np.minimum(d2, self.c2).sum())
         else:
             d = self.residuals(X)
@@ -533,16 +534,27 @@ class TlsSearch(NodeBounds):
 
     def result(self, lb: float, stopped, timings, note: str = "") -> TriangulationResult:
         """The result at the search's lower bound ``lb`` (pixels^2): the decision by the one rule on this search's
-        scale, the reported numbers and their checks (:func:`tritools.solve.robust_report.tls_reported`), the
+        scale, the reported numbers and their checks (:func:`tritools.solve.robust_report.tls_reported`; a stack of
+        point searches: :func:`~tritools.solve.robust_report.tls_reported_stack`, then :meth:`finish`), the
         message (``note`` appended: the path that decided)."""
-        ub = self.best_f
-        X = self.frame.user_point(self.best_X) if self.frame.moved else self.best_X
+        X = self.user_estimate()
         rep = self.report(X)
-        certified = self.tol.certified_one(lb, ub, self.scale)     # lb is valid also when the search stopped
         told = tls_reported(self.C_user, self.x if self.points else np.array([r.center for r in self.regions]),
-                            None if self.points else rep.residuals, X, self.c, lb, self.tol, certified,
-                            None if self.cells_decided else ub,
+                            None if self.points else rep.residuals, X, self.c, lb, self.tol,
+                            self.tol.certified_one(lb, self.best_f, self.scale),    # lb valid also when stopped
+                            None if self.cells_decided else self.best_f,
                             None if self.points else self.regions)
+        return self.finish(X, rep, told, lb, stopped, timings, note)
+
+    def user_estimate(self):
+        """The best estimate in the caller's frame (None: no candidate)."""
+        return self.frame.user_point(self.best_X) if self.frame.moved else self.best_X
+
+    def finish(self, X, rep: PointReport, told, lb: float, stopped, timings, note: str = "") -> TriangulationResult:
+        """:meth:`result` from the reported numbers ``told`` of X (:mod:`tritools.solve.robust_report`) and its
+        :meth:`report` ``rep``: status, certificate, message."""
+        ub = self.best_f
+        certified = self.tol.certified_one(lb, ub, self.scale)
         inliers = told.inliers
         if not certified and stopped is None:   # the deadline cut a step short, or a sub-problem hit the memory budget
             stopped = "time limit" if self.deadline.expired or self.bounds.deadline.expired else \

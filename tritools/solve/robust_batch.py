@@ -201,7 +201,7 @@ def _drive_chunks(problems, thresholds, opts, idx, out, points) -> None:
         results = _enumerated_then_searched([s for _, s in searches])
         share = (time.perf_counter() - t0) / max(1, len(searches))
         for (i, _), r in zip(searches, results):
-            r = dataclasses.replace(r, timings={**r.timings, "batch_share": share})
+            r.timings["batch_share"] = share    # the result's own dict (TriangulationResult copies it): no replace
             out[i] = mark_cut(r) if cut else r
 
 

@@ -11,8 +11,8 @@ import numpy as np
 from ..model.geometry import PROJECTION_DENOM_RTOL
 from ..model.refine import disc_shapes
 
-__all__ = ["point_distances2", "point_distances2_one", "point_distances2_stack", "projections", "disc_distances2",
-           "disc_shapes"]
+__all__ = ["point_distances2", "point_distances2_one", "point_distances2_rows", "point_distances2_stack", "projections",
+           "disc_distances2", "disc_shapes"]
 
 
 def projections(X, cameras) -> np.ndarray:
@@ -61,6 +61,19 @@ def point_distances2_one(C: np.ndarray, absC2: np.ndarray, x: np.ndarray, X) -> 
     with np.errstate(all="ignore"):
         d = u[:, :2] / u[:, 2:] - x
         d2 = d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1]
+    return np.where(ok & np.isfinite(d2), d2, np.inf)
+
+
+def point_distances2_rows(C: np.ndarray, x: np.ndarray, X: np.ndarray) -> np.ndarray:
+    """:func:`point_distances2_one` of R problems, one candidate each (tested equal, bit for bit): cameras C (R, N,
+    3, 4), points x (R, N, 2), X (R, 3) -> (R, N), the same rule; the same matrix-vector products per camera (the
+    stacked matmul of (3, 4) by (4, 1) items)."""
+    Xh = np.concatenate([X, np.ones((len(X), 1))], axis=1)
+    with np.errstate(all="ignore"):
+        u = np.matmul(C, Xh[:, None, :, None])[..., 0]
+        ok = np.abs(u[..., 2]) > PROJECTION_DENOM_RTOL * np.matmul(np.abs(C[:, :, 2]), np.abs(Xh)[:, :, None])[..., 0]
+        d = u[..., :2] / u[..., 2:] - x
+        d2 = d[..., 0] * d[..., 0] + d[..., 1] * d[..., 1]
     return np.where(ok & np.isfinite(d2), d2, np.inf)
 
 

@@ -41,11 +41,12 @@ from ..model.normalize import SCALE_BOUNDS
 from ..model.stacked import gauss_newton_polish, refine_points_stack
 from . import robust_enum as enum
 from .robust_bounds import ROUND_DOWN
-from .robust_costs import point_distances2_stack
+from .robust_costs import point_distances2_rows, point_distances2_stack
 from .robust_drive import credit     # (the drive's rule: per-problem time limits)
 
 __all__ = ["enumerate_tls", "enumerate_many", "eligible", "closed_terms", "lower_bounds", "refine_rows",
-           "enumerated_result", "ENUM_CHUNK", "ENUM_ROWS", "SINGLE_POLISH_STEPS", "THREE_VIEW_PATH"]
+           "enumerated_result", "enumerated_results", "ENUM_CHUNK", "ENUM_ROWS", "SINGLE_POLISH_STEPS",
+           "THREE_VIEW_PATH"]
 
 log = logging.getLogger(__name__)
 
@@ -201,9 +202,41 @@ def _first_of_runs(sorted_keys: np.ndarray) -> np.ndarray:
 def enumerated_result(search, lb: float, n_bounded: int, n_sets: int):
     """The result of a search decided by the enumeration (:meth:`tritools.solve.robust.TlsSearch.result` at the lower
     bound ``lb``, pixels^2), its message saying so; ``n_bounded`` subsets were bounded."""
-    search.bounds.n_solved += int(n_bounded)
-    t = time.perf_counter() - search.t0
-    return search.result(lb, None, {"enumeration": t, "total": t}, f"; {enum.ENUMERATED} ({n_sets} sets of >= 2 views)")
+    return enumerated_results([search], [lb], [n_bounded], n_sets)[0]
+
+
+def enumerated_results(searches: list, lbs, n_bounded, n_sets: int) -> list:
+    """:func:`enumerated_result` of point searches of one view count at once: their reported numbers from one
+    :func:`tritools.solve.robust_report.tls_reported_stack` (the twin of :meth:`TlsSearch.result`'s
+    :func:`~tritools.solve.robust_report.tls_reported`, equal bit for bit), then each search's
+    :meth:`~tritools.solve.robust.TlsSearch.finish`; a search without an estimate (or not of points) takes
+    :meth:`~tritools.solve.robust.TlsSearch.result` itself."""
+    from .robust_report import tls_reported_stack
+
+    note = f"; {enum.ENUMERATED} ({n_sets} sets of >= 2 views)"
+    timings = []
+    for s, n in zip(searches, n_bounded):
+        s.bounds.n_solved += int(n)
+        t = time.perf_counter() - s.t0
+        timings.append({"enumeration": t, "total": t})
+    first = searches[0]
+    stack = [k for k, s in enumerate(searches) if s.points and s.best_X is not None and not s.cells_decided
+             and s.N == first.N and s.tol is first.tol]
+    out = [None] * len(searches)
+    if len(stack) > 1:
+        group = [searches[k] for k in stack]
+        X = np.array([s.user_estimate() for s in group])
+        lb = np.array([float(lbs[k]) for k in stack])
+        certified = [s.tol.certified_one(float(b), s.best_f, s.scale) for s, b in zip(group, lb)]
+        told = tls_reported_stack(np.stack([s.C_user for s in group]), np.stack([s.x for s in group]), X,
+                                  np.stack([s.c for s in group]), lb, first.tol, certified,
+                                  np.array([s.best_f for s in group]))
+        for k, s, Xk, t, b in zip(stack, group, X, told, lb):
+            out[k] = s.finish(Xk.copy(), s.report(Xk), t, float(b), None, timings[k], note)
+    for k, s in enumerate(searches):
+        if out[k] is None:
+            out[k] = s.result(float(lbs[k]), None, timings[k], note)
+    return out
 
 
 def _outside_sums(c2: np.ndarray, W: np.ndarray) -> np.ndarray:
@@ -228,6 +261,7 @@ class _Group:
         self.W = enum.subset_masks(N)
         self.size = self.W.sum(axis=1)
         self.Xn = np.full((len(group), len(self.W), 3), np.nan)
+        self.has = np.zeros(self.Xn.shape[:2], bool)     # np.isfinite(Xn).all(axis=2), kept with Xn (:meth:`_put`)
         self.results: list = [None] * len(group)
         self._fundamentals = self._floor = self._terms_cache = None
         self.staged = len(group) >= STAGED_FROM
@@ -269,7 +303,7 @@ class _Group:
         """Step 1 (after :meth:`_all_views_first` in a batch): the candidates of the pairs and of all views, then of
         the open sets where the best inlier set leaves out LATER_FROM views or more (one problem), each stack's best
         offered; the problems with a candidate and time left."""
-        todo = lambda rows: rows & live[:, None] & ~np.isfinite(self.Xn).all(axis=2)     # noqa: E731
+        todo = lambda rows: rows & live[:, None] & ~self.has     # noqa: E731
         pairs = np.broadcast_to((self.size == 2)[None], self.Xn.shape[:2])
         if self.staged:               # a batch: the sets of all views but one next; where the best then has one view
             loo = todo((self.size == self.N - 1)[None])        # outside its inlier set, only the pairs holding it
@@ -326,7 +360,7 @@ class _Group:
         own sets (:func:`refine_rows`: a row's few polish steps may leave it short of the set's L2 optimum, and a
         Lagrangian bound taken there fails or falls short), offered (UB may fall: a set's optimum the polish did not
         reach) and bounded again, the larger of the two bounds kept (both are valid)."""
-        rows = self._failing() & self.bounded & probs[:, None] & np.isfinite(self.Xn).all(axis=2)
+        rows = self._failing() & self.bounded & probs[:, None] & self.has
         pp, mm = np.nonzero(rows)
         if not pp.size:
             return
@@ -334,9 +368,8 @@ class _Group:
         pp, mm, Xr = pp[ok], mm[ok], Xr[ok]
         if not pp.size:
             return
-        self.Xn[pp, mm] = Xr
-        for p, X in zip(pp, Xr):
-            self.group[p].offer(self.frames[p].world_point(X))
+        self._put(pp, mm, Xr)
+        self._offer_each([(p, self.frames[p].world_point(X)) for p, X in zip(pp, Xr)])
         old = self.lb.copy()
         self.bounded[pp, mm] = False
         again = np.zeros_like(self.bounded)
@@ -370,14 +403,20 @@ class _Group:
                 fn = lambda C, W: enum.enum_candidates(C, W, None, by_size=True)        # noqa: E731
             else:
                 fn = lambda C, W: enum.enum_candidates(C, W, SINGLE_POLISH_STEPS)       # noqa: E731
-            self.Xn[pp, mm] = _by_rows(fn, pp.size, self.Cn[pp], self.W[mm])
+            self._put(pp, mm, _by_rows(fn, pp.size, self.Cn[pp], self.W[mm]))
+
+    def _put(self, pp, mm, X: np.ndarray) -> None:
+        """Xn[pp, mm] = X, and its finiteness in ``has`` (a (P, M, 3) finiteness test per step cost ~4 ms at 200
+        problems of 10 views)."""
+        self.Xn[pp, mm] = X
+        self.has[pp, mm] = np.isfinite(X).all(axis=-1)
 
     def _offer(self, rows: np.ndarray) -> np.ndarray:
         """Offer each problem the best of its candidates in ``rows`` (P, M) (world frame, ranked by f_TLS in one
         stacked evaluation), refined to convergence on its inlier set S (:func:`_refine`: its f_TLS is at most the
         candidate's), and put the refined point in the row of S (whose bound is then taken at the L2 optimum); the
         candidate itself where that fails.  The problems that may go on: a candidate and time left."""
-        pp, mm = np.nonzero(rows & np.isfinite(self.Xn).all(axis=2))
+        pp, mm = np.nonzero(rows & self.has)
         picks = []
         if pp.size:
             world = self.origin[pp] + self.depth[pp, None] * self.Xn[pp, mm]
@@ -387,24 +426,33 @@ class _Group:
             first = _first_of_runs(pp[order])
             for r in order[first]:
                 picks.append((int(pp[r]), world[r], np.nonzero(d2[r] < self.c2[pp[r]])[0].tolist()))
-        for p, X, _ in picks:
-            self.group[p].offer(X)
+        self._offer_each([(p, X) for p, X, _ in picks])
         for _ in range(LO_ROUNDS):                      # inlier set -> its L2 optimum -> inlier set
             picks = [(p, X, S) for p, X, S in picks if len(S) >= 2 and frozenset(S) not in self.refined[p]]
             for p, _, S in picks:                       # (a set refined before: its optimum was offered then)
                 self.refined[p].add(frozenset(S))
             refined = self._refine(picks)
+            picks = [(p, S, refined[p], self.frames[p].world_point(refined[p])) for p, _, S in picks if p in refined]
+            self._offer_each([(p, Xw) for p, _, _, Xw in picks])
             again = []
-            for p, _, S in picks:
-                s, Xr = self.group[p], refined.get(p)
-                if Xr is None:
-                    continue
-                s.offer(self.frames[p].world_point(Xr))
-                self.Xn[p, enum.row_of(self.N)[sum(1 << i for i in S)]] = Xr
-                if s.best_S != frozenset(S) and np.array_equal(s.best_X, self.frames[p].world_point(Xr)):
+            for p, S, Xr, Xw in picks:
+                s = self.group[p]
+                self._put(p, enum.row_of(self.N)[sum(1 << i for i in S)], Xr)
+                if s.best_S != frozenset(S) and np.array_equal(s.best_X, Xw):
                     again.append((p, s.best_X, sorted(s.best_S)))          # a new best with another inlier set
             picks = again
         return np.array([s.best_X is not None for s in self.group]) & ~self._expired()
+
+    def _offer_each(self, offers: list) -> None:
+        """Offer each (problem, world point) in turn (:meth:`TlsSearch.offer`), their squared distances from one
+        :func:`~tritools.solve.robust_costs.point_distances2_rows` (the twin of the search's own)."""
+        finite = [(p, X) for p, X in offers if np.isfinite(X).all()]
+        if not finite:
+            return
+        P = np.array([p for p, _ in finite])
+        d2 = point_distances2_rows(self.C[P], self.x[P], np.array([X for _, X in finite]))
+        for (p, X), d in zip(finite, d2):
+            self.group[p].offer(X, d)
 
     def _refine(self, picks: list) -> dict:
         """problem -> the candidate refined on its inlier set S (normalised, :func:`refine_rows`); absent where it
@@ -424,7 +472,7 @@ class _Group:
         :func:`~tritools.solve.robust_enum.enum_bounds_rows`), their candidates first where missing."""
         rows = rows & ~self.bounded
         self.bounded |= rows
-        self._candidates(rows & ~np.isfinite(self.Xn).all(axis=2))
+        self._candidates(rows & ~self.has)
         pp, mm = np.nonzero(rows)
         if not pp.size:
             return
@@ -495,23 +543,27 @@ class _Group:
         if not len(probs):
             return []
         lb_all, floors = self._lower_bounds(), self._floors()
-        late = []
+        late, met = [], []
         for p in probs:
             s, lb, ub = self.group[p], float(lb_all[p]), self.group[p].best_f
             if s.tol.certified_one(lb, ub, floors[p]) and not s.tol.contradicts_one(lb, ub, floors[p]):
                 s.set_normalization_scale(SCALE_BOUNDS[1])       # met at the floor: met at the documented scale
-                self._result(p, lb)
+                met.append(p)
             else:
                 late.append(p)
+        self._results(met, lb_all)
         if not final:
             return late
         if self.scales is not None:
             self.scales([self.group[p] for p in late])
-        for p in late:
-            s = self.group[p]
-            if s.tol.certified_one(float(lb_all[p]), s.best_f, s.scale):
-                self._result(p, float(lb_all[p]))
+        self._results([p for p in late if self.group[p].tol.certified_one(float(lb_all[p]), self.group[p].best_f,
+                                                                          self.group[p].scale)], lb_all)
         return [p for p in late if self.results[p] is None]
 
-    def _result(self, p: int, lb: float) -> None:
-        self.results[p] = enumerated_result(self.group[p], lb, self.bounded[p].sum(), len(self.W))
+    def _results(self, probs: list, lb_all: np.ndarray) -> None:
+        """The results of the decided problems ``probs`` at their lower bounds (:func:`enumerated_results`)."""
+        if probs:
+            done = enumerated_results([self.group[p] for p in probs], lb_all[probs], self.bounded[probs].sum(axis=1),
+                                      len(self.W))
+            for p, r in zip(probs, done):
+                self.results[p] = r

@@ -29,9 +29,9 @@ import numpy as np
 from ..model.normalize import RESOLUTION_REL
 from ..model.stacked import norms
 from .decide import gamma_from_c, gamma_lower_one
-from .report import enlarged_distances, gamma_upper, projections_and_spread
+from .report import enlarged_distances, gamma_upper, projections_and_spread, projections_and_spread_stack
 
-__all__ = ["TlsReported", "tls_reported"]
+__all__ = ["TlsReported", "tls_reported", "tls_reported_stack"]
 
 
 @dataclass(frozen=True)
@@ -60,7 +60,45 @@ def tls_reported(C: np.ndarray, centres: np.ndarray, residuals, X, c: np.ndarray
     res = np.where(np.isfinite(residuals), residuals, np.inf)
     g_ub = float(gamma_upper(np.where(np.isfinite(res), res, c), norms(np.where(np.isfinite(u), u, 0.0), axis=1),
                              cap=c))
-    resolution = coordinate_resolution(centres)
+    g_lb, g_ub, holds, reason = _checked(g_ub, spread, coordinate_resolution(centres), N, c, lb, tolerances,
+                                         certified, res, f_search)
+    inliers = inlier_mask(C, X, centres, res, c, u, exact=points_given, regions=regions)
+    image_points = np.where(np.isfinite(res)[:, None] & np.isfinite(u), u, np.nan)
+    return TlsReported(g_lb, g_ub, residuals, inliers, holds, reason, image_points)
+
+
+def tls_reported_stack(C: np.ndarray, points: np.ndarray, X: np.ndarray, c: np.ndarray, lb, tolerances, certified,
+                       f_search) -> list:
+    """The twin of :func:`tls_reported` for M point problems of N views (tested equal, bit for bit): C (M, N, 3, 4),
+    ``points`` (M, N, 2), X (M, 3), c (M, N), lb, certified and f_search (M,) (f_search NaN: none); one
+    :class:`TlsReported` per problem.  The projections, distances, gamma_UB and inlier flags in stacked calls
+    (:func:`tritools.solve.report.projections_and_spread_stack`), the checks per problem (:func:`_checked`)."""
+    M, N = points.shape[:2]
+    u, fin, spread = projections_and_spread_stack(np.asarray(C, float), X)
+    u = np.where(fin[:, None, None], u, np.inf)
+    residuals = norms(u - points, axis=2)
+    res = np.where(np.isfinite(residuals), residuals, np.inf)
+    u_norm = norms(np.where(np.isfinite(u), u, 0.0), axis=2)
+    g_ub = gamma_upper(np.where(np.isfinite(res), res, c), u_norm, cap=c)
+    a = np.sort(np.abs(points).reshape(M, 2 * N), axis=1)
+    mid = 0.5 * (a[:, (2 * N - 1) // 2] + a[:, N])              # coordinate_resolution's median, per problem
+    inliers = inlier_mask_stack(C, X, points, res, c, u, u_norm)
+    image_points = np.where(np.isfinite(res)[:, :, None] & np.isfinite(u), u, np.nan)
+    out = []
+    for k in range(M):
+        f_k = float(f_search[k])
+        checked = _checked(float(g_ub[k]), float(spread[k]), RESOLUTION_REL * max(1.0, float(mid[k])), N, c[k],
+                           float(lb[k]), tolerances, bool(certified[k]), res[k], f_k if f_k == f_k else None)
+        out.append(TlsReported(checked[0], checked[1], residuals[k].copy(), inliers[k].copy(), checked[2],
+                               checked[3], image_points[k].copy()))
+    return out
+
+
+def _checked(g_ub: float, spread: float, resolution: float, N: int, c: np.ndarray, lb: float, tolerances,
+             certified: bool, res: np.ndarray, f_search) -> tuple:
+    """(gamma_LB, gamma_UB, holds, reason) of :func:`tls_reported` from gamma_UB (float), the rounding spread and the
+    coordinates' resolution (module docstring): gamma_LB lowered by round-off and spread, never above gamma_UB; the
+    certificate withheld where the spread, the search's drift or the gap guard say so."""
     # lowered by the normalisation's round-off and by the estimate's rounding spread: bounds from a normalised frame
     # describe the caller's float problem only to that spread (a 6-view track 4.5e8 px off-axis: spread 0.06 px,
     # the frame's bound 7e-4 px above an achievable value)
@@ -82,9 +120,7 @@ def tls_reported(C: np.ndarray, centres: np.ndarray, residuals, X, c: np.ndarray
     elif certified and not guards_pass(g_lb, g_ub, N, tolerances, resolved):
         holds, reason = False, "the bounds met on the search's scale, but their gap exceeds the coordinates' " \
                                f"resolution ({resolved:.3g} px, at most the thresholds' own scale)"
-    inliers = inlier_mask(C, X, centres, res, c, u, exact=points_given, regions=regions)
-    image_points = np.where(np.isfinite(res)[:, None] & np.isfinite(u), u, np.nan)
-    return TlsReported(g_lb, g_ub if math.isfinite(g_ub) else math.inf, residuals, inliers, holds, reason, image_points)
+    return g_lb, g_ub if math.isfinite(g_ub) else math.inf, holds, reason
 
 
 def coordinate_resolution(centres: np.ndarray) -> float:
@@ -152,6 +188,20 @@ def inlier_mask(C: np.ndarray, X, points: np.ndarray, res: np.ndarray, c: np.nda
         return inl
     for i in np.flatnonzero(ambiguous):
         inl[i] = _exact_below(C[i], X, points[i], float(c[i]))
+    return inl
+
+
+def inlier_mask_stack(C: np.ndarray, X: np.ndarray, points: np.ndarray, res: np.ndarray, c: np.ndarray,
+                      u: np.ndarray, u_norm: np.ndarray) -> np.ndarray:
+    """The twin of :func:`inlier_mask` (``exact``) for M point problems (tested equal): (M, N) bool, d_i(X) < c_i,
+    a view within its distance's round-off margin of its threshold compared exactly (:func:`_exact_below`); C (M,
+    N, 3, 4), X (M, 3), ``res`` / ``c`` (M, N), ``u_norm`` (M, N) the norms of the finite projections ``u``."""
+    inl = res < c
+    with np.errstate(invalid="ignore", over="ignore"):
+        margin = enlarged_distances(res, u_norm) - res
+        ambiguous = np.isfinite(res) & np.isfinite(c) & (np.abs(res - c) <= margin)
+    for m, i in zip(*np.nonzero(ambiguous)):
+        inl[m, i] = _exact_below(C[m, i], X[m], points[m, i], float(c[m, i]))
     return inl
 
 

@@ -216,23 +216,25 @@ def project_world(C: np.ndarray, X: np.ndarray) -> tuple:
         return project_quiet(C, X, h=h)
 
 
-def project_world_one(C: list, X: list) -> tuple:
+def project_world_one(C: list, X: list, absC: list | None = None) -> tuple:
     """The scalar twin of :func:`project_world` for one point: cameras C (N lists of 3 rows of 4 floats), X (3
-    floats) -> (u (N pairs), finite).  The same numbers bit for bit (tests/test_single_call_twins.py): each
-    homogeneous coordinate as numpy's einsum sums four products, (p_0 + p_2) + (p_1 + p_3); a view recomputed by
-    the compensated dot product (:func:`tritools.model.exact.dot2`'s steps, the plain sum where it is not finite)
-    where some row's sum of |products| exceeds CANCELLATION_RATIO times |sum|; then the rule of
-    :func:`tritools.model.stacked.project_quiet`."""
-    Xh = (X[0], X[1], X[2], 1.0)
-    aX = (abs(X[0]), abs(X[1]), abs(X[2]), 1.0)
+    floats) -> (u (N pairs), finite); ``absC`` the cameras' |entries| when the caller has them.  The same numbers
+    bit for bit (tests/test_single_call_twins.py): each homogeneous coordinate as numpy's einsum sums four
+    products, (p_0 + p_2) + (p_1 + p_3); a view recomputed by the compensated dot product
+    (:func:`tritools.model.exact.dot2`'s steps, the plain sum where it is not finite) where some row's sum of
+    |products| exceeds CANCELLATION_RATIO times |sum|; then the rule of :func:`tritools.model.stacked.project_quiet`
+    (its |P_3| . |X~| is that sum of |products| of the third row)."""
+    x0, x1, x2 = X
+    a0, a1, a2 = abs(x0), abs(x1), abs(x2)
     u, fin = [], True
-    for P in C:
-        h = [_dot4(row, Xh) for row in P]
-        mag = [_dot4([abs(v) for v in row], aX) for row in P]
-        if not all(m <= CANCELLATION_RATIO * abs(v) for m, v in zip(mag, h)):
-            h = [_dot2_one(row, Xh) for row in P]
+    for P, A in zip(C, absC or [[[abs(v) for v in row] for row in P] for P in C]):
+        h = [(r[0] * x0 + r[2] * x2) + (r[1] * x1 + r[3] * 1.0) for r in P]
+        mag = [(r[0] * a0 + r[2] * a2) + (r[1] * a1 + r[3] * 1.0) for r in A]
+        if not (mag[0] <= CANCELLATION_RATIO * abs(h[0]) and mag[1] <= CANCELLATION_RATIO * abs(h[1])
+                and mag[2] <= CANCELLATION_RATIO * abs(h[2])):
+            h = [_dot2_one(r, (x0, x1, x2, 1.0)) for r in P]
         den = h[2]
-        if abs(den) <= PROJECTION_DENOM_RTOL * _dot4([abs(v) for v in P[2]], aX):
+        if abs(den) <= PROJECTION_DENOM_RTOL * mag[2]:
             u.append((h[0] / 1.0, h[1] / 1.0))
             fin = False
             continue

@@ -91,8 +91,9 @@ def projections_and_spread_one(C: np.ndarray, X) -> tuple:
     view by view (numpy's order below 8 terms): the same numbers bit for bit (tests/test_single_call_twins.py)."""
     X = [float(v) for v in np.asarray(X, float)]
     Cl = C.tolist()
+    absC = [[[abs(v) for v in row] for row in P] for P in Cl]
     pts = [X] + [[X[j] + (math.ulp(abs(X[j])) if j == k else 0.0) for j in range(3)] for k in range(3)]
-    proj = [project_world_one(Cl, p) for p in pts]
+    proj = [project_world_one(Cl, p, absC) for p in pts]
     u0 = proj[0][0]
     if not all(fin for _, fin in proj):
         return np.array(u0), proj[0][1], math.inf

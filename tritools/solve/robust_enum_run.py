@@ -183,7 +183,10 @@ def refine_rows(Cn: np.ndarray, X0: np.ndarray, inS: np.ndarray) -> tuple:
     (R, N) by :func:`tritools.model.stacked.refine_points_stack` and one Gauss-Newton step (a row's few polish
     steps leave the L2 optimum of a set short by ~1e-6 in X, though not in f; the step finishes a weak direction
     the damped LM left, tiny baselines), the views outside the set masked; Cn (R, N, 3, 4) each row's normalised
-    cameras (observations at the origin)."""
+    cameras (observations at the origin).  A stack of one row (a single call): :func:`refine_row_one`."""
+    if len(X0) == 1:
+        Xn, ok = refine_row_one(Cn[0], X0[0], np.flatnonzero(inS[0]).tolist())
+        return Xn[None], np.array([ok])
     Cm = np.where(inS[:, :, None, None], Cn, enum.MASKED_CAMERA)
     zeros = np.zeros(inS.shape + (2,))
     Xn, ok = refine_points_stack(Cm, zeros, X0, np.ones(len(X0), bool))

@@ -73,7 +73,7 @@ def test_three_rest_and_exact_terms_are_the_masked_sums_bit_for_bit():
     rng = np.random.default_rng(4)
     W = enum.subset_masks(3)
     for k in range(3000):
-        N = 3 if k % 2 else int(rng.integers(2, 8))
+        N = 3 if k % 2 else int(rng.integers(2, 12))
         c = 10.0 ** rng.uniform(-150, 160, N) if k % 3 == 0 else rng.uniform(0.1, 1000.0, N)
         if k % 7 == 0:
             c[rng.integers(N)] = np.inf

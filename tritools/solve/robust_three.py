@@ -34,7 +34,7 @@ from ..model.normalize import SCALE_BOUNDS
 from . import robust_enum as enum
 from .robust_bounds import ROUND_DOWN
 from .robust_costs import point_distances2
-from .robust_enum_run import LO_ROUNDS, eligible, enumerated_result, refine_row_one
+from .robust_enum_run import LO_ROUNDS, eligible, enumerated_result, lower_bounds, refine_row_one
 
 __all__ = ["three_view_tls", "three_terms", "three_lower_bound", "exact_terms", "three_rest", "VIEWS", "POLISH_STEPS"]
 
@@ -244,9 +244,12 @@ def exact_terms(c2) -> float:
     """The least of the exact terms of the sets of at most one view (c^2 of the others, rounded down): the scalar
     twin of those terms of :func:`~tritools.solve.robust_enum_run.lower_bounds` (each sum over the views in view
     order with 0 for the left-out view, numpy's order below 8 terms; the minimum), bit for bit
-    (tests/test_robust_three_path.py).  ``c2`` a list or array of the squared thresholds (> 0, inf allowed)."""
+    (tests/test_single_call_twins.py).  ``c2`` a list or array of the squared thresholds (> 0, inf allowed); from 8
+    views on (numpy's order then depends on the layout) lower_bounds itself."""
     c2 = [float(v) for v in c2]
     n = len(c2)
+    if n >= 8:
+        return float(lower_bounds(np.array([np.inf]), np.full((1, 1), np.inf), np.array(c2)[None])[0])
     small = []
     for i in range(n):
         t = 0.0 if i == 0 else c2[0]

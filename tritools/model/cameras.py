@@ -46,6 +46,7 @@ from __future__ import annotations
 import enum
 import math
 from dataclasses import dataclass
+from operator import mul
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -348,31 +349,32 @@ def _rank_ratio_scalar(C: np.ndarray, decide_only: bool = False) -> list:
 
 
 def _conditioned_ratio_one(P: list) -> float:
-    """The scalar twin of :func:`_conditioned_ratio` for one finite camera or left block (three rows of floats)."""
-    k = _p2(max(abs(v) for row in P for v in row))
+    """The scalar twin of :func:`_conditioned_ratio` for one finite camera or left block (three rows of floats).
+    (Its sums are ``sum(map(mul, a, b))``: the order and operations of a sum over a generator, without its cost.)"""
+    k = _p2(max(max(map(abs, P[0])), max(map(abs, P[1])), max(map(abs, P[2]))))
     rows, nonzero = [], []
     for row in P:
         row = [v / k for v in row]
-        sr = _p2(max(abs(v) for v in row))
+        sr = _p2(max(map(abs, row)))
         row = [v / sr for v in row]
-        n = math.sqrt(sum(v * v for v in row))
+        n = math.sqrt(sum(map(mul, row, row)))
         rows.append([v / n for v in row] if n > 0 else row)
         nonzero.append(n > 0)
     u3 = rows[2]
     ps, pns = [], []
     for r in rows[:2]:
-        d = sum(a * b for a, b in zip(r, u3))
+        d = sum(map(mul, r, u3))
         p = [a - d * b for a, b in zip(r, u3)]
-        d = sum(a * b for a, b in zip(p, u3))
+        d = sum(map(mul, p, u3))
         p = [a - d * b for a, b in zip(p, u3)]
-        pn = math.sqrt(sum(v * v for v in p))
+        pn = math.sqrt(sum(map(mul, p, p)))
         ps.append([v / pn for v in p] if pn > 0 else p)
         pns.append(pn)
     ok = nonzero[2] and all(nz and pn > CAMERA_RANK_RTOL for nz, pn in zip(nonzero[:2], pns))
     q0, q1 = ps
-    sg = -1.0 if sum(a * b for a, b in zip(q0, q1)) < 0 else 1.0
-    num = math.sqrt(sum((a - sg * b) ** 2 for a, b in zip(q0, q1)))
-    den = math.sqrt(sum((a + sg * b) ** 2 for a, b in zip(q0, q1)))
+    sg = -1.0 if sum(map(mul, q0, q1)) < 0 else 1.0
+    num = math.sqrt(sum([(a - sg * b) ** 2 for a, b in zip(q0, q1)]))
+    den = math.sqrt(sum([(a + sg * b) ** 2 for a, b in zip(q0, q1)]))
     return num / (den if den > 0 else 1.0) if ok else 0.0
 
 

@@ -16,16 +16,18 @@ column is ~|origin| times its rotation part).
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
 from .cameras import power2_scale
-from .exact import dot2, homogeneous_images
+from .exact import CANCELLATION_RATIO, dot2, homogeneous_images, two_prod, two_sum
+from .geometry import PROJECTION_DENOM_RTOL
 from .stacked import norms, project_quiet
 
-__all__ = ["WorldFrame", "world_frame", "world_origins", "moved_cameras", "recentred", "project_world",
-           "frame_centre_groups", "RECENTRE_RATIO",
+__all__ = ["WorldFrame", "world_frame", "world_origins", "world_origin_one", "moved_cameras", "recentred",
+           "project_world", "project_world_one", "frame_centre_groups", "RECENTRE_RATIO",
            "RESOLVED_SPREAD_RTOL"]
 
 #: the origin moves to the cameras' mean centre when that is farther than this many times their spread ...
@@ -88,8 +90,62 @@ def _centres_loop(cameras: np.ndarray) -> np.ndarray:
 
 def world_frame(cameras) -> WorldFrame:
     """The frame of the module docstring for validated cameras (N, 3, 4) (:func:`world_origins` of a stack of
-    one)."""
-    return WorldFrame(world_origins(np.asarray(cameras, float)[None])[0])
+    one; up to :data:`SCALAR_MAX_VIEWS` cameras its scalar twin :func:`world_origin_one`)."""
+    C = np.asarray(cameras, float)
+    if C.ndim == 3 and C.shape[1:] == (3, 4) and len(C) <= SCALAR_MAX_VIEWS:
+        return WorldFrame(world_origin_one(C))
+    return WorldFrame(world_origins(C[None])[0])
+
+
+#: :func:`world_frame` takes the scalar twin :func:`world_origin_one` up to this many cameras (numpy's sum over the
+#: views is sequential below 8 terms; from 8 on, its order depends on the memory layout).
+SCALAR_MAX_VIEWS = 7
+
+
+def _minor(P: list, c0: int, c1: int, c2: int) -> float:
+    """det of the columns c0, c1, c2 of a 3x4 matrix of floats (rows P[r]), expanded along the first row: the
+    operations of :func:`tritools.model.stacked._det3`, in its order."""
+    (a00, a01, a02), (a10, a11, a12), (a20, a21, a22) = ((r[c0], r[c1], r[c2]) for r in P)
+    return (a00 * (a11 * a22 - a12 * a21)
+            - a01 * (a10 * a22 - a12 * a20)
+            + a02 * (a10 * a21 - a11 * a20))
+
+
+def world_origin_one(C: np.ndarray) -> np.ndarray:
+    """The scalar twin of :func:`world_origins` for one problem's finite cameras (N, 3, 4), N <= 7: the same
+    operations in the same order on Python floats (each camera divided by its largest |entry|, the null vector
+    from the signed minors, the mean of the finite centres summed view by view, the norms as x^2 + y^2 + z^2), so
+    bit for bit the stack's origin (tests/test_scalar_twins_single3.py).  Returns a new (3,) array."""
+    cs, rows = [], []                               # the finite centres; every view's summand (0 where not finite)
+    for P in C.tolist():
+        m = max(abs(v) for row in P for v in row)
+        c = None
+        if m > 0:                                   # (an all-zero camera, not a validated one: no centre)
+            P = [[v / m for v in row] for row in P]
+            a0, a1, a2, a3 = (_minor(P, 1, 2, 3), -_minor(P, 0, 2, 3), _minor(P, 0, 1, 3), -_minor(P, 0, 1, 2))
+            if a3 != 0:
+                c = (a0 / a3, a1 / a3, a2 / a3)
+                c = c if all(math.isfinite(v) for v in c) else None
+        if c is not None:
+            cs.append(c)
+        rows.append(c or (0.0, 0.0, 0.0))
+    k = len(cs)
+    if k < 2:
+        return np.zeros(3)
+    sx, sy, sz = rows[0]
+    for x, y, z in rows[1:]:                        # np.sum over the views: in view order from the first
+        sx, sy, sz = sx + x, sy + y, sz + z
+    mean = (sx / k, sy / k, sz / k)
+    spread = 0.0
+    for c in cs:
+        dx, dy, dz = c[0] - mean[0], c[1] - mean[1], c[2] - mean[2]
+        dev = math.sqrt(dx * dx + dy * dy + dz * dz)
+        if not math.isfinite(dev):
+            return np.zeros(3)                      # the spread is not finite: no move
+        spread = max(spread, dev)
+    far = math.sqrt(mean[0] * mean[0] + mean[1] * mean[1] + mean[2] * mean[2])
+    move = math.isfinite(far) and far > RECENTRE_RATIO * spread and spread > RESOLVED_SPREAD_RTOL * far
+    return np.array(mean) if move else np.zeros(3)
 
 
 def world_origins(C: np.ndarray) -> np.ndarray:
@@ -158,6 +214,50 @@ def project_world(C: np.ndarray, X: np.ndarray) -> tuple:
     with np.errstate(over="ignore", invalid="ignore"):
         h = homogeneous_images(C, np.concatenate([X, np.ones((len(X), 1))], axis=1))
         return project_quiet(C, X, h=h)
+
+
+def project_world_one(C: list, X: list, absC: list | None = None) -> tuple:
+    """The scalar twin of :func:`project_world` for one point: cameras C (N lists of 3 rows of 4 floats), X (3
+    floats) -> (u (N pairs), finite); ``absC`` the cameras' |entries| when the caller has them.  The same numbers
+    bit for bit (tests/test_single_call_twins.py): each homogeneous coordinate as numpy's einsum sums four
+    products, (p_0 + p_2) + (p_1 + p_3); a view recomputed by the compensated dot product
+    (:func:`tritools.model.exact.dot2`'s steps, the plain sum where it is not finite) where some row's sum of
+    |products| exceeds CANCELLATION_RATIO times |sum|; then the rule of :func:`tritools.model.stacked.project_quiet`
+    (its |P_3| . |X~| is that sum of |products| of the third row)."""
+    x0, x1, x2 = X
+    a0, a1, a2 = abs(x0), abs(x1), abs(x2)
+    u, fin = [], True
+    for P, A in zip(C, absC or [[[abs(v) for v in row] for row in P] for P in C]):
+        h = [(r[0] * x0 + r[2] * x2) + (r[1] * x1 + r[3] * 1.0) for r in P]
+        mag = [(r[0] * a0 + r[2] * a2) + (r[1] * a1 + r[3] * 1.0) for r in A]
+        if not (mag[0] <= CANCELLATION_RATIO * abs(h[0]) and mag[1] <= CANCELLATION_RATIO * abs(h[1])
+                and mag[2] <= CANCELLATION_RATIO * abs(h[2])):
+            h = [_dot2_one(r, (x0, x1, x2, 1.0)) for r in P]
+        den = h[2]
+        if abs(den) <= PROJECTION_DENOM_RTOL * mag[2]:
+            u.append((h[0] / 1.0, h[1] / 1.0))
+            fin = False
+            continue
+        ui = (h[0] / den, h[1] / den)
+        fin = fin and math.isfinite(ui[0]) and math.isfinite(ui[1])
+        u.append(ui)
+    return u, fin
+
+
+def _dot4(a, x) -> float:
+    """sum_k a_k x_k of four terms in numpy einsum's order, (p_0 + p_2) + (p_1 + p_3)."""
+    return (a[0] * x[0] + a[2] * x[2]) + (a[1] * x[1] + a[3] * x[3])
+
+
+def _dot2_one(a, x) -> float:
+    """:func:`tritools.model.exact.dot2` of one row (b = 0) on floats: the same operations, in its order."""
+    s, c = 0.0, 0.0
+    for ak, xk in zip(a, x):
+        p, ep = two_prod(ak, xk)
+        s, es = two_sum(s, p)
+        c = c + (ep + es)
+    out = s + c
+    return out if math.isfinite(out) else _dot4(a, x) + 0.0
 
 
 def frame_centre_groups(cameras_f: np.ndarray, frame: WorldFrame) -> np.ndarray:

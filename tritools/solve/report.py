@@ -11,14 +11,15 @@ import numpy as np
 
 from ..model.cameras import depths_stack_arrays, depths_validated
 from ..model.exact import HOMOGENEOUS_RTOL
-from ..model.frame import project_world
+from ..model.frame import project_world, project_world_one
 from ..model.geometry import WorldFrame, project_point_views
 from ..model.refine import disc_shapes
 from ..model.regions import extent_of
 from ..model.stacked import norms
 
 __all__ = ["PointReport", "point_report", "points_report_stack", "solve_radius", "solve_ball", "region_extent",
-           "gamma_upper", "rounding_spread", "projections_and_spread", "projections_and_spread_stack"]
+           "gamma_upper", "rounding_spread", "projections_and_spread", "projections_and_spread_one",
+           "projections_and_spread_views", "projections_and_spread_stack"]
 
 _U = 2.0 ** -53                   # the unit round-off of float64
 #: |u~_i - u_i| <= _PROJ_ABS |u_i|: the quotient of two homogeneous coordinates with relative error HOMOGENEOUS_RTOL
@@ -66,7 +67,16 @@ def rounding_spread(C: np.ndarray, X: np.ndarray) -> float:
 
 
 def projections_and_spread(C: np.ndarray, X: np.ndarray) -> tuple:
-    """(u (N, 2) the compensated projections of X, finite, :func:`rounding_spread`) from one stacked projection."""
+    """(u (N, 2) the compensated projections of X, finite, :func:`rounding_spread`): up to :data:`SCALAR_MAX_VIEWS`
+    views by the scalar twin :func:`projections_and_spread_one`, else from one stacked projection
+    (:func:`projections_and_spread_views`); the same numbers (:func:`projections_and_spread_stack`: M problems)."""
+    if len(C) <= SCALAR_MAX_VIEWS:
+        return projections_and_spread_one(C, X)
+    return projections_and_spread_views(C, X)
+
+
+def projections_and_spread_views(C: np.ndarray, X: np.ndarray) -> tuple:
+    """:func:`projections_and_spread` of one problem from one stacked projection of X and X + ulp(|X_k|) e_k."""
     X = np.asarray(X, float)
     Xs = np.vstack([X, X + np.diag(np.spacing(np.abs(X)))])
     u, _, fin = project_world(np.broadcast_to(C, (4,) + C.shape), Xs)
@@ -91,6 +101,29 @@ def projections_and_spread_stack(C: np.ndarray, X: np.ndarray) -> tuple:
         d2 = np.max(np.sum((u[:, 1:] - u[:, :1]) ** 2, axis=3), axis=1)
         spread = np.sqrt(np.sum(d2, axis=1) / (2 * N))
     return u[:, 0], fin[:, 0], np.where(fin.all(axis=1), spread, np.inf)
+
+
+def projections_and_spread_one(C: np.ndarray, X) -> tuple:
+    """The scalar twin of :func:`projections_and_spread_views` for a few views (N <= :data:`SCALAR_MAX_VIEWS`): the four
+    points X and X + ulp(|X_k|) e_k projected by :func:`tritools.model.frame.project_world_one`, the spread summed
+    view by view (numpy's order below 8 terms): the same numbers bit for bit (tests/test_single_call_twins.py)."""
+    X = [float(v) for v in np.asarray(X, float)]
+    Cl = C.tolist()
+    absC = [[[abs(v) for v in row] for row in P] for P in Cl]
+    pts = [X] + [[X[j] + (math.ulp(abs(X[j])) if j == k else 0.0) for j in range(3)] for k in range(3)]
+    proj = [project_world_one(Cl, p, absC) for p in pts]
+    u0 = proj[0][0]
+    if not all(fin for _, fin in proj):
+        return np.array(u0), proj[0][1], math.inf
+    total = None
+    for i, (a, b) in enumerate(u0):
+        d2 = max((u[i][0] - a) * (u[i][0] - a) + (u[i][1] - b) * (u[i][1] - b) for u, _ in proj[1:])
+        total = d2 if total is None else total + d2
+    return np.array(u0), True, math.sqrt(total / (2 * len(Cl)))
+
+
+#: :func:`projections_and_spread_one` replaces the stacked projection up to this many views.
+SCALAR_MAX_VIEWS = 7
 
 
 @dataclass(frozen=True)

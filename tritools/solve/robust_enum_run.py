@@ -38,6 +38,7 @@ import time
 import numpy as np
 
 from ..model.normalize import SCALE_BOUNDS
+from ..model.lm_one import refine_point_one
 from ..model.stacked import gauss_newton_polish, refine_points_stack
 from . import robust_enum as enum
 from .robust_bounds import ROUND_DOWN
@@ -45,8 +46,8 @@ from .robust_costs import point_distances2_rows, point_distances2_stack
 from .robust_drive import credit     # (the drive's rule: per-problem time limits)
 
 __all__ = ["enumerate_tls", "enumerate_many", "eligible", "closed_terms", "lower_bounds", "refine_rows",
-           "enumerated_result", "enumerated_results", "ENUM_CHUNK", "ENUM_ROWS", "SINGLE_POLISH_STEPS",
-           "THREE_VIEW_PATH"]
+           "refine_row_one", "enumerated_result", "enumerated_results", "ENUM_CHUNK", "ENUM_ROWS",
+           "SINGLE_POLISH_STEPS", "THREE_VIEW_PATH"]
 
 log = logging.getLogger(__name__)
 
@@ -183,12 +184,25 @@ def refine_rows(Cn: np.ndarray, X0: np.ndarray, inS: np.ndarray) -> tuple:
     (R, N) by :func:`tritools.model.stacked.refine_points_stack` and one Gauss-Newton step (a row's few polish
     steps leave the L2 optimum of a set short by ~1e-6 in X, though not in f; the step finishes a weak direction
     the damped LM left, tiny baselines), the views outside the set masked; Cn (R, N, 3, 4) each row's normalised
-    cameras (observations at the origin)."""
+    cameras (observations at the origin).  A stack of one row (a single call): :func:`refine_row_one`."""
+    if len(X0) == 1:
+        Xn, ok = refine_row_one(Cn[0], X0[0], np.flatnonzero(inS[0]).tolist())
+        return Xn[None], np.array([ok])
     Cm = np.where(inS[:, :, None, None], Cn, enum.MASKED_CAMERA)
     zeros = np.zeros(inS.shape + (2,))
     Xn, ok = refine_points_stack(Cm, zeros, X0, np.ones(len(X0), bool))
     Xn = gauss_newton_polish(Cm, zeros, Xn, ok)
     return Xn, ok & np.isfinite(Xn).all(axis=1)
+
+
+def refine_row_one(Cn: np.ndarray, X0: np.ndarray, views: list) -> tuple:
+    """The scalar twin of :func:`refine_rows` for one row (:func:`tritools.model.lm_one.refine_point_one` on Python
+    floats): (Xn (3,), ok) for one problem's normalised cameras Cn (N, 3, 4), a start X0 (3,) and its set's views
+    (ascending).  The masked views are left out: their residual and Jacobian are 0 at every X, terms that add
+    nothing.  Equal to :func:`refine_rows` up to round-off (tests/test_single_call_twins.py)."""
+    C = Cn.tolist()
+    X, ok, _ = refine_point_one([C[i] for i in views], [(0.0, 0.0)] * len(views), X0.tolist())
+    return np.array(X), ok
 
 
 def _first_of_runs(sorted_keys: np.ndarray) -> np.ndarray:

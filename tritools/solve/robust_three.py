@@ -9,7 +9,7 @@ and the superadditive closure of L2LB(V) is its maximum with the largest pair bo
 L2* is 0).  :func:`three_view_tls` takes the steps of :class:`tritools.solve.robust_enum_run._Group` for one
 problem with the same functions and rules -- the frame (:func:`~tritools.solve.robust_enum.enum_frame`), the four
 candidates in one masked stack (:func:`~tritools.solve.robust_enum.enum_candidates`), the best of them offered and
-refined on its inlier set (:func:`~tritools.solve.robust_enum_run.refine_rows`, inlier set -> its L2 optimum ->
+refined on its inlier set (:func:`~tritools.solve.robust_enum_run.refine_row_one`, inlier set -> its L2 optimum ->
 inlier set, at most :data:`~tritools.solve.robust_enum_run.LO_ROUNDS` rounds), the Lagrangian bounds
 (:func:`~tritools.solve.robust_enum.enum_bounds_rows`) of the sets whose c^2(V - S) alone does not meet UB and of
 the pairs holding a view outside the best inlier set (one stacked verification: the whole set's bound with them,
@@ -34,9 +34,9 @@ from ..model.normalize import SCALE_BOUNDS
 from . import robust_enum as enum
 from .robust_bounds import ROUND_DOWN
 from .robust_costs import point_distances2
-from .robust_enum_run import LO_ROUNDS, eligible, enumerated_result, lower_bounds, refine_rows
+from .robust_enum_run import LO_ROUNDS, eligible, enumerated_result, lower_bounds, refine_row_one
 
-__all__ = ["three_view_tls", "three_terms", "three_lower_bound", "exact_terms", "VIEWS", "POLISH_STEPS"]
+__all__ = ["three_view_tls", "three_terms", "three_lower_bound", "exact_terms", "three_rest", "VIEWS", "POLISH_STEPS"]
 
 log = logging.getLogger(__name__)
 
@@ -48,6 +48,9 @@ VIEWS = 3
 #: single calls per setting, median CPU, settings interleaved): 5 steps 2.48-2.52 ms, 2 steps 2.31-2.34, 1 step
 #: 2.18-2.25, 0 steps 2.22-2.25; scenes left to the branch and bound 23 / 21 / 21 / 22 of 300; every one certified.
 POLISH_STEPS = 1
+#: the sizes of the rows of :func:`~tritools.solve.robust_enum.subset_masks` (3).
+_SIZE = np.array([2, 2, 2, 3])
+_SIZE.flags.writeable = False
 
 
 def three_view_tls(search):
@@ -69,9 +72,9 @@ class _ThreeViews:
     def __init__(self, search):
         self.s = search
         self.W = enum.subset_masks(VIEWS)
-        self.size = self.W.sum(axis=1)
-        with np.errstate(over="ignore", invalid="ignore"):       # c^2(V - S); inf: c_i = inf
-            self.rest = np.sum(np.where(self.W, 0.0, search.c2[None]), axis=1) * ROUND_DOWN
+        self.size = _SIZE
+        c2 = search.c2.tolist()
+        self.rest = np.array(three_rest(c2))          # c^2(V - S); inf: c_i = inf
         self.lb = np.zeros(len(self.W))
         self.bounded = np.zeros(len(self.W), bool)
         self.F = None
@@ -79,7 +82,7 @@ class _ThreeViews:
         from .robust import scale_from
 
         self.floor = scale_from(SCALE_BOUNDS[1], search.c2)
-        self.exact = exact_terms(search.c2)           # the terms of |S| <= 1 (they do not change)
+        self.exact = exact_terms(c2)                  # the terms of |S| <= 1 (they do not change)
 
     def run(self):
         s = self.s
@@ -137,15 +140,13 @@ class _ThreeViews:
             if len(S) < 2 or frozenset(S) in refined:
                 return
             refined.add(frozenset(S))
-            inS = np.zeros((1, VIEWS), bool)
-            inS[0, S] = True
-            Xr, ok = refine_rows(self.Cn[None], fr.normalized_point(X)[None], inS)
-            if not ok[0]:
+            Xr, ok = refine_row_one(self.Cn, fr.normalized_point(X), S)
+            if not ok:
                 return
-            Xw = fr.world_point(Xr[0])
+            Xw = fr.world_point(Xr)
             s.offer(Xw)
             row = enum.row_of(VIEWS)[sum(1 << i for i in S)]
-            self.Xn[row], self.refined[row] = Xr[0], True
+            self.Xn[row], self.refined[row] = Xr, True
             if s.best_S == frozenset(S) or not np.array_equal(s.best_X, Xw):
                 return
             X, S = s.best_X, sorted(s.best_S)                # a new best with another inlier set
@@ -162,13 +163,13 @@ class _ThreeViews:
         self.refined[failing] = True
         if not m.size:
             return lb
-        Xr, ok = refine_rows(np.broadcast_to(self.Cn, (len(m),) + self.Cn.shape), self.Xn[m], self.W[m])
-        for r, row in enumerate(m):
-            if ok[r]:
-                self.Xn[row] = Xr[r]
-                s.offer(self.frame.world_point(Xr[r]))
         again = np.zeros(len(self.W), bool)
-        again[m[ok]] = True
+        for row in m.tolist():
+            Xr, ok = refine_row_one(self.Cn, self.Xn[row], np.nonzero(self.W[row])[0].tolist())
+            if ok:
+                self.Xn[row] = Xr
+                s.offer(self.frame.world_point(Xr))
+                again[row] = True
         old = self.lb.copy()
         self.bounded &= ~again
         self._bound(again)
@@ -229,10 +230,36 @@ def three_terms(lb: list, rest: list) -> list:
             (closed_all + rest[3]) * ROUND_DOWN]
 
 
-def exact_terms(c2: np.ndarray) -> float:
-    """The least of the exact terms of the sets of at most one view (c^2 of the others, rounded down), by
-    :func:`~tritools.solve.robust_enum_run.lower_bounds` itself (its sums, once per problem)."""
-    return float(lower_bounds(np.array([np.inf]), np.full((1, 1), np.inf), c2[None])[0])
+def three_rest(c2: list) -> list:
+    """c^2(V - S) rounded down for the rows of :func:`~tritools.solve.robust_enum.subset_masks` (3) (the pairs
+    {0, 1}, {0, 2}, {1, 2}, then all views) from the squared thresholds ``c2`` (3 floats, > 0, inf allowed): the
+    scalar twin of the masked sum (0 inside S) over the views in view order (numpy's order for three terms) times
+    ``ROUND_DOWN``, bit for bit (tests/test_single_call_twins.py)."""
+    c0, c1, c2_ = c2
+    return [((0.0 + 0.0) + c2_) * ROUND_DOWN, ((0.0 + c1) + 0.0) * ROUND_DOWN, ((c0 + 0.0) + 0.0) * ROUND_DOWN,
+            ((0.0 + 0.0) + 0.0) * ROUND_DOWN]
+
+
+def exact_terms(c2) -> float:
+    """The least of the exact terms of the sets of at most one view (c^2 of the others, rounded down): the scalar
+    twin of those terms of :func:`~tritools.solve.robust_enum_run.lower_bounds` (each sum over the views in view
+    order with 0 for the left-out view, numpy's order below 8 terms; the minimum), bit for bit
+    (tests/test_single_call_twins.py).  ``c2`` a list or array of the squared thresholds (> 0, inf allowed); from 8
+    views on (numpy's order then depends on the layout) lower_bounds itself."""
+    c2 = [float(v) for v in c2]
+    n = len(c2)
+    if n >= 8:
+        return float(lower_bounds(np.array([np.inf]), np.full((1, 1), np.inf), np.array(c2)[None])[0])
+    small = []
+    for i in range(n):
+        t = 0.0 if i == 0 else c2[0]
+        for j in range(1, n):
+            t = t + (0.0 if j == i else c2[j])
+        small.append(t)
+    total = c2[0]
+    for v in c2[1:]:
+        total = total + v
+    return min(min(small) * ROUND_DOWN, total * ROUND_DOWN)
 
 
 def three_lower_bound(ub: float, terms: list, exact: float) -> float:

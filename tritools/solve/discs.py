@@ -42,7 +42,7 @@ from ..model.normalize import normalization_stack
 from ..model.regions import ConeKind, Region
 from ..model.stacked import LM_MAX_ITER, damped_step, lm_accept, norms, project_stack
 from .decide import decide, decide_reported, gamma_from_c, gamma_lower
-from .report import gamma_upper
+from .report import disc_distances, gamma_upper
 from .regions_verify import compact_bounds, region_forms
 
 __all__ = ["DiscBatch", "disc_radius", "verify_discs", "refine_discs_stack", "ellipse_shapes"]
@@ -156,7 +156,7 @@ def verify_discs(cameras, centers, radii, *, tolerances: Tolerances = DEFAULT_TO
     X = norm.world_points(Xn) + origin
     uw, _, fin_w = project_world(C, X)
     ok &= fin_w
-    dist = np.maximum(0.0, np.linalg.norm(uw - x, axis=2) - rho)
+    dist = disc_distances(uw, x, np.broadcast_to(rho, x.shape[:2]))     # the rule of point_report (review 10)
     return reported_batch(ok, optimal, c_lower, X, uw, fin_w, dist, norm, tolerances)
 
 

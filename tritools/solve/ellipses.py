@@ -24,7 +24,7 @@ from sospoly import DEFAULT_TOLERANCES, Tolerances
 from sospoly.budget import Deadline
 from sospoly.solvers import with_single_threaded_blas
 
-from ..model.frame import recentred
+from ..model.frame import project_world, recentred
 from ..model.normalize import normalization_stack
 from ..model.stacked import LM_MAX_ITER, damped_step, lm_accept, project_stack
 from .decide import decide
@@ -136,7 +136,7 @@ def verify_ellipses(cameras, centers, D, *, tolerances: Tolerances = DEFAULT_TOL
     ok &= ok_b
     _, optimal, c_lower = decide(lower, upper_f, tolerances, N, norm.resolution)
     X = norm.world_points(Xn) + origin
-    uw, _, fin_w = project_stack(C, X)
+    uw, _, fin_w = project_world(C, X)    # the reported numbers: compensated projections, as verify_discs (review 10)
     ok &= fin_w
     ew = _local_residual(np.where(fin_w[:, None, None], uw - x, 0.0), R, sigma)[0]
     return reported_batch(ok, optimal, c_lower, X, uw, fin_w, np.linalg.norm(ew, axis=2), norm, tolerances)

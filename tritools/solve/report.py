@@ -153,12 +153,16 @@ def point_report(X, cameras, regions, world_frame=WorldFrame.RIGHT_HANDED) -> Po
 
 
 def disc_distances(u: np.ndarray, centres: np.ndarray, radii: np.ndarray) -> np.ndarray:
-    """Distances (N,) of image points u (N, 2) to point / disc regions (centres (N, 2), radii (N,): 0 for a point):
-    ||u_i - c_i|| for a point (its :meth:`~tritools.model.regions.Region.distance`, the same numbers), max(0,
-    ||u_i - c_i|| - rho_i) for a disc (closed form: within a few ulps of the region's closest-point distance, and
-    no further from the exact one).  NaN / inf where u is not finite."""
-    d = np.hypot(u[:, 0] - centres[:, 0], u[:, 1] - centres[:, 1])
-    return np.where(radii > 0, np.maximum(d - radii, 0.0), d)
+    """Distances (..., N) of image points u (..., N, 2) to point / disc regions (centres (..., N, 2), radii (..., N):
+    0 for a point): q = ||u_i - c_i|| for a point (its :meth:`~tritools.model.regions.Region.distance`, the same
+    numbers; its round-off is relative to q, within :func:`gamma_upper`'s margin), and for a disc the closed form
+    max(0, q - rho + 4u (q + rho)): the differences u - c and the norm err by at most 3u q, rho = sqrt(D_00) and the
+    subtraction by u rho and u |q - rho|, so this bounds the exact distance of the float data from above even where
+    q >> |u| (a large disc whose border passes near the projection; review 10).  NaN / inf where u is not finite."""
+    q = np.hypot(u[..., 0] - centres[..., 0], u[..., 1] - centres[..., 1])
+    with np.errstate(invalid="ignore"):
+        disc = np.maximum(q - radii + 4 * _U * (q + radii), 0.0)
+    return np.where(radii > 0, disc, q)
 
 
 def points_report_stack(C: np.ndarray, x: np.ndarray, X: np.ndarray, world_frame=WorldFrame.RIGHT_HANDED):

@@ -69,10 +69,11 @@ ALL_PAIRS_CHUNK_BYTES = 256 * 2 ** 20
 #: on the 2-core machine at N = 200; half of it, so the estimate errs long).
 ALL_PAIRS_FLOPS = 1e9
 #: seconds per view at which :func:`band_seconds` counts a band bound: a fixed part per view plus a part per view
-#: and squared width (measured on the 2-core machine, quiet, one problem of 400 views with disc regions: 0.13 s at
-#: width 4 and 0.29 s at width 8, i.e. ~2.0e-4 + 8.3e-6 w^2 per view; wave 9's single 12.5e-6 w^2 counted 0.08 s at
-#: width 4 and let a band started 0.1 s before a 0.2 s limit run 60% past it).  Rounded up, so the estimate errs long.
-BAND_SECONDS_PER_VIEW = 2.2e-4
+#: and squared width, fitted to the measured times (one problem of 100-400 views, points and discs: ~2e-4 s per view
+#: at width 4, ~7e-4 at width 8).  Not rounded up: the band's column loops stop at the active deadline
+#: (:mod:`sospoly.analysis.banded`), so a band that runs longer than estimated costs the rest of the limit, never more,
+#: while an estimate that errs long skips bands that would certify in time (review 10: N = 400 at 0.1-0.15 s).
+BAND_SECONDS_PER_VIEW = 5.0e-5
 BAND_SECONDS = 1.0e-5
 
 
@@ -336,8 +337,7 @@ def all_pairs_seconds(n_views: int, problems: int = 1) -> float:
 def band_seconds(n_views: int, width: int, problems: int = 1) -> float:
     """Estimated seconds of the band bound of ``width`` (:func:`_band_bounds`) on ``problems`` problems of
     ``n_views`` views: linear in N, a fixed part and a part quadratic in the width per view
-    (:data:`BAND_SECONDS_PER_VIEW` + :data:`BAND_SECONDS` width^2; one band call at N = 400 takes 0.13-0.29 s, which a
-    call started just before its deadline would overrun it by)."""
+    (:data:`BAND_SECONDS_PER_VIEW` + :data:`BAND_SECONDS` width^2; one band call at N = 400 takes 0.08-0.29 s)."""
     return problems * n_views * (BAND_SECONDS_PER_VIEW + width * width * BAND_SECONDS)
 
 

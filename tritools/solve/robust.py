@@ -327,9 +327,12 @@ class TlsSearch(NodeBounds):
     def fallback_estimate(self):
         """The local L2 estimate of every view (:func:`tritools.solve.trivial.local_estimate`, in the normalised
         frame), or None: the estimate of last resort, so that a search stopped before any candidate still
-        reports X and gamma_UB."""
+        reports X and gamma_UB.  Past the deadline the frame's origin (the DLT point of the region centres, where
+        the refinement starts) without the refinement: a batch stopped by its limit reports every point at once."""
         try:
             norm = normalization_for(self.C, self.regions)
+            if self.deadline.expired:
+                return norm.world_point(np.zeros(3))
             est = local_estimate(norm.cameras(self.C), norm.regions(self.regions))
         except (ValueError, np.linalg.LinAlgError, FloatingPointError):
             return None

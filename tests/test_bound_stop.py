@@ -114,3 +114,56 @@ def test_a_callers_level_is_not_passed_to_the_sub_problems(monkeypatch):
     low = tritools.triangulate(P, obs, robust=C, options=opts)
     assert plain.optimal and low.optimal and np.array_equal(plain.inliers, low.inliers)
     assert (low.gamma_lb, low.gamma_ub) == (plain.gamma_lb, plain.gamma_ub)
+
+
+# ----------------------------------------------------------------------------- review 10b
+def test_batch_rows_stop_at_the_level_like_single_calls():
+    """A batch row decided but not certified by the batched degree-2 SDP stops there when its gamma_lb reaches the
+    caller's lower_bound_stop, as a single call does (it went on at delta = 4, with another bound)."""
+    from tritools.solve.options import TriangulationOptions
+
+    rng = np.random.default_rng(11)
+    probs = [robust_protocol_scene(3 + i % 2, 1, 5.0, rng)[:2] for i in range(60)]
+    opts = TriangulationOptions(lower_bound_stop=0.0)
+    many = tritools.triangulate_many(probs, options=opts, executor=None)
+    stopped = 0
+    for p, m in zip(probs, many):
+        s = tritools.triangulate(*p, options=opts)
+        assert (s.status, s.optimal, s.delta) == (m.status, m.optimal, m.delta)
+        assert s.gamma_lb == pytest.approx(m.gamma_lb, rel=1e-9)
+        stopped += not s.optimal
+    assert stopped >= 3
+
+
+def test_robust_sub_solves_respect_the_callers_max_delta(monkeypatch):
+    """Theorem 1 first (delta = 4) is not run under a caller's max_delta = 2: no sub-problem bound above degree 2."""
+    import tritools.solve.triangulate as tt
+
+    P, obs, _, _ = _scene(3, 1, 14)
+    orig, degrees = tt.triangulate, []
+
+    def spy(*a, **k):
+        r = orig(*a, **k)
+        degrees.extend(t.delta for t in r.attempts if t.gamma_lb is not None)
+        return r
+
+    monkeypatch.setattr(tt, "triangulate", spy)
+    r = tritools.triangulate(P, obs, robust=200.0, max_delta=2)
+    assert degrees and max(degrees) <= 2
+    assert not r.optimal
+
+
+def test_refused_light_solve_is_not_weak():
+    """Options that refuse the degree-2 cap (method corollary1 at delta 4) run the full plan: the subset is not
+    weak, so a later strengthen does not solve the same plan again (and never weak and exhausted at once)."""
+    from tritools.solve.options import TriangulationOptions
+    from tritools.solve.robust_bounds import SubsetBounds
+    from sospoly.budget import Deadline
+
+    P, obs, _, _ = _scene(3, 1, 14)
+    opts = TriangulationOptions(method="corollary1", delta=4)
+    sb = SubsetBounds(P, [tritools.Point(p) for p in obs], opts, Deadline(None), points=obs)
+    S = frozenset(range(3))
+    sb._solve_one(S, light=True)
+    assert S not in sb.weak
+    assert not (S in sb.weak and S in sb.exhausted)

@@ -298,7 +298,7 @@ class SubsetBounds:
             return
         self.n_solved += 1
         self.budget_exceeded |= out.budget_exceeded
-        if (light or out.stopped) and not out.certified:
+        if (out.light or out.stopped) and not out.certified:     # light as it ran (the options may refuse it)
             self.weak.add(S)
         if out.exhausted:                       # the plan ran out, not at a time or memory limit nor at ``need``
             self.exhausted.add(S)

@@ -11,19 +11,21 @@ degree plan for three views.
   a result is not certified and the plan did not run out: the subset stays weak (a later, larger need solves it
   again) and is never exhausted (:attr:`SubSolve.stopped`).  A caller's own ``lower_bound_stop`` (a level of the
   whole problem) is not passed on;
-* three views from ``from_delta``, point regions, ``method="auto"``: Theorem 1 at delta = 4 first
+* three views from ``from_delta``, point regions, ``method="auto"``, no ``max_delta`` below 4: Theorem 1 at
+  delta = 4 first
   (:data:`THEOREM1_FIRST`).  Three camera centres are always coplanar, so Corollary 1's epipolar constraints admit
   image points on the centres' plane lines and its delta = 4 bound often stops below L2* (the plan then ends with
   the exact-variety step, Theorem 1 at delta = 4, anyway: :mod:`tritools.solve.stages.exact`).  Measured on the
   full-plan sub-problems of 300 robust calls (N = 3-5, 20-40% wrong matches, 5 px): Theorem 1 at delta = 4 alone
   certified all 16 with the same bounds at 0.61x the CPU time of Corollary 1 delta = 4 -> Theorem 1 delta = 4.
-  Where it neither certifies nor reaches ``need``, the ordinary plan from ``from_delta`` runs too and the larger
-  bound is kept (its status decides exhaustion, as before).
+  Where it neither certifies nor reaches ``need`` nor runs out of time, the ordinary plan from ``from_delta`` runs
+  too, within what is left of the limit, and the larger bound is kept (its status decides exhaustion, as before).
 """
 from __future__ import annotations
 
 import dataclasses
 import math
+import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -55,13 +57,16 @@ THEOREM1_FIRST = True
 class SubSolve:
     """The outcome of one sub-problem: ``lb`` the rigorous bound of L2*(S) (pixels^2, rounded down; 0 without
     one), ``X`` the estimate (or None), ``certified``, ``stopped`` (at ``need``, not certified), ``exhausted`` (the
-    full plan ran out: no later solve raises the bound), ``budget_exceeded``."""
+    full plan ran out: no later solve raises the bound), ``budget_exceeded``, ``light`` (only the degree-2 steps
+    ran: the caller's options may refuse them, review 10b), ``timed_out`` (stopped by its time limit)."""
     lb: float
     X: np.ndarray | None
     certified: bool
     stopped: bool = False
     exhausted: bool = False
     budget_exceeded: bool = False
+    light: bool = False
+    timed_out: bool = False
 
 
 def stop_level(need: float, n_views: int) -> float | None:
@@ -93,12 +98,14 @@ def solve_subproblem(cameras, regions, opts, *, light: bool, from_delta: int | N
     stop = None if light or not BOUND_STOP else stop_level(need, len(cameras))
     if stop is not None or opts.lower_bound_stop is not None:      # the sub-problem's own level, or none
         opts = dataclasses.replace(opts, lower_bound_stop=stop)
-    first = None
+    first, t0 = None, time.monotonic()
     if THEOREM1_FIRST and not light and from_delta is not None and len(cameras) == 3 and points \
-            and opts.method == MethodChoice.AUTO:
+            and opts.method == MethodChoice.AUTO and (opts.max_delta is None or opts.max_delta >= 4):
         first = _run(cameras, regions, _theorem1(opts), light, stop, need)
-        if first is not None and (first.certified or first.lb >= need):
-            return first
+        if first is not None and (first.certified or first.lb >= need or first.timed_out):
+            return first                        # certified, at the level, or out of time: no second solve
+        if math.isfinite(limit):                # the ordinary plan gets what is left of the limit
+            opts = opts.replace(time_limit=max(1e-3, limit - (time.monotonic() - t0)))
     plan = _run(cameras, regions, opts, light, stop, need)
     return _larger(first, plan)
 
@@ -126,7 +133,7 @@ def _run(cameras, regions, opts, light: bool, stop, need: float) -> SubSolve | N
     stopped = stop is not None and not certified and lb >= need
     X = np.asarray(res.X, float) if res.X is not None and np.all(np.isfinite(res.X)) else None
     return SubSolve(lb, X, certified, stopped, not light and not stopped and res.status in EXHAUSTED,
-                    res.status == Status.BUDGET_EXCEEDED)
+                    res.status == Status.BUDGET_EXCEEDED, light, res.status == Status.TIME_LIMIT)
 
 
 def _larger(first: SubSolve | None, plan: SubSolve | None) -> SubSolve | None:
@@ -134,4 +141,5 @@ def _larger(first: SubSolve | None, plan: SubSolve | None) -> SubSolve | None:
     if first is None or plan is None:
         return plan if first is None else first
     return SubSolve(max(first.lb, plan.lb), plan.X if plan.X is not None else first.X, plan.certified,
-                    plan.stopped, plan.exhausted, first.budget_exceeded or plan.budget_exceeded)
+                    plan.stopped, plan.exhausted, first.budget_exceeded or plan.budget_exceeded, plan.light,
+                    plan.timed_out)

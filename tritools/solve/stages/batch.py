@@ -56,7 +56,7 @@ from ..report import points_report_stack
 from ..sdp_batch import solve_corollary1_points
 from ..settings import stack_deadline
 from ..trivial import TRIVIAL_BOUND
-from .context import AttemptStep, ImplName, Implementation, fast_names
+from .context import AttemptStep, ImplName, Implementation, bound_stop_reached, fast_names
 
 __all__ = ["BatchContext", "BatchPlan", "BATCH_VERIFY_IMPLEMENTATIONS", "BATCH_SDP_IMPLEMENTATIONS",
            "plan_batch_stage", "verify_batch_stage", "sdp_batch_stage", "per_point_batch_stage",
@@ -306,7 +306,7 @@ def _sdp_points(idx: np.ndarray, ctx: BatchContext) -> None:
         m, opt = idx[k], bool(b.optimal[k])
         ctx.prefix[m] += (Attempt("corollary1", 2, str(b.status[k]), float(b.gamma_lb[k]), None,
                                   AttemptStep.SDP_BATCH.value, "dense", ("ipm-batch:converged",)),)
-        if opt or final:
+        if opt or final or bound_stop_reached(ctx.opts.lower_bound_stop, float(b.gamma_lb[k]), opt):
             ctx.store(np.array([m]), b.X[k:k + 1], b.X_raw[k:k + 1], b.gamma_lb[k:k + 1], b.image_points[k:k + 1],
                       str(b.status[k]), opt, b.certified_by[k] if opt else None, b.scale[k])
         else:                       # delta = 2 decided, not certified: the per-point path continues at 4

@@ -106,6 +106,13 @@ def sparsity_name(step: Step) -> str:
     return "dense" if step.formulation == "dense" else "views"
 
 
+def bound_stop_reached(stop, gamma_lb, certified: bool) -> bool:
+    """The rule of ``lower_bound_stop`` (the best-bound stop of the degree plan): an uncertified result whose
+    rigorous gamma_lb is at the level ``stop`` (None: never) ends the plan; single calls
+    (:meth:`PointContext.bound_reached`) and the batch's degree-2 SDP rows alike."""
+    return stop is not None and not certified and gamma_lb is not None and gamma_lb >= stop
+
+
 class PointContext:
     """One triangulation in progress (module docstring).  ``stages`` / ``step_stages``: the pipelines run
     (:mod:`tritools.solve.stages`); ``fast``: the names of the fast implementations allowed."""
@@ -138,9 +145,9 @@ class PointContext:
     def bound_reached(self) -> bool:
         """Whether the best result so far is uncertified with a rigorous gamma_lb at the options'
         ``lower_bound_stop`` (no more steps then: :mod:`tritools.solve.stages.sdp`)."""
-        stop, best = self.opts.lower_bound_stop, self.best
-        return stop is not None and best is not None and not best.status.certified and \
-            best.gamma_lb is not None and best.gamma_lb >= stop
+        best = self.best
+        return best is not None and bound_stop_reached(self.opts.lower_bound_stop, best.gamma_lb,
+                                                       best.status.certified)
 
     @property
     def expired(self) -> bool:

@@ -354,3 +354,20 @@ def test_time_limit_counts_from_the_call_entry(monkeypatch):
                         lambda self, d: seen.append(d.remaining()) or setattr(self, "deadline", d))
     tritools.triangulate(P, x, robust=2.0, time_limit=0.5)
     assert seen and seen[0] <= 0.5
+
+
+def test_sampled_pairs_are_the_combinations_draw():
+    """The candidate stage's pairs without the full list: the same pairs in the same order as drawing from
+    list(itertools.combinations(range(N), 2)) with the same generator (79,800 pairs at N = 400)."""
+    import itertools
+
+    from tritools.solve.robust import MAX_PAIRS
+    from tritools.solve.robust_rays import sampled_pairs
+
+    for N in (2, 3, 10, 32, 33, 120, 400):
+        for seed in range(2):
+            pairs = list(itertools.combinations(range(N), 2))
+            rng = np.random.default_rng(seed)
+            if len(pairs) > MAX_PAIRS:
+                pairs = [pairs[k] for k in rng.choice(len(pairs), MAX_PAIRS, replace=False)]
+            assert sampled_pairs(N, np.random.default_rng(seed), MAX_PAIRS) == [frozenset(p) for p in pairs]

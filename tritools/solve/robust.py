@@ -66,7 +66,6 @@ the relative part ``gap_rel * max(scale, UB)``.  Bounds are reported as gamma = 
 """
 from __future__ import annotations
 
-import itertools
 import logging
 import math
 import time
@@ -86,7 +85,7 @@ from .robust_drive import drive
 from .settings import call_deadline
 from .robust_loo import leave_one_out
 from .robust_nodes import NodeBounds, lookahead_bound
-from .robust_rays import ray_candidates
+from .robust_rays import ray_candidates, sampled_pairs
 from .robust_costs import disc_distances2, disc_shapes, point_distances2, point_distances2_one
 from .robust_report import tls_reported
 
@@ -398,11 +397,9 @@ class TlsSearch(NodeBounds):
             self.loo_lb = max(self.loo_lb, (yield from robust_suspects.suspect_bound(self)))
             if self.meets(self.loo_lb):
                 return
-        pairs = list(itertools.combinations(range(self.N), 2))
-        if len(pairs) > MAX_PAIRS:
-            pairs = [pairs[k] for k in rng.choice(len(pairs), MAX_PAIRS, replace=False)]
-        pairs = [frozenset(p) for p in pairs]
-        yield from self.need(pairs)
+        if self.deadline.expired:               # past the limit: no pair stage (79,800 pairs at N = 400)
+            return
+        yield from self.need(sampled_pairs(self.N, rng, MAX_PAIRS))
         est = self.bounds.take_estimates()
         starts = []
         if est:

@@ -22,7 +22,7 @@ import math
 
 import numpy as np
 
-__all__ = ["ray_candidates", "SWEEP", "GOLDEN_STEPS", "MAX_RAYS"]
+__all__ = ["ray_candidates", "sampled_pairs", "SWEEP", "GOLDEN_STEPS", "MAX_RAYS"]
 
 #: depths of the geometric sweep along each ray: baseline * 10^k, k in [-3, 3] (this many).
 SWEEP = 13
@@ -174,3 +174,14 @@ def _golden(search, centres, dirs, a, b) -> list:
         f1, f2 = np.where(left, fn, f2), np.where(left, f1, fn)
     s = np.where(f1 <= f2, x1, x2)
     return list(centres + np.exp(s)[:, None] * dirs)
+
+
+def sampled_pairs(N: int, rng, limit: int) -> list:
+    """The view pairs of the search's candidate stage: all N(N - 1)/2 (in ``itertools.combinations`` order), or
+    ``limit`` of them drawn by ``rng.choice`` over that order, without building the full list (the same pairs, in
+    the same order, as indexing ``list(combinations(range(N), 2))``; 79,800 pairs at N = 400)."""
+    I, J = np.triu_indices(N, 1)                         # row-major: the order of itertools.combinations
+    if I.size > limit:
+        k = rng.choice(I.size, limit, replace=False)
+        I, J = I[k], J[k]
+    return [frozenset((int(a), int(b))) for a, b in zip(I, J)]

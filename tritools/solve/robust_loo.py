@@ -83,7 +83,7 @@ def leave_one_out(search, W: frozenset, c2_out: float):
         return (yield from _halves_only(search, W, c2_out, lw, A, B))
     parts, grouped = (A, B), (c2_out + min(lw, _groups_term(search, (A, B), W))) * ROUND_DOWN
     for m in group_counts(search, W):
-        if search.meets(grouped):
+        if search.meets(grouped) or search.deadline.expired:    # past the limit: the bound so far (valid)
             return grouped
         bound, more = yield from _group_bound(search, W, c2_out, m)
         if bound > grouped:
@@ -157,7 +157,7 @@ def _group_bound(search, W: frozenset, c2_out: float, m: int, keep: frozenset = 
     lw = b.bound(W) if b.known(W) else 0.0
     bound = (c2_out + min(lw, _groups_term(search, parts, W, keep))) * ROUND_DOWN
     for h in range(2, _most_hit(m) + 1):           # h groups hit: the complements of every h groups
-        if search.meets(bound) or h >= m - 1:
+        if search.meets(bound) or h >= m - 1 or search.deadline.expired:
             break
         yield from search.verify_first(*[W - frozenset().union(*H) for H in itertools.combinations(parts, h)])
         bound = max(bound, (c2_out + min(lw, _groups_term(search, parts, W, keep))) * ROUND_DOWN)

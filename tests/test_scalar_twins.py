@@ -115,7 +115,7 @@ def test_scalar_damped_step_equals_the_batched_solve():
 
 
 def _solve3_loop(A, g):
-    """The loop form of tritools.model.stacked._solve3 (whole rows eliminated): the reference of the unrolled code."""
+    """The loop form of tritools.model.stacked.solve3 (whole rows eliminated): the reference of the unrolled code."""
     A = [list(A[0]) + [g[0]], list(A[1]) + [g[1]], list(A[2]) + [g[2]]]
     for k in range(3):
         p = k
@@ -134,9 +134,9 @@ def _solve3_loop(A, g):
 
 
 def test_unrolled_solve3_equals_the_elimination_loop_bit_for_bit():
-    """_solve3 (unrolled, only the entries later steps read) gives the loop's numbers exactly: every pivot order
+    """solve3 (unrolled, only the entries later steps read) gives the loop's numbers exactly: every pivot order
     (ties keep the first row), zero pivots at each column (None), random scales."""
-    from tritools.model.stacked import _solve3
+    from tritools.model.stacked import solve3
 
     rng = np.random.default_rng(11)
     cases = [np.diag([1.0, 2.0, 3.0]), np.ones((3, 3)), np.zeros((3, 3)), np.array([[0, 1, 0], [1, 0, 0], [0, 0, 1.0]]),
@@ -149,7 +149,7 @@ def test_unrolled_solve3_equals_the_elimination_loop_bit_for_bit():
         cases.append(np.round(A, int(rng.integers(0, 3))) if k % 5 == 0 else A)
     for A in cases:
         g = rng.normal(size=3)
-        got, ref = _solve3(A.tolist(), g.tolist()), _solve3_loop(A.tolist(), g.tolist())
+        got, ref = solve3(A.tolist(), g.tolist()), _solve3_loop(A.tolist(), g.tolist())
         assert (got is None) == (ref is None), A
         if ref is not None:
             assert np.array_equal(np.array(got), np.array(ref), equal_nan=True), A

@@ -4,7 +4,7 @@ of a single call (issue #19: at three views each numpy call on a (3, 2, 3) array
 
 The maths is that of :func:`~tritools.model.stacked.refine_point`: minimise f(X) = sum_i ||Phi(X, P_i) - x^_i||^2
 with Phi(X, P) = (P_1 X~, P_2 X~) / (P_3 X~), the Jacobian d Phi / d X = (P[:2, :3] - u P[2, :3]) / (P_3 X~), the
-step -(J^T J + mu (1 + tr J^T J) / 3 I)^{-1} J^T r (:func:`~tritools.model.stacked._solve3`, Gaussian elimination
+step -(J^T J + mu (1 + tr J^T J) / 3 I)^{-1} J^T r (:func:`~tritools.model.stacked.solve3`, Gaussian elimination
 with partial pivoting; the pseudo-inverse where it is exactly singular), a step accepted iff f does not increase,
 mu / 10 on acceptance (floor 1e-12) and x 10 otherwise, stopping when ||step|| <= LM_STEP_RTOL (1 + ||X||)
 (converged) or mu > 1e12 (stalled) or after LM_MAX_ITER iterations; a projection is undefined where
@@ -22,7 +22,7 @@ import math
 import numpy as np
 
 from .geometry import PROJECTION_DENOM_RTOL
-from .stacked import LM_MAX_ITER, LM_STEP_RTOL, _solve3
+from .stacked import LM_MAX_ITER, LM_STEP_RTOL, solve3
 
 __all__ = ["refine_point_one"]
 
@@ -94,7 +94,7 @@ def _step(A: list, g: list, mu: float) -> list:
     """-(A + mu (1 + tr A) / 3 I)^{-1} g (:func:`tritools.model.stacked.damped_step_one` on floats)."""
     damp = mu * (1.0 + (A[0][0] + A[1][1] + A[2][2])) / 3
     A = [[A[0][0] + damp, A[0][1], A[0][2]], [A[1][0], A[1][1] + damp, A[1][2]], [A[2][0], A[2][1], A[2][2] + damp]]
-    x = _solve3(A, g)
+    x = solve3(A, g)
     if x is None:
         x = (np.linalg.pinv(np.array(A)) @ np.array(g)).tolist()
     return [-x[0], -x[1], -x[2]]

@@ -29,7 +29,7 @@ from .geometry import POINT_AT_INFINITY_RTOL, PROJECTION_DENOM_RTOL, SAME_CENTER
 __all__ = ["null_vectors", "dlt_stack", "project_stack", "refine_points_stack", "fundamental_stack",
            "epipolar_quadratics", "pixel_scales", "distinct_centres", "centre_vectors", "view_pairs", "band_pairs",
            "norms", "median_rows", "gauss_newton_polish", "project_quiet", "project_one", "next_damping", "lm_accept",
-           "LM_MAX_ITER", "LM_STEP_RTOL"]
+           "solve3", "LM_MAX_ITER", "LM_STEP_RTOL"]
 
 #: Levenberg-Marquardt iterations at most (from the DLT start it converges in ~5-10).
 LM_MAX_ITER = 100
@@ -331,7 +331,7 @@ class _View:
         return u, den, cost, r
 
 
-def _solve3(A: list, g: list) -> list | None:
+def solve3(A: list, g: list) -> list | None:
     """x with A x = g for a 3x3 matrix (lists), Gaussian elimination with partial pivoting (LAPACK gesv's
     algorithm on plain floats, unrolled: the pivot is the first row of the largest |A[i][k]|, i >= k, and each
     elimination computes only the entries that later steps read, the same operations as the loop over whole rows,
@@ -366,12 +366,12 @@ def _solve3(A: list, g: list) -> list | None:
 
 def damped_step_one(JtJ: np.ndarray, g: np.ndarray, mu: float) -> np.ndarray:
     """The scalar twin of :func:`damped_step`: -(J^T J + mu (1 + tr J^T J) / 3 I)^{-1} g for one 3x3 system
-    (:func:`_solve3`; the pseudo-inverse where it is exactly singular)."""
+    (:func:`solve3`; the pseudo-inverse where it is exactly singular)."""
     A = JtJ.tolist()
     damp = mu * (1.0 + (A[0][0] + A[1][1] + A[2][2])) / 3
     for k in range(3):
         A[k][k] += damp
-    x = _solve3(A, g.tolist())
+    x = solve3(A, g.tolist())
     if x is None:
         return -(np.linalg.pinv(np.array(A)) @ g)
     return -np.array(x)

@@ -80,14 +80,13 @@ def tls_reported_stack(C: np.ndarray, points: np.ndarray, X: np.ndarray, c: np.n
     res = np.where(np.isfinite(residuals), residuals, np.inf)
     u_norm = norms(np.where(np.isfinite(u), u, 0.0), axis=2)
     g_ub = gamma_upper(np.where(np.isfinite(res), res, c), u_norm, cap=c)
-    a = np.sort(np.abs(points).reshape(M, 2 * N), axis=1)
-    mid = 0.5 * (a[:, (2 * N - 1) // 2] + a[:, N])              # coordinate_resolution's median, per problem
+    resolution = coordinate_resolutions(points)
     inliers = inlier_mask_stack(C, X, points, res, c, u, u_norm)
     image_points = np.where(np.isfinite(res)[:, :, None] & np.isfinite(u), u, np.nan)
     out = []
     for k in range(M):
         f_k = float(f_search[k])
-        checked = _checked(float(g_ub[k]), float(spread[k]), RESOLUTION_REL * max(1.0, float(mid[k])), N, c[k],
+        checked = _checked(float(g_ub[k]), float(spread[k]), float(resolution[k]), N, c[k],
                            float(lb[k]), tolerances, bool(certified[k]), res[k], f_k if f_k == f_k else None)
         out.append(TlsReported(checked[0], checked[1], residuals[k].copy(), inliers[k].copy(), checked[2],
                                checked[3], image_points[k].copy()))
@@ -125,8 +124,14 @@ def _checked(g_ub: float, spread: float, resolution: float, N: int, c: np.ndarra
 
 def coordinate_resolution(centres: np.ndarray) -> float:
     """The coordinates' resolution in pixels: ``RESOLUTION_REL`` max(1, median |x|) over the centres' coordinates."""
-    a = np.sort(np.abs(centres), axis=None)
-    return RESOLUTION_REL * max(1.0, float(0.5 * (a[(a.size - 1) // 2] + a[a.size // 2])))
+    return float(coordinate_resolutions(np.asarray(centres, float)[None])[0])
+
+
+def coordinate_resolutions(points: np.ndarray) -> np.ndarray:
+    """:func:`coordinate_resolution` of M problems' points (M, N, 2) -> (M,) (the same rule, the same numbers)."""
+    a = np.sort(np.abs(points).reshape(len(points), -1), axis=1)
+    n = a.shape[1]
+    return RESOLUTION_REL * np.maximum(1.0, 0.5 * (a[:, (n - 1) // 2] + a[:, n // 2]))
 
 
 def guards_pass(g_lb: float, g_ub: float, N: int, tolerances, resolved: float, share: float = 1.0) -> bool:

@@ -115,7 +115,7 @@ def world_origin_one(C: np.ndarray) -> np.ndarray:
     """The scalar twin of :func:`world_origins` for one problem's finite cameras (N, 3, 4), N <= 7: the same
     operations in the same order on Python floats (each camera divided by its largest |entry|, the null vector
     from the signed minors, the mean of the finite centres summed view by view, the norms as x^2 + y^2 + z^2), so
-    bit for bit the stack's origin (tests/test_scalar_twins_single3.py).  Returns a new (3,) array."""
+    bit for bit the stack's origin (tests/test_single_call_twins.py).  Returns a new (3,) array."""
     cs, rows = [], []                               # the finite centres; every view's summand (0 where not finite)
     for P in C.tolist():
         m = max(abs(v) for row in P for v in row)
@@ -228,8 +228,8 @@ def project_world_one(C: list, X: list, absC: list | None = None) -> tuple:
     a0, a1, a2 = abs(x0), abs(x1), abs(x2)
     u, fin = [], True
     for P, A in zip(C, absC or [[[abs(v) for v in row] for row in P] for P in C]):
-        h = [(r[0] * x0 + r[2] * x2) + (r[1] * x1 + r[3] * 1.0) for r in P]
-        mag = [(r[0] * a0 + r[2] * a2) + (r[1] * a1 + r[3] * 1.0) for r in A]
+        h = [_dot4(r, (x0, x1, x2, 1.0)) for r in P]
+        mag = [_dot4(r, (a0, a1, a2, 1.0)) for r in A]
         if not (mag[0] <= CANCELLATION_RATIO * abs(h[0]) and mag[1] <= CANCELLATION_RATIO * abs(h[1])
                 and mag[2] <= CANCELLATION_RATIO * abs(h[2])):
             h = [_dot2_one(r, (x0, x1, x2, 1.0)) for r in P]

@@ -534,9 +534,8 @@ class TlsSearch(NodeBounds):
 
     def result(self, lb: float, stopped, timings, note: str = "") -> TriangulationResult:
         """The result at the search's lower bound ``lb`` (pixels^2): the decision by the one rule on this search's
-        scale, the reported numbers and their checks (:func:`tritools.solve.robust_report.tls_reported`; a stack of
-        point searches: :func:`~tritools.solve.robust_report.tls_reported_stack`, then :meth:`finish`), the
-        message (``note`` appended: the path that decided)."""
+        scale, the reported numbers and their checks (:func:`~.robust_report.tls_reported`; a stack of point searches:
+        :func:`~.robust_report.tls_reported_stack`, then :meth:`finish`), the message (``note``: what decided)."""
         X = self.user_estimate()
         rep = self.report(X)
         told = tls_reported(self.C_user, self.x if self.points else np.array([r.center for r in self.regions]),

@@ -17,7 +17,6 @@ four separate arguments.  Two rules live here and nowhere else:
 from __future__ import annotations
 
 import time
-
 from dataclasses import dataclass
 
 from sospoly import GramForm, Tolerances

@@ -11,15 +11,14 @@ degree plan for three views.
   a result is not certified and the plan did not run out: the subset stays weak (a later, larger need solves it
   again) and is never exhausted (:attr:`SubSolve.stopped`).  A caller's own ``lower_bound_stop`` (a level of the
   whole problem) is not passed on;
-* three views from ``from_delta``, point regions, ``method="auto"``, no ``max_delta`` below 4: Theorem 1 at
-  delta = 4 first
-  (:data:`THEOREM1_FIRST`).  Three camera centres are always coplanar, so Corollary 1's epipolar constraints admit
-  image points on the centres' plane lines and its delta = 4 bound often stops below L2* (the plan then ends with
-  the exact-variety step, Theorem 1 at delta = 4, anyway: :mod:`tritools.solve.stages.exact`).  Measured on the
+* three views from ``from_delta``, point regions, ``method="auto"``, no ``max_delta`` below 4: Theorem 1 at delta = 4
+  first (:data:`THEOREM1_FIRST`).  Three camera centres are always coplanar, so Corollary 1's epipolar constraints
+  admit image points on the centres' plane lines and its delta = 4 bound often stops below L2* (the plan then ends
+  with the exact-variety step, Theorem 1 at delta = 4, anyway: :mod:`tritools.solve.stages.exact`).  Measured on the
   full-plan sub-problems of 300 robust calls (N = 3-5, 20-40% wrong matches, 5 px): Theorem 1 at delta = 4 alone
-  certified all 16 with the same bounds at 0.61x the CPU time of Corollary 1 delta = 4 -> Theorem 1 delta = 4.
-  Where it neither certifies nor reaches ``need`` nor runs out of time, the ordinary plan from ``from_delta`` runs
-  too, within what is left of the limit, and the larger bound is kept (its status decides exhaustion, as before).
+  certified all 16 with the same bounds at 0.61x the CPU time of Corollary 1 delta = 4 -> Theorem 1 delta = 4. Where
+  it neither certifies nor reaches ``need`` nor runs out of time, the ordinary plan from ``from_delta`` runs too,
+  within what is left of the limit, and the larger bound is kept (its status decides exhaustion, as before).
 """
 from __future__ import annotations
 

@@ -26,7 +26,11 @@ paper's setting).  Columns per (N, outlier fraction, noise), over the trials:
   ``--peer-max``: fraction tight by the paper's rank test (sigma_2 / sigma_1 < 1e-4 of the solution
   matrix), median time, and the ratio of its median time to tritools';
 * ``cpu_med``, ``shor_cpu``, ``peer/single cpu``: the same medians in CPU seconds of this process
-  (``time.process_time``: less sensitive than wall time to other jobs on a shared machine);
+  (``time.process_time``: less sensitive than wall time to other jobs on a shared machine).  These calls are
+  interleaved per scene with the reference, pycolmap and the peer, so each starts with caches the others filled;
+* ``cpu_loop``, ``shor_cpu_loop``, ``peer/single loop`` (unless ``--no-own-loop``): the same scenes again, each
+  method in its own loop (all of tritools' calls, then all of the peer's; every scene has new cameras, so nothing
+  of a call before is reused), median CPU per call: how a caller that triangulates point after point sees it;
 * with ``--batch K``: K more scenes of the cell through one ``triangulate_many`` call -- certified count, CPU
   seconds per point (the call's CPU time over K: a mean, so a rare hard scene that needs the branch and bound
   weighs in, unlike the single calls' median), and the peer's median CPU time per point over it (the peer solves
@@ -159,8 +163,8 @@ def run_cell(N, frac, noise, trials, args, rng):
         return None
     row = dict(cert=0, ref=0, ref_n=0, lb_above=0, inl=0, t=[], cpu=[], col_ref=0, col_dx=[], col_t=[], shor=0,
                shor_t=[], shor_cpu=[], shor_n=0)
-    for _ in range(trials):
-        P, obs, X, out = scene(N, n_out, noise, rng)
+    scenes = [scene(N, n_out, noise, rng) for _ in range(trials)]
+    for P, obs, X, out in scenes:
         t0, c0 = time.perf_counter(), time.process_time()
         r = tritools.triangulate(P, obs, robust=THRESHOLD, time_limit=args.time_limit)
         row["t"].append(time.perf_counter() - t0)
@@ -187,9 +191,25 @@ def run_cell(N, frac, noise, trials, args, rng):
             row["shor_t"].append(sec)
             row["shor_cpu"].append(cpu)
             row["shor_n"] += 1
+    if args.own_loop:
+        row.update(own_loops(scenes, N <= args.peer_max, args))
     if args.batch:
         row.update(batch_cell(N, n_out, noise, args))
     return row
+
+
+def own_loops(scenes, peer: bool, args) -> dict:
+    """The cell's scenes again, each method in its own loop (tritools' calls, then the peer's solves): median CPU
+    seconds per call of each (module docstring, ``cpu_loop``)."""
+    import tritools
+
+    ours = []
+    for P, obs, _, _ in scenes:
+        c0 = time.process_time()
+        tritools.triangulate(P, obs, robust=THRESHOLD, time_limit=args.time_limit)
+        ours.append(time.process_time() - c0)
+    peers = [shor_epipolar(P, obs)[2] for P, obs, _, _ in scenes] if peer else []
+    return dict(cpu_loop=float(np.median(ours)), shor_cpu_loop=float(np.median(peers)) if peers else None)
 
 
 def _warm_up(args) -> None:
@@ -412,6 +432,8 @@ def main(argv=None) -> int:
     ap.add_argument("--oxford-threshold", type=float, default=5.0, dest="oxford_threshold")
     ap.add_argument("--batch", type=int, default=0,
                     help="per cell, this many more scenes through one triangulate_many call (CPU per point)")
+    ap.add_argument("--no-own-loop", action="store_false", dest="own_loop",
+                    help="skip the second timing of each method in its own loop (cpu_loop columns)")
     ap.add_argument("--skip-sim", action="store_true", dest="skip_sim", help="only the COLMAP and Oxford parts")
     args = ap.parse_args(argv)
     if args.pycolmap:
@@ -430,6 +452,8 @@ def main(argv=None) -> int:
     head = ("N", "out", "noise", "cert", "t_med[s]", "t_max[s]", "=ref", "lb>ref", "inl", "colmap_inl",
             "colmap_df[px2]", "colmap_t", "shor_tight", "shor_t", "shor/ours", "cpu_med[s]", "shor_cpu[s]",
             "peer/single cpu")
+    if args.own_loop:
+        head += ("cpu_loop[s]", "shor_cpu_loop[s]", "peer/single loop")
     if args.batch:
         head += ("batch_cert", "batch_cpu/pt[s]", "peer/batch cpu")
     print("\n" + " | ".join(head))
@@ -454,6 +478,10 @@ def main(argv=None) -> int:
                          f"{np.median(r['cpu']):.4f}",
                          f"{np.median(r['shor_cpu']):.3f}" if r["shor_cpu"] else "-",
                          f"{np.median(r['shor_cpu']) / np.median(r['cpu']):.1f}" if r["shor_cpu"] else "-"]
+                if args.own_loop:
+                    sl = r["shor_cpu_loop"]
+                    cells += [f"{r['cpu_loop']:.4f}", "-" if sl is None else f"{sl:.3f}",
+                              "-" if sl is None else f"{sl / r['cpu_loop']:.1f}"]
                 if args.batch:
                     cells += [f"{r['batch_cert']}/{args.batch}", f"{r['batch_cpu']:.4f}",
                               f"{np.median(r['shor_cpu']) / r['batch_cpu']:.1f}" if r["shor_cpu"] else "-"]

@@ -52,7 +52,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..model.exact import homogeneous_images
-from .robust_report import coordinate_resolution, guards_pass, threshold_resolution
 
 __all__ = ["search_bound", "cell_lower_bound", "CellBound", "FALLBACK_NODES", "fallback_nodes", "frame", "w_bound",
            "evaluate_cells", "MAX_CELLS", "BATCH", "ENABLED", "MIN_VIEWS", "MAX_VIEWS"]
@@ -90,8 +89,6 @@ BATCH = 64
 MARGIN_REL = 1.0 - 1e-9
 #: the frame is refused when the best candidate's sum of d_i^2 from it differs by more than this (relative).
 FRAME_CHECK_REL = 1e-9
-#: the cells prune within this fraction of the report's guards (:func:`_strict_rule`).
-STRICT = 0.5
 #: coordinate-descent passes of the box least squares (:func:`_box_ls`).
 CD_PASSES = 2
 
@@ -400,23 +397,6 @@ def search_bound(search) -> CellBound | None:
         ratio = np.sqrt(search.sq_distances(search.best_X)) / search.c
     order = np.argsort(np.where(np.isfinite(ratio), ratio, np.inf), kind="stable")
     lb = cell_lower_bound(search.C, search.x, search.c2, search.best_X, order, lambda: search.best_f,
-                          _strict_rule(search), search.offer, search.deadline,
+                          search.meets, search.offer, search.deadline,
                           max_cells=min(MAX_CELLS, MAX_VIEW_CELLS // max(search.N, 1)))
     return lb
-
-
-def _strict_rule(search):
-    """The pruning rule of the cells: the search's rule, and the gap within :data:`STRICT` of the report's own guards
-    (relative gap_rel, or the coordinates' resolution in gamma, :mod:`tritools.solve.robust_report`): a bound that
-    met only the search's absolute part would be refused there."""
-    N, tol = search.N, search.tol
-    resolved = min(coordinate_resolution(search.x), threshold_resolution(search.c, N, tol))
-
-    def meets(lb: float) -> bool:
-        ub = search.best_f
-        if lb >= ub:
-            return True
-        if not search.meets(lb):
-            return False
-        return guards_pass(math.sqrt(max(lb, 0.0) / (2 * N)), math.sqrt(ub / (2 * N)), N, tol, resolved, STRICT)
-    return meets

@@ -570,8 +570,8 @@ class _Group:
             return late
         if self.scales is not None:
             self.scales([self.group[p] for p in late])
-        self._results([p for p in late if self.group[p].tol.certified_one(float(lb_all[p]), self.group[p].best_f,
-                                                                          self.group[p].scale)], lb_all)
+        # the search's rule (TlsSearch.meets): a gap the report's guard would refuse goes on to the branch and bound
+        self._results([p for p in late if self.group[p].meets(float(lb_all[p]))], lb_all)
         return [p for p in late if self.results[p] is None]
 
     def _results(self, probs: list, lb_all: np.ndarray) -> None:

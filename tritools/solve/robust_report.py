@@ -31,7 +31,8 @@ from ..model.stacked import norms
 from .decide import gamma_from_c, gamma_lower_one
 from .report import enlarged_distances, gamma_upper, projections_and_spread, projections_and_spread_stack
 
-__all__ = ["TlsReported", "tls_reported", "tls_reported_stack"]
+__all__ = ["TlsReported", "tls_reported", "tls_reported_stack", "guards_pass", "capped_resolution",
+           "reported_resolution", "PRUNE_SHARE"]
 
 
 @dataclass(frozen=True)
@@ -105,7 +106,7 @@ def _checked(g_ub: float, spread: float, resolution: float, N: int, c: np.ndarra
     g_lb = min(g_lb, g_ub)
     holds, reason = certified, ""
     f_ub = 2.0 * N * g_ub * g_ub
-    resolved = min(resolution, threshold_resolution(c, N, tolerances))
+    resolved = capped_resolution(resolution, c, N, tolerances)
     drift = search_drift(res, c, f_search, f_ub)
     if not spread <= resolution:         # no bound from a normalised frame is known to hold
         holds, g_lb = False, 0.0
@@ -134,10 +135,29 @@ def coordinate_resolutions(points: np.ndarray) -> np.ndarray:
     return RESOLUTION_REL * np.maximum(1.0, 0.5 * (a[:, (n - 1) // 2] + a[:, n // 2]))
 
 
+def capped_resolution(resolution: float, c: np.ndarray, N: int, tolerances) -> float:
+    """The gamma gap the report lets pass as "within resolution": the coordinates' ``resolution`` capped by the
+    thresholds' own scale (:func:`threshold_resolution`)."""
+    return min(resolution, threshold_resolution(c, N, tolerances))
+
+
+def reported_resolution(centres: np.ndarray, c: np.ndarray, tolerances) -> float:
+    """:func:`capped_resolution` of a problem with the regions' ``centres`` (N, 2) and thresholds ``c`` (N,): the
+    ``resolved`` of the report's gap guard, which a search prunes within (:data:`PRUNE_SHARE`)."""
+    return capped_resolution(coordinate_resolution(centres), c, len(centres), tolerances)
+
+
+#: a TLS search prunes a node by the certificate rule only within this share of the report's gap guard
+#: (:meth:`tritools.solve.robust.TlsSearch.meets`; the reported gamma_LB is lowered by round-off and the rounding
+#: spread after the search, so its gap must pass with room).
+PRUNE_SHARE = 0.5
+
+
 def guards_pass(g_lb: float, g_ub: float, N: int, tolerances, resolved: float, share: float = 1.0) -> bool:
     """The reported numbers' gap guard (module docstring), within ``share`` of it: the relative part of the rule on
     f = 2N gamma^2, or a gamma gap within ``resolved`` (the coordinates' resolution capped by the thresholds' scale,
-    :func:`threshold_resolution`).  The cells prune with a share of it (:mod:`tritools.solve.robust_cells`)."""
+    :func:`threshold_resolution`).  Searches prune within :data:`PRUNE_SHARE` of it
+    (:meth:`tritools.solve.robust.TlsSearch.meets`, also in :mod:`tritools.solve.robust_cells`)."""
     f_lb, f_ub = 2.0 * N * g_lb * g_lb, 2.0 * N * g_ub * g_ub
     return f_ub - f_lb <= share * tolerances.gap_rel * abs(f_ub) or g_ub - g_lb <= share * resolved
 

@@ -107,7 +107,7 @@ class _ThreeViews:
         if more.any():
             self._bound(more)
             lb = self._lower_bound()
-        return self._result(lb) if s.tol.certified_one(lb, s.best_f, s.scale) else None
+        return self._result(lb) if s.meets(lb) else None      # (the search's rule: the report's guard too)
 
     def _meets_at_floor(self, lb: float) -> bool:
         """LB meets UB under the rule at the floor of the decision scale, without contradicting it there."""

@@ -87,7 +87,7 @@ from .robust_loo import leave_one_out
 from .robust_nodes import NodeBounds, lookahead_bound
 from .robust_rays import ray_candidates, sampled_pairs
 from .robust_costs import disc_distances2, disc_shapes, point_distances2, point_distances2_one
-from .robust_report import PRUNE_SHARE, guards_pass, reported_resolution, tls_reported
+from .robust_report import tls_reported
 
 __all__ = ["robust_thresholds", "triangulate_robust", "drive", "lookahead_bound", "tls_cost", "point_distances2",
            "MAX_NODES", "MAX_PAIRS", "MIN_THRESHOLD",
@@ -439,31 +439,6 @@ class TlsSearch(NodeBounds):
                     chains.append(k)
 
     # ------------------------------------------------------------------ bounds
-    def meets(self, lb: float) -> bool:
-        """Is a lower bound good enough to prune: it exceeds UB, or it meets UB under the certificate rule on this
-        search's scale and within :data:`~tritools.solve.robust_report.PRUNE_SHARE` of the report's own gap guard
-        (:func:`~tritools.solve.robust_report.guards_pass`)?  The guard matters where the scale min(c^2, rho^2) is
-        large (rho inflated by a wrong match): a node pruned by the absolute part of the rule alone would leave a gap
-        that the report refuses (a 0.05 px^2 inlier pair under c^2 = 40000 px^2: gamma gap 5e-5 px against a 9e-6 px
-        resolution), where its leaf's own bound closes it."""
-        ub = self.best_f
-        if lb >= ub:
-            return True
-        if not self.tol.certified_one(lb, ub, self.scale):
-            return False
-        N = self.N
-        return guards_pass(math.sqrt(max(lb, 0.0) / (2 * N)), math.sqrt(ub / (2 * N)), N, self.tol, self.resolved,
-                           PRUNE_SHARE)
-
-    @property
-    def resolved(self) -> float:
-        """The report's gamma resolution of this problem: the coordinates' resolution capped by the thresholds' scale
-        (:func:`~tritools.solve.robust_report.reported_resolution`)."""
-        if self._resolved is None:
-            centres = self.x if self.points else np.array([r.center for r in self.regions])
-            self._resolved = reported_resolution(centres, self.c, self.tol)
-        return self._resolved
-
     def search(self, order: np.ndarray):
         """Depth-first branch and bound (module docstring): (global lower bound, why it stopped early or None)."""
         # a node: (I, O, c^2(O), next view in the order, parent's bound, lower bound of L2*(I), of L2*(I + {u}))

@@ -16,6 +16,7 @@ import math
 import numpy as np
 
 from .robust_bounds import ROUND_DOWN
+from .robust_report import PRUNE_SHARE, guards_pass, reported_resolution
 
 __all__ = ["NodeBounds", "lookahead_bound"]
 
@@ -34,10 +35,35 @@ def lookahead_bound(s_lo: float, s_hi: float, a: np.ndarray, c2: np.ndarray) -> 
     return float(np.min(g))
 
 
-
 class NodeBounds:
-    """The node bounds of :class:`tritools.solve.robust.TlsSearch` (its attributes: N, c2, best_f, best_S, bounds,
-    anchors, anchor_a; its methods need, offer_new, meets)."""
+    """The node bounds of :class:`tritools.solve.robust.TlsSearch` and its pruning rule :meth:`meets` (its
+    attributes: N, c, c2, x, regions, points, tol, scale, best_f, best_S, bounds, anchors, anchor_a, _resolved; its
+    methods need, offer_new)."""
+
+    def meets(self, lb: float) -> bool:
+        """Is a lower bound good enough to prune: it exceeds UB, or it meets UB under the certificate rule on this
+        search's scale and within :data:`~tritools.solve.robust_report.PRUNE_SHARE` of the report's own gap guard
+        (:func:`~tritools.solve.robust_report.guards_pass`)?  The guard matters where the scale min(c^2, rho^2) is
+        large (rho inflated by a wrong match): a node pruned by the absolute part of the rule alone would leave a gap
+        that the report refuses (a 0.05 px^2 inlier pair under c^2 = 40000 px^2: gamma gap 5e-5 px against a 9e-6 px
+        resolution), where its leaf's own bound closes it."""
+        ub = self.best_f
+        if lb >= ub:
+            return True
+        if not self.tol.certified_one(lb, ub, self.scale):
+            return False
+        N = self.N
+        return guards_pass(math.sqrt(max(lb, 0.0) / (2 * N)), math.sqrt(ub / (2 * N)), N, self.tol, self.resolved,
+                           PRUNE_SHARE)
+
+    @property
+    def resolved(self) -> float:
+        """The report's gamma resolution of this problem: the coordinates' resolution capped by the thresholds' scale
+        (:func:`~tritools.solve.robust_report.reported_resolution`)."""
+        if self._resolved is None:
+            centres = self.x if self.points else np.array([r.center for r in self.regions])
+            self._resolved = reported_resolution(centres, self.c, self.tol)
+        return self._resolved
 
     def leave_one_out_bound(self) -> float:
         """f_TLS* >= min(L2LB(V), min_j [c_j^2 + min(L2LB(V - j), min_{i != j} c_i^2)]) over the views V: an X

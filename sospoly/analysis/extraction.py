@@ -29,7 +29,7 @@ from ..tolerances import DEFAULT_TOLERANCES, Tolerances
 __all__ = ["Candidate", "CandidateFamily", "kernel_family", "best_in_family", "kernel_basis", "range_basis",
            "candidates_from_span", "extract_from_gram",
            "extract_from_moment", "henrion_lasserre", "has_constant_entry", "KERNEL_CONSTANT_RTOL", "lowered_exponents",
-           "monomial_jacobian"]
+           "monomial_jacobian", "OBJECTIVE_ERRORS"]
 
 #: a kernel vector w gives the candidate w[degree-1 rows] / w[0] only when |w[0]| > KERNEL_CONSTANT_RTOL max |w|
 #: (else its constant entry is numerically zero and the quotient meaningless).
@@ -280,7 +280,8 @@ def kernel_family(G: np.ndarray, basis: np.ndarray, tol: Tolerances = DEFAULT_TO
     return CandidateFamily(W, deg1, a0, Z)
 
 
-_OBJECTIVE_ERRORS = (ValueError, FloatingPointError, np.linalg.LinAlgError)
+#: the errors of an objective that :func:`best_in_family` counts as +inf (a candidate it cannot evaluate)
+OBJECTIVE_ERRORS = (ValueError, FloatingPointError, np.linalg.LinAlgError)
 
 
 def best_in_family(family: CandidateFamily, objective, max_evals: int = 400,
@@ -295,7 +296,7 @@ def best_in_family(family: CandidateFamily, objective, max_evals: int = 400,
     def obj_t(t):
         try:
             val = float(objective(family.point(t)))
-        except _OBJECTIVE_ERRORS:
+        except OBJECTIVE_ERRORS:
             return np.inf
         return val if np.isfinite(val) else np.inf
 
@@ -304,7 +305,7 @@ def best_in_family(family: CandidateFamily, objective, max_evals: int = 400,
             try:
                 vals = np.asarray(objective_many(np.array([family.point([t]) for t in grid])), float)
                 return np.where(np.isfinite(vals), vals, np.inf)
-            except _OBJECTIVE_ERRORS:
+            except OBJECTIVE_ERRORS:
                 pass
         return np.array([obj_t([t]) for t in grid])
 

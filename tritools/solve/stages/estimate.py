@@ -36,6 +36,7 @@ import numpy as np
 import sospoly
 from sospoly import SolveStatus
 from sospoly.analysis import best_in_family, kernel_family, rigorous_psatz_bound
+from sospoly.analysis.extraction import OBJECTIVE_ERRORS
 
 from ...model.geometry import (common_centre, gamma as gamma_of, gamma_validated, point_from_validated,
                                points_from_validated, refine_l2, validate_cameras)
@@ -261,7 +262,7 @@ class CandidateCost:
     def _value_or_inf(self, v) -> float:
         try:
             return self.value(v)
-        except (ValueError, FloatingPointError, np.linalg.LinAlgError):     # (best_in_family's rule)
+        except OBJECTIVE_ERRORS:                # best_in_family's rule
             return np.inf
 
     def many(self, V: np.ndarray) -> np.ndarray:

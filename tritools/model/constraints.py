@@ -30,10 +30,11 @@ from sospoly import Polynomial
 from sospoly.budget import check_deadline
 
 from .exact import same_exact_centre
-from .geometry import fundamental_matrix
+from .cameras import CAMERA_RANK_RTOL, camera_rank_ratio, power2_scale
+from .geometry import SAME_CENTER_RTOL, fundamental_matrix
 
 __all__ = ["Method", "RANK_RTOL", "COEF_RTOL", "minors_matrix", "theorem1_constraints", "corollary1_constraints",
-           "triple_minor_constraints", "THEOREM1_DENSE_MAX_VIEWS", "centre_groups",
+           "triple_minor_constraints", "THEOREM1_DENSE_MAX_VIEWS", "centre_groups", "centre_groups_loop",
            "CentreRelations", "centre_relations"]
 
 #: relative singular-value threshold for the numerical rank N2 of M1 (rows scaled to unit norm first).
@@ -178,18 +179,136 @@ def centre_relations(cameras: np.ndarray, groups=None, *, raw=None, admitted=fro
 
 def centre_groups(cameras: np.ndarray) -> np.ndarray:
     """One label per view; views whose camera centres coincide share one (the rule of
-    :func:`tritools.model.geometry.fundamental_matrix`: F_ij vanishes; Corollary 1 drops such pairs)."""
+    :func:`tritools.model.geometry.fundamental_matrix`: F_ij vanishes; Corollary 1 drops such pairs).
+
+    The labels of :func:`centre_groups_loop` (pairs i < j in order, ``label[label == label[j]] = label[i]`` for
+    each pair that shares a centre), with the pairs' test stacked (:func:`_stacked_pair_tests`): the per-pair
+    rule runs only for pairs the stacked norms leave within round-off of the threshold, and for cameras that are
+    not a float (N, 3, 4) stack of valid cameras (the loop raises as before)."""
+    N = len(cameras)
+    if N < 2:
+        return np.arange(N)
+    check_deadline("comparing the camera centres")
+    C = np.asarray(cameras)
+    if not _stackable(C):
+        return centre_groups_loop(cameras)
+    same, unsure = _stacked_pair_tests(C)
+    for i, j in unsure:                                 # near the threshold: the exact per-pair rule
+        check_deadline("comparing the camera centres")
+        if _same_centre_pair(C[i], C[j]):
+            same.append((i, j))
+    return _merged_labels(N, sorted(same))
+
+
+def centre_groups_loop(cameras: np.ndarray) -> np.ndarray:
+    """:func:`centre_groups` pair by pair (the reference, and the rule for inputs the stacked test refuses)."""
     N = cameras.shape[0]
     label = np.arange(N)
     for i, j in combinations(range(N), 2):
         check_deadline("comparing the camera centres")
-        try:
-            fundamental_matrix(cameras[i], cameras[j])
-        except ValueError as exc:
-            if "same camera centre" not in str(exc):
-                raise
+        if _same_centre_pair(cameras[i], cameras[j]):
             label[label == label[j]] = label[i]
     return label
+
+
+def _same_centre_pair(Pi: np.ndarray, Pj: np.ndarray) -> bool:
+    """Does :func:`fundamental_matrix` refuse the pair for sharing one centre?  (Other ValueErrors propagate.)"""
+    try:
+        fundamental_matrix(Pi, Pj)
+    except ValueError as exc:
+        if "same camera centre" not in str(exc):
+            raise
+        return True
+    return False
+
+
+def _merged_labels(N: int, pairs) -> np.ndarray:
+    """The labels of :func:`centre_groups_loop` for the pairs ``pairs`` (in combinations order) that share a centre:
+    each pair moves the class of j to the label of i, as ``label[label == label[j]] = label[i]`` does."""
+    label = list(range(N))
+    members = {v: [v] for v in range(N)}
+    for i, j in pairs:
+        li, lj = label[i], label[j]
+        if li != lj:
+            moved = members.pop(lj)
+            for v in moved:
+                label[v] = li
+            members[li] += moved
+    return np.array(label, dtype=np.int_)
+
+
+def _stackable(C: np.ndarray) -> bool:
+    """A finite float64 (N, 3, 4) stack whose cameras all pass :func:`~tritools.model.cameras.check_camera` by a
+    margin (``camera_rank_ratio`` stacked: the same operations per camera; a factor 2 from the threshold)."""
+    if C.dtype != np.float64 or C.ndim != 3 or C.shape[1:] != (3, 4) or not np.isfinite(C).all():
+        return False
+    return bool(np.all(camera_rank_ratio(C) > 2 * CAMERA_RANK_RTOL))
+
+
+#: entries of one (rows, 3, columns, 3) block of :func:`_stacked_pair_tests` (memory bounded at any N).
+PAIR_BLOCK_ENTRIES = 2 ** 18
+#: the round-off of two evaluations of ||F_ij|| apart (:func:`_stacked_pair_tests`), in units of eps * ||W||_F.
+PAIR_ROUNDOFF_UNITS = 32.0
+#: relative slack for the rounding of the Frobenius norms (of F and of the cameras) in the threshold test.
+PAIR_NORM_RTOL = 1e-12
+
+
+def _stacked_pair_tests(C: np.ndarray) -> tuple[list, list]:
+    """(pairs i < j whose centres coincide by :func:`fundamental_matrix`'s rule, pairs too close to call), stacked.
+
+    With S_k = P_k / 2^(e_k) (the power-of-two scaling of ``fundamental_matrix``), a_j the null vector and S_j^+
+    the pseudo-inverse (batched SVDs: the same LAPACK calls per camera, so the same bits as the loop's),
+    ``F_ij = [e]_x S_i S_j^+``, ``e = S_i a_j``, for all pairs of a block of rows in three matrix products.  Any
+    evaluation order of these sums of <= 4 products differs from the exact value by at most ~6 u W entrywise,
+    ``W = [|S_i| |a_j| + |e|]_x |S_i| |S_j^+|``, so the loop's ||F|| and this one are within
+    ``PAIR_ROUNDOFF_UNITS * eps * ||W||_F`` (a factor ~2.5 to spare); a pair is decided here only when that band
+    (and ``PAIR_NORM_RTOL`` for the norms' rounding) lies on one side of ``SAME_CENTER_RTOL ||S_i|| ||S_j||``."""
+    N = C.shape[0]
+    S = C / power2_scale(C, (1, 2))
+    a = np.linalg.svd(S)[2][:, -1]
+    pinv = np.linalg.pinv(S)
+    nP = np.sqrt(np.sum(S * S, axis=(1, 2)))
+    rows = max(1, PAIR_BLOCK_ENTRIES // (9 * N))
+    same, unsure = [], []
+    for i0 in range(0, N - 1, rows):
+        check_deadline("comparing the camera centres")
+        i1 = min(N - 1, i0 + rows)
+        nrm, err = _pair_block(S[i0:i1], a[i0:], pinv[i0:])
+        T = SAME_CENTER_RTOL * nP[i0:i1, None] * nP[None, i0:]
+        below = (nrm + err) * (1 + PAIR_NORM_RTOL) < T * (1 - PAIR_NORM_RTOL)      # the loop's ||F|| <= its T
+        above = (nrm - err) * (1 - PAIR_NORM_RTOL) > T * (1 + PAIR_NORM_RTOL)      # the loop's ||F|| > its T
+        upper = np.arange(i0, i1)[:, None] < np.arange(i0, N)[None, :]
+        same += _pair_list(below & upper, i0)
+        unsure += _pair_list(~below & ~above & upper, i0)                        # (NaN: neither)
+    return same, unsure
+
+
+def _pair_list(mask: np.ndarray, i0: int) -> list:
+    """The pairs (i0 + row, i0 + column) where ``mask`` holds, in row-major (combinations) order."""
+    I, J = np.nonzero(mask)
+    return list(zip((I + i0).tolist(), (J + i0).tolist()))
+
+
+def _pair_block(Si: np.ndarray, a: np.ndarray, pinv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(||F_ij||_F, its round-off band) for the rows Si (b, 3, 4) against the columns' null vectors a (n, 4) and
+    pseudo-inverses pinv (n, 4, 3) (:func:`_stacked_pair_tests`), each (b, n); NaN where not finite."""
+    b, n = Si.shape[0], a.shape[0]
+    R, Ra = Si.reshape(3 * b, 4), np.abs(Si).reshape(3 * b, 4)
+    PT = np.swapaxes(pinv, 0, 1).reshape(4, 3 * n)                  # PT[k, 3j + c] = pinv_j[k, c]
+    with np.errstate(all="ignore"):
+        e = (R @ a.T).reshape(b, 3, n)                              # e[i, :, j] = S_i a_j
+        s = (Ra @ np.abs(a).T).reshape(b, 3, n) + np.abs(e)
+        M = (R @ PT).reshape(b, 3, n, 3)                            # M[i, :, j, :] = S_i S_j^+
+        Q = (Ra @ np.abs(PT)).reshape(b, 3, n, 3)
+        F2 = np.zeros((b, n))
+        W2 = np.zeros((b, n))
+        for r in range(3):                                          # row r of [e]_x M: e_p M_q - e_q M_p
+            p, q = (r + 1) % 3, (r + 2) % 3
+            Fr = e[:, p, :, None] * M[:, q] - e[:, q, :, None] * M[:, p]
+            Wr = s[:, p, :, None] * Q[:, q] + s[:, q, :, None] * Q[:, p]
+            F2 += np.sum(Fr * Fr, axis=2)
+            W2 += np.sum(Wr * Wr, axis=2)
+    return np.sqrt(F2), PAIR_ROUNDOFF_UNITS * np.finfo(float).eps * np.sqrt(W2)
 
 
 @lru_cache(maxsize=64)

@@ -11,8 +11,10 @@ import numpy as np
 import pytest
 
 from sospoly.budget import Deadline, TimeLimitReached, deadline_scope
+from tritools.model import centres as cm_centres
 from tritools.model import constraints as cm
-from tritools.model.constraints import _merged_labels, centre_groups, centre_groups_loop
+from tritools.model.centres import merged_labels
+from tritools.model.constraints import centre_groups, centre_groups_loop
 from tritools.scene import random_scene
 
 
@@ -91,7 +93,7 @@ def test_undecided_pairs_take_the_per_pair_rule(monkeypatch):
     C, _ = _cameras(rng, 12, offset=1e6)
     calls = []
     real = cm._same_centre_pair
-    monkeypatch.setattr(cm, "PAIR_ROUNDOFF_UNITS", 1e30)
+    monkeypatch.setattr(cm_centres, "PAIR_ROUNDOFF_UNITS", 1e30)
     monkeypatch.setattr(cm, "_same_centre_pair", lambda Pi, Pj: calls.append(1) or real(Pi, Pj))
     assert np.array_equal(centre_groups(C), centre_groups_loop(C))
     assert len(calls) == 2 * 66                 # 66 pairs in each of the two calls
@@ -101,7 +103,7 @@ def test_small_blocks(monkeypatch):
     """Rows split into blocks of one (the memory bound): the same labels."""
     rng = np.random.default_rng(3)
     C, _ = _cameras(rng, 25)
-    monkeypatch.setattr(cm, "PAIR_BLOCK_ENTRIES", 1)
+    monkeypatch.setattr(cm_centres, "PAIR_BLOCK_ENTRIES", 1)
     assert np.array_equal(centre_groups(C), centre_groups_loop(C))
 
 
@@ -114,7 +116,7 @@ def test_merge_order_is_the_loops():
         ref = np.arange(N)
         for i, j in pairs:
             ref[ref == ref[j]] = ref[i]
-        assert np.array_equal(_merged_labels(N, pairs), ref)
+        assert np.array_equal(merged_labels(N, pairs), ref)
 
 
 def test_bad_cameras_raise_as_the_loop():

@@ -30,12 +30,12 @@ from sospoly import Polynomial
 from sospoly.budget import check_deadline
 
 from .exact import same_exact_centre
-from .cameras import CAMERA_RANK_RTOL, camera_rank_ratio, power2_scale
-from .geometry import SAME_CENTER_RTOL, fundamental_matrix
+from .centres import dot_norms, merged_labels, pair_fundamentals, stackable, stacked_pair_tests
+from .geometry import fundamental_matrix
 
 __all__ = ["Method", "RANK_RTOL", "COEF_RTOL", "minors_matrix", "theorem1_constraints", "corollary1_constraints",
            "triple_minor_constraints", "THEOREM1_DENSE_MAX_VIEWS", "centre_groups", "centre_groups_loop",
-           "CentreRelations", "centre_relations"]
+           "epipolar_polynomial", "CentreRelations", "centre_relations"]
 
 #: relative singular-value threshold for the numerical rank N2 of M1 (rows scaled to unit norm first).
 #: Directions below it are dropped: at an exactly feasible point their values are float
@@ -182,22 +182,23 @@ def centre_groups(cameras: np.ndarray) -> np.ndarray:
     :func:`tritools.model.geometry.fundamental_matrix`: F_ij vanishes; Corollary 1 drops such pairs).
 
     The labels of :func:`centre_groups_loop` (pairs i < j in order, ``label[label == label[j]] = label[i]`` for
-    each pair that shares a centre), with the pairs' test stacked (:func:`_stacked_pair_tests`): the per-pair
-    rule runs only for pairs the stacked norms leave within round-off of the threshold, and for cameras that are
+    each pair that shares a centre), with the pairs' test stacked
+    (:func:`~tritools.model.centres.stacked_pair_tests`): the per-pair rule runs only for pairs the stacked norms
+    leave within round-off of the threshold, and for cameras that are
     not a float (N, 3, 4) stack of valid cameras (the loop raises as before)."""
     N = len(cameras)
     if N < 2:
         return np.arange(N)
     check_deadline("comparing the camera centres")
     C = np.asarray(cameras)
-    if not _stackable(C):
+    if not stackable(C):
         return centre_groups_loop(cameras)
-    same, unsure = _stacked_pair_tests(C)
+    same, unsure = stacked_pair_tests(C)
     for i, j in unsure:                                 # near the threshold: the exact per-pair rule
         check_deadline("comparing the camera centres")
         if _same_centre_pair(C[i], C[j]):
             same.append((i, j))
-    return _merged_labels(N, sorted(same))
+    return merged_labels(N, sorted(same))
 
 
 def centre_groups_loop(cameras: np.ndarray) -> np.ndarray:
@@ -220,95 +221,6 @@ def _same_centre_pair(Pi: np.ndarray, Pj: np.ndarray) -> bool:
             raise
         return True
     return False
-
-
-def _merged_labels(N: int, pairs) -> np.ndarray:
-    """The labels of :func:`centre_groups_loop` for the pairs ``pairs`` (in combinations order) that share a centre:
-    each pair moves the class of j to the label of i, as ``label[label == label[j]] = label[i]`` does."""
-    label = list(range(N))
-    members = {v: [v] for v in range(N)}
-    for i, j in pairs:
-        li, lj = label[i], label[j]
-        if li != lj:
-            moved = members.pop(lj)
-            for v in moved:
-                label[v] = li
-            members[li] += moved
-    return np.array(label, dtype=np.int_)
-
-
-def _stackable(C: np.ndarray) -> bool:
-    """A finite float64 (N, 3, 4) stack whose cameras all pass :func:`~tritools.model.cameras.check_camera` by a
-    margin (``camera_rank_ratio`` stacked: the same operations per camera; a factor 2 from the threshold)."""
-    if C.dtype != np.float64 or C.ndim != 3 or C.shape[1:] != (3, 4) or not np.isfinite(C).all():
-        return False
-    return bool(np.all(camera_rank_ratio(C) > 2 * CAMERA_RANK_RTOL))
-
-
-#: entries of one (rows, 3, columns, 3) block of :func:`_stacked_pair_tests` (memory bounded at any N).
-PAIR_BLOCK_ENTRIES = 2 ** 18
-#: the round-off of two evaluations of ||F_ij|| apart (:func:`_stacked_pair_tests`), in units of eps * ||W||_F.
-PAIR_ROUNDOFF_UNITS = 32.0
-#: relative slack for the rounding of the Frobenius norms (of F and of the cameras) in the threshold test.
-PAIR_NORM_RTOL = 1e-12
-
-
-def _stacked_pair_tests(C: np.ndarray) -> tuple[list, list]:
-    """(pairs i < j whose centres coincide by :func:`fundamental_matrix`'s rule, pairs too close to call), stacked.
-
-    With S_k = P_k / 2^(e_k) (the power-of-two scaling of ``fundamental_matrix``), a_j the null vector and S_j^+
-    the pseudo-inverse (batched SVDs: the same LAPACK calls per camera, so the same bits as the loop's),
-    ``F_ij = [e]_x S_i S_j^+``, ``e = S_i a_j``, for all pairs of a block of rows in three matrix products.  Any
-    evaluation order of these sums of <= 4 products differs from the exact value by at most ~6 u W entrywise,
-    ``W = [|S_i| |a_j| + |e|]_x |S_i| |S_j^+|``, so the loop's ||F|| and this one are within
-    ``PAIR_ROUNDOFF_UNITS * eps * ||W||_F`` (a factor ~2.5 to spare); a pair is decided here only when that band
-    (and ``PAIR_NORM_RTOL`` for the norms' rounding) lies on one side of ``SAME_CENTER_RTOL ||S_i|| ||S_j||``."""
-    N = C.shape[0]
-    S = C / power2_scale(C, (1, 2))
-    a = np.linalg.svd(S)[2][:, -1]
-    pinv = np.linalg.pinv(S)
-    nP = np.sqrt(np.sum(S * S, axis=(1, 2)))
-    rows = max(1, PAIR_BLOCK_ENTRIES // (9 * N))
-    same, unsure = [], []
-    for i0 in range(0, N - 1, rows):
-        check_deadline("comparing the camera centres")
-        i1 = min(N - 1, i0 + rows)
-        nrm, err = _pair_block(S[i0:i1], a[i0:], pinv[i0:])
-        T = SAME_CENTER_RTOL * nP[i0:i1, None] * nP[None, i0:]
-        below = (nrm + err) * (1 + PAIR_NORM_RTOL) < T * (1 - PAIR_NORM_RTOL)      # the loop's ||F|| <= its T
-        above = (nrm - err) * (1 - PAIR_NORM_RTOL) > T * (1 + PAIR_NORM_RTOL)      # the loop's ||F|| > its T
-        upper = np.arange(i0, i1)[:, None] < np.arange(i0, N)[None, :]
-        same += _pair_list(below & upper, i0)
-        unsure += _pair_list(~below & ~above & upper, i0)                        # (NaN: neither)
-    return same, unsure
-
-
-def _pair_list(mask: np.ndarray, i0: int) -> list:
-    """The pairs (i0 + row, i0 + column) where ``mask`` holds, in row-major (combinations) order."""
-    I, J = np.nonzero(mask)
-    return list(zip((I + i0).tolist(), (J + i0).tolist()))
-
-
-def _pair_block(Si: np.ndarray, a: np.ndarray, pinv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(||F_ij||_F, its round-off band) for the rows Si (b, 3, 4) against the columns' null vectors a (n, 4) and
-    pseudo-inverses pinv (n, 4, 3) (:func:`_stacked_pair_tests`), each (b, n); NaN where not finite."""
-    b, n = Si.shape[0], a.shape[0]
-    R, Ra = Si.reshape(3 * b, 4), np.abs(Si).reshape(3 * b, 4)
-    PT = np.swapaxes(pinv, 0, 1).reshape(4, 3 * n)                  # PT[k, 3j + c] = pinv_j[k, c]
-    with np.errstate(all="ignore"):
-        e = (R @ a.T).reshape(b, 3, n)                              # e[i, :, j] = S_i a_j
-        s = (Ra @ np.abs(a).T).reshape(b, 3, n) + np.abs(e)
-        M = (R @ PT).reshape(b, 3, n, 3)                            # M[i, :, j, :] = S_i S_j^+
-        Q = (Ra @ np.abs(PT)).reshape(b, 3, n, 3)
-        F2 = np.zeros((b, n))
-        W2 = np.zeros((b, n))
-        for r in range(3):                                          # row r of [e]_x M: e_p M_q - e_q M_p
-            p, q = (r + 1) % 3, (r + 2) % 3
-            Fr = e[:, p, :, None] * M[:, q] - e[:, q, :, None] * M[:, p]
-            Wr = s[:, p, :, None] * Q[:, q] + s[:, q, :, None] * Q[:, p]
-            F2 += np.sum(Fr * Fr, axis=2)
-            W2 += np.sum(Wr * Wr, axis=2)
-    return np.sqrt(F2), PAIR_ROUNDOFF_UNITS * np.finfo(float).eps * np.sqrt(W2)
 
 
 @lru_cache(maxsize=64)
@@ -410,19 +322,17 @@ def corollary1_constraints(cameras: np.ndarray, gens, x_index, pairs=None, relat
 
     one = Polynomial.constant(1.0, gens)
     xt = [[var(2 * i), var(2 * i + 1), one] for i in range(N)]
+    Fs = _epipolar_matrices(cameras, pairs)
+    mono = _Monomials(n, x_index)
     polys, kept, skipped, homography = [], [], [], []
     loose = relations.loose if relations is not None else frozenset()
-    for i, j in pairs:
+    for (i, j), F in zip(pairs, Fs):
         check_deadline("building the epipolar constraints")
         if i in loose or j in loose:                    # CentreRelations.loose: no constraint at all
             skipped.append((i, j))
             continue
-        try:
-            if relations is not None and relations.groups[i] == relations.groups[j]:
-                raise ValueError("one centre (raw cameras)")
-            F = fundamental_matrix(cameras[i], cameras[j])
-        except ValueError:
-            if relations is None:
+        if F is None or (relations is not None and relations.groups[i] == relations.groups[j]):
+            if relations is None:                       # one centre (or no fundamental matrix): the homography
                 H = _pair_homography(cameras[i], cameras[j])
             else:
                 H = _pair_homography(cameras[i], cameras[j], check=False) if (i, j) in relations.coincident \
@@ -438,15 +348,86 @@ def corollary1_constraints(cameras: np.ndarray, gens, x_index, pairs=None, relat
                 kept.append((i, j))
             homography.append((i, j))
             continue
-        F = F / np.linalg.norm(F)
-        p = Polynomial(gens, {})
-        for a in range(3):
-            for b in range(3):
-                if F[a, b] != 0.0:
-                    p = p + float(F[a, b]) * xt[i][a] * xt[j][b]
-        polys.append(p)
+        terms = mono.bilinear(i, j, F)
+        polys.append(Polynomial.from_trusted_terms(gens, terms) if terms is not None
+                     else epipolar_polynomial(gens, F, xt[i], xt[j]))
         kept.append((i, j))
     return polys, {"N1": len(polys), "N2": len(polys), "pairs": kept, "skipped": skipped, "homography": homography}
+
+
+def epipolar_polynomial(gens: tuple, F: np.ndarray, xi: list, xj: list) -> Polynomial:
+    """x~_i^T F x~_j by polynomial arithmetic, ``xi``/``xj`` the polynomials (x_1, x_2, 1) of the two views (the
+    reference of :meth:`_Monomials.bilinear`, and the rule where the two views' variables are not distinct)."""
+    p = Polynomial(gens, {})
+    for a in range(3):
+        for b in range(3):
+            if F[a, b] != 0.0:
+                p = p + float(F[a, b]) * xi[a] * xj[b]
+    return p
+
+
+class _Monomials:
+    """The exponent tuples of x~_i^T F x~_j over ``n`` generators (``x_index``: the generator of each image
+    variable), the linear and constant ones shared between pairs."""
+
+    def __init__(self, n: int, x_index):
+        self.n, self.x = n, [int(k) for k in x_index]
+        self.lin: dict[int, tuple] = {}
+        self.const = (0,) * n
+
+    def _linear(self, v: int) -> tuple:
+        if v not in self.lin:
+            e = [0] * self.n
+            e[v] = 1
+            self.lin[v] = tuple(e)
+        return self.lin[v]
+
+    def bilinear(self, i: int, j: int, F: np.ndarray) -> dict | None:
+        """{exponent: F[a, b]} in the order (a, b) of :func:`epipolar_polynomial`, its terms (the four variables
+        are distinct, so each (a, b) has its own monomial and the sum is the coefficients themselves); None when
+        the variables of views i and j are not four distinct generators or F is not finite (the arithmetic refuses
+        it)."""
+        u = (self.x[2 * i], self.x[2 * i + 1], self.x[2 * j], self.x[2 * j + 1])
+        if len(set(u)) != 4 or not np.isfinite(F).all():
+            return None
+        terms = {}
+        for a, b in zip(*np.nonzero(F)):
+            if a < 2 and b < 2:
+                e = [0] * self.n
+                e[u[a]] = e[u[2 + b]] = 1
+                terms[tuple(e)] = float(F[a, b])
+            else:
+                terms[self.const if a == b == 2 else self._linear(u[a] if a < 2 else u[2 + b])] = float(F[a, b])
+        return terms
+
+
+def _epipolar_matrices(cameras: np.ndarray, pairs: list) -> list:
+    """Per pair, ``F / ||F||`` for F = ``fundamental_matrix(cameras[i], cameras[j])`` (normalised once more, as the
+    constraints always were), or None where that raises (one centre, bad cameras): stacked
+    (:func:`~tritools.model.centres.pair_fundamentals`, the same numbers) for a valid float stack, pair by pair
+    otherwise and where the stacked norm is within round-off of the threshold."""
+    C = np.asarray(cameras)
+    if not pairs:
+        return []
+    if not stackable(C):
+        return [_epipolar_matrix(C[i], C[j]) for i, j in pairs]
+    I, J = (np.array(v, dtype=np.intp) for v in zip(*pairs))
+    F, defined, recheck = pair_fundamentals(C, I, J)
+    F = F / np.where(defined, dot_norms(F.reshape(len(F), 9)), 1.0)[:, None, None]
+    out = [F[k] if defined[k] else None for k in range(len(F))]
+    for k in np.flatnonzero(recheck):
+        check_deadline("computing the fundamental matrices")
+        out[k] = _epipolar_matrix(C[I[k]], C[J[k]])
+    return out
+
+
+def _epipolar_matrix(Pi: np.ndarray, Pj: np.ndarray) -> np.ndarray | None:
+    """``F / ||F||`` of ``fundamental_matrix(Pi, Pj)``, None where it raises (:func:`_epipolar_matrices`)."""
+    try:
+        F = fundamental_matrix(Pi, Pj)
+    except ValueError:
+        return None
+    return F / np.linalg.norm(F)
 
 
 def _pair_homography(Pi: np.ndarray, Pj: np.ndarray, check: bool = True) -> np.ndarray | None:

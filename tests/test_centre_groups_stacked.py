@@ -138,3 +138,61 @@ def test_deadline_honoured():
     t = time.process_time()
     centre_groups(C)
     assert time.process_time() - t < 1.0                  # the loop: ~0.4 s at N = 50, ~26 s at N = 400
+
+
+def _frame_groups_reference(cameras_f, frame):
+    """The pair loop frame_centre_groups replaced (its per-view centres, np.linalg.norm per pair)."""
+    from tritools.model.frame import RESOLVED_SPREAD_RTOL, _centres
+
+    label = centre_groups_loop(cameras_f)
+    if not frame.moved:
+        return label
+    tol = RESOLVED_SPREAD_RTOL * float(np.linalg.norm(frame.origin))
+    cs = [_centres(cameras_f[i:i + 1]) for i in range(len(cameras_f))]
+    for i in range(len(cs)):
+        for j in range(i + 1, len(cs)):
+            if len(cs[i]) and len(cs[j]) and np.linalg.norm(cs[i][0] - cs[j][0]) <= tol:
+                label[label == label[j]] = label[i]
+    return label
+
+
+@pytest.mark.parametrize("offset", [1e6, 1e7, 1e8])
+def test_frame_groups_equal_the_loop(offset, monkeypatch):
+    """Georeferenced cameras (the frame moves): views whose re-centred centres are within the caller's round-off
+    are joined exactly as the pair loop joined them (also in blocks of one row)."""
+    from tritools.model import frame as fm
+
+    rng = np.random.default_rng(int(offset) % 89)
+    for N in (2, 5, 13, 30):
+        C, _ = _cameras(rng, N, offset=offset, dup=0.2, near=0.3)
+        fr = fm.world_frame(C)
+        Cf = fr.cameras(C)
+        assert fr.moved
+        ref = _frame_groups_reference(Cf, fr)
+        assert np.array_equal(fm.frame_centre_groups(Cf, fr), ref)
+        monkeypatch.setattr(fm, "CLOSE_PAIR_BLOCK", 1)
+        assert np.array_equal(fm.frame_centre_groups(Cf, fr), ref)
+        monkeypatch.undo()
+
+
+def test_relations_equal_the_pair_loop():
+    """centre_relations / untied / loose over the groups' members only: the sets and order of the pair loop."""
+    from itertools import combinations
+
+    from tritools.model.centres import group_pairs
+    from tritools.model.constraints import _pair_homography, centre_relations
+    from tritools.model.exact import same_exact_centre
+
+    rng = np.random.default_rng(9)
+    for N in (2, 4, 9, 20):
+        C, _ = _cameras(rng, N, dup=0.4, near=0.3)
+        C[1:] = np.where(rng.random((N - 1, 1, 1)) < 0.3, C[:-1] * 2.0, C[1:])       # exact scaled copies
+        g = centre_groups(C)
+        all_pairs = list(combinations(range(N), 2))
+        assert group_pairs(g) == [(i, j) for i, j in all_pairs if g[i] == g[j]]
+        rel = centre_relations(C)
+        ref = frozenset((i, j) for i, j in all_pairs if g[i] == g[j]
+                        and _pair_homography(C[i], C[j], check=False) is not None and same_exact_centre(C[i], C[j]))
+        assert rel.coincident == ref
+        assert rel.untied == tuple((i, j) for i, j in all_pairs if g[i] == g[j] and (i, j) not in ref)
+        assert all(type(i) is int and type(j) is int for i, j in rel.untied)

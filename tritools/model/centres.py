@@ -11,6 +11,8 @@ rest); :func:`merged_labels` replays the union of :func:`tritools.model.constrai
 """
 from __future__ import annotations
 
+from itertools import combinations
+
 import numpy as np
 
 from sospoly.budget import check_deadline
@@ -18,16 +20,19 @@ from sospoly.budget import check_deadline
 from .cameras import CAMERA_RANK_RTOL, camera_rank_ratio, power2_scale
 from .geometry import SAME_CENTER_RTOL
 
-__all__ = ["merged_labels", "stackable", "stacked_pair_tests", "pair_fundamentals", "dot_norms", "skew_stack",
-           "PAIR_BLOCK_ENTRIES", "PAIR_ROUNDOFF_UNITS", "PAIR_NORM_RTOL", "PAIR_CHUNK", "PAIR_RECHECK_RTOL"]
+__all__ = ["merged_labels", "group_pairs", "stackable", "stacked_pair_tests", "pair_fundamentals", "dot_norms",
+           "skew_stack", "PAIR_BLOCK_ENTRIES", "PAIR_ROUNDOFF_UNITS", "PAIR_NORM_RTOL", "PAIR_CHUNK",
+           "PAIR_RECHECK_RTOL"]
 
 
-def merged_labels(N: int, pairs) -> np.ndarray:
+def merged_labels(N: int, pairs, start=None) -> np.ndarray:
     """The labels of :func:`~tritools.model.constraints.centre_groups_loop` for the pairs ``pairs`` (in combinations
     order) that share a centre: each pair moves the class of j to the label of i, as
-    ``label[label == label[j]] = label[i]`` does."""
-    label = list(range(N))
-    members = {v: [v] for v in range(N)}
+    ``label[label == label[j]] = label[i]`` does, from the labels ``start`` (default ``arange(N)``)."""
+    label = list(range(N)) if start is None else [int(v) for v in start]
+    members: dict[int, list] = {}
+    for v, lv in enumerate(label):
+        members.setdefault(lv, []).append(v)
     for i, j in pairs:
         li, lj = label[i], label[j]
         if li != lj:
@@ -159,4 +164,16 @@ def skew_stack(e: np.ndarray) -> np.ndarray:
     out = np.zeros(e.shape + (3,))
     out[:, 0, 1], out[:, 0, 2], out[:, 1, 2] = -e[:, 2], e[:, 1], -e[:, 0]
     out[:, 1, 0], out[:, 2, 0], out[:, 2, 1] = e[:, 2], -e[:, 1], e[:, 0]
+    return out
+
+
+def group_pairs(groups) -> list:
+    """The pairs (i < j) with ``groups[i] == groups[j]``, in combinations order: a loop over the members of each
+    group, not over all N(N-1)/2 pairs."""
+    g = np.asarray(groups)
+    values, counts = np.unique(g, return_counts=True)
+    out = []
+    for v in values[counts > 1]:
+        out += combinations(np.flatnonzero(g == v).tolist(), 2)
+    out.sort()
     return out

@@ -30,7 +30,7 @@ from sospoly import Polynomial
 from sospoly.budget import check_deadline
 
 from .exact import same_exact_centre
-from .centres import dot_norms, merged_labels, pair_fundamentals, stackable, stacked_pair_tests
+from .centres import dot_norms, group_pairs, merged_labels, pair_fundamentals, stackable, stacked_pair_tests
 from .geometry import fundamental_matrix
 
 __all__ = ["Method", "RANK_RTOL", "COEF_RTOL", "minors_matrix", "theorem1_constraints", "corollary1_constraints",
@@ -144,9 +144,7 @@ class CentreRelations:
     @property
     def untied(self) -> tuple:
         """The pairs (i < j) of one group that are not coincident: their centres agree to round-off only."""
-        g = self.groups
-        return tuple((i, j) for i, j in combinations(range(len(g)), 2)
-                     if g[i] == g[j] and (i, j) not in self.coincident)
+        return tuple(p for p in group_pairs(self.groups) if p not in self.coincident)
 
     @property
     def loose(self) -> frozenset:
@@ -171,8 +169,8 @@ def centre_relations(cameras: np.ndarray, groups=None, *, raw=None, admitted=fro
     cameras = np.asarray(cameras, float)
     raw = cameras if raw is None else np.asarray(raw, float)
     groups = centre_groups(cameras) if groups is None else np.asarray(groups)
-    pairs = frozenset((i, j) for i, j in combinations(range(len(cameras)), 2)
-                      if groups[i] == groups[j] and _pair_homography(cameras[i], cameras[j], check=False) is not None
+    pairs = frozenset((i, j) for i, j in group_pairs(groups)
+                      if _pair_homography(cameras[i], cameras[j], check=False) is not None
                       and ((i, j) in admitted or same_exact_centre(raw[i], raw[j])))
     return CentreRelations(groups, pairs)
 

@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from sospoly import Polynomial
+from sospoly import Polynomial, variables
 from tritools.model.centres import dot_norms, pair_fundamentals, skew_stack
 from tritools.model.constraints import (_pair_homography, centre_relations, corollary1_constraints,
                                         epipolar_polynomial)
@@ -132,3 +132,55 @@ def test_stacked_fundamental_matrices_are_the_per_pair_ones():
     assert all(np.array_equal(skew_stack(e)[k], _skew(e[k])) for k in range(7))
     A = rng.normal(size=(9, 12)) * 10.0 ** rng.uniform(-5, 5, size=(9, 1))
     assert all(dot_norms(A)[k] == np.linalg.norm(A[k].reshape(3, 4)) for k in range(9))
+
+
+def test_sum_in_order_is_the_repeated_addition():
+    """f = 0 + p_1 + p_2 + ... in one dict: the terms, values and order of Polynomial.__add__, also when sums
+    cancel to exactly 0 and the monomial comes back later, and with a polynomial over other generators."""
+    from tritools.model.problem import sum_in_order
+
+    rng = np.random.default_rng(12)
+    gens = ("a", "b", "c")
+    for _ in range(200):
+        polys = []
+        for _ in range(int(rng.integers(0, 7))):
+            terms = {tuple(int(k) for k in rng.integers(0, 2, size=3)): float(rng.choice([1.0, -1.0, 0.5, 3.0]))
+                     for _ in range(int(rng.integers(1, 4)))}
+            polys.append(Polynomial(gens, terms))
+        if polys and rng.random() < 0.1:
+            polys.insert(int(rng.integers(len(polys))), Polynomial(("a", "b"), {(1, 1): 2.0}))
+        ref = Polynomial(gens, {})
+        for p in polys:
+            ref = ref + p
+        got = sum_in_order(gens, polys)
+        assert _same(got, ref)
+
+
+@pytest.mark.parametrize("kind", ["points", "discs"])
+def test_built_problem_equals_the_arithmetic(kind):
+    """build_problem's objective is the regions' objectives added one by one (the sum it replaced)."""
+    from tritools.model.constraints import Method
+    from tritools.model.problem import build_problem
+    from tritools.model.regions import Ellipse, Point
+    from tritools.scene import random_scene
+
+    sc = random_scene(7, 1, seed=4)
+    C, x = np.asarray(sc.cameras, float), np.asarray(sc.points2d, float)[0]
+    regs = [Point(p) if kind == "points" else Ellipse(p, np.eye(2)) for p in x]
+    prob = build_problem(C, regs, Method.COROLLARY1, "dense")
+    v = variables(list(prob.gens))
+    ref, pos = Polynomial(prob.gens, {}), 2 * len(regs)
+    for i, r in enumerate(regs):
+        ref = ref + r.polynomials((v[2 * i], v[2 * i + 1]), tuple(v[pos:pos + r.n_aux])).f
+        pos += r.n_aux
+    assert _same(prob.f, ref) and len(ref.terms) > 3 * len(regs)
+
+
+def test_delta_min_honours_the_deadline():
+    from sospoly import delta_min
+    from sospoly.budget import Deadline, TimeLimitReached, deadline_scope
+
+    x = Polynomial(("x",), {(3,): 1.0})
+    assert delta_min(x, [x * x] * 100) == 6 and delta_min(Polynomial(("x",), {})) == 0
+    with deadline_scope(Deadline.after(0.0)), pytest.raises(TimeLimitReached):
+        delta_min(x, [x] * 100)

@@ -319,7 +319,13 @@ def corollary1_constraints(cameras: np.ndarray, gens, x_index, pairs=None, relat
         return Polynomial(gens, {tuple(e): 1.0})
 
     one = Polynomial.constant(1.0, gens)
-    xt = [[var(2 * i), var(2 * i + 1), one] for i in range(N)]
+    views: dict[int, list] = {}
+
+    def xt(i):                                          # (x_i1, x_i2, 1), made when a pair needs the arithmetic
+        if i not in views:
+            views[i] = [var(2 * i), var(2 * i + 1), one]
+        return views[i]
+
     Fs = _epipolar_matrices(cameras, pairs)
     mono = _Monomials(n, x_index)
     polys, kept, skipped, homography = [], [], [], []
@@ -338,17 +344,17 @@ def corollary1_constraints(cameras: np.ndarray, gens, x_index, pairs=None, relat
             if H is None:
                 skipped.append((i, j))
                 continue
-            Hx = [sum((float(H[a, b]) * xt[i][b] for b in range(3) if H[a, b] != 0.0), Polynomial(gens, {}))
+            Hx = [sum((float(H[a, b]) * xt(i)[b] for b in range(3) if H[a, b] != 0.0), Polynomial(gens, {}))
                   for a in range(3)]
             for a in range(3):                              # (x~_j x H x~_i)_a
                 b, c = (a + 1) % 3, (a + 2) % 3
-                polys.append(xt[j][b] * Hx[c] - xt[j][c] * Hx[b])
+                polys.append(xt(j)[b] * Hx[c] - xt(j)[c] * Hx[b])
                 kept.append((i, j))
             homography.append((i, j))
             continue
         terms = mono.bilinear(i, j, F)
         polys.append(Polynomial.from_trusted_terms(gens, terms) if terms is not None
-                     else epipolar_polynomial(gens, F, xt[i], xt[j]))
+                     else epipolar_polynomial(gens, F, xt(i), xt(j)))
         kept.append((i, j))
     return polys, {"N1": len(polys), "N2": len(polys), "pairs": kept, "skipped": skipped, "homography": homography}
 

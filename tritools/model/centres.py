@@ -64,11 +64,12 @@ def stacked_pair_tests(C: np.ndarray) -> tuple[list, list]:
 
     With S_k = P_k / 2^(e_k) (the power-of-two scaling of ``fundamental_matrix``), a_j the null vector and S_j^+
     the pseudo-inverse (batched SVDs: the same LAPACK calls per camera, so the same bits as the loop's),
-    ``F_ij = [e]_x S_i S_j^+``, ``e = S_i a_j``, for all pairs of a block of rows in three matrix products.  Any
-    evaluation order of these sums of <= 4 products differs from the exact value by at most ~6 u W entrywise,
-    ``W = [|S_i| |a_j| + |e|]_x |S_i| |S_j^+|``, so the loop's ||F|| and this one are within
-    ``PAIR_ROUNDOFF_UNITS * eps * ||W||_F`` (a factor ~2.5 to spare); a pair is decided here only when that band
-    (and ``PAIR_NORM_RTOL`` for the norms' rounding) lies on one side of ``SAME_CENTER_RTOL ||S_i|| ||S_j||``."""
+    ``F_ij = [e]_x S_i S_j^+``, ``e = S_i a_j``, for all pairs of a block of rows in three matrix products.  Either
+    evaluation order of these sums of <= 4 products (([e]_x S_i) S_j^+ in the loop, [e]_x (S_i S_j^+) here) is
+    within ~7 u W entrywise of the exact value (u = eps / 2, first order), ``W = [|S_i| |a_j| + |e|]_x |S_i|
+    |S_j^+|``, so the loop's ||F|| and this one are within 7 eps ||W||_F; ``PAIR_ROUNDOFF_UNITS * eps * ||W||_F``
+    (a factor ~4 to spare) is the band, and a pair is decided here only when the band (and ``PAIR_NORM_RTOL`` for
+    the norms' rounding) lies on one side of ``SAME_CENTER_RTOL ||S_i|| ||S_j||``."""
     N = C.shape[0]
     S = C / power2_scale(C, (1, 2))
     a = np.linalg.svd(S)[2][:, -1]

@@ -182,8 +182,8 @@ def centre_groups(cameras: np.ndarray) -> np.ndarray:
     The labels of :func:`centre_groups_loop` (pairs i < j in order, ``label[label == label[j]] = label[i]`` for
     each pair that shares a centre), with the pairs' test stacked
     (:func:`~tritools.model.centres.stacked_pair_tests`): the per-pair rule runs only for pairs the stacked norms
-    leave within round-off of the threshold, and for cameras that are
-    not a float (N, 3, 4) stack of valid cameras (the loop raises as before)."""
+    leave within round-off of the threshold, and for cameras that are not a float (N, 3, 4) stack of valid cameras
+    (the loop raises as before)."""
     N = len(cameras)
     if N < 2:
         return np.arange(N)

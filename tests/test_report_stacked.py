@@ -8,7 +8,8 @@ import pytest
 
 from sospoly.algebra.basis import sigma, tau
 from sospoly.analysis.complexity import n_lmivar_formula
-from tritools.model.geometry import project_point_views, project_views
+from tritools.model.geometry import image_points, project_homogeneous, project_point_views, project_points_views, \
+    project_views
 from tritools.model.regions import Ellipse, Point
 from tritools.solve.report import gamma_upper, point_report
 
@@ -41,6 +42,45 @@ def test_stacked_projection_is_the_per_view_projection(kind):
         assert np.array_equal(project_point_views(Xh, C), ref, equal_nan=True)
     if kind == "principal-plane":
         assert np.isinf(project_point_views(Xh, C)[0]).all()
+
+
+@pytest.mark.parametrize("kind", ["plain", "georeferenced", "principal-plane", "zero-camera", "infinite-point"])
+def test_stacked_projection_of_many_points_is_the_per_view_projection(kind):
+    """(m, N, 2) for m points: the per-camera loop's numbers (points near, far, at infinity, NaN, behind)."""
+    rng = np.random.default_rng(10 + len(kind))
+    for _ in range(150):
+        N, m = int(rng.integers(1, 20)), int(rng.integers(1, 9))
+        C, X = _cameras(rng, N, kind)
+        Xs = X + rng.normal(size=(m, 3)) * 10.0 ** rng.uniform(-8, 3, size=(m, 1))
+        Xs[rng.random(m) < 0.1] = np.nan
+        Xh = np.hstack([Xs, np.ones((m, 1))])
+        ref = np.stack([project_homogeneous(Xh, P) for P in C], axis=1)
+        got = project_points_views(Xh, C)
+        assert got.shape == (m, N, 2) and np.array_equal(got, ref, equal_nan=True)
+        one = np.vstack([project_homogeneous(Xh[:1], P) for P in C])     # (a batch of one: its own BLAS call)
+        assert np.array_equal(project_point_views(Xh[:1], C), one, equal_nan=True)
+
+
+@pytest.mark.parametrize("georeferenced", [False, True])
+def test_image_points_is_the_per_camera_loop(georeferenced):
+    """``image_points`` for (3,) and (m, 3) inputs: bit for bit the per-camera ``project_homogeneous`` loop."""
+    from tritools.scene import random_scene
+
+    rng = np.random.default_rng(int(georeferenced))
+    for N in (1, 2, 5, 30):
+        sc = random_scene(max(N, 2), 6, seed=N)
+        C, X = np.asarray(sc.cameras, float)[:N], np.asarray(sc.points3d, float)
+        if georeferenced:
+            off = rng.normal(size=3) * 1e7
+            C = C.copy()
+            C[:, :, 3] -= np.einsum("nij,j->ni", C[:, :, :3], off)
+            X = X + off
+        C = C * 10.0 ** rng.uniform(-3, 6, size=(N, 1, 1))
+        Xh = np.hstack([X, np.ones((len(X), 1))])
+        ref = np.stack([project_homogeneous(Xh, P) for P in C], axis=1)
+        assert np.array_equal(image_points(X, C), ref)
+        one = np.stack([project_homogeneous(Xh[2:3], P) for P in C], axis=1)[0]
+        assert image_points(X[2], C).shape == (N, 2) and np.array_equal(image_points(X[2], C), one)
 
 
 def _looped_report(X, C, regions):

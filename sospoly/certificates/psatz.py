@@ -87,9 +87,18 @@ def _check_poly(p, what: str) -> Polynomial:
 
 
 def delta_min(f: Polynomial, eq=(), ineq=()) -> int:
-    """delta_min = 2 ceil(max(deg f, deg g_k, deg h_k) / 2) (SPEC §5)."""
-    d = max([f.degree] + [g.degree for g in eq] + [h.degree for h in ineq] + [0])
+    """delta_min = 2 ceil(max(deg f, deg g_k, deg h_k) / 2) (SPEC §5).  Checks the active deadline every
+    :data:`DEADLINE_STRIDE` polynomials (tens of thousands of constraints take seconds to read)."""
+    d = 0
+    for k, p in enumerate((f, *eq, *ineq)):
+        if k % DEADLINE_STRIDE == 0:
+            check_deadline("reading the data's degrees")
+        d = max(d, p.degree)
     return 2 * ((d + 1) // 2)
+
+
+#: polynomials read between two deadline checks in :func:`delta_min`.
+DEADLINE_STRIDE = 64
 
 
 def default_q(gens, delta: int, deg_f: int) -> Polynomial:

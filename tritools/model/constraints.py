@@ -30,11 +30,12 @@ from sospoly import Polynomial
 from sospoly.budget import check_deadline
 
 from .exact import same_exact_centre
+from .centres import dot_norms, group_pairs, merged_labels, pair_fundamentals, stackable, stacked_pair_tests
 from .geometry import fundamental_matrix
 
 __all__ = ["Method", "RANK_RTOL", "COEF_RTOL", "minors_matrix", "theorem1_constraints", "corollary1_constraints",
-           "triple_minor_constraints", "THEOREM1_DENSE_MAX_VIEWS", "centre_groups",
-           "CentreRelations", "centre_relations"]
+           "triple_minor_constraints", "THEOREM1_DENSE_MAX_VIEWS", "centre_groups", "centre_groups_loop",
+           "epipolar_polynomial", "CentreRelations", "centre_relations"]
 
 #: relative singular-value threshold for the numerical rank N2 of M1 (rows scaled to unit norm first).
 #: Directions below it are dropped: at an exactly feasible point their values are float
@@ -143,9 +144,7 @@ class CentreRelations:
     @property
     def untied(self) -> tuple:
         """The pairs (i < j) of one group that are not coincident: their centres agree to round-off only."""
-        g = self.groups
-        return tuple((i, j) for i, j in combinations(range(len(g)), 2)
-                     if g[i] == g[j] and (i, j) not in self.coincident)
+        return tuple(p for p in group_pairs(self.groups) if p not in self.coincident)
 
     @property
     def loose(self) -> frozenset:
@@ -170,26 +169,56 @@ def centre_relations(cameras: np.ndarray, groups=None, *, raw=None, admitted=fro
     cameras = np.asarray(cameras, float)
     raw = cameras if raw is None else np.asarray(raw, float)
     groups = centre_groups(cameras) if groups is None else np.asarray(groups)
-    pairs = frozenset((i, j) for i, j in combinations(range(len(cameras)), 2)
-                      if groups[i] == groups[j] and _pair_homography(cameras[i], cameras[j], check=False) is not None
+    pairs = frozenset((i, j) for i, j in group_pairs(groups)
+                      if _pair_homography(cameras[i], cameras[j], check=False) is not None
                       and ((i, j) in admitted or same_exact_centre(raw[i], raw[j])))
     return CentreRelations(groups, pairs)
 
 
 def centre_groups(cameras: np.ndarray) -> np.ndarray:
     """One label per view; views whose camera centres coincide share one (the rule of
-    :func:`tritools.model.geometry.fundamental_matrix`: F_ij vanishes; Corollary 1 drops such pairs)."""
+    :func:`tritools.model.geometry.fundamental_matrix`: F_ij vanishes; Corollary 1 drops such pairs).
+
+    The labels of :func:`centre_groups_loop` (pairs i < j in order, ``label[label == label[j]] = label[i]`` for
+    each pair that shares a centre), with the pairs' test stacked
+    (:func:`~tritools.model.centres.stacked_pair_tests`): the per-pair rule runs only for pairs the stacked norms
+    leave within round-off of the threshold, and for cameras that are not a float (N, 3, 4) stack of valid cameras
+    (the loop raises as before)."""
+    N = len(cameras)
+    if N < 2:
+        return np.arange(N)
+    check_deadline("comparing the camera centres")
+    C = np.asarray(cameras)
+    if not stackable(C):
+        return centre_groups_loop(cameras)
+    same, unsure = stacked_pair_tests(C)
+    for i, j in unsure:                                 # near the threshold: the exact per-pair rule
+        check_deadline("comparing the camera centres")
+        if _same_centre_pair(C[i], C[j]):
+            same.append((i, j))
+    return merged_labels(N, sorted(same))
+
+
+def centre_groups_loop(cameras: np.ndarray) -> np.ndarray:
+    """:func:`centre_groups` pair by pair (the reference, and the rule for inputs the stacked test refuses)."""
     N = cameras.shape[0]
     label = np.arange(N)
     for i, j in combinations(range(N), 2):
         check_deadline("comparing the camera centres")
-        try:
-            fundamental_matrix(cameras[i], cameras[j])
-        except ValueError as exc:
-            if "same camera centre" not in str(exc):
-                raise
+        if _same_centre_pair(cameras[i], cameras[j]):
             label[label == label[j]] = label[i]
     return label
+
+
+def _same_centre_pair(Pi: np.ndarray, Pj: np.ndarray) -> bool:
+    """Does :func:`fundamental_matrix` refuse the pair for sharing one centre?  (Other ValueErrors propagate.)"""
+    try:
+        fundamental_matrix(Pi, Pj)
+    except ValueError as exc:
+        if "same camera centre" not in str(exc):
+            raise
+        return True
+    return False
 
 
 @lru_cache(maxsize=64)
@@ -290,20 +319,24 @@ def corollary1_constraints(cameras: np.ndarray, gens, x_index, pairs=None, relat
         return Polynomial(gens, {tuple(e): 1.0})
 
     one = Polynomial.constant(1.0, gens)
-    xt = [[var(2 * i), var(2 * i + 1), one] for i in range(N)]
+    views: dict[int, list] = {}
+
+    def xt(i):                                          # (x_i1, x_i2, 1), made when a pair needs the arithmetic
+        if i not in views:
+            views[i] = [var(2 * i), var(2 * i + 1), one]
+        return views[i]
+
+    Fs = _epipolar_matrices(cameras, pairs)
+    mono = _Monomials(n, x_index)
     polys, kept, skipped, homography = [], [], [], []
     loose = relations.loose if relations is not None else frozenset()
-    for i, j in pairs:
+    for (i, j), F in zip(pairs, Fs):
         check_deadline("building the epipolar constraints")
         if i in loose or j in loose:                    # CentreRelations.loose: no constraint at all
             skipped.append((i, j))
             continue
-        try:
-            if relations is not None and relations.groups[i] == relations.groups[j]:
-                raise ValueError("one centre (raw cameras)")
-            F = fundamental_matrix(cameras[i], cameras[j])
-        except ValueError:
-            if relations is None:
+        if F is None or (relations is not None and relations.groups[i] == relations.groups[j]):
+            if relations is None:                       # one centre (or no fundamental matrix): the homography
                 H = _pair_homography(cameras[i], cameras[j])
             else:
                 H = _pair_homography(cameras[i], cameras[j], check=False) if (i, j) in relations.coincident \
@@ -311,23 +344,94 @@ def corollary1_constraints(cameras: np.ndarray, gens, x_index, pairs=None, relat
             if H is None:
                 skipped.append((i, j))
                 continue
-            Hx = [sum((float(H[a, b]) * xt[i][b] for b in range(3) if H[a, b] != 0.0), Polynomial(gens, {}))
+            Hx = [sum((float(H[a, b]) * xt(i)[b] for b in range(3) if H[a, b] != 0.0), Polynomial(gens, {}))
                   for a in range(3)]
             for a in range(3):                              # (x~_j x H x~_i)_a
                 b, c = (a + 1) % 3, (a + 2) % 3
-                polys.append(xt[j][b] * Hx[c] - xt[j][c] * Hx[b])
+                polys.append(xt(j)[b] * Hx[c] - xt(j)[c] * Hx[b])
                 kept.append((i, j))
             homography.append((i, j))
             continue
-        F = F / np.linalg.norm(F)
-        p = Polynomial(gens, {})
-        for a in range(3):
-            for b in range(3):
-                if F[a, b] != 0.0:
-                    p = p + float(F[a, b]) * xt[i][a] * xt[j][b]
-        polys.append(p)
+        terms = mono.bilinear(i, j, F)
+        polys.append(Polynomial.from_trusted_terms(gens, terms) if terms is not None
+                     else epipolar_polynomial(gens, F, xt(i), xt(j)))
         kept.append((i, j))
     return polys, {"N1": len(polys), "N2": len(polys), "pairs": kept, "skipped": skipped, "homography": homography}
+
+
+def epipolar_polynomial(gens: tuple, F: np.ndarray, xi: list, xj: list) -> Polynomial:
+    """x~_i^T F x~_j by polynomial arithmetic, ``xi``/``xj`` the polynomials (x_1, x_2, 1) of the two views (the
+    reference of :meth:`_Monomials.bilinear`, and the rule where the two views' variables are not distinct)."""
+    p = Polynomial(gens, {})
+    for a in range(3):
+        for b in range(3):
+            if F[a, b] != 0.0:
+                p = p + float(F[a, b]) * xi[a] * xj[b]
+    return p
+
+
+class _Monomials:
+    """The exponent tuples of x~_i^T F x~_j over ``n`` generators (``x_index``: the generator of each image
+    variable), the linear and constant ones shared between pairs."""
+
+    def __init__(self, n: int, x_index):
+        self.n, self.x = n, [int(k) for k in x_index]
+        self.lin: dict[int, tuple] = {}
+        self.const = (0,) * n
+
+    def _linear(self, v: int) -> tuple:
+        if v not in self.lin:
+            e = [0] * self.n
+            e[v] = 1
+            self.lin[v] = tuple(e)
+        return self.lin[v]
+
+    def bilinear(self, i: int, j: int, F: np.ndarray) -> dict | None:
+        """{exponent: F[a, b]} in the order (a, b) of :func:`epipolar_polynomial`, its terms (the four variables
+        are distinct, so each (a, b) has its own monomial and the sum is the coefficients themselves); None when
+        the variables of views i and j are not four distinct generators or F is not finite (the arithmetic refuses
+        it)."""
+        u = (self.x[2 * i], self.x[2 * i + 1], self.x[2 * j], self.x[2 * j + 1])
+        if len(set(u)) != 4 or not np.isfinite(F).all():
+            return None
+        terms = {}
+        for a, b in zip(*np.nonzero(F)):
+            if a < 2 and b < 2:
+                e = [0] * self.n
+                e[u[a]] = e[u[2 + b]] = 1
+                terms[tuple(e)] = float(F[a, b])
+            else:
+                terms[self.const if a == b == 2 else self._linear(u[a] if a < 2 else u[2 + b])] = float(F[a, b])
+        return terms
+
+
+def _epipolar_matrices(cameras: np.ndarray, pairs: list) -> list:
+    """Per pair, ``F / ||F||`` for F = ``fundamental_matrix(cameras[i], cameras[j])`` (normalised once more, as the
+    constraints always were), or None where that raises (one centre, bad cameras): stacked
+    (:func:`~tritools.model.centres.pair_fundamentals`, the same numbers) for a valid float stack, pair by pair
+    otherwise and where the stacked norm is within round-off of the threshold."""
+    C = np.asarray(cameras)
+    if not pairs:
+        return []
+    if not stackable(C):
+        return [_epipolar_matrix(C[i], C[j]) for i, j in pairs]
+    I, J = (np.array(v, dtype=np.intp) for v in zip(*pairs))
+    F, defined, recheck = pair_fundamentals(C, I, J)
+    F = F / np.where(defined, dot_norms(F.reshape(len(F), 9)), 1.0)[:, None, None]
+    out = [F[k] if defined[k] else None for k in range(len(F))]
+    for k in np.flatnonzero(recheck):
+        check_deadline("computing the fundamental matrices")
+        out[k] = _epipolar_matrix(C[I[k]], C[J[k]])
+    return out
+
+
+def _epipolar_matrix(Pi: np.ndarray, Pj: np.ndarray) -> np.ndarray | None:
+    """``F / ||F||`` of ``fundamental_matrix(Pi, Pj)``, None where it raises (:func:`_epipolar_matrices`)."""
+    try:
+        F = fundamental_matrix(Pi, Pj)
+    except ValueError:
+        return None
+    return F / np.linalg.norm(F)
 
 
 def _pair_homography(Pi: np.ndarray, Pj: np.ndarray, check: bool = True) -> np.ndarray | None:

@@ -21,6 +21,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from sospoly.budget import check_deadline
+
 from .cameras import power2_scale
 from .exact import CANCELLATION_RATIO, dot2, homogeneous_images, two_prod, two_sum
 from .geometry import PROJECTION_DENOM_RTOL
@@ -59,16 +61,25 @@ def _centres(cameras: np.ndarray) -> np.ndarray:
     """Finite camera centres (K, 3) from the null vectors of the cameras (rows scaled to unit norm): one batched
     SVD of the stack (the same LAPACK routine per camera as a loop of single SVDs, so the same numbers), a loop
     only when the batch fails (:func:`_centres_loop`)."""
+    c, has = _view_centres(cameras)
+    return c[has].reshape(-1, 3)
+
+
+def _view_centres(cameras: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(centre (N, 3), has (N,)): row i is ``_centres(cameras[i:i + 1])`` where that is not empty."""
     C = np.asarray(cameras, float)
     with np.errstate(all="ignore"):
         A = C / np.maximum(norms(C, axis=2, keepdims=True), 1e-300)
         try:
             w = np.linalg.svd(A)[2][:, -1]
         except np.linalg.LinAlgError:
-            return _centres_loop(C)
+            rows = [_centres_loop(C[i:i + 1]) for i in range(len(C))]
+            return (np.array([r[0] if len(r) else np.zeros(3) for r in rows]).reshape(-1, 3),
+                    np.array([len(r) > 0 for r in rows], bool))
         keep = (np.abs(w[:, 3]) > 1e-300) & np.isfinite(w).all(axis=1)
-        c = w[keep, :3] / w[keep, 3:]
-    return c[np.isfinite(c).all(axis=1)].reshape(-1, 3)
+        c = np.where(keep[:, None], w[:, :3], 0.0) / np.where(keep, w[:, 3], 1.0)[:, None]
+    has = keep & np.isfinite(c).all(axis=1)
+    return np.where(has[:, None], c, 0.0), has
 
 
 def _centres_loop(cameras: np.ndarray) -> np.ndarray:
@@ -265,16 +276,34 @@ def frame_centre_groups(cameras_f: np.ndarray, frame: WorldFrame) -> np.ndarray:
     :func:`tritools.model.constraints.centre_groups` on them, and -- when the frame moved -- views whose centres
     differ by at most ``RESOLVED_SPREAD_RTOL`` |origin| joined (a baseline at the caller's data's round-off, which
     the re-centring cannot resolve)."""
+    from .centres import merged_labels
     from .constraints import centre_groups
 
     label = centre_groups(cameras_f)
     if not frame.moved:
         return label
     tol = RESOLVED_SPREAD_RTOL * float(np.linalg.norm(frame.origin))
-    N = len(cameras_f)
-    cs = [_centres(cameras_f[i:i + 1]) for i in range(N)]
-    for i in range(N):
-        for j in range(i + 1, N):
-            if len(cs[i]) and len(cs[j]) and np.linalg.norm(cs[i][0] - cs[j][0]) <= tol:
-                label[label == label[j]] = label[i]
-    return label
+    return merged_labels(len(label), _close_pairs(*_view_centres(cameras_f), tol), label)
+
+
+#: pairs per block of :func:`_close_pairs` (memory bounded at any N).
+CLOSE_PAIR_BLOCK = 2 ** 16
+
+
+def _close_pairs(c: np.ndarray, has: np.ndarray, tol: float) -> list:
+    """The pairs i < j (combinations order) of views with centres whose distance ``np.linalg.norm(c_i - c_j)`` (the
+    same numbers: :func:`~tritools.model.centres.dot_norms`) is at most ``tol``, in blocks of rows."""
+    from .centres import dot_norms
+
+    N = len(c)
+    rows = max(1, CLOSE_PAIR_BLOCK // max(N, 1))
+    out = []
+    for i0 in range(0, N, rows):
+        check_deadline("comparing the camera centres")
+        i = np.arange(i0, min(N, i0 + rows))[:, None]
+        j = np.arange(N)[None, :]
+        I, J = np.nonzero((i < j) & has[i] & has[j])
+        I, J = I + i0, J
+        close = dot_norms(c[I] - c[J]) <= tol
+        out += zip(I[close].tolist(), J[close].tolist())
+    return out

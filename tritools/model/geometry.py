@@ -90,26 +90,32 @@ def project_views(Xh: np.ndarray, cameras) -> list:
 
 
 def project_point_views(Xh: np.ndarray, cameras: np.ndarray) -> np.ndarray:
-    """``np.vstack(project_views(Xh, cameras))`` for one homogeneous point Xh (1, 4) and cameras (N, 3, 4), stacked
-    over the cameras: the operations of :func:`_project_scaled` per camera in one numpy expression each (the same
-    numbers, tested equal), so a report of N views costs a few numpy calls instead of N."""
+    """``np.vstack(project_views(Xh, cameras))`` for one homogeneous point Xh (1, 4) and cameras (N, 3, 4): row 0
+    of :func:`project_points_views`, so a report of N views costs a few numpy calls instead of N."""
+    return project_points_views(Xh, cameras)[0]
+
+
+def project_points_views(Xh: np.ndarray, cameras: np.ndarray) -> np.ndarray:
+    """``np.stack(project_views(Xh, cameras), axis=1)``, (m, N, 2), for homogeneous points Xh (m, 4) and cameras
+    (N, 3, 4), stacked over the cameras: the operations of :func:`_project_scaled` per camera in one numpy
+    expression each (a matrix product broadcast over the cameras makes the same BLAS call per camera as the loop;
+    the compensated sums are elementwise), so the same numbers, tested equal."""
     Xs, finite = _scaled_points(Xh)
     C = np.asarray(cameras, float)
     Ps = C / power2_scale(C, (1, 2))
-    h = (Xs @ np.swapaxes(Ps, 1, 2))[:, 0, :]                              # (N, 3): Xs @ Ps.T per camera
-    mag = (np.abs(Xs) @ np.swapaxes(np.abs(Ps), 1, 2))[:, 0, :]
-    rows = np.nonzero(~np.all(mag <= CANCELLATION_RATIO * np.abs(h), axis=1))[0]
-    if rows.size:                     # cancellation (a georeferenced world): compensated, per camera
-        h[rows] = accurate_homogeneous(Ps[rows], Xs[0][None, None, :])
-    den = h[:, 2]
-    tiny = np.abs(den) <= PROJECTION_DENOM_RTOL * (np.abs(Xs) @ np.abs(Ps[:, 2, :]).T)[0]
+    h = Xs @ np.swapaxes(Ps, 1, 2)                                        # (N, m, 3): Xs @ Ps.T per camera
+    mag = np.abs(Xs) @ np.swapaxes(np.abs(Ps), 1, 2)
+    view, point = np.nonzero(~np.all(mag <= CANCELLATION_RATIO * np.abs(h), axis=2))
+    if view.size:                     # cancellation (a georeferenced world): compensated, per camera and point
+        h[view, point] = accurate_homogeneous(Ps[view], Xs[point][:, None, :])
+    den = h[..., 2]
+    tiny = np.abs(den) <= PROJECTION_DENOM_RTOL * (np.abs(Xs) @ np.abs(Ps[:, 2, :]).T).T
     safe = np.where(tiny, 1.0, den)
     with np.errstate(over="ignore"):
-        out = h[:, :2] / safe[:, None]
+        out = h[..., :2] / safe[..., None]
     out[tiny] = np.inf
-    if not finite[0]:
-        out[:] = np.nan
-    return out
+    out[:, ~finite] = np.nan
+    return np.swapaxes(out, 0, 1)
 
 
 def _scaled_points(Xh: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -159,11 +165,11 @@ def project(X: ArrayLike, P: ArrayLike) -> np.ndarray:
 
 
 def image_points(X, cameras) -> np.ndarray:
-    """Projections of ``X`` in every view: (3,) -> (N, 2); (m, 3) -> (m, N, 2)."""
+    """Projections of ``X`` in every view: (3,) -> (N, 2); (m, 3) -> (m, N, 2) (:func:`project_points_views`:
+    the per-camera :func:`project_homogeneous` stacked, the same numbers)."""
     A, single = points3d_array(X)
     C = validate_cameras(cameras, min_views=1, require_distinct=False)
-    Xh = np.hstack([A, np.ones((len(A), 1))])
-    out = np.stack([project_homogeneous(Xh, P) for P in C], axis=1)
+    out = project_points_views(np.hstack([A, np.ones((len(A), 1))]), C)
     return out[0] if single else out
 
 

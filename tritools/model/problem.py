@@ -27,6 +27,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from sospoly import Polynomial, variables
+from sospoly.budget import check_deadline
 
 from .constraints import (THEOREM1_DENSE_MAX_VIEWS, Method, centre_relations, corollary1_constraints,
                           theorem1_constraints, triple_minor_constraints)
@@ -98,20 +99,21 @@ def build_problem(cameras: np.ndarray, regions, method: Method = Method.THEOREM1
     v = variables(names)
     gens = v[0].gens
     x_index = np.arange(2 * N)
-    f = Polynomial(gens, {})
-    eq, ineq, eq_views, ineq_views, view_vars = [], [], [], [], []
+    fs, eq, ineq, eq_views, ineq_views, view_vars = [], [], [], [], [], []
     pos = 2 * N
     for i, reg in enumerate(regions):
+        check_deadline("building the regions' polynomials")
         xi = (v[2 * i], v[2 * i + 1])
         yi = tuple(v[pos:pos + reg.n_aux])
         view_vars.append((2 * i, 2 * i + 1) + tuple(range(pos, pos + reg.n_aux)))
         pos += reg.n_aux
         polys = reg.polynomials(xi, yi)
-        f = f + polys.f
+        fs.append(polys.f)
         eq += [p.with_gens(gens) for p in polys.eq]
         ineq += [p.with_gens(gens) for p in polys.ineq]
         eq_views += [(i,)] * len(polys.eq)
         ineq_views += [(i,)] * len(polys.ineq)
+    f = sum_in_order(gens, fs)
     if method == Method.THEOREM1 and formulation == "dense":
         if N > THEOREM1_DENSE_MAX_VIEWS:
             raise ValueError(f"Theorem 1 with all minors is built for at most {THEOREM1_DENSE_MAX_VIEWS} views "
@@ -136,6 +138,26 @@ def build_problem(cameras: np.ndarray, regions, method: Method = Method.THEOREM1
     return TriangulationProblem(gens, x_index, f.with_gens(gens), tuple(eq) + tuple(proj), tuple(ineq), N,
                                 method, tuple(proj), info, tuple(view_vars), tuple(eq_views) + tuple(proj_views),
                                 tuple(ineq_views), formulation)
+
+
+def sum_in_order(gens: tuple, polys: list) -> Polynomial:
+    """``Polynomial(gens, {}) + polys[0] + polys[1] + ...`` (left to right) in one dict: each addition adds its
+    terms in order and a sum that reaches exactly 0 leaves (``Polynomial.__add__``'s terms, values and order), without
+    copying and rehashing the partial sum at every step (O(N^2) over N views).  Polynomials over other generators
+    are added by the arithmetic."""
+    out: dict = {}
+    total = None
+    for p in polys:
+        if total is not None or p.gens != gens:
+            total = (Polynomial.from_trusted_terms(gens, out) if total is None else total) + p
+            continue
+        for e, c in p.terms.items():
+            s = out.get(e, 0.0) + c
+            if s != 0.0:
+                out[e] = s
+            else:
+                out.pop(e, None)
+    return Polynomial.from_trusted_terms(gens, out) if total is None else total
 
 
 def _comb4(n: int) -> int:

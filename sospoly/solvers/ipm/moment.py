@@ -5,12 +5,12 @@ import threading
 from collections import OrderedDict
 
 import numpy as np
-import scipy.linalg as sla
 import scipy.sparse as sp
 
 from ...algebra.svec import smat, svec, svec_scale, triu_pairs
 from ...tolerances import Tolerances
 from .core import IpmResult, Layout, Operator, mehrotra
+from .lapack import cho_solve, cholesky, solve_lower
 
 __all__ = ["MomentReduction", "reduction_for", "REDUCE_MIN_FRACTION"]
 
@@ -251,31 +251,30 @@ class _MomentOperator(Operator):
         M = red.schur(Zs[0][0], Rs[0][0], self.ws)
         dmax = max(1.0, float(np.abs(np.diagonal(M)).max()))
         for k in range(3):
-            Mr = M.copy()
+            Mr = np.array(M, order="F")          # potrf's storage order: factorised in place
             Mr[np.diag_indices(m2)] += tol.ipm_schur_regularization * 100.0 ** k * dmax
             try:
-                cf = sla.cho_factor(Mr, lower=True, check_finite=False)
+                Lc = cholesky(Mr, lower=True, overwrite=True)
                 break
             except np.linalg.LinAlgError:
                 if k == 2:
                     raise
-        Lc = cf[0]
         t0 = m2 - red.n_touched
         if p:
             # AE^T vanishes on the leading rows: L^-1 AE^T = [0; L22^-1 AE2^T]
-            C = sla.solve_triangular(Lc[t0:, t0:], AE[:, t0:].T, lower=True, check_finite=False)
+            C = solve_lower(Lc[t0:, t0:], AE[:, t0:].T)
             SE = C.T @ C
             SE[np.diag_indices(p)] += tol.ipm_schur_regularization * max(1.0, float(np.abs(np.diagonal(SE)).max()))
-            cfe = sla.cho_factor(SE, lower=True, check_finite=False)
+            Le = cholesky(SE, lower=True)
 
         def base(r1, r2):
             # u = L^-1 r1; dz = SE^-1 (C^T u - r2); dy = L^-T (u - C dz), C = [0; C2] = L^-1 AE^T
-            u = sla.solve_triangular(Lc, r1, lower=True, check_finite=False)
+            u = solve_lower(Lc, r1)
             if not p:
-                return sla.solve_triangular(Lc, u, lower=True, trans="T", check_finite=False), np.zeros(0)
-            dz = sla.cho_solve(cfe, C.T @ u[t0:] - r2, check_finite=False)
+                return solve_lower(Lc, u, trans=True), np.zeros(0)
+            dz = cho_solve(Le, C.T @ u[t0:] - r2, lower=True)
             u[t0:] -= C @ dz
-            return sla.solve_triangular(Lc, u, lower=True, trans="T", check_finite=False), dz
+            return solve_lower(Lc, u, trans=True), dz
 
         def solve(rx, rE):
             r1, r2 = rx[0], rE[0]

@@ -12,6 +12,11 @@ from ...tolerances import Tolerances
 from .core import IpmResult, Layout, Operator, mehrotra
 from .lapack import cho_solve, cholesky, solve_lower
 
+try:    # the kernel of csr_matrix @ dense (scipy.sparse's _matmul_multivector), run into a reused buffer
+    from scipy.sparse._sparsetools import csr_matvecs as _csr_matvecs
+except ImportError:  # pragma: no cover - a scipy without it: the public product (a fresh array per call)
+    _csr_matvecs = None
+
 __all__ = ["MomentReduction", "reduction_for", "REDUCE_MIN_FRACTION"]
 
 #: reduction plans by sparsity pattern (least recently used dropped beyond _REDUCTIONS_MAX)
@@ -149,19 +154,22 @@ class MomentReduction:
 
     def workspace(self, V: np.ndarray) -> dict:
         """Work buffers (allocating the (m', n, n) stack every iteration costs more than the
-        product; one set per thread, so a plan can be shared between threads) and the sparse
+        product, and a fresh (m' x m') array is paged in anew every iteration: M and its factor live
+        in buffers too; one set per thread, so a plan can be shared between threads) and the sparse
         vec(A_a) of this instance's values V."""
         m2, n, K = self.m2, self.n, self.K
         EF = sp.csr_matrix((V[self.ef_src], *self.ef_pattern), shape=(m2, n * n))
         bufs = getattr(self._local, "bufs", None)    # reused by later solves in the same thread
         if bufs is None:
             bufs = self._local.bufs = {"Zg": np.empty((m2, K, n)), "Rg": np.empty((m2, K, n)),
-                                       "P": np.empty((m2, n, n)), "PT": np.empty((n * n, m2))}
+                                       "P": np.empty((m2, n, n)), "PT": np.empty((n * n, m2)),
+                                       "M": np.empty((m2, m2)), "Mr": np.empty((m2, m2), order="F")}
         return dict(bufs, EF=EF, V=V)
 
     # ------------------------------------------------------------------ Schur complement
     def schur(self, Z: np.ndarray, R: np.ndarray, ws: dict) -> np.ndarray:
-        """M_ab = <A_a, Z A_b R> for all a, b (``ws`` from :meth:`workspace`)."""
+        """M_ab = <A_a, Z A_b R> for all a, b (``ws`` from :meth:`workspace`; M is its buffer, overwritten by the
+        next call in this thread)."""
         m2, n = self.m2, self.n
         Zg, Rg, P, PT = ws["Zg"], ws["Rg"], ws["P"], ws["PT"]
         np.take(Z, self.Ipad, axis=0, out=Zg)
@@ -170,7 +178,14 @@ class MomentReduction:
         for a, b, k in self.groups:                                         # P_b = Z A_b R
             np.matmul(Zg[a:b, :k].transpose(0, 2, 1), Rg[a:b, :k], out=P[a:b])
         np.copyto(PT, P.reshape(m2, n * n).T)
-        return ws["EF"] @ PT       # M[a, b] = <A_a, P_b>; symmetric up to round-off (Cholesky reads one triangle)
+        # M[a, b] = <A_a, P_b>; symmetric up to round-off (Cholesky reads one triangle)
+        EF = ws["EF"]
+        if _csr_matvecs is None:
+            return EF @ PT
+        M = ws["M"]
+        M.fill(0.0)
+        _csr_matvecs(m2, n * n, m2, EF.indptr, EF.indices, EF.data, PT.ravel(), M.ravel())
+        return M
 
     # ------------------------------------------------------------------ one instance
     def solve(self, A: sp.spmatrix, b: np.ndarray, q: np.ndarray, tol: Tolerances, deadline=None) -> IpmResult | None:
@@ -251,7 +266,8 @@ class _MomentOperator(Operator):
         M = red.schur(Zs[0][0], Rs[0][0], self.ws)
         dmax = max(1.0, float(np.abs(np.diagonal(M)).max()))
         for k in range(3):
-            Mr = np.array(M, order="F")          # potrf's storage order: factorised in place
+            Mr = self.ws["Mr"]                   # potrf's storage order: factorised in place
+            np.copyto(Mr, M)
             Mr[np.diag_indices(m2)] += tol.ipm_schur_regularization * 100.0 ** k * dmax
             try:
                 Lc = cholesky(Mr, lower=True, overwrite=True)

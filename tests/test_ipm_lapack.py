@@ -132,3 +132,51 @@ def test_schur_in_the_reused_buffer_equals_the_sparse_product():
     if moment._csr_matvecs is not None:
         assert M2 is M
     np.testing.assert_allclose(M2, dense.T, rtol=1e-12, atol=1e-12 * np.abs(dense).max())
+
+
+def test_regularized_cholesky_raises_the_shift_100x_while_indefinite():
+    reg = 1e-16
+    # PSD up to round-off but indefinite by ~1e-15 relative: the first shift (1e-16) fails, the second (1e-14) holds
+    A = np.array([[1.0, 1.0], [1.0, 1.0 - 1e-15]])
+    buf = np.empty((2, 2), order="F")
+    L = moment._regularized_cholesky(A, buf, reg)
+    L = np.tril(L)
+    np.testing.assert_allclose(L @ L.T, A + 1e-14 * np.eye(2), rtol=0, atol=1e-15)   # not 1e-16, not 1e-12
+    assert np.array_equal(A, [[1.0, 1.0], [1.0, 1.0 - 1e-15]])        # A itself untouched
+    with pytest.raises(np.linalg.LinAlgError):                         # beyond the last shift (1e-12)
+        moment._regularized_cholesky(np.diag([1.0, -1e-9]), buf, reg)
+
+
+def test_moment_form_solves_a_program_with_dependent_equality_rows():
+    """A Theorem 1 (delta = 4) sub-problem of the robust benchmark (three views, 5 px, one wrong match; seed 103,
+    track 1) whose equality rows (E A_w)^T are numerically dependent: their Schur complement C^T C is singular,
+    its once-regularised Cholesky failed at the first iteration and the program went to the unreduced method.
+    Regularised like M, the moment form converges; its optimum equals the unreduced IPM's and Clarabel's."""
+    from pathlib import Path
+
+    import sospoly
+    from sospoly.lowering.conic import Cone, ConicProblem
+    from sospoly.solvers.backends import ClarabelBackend
+    from sospoly.solvers.ipm.core import mehrotra, result_of
+    from sospoly.solvers.ipm.core import layout_of as _layout_of
+    from sospoly.solvers.ipm.operators import SparseOperator
+
+    d = np.load(Path(__file__).parent / "data" / "moment_dependent_equalities.npz")
+    A = sp.csc_matrix((d["data"], d["indices"], d["indptr"]), shape=tuple(d["shape"]))
+    b, q = d["b"], d["q"]
+    cones = (Cone("psd", 406, 28),)
+    red = reduction_for(A, q, 28)
+    assert isinstance(red, MomentReduction)
+    res = red.solve(A, b, q, sospoly.DEFAULT_TOLERANCES)
+    assert res is not None and res.converged[0], res.reason
+    lay = _layout_of(cones)
+    plain = result_of(*mehrotra(SparseOperator(A, lay), q[None], b[None], lay, sospoly.DEFAULT_TOLERANCES),
+                      q[None], b[None], lay)
+    assert plain.converged[0]
+    ref = ClarabelBackend().solve(ConicProblem(q, A, b, cones, A.shape[1], ()))
+    assert abs(res.primal_objective[0] - plain.primal_objective[0]) < 1e-7
+    assert abs(res.primal_objective[0] - float(q @ ref.x)) < 1e-7
+    # the returned slack is the image form's: s = b - A x, PSD up to the solver tolerance
+    from sospoly.algebra.svec import smat
+    np.testing.assert_allclose(res.s[0], b - A @ res.x[0], atol=1e-7)
+    assert np.linalg.eigvalsh(smat(res.s[0], 28))[0] > -1e-7

@@ -220,11 +220,32 @@ class MomentReduction:
         return IpmResult(conv, x[None], z[None], s[None], np.array([pobj]), np.array([dobj]), its, why)
 
 
+#: regularisations tried on a Schur complement: r, 100 r, 10^4 r (times its largest diagonal entry, at least 1)
+_REGULARIZATION_STEPS = 3
+
+
+def _regularized_cholesky(A: np.ndarray, buf: np.ndarray, reg: float) -> np.ndarray:
+    """The lower Cholesky factor of A + reg 100^k max(1, max |diag A|) I, into ``buf`` (Fortran order, n x n,
+    overwritten), for the first k = 0, 1, 2 at which it is numerically positive definite (LinAlgError after
+    the last); A itself is left as it is (the Newton solves refine against it)."""
+    dmax = max(1.0, float(np.abs(np.diagonal(A)).max()))
+    for k in range(_REGULARIZATION_STEPS):
+        np.copyto(buf, A)                        # potrf's storage order: factorised in place
+        buf[np.diag_indices(A.shape[0])] += reg * 100.0 ** k * dmax
+        try:
+            return cholesky(buf, lower=True, overwrite=True)
+        except np.linalg.LinAlgError:
+            if k == _REGULARIZATION_STEPS - 1:
+                raise
+    raise AssertionError("unreachable")  # pragma: no cover
+
+
 class _MomentOperator(Operator):
     """The moment form as an :class:`~.core.Operator`: S = smat(E^T y) (A = -E^T, b = 0), equality rows
     (E A_w)^T y = -q_w; its Schur complement from :meth:`MomentReduction.schur`, factorised by Cholesky
     (regularised ``ipm_schur_regularization`` * max diag, raised 100x while M is numerically indefinite)
-    with the equality rows eliminated through the Cholesky factor of their Schur complement."""
+    with the equality rows eliminated through the Cholesky factor of their Schur complement (regularised
+    the same way: :func:`_regularized_cholesky`)."""
 
     def __init__(self, red: MomentReduction, e: np.ndarray, AE: np.ndarray, ws: dict, tol: Tolerances):
         self.red, self.e, self.AE, self.ws, self.tol = red, e, AE, ws, tol
@@ -264,24 +285,14 @@ class _MomentOperator(Operator):
         red, tol, AE = self.red, self.tol, self.AE
         m2, p = red.m2, AE.shape[0]
         M = red.schur(Zs[0][0], Rs[0][0], self.ws)
-        dmax = max(1.0, float(np.abs(np.diagonal(M)).max()))
-        for k in range(3):
-            Mr = self.ws["Mr"]                   # potrf's storage order: factorised in place
-            np.copyto(Mr, M)
-            Mr[np.diag_indices(m2)] += tol.ipm_schur_regularization * 100.0 ** k * dmax
-            try:
-                Lc = cholesky(Mr, lower=True, overwrite=True)
-                break
-            except np.linalg.LinAlgError:
-                if k == 2:
-                    raise
+        Lc = _regularized_cholesky(M, self.ws["Mr"], tol.ipm_schur_regularization)
         t0 = m2 - red.n_touched
         if p:
             # AE^T vanishes on the leading rows: L^-1 AE^T = [0; L22^-1 AE2^T]
             C = solve_lower(Lc[t0:, t0:], AE[:, t0:].T)
-            SE = C.T @ C
-            SE[np.diag_indices(p)] += tol.ipm_schur_regularization * max(1.0, float(np.abs(np.diagonal(SE)).max()))
-            Le = cholesky(SE, lower=True)
+            # SE is singular when the equality rows are linearly dependent: regularised like M (it was
+            # regularised once and such programs went to the unreduced method at the first iteration)
+            Le = _regularized_cholesky(C.T @ C, np.empty((p, p), order="F"), tol.ipm_schur_regularization)
 
         def base(r1, r2):
             # u = L^-1 r1; dz = SE^-1 (C^T u - r2); dy = L^-T (u - C dz), C = [0; C2] = L^-1 AE^T

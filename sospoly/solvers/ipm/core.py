@@ -163,9 +163,9 @@ def _max_step(Li: np.ndarray, dX: np.ndarray) -> np.ndarray:
         w, _, _, _, info = _syevr(T[0], compute_v=0, range="I", il=1, iu=1)      # smallest eigenvalue only
         if info:
             raise np.linalg.LinAlgError("eigenvalue computation failed")
-        lam = w[:1]
-    else:
-        lam = np.linalg.eigvalsh(T)[..., 0]
+        lam1 = float(w[0])          # the rule below on a Python float (no errstate / where on a 1-vector)
+        return np.array([-1.0 / min(lam1, -1e-300) if lam1 < 0 else np.inf])
+    lam = np.linalg.eigvalsh(T)[..., 0]
     with np.errstate(divide="ignore"):
         return np.where(lam < 0, -1.0 / np.minimum(lam, -1e-300), np.inf)
 

@@ -5,12 +5,17 @@ import threading
 from collections import OrderedDict
 
 import numpy as np
-import scipy.linalg as sla
 import scipy.sparse as sp
 
 from ...algebra.svec import smat, svec, svec_scale, triu_pairs
 from ...tolerances import Tolerances
 from .core import IpmResult, Layout, Operator, mehrotra
+from .lapack import cho_solve, cholesky, solve_lower
+
+try:    # the kernel of csr_matrix @ dense (scipy.sparse's _matmul_multivector), run into a reused buffer
+    from scipy.sparse._sparsetools import csr_matvecs as _csr_matvecs
+except ImportError:  # pragma: no cover - a scipy without it: the public product (a fresh array per call)
+    _csr_matvecs = None
 
 __all__ = ["MomentReduction", "reduction_for", "REDUCE_MIN_FRACTION"]
 
@@ -149,19 +154,22 @@ class MomentReduction:
 
     def workspace(self, V: np.ndarray) -> dict:
         """Work buffers (allocating the (m', n, n) stack every iteration costs more than the
-        product; one set per thread, so a plan can be shared between threads) and the sparse
+        product, and a fresh (m' x m') array is paged in anew every iteration: M and its factor live
+        in buffers too; one set per thread, so a plan can be shared between threads) and the sparse
         vec(A_a) of this instance's values V."""
         m2, n, K = self.m2, self.n, self.K
         EF = sp.csr_matrix((V[self.ef_src], *self.ef_pattern), shape=(m2, n * n))
         bufs = getattr(self._local, "bufs", None)    # reused by later solves in the same thread
         if bufs is None:
             bufs = self._local.bufs = {"Zg": np.empty((m2, K, n)), "Rg": np.empty((m2, K, n)),
-                                       "P": np.empty((m2, n, n)), "PT": np.empty((n * n, m2))}
+                                       "P": np.empty((m2, n, n)), "PT": np.empty((n * n, m2)),
+                                       "M": np.empty((m2, m2)), "Mr": np.empty((m2, m2), order="F")}
         return dict(bufs, EF=EF, V=V)
 
     # ------------------------------------------------------------------ Schur complement
     def schur(self, Z: np.ndarray, R: np.ndarray, ws: dict) -> np.ndarray:
-        """M_ab = <A_a, Z A_b R> for all a, b (``ws`` from :meth:`workspace`)."""
+        """M_ab = <A_a, Z A_b R> for all a, b (``ws`` from :meth:`workspace`; M is its buffer, overwritten by the
+        next call in this thread)."""
         m2, n = self.m2, self.n
         Zg, Rg, P, PT = ws["Zg"], ws["Rg"], ws["P"], ws["PT"]
         np.take(Z, self.Ipad, axis=0, out=Zg)
@@ -170,7 +178,14 @@ class MomentReduction:
         for a, b, k in self.groups:                                         # P_b = Z A_b R
             np.matmul(Zg[a:b, :k].transpose(0, 2, 1), Rg[a:b, :k], out=P[a:b])
         np.copyto(PT, P.reshape(m2, n * n).T)
-        return ws["EF"] @ PT       # M[a, b] = <A_a, P_b>; symmetric up to round-off (Cholesky reads one triangle)
+        # M[a, b] = <A_a, P_b>; symmetric up to round-off (Cholesky reads one triangle)
+        EF = ws["EF"]
+        if _csr_matvecs is None:
+            return EF @ PT
+        M = ws["M"]
+        M.fill(0.0)
+        _csr_matvecs(m2, n * n, m2, EF.indptr, EF.indices, EF.data, PT.ravel(), M.ravel())
+        return M
 
     # ------------------------------------------------------------------ one instance
     def solve(self, A: sp.spmatrix, b: np.ndarray, q: np.ndarray, tol: Tolerances, deadline=None) -> IpmResult | None:
@@ -205,11 +220,32 @@ class MomentReduction:
         return IpmResult(conv, x[None], z[None], s[None], np.array([pobj]), np.array([dobj]), its, why)
 
 
+#: regularisations tried on a Schur complement: r, 100 r, 10^4 r (times its largest diagonal entry, at least 1)
+_REGULARIZATION_STEPS = 3
+
+
+def _regularized_cholesky(A: np.ndarray, buf: np.ndarray, reg: float) -> np.ndarray:
+    """The lower Cholesky factor of A + reg 100^k max(1, max |diag A|) I, into ``buf`` (Fortran order, n x n,
+    overwritten), for the first k = 0, 1, 2 at which it is numerically positive definite (LinAlgError after
+    the last); A itself is left as it is (the Newton solves refine against it)."""
+    dmax = max(1.0, float(np.abs(np.diagonal(A)).max()))
+    for k in range(_REGULARIZATION_STEPS):
+        np.copyto(buf, A)                        # potrf's storage order: factorised in place
+        buf[np.diag_indices(A.shape[0])] += reg * 100.0 ** k * dmax
+        try:
+            return cholesky(buf, lower=True, overwrite=True)
+        except np.linalg.LinAlgError:
+            if k == _REGULARIZATION_STEPS - 1:
+                raise
+    raise AssertionError("unreachable")  # pragma: no cover
+
+
 class _MomentOperator(Operator):
     """The moment form as an :class:`~.core.Operator`: S = smat(E^T y) (A = -E^T, b = 0), equality rows
     (E A_w)^T y = -q_w; its Schur complement from :meth:`MomentReduction.schur`, factorised by Cholesky
     (regularised ``ipm_schur_regularization`` * max diag, raised 100x while M is numerically indefinite)
-    with the equality rows eliminated through the Cholesky factor of their Schur complement."""
+    with the equality rows eliminated through the Cholesky factor of their Schur complement (regularised
+    the same way: :func:`_regularized_cholesky`)."""
 
     def __init__(self, red: MomentReduction, e: np.ndarray, AE: np.ndarray, ws: dict, tol: Tolerances):
         self.red, self.e, self.AE, self.ws, self.tol = red, e, AE, ws, tol
@@ -249,33 +285,23 @@ class _MomentOperator(Operator):
         red, tol, AE = self.red, self.tol, self.AE
         m2, p = red.m2, AE.shape[0]
         M = red.schur(Zs[0][0], Rs[0][0], self.ws)
-        dmax = max(1.0, float(np.abs(np.diagonal(M)).max()))
-        for k in range(3):
-            Mr = M.copy()
-            Mr[np.diag_indices(m2)] += tol.ipm_schur_regularization * 100.0 ** k * dmax
-            try:
-                cf = sla.cho_factor(Mr, lower=True, check_finite=False)
-                break
-            except np.linalg.LinAlgError:
-                if k == 2:
-                    raise
-        Lc = cf[0]
+        Lc = _regularized_cholesky(M, self.ws["Mr"], tol.ipm_schur_regularization)
         t0 = m2 - red.n_touched
         if p:
             # AE^T vanishes on the leading rows: L^-1 AE^T = [0; L22^-1 AE2^T]
-            C = sla.solve_triangular(Lc[t0:, t0:], AE[:, t0:].T, lower=True, check_finite=False)
-            SE = C.T @ C
-            SE[np.diag_indices(p)] += tol.ipm_schur_regularization * max(1.0, float(np.abs(np.diagonal(SE)).max()))
-            cfe = sla.cho_factor(SE, lower=True, check_finite=False)
+            C = solve_lower(Lc[t0:, t0:], AE[:, t0:].T)
+            # SE is singular when the equality rows are linearly dependent: regularised like M (it was
+            # regularised once and such programs went to the unreduced method at the first iteration)
+            Le = _regularized_cholesky(C.T @ C, np.empty((p, p), order="F"), tol.ipm_schur_regularization)
 
         def base(r1, r2):
             # u = L^-1 r1; dz = SE^-1 (C^T u - r2); dy = L^-T (u - C dz), C = [0; C2] = L^-1 AE^T
-            u = sla.solve_triangular(Lc, r1, lower=True, check_finite=False)
+            u = solve_lower(Lc, r1)
             if not p:
-                return sla.solve_triangular(Lc, u, lower=True, trans="T", check_finite=False), np.zeros(0)
-            dz = sla.cho_solve(cfe, C.T @ u[t0:] - r2, check_finite=False)
+                return solve_lower(Lc, u, trans=True), np.zeros(0)
+            dz = cho_solve(Le, C.T @ u[t0:] - r2, lower=True)
             u[t0:] -= C @ dz
-            return sla.solve_triangular(Lc, u, lower=True, trans="T", check_finite=False), dz
+            return solve_lower(Lc, u, trans=True), dz
 
         def solve(rx, rE):
             r1, r2 = rx[0], rE[0]

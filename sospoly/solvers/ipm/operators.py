@@ -18,6 +18,7 @@ import scipy.sparse as sp
 
 from ...algebra.svec import smat, svec_scale, triu_pairs
 from .core import Layout, Operator
+from .lapack import cho_solve, cholesky
 
 __all__ = ["DenseOperator", "SparseOperator", "newton_solver"]
 
@@ -40,8 +41,8 @@ def newton_solver(M: np.ndarray, AE: np.ndarray | None, p: int):
     if B == 1:
         if p == 0:
             try:
-                cf = sla.cho_factor(Kr[0], check_finite=False)
-                base = lambda r: sla.cho_solve(cf, r[0], check_finite=False)[None]  # noqa: E731
+                cf = cholesky(Kr[0], lower=False)
+                base = lambda r: cho_solve(cf, r[0], lower=False)[None]  # noqa: E731
             except (np.linalg.LinAlgError, ValueError):
                 base = None
         if base is None:

@@ -35,8 +35,7 @@ import numpy as np
 
 import sospoly
 from sospoly import SolveStatus
-from sospoly.analysis import best_in_family, kernel_family, rigorous_psatz_bound
-from sospoly.analysis.extraction import OBJECTIVE_ERRORS
+from sospoly.analysis import OBJECTIVE_ERRORS, best_in_family, kernel_family, rigorous_psatz_bound
 
 from ...model.geometry import (common_centre, gamma as gamma_of, gamma_validated, point_from_validated,
                                points_from_validated, refine_l2, validate_cameras)

@@ -25,7 +25,6 @@ import time
 
 import sospoly
 from sospoly import BudgetExceeded, Multiplier
-from sospoly.algebra.basis import sigma
 from sospoly.budget import TimeLimitReached, gram_block_exceeds
 from sospoly.solvers import CLARABEL_FAST_CHAIN, CLARABEL_SPLIT_CHAIN, AutoBackend
 
@@ -193,7 +192,7 @@ def _dense_floor_exceeds(ctx: PointContext, step: Step) -> str | None:
     if step.formulation != "dense":
         return None
     n = 2 * ctx.N + sum(int(r.n_aux) for r in ctx.regions)
-    return gram_block_exceeds(sigma(n, step.delta // 2), ctx.opts.budget)
+    return gram_block_exceeds(sospoly.sigma(n, step.delta // 2), ctx.opts.budget)
 
 
 def _shape(ctx: PointContext, problem: TriangulationProblem, step: Step):

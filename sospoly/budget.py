@@ -48,6 +48,7 @@ import time
 from dataclasses import dataclass
 
 __all__ = ["Budget", "DEFAULT_TIME_LIMIT", "DEFAULT_BUDGET", "UNLIMITED", "ProgramSize", "estimate_size",
+           "gram_block_exceeds",
            "BudgetExceeded", "Deadline",
            "as_budget", "TimeLimitReached", "deadline_scope", "check_deadline", "active_deadline",
            "cpu_share", "MIN_CPU_SHARE", "address_space_available",
@@ -211,6 +212,26 @@ def memory_room(budget: Budget | None) -> tuple[float | None, str]:
     if room is not None and (limit is None or ADDRESS_SPACE_SHARE * room < limit):
         return ADDRESS_SPACE_SHARE * room, "the address space left under the process's limit (RLIMIT_AS)"
     return limit, "the memory budget"
+
+
+def gram_block_exceeds(side: int, budget: Budget | None) -> str | None:
+    """Why no program holding a PSD block of ``side`` fits ``budget`` (None when one might): the side beyond
+    ``max_gram_side``, or the block's own share of Clarabel's memory (``CLARABEL_ENTRY_COPIES`` floats per svec
+    entry pair, L = side (side + 1) / 2) beyond the room of :func:`memory_room`.  A floor of
+    :func:`estimate_size` for every program with this block (more blocks or columns only add to it), computed
+    from the side alone: a caller refuses a program before building its polynomials (dense certificates of many
+    variables take seconds and gigabytes to build before :class:`CertificateShape.size` sees them)."""
+    side = int(side)
+    if budget is None:
+        return None
+    if side > budget.max_gram_side:
+        return f"a Gram matrix of side {side} exceeds the limit {budget.max_gram_side}"
+    L = side * (side + 1) // 2
+    floor = 8.0 * CLARABEL_ENTRY_COPIES * float(L) * float(L)
+    room, what = memory_room(budget)
+    if room is not None and floor > room:
+        return f"a Gram block of side {side} alone needs at least {_human(floor)}, beyond {what} {_human(room)}"
+    return None
 
 
 @dataclass(frozen=True)

@@ -25,7 +25,7 @@ import time
 
 import sospoly
 from sospoly import BudgetExceeded, Multiplier
-from sospoly.budget import TimeLimitReached
+from sospoly.budget import TimeLimitReached, gram_block_exceeds
 from sospoly.solvers import CLARABEL_FAST_CHAIN, CLARABEL_SPLIT_CHAIN, AutoBackend
 
 from ...model.constraints import Method
@@ -153,6 +153,11 @@ def _chain(ctx: PointContext, step: Step) -> tuple | None:
 def _build(ctx: PointContext, st: StepState) -> bool:
     """The step's program in ``st.psatz``; False (and ``st.result``) when it cannot be built."""
     step, t = st.step, st.t0
+    why = _dense_floor_exceeds(ctx, step)
+    if why:                                       # refused before its polynomials are built (seconds, gigabytes)
+        _fail(ctx, st, Status.BUDGET_EXCEEDED, f"delta={step.delta} ({st.sparsity}): {why} (estimated before "
+                                               "building the program); use the 'views' sparsity or a larger budget")
+        return False
     try:
         problem = st.problem = ctx.problem(step.method, step.formulation)
     except ValueError as exc:                     # e.g. Theorem 1 with all minors for too many views
@@ -177,6 +182,17 @@ def _build(ctx: PointContext, st: StepState) -> bool:
     else:
         st.psatz = comp.bind(theta)
     return True
+
+
+def _dense_floor_exceeds(ctx: PointContext, step: Step) -> str | None:
+    """Why a dense step cannot fit the budget whatever its constraints (None: it may): its Gram block has side
+    sigma(n, delta / 2) over the n = 2N + sum of the regions' auxiliary variables (:func:`sospoly.budget.
+    gram_block_exceeds`, a floor of the estimate the built program gets).  At N = 200 points the dense Corollary 1
+    program took 17 s and 2.6 GB to build before its estimate (339 GiB) refused it."""
+    if step.formulation != "dense":
+        return None
+    n = 2 * ctx.N + sum(int(r.n_aux) for r in ctx.regions)
+    return gram_block_exceeds(sospoly.sigma(n, step.delta // 2), ctx.opts.budget)
 
 
 def _shape(ctx: PointContext, problem: TriangulationProblem, step: Step):

@@ -17,15 +17,7 @@ from tritools.model.centres import merged_labels
 from tritools.model.constraints import centre_groups, centre_groups_loop
 from tritools.scene import random_scene
 
-
-def _rotation(rng) -> np.ndarray:
-    q, _ = np.linalg.qr(rng.normal(size=(3, 3)))
-    return q * np.sign(np.linalg.det(q))
-
-
-def _camera(f: float, pp: float, R: np.ndarray, centre: np.ndarray) -> np.ndarray:
-    K = np.array([[f, 0.0, pp], [0.0, 1.1 * f, 0.7 * pp], [0.0, 0.0, 1.0]])
-    return K @ R @ np.hstack([np.eye(3), -centre[:, None]])
+from tests.test_centres import _camera, _rotation
 
 
 def _cameras(rng, N: int, *, offset: float = 0.0, pp: float = 320.0, f: float = 800.0, dup: float = 0.3,

@@ -15,7 +15,7 @@ The layers, from meaning to numbers (docs/architecture.md draws them):
 """
 from .algebra.basis import GramBasis, GramBlocks, MonomialIndex, monomials, sigma, tau
 from .algebra.linpoly import LinPoly
-from .algebra.polynomial import Polynomial, as_polynomial, det, variables
+from .algebra.polynomial import Polynomial, as_polynomial, det, sum_in_order, variables
 from .analysis.complexity import n_lmivar_formula, n_lmivar_shape
 from .analysis.extraction import Candidate, extract_from_gram, extract_from_moment
 from .analysis.moments import MomentMatrix
@@ -43,7 +43,7 @@ from .tolerances import DEFAULT_TOLERANCES, Tolerances
 __version__ = "0.2.0"
 
 __all__ = [
-    "GramBasis", "GramBlocks", "MonomialIndex", "monomials", "sigma", "tau", "LinPoly", "Polynomial",
+    "GramBasis", "GramBlocks", "MonomialIndex", "monomials", "sigma", "tau", "LinPoly", "Polynomial", "sum_in_order",
     "as_polynomial", "det", "variables", "n_lmivar_formula", "n_lmivar_shape", "Candidate", "extract_from_gram",
     "extract_from_moment", "ExactCheck", "RigorousBound", "exact_check", "rigorous_psatz_bound", "DEFAULT_BUDGET",
     "UNLIMITED", "Budget", "BudgetExceeded", "ProgramSize", "estimate_size", "Sense", "SOSProgram", "DataSlots",

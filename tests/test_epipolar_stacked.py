@@ -137,7 +137,7 @@ def test_stacked_fundamental_matrices_are_the_per_pair_ones():
 def test_sum_in_order_is_the_repeated_addition():
     """f = 0 + p_1 + p_2 + ... in one dict: the terms, values and order of Polynomial.__add__, also when sums
     cancel to exactly 0 and the monomial comes back later, and with a polynomial over other generators."""
-    from tritools.model.problem import sum_in_order
+    from sospoly import sum_in_order
 
     rng = np.random.default_rng(12)
     gens = ("a", "b", "c")

@@ -26,7 +26,8 @@ from collections.abc import Iterable, Mapping, Sequence
 
 import numpy as np
 
-__all__ = ["Polynomial", "variables", "det", "as_polynomial", "MAX_TERM_PRODUCTS", "MAX_VARIABLES"]
+__all__ = ["Polynomial", "variables", "det", "as_polynomial", "sum_in_order", "MAX_TERM_PRODUCTS",
+           "MAX_VARIABLES"]
 
 Exponent = tuple  # tuple[int, ...]
 #: largest number of term pairs one polynomial product may form (about 10-20 s of pure-Python work).
@@ -496,3 +497,23 @@ def det(matrix: Sequence[Sequence[object]]) -> Polynomial:
         return total
 
     return rec(tuple(range(n)), 0)
+
+
+def sum_in_order(gens: tuple, polys: list) -> Polynomial:
+    """``Polynomial(gens, {}) + polys[0] + polys[1] + ...`` (left to right) in one dict: each addition adds its
+    terms in order and a sum that reaches exactly 0 leaves (``Polynomial.__add__``'s terms, values and order), without
+    copying and rehashing the partial sum at every step (O(N^2) over N views).  Polynomials over other generators
+    are added by the arithmetic."""
+    out: dict = {}
+    total = None
+    for p in polys:
+        if total is not None or p.gens != gens:
+            total = (Polynomial.from_trusted_terms(gens, out) if total is None else total) + p
+            continue
+        for e, c in p.terms.items():
+            s = out.get(e, 0.0) + c
+            if s != 0.0:
+                out[e] = s
+            else:
+                out.pop(e, None)
+    return Polynomial.from_trusted_terms(gens, out) if total is None else total

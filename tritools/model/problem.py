@@ -26,7 +26,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from sospoly import Polynomial, variables
+from sospoly import Polynomial, sum_in_order, variables
 from sospoly.budget import check_deadline
 
 from .constraints import (THEOREM1_DENSE_MAX_VIEWS, Method, centre_relations, corollary1_constraints,
@@ -138,26 +138,6 @@ def build_problem(cameras: np.ndarray, regions, method: Method = Method.THEOREM1
     return TriangulationProblem(gens, x_index, f.with_gens(gens), tuple(eq) + tuple(proj), tuple(ineq), N,
                                 method, tuple(proj), info, tuple(view_vars), tuple(eq_views) + tuple(proj_views),
                                 tuple(ineq_views), formulation)
-
-
-def sum_in_order(gens: tuple, polys: list) -> Polynomial:
-    """``Polynomial(gens, {}) + polys[0] + polys[1] + ...`` (left to right) in one dict: each addition adds its
-    terms in order and a sum that reaches exactly 0 leaves (``Polynomial.__add__``'s terms, values and order), without
-    copying and rehashing the partial sum at every step (O(N^2) over N views).  Polynomials over other generators
-    are added by the arithmetic."""
-    out: dict = {}
-    total = None
-    for p in polys:
-        if total is not None or p.gens != gens:
-            total = (Polynomial.from_trusted_terms(gens, out) if total is None else total) + p
-            continue
-        for e, c in p.terms.items():
-            s = out.get(e, 0.0) + c
-            if s != 0.0:
-                out[e] = s
-            else:
-                out.pop(e, None)
-    return Polynomial.from_trusted_terms(gens, out) if total is None else total
 
 
 def _comb4(n: int) -> int:

@@ -269,3 +269,28 @@ def test_stacked_report_equals_the_scalar_report(N):
         assert fin1 == fin[k] and spread1 == spread[k] and np.array_equal(u1, u[k], equal_nan=True)
         seen.add((want.holds, bool(want.reason), bool(want.inliers.all())))
     assert len(seen) >= 4                  # the cases reach certified, withheld and outlier-holding reports
+
+
+def test_search_drift_near_zero_optimum_in_a_georeferenced_world():
+    """Review 11 F1: the drift test was purely relative, so a noise-free track in a georeferenced world (the search's
+    value and the compensated one both ~1e-17 px^2, 100% apart) was refused in single calls.  The absolute clause
+    (drift worth at most SEARCH_DRIFT_REL of the resolution in gamma) lets it pass, with gamma_LB lowered by the
+    drift; a single call and a batch agree, and the L2 path certifies the same value."""
+    from tritools.scene import random_scene
+    from tritools.solve.robust_report import SEARCH_DRIFT_REL, drift_within
+
+    tol = tritools.TriangulationOptions().tolerances
+    assert drift_within(1.0, 1e-17, 4, tol, 1e-6)
+    assert not drift_within(1.0, 1e-6, 4, tol, 1e-6)
+    assert drift_within(0.5 * SEARCH_DRIFT_REL * tol.gap_rel, 1e3, 4, tol, 0.0)
+    for seed in range(3):
+        sc = random_scene(4 + seed, 1, noise_px=0.0, seed=seed)
+        M = np.eye(4)
+        M[:3, 3] = -np.array([3.1e6, -4.9e5, 7.4e6]) * (1 + seed)
+        cams, x = sc.cameras @ M, sc.points2d[0]
+        s = tritools.triangulate(cams, x, robust=5.0)
+        m = tritools.triangulate_many([(cams, x)], robust=5.0)[0]
+        l2 = tritools.triangulate(cams, x)
+        assert l2.optimal and s.optimal and m.optimal, (seed, s.message)
+        assert s.inliers.all() and 0.0 <= s.gamma_lb <= s.gamma_ub <= 1e-6
+        assert abs(s.gamma_ub - l2.gamma_ub) <= 1e-9

@@ -18,6 +18,8 @@ here, in the caller's frame and units, by the L2 path's rules (:mod:`tritools.so
   (:func:`tritools.solve.report.rounding_spread`; a point near the cameras' principal planes seen 1e8 px off-axis
   moves 0.5 px per unit in the last place, and bounds from a normalised frame then describe another problem:
   gamma_LB is then reported as 0).
+* The search's own value at its estimate must agree with the compensated f_TLS (:func:`drift_within`: relatively, or
+  absolutely within a tenth of the resolution in gamma); gamma_LB is lowered by the drift seen.
 """
 from __future__ import annotations
 
@@ -108,11 +110,15 @@ def _checked(g_ub: float, spread: float, resolution: float, N: int, c: np.ndarra
     f_ub = 2.0 * N * g_ub * g_ub
     resolved = capped_resolution(resolution, c, N, tolerances)
     drift = search_drift(res, c, f_search, f_ub)
+    d_abs = search_drift_abs(res, c, f_search)
+    if d_abs > 0.0:                      # the search's bound is in its own arithmetic: lowered by the drift seen
+        g_lb = min(g_lb, max(0.0, gamma_lower_one(gamma_from_c(max(lb - d_abs, 0.0), N, 1.0), g_ub, 1.0,
+                                                  resolution) - spread))
     if not spread <= resolution:         # no bound from a normalised frame is known to hold
         holds, g_lb = False, 0.0
         reason = "the estimate's own rounding moves its projections by more than the coordinates' resolution " \
                  f"({resolution:.3g} px): the float data cannot certify this optimum"
-    elif not drift <= SEARCH_DRIFT_REL * tolerances.gap_rel:
+    elif not drift_within(drift, d_abs, N, tolerances, resolved):
         holds, g_lb = False, 0.0
         reason = f"the search's own value at its estimate differs from the compensated one by {drift:.2g} " \
                  "(relative): its arithmetic lost digits to cancellation (a georeferenced or rescaled frame), so its " \
@@ -180,6 +186,27 @@ def search_drift(res: np.ndarray, c: np.ndarray, f_search: float | None, f_ub: f
     if not math.isfinite(f_comp):
         return 0.0
     return abs(f_search - f_comp) / max(f_comp, 1e-300)
+
+
+def search_drift_abs(res: np.ndarray, c: np.ndarray, f_search: float | None) -> float:
+    """|f_search - f_TLS(X)| in pixels^2 (the absolute twin of :func:`search_drift`; 0 without ``f_search`` or a
+    finite compensated value)."""
+    if f_search is None or not math.isfinite(f_search):
+        return 0.0
+    with np.errstate(over="ignore", invalid="ignore"):
+        f_comp = float(np.sum(np.minimum(np.where(np.isfinite(res), res * res, np.inf), c * c)))
+    return abs(f_search - f_comp) if math.isfinite(f_comp) else 0.0
+
+
+def drift_within(drift: float, d_abs: float, N: int, tolerances, resolved: float) -> bool:
+    """Are the search's bounds trusted: its drift (:func:`search_drift`) within ``SEARCH_DRIFT_REL`` gap_rel, or its
+    absolute drift ``d_abs`` (pixels^2) worth at most ``SEARCH_DRIFT_REL`` of the report's resolution ``resolved``
+    in gamma, sqrt(d_abs / 2N).  The relative test alone refused every optimum near 0 (a noise-free track in a
+    georeferenced world: two values ~1e-17 px^2 differing by 100%, review 11 F1); the reported gamma_LB is lowered by
+    ``d_abs`` either way (:func:`_checked`)."""
+    if drift <= SEARCH_DRIFT_REL * tolerances.gap_rel:
+        return True
+    return math.isfinite(d_abs) and math.sqrt(d_abs / (2.0 * N)) <= SEARCH_DRIFT_REL * resolved
 
 
 def threshold_resolution(c: np.ndarray, N: int, tolerances) -> float:

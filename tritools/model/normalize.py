@@ -54,7 +54,7 @@ from .stacked import (dlt_stack, median_rows, norms, null_vectors, pixel_scales,
                       project_stack, refine_point, refine_points_stack)
 
 __all__ = ["Normalization", "NormalizationStack", "normalization_for", "normalization_stack", "unconstrained_reason",
-           "resolutions", "RHO_FLOOR_REL", "RESOLUTION_REL", "DEPTH_FLOOR_REL",
+           "resolutions", "magnitudes", "RHO_FLOOR_REL", "RESOLUTION_REL", "DEPTH_FLOOR_REL",
            "SCALE_BOUNDS"]
 
 #: floor of the residual scale rho, relative to the median pixel scale (focal length) of the views.
@@ -76,11 +76,21 @@ class Normalization:
     origin: np.ndarray      # (3,)
     depth: float
     resolution: float = np.inf
+    points_magnitude: float | None = None      # max(1, max |x|) of the caller's points; None: from ``shifts``
 
     @classmethod
     def identity(cls, n_views: int, points=None) -> Normalization:
         res = np.inf if points is None else float(resolutions(np.ones(1), np.asarray(points, float)[None])[0])
-        return cls(1.0, np.zeros((n_views, 2)), np.zeros(3), 1.0, res)
+        mag = None if points is None else float(magnitudes(np.asarray(points, float)[None])[0])
+        return cls(1.0, np.zeros((n_views, 2)), np.zeros(3), 1.0, res, mag)
+
+    @property
+    def magnitude(self) -> float:
+        """max(1, max |x_i|) of the caller's points in pixels (the shifts are the points): the magnitude whose
+        round-off every distance carries (:func:`tritools.solve.decide.gamma_lower`)."""
+        if self.points_magnitude is not None:
+            return self.points_magnitude
+        return float(magnitudes(np.asarray(self.shifts, float)[None])[0])
 
     def transform(self, i: int) -> np.ndarray:
         s, (tx, ty) = self.scale, self.shifts[i]
@@ -141,6 +151,20 @@ class NormalizationStack:
 
     def world_points(self, Xn: np.ndarray) -> np.ndarray:
         return self.origin + self.depth[:, None] * Xn
+
+    @property
+    def magnitude(self) -> np.ndarray:
+        """(M,) max(1, max |x_i|) of each problem's points (the shifts): :attr:`Normalization.magnitude`."""
+        return magnitudes(self.shifts)
+
+
+def magnitudes(x: np.ndarray) -> np.ndarray:
+    """max(1, max |x|) over the finite coordinates of each problem's points x (M, N, 2), in pixels: a bound of the
+    magnitude whose round-off each distance d_i carries (:func:`tritools.solve.decide.gamma_lower`; the resolution,
+    by contrast, is of the median magnitude, review 12 F1)."""
+    a = np.abs(np.asarray(x, float).reshape(len(x), -1))
+    a = np.where(np.isfinite(a), a, 0.0)
+    return np.maximum(1.0, a.max(axis=1)) if a.shape[1] else np.ones(len(x))
 
 
 def resolutions(scale: np.ndarray, x: np.ndarray) -> np.ndarray:

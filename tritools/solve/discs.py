@@ -167,7 +167,7 @@ def reported_batch(ok, optimal, c_lower, X, uw, fin_w, dist, norm, tolerances) -
     N = dist.shape[1]
     gamma_ub = np.where(fin_w, gamma_upper(dist, norms(uw, axis=2)), np.inf)
     gamma_lb = np.minimum(gamma_lower(gamma_from_c(np.maximum(c_lower, 0.0), N, norm.scale), gamma_ub, norm.scale,
-                                      norm.resolution), gamma_ub)
+                                      norm.resolution, norm.magnitude), gamma_ub)
     certified = ok & optimal & decide_reported(gamma_lb, gamma_ub, tolerances, N, norm.scale, norm.resolution)
     return DiscBatch(certified, ok, X, gamma_lb, gamma_ub, uw, dist)
 

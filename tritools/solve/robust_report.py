@@ -28,7 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..model.normalize import RESOLUTION_REL
+from ..model.normalize import RESOLUTION_REL, magnitudes
 from ..model.stacked import norms
 from .decide import gamma_from_c, gamma_lower_one
 from .report import enlarged_distances, gamma_upper, projections_and_spread, projections_and_spread_stack
@@ -63,8 +63,9 @@ def tls_reported(C: np.ndarray, centres: np.ndarray, residuals, X, c: np.ndarray
     res = np.where(np.isfinite(residuals), residuals, np.inf)
     g_ub = float(gamma_upper(np.where(np.isfinite(res), res, c), norms(np.where(np.isfinite(u), u, 0.0), axis=1),
                              cap=c))
+    mag = float(magnitudes(np.asarray(centres, float)[None])[0])
     g_lb, g_ub, holds, reason = _checked(g_ub, spread, coordinate_resolution(centres), N, c, lb, tolerances,
-                                         certified, res, f_search)
+                                         certified, res, f_search, mag)
     inliers = inlier_mask(C, X, centres, res, c, u, exact=points_given, regions=regions)
     image_points = np.where(np.isfinite(res)[:, None] & np.isfinite(u), u, np.nan)
     return TlsReported(g_lb, g_ub, residuals, inliers, holds, reason, image_points)
@@ -83,28 +84,29 @@ def tls_reported_stack(C: np.ndarray, points: np.ndarray, X: np.ndarray, c: np.n
     res = np.where(np.isfinite(residuals), residuals, np.inf)
     u_norm = norms(np.where(np.isfinite(u), u, 0.0), axis=2)
     g_ub = gamma_upper(np.where(np.isfinite(res), res, c), u_norm, cap=c)
-    resolution = coordinate_resolutions(points)
+    resolution, magnitude = coordinate_resolutions(points), magnitudes(points)
     inliers = inlier_mask_stack(C, X, points, res, c, u, u_norm)
     image_points = np.where(np.isfinite(res)[:, :, None] & np.isfinite(u), u, np.nan)
     out = []
     for k in range(M):
         f_k = float(f_search[k])
         checked = _checked(float(g_ub[k]), float(spread[k]), float(resolution[k]), N, c[k],
-                           float(lb[k]), tolerances, bool(certified[k]), res[k], f_k if f_k == f_k else None)
+                           float(lb[k]), tolerances, bool(certified[k]), res[k], f_k if f_k == f_k else None,
+                           float(magnitude[k]))
         out.append(TlsReported(checked[0], checked[1], residuals[k].copy(), inliers[k].copy(), checked[2],
                                checked[3], image_points[k].copy()))
     return out
 
 
 def _checked(g_ub: float, spread: float, resolution: float, N: int, c: np.ndarray, lb: float, tolerances,
-             certified: bool, res: np.ndarray, f_search) -> tuple:
+             certified: bool, res: np.ndarray, f_search, magnitude: float = 1.0) -> tuple:
     """(gamma_LB, gamma_UB, holds, reason) of :func:`tls_reported` from gamma_UB (float), the rounding spread and the
     coordinates' resolution (module docstring): gamma_LB lowered by round-off and spread, never above gamma_UB; the
     certificate withheld where the spread, the search's drift or the gap guard say so."""
     # lowered by the normalisation's round-off and by the estimate's rounding spread: bounds from a normalised frame
     # describe the caller's float problem only to that spread (a 6-view track 4.5e8 px off-axis: spread 0.06 px,
     # the frame's bound 7e-4 px above an achievable value)
-    g_lb = max(0.0, gamma_lower_one(gamma_from_c(max(lb, 0.0), N, 1.0), g_ub, 1.0, resolution) - spread)
+    g_lb = max(0.0, gamma_lower_one(gamma_from_c(max(lb, 0.0), N, 1.0), g_ub, 1.0, resolution, magnitude) - spread)
     g_lb = min(g_lb, g_ub)
     holds, reason = certified, ""
     f_ub = 2.0 * N * g_ub * g_ub
@@ -113,7 +115,7 @@ def _checked(g_ub: float, spread: float, resolution: float, N: int, c: np.ndarra
     d_abs = search_drift_abs(res, c, f_search)
     if d_abs > 0.0:                      # the search's bound is in its own arithmetic: lowered by the drift seen
         g_lb = min(g_lb, max(0.0, gamma_lower_one(gamma_from_c(max(lb - d_abs, 0.0), N, 1.0), g_ub, 1.0,
-                                                  resolution) - spread))
+                                                  resolution, magnitude) - spread))
     if not spread <= resolution:         # no bound from a normalised frame is known to hold
         holds, g_lb = False, 0.0
         reason = "the estimate's own rounding moves its projections by more than the coordinates' resolution " \

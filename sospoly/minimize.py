@@ -539,4 +539,19 @@ class _Run:
             notes = [f"proven for every point by the shifted certificate (margin {gb.margin * self.fscale:.3g})"]
         elif not notes:
             notes.append(gb.message if self.box is None else gb.message + "; the box bound is not finite")
+        if not np.isfinite(best) and gb.q_min > 0:
+            best, notes = self._proven_on_face(psatz, sol, c, best, notes)
         return best, "; ".join(notes)
+
+    def _proven_on_face(self, psatz, sol, c: float, best: float, notes: list) -> tuple[float, list]:
+        """Step 2 once more when neither proof holds: every Gram matrix may lie on a singular face of the PSD
+        cone (Rosenbrock's), which no shift or projection leaves; the exact proof on that face
+        (:mod:`sospoly.analysis.exact_face`, small programs only) at the margins of the shifted certificate."""
+        from .analysis.exact_face import face_exact_check
+        from .analysis.proof import GLOBAL_MARGINS, WEAK_MARGINS
+
+        fc = face_exact_check(psatz, sol, c, [r * max(1.0, abs(c)) for r in GLOBAL_MARGINS + WEAK_MARGINS])
+        if not fc.ok:
+            return best, notes + [f"exact face check: {fc.message}"]
+        return fc.level, [f"proven for every point in exact arithmetic ({fc.message}; margin "
+                          f"{fc.margin * self.fscale:.3g})"]

@@ -210,15 +210,14 @@ def _solve(bal: _Balanced, gb: GramBasis, backend, form, tol: Tolerances, budget
     return status, G, msg
 
 
-def _in_caller_units(Q: np.ndarray, bal: _Balanced) -> tuple[np.ndarray, tuple]:
-    """(the Gram matrix on ``bal.full`` in the caller's units, the decomposition's polynomials): p(v) =
-    scale pn(2^-k v), b_i(2^-k v) = 2^(-k . e_i) b_i(v), so the caller's Gram matrix is scale D Q D with
-    D = diag(2^(-k . e_i)) -- a power-of-two scaling, exact."""
+def _in_caller_units(Q: np.ndarray, bal: _Balanced, tol: Tolerances) -> tuple[np.ndarray, tuple]:
+    """(the Gram matrix on ``bal.full`` in the caller's units, the decomposition's polynomials: one per eigenvalue
+    of Q above ``psd_margin * max(1, lambda_max)``): p(v) = scale pn(2^-k v), b_i(2^-k v) = 2^(-k . e_i) b_i(v),
+    so the caller's Gram matrix is scale D Q D with D = diag(2^(-k . e_i)) -- a power-of-two scaling, exact."""
     e = -(bal.basis @ bal.k)
     lam, U = np.linalg.eigh(Q)
-    top = max(1.0, float(lam[-1]))
     decomposition = []
-    for j in np.nonzero(lam > 1e-14 * top)[0]:
+    for j in np.nonzero(lam > tol.psd_margin * max(1.0, float(lam[-1])))[0]:
         coef = np.sqrt(lam[j] * bal.scale) * U[:, j]
         terms = {tuple(int(a) for a in row): math.ldexp(float(c), int(s)) for row, c, s in zip(bal.basis, coef, e)
                  if c != 0.0}
@@ -280,7 +279,7 @@ def is_sos(p: Polynomial | float, *, backend: str | object | None = None, form: 
     for how, Q in _gram_candidates(status, G, gb, t, tol):
         ok, resid, lam = _verdict(Q, gb, t, tol)
         if ok:
-            gram, decomposition = _in_caller_units(Q, bal)
+            gram, decomposition = _in_caller_units(Q, bal, tol)
             note = "" if how == "solver" else f"the solver ended {status.value} ({msg}); {how}"
             log.debug("is_sos: %s accepted (residual %.3g, lambda_min %.3g)", how, resid, lam)
             return SOSResult(True, SolveStatus.FEASIBLE, gram, bal.full, decomposition, lam, note, resid)

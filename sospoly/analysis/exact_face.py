@@ -41,7 +41,7 @@ import numpy as np
 from .rigor import (_exact_multipliers, _exact_u_terms, _facial_reduction, _gram_entries, _ldl_psd,
                     _shift_multipliers, solution_at_level)
 
-__all__ = ["FaceCheck", "face_exact_check", "MAX_DENOMINATOR", "MAX_EXACT_ENTRIES", "FACE_SHIFTS"]
+__all__ = ["FaceCheck", "face_exact_check", "MAX_DENOMINATOR", "MAX_EXACT_ENTRIES", "MAX_GRAM_PAIRS", "FACE_SHIFTS"]
 
 #: kernel vectors are rationalised with denominators up to this (structural faces have small rational vectors)
 MAX_DENOMINATOR = 1024
@@ -52,6 +52,9 @@ ROUNDING = 1e-3
 MAX_FACE_DIMENSION = 4
 #: the exact system is set up only for certificates with at most this many live Gram entries (rational arithmetic)
 MAX_EXACT_ENTRIES = 120
+#: ... and only for certificates with at most this many Gram entries before the rows forced to zero are removed
+#: (the rational arithmetic of reading the certificate costs that much already)
+MAX_GRAM_PAIRS = 500
 #: shifts t on the face, relative to the margin, largest first (as :data:`sospoly.analysis.rigor.EXACT_SHIFTS`)
 FACE_SHIFTS = (1e-1, 1e-2, 1e-3, 0.0)
 
@@ -251,6 +254,8 @@ def face_exact_check(psatz, sol, c: float, margins) -> FaceCheck:
     if structure.free or sol is None or sol.x is None:
         return FaceCheck(False, -np.inf, np.inf, 0, "exact face checks need a fixed multiplier and a solution")
     u = structure.u
+    if u.gram.n_pairs > MAX_GRAM_PAIRS:
+        return FaceCheck(False, -np.inf, np.inf, 0, "too large for exact checks")
     x = solution_at_level(structure, sol.x, c)
     why = _shift_multipliers(structure, x) or _exact_multipliers(structure, x)
     if why:

@@ -11,7 +11,7 @@ The layers, from meaning to numbers (docs/architecture.md draws them):
 * :mod:`sospoly.analysis` -- minimisers (dense and clique-wise), certification by verification,
   rigorous bounds, complexity counts;
 * :mod:`sospoly.tolerances` / :mod:`sospoly.budget` -- every tolerance and decision, every resource limit;
-* :mod:`sospoly.minimize` -- ``minimize`` and ``is_sos``.
+* :mod:`sospoly.minimize` -- ``minimize``; :mod:`sospoly.sos_check` -- ``is_sos``.
 """
 from .algebra.basis import GramBasis, GramBlocks, MonomialIndex, monomials, sigma, tau
 from .algebra.linpoly import LinPoly
@@ -31,7 +31,8 @@ from .certificates.shape import CertificateShape, Sparsity, clique_shape, correl
 from .certificates.reduction import diagonal_reduction, ideal_reduction, reduce_shape
 from .lowering.conic import ConicProblem, GramForm, lower
 from .ratios import RatioResult, minimize_ratios
-from .minimize import MinimizeResult, SolveAttempt, SOSResult, candidates_of, feasibility_violation, is_sos, minimize
+from .minimize import MinimizeResult, SolveAttempt, candidates_of, feasibility_violation, minimize
+from .sos_check import SOSResult, is_sos
 from .solvers.compiled_solve import CompiledPsatz, PsatzCache, compile_psatz
 from .solvers.gevp import CompiledGevp, GevpResult, bisect
 from .solvers.lower_bound import solve_psatz

@@ -81,7 +81,6 @@ from .analysis.candidates import candidates_of, dedupe_points, feasibility_viola
 from .analysis.candidates import support_of
 from .analysis.moments import moment_matrices_of
 from .budget import Budget, BudgetExceeded, TimeLimitReached, as_budget, deadline_scope
-from .certificates.program import SOSProgram
 from .analysis.proof import unsolved_claim
 from .certificates.psatz import Multiplier, PsatzProblem, as_multiplier, build_psatz, checked_inputs
 from .certificates.shape import MINIMIZE_SPARSITIES, Sparsity
@@ -92,9 +91,10 @@ from .lowering.conic import GramForm
 from .solvers.backends import cvxpy_available, get_backend
 from .scaling import ScaledProgram, scaled_program
 from .solvers.lower_bound import solve_psatz
-from .solvers.solve import LowerBound, ProgramSolution, solve_program
+from .solvers.solve import LowerBound, ProgramSolution
+from .sos_check import SOSResult, is_sos
 from .status import SolveStatus
-from .tolerances import DEFAULT_TOLERANCES, Tolerances, as_tolerances
+from .tolerances import Tolerances, as_tolerances
 
 __all__ = ["MinimizeResult", "SOSResult", "SolveAttempt", "LowerBound", "minimize", "solve_psatz", "is_sos",
            "feasibility_violation", "candidates_of", "DENSE_AUTO_MAX_SIDE"]
@@ -539,58 +539,19 @@ class _Run:
             notes = [f"proven for every point by the shifted certificate (margin {gb.margin * self.fscale:.3g})"]
         elif not notes:
             notes.append(gb.message if self.box is None else gb.message + "; the box bound is not finite")
+        if not np.isfinite(best) and gb.q_min > 0:
+            best, notes = self._proven_on_face(psatz, sol, c, best, notes)
         return best, "; ".join(notes)
 
+    def _proven_on_face(self, psatz, sol, c: float, best: float, notes: list) -> tuple[float, list]:
+        """Step 2 once more when neither proof holds: every Gram matrix may lie on a singular face of the PSD
+        cone (Rosenbrock's), which no shift or projection leaves; the exact proof on that face
+        (:mod:`sospoly.analysis.exact_face`, small programs only) at the margins of the shifted certificate."""
+        from .analysis.exact_face import face_exact_check
+        from .analysis.proof import GLOBAL_MARGINS, WEAK_MARGINS
 
-# ----------------------------------------------------------------------------- is_sos
-@dataclass(frozen=True)
-class SOSResult:
-    """``is_sos`` answer; when True, ``p = sum_k decomposition[k]**2`` up to the solver's accuracy."""
-    is_sos: bool
-    status: SolveStatus
-    gram: np.ndarray | None
-    basis: np.ndarray | None
-    decomposition: tuple = ()
-    min_eigenvalue: float | None = None
-    message: str = ""
-
-
-def is_sos(p: Polynomial | float, *, backend: str | object | None = None, form: GramForm = GramForm.IMAGE,
-           tolerances: Tolerances = DEFAULT_TOLERANCES, budget: Budget | None = None) -> SOSResult:
-    """Decide whether ``p`` is a sum of squares (Gram matrix method, SPEC §4)."""
-    from .algebra.basis import sigma
-
-    if not isinstance(p, Polynomial):
-        raise TypeError(f"is_sos needs a sospoly Polynomial, got {type(p).__name__}")
-    tolerances, budget = as_tolerances(tolerances), as_budget(budget)
-    if p.is_zero:
-        return SOSResult(True, SolveStatus.FEASIBLE, np.zeros((1, 1)), np.zeros((1, max(p.nvars, 1)), int), (), 0.0)
-    if p.degree % 2:
-        return SOSResult(False, SolveStatus.INFEASIBLE, None, None, message=f"odd degree {p.degree}")
-    if p.nvars == 0 or p.degree == 0:
-        c = p.coefficient((0,) * p.nvars)
-        return SOSResult(c >= 0, SolveStatus.FEASIBLE if c >= 0 else SolveStatus.INFEASIBLE,
-                         np.array([[c]]), np.zeros((1, p.nvars), int),
-                         (Polynomial.constant(np.sqrt(max(c, 0.0)), p.gens),) if c >= 0 else ())
-    side = sigma(p.nvars, p.degree // 2)
-    if side > budget.max_gram_side:
-        return SOSResult(False, SolveStatus.BUDGET_EXCEEDED, None, None,
-                         message=f"the Gram matrix would have side {side} (limit {budget.max_gram_side})")
-    prog = SOSProgram(p.gens)
-    con = prog.add_sos(p, degree=p.degree, name="p")
-    sol = solve_program(prog, backend, form, tolerances, deadline=budget.deadline())
-    basis = con.gram.blocks[0].b
-    if not sol.status.ok:
-        return SOSResult(False, sol.status, None, basis, message=sol.message)
-    G = sol.grams["p"]
-    lam, V = np.linalg.eigh(G)
-    decomposition = []
-    for k in range(lam.size):
-        if lam[k] > tolerances.psd_margin * max(1.0, lam[-1]):
-            coef = np.sqrt(lam[k]) * V[:, k]
-            decomposition.append(Polynomial(p.gens, {tuple(int(t) for t in e): float(c)
-                                                     for e, c in zip(basis, coef) if c != 0.0}))
-    return SOSResult(True, sol.status, G, basis, tuple(decomposition), float(lam[0]))
-
-
-
+        fc = face_exact_check(psatz, sol, c, [r * max(1.0, abs(c)) for r in GLOBAL_MARGINS + WEAK_MARGINS])
+        if not fc.ok:
+            return best, notes + [f"exact face check: {fc.message}"]
+        return fc.level, [f"proven for every point in exact arithmetic ({fc.message}; margin "
+                          f"{fc.margin * self.fscale:.3g})"]

@@ -236,6 +236,18 @@ class Tolerances:
         top = np.maximum(np.abs(lam[..., -1:]), 1e-300)
         return _maybe_scalar(np.maximum(1, np.sum(lam <= self.kernel_rel * top, axis=-1)))
 
+    def range_mask(self, eigenvalues):
+        """Which eigenvalues of a Gram matrix are numerically non-zero, ``lambda > kernel_rel * |lambda_max|`` (the
+        complement of :meth:`kernel_dimension`'s kernel, possibly all of them): the range a face re-fit keeps
+        (:func:`sospoly.is_sos`)."""
+        lam = np.asarray(eigenvalues, float)
+        top = np.maximum(np.abs(lam[..., -1:]), 1e-300)
+        return lam > self.kernel_rel * top
+
+    def identity_accepts(self, residual):
+        """Is a coefficient identity with relative residual ``residual`` accepted (``<= identity_residual``)?"""
+        return _maybe_scalar(np.asarray(residual, float) <= self.identity_residual)
+
     def moment_rank_mask(self, eigenvalues):
         """Which eigenvalues of a moment matrix count toward its rank (``>= moment_rank_rel * lambda_max``);
         at least the largest one."""

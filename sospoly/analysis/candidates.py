@@ -149,6 +149,10 @@ def candidates_of(psatz, sol: ProgramSolution, tol: Tolerances) -> list[Candidat
             cands += [c for c in extract_from_moment(M, blk.b, tol) if c.point.shape == (n,)]
             continue
         cl = np.asarray(shape.cliques[k], np.int64)
+        rows = _unit_rows(blk.b[:, cl])
+        if rows[0] != 0 or np.any(rows < 0):        # a reduced clique basis without 1 first and every x_i
+            partial = True
+            continue
         moments.append(M)
         bases.append(blk.b[:, cl])
         cliques.append(tuple(int(i) for i in cl))

@@ -294,3 +294,21 @@ def test_search_drift_near_zero_optimum_in_a_georeferenced_world():
         assert l2.optimal and s.optimal and m.optimal, (seed, s.message)
         assert s.inliers.all() and 0.0 <= s.gamma_lb <= s.gamma_ub <= 1e-6
         assert abs(s.gamma_ub - l2.gamma_ub) <= 1e-9
+
+
+def test_batch_l2_settles_tls_only_within_the_tls_guard():
+    """Review 12 F2: a batch took an L2 certificate as the TLS one (every residual below c, f_L2 <= min c^2) with a
+    gap that passed only the L2 guard (coordinates' resolution), not the TLS report's (capped by c_min sqrt(gap_abs /
+    2N)); a single call refused it.  _l2_suffices now applies the report's guard, as the single call does."""
+    from tritools.solve.robust_batch import _l2_suffices
+    from tritools.solve.robust_report import reported_resolution
+
+    tol = tritools.TriangulationOptions().tolerances
+    centres = np.array([[7e5, 1e3], [7e5 + 10, 2e3], [7e5 - 40, 1.5e3], [7e5 + 3, 900.0]])
+    res = tritools.TriangulationResult("corollary1", "optimal", X=np.zeros(3), gamma_lb=0.0, gamma_ub=8e-6,
+                                       optimal=True, residuals=np.full(4, 1e-5))
+    wide = np.full(4, 1.0)
+    tight = np.array([0.0144, 1.0, 1.0, 1.0])
+    assert reported_resolution(centres, wide, tol) > 8e-6 > reported_resolution(centres, tight, tol)
+    assert _l2_suffices(res, wide, centres, tol)
+    assert not _l2_suffices(res, tight, centres, tol)

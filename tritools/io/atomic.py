@@ -13,19 +13,24 @@ folder by one rename, under an advisory lock on the folder (:func:`locked_direct
 so that two writers to one folder never interleave their files.  Nothing else in the folder is touched.
 Each writer holds a lock on its own stage; a stage whose lock is free was left by a writer that was
 killed (SIGKILL) and is removed by the next writer.
+
+:func:`input_clash` is the one rule that keeps a command from writing over its own input: an output is
+refused when it is one of the inputs (the same file: through symlinks, hard links, bind mounts), or, for
+an output folder, when it contains one.  Every command checks its outputs with it before any work.
 """
 from __future__ import annotations
 
 import contextlib
 import os
 import shutil
+import stat
 import tempfile
 import threading
 import uuid
 from pathlib import Path
 
 __all__ = ["atomic_path", "atomic_open", "staged_directory", "locked_directory", "DirectoryInTheWay",
-           "TEMP_PREFIX", "STAGING_PREFIX"]
+           "same_file", "input_clash", "TEMP_PREFIX", "STAGING_PREFIX"]
 
 #: prefix of the temporary file beside a target.
 TEMP_PREFIX = ".tmp-"
@@ -41,6 +46,43 @@ class DirectoryInTheWay(IsADirectoryError):
 
     def __str__(self) -> str:
         return f"{self.filename}: {self.strerror}"
+
+
+def same_file(a, b) -> bool:
+    """True when the paths ``a`` and ``b`` both exist and name one file or folder: the same device and
+    inode (:func:`os.path.samefile`), so also through symlinks, hard links and bind mounts.  A special file
+    (``/dev/stdout``, a FIFO: written directly, never replaced) is never the same as anything."""
+    try:
+        if stat.S_ISCHR(os.stat(a).st_mode) or stat.S_ISFIFO(os.stat(a).st_mode):
+            return False
+        return os.path.samefile(a, b)
+    except (OSError, ValueError):       # a path that does not exist (yet), or cannot be a path (NUL)
+        return False
+
+
+def _contains(folder, path) -> bool:
+    """True when the existing folder ``folder`` is a parent (at any depth) of the existing ``path``."""
+    try:
+        parents = Path(path).resolve(strict=True).parents
+    except (OSError, RuntimeError, ValueError):
+        return False
+    return any(same_file(folder, p) for p in parents)
+
+
+def input_clash(output, output_name: str, inputs, folder: bool = False) -> str | None:
+    """Why the command may not write ``output`` (named ``output_name`` in the message: a flag such as
+    ``--output``, or ``OUT_DIR``), or None when it may.
+
+    ``inputs``: ``(name, path)`` pairs of what the command reads.  The output is refused when it is one of
+    them (:func:`same_file`); with ``folder`` (an output folder, whose files are replaced) also when it
+    contains one.  The one wording of the rule "a command never writes over its input".
+    """
+    for name, path in inputs:
+        if same_file(output, path):
+            return f"{output_name} must differ from {name} {path} (an input is never overwritten)"
+        if folder and _contains(output, path):
+            return f"{output_name} {output} contains {name} {path}: outputs are kept out of the input's folders"
+    return None
 
 
 def _temp_name(path: Path) -> Path:
@@ -102,8 +144,11 @@ def atomic_path(path):
             raise
         _fsync_path(path.parent, directory=True)
     finally:
-        with contextlib.suppress(FileNotFoundError):
-            os.unlink(tmp)
+        # only a temporary file that exists: unlinking a missing one on a read-only file system raises EROFS,
+        # which would replace the error that names the target
+        if os.path.lexists(tmp):
+            with contextlib.suppress(FileNotFoundError):
+                os.unlink(tmp)
 
 
 @contextlib.contextmanager

@@ -66,8 +66,7 @@ def _plot_dataset(args) -> int:
         require_matplotlib()
     except ImportError as exc:
         return exit_invalid(str(exc))
-    out = Path(args.out) if args.out else Path(f"{args.name}_summary.png")
-    seq = load_oxford(args.name, args.data_dir, "plot-dataset", [("--out", out)])
+    seq = load_oxford(args.name, args.data_dir, "plot-dataset", [("--out", args.out)])
     options = sequence_options(options, args, seq)
     tracks = select_tracks(seq.tracks, args.limit, args.sample, args.seed)
     if not tracks:
@@ -79,6 +78,7 @@ def _plot_dataset(args) -> int:
     results = triangulate_many(problems, options=options, progress=args.progress)
     from ..plot import dataset_summary
 
+    out = Path(args.out) if args.out else Path(f"{seq.name}_summary.png")   # by default in the working directory
     fig = dataset_summary(results, [t.n_views for t in tracks],
                           title=f"{seq.name}: {len(tracks)} of {len(seq.tracks)} tracks, {args.method}"
                                 + (f" delta={args.delta}" if args.delta is not None else ""))

@@ -152,6 +152,25 @@ def test_dataset_csv_and_plot_out_refuse_a_data_file(house, tmp_path, capsys):
     assert _files(house) == before
 
 
+def test_colmap_refuses_to_write_its_keypoint_radii_file_into_out(model, tmp_path, capsys):
+    """A radius file kept in OUT_DIR under a name the command writes (points3D_uncertainty.txt) would be read,
+    then replaced by the run's own file."""
+    out = tmp_path / "out"
+    out.mkdir()
+    radii = out / "points3D_uncertainty.txt"
+    radii.write_text("# IMAGE_ID POINT2D_IDX RADIUS\n")
+    before = _files(tmp_path)
+    rc, _, err = run(["colmap", model, out, "--keypoint-radii", radii, "--keypoint-radius", "1"], capsys)
+    assert rc == 2 and f"OUT_DIR/points3D_uncertainty.txt must differ from --keypoint-radii {radii}" in \
+        _one_error(err)
+    assert _files(tmp_path) == before
+    (out / "mine.txt").write_text("# IMAGE_ID POINT2D_IDX RADIUS\n")       # any other name in OUT_DIR is fine
+    rc, _, err = run(["colmap", model, out, "--keypoint-radii", out / "mine.txt", "--keypoint-radius", "1",
+                      "--max-delta", "2"], capsys)
+    assert rc == 0, err
+    assert (out / "points3D_uncertainty.txt").read_text() != "# IMAGE_ID POINT2D_IDX RADIUS\n"
+
+
 # ----------------------------------------------------------------------------- F4: one --robust rule and wording
 @pytest.mark.parametrize("value, expect", [
     ("0", "--robust: must be a positive threshold in pixels, got 0.0"),

@@ -150,8 +150,7 @@ def run_colmap(args) -> int:
         quality = _quality_options(args)
     except OptionError as exc:
         return exit_invalid(option_flag_error(exc, args))
-    for e in args.export:                            # an export written over the --keypoint-radii file it reads
-        refuse_input_as_output(e, "--export", [("--keypoint-radii", args.keypoint_radii)])
+    _refuse_radii_as_output(args)
     try:
         with executor_from_args(args) as executor, _cameras_reported_here():
             result = retriangulate_folder(args.in_dir, args.out_dir, dataclasses.replace(options, executor=executor),
@@ -189,6 +188,18 @@ def run_colmap(args) -> int:
         summary["quality"] = q.summary()
     _print_summary(report, result, summary)
     return _skipped_status(report, getattr(args, "quiet", False))
+
+
+def _refuse_radii_as_output(args) -> None:
+    """CLIError when an export, or a file the command writes into OUT_DIR, is the ``--keypoint-radii`` file it
+    reads (:func:`refuse_input_as_output`; OUT_DIR = IN_DIR is refused by the library's ``check_output``)."""
+    from ..sfm.folder import written_names
+
+    radii = [("--keypoint-radii", args.keypoint_radii)]
+    for e in args.export:
+        refuse_input_as_output(e, "--export", radii)
+    for name in written_names():
+        refuse_input_as_output(Path(args.out_dir) / name, f"OUT_DIR/{name}", radii)
 
 
 @contextlib.contextmanager

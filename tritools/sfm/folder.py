@@ -33,7 +33,7 @@ from .retriangulate import RetriangulationReport, has_tqdm, progress_bar, skippe
 from .robust_tracks import drop_observations, rewrite_images
 
 __all__ = ["OutputError", "atomic_directory", "check_output", "retriangulate_folder", "FolderResult",
-           "EXTRA_FILES", "EXPORT_SUFFIXES"]
+           "EXTRA_FILES", "EXPORT_SUFFIXES", "written_names"]
 
 logger = logging.getLogger(__name__)
 #: files of newer COLMAP versions copied unchanged when the output has the input's format.
@@ -63,6 +63,16 @@ def atomic_directory(target):
 
 def _model_names(fmt: str) -> tuple:
     return tuple(f"{stem}.{fmt}" for stem in ("cameras", "images", "points3D"))
+
+
+def written_names() -> tuple:
+    """Every file name :func:`retriangulate_folder` (with ``quality``) may write into OUT, in either format: the
+    model, the certificate sidecar, the copied ``rigs``/``frames`` files and the quality file."""
+    from .certificates import CERTIFICATES_FILE
+    from .quality import QUALITY_FILE
+
+    return tuple(n for fmt in ("bin", "txt") for n in _model_names(fmt) + EXTRA_FILES[fmt]) + \
+        (CERTIFICATES_FILE, QUALITY_FILE)
 
 
 def _check_names(out_dir, fmt_out: str, in_dir) -> None:

@@ -23,7 +23,7 @@ import pytest
 
 from tests.cli_util import run, write
 from tests.test_cli import example4_doc
-from tritools.io.atomic import TEMP_PREFIX, atomic_open, input_clash, same_file
+from tritools.io.atomic import TEMP_PREFIX, atomic_open, input_clash, new_folders, same_file
 from tritools.io.colmap.formats import write_model_arrays
 from tritools.sfm.synthetic import synthetic_arrays
 
@@ -240,6 +240,27 @@ def test_a_failing_quality_step_leaves_out_and_exports_as_they_were(model, tmp_p
     assert rc == 2 and str(tmp_path / "r.txt") in _one_error(err)
     assert _files(tmp_path) == before
     assert not [p for p in tmp_path.rglob("*") if p.name.startswith((TEMP_PREFIX, ".tritools-staging-"))]
+
+
+def test_a_failing_run_removes_the_folders_it_created(model, tmp_path, capsys):
+    """OUT_DIR and the exports' folders are created if missing; a failed run removed only OUT_DIR's last folder and
+    left the others (and the exports' folders) behind.  Now every folder it created goes, folders it found stay."""
+    (tmp_path / "r.txt").write_text("999 0 1.5\n")                  # fails after the solve, before the commit
+    (tmp_path / "kept").mkdir()
+    before = sorted(p.relative_to(tmp_path) for p in tmp_path.rglob("*"))
+    rc, _, err = run(["colmap", model, tmp_path / "x" / "y" / "out", "--max-delta", "2", "--keypoint-radii",
+                      tmp_path / "r.txt", "--export", tmp_path / "x" / "e" / "f" / "e.ply",
+                      "--export", tmp_path / "kept" / "g" / "e.npz"], capsys)
+    assert rc == 2 and "unknown IMAGE_ID 999" in _one_error(err)
+    assert sorted(p.relative_to(tmp_path) for p in tmp_path.rglob("*")) == before
+    with pytest.raises(RuntimeError):
+        with new_folders(tmp_path / "a" / "b"):
+            (tmp_path / "a" / "b" / "c").mkdir()                     # not empty: kept, and so its parents
+            raise RuntimeError
+    assert (tmp_path / "a" / "b" / "c").is_dir()
+    with new_folders(tmp_path / "n" / "m"):                          # success: the folders stay
+        pass
+    assert (tmp_path / "n" / "m").is_dir()
 
 
 def test_quality_in_the_stage_still_writes_the_quality_and_exports(model, tmp_path, capsys):

@@ -21,7 +21,7 @@ from pathlib import Path
 
 from .app import (METHODS, CLIError, add_data_dir_option, add_solver_options, add_track_options, exit_invalid,
                   load_oxford, options_from_args, select_tracks, write_error)
-from ..io.atomic import atomic_path
+from ..io.atomic import atomic_path, new_folders
 from .conventions import add_world_frame_option, sequence_options
 from ..model.constraints import Method
 
@@ -83,8 +83,7 @@ def _plot_dataset(args) -> int:
                           title=f"{seq.name}: {len(tracks)} of {len(seq.tracks)} tracks, {args.method}"
                                 + (f" delta={args.delta}" if args.delta is not None else ""))
     try:
-        out.parent.mkdir(parents=True, exist_ok=True)
-        with atomic_path(out) as tmp:
+        with new_folders(out.parent), atomic_path(out) as tmp:
             fig.savefig(tmp, dpi=120)
     except OSError as exc:
         return exit_invalid(write_error(out, exc))

@@ -30,7 +30,7 @@ import uuid
 from pathlib import Path
 
 __all__ = ["atomic_path", "atomic_open", "staged_directory", "locked_directory", "DirectoryInTheWay",
-           "same_file", "input_clash", "TEMP_PREFIX", "STAGING_PREFIX"]
+           "same_file", "input_clash", "new_folders", "TEMP_PREFIX", "STAGING_PREFIX"]
 
 #: prefix of the temporary file beside a target.
 TEMP_PREFIX = ".tmp-"
@@ -83,6 +83,38 @@ def input_clash(output, output_name: str, inputs, folder: bool = False) -> str |
         if folder and _contains(output, path):
             return f"{output_name} {output} contains {name} {path}: outputs are kept out of the input's folders"
     return None
+
+
+def _make_folders(folder: Path) -> list:
+    """``mkdir -p folder``; returns the folders it created, deepest first."""
+    created, p = [], folder
+    while not os.path.lexists(p) and p != p.parent:
+        created.append(p)
+        p = p.parent
+    folder.mkdir(parents=True, exist_ok=True)
+    return created
+
+
+def _remove_folders(created: list) -> None:
+    """Remove folders of :func:`_make_folders` again, deepest first, each only while empty (another writer may
+    be using it): a failed command leaves no folder it created behind."""
+    for p in created:
+        try:
+            p.rmdir()
+        except OSError:
+            return
+
+
+@contextlib.contextmanager
+def new_folders(folder):
+    """Create ``folder`` and its missing parents for a write; on an exception remove again those it created
+    (deepest first, only while empty)."""
+    created = _make_folders(Path(folder))
+    try:
+        yield
+    except BaseException:
+        _remove_folders(created)
+        raise
 
 
 def _temp_name(path: Path) -> Path:
@@ -187,9 +219,9 @@ def staged_directory(target):
     """Yield a staging directory inside the folder ``target`` (created if needed).  On success each
     file written into it replaces the file of the same name in ``target`` (one ``os.replace`` each,
     under :func:`locked_directory`); files of ``target`` not written are kept, and nothing is ever
-    deleted.  On an exception the staging directory is removed, ``target`` is as it was (a folder
-    created for the call and still empty is removed again).  A name taken by a directory in
-    ``target`` raises :class:`DirectoryInTheWay` before anything is replaced."""
+    deleted.  On an exception the staging directory is removed, ``target`` is as it was (folders
+    created for the call, ``target`` and missing parents, are removed again while empty).  A name taken
+    by a directory in ``target`` raises :class:`DirectoryInTheWay` before anything is replaced."""
     target = Path(target)
     if target.name.startswith(STAGING_PREFIX) and target.is_dir():
         # already the (locked) stage of an outer writer, which commits its files: a second stage and lock
@@ -198,8 +230,7 @@ def staged_directory(target):
         return
     if target.exists() and not target.is_dir():
         raise NotADirectoryError(20, "exists and is not a directory", str(target))
-    created = not target.exists()
-    target.mkdir(parents=True, exist_ok=True)
+    created = _make_folders(target)
     try:
         with locked_directory(target):   # a stage is created and locked, or swept, under the folder's lock
             _sweep_stale_stages(target)
@@ -208,9 +239,7 @@ def staged_directory(target):
     except OSError as exc:               # e.g. a read-only folder: name the folder, not the temporary name
         if isinstance(exc.filename, str) and exc.filename.startswith(str(target / STAGING_PREFIX)):
             exc.filename = str(target)
-        if created:
-            with contextlib.suppress(OSError):
-                target.rmdir()
+        _remove_folders(created)
         raise
     try:
         try:
@@ -230,9 +259,7 @@ def staged_directory(target):
     except BaseException:
         shutil.rmtree(stage, ignore_errors=True)
         _release(held)
-        if created:
-            with contextlib.suppress(OSError):
-                target.rmdir()          # only when empty: another writer may be using it
+        _remove_folders(created)        # only when empty: another writer may be using them
         raise
     shutil.rmtree(stage, ignore_errors=True)
     _release(held)

@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..io.atomic import DirectoryInTheWay, atomic_path, input_clash, staged_directory
+from ..io.atomic import DirectoryInTheWay, atomic_path, input_clash, new_folders, staged_directory
 from ..io.colmap.formats import ModelWriter, open_model
 from ..solve.call_limit import call_limit
 from .certificates import CertificateWriter
@@ -182,7 +182,7 @@ def retriangulate_folder(in_dir, out_dir, options: RetriangulationOptions | None
     copied, notes = [], _other_model_notes(out_dir, fmt_out)
     _check_names(out_dir, fmt_out, src.folder)
     try:
-        with contextlib.ExitStack() as staged_exports, atomic_directory(out_dir) as tmp:
+        with _export_stack(exports) as staged_exports, atomic_directory(out_dir) as tmp:
             writer = ModelWriter(src.arrays, tmp, fmt_out)
             certs = CertificateWriter(tmp, options.method, options.path)
             try:
@@ -242,6 +242,17 @@ def _copy_extra_files(folder: Path, tmp: Path, fmt_out: str, copied: list, notes
                     notes.append(f"{name} not copied: the output is a {fmt_out} model")
 
 
+@contextlib.contextmanager
+def _export_stack(exports):
+    """The :class:`contextlib.ExitStack` of the staged exports (:func:`_stage_exports`), with the exports' missing
+    folders created first: entered before OUT's own stage, they are removed again (while empty) after it when
+    the run fails, so that a parent shared with OUT goes too."""
+    with contextlib.ExitStack() as stack:
+        for e in exports:
+            stack.enter_context(new_folders(Path(e).parent))
+        yield stack
+
+
 def _stage_exports(stack: contextlib.ExitStack, exports, xyz: list, rgb: list, report) -> list:
     """Write the .ply / .npz exports of the points (:mod:`tritools.io.export`) to staged paths of ``stack``:
     renamed into place after the model (the stack closes last).  Returns the staged paths."""
@@ -252,7 +263,6 @@ def _stage_exports(stack: contextlib.ExitStack, exports, xyz: list, rgb: list, r
     out = []
     for e in exports:
         target = Path(e)
-        target.parent.mkdir(parents=True, exist_ok=True)
         staged = stack.enter_context(atomic_path(target))
         export_points(staged, all_xyz, all_rgb, report, fmt=target.suffix.lower()[1:])
         out.append(staged)

@@ -213,11 +213,7 @@ def retriangulate_folder(in_dir, out_dir, options: RetriangulationOptions | None
             _copy_extra_files(src.folder, tmp, fmt_out, copied, notes)
             report = RetriangulationReport.from_chunks(options, ids, results, skipped_cameras(src.arrays, geom))
             staged = _stage_exports(staged_exports, exports, xyz, rgb, report)
-            if quality is not None and quality.active:
-                from .quality import apply_quality_staged
-                quality = apply_quality_staged(tmp, quality, staged)
-            else:
-                quality = None
+            point_quality = _staged_quality(tmp, quality, staged)
             timings["write"] += time.perf_counter() - t0
     finally:
         if bar is not None:
@@ -226,7 +222,17 @@ def retriangulate_folder(in_dir, out_dir, options: RetriangulationOptions | None
     out = Path(out_dir)
     logger.info("re-triangulated %d points into %s in %.2f s", report.n_points, out, timings["total"])
     return FolderResult(report, out, src.format, fmt_out, out / sidecar.name, tuple(Path(e) for e in exports),
-                        tuple(copied), tuple(notes), timings, quality)
+                        tuple(copied), tuple(notes), timings, point_quality)
+
+
+def _staged_quality(stage: Path, quality, staged_exports: list):
+    """The :class:`~tritools.sfm.quality.PointQuality` of ``quality`` applied to the staged model and exports
+    (:func:`~tritools.sfm.quality.apply_quality_staged`), or None without ``quality``."""
+    if quality is None or not quality.active:
+        return None
+    from .quality import apply_quality_staged
+
+    return apply_quality_staged(stage, quality, staged_exports)
 
 
 def _copy_extra_files(folder: Path, tmp: Path, fmt_out: str, copied: list, notes: list) -> None:

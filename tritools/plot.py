@@ -28,7 +28,7 @@ import numpy as np
 from .model.geometry import image_points
 from .model.geometry import validate_cameras
 from .model.regions import Ellipse, EllipseBorder, Point, Polytope, Region, Segment, as_regions
-from .io.atomic import atomic_path
+from .io.atomic import atomic_path, new_folders
 from .result import Status, TriangulationResult
 
 __all__ = ["figure3", "draw_region", "require_matplotlib", "dataset_summary", "save_figure3_examples", "view_color",
@@ -324,19 +324,19 @@ def save_figure3_examples(out_dir, examples: Sequence[int] = (2, 3, 4), *, metho
         if k not in (2, 3, 4):
             raise ValueError(f"examples: Figure 3 covers Examples 2, 3 and 4, got {k}")
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
     results = dict(results or {})
     paths = []
-    for k in examples:
-        cams, regions = paper_example(k)
-        res = results.get(k)
-        if res is None:
-            res = triangulate(cams, regions, method, delta=delta)
-        fig = figure3(cams, regions, res, title=f"Figure 3 ({'abc'[k - 2]}): Example {k}")
-        path = out / f"figure3_example{k}.png"
-        with atomic_path(path) as tmp:
-            fig.savefig(tmp, dpi=dpi)
-        paths.append(path)
+    with new_folders(out):          # a folder created here is removed again if nothing could be written
+        for k in examples:
+            cams, regions = paper_example(k)
+            res = results.get(k)
+            if res is None:
+                res = triangulate(cams, regions, method, delta=delta)
+            fig = figure3(cams, regions, res, title=f"Figure 3 ({'abc'[k - 2]}): Example {k}")
+            path = out / f"figure3_example{k}.png"
+            with atomic_path(path) as tmp:
+                fig.savefig(tmp, dpi=dpi)
+            paths.append(path)
     return paths
 
 

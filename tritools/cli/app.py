@@ -44,7 +44,7 @@ from ..solve.call_limit import call_limit
 from ..solve.options import TriangulationOptions
 from .flags import (METHODS, OPTION_FLAGS, PATHS, SPARSITIES, CLIError, add_data_dir_option,  # noqa: F401 - faces
                     add_robust_option, add_solver_options, add_track_options, option_flag_error, options_from_args,
-                    robust_from_args, select_tracks)
+                    refuse_input_as_output, robust_from_args, select_tracks, write_error)
 from .conventions import (silence_stdout, add_logging_options, add_world_frame_option, cli_logging,
                           sequence_options)
 
@@ -171,7 +171,7 @@ def _emit(text: str, output: str | None) -> None:
         with atomic_open(output, "w", encoding="utf-8") as fh:
             fh.write(text + "\n")
     except OSError as exc:
-        raise CLIError(f"cannot write {output}: {exc.strerror or exc}") from None
+        raise write_error(output, exc) from None
 
 
 def _dumps(obj) -> str:
@@ -229,6 +229,9 @@ def _read_specs(file: str) -> list[ProblemSpec]:
 
 
 def _cmd_solve(args) -> int:
+    # the input file, or the file stdin reads (`tritools solve - -o F.json < F.json`)
+    source = ("stdin", "/dev/stdin") if args.file == "-" else ("FILE", args.file)
+    refuse_input_as_output(args.output, "--output", [source])
     specs = _read_specs(args.file)
     results, times = _solve_specs(specs, options_from_args(args), args.progress, robust_from_args(args))
     if args.json:
@@ -349,13 +352,20 @@ def _summary_row(rs: list[TriangulationResult], times: list) -> dict:
             "mean_seconds": float(np.mean(secs)) if secs else None}
 
 
-def load_oxford(name: str, data_dir, command: str):
+def load_oxford(name: str, data_dir, command: str, outputs=()):
     """:func:`tritools.io.oxford.load_sequence` for a subcommand: a missing or unreadable sequence is a
-    :class:`CLIError` naming what was tried (``--data-dir``, ``$TRITOOLS_DATA``) or the bad file."""
+    :class:`CLIError` naming what was tried (``--data-dir``, ``$TRITOOLS_DATA``) or the bad file.
+    ``outputs``: ``(flag, path)`` of the files the command will write, refused (:func:`refuse_input_as_output`)
+    when one is a file of the sequence's folder."""
     from ..io.oxford import DATA_ENV, DataNotFoundError, load_sequence
+    from ..io.oxford import data_dir as oxford_data_dir
 
     try:
-        return load_sequence(name, data_dir)
+        seq = load_sequence(name, data_dir)
+        folder = oxford_data_dir(data_dir) / name
+        for flag, path in outputs:
+            refuse_input_as_output(path, flag, [("the data file", f) for f in folder.iterdir()])
+        return seq
     except DataNotFoundError as exc:
         msg = str(exc).replace("pass data_dir=...", "pass --data-dir DIR")
         if DATA_ENV not in msg:
@@ -370,7 +380,7 @@ def _cmd_dataset(args) -> int:
 
     options = options_from_args(args)
     select_tracks((), args.limit, args.sample, args.seed)            # the flags checked before any data is read
-    seq = load_oxford(args.name, args.data_dir, "dataset")
+    seq = load_oxford(args.name, args.data_dir, "dataset", [("--csv", args.csv)])
     options = sequence_options(options, args, seq)
     tracks = select_tracks(seq.tracks, args.limit, args.sample, args.seed)
     specs = []
@@ -418,7 +428,7 @@ def _write_dataset_csv(path, name, tracks, results, times) -> None:
                             r.gamma_lb, r.gamma_ub, r.optimal, r.delta, r.n_lmivar, r.certified_by,
                             t, source, r.message])
     except OSError as exc:
-        raise CLIError(f"cannot write {path}: {exc.strerror or exc}") from None
+        raise write_error(path, exc) from None
 
 
 # ----------------------------------------------------------------------------- parser

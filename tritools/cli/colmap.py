@@ -14,13 +14,15 @@ written but cameras that cannot be used (EQUIRECTANGULAR, a pycolmap-only model 
 """
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import json
+import logging
 import sys
 from pathlib import Path
 
-from .app import CLIError, add_data_dir_option, add_robust_option, add_solver_options, exit_invalid, options_from_args
-from .app import printable
+from .app import (CLIError, add_data_dir_option, add_robust_option, add_solver_options, exit_invalid, option_flag_error,
+                  options_from_args, printable, refuse_input_as_output, robust_from_args)
 from .workers import executor_from_args
 from ..io.problem_file import jsonable
 
@@ -128,10 +130,6 @@ def _quality_options(args):
                           max_depth_ratio=args.max_depth_ratio, keypoint_radii=args.keypoint_radii)
 
 
-def _flag(name: str) -> str:
-    return "--" + name.replace("_", "-")
-
-
 def _os_message(exc: OSError) -> str:
     where = exc.filename if exc.filename is not None else ""
     return f"{where}: {exc.strerror}" if where and exc.strerror else str(exc)
@@ -143,38 +141,32 @@ def run_colmap(args) -> int:
     from ..sfm import CameraError, OptionError, OutputError, RetriangulationOptions, retriangulate_folder
 
     solver = options_from_args(args)                 # exactly as `tritools solve` (CLIError: exit 2 naming the flag)
+    robust = robust_from_args(args)                  # the one --robust rule and wording of `tritools solve`
     try:
         options = RetriangulationOptions(solver=solver, min_track_length=args.min_track_length,
                                          max_track_length=args.max_track_length, behind=args.behind,
                                          strict=args.strict, chunk_points=args.chunk_points, progress=args.progress,
-                                         robust=args.robust)
+                                         robust=robust)
         quality = _quality_options(args)
     except OptionError as exc:
-        return exit_invalid(f"{_flag(exc.field)} {exc.detail}")
+        return exit_invalid(option_flag_error(exc, args))
+    _refuse_radii_as_output(args)
     try:
-        with executor_from_args(args) as executor:
+        with executor_from_args(args) as executor, _cameras_reported_here():
             result = retriangulate_folder(args.in_dir, args.out_dir, dataclasses.replace(options, executor=executor),
                                           input_format=None if args.input_type == "auto" else args.input_type,
-                                          output_format=args.output_type, exports=args.export)
+                                          output_format=args.output_type, exports=args.export, quality=quality)
     except CLIError as exc:
         return exit_invalid(exc)
     except OptionError as exc:
-        return exit_invalid(f"{_flag(exc.field)} {exc.detail}")
+        return exit_invalid(option_flag_error(exc, args))
     except (ModelFormatError, CameraError, OutputError) as exc:
         return exit_invalid(str(exc))
     except OSError as exc:
         return exit_invalid(_os_message(exc))
     except ValueError as exc:
         return exit_invalid(str(exc))
-    q = None
-    if quality.active:
-        from ..sfm.quality import apply_quality_folder
-        try:
-            q = apply_quality_folder(result.out_dir, quality, result.exports)
-        except (ModelFormatError, OutputError, ValueError) as exc:
-            return exit_invalid(str(exc))
-        except OSError as exc:
-            return exit_invalid(_os_message(exc))
+    q = result.quality                               # applied before anything was committed
     report = result.report
     summary = {"in_dir": str(args.in_dir), "out_dir": str(result.out_dir), "input_type": result.input_format,
                "output_type": result.output_format, "certificates": str(result.certificates),
@@ -196,6 +188,35 @@ def run_colmap(args) -> int:
         summary["quality"] = q.summary()
     _print_summary(report, result, summary)
     return _skipped_status(report, getattr(args, "quiet", False))
+
+
+def _refuse_radii_as_output(args) -> None:
+    """CLIError when an export, or a file the command writes into OUT_DIR, is the ``--keypoint-radii`` file it
+    reads (:func:`refuse_input_as_output`; OUT_DIR = IN_DIR is refused by the library's ``check_output``)."""
+    from ..sfm.folder import written_names
+
+    radii = [("--keypoint-radii", args.keypoint_radii)]
+    for e in args.export:
+        refuse_input_as_output(e, "--export", radii)
+    for name in written_names():
+        refuse_input_as_output(Path(args.out_dir) / name, f"OUT_DIR/{name}", radii)
+
+
+@contextlib.contextmanager
+def _cameras_reported_here():
+    """The command reports the skipped cameras itself (the summary, and one warning line with exit 3): the
+    library's warning per camera (:data:`~tritools.sfm.retriangulate.SKIPPED_CAMERAS_LOGGER`) is shown only
+    from ``-v`` (info) on, so that exit 3 prints one line."""
+    from ..sfm.retriangulate import SKIPPED_CAMERAS_LOGGER
+
+    lg = logging.getLogger(SKIPPED_CAMERAS_LOGGER)
+    saved = lg.level
+    if not lg.isEnabledFor(logging.INFO):
+        lg.setLevel(logging.ERROR)
+    try:
+        yield
+    finally:
+        lg.setLevel(saved)
 
 
 def _skipped_status(report, quiet: bool = False) -> int:
@@ -259,7 +280,7 @@ def run_from_oxford(args) -> int:
     from ..sfm import OutputError, atomic_directory
 
     if args.max_tracks is not None and args.max_tracks < 1:
-        return exit_invalid(f"--max-tracks must be >= 1, got {args.max_tracks}")
+        return exit_invalid(f"--max-tracks: must be an integer >= 1, got {args.max_tracks}")
     if Path(args.out_dir).exists() and not Path(args.out_dir).is_dir():
         return exit_invalid(f"OUT_DIR {args.out_dir}: exists and is not a directory")
     try:

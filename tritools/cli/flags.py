@@ -17,7 +17,7 @@ from ..solve.options import TRIANGULATION_BUDGET, MethodChoice, OptionError, Sol
 
 __all__ = ["CLIError", "METHODS", "PATHS", "SPARSITIES", "OPTION_FLAGS", "add_solver_options", "option_flag_error",
            "options_from_args", "add_robust_option", "robust_from_args", "add_track_options", "add_data_dir_option",
-           "select_tracks"]
+           "select_tracks", "refuse_input_as_output", "write_error"]
 
 METHODS = tuple(m.value for m in MethodChoice)
 PATHS = tuple(p.value for p in SolvePath)
@@ -26,6 +26,25 @@ SPARSITIES = ("auto", "none", "views")          # the spellings of tritools.solv
 
 class CLIError(Exception):
     """Invalid usage or input: printed as one line, exit code 2."""
+
+
+def write_error(path, exc: OSError) -> CLIError:
+    """The one-line :class:`CLIError` ``cannot write PATH: reason`` of an output that could not be written (the
+    target named, never a temporary file: :mod:`tritools.io.atomic`)."""
+    return CLIError(f"cannot write {path}: {exc.strerror or exc}")
+
+
+def refuse_input_as_output(output, name: str, inputs) -> None:
+    """CLIError (exit 2, before any work) when the output ``output`` of the flag ``name`` is one of the command's
+    ``inputs`` (``(name, path)`` pairs; :func:`tritools.io.atomic.input_clash`, the rule ``tritools colmap``
+    applies to OUT_DIR); None and ``-`` (stdout) are never refused."""
+    from ..io.atomic import input_clash
+
+    if output is None or str(output) == "-":
+        return
+    clash = input_clash(output, name, [(n, p) for n, p in inputs if p is not None and str(p) != "-"])
+    if clash:
+        raise CLIError(clash)
 
 
 def add_solver_options(p, default_method: str = "auto", default_path: str = "auto",
@@ -72,8 +91,12 @@ _LIMIT_UNITS = {"time_limit": ("time_limit", "seconds"), "max_bytes": ("memory_l
 
 
 def option_flag_error(exc: OptionError, args=None) -> CLIError:
-    """The one-line :class:`CLIError` of an invalid option: its flag (from ``exc.field``), then the message."""
-    flag = OPTION_FLAGS.get(exc.field, "options")
+    """The one-line :class:`CLIError` ``FLAG: message`` of an invalid option, for every subcommand: the flag of a
+    solver option from :data:`OPTION_FLAGS` (then the option's message), the flag of any other field spelt from
+    it (``min_track_length`` -> ``--min-track-length``, then the reason: ``--robust: must be ...``)."""
+    if exc.field not in OPTION_FLAGS:
+        return CLIError(f"--{exc.field.replace('_', '-')}: {exc.text}")
+    flag = OPTION_FLAGS[exc.field]
     if exc.field in _LIMIT_UNITS and args is not None:
         dest, unit = _LIMIT_UNITS[exc.field]
         return CLIError(f"{flag}: must be a positive number of {unit}, got {vars(args).get(dest)}")
@@ -104,14 +127,16 @@ def add_robust_option(p) -> None:
 
 
 def robust_from_args(args):
-    """The ``--robust`` threshold (None when absent); CLIError naming the flag unless positive."""
-    c = getattr(args, "robust", None)
-    if c is not None and not c > 0:
-        raise CLIError(f"--robust: must be a positive threshold in pixels, got {c}")
-    from ..solve.robust import MIN_THRESHOLD
-    if c is not None and c < MIN_THRESHOLD:
-        raise CLIError(f"--robust: must be at least {MIN_THRESHOLD:g} pixels (its square underflows), got {c}")
-    return c
+    """The ``--robust`` threshold of every subcommand that has the flag (None when absent), validated by the
+    library's one rule (:func:`tritools.sfm.certify.robust_threshold`: positive, at least
+    :data:`tritools.solve.robust.MIN_THRESHOLD`; ``inf`` is the plain L2 problem); a :class:`CLIError`
+    ``--robust: ...`` otherwise (:func:`option_flag_error`)."""
+    from ..sfm.certify import robust_threshold
+
+    try:
+        return robust_threshold(getattr(args, "robust", None))
+    except OptionError as exc:
+        raise option_flag_error(exc, args) from None
 
 
 def add_track_options(p) -> None:

@@ -20,8 +20,8 @@ import sys
 from pathlib import Path
 
 from .app import (METHODS, CLIError, add_data_dir_option, add_solver_options, add_track_options, exit_invalid,
-                  load_oxford, options_from_args, select_tracks)
-from ..io.atomic import atomic_path
+                  load_oxford, options_from_args, select_tracks, write_error)
+from ..io.atomic import atomic_path, new_folders
 from .conventions import add_world_frame_option, sequence_options
 from ..model.constraints import Method
 
@@ -36,7 +36,9 @@ def run_figure3(args) -> int:
         from ..plot import save_figure3_examples
 
         paths = save_figure3_examples(args.out, args.examples, method=args.method, delta=args.delta)
-    except (CLIError, ImportError, ValueError, OSError) as exc:
+    except OSError as exc:
+        return exit_invalid(write_error(exc.filename or args.out, exc))
+    except (CLIError, ImportError, ValueError) as exc:
         return exit_invalid(str(exc))
     for p in paths:
         print(p)
@@ -64,7 +66,7 @@ def _plot_dataset(args) -> int:
         require_matplotlib()
     except ImportError as exc:
         return exit_invalid(str(exc))
-    seq = load_oxford(args.name, args.data_dir, "plot-dataset")
+    seq = load_oxford(args.name, args.data_dir, "plot-dataset", [("--out", args.out)])
     options = sequence_options(options, args, seq)
     tracks = select_tracks(seq.tracks, args.limit, args.sample, args.seed)
     if not tracks:
@@ -76,16 +78,15 @@ def _plot_dataset(args) -> int:
     results = triangulate_many(problems, options=options, progress=args.progress)
     from ..plot import dataset_summary
 
+    out = Path(args.out) if args.out else Path(f"{seq.name}_summary.png")   # by default in the working directory
     fig = dataset_summary(results, [t.n_views for t in tracks],
                           title=f"{seq.name}: {len(tracks)} of {len(seq.tracks)} tracks, {args.method}"
                                 + (f" delta={args.delta}" if args.delta is not None else ""))
-    out = Path(args.out) if args.out else Path(f"{seq.name}_summary.png")
     try:
-        out.parent.mkdir(parents=True, exist_ok=True)
-        with atomic_path(out) as tmp:
+        with new_folders(out.parent), atomic_path(out) as tmp:
             fig.savefig(tmp, dpi=120)
     except OSError as exc:
-        return exit_invalid(f"cannot write {out}: {exc}")
+        return exit_invalid(write_error(out, exc))
     n_cert = sum(bool(r.optimal) for r in results)
     print(f"{out}  ({n_cert}/{len(results)} certified)")
     return 0

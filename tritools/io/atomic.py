@@ -13,19 +13,24 @@ folder by one rename, under an advisory lock on the folder (:func:`locked_direct
 so that two writers to one folder never interleave their files.  Nothing else in the folder is touched.
 Each writer holds a lock on its own stage; a stage whose lock is free was left by a writer that was
 killed (SIGKILL) and is removed by the next writer.
+
+:func:`input_clash` is the one rule that keeps a command from writing over its own input: an output is
+refused when it is one of the inputs (the same file: through symlinks, hard links, bind mounts), or, for
+an output folder, when it contains one.  Every command checks its outputs with it before any work.
 """
 from __future__ import annotations
 
 import contextlib
 import os
 import shutil
+import stat
 import tempfile
 import threading
 import uuid
 from pathlib import Path
 
 __all__ = ["atomic_path", "atomic_open", "staged_directory", "locked_directory", "DirectoryInTheWay",
-           "TEMP_PREFIX", "STAGING_PREFIX"]
+           "same_file", "input_clash", "new_folders", "TEMP_PREFIX", "STAGING_PREFIX"]
 
 #: prefix of the temporary file beside a target.
 TEMP_PREFIX = ".tmp-"
@@ -41,6 +46,75 @@ class DirectoryInTheWay(IsADirectoryError):
 
     def __str__(self) -> str:
         return f"{self.filename}: {self.strerror}"
+
+
+def same_file(a, b) -> bool:
+    """True when the paths ``a`` and ``b`` both exist and name one file or folder: the same device and
+    inode (:func:`os.path.samefile`), so also through symlinks, hard links and bind mounts.  A special file
+    (``/dev/stdout``, a FIFO: written directly, never replaced) is never the same as anything."""
+    try:
+        if stat.S_ISCHR(os.stat(a).st_mode) or stat.S_ISFIFO(os.stat(a).st_mode):
+            return False
+        return os.path.samefile(a, b)
+    except (OSError, ValueError):       # a path that does not exist (yet), or cannot be a path (NUL)
+        return False
+
+
+def _contains(folder, path) -> bool:
+    """True when the existing folder ``folder`` is a parent (at any depth) of the existing ``path``."""
+    try:
+        parents = Path(path).resolve(strict=True).parents
+    except (OSError, RuntimeError, ValueError):
+        return False
+    return any(same_file(folder, p) for p in parents)
+
+
+def input_clash(output, output_name: str, inputs, folder: bool = False) -> str | None:
+    """Why the command may not write ``output`` (named ``output_name`` in the message: a flag such as
+    ``--output``, or ``OUT_DIR``), or None when it may.
+
+    ``inputs``: ``(name, path)`` pairs of what the command reads.  The output is refused when it is one of
+    them (:func:`same_file`); with ``folder`` (an output folder, whose files are replaced) also when it
+    contains one.  The one wording of the rule "a command never writes over its input".
+    """
+    for name, path in inputs:
+        if same_file(output, path):
+            return f"{output_name} must differ from {name} {path} (an input is never overwritten)"
+        if folder and _contains(output, path):
+            return f"{output_name} {output} contains {name} {path}: outputs are kept out of the input's folders"
+    return None
+
+
+def _make_folders(folder: Path) -> list:
+    """``mkdir -p folder``; returns the folders it created, deepest first."""
+    created, p = [], folder
+    while not os.path.lexists(p) and p != p.parent:
+        created.append(p)
+        p = p.parent
+    folder.mkdir(parents=True, exist_ok=True)
+    return created
+
+
+def _remove_folders(created: list) -> None:
+    """Remove folders of :func:`_make_folders` again, deepest first, each only while empty (another writer may
+    be using it): a failed command leaves no folder it created behind."""
+    for p in created:
+        try:
+            p.rmdir()
+        except OSError:
+            return
+
+
+@contextlib.contextmanager
+def new_folders(folder):
+    """Create ``folder`` and its missing parents for a write; on an exception remove again those it created
+    (deepest first, only while empty)."""
+    created = _make_folders(Path(folder))
+    try:
+        yield
+    except BaseException:
+        _remove_folders(created)
+        raise
 
 
 def _temp_name(path: Path) -> Path:
@@ -102,8 +176,11 @@ def atomic_path(path):
             raise
         _fsync_path(path.parent, directory=True)
     finally:
-        with contextlib.suppress(FileNotFoundError):
-            os.unlink(tmp)
+        # only a temporary file that exists: unlinking a missing one on a read-only file system raises EROFS,
+        # which would replace the error that names the target
+        if os.path.lexists(tmp):
+            with contextlib.suppress(FileNotFoundError):
+                os.unlink(tmp)
 
 
 @contextlib.contextmanager
@@ -142,9 +219,9 @@ def staged_directory(target):
     """Yield a staging directory inside the folder ``target`` (created if needed).  On success each
     file written into it replaces the file of the same name in ``target`` (one ``os.replace`` each,
     under :func:`locked_directory`); files of ``target`` not written are kept, and nothing is ever
-    deleted.  On an exception the staging directory is removed, ``target`` is as it was (a folder
-    created for the call and still empty is removed again).  A name taken by a directory in
-    ``target`` raises :class:`DirectoryInTheWay` before anything is replaced."""
+    deleted.  On an exception the staging directory is removed, ``target`` is as it was (folders
+    created for the call, ``target`` and missing parents, are removed again while empty).  A name taken
+    by a directory in ``target`` raises :class:`DirectoryInTheWay` before anything is replaced."""
     target = Path(target)
     if target.name.startswith(STAGING_PREFIX) and target.is_dir():
         # already the (locked) stage of an outer writer, which commits its files: a second stage and lock
@@ -153,8 +230,7 @@ def staged_directory(target):
         return
     if target.exists() and not target.is_dir():
         raise NotADirectoryError(20, "exists and is not a directory", str(target))
-    created = not target.exists()
-    target.mkdir(parents=True, exist_ok=True)
+    created = _make_folders(target)
     try:
         with locked_directory(target):   # a stage is created and locked, or swept, under the folder's lock
             _sweep_stale_stages(target)
@@ -163,9 +239,7 @@ def staged_directory(target):
     except OSError as exc:               # e.g. a read-only folder: name the folder, not the temporary name
         if isinstance(exc.filename, str) and exc.filename.startswith(str(target / STAGING_PREFIX)):
             exc.filename = str(target)
-        if created:
-            with contextlib.suppress(OSError):
-                target.rmdir()
+        _remove_folders(created)
         raise
     try:
         try:
@@ -185,9 +259,7 @@ def staged_directory(target):
     except BaseException:
         shutil.rmtree(stage, ignore_errors=True)
         _release(held)
-        if created:
-            with contextlib.suppress(OSError):
-                target.rmdir()          # only when empty: another writer may be using it
+        _remove_folders(created)        # only when empty: another writer may be using them
         raise
     shutil.rmtree(stage, ignore_errors=True)
     _release(held)

@@ -9,7 +9,8 @@ was written each file replaces its namesake in OUT by one rename, under a lock o
 (:func:`atomic_directory`).  Nothing else in OUT is touched (a user's notes, masks, subfolders
 stay), a failure at any point leaves OUT exactly as it was, and two runs writing to one OUT never
 mix their files.  Exports (.ply/.npz) are written to temporary files and renamed into place after
-the model.
+the model.  The point quality (``quality``: :mod:`tritools.sfm.quality`) is applied to the staged model and
+exports before anything is renamed, so a failure there too leaves OUT and the exports as they were.
 """
 from __future__ import annotations
 
@@ -23,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..io.atomic import DirectoryInTheWay, atomic_path, staged_directory
+from ..io.atomic import DirectoryInTheWay, atomic_path, input_clash, new_folders, staged_directory
 from ..io.colmap.formats import ModelWriter, open_model
 from ..solve.call_limit import call_limit
 from .certificates import CertificateWriter
@@ -32,7 +33,7 @@ from .retriangulate import RetriangulationReport, has_tqdm, progress_bar, skippe
 from .robust_tracks import drop_observations, rewrite_images
 
 __all__ = ["OutputError", "atomic_directory", "check_output", "retriangulate_folder", "FolderResult",
-           "EXTRA_FILES", "EXPORT_SUFFIXES"]
+           "EXTRA_FILES", "EXPORT_SUFFIXES", "written_names"]
 
 logger = logging.getLogger(__name__)
 #: files of newer COLMAP versions copied unchanged when the output has the input's format.
@@ -62,6 +63,16 @@ def atomic_directory(target):
 
 def _model_names(fmt: str) -> tuple:
     return tuple(f"{stem}.{fmt}" for stem in ("cameras", "images", "points3D"))
+
+
+def written_names() -> tuple:
+    """Every file name :func:`retriangulate_folder` (with ``quality``) may write into OUT, in either format: the
+    model, the certificate sidecar, the copied ``rigs``/``frames`` files and the quality file."""
+    from .certificates import CERTIFICATES_FILE
+    from .quality import QUALITY_FILE
+
+    return tuple(n for fmt in ("bin", "txt") for n in _model_names(fmt) + EXTRA_FILES[fmt]) + \
+        (CERTIFICATES_FILE, QUALITY_FILE)
 
 
 def _check_names(out_dir, fmt_out: str, in_dir) -> None:
@@ -100,13 +111,12 @@ def check_output(in_dir, out_dir, exports=()) -> None:
     """Refuse unusable outputs before any work (:class:`OutputError`): OUT a file, OUT = IN, OUT
     containing IN (replacing OUT would delete the input), an export that is a directory or has
     another suffix than .ply/.npz."""
-    src, dst = Path(in_dir).resolve(), Path(out_dir).resolve()
+    dst = Path(out_dir)
     if dst.exists() and not dst.is_dir():
         raise OutputError(f"OUT_DIR {out_dir}: exists and is not a directory")
-    if dst == src:
-        raise OutputError("OUT_DIR must differ from IN_DIR (the input model is never overwritten)")
-    if dst in src.parents:
-        raise OutputError(f"OUT_DIR {out_dir} contains IN_DIR {in_dir}: outputs are kept out of the input's folders")
+    clash = input_clash(out_dir, "OUT_DIR", [("IN_DIR", in_dir)], folder=True)   # the rule of every command
+    if clash:
+        raise OutputError(clash)
     for e in exports:
         p = Path(e)
         if p.suffix.lower() not in EXPORT_SUFFIXES:
@@ -129,6 +139,7 @@ class FolderResult:
     copied: tuple = ()
     notes: tuple = ()
     timings: dict = field(default_factory=dict)
+    quality: object = None          # the PointQuality of ``quality`` (tritools.sfm.quality), or None
 
 
 def _within_total_limit(run):
@@ -144,11 +155,14 @@ def _within_total_limit(run):
 @_within_total_limit
 def retriangulate_folder(in_dir, out_dir, options: RetriangulationOptions | None = None, *,
                          input_format: str | None = None, output_format: str | None = None,
-                         exports=()) -> FolderResult:
+                         exports=(), quality=None) -> FolderResult:
     """Re-triangulate the model in ``in_dir`` into ``out_dir`` (see the module docstring).
 
     ``input_format`` None detects it; ``output_format`` None keeps it; ``exports``: .ply / .npz
-    paths written with the certificate fields (:mod:`tritools.io.export`)."""
+    paths written with the certificate fields (:mod:`tritools.io.export`); ``quality``: a
+    :class:`~tritools.sfm.quality.QualityOptions` applied to the staged output before anything is committed
+    (:func:`~tritools.sfm.quality.apply_quality_staged`: a failure there leaves OUT_DIR and the exports as they
+    were)."""
     options = options or RetriangulationOptions()
     t_start = time.perf_counter()
     check_output(in_dir, out_dir, exports)
@@ -168,7 +182,7 @@ def retriangulate_folder(in_dir, out_dir, options: RetriangulationOptions | None
     copied, notes = [], _other_model_notes(out_dir, fmt_out)
     _check_names(out_dir, fmt_out, src.folder)
     try:
-        with contextlib.ExitStack() as staged_exports, atomic_directory(out_dir) as tmp:
+        with _export_stack(exports) as staged_exports, atomic_directory(out_dir) as tmp:
             writer = ModelWriter(src.arrays, tmp, fmt_out)
             certs = CertificateWriter(tmp, options.method, options.path)
             try:
@@ -198,7 +212,8 @@ def retriangulate_folder(in_dir, out_dir, options: RetriangulationOptions | None
                 raise
             _copy_extra_files(src.folder, tmp, fmt_out, copied, notes)
             report = RetriangulationReport.from_chunks(options, ids, results, skipped_cameras(src.arrays, geom))
-            _stage_exports(staged_exports, exports, xyz, rgb, report)
+            staged = _stage_exports(staged_exports, exports, xyz, rgb, report)
+            point_quality = _staged_quality(tmp, quality, staged)
             timings["write"] += time.perf_counter() - t0
     finally:
         if bar is not None:
@@ -207,7 +222,17 @@ def retriangulate_folder(in_dir, out_dir, options: RetriangulationOptions | None
     out = Path(out_dir)
     logger.info("re-triangulated %d points into %s in %.2f s", report.n_points, out, timings["total"])
     return FolderResult(report, out, src.format, fmt_out, out / sidecar.name, tuple(Path(e) for e in exports),
-                        tuple(copied), tuple(notes), timings)
+                        tuple(copied), tuple(notes), timings, point_quality)
+
+
+def _staged_quality(stage: Path, quality, staged_exports: list):
+    """The :class:`~tritools.sfm.quality.PointQuality` of ``quality`` applied to the staged model and exports
+    (:func:`~tritools.sfm.quality.apply_quality_staged`), or None without ``quality``."""
+    if quality is None or not quality.active:
+        return None
+    from .quality import apply_quality_staged
+
+    return apply_quality_staged(stage, quality, staged_exports)
 
 
 def _copy_extra_files(folder: Path, tmp: Path, fmt_out: str, copied: list, notes: list) -> None:
@@ -223,15 +248,28 @@ def _copy_extra_files(folder: Path, tmp: Path, fmt_out: str, copied: list, notes
                     notes.append(f"{name} not copied: the output is a {fmt_out} model")
 
 
-def _stage_exports(stack: contextlib.ExitStack, exports, xyz: list, rgb: list, report) -> None:
+@contextlib.contextmanager
+def _export_stack(exports):
+    """The :class:`contextlib.ExitStack` of the staged exports (:func:`_stage_exports`), with the exports' missing
+    folders created first: entered before OUT's own stage, they are removed again (while empty) after it when
+    the run fails, so that a parent shared with OUT goes too."""
+    with contextlib.ExitStack() as stack:
+        for e in exports:
+            stack.enter_context(new_folders(Path(e).parent))
+        yield stack
+
+
+def _stage_exports(stack: contextlib.ExitStack, exports, xyz: list, rgb: list, report) -> list:
     """Write the .ply / .npz exports of the points (:mod:`tritools.io.export`) to staged paths of ``stack``:
-    renamed into place after the model (the stack closes last)."""
+    renamed into place after the model (the stack closes last).  Returns the staged paths."""
     from ..io.export import export_points
 
     all_xyz = np.concatenate(xyz) if xyz else np.zeros((0, 3))
     all_rgb = np.concatenate(rgb) if rgb else np.zeros((0, 3), np.uint8)
+    out = []
     for e in exports:
         target = Path(e)
-        target.parent.mkdir(parents=True, exist_ok=True)
         staged = stack.enter_context(atomic_path(target))
         export_points(staged, all_xyz, all_rgb, report, fmt=target.suffix.lower()[1:])
+        out.append(staged)
+    return out

@@ -33,6 +33,7 @@ from ..solve.options import OptionError
 from .pipeline import ModelGeometry
 
 __all__ = ["QualityOptions", "PointQuality", "point_quality", "drop_points", "write_quality", "apply_quality_folder",
+           "apply_quality_staged",
            "read_keypoint_radii",
            "QUALITY_FILE",
            "COLMAP_MIN_TRI_ANGLE", "COLMAP_MAX_REPROJ_ERROR"]
@@ -90,6 +91,12 @@ class QualityOptions:
     @property
     def active(self) -> bool:
         return any(getattr(self, f.name) is not None for f in fields(self) if f.name != "exact_depths")
+
+    @property
+    def filtering(self) -> bool:
+        """A filter is set (points may be removed from the model)."""
+        return any(getattr(self, k) is not None for k in ("min_angle", "max_error", "max_uncertainty",
+                                                           "max_depth_ratio"))
 
     @property
     def uncertain(self) -> bool:
@@ -283,28 +290,42 @@ def _update_export(path: Path, q: PointQuality, filtered: bool) -> None:
         write_npz(path, xyz, rgb, **rest, **extra)
 
 
+def apply_quality_staged(stage, options: QualityOptions, exports=()) -> PointQuality:
+    """:func:`apply_quality_folder` on a staged output that the caller commits (``tritools colmap``: inside the
+    stage of :func:`tritools.sfm.folder.retriangulate_folder`, so that a bad radius file or any other failure
+    leaves OUT_DIR and the exports as they were): the model files in ``stage`` are rewritten in place,
+    :data:`QUALITY_FILE` is added, and ``exports`` (their staged paths) get the quality columns."""
+    from ..io.colmap.formats import detect_format, read_model_arrays, write_model_arrays
+    from .pipeline import prepare_geometry
+
+    stage = Path(stage)
+    fmt = detect_format(stage)
+    arrays = read_model_arrays(stage, fmt)
+    q = point_quality(arrays, prepare_geometry(arrays), options)
+    filtered = options.filtering
+    write_model_arrays(drop_points(arrays, q.kept) if filtered else arrays, stage, fmt)
+    write_quality(stage, q, options)
+    for e in exports:
+        _update_export(Path(e), q, filtered)
+    return q
+
+
 def apply_quality_folder(folder, options: QualityOptions, exports=()) -> PointQuality:
     """Compute the quality of the model in ``folder`` (a ``tritools colmap`` output), write
     :data:`QUALITY_FILE`, remove the filtered points from the model (when a filter is set) and add
-    the quality columns to ``exports``; the folder is replaced atomically."""
+    the quality columns to ``exports``; the folder is replaced atomically (:func:`apply_quality_staged` on a
+    copy staged in it), then the exports are updated, each atomically."""
     import shutil
 
-    from ..io.colmap.formats import detect_format, read_model_arrays, write_model_arrays
     from .folder import atomic_directory
-    from .pipeline import prepare_geometry
 
     folder = Path(folder)
-    fmt = detect_format(folder)
-    arrays = read_model_arrays(folder, fmt)
-    q = point_quality(arrays, prepare_geometry(arrays), options)
-    filtered = any(getattr(options, k) is not None for k in ("min_angle", "max_error", "max_uncertainty",
-                                                               "max_depth_ratio"))
     with atomic_directory(folder) as tmp:
         for f in folder.iterdir():
             if f.is_file():
                 shutil.copyfile(f, tmp / f.name)
-        write_model_arrays(drop_points(arrays, q.kept) if filtered else arrays, tmp, fmt)
-        write_quality(tmp, q, options)
+        q = apply_quality_staged(tmp, options)
+    filtered = options.filtering
     for e in exports:
         _update_export(Path(e), q, filtered)
     return q

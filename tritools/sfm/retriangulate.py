@@ -40,9 +40,12 @@ from .pipeline import RetriangulationOptions, prepare_geometry, process_chunk
 from .robust_tracks import removed_observations, without_observations
 
 __all__ = ["PointCertificate", "RetriangulationReport", "retriangulate", "retriangulate_arrays", "progress_bar",
-           "has_tqdm", "skipped_cameras", "PROGRESS_MIN_POINTS", "REPORT_FIELDS"]
+           "has_tqdm", "skipped_cameras", "PROGRESS_MIN_POINTS", "REPORT_FIELDS", "SKIPPED_CAMERAS_LOGGER"]
 
 logger = logging.getLogger(__name__)
+#: the logger of the one warning per skipped camera (a child of ``tritools``: a caller that reports the skipped
+#: cameras itself, as ``tritools colmap`` does with its exit 3, can quiet it alone).
+SKIPPED_CAMERAS_LOGGER = f"{__name__}.cameras"
 #: no progress bar for runs with fewer points than this.
 PROGRESS_MIN_POINTS = 2000
 #: per-point arrays of a report (and of a :class:`~.pipeline.ChunkResult`).
@@ -229,7 +232,8 @@ def skipped_cameras(arrays: ModelArrays, geom) -> tuple:
         if reason is not None and np.any(arrays.image_camera == k):
             out.append((int(arrays.camera_ids[k]), arrays.camera_models[k],
                         f"{arrays.camera_source(k)}: {reason}", int(n_obs[k])))
-            logger.warning("camera %d (%s) skipped: %s", arrays.camera_ids[k], arrays.camera_models[k], reason)
+            logging.getLogger(SKIPPED_CAMERAS_LOGGER).warning("camera %d (%s) skipped: %s", arrays.camera_ids[k],
+                                                              arrays.camera_models[k], reason)
     return tuple(out)
 
 

@@ -361,6 +361,29 @@ def _mono(gens, e) -> Polynomial:
     return Polynomial(gens, {tuple(int(k) for k in e): 1.0})
 
 
+#: rows of f's support between two deadline checks while its slots are assembled (one row is one small product)
+_DEADLINE_ROWS = 64
+
+
+def _multipliers(prog: SOSProgram, shape: CertificateShape) -> tuple:
+    """(r, s, the multipliers of the equality and inequality slots): the free r_k on the supports of
+    ``shape.r_supports``, the SOS s_k on the bases ``shape.s_bases``, and (r_1, ..., r_K, -s_1, ..., -s_M).
+    The active deadline is checked before each one: a dense program of 100 views with disc regions has ~5,000
+    equality multipliers (~2.5 ms each, seconds in all)."""
+    r, s_ = [], []
+    for k, E in enumerate(shape.r_supports):
+        check_deadline("assembling the certificate's multipliers")
+        r.append(prog.free_poly(-1, name=f"r{k}", monomial_exponents=E))
+    for k, B in enumerate(shape.s_bases):
+        check_deadline("assembling the certificate's multipliers")
+        s_.append(prog.sos_poly(-1, name=f"s{k}", basis=B))
+    neg = []
+    for sk in s_:
+        check_deadline("assembling the certificate's multipliers")
+        neg.append(-1.0 * sk)
+    return tuple(r), tuple(s_), r + neg
+
+
 def psatz_structure(slots: DataSlots, degree: int, shape: CertificateShape, q: Polynomial | None) -> PsatzStructure:
     """Build the parametric program of ``slots`` with certificate ``shape``; ``q`` the fixed multiplier,
     or None for a free SOS q (dense shapes only)."""
@@ -389,10 +412,10 @@ def psatz_structure(slots: DataSlots, degree: int, shape: CertificateShape, q: P
         c = prog.scalar("c")
         mult_q = LinPoly.from_polynomial(q, gens)
         u0 = -1.0 * (c * q)
-    r = tuple(prog.free_poly(-1, name=f"r{k}", monomial_exponents=E) for k, E in enumerate(shape.r_supports))
-    s_ = tuple(prog.sos_poly(-1, name=f"s{k}", basis=B) for k, B in enumerate(shape.s_bases))
-    mults = list(r) + [-1.0 * sk for sk in s_]
+    r, s_, mults = _multipliers(prog, shape)
     for t, e in enumerate(slots.supports[0]):
+        if t % _DEADLINE_ROWS == 0:
+            check_deadline("assembling the certificate")
         params[f"f:{t}"] = mult_q * _mono(gens, e)
     n_slots = max([E.shape[0] for E in slots.supports[1:]], default=0)
     for t in range(n_slots):

@@ -31,15 +31,18 @@ certificate checks of :mod:`sospoly.solvers.solve` run on the returned x.
 """
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 
 import numpy as np
 import scipy.linalg as sla
 
 from ...algebra.svec import smat, svec
+from ...budget import cpu_share
 from ...tolerances import Tolerances
 
-__all__ = ["IpmResult", "Layout", "layout_of", "Operator", "stopping_rule", "mehrotra", "Iterate"]
+__all__ = ["IpmResult", "Layout", "layout_of", "Operator", "stopping_rule", "mehrotra", "Iterate", "out_of_time",
+           "predicted_iteration", "IPM_SECONDS_PER_UNIT"]
 
 
 @dataclass(frozen=True)
@@ -301,13 +304,42 @@ def _why(ok, diverged, stalled, timeout) -> str:
         "stalled" if stalled else "time limit" if timeout else "iteration limit"
 
 
+#: seconds of one iteration per unit of B (m sum_k n_k^3 + m^3 / 3) -- the Schur complement's products over
+#: the PSD blocks of sides n_k and its Cholesky factor, m columns, B instances -- on a core of its own.  Measured
+#: first iterations (2-4x the later ones: the work arrays are paged in) of dense degree-2 programs, 20-50 views
+#: with points, discs and mixed regions: 1.0-3.4e-9 s per unit under a load average of ~5 on 2 cores (0.4-1.4e-9
+#: on a core of its own).
+IPM_SECONDS_PER_UNIT = 1e-9
+
+
+def predicted_iteration(B: int, m: int, sizes) -> float:
+    """Predicted wall seconds of the first iteration (:data:`IPM_SECONDS_PER_UNIT`, over the share of a core this
+    process can expect now, :func:`sospoly.budget.cpu_share`): what :func:`out_of_time` compares with the time
+    left before there is a measured iteration."""
+    units = float(B) * (float(m) * sum(float(n) ** 3 for n in sizes) + float(m) ** 3 / 3.0)
+    return IPM_SECONDS_PER_UNIT * units / cpu_share()
+
+
+def out_of_time(deadline, last_iteration: float) -> bool:
+    """Has ``deadline`` (a :class:`sospoly.budget.Deadline` or None) passed, or is what is left of it shorter
+    than the last iteration took?  An iteration cannot be interrupted (its Schur complement and factorisation
+    are one native call each: ~0.5-1.5 s at 30-50 views with dense degree-2 programs), so the next one would
+    end past the deadline by about the difference: stopping one iteration early keeps the time limit."""
+    if deadline is None or deadline.end is None:
+        return False
+    left = deadline.end - time.monotonic()
+    return left <= 0.0 or left < last_iteration
+
+
 def mehrotra(op: Operator, q: np.ndarray, b: np.ndarray, lay: Layout, tol: Tolerances, deadline=None):
     """Run the predictor-corrector on a batch; returns (Iterate, converged, iterations, reasons).
 
     ``q`` (B, m) the costs, ``b`` (B, n_rows) the right-hand sides (zero rows first, then svec
     blocks), ``op`` the operator of the whole batch (:meth:`Operator.subset` gives the active part).
     An instance stops at the stopping rule (:func:`stopping_rule`), when its merit |pobj - dobj| + pres + dres
-    has not halved over the last 4 iterations (stalled), at ``ipm_max_iter`` or at the deadline."""
+    has not halved over the last 4 iterations (stalled), at ``ipm_max_iter`` or at the deadline
+    (:func:`out_of_time`: also when less time is left than the last iteration took, or than the first is
+    predicted to take, :func:`predicted_iteration`)."""
     B = q.shape[0]
     bk = [b[:, lay.block(k)] for k in range(len(lay.sizes))]
     it_ = _start(q, b, lay)
@@ -320,7 +352,14 @@ def mehrotra(op: Operator, q: np.ndarray, b: np.ndarray, lay: Layout, tol: Toler
         for g in idx:
             its[g], reason[g] = it, why
 
+    # how long the next iteration may take (predicted for the first, then the last one measured), when it started
+    last = 0.0 if deadline is None or deadline.end is None else predicted_iteration(B, q.shape[1], lay.sizes)
+    t_it = None
     for it in range(tol.ipm_max_iter + 1):
+        now = time.monotonic()
+        if t_it is not None:
+            last = now - t_it
+        t_it = now
         if active.size == 0:
             break
         sub = op if active.size == B else op.subset(active)
@@ -336,7 +375,7 @@ def mehrotra(op: Operator, q: np.ndarray, b: np.ndarray, lay: Layout, tol: Toler
         stalled = (it >= 8) & (merit > 0.5 * history[active, 0])
         history[active, :-1] = history[active, 1:]
         history[active, -1] = merit
-        timeout = deadline is not None and deadline.expired
+        timeout = out_of_time(deadline, last)
         done = ok | diverged | stalled | (it == tol.ipm_max_iter) | timeout
         for j in np.nonzero(done)[0]:
             converged[active[j]] = bool(ok[j])

@@ -1,0 +1,148 @@
+"""Steps that used to run past a time limit (issue #22, wave 12): each now reads the deadline inside the step.
+
+No timings: a deadline that passes *during* the step (set by the step's own work, counted) or that is shorter than
+the step is predicted to take makes it stop with the named status, and the results without such a deadline are
+unchanged (the same iterates, the same numbers)."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import sospoly
+import tritools.model.geometry as geometry
+import tritools.model.refine as refine
+from sospoly.budget import Deadline, TimeLimitReached, deadline_scope
+from sospoly.certificates import program as program_mod
+from sospoly.algebra.svec import svec
+from sospoly.certificates.psatz import DataSlots, dense_shape, psatz_structure
+from sospoly.lowering.conic import Cone
+from sospoly.solvers.ipm import core, ipm_solve_batch
+from tritools.scene import uncertain_problem
+
+
+class _Switch:
+    """A deadline whose end moves: far away until :meth:`expire` (then passed)."""
+
+    def __init__(self):
+        self.end = float("inf")
+
+    def expire(self):
+        self.end = 0.0
+
+    @property
+    def expired(self):
+        return self.end <= 0.0
+
+    def remaining(self):
+        return 0.0 if self.expired else 1e9
+
+
+# ----------------------------------------------------------------------------- the certificate's multipliers
+def _equality_program(k: int):
+    x = sospoly.variables("x", n=4)
+    f = sum((xi - 1) ** 2 for xi in x)
+    eq = [x[i % 4] * x[(i + 1) % 4] - (i + 1) for i in range(k)]
+    return f, eq, x
+
+
+def test_multipliers_stop_at_a_deadline_that_passes_among_them(monkeypatch):
+    """The equality multipliers r_k are made one by one with the deadline read before each (a dense 100-view
+    program with discs has ~5,000 of them: 12 s past a 5 s limit before): the deadline passing at the first one
+    stops the loop at the second with TimeLimitReached naming the multipliers."""
+    f, eq, x = _equality_program(12)
+    slots = DataSlots.of(f, eq, ())
+    shape = dense_shape(4, 4, [g.degree for g in eq], [])
+    made = []
+    real = program_mod.SOSProgram.free_poly
+    switch = _Switch()
+
+    def counted(self, *a, **kw):
+        made.append(1)
+        switch.expire()
+        return real(self, *a, **kw)
+
+    whole = psatz_structure(slots, 4, shape, sospoly.Polynomial.constant(1.0, slots.gens))
+    assert len(whole.r) == 12                                  # without a deadline: every multiplier
+    monkeypatch.setattr(program_mod.SOSProgram, "free_poly", counted)
+    with deadline_scope(switch), pytest.raises(TimeLimitReached, match="multipliers"):
+        psatz_structure(slots, 4, shape, sospoly.Polynomial.constant(1.0, slots.gens))
+    assert len(made) == 1
+
+
+# ----------------------------------------------------------------------------- the interior-point iteration
+def _lambda_min():
+    """max c s.t. M - c I >= 0 (optimum lambda_min(M)) in the IPM's form: min -c, s = svec(M) - c svec(I)."""
+    rng = np.random.default_rng(5)
+    M = rng.standard_normal((6, 6))
+    M = M + M.T
+    A = svec(np.eye(6))[None, :, None]
+    return A, svec(M)[None], np.array([-1.0]), (Cone("psd", 21, 6),), np.linalg.eigvalsh(M)[0]
+
+
+def test_out_of_time_compares_the_time_left_with_the_next_iteration():
+    assert not core.out_of_time(None, 10.0)
+    assert not core.out_of_time(Deadline(None), 10.0)
+    assert core.out_of_time(Deadline.after(0.0), 0.0)            # passed
+    left = Deadline.after(30.0)
+    assert core.out_of_time(left, 60.0)                          # the next iteration would end past it
+    assert not core.out_of_time(left, 1.0)
+
+
+def test_ipm_does_not_start_an_iteration_predicted_past_the_deadline(monkeypatch):
+    """The first iteration is predicted from the program's size (core.predicted_iteration); with 60 s left and
+    an iteration predicted at hours, the method stops before it with the reason "time limit".  With the real
+    constant the same 60 s change nothing: the iterates equal those without a deadline, bit for bit."""
+    A, b, q, cones, lam = _lambda_min()
+    free = ipm_solve_batch(A, b, q, cones)
+    assert free.converged[0] and abs(free.x[0, 0] - lam) < 1e-6
+    timed = ipm_solve_batch(A, b, q, cones, deadline=Deadline.after(60.0))
+    assert np.array_equal(timed.x, free.x) and timed.iterations[0] == free.iterations[0]
+    monkeypatch.setattr(core, "IPM_SECONDS_PER_UNIT", 1e6)
+    stopped = ipm_solve_batch(A, b, q, cones, deadline=Deadline.after(60.0))
+    assert not stopped.converged[0] and stopped.reason[0] == "time limit" and stopped.iterations[0] == 0
+
+
+def test_ipm_stops_when_less_is_left_than_the_last_iteration_took(monkeypatch):
+    """After the first iteration the measured one is the prediction: a clock that advances 10 s per iteration
+    against a deadline 25 s away stops the method after two iterations (the third would end past it), not at
+    the deadline's passing."""
+    A, b, q, cones, _ = _lambda_min()
+    clock = {"t": 1000.0}
+    monkeypatch.setattr(core.time, "monotonic", lambda: clock["t"])
+    real = core._Newton.__init__
+
+    def slow(self, *a, **kw):
+        clock["t"] += 10.0
+        real(self, *a, **kw)
+
+    monkeypatch.setattr(core._Newton, "__init__", slow)
+    monkeypatch.setattr(core, "predicted_iteration", lambda *a: 0.0)
+    res = ipm_solve_batch(A, b, q, cones, deadline=Deadline(1025.0))
+    assert res.reason[0] == "time limit" and res.iterations[0] == 2
+    assert clock["t"] <= 1025.0                                   # never past the deadline
+
+
+# ----------------------------------------------------------------------------- the refinement of other regions
+def test_looped_refinement_after_the_deadline_is_bounded(monkeypatch):
+    """Regions without a stacked distance (segments, ellipses, polytopes: each closest point 10-140 us) are
+    refined through a loop over the views; past the deadline it makes at most evaluations_after(N, False) more
+    evaluations (counted), and its estimate is no worse than the start."""
+    P, R, X = uncertain_problem(16, seed=3, kinds="mixed")
+    calls = []
+    real = refine.residual_function
+
+    def counted(cameras, regions):
+        fun, vec = real(cameras, regions)
+        return (lambda Y: calls.append(1) or fun(Y)), vec
+
+    monkeypatch.setattr(geometry, "residual_function", counted)
+    monkeypatch.setattr(refine, "LOOPED_VIEW_EVALS_AFTER_DEADLINE", 16 * 6)
+    X0 = X + np.array([0.3, -0.2, 0.1])
+    with deadline_scope(Deadline.after(0.0)):
+        Xr = geometry.refine_l2(X0, P, R)
+    assert len(calls) == 6 == refine.evaluations_after(16, vectorised=False)
+    g = lambda Y: geometry.gamma_validated(np.asarray(Y, float)[None], P, R)[0]   # noqa: E731
+    assert Xr is not None and g(Xr) <= g(X0)
+    calls.clear()
+    free = geometry.refine_l2(X0, P, R)
+    assert len(calls) > 6 and g(free) <= g(Xr) * (1 + 1e-12)

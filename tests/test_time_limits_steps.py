@@ -5,8 +5,11 @@ the step is predicted to take makes it stop with the named status, and the resul
 unchanged (the same iterates, the same numbers)."""
 from __future__ import annotations
 
+import time
+
 import numpy as np
 import pytest
+from scipy.optimize import least_squares
 
 import sospoly
 import tritools.model.geometry as geometry
@@ -14,6 +17,7 @@ import tritools.model.refine as refine
 from sospoly.budget import Deadline, TimeLimitReached, deadline_scope
 from sospoly.certificates import program as program_mod
 from sospoly.algebra.svec import svec
+from sospoly.analysis.extraction import CandidateFamily, best_in_family, span_search
 from sospoly.certificates.psatz import DataSlots, dense_shape, psatz_structure
 from sospoly.lowering.conic import Cone
 from sospoly.solvers.ipm import core, ipm_solve_batch
@@ -146,3 +150,62 @@ def test_looped_refinement_after_the_deadline_is_bounded(monkeypatch):
     calls.clear()
     free = geometry.refine_l2(X0, P, R)
     assert len(calls) > 6 and g(free) <= g(Xr) * (1 + 1e-12)
+
+
+# ----------------------------------------------------------------------------- minimiser candidates past the deadline
+def test_span_search_and_family_scan_stop_at_the_deadline():
+    """The candidate searches are heuristics whose every partial answer is valid: past the deadline no start is
+    searched (span_search: no point; best_in_family: the family's first member, one evaluation)."""
+    E = np.array([[0, 0], [1, 0], [0, 1]])
+    W = np.array([[1.0], [1.0], [2.0]])                       # span of b(v*) = (1, v1, v2) at v* = (1, 2)
+    found = span_search(W, E, [np.zeros(2)])
+    assert found and np.allclose(found[0], [1.0, 2.0], atol=1e-6)
+    with deadline_scope(Deadline.after(0.0)):
+        assert span_search(W, E, [np.zeros(2)]) == []
+    fam = CandidateFamily(np.eye(3), np.array([1, 2]), np.array([1.0, 0.0, 0.0]), np.eye(3)[:, 1:])   # v(t) = t
+    evals = []
+
+    def objective(v):
+        evals.append(1)
+        return float(np.sum((v - 1.0) ** 2))
+
+    _, free_val = best_in_family(fam, objective, max_evals=400)
+    assert free_val < 1e-3 and len(evals) > 1                  # the searched family: near its minimum at t = 1
+    evals.clear()
+    with deadline_scope(Deadline.after(0.0)):
+        v, val = best_in_family(fam, objective, max_evals=400)
+    assert len(evals) == 1 and val == objective(np.zeros(2)) and np.array_equal(v, np.zeros(2))
+
+
+def test_no_extraction_past_the_deadline_the_earlier_estimate_stands_in(monkeypatch):
+    """A step whose SDP returns after the call's deadline extracts no candidates (0.5-1.4 s past a 0.2-1 s limit
+    on this six-view track before): the local estimate stands in, the result is ``time_limit`` with a valid
+    lower bound (below an independent upper bound of the optimum) and gamma_UB the objective at the reported X."""
+    import tritools
+    import tritools.solve.stages.estimate as est
+    import tritools.solve.stages.sdp as sdp
+    from tritools.scene import robust_protocol_scene
+
+    P, x, X, _ = robust_protocol_scene(6, 1, 1.0, np.random.default_rng(6010))
+    real_solve, extracted = sdp.solve_psatz, []
+
+    def late(ctx, *a, **kw):
+        out = real_solve(ctx, *a, **kw)
+        while not ctx.settings.deadline.expired:            # the deadline passes before the extraction
+            time.sleep(0.01)
+        return out
+
+    monkeypatch.setattr(sdp, "solve_psatz", late)
+    monkeypatch.setattr(est, "_best_candidate", lambda *a: extracted.append(1))
+    r = tritools.triangulate(P, x, time_limit=0.5)
+    assert not extracted
+    assert r.status == tritools.Status.TIME_LIMIT and not r.optimal
+
+    def gamma(Y):
+        h = P @ np.append(Y, 1.0)
+        return float(np.sqrt(np.sum((h[:, :2] / h[:, 2:] - x) ** 2) / (2 * len(P))))
+
+    ref = min(gamma(X), gamma(least_squares(lambda Y: (lambda h: (h[:, :2] / h[:, 2:] - x).ravel())(
+        P @ np.append(Y, 1.0)), X, method="lm").x))
+    assert r.gamma_lb is not None and r.gamma_lb <= ref * (1 + 1e-9)
+    assert r.gamma_ub == pytest.approx(gamma(r.X), rel=1e-9) and r.gamma_ub >= r.gamma_lb

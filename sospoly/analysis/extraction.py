@@ -24,6 +24,7 @@ import numpy as np
 import scipy.linalg as sla
 
 from ..algebra.basis import MonomialIndex
+from ..budget import deadline_passed
 from ..tolerances import DEFAULT_TOLERANCES, Tolerances
 
 __all__ = ["Candidate", "CandidateFamily", "kernel_family", "best_in_family", "kernel_basis", "range_basis",
@@ -163,7 +164,8 @@ def span_search(W: np.ndarray, basis: np.ndarray, starts, seed: int = 0) -> list
     ||(I - Q Q^T) b(v)|| / ||b(v)|| (Q an orthonormal basis of span W) from the given starts and a few
     seeded random ones.  A fallback when the span is not *flat* (Henrion-Lasserre needs a flat extension;
     interior-point solutions often sit at the centre of a face and mix minimisers with spurious
-    directions)."""
+    directions).  Past the active deadline (:func:`sospoly.budget.deadline_passed`) no further start is
+    searched: the points found so far are returned."""
     from scipy.optimize import least_squares
 
     n = basis.shape[1]
@@ -196,6 +198,8 @@ def span_search(W: np.ndarray, basis: np.ndarray, starts, seed: int = 0) -> list
     pts += list(rng.standard_normal((max(0, SPAN_SEARCH_STARTS - len(pts)), n)))
     found = []
     for v0 in pts[:SPAN_SEARCH_STARTS]:
+        if deadline_passed():           # the points found so far (every candidate is checked by its caller)
+            break
         try:
             res = least_squares(resid, v0, jac=jac, method="lm", xtol=1e-14, ftol=1e-14, max_nfev=SPAN_SEARCH_EVALS)
         except (ValueError, np.linalg.LinAlgError):
@@ -290,7 +294,8 @@ def best_in_family(family: CandidateFamily, objective, max_evals: int = 400,
     ``max_evals`` evaluations of ``objective`` in all (a third for the scan of a one-parameter family, the
     rest shared by the starts).  ``objective_many``: the vectorised twin of ``objective`` (points (m, n) ->
     values (m,), the same numbers), used for the scan; an evaluation that raises (ValueError,
-    FloatingPointError, LinAlgError) or is not finite counts as +inf either way."""
+    FloatingPointError, LinAlgError) or is not finite counts as +inf either way.  Past the active deadline
+    (:func:`sospoly.budget.deadline_passed`) no further start is searched: the best member so far is returned."""
     from scipy.optimize import minimize as sp_min
 
     def obj_t(t):
@@ -326,6 +331,8 @@ def best_in_family(family: CandidateFamily, objective, max_evals: int = 400,
         max_evals -= grid.size
     per_start = max(10, max_evals // len(starts))
     for t0 in starts:
+        if deadline_passed():           # the best member so far (any member is a legitimate candidate)
+            break
         res = sp_min(obj_t, t0, method="Nelder-Mead",
                      options={"maxfev": per_start, "xatol": 1e-10, "fatol": 1e-12})
         if res.fun < best_v:

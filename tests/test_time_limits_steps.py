@@ -209,3 +209,38 @@ def test_no_extraction_past_the_deadline_the_earlier_estimate_stands_in(monkeypa
         P @ np.append(Y, 1.0)), X, method="lm").x))
     assert r.gamma_lb is not None and r.gamma_lb <= ref * (1 + 1e-9)
     assert r.gamma_ub == pytest.approx(gamma(r.X), rel=1e-9) and r.gamma_ub >= r.gamma_lb
+
+
+# ----------------------------------------------------------------------------- the vectorised stages of a batch
+def test_a_stack_deadline_ends_with_the_batch_call():
+    """The vectorised stages of a batch got M x the per-point limit whatever the call's total_time_limit (six
+    100-view tracks under total_time_limit=0.2 ran their band and all-pairs bounds for ~2 s): the stack's
+    deadline now ends with the enclosing call."""
+    from tritools import TriangulationOptions
+    from tritools.solve.call_limit import call_limit
+    from tritools.solve.settings import stack_deadline
+
+    opts = TriangulationOptions()
+    assert stack_deadline(opts, 6).remaining() > 300            # 6 x the default 60 s per point
+    with call_limit(0.5):
+        assert stack_deadline(opts, 6).remaining() <= 0.5
+    with call_limit(1e-9):
+        time.sleep(1e-3)
+        assert stack_deadline(opts, 6).expired
+    assert stack_deadline(TriangulationOptions(budget=sospoly.Budget(time_limit=None)), 6).end is None
+
+
+def test_batched_sdp_starts_nothing_past_its_deadline(monkeypatch):
+    """Past its deadline the batched degree-2 SDP hands every problem back with the named reason before its
+    epipolar data (~0.4 s at 6 x 100 views)."""
+    import tritools.solve.sdp_batch as sb
+    from tritools.scene import random_scene
+
+    sc = random_scene(5, 3, seed=2)
+    C = np.repeat(sc.cameras[None], 3, axis=0)
+    x = sc.points2d                                             # (3 points, 5 views, 2)
+    done = sb.solve_corollary1_points(C, x)
+    assert done.done.all()
+    monkeypatch.setattr(sb, "fundamental_stack", lambda *a: pytest.fail("epipolar data computed past the deadline"))
+    late = sb.solve_corollary1_points(C, x, deadline=Deadline.after(0.0))
+    assert not late.done.any() and set(late.reason) == {"time limit reached before the batched SDP"}

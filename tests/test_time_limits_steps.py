@@ -244,3 +244,24 @@ def test_batched_sdp_starts_nothing_past_its_deadline(monkeypatch):
     monkeypatch.setattr(sb, "fundamental_stack", lambda *a: pytest.fail("epipolar data computed past the deadline"))
     late = sb.solve_corollary1_points(C, x, deadline=Deadline.after(0.0))
     assert not late.done.any() and set(late.reason) == {"time limit reached before the batched SDP"}
+
+
+# ----------------------------------------------------------------------------- the data slots' index
+def test_data_slots_not_indexed_when_the_index_cannot_end_in_time(monkeypatch):
+    """Indexing the stacked supports (and looking an instance's coefficients up in them) is one native call each
+    (~1.3 s of CPU at 100 disc regions, dense): not started when its predicted time does not fit in what is
+    left of the deadline; with time enough, the same slots and theta as without a deadline."""
+    import sospoly.certificates.psatz as psatz
+
+    f, eq, _ = _equality_program(6)
+    free = DataSlots.of(f, eq, ())
+    with deadline_scope(Deadline.after(60.0)):
+        timed = DataSlots.of(f, eq, ())
+        assert timed.key() == free.key()
+        assert np.array_equal(timed.theta(f, eq), free.theta(f, eq))
+    monkeypatch.setattr(psatz, "INDEX_SECONDS_PER_ENTRY", 1e3)      # hours: more than the 60 s left
+    with deadline_scope(Deadline.after(60.0)), pytest.raises(TimeLimitReached, match="indexing the data's supports"):
+        DataSlots.of(f, eq, ())
+    with deadline_scope(Deadline.after(60.0)), pytest.raises(TimeLimitReached, match="coefficients"):
+        free.theta(f, eq)
+    assert np.array_equal(free.theta(f, eq), DataSlots.of(f, eq, ()).theta(f, eq))    # no deadline: no refusal

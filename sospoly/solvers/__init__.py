@@ -5,6 +5,6 @@ bisection (:mod:`.gevp`) and BLAS threading (:mod:`.blas`)."""
 # The package face (:mod:`sospoly.faces`): callers outside sospoly import from ``sospoly.solvers``.
 from ..faces import lazy_face
 
-_MODULES = ('backends', 'solve', 'compiled_solve', 'lower_bound', 'gevp', 'blas', 'stacked_conic')
+_MODULES = ('backends', 'solve', 'compiled_solve', 'lower_bound', 'gevp', 'blas', 'stacked_conic', 'level')
 
 __getattr__, __dir__ = lazy_face(__name__, _MODULES, globals())

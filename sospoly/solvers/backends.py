@@ -348,7 +348,8 @@ class IpmBackend:
               deadline: Deadline | None = None, *, take_stalled: bool = False) -> ConicSolution:
         """``take_stalled``: a stalled iterate that meets :func:`ipm_almost_solved` is the answer (status
         ALMOST_SOLVED, only with ``Tolerances.accept_inaccurate``) instead of a fall-back."""
-        from .ipm import ipm_solve_batch, ipm_solve_sparse, layout_of
+        from .ipm import IPM_LEVEL, ipm_solve_batch, ipm_solve_sparse, layout_of
+        from .level import active_level, stop_threshold
 
         t0 = time.perf_counter()
         try:
@@ -362,14 +363,18 @@ class IpmBackend:
                 res = ipm_solve_batch(problem.A.toarray()[None], problem.b[None], problem.q, problem.cones,
                                       self.tolerances, deadline=deadline)
             else:
+                stop_at = stop_threshold(active_level(), problem.objective_sign, problem.objective_offset) \
+                    if self.tolerances.accept_inaccurate else None
                 res = ipm_solve_sparse(problem.A, problem.b, problem.q, problem.cones, self.tolerances,
-                                       deadline=deadline)
+                                       deadline=deadline, stop_at=stop_at)
             ok = bool(res.converged[0])
             x, z = res.x[0], res.z[0]
             raw = RawStatus.SOLVED if ok else RawStatus.FAILED
             if not ok and take_stalled and self.tolerances.accept_inaccurate and res.reason[0] == IPM_STALLED \
                     and ipm_almost_solved(problem, res, self.tolerances):
                 ok, raw = True, RawStatus.ALMOST_SOLVED          # the caller makes the bound rigorous
+            if not ok and self.tolerances.accept_inaccurate and res.reason[0] == IPM_LEVEL:
+                ok, raw = True, RawStatus.ALMOST_SOLVED          # an iterate at the caller's level (.level)
             if ok and accept is not None and not accept(x, z):
                 ok, why = False, "certificate check failed"
             else:

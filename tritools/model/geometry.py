@@ -28,7 +28,7 @@ from .cameras import (CAMERA_RANK_RTOL, POINT_AT_INFINITY_RTOL, SAME_CAMERA_RTOL
                       world_frame_of)
 from .exact import CANCELLATION_RATIO, accurate_homogeneous
 from .refine import (EvaluationGuard, RefinementStopped, disc_shapes, evaluations_after, gamma_discs,
-                     residual_function)
+                     residual_function, residual_jacobian)
 from .regions.base import real_array
 
 __all__ = [
@@ -472,16 +472,17 @@ def refine_l2(X0, cameras, regions, *, xtol: float = 1e-15, ftol: float = 1e-15,
               max_nfev: int = 400) -> np.ndarray | None:
     """Local minimisation of gamma (SPEC §1) from X0 by Levenberg-Marquardt on the residuals
     x_i - closest point of R_i (scipy's least_squares with these stopping tolerances; the residuals vectorised
-    for point and disc regions, :mod:`tritools.model.refine`); None when the solver fails or leaves the finite
-    numbers.  Past the active deadline it makes at most :func:`tritools.model.refine.evaluations_after` more
-    evaluations, then returns its best iterate (any X is a valid estimate)."""
+    and their Jacobian analytic for point and disc regions, :mod:`tritools.model.refine`); None when the solver
+    fails or leaves the finite numbers.  Past the active deadline it makes at most
+    :func:`tritools.model.refine.evaluations_after` more evaluations, then returns its best iterate (any X is a
+    valid estimate)."""
     from scipy.optimize import least_squares
 
     fun, vectorised = residual_function(cameras, regions)
     guard = EvaluationGuard(fun, evaluations_after(len(regions), vectorised))
     try:
-        X = least_squares(guard, np.asarray(X0, float), method="lm", xtol=xtol, ftol=ftol, gtol=gtol,
-                          max_nfev=max_nfev).x
+        X = least_squares(guard, np.asarray(X0, float), jac=residual_jacobian(cameras, regions), method="lm",
+                          xtol=xtol, ftol=ftol, gtol=gtol, max_nfev=max_nfev).x
     except RefinementStopped:
         X = guard.best_X
     except (ValueError, np.linalg.LinAlgError):

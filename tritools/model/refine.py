@@ -26,9 +26,9 @@ import numpy as np
 
 from sospoly.budget import active_deadline
 
-__all__ = ["residual_function", "disc_residuals", "disc_shapes", "gamma_discs", "EvaluationGuard",
-           "RefinementStopped", "evaluations_after", "MIN_EVALS_AFTER_DEADLINE", "VIEW_EVALS_AFTER_DEADLINE",
-           "LOOPED_VIEW_EVALS_AFTER_DEADLINE", "MIN_LOOPED_EVALS_AFTER_DEADLINE",
+__all__ = ["residual_function", "residual_jacobian", "disc_residuals", "disc_jacobian", "disc_shapes", "gamma_discs",
+           "EvaluationGuard", "RefinementStopped", "evaluations_after", "MIN_EVALS_AFTER_DEADLINE",
+           "VIEW_EVALS_AFTER_DEADLINE", "LOOPED_VIEW_EVALS_AFTER_DEADLINE", "MIN_LOOPED_EVALS_AFTER_DEADLINE",
            "FAR_RESIDUAL"]
 
 #: the residual of every view where a projection is at infinity (its denominator below 1e-300)
@@ -58,6 +58,29 @@ def disc_residuals(X, cameras: np.ndarray, centres: np.ndarray, radii: np.ndarra
         with np.errstate(divide="ignore", invalid="ignore"):
             e = e * np.where(n > radii, 1.0 - radii / n, 0.0)[:, None]
     return e.ravel()
+
+
+def disc_jacobian(X, cameras: np.ndarray, centres: np.ndarray, radii: np.ndarray) -> np.ndarray:
+    """d r / d X (2N, 3) of :func:`disc_residuals`, analytic: with h = P_i (X, 1), x_i = h_{1:2} / h_3,
+    d x_i / d X = (P_i[1:2, 1:3] - x_i P_i[3, 1:3]) / h_3; d r_i / d e_i = I for a point, and for a disc
+    (1 - rho_i / |e_i|) I + rho_i e_i e_i^T / |e_i|^3 outside it, 0 inside.  Zero where a projection is at infinity
+    (the residuals are the constant :data:`FAR_RESIDUAL` there)."""
+    N = len(cameras)
+    h = cameras @ np.append(np.asarray(X, float), 1.0)
+    if np.any(np.abs(h[:, 2]) < 1e-300):
+        return np.zeros((2 * N, 3))
+    x = h[:, :2] / h[:, 2:]
+    J = (cameras[:, :2, :3] - x[:, :, None] * cameras[:, 2:3, :3]) / h[:, 2, None, None]      # (N, 2, 3)
+    if np.any(radii):
+        e = x - centres
+        n = np.hypot(e[:, 0], e[:, 1])
+        out = n > radii
+        with np.errstate(divide="ignore", invalid="ignore"):
+            k = np.where(out, 1.0 - radii / n, 0.0)
+            w = np.where(out, radii / (n * n * n), 0.0)
+        D = k[:, None, None] * np.eye(2) + w[:, None, None] * e[:, :, None] * e[:, None, :]
+        J = D @ J
+    return J.reshape(2 * N, 3)
 
 
 def _looped_residuals(X, cameras, regions) -> np.ndarray:
@@ -93,6 +116,16 @@ def residual_function(cameras, regions) -> tuple:
     if shapes is None:
         return (lambda X: _looped_residuals(X, cameras, regions)), False
     return (lambda X: disc_residuals(X, cameras, *shapes)), True
+
+
+def residual_jacobian(cameras, regions):
+    """J(X) -> d r / d X (2N, 3) for point and disc regions (:func:`disc_jacobian`), else ``"2-point"`` (scipy's
+    finite differences through the regions' ``closest_point``)."""
+    cameras = np.asarray(cameras, float)
+    shapes = disc_shapes(regions)
+    if shapes is None:
+        return "2-point"
+    return lambda X: disc_jacobian(X, cameras, *shapes)
 
 
 def gamma_discs(Xs: np.ndarray, cameras: np.ndarray, centres: np.ndarray, radii: np.ndarray) -> np.ndarray:

@@ -14,11 +14,11 @@ import scipy.sparse as sp
 
 from ...tolerances import DEFAULT_TOLERANCES, Tolerances, as_tolerances
 from ..blas import with_single_threaded_blas
-from .core import IpmResult, Layout, layout_of, mehrotra, result_of, stopping_rule
+from .core import IPM_LEVEL, IpmResult, Layout, layout_of, mehrotra, result_of, stopping_rule
 from .moment import MomentReduction, reduction_for
 from .operators import DenseOperator, SparseOperator
 
-__all__ = ["IpmResult", "Layout", "layout_of", "stopping_rule", "ipm_solve_batch", "ipm_solve_sparse",
+__all__ = ["IPM_LEVEL", "IpmResult", "Layout", "layout_of", "stopping_rule", "ipm_solve_batch", "ipm_solve_sparse",
            "MomentReduction"]
 
 
@@ -47,13 +47,16 @@ def ipm_solve_batch(A: np.ndarray, b: np.ndarray, q: np.ndarray, cones,
 
 @with_single_threaded_blas
 def ipm_solve_sparse(A: sp.spmatrix, b: np.ndarray, q: np.ndarray, cones,
-                     tolerances: Tolerances = DEFAULT_TOLERANCES, *, deadline=None) -> IpmResult:
+                     tolerances: Tolerances = DEFAULT_TOLERANCES, *, deadline=None,
+                     stop_at: float | None = None) -> IpmResult:
     """One instance with sparse A; results with batch axis 1.
 
     One PSD block whose image-form columns mostly are *pair columns* (two entries, one of them in a
     row no other column touches, zero cost: the alpha of ``GramForm.IMAGE``) is solved in its reduced
     moment form (:class:`MomentReduction`); anything else (and a reduced solve that did not converge)
-    with the svec-Kronecker Schur complement of :class:`SparseOperator`."""
+    with the svec-Kronecker Schur complement of :class:`SparseOperator`.  ``stop_at``: the moment form stops
+    at an iterate with q^T x <= stop_at (reason ``IPM_LEVEL``, :mod:`sospoly.solvers.level`); the other form
+    ignores it."""
     tolerances = as_tolerances(tolerances)
     lay = layout_of(cones)
     A = A if sp.issparse(A) else sp.csr_matrix(A)
@@ -66,8 +69,8 @@ def ipm_solve_sparse(A: sp.spmatrix, b: np.ndarray, q: np.ndarray, cones,
         Ac.sort_indices()
         red = reduction_for(Ac, q[0], lay.sizes[0])
         if red is not None and red.m2 < A.shape[1]:      # only when the moment form is the smaller system
-            res = red.solve(Ac, b[0], q[0], tolerances, deadline)
-            if res is not None and (res.converged[0] or res.reason[0] == "time limit"):
+            res = red.solve(Ac, b[0], q[0], tolerances, deadline, stop_at)
+            if res is not None and (res.converged[0] or res.reason[0] in ("time limit", IPM_LEVEL)):
                 return res
             # not converged (e.g. stalled on some Example 5 cases): the unreduced method next,
             # the caller's fallback (Clarabel) after that

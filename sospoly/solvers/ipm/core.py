@@ -40,6 +40,7 @@ import scipy.linalg as sla
 from ...algebra.svec import smat, svec
 from ...budget import cpu_share
 from ...tolerances import Tolerances
+from ..level import IPM_LEVEL
 
 __all__ = ["IpmResult", "Layout", "layout_of", "Operator", "stopping_rule", "mehrotra", "Iterate", "out_of_time",
            "predicted_iteration", "IPM_SECONDS_PER_UNIT"]
@@ -331,15 +332,17 @@ def out_of_time(deadline, last_iteration: float) -> bool:
     return left <= 0.0 or left < last_iteration
 
 
-def mehrotra(op: Operator, q: np.ndarray, b: np.ndarray, lay: Layout, tol: Tolerances, deadline=None):
+def mehrotra(op: Operator, q: np.ndarray, b: np.ndarray, lay: Layout, tol: Tolerances, deadline=None, stop=None):
     """Run the predictor-corrector on a batch; returns (Iterate, converged, iterations, reasons).
 
     ``q`` (B, m) the costs, ``b`` (B, n_rows) the right-hand sides (zero rows first, then svec
     blocks), ``op`` the operator of the whole batch (:meth:`Operator.subset` gives the active part).
     An instance stops at the stopping rule (:func:`stopping_rule`), when its merit |pobj - dobj| + pres + dres
-    has not halved over the last 4 iterations (stalled), at ``ipm_max_iter`` or at the deadline
+    has not halved over the last 4 iterations (stalled), at ``ipm_max_iter``, at the deadline
     (:func:`out_of_time`: also when less time is left than the last iteration took, or than the first is
-    predicted to take, :func:`predicted_iteration`)."""
+    predicted to take, :func:`predicted_iteration`), or where ``stop(active, iterate, residuals)`` (bool per
+    active instance; optional) says so (reason :data:`IPM_LEVEL`, not converged: the caller judges that
+    iterate)."""
     B = q.shape[0]
     bk = [b[:, lay.block(k)] for k in range(len(lay.sizes))]
     it_ = _start(q, b, lay)
@@ -376,10 +379,12 @@ def mehrotra(op: Operator, q: np.ndarray, b: np.ndarray, lay: Layout, tol: Toler
         history[active, :-1] = history[active, 1:]
         history[active, -1] = merit
         timeout = out_of_time(deadline, last)
-        done = ok | diverged | stalled | (it == tol.ipm_max_iter) | timeout
+        level = np.zeros(active.size, bool) if stop is None or it == 0 else \
+            np.asarray(stop(active, it_, r), bool) & ~ok & ~diverged
+        done = ok | diverged | stalled | (it == tol.ipm_max_iter) | timeout | level
         for j in np.nonzero(done)[0]:
             converged[active[j]] = bool(ok[j])
-            finish([active[j]], it, _why(ok[j], diverged[j], stalled[j], timeout))
+            finish([active[j]], it, IPM_LEVEL if level[j] else _why(ok[j], diverged[j], stalled[j], timeout))
         if done.all():
             break
         if done.any():

@@ -38,6 +38,7 @@ import numpy as np
 import sospoly
 from sospoly import SolveStatus
 from sospoly.analysis import OBJECTIVE_ERRORS, best_in_family, kernel_family, rigorous_psatz_bound
+from sospoly.solvers import IPM_LEVEL
 
 from ...model.geometry import (common_centre, gamma as gamma_of, gamma_validated, point_from_validated,
                                points_from_validated, refine_l2, validate_cameras)
@@ -46,7 +47,7 @@ from ...result import Status, TriangulationResult
 from ..decide import decide, gamma_from_c
 from ..plan import Step
 from ..report import solve_ball, solve_radius
-from .context import PointContext, StepState
+from .context import PointContext, StepState, bound_stop_reached
 from .outcome import better, join, replace, report_point
 from .sdp import resolve_chain, solve_psatz
 
@@ -104,6 +105,9 @@ def estimate_stage(ctx: PointContext, st: StepState) -> None:
     if _known_estimate_meets(ctx, st):
         st.estimate, st.shortcut = ctx.estimate_n, True
         return
+    if level_stopped(lb) and ctx.estimate_n is not None and np.isfinite(ctx.estimate_n[0]):
+        st.estimate, st.shortcut = ctx.estimate_n, False     # an iterate's moments hold no minimiser to extract
+        return
     t = time.perf_counter()
     best = None if ctx.expired else _best_candidate(ctx, st.problem, st.psatz, lb.solution)
     ctx.timings[f"extract_d{st.step.delta}"] = time.perf_counter() - t
@@ -125,6 +129,12 @@ def estimate_stage(ctx: PointContext, st: StepState) -> None:
     st.estimate = (g_n, X_n, X_raw_n, x_star_n)
     if ctx.estimate_n is None or g_n < ctx.estimate_n[0]:
         ctx.estimate_n = st.estimate
+
+
+def level_stopped(lb) -> bool:
+    """Whether the solve stopped at an iterate proving the options' level (:func:`sospoly.solvers.level_scope`),
+    not at the optimum."""
+    return lb.solution is not None and any(a.solver_status == IPM_LEVEL for a in lb.solution.attempts)
 
 
 def _stand_in(ctx: PointContext, st: StepState) -> bool:
@@ -221,10 +231,13 @@ def resolve_stage(ctx: PointContext, st: StepState) -> None:
     """The full retry chain for a quick "almost solved" iterate that did not certify (module docstring)."""
     key = f"solve_d{st.step.delta}"
     if st.lb is None or st.result is None or st.lb.status != SolveStatus.INACCURATE or st.result.optimal or \
-            ctx.expired or ctx.timings.get(key, np.inf) > _resolve_limit(ctx, st.step):
-        return
+            ctx.expired or ctx.timings.get(key, np.inf) > _resolve_limit(ctx, st.step) or \
+            bound_stop_reached(ctx.opts.lower_bound_stop, st.result.gamma_lb, st.result.status.certified):
+        return                                   # (an iterate at the options' level: what the caller asked for)
     first = (st.lb, st.result, st.estimate)
-    tried = tuple(f"{a.label}:{a.solver_status}" for a in (st.lb.solution.attempts if st.lb.solution else ()))
+    attempts = st.lb.solution.attempts if st.lb.solution else ()
+    # an iterate stopped at the level that fell short of it: the interior-point method again, to the optimum
+    tried = () if level_stopped(st.lb) else tuple(f"{a.label}:{a.solver_status}" for a in attempts)
     st.lb = solve_psatz(ctx, st.psatz, dataclasses.replace(st.tol, accept_inaccurate=False), tried=tried)
     st.result, st.estimate = None, None
     resolve_chain(ctx, st)

@@ -26,7 +26,7 @@ import time
 import sospoly
 from sospoly import BudgetExceeded, Multiplier
 from sospoly.budget import TimeLimitReached, gram_block_exceeds
-from sospoly.solvers import CLARABEL_FAST_CHAIN, CLARABEL_SPLIT_CHAIN, AutoBackend
+from sospoly.solvers import CLARABEL_FAST_CHAIN, CLARABEL_SPLIT_CHAIN, AutoBackend, level_scope
 
 from ...model.constraints import Method
 from ...model.normalize import unconstrained_reason
@@ -34,6 +34,7 @@ from ...model.problem import TriangulationProblem, view_band, view_chain
 from ...result import Attempt, Status, TriangulationResult
 from ..plan import Step
 from ..coplanar import futile_after
+from ..decide import c_from_gamma
 from ..sdp_batch import solve_corollary1_points
 from ..structures import STRUCTURE_CACHE, structure_key
 from .context import AttemptStep, ImplName, Implementation, PointContext, StepState
@@ -114,23 +115,40 @@ def _generic(ctx: PointContext, st: StepState) -> bool:
     if not _build(ctx, st):
         return True
     t1 = st.t_solve = time.perf_counter()
-    st.lb = solve_psatz(ctx, st.psatz, st.tol, chain=_chain(ctx, st.step))
+    st.lb = solve_psatz(ctx, st.psatz, st.tol, chain=_chain(ctx, st.step), level=_level(ctx))
     ctx.timings[f"solve_d{st.step.delta}"] = time.perf_counter() - t1
     return True
 
 
-def solve_psatz(ctx: PointContext, psatz, tol, chain: tuple | None = None, tried: tuple = ()):
+#: the level a solve may stop at lies this much (relative, in c) above the options' ``lower_bound_stop`` (the
+#: rigorous margin and the report's round-off lowering of gamma_lb come off after the solve: measured ~1e-11 of it)
+LEVEL_MARGIN = 1e-6
+
+
+def _level(ctx: PointContext) -> float | None:
+    """The options' ``lower_bound_stop`` as a level of the normalised c* (:func:`sospoly.solvers.level_scope`: the
+    solve may stop at an iterate proving it), raised by :data:`LEVEL_MARGIN`; None without one."""
+    stop = ctx.opts.lower_bound_stop
+    if stop is None:
+        return None
+    return float(c_from_gamma(stop, ctx.N, ctx.norm.scale)) * (1.0 + LEVEL_MARGIN)
+
+
+def solve_psatz(ctx: PointContext, psatz, tol, chain: tuple | None = None, tried: tuple = (),
+                level: float | None = None):
     """sospoly's solve of a bound compiled instance or a built program, under the point's settings;
     ``chain``: the default back-end with this Clarabel retry chain (:func:`_chain`); ``tried``: solver attempts
     already made on this very program (``label:status``), whose settings the default back-end's retry chain
-    skips (a deterministic solver repeats their answer at their cost)."""
+    skips (a deterministic solver repeats their answer at their cost); ``level``: the solve may stop at an iterate
+    proving c* >= level (:func:`_level`; the status is then INACCURATE and the bound made rigorous as always)."""
     s = ctx.settings
     backend = s.backend
     if chain is not None and s.auto_backend:
         backend = AutoBackend(tol, clarabel_chain=chain)
     elif tried and s.auto_backend:
         backend = AutoBackend(tol, skip=tuple(t.split(":")[0] for t in tried))
-    return sospoly.solve_psatz(psatz, backend=backend, form=s.form, tolerances=tol, deadline=s.deadline)
+    with level_scope(level):
+        return sospoly.solve_psatz(psatz, backend=backend, form=s.form, tolerances=tol, deadline=s.deadline)
 
 
 def _chain(ctx: PointContext, step: Step) -> tuple | None:

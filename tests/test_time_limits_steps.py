@@ -265,3 +265,31 @@ def test_data_slots_not_indexed_when_the_index_cannot_end_in_time(monkeypatch):
     with deadline_scope(Deadline.after(60.0)), pytest.raises(TimeLimitReached, match="coefficients"):
         free.theta(f, eq)
     assert np.array_equal(free.theta(f, eq), DataSlots.of(f, eq, ()).theta(f, eq))    # no deadline: no refusal
+
+
+# ----------------------------------------------------------------------------- the moment form's plateaus
+#: merits (|pobj - dobj| + pres + dres) per iteration of recorded moment-form solves (wave 12 traces): a
+#: Theorem 1 delta = 4 three-view program that stalls on a plateau from iteration 7, and the converging run
+#: (four views) that came closest to a plateau from iteration 8 (its merit fell 4.2x over two iterations there)
+STALLING = [2.4, 1.1, 0.82, 0.34, 1.8e-2, 8.4e-4, 3.0e-5, 7.4e-5, 7.7e-5, 7.7e-5, 7.7e-5, 7.7e-5]
+CONVERGING = [2.41, 5.22, 3.81, 3.43, 0.861, 0.0592, 0.00376, 0.000244, 2.11e-05, 3.11e-06, 1.05e-06, 7.41e-07,
+              1.79e-07, 1.4e-08, 3.37e-09]
+
+
+def _first_stall(merits, flat):
+    history = np.full((1, 5), np.inf)
+    for it, m in enumerate(merits):
+        if core.stalled_rule(it, np.array([m]), history, flat)[0]:
+            return it
+        history[0, :-1] = history[0, 1:]
+        history[0, -1] = m
+    return None
+
+
+def test_the_moment_form_stops_at_a_plateau_not_on_a_converging_run():
+    """The halving rule declares the plateau stalled at iteration 11; the flat rule (the moment form's: its
+    fallback, the unreduced method, starts afresh, so the result is the same) at 8.  Neither fires on the
+    converging run."""
+    assert _first_stall(STALLING, flat=False) == 11
+    assert _first_stall(STALLING, flat=True) == 8
+    assert _first_stall(CONVERGING, flat=False) is None and _first_stall(CONVERGING, flat=True) is None

@@ -43,7 +43,8 @@ from ...tolerances import Tolerances
 from ..level import IPM_LEVEL
 
 __all__ = ["IpmResult", "Layout", "layout_of", "Operator", "stopping_rule", "mehrotra", "Iterate", "out_of_time",
-           "predicted_iteration", "IPM_SECONDS_PER_UNIT"]
+           "predicted_iteration", "IPM_SECONDS_PER_UNIT", "FLAT_STALL_RATIO",
+           "stalled_rule"]
 
 
 @dataclass(frozen=True)
@@ -332,7 +333,26 @@ def out_of_time(deadline, last_iteration: float) -> bool:
     return left <= 0.0 or left < last_iteration
 
 
-def mehrotra(op: Operator, q: np.ndarray, b: np.ndarray, lay: Layout, tol: Tolerances, deadline=None, stop=None):
+#: ``flat_stall``: also stalled when the merit fell by less than this factor's complement over the last two
+#: iterations (from iteration 8, like the halving rule).  Traces of the moment form (every solve of the fast test
+#: tier and a workload of Theorem 1 / Corollary 1 delta = 4, mixed-region and robust calls): its stalls sit on a
+#: plateau (the merit within a few % from one iteration to the next) for 2-5 iterations before the halving rule
+#: fires, and no converging run had such a plateau from iteration 8 (benchmarks/RESULTS.md, wave 12).
+FLAT_STALL_RATIO = 0.9
+
+
+def stalled_rule(it: int, merit: np.ndarray, history: np.ndarray, flat: bool = False) -> np.ndarray:
+    """Stalled instances at iteration ``it`` (from 8 on): the merit |pobj - dobj| + pres + dres (B,) has not halved
+    against ``history[:, 0]`` (the merits of the last five iterations (B, 5), oldest first); with ``flat`` also
+    where it fell by less than 1 - :data:`FLAT_STALL_RATIO` against ``history[:, -2]`` (two iterations back)."""
+    stalled = (it >= 8) & (merit > 0.5 * history[:, 0])
+    if flat:
+        stalled |= (it >= 8) & (merit > FLAT_STALL_RATIO * history[:, -2])
+    return stalled
+
+
+def mehrotra(op: Operator, q: np.ndarray, b: np.ndarray, lay: Layout, tol: Tolerances, deadline=None, stop=None, *,
+             flat_stall: bool = False):
     """Run the predictor-corrector on a batch; returns (Iterate, converged, iterations, reasons).
 
     ``q`` (B, m) the costs, ``b`` (B, n_rows) the right-hand sides (zero rows first, then svec
@@ -342,7 +362,8 @@ def mehrotra(op: Operator, q: np.ndarray, b: np.ndarray, lay: Layout, tol: Toler
     (:func:`out_of_time`: also when less time is left than the last iteration took, or than the first is
     predicted to take, :func:`predicted_iteration`), or where ``stop(active, iterate, residuals)`` (bool per
     active instance; optional) says so (reason :data:`IPM_LEVEL`, not converged: the caller judges that
-    iterate)."""
+    iterate).  ``flat_stall``: also stalled on a plateau of two iterations (:data:`FLAT_STALL_RATIO`), for
+    callers whose fallback does not start from this iterate."""
     B = q.shape[0]
     bk = [b[:, lay.block(k)] for k in range(len(lay.sizes))]
     it_ = _start(q, b, lay)
@@ -375,7 +396,7 @@ def mehrotra(op: Operator, q: np.ndarray, b: np.ndarray, lay: Layout, tol: Toler
         # stalled: the merit has not halved over the last 4 iterations (the iterates sit on a face from
         # which the Newton direction makes no progress): hand over to the fallback
         merit = np.abs(r.pobj - r.dobj) + r.pres + r.dres
-        stalled = (it >= 8) & (merit > 0.5 * history[active, 0])
+        stalled = stalled_rule(it, merit, history[active], flat_stall)
         history[active, :-1] = history[active, 1:]
         history[active, -1] = merit
         timeout = out_of_time(deadline, last)

@@ -11,8 +11,9 @@ four separate arguments.  Two rules live here and nowhere else:
 * ``time_limit`` (``options.budget.time_limit``) is **per point**: a single call gets one
   :class:`sospoly.budget.Deadline` that every stage checks (building, compiling, solving, and the
   vectorised verification between its steps); a stack of M points solved together by a vectorised
-  stage gets M times the per-point limit (:func:`stack_deadline`), and each point a later stage solves
-  alone gets its own.  A whole-call limit of a batch is a separate option of the batch.
+  stage gets M times the per-point limit, ending no later than the batch call's ``total_time_limit``
+  (:func:`stack_deadline`), and each point a later stage solves alone gets its own.  A whole-call limit of a
+  batch is a separate option of the batch.
 """
 from __future__ import annotations
 

@@ -175,6 +175,19 @@ def test_span_search_and_family_scan_stop_at_the_deadline():
     with deadline_scope(Deadline.after(0.0)):
         v, val = best_in_family(fam, objective, max_evals=400)
     assert len(evals) == 1 and val == objective(np.zeros(2)) and np.array_equal(v, np.zeros(2))
+    # the deadline passing during a Nelder-Mead run (one evaluation of gamma over mixed regions is ~1 ms, a run
+    # several hundred): it stops at the next evaluation with the best member evaluated so far
+    switch, seen = _Switch(), []
+
+    def expiring(v):
+        seen.append((float(np.sum((v - 1.0) ** 2)), np.array(v)))
+        if len(seen) == 8:
+            switch.expire()
+        return seen[-1][0]
+
+    with deadline_scope(switch):
+        v, val = best_in_family(fam, expiring, max_evals=400)
+    assert len(seen) == 8 and val == min(e for e, _ in seen) and np.allclose(v, min(seen, key=lambda p: p[0])[1])
 
 
 def test_no_extraction_past_the_deadline_the_earlier_estimate_stands_in(monkeypatch):

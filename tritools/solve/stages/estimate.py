@@ -318,6 +318,8 @@ def _best_candidate(ctx: PointContext, problem, psatz, sol):
             points.append(v)
     best = None
     for v in points:
+        if best is not None and ctx.expired:    # past the deadline: the best candidate so far
+            break
         e = cost.one(v)
         if e is not None and (best is None or e[0] < best[0]):
             best = e

@@ -306,3 +306,32 @@ def test_the_moment_form_stops_at_a_plateau_not_on_a_converging_run():
     assert _first_stall(STALLING, flat=False) == 11
     assert _first_stall(STALLING, flat=True) == 8
     assert _first_stall(CONVERGING, flat=False) is None and _first_stall(CONVERGING, flat=True) is None
+
+
+def test_region_verification_not_started_past_the_deadline(monkeypatch):
+    """The local estimate the region verification starts from can end past the deadline (a looped refinement of
+    30 mixed regions); the verification (a face bound over every view's closest points) is then not started: the
+    call ends ``time_limit`` with the local estimate, gamma_UB the objective at its X."""
+    import tritools
+    import tritools.solve.stages.context as context
+    import tritools.solve.stages.verify as verify
+    from tritools.scene import uncertain_problem
+
+    P, R, _ = uncertain_problem(6, seed=6000, kinds="mixed")
+    real_local, started = context.local_estimate, []
+
+    def late(cams, regs):
+        out = real_local(cams, regs)
+        t_end = time.monotonic() + 0.6                       # past the 0.5 s limit of the call
+        while time.monotonic() < t_end:
+            time.sleep(0.01)
+        return out
+
+    monkeypatch.setattr(context, "local_estimate", late)
+    monkeypatch.setattr(verify, "region_bound", lambda *a, **kw: started.append(1) or pytest.fail("started"))
+    r = tritools.triangulate(P, R, time_limit=0.5)
+    assert not started and r.status == tritools.Status.TIME_LIMIT and not r.optimal
+    h = P @ np.append(r.X, 1.0)
+    u = h[:, :2] / h[:, 2:]
+    g = float(np.sqrt(sum(float(reg.distance(ui)) ** 2 for reg, ui in zip(R, u)) / (2 * len(R))))
+    assert r.gamma_ub == pytest.approx(g, rel=1e-9)

@@ -50,7 +50,8 @@ from dataclasses import dataclass
 __all__ = ["Budget", "DEFAULT_TIME_LIMIT", "DEFAULT_BUDGET", "UNLIMITED", "ProgramSize", "estimate_size",
            "gram_block_exceeds",
            "BudgetExceeded", "Deadline",
-           "as_budget", "TimeLimitReached", "deadline_scope", "check_deadline", "active_deadline",
+           "as_budget", "TimeLimitReached", "deadline_scope", "check_deadline", "check_time_left", "deadline_passed",
+           "active_deadline",
            "cpu_share", "MIN_CPU_SHARE", "address_space_available",
            "memory_room", "CLARABEL_ENTRY_COPIES", "CLARABEL_LARGEST_BLOCK_COPIES", "AUTO_IPM_MAX_BYTES",
            "ADDRESS_SPACE_SHARE", "ClarabelTimeModel", "CLARABEL_TIME_MODEL"]
@@ -169,11 +170,28 @@ def active_deadline() -> Deadline | None:
     return _ACTIVE_DEADLINE.get()
 
 
-def check_deadline(what: str = "building the program") -> None:
-    """Raise :class:`TimeLimitReached` when the active deadline has passed (O(1): one clock read)."""
+def deadline_passed() -> bool:
+    """Has the active deadline (:func:`deadline_scope`) passed?  O(1): one clock read.  Heuristics whose every
+    partial answer is valid (the search for minimiser candidates) stop with what they have when it is True;
+    the build loops raise instead (:func:`check_deadline`)."""
     d = _ACTIVE_DEADLINE.get()
-    if d is not None and d.end is not None and time.monotonic() >= d.end:
+    return d is not None and d.end is not None and time.monotonic() >= d.end
+
+
+def check_deadline(what: str = "building the program") -> None:
+    """Raise :class:`TimeLimitReached` when the active deadline has passed (:func:`deadline_passed`)."""
+    if deadline_passed():
         raise TimeLimitReached(f"time limit reached while {what}")
+
+
+def check_time_left(seconds: float, what: str) -> None:
+    """:func:`check_deadline`, and raise :class:`TimeLimitReached` too when less of the active deadline is left
+    than ``seconds`` of CPU time take at the share of a core this process can expect (:func:`cpu_share`): a
+    step that cannot be interrupted is not started when it cannot end before the deadline."""
+    check_deadline(what)
+    d = _ACTIVE_DEADLINE.get()
+    if d is not None and d.end is not None and seconds > (d.end - time.monotonic()) * cpu_share():
+        raise TimeLimitReached(f"time limit reached: {what} (~{seconds:.2g} s of CPU) cannot end before it")
 
 
 #: floats per svec-entry pair (L^2) of every PSD block in Clarabel: the KKT block and its LDL factor.

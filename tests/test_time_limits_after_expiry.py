@@ -90,11 +90,19 @@ def test_refinement_after_the_deadline_is_bounded_and_returns_its_best_iterate(k
 
 
 def test_the_guard_allows_many_evaluations_to_small_problems():
-    """The trivial bound after a time limit needs the local estimate to converge: a 12-view problem keeps scipy's
-    whole budget (400 evaluations) past the deadline, a 400-view looped one only MIN_EVALS_AFTER_DEADLINE."""
-    assert refine.evaluations_after(12, vectorised=False) >= 400
-    assert refine.evaluations_after(400, vectorised=False) == refine.MIN_EVALS_AFTER_DEADLINE
+    """The trivial bound after a time limit needs the local estimate to converge: stacked point / disc residuals
+    keep scipy's whole budget (400 evaluations) past the deadline, a three-view looped problem over 100 (~25
+    Levenberg-Marquardt iterations); the looped evaluations of more views (each N closest points, 10-140 us
+    apiece) about LOOPED_VIEW_EVALS_AFTER_DEADLINE region distances in all (16 mixed regions used to get 500
+    evaluations: 0.1-0.5 s past a limit), a 400-view one only the start and its Jacobian."""
+    assert refine.evaluations_after(3, vectorised=False) >= 100
     assert refine.evaluations_after(400, vectorised=True) >= 400
+    for n in (3, 12, 16, 30, 100):
+        allowed = refine.evaluations_after(n, vectorised=False)
+        assert allowed >= refine.MIN_LOOPED_EVALS_AFTER_DEADLINE
+        assert allowed * n <= max(refine.LOOPED_VIEW_EVALS_AFTER_DEADLINE, 4 * n)
+    assert refine.evaluations_after(16, vectorised=False) < 100
+    assert refine.evaluations_after(400, vectorised=False) == refine.MIN_LOOPED_EVALS_AFTER_DEADLINE == 4
 
 
 # ----------------------------------------------------------------------------- the robust search past the deadline

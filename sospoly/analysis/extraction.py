@@ -24,6 +24,7 @@ import numpy as np
 import scipy.linalg as sla
 
 from ..algebra.basis import MonomialIndex
+from ..budget import deadline_passed
 from ..tolerances import DEFAULT_TOLERANCES, Tolerances
 
 __all__ = ["Candidate", "CandidateFamily", "kernel_family", "best_in_family", "kernel_basis", "range_basis",
@@ -163,7 +164,8 @@ def span_search(W: np.ndarray, basis: np.ndarray, starts, seed: int = 0) -> list
     ||(I - Q Q^T) b(v)|| / ||b(v)|| (Q an orthonormal basis of span W) from the given starts and a few
     seeded random ones.  A fallback when the span is not *flat* (Henrion-Lasserre needs a flat extension;
     interior-point solutions often sit at the centre of a face and mix minimisers with spurious
-    directions)."""
+    directions).  Past the active deadline (:func:`sospoly.budget.deadline_passed`) no further start is
+    searched: the points found so far are returned."""
     from scipy.optimize import least_squares
 
     n = basis.shape[1]
@@ -196,6 +198,8 @@ def span_search(W: np.ndarray, basis: np.ndarray, starts, seed: int = 0) -> list
     pts += list(rng.standard_normal((max(0, SPAN_SEARCH_STARTS - len(pts)), n)))
     found = []
     for v0 in pts[:SPAN_SEARCH_STARTS]:
+        if deadline_passed():           # the points found so far (every candidate is checked by its caller)
+            break
         try:
             res = least_squares(resid, v0, jac=jac, method="lm", xtol=1e-14, ftol=1e-14, max_nfev=SPAN_SEARCH_EVALS)
         except (ValueError, np.linalg.LinAlgError):
@@ -290,8 +294,9 @@ def best_in_family(family: CandidateFamily, objective, max_evals: int = 400,
     ``max_evals`` evaluations of ``objective`` in all (a third for the scan of a one-parameter family, the
     rest shared by the starts).  ``objective_many``: the vectorised twin of ``objective`` (points (m, n) ->
     values (m,), the same numbers), used for the scan; an evaluation that raises (ValueError,
-    FloatingPointError, LinAlgError) or is not finite counts as +inf either way."""
-    from scipy.optimize import minimize as sp_min
+    FloatingPointError, LinAlgError) or is not finite counts as +inf either way.  Past the active deadline
+    (:func:`sospoly.budget.deadline_passed`) no further start is searched, and a search under way stops: the best
+    member so far is returned."""
 
     def obj_t(t):
         try:
@@ -326,8 +331,39 @@ def best_in_family(family: CandidateFamily, objective, max_evals: int = 400,
         max_evals -= grid.size
     per_start = max(10, max_evals // len(starts))
     for t0 in starts:
-        res = sp_min(obj_t, t0, method="Nelder-Mead",
-                     options={"maxfev": per_start, "xatol": 1e-10, "fatol": 1e-12})
-        if res.fun < best_v:
-            best_t, best_v = res.x, float(res.fun)
+        if deadline_passed():           # the best member so far (any member is a legitimate candidate)
+            break
+        t, v, stopped = _nelder_mead_until_deadline(obj_t, t0, per_start)
+        if v < best_v:
+            best_t, best_v = t, v
+        if stopped:
+            break
     return family.point(best_t), best_v
+
+
+class _DeadlinePassed(Exception):
+    """Raised inside a Nelder-Mead run when the active deadline passes (:func:`_nelder_mead_until_deadline`)."""
+
+
+def _nelder_mead_until_deadline(objective, t0, maxfev: int) -> tuple:
+    """(t, objective(t), stopped): scipy's Nelder-Mead from ``t0`` (at most ``maxfev`` evaluations; its result,
+    the best vertex, is the best point it evaluated), or -- when the active deadline passes during the run (one
+    evaluation of gamma through the regions' closest points is ~1 ms at 6 mixed regions, a run several hundred)
+    -- the best point evaluated so far (``stopped``; (t0, inf) when none was)."""
+    from scipy.optimize import minimize as sp_min
+
+    seen = {"t": np.asarray(t0, float), "v": np.inf}
+
+    def watched(t):
+        if deadline_passed():
+            raise _DeadlinePassed
+        v = objective(t)
+        if v < seen["v"]:
+            seen["t"], seen["v"] = np.array(t, float), v
+        return v
+
+    try:
+        res = sp_min(watched, t0, method="Nelder-Mead", options={"maxfev": maxfev, "xatol": 1e-10, "fatol": 1e-12})
+    except _DeadlinePassed:
+        return seen["t"], seen["v"], True
+    return res.x, float(res.fun), False

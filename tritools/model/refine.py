@@ -14,8 +14,10 @@ loops cost ~30 ms per evaluation, the stacked expressions well under 1 ms.
 The cost bound.  The refinement also runs after a time limit has passed: the estimate of last resort, which the
 trivial bound gamma* >= 0 may certify (:mod:`tritools.solve.trivial`), comes from it.  Past the active deadline
 (:func:`sospoly.budget.active_deadline`) it may evaluate the residuals at most :func:`evaluations_after` more times
-(work in proportion to N views, about :data:`VIEW_EVALS_AFTER_DEADLINE` region distances, never fewer than
-:data:`MIN_EVALS_AFTER_DEADLINE` evaluations); it then stops with the best iterate so far.  Any X is a valid
+(work in proportion to N views: :data:`VIEW_EVALS_AFTER_DEADLINE` stacked evaluations, never fewer than
+:data:`MIN_EVALS_AFTER_DEADLINE`; through the regions' own closest points about
+:data:`LOOPED_VIEW_EVALS_AFTER_DEADLINE` region distances, never fewer than :data:`MIN_LOOPED_EVALS_AFTER_DEADLINE`
+evaluations); it then stops with the best iterate so far.  Any X is a valid
 estimate (gamma(X) >= gamma*), so stopping early only makes gamma_UB less tight.
 """
 from __future__ import annotations
@@ -26,7 +28,8 @@ from sospoly.budget import active_deadline
 
 __all__ = ["residual_function", "residual_jacobian", "disc_residuals", "disc_jacobian", "disc_shapes", "gamma_discs",
            "EvaluationGuard", "RefinementStopped", "evaluations_after", "MIN_EVALS_AFTER_DEADLINE",
-           "VIEW_EVALS_AFTER_DEADLINE", "FAR_RESIDUAL"]
+           "VIEW_EVALS_AFTER_DEADLINE", "LOOPED_VIEW_EVALS_AFTER_DEADLINE", "MIN_LOOPED_EVALS_AFTER_DEADLINE",
+           "FAR_RESIDUAL"]
 
 #: the residual of every view where a projection is at infinity (its denominator below 1e-300)
 FAR_RESIDUAL = 1e150
@@ -35,6 +38,12 @@ FAR_RESIDUAL = 1e150
 MIN_EVALS_AFTER_DEADLINE = 24
 #: ... and in region distances (views x evaluations): 400 evaluations (scipy's default max_nfev) up to 20 views
 VIEW_EVALS_AFTER_DEADLINE = 8000
+#: ... in region distances through the regions' own ``closest_point`` (the loop of the other region kinds:
+#: 10-140 us each, so 8000 of them were 0.1-0.5 s past a limit with 16-30 mixed regions): 133 evaluations at 3
+#: views (~33 Levenberg-Marquardt iterations), 25 at 16, 13 at 30, one iteration at least
+LOOPED_VIEW_EVALS_AFTER_DEADLINE = 400
+#: the fewest evaluations of the loop past the deadline: the start and its forward-difference Jacobian
+MIN_LOOPED_EVALS_AFTER_DEADLINE = 4
 
 
 def disc_residuals(X, cameras: np.ndarray, centres: np.ndarray, radii: np.ndarray) -> np.ndarray:
@@ -139,9 +148,12 @@ def gamma_discs(Xs: np.ndarray, cameras: np.ndarray, centres: np.ndarray, radii:
 
 
 def evaluations_after(n_views: int, vectorised: bool) -> int:
-    """Evaluations allowed once the deadline has passed (module docstring); a vectorised evaluation counts as one
-    region distance."""
-    return max(MIN_EVALS_AFTER_DEADLINE, VIEW_EVALS_AFTER_DEADLINE // (1 if vectorised else max(1, n_views)))
+    """Evaluations allowed once the deadline has passed (module docstring): a vectorised evaluation counts as one
+    region distance of :data:`VIEW_EVALS_AFTER_DEADLINE`; a looped one as ``n_views`` of
+    :data:`LOOPED_VIEW_EVALS_AFTER_DEADLINE`."""
+    if vectorised:
+        return max(MIN_EVALS_AFTER_DEADLINE, VIEW_EVALS_AFTER_DEADLINE)
+    return max(MIN_LOOPED_EVALS_AFTER_DEADLINE, LOOPED_VIEW_EVALS_AFTER_DEADLINE // max(1, n_views))
 
 
 class RefinementStopped(Exception):

@@ -11,8 +11,9 @@ four separate arguments.  Two rules live here and nowhere else:
 * ``time_limit`` (``options.budget.time_limit``) is **per point**: a single call gets one
   :class:`sospoly.budget.Deadline` that every stage checks (building, compiling, solving, and the
   vectorised verification between its steps); a stack of M points solved together by a vectorised
-  stage gets M times the per-point limit (:func:`stack_deadline`), and each point a later stage solves
-  alone gets its own.  A whole-call limit of a batch is a separate option of the batch.
+  stage gets M times the per-point limit, ending no later than the batch call's ``total_time_limit``
+  (:func:`stack_deadline`), and each point a later stage solves alone gets its own.  A whole-call limit of a
+  batch is a separate option of the batch.
 """
 from __future__ import annotations
 
@@ -68,9 +69,18 @@ class SolveSettings:
 
 def stack_deadline(options, n_points: int) -> Deadline:
     """The deadline of one vectorised call over ``n_points`` points: the per-point ``time_limit`` times the
-    number of points (no limit when the budget has none)."""
+    number of points (no limit when the budget has none), and no later than the end of the enclosing batch call
+    (``total_time_limit``, :func:`tritools.solve.call_limit.current_end`: six 100-view point tracks under
+    ``total_time_limit=0.2`` ran their band and all-pairs bounds for ~2 s before)."""
+    from .call_limit import current_end
+
     limit = options.budget.time_limit
-    return Deadline.after(None if limit is None else float(limit) * max(1, int(n_points)))
+    seconds = None if limit is None else float(limit) * max(1, int(n_points))
+    end = current_end()
+    if end is not None:
+        left = max(0.0, end - time.time())
+        seconds = left if seconds is None else min(seconds, left)
+    return Deadline.after(seconds)
 
 
 def call_deadline(options, t0: float) -> Deadline:

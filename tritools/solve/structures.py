@@ -67,7 +67,10 @@ def corollary1_point_structure(N: int) -> PointStructure:
             e[k] += 1
         return e
 
-    f = Polynomial(gens, {tuple(mono(k, k)): 1.0 for k in range(n)})
+    check_deadline("building the batched Corollary 1 structure")
+    # exponent rows as Python ints (Polynomial's fast path: numpy integers are converted one by one, ~1 s at
+    # 400 views for f alone)
+    f = Polynomial(gens, {tuple(mono(k, k).tolist()): 1.0 for k in range(n)})
     exps = np.zeros((len(I), 3, 3, n), np.int64)
     eq = []
     for k, (i, j) in enumerate(zip(I, J)):
@@ -76,7 +79,7 @@ def corollary1_point_structure(N: int) -> PointStructure:
         for a in range(3):
             for b in range(3):
                 exps[k, a, b] = mono(*(([2 * i + a] if a < 2 else []) + ([2 * j + b] if b < 2 else [])))
-        eq.append(Polynomial(gens, {tuple(e): 1.0 for e in exps[k].reshape(9, n)}))
+        eq.append(Polynomial(gens, {tuple(e): 1.0 for e in exps[k].reshape(9, n).tolist()}))
     key = structure_key(N, ("point",) * N, Method.COROLLARY1, 2, "dense", GramForm.IMAGE)
     comp, _ = STRUCTURE_CACHE.get(f, eq, (), 2, Multiplier.FIXED, GramForm.IMAGE, gens=gens, key=key)
     slots = comp.slots

@@ -31,16 +31,20 @@ certificate checks of :mod:`sospoly.solvers.solve` run on the returned x.
 """
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 
 import numpy as np
 import scipy.linalg as sla
 
 from ...algebra.svec import smat, svec
+from ...budget import cpu_share
 from ...tolerances import Tolerances
 from ..level import IPM_LEVEL
 
-__all__ = ["IpmResult", "Layout", "layout_of", "Operator", "stopping_rule", "mehrotra", "Iterate"]
+__all__ = ["IpmResult", "Layout", "layout_of", "Operator", "stopping_rule", "mehrotra", "Iterate", "out_of_time",
+           "predicted_iteration", "IPM_SECONDS_PER_UNIT", "FLAT_STALL_RATIO",
+           "stalled_rule"]
 
 
 @dataclass(frozen=True)
@@ -302,17 +306,64 @@ def _why(ok, diverged, stalled, timeout) -> str:
         "stalled" if stalled else "time limit" if timeout else "iteration limit"
 
 
+#: seconds of one iteration per unit of B (m sum_k n_k^3 + m^3 / 3) -- the Schur complement's products over
+#: the PSD blocks of sides n_k and its Cholesky factor, m columns, B instances -- on a core of its own.  Measured
+#: first iterations (2-4x the later ones: the work arrays are paged in) of dense degree-2 programs, 20-50 views
+#: with points, discs and mixed regions: 1.0-3.4e-9 s per unit under a load average of ~5 on 2 cores (0.4-1.4e-9
+#: on a core of its own).
+IPM_SECONDS_PER_UNIT = 1e-9
 
 
-def mehrotra(op: Operator, q: np.ndarray, b: np.ndarray, lay: Layout, tol: Tolerances, deadline=None, stop=None):
+def predicted_iteration(B: int, m: int, sizes) -> float:
+    """Predicted wall seconds of the first iteration (:data:`IPM_SECONDS_PER_UNIT`, over the share of a core this
+    process can expect now, :func:`sospoly.budget.cpu_share`): what :func:`out_of_time` compares with the time
+    left before there is a measured iteration."""
+    units = float(B) * (float(m) * sum(float(n) ** 3 for n in sizes) + float(m) ** 3 / 3.0)
+    return IPM_SECONDS_PER_UNIT * units / cpu_share()
+
+
+def out_of_time(deadline, last_iteration: float) -> bool:
+    """Has ``deadline`` (a :class:`sospoly.budget.Deadline` or None) passed, or is what is left of it shorter
+    than the last iteration took?  An iteration cannot be interrupted (its Schur complement and factorisation
+    are one native call each: ~0.5-1.5 s at 30-50 views with dense degree-2 programs), so the next one would
+    end past the deadline by about the difference: stopping one iteration early keeps the time limit."""
+    if deadline is None or deadline.end is None:
+        return False
+    left = deadline.end - time.monotonic()
+    return left <= 0.0 or left < last_iteration
+
+
+#: ``flat_stall``: also stalled when the merit fell by less than this factor's complement over the last two
+#: iterations (from iteration 8, like the halving rule).  Traces of the moment form (every solve of the fast test
+#: tier and a workload of Theorem 1 / Corollary 1 delta = 4, mixed-region and robust calls): its stalls sit on a
+#: plateau (the merit within a few % from one iteration to the next) for 2-5 iterations before the halving rule
+#: fires, and no converging run had such a plateau from iteration 8 (benchmarks/RESULTS.md, wave 12).
+FLAT_STALL_RATIO = 0.9
+
+
+def stalled_rule(it: int, merit: np.ndarray, history: np.ndarray, flat: bool = False) -> np.ndarray:
+    """Stalled instances at iteration ``it`` (from 8 on): the merit |pobj - dobj| + pres + dres (B,) has not halved
+    against ``history[:, 0]`` (the merits of the last five iterations (B, 5), oldest first); with ``flat`` also
+    where it fell by less than 1 - :data:`FLAT_STALL_RATIO` against ``history[:, -2]`` (two iterations back)."""
+    stalled = (it >= 8) & (merit > 0.5 * history[:, 0])
+    if flat:
+        stalled |= (it >= 8) & (merit > FLAT_STALL_RATIO * history[:, -2])
+    return stalled
+
+
+def mehrotra(op: Operator, q: np.ndarray, b: np.ndarray, lay: Layout, tol: Tolerances, deadline=None, stop=None, *,
+             flat_stall: bool = False):
     """Run the predictor-corrector on a batch; returns (Iterate, converged, iterations, reasons).
 
     ``q`` (B, m) the costs, ``b`` (B, n_rows) the right-hand sides (zero rows first, then svec
     blocks), ``op`` the operator of the whole batch (:meth:`Operator.subset` gives the active part).
     An instance stops at the stopping rule (:func:`stopping_rule`), when its merit |pobj - dobj| + pres + dres
-    has not halved over the last 4 iterations (stalled), at ``ipm_max_iter``, at the deadline, or where
-    ``stop(active, iterate, residuals)`` (bool per active instance; optional) says so (reason :data:`IPM_LEVEL`,
-    not converged: the caller judges that iterate)."""
+    has not halved over the last 4 iterations (stalled), at ``ipm_max_iter``, at the deadline
+    (:func:`out_of_time`: also when less time is left than the last iteration took, or than the first is
+    predicted to take, :func:`predicted_iteration`), or where ``stop(active, iterate, residuals)`` (bool per
+    active instance; optional) says so (reason :data:`IPM_LEVEL`, not converged: the caller judges that
+    iterate).  ``flat_stall``: also stalled on a plateau of two iterations (:data:`FLAT_STALL_RATIO`), for
+    callers whose fallback does not start from this iterate."""
     B = q.shape[0]
     bk = [b[:, lay.block(k)] for k in range(len(lay.sizes))]
     it_ = _start(q, b, lay)
@@ -325,7 +376,14 @@ def mehrotra(op: Operator, q: np.ndarray, b: np.ndarray, lay: Layout, tol: Toler
         for g in idx:
             its[g], reason[g] = it, why
 
+    # how long the next iteration may take (predicted for the first, then the last one measured), when it started
+    last = 0.0 if deadline is None or deadline.end is None else predicted_iteration(B, q.shape[1], lay.sizes)
+    t_it = None
     for it in range(tol.ipm_max_iter + 1):
+        now = time.monotonic()
+        if t_it is not None:
+            last = now - t_it
+        t_it = now
         if active.size == 0:
             break
         sub = op if active.size == B else op.subset(active)
@@ -338,10 +396,10 @@ def mehrotra(op: Operator, q: np.ndarray, b: np.ndarray, lay: Layout, tol: Toler
         # stalled: the merit has not halved over the last 4 iterations (the iterates sit on a face from
         # which the Newton direction makes no progress): hand over to the fallback
         merit = np.abs(r.pobj - r.dobj) + r.pres + r.dres
-        stalled = (it >= 8) & (merit > 0.5 * history[active, 0])
+        stalled = stalled_rule(it, merit, history[active], flat_stall)
         history[active, :-1] = history[active, 1:]
         history[active, -1] = merit
-        timeout = deadline is not None and deadline.expired
+        timeout = out_of_time(deadline, last)
         level = np.zeros(active.size, bool) if stop is None or it == 0 else \
             np.asarray(stop(active, it_, r), bool) & ~ok & ~diverged
         done = ok | diverged | stalled | (it == tol.ipm_max_iter) | timeout | level

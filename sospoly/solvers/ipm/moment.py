@@ -218,8 +218,9 @@ class MomentReduction:
             def stop(active, it_, r):
                 x = self._image_x(it_.zE[0], it_.Z[0][0], b, ap)
                 return np.array([r.dres[0] <= LEVEL_DRES and float(q @ x) <= stop_at])
+        # a stalled moment form goes to the unreduced method, which starts afresh: stopped at a plateau already
         it_, conv, its, why = mehrotra(op, cq[None], np.concatenate([bE, np.zeros(self.L)])[None], lay, tol, deadline,
-                                       stop)
+                                       stop, flat_stall=True)
         y = it_.x[0]
         x = self._image_x(it_.zE[0], it_.Z[0][0], b, ap)
         z = e * y[self.row2col]

@@ -11,7 +11,9 @@
   extraction is skipped (it found the same point in every measured case and cost ~10% of a views step and
   up to 80% of a certifying degree-2 step with regions: benchmarks/RESULTS.md, issue #22); if
   the step's rigorous decision then does not certify, the extraction runs after all and ``rigor`` and
-  ``decide`` follow again on its estimate, so nothing is decided on the shortcut alone;
+  ``decide`` follow again on its estimate, so nothing is decided on the shortcut alone.  Past the deadline the
+  extraction is not started (its searches also stop when the deadline passes during them) and the earlier
+  estimate stands in (:func:`_stand_in`);
 * ``rigor`` -- c_LB = c* minus the rigorous margin of the certificate (:func:`sospoly.analysis.
   rigorous_psatz_bound`: its PSD defect and identity residual on the box / ball that holds a minimiser,
   :func:`tritools.solve.report.solve_radius` / :func:`~tritools.solve.report.solve_ball`, derived from
@@ -107,8 +109,10 @@ def estimate_stage(ctx: PointContext, st: StepState) -> None:
         st.estimate, st.shortcut = ctx.estimate_n, False     # an iterate's moments hold no minimiser to extract
         return
     t = time.perf_counter()
-    best = _best_candidate(ctx, st.problem, st.psatz, lb.solution)
+    best = None if ctx.expired else _best_candidate(ctx, st.problem, st.psatz, lb.solution)
     ctx.timings[f"extract_d{st.step.delta}"] = time.perf_counter() - t
+    if best is None and ctx.expired and _stand_in(ctx, st):
+        return
     if best is None:
         if _iterate(lb):
             return _unsolved(st)
@@ -131,6 +135,19 @@ def level_stopped(lb) -> bool:
     """Whether the solve stopped at an iterate proving the options' level (:func:`sospoly.solvers.level_scope`),
     not at the optimum."""
     return lb.solution is not None and any(a.solver_status == IPM_LEVEL for a in lb.solution.attempts)
+
+
+def _stand_in(ctx: PointContext, st: StepState) -> bool:
+    """Past the deadline: the earlier steps' estimate (the local one before the first) stands in for the
+    extraction that was not made or found nothing in time (its span searches and family scans stop at the
+    deadline: 0.5-1.4 s past a 0.2-1 s limit on a six-view track before); any X gives a valid c_UB.  Not a
+    shortcut: a step that does not certify on it does not extract after all.  False without an estimate."""
+    if ctx.estimate_n is None:
+        ctx.estimate_n = _local_seed(ctx)
+    if ctx.estimate_n is None or not np.isfinite(ctx.estimate_n[0]):
+        return False
+    st.estimate, st.shortcut = ctx.estimate_n, False
+    return True
 
 
 def _known_estimate_meets(ctx: PointContext, st: StepState) -> bool:
@@ -301,6 +318,8 @@ def _best_candidate(ctx: PointContext, problem, psatz, sol):
             points.append(v)
     best = None
     for v in points:
+        if best is not None and ctx.expired:    # past the deadline: the best candidate so far
+            break
         e = cost.one(v)
         if e is not None and (best is None or e[0] < best[0]):
             best = e

@@ -170,7 +170,7 @@ def _verify_regions(ctx: PointContext, step: Step) -> TriangulationResult | None
     """The degree-2 certificate with the region multipliers (:func:`tritools.solve.regions_verify.region_bound`)
     at the local estimate of the normalised problem, decided by the rule of every path."""
     local = ctx.local()
-    if local is None:
+    if local is None or ctx.expired:        # past the deadline (the local estimate can end there): not started
         return None
     Xn = local[1]
     extents = [r.extent().radius for r in ctx.regs_n]

@@ -312,3 +312,24 @@ def test_batch_l2_settles_tls_only_within_the_tls_guard():
     assert reported_resolution(centres, wide, tol) > 8e-6 > reported_resolution(centres, tight, tol)
     assert _l2_suffices(res, wide, centres, tol)
     assert not _l2_suffices(res, tight, centres, tol)
+
+
+@pytest.mark.parametrize("kw,err,words", [
+    (dict(problems=5), TypeError, "problems"),
+    (dict(problems=[], chunk_size="a"), ValueError, "chunk_size"),
+    (dict(problems=[], chunk_size=float("nan")), ValueError, "chunk_size"),
+    (dict(problems=[], chunk_size=0), ValueError, "chunk_size"),
+])
+def test_batch_bad_arguments_name_themselves(kw, err, words):
+    """Review 12 F5: triangulate_many(5) and chunk_size='a' raised messages that did not name the argument."""
+    p = kw.pop("problems")
+    with pytest.raises(err, match=words):
+        tritools.triangulate_many(p, **kw)
+    assert len(tritools.triangulate_many([], chunk_size=2.0)) == 0
+
+
+def test_sparsity_error_lists_every_accepted_spelling():
+    with pytest.raises(ValueError, match="'dense'.*'cliques'"):
+        tritools.TriangulationOptions(sparsity="term")
+    opts = tritools.TriangulationOptions
+    assert opts(sparsity="dense").sparsity == opts(sparsity="none").sparsity

@@ -397,8 +397,11 @@ def triangulate_many(problems: Iterable[Sequence], method: str | Method | None =
         truncated least squares (:mod:`tritools.solve.robust_batch`; ``retries`` do not apply)
     """
     opts = options_from(options, method=method, delta=delta, max_delta=max_delta, **overrides)
-    if isinstance(chunk_size, bool) or int(chunk_size) != chunk_size or chunk_size < 1:
+    if isinstance(chunk_size, bool) or not isinstance(chunk_size, (int, float, np.integer, np.floating)) or \
+            not (np.isfinite(chunk_size) and chunk_size == int(chunk_size) and chunk_size >= 1):
         raise ValueError(f"chunk_size must be a positive integer, got {chunk_size!r}")
+    if isinstance(problems, (str, bytes)) or not hasattr(problems, "__iter__"):
+        raise TypeError(f"problems must be an iterable of (cameras, regions) pairs, got {type(problems).__name__}")
     for step in retries:
         if not (isinstance(step, (tuple, list)) and len(step) == 2):
             raise ValueError(f"retries must be (method, delta) pairs, got {step!r}")

@@ -105,7 +105,8 @@ def _sparsity(value) -> Sparsity:
     try:
         return Sparsity.parse(value, "sparsity", SPARSITY_CHOICES, SPARSITY_SPELLINGS)
     except ValueError:
-        raise OptionError("sparsity", f"must be one of 'auto', 'none', 'views', got {value!r}") from None
+        raise OptionError("sparsity", "must be one of 'auto', 'none' (or 'dense'), 'views' (or 'cliques'), "
+                                      f"got {value!r}") from None
 
 
 def _degree(value, name: str, minimum: int = 2):

@@ -333,3 +333,35 @@ def test_sparsity_error_lists_every_accepted_spelling():
         tritools.TriangulationOptions(sparsity="term")
     opts = tritools.TriangulationOptions
     assert opts(sparsity="dense").sparsity == opts(sparsity="none").sparsity
+
+
+def test_search_value_below_its_bound_is_not_a_numerical_failure():
+    """Review 12 F3: two views at pixel scale 1e-3 with ~1e5 px offsets, c far above the residuals: the search's
+    plain-arithmetic value fell below its rigorous lower bound and the result was ``numerical_failure`` with no bound
+    (the L2 call reports a valid one).  A contradiction is now judged against the compensated value too: the bound
+    is reported, at most the exact two-view optimum (a scipy LM from the true point, evaluated exactly)."""
+    from fractions import Fraction
+
+    from scipy.optimize import least_squares
+
+    P = np.array([[[-12531.578895967436, 19177.927440587446, -12590.128761269432, -261408.6288031895],
+                   [42207.619143927186, -64595.175582315474, 42402.77631223271, 880455.2947568785],
+                   [0.47937660790136666, -0.7336580359031769, 0.48160560020796295, 10.000000000000002]],
+                  [[-12162.889951583895, -19780.218019611868, -12006.323162813771, -261408.62880318944],
+                   [40965.500985545004, 66623.79389355169, 40436.53147250728, 880455.2947568784],
+                   [0.4652843585411732, 0.7566931624858563, 0.4592667237500258, 10.0]]])
+    x = np.array([[-26140.876059617272, 88045.50131798445], [-26140.901488864693, 88045.53763326645]])
+    X0 = np.array([-0.09073793528015894, -0.1468930311058098, 0.46533114542185905])
+    c = np.array([1000.0, 1000.0])
+    r = tritools.triangulate(P, x, robust=c)
+    m = tritools.triangulate_many([(P, x)], robust=[c])[0]
+    assert r.status != tritools.Status.NUMERICAL_FAILURE and r.gamma_lb is not None
+    assert (r.status, r.gamma_lb) == (m.status, m.gamma_lb)
+
+    def resid(X):
+        h = P @ np.append(X, 1.0)
+        return (h[:, :2] / h[:, 2:] - x).ravel()
+    best = min((least_squares(resid, s, method="lm", xtol=1e-15, ftol=1e-15).x for s in (X0, r.X)),
+               key=lambda X: float(resid(X) @ resid(X)))
+    f = _f_tls_exact(P, x, c, best)
+    assert Fraction(r.gamma_lb) ** 2 * 4 <= f and r.gamma_lb <= r.gamma_ub

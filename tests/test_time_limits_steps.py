@@ -335,3 +335,19 @@ def test_region_verification_not_started_past_the_deadline(monkeypatch):
     u = h[:, :2] / h[:, 2:]
     g = float(np.sqrt(sum(float(reg.distance(ui)) ** 2 for reg, ui in zip(R, u)) / (2 * len(R))))
     assert r.gamma_ub == pytest.approx(g, rel=1e-9)
+
+
+def test_all_pairs_bounds_as_many_problems_as_fit(monkeypatch):
+    """A batch cut by its time limit runs the all-pairs bound on the problems that fit instead of none
+    (fastpath.fitting, the rule of fastpath._fits): 0 past the deadline, everything without one, and floor(left /
+    per-problem estimate) in between (cpu_share fixed at 1)."""
+    from sospoly.budget import Deadline
+
+    from tritools.solve import fastpath
+
+    monkeypatch.setattr(fastpath, "cpu_share", lambda: 1.0)
+    per = fastpath.all_pairs_seconds(100, 1)
+    assert fastpath.fitting(None, 100, 7) == 7
+    assert fastpath.fitting(Deadline.after(0.0), 100, 7) == 0
+    assert fastpath.fitting(Deadline.after(2.5 * per), 100, 7) == 2
+    assert fastpath.fitting(Deadline.after(100 * per), 100, 7) == 7

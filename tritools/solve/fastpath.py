@@ -314,9 +314,12 @@ def lagrangian_bounds(C, Cn, v, ok, radius, resolution, tolerances, f0=None, wei
         if fits(deadline, N, 1):
             lower, ok = _all_pairs_bounds(C, Cn, v, ok, radius, tolerances, f0, F2(todo), views)
         return lower, upper, ok
-    for part in (todo[k:k + step] for k in range(0, todo.size, step)):
-        if not fits(deadline, N, len(part)):
+    k = 0
+    while k < todo.size:
+        part = todo[k:k + min(step, fitting(deadline, N, step))]     # as many as fit in what is left
+        if not part.size:
             break
+        k += part.size
         lower[part], ok[part] = _all_pairs_bounds(C[part], Cn[part], v[part], ok[part], radius[part], tolerances,
                                                   f0[part], F2(part), None if views is None else views[part])
     return lower, upper, ok
@@ -347,6 +350,17 @@ def fits(deadline: Deadline | None, n_views: int, problems: int = 1) -> bool:
     """Does the all-pairs bound of ``problems`` problems fit in what is left of ``deadline`` (None: always)?
     The problems it does not fit keep no lower bound (NaN), which is valid."""
     return _fits(deadline, all_pairs_seconds(n_views, problems))
+
+
+def fitting(deadline: Deadline | None, n_views: int, most: int) -> int:
+    """How many problems' all-pairs bounds (at most ``most``) fit in what is left of ``deadline``, by the rule of
+    :func:`_fits`: a batch cut by its time limit bounds those it can instead of none (six 100-view tracks whose
+    all-pairs estimate exceeded a 1 s ``total_time_limit`` by 20% certified 2 of 6, the band's)."""
+    if deadline is None or deadline.remaining() is None:
+        return most
+    per = all_pairs_seconds(n_views, 1)
+    room = deadline.remaining() * cpu_share()
+    return int(min(most, room // per)) if per > 0 else most
 
 
 def _fits(deadline: Deadline | None, seconds: float) -> bool:

@@ -555,9 +555,7 @@ class TlsSearch(NodeBounds):
         if not certified and stopped is None:   # the deadline cut a step short, or a sub-problem hit the memory budget
             stopped = "time limit" if self.deadline.expired or self.bounds.deadline.expired else \
                 "memory budget" if self.bounds.budget_exceeded else None
-        # a contradiction only against the compensated value too: the search's plain-arithmetic best_f can fall below
-        # its rigorous lb where its arithmetic lost digits (pixel scale 1e-3 with 1e5 px offsets, review 12 F3); the
-        # reported checks (drift) then withhold the certificate with their reason, the bound stays
+        # also against the compensated value: best_f's plain arithmetic can fall below a rigorous lb (review 12 F3)
         f_told = 2.0 * self.N * told.gamma_ub ** 2 if math.isfinite(told.gamma_ub) else math.inf
         contradicts = self.tol.contradicts_one(lb, max(ub, f_told), self.scale)
         status = Status.NUMERICAL_FAILURE if contradicts else Status.OPTIMAL if certified else \

@@ -181,23 +181,24 @@ def search_drift(res: np.ndarray, c: np.ndarray, f_search: float | None, f_ub: f
     same arithmetic; where that lost digits to cancellation (a 3e7 georeferenced world seen by cameras scaled by
     1e-6 with 1e5 px offsets: 0.6% off, its bound 1.3e-4 above an attained value, review 8b F2) its bounds are not
     trusted."""
-    if f_search is None or not math.isfinite(f_search):
-        return 0.0
-    with np.errstate(over="ignore", invalid="ignore"):
-        f_comp = float(np.sum(np.minimum(np.where(np.isfinite(res), res * res, np.inf), c * c)))
-    if not math.isfinite(f_comp):
-        return 0.0
-    return abs(f_search - f_comp) / max(f_comp, 1e-300)
+    f_comp = _compensated_f(res, c, f_search)
+    return 0.0 if f_comp is None else abs(f_search - f_comp) / max(f_comp, 1e-300)
 
 
 def search_drift_abs(res: np.ndarray, c: np.ndarray, f_search: float | None) -> float:
     """|f_search - f_TLS(X)| in pixels^2 (the absolute twin of :func:`search_drift`; 0 without ``f_search`` or a
     finite compensated value)."""
+    f_comp = _compensated_f(res, c, f_search)
+    return 0.0 if f_comp is None else abs(f_search - f_comp)
+
+
+def _compensated_f(res: np.ndarray, c: np.ndarray, f_search: float | None) -> float | None:
+    """f_TLS of the compensated distances ``res``; None without a finite ``f_search`` or a finite value."""
     if f_search is None or not math.isfinite(f_search):
-        return 0.0
+        return None
     with np.errstate(over="ignore", invalid="ignore"):
         f_comp = float(np.sum(np.minimum(np.where(np.isfinite(res), res * res, np.inf), c * c)))
-    return abs(f_search - f_comp) if math.isfinite(f_comp) else 0.0
+    return f_comp if math.isfinite(f_comp) else None
 
 
 def drift_within(drift: float, d_abs: float, N: int, tolerances, resolved: float) -> bool:

@@ -59,12 +59,8 @@ def test_other_regions_keep_the_loop():
 
 
 # ----------------------------------------------------------------------------- the refinement past the deadline
-@pytest.mark.parametrize("kind", ["points", "discs"])
-def test_refinement_after_the_deadline_is_bounded_and_returns_its_best_iterate(kind, monkeypatch):
-    """Past the active deadline, refine_l2 evaluates the residuals at most evaluations_after(N) times (counted),
-    and its estimate is no worse than the start (any X is a valid estimate; gamma_UB only less tight)."""
-    P, x, X, _ = robust_protocol_scene(400, 0, 1.0, np.random.default_rng(5))
-    regs = _regions(x, kind)
+def count_residual_evaluations(monkeypatch) -> list:
+    """A list that grows by one per evaluation of refine_l2's residuals (monkeypatched for the test)."""
     calls = []
     real = refine.residual_function
 
@@ -73,6 +69,16 @@ def test_refinement_after_the_deadline_is_bounded_and_returns_its_best_iterate(k
         return (lambda Y: calls.append(1) or fun(Y)), vec
 
     monkeypatch.setattr(geometry, "residual_function", counted)
+    return calls
+
+
+@pytest.mark.parametrize("kind", ["points", "discs"])
+def test_refinement_after_the_deadline_is_bounded_and_returns_its_best_iterate(kind, monkeypatch):
+    """Past the active deadline, refine_l2 evaluates the residuals at most evaluations_after(N) times (counted),
+    and its estimate is no worse than the start (any X is a valid estimate; gamma_UB only less tight)."""
+    P, x, X, _ = robust_protocol_scene(400, 0, 1.0, np.random.default_rng(5))
+    regs = _regions(x, kind)
+    calls = count_residual_evaluations(monkeypatch)
     X0 = X + np.array([0.3, -0.2, 0.1])
     monkeypatch.setattr(refine, "MIN_EVALS_AFTER_DEADLINE", 5)
     monkeypatch.setattr(refine, "VIEW_EVALS_AFTER_DEADLINE", 5)

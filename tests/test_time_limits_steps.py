@@ -22,6 +22,7 @@ from sospoly.certificates.psatz import DataSlots, dense_shape, psatz_structure
 from sospoly.lowering.conic import Cone
 from sospoly.solvers.ipm import core, ipm_solve_batch
 from tritools.scene import uncertain_problem
+from tests.test_time_limits_after_expiry import count_residual_evaluations
 
 
 class _Switch:
@@ -132,14 +133,7 @@ def test_looped_refinement_after_the_deadline_is_bounded(monkeypatch):
     refined through a loop over the views; past the deadline it makes at most evaluations_after(N, False) more
     evaluations (counted), and its estimate is no worse than the start."""
     P, R, X = uncertain_problem(16, seed=3, kinds="mixed")
-    calls = []
-    real = refine.residual_function
-
-    def counted(cameras, regions):
-        fun, vec = real(cameras, regions)
-        return (lambda Y: calls.append(1) or fun(Y)), vec
-
-    monkeypatch.setattr(geometry, "residual_function", counted)
+    calls = count_residual_evaluations(monkeypatch)
     monkeypatch.setattr(refine, "LOOPED_VIEW_EVALS_AFTER_DEADLINE", 16 * 6)
     X0 = X + np.array([0.3, -0.2, 0.1])
     with deadline_scope(Deadline.after(0.0)):

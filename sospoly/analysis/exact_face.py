@@ -38,8 +38,8 @@ from fractions import Fraction
 
 import numpy as np
 
-from .rigor import (_exact_multipliers, _exact_u_terms, _facial_reduction, _gram_entries, _ldl_psd,
-                    _shift_multipliers, solution_at_level)
+from .rigor import (exact_multipliers, exact_u_terms, facial_reduction, gram_entries, ldl_psd,
+                    shift_multipliers, solution_at_level)
 
 __all__ = ["FaceCheck", "face_exact_check", "MAX_DENOMINATOR", "MAX_EXACT_ENTRIES", "MAX_GRAM_PAIRS", "FACE_SHIFTS"]
 
@@ -224,7 +224,7 @@ def _solve_psd(sys_: _System, free_values: dict, margin: Fraction, live: list) -
         if not idx:
             continue
         M = [[vals.get((j, min(a, b), max(a, b)), Fraction(0)) for b in idx] for a in idx]
-        if not _ldl_psd(M):
+        if not ldl_psd(M):
             return False
     return True
 
@@ -257,16 +257,16 @@ def face_exact_check(psatz, sol, c: float, margins) -> FaceCheck:
     if u.gram.n_pairs > MAX_GRAM_PAIRS:
         return FaceCheck(False, -np.inf, np.inf, 0, "too large for exact checks")
     x = solution_at_level(structure, sol.x, c)
-    why = _shift_multipliers(structure, x) or _exact_multipliers(structure, x)
+    why = shift_multipliers(structure, x) or exact_multipliers(structure, x)
     if why:
         return FaceCheck(False, -np.inf, np.inf, 0, why)
     coef0: dict = {}
-    _exact_u_terms(structure, np.asarray(psatz.theta, float), x, coef0)
+    exact_u_terms(structure, np.asarray(psatz.theta, float), x, coef0)
     coefq = {e: Fraction(v) for e, v in structure.q.terms.items()}
-    pairs = _gram_entries(u)
+    pairs = gram_entries(u)
     if any(v != 0 and m not in pairs for m, v in list(coef0.items()) + list(coefq.items())):
         return FaceCheck(False, -np.inf, np.inf, 0, "the certificate has monomials outside every Gram block")
-    live = _facial_reduction(u, pairs, coef0)
+    live = facial_reduction(u, pairs, coef0)
     if isinstance(live, str) or sum(int(lv.sum()) * (int(lv.sum()) + 1) // 2 for lv in live) > MAX_EXACT_ENTRIES:
         return FaceCheck(False, -np.inf, np.inf, 0, live if isinstance(live, str) else "too large for exact checks")
     grams = [np.asarray(sol.grams[name], float) for name in u.block_names()]

@@ -48,7 +48,9 @@ from ..algebra.basis import unique_rows
 
 __all__ = ["solution_at_level", "gram_pairs", "psd_defect_of", "u_terms",
            "RigorousBound", "rigorous_psatz_bound", "certificate_residual", "exact_check", "ExactCheck",
-           "image_form_stack_margin"]
+           "image_form_stack_margin",
+           # the exact-arithmetic steps of exact_check, shared with sospoly.analysis.exact_face
+           "ldl_psd", "shift_multipliers", "exact_multipliers", "gram_entries", "facial_reduction", "exact_u_terms"]
 
 _EPS = np.finfo(float).eps
 
@@ -253,7 +255,7 @@ class ExactCheck:
     message: str = ""
 
 
-def _ldl_psd(M: list) -> bool:
+def ldl_psd(M: list) -> bool:
     """Exact PSD test of a symmetric rational matrix (list of lists of Fractions) by LDL^T with
     symmetric pivoting: PSD iff every pivot is >= 0 and a zero pivot has a zero row."""
     A = [row[:] for row in M]
@@ -308,27 +310,27 @@ def exact_check(psatz, sol, c: float, margin: float | None = None) -> ExactCheck
         return ExactCheck(False, float(c), "c and margin must be finite, margin >= 0")
     theta = np.asarray(psatz.theta, float)
     x = solution_at_level(structure, sol.x, c)
-    why = _shift_multipliers(structure, x) or _exact_multipliers(structure, x)
+    why = shift_multipliers(structure, x) or exact_multipliers(structure, x)
     if why:
         return ExactCheck(False, float(c), why)
     # the target coefficients p = u(x) + margin q, exactly
     coef: dict = {}
-    _exact_u_terms(structure, theta, x, coef)
+    exact_u_terms(structure, theta, x, coef)
     for e, cq in structure.q.terms.items():
         coef[e] = coef.get(e, Fraction(0)) + Fraction(margin) * Fraction(cq)
     u = structure.u
-    pairs = _gram_entries(u)
+    pairs = gram_entries(u)
     for m, val in coef.items():
         if val != 0 and m not in pairs:
             return ExactCheck(False, float(c), f"the residual has monomial {m} outside every Gram block")
-    live = _facial_reduction(u, pairs, coef)
+    live = facial_reduction(u, pairs, coef)
     if isinstance(live, str):
         return ExactCheck(False, float(c), live)
     return _proof_by_shifts([np.asarray(sol.grams[name], float) for name in u.block_names()], live, pairs, coef,
                             c, margin)
 
 
-def _shift_multipliers(structure, x: np.ndarray) -> str | None:
+def shift_multipliers(structure, x: np.ndarray) -> str | None:
     """Shift each inequality multiplier s_k of ``x`` (in place) by twice its PSD defect on the diagonal (plus a
     few ulps); the reason it cannot be used when its defect exceeds ``SHIFT_LIMIT`` of its scale."""
     prog = structure.program
@@ -347,7 +349,7 @@ def _shift_multipliers(structure, x: np.ndarray) -> str | None:
     return None
 
 
-def _exact_multipliers(structure, x: np.ndarray) -> str | None:
+def exact_multipliers(structure, x: np.ndarray) -> str | None:
     """The exact LDL^T test of every inequality multiplier's Gram matrix read from ``x`` as rationals; the
     reason of the first that is not PSD."""
     prog = structure.program
@@ -358,12 +360,12 @@ def _exact_multipliers(structure, x: np.ndarray) -> str | None:
         for p, val in enumerate(x[blk.slice]):
             i, kk = int(blk.gram.pair_i[p]), int(blk.gram.pair_j[p])
             S[i][kk] = S[kk][i] = Fraction(float(val))
-        if not _ldl_psd(S):
+        if not ldl_psd(S):
             return f"multiplier s{k} is not PSD"
     return None
 
 
-def _gram_entries(u) -> dict:
+def gram_entries(u) -> dict:
     """monomial -> every Gram entry (block j, i <= k) whose product b_i b_k it is."""
     pairs: dict = {}
     for j, blk in enumerate(u.gram.blocks):
@@ -374,7 +376,7 @@ def _gram_entries(u) -> dict:
     return pairs
 
 
-def _facial_reduction(u, pairs: dict, coef: dict) -> list | str:
+def facial_reduction(u, pairs: dict, coef: dict) -> list | str:
     """The live rows of each Gram block: a monomial whose remaining entries are all diagonal and whose
     coefficient is 0 forces those diagonal entries, hence their rows, to 0 (PSD); a negative one is
     infeasible (returned as the reason, a str)."""
@@ -435,12 +437,12 @@ def _projected_psd(G0q: list, live: list, pairs: dict, coef: dict, t: Fraction) 
                 G[j][k][i] += step
     for j, Gj in enumerate(G):
         idx = [i for i in range(len(Gj)) if live[j][i]]
-        if idx and not _ldl_psd([[Gj[a][b] for b in idx] for a in idx]):
+        if idx and not ldl_psd([[Gj[a][b] for b in idx] for a in idx]):
             return False
     return True
 
 
-def _exact_u_terms(structure, theta, x, coef: dict) -> None:
+def exact_u_terms(structure, theta, x, coef: dict) -> None:
     """Add u(x)'s coefficients, computed exactly in Fractions, into ``coef`` (monomial tuple -> Fraction)."""
     u = structure.u
     off_of_col, owned = _owner_offsets(structure)

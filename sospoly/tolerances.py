@@ -164,9 +164,10 @@ class Tolerances:
         same operations: a single call's decision without numpy)."""
         return self.gap_abs * scale + self.gap_rel * max(scale, abs(upper))
 
-    def certified_relatively_one(self, lower: float, upper: float) -> bool:
-        """The scalar twin of :meth:`certified_relatively` for floats."""
-        return upper - lower <= self.gap_rel * abs(upper)
+    def certified_relatively_one(self, lower: float, upper: float, share: float = 1.0) -> bool:
+        """The scalar twin of :meth:`certified_relatively` for floats; within ``share`` of the relative gap
+        (``upper - lower <= share gap_rel |upper|``: a caller that prunes with a margin to spare)."""
+        return upper - lower <= share * self.gap_rel * abs(upper)
 
     def certified_one(self, lower, upper, scale: float = 1.0) -> bool:
         """The scalar twin of :meth:`certified` for one pair of floats (plain Python arithmetic, the same rule: a

@@ -519,6 +519,9 @@ def test_tolerances_scalar_rule_equals_the_vectorised_rule():
                 assert tol.gap_tolerance_one(up, scale) == float(tol.gap_tolerance(up, scale))
             lo = up - tol.gap_rel * abs(up) * rng.choice([0.5, 1.0, 2.0])
             assert tol.certified_relatively_one(lo, up) == bool(tol.certified_relatively(lo, up))
+            # within a share of the gap: the rule of Tolerances(gap_rel=share gap_rel)
+            half = Tolerances(gap_abs=tol.gap_abs, gap_rel=0.5 * tol.gap_rel)
+            assert tol.certified_relatively_one(lo, up, 0.5) == bool(half.certified_relatively(lo, up))
 
 
 def test_tolerances_certified_one_and_contradicts_one_equal_the_vectorised_rule():

@@ -167,7 +167,7 @@ def guards_pass(g_lb: float, g_ub: float, N: int, tolerances, resolved: float, s
     :func:`threshold_resolution`).  Searches prune within :data:`PRUNE_SHARE` of it
     (:meth:`tritools.solve.robust.TlsSearch.meets`, also in :mod:`tritools.solve.robust_cells`)."""
     f_lb, f_ub = 2.0 * N * g_lb * g_lb, 2.0 * N * g_ub * g_ub
-    return f_ub - f_lb <= share * tolerances.gap_rel * abs(f_ub) or g_ub - g_lb <= share * resolved
+    return tolerances.certified_relatively_one(f_lb, f_ub, share) or g_ub - g_lb <= share * resolved
 
 
 #: the search's value at its estimate may differ from the compensated f_TLS by at most this fraction of the decision

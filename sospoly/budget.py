@@ -108,13 +108,19 @@ def as_budget(value) -> Budget:
 
 @dataclass(frozen=True)
 class Deadline:
-    """A point in time (``time.monotonic``) after which work stops; ``None`` end: never."""
+    """A point in time (``time.monotonic``) after which work stops; ``None`` end: never.  ``span``: the time limit
+    it stands for (seconds; None: unknown), so that work allowed past it can be a share of the limit
+    (:meth:`overrun`)."""
 
     end: float | None
+    span: float | None = None
 
     @classmethod
-    def after(cls, seconds: float | None) -> Deadline:
-        return cls(None if seconds is None else time.monotonic() + float(seconds))
+    def after(cls, seconds: float | None, span: float | None = None) -> Deadline:
+        """The deadline ``seconds`` from now, standing for a limit of ``span`` seconds (default ``seconds``)."""
+        if seconds is None:
+            return cls(None)
+        return cls(time.monotonic() + float(seconds), float(seconds) if span is None else float(span))
 
     def remaining(self) -> float | None:
         return None if self.end is None else max(0.0, self.end - time.monotonic())
@@ -122,6 +128,16 @@ class Deadline:
     @property
     def expired(self) -> bool:
         return self.end is not None and time.monotonic() >= self.end
+
+    def overrun(self) -> float:
+        """The time since the deadline passed as a share of its ``span`` (0 before it, or without an end; inf past
+        it without a span)."""
+        if self.end is None:
+            return 0.0
+        late = time.monotonic() - self.end
+        if late <= 0.0:
+            return 0.0
+        return late / self.span if self.span else float("inf")
 
 
 class TimeLimitReached(RuntimeError):

@@ -131,16 +131,22 @@ def test_ipm_stops_when_less_is_left_than_the_last_iteration_took(monkeypatch):
 def test_looped_refinement_after_the_deadline_is_bounded(monkeypatch):
     """Regions without a stacked distance (segments, ellipses, polytopes: each closest point 10-140 us) are
     refined through a loop over the views; past the deadline it makes at most evaluations_after(N, False) more
-    evaluations (counted), and its estimate is no worse than the start."""
+    evaluations (counted), and fewer once OVERRUN_SHARE_AFTER_DEADLINE of the limit has gone by (never fewer than
+    evaluations_floor: the start); its estimate is no worse than the start."""
     P, R, X = uncertain_problem(16, seed=3, kinds="mixed")
     calls = count_residual_evaluations(monkeypatch)
     monkeypatch.setattr(refine, "LOOPED_VIEW_EVALS_AFTER_DEADLINE", 16 * 6)
     X0 = X + np.array([0.3, -0.2, 0.1])
-    with deadline_scope(Deadline.after(0.0)):
+    g = lambda Y: geometry.gamma_validated(np.asarray(Y, float)[None], P, R)[0]   # noqa: E731
+    with deadline_scope(Deadline.after(0.0, span=1e9)):          # a long limit: the counted allowance decides
         Xr = geometry.refine_l2(X0, P, R)
     assert len(calls) == 6 == refine.evaluations_after(16, vectorised=False)
-    g = lambda Y: geometry.gamma_validated(np.asarray(Y, float)[None], P, R)[0]   # noqa: E731
     assert Xr is not None and g(Xr) <= g(X0)
+    calls.clear()
+    with deadline_scope(Deadline.after(0.0)):                     # a zero limit: any time past it is too much
+        Xz = geometry.refine_l2(X0, P, R)
+    assert len(calls) == refine.evaluations_floor(vectorised=False) == 1
+    assert Xz is not None and np.array_equal(Xz, X0)                   # the start: the estimate of last resort
     calls.clear()
     free = geometry.refine_l2(X0, P, R)
     assert len(calls) > 6 and g(free) <= g(Xr) * (1 + 1e-12)
@@ -345,3 +351,14 @@ def test_all_pairs_bounds_as_many_problems_as_fit(monkeypatch):
     assert fastpath.fitting(Deadline.after(0.0), 100, 7) == 0
     assert fastpath.fitting(Deadline.after(2.5 * per), 100, 7) == 2
     assert fastpath.fitting(Deadline.after(100 * per), 100, 7) == 7
+
+
+def test_deadline_overrun_is_the_share_of_the_limit_gone_by_since_it_passed():
+    import time
+
+    assert Deadline(None).overrun() == 0.0 and Deadline.after(None).span is None
+    assert Deadline.after(10.0).overrun() == 0.0 and Deadline.after(10.0).span == 10.0
+    late = Deadline(time.monotonic() - 1.0, span=2.0).overrun()
+    assert 0.5 <= late < 0.75
+    assert Deadline(time.monotonic() - 1.0).overrun() == float("inf")          # no span: any lateness is too much
+    assert Deadline.after(-1.0, span=4.0).overrun() >= 0.25

@@ -96,8 +96,10 @@ def diagonal_reduction(shape: CertificateShape, f_support, eq_supports=(), ineq_
         Q = np.zeros((1, n), np.int64) if q_support is None else _rows(q_support, n=n)
     reached = [Q, _minkowski(Q, _rows(F, n=n))]
     for R, G in zip(shape.r_supports, eq_supports):
+        check_deadline("reducing the certificate's bases")
         reached.append(_minkowski(R, _rows(G, n=n)))
     for B, H in zip(shape.s_bases, ineq_supports):
+        check_deadline("reducing the certificate's bases")
         reached.append(_minkowski(unique_rows(_pair_sums(B, True)), _rows(H, n=n)))
     reachable = MonomialIndex(_rows(*reached, n=n))
 
@@ -151,6 +153,7 @@ def ideal_reduction(shape: CertificateShape, eq_supports) -> CertificateShape:
         for k, (G, L) in enumerate(zip(eqs, leads)):
             if L is None or L.sum() < 2 or not lead_vars[k] <= block_vars:
                 continue                 # no monomial of B is a multiple of L
+            check_deadline("reducing the certificate's bases")
             divisible = np.all(B >= L, axis=1) & (B.sum(axis=1) >= 2)
             if not divisible.any():
                 continue

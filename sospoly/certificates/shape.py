@@ -214,6 +214,7 @@ def clique_shape(n: int, degree: int, cliques, eq_variables=(), ineq_variables=(
     if not cliques:
         raise ValueError("clique_shape needs at least one clique")
     for c in cliques:
+        check_deadline("sizing the certificate")
         if any(i < 0 or i >= n for i in c) or len(set(c)) != len(c):
             raise ValueError(f"clique {c} is not a set of variable indices in 0..{n - 1}")
         _check_side(sigma(len(c), degree // 2), max_gram_side, f"the degree-{degree} block of a {len(c)}-variable "

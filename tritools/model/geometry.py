@@ -27,7 +27,7 @@ from .cameras import (CAMERA_RANK_RTOL, POINT_AT_INFINITY_RTOL, SAME_CAMERA_RTOL
                       depths_stack, points3d_array, power2_scale, unit_rows, validate_cameras, WorldFrame,
                       world_frame_of)
 from .exact import CANCELLATION_RATIO, accurate_homogeneous
-from .refine import (EvaluationGuard, RefinementStopped, disc_shapes, evaluations_after, gamma_discs,
+from .refine import (EvaluationGuard, RefinementStopped, disc_shapes, evaluations_after, evaluations_floor, gamma_discs,
                      residual_function, residual_jacobian)
 from .regions.base import real_array
 
@@ -190,7 +190,11 @@ def gamma_validated(Xs: np.ndarray, cameras: np.ndarray, regions: Sequence, *, s
         x = project_homogeneous(Xh, P)
         finite = np.all(np.isfinite(x), axis=1)
         bad |= ~finite
-        if np.any(finite):
+        if m == 1:                                   # one point: the region's scalar path (the same numbers)
+            if finite[0]:
+                d = float(R.distance(x[0]))
+                total[0] += d * d
+        elif np.any(finite):
             d = np.asarray(R.distance(x[finite]), dtype=float)
             total[finite] += d * d
     out = np.sqrt(total / (2 * len(cameras)))
@@ -479,7 +483,7 @@ def refine_l2(X0, cameras, regions, *, xtol: float = 1e-15, ftol: float = 1e-15,
     from scipy.optimize import least_squares
 
     fun, vectorised = residual_function(cameras, regions)
-    guard = EvaluationGuard(fun, evaluations_after(len(regions), vectorised))
+    guard = EvaluationGuard(fun, evaluations_after(len(regions), vectorised), evaluations_floor(vectorised))
     try:
         X = least_squares(guard, np.asarray(X0, float), jac=residual_jacobian(cameras, regions), method="lm",
                           xtol=xtol, ftol=ftol, gtol=gtol, max_nfev=max_nfev).x

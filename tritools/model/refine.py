@@ -17,7 +17,9 @@ trivial bound gamma* >= 0 may certify (:mod:`tritools.solve.trivial`), comes fro
 (work in proportion to N views: :data:`VIEW_EVALS_AFTER_DEADLINE` stacked evaluations, never fewer than
 :data:`MIN_EVALS_AFTER_DEADLINE`; through the regions' own closest points about
 :data:`LOOPED_VIEW_EVALS_AFTER_DEADLINE` region distances, never fewer than :data:`MIN_LOOPED_EVALS_AFTER_DEADLINE`
-evaluations); it then stops with the best iterate so far.  Any X is a valid
+evaluations), and past :func:`evaluations_floor` (the looped start, or the stacked fewest) it also stops once
+:data:`OVERRUN_SHARE_AFTER_DEADLINE` of the time limit has gone by since the deadline; it then stops with the best
+iterate so far.  Any X is a valid
 estimate (gamma(X) >= gamma*), so stopping early only makes gamma_UB less tight.
 """
 from __future__ import annotations
@@ -27,7 +29,8 @@ import numpy as np
 from sospoly.budget import active_deadline
 
 __all__ = ["residual_function", "residual_jacobian", "disc_residuals", "disc_jacobian", "disc_shapes", "gamma_discs",
-           "EvaluationGuard", "RefinementStopped", "evaluations_after", "MIN_EVALS_AFTER_DEADLINE",
+           "EvaluationGuard", "RefinementStopped", "evaluations_after", "evaluations_floor", "MIN_EVALS_AFTER_DEADLINE",
+           "OVERRUN_SHARE_AFTER_DEADLINE",
            "VIEW_EVALS_AFTER_DEADLINE", "LOOPED_VIEW_EVALS_AFTER_DEADLINE", "MIN_LOOPED_EVALS_AFTER_DEADLINE",
            "FAR_RESIDUAL"]
 
@@ -44,6 +47,10 @@ VIEW_EVALS_AFTER_DEADLINE = 8000
 LOOPED_VIEW_EVALS_AFTER_DEADLINE = 400
 #: the fewest evaluations of the loop past the deadline: the start and its forward-difference Jacobian
 MIN_LOOPED_EVALS_AFTER_DEADLINE = 4
+#: past the deadline, beyond those fewest evaluations, the refinement also stops once the time since the deadline
+#: exceeds this share of the time limit (:meth:`sospoly.budget.Deadline.overrun`): at a 0.2 s limit the loop's 400
+#: region distances (~50 ms for polytopes) were a quarter of the limit
+OVERRUN_SHARE_AFTER_DEADLINE = 0.03
 
 
 def disc_residuals(X, cameras: np.ndarray, centres: np.ndarray, radii: np.ndarray) -> np.ndarray:
@@ -147,6 +154,13 @@ def gamma_discs(Xs: np.ndarray, cameras: np.ndarray, centres: np.ndarray, radii:
     return np.where(fin & ok & np.isfinite(out), out, np.inf)
 
 
+def evaluations_floor(vectorised: bool) -> int:
+    """The evaluations past the deadline always allowed, whatever the time (module docstring): a stacked evaluation
+    costs microseconds, so :data:`MIN_EVALS_AFTER_DEADLINE` of them; a looped one only the start (its value: the
+    estimate of last resort; 30 mixed views cost ~2 ms per evaluation, and an LM step needs four)."""
+    return MIN_EVALS_AFTER_DEADLINE if vectorised else 1
+
+
 def evaluations_after(n_views: int, vectorised: bool) -> int:
     """Evaluations allowed once the deadline has passed (module docstring): a vectorised evaluation counts as one
     region distance of :data:`VIEW_EVALS_AFTER_DEADLINE`; a looped one as ``n_views`` of
@@ -164,15 +178,17 @@ class EvaluationGuard:
     """Wraps the residual function: remembers the best iterate (least sum of squares) and raises
     :class:`RefinementStopped` once ``allowed`` evaluations were made after the active deadline passed."""
 
-    def __init__(self, fun, allowed: int):
+    def __init__(self, fun, allowed: int, floor: int | None = None):
         self.fun, self.allowed = fun, allowed
+        self.floor = allowed if floor is None else min(floor, allowed)
         self.deadline = active_deadline()
         self.after = 0
         self.best_X, self.best_cost = None, np.inf
 
     def __call__(self, X) -> np.ndarray:
         if self.deadline is not None and self.deadline.expired:
-            if self.after >= self.allowed:
+            if self.after >= self.allowed or (self.after >= self.floor
+                                              and self.deadline.overrun() > OVERRUN_SHARE_AFTER_DEADLINE):
                 raise RefinementStopped
             self.after += 1
         r = self.fun(X)

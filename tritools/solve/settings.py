@@ -90,7 +90,7 @@ def call_deadline(options, t0: float) -> Deadline:
     limit = options.budget.time_limit
     if limit is None:
         return Deadline(None)
-    return Deadline.after(limit - (time.perf_counter() - t0))
+    return Deadline.after(limit - (time.perf_counter() - t0), span=limit)
 
 
 def no_deadline() -> Deadline:

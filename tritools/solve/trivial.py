@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..model.geometry import gamma as gamma_of
+from ..model.geometry import gamma_validated
 from ..model.geometry import refine_l2
 from .decide import decide, decide_reported
 
@@ -49,5 +49,5 @@ def local_estimate(cameras_n, regions_n) -> tuple[float, np.ndarray] | None:
     X = refine_l2(np.zeros(3), cameras_n, regions_n)
     if X is None:
         return None
-    g = float(gamma_of(X, cameras_n, regions_n))
+    g = float(gamma_validated(np.asarray(X, float)[None], np.asarray(cameras_n, float), regions_n)[0])   # (checked)
     return (g, X) if np.isfinite(g) else None

@@ -349,7 +349,7 @@ class Region(abc.ABC):
         float or ndarray of shape (m,)
         """
         P, single = as_points(points)
-        C = np.atleast_2d(self.closest_point(P))
+        C = np.atleast_2d(self.closest_point(P[0] if single else P))       # one point: a region's scalar twin
         d = np.hypot(P[:, 0] - C[:, 0], P[:, 1] - C[:, 1])
         return float(d[0]) if single else d
 

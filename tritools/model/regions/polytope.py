@@ -9,6 +9,7 @@ O(m + points) whatever the number of edges.
 """
 from __future__ import annotations
 
+import functools
 from collections import deque
 from dataclasses import dataclass, field
 from typing import ClassVar
@@ -16,6 +17,7 @@ from typing import ClassVar
 import numpy as np
 
 from ...errors import FieldError
+from .polygon_distance import affine, closest_on_boundary, closest_on_boundary_one, unit_edges
 from .base import (Region, RegionPolynomials, as_matrix, as_points, as_vector, check_xy, real_array, similarity_args,
                    square)
 from .forms import ConeKind, ConicForm, RegionExtent
@@ -309,16 +311,25 @@ class Polytope(Region):
         step = max(1, POLYTOPE_CHUNK // len(self.c))
         for s in range(0, len(P), step):
             with np.errstate(over="ignore", invalid="ignore"):       # overflow: far outside
-                inside[s:s + step] = np.all(np.abs(P[s:s + step] @ self.B.T + self.c) <= 1.0, axis=1)
+                inside[s:s + step] = np.all(np.abs(affine(P[s:s + step], self.B, self.c)) <= 1.0, axis=1)
         return bool(inside[0]) if single else inside
 
     def closest_point(self, points) -> np.ndarray:
         P, single = as_points(points)
+        if single:                                   # one point: the scalar twin of the boundary search
+            with np.errstate(over="ignore", invalid="ignore"):
+                inside = bool(np.all(np.abs(affine(P, self.B, self.c)) <= 1.0))     # contains' operation
+            return P[0].copy() if inside else np.array(closest_on_boundary_one(P[0], self._unit_edges))
         C = P.copy()
         out = ~np.atleast_1d(self.contains(P))
         if np.any(out):
-            C[out] = _closest_on_boundary(P[out], self.vertices)
-        return C[0] if single else C
+            C[out] = closest_on_boundary(P[out], self.vertices, POLYTOPE_CHUNK)
+        return C
+
+    @functools.cached_property
+    def _unit_edges(self) -> tuple:
+        """The boundary at unit scale for :func:`~.polygon_distance.closest_on_boundary_one`, once."""
+        return unit_edges(self.vertices)
 
     @property
     def center(self) -> np.ndarray:
@@ -366,53 +377,3 @@ class Polytope(Region):
             raise FieldError("half_widths", f"must be positive, got {w.tolist()}")
         B = np.diag(1.0 / w)
         return cls(B, -B @ c0)
-
-
-def _closest_on_boundary(Q: np.ndarray, V: np.ndarray) -> np.ndarray:
-    """Closest points of the closed polygonal boundary through V (k, 2) (a segment for k = 2,
-    a point for k = 1) to the rows of Q, over blocks of points x edges."""
-    if len(V) == 1:
-        return np.broadcast_to(V[0], Q.shape).copy()
-    # at unit scale around the polygon, so that squared lengths neither overflow nor underflow; a point
-    # farther than 1e150 polygon sizes is moved along its direction to that distance (same closest point
-    # to within 1e-150 relative)
-    mean = (V / 2.0).mean(axis=0) * 2.0
-    span = float(np.max(np.abs(V - mean)))
-    with np.errstate(over="ignore", invalid="ignore"):
-        Qs = (Q - mean) / span
-    far = ~(np.max(np.abs(Qs), axis=1) <= 1e150)
-    if np.any(far):
-        d = Q[far] / 2.0 - mean / 2.0
-        Qs[far] = 1e150 * (d / np.max(np.abs(d), axis=1, keepdims=True))
-    return mean + span * _closest_unit(Qs, (V - mean) / span)
-
-
-def _closest_unit(Q: np.ndarray, V: np.ndarray) -> np.ndarray:
-    """:func:`_closest_on_boundary` for a polygon of size ~1 (at least 2 vertices)."""
-    A = V if len(V) > 2 else V[:1]
-    D = (np.roll(V, -1, axis=0) if len(V) > 2 else V[1:]) - A
-    dd = np.sum(D * D, axis=1)
-    dd = np.where(dd > 0, dd, 1.0)
-    best = np.empty_like(Q)
-    qstep = max(1, min(len(Q), POLYTOPE_CHUNK // 64))
-    estep = max(1, POLYTOPE_CHUNK // qstep)
-    for qs in range(0, len(Q), qstep):
-        q = Q[qs:qs + qstep]
-        bd = np.full(len(q), np.inf)
-        bp = np.empty_like(q)
-        for es in range(0, len(A), estep):
-            a, d = A[es:es + estep], D[es:es + estep]
-            rx = q[:, None, 0] - a[None, :, 0]
-            ry = q[:, None, 1] - a[None, :, 1]
-            t = np.clip((rx * d[None, :, 0] + ry * d[None, :, 1]) / dd[None, es:es + estep], 0.0, 1.0)
-            cx = a[None, :, 0] + t * d[None, :, 0]
-            cy = a[None, :, 1] + t * d[None, :, 1]
-            dist = (q[:, None, 0] - cx) ** 2 + (q[:, None, 1] - cy) ** 2
-            j = np.argmin(dist, axis=1)
-            rows = np.arange(len(q))
-            better = dist[rows, j] < bd
-            bd[better] = dist[rows, j][better]
-            bp[better, 0] = cx[rows, j][better]
-            bp[better, 1] = cy[rows, j][better]
-        best[qs:qs + qstep] = bp
-    return best

@@ -122,6 +122,7 @@ def test_refined_rows_rescue_failing_bounds(N, n_out, three, monkeypatch):
     rng = np.random.default_rng(3)
     scenes = [robust_protocol_scene(N, n_out, 1.0, rng) for _ in range(30 if three else 20)]
     decided = {}
+    monkeypatch.setattr(robust_three._ThreeViews, "_ascend_all", lambda self, lb: lb)     # (its own test below)
     for on in (True, False):
         if not on:
             monkeypatch.setattr(robust_three._ThreeViews, "_second_chance", lambda self, lb: lb)
@@ -133,6 +134,27 @@ def test_refined_rows_rescue_failing_bounds(N, n_out, three, monkeypatch):
     assert sum(decided[True]) > sum(decided[False])
     for (P, x, X, _), r, off in zip(scenes, rescued, decided[False]):
         if r is not None and not off:
+            _check_against_reference(r, P, x, C, X)
+
+
+def test_ascended_all_views_bound_decides_more_and_stays_below_the_reference(monkeypatch):
+    """One wrong match among three views: the candidate's KKT multipliers give the all-views set no bound, the best
+    degree-2 certificate (sospoly.analysis.ascend_one, ``_ascend_all``) often exceeds UB: the three-view path decides
+    those scenes instead of handing them to the branch and bound; every answer below the reference (enumeration
+    of the inlier sets with multi-start L2 optima).  Switched off, fewer scenes are decided."""
+    rng = np.random.default_rng(7)
+    scenes = [robust_protocol_scene(3, 1, noise, rng) for noise in (1.0, 5.0) for _ in range(20)]
+    decided = {}
+    for on in (True, False):
+        if not on:
+            monkeypatch.setattr(robust_three._ThreeViews, "_ascend_all", lambda self, lb: lb)
+        out = [_enumerated(P, x, three=True, monkeypatch=monkeypatch)[0] for P, x, _, _ in scenes]
+        decided[on] = [r is not None for r in out]
+        if on:
+            rescued = out
+    assert sum(decided[True]) > sum(decided[False])
+    for (P, x, X, _), r in zip(scenes, rescued):
+        if r is not None:
             _check_against_reference(r, P, x, C, X)
 
 

@@ -36,7 +36,7 @@ from ..status import SolveStatus
 from ..tolerances import DEFAULT_TOLERANCES, Tolerances
 
 __all__ = ["Verification", "VerificationBatch", "SparseQuadratics", "quadratic_parts", "verify_quadratic",
-           "verify_quadratic_batch", "ROUNDOFF"]
+           "verify_quadratic_batch", "bound_at_one", "ROUNDOFF"]
 
 #: the Lagrangian Hessian must satisfy lambda_min >= -ROUNDOFF * max(1, max|H|): float
 #: round-off only (a genuinely indefinite H means no bound for these multipliers).
@@ -266,6 +266,17 @@ def _verify_one(f0: float, f1, F2, g0, g1, G2: SparseQuadratics, v, tolerances: 
         lam = _lstsq_one(J.T, -grad_f)
     else:
         lam = np.zeros(0)
+    return bound_at_one(f0, f1, F2, g0, g1, G2, lam, fv, tolerances, radius)
+
+
+def bound_at_one(f0: float, f1, F2, g0, g1, G2: SparseQuadratics, lam, fv: float, tolerances: Tolerances,
+                 radius: float | None) -> VerificationBatch:
+    """The Lagrangian bound c(lambda) = min_v L(v, lambda) of one program at the given multipliers ``lam`` (K,),
+    with the rigorous margin of :func:`verify_quadratic_batch` on the ball of ``radius`` and the certificate rule
+    against the value ``fv`` of a feasible point (the second half of :func:`_verify_one`; also the bound of
+    multipliers found by :func:`sospoly.analysis.lagrangian.ascend_one`).  A :class:`VerificationBatch` of one."""
+    n = len(f1)
+    lam = np.asarray(lam, float)
     L0, L1 = f0 + lam @ g0, f1 + lam @ g1
     L2 = F2 + np.bincount(G2.i * n + G2.j, G2.vals[0] * lam[G2.k], n * n).reshape(n, n)
     eig, Q = np.linalg.eigh(L2)

@@ -54,7 +54,7 @@ import functools
 
 import numpy as np
 
-from sospoly.analysis import verify_quadratic_batch
+from sospoly.analysis import ascend_one, bound_at_one, verify_quadratic_batch
 
 from ..model.cameras import power2_scale
 from ..model.exact import dot2, homogeneous_images
@@ -342,6 +342,42 @@ def _verified(v, fin, F, N: int, s, tolerances, size, accepted=True):
             return lb, None
         ub = radius ** 2 / (s * s)
         return lb, good & np.asarray(tolerances.certified(lb, ub, ub / size), bool)
+
+
+def ascended_bound(Cn, F, defined, W: np.ndarray, Xn: np.ndarray, s: float, tolerances, need: float) -> float:
+    """The L2 lower bound (pixels^2) of one subset ``W`` (N,) of one problem (Cn (N, 3, 4), F (K, 3, 3), ``defined``
+    (K,) of :func:`fundamentals`, frame scale ``s``) by the best degree-2 certificate rather than the one at the
+    candidate Xn (3,) (:func:`sospoly.analysis.ascend_one` from the candidate's KKT multipliers, stopping once the
+    bound passes ``need`` pixels^2; the bound itself :func:`sospoly.analysis.bound_at_one` at the multipliers found,
+    with the rigorous margin on the ball of the candidate's norm, rounded as :func:`_verified` rounds).  0 when
+    no bound is found.  Where the relaxation is not tight at the candidate (a wrong match among three views: the
+    KKT multipliers' Lagrangian is indefinite) its SDP value may still exceed what a search needs."""
+    N = len(W)
+    u, _, fin = project_stack(Cn[None], Xn[None])
+    if not (fin[0] and np.isfinite(Xn).all()):
+        return 0.0
+    v = np.where(W[:, None], u[0], 0.0).reshape(-1)
+    I, J = view_pairs(N)
+    held = W[I] & W[J] & defined
+    g0, g1, G2 = epipolar_quadratics(np.where(held[:, None, None], F, 0.0)[None], N)
+    if not (np.isfinite(g0).all() and np.isfinite(g1).all()):
+        return 0.0
+    n = 2 * N
+    radius = float(np.sqrt(v @ v))
+    ver = verify_quadratic_batch(np.zeros(1), np.zeros((1, n)), np.eye(n)[None], g0, g1, G2, v[None],
+                                 tolerances=tolerances, radius=np.array([radius]))
+    found = ascend_one(0.0, np.zeros(n), np.eye(n), g0[0], g1[0], G2, ver.multipliers[0],
+                       target=need * s * s * (1.0 + ASCENT_HEADROOM))
+    if found is None:
+        return 0.0
+    out = bound_at_one(0.0, np.zeros(n), np.eye(n), g0[0], g1[0], G2, found[0], radius * radius, tolerances, radius)
+    with np.errstate(invalid="ignore", over="ignore"):
+        lb = max(min(float(out.lower_bound[0]), radius * radius), 0.0) / (s * s) * ROUND_DOWN
+    return lb if np.isfinite(lb) else 0.0
+
+
+#: :func:`ascended_bound` climbs past the need by this fraction (the rigorous margin then takes a little)
+ASCENT_HEADROOM = 1e-6
 
 
 def _subset_bounds(Cn, F, defined, Xn: np.ndarray, s: np.ndarray, tolerances, accepted=True):

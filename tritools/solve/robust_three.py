@@ -98,6 +98,8 @@ class _ThreeViews:
         lb = self._lower_bound()
         if not self._meets_at_floor(lb) and not s.deadline.expired:
             lb = self._second_chance(lb)
+        if not self._meets_at_floor(lb) and not s.deadline.expired:
+            lb = self._ascend_all(lb)
         if self._meets_at_floor(lb):
             s.set_normalization_scale(SCALE_BOUNDS[1])       # met at the floor: met at the documented scale
             return self._result(lb)
@@ -174,6 +176,22 @@ class _ThreeViews:
         self.bounded &= ~again
         self._bound(again)
         self.lb = np.maximum(self.lb, old)             # both bounds are valid: the larger
+        return self._lower_bound()
+
+    def _ascend_all(self, lb: float) -> float:
+        """The row of all three views, when its term does not meet UB: its bound by the best degree-2 certificate
+        (:func:`~tritools.solve.robust_enum.ascended_bound`, climbing to UB) instead of the one at its candidate
+        (one wrong match: the candidate's KKT multipliers give no bound, the dual's maximum often exceeds UB, and
+        the search's batched SDP of the same certificate is not needed); LB after."""
+        s, row = self.s, len(self.W) - 1
+        if not (self._failing()[row] and np.isfinite(self.Xn[row]).all()):
+            return lb
+        if self.F is None:
+            F, defined = enum.fundamentals(s.C[None], self.Cn[None])
+            self.F, self.defined = F[0], defined[0]
+        bound = enum.ascended_bound(self.Cn, self.F, self.defined, self.W[row], self.Xn[row], self.frame.scale,
+                                    s.tol, s.best_f)
+        self.lb[row] = max(self.lb[row], bound)          # both bounds are valid: the larger
         return self._lower_bound()
 
     def _failing(self) -> np.ndarray:

@@ -122,7 +122,8 @@ def test_refined_rows_rescue_failing_bounds(N, n_out, three, monkeypatch):
     rng = np.random.default_rng(3)
     scenes = [robust_protocol_scene(N, n_out, 1.0, rng) for _ in range(30 if three else 20)]
     decided = {}
-    monkeypatch.setattr(robust_three._ThreeViews, "_ascend_all", lambda self, lb: lb)     # (its own test below)
+    for later in ("_ascend_all", "_solve_all"):                       # (their own test below)
+        monkeypatch.setattr(robust_three._ThreeViews, later, lambda self, lb: lb)
     for on in (True, False):
         if not on:
             monkeypatch.setattr(robust_three._ThreeViews, "_second_chance", lambda self, lb: lb)
@@ -137,17 +138,22 @@ def test_refined_rows_rescue_failing_bounds(N, n_out, three, monkeypatch):
             _check_against_reference(r, P, x, C, X)
 
 
-def test_ascended_all_views_bound_decides_more_and_stays_below_the_reference(monkeypatch):
-    """One wrong match among three views: the candidate's KKT multipliers give the all-views set no bound, the best
-    degree-2 certificate (sospoly.analysis.ascend_one, ``_ascend_all``) often exceeds UB: the three-view path decides
-    those scenes instead of handing them to the branch and bound; every answer below the reference (enumeration
-    of the inlier sets with multi-start L2 optima).  Switched off, fewer scenes are decided."""
+@pytest.mark.parametrize("step", ["_ascend_all", "_solve_all"])
+def test_all_views_bounds_decide_more_and_stay_below_the_reference(step, monkeypatch):
+    """One wrong match among three views: the candidate's KKT multipliers give the all-views set no bound.  The
+    best degree-2 certificate (sospoly.analysis.ascend_one, ``_ascend_all``) often exceeds UB; where it does not,
+    the search's own sub-problem (Theorem 1 at delta = 4 stopped at UB, ``_solve_all``) does: the three-view path
+    decides those scenes instead of handing them to the branch and bound; every answer below the reference
+    (enumeration of the inlier sets with multi-start L2 optima).  Each step switched off alone (the other off
+    too), fewer scenes are decided."""
     rng = np.random.default_rng(7)
     scenes = [robust_protocol_scene(3, 1, noise, rng) for noise in (1.0, 5.0) for _ in range(20)]
+    other = {"_ascend_all": "_solve_all", "_solve_all": "_ascend_all"}[step]
+    monkeypatch.setattr(robust_three._ThreeViews, other, lambda self, lb: lb)
     decided = {}
     for on in (True, False):
         if not on:
-            monkeypatch.setattr(robust_three._ThreeViews, "_ascend_all", lambda self, lb: lb)
+            monkeypatch.setattr(robust_three._ThreeViews, step, lambda self, lb: lb)
         out = [_enumerated(P, x, three=True, monkeypatch=monkeypatch)[0] for P, x, _, _ in scenes]
         decided[on] = [r is not None for r in out]
         if on:

@@ -32,9 +32,10 @@ import numpy as np
 
 from ..model.normalize import SCALE_BOUNDS
 from . import robust_enum as enum
-from .robust_bounds import ROUND_DOWN
+from .robust_bounds import FULL_FROM_DELTA, ROUND_DOWN, SUB_TIME_LIMIT
 from .robust_costs import point_distances2
 from .robust_enum_run import LO_ROUNDS, eligible, enumerated_result, lower_bounds, refine_row_one
+from .robust_subsolve import solve_subproblem
 
 __all__ = ["three_view_tls", "three_terms", "three_lower_bound", "exact_terms", "three_rest", "VIEWS", "POLISH_STEPS"]
 
@@ -100,6 +101,8 @@ class _ThreeViews:
             lb = self._second_chance(lb)
         if not self._meets_at_floor(lb) and not s.deadline.expired:
             lb = self._ascend_all(lb)
+        if not self._meets_at_floor(lb) and not s.deadline.expired:
+            lb = self._solve_all(lb)
         if self._meets_at_floor(lb):
             s.set_normalization_scale(SCALE_BOUNDS[1])       # met at the floor: met at the documented scale
             return self._result(lb)
@@ -192,6 +195,26 @@ class _ThreeViews:
         bound = enum.ascended_bound(self.Cn, self.F, self.defined, self.W[row], self.Xn[row], self.frame.scale,
                                     s.tol, s.best_f)
         self.lb[row] = max(self.lb[row], bound)          # both bounds are valid: the larger
+        return self._lower_bound()
+
+    def _solve_all(self, lb: float) -> float:
+        """The row of all three views, when it alone keeps LB below UB: the sub-problem the search would solve for
+        it (:func:`~tritools.solve.robust_subsolve.solve_subproblem`: Theorem 1 at delta = 4 first, stopping once
+        its rigorous bound reaches UB), here rather than after the search's set-up; its estimate offered (UB may
+        fall); LB after."""
+        s, row = self.s, len(self.W) - 1
+        failing = self._failing()
+        if not failing[row] or failing[:row].any():
+            return lb
+        remaining = s.deadline.remaining()
+        limit = SUB_TIME_LIMIT if remaining is None else min(SUB_TIME_LIMIT, remaining)
+        out = solve_subproblem(s.C, s.regions, s.opts, light=False, from_delta=FULL_FROM_DELTA, limit=limit,
+                               need=s.best_f, points=True)
+        if out is None:
+            return lb
+        self.lb[row] = max(self.lb[row], out.lb)
+        if out.X is not None:
+            s.offer(out.X)
         return self._lower_bound()
 
     def _failing(self) -> np.ndarray:

@@ -129,6 +129,10 @@ def _credit_others(searches: list, ran: set, seconds: float) -> None:
             credit(s, seconds)
 
 
+#: rows per problem bounded by the dual ascent in the second round at most (:meth:`_Group._ascend`; each ~0.5-3 ms)
+ASCENT_ROWS = 3
+
+
 def _run(group: list, scales) -> list:
     """:meth:`_Group.run`; where a stack fails on degenerate data, each problem alone (so that one problem never
     decides another's path); None for a problem that fails alone (its search runs)."""
@@ -367,7 +371,30 @@ class _Group:
         more = ~self.bounded & (live & keep)[:, None] & self._feeding()
         if more.any():
             self._bound(more)
+        self._ascend(live & keep & ~self._expired())
         self._decide(np.nonzero(keep)[0], final=True)
+
+    def _ascend(self, probs: np.ndarray) -> None:
+        """The bounded rows of the problems ``probs`` (P,) whose term still does not meet UB: their bound by the best
+        degree-2 certificate (:func:`~tritools.solve.robust_enum.ascended_bound`, climbing to what the term needs,
+        UB - c^2(V - S)) instead of the one at their candidate (a set holding a wrong match: the KKT multipliers
+        give no bound, the dual's maximum often passes the need), the larger kept; at most :data:`ASCENT_ROWS`
+        rows per problem, the largest sets first (the set of all views is the one a wrong match leaves open)."""
+        rows = self._failing() & self.bounded & probs[:, None] & self.has
+        if not rows.any():
+            return
+        F, defined = self._fundamentals
+        ub = self._ub()
+        order = np.argsort(-self.size, kind="stable")
+        for p in np.nonzero(rows.any(axis=1))[0]:
+            for m in [m for m in order if rows[p, m]][:ASCENT_ROWS]:
+                if self.group[p].deadline.expired:
+                    break
+                b = enum.ascended_bound(self.Cn[p], F[p], defined[p], self.W[m], self.Xn[p, m],
+                                        self.frames[p].scale, self.tol, float(ub[p] - self.rest[p, m]))
+                if b > self.lb[p, m]:
+                    self.lb[p, m] = b
+                    self._terms_cache = None
 
     def _second_chance(self, probs: np.ndarray) -> None:
         """The bounded rows of the problems ``probs`` (P,) whose term does not meet UB, refined to convergence on their

@@ -74,7 +74,7 @@ def corollary1_point_structure(N: int) -> PointStructure:
     exps = np.zeros((len(I), 3, 3, n), np.int64)
     eq = []
     for k, (i, j) in enumerate(zip(I, J)):
-        if k % 64 == 0:                     # N(N - 1)/2 pairs: a long build at large N stops at the active deadline
+        if k % 8 == 0:                      # N(N - 1)/2 pairs: a long build at large N stops at the active deadline
             check_deadline("building the batched Corollary 1 structure")
         for a in range(3):
             for b in range(3):

@@ -37,11 +37,16 @@ def l2_min(cams, x, starts, tol=1e-14) -> float:
 
 def tls_by_subsets(cams, x, c, starts, tol=1e-12, with_ray=True) -> float:
     """min over inlier sets S (|S| >= 2) of f_TLS at S's local L2 minimisers from ``starts`` (and, ``with_ray``,
-    the value sum of all but the largest c^2 of a point on one view's ray): an attained value, >= the TLS optimum."""
+    the value sum of all but the largest c^2 of a point on one view's ray): an attained value, >= the TLS optimum.
+    Sets whose c^2(V - S) alone reaches the best value so far are skipped (f_TLS = min over S of L2(S) + c^2(V - S);
+    a point that does better has another inlier set, enumerated too)."""
     N = len(x)
-    best = float(np.sum(np.sort(np.asarray(c, float) ** 2)[:-1])) if with_ray else np.inf
-    for k in range(2, N + 1):
+    c2 = np.asarray(c, float) ** 2 * np.ones(N)
+    best = float(np.sum(np.sort(c2)[:-1])) if with_ray else np.inf
+    for k in range(N, 1, -1):                    # large sets first: UB falls fast and prunes the small ones
         for S in map(list, itertools.combinations(range(N), k)):
+            if float(np.sum(np.delete(c2, S))) >= best:
+                continue                         # every X is worth >= c^2(V - S) with S its inliers: no better
             for X0 in starts:
                 X = least_squares(_residuals(cams[S], x[S]), X0, xtol=tol, ftol=tol).x
                 u = np.einsum("nij,j->ni", cams, np.append(X, 1.0))

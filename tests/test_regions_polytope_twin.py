@@ -66,3 +66,20 @@ def test_closest_point_is_no_farther_than_boundary_samples():
                 assert np.all(np.abs(poly.B @ c + poly.c) <= 1.0 + 1e-9)
             else:
                 assert np.array_equal(c, q)
+
+
+def test_gamma_of_one_point_equals_the_stacked_loop():
+    """geometry.gamma_validated of one point (the regions' one-point paths) equals its value in a stack of points to
+    round-off (the projections' matrix products take shape-dependent kernels), with mixed regions and polygons."""
+    from tritools.model.geometry import gamma_validated
+    from tritools.scene import uncertain_problem
+
+    P, R, X = uncertain_problem(8, seed=4, kinds="mixed")
+    rng = np.random.default_rng(3)
+    Xs = X + rng.normal(size=(12, 3)) * 0.3
+    stacked = gamma_validated(Xs, P, R)
+    one = np.array([gamma_validated(Xi[None], P, R)[0] for Xi in Xs])
+    np.testing.assert_allclose(one, stacked, rtol=1e-12, atol=0)
+    polys = [r if isinstance(r, Polytope) else Polytope.box(r.center, [1.0, 2.0]) for r in R]
+    np.testing.assert_allclose(np.array([gamma_validated(Xi[None], P, polys)[0] for Xi in Xs]),
+                               gamma_validated(Xs, P, polys), rtol=1e-12, atol=0)

@@ -19,7 +19,8 @@ p is SOS iff p = b(v)^T Q b(v) with Q PSD for the monomials b(v) of degree <= de
    which G approximates; with V the eigenvectors of G above ``kernel_rel * lambda_max``
    (:meth:`~sospoly.Tolerances.range_mask`), Q = V R V^T where R (r x r) is the least-squares solution of the
    coefficient identity nearest V^T G V.  Q has rank r by construction, its identity residual is the least
-   squares' one.
+   squares' one, which must be at round-off level (``REFIT_RESIDUAL``): an SOS p on that face satisfies the
+   linear system exactly, so a residual within ``identity_residual`` but far above round-off means p is not there.
 5. **The verdict** is the a-posteriori rule of every sospoly certificate, in the balanced units of step 1:
    p is SOS (``is_sos=True``, status ``FEASIBLE``) when a Gram matrix -- the solver's, the re-fitted one or the
    solver's unsettled iterate, in that order -- has coefficient residual
@@ -50,7 +51,16 @@ from .lowering.conic import GramForm, lower
 from .status import SolveStatus
 from .tolerances import DEFAULT_TOLERANCES, Tolerances, as_tolerances
 
-__all__ = ["SOSResult", "is_sos", "face_refit", "REFIT_MAX_SIDE", "REFIT_ITERATIONS"]
+__all__ = ["SOSResult", "is_sos", "face_refit", "REFIT_MAX_SIDE", "REFIT_ITERATIONS", "REFIT_RESIDUAL"]
+
+#: a re-fitted Gram matrix is accepted only when its coefficient residual (relative, balanced units) is at most this:
+#: the re-fit is a linear least-squares solve on a face, which an SOS p on that face satisfies to round-off (~1e-16
+#: on Rosenbrock and its scalings; ~1e-12 from an iterate 1e-4 off, where the alternating projections settle at
+#: REFIT_SETTLED); a larger residual means p is not there (Rosenbrock - 1e-4, negative at (1, 1), fitted to 4.6e-8 <
+#: identity_residual, review 13 F1)
+REFIT_RESIDUAL = 1e-10
+#: how the re-fitted candidate is named (:func:`_gram_candidates`)
+REFIT = "Gram matrix re-fitted"
 
 log = logging.getLogger(__name__)
 
@@ -278,6 +288,8 @@ def is_sos(p: Polynomial | float, *, backend: str | object | None = None, form: 
         return SOSResult(False, status, None, bal.full, message=msg)
     for how, Q in _gram_candidates(status, G, gb, t, tol):
         ok, resid, lam = _verdict(Q, gb, t, tol)
+        if ok and how.startswith(REFIT) and resid > REFIT_RESIDUAL:
+            ok = False                   # p is not on that face: its least squares do not close (module docstring)
         if ok:
             gram, decomposition = _in_caller_units(Q, bal, tol)
             note = "" if how == "solver" else f"the solver ended {status.value} ({msg}); {how}"
@@ -296,6 +308,6 @@ def _gram_candidates(status: SolveStatus, G: np.ndarray, gb: GramBasis, t: np.nd
         Q = face_refit(G, gb, t, tol)
         if Q is not None:
             rank = int(np.sum(tol.range_mask(np.linalg.eigvalsh(Q))))
-            yield f"Gram matrix re-fitted on the face of its iterate's range (rank {rank} of {gb.size})", Q
+            yield f"{REFIT} on the face of its iterate's range (rank {rank} of {gb.size})", Q
     if not status.ok:
         yield "its iterate passes the a-posteriori checks", G

@@ -4,7 +4,7 @@ vectorised rule it mirrors:
 * :func:`tritools.model.frame.world_origin_one` vs :func:`tritools.model.frame.world_origins` (bit for bit);
 * :func:`tritools.solve.robust_three.three_rest` / ``exact_terms`` vs the masked sums of the stack (bit for bit);
 * :func:`tritools.solve.report.projections_and_spread_one` vs ``projections_and_spread_views`` (bit for bit);
-* :func:`tritools.solve.robust_enum_run.refine_row_one` vs :func:`~tritools.solve.robust_enum_run.refine_rows` (up
+* :func:`tritools.solve.robust_enum.refine_row_one` vs :func:`~tritools.solve.robust_enum.refine_rows` (up
   to round-off: the sums in view order instead of BLAS's), and both against scipy's least squares on the set.
 
 Cameras: protocol scenes, rescaled (1e-6..1e8), georeferenced (offsets 1e3..1e9), points near a principal plane,
@@ -21,7 +21,8 @@ from tritools.solve import robust_enum as enum
 from tritools.solve import robust_three
 from tritools.solve.report import projections_and_spread, projections_and_spread_one, projections_and_spread_views
 from tritools.solve.robust_bounds import ROUND_DOWN
-from tritools.solve.robust_enum_run import lower_bounds, refine_row_one, refine_rows
+from tritools.solve.robust_enum import refine_row_one, refine_rows
+from tritools.solve.robust_enum_run import lower_bounds
 
 
 def _cameras(rng, N, kind):

@@ -58,14 +58,16 @@ from sospoly.analysis import ascend_one, bound_at_one, verify_quadratic_batch
 
 from ..model.cameras import power2_scale
 from ..model.exact import dot2, homogeneous_images
+from ..model.lm_one import refine_point_one
 from ..model.normalize import RHO_FLOOR_REL, SCALE_BOUNDS, Normalization
-from ..model.stacked import (damped_step, dlt_stack, epipolar_quadratics, fundamental_stack, median_rows, next_damping,
-                             norms, null_vectors, pixel_scales, project_quiet, project_stack, view_pairs)
+from ..model.stacked import (damped_step, dlt_stack, epipolar_quadratics, fundamental_stack, gauss_newton_polish,
+                             median_rows, next_damping, norms, null_vectors, pixel_scales, project_quiet, project_stack,
+                             refine_points_stack, view_pairs)
 from .robust_bounds import ROUND_DOWN
 
 __all__ = ["enum_frame", "enum_frames", "subset_masks", "closure", "enum_candidates", "enum_bounds",
-           "enum_bounds_rows", "fundamentals", "row_of", "subset_of", "ENUM_MAX_VIEWS", "POLISH_STEPS", "MASKED_CAMERA",
-           "ENUMERATED"]
+           "enum_bounds_rows", "fundamentals", "row_of", "subset_of", "refine_rows", "refine_row_one", "ascended_bound",
+           "ENUM_MAX_VIEWS", "POLISH_STEPS", "MASKED_CAMERA", "ENUMERATED", "ASCENT_HEADROOM"]
 
 #: the enumeration runs for point problems with at most this many views in single calls (the branch and bound
 #: beyond; batches: :data:`tritools.solve.robust_batch.BATCH_ENUM_MAX_VIEWS`, 10 views, 1013 sets).  Measured
@@ -246,6 +248,32 @@ def enum_candidates(Cn: np.ndarray, W: np.ndarray, steps: int | None = None, by_
         Xn = _polish(Cm, np.where(ok[:, None] & np.isfinite(X0), X0, 0.0), steps)
         out[r] = np.where(np.isfinite(Xn).all(axis=1)[:, None], Xn, np.nan)
     return out
+
+
+def refine_rows(Cn: np.ndarray, X0: np.ndarray, inS: np.ndarray) -> tuple:
+    """(Xn (R, 3), ok (R,)): normalised candidates X0 (R, 3) refined to convergence on their inlier sets ``inS``
+    (R, N) by :func:`tritools.model.stacked.refine_points_stack` and one Gauss-Newton step (a row's few polish
+    steps leave the L2 optimum of a set short by ~1e-6 in X, though not in f; the step finishes a weak direction
+    the damped LM left, tiny baselines), the views outside the set masked; Cn (R, N, 3, 4) each row's normalised
+    cameras (observations at the origin).  A stack of one row (a single call): :func:`refine_row_one`."""
+    if len(X0) == 1:
+        Xn, ok = refine_row_one(Cn[0], X0[0], np.flatnonzero(inS[0]).tolist())
+        return Xn[None], np.array([ok])
+    Cm = np.where(inS[:, :, None, None], Cn, MASKED_CAMERA)
+    zeros = np.zeros(inS.shape + (2,))
+    Xn, ok = refine_points_stack(Cm, zeros, X0, np.ones(len(X0), bool))
+    Xn = gauss_newton_polish(Cm, zeros, Xn, ok)
+    return Xn, ok & np.isfinite(Xn).all(axis=1)
+
+
+def refine_row_one(Cn: np.ndarray, X0: np.ndarray, views: list) -> tuple:
+    """The scalar twin of :func:`refine_rows` for one row (:func:`tritools.model.lm_one.refine_point_one` on Python
+    floats): (Xn (3,), ok) for one problem's normalised cameras Cn (N, 3, 4), a start X0 (3,) and its set's views
+    (ascending).  The masked views are left out: their residual and Jacobian are 0 at every X, terms that add
+    nothing.  Equal to :func:`refine_rows` up to round-off (tests/test_single_call_twins.py)."""
+    C = Cn.tolist()
+    X, ok, _ = refine_point_one([C[i] for i in views], [(0.0, 0.0)] * len(views), X0.tolist())
+    return np.array(X), ok
 
 
 def fundamentals(C: np.ndarray, Cn: np.ndarray) -> tuple:

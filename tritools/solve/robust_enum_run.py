@@ -38,16 +38,13 @@ import time
 import numpy as np
 
 from ..model.normalize import SCALE_BOUNDS
-from ..model.lm_one import refine_point_one
-from ..model.stacked import gauss_newton_polish, refine_points_stack
 from . import robust_enum as enum
 from .robust_bounds import ROUND_DOWN
 from .robust_costs import point_distances2_rows, point_distances2_stack
 from .robust_drive import credit     # (the drive's rule: per-problem time limits)
 
-__all__ = ["enumerate_tls", "enumerate_many", "eligible", "closed_terms", "lower_bounds", "refine_rows",
-           "refine_row_one", "enumerated_result", "enumerated_results", "ENUM_CHUNK", "ENUM_ROWS",
-           "SINGLE_POLISH_STEPS", "THREE_VIEW_PATH"]
+__all__ = ["enumerate_tls", "enumerate_many", "eligible", "closed_terms", "lower_bounds", "enumerated_result",
+           "enumerated_results", "ENUM_CHUNK", "ENUM_ROWS", "SINGLE_POLISH_STEPS", "THREE_VIEW_PATH", "ASCENT_ROWS"]
 
 log = logging.getLogger(__name__)
 
@@ -181,32 +178,6 @@ def lower_bounds(ub: np.ndarray, terms: np.ndarray, c2: np.ndarray) -> np.ndarra
         small = np.sum(np.where(np.eye(N, dtype=bool)[None], 0.0, c2[:, None, :]), axis=2)   # |S| = 1: exact
         return np.minimum.reduce([ub, np.min(terms, axis=1), np.min(small, axis=1) * ROUND_DOWN,
                                   np.sum(c2, axis=1) * ROUND_DOWN])
-
-
-def refine_rows(Cn: np.ndarray, X0: np.ndarray, inS: np.ndarray) -> tuple:
-    """(Xn (R, 3), ok (R,)): normalised candidates X0 (R, 3) refined to convergence on their inlier sets ``inS``
-    (R, N) by :func:`tritools.model.stacked.refine_points_stack` and one Gauss-Newton step (a row's few polish
-    steps leave the L2 optimum of a set short by ~1e-6 in X, though not in f; the step finishes a weak direction
-    the damped LM left, tiny baselines), the views outside the set masked; Cn (R, N, 3, 4) each row's normalised
-    cameras (observations at the origin).  A stack of one row (a single call): :func:`refine_row_one`."""
-    if len(X0) == 1:
-        Xn, ok = refine_row_one(Cn[0], X0[0], np.flatnonzero(inS[0]).tolist())
-        return Xn[None], np.array([ok])
-    Cm = np.where(inS[:, :, None, None], Cn, enum.MASKED_CAMERA)
-    zeros = np.zeros(inS.shape + (2,))
-    Xn, ok = refine_points_stack(Cm, zeros, X0, np.ones(len(X0), bool))
-    Xn = gauss_newton_polish(Cm, zeros, Xn, ok)
-    return Xn, ok & np.isfinite(Xn).all(axis=1)
-
-
-def refine_row_one(Cn: np.ndarray, X0: np.ndarray, views: list) -> tuple:
-    """The scalar twin of :func:`refine_rows` for one row (:func:`tritools.model.lm_one.refine_point_one` on Python
-    floats): (Xn (3,), ok) for one problem's normalised cameras Cn (N, 3, 4), a start X0 (3,) and its set's views
-    (ascending).  The masked views are left out: their residual and Jacobian are 0 at every X, terms that add
-    nothing.  Equal to :func:`refine_rows` up to round-off (tests/test_single_call_twins.py)."""
-    C = Cn.tolist()
-    X, ok, _ = refine_point_one([C[i] for i in views], [(0.0, 0.0)] * len(views), X0.tolist())
-    return np.array(X), ok
 
 
 def _first_of_runs(sorted_keys: np.ndarray) -> np.ndarray:
@@ -398,14 +369,14 @@ class _Group:
 
     def _second_chance(self, probs: np.ndarray) -> None:
         """The bounded rows of the problems ``probs`` (P,) whose term does not meet UB, refined to convergence on their
-        own sets (:func:`refine_rows`: a row's few polish steps may leave it short of the set's L2 optimum, and a
-        Lagrangian bound taken there fails or falls short), offered (UB may fall: a set's optimum the polish did not
-        reach) and bounded again, the larger of the two bounds kept (both are valid)."""
+        own sets (:func:`~.robust_enum.refine_rows`: a row's few polish steps may leave it short of the set's L2
+        optimum, and a Lagrangian bound taken there fails or falls short), offered (UB may fall: a set's optimum the
+        polish did not reach) and bounded again, the larger of the two bounds kept (both are valid)."""
         rows = self._failing() & self.bounded & probs[:, None] & self.has
         pp, mm = np.nonzero(rows)
         if not pp.size:
             return
-        Xr, ok = _by_rows(refine_rows, len(pp), self.Cn[pp], self.Xn[pp, mm], self.W[mm])
+        Xr, ok = _by_rows(enum.refine_rows, len(pp), self.Cn[pp], self.Xn[pp, mm], self.W[mm])
         pp, mm, Xr = pp[ok], mm[ok], Xr[ok]
         if not pp.size:
             return
@@ -496,8 +467,8 @@ class _Group:
             self.group[p].offer(X, d)
 
     def _refine(self, picks: list) -> dict:
-        """problem -> the candidate refined on its inlier set S (normalised, :func:`refine_rows`); absent where it
-        fails."""
+        """problem -> the candidate refined on its inlier set S (normalised, :func:`~.robust_enum.refine_rows`); absent
+        where it fails."""
         if not picks:
             return {}
         P = np.array([p for p, _, _ in picks])
@@ -505,7 +476,7 @@ class _Group:
         for r, (_, _, S) in enumerate(picks):
             inS[r, S] = True
         X0 = np.array([self.frames[p].normalized_point(X) for p, X, _ in picks])
-        Xn, ok = refine_rows(self.Cn[P], X0, inS)
+        Xn, ok = enum.refine_rows(self.Cn[P], X0, inS)
         return {int(p): Xn[r] for r, p in enumerate(P) if ok[r]}
 
     def _bound(self, rows: np.ndarray) -> None:

@@ -9,7 +9,7 @@ and the superadditive closure of L2LB(V) is its maximum with the largest pair bo
 L2* is 0).  :func:`three_view_tls` takes the steps of :class:`tritools.solve.robust_enum_run._Group` for one
 problem with the same functions and rules -- the frame (:func:`~tritools.solve.robust_enum.enum_frame`), the four
 candidates in one masked stack (:func:`~tritools.solve.robust_enum.enum_candidates`), the best of them offered and
-refined on its inlier set (:func:`~tritools.solve.robust_enum_run.refine_row_one`, inlier set -> its L2 optimum ->
+refined on its inlier set (:func:`~tritools.solve.robust_enum.refine_row_one`, inlier set -> its L2 optimum ->
 inlier set, at most :data:`~tritools.solve.robust_enum_run.LO_ROUNDS` rounds), the Lagrangian bounds
 (:func:`~tritools.solve.robust_enum.enum_bounds_rows`) of the sets whose c^2(V - S) alone does not meet UB and of
 the pairs holding a view outside the best inlier set (one stacked verification: the whole set's bound with them,
@@ -34,7 +34,7 @@ from ..model.normalize import SCALE_BOUNDS
 from . import robust_enum as enum
 from .robust_bounds import FULL_FROM_DELTA, ROUND_DOWN, SUB_TIME_LIMIT
 from .robust_costs import point_distances2
-from .robust_enum_run import LO_ROUNDS, eligible, enumerated_result, lower_bounds, refine_row_one
+from .robust_enum_run import LO_ROUNDS, eligible, enumerated_result, lower_bounds
 from .robust_subsolve import solve_subproblem
 
 __all__ = ["three_view_tls", "three_terms", "three_lower_bound", "exact_terms", "three_rest", "VIEWS", "POLISH_STEPS"]
@@ -145,7 +145,7 @@ class _ThreeViews:
             if len(S) < 2 or frozenset(S) in refined:
                 return
             refined.add(frozenset(S))
-            Xr, ok = refine_row_one(self.Cn, fr.normalized_point(X), S)
+            Xr, ok = enum.refine_row_one(self.Cn, fr.normalized_point(X), S)
             if not ok:
                 return
             Xw = fr.world_point(Xr)
@@ -170,7 +170,7 @@ class _ThreeViews:
             return lb
         again = np.zeros(len(self.W), bool)
         for row in m.tolist():
-            Xr, ok = refine_row_one(self.Cn, self.Xn[row], np.nonzero(self.W[row])[0].tolist())
+            Xr, ok = enum.refine_row_one(self.Cn, self.Xn[row], np.nonzero(self.W[row])[0].tolist())
             if ok:
                 self.Xn[row] = Xr
                 s.offer(self.frame.world_point(Xr))

@@ -46,6 +46,20 @@ def _check_against_reference(res, P, x, c, X_true):
         assert f_ub <= f_ref * (1 + 1e-6), (f_ub, f_ref)
 
 
+def _on_and_off(scenes, three, monkeypatch, switch_off):
+    """(the results of ``scenes`` with a step on, which scenes were decided on, which off): ``switch_off()`` applies
+    the monkeypatches that turn the step off between the two passes."""
+    decided = {}
+    for on in (True, False):
+        if not on:
+            switch_off()
+        out = [_enumerated(P, x, three=three, monkeypatch=monkeypatch)[0] for P, x, _, _ in scenes]
+        decided[on] = [r is not None for r in out]
+        if on:
+            rescued = out
+    return rescued, decided[True], decided[False]
+
+
 @pytest.mark.parametrize("n_out, noise", [(0, 1.0), (1, 1.0), (1, 5.0), (2, 5.0)])
 def test_decides_where_the_stack_decides_with_the_same_answer(n_out, noise, monkeypatch):
     """Protocol scenes: wherever the stack of one decides, the three-view path decides too (it bounds the same rows
@@ -121,19 +135,16 @@ def test_refined_rows_rescue_failing_bounds(N, n_out, three, monkeypatch):
     below the reference.  Switched off, fewer scenes are decided."""
     rng = np.random.default_rng(3)
     scenes = [robust_protocol_scene(N, n_out, 1.0, rng) for _ in range(30 if three else 20)]
-    decided = {}
     for later in ("_ascend_all", "_solve_all"):                       # (their own test below)
         monkeypatch.setattr(robust_three._ThreeViews, later, lambda self, lb: lb)
-    for on in (True, False):
-        if not on:
-            monkeypatch.setattr(robust_three._ThreeViews, "_second_chance", lambda self, lb: lb)
-            monkeypatch.setattr(run_mod._Group, "_second_chance", lambda self, probs: None)
-        out = [_enumerated(P, x, three=three, monkeypatch=monkeypatch)[0] for P, x, _, _ in scenes]
-        decided[on] = [r is not None for r in out]
-        if on:
-            rescued = out
-    assert sum(decided[True]) > sum(decided[False])
-    for (P, x, X, _), r, off in zip(scenes, rescued, decided[False]):
+
+    def switch_off():
+        monkeypatch.setattr(robust_three._ThreeViews, "_second_chance", lambda self, lb: lb)
+        monkeypatch.setattr(run_mod._Group, "_second_chance", lambda self, probs: None)
+
+    rescued, on, off_ = _on_and_off(scenes, three, monkeypatch, switch_off)
+    assert sum(on) > sum(off_)
+    for (P, x, X, _), r, off in zip(scenes, rescued, off_):
         if r is not None and not off:
             _check_against_reference(r, P, x, C, X)
 
@@ -150,15 +161,9 @@ def test_all_views_bounds_decide_more_and_stay_below_the_reference(step, monkeyp
     scenes = [robust_protocol_scene(3, 1, noise, rng) for noise in (1.0, 5.0) for _ in range(20)]
     other = {"_ascend_all": "_solve_all", "_solve_all": "_ascend_all"}[step]
     monkeypatch.setattr(robust_three._ThreeViews, other, lambda self, lb: lb)
-    decided = {}
-    for on in (True, False):
-        if not on:
-            monkeypatch.setattr(robust_three._ThreeViews, step, lambda self, lb: lb)
-        out = [_enumerated(P, x, three=True, monkeypatch=monkeypatch)[0] for P, x, _, _ in scenes]
-        decided[on] = [r is not None for r in out]
-        if on:
-            rescued = out
-    assert sum(decided[True]) > sum(decided[False])
+    rescued, on, off = _on_and_off(scenes, True, monkeypatch,
+                                   lambda: monkeypatch.setattr(robust_three._ThreeViews, step, lambda self, lb: lb))
+    assert sum(on) > sum(off)
     for (P, x, X, _), r in zip(scenes, rescued):
         if r is not None:
             _check_against_reference(r, P, x, C, X)
@@ -173,15 +178,9 @@ def test_stacked_enumeration_ascent_decides_more_and_stays_below_the_reference(m
         for noise in (1.0, 5.0):
             rng = np.random.default_rng(13)
             scenes += [robust_protocol_scene(N, n_out, noise, rng) for _ in range(20)]
-    decided = {}
-    for on in (True, False):
-        if not on:
-            monkeypatch.setattr(run_mod._Group, "_ascend", lambda self, probs: None)
-        out = [_enumerated(P, x, three=False, monkeypatch=monkeypatch)[0] for P, x, _, _ in scenes]
-        decided[on] = [r is not None for r in out]
-        if on:
-            rescued = out
-    assert sum(decided[True]) > sum(decided[False])
+    rescued, on, off = _on_and_off(scenes, False, monkeypatch,
+                                   lambda: monkeypatch.setattr(run_mod._Group, "_ascend", lambda self, probs: None))
+    assert sum(on) > sum(off)
     for (P, x, X, _), r in zip(scenes, rescued):
         if r is not None:
             _check_against_reference(r, P, x, C, X)

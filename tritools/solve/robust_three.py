@@ -189,9 +189,7 @@ class _ThreeViews:
         s, row = self.s, len(self.W) - 1
         if not (self._failing()[row] and np.isfinite(self.Xn[row]).all()):
             return lb
-        if self.F is None:
-            F, defined = enum.fundamentals(s.C[None], self.Cn[None])
-            self.F, self.defined = F[0], defined[0]
+        self._fundamentals()
         bound = enum.ascended_bound(self.Cn, self.F, self.defined, self.W[row], self.Xn[row], self.frame.scale,
                                     s.tol, s.best_f)
         self.lb[row] = max(self.lb[row], bound)          # both bounds are valid: the larger
@@ -228,15 +226,19 @@ class _ThreeViews:
         if not rows.any():
             return
         self.bounded |= rows
-        if self.F is None:
-            F, defined = enum.fundamentals(self.s.C[None], self.Cn[None])
-            self.F, self.defined = F[0], defined[0]
+        self._fundamentals()
         m = np.nonzero(rows)[0]
         R = len(m)
         self.lb[m], _ = enum.enum_bounds_rows(
             np.broadcast_to(self.Cn, (R,) + self.Cn.shape), np.broadcast_to(self.F, (R,) + self.F.shape),
             np.broadcast_to(self.defined, (R,) + self.defined.shape), self.W[m], self.Xn[m],
             np.full(R, self.frame.scale), self.s.tol, accepted=False)
+
+    def _fundamentals(self) -> None:
+        """The view pairs' fundamental matrices (``F``, ``defined``), computed once."""
+        if self.F is None:
+            F, defined = enum.fundamentals(self.s.C[None], self.Cn[None])
+            self.F, self.defined = F[0], defined[0]
 
     def _terms(self) -> list:
         return three_terms(self.lb.tolist(), self.rest.tolist())

@@ -45,8 +45,12 @@ X_BETTER = np.array([0.20701274495340752, -0.5079592562986958, -0.23786695133141
 def test_decision_scale_is_capped_by_the_l2_scale():
     from tritools.solve.robust import decision_scale
 
+    from tritools.model.normalize import normalization_for
+
     s2 = decision_scale(CAMS, REGIONS, np.array([1e10]))
-    assert s2 < 1.0                       # pixel data of a few hundred px: 1 / s^2 is well below 1 px^2
+    # the L2 scale: here the ellipse border's radius (the regions' offset bounds the image scale), far below c^2
+    assert s2 == pytest.approx(1.0 / normalization_for(CAMS, REGIONS).scale ** 2, rel=1e-12)
+    assert s2 <= REGIONS[3].center_offset ** 2 * (1 + 1e-12)
     assert decision_scale(CAMS, REGIONS, np.array([1e-6])) == 1e-6     # small thresholds keep their own scale
 
 

@@ -9,6 +9,13 @@ Levenberg-Marquardt on the reprojection residuals), an approximation of gamma* f
 c = 2N gamma'^2 is O(1), the scale at which the certificate tolerances of
 :class:`sospoly.Tolerances` are meaningful.
 
+The regions' offset: the auxiliary points y_i of a region whose centre is not one of its points (an ellipse
+border) are at least ``Region.center_offset`` from the shift t_i, whatever the residual, so s is at most one over
+the largest offset (:func:`normalization_for`).  Without it, a border of radius 3.8 px around consistent centres
+(rho at its floor, 0.008 px) put every border point ~470 units from the origin: the delta = 4 program's equality
+multipliers then nearly cancel the level c (coefficients 1 against 5e-6), and Clarabel ended every attempt of its
+retry chain in a numerical error (30 s, gamma_LB = 0; with the offset: certified in 4 s).
+
 The floor: noise-free data have rho = 0, so rho is floored at ``RHO_FLOOR_REL`` times the views'
 median *pixel scale* (:func:`tritools.model.stacked.pixel_scales`: pixels per radian, the focal
 length of a finite camera) -- a property of the cameras, not of the coordinates' magnitude, so a
@@ -42,6 +49,7 @@ with the scalar twin :func:`tritools.model.stacked.refine_point`: equal up to ro
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -409,7 +417,12 @@ def normalization_for(cameras: np.ndarray, regions, enabled: bool = True) -> Nor
     st = normalization_stack(np.asarray(cameras, float)[None], centers[None])
     if not st.ok[0]:
         return Normalization(1.0, centers, np.zeros(3), 1.0, float(resolutions(np.ones(1), centers[None])[0]))
-    return st.item(0)
+    norm = st.item(0)
+    offset = max(float(r.center_offset) for r in regions)
+    if math.isfinite(offset) and offset * norm.scale > 1.0:       # the regions' offset bounds the scale
+        s = float(_clip_scale(np.array([1.0 / offset]))[0])
+        norm = dataclasses.replace(norm, scale=s, resolution=float(resolutions(np.array([s]), centers[None])[0]))
+    return norm
 
 
 

@@ -330,9 +330,14 @@ class Region(abc.ABC):
         fast path, :mod:`tritools.solve.discs`, then applies), else None.  Default None: always correct."""
         return None
 
+    @property
+    def center_offset(self) -> float:
+        """d(:attr:`center`, R), 0 for a centre in R: it bounds the image scale (:func:`~tritools.model.
+        normalize.normalization_for`).  Default: :meth:`distance`."""
+        return float(self.distance(self.center))
+
     def _fields(self) -> dict[str, Any]:
-        """Data fields for :meth:`to_dict`: by default the dataclass fields given to
-        ``__init__``, arrays as lists (override when the constructor differs)."""
+        """Fields for :meth:`to_dict`: the dataclass init fields, arrays as lists (override if the init differs)."""
         values = {f.name: getattr(self, f.name) for f in fields(self) if f.init}
         return {k: v.tolist() if isinstance(v, np.ndarray) else v for k, v in values.items()}
 

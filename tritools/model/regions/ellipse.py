@@ -267,6 +267,11 @@ class EllipseBorder(Region):
     def center(self) -> np.ndarray:
         return self.center_.copy()
 
+    @property
+    def center_offset(self) -> float:
+        """The smallest semi-axis: the distance from the centre to the border."""
+        return float(self._axes[1])
+
     def similarity(self, scale, shift):
         s, t = similarity_args(scale, shift)
         return type(self)(s * (self.center_ - t), s * s * self.D)
@@ -306,6 +311,11 @@ class Ellipse(EllipseBorder):
         x, y = check_xy(x, y, 2)
         f = square(x[0] - y[0]) + square(x[1] - y[1])
         return RegionPolynomials(f, (), (self._quadratic(y),))
+
+    @property
+    def center_offset(self) -> float:
+        """0: the centre is a point of the filled ellipse."""
+        return 0.0
 
     def conic_form(self) -> ConicForm:
         """``||L'(a - x^ s)|| <= s`` with ``D^-1 = L L'``: the region itself."""

@@ -56,6 +56,11 @@ class Point(Region):
     def center(self) -> np.ndarray:
         return self.x.copy()
 
+    @property
+    def center_offset(self) -> float:
+        """0: the centre is a point of the region."""
+        return 0.0
+
     def similarity(self, scale, shift) -> Point:
         s, t = similarity_args(scale, shift)
         return Point(s * (self.x - t))
@@ -137,6 +142,11 @@ class Segment(Region):
     @property
     def center(self) -> np.ndarray:
         return self.center_.copy()
+
+    @property
+    def center_offset(self) -> float:
+        """0: the centre is a point of the region."""
+        return 0.0
 
     def similarity(self, scale, shift) -> Segment:
         s, t = similarity_args(scale, shift)

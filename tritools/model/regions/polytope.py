@@ -348,6 +348,11 @@ class Polytope(Region):
             return mean
         return mean + span * np.array([((x + xn) * cross).sum(), ((y + yn) * cross).sum()]) / (6.0 * area)
 
+    @property
+    def center_offset(self) -> float:
+        """0: the centroid (or vertex mean) of a convex polygon is one of its points."""
+        return 0.0
+
     def similarity(self, scale, shift) -> Polytope:
         s, t = similarity_args(scale, shift)
         return Polytope(self.B / s, self.c + self.B @ t)

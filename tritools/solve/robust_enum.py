@@ -51,6 +51,7 @@ elsewhere is the documented scale computed.
 from __future__ import annotations
 
 import functools
+import math
 
 import numpy as np
 
@@ -65,7 +66,7 @@ from ..model.stacked import (damped_step, dlt_stack, epipolar_quadratics, fundam
                              refine_points_stack, view_pairs)
 from .robust_bounds import ROUND_DOWN
 
-__all__ = ["enum_frame", "enum_frames", "subset_masks", "closure", "enum_candidates", "enum_bounds",
+__all__ = ["enum_frame", "enum_frame_one", "enum_frames", "subset_masks", "closure", "enum_candidates", "enum_bounds",
            "enum_bounds_rows", "fundamentals", "row_of", "subset_of", "refine_rows", "refine_row_one", "ascended_bound",
            "ENUM_MAX_VIEWS", "POLISH_STEPS", "MASKED_CAMERA", "ENUMERATED", "ASCENT_HEADROOM"]
 
@@ -142,9 +143,68 @@ def closure(N: int, lb_by_bits: np.ndarray) -> np.ndarray:
 
 def enum_frame(C: np.ndarray, x: np.ndarray):
     """:func:`enum_frames` of one problem (cameras C (N, 3, 4), points x (N, 2)): (Normalization, Cn (N, 3, 4)) or
-    None."""
+    None; up to :data:`FRAME_SCALAR_MAX_VIEWS` views by the scalar twin :func:`enum_frame_one`."""
+    if len(x) <= FRAME_SCALAR_MAX_VIEWS:
+        return enum_frame_one(C, x)
     frames, Cn = enum_frames(C[None], x[None])
     return None if frames[0] is None else (frames[0], Cn[0])
+
+
+#: :func:`enum_frame` takes the scalar twin up to this many views (numpy's sums over the views are sequential below
+#: 8 terms, so the twin's sums are numpy's).
+FRAME_SCALAR_MAX_VIEWS = 7
+
+
+def enum_frame_one(C: np.ndarray, x: np.ndarray):
+    """The scalar twin of :func:`enum_frames` for one problem (cameras C (N, 3, 4), points x (N, 2)): the same steps,
+    the camera centres, their mean c0, the compensated last columns of the cameras moved to c0 and the frame's
+    scalars on Python floats, the DLT, the floor's pixel scales and the normalised cameras on the problem's small
+    arrays -- equal to the stack of one up to round-off (tests/test_enum_frame_twin.py).  (Normalization, Cn) or
+    None where the stacked rule gives None."""
+    N = len(x)
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        C = C / power2_scale(C, (1, 2))
+        a = null_vectors(C)
+        an = norms(a, axis=1)
+        if not (np.abs(a[:, 3]) > 1e-12 * an).all():
+            return None                                     # a centre at infinity
+        centres = (a[:, :3] / a[:, 3:]).tolist()
+        sx = sy = sz = 0.0
+        for cx, cy, cz in centres:                          # np.add.reduce over the views: in view order
+            sx, sy, sz = sx + cx, sy + cy, sz + cz
+        c0 = [sx / N, sy / N, sz / N]
+        Cc = C.copy()
+        Cc[:, :, 3] = dot2(C[:, :, :3], np.broadcast_to(c0, (N, 3, 3)), C[:, :, 3])
+        X0, good = dlt_stack(Cc[None], x[None])
+        X0 = X0[0]
+        if not (good[0] and np.isfinite(X0).all()):
+            return None
+        u, _, fin = project_stack(Cc[None], X0[None])
+        if not fin[0]:
+            return None
+        X0l = X0.tolist()
+        dist = sorted(math.sqrt((cx - c0[0] - X0l[0]) ** 2 + (cy - c0[1] - X0l[1]) ** 2 + (cz - c0[2] - X0l[2]) ** 2)
+                      for cx, cy, cz in centres)
+        d = dist[(N - 1) // 2] if N % 2 else (dist[N // 2 - 1] + dist[N // 2]) / 2
+        rho = math.sqrt(float(np.add.reduce((u[0] - x) ** 2, axis=None)) / N)
+        B = C[:, :2, :3] - x[:, :, None] * C[:, 2:3, :3]
+        top = norms(B, axis=(1, 2)) / norms(C[:, 2, :3], axis=1)
+        if not rho > RHO_FLOOR_REL * float(np.max(top)):
+            ps = pixel_scales(C[None], x[None])[0]
+            ps = ps[np.isfinite(ps) & (ps > 0)]
+            rho = max(rho, RHO_FLOOR_REL * float(np.median(ps)) if ps.size else 0.0)
+        if not (math.isfinite(d) and d > 0 and math.isfinite(rho) and rho > 0):
+            return None
+        s = min(max(1.0 / rho, SCALE_BOUNDS[0]), SCALE_BOUNDS[1])
+        CH = np.empty_like(C)
+        CH[:, :, :3] = C[:, :, :3] * d
+        CH[:, :, 3] = homogeneous_images(Cc, np.append(X0, 1.0))
+        Cn = CH.copy()
+        Cn[:, :2] = s * (CH[:, :2] - x[..., None] * CH[:, 2:3])
+        Cn /= norms(Cn, axis=(1, 2))[:, None, None]
+        if not np.isfinite(Cn).all():
+            return None
+    return Normalization(s, x, np.array(c0) + X0, d), Cn
 
 
 def enum_frames(C: np.ndarray, x: np.ndarray) -> tuple:

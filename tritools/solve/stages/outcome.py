@@ -178,6 +178,7 @@ def settle_stage(ctx: PointContext) -> None:
     if best.status.certified or best.status == Status.INVALID_INPUT:
         ctx.best = best
         return
+    best = _steps_best_estimate(ctx, best)
     step = step_of(best, ctx)
     cert = (trivial_certificate(ctx, step, best.X) if best.X is not None else None) or trivial_certificate(ctx, step)
     if cert is not None:
@@ -195,6 +196,26 @@ def settle_stage(ctx: PointContext) -> None:
     note = "X and gamma_UB from the local L2 refinement of the DLT point"
     ctx.best = replace(rep, delta=best.delta, n_lmivar=best.n_lmivar, sparsity=best.sparsity,
                        message=join(best.message, note))
+
+
+def _steps_best_estimate(ctx: PointContext, best: TriangulationResult) -> TriangulationResult:
+    """``best`` (the largest lower bound of the plan, not certified) with the steps' best estimate
+    (``PointContext.estimate_n``) when another step's estimate has a lower gamma_UB: the reported bounds are then
+    the largest lower bound and the lowest upper bound of the plan (both valid), not one step's pair (a delta = 2
+    step's estimate at 112 px was reported beside a delta = 4 step's at 0.61 px, both lower bounds 0: review 14 F1).
+    The step, degree and solver fields stay those of the bound."""
+    est, norm = ctx.estimate_n, ctx.norm
+    if best.X is None or est is None or best.gamma_ub is None or not est[0] / norm.scale < best.gamma_ub:
+        return best                     # (est[0] = s gamma: the report below decides on the caller's numbers)
+    _, X_n, X_raw_n, x_star_n = est
+    rep = report_point(ctx, step_of(best, ctx), best.status, False, best.gamma_lb, X=norm.world_point(X_n),
+                       X_raw=norm.world_point(X_raw_n), image_points=norm.image_points(x_star_n), certified_by=None,
+                       lowered=True)
+    if rep.gamma_ub is None or not rep.gamma_ub < best.gamma_ub:
+        return best
+    return replace(best, X=rep.X, X_raw=rep.X_raw, gamma_ub=rep.gamma_ub, gamma_ub_raw=rep.gamma_ub_raw,
+                   gamma_lb=rep.gamma_lb, image_points=rep.image_points, residuals=rep.residuals, depths=rep.depths,
+                   in_front=rep.in_front, message=join(best.message, "X and gamma_UB from the plan's best estimate"))
 
 
 def world_frame_stage(ctx: PointContext) -> None:

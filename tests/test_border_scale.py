@@ -99,3 +99,73 @@ def test_rescaled_pixels(k):
     assert res.gamma_lb <= ref * (1 + 1e-9)
     assert res.optimal, (res.status, res.gamma_lb, res.gamma_ub)
     assert res.gamma_ub <= ref * (1 + 1e-6)
+
+
+# review 14 F1: four views, borders of ~3000 px passing within ~1 px of a common point (an independent reference
+# attains 0.6071 px).  Its delta = 2 step's estimate was at 112.6 px, its delta = 4 step's at 0.6071 px, both lower
+# bounds 0: the result reported the first.
+RING_CAMS = np.array([
+    [[-490.2485756033677, 708.4564589040294, 12.073937055995575, 1921.368148066148],
+     [115.80073945995144, 174.75956270013546, 808.4857970214355, 1441.0261110496108],
+     [0.5519744776866801, 0.8330069289023894, 0.037731053299986175, 6.004275462706712]],
+    [[858.0875068917207, 36.830072314519974, 68.77046088007715, 1965.9353254645648],
+     [25.203887497261363, -57.155727243468505, 832.8853383859604, 1474.4514940984234],
+     [0.3940534851895263, -0.8936087149761321, 0.21490769025024112, 6.143547892076764]],
+    [[843.373425203752, -155.8241110552258, 82.70497006794606, 1987.5286201538227],
+     [4.639459633115006, -24.650496828477223, 834.8477875759279, 1490.646465115367],
+     [0.17867783826758307, -0.9493557081726293, 0.25845303146233145, 6.211026937980696]],
+    [[204.838077373006, -832.3512509199431, 87.36565200429865, 1995.8232809019005],
+     [-10.229115421632764, -7.12861091195496, 835.1314555829861, 1496.8674606764253],
+     [-0.7892583986733918, -0.550029577458535, 0.2730176625134333, 6.2369477528184385]]])
+
+
+def _ring_regions():
+    def border(c, L):
+        L = np.array(L)
+        return EllipseBorder(c, L @ L.T)
+    return [border([-16774.918212150285, 23318.465527228098], [[24690.705230652104, -9896.142347491043],
+                                                                [8884.642014335477, 27501.697111512756]]),
+            border([370.26704948112217, 691.6120090054338], [[-526.9392166656899, -11.742667683216618],
+                                                             [10.883299147839185, -568.5474621717259]]),
+            Point([114.20904098082565, 180.81502720230924]),
+            border([1235.1138234730713, 1270.6031111961736], [[1254.510185541943, -1781.6821579047971],
+                                                              [927.9542933385201, 2408.672960010254]])]
+
+
+def test_result_keeps_the_plans_best_estimate():
+    regions = _ring_regions()
+    res = tritools.triangulate(RING_CAMS, regions, time_limit=30)
+    ubs = [a.gamma_ub for a in res.attempts if a.gamma_ub is not None]
+    assert len(ubs) >= 2
+    assert res.gamma_ub <= min(ubs) * (1 + 1e-9)                  # no step's estimate is better than the result's
+    assert res.gamma_ub == pytest.approx(float(tritools.gamma(res.X, RING_CAMS, regions)), rel=1e-9)
+    ref = _reference(RING_CAMS, regions, [np.array([-1.4633486312784818, 0.8491135881688185, -0.6836519096918539])])
+    assert res.gamma_ub <= ref * (1 + 1e-6)
+    assert res.gamma_lb is None or res.gamma_lb <= ref * (1 + 1e-9)
+
+
+class _Probe(Point):
+    """A point region whose ``center_offset`` is whatever the test sets (the protocol's misuse cases)."""
+
+    def __init__(self, x, offset):
+        super().__init__(x)
+        object.__setattr__(self, "_offset", offset)
+
+    @property
+    def center_offset(self):
+        if isinstance(self._offset, Exception):
+            raise self._offset
+        return self._offset
+
+
+def test_regions_offset_ignores_broken_values_in_any_order():
+    from tritools.model.normalize import regions_offset
+
+    border = REGIONS[3]
+    for bad in (float("nan"), float("inf"), -1.0, ZeroDivisionError("user code"), ValueError("user code")):
+        probe = _Probe([300.0, 200.0], bad)
+        assert regions_offset([probe, border]) == regions_offset([border, probe]) == border.center_offset
+        assert regions_offset([probe]) == 0.0
+    for bad in (None, "3", True):
+        with pytest.raises(TypeError, match=r"regions\[1\]\.center_offset"):
+            regions_offset([border, _Probe([300.0, 200.0], bad)])

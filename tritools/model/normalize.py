@@ -51,6 +51,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import numbers
 from dataclasses import dataclass
 
 import numpy as np
@@ -61,8 +62,8 @@ from .geometry import COMMON_CENTRE_RTOL, POINT_AT_INFINITY_RTOL, point_from_ima
 from .stacked import (dlt_stack, median_rows, norms, null_vectors, pixel_scales, project_one, project_quiet,
                       project_stack, refine_point, refine_points_stack)
 
-__all__ = ["Normalization", "NormalizationStack", "normalization_for", "normalization_stack", "unconstrained_reason",
-           "resolutions", "magnitudes", "RHO_FLOOR_REL", "RESOLUTION_REL", "DEPTH_FLOOR_REL",
+__all__ = ["Normalization", "NormalizationStack", "normalization_for", "normalization_stack", "regions_offset",
+           "unconstrained_reason", "resolutions", "magnitudes", "RHO_FLOOR_REL", "RESOLUTION_REL", "DEPTH_FLOOR_REL",
            "SCALE_BOUNDS"]
 
 #: floor of the residual scale rho, relative to the median pixel scale (focal length) of the views.
@@ -409,21 +410,41 @@ def _off_a_common_centre(C: np.ndarray, x: np.ndarray, a: np.ndarray, X0: np.nda
 def normalization_for(cameras: np.ndarray, regions, enabled: bool = True) -> Normalization:
     """The normalisation of one problem: :func:`normalization_stack` on a stack of one, with the regions'
     centres as the points (identity when ``enabled`` is False; the centres as shifts with unit scale when
-    the data cannot be normalised, e.g. the DLT estimate is at infinity)."""
+    the data cannot be normalised, e.g. the DLT estimate is at infinity); the image scale then at most one over
+    the regions' offset (:func:`regions_offset`, module docstring)."""
     N = len(regions)
     centers = np.array([r.center for r in regions], float)
     if not enabled:
         return Normalization.identity(N, centers)
     st = normalization_stack(np.asarray(cameras, float)[None], centers[None])
-    if not st.ok[0]:
-        return Normalization(1.0, centers, np.zeros(3), 1.0, float(resolutions(np.ones(1), centers[None])[0]))
-    norm = st.item(0)
-    offset = max(float(r.center_offset) for r in regions)
-    if math.isfinite(offset) and offset * norm.scale > 1.0:       # the regions' offset bounds the scale
+    if st.ok[0]:
+        norm = st.item(0)
+    else:
+        norm = Normalization(1.0, centers, np.zeros(3), 1.0, float(resolutions(np.ones(1), centers[None])[0]))
+    offset = regions_offset(regions)
+    if offset * norm.scale > 1.0:
         s = float(_clip_scale(np.array([1.0 / offset]))[0])
         norm = dataclasses.replace(norm, scale=s, resolution=float(resolutions(np.array([s]), centers[None])[0]))
     return norm
 
+
+def regions_offset(regions) -> float:
+    """The largest ``Region.center_offset`` (pixels) over the regions, 0 without one.  An offset that is not a real
+    number raises a TypeError naming it; one that is not finite or negative, or a region whose own arithmetic fails
+    at its centre (ArithmeticError, ValueError), gives no offset: the residual rule alone, as before the offset
+    existed (and never a different value for a different order of the views)."""
+    out = 0.0
+    for i, r in enumerate(regions):
+        try:
+            v = r.center_offset
+        except (ArithmeticError, ValueError, np.linalg.LinAlgError):
+            continue
+        if isinstance(v, (bool, np.bool_)) or not isinstance(v, (numbers.Real, np.floating, np.integer)):
+            raise TypeError(f"regions[{i}].center_offset must be a real number, got {type(v).__name__}")
+        v = float(v)
+        if math.isfinite(v) and v > out:
+            out = v
+    return out
 
 
 #: image coordinates up to this magnitude are not blamed when the normalised pairs are lost

@@ -1,7 +1,7 @@
 """Robust (TLS) calls that ran to the time limit in review 6: long protocol tracks with many wrong matches (F5)
-and a 7-view mixed-region problem whose L2 path gives up (F6), timed in this checkout and, with ``--other DIR``,
-in another one (e.g. main) in the same run, interleaved (process CPU time of each call, one BLAS thread, in a
-fresh subprocess per call).
+and a 7-view mixed-region problem whose L2 path gave up (F6; plain and robust certify since wave 14's
+normalisation fix), timed in this checkout and, with ``--other DIR``, in another one (e.g. main) in the same run,
+interleaved (process CPU time of each call, one BLAS thread, in a fresh subprocess per call).
 
 Usage: python benchmarks/robust_long.py [--other /work/main] [--seeds 3] [--time-limit 60] [--sizes 60 80 100]
 """

@@ -13,6 +13,7 @@ import pytest
 import tritools
 from tritools import Ellipse, EllipseBorder, Point, Polytope, Segment
 from tritools.model.normalize import normalization_for, normalization_stack
+from tritools.scene import random_cameras
 from tests.reference.regions import region_and_spec, region_reference, spec_of
 from tests.test_robust_scale import CAMS, REGIONS, X_BETTER
 
@@ -54,31 +55,22 @@ def test_five_view_problem_with_a_border_is_certified():
 
 
 def _border_problem(seed, N=4):
-    """Noise-free projections of a random point, view 0 an ellipse border, the others random kinds."""
+    """Noise-free projections of a random point (:func:`tritools.scene.random_cameras`), view 0 an ellipse border,
+    the others random kinds."""
     rng = np.random.default_rng(seed)
+    cams = random_cameras(N, rng)
     X = rng.normal(size=3)
-    K = np.array([[800.0, 0, 320], [0, 800, 240], [0, 0, 1]])
-    cams = []
-    for _ in range(N):
-        a = rng.uniform(0, 2 * np.pi)
-        C = 6 * np.array([np.cos(a), np.sin(a), rng.uniform(-0.3, 0.3)])
-        z = -C / np.linalg.norm(C)
-        x = np.cross([0, 0, 1.0], z)
-        x /= np.linalg.norm(x)
-        R = np.stack([x, np.cross(z, x), z])
-        cams.append(K @ np.hstack([R, (-R @ C)[:, None]]))
-    cams = np.array(cams)
     h = cams @ np.append(X, 1.0)
-    u = h[:, :2] / h[:, 2:] + rng.normal(scale=0.0, size=(N, 2))     # (the probe's draws: its seeds)
+    u = h[:, :2] / h[:, 2:]
     kinds = ["border"] + [("point", "segment", "ellipse", "border", "box")[k] for k in rng.integers(0, 5, N - 1)]
     regions, specs = zip(*[region_and_spec(k, u[i], rng) for i, k in enumerate(kinds)])
     return cams, list(regions), list(specs), X
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("seed", [1, 2, 5, 6, 8])
+@pytest.mark.parametrize("seed", [1, 2, 3, 6, 9])
 def test_noise_free_centres_with_borders(seed):
-    """Seeds whose main before this change ended solver_failed, not_certified or time_limit with gamma_LB = 0."""
+    """Seeds whose main before this change ended not_certified or time_limit (20 s) with gamma_LB = 0."""
     cams, regions, specs, X = _border_problem(seed)
     res = tritools.triangulate(cams, regions, time_limit=60)
     ref = min(region_reference(cams, specs, [X, res.X], np.random.default_rng(0)), res.gamma_ub)

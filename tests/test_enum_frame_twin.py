@@ -5,25 +5,19 @@ degenerate problems."""
 import numpy as np
 import pytest
 
+from tritools.scene import random_cameras
 from tritools.solve.robust_enum import FRAME_SCALAR_MAX_VIEWS, enum_frame, enum_frame_one, enum_frames
 
 
 def _problem(rng, N, noise=1.0, shift=0.0, pixel=1.0):
-    X = rng.normal(size=3) + shift
-    K = np.array([[800.0 * pixel, 0, 320 * pixel], [0, 800.0 * pixel, 240 * pixel], [0, 0, 1]])
-    cams, x = [], []
-    for _ in range(N):
-        a = rng.uniform(0, 2 * np.pi)
-        C = shift + 6 * np.array([np.cos(a), np.sin(a), rng.uniform(-0.3, 0.3)])
-        z = (X - C) / np.linalg.norm(X - C)
-        u = np.cross([0, 0, 1.0], z)
-        u /= np.linalg.norm(u)
-        R = np.stack([u, np.cross(z, u), z])
-        P = K @ np.hstack([R, (-R @ C)[:, None]])
-        h = P @ np.append(X, 1.0)
-        cams.append(P * rng.uniform(0.5, 2.0))
-        x.append(h[:2] / h[2] + rng.normal(scale=noise * pixel, size=2))
-    return np.array(cams), np.array(x)
+    """N cameras of :func:`tritools.scene.random_cameras` in a world moved by ``shift``, pixels times ``pixel``, each
+    camera at its own scale, and the noisy projections of a random point."""
+    T = np.eye(4)
+    T[:3, 3] = -shift                                  # world point X + shift seen as X was
+    cams = np.diag([pixel, pixel, 1.0]) @ random_cameras(N, rng) @ T
+    cams = cams * rng.uniform(0.5, 2.0, size=(N, 1, 1))
+    h = cams @ np.append(rng.normal(size=3) + shift, 1.0)
+    return cams, h[:, :2] / h[:, 2:] + rng.normal(scale=noise * pixel, size=(N, 2))
 
 
 def _assert_same(C, x):

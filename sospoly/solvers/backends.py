@@ -358,6 +358,10 @@ class IpmBackend:
             att = Attempt("ipm", RawStatus.FAILED, str(exc)[:200], 0, 0.0)
             sol = None
         else:
+            if deadline is not None and deadline.expired:    # no set-up past the deadline; the fallback ends it
+                att = Attempt(IPM_LABEL, RawStatus.TIME_LIMIT, "time limit reached", 0, 0.0)
+                fb = self.fallback.solve(problem, accept=accept, retry=retry, deadline=deadline)
+                return dataclasses.replace(fb, attempts=(att,) + tuple(fb.attempts))
             m = problem.n_cols
             if sum(m * n ** 3 for n in lay.sizes) <= IPM_DENSE_LIMIT:
                 res = ipm_solve_batch(problem.A.toarray()[None], problem.b[None], problem.q, problem.cones,

@@ -51,7 +51,11 @@ BOUND_STOP = "stopped: gamma_lb reached lower_bound_stop (not certified)"
 
 
 def steps_stage(ctx: PointContext) -> None:
-    """Walk the degree plan (module docstring); ``ctx.best`` is the best result so far."""
+    """Walk the degree plan (module docstring); ``ctx.best`` is the best result so far.  The local estimate (the
+    answer of last resort, :meth:`PointContext.local`) is computed before the first step, so that a step cut by
+    the deadline leaves only the report to do past it (it cost 7-10 ms past a 0.2 s limit at 30 views of regions)."""
+    if ctx.steps and not (ctx.finished or ctx.expired):
+        ctx.local()
     for step in ctx.steps:
         if ctx.finished or ctx.expired:
             break

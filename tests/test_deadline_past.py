@@ -50,3 +50,33 @@ def test_sdp_steps_have_the_local_estimate_before_the_first_step():
     assert "local" in keys and "build" in keys
     assert keys.index("local") < keys.index("build")        # computed before the step's problem was built
     assert res.X is not None and res.gamma_ub is not None
+
+
+def test_default_q_is_the_power_of_one_plus_the_squared_norm():
+    from sospoly import Polynomial
+    from sospoly.certificates.psatz import default_q
+    gens = ("a", "b", "c")
+    norm2 = Polynomial.constant(1.0, gens)
+    for k in range(len(gens)):
+        norm2 = norm2 + Polynomial(gens, {tuple(2 * (j == k) for j in range(3)): 1.0})
+    for delta, deg_f, k in ((2, 2, 0), (4, 2, 1), (6, 2, 2), (4, 4, 0), (3, 0, 1)):
+        q = default_q(gens, delta, deg_f)
+        assert q.terms == (norm2 ** k).terms and q.gens == gens
+
+
+def test_a_search_over_regions_computes_a_candidate_s_residuals_once(monkeypatch):
+    from tritools.solve import robust
+    P, R, X = uncertain_problem(5, seed=2, kinds="mixed")
+    s = robust.TlsSearch(P, R, np.full(5, 3.0), tritools.TriangulationOptions(), 0.0)
+    calls = []
+    real = robust.point_report
+    monkeypatch.setattr(robust, "point_report", lambda *a, **k: calls.append(1) or real(*a, **k))
+    d = s.residuals(X)
+    assert len(calls) == 1 and s.residuals(np.array(X, float)) is d and len(calls) == 1
+    assert not d.flags.writeable
+    assert np.array_equal(d, real(X, s.C, s.regions, s.opts.world_frame).residuals)
+    s.residuals(X + 1.0)
+    assert len(calls) == 2
+    monkeypatch.setattr(robust, "RESIDUAL_MEMO", 1)         # full: it starts afresh, and stays right
+    e = s.residuals(X + 2.0)
+    assert len(s._memo) == 1 and np.array_equal(e, real(X + 2.0, s.C, s.regions, s.opts.world_frame).residuals)

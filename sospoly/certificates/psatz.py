@@ -104,10 +104,13 @@ DEADLINE_STRIDE = 64
 def default_q(gens, delta: int, deg_f: int) -> Polynomial:
     """(1 + ||v||^2)^k with k = floor((delta - deg f)/2)."""
     k = max((delta - max(deg_f, 0)) // 2, 0)
-    norm2 = Polynomial.constant(1.0, gens)
-    for g in gens:
-        norm2 = norm2 + Polynomial(gens, {tuple(2 if h == g else 0 for h in gens): 1.0})
-    return norm2 ** k
+    n = len(gens)
+    if k == 0:
+        return Polynomial.constant(1.0, gens)
+    terms = {(0,) * n: 1.0}                  # 1 + sum_j v_j^2 in one dictionary (not n sums of growing ones)
+    for j in range(n):
+        terms[(0,) * j + (2,) + (0,) * (n - j - 1)] = 1.0
+    return Polynomial._raw(tuple(str(g) for g in gens), terms) ** k
 
 
 #: the largest Gram matrix side sigma(n, delta/2) = C(n + delta/2, n) a dense program may have (the default

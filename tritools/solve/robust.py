@@ -105,6 +105,8 @@ LO_ROUNDS = 5
 LO_STARTS = 3
 #: candidate-view pairs per block of :meth:`TlsSearch.screen` (the deadline is checked between blocks; ~5 ms each)
 SCREEN_BLOCK = 1 << 16
+#: candidates whose exact residuals (regions other than points and discs) a search keeps (then it starts afresh)
+RESIDUAL_MEMO = 256
 #: branching order (:func:`branching_order`): this many confident inliers first, then the views whose d_i / c_i is
 #: within a factor AMBIGUOUS of 1.
 ANCHORS = 2
@@ -225,6 +227,7 @@ class TlsSearch(NodeBounds):
         self.loo_lb = 0.0                            # leave_one_out / suspect bound (candidates), where computed
         self._absC2 = None                           # |third rows| of the cameras (point_distances2_one)
         self._discs = None                           # (centres, radii) of disc regions, or False (screen)
+        self._memo = {}                              # residuals of other regions' candidates (X bytes -> d)
         self.drows = None                           # depth rows of the cameras (report; a batch sets them)
         self.futile_leaf = None                     # (inlier set, its leaf bound) that fired the rule
         self.max_nodes = MAX_NODES                  # the search's node budget (smaller after an exhausted cell search)
@@ -258,8 +261,13 @@ class TlsSearch(NodeBounds):
             return np.sqrt(self.sq_distances(X))
         if self.discs():
             return np.sqrt(disc_distances2(self.C, *self.discs(), np.asarray(X, float)[None])[0])
-        rep = point_report(X, self.C, self.regions, self.opts.world_frame)
-        return np.full(self.N, np.inf) if rep.residuals is None else rep.residuals
+        key = np.asarray(X, float).tobytes()          # the same candidate is screened, offered, ordered: once
+        if key not in self._memo:
+            rep = point_report(X, self.C, self.regions, self.opts.world_frame)
+            self._memo = self._memo if len(self._memo) < RESIDUAL_MEMO else {}
+            self._memo[key] = np.full(self.N, np.inf) if rep.residuals is None else rep.residuals
+            self._memo[key].setflags(write=False)
+        return self._memo[key]
 
     def sq_distances(self, X) -> np.ndarray:
         """d_i(X)^2 (N,) of point regions (:func:`tritools.solve.robust_costs.point_distances2_one`)."""
@@ -495,6 +503,8 @@ class TlsSearch(NodeBounds):
         """Generator (:func:`drive`): yields subset requests, returns the :class:`TriangulationResult`."""
         rng = np.random.default_rng(0)
         t = time.perf_counter()
+        if not self.points:          # its normalisation now, not past a deadline that cut the candidates short
+            _ = self.scale
         yield from self.candidates(rng)
         t_cand = time.perf_counter() - t
         if self.best_X is None:                 # candidates cut short (deadline) or none finite: a local estimate

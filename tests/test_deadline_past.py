@@ -80,3 +80,57 @@ def test_a_search_over_regions_computes_a_candidate_s_residuals_once(monkeypatch
     monkeypatch.setattr(robust, "RESIDUAL_MEMO", 1)         # full: it starts afresh, and stays right
     e = s.residuals(X + 2.0)
     assert len(s._memo) == 1 and np.array_equal(e, real(X + 2.0, s.C, s.regions, s.opts.world_frame).residuals)
+
+
+def _shifted_problem(N=6, seed=7):
+    """Mixed regions, c = 5 px, the two views outside the first centre pair moved 94 px away (wrong matches)."""
+    from tritools.solve.robust_rays import sampled_pairs
+    P, R, X = uncertain_problem(N, seed=seed, kinds="mixed")
+    first = sorted(sampled_pairs(N, np.random.default_rng(1), 8)[0])
+    bad = [i for i in range(N) if i not in first][:2]
+    R = list(R)
+    for i in bad:
+        R[i] = R[i].similarity(1.0, np.array([-80.0, 50.0]))
+    return P, R, bad
+
+
+def test_a_robust_search_over_regions_has_an_anytime_candidate_with_an_inlier_set():
+    """A limit that ends the search before any L2 sub-problem returns: the best centre-pair DLT point, with the wrong
+    matches out (review 15 F3: the local L2 estimate of every view, every view an outlier, gamma_UB = c / sqrt 2)."""
+    P, R, bad = _shifted_problem()
+    c = 5.0
+    for limit in (1e-4, 1e-3):
+        res = tritools.triangulate(P, R, robust=c, time_limit=limit)
+        assert res.status == tritools.Status.TIME_LIMIT and not res.optimal
+        assert res.gamma_ub < c / np.sqrt(2) * (1 - 1e-6)
+        assert res.inliers.sum() >= 2 and not res.inliers[bad].any()
+    full = tritools.triangulate(P, R, robust=c)
+    assert full.optimal and full.gamma_lb <= res.gamma_ub      # the anytime value is an upper bound of the optimum
+    assert np.array_equal(full.inliers, res.inliers)
+
+
+def test_centre_pair_candidates_are_the_dlt_points_of_the_centres():
+    from tritools.model.geometry import dlt
+    from tritools.solve import robust
+    from tritools.solve.robust_rays import CENTRE_PAIRS, centre_pair_candidates, sampled_pairs
+    for N in (2, 4, 7):
+        P, R, _ = uncertain_problem(N, seed=3, kinds="mixed")
+        s = robust.TlsSearch(P, R, np.full(N, 5.0), tritools.TriangulationOptions(), 0.0)
+        Xs = centre_pair_candidates(s)
+        pairs = sampled_pairs(N, np.random.default_rng(1), CENTRE_PAIRS)
+        assert len(Xs) == min(CENTRE_PAIRS, N * (N - 1) // 2) == len(pairs)
+        for X, p in zip(Xs, pairs):
+            i, j = sorted(p)
+            ref = dlt(s.C[[i, j]], np.array([R[i].center, R[j].center]))
+            assert np.allclose(X, ref, rtol=1e-6, atol=1e-9 * (1 + np.abs(ref).max()))
+
+
+def test_default_q_names_a_degree_that_is_not_an_integer():
+    import pytest
+    from sospoly.certificates.psatz import default_q
+    for bad in (2.0, 4.0, None, "4", True):
+        with pytest.raises(TypeError, match="delta"):
+            default_q(["x"], bad, 2)
+    with pytest.raises(TypeError, match="deg_f"):
+        default_q(["x"], 4, 2.0)
+    assert default_q(["x"], np.int64(4), 2).terms == {(0,): 1.0, (2,): 1.0}

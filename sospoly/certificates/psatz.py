@@ -102,8 +102,12 @@ DEADLINE_STRIDE = 64
 
 
 def default_q(gens, delta: int, deg_f: int) -> Polynomial:
-    """(1 + ||v||^2)^k with k = floor((delta - deg f)/2)."""
-    k = max((delta - max(deg_f, 0)) // 2, 0)
+    """(1 + ||v||^2)^k with k = floor((delta - deg f)/2); ``delta`` and ``deg_f`` integers (TypeError naming them
+    otherwise, also where k would be 0)."""
+    for name, value in (("delta", delta), ("deg_f", deg_f)):
+        if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Integral):
+            raise TypeError(f"default_q: {name} must be an integer, got {value!r}")
+    k = max((int(delta) - max(int(deg_f), 0)) // 2, 0)
     n = len(gens)
     if k == 0:
         return Polynomial.constant(1.0, gens)

@@ -85,7 +85,7 @@ from .robust_drive import drive
 from .settings import call_deadline
 from .robust_loo import leave_one_out
 from .robust_nodes import NodeBounds, lookahead_bound
-from .robust_rays import ray_candidates, sampled_pairs
+from .robust_rays import centre_pair_candidates, ray_candidates, sampled_pairs
 from .robust_costs import disc_distances2, disc_shapes, point_distances2, point_distances2_one
 from .robust_report import tls_reported
 
@@ -348,9 +348,13 @@ class TlsSearch(NodeBounds):
 
     def offer_new(self) -> None:
         est = self.bounds.take_estimates()
-        if not est:
+        if est:
+            self.offer_screened(np.array([X for _, X in est]))
+
+    def offer_screened(self, Xs: np.ndarray) -> None:
+        """Offer the :data:`LO_STARTS` best of the candidates ``Xs`` (M, 3) by :meth:`screen`."""
+        if not len(Xs):
             return
-        Xs = np.array([X for _, X in est])
         f = self.screen(Xs)
         for k in np.argsort(f)[:LO_STARTS]:
             if f[k] < self.best_f * (1 + 1e-9):        # the screen is only a ranking: exact costs decide
@@ -505,9 +509,12 @@ class TlsSearch(NodeBounds):
         t = time.perf_counter()
         if not self.points:          # its normalisation now, not past a deadline that cut the candidates short
             _ = self.scale
+            self.offer_screened(centre_pair_candidates(self))     # an anytime candidate with an inlier set
         yield from self.candidates(rng)
         t_cand = time.perf_counter() - t
-        if self.best_X is None:                 # candidates cut short (deadline) or none finite: a local estimate
+        if self.best_X is None:                 # candidates cut short (deadline): the sub-problems' estimates so far
+            self.offer_new()
+        if self.best_X is None:                 # none, or none finite: a local estimate
             self.offer(self.fallback_estimate())
         if self.best_X is None:
             return TriangulationResult("tls", Status.NUMERICAL_FAILURE, message="no finite candidate estimate found",

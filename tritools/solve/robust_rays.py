@@ -22,7 +22,8 @@ import math
 
 import numpy as np
 
-__all__ = ["ray_candidates", "sampled_pairs", "SWEEP", "GOLDEN_STEPS", "MAX_RAYS"]
+__all__ = ["ray_candidates", "sampled_pairs", "centre_pair_candidates", "SWEEP", "GOLDEN_STEPS", "MAX_RAYS",
+           "CENTRE_PAIRS"]
 
 #: depths of the geometric sweep along each ray: baseline * 10^k, k in [-3, 3] (this many).
 SWEEP = 13
@@ -185,3 +186,29 @@ def sampled_pairs(N: int, rng, limit: int) -> list:
         k = rng.choice(I.size, limit, replace=False)
         I, J = I[k], J[k]
     return [frozenset((int(a), int(b))) for a, b in zip(I, J)]
+
+
+#: region-centre pairs whose DLT points a search of regions other than points screens first
+#: (:func:`centre_pair_candidates`)
+CENTRE_PAIRS = 8
+
+
+def centre_pair_candidates(search) -> np.ndarray:
+    """Anytime candidates of a search over regions other than points: the DLT points (M, 3) of the region centres
+    of :data:`CENTRE_PAIRS` view pairs (all pairs up to that many; else drawn by :func:`sampled_pairs` from a stream
+    of their own, so the search's later draws do not change).  Cheap -- one stacked DLT, and the caller screens them
+    at CENTRE_PAIRS x N region distances -- they give a candidate with an inlier set before the L2 sub-problems
+    (each a whole triangulation with regions) have returned one: a limit that cuts those short then reports this
+    candidate instead of the local L2 estimate of every view, which the wrong matches pull away from every view
+    (review 15 F3: gamma_UB c / sqrt 2, every view an outlier).  Only a ranking: the caller keeps a candidate by its
+    exact f_TLS."""
+    from ..model.stacked import dlt_stack
+
+    pairs = np.array([sorted(p) for p in sampled_pairs(search.N, np.random.default_rng(1), CENTRE_PAIRS)], int)
+    if not pairs.size:
+        return np.zeros((0, 3))
+    centres = np.array([np.asarray(r.center, float).reshape(2) for r in search.regions])
+    with np.errstate(all="ignore"):
+        X, ok = dlt_stack(search.C[pairs], centres[pairs])
+    ok &= np.isfinite(X).all(axis=1)
+    return X[ok]

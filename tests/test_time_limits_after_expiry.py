@@ -133,8 +133,9 @@ class _SlowClock:
 
 
 def test_parent_verification_starts_no_chunk_predicted_past_the_deadline(monkeypatch):
-    """In chunks, after the first one (not predicted), a chunk that the time per subset so far says would end past
-    the deadline is not started: its subsets are not accepted (bound 0, no estimate)."""
+    """In chunks: the first one holds the subsets predicted to end in time (``_first_cost`` each, at least one), a
+    later one those the time per subset so far says end before the deadline; the others are not started: their
+    subsets are not accepted (bound 0, no estimate)."""
     import tritools.solve.robust_verify as rv
 
     P, x, X, _ = robust_protocol_scene(12, 0, 1.0, np.random.default_rng(2))
@@ -145,8 +146,13 @@ def test_parent_verification_starts_no_chunk_predicted_past_the_deadline(monkeyp
     args = ([P] * 12, [frame] * 12, subsets, [[]] * 12, tritools.TriangulationOptions().tolerances)
     good, lb, Xs = verify_in_parent(*args, deadline=_Almost())
     full, lb_full, _ = verify_in_parent(*args)
-    assert full.all() and good[:3].all() and not good[3:].any()
-    assert np.all(lb[3:] == 0.0) and np.isnan(Xs[3:]).all()
+    first = max(1, min(3, int(1e-3 // rv._first_cost(11))))       # the first chunk: as many as are predicted to fit
+    assert full.all() and good[:first].all() and not good[first:].any()
+    assert np.all(lb[first:] == 0.0) and np.isnan(Xs[first:]).all()
+    np.testing.assert_allclose(lb[:first], lb_full[:first], rtol=1e-12)   # (a stack of one: other last bits)
+    monkeypatch.setattr(rv, "_first_cost", lambda k: 1e-4)         # predicted to fit: a whole first chunk of 3
+    good, lb, Xs = verify_in_parent(*args, deadline=_Almost())
+    assert good[:3].all() and not good[3:].any()
     np.testing.assert_array_equal(lb[:3], lb_full[:3])
 
 

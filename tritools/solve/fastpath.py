@@ -68,6 +68,9 @@ ALL_PAIRS_CHUNK_BYTES = 256 * 2 ** 20
 #: flops per second at which :func:`all_pairs_seconds` counts the all-pairs bound (measured ~2e9 n^2 K per second
 #: on the 2-core machine at N = 200; half of it, so the estimate errs long).
 ALL_PAIRS_FLOPS = 1e9
+#: ... plus this many seconds per pair and problem (the stacked arrays' own cost, which the flop count leaves out:
+#: measured 0.09-0.22 ms per problem at N = 7-11 against an n^2 K count of 0.004-0.03 ms, review 15 F1)
+ALL_PAIRS_PAIR_SECONDS = 4e-6
 #: seconds per view at which :func:`band_seconds` counts a band bound: a fixed part per view plus a part per view
 #: and squared width, fitted to the measured times (one problem of 100-400 views, points and discs: ~2e-4 s per view
 #: at width 4, ~7e-4 at width 8).  Not rounded up: the band's column loops stop at the active deadline
@@ -334,9 +337,9 @@ def all_pairs_seconds(n_views: int, problems: int = 1) -> float:
     """Estimated seconds of the all-pairs bound of ``problems`` problems of ``n_views`` views: its least squares
     over K = N(N - 1)/2 multipliers with n = 2N rows costs ~n^2 K flops per problem, counted at
     :data:`ALL_PAIRS_FLOPS` (review 8 F1: one 200-view problem, 19,900 pairs, took 1.5 s in one uninterruptible
-    call and ran a 1 s time limit to 2.1-2.7 s)."""
+    call and ran a 1 s time limit to 2.1-2.7 s), plus :data:`ALL_PAIRS_PAIR_SECONDS` per pair."""
     n, K = 2 * n_views, n_views * (n_views - 1) // 2
-    return problems * n * n * K / ALL_PAIRS_FLOPS
+    return problems * K * (n * n / ALL_PAIRS_FLOPS + ALL_PAIRS_PAIR_SECONDS)
 
 
 def band_seconds(n_views: int, width: int, problems: int = 1) -> float:

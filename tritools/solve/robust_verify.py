@@ -38,7 +38,7 @@ import numpy as np
 
 from ..model.normalize import normalization_stack
 from ..model.stacked import damped_step, dlt_stack, next_damping, project_stack
-from .fastpath import lagrangian_bounds
+from .fastpath import all_pairs_seconds, lagrangian_bounds
 
 __all__ = ["ParentFrame", "parent_frames", "frames_of", "verify_in_parent", "LM_STEPS", "LM_MORE"]
 
@@ -46,6 +46,11 @@ __all__ = ["ParentFrame", "parent_frames", "frames_of", "verify_in_parent", "LM_
 #: 40,000 view rows, polished for 0.3 s past a 1 s limit in one call; wave 9: a chunk of 4096 view pairs took ~60 ms,
 #: the step by which a call could overrun its deadline, hence 1024)
 CHUNK_VIEW_ROWS = 1024
+#: before any chunk was timed, a subset of k views is predicted at this many times the all-pairs estimate
+#: (:func:`tritools.solve.fastpath.all_pairs_seconds`: its bound, and a second one for pairs) plus
+#: :data:`FIRST_SUBSET_SECONDS` (the polish and projections)
+FIRST_SUBSET_FACTOR = 2.0
+FIRST_SUBSET_SECONDS = 2e-4
 
 #: damped Gauss-Newton steps polishing the start of each subset (a warm start rarely needs more than 3-4).
 LM_STEPS = 6
@@ -156,8 +161,14 @@ def verify_in_parent(C: np.ndarray, frames: list, subsets: list, estimates: list
     if deadline is not None and deadline.expired:          # nothing accepted: the callers keep their valid bounds
         return np.zeros(M, bool), np.zeros(M), np.full((M, 3), np.nan)
     step = max(1, CHUNK_VIEW_ROWS // max(1, len(subsets[0])))
-    if deadline is not None and M > step:                  # in chunks, the deadline checked between them
-        return _chunked(C, frames, subsets, estimates, tolerances, enough, deadline, step)
+    if deadline is not None and M > min(step, max(1, _fitting(deadline, _first_cost(len(subsets[0])), M))):
+        return _chunked(C, frames, subsets, estimates, tolerances, enough, deadline, step)   # deadline between
+    return _verify(C, frames, subsets, estimates, tolerances, enough, deadline)
+
+
+def _verify(C, frames, subsets, estimates, tolerances, enough, deadline) -> tuple:
+    """:func:`verify_in_parent` of one stacked call."""
+    M = len(subsets)
     Cn = np.stack([f.cameras_n[S] for f, S in zip(frames, subsets)])
     Craw = np.stack([c[S] for c, S in zip(C, subsets)])
     res = np.array([f.resolution for f in frames])
@@ -175,24 +186,44 @@ def verify_in_parent(C: np.ndarray, frames: list, subsets: list, estimates: list
 
 
 def _chunked(C, frames, subsets, estimates, tolerances, enough, deadline, step: int) -> tuple:
-    """:func:`verify_in_parent` in chunks of ``step`` subsets.  A chunk is started only where it is predicted to end
-    before the deadline, at the wall time per subset of the chunks before (equal-size subsets cost alike; the first
-    chunk is not predicted): a chunk of large subsets (banded bounds of 400 views) takes ~0.1-0.5 s, which a call
-    would otherwise overrun its limit by.  The subsets not reached are not accepted (bound 0, no estimate)."""
+    """:func:`verify_in_parent` in chunks of at most ``step`` subsets, each of as many subsets as are predicted to end
+    before the deadline at the wall time per subset of the chunks before (equal-size subsets cost alike); the first
+    chunk at :func:`_first_cost` per subset, at least one subset: a chunk of large subsets (banded bounds of 400 views)
+    takes ~0.1-0.5 s, and one of 34 subsets of 29 views (1024 view rows, all pairs) ~0.1 s, which a call would
+    otherwise overrun its limit by (review 15 F1).  The subsets not reached are not accepted (bound 0, no
+    estimate)."""
     M = len(subsets)
     good, lb, X = np.zeros(M, bool), np.zeros(M), np.full((M, 3), np.nan)
-    per_subset = 0.0
-    for k in range(0, M, step):
-        stop = min(M, k + step)
-        remaining = deadline.remaining()
-        if remaining is not None and (remaining <= 0.0 or per_subset * (stop - k) > remaining):
+    per_subset = _first_cost(len(subsets[0]))      # predicted until a chunk is timed, then the largest measured
+    k = 0
+    while k < M:
+        fit = _fitting(deadline, per_subset, M - k)  # as many as are predicted to end in time; the first chunk
+        stop = k + min(step, fit if k else max(1, fit))   # at least one subset (its prediction is only an estimate)
+        if stop == k:
             break
         t = time.monotonic()
-        good[k:stop], lb[k:stop], X[k:stop] = verify_in_parent(
+        good[k:stop], lb[k:stop], X[k:stop] = _verify(
             C[k:stop], frames[k:stop], subsets[k:stop], estimates[k:stop], tolerances,
             None if enough is None else np.asarray(enough)[k:stop], deadline)
-        per_subset = max(per_subset, (time.monotonic() - t) / (stop - k))
+        per_subset = max(per_subset if k else 0.0, (time.monotonic() - t) / (stop - k))
+        k = stop
     return good, lb, X
+
+
+def _first_cost(k: int) -> float:
+    """The predicted seconds of one subset of ``k`` views before any was timed (:data:`FIRST_SUBSET_FACTOR`)."""
+    return FIRST_SUBSET_FACTOR * all_pairs_seconds(k) + FIRST_SUBSET_SECONDS
+
+
+def _fitting(deadline, per_subset: float, most: int) -> int:
+    """How many subsets (at most ``most``) at ``per_subset`` seconds end before ``deadline``; ``most`` without a
+    limit, 0 once it has passed."""
+    remaining = deadline.remaining()
+    if remaining is None:
+        return most
+    if remaining <= 0.0:
+        return 0
+    return int(min(most, remaining // per_subset)) if per_subset > 0 else most
 
 
 def _bounds(Craw, Cn, Xn, res, s2, enough, tolerances, deadline=None) -> tuple:

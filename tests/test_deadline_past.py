@@ -134,3 +134,28 @@ def test_default_q_names_a_degree_that_is_not_an_integer():
     with pytest.raises(TypeError, match="deg_f"):
         default_q(["x"], 4, 2.0)
     assert default_q(["x"], np.int64(4), 2).terms == {(0,): 1.0, (2,): 1.0}
+
+
+def test_a_batch_reports_region_problems_it_did_not_reach_from_their_centres(monkeypatch):
+    """Past the whole call's end, a problem with regions gets the DLT point of its region centres, gamma_UB its exact
+    value there, status time_limit -- no refinement, no normalisation (review 15 F1) -- and a problem that does not
+    validate still gets invalid_input naming what is wrong."""
+    from tritools.model.geometry import dlt
+    from tritools.solve import call_limit
+    from tritools.solve.report import point_report
+
+    probs = [uncertain_problem(6, 40 + j, kinds="mixed")[:2] for j in range(4)]
+    bad = (probs[0][0][:, :, :3], probs[0][1])                 # 3x3 cameras
+    def no_local(*a, **k):
+        raise AssertionError("a problem past the end was refined")
+    monkeypatch.setattr("tritools.solve.trivial.local_estimate", no_local)
+    monkeypatch.setattr("tritools.solve.stages.context.local_estimate", no_local)
+    res = tritools.triangulate_many(probs + [bad], total_time_limit=1e-9)
+    assert len(res) == 5 and res[4].status == tritools.Status.INVALID_INPUT and "shape" in res[4].message
+    for (P, R), r in zip(probs, res[:4]):
+        assert r.status == tritools.Status.TIME_LIMIT and not r.optimal and r.gamma_lb is None
+        assert call_limit.CUT_MESSAGE in r.message and "region centres" in r.message
+        X = dlt(P, np.array([reg.center for reg in R]))
+        assert np.allclose(r.X, X, rtol=1e-9, atol=1e-12)
+        rep = point_report(r.X, P, R)
+        assert r.gamma_ub == rep.gamma and np.array_equal(r.residuals, rep.residuals)

@@ -39,7 +39,7 @@ from ..model.regions import Region, declares_extent
 from ..model.constraints import Method
 from ..records import TriangulationResults
 from ..result import Attempt, Status, TriangulationResult
-from .call_limit import call_limit, expired, expired_points, mark_cut, within
+from .call_limit import call_limit, expired, expired_points, expired_regions, mark_cut, within
 from .options import TriangulationOptions, options_from
 from .discs import as_disc_problem, solve_disc_group
 from .plan import batch_steps
@@ -118,12 +118,14 @@ def _run_chunk(items, retries, end=None) -> list:
 
 def _expired_items(items, retries, end) -> list:
     """``time_limit`` results of items not started before ``end``: point problems of equal size through
-    :func:`tritools.solve.call_limit.expired_points` (vectorised), the others one by one (their local estimate)."""
+    :func:`tritools.solve.call_limit.expired_points` (vectorised), the others one by one
+    (:func:`~tritools.solve.call_limit.expired_regions`: the DLT point of their region centres)."""
     out, points = [], {}
     for i, c, r, o, pre in items:
         pp = as_point_problem(c, r)
         if pp is None:
-            out.append((i, _solve_item(c, r, o, pre, retries, end)))
+            res = expired_regions(c, r, o)          # None: the input does not validate (the per-point path names it)
+            out.append((i, res if res is not None else _solve_item(c, r, o, pre, retries, end)))
         else:
             points.setdefault((len(pp[1]), o), []).append((i, *pp))
     for (_, o), group in points.items():

@@ -216,6 +216,7 @@ class TlsSearch(NodeBounds):
         self.bounds = SubsetBounds(cams, regions, opts, self.deadline, points=points)
         self.bounds.c2 = self.c2
         self._scale = None                               # decision_scale, computed when first needed
+        self._norm = None                                # its normalisation (also the fallback estimate's)
         self._resolved = None                            # the report's gamma resolution (:attr:`resolved`)
         self.tol = opts.tolerances
         self.best_X, self.best_f, self.best_S = None, math.inf, frozenset()
@@ -245,8 +246,14 @@ class TlsSearch(NodeBounds):
     def scale(self) -> float:
         """The scale of the certificate rule (:func:`decision_scale`)."""
         if self._scale is None:
-            self._scale = decision_scale(self.C, self.regions, self.c2)
+            self._scale = scale_from(self.normalization().scale, self.c2)     # (decision_scale's value)
         return self._scale
+
+    def normalization(self):
+        """The L2 normalisation of the problem (:func:`~tritools.model.normalize.normalization_for`), computed once."""
+        if self._norm is None:
+            self._norm = normalization_for(self.C, self.regions)
+        return self._norm
 
     def set_normalization_scale(self, s: float) -> None:
         """Give the L2 normalisation's image scale s of this problem, computed in a batch (:func:`scale_from`)."""
@@ -338,7 +345,7 @@ class TlsSearch(NodeBounds):
         reports X and gamma_UB.  Past the deadline the frame's origin (the DLT point of the region centres, where
         the refinement starts) without the refinement: a batch stopped by its limit reports every point at once."""
         try:
-            norm = normalization_for(self.C, self.regions)
+            norm = self.normalization()
             if self.deadline.expired:
                 return norm.world_point(np.zeros(3))
             est = local_estimate(norm.cameras(self.C), norm.regions(self.regions))

@@ -86,7 +86,8 @@ from .settings import call_deadline
 from .robust_loo import leave_one_out
 from .robust_nodes import NodeBounds, lookahead_bound
 from .robust_rays import centre_pair_candidates, ray_candidates, sampled_pairs
-from .robust_costs import disc_distances2, disc_shapes, point_distances2, point_distances2_one
+from .robust_costs import (decision_scale, disc_distances2, disc_shapes, point_distances2,  # noqa: F401
+                           point_distances2_one, scale_from, tls_cost)
 from .robust_report import tls_reported
 
 __all__ = ["robust_thresholds", "triangulate_robust", "drive", "lookahead_bound", "tls_cost", "point_distances2",
@@ -150,14 +151,6 @@ def _short(value, limit: int = 120) -> str:
     return text if len(text) <= limit else text[:limit - 5] + " ...]"
 
 
-def tls_cost(residuals, c) -> float:
-    """f_TLS = sum_i min(d_i^2, c_i^2) (an undefined projection, d_i = inf, counts c_i^2)."""
-    d = np.asarray(residuals, float)
-    with np.errstate(over="ignore"):                  # c or d above 1e154: c^2 = inf, as it should
-        d2 = np.where(np.isfinite(d), d * d, np.inf)
-        return float(np.sum(np.minimum(d2, np.asarray(c, float) ** 2)))
-
-
 def branching_order(ratio: np.ndarray) -> np.ndarray:
     """The views in branching order from r_i = d_i / c_i at the best candidate: the :data:`ANCHORS` most
     confident inliers first (the lookahead needs inliers in I), then the ambiguous views (1/AMBIGUOUS < r_i <
@@ -169,25 +162,6 @@ def branching_order(ratio: np.ndarray) -> np.ndarray:
     rest = [int(i) for i in by_r if int(i) not in head]
     amb = sorted((i for i in rest if 1 / AMBIGUOUS < r[i] < AMBIGUOUS), key=lambda i: abs(math.log(r[i])))
     return np.array(head + amb + [i for i in rest if i not in amb], dtype=int)
-
-
-def decision_scale(cams, regions, c2: np.ndarray) -> float:
-    """The scale of the certificate rule on f_TLS (pixels^2): ``min(min_i c_i^2, rho^2)`` with rho = 1 / s the
-    residual scale of the L2 normalisation (:mod:`tritools.model.normalize`; an L2 certificate allows
-    ``gap_abs`` at c = s^2 f = 1).  Thresholds far above the residuals (or so large that c^2 overflows) thus
-    never loosen the rule beyond the L2 one: f_TLS = L2 there."""
-    from ..model.normalize import normalization_for
-
-    return scale_from(normalization_for(cams, regions).scale, c2)
-
-
-def scale_from(s: float, c2: np.ndarray) -> float:
-    """:func:`decision_scale` from the L2 normalisation's image scale s (a batch computes s for many problems in
-    one :func:`tritools.model.normalize.normalization_stack` call)."""
-    finite = c2[np.isfinite(c2) & (c2 > 0)]
-    rho2 = 1.0 / (s * s) if np.isfinite(s) and s > 0 else math.inf
-    scale = min([rho2, *finite.tolist()])
-    return float(scale) if np.isfinite(scale) and scale > 0 else 1.0
 
 
 class TlsSearch(NodeBounds):

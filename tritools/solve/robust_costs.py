@@ -6,12 +6,15 @@ denominator below :data:`tritools.model.geometry.PROJECTION_DENOM_RTOL` of its s
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from ..model.geometry import PROJECTION_DENOM_RTOL
 from ..model.refine import disc_shapes
 
-__all__ = ["point_distances2", "point_distances2_one", "point_distances2_rows", "point_distances2_stack", "projections",
+__all__ = ["tls_cost", "decision_scale", "scale_from",
+           "point_distances2", "point_distances2_one", "point_distances2_rows", "point_distances2_stack", "projections",
            "disc_distances2", "disc_shapes"]
 
 
@@ -87,3 +90,30 @@ def disc_distances2(C: np.ndarray, centres: np.ndarray, radii: np.ndarray, Xs: n
     with np.errstate(invalid="ignore"):
         d = np.maximum(np.sqrt(d2) - radii[None], 0.0)
     return np.where(np.isfinite(d2), d * d, np.inf)
+
+
+def tls_cost(residuals, c) -> float:
+    """f_TLS = sum_i min(d_i^2, c_i^2) (an undefined projection, d_i = inf, counts c_i^2)."""
+    d = np.asarray(residuals, float)
+    with np.errstate(over="ignore"):                  # c or d above 1e154: c^2 = inf, as it should
+        d2 = np.where(np.isfinite(d), d * d, np.inf)
+        return float(np.sum(np.minimum(d2, np.asarray(c, float) ** 2)))
+
+
+def decision_scale(cams, regions, c2: np.ndarray) -> float:
+    """The scale of the certificate rule on f_TLS (pixels^2): ``min(min_i c_i^2, rho^2)`` with rho = 1 / s the
+    residual scale of the L2 normalisation (:mod:`tritools.model.normalize`; an L2 certificate allows
+    ``gap_abs`` at c = s^2 f = 1).  Thresholds far above the residuals (or so large that c^2 overflows) thus
+    never loosen the rule beyond the L2 one: f_TLS = L2 there."""
+    from ..model.normalize import normalization_for
+
+    return scale_from(normalization_for(cams, regions).scale, c2)
+
+
+def scale_from(s: float, c2: np.ndarray) -> float:
+    """:func:`decision_scale` from the L2 normalisation's image scale s (a batch computes s for many problems in
+    one :func:`tritools.model.normalize.normalization_stack` call)."""
+    finite = c2[np.isfinite(c2) & (c2 > 0)]
+    rho2 = 1.0 / (s * s) if np.isfinite(s) and s > 0 else math.inf
+    scale = min([rho2, *finite.tolist()])
+    return float(scale) if np.isfinite(scale) and scale > 0 else 1.0

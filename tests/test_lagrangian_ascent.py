@@ -95,3 +95,38 @@ def test_no_positive_definite_start_gives_none():
     F2 = -np.eye(n)                                   # concave f: L2 = -I + lam G2 with G2 = 0 is never PD
     G2 = np.zeros((1, n, n))
     assert ascend_one(0.0, np.zeros(n), F2, np.zeros(1), np.ones((1, n)), _sparse(G2), np.zeros(1)) is None
+
+
+def _counted_ascent(monkeypatch, *args, **kwargs):
+    """ascend_one(*args, **kwargs) and the Newton steps it took."""
+    import sospoly.analysis.lagrangian as lagrangian
+
+    calls = []
+    step = lagrangian._newton_step
+    monkeypatch.setattr(lagrangian, "_newton_step", lambda *a: calls.append(1) or step(*a))
+    out = lagrangian.ascend_one(*args, **kwargs)
+    monkeypatch.undo()
+    return out, len(calls)
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_a_target_out_of_reach_ends_the_ascent_early_and_one_within_reach_is_reached(seed, monkeypatch):
+    """out_of_reach: with a target 3% above the SDP's value (checked by cvxpy + Clarabel) the ascent gives up
+    after its first centred weights instead of climbing to the end; with one 0.1% below the value it never gives
+    up (it reaches the target)."""
+    rng = np.random.default_rng(seed)
+    n, K = int(rng.integers(3, 7)), int(rng.integers(1, 4))
+    f0, f1, F2, g0, g1, G2, _ = _program(rng, n, K)
+    sdp = _sdp_value(f0, f1, F2, g0, g1, G2)
+    if sdp is None:
+        pytest.skip("the hand-written SDP did not solve")
+    args = (f0, f1, F2, g0, g1, _sparse(G2), np.zeros(K))
+    full, n_full = _counted_ascent(monkeypatch, *args)
+    high = sdp + 0.03 * max(1.0, abs(sdp))
+    part, n_part = _counted_ascent(monkeypatch, *args, target=high)
+    assert part[1] < high and part[1] <= full[1] + 1e-9 * max(1.0, abs(full[1]))
+    assert n_part < n_full                               # it gave up before the climb's end
+    low = sdp - 1e-3 * max(1.0, abs(sdp))
+    if full[1] >= low:                                   # (a hard case may end below it without a target too)
+        reached = ascend_one(*args, target=low)
+        assert reached[1] >= low

@@ -12,7 +12,8 @@ Where L2(lambda) is positive definite the inner minimum is attained at w = -(2 L
 
 so d is concave and smooth on that open set (Danskin).  Damped Newton steps on d + mu log det L2 (the set's
 barrier) for mu falling tenfold once each weight's iterates are centred climb towards the SDP's value, stopping
-at any ``target`` below it, with n x n Cholesky factorisations only (tens of microseconds each; an interior-point
+at any ``target`` below it and giving up on one above it (:func:`out_of_reach`, the barrier's own gap bound), with
+n x n Cholesky factorisations only (tens of microseconds each; an interior-point
 solve of the same SDP costs ~10 iterations of a solver's set-up).  The supremum may lie on the boundary of the PD
 set and be approached slowly (the "hard case"); within ``max_iter`` steps the ascent then ends below it: a valid,
 weaker bound (tests/test_lagrangian_ascent.py compares with the SDP solved by Clarabel).  Verification at a
@@ -32,7 +33,7 @@ import numpy as np
 from ..solvers.ipm.lapack import cho_solve, cholesky, solve_lower
 from .verify import SparseQuadratics
 
-__all__ = ["ascend_one", "ASCENT_MAX_ITER", "ASCENT_RTOL"]
+__all__ = ["ascend_one", "out_of_reach", "ASCENT_MAX_ITER", "ASCENT_RTOL", "GIVE_UP_MARGIN"]
 
 #: Newton iterations of :func:`ascend_one` at most (over all barrier weights)
 ASCENT_MAX_ITER = 80
@@ -121,20 +122,41 @@ def ascend_one(f0: float, f1, F2, g0, g1, G2: SparseQuadratics, lam0, *, target:
     while steps < max_iter:
         if target is not None and best[1] >= target:
             break
+        centred = False
         for _ in range(_STEPS_PER_ROUND):
             steps += 1
             moved = _newton_step(F2, f1, f0, g0, g1, G2d, lam, d, w, R, mu)
             if moved is None:
+                centred = True                           # no step raises phi: its maximiser for this mu
                 break
             lam, d, w, R, decrement = moved
             if d > best[1]:
                 best = (lam, d)
-            if (target is not None and d >= target) or steps >= max_iter or decrement <= _CENTRED * mu:
-                break                                    # (centred for this mu: the next, smaller one)
+            if (target is not None and d >= target) or steps >= max_iter:
+                break
+            if decrement <= _CENTRED * mu:
+                centred = True                           # (centred for this mu: the next, smaller one)
+                break
+        if centred and target is not None and out_of_reach(d, mu, n, target):
+            break
         if n * mu <= ASCENT_RTOL * max(1.0, abs(best[1])):
             break
         mu *= 0.1
     return best[0], float(best[1])
+
+
+def out_of_reach(d: float, mu: float, n: int, target: float) -> bool:
+    """Is ``target`` above the dual's supremum, judged at a centred iterate of barrier weight ``mu``?  The barrier
+    problem max d + mu log det L2 is, up to a constant, the standard one of the SDP max {t : [[L0 - t, L1^T / 2],
+    [L1 / 2, L2]] PSD} (its t-part is maximised at t = d - mu), whose central point of weight mu has a gap of at
+    most (n + 1) mu: sup d <= d(lambda_mu) + n mu.  An iterate centred to a Newton decrement of
+    :data:`_CENTRED` mu is not the central point, so the test keeps :data:`GIVE_UP_MARGIN` times that gap.  Only
+    ends the ascent early (no bound is read from it): a wrong call costs the caller's next step, never a bound."""
+    return d + GIVE_UP_MARGIN * n * mu < target
+
+
+#: :func:`out_of_reach` asks the target to exceed a centred iterate's d by this many times the central gap n mu
+GIVE_UP_MARGIN = 4.0
 
 
 #: the first barrier weight, relative to max(1, |d|) / n at the start

@@ -186,6 +186,35 @@ def test_stacked_enumeration_ascent_decides_more_and_stays_below_the_reference(m
             _check_against_reference(r, P, x, C, X)
 
 
+def test_stacked_enumeration_solves_the_all_views_subproblem_as_a_single_call_does(monkeypatch):
+    """The stacked enumeration of three-view problems (a batch's path) solves the all-views sub-problem itself where
+    that set alone keeps LB below UB (``_Group._solve_all``, the single call's ``_solve_all``): more scenes decided
+    than without it (they went to the branch and bound), every answer below the reference; through
+    ``triangulate_many`` no problem of such a batch reaches the branch and bound, and each batch result has the
+    single call's status and inlier set."""
+    rng = np.random.default_rng(7)
+    scenes = [robust_protocol_scene(3, 1, noise, rng) for noise in (1.0, 5.0) for _ in range(20)]
+    rescued, on, off = _on_and_off(scenes, False, monkeypatch,
+                                   lambda: monkeypatch.setattr(run_mod._Group, "_solve_all", lambda self, probs: None))
+    assert sum(on) > sum(off)
+    for (P, x, X, _), r in zip(scenes, rescued):
+        if r is not None:
+            _check_against_reference(r, P, x, C, X)
+    monkeypatch.undo()
+    import tritools.solve.robust_drive as drive_mod
+
+    searched = []
+    drive = drive_mod.drive
+    monkeypatch.setattr(drive_mod, "drive", lambda searches: searched.extend(searches) or drive(searches))
+    probs = [(P, x) for P, x, _, _ in scenes]
+    batch = tritools.triangulate_many(probs, robust=C)
+    assert searched == []
+    for (P, x), r in zip(probs, batch):
+        one = tritools.triangulate(P, x, robust=C)
+        assert (r.status, r.optimal) == (one.status, one.optimal)
+        np.testing.assert_array_equal(r.inliers, one.inliers)
+
+
 def test_other_view_counts_and_regions_are_not_taken():
     """Only searches of three point views: others get None (the stacked enumeration or the search runs)."""
     rng = np.random.default_rng(5)

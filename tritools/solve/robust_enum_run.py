@@ -62,10 +62,8 @@ ENUM_ROWS = 8192
 #: clean tracks; in batches the staged order is the cheaper one (benchmarks/RESULTS.md, wave 7).
 STAGED_FROM = 2
 #: a single call computes the candidates of the sets whose c^2(V - S) does not meet UB (they may lower it) only when
-#: its best inlier set leaves out at least this many views.  Measured (protocol scenes, 40 per cell, 0 and 3
-#: interleaved in one process, median CPU): N = 5 with one or two wrong matches 1.9-2.1 ms against 2.3-2.7, N = 8
-#: with two 2.7 against 3.4, the same certificates and values; without them at every count, N = 7 with three left 3
-#: of 40 scenes to the branch and bound (with LATER_FROM = 3: none), N = 7 with two 1 of 40 (mean CPU unchanged).
+#: its best inlier set leaves out at least this many views (measured, 0 against 3: N = 5-8 1.9-2.7 ms against
+#: 2.3-3.4, the same answers; without them, N = 7 with three wrong matches left 3 of 40 scenes to the search).
 LATER_FROM = 3
 #: Levenberg-Marquardt steps polishing the rows of a single problem (a stack of many: enum.POLISH_STEPS, 5): its best
 #: candidate is refined to convergence on its inlier set, and the rows whose bound then fails on their own sets
@@ -343,7 +341,28 @@ class _Group:
         if more.any():
             self._bound(more)
         self._ascend(live & keep & ~self._expired())
+        if self.N == 3:
+            self._solve_all(live & keep & ~self._expired())
         self._decide(np.nonzero(keep)[0], final=True)
+
+    def _solve_all(self, probs: np.ndarray) -> None:
+        """Three views, as a single call: the problems ``probs`` (P,) whose set of all views alone fails get its
+        sub-problem (:func:`~tritools.solve.robust_three.solve_all_views`) here, not after a search's set-up."""
+        from .robust_three import solve_all_views
+
+        failing, row = self._failing(), len(self.W) - 1
+        for p in np.nonzero(probs & failing[:, row] & ~failing[:, :row].any(axis=1))[0]:
+            s = self.group[p]
+            if s.deadline.expired:
+                continue
+            out = solve_all_views(s)
+            if out is None:
+                continue
+            if out.lb > self.lb[p, row]:
+                self.lb[p, row] = out.lb
+                self._terms_cache = None
+            if out.X is not None:
+                self._offer_each([(p, out.X)])
 
     def _ascend(self, probs: np.ndarray) -> None:
         """The bounded rows of the problems ``probs`` (P,) whose term still does not meet UB: their bound by the best

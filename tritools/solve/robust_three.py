@@ -37,7 +37,8 @@ from .robust_costs import point_distances2
 from .robust_enum_run import LO_ROUNDS, eligible, enumerated_result, lower_bounds
 from .robust_subsolve import solve_subproblem
 
-__all__ = ["three_view_tls", "three_terms", "three_lower_bound", "exact_terms", "three_rest", "VIEWS", "POLISH_STEPS"]
+__all__ = ["three_view_tls", "solve_all_views", "three_terms", "three_lower_bound", "exact_terms", "three_rest",
+           "VIEWS", "POLISH_STEPS"]
 
 log = logging.getLogger(__name__)
 
@@ -204,10 +205,7 @@ class _ThreeViews:
         failing = self._failing()
         if not failing[row] or failing[:row].any():
             return lb
-        remaining = s.deadline.remaining()
-        limit = SUB_TIME_LIMIT if remaining is None else min(SUB_TIME_LIMIT, remaining)
-        out = solve_subproblem(s.C, s.regions, s.opts, light=False, from_delta=FULL_FROM_DELTA, limit=limit,
-                               need=s.best_f, points=True)
+        out = solve_all_views(s)
         if out is None:
             return lb
         self.lb[row] = max(self.lb[row], out.lb)
@@ -258,6 +256,19 @@ class _ThreeViews:
 
     def _result(self, lb: float):
         return enumerated_result(self.s, lb, self.bounded.sum(), len(self.W))
+
+
+def solve_all_views(search):
+    """The L2 sub-problem of all views of a search (its cameras and regions) when that set alone keeps LB below UB:
+    :func:`~tritools.solve.robust_subsolve.solve_subproblem` as the search would solve it (three views: Theorem 1 at
+    delta = 4 first), stopping once its rigorous bound reaches UB, within :data:`~tritools.solve.robust_bounds.
+    SUB_TIME_LIMIT` and the search's deadline: a :class:`~tritools.solve.robust_subsolve.SubSolve` (``lb`` pixels^2,
+    rounded down, and its estimate) or None (refused input).  The single call (:meth:`_ThreeViews._solve_all`) and a
+    batch's stack of three-view problems (:meth:`tritools.solve.robust_enum_run._Group._solve_all`) both call it."""
+    remaining = search.deadline.remaining()
+    limit = SUB_TIME_LIMIT if remaining is None else min(SUB_TIME_LIMIT, remaining)
+    return solve_subproblem(search.C, search.regions, search.opts, light=False, from_delta=FULL_FROM_DELTA,
+                            limit=limit, need=search.best_f, points=True)
 
 
 def three_terms(lb: list, rest: list) -> list:

@@ -117,15 +117,12 @@ def expired_regions(cameras, regions, opts) -> TriangulationResult | None:
     not optimal -- without the local refinement through the regions' distances and the normalisation (~10-20 ms a
     problem at 12 views of mixed regions, review 15 F1: 12 such problems took a 0.2 s batch limit to 1.4x).  None
     where the input does not validate (the caller's per-point path then reports what is wrong)."""
-    from ..model.regions import as_regions, require_extent
-    from .fastpath_cameras import validated_cameras
+    from .fastpath_cameras import validated_problem
     from .report import point_report
 
     t0 = time.perf_counter()
     try:
-        cams = validated_cameras(cameras)
-        regs = as_regions(regions, cams.shape[0])
-        require_extent(regs)
+        cams, regs = validated_problem(cameras, regions)
         centres = np.array([np.asarray(r.center, float).reshape(2) for r in regs])
     except (ValueError, TypeError):
         return None

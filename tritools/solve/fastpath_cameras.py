@@ -27,7 +27,7 @@ from ..model.cameras import as_world_frame, depth_rows, validate_cameras
 from ..model.frame import WorldFrame, world_frame
 from ..model.regions.base import real_array
 
-__all__ = ["validated_cameras", "framed_cameras", "depths_one"]
+__all__ = ["validated_cameras", "validated_problem", "framed_cameras", "depths_one"]
 
 #: the last entry of each function: (key, value) or None.
 _LAST_VALID: list = [None]
@@ -55,6 +55,18 @@ def validated_cameras(cameras) -> np.ndarray:
     C = validate_cameras(C)
     _LAST_VALID[0] = key
     return C
+
+
+def validated_problem(cameras, regions) -> tuple[np.ndarray, list]:
+    """The input checks of every path of one problem, in one place: (:func:`validated_cameras` of ``cameras``, the
+    regions as :func:`tritools.model.regions.as_regions` of ``regions`` for that many views, each with an extent,
+    :func:`~tritools.model.regions.require_extent`).  Raises their ValueError / TypeError."""
+    from ..model.regions import as_regions, require_extent
+
+    cams = validated_cameras(cameras)
+    regs = as_regions(regions, cams.shape[0])
+    require_extent(regs)                  # every path needs it (docs/regions.md): refused alike everywhere
+    return cams, regs
 
 
 def framed_cameras(cams: np.ndarray) -> tuple[WorldFrame, np.ndarray]:

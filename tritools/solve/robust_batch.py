@@ -29,10 +29,10 @@ import time
 
 import numpy as np
 
-from ..model.geometry import validate_cameras
-from ..model.regions import as_regions, require_extent
+from ..model.regions import as_regions
 from ..result import Attempt, Status, TriangulationResult
 from .call_limit import call_limit, current_end, mark_cut, within
+from .fastpath_cameras import validated_problem
 from .robust import robust_thresholds, triangulate_robust
 
 __all__ = ["robust_many", "thresholds_for"]
@@ -129,9 +129,7 @@ def _search_or_failure(cameras, regions, c, opts):
 
     t0 = time.perf_counter()
     try:
-        cams = validate_cameras(cameras)
-        regs = as_regions(regions, cams.shape[0])
-        require_extent(regs)
+        cams, regs = validated_problem(cameras, regions)
         return TlsSearch(cams, regs, c, opts, t0)
     except (ValueError, TypeError) as exc:
         return TriangulationResult("tls", Status.INVALID_INPUT, message=f"{type(exc).__name__}: {exc}",
@@ -180,10 +178,7 @@ def _after_l2(problems, thresholds, opts, idx, first, out) -> list:
         elif _l2_suffices(res, c, problems[i][1], opts.tolerances):
             out[i] = settled_by_l2(res)
         elif not np.any(np.isfinite(c)):
-            cams, regions = problems[i]
-            regs = as_regions(regions, len(c))
-            require_extent(regs)
-            out[i] = triangulate_robust(validate_cameras(cams), regs, c, opts)
+            out[i] = triangulate_robust(*validated_problem(*problems[i]), c, opts)
         else:
             rest.append(i)
     return rest

@@ -37,9 +37,8 @@ from numpy.typing import ArrayLike
 from sospoly.analysis import rigorous_psatz_bound  # noqa: F401 - re-exported (the rigor stage's bound)
 
 from ..model.constraints import Method
-from ..model.regions import as_regions, require_extent
 from ..result import TriangulationResult
-from .fastpath_cameras import validated_cameras
+from .fastpath_cameras import validated_problem
 from .options import TriangulationOptions, options_from
 from .stages import run_point
 from .stages.estimate import FAMILY_SEARCH_EVALS, INACCURATE_RESOLVE_MAX_SECONDS, MAX_FAMILY_DIM
@@ -71,9 +70,7 @@ def triangulate(cameras: ArrayLike, regions: Sequence | ArrayLike, method: str |
     """
     t0 = time.perf_counter()
     opts = options_from(options, method=method, delta=delta, max_delta=max_delta, **overrides)
-    cams = validated_cameras(cameras)     # (the checks of validate_cameras; remembered for the last cameras)
-    regs = as_regions(regions, cams.shape[0])
-    require_extent(regs)                  # every path needs it (docs/regions.md): refused alike everywhere
+    cams, regs = validated_problem(cameras, regions)     # (the camera checks remembered for the last cameras)
     if robust is not None:
         from .robust import robust_thresholds, triangulate_robust
 

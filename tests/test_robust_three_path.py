@@ -215,6 +215,28 @@ def test_stacked_enumeration_solves_the_all_views_subproblem_as_a_single_call_do
         np.testing.assert_array_equal(r.inliers, one.inliers)
 
 
+def test_batch_sub_problems_of_others_do_not_use_up_a_problems_time_limit(monkeypatch):
+    """Per-problem time limits in a batch: the all-views sub-problems the stack solves for some problems are credited
+    to the others' deadlines (the stack's rule, ``_Group._expired``).  Each such solve made 0.45 s slower (after it:
+    its own limit is not touched), the second starts after the 0.4 s each problem may use; every problem is still
+    decided, as without a limit."""
+    rng = np.random.default_rng(7)
+    probs = [robust_protocol_scene(3, 1, noise, rng)[:2] for noise in (1.0, 5.0) for _ in range(20)]
+    solved = []
+    solve = robust_three.solve_all_views
+
+    def slow(search):
+        out = solve(search)
+        time.sleep(0.45)
+        solved.append(1)
+        return out
+
+    monkeypatch.setattr(robust_three, "solve_all_views", slow)
+    out = tritools.triangulate_many(probs, robust=C, time_limit=0.4)
+    assert len(solved) >= 2
+    assert all(r.optimal for r in out), [r.status for r in out if not r.optimal]
+
+
 def test_other_view_counts_and_regions_are_not_taken():
     """Only searches of three point views: others get None (the stacked enumeration or the search runs)."""
     rng = np.random.default_rng(5)

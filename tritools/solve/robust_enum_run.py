@@ -352,10 +352,9 @@ class _Group:
 
         failing, row = self._failing(), len(self.W) - 1
         for p in np.nonzero(probs & failing[:, row] & ~failing[:, :row].any(axis=1))[0]:
-            s = self.group[p]
-            if s.deadline.expired:
+            if self._expired()[p]:                      # (the others' solves credited to every deadline)
                 continue
-            out = solve_all_views(s)
+            out = solve_all_views(self.group[p])
             if out is None:
                 continue
             if out.lb > self.lb[p, row]:

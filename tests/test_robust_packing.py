@@ -43,6 +43,40 @@ def test_packing_bound_below_every_subset_optimum(seed):
     assert positive > 10
 
 
+def _packing_by_all_pairs(lb: dict, S: frozenset) -> float:
+    """The packing bound as first written: every pair of S in view order, looked up in the cache, a stable sort
+    by bound, greedy disjoint pairs, rounded down."""
+    pairs = [(lb[P], P) for P in map(frozenset, itertools.combinations(sorted(S), 2)) if P in lb and lb[P] > 0]
+    pairs.sort(key=lambda bp: bp[0], reverse=True)
+    used, total = set(), 0.0
+    for b, P in pairs:
+        if not (P & used):
+            total += b
+            used |= P
+    return total * rb.ROUND_DOWN
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_packing_bound_from_the_cache_equals_the_bound_from_all_pairs(seed):
+    """packing_bound walks the cache instead of S's pairs where the cache is the shorter list (a large S): the same
+    value bit for bit as the walk over all pairs of S (ties in bound included: equal bounds on purpose), on both
+    sides of the switch."""
+    rng = np.random.default_rng(seed)
+    N = 60
+    opts = tritools.TriangulationOptions()
+    cams = sphere_cameras(N, rng)
+    sb = rb.SubsetBounds(cams, [Point(p) for p in rng.uniform(0, 100, (N, 2))], opts, opts.budget.deadline())
+    pool = [frozenset(p) for p in itertools.combinations(range(N), 2)]
+    for k in rng.choice(len(pool), 300, replace=False):
+        sb._lb[pool[k]] = float(rng.choice([0.0, 1.5, 2.0, rng.uniform(0, 10)]))     # ties and zeros on purpose
+    for _ in range(40):                                                            # larger sets in the cache too
+        sb._lb[frozenset(rng.choice(N, 5, replace=False).tolist())] = 3.0
+    for size in (4, 10, 25, 40, 60):                    # 6 .. 1770 pairs against a cache of ~340 entries
+        for _ in range(5):
+            S = frozenset(rng.choice(N, size, replace=False).tolist())
+            assert sb.packing_bound(S) == _packing_by_all_pairs(sb._lb, S)
+
+
 def _sphere_scene(N, n_out, rng):
     """The CVPR 2023 protocol (benchmarks/robust.py): cameras on a sphere of radius 2 looking at the origin, the
     point in [-0.5, 0.5]^3, 1 px noise, outliers uniform in the 2108 x 1162 image."""

@@ -272,8 +272,9 @@ def test_cpu_share_from_the_load_average(monkeypatch):
 
 @pytest.mark.parametrize("kind", ["points", "discs"])
 def test_screen_past_the_deadline_ranks_only_its_first_block(kind, monkeypatch):
-    """The screen of many candidates runs in blocks of SCREEN_BLOCK candidate-views; past the deadline only the
-    first block is screened and the rest rank last (inf); before it, every candidate gets its f_TLS."""
+    """The screen of many candidates runs in blocks of SCREEN_BLOCK candidate-views; one that starts past the
+    deadline screens only a first block of SCREEN_LATE candidate-views and the rest rank last (inf); before it, every
+    candidate gets its f_TLS."""
     import tritools.solve.robust as robust
 
     P, x, X, _ = robust_protocol_scene(40, 8, 1.0, np.random.default_rng(9))
@@ -281,6 +282,7 @@ def test_screen_past_the_deadline_ranks_only_its_first_block(kind, monkeypatch):
     search = TlsSearch(P, regs, np.full(40, 2.0), tritools.TriangulationOptions(), 0.0,
                        points=x if kind == "points" else None)
     monkeypatch.setattr(robust, "SCREEN_BLOCK", 400)                  # 10 candidates per block
+    monkeypatch.setattr(robust, "SCREEN_LATE", 200)                   # 5 past the deadline
     Xs = X + np.random.default_rng(0).normal(scale=0.1, size=(35, 3))
     full = search.screen(Xs)
     assert np.isfinite(full).all()
@@ -288,8 +290,8 @@ def test_screen_past_the_deadline_ranks_only_its_first_block(kind, monkeypatch):
     np.testing.assert_allclose(full, np.sum(np.minimum(d * d, 4.0), axis=1), rtol=1e-9)
     search.set_deadline(Deadline.after(0.0))
     late = search.screen(Xs)
-    np.testing.assert_array_equal(late[:10], full[:10])
-    assert np.isinf(late[10:]).all()
+    np.testing.assert_array_equal(late[:5], full[:5])
+    assert np.isinf(late[5:]).all()
 
 
 def test_expired_cache_in_a_shared_batch_leaves_the_others_their_packing_bounds(monkeypatch):

@@ -152,10 +152,15 @@ class SubsetBounds:
 
     def packing_bound(self, S: frozenset) -> float:
         """sum of the cached bounds of disjoint view pairs inside S, picked greedily by size (module docstring:
-        superadditivity), rounded down; 0 when no pair of S is cached."""
-        pairs = [(self._lb[P], P) for P in map(frozenset, itertools.combinations(sorted(S), 2))
-                 if P in self._lb and self._lb[P] > 0]
-        pairs.sort(key=lambda bp: bp[0], reverse=True)
+        superadditivity), rounded down; 0 when no pair of S is cached.  The pairs are those of S in the cache, found by
+        whichever is shorter, S's pairs or the cache (|S| = 320 of 400 views: 51,040 pairs, ~15 ms past a deadline),
+        taken by bound, ties in the order of their views."""
+        if len(S) * (len(S) - 1) // 2 <= len(self._lb):
+            pairs = [(self._lb[P], P) for P in map(frozenset, itertools.combinations(sorted(S), 2))
+                     if P in self._lb and self._lb[P] > 0]
+        else:
+            pairs = [(b, P) for P, b in self._lb.items() if len(P) == 2 and b > 0 and P <= S]
+        pairs.sort(key=lambda bp: (-bp[0], sorted(bp[1])))
         used, total = set(), 0.0
         for b, P in pairs:
             if not (P & used):

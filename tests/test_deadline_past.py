@@ -159,3 +159,94 @@ def test_a_batch_reports_region_problems_it_did_not_reach_from_their_centres(mon
         assert np.allclose(r.X, X, rtol=1e-9, atol=1e-12)
         rep = point_report(r.X, P, R)
         assert r.gamma_ub == rep.gamma and np.array_equal(r.residuals, rep.residuals)
+
+
+def _robust_search(N, n_out, seed=3):
+    import time
+
+    from tritools.scene import robust_protocol_scene
+    from tritools.solve.options import options_from
+    from tritools.solve.robust import TlsSearch, robust_thresholds
+
+    P, x, X, _ = robust_protocol_scene(N, n_out, 1.0, np.random.default_rng(seed))
+    s = TlsSearch(P, None, robust_thresholds(5.0, N), options_from(None), time.perf_counter(), points=x)
+    s.set_deadline(Deadline(None))
+    return s, X
+
+
+def test_a_screen_started_past_the_deadline_takes_one_small_block():
+    """TlsSearch.screen ranks candidates in blocks; one that starts past the deadline evaluates SCREEN_LATE
+    candidate-views only (the rest rank last), one before it evaluates every candidate."""
+    from tritools.solve import robust as rob
+
+    s, X = _robust_search(400, 80)
+    Xs = X + np.random.default_rng(0).normal(size=(500, 3)) * 0.1
+    assert np.isfinite(s.screen(Xs)).all()
+    s.set_deadline(Deadline.after(0.0))
+    f = s.screen(Xs)
+    n = max(1, rob.SCREEN_LATE // 400)
+    assert np.isfinite(f[:n]).all() and np.isinf(f[n:]).all()
+
+
+def test_the_rays_golden_section_stops_at_the_deadline(monkeypatch):
+    """robust_rays.ray_candidates: the sweep's screen, then no golden-section step once the deadline has passed
+    (each screen call computes its first block whatever the time: 22 of them ran ~30 ms past a 0.05 s limit at
+    400 views); before the deadline the golden section runs its steps."""
+    from tritools.solve import robust_rays
+
+    calls = {}
+    for late in (False, True):
+        s, _ = _robust_search(12, 3)
+        s.offer(np.zeros(3))
+        screen = s.screen
+        n = []
+
+        def counted(Xs, screen=screen, n=n):
+            n.append(len(Xs))
+            out = screen(Xs)
+            if late:
+                s.set_deadline(Deadline.after(0.0))          # the deadline passes during the sweep's screen
+            return out
+        s.screen = counted
+        out = robust_rays.ray_candidates(s)
+        calls[late] = len(n)
+        assert out and all(np.isfinite(X).all() for X in out)
+    assert calls[True] == 1 and calls[False] > robust_rays.GOLDEN_STEPS
+
+
+def test_a_batch_past_its_total_limit_keeps_every_row_of_bad_input():
+    """triangulate_many past its total_time_limit reports the point problems it did not reach from one vectorised
+    estimate (call_limit.expired_points); a problem with NaN cameras or an infinite observation among them gets the
+    per-point check's invalid_input row (the message a batch without the limit gives) instead of failing the call
+    (it raised LinAlgError), and the others keep their estimates."""
+    from tritools.scene import robust_protocol_scene
+
+    P, x, _, _ = robust_protocol_scene(4, 0, 1.0, np.random.default_rng(0))
+    Pb, xb = P.copy(), x.copy()
+    Pb[1, 0, 0], xb[2, 0] = np.nan, np.inf
+    probs = [(P, x), (Pb, x), (P, xb), (P * 1e300, x), (P, x + 1.0)]
+    free = tritools.triangulate_many(probs)
+    cut = tritools.triangulate_many(probs, total_time_limit=1e-9)
+    assert len(cut) == len(probs)
+    for k in (1, 2):
+        assert cut[k].status == free[k].status == tritools.Status.INVALID_INPUT
+        assert cut[k].message == free[k].message
+    for k in (0, 3, 4):
+        assert cut[k].status == tritools.Status.TIME_LIMIT and cut[k].X is not None and cut[k].gamma_ub is not None
+
+
+def test_batches_of_extreme_cameras_raise_no_numpy_warning():
+    """Cameras scaled by 1e300 / 1e-300 (the same cameras) in triangulate_many and triangulate_points: the batch
+    steps' overflow is checked for finiteness, and numpy's warnings (an exception under -W error) stay inside; every
+    point certified as with unscaled cameras."""
+    import warnings
+
+    from tritools.scene import robust_protocol_scene
+
+    P, x, _, _ = robust_protocol_scene(4, 0, 1.0, np.random.default_rng(0))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        many = tritools.triangulate_many([(P * k, x) for k in (1.0, 1e300, 1e-300)])
+        pts = [tritools.triangulate_points(P * k, np.array([x, x + 1.0])) for k in (1e300, 1e-300)]
+    assert all(r.optimal for r in many)
+    assert all(bool(np.all(r.optimal)) for r in pts)

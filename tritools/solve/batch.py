@@ -284,7 +284,9 @@ def solve_point_stack(cameras: np.ndarray, points2d: np.ndarray, opts: Triangula
     ``stages`` (:data:`~tritools.solve.stages.BATCH_STAGES`) of :class:`PointStack`, whose ``per_point`` stage
     runs the rows left open through ``executor`` (no per-item parsing); rows a stage list without
     ``per_point`` leaves open are solved the same way after it."""
-    with call_limit(opts.total_time_limit) as end:
+    # (cameras scaled by 1e+-300 over- and underflow in intermediate products that every step checks for
+    # finiteness: numpy's warnings are noise, and raised under -W error, as in robust_batch.robust_many)
+    with call_limit(opts.total_time_limit) as end, np.errstate(all="ignore"):
         M = len(points2d)
         out = BatchOutcome(M)
         if expired(end):                          # past the whole call's end: estimates only
@@ -303,7 +305,7 @@ def solve_point_problems(problems, opts: TriangulationOptions, *, executor=None,
     """The engine of :func:`triangulate_many` (module docstring); ``problems`` a sequence of (cameras, regions);
     ``stages``: the batch stages run on each group of point problems (their open rows, with every other
     problem, then go through ``executor`` in one pass)."""
-    with call_limit(opts.total_time_limit) as end:
+    with call_limit(opts.total_time_limit) as end, np.errstate(all="ignore"):
         return _solve_problems(problems, opts, executor, progress, retries, chunk_size, end, stages)
 
 

@@ -89,13 +89,29 @@ def mark_cut(result):
 def expired_points(C: np.ndarray, x: np.ndarray, opts) -> list[TriangulationResult]:
     """``time_limit`` results of point problems (C (M, N, 3, 4), x (M, N, 2)) not solved before the end: the DLT
     point refined by Levenberg-Marquardt (vectorised), gamma_UB = gamma(X) (a valid upper bound: the value of the
-    objective at a point), no lower bound, not optimal."""
+    objective at a point), no lower bound, not optimal.  A problem whose numbers are not all finite gets the
+    per-point check's ``invalid_input`` result instead (:func:`_refused`: what a batch without the limit reports); a
+    stack the vectorised steps cannot take (LinAlgError on extreme numbers) is taken one problem at a time; each
+    camera is divided by its largest entry first (the same camera)."""
     t0 = time.perf_counter()
     C, x = np.asarray(C, float), np.asarray(x, float)
+    finite = np.isfinite(C).all(axis=(1, 2, 3)) & np.isfinite(x).all(axis=(1, 2))
+    if not finite.all():
+        good_rows = iter(expired_points(C[finite], x[finite], opts) if finite.any() else [])
+        return [next(good_rows) if finite[m] else _refused(C[m], x[m], opts) for m in range(len(x))]
     with np.errstate(all="ignore"):
-        X0, ok = dlt_stack(C, x)
-        X, ok = refine_points_stack(C, x, X0, ok)
-        gamma, res, dep = points_report_stack(C, x, X, opts.world_frame)
+        top = np.max(np.abs(C), axis=(2, 3), keepdims=True)
+        C = C / np.where(top > 0, top, 1.0)             # each camera at unit scale (the same camera: 1e300 overflowed)
+        try:
+            X0, ok = dlt_stack(C, x)
+            X, ok = refine_points_stack(C, x, X0, ok)
+            gamma, res, dep = points_report_stack(C, x, X, opts.world_frame)
+        except np.linalg.LinAlgError:
+            if len(x) == 1:
+                X, ok, gamma = np.full((1, 3), np.nan), np.zeros(1, bool), np.full(1, np.nan)
+                res, dep = [None], [None]
+            else:
+                return [r for m in range(len(x)) for r in expired_points(C[m:m + 1], x[m:m + 1], opts)]
     share = (time.perf_counter() - t0) / max(len(x), 1)
     out = []
     for m in range(len(x)):
@@ -109,6 +125,24 @@ def expired_points(C: np.ndarray, x: np.ndarray, opts) -> list[TriangulationResu
             depths=dep[m] if good else None, residuals=res[m] if good else None,
             attempts=(Attempt(opts.method.value, None, Status.TIME_LIMIT.value, step="call"),)))
     return out
+
+
+def _refused(cameras, points, opts) -> TriangulationResult:
+    """The ``invalid_input`` result of one point problem that the per-point checks refuse
+    (:func:`~tritools.solve.fastpath_cameras.validated_problem`: the message a batch without the limit gives); a
+    ``time_limit`` result without an estimate if they accept it."""
+    from .fastpath_cameras import validated_problem
+
+    try:
+        validated_problem(cameras, points)
+    except (ValueError, TypeError) as exc:
+        why = f"{type(exc).__name__}: {exc}"
+        return TriangulationResult(opts.method.value, Status.INVALID_INPUT, message=why,
+                                   attempts=(Attempt(opts.method.value, None, Status.INVALID_INPUT.value,
+                                                     step="call"),))
+    return TriangulationResult(opts.method.value, Status.TIME_LIMIT, optimal=False,
+                               message=f"{CUT_MESSAGE} before this point was solved; no estimate",
+                               attempts=(Attempt(opts.method.value, None, Status.TIME_LIMIT.value, step="call"),))
 
 
 def expired_regions(cameras, regions, opts) -> TriangulationResult | None:

@@ -207,3 +207,29 @@ def test_points_from_an_array_equal_points_built_one_by_one():
     for bad in (np.array([[1.0, np.nan]]), np.array([[1.0, 2.0, 3.0]]), np.array([[1 + 1j, 2]])):
         with pytest.raises(ValueError):
             as_regions(bad)
+
+
+def test_as_points_fast_path_for_one_float_point_is_the_checked_conversion():
+    """as_points takes a finite float64 (2,) array without real_array's conversions: the same (1, 2) result, a new
+    array (writing to it leaves the caller's point alone), and every other input -- NaN / inf, other dtypes,
+    subclasses, (m, 2) -- goes through the checks with their messages."""
+    import numpy as np
+    import pytest
+
+    from tritools.model.regions.base import as_points
+
+    rng = np.random.default_rng(0)
+    for p in list(rng.normal(size=(20, 2)) * 10.0 ** rng.integers(-300, 300, size=(20, 1))) + [np.array([-0.0, 0.0])]:
+        P, single = as_points(p)
+        Q, single_q = as_points(p.tolist())                      # the checked path
+        assert single and single_q and P.shape == (1, 2) and P.dtype == np.float64
+        np.testing.assert_array_equal(P, Q)
+        P[0, 0] = 12345.0
+        assert p[0] != 12345.0
+    for bad in (np.array([np.nan, 1.0]), np.array([1.0, np.inf]), np.array([1.0, 2.0, 3.0])):
+        with pytest.raises(ValueError, match="points"):
+            as_points(bad)
+    P, single = as_points(np.array([1, 2], dtype=np.int32))
+    assert single and P.dtype == np.float64
+    P, single = as_points(np.zeros((3, 2)))
+    assert not single and P.shape == (3, 2)

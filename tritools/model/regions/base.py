@@ -8,11 +8,10 @@ A region ``R_i`` of view i declares the number ``n_aux`` (``n_i``) of auxiliary 
 exact closest point (hence the Euclidean distance ``d(p, R)`` of paper eq. (7)) used to
 evaluate ``gamma(X)``.
 
-The helpers (:func:`real_array`, :func:`as_vector`, :func:`as_matrix`, :func:`as_points`,
-:func:`positive_number`, :func:`similarity_args`, :func:`check_xy`, :func:`square`) are
-public so that every region module, and a user's own region type, validates its numbers the
-same way: real (not complex, boolean, string or object) and finite, with errors that name the
-argument.
+The helpers (:func:`real_array`, :func:`as_vector`, :func:`as_matrix`, :func:`as_points`, :func:`positive_number`,
+:func:`similarity_args`, :func:`check_xy`, :func:`square`) are public so that every region module, and a user's own
+region type, validates its numbers the same way: real (not complex, boolean, string or object) and finite, with
+errors that name the argument.
 """
 from __future__ import annotations
 
@@ -154,14 +153,14 @@ def as_matrix(value, name: str, shape: tuple) -> np.ndarray:
 
 
 def as_points(points, name: str = "points") -> tuple[np.ndarray, bool]:
-    """``(P, single)``: ``P`` of shape (m, 2) from one point ``(2,)`` (``single`` true) or
-    many ``(m, 2)``; real numbers, finite.
+    """``(P, single)``: ``P`` (a new array) of shape (m, 2) from one point ``(2,)`` (``single`` true) or many
+    ``(m, 2)``; real numbers, finite.  A finite float64 ``(2,)`` array (every internal call) skips the conversions.
 
-    Raises
-    ------
-    ValueError
-        Not real numbers, another shape, NaN or inf; the message names ``name``.
+    Raises ValueError: not real numbers, another shape, NaN or inf; the message names ``name``.
     """
+    if type(points) is np.ndarray and points.dtype == np.float64 and points.shape == (2,) \
+            and math.isfinite(points[0]) and math.isfinite(points[1]):
+        return points.reshape(1, 2).copy(), True
     arr = real_array(points, name, "array of shape (2,) or (m, 2)")
     if arr.shape == (2,) or (arr.ndim == 2 and arr.shape[1] == 2):
         _check_finite(arr, name)

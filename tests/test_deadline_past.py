@@ -216,19 +216,20 @@ def test_the_rays_golden_section_stops_at_the_deadline(monkeypatch):
 
 def test_a_batch_past_its_total_limit_keeps_every_row_of_bad_input():
     """triangulate_many past its total_time_limit reports the point problems it did not reach from one vectorised
-    estimate (call_limit.expired_points); a problem with NaN cameras or an infinite observation among them gets the
-    per-point check's invalid_input row (the message a batch without the limit gives) instead of failing the call
-    (it raised LinAlgError), and the others keep their estimates."""
+    estimate (call_limit.expired_points); a problem with NaN cameras, an infinite observation, a camera of rank < 3
+    or all cameras equal among them gets the per-point check's invalid_input row (the message a batch without the
+    limit gives) instead of failing the call (it raised LinAlgError) or an estimate, and the others keep theirs."""
     from tritools.scene import robust_protocol_scene
 
     P, x, _, _ = robust_protocol_scene(4, 0, 1.0, np.random.default_rng(0))
-    Pb, xb = P.copy(), x.copy()
-    Pb[1, 0, 0], xb[2, 0] = np.nan, np.inf
-    probs = [(P, x), (Pb, x), (P, xb), (P * 1e300, x), (P, x + 1.0)]
+    Pb, xb, Pr = P.copy(), x.copy(), P.copy()
+    Pb[1, 0, 0], xb[2, 0], Pr[0, 1] = np.nan, np.inf, 0.0
+    Pe = np.broadcast_to(P[0], P.shape).copy()                    # all cameras equal: ill-posed
+    probs = [(P, x), (Pb, x), (P, xb), (P * 1e300, x), (P, x + 1.0), (Pr, x), (Pe, x)]
     free = tritools.triangulate_many(probs)
     cut = tritools.triangulate_many(probs, total_time_limit=1e-9)
     assert len(cut) == len(probs)
-    for k in (1, 2):
+    for k in (1, 2, 5, 6):                                        # non-finite, rank < 3, all equal
         assert cut[k].status == free[k].status == tritools.Status.INVALID_INPUT
         assert cut[k].message == free[k].message
     for k in (0, 3, 4):

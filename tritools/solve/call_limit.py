@@ -27,6 +27,7 @@ import time
 
 import numpy as np
 
+from ..model.cameras import camera_problems
 from ..model.stacked import dlt_stack, refine_points_stack
 from ..result import Attempt, Status, TriangulationResult
 from .report import points_report_stack
@@ -89,15 +90,17 @@ def mark_cut(result):
 def expired_points(C: np.ndarray, x: np.ndarray, opts) -> list[TriangulationResult]:
     """``time_limit`` results of point problems (C (M, N, 3, 4), x (M, N, 2)) not solved before the end: the DLT
     point refined by Levenberg-Marquardt (vectorised), gamma_UB = gamma(X) (a valid upper bound: the value of the
-    objective at a point), no lower bound, not optimal.  A problem whose numbers are not all finite gets the
-    per-point check's ``invalid_input`` result instead (:func:`_refused`: what a batch without the limit reports); a
-    stack the vectorised steps cannot take (LinAlgError on extreme numbers) is taken one problem at a time; each
-    camera is divided by its largest entry first (the same camera)."""
+    objective at a point), no lower bound, not optimal.  A problem that the per-point checks refuse (non-finite
+    numbers, a camera of rank < 3, cameras all equal, fewer than two views: :func:`~tritools.model.cameras.
+    camera_problems`, the vectorised twin of the camera checks) gets their ``invalid_input`` result instead
+    (:func:`_refused`: what a batch without the limit reports); a stack the vectorised steps cannot take
+    (LinAlgError on extreme numbers) is taken one problem at a time; each camera is divided by its largest entry
+    first (the same camera)."""
     t0 = time.perf_counter()
     C, x = np.asarray(C, float), np.asarray(x, float)
-    finite = np.isfinite(C).all(axis=(1, 2, 3)) & np.isfinite(x).all(axis=(1, 2))
+    finite = camera_problems(C).valid & np.isfinite(x).all(axis=(1, 2)) & (x.shape[1] >= 2)
     if not finite.all():
-        good_rows = iter(expired_points(C[finite], x[finite], opts) if finite.any() else [])
+        good_rows = iter(expired_points(C[finite], x[finite], opts) if finite.any() else [])     # (checked)
         return [next(good_rows) if finite[m] else _refused(C[m], x[m], opts) for m in range(len(x))]
     with np.errstate(all="ignore"):
         top = np.max(np.abs(C), axis=(2, 3), keepdims=True)
@@ -116,11 +119,12 @@ def expired_points(C: np.ndarray, x: np.ndarray, opts) -> list[TriangulationResu
     out = []
     for m in range(len(x)):
         good = bool(ok[m]) and bool(np.isfinite(gamma[m]))
-        why = "the local L2 refinement of the DLT point" if good else "no estimate: the DLT point is at infinity"
+        why = "X and gamma_UB from the local L2 refinement of the DLT point" if good else \
+            "no estimate: the DLT point is at infinity"
         out.append(TriangulationResult(
             opts.method.value, Status.TIME_LIMIT, X=X[m] if good else None,
             gamma_ub=float(gamma[m]) if good else None, optimal=False,
-            message=f"{CUT_MESSAGE} before this point was solved; X and gamma_UB from {why}",
+            message=f"{CUT_MESSAGE} before this point was solved; {why}",
             timings={"batch_share": share}, in_front=bool(np.all(dep[m] > 0)) if good else None,
             depths=dep[m] if good else None, residuals=res[m] if good else None,
             attempts=(Attempt(opts.method.value, None, Status.TIME_LIMIT.value, step="call"),)))
@@ -164,10 +168,11 @@ def expired_regions(cameras, regions, opts) -> TriangulationResult | None:
         X, ok = dlt_stack(cams[None], centres[None])
     rep = point_report(X[0] if ok[0] else None, cams, regs, opts.world_frame)
     good = rep.gamma is not None and bool(np.isfinite(rep.gamma))
-    why = "the DLT point of the region centres" if good else "no estimate: the DLT point is at infinity"
+    why = "X and gamma_UB from the DLT point of the region centres" if good else \
+        "no estimate: the DLT point is at infinity"
     return TriangulationResult(
         opts.method.value, Status.TIME_LIMIT, X=X[0] if good else None, gamma_ub=float(rep.gamma) if good else None,
-        optimal=False, message=f"{CUT_MESSAGE} before this point was solved; X and gamma_UB from {why}",
+        optimal=False, message=f"{CUT_MESSAGE} before this point was solved; {why}",
         timings={"total": time.perf_counter() - t0}, in_front=bool(np.all(rep.depths > 0)) if good else None,
         depths=rep.depths if good else None, residuals=rep.residuals if good else None,
         attempts=(Attempt(opts.method.value, None, Status.TIME_LIMIT.value, step="call"),))

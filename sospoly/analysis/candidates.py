@@ -66,20 +66,22 @@ class _Compiled:
             self.cols[t, :nz.size], self.pows[t, :nz.size] = nz, row[nz]
 
     def values(self, x) -> np.ndarray:
-        terms = self.coef * np.prod(np.asarray(x, float)[self.cols] ** self.pows, axis=1)
-        return np.bincount(self.which, weights=terms, minlength=self.m)
+        with np.errstate(over="ignore", invalid="ignore"):      # a polish step far out: inf / nan, judged there
+            terms = self.coef * np.prod(np.asarray(x, float)[self.cols] ** self.pows, axis=1)
+            return np.bincount(self.which, weights=terms, minlength=self.m)
 
     def jacobian(self, x) -> np.ndarray:
         xc = np.asarray(x, float)[self.cols]
-        P = xc ** self.pows
         J = np.zeros((self.m, self.n))
-        for j in range(self.cols.shape[1]):
-            live = self.pows[:, j] > 0
-            if not live.any():
-                continue
-            others = np.prod(np.delete(P[live], j, axis=1), axis=1)
-            d = self.coef[live] * self.pows[live, j] * xc[live, j] ** (self.pows[live, j] - 1) * others
-            np.add.at(J, (self.which[live], self.cols[live, j]), d)
+        with np.errstate(over="ignore", invalid="ignore"):
+            P = xc ** self.pows
+            for j in range(self.cols.shape[1]):
+                live = self.pows[:, j] > 0
+                if not live.any():
+                    continue
+                others = np.prod(np.delete(P[live], j, axis=1), axis=1)
+                d = self.coef[live] * self.pows[live, j] * xc[live, j] ** (self.pows[live, j] - 1) * others
+                np.add.at(J, (self.which[live], self.cols[live, j]), d)
         return J
 
 

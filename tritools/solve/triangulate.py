@@ -32,6 +32,7 @@ from __future__ import annotations
 import time
 from collections.abc import Sequence
 
+import numpy as np
 from numpy.typing import ArrayLike
 
 from sospoly.analysis import rigorous_psatz_bound  # noqa: F401 - re-exported (the rigor stage's bound)
@@ -75,4 +76,5 @@ def triangulate(cameras: ArrayLike, regions: Sequence | ArrayLike, method: str |
         from .robust import robust_thresholds, triangulate_robust
 
         return triangulate_robust(cams, regs, robust_thresholds(robust, cams.shape[0]), opts, t0)
-    return run_point(cams, regs, opts, t0)
+    with np.errstate(all="ignore"):     # extreme numbers over- and underflow in steps that check finiteness (as the
+        return run_point(cams, regs, opts, t0)     # robust path): numpy's warnings are noise, an error under -W error

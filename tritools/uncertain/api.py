@@ -332,7 +332,7 @@ def _group_chunk(C, blocks, X0, Xe, convexified, opts) -> list[UncertaintyResult
     empty = _empty(st, b.reshape(M, K), be.reshape(M, K), a.reshape(M, K, 3), ae.reshape(M, K, 3), sigma)
     witnesses = np.where(((st == BlockStatus.SOLVED))[:, :, None], X0[:, None, :] + sigma[:, None, None] * blk.eta,
                          np.nan)
-    with np.errstate(invalid="ignore", divide="ignore"):
+    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
         dirs = np.where(ray[:, :, None], blk.eta / np.linalg.norm(blk.eta, axis=2, keepdims=True), np.nan)
     centre = centres(blocks, R, witnesses[:, :6], X0, dirs, sigma, opts.witness_rtol)
     witnesses = pull_inside(blocks, R, witnesses, centre, opts.witness_rtol)

@@ -60,6 +60,16 @@ def _on_and_off(scenes, three, monkeypatch, switch_off):
     return rescued, decided[True], decided[False]
 
 
+def _decides_more_below_the_reference(scenes, three, monkeypatch, switch_off):
+    """With a step on, more of ``scenes`` are decided than with it off (``switch_off``, :func:`_on_and_off`), and every
+    answer with it on is below the reference."""
+    rescued, on, off = _on_and_off(scenes, three, monkeypatch, switch_off)
+    assert sum(on) > sum(off)
+    for (P, x, X, _), r in zip(scenes, rescued):
+        if r is not None:
+            _check_against_reference(r, P, x, C, X)
+
+
 @pytest.mark.parametrize("n_out, noise", [(0, 1.0), (1, 1.0), (1, 5.0), (2, 5.0)])
 def test_decides_where_the_stack_decides_with_the_same_answer(n_out, noise, monkeypatch):
     """Protocol scenes: wherever the stack of one decides, the three-view path decides too (it bounds the same rows
@@ -161,12 +171,8 @@ def test_all_views_bounds_decide_more_and_stay_below_the_reference(step, monkeyp
     scenes = [robust_protocol_scene(3, 1, noise, rng) for noise in (1.0, 5.0) for _ in range(20)]
     other = {"_ascend_all": "_solve_all", "_solve_all": "_ascend_all"}[step]
     monkeypatch.setattr(robust_three._ThreeViews, other, lambda self, lb: lb)
-    rescued, on, off = _on_and_off(scenes, True, monkeypatch,
-                                   lambda: monkeypatch.setattr(robust_three._ThreeViews, step, lambda self, lb: lb))
-    assert sum(on) > sum(off)
-    for (P, x, X, _), r in zip(scenes, rescued):
-        if r is not None:
-            _check_against_reference(r, P, x, C, X)
+    _decides_more_below_the_reference(scenes, True, monkeypatch,
+                                      lambda: monkeypatch.setattr(robust_three._ThreeViews, step, lambda self, lb: lb))
 
 
 def test_stacked_enumeration_ascent_decides_more_and_stays_below_the_reference(monkeypatch):
@@ -178,12 +184,8 @@ def test_stacked_enumeration_ascent_decides_more_and_stays_below_the_reference(m
         for noise in (1.0, 5.0):
             rng = np.random.default_rng(13)
             scenes += [robust_protocol_scene(N, n_out, noise, rng) for _ in range(20)]
-    rescued, on, off = _on_and_off(scenes, False, monkeypatch,
-                                   lambda: monkeypatch.setattr(run_mod._Group, "_ascend", lambda self, probs: None))
-    assert sum(on) > sum(off)
-    for (P, x, X, _), r in zip(scenes, rescued):
-        if r is not None:
-            _check_against_reference(r, P, x, C, X)
+    _decides_more_below_the_reference(scenes, False, monkeypatch,
+                                      lambda: monkeypatch.setattr(run_mod._Group, "_ascend", lambda self, probs: None))
 
 
 def test_stacked_enumeration_solves_the_all_views_subproblem_as_a_single_call_does(monkeypatch):
@@ -194,12 +196,8 @@ def test_stacked_enumeration_solves_the_all_views_subproblem_as_a_single_call_do
     single call's status and inlier set."""
     rng = np.random.default_rng(7)
     scenes = [robust_protocol_scene(3, 1, noise, rng) for noise in (1.0, 5.0) for _ in range(20)]
-    rescued, on, off = _on_and_off(scenes, False, monkeypatch,
-                                   lambda: monkeypatch.setattr(run_mod._Group, "_solve_all", lambda self, probs: None))
-    assert sum(on) > sum(off)
-    for (P, x, X, _), r in zip(scenes, rescued):
-        if r is not None:
-            _check_against_reference(r, P, x, C, X)
+    off = lambda: monkeypatch.setattr(run_mod._Group, "_solve_all", lambda self, probs: None)     # noqa: E731
+    _decides_more_below_the_reference(scenes, False, monkeypatch, off)
     monkeypatch.undo()
     import tritools.solve.robust_drive as drive_mod
 

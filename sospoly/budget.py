@@ -358,9 +358,19 @@ class ClarabelTimeModel:
     PER_ROW = 2e-6
     SCALE_RANGE = (0.5, 4.0)
     MIN_CALIBRATED = 0.25
+    GROWTH = 0.5
 
     def __init__(self) -> None:
         self.scale = 1.0
+        self.reference_entries = math.inf       # the smallest program that lowered the scale
+
+    def scale_for(self, entries: float) -> float:
+        """The scale of a program of ``entries`` = sum_k L_k^2 (class docstring): ``scale`` at or above 1 and up
+        to ``reference_entries``, beyond it the optimism shrinks as (entries / reference)^GROWTH up to 1."""
+        s = self.scale
+        if s >= 1.0 or entries <= self.reference_entries:
+            return s
+        return min(1.0, s * (entries / self.reference_entries) ** self.GROWTH)
 
     @staticmethod
     def _entries(psd_sides) -> float:
@@ -369,12 +379,12 @@ class ClarabelTimeModel:
     def first_iteration(self, psd_sides, n_rows: int) -> float:
         """Predicted seconds of set-up + initial point + one iteration."""
         e = self._entries(psd_sides)
-        return self.scale * (self.FIXED + self.PER_ENTRY_FIRST * e + self.PER_ROW * n_rows)
+        return self.scale_for(e) * (self.FIXED + self.PER_ENTRY_FIRST * e + self.PER_ROW * n_rows)
 
     def iteration(self, psd_sides, n_rows: int) -> float:
         """Predicted seconds of one interior-point iteration."""
         e = self._entries(psd_sides)
-        return self.scale * (self.FIXED + self.PER_ENTRY_ITER * e + self.PER_ROW * n_rows)
+        return self.scale_for(e) * (self.FIXED + self.PER_ENTRY_ITER * e + self.PER_ROW * n_rows)
 
     def observe(self, psd_sides, n_rows: int, setup_seconds: float, solve_seconds: float, iterations: int) -> None:
         """Follow a measured call: set-up plus two iterations' worth of the solve (the initial point and
@@ -385,7 +395,8 @@ class ClarabelTimeModel:
         Programs predicted under ``MIN_CALIBRATED`` seconds are not observed: the per-entry terms were
         calibrated on large programs, and a fast small one says nothing about the next large one (a test
         suite's small programs pulled the scale to 1/4, and an 8-view Theorem 1 start then overran its
-        3 s limit by 5 s)."""
+        3 s limit by 5 s).  A measurement that lowers the scale records its size in ``reference_entries``
+        (the smallest such; :meth:`scale_for`)."""
         per_iter = solve_seconds / (max(int(iterations), 0) + 1)
         measured = setup_seconds + 2.0 * per_iter
         e = self._entries(psd_sides)
@@ -396,6 +407,8 @@ class ClarabelTimeModel:
         ratio = min(hi, max(lo, measured / predicted))
         mixed = ratio if ratio >= self.scale else 0.75 * self.scale + 0.25 * ratio
         self.scale = min(hi, max(lo, mixed))
+        if ratio < 1.0:
+            self.reference_entries = min(self.reference_entries, e)
 
 
 #: the process's model of Clarabel's uninterruptible time (used by the Clarabel back-end).

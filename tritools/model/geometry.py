@@ -184,22 +184,36 @@ def gamma_validated(Xs: np.ndarray, cameras: np.ndarray, regions: Sequence, *, s
         return gamma_discs(Xs, np.asarray(cameras, float), *shapes)
     m = len(Xs)
     Xh = np.hstack([Xs, np.ones((m, 1))])
+    if m == 1:
+        return _gamma_one(Xh, cameras, regions)
     total = np.zeros(m)
     bad = ~np.all(np.isfinite(Xs), axis=1)
     for P, R in zip(cameras, regions):
         x = project_homogeneous(Xh, P)
         finite = np.all(np.isfinite(x), axis=1)
         bad |= ~finite
-        if m == 1:                                   # one point: the region's scalar path (the same numbers)
-            if finite[0]:
-                d = float(R.distance(x[0]))
-                total[0] += d * d
-        elif np.any(finite):
+        if np.any(finite):
             d = np.asarray(R.distance(x[finite]), dtype=float)
             total[finite] += d * d
     out = np.sqrt(total / (2 * len(cameras)))
     out[bad] = np.inf
     return out
+
+
+def _gamma_one(Xh: np.ndarray, cameras: np.ndarray, regions: Sequence) -> np.ndarray:
+    """:func:`gamma_validated` of one point (Xh (1, 4)): the same projections, the regions' closest points stacked
+    by kind (:class:`~tritools.model.regions.RegionStack`, each the region's own single-point value) and the squares
+    summed in view order, so the same numbers as a loop over ``Region.distance``."""
+    from .regions.stack import RegionStack
+
+    x = np.array([project_homogeneous(Xh, P)[0] for P in cameras])
+    if not np.all(np.isfinite(Xh)) or not np.all(np.isfinite(x)):
+        return np.array([np.inf])
+    stack = regions if isinstance(regions, RegionStack) else RegionStack(regions)
+    total = 0.0
+    for d in stack.distances(x).tolist():
+        total += d * d
+    return np.array([np.sqrt(total / (2 * len(cameras)))])
 
 
 def gamma(X: ArrayLike, cameras: ArrayLike, regions: Sequence | ArrayLike) -> float | np.ndarray:

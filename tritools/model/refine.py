@@ -28,6 +28,8 @@ import numpy as np
 
 from sospoly.budget import active_deadline
 
+from .regions.stack import RegionStack
+
 __all__ = ["residual_function", "residual_jacobian", "disc_residuals", "disc_jacobian", "disc_shapes", "gamma_discs",
            "EvaluationGuard", "RefinementStopped", "evaluations_after", "evaluations_floor", "MIN_EVALS_AFTER_DEADLINE",
            "OVERRUN_SHARE_AFTER_DEADLINE",
@@ -91,17 +93,17 @@ def disc_jacobian(X, cameras: np.ndarray, centres: np.ndarray, radii: np.ndarray
 
 
 def _looped_residuals(X, cameras, regions) -> np.ndarray:
-    """r_i stacked (2N,) through each region's ``closest_point``; :data:`FAR_RESIDUAL` where a projection is at
-    infinity."""
+    """r_i stacked (2N,) through each region's ``closest_point`` (``regions`` a sequence, or a
+    :class:`~tritools.model.regions.RegionStack`: the same closest points, stacked by region kind);
+    :data:`FAR_RESIDUAL` where a projection is at infinity."""
     Xh = np.append(X, 1.0)
-    out = []
-    for P, r in zip(cameras, regions):
-        p = P @ Xh
-        if abs(p[2]) < 1e-300:
-            return np.full(2 * len(regions), FAR_RESIDUAL)
-        x = p[:2] / p[2]
-        out.append(x - r.closest_point(x))
-    return np.concatenate(out)
+    p = cameras @ Xh
+    if np.any(np.abs(p[:, 2]) < 1e-300):
+        return np.full(2 * len(regions), FAR_RESIDUAL)
+    x = p[:, :2] / p[:, 2:]
+    if isinstance(regions, RegionStack):
+        return (x - regions.closest(x)).reshape(-1)
+    return np.concatenate([xi - r.closest_point(xi) for xi, r in zip(x, regions)])
 
 
 def disc_shapes(regions) -> tuple | None:
@@ -121,7 +123,8 @@ def residual_function(cameras, regions) -> tuple:
     cameras = np.asarray(cameras, float)
     shapes = disc_shapes(regions)
     if shapes is None:
-        return (lambda X: _looped_residuals(X, cameras, regions)), False
+        stack = RegionStack(regions)
+        return (lambda X: _looped_residuals(X, cameras, stack)), False
     return (lambda X: disc_residuals(X, cameras, *shapes)), True
 
 

@@ -14,7 +14,7 @@ from ..model.exact import HOMOGENEOUS_RTOL
 from ..model.frame import project_world, project_world_one
 from ..model.geometry import WorldFrame, project_point_views
 from ..model.refine import disc_shapes
-from ..model.regions import extent_of
+from ..model.regions import RegionStack, extent_of
 from ..model.stacked import norms
 
 __all__ = ["PointReport", "point_report", "points_report_stack", "solve_radius", "solve_ball", "region_extent",
@@ -146,7 +146,7 @@ def point_report(X, cameras, regions, world_frame=WorldFrame.RIGHT_HANDED) -> Po
     if shapes is not None:
         res = np.where(fin, disc_distances(u, *shapes), np.inf)
     else:
-        res = np.array([float(r.distance(x)) if ok else np.inf for x, r, ok in zip(u, regions, fin)])
+        res = np.where(fin, RegionStack(regions).distances(np.where(fin[:, None], u, 0.0)), np.inf)
     un = np.hypot(u[:, 0], u[:, 1])
     gamma = float(gamma_upper(res, un)) if np.isfinite(res).all() else math.inf
     return PointReport(gamma, res, depths_validated(X, C, world_frame))

@@ -50,6 +50,7 @@ from .polytope import (POLYTOPE_CHUNK, POLYTOPE_RANK_RTOL, POLYTOPE_ROUNDOFF, PO
 from .ellipse import ELLIPSE_MAX_ITER, ELLIPSE_SCALAR_MAX, PD_RTOL, SYMMETRY_RTOL, Ellipse, EllipseBorder
 from .coerce import as_region, as_regions
 from .dilation import DILATION_GROW, dilate
+from .stack import RegionStack
 # isort: on
 
 __all__ = [
@@ -63,4 +64,6 @@ __all__ = [
     "check_xy", "square",
     "POLYTOPE_RANK_RTOL", "POLYTOPE_VERTEX_RTOL", "POLYTOPE_ROUNDOFF", "POLYTOPE_CHUNK", "SYMMETRY_RTOL", "PD_RTOL",
     "ELLIPSE_MAX_ITER", "ELLIPSE_SCALAR_MAX",
+    # one closest point per view, stacked by kind (issue 22)
+    "RegionStack",
 ]

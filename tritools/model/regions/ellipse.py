@@ -54,7 +54,7 @@ def _ellipse_root(r0, z0, z1, g, max_iter=ELLIPSE_MAX_ITER):
     return u
 
 
-def _ellipse_closest_scalar(e0: float, e1: float, y0: float, y1: float) -> tuple[float, float]:
+def ellipse_closest_scalar(e0: float, e1: float, y0: float, y1: float) -> tuple[float, float]:
     """Scalar version of :func:`_ellipse_closest_local` for ``y0, y1 >= 0`` (fast for few points)."""
     if y1 > 0:
         if y0 > 0:
@@ -96,7 +96,7 @@ def _ellipse_closest_local(e0: float, e1: float, Y: np.ndarray) -> np.ndarray:
     if len(Y) <= ELLIPSE_SCALAR_MAX:
         out = np.empty_like(Y)
         for k, (a, b) in enumerate(Y):
-            x0, x1 = _ellipse_closest_scalar(e0, e1, abs(float(a)), abs(float(b)))
+            x0, x1 = ellipse_closest_scalar(e0, e1, abs(float(a)), abs(float(b)))
             out[k] = (-x0 if a < 0 else x0, -x1 if b < 0 else x1)
         return out
     sgn = np.where(Y < 0, -1.0, 1.0)
@@ -130,6 +130,22 @@ def _ellipse_closest_local(e0: float, e1: float, Y: np.ndarray) -> np.ndarray:
         x0[m] = np.where(inner, e0 * xde0, e0)
         x1[m] = np.where(inner, e1 * np.sqrt(np.maximum(0.0, 1.0 - xde0 * xde0)), 0.0)
     return np.column_stack([x0, x1]) * sgn
+
+
+def ellipse_levels(U: np.ndarray, Dinv: np.ndarray) -> np.ndarray:
+    """u' D^-1 u for offsets U (m, 2) from the centres, D^-1 (1, 2, 2) broadcast or (m, 2, 2) one per row: the rule
+    of :meth:`EllipseBorder.level` and of the stacked regions (:mod:`.stack`), the same operations."""
+    u0, u1 = U[:, 0], U[:, 1]
+    return u0 * (Dinv[:, 0, 0] * u0 + Dinv[:, 0, 1] * u1) + u1 * (Dinv[:, 1, 0] * u0 + Dinv[:, 1, 1] * u1)
+
+
+def rotate(U: np.ndarray, Q: np.ndarray, back: bool = False) -> np.ndarray:
+    """U Q (into the axes Q's columns) or, with ``back``, U Q' (out of them), for U (m, 2) and Q (1, 2, 2) broadcast
+    or (m, 2, 2) one per row; the rule of the ellipse distances, single and stacked."""
+    u0, u1 = U[:, 0:1], U[:, 1:2]
+    if back:
+        return u0 * Q[:, :, 0] + u1 * Q[:, :, 1]
+    return u0 * Q[:, 0, :] + u1 * Q[:, 1, :]
 
 
 def _shape_fields(D: np.ndarray) -> tuple:
@@ -249,14 +265,21 @@ class EllipseBorder(Region):
     def level(self, points) -> float | np.ndarray:
         """``(p - x^)' D^-1 (p - x^)`` (1 on the border, < 1 inside)."""
         P, single = as_points(points)
-        U = P - self.center_
-        q = np.einsum("ij,jk,ik->i", U, self._Dinv, U)
+        q = ellipse_levels(P - self.center_, self._Dinv[None])
         return float(q[0]) if single else q
 
+    @staticmethod
+    def stacked_shapes(regions) -> tuple:
+        """(semi-axes (k, 2) descending, axis directions (k, 2, 2), D^-1 (k, 2, 2)) of ellipse regions, stacked: the
+        fields the distances use (:class:`~.stack.RegionStack`)."""
+        return (np.array([r._axes for r in regions], float).reshape(-1, 2),
+                np.array([r._Q for r in regions], float).reshape(-1, 2, 2),
+                np.array([r._Dinv for r in regions], float).reshape(-1, 2, 2))
+
     def _border_closest(self, P: np.ndarray) -> np.ndarray:
-        Y = (P - self.center_) @ self._Q
+        Y = rotate(P - self.center_, self._Q[None])
         X = _ellipse_closest_local(float(self._axes[0]), float(self._axes[1]), Y)
-        return self.center_ + X @ self._Q.T
+        return self.center_ + rotate(X, self._Q[None], back=True)
 
     def closest_point(self, points) -> np.ndarray:
         P, single = as_points(points)

@@ -80,6 +80,24 @@ class Point(Region):
 
 
 # ----------------------------------------------------------------------------- II: segment
+def segment_scaling(D: np.ndarray) -> tuple:
+    """(s, u, uu) of directions D (k, 2): s the largest entry's magnitude, u = D / s (0 where s = 0) and
+    uu = u.u, for :func:`segment_parameters` (a direction of any finite size neither overflows nor underflows)."""
+    s = np.max(np.abs(D), axis=1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        u = np.where(s[:, None] > 0, D / np.where(s > 0, s, 1.0)[:, None], 0.0)
+    return s, u, u[:, 0] * u[:, 0] + u[:, 1] * u[:, 1]
+
+
+def segment_parameters(R: np.ndarray, s: np.ndarray, u: np.ndarray, uu: np.ndarray) -> np.ndarray:
+    """t* = clip(r.d^ / ||d^||^2, -1, 1) for offsets R = p - x^ (m, 2) from segments of :func:`segment_scaling` (one
+    segment broadcast, or one per row): (r.u) / (s u.u), +-inf clipped to +-1, 0 for NaN and for a zero direction.
+    The rule of :meth:`Segment.parameter` and of the stacked regions (:mod:`.stack`), the same operations."""
+    with np.errstate(over="ignore", divide="ignore", invalid="ignore"):
+        t = np.clip((R[:, 0] * u[:, 0] + R[:, 1] * u[:, 1]) / (s * uu), -1.0, 1.0)
+    return np.where(np.isnan(t) | (s == 0.0), 0.0, t)
+
+
 @dataclass(frozen=True, eq=False)
 class Segment(Region):
     """Case II: ``R = {x^ + t d^ : t in [-1, 1]}``; ``n = 1``,
@@ -123,14 +141,8 @@ class Segment(Region):
         (0 for a zero direction); computed with ``d^`` scaled by its largest entry, so
         directions of any finite size neither overflow nor underflow."""
         P, single = as_points(points)
-        s = float(np.max(np.abs(self.direction)))
-        if s == 0.0:
-            t = np.zeros(len(P))
-        else:
-            u = self.direction / s
-            with np.errstate(over="ignore", divide="ignore", invalid="ignore"):
-                t = np.clip(((P - self.center_) @ u) / (s * float(u @ u)), -1.0, 1.0)   # +-inf clips to +-1
-            t = np.where(np.isnan(t), 0.0, t)
+        s, u, uu = segment_scaling(self.direction[None])
+        t = segment_parameters(P - self.center_, s, u, uu)
         return float(t[0]) if single else t
 
     def closest_point(self, points) -> np.ndarray:

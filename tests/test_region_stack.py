@@ -1,0 +1,97 @@
+"""RegionStack (tritools.model.regions.stack): one closest point per view, stacked by region kind, equal bit for bit
+to each region's own single-point ``closest_point`` / ``distance``; and the callers that use it (the local
+refinement's residuals, gamma of one point, the point report) give the numbers of the loop over the views."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from tritools.model import refine
+from tritools.model.geometry import gamma_validated, project_homogeneous
+from tritools.model.regions import (Ellipse, EllipseBorder, Point, Polytope, Region, RegionStack, Segment,
+                                    as_points)
+from tritools.scene import uncertain_problem
+from tritools.solve.report import point_report
+
+
+class _Shifted(Point):
+    """A user region class the stack does not know: its own closest_point is used."""
+
+    def closest_point(self, points):
+        P, single = as_points(points)
+        C = np.broadcast_to(self.x + 1.0, P.shape).copy()
+        return C[0] if single else C
+
+
+def _regions(rng, scale: float) -> list[Region]:
+    c = lambda: rng.normal(size=2) * scale          # noqa: E731
+    out = [Point(c()), Segment(c(), rng.normal(size=2) * scale * 0.01), Segment(c(), [0.0, 0.0]),
+           Segment(c(), [scale * 1e-3, 0.0]), EllipseBorder(c(), np.diag([4.0, 1.0]) * (scale * 1e-3) ** 2),
+           EllipseBorder.circle(c(), scale * 1e-3),
+           Ellipse(c(), np.array([[3.0, 1.0], [1.0, 2.0]]) * (scale * 1e-3) ** 2),
+           Ellipse(c(), np.eye(2) * (scale * 1e-3) ** 2), Polytope.box(c(), [scale * 1e-3, scale * 2e-3]),
+           _Shifted(c())]
+    rng.shuffle(out)
+    return out
+
+
+@pytest.mark.parametrize("scale", [1e-3, 1.0, 1e3, 1e6])
+def test_closest_points_and_distances_are_the_regions_own_bit_for_bit(scale):
+    rng = np.random.default_rng(int(np.log10(scale)) + 10)
+    for _ in range(30):
+        regions = _regions(rng, scale)
+        stack = RegionStack(regions)
+        centres = np.array([r.center for r in regions])
+        for spread in (0.0, 1e-4, 1e-3, 1e-2, 1.0):         # on the centre, inside the uncertain regions, far
+            U = centres + rng.normal(size=centres.shape) * spread * scale
+            U[0] = centres[0]
+            want = np.array([r.closest_point(u) for r, u in zip(regions, U)])
+            assert np.array_equal(stack.closest(U), want)
+            assert np.array_equal(stack.distances(U), np.array([r.distance(u) for r, u in zip(regions, U)]))
+
+
+def test_points_on_an_axis_and_inside_filled_ellipses():
+    e = Ellipse([10.0, -5.0], np.diag([9.0, 1.0]))
+    b = EllipseBorder([10.0, -5.0], np.diag([9.0, 1.0]))
+    regions = [e, b, e, b, e, b]
+    U = np.array([[10.0, -5.0], [10.0, -5.0], [11.0, -5.0], [10.0, -3.0], [20.0, -5.0], [12.0, -5.0]])
+    stack = RegionStack(regions)
+    assert np.array_equal(stack.closest(U), np.array([r.closest_point(u) for r, u in zip(regions, U)]))
+    assert stack.distances(U)[0] == 0.0 and stack.distances(U)[2] == 0.0      # inside the filled ellipse
+
+
+def test_bad_points_are_refused_like_the_regions():
+    stack = RegionStack([Point([0.0, 0.0]), Segment([1.0, 1.0], [1.0, 0.0])])
+    with pytest.raises(ValueError, match="finite"):
+        stack.closest(np.array([[0.0, 0.0], [np.inf, 1.0]]))
+    with pytest.raises(ValueError, match="finite"):
+        Segment([1.0, 1.0], [1.0, 0.0]).closest_point([np.inf, 1.0])
+    with pytest.raises(ValueError, match="shape"):
+        stack.closest(np.zeros((3, 2)))
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_gamma_of_one_point_and_the_report_are_the_loop_over_the_views(seed):
+    rng = np.random.default_rng(seed)
+    cams, regions, X = uncertain_problem(int(rng.integers(2, 31)), seed=seed, kinds="mixed")
+    for _ in range(5):
+        Y = np.asarray(X, float) + rng.normal(size=3) * 0.05
+        Xh = np.append(Y, 1.0)[None]
+        total = np.zeros(1)                       # the former loop of gamma_validated for one point
+        for P, R in zip(cams, regions):
+            d = float(R.distance(project_homogeneous(Xh, P)[0]))
+            total[0] += d * d
+        assert gamma_validated(Y[None], cams, regions)[0] == np.sqrt(total / (2 * len(cams)))[0]
+        u = np.array([project_homogeneous(Xh, P)[0] for P in cams])
+        rep = point_report(Y, cams, regions)
+        assert np.array_equal(rep.residuals, np.array([r.distance(x) for r, x in zip(regions, u)]))
+
+
+def test_the_refinement_residuals_through_the_stack_equal_the_loop():
+    cams, regions, X = uncertain_problem(12, seed=3, kinds="mixed")
+    fun, vectorised = refine.residual_function(cams, regions)
+    assert not vectorised
+    rng = np.random.default_rng(0)
+    for _ in range(10):
+        Y = np.asarray(X, float) + rng.normal(size=3) * 0.1
+        assert np.array_equal(fun(Y), refine._looped_residuals(Y, np.asarray(cams, float), list(regions)))

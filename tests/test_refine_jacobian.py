@@ -36,12 +36,19 @@ def test_jacobian_matches_differences(seed):
         assert np.all(J[4:6] == 0.0)
 
 
-def test_jacobian_only_for_points_and_discs():
+def test_jacobian_for_every_region_kind():
+    """Points and discs: the stacked closed form; other regions (here ellipses the point lies outside of): through
+    RegionStack.residual_derivatives (tests/test_region_stack.py), no longer scipy's forward differences."""
     sc = random_scene(3, 1, noise_px=1.0, seed=0)
     pts = [Point(p) for p in sc.points2d[0]]
     assert callable(residual_jacobian(sc.cameras, pts))
-    ell = [Ellipse(p, np.diag([1.0, 4.0])) for p in sc.points2d[0]]
-    assert residual_jacobian(sc.cameras, ell) == "2-point"
+    ell = [Ellipse(p + 5.0, np.diag([1.0, 4.0])) for p in sc.points2d[0]]
+    jac = residual_jacobian(sc.cameras, ell)
+    assert callable(jac)
+    fun, _ = residual_function(sc.cameras, ell)
+    X = sc.points3d[0]
+    F = np.column_stack([(fun(X + e) - fun(X - e)) / 2e-6 for e in np.eye(3) * 1e-6])
+    assert np.abs(jac(X) - F).max() <= 1e-5 * np.abs(F).max()
 
 
 @pytest.mark.parametrize("seed", range(3))

@@ -95,3 +95,59 @@ def test_the_refinement_residuals_through_the_stack_equal_the_loop():
     for _ in range(10):
         Y = np.asarray(X, float) + rng.normal(size=3) * 0.1
         assert np.array_equal(fun(Y), refine._looped_residuals(Y, np.asarray(cams, float), list(regions)))
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_the_analytic_jacobian_matches_central_differences(seed):
+    """d r / d X through RegionStack.residual_derivatives (segments, ellipse borders and filled ellipses by their
+    curvature, polygons by edge / vertex) against central differences of the residuals, away from kinks."""
+    rng = np.random.default_rng(seed)
+    cams, regions, X = uncertain_problem(10, seed=seed, kinds="mixed")
+    cams = np.asarray(cams, float)
+    stack = RegionStack(regions)
+    for _ in range(5):
+        Y = np.asarray(X, float) + rng.normal(size=3) * 0.05
+        J = refine.stacked_jacobian(Y, cams, stack)
+        F = np.zeros_like(J)
+        for j in range(3):
+            e = np.zeros(3)
+            e[j] = 1e-6
+            r = refine._looped_residuals
+            F[:, j] = (r(Y + e, cams, stack) - r(Y - e, cams, stack)) / 2e-6
+        assert np.abs(J - F).max() <= 1e-5 * max(1.0, np.abs(F).max())
+
+
+def test_the_remembered_closest_points_are_never_stale():
+    regions = [Segment([0.0, 0.0], [1.0, 0.0]), EllipseBorder.circle([5.0, 5.0], 1.0), Point([1.0, 2.0])]
+    stack = RegionStack(regions)
+    U1 = np.array([[0.5, 1.0], [7.0, 5.0], [0.0, 0.0]])
+    U2 = U1 + 0.25
+    a = stack.closest(U1)
+    a[:] = 99.0                                   # the caller's copy, not the remembered one
+    b = stack.closest(U2)
+    c = stack.closest(U1)
+    assert np.array_equal(c, np.array([r.closest_point(u) for r, u in zip(regions, U1)]))
+    assert np.array_equal(b, np.array([r.closest_point(u) for r, u in zip(regions, U2)]))
+
+
+def test_the_local_estimate_of_mixed_regions_is_as_good_as_with_differences():
+    """The analytic Jacobian steers LM to the same local minimum as scipy's forward differences did."""
+    from scipy.optimize import least_squares
+
+    for seed in range(4):
+        cams, regions, X = uncertain_problem(8, seed=seed, kinds="mixed")
+        cams = np.asarray(cams, float)
+        f, _ = refine.residual_function(cams, regions)
+        calls = []
+
+        def fun(Y):
+            calls.append(1)
+            return f(Y)
+
+        X0 = np.asarray(X, float) + 0.02
+        a = least_squares(fun, X0, jac=refine.residual_jacobian(cams, regions), method="lm", xtol=1e-15, ftol=1e-15,
+                          gtol=1e-15)
+        n_analytic = len(calls)
+        b = least_squares(fun, X0, jac="2-point", method="lm", xtol=1e-15, ftol=1e-15, gtol=1e-15)
+        assert a.cost <= b.cost * (1 + 1e-9) + 1e-20
+        assert n_analytic < len(calls) - n_analytic         # fewer evaluations of the residuals

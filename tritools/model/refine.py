@@ -123,7 +123,7 @@ def residual_function(cameras, regions) -> tuple:
     cameras = np.asarray(cameras, float)
     shapes = disc_shapes(regions)
     if shapes is None:
-        stack = RegionStack(regions)
+        stack = regions if isinstance(regions, RegionStack) else RegionStack(regions)
         return (lambda X: _looped_residuals(X, cameras, stack)), False
     return (lambda X: disc_residuals(X, cameras, *shapes)), True
 
@@ -134,8 +134,26 @@ def residual_jacobian(cameras, regions):
     cameras = np.asarray(cameras, float)
     shapes = disc_shapes(regions)
     if shapes is None:
-        return "2-point"
+        stack = regions if isinstance(regions, RegionStack) else RegionStack(regions)
+        return lambda X: stacked_jacobian(X, cameras, stack)
     return lambda X: disc_jacobian(X, cameras, *shapes)
+
+
+def stacked_jacobian(X, cameras: np.ndarray, stack: RegionStack) -> np.ndarray:
+    """d r / d X (2N, 3) of the residuals through a :class:`~tritools.model.regions.RegionStack`: d x_i / d X of
+    :func:`disc_jacobian` times :meth:`~tritools.model.regions.RegionStack.residual_derivatives` (I - the
+    projection's derivative onto each region); zero where a projection is at infinity or the derivatives are not
+    finite (the residuals are then constant or refused)."""
+    N = len(cameras)
+    h = cameras @ np.append(np.asarray(X, float), 1.0)
+    if np.any(np.abs(h[:, 2]) < 1e-300):
+        return np.zeros((2 * N, 3))
+    x = h[:, :2] / h[:, 2:]
+    if not np.all(np.isfinite(x)):
+        return np.zeros((2 * N, 3))
+    J = (cameras[:, :2, :3] - x[:, :, None] * cameras[:, 2:3, :3]) / h[:, 2, None, None]
+    J = stack.residual_derivatives(x) @ J
+    return np.where(np.isfinite(J), J, 0.0).reshape(2 * N, 3)
 
 
 def gamma_discs(Xs: np.ndarray, cameras: np.ndarray, centres: np.ndarray, radii: np.ndarray) -> np.ndarray:

@@ -175,3 +175,43 @@ def test_band_certificate_is_invariant_to_units(img_scale, img_shift, world_shif
     assert ref.certified.all() and new.certified.all()
     np.testing.assert_allclose(new.gamma_ub / img_scale, ref.gamma_ub, rtol=1e-6)
     np.testing.assert_allclose(new.gamma_lb / img_scale, ref.gamma_lb, rtol=1e-5)
+
+
+def test_small_stacks_through_lapack_equal_the_column_loop(monkeypatch):
+    """Stacks of at most LAPACK_MAX_STACK problems are factored by dpbtrf one by one: the same factors and solutions
+    to round-off as the column loop, the same failures, and the module's backward error bound holds for them
+    (checked against the residual R R^T - A in extended precision)."""
+    from sospoly.analysis import banded as B
+
+    rng = np.random.default_rng(7)
+    for _ in range(60):
+        n, M = int(rng.integers(2, 80)), int(rng.integers(1, 4))
+        b = int(rng.integers(1, min(n, 6)))
+        A = np.zeros((M, n, n))
+        for m in range(M):
+            X = rng.normal(size=(n, n)) * 10.0 ** rng.uniform(-3, 3, size=(n, 1))
+            S = np.triu(np.tril((X + X.T) / 2, b), -b)
+            A[m] = S + np.eye(n) * (np.abs(S).sum(axis=1) + 1e-8)
+        ab = B.band_from_dense(A, b)
+        R1, ok1 = B.band_cholesky(ab)
+        rhs = rng.normal(size=(M, n))
+        x1 = B.band_solve(R1, rhs)
+        with monkeypatch.context() as mp:
+            mp.setattr(B, "LAPACK_MAX_STACK", 0)
+            R2, ok2 = B.band_cholesky(ab)
+            x2 = B.band_solve(R2, rhs)
+        assert ok1.all() and ok2.all()
+        assert np.abs(R1 - R2).max() <= 1e-13 * np.abs(R2).max()
+        assert np.abs(x1 - x2).max() <= 1e-10 * np.abs(x2).max()
+        eps = B.cholesky_backward_error(R1)
+        for m in range(M):
+            L = np.zeros((n, n))
+            for d in range(b + 1):
+                L[np.arange(d, n), np.arange(n - d)] = R1[m, d, :n - d]
+            E = L.astype(np.longdouble) @ L.T.astype(np.longdouble) - A[m].astype(np.longdouble)
+            assert np.linalg.norm(E.astype(float), 2) <= eps[m]
+        bad = ab.copy()
+        bad[0, 0, n // 2] = -1.0                  # indefinite
+        bad[-1, 0, 0] = np.nan                    # not finite
+        ok = B.band_cholesky(bad)[1]
+        assert not ok[0] and not ok[-1]

@@ -370,6 +370,8 @@ class ClarabelTimeModel:
         s = self.scale
         if s >= 1.0 or entries <= self.reference_entries:
             return s
+        if not self.reference_entries > 0:          # learnt on programs without PSD blocks: no optimism beyond
+            return 1.0
         return min(1.0, s * (entries / self.reference_entries) ** self.GROWTH)
 
     @staticmethod
@@ -407,7 +409,7 @@ class ClarabelTimeModel:
         ratio = min(hi, max(lo, measured / predicted))
         mixed = ratio if ratio >= self.scale else 0.75 * self.scale + 0.25 * ratio
         self.scale = min(hi, max(lo, mixed))
-        if ratio < 1.0:
+        if ratio < 1.0 and e > 0:
             self.reference_entries = min(self.reference_entries, e)
 
 

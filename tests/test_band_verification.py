@@ -215,3 +215,31 @@ def test_small_stacks_through_lapack_equal_the_column_loop(monkeypatch):
         bad[-1, 0, 0] = np.nan                    # not finite
         ok = B.band_cholesky(bad)[1]
         assert not ok[0] and not ok[-1]
+
+
+def test_review17_inputs_of_any_dtype_padding_and_underflow(monkeypatch):
+    """Review 17: an int64 / float32 stack factored through LAPACK kept its dtype (a truncated factor with the
+    float64 bound); padding rows with b > n were not cleared; near 1e-315 the bound underflowed to 0 below the
+    residual (now a term for underflow)."""
+    from sospoly.analysis import banded as B
+
+    A = np.array([[[2, 1], [1, 3]]])
+    for dtype in (np.int64, np.float32):
+        ab = B.band_from_dense(A, 1).astype(dtype)
+        R, ok = B.band_cholesky(ab)
+        R64, _ = B.band_cholesky(ab.astype(float))
+        assert ok[0] and R.dtype == np.float64 and np.array_equal(R, R64)
+    ab = np.zeros((1, 5, 2))
+    ab[0, 0] = [4.0, 9.0]
+    ab[0, 1, 0] = 1.0
+    ab[0, 1, 1] = ab[0, 2:, :] = np.nan              # padding of a b = 4 band on n = 2: not part of the matrix
+    assert B.band_cholesky(ab)[1].all()
+    with monkeypatch.context() as mp:
+        mp.setattr(B, "LAPACK_MAX_STACK", 0)
+        assert B.band_cholesky(ab)[1].all()
+    tiny = np.array([[[3e-315, 1e-315, 0], [1e-315, 3e-315, 1e-315], [0, 1e-315, 3e-315]]])
+    R, ok = B.band_cholesky(B.band_from_dense(tiny, 1))
+    assert ok[0]
+    L = np.diag(R[0, 0]) + np.diag(R[0, 1, :2], -1)
+    E = (L @ L.T - tiny[0]).astype(float)
+    assert np.linalg.norm(E, 2) <= B.cholesky_backward_error(R)[0] and B.cholesky_backward_error(R)[0] > 0

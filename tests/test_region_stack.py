@@ -151,3 +151,28 @@ def test_the_local_estimate_of_mixed_regions_is_as_good_as_with_differences():
         b = least_squares(fun, X0, jac="2-point", method="lm", xtol=1e-15, ftol=1e-15, gtol=1e-15)
         assert a.cost <= b.cost * (1 + 1e-9) + 1e-20
         assert n_analytic < len(calls) - n_analytic         # fewer evaluations of the residuals
+
+
+def test_one_stack_serves_the_residuals_and_the_jacobian():
+    """Review 17: residual_function and residual_jacobian each built their own stack from the list, so the
+    Jacobian never found the closest points just computed; a RegionStack is now a sequence of its regions (it
+    passes disc_shapes) and refine_l2 hands one stack to both."""
+    from tritools.model.geometry import refine_l2
+
+    cams, regions, X = uncertain_problem(12, seed=5, kinds="mixed")
+    stack = RegionStack(regions)
+    assert list(stack) == list(regions) and stack[3] is regions[3] and refine.disc_shapes(stack) is None
+    calls = {"closest": 0, "memo": 0}
+    real = RegionStack.closest
+
+    def counted(self, U):
+        calls["closest"] += 1
+        calls["memo"] += self._memo is not None and np.array_equal(np.asarray(U, float), self._memo[0])
+        return real(self, U)
+
+    RegionStack.closest = counted
+    try:
+        refine_l2(np.asarray(X, float) + 0.05, np.asarray(cams, float), list(regions))
+    finally:
+        RegionStack.closest = real
+    assert calls["memo"] >= 1

@@ -222,3 +222,14 @@ def test_a_step_cut_by_its_solver_time_limit_makes_the_result_time_limit():
     done = TriangulationResult("theorem1", Status.OPTIMAL, X=np.zeros(3), gamma_ub=1.0, gamma_lb=1.0, optimal=True)
     ctx.attempts = [Attempt("corollary1", 4, "time_limit")]
     assert _stopped_short(ctx, done).status == Status.OPTIMAL
+
+
+def test_a_program_without_psd_blocks_never_breaks_the_model():
+    """Review 17: a fast measurement of a program with no PSD blocks (sum L^2 = 0) recorded reference_entries = 0,
+    and every later prediction divided by it (ZeroDivisionError in every Clarabel call with a deadline)."""
+    m = ClarabelTimeModel()
+    m.observe([], 200000, setup_seconds=0.05, solve_seconds=0.05, iterations=5)      # predicted 0.41 s: fast
+    assert m.scale < 1.0 and m.reference_entries > 0
+    assert m.first_iteration([68] * 11, 10000) > 0
+    m.reference_entries = 0.0                                                        # as recorded before the fix
+    assert m.scale_for(1e7) == 1.0

@@ -51,6 +51,7 @@ def band_cholesky(ab: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     Stacks of at most :data:`LAPACK_MAX_STACK` problems go one by one through LAPACK's ``dpbtrf`` (the same lower
     banded storage); larger ones through the column loop over the stack.  Both compute a Cholesky factor by inner
     products of at most b + 1 terms, so the backward error bound of the module docstring holds for either."""
+    ab = np.asarray(ab, dtype=float)
     M, b1, n = ab.shape
     if 0 < M <= LAPACK_MAX_STACK:
         return _cholesky_lapack(ab)
@@ -58,7 +59,7 @@ def band_cholesky(ab: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     A = np.zeros((M, b1, n + b))
     A[:, :, :n] = ab
     for d in range(1, b1):                     # entries below the last row are not part of the matrix
-        A[:, d, n - d:n] = 0.0
+        A[:, d, max(n - d, 0):n] = 0.0
     d1, d2 = np.tril_indices(b)                # the pairs of sub-diagonal offsets 1 + d1 >= 1 + d2
     rows = d1 - d2
     with np.errstate(all="ignore"):            # a failed problem's numbers may overflow: it is flagged, not used
@@ -86,7 +87,7 @@ def _cholesky_lapack(ab: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         check_deadline("factoring a banded matrix")
         a = ab[m].copy()
         for d in range(1, b1):                  # entries below the last row are not part of the matrix
-            a[d, n - d:] = 0.0
+            a[d, max(n - d, 0):] = 0.0
         if not np.all(np.isfinite(a)):
             continue
         c, info = _pbtrf(a, lower=1)
@@ -96,17 +97,25 @@ def _cholesky_lapack(ab: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def cholesky_backward_error(R: np.ndarray) -> np.ndarray:
-    """gamma_{b+2} ||R||_F^2 (1 + 4 u) per problem: a bound of ||E||_2 for A + E = R^T R (module docstring),
-    hence of -lambda_min(A) for a successful factorisation (the factor 1 + 4 u covers the sum of squares)."""
-    b1 = R.shape[1]
+    """A bound of ||E||_2 for A + E = R^T R (module docstring), hence of -lambda_min(A) for a successful
+    factorisation, per problem: gamma_{b+2} ||R||_F^2, times 1 + gamma_{n(b+1)+1} for the rounding of the computed
+    sum of squares and of gamma itself, plus n (2b + 1)(b + 3) 2^-1074 for underflow (each of the at most
+    n (2b + 1) entries of E gains at most (b + 3) half-spacings of the subnormal numbers: review 17 found banded
+    matrices near 1e-315 whose residual 1e-323 exceeded the bound without it)."""
+    R = np.asarray(R, dtype=float)
+    b1, n = R.shape[1], R.shape[2]
     k = b1 + 1
     gamma = k * _U / (1 - k * _U)
-    return gamma * np.einsum("mdc,mdc->m", R, R) * (1 + 4 * _U)
+    terms = n * b1 + 1
+    sum_rounding = 1.0 + terms * _U / (1 - terms * _U)
+    tiny = float(n * (2 * b1 - 1) * (b1 + 2)) * 2.0 ** -1074
+    return gamma * np.einsum("mdc,mdc->m", R, R) * sum_rounding * (1 + 4 * _U) + tiny
 
 
 def band_solve(R: np.ndarray, rhs: np.ndarray) -> np.ndarray:
     """x with R R^T x = rhs for lower banded Cholesky factors R (M, b + 1, n) (finite, positive diagonal) and
     rhs (M, n)."""
+    R, rhs = np.asarray(R, dtype=float), np.asarray(rhs, dtype=float)
     M, b1, n = R.shape
     if 0 < M <= LAPACK_MAX_STACK:
         out = np.empty((M, n))

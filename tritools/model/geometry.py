@@ -496,6 +496,10 @@ def refine_l2(X0, cameras, regions, *, xtol: float = 1e-15, ftol: float = 1e-15,
     valid estimate)."""
     from scipy.optimize import least_squares
 
+    from .regions.stack import RegionStack
+
+    if not isinstance(regions, RegionStack) and disc_shapes(regions) is None:
+        regions = RegionStack(regions)           # one stack for the residuals and the Jacobian (its closest points)
     fun, vectorised = residual_function(cameras, regions)
     guard = EvaluationGuard(fun, evaluations_after(len(regions), vectorised), evaluations_floor(vectorised))
     try:

@@ -62,6 +62,12 @@ class RegionStack:
     def __len__(self) -> int:
         return len(self.regions)
 
+    def __iter__(self):
+        return iter(self.regions)
+
+    def __getitem__(self, i):
+        return self.regions[i]
+
     def closest(self, U: np.ndarray) -> np.ndarray:
         """Pi_{R_i}(u_i) for U (N, 2), one finite point per view (ValueError otherwise, like ``closest_point``)."""
         U = np.asarray(U, float)

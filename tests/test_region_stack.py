@@ -89,12 +89,16 @@ def test_gamma_of_one_point_and_the_report_are_the_loop_over_the_views(seed):
 
 def test_the_refinement_residuals_through_the_stack_equal_the_loop():
     cams, regions, X = uncertain_problem(12, seed=3, kinds="mixed")
+    cams = np.asarray(cams, float)
     fun, vectorised = refine.residual_function(cams, regions)
     assert not vectorised
     rng = np.random.default_rng(0)
     for _ in range(10):
         Y = np.asarray(X, float) + rng.normal(size=3) * 0.1
-        assert np.array_equal(fun(Y), refine._looped_residuals(Y, np.asarray(cams, float), list(regions)))
+        x = (cams @ np.append(Y, 1.0))
+        x = x[:, :2] / x[:, 2:]
+        loop = np.concatenate([xi - r.closest_point(xi) for xi, r in zip(x, regions)])     # one view at a time
+        assert np.array_equal(fun(Y), loop)
 
 
 @pytest.mark.parametrize("seed", range(4))

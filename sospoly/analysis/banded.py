@@ -121,7 +121,7 @@ def band_solve(R: np.ndarray, rhs: np.ndarray) -> np.ndarray:
         out = np.empty((M, n))
         for m in range(M):
             check_deadline("solving a banded system")
-            x, info = _pbtrs(R[m], np.asarray(rhs[m], float)[:, None], lower=1)
+            x, info = _pbtrs(R[m], rhs[m][:, None], lower=1)
             out[m] = x[:, 0] if info == 0 else np.nan
         return out
     b = b1 - 1

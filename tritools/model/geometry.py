@@ -30,6 +30,7 @@ from .exact import CANCELLATION_RATIO, accurate_homogeneous
 from .refine import (EvaluationGuard, RefinementStopped, disc_shapes, evaluations_after, evaluations_floor, gamma_discs,
                      residual_function, residual_jacobian)
 from .regions.base import real_array
+from .regions.stack import RegionStack
 
 __all__ = [
     "PointAtInfinityError", "validate_cameras", "validate_points2d", "project", "image_points",
@@ -204,12 +205,10 @@ def _gamma_one(Xh: np.ndarray, cameras: np.ndarray, regions: Sequence) -> np.nda
     """:func:`gamma_validated` of one point (Xh (1, 4)): the same projections, the regions' closest points stacked
     by kind (:class:`~tritools.model.regions.RegionStack`, each the region's own single-point value) and the squares
     summed in view order, so the same numbers as a loop over ``Region.distance``."""
-    from .regions.stack import RegionStack
-
     x = np.array([project_homogeneous(Xh, P)[0] for P in cameras])
     if not np.all(np.isfinite(Xh)) or not np.all(np.isfinite(x)):
         return np.array([np.inf])
-    stack = regions if isinstance(regions, RegionStack) else RegionStack(regions)
+    stack = RegionStack.of(regions)
     total = 0.0
     for d in stack.distances(x).tolist():
         total += d * d
@@ -496,10 +495,8 @@ def refine_l2(X0, cameras, regions, *, xtol: float = 1e-15, ftol: float = 1e-15,
     valid estimate)."""
     from scipy.optimize import least_squares
 
-    from .regions.stack import RegionStack
-
-    if not isinstance(regions, RegionStack) and disc_shapes(regions) is None:
-        regions = RegionStack(regions)           # one stack for the residuals and the Jacobian (its closest points)
+    if disc_shapes(regions) is None:
+        regions = RegionStack.of(regions)        # one stack for the residuals and the Jacobian (its closest points)
     fun, vectorised = residual_function(cameras, regions)
     guard = EvaluationGuard(fun, evaluations_after(len(regions), vectorised), evaluations_floor(vectorised))
     try:

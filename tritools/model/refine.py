@@ -93,17 +93,15 @@ def disc_jacobian(X, cameras: np.ndarray, centres: np.ndarray, radii: np.ndarray
 
 
 def _looped_residuals(X, cameras, regions) -> np.ndarray:
-    """r_i stacked (2N,) through each region's ``closest_point`` (``regions`` a sequence, or a
-    :class:`~tritools.model.regions.RegionStack`: the same closest points, stacked by region kind);
-    :data:`FAR_RESIDUAL` where a projection is at infinity."""
+    """r_i stacked (2N,) through the regions' closest points (a :class:`~tritools.model.regions.RegionStack`, or a
+    sequence stacked here: each region's own ``closest_point``, stacked by kind); :data:`FAR_RESIDUAL` where a
+    projection is at infinity."""
     Xh = np.append(X, 1.0)
     p = cameras @ Xh
     if np.any(np.abs(p[:, 2]) < 1e-300):
         return np.full(2 * len(regions), FAR_RESIDUAL)
     x = p[:, :2] / p[:, 2:]
-    if isinstance(regions, RegionStack):
-        return (x - regions.closest(x)).reshape(-1)
-    return np.concatenate([xi - r.closest_point(xi) for xi, r in zip(x, regions)])
+    return (x - RegionStack.of(regions).closest(x)).reshape(-1)
 
 
 def disc_shapes(regions) -> tuple | None:
@@ -123,7 +121,7 @@ def residual_function(cameras, regions) -> tuple:
     cameras = np.asarray(cameras, float)
     shapes = disc_shapes(regions)
     if shapes is None:
-        stack = regions if isinstance(regions, RegionStack) else RegionStack(regions)
+        stack = RegionStack.of(regions)
         return (lambda X: _looped_residuals(X, cameras, stack)), False
     return (lambda X: disc_residuals(X, cameras, *shapes)), True
 
@@ -134,7 +132,7 @@ def residual_jacobian(cameras, regions):
     cameras = np.asarray(cameras, float)
     shapes = disc_shapes(regions)
     if shapes is None:
-        stack = regions if isinstance(regions, RegionStack) else RegionStack(regions)
+        stack = RegionStack.of(regions)
         return lambda X: stacked_jacobian(X, cameras, stack)
     return lambda X: disc_jacobian(X, cameras, *shapes)
 

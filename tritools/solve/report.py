@@ -146,7 +146,7 @@ def point_report(X, cameras, regions, world_frame=WorldFrame.RIGHT_HANDED) -> Po
     if shapes is not None:
         res = np.where(fin, disc_distances(u, *shapes), np.inf)
     else:
-        res = np.where(fin, RegionStack(regions).distances(np.where(fin[:, None], u, 0.0)), np.inf)
+        res = np.where(fin, RegionStack.of(regions).distances(np.where(fin[:, None], u, 0.0)), np.inf)
     un = np.hypot(u[:, 0], u[:, 1])
     gamma = float(gamma_upper(res, un)) if np.isfinite(res).all() else math.inf
     return PointReport(gamma, res, depths_validated(X, C, world_frame))

@@ -35,6 +35,15 @@ __all__ = ["RegionStack", "MIN_CURVATURE_FACTOR"]
 MIN_CURVATURE_FACTOR = 0.1
 
 
+class _Ellipses:
+    """The ellipses (border or filled) of a stack: their view indices and stacked shape fields."""
+
+    def __init__(self, idx: np.ndarray, regions: tuple) -> None:
+        self.idx = idx
+        self.axes, self.Q, self.Dinv = EllipseBorder.stacked_shapes([regions[i] for i in idx])
+        self.axes_list = self.axes.tolist()           # Python floats for the scalar bisection
+
+
 class RegionStack:
     """The regions of N views grouped by kind (module docstring); :meth:`closest` and :meth:`distances` take one
     finite image point per view."""
@@ -53,11 +62,14 @@ class RegionStack:
         if self.segment.size:
             self._dirs = np.array([self.regions[i].direction for i in self.segment], float)
             self._seg = segment_scaling(self._dirs)
-        self._Q, self._axes, self._Dinvs = {}, {}, {}
-        for a in (self.border, self.filled):
-            axes, self._Q[id(a)], self._Dinvs[id(a)] = EllipseBorder.stacked_shapes([self.regions[i] for i in a])
-            self._axes[id(a)] = axes.tolist()
-        self._Dinv = self._Dinvs[id(self.filled)]
+        self._ellipses = {"border": _Ellipses(self.border, self.regions),
+                          "filled": _Ellipses(self.filled, self.regions)}
+        self._Dinv = self._ellipses["filled"].Dinv
+
+    @classmethod
+    def of(cls, regions) -> RegionStack:
+        """``regions`` itself when it is a stack already, else the stack of the sequence."""
+        return regions if isinstance(regions, cls) else cls(regions)
 
     def __len__(self) -> int:
         return len(self.regions)
@@ -87,23 +99,24 @@ class RegionStack:
             t = segment_parameters(U[i] - C[i], s, u, uu)
             out[i] = C[i] + t[:, None] * self._dirs
         if self.border.size:
-            out[self.border] = self._on_border(U, self.border)
+            out[self.border] = self._on_border(U, "border")
         if self.filled.size:
             i = self.filled
             inside = ellipse_levels(U[i] - C[i], self._Dinv) <= 1.0
             out[i] = U[i]
             if not np.all(inside):
-                out[i[~inside]] = self._on_border(U, i, ~inside)
+                out[i[~inside]] = self._on_border(U, "filled", ~inside)
         for i in self.other:
             out[i] = np.asarray(self.regions[i].closest_point(U[i]), float).reshape(2)
         self._memo = (U.copy(), out.copy())
         return out
 
-    def _on_border(self, U: np.ndarray, idx: np.ndarray, keep: np.ndarray | None = None) -> np.ndarray:
-        """The closest border points of the ellipses ``idx`` (the rows ``keep`` of them): EllipseBorder's rule, the
-        rotations stacked and the scalar bisection per view (a vectorised bisection makes ~50 passes of a dozen numpy
-        operations: slower than the scalar loop for the few ellipses of one problem)."""
-        Q, axes = self._Q[id(idx)], self._axes[id(idx)]
+    def _on_border(self, U: np.ndarray, group: str, keep: np.ndarray | None = None) -> np.ndarray:
+        """The closest border points of the ellipses of ``group`` (the rows ``keep`` of them): EllipseBorder's rule,
+        the rotations stacked and the scalar bisection per view (a vectorised bisection makes ~50 passes of a dozen
+        numpy operations: slower than the scalar loop for the few ellipses of one problem)."""
+        g = self._ellipses[group]
+        idx, Q, axes = g.idx, g.Q, g.axes_list
         rows = np.arange(len(idx)) if keep is None else np.flatnonzero(keep)
         C = self._centres[idx[rows]]
         Y = rotate(U[idx[rows]] - C, Q[rows])
@@ -133,9 +146,9 @@ class RegionStack:
             inner = (np.abs(t) < 1.0) & (s > 0)
             with np.errstate(divide="ignore", invalid="ignore"):
                 J[i] = np.where(inner[:, None, None], u[:, :, None] * u[:, None, :] / uu[:, None, None], 0.0)
-        for idx in (self.border, self.filled):
-            if idx.size:
-                J[idx] = self._border_jacobian(U[idx], P[idx], idx)
+        for g in self._ellipses.values():
+            if g.idx.size:
+                J[g.idx] = self._border_jacobian(U[g.idx], P[g.idx], g)
         if self.filled.size:
             i = self.filled
             inside = ellipse_levels(U[i] - self._centres[i], self._Dinv) <= 1.0
@@ -152,10 +165,10 @@ class RegionStack:
                 J[i, :, k] = (np.asarray(r.closest_point(U[i] + e), float) - r.closest_point(U[i] - e)) / (2 * h)
         return np.eye(2) - J
 
-    def _border_jacobian(self, U: np.ndarray, P: np.ndarray, idx: np.ndarray) -> np.ndarray:
+    def _border_jacobian(self, U: np.ndarray, P: np.ndarray, g: _Ellipses) -> np.ndarray:
         """JPi of the projection onto the ellipses' borders (:meth:`residual_derivatives`) at the foot points P."""
-        Q, ax = self._Q[id(idx)], np.array(self._axes[id(idx)], float).reshape(-1, 2)
-        c = self._centres[idx]
+        Q, ax = g.Q, g.axes
+        c = self._centres[g.idx]
         x, y = rotate(P - c, Q).T
         a, b = ax[:, 0], ax[:, 1]
         with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
@@ -164,7 +177,7 @@ class RegionStack:
             tl = tl / np.hypot(tl[:, 0], tl[:, 1])[:, None]
             t = rotate(tl, Q, back=True)
             n = np.hypot(*(U - P).T)
-            outside = ellipse_levels(U - c, self._Dinvs[id(idx)]) > 1.0
+            outside = ellipse_levels(U - c, g.Dinv) > 1.0
             den = np.maximum(np.where(outside, 1.0 + kappa * n, 1.0 - kappa * n), MIN_CURVATURE_FACTOR)
             J = t[:, :, None] * t[:, None, :] / den[:, None, None]
         return np.where(np.isfinite(J), J, 0.0)

@@ -13,7 +13,7 @@ Layout (docs/architecture.md): :mod:`tritools.model` (the problem as data), :mod
 >>> res = tritools.triangulate(cams, regions, "theorem1", delta=4)   # doctest: +SKIP
 >>> res.X, res.gamma_lb, res.gamma_ub, res.optimal          # doctest: +SKIP
 """
-from . import _startup  # noqa: F401 - first: Ctrl-C while the command starts exits 130 with one line
+from . import startup  # noqa: F401 - first: Ctrl-C while the command starts exits 130 with one line
 
 import logging as _logging
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 import signal
 import sys
 
-from ._startup import guard_startup, EXIT_INTERRUPTED
+from .startup import guard_startup, EXIT_INTERRUPTED
 
 guard_startup()                 # before the heavy imports (the package's __init__ installed it already)
 

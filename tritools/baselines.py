@@ -404,6 +404,6 @@ BASELINES: dict[str, Callable[..., TriangulationResult]] = {
 def tpml(cameras, regions, degree: int = 4, **options) -> TriangulationResult:
     """The world-domain TPML-style baseline (:func:`tritools.tpml.tpml`: a sum-of-ratios SOS relaxation in the
     scene point's coordinates; an estimate without certificate)."""
-    from .tpml import tpml as _tpml
+    from .tpml import tpml as world_tpml
 
-    return _tpml(cameras, regions, degree, **options)
+    return world_tpml(cameras, regions, degree, **options)

@@ -34,7 +34,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from ..model.constraints import Method
-from .._startup import EXIT_INTERRUPTED, INTERRUPTED_MESSAGE, end_startup
+from ..startup import EXIT_INTERRUPTED, INTERRUPTED_MESSAGE, end_startup
 from ..io.atomic import atomic_open
 from ..io.problem_file import (ProblemFileError, ProblemSpec, jsonable, load_problem_file, parse_problem_bytes,
                                parse_problem_text)

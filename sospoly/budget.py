@@ -25,6 +25,10 @@ Memory model (8-byte floats; an estimate, deliberately on the safe side):
   #22): N = 16 / 20 / 24 / 30 used 336 / 446 / 639 / 827 MiB, 1.6-1.7 floats per entry of the estimate's
   blocks; the unweighted largest-block term estimated 588 / 871 / 1408 / 2223 MiB (1.7-2.7x, N = 30 refused
   by the 2 GiB default), the weighted one 524 / 718 / 1099 / 1679 MiB (1.6-2.0x, still above every peak).
+* Clarabel decomposes a PSD block along the aggregate sparsity of its rows: where the dense estimate does not
+  fit, a program lowered in the image form is sized again on the chordal cliques of its Gram blocks' structurally
+  non-zero entries (:mod:`sospoly.certificates.sizing`; a degree-2 program of 30 views of mixed regions: 2.1 GiB
+  dense, 0.37 GiB on its cliques, 0.26 GB measured).
 * The batched interior-point method (:mod:`sospoly.solvers.ipm`) holds, per PSD block of side s,
   the m full s x s matrices of the columns (m = number of decision columns) and the m x m Schur
   complement.

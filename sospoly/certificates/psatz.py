@@ -52,6 +52,7 @@ from .program import SOSConstraint, SOSProgram
 from .shape import CertificateShape, correlative_shape, dense_shape, newton_shape
 from .term_hierarchy import parse_term_kind, term_level_shape
 from .reduction import reduce_shape
+from .sizing import check_size
 
 __all__ = ["Multiplier", "DataSlots", "PsatzStructure", "PsatzProblem", "StructureMismatch", "build_psatz",
            "psatz_structure", "delta_min", "default_q", "common_gens", "checked_inputs", "as_multiplier",
@@ -546,19 +547,6 @@ class PsatzProblem:
     @property
     def n_lmivar(self) -> int:
         return self.structure.n_lmivar
-
-
-def check_size(shape: CertificateShape, budget, free: bool, n: int, degree: int, deg_f: int) -> None:
-    """:class:`~sospoly.budget.BudgetExceeded` when the program of ``shape`` does not fit ``budget``
-    (its estimate, :meth:`CertificateShape.size`, checked before anything is assembled)."""
-    if budget is None:
-        return
-    q_side = sigma(n, (degree - max(deg_f, 0)) // 2) if free else 0
-    size = shape.size(q_side)
-    why = size.exceeds(budget)
-    if why:
-        raise BudgetExceeded(why, size, "use a lower degree, a sparse certificate (sparsity='correlative'), "
-                                        "or a larger budget")
 
 
 def build_psatz(f, eq=(), ineq=(), degree: int | None = None, multiplier=Multiplier.FIXED, gens=None, *,

@@ -223,16 +223,20 @@ class LoweredPsatz:
         return A, b
 
 def structure_for(f, eq=(), ineq=(), degree=None, multiplier=Multiplier.FIXED, gens=None, *, sparsity="none",
-                  low_degree=None, slots: DataSlots | None = None, budget=None) -> PsatzStructure:
+                  low_degree=None, slots: DataSlots | None = None, budget=None, form=None) -> PsatzStructure:
     """The structure :func:`sospoly.build_psatz` builds for these polynomials (on ``slots`` when given,
-    e.g. the union of several instances' supports), checked against ``budget`` the same way."""
+    e.g. the union of several instances' supports), checked against ``budget`` the same way; ``form``: the Gram
+    form it will be lowered in (the image form is sized on its Gram blocks' aggregate sparsity where the dense
+    estimate does not fit: :mod:`sospoly.certificates.sizing`)."""
     budget = as_budget(budget)
     f, eq, ineq, gens, degree = checked_inputs(f, eq, ineq, degree, gens, budget.max_gram_side)
     multiplier = as_multiplier(multiplier)
     shape = certificate_shape(sparsity, gens, degree, f, eq, ineq, low_degree=low_degree,
                               max_gram_side=budget.max_gram_side)
     q = fixed_q_for(multiplier, gens, degree, f, shape.is_dense)
-    check_size(shape, budget, q is None, len(gens), degree, f.degree)
-    return psatz_structure(slots if slots is not None else DataSlots.of(f, eq, ineq, gens), degree, shape, q)
+    slots = slots if slots is not None else DataSlots.of(f, eq, ineq, gens)
+    check_size(shape, budget, q is None, len(gens), degree, f.degree, slots=slots, q=q,
+               image_form=form is not None and GramForm(form) == GramForm.IMAGE)
+    return psatz_structure(slots, degree, shape, q)
 
 

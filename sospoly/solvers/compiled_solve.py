@@ -218,7 +218,8 @@ class PsatzCache:
                 if comp.slots.contains(slots):
                     # a structure compiled under another budget is still sized against this call's
                     st = comp.structure
-                    check_size(st.shape, as_budget(budget), st.free, len(gens), degree, f.degree)
+                    check_size(st.shape, as_budget(budget), st.free, len(gens), degree, f.degree, slots=comp.slots,
+                               q=st.q, image_form=GramForm(form) == GramForm.IMAGE)
                     self._store.move_to_end(k)
                     return comp, comp.theta(f, eq, ineq)
                 old = comp.slots
@@ -226,7 +227,7 @@ class PsatzCache:
                                                                      slots.degrees):
                     slots = old.union(slots)        # same structure, larger support: compile on the union
         structure = structure_for(f, eq, ineq, degree, multiplier, gens, sparsity=sparsity, low_degree=low_degree,
-                                  slots=slots, budget=budget)
+                                  slots=slots, budget=budget, form=form)
         comp = self.compiled(structure, form, key=k)
         return comp, comp.theta(f, eq, ineq)
 

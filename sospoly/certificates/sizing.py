@@ -1,0 +1,134 @@
+"""Sizing a certificate before it is assembled: the budget check of every build (:func:`check_size`), with the
+aggregate sparsity of its Gram blocks where the dense estimate does not fit (:func:`gram_pattern_sides`).
+
+The memory model of :mod:`sospoly.budget` charges Clarabel ~L^2 floats per PSD block of side s (L = s (s + 1) / 2),
+the cost of a block whose pattern is dense.  Clarabel decomposes a PSD cone along the *aggregate sparsity* of its
+rows (``chordal_decomposition_enable``, on in every attempt of sospoly's retry chains): an entry of S = b - A x
+whose row of A is empty and whose b is 0 is zero in every feasible S, and the cone is replaced by the cones of the
+maximal cliques of a chordal extension of the other entries' graph.  In the image form (:class:`~sospoly.lowering.
+conic.GramForm` ``IMAGE``, the default) of u = q (f - c) + sum_k r_k g_k - sum_k s_k h_k = b(x)^T G b(x), the entry
+(a, b) of a Gram block of u has a non-empty row only when its monomial m = b_a b_b
+
+* is a monomial of the data, D = supp(q) (supp(f) + {1}) + U_k supp(r_k) supp(g_k) + U_k {products of the basis of
+  s_k} supp(h_k) (sums of exponent rows), or
+* is the monomial of another entry of u's blocks (their coefficient equation then couples them: pair columns);
+
+otherwise its coefficient equation reads G_ab = 0 alone.  The diagonal is always kept.  A degree-2 certificate
+with region variables has mostly such zeros: 30 views of mixed regions (a block of side 112) are estimated at
+2.1 GiB dense; on their cliques (the image points, and each view's own variables beside its image point) at
+0.37 GiB with the margin :data:`PATTERN_MARGIN`, and the process grew by 0.26 GB while Clarabel solved it
+(benchmarks/RESULTS.md, wave 18).
+
+The pattern is computed only where the dense estimate does not fit the budget (one ``numpy.unique`` over the
+pairs, ``networkx``'s minimal chordal completion), for blocks of at most :data:`PATTERN_MAX_PAIRS` pairs in all;
+other forms (``KERNEL``: the Gram matrix is the variable, every entry has a row) keep the dense estimate.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..algebra.basis import sigma
+from ..budget import BudgetExceeded, ProgramSize, estimate_size
+
+__all__ = ["check_size", "gram_pattern_sides", "PATTERN_MAX_PAIRS", "PATTERN_DENSE_FRACTION", "PATTERN_MARGIN"]
+
+#: the most Gram entry pairs (over all of u's blocks) whose pattern is computed (beyond: the dense estimate)
+PATTERN_MAX_PAIRS = 400_000
+#: Clarabel's term on the clique blocks is multiplied by this: its peak grew 1.3-1.4x the clique blocks' estimate on
+#: the degree-2 programs of 24-30 views of mixed regions (106-263 MB), 2x at 16 views (32 MB: fixed costs)
+PATTERN_MARGIN = 2.0
+#: a block whose kept entries exceed this fraction of its pairs is taken as dense (its chordal extension would be)
+PATTERN_DENSE_FRACTION = 0.5
+
+
+def check_size(shape, budget, free: bool, n: int, degree: int, deg_f: int, *, slots=None, q=None,
+               image_form: bool = False) -> None:
+    """:class:`~sospoly.budget.BudgetExceeded` when the program of ``shape`` does not fit ``budget`` (its estimate,
+    :meth:`~sospoly.certificates.shape.CertificateShape.size`, checked before anything is assembled).  Where the
+    dense estimate does not fit, a fixed-multiplier program lowered in the image form (``image_form``, with its
+    data ``slots`` and multiplier ``q``) is estimated again with Clarabel's blocks on its Gram blocks' aggregate
+    sparsity (module docstring)."""
+    if budget is None:
+        return
+    q_side = sigma(n, (degree - max(deg_f, 0)) // 2) if free else 0
+    size = shape.size(q_side)
+    why = size.exceeds(budget)
+    if why and image_form and not free and slots is not None:
+        sides = gram_pattern_sides(shape, slots, q)
+        if sides is not None:
+            size = _with_clarabel_sides(size, shape, sides)
+            why = size.exceeds(budget)
+    if why:
+        raise BudgetExceeded(why, size, "use a lower degree, a sparse certificate (sparsity='correlative'), "
+                                        "or a larger budget")
+
+
+def _with_clarabel_sides(size: ProgramSize, shape, sides) -> ProgramSize:
+    """``size`` with Clarabel's term from the clique blocks ``sides`` (the columns, rows and the interior-point
+    method's term stay those of the dense blocks)."""
+    clar = PATTERN_MARGIN * estimate_size(sides, 1 + shape.n_free()).clarabel_bytes
+    return ProgramSize(size.gram_sides, size.n_columns, size.n_rows, min(size.clarabel_bytes, clar), size.ipm_bytes)
+
+
+def gram_pattern_sides(shape, slots, q=None) -> tuple | None:
+    """The PSD block sides Clarabel's chordal decomposition may keep (module docstring): for each of u's blocks
+    the maximal cliques of a chordal extension of its kept entries, the multipliers' blocks as they are; None when
+    there are more than :data:`PATTERN_MAX_PAIRS` pairs.  ``slots``: the data's
+    :class:`~sospoly.certificates.psatz.DataSlots`; ``q``: the fixed multiplier (None: 1)."""
+    bases = [np.asarray(B, np.int64) for B in shape.u_bases]
+    if sum(B.shape[0] * (B.shape[0] + 1) // 2 for B in bases) > PATTERN_MAX_PAIRS:
+        return None
+    n = len(slots.gens)
+    pairs, owners = [], []
+    for k, B in enumerate(bases):
+        i, j = np.triu_indices(B.shape[0])
+        pairs.append(B[i] + B[j])
+        owners.append((k, i, j))
+    data = _data_rows(shape, slots, q, n)
+    rows = np.vstack(pairs + [data]) if pairs else data
+    _, ids = np.unique(rows, axis=0, return_inverse=True)
+    ids = ids.reshape(-1)
+    n_pairs = sum(p.shape[0] for p in pairs)
+    pair_ids = ids[:n_pairs]
+    kept_all = np.isin(pair_ids, ids[n_pairs:]) | (np.bincount(pair_ids)[pair_ids] >= 2)
+    sides, at = [], 0
+    for (k, i, j), P in zip(owners, pairs):
+        kept = kept_all[at:at + P.shape[0]] & (i != j)
+        at += P.shape[0]
+        sides += _clique_sides(bases[k].shape[0], i[kept], j[kept])
+    return tuple(sides) + tuple(np.asarray(B).shape[0] for B in shape.s_bases)
+
+
+def _data_rows(shape, slots, q, n: int) -> np.ndarray:
+    """The exponent rows of D (module docstring), with repetitions."""
+    sup = slots.supports
+    q_rows = np.zeros((1, n), np.int64) if q is None else np.array(list(q.terms.keys()), np.int64).reshape(-1, n)
+    f_rows = np.vstack([sup[0].reshape(-1, n), np.zeros((1, n), np.int64)])
+    parts = [_sums(q_rows, f_rows)]
+    n_eq = slots.n_eq
+    for k, E in enumerate(shape.r_supports):
+        parts.append(_sums(np.asarray(E, np.int64).reshape(-1, n), sup[1 + k]))
+    for k, B in enumerate(shape.s_bases):
+        B = np.asarray(B, np.int64).reshape(-1, n)
+        i, j = np.triu_indices(B.shape[0])
+        parts.append(_sums(B[i] + B[j], sup[1 + n_eq + k]))
+    return np.vstack(parts)
+
+
+def _sums(A: np.ndarray, B: np.ndarray) -> np.ndarray:
+    """Every row of A plus every row of B."""
+    return (A[:, None, :] + B[None, :, :]).reshape(-1, A.shape[1])
+
+
+def _clique_sides(s: int, i: np.ndarray, j: np.ndarray) -> list:
+    """The sides of the maximal cliques of a minimal chordal extension of the graph on s nodes with edges (i, j);
+    [s] when the graph is nearly complete."""
+    if s <= 2 or i.size > PATTERN_DENSE_FRACTION * s * (s - 1) / 2:
+        return [s]
+    import networkx as nx
+
+    G = nx.Graph()
+    G.add_nodes_from(range(s))
+    G.add_edges_from(zip(i.tolist(), j.tolist()))
+    H, _ = nx.complete_to_chordal_graph(G)
+    return [len(c) for c in nx.chordal_graph_cliques(H)]

@@ -25,16 +25,16 @@ def _chain_program(n_groups: int, group: int = 3):
 
 
 def test_cliques_of_a_chain_of_groups():
-    gens, f, eq, ineq = _chain_program(6)
+    gens, f, eq, ineq = _chain_program(20)
     shape = certificate_shape("none", gens, 2, f, eq, ineq)
     slots = DataSlots.of(f, eq, ineq, gens)
     sides = gram_pattern_sides(shape, slots)
-    # the u block (1, v_0..v_17): squares and linear terms keep (0, i); products keep (g0, g0+1) and (g_k, g_k+1)
-    assert shape.gram_sides()[0] == 19
+    # the u block (1, v_0..v_59): squares and linear terms keep (0, i); products keep (g0, g0+1) and (g_k, g_k+1)
+    assert shape.gram_sides()[0] == 61
     assert sides[-1] == 1                                # the inequality's multiplier block as it is
     # the constant is joined to every variable (linear terms), the rest is a tree: its cliques are the constant
-    # with each kept product (6 in the groups, 5 between them) and with each group's third variable
-    assert sorted(sides[:-1]) == [2] * 6 + [3] * 11
+    # with each kept product (20 in the groups, 19 between them) and with each group's third variable
+    assert sorted(sides[:-1]) == [2] * 20 + [3] * 39
 
 
 def test_image_form_sized_on_cliques_kernel_form_dense():

@@ -20,7 +20,7 @@ with region variables has mostly such zeros: 30 views of mixed regions (a block 
 (benchmarks/RESULTS.md, wave 18).
 
 The pattern is computed only where the dense estimate does not fit the budget (one ``numpy.unique`` over the
-pairs, ``networkx``'s minimal chordal completion), for blocks of at most :data:`PATTERN_MAX_PAIRS` pairs in all;
+pairs, a minimum-degree elimination), for blocks of at most :data:`PATTERN_MAX_PAIRS` pairs in all;
 other forms (``KERNEL``: the Gram matrix is the variable, every entry has a row) keep the dense estimate.
 """
 from __future__ import annotations
@@ -30,13 +30,19 @@ import numpy as np
 from ..algebra.basis import sigma
 from ..budget import BudgetExceeded, ProgramSize, estimate_size
 
-__all__ = ["check_size", "gram_pattern_sides", "PATTERN_MAX_PAIRS", "PATTERN_DENSE_FRACTION", "PATTERN_MARGIN"]
+__all__ = ["check_size", "gram_pattern_sides", "PATTERN_MAX_PAIRS", "PATTERN_DENSE_FRACTION", "PATTERN_MARGIN",
+           "PATTERN_MIN_SIDE", "PATTERN_MAX_SIDE"]
 
 #: the most Gram entry pairs (over all of u's blocks) whose pattern is computed (beyond: the dense estimate)
 PATTERN_MAX_PAIRS = 400_000
 #: Clarabel's term on the clique blocks is multiplied by this: its peak grew 1.3-1.4x the clique blocks' estimate on
 #: the degree-2 programs of 24-30 views of mixed regions (106-263 MB), 2x at 16 views (32 MB: fixed costs)
 PATTERN_MARGIN = 2.0
+#: u's blocks of a smaller side keep their dense estimate (no chordal extension computed: the view cliques of a
+#: sparse certificate, 45-sided at degree 4, are nearly dense and many)
+PATTERN_MIN_SIDE = 50
+#: ... and blocks of a larger side too (the elimination's Python cost grows ~side^3)
+PATTERN_MAX_SIDE = 600
 #: a block whose kept entries exceed this fraction of its pairs is taken as dense (its chordal extension would be)
 PATTERN_DENSE_FRACTION = 0.5
 
@@ -79,56 +85,88 @@ def gram_pattern_sides(shape, slots, q=None) -> tuple | None:
     if sum(B.shape[0] * (B.shape[0] + 1) // 2 for B in bases) > PATTERN_MAX_PAIRS:
         return None
     n = len(slots.gens)
+    w = _weights(n)
     pairs, owners = [], []
     for k, B in enumerate(bases):
         i, j = np.triu_indices(B.shape[0])
-        pairs.append(B[i] + B[j])
+        kb = _keys(B, w)
+        with np.errstate(over="ignore"):
+            pairs.append(kb[i] + kb[j])              # the key of b_a b_b (the keys are additive)
         owners.append((k, i, j))
-    data = _data_rows(shape, slots, q, n)
-    rows = np.vstack(pairs + [data]) if pairs else data
-    _, ids = np.unique(rows, axis=0, return_inverse=True)
-    ids = ids.reshape(-1)
-    n_pairs = sum(p.shape[0] for p in pairs)
-    pair_ids = ids[:n_pairs]
-    kept_all = np.isin(pair_ids, ids[n_pairs:]) | (np.bincount(pair_ids)[pair_ids] >= 2)
+    keys = np.concatenate(pairs) if pairs else np.zeros(0, np.uint64)
+    data = np.unique(_data_keys(shape, slots, q, w))
+    uniq, ids, counts = np.unique(keys, return_inverse=True, return_counts=True)
+    kept_all = np.isin(uniq, data, assume_unique=True)[ids] | (counts[ids] >= 2)
     sides, at = [], 0
     for (k, i, j), P in zip(owners, pairs):
-        kept = kept_all[at:at + P.shape[0]] & (i != j)
-        at += P.shape[0]
+        kept = kept_all[at:at + P.size] & (i != j)
+        at += P.size
         sides += _clique_sides(bases[k].shape[0], i[kept], j[kept])
     return tuple(sides) + tuple(np.asarray(B).shape[0] for B in shape.s_bases)
 
 
-def _data_rows(shape, slots, q, n: int) -> np.ndarray:
-    """The exponent rows of D (module docstring), with repetitions."""
+def _weights(n: int) -> np.ndarray:
+    """The monomial keys' linear form: ``n`` fixed random odd 64-bit words."""
+    return np.random.default_rng(_KEY_SEED).integers(1, 2 ** 63, size=n, dtype=np.uint64) | np.uint64(1)
+
+
+def _keys(rows, w: np.ndarray) -> np.ndarray:
+    """One 64-bit key per exponent row: w . row modulo 2^64, additive (the key of a product is the sum of the
+    keys).  Equal rows get equal keys; two monomials sharing a key by accident only keep more entries (one taken
+    for data, or for shared), so the estimate can only grow."""
+    rows = np.asarray(rows, np.int64).reshape(-1, w.size)
+    with np.errstate(over="ignore"):
+        return (rows.astype(np.uint64) * w[None]).sum(axis=1, dtype=np.uint64)
+
+
+#: the seed of the keys' linear form (any: collisions are harmless, :func:`_keys`)
+_KEY_SEED = 20261204
+
+
+def _data_keys(shape, slots, q, w: np.ndarray) -> np.ndarray:
+    """The keys of D (module docstring), with repetitions."""
     sup = slots.supports
-    q_rows = np.zeros((1, n), np.int64) if q is None else np.array(list(q.terms.keys()), np.int64).reshape(-1, n)
-    f_rows = np.vstack([sup[0].reshape(-1, n), np.zeros((1, n), np.int64)])
-    parts = [_sums(q_rows, f_rows)]
-    n_eq = slots.n_eq
+    q_keys = np.zeros(1, np.uint64) if q is None else _keys(list(q.terms.keys()), w)
+    parts = [_sums(q_keys, np.append(_keys(sup[0], w), np.uint64(0)))]
     for k, E in enumerate(shape.r_supports):
-        parts.append(_sums(np.asarray(E, np.int64).reshape(-1, n), sup[1 + k]))
+        parts.append(_sums(_keys(E, w), _keys(sup[1 + k], w)))
     for k, B in enumerate(shape.s_bases):
-        B = np.asarray(B, np.int64).reshape(-1, n)
-        i, j = np.triu_indices(B.shape[0])
-        parts.append(_sums(B[i] + B[j], sup[1 + n_eq + k]))
-    return np.vstack(parts)
+        kb = _keys(B, w)
+        i, j = np.triu_indices(kb.size)
+        with np.errstate(over="ignore"):
+            parts.append(_sums(kb[i] + kb[j], _keys(sup[1 + slots.n_eq + k], w)))
+    return np.concatenate(parts)
 
 
-def _sums(A: np.ndarray, B: np.ndarray) -> np.ndarray:
-    """Every row of A plus every row of B."""
-    return (A[:, None, :] + B[None, :, :]).reshape(-1, A.shape[1])
+def _sums(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Every key of a plus every key of b (the keys of the products)."""
+    with np.errstate(over="ignore"):
+        return (a[:, None] + b[None, :]).reshape(-1)
 
 
 def _clique_sides(s: int, i: np.ndarray, j: np.ndarray) -> list:
-    """The sides of the maximal cliques of a minimal chordal extension of the graph on s nodes with edges (i, j);
-    [s] when the graph is nearly complete."""
-    if s <= 2 or i.size > PATTERN_DENSE_FRACTION * s * (s - 1) / 2:
+    """The sides of the maximal cliques of the chordal extension that eliminating a node of least degree first
+    gives (the graph on s nodes with edges (i, j); Clarabel orders its decomposition by approximate minimum
+    degree); [s] when the graph is nearly complete or small (:data:`PATTERN_MIN_SIDE`) or large
+    (:data:`PATTERN_MAX_SIDE`)."""
+    if s < PATTERN_MIN_SIDE or s > PATTERN_MAX_SIDE or i.size > PATTERN_DENSE_FRACTION * s * (s - 1) / 2:
         return [s]
-    import networkx as nx
-
-    G = nx.Graph()
-    G.add_nodes_from(range(s))
-    G.add_edges_from(zip(i.tolist(), j.tolist()))
-    H, _ = nx.complete_to_chordal_graph(G)
-    return [len(c) for c in nx.chordal_graph_cliques(H)]
+    adj = [set() for _ in range(s)]
+    for a, b in zip(i.tolist(), j.tolist()):
+        adj[a].add(b)
+        adj[b].add(a)
+    alive, holding, cliques = set(range(s)), [[] for _ in range(s)], []
+    while alive:
+        v = min(alive, key=lambda u: (len(adj[u]), u))
+        clique = frozenset(adj[v]) | {v}
+        # {v} + its remaining neighbours is a clique of the extension; maximal unless inside an earlier one
+        if not any(clique <= c for c in holding[v]):
+            cliques.append(clique)
+            for u in clique:
+                holding[u].append(clique)
+        for a in adj[v]:
+            adj[a] |= adj[v]
+            adj[a].discard(a)
+            adj[a].discard(v)
+        alive.discard(v)
+    return [len(c) for c in cliques]

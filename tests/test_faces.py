@@ -159,3 +159,26 @@ def test_many_duplicated_and_georeferenced_views(kind, size):
         assert geo.optimal == base.optimal
         n_ver += geo.certified_by == "verification"
     assert n_ver >= 4
+
+
+def test_no_face_multiplier_started_without_the_time_the_last_bound_took():
+    """Each bound of face_bound costs about the same and its view quadratics do not look at the deadline: a
+    multiplier is not tried once less is left than the last bound took (issue #22: calls past their limit)."""
+    import time
+
+    from sospoly.budget import Deadline
+    from tritools.solve.regions_verify import region_forms
+
+    forms = region_forms([Segment([0.0, 0.0], [1.0, 0.0]), Segment([1.0, 1.0], [0.0, 1.0])])
+    calls = []
+
+    def bound_at(mu):
+        calls.append(mu)
+        time.sleep(0.03)
+        return 0.0                              # never certifies against c_upper = 1
+
+    faces.face_bound(bound_at, forms, 1.0, tol, deadline=Deadline.after(0.05))
+    assert len(calls) == 1                      # 20 ms left after the first 30 ms bound
+    calls.clear()
+    faces.face_bound(bound_at, forms, 1.0, tol, deadline=Deadline.after(10.0))
+    assert len(calls) == 1 + len(faces.FACE_MU_FRACTIONS)

@@ -28,7 +28,7 @@ def test_cliques_of_a_chain_of_groups():
     gens, f, eq, ineq = _chain_program(20)
     shape = certificate_shape("none", gens, 2, f, eq, ineq)
     slots = DataSlots.of(f, eq, ineq, gens)
-    sides = gram_pattern_sides(shape, slots)
+    sides = [c for b in gram_pattern_sides(shape, slots) for c in b]
     # the u block (1, v_0..v_59): squares and linear terms keep (0, i); products keep (g0, g0+1) and (g_k, g_k+1)
     assert shape.gram_sides()[0] == 61
     assert sides[-1] == 1                                # the inequality's multiplier block as it is
@@ -57,7 +57,7 @@ def test_dense_data_keeps_the_dense_estimate():
     f = sum((var[i] * var[j] for i in range(n) for j in range(i, n)), Polynomial(gens, {}))
     shape = certificate_shape("none", gens, 2, f, (), ())
     sides = gram_pattern_sides(shape, DataSlots.of(f, (), (), gens))   # every product is data: one block
-    assert sides == (n + 1,)
+    assert sides == ((n + 1,),)
 
 
 def test_compiled_structure_under_a_budget_between_the_estimates():

@@ -60,25 +60,31 @@ def check_size(shape, budget, free: bool, n: int, degree: int, deg_f: int, *, sl
     size = shape.size(q_side)
     why = size.exceeds(budget)
     if why and image_form and not free and slots is not None:
-        sides = gram_pattern_sides(shape, slots, q)
-        if sides is not None:
-            size = _with_clarabel_sides(size, shape, sides)
+        blocks = gram_pattern_sides(shape, slots, q)
+        if blocks is not None:
+            size = _with_clarabel_sides(size, shape, blocks)
             why = size.exceeds(budget)
     if why:
         raise BudgetExceeded(why, size, "use a lower degree, a sparse certificate (sparsity='correlative'), "
                                         "or a larger budget")
 
 
-def _with_clarabel_sides(size: ProgramSize, shape, sides) -> ProgramSize:
-    """``size`` with Clarabel's term from the clique blocks ``sides`` (the columns, rows and the interior-point
-    method's term stay those of the dense blocks)."""
-    clar = PATTERN_MARGIN * estimate_size(sides, 1 + shape.n_free()).clarabel_bytes
+def _with_clarabel_sides(size: ProgramSize, shape, blocks) -> ProgramSize:
+    """``size`` with Clarabel's term on the blocks ``blocks`` (one tuple of clique sides per Gram block of u, then
+    one per multiplier block), the decomposed blocks' cliques charged :data:`PATTERN_MARGIN` times (the columns,
+    rows and the interior-point method's term stay those of the dense blocks)."""
+    sides = [c for b in blocks for c in b]
+    split = [c for b, s0 in zip(blocks, size.gram_sides) if tuple(b) != (s0,) for c in b]
+    clar = estimate_size(sides, 1 + shape.n_free()).clarabel_bytes
+    if split:
+        clar += (PATTERN_MARGIN - 1.0) * estimate_size(split).clarabel_bytes
     return ProgramSize(size.gram_sides, size.n_columns, size.n_rows, min(size.clarabel_bytes, clar), size.ipm_bytes)
 
 
 def gram_pattern_sides(shape, slots, q=None) -> tuple | None:
-    """The PSD block sides Clarabel's chordal decomposition may keep (module docstring): for each of u's blocks
-    the maximal cliques of a chordal extension of its kept entries, the multipliers' blocks as they are; None when
+    """The PSD blocks Clarabel's chordal decomposition may keep (module docstring), one tuple of sides per Gram block
+    (u's, then the multipliers'): for u's blocks the maximal cliques of a chordal extension of its kept entries, the
+    multipliers' blocks as they are; None when
     there are more than :data:`PATTERN_MAX_PAIRS` pairs.  ``slots``: the data's
     :class:`~sospoly.certificates.psatz.DataSlots`; ``q``: the fixed multiplier (None: 1)."""
     bases = [np.asarray(B, np.int64) for B in shape.u_bases]
@@ -97,12 +103,12 @@ def gram_pattern_sides(shape, slots, q=None) -> tuple | None:
     data = np.unique(_data_keys(shape, slots, q, w))
     uniq, ids, counts = np.unique(keys, return_inverse=True, return_counts=True)
     kept_all = np.isin(uniq, data, assume_unique=True)[ids] | (counts[ids] >= 2)
-    sides, at = [], 0
+    blocks, at = [], 0
     for (k, i, j), P in zip(owners, pairs):
         kept = kept_all[at:at + P.size] & (i != j)
         at += P.size
-        sides += _clique_sides(bases[k].shape[0], i[kept], j[kept])
-    return tuple(sides) + tuple(np.asarray(B).shape[0] for B in shape.s_bases)
+        blocks.append(tuple(_clique_sides(bases[k].shape[0], i[kept], j[kept])))
+    return tuple(blocks) + tuple((np.asarray(B).shape[0],) for B in shape.s_bases)
 
 
 def _weights(n: int) -> np.ndarray:

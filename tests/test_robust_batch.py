@@ -217,3 +217,22 @@ def test_stacked_enumeration_results_equal_one_by_one():
         for att in da["attempts"] + db["attempts"]:
             att.pop("seconds")
         assert da == db
+
+
+def test_shared_per_view_thresholds_do_not_lose_the_batch_to_one_bad_problem():
+    """Review 18: one array of per-view thresholds for a batch holding a malformed problem (one view, or cameras and
+    observations of other counts) raised for the whole call; that problem now gets ``invalid_input`` with its own
+    error and the others their results (equal to their single calls).  Invalid thresholds still raise."""
+    from tritools.scene import robust_protocol_scene
+
+    P, x, _, _ = robust_protocol_scene(4, 1, 0.5, np.random.default_rng(0))
+    c = np.array([5.0, 5.0, np.inf, 5.0])
+    single = tritools.triangulate(P, x, robust=c)
+    for bad in [(P[:1], x[:1]), (P, x[:3]), (P[:2, :, :3], x[:2])]:
+        rs = tritools.triangulate_many([(P, x), bad, (P, x)], robust=c, progress=False)
+        assert [r.status.value for r in rs] == [single.status.value, "invalid_input", single.status.value]
+        assert "ValueError" in rs[1].message and rs[1].inliers is None
+        for r in (rs[0], rs[2]):
+            assert r.gamma_ub == single.gamma_ub and np.array_equal(r.inliers, single.inliers)
+    with pytest.raises(ValueError, match="positive"):
+        tritools.triangulate_many([(P, x), (P[:1], x[:1])], robust=np.array([5.0, -1.0, 5.0, 5.0]), progress=False)

@@ -42,10 +42,11 @@ def thresholds_for(robust, problems) -> list:
     equal size; or a sequence with one entry per problem, each a scalar or a per-view array (a 2-D array; a list
     holding an array; or a list of M scalars for M problems that cannot be per-view thresholds because some problem
     has another view count -- M scalars for M problems of M views each read as per-view thresholds).  ValueError
-    naming ``robust`` (and the problem, ``robust[k]``)."""
+    naming ``robust`` (and the problem, ``robust[k]``); a problem that a valid shared per-view array does not fit gets
+    a ValueError instance in its place (:func:`_shared`: status ``invalid_input``, the batch goes on)."""
     sizes = [_n_views(p) for p in problems]
     if not _per_problem(robust, sizes):
-        return [robust_thresholds(robust, n) if n is not None else None for n in sizes]
+        return [_shared(robust, n, k) if n is not None else None for k, n in enumerate(sizes)]
     if len(robust) != len(problems):
         raise ValueError(f"robust must be a scalar, one threshold per view, or one entry per problem "
                          f"({len(problems)}), got {len(robust)} entries")
@@ -56,6 +57,19 @@ def thresholds_for(robust, problems) -> list:
         except ValueError as exc:
             raise ValueError(f"robust[{k}] (problem {k}): {exc}") from None
     return out
+
+
+def _shared(robust, n: int, k: int):
+    """The thresholds of problem ``k`` (``n`` views) from one value or one per-view array; a ValueError *instance*
+    naming ``problems[k]`` when a valid per-view array has another length (that problem gets status
+    ``invalid_input``, the batch goes on); raised when ``robust`` itself is invalid (every problem's)."""
+    try:
+        return robust_thresholds(robust, n)
+    except ValueError as exc:
+        if np.ndim(robust) != 1:
+            raise
+        robust_thresholds(robust, len(robust))          # raises for invalid values: the call's argument
+        return ValueError(f"problems[{k}]: {n} views, {exc}")
 
 
 def _per_problem(robust, sizes: list) -> bool:
@@ -123,6 +137,17 @@ ROBUST_CHUNK = 512
 BATCH_ENUM_MAX_VIEWS = 10
 
 
+def _mismatch(problem, exc: ValueError) -> TriangulationResult:
+    """The ``invalid_input`` result of a problem whose per-view thresholds do not fit it: the problem's own fault
+    when it has one (e.g. one view), else the thresholds'."""
+    why = f"ValueError: {exc}"
+    try:
+        validated_problem(*problem)
+    except (ValueError, TypeError) as bad:
+        why = f"{type(bad).__name__}: {bad}"
+    return TriangulationResult("tls", Status.INVALID_INPUT, message=why)
+
+
 def _search_or_failure(cameras, regions, c, opts):
     """A :class:`tritools.solve.robust.TlsSearch` for one problem, or a failed result (bad input)."""
     from .robust import TlsSearch
@@ -152,6 +177,9 @@ def _robust_many(problems: list, robust, opts, executor, progress) -> list[Trian
     out: list = [None] * len(problems)
     direct, l2_first, points = [], [], {}
     for i, (prob, c) in enumerate(zip(problems, thresholds)):
+        if isinstance(c, ValueError):               # thresholds of another view count (:func:`_shared`)
+            out[i] = _mismatch(prob, c)
+            continue
         pp = as_point_problem(*prob) if isinstance(prob, (list, tuple)) and len(prob) == 2 else None
         (direct if pp is not None and np.any(np.isfinite(c)) else l2_first).append(i)
         if pp is not None:

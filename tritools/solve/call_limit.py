@@ -87,7 +87,7 @@ def mark_cut(result):
     return dataclasses.replace(result, message=message)
 
 
-def expired_points(C: np.ndarray, x: np.ndarray, opts) -> list[TriangulationResult]:
+def expired_points(C: np.ndarray, x: np.ndarray, opts, *, refine: bool = True) -> list[TriangulationResult]:
     """``time_limit`` results of point problems (C (M, N, 3, 4), x (M, N, 2)) not solved before the end: the DLT
     point refined by Levenberg-Marquardt (vectorised), gamma_UB = gamma(X) (a valid upper bound: the value of the
     objective at a point), no lower bound, not optimal.  A problem that the per-point checks refuse (non-finite
@@ -95,31 +95,33 @@ def expired_points(C: np.ndarray, x: np.ndarray, opts) -> list[TriangulationResu
     camera_problems`, the vectorised twin of the camera checks) gets their ``invalid_input`` result instead
     (:func:`_refused`: what a batch without the limit reports); a stack the vectorised steps cannot take
     (LinAlgError on extreme numbers) is taken one problem at a time; each camera is divided by its largest entry
-    first (the same camera)."""
+    first (the same camera).  ``refine=False``: the DLT point itself (the robust rows: an L2 refinement through
+    wrong matches costs tens of iterations and means nothing for their TLS value)."""
     t0 = time.perf_counter()
     C, x = np.asarray(C, float), np.asarray(x, float)
     finite = camera_problems(C).valid & np.isfinite(x).all(axis=(1, 2)) & (x.shape[1] >= 2)
     if not finite.all():
-        good_rows = iter(expired_points(C[finite], x[finite], opts) if finite.any() else [])     # (checked)
+        good_rows = iter(expired_points(C[finite], x[finite], opts, refine=refine) if finite.any() else [])
         return [next(good_rows) if finite[m] else _refused(C[m], x[m], opts) for m in range(len(x))]
     with np.errstate(all="ignore"):
         top = np.max(np.abs(C), axis=(2, 3), keepdims=True)
         C = C / np.where(top > 0, top, 1.0)             # each camera at unit scale (the same camera: 1e300 overflowed)
         try:
             X0, ok = dlt_stack(C, x)
-            X, ok = refine_points_stack(C, x, X0, ok)
+            X, ok = refine_points_stack(C, x, X0, ok) if refine else (X0, ok)
             gamma, res, dep = points_report_stack(C, x, X, opts.world_frame)
         except np.linalg.LinAlgError:
             if len(x) == 1:
                 X, ok, gamma = np.full((1, 3), np.nan), np.zeros(1, bool), np.full(1, np.nan)
                 res, dep = [None], [None]
             else:
-                return [r for m in range(len(x)) for r in expired_points(C[m:m + 1], x[m:m + 1], opts)]
+                return [r for m in range(len(x)) for r in expired_points(C[m:m + 1], x[m:m + 1], opts, refine=refine)]
     share = (time.perf_counter() - t0) / max(len(x), 1)
     out = []
     for m in range(len(x)):
         good = bool(ok[m]) and bool(np.isfinite(gamma[m]))
-        why = "X and gamma_UB from the local L2 refinement of the DLT point" if good else \
+        why = ("X and gamma_UB from the local L2 refinement of the DLT point" if refine else
+               "X and gamma_UB from the DLT point") if good else \
             "no estimate: the DLT point is at infinity"
         out.append(TriangulationResult(
             opts.method.value, Status.TIME_LIMIT, X=X[m] if good else None,

@@ -31,9 +31,10 @@ import numpy as np
 
 from ..model.regions import as_regions
 from ..result import Attempt, Status, TriangulationResult
-from .call_limit import call_limit, current_end, mark_cut, within
+from .call_limit import call_limit, current_end, expired, expired_points, mark_cut, within
 from .fastpath_cameras import validated_problem
 from .robust import robust_thresholds, triangulate_robust
+from .robust_report import tls_reported_stack
 
 __all__ = ["robust_many", "thresholds_for"]
 
@@ -215,26 +216,92 @@ def _after_l2(problems, thresholds, opts, idx, first, out) -> list:
 def _drive_chunks(problems, thresholds, opts, idx, out, points) -> None:
     """The TLS results of the problems ``idx`` (:func:`_enumerated_then_searched`), :data:`ROBUST_CHUNK` together at
     a time (each search's time budget starts with its chunk).  ``points``: index -> (cameras, centres) of the point
-    problems (their cameras checked in one vectorised call per view count, :func:`_point_searches`)."""
-    for k in range(0, len(idx), ROBUST_CHUNK):
+    problems (their cameras checked in one vectorised call per view count, :func:`_point_searches`).  Under a
+    whole-call limit a chunk takes about :data:`CHUNK_SHARE` of the time left at the last chunk's cost per problem
+    (at least :data:`CHUNK_MIN` problems), and the problems whose chunk would start after the end get the rows of
+    :func:`expired_tls` (a search past its deadline still costs ~1 ms: 200 problems took a 0.01 s limit to 0.1-0.4 s,
+    review 18)."""
+    k, per = 0, CHUNK_PRIOR_SECONDS
+    while k < len(idx):
+        end = current_end()
+        if expired(end):
+            expired_tls(problems, thresholds, opts, idx[k:], out, points)
+            return
+        size = ROBUST_CHUNK if end is None else \
+            int(min(ROBUST_CHUNK, max(CHUNK_MIN, CHUNK_SHARE * (end - time.time()) / per)))
         t0 = time.perf_counter()
-        chunk = idx[k:k + ROBUST_CHUNK]
-        run, cut = within(opts, current_end())
-        searches = _point_searches([i for i in chunk if i in points], points, thresholds, run, t0)
-        for i in chunk:
-            if i in searches:
-                continue
-            s = _search_or_failure(*problems[i], thresholds[i], run)
-            if isinstance(s, TriangulationResult):
-                out[i] = s
-            else:
-                searches[i] = s
-        searches = sorted(searches.items())
-        results = _enumerated_then_searched([s for _, s in searches])
-        share = (time.perf_counter() - t0) / max(1, len(searches))
-        for (i, _), r in zip(searches, results):
-            r.timings["batch_share"] = share    # the result's own dict (TriangulationResult copies it): no replace
-            out[i] = mark_cut(r) if cut else r
+        chunk = idx[k:k + size]
+        k += size
+        _drive_chunk(problems, thresholds, opts, chunk, out, points, t0)
+        per = max((time.perf_counter() - t0) / len(chunk), 1e-6)
+
+
+#: under a whole-call limit: a chunk's share of the time left, the fewest problems in a chunk, and the cost per
+#: problem assumed before the first chunk (seconds; measured 0.5-2 ms on the 2-core machine)
+CHUNK_SHARE = 0.25
+CHUNK_MIN = 2
+CHUNK_PRIOR_SECONDS = 2e-3
+
+
+def _drive_chunk(problems, thresholds, opts, chunk, out, points, t0) -> None:
+    """The results of one chunk of :func:`_drive_chunks`."""
+    run, cut = within(opts, current_end())
+    searches = _point_searches([i for i in chunk if i in points], points, thresholds, run, t0)
+    for i in chunk:
+        if i in searches:
+            continue
+        s = _search_or_failure(*problems[i], thresholds[i], run)
+        if isinstance(s, TriangulationResult):
+            out[i] = s
+        else:
+            searches[i] = s
+    searches = sorted(searches.items())
+    results = _enumerated_then_searched([s for _, s in searches])
+    share = (time.perf_counter() - t0) / max(1, len(searches))
+    for (i, _), r in zip(searches, results):
+        r.timings["batch_share"] = share    # the result's own dict (TriangulationResult copies it): no replace
+        out[i] = mark_cut(r) if cut else r
+
+
+def expired_tls(problems, thresholds, opts, idx, out, points) -> None:
+    """``time_limit`` rows of the problems ``idx`` not started before the whole call's end: for point problems, per
+    view count, the DLT point of all views (:func:`~.call_limit.expired_points`, vectorised) with its TLS
+    numbers (:func:`~.robust_report.tls_reported_stack` at the trivial lower bound 0, not certified: gamma_UB =
+    gamma_TLS(X), a valid upper bound, inliers d_i(X) < c_i); a problem those checks refuse keeps their
+    ``invalid_input`` row; other problems through their search with a spent budget (its last-resort estimate)."""
+    groups: dict = {}
+    for i in idx:
+        if i in points:
+            groups.setdefault(len(points[i][1]), []).append(i)
+        else:
+            _drive_chunk(problems, thresholds, opts, [i], out, points, time.perf_counter())
+    for group in groups.values():
+        C = np.stack([points[i][0] for i in group])
+        x = np.stack([points[i][1] for i in group])
+        l2 = expired_points(C, x, opts, refine=False)
+        have = [k for k, r in enumerate(l2) if r.X is not None]
+        told = tls_reported_stack(C[have], x[have], np.array([l2[k].X for k in have]).reshape(-1, 3),
+                                  np.stack([thresholds[group[k]] for k in have]).reshape(len(have), -1),
+                                  np.zeros(len(have)), opts.tolerances, np.zeros(len(have), bool),
+                                  np.full(len(have), np.nan)) if have else []       # (checked)
+        told = dict(zip(have, told))
+        for k, (i, r) in enumerate(zip(group, l2)):
+            out[i] = _expired_row(r, told.get(k))
+
+
+def _expired_row(r: TriangulationResult, told) -> TriangulationResult:
+    """The TLS form of an expired L2 row ``r`` (:func:`expired_tls`) with its reported TLS numbers ``told``."""
+    if r.status == Status.INVALID_INPUT:
+        return dataclasses.replace(r, method="tls")
+    if told is None:
+        return dataclasses.replace(r, method="tls", attempts=(Attempt("tls", None, Status.TIME_LIMIT.value,
+                                                                      step="call"),))
+    msg = r.message.replace("gamma_UB from the DLT point", "gamma_UB (TLS) at the DLT point of all views")
+    return dataclasses.replace(r, method="tls", gamma_ub=told.gamma_ub, gamma_lb=told.gamma_lb,
+                               residuals=told.residuals, inliers=told.inliers, image_points=told.image_points,
+                               message=f"TLS: {int(told.inliers.sum())}/{len(told.inliers)} inliers; {msg}",
+                               attempts=(Attempt("tls", None, Status.TIME_LIMIT.value, None, told.gamma_ub,
+                                                 step="call"),))
 
 
 def _enumerated_then_searched(searches: list) -> list:

@@ -153,7 +153,8 @@ def test_parent_verification_starts_no_chunk_predicted_past_the_deadline(monkeyp
     monkeypatch.setattr(rv, "_first_cost", lambda k: 1e-4)         # predicted to fit: a whole first chunk of 3
     good, lb, Xs = verify_in_parent(*args, deadline=_Almost())
     assert good[:3].all() and not good[3:].any()
-    np.testing.assert_array_equal(lb[:3], lb_full[:3])
+    np.testing.assert_allclose(lb[:3], lb_full[:3], rtol=1e-12)      # (a stack of 3 against one of 12: numpy's
+    # vectorised loops may round the last bits of stacks of other sizes differently: numpy 2.4 does here)
 
 
 def test_compute_many_past_the_deadline_stores_zero_without_packing(monkeypatch):

@@ -362,3 +362,19 @@ def test_deadline_overrun_is_the_share_of_the_limit_gone_by_since_it_passed():
     assert 0.5 <= late < 0.75
     assert Deadline(time.monotonic() - 1.0).overrun() == float("inf")          # no span: any lateness is too much
     assert Deadline.after(-1.0, span=4.0).overrun() >= 0.25
+
+
+def test_steps_stop_a_report_reserve_before_the_limit():
+    """Review 18: past its steps' deadline a call still reports at its estimate (3-6 ms at 8-30 views of regions):
+    the steps' deadline comes ``report_reserve(limit)`` before the limit (10%, at most 0.5 s)."""
+    import time
+
+    from tritools.solve.options import options_from
+    from tritools.solve.settings import REPORT_RESERVE_MAX, call_deadline, report_reserve
+
+    assert report_reserve(0.05) == pytest.approx(0.005) and report_reserve(60.0) == REPORT_RESERVE_MAX
+    for limit in (0.05, 2.0, 60.0):
+        t0 = time.perf_counter()
+        d = call_deadline(options_from(None, time_limit=limit), t0)
+        left = d.remaining()
+        assert limit - report_reserve(limit) - 0.01 <= left <= limit - report_reserve(limit)

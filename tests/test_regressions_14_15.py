@@ -442,8 +442,12 @@ def test_arrays_api_agrees_with_the_object_api():
     assert all(res.optimal)
     one_view = visible.copy()
     one_view[1] = [True, False, False, False]
-    with pytest.raises(ValueError, match=r"points2d\[1\] is visible in fewer than 2 views"):
-        tritools.triangulate_points(sc.cameras, x, one_view, progress=False)
+    cut = tritools.triangulate_points(sc.cameras, x, one_view, progress=False)   # review 18: a row, not a raise
+    assert cut.status[1] == tritools.Status.INVALID_INPUT and "points2d[1] is visible in fewer than 2 views" in \
+        cut.message[1] and not cut.optimal[1]
+    others = np.arange(len(x)) != 1
+    np.testing.assert_array_equal(cut.X[others], res.X[others])
+    assert list(cut.status[others]) == list(res.status[others])
 
 
 # ----------------------------------------------------------------------------- #14: COLMAP diagnoses

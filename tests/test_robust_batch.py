@@ -264,3 +264,23 @@ def test_whole_call_limit_rows_past_the_end_are_cheap_and_valid():
         g = np.sqrt(np.sum(np.minimum(d, 3.0) ** 2) / (2 * len(x)))
         assert g <= r.gamma_ub <= g * (1 + 1e-9)
         assert np.array_equal(r.inliers, d < 3.0)
+
+
+def test_triangulate_points_keeps_the_points_seen_in_fewer_than_two_views():
+    """Review 18: one point seen in a single view made triangulate_points raise for the whole call; it now gets
+    ``invalid_input`` naming it, the others their results (equal to the call without it), L2 and robust."""
+    sc = random_scene(4, 5, seed=1)
+    x = sc.points2d.copy()
+    x[1, 1:] = np.nan
+    x[3, :] = np.nan
+    keep = np.array([True, False, True, False, True])
+    for kw in ({}, {"robust": 5.0}):
+        cut = tritools.triangulate_points(sc.cameras, x, progress=False, **kw)
+        ref = tritools.triangulate_points(sc.cameras, x[keep], progress=False, **kw)
+        assert [s.value for s in cut.status] == ["optimal", "invalid_input", "optimal", "invalid_input", "optimal"]
+        assert "points2d[1] is visible in fewer than 2 views" in cut.message[1] and "points2d[3]" in cut.message[3]
+        np.testing.assert_array_equal(cut.X[keep], ref.X)
+        np.testing.assert_array_equal(cut.gamma_ub[keep], ref.gamma_ub)
+        assert np.isnan(cut.X[~keep]).all() and not cut.optimal[~keep].any()
+        if kw:
+            assert not cut.inliers[1].any() and cut.inliers[0].all()

@@ -66,7 +66,8 @@ def triangulate_points(cameras: ArrayLike, points2d: ArrayLike, visible: ArrayLi
         Observed image points (any real dtype, float32 included); entries of views that do not see a point
         are ignored (NaN marks them by default).
     visible : bool array (M, V), optional
-        Which views see which point (default: the finite entries of ``points2d``); each point needs >= 2.
+        Which views see which point (default: the finite entries of ``points2d``); a point seen in fewer than 2
+        gets status ``invalid_input`` (the others are solved).
     layout : "auto" (default), "points_views", "views_xy_points" or "views_points"
         Axis order of ``points2d`` (:mod:`tritools.model.opencv`); "auto" refuses a shape that fits several
         layouts (two views and two points: (2, 2, 2)) with a ValueError asking for ``layout=``.
@@ -83,15 +84,33 @@ def triangulate_points(cameras: ArrayLike, points2d: ArrayLike, visible: ArrayLi
         raise ValueError(f"cameras must have shape (V, 3, 4), got {C.shape}")
     x = points_array(points2d, C.shape[0], layout, "points2d")
     vis = np.all(np.isfinite(x), axis=2) if visible is None else _visible_mask(visible, x)
-    if np.any(vis.sum(axis=1) < 2):
-        bad = int(np.argmax(vis.sum(axis=1) < 2))
-        raise ValueError(f"points2d[{bad}] is visible in fewer than 2 views")
+    few = vis.sum(axis=1) < 2
+    if np.any(few):
+        return _with_unseen(C, x, vis, few, robust, opts, executor, progress)
     views = [np.nonzero(row)[0] for row in vis]
     if robust is not None:
         return _robust_points(C, x, vis, views, robust, opts, executor, progress)
     outcome = solve_point_problems([(C[v], x[m, v]) for m, v in enumerate(views)], opts, executor=executor,
                                    progress=progress)
     return outcome.record().with_views(vis)
+
+
+def _with_unseen(C, x, vis, few, robust, opts, executor, progress) -> TriangulationResults:
+    """The points seen in fewer than two views (``few``) get status ``invalid_input`` naming them; the others their
+    results, in input order (a batch never loses a point)."""
+    from ..result import Status, TriangulationResult
+
+    method = "tls" if robust is not None else opts.method.value
+    idx_bad = np.nonzero(few)[0]
+    bad = TriangulationResults.from_rows(
+        [TriangulationResult(method, Status.INVALID_INPUT, message=f"ValueError: points2d[{m}] is visible in "
+                                                                   "fewer than 2 views") for m in idx_bad.tolist()])
+    if few.all():
+        return bad
+    good = triangulate_points(C, x[~few], vis[~few], layout=PointsLayout.POINTS_VIEWS, options=opts,
+                              executor=executor, progress=progress, robust=robust)
+    order = np.argsort(np.concatenate([np.nonzero(~few)[0], idx_bad]), kind="stable")
+    return TriangulationResults.concat([good, bad]).take(order)
 
 
 def _visible_mask(visible, x: np.ndarray) -> np.ndarray:

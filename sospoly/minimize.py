@@ -197,6 +197,8 @@ def _choose_sparsity(sparsity, f, eq, ineq, degree: int, multiplier="auto", last
         return [(k, None) for k in term_levels(*supports, degree)]
     if sparsity != Sparsity.AUTO:              # the steps' kinds are plain strings ("none": the dense one)
         return [("none" if sparsity == Sparsity.DENSE else sparsity.value, None)]
+    if isinstance(multiplier, str) and multiplier == "free":
+        return [("none", None)]                # a free q needs the dense certificate (review 18: auto raised)
     cs = correlative_sparsity(n, *supports)
     steps = [] if cs.is_dense else [("correlative", low)]
     if cs.is_dense or (sigma(n, degree // 2) <= DENSE_AUTO_MAX_SIDE and
@@ -368,11 +370,19 @@ def _better(a: MinimizeResult, b: MinimizeResult) -> bool:
         la == lb and a.upper_bound is not None and (b.upper_bound is None or a.upper_bound < b.upper_bound))
 
 
+#: statuses of an uncertified best answer that the deadline turns into TIME_LIMIT (:func:`_finish`)
+_OUT_OF_TIME = frozenset({SolveStatus.OPTIMAL, SolveStatus.INACCURATE, SolveStatus.CHECK_FAILED,
+                          SolveStatus.NUMERICAL_ERROR, SolveStatus.UNPROVEN, SolveStatus.NOT_SOLVED})
+
+
 def _finish(best: MinimizeResult, run: _Run, seconds: float) -> MinimizeResult:
     import dataclasses
 
     status = best.status
-    if run.deadline.expired and not best.optimal and status == SolveStatus.OPTIMAL:
+    # past the deadline an uncertified answer is the time limit's, unless it is a verdict (an empty set, no
+    # certificate at any degree tried) or the budget refused what was left; a numerical failure too (review 18:
+    # a Motzkin call that spent its minute was reported as numerical_error)
+    if run.deadline.expired and not best.optimal and status in _OUT_OF_TIME:
         status = SolveStatus.TIME_LIMIT
     return dataclasses.replace(best, status=status, seconds=seconds, attempts=tuple(run.attempts))
 

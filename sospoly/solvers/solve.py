@@ -21,6 +21,7 @@ from ..budget import Deadline
 from .backends import ConicSolution, RawStatus, get_backend
 from ..lowering.conic import ConicProblem, GramForm, lower
 from ..algebra.polynomial import Polynomial
+from ..algebra.svec import smat
 from ..certificates.program import Sense, SOSProgram
 from ..status import SolveStatus
 from ..tolerances import DEFAULT_TOLERANCES, Tolerances, as_tolerances
@@ -114,6 +115,45 @@ def _scalar_cone_margins(problem: ConicProblem, x: np.ndarray) -> list:
     return out
 
 
+def check_unbounded_ray(problem: ConicProblem, d: np.ndarray | None, tol: Tolerances) -> tuple[bool, str]:
+    """A-posteriori check of an unboundedness certificate: a ray d of min q^T x s.t. b - A x in K with q^T d < 0 and
+    -A d in K (every cone is its own recession cone), scaled to q^T d = -1 and checked by the rules of
+    :func:`check_certificate` (PSD and scalar cones within ``psd_margin``, zero rows within ``identity_residual`` of
+    the size of their terms).  For a Positivstellensatz program such a ray is itself a certificate that the
+    constraint set is empty (c grows along it), so an unchecked one would make c* = +inf a claim: at f scaled by 1e8
+    Clarabel reported dual infeasibility of a bounded problem (review 18)."""
+    if d is None or not np.all(np.isfinite(d)):
+        return False, "no finite ray"
+    qd = float(problem.q @ d)
+    if not qd < 0:
+        return False, f"q^T d = {qd:.3g} is not negative"
+    d = d / -qd
+    r = -(problem.A @ d)
+    size = np.abs(problem.A) @ np.abs(d)
+    row = 0
+    for k, cone in enumerate(problem.cones):
+        v, sz = r[row:row + cone.dim], size[row:row + cone.dim]
+        row += cone.dim
+        if not cone.dim:
+            continue
+        if cone.kind == "zero":
+            bad = float(np.max(np.abs(v) / np.maximum(sz, 1.0)))
+            if bad > tol.identity_residual:
+                return False, f"zero cone {k}: residual {bad:.3g} of its terms"
+            continue
+        if cone.kind == "psd":
+            M = smat(v)
+            lam, scale = float(np.linalg.eigvalsh(M)[0]), float(np.max(np.abs(M)))
+        elif cone.kind == "nonneg":
+            lam, scale = float(v.min()), float(np.abs(v).max())
+        else:
+            norm = float(np.linalg.norm(v[1:]))
+            lam, scale = float(v[0]) - norm, max(abs(float(v[0])), norm)
+        if not tol.psd_accepts(lam, scale):
+            return False, f"{cone.kind} cone {k}: violated by {-lam:.3g} (scale {scale:.3g})"
+    return True, ""
+
+
 def solve_conic(problem: ConicProblem, backend=None, tolerances: Tolerances = DEFAULT_TOLERANCES,
                 feasibility: bool = False, extra_check=None, retry: bool = True,
                 deadline: Deadline | None = None) -> tuple[SolveStatus, ConicSolution, dict, float, str]:
@@ -164,9 +204,13 @@ def solve_conic(problem: ConicProblem, backend=None, tolerances: Tolerances = DE
         RawStatus.ALMOST_INFEASIBLE: SolveStatus.INACCURATE,
         RawStatus.TIME_LIMIT: SolveStatus.TIME_LIMIT,
     }.get(sol.raw_status, SolveStatus.NUMERICAL_ERROR)
+    detail = "; ".join(f"{a.label}: {a.solver_status}" for a in sol.attempts)
     if feasibility and status == SolveStatus.UNBOUNDED:  # a feasibility problem has no objective to be unbounded
         status = SolveStatus.NUMERICAL_ERROR
-    detail = "; ".join(f"{a.label}: {a.solver_status}" for a in sol.attempts)
+    elif status == SolveStatus.UNBOUNDED:
+        ok, why = check_unbounded_ray(problem, sol.x, tolerances)
+        if not ok:
+            status, detail = SolveStatus.NUMERICAL_ERROR, f"{detail}; its unboundedness ray fails the check: {why}"
     return status, sol, {}, np.nan, detail
 
 

@@ -1,0 +1,62 @@
+"""Review 18 (sospoly): an unchecked unboundedness ray claimed c* = +inf on a bounded problem; a minimize call past
+its deadline was reported as a numerical error; multiplier="free" with sparsity="auto" raised on decoupled
+variables."""
+import dataclasses
+import types
+
+import numpy as np
+
+import sospoly as sp
+from sospoly.budget import Deadline
+from sospoly.status import SolveStatus
+
+
+def test_no_infinite_bound_from_an_unchecked_ray():
+    x, y = sp.variables("x y")
+    for s in (1.0, 1e8):                      # Clarabel reported dual infeasibility at 1e8 (true minimum 1e8)
+        lb = sp.solve_psatz(sp.build_psatz(s * ((x - 1) ** 2 + (y + 2) ** 2), ineq=[x - 2], degree=4,
+                                           multiplier="putinar"))
+        assert lb.lower_bound is None or lb.lower_bound <= s * (1 + 1e-6)
+        assert lb.status != SolveStatus.UNBOUNDED
+    for kw in ({"ineq": [-1 - x ** 2]}, {"eq": [x ** 2 + 1]}):     # empty sets: the ray holds, +inf stays
+        lb = sp.solve_psatz(sp.build_psatz((x - 1) ** 2 + y ** 2, degree=2, multiplier="putinar", **kw))
+        assert lb.status == SolveStatus.UNBOUNDED and lb.lower_bound == np.inf
+
+
+def test_check_unbounded_ray_rejects_what_leaves_the_cones():
+    from sospoly.lowering.conic import ConicProblem
+    from sospoly.solvers.solve import check_unbounded_ray
+
+    x, = sp.variables("x")
+    ps = sp.build_psatz((x - 1) ** 2, ineq=[-1 - x ** 2], degree=2, multiplier="putinar")
+    prob = sp.CompiledPsatz(ps.structure, sp.GramForm.IMAGE).problem_from_theta(ps.theta)
+    assert isinstance(prob, ConicProblem)
+    sol = sp.solve_psatz(ps)
+    assert sol.status == SolveStatus.UNBOUNDED
+    ok, why = check_unbounded_ray(prob, np.zeros(prob.n_cols), sp.DEFAULT_TOLERANCES)
+    assert not ok and "not negative" in why
+    ok, _ = check_unbounded_ray(prob, None, sp.DEFAULT_TOLERANCES)
+    assert not ok
+
+
+def test_minimize_past_its_deadline_says_time_limit():
+    from sospoly.minimize import _finish
+
+    x, = sp.variables("x")
+    best = sp.minimize((x - 1) ** 2, degree=2)
+    assert best.optimal
+    run = types.SimpleNamespace(deadline=Deadline.after(0.0), attempts=[])
+    for status in (SolveStatus.NUMERICAL_ERROR, SolveStatus.UNPROVEN, SolveStatus.CHECK_FAILED):
+        failed = dataclasses.replace(best, status=status, optimal=False)
+        assert _finish(failed, run, 1.0).status == SolveStatus.TIME_LIMIT
+    for status in (SolveStatus.INFEASIBLE, SolveStatus.BUDGET_EXCEEDED):
+        verdict = dataclasses.replace(best, status=status, optimal=False)
+        assert _finish(verdict, run, 1.0).status == status
+    assert _finish(best, run, 1.0).status == SolveStatus.OPTIMAL       # certified stays certified
+
+
+def test_free_multiplier_with_auto_sparsity_on_decoupled_variables():
+    x, y = sp.variables("x y")
+    r = sp.minimize((x - 1) ** 2 + (y + 2) ** 2, ineq=[x - 2], multiplier="free")
+    assert r.lower_bound is not None and r.lower_bound <= 1.0 + 1e-9
+    assert r.status == SolveStatus.OPTIMAL and r.sparsity == "dense"

@@ -84,6 +84,32 @@ def test_fast_chain_goes_on_after_an_almost_solved_first_attempt(monkeypatch):
     assert sol.raw_status == RawStatus.SOLVED and sol.primal_objective == pytest.approx(-3.0, abs=1e-6)
 
 
+def test_provisional_almost_solved_kept_when_the_refined_attempt_runs_out_of_time(monkeypatch):
+    # review 18: the refined attempt ran to the time limit and the step reported no bound at all; the provisional
+    # ALMOST_SOLVED answer (accepted by the caller's check) is returned then, for the caller to make rigorous
+    import dataclasses
+
+    from sospoly import DEFAULT_TOLERANCES
+
+    real = ClarabelBackend.solve_once
+
+    def fake(self, problem, label="default", overrides=None, *args, **kw):
+        sol, att = real(self, problem, label, overrides, *args, **kw)
+        if label == "no-refinement":
+            return sol, dataclasses.replace(att, raw_status=RawStatus.ALMOST_SOLVED)
+        return sol, dataclasses.replace(att, raw_status=RawStatus.TIME_LIMIT)
+
+    monkeypatch.setattr(ClarabelBackend, "solve_once", fake)
+    tol = dataclasses.replace(DEFAULT_TOLERANCES, accept_inaccurate=True)
+    sol = ClarabelBackend(tol, retry_chain=CLARABEL_FAST_CHAIN).solve(_Problem())
+    assert [a.label for a in sol.attempts] == ["no-refinement", "default"]
+    assert sol.raw_status == RawStatus.ALMOST_SOLVED and sol.primal_objective == pytest.approx(-3.0, abs=1e-6)
+    refused = ClarabelBackend(tol, retry_chain=CLARABEL_FAST_CHAIN).solve(_Problem(), accept=lambda x, z: False)
+    assert refused.raw_status == RawStatus.TIME_LIMIT           # not accepted by the check: nothing kept
+    strict = ClarabelBackend(retry_chain=CLARABEL_FAST_CHAIN).solve(_Problem())
+    assert strict.raw_status == RawStatus.TIME_LIMIT            # without accept_inaccurate: nothing kept
+
+
 # ----------------------------------------------------------------------------- triangulation
 def test_point_regions_keep_the_default_chain():
     cams, regs, X = uncertain_problem(6, 0, kinds="point", noise_px=1.0)

@@ -1,6 +1,6 @@
 """Solver back-ends for :class:`~sospoly.lowering.conic.ConicProblem`.
 
-This is the only module of sospoly that imports a solver.  Two back-ends:
+This module and :mod:`.cvxpy_backend` are the only ones of sospoly that import a solver.  The back-ends:
 
 * :class:`ClarabelBackend` (default): Clarabel called directly on the standard
   form, with a retry chain of settings for the routine numerical failures of
@@ -11,7 +11,7 @@ This is the only module of sospoly that imports a solver.  Two back-ends:
   complement of the size of the free scalars), falling back to Clarabel when it
   does not converge or its answer fails the a-posteriori check; both attempts are
   recorded.
-* :class:`CvxpyBackend`: the same conic data re-expressed as a cvxpy problem and
+* :class:`CvxpyBackend` (:mod:`.cvxpy_backend`): the same conic data re-expressed as a cvxpy problem and
   solved by any installed cvxpy SDP solver (for cross-checking).
 """
 from __future__ import annotations
@@ -19,7 +19,6 @@ from __future__ import annotations
 import enum
 import dataclasses
 import time
-import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -28,10 +27,9 @@ import scipy.sparse as sp
 from ..budget import AUTO_IPM_MAX_BYTES as _AUTO_IPM_MAX_BYTES
 from ..budget import CLARABEL_TIME_MODEL, BudgetExceeded, Deadline, estimate_size, memory_room
 from ..lowering.conic import ConicProblem
-from ..algebra.svec import triu_pairs, svec_scale
 from ..tolerances import DEFAULT_TOLERANCES, Tolerances, as_tolerances
 
-__all__ = ["RawStatus", "Attempt", "ConicSolution", "ClarabelBackend", "CvxpyBackend", "IpmBackend", "AutoBackend",
+__all__ = ["RawStatus", "Attempt", "ConicSolution", "ClarabelBackend", "IpmBackend", "AutoBackend",
            "CLARABEL_FAST_CHAIN", "CLARABEL_SPLIT_CHAIN", "get_backend", "cvxpy_available", "import_cvxpy"]
 
 
@@ -266,25 +264,28 @@ class ClarabelBackend:
         ``time_limit`` and the last attempt's iterate (if any).
         """
         attempts = []
-        last = None
+        last = provisional = None
         first_seconds = 0.0          # the longest start (set-up + 2 iterations' worth) measured so far
         for label, overrides in self._chain(problem, retry):
             if deadline is not None and deadline.expired:
                 attempts.append(Attempt(label, RawStatus.TIME_LIMIT, "time limit reached", 0, 0.0))
-                return self._time_limit(last, attempts)
+                return _kept(provisional, attempts) or self._time_limit(last, attempts)
             sol, att = self.solve_once(problem, label, overrides, deadline, first_seconds)
             attempts.append(att)
             if sol is None:
                 if att.raw_status == RawStatus.TIME_LIMIT:
-                    return self._time_limit(last, attempts)
+                    return _kept(provisional, attempts) or self._time_limit(last, attempts)
                 first_seconds = max(first_seconds, att.seconds)     # an exception: all of it was uninterruptible
                 continue
             first_seconds = max(first_seconds, att.start_seconds)
             x, z = np.asarray(sol.x, float), np.asarray(sol.z, float)
             last = ConicSolution(att.raw_status, x, z, float(sol.obj_val), float(sol.obj_val_dual), tuple(attempts))
             if att.raw_status == RawStatus.TIME_LIMIT:
-                return last
+                return _kept(provisional, attempts) or last
             if _provisional(overrides) and att.raw_status != RawStatus.SOLVED:
+                if att.raw_status == RawStatus.ALMOST_SOLVED and self.tolerances.accept_inaccurate and \
+                        (accept is None or accept(x, z)):
+                    provisional = last                   # kept in case the refined attempts run out of time
                 continue                                 # CLARABEL_FAST_CHAIN: the refined attempts decide
             if att.raw_status in (RawStatus.PRIMAL_INFEASIBLE, RawStatus.DUAL_INFEASIBLE):
                 return last
@@ -438,6 +439,17 @@ AUTO_IPM_MIN_COST_SCALARS = 1e7
 AUTO_IPM_MAX_BYTES = _AUTO_IPM_MAX_BYTES
 
 
+def _kept(provisional: ConicSolution | None, attempts: list) -> ConicSolution | None:
+    """The provisional attempt's "almost solved" answer (accepted by the caller's check, with
+    ``accept_inaccurate``) when the refined attempts after it ran out of time: its caller makes the bound rigorous,
+    as for any such answer (a 30-view views program ended AlmostSolved without refinement in 10 s, then the refined
+    attempt ran to the 60 s limit and the step reported no bound at all, review 18); None without one."""
+    if provisional is None:
+        return None
+    return ConicSolution(RawStatus.ALMOST_SOLVED, provisional.x, provisional.z, provisional.primal_objective,
+                         provisional.dual_objective, tuple(attempts))
+
+
 def _provisional(overrides: dict) -> bool:
     """An attempt without iterative refinement (:data:`CLARABEL_FAST_CHAIN`): only SOLVED is final."""
     return overrides.get("iterative_refinement_enable") is False
@@ -483,92 +495,6 @@ class AutoBackend:
         return self.clarabel.solve(problem, accept=accept, retry=retry, deadline=deadline)
 
 
-def _svec_operator(s: int) -> sp.csr_matrix:
-    """Sparse T with svec(S) = T @ vec(S) (vec column-major, as cvxpy's)."""
-    i, j = triu_pairs(s)
-    return sp.csr_matrix((svec_scale(s), (np.arange(i.size), j * s + i)), shape=(i.size, s * s))
-
-
-class CvxpyBackend:
-    """Re-expresses the conic data in cvxpy and solves it with ``solver`` (any SDP solver)."""
-
-    name = "cvxpy"
-
-    def __init__(self, solver: str | None = None, tolerances: Tolerances = DEFAULT_TOLERANCES, **solver_kwargs):
-        self.solver = solver
-        self.tolerances = as_tolerances(tolerances)
-        self.solver_kwargs = solver_kwargs
-
-    def _tolerance_kwargs(self, solver):
-        t = self.tolerances
-        if solver == "CLARABEL":
-            return {"tol_gap_abs": t.solver_gap_abs, "tol_gap_rel": t.solver_gap_rel, "tol_feas": t.solver_feas,
-                    "max_iter": t.solver_max_iter}
-        if solver == "SCS":
-            return {"eps_abs": 1e-9, "eps_rel": 1e-9, "max_iters": 200000}
-        return {}
-
-    def solve(self, problem: ConicProblem, accept=None, retry: bool = True,
-              deadline: Deadline | None = None) -> ConicSolution:
-        cp = import_cvxpy()
-        t0 = time.perf_counter()
-        x = cp.Variable(problem.n_cols)
-        cons = []
-        psd_cons = []
-        row = 0
-        for cone in problem.cones:
-            rows = slice(row, row + cone.dim)
-            Ar, br = problem.A[rows], problem.b[rows]
-            if cone.kind == "zero":
-                cons.append(Ar @ x == br)
-            elif cone.kind == "nonneg":
-                cons.append(Ar @ x <= br)
-            elif cone.kind == "soc":
-                e = br - Ar @ x
-                cons.append(cp.SOC(e[0], e[1:]))
-            else:
-                S = cp.Variable((cone.size, cone.size), symmetric=True)
-                cons.append(_svec_operator(cone.size) @ cp.vec(S, order="F") == br - Ar @ x)
-                c = S >> 0
-                cons.append(c)
-                psd_cons.append((row, cone.size, c))
-            row += cone.dim
-        prob = cp.Problem(cp.Minimize(problem.q @ x), cons)
-        solver = self.solver
-        if solver is None:
-            solver = "CLARABEL" if "CLARABEL" in cp.installed_solvers() else None
-        kwargs = dict(self._tolerance_kwargs(solver))
-        kwargs.update(self.solver_kwargs)
-        try:
-            with warnings.catch_warnings():          # inaccuracy is reported through the status, not a warning
-                warnings.simplefilter("ignore")
-                prob.solve(solver=solver, **kwargs)
-            status = prob.status
-        except (KeyboardInterrupt, SystemExit):
-            raise
-        except BaseException as exc:
-            status = f"error: {type(exc).__name__}: {exc}"[:200]
-        secs = time.perf_counter() - t0
-        raw = {"optimal": RawStatus.SOLVED, "optimal_inaccurate": RawStatus.ALMOST_SOLVED,
-               "infeasible": RawStatus.PRIMAL_INFEASIBLE, "unbounded": RawStatus.DUAL_INFEASIBLE,
-               "infeasible_inaccurate": RawStatus.ALMOST_INFEASIBLE,
-               "unbounded_inaccurate": RawStatus.ALMOST_INFEASIBLE}.get(status, RawStatus.FAILED)
-        att = Attempt(f"cvxpy:{solver or 'default'}", raw, str(status), 0, secs)
-        if x.value is None:
-            return ConicSolution(raw, None, None, None, None, (att,))
-        xv = np.asarray(x.value, float)
-        z = np.zeros(problem.n_rows)
-        for row, s, c in psd_cons:
-            if c.dual_value is not None:
-                D = np.asarray(c.dual_value, float)
-                i, j = triu_pairs(s)
-                z[row:row + i.size] = D[i, j] * svec_scale(s)
-        obj = float(problem.q @ xv)
-        if raw == RawStatus.SOLVED and accept is not None and not accept(xv, z):
-            raw = RawStatus.ALMOST_SOLVED
-        return ConicSolution(raw, xv, z, obj, obj, (att,))
-
-
 def get_backend(backend, tolerances: Tolerances = DEFAULT_TOLERANCES):
     """Resolve a back-end given by object, or by name ``"clarabel"`` / ``"ipm"`` / ``"auto"`` / ``"cvxpy"`` /
     ``"cvxpy:SCS"``.
@@ -588,6 +514,8 @@ def get_backend(backend, tolerances: Tolerances = DEFAULT_TOLERANCES):
         if name == "clarabel":
             return ClarabelBackend(tolerances)
         if name == "cvxpy":
+            from .cvxpy_backend import CvxpyBackend
+
             _check_cvxpy_solver(solver or None)
             return CvxpyBackend(solver or None, tolerances)
         if name == "ipm":
@@ -598,3 +526,11 @@ def get_backend(backend, tolerances: Tolerances = DEFAULT_TOLERANCES):
     if not hasattr(backend, "solve"):
         raise TypeError("backend must be a name or an object with a solve(problem, accept) method")
     return backend
+
+
+def __getattr__(name: str):
+    """``CvxpyBackend`` lives in :mod:`.cvxpy_backend` (which builds on this module's classes)."""
+    if name == "CvxpyBackend":
+        from .cvxpy_backend import CvxpyBackend
+        return CvxpyBackend
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -1,0 +1,103 @@
+"""The cvxpy back-end of :mod:`sospoly.solvers.backends`: the conic data re-expressed as a cvxpy problem and solved
+by any installed cvxpy SDP solver (for cross-checking the default back-ends)."""
+from __future__ import annotations
+
+import time
+import warnings
+
+import numpy as np
+import scipy.sparse as sp
+
+from ..algebra.svec import svec_scale, triu_pairs
+from ..budget import Deadline
+from ..lowering.conic import ConicProblem
+from ..tolerances import DEFAULT_TOLERANCES, Tolerances, as_tolerances
+from .backends import Attempt, ConicSolution, RawStatus, import_cvxpy
+
+__all__ = ["CvxpyBackend"]
+
+
+def _svec_operator(s: int) -> sp.csr_matrix:
+    """Sparse T with svec(S) = T @ vec(S) (vec column-major, as cvxpy's)."""
+    i, j = triu_pairs(s)
+    return sp.csr_matrix((svec_scale(s), (np.arange(i.size), j * s + i)), shape=(i.size, s * s))
+
+
+class CvxpyBackend:
+    """Re-expresses the conic data in cvxpy and solves it with ``solver`` (any SDP solver)."""
+
+    name = "cvxpy"
+
+    def __init__(self, solver: str | None = None, tolerances: Tolerances = DEFAULT_TOLERANCES, **solver_kwargs):
+        self.solver = solver
+        self.tolerances = as_tolerances(tolerances)
+        self.solver_kwargs = solver_kwargs
+
+    def _tolerance_kwargs(self, solver):
+        t = self.tolerances
+        if solver == "CLARABEL":
+            return {"tol_gap_abs": t.solver_gap_abs, "tol_gap_rel": t.solver_gap_rel, "tol_feas": t.solver_feas,
+                    "max_iter": t.solver_max_iter}
+        if solver == "SCS":
+            return {"eps_abs": 1e-9, "eps_rel": 1e-9, "max_iters": 200000}
+        return {}
+
+    def solve(self, problem: ConicProblem, accept=None, retry: bool = True,
+              deadline: Deadline | None = None) -> ConicSolution:
+        cp = import_cvxpy()
+        t0 = time.perf_counter()
+        x = cp.Variable(problem.n_cols)
+        cons = []
+        psd_cons = []
+        row = 0
+        for cone in problem.cones:
+            rows = slice(row, row + cone.dim)
+            Ar, br = problem.A[rows], problem.b[rows]
+            if cone.kind == "zero":
+                cons.append(Ar @ x == br)
+            elif cone.kind == "nonneg":
+                cons.append(Ar @ x <= br)
+            elif cone.kind == "soc":
+                e = br - Ar @ x
+                cons.append(cp.SOC(e[0], e[1:]))
+            else:
+                S = cp.Variable((cone.size, cone.size), symmetric=True)
+                cons.append(_svec_operator(cone.size) @ cp.vec(S, order="F") == br - Ar @ x)
+                c = S >> 0
+                cons.append(c)
+                psd_cons.append((row, cone.size, c))
+            row += cone.dim
+        prob = cp.Problem(cp.Minimize(problem.q @ x), cons)
+        solver = self.solver
+        if solver is None:
+            solver = "CLARABEL" if "CLARABEL" in cp.installed_solvers() else None
+        kwargs = dict(self._tolerance_kwargs(solver))
+        kwargs.update(self.solver_kwargs)
+        try:
+            with warnings.catch_warnings():          # inaccuracy is reported through the status, not a warning
+                warnings.simplefilter("ignore")
+                prob.solve(solver=solver, **kwargs)
+            status = prob.status
+        except (KeyboardInterrupt, SystemExit):
+            raise
+        except BaseException as exc:
+            status = f"error: {type(exc).__name__}: {exc}"[:200]
+        secs = time.perf_counter() - t0
+        raw = {"optimal": RawStatus.SOLVED, "optimal_inaccurate": RawStatus.ALMOST_SOLVED,
+               "infeasible": RawStatus.PRIMAL_INFEASIBLE, "unbounded": RawStatus.DUAL_INFEASIBLE,
+               "infeasible_inaccurate": RawStatus.ALMOST_INFEASIBLE,
+               "unbounded_inaccurate": RawStatus.ALMOST_INFEASIBLE}.get(status, RawStatus.FAILED)
+        att = Attempt(f"cvxpy:{solver or 'default'}", raw, str(status), 0, secs)
+        if x.value is None:
+            return ConicSolution(raw, None, None, None, None, (att,))
+        xv = np.asarray(x.value, float)
+        z = np.zeros(problem.n_rows)
+        for row, s, c in psd_cons:
+            if c.dual_value is not None:
+                D = np.asarray(c.dual_value, float)
+                i, j = triu_pairs(s)
+                z[row:row + i.size] = D[i, j] * svec_scale(s)
+        obj = float(problem.q @ xv)
+        if raw == RawStatus.SOLVED and accept is not None and not accept(xv, z):
+            raw = RawStatus.ALMOST_SOLVED
+        return ConicSolution(raw, xv, z, obj, obj, (att,))

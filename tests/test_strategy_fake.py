@@ -62,7 +62,8 @@ def test_canned_iterates_move_the_level_by_the_given_amount_and_bad_answers_are_
     (Canned(RawStatus.FAILED, REFERENCE, "MaxIterations"), SolveStatus.NUMERICAL_ERROR, None),
     (Canned(RawStatus.FAILED, None, "exception: PanicException"), SolveStatus.NUMERICAL_ERROR, None),
     (Canned(RawStatus.PRIMAL_INFEASIBLE), SolveStatus.INFEASIBLE, None),
-    (Canned(RawStatus.DUAL_INFEASIBLE), SolveStatus.UNBOUNDED, np.inf),
+    (Canned(RawStatus.DUAL_INFEASIBLE), SolveStatus.NUMERICAL_ERROR, None),     # no ray to check: no +inf (review 18)
+    (Canned(RawStatus.DUAL_INFEASIBLE, REFERENCE), SolveStatus.NUMERICAL_ERROR, None),   # not a ray of this problem
     (Canned(RawStatus.ALMOST_INFEASIBLE), SolveStatus.INACCURATE, None),
     (Canned(RawStatus.TIME_LIMIT), SolveStatus.TIME_LIMIT, None),
 ], ids=lambda v: v.label if isinstance(v, Canned) else None)

@@ -8,6 +8,8 @@ program with a known optimum for the chain rule.
 """
 from __future__ import annotations
 
+import types
+
 import numpy as np
 import pytest
 import scipy.sparse as sp
@@ -108,6 +110,40 @@ def test_provisional_almost_solved_kept_when_the_refined_attempt_runs_out_of_tim
     assert refused.raw_status == RawStatus.TIME_LIMIT           # not accepted by the check: nothing kept
     strict = ClarabelBackend(retry_chain=CLARABEL_FAST_CHAIN).solve(_Problem())
     assert strict.raw_status == RawStatus.TIME_LIMIT            # without accept_inaccurate: nothing kept
+
+
+@pytest.mark.parametrize("refined", [RawStatus.FAILED, RawStatus.ALMOST_SOLVED])
+def test_provisional_almost_solved_kept_when_no_refined_attempt_is_accepted(monkeypatch, refined):
+    # review 3 of wave 18: refined attempts that all fail, or end almost solved and rejected by the check, lost the
+    # accepted provisional answer (FAILED, or the last rejected iterate); the accepted one is returned
+    import dataclasses
+
+    from sospoly import DEFAULT_TOLERANCES
+
+    real = ClarabelBackend.solve_once
+
+    def fake(self, problem, label="default", overrides=None, *args, **kw):
+        sol, att = real(self, problem, label, overrides, *args, **kw)
+        if label != "no-refinement":
+            sol = types.SimpleNamespace(x=np.asarray(sol.x) + 1.0, z=np.asarray(sol.z), obj_val=99.0,
+                                        obj_val_dual=99.0)
+        return sol, dataclasses.replace(att, raw_status=RawStatus.ALMOST_SOLVED if label == "no-refinement"
+                                        else refined)
+
+    monkeypatch.setattr(ClarabelBackend, "solve_once", fake)
+    tol = dataclasses.replace(DEFAULT_TOLERANCES, accept_inaccurate=True)
+    first = {}
+
+    def accept(x, z):                       # accepts only the provisional iterate (the first one seen)
+        first.setdefault("x", np.array(x))
+        return np.array_equal(x, first["x"])
+
+    sol = ClarabelBackend(tol, retry_chain=CLARABEL_FAST_CHAIN).solve(_Problem(), accept=accept)
+    assert len(sol.attempts) == len(CLARABEL_FAST_CHAIN)               # every refined attempt ran
+    assert sol.raw_status == RawStatus.ALMOST_SOLVED
+    assert np.array_equal(sol.x, first["x"]) and sol.primal_objective == pytest.approx(-3.0, abs=1e-6)
+    refused = ClarabelBackend(tol, retry_chain=CLARABEL_FAST_CHAIN).solve(_Problem(), accept=lambda x, z: False)
+    assert not np.array_equal(refused.x, first["x"])                    # nothing accepted: nothing kept
 
 
 # ----------------------------------------------------------------------------- triangulation

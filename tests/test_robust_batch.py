@@ -236,6 +236,10 @@ def test_shared_per_view_thresholds_do_not_lose_the_batch_to_one_bad_problem():
             assert r.gamma_ub == single.gamma_ub and np.array_equal(r.inliers, single.inliers)
     with pytest.raises(ValueError, match="positive"):
         tritools.triangulate_many([(P, x), (P[:1], x[:1])], robust=np.array([5.0, -1.0, 5.0, 5.0]), progress=False)
+    # review 3: an array that fits only a 1-view problem (no triangulation) fits no problem: raised, not the
+    # valid 4-view problem made invalid_input
+    with pytest.raises(ValueError, match="one threshold per view"):
+        tritools.triangulate_many([(P, x), (P[:1], x[:1])], robust=np.array([5.0]), progress=False)
 
 
 def test_whole_call_limit_rows_past_the_end_are_cheap_and_valid():
@@ -284,3 +288,11 @@ def test_triangulate_points_keeps_the_points_seen_in_fewer_than_two_views():
         assert np.isnan(cut.X[~keep]).all() and not cut.optimal[~keep].any()
         if kw:
             assert not cut.inliers[1].any() and cut.inliers[0].all()
+    allbad = np.full_like(x, np.nan)
+    allbad[:, 0] = sc.points2d[:, 0]
+    for kw in ({}, {"robust": 5.0}):           # every point seen once: every row invalid_input, width V (review 3)
+        cut = tritools.triangulate_points(sc.cameras, allbad, progress=False, **kw)
+        assert all(s.value == "invalid_input" for s in cut.status) and len(cut) == 5 and cut.width == 4
+    for xx in (x, allbad):                     # the robust argument is checked whether or not any point is solved
+        with pytest.raises(ValueError, match="robust"):
+            tritools.triangulate_points(sc.cameras, xx, progress=False, robust=-1.0)

@@ -294,8 +294,9 @@ class ClarabelBackend:
             if att.raw_status == RawStatus.ALMOST_SOLVED and self.tolerances.accept_inaccurate and \
                     (accept is None or accept(x, z)):
                 return last                              # the caller makes the bound rigorous (Tolerances)
-        if last is None:
-            return ConicSolution(RawStatus.FAILED, None, None, None, None, tuple(attempts))
+        if provisional is not None or last is None:              # the accepted answer over a rejected last one
+            return _kept(provisional, attempts) or ConicSolution(RawStatus.FAILED, None, None, None, None,
+                                                                 tuple(attempts))
         return ConicSolution(last.raw_status, last.x, last.z, last.primal_objective, last.dual_objective,
                              tuple(attempts))
 
@@ -441,7 +442,8 @@ AUTO_IPM_MAX_BYTES = _AUTO_IPM_MAX_BYTES
 
 def _kept(provisional: ConicSolution | None, attempts: list) -> ConicSolution | None:
     """The provisional attempt's "almost solved" answer (accepted by the caller's check, with
-    ``accept_inaccurate``) when the refined attempts after it ran out of time: its caller makes the bound rigorous,
+    ``accept_inaccurate``) when the refined attempts after it ran out of time or ended without an accepted answer
+    (failed, or almost solved and rejected: review 3 of wave 18): its caller makes the bound rigorous,
     as for any such answer (a 30-view views program ended AlmostSolved without refinement in 10 s, then the refined
     attempt ran to the 60 s limit and the step reported no bound at all, review 18); None without one."""
     if provisional is None:

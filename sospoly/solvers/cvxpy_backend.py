@@ -42,17 +42,13 @@ class CvxpyBackend:
             return {"eps_abs": 1e-9, "eps_rel": 1e-9, "max_iters": 200000}
         return {}
 
-    def solve(self, problem: ConicProblem, accept=None, retry: bool = True,
-              deadline: Deadline | None = None) -> ConicSolution:
-        cp = import_cvxpy()
-        t0 = time.perf_counter()
-        x = cp.Variable(problem.n_cols)
-        cons = []
-        psd_cons = []
+    def _constraints(self, cp, problem: ConicProblem, x, b):
+        """The cone constraints b - A x in K as cvxpy constraints, and the PSD ones as (row, side, constraint)."""
+        cons, psd_cons = [], []
         row = 0
         for cone in problem.cones:
             rows = slice(row, row + cone.dim)
-            Ar, br = problem.A[rows], problem.b[rows]
+            Ar, br = problem.A[rows], b[rows]
             if cone.kind == "zero":
                 cons.append(Ar @ x == br)
             elif cone.kind == "nonneg":
@@ -67,27 +63,54 @@ class CvxpyBackend:
                 cons.append(c)
                 psd_cons.append((row, cone.size, c))
             row += cone.dim
-        prob = cp.Problem(cp.Minimize(problem.q @ x), cons)
-        solver = self.solver
-        if solver is None:
-            solver = "CLARABEL" if "CLARABEL" in cp.installed_solvers() else None
+        return cons, psd_cons
+
+    def _run(self, cp, prob, solver):
+        """Solve ``prob`` with the configured solver; returns cvxpy's status (or the error as a string)."""
         kwargs = dict(self._tolerance_kwargs(solver))
         kwargs.update(self.solver_kwargs)
         try:
             with warnings.catch_warnings():          # inaccuracy is reported through the status, not a warning
                 warnings.simplefilter("ignore")
                 prob.solve(solver=solver, **kwargs)
-            status = prob.status
+            return prob.status
         except (KeyboardInterrupt, SystemExit):
             raise
         except BaseException as exc:
-            status = f"error: {type(exc).__name__}: {exc}"[:200]
-        secs = time.perf_counter() - t0
+            return f"error: {type(exc).__name__}: {exc}"[:200]
+
+    def _ray(self, cp, problem: ConicProblem, solver):
+        """cvxpy reports unboundedness without a ray; the ray of min q^T x s.t. b - A x in K is found as the
+        solution of the homogeneous program min q^T d s.t. -A d in K, q^T d >= -1 (None if it gives none), so
+        that the caller's ray check (:func:`~sospoly.solvers.solve.check_unbounded_ray`) can verify it."""
+        d = cp.Variable(problem.n_cols)
+        cons, _ = self._constraints(cp, problem, d, np.zeros(problem.n_rows))
+        prob = cp.Problem(cp.Minimize(problem.q @ d), cons + [problem.q @ d >= -1.0])
+        status = self._run(cp, prob, solver)
+        if status not in ("optimal", "optimal_inaccurate") or d.value is None:
+            return None
+        return np.asarray(d.value, float)
+
+    def solve(self, problem: ConicProblem, accept=None, retry: bool = True,
+              deadline: Deadline | None = None) -> ConicSolution:
+        cp = import_cvxpy()
+        t0 = time.perf_counter()
+        x = cp.Variable(problem.n_cols)
+        cons, psd_cons = self._constraints(cp, problem, x, problem.b)
+        prob = cp.Problem(cp.Minimize(problem.q @ x), cons)
+        solver = self.solver
+        if solver is None:
+            solver = "CLARABEL" if "CLARABEL" in cp.installed_solvers() else None
+        status = self._run(cp, prob, solver)
         raw = {"optimal": RawStatus.SOLVED, "optimal_inaccurate": RawStatus.ALMOST_SOLVED,
                "infeasible": RawStatus.PRIMAL_INFEASIBLE, "unbounded": RawStatus.DUAL_INFEASIBLE,
                "infeasible_inaccurate": RawStatus.ALMOST_INFEASIBLE,
                "unbounded_inaccurate": RawStatus.ALMOST_INFEASIBLE}.get(status, RawStatus.FAILED)
-        att = Attempt(f"cvxpy:{solver or 'default'}", raw, str(status), 0, secs)
+        if raw == RawStatus.DUAL_INFEASIBLE:
+            ray = self._ray(cp, problem, solver)
+            att = Attempt(f"cvxpy:{solver or 'default'}", raw, str(status), 0, time.perf_counter() - t0)
+            return ConicSolution(raw, ray, None, None, None, (att,))
+        att = Attempt(f"cvxpy:{solver or 'default'}", raw, str(status), 0, time.perf_counter() - t0)
         if x.value is None:
             return ConicSolution(raw, None, None, None, None, (att,))
         xv = np.asarray(x.value, float)

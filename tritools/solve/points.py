@@ -84,6 +84,9 @@ def triangulate_points(cameras: ArrayLike, points2d: ArrayLike, visible: ArrayLi
         raise ValueError(f"cameras must have shape (V, 3, 4), got {C.shape}")
     x = points_array(points2d, C.shape[0], layout, "points2d")
     vis = np.all(np.isfinite(x), axis=2) if visible is None else _visible_mask(visible, x)
+    if robust is not None:
+        from .robust import robust_thresholds
+        robust_thresholds(robust, C.shape[0])       # the argument is checked whether or not any point is solved
     few = vis.sum(axis=1) < 2
     if np.any(few):
         return _with_unseen(C, x, vis, few, robust, opts, executor, progress)
@@ -104,7 +107,8 @@ def _with_unseen(C, x, vis, few, robust, opts, executor, progress) -> Triangulat
     idx_bad = np.nonzero(few)[0]
     bad = TriangulationResults.from_rows(
         [TriangulationResult(method, Status.INVALID_INPUT, message=f"ValueError: points2d[{m}] is visible in "
-                                                                   "fewer than 2 views") for m in idx_bad.tolist()])
+                                                                   "fewer than 2 views") for m in idx_bad.tolist()]
+    ).with_views(vis[few])                          # width V, as the solved rows
     if few.all():
         return bad
     good = triangulate_points(C, x[~few], vis[~few], layout=PointsLayout.POINTS_VIEWS, options=opts,

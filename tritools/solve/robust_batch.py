@@ -45,12 +45,13 @@ def thresholds_for(robust, problems) -> list:
     has another view count -- M scalars for M problems of M views each read as per-view thresholds).  ValueError
     naming ``robust`` (and the problem, ``robust[k]``); a problem that a valid shared per-view array does not fit gets
     a ValueError instance in its place (:func:`_shared`: status ``invalid_input``, the batch goes on) -- unless the
-    array fits no problem (the argument is wrong: raised)."""
+    array fits no problem of two or more views (the argument is wrong: raised)."""
     sizes = [_n_views(p) for p in problems]
     if not _per_problem(robust, sizes):
         out = [_shared(robust, n, k) if n is not None else None for k, n in enumerate(sizes)]
-        if out and all(isinstance(c, ValueError) for c in out if c is not None) and any(c is not None for c in out):
-            robust_thresholds(robust, next(n for n in sizes if n is not None))   # fits no problem: the argument's
+        solvable = [c for c, n in zip(out, sizes) if n is not None and n >= 2]   # a 1-view problem is no fit
+        if solvable and all(isinstance(c, ValueError) for c in solvable):
+            robust_thresholds(robust, next(n for n in sizes if n is not None and n >= 2))   # fits no problem
         return out
     if len(robust) != len(problems):
         raise ValueError(f"robust must be a scalar, one threshold per view, or one entry per problem "

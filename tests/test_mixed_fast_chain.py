@@ -146,6 +146,37 @@ def test_provisional_almost_solved_kept_when_no_refined_attempt_is_accepted(monk
     assert not np.array_equal(refused.x, first["x"])                    # nothing accepted: nothing kept
 
 
+def test_a_dual_infeasible_attempt_whose_ray_fails_the_check_goes_on_to_the_next_settings(monkeypatch):
+    # review 3 of wave 18: Clarabel's unchecked DualInfeasible ended the chain (numerical_error, no bound) where a
+    # later attempt solves; a ray that fails the check is a numerical failure now (and a valid one still ends it)
+    import dataclasses
+
+    real = ClarabelBackend.solve_once
+
+    def fake(ray):
+        def solve_once(self, problem, label="default", overrides=None, *args, **kw):
+            sol, att = real(self, problem, label, overrides, *args, **kw)
+            if label != "default":
+                return sol, att
+            bad = types.SimpleNamespace(x=np.asarray(ray, float), z=np.zeros(problem.n_rows), obj_val=np.nan,
+                                        obj_val_dual=np.nan)
+            return bad, dataclasses.replace(att, raw_status=RawStatus.DUAL_INFEASIBLE)
+        return solve_once
+
+    monkeypatch.setattr(ClarabelBackend, "solve_once", fake([1.0, 1.0]))      # leaves the PSD cone: no ray
+    sol = ClarabelBackend().solve(_Problem())
+    assert [a.label for a in sol.attempts][:2] == ["default", "qdldl"]
+    assert sol.raw_status == RawStatus.SOLVED and sol.primal_objective == pytest.approx(-3.0, abs=1e-6)
+    monkeypatch.setattr(ClarabelBackend, "solve_once", real)
+
+    class Unbounded(_Problem):                  # without x2 <= 2: x2 grows without bound, a genuine ray
+        A, b, n_rows = _Problem.A[:4], _Problem.b[:4], 4
+        cones = (_Problem._Cone("psd", 3, 2), _Problem._Cone("nonneg", 1))
+
+    sol = ClarabelBackend().solve(Unbounded())
+    assert sol.raw_status == RawStatus.DUAL_INFEASIBLE and [a.label for a in sol.attempts] == ["default"]
+
+
 # ----------------------------------------------------------------------------- triangulation
 def test_point_regions_keep_the_default_chain():
     cams, regs, X = uncertain_problem(6, 0, kinds="point", noise_px=1.0)

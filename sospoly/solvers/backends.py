@@ -28,6 +28,7 @@ from ..budget import AUTO_IPM_MAX_BYTES as _AUTO_IPM_MAX_BYTES
 from ..budget import CLARABEL_TIME_MODEL, BudgetExceeded, Deadline, estimate_size, memory_room
 from ..lowering.conic import ConicProblem
 from ..tolerances import DEFAULT_TOLERANCES, Tolerances, as_tolerances
+from .rays import check_unbounded_ray
 
 __all__ = ["RawStatus", "Attempt", "ConicSolution", "ClarabelBackend", "IpmBackend", "AutoBackend",
            "CLARABEL_FAST_CHAIN", "CLARABEL_SPLIT_CHAIN", "get_backend", "cvxpy_available", "import_cvxpy"]
@@ -287,6 +288,9 @@ class ClarabelBackend:
                         (accept is None or accept(x, z)):
                     provisional = last                   # kept in case the refined attempts run out of time
                 continue                                 # CLARABEL_FAST_CHAIN: the refined attempts decide
+            if att.raw_status == RawStatus.DUAL_INFEASIBLE and retry and \
+                    not check_unbounded_ray(problem, x, self.tolerances)[0]:
+                continue                                 # an unchecked ray is a numerical failure: next settings
             if att.raw_status in (RawStatus.PRIMAL_INFEASIBLE, RawStatus.DUAL_INFEASIBLE):
                 return last
             if att.raw_status == RawStatus.SOLVED and (accept is None or accept(x, z)):

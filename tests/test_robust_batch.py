@@ -296,3 +296,43 @@ def test_triangulate_points_keeps_the_points_seen_in_fewer_than_two_views():
     for xx in (x, allbad):                     # the robust argument is checked whether or not any point is solved
         with pytest.raises(ValueError, match="robust"):
             tritools.triangulate_points(sc.cameras, xx, progress=False, robust=-1.0)
+
+
+def test_rows_past_the_end_start_from_a_clean_view_pair():
+    """Review 3 of wave 18: past the whole call's end a problem got the DLT point of all views, which every wrong
+    match pulls off: 6-view problems of regions with one wrong match had 0/6 inliers at c = 3 px (their optimum
+    5/6), and problems of regions paid ~4 ms each through their search.  The rows now take the best (least TLS
+    cost) of the DLT points of all views and of view pairs (:func:`tritools.solve.robust_costs.tls_start_stack`):
+    every wrong match out, the clean views in, gamma_UB the exact TLS value there, still no lower bound."""
+    from tritools.scene import robust_protocol_scene
+    from tritools.solve.call_limit import CUT_MESSAGE
+    from tritools.solve.robust_costs import tls_start_stack
+
+    rng = np.random.default_rng(2)
+    scenes = [robust_protocol_scene(6, 1, 0.5, rng) for _ in range(40)]
+    for regions in (False, True):
+        probs = [(P, [tritools.Ellipse(x[0], np.eye(2) * 4.0)] + [tritools.Point(p) for p in x[1:]]) if regions
+                 else (P, x) for P, x, _, _ in scenes]
+        tritools.triangulate_many(probs[:2], robust=3.0, progress=False)
+        rs = tritools.triangulate_many(probs, robust=3.0, total_time_limit=1e-4, progress=False)
+        late = [(r, s) for r, s in zip(rs, scenes) if CUT_MESSAGE in r.message and "view pairs" in r.message]
+        assert len(late) >= 30
+        for r, (P, x, _, _) in late:
+            assert r.status == tritools.Status.TIME_LIMIT and not r.optimal and r.gamma_lb == 0.0
+            h = P @ np.append(r.X, 1.0)
+            d = np.linalg.norm(h[:, :2] / h[:, 2:] - x, axis=1)
+            if regions:
+                d[0] = max(d[0] - 2.0, 0.0)
+            np.testing.assert_allclose(r.residuals, d, rtol=1e-7, atol=1e-9)
+            g = np.sqrt(np.sum(np.minimum(d, 3.0) ** 2) / 12)
+            assert g <= r.gamma_ub <= g * (1 + 1e-9)
+            assert np.array_equal(r.inliers, d < 3.0)
+        wrong = np.array([s[3] for _, s in late])
+        inl = np.array([r.inliers for r, _ in late])
+        assert not (inl & wrong).any() and (inl | wrong).all()          # the wrong match out, every clean view in
+    # the start itself: c = inf picks the least squared distance; two views have no pairs beside all views
+    P, x, _, _ = scenes[0]
+    X, ok = tls_start_stack(P[None], x[None], np.full((1, 6), np.inf))
+    X2, ok2 = tls_start_stack(P[None, :2], x[None, :2], np.full((1, 2), 3.0))
+    from tritools.model.stacked import dlt_stack
+    assert ok[0] and ok2[0] and np.array_equal(X2, dlt_stack(P[None, :2], x[None, :2])[0])

@@ -394,3 +394,22 @@ def test_sampled_pairs_are_the_combinations_draw():
             if len(pairs) > MAX_PAIRS:
                 pairs = [pairs[k] for k in rng.choice(len(pairs), MAX_PAIRS, replace=False)]
             assert sampled_pairs(N, np.random.default_rng(seed), MAX_PAIRS) == [frozenset(p) for p in pairs]
+
+
+def test_a_verification_cut_by_the_limit_says_time_limit_not_budget_exceeded():
+    """A 100-view track with 30% wrong matches: the bands do not certify and the all-pairs bound (estimated
+    0.22 s) does not fit in a 0.2 s limit; the dense SDP after it is refused by the memory budget.  The call said
+    ``budget_exceeded`` ("use a larger budget"), although without the limit the verification certifies: the limit
+    stopped it, so ``time_limit`` with the reason, and its estimate is the no-limit call's optimum."""
+    from tritools.solve.fastpath import fits
+
+    P, x, _, _ = robust_protocol_scene(100, 30, 1.0, np.random.default_rng(1))
+    assert not fits(Deadline.after(0.2), 100)
+    cut = tritools.triangulate(P, x, time_limit=0.2)
+    full = tritools.triangulate(P, x)
+    assert full.optimal
+    assert cut.status == tritools.Status.TIME_LIMIT and not cut.optimal
+    assert "all-pairs bound did not fit" in cut.message
+    assert cut.attempts[0].status == "time_limit"
+    assert cut.gamma_lb is None or cut.gamma_lb <= full.gamma_ub * (1 + 1e-9)
+    assert cut.gamma_ub >= full.gamma_lb * (1 - 1e-12)

@@ -214,7 +214,7 @@ def test_a_step_cut_by_its_solver_time_limit_makes_the_result_time_limit():
 
     best = TriangulationResult("corollary1", Status.NOT_CERTIFIED, X=np.zeros(3), gamma_ub=1.0, gamma_lb=0.5,
                                optimal=False)
-    ctx = SimpleNamespace(expired=False, skipped=None, steps=[], opts=None,
+    ctx = SimpleNamespace(expired=False, skipped=None, steps=[], opts=None, verify_cut=False,
                           attempts=[Attempt("corollary1", 4, "not_certified"), Attempt("theorem1", 4, "time_limit")])
     assert _stopped_short(ctx, best).status == Status.TIME_LIMIT
     ctx.attempts = ctx.attempts[:1]

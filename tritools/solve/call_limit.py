@@ -31,8 +31,10 @@ from ..model.cameras import camera_problems
 from ..model.stacked import dlt_stack, refine_points_stack
 from ..result import Attempt, Status, TriangulationResult
 from .report import points_report_stack
+from .robust_costs import tls_start_stack
 
 __all__ = ["call_limit", "current_end", "expired", "within", "mark_cut", "expired_points", "expired_regions",
+           "expired_regions_validated",
            "EXPIRED_SLICE", "CUT_MESSAGE"]
 
 #: the per-point time limit of a point whose turn comes after the end: enough to return the local estimate only.
@@ -87,7 +89,8 @@ def mark_cut(result):
     return dataclasses.replace(result, message=message)
 
 
-def expired_points(C: np.ndarray, x: np.ndarray, opts, *, refine: bool = True) -> list[TriangulationResult]:
+def expired_points(C: np.ndarray, x: np.ndarray, opts, *, refine: bool = True,
+                   c: np.ndarray | None = None) -> list[TriangulationResult]:
     """``time_limit`` results of point problems (C (M, N, 3, 4), x (M, N, 2)) not solved before the end: the DLT
     point refined by Levenberg-Marquardt (vectorised), gamma_UB = gamma(X) (a valid upper bound: the value of the
     objective at a point), no lower bound, not optimal.  A problem that the per-point checks refuse (non-finite
@@ -96,18 +99,20 @@ def expired_points(C: np.ndarray, x: np.ndarray, opts, *, refine: bool = True) -
     (:func:`_refused`: what a batch without the limit reports); a stack the vectorised steps cannot take
     (LinAlgError on extreme numbers) is taken one problem at a time; each camera is divided by its largest entry
     first (the same camera).  ``refine=False``: the DLT point itself (the robust rows: an L2 refinement through
-    wrong matches costs tens of iterations and means nothing for their TLS value)."""
+    wrong matches costs tens of iterations and means nothing for their TLS value); with TLS thresholds ``c``
+    (M, N), the cheap TLS start of :func:`~tritools.solve.robust_costs.tls_start_stack` instead."""
     t0 = time.perf_counter()
     C, x = np.asarray(C, float), np.asarray(x, float)
     finite = camera_problems(C).valid & np.isfinite(x).all(axis=(1, 2)) & (x.shape[1] >= 2)
     if not finite.all():
-        good_rows = iter(expired_points(C[finite], x[finite], opts, refine=refine) if finite.any() else [])
+        good_rows = iter(expired_points(C[finite], x[finite], opts, refine=refine,
+                                        c=None if c is None else c[finite]) if finite.any() else [])
         return [next(good_rows) if finite[m] else _refused(C[m], x[m], opts) for m in range(len(x))]
     with np.errstate(all="ignore"):
         top = np.max(np.abs(C), axis=(2, 3), keepdims=True)
         C = C / np.where(top > 0, top, 1.0)             # each camera at unit scale (the same camera: 1e300 overflowed)
         try:
-            X0, ok = dlt_stack(C, x)
+            X0, ok = dlt_stack(C, x) if c is None else tls_start_stack(C, x, c)
             X, ok = refine_points_stack(C, x, X0, ok) if refine else (X0, ok)
             gamma, res, dep = points_report_stack(C, x, X, opts.world_frame)
         except np.linalg.LinAlgError:
@@ -115,13 +120,15 @@ def expired_points(C: np.ndarray, x: np.ndarray, opts, *, refine: bool = True) -
                 X, ok, gamma = np.full((1, 3), np.nan), np.zeros(1, bool), np.full(1, np.nan)
                 res, dep = [None], [None]
             else:
-                return [r for m in range(len(x)) for r in expired_points(C[m:m + 1], x[m:m + 1], opts, refine=refine)]
+                return [r for m in range(len(x)) for r in expired_points(C[m:m + 1], x[m:m + 1], opts, refine=refine,
+                                                                         c=None if c is None else c[m:m + 1])]
     share = (time.perf_counter() - t0) / max(len(x), 1)
     out = []
     for m in range(len(x)):
         good = bool(ok[m]) and bool(np.isfinite(gamma[m]))
         why = ("X and gamma_UB from the local L2 refinement of the DLT point" if refine else
-               "X and gamma_UB from the DLT point") if good else \
+               "X and gamma_UB from the DLT point" if c is None else
+               "X and gamma_UB from the best of the DLT points of all views and of view pairs") if good else \
             "no estimate: the DLT point is at infinity"
         out.append(TriangulationResult(
             opts.method.value, Status.TIME_LIMIT, X=X[m] if good else None,
@@ -158,7 +165,6 @@ def expired_regions(cameras, regions, opts) -> TriangulationResult | None:
     problem at 12 views of mixed regions, review 15 F1: 12 such problems took a 0.2 s batch limit to 1.4x).  None
     where the input does not validate (the caller's per-point path then reports what is wrong)."""
     from .fastpath_cameras import validated_problem
-    from .report import point_report
 
     t0 = time.perf_counter()
     try:
@@ -166,11 +172,24 @@ def expired_regions(cameras, regions, opts) -> TriangulationResult | None:
         centres = np.array([np.asarray(r.center, float).reshape(2) for r in regs])
     except (ValueError, TypeError):
         return None
+    return expired_regions_validated(cams, regs, centres, opts, t0)
+
+
+def expired_regions_validated(cams: np.ndarray, regs: list, centres: np.ndarray, opts, t0: float,
+                              c: np.ndarray | None = None) -> TriangulationResult:
+    """:func:`expired_regions` of a validated problem (cameras, regions and their centres (N, 2)); with TLS
+    thresholds ``c`` (N,) the cheap TLS start (:func:`~tritools.solve.robust_costs.tls_start_stack` on the centres)
+    instead of the DLT point."""
+    from .report import point_report
+
     with np.errstate(all="ignore"):
-        X, ok = dlt_stack(cams[None], centres[None])
+        X, ok = dlt_stack(cams[None], centres[None]) if c is None else \
+            tls_start_stack(cams[None], centres[None], np.asarray(c, float)[None])
     rep = point_report(X[0] if ok[0] else None, cams, regs, opts.world_frame)
     good = rep.gamma is not None and bool(np.isfinite(rep.gamma))
-    why = "X and gamma_UB from the DLT point of the region centres" if good else \
+    why = ("X and gamma_UB from the DLT point of the region centres" if c is None else
+           "X and gamma_UB from the best of the DLT points of the region centres of all views and of view pairs") \
+        if good else \
         "no estimate: the DLT point is at infinity"
     return TriangulationResult(
         opts.method.value, Status.TIME_LIMIT, X=X[0] if good else None, gamma_ub=float(rep.gamma) if good else None,

@@ -131,6 +131,7 @@ class PointContext:
         self.steps: list[Step] = []
         self.best: TriangulationResult | None = None
         self.skipped: TriangulationResult | None = None     # a step that exceeded the budget
+        self.verify_cut = False                             # the verification's bound did not fit in the time left
         self.finished = False                               # a stage decided the point: the walk stops
         self.estimate_n: tuple | None = None                # the steps' best (gamma_n, X_n, X_raw_n, x*_n)
         self._problems: dict = {}

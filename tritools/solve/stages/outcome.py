@@ -162,7 +162,9 @@ def _stopped_short(ctx: PointContext, best: TriangulationResult | None) -> Trian
     # result is not the plan's last word (a robust search would take a not_certified sub-problem as exhausted)
     timed_out = ctx.expired or any(a.status == Status.TIME_LIMIT.value for a in ctx.attempts)
     if timed_out and open_:
-        return replace(best, status=Status.TIME_LIMIT, message=join(best.message, "time limit reached"))
+        why = "time limit reached" + (" (the verification's all-pairs bound did not fit in the time left)"
+                                      if ctx.verify_cut else "")
+        return replace(best, status=Status.TIME_LIMIT, message=join(best.message, why))
     if ctx.skipped is not None and ctx.skipped is not best and open_:
         # the best bounds so far, and why the plan stopped short of a certificate
         return replace(best, status=Status.BUDGET_EXCEEDED, message=join(best.message,

@@ -38,7 +38,7 @@ from ...result import Attempt, Status, TriangulationResult
 from ..decide import cheirality, decide, gamma_from_c
 from ..discs import disc_radius, ellipse_shapes, verify_discs
 from ..ellipses import verify_ellipses
-from ..fastpath import verify_checked
+from ..fastpath import fits, verify_checked
 from ..fastpath_cameras import depths_one
 from ..options import SolvePath
 from ..regions_verify import constraint_counts, region_bound, region_forms
@@ -77,7 +77,8 @@ def verify_stage(ctx: PointContext) -> None:
     except TimeLimitReached:          # building the problem ran out of time: the SDP step reports it
         res = None
     ctx.timings["verify"] = time.perf_counter() - t
-    ctx.attempts.append(Attempt(step.method.value, 2, "verified" if res is not None else "verification_failed",
+    failed = Status.TIME_LIMIT.value if ctx.verify_cut else "verification_failed"   # cut: the plan stopped short
+    ctx.attempts.append(Attempt(step.method.value, 2, "verified" if res is not None else failed,
                                 None if res is None else res.gamma_lb, None if res is None else res.gamma_ub,
                                 AttemptStep.VERIFICATION, "dense", (), time.perf_counter() - t))
     if res is not None:
@@ -108,9 +109,11 @@ def _verify_points(ctx: PointContext, step: Step) -> TriangulationResult | None:
     """The vectorised verification on a stack of one: it already decided the certificate on the reported
     numbers (gamma_LB <= gamma(X) in pixels), so only the residuals, depths and cheirality are added."""
     x = ctx.centres()[None]
+    cut = not fits(ctx.settings.deadline, ctx.N)     # the all-pairs bound will not be started (its estimate)
     b = verify_checked(ctx.cams[None], x, np.isfinite(x).all(axis=(1, 2)), ctx.tolerances,
                        deadline=ctx.settings.deadline)
     if not b.certified[0]:
+        ctx.verify_cut = cut
         return None
     X = b.X[0]
     # gamma(X) and the residuals as points_report_stack computes them (verify_checked uses its formulas on the

@@ -413,3 +413,27 @@ def test_a_verification_cut_by_the_limit_says_time_limit_not_budget_exceeded():
     assert cut.attempts[0].status == "time_limit"
     assert cut.gamma_lb is None or cut.gamma_lb <= full.gamma_ub * (1 + 1e-9)
     assert cut.gamma_ub >= full.gamma_lb * (1 - 1e-12)
+
+
+def test_region_verification_is_not_started_when_its_bound_cannot_fit(monkeypatch):
+    """100 views of mixed regions at a 0.05 s limit: the local estimate took ~40 ms, then the region verification
+    spent ~30 ms on its per-view set-up before its Lagrangian bound was skipped for time (1.36x the limit).  It is
+    not started now when its set-up and cheapest bound do not fit (:func:`region_bound_fits`), and the attempt
+    says time_limit."""
+    import tritools.solve.stages.verify as verify
+    from tritools.scene import uncertain_problem
+    from tritools.solve.regions_verify import region_bound_fits
+
+    assert region_bound_fits(None, 100) and region_bound_fits(Deadline.after(10.0), 100)
+    assert not region_bound_fits(Deadline.after(0.01), 100)         # 30 ms of set-up alone
+    assert region_bound_fits(Deadline.after(0.05), 5)
+    P, R = uncertain_problem(12, seed=5, kinds="mixed")[:2]
+    free = tritools.triangulate(P, R)
+    monkeypatch.setattr(verify, "region_bound_fits", lambda deadline, n: False)
+    called = []
+    monkeypatch.setattr(verify, "region_bound", lambda *a, **k: called.append(1))
+    cut = tritools.triangulate(P, R, time_limit=5.0, max_delta=2)
+    assert not called and cut.attempts[0].status == "time_limit"
+    # the plan goes on (here with time for its SDP): a certificate stays a certificate, with the same optimum
+    assert cut.status == free.status and cut.optimal == free.optimal
+    assert cut.gamma_lb <= free.gamma_ub * (1 + 1e-9) and free.gamma_lb <= cut.gamma_ub * (1 + 1e-9)

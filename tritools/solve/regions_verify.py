@@ -62,11 +62,11 @@ from sospoly import DEFAULT_TOLERANCES, Tolerances
 from sospoly.budget import Deadline
 
 from ..model.regions import ConeKind, ConicForm, Region, conic_form_of, extent_of
-from .fastpath import lagrangian_bounds
+from .fastpath import BAND_MIN_VIEWS, BAND_WIDTHS, _fits, all_pairs_seconds, band_seconds, lagrangian_bounds
 
 __all__ = ["ViewQuadratics", "view_quadratics", "reduce_views", "compact_bounds", "region_bound", "region_forms",
            "constraint_counts", "ellipse_axes", "closest_on_ellipses", "ACTIVE_RTOL", "PD_MARGIN",
-           "ELLIPSE_NEWTON_ITER"]
+           "ELLIPSE_NEWTON_ITER", "region_bound_fits", "REGION_SETUP_SECONDS"]
 
 _ROUND_DOWN = 1 - 8 * np.finfo(float).eps
 #: a polytope face k is active at y^ when |B_k y^ + c_k| >= 1 - ACTIVE_RTOL.
@@ -291,6 +291,22 @@ def compact_bounds(C, Cn, z, weights, const, kept, radius, resolution, tolerance
         lower[rows] = np.where(okr, lo + base[rows], np.nan)
         ok[rows] = okr
     return lower, ok
+
+
+#: seconds per view of :func:`region_bound`'s set-up before its Lagrangian bound (closest points, view quadratics:
+#: per-view Python; measured ~0.3 ms a view of mixed regions at N = 100).
+REGION_SETUP_SECONDS = 3e-4
+
+
+def region_bound_fits(deadline: Deadline | None, n_views: int) -> bool:
+    """Can :func:`region_bound` bound anything in what is left of ``deadline`` (None: always)?  Its set-up
+    (:data:`REGION_SETUP_SECONDS` a view) and then its cheapest Lagrangian bound (the narrowest band from
+    BAND_MIN_VIEWS views, else all pairs) must fit, by the rule of the point bounds
+    (:func:`tritools.solve.fastpath.lagrangian_bounds`, which would skip the bound after the set-up: 30 ms past a
+    0.05 s limit at 100 views of mixed regions)."""
+    bound = band_seconds(n_views, BAND_WIDTHS[0]) if n_views >= BAND_MIN_VIEWS and BAND_WIDTHS[0] < n_views - 1 \
+        else all_pairs_seconds(n_views)
+    return _fits(deadline, n_views * REGION_SETUP_SECONDS + bound)
 
 
 def region_bound(C, Cn, regions_n, Xn, extents, *, forms=None, tolerances: Tolerances = DEFAULT_TOLERANCES,

@@ -41,7 +41,7 @@ from ..ellipses import verify_ellipses
 from ..fastpath import fits, verify_checked
 from ..fastpath_cameras import depths_one
 from ..options import SolvePath
-from ..regions_verify import constraint_counts, region_bound, region_forms
+from ..regions_verify import constraint_counts, region_bound, region_bound_fits, region_forms
 from ..plan import Step, degree_plan, delta_min
 from ..report import solve_ball
 from .context import AttemptStep, ImplName, Implementation, PointContext
@@ -174,6 +174,9 @@ def _verify_regions(ctx: PointContext, step: Step) -> TriangulationResult | None
     at the local estimate of the normalised problem, decided by the rule of every path."""
     local = ctx.local()
     if local is None or ctx.expired:        # past the deadline (the local estimate can end there): not started
+        return None
+    if not region_bound_fits(ctx.settings.deadline, ctx.N):     # its set-up and a bound no longer fit: not started
+        ctx.verify_cut = True
         return None
     Xn = local[1]
     extents = [r.extent().radius for r in ctx.regs_n]

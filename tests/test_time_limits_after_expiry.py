@@ -437,3 +437,27 @@ def test_region_verification_is_not_started_when_its_bound_cannot_fit(monkeypatc
     # the plan goes on (here with time for its SDP): a certificate stays a certificate, with the same optimum
     assert cut.status == free.status and cut.optimal == free.optimal
     assert cut.gamma_lb <= free.gamma_ub * (1 + 1e-9) and free.gamma_lb <= cut.gamma_ub * (1 + 1e-9)
+
+
+def test_a_region_sub_problem_without_time_for_its_set_up_is_not_started(monkeypatch):
+    """Robust calls on 100 views of mixed regions at 0.05 s started their all-views L2 sub-problem with ~40 ms left;
+    its regions' normalisation and the verification's set-up cannot stop at a deadline (1.2-1.6x the limit).  A
+    sub-problem of regions is started only with SUB_REGION_SETUP_SECONDS a view left: else bound 0 (valid), weak."""
+    import tritools.solve.robust_bounds as rbounds
+    from tritools.scene import uncertain_problem
+    from tritools.solve.options import TriangulationOptions
+
+    P, R = uncertain_problem(12, seed=3, kinds="mixed")[:2]
+    calls = []
+    monkeypatch.setattr(rbounds, "solve_subproblem", lambda *a, **k: calls.append(k) or None)
+    opts = TriangulationOptions()
+    S = frozenset(range(12))
+    sb = rbounds.SubsetBounds(P, R, opts, Deadline.after(12 * rbounds.SUB_REGION_SETUP_SECONDS / 2))
+    sb._solve_one(S)
+    assert not calls and sb._lb[S] == 0.0 and S in sb.weak and S not in sb.exhausted
+    sb = rbounds.SubsetBounds(P, R, opts, Deadline.after(10.0))
+    sb._solve_one(S)
+    assert len(calls) == 1                           # with time: started (the stub answers None: bound 0)
+    pts = rbounds.SubsetBounds(P, [Point(r.center) for r in R], opts, Deadline.after(1e-4))
+    pts._solve_one(S)
+    assert len(calls) == 2                           # point sub-problems have no such set-up: started

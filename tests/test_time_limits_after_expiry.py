@@ -461,3 +461,22 @@ def test_a_region_sub_problem_without_time_for_its_set_up_is_not_started(monkeyp
     pts = rbounds.SubsetBounds(P, [Point(r.center) for r in R], opts, Deadline.after(1e-4))
     pts._solve_one(S)
     assert len(calls) == 2                           # point sub-problems have no such set-up: started
+
+
+def test_a_looped_refinement_with_an_iterate_stops_at_the_overrun_share():
+    """Past the deadline the looped residuals (N closest points each) kept a floor of 4 evaluations even when the
+    refinement already had an iterate: ~10 ms past a 0.05 s limit at 100 views of mixed regions.  With an iterate
+    (``early``), the overrun share stops it; the vectorised guard keeps its floor."""
+    import time
+
+    fun = lambda X: np.asarray(X, float)      # noqa: E731
+    with deadline_scope(Deadline.after(0.001)):
+        time.sleep(0.01)                      # well past the deadline and its overrun share
+        for early, expected in ((True, 1), (False, 4)):
+            guard = refine.EvaluationGuard(fun, 100, 4, early=early)
+            n = 0
+            with pytest.raises(refine.RefinementStopped):
+                for _ in range(10):
+                    guard(np.ones(3))
+                    n += 1
+            assert n == expected and guard.best_X is not None

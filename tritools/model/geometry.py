@@ -498,7 +498,8 @@ def refine_l2(X0, cameras, regions, *, xtol: float = 1e-15, ftol: float = 1e-15,
     if disc_shapes(regions) is None:
         regions = RegionStack.of(regions)        # one stack for the residuals and the Jacobian (its closest points)
     fun, vectorised = residual_function(cameras, regions)
-    guard = EvaluationGuard(fun, evaluations_after(len(regions), vectorised), evaluations_floor(vectorised))
+    guard = EvaluationGuard(fun, evaluations_after(len(regions), vectorised), evaluations_floor(vectorised),
+                            early=not vectorised)
     try:
         X = least_squares(guard, np.asarray(X0, float), jac=residual_jacobian(cameras, regions), method="lm",
                           xtol=xtol, ftol=ftol, gtol=gtol, max_nfev=max_nfev).x

@@ -77,7 +77,8 @@ def verify_stage(ctx: PointContext) -> None:
     except TimeLimitReached:          # building the problem ran out of time: the SDP step reports it
         res = None
     ctx.timings["verify"] = time.perf_counter() - t
-    failed = Status.TIME_LIMIT.value if ctx.verify_cut else "verification_failed"   # cut: the plan stopped short
+    cut = ctx.verify_cut or (res is None and ctx.expired)           # not run (or not finished) for lack of time
+    failed = Status.TIME_LIMIT.value if cut else "verification_failed"
     ctx.attempts.append(Attempt(step.method.value, 2, "verified" if res is not None else failed,
                                 None if res is None else res.gamma_lb, None if res is None else res.gamma_ub,
                                 AttemptStep.VERIFICATION, "dense", (), time.perf_counter() - t))

@@ -213,3 +213,25 @@ def test_mixed_regions_under_pixel_rescaling(scale):
     assert ref == pytest.approx(scale * reference(cams, regs, [X]), rel=1e-6)
     assert base.optimal and res.optimal
     assert res.gamma_ub == pytest.approx(scale * base.gamma_ub, rel=1e-6)
+
+
+def test_an_unchecked_infeasibility_does_not_override_the_accepted_provisional_answer(monkeypatch):
+    # review 4: a refined attempt's PrimalInfeasible (never checked) discarded the provisional answer that the
+    # caller's check had accepted -- a feasible iterate; the accepted answer is returned
+    import dataclasses
+
+    from sospoly import DEFAULT_TOLERANCES
+
+    real = ClarabelBackend.solve_once
+
+    def fake(self, problem, label="default", overrides=None, *args, **kw):
+        sol, att = real(self, problem, label, overrides, *args, **kw)
+        status = RawStatus.ALMOST_SOLVED if label == "no-refinement" else RawStatus.PRIMAL_INFEASIBLE
+        return sol, dataclasses.replace(att, raw_status=status)
+
+    monkeypatch.setattr(ClarabelBackend, "solve_once", fake)
+    tol = dataclasses.replace(DEFAULT_TOLERANCES, accept_inaccurate=True)
+    sol = ClarabelBackend(tol, retry_chain=CLARABEL_FAST_CHAIN).solve(_Problem())
+    assert sol.raw_status == RawStatus.ALMOST_SOLVED and sol.primal_objective == pytest.approx(-3.0, abs=1e-6)
+    plain = ClarabelBackend(tol, retry_chain=CLARABEL_FAST_CHAIN).solve(_Problem(), accept=lambda x, z: False)
+    assert plain.raw_status == RawStatus.PRIMAL_INFEASIBLE          # nothing accepted: the solver's word stands

@@ -75,7 +75,7 @@ def test_ray_check_does_not_depend_on_the_objective_scale():
         prob = ConicProblem(q=np.array([s]), A=sps.csc_matrix(np.array([[-1.0]])), b=np.zeros(1),
                             cones=(Cone("nonneg", 1),), n_program_vars=1, psd_blocks=())
         ok, why = check_unbounded_ray(prob, np.array([-1.0]), sp.DEFAULT_TOLERANCES)
-        assert not ok and "violated" in why
+        assert not ok and "nonneg cone 0" in why
         ok, _ = check_unbounded_ray(prob, np.array([1.0]), sp.DEFAULT_TOLERANCES)
         assert not ok                                       # a feasible direction that does not descend
         flip = ConicProblem(q=np.array([-s]), A=prob.A, b=prob.b, cones=prob.cones, n_program_vars=1,
@@ -99,3 +99,35 @@ def test_empty_sets_are_proved_empty_by_every_backend(backend):
     bounded = sp.solve_psatz(sp.build_psatz((x - 1) ** 2 + y ** 2, degree=2, ineq=[x - 2], multiplier="putinar"),
                              backend=backend)
     assert bounded.lower_bound is not None and bounded.lower_bound <= 1.0 + 1e-6
+
+
+def test_ray_check_measures_each_cone_against_its_own_terms():
+    # review 4: measured against the largest term of all cones, cancelling terms of another row (1e9 x2 - 1e9 x3)
+    # or cones rescaled apart (1e-6 beside 1e6) let a violated cone pass; a zero row was checked absolutely
+    import scipy.sparse as sps
+
+    from sospoly.lowering.conic import Cone, ConicProblem
+    from sospoly.solvers.rays import check_unbounded_ray
+
+    T = sp.DEFAULT_TOLERANCES
+    A = sps.csc_matrix(np.array([[-1.0, 0, 0], [0, 1e9, -1e9]]))      # min x1 s.t. x1 >= 0, 1e9 (x2 - x3) = 0
+    prob = ConicProblem(q=np.array([1.0, 0, 0]), A=A, b=np.zeros(2), cones=(Cone("nonneg", 1), Cone("zero", 1)),
+                        n_program_vars=3, psd_blocks=())
+    for t in (0.0, 1e-3, 1.0, 1e3):
+        assert not check_unbounded_ray(prob, np.array([-1.0, t, t]), T)[0]
+    for s in (1e-6, 1.0, 1e6):                                         # PSD cone scaled by s, a big zero row
+        A2 = sps.csc_matrix(np.array([[-s, 0, 0], [0, 0, 0], [-s, 0, 0], [0, 1e6, 1e6]]))
+        prob2 = ConicProblem(q=np.array([1.0, 0, 0]), A=A2, b=np.zeros(4), cones=(Cone("psd", 3, 2), Cone("zero", 1)),
+                             n_program_vars=3, psd_blocks=())
+        assert not check_unbounded_ray(prob2, np.array([-1.0, 1e3, -1e3]), T)[0]
+        assert check_unbounded_ray(dataclass_q(prob2, [-1.0, 0, 0]), np.array([1.0, 1e3, -1e3]), T)[0]
+    zero = ConicProblem(q=np.array([-1.0, 0.0]), A=sps.csc_matrix(np.array([[1e-8, 0.0]])), b=np.zeros(1),
+                        cones=(Cone("zero", 1),), n_program_vars=2, psd_blocks=())
+    assert not check_unbounded_ray(zero, np.array([1.0, 1.0]), T)[0]    # min -x1 s.t. 1e-8 x1 = 0: bounded
+    free = ConicProblem(q=np.array([0.0, 1.0]), A=sps.csc_matrix(np.array([[-1.0, 0.0]])), b=np.zeros(1),
+                        cones=(Cone("nonneg", 1),), n_program_vars=2, psd_blocks=())
+    assert check_unbounded_ray(free, np.array([0.0, -1.0]), T)[0]      # A d = 0, q^T d < 0: a ray
+
+
+def dataclass_q(prob, q):
+    return dataclasses.replace(prob, q=np.asarray(q, float))

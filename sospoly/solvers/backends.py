@@ -291,6 +291,8 @@ class ClarabelBackend:
             if att.raw_status == RawStatus.DUAL_INFEASIBLE and retry and \
                     not check_unbounded_ray(problem, x, self.tolerances)[0]:
                 continue                                 # an unchecked ray is a numerical failure: next settings
+            if att.raw_status == RawStatus.PRIMAL_INFEASIBLE and provisional is not None:
+                return _kept(provisional, attempts)      # an accepted iterate says feasible: the unchecked claim loses
             if att.raw_status in (RawStatus.PRIMAL_INFEASIBLE, RawStatus.DUAL_INFEASIBLE):
                 return last
             if att.raw_status == RawStatus.SOLVED and (accept is None or accept(x, z)):

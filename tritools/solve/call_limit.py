@@ -28,6 +28,7 @@ import time
 import numpy as np
 
 from ..model.cameras import camera_problems
+from ..model.frame import recentred
 from ..model.stacked import dlt_stack, refine_points_stack
 from ..result import Attempt, Status, TriangulationResult
 from .report import points_report_stack
@@ -112,8 +113,10 @@ def expired_points(C: np.ndarray, x: np.ndarray, opts, *, refine: bool = True,
         top = np.max(np.abs(C), axis=(2, 3), keepdims=True)
         C = C / np.where(top > 0, top, 1.0)             # each camera at unit scale (the same camera: 1e300 overflowed)
         try:
-            X0, ok = dlt_stack(C, x) if c is None else tls_start_stack(C, x, c)
-            X, ok = refine_points_stack(C, x, X0, ok) if refine else (X0, ok)
+            Cr, origin = recentred(C)                   # a georeferenced world: the DLT in its local frame
+            X0, ok = dlt_stack(Cr, x) if c is None else tls_start_stack(Cr, x, c)
+            Xr, ok = refine_points_stack(Cr, x, X0, ok) if refine else (X0, ok)
+            X = origin + Xr
             gamma, res, dep = points_report_stack(C, x, X, opts.world_frame)
         except np.linalg.LinAlgError:
             if len(x) == 1:
@@ -183,8 +186,10 @@ def expired_regions_validated(cams: np.ndarray, regs: list, centres: np.ndarray,
     from .report import point_report
 
     with np.errstate(all="ignore"):
-        X, ok = dlt_stack(cams[None], centres[None]) if c is None else \
-            tls_start_stack(cams[None], centres[None], np.asarray(c, float)[None])
+        Cr, origin = recentred(cams[None])              # a georeferenced world: the DLT in its local frame
+        X, ok = dlt_stack(Cr, centres[None]) if c is None else \
+            tls_start_stack(Cr, centres[None], np.asarray(c, float)[None])
+        X = origin + X
     rep = point_report(X[0] if ok[0] else None, cams, regs, opts.world_frame)
     good = rep.gamma is not None and bool(np.isfinite(rep.gamma))
     why = ("X and gamma_UB from the DLT point of the region centres" if c is None else

@@ -240,6 +240,10 @@ def test_shared_per_view_thresholds_do_not_lose_the_batch_to_one_bad_problem():
     # valid 4-view problem made invalid_input
     with pytest.raises(ValueError, match="one threshold per view"):
         tritools.triangulate_many([(P, x), (P[:1], x[:1])], robust=np.array([5.0]), progress=False)
+    bad3 = x[:3].copy()
+    bad3[0, 0] = np.nan                        # review 4: an invalid 3-view problem is no fit either
+    with pytest.raises(ValueError, match="one threshold per view"):
+        tritools.triangulate_many([(P, x), (P[:3], bad3)], robust=np.array([5.0, 5.0, 5.0]), progress=False)
 
 
 def test_whole_call_limit_rows_past_the_end_are_cheap_and_valid():

@@ -45,13 +45,14 @@ def thresholds_for(robust, problems) -> list:
     has another view count -- M scalars for M problems of M views each read as per-view thresholds).  ValueError
     naming ``robust`` (and the problem, ``robust[k]``); a problem that a valid shared per-view array does not fit gets
     a ValueError instance in its place (:func:`_shared`: status ``invalid_input``, the batch goes on) -- unless the
-    array fits no problem of two or more views (the argument is wrong: raised)."""
+    array fits no valid problem of two or more views (the argument is wrong: raised)."""
     sizes = [_n_views(p) for p in problems]
     if not _per_problem(robust, sizes):
         out = [_shared(robust, n, k) if n is not None else None for k, n in enumerate(sizes)]
-        solvable = [c for c, n in zip(out, sizes) if n is not None and n >= 2]   # a 1-view problem is no fit
-        if solvable and all(isinstance(c, ValueError) for c in solvable):
-            robust_thresholds(robust, next(n for n in sizes if n is not None and n >= 2))   # fits no problem
+        solvable = [k for k, n in enumerate(sizes) if n is not None and n >= 2]    # a 1-view problem is no fit
+        fits = [k for k in solvable if not isinstance(out[k], ValueError)]
+        if solvable and len(fits) < len(solvable) and not any(_valid(problems[k]) for k in fits):
+            robust_thresholds(robust, sizes[solvable[0]])     # fits no valid problem: the argument is wrong
         return out
     if len(robust) != len(problems):
         raise ValueError(f"robust must be a scalar, one threshold per view, or one entry per problem "
@@ -63,6 +64,17 @@ def thresholds_for(robust, problems) -> list:
         except ValueError as exc:
             raise ValueError(f"robust[{k}] (problem {k}): {exc}") from None
     return out
+
+
+def _valid(problem) -> bool:
+    """Does ``problem`` pass the input checks (:func:`~tritools.solve.fastpath_cameras.validated_problem`)?"""
+    from .fastpath_cameras import validated_problem
+
+    try:
+        validated_problem(*problem)
+    except (ValueError, TypeError):
+        return False
+    return True
 
 
 def _shared(robust, n: int, k: int):

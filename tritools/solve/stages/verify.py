@@ -114,7 +114,9 @@ def _verify_points(ctx: PointContext, step: Step) -> TriangulationResult | None:
     b = verify_checked(ctx.cams[None], x, np.isfinite(x).all(axis=(1, 2)), ctx.tolerances,
                        deadline=ctx.settings.deadline)
     if not b.certified[0]:
-        ctx.verify_cut = cut
+        # not started for time: before the call, or after the bands used up the time (no bound at all, and the
+        # all-pairs bound no longer fits: review 4)
+        ctx.verify_cut = cut or (not np.isfinite(b.gamma_lb[0]) and not fits(ctx.settings.deadline, ctx.N))
         return None
     X = b.X[0]
     # gamma(X) and the residuals as points_report_stack computes them (verify_checked uses its formulas on the

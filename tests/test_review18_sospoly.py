@@ -131,3 +131,29 @@ def test_ray_check_measures_each_cone_against_its_own_terms():
 
 def dataclass_q(prob, q):
     return dataclasses.replace(prob, q=np.asarray(q, float))
+
+
+def test_infeasible_only_with_a_checked_farkas_certificate():
+    # review 4: Clarabel's unchecked PrimalInfeasible on rescaled feasible programs (14 of 200 random ones) was
+    # reported `infeasible`; a certificate z in K*, A^T z = 0, b^T z < 0 is now checked like a ray
+    import scipy.sparse as sps
+
+    from sospoly.lowering.conic import Cone, ConicProblem
+    from sospoly.solvers.rays import check_infeasibility
+    from sospoly.solvers.solve import solve_conic_problem
+
+    T = sp.DEFAULT_TOLERANCES
+    for s in (1e-6, 1.0, 1e6):                  # x >= 1 and x <= 0, rows scaled apart: infeasible at every scale
+        prob = ConicProblem(q=np.array([1.0]), A=sps.csc_matrix(np.array([[-1.0], [s]])), b=np.array([-1.0, 0.0]),
+                            cones=(Cone("nonneg", 2),), n_program_vars=1, psd_blocks=())
+        assert solve_conic_problem(prob).status == SolveStatus.INFEASIBLE
+        assert check_infeasibility(prob, np.array([1.0, 1.0 / s]), T)[0]
+        assert not check_infeasibility(prob, np.array([1.0, 0.5 / s]), T)[0]     # A^T z != 0
+        assert not check_infeasibility(prob, np.array([-1.0, -1.0 / s]), T)[0]   # outside K*, b^T z > 0
+    feasible = ConicProblem(q=np.array([1.0]), A=sps.csc_matrix(np.array([[-1.0], [1.0]])), b=np.array([-1.0, 2.0]),
+                            cones=(Cone("nonneg", 2),), n_program_vars=1, psd_blocks=())
+    assert not check_infeasibility(feasible, np.array([1.0, 1.0]), T)[0]        # b^T z = 1 > 0
+    assert solve_conic_problem(feasible).status == SolveStatus.OPTIMAL
+    x, y = sp.variables("x y")
+    motzkin = x ** 4 * y ** 2 + x ** 2 * y ** 4 - 3 * x ** 2 * y ** 2 + 1
+    assert not sp.is_sos(motzkin).is_sos                                         # the classic non-SOS polynomial

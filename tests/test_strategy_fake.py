@@ -99,7 +99,8 @@ def _chain_of(fake):
     ([Canned(RawStatus.ALMOST_SOLVED, REFERENCE)] * 4, None, SolveStatus.INACCURATE, CHAIN),
     ([Canned(RawStatus.ALMOST_SOLVED, REFERENCE)], Tolerances(accept_inaccurate=True), SolveStatus.INACCURATE,
      CHAIN[:1]),                                               # the caller takes the iterate: no retry
-    ([Canned(RawStatus.PRIMAL_INFEASIBLE)], None, SolveStatus.INFEASIBLE, CHAIN[:1]),
+    # an infeasibility whose Farkas certificate does not check (here none) is a numerical failure: next settings
+    ([Canned(RawStatus.PRIMAL_INFEASIBLE)] + [RawStatus.FAILED] * 3, None, SolveStatus.NUMERICAL_ERROR, CHAIN),
     ([RawStatus.FAILED, Canned(RawStatus.TIME_LIMIT)], None, SolveStatus.TIME_LIMIT, CHAIN[:2]),
 ])
 def test_clarabel_retry_chain_attempts_and_settings(script, tol, status, labels):

@@ -28,7 +28,7 @@ from ..budget import AUTO_IPM_MAX_BYTES as _AUTO_IPM_MAX_BYTES
 from ..budget import CLARABEL_TIME_MODEL, BudgetExceeded, Deadline, estimate_size, memory_room
 from ..lowering.conic import ConicProblem
 from ..tolerances import DEFAULT_TOLERANCES, Tolerances, as_tolerances
-from .rays import check_unbounded_ray
+from .rays import check_infeasibility, check_unbounded_ray
 
 __all__ = ["RawStatus", "Attempt", "ConicSolution", "ClarabelBackend", "IpmBackend", "AutoBackend",
            "CLARABEL_FAST_CHAIN", "CLARABEL_SPLIT_CHAIN", "get_backend", "cvxpy_available", "import_cvxpy"]
@@ -293,6 +293,9 @@ class ClarabelBackend:
                 continue                                 # an unchecked ray is a numerical failure: next settings
             if att.raw_status == RawStatus.PRIMAL_INFEASIBLE and provisional is not None:
                 return _kept(provisional, attempts)      # an accepted iterate says feasible: the unchecked claim loses
+            if att.raw_status == RawStatus.PRIMAL_INFEASIBLE and retry and \
+                    not check_infeasibility(problem, z, self.tolerances)[0]:
+                continue                                 # an unchecked certificate is a numerical failure too
             if att.raw_status in (RawStatus.PRIMAL_INFEASIBLE, RawStatus.DUAL_INFEASIBLE):
                 return last
             if att.raw_status == RawStatus.SOLVED and (accept is None or accept(x, z)):

@@ -19,7 +19,7 @@ import numpy as np
 
 from ..budget import Deadline
 from .backends import ConicSolution, RawStatus, get_backend
-from .rays import check_unbounded_ray
+from .rays import check_infeasibility, check_unbounded_ray
 from ..lowering.conic import ConicProblem, GramForm, lower
 from ..algebra.polynomial import Polynomial
 from ..certificates.program import Sense, SOSProgram
@@ -172,6 +172,11 @@ def solve_conic(problem: ConicProblem, backend=None, tolerances: Tolerances = DE
         ok, why = check_unbounded_ray(problem, sol.x, tolerances)
         if not ok:
             status, detail = SolveStatus.NUMERICAL_ERROR, f"{detail}; its unboundedness ray fails the check: {why}"
+    elif status == SolveStatus.INFEASIBLE and sol.z is not None:     # (cvxpy gives no certificate: its word)
+        ok, why = check_infeasibility(problem, sol.z, tolerances)
+        if not ok:
+            status, detail = SolveStatus.NUMERICAL_ERROR, f"{detail}; its infeasibility certificate fails the " \
+                                                          f"check: {why}"
     return status, sol, {}, np.nan, detail
 
 

@@ -157,3 +157,23 @@ def test_infeasible_only_with_a_checked_farkas_certificate():
     x, y = sp.variables("x y")
     motzkin = x ** 4 * y ** 2 + x ** 2 * y ** 4 - 3 * x ** 2 * y ** 2 + 1
     assert not sp.is_sos(motzkin).is_sos                                         # the classic non-SOS polynomial
+
+
+@pytest.mark.parametrize("backend", ["cvxpy", "cvxpy:SCS"])
+def test_cvxpy_infeasibility_comes_with_a_checked_certificate(backend):
+    # cvxpy reports infeasibility without a certificate; the back-end finds one (a feasibility program) and the
+    # check verifies it: infeasible programs stay infeasible, and a Psatz program's non-SOS answer stays a "no"
+    pytest.importorskip("cvxpy")
+    import scipy.sparse as sps
+
+    from sospoly.lowering.conic import Cone, ConicProblem
+    from sospoly.solvers.solve import solve_conic_problem
+
+    for s in (1e-3, 1.0, 1e3):
+        prob = ConicProblem(q=np.array([1.0]), A=sps.csc_matrix(np.array([[-1.0], [s]])), b=np.array([-1.0, 0.0]),
+                            cones=(Cone("nonneg", 2),), n_program_vars=1, psd_blocks=())
+        r = solve_conic_problem(prob, backend=backend)
+        assert r.status == SolveStatus.INFEASIBLE, r.message
+    x, y = sp.variables("x y")
+    motzkin = x ** 4 * y ** 2 + x ** 2 * y ** 4 - 3 * x ** 2 * y ** 2 + 1
+    assert not sp.is_sos(motzkin, backend=backend).is_sos

@@ -91,6 +91,30 @@ class CvxpyBackend:
             return None
         return np.asarray(d.value, float)
 
+    def _farkas(self, cp, problem: ConicProblem, solver) -> np.ndarray:
+        """cvxpy reports infeasibility without a certificate; a Farkas certificate z of b - A x in K (z in K*,
+        A^T z = 0, b^T z = -1) is found by a feasibility program, so that the caller's check
+        (:func:`~sospoly.solvers.rays.check_infeasibility`) can verify it; NaN where the program gives none (the
+        check then fails: ``numerical_error``, never an unchecked ``infeasible``)."""
+        z = cp.Variable(problem.n_rows)
+        cons, row = [], 0
+        for cone in problem.cones:
+            zr = z[row:row + cone.dim]
+            if cone.kind == "nonneg":
+                cons.append(zr >= 0)
+            elif cone.kind == "soc":
+                cons.append(cp.SOC(zr[0], zr[1:]))
+            elif cone.kind == "psd":
+                S = cp.Variable((cone.size, cone.size), symmetric=True)
+                cons += [_svec_operator(cone.size) @ cp.vec(S, order="F") == zr, S >> 0]
+            row += cone.dim                            # the zero cone's dual: free
+        At = sp.csr_matrix(problem.A.T)
+        cons += [At @ z == 0, np.asarray(problem.b, float) @ z == -1.0]
+        status = self._run(cp, cp.Problem(cp.Minimize(0), cons), solver)
+        if status not in ("optimal", "optimal_inaccurate") or z.value is None:
+            return np.full(problem.n_rows, np.nan)
+        return np.asarray(z.value, float)
+
     def solve(self, problem: ConicProblem, accept=None, retry: bool = True,
               deadline: Deadline | None = None) -> ConicSolution:
         cp = import_cvxpy()
@@ -110,6 +134,10 @@ class CvxpyBackend:
             ray = self._ray(cp, problem, solver)
             att = Attempt(f"cvxpy:{solver or 'default'}", raw, str(status), 0, time.perf_counter() - t0)
             return ConicSolution(raw, ray, None, None, None, (att,))
+        if raw == RawStatus.PRIMAL_INFEASIBLE:
+            z = self._farkas(cp, problem, solver)
+            att = Attempt(f"cvxpy:{solver or 'default'}", raw, str(status), 0, time.perf_counter() - t0)
+            return ConicSolution(raw, None, z, None, None, (att,))
         att = Attempt(f"cvxpy:{solver or 'default'}", raw, str(status), 0, time.perf_counter() - t0)
         if x.value is None:
             return ConicSolution(raw, None, None, None, None, (att,))

@@ -29,28 +29,44 @@ def check_unbounded_ray(problem: ConicProblem, d: np.ndarray | None, tol: Tolera
     ray (a direction no constraint sees).  For a Positivstellensatz program such a ray is itself a certificate that
     the constraint set is empty (c grows along it), so an unchecked one would make c* = +inf a claim: at f scaled
     by 1e8 Clarabel reported dual infeasibility of a bounded problem (review 18)."""
-    if d is None or not np.all(np.isfinite(d)):
-        return False, "no finite ray"
-    d = np.asarray(d, float)
-    top = float(np.max(np.abs(d))) if d.size else 0.0
+    return _candidates(_checked, problem, d, tol, "ray")
+
+
+#: the relative sizes below which a certificate is also tried with its components set to 0 (:func:`_candidates`)
+_RAY_CLEANING = (1e-12, 1e-10, 1e-8)
+
+
+def _candidates(rules, problem: ConicProblem, v, tol: Tolerances, what: str) -> tuple[bool, str]:
+    """``rules(problem, v, tol)`` on the certificate v scaled to max |v_i| = 1, then on v with its components below
+    each of :data:`_RAY_CLEANING` set to 0: a solver's certificate carries its own accuracy as noise in the
+    components that should be 0 (Clarabel: a 1e-10 component of the ray of min -x1 - x2 s.t.
+    [[1, x1], [x1, 1]] >= 0, x2 >= 0 violated the PSD cone by 70% of its own terms), and each cleaned vector is
+    another candidate, checked by the same rules.  (ok, why the first candidate failed)."""
+    if v is None or not np.all(np.isfinite(v)):
+        return False, f"no finite {what}"
+    v = np.asarray(v, float)
+    top = float(np.max(np.abs(v))) if v.size else 0.0
     if not top > 0:
-        return False, "d = 0 is no ray"
-    d = d / top
-    ok, why = _checked(problem, d, tol)
+        return False, f"the zero {what} is no {what}"
+    v = v / top
+    ok, why = rules(problem, v, tol)
     for cut in _RAY_CLEANING:
         if ok:
             break
-        # a solver's ray carries its own accuracy as noise in the components that should be 0 (Clarabel: a 1e-10
-        # component of min -x1 - x2 s.t. [[1, x1], [x1, 1]] >= 0, x2 >= 0 violated the PSD cone by 70% of its own
-        # terms); the ray with those components set to 0 is another candidate, checked by the same rules
-        clean = np.where(np.abs(d) > cut, d, 0.0)
-        if not np.array_equal(clean, d):
-            ok = _checked(problem, clean, tol)[0]
+        clean = np.where(np.abs(v) > cut, v, 0.0)
+        if not np.array_equal(clean, v):
+            ok = rules(problem, clean, tol)[0]
     return ok, "" if ok else why
 
 
-#: the relative sizes below which :func:`check_unbounded_ray` also tries the ray with its components set to 0
-_RAY_CLEANING = (1e-12, 1e-10, 1e-8)
+def _cone_floor(kind: str, v: np.ndarray) -> float:
+    """The smallest eigenvalue of v in a self-dual cone: min v (nonneg), lambda_min(smat v) (psd), v_0 - ||v_1..||
+    (soc); >= 0 iff v is in the cone."""
+    if kind == "nonneg":
+        return float(v.min())
+    if kind == "psd":
+        return float(np.linalg.eigvalsh(smat(v))[0])
+    return float(v[0]) - float(np.linalg.norm(v[1:]))
 
 
 def _checked(problem: ConicProblem, d: np.ndarray, tol: Tolerances) -> tuple[bool, str]:
@@ -79,8 +95,7 @@ def _checked(problem: ConicProblem, d: np.ndarray, tol: Tolerances) -> tuple[boo
                 return False, f"nonneg cone {k}: row {i} is {float(v[i]):.3g} with terms {float(sz[i]):.3g}"
             continue
         scale = float(sz.max())
-        lam = float(np.linalg.eigvalsh(smat(v))[0]) if cone.kind == "psd" else \
-            float(v[0]) - float(np.linalg.norm(v[1:]))
+        lam = _cone_floor(cone.kind, v)
         if not lam >= -tol.psd_margin * scale:
             return False, f"{cone.kind} cone {k}: violated by {-lam:.3g} (its terms {scale:.3g})"
     return True, ""
@@ -94,21 +109,7 @@ def check_infeasibility(problem: ConicProblem, z: np.ndarray | None, tol: Tolera
     of its largest entry, b^T z <= -1000 eps sum_i |b_i z_i|; and again with the noise components of z (below
     1e-12-1e-8 of its largest) set to 0.  (An unchecked "infeasible" from Clarabel on rescaled feasible problems:
     14 of 200 in review 4's random programs.)"""
-    if z is None or not np.all(np.isfinite(z)):
-        return False, "no finite certificate"
-    z = np.asarray(z, float)
-    top = float(np.max(np.abs(z))) if z.size else 0.0
-    if not top > 0:
-        return False, "z = 0 is no certificate"
-    z = z / top
-    ok, why = _farkas(problem, z, tol)
-    for cut in _RAY_CLEANING:
-        if ok:
-            break
-        clean = np.where(np.abs(z) > cut, z, 0.0)
-        if not np.array_equal(clean, z):
-            ok = _farkas(problem, clean, tol)[0]
-    return ok, "" if ok else why
+    return _candidates(_farkas, problem, z, tol, "certificate")
 
 
 def _farkas(problem: ConicProblem, z: np.ndarray, tol: Tolerances) -> tuple[bool, str]:
@@ -130,12 +131,7 @@ def _farkas(problem: ConicProblem, z: np.ndarray, tol: Tolerances) -> tuple[bool
         if not cone.dim or cone.kind == "zero":
             continue
         scale = float(np.max(np.abs(v)))
-        if cone.kind == "nonneg":
-            lam = float(v.min())
-        elif cone.kind == "psd":
-            lam = float(np.linalg.eigvalsh(smat(v))[0])
-        else:
-            lam = float(v[0]) - float(np.linalg.norm(v[1:]))
+        lam = _cone_floor(cone.kind, v)
         if not lam >= -tol.psd_margin * scale:
             return False, f"{cone.kind} cone {k} of z: violated by {-lam:.3g} (its entries {scale:.3g})"
     return True, ""

@@ -266,9 +266,9 @@ def test_cpu_share_from_the_load_average(monkeypatch):
             return 1.5 * fp.band_seconds(100, 4)
 
     monkeypatch.setattr(fp, "cpu_share", lambda: 1.0)
-    assert fp._fits(Left(), fp.band_seconds(100, 4))
+    assert fp.seconds_fit(Left(), fp.band_seconds(100, 4))
     monkeypatch.setattr(fp, "cpu_share", lambda: 0.5)
-    assert not fp._fits(Left(), fp.band_seconds(100, 4))
+    assert not fp.seconds_fit(Left(), fp.band_seconds(100, 4))
 
 
 @pytest.mark.parametrize("kind", ["points", "discs"])
@@ -349,7 +349,7 @@ def test_band_bound_interrupted_by_the_deadline_leaves_no_bound(monkeypatch):
     P, x, X, _ = robust_protocol_scene(60, 0, 1.0, np.random.default_rng(8))
     free = fp.verify_points(P[None], x[None])
     assert free.certified[0]
-    monkeypatch.setattr(fp, "_fits", lambda deadline, seconds: True)     # started however little time is left
+    monkeypatch.setattr(fp, "seconds_fit", lambda deadline, seconds: True)     # started however little time is left
     with deadline_scope(Deadline(0.0)):
         b = fp.verify_points(P[None], x[None], deadline=Deadline(None))
     assert not b.certified[0] and np.isnan(b.gamma_lb[0])

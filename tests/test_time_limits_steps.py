@@ -339,7 +339,7 @@ def test_region_verification_not_started_past_the_deadline(monkeypatch):
 
 def test_all_pairs_bounds_as_many_problems_as_fit(monkeypatch):
     """A batch cut by its time limit runs the all-pairs bound on the problems that fit instead of none
-    (fastpath.fitting, the rule of fastpath._fits): 0 past the deadline, everything without one, and floor(left /
+    (fastpath.fitting, the rule of fastpath.seconds_fit): 0 past the deadline, everything without one, and floor(left /
     per-problem estimate) in between (cpu_share fixed at 1)."""
     from sospoly.budget import Deadline
 

@@ -53,7 +53,7 @@ from .trivial import trivially_certified, trivially_certified_reported
 
 __all__ = ["FastPathBatch", "verify_points", "verify_checked", "verify_one", "stack_point_problems",
            "lagrangian_bounds", "BAND_MIN_VIEWS", "BAND_WIDTHS",
-           "band_seconds", "BAND_SECONDS", "BAND_SECONDS_PER_VIEW"]
+           "band_seconds", "BAND_SECONDS", "BAND_SECONDS_PER_VIEW", "seconds_fit", "all_pairs_seconds"]
 
 #: from this many views on, the certificate is first tried with the epipolar constraints of bands of view
 #: pairs (:func:`_band_bounds`, cost linear in N), of the widths ``BAND_WIDTHS`` in turn; problems no band
@@ -301,7 +301,7 @@ def lagrangian_bounds(C, Cn, v, ok, radius, resolution, tolerances, f0=None, wei
     # a band with dropped pairs is a broken chain (its multipliers cannot carry the KKT residual): all pairs then
     band = todo if views is None else todo[views.all(axis=1)]
     for width in BAND_WIDTHS if N >= BAND_MIN_VIEWS else ():
-        if width >= N - 1 or not band.size or not _fits(deadline, band_seconds(N, width, band.size)):
+        if width >= N - 1 or not band.size or not seconds_fit(deadline, band_seconds(N, width, band.size)):
             break
         try:
             lower_b, ok_b = _band_bounds(C[band], Cn[band], v[band], ok[band], radius[band], width, tolerances,
@@ -352,12 +352,12 @@ def band_seconds(n_views: int, width: int, problems: int = 1) -> float:
 def fits(deadline: Deadline | None, n_views: int, problems: int = 1) -> bool:
     """Does the all-pairs bound of ``problems`` problems fit in what is left of ``deadline`` (None: always)?
     The problems it does not fit keep no lower bound (NaN), which is valid."""
-    return _fits(deadline, all_pairs_seconds(n_views, problems))
+    return seconds_fit(deadline, all_pairs_seconds(n_views, problems))
 
 
 def fitting(deadline: Deadline | None, n_views: int, most: int) -> int:
     """How many problems' all-pairs bounds (at most ``most``) fit in what is left of ``deadline``, by the rule of
-    :func:`_fits`: a batch cut by its time limit bounds those it can instead of none (six 100-view tracks whose
+    :func:`seconds_fit`: a batch cut by its time limit bounds those it can instead of none (six 100-view tracks whose
     all-pairs estimate exceeded a 1 s ``total_time_limit`` by 20% certified 2 of 6, the band's)."""
     if deadline is None or deadline.remaining() is None:
         return most
@@ -366,7 +366,7 @@ def fitting(deadline: Deadline | None, n_views: int, most: int) -> int:
     return int(min(most, room // per)) if per > 0 else most
 
 
-def _fits(deadline: Deadline | None, seconds: float) -> bool:
+def seconds_fit(deadline: Deadline | None, seconds: float) -> bool:
     """Is more than ``seconds`` of CPU time left of ``deadline`` (None: no limit), a wall-clock deadline, at the
     share of a core the process can expect (:func:`sospoly.budget.cpu_share`)?  The one rule of the bounds not
     started where they would end past the deadline."""

@@ -62,7 +62,7 @@ from sospoly import DEFAULT_TOLERANCES, Tolerances
 from sospoly.budget import Deadline
 
 from ..model.regions import ConeKind, ConicForm, Region, conic_form_of, extent_of
-from .fastpath import BAND_MIN_VIEWS, BAND_WIDTHS, _fits, all_pairs_seconds, band_seconds, lagrangian_bounds
+from .fastpath import BAND_MIN_VIEWS, BAND_WIDTHS, all_pairs_seconds, band_seconds, lagrangian_bounds, seconds_fit
 
 __all__ = ["ViewQuadratics", "view_quadratics", "reduce_views", "compact_bounds", "region_bound", "region_forms",
            "constraint_counts", "ellipse_axes", "closest_on_ellipses", "ACTIVE_RTOL", "PD_MARGIN",
@@ -306,7 +306,7 @@ def region_bound_fits(deadline: Deadline | None, n_views: int) -> bool:
     0.05 s limit at 100 views of mixed regions)."""
     bound = band_seconds(n_views, BAND_WIDTHS[0]) if n_views >= BAND_MIN_VIEWS and BAND_WIDTHS[0] < n_views - 1 \
         else all_pairs_seconds(n_views)
-    return _fits(deadline, n_views * REGION_SETUP_SECONDS + bound)
+    return seconds_fit(deadline, n_views * REGION_SETUP_SECONDS + bound)
 
 
 def region_bound(C, Cn, regions_n, Xn, extents, *, forms=None, tolerances: Tolerances = DEFAULT_TOLERANCES,

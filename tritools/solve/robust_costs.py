@@ -13,7 +13,7 @@ import numpy as np
 from ..model.geometry import PROJECTION_DENOM_RTOL
 from ..model.refine import disc_shapes
 
-__all__ = ["tls_cost", "decision_scale", "scale_from",
+__all__ = ["tls_cost", "tls_costs2", "decision_scale", "scale_from",
            "point_distances2", "point_distances2_one", "point_distances2_rows", "point_distances2_stack", "projections",
            "disc_distances2", "disc_shapes", "tls_start_stack", "START_PAIRS"]
 
@@ -97,7 +97,14 @@ def tls_cost(residuals, c) -> float:
     d = np.asarray(residuals, float)
     with np.errstate(over="ignore"):                  # c or d above 1e154: c^2 = inf, as it should
         d2 = np.where(np.isfinite(d), d * d, np.inf)
-        return float(np.sum(np.minimum(d2, np.asarray(c, float) ** 2)))
+        return float(tls_costs2(d2, np.asarray(c, float) ** 2))
+
+
+def tls_costs2(d2: np.ndarray, c2: np.ndarray) -> np.ndarray:
+    """:func:`tls_cost` from squared distances along the last axis (any leading axes, ``c2`` broadcast):
+    sum_i min(d_i^2, c_i^2)."""
+    with np.errstate(invalid="ignore"):
+        return np.sum(np.minimum(d2, c2), axis=-1)
 
 
 def decision_scale(cams, regions, c2: np.ndarray) -> float:
@@ -149,8 +156,8 @@ def tls_start_stack(C: np.ndarray, x: np.ndarray, c: np.ndarray) -> tuple[np.nda
     Xs = np.concatenate([X_all[:, None], Xp.reshape(M, K, 3)], axis=1)              # (M, K + 1, 3)
     ok = np.concatenate([ok_all[:, None], okp.reshape(M, K)], axis=1) & np.isfinite(Xs).all(axis=2)
     d2 = point_distances2_stack(C, x, np.where(ok[..., None], Xs, 0.0))
-    with np.errstate(over="ignore", invalid="ignore"):
-        cost = np.sum(np.minimum(d2, (np.asarray(c, float) ** 2)[:, None]), axis=2)
+    with np.errstate(over="ignore"):
+        cost = tls_costs2(d2, (np.asarray(c, float) ** 2)[:, None])
     cost = np.where(ok & np.isfinite(cost), cost, np.inf)
     best = np.argmin(cost, axis=1)
     rows = np.arange(M)

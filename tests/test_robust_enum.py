@@ -223,15 +223,17 @@ def test_masked_candidates_are_the_subset_problems():
 
 
 def test_time_limit_and_degenerate_data_go_to_the_search():
-    """An expired time limit: no enumeration, the search's time_limit status with valid bounds.  Two views only,
-    and non-point regions: the branch and bound as before."""
+    """An expired time limit: no enumeration, the search's time_limit status with valid bounds.  Two views are
+    enumerated (tests/test_robust_two_views.py), unless the search itself was asked for."""
     rng = np.random.default_rng(61)
     P, x, X, out = robust_protocol_scene(5, 1, 1.0, rng)
     timed = tritools.triangulate(P, x, robust=200.0, time_limit=1e-9)
     assert timed.status == tritools.Status.TIME_LIMIT and enum_mod.ENUMERATED not in timed.message
     assert timed.gamma_lb <= timed.gamma_ub
     two = tritools.triangulate(P[:2], x[:2], robust=200.0)
-    assert enum_mod.ENUMERATED not in two.message
+    assert enum_mod.ENUMERATED in two.message and two.optimal
+    timed2 = tritools.triangulate(P[:2], x[:2], robust=200.0, time_limit=1e-9)
+    assert enum_mod.ENUMERATED not in timed2.message and timed2.gamma_lb <= timed2.gamma_ub
 
 
 @pytest.mark.parametrize("baseline", [1e-2, 1e-4])

@@ -1,6 +1,6 @@
 """Batches of robust (TLS) problems: :func:`triangulate_many` and :func:`triangulate_points` with ``robust=``.
 
-1. Point-region problems (with a finite threshold) of 3 to :data:`BATCH_ENUM_MAX_VIEWS` views first go through the
+1. Point-region problems (with a finite threshold) of 2 to :data:`BATCH_ENUM_MAX_VIEWS` views first go through the
    enumeration of every inlier set, stacked across problems (:func:`tritools.solve.robust_enum_run.enumerate_many`,
    the single call's path).  The others, and those it does not decide, go to the branch and bound of
    :mod:`tritools.solve.robust` -- exactly the search :func:`tritools.triangulate` runs for one of them -- in
@@ -352,7 +352,7 @@ def _expired_row(r: TriangulationResult, told) -> TriangulationResult:
 
 
 def _enumerated_then_searched(searches: list) -> list:
-    """The results of the searches: point problems of 3 to BATCH_ENUM_MAX_VIEWS views by the enumeration of every inlier
+    """The results of the searches: point problems of 2 to BATCH_ENUM_MAX_VIEWS views by the enumeration of every inlier
     set, stacked across problems (:func:`tritools.solve.robust_enum_run.enumerate_many`, the single call's path),
     the others and those it leaves open by the branch and bound (:func:`tritools.solve.robust_drive.drive`).  The
     decision scales come from one normalisation stack per view count (:func:`_normalization_scales`), computed only

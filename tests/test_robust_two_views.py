@@ -1,0 +1,167 @@
+"""Robust (TLS) triangulation of two point views by the enumeration (:mod:`tritools.solve.robust_enum_run`): with
+N = 2, f*_TLS = min(L2*(V), c_1^2, c_2^2), the one-view sets reached on a view's ray
+(:func:`tritools.solve.robust_rays.ray_samples_stack`).
+
+References independent of tritools' solvers: the exact two-view L2 optimum of Hartley & Sturm
+(tests/reference/hartley_sturm.py), the thresholds, and the branch and bound (the search) on the same problems.
+"""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import tritools
+import tritools.solve.robust_enum as enum_mod
+import tritools.solve.robust_enum_run as enum_run
+from tests.reference.hartley_sturm import hartley_sturm
+from tritools.scene import robust_protocol_scene
+from tritools.solve.robust_rays import _finite_median, best_ray_samples, ray_samples_stack
+
+GAP = 1e-6          # docs/robust.md: gap_abs * scale + gap_rel * max(scale, UB)
+
+
+def _f_tls(P, x, c, X):
+    h = P @ np.append(X, 1.0)
+    d2 = np.sum((h[:, :2] / h[:, 2:3] - x) ** 2, axis=1)
+    return float(np.sum(np.minimum(d2, np.asarray(c, float) ** 2)))
+
+
+def _cases(seed: int, n: int):
+    """Protocol scenes of two views: clean or one wrong match, noise 0 / 1 / 5 px, thresholds 2-200 px (per view),
+    pixel coordinates scaled by 1e-3 / 1 / 1e4 and a world moved to 1e6 (georeferenced) in some."""
+    rng = np.random.default_rng(seed)
+    out = []
+    for _ in range(n):
+        P, x, _, _ = robust_protocol_scene(2, int(rng.integers(0, 2)), float(rng.choice([0.0, 1.0, 5.0])), rng)
+        c = rng.choice([2.0, 20.0, 200.0], size=2)
+        s = float(rng.choice([1e-3, 1.0, 1e4]))
+        P, x, c = np.diag([s, s, 1.0]) @ P, x * s, c * s
+        if rng.random() < 0.25:
+            M = np.eye(4)
+            M[:3, 3] = -np.array([1e6, -2e6, 5e5])
+            P = P @ M
+        out.append((P, x, c))
+    return out
+
+
+def _reference(P, x, c) -> float:
+    return min(hartley_sturm(P[0], P[1], x[0], x[1])[1], *(np.asarray(c, float) ** 2).tolist())
+
+
+def _check(res, P, x, c, f_ref):
+    """No lower bound above the reference; gamma_UB is f_TLS at X; a certificate reaches the reference."""
+    scale = float(np.min(np.asarray(c, float) ** 2))
+    tol = GAP * scale + GAP * max(scale, f_ref) + 1e-9 * f_ref
+    f_lb, f_ub = 4 * res.gamma_lb ** 2, 4 * res.gamma_ub ** 2
+    assert f_lb <= f_ref + tol, (f_lb, f_ref)
+    assert f_ub == pytest.approx(_f_tls(P, x, c, res.X), rel=1e-6, abs=1e-6 * scale)
+    if res.optimal:
+        assert f_ub <= f_ref + 2 * tol, (f_ub, f_ref)
+    h = P @ np.append(res.X, 1.0)
+    d = np.sqrt(np.sum((h[:, :2] / h[:, 2:3] - x) ** 2, axis=1))
+    assert np.array_equal(res.inliers, d < c) or not res.optimal
+
+
+def test_two_views_enumerated_certified_at_the_closed_form():
+    """60 cases through one batch and one by one: every one enumerated and certified at min(L2*, c_1^2, c_2^2)."""
+    cases = _cases(3, 60)
+    many = tritools.triangulate_many([(P, x) for P, x, _ in cases], robust=[c for _, _, c in cases])
+    for (P, x, c), rm in zip(cases, many):
+        f_ref = _reference(P, x, c)
+        for res in (rm, tritools.triangulate(P, x, robust=c)):
+            assert res.optimal, (res.status, res.message)
+            assert enum_mod.ENUMERATED in res.message
+            _check(res, P, x, c, f_ref)
+
+
+def test_one_view_optimum_on_the_ray():
+    """A wrong match far from the epipolar line (L2* >> c^2): the optimum is min c^2, reached on the other view's
+    ray with the wrong match an outlier; certified by the enumeration and equal to the search's value."""
+    rng = np.random.default_rng(8)
+    P, x, X, _ = robust_protocol_scene(2, 0, 1.0, rng)
+    x = x.copy()
+    F = _fundamental(P)
+    line = F @ np.append(x[0], 1.0)
+    n = line[:2] / np.linalg.norm(line[:2])
+    x[1] = x[1] + 150.0 * n                           # ~150 px off its epipolar line
+    c = np.array([30.0, 20.0])
+    f_ref = _reference(P, x, c)
+    assert f_ref == pytest.approx(400.0)
+    res = tritools.triangulate(P, x, robust=c)
+    assert res.optimal and enum_mod.ENUMERATED in res.message
+    _check(res, P, x, c, f_ref)
+    assert res.inliers.tolist() == [True, False]
+    search = _searched(P, x, c)
+    assert enum_mod.ENUMERATED not in search.message and search.optimal
+    assert 4 * search.gamma_ub ** 2 == pytest.approx(4 * res.gamma_ub ** 2, rel=1e-9)
+
+
+def _fundamental(P):
+    C1 = np.linalg.svd(P[0])[2][-1]
+    e2 = P[1] @ C1
+    ex = np.array([[0, -e2[2], e2[1]], [e2[2], 0, -e2[0]], [-e2[1], e2[0], 0]])
+    return ex @ P[1] @ np.linalg.pinv(P[0])
+
+
+def _searched(P, x, c):
+    """The branch and bound alone (the enumeration refused)."""
+    old = enum_run.eligible
+    try:
+        enum_run.eligible = lambda s, m=None: s.N >= 3 and old(s, m)
+        return tritools.triangulate(P, x, robust=c)
+    finally:
+        enum_run.eligible = old
+
+
+def test_batch_equals_search_on_protocol_scenes():
+    """The enumeration and the search agree (certified both, values within the rule) on 40 protocol scenes."""
+    for P, x, c in _cases(11, 40):
+        a, b = tritools.triangulate(P, x, robust=c), _searched(P, x, c)
+        assert a.optimal and b.optimal
+        tol = 2 * (GAP * float(np.min(c ** 2)) + GAP * max(float(np.min(c ** 2)), 4 * b.gamma_ub ** 2))
+        assert abs(4 * a.gamma_ub ** 2 - 4 * b.gamma_ub ** 2) <= tol
+
+
+def test_ray_samples_on_the_rays():
+    """Every sample lies on its view's ray in front of the camera (its projection is the view's point); the depths
+    closest to the other ray are among them; the best sample is the least f, ties to the reference depth."""
+    rng = np.random.default_rng(2)
+    C = np.stack([robust_protocol_scene(3, 0, 0.0, rng)[0] for _ in range(4)])
+    x = np.stack([np.array([[(Q @ np.append(X, 1))[:2] / (Q @ np.append(X, 1))[2] for Q in Cp]
+                            for X in [rng.uniform(-0.5, 0.5, 3)]])[0] for Cp in C])
+    x = x + rng.normal(scale=3.0, size=x.shape)         # rays that do not meet
+    X, tie = ray_samples_stack(C, x)
+    assert X.shape[:3] == (4, 3, 13 + 3 + 1)
+    own = np.zeros(X.shape[:3], bool)
+    own[:, [0, 1, 2], 13 + np.arange(3)] = True                # the ray's own slot among the closest depths
+    assert np.isnan(X[own]).all() and np.isfinite(X[~own]).all()
+    for p in range(4):
+        for i in range(3):
+            h = (C[p, i] @ np.c_[X[p, i][~own[p, i]], np.ones(16)].T).T
+            assert np.all(h[:, 2] * np.sign(np.linalg.det(C[p, i][:, :3])) > 0)         # positive depth
+            assert np.allclose(h[:, :2] / h[:, 2:], x[p, i], atol=1e-6)
+    centre = lambda Q: np.linalg.svd(Q)[2][-1][:3] / np.linalg.svd(Q)[2][-1][3]      # noqa: E731
+    for p in range(4):                  # the slot of ray j on ray i: the point of ray i closest to line j
+        for i, j in [(0, 1), (1, 2), (2, 0)]:
+            Xi, Cj = X[p, i, 13 + j], centre(C[p, j])
+            uj = X[p, j, 0] - Cj
+            uj /= np.linalg.norm(uj)
+            w = Xi - Cj - ((Xi - Cj) @ uj) * uj                       # from line j to Xi, perpendicular to line j
+            ui = X[p, i, 12] - X[p, i, 0]
+            assert np.linalg.norm(w) > 1e-6 and abs(w @ ui) <= 1e-6 * np.linalg.norm(w) * np.linalg.norm(ui)
+    f = np.ones((1, 1, 5))
+    f[0, 0, [1, 3]] = 0.5
+    t = np.array([[[0.0, 2.0, 0.0, 1.0, 0.0]]])
+    assert best_ray_samples(f, t)[0, 0] == 3
+    f[0, 0, 4] = np.nan
+    assert best_ray_samples(f, t)[0, 0] == 3
+
+
+def test_finite_median_equals_nanmedian():
+    rng = np.random.default_rng(0)
+    a = rng.normal(size=(30, 3, 6))
+    a[a > 0.7] = np.nan
+    a[0, 0] = np.nan
+    with np.errstate(all="ignore"), pytest.warns(RuntimeWarning):
+        ref = np.nanmedian(a, axis=-1)
+    assert np.allclose(_finite_median(a), ref, equal_nan=True) and np.isnan(_finite_median(a)[0, 0])

@@ -43,8 +43,11 @@ class CvxpyBackend:
         return {}
 
     def _constraints(self, cp, problem: ConicProblem, x, b):
-        """The cone constraints b - A x in K as cvxpy constraints, and the PSD ones as (row, side, constraint)."""
-        cons, psd_cons = [], []
+        """The cone constraints b - A x in K as cvxpy constraints, and per cone (row, kind, the constraint whose
+        dual is z on its rows): the equality, the inequality, the second-order cone, and for a PSD cone the equality
+        svec(S) = b - A x (cvxpy's Lagrangian f + nu^T (lhs - rhs) makes each of these duals z of
+        min q^T x s.t. b - A x in K, q + A^T z = 0)."""
+        cons, duals = [], []
         row = 0
         for cone in problem.cones:
             rows = slice(row, row + cone.dim)
@@ -59,11 +62,27 @@ class CvxpyBackend:
             else:
                 S = cp.Variable((cone.size, cone.size), symmetric=True)
                 cons.append(_svec_operator(cone.size) @ cp.vec(S, order="F") == br - Ar @ x)
-                c = S >> 0
-                cons.append(c)
-                psd_cons.append((row, cone.size, c))
+                duals.append((row, cone.kind, cons[-1]))
+                cons.append(S >> 0)
+                row += cone.dim
+                continue
+            duals.append((row, cone.kind, cons[-1]))
             row += cone.dim
-        return cons, psd_cons
+        return cons, duals
+
+    @staticmethod
+    def _dual(problem: ConicProblem, duals) -> np.ndarray | None:
+        """z (the dual of every row, :meth:`_constraints`), or None where cvxpy gives no dual value."""
+        z = np.zeros(problem.n_rows)
+        for row, kind, c in duals:
+            v = c.dual_value
+            if v is None:
+                return None
+            if kind == "soc":
+                v = np.concatenate([np.ravel(np.asarray(v[0], float)), np.ravel(np.asarray(v[1], float))])
+            v = np.ravel(np.asarray(v, float))
+            z[row:row + v.size] = v
+        return z if np.all(np.isfinite(z)) else None
 
     def _run(self, cp, prob, solver):
         """Solve ``prob`` with the configured solver; returns cvxpy's status (or the error as a string)."""
@@ -120,7 +139,7 @@ class CvxpyBackend:
         cp = import_cvxpy()
         t0 = time.perf_counter()
         x = cp.Variable(problem.n_cols)
-        cons, psd_cons = self._constraints(cp, problem, x, problem.b)
+        cons, duals = self._constraints(cp, problem, x, problem.b)
         prob = cp.Problem(cp.Minimize(problem.q @ x), cons)
         solver = self.solver
         if solver is None:
@@ -142,12 +161,7 @@ class CvxpyBackend:
         if x.value is None:
             return ConicSolution(raw, None, None, None, None, (att,))
         xv = np.asarray(x.value, float)
-        z = np.zeros(problem.n_rows)
-        for row, s, c in psd_cons:
-            if c.dual_value is not None:
-                D = np.asarray(c.dual_value, float)
-                i, j = triu_pairs(s)
-                z[row:row + i.size] = D[i, j] * svec_scale(s)
+        z = self._dual(problem, duals)
         obj = float(problem.q @ xv)
         if raw == RawStatus.SOLVED and accept is not None and not accept(xv, z):
             raw = RawStatus.ALMOST_SOLVED

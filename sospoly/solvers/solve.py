@@ -19,7 +19,7 @@ import numpy as np
 
 from ..budget import Deadline
 from .backends import ConicSolution, RawStatus, get_backend
-from .rays import check_infeasibility, check_unbounded_ray
+from .rays import check_dual_certificate, check_infeasibility, check_primal_point, check_unbounded_ray
 from ..lowering.conic import ConicProblem, GramForm, lower
 from ..algebra.polynomial import Polynomial
 from ..certificates.program import Sense, SOSProgram
@@ -182,8 +182,10 @@ def solve_conic(problem: ConicProblem, backend=None, tolerances: Tolerances = DE
 
 @dataclass(frozen=True)
 class ConicResult:
-    """Outcome of :func:`solve_conic_problem`: the status (``SolveStatus``), the caller's objective (None
-    unless the status is ok), the primal x, the dual z, the solver attempts and a message."""
+    """Outcome of :func:`solve_conic_problem`: the status (``SolveStatus``), the caller's objective at x (None
+    unless x passed the primal checks: ``optimal`` when the dual z proves it optimal too,
+    :func:`~sospoly.solvers.rays.check_dual_certificate`; ``inaccurate`` when it does not -- a feasible point's
+    value), the primal x, the dual z, the solver attempts and a message."""
     status: object
     objective: float | None
     x: np.ndarray | None
@@ -194,14 +196,26 @@ class ConicResult:
 
 def solve_conic_problem(problem: ConicProblem, backend=None, tolerances=None) -> ConicResult:
     """Solve a lowered (or read: SDPA, CBF) conic problem with ``backend`` (default Clarabel) and check the
-    answer a posteriori (:func:`solve_conic`); a :class:`ConicResult` with the caller's objective
-    ``objective_sign * q^T x + objective_offset``."""
+    answer a posteriori (:func:`solve_conic`; ``optimal`` also needs x feasible at each cone's own scale and the dual
+    to prove it optimal, :func:`~sospoly.solvers.rays.check_primal_point` and
+    :func:`~sospoly.solvers.rays.check_dual_certificate`, else ``inaccurate``); a :class:`ConicResult` with the
+    caller's objective ``objective_sign * q^T x + objective_offset``."""
     if problem.params:
         raise ValueError("solve: instantiate the problem's parameters first (ConicProblem.instantiate)")
-    status, sol, _, resid, msg = solve_conic(problem, backend, tolerances or DEFAULT_TOLERANCES)
+    tolerances = as_tolerances(tolerances or DEFAULT_TOLERANCES)
+    status, sol, _, resid, msg = solve_conic(problem, backend, tolerances)
     obj = None
     if status.ok and sol.x is not None:
         obj = problem.objective_sign * float(problem.q @ sol.x) + problem.objective_offset
+        ok, why = check_primal_point(problem, sol.x, tolerances)
+        if not ok:
+            status, obj, msg = SolveStatus.INACCURATE, None, f"the point is not feasible at its cones' own scale: {why}"
+        elif status == SolveStatus.OPTIMAL and sol.z is not None:    # (a back-end without a dual: its word)
+            ok, why = check_dual_certificate(problem, sol.x, sol.z, tolerances)
+            if not ok:
+                status, msg = SolveStatus.INACCURATE, (
+                    f"a feasible point (checked) whose optimality the dual does not prove: {why}; the objective is "
+                    "its value (the problem may even be unbounded)")
     return ConicResult(status, obj, sol.x, sol.z, sol.attempts, msg)
 
 

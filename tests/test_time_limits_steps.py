@@ -378,3 +378,40 @@ def test_steps_stop_a_report_reserve_before_the_limit():
         d = call_deadline(options_from(None, time_limit=limit), t0)
         left = d.remaining()
         assert limit - report_reserve(limit) - 0.01 <= left <= limit - report_reserve(limit)
+
+
+def test_report_reserve_grows_with_views_of_regions():
+    """Wave 19: 100 views of mixed regions at 0.05 s ran 8-10 ms past the steps' deadline: the reserve covers the
+    regions' share (REPORT_SECONDS_PER_REGION a view), never more than half the limit nor REPORT_RESERVE_MAX."""
+    import time
+
+    from tritools.solve.options import options_from
+    from tritools.solve.settings import (REPORT_RESERVE_MAX, REPORT_RESERVE_TOP_SHARE, REPORT_SECONDS_PER_REGION,
+                                         call_deadline, report_reserve)
+
+    assert report_reserve(0.05, 100) == pytest.approx(max(0.005, 100 * REPORT_SECONDS_PER_REGION))
+    assert report_reserve(0.05, 10) == pytest.approx(0.005)                 # the share where it is larger
+    assert report_reserve(0.05, 10 ** 6) == pytest.approx(REPORT_RESERVE_TOP_SHARE * 0.05)
+    assert report_reserve(60.0, 10 ** 6) == REPORT_RESERVE_MAX
+    assert report_reserve(0.05, -3) == report_reserve(0.05)
+    t0 = time.perf_counter()
+    left = call_deadline(options_from(None, time_limit=0.05), t0, 100).remaining()
+    assert 0.05 - report_reserve(0.05, 100) - 0.01 <= left <= 0.05 - report_reserve(0.05, 100)
+
+
+def test_mixed_regions_normalised_by_class_equal_one_by_one():
+    """Normalization.regions stacks the regions of each class with a stacked construction (mixed lists too): the
+    same fields as each region's own similarity, bit for bit, in the input order."""
+    from tritools.model.normalize import normalization_for
+    from tritools.scene import uncertain_problem
+
+    P, R, _ = uncertain_problem(40, seed=4, kinds="mixed")
+    assert len({type(r) for r in R}) >= 4
+    norm = normalization_for(np.asarray(P), R)
+    got = norm.regions(R)
+    for i, (r, g) in enumerate(zip(R, got)):
+        ref = r.similarity(norm.scale, norm.shifts[i])
+        assert type(g) is type(ref)
+        for name in ("center", "D", "B", "c", "vertices", "a", "b"):
+            if hasattr(ref, name):
+                assert np.array_equal(np.asarray(getattr(g, name)), np.asarray(getattr(ref, name))), (i, name)

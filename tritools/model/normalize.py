@@ -121,11 +121,22 @@ class Normalization:
             return out / np.linalg.norm(out, axis=(1, 2))[:, None, None]
 
     def regions(self, regions) -> list:
-        kinds = {type(r) for r in regions}
-        many = getattr(kinds.pop(), "similarity_many", None) if len(kinds) == 1 else None
-        if many is not None:            # one stacked construction (the same numbers): N ellipses in a few numpy calls
-            return many(regions, self.scale, self.shifts)
-        return [r.similarity(self.scale, self.shifts[i]) for i, r in enumerate(regions)]
+        """Each region under its view's similarity; the regions of one class with a stacked construction
+        (``similarity_many``: N ellipses in a few numpy calls, the same numbers) in one call per class, mixed
+        lists included."""
+        out = [None] * len(regions)
+        by_class: dict = {}
+        for i, r in enumerate(regions):
+            by_class.setdefault(type(r), []).append(i)
+        for cls, idx in by_class.items():
+            many = getattr(cls, "similarity_many", None)
+            if many is not None and len(idx) > 1:
+                for i, r in zip(idx, many([regions[i] for i in idx], self.scale, self.shifts[idx])):
+                    out[i] = r
+            else:
+                for i in idx:
+                    out[i] = regions[i].similarity(self.scale, self.shifts[i])
+        return out
 
     def world_point(self, Xn: np.ndarray) -> np.ndarray:
         return self.origin + self.depth * np.asarray(Xn, float)

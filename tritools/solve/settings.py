@@ -84,30 +84,38 @@ def stack_deadline(options, n_points: int) -> Deadline:
     return Deadline.after(seconds)
 
 
-def call_deadline(options, t0: float) -> Deadline:
+def call_deadline(options, t0: float, region_views: int = 0) -> Deadline:
     """The deadline of one call that started at ``t0`` (``time.perf_counter()`` at its entry): the options'
     ``time_limit`` counted from the call's entry, so the input checks before the first stage (~5-10 ms for 400
     views of regions) are inside the limit; none without a limit.  The steps' deadline comes
-    :func:`report_reserve` before the limit: what runs after the last step (the report at the estimate, the result's
-    checks) fits in it."""
+    :func:`report_reserve` before the limit (``region_views``: the call's views of regions other than points):
+    what runs after the last step (the report at the estimate, the result's checks) fits in it."""
     limit = options.budget.time_limit
     if limit is None:
         return Deadline(None)
-    return Deadline.after(limit - report_reserve(limit) - (time.perf_counter() - t0), span=limit)
+    return Deadline.after(limit - report_reserve(limit, region_views) - (time.perf_counter() - t0), span=limit)
 
 
 #: the share of a call's time limit kept for the work after its last step, and its most in seconds
 #: (:func:`report_reserve`)
 REPORT_RESERVE_SHARE = 0.1
 REPORT_RESERVE_MAX = 0.5
+#: seconds per view of a region other than a point that the work past the steps' deadline takes (the regions'
+#: closest points and gamma at the estimate, the step it is in): 100 views of mixed regions at 0.05 s ran 8-10 ms
+#: past the steps' deadline (1.05-1.11x the limit with the 10% share alone, wave 19)
+REPORT_SECONDS_PER_REGION = 1e-4
+#: the reserve never takes more than this share of the limit (the steps keep at least the rest)
+REPORT_RESERVE_TOP_SHARE = 0.5
 
 
-def report_reserve(limit: float) -> float:
-    """Seconds of a call's ``limit`` kept after its steps' deadline: :data:`REPORT_RESERVE_SHARE` of it, at most
-    :data:`REPORT_RESERVE_MAX`.  Past the deadline a call still reports at its estimate (region distances,
-    compensated projections, the TLS report) and ends the step it is in: 3-6 ms at 8-30 views of regions, so
-    calls with 10-50 ms limits ended 1.07-1.33x their limit (review 18)."""
-    return min(REPORT_RESERVE_SHARE * limit, REPORT_RESERVE_MAX)
+def report_reserve(limit: float, region_views: int = 0) -> float:
+    """Seconds of a call's ``limit`` kept after its steps' deadline: :data:`REPORT_RESERVE_SHARE` of it, or the
+    predicted work of ``region_views`` views of regions (:data:`REPORT_SECONDS_PER_REGION` each) if more, at most
+    :data:`REPORT_RESERVE_TOP_SHARE` of the limit and :data:`REPORT_RESERVE_MAX`.  Past the deadline a call still
+    reports at its estimate (region distances, compensated projections, the TLS report) and ends the step it is
+    in: 3-6 ms at 8-30 views of regions, so calls with 10-50 ms limits ended 1.07-1.33x their limit (review 18)."""
+    tail = REPORT_SECONDS_PER_REGION * max(int(region_views), 0)
+    return min(max(REPORT_RESERVE_SHARE * limit, tail), REPORT_RESERVE_TOP_SHARE * limit, REPORT_RESERVE_MAX)
 
 
 def no_deadline() -> Deadline:

@@ -1,6 +1,7 @@
 """Cases IV and V of SPEC §2: the border ``{y : (y - x^)' D^-1 (y - x^) = 1}`` of an ellipse
 (:class:`EllipseBorder`) and the filled ellipse (:class:`Ellipse`), with the exact
-point-to-ellipse distance (Eberly's bisection on the Lagrange condition's 1-D root)."""
+point-to-ellipse distance (Eberly's 1-D root of the Lagrange condition, by a safeguarded Newton: ~10x faster than
+his bisection, the same root to an ulp)."""
 from __future__ import annotations
 
 import math
@@ -20,38 +21,50 @@ __all__ = ["EllipseBorder", "Ellipse", "SYMMETRY_RTOL", "PD_RTOL", "ELLIPSE_MAX_
 SYMMETRY_RTOL = 1e-10
 #: ``D`` is positive definite iff ``min eig > PD_RTOL * max eig`` (and ``max eig > 0``).
 PD_RTOL = 1e-12
-#: Maximum bisection steps of the point-to-ellipse root finder (converges in < 80 in practice).
+#: Maximum steps of the point-to-ellipse root finder (safeguarded Newton: at most ~35 measured, bisection ~52).
 ELLIPSE_MAX_ITER = 200
 #: Up to this many points the point-to-ellipse solver runs a scalar loop (faster than numpy).
 ELLIPSE_SCALAR_MAX = 8
 
 
 def _ellipse_root(r0, z0, z1, g, max_iter=ELLIPSE_MAX_ITER):
-    """Vectorised bisection for the root ``u = s + 1 > 0`` of Eberly's function
-    ``G(s) = (r0 z0 / (s + r0))^2 + (z1 / (s + 1))^2 - 1`` (``z0, z1 > 0``, ``r0 >= 1``).
+    """Vectorised safeguarded Newton for the root ``u = s + 1 > 0`` of Eberly's function
+    ``G(u) = (r0 z0 / (u + r0 - 1))^2 + (z1 / u)^2 - 1`` (``z0, z1 > 0``, ``r0 >= 1``): the scalar twin
+    :func:`ellipse_closest_scalar`'s steps on every element (the same operations, so the same numbers).
 
-    The root lies in ``[z1, 1]`` inside the ellipse (``g < 0``) and in
-    ``[z1, ||(r0 z0, z1)||]`` outside; bisecting on ``u`` (not ``s``) keeps full
-    relative precision when ``u`` is tiny (points close to the major axis).
+    G is decreasing and convex on u > 0; the root lies in ``[z1, 1]`` inside the ellipse (``g < 0``) and in
+    ``[z1, ||(r0 z0, z1)||]`` outside.  From u = z1 (where G >= 0) each step keeps the bracket [lo, hi] (G > 0 at
+    lo, G < 0 at hi) and takes Newton's step u - G / G' when it falls inside it, else the bracket's midpoint, until
+    the bracket is 2 eps of hi wide or G = 0 (bisection alone: ~52 steps; this: a handful, at most ~35 measured).
+    Working on ``u`` (not ``s``) keeps full relative precision when ``u`` is tiny (points close to the major axis).
     """
     n0 = r0 * z0
     rm1 = r0 - 1.0
-    u0 = np.array(z1, dtype=float)
-    u1 = np.where(g < 0, 1.0, np.hypot(n0, z1))
-    u = 0.5 * (u0 + u1)
+    lo = np.array(z1, dtype=float)
+    hi = np.where(g < 0, 1.0, np.hypot(n0, z1))
+    u = lo.copy()
     active = np.ones_like(u, dtype=bool)
-    eps = 2.0 * np.finfo(float).eps
-    for _ in range(max_iter):
-        u = np.where(active, 0.5 * (u0 + u1), u)
-        G = (n0 / (u + rm1)) ** 2 + (z1 / u) ** 2 - 1.0
-        u0 = np.where(active & (G > 0), u, u0)
-        u1 = np.where(active & (G < 0), u, u1)
-        done = (G == 0) | (u1 - u0 <= eps * u1)
-        u = np.where(active & done & (G != 0), 0.5 * (u0 + u1), u)
-        active &= ~done
-        if not active.any():
-            break
+    with np.errstate(divide="ignore", invalid="ignore"):
+        for _ in range(max_iter):
+            a, b = n0 / (u + rm1), z1 / u
+            G = a * a + b * b - 1.0
+            lo = np.where(active & (G > 0), u, lo)
+            hi = np.where(active & (G < 0), u, hi)
+            zero = G == 0
+            narrow = ~zero & (hi - lo <= _ROOT_EPS * hi)
+            u = np.where(active & narrow, 0.5 * (lo + hi), u)
+            active &= ~(zero | narrow)
+            if not active.any():
+                break
+            d = -2.0 * (a * a / (u + rm1) + b * b / u)
+            v = u - G / d
+            v = np.where((lo < v) & (v < hi), v, 0.5 * (lo + hi))
+            u = np.where(active, v, u)
     return u
+
+
+#: the relative width at which the root's bracket is closed (:func:`_ellipse_root`, :func:`ellipse_closest_scalar`)
+_ROOT_EPS = 2.0 * float(np.finfo(float).eps)
 
 
 def ellipse_closest_scalar(e0: float, e1: float, y0: float, y1: float) -> tuple[float, float]:
@@ -64,22 +77,23 @@ def ellipse_closest_scalar(e0: float, e1: float, y0: float, y1: float) -> tuple[
                 return y0, y1
             r0 = (e0 / e1) ** 2
             n0, rm1 = r0 * z0, r0 - 1.0
-            u0 = z1
-            u1 = 1.0 if g < 0 else math.hypot(n0, z1)
-            eps = 2.0 * np.finfo(float).eps
-            u = 0.5 * (u0 + u1)
-            for _ in range(ELLIPSE_MAX_ITER):
-                u = 0.5 * (u0 + u1)
-                G = (n0 / (u + rm1)) ** 2 + (z1 / u) ** 2 - 1.0
+            lo = z1
+            hi = 1.0 if g < 0 else float(np.hypot(n0, z1))
+            u = lo
+            for _ in range(ELLIPSE_MAX_ITER):          # the safeguarded Newton of _ellipse_root, one element
+                a, b = n0 / (u + rm1), z1 / u
+                G = a * a + b * b - 1.0
                 if G > 0:
-                    u0 = u
+                    lo = u
                 elif G < 0:
-                    u1 = u
+                    hi = u
                 else:
                     break
-                if u1 - u0 <= eps * u1:
-                    u = 0.5 * (u0 + u1)
+                if hi - lo <= _ROOT_EPS * hi:
+                    u = 0.5 * (lo + hi)
                     break
+                v = u - G / (-2.0 * (a * a / (u + rm1) + b * b / u))
+                u = v if lo < v < hi else 0.5 * (lo + hi)
             return r0 * y0 / (u + rm1), y1 / u
         return 0.0, e1
     numer0, denom0 = e0 * y0, e0 * e0 - e1 * e1

@@ -165,3 +165,24 @@ def test_finite_median_equals_nanmedian():
     with np.errstate(all="ignore"), pytest.warns(RuntimeWarning):
         ref = np.nanmedian(a, axis=-1)
     assert np.allclose(_finite_median(a), ref, equal_nan=True) and np.isnan(_finite_median(a)[0, 0])
+
+
+def test_trusted_view_near_the_epipole_in_a_georeferenced_world():
+    """Review of wave 19, F2: c = [inf, c2] with c2^2 = L2*(1 + 1e-9), observation 0 near the epipole, world at 1e6.
+    The both-views candidate was left unrefined (its inlier set held one view) and a ray sample next to camera 1's
+    principal plane (f = c2^2) replaced it; its report refused its own rounding: gamma_UB inf, inliers [F, F] for a
+    view with c = inf.  Now the both-views candidate is refined first and a ray sample equal to UB under the rule is
+    not offered: certified at L2* (Hartley-Sturm) with both views inliers."""
+    P = np.array([[[-853.205141335401, -41.13954762778348, -112.90936373844153, 827380727.9490547],
+                   [23.864928919097387, -472.32646006646684, -688.4316816422431, -624302008.2309095],
+                   [-0.365382968017855, -0.8957387872901238, 0.25327319563365086, -1552731.204379218]],
+                  [[542.5652519739198, -635.9170297190916, -208.883887994563, -1709958913.59192],
+                   [266.386158298013, -148.87345689104592, 777.4799730543135, -952874204.7519127],
+                   [-0.35994557875274186, -0.8958755913775928, 0.2604728490845105, -1562046.879146098]]])
+    x = np.array([[316.3950858915726, 236.51444128857258], [319.4748702391962, 236.57636689718305]])
+    c = np.array([np.inf, 0.5619248319492886])
+    f_ref = _reference(P, x, c)
+    for res in (tritools.triangulate(P, x, robust=c), tritools.triangulate_many([(P, x)], robust=[c])[0]):
+        assert res.optimal, res.message
+        assert res.inliers.tolist() == [True, True] and np.isfinite(res.gamma_ub)
+        _check(res, P, x, c, f_ref)

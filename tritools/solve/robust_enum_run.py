@@ -42,7 +42,7 @@ from . import robust_enum as enum
 from .robust_bounds import ROUND_DOWN
 from .robust_costs import point_distances2_rows, point_distances2_stack
 from .robust_drive import credit     # (the drive's rule: per-problem time limits)
-from .robust_rays import best_ray_samples, ray_samples_stack
+from .robust_two import two_view_rays
 
 __all__ = ["enumerate_tls", "enumerate_many", "eligible", "closed_terms", "lower_bounds", "enumerated_result",
            "enumerated_results", "ENUM_CHUNK", "ENUM_ROWS", "SINGLE_POLISH_STEPS", "THREE_VIEW_PATH", "ASCENT_ROWS"]
@@ -271,7 +271,7 @@ class _Group:
                 return self.results
         live = self._upper_bounds(live)
         if self.N == 2:
-            live = self._ray_candidates(live)
+            live = two_view_rays(self, live)
         self._second_round(self._first_round(live), live)
         return self.results
 
@@ -313,23 +313,6 @@ class _Group:
             self._candidates(later)
             live = live & (self._offer(later) | ~later.any(axis=1))
         return live
-
-    def _ray_candidates(self, live: np.ndarray) -> np.ndarray:
-        """Two views: an inlier set of one view is reached only on that view's ray (:mod:`~tritools.solve.robust_rays`,
-        f*_TLS = min(L2*(V), c_1^2, c_2^2)); each ray's best depth sample (:func:`~tritools.solve.robust_rays.
-        ray_samples_stack`, one stacked evaluation for the problems ``live``) offered.  Only a ranking of points: the
-        search keeps a candidate by its exact f_TLS.  The problems that may go on."""
-        P = np.nonzero(live)[0]
-        if not P.size:
-            return live
-        X, tie = ray_samples_stack(self.C[P], self.x[P])
-        R, N, K = X.shape[:3]
-        d2 = point_distances2_stack(self.C[P], self.x[P], X.reshape(R, N * K, 3)).reshape(R, N, K, N)
-        f = np.sum(np.minimum(d2, self.c2[P][:, None, None, :]), axis=3)
-        k = best_ray_samples(np.where(np.isfinite(X).all(axis=3), f, np.inf), tie)
-        best = np.take_along_axis(X, k[:, :, None, None], axis=2)[:, :, 0]
-        self._offer_each([(int(p), best[r, i]) for r, p in enumerate(P) for i in range(N)])
-        return live & ~self._expired()
 
     def _first_round(self, live: np.ndarray) -> list:
         """Step 2: the bounds of the sets in need -- the pairs holding a view outside the best inlier set (they feed

@@ -149,15 +149,12 @@ class CvxpyBackend:
                "infeasible": RawStatus.PRIMAL_INFEASIBLE, "unbounded": RawStatus.DUAL_INFEASIBLE,
                "infeasible_inaccurate": RawStatus.ALMOST_INFEASIBLE,
                "unbounded_inaccurate": RawStatus.ALMOST_INFEASIBLE}.get(status, RawStatus.FAILED)
-        if raw == RawStatus.DUAL_INFEASIBLE:
-            ray = self._ray(cp, problem, solver)
-            att = Attempt(f"cvxpy:{solver or 'default'}", raw, str(status), 0, time.perf_counter() - t0)
-            return ConicSolution(raw, ray, None, None, None, (att,))
-        if raw == RawStatus.PRIMAL_INFEASIBLE:
-            z = self._farkas(cp, problem, solver)
-            att = Attempt(f"cvxpy:{solver or 'default'}", raw, str(status), 0, time.perf_counter() - t0)
-            return ConicSolution(raw, None, z, None, None, (att,))
+        # cvxpy gives no certificate of either infeasibility: each is found by a program of its own (its time counted)
+        ray = self._ray(cp, problem, solver) if raw == RawStatus.DUAL_INFEASIBLE else None
+        farkas = self._farkas(cp, problem, solver) if raw == RawStatus.PRIMAL_INFEASIBLE else None
         att = Attempt(f"cvxpy:{solver or 'default'}", raw, str(status), 0, time.perf_counter() - t0)
+        if raw in (RawStatus.DUAL_INFEASIBLE, RawStatus.PRIMAL_INFEASIBLE):
+            return ConicSolution(raw, ray, farkas, None, None, (att,))
         if x.value is None:
             return ConicSolution(raw, None, None, None, None, (att,))
         xv = np.asarray(x.value, float)

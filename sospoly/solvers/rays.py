@@ -76,28 +76,26 @@ def _checked(problem: ConicProblem, d: np.ndarray, tol: Tolerances) -> tuple[boo
     qd, qn = float(problem.q @ d), float(np.linalg.norm(problem.q)) * float(np.linalg.norm(d))
     if not qd <= -_RAY_DESCENT * qn:
         return False, f"q^T d = {qd:.3g} is not clearly negative (|q| |d| = {qn:.3g})"
-    size = np.abs(problem.A) @ np.abs(d)
-    r = -(problem.A @ d)
+    return _cones_hold(problem, -(problem.A @ d), np.abs(problem.A) @ np.abs(d), tol)
+
+
+def _cones_hold(problem: ConicProblem, v: np.ndarray, size: np.ndarray, tol: Tolerances) -> tuple[bool, str]:
+    """Does the row vector ``v`` (one entry per row of the cones) lie in K at the rows' own sizes ``size``: a zero
+    row |v_i| <= ``identity_residual`` size_i, a nonnegative row v_i >= -``psd_margin`` size_i, a PSD or
+    second-order cone's floor (:func:`_cone_floor`) >= -``psd_margin`` max of its rows' sizes?  (ok, why not)."""
     row = 0
     for k, cone in enumerate(problem.cones):
-        v, sz = r[row:row + cone.dim], size[row:row + cone.dim]
+        w, sz = v[row:row + cone.dim], size[row:row + cone.dim]
         row += cone.dim
         if not cone.dim:
             continue
-        if cone.kind == "zero":
-            bad = np.abs(v) > tol.identity_residual * sz
+        if cone.kind in ("zero", "nonneg"):
+            bad = np.abs(w) > tol.identity_residual * sz if cone.kind == "zero" else w < -tol.psd_margin * sz
             if np.any(bad):
                 i = int(np.argmax(bad))
-                return False, f"zero cone {k}: row {i} residual {abs(float(v[i])):.3g} of terms {float(sz[i]):.3g}"
+                return False, f"{cone.kind} cone {k}: row {i} is {float(w[i]):.3g} with terms {float(sz[i]):.3g}"
             continue
-        if cone.kind == "nonneg":
-            bad = v < -tol.psd_margin * sz
-            if np.any(bad):
-                i = int(np.argmax(bad))
-                return False, f"nonneg cone {k}: row {i} is {float(v[i]):.3g} with terms {float(sz[i]):.3g}"
-            continue
-        scale = float(sz.max())
-        lam = _cone_floor(cone.kind, v)
+        lam, scale = _cone_floor(cone.kind, w), float(sz.max())
         if not lam >= -tol.psd_margin * scale:
             return False, f"{cone.kind} cone {k}: violated by {-lam:.3g} (its terms {scale:.3g})"
     return True, ""
@@ -149,8 +147,12 @@ def _row_scales(problem: ConicProblem, x: np.ndarray) -> np.ndarray:
     """t_i = |b_i| + ||A_i||_1 max(||x||_inf, 1): the size of row i's terms at x's magnitude (floored at 1, so that a
     row active at 0 -- x_j >= 0 with x_j = 0 -- is measured against its coefficients, not against round-off).
     Scales with the row (a rescaled cone scales its own t)."""
-    X = max(float(np.max(np.abs(x))) if x.size else 0.0, 1.0)
-    return np.abs(np.asarray(problem.b, float)) + np.asarray(abs(problem.A).sum(axis=1)).ravel() * X
+    return np.abs(np.asarray(problem.b, float)) + np.asarray(abs(problem.A).sum(axis=1)).ravel() * _magnitude(x)
+
+
+def _magnitude(x: np.ndarray) -> float:
+    """max(||x||_inf, 1): the length scale of a point's rows and dual residual (:func:`_row_scales`)."""
+    return max(float(np.max(np.abs(x))) if x.size else 0.0, 1.0)
 
 
 def check_dual_certificate(problem: ConicProblem, x: np.ndarray, z: np.ndarray | None,
@@ -170,9 +172,7 @@ def check_dual_certificate(problem: ConicProblem, x: np.ndarray, z: np.ndarray |
     q, b = np.asarray(problem.q, float), np.asarray(problem.b, float)
     t = _row_scales(problem, x)
     s_abs = np.abs(b - problem.A @ x)
-    X = max(float(np.max(np.abs(x))) if x.size else 0.0, 1.0)
-    r = problem.A.T @ z + q
-    err_r = float(np.abs(r).sum()) * X
+    err_r = float(np.abs(problem.A.T @ z + q).sum()) * _magnitude(x)
     err_k, row = 0.0, 0
     for cone in problem.cones:
         v = z[row:row + cone.dim]
@@ -201,21 +201,4 @@ def check_primal_point(problem: ConicProblem, x: np.ndarray, tol: Tolerances) ->
     but a generic program whose PSD rows are scaled by 1e-6 then passes violated by 10% of its entries (wave 19: an
     "optimal" objective 48% below the true minimum)."""
     x = np.asarray(x, float)
-    slack = np.asarray(problem.b, float) - problem.A @ x
-    size = _row_scales(problem, x)
-    row = 0
-    for k, cone in enumerate(problem.cones):
-        v, sz = slack[row:row + cone.dim], size[row:row + cone.dim]
-        row += cone.dim
-        if not cone.dim:
-            continue
-        if cone.kind in ("zero", "nonneg"):
-            bad = np.abs(v) > tol.identity_residual * sz if cone.kind == "zero" else v < -tol.psd_margin * sz
-            if np.any(bad):
-                i = int(np.argmax(bad))
-                return False, f"{cone.kind} cone {k}: row {i} slack {float(v[i]):.3g} with terms {float(sz[i]):.3g}"
-            continue
-        lam, scale = _cone_floor(cone.kind, v), float(sz.max())
-        if not lam >= -tol.psd_margin * scale:
-            return False, f"{cone.kind} cone {k}: violated by {-lam:.3g} (its terms {scale:.3g})"
-    return True, ""
+    return _cones_hold(problem, np.asarray(problem.b, float) - problem.A @ x, _row_scales(problem, x), tol)

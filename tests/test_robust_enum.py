@@ -300,11 +300,11 @@ def test_floor_scale_never_above_the_decision_scale():
 
 
 def test_first_of_runs_equals_numpy_unique_on_sorted_keys():
-    """robust_enum_run._first_of_runs (the best row of each problem in a stack): np.unique's return_index on sorted
+    """robust_enum.first_of_runs (the best row of each problem in a stack): np.unique's return_index on sorted
     keys, empty and single-run arrays included."""
     import numpy as np
 
-    from tritools.solve.robust_enum_run import _first_of_runs
+    from tritools.solve.robust_enum import first_of_runs as _first_of_runs
 
     rng = np.random.default_rng(0)
     for _ in range(500):

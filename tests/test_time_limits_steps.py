@@ -395,7 +395,10 @@ def test_report_reserve_grows_with_views_of_regions():
     assert report_reserve(60.0, 10 ** 6) == REPORT_RESERVE_MAX
     assert report_reserve(0.05, -3) == report_reserve(0.05)
     t0 = time.perf_counter()
-    left = call_deadline(options_from(None, time_limit=0.05), t0, 100).remaining()
+    import tritools
+
+    discs = [tritools.Ellipse([0.0, 0.0], np.eye(2))] * 100 + [tritools.Point([1.0, 2.0])] * 5     # points: no share
+    left = call_deadline(options_from(None, time_limit=0.05), t0, discs).remaining()
     assert 0.05 - report_reserve(0.05, 100) - 0.01 <= left <= 0.05 - report_reserve(0.05, 100)
 
 

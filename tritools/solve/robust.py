@@ -596,5 +596,5 @@ def triangulate_robust(cams: np.ndarray, regions, c: np.ndarray, opts, t0: float
         return dataclasses.replace(res, inliers=None if res.residuals is None else np.ones(len(regions), bool))
     with np.errstate(all="ignore"):     # as in robust_batch.robust_many: finiteness is checked, warnings are noise
         search = TlsSearch(cams, regions, c, opts, t0)      # a few views: every inlier set enumerated (robust_enum_run)
-        search.set_deadline(call_deadline(opts, t0, sum(not r.is_point for r in regions)))   # from the call's entry
+        search.set_deadline(call_deadline(opts, t0, regions))   # the time limit counts from the call's entry
         return enumerate_tls(search) or drive([search])[0]

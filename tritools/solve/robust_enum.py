@@ -68,7 +68,7 @@ from .robust_bounds import ROUND_DOWN
 
 __all__ = ["enum_frame", "enum_frame_one", "enum_frames", "subset_masks", "closure", "enum_candidates", "enum_bounds",
            "enum_bounds_rows", "fundamentals", "row_of", "subset_of", "refine_rows", "refine_row_one", "ascended_bound",
-           "ENUM_MAX_VIEWS", "POLISH_STEPS", "MASKED_CAMERA", "ENUMERATED", "ASCENT_HEADROOM"]
+           "first_of_runs", "ENUM_MAX_VIEWS", "POLISH_STEPS", "MASKED_CAMERA", "ENUMERATED", "ASCENT_HEADROOM"]
 
 #: the enumeration runs for point problems with at most this many views in single calls (the branch and bound
 #: beyond; batches: :data:`tritools.solve.robust_batch.BATCH_ENUM_MAX_VIEWS`, 10 views, 1013 sets).  Measured
@@ -494,3 +494,11 @@ def row_of(N: int) -> np.ndarray:
     out[subset_masks(N).astype(np.int64) @ (1 << np.arange(N))] = np.arange(len(subset_masks(N)))
     out.flags.writeable = False
     return out
+
+
+def first_of_runs(sorted_keys: np.ndarray) -> np.ndarray:
+    """The index of the first entry of each run of equal keys in a sorted 1-D integer array: ``np.unique``'s
+    ``return_index`` for sorted input (its result here), without its per-call overhead."""
+    if sorted_keys.size == 0:
+        return np.zeros(0, int)
+    return np.flatnonzero(np.concatenate(([True], sorted_keys[1:] != sorted_keys[:-1])))

@@ -179,14 +179,6 @@ def lower_bounds(ub: np.ndarray, terms: np.ndarray, c2: np.ndarray) -> np.ndarra
                                   np.sum(c2, axis=1) * ROUND_DOWN])
 
 
-def _first_of_runs(sorted_keys: np.ndarray) -> np.ndarray:
-    """The index of the first entry of each run of equal keys in a sorted 1-D integer array: ``np.unique``'s
-    ``return_index`` for sorted input (its result here), without its per-call overhead."""
-    if sorted_keys.size == 0:
-        return np.zeros(0, int)
-    return np.flatnonzero(np.concatenate(([True], sorted_keys[1:] != sorted_keys[:-1])))
-
-
 def enumerated_result(search, lb: float, n_bounded: int, n_sets: int):
     """The result of a search decided by the enumeration (:meth:`tritools.solve.robust.TlsSearch.result` at the lower
     bound ``lb``, pixels^2), its message saying so; ``n_bounded`` subsets were bounded."""
@@ -456,7 +448,7 @@ class _Group:
             d2 = point_distances2_stack(self.C[pp], self.x[pp], world[:, None])[:, 0]           # (R, N)
             f = np.sum(np.minimum(d2, self.c2[pp]), axis=1)       # (only ranks: offer() computes it exactly)
             order = np.lexsort((f, pp))
-            first = _first_of_runs(pp[order])
+            first = enum.first_of_runs(pp[order])
             for r in order[first]:
                 picks.append((int(pp[r]), world[r], np.nonzero(d2[r] < self.c2[pp[r]])[0].tolist()))
         self._offer_each([(p, X) for p, X, _ in picks])

@@ -42,20 +42,8 @@ _GOLD = (math.sqrt(5.0) - 1.0) / 2.0
 
 def _rays(C: np.ndarray, pts: np.ndarray):
     """Centres (N, 3), unit directions (N, 3) towards positive depth, and a mask of views whose M_i is
-    invertible (others give no ray).  One stacked solve; view by view where a stack member is singular."""
-    M, p = C[:, :, :3], C[:, :, 3]
-    rhs = np.stack([-p, np.concatenate([pts, np.ones((len(C), 1))], axis=1)], axis=2)      # (N, 3, 2)
-    try:
-        with np.errstate(all="ignore"):
-            sol = np.linalg.solve(M, rhs)
-    except np.linalg.LinAlgError:
-        return _rays_one_by_one(C, pts)
-    with np.errstate(all="ignore"):
-        c, d = sol[..., 0], sol[..., 1]
-        n = np.linalg.norm(d, axis=1)
-        ok = np.isfinite(c).all(axis=1) & np.isfinite(n) & (n > 0)
-        dirs = np.where(ok[:, None], d / np.where(ok, n, 1.0)[:, None] * np.sign(np.linalg.det(M))[:, None], 0.0)
-    return np.where(ok[:, None], c, 0.0), dirs, ok
+    invertible (others give no ray): :func:`_rays_stack` of one problem."""
+    return tuple(a[0] for a in _rays_stack(C[None], pts[None]))
 
 
 def _rays_one_by_one(C: np.ndarray, pts: np.ndarray):
@@ -77,27 +65,38 @@ def _rays_one_by_one(C: np.ndarray, pts: np.ndarray):
 
 
 def _closest_depths_all(centres, dirs) -> list:
-    """For each ray i (unit directions u), the depths t > 0 of its points closest to every other, non-parallel
-    ray j: with b = C_j - C_i and k = u_i . u_j, t = (b . u_i - k b . u_j) / (1 - k^2) (all pairs at once)."""
-    b = centres[None, :, :] - centres[:, None, :]                  # b[i, j] = C_j - C_i
-    k = dirs @ dirs.T
+    """For each ray i, the depths t > 0 of its points closest to every other, non-parallel ray
+    (:func:`_closest_depths` of one problem)."""
+    t, good = _closest_depths(centres[None], dirs[None])
+    return [t[0, i, good[0, i]] for i in range(len(centres))]
+
+
+def _closest_depths(centres: np.ndarray, dirs: np.ndarray) -> tuple:
+    """(t, good) (P, N, N) for P problems' rays (centres, unit directions u (P, N, 3)): the depth t[p, i, j] of the
+    point of ray i closest to ray j, with b = C_j - C_i and k = u_i . u_j, t = (b . u_i - k b . u_j) / (1 - k^2);
+    ``good`` where j != i, the rays are not parallel and t > 0."""
+    b = centres[:, None, :, :] - centres[:, :, None, :]                            # b[p, i, j] = C_j - C_i
+    k = dirs @ np.swapaxes(dirs, 1, 2)
     den = 1.0 - k * k
     with np.errstate(all="ignore"):
-        t = (np.einsum("ijk,ik->ij", b, dirs) - k * np.einsum("ijk,jk->ij", b, dirs)) / den
-    good = (den > 1e-12) & np.isfinite(t) & (t > 0)
-    np.fill_diagonal(good, False)
-    return [t[i, good[i]] for i in range(len(centres))]
+        t = (np.einsum("pijk,pik->pij", b, dirs) - k * np.einsum("pijk,pjk->pij", b, dirs)) / den
+    good = (den > 1e-12) & np.isfinite(t) & (t > 0) & ~np.eye(centres.shape[1], dtype=bool)[None]
+    return t, good
 
 
 def _baseline(centres: np.ndarray) -> float:
-    """The median distance between camera centres, or (coincident centres) max(1, |C|)."""
-    d = np.linalg.norm(centres[:, None] - centres[None], axis=2)
-    d = d[np.triu_indices(len(centres), 1)]
-    d = d[np.isfinite(d) & (d > 0)]
-    if not d.size:
-        return max(1.0, float(np.max(np.linalg.norm(centres, axis=1))))
-    d = np.sort(d)                                   # the median without np.median's per-call overhead
-    return float((d[(d.size - 1) // 2] + d[d.size // 2]) / 2)
+    """The median distance between camera centres, or (coincident centres) max(1, |C|): :func:`_baselines` of one."""
+    return float(_baselines(centres[None])[0])
+
+
+def _baselines(centres: np.ndarray) -> np.ndarray:
+    """(P,) the median distance between each problem's camera centres (P, N, 3), or (coincident centres)
+    max(1, max |C_i|)."""
+    i, j = np.triu_indices(centres.shape[1], 1)
+    d = np.linalg.norm(centres[:, i] - centres[:, j], axis=2)                     # (P, pairs)
+    base = _finite_median(np.where(np.isfinite(d) & (d > 0), d, np.nan))
+    far = np.maximum(1.0, np.max(np.linalg.norm(centres, axis=2), axis=1))
+    return np.where(np.isfinite(base), base, far)
 
 
 def ray_candidates(search) -> list:
@@ -154,18 +153,9 @@ def ray_samples_stack(C: np.ndarray, pts: np.ndarray):
     the tie rule of :func:`_best_depth`).  C (P, N, 3, 4), pts (P, N, 2)."""
     P, N = C.shape[:2]
     centres, dirs, ok = _rays_stack(C, pts)
-    b = centres[:, None, :, :] - centres[:, :, None, :]                            # b[p, i, j] = C_j - C_i
-    k = dirs @ np.swapaxes(dirs, 1, 2)
-    den = 1.0 - k * k
-    with np.errstate(all="ignore"):
-        t = (np.einsum("pijk,pik->pij", b, dirs) - k * np.einsum("pijk,pjk->pij", b, dirs)) / den
-    good = (den > 1e-12) & np.isfinite(t) & (t > 0) & ~np.eye(N, dtype=bool)[None] & ok[:, :, None] & ok[:, None, :]
-    near = np.where(good, t, np.nan)
-    dist = np.linalg.norm(b, axis=3)[:, np.triu_indices(N, 1)[0], np.triu_indices(N, 1)[1]]       # (P, pairs)
-    dist = np.where(np.isfinite(dist) & (dist > 0), dist, np.nan)
-    base, med = _finite_median(dist), _finite_median(near)                       # (P,), (P, N)
-    far = np.maximum(1.0, np.max(np.linalg.norm(centres, axis=2), axis=1))
-    base = np.where(np.isfinite(base), base, far)
+    t, good = _closest_depths(centres, dirs)
+    near = np.where(good & ok[:, :, None] & ok[:, None, :], t, np.nan)
+    base, med = _baselines(centres), _finite_median(near)                       # (P,), (P, N)
     ref = np.where(np.isfinite(med), med, base[:, None])
     ts = np.concatenate([np.broadcast_to(base[:, None, None] * np.logspace(-3, 3, SWEEP), (P, N, SWEEP)), near,
                          med[:, :, None]], axis=2)

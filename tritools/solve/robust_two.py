@@ -41,10 +41,8 @@ def two_view_rays(group, live: np.ndarray) -> np.ndarray:
     k = best_ray_samples(f, tie)
     best = np.take_along_axis(X, k[:, :, None, None], axis=2)[:, :, 0]
     fk = np.take_along_axis(f, k[:, :, None], axis=2)[:, :, 0]
-    ub, floors = group._ub()[P], group._floors()[P]
-    gap = np.array([group.tol.gap_tolerance_one(float(u), float(s)) if np.isfinite(u) else 0.0
-                    for u, s in zip(ub, floors)])            # the rule at the floor scale: the tightest
-    same = np.isfinite(ub)[:, None] & (fk >= (ub - gap)[:, None])
+    # the decision rule at the floor scale (the tightest): a sample that meets UB changes no decision
+    same = np.asarray(group.tol.certified(fk, group._ub()[P][:, None], group._floors()[P][:, None]), bool)
     group._offer_each([(int(p), best[r, i]) for r, p in enumerate(P) for i in range(N) if not same[r, i]])
     return live & ~group._expired()
 

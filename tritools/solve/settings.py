@@ -84,15 +84,16 @@ def stack_deadline(options, n_points: int) -> Deadline:
     return Deadline.after(seconds)
 
 
-def call_deadline(options, t0: float, region_views: int = 0) -> Deadline:
+def call_deadline(options, t0: float, regions=()) -> Deadline:
     """The deadline of one call that started at ``t0`` (``time.perf_counter()`` at its entry): the options'
     ``time_limit`` counted from the call's entry, so the input checks before the first stage (~5-10 ms for 400
     views of regions) are inside the limit; none without a limit.  The steps' deadline comes
-    :func:`report_reserve` before the limit (``region_views``: the call's views of regions other than points):
-    what runs after the last step (the report at the estimate, the result's checks) fits in it."""
+    :func:`report_reserve` before the limit (counting the call's ``regions`` other than points): what runs after
+    the last step (the report at the estimate, the result's checks) fits in it."""
     limit = options.budget.time_limit
     if limit is None:
         return Deadline(None)
+    region_views = sum(not r.is_point for r in regions)
     return Deadline.after(limit - report_reserve(limit, region_views) - (time.perf_counter() - t0), span=limit)
 
 

@@ -124,8 +124,7 @@ class PointContext:
         self.cams_user = cams                               # the caller's: the final report is made on these
         self.regions, self.opts, self.t0 = regions, opts, t0
         self.N = self.cams.shape[0]
-        self.settings = SolveSettings.from_options(           # the limit counts from t0
-            opts, call_deadline(opts, t0, sum(not r.is_point for r in regions)))
+        self.settings = SolveSettings.from_options(opts, call_deadline(opts, t0, regions))   # the limit counts from t0
         self.stages, self.step_stages, self.fast = tuple(stages), tuple(step_stages), fast_names(fast)
         self.timings: dict = {}
         self.attempts: list[Attempt] = []

@@ -266,9 +266,44 @@ def test_stacked_report_equals_the_scalar_report(N):
         for a, b in ((g.residuals, want.residuals), (g.inliers, want.inliers), (g.image_points, want.image_points)):
             assert a.dtype == b.dtype and np.array_equal(a, b, equal_nan=True)
         u1, fin1, spread1 = projections_and_spread(P, Xk)
-        assert fin1 == fin[k] and spread1 == spread[k] and np.array_equal(u1, u[k], equal_nan=True)
+        assert np.array_equal(fin1, fin[k]) and spread1 == spread[k] and np.array_equal(u1, u[k], equal_nan=True)
         seen.add((want.holds, bool(want.reason), bool(want.inliers.all())))
     assert len(seen) >= 4                  # the cases reach certified, withheld and outlier-holding reports
+
+
+@pytest.mark.parametrize("geo", [0.0, 1e6])
+def test_an_undefined_view_counts_its_threshold_and_leaves_the_others_defined(geo):
+    """An estimate on one camera's principal plane (its projection undefined) in a TLS report: that view is an
+    outlier counted c_i^2 in gamma_UB and has no image point; the other views keep their projections, residuals and
+    inlier flags (they were all reported undefined, gamma_UB inf, and a c = inf view an outlier: a result that
+    contradicted itself, review 19).  With c_i = inf for the undefined view gamma_UB is inf.  The batch's stacked
+    report says the same, bit for bit; gamma_UB bounds the exact f_TLS at X."""
+    from tritools.solve.robust_report import tls_reported, tls_reported_stack
+
+    X = np.array([0.3, -0.2, 4.0]) + geo * DIRECTION
+    P = _geo(CAMS.copy(), geo * DIRECTION)
+    third = np.array([[1.0, 0, 0, 0], [0, 1.0, 0, 0], [0.0, 0.0, 0.0, 0.0]])
+    third[2, :3] = [0.2, 0.9, -0.1]
+    third[2, 3] = -third[2, :3] @ X                  # X on its principal plane, exactly in float
+    P = np.concatenate([P, third[None]])
+    h = P[:3] @ np.append(X, 1.0)
+    x = np.vstack([h[:, :2] / h[:, 2:] + [[0.01, -0.02], [0.0, 0.015], [-0.01, 0.0]], [[5.0, 7.0]]])
+    tol = tritools.TriangulationOptions().tolerances
+    for c3 in (3.0, np.inf):
+        c = np.array([1.0, np.inf, 2.0, c3])
+        r = tls_reported(P, x, None, X, c, 0.0, tol, False)
+        assert np.array_equal(r.inliers, [True, True, True, False])
+        assert np.isnan(r.image_points[3]).all() and np.isfinite(r.image_points[:3]).all()
+        assert np.isfinite(r.residuals[:3]).all() and r.residuals[3] == np.inf
+        if np.isfinite(c3):
+            f = _f_tls_exact(P[:3], x[:3], c[:3], X) + Fraction(c3) ** 2
+            assert Fraction(r.gamma_ub) ** 2 * 8 >= f and r.gamma_ub <= 1.0001 * float(np.sqrt(float(f) / 8))
+        else:
+            assert r.gamma_ub == np.inf
+        s = tls_reported_stack(P[None], x[None], X[None], c[None], np.zeros(1), tol, np.zeros(1, bool),
+                               np.full(1, np.nan))[0]
+        assert (s.gamma_lb, s.gamma_ub, s.holds, s.reason) == (r.gamma_lb, r.gamma_ub, r.holds, r.reason)
+        assert np.array_equal(s.inliers, r.inliers) and np.array_equal(s.image_points, r.image_points, equal_nan=True)
 
 
 def test_search_drift_near_zero_optimum_in_a_georeferenced_world():

@@ -26,10 +26,10 @@ from sospoly.budget import check_deadline
 from .cameras import power2_scale
 from .exact import CANCELLATION_RATIO, dot2, homogeneous_images, two_prod, two_sum
 from .geometry import PROJECTION_DENOM_RTOL
-from .stacked import norms, project_quiet
+from .stacked import norms, project_quiet_views
 
 __all__ = ["WorldFrame", "world_frame", "world_origins", "world_origin_one", "moved_cameras", "recentred",
-           "project_world", "project_world_one", "frame_centre_groups", "RECENTRE_RATIO",
+           "project_world", "project_world_views", "project_world_one", "frame_centre_groups", "RECENTRE_RATIO",
            "RESOLVED_SPREAD_RTOL"]
 
 #: the origin moves to the cameras' mean centre when that is farther than this many times their spread ...
@@ -222,14 +222,22 @@ def project_world(C: np.ndarray, X: np.ndarray) -> tuple:
     view, as :func:`tritools.model.geometry.project_homogeneous` does, so a problem gets the same numbers in any
     batch.  Then the same rule: (u (M, N, 2), h, finite (M,)).  The reported gamma_UB rests on it
     (:func:`tritools.solve.report.gamma_upper`)."""
+    u, h, defined = project_world_views(C, X)
+    return u, h, defined.all(axis=1)
+
+
+def project_world_views(C: np.ndarray, X: np.ndarray) -> tuple:
+    """:func:`project_world` with its rule per view (:func:`tritools.model.stacked.project_quiet_views`): (u (M, N,
+    2), h, defined (M, N))."""
     with np.errstate(over="ignore", invalid="ignore"):
         h = homogeneous_images(C, np.concatenate([X, np.ones((len(X), 1))], axis=1))
-        return project_quiet(C, X, h=h)
+        return project_quiet_views(C, X, h=h)
 
 
 def project_world_one(C: list, X: list, absC: list | None = None) -> tuple:
     """The scalar twin of :func:`project_world` for one point: cameras C (N lists of 3 rows of 4 floats), X (3
-    floats) -> (u (N pairs), finite); ``absC`` the cameras' |entries| when the caller has them.  The same numbers
+    floats) -> (u (N pairs), defined (N bools), the rule per view of :func:`project_world_views`); ``absC`` the
+    cameras' |entries| when the caller has them.  The same numbers
     bit for bit (tests/test_single_call_twins.py): each homogeneous coordinate as numpy's einsum sums four
     products, (p_0 + p_2) + (p_1 + p_3); a view recomputed by the compensated dot product
     (:func:`tritools.model.exact.dot2`'s steps, the plain sum where it is not finite) where some row's sum of
@@ -237,7 +245,7 @@ def project_world_one(C: list, X: list, absC: list | None = None) -> tuple:
     (its |P_3| . |X~| is that sum of |products| of the third row)."""
     x0, x1, x2 = X
     a0, a1, a2 = abs(x0), abs(x1), abs(x2)
-    u, fin = [], True
+    u, defined = [], []
     for P, A in zip(C, absC or [[[abs(v) for v in row] for row in P] for P in C]):
         h = [_dot4(r, (x0, x1, x2, 1.0)) for r in P]
         mag = [_dot4(r, (a0, a1, a2, 1.0)) for r in A]
@@ -247,12 +255,12 @@ def project_world_one(C: list, X: list, absC: list | None = None) -> tuple:
         den = h[2]
         if abs(den) <= PROJECTION_DENOM_RTOL * mag[2]:
             u.append((h[0] / 1.0, h[1] / 1.0))
-            fin = False
+            defined.append(False)
             continue
         ui = (h[0] / den, h[1] / den)
-        fin = fin and math.isfinite(ui[0]) and math.isfinite(ui[1])
+        defined.append(math.isfinite(ui[0]) and math.isfinite(ui[1]))
         u.append(ui)
-    return u, fin
+    return u, defined
 
 
 def _dot4(a, x) -> float:

@@ -28,8 +28,8 @@ from .geometry import POINT_AT_INFINITY_RTOL, PROJECTION_DENOM_RTOL, SAME_CENTER
 
 __all__ = ["null_vectors", "dlt_stack", "project_stack", "refine_points_stack", "fundamental_stack",
            "epipolar_quadratics", "pixel_scales", "distinct_centres", "centre_vectors", "view_pairs", "band_pairs",
-           "norms", "median_rows", "gauss_newton_polish", "project_quiet", "project_one", "next_damping", "lm_accept",
-           "solve3", "LM_MAX_ITER", "LM_STEP_RTOL"]
+           "norms", "median_rows", "gauss_newton_polish", "project_quiet", "project_quiet_views", "project_one",
+           "next_damping", "lm_accept", "solve3", "LM_MAX_ITER", "LM_STEP_RTOL"]
 
 #: Levenberg-Marquardt iterations at most (from the DLT start it converges in ~5-10).
 LM_MAX_ITER = 100
@@ -132,6 +132,15 @@ def project_quiet(C: np.ndarray, X: np.ndarray, absC2: np.ndarray | None = None,
     ``np.errstate`` around a loop instead of one per projection); ``absC2``: |C[:, :, 2, :]| when the caller
     has it (the cameras of a loop do not change); ``h``: the homogeneous images when the caller computed them
     (more accurately: :func:`tritools.model.frame.project_world`)."""
+    x, h, defined = project_quiet_views(C, X, absC2, h)
+    return x, h, defined.all(axis=1)
+
+
+def project_quiet_views(C: np.ndarray, X: np.ndarray, absC2: np.ndarray | None = None,
+                        h: np.ndarray | None = None) -> tuple:
+    """:func:`project_quiet` with its rule per view: (x (M, N, 2), h (M, N, 3), defined (M, N)), a view undefined
+    where its denominator is at round-off, |P_3 . X~| <= PROJECTION_DENOM_RTOL |P_3| . |X~| (x is then its undivided
+    pair h_1, h_2), or its projection is not finite."""
     Xh = np.concatenate([X, np.ones((len(X), 1))], axis=1)
     if h is None:
         h = np.einsum("mnij,mj->mni", C, Xh)
@@ -139,8 +148,7 @@ def project_quiet(C: np.ndarray, X: np.ndarray, absC2: np.ndarray | None = None,
     absC2 = np.abs(C[:, :, 2, :]) if absC2 is None else absC2
     tiny = np.abs(den) <= PROJECTION_DENOM_RTOL * np.einsum("mnj,mj->mn", absC2, np.abs(Xh))
     x = h[..., :2] / np.where(tiny, 1.0, den)[..., None]
-    ok = ~tiny.any(axis=1) & np.isfinite(x).all(axis=(1, 2))
-    return x, h, ok
+    return x, h, ~tiny & np.isfinite(x).all(axis=2)
 
 
 def project_one(C: np.ndarray, X: np.ndarray) -> tuple:

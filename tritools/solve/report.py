@@ -11,7 +11,7 @@ import numpy as np
 
 from ..model.cameras import depths_stack_arrays, depths_validated
 from ..model.exact import HOMOGENEOUS_RTOL
-from ..model.frame import project_world, project_world_one
+from ..model.frame import project_world, project_world_one, project_world_views
 from ..model.geometry import WorldFrame, project_point_views
 from ..model.refine import disc_shapes
 from ..model.regions import RegionStack, extent_of
@@ -67,9 +67,13 @@ def rounding_spread(C: np.ndarray, X: np.ndarray) -> float:
 
 
 def projections_and_spread(C: np.ndarray, X: np.ndarray) -> tuple:
-    """(u (N, 2) the compensated projections of X, finite, :func:`rounding_spread`): up to :data:`SCALAR_MAX_VIEWS`
-    views by the scalar twin :func:`projections_and_spread_one`, else from one stacked projection
-    (:func:`projections_and_spread_views`); the same numbers (:func:`projections_and_spread_stack`: M problems)."""
+    """(u (N, 2) the compensated projections of X, defined (N,) per view, :func:`rounding_spread`): up to
+    :data:`SCALAR_MAX_VIEWS` views by the scalar twin :func:`projections_and_spread_one`, else from one stacked
+    projection (:func:`projections_and_spread_views`); the same numbers (:func:`projections_and_spread_stack`: M
+    problems).  A view is undefined where its denominator is at round-off or its projection is not finite
+    (:func:`tritools.model.frame.project_world_views`; u is then its undivided pair): the spread is taken over the
+    views defined at X (a TLS cost counts an undefined view c_i^2, constant near X), and is inf where one of them is
+    undefined at X + ulp(X_k) e_k."""
     if len(C) <= SCALAR_MAX_VIEWS:
         return projections_and_spread_one(C, X)
     return projections_and_spread_views(C, X)
@@ -78,48 +82,49 @@ def projections_and_spread(C: np.ndarray, X: np.ndarray) -> tuple:
 def projections_and_spread_views(C: np.ndarray, X: np.ndarray) -> tuple:
     """:func:`projections_and_spread` of one problem from one stacked projection of X and X + ulp(|X_k|) e_k."""
     X = np.asarray(X, float)
-    Xs = np.vstack([X, X + np.diag(np.spacing(np.abs(X)))])
-    u, _, fin = project_world(np.broadcast_to(C, (4,) + C.shape), Xs)
-    if not fin.all():
-        return u[0], bool(fin[0]), math.inf
-    d2 = np.max(np.sum((u[1:] - u[0]) ** 2, axis=2), axis=0)
-    return u[0], True, float(np.sqrt(np.sum(d2) / (2 * len(C))))
+    u, defined, spread = projections_and_spread_stack(np.asarray(C, float)[None], X[None])
+    return u[0], defined[0], float(spread[0])
 
 
 def projections_and_spread_stack(C: np.ndarray, X: np.ndarray) -> tuple:
     """The twin of :func:`projections_and_spread` for M problems of N views (tested equal, bit for bit): C (M, N, 3,
-    4), X (M, 3) -> (u (M, N, 2), finite (M,), spread (M,)), one stacked projection of the 4 M points X and
-    X + ulp(X_k) e_k (spread inf where a projection is not finite; u of X as projected there)."""
+    4), X (M, 3) -> (u (M, N, 2), defined (M, N), spread (M,)), one stacked projection of the 4 M points X and
+    X + ulp(X_k) e_k (spread inf where a view defined at X is not at X + ulp(X_k) e_k)."""
     X = np.asarray(X, float)
     M, N = C.shape[:2]
     eye = np.eye(3, dtype=bool)[None]
     Xs = np.concatenate([X[:, None], X[:, None] + np.where(eye, np.spacing(np.abs(X))[:, None, :], 0.0)], axis=1)
     Cs = np.broadcast_to(np.asarray(C, float)[:, None], (M, 4) + C.shape[1:]).reshape((4 * M,) + C.shape[1:])
-    u, _, fin = project_world(Cs, Xs.reshape(4 * M, 3))
-    u, fin = u.reshape(M, 4, N, 2), fin.reshape(M, 4)
+    u, _, defined = project_world_views(Cs, Xs.reshape(4 * M, 3))
+    u, defined = u.reshape(M, 4, N, 2), defined.reshape(M, 4, N)
+    at_x = defined[:, 0]
     with np.errstate(invalid="ignore", over="ignore"):
         d2 = np.max(np.sum((u[:, 1:] - u[:, :1]) ** 2, axis=3), axis=1)
-        spread = np.sqrt(np.sum(d2, axis=1) / (2 * N))
-    return u[:, 0], fin[:, 0], np.where(fin.all(axis=1), spread, np.inf)
+        spread = np.sqrt(np.sum(np.where(at_x, d2, 0.0), axis=1) / (2 * N))
+    kept = np.all(defined[:, 1:] | ~at_x[:, None], axis=(1, 2))
+    return u[:, 0], at_x, np.where(kept, spread, np.inf)
 
 
 def projections_and_spread_one(C: np.ndarray, X) -> tuple:
     """The scalar twin of :func:`projections_and_spread_views` for a few views (N <= :data:`SCALAR_MAX_VIEWS`): the four
     points X and X + ulp(|X_k|) e_k projected by :func:`tritools.model.frame.project_world_one`, the spread summed
-    view by view (numpy's order below 8 terms): the same numbers bit for bit (tests/test_single_call_twins.py)."""
+    view by view (numpy's order below 8 terms, 0 for a view undefined at X): the same numbers bit for bit
+    (tests/test_single_call_twins.py)."""
     X = [float(v) for v in np.asarray(X, float)]
     Cl = C.tolist()
     absC = [[[abs(v) for v in row] for row in P] for P in Cl]
     pts = [X] + [[X[j] + (math.ulp(abs(X[j])) if j == k else 0.0) for j in range(3)] for k in range(3)]
     proj = [project_world_one(Cl, p, absC) for p in pts]
-    u0 = proj[0][0]
-    if not all(fin for _, fin in proj):
-        return np.array(u0), proj[0][1], math.inf
-    total = None
+    u0, at_x = proj[0]
+    total, kept = None, True
     for i, (a, b) in enumerate(u0):
-        d2 = max((u[i][0] - a) * (u[i][0] - a) + (u[i][1] - b) * (u[i][1] - b) for u, _ in proj[1:])
+        if not at_x[i]:
+            d2 = 0.0
+        else:
+            kept = kept and all(d[i] for _, d in proj[1:])
+            d2 = max((u[i][0] - a) * (u[i][0] - a) + (u[i][1] - b) * (u[i][1] - b) for u, _ in proj[1:])
         total = d2 if total is None else total + d2
-    return np.array(u0), True, math.sqrt(total / (2 * len(Cl)))
+    return np.array(u0), np.array(at_x, bool), math.sqrt(total / (2 * len(Cl))) if kept else math.inf
 
 
 #: :func:`projections_and_spread_one` replaces the stacked projection up to this many views.

@@ -55,8 +55,8 @@ def tls_reported(C: np.ndarray, centres: np.ndarray, residuals, X, c: np.ndarray
     regions (computed here from compensated projections; ``centres`` are then the points), ``lb`` the search's
     bound of f*_TLS (pixels^2), ``certified`` the search's decision (on its scale S)."""
     N = len(C)
-    u, fin, spread = projections_and_spread(np.asarray(C, float), X)
-    u = u if fin else np.full((N, 2), np.inf)
+    u, defined, spread = projections_and_spread(np.asarray(C, float), X)
+    u = np.where(defined[:, None], u, np.inf)            # an undefined view: d_i = inf, counted c_i^2
     points_given = residuals is None
     if points_given:
         residuals = norms(u - centres, axis=1)
@@ -78,8 +78,8 @@ def tls_reported_stack(C: np.ndarray, points: np.ndarray, X: np.ndarray, c: np.n
     :class:`TlsReported` per problem.  The projections, distances, gamma_UB and inlier flags in stacked calls
     (:func:`tritools.solve.report.projections_and_spread_stack`), the checks per problem (:func:`_checked`)."""
     M, N = points.shape[:2]
-    u, fin, spread = projections_and_spread_stack(np.asarray(C, float), X)
-    u = np.where(fin[:, None, None], u, np.inf)
+    u, defined, spread = projections_and_spread_stack(np.asarray(C, float), X)
+    u = np.where(defined[..., None], u, np.inf)
     residuals = norms(u - points, axis=2)
     res = np.where(np.isfinite(residuals), residuals, np.inf)
     u_norm = norms(np.where(np.isfinite(u), u, 0.0), axis=2)

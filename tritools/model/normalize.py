@@ -268,7 +268,7 @@ def _normalization_stack(C: np.ndarray, x: np.ndarray, ok: np.ndarray) -> Normal
     # the scale from the residual of the locally refined estimate: refine from the DLT point (Xn = 0), then
     # the exact image similarity x' -> k x', k = s_new / s
     Xn, ok_r, converged = refine_points_stack(Cn, np.zeros((M, N, 2)), np.zeros((M, 3)), ok.copy(),
-                                              return_converged=True)
+                                              return_converged=True, scalar=False)    # (any M: the stack's numbers)
     u, _, fin = project_stack(Cn, Xn)
     r = np.sqrt(np.add.reduce(np.add.reduce(np.where(fin[:, None, None], u, 0.0) ** 2, axis=2), axis=1) / N) / s
     use = ok_r & fin & np.isfinite(r)

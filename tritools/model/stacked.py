@@ -167,12 +167,21 @@ def project_one(C: np.ndarray, X: np.ndarray) -> tuple:
 
 def damped_step(JtJ: np.ndarray, g: np.ndarray, mu: np.ndarray) -> np.ndarray:
     """The Levenberg-Marquardt step -(J^T J + mu (1 + tr J^T J) / 3 I)^{-1} g for a stack (M, 3, 3), (M, 3),
-    (M,), the damping scaled by (1 + tr J^T J) / 3; a pseudo-inverse where a system is singular."""
+    (M,), the damping scaled by (1 + tr J^T J) / 3; a pseudo-inverse where a system is singular (that row only:
+    each row's step is the one it gets alone, in any stack)."""
     A = JtJ + mu[:, None, None] * _EYE3 * (1.0 + np.trace(JtJ, axis1=1, axis2=2))[:, None, None] / 3
     try:
         return -np.linalg.solve(A, g[..., None])[..., 0]
     except np.linalg.LinAlgError:
-        return -np.einsum("mij,mj->mi", np.linalg.pinv(A), g)
+        return -np.array([_solve_or_pinv(a, b) for a, b in zip(A, g)]).reshape(g.shape)
+
+
+def _solve_or_pinv(A: np.ndarray, g: np.ndarray) -> np.ndarray:
+    """A^{-1} g for one row of :func:`damped_step` (the stacked solve's numbers), its pseudo-inverse's if singular."""
+    try:
+        return np.linalg.solve(A[None], g[None, :, None])[0, :, 0]
+    except np.linalg.LinAlgError:
+        return np.linalg.pinv(A) @ g
 
 
 def refine_points_stack(C: np.ndarray, xhat: np.ndarray, X: np.ndarray, ok: np.ndarray, *,
@@ -257,13 +266,15 @@ def lm_accept(X: np.ndarray, cost: np.ndarray, mu: np.ndarray, active: np.ndarra
     return active[~done]
 
 
-def gauss_newton_polish(C: np.ndarray, xhat: np.ndarray, X: np.ndarray, ok: np.ndarray) -> np.ndarray:
+def gauss_newton_polish(C: np.ndarray, xhat: np.ndarray, X: np.ndarray, ok: np.ndarray,
+                        scalar: bool | None = None) -> np.ndarray:
     """X (M, 3) after one undamped Gauss-Newton step on sum_i ||Phi(X, P_i) - x^_i||^2, kept only where it lowers
     the cost strictly (elsewhere X unchanged).  The Levenberg-Marquardt iteration damps every step by at least
     1e-12 (1 + tr J^T J) / 3; a direction of J^T J weaker than that (a tiny baseline: the depth, eigenvalues ~1e-13
     of the largest at zero noise) is then crossed only by halves and the step rule stops it early, at a cost far
-    above round-off.  One exact step finishes that direction; where it does not help, nothing changes."""
-    if len(X) == 1:                             # a stack of one: the scalar twin (tests/test_scalar_twins.py)
+    above round-off.  One exact step finishes that direction; where it does not help, nothing changes.  ``scalar``:
+    as in :func:`refine_points_stack` (None: a stack of one runs the scalar twin)."""
+    if (len(X) == 1) if scalar is None else scalar:     # a stack of one: the scalar twin (tests/test_scalar_twins.py)
         return _gauss_newton_one(C[0], xhat[0], X[0])[None] if ok[0] else X.copy()
     act = np.nonzero(ok)[0]
     X = X.copy()
@@ -486,13 +497,11 @@ def fundamental_stack(C: np.ndarray, pairs: tuple | None = None) -> tuple[np.nda
     Pi = C[:, I]
     a = null_vectors(C)
     with np.errstate(over="ignore", invalid="ignore"):
-        CCt = C @ np.swapaxes(C, 2, 3)
-        try:
-            inv = np.linalg.inv(CCt)
-        except np.linalg.LinAlgError:       # an exactly singular camera (points at 1e20 px) must not fail the stack
-            inv = np.linalg.pinv(np.where(np.isfinite(CCt), CCt, 0.0))
+        inv = _inverses(C @ np.swapaxes(C, 2, 3))
         pinv = np.einsum("mnij,mnjk->mnik", np.swapaxes(C, 2, 3), inv)
-        e = np.einsum("mkij,mkj->mki", Pi, a[:, J])
+        aJ = a[:, J]                        # e = P_i a_j term by term (einsum's order varies with the stack's shape)
+        e = ((Pi[..., 0] * aJ[:, :, None, 0] + Pi[..., 1] * aJ[:, :, None, 1]) + Pi[..., 2] * aJ[:, :, None, 2]) \
+            + Pi[..., 3] * aJ[:, :, None, 3]
     ex = np.zeros(e.shape + (3,))
     ex[..., 0, 1], ex[..., 0, 2], ex[..., 1, 2] = -e[..., 2], e[..., 1], -e[..., 0]
     ex[..., 1, 0], ex[..., 2, 0], ex[..., 2, 1] = e[..., 2], -e[..., 1], e[..., 0]
@@ -502,6 +511,24 @@ def fundamental_stack(C: np.ndarray, pairs: tuple | None = None) -> tuple[np.nda
     defined = distinct_centres(c[:, I], c[:, J]) & np.isfinite(nrm) & (nrm > 0)
     F = np.where(defined[..., None, None], F / np.where(nrm > 0, nrm, 1.0)[..., None, None], 0.0)
     return F, defined
+
+
+def _inverses(A: np.ndarray) -> np.ndarray:
+    """The inverses of a stack of square matrices (..., n, n); where one is exactly singular (a camera of points at
+    1e20 px), that one's pseudo-inverse (non-finite entries read as 0) and the others' inverses as they are: each
+    matrix's numbers do not depend on the rest of its stack (review 19 F4)."""
+    try:
+        return np.linalg.inv(A)
+    except np.linalg.LinAlgError:
+        flat = A.reshape((-1,) + A.shape[-2:])
+        return np.array([_inverse_or_pinv(a) for a in flat]).reshape(A.shape)
+
+
+def _inverse_or_pinv(a: np.ndarray) -> np.ndarray:
+    try:
+        return np.linalg.inv(a[None])[0]
+    except np.linalg.LinAlgError:
+        return np.linalg.pinv(np.where(np.isfinite(a), a, 0.0))
 
 
 def epipolar_quadratics(F: np.ndarray, N: int, pairs: tuple | None = None):

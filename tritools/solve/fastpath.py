@@ -172,8 +172,9 @@ def verify_checked(C: np.ndarray, x: np.ndarray, ok: np.ndarray, tolerances: Tol
     Xn = norm.Xn.copy()
     polish = ~norm.converged                # the normalisation's refinement converged elsewhere
     if polish.any():
-        Xn[polish], ok[polish] = refine_points_stack(Cn[polish], xhat[polish], norm.Xn[polish], ok[polish])
-    Xn = gauss_newton_polish(Cn, xhat, Xn, ok)      # a weak direction the damped LM left (tiny baselines)
+        Xn[polish], ok[polish] = refine_points_stack(Cn[polish], xhat[polish], norm.Xn[polish], ok[polish],
+                                                     scalar=False)
+    Xn = gauss_newton_polish(Cn, xhat, Xn, ok, scalar=False)     # a weak direction the damped LM left (tiny baselines)
     u, _, fin = project_stack(Cn, Xn)
     ok &= fin
     v = np.where(ok[:, None], u.reshape(M, -1), 0.0)

@@ -37,7 +37,7 @@ from ..model.regions import Point
 from ..result import Status
 from .coplanar import (CEILING_MIN_VIEWS, COPLANAR_BUDGET_NAME, COPLANAR_MAX_CEILING, hopeless_subset,
                        plane_distances2, sits_on_ceiling, subset_futile)
-from .fastpath import verify_points
+from .fastpath import stack_point_problems, verify_checked
 from .robust_subsolve import EXHAUSTED, ROUND_DOWN, TRUSTED_LOWER_BOUND, solve_subproblem
 from .robust_verify import parent_frames, verify_in_parent
 from .sdp_batch import solve_corollary1_points
@@ -475,8 +475,11 @@ def _packed(items: list) -> list:
 
 
 def _verify_stack(C, x, opts, deadline=None):
-    """(decided (M,), gamma_lb, X, certified (M,)) of the vectorised verification: certified problems only."""
-    b = verify_points(C, x, tolerances=opts.tolerances, deadline=deadline)
+    """(decided (M,), gamma_lb, X, certified (M,)) of the vectorised verification: certified problems only.  By
+    the stacked code however many sub-problems the round has (a search's numbers then do not depend on the other
+    searches of its batch, review 19 F4)."""
+    C, x, good = stack_point_problems(C, x, "verify_points")
+    b = verify_checked(C, x, good, opts.tolerances, deadline=deadline, scalar=False)
     ok = b.certified & np.isfinite(b.gamma_lb)
     return ok, b.gamma_lb, b.X, ok
 
@@ -486,7 +489,8 @@ def _sdp_stack(C, x, opts, deadline=None):
     (:func:`tritools.solve.sdp_batch.solve_corollary1_points`): its rigorous lower bound wherever it decided the
     problem, certified or not (an uncertified one is marked weak: :meth:`SubsetBounds.strengthen` may solve it
     with the full degree plan where the search needs it)."""
-    b = solve_corollary1_points(C, x, tolerances=opts.tolerances, refine=opts.refine, deadline=deadline)
+    b = solve_corollary1_points(C, x, tolerances=opts.tolerances, refine=opts.refine, deadline=deadline,
+                                scalar=False)
     kernel = _kernel_hand_backs(b)
     X = np.where(kernel[:, None], np.nan, b.X)          # no estimate from a point the extraction did not give
     return (b.done | kernel) & np.isfinite(b.gamma_lb), b.gamma_lb, X, b.optimal & b.done

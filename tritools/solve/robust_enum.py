@@ -258,9 +258,12 @@ def enum_frames(C: np.ndarray, x: np.ndarray) -> tuple:
 
 def _polish(Cm: np.ndarray, X: np.ndarray, steps: int) -> np.ndarray:
     """At most ``steps`` Levenberg-Marquardt steps on sum_i ||Phi(X, P_i)||^2 for a stack of masked cameras
-    Cm (M, N, 3, 4) (observations at the origin), a step kept where it does not raise the cost; stops once no
-    row's cost moves by POLISH_RTOL of it.  Any candidate gives a valid bound: this only tightens it."""
+    Cm (M, N, 3, 4) (observations at the origin), a step kept where it does not raise the cost; a row stops once its
+    cost moves by at most POLISH_RTOL of it (each row on its own: a row's candidate does not depend on the other rows
+    of its stack, so a problem gets the same numbers in any batch, review 19 F4).  Any candidate gives a valid bound:
+    this only tightens it."""
     mu = np.full(len(X), 1e-3)
+    active = np.ones(len(X), bool)
     with np.errstate(all="ignore"):
         absC2 = np.abs(Cm[:, :, 2, :])
         u, h, fin = project_quiet(Cm, X, absC2)
@@ -274,10 +277,10 @@ def _polish(Cm: np.ndarray, X: np.ndarray, steps: int) -> np.ndarray:
             Xt = X + np.where(np.isfinite(step), step, 0.0)
             ut, ht, fint = project_quiet(Cm, Xt, absC2)
             ct = np.where(fint, np.sum(ut * ut, axis=(1, 2)), np.inf)
-            better = ct <= cost
-            settled = np.all(np.isfinite(cost) & (np.abs(ct - cost) <= POLISH_RTOL * cost))
+            better = active & (ct <= cost)
             X = np.where(better[:, None], Xt, X)
-            if settled or step_no == steps - 1:         # (the last step: its state is not read again)
+            active &= ~(np.isfinite(cost) & (np.abs(ct - cost) <= POLISH_RTOL * cost))
+            if not active.any() or step_no == steps - 1:    # (the last step: its state is not read again)
                 break
             u, h = np.where(better[:, None, None], ut, u), np.where(better[:, None, None], ht, h)
             cost = np.where(better, ct, cost)
@@ -310,19 +313,21 @@ def enum_candidates(Cn: np.ndarray, W: np.ndarray, steps: int | None = None, by_
     return out
 
 
-def refine_rows(Cn: np.ndarray, X0: np.ndarray, inS: np.ndarray) -> tuple:
+def refine_rows(Cn: np.ndarray, X0: np.ndarray, inS: np.ndarray, scalar: bool | None = None) -> tuple:
     """(Xn (R, 3), ok (R,)): normalised candidates X0 (R, 3) refined to convergence on their inlier sets ``inS``
     (R, N) by :func:`tritools.model.stacked.refine_points_stack` and one Gauss-Newton step (a row's few polish
     steps leave the L2 optimum of a set short by ~1e-6 in X, though not in f; the step finishes a weak direction
     the damped LM left, tiny baselines), the views outside the set masked; Cn (R, N, 3, 4) each row's normalised
-    cameras (observations at the origin).  A stack of one row (a single call): :func:`refine_row_one`."""
-    if len(X0) == 1:
+    cameras (observations at the origin).  A stack of one row (a single call): :func:`refine_row_one`; ``scalar``
+    False: the stacked code for any number of rows (a batch: each row's numbers then do not depend on how many rows
+    its stack has, review 19 F4; the twins agree only up to round-off)."""
+    if (len(X0) == 1) if scalar is None else scalar:
         Xn, ok = refine_row_one(Cn[0], X0[0], np.flatnonzero(inS[0]).tolist())
         return Xn[None], np.array([ok])
     Cm = np.where(inS[:, :, None, None], Cn, MASKED_CAMERA)
     zeros = np.zeros(inS.shape + (2,))
-    Xn, ok = refine_points_stack(Cm, zeros, X0, np.ones(len(X0), bool))
-    Xn = gauss_newton_polish(Cm, zeros, Xn, ok)
+    Xn, ok = refine_points_stack(Cm, zeros, X0, np.ones(len(X0), bool), scalar=False)
+    Xn = gauss_newton_polish(Cm, zeros, Xn, ok, scalar=False)
     return Xn, ok & np.isfinite(Xn).all(axis=1)
 
 

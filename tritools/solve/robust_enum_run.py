@@ -389,7 +389,7 @@ class _Group:
         pp, mm = np.nonzero(rows)
         if not pp.size:
             return
-        Xr, ok = _by_rows(enum.refine_rows, len(pp), self.Cn[pp], self.Xn[pp, mm], self.W[mm])
+        Xr, ok = _by_rows(self._refine_rows, len(pp), self.Cn[pp], self.Xn[pp, mm], self.W[mm])
         pp, mm, Xr = pp[ok], mm[ok], Xr[ok]
         if not pp.size:
             return
@@ -489,8 +489,13 @@ class _Group:
         for r, (_, _, S) in enumerate(picks):
             inS[r, S] = True
         X0 = np.array([self.frames[p].normalized_point(X) for p, X, _ in picks])
-        Xn, ok = enum.refine_rows(self.Cn[P], X0, inS)
+        Xn, ok = self._refine_rows(self.Cn[P], X0, inS)
         return {int(p): Xn[r] for r, p in enumerate(P) if ok[r]}
+
+    def _refine_rows(self, Cn: np.ndarray, X0: np.ndarray, inS: np.ndarray) -> tuple:
+        """:func:`~.robust_enum.refine_rows`, by its stacked code in a batch however many rows there are (a problem
+        then gets the same numbers in any batch), by the scalar twin for a single call's row."""
+        return enum.refine_rows(Cn, X0, inS, scalar=None if not self.staged else False)
 
     def _bound(self, rows: np.ndarray) -> None:
         """The Lagrangian bounds of the rows (P, M) not bounded yet (one stacked verification,

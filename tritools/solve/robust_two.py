@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import robust_enum as enum
 from .robust_costs import point_distances2_stack
 from .robust_rays import best_ray_samples, ray_samples_stack
 
@@ -54,7 +53,7 @@ def _refine_both_views(group, P: np.ndarray) -> None:
     P = np.array([p for p in P[group.has[P, row]] if full not in group.refined[p]], int)
     if not P.size:
         return
-    Xr, ok = enum.refine_rows(group.Cn[P], group.Xn[P, row], np.broadcast_to(group.W[row], (len(P), group.N)))
+    Xr, ok = group._refine_rows(group.Cn[P], group.Xn[P, row], np.broadcast_to(group.W[row], (len(P), group.N)))
     P, Xr = P[ok], Xr[ok]
     for p in P:
         group.refined[p].add(full)

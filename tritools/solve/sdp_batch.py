@@ -101,15 +101,18 @@ def _hand_back(ok: np.ndarray, bad: np.ndarray, reason: list, why) -> None:
 
 @with_single_threaded_blas
 def solve_corollary1_points(cameras, points2d, *, tolerances: Tolerances = DEFAULT_TOLERANCES,
-                            refine: bool = True, deadline: Deadline | None = None) -> SdpBatch:
+                            refine: bool = True, deadline: Deadline | None = None,
+                            scalar: bool | None = None) -> SdpBatch:
     """The delta = 2 SDP path (module docstring) for M point problems with N views: cameras (M, N, 3, 4)
-    in pixels, points2d (M, N, 2) the point regions' centres."""
+    in pixels, points2d (M, N, 2) the point regions' centres.  ``scalar``: as in
+    :func:`tritools.model.stacked.refine_points_stack` (None: a stack of one normalised and refined by the scalar
+    twins; False: the stacked code, so a problem's numbers do not depend on the other rows of its stack)."""
     C, x, ok = stack_point_problems(cameras, points2d, "solve_corollary1_points")
     M, N = x.shape[:2]
     if expired(deadline):                       # nothing started past the deadline (the epipolar data: ~0.4 s at
         return _handed_back(C, x, ["time limit reached before the batched SDP"] * M)    # 6 x 100 views)
     reason = ["" if k else "invalid or degenerate data" for k in ok]
-    norm = normalization_stack(C, x, ok)
+    norm = normalization_stack(C, x, ok, scalar=scalar)
     Cn = norm.cameras_n
     F, defined = fundamental_stack(Cn)
     defined &= fundamental_stack(C)[1]          # one centre or not: decided on the raw cameras
@@ -120,7 +123,7 @@ def solve_corollary1_points(cameras, points2d, *, tolerances: Tolerances = DEFAU
         return _handed_back(C, x, reason)
     c_lb, lam, V, gram_error, iters, comp = solved
     X_raw_n, xn = _extract(V, lam, Cn, ok, reason, tolerances)
-    X_n, g_n = _refined(Cn, X_raw_n, ok, refine)
+    X_n, g_n = _refined(Cn, X_raw_n, ok, refine, scalar)
     c_ub = 2 * N * g_n ** 2
     # rigorous bound (sospoly.analysis.rigor): the observed points are the origin, so f(v) = ||v||^2 and a
     # minimiser has ||v*||^2 = f(v*) <= c_ub; the basis is b = (1, v) (||b||^2 <= 1 + c_ub) and q = 1 (degree 2)
@@ -203,14 +206,14 @@ def _gamma_n(Cn, X, usable) -> np.ndarray:
     return np.where(fin & usable, gamma_from_c(np.sum(u ** 2, axis=(1, 2)), Cn.shape[1], 1.0), np.inf)
 
 
-def _refined(Cn, X_raw_n, ok, refine: bool):
+def _refined(Cn, X_raw_n, ok, refine: bool, scalar: bool | None = None):
     """(X_n, gamma_n): the extracted points, replaced by their Levenberg-Marquardt refinement where better."""
     M, N = Cn.shape[:2]
     g_raw = _gamma_n(Cn, X_raw_n, np.ones(M, bool))
     ok &= np.isfinite(g_raw)
     X_n, g_n = X_raw_n.copy(), g_raw.copy()
     if refine:
-        Xr, okr = refine_points_stack(Cn, np.zeros((M, N, 2)), X_raw_n, ok.copy())
+        Xr, okr = refine_points_stack(Cn, np.zeros((M, N, 2)), X_raw_n, ok.copy(), scalar=scalar)
         gr = _gamma_n(Cn, Xr, okr)
         better = gr < g_n
         X_n[better], g_n[better] = Xr[better], gr[better]

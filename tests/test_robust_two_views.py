@@ -186,3 +186,34 @@ def test_trusted_view_near_the_epipole_in_a_georeferenced_world():
         assert res.optimal, res.message
         assert res.inliers.tolist() == [True, True] and np.isfinite(res.gamma_ub)
         _check(res, P, x, c, f_ref)
+
+
+#: review 19 F3: a tiny baseline 1e6 from the origin (cameras scaled ~1e3, c = [3, 50]): the search works in a
+#: re-centred frame, and rounding its estimate to the world's float grid moves f_TLS by 2e-7 relative; that drift was
+#: read as lost digits and the enumeration refused what the branch and bound certified
+F3_P = np.array([[[1.7668730131194465e+02, -6.9639156671806029e+02, 4.7562630642035299e+02, -1.8072835879582417e+09],
+                  [7.4831521701761551e+02, 2.6018620797896335e+02, 2.6443803273622825e+02, -3.6016181742780298e+08],
+                  [-8.9710290619407176e-02, 1.8599368613125183e-01, 9.7844693901932711e-01, -2.7525806627752696e+04]],
+                 [[-2.3089095801455130e+02, -7.1877118951078967e+02, 4.1527983653961257e+02, -1.4142913391393421e+09],
+                  [7.5591861284527977e+02, -1.6921774803245418e+02, 3.1233380301352736e+02, -1.2505210109810760e+09],
+                  [-5.8360574819665043e-02, 1.4426721100814782e-01, 9.8781628612543582e-01, -1.4701314637518543e+05]]])
+F3_X = np.array([[323.49916868887743, 243.0434922856761], [296.30592434039806, 213.40884151978676]])
+
+
+def test_rounding_drift_of_a_recentred_estimate_is_not_lost_digits():
+    """The drift that the estimate's own rounding explains (robust_report.rounding_drift) is accepted: certified,
+    single and batch, with bounds around the Hartley-Sturm optimum (both views inliers: f* = L2*)."""
+    from tritools.solve.robust_report import drift_within, rounding_drift
+
+    c = np.array([3.0, 50.0])
+    f_ref = hartley_sturm(F3_P[0], F3_P[1], F3_X[0], F3_X[1])[1]
+    for r in (tritools.triangulate(F3_P, F3_X, robust=c),
+              tritools.triangulate_many([(F3_P, F3_X)], robust=[c], progress=False)[0]):
+        assert r.optimal, r.message
+        assert 4 * r.gamma_lb ** 2 <= f_ref * (1 + 1e-12) and 4 * r.gamma_ub ** 2 >= f_ref * (1 - 1e-12)
+        assert r.inliers.all()
+    tol = tritools.TriangulationOptions().tolerances
+    assert rounding_drift(1.0, 0.0, 2) == 0.0 and rounding_drift(np.inf, 1e-9, 2) == 0.0
+    explained = rounding_drift(1.58, 1e-8, 2)
+    assert drift_within(1.0, 0.9 * explained, 2, tol, 0.0, explained)
+    assert not drift_within(1.0, 1.1 * explained, 2, tol, 0.0, explained)      # more than the rounding: lost digits

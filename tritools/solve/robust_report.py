@@ -120,7 +120,7 @@ def _checked(g_ub: float, spread: float, resolution: float, N: int, c: np.ndarra
         holds, g_lb = False, 0.0
         reason = "the estimate's own rounding moves its projections by more than the coordinates' resolution " \
                  f"({resolution:.3g} px): the float data cannot certify this optimum"
-    elif not drift_within(drift, d_abs, N, tolerances, resolved):
+    elif not drift_within(drift, d_abs, N, tolerances, resolved, rounding_drift(f_ub, spread, N)):
         holds, g_lb = False, 0.0
         reason = f"the search's own value at its estimate differs from the compensated one by {drift:.2g} " \
                  "(relative): its arithmetic lost digits to cancellation (a georeferenced or rescaled frame), so its " \
@@ -201,15 +201,35 @@ def _compensated_f(res: np.ndarray, c: np.ndarray, f_search: float | None) -> fl
     return f_comp if math.isfinite(f_comp) else None
 
 
-def drift_within(drift: float, d_abs: float, N: int, tolerances, resolved: float) -> bool:
-    """Are the search's bounds trusted: its drift (:func:`search_drift`) within ``SEARCH_DRIFT_REL`` gap_rel, or its
+def drift_within(drift: float, d_abs: float, N: int, tolerances, resolved: float, explained: float = 0.0) -> bool:
+    """Are the search's bounds trusted: its drift (:func:`search_drift`) within ``SEARCH_DRIFT_REL`` gap_rel, its
     absolute drift ``d_abs`` (pixels^2) worth at most ``SEARCH_DRIFT_REL`` of the report's resolution ``resolved``
-    in gamma, sqrt(d_abs / 2N).  The relative test alone refused every optimum near 0 (a noise-free track in a
-    georeferenced world: two values ~1e-17 px^2 differing by 100%, review 11 F1); the reported gamma_LB is lowered by
-    ``d_abs`` either way (:func:`_checked`)."""
-    if drift <= SEARCH_DRIFT_REL * tolerances.gap_rel:
+    in gamma, sqrt(d_abs / 2N), or within what the estimate's own rounding ``explained`` (:func:`rounding_drift`).
+    The relative test alone refused every optimum near 0 (a noise-free track in a georeferenced world: two values
+    ~1e-17 px^2 differing by 100%, review 11 F1); the reported gamma_LB is lowered by ``d_abs`` either way
+    (:func:`_checked`)."""
+    if drift <= SEARCH_DRIFT_REL * tolerances.gap_rel or d_abs <= explained:
         return True
     return math.isfinite(d_abs) and math.sqrt(d_abs / (2.0 * N)) <= SEARCH_DRIFT_REL * resolved
+
+
+def rounding_drift(f: float, spread: float, N: int) -> float:
+    """How far (pixels^2) f_TLS can move between the search's estimate and its float rounding in the caller's frame
+    (a search in a re-centred frame rounds origin + X' to the world's float grid, review 19 F3: a tiny baseline 1e6
+    from the origin moved f by 2e-7 relative), with the search's own plain arithmetic, equivalent to moving X~ by a
+    few units in the last place: each coordinate moves by at most ``ROUNDING_ULPS`` ulps, so each projection by at
+    most ROUNDING_ULPS m_i (m_i its largest move per ulp, sqrt(sum m_i^2 / 2N) the rounding ``spread``), and
+    |sum_i (d_i + delta_i)^2 - d_i^2| <= 2 sqrt(f) ||delta|| + ||delta||^2 with ||delta|| <= 3 ROUNDING_ULPS
+    sqrt(2N) spread (three coordinates; truncation at c_i is 1-Lipschitz in d_i^2).  0 where either is not finite."""
+    if not (math.isfinite(f) and math.isfinite(spread)):
+        return 0.0
+    move = 3.0 * ROUNDING_ULPS * math.sqrt(2.0 * N) * spread
+    return 2.0 * math.sqrt(max(f, 0.0)) * move + move * move
+
+
+#: units in the last place that the rounding of a re-centred estimate (1/2) and the search's plain arithmetic on
+#: X~ (the dot products' backward error, 4 u |x_k| each, ~2 ulps) move a coordinate by, with room: 4
+ROUNDING_ULPS = 4.0
 
 
 def threshold_resolution(c: np.ndarray, N: int, tolerances) -> float:

@@ -9,7 +9,8 @@ import numpy as np
 
 import tritools
 from tritools.model.stacked import damped_step, fundamental_stack
-from tritools.solve.robust_enum import _polish, enum_candidates, subset_masks
+from tritools.solve.robust_enum import enum_candidates, subset_masks
+from tritools.solve.robust_verify import polish_rows
 
 #: the reviewer's case 4:492 (tiny baseline, world +1e6, pixels x 1e-3, c = [5e-4, 0.1]) and two neighbours: 472
 #: (cameras whose normalisation is undefined) and 473 (an ordinary wrong match)
@@ -70,8 +71,8 @@ def test_polish_rows_are_independent_of_their_stack():
         assert stack[r].tobytes() == alone[0].tobytes(), r
     X0 = rng.normal(size=(len(rows), 3))
     Cm = np.where(W[:len(rows), :, None, None], Cn[rows], 0.0)
-    both = _polish(Cm, X0, 8)
-    assert all(both[r].tobytes() == _polish(Cm[r:r + 1], X0[r:r + 1], 8)[0].tobytes() for r in range(len(rows)))
+    both = polish_rows(Cm, X0, 8)
+    assert all(both[r].tobytes() == polish_rows(Cm[r:r + 1], X0[r:r + 1], 8)[0].tobytes() for r in range(len(rows)))
 
 
 def test_a_singular_row_does_not_change_the_others():

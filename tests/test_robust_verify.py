@@ -202,17 +202,17 @@ def test_split_bound_replaces_the_whole_problem_solve(k, monkeypatch):
 
 
 def test_polish_early_stop_reaches_the_local_minimum():
-    """_polish stops once no row's cost moves by 1e-13 of it: from warm starts it ends at the local minimum that
+    """polish_rows stops a row once its's cost moves by 1e-13 of it: from warm starts it ends at the local minimum that
     scipy's Levenberg-Marquardt reaches from the same start (cost within 1e-9), with a stack of rows that
     converge at different speeds (clean tracks and tracks with a wrong match)."""
-    from tritools.solve.robust_verify import _cost, _polish
+    from tritools.solve.robust_verify import _cost, polish_rows
 
     rng = np.random.default_rng(11)
     scenes = [robust_protocol_scene(4, k % 2, 1.0, rng) for k in range(6)]
     frames = parent_frames(np.array([P for P, *_ in scenes]), np.array([x for _, x, *_ in scenes]))
     Cn = np.array([f.cameras_n for f in frames])
     X0 = np.array([f.Xn for f in frames]) + 1e-3 * rng.normal(size=(6, 3))
-    got = _cost(Cn, _polish(Cn, X0, 50))
+    got = _cost(Cn, polish_rows(Cn, X0, 50))
     for m in range(6):
         def res(X, m=m):
             h = Cn[m] @ np.append(X, 1.0)
@@ -220,4 +220,4 @@ def test_polish_early_stop_reaches_the_local_minimum():
 
         ref = least_squares(res, X0[m], method="lm", xtol=1e-15, ftol=1e-15, gtol=1e-15)
         assert got[m] <= 2 * ref.cost * (1 + 1e-9) + 1e-300
-    assert np.all(_cost(Cn, _polish(Cn, X0, 6)) <= _cost(Cn, X0))
+    assert np.all(_cost(Cn, polish_rows(Cn, X0, 6)) <= _cost(Cn, X0))

@@ -61,10 +61,11 @@ from ..model.cameras import power2_scale
 from ..model.exact import dot2, homogeneous_images
 from ..model.lm_one import refine_point_one
 from ..model.normalize import RHO_FLOOR_REL, SCALE_BOUNDS, Normalization
-from ..model.stacked import (damped_step, dlt_stack, epipolar_quadratics, fundamental_stack, gauss_newton_polish,
-                             median_rows, next_damping, norms, null_vectors, pixel_scales, project_quiet, project_stack,
+from ..model.stacked import (dlt_stack, epipolar_quadratics, fundamental_stack, gauss_newton_polish,
+                             median_rows, norms, null_vectors, pixel_scales, project_stack,
                              refine_points_stack, view_pairs)
 from .robust_bounds import ROUND_DOWN
+from .robust_verify import polish_rows
 
 __all__ = ["enum_frame", "enum_frame_one", "enum_frames", "subset_masks", "closure", "enum_candidates", "enum_bounds",
            "enum_bounds_rows", "fundamentals", "row_of", "subset_of", "refine_rows", "refine_row_one", "ascended_bound",
@@ -85,8 +86,6 @@ CLOSURE_CHUNK = 16
 MASKED_CAMERA = np.array([[0.0, 0.0, 0.0, 0.0], [0.0, 0.0, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0]])
 #: the result's message says this when the enumeration decided it.
 ENUMERATED = "every inlier set enumerated"
-#: :func:`_polish` stops when no row's cost changes by more than this fraction in a step.
-POLISH_RTOL = 1e-13
 
 
 @functools.lru_cache(maxsize=16)
@@ -256,38 +255,6 @@ def enum_frames(C: np.ndarray, x: np.ndarray) -> tuple:
     return frames, Cn
 
 
-def _polish(Cm: np.ndarray, X: np.ndarray, steps: int) -> np.ndarray:
-    """At most ``steps`` Levenberg-Marquardt steps on sum_i ||Phi(X, P_i)||^2 for a stack of masked cameras
-    Cm (M, N, 3, 4) (observations at the origin), a step kept where it does not raise the cost; a row stops once its
-    cost moves by at most POLISH_RTOL of it (each row on its own: a row's candidate does not depend on the other rows
-    of its stack, so a problem gets the same numbers in any batch, review 19 F4).  Any candidate gives a valid bound:
-    this only tightens it."""
-    mu = np.full(len(X), 1e-3)
-    active = np.ones(len(X), bool)
-    with np.errstate(all="ignore"):
-        absC2 = np.abs(Cm[:, :, 2, :])
-        u, h, fin = project_quiet(Cm, X, absC2)
-        cost = np.where(fin, np.sum(u * u, axis=(1, 2)), np.inf)
-        for step_no in range(steps):
-            den = np.where(h[..., 2] == 0, 1.0, h[..., 2])
-            J = ((Cm[..., :2, :3] - u[..., None] * Cm[..., 2:3, :3]) / den[..., None, None]).reshape(len(X), -1, 3)
-            r = u.reshape(len(X), -1)
-            Jt = np.swapaxes(J, 1, 2)                      # (batched matmul: ~3x faster than einsum here)
-            step = damped_step(Jt @ J, (Jt @ r[..., None])[..., 0], mu)
-            Xt = X + np.where(np.isfinite(step), step, 0.0)
-            ut, ht, fint = project_quiet(Cm, Xt, absC2)
-            ct = np.where(fint, np.sum(ut * ut, axis=(1, 2)), np.inf)
-            better = active & (ct <= cost)
-            X = np.where(better[:, None], Xt, X)
-            active &= ~(np.isfinite(cost) & (np.abs(ct - cost) <= POLISH_RTOL * cost))
-            if not active.any() or step_no == steps - 1:    # (the last step: its state is not read again)
-                break
-            u, h = np.where(better[:, None, None], ut, u), np.where(better[:, None, None], ht, h)
-            cost = np.where(better, ct, cost)
-            mu = next_damping(mu, better)
-    return X
-
-
 def enum_candidates(Cn: np.ndarray, W: np.ndarray, steps: int | None = None, by_size: bool = False) -> np.ndarray:
     """Normalised candidates Xn (M, 3) (NaN where not finite) of the subsets ``W`` (M, N) of the views of the
     normalised cameras Cn ((N, 3, 4) shared by every row, or (M, N, 3, 4): each row its own problem's): the DLT of
@@ -299,7 +266,7 @@ def enum_candidates(Cn: np.ndarray, W: np.ndarray, steps: int | None = None, by_
     if not by_size:
         Cm = np.where(W[:, :, None, None], Cn, MASKED_CAMERA)
         X0, ok = dlt_stack(Cm, np.zeros((M, N, 2)))
-        Xn = _polish(Cm, np.where(ok[:, None] & np.isfinite(X0), X0, 0.0), steps)
+        Xn = polish_rows(Cm, np.where(ok[:, None] & np.isfinite(X0), X0, 0.0), steps)
         return np.where(np.isfinite(Xn).all(axis=1)[:, None], Xn, np.nan)
     Cb = np.broadcast_to(Cn, (M,) + Cn.shape[-3:])
     size = W.sum(axis=1)
@@ -308,7 +275,7 @@ def enum_candidates(Cn: np.ndarray, W: np.ndarray, steps: int | None = None, by_
         r = np.nonzero(size == k)[0]        # DLT row, residual and Jacobian (module docstring), so this is the
         Cm = Cb[r[:, None], np.nonzero(W[r])[1].reshape(len(r), k)]     # masked stack's program at k / N the cost
         X0, ok = dlt_stack(Cm, np.zeros((len(r), k, 2)))
-        Xn = _polish(Cm, np.where(ok[:, None] & np.isfinite(X0), X0, 0.0), steps)
+        Xn = polish_rows(Cm, np.where(ok[:, None] & np.isfinite(X0), X0, 0.0), steps)
         out[r] = np.where(np.isfinite(Xn).all(axis=1)[:, None], Xn, np.nan)
     return out
 

@@ -37,7 +37,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..model.normalize import normalization_stack
-from ..model.stacked import damped_step, dlt_stack, next_damping, project_stack
+from ..model.stacked import damped_step, dlt_stack, next_damping, project_quiet, project_stack
 from .fastpath import all_pairs_seconds, lagrangian_bounds
 
 __all__ = ["ParentFrame", "parent_frames", "frames_of", "verify_in_parent", "LM_STEPS", "LM_MORE"]
@@ -56,7 +56,7 @@ FIRST_SUBSET_SECONDS = 2e-4
 LM_STEPS = 6
 #: further steps for the view pairs whose first bound was not accepted.
 LM_MORE = 24
-#: :func:`_polish` stops when no row's cost changes by more than this fraction in a step.
+#: :func:`polish_rows` stops a row once a step changes its cost by at most this fraction of it.
 POLISH_RTOL = 1e-13
 #: a bound is rounded down by this factor (one division by s^2 on top of the certificate's own margin).
 _ROUND_DOWN = 1.0 - 1e-12
@@ -102,28 +102,33 @@ def _cost(Cn: np.ndarray, X: np.ndarray) -> np.ndarray:
     return np.where(fin, np.sum(u * u, axis=(1, 2)), np.inf)
 
 
-def _polish(Cn: np.ndarray, X: np.ndarray, steps: int) -> np.ndarray:
-    """At most ``steps`` Levenberg-Marquardt steps on sum_i ||Phi(X, P'_i)||^2 (observed points at the origin),
-    a step kept only where it lowers the cost; stops early once no row's trial step changes its cost by more
-    than :data:`POLISH_RTOL` of it (a warm start is usually there after 2-3 steps: the remaining steps would
-    move the candidate by round-off, and any candidate gives a valid bound)."""
+def polish_rows(Cm: np.ndarray, X: np.ndarray, steps: int) -> np.ndarray:
+    """At most ``steps`` Levenberg-Marquardt steps on sum_i ||Phi(X, P_i)||^2 for a stack of masked cameras
+    Cm (M, N, 3, 4) (observations at the origin; masked views all zero), a step kept where it does not raise the cost;
+    a row stops once its
+    cost moves by at most POLISH_RTOL of it (each row on its own: a row's candidate does not depend on the other rows
+    of its stack, so a problem gets the same numbers in any batch, review 19 F4).  Any candidate gives a valid bound:
+    this only tightens it."""
     mu = np.full(len(X), 1e-3)
+    active = np.ones(len(X), bool)
     with np.errstate(all="ignore"):
-        u, h, fin = project_stack(Cn, X)
+        absC2 = np.abs(Cm[:, :, 2, :])
+        u, h, fin = project_quiet(Cm, X, absC2)
         cost = np.where(fin, np.sum(u * u, axis=(1, 2)), np.inf)
-        for _ in range(steps):
-            J = (Cn[..., :2, :3] - u[..., None] * Cn[..., 2:3, :3]) / h[..., 2][..., None, None]
-            J = J.reshape(len(X), -1, 3)
+        for step_no in range(steps):
+            den = np.where(h[..., 2] == 0, 1.0, h[..., 2])
+            J = ((Cm[..., :2, :3] - u[..., None] * Cm[..., 2:3, :3]) / den[..., None, None]).reshape(len(X), -1, 3)
             r = u.reshape(len(X), -1)
-            step = damped_step(np.einsum("mki,mkj->mij", J, J), np.einsum("mki,mk->mi", J, r), mu)
+            Jt = np.swapaxes(J, 1, 2)                      # (batched matmul: ~3x faster than einsum here)
+            step = damped_step(Jt @ J, (Jt @ r[..., None])[..., 0], mu)
             Xt = X + np.where(np.isfinite(step), step, 0.0)
-            ut, ht, fint = project_stack(Cn, Xt)
+            ut, ht, fint = project_quiet(Cm, Xt, absC2)
             ct = np.where(fint, np.sum(ut * ut, axis=(1, 2)), np.inf)
-            better = ct <= cost
-            if np.all(np.isfinite(cost) & (np.abs(ct - cost) <= POLISH_RTOL * cost)):
-                X = np.where(better[:, None], Xt, X)
-                break
+            better = active & (ct <= cost)
             X = np.where(better[:, None], Xt, X)
+            active &= ~(np.isfinite(cost) & (np.abs(ct - cost) <= POLISH_RTOL * cost))
+            if not active.any() or step_no == steps - 1:    # (the last step: its state is not read again)
+                break
             u, h = np.where(better[:, None, None], ut, u), np.where(better[:, None, None], ht, h)
             cost = np.where(better, ct, cost)
             mu = next_damping(mu, better)
@@ -174,11 +179,11 @@ def _verify(C, frames, subsets, estimates, tolerances, enough, deadline) -> tupl
     res = np.array([f.resolution for f in frames])
     s2 = np.array([f.scale for f in frames]) ** 2
     enough = np.full(M, np.inf) if enough is None else np.asarray(enough, float)
-    Xn = _polish(Cn, _starts(frames, subsets, Cn, estimates), LM_STEPS)
+    Xn = polish_rows(Cn, _starts(frames, subsets, Cn, estimates), LM_STEPS)
     good, lb = _bounds(Craw, Cn, Xn, res, s2, enough, tolerances, deadline)
     again = np.nonzero(~good & np.isfinite(Xn).all(axis=1))[0]
     if again.size and len(subsets[0]) == 2:
-        Xn[again] = _polish(Cn[again], Xn[again], LM_MORE)
+        Xn[again] = polish_rows(Cn[again], Xn[again], LM_MORE)
         good[again], lb[again] = _bounds(Craw[again], Cn[again], Xn[again], res[again], s2[again], enough[again],
                                          tolerances, deadline)
     X = np.array([f.origin for f in frames]) + np.array([f.depth for f in frames])[:, None] * Xn

@@ -366,7 +366,7 @@ def _enumerated_then_searched(searches: list) -> list:
         _normalization_scales(group)
         normalised.update(map(id, group))
 
-    results = enumerate_many(searches, scales=scales, max_views=BATCH_ENUM_MAX_VIEWS)
+    results = enumerate_many(searches, scales=scales, max_views=BATCH_ENUM_MAX_VIEWS, staged=True)
     left = [k for k, r in enumerate(results) if r is None]
     _normalization_scales([searches[k] for k in left if id(searches[k]) not in normalised])
     for k, r in zip(left, drive([searches[k] for k in left]) if left else []):
@@ -386,7 +386,7 @@ def _normalization_scales(searches) -> None:
         if s.points:
             groups.setdefault(s.N, []).append(s)
     for group in groups.values():
-        st = normalization_stack(np.stack([s.C for s in group]), np.stack([s.x for s in group]))
+        st = normalization_stack(np.stack([s.C for s in group]), np.stack([s.x for s in group]), scalar=False)
         for k, (s, frame) in enumerate(zip(group, frames_of(st))):
             s.set_normalization_scale(float(st.scale[k]) if st.ok[k] else 1.0)
             s.bounds.set_frame(frame)           # the sub-problems are verified in this frame (.robust_verify)

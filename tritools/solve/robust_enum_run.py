@@ -97,11 +97,12 @@ def enumerate_tls(search):
     return enumerate_many([search])[0]
 
 
-def enumerate_many(searches: list, scales=None, max_views: int | None = None) -> list:
+def enumerate_many(searches: list, scales=None, max_views: int | None = None, staged: bool | None = None) -> list:
     """A result or None per search (module docstring), in input order; searches that are not :func:`eligible` (up
     to ``max_views`` views; None: ENUM_MAX_VIEWS) get None.  ``scales(list of searches)``: sets the documented
     decision scale of the searches that need it (a batch: one normalisation stack); None: each search computes its
-    own when asked."""
+    own when asked.  ``staged``: True (a batch): every stack in the staged order, so a problem gets the same numbers
+    however many problems of its view count its batch holds (review 20 F1); None: from STAGED_FROM problems."""
     out: list = [None] * len(searches)
     groups: dict = {}
     for k, s in enumerate(searches):
@@ -111,7 +112,7 @@ def enumerate_many(searches: list, scales=None, max_views: int | None = None) ->
         for a in range(0, len(idx), ENUM_CHUNK):
             part = idx[a:a + ENUM_CHUNK]
             t = time.monotonic()
-            for k, r in zip(part, _run([searches[k] for k in part], scales)):
+            for k, r in zip(part, _run([searches[k] for k in part], scales, staged)):
                 out[k] = r
             _credit_others(searches, set(part), time.monotonic() - t)
     return out
@@ -129,16 +130,16 @@ def _credit_others(searches: list, ran: set, seconds: float) -> None:
 ASCENT_ROWS = 3
 
 
-def _run(group: list, scales) -> list:
+def _run(group: list, scales, staged: bool | None = None) -> list:
     """:meth:`_Group.run`; where a stack fails on degenerate data, each problem alone (so that one problem never
     decides another's path); None for a problem that fails alone (its search runs)."""
     try:
-        return _Group(group, scales).run()
+        return _Group(group, scales, staged).run()
     except (ValueError, np.linalg.LinAlgError, FloatingPointError):
         log.debug("enumeration of %d problems failed", len(group), exc_info=True)
         if len(group) == 1:
             return [None]
-    return [_run([s], scales)[0] for s in group]
+    return [_run([s], scales, staged)[0] for s in group]
 
 
 def _by_rows(fn, n: int, *arrays) -> tuple:
@@ -231,7 +232,7 @@ def _outside_sums(c2: np.ndarray, W: np.ndarray) -> np.ndarray:
 class _Group:
     """P searches of one view count N enumerated together: row (p, m) is subset m of problem p."""
 
-    def __init__(self, group: list, scales):
+    def __init__(self, group: list, scales, staged: bool | None = None):
         self.group, self.scales = group, scales
         self.N = N = group[0].N
         self.tol = group[0].tol
@@ -244,7 +245,7 @@ class _Group:
         self.has = np.zeros(self.Xn.shape[:2], bool)     # np.isfinite(Xn).all(axis=2), kept with Xn (:meth:`_put`)
         self.results: list = [None] * len(group)
         self._fundamentals = self._floor = self._terms_cache = None
-        self.staged = len(group) >= STAGED_FROM
+        self.staged = len(group) >= STAGED_FROM if staged is None else staged
         self.refined: list = [set() for _ in group]     # the inlier sets refined to convergence, per problem
         self._clock = time.monotonic()                   # the stack's time is shared (:meth:`_expired`)
 

@@ -400,3 +400,45 @@ def test_search_value_below_its_bound_is_not_a_numerical_failure():
                key=lambda X: float(resid(X) @ resid(X)))
     f = _f_tls_exact(P, x, c, best)
     assert Fraction(r.gamma_lb) ** 2 * 4 <= f and r.gamma_lb <= r.gamma_ub
+
+
+def _tls_reference(P, x, c, X0) -> float:
+    """min over inlier sets S of (L2*(S) by scipy multi-start) + c^2(V - S): an achievable f_TLS (independent of
+    tritools), so no valid lower bound exceeds it."""
+    from itertools import combinations
+
+    from tests.reference.multistart import best_local_gamma
+
+    N = len(P)
+    best = float(np.sum(c ** 2) - np.max(c ** 2))          # one view alone costs 0
+    for k in range(2, N + 1):
+        for S in combinations(range(N), k):
+            S = list(S)
+            g = best_local_gamma(P[S], x[S], [X0, X0 + 0.3, X0 - 0.3])
+            rest = float(np.sum(np.delete(c, S) ** 2))
+            best = min(best, 2 * k * g * g + rest)
+    return best
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_rescaled_georeferenced_frame_keeps_its_drift_guard_end_to_end(seed):
+    """Review 8b F2 through the public API (review 20 F3): a world 3e7 from the origin, cameras scaled by 1e-6, image
+    coordinates offset by 1e5 px (the plain arithmetic loses digits there).  Whatever the status, gamma_LB never
+    exceeds an achievable f_TLS of the same problem (enumerated inlier sets, scipy multi-start on the untransformed
+    data: the same optimum up to the transformed data's own rounding, ~1e-6 relative in f here -- the 0.6% drift of
+    the review's case is far outside), and gamma_UB bounds the exact f_TLS at X."""
+    rng = np.random.default_rng([seed, 8])
+    N = 4
+    P, x, X_true, _ = robust_protocol_scene(N, 1, 1.0, rng)
+    c = np.full(N, 20.0)
+    f_ref = _tls_reference(P, x, c, X_true)
+    A = np.array([[1.0, 0.0, 1e5], [0.0, 1.0, 1e5], [0.0, 0.0, 1.0]])
+    Pt = A @ _geo(P, 3e7 * DIRECTION) * 1e-6
+    xt = x + 1e5
+    for r in (tritools.triangulate(Pt, xt, robust=c),
+              tritools.triangulate_many([(Pt, xt)], robust=[c], progress=False)[0]):
+        f_lb = 2 * N * r.gamma_lb ** 2
+        assert f_lb <= f_ref * (1 + 2e-5), (r.status, f_lb, f_ref, r.message)
+        assert Fraction(r.gamma_ub) ** 2 * 2 * N >= _f_tls_exact(Pt, xt, c, r.X)
+        if r.optimal:
+            assert 2 * N * r.gamma_ub ** 2 >= f_ref * (1 - 2e-5)

@@ -218,3 +218,26 @@ def test_rounding_drift_of_a_recentred_estimate_is_not_lost_digits():
     assert drift_within(2e-7, 0.9 * explained, 2, tol, 0.0, explained)
     assert not drift_within(0.5, 0.9 * explained, 2, tol, 0.0, explained)        # explained, but 50% relative
     assert not drift_within(2e-7, 1.1 * explained, 2, tol, 0.0, explained)     # more than the rounding: lost digits
+
+
+#: review 20 F2: two cameras whose centres coincide to round-off (1.5e-6 apart, 7.4e7 from the origin), c = [inf, 0.01]
+F2_P = np.array([[[-1.8641053596871741e+03, 4.5768567923394500e+02, -2.4773485692270033e+03, -1.5150580644929233e+11],
+                  [-5.4956133596871507e+02, -1.5989479893778307e+03, -4.1719356735580669e+02, -1.0786302475220467e+11],
+                  [3.1034496842784631e-01, 4.9023130241117943e-02, 2.9091342554739441e+00, 9.8879026980920985e+07]],
+                 [[-9.9670743185589561e+02, 1.2998883628820890e+03, -2.6717944243089355e+03, -7.4268399737958054e+10],
+                  [-1.4864471498469748e+03, -8.3738078377441093e+02, -3.4924361275096817e+02, -1.2599213758347910e+11],
+                  [2.0222517758138137e-01, 1.7236050303212136e-01, 2.9139622883019181e+00, 9.8171906272812590e+07]]])
+F2_X = np.array([[-891.4032196502966, -162.81339034608033], [-1615.1216794673487, 851.6861311609724]])
+
+
+def test_centres_coinciding_to_round_off_still_give_a_ray_estimate():
+    """The ray sweep's depths come from the centres' spread; centres 1.5e-6 apart 7.4e7 from the origin put every
+    sample where no projection is defined, and the call ended in numerical_failure without X.  Such centres now
+    count as coincident for the sweep (robust_rays.COINCIDENT_REL): a point on view 0's ray (c_0 = inf: an inlier)
+    costs c_1^2, a valid upper bound; the lower bound 0 (the exact two-view problem is ill-posed there)."""
+    c = np.array([np.inf, 0.01])
+    for r in (tritools.triangulate(F2_P, F2_X, robust=c),
+              tritools.triangulate_many([(F2_P, F2_X)], robust=[c], progress=False)[0]):
+        assert r.X is not None and np.isfinite(r.X).all(), r.message
+        assert r.gamma_ub is not None and 4 * r.gamma_ub ** 2 <= 1e-4 * (1 + 1e-9)
+        assert r.gamma_lb is not None and 0.0 <= r.gamma_lb <= r.gamma_ub and r.inliers[0]

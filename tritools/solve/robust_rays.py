@@ -90,13 +90,19 @@ def _baseline(centres: np.ndarray) -> float:
 
 
 def _baselines(centres: np.ndarray) -> np.ndarray:
-    """(P,) the median distance between each problem's camera centres (P, N, 3), or (coincident centres)
-    max(1, max |C_i|)."""
+    """(P,) the median distance between each problem's camera centres (P, N, 3), or (coincident centres, also to
+    round-off: at most ``COINCIDENT_REL`` max |C_i|) max(1, max |C_i|)."""
     i, j = np.triu_indices(centres.shape[1], 1)
     d = np.linalg.norm(centres[:, i] - centres[:, j], axis=2)                     # (P, pairs)
     base = _finite_median(np.where(np.isfinite(d) & (d > 0), d, np.nan))
     far = np.maximum(1.0, np.max(np.linalg.norm(centres, axis=2), axis=1))
-    return np.where(np.isfinite(base), base, far)
+    return np.where(np.isfinite(base) & (base > COINCIDENT_REL * far), base, far)
+
+
+#: centres closer than this times their distance from the origin coincide for the sweep: its deepest point, 1e3
+#: baselines, would lie within 100 PROJECTION_DENOM_RTOL |C| of the centre, where no projection is defined (review 20
+#: F2: centres 1.5e-6 apart 7.4e7 from the origin gave no finite candidate, numerical_failure without X)
+COINCIDENT_REL = 1e-11
 
 
 def ray_candidates(search) -> list:

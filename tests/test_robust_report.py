@@ -442,3 +442,21 @@ def test_rescaled_georeferenced_frame_keeps_its_drift_guard_end_to_end(seed):
         assert Fraction(r.gamma_ub) ** 2 * 2 * N >= _f_tls_exact(Pt, xt, c, r.X)
         if r.optimal:
             assert 2 * N * r.gamma_ub ** 2 >= f_ref * (1 - 2e-5)
+
+
+def test_a_drifted_search_keeps_a_certificate_that_needs_no_bound_of_it():
+    """Review 20 F3 follow-up: where the search's value drifts beyond what the rounding explains its bounds are not
+    trusted, but a certificate 0 <= gamma* <= gamma_UB within the resolution needs none (an optimum near 0 in a
+    georeferenced world with tiny thresholds): it holds, at gamma_LB 0.  A gap beyond the resolution is refused."""
+    from tritools.solve.robust_report import tls_reported
+
+    tol = tritools.TriangulationOptions().tolerances
+    X = np.array([0.1, 0.2, 3.0])
+    h = CAMS @ np.append(X, 1.0)
+    x = h[:, :2] / h[:, 2:]                                   # zero noise: f_TLS(X) ~ 0
+    c = np.full(3, 1e-3)
+    near = tls_reported(CAMS, x, None, X, c, 0.0, tol, True, 1e-12)       # 1e-12 against ~1e-31: drifted
+    assert near.holds and near.gamma_lb == 0.0 and near.gamma_ub < 1e-9
+    off = x + np.array([[3e-4, 0.0], [0.0, 0.0], [0.0, 0.0]])             # gamma* ~ 1e-4: beyond the resolution
+    far = tls_reported(CAMS, off, None, X, c, 0.0, tol, True, 1e-12)
+    assert not far.holds and far.gamma_lb == 0.0 and "cancellation" in far.reason

@@ -121,10 +121,14 @@ def _checked(g_ub: float, spread: float, resolution: float, N: int, c: np.ndarra
         reason = "the estimate's own rounding moves its projections by more than the coordinates' resolution " \
                  f"({resolution:.3g} px): the float data cannot certify this optimum"
     elif not drift_within(drift, d_abs, N, tolerances, resolved, rounding_drift(f_ub, spread, N)):
-        holds, g_lb = False, 0.0
-        reason = f"the search's own value at its estimate differs from the compensated one by {drift:.2g} " \
-                 "(relative): its arithmetic lost digits to cancellation (a georeferenced or rescaled frame), so its " \
-                 "bounds are not trusted"
+        # the search's bounds are not trusted; a certificate that needs none (0 <= gamma* <= gamma_UB within the
+        # resolution: an optimum near 0 in a georeferenced world with tiny thresholds) still holds, at gamma_LB 0
+        g_lb = 0.0
+        if not (certified and guards_pass(0.0, g_ub, N, tolerances, resolved)):
+            holds = False
+            reason = f"the search's own value at its estimate differs from the compensated one by {drift:.2g} " \
+                     "(relative): its arithmetic lost digits to cancellation (a georeferenced or rescaled frame), so " \
+                     "its bounds are not trusted"
     elif certified and not guards_pass(g_lb, g_ub, N, tolerances, resolved):
         holds, reason = False, "the bounds met on the search's scale, but their gap exceeds the coordinates' " \
                                f"resolution ({resolved:.3g} px, at most the thresholds' own scale)"

@@ -496,7 +496,7 @@ class _Group:
     def _refine_rows(self, Cn: np.ndarray, X0: np.ndarray, inS: np.ndarray) -> tuple:
         """:func:`~.robust_enum.refine_rows`, by its stacked code in a batch however many rows there are (a problem
         then gets the same numbers in any batch), by the scalar twin for a single call's row."""
-        return enum.refine_rows(Cn, X0, inS, scalar=None if not self.staged else False)
+        return enum.refine_rows(Cn, X0, inS, scalar=False if self.staged else None)
 
     def _bound(self, rows: np.ndarray) -> None:
         """The Lagrangian bounds of the rows (P, M) not bounded yet (one stacked verification,

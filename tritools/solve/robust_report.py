@@ -206,18 +206,18 @@ def _compensated_f(res: np.ndarray, c: np.ndarray, f_search: float | None) -> fl
 
 
 def drift_within(drift: float, d_abs: float, N: int, tolerances, resolved: float, explained: float = 0.0) -> bool:
-    """Are the search's bounds trusted: its drift (:func:`search_drift`) within ``SEARCH_DRIFT_REL`` gap_rel, its
+    """Are the search's bounds trusted: its drift (:func:`search_drift`) within ``SEARCH_DRIFT_REL`` gap_rel; or its
     absolute drift ``d_abs`` (pixels^2) worth at most ``SEARCH_DRIFT_REL`` of the report's resolution ``resolved``
-    in gamma, sqrt(d_abs / 2N), or within what the estimate's own rounding ``explained`` (:func:`rounding_drift`)
-    and at most ``EXPLAINED_DRIFT_GAPS`` gap_rel relative (near f = 0 the rounding explains any relative drift, review
-    20 F3; the cap stays 60x below the 0.6% of review 8b F2's lost digits).
-    The relative test alone refused every optimum near 0 (a noise-free track in a georeferenced world: two values
-    ~1e-17 px^2 differing by 100%, review 11 F1); the reported gamma_LB is lowered by ``d_abs`` either way
-    (:func:`_checked`)."""
-    if drift <= SEARCH_DRIFT_REL * tolerances.gap_rel or \
-            (d_abs <= explained and drift <= EXPLAINED_DRIFT_GAPS * tolerances.gap_rel):
+    in gamma, sqrt(d_abs / 2N) (the relative test alone refused every optimum near 0: a noise-free track in a
+    georeferenced world, two values ~1e-17 px^2 differing by 100%, review 11 F1); or within what the estimate's own
+    rounding ``explained`` (:func:`rounding_drift`) and at most ``EXPLAINED_DRIFT_GAPS`` gap_rel relative (near f = 0
+    the rounding explains any relative drift, review 20 F3; the cap stays 60x below the 0.6% of review 8b F2's lost
+    digits).  The reported gamma_LB is lowered by ``d_abs`` either way (:func:`_checked`)."""
+    if drift <= SEARCH_DRIFT_REL * tolerances.gap_rel:
         return True
-    return math.isfinite(d_abs) and math.sqrt(d_abs / (2.0 * N)) <= SEARCH_DRIFT_REL * resolved
+    if math.isfinite(d_abs) and math.sqrt(d_abs / (2.0 * N)) <= SEARCH_DRIFT_REL * resolved:
+        return True
+    return d_abs <= explained and drift <= EXPLAINED_DRIFT_GAPS * tolerances.gap_rel
 
 
 #: a drift the rounding explains is trusted up to this many gap_rel (relative): review 20 G2, two certificates of

@@ -105,10 +105,9 @@ def _cost(Cn: np.ndarray, X: np.ndarray) -> np.ndarray:
 def polish_rows(Cm: np.ndarray, X: np.ndarray, steps: int) -> np.ndarray:
     """At most ``steps`` Levenberg-Marquardt steps on sum_i ||Phi(X, P_i)||^2 for a stack of masked cameras
     Cm (M, N, 3, 4) (observations at the origin; masked views all zero), a step kept where it does not raise the cost;
-    a row stops once its
-    cost moves by at most POLISH_RTOL of it (each row on its own: a row's candidate does not depend on the other rows
-    of its stack, so a problem gets the same numbers in any batch, review 19 F4).  Any candidate gives a valid bound:
-    this only tightens it."""
+    a row stops once a step moves its cost by at most POLISH_RTOL of it (each row on its own: a row's candidate does
+    not depend on the other rows of its stack, so a problem gets the same numbers in any batch, review 19 F4).  Any
+    candidate gives a valid bound: this only tightens it."""
     mu = np.full(len(X), 1e-3)
     active = np.ones(len(X), bool)
     with np.errstate(all="ignore"):

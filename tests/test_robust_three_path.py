@@ -235,12 +235,43 @@ def test_batch_sub_problems_of_others_do_not_use_up_a_problems_time_limit(monkey
     assert all(r.optimal for r in out), [r.status for r in out if not r.optimal]
 
 
+@pytest.mark.parametrize("c", [200.0, 20.0, 3.0, 0.5])
+def test_two_view_path_decides_where_the_stack_decides_with_the_same_answer(c, monkeypatch):
+    """Two views (``robust_three.two_view_tls``): wherever the stack of one decides, the single-call path decides too,
+    with the same inlier set, gamma_ub and certificate, a lower bound never below the stack's, and both below the
+    closed form min(L2*, c_1^2, c_2^2) of the independent reference; thresholds from above every residual (both views
+    inliers) to below the noise (the optimum on a ray: one inlier)."""
+    rng = np.random.default_rng([int(c * 10), 2])
+    decided = {True: 0, False: 0}
+    for k in range(12):
+        P, x, X, _ = robust_protocol_scene(2, k % 2, 5.0, rng)
+        two, _ = _enumerated(P, x, c=c, three=True, monkeypatch=monkeypatch)
+        stack, _ = _enumerated(P, x, c=c, three=False, monkeypatch=monkeypatch)
+        decided[True] += two is not None
+        decided[False] += stack is not None
+        if two is not None:
+            _check_against_reference(two, P, x, c, X)
+        if stack is None:
+            continue
+        assert two is not None
+        assert enum_mod.ENUMERATED in two.message
+        assert two.optimal == stack.optimal
+        np.testing.assert_array_equal(two.inliers, stack.inliers)
+        assert two.gamma_ub == pytest.approx(stack.gamma_ub, rel=1e-9)
+        assert two.gamma_lb >= stack.gamma_lb * (1 - 1e-9)
+    assert decided[True] >= decided[False] >= 10
+
+
 def test_other_view_counts_and_regions_are_not_taken():
-    """Only searches of three point views: others get None (the stacked enumeration or the search runs)."""
+    """Only searches of three point views (two: ``two_view_tls``): others get None (the stacked enumeration or the
+    search runs)."""
     rng = np.random.default_rng(5)
     P, x, _, _ = robust_protocol_scene(4, 1, 1.0, rng)
     s = TlsSearch(P, None, robust_thresholds(C, 4), options_from(None), time.perf_counter(), points=x)
     assert robust_three.three_view_tls(s) is None
+    assert robust_three.two_view_tls(s) is None
+    s2 = TlsSearch(P[:2], None, robust_thresholds(C, 2), options_from(None), time.perf_counter(), points=x[:2])
+    assert robust_three.three_view_tls(s2) is None and robust_three.two_view_tls(s2) is not None
     P3, x3 = P[:3], x[:3]
     regions = [Ellipse(p, np.eye(2) / 4.0) for p in x3]
     s = TlsSearch(P3, regions, robust_thresholds(C, 3), options_from(None), time.perf_counter())

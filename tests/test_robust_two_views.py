@@ -105,12 +105,13 @@ def _fundamental(P):
 
 def _searched(P, x, c):
     """The branch and bound alone (the enumeration refused)."""
-    old = enum_run.eligible
+    old, path = enum_run.eligible, enum_run.THREE_VIEW_PATH
     try:
         enum_run.eligible = lambda s, m=None: s.N >= 3 and old(s, m)
+        enum_run.THREE_VIEW_PATH = False                # (the single-call path of two views: robust_three)
         return tritools.triangulate(P, x, robust=c)
     finally:
-        enum_run.eligible = old
+        enum_run.eligible, enum_run.THREE_VIEW_PATH = old, path
 
 
 def test_batch_equals_search_on_protocol_scenes():

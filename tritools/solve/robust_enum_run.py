@@ -72,7 +72,8 @@ LATER_FROM = 3
 #: (protocol scenes, one or two wrong matches, 1 and 5 px, 160 single calls per setting, median CPU, interleaved):
 #: N = 5: 5 steps 3.00-3.07 ms, 2 steps 2.78-2.89, 1 step 2.73; N = 7: 3.36-3.47, 3.11-3.14, 3.03.
 SINGLE_POLISH_STEPS = 1
-#: single calls of three views take :mod:`tritools.solve.robust_three` (False: the stack of one; the tests compare).
+#: single calls of two and three views take :mod:`tritools.solve.robust_three` (False: the stack of one; the tests
+#: compare).
 THREE_VIEW_PATH = True
 #: rounds of local optimisation of the best candidate of a stack (inlier set -> its L2 optimum -> inlier set).
 LO_ROUNDS = 3
@@ -90,10 +91,10 @@ def enumerate_tls(search):
     search, which has been offered the best candidates found here): :func:`enumerate_many` of one, or for three views
     :func:`tritools.solve.robust_three.three_view_tls` (the same steps without a stack's bookkeeping) where
     :data:`THREE_VIEW_PATH`."""
-    if THREE_VIEW_PATH and search.N == 3:
-        from .robust_three import three_view_tls
+    if THREE_VIEW_PATH and search.N in (2, 3):
+        from .robust_three import three_view_tls, two_view_tls
 
-        return three_view_tls(search)
+        return (two_view_tls if search.N == 2 else three_view_tls)(search)
     return enumerate_many([search])[0]
 
 

@@ -1,4 +1,4 @@
-"""Single robust calls of three point views: the enumeration of every inlier set in one pass, no stack of problems.
+"""Single robust calls of three (and two) point views: the enumeration of every inlier set in one pass, no stack.
 
 With N = 3 views the inlier sets of at least two views are the three pairs and all views, so (the identity of
 :mod:`tritools.solve.robust`, the terms of :mod:`tritools.solve.robust_enum`)
@@ -36,9 +36,10 @@ from .robust_bounds import FULL_FROM_DELTA, ROUND_DOWN, SUB_TIME_LIMIT
 from .robust_costs import point_distances2
 from .robust_enum_run import LO_ROUNDS, eligible, enumerated_result, lower_bounds
 from .robust_subsolve import solve_subproblem
+from .robust_two import ray_offers
 
-__all__ = ["three_view_tls", "solve_all_views", "three_terms", "three_lower_bound", "exact_terms", "three_rest",
-           "VIEWS", "POLISH_STEPS"]
+__all__ = ["two_view_tls", "three_view_tls", "solve_all_views", "three_terms", "three_lower_bound", "exact_terms",
+           "three_rest", "VIEWS", "POLISH_STEPS"]
 
 log = logging.getLogger(__name__)
 
@@ -50,9 +51,18 @@ VIEWS = 3
 #: single calls per setting, median CPU, settings interleaved): 5 steps 2.48-2.52 ms, 2 steps 2.31-2.34, 1 step
 #: 2.18-2.25, 0 steps 2.22-2.25; scenes left to the branch and bound 23 / 21 / 21 / 22 of 300; every one certified.
 POLISH_STEPS = 1
-#: the sizes of the rows of :func:`~tritools.solve.robust_enum.subset_masks` (3).
-_SIZE = np.array([2, 2, 2, 3])
-_SIZE.flags.writeable = False
+
+
+def two_view_tls(search):
+    """The TLS result of one :class:`tritools.solve.robust.TlsSearch` of two point views (:class:`_TwoViews`), or
+    None (the caller runs the search).  Searches of other view counts or regions get None too."""
+    if search.N != 2 or not eligible(search):
+        return None
+    try:
+        return _TwoViews(search).run()
+    except (ValueError, np.linalg.LinAlgError, FloatingPointError):
+        log.debug("two-view enumeration failed", exc_info=True)
+        return None
 
 
 def three_view_tls(search):
@@ -71,12 +81,14 @@ class _ThreeViews:
     """One search's rows: the sets of :func:`~tritools.solve.robust_enum.subset_masks` (3) -- the pairs, then all
     views."""
 
+    views = VIEWS
+
     def __init__(self, search):
         self.s = search
-        self.W = enum.subset_masks(VIEWS)
-        self.size = _SIZE
+        self.W = enum.subset_masks(self.views)
+        self.size = self.W.sum(axis=1)
         c2 = search.c2.tolist()
-        self.rest = np.array(three_rest(c2))          # c^2(V - S); inf: c_i = inf
+        self.rest = np.array(self._rest(c2))           # c^2(V - S); inf: c_i = inf
         self.lb = np.zeros(len(self.W))
         self.bounded = np.zeros(len(self.W), bool)
         self.F = None
@@ -124,7 +136,7 @@ class _ThreeViews:
         """The pairs holding a view outside the best inlier set, where UB exceeds min c^2 (they feed the closure of
         the sets holding that view)."""
         s = self.s
-        best = np.array([i in s.best_S for i in range(VIEWS)])
+        best = np.array([i in s.best_S for i in range(self.views)])
         inside = ~(self.W & ~best[None]).any(axis=1)
         return (self.size == 2) & ~inside & (s.best_f > np.min(s.c2))
 
@@ -151,7 +163,7 @@ class _ThreeViews:
                 return
             Xw = fr.world_point(Xr)
             s.offer(Xw)
-            row = enum.row_of(VIEWS)[sum(1 << i for i in S)]
+            row = enum.row_of(self.views)[sum(1 << i for i in S)]
             self.Xn[row], self.refined[row] = Xr, True
             if s.best_S == frozenset(S) or not np.array_equal(s.best_X, Xw):
                 return
@@ -238,6 +250,10 @@ class _ThreeViews:
             F, defined = enum.fundamentals(self.s.C[None], self.Cn[None])
             self.F, self.defined = F[0], defined[0]
 
+    @staticmethod
+    def _rest(c2: list) -> list:
+        return three_rest(c2)
+
     def _terms(self) -> list:
         return three_terms(self.lb.tolist(), self.rest.tolist())
 
@@ -252,10 +268,49 @@ class _ThreeViews:
 
     def _feeding(self) -> np.ndarray:
         """The rows inside a row whose term does not meet UB at the floor scale."""
-        return (enum.subset_of(VIEWS) & self._failing()[None]).any(axis=1)
+        return (enum.subset_of(self.views) & self._failing()[None]).any(axis=1)
 
     def _result(self, lb: float):
         return enumerated_result(self.s, lb, self.bounded.sum(), len(self.W))
+
+
+
+class _TwoViews(_ThreeViews):
+    """Two point views: the one set of at least two views is all views, f*_TLS = min(L2*(V), c_1^2, c_2^2)
+    (:mod:`tritools.solve.robust_two`).  After the best candidate's offer, the candidate of both views refined to
+    convergence on both views and each view's ray sampled (:func:`~tritools.solve.robust_two.ray_offers`), as a
+    stack's two-view problems take them (:func:`~tritools.solve.robust_two.two_view_rays`); no all-views sub-problem
+    (the stack solves none for two views either)."""
+
+    views = 2
+
+    @staticmethod
+    def _rest(c2: list) -> list:
+        """c^2(V - V) rounded down: the masked sum of :func:`three_rest` for the one row (0)."""
+        return [(0.0 + 0.0) * ROUND_DOWN]
+
+    def _terms(self) -> list:
+        """The one term L2LB(V) + 0, rounded down (a split of two views into parts of one view closes to 0: the
+        stack's closure leaves the bound as it is)."""
+        return [(float(self.lb[0]) + float(self.rest[0])) * ROUND_DOWN]
+
+    def _offer(self) -> None:
+        super()._offer()
+        s = self.s
+        if s.best_X is None:
+            return
+        if not self.refined[0] and np.isfinite(self.Xn[0]).all():
+            Xr, ok = enum.refine_row_one(self.Cn, self.Xn[0], [0, 1])
+            if ok:
+                self.Xn[0], self.refined[0] = Xr, True
+                s.offer(self.frame.world_point(Xr))
+        for _, X in ray_offers(s.C[None], s.x[None], s.c2[None], np.array([s.best_f]), np.array([self.floor]),
+                               s.tol):
+            if np.isfinite(X).all():
+                s.offer(X)
+
+    def _solve_all(self, lb: float) -> float:
+        return lb
 
 
 def solve_all_views(search):

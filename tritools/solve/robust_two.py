@@ -22,7 +22,7 @@ import numpy as np
 from .robust_costs import point_distances2_stack
 from .robust_rays import best_ray_samples, ray_samples_stack
 
-__all__ = ["two_view_rays"]
+__all__ = ["two_view_rays", "ray_offers"]
 
 
 def two_view_rays(group, live: np.ndarray) -> np.ndarray:
@@ -32,18 +32,27 @@ def two_view_rays(group, live: np.ndarray) -> np.ndarray:
     if not P.size:
         return live
     _refine_both_views(group, P)
-    X, tie = ray_samples_stack(group.C[P], group.x[P])
+    offers = ray_offers(group.C[P], group.x[P], group.c2[P], group._ub()[P], group._floors()[P], group.tol)
+    group._offer_each([(int(P[r]), X) for r, X in offers])
+    return live & ~group._expired()
+
+
+def ray_offers(C: np.ndarray, x: np.ndarray, c2: np.ndarray, ub: np.ndarray, floors: np.ndarray, tol) -> list:
+    """Step (2) of the module docstring for R problems of two point views (cameras C (R, 2, 3, 4), points x (R, 2, 2),
+    squared thresholds c2 (R, 2), their best values ``ub`` (R,) and decision-scale floors (R,)): the (problem row,
+    world point) to offer -- each view's best ray sample unless it equals UB under the decision rule at the floor
+    scale (the tightest).  A stack's two-view problems (:func:`two_view_rays`) and a single call
+    (:mod:`tritools.solve.robust_three`) both call it."""
+    X, tie = ray_samples_stack(C, x)
     R, N, K = X.shape[:3]
-    d2 = point_distances2_stack(group.C[P], group.x[P], X.reshape(R, N * K, 3)).reshape(R, N, K, N)
-    f = np.sum(np.minimum(d2, group.c2[P][:, None, None, :]), axis=3)
+    d2 = point_distances2_stack(C, x, X.reshape(R, N * K, 3)).reshape(R, N, K, N)
+    f = np.sum(np.minimum(d2, c2[:, None, None, :]), axis=3)
     f = np.where(np.isfinite(X).all(axis=3), f, np.inf)
     k = best_ray_samples(f, tie)
     best = np.take_along_axis(X, k[:, :, None, None], axis=2)[:, :, 0]
     fk = np.take_along_axis(f, k[:, :, None], axis=2)[:, :, 0]
-    # the decision rule at the floor scale (the tightest): a sample that meets UB changes no decision
-    same = np.asarray(group.tol.certified(fk, group._ub()[P][:, None], group._floors()[P][:, None]), bool)
-    group._offer_each([(int(p), best[r, i]) for r, p in enumerate(P) for i in range(N) if not same[r, i]])
-    return live & ~group._expired()
+    same = np.asarray(tol.certified(fk, ub[:, None], floors[:, None]), bool)
+    return [(r, best[r, i]) for r in range(R) for i in range(N) if not same[r, i]]
 
 
 def _refine_both_views(group, P: np.ndarray) -> None:

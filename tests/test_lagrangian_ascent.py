@@ -130,3 +130,31 @@ def test_a_target_out_of_reach_ends_the_ascent_early_and_one_within_reach_is_rea
     if full[1] >= low:                                   # (a hard case may end below it without a target too)
         reached = ascend_one(*args, target=low)
         assert reached[1] >= low
+
+
+def test_a_start_stalled_at_the_boundary_is_retried_from_zero():
+    """A robust five-view subset holding a wrong match (tests/data/ascent_stalled_start.npz: f = |v|^2 in the normalised
+    frame, the ten epipolar equalities, the KKT multipliers of its candidate): the ascent from the KKT start alone
+    stalls below the target; ascend_one's second start from lambda = 0 reaches it, the rigorous bound at its
+    multipliers (bound_at_one, on the ball of the candidate's norm) passes it too and stays below the degree-2 SDP's
+    value (cvxpy + Clarabel, by hand) and the candidate's cost."""
+    import pathlib
+
+    import sospoly.analysis.lagrangian as lagrangian
+
+    d = np.load(pathlib.Path(__file__).parent / "data" / "ascent_stalled_start.npz")
+    g0, g1, G2, lam0, v, target = d["g0"], d["g1"], d["G2"], d["lam0"], d["v"], float(d["target"])
+    n = len(v)
+    f0, f1, F2 = 0.0, np.zeros(n), np.eye(n)
+    data = (F2, f1, f0, g0, g1, G2)
+    alone = lagrangian._ascend_from(data, lam0, target, lagrangian.ASCENT_MAX_ITER)
+    assert alone is None or alone[1] < target                            # the stall this guards against
+    found = ascend_one(f0, f1, F2, g0, g1, _sparse(G2), lam0, target=target)
+    assert found is not None and found[1] >= target
+    radius = float(np.linalg.norm(v))
+    lb = float(bound_at_one(f0, f1, F2, g0, g1, _sparse(G2), found[0], radius ** 2, DEFAULT_TOLERANCES,
+                            radius).lower_bound[0])
+    assert target * (1 - 1e-6) <= lb <= float(v @ v)
+    sdp = _sdp_value(f0, f1, F2, g0, g1, G2)
+    if sdp is not None:
+        assert lb <= sdp + 1e-6 * max(1.0, abs(sdp))

@@ -106,13 +106,33 @@ def ascend_one(f0: float, f1, F2, g0, g1, G2: SparseQuadratics, lam0, *, target:
 
     Newton's method on d + mu log det L2 for mu falling tenfold per round (the maximum of d often lies on the
     boundary of the positive definite set, where plain Newton steps are cut to nothing): the barrier's maximiser
-    is within n mu of the dual's value; ``max_iter`` Newton steps in all."""
+    is within n mu of the dual's value; ``max_iter`` Newton steps in all.  Where the ascent from ``lam0`` ends below
+    ``target``, a second one from lambda = 0 (when L2(0) is positive definite), the better kept: a start on the
+    segment from lam0 to 0 next to the boundary of the positive definite set can stall at once (no Newton step
+    raises the barrier function there) and give up below a dual supremum that passes the target (measured on
+    robust five-view subsets holding a wrong match: the KKT start stuck at d = -6.7 and 0.048, the zero start
+    reached 1.59 and 0.30 against targets 0.52 and 0.29)."""
     f0 = float(f0)
     f1, F2 = np.asarray(f1, float), np.asarray(F2, float)
     g0, g1 = np.asarray(g0, float), np.asarray(g1, float)
     K, n = g1.shape
     G2d = _dense(G2, K, n)
-    start = _feasible_start(F2, f1, f0, g0, g1, G2d, np.asarray(lam0, float))
+    lam0 = np.asarray(lam0, float)
+    data = (F2, f1, f0, g0, g1, G2d)
+    best = _ascend_from(data, lam0, target, max_iter)
+    if target is not None and (best is None or best[1] < target) and np.any(lam0 != 0):
+        again = _ascend_from(data, np.zeros_like(lam0), target, max_iter)     # (module docstring: a second start)
+        if again is not None and (best is None or again[1] > best[1]):
+            best = again
+    return best
+
+
+def _ascend_from(data: tuple, lam0: np.ndarray, target: float | None, max_iter: int):
+    """:func:`ascend_one` from one start (the first positive definite point of the segment from ``lam0`` to 0):
+    (lambda, d) or None."""
+    F2, f1, f0, g0, g1, G2d = data
+    n = len(f1)
+    start = _feasible_start(F2, f1, f0, g0, g1, G2d, lam0)
     if start is None:
         return None
     lam, d, w, R = start

@@ -13,11 +13,15 @@ Any such lambda gives a valid lower bound c(lambda) <= min{f : g = 0}.
 Given a candidate minimiser v^ (e.g. from a local solver), lambda is recovered
 from the KKT conditions grad f(v^) + J(v^)^T lambda = 0 by least squares; the bound
 is then computed from the exact polynomial data (never from the local solver's
-word): H must have lambda_min(H) >= -ROUNDOFF * max(1, |H|), c(lambda) is the
-minimum of the quadratic L, evaluated with a least-squares solve and checked by
+word): H must have lambda_min(H) >= -ROUNDOFF * max(|F2|, |H|) (relative to the
+program's own quadratic terms: scaling f, or the variables, scales both sides), c(lambda)
+is the minimum of the quadratic L, evaluated with a least-squares solve and checked by
 the residual of the stationarity system.  When f(v^) - c(lambda) is within the
-optimality tolerance, v^ is certified globally optimal exactly as the degree-2
-SDP would certify it; otherwise the caller falls back to the SDP.
+optimality tolerance at the objective's own scale (its largest coefficient, as
+:func:`sospoly.minimize` measures it), v^ is certified globally optimal exactly as the
+degree-2 SDP would certify it; otherwise the caller falls back to the SDP.  (A floor of 1 in
+either test made both absolute for programs of small scale: the maximiser of 1e-13 (x + y)
+on the unit circle was certified as its minimum, review 21a F1.)
 
 :func:`verify_quadratic_batch` runs the same test on a stack of M programs with one
 structure (n variables, K equalities), every step vectorised with numpy over the
@@ -38,7 +42,7 @@ from ..tolerances import DEFAULT_TOLERANCES, Tolerances
 __all__ = ["Verification", "VerificationBatch", "SparseQuadratics", "quadratic_parts", "verify_quadratic",
            "verify_quadratic_batch", "bound_at_one", "ROUNDOFF"]
 
-#: the Lagrangian Hessian must satisfy lambda_min >= -ROUNDOFF * max(1, max|H|): float
+#: the Lagrangian Hessian must satisfy lambda_min >= -ROUNDOFF * max(max|F2|, max|H|): float
 #: round-off only (a genuinely indefinite H means no bound for these multipliers).
 ROUNDOFF = 1e-12
 
@@ -173,10 +177,10 @@ def verify_quadratic_batch(f0, f1, F2, g0, g1, G2, points, *,
 
     Steps, all vectorised over m: lambda = argmin ||J(v^)^T lambda + grad f(v^)|| (min-norm
     least squares); L = f + lambda^T g with Hessian part L2; reject when
-    lambda_min(L2) < -ROUNDOFF * max(1, max|L2|); w = least-squares solution of
-    2 L2 w = -L1, rejected when ||2 L2 w + L1|| / max(1, ||L1||) > identity_residual;
-    c = L(w) = min_v L(v, lambda) <= min{f : g = 0}; certified iff
-    ``tolerances.certified(c, f(v^))``.
+    lambda_min(L2) < -ROUNDOFF * max(max|F2|, max|L2|); w = least-squares solution of
+    2 L2 w = -L1, rejected when ||2 L2 w + L1|| / max(min(1, s_f), ||L1||) > identity_residual, s_f the
+    objective's largest coefficient (:func:`_objective_scales`); c = L(w) = min_v L(v, lambda) <= min{f : g = 0};
+    certified iff ``tolerances.certified(c, f(v^), s_f)`` (the rule at the objective's own scale).
 
     ``radius`` (scalar or (M,)): a bound on the norm of a minimiser.  The bound is then made rigorous
     against the accepted round-off: with eps = max(0, -lambda_min(L2)) and the stationarity residual
@@ -216,8 +220,9 @@ def verify_quadratic_batch(f0, f1, F2, g0, g1, G2, points, *,
     L1 = f1 + np.einsum("mk,mki->mi", lam, g1)
     L2 = F2 + G2.combine(lam, n)
     eig, Q = np.linalg.eigh(L2)
-    scale = np.maximum(1.0, np.max(np.abs(L2), axis=(1, 2)))
+    scale = np.maximum(np.max(np.abs(F2), axis=(1, 2)), np.max(np.abs(L2), axis=(1, 2)))
     psd = eig[:, 0] >= -ROUNDOFF * scale
+    s_f = _objective_scales(f0, f1, F2)
     # min of L0 + L1.v + v^T L2 v: stationary point 2 L2 w = -L1 by least squares (the
     # pseudo-inverse of the symmetric 2 L2 from its eigen-decomposition, lstsq's cut-off)
     s = 2 * eig
@@ -226,7 +231,7 @@ def verify_quadratic_batch(f0, f1, F2, g0, g1, G2, points, *,
     inv = np.where(abs_s > cut, 1.0 / np.where(abs_s > cut, s, 1.0), 0.0)
     w = -np.einsum("mij,mj->mi", Q, inv * np.einsum("mji,mj->mi", Q, L1))
     r_abs = _row_norms(2 * np.einsum("mij,mj->mi", L2, w) + L1)          # the stationarity residual ||2 L2 w + L1||
-    resid = r_abs / np.maximum(1.0, _row_norms(L1))
+    resid = r_abs / np.maximum(np.minimum(1.0, s_f), np.maximum(_row_norms(L1), _TINY))
     in_range = resid <= tolerances.identity_residual
     t1, t2 = np.einsum("mi,mi->m", L1, w), np.einsum("mi,mij,mj->m", w, L2, w)
     c = L0 + t1 + t2
@@ -237,8 +242,23 @@ def verify_quadratic_batch(f0, f1, F2, g0, g1, G2, points, *,
     reason = np.where(~psd, 1, np.where(~in_range, 2, 0))
     bounded = reason == 0
     lower = np.where(bounded, c, np.nan)
-    certified = bounded & np.asarray(tolerances.certified(lower, fv), bool)
+    certified = bounded & np.asarray(tolerances.certified(lower, fv, s_f), bool)
     return VerificationBatch(lower, fv, certified, lam, eig[:, 0], reason)
+
+
+#: the denominator's floor of the stationarity test (a zero L1 and residual: in range)
+_TINY = 1e-300
+
+
+def _objective_scales(f0, f1, F2) -> np.ndarray:
+    """s_f (M,): the largest absolute coefficient of each program's objective f0 + f1.v + v^T F2 v (F2 counts twice
+    off the diagonal, as the polynomial's coefficient), the scale of the certificate rule (:mod:`sospoly.tolerances`)
+    and of the stationarity test."""
+    f0, f1, F2 = np.atleast_1d(f0), np.atleast_2d(f1), np.asarray(F2, float).reshape((-1,) + np.shape(F2)[-2:])
+    off = 2 * np.max(np.abs(F2 - np.einsum("mii->mi", F2)[:, :, None] * np.eye(F2.shape[-1])), axis=(1, 2),
+                     initial=0.0)
+    diag = np.max(np.abs(np.einsum("mii->mi", F2)), axis=1, initial=0.0)
+    return np.maximum.reduce([np.abs(f0), np.max(np.abs(f1), axis=1, initial=0.0), diag, off])
 
 
 def _lstsq_one(A: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -280,13 +300,14 @@ def bound_at_one(f0: float, f1, F2, g0, g1, G2: SparseQuadratics, lam, fv: float
     L0, L1 = f0 + lam @ g0, f1 + lam @ g1
     L2 = F2 + np.bincount(G2.i * n + G2.j, G2.vals[0] * lam[G2.k], n * n).reshape(n, n)
     eig, Q = np.linalg.eigh(L2)
-    psd = bool(eig[0] >= -ROUNDOFF * np.maximum(1.0, np.max(np.abs(L2))))        # (NaN: not PSD)
+    psd = bool(eig[0] >= -ROUNDOFF * max(float(np.max(np.abs(F2))), float(np.max(np.abs(L2)))))  # (NaN: not PSD)
+    s_f = float(_objective_scales(f0, f1, F2)[0])
     s = 2 * eig
     cut = _EPS * n * np.max(np.abs(s))
     inv = np.where(np.abs(s) > cut, 1.0 / np.where(np.abs(s) > cut, s, 1.0), 0.0)
     w = -(Q @ (inv * (L1 @ Q)))
     r_abs = math.sqrt(float(np.sum((2 * (L2 @ w) + L1) ** 2)))
-    in_range = r_abs / max(1.0, math.sqrt(float(L1 @ L1))) <= tolerances.identity_residual
+    in_range = r_abs / max(min(1.0, s_f), math.sqrt(float(L1 @ L1)), _TINY) <= tolerances.identity_residual
     t1, t2 = float(L1 @ w), float(w @ L2 @ w)
     c = L0 + t1 + t2
     if radius is not None:
@@ -296,7 +317,7 @@ def bound_at_one(f0: float, f1, F2, g0, g1, G2: SparseQuadratics, lam, fv: float
     reason = 1 if not psd else 2 if not in_range else 0
     lower = np.array([c if reason == 0 else np.nan])
     fv = np.array([fv])
-    certified = (reason == 0) & np.asarray(tolerances.certified(lower, fv), bool)
+    certified = (reason == 0) & np.asarray(tolerances.certified(lower, fv, s_f), bool)
     return VerificationBatch(lower, fv, certified, lam[None], eig[:1].copy(), np.array([reason]))
 
 

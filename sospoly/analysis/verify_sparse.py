@@ -36,7 +36,7 @@ import scipy.sparse as sp
 
 from ..tolerances import DEFAULT_TOLERANCES, Tolerances
 from .banded import band_cholesky, band_from_dense, band_matvec, band_solve, cholesky_backward_error
-from .verify import SparseQuadratics, VerificationBatch
+from .verify import _TINY, SparseQuadratics, VerificationBatch, _objective_scales
 
 __all__ = ["verify_quadratic_banded_batch", "RIDGE"]
 
@@ -135,7 +135,9 @@ def verify_quadratic_banded_batch(f0, f1, F2, g0, g1, G2: SparseQuadratics, poin
     w = np.where(pd[:, None], band_solve(R, -L1 / 2), 0.0)
     L2w = band_matvec(Hb, w)
     r_abs = np.linalg.norm(2 * L2w + L1, axis=1)
-    in_range = r_abs / np.maximum(1.0, np.linalg.norm(L1, axis=1)) <= tolerances.identity_residual
+    s_f = _objective_scales(f0, f1, F2)              # (the rules of verify_quadratic_batch at the objective's scale)
+    in_range = r_abs / np.maximum(np.minimum(1.0, s_f), np.maximum(np.linalg.norm(L1, axis=1), _TINY)) \
+        <= tolerances.identity_residual
     t1, t2 = np.einsum("mi,mi->m", L1, w), np.einsum("mi,mi->m", w, L2w)
     c = L0 + t1 + t2
     if radius is not None:
@@ -144,5 +146,5 @@ def verify_quadratic_banded_batch(f0, f1, F2, g0, g1, G2: SparseQuadratics, poin
     reason = np.where(~pd, 1, np.where(~in_range, 2, 0))
     bounded = (reason == 0) & np.isfinite(c)
     lower = np.where(bounded, c, np.nan)
-    certified = bounded & np.asarray(tolerances.certified(lower, fv), bool)
+    certified = bounded & np.asarray(tolerances.certified(lower, fv, s_f), bool)
     return VerificationBatch(lower, fv, certified, lam, -eps, reason)

@@ -224,11 +224,13 @@ class Tolerances:
         return _maybe_scalar(out)
 
     # ------------------------------------------------------------------ matrices
-    def psd_accepts(self, lambda_min, max_abs_entry):
+    def psd_accepts(self, lambda_min, max_abs_entry, floor=1.0):
         """Is a Gram matrix with smallest eigenvalue ``lambda_min`` and largest entry ``max_abs_entry``
-        accepted as PSD: ``lambda_min >= -psd_margin * max(1, max_abs_entry)``?"""
+        accepted as PSD: ``lambda_min >= -psd_margin * max(floor, max_abs_entry)``?  ``floor``: 1, or the
+        program's own scale where that is smaller (:func:`sospoly.solvers.solve.check_certificate`: a floor of 1
+        is an absolute margin for a program whose coefficients are all far below 1)."""
         lam = np.asarray(lambda_min, float)
-        return _maybe_scalar(lam >= -self.psd_margin * np.maximum(1.0, np.asarray(max_abs_entry, float)))
+        return _maybe_scalar(lam >= -self.psd_margin * np.maximum(floor, np.asarray(max_abs_entry, float)))
 
     def kernel_dimension(self, eigenvalues):
         """Number (>= 1) of numerically zero eigenvalues, ``lambda <= kernel_rel * |lambda_max|``, of

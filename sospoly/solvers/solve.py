@@ -6,14 +6,21 @@ the returned numbers check out independently of the solver's word
 
 * every Gram matrix, recomputed from the primal x (so that the polynomial
   identity u(v) = b(v)^T G b(v) holds exactly in the image form), has
-  ``lambda_min >= -psd_margin * max(1, max|G|)``;
-* the linear equalities (zero-cone rows) hold to ``identity_residual``;
+  ``lambda_min >= -psd_margin * max(floor, max|G|)``;
+* the linear equalities (zero-cone rows) hold to ``identity_residual`` relative to
+  ``max(floor, max|b|)`` of their rows;
 * the coefficient identity between each SOS expression and its Gram matrix holds
   to ``identity_residual`` (non-trivial for the kernel form and cvxpy).
+
+``floor`` is 1, or the program's own scale max|b| where that is smaller: with a floor of 1 the
+margins are absolute, and a program whose coefficients are all ~1e-10 passed with a level 100%
+above its minimum (review 21a F2).  Such a program is also solved in exact scaled form
+(:func:`solve_conic`: its right-hand side b times a power of two, x divided by it after), as the
+solvers' own stopping rules have absolute parts that a tiny program sits below.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -27,7 +34,7 @@ from ..status import SolveStatus
 from ..tolerances import DEFAULT_TOLERANCES, Tolerances, as_tolerances
 
 __all__ = ["ProgramSolution", "LowerBound", "lower_bound_of", "solve_program", "solve_conic", "check_certificate",
-           "ConicResult", "solve_conic_problem"]
+           "check_floor", "ConicResult", "solve_conic_problem", "RESCALE_BELOW"]
 
 
 @dataclass(frozen=True)
@@ -69,32 +76,66 @@ def check_certificate(problem: ConicProblem, x: np.ndarray, tol: Tolerances) -> 
     mins = {}
     ok = True
     msg = []
+    floor = check_floor(problem)
     for name, G in grams.items():
         scale = float(np.max(np.abs(G))) if G.size else 0.0
         lam = float(np.linalg.eigvalsh(G)[0]) if G.size else 0.0
         mins[name] = lam
-        if not tol.psd_accepts(lam, scale):
+        if not tol.psd_accepts(lam, scale, floor):
             ok = False
             msg.append(f"Gram {name}: lambda_min {lam:.3g} below the PSD margin "
-                       f"({tol.psd_margin:g} * max(1, {scale:.3g}))")
+                       f"({tol.psd_margin:g} * max({floor:.3g}, {scale:.3g}))")
     for label, lam, scale in _scalar_cone_margins(problem, x):
         mins[label] = lam
-        if not tol.psd_accepts(lam, scale):
+        if not tol.psd_accepts(lam, scale, floor):
             ok = False
-            msg.append(f"{label}: violated by {-lam:.3g} (margin {tol.psd_margin:g} * max(1, {scale:.3g}))")
+            msg.append(f"{label}: violated by {-lam:.3g} (margin {tol.psd_margin:g} * max({floor:.3g}, {scale:.3g}))")
     # zero-cone rows
     resid = 0.0
     row = 0
     for cone in problem.cones:
         if cone.kind == "zero":
             r = problem.b[row:row + cone.dim] - problem.A[row:row + cone.dim] @ x
-            bscale = max(1.0, float(np.max(np.abs(problem.b[row:row + cone.dim]))) if cone.dim else 1.0)
+            bscale = max(floor, float(np.max(np.abs(problem.b[row:row + cone.dim]))) if cone.dim else 1.0)
             resid = max(resid, float(np.max(np.abs(r))) / bscale if cone.dim else 0.0)
         row += cone.dim
     if resid > tol.identity_residual:
         ok = False
         msg.append(f"equality residual {resid:.3g} > {tol.identity_residual:g}")
     return ok, mins, resid, "; ".join(msg)
+
+
+def check_floor(problem: ConicProblem) -> float:
+    """The floor of :func:`check_certificate`'s margins (module docstring): min(1, max|b|), 1 where b is 0."""
+    bmax = float(np.max(np.abs(problem.b))) if problem.b.size else 0.0
+    return min(1.0, bmax) if bmax > 0 and np.isfinite(bmax) else 1.0
+
+
+#: :func:`solve_conic` solves a program whose right-hand side has max|b| below this in exact scaled form (b times
+#: a power of two bringing max|b| into [1, 2)); above it (tritools' normalised programs: max|b| >= 1) as it is
+RESCALE_BELOW = 2.0 ** -10
+
+
+def _rhs_scale(problem: ConicProblem) -> float:
+    """The power of two alpha with alpha max|b| in [1, 2) where max|b| < :data:`RESCALE_BELOW` (1 otherwise, or for
+    a parametric problem): A x + s = b, s in K holds iff A (alpha x) + alpha s = alpha b with alpha s in K, so the
+    scaled program's solution divided by alpha is the program's, exactly."""
+    if problem.params or not problem.b.size:
+        return 1.0
+    bmax = float(np.max(np.abs(problem.b)))
+    if not (0.0 < bmax < RESCALE_BELOW and np.isfinite(bmax)):
+        return 1.0
+    return float(np.ldexp(1.0, -int(np.frexp(bmax)[1]) + 1))
+
+
+def _unscaled(sol: ConicSolution, alpha: float) -> ConicSolution:
+    """The solution of the program from that of its scaled form (:func:`_rhs_scale`): x and the objectives over
+    alpha, the dual z unchanged (a cone's dual is invariant under the scaling of b)."""
+    if alpha == 1.0:
+        return sol
+    div = (lambda v: None if v is None else v / alpha)         # noqa: E731
+    return ConicSolution(sol.raw_status, div(sol.x), sol.z, div(sol.primal_objective), div(sol.dual_objective),
+                         sol.attempts)
 
 
 def _scalar_cone_margins(problem: ConicProblem, x: np.ndarray) -> list:
@@ -131,6 +172,8 @@ def solve_conic(problem: ConicProblem, backend=None, tolerances: Tolerances = DE
         return SolveStatus.TIME_LIMIT, ConicSolution(RawStatus.TIME_LIMIT, None, None, None, None, ()), {}, np.nan, \
             "time limit reached before the solve"
     cache = {}
+    alpha = _rhs_scale(problem)
+    work = problem if alpha == 1.0 else replace(problem, b=problem.b * alpha)
 
     def checked(x):
         """The a-posteriori check of ``x`` (with ``extra_check``), made once per iterate."""
@@ -144,10 +187,19 @@ def solve_conic(problem: ConicProblem, backend=None, tolerances: Tolerances = DE
         cache["last"] = (x, res)
         return res
 
-    def accept(x, z):
-        return checked(x)[0]
+    def accept(x, z):           # (an iterate of the scaled form: checked as the program's)
+        if alpha == 1.0 or x is None:
+            return checked(x)[0]
+        if "scaled" not in cache or cache["scaled"][0] is not x:
+            cache["scaled"] = (x, x / alpha)
+        return checked(cache["scaled"][1])[0]
 
-    sol = be.solve(problem, accept=accept, retry=retry, deadline=deadline)
+    sol = be.solve(work, accept=accept, retry=retry, deadline=deadline)
+    if alpha != 1.0:
+        scaled_x = sol.x
+        sol = _unscaled(sol, alpha)
+        if "scaled" in cache and cache["scaled"][0] is scaled_x:
+            sol = replace(sol, x=cache["scaled"][1])       # (the array checked: its cached check)
     if sol.raw_status == RawStatus.SOLVED:
         ok, mins, resid, msg = checked(sol.x)
         if ok:

@@ -6,7 +6,8 @@
   certificate (strategy step 2: the PSD defect and the identity residual of the returned certificate
   accounted for on a box holding a minimiser, or for every v by the shifted certificate);
 * ``minimizers`` / ``upper_bound`` -- extracted points (Gram kernel, moment matrices, clique moments
-  for sparse certificates), polished locally, kept when feasible, sorted by f; ``upper_bound`` is f
+  for sparse certificates), polished locally, kept when feasible (by value, and near the set:
+  :func:`~sospoly.analysis.candidates.value_shift` within the gap tolerance), sorted by f; ``upper_bound`` is f
   at the best one;
 * ``optimal`` -- ``Tolerances.certified(lower_bound, upper_bound, scale)`` with ``scale`` the largest
   coefficient of the balanced f expanded at the origin or at the minimiser, the smaller (strategy steps 1 and
@@ -78,7 +79,7 @@ import numpy as np
 from .algebra.polynomial import Polynomial
 from .analysis.recession import unbounded_result
 from .analysis.candidates import candidates_of, dedupe_points, feasibility_violation, feasible_points
-from .analysis.candidates import support_of
+from .analysis.candidates import support_of, value_shift
 from .analysis.moments import moment_matrices_of
 from .budget import Budget, BudgetExceeded, TimeLimitReached, as_budget, deadline_scope
 from .analysis.proof import unsolved_claim
@@ -498,7 +499,8 @@ class _Run:
         found = dedupe_points(sorted(found + self._points(psatz, lb.solution), key=lambda t: t[0]))
         pts = [(float(self.f.evaluate(self.scaling.to_original(p))) / fs, p) for _, p in found]
         found = sorted([(v, p) for v, p in pts if np.isfinite(v)], key=lambda t: t[0])
-        upper = found[0][0] if found else None
+        bounds = self._trusted(found)
+        upper = bounds[0][0] if bounds else None
         c, note = self._proven(psatz, lb.solution, c_relax, upper)
         msg = "; ".join(m for m in (lb.message, note) if m)
         status, optimal = lb.status, False
@@ -516,11 +518,24 @@ class _Run:
                 c = tol.consistent(c, upper)
         near = tol.gap_tolerance(upper) if upper is not None else 0.0
         back = self.scaling.to_original
-        minimizers = tuple(back(p) for val, p in found if val <= upper + near) if upper is not None else ()
+        minimizers = tuple(back(p) for val, p in bounds if val <= upper + near) if upper is not None else ()
+        if len(bounds) < len(found):
+            msg = "; ".join(m for m in (msg, f"{len(found) - len(bounds)} candidate(s) meet the constraints only by "
+                                             "their values (not upper bounds: sospoly.analysis.candidates."
+                                             "value_shift)") if m)
         return MinimizeResult(status, None if c is None else c * fs, None if upper is None else upper * fs, minimizers,
                               optimal, psatz.n_lmivar, degree, _name_of(mult), self.gens, bracket, lb.solution, 0.0,
-                              msg, tuple(back(p) for _, p in found), label, scale=fs,
+                              msg, tuple(back(p) for _, p in bounds), label, scale=fs,
                               moment_matrices=moment_matrices_of(psatz.u, lb.solution, self.scaling.k))
+
+    def _trusted(self, found: list) -> list:
+        """The (value, point) pairs of ``found`` (normalised, ascending) whose value is an upper bound: the point's
+        first-order distance to the constraints moves f by at most the gap tolerance
+        (:func:`~sospoly.analysis.candidates.value_shift`; a candidate feasible by the constraints' values only --
+        a squared constraint, a circle far from the origin -- may lie below the minimum, review 21a F3)."""
+        if not (self.eqn or self.ineqn):
+            return found
+        return [(v, p) for v, p in found if value_shift(self.fn, self.eqn, self.ineqn, p) <= self.tol.gap_tolerance(v)]
 
     def _proven(self, psatz: PsatzProblem, sol: ProgramSolution, c: float, upper) -> tuple[float, str]:
         """(the largest proven lower bound of the normalised program from the certificate at level c, or -inf;

@@ -184,6 +184,34 @@ def _violation_of(eq, ineq):
     return violation
 
 
+def value_shift(f: Polynomial, eq, ineq, p: np.ndarray) -> float:
+    """How far f may fall from p to the constraints, to first order: ||grad f(p)|| times the largest distance
+    estimate D_k r_k / ||grad g_k(p)|| of a violated constraint (r_k = |g_k(p)| for an equality, max(0, -h_k(p)) for
+    an inequality, D_k its degree; inf where its gradient vanishes).  A candidate is feasible within
+    :meth:`~sospoly.Tolerances.feasible` by the constraint's *value*: a squared constraint (x^2 + y^2 - 1)^2 = 0
+    passes 1e-3 off its set, and f there lies ~1e-4 below the minimum (review 21a F3); :func:`sospoly.minimize`
+    takes a point's value as an upper bound only where this shift is within the gap tolerance.  The degree covers a
+    constraint vanishing to a higher order (r = |h|^m: r / ||grad r|| is 1/m of the distance, m <= D)."""
+    p = np.asarray(p, float)
+    worst = 0.0
+    for polys, viol in ((eq, np.abs), (ineq, lambda v: np.maximum(0.0, -v))):
+        if not polys:
+            continue
+        c = _Compiled(polys)
+        r = viol(c.values(p))
+        if not np.any(r > 0):
+            continue
+        g = np.linalg.norm(c.jacobian(p), axis=1)
+        deg = np.array([max(1, q.degree) for q in polys], float)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            d = np.where(r > 0, np.where(g > 0, deg * r / g, np.inf), 0.0)
+        worst = max(worst, float(np.max(d)))
+    if worst == 0.0:
+        return 0.0
+    grad = float(np.linalg.norm(_Compiled([f]).jacobian(p)[0]))
+    return grad * worst if np.isfinite(worst) else (0.0 if grad == 0.0 else np.inf)
+
+
 def feasible_points(f, eq, ineq, cands, tol: Tolerances, refine: bool):
     pts, raw = [], []
     violation = _violation_of(eq, ineq)

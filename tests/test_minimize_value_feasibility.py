@@ -1,0 +1,47 @@
+"""sospoly.minimize's upper bounds come from points near the feasible set, not from points that meet the
+constraints only by value (review 21a F3): a squared constraint (x^2 + y^2 - 1)^2 = 0 is met to 1e-6 by value 1e-3 off
+its set, where f = x + y lies ~1e-4 below the true minimum -sqrt(2); such a point gave ``optimal=True`` with
+lower = upper below the minimum.  ``sospoly.analysis.candidates.value_shift`` (first-order distance times
+|grad f|) decides which points' values are upper bounds."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+import sospoly as sp
+from sospoly import DEFAULT_TOLERANCES as TOL
+from sospoly.analysis.candidates import value_shift
+
+F_MIN = -math.sqrt(2.0)
+
+
+@pytest.mark.parametrize("refine", [False, True])
+def test_squared_constraint_never_certifies_below_the_minimum(refine):
+    x, y = sp.variables("x y")
+    r = sp.minimize(x + y, eq=[(x ** 2 + y ** 2 - 1) ** 2], refine=refine)
+    assert r.lower_bound is None or r.lower_bound <= F_MIN + 1e-12
+    if r.upper_bound is not None:
+        assert r.upper_bound >= F_MIN - TOL.gap_tolerance(F_MIN)          # an upper bound, within the rule
+        for p in r.minimizers:
+            assert abs(float(np.dot(p, p)) - 1.0) <= 1e-5                 # on the circle, not 1e-4 off it
+    if r.optimal:
+        assert r.upper_bound - r.lower_bound <= TOL.gap_tolerance(r.upper_bound)
+
+
+def test_value_shift_covers_the_drop_to_the_set():
+    """At points off the unit circle by h, along the minimiser's ray: the shift bounds the value drop f(p) - f(p on
+    the set) from above (first order), for the plain and the squared constraint alike; 0 on the set."""
+    x, y = sp.variables("x y")
+    f = x + y
+    u = -np.ones(2) / math.sqrt(2)
+    for h in (1e-2, 1e-4, 1e-6):
+        p = (1 + h) * u
+        drop = abs(float(f(p)) - F_MIN)
+        for g in (x ** 2 + y ** 2 - 1, (x ** 2 + y ** 2 - 1) ** 2):
+            assert value_shift(f, [g], [], p) >= drop * (1 - 1e-6)
+    assert value_shift(f, [x ** 2 + y ** 2 - 1], [], np.array([1.0, 0.0])) == 0.0
+    # an inequality met with a slack: no shift; violated: a shift of its distance's order
+    assert value_shift(f, [], [1 - x ** 2 - y ** 2], 0.5 * u) == 0.0
+    assert value_shift(f, [], [1 - x ** 2 - y ** 2], 1.01 * u) >= math.sqrt(2) * 0.01 * (1 - 1e-6)

@@ -187,3 +187,24 @@ def test_help_describes_every_argument(capsys):
     for sub in ap._subparsers._group_actions[0].choices.values():
         for action in sub._actions:
             assert action.help, (sub.prog, action.dest)
+
+
+def test_corrupt_point_count_gives_one_error_line_and_no_progress_bar(tmp_path):
+    """Review 21b F3: a points3D.bin whose header claims 32518 points but ends after a few records exits 2 with
+    exactly one stderr line (no progress bar sized from the untrusted count, even past the bar's threshold)."""
+    import struct
+    import subprocess
+    import sys
+
+    from tests.test_colmap import synthetic_model
+    from tritools.io.colmap import write_binary_model
+
+    src = tmp_path / "in"
+    write_binary_model(synthetic_model(n_points=6, seed=3)[0], src)
+    b = bytearray((src / "points3D.bin").read_bytes())
+    struct.pack_into("<Q", b, 0, 32518)
+    (src / "points3D.bin").write_bytes(bytes(b))
+    p = subprocess.run([sys.executable, "-m", "tritools", "colmap", str(src), str(tmp_path / "out")],
+                       capture_output=True, text=True, timeout=300)
+    lines = [ln for ln in p.stderr.replace("\r", "\n").splitlines() if ln.strip()]
+    assert p.returncode == 2 and len(lines) == 1 and "points3D.bin" in lines[0], p.stderr

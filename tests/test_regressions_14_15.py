@@ -405,10 +405,16 @@ def test_no_progress_bar_for_tiny_batches(capsys):
     assert progress_bar(None, "auto") is None and progress_bar(10 ** 6, False) is None
     assert _progress_bar(10 ** 6, None) is None and progress_bar(10 ** 6, None) is None   # library: only if asked
     pytest.importorskip("tqdm", reason="tqdm not installed (pip install '.[progress]')")
-    for bar in (_progress_bar(PROGRESS_MIN_ITEMS, "auto"), progress_bar(PROGRESS_MIN_POINTS, "auto"),
-                progress_bar(3, True)):
-        assert bar is not None
-        bar.close()
+    import importlib
+
+    retri = importlib.import_module("tritools.sfm.retriangulate")
+    assert progress_bar(PROGRESS_MIN_POINTS, "auto") is None      # (the command line's bar: a terminal only)
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(retri, "_stderr_is_terminal", lambda: True)
+        for bar in (_progress_bar(PROGRESS_MIN_ITEMS, "auto"), progress_bar(PROGRESS_MIN_POINTS, "auto"),
+                    progress_bar(3, True)):
+            assert bar is not None
+            bar.close()
     capsys.readouterr()
 
 

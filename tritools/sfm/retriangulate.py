@@ -211,8 +211,11 @@ def has_tqdm() -> bool:
 def progress_bar(total: int | None, enabled: bool | str | None):
     """A tqdm bar over points (moved once per stack of equal track lengths), or None: ``enabled`` None / False
     (the library's default: no bar unless asked), ``"auto"`` (the command line's default) with fewer than
-    PROGRESS_MIN_POINTS points or an unknown total, or tqdm missing (a warning when ``enabled`` is True)."""
-    if enabled is None or enabled is False or (enabled == "auto" and (total is None or total < PROGRESS_MIN_POINTS)):
+    PROGRESS_MIN_POINTS points, an unknown total or a standard error that is not a terminal (a captured or
+    redirected stream gets its one error line and nothing else, review 21b F3), or tqdm missing (a warning when
+    ``enabled`` is True)."""
+    if enabled is None or enabled is False or (enabled == "auto" and (total is None or total < PROGRESS_MIN_POINTS
+                                                                      or not _stderr_is_terminal())):
         return None
     try:
         from tqdm import tqdm
@@ -221,6 +224,15 @@ def progress_bar(total: int | None, enabled: bool | str | None):
             logger.warning("progress=True needs tqdm (pip install 'sospoly-tritools[progress]'): no progress bar")
         return None
     return tqdm(total=total, desc="re-triangulating", unit="pt", leave=False)
+
+
+def _stderr_is_terminal() -> bool:
+    import sys
+
+    try:
+        return bool(sys.stderr is not None and sys.stderr.isatty())
+    except (AttributeError, ValueError):            # a closed or replaced stream
+        return False
 
 
 def skipped_cameras(arrays: ModelArrays, geom) -> tuple:
@@ -245,12 +257,14 @@ def retriangulate_arrays(arrays: ModelArrays, options: RetriangulationOptions | 
     :func:`.robust_tracks.without_observations`) and the report (points in the arrays' order)."""
     options = options or RetriangulationOptions()
     geom = prepare_geometry(arrays, options.strict)
-    bar = progress_bar(arrays.n_points, options.progress)
+    bar = None
     ids, results = [], []
     try:
         with call_limit(options.solver.total_time_limit):          # the whole run within total_time_limit
             for a in range(0, arrays.n_points, options.chunk_points):
                 chunk = arrays.points(a, a + options.chunk_points)
+                if a == 0:              # (after the first records read: a header count alone starts no bar)
+                    bar = progress_bar(arrays.n_points, options.progress)
                 results.append(process_chunk(arrays, geom, chunk, options, bar))
                 ids.append(chunk.ids)
     finally:

@@ -127,7 +127,9 @@ def test_an_uncertified_result_past_its_deadline_says_time_limit(monkeypatch):
 
     monkeypatch.setattr(rb.SubsetBounds, "strengthen", late)
     from tritools.solve import robust_cells
+    import tritools.solve.robust_enum_run as run_mod
     monkeypatch.setattr(robust_cells, "ENABLED", False)        # the leaf solve of the inlier-set search
+    monkeypatch.setattr(run_mod, "SOLVE_LAST_SET", False)       # (not the enumeration's own solve of that set)
     r = tritools.triangulate(cams, x, robust=200.0)
     assert calls and not r.optimal and r.status == tritools.Status.TIME_LIMIT
     assert r.gamma_lb <= full.gamma_ub * (1 + 1e-9) and r.gamma_lb <= r.gamma_ub

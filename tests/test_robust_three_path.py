@@ -147,6 +147,7 @@ def test_refined_rows_rescue_failing_bounds(N, n_out, three, monkeypatch):
     scenes = [robust_protocol_scene(N, n_out, 1.0, rng) for _ in range(30 if three else 20)]
     for later in ("_ascend_all", "_solve_all"):                       # (their own test below)
         monkeypatch.setattr(robust_three._ThreeViews, later, lambda self, lb: lb)
+    monkeypatch.setattr(run_mod, "SOLVE_LAST_SET", False)              # (the stack's own solve: its test below)
 
     def switch_off():
         monkeypatch.setattr(robust_three._ThreeViews, "_second_chance", lambda self, lb: lb)
@@ -184,6 +185,7 @@ def test_stacked_enumeration_ascent_decides_more_and_stays_below_the_reference(m
         for noise in (1.0, 5.0):
             rng = np.random.default_rng(13)
             scenes += [robust_protocol_scene(N, n_out, noise, rng) for _ in range(20)]
+    monkeypatch.setattr(run_mod, "SOLVE_LAST_SET", False)              # (the stack's own solve: its test below)
     _decides_more_below_the_reference(scenes, False, monkeypatch,
                                       lambda: monkeypatch.setattr(run_mod._Group, "_ascend", lambda self, probs: None))
 
@@ -218,21 +220,36 @@ def test_batch_sub_problems_of_others_do_not_use_up_a_problems_time_limit(monkey
     to the others' deadlines (the stack's rule, ``_Group._expired``).  Each such solve made 0.45 s slower (after it:
     its own limit is not touched), the second starts after the 0.4 s each problem may use; every problem is still
     decided, as without a limit."""
+    import tritools.solve.robust_bounds as rb
+
     rng = np.random.default_rng(7)
     probs = [robust_protocol_scene(3, 1, noise, rng)[:2] for noise in (1.0, 5.0) for _ in range(20)]
     solved = []
-    solve = robust_three.solve_all_views
+    solve = rb.SubsetBounds.solve_full
 
-    def slow(search):
-        out = solve(search)
+    def slow(self, S, need, X=None):
+        out = solve(self, S, need, X)
         time.sleep(0.45)
         solved.append(1)
         return out
 
-    monkeypatch.setattr(robust_three, "solve_all_views", slow)
+    monkeypatch.setattr(rb.SubsetBounds, "solve_full", slow)
     out = tritools.triangulate_many(probs, robust=C, time_limit=0.4)
     assert len(solved) >= 2
     assert all(r.optimal for r in out), [r.status for r in out if not r.optimal]
+
+
+def test_stacked_enumeration_solves_the_last_open_set_at_any_view_count(monkeypatch):
+    """Four and five views with two wrong matches: where one set alone keeps a problem open after the ascent (a
+    wrong match left in it: the degree-2 certificate falls short), the stack solves that set's sub-problem
+    (``SOLVE_LAST_SET``: :meth:`SubsetBounds.solve_full`, stopping at what the term needs) instead of handing the
+    problem to the branch and bound: more scenes decided by the enumeration, every answer below the reference."""
+    scenes = []
+    for N in (4, 5):
+        rng = np.random.default_rng([N, 21])
+        scenes += [robust_protocol_scene(N, 2, noise, rng) for noise in (1.0, 5.0) for _ in range(12)]
+    _decides_more_below_the_reference(scenes, False, monkeypatch,
+                                      lambda: monkeypatch.setattr(run_mod, "SOLVE_LAST_SET", False))
 
 
 @pytest.mark.parametrize("c", [200.0, 20.0, 3.0, 0.5])

@@ -241,6 +241,19 @@ class SubsetBounds:
         self._count_ceiling(S)
         return True
 
+    def solve_full(self, S: frozenset, need: float, X=None) -> float:
+        """S's bound after solving S with the degree plan from :data:`FULL_FROM_DELTA` (three views: Theorem 1 at
+        delta = 4 first, :mod:`~tritools.solve.robust_subsolve`), stopping once its rigorous bound reaches ``need``
+        (S then weak, as :meth:`strengthen` leaves it), cached for a later search: the enumeration's last open set,
+        whose degree-2 bounds fall short (:meth:`tritools.solve.robust_enum_run._Group._solve_all`).  No solve (0)
+        past the deadline or where no Corollary 1 degree can certify S (:func:`~tritools.solve.coplanar.
+        subset_futile` at its candidate ``X``, a world point, or None)."""
+        views = sorted(S)
+        if self.deadline.expired or subset_futile(self.C[views], [self.regions[i] for i in views], self.opts, 0.0, X):
+            return 0.0
+        self._solve_one(S, light=False, from_delta=FULL_FROM_DELTA, need=need)
+        return self._lb[S]
+
     def split_bound(self, S: frozenset, need: float) -> float:
         """max over tried triples T of S holding a view outside the caller's ``hint`` (a likely wrong match w) of
         L2LB(T) + L2LB(S - T), rounded down: L2*(S) >= L2*(T) + L2*(S - T) (superadditivity, module docstring).

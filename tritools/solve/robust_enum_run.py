@@ -77,6 +77,9 @@ SINGLE_POLISH_STEPS = 1
 THREE_VIEW_PATH = True
 #: rounds of local optimisation of the best candidate of a stack (inlier set -> its L2 optimum -> inlier set).
 LO_ROUNDS = 3
+#: a problem kept open by one set alone gets that set's sub-problem solved in the enumeration (:meth:`_Group.
+#: _solve_all`) at every view count (False: three views, the set of all views, only; the tests compare).
+SOLVE_LAST_SET = True
 
 
 def eligible(search, max_views: int | None = None) -> bool:
@@ -338,27 +341,29 @@ class _Group:
         if more.any():
             self._bound(more)
         self._ascend(live & keep & ~self._expired())
-        if self.N == 3:
-            self._solve_all(live & keep & ~self._expired())
+        self._solve_all(live & keep & ~self._expired())
         self._decide(np.nonzero(keep)[0], final=True)
 
     def _solve_all(self, probs: np.ndarray) -> None:
-        """Three views, as a single call: the problems ``probs`` (P,) whose set of all views alone fails get its
-        sub-problem (:func:`~tritools.solve.robust_three.solve_all_views`) here, not after a search's set-up."""
-        from .robust_three import solve_all_views
-
-        failing, row = self._failing(), len(self.W) - 1
-        for p in np.nonzero(probs & failing[:, row] & ~failing[:, :row].any(axis=1))[0]:
+        """The problems ``probs`` (P,) kept open by one set alone (its term failing after the ascent: the degree-2
+        certificate falls short, e.g. three views, or a wrong match left in a larger set): that set's L2 sub-problem
+        solved here (:meth:`~tritools.solve.robust_bounds.SubsetBounds.solve_full`, stopping once its rigorous bound
+        reaches UB - c^2(V - S)), its estimate offered -- not after a search's set-up, nodes and sub-problems."""
+        failing, ub = self._failing(), self._ub()
+        if not SOLVE_LAST_SET:
+            failing = failing & (self.N == 3) & (self.size == self.N)[None]
+        for p in np.nonzero(probs & (failing.sum(axis=1) == 1) & (self._failing().sum(axis=1) == 1))[0]:
             if self._expired()[p]:                      # (the others' solves credited to every deadline)
                 continue
-            out = solve_all_views(self.group[p])
-            if out is None:
-                continue
-            if out.lb > self.lb[p, row]:
-                self.lb[p, row] = out.lb
+            m, bounds = int(np.argmax(failing[p])), self.group[p].bounds
+            S = frozenset(np.nonzero(self.W[m])[0].tolist())
+            X = self.frames[p].world_point(self.Xn[p, m]) if self.has[p, m] else None
+            b = bounds.solve_full(S, float(ub[p] - self.rest[p, m]), X)
+            if b > self.lb[p, m]:
+                self.lb[p, m] = b
                 self._terms_cache = None
-            if out.X is not None:
-                self._offer_each([(p, out.X)])
+            if bounds.estimate(S) is not None:
+                self._offer_each([(p, bounds.estimate(S))])
 
     def _ascend(self, probs: np.ndarray) -> None:
         """The bounded rows of the problems ``probs`` (P,) whose term still does not meet UB: their bound by the best

@@ -32,13 +32,12 @@ import numpy as np
 
 from ..model.normalize import SCALE_BOUNDS
 from . import robust_enum as enum
-from .robust_bounds import FULL_FROM_DELTA, ROUND_DOWN, SUB_TIME_LIMIT
+from .robust_bounds import ROUND_DOWN
 from .robust_costs import point_distances2
 from .robust_enum_run import LO_ROUNDS, eligible, enumerated_result, lower_bounds
-from .robust_subsolve import solve_subproblem
 from .robust_two import ray_offers
 
-__all__ = ["two_view_tls", "three_view_tls", "solve_all_views", "three_terms", "three_lower_bound", "exact_terms",
+__all__ = ["two_view_tls", "three_view_tls", "three_terms", "three_lower_bound", "exact_terms",
            "three_rest", "VIEWS", "POLISH_STEPS"]
 
 log = logging.getLogger(__name__)
@@ -209,20 +208,19 @@ class _ThreeViews:
         return self._lower_bound()
 
     def _solve_all(self, lb: float) -> float:
-        """The row of all three views, when it alone keeps LB below UB: the sub-problem the search would solve for
-        it (:func:`~tritools.solve.robust_subsolve.solve_subproblem`: Theorem 1 at delta = 4 first, stopping once
-        its rigorous bound reaches UB), here rather than after the search's set-up; its estimate offered (UB may
-        fall); LB after."""
+        """The row of all three views, when it alone keeps LB below UB: its sub-problem solved as a stack solves its
+        last open set (:meth:`~tritools.solve.robust_bounds.SubsetBounds.solve_full`: Theorem 1 at delta = 4 first,
+        stopping once its rigorous bound reaches UB, cached for the search), here rather than after the search's
+        set-up; its estimate offered (UB may fall); LB after."""
         s, row = self.s, len(self.W) - 1
         failing = self._failing()
         if not failing[row] or failing[:row].any():
             return lb
-        out = solve_all_views(s)
-        if out is None:
-            return lb
-        self.lb[row] = max(self.lb[row], out.lb)
-        if out.X is not None:
-            s.offer(out.X)
+        S = frozenset(range(self.views))
+        X = self.frame.world_point(self.Xn[row]) if np.isfinite(self.Xn[row]).all() else None
+        self.lb[row] = max(self.lb[row], s.bounds.solve_full(S, s.best_f, X))
+        if s.bounds.estimate(S) is not None:
+            s.offer(s.bounds.estimate(S))
         return self._lower_bound()
 
     def _failing(self) -> np.ndarray:
@@ -311,19 +309,6 @@ class _TwoViews(_ThreeViews):
 
     def _solve_all(self, lb: float) -> float:
         return lb
-
-
-def solve_all_views(search):
-    """The L2 sub-problem of all views of a search (its cameras and regions) when that set alone keeps LB below UB:
-    :func:`~tritools.solve.robust_subsolve.solve_subproblem` as the search would solve it (three views: Theorem 1 at
-    delta = 4 first), stopping once its rigorous bound reaches UB, within :data:`~tritools.solve.robust_bounds.
-    SUB_TIME_LIMIT` and the search's deadline: a :class:`~tritools.solve.robust_subsolve.SubSolve` (``lb`` pixels^2,
-    rounded down, and its estimate) or None (refused input).  The single call (:meth:`_ThreeViews._solve_all`) and a
-    batch's stack of three-view problems (:meth:`tritools.solve.robust_enum_run._Group._solve_all`) both call it."""
-    remaining = search.deadline.remaining()
-    limit = SUB_TIME_LIMIT if remaining is None else min(SUB_TIME_LIMIT, remaining)
-    return solve_subproblem(search.C, search.regions, search.opts, light=False, from_delta=FULL_FROM_DELTA,
-                            limit=limit, need=search.best_f, points=True)
 
 
 def three_terms(lb: list, rest: list) -> list:

@@ -70,6 +70,8 @@ The default strategy (each step recorded in ``attempts``):
 """
 from __future__ import annotations
 
+import math
+import numbers
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -289,10 +291,15 @@ def minimize(f: Polynomial | float, eq: Sequence[Polynomial | float] = (), ineq:
         chk = is_sos(multiplier, backend=backend, tolerances=tol)
         if not chk.is_sos:
             raise ValueError("the given multiplier q is not SOS: the certificate would not be a valid bound")
-    if radius is not None and not (np.isfinite(radius) and radius > 0):
-        raise ValueError(f"radius must be a positive finite number, got {radius!r}")
+    if radius is not None:
+        if isinstance(radius, (bool, np.bool_)) or not isinstance(radius, numbers.Real):
+            raise TypeError(f"radius must be a positive finite number, got {type(radius).__name__} {radius!r}")
+        if not (math.isfinite(radius) and radius > 0):
+            raise ValueError(f"radius must be a positive finite number, got {radius!r}")
     f, eq, ineq, gens, d0 = checked_inputs(f, eq, ineq, degree, gens, budget.max_gram_side)
-    if max_degree is not None and (int(max_degree) != max_degree or max_degree < d0):
+    if max_degree is not None and (isinstance(max_degree, (bool, np.bool_)) or not isinstance(max_degree, numbers.Real)
+                                   or not math.isfinite(max_degree) or int(max_degree) != max_degree
+                                   or max_degree < d0):
         raise ValueError(f"max_degree must be an integer >= the first degree {d0}, got {max_degree!r}")
     last = d0 if degree is not None else int(max_degree if max_degree is not None else d0 + 4)
 

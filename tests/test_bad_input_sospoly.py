@@ -182,3 +182,26 @@ def test_triangulate_names_the_unsupported_degree():
     # a degree whose program cannot fit is refused by the budget before anything is built: a status, not a crash
     res = tritools.triangulate(cams, regions, "corollary1", delta=200)
     assert res.status == tritools.Status.BUDGET_EXCEEDED and "side" in res.message
+
+
+def test_review21a_bad_arguments_are_named():
+    """Review 21a F7: a radius that is not a number, an array radius, max_degree NaN, one polynomial where a
+    sequence of constraints is expected, and a variable name that is not an identifier: a TypeError/ValueError
+    naming the argument (before: numpy's 'truth value is ambiguous', 'Polynomial object is not iterable', ...)."""
+    import numpy as np
+
+    import sospoly as sp
+
+    x, y = sp.variables("x y")
+    for kw, exc, name in ((dict(radius="2"), TypeError, "radius"), (dict(radius=np.array([1.0, 2.0])), TypeError,
+                                                                     "radius"),
+                          (dict(radius=True), TypeError, "radius"), (dict(radius=-1.0), ValueError, "radius"),
+                          (dict(max_degree=float("nan")), ValueError, "max_degree"),
+                          (dict(eq=x ** 2 + y ** 2 - 1), TypeError, "eq"), (dict(ineq=3.0), TypeError, "ineq")):
+        with pytest.raises(exc, match=name):
+            sp.minimize(x + y, **kw)
+    with pytest.raises(ValueError, match="identifiers"):
+        sp.variables("1x")
+    with pytest.raises(ValueError, match="identifiers"):
+        sp.variables(["x", "y z"])
+    assert sp.minimize(x + y, eq=[x ** 2 + y ** 2 - 1], radius=np.float64(2.0)).optimal     # numpy scalars are fine

@@ -464,6 +464,10 @@ def variables(names: str | Iterable[str], n: int | None = None) -> tuple[Polynom
         raise ValueError(f"{m} variables exceed the limit sospoly.algebra.polynomial.MAX_VARIABLES = "
                          f"{MAX_VARIABLES} (exponents are dense: n variables hold n**2 entries)")
     gens = tuple(str(g) for g in gens)
+    bad = [g for g in gens if not g.isidentifier()]
+    if bad:
+        raise ValueError(f"variable names must be identifiers (a letter or _ first, then letters, digits, _), got "
+                         f"{bad[:5]!r}")
     if len(set(gens)) != m:
         raise ValueError(f"duplicate variable names in {gens[:20]}")
     zero = (0,) * m                      # each exponent built by tuple slicing (C speed, no per-entry checks)

@@ -136,12 +136,21 @@ def check_degree_supported(nvars: int, degree: int, max_gram_side: int = MAX_GRA
                              hint="use a lower degree or a sparse certificate")
 
 
+def _sequence(polys, name: str):
+    """``polys`` as a sequence of constraints; one polynomial or number (not a sequence) is a TypeError naming the
+    argument (``eq=g`` for ``eq=[g]``)."""
+    if isinstance(polys, (Polynomial, numbers.Number, str)) or not hasattr(polys, "__iter__"):
+        raise TypeError(f"{name} must be a sequence of polynomials, e.g. {name}=[g], got a single "
+                        f"{type(polys).__name__}")
+    return polys
+
+
 def checked_inputs(f, eq, ineq, degree, gens, max_gram_side: int | None = MAX_GRAM_SIDE) -> tuple:
     """(f, eq, ineq, gens, degree) validated and on common variables: the input rules of every
     Positivstellensatz entry point."""
     f = _check_poly(f, "f")
-    eq = tuple(_check_poly(g, "each equality g_k") for g in eq)
-    ineq = tuple(_check_poly(h, "each inequality h_k") for h in ineq)
+    eq = tuple(_check_poly(g, "each equality g_k") for g in _sequence(eq, "eq"))
+    ineq = tuple(_check_poly(h, "each inequality h_k") for h in _sequence(ineq, "ineq"))
     if gens is None:
         gens = common_gens(f, *eq, *ineq)
     gens = tuple(gens)

@@ -287,3 +287,20 @@ def test_sdpa_sizes_are_bounded(tmp_path, text, needle):
     (tmp_path / "big.dat-s").write_text(text)
     with pytest.raises(ValueError, match=needle):
         sp.ConicProblem.from_sdpa(tmp_path / "big.dat-s")
+
+
+def test_regions_that_overflow_in_the_normalised_frame_are_a_numerical_failure():
+    """Review 21b F2: a disc holding everything (D = 1e308 I) or a box of half-width 1e-300 (B = 1e300 I) is a valid
+    region whose program overflows when built: status numerical_failure naming the overflow, never budget_exceeded
+    (the memory budget's status); a Theorem 1 program refused for its size is still budget_exceeded."""
+    import numpy as np
+
+    import tritools
+
+    cams = np.array([[[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 1]], [[1, 0, 0, 1], [0, 1, 0, 0], [0, 0, 1, 1]],
+                     [[1, 0, 0, 0], [0, 1, 0, 1], [0, 0, 1, 1]]], float)
+    for reg in (tritools.Ellipse([0.5, 0.0], 1e308 * np.eye(2)), tritools.Polytope(1e300 * np.eye(2), [0.0, 0.0])):
+        regions = [tritools.Point([0.0, 0.0]), reg, tritools.Segment([0.0, 0.5], [0.1, 0.0])]
+        r = tritools.triangulate(cams, regions)
+        assert r.status == tritools.Status.NUMERICAL_FAILURE and "not representable" in r.message, r.message
+        assert not r.optimal

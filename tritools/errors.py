@@ -7,7 +7,7 @@ problem-file reader a field into its location ``problems[3].regions[1].D``) with
 """
 from __future__ import annotations
 
-__all__ = ["FieldError", "MISSING"]
+__all__ = ["FieldError", "ProblemTooLarge", "MISSING"]
 
 #: the ``reason`` of a required field that was not given
 MISSING = "is missing"
@@ -30,3 +30,9 @@ class FieldError(ValueError):
 
     def __reduce__(self):                   # picklable across processes (executors)
         return type(self), (self.field, self.reason, self.message)
+
+
+class ProblemTooLarge(ValueError):
+    """A program refused for its size before it is built (Theorem 1 with all minors beyond its view count): the
+    plan's step ends ``budget_exceeded``; any other ValueError while building a program is a numerical failure
+    (numbers that overflow in the normalised frame, review 21b F2)."""

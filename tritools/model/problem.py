@@ -29,6 +29,7 @@ import numpy as np
 from sospoly import Polynomial, sum_in_order, variables
 from sospoly.budget import check_deadline
 
+from ..errors import ProblemTooLarge
 from .constraints import (THEOREM1_DENSE_MAX_VIEWS, Method, centre_relations, corollary1_constraints,
                           theorem1_constraints, triple_minor_constraints)
 
@@ -116,7 +117,7 @@ def build_problem(cameras: np.ndarray, regions, method: Method = Method.THEOREM1
     f = sum_in_order(gens, fs)
     if method == Method.THEOREM1 and formulation == "dense":
         if N > THEOREM1_DENSE_MAX_VIEWS:
-            raise ValueError(f"Theorem 1 with all minors is built for at most {THEOREM1_DENSE_MAX_VIEWS} views "
+            raise ProblemTooLarge(f"Theorem 1 with all minors is built for at most {THEOREM1_DENSE_MAX_VIEWS} views "
                              f"(C(2N, 4) = {_comb4(2 * N)} minors for N = {N}); use the 'views' formulation")
         rel = centre_relations(cameras) if relations is None else relations
         proj, info = theorem1_constraints(cameras, gens, x_index, rel.groups, rel.loose)

@@ -28,6 +28,7 @@ from sospoly import BudgetExceeded, Multiplier
 from sospoly.budget import TimeLimitReached, gram_block_exceeds
 from sospoly.solvers import CLARABEL_FAST_CHAIN, CLARABEL_SPLIT_CHAIN, AutoBackend, level_scope
 
+from ...errors import ProblemTooLarge
 from ...model.constraints import Method
 from ...model.normalize import unconstrained_reason
 from ...model.problem import TriangulationProblem, view_band, view_chain
@@ -182,8 +183,13 @@ def _build(ctx: PointContext, st: StepState) -> bool:
         return False
     try:
         problem = st.problem = ctx.problem(step.method, step.formulation)
-    except ValueError as exc:                     # e.g. Theorem 1 with all minors for too many views
+    except ProblemTooLarge as exc:                # Theorem 1 with all minors for too many views
         _fail(ctx, st, Status.BUDGET_EXCEEDED, str(exc))
+        return False
+    except ValueError as exc:                     # numbers that overflow in the normalised frame (review 21b F2)
+        _fail(ctx, st, Status.NUMERICAL_FAILURE, f"delta={step.delta} ({st.sparsity}): the program's numbers are not "
+                                                 f"representable in floating point ({exc}): the regions' or cameras' "
+                                                 "magnitudes overflow in the normalised frame")
         return False
     if not problem.projection:
         status, why = unconstrained_reason(ctx.cams, ctx.regions)

@@ -218,3 +218,43 @@ def test_every_single_call_path_judges_in_front_in_the_given_frame(path):
     assert r.optimal and r.status == Status.OPTIMAL and r.in_front and np.all(r.depths > 0), (r.status, r.depths)
     r = triangulate(Pm, regions, require_in_front=True, **kw)
     assert r.status == Status.BEHIND_CAMERA and not r.in_front and np.all(r.depths < 0)
+
+
+def _far_discs(seed: int):
+    """Two cameras (baseline 1, f = 800) and discs of 0.5 / 0.3 px around noisy views of a point at depth 1e7: the
+    cost-0 set holds points behind both cameras and points in front (the disparity may be made positive inside the
+    discs)."""
+    import tritools
+
+    P1 = np.diag([800.0, 800, 1]) @ np.hstack([np.eye(3), np.zeros((3, 1))])
+    P2 = np.diag([800.0, 800, 1]) @ np.hstack([np.eye(3), [[-1.0], [0], [0]]])
+    cams = np.array([P1, P2])
+    rng = np.random.default_rng(seed)
+    obs = [tritools.project(np.array([0.3, 0.2, 1e7]), P) + rng.normal(size=2) for P in cams]
+    return cams, [tritools.Ellipse.circle(obs[0], 0.5), tritools.Ellipse.circle(obs[1], 0.3)]
+
+
+def test_uncertain_regions_with_minimisers_in_front_are_not_behind_camera():
+    """Review 21b F1: the certified estimate of two discs lay behind both cameras (depth -1554) while cost-0 points
+    in front exist; the result is now an in-front minimiser (tritools.solve.front), certified, with gamma_ub the
+    gamma of the point reported, and require_in_front keeps OPTIMAL."""
+    import tritools
+
+    cams, regs = _far_discs(0)
+    for opts in ({}, {"require_in_front": True}):
+        r = triangulate(cams, regs, **opts)
+        assert r.status == Status.OPTIMAL and r.optimal and r.in_front and np.all(depths(r.X, cams) > 0)
+        assert r.gamma_ub == pytest.approx(tritools.gamma(r.X, cams, regs), abs=1e-12)
+        assert r.gamma_lb <= r.gamma_ub <= 1e-9
+
+
+def test_point_regions_with_the_optimum_behind_stay_behind_camera():
+    """Point regions: the minimiser is unique, so an optimum behind the cameras stays the answer (behind_camera under
+    require_in_front), the in-front search not taken."""
+    P1 = np.hstack([np.eye(3), np.zeros((3, 1))])
+    P2 = np.hstack([np.eye(3), [[-1.0], [0], [0]]])
+    X = np.array([0.2, 0.1, -5.0])                               # behind both cameras
+    x = [P @ np.append(X, 1.0) for P in (P1, P2)]
+    pts = [Point(h[:2] / h[2]) for h in x]
+    r = triangulate(np.array([P1, P2]), pts, require_in_front=True)
+    assert r.status == Status.BEHIND_CAMERA and not r.in_front

@@ -18,9 +18,10 @@ import time
 import numpy as np
 
 from ...model.constraints import Method
-from ...model.geometry import project_point_views
+from ...model.geometry import project, project_point_views
 from ...result import Attempt, Status, TriangulationResult
 from ..decide import cheirality, decide_reported, gamma_lower
+from ..front import front_estimate
 from ..plan import Step
 from ..report import point_report
 from ..trivial import TRIVIAL_BOUND, trivially_certified, trivially_certified_reported
@@ -55,9 +56,12 @@ def has_upper(rep) -> bool:
 
 
 def report_point(ctx: PointContext, step: Step, status, optimal, gamma_lb, *, X, X_raw, image_points,
-                 certified_by, n_lmivar=None, lowered: bool = False) -> TriangulationResult:
+                 certified_by, n_lmivar=None, lowered: bool = False, front_tried: bool = False) -> TriangulationResult:
     """The result of the estimate ``X`` under ``step`` (module docstring); ``lowered``: ``gamma_lb`` is already a
-    bound of the caller's data (:func:`tritools.solve.decide.gamma_lower`, done by the batch paths)."""
+    bound of the caller's data (:func:`tritools.solve.decide.gamma_lower`, done by the batch paths).  A certified
+    estimate behind a camera is replaced by an in-front one of no larger gamma where the regions admit it
+    (:func:`tritools.solve.front.front_estimate`; the certificate decided again on it)."""
+    status0, optimal0, gamma_lb0 = status, optimal, gamma_lb
     rep = point_report(X, ctx.cams, ctx.regions, ctx.opts.world_frame)
     same = X_raw is X or (X_raw is not None and X is not None and np.array_equal(X_raw, X))
     raw = rep if same else point_report(X_raw, ctx.cams, ctx.regions)     # gamma only: the frame is irrelevant
@@ -75,6 +79,14 @@ def report_point(ctx: PointContext, step: Step, status, optimal, gamma_lb, *, X,
                 msg = "the bounds met in normalised coordinates, but not at the estimate in world coordinates"
     if optimal and not has_upper(rep):
         status, optimal, msg = Status.NOT_CERTIFIED, False, UNDEFINED_MESSAGE
+    if optimal and rep.depths is not None and not cheirality(status, rep.depths)[1] and not front_tried:
+        front = front_estimate(ctx, X)              # other minimisers in front (uncertain regions, review 21b F1)
+        if front is not None:
+            ip = np.array([r.closest_point(project(front, P)[None])[0] for P, r in zip(ctx.cams, ctx.regions)])
+            out = report_point(ctx, step, status0, optimal0, gamma_lb0, X=front, X_raw=front, image_points=ip,
+                               certified_by=certified_by, n_lmivar=n_lmivar, lowered=lowered, front_tried=True)
+            if out.optimal and out.in_front:
+                return out
     status, in_front = cheirality(status, rep.depths, ctx.opts.require_in_front)
     if optimal and not in_front:
         msg = behind_message(rep.depths)

@@ -92,7 +92,7 @@ from .certificates.term_hierarchy import (cheap_term_level, newton_smaller, pars
                                          term_levels)
 from .lowering.conic import GramForm
 from .solvers.backends import cvxpy_available, get_backend
-from .scaling import ScaledProgram, scaled_program
+from .scaling import ScaledProgram, lifted, scaled_program, used_gens
 from .solvers.lower_bound import solve_psatz
 from .solvers.solve import LowerBound, ProgramSolution
 from .sos_check import SOSResult, is_sos
@@ -297,6 +297,13 @@ def minimize(f: Polynomial | float, eq: Sequence[Polynomial | float] = (), ineq:
         if not (math.isfinite(radius) and radius > 0):
             raise ValueError(f"radius must be a positive finite number, got {radius!r}")
     f, eq, ineq, gens, d0 = checked_inputs(f, eq, ineq, degree, gens, budget.max_gram_side)
+    used = used_gens(gens, f, *eq, *ineq, *([multiplier] if isinstance(multiplier, Polynomial) else []))
+    if 0 < len(used) < len(gens):               # a variable in no polynomial: solved without it (review 21a F5)
+        res = minimize(f.with_gens(used), [g.with_gens(used) for g in eq], [h.with_gens(used) for h in ineq], degree,
+                       multiplier.with_gens(used) if isinstance(multiplier, Polynomial) else multiplier,
+                       sparsity=sparsity, low_degree=low_degree, max_degree=max_degree, backend=backend, form=form,
+                       tolerances=tolerances, budget=budget, refine=refine, gens=used, radius=radius)
+        return lifted(res, gens, used)
     if max_degree is not None and (isinstance(max_degree, (bool, np.bool_)) or not isinstance(max_degree, numbers.Real)
                                    or not math.isfinite(max_degree) or int(max_degree) != max_degree
                                    or max_degree < d0):

@@ -25,8 +25,8 @@ import numpy as np
 
 from .algebra.polynomial import Polynomial
 
-__all__ = ["VariableScaling", "ScaledProgram", "balancing", "power2_normalised", "scaled_program", "MIN_GAIN_BITS",
-           "MAX_EXPONENT"]
+__all__ = ["VariableScaling", "ScaledProgram", "balancing", "power2_normalised", "scaled_program", "used_gens",
+           "lifted", "MIN_GAIN_BITS", "MAX_EXPONENT"]
 
 #: the scaling is applied only when it narrows the largest log2-spread of the polynomials' coefficients by this.
 MIN_GAIN_BITS = 4.0
@@ -155,3 +155,34 @@ def scaled_program(f, eq, ineq, multiplier, radius) -> ScaledProgram:
         r = sc.radius(radius)
         box, ball = (r if box is None else np.minimum(box, r)), float(np.max(r))
     return ScaledProgram(fn, eqn, ineqn, fs, sc, mult, box, ball)
+
+
+def used_gens(gens: tuple, *polys) -> tuple:
+    """The variables of ``gens`` that some polynomial of ``polys`` uses (a nonzero exponent), in ``gens`` order:
+    :func:`sospoly.minimize` solves over these alone (a variable in no polynomial is unbounded by every constraint,
+    so no box holds a minimiser and certificates were lost, review 21a F5) and :func:`lifted` maps back."""
+    used = set()
+    for p in polys:
+        p = p.with_gens(gens)
+        for e in p.terms:
+            used.update(k for k, v in enumerate(e) if v)
+    return tuple(g for k, g in enumerate(gens) if k in used)
+
+
+def lifted(res, gens: tuple, used: tuple):
+    """The inverse of solving over ``used`` (:func:`used_gens`) instead of ``gens``: a :class:`sospoly.
+    MinimizeResult` over ``used`` as one over ``gens``, every point with 0 in the unused variables (any value is as
+    good: no polynomial holds them), ``gens`` the caller's; the moment matrices stay over ``used``."""
+    pos = [gens.index(g) for g in used]
+
+    def up(p):
+        out = np.zeros(len(gens))
+        out[pos] = np.asarray(p, float)
+        return out
+    import dataclasses
+
+    note = f"variables {[g for g in gens if g not in used]} appear in no polynomial: solved without them (0 in the " \
+           "points)"
+    return dataclasses.replace(res, gens=tuple(gens), minimizers=tuple(up(p) for p in res.minimizers),
+                               candidates=tuple(up(p) for p in res.candidates),
+                               message="; ".join(m for m in (res.message, note) if m))

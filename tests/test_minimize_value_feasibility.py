@@ -45,3 +45,20 @@ def test_value_shift_covers_the_drop_to_the_set():
     # an inequality met with a slack: no shift; violated: a shift of its distance's order
     assert value_shift(f, [], [1 - x ** 2 - y ** 2], 0.5 * u) == 0.0
     assert value_shift(f, [], [1 - x ** 2 - y ** 2], 1.01 * u) >= math.sqrt(2) * 0.01 * (1 - 1e-6)
+
+
+def test_a_variable_in_no_polynomial_changes_nothing():
+    """Review 21a F5: x, y, z = variables("x y z") with z in no polynomial -- a box problem on (x, y) certified with
+    two generators was unproven (no box holds z) and minimize_ratios refused its denominator.  Now solved without z:
+    the same bounds, certified, every point with 0 in z and the caller's generators in the result."""
+    x, y = sp.variables("x y")
+    x3, y3, _ = sp.variables("x y z")
+    f = lambda a, b: -(a - 0.3) ** 2 - (b - 0.2) ** 2                 # noqa: E731  (min -1.13 at (1, 1))
+    box = lambda a, b: [a, 1 - a, b, 1 - b]                            # noqa: E731
+    r2 = sp.minimize(f(x, y), ineq=box(x, y), degree=4)
+    r3 = sp.minimize(f(x3, y3), ineq=box(x3, y3), degree=4)
+    assert r2.optimal and r3.optimal and r3.gens == ("x", "y", "z")
+    assert r3.lower_bound == pytest.approx(r2.lower_bound, rel=1e-9) and r3.lower_bound <= -1.13 + 1e-12
+    assert all(len(p) == 3 and p[2] == 0.0 for p in r3.minimizers)
+    q = sp.minimize_ratios([(x3 ** 2 + 1, x3 + 2)], ineq=[x3, 1 - x3])
+    assert q.status == sp.SolveStatus.OPTIMAL and q.denominator_bounds[0] > 1.9

@@ -380,7 +380,9 @@ def _better(a: MinimizeResult, b: MinimizeResult) -> bool:
         return a.optimal
     la, lb = a.lower_bound, b.lower_bound
     if la is None or not np.isfinite(la):
-        return False
+        # neither bound: feasible points (an upper bound) over none -- a later degree's points were lost behind a
+        # first degree's "no certificate at this degree" (review 21a F4)
+        return (lb is None or not np.isfinite(lb)) and a.upper_bound is not None and b.upper_bound is None
     return lb is None or not np.isfinite(lb) or la > lb or (
         la == lb and a.upper_bound is not None and (b.upper_bound is None or a.upper_bound < b.upper_bound))
 

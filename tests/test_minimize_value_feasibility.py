@@ -62,3 +62,14 @@ def test_a_variable_in_no_polynomial_changes_nothing():
     assert all(len(p) == 3 and p[2] == 0.0 for p in r3.minimizers)
     q = sp.minimize_ratios([(x3 ** 2 + 1, x3 + 2)], ineq=[x3, 1 - x3])
     assert q.status == sp.SolveStatus.OPTIMAL and q.denominator_bounds[0] > 1.9
+
+
+def test_later_degrees_feasible_points_are_not_lost_behind_a_first_infeasible_degree():
+    """Review 21a F4: min -(x^2 + y^2 + z^2) on the simplex (min -1 at a vertex): degree 2 has no certificate
+    (INFEASIBLE, 'try a larger degree'), degrees 4 and 6 solved and found the vertices; the result was the degree-2
+    verdict with no upper bound.  Now the best result keeps the feasible points: upper bound -1, never INFEASIBLE."""
+    x, y, z = sp.variables("x y z")
+    r = sp.minimize(-(x ** 2 + y ** 2 + z ** 2), eq=[x + y + z - 1], ineq=[x, y, z])
+    assert r.status != sp.SolveStatus.INFEASIBLE
+    assert r.upper_bound == pytest.approx(-1.0, abs=1e-6)
+    assert r.lower_bound is None or r.lower_bound <= -1.0 + 1e-9

@@ -258,3 +258,18 @@ def test_point_regions_with_the_optimum_behind_stay_behind_camera():
     pts = [Point(h[:2] / h[2]) for h in x]
     r = triangulate(np.array([P1, P2]), pts, require_in_front=True)
     assert r.status == Status.BEHIND_CAMERA and not r.in_front
+
+
+def test_batches_of_discs_look_for_the_in_front_minimiser_too():
+    """The disc batch (triangulate_many's verification stack) hands a certified row behind a camera to the single
+    call, which looks for an in-front minimiser: the batch's result equals the single call's (in front, certified)."""
+    import tritools
+
+    probs = [_far_discs(s) for s in (0, 1, 2)]
+    many = tritools.triangulate_many(probs, progress=False)
+    for (cams, regs), rm in zip(probs, many):
+        one = triangulate(cams, regs)
+        assert (rm.status, rm.optimal, rm.in_front) == (one.status, one.optimal, one.in_front)
+        if one.in_front:
+            assert np.all(depths(rm.X, cams) > 0)
+    assert many[0].in_front and many[0].optimal

@@ -255,6 +255,9 @@ def _solve_group(group, opts, verify):
                          (Attempt("corollary1", 2, "verification_failed", None, None, AttemptStep.VERIFICATION,
                                    "dense"),)))
             continue
+        if not in_front[k]:         # other minimisers may lie in front: the single call looks (tritools.solve.front)
+            rest.append((i, cams, regions, opts, ()))
+            continue
         if n_lmivar is None:
             from sospoly import n_lmivar_formula
 

@@ -241,18 +241,28 @@ class SubsetBounds:
         self._count_ceiling(S)
         return True
 
-    def solve_full(self, S: frozenset, need: float, X=None) -> float:
-        """S's bound after solving S with the degree plan from :data:`FULL_FROM_DELTA` (three views: Theorem 1 at
-        delta = 4 first, :mod:`~tritools.solve.robust_subsolve`), stopping once its rigorous bound reaches ``need``
-        (S then weak, as :meth:`strengthen` leaves it), cached for a later search: the enumeration's last open set,
-        whose degree-2 bounds fall short (:meth:`tritools.solve.robust_enum_run._Group._solve_all`).  No solve (0)
-        past the deadline or where no Corollary 1 degree can certify S (:func:`~tritools.solve.coplanar.
-        subset_futile` at its candidate ``X``, a world point, or None)."""
+    def solve_full(self, S: frozenset, need: float, X=None) -> tuple:
+        """(L2 lower bound of S in pixels^2, rounded down -- 0 without one --, its estimate or None) by the degree
+        plan from :data:`FULL_FROM_DELTA` (three views: Theorem 1 at delta = 4 first,
+        :mod:`~tritools.solve.robust_subsolve`), stopping once its rigorous bound reaches ``need``: the
+        enumeration's last open set, whose degree-2 bounds fall short
+        (:meth:`tritools.solve.robust_enum_run._Group._solve_all`).  Not cached: a search that runs after it bounds S
+        its own way (a stopped or exhausted plan from delta = 4 stored here kept a two-view search from its
+        verification, which certified).  No solve past the deadline or where no Corollary 1 degree can certify S
+        (:func:`~tritools.solve.coplanar.subset_futile` at its candidate ``X``, a world point, or None)."""
         views = sorted(S)
-        if self.deadline.expired or subset_futile(self.C[views], [self.regions[i] for i in views], self.opts, 0.0, X):
-            return 0.0
-        self._solve_one(S, light=False, from_delta=FULL_FROM_DELTA, need=need)
-        return self._lb[S]
+        regions = [self.regions[i] for i in views]
+        if self.deadline.expired or subset_futile(self.C[views], regions, self.opts, 0.0, X):
+            return 0.0, None
+        remaining = self.deadline.remaining()
+        limit = SUB_TIME_LIMIT if remaining is None else min(SUB_TIME_LIMIT, remaining)
+        out = solve_subproblem(self.C[views], regions, self.opts, light=False, from_delta=FULL_FROM_DELTA, limit=limit,
+                               need=need, points=self.points)
+        if out is None:
+            return 0.0, None
+        self.n_solved += 1
+        self.budget_exceeded |= out.budget_exceeded
+        return max(out.lb, 0.0), out.X
 
     def split_bound(self, S: frozenset, need: float) -> float:
         """max over tried triples T of S holding a view outside the caller's ``hint`` (a likely wrong match w) of

@@ -350,20 +350,22 @@ class _Group:
         solved here (:meth:`~tritools.solve.robust_bounds.SubsetBounds.solve_full`, stopping once its rigorous bound
         reaches UB - c^2(V - S)), its estimate offered -- not after a search's set-up, nodes and sub-problems."""
         failing, ub = self._failing(), self._ub()
+        if self.N < 3:                                  # (two views: the rays and the search, as before)
+            return
         if not SOLVE_LAST_SET:
             failing = failing & (self.N == 3) & (self.size == self.N)[None]
         for p in np.nonzero(probs & (failing.sum(axis=1) == 1) & (self._failing().sum(axis=1) == 1))[0]:
             if self._expired()[p]:                      # (the others' solves credited to every deadline)
                 continue
-            m, bounds = int(np.argmax(failing[p])), self.group[p].bounds
+            m = int(np.argmax(failing[p]))
             S = frozenset(np.nonzero(self.W[m])[0].tolist())
             X = self.frames[p].world_point(self.Xn[p, m]) if self.has[p, m] else None
-            b = bounds.solve_full(S, float(ub[p] - self.rest[p, m]), X)
+            b, Xs = self.group[p].bounds.solve_full(S, float(ub[p] - self.rest[p, m]), X)
             if b > self.lb[p, m]:
                 self.lb[p, m] = b
                 self._terms_cache = None
-            if bounds.estimate(S) is not None:
-                self._offer_each([(p, bounds.estimate(S))])
+            if Xs is not None:
+                self._offer_each([(p, Xs)])
 
     def _ascend(self, probs: np.ndarray) -> None:
         """The bounded rows of the problems ``probs`` (P,) whose term still does not meet UB: their bound by the best

@@ -210,17 +210,17 @@ class _ThreeViews:
     def _solve_all(self, lb: float) -> float:
         """The row of all three views, when it alone keeps LB below UB: its sub-problem solved as a stack solves its
         last open set (:meth:`~tritools.solve.robust_bounds.SubsetBounds.solve_full`: Theorem 1 at delta = 4 first,
-        stopping once its rigorous bound reaches UB, cached for the search), here rather than after the search's
-        set-up; its estimate offered (UB may fall); LB after."""
+        stopping once its rigorous bound reaches UB), here rather than after the search's set-up; its estimate
+        offered (UB may fall); LB after."""
         s, row = self.s, len(self.W) - 1
         failing = self._failing()
         if not failing[row] or failing[:row].any():
             return lb
-        S = frozenset(range(self.views))
         X = self.frame.world_point(self.Xn[row]) if np.isfinite(self.Xn[row]).all() else None
-        self.lb[row] = max(self.lb[row], s.bounds.solve_full(S, s.best_f, X))
-        if s.bounds.estimate(S) is not None:
-            s.offer(s.bounds.estimate(S))
+        b, Xs = s.bounds.solve_full(frozenset(range(self.views)), s.best_f, X)
+        self.lb[row] = max(self.lb[row], b)
+        if Xs is not None:
+            s.offer(Xs)
         return self._lower_bound()
 
     def _failing(self) -> np.ndarray:

@@ -207,6 +207,21 @@ def ellipse_shapes(regions) -> list | None:
     return out
 
 
+#: a certified disc/ellipse row behind a camera whose gamma_UB is at most this fraction of its smallest region goes to
+#: the single call, which looks for an in-front minimiser (cost 0: the minimisers may form a set; the single call's
+#: own rule is the trivial bound's, :func:`tritools.solve.trivial.trivially_certified_reported`)
+FRONT_GAMMA_REL = 1e-6
+
+
+def _region_size(shape) -> float:
+    """The smallest positive radius of a row's discs (radii (N,)) or ellipses (D (N, 2, 2): sqrt of the larger
+    eigenvalue); 0 where every view is a point."""
+    a = np.asarray(shape, float)
+    r = a if a.ndim == 1 else np.sqrt(np.maximum(np.linalg.eigvalsh(a)[:, -1], 0.0))
+    r = r[r > 0]
+    return float(r.min()) if r.size else 0.0
+
+
 def solve_disc_group(group, opts):
     """Disc or ellipse problems of one N (``group``: [(index, cameras, centres, radii or D, regions)]) through
     :func:`verify_discs` / :func:`tritools.solve.ellipses.verify_ellipses`: ({index: certified result},
@@ -255,8 +270,8 @@ def _solve_group(group, opts, verify):
                          (Attempt("corollary1", 2, "verification_failed", None, None, AttemptStep.VERIFICATION,
                                    "dense"),)))
             continue
-        if not in_front[k]:         # other minimisers may lie in front: the single call looks (tritools.solve.front)
-            rest.append((i, cams, regions, opts, ()))
+        if not in_front[k] and b.gamma_ub[k] <= FRONT_GAMMA_REL * _region_size(group[k][3]):
+            rest.append((i, cams, regions, opts, ()))    # cost ~0: minimisers in front may exist (tritools.solve.front)
             continue
         if n_lmivar is None:
             from sospoly import n_lmivar_formula

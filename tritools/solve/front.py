@@ -19,7 +19,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..model.geometry import refine_l2
+from ..model.cameras import depths_stack
+from ..model.geometry import gamma_validated, refine_l2
 from .report import point_report
 
 __all__ = ["front_estimate", "SWEEP", "MAX_RAYS"]
@@ -69,15 +70,18 @@ def _best_sample(ctx, cams: np.ndarray, regs: list, Xn: np.ndarray):
     C = np.array(centres)
     gaps = [np.linalg.norm(a - b) for k, a in enumerate(C) for b in C[k + 1:]]
     base = float(np.median(gaps)) if gaps and np.median(gaps) > 0 else 1.0
-    best, best_g = None, np.inf
-    for c, d in zip(centres, dirs):
-        for s in (1.0, -1.0):                      # (the ray's sign toward positive depth is the report's call)
-            for t in SWEEP * base:
-                Y = c + s * t * d
-                rep = point_report(ctx.norm.world_point(Y), ctx.cams, ctx.regions, ctx.opts.world_frame)
-                if _in_front(rep) and rep.gamma is not None and rep.gamma < best_g:
-                    best, best_g = Y, rep.gamma
-    return best
+    t = np.concatenate([SWEEP, -SWEEP]) * base    # (the ray's sign toward positive depth is the depths' call)
+    Y = (C[:, None, :] + t[None, :, None] * np.array(dirs)[:, None, :]).reshape(-1, 3)
+    W = np.array([ctx.norm.world_point(y) for y in Y])
+    with np.errstate(all="ignore"):
+        dep = depths_stack(np.broadcast_to(ctx.cams, (len(W),) + ctx.cams.shape), W, ctx.opts.world_frame)
+        front = np.all(np.isfinite(dep) & (dep > 0), axis=1)
+        if not front.any():
+            return None
+        g = np.full(len(W), np.inf)
+        g[front] = gamma_validated(W[front], ctx.cams, ctx.regions)     # one stacked evaluation of the samples
+    k = int(np.argmin(g))
+    return Y[k] if np.isfinite(g[k]) else None
 
 
 def _in_front(rep) -> bool:

@@ -70,6 +70,12 @@ class _Compiled:
             terms = self.coef * np.prod(np.asarray(x, float)[self.cols] ** self.pows, axis=1)
             return np.bincount(self.which, weights=terms, minlength=self.m)
 
+    def magnitudes(self, x) -> np.ndarray:
+        """sum_t |term_t(x)| per polynomial: the scale of the evaluation's round-off at x."""
+        with np.errstate(over="ignore", invalid="ignore"):
+            terms = np.abs(self.coef * np.prod(np.asarray(x, float)[self.cols] ** self.pows, axis=1))
+            return np.bincount(self.which, weights=terms, minlength=self.m)
+
     def jacobian(self, x) -> np.ndarray:
         xc = np.asarray(x, float)[self.cols]
         J = np.zeros((self.m, self.n))
@@ -186,30 +192,52 @@ def _violation_of(eq, ineq):
 
 def value_shift(f: Polynomial, eq, ineq, p: np.ndarray) -> float:
     """How far f may fall from p to the constraints, to first order: ||grad f(p)|| times the largest distance
-    estimate D_k r_k / ||grad g_k(p)|| of a violated constraint (r_k = |g_k(p)| for an equality, max(0, -h_k(p)) for
-    an inequality, D_k its degree; inf where its gradient vanishes).  A candidate is feasible within
+    estimate (D_k r_k + e_k) / ||grad g_k(p)|| of a violated or active constraint (r_k = |g_k(p)| for an equality,
+    max(0, -h_k(p)) for an inequality, D_k its degree, e_k the round-off of its evaluation at p; inf where its
+    gradient vanishes or its Newton step toward the set does not halve r_k).  A candidate is feasible within
     :meth:`~sospoly.Tolerances.feasible` by the constraint's *value*: a squared constraint (x^2 + y^2 - 1)^2 = 0
     passes 1e-3 off its set, and f there lies ~1e-4 below the minimum (review 21a F3); :func:`sospoly.minimize`
     takes a point's value as an upper bound only where this shift is within the gap tolerance.  The degree covers a
-    constraint vanishing to a higher order (r = |h|^m: r / ||grad r|| is 1/m of the distance, m <= D)."""
+    constraint vanishing to a higher order (r = |h|^m: r / ||grad r|| is 1/m of the distance, m <= D); the round-off
+    term a point whose constraints vanish to round-off where their gradient is tiny (a cusp y^2 = x^3 in shifted
+    variables met to 1e-15 at x = -5e-5, review 21c F2: the set's place is not resolved there)."""
     p = np.asarray(p, float)
     worst = 0.0
+    eps = 64 * np.finfo(float).eps
     for polys, viol in ((eq, np.abs), (ineq, lambda v: np.maximum(0.0, -v))):
         if not polys:
             continue
         c = _Compiled(polys)
-        r = viol(c.values(p))
-        if not np.any(r > 0):
+        v = c.values(p)
+        r, noise = viol(v), eps * c.magnitudes(p)
+        near = (r > 0) | (np.abs(v) <= noise)          # violated, or active to round-off
+        if not np.any(near):
             continue
-        g = np.linalg.norm(c.jacobian(p), axis=1)
+        J = c.jacobian(p)
+        g = np.linalg.norm(J, axis=1)
         deg = np.array([max(1, q.degree) for q in polys], float)
         with np.errstate(divide="ignore", invalid="ignore"):
-            d = np.where(r > 0, np.where(g > 0, deg * r / g, np.inf), 0.0)
+            d = np.where(near, np.where(g > 0, (deg * r + noise) / g, np.inf), 0.0)
+        d = np.where(_linear_model_fails(c, p, J, g, r) & (r > noise), np.inf, d)
         worst = max(worst, float(np.max(d)))
     if worst == 0.0:
         return 0.0
     grad = float(np.linalg.norm(_Compiled([f]).jacobian(p)[0]))
     return grad * worst if np.isfinite(worst) else (0.0 if grad == 0.0 else np.inf)
+
+
+def _linear_model_fails(c: _Compiled, p: np.ndarray, J: np.ndarray, g: np.ndarray, r: np.ndarray) -> np.ndarray:
+    """Per violated constraint: does its Newton step toward the set (p - v_k grad_k / |grad_k|^2) fail to halve the
+    violation beyond the evaluation's round-off?  Then the first-order distance means nothing (review 21c F2: on the
+    cusp y^2 = x^3 at x < 0 the gradient points along y, whose step leaves g > 0: no feasible point is near)."""
+    out = np.zeros(len(r), bool)
+    vals = c.values(p)
+    for k in np.nonzero((r > 0) & (g > 0))[0]:
+        q = p - vals[k] * J[k] / (g[k] * g[k])
+        after = abs(float(c.values(q)[k]))
+        noise = 64 * np.finfo(float).eps * float(max(c.magnitudes(p)[k], c.magnitudes(q)[k]))
+        out[k] = after > 0.5 * r[k] + noise
+    return out
 
 
 def feasible_points(f, eq, ineq, cands, tol: Tolerances, refine: bool):

@@ -12,6 +12,8 @@ of M and one step of iterative refinement (M becomes ill-conditioned near degene
 """
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import scipy.linalg as sla
 import scipy.sparse as sp
@@ -46,7 +48,9 @@ def newton_solver(M: np.ndarray, AE: np.ndarray | None, p: int):
             except (np.linalg.LinAlgError, ValueError):
                 base = None
         if base is None:
-            lu = sla.lu_factor(Kr[0], check_finite=False)
+            with warnings.catch_warnings():       # an exactly singular K: its solves go non-finite, and the IPM's
+                warnings.simplefilter("ignore", sla.LinAlgWarning)   # own checks hand the program on (no stderr)
+                lu = sla.lu_factor(Kr[0], check_finite=False)
             base = lambda r: sla.lu_solve(lu, r[0], check_finite=False)[None]  # noqa: E731
     else:
         base = lambda r: np.linalg.solve(Kr, r[..., None])[..., 0]  # noqa: E731

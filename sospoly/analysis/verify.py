@@ -40,7 +40,7 @@ from ..status import SolveStatus
 from ..tolerances import DEFAULT_TOLERANCES, Tolerances
 
 __all__ = ["Verification", "VerificationBatch", "SparseQuadratics", "quadratic_parts", "verify_quadratic",
-           "verify_quadratic_batch", "bound_at_one", "ROUNDOFF"]
+           "verify_quadratic_batch", "bound_at_one", "objective_scales", "stationary", "ROUNDOFF"]
 
 #: the Lagrangian Hessian must satisfy lambda_min >= -ROUNDOFF * max(max|F2|, max|H|): float
 #: round-off only (a genuinely indefinite H means no bound for these multipliers).
@@ -179,7 +179,7 @@ def verify_quadratic_batch(f0, f1, F2, g0, g1, G2, points, *,
     least squares); L = f + lambda^T g with Hessian part L2; reject when
     lambda_min(L2) < -ROUNDOFF * max(max|F2|, max|L2|); w = least-squares solution of
     2 L2 w = -L1, rejected when ||2 L2 w + L1|| / max(min(1, s_f), ||L1||) > identity_residual, s_f the
-    objective's largest coefficient (:func:`_objective_scales`); c = L(w) = min_v L(v, lambda) <= min{f : g = 0};
+    objective's largest coefficient (:func:`objective_scales`); c = L(w) = min_v L(v, lambda) <= min{f : g = 0};
     certified iff ``tolerances.certified(c, f(v^), s_f)`` (the rule at the objective's own scale).
 
     ``radius`` (scalar or (M,)): a bound on the norm of a minimiser.  The bound is then made rigorous
@@ -222,7 +222,7 @@ def verify_quadratic_batch(f0, f1, F2, g0, g1, G2, points, *,
     eig, Q = np.linalg.eigh(L2)
     scale = np.maximum(np.max(np.abs(F2), axis=(1, 2)), np.max(np.abs(L2), axis=(1, 2)))
     psd = eig[:, 0] >= -ROUNDOFF * scale
-    s_f = _objective_scales(f0, f1, F2)
+    s_f = objective_scales(f0, f1, F2)
     # min of L0 + L1.v + v^T L2 v: stationary point 2 L2 w = -L1 by least squares (the
     # pseudo-inverse of the symmetric 2 L2 from its eigen-decomposition, lstsq's cut-off)
     s = 2 * eig
@@ -231,8 +231,7 @@ def verify_quadratic_batch(f0, f1, F2, g0, g1, G2, points, *,
     inv = np.where(abs_s > cut, 1.0 / np.where(abs_s > cut, s, 1.0), 0.0)
     w = -np.einsum("mij,mj->mi", Q, inv * np.einsum("mji,mj->mi", Q, L1))
     r_abs = _row_norms(2 * np.einsum("mij,mj->mi", L2, w) + L1)          # the stationarity residual ||2 L2 w + L1||
-    resid = r_abs / np.maximum(np.minimum(1.0, s_f), np.maximum(_row_norms(L1), _TINY))
-    in_range = resid <= tolerances.identity_residual
+    in_range = stationary(r_abs, _row_norms(L1), s_f, tolerances)
     t1, t2 = np.einsum("mi,mi->m", L1, w), np.einsum("mi,mij,mj->m", w, L2, w)
     c = L0 + t1 + t2
     if radius is not None:
@@ -250,7 +249,14 @@ def verify_quadratic_batch(f0, f1, F2, g0, g1, G2, points, *,
 _TINY = 1e-300
 
 
-def _objective_scales(f0, f1, F2) -> np.ndarray:
+def stationary(r_abs, l1_norm, s_f, tolerances: Tolerances):
+    """The stationarity test of the Lagrangian's minimiser w (every verification, dense or banded): the residual
+    ||2 L2 w + L1|| over max(min(1, s_f), ||L1||) within ``identity_residual``, s_f the objective's scale
+    (:func:`objective_scales`) -- relative at any scale (a floor of 1 made it absolute below scale 1)."""
+    return r_abs / np.maximum(np.minimum(1.0, s_f), np.maximum(l1_norm, _TINY)) <= tolerances.identity_residual
+
+
+def objective_scales(f0, f1, F2) -> np.ndarray:
     """s_f (M,): the largest absolute coefficient of each program's objective f0 + f1.v + v^T F2 v (F2 counts twice
     off the diagonal, as the polynomial's coefficient), the scale of the certificate rule (:mod:`sospoly.tolerances`)
     and of the stationarity test."""
@@ -301,13 +307,13 @@ def bound_at_one(f0: float, f1, F2, g0, g1, G2: SparseQuadratics, lam, fv: float
     L2 = F2 + np.bincount(G2.i * n + G2.j, G2.vals[0] * lam[G2.k], n * n).reshape(n, n)
     eig, Q = np.linalg.eigh(L2)
     psd = bool(eig[0] >= -ROUNDOFF * max(float(np.max(np.abs(F2))), float(np.max(np.abs(L2)))))  # (NaN: not PSD)
-    s_f = float(_objective_scales(f0, f1, F2)[0])
+    s_f = float(objective_scales(f0, f1, F2)[0])
     s = 2 * eig
     cut = _EPS * n * np.max(np.abs(s))
     inv = np.where(np.abs(s) > cut, 1.0 / np.where(np.abs(s) > cut, s, 1.0), 0.0)
     w = -(Q @ (inv * (L1 @ Q)))
     r_abs = math.sqrt(float(np.sum((2 * (L2 @ w) + L1) ** 2)))
-    in_range = r_abs / max(min(1.0, s_f), math.sqrt(float(L1 @ L1)), _TINY) <= tolerances.identity_residual
+    in_range = bool(stationary(r_abs, math.sqrt(float(L1 @ L1)), s_f, tolerances))
     t1, t2 = float(L1 @ w), float(w @ L2 @ w)
     c = L0 + t1 + t2
     if radius is not None:

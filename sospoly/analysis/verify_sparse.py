@@ -36,7 +36,7 @@ import scipy.sparse as sp
 
 from ..tolerances import DEFAULT_TOLERANCES, Tolerances
 from .banded import band_cholesky, band_from_dense, band_matvec, band_solve, cholesky_backward_error
-from .verify import _TINY, SparseQuadratics, VerificationBatch, _objective_scales
+from .verify import SparseQuadratics, VerificationBatch, objective_scales, stationary
 
 __all__ = ["verify_quadratic_banded_batch", "RIDGE"]
 
@@ -135,9 +135,8 @@ def verify_quadratic_banded_batch(f0, f1, F2, g0, g1, G2: SparseQuadratics, poin
     w = np.where(pd[:, None], band_solve(R, -L1 / 2), 0.0)
     L2w = band_matvec(Hb, w)
     r_abs = np.linalg.norm(2 * L2w + L1, axis=1)
-    s_f = _objective_scales(f0, f1, F2)              # (the rules of verify_quadratic_batch at the objective's scale)
-    in_range = r_abs / np.maximum(np.minimum(1.0, s_f), np.maximum(np.linalg.norm(L1, axis=1), _TINY)) \
-        <= tolerances.identity_residual
+    s_f = objective_scales(f0, f1, F2)               # (the rules of verify_quadratic_batch at the objective's scale)
+    in_range = stationary(r_abs, np.linalg.norm(L1, axis=1), s_f, tolerances)
     t1, t2 = np.einsum("mi,mi->m", L1, w), np.einsum("mi,mi->m", w, L2w)
     c = L0 + t1 + t2
     if radius is not None:

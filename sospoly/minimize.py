@@ -81,7 +81,7 @@ import numpy as np
 from .algebra.polynomial import Polynomial
 from .analysis.recession import unbounded_result
 from .analysis.candidates import candidates_of, dedupe_points, feasibility_violation, feasible_points
-from .analysis.candidates import support_of, value_shift
+from .analysis.candidates import support_of, value_shift_of
 from .analysis.moments import moment_matrices_of
 from .budget import Budget, BudgetExceeded, TimeLimitReached, as_budget, deadline_scope
 from .analysis.proof import unsolved_claim
@@ -414,6 +414,7 @@ class _Run:
         self.gens, self.tol, self.budget, self.deadline = gens, tol, budget, deadline
         self.refine = refine
         self.attempts: list[SolveAttempt] = []
+        self._shift = None                      # candidates.value_shift_of of the normalised program, when needed
 
     def _empty(self, status, degree, mult, kind, message, n_lmivar=0) -> MinimizeResult:
         return MinimizeResult(status, None, None, (), False, n_lmivar, degree, _name_of(mult), self.gens,
@@ -545,13 +546,14 @@ class _Run:
                               moment_matrices=moment_matrices_of(psatz.u, lb.solution, self.scaling.k))
 
     def _trusted(self, found: list) -> list:
-        """The (value, point) pairs of ``found`` (normalised, ascending) whose value is an upper bound: the point's
-        first-order distance to the constraints moves f by at most the gap tolerance
-        (:func:`~sospoly.analysis.candidates.value_shift`; a candidate feasible by the constraints' values only --
-        a squared constraint, a circle far from the origin -- may lie below the minimum, review 21a F3)."""
+        """The (value, point) pairs of ``found`` (normalised, ascending) whose value is an upper bound: moving the
+        point onto the constraints shifts f by at most the gap tolerance (:func:`~sospoly.analysis.candidates.
+        value_shift`; a point feasible by the constraints' values only may lie below the minimum, review 21a F3)."""
         if not (self.eqn or self.ineqn):
             return found
-        return [(v, p) for v, p in found if value_shift(self.fn, self.eqn, self.ineqn, p) <= self.tol.gap_tolerance(v)]
+        if self._shift is None:                 # (the constraints compiled once per call)
+            self._shift = value_shift_of(self.fn, self.eqn, self.ineqn)
+        return [(v, p) for v, p in found if self._shift(p) <= self.tol.gap_tolerance(v)]
 
     def _proven(self, psatz: PsatzProblem, sol: ProgramSolution, c: float, upper) -> tuple[float, str]:
         """(the largest proven lower bound of the normalised program from the certificate at level c, or -inf;

@@ -201,42 +201,52 @@ def value_shift(f: Polynomial, eq, ineq, p: np.ndarray) -> float:
     constraint vanishing to a higher order (r = |h|^m: r / ||grad r|| is 1/m of the distance, m <= D); the round-off
     term a point whose constraints vanish to round-off where their gradient is tiny (a cusp y^2 = x^3 in shifted
     variables met to 1e-15 at x = -5e-5, review 21c F2: the set's place is not resolved there)."""
-    p = np.asarray(p, float)
-    worst = 0.0
-    eps = 64 * np.finfo(float).eps
-    for polys, viol in ((eq, np.abs), (ineq, lambda v: np.maximum(0.0, -v))):
-        if not polys:
-            continue
-        c = _Compiled(polys)
-        v = c.values(p)
-        r, noise = viol(v), eps * c.magnitudes(p)
-        near = (r > 0) | (np.abs(v) <= noise)          # violated, or active to round-off
-        if not np.any(near):
-            continue
-        J = c.jacobian(p)
-        g = np.linalg.norm(J, axis=1)
-        deg = np.array([max(1, q.degree) for q in polys], float)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            d = np.where(near, np.where(g > 0, (deg * r + noise) / g, np.inf), 0.0)
-        d = np.where(_linear_model_fails(c, p, J, g, r) & (r > noise), np.inf, d)
-        worst = max(worst, float(np.max(d)))
-    if worst == 0.0:
-        return 0.0
-    grad = float(np.linalg.norm(_Compiled([f]).jacobian(p)[0]))
-    return grad * worst if np.isfinite(worst) else (0.0 if grad == 0.0 else np.inf)
+    return value_shift_of(f, eq, ineq)(p)
 
 
-def _linear_model_fails(c: _Compiled, p: np.ndarray, J: np.ndarray, g: np.ndarray, r: np.ndarray) -> np.ndarray:
-    """Per violated constraint: does its Newton step toward the set (p - v_k grad_k / |grad_k|^2) fail to halve the
-    violation beyond the evaluation's round-off?  Then the first-order distance means nothing (review 21c F2: on the
-    cusp y^2 = x^3 at x < 0 the gradient points along y, whose step leaves g > 0: no feasible point is near)."""
-    out = np.zeros(len(r), bool)
-    vals = c.values(p)
-    for k in np.nonzero((r > 0) & (g > 0))[0]:
-        q = p - vals[k] * J[k] / (g[k] * g[k])
-        after = abs(float(c.values(q)[k]))
-        noise = 64 * np.finfo(float).eps * float(max(c.magnitudes(p)[k], c.magnitudes(q)[k]))
-        out[k] = after > 0.5 * r[k] + noise
+#: the round-off of a polynomial's evaluation, relative to the sum of its terms' magnitudes (:func:`value_shift_of`)
+EVAL_ROUNDOFF = 64 * np.finfo(float).eps
+
+
+def value_shift_of(f: Polynomial, eq, ineq):
+    """:func:`value_shift` as a function of the point, the polynomials compiled once (many candidates)."""
+    fc = _Compiled([f])
+    parts = [(_Compiled(polys), np.array([max(1, q.degree) for q in polys], float), viol)
+             for polys, viol in ((eq, np.abs), (ineq, lambda v: np.maximum(0.0, -v))) if polys]
+
+    def shift(p) -> float:
+        p = np.asarray(p, float)
+        worst = 0.0
+        for c, deg, viol in parts:
+            v = c.values(p)
+            r, noise = viol(v), EVAL_ROUNDOFF * c.magnitudes(p)
+            near = (r > 0) | (np.abs(v) <= noise)          # violated, or active to round-off
+            if not np.any(near):
+                continue
+            J = c.jacobian(p)
+            g = np.linalg.norm(J, axis=1)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                d = np.where(near, np.where(g > 0, (deg * r + noise) / g, np.inf), 0.0)
+            d = np.where(_linear_model_fails(c, p, v, J, g, r > noise), np.inf, d)
+            worst = max(worst, float(np.max(d)))
+        if worst == 0.0:
+            return 0.0
+        grad = float(np.linalg.norm(fc.jacobian(p)[0]))
+        return grad * worst if np.isfinite(worst) else (0.0 if grad == 0.0 else np.inf)
+    return shift
+
+
+def _linear_model_fails(c: _Compiled, p: np.ndarray, v: np.ndarray, J: np.ndarray, g: np.ndarray,
+                        which: np.ndarray) -> np.ndarray:
+    """Per constraint in ``which`` (violated beyond round-off): does its Newton step toward the set
+    (p - v_k grad_k / |grad_k|^2) fail to halve the violation beyond the evaluation's round-off?  Then the
+    first-order distance means nothing (review 21c F2: on the cusp y^2 = x^3 at x < 0 the gradient points along y,
+    whose step leaves g > 0: no feasible point is near)."""
+    out = np.zeros(len(v), bool)
+    for k in np.nonzero(which & (g > 0))[0]:
+        q = p - v[k] * J[k] / (g[k] * g[k])
+        noise = EVAL_ROUNDOFF * float(max(c.magnitudes(p)[k], c.magnitudes(q)[k]))
+        out[k] = abs(float(c.values(q)[k])) > 0.5 * abs(float(v[k])) + noise
     return out
 
 

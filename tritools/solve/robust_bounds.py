@@ -251,18 +251,10 @@ class SubsetBounds:
         verification, which certified).  No solve past the deadline or where no Corollary 1 degree can certify S
         (:func:`~tritools.solve.coplanar.subset_futile` at its candidate ``X``, a world point, or None)."""
         views = sorted(S)
-        regions = [self.regions[i] for i in views]
-        if self.deadline.expired or subset_futile(self.C[views], regions, self.opts, 0.0, X):
+        if self.deadline.expired or subset_futile(self.C[views], [self.regions[i] for i in views], self.opts, 0.0, X):
             return 0.0, None
-        remaining = self.deadline.remaining()
-        limit = SUB_TIME_LIMIT if remaining is None else min(SUB_TIME_LIMIT, remaining)
-        out = solve_subproblem(self.C[views], regions, self.opts, light=False, from_delta=FULL_FROM_DELTA, limit=limit,
-                               need=need, points=self.points)
-        if out is None:
-            return 0.0, None
-        self.n_solved += 1
-        self.budget_exceeded |= out.budget_exceeded
-        return max(out.lb, 0.0), out.X
+        out = self._solved(views, False, FULL_FROM_DELTA, SUB_TIME_LIMIT, need)
+        return (0.0, None) if out is None else (max(out.lb, 0.0), out.X)
 
     def split_bound(self, S: frozenset, need: float) -> float:
         """max over tried triples T of S holding a view outside the caller's ``hint`` (a likely wrong match w) of
@@ -323,23 +315,31 @@ class SubsetBounds:
         deadline alone)."""
         views = sorted(S)
         remaining = self.deadline.remaining()
-        limit = limit if remaining is None else min(limit, remaining)      # inf, no deadline: the options' budget
         if not self.points and remaining is not None and remaining < len(views) * SUB_REGION_SETUP_SECONDS:
             self.weak.add(S)                    # no time for its set-up: 0 is a valid bound, not a final one
             self._store(S, 0.0, None)
             return
-        out = solve_subproblem(self.C[views], [self.regions[i] for i in views], self.opts, light=light,
-                               from_delta=from_delta, limit=limit, need=need, points=self.points)
+        out = self._solved(views, light, from_delta, limit, need)
         if out is None:
             self._store(S, 0.0, None)           # e.g. coincident or duplicated cameras: 0 is a valid bound
             return
-        self.n_solved += 1
-        self.budget_exceeded |= out.budget_exceeded
         if (out.light or out.stopped) and not out.certified:     # light as it ran (the options may refuse it)
             self.weak.add(S)
         if out.exhausted:                       # the plan ran out, not at a time or memory limit nor at ``need``
             self.exhausted.add(S)
         self._store(S, out.lb, out.X)
+
+    def _solved(self, views: list, light: bool, from_delta, limit: float, need: float):
+        """:func:`~tritools.solve.robust_subsolve.solve_subproblem` of the sub-problem of ``views`` within ``limit``
+        seconds and the deadline, counted (``n_solved``, ``budget_exceeded``); None where the input is refused."""
+        remaining = self.deadline.remaining()
+        limit = limit if remaining is None else min(limit, remaining)      # inf, no deadline: the options' budget
+        out = solve_subproblem(self.C[views], [self.regions[i] for i in views], self.opts, light=light,
+                               from_delta=from_delta, limit=limit, need=need, points=self.points)
+        if out is not None:
+            self.n_solved += 1
+            self.budget_exceeded |= out.budget_exceeded
+        return out
 
     def _store(self, S: frozenset, lb: float, X) -> None:
         self._lb[S] = max(lb, 0.0, self._floor.pop(S, 0.0))

@@ -34,7 +34,8 @@ from ..model.normalize import SCALE_BOUNDS
 from . import robust_enum as enum
 from .robust_bounds import ROUND_DOWN
 from .robust_costs import point_distances2
-from .robust_enum_run import LO_ROUNDS, eligible, enumerated_result, lower_bounds
+from .robust_enum_run import LO_ROUNDS, eligible, lower_bounds
+from .robust_report import enumerated_result
 from .robust_two import ray_offers
 
 __all__ = ["two_view_tls", "three_view_tls", "three_terms", "three_lower_bound", "exact_terms",
@@ -55,24 +56,24 @@ POLISH_STEPS = 1
 def two_view_tls(search):
     """The TLS result of one :class:`tritools.solve.robust.TlsSearch` of two point views (:class:`_TwoViews`), or
     None (the caller runs the search).  Searches of other view counts or regions get None too."""
-    if search.N != 2 or not eligible(search):
-        return None
-    try:
-        return _TwoViews(search).run()
-    except (ValueError, np.linalg.LinAlgError, FloatingPointError):
-        log.debug("two-view enumeration failed", exc_info=True)
-        return None
+    return _single(search, _TwoViews)
 
 
 def three_view_tls(search):
     """The TLS result of one :class:`tritools.solve.robust.TlsSearch` of three point views (module docstring), or
     None (the caller runs the search).  Searches of other view counts or regions get None too."""
-    if search.N != VIEWS or not eligible(search):
+    return _single(search, _ThreeViews)
+
+
+def _single(search, path):
+    """``path(search).run()`` for a search of ``path.views`` point views (None otherwise, or where it fails on
+    degenerate data)."""
+    if search.N != path.views or not eligible(search):
         return None
     try:
-        return _ThreeViews(search).run()
+        return path(search).run()
     except (ValueError, np.linalg.LinAlgError, FloatingPointError):
-        log.debug("three-view enumeration failed", exc_info=True)
+        log.debug("%d-view enumeration failed", path.views, exc_info=True)
         return None
 
 

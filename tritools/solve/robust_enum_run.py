@@ -42,6 +42,7 @@ from . import robust_enum as enum
 from .robust_bounds import ROUND_DOWN
 from .robust_costs import point_distances2_rows, point_distances2_stack
 from .robust_drive import credit     # (the drive's rule: per-problem time limits)
+from .robust_report import enumerated_result, enumerated_results
 from .robust_two import two_view_rays
 
 __all__ = ["enumerate_tls", "enumerate_many", "eligible", "closed_terms", "lower_bounds", "enumerated_result",
@@ -77,8 +78,7 @@ SINGLE_POLISH_STEPS = 1
 THREE_VIEW_PATH = True
 #: rounds of local optimisation of the best candidate of a stack (inlier set -> its L2 optimum -> inlier set).
 LO_ROUNDS = 3
-#: a problem kept open by one set alone gets that set's sub-problem solved in the enumeration (:meth:`_Group.
-#: _solve_all`) at every view count (False: three views, the set of all views, only; the tests compare).
+#: :meth:`_Group._solve_all` from three views on (False: three views' set of all views only; the tests compare).
 SOLVE_LAST_SET = True
 
 
@@ -182,46 +182,6 @@ def lower_bounds(ub: np.ndarray, terms: np.ndarray, c2: np.ndarray) -> np.ndarra
         small = np.sum(np.where(np.eye(N, dtype=bool)[None], 0.0, c2[:, None, :]), axis=2)   # |S| = 1: exact
         return np.minimum.reduce([ub, np.min(terms, axis=1), np.min(small, axis=1) * ROUND_DOWN,
                                   np.sum(c2, axis=1) * ROUND_DOWN])
-
-
-def enumerated_result(search, lb: float, n_bounded: int, n_sets: int):
-    """The result of a search decided by the enumeration (:meth:`tritools.solve.robust.TlsSearch.result` at the lower
-    bound ``lb``, pixels^2), its message saying so; ``n_bounded`` subsets were bounded."""
-    return enumerated_results([search], [lb], [n_bounded], n_sets)[0]
-
-
-def enumerated_results(searches: list, lbs, n_bounded, n_sets: int) -> list:
-    """:func:`enumerated_result` of point searches of one view count at once: their reported numbers from one
-    :func:`tritools.solve.robust_report.tls_reported_stack` (the twin of :meth:`TlsSearch.result`'s
-    :func:`~tritools.solve.robust_report.tls_reported`, equal bit for bit), then each search's
-    :meth:`~tritools.solve.robust.TlsSearch.finish`; a search without an estimate (or not of points) takes
-    :meth:`~tritools.solve.robust.TlsSearch.result` itself."""
-    from .robust_report import tls_reported_stack
-
-    note = f"; {enum.ENUMERATED} ({n_sets} sets of >= 2 views)"
-    timings = []
-    for s, n in zip(searches, n_bounded):
-        s.bounds.n_solved += int(n)
-        t = time.perf_counter() - s.t0
-        timings.append({"enumeration": t, "total": t})
-    first = searches[0]
-    stack = [k for k, s in enumerate(searches) if s.points and s.best_X is not None and not s.cells_decided
-             and s.N == first.N and s.tol is first.tol]
-    out = [None] * len(searches)
-    if len(stack) > 1:
-        group = [searches[k] for k in stack]
-        X = np.array([s.user_estimate() for s in group])
-        lb = np.array([float(lbs[k]) for k in stack])
-        certified = [s.tol.certified_one(float(b), s.best_f, s.scale) for s, b in zip(group, lb)]
-        told = tls_reported_stack(np.stack([s.C_user for s in group]), np.stack([s.x for s in group]), X,
-                                  np.stack([s.c for s in group]), lb, first.tol, certified,
-                                  np.array([s.best_f for s in group]))
-        for k, s, Xk, t, b in zip(stack, group, X, told, lb):
-            out[k] = s.finish(Xk.copy(), s.report(Xk), t, float(b), None, timings[k], note)
-    for k, s in enumerate(searches):
-        if out[k] is None:
-            out[k] = s.result(float(lbs[k]), None, timings[k], note)
-    return out
 
 
 def _outside_sums(c2: np.ndarray, W: np.ndarray) -> np.ndarray:
@@ -345,16 +305,16 @@ class _Group:
         self._decide(np.nonzero(keep)[0], final=True)
 
     def _solve_all(self, probs: np.ndarray) -> None:
-        """The problems ``probs`` (P,) kept open by one set alone (its term failing after the ascent: the degree-2
-        certificate falls short, e.g. three views, or a wrong match left in a larger set): that set's L2 sub-problem
-        solved here (:meth:`~tritools.solve.robust_bounds.SubsetBounds.solve_full`, stopping once its rigorous bound
-        reaches UB - c^2(V - S)), its estimate offered -- not after a search's set-up, nodes and sub-problems."""
-        failing, ub = self._failing(), self._ub()
-        if self.N < 3:                                  # (two views: the rays and the search, as before)
+        """The problems ``probs`` (P,) kept open by one set alone after the ascent (three views, or a wrong match left
+        in a larger set): that set's L2 sub-problem solved here (:meth:`~tritools.solve.robust_bounds.SubsetBounds.
+        solve_full`, stopping at UB - c^2(V - S)), its estimate offered; two views: the rays and the search."""
+        if self.N < 3:
             return
+        failing, ub = self._failing(), self._ub()
+        one = failing.sum(axis=1) == 1
         if not SOLVE_LAST_SET:
-            failing = failing & (self.N == 3) & (self.size == self.N)[None]
-        for p in np.nonzero(probs & (failing.sum(axis=1) == 1) & (self._failing().sum(axis=1) == 1))[0]:
+            one &= (self.N == 3) & failing[:, -1]          # (the set of all views, the last row)
+        for p in np.nonzero(probs & one)[0]:
             if self._expired()[p]:                      # (the others' solves credited to every deadline)
                 continue
             m = int(np.argmax(failing[p]))

@@ -34,7 +34,7 @@ from .decide import gamma_from_c, gamma_lower_one
 from .report import enlarged_distances, gamma_upper, projections_and_spread, projections_and_spread_stack
 
 __all__ = ["TlsReported", "tls_reported", "tls_reported_stack", "guards_pass", "capped_resolution",
-           "reported_resolution", "PRUNE_SHARE"]
+           "reported_resolution", "enumerated_result", "enumerated_results", "PRUNE_SHARE"]
 
 
 @dataclass(frozen=True)
@@ -313,3 +313,45 @@ def _exact_below(P: np.ndarray, X, x: np.ndarray, c: float) -> bool:
         return False
     dx, dy = h[0] / h[2] - Fraction(float(x[0])), h[1] / h[2] - Fraction(float(x[1]))
     return dx * dx + dy * dy < Fraction(c) ** 2
+
+
+def enumerated_result(search, lb: float, n_bounded: int, n_sets: int):
+    """The result of a search decided by the enumeration (:meth:`tritools.solve.robust.TlsSearch.result` at the lower
+    bound ``lb``, pixels^2), its message saying so; ``n_bounded`` subsets were bounded."""
+    return enumerated_results([search], [lb], [n_bounded], n_sets)[0]
+
+
+def enumerated_results(searches: list, lbs, n_bounded, n_sets: int) -> list:
+    """:func:`enumerated_result` of point searches of one view count at once: their reported numbers from one
+    :func:`tritools.solve.robust_report.tls_reported_stack` (the twin of :meth:`TlsSearch.result`'s
+    :func:`~tritools.solve.robust_report.tls_reported`, equal bit for bit), then each search's
+    :meth:`~tritools.solve.robust.TlsSearch.finish`; a search without an estimate (or not of points) takes
+    :meth:`~tritools.solve.robust.TlsSearch.result` itself."""
+    import time
+
+    from .robust_enum import ENUMERATED
+
+    note = f"; {ENUMERATED} ({n_sets} sets of >= 2 views)"
+    timings = []
+    for s, n in zip(searches, n_bounded):
+        s.bounds.n_solved += int(n)
+        t = time.perf_counter() - s.t0
+        timings.append({"enumeration": t, "total": t})
+    first = searches[0]
+    stack = [k for k, s in enumerate(searches) if s.points and s.best_X is not None and not s.cells_decided
+             and s.N == first.N and s.tol is first.tol]
+    out = [None] * len(searches)
+    if len(stack) > 1:
+        group = [searches[k] for k in stack]
+        X = np.array([s.user_estimate() for s in group])
+        lb = np.array([float(lbs[k]) for k in stack])
+        certified = [s.tol.certified_one(float(b), s.best_f, s.scale) for s, b in zip(group, lb)]
+        told = tls_reported_stack(np.stack([s.C_user for s in group]), np.stack([s.x for s in group]), X,
+                                  np.stack([s.c for s in group]), lb, first.tol, certified,
+                                  np.array([s.best_f for s in group]))
+        for k, s, Xk, t, b in zip(stack, group, X, told, lb):
+            out[k] = s.finish(Xk.copy(), s.report(Xk), t, float(b), None, timings[k], note)
+    for k, s in enumerate(searches):
+        if out[k] is None:
+            out[k] = s.result(float(lbs[k]), None, timings[k], note)
+    return out

@@ -36,7 +36,7 @@ from .robust_bounds import ROUND_DOWN
 from .robust_costs import point_distances2
 from .robust_enum_run import LO_ROUNDS, eligible, lower_bounds
 from .robust_report import enumerated_result
-from .robust_two import ray_offers
+from .robust_two import optimum_candidate, ray_offers
 
 __all__ = ["two_view_tls", "three_view_tls", "three_terms", "three_lower_bound", "exact_terms",
            "three_rest", "VIEWS", "POLISH_STEPS"]
@@ -104,7 +104,7 @@ class _ThreeViews:
         if framed is None:
             return None
         self.frame, self.Cn = framed
-        self.Xn = enum.enum_candidates(self.Cn, self.W, POLISH_STEPS)
+        self.Xn = self._candidates()
         self._offer()
         if s.best_X is None or s.deadline.expired:
             return None
@@ -126,6 +126,10 @@ class _ThreeViews:
             self._bound(more)
             lb = self._lower_bound()
         return self._result(lb) if s.meets(lb) else None      # (the search's rule: the report's guard too)
+
+    def _candidates(self) -> np.ndarray:
+        """The rows' normalised candidates (:func:`~tritools.solve.robust_enum.enum_candidates`)."""
+        return enum.enum_candidates(self.Cn, self.W, POLISH_STEPS)
 
     def _meets_at_floor(self, lb: float) -> bool:
         """LB meets UB under the rule at the floor of the decision scale, without contradicting it there."""
@@ -276,12 +280,16 @@ class _ThreeViews:
 
 class _TwoViews(_ThreeViews):
     """Two point views: the one set of at least two views is all views, f*_TLS = min(L2*(V), c_1^2, c_2^2)
-    (:mod:`tritools.solve.robust_two`).  After the best candidate's offer, the candidate of both views refined to
-    convergence on both views and each view's ray sampled (:func:`~tritools.solve.robust_two.ray_offers`), as a
-    stack's two-view problems take them (:func:`~tritools.solve.robust_two.two_view_rays`); no all-views sub-problem
-    (the stack solves none for two views either)."""
+    (:mod:`tritools.solve.robust_two`).  The candidate is the closed-form optimum of both views
+    (:func:`~tritools.solve.robust_two.optimum_candidate`; the enumeration's where it does not apply); after its
+    offer, it is refined to convergence on both views and, unless UB is already at most min c_j^2, each view's ray is
+    sampled (:func:`~tritools.solve.robust_two.ray_offers`), as a stack's two-view problems take them
+    (:func:`~tritools.solve.robust_two.two_view_rays`); no all-views sub-problem (the stack solves none for two views
+    either)."""
 
     views = 2
+    rays_done = False
+    closed_form = False
 
     @staticmethod
     def _rest(c2: list) -> list:
@@ -293,6 +301,17 @@ class _TwoViews(_ThreeViews):
         stack's closure leaves the bound as it is)."""
         return [(float(self.lb[0]) + float(self.rest[0])) * ROUND_DOWN]
 
+    def _candidates(self) -> np.ndarray:
+        """The closed-form L2 optimum of both views (:func:`~tritools.solve.robust_two.optimum_candidate`), else
+        the enumeration's candidate."""
+        self._fundamentals()
+        if self.defined[0]:
+            Xn = optimum_candidate(self.Cn, self.F[0])
+            if Xn is not None:
+                self.closed_form = True
+                return Xn[None]
+        return super()._candidates()
+
     def _offer(self) -> None:
         super()._offer()
         s = self.s
@@ -303,13 +322,48 @@ class _TwoViews(_ThreeViews):
             if ok:
                 self.Xn[0], self.refined[0] = Xr, True
                 s.offer(self.frame.world_point(Xr))
+        if not (self.refined[0] and s.best_f <= float(np.min(s.c2))):
+            self._rays()
+        # else: a ray sample costs min(d_j^2, c_j^2) >= min(L2*, c_j^2) >= L2*, and UB is L2 at both views' refined
+        # optimum: the rays wait for a decision that fails (:meth:`_solve_all`)
+
+    def _rays(self) -> None:
+        """Each view's ray sampled (:func:`~tritools.solve.robust_two.ray_offers`), its best sample offered."""
+        s = self.s
+        self.rays_done = True
         for _, X in ray_offers(s.C[None], s.x[None], s.c2[None], np.array([s.best_f]), np.array([self.floor]),
                                s.tol):
             if np.isfinite(X).all():
                 s.offer(X)
 
     def _solve_all(self, lb: float) -> float:
-        return lb
+        """No all-views sub-problem (the stack solves none for two views either); the rays :meth:`_offer` left,
+        where LB does not meet UB yet (the cost at both views' optimum may be far above L2* where that optimum sits
+        at a camera centre: an observation next to its epipole); LB after."""
+        if not self.rays_done:
+            self._rays()
+        if self.closed_form and not self._meets_at_floor(self._lower_bound()):
+            self._enumerated_candidate()
+        return self._lower_bound()
+
+    def _enumerated_candidate(self) -> None:
+        """The enumeration's candidate of both views (the DLT, polished) offered, refined, offered and bounded (the
+        larger of the two valid bounds kept), where the closed form's does not decide: its optimum at a camera
+        centre (an observation next to its epipole) is a stationary point the refinement stays at, where the
+        world's cost is far above the frame's; the search that may follow starts from both."""
+        self.closed_form = False
+        Xn = super()._candidates()[0]
+        if not np.isfinite(Xn).all():
+            return
+        self.s.offer(self.frame.world_point(Xn))
+        Xr, ok = enum.refine_row_one(self.Cn, Xn, [0, 1])
+        if not ok:
+            return
+        self.s.offer(self.frame.world_point(Xr))
+        old = self.lb.copy()
+        self.Xn[0], self.bounded[0] = Xr, False
+        self._bound(np.ones(1, bool))
+        self.lb = np.maximum(self.lb, old)
 
 
 def three_terms(lb: list, rest: list) -> list:

@@ -14,15 +14,25 @@ camera's principal plane, where a georeferenced world's rounding makes the repor
 gamma_UB inf and no inlier for a view with c = inf, where the refined candidate of both views certifies).  The
 candidates are only a ranking: the search keeps one by its exact f_TLS (:meth:`tritools.solve.robust.TlsSearch.
 offer`).
+
+A single call (:class:`tritools.solve.robust_three._TwoViews`) starts instead from the closed-form optimum of both
+views (:func:`two_view_optimum`, Hartley and Sturm's degree-6 polynomial in the normalised frame, where both
+observations sit at the origin): the refinement then converges in a step or two (a wrong match took ~30
+Levenberg-Marquardt steps from the DLT), and the Lagrangian bound taken there is L2* itself (one quadratic
+constraint: the S-lemma).  Its rays wait until a decision fails where UB is already at most min c_j^2 (a ray sample
+then costs at least min(L2*, c_j^2) = L2*).
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
+from ..model.stacked import dlt_stack
 from .robust_costs import point_distances2_stack
 from .robust_rays import best_ray_samples, ray_samples_stack
 
-__all__ = ["two_view_rays", "ray_offers"]
+__all__ = ["two_view_rays", "ray_offers", "two_view_optimum", "optimum_candidate"]
 
 
 def two_view_rays(group, live: np.ndarray) -> np.ndarray:
@@ -69,3 +79,98 @@ def _refine_both_views(group, P: np.ndarray) -> None:
     if P.size:
         group._put(P, np.full(len(P), row), Xr)
         group._offer_each([(int(p), group.frames[p].world_point(X)) for p, X in zip(P, Xr)])
+
+
+def two_view_optimum(F: np.ndarray):
+    """The L2 optimum of two views with both observations at the origin (the normalised frame of
+    :func:`~tritools.solve.robust_enum.enum_frame`) in closed form (Hartley and Sturm, "Triangulation", 1997): the
+    corrected points (y_0, y_1) (two 2-vectors) with y_0^T F y_1 = 0 (homogeneous) closest to the origins, and their
+    cost ||y_0||^2 + ||y_1||^2; None where the form does not apply (an epipole at an origin, a line at infinity,
+    non-finite numbers).
+
+    With e_1 (F e_1 = 0) and e_0 (F^T e_0 = 0) scaled to unit first two coordinates, the rotations R_k taking e_k to
+    (1, 0, f_k) bring F to R_0 F R_1^T = [[f_0 f_1 d, -f_0 c, -f_0 d], [-f_1 b, a, b], [-f_1 d, c, d]].  The pencil of
+    epipolar lines through e_1, l_1(t) = (t f_1, 1, -t), and its partner l_0(t) = (-f_0 (c t + d), a t + b, c t + d)
+    give the cost s(t) = t^2 / (1 + f_1^2 t^2) + (c t + d)^2 / ((a t + b)^2 + f_0^2 (c t + d)^2), stationary at the
+    real roots of the degree-6 polynomial t ((a t + b)^2 + f_0^2 (c t + d)^2)^2 - (a d - b c) (1 + f_1^2 t^2)^2
+    (a t + b)(c t + d); the least of s at those roots and at t = inf is the optimum, attained at the points of l_0
+    and l_1 closest to the origins.  A candidate only: the caller refines it and bounds the set at it, so round-off
+    in the roots changes no rigour."""
+    with np.errstate(all="ignore"):
+        if not np.isfinite(F).all():
+            return None
+        e1, e0 = np.array(_null(F.tolist())), np.array(_null(F.T.tolist()))
+        n1, n0 = np.hypot(e1[0], e1[1]), np.hypot(e0[0], e0[1])
+        if not (n1 > 1e-12 * abs(e1[2]) and n0 > 1e-12 * abs(e0[2])):
+            return None                                     # an epipole at an origin: an observation on a baseline
+        e1, e0 = e1 / n1, e0 / n0
+        R1 = np.array([[e1[0], e1[1], 0.0], [-e1[1], e1[0], 0.0], [0.0, 0.0, 1.0]])
+        R0 = np.array([[e0[0], e0[1], 0.0], [-e0[1], e0[0], 0.0], [0.0, 0.0, 1.0]])
+        G = R0 @ F @ R1.T
+        f1, f0 = float(e1[2]), float(e0[2])
+        a, b, c, d = float(G[1, 1]), float(G[1, 2]), float(G[2, 1]), float(G[2, 2])
+        t = _stationary(a, b, c, d, f0, f1)
+        if t is None:
+            return None
+        l1 = np.array([t * f1, 1.0, -t]) if np.isfinite(t) else np.array([f1, 0.0, -1.0])
+        l0 = np.array([-f0 * (c * t + d), a * t + b, c * t + d]) if np.isfinite(t) else np.array([-f0 * c, a, c])
+        y1, y0 = R1.T @ _foot(l1), R0.T @ _foot(l0)
+        if not (abs(y1[2]) > 0 and abs(y0[2]) > 0):
+            return None
+        y0, y1 = y0[:2] / y0[2], y1[:2] / y1[2]
+        cost = float(y0 @ y0 + y1 @ y1)
+    return (y0, y1, cost) if np.isfinite(cost) and np.isfinite(y0).all() and np.isfinite(y1).all() else None
+
+
+def _stationary(a: float, b: float, c: float, d: float, f0: float, f1: float):
+    """The t of :func:`two_view_optimum` (a real root of its polynomial or inf) where s(t) is least, or None."""
+    e = f0 * f0
+    p2, p1, p0 = a * a + e * c * c, 2.0 * (a * b + e * c * d), b * b + e * d * d     # (at + b)^2 + f0^2 (ct + d)^2
+    q2, q1, q0 = a * c, a * d + b * c, b * d                                        # (at + b)(ct + d)
+    k, h2, h4 = a * d - b * c, f1 * f1, f1 ** 4                                     # (1 + f1^2 t^2)^2 = h4 t^4 + ...
+    g = [-k * h4 * q2, p2 * p2 - k * h4 * q1, 2 * p2 * p1 - k * (h4 * q0 + 2 * h2 * q2),
+         p1 * p1 + 2 * p2 * p0 - 2 * k * h2 * q1, 2 * p1 * p0 - k * (2 * h2 * q0 + q2), p0 * p0 - k * q1, -k * q0]
+    if not all(math.isfinite(v) for v in g) or not any(g):
+        return None
+    ts = np.roots(g).real.tolist()
+
+    def cost(t: float) -> float:
+        u, v = a * t + b, c * t + d
+        return t * t / (1.0 + f1 * f1 * t * t) + v * v / (u * u + f0 * f0 * v * v)
+
+    best_t = math.inf
+    best = (1.0 / (f1 * f1) if f1 != 0 else math.inf) + (c * c / p2 if p2 > 0 else math.inf)
+    for t in ts:
+        v = cost(t)
+        if v < best:
+            best, best_t = v, t
+    return best_t if math.isfinite(best) else None
+
+
+def _null(rows: list) -> list:
+    """A null vector of a rank-2 3x3 matrix given by its rows: the longest cross product of two rows."""
+    best, out = -1.0, None
+    for i, j in ((0, 1), (0, 2), (1, 2)):
+        u, v = rows[i], rows[j]
+        w = [u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]]
+        n = w[0] * w[0] + w[1] * w[1] + w[2] * w[2]
+        if n > best:
+            best, out = n, w
+    return out
+
+
+def _foot(line: np.ndarray) -> np.ndarray:
+    """The point (homogeneous) of the line (l, m, n) closest to the origin: (-l n, -m n, l^2 + m^2)."""
+    return np.array([-line[0] * line[2], -line[1] * line[2], line[0] ** 2 + line[1] ** 2])
+
+
+def optimum_candidate(Cn: np.ndarray, F: np.ndarray):
+    """The normalised candidate Xn (3,) of two normalised point views Cn (2, 3, 4) (observations at the origin) with
+    x_0^T F x_1 = 0 (:func:`~tritools.model.stacked.fundamental_stack`'s F of the pair): the DLT of the corrected
+    points of :func:`two_view_optimum` (exactly consistent, so the DLT is their intersection), or None."""
+    opt = two_view_optimum(F)
+    if opt is None:
+        return None
+    y0, y1, _ = opt
+    X, ok = dlt_stack(Cn[None], np.array([[y0, y1]]))
+    return X[0] if ok[0] and np.isfinite(X[0]).all() else None

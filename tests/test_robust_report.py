@@ -391,7 +391,8 @@ def test_search_value_below_its_bound_is_not_a_numerical_failure():
     r = tritools.triangulate(P, x, robust=c)
     m = tritools.triangulate_many([(P, x)], robust=[c])[0]
     assert r.status != tritools.Status.NUMERICAL_FAILURE and r.gamma_lb is not None
-    assert (r.status, r.gamma_lb) == (m.status, m.gamma_lb)
+    assert r.status == m.status     # (the single call starts from the closed-form optimum, the batch from the DLT:
+    assert r.gamma_lb == pytest.approx(m.gamma_lb, rel=1e-5)    # their rounding spreads differ at this scale)
 
     def resid(X):
         h = P @ np.append(X, 1.0)
@@ -399,7 +400,8 @@ def test_search_value_below_its_bound_is_not_a_numerical_failure():
     best = min((least_squares(resid, s, method="lm", xtol=1e-15, ftol=1e-15).x for s in (X0, r.X)),
                key=lambda X: float(resid(X) @ resid(X)))
     f = _f_tls_exact(P, x, c, best)
-    assert Fraction(r.gamma_lb) ** 2 * 4 <= f and r.gamma_lb <= r.gamma_ub
+    for res in (r, m):
+        assert Fraction(res.gamma_lb) ** 2 * 4 <= f and res.gamma_lb <= res.gamma_ub
 
 
 def _tls_reference(P, x, c, X0) -> float:

@@ -353,12 +353,15 @@ def _expired_row(r: TriangulationResult, told) -> TriangulationResult:
 
 def _enumerated_then_searched(searches: list) -> list:
     """The results of the searches: point problems of 2 to BATCH_ENUM_MAX_VIEWS views by the enumeration of every inlier
-    set, stacked across problems (:func:`tritools.solve.robust_enum_run.enumerate_many`, the single call's path),
-    the others and those it leaves open by the branch and bound (:func:`tritools.solve.robust_drive.drive`).  The
+    set, stacked across problems (:func:`tritools.solve.robust_enum_run.enumerate_many`, the staged order), those it
+    leaves open by the single call's enumeration of each alone (:func:`~tritools.solve.robust_enum_run.enumerate_tls`:
+    the unstaged order, or the scalar paths of two and three views; it decided tiny-baseline tracks in
+    georeferenced worlds that the staged order left to the search with a worse estimate, review 22a F1), the
+    others and those still open by the branch and bound (:func:`tritools.solve.robust_drive.drive`).  The
     decision scales come from one normalisation stack per view count (:func:`_normalization_scales`), computed only
     for the searches that need them."""
     from .robust_drive import drive
-    from .robust_enum_run import enumerate_many
+    from .robust_enum_run import eligible, enumerate_many, enumerate_tls
 
     normalised: set = set()
 
@@ -369,6 +372,10 @@ def _enumerated_then_searched(searches: list) -> list:
     results = enumerate_many(searches, scales=scales, max_views=BATCH_ENUM_MAX_VIEWS, staged=True)
     left = [k for k, r in enumerate(results) if r is None]
     _normalization_scales([searches[k] for k in left if id(searches[k]) not in normalised])
+    for k in left:                      # the single call's enumeration next (review 22a F1), each problem alone
+        if eligible(searches[k], BATCH_ENUM_MAX_VIEWS):
+            results[k] = enumerate_tls(searches[k])
+    left = [k for k in left if results[k] is None]
     for k, r in zip(left, drive([searches[k] for k in left]) if left else []):
         results[k] = r
     return results

@@ -11,6 +11,8 @@ degree plan for three views.
   a result is not certified and the plan did not run out: the subset stays weak (a later, larger need solves it
   again) and is never exhausted (:attr:`SubSolve.stopped`).  A caller's own ``lower_bound_stop`` (a level of the
   whole problem) is not passed on;
+* one camera given |S| times with point regions (:func:`one_camera`, exact multiples): L2*(S) is the observations'
+  spread about their mean (:func:`_one_camera`), with no solve (``triangulate`` refuses such cameras);
 * three views from ``from_delta``, point regions, ``method="auto"``, no ``max_delta`` below 4: Theorem 1 at delta = 4
   first (:data:`THEOREM1_FIRST`).  Three camera centres are always coplanar, so Corollary 1's epipolar constraints
   admit image points on the centres' plane lines and its delta = 4 bound often stops below L2* (the plan then ends
@@ -26,13 +28,14 @@ import dataclasses
 import math
 import time
 from dataclasses import dataclass
+from fractions import Fraction
 
 import numpy as np
 
 from ..result import Status
 from .options import MethodChoice
 
-__all__ = ["SubSolve", "solve_subproblem", "stop_level", "THEOREM1_FIRST", "BOUND_STOP", "ROUND_DOWN",
+__all__ = ["SubSolve", "solve_subproblem", "stop_level", "one_camera", "THEOREM1_FIRST", "BOUND_STOP", "ROUND_DOWN",
            "TRUSTED_LOWER_BOUND", "EXHAUSTED"]
 
 #: f = 2 |S| gamma^2 is computed with a few roundings (and gamma came through a square root): multiplying by
@@ -83,6 +86,8 @@ def solve_subproblem(cameras, regions, opts, *, light: bool, from_delta: int | N
     """The sub-problem (cameras and regions of S) under the caller's options (module docstring); ``limit``
     seconds (inf: the options' budget); None when the input is refused (e.g. coincident cameras: 0 is a valid
     bound then)."""
+    if points and len(cameras) >= 2 and one_camera(cameras):
+        return _one_camera(regions)
     opts = opts.replace(time_limit=max(1e-3, limit)) if math.isfinite(limit) else opts
     if light:
         try:
@@ -107,6 +112,39 @@ def solve_subproblem(cameras, regions, opts, *, light: bool, from_delta: int | N
             opts = opts.replace(time_limit=max(1e-3, limit - (time.monotonic() - t0)))
     plan = _run(cameras, regions, opts, light, stop, need)
     return _larger(first, plan)
+
+
+def one_camera(cameras) -> bool:
+    """Are the cameras (N, 3, 4) one camera given N times: each exactly a multiple of the first, in exact rational
+    arithmetic?  (Only then is every view's projection the same point for every X; nearly equal cameras -- a
+    micro-baseline -- may see different points near their centres.)"""
+    C = np.asarray(cameras, float).reshape(len(cameras), 12)
+    k = int(np.argmax(np.abs(C[0])))
+    if not (np.isfinite(C).all() and C[0, k] != 0):
+        return False
+    if not all(np.array_equal(C[i] == 0, C[0] == 0) for i in range(1, len(C))):
+        return False
+    first = [Fraction(float(v)) for v in C[0]]
+    for row in C[1:]:
+        scale = Fraction(float(row[k])) / first[k]
+        if any(Fraction(float(v)) != scale * f for v, f in zip(row, first)):
+            return False
+    return True
+
+
+def _one_camera(regions) -> SubSolve:
+    """The sub-problem of one camera given |S| times with point regions x_i (:func:`one_camera`): every view
+    projects X to the same point u, so sum_i |u - x_i|^2 >= sum_i |x_bar - x_i|^2 = sum_{i<j} |x_i - x_j|^2 / |S|,
+    attained on the ray of x_bar: L2*(S) exactly, from the differences' squares (each within a few roundings of its
+    exact value) summed exactly (``math.fsum``), divided and rounded down by ``ROUND_DOWN``; certified, no estimate
+    (the ray's depth is not determined by S).  Not 0 where the observations differ, so a track that lists one image
+    twice with two keypoints is certified (review 22a F3: the sub-problem was refused, its bound 0)."""
+    x = np.array([r.center for r in regions], float)
+    n = len(x)
+    with np.errstate(over="ignore", invalid="ignore"):
+        terms = [(x[i + 1:] - x[i]) ** 2 for i in range(n - 1)]
+    lb = math.fsum(float(v) for t in terms for v in t.ravel()) / n * ROUND_DOWN    # (a few roundings of 1e-16)
+    return SubSolve(lb if math.isfinite(lb) else 0.0, None, math.isfinite(lb))
 
 
 def _theorem1(opts):

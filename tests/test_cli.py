@@ -341,3 +341,16 @@ def test_overflowing_input_prints_no_numpy_warnings(tmp_path, capsys):
         assert rc == 0 and err == "", err
         assert json.loads(out)[0]["status"] != "optimal"
     assert not [w for w in caught if issubclass(w.category, RuntimeWarning)]
+
+
+def test_a_negative_non_number_value_gets_the_flag_s_own_message(tmp_path, capsys):
+    """Review 22a F4: ``--robust -inf`` said argparse's "expected one argument" (``-inf`` read as an option); the
+    value now reaches the flag's own check, as ``--robust=-inf`` did.  Exit 2, one line naming the flag."""
+    problems = str(write(tmp_path, example4_doc()))
+    for value in ("-inf", "-nan", "-1e5"):
+        assert cli.main(["solve", problems, "--robust", value]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and "--robust" in err and "expected one argument" not in err, err
+    assert cli._joined_negative_values(["solve", "f.json", "--robust", "-inf", "--json"]) == \
+        ["solve", "f.json", "--robust=-inf", "--json"]
+    assert cli._joined_negative_values(["--robust", "--json", "-o", "-x"]) == ["--robust", "--json", "-o", "-x"]

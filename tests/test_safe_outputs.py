@@ -291,3 +291,19 @@ def test_a_model_written_inside_an_outer_stage_does_not_wait_for_its_own_lock(mo
     assert done, "writing a model inside an atomic directory deadlocked"
     assert sorted(p.name for p in out.iterdir()) == ["cameras.bin", "images.bin", "points3D.bin"]
     assert read_model_arrays(out).equals(arrays)
+
+
+def test_a_symlinked_output_is_written_through_its_link(tmp_path, capsys):
+    """Review 22a F4: ``solve -o link.json`` with link.json a symbolic link replaced the link by a regular file (a
+    file the command did not write); the output now goes to the link's target and the link stays."""
+    target = tmp_path / "real.json"
+    target.write_text("old")
+    link = tmp_path / "link.json"
+    link.symlink_to(target)
+    with atomic_open(link) as fh:
+        fh.write("new")
+    assert link.is_symlink() and target.read_text() == "new"
+    problems = write(tmp_path, example4_doc())
+    assert main(["solve", str(problems), "--json", "-o", str(link)]) == 0
+    assert link.is_symlink() and json.loads(target.read_text())[0]["status"] == "optimal"
+    assert sorted(os.listdir(tmp_path)) == ["link.json", "problems.json", "real.json"]

@@ -494,11 +494,33 @@ def build_parser() -> argparse.ArgumentParser:
     return ap
 
 
+def _joined_negative_values(argv: list) -> list:
+    """``--flag -inf`` as ``--flag=-inf``: argparse reads a value that starts with "-" but is not a plain negative
+    number (``-inf``, ``-nan``, ``-1e5`` ...) as an option and says "expected one argument" instead of the flag's own
+    message (review 22a F4).  Only a token that parses as a float after a ``--flag`` without "=" is joined."""
+    out: list = []
+    for tok in (str(t) for t in argv):
+        prev = out[-1] if out else ""
+        if prev.startswith("--") and "=" not in prev and tok.startswith("-") and _is_float(tok):
+            out[-1] = f"{prev}={tok}"
+        else:
+            out.append(tok)
+    return out
+
+
+def _is_float(tok: str) -> bool:
+    try:
+        float(tok)
+    except ValueError:
+        return False
+    return True
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; returns the exit code (0 ok, 1 internal error, 2 invalid input)."""
     os.environ.setdefault("RUST_BACKTRACE", "0")
     try:
-        args = build_parser().parse_args(argv)
+        args = build_parser().parse_args(_joined_negative_values(sys.argv[1:] if argv is None else list(argv)))
         end_startup()                   # from here on Ctrl-C is a KeyboardInterrupt: cleanups run, then 130
         with cli_logging(args):
             if os.environ.get(DEBUG_ENV):

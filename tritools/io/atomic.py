@@ -157,9 +157,12 @@ def atomic_path(path):
 
     The caller writes the whole file to the yielded path.  On an exception the temporary file is
     removed and ``path`` is untouched.  Refuses (:class:`DirectoryInTheWay`) when ``path`` is a directory;
-    a special file (``/dev/stdout``, a FIFO) is written directly.
+    a special file (``/dev/stdout``, a FIFO) is written directly; a symbolic link is written through (its target
+    replaced, the link kept: review 22a F4 -- a command never removes a file it did not write).
     """
     path = Path(path)
+    if path.is_symlink():               # written through the link (as a shell's redirection): the link stays
+        path = Path(os.path.realpath(path))
     _check_not_directory(path)
     if path.exists() and not path.is_file():       # /dev/stdout, /dev/null, a FIFO: nothing to replace
         yield path

@@ -43,6 +43,7 @@ paper's setting).  Columns per (N, outlier fraction, noise), over the trials:
 from __future__ import annotations
 
 import argparse
+import gc
 import itertools
 import os
 import sys
@@ -242,6 +243,7 @@ def batch_cell(N: int, n_out: int, noise: float, args) -> dict:
 
     rng = np.random.default_rng([args.seed, N, n_out, int(noise * 10)])
     probs = [scene(N, n_out, noise, rng)[:2] for _ in range(args.batch)]
+    gc.collect()                # the peer's cvxpy objects of the cell: a collection inside a batch of 20 doubled it
     c0 = time.process_time()
     res = tritools.triangulate_many(probs, robust=THRESHOLD, time_limit=args.time_limit)
     cpu = time.process_time() - c0

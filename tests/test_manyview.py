@@ -107,3 +107,22 @@ def test_a_degree_beyond_the_budget_is_skipped_with_a_named_status_and_the_best_
     assert [a.status for a in res.attempts][-1] == "budget_exceeded"
     ref = reference(cams, regs, [X, res.X])
     assert res.gamma_lb <= ref * (1 + 1e-9) + 1e-9
+
+
+def test_views_asked_for_one_clique_is_the_dense_formulation():
+    """Theorem 1 at three views (one triple holds every view) or any method at two: ``sparsity="views"`` is the dense
+    formulation (the views program only adds a redundant block; on three views with a wrong match it ended
+    solver_failed after ~1 s).  Certified at the dense formulation's value."""
+    from tritools.scene import robust_protocol_scene
+    from tritools.solve.options import options_from
+    from tritools.solve.plan import degree_plan
+
+    views = options_from(None, sparsity="views")
+    assert {s.formulation for s in degree_plan(views.replace(method="theorem1"), 3, 6, 4)} == {"dense"}
+    assert [s.formulation for s in degree_plan(views, 2, 4, 2)] == ["dense", "dense"]
+    assert degree_plan(views, 3, 6, 2)[-1].formulation == "views"          # Corollary 1: the band's pair cliques
+    P, x, _, _ = robust_protocol_scene(3, 1, 5.0, np.random.default_rng(4))
+    r = tritools.triangulate(P, x, "theorem1", delta=4, max_delta=4, sparsity="views")
+    d = tritools.triangulate(P, x, "theorem1", delta=4, max_delta=4, sparsity="dense")
+    assert r.sparsity == "dense" and r.optimal and d.optimal
+    assert r.gamma_lb == pytest.approx(d.gamma_lb, rel=1e-9)

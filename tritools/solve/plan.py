@@ -84,10 +84,11 @@ class Step:
 def _formulation(options: TriangulationOptions, method: Method, delta: int, n_views: int, n_vars: int) -> str:
     if delta <= 2 or options.sparsity == Sparsity.DENSE:
         return "dense"
+    if n_views <= 2 or (n_views == 3 and method == Method.THEOREM1):
+        return "dense"      # one clique holds every view: the views add a redundant block (asked for too: Theorem 1
+        #                     at three views of wrong matches, 'views' ended solver_failed after 1.1 s, dense 23 ms)
     if options.sparsity == Sparsity.CLIQUES:          # the view cliques ("views")
         return "views"
-    if n_views <= 2 or (n_views == 3 and method == Method.THEOREM1):
-        return "dense"                              # one clique holds every view: the views add nothing
     # Corollary 1 with three views: the band's cliques are view pairs, and the size rule decides (measured,
     # benchmarks/RESULTS.md "issue #22": mixed 16 px regions, dense 5.3 s and 16.9 s, views 0.6 s and 1.2 s,
     # same certified values)

@@ -1,7 +1,7 @@
 """One camera listed twice in a track with two different keypoints (review 22a F3): the L2 sub-problem of such views
 is refused by ``triangulate`` (cameras equal up to scale), so its bound was 0 and the robust search never
 certified; now its exact value, sum_i |x_i - x_bar|^2 (:func:`tritools.solve.robust_subsolve._one_camera`), only for
-cameras that are exact multiples of each other (:func:`~tritools.solve.robust_subsolve.one_camera`).
+cameras that are exact multiples of each other (:func:`tritools.model.exact.one_exact_camera`).
 
 Reference independent of tritools' solvers: every inlier set S enumerated, L2*(S) by scipy multi-start least
 squares (an attained value, so no valid lower bound exceeds the reference)."""
@@ -15,7 +15,8 @@ from scipy.optimize import least_squares
 
 import tritools
 from tritools.scene import robust_protocol_scene
-from tritools.solve.robust_subsolve import _one_camera, one_camera
+from tritools.model.exact import one_exact_camera as one_camera
+from tritools.solve.robust_subsolve import _one_camera
 
 
 def _reference(P, x, c, starts) -> float:

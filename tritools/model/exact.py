@@ -4,10 +4,12 @@ the places where a plain sum cancels -- a georeferenced camera's P (X, 1), whose
 result.  Vectorised over leading axes; numpy has no fused multiply-add, so products split by Dekker's rule."""
 from __future__ import annotations
 
+from fractions import Fraction
+
 import numpy as np
 
 __all__ = ["two_sum", "two_prod", "dot2", "accurate_homogeneous", "homogeneous_images", "CANCELLATION_RATIO",
-           "HOMOGENEOUS_RTOL", "exact_centre", "same_exact_centre"]
+           "HOMOGENEOUS_RTOL", "exact_centre", "same_exact_centre", "one_exact_camera"]
 
 #: a sum of products is recomputed by :func:`dot2` when the sum of its terms' magnitudes exceeds this many times
 #: its magnitude (more than 6 bits lost to cancellation); below, the plain sum of 4 products errs by at most
@@ -90,3 +92,26 @@ def same_exact_centre(Pi, Pj) -> bool:
     if not any(a) or not any(b):
         return False
     return all(a[p] * b[q] == a[q] * b[p] for p in range(4) for q in range(p + 1, 4))
+
+
+def one_exact_camera(cameras) -> bool:
+    """Are the float cameras (N, 3, 4) one camera given N times: each exactly a multiple of the first (the 12-vectors
+    proportional in exact rational arithmetic)?  Only then does every view project each X to the same point; cameras
+    equal only to round-off may have a micro-baseline, and near their centres the exact problem sees parallax
+    (:func:`same_exact_centre`).  A float screen (a necessary condition: an exact multiple leaves ~1e-16 in it) rejects
+    distinct cameras before the exact test."""
+    C = np.asarray(cameras, float).reshape(len(cameras), 12)
+    k = int(np.argmax(np.abs(C[0])))
+    if not (np.isfinite(C).all() and C[0, k] != 0):
+        return False
+    top = float(np.max(np.abs(C[0])))
+    for row in C[1:]:
+        if not np.array_equal(row == 0, C[0] == 0) or \
+                np.max(np.abs(row * C[0, k] - row[k] * C[0])) > 1e-12 * abs(row[k]) * top:
+            return False
+    a = [Fraction(float(v)) for v in C[0]]
+    for row in C[1:]:
+        b = [Fraction(float(v)) for v in row]
+        if any(b[i] * a[k] != b[k] * a[i] for i in range(12)):
+            return False
+    return True

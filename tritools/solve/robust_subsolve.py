@@ -11,8 +11,9 @@ degree plan for three views.
   a result is not certified and the plan did not run out: the subset stays weak (a later, larger need solves it
   again) and is never exhausted (:attr:`SubSolve.stopped`).  A caller's own ``lower_bound_stop`` (a level of the
   whole problem) is not passed on;
-* one camera given |S| times with point regions (:func:`one_camera`, exact multiples): L2*(S) is the observations'
-  spread about their mean (:func:`_one_camera`), with no solve (``triangulate`` refuses such cameras);
+* one camera given |S| times with point regions (exact multiples, :func:`~tritools.model.exact.one_exact_camera`):
+  L2*(S) is the observations' spread about their mean (:func:`_one_camera`), with no solve (``triangulate``
+  refuses such cameras);
 * three views from ``from_delta``, point regions, ``method="auto"``, no ``max_delta`` below 4: Theorem 1 at delta = 4
   first (:data:`THEOREM1_FIRST`).  Three camera centres are always coplanar, so Corollary 1's epipolar constraints
   admit image points on the centres' plane lines and its delta = 4 bound often stops below L2* (the plan then ends
@@ -28,14 +29,13 @@ import dataclasses
 import math
 import time
 from dataclasses import dataclass
-from fractions import Fraction
-
 import numpy as np
 
+from ..model.exact import one_exact_camera
 from ..result import Status
 from .options import MethodChoice
 
-__all__ = ["SubSolve", "solve_subproblem", "stop_level", "one_camera", "THEOREM1_FIRST", "BOUND_STOP", "ROUND_DOWN",
+__all__ = ["SubSolve", "solve_subproblem", "stop_level", "THEOREM1_FIRST", "BOUND_STOP", "ROUND_DOWN",
            "TRUSTED_LOWER_BOUND", "EXHAUSTED"]
 
 #: f = 2 |S| gamma^2 is computed with a few roundings (and gamma came through a square root): multiplying by
@@ -86,7 +86,7 @@ def solve_subproblem(cameras, regions, opts, *, light: bool, from_delta: int | N
     """The sub-problem (cameras and regions of S) under the caller's options (module docstring); ``limit``
     seconds (inf: the options' budget); None when the input is refused (e.g. coincident cameras: 0 is a valid
     bound then)."""
-    if points and len(cameras) >= 2 and one_camera(cameras):
+    if points and len(cameras) >= 2 and one_exact_camera(cameras):
         return _one_camera(regions)
     opts = opts.replace(time_limit=max(1e-3, limit)) if math.isfinite(limit) else opts
     if light:
@@ -114,26 +114,9 @@ def solve_subproblem(cameras, regions, opts, *, light: bool, from_delta: int | N
     return _larger(first, plan)
 
 
-def one_camera(cameras) -> bool:
-    """Are the cameras (N, 3, 4) one camera given N times: each exactly a multiple of the first, in exact rational
-    arithmetic?  (Only then is every view's projection the same point for every X; nearly equal cameras -- a
-    micro-baseline -- may see different points near their centres.)"""
-    C = np.asarray(cameras, float).reshape(len(cameras), 12)
-    k = int(np.argmax(np.abs(C[0])))
-    if not (np.isfinite(C).all() and C[0, k] != 0):
-        return False
-    if not all(np.array_equal(C[i] == 0, C[0] == 0) for i in range(1, len(C))):
-        return False
-    first = [Fraction(float(v)) for v in C[0]]
-    for row in C[1:]:
-        scale = Fraction(float(row[k])) / first[k]
-        if any(Fraction(float(v)) != scale * f for v, f in zip(row, first)):
-            return False
-    return True
-
-
 def _one_camera(regions) -> SubSolve:
-    """The sub-problem of one camera given |S| times with point regions x_i (:func:`one_camera`): every view
+    """The sub-problem of one camera given |S| times with point regions x_i
+    (:func:`~tritools.model.exact.one_exact_camera`): every view
     projects X to the same point u, so sum_i |u - x_i|^2 >= sum_i |x_bar - x_i|^2 = sum_{i<j} |x_i - x_j|^2 / |S|,
     attained on the ray of x_bar: L2*(S) exactly, from the differences' squares (each within a few roundings of its
     exact value) summed exactly (``math.fsum``), divided and rounded down by ``ROUND_DOWN``; certified, no estimate

@@ -36,6 +36,7 @@ import numpy as np
 from ..model.constraints import Method
 from ..startup import EXIT_INTERRUPTED, INTERRUPTED_MESSAGE, end_startup
 from ..io.atomic import atomic_open
+from ..io.oxford import is_float
 from ..io.problem_file import (ProblemFileError, ProblemSpec, jsonable, load_problem_file, parse_problem_bytes,
                                parse_problem_text)
 from ..result import Status, TriangulationResult, TriangulationResults
@@ -501,19 +502,11 @@ def _joined_negative_values(argv: list) -> list:
     out: list = []
     for tok in (str(t) for t in argv):
         prev = out[-1] if out else ""
-        if prev.startswith("--") and "=" not in prev and tok.startswith("-") and _is_float(tok):
+        if prev.startswith("--") and "=" not in prev and tok.startswith("-") and is_float(tok):
             out[-1] = f"{prev}={tok}"
         else:
             out.append(tok)
     return out
-
-
-def _is_float(tok: str) -> bool:
-    try:
-        float(tok)
-    except ValueError:
-        return False
-    return True
 
 
 def main(argv: Sequence[str] | None = None) -> int:

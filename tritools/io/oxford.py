@@ -148,7 +148,7 @@ def _read_table(path, columns: int | None = None, what: str = "numbers") -> np.n
         try:
             row = [float(t) for t in tokens]
         except ValueError:
-            bad = next(t for t in tokens if not _is_float(t))
+            bad = next(t for t in tokens if not is_float(t))
             raise ValueError(f"{path}:{lineno}: expected a number, got {bad[:40]!r}") from None
         if not all(np.isfinite(row)):
             raise ValueError(f"{path}:{lineno}: non-finite number (NaN and Infinity are not allowed)")
@@ -158,7 +158,8 @@ def _read_table(path, columns: int | None = None, what: str = "numbers") -> np.n
     return np.array(rows, dtype=float)
 
 
-def _is_float(token: str) -> bool:
+def is_float(token: str) -> bool:
+    """Does the text token parse as a float (``float(token)``)?  (Data files and the command line.)"""
     try:
         float(token)
     except ValueError:

@@ -227,7 +227,7 @@ def value_shift_of(f: Polynomial, eq, ineq):
             g = np.linalg.norm(J, axis=1)
             with np.errstate(divide="ignore", invalid="ignore"):
                 d = np.where(near, np.where(g > 0, (deg * r + noise) / g, np.inf), 0.0)
-            d = np.where(_linear_model_fails(c, p, v, J, g, r > noise), np.inf, d)
+            d = np.where(_linear_model_fails(c, p, v, J, g, r > noise, noise), np.inf, d)
             worst = max(worst, float(np.max(d)))
         if worst == 0.0:
             return 0.0
@@ -237,16 +237,16 @@ def value_shift_of(f: Polynomial, eq, ineq):
 
 
 def _linear_model_fails(c: _Compiled, p: np.ndarray, v: np.ndarray, J: np.ndarray, g: np.ndarray,
-                        which: np.ndarray) -> np.ndarray:
-    """Per constraint in ``which`` (violated beyond round-off): does its Newton step toward the set
-    (p - v_k grad_k / |grad_k|^2) fail to halve the violation beyond the evaluation's round-off?  Then the
-    first-order distance means nothing (review 21c F2: on the cusp y^2 = x^3 at x < 0 the gradient points along y,
-    whose step leaves g > 0: no feasible point is near)."""
+                        which: np.ndarray, noise: np.ndarray) -> np.ndarray:
+    """Per constraint in ``which`` (violated beyond its evaluation's round-off at p, ``noise``): does its Newton step
+    toward the set (p - v_k grad_k / |grad_k|^2) fail to halve the violation beyond the round-off?  Then the first-order
+    distance means nothing (review 21c F2: on the cusp y^2 = x^3 at x < 0 the gradient points along y, whose step
+    leaves g > 0: no feasible point is near)."""
     out = np.zeros(len(v), bool)
     for k in np.nonzero(which & (g > 0))[0]:
         q = p - v[k] * J[k] / (g[k] * g[k])
-        noise = EVAL_ROUNDOFF * float(max(c.magnitudes(p)[k], c.magnitudes(q)[k]))
-        out[k] = abs(float(c.values(q)[k])) > 0.5 * abs(float(v[k])) + noise
+        tol = max(float(noise[k]), EVAL_ROUNDOFF * float(c.magnitudes(q)[k]))
+        out[k] = abs(float(c.values(q)[k])) > 0.5 * abs(float(v[k])) + tol
     return out
 
 

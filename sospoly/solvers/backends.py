@@ -380,8 +380,14 @@ class IpmBackend:
             else:
                 stop_at = stop_threshold(active_level(), problem.objective_sign, problem.objective_offset) \
                     if self.tolerances.accept_inaccurate else None
+                taken = [False]                 # a stalled moment form taken where it is almost solved
+
+                def almost(r):
+                    taken[0] = self.tolerances.accept_inaccurate and ipm_almost_solved(problem, r, self.tolerances)
+                    return taken[0]
                 res = ipm_solve_sparse(problem.A, problem.b, problem.q, problem.cones, self.tolerances,
-                                       deadline=deadline, stop_at=stop_at)
+                                       deadline=deadline, stop_at=stop_at, almost=almost)
+                take_stalled = take_stalled or taken[0]
             ok = bool(res.converged[0])
             x, z = res.x[0], res.z[0]
             raw = RawStatus.SOLVED if ok else RawStatus.FAILED

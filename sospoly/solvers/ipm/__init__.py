@@ -48,7 +48,7 @@ def ipm_solve_batch(A: np.ndarray, b: np.ndarray, q: np.ndarray, cones,
 @with_single_threaded_blas
 def ipm_solve_sparse(A: sp.spmatrix, b: np.ndarray, q: np.ndarray, cones,
                      tolerances: Tolerances = DEFAULT_TOLERANCES, *, deadline=None,
-                     stop_at: float | None = None) -> IpmResult:
+                     stop_at: float | None = None, almost=None) -> IpmResult:
     """One instance with sparse A; results with batch axis 1.
 
     One PSD block whose image-form columns mostly are *pair columns* (two entries, one of them in a
@@ -56,7 +56,11 @@ def ipm_solve_sparse(A: sp.spmatrix, b: np.ndarray, q: np.ndarray, cones,
     moment form (:class:`MomentReduction`); anything else (and a reduced solve that did not converge)
     with the svec-Kronecker Schur complement of :class:`SparseOperator`.  ``stop_at``: the moment form stops
     at an iterate with q^T x <= stop_at (reason ``IPM_LEVEL``, :mod:`sospoly.solvers.level`); the other form
-    ignores it."""
+    ignores it.  ``almost``: a predicate on the moment form's result; a stalled moment form whose iterate it
+    accepts is returned as it is (reason ``"stalled"``, not converged: the caller takes it as "almost solved",
+    :func:`sospoly.solvers.backends.ipm_almost_solved`) instead of starting the unreduced method afresh (measured:
+    three-view Theorem 1 programs at delta = 4 stalling after 10 iterations at relative gaps 4e-9..2e-8, residuals
+    ~1e-12; the unreduced method then took 50-90 ms more, benchmarks/RESULTS.md, wave 23)."""
     tolerances = as_tolerances(tolerances)
     lay = layout_of(cones)
     A = A if sp.issparse(A) else sp.csr_matrix(A)
@@ -71,6 +75,8 @@ def ipm_solve_sparse(A: sp.spmatrix, b: np.ndarray, q: np.ndarray, cones,
         if red is not None and red.m2 < A.shape[1]:      # only when the moment form is the smaller system
             res = red.solve(Ac, b[0], q[0], tolerances, deadline, stop_at)
             if res is not None and (res.converged[0] or res.reason[0] in ("time limit", IPM_LEVEL)):
+                return res
+            if res is not None and res.reason[0] == "stalled" and almost is not None and almost(res):
                 return res
             # not converged (e.g. stalled on some Example 5 cases): the unreduced method next,
             # the caller's fallback (Clarabel) after that

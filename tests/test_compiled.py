@@ -164,6 +164,23 @@ def test_cache_reuses_and_grows_support():
         assert close(c.solve(f, [x * y - 1], []).lower_bound, ref.lower_bound)
 
 
+def test_cache_hit_theta_is_the_slots_theta_and_mismatches_still_raise():
+    """A hit reads theta in one pass (no slots built for the instance): the same vector as the entry's own
+    ``theta``, a subset of its terms is a hit, a term outside it grows the support, a degree that differs raises."""
+    x, y = sospoly.variables("x y")
+    cache = sospoly.PsatzCache()
+    a, _ = cache.get(x ** 2 + y ** 2 + x, [x * y - 1], [], 2, key="k")
+    b, th = cache.get(3 * x ** 2 + y ** 2, [x * y], [], 2, key="k")            # fewer terms: a hit
+    assert b is a and cache.compiles == 1
+    np.testing.assert_array_equal(th, a.theta(3 * x ** 2 + y ** 2, [x * y], []))
+    assert np.count_nonzero(th) == 3
+    c, _ = cache.get(x ** 2 + y ** 2 + y, [x * y - 1], [], 2, key="k")         # y outside: the union
+    assert c is not a and cache.compiles == 2 and c.contains(x ** 2 + y ** 2 + x, [x * y - 1], [])
+    with pytest.raises(sospoly.StructureMismatch, match="degree 0"):
+        cache.get(x ** 2 + y ** 2, [x * 0 + 1], [], 2, key="k")              # inside the support, degree 0
+    assert cache.compiles == 2
+
+
 def test_lowered_structure_is_solved_only_by_the_solver_layer():
     """sospoly.lowering.compiled only lowers: its LoweredPsatz gives the same conic data as the solver's
     CompiledPsatz (a subclass), and solve_psatz refuses an instance bound to a bare LoweredPsatz (TypeError

@@ -20,7 +20,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..budget import as_budget
-from ..certificates.psatz import DataSlots, Multiplier, PsatzStructure, as_multiplier, check_size, checked_inputs
+from ..certificates.psatz import (DataSlots, Multiplier, PsatzStructure, StructureMismatch, as_multiplier, check_size,
+                                  checked_inputs)
 from ..lowering.compiled import LoweredPsatz, structure_for
 from ..lowering.conic import ConicProblem, GramForm
 from ..status import SolveStatus
@@ -210,17 +211,26 @@ class PsatzCache:
         outside the cached entry's is compiled on the union of both."""
         eq, ineq = tuple(eq), tuple(ineq)
         f, eq, ineq, gens, degree = checked_inputs(f, eq, ineq, degree, gens, as_budget(budget).max_gram_side)
-        slots = DataSlots.of(f, eq, ineq, gens)
         k = None if key is None else ("user", key, tuple(gens), int(degree), GramForm(form).value)
         if k is not None:
             comp = self._store.get(k)
             if comp is not None:
-                if comp.slots.contains(slots):
+                theta = _theta_within(comp, f, eq, ineq)     # every term inside the entry's support: a hit
+                if theta is not None:
                     # a structure compiled under another budget is still sized against this call's
                     st = comp.structure
                     check_size(st.shape, as_budget(budget), st.free, len(gens), degree, f.degree, slots=comp.slots,
                                q=st.q, image_form=GramForm(form) == GramForm.IMAGE)
                     self._store.move_to_end(k)
+                    return comp, theta
+        slots = DataSlots.of(f, eq, ineq, gens)
+        if k is not None:
+            comp = self._store.get(k)
+            if comp is not None:
+                if comp.slots.contains(slots):   # a degree that differs: sized, then theta raises, as before
+                    st = comp.structure
+                    check_size(st.shape, as_budget(budget), st.free, len(gens), degree, f.degree, slots=comp.slots,
+                               q=st.q, image_form=GramForm(form) == GramForm.IMAGE)
                     return comp, comp.theta(f, eq, ineq)
                 old = comp.slots
                 if (old.gens, old.n_eq, old.n_ineq, old.degrees) == (slots.gens, slots.n_eq, slots.n_ineq,
@@ -230,4 +240,15 @@ class PsatzCache:
                                   slots=slots, budget=budget, form=form)
         comp = self.compiled(structure, form, key=k)
         return comp, comp.theta(f, eq, ineq)
+
+
+def _theta_within(comp: CompiledPsatz, f, eq, ineq):
+    """The instance's theta in ``comp``'s slots, or None where a term lies outside them (or a degree differs):
+    :meth:`DataSlots.theta` raises :class:`StructureMismatch` exactly where :meth:`DataSlots.contains` of the
+    instance's own slots is False, or the degree differs -- one pass instead of building the slots and
+    searching them twice (~0.7 ms of every compiled solve of a three-view Theorem 1 program)."""
+    try:
+        return comp.theta(f, eq, ineq)
+    except StructureMismatch:
+        return None
 

@@ -1,13 +1,19 @@
-"""Outer bounds of the level set ``L(tau) = {X : gamma(X) <= tau}`` (docs/uncertainty.md, "The level set").
+"""Outer bounds of the level set ``L(tau) = {X : gamma(X) <= tau, depth_i(X) >= 0 for every i}``
+(docs/uncertainty.md, "The level set"): the points in front of every camera, as in the per-view set.
+gamma itself -- and the certificate of :func:`tritools.triangulate` -- ignores cheirality, so an L2 optimum
+behind a camera (``TriangulationResult.in_front`` False) is not a point of L; ``empty`` then says that no
+point in front of every camera reaches the level (review 23a F1).
 
 ``gamma(X) <= tau`` implies ``d(Phi(X, P_i), R_i) <= sqrt(2N) tau`` in every view (gamma^2 is the mean
 of the 2N squared coordinates of the distances), so L lies in the per-view set of the regions dilated
 by ``sqrt(2N) tau``: its certified bounds (:func:`tritools.uncertainty`) are valid outer bounds of L,
 up to sqrt(2N) loose.  Inner witnesses are points of L itself: for each side of the box a local
-search (SLSQP, ``min +-X_k s.t. gamma(X)^2 <= tau^2``, from the local L2 optimum) whose result is
-kept only if ``gamma(w) <= tau`` holds when re-evaluated; ``gap`` then measures the looseness of the
-bounds against them.  For point regions the box is tightened by certified SOS bounds
-(:func:`_sos_box`, ``sospoly.minimize`` with a radius: the rigour of gamma_LB).
+search (SLSQP, ``min +-X_k s.t. gamma(X)^2 <= tau^2`` and every depth >= 0, from a point of L) whose
+result is kept only if ``gamma(w) <= tau`` and its depths (:func:`tritools.depths`, the options'
+``world_frame``) hold when re-evaluated; ``gap`` then measures the looseness of the bounds against them.
+For point regions the box is tightened by certified SOS bounds (:func:`_sos_box`, ``sospoly.minimize`` with
+a radius: the rigour of gamma_LB; its programs ignore the depths, so they bound a superset of L within the
+relaxation's box).
 """
 from __future__ import annotations
 
@@ -15,7 +21,8 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..model.geometry import dlt, gamma, gamma_validated, refine_l2, validate_cameras
+from ..model.geometry import depths, dlt, gamma, gamma_validated, refine_l2, validate_cameras
+from ..model.cameras import as_world_frame, depth_rows
 from ..model.regions import as_regions
 from .witness import witness_gap
 
@@ -29,9 +36,21 @@ def _check_level(level) -> float:
     return float(level)
 
 
-def _start(C, regs, tau, estimate):
+def _in_front(C, X, frame) -> bool:
+    """Every depth of X (:func:`tritools.depths` in ``frame``) is >= 0 (the closure of "in front")."""
+    with np.errstate(all="ignore"):
+        return bool(np.all(depths(X, C, frame) >= 0))
+
+
+def _in_level(C, regs, tau, X, frame) -> bool:
+    """X is a point of L: finite, gamma(X) <= tau (:func:`gamma_validated`) and in front of every camera."""
+    return bool(np.all(np.isfinite(X))) and float(gamma_validated(np.asarray(X, float)[None], C, regs)[0]) <= tau \
+        and _in_front(C, X, frame)
+
+
+def _start(C, regs, tau, estimate, frame):
     """A point of L to start the local searches from: the estimate if it is in L, else the local L2
-    optimum from the DLT of the region centres; None when neither is."""
+    optimum from the DLT of the region centres, else the DLT point; None when none is."""
     cands = [] if estimate is None else [np.asarray(estimate, float)]
     try:
         X0 = dlt(C, np.array([r.center for r in regs]))
@@ -40,7 +59,7 @@ def _start(C, regs, tau, estimate):
     except ValueError:
         pass
     for X in cands:
-        if np.all(np.isfinite(X)) and float(gamma(X, C, regs)) <= tau:
+        if np.all(np.isfinite(X)) and float(gamma(X, C, regs)) <= tau and _in_front(C, X, frame):
             return X
     return None
 
@@ -64,10 +83,11 @@ def _g2_function(C, regs, start, scale):
     return lambda Y: (float(gamma_validated((start + scale * Y)[None], C, regs)[0]) ** 2, None)
 
 
-def _extreme(C, regs, tau, start, k, sign, scale):
-    """A point of L found by SLSQP minimising ``sign * X_k`` (in coordinates (X - start) / scale), moved
-    back towards ``start`` by the least step of a ladder that gives ``gamma <= tau`` (re-evaluated by
-    :func:`gamma_validated`); or None."""
+def _extreme(C, regs, tau, start, k, sign, scale, frame):
+    """A point of L found by SLSQP minimising ``sign * X_k`` (in coordinates (X - start) / scale) with every
+    depth >= 0, moved back towards ``start`` by the least step of a ladder that gives a point of L
+    (:func:`_in_level`: gamma re-evaluated by :func:`gamma_validated`, the depths by :func:`tritools.depths`;
+    L is star-shaped about no point in general, so the ladder only trims the solver's last step); or None."""
     from scipy.optimize import minimize
 
     f = _g2_function(C, regs, start, scale)
@@ -75,17 +95,22 @@ def _extreme(C, regs, tau, start, k, sign, scale):
     con = {"type": "ineq", "fun": lambda Y: (tau * tau - f(Y)[0]) / t2}
     if f(np.zeros(3))[1] is not None:
         con["jac"] = lambda Y: -f(Y)[1] / t2
+    rows = depth_rows(np.asarray(C, float)) * as_world_frame(frame).sign            # depth_i = rows_i . X~
+    d0 = rows[:, :3] @ start + rows[:, 3]
+    dscale = np.maximum(np.abs(d0), 1e-300)
+    front = {"type": "ineq", "fun": lambda Y: (d0 + scale * (rows[:, :3] @ Y)) / dscale,
+             "jac": lambda Y: scale * rows[:, :3] / dscale[:, None]}
     try:
         with np.errstate(all="ignore"):
             res = minimize(lambda Y: sign * Y[k], np.zeros(3), jac=lambda Y: sign * np.eye(3)[k], method="SLSQP",
-                           constraints=[con], options={"maxiter": 60, "ftol": 1e-10})
+                           constraints=[con, front], options={"maxiter": 60, "ftol": 1e-10})
     except (ValueError, ArithmeticError):
         return None
     if not np.all(np.isfinite(res.x)):
         return None
     for theta in (1.0, 1 - 1e-9, 1 - 1e-6, 1 - 1e-4, 1 - 1e-2):
         X = start + scale * theta * res.x
-        if float(gamma_validated(X[None], C, regs)[0]) <= tau:
+        if _in_level(C, regs, tau, X, frame):
             return X
     return None
 
@@ -151,17 +176,18 @@ def level_bounds(cameras, regions, level, estimate, opts):
             out = _with_box(out, *box)
             definition = "level_sos"
     nan = np.full((3, 3), np.nan)
-    start = _start(C, regs, tau, estimate) if out.status.value in ("bounded", "unbounded") else None
+    frame = opts.world_frame
+    start = _start(C, regs, tau, estimate, frame) if out.status.value in ("bounded", "unbounded") else None
     wl, wh = nan.copy(), nan.copy()
     if start is not None:
         width = np.where(np.isfinite(out.hi - out.lo), out.hi - out.lo, 0.0)
         scale = float(np.max(width)) or 1.0
         for k in range(3):
             if np.isfinite(out.lo[k]):
-                w = _extreme(C, regs, tau, start, k, 1.0, scale)
+                w = _extreme(C, regs, tau, start, k, 1.0, scale, frame)
                 wl[k] = np.nan if w is None else w
             if np.isfinite(out.hi[k]):
-                w = _extreme(C, regs, tau, start, k, -1.0, scale)
+                w = _extreme(C, regs, tau, start, k, -1.0, scale, frame)
                 wh[k] = np.nan if w is None else w
     gap, gap_rel, inner, dw = witness_gap(out.lo, out.hi, wl, wh, out.estimate, out.status.value == "bounded")
     return replace(out, witness_lo=wl, witness_hi=wh, gap=gap, gap_rel=gap_rel, distance_witness=dw,

@@ -280,11 +280,12 @@ def test_an_undefined_view_counts_its_threshold_and_leaves_the_others_defined(ge
     report says the same, bit for bit; gamma_UB bounds the exact f_TLS at X."""
     from tritools.solve.robust_report import tls_reported, tls_reported_stack
 
-    X = np.array([0.3, -0.2, 4.0]) + geo * DIRECTION
+    X = np.round((np.array([0.3, -0.2, 4.0]) + geo * DIRECTION) * 1024) / 1024     # multiples of 2^-10
     P = _geo(CAMS.copy(), geo * DIRECTION)
     third = np.array([[1.0, 0, 0, 0], [0, 1.0, 0, 0], [0.0, 0.0, 0.0, 0.0]])
-    third[2, :3] = [0.2, 0.9, -0.1]
-    third[2, 3] = -third[2, :3] @ X                  # X on its principal plane, exactly in float
+    third[2, :3] = [0.25, 1.0, -0.125]
+    third[2, 3] = -third[2, :3] @ X                  # X on its principal plane in exact arithmetic (dyadic numbers:
+    assert sum(Fraction(a) * Fraction(v) for a, v in zip(third[2], np.append(X, 1.0))) == 0    # every sum is exact)
     P = np.concatenate([P, third[None]])
     h = P[:3] @ np.append(X, 1.0)
     x = np.vstack([h[:, :2] / h[:, 2:] + [[0.01, -0.02], [0.0, 0.015], [-0.01, 0.0]], [[5.0, 7.0]]])

@@ -96,9 +96,14 @@ def test_projections_and_spread_one_is_the_stack_bit_for_bit(kind):
     for _ in range(300):
         N = int(rng.integers(2, 8))
         P, _, X = _cameras(rng, N, kind if kind in KINDS else "plain")
-        if kind == "principal_plane":              # near camera 0's principal plane (a denominator at round-off)
+        if kind == "principal_plane":              # near camera 0's centre, or on its principal plane exactly
             c = np.linalg.svd(P[0])[2][-1]
             X = c[:3] / c[3] + rng.normal(size=3) * 10.0 ** rng.uniform(-12, 0)
+            if rng.random() < 0.3:                 # dyadic X and third row: P_3 . X~ = 0 in exact arithmetic
+                X = np.round(X * 2.0 ** 20) / 2.0 ** 20
+                P = P.copy()
+                P[0, 2, :3] = np.round(P[0, 2, :3] * 2.0 ** 20) / 2.0 ** 20
+                P[0, 2, 3] = -(P[0, 2, :3] @ X)
         elif kind == "huge":                       # the compensated products overflow: the plain sums
             X = X * 10.0 ** rng.uniform(-300, 300)
         elif kind == "zeros":

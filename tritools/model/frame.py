@@ -25,12 +25,11 @@ from sospoly.budget import check_deadline
 
 from .cameras import power2_scale
 from .exact import CANCELLATION_RATIO, dot2, homogeneous_images, two_prod, two_sum
-from .geometry import PROJECTION_DENOM_RTOL
 from .stacked import norms, project_quiet_views
 
 __all__ = ["WorldFrame", "world_frame", "world_origins", "world_origin_one", "moved_cameras", "recentred",
            "project_world", "project_world_views", "project_world_one", "frame_centre_groups", "RECENTRE_RATIO",
-           "RESOLVED_SPREAD_RTOL"]
+           "RESOLVED_SPREAD_RTOL", "COMPENSATED_DENOM_RTOL"]
 
 #: the origin moves to the cameras' mean centre when that is farther than this many times their spread ...
 RECENTRE_RATIO = 100.0
@@ -40,6 +39,14 @@ RECENTRE_RATIO = 100.0
 #: between homogeneous centres, ~ separation / distance) at the same level: 1e-9 joined centres 8.7e-4 apart 1.3e6
 #: from the origin, which the untranslated scene certifies (review 22a F2: ``ill_posed``, its estimate 1e13 away).
 RESOLVED_SPREAD_RTOL = 1e-10
+#: the caller's-frame projections' rule for an undefined view (:func:`project_world`): |P_3 . X~| <= this times
+#: sum_k |p3_k| |X~_k|.  There every view that cancels is recomputed by the compensated dot product, whose error is
+#: at most eps |P_3 . X~| + 16 eps^2 sum_k |p3_k X~_k| (Ogita, Rump and Oishi's Dot2 of four terms; a view that does
+#: not cancel has |P_3 . X~| >= sum / CANCELLATION_RATIO), so a denominator above 1e-22 of the sum keeps more than
+#: six correct digits -- the plain dot product's rule, :data:`tritools.model.geometry.PROJECTION_DENOM_RTOL` = 1e-10,
+#: called views 1e5 times their round-off undefined in georeferenced worlds and reported their residuals as inf
+#: (review 23a F2).
+COMPENSATED_DENOM_RTOL = 1e-22
 
 
 @dataclass(frozen=True)
@@ -234,7 +241,7 @@ def project_world_views(C: np.ndarray, X: np.ndarray) -> tuple:
     2), h, defined (M, N))."""
     with np.errstate(over="ignore", invalid="ignore"):
         h = homogeneous_images(C, np.concatenate([X, np.ones((len(X), 1))], axis=1))
-        return project_quiet_views(C, X, h=h)
+        return project_quiet_views(C, X, h=h, rtol=COMPENSATED_DENOM_RTOL)
 
 
 def project_world_one(C: list, X: list, absC: list | None = None) -> tuple:
@@ -256,7 +263,7 @@ def project_world_one(C: list, X: list, absC: list | None = None) -> tuple:
                 and mag[2] <= CANCELLATION_RATIO * abs(h[2])):
             h = [_dot2_one(r, (x0, x1, x2, 1.0)) for r in P]
         den = h[2]
-        if abs(den) <= PROJECTION_DENOM_RTOL * mag[2]:
+        if abs(den) <= COMPENSATED_DENOM_RTOL * mag[2]:
             u.append((h[0] / 1.0, h[1] / 1.0))
             defined.append(False)
             continue

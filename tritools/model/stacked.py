@@ -137,16 +137,17 @@ def project_quiet(C: np.ndarray, X: np.ndarray, absC2: np.ndarray | None = None,
 
 
 def project_quiet_views(C: np.ndarray, X: np.ndarray, absC2: np.ndarray | None = None,
-                        h: np.ndarray | None = None) -> tuple:
+                        h: np.ndarray | None = None, rtol: float = PROJECTION_DENOM_RTOL) -> tuple:
     """:func:`project_quiet` with its rule per view: (x (M, N, 2), h (M, N, 3), defined (M, N)), a view undefined
-    where its denominator is at round-off, |P_3 . X~| <= PROJECTION_DENOM_RTOL |P_3| . |X~| (x is then its undivided
-    pair h_1, h_2), or its projection is not finite."""
+    where its denominator is at round-off, |P_3 . X~| <= rtol |P_3| . |X~| (``PROJECTION_DENOM_RTOL``, the plain dot
+    product's; :func:`tritools.model.frame.project_world` passes its compensated images' own; x is then the
+    undivided pair h_1, h_2), or its projection is not finite."""
     Xh = np.concatenate([X, np.ones((len(X), 1))], axis=1)
     if h is None:
         h = np.einsum("mnij,mj->mni", C, Xh)
     den = h[..., 2]
     absC2 = np.abs(C[:, :, 2, :]) if absC2 is None else absC2
-    tiny = np.abs(den) <= PROJECTION_DENOM_RTOL * np.einsum("mnj,mj->mn", absC2, np.abs(Xh))
+    tiny = np.abs(den) <= rtol * np.einsum("mnj,mj->mn", absC2, np.abs(Xh))
     x = h[..., :2] / np.where(tiny, 1.0, den)[..., None]
     return x, h, ~tiny & np.isfinite(x).all(axis=2)
 

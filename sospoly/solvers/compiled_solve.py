@@ -217,10 +217,7 @@ class PsatzCache:
             if comp is not None:
                 theta = _theta_within(comp, f, eq, ineq)     # every term inside the entry's support: a hit
                 if theta is not None:
-                    # a structure compiled under another budget is still sized against this call's
-                    st = comp.structure
-                    check_size(st.shape, as_budget(budget), st.free, len(gens), degree, f.degree, slots=comp.slots,
-                               q=st.q, image_form=GramForm(form) == GramForm.IMAGE)
+                    _sized(comp, budget, len(gens), degree, f.degree, form)
                     self._store.move_to_end(k)
                     return comp, theta
         slots = DataSlots.of(f, eq, ineq, gens)
@@ -228,9 +225,7 @@ class PsatzCache:
             comp = self._store.get(k)
             if comp is not None:
                 if comp.slots.contains(slots):   # a degree that differs: sized, then theta raises, as before
-                    st = comp.structure
-                    check_size(st.shape, as_budget(budget), st.free, len(gens), degree, f.degree, slots=comp.slots,
-                               q=st.q, image_form=GramForm(form) == GramForm.IMAGE)
+                    _sized(comp, budget, len(gens), degree, f.degree, form)
                     return comp, comp.theta(f, eq, ineq)
                 old = comp.slots
                 if (old.gens, old.n_eq, old.n_ineq, old.degrees) == (slots.gens, slots.n_eq, slots.n_ineq,
@@ -242,6 +237,14 @@ class PsatzCache:
         return comp, comp.theta(f, eq, ineq)
 
 
+def _sized(comp: CompiledPsatz, budget, n_gens: int, degree: int, f_degree: int, form) -> None:
+    """A cached structure, compiled under another budget perhaps, sized against this call's (raises as
+    :func:`check_size`)."""
+    st = comp.structure
+    check_size(st.shape, as_budget(budget), st.free, n_gens, degree, f_degree, slots=comp.slots, q=st.q,
+               image_form=GramForm(form) == GramForm.IMAGE)
+
+
 def _theta_within(comp: CompiledPsatz, f, eq, ineq):
     """The instance's theta in ``comp``'s slots, or None where a term lies outside them (or a degree differs):
     :meth:`DataSlots.theta` raises :class:`StructureMismatch` exactly where :meth:`DataSlots.contains` of the
@@ -251,4 +254,3 @@ def _theta_within(comp: CompiledPsatz, f, eq, ineq):
         return comp.theta(f, eq, ineq)
     except StructureMismatch:
         return None
-

@@ -374,25 +374,27 @@ class IpmBackend:
                 fb = self.fallback.solve(problem, accept=accept, retry=retry, deadline=deadline)
                 return dataclasses.replace(fb, attempts=(att,) + tuple(fb.attempts))
             m = problem.n_cols
+            taken: list = []                    # a stalled moment-form iterate taken as almost solved (sparse path)
             if sum(m * n ** 3 for n in lay.sizes) <= IPM_DENSE_LIMIT:
                 res = ipm_solve_batch(problem.A.toarray()[None], problem.b[None], problem.q, problem.cones,
                                       self.tolerances, deadline=deadline)
             else:
                 stop_at = stop_threshold(active_level(), problem.objective_sign, problem.objective_offset) \
                     if self.tolerances.accept_inaccurate else None
-                taken = [False]                 # a stalled moment form taken where it is almost solved
 
                 def almost(r):
-                    taken[0] = self.tolerances.accept_inaccurate and ipm_almost_solved(problem, r, self.tolerances)
-                    return taken[0]
+                    if self.tolerances.accept_inaccurate and ipm_almost_solved(problem, r, self.tolerances):
+                        taken.append(r)
+                        return True
+                    return False
                 res = ipm_solve_sparse(problem.A, problem.b, problem.q, problem.cones, self.tolerances,
                                        deadline=deadline, stop_at=stop_at, almost=almost)
-                take_stalled = take_stalled or taken[0]
             ok = bool(res.converged[0])
             x, z = res.x[0], res.z[0]
             raw = RawStatus.SOLVED if ok else RawStatus.FAILED
-            if not ok and take_stalled and self.tolerances.accept_inaccurate and res.reason[0] == IPM_STALLED \
-                    and ipm_almost_solved(problem, res, self.tolerances):
+            if not ok and ((taken and taken[-1] is res) or (
+                    take_stalled and self.tolerances.accept_inaccurate and res.reason[0] == IPM_STALLED
+                    and ipm_almost_solved(problem, res, self.tolerances))):
                 ok, raw = True, RawStatus.ALMOST_SOLVED          # the caller makes the bound rigorous
             if not ok and self.tolerances.accept_inaccurate and res.reason[0] == IPM_LEVEL:
                 ok, raw = True, RawStatus.ALMOST_SOLVED          # an iterate at the caller's level (.level)

@@ -29,6 +29,7 @@ import dataclasses
 import math
 import time
 from dataclasses import dataclass
+
 import numpy as np
 
 from ..model.exact import one_exact_camera

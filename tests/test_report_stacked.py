@@ -21,8 +21,9 @@ def _cameras(rng, N, kind):
         off = rng.normal(size=3) * 1e6
         C[:, :, 3] = -np.einsum("nij,j->ni", C[:, :, :3], off) + rng.normal(size=(N, 3))
         X = off + rng.normal(size=3)
-    elif kind == "principal-plane":
-        C[0, 2, :3] = rng.normal(size=3)
+    elif kind == "principal-plane":           # X on camera 0's principal plane in exact arithmetic (dyadic numbers
+        X = rng.integers(-2 ** 20, 2 ** 20, size=3) * 2.0 ** -10     # of <= 41 bits: every product and sum exact)
+        C[0, 2, :3] = rng.integers(-2 ** 10, 2 ** 10, size=3)
         C[0, 2, 3] = -C[0, 2, :3] @ X
     elif kind == "zero-camera":
         C[rng.integers(N)] = 0.0

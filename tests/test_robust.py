@@ -428,7 +428,11 @@ def test_point_distances_match_point_report():
     rng = np.random.default_rng(1)
     Xs = np.vstack([X, X + rng.normal(size=(5, 3))])
     P = cams[2] / np.linalg.norm(cams[2][2, :3])
-    Xs = np.vstack([Xs, X - (P[2] @ np.append(X, 1.0)) * P[2, :3]])    # on the principal plane of view 2
+    Xp = np.round((X - (P[2] @ np.append(X, 1.0)) * P[2, :3]) * 2.0 ** 10) / 2.0 ** 10
+    cams = cams.copy()                  # on the principal plane of view 2 in exact arithmetic (dyadic numbers of few
+    cams[2, 2, :3] = np.round(cams[2, 2, :3] * 2.0 ** 10) / 2.0 ** 10          # bits: every product and sum exact)
+    cams[2, 2, 3] = -(cams[2, 2, :3] @ Xp)
+    Xs = np.vstack([Xs, Xp])
     d2 = point_distances2(cams, x, Xs)
     for X_, row in zip(Xs, d2):
         ref = point_report(X_, cams, regions).residuals

@@ -9,12 +9,22 @@ from fractions import Fraction
 import numpy as np
 
 __all__ = ["two_sum", "two_prod", "dot2", "accurate_homogeneous", "homogeneous_images", "CANCELLATION_RATIO",
-           "HOMOGENEOUS_RTOL", "exact_centre", "same_exact_centre", "one_exact_camera"]
+           "HOMOGENEOUS_RTOL", "COMPENSATED_DENOM_RTOL", "exact_centre", "same_exact_centre", "one_exact_camera"]
 
 #: a sum of products is recomputed by :func:`dot2` when the sum of its terms' magnitudes exceeds this many times
 #: its magnitude (more than 6 bits lost to cancellation); below, the plain sum of 4 products errs by at most
 #: 4u |terms| <= 4u CANCELLATION_RATIO |sum| (:data:`HOMOGENEOUS_RTOL`).
 CANCELLATION_RATIO = 64.0
+#: the rule for an undefined projection where P_i X~ was computed by :func:`dot2` (a view that cancels):
+#: |P_3 . X~| <= this times sum_k |p3_k| |X~_k|.  The compensated dot product errs by at most
+#: eps |P_3 . X~| + 16 eps^2 sum_k |p3_k X~_k| (Ogita, Rump and Oishi's Dot2 of four terms), so a denominator above
+#: 1e-22 of the sum keeps more than six correct digits; a view that does not cancel has |P_3 . X~| >= sum /
+#: CANCELLATION_RATIO and is never undefined.  The plain dot product's rule,
+#: :data:`tritools.model.geometry.PROJECTION_DENOM_RTOL` = 1e-10, called views 1e5 times their round-off undefined
+#: (georeferenced worlds, points next to nearly coincident centres) and reported their residuals as inf (review 23a
+#: F2, F3).  Used by every compensated projection: :func:`tritools.model.frame.project_world` and
+#: :func:`tritools.model.geometry.project_points_views` (the report of one point, :func:`tritools.project`).
+COMPENSATED_DENOM_RTOL = 1e-22
 #: the relative error of a homogeneous image P_i X~ from :func:`homogeneous_images` (either branch).
 HOMOGENEOUS_RTOL = 4 * CANCELLATION_RATIO * 2.0 ** -53
 

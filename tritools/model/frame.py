@@ -24,7 +24,7 @@ import numpy as np
 from sospoly.budget import check_deadline
 
 from .cameras import power2_scale
-from .exact import CANCELLATION_RATIO, dot2, homogeneous_images, two_prod, two_sum
+from .exact import CANCELLATION_RATIO, COMPENSATED_DENOM_RTOL, dot2, homogeneous_images, two_prod, two_sum
 from .stacked import norms, project_quiet_views
 
 __all__ = ["WorldFrame", "world_frame", "world_origins", "world_origin_one", "moved_cameras", "recentred",
@@ -39,14 +39,6 @@ RECENTRE_RATIO = 100.0
 #: between homogeneous centres, ~ separation / distance) at the same level: 1e-9 joined centres 8.7e-4 apart 1.3e6
 #: from the origin, which the untranslated scene certifies (review 22a F2: ``ill_posed``, its estimate 1e13 away).
 RESOLVED_SPREAD_RTOL = 1e-10
-#: the caller's-frame projections' rule for an undefined view (:func:`project_world`): |P_3 . X~| <= this times
-#: sum_k |p3_k| |X~_k|.  There every view that cancels is recomputed by the compensated dot product, whose error is
-#: at most eps |P_3 . X~| + 16 eps^2 sum_k |p3_k X~_k| (Ogita, Rump and Oishi's Dot2 of four terms; a view that does
-#: not cancel has |P_3 . X~| >= sum / CANCELLATION_RATIO), so a denominator above 1e-22 of the sum keeps more than
-#: six correct digits -- the plain dot product's rule, :data:`tritools.model.geometry.PROJECTION_DENOM_RTOL` = 1e-10,
-#: called views 1e5 times their round-off undefined in georeferenced worlds and reported their residuals as inf
-#: (review 23a F2).
-COMPENSATED_DENOM_RTOL = 1e-22
 
 
 @dataclass(frozen=True)

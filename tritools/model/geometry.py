@@ -26,7 +26,7 @@ from .cameras import (CAMERA_RANK_RTOL, POINT_AT_INFINITY_RTOL, SAME_CAMERA_RTOL
                       camera_center, camera_problems, camera_rank_ratio, cameras_all_equal, check_camera, depths,
                       depths_stack, points3d_array, power2_scale, unit_rows, validate_cameras, WorldFrame,
                       world_frame_of)
-from .exact import CANCELLATION_RATIO, accurate_homogeneous
+from .exact import CANCELLATION_RATIO, COMPENSATED_DENOM_RTOL, accurate_homogeneous
 from .refine import (EvaluationGuard, RefinementStopped, disc_shapes, evaluations_after, evaluations_floor, gamma_discs,
                      residual_function, residual_jacobian)
 from .regions.base import real_array
@@ -47,7 +47,10 @@ __all__ = [
 #: ``|p3.X~| <= PROJECTION_DENOM_RTOL * sum_k |p3_k| |X~_k|``: that sum bounds the round-off of the dot
 #: product (times eps), so beyond this the projection would carry fewer than ~6 correct digits (a point at
 #: a shared camera centre, depth ~1e-13, used to get a round-off gamma reported as an upper bound).  The
-#: componentwise sum, not ||p3|| ||X~||: georeferenced scenes (|X| ~ 5e6, depth 10) are well defined.
+#: componentwise sum, not ||p3|| ||X~||: georeferenced scenes (|X| ~ 5e6, depth 10) are well defined.  The rule
+#: of the plain dot products (:func:`tritools.model.stacked.project_stack`, the searches); the projections of this
+#: module recompute a view that cancels by the compensated dot product and so use
+#: :data:`tritools.model.exact.COMPENSATED_DENOM_RTOL` (a view that does not cancel is never that small).
 PROJECTION_DENOM_RTOL = 1e-10
 #: every view shares one centre C (:func:`common_centre`) if ``|P_i C~| <= COMMON_CENTRE_RTOL sum |P_i| |C~|``
 #: for every camera: round-off only (the pairwise homography test has the same tolerance).
@@ -110,7 +113,7 @@ def project_points_views(Xh: np.ndarray, cameras: np.ndarray) -> np.ndarray:
     if view.size:                     # cancellation (a georeferenced world): compensated, per camera and point
         h[view, point] = accurate_homogeneous(Ps[view], Xs[point][:, None, :])
     den = h[..., 2]
-    tiny = np.abs(den) <= PROJECTION_DENOM_RTOL * (np.abs(Xs) @ np.abs(Ps[:, 2, :]).T).T
+    tiny = np.abs(den) <= COMPENSATED_DENOM_RTOL * (np.abs(Xs) @ np.abs(Ps[:, 2, :]).T).T
     safe = np.where(tiny, 1.0, den)
     with np.errstate(over="ignore"):
         out = h[..., :2] / safe[..., None]
@@ -134,7 +137,7 @@ def _project_scaled(Xs: np.ndarray, finite: np.ndarray, P: np.ndarray) -> np.nda
     if rows.size:                     # cancellation (a georeferenced world): compensated, per point
         h[rows] = accurate_homogeneous(np.broadcast_to(Ps, (rows.size, 3, 4)), Xs[rows][:, None, :])
     den = h[:, 2]
-    tiny = np.abs(den) <= PROJECTION_DENOM_RTOL * (np.abs(Xs) @ np.abs(Ps[2]))
+    tiny = np.abs(den) <= COMPENSATED_DENOM_RTOL * (np.abs(Xs) @ np.abs(Ps[2]))
     safe = np.where(tiny, 1.0, den)
     with np.errstate(over="ignore"):
         out = h[:, :2] / safe[:, None]

@@ -77,3 +77,41 @@ def test_exactly_at_a_centre_is_undefined_and_next_to_it_is_defined():
     assert COMPENSATED_DENOM_RTOL * mag < abs(float(h[2])) < PROJECTION_DENOM_RTOL * mag
     np.testing.assert_allclose(u, [float(h[0] / h[2]), float(h[1] / h[2])], rtol=1e-12)
     np.testing.assert_array_equal(project_points_views(np.append(X, 1.0)[None], P[None])[0, 0], u)
+
+
+def test_the_rule_keeps_the_error_that_gamma_upper_assumes():
+    """Above the rule the compensated denominator errs by at most (u + 16 u^2 / rtol) of itself, which must not exceed
+    HOMOGENEOUS_RTOL (gamma_UB's margin); 1e-22 (the first choice) allowed 1.6e-9."""
+    from tritools.model.exact import HOMOGENEOUS_RTOL
+    u = 2.0 ** -53
+    assert u + 16 * u * u / COMPENSATED_DENOM_RTOL <= HOMOGENEOUS_RTOL
+
+
+def _cancelling_camera(rng, lo, hi):
+    """A camera whose third row (a, -1, 0, 0) sums to the rounding error of a X_1 at X = (X_1, fl(a X_1), 1): a
+    denominator of |P_3 . X~| / sum |p3_k X~_k| in [lo, hi] (searched), exactly known."""
+    from tritools.model.exact import two_prod
+    while True:
+        a, X1 = rng.uniform(1, 2), rng.uniform(1, 2) * 2.0 ** int(rng.integers(-20, 20))
+        p, err = two_prod(a, X1)
+        ratio = abs(err) / (2 * abs(p))
+        if err != 0 and lo <= ratio <= hi:
+            P = np.array([[0.0, 0.0, 1.0, 3.0], [1.0, 0.0, 0.0, 2.0], [a, -1.0, 0.0, 0.0]])
+            return P, np.array([X1, p, 1.0]), ratio
+
+
+@pytest.mark.parametrize("lo, hi, defined", [(1e-21, 6e-18, False), (2e-17, 1e-15, True)])
+def test_tiny_denominators_are_undefined_below_the_rule_and_accurate_above(lo, hi, defined):
+    rng = np.random.default_rng(int(-np.log10(lo)))
+    from tritools.model.exact import HOMOGENEOUS_RTOL
+    for _ in range(40):
+        P, X, _ = _cancelling_camera(rng, lo, hi)
+        u = project_points_views(np.append(X, 1.0)[None], P[None])[0, 0]
+        assert np.array_equal(u, project_homogeneous(np.append(X, 1.0)[None], P)[0])
+        if not defined:
+            assert np.isinf(u).all()
+            continue
+        Xf = [Fraction(float(v)) for v in X] + [Fraction(1)]
+        h = [sum(Fraction(float(P[r, k])) * Xf[k] for k in range(4)) for r in range(3)]
+        exact = np.array([float(h[0] / h[2]), float(h[1] / h[2])])
+        assert np.all(np.abs(u - exact) <= 2.5 * HOMOGENEOUS_RTOL * np.abs(exact))

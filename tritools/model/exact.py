@@ -17,14 +17,16 @@ __all__ = ["two_sum", "two_prod", "dot2", "accurate_homogeneous", "homogeneous_i
 CANCELLATION_RATIO = 64.0
 #: the rule for an undefined projection where P_i X~ was computed by :func:`dot2` (a view that cancels):
 #: |P_3 . X~| <= this times sum_k |p3_k| |X~_k|.  The compensated dot product errs by at most
-#: eps |P_3 . X~| + 16 eps^2 sum_k |p3_k X~_k| (Ogita, Rump and Oishi's Dot2 of four terms), so a denominator above
-#: 1e-22 of the sum keeps more than six correct digits; a view that does not cancel has |P_3 . X~| >= sum /
+#: u |P_3 . X~| + 16 u^2 sum_k |p3_k X~_k| (Ogita, Rump and Oishi's Dot2 of four terms, u = 2^-53), so above the rule
+#: the denominator errs by at most (u + 16 u^2 / rtol) |P_3 . X~| <= :data:`HOMOGENEOUS_RTOL` |P_3 . X~| (needs rtol >=
+#: 16 u / 255 ~ 7e-18), the relative error that :func:`tritools.solve.report.gamma_upper`'s margin assumes of every
+#: homogeneous image: a reported gamma_UB stays an upper bound.  A view that does not cancel has |P_3 . X~| >= sum /
 #: CANCELLATION_RATIO and is never undefined.  The plain dot product's rule,
 #: :data:`tritools.model.geometry.PROJECTION_DENOM_RTOL` = 1e-10, called views 1e5 times their round-off undefined
 #: (georeferenced worlds, points next to nearly coincident centres) and reported their residuals as inf (review 23a
 #: F2, F3).  Used by every compensated projection: :func:`tritools.model.frame.project_world` and
 #: :func:`tritools.model.geometry.project_points_views` (the report of one point, :func:`tritools.project`).
-COMPENSATED_DENOM_RTOL = 1e-22
+COMPENSATED_DENOM_RTOL = 1e-17
 #: the relative error of a homogeneous image P_i X~ from :func:`homogeneous_images` (either branch).
 HOMOGENEOUS_RTOL = 4 * CANCELLATION_RATIO * 2.0 ** -53
 

@@ -57,6 +57,14 @@ def test_two_view_track_keeping_one_observation_is_not_moved():
     assert not rep.updated[0]
     assert new.points3D[pid].xyz == m.points3D[pid].xyz and new.points3D[pid].track == m.points3D[pid].track
     assert "not determined" in rep.records[0].message
+    # the TLS optimum is certified, but the written point is the input one: not CERTIFIED anywhere (review 24b S1)
+    assert rep.records[0].status.value == "optimal" and rep.records[0].optimal
+    assert not rep.records[0].certified and not rep.certified[0] and rep.n_certified == 0
+    from tritools.sfm.certificates import write_certificates
+    import tempfile
+    with tempfile.TemporaryDirectory() as d:
+        row = write_certificates(rep, d).read_text().splitlines()[-1].split()
+        assert row[4] == "0" and row[5] == "optimal" and row[9] == "0"        # CERTIFIED, STATUS, UPDATED
     assert rng is not None
 
 

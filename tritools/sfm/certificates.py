@@ -22,7 +22,7 @@ import numpy as np
 from ..io.atomic import atomic_open
 from ..io.colmap.model import ModelFormatError
 from ..result import Status, TriangulationResult
-from .certify import STATUS_LEGEND
+from .certify import STATUS_LEGEND, written_certified
 from .retriangulate import PointCertificate, RetriangulationReport
 
 __all__ = ["CERTIFICATES_FILE", "CertificateWriter", "write_certificates", "read_certificates", "COLUMNS"]
@@ -53,7 +53,7 @@ class CertificateWriter:
 
     def write(self, point_ids, r) -> None:
         """Append lines for ``point_ids`` from per-point arrays ``r`` (a report or a chunk result)."""
-        certified = (r.status == STATUS_LEGEND.index(Status.OPTIMAL.value)) & r.optimal & r.in_front
+        certified = written_certified(r.status, r.optimal, r.in_front, r.updated)
         rows = zip(np.asarray(point_ids).tolist(), r.n_views.tolist(), r.gamma_lb.tolist(), r.gamma_ub.tolist(),
                    certified.tolist(), r.status.tolist(), r.delta.tolist(), r.certified_by.tolist(),
                    r.gamma_input.tolist(), r.updated.tolist(), r.in_front.tolist(), r.message.tolist())

@@ -20,7 +20,7 @@ from ..result import Status
 from ..solve.options import DEFAULT_OPTIONS, OptionError, OptionTypeError, TriangulationOptions
 
 __all__ = ["CertifyOptions", "RecordColumns", "StackResult", "certify_stack", "STATUS_LEGEND", "status_code",
-           "solver_options", "robust_threshold"]
+           "solver_options", "robust_threshold", "written_certified"]
 
 _CODE = {s: k for k, s in enumerate(STATUS_LEGEND)}
 
@@ -28,6 +28,17 @@ _CODE = {s: k for k, s in enumerate(STATUS_LEGEND)}
 def status_code(status) -> int:
     """Code of a :class:`tritools.Status` (or its value) in :data:`STATUS_LEGEND`."""
     return _CODE[Status(status).value]
+
+
+def written_certified(status, optimal, in_front, updated):
+    """CERTIFIED of a re-triangulated point (docs/colmap.md): the *written* point is a certified global minimiser in
+    front of its cameras -- status ``optimal`` (codes of :data:`STATUS_LEGEND`), certified by the solver, in front,
+    and written anew (``updated``).  A certified estimate that is not written -- behind a camera under
+    ``behind="keep-input"``, or a robust optimum that keeps fewer than two observations (any point of one ray costs
+    the same: the input point and its track are kept) -- leaves an input point that is not that minimiser (review
+    24b S1).  Arrays or scalars, elementwise."""
+    return (np.asarray(status) == _CODE[Status.OPTIMAL.value]) & np.asarray(optimal, bool) \
+        & np.asarray(in_front, bool) & np.asarray(updated, bool)
 
 
 def solver_options(base, name: str, **shorthands) -> TriangulationOptions:

@@ -35,7 +35,7 @@ from ..io.colmap.pycolmap_bridge import from_pycolmap, import_pycolmap, is_pycol
 from ..records import TriangulationResults
 from ..result import Status, TriangulationResult
 from ..solve.call_limit import call_limit
-from .certify import STATUS_LEGEND, RecordColumns, status_code
+from .certify import STATUS_LEGEND, RecordColumns, status_code, written_certified
 from .pipeline import RetriangulationOptions, prepare_geometry, process_chunk
 from .robust_tracks import removed_observations, without_observations
 
@@ -61,7 +61,8 @@ class PointCertificate:
 
     ``optimal``: the solver certified its estimate; ``in_front``: the estimate (or, without one, the
     input point) has positive depth in every camera of the track; ``certified`` = both, with status
-    ``optimal``: the *written* point is a certified global L2 minimiser in front of its cameras."""
+    ``optimal``, and the estimate written (``updated``): the *written* point is a certified global minimiser in front
+    of its cameras."""
     point3D_id: int
     n_views: int
     result: TriangulationResult
@@ -110,8 +111,8 @@ class PointCertificate:
 
     @property
     def certified(self) -> bool:
-        """Status optimal, certified, in front of the cameras."""
-        return self.status == Status.OPTIMAL and bool(self.optimal) and bool(self.in_front)
+        """Status optimal, certified, in front of the cameras, written anew (:func:`~.certify.written_certified`)."""
+        return bool(written_certified(status_code(self.status), self.optimal, self.in_front, self.updated))
 
 
 def _opt(v) -> float | None:
@@ -154,8 +155,9 @@ class RetriangulationReport(RecordColumns):
 
     @property
     def certified(self) -> np.ndarray:
-        """(P,) bool: status optimal, certified by the solver, in front of the cameras."""
-        return (self.status == status_code(Status.OPTIMAL)) & self.optimal & self.in_front
+        """(P,) bool: status optimal, certified by the solver, in front of the cameras, written anew
+        (:func:`~.certify.written_certified`)."""
+        return written_certified(self.status, self.optimal, self.in_front, self.updated)
 
     @property
     def n_certified(self) -> int:

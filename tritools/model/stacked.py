@@ -24,12 +24,13 @@ import numpy as np
 
 from sospoly.analysis import SparseQuadratics
 
+from .cameras import power2_scale
 from .geometry import POINT_AT_INFINITY_RTOL, PROJECTION_DENOM_RTOL, SAME_CENTER_RTOL
 
 __all__ = ["null_vectors", "dlt_stack", "project_stack", "refine_points_stack", "fundamental_stack",
            "epipolar_quadratics", "pixel_scales", "distinct_centres", "centre_vectors", "view_pairs", "band_pairs",
            "norms", "median_rows", "gauss_newton_polish", "project_quiet", "project_quiet_views", "project_one",
-           "next_damping", "lm_accept", "solve3", "LM_MAX_ITER", "LM_STEP_RTOL"]
+           "next_damping", "lm_accept", "solve3", "obliquities", "LM_MAX_ITER", "LM_STEP_RTOL"]
 
 #: Levenberg-Marquardt iterations at most (from the DLT start it converges in ~5-10).
 LM_MAX_ITER = 100
@@ -583,6 +584,25 @@ def pixel_scales(C: np.ndarray, x: np.ndarray) -> np.ndarray:
     d = norms(C[..., 2, :3], axis=-1)
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         return np.where(d > 0, sigma_max_2x3(B) / d, np.nan)
+
+
+def obliquities(C: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """sec theta_i (..., N) of cameras C (..., N, 3, 4) at points x (..., N, 2): theta the angle between the ray of
+    x_i and the principal axis, sec theta = |m3| |M^-1 x~| (M = P[:, :3], m3 its third row; m3 . M^-1 x~ = 1), from
+    M^-1 = [m2 x m3, m3 x m1, m1 x m2] / det M.  A relative perturbation of the camera moves the depth of a point on
+    that ray by ~ sec theta times its own size, so the projection there by ~ |x_i| sec theta times it
+    (:func:`tritools.model.normalize.magnitudes`).  Invariant to the camera's scale, image similarities fixing
+    nothing in particular (the ray and the axis are the camera's) and world similarities; 1 where it is not finite
+    (an affine camera, m3 = 0: no depth)."""
+    C = np.asarray(C, float)
+    C = C / power2_scale(C, (-2, -1))
+    m1, m2, m3 = C[..., 0, :3], C[..., 1, :3], C[..., 2, :3]
+    with np.errstate(all="ignore"):
+        c0, c1, c2 = np.cross(m2, m3), np.cross(m3, m1), np.cross(m1, m2)
+        det = np.add.reduce(m1 * c0, axis=-1)
+        ray = c0 * x[..., 0:1] + c1 * x[..., 1:2] + c2
+        sec = norms(m3, axis=-1) * norms(ray, axis=-1) / np.abs(det)
+    return np.where(np.isfinite(sec), np.maximum(sec, 1.0), 1.0)
 
 
 def sigma_max_2x3(B: np.ndarray) -> np.ndarray:

@@ -63,7 +63,7 @@ def tls_reported(C: np.ndarray, centres: np.ndarray, residuals, X, c: np.ndarray
     res = np.where(np.isfinite(residuals), residuals, np.inf)
     g_ub = float(gamma_upper(np.where(np.isfinite(res), res, c), norms(np.where(np.isfinite(u), u, 0.0), axis=1),
                              cap=c))
-    mag = float(magnitudes(np.asarray(centres, float)[None])[0])
+    mag = float(magnitudes(np.asarray(centres, float)[None], np.asarray(C, float)[None])[0])
     g_lb, g_ub, holds, reason = _checked(g_ub, spread, coordinate_resolution(centres), N, c, lb, tolerances,
                                          certified, res, f_search, mag)
     inliers = inlier_mask(C, X, centres, res, c, u, exact=points_given, regions=regions)
@@ -84,7 +84,7 @@ def tls_reported_stack(C: np.ndarray, points: np.ndarray, X: np.ndarray, c: np.n
     res = np.where(np.isfinite(residuals), residuals, np.inf)
     u_norm = norms(np.where(np.isfinite(u), u, 0.0), axis=2)
     g_ub = gamma_upper(np.where(np.isfinite(res), res, c), u_norm, cap=c)
-    resolution, magnitude = coordinate_resolutions(points), magnitudes(points)
+    resolution, magnitude = coordinate_resolutions(points), magnitudes(points, np.asarray(C, float))
     inliers = inlier_mask_stack(C, X, points, res, c, u, u_norm)
     image_points = np.where(np.isfinite(res)[:, :, None] & np.isfinite(u), u, np.nan)
     out = []

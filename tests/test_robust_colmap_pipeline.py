@@ -111,3 +111,44 @@ def test_robust_option_refuses_text():
         with pytest.raises(OptionError, match="robust"):
             RetriangulationOptions(robust=bad)
     assert RetriangulationOptions(robust=np.float32(2.5)).robust == 2.5
+
+
+def _away_model():
+    """Six tracks of five views plus a wrong match in a sixth camera facing away (the first test's scene)."""
+    rng = np.random.default_rng(0)
+    cams = _ring(5, away=True)
+    tracks = []
+    for X in rng.uniform(-0.5, 0.5, size=(6, 3)):
+        h = cams @ np.append(X, 1.0)
+        obs = h[:, :2] / h[:, 2:] + rng.normal(size=(6, 2)) * 0.5
+        obs[5] = rng.uniform([0, 0], [640, 480])
+        tracks.append({j: tuple(obs[j]) for j in range(6)})
+    return model_from_projections(cams, (640, 480), tracks)
+
+
+def test_the_inlier_set_is_reported_as_data(tmp_path, capsys):
+    """Review 24b M2: the inlier count and the removed (image id, keypoint index) pairs per point, in the records
+    and the JSON of ``tritools colmap --robust`` (before: free text in MESSAGE only)."""
+    import json
+
+    from tests.cli_util import run
+    from tritools.io.colmap.formats import write_model
+
+    m = _away_model()
+    new, rep = retriangulate(m, robust=5.0)
+    away = max(m.images)
+    for pid, r in zip(sorted(m.points3D), rep.records):
+        gone = {e for e in m.points3D[pid].track} - set(new.points3D[pid].track)
+        assert r.n_inliers == 5 and set(r.removed_observations) == gone and len(gone) == 1
+        assert all(img == away for img, _ in r.removed_observations)
+        assert all(new.images[img].points2D[kp][2] == -1 for img, kp in r.removed_observations)
+    plain = retriangulate(m)[1]
+    assert plain.n_inliers is None and plain.records[0].n_inliers is None
+    assert plain.records[0].removed_observations == ()
+    write_model(m, tmp_path / "in", "bin")
+    rc, out, _ = run(["colmap", tmp_path / "in", tmp_path / "out", "--robust", "5", "--json"], capsys)
+    assert rc == 0
+    points = json.loads(out)["points"]
+    assert [p["n_inliers"] for p in points] == [5] * 6
+    assert [sorted(map(tuple, p["removed_observations"])) for p in points] == \
+        [sorted(r.removed_observations) for r in rep.records]

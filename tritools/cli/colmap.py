@@ -178,7 +178,10 @@ def run_colmap(args) -> int:
         summary["points"] = [{"point3D_id": r.point3D_id, "n_views": r.n_views, "status": r.status.value,
                               "gamma_lb": r.gamma_lb, "gamma_ub": r.gamma_ub, "certified": r.certified,
                               "certified_by": r.certified_by, "delta": r.delta, "gamma_input": r.gamma_input,
-                              "updated": r.updated, "in_front": r.in_front, "message": r.message}
+                              "updated": r.updated, "in_front": r.in_front, "message": r.message,
+                              **({"n_inliers": r.n_inliers,
+                                  "removed_observations": [list(t) for t in r.removed_observations]}
+                                 if report.n_inliers is not None else {})}
                              for r in report.records]
         if q is not None:
             _add_quality_records(summary, q)

@@ -209,6 +209,7 @@ class ChunkResult(RecordColumns):
     n_skipped_observations: int = 0
     keep_obs: np.ndarray | None = None        # (chunk observations,) False: an outlier removed (``robust``)
     n_inliers: np.ndarray | None = None       # (points,) inliers of the robust estimate (-1: not robust)
+    removed: np.ndarray | None = None         # (K, 3) (point in the chunk, image id, keypoint) removed (``robust``)
 
 
 #: columns of the solver's record a chunk does not keep (per-view arrays, steps): a model's report stays small.
@@ -346,8 +347,11 @@ def process_chunk(arrays: ModelArrays, geom: ModelGeometry, chunk: PointChunk, o
     if progress is not None:
         progress.update(int(np.count_nonzero(~solve)))
     robust = options.robust is not None
+    gone = np.nonzero(~keep)[0]
+    removed = np.stack([owner[gone], arrays.image_ids[obs_img[gone]], chunk.track_kp[gone]], axis=1).astype(np.int64)
     return ChunkResult(replace(rec, in_front=~behind, message=message), xyz, error, gamma_input, upd,
-                       int(np.count_nonzero(~usable)), keep if robust else None, n_inl if robust else None)
+                       int(np.count_nonzero(~usable)), keep if robust else None, n_inl if robust else None,
+                       removed if robust else None)
 
 
 def _outlier_notes(arrays, obs_img, owner, keep, message) -> None:

@@ -68,6 +68,10 @@ class PointCertificate:
     result: TriangulationResult
     gamma_input: float | None = None
     updated: bool = False
+    #: with ``robust``: the observations the robust estimate keeps (None: not robust, or no estimate) and the
+    #: (image id, keypoint index) of those removed from the written track as outliers
+    n_inliers: int | None = None
+    removed_observations: tuple = ()
 
     @property
     def status(self) -> Status:
@@ -115,6 +119,17 @@ class PointCertificate:
         return bool(written_certified(status_code(self.status), self.optimal, self.in_front, self.updated))
 
 
+def _removed_rows(results: list) -> np.ndarray:
+    """The chunks' removed observations (point in the chunk, image id, keypoint) with the points numbered over the
+    whole report (in point order: each chunk's rows are by point)."""
+    rows, offset = [], 0
+    for r in results:
+        rem = r.removed if r.removed is not None else np.zeros((0, 3), np.int64)
+        rows.append(rem + np.array([offset, 0, 0]))
+        offset += len(r.updated)
+    return np.concatenate(rows) if rows else np.zeros((0, 3), np.int64)
+
+
 def _opt(v) -> float | None:
     v = float(v)
     return v if np.isfinite(v) else None
@@ -135,6 +150,10 @@ class RetriangulationReport(RecordColumns):
     updated: np.ndarray
     skipped_cameras: tuple = ()
     n_skipped_observations: int = 0
+    #: with ``robust``: (P,) inliers of each robust estimate (-1: none) and (K, 3) rows (point index, image id,
+    #: keypoint index) of the observations removed from the written tracks, by point; None otherwise
+    n_inliers: np.ndarray | None = None
+    removed: np.ndarray | None = None
 
     @classmethod
     def from_chunks(cls, options: RetriangulationOptions, ids: list, results: list, skipped_cameras=()):
@@ -143,10 +162,13 @@ class RetriangulationReport(RecordColumns):
             """Concatenation of one field over the chunks."""
             parts = [getattr(r, name) for r in results]
             return np.concatenate(parts) if parts else np.zeros(0, dtype)
+        robust = options.robust is not None
         return cls(options.method, options.path, np.concatenate(ids) if ids else np.zeros(0, np.int64),
                    TriangulationResults.concat([r.results for r in results]), cat("gamma_input", float),
                    cat("updated", bool), skipped_cameras=tuple(skipped_cameras),
-                   n_skipped_observations=sum(r.n_skipped_observations for r in results))
+                   n_skipped_observations=sum(r.n_skipped_observations for r in results),
+                   n_inliers=cat("n_inliers", np.int32) if robust else None,
+                   removed=_removed_rows(results) if robust else None)
 
     @property
     def n_points(self) -> int:
@@ -181,8 +203,13 @@ class RetriangulationReport(RecordColumns):
 
     def record(self, i: int) -> PointCertificate:
         """The :class:`PointCertificate` of the i-th point."""
+        n_inl, gone = None, ()
+        if self.n_inliers is not None:
+            n_inl = int(self.n_inliers[i]) if self.n_inliers[i] >= 0 else None
+            a, b = np.searchsorted(self.removed[:, 0], [i, i + 1])
+            gone = tuple((int(img), int(kp)) for img, kp in self.removed[a:b, 1:])
         return PointCertificate(int(self.point_ids[i]), int(self.n_views[i]), self.results[int(i)],
-                                _opt(self.gamma_input[i]), bool(self.updated[i]))
+                                _opt(self.gamma_input[i]), bool(self.updated[i]), n_inl, gone)
 
     @cached_property
     def records(self) -> tuple:

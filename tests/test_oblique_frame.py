@@ -78,3 +78,27 @@ def test_magnitudes_with_cameras_count_the_obliquity():
     assert magnitudes(x)[0] == 1e9
     assert magnitudes(x, C)[0] == pytest.approx(1e9 * np.hypot(1.0, 1e6), rel=1e-9)
     assert magnitudes(np.array([[[10.0, 20.0], [30.0, 0.0]]]), C)[0] == pytest.approx(30.0 * np.hypot(1, 0.03))
+
+
+def test_the_scalar_obliquity_is_the_vectorised_one_bit_for_bit():
+    """:func:`obliquity_one` (one problem's magnitude) against :func:`obliquities`, over random cameras of every scale,
+    points on and far off the axis, affine cameras and cameras whose centre is at infinity."""
+    from tritools.model.cameras import power2_scale
+    from tritools.model.normalize import _obliquities_one
+    from tritools.model.stacked import obliquity_one
+
+    rng = np.random.default_rng(5)
+    for _ in range(200):
+        N = int(rng.integers(1, 7))
+        C = rng.normal(size=(N, 3, 4)) * 10.0 ** rng.uniform(-6, 8)
+        x = rng.normal(size=(N, 2)) * 10.0 ** rng.uniform(-3, 12, size=(N, 1))
+        if rng.random() < 0.2:
+            C[0, 2, :3] = 0.0                                      # affine: no depth
+        if rng.random() < 0.2:
+            C[-1, 2, :3] = C[-1, 0, :3] * 0.5 + C[-1, 1, :3] * 0.25   # a centre at infinity (a dyadic combination)
+        vec = obliquities(C, x)
+        one = [obliquity_one(P, p) for P, p in zip((C / power2_scale(C, (1, 2))).tolist(), x.tolist())]
+        np.testing.assert_array_equal(vec, np.array(one))
+        np.testing.assert_array_equal(vec, np.array(_obliquities_one(C, x)))
+        assert magnitudes(x[None], C[None])[0] == magnitudes(np.concatenate([x[None], x[None]]),
+                                                            np.concatenate([C[None], C[None]]))[0]

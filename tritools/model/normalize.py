@@ -59,8 +59,8 @@ import numpy as np
 from .exact import homogeneous_images
 from .cameras import power2_scale
 from .geometry import COMMON_CENTRE_RTOL, POINT_AT_INFINITY_RTOL, point_from_image_points
-from .stacked import (dlt_stack, median_rows, norms, null_vectors, obliquities, pixel_scales, project_one,
-                      project_quiet, project_stack, refine_point, refine_points_stack)
+from .stacked import (dlt_stack, median_rows, norms, null_vectors, obliquities, obliquity_one, pixel_scales,
+                      project_one, project_quiet, project_stack, refine_point, refine_points_stack)
 
 __all__ = ["Normalization", "NormalizationStack", "normalization_for", "normalization_stack", "regions_offset",
            "unconstrained_reason", "resolutions", "magnitudes", "RHO_FLOOR_REL", "RESOLUTION_REL", "DEPTH_FLOOR_REL",
@@ -197,8 +197,30 @@ def magnitudes(x: np.ndarray, C: np.ndarray | None = None, at: np.ndarray | None
     a = a.max(axis=2)
     if C is not None:
         at = np.where(np.isfinite(x), x, 0.0) if at is None else at
-        a = a * obliquities(C, at)
-    return np.maximum(1.0, a.max(axis=1))
+        if len(a) == 1 and a.shape[1] <= SCALAR_MAX_VIEWS:     # one problem: the scalar twin, the same numbers
+            sec = np.array([_obliquities_one(np.asarray(C[0], float), at[0])])
+        else:
+            sec = obliquities(C, at)
+        with np.errstate(invalid="ignore", over="ignore"):
+            a = np.where(a > 0, a * sec, 0.0)
+    # an obliquity that overflows (a ray parallel to the image plane): the largest finite magnitude, which lowers
+    # gamma_LB to 0 (gamma_lower reads a non-finite magnitude as 1)
+    return np.minimum(np.maximum(1.0, a.max(axis=1)), np.finfo(float).max)
+
+
+#: :func:`magnitudes` of one problem takes the scalar obliquities up to this many views.
+SCALAR_MAX_VIEWS = 7
+
+
+def _obliquities_one(C: np.ndarray, at: np.ndarray) -> list:
+    """:func:`tritools.model.stacked.obliquities` of one problem (C (N, 3, 4), at (N, 2)) view by view
+    (:func:`~tritools.model.stacked.obliquity_one` on the cameras divided by the same powers of two)."""
+    out = []
+    for P, p in zip(C.tolist(), at.tolist()):
+        m = max(abs(v) for row in P for v in row)                 # power2_scale's power of two, on floats
+        k = math.ldexp(1.0, math.frexp(m)[1]) if 0 < m < math.inf else 1.0
+        out.append(obliquity_one([[v / k for v in row] for row in P], p))
+    return out
 
 
 def resolutions(scale: np.ndarray, x: np.ndarray) -> np.ndarray:

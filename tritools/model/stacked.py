@@ -591,9 +591,9 @@ def obliquities(C: np.ndarray, x: np.ndarray) -> np.ndarray:
     x_i and the principal axis, sec theta = |m3| |M^-1 x~| (M = P[:, :3], m3 its third row; m3 . M^-1 x~ = 1), from
     M^-1 = [m2 x m3, m3 x m1, m1 x m2] / det M.  A relative perturbation of the camera moves the depth of a point on
     that ray by ~ sec theta times its own size, so the projection there by ~ |x_i| sec theta times it
-    (:func:`tritools.model.normalize.magnitudes`).  Invariant to the camera's scale, image similarities fixing
-    nothing in particular (the ray and the axis are the camera's) and world similarities; 1 where it is NaN (an affine
-    camera, m3 = 0: no depth), inf where the ray is parallel to the image plane or the numbers overflow."""
+    (:func:`tritools.model.normalize.magnitudes`).  Invariant to the camera's scale, to image similarities (the point
+    moving with the image) and to world similarities (the ray and the axis are the camera's); 1 where it is NaN (an
+    affine camera, m3 = 0: no depth), inf where the ray is parallel to the image plane or the numbers overflow."""
     C = np.asarray(C, float)
     M = np.moveaxis(C[..., :3] / power2_scale(C, (-2, -1)), (-2, -1), (0, 1))     # M[r, k] (...,): entries
     (a, b, c), (d, e, f), (g, h, i) = M

@@ -102,3 +102,17 @@ def test_the_scalar_obliquity_is_the_vectorised_one_bit_for_bit():
         np.testing.assert_array_equal(vec, np.array(_obliquities_one(C, x)))
         assert magnitudes(x[None], C[None])[0] == magnitudes(np.concatenate([x[None], x[None]]),
                                                             np.concatenate([C[None], C[None]]))[0]
+
+
+def test_an_l2_certificate_whose_bound_exceeded_its_own_estimate_s_exact_cost():
+    """Review 24c k = 191: three views, one observed 2.7e6 px off-axis; before the obliquity term the L2 call was
+    ``optimal`` with gamma_LB = gamma_UB = 0.274201525684449 while the exact cost at its own float X is
+    0.2742015250090409 (so gamma* is lower).  Every path's gamma_LB is now at most the exact cost at its X."""
+    d = np.load(Path(__file__).parent / "data" / "oblique_l2_certified.npz")
+    P, x = d["P"], d["x"]
+    for r in (tritools.triangulate(P, x), tritools.triangulate_many([(P, x)])[0]):
+        g = _exact_gamma(P, x, np.asarray(r.X, float), np.inf)
+        assert r.gamma_ub >= g
+        assert r.gamma_lb is None or r.gamma_lb <= g
+    pts = tritools.triangulate_points(P, x[None])
+    assert pts.gamma_lb[0] <= _exact_gamma(P, x, pts.X[0], np.inf)

@@ -21,7 +21,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..model.geometry import depths, dlt, gamma, gamma_validated, refine_l2, validate_cameras
+from ..model.geometry import depths, dlt, gamma_validated, refine_l2, validate_cameras
 from ..model.cameras import as_world_frame, depth_rows
 from ..model.regions import as_regions
 from .witness import witness_gap
@@ -59,7 +59,7 @@ def _start(C, regs, tau, estimate, frame):
     except ValueError:
         pass
     for X in cands:
-        if np.all(np.isfinite(X)) and float(gamma(X, C, regs)) <= tau and _in_front(C, X, frame):
+        if _in_level(C, regs, tau, X, frame):
             return X
     return None
 

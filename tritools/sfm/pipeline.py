@@ -347,11 +347,15 @@ def process_chunk(arrays: ModelArrays, geom: ModelGeometry, chunk: PointChunk, o
     if progress is not None:
         progress.update(int(np.count_nonzero(~solve)))
     robust = options.robust is not None
-    gone = np.nonzero(~keep)[0]
-    removed = np.stack([owner[gone], arrays.image_ids[obs_img[gone]], chunk.track_kp[gone]], axis=1).astype(np.int64)
     return ChunkResult(replace(rec, in_front=~behind, message=message), xyz, error, gamma_input, upd,
                        int(np.count_nonzero(~usable)), keep if robust else None, n_inl if robust else None,
-                       removed if robust else None)
+                       _removed(arrays, chunk, owner, obs_img, keep) if robust else None)
+
+
+def _removed(arrays, chunk, owner, obs_img, keep) -> np.ndarray:
+    """(K, 3) int64 rows (point in the chunk, image id, keypoint index) of the observations ``keep`` drops, by point."""
+    gone = np.nonzero(~keep)[0]
+    return np.stack([owner[gone], arrays.image_ids[obs_img[gone]], chunk.track_kp[gone]], axis=1).astype(np.int64)
 
 
 def _outlier_notes(arrays, obs_img, owner, keep, message) -> None:

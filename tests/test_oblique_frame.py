@@ -16,7 +16,7 @@ import pytest
 
 import tritools
 from tritools.model.normalize import magnitudes
-from tritools.model.stacked import obliquities
+from tritools.model.oblique import obliquities
 
 DATA = Path(__file__).parent / "data" / "oblique_views.npz"
 
@@ -85,7 +85,7 @@ def test_the_scalar_obliquity_is_the_vectorised_one_bit_for_bit():
     points on and far off the axis, affine cameras and cameras whose centre is at infinity."""
     from tritools.model.cameras import power2_scale
     from tritools.model.normalize import _obliquities_one
-    from tritools.model.stacked import obliquity_one
+    from tritools.model.oblique import obliquity_one
 
     rng = np.random.default_rng(5)
     for _ in range(200):

@@ -59,8 +59,9 @@ import numpy as np
 from .exact import homogeneous_images
 from .cameras import power2_scale
 from .geometry import COMMON_CENTRE_RTOL, POINT_AT_INFINITY_RTOL, point_from_image_points
-from .stacked import (dlt_stack, median_rows, norms, null_vectors, obliquities, obliquity_one, pixel_scales,
-                      project_one, project_quiet, project_stack, refine_point, refine_points_stack)
+from .oblique import obliquities, obliquity_one
+from .stacked import (dlt_stack, median_rows, norms, null_vectors, pixel_scales, project_one, project_quiet,
+                      project_stack, refine_point, refine_points_stack)
 
 __all__ = ["Normalization", "NormalizationStack", "normalization_for", "normalization_stack", "regions_offset",
            "unconstrained_reason", "resolutions", "magnitudes", "RHO_FLOOR_REL", "RESOLUTION_REL", "DEPTH_FLOOR_REL",
@@ -185,7 +186,7 @@ def magnitudes(x: np.ndarray, C: np.ndarray | None = None, at: np.ndarray | None
     bound of the magnitude whose round-off each distance d_i carries (:func:`tritools.solve.decide.gamma_lower`; the
     resolution, by contrast, is of the median magnitude, review 12 F1).  With the cameras C (M, N, 3, 4) (at the
     points ``at``, default x: the normalised cameras at 0, the obliquity being the frame's), sec theta_i is the
-    obliquity of view i's ray (:func:`tritools.model.stacked.obliquities`): the depth of a point on a ray with sec
+    obliquity of view i's ray (:func:`tritools.model.oblique.obliquities`): the depth of a point on a ray with sec
     theta = 1e8 (an observation 1e11 px off-axis at f = 1e3) moves by ~1e8 times the round-off of the cameras, its
     projection with it, so a bound computed in a rounded frame held the caller's problem only to that (review 24a
     F2/F3: certified TLS bounds 13.5 and 654 px where the float data attain 0.51 and 3.3 px next to such a ray).
@@ -213,8 +214,8 @@ SCALAR_MAX_VIEWS = 7
 
 
 def _obliquities_one(C: np.ndarray, at: np.ndarray) -> list:
-    """:func:`tritools.model.stacked.obliquities` of one problem (C (N, 3, 4), at (N, 2)) view by view
-    (:func:`~tritools.model.stacked.obliquity_one` on the cameras divided by the same powers of two)."""
+    """:func:`tritools.model.oblique.obliquities` of one problem (C (N, 3, 4), at (N, 2)) view by view
+    (:func:`~tritools.model.oblique.obliquity_one` on the cameras divided by the same powers of two)."""
     out = []
     for P, p in zip(C.tolist(), at.tolist()):
         m = max(abs(v) for row in P for v in row)                 # power2_scale's power of two, on floats

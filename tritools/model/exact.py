@@ -4,24 +4,28 @@ the places where a plain sum cancels -- a georeferenced camera's P (X, 1), whose
 result.  Vectorised over leading axes; numpy has no fused multiply-add, so products split by Dekker's rule."""
 from __future__ import annotations
 
+import math
 from fractions import Fraction
 
 import numpy as np
 
 __all__ = ["two_sum", "two_prod", "dot2", "accurate_homogeneous", "homogeneous_images", "CANCELLATION_RATIO",
-           "HOMOGENEOUS_RTOL", "COMPENSATED_DENOM_RTOL", "exact_centre", "same_exact_centre", "one_exact_camera"]
+           "HOMOGENEOUS_RTOL", "COMPENSATED_DENOM_RTOL", "EXACT_ROUNDING_RATIO", "exactly_rounded",
+           "exact_centre", "same_exact_centre", "one_exact_camera"]
 
 #: a sum of products is recomputed by :func:`dot2` when the sum of its terms' magnitudes exceeds this many times
 #: its magnitude (more than 6 bits lost to cancellation); below, the plain sum of 4 products errs by at most
 #: 4u |terms| <= 4u CANCELLATION_RATIO |sum| (:data:`HOMOGENEOUS_RTOL`).
 CANCELLATION_RATIO = 64.0
 #: the rule for an undefined projection where P_i X~ was computed by :func:`dot2` (a view that cancels):
-#: |P_3 . X~| <= this times sum_k |p3_k| |X~_k|.  The compensated dot product errs by at most
-#: u |P_3 . X~| + 16 u^2 sum_k |p3_k X~_k| (Ogita, Rump and Oishi's Dot2 of four terms, u = 2^-53), so above the rule
-#: the denominator errs by at most (u + 16 u^2 / rtol) |P_3 . X~| <= :data:`HOMOGENEOUS_RTOL` |P_3 . X~| (needs rtol >=
-#: 16 u / 255 ~ 7e-18), the relative error that :func:`tritools.solve.report.gamma_upper`'s margin assumes of every
-#: homogeneous image: a reported gamma_UB stays an upper bound.  A view that does not cancel has |P_3 . X~| >= sum /
-#: CANCELLATION_RATIO and is never undefined.  The plain dot product's rule,
+#: |P_3 . X~| <= this times sum_k |p3_k| |X~_k| (the point within round-off of the camera's principal plane).  The
+#: compensated dot product errs by at most u |P_3 . X~| + 16 u^2 sum_k |p3_k X~_k| (Ogita, Rump and Oishi's Dot2 of
+#: four terms, u = 2^-53), so above the rule the denominator errs by at most (u + 16 u^2 / rtol) |P_3 . X~| <=
+#: :data:`HOMOGENEOUS_RTOL` |P_3 . X~| (needs rtol >= 16 u / 255 ~ 7e-18), the relative error that
+#: :func:`tritools.solve.report.gamma_upper`'s margin assumes of every homogeneous image.  The numerators may cancel
+#: further (a projection next to the image origin); :func:`dot2` rounds any entry that cancels more than 40 bits
+#: exactly, so they keep that relative error too (~u), and a reported gamma_UB stays an upper bound.  A view that does
+#: not cancel has |P_3 . X~| >= sum / CANCELLATION_RATIO and is never undefined.  The plain dot product's rule,
 #: :data:`tritools.model.geometry.PROJECTION_DENOM_RTOL` = 1e-10, called views 1e5 times their round-off undefined
 #: (georeferenced worlds, points next to nearly coincident centres) and reported their residuals as inf (review 23a
 #: F2, F3).  Used by every compensated projection: :func:`tritools.model.frame.project_world` and
@@ -49,15 +53,45 @@ def two_prod(a, b):
 
 def dot2(A: np.ndarray, x: np.ndarray, b: np.ndarray) -> np.ndarray:
     """sum_k A[..., k] x[..., k] + b, accurate as if computed in twice the working precision (Ogita, Rump and
-    Oishi's Dot2); the plain sum where the splitting overflows."""
+    Oishi's Dot2), and rounded exactly where that is not enough: Dot2 errs by at most u |s| + gamma_5^2 S (S = |b| +
+    sum_k |A_k x_k|, gamma_5 ~ 5u), so where S exceeds :data:`EXACT_ROUNDING_RATIO` |s| (more than 40 bits cancelled:
+    a numerator next to the image origin in a georeferenced world) the result is recomputed as the correctly rounded
+    sum of the exact products' parts (:func:`math.fsum` of b and the pairs of :func:`two_prod`).  Every entry then errs
+    by at most ~1.003 u |s| (0 stays 0), the relative error :data:`HOMOGENEOUS_RTOL` covers; the plain sum where the
+    splitting overflows.  :func:`tritools.model.frame._dot2_one` is the scalar twin (the same numbers)."""
     P, EP = two_prod(A, x)                  # every product at once (elementwise: the same numbers as one by one)
     s, c = b, np.zeros_like(b)
+    S = np.abs(b)
     for k in range(A.shape[-1]):
         s, es = two_sum(s, P[..., k])
         c = c + (EP[..., k] + es)
+        S = S + np.abs(P[..., k])
     out = s + c
     plain = np.einsum("...k,...k->...", A, x) + b
-    return np.where(np.isfinite(out), out, plain)
+    out = np.where(np.isfinite(out), out, plain)
+    with np.errstate(invalid="ignore", over="ignore"):
+        flagged = np.nonzero(np.isfinite(out) & (S > EXACT_ROUNDING_RATIO * np.abs(out)))
+    if flagged[0].size:
+        out = np.array(out, dtype=float)
+        for idx in zip(*flagged):
+            out[idx] = exactly_rounded(b[idx], P[idx], EP[idx], out[idx])
+    return out
+
+
+#: :func:`dot2` rounds a sum exactly where the sum of its terms' magnitudes exceeds this many times its value:
+#: below, Dot2's bound u |s| + 25 u^2 S is at most (1 + 25 u 2^40) u |s| ~ 1.003 u |s|.
+EXACT_ROUNDING_RATIO = 2.0 ** 40
+
+
+def exactly_rounded(b: float, P, EP, fallback: float) -> float:
+    """fl(b + sum_k (P_k + EP_k)): the exact sum of a dot product's parts (:func:`two_prod`'s pairs, exact unless
+    a product underflows), correctly rounded by :func:`math.fsum`; ``fallback`` where the parts are not finite."""
+    parts = [float(b)] + [float(v) for pair in zip(P, EP) for v in pair]
+    try:
+        out = math.fsum(parts)
+    except (OverflowError, ValueError):
+        return float(fallback)
+    return out if math.isfinite(out) else float(fallback)
 
 
 def accurate_homogeneous(P: np.ndarray, Xh: np.ndarray) -> np.ndarray:

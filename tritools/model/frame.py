@@ -24,7 +24,8 @@ import numpy as np
 from sospoly.budget import check_deadline
 
 from .cameras import power2_scale
-from .exact import CANCELLATION_RATIO, COMPENSATED_DENOM_RTOL, dot2, homogeneous_images, two_prod, two_sum
+from .exact import (CANCELLATION_RATIO, COMPENSATED_DENOM_RTOL, EXACT_ROUNDING_RATIO, dot2, exactly_rounded,
+                    homogeneous_images, two_prod, two_sum)
 from .stacked import norms, project_quiet_views
 
 __all__ = ["WorldFrame", "world_frame", "world_origins", "world_origin_one", "moved_cameras", "recentred",
@@ -271,14 +272,22 @@ def _dot4(a, x) -> float:
 
 
 def _dot2_one(a, x) -> float:
-    """:func:`tritools.model.exact.dot2` of one row (b = 0) on floats: the same operations, in its order."""
-    s, c = 0.0, 0.0
+    """:func:`tritools.model.exact.dot2` of one row (b = 0) on floats: the same operations, in its order, and the same
+    exact rounding where more than 40 bits cancel (:func:`tritools.model.exact.exactly_rounded`)."""
+    s, c, S = 0.0, 0.0, 0.0
+    parts = []
     for ak, xk in zip(a, x):
         p, ep = two_prod(ak, xk)
         s, es = two_sum(s, p)
         c = c + (ep + es)
+        S = S + abs(p)
+        parts.append((p, ep))
     out = s + c
-    return out if math.isfinite(out) else _dot4(a, x) + 0.0
+    if not math.isfinite(out):
+        out = _dot4(a, x) + 0.0
+    if math.isfinite(out) and S > EXACT_ROUNDING_RATIO * abs(out):
+        out = exactly_rounded(0.0, [p for p, _ in parts], [ep for _, ep in parts], out)
+    return out
 
 
 def frame_centre_groups(cameras_f: np.ndarray, frame: WorldFrame) -> np.ndarray:

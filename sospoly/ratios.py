@@ -18,6 +18,11 @@ certified first: ``sospoly.minimize(q_i, eq, ineq)`` must return a lower bound >
 ``RatioResult.denominator_bounds``); otherwise the status is ``INFEASIBLE`` with a message naming
 the denominator and no bound is reported.
 
+**A proven bound.** The solver's lambda is reported only as far as it is proven
+(:func:`sospoly.ratios_proof.proven_ratio_bound`): the certificates' identity residuals, recomputed in exact
+arithmetic, and PSD defects are bounded on the box the constraints imply and subtracted; a set the constraints do
+not bound gives status ``UNPROVEN`` and no bound.
+
 The upper bound is the objective at feasible candidates (moment atoms and their local polish by SLSQP
 on the rational objective); ``optimal`` follows :meth:`sospoly.Tolerances.certified` at the scale of
 the objective's value.
@@ -25,6 +30,7 @@ the objective's value.
 from __future__ import annotations
 
 import logging
+import math
 import time
 from dataclasses import dataclass
 
@@ -37,6 +43,8 @@ from .budget import as_budget
 from .certificates.program import SOSProgram
 from .certificates.psatz import common_gens
 from .lowering.conic import GramForm
+from .ratios_proof import proven_ratio_bound
+from .scaling import balancing, used_gens
 from .solvers.solve import solve_program
 from .status import SolveStatus
 from .tolerances import Tolerances, as_tolerances
@@ -106,13 +114,23 @@ def _check_terms(terms, eq, ineq, gens):
 
 
 def _normalised(pairs, eq, ineq):
-    """Each (p_i, q_i) divided by max|coef q_i| (the ratio unchanged), then every p_i by F = the largest
-    remaining coefficient of the p_i (the objective / F), every constraint by its own largest coefficient."""
-    pairs = [(p * (1.0 / q.max_abs_coefficient()), q * (1.0 / q.max_abs_coefficient())) for p, q in pairs]
-    F = max(p.max_abs_coefficient() for p, _ in pairs) or 1.0
+    """Each (p_i, q_i) divided by the power of two at or above max|coef q_i| (the ratio unchanged), then every p_i
+    by the power of two F at or above the largest remaining coefficient of the p_i (the objective / F), every
+    constraint by its own such power: exact in floating point, so the normalised program *is* the caller's
+    (its proven bound times F is one of the caller's problem)."""
+    pairs = [(p * (1.0 / _pow2(q)), q * (1.0 / _pow2(q))) for p, q in pairs]
+    F = _pow2_of(max(p.max_abs_coefficient() for p, _ in pairs))
     pairs = [(p * (1.0 / F), q) for p, q in pairs]
-    return (pairs, tuple(g * (1.0 / (g.max_abs_coefficient() or 1.0)) for g in eq),
-            tuple(h * (1.0 / (h.max_abs_coefficient() or 1.0)) for h in ineq), F)
+    return (pairs, tuple(g * (1.0 / _pow2(g)) for g in eq), tuple(h * (1.0 / _pow2(h)) for h in ineq), F)
+
+
+def _pow2(p) -> float:
+    return _pow2_of(p.max_abs_coefficient())
+
+
+def _pow2_of(m: float) -> float:
+    """The power of two at or just above m (1 for 0 or a non-finite m)."""
+    return math.ldexp(1.0, math.frexp(m)[1]) if m > 0 and math.isfinite(m) else 1.0
 
 
 def _degree(pairs, eq, ineq, degree):
@@ -213,15 +231,27 @@ def minimize_ratios(terms, eq=(), ineq=(), degree: int | None = None, *, gens=No
     """Certified lower bound (and minimisers) of sum_i p_i / q_i on {eq = 0, ineq >= 0} (module docstring).
 
     ``terms``: (p_i, q_i) pairs of Polynomials (numbers allowed); every q_i must be certified > 0 on the set.
-    The data are normalised (each ratio's q_i and the objective to unit largest coefficient, each constraint
-    to its own) and bounds reported in the caller's units.  ``budget`` (:class:`sospoly.Budget`): a Gram side
+    The data are scaled exactly (the variables by powers of two that balance the coefficients,
+    :func:`sospoly.scaling.balancing`; each ratio's q_i, the objective and each constraint divided by a power of
+    two near its largest coefficient), so the program solved is the caller's; the lower bound is the one proven
+    from the solved certificate (:mod:`sospoly.ratios_proof`: its identity residual in exact arithmetic and its
+    PSD defects on the box the constraints imply; none there: status ``UNPROVEN``, no bound), and bounds and
+    minimisers are reported in the caller's units.  ``budget`` (:class:`sospoly.Budget`): a Gram side
     above ``max_gram_side`` is refused (status ``BUDGET_EXCEEDED``) and the solve stops at ``time_limit``.
     """
     t0 = time.perf_counter()
     tol, budget = as_tolerances(tolerances), as_budget(budget)
     pairs0, eq0, ineq0, gens = _check_terms(terms, eq, ineq, gens)
+    used = used_gens(gens, *[v for pq in pairs0 for v in pq], *eq0, *ineq0)
+    if 0 < len(used) < len(gens):               # a variable in no polynomial: solved without it (no box holds it)
+        res = minimize_ratios([(p.with_gens(used), q.with_gens(used)) for p, q in pairs0],
+                              [g.with_gens(used) for g in eq0], [h.with_gens(used) for h in ineq0], degree,
+                              gens=used, backend=backend, tolerances=tolerances, budget=budget)
+        return _lifted(res, gens, used)
     degree = _degree(pairs0, eq0, ineq0, degree)
-    pairs, eq, ineq, F = _normalised(pairs0, eq0, ineq0)
+    scaling = balancing([v for pq in pairs0 for v in pq] + list(eq0) + list(ineq0), len(gens))
+    pairs, eq, ineq, F = _normalised([(scaling.polynomial(p), scaling.polynomial(q)) for p, q in pairs0],
+                                     [scaling.polynomial(g) for g in eq0], [scaling.polynomial(h) for h in ineq0])
     side = sigma(len(gens), degree // 2)
     if side > budget.max_gram_side:
         return RatioResult(SolveStatus.BUDGET_EXCEEDED, None, None, (), False, 0, degree, (), gens, None,
@@ -240,7 +270,9 @@ def minimize_ratios(terms, eq=(), ineq=(), degree: int | None = None, *, gens=No
     if sol.status != SolveStatus.OPTIMAL:
         return RatioResult(sol.status, None, None, (), False, prog.n_lmivar(), degree, dbounds, gens, sol,
                            time.perf_counter() - t0, sol.message)
-    lower = float(sol.objective)
+    relaxed = float(sol.objective)
+    q_unit = [_pow2(scaling.polynomial(q)) for _, q in pairs0]          # the divisors of the normalised q_i
+    lower, note = proven_ratio_bound(prog, names, sol, pairs, eq, ineq, [b / u for b, u in zip(dbounds, q_unit)])
     obj = _objective(pairs)
     found = []
     for p in _candidates(prog, names, sol, tol, len(gens)):
@@ -249,8 +281,11 @@ def minimize_ratios(terms, eq=(), ineq=(), degree: int | None = None, *, gens=No
                 found.append((obj(v), v))
     found = _distinct(sorted(found, key=lambda t: t[0]))
     upper = found[0][0] if found else None
-    status, optimal, msg = SolveStatus.OPTIMAL, False, ""
-    if upper is not None:
+    status, optimal, msg = SolveStatus.OPTIMAL, False, note
+    if not np.isfinite(lower):
+        status, lower = SolveStatus.UNPROVEN, None
+        msg = f"the relaxation's value {relaxed * F:.10g} is not proven a lower bound ({note})"
+    elif upper is not None:
         scale = max(1.0, abs(upper))
         if tol.contradicts(lower, upper, scale):
             status, msg = SolveStatus.INCONSISTENT, f"lower bound {lower * F:.10g} exceeds the objective " \
@@ -258,6 +293,24 @@ def minimize_ratios(terms, eq=(), ineq=(), degree: int | None = None, *, gens=No
         else:
             optimal = bool(tol.certified(lower, upper, scale))
             lower = tol.consistent(lower, upper)
-    mins = tuple(v for val, v in found if upper is not None and val <= upper + tol.gap_tolerance(upper))
-    return RatioResult(status, lower * F, None if upper is None else upper * F, mins, optimal, prog.n_lmivar(),
+    mins = tuple(scaling.to_original(v) for val, v in found
+                 if upper is not None and val <= upper + tol.gap_tolerance(upper))
+    return RatioResult(status, None if lower is None else lower * F, None if upper is None else upper * F, mins,
+                       optimal, prog.n_lmivar(),
                        degree, dbounds, gens, sol, time.perf_counter() - t0, msg)
+
+
+def _lifted(res: RatioResult, gens: tuple, used: tuple) -> RatioResult:
+    """A result over ``used`` as one over ``gens``: 0 in the variables no polynomial holds (any value is as good)."""
+    import dataclasses
+
+    pos = [gens.index(g) for g in used]
+
+    def up(p):
+        out = np.zeros(len(gens))
+        out[pos] = np.asarray(p, float)
+        return out
+    note = f"variables {[g for g in gens if g not in used]} appear in no polynomial: solved without them (0 in the " \
+           "points)"
+    return dataclasses.replace(res, gens=tuple(gens), minimizers=tuple(up(p) for p in res.minimizers),
+                               message="; ".join(m for m in (res.message, note) if m))

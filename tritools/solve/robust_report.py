@@ -28,8 +28,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..model.normalize import RESOLUTION_REL, magnitudes
-from ..model.stacked import norms
+from ..model.cameras import power2_scale
+from ..model.normalize import RESOLUTION_REL, magnitudes, world_origin_magnitudes
+from ..model.stacked import norms, null_vectors
 from .decide import gamma_from_c, gamma_lower_one
 from .report import enlarged_distances, gamma_upper, projections_and_spread, projections_and_spread_stack
 
@@ -63,7 +64,8 @@ def tls_reported(C: np.ndarray, centres: np.ndarray, residuals, X, c: np.ndarray
     res = np.where(np.isfinite(residuals), residuals, np.inf)
     g_ub = float(gamma_upper(np.where(np.isfinite(res), res, c), norms(np.where(np.isfinite(u), u, 0.0), axis=1),
                              cap=c))
-    mag = float(magnitudes(np.asarray(centres, float)[None], np.asarray(C, float)[None])[0])
+    mag = float(_magnitudes(np.asarray(C, float)[None], np.asarray(centres, float)[None],
+                            np.asarray(X, float)[None])[0])
     g_lb, g_ub, holds, reason = _checked(g_ub, spread, coordinate_resolution(centres), N, c, lb, tolerances,
                                          certified, res, f_search, mag)
     inliers = inlier_mask(C, X, centres, res, c, u, exact=points_given, regions=regions)
@@ -84,7 +86,7 @@ def tls_reported_stack(C: np.ndarray, points: np.ndarray, X: np.ndarray, c: np.n
     res = np.where(np.isfinite(residuals), residuals, np.inf)
     u_norm = norms(np.where(np.isfinite(u), u, 0.0), axis=2)
     g_ub = gamma_upper(np.where(np.isfinite(res), res, c), u_norm, cap=c)
-    resolution, magnitude = coordinate_resolutions(points), magnitudes(points, np.asarray(C, float))
+    resolution, magnitude = coordinate_resolutions(points), _magnitudes(np.asarray(C, float), points, X)
     inliers = inlier_mask_stack(C, X, points, res, c, u, u_norm)
     image_points = np.where(np.isfinite(res)[:, :, None] & np.isfinite(u), u, np.nan)
     out = []
@@ -96,6 +98,20 @@ def tls_reported_stack(C: np.ndarray, points: np.ndarray, X: np.ndarray, c: np.n
         out.append(TlsReported(checked[0], checked[1], residuals[k].copy(), inliers[k].copy(), checked[2],
                                checked[3], image_points[k].copy()))
     return out
+
+
+def _magnitudes(C: np.ndarray, points: np.ndarray, X: np.ndarray) -> np.ndarray:
+    """(M,) the magnitude that gamma_LB is lowered by (:func:`tritools.solve.decide.gamma_lower`): the points'
+    obliquity magnitudes (:func:`tritools.model.normalize.magnitudes`) and at least the frame's origin magnitude at
+    X (:func:`tritools.model.normalize.world_origin_magnitudes`) for the search's frame, the cameras moved to their
+    centres' mean (:func:`tritools.solve.robust_enum.enum_frame`)."""
+    with np.errstate(all="ignore"):
+        Cs = C / power2_scale(C, (2, 3))
+        a = null_vectors(Cs)
+        c = a[..., :3] / a[..., 3:]
+        o = np.add.reduce(c, axis=1) / C.shape[1]
+        o = np.where(np.isfinite(o), o, 0.0)
+    return np.maximum(magnitudes(points, C), world_origin_magnitudes(C, points, X, o))
 
 
 def _checked(g_ub: float, spread: float, resolution: float, N: int, c: np.ndarray, lb: float, tolerances,

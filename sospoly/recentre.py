@@ -42,7 +42,8 @@ import numpy as np
 from .algebra.polynomial import Polynomial
 from .scaling import MAX_EXPONENT, scaled_program
 
-__all__ = ["Cancellation", "CANCELLATION_BITS", "T_BITS", "MAX_TERMS", "translation_point", "translated",
+__all__ = ["Cancellation", "CANCELLATION_BITS", "T_BITS", "MAX_TERMS", "SCALE_MAX_TERMS", "translation_point",
+           "translated",
            "cancellation_scale", "scale_of_result", "translated_program", "result_in_original", "exact_value",
            "with_exact_values"]
 
@@ -59,6 +60,10 @@ CANCELLED = 64 * float(np.finfo(float).eps)
 MAX_CANDIDATES = 20
 #: a translation that would expand to more terms than this is not attempted (its cost would dominate).
 MAX_TERMS = 5000
+#: the scale at a minimiser (:func:`cancellation_scale`) is measured up to this many expanded terms (~0.2-2 s);
+#: beyond, a minimiser away from the origin gets no certificate (:func:`with_exact_values`): the origin's scale may
+#: be 1e13 times the minimiser's (review 25b F3).
+SCALE_MAX_TERMS = 20000
 
 
 def translation_point(x) -> np.ndarray:
@@ -146,12 +151,13 @@ def with_exact_values(res, f: Polynomial, tol, scale: float):
     else:
         optimal = False
     message = res.message
-    if optimal and vals and _expanded_terms(f) > MAX_TERMS and _away_from_origin(f, vals[0][1]):
+    if optimal and vals and _expanded_terms(f) > SCALE_MAX_TERMS and _away_from_origin(f, vals[0][1]):
         # the scale at the minimiser needs f(y + t) expanded: not computed, and the origin's may be 1e8 times too
         # large (a translated quartic in 10 variables: "optimal" with a gap of 5644 at scale 3.5e13, review 25b F3)
         optimal = False
-        message = "; ".join(m for m in (message, f"not certified: f(y + t) at the minimiser has more than {MAX_TERMS} "
-                                        "terms, so the gap cannot be decided at the minimiser's scale") if m)
+        note = f"not certified: f(y + t) at the minimiser has more than {SCALE_MAX_TERMS} terms, so the gap cannot " \
+               "be decided at the minimiser's scale"
+        message = "; ".join(m for m in (message, note) if m)
     near = tol.gap_tolerance(upper, scale) if upper is not None else 0.0
     mins = tuple(p for v, p in vals if v <= upper + near) if upper is not None else ()
     return replace(res, lower_bound=lower, upper_bound=upper, minimizers=mins, candidates=tuple(p for _, p in vals),
@@ -211,7 +217,7 @@ def cancellation_scale(f: Polynomial, x) -> Cancellation:
     t = translation_point(x)
     t = np.where(np.abs(p0.scaling.to_scaled(t)) < NEGLIGIBLE_SHIFT, 0.0, t)      # coordinates already at the origin
     s0 = p0.fscale
-    if not np.any(t) or _expanded_terms(f) > MAX_TERMS:
+    if not np.any(t) or _expanded_terms(f) > SCALE_MAX_TERMS:
         return Cancellation(s0, s0, t)
     st = _structure_scale(_significant_part(f, t))
     return Cancellation(s0, s0 if st is None else min(s0, st), t)

@@ -5,6 +5,8 @@ p is SOS iff p = b(v)^T Q b(v) with Q PSD for the monomials b(v) of degree <= de
 1. **Exact scaling** (:mod:`sospoly.scaling`): v = 2^k w balancing the coefficients' magnitudes, then p divided by a
    power of two near its largest coefficient.  Every step is exact in floating point, so the balanced question is
    the caller's, and the tolerances act at p's own scale (p and 1e6 p, p(x, y) and p(1e3 x, y) get one answer).
+   The memory of the basis reduction and of the program is estimated before either is built (``budget.max_bytes``:
+   ``BUDGET_EXCEEDED`` naming the size).
 2. **Basis reduction** (exact: every decomposition of p uses only the kept monomials):
    the Newton polytope -- m is kept only when 2m lies in N(p), the convex hull of p's exponents (Reznick
    1978) -- then the diagonal consistency test (:func:`sospoly.certificates.reduction.diagonal_reduction`,
@@ -276,7 +278,13 @@ def is_sos(p: Polynomial | float, *, backend: str | object | None = None, form: 
     if side > budget.max_gram_side:
         return SOSResult(False, SolveStatus.BUDGET_EXCEEDED, None, None,
                          message=f"the Gram matrix would have side {side} (limit {budget.max_gram_side})")
+    refused = _over_budget(side, p.nvars, budget)
+    if refused:
+        return SOSResult(False, SolveStatus.BUDGET_EXCEEDED, None, None, message=refused)
     bal = _balanced(p)
+    refused = _over_budget(bal.basis.shape[0], p.nvars, budget, reduction=False)
+    if refused:
+        return SOSResult(False, SolveStatus.BUDGET_EXCEEDED, None, bal.full, message=refused)
     if not bal.basis.shape[0]:
         return SOSResult(False, SolveStatus.INFEASIBLE, None, bal.full,
                          message="no monomial of the Gram basis survives the Newton polytope and diagonal tests")
@@ -385,6 +393,23 @@ WITNESS_RANDOM_STARTS = 4
 WITNESS_ITERATIONS = 50
 #: above this many variables the starts are only evaluated, not polished (and the unit vectors are left out).
 WITNESS_MAX_POLISHED_VARS = 8
+
+
+def _over_budget(side: int, n: int, budget: Budget, reduction: bool = True) -> str:
+    """Why a question of Gram side ``side`` in n variables exceeds ``budget.max_bytes`` ('' when it fits): the basis
+    reduction's pair table (side^2 exponent rows of n int64, ``reduction``) and the program
+    (:func:`sospoly.budget.estimate_size`), estimated before either is built (review 25b F6: a quartic in 85
+    variables raised MemoryError after 54 s)."""
+    from .budget import estimate_size
+
+    if budget.max_bytes is None:
+        return ""
+    need = float(side) ** 2 * max(n, 1) * 8.0 if reduction else estimate_size([side]).clarabel_bytes
+    if need <= budget.max_bytes:
+        return ""
+    what = "the basis reduction's pair table" if reduction else "the program"
+    return f"{what} would need ~{need / 2 ** 30:.3g} GiB (Gram side {side}), above the budget's max_bytes " \
+           f"{budget.max_bytes / 2 ** 30:.3g} GiB"
 
 
 def _gram_candidates(status: SolveStatus, G: np.ndarray, gb: GramBasis, t: np.ndarray, tol: Tolerances):

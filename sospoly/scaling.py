@@ -39,10 +39,13 @@ class VariableScaling:
     """v = 2^k w (elementwise): ``polynomial`` maps p(v) to p(2^k w) exactly; ``to_original`` /
     ``to_scaled`` map points."""
     k: np.ndarray
+    #: the balancing wanted an exponent beyond ``MAX_EXPONENT`` (or would overflow): the scaled program is still the
+    #: caller's, but its coefficients stay unbalanced, so the tolerances do not act at the problem's own scale
+    capped: bool = False
 
     @classmethod
-    def identity(cls, n: int) -> VariableScaling:
-        return cls(np.zeros(n, np.int64))
+    def identity(cls, n: int, capped: bool = False) -> VariableScaling:
+        return cls(np.zeros(n, np.int64), capped)
 
     @property
     def is_identity(self) -> bool:
@@ -96,19 +99,21 @@ def balancing(polys, n: int) -> VariableScaling:
         return ident
     A, b = np.array(rows), np.array(rhs)
     sol = np.linalg.lstsq(A, b, rcond=None)[0]
-    k = np.clip(np.round(sol[:n]), -MAX_EXPONENT, MAX_EXPONENT).astype(np.int64)
+    wanted = np.round(sol[:n])
+    capped = bool(np.any(np.abs(wanted) > MAX_EXPONENT))
+    k = np.clip(wanted, -MAX_EXPONENT, MAX_EXPONENT).astype(np.int64)
     if not np.any(k):
         return ident
-    sc = VariableScaling(k)
+    sc = VariableScaling(k, capped)
     try:
         scaled = [sc.polynomial(p) for p in polys]
     except (OverflowError, ValueError):
-        return ident
+        return VariableScaling.identity(n, True)
     for p, q in zip(polys, scaled):
         cq = np.abs(q.coefficients())
         if not np.all(np.isfinite(cq)) or np.any(cq < np.finfo(float).tiny) or len(q.terms) != len(p.terms):
-            return ident
-    return sc if _spread(polys) - _spread(scaled) >= MIN_GAIN_BITS else ident
+            return VariableScaling.identity(n, True)
+    return sc if _spread(polys) - _spread(scaled) >= MIN_GAIN_BITS else VariableScaling.identity(n, capped)
 
 
 def power2_normalised(p: Polynomial) -> tuple[Polynomial, float]:

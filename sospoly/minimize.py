@@ -74,7 +74,7 @@ import math
 import numbers
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass, replace as _replace
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -92,7 +92,7 @@ from .certificates.term_hierarchy import (cheap_term_level, newton_smaller, pars
                                          term_levels)
 from .lowering.conic import GramForm
 from .solvers.backends import cvxpy_available, get_backend
-from .scaling import ScaledProgram, balancing, lifted, scaled_program, used_gens
+from .scaling import ScaledProgram, lifted, scaled_program, uncapped, used_gens
 from .solvers.lower_bound import solve_psatz
 from .solvers.solve import LowerBound, ProgramSolution
 from .sos_check import SOSResult, is_sos
@@ -316,19 +316,7 @@ def minimize(f: Polynomial | float, eq: Sequence[Polynomial | float] = (), ineq:
                          deadline=deadline, refine=refine, t0=t0)
 
     best = solve(f, eq, ineq, multiplier, radius)
-    return _uncapped(_recentred(best, f, eq, ineq, multiplier, radius, solve, tol, deadline, t0), f, eq, ineq)
-
-
-def _uncapped(res: MinimizeResult, f, eq, ineq) -> MinimizeResult:
-    """``res``, not certified where the variables' balancing was capped (:attr:`sospoly.scaling.VariableScaling.
-    capped`: exponents beyond 2^+-200): the tolerances then act at a scale that is not the problem's (review 25b F4:
-    min (s x)^2 - s x at s = 1e100 "optimal" at x = 0, f = 0 > -1/4; a point 14558 outside its constraint accepted
-    at s = 1e70).  The lower bound stays (it is proven)."""
-    if not res.optimal or not balancing([f, *eq, *ineq], f.nvars).capped:
-        return res
-    note = "not certified: balancing the variables needs powers of two beyond 2^+-200, so the gap and feasibility " \
-           "tolerances do not act at the problem's own scale"
-    return _replace(res, optimal=False, message="; ".join(m for m in (res.message, note) if m))
+    return uncapped(_recentred(best, f, eq, ineq, multiplier, radius, solve, tol, deadline, t0), f, eq, ineq)
 
 
 def _strategy(f, eq, ineq, multiplier, radius, *, gens, d0, last, sparsity, low_degree, form, backend, tol, budget,

@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import logging
 import math
+import numbers
 import time
 from dataclasses import dataclass
 
@@ -138,7 +139,9 @@ def _degree(pairs, eq, ineq, degree):
     need += need % 2
     if degree is None:
         return max(need, 2)
-    if int(degree) != degree or degree % 2 or degree < need:
+    if isinstance(degree, (bool, np.bool_)) or not isinstance(degree, numbers.Real):
+        raise TypeError(f"minimize_ratios degree must be an even integer, got {type(degree).__name__} {degree!r}")
+    if not math.isfinite(degree) or int(degree) != degree or degree % 2 or degree < need:
         raise ValueError(f"minimize_ratios degree must be an even integer >= {need}, got {degree!r}")
     return int(degree)
 

@@ -61,7 +61,7 @@ class CompiledPsatz(LoweredPsatz):
 
     def _trivially_unbounded(self) -> bool:
         s = self.slots
-        return not s.n_eq and not s.n_ineq and s.degrees[0] % 2 == 1
+        return not s.n_eq and not s.n_ineq and s.degrees[0] > 0 and s.degrees[0] % 2 == 1     # (f = 0: degree -1)
 
     def solve(self, f, eq=(), ineq=(), *, backend=None, tolerances: Tolerances = DEFAULT_TOLERANCES,
               deadline=None) -> LowerBound:

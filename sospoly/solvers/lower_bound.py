@@ -50,7 +50,7 @@ def solve_psatz(psatz, *, backend=None, form: GramForm = GramForm.IMAGE,
         return psatz.compiled.solve_theta(psatz.theta, backend=backend, tolerances=tolerances, problem=psatz.problem,
                                           deadline=deadline)
     slots = psatz.structure.slots
-    if not slots.n_eq and not slots.n_ineq and slots.degrees[0] % 2:
+    if not slots.n_eq and not slots.n_ineq and slots.degrees[0] > 0 and slots.degrees[0] % 2:   # (f = 0: degree -1)
         # f of odd degree on all of R^n is unbounded below, so no certificate exists at any degree.
         # The SDP is then only *weakly* infeasible (no Farkas certificate): solvers cannot detect it
         # and report numerical errors, so decide it exactly here.

@@ -1,0 +1,35 @@
+"""Review 25b F7 (low): the zero objective, rigorous_psatz_bound's inputs, minimize_ratios' degree type."""
+import math
+
+import pytest
+
+import sospoly as sp
+
+x, y = sp.variables("x y")
+
+
+def test_zero_objective_is_not_unbounded():
+    r = sp.minimize(0 * x)
+    assert r.status != sp.SolveStatus.INFEASIBLE and "unbounded" not in r.message
+    assert r.lower_bound is not None and -1e-6 <= r.lower_bound <= 0.0
+
+
+@pytest.mark.parametrize("c,radius,err", [(0.0, -1.0, ValueError), (0.0, math.nan, ValueError),
+                                          (0.9, math.inf, ValueError), (math.nan, 1.0, ValueError)])
+def test_rigorous_bound_inputs(c, radius, err):
+    ps = sp.build_psatz(x ** 2 + 1, degree=2)
+    sol = sp.solve_psatz(ps).solution
+    with pytest.raises(err, match="rigorous_psatz_bound"):
+        sp.rigorous_psatz_bound(ps, sol, c, radius)
+    assert sp.rigorous_psatz_bound(ps, sol, 0.5, 2.0).lower_bound <= 1.0
+
+
+def test_rigorous_bound_needs_a_solution():
+    ps = sp.build_psatz(x ** 2 + 1, degree=2)
+    with pytest.raises(TypeError, match="ProgramSolution"):
+        sp.rigorous_psatz_bound(ps, None, 0.0, 1.0)
+
+
+def test_ratios_degree_type():
+    with pytest.raises(TypeError, match="degree"):
+        sp.minimize_ratios([(x ** 2, 1 + x ** 2)], ineq=[1 - x ** 2], degree=True)

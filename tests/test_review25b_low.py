@@ -15,13 +15,21 @@ def test_zero_objective_is_not_unbounded():
 
 
 @pytest.mark.parametrize("c,radius,err", [(0.0, -1.0, ValueError), (0.0, math.nan, ValueError),
-                                          (0.9, math.inf, ValueError), (math.nan, 1.0, ValueError)])
+                                          (0.0, [1.0, -2.0], ValueError), ("0", 1.0, TypeError)])
 def test_rigorous_bound_inputs(c, radius, err):
     ps = sp.build_psatz(x ** 2 + 1, degree=2)
     sol = sp.solve_psatz(ps).solution
     with pytest.raises(err, match="rigorous_psatz_bound"):
         sp.rigorous_psatz_bound(ps, sol, c, radius)
     assert sp.rigorous_psatz_bound(ps, sol, 0.5, 2.0).lower_bound <= 1.0
+
+
+@pytest.mark.parametrize("c,radius", [(0.9, math.inf), (math.nan, 1.0)])
+def test_rigorous_bound_nothing_provable(c, radius):
+    """An infinite radius or a non-finite level proves nothing: -inf, never NaN or a finite bound."""
+    ps = sp.build_psatz(x ** 2 + 1, degree=2)
+    sol = sp.solve_psatz(ps).solution
+    assert sp.rigorous_psatz_bound(ps, sol, c, radius).lower_bound == -math.inf
 
 
 def test_rigorous_bound_needs_a_solution():

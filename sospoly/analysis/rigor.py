@@ -202,7 +202,8 @@ def rigorous_psatz_bound(psatz, sol, c: float, radius, ball: float | None = None
     a bound of ||v|| (one number: a ball) or of every |v_i| (one per variable: a box); ``ball`` optionally a
     bound of ||v|| that holds on the box's minimiser too (it caps each block's R^2: a box of many variables
     has corners far outside a ball of the same per-variable radius))."""
-    _check_rigor_inputs(sol, c, radius, ball)
+    if not _check_rigor_inputs(sol, c, radius, ball):
+        return RigorousBound(-np.inf, np.inf, float(np.max(np.asarray(radius, float))), np.inf, np.inf, 0.0)
     structure = psatz.structure
     theta = np.asarray(psatz.theta, float)
     n = len(structure.gens)
@@ -233,20 +234,21 @@ def rigorous_psatz_bound(psatz, sol, c: float, radius, ball: float | None = None
     return RigorousBound(float(c) - margin, margin, R, psd, resid, qmin)
 
 
-def _check_rigor_inputs(sol, c, radius, ball) -> None:
+def _check_rigor_inputs(sol, c, radius, ball) -> bool:
     """TypeError / ValueError naming what is wrong in :func:`rigorous_psatz_bound`'s inputs (review 25b F7: a
-    negative, NaN or infinite radius gave a bound or NaN; ``sol=None`` an AttributeError)."""
+    negative or NaN radius gave a bound or NaN; ``sol=None`` an AttributeError); False where no bound can be proven
+    (an infinite radius or a non-finite level: the caller gets -inf, as for any unprovable margin)."""
     if sol is None or not hasattr(sol, "grams") or not hasattr(sol, "x"):
         raise TypeError(f"rigorous_psatz_bound needs a solved ProgramSolution, got {type(sol).__name__}")
-    if isinstance(c, (bool, np.bool_)) or not isinstance(c, (int, float, np.floating, np.integer)) \
-            or not np.isfinite(c):
-        raise ValueError(f"rigorous_psatz_bound level c must be a finite number, got {c!r}")
+    if isinstance(c, (bool, np.bool_)) or not isinstance(c, (int, float, np.floating, np.integer)):
+        raise TypeError(f"rigorous_psatz_bound level c must be a number, got {type(c).__name__}")
     r = np.asarray(radius, float) if not isinstance(radius, (bool, np.bool_)) else np.array(np.nan)
-    if r.size == 0 or not np.all(np.isfinite(r)) or not np.all(r >= 0):
-        raise ValueError(f"rigorous_psatz_bound radius must be non-negative and finite (one number or one per "
-                         f"variable), got {radius!r}")
-    if ball is not None and not (np.isfinite(ball) and ball >= 0):
-        raise ValueError(f"rigorous_psatz_bound ball must be non-negative and finite, got {ball!r}")
+    if r.size == 0 or np.any(np.isnan(r)) or not np.all(r >= 0):
+        raise ValueError(f"rigorous_psatz_bound radius must be non-negative (one number or one per variable), got "
+                         f"{radius!r}")
+    if ball is not None and (np.isnan(ball) or ball < 0):
+        raise ValueError(f"rigorous_psatz_bound ball must be non-negative, got {ball!r}")
+    return bool(np.isfinite(c) and np.all(np.isfinite(r)))
 
 
 def image_form_stack_margin(eigenvalues, gram_error, weight, q_min=1.0) -> np.ndarray:

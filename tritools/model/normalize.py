@@ -88,6 +88,9 @@ class Normalization:
     depth: float
     resolution: float = np.inf
     points_magnitude: float | None = None      # magnitudes() of the caller's points; None: from ``shifts``
+    #: (num (N,), the moved cameras' third rows (N, 4), their origin c0 (3,), |depth| at X0 (N,)): the frame origin's
+    #: term num_i / |P_3 X~| of :func:`origin_magnitudes`, where the frame's builder knows it
+    frame_terms: tuple | None = None
 
     @classmethod
     def identity(cls, n_views: int, points=None) -> Normalization:

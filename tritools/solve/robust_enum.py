@@ -203,7 +203,9 @@ def enum_frame_one(C: np.ndarray, x: np.ndarray):
         Cn /= norms(Cn, axis=(1, 2))[:, None, None]
         if not np.isfinite(Cn).all():
             return None
-    return Normalization(s, x, np.array(c0) + X0, d), Cn
+        terms = (np.maximum(np.abs(Cc[:, 0, 3]), np.abs(Cc[:, 1, 3])) + np.max(np.abs(x), axis=1) * np.abs(Cc[:, 2, 3]),
+                 Cc[:, 2, :].copy(), np.array(c0), np.abs(CH[:, 2, 3]))
+    return Normalization(s, x, np.array(c0) + X0, d, frame_terms=terms), Cn
 
 
 def enum_frames(C: np.ndarray, x: np.ndarray) -> tuple:

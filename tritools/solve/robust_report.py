@@ -50,7 +50,8 @@ class TlsReported:
 
 
 def tls_reported(C: np.ndarray, centres: np.ndarray, residuals, X, c: np.ndarray, lb: float, tolerances,
-                 certified: bool, f_search: float | None = None, regions=None) -> TlsReported:
+                 certified: bool, f_search: float | None = None, regions=None,
+                 frame_terms: tuple | None = None) -> TlsReported:
     """The reported bounds and checks of a TLS result at X (module docstring): cameras C (N, 3, 4), the regions'
     centres (N, 2) (their magnitude sets the resolution), ``residuals`` the distances d_i(X) or None for point
     regions (computed here from compensated projections; ``centres`` are then the points), ``lb`` the search's
@@ -64,8 +65,12 @@ def tls_reported(C: np.ndarray, centres: np.ndarray, residuals, X, c: np.ndarray
     res = np.where(np.isfinite(residuals), residuals, np.inf)
     g_ub = float(gamma_upper(np.where(np.isfinite(res), res, c), norms(np.where(np.isfinite(u), u, 0.0), axis=1),
                              cap=c))
-    mag = float(_magnitudes(np.asarray(C, float)[None], np.asarray(centres, float)[None],
-                            np.asarray(X, float)[None])[0])
+    if frame_terms is None:
+        mag = float(_magnitudes(np.asarray(C, float)[None], np.asarray(centres, float)[None],
+                                np.asarray(X, float)[None])[0])
+    else:                                # the bounds' frame told its own terms (the enumeration's frame)
+        mag = max(float(magnitudes(np.asarray(centres, float)[None], np.asarray(C, float)[None])[0]),
+                  _terms_magnitude(frame_terms, X))
     g_lb, g_ub, holds, reason = _checked(g_ub, spread, coordinate_resolution(centres), N, c, lb, tolerances,
                                          certified, res, f_search, mag)
     inliers = inlier_mask(C, X, centres, res, c, u, exact=points_given, regions=regions)
@@ -98,6 +103,18 @@ def tls_reported_stack(C: np.ndarray, points: np.ndarray, X: np.ndarray, c: np.n
         out.append(TlsReported(checked[0], checked[1], residuals[k].copy(), inliers[k].copy(), checked[2],
                                checked[3], image_points[k].copy()))
     return out
+
+
+def _terms_magnitude(terms: tuple, X) -> float:
+    """max_i num_i / min(|P_3 X0~|, |P_3 X~|) from a frame's origin terms (:attr:`tritools.model.normalize.
+    Normalization.frame_terms`: the enumeration's frame, cameras moved to c0): the term of :func:`_magnitudes` at X
+    and at the frame's own point X0 (the DLT of every view, which a wrong match may move), the smaller depth."""
+    num, row3, c0, h3_0 = terms
+    with np.errstate(all="ignore"):
+        d = np.asarray(X, float) - c0
+        h3 = np.abs(row3[:, 0] * d[0] + row3[:, 1] * d[1] + row3[:, 2] * d[2] + row3[:, 3])
+        K = float(np.max(num / np.minimum(h3, h3_0)))
+    return min(K, float(np.finfo(float).max)) if K == K else float(np.finfo(float).max)
 
 
 def _magnitudes(C: np.ndarray, points: np.ndarray, X: np.ndarray) -> np.ndarray:

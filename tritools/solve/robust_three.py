@@ -274,6 +274,7 @@ class _ThreeViews:
         return (enum.subset_of(self.views) & self._failing()[None]).any(axis=1)
 
     def _result(self, lb: float):
+        self.s.enum_terms = self.frame.frame_terms             # the frame of every bound the enumeration used
         return enumerated_result(self.s, lb, self.bounded.sum(), len(self.W))
 
 

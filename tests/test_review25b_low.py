@@ -41,3 +41,17 @@ def test_rigorous_bound_needs_a_solution():
 def test_ratios_degree_type():
     with pytest.raises(TypeError, match="degree"):
         sp.minimize_ratios([(x ** 2, 1 + x ** 2)], ineq=[1 - x ** 2], degree=True)
+
+
+def test_robinson_status_agrees_with_its_numbers():
+    """Review 25b F5: status inconsistent_bounds with lower <= upper after the exact re-valuation, the message citing
+    a float value -1.96e56 of a polynomial that is >= 0 everywhere."""
+    z = sp.variables("x y")
+    X, Y = z
+    robinson = (X ** 6 + Y ** 6 + 1 - (X ** 4 * Y ** 2 + X ** 2 * Y ** 4 + X ** 4 + X ** 2 + Y ** 4 + Y ** 2)
+                + 3 * X ** 2 * Y ** 2)
+    r = sp.minimize(robinson, degree=6)
+    if r.lower_bound is not None and r.upper_bound is not None and r.lower_bound <= r.upper_bound:
+        assert r.status != sp.SolveStatus.INCONSISTENT and "numerical failure" not in r.message
+    assert r.lower_bound is None or r.lower_bound <= 0.0
+    assert r.upper_bound is None or r.upper_bound >= 0.0

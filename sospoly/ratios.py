@@ -45,7 +45,7 @@ from .certificates.program import SOSProgram
 from .certificates.psatz import common_gens
 from .lowering.conic import GramForm
 from .ratios_proof import proven_ratio_bound
-from .scaling import balancing, used_gens
+from .scaling import balancing, lifted, used_gens
 from .solvers.solve import solve_program
 from .status import SolveStatus
 from .tolerances import Tolerances, as_tolerances
@@ -250,7 +250,7 @@ def minimize_ratios(terms, eq=(), ineq=(), degree: int | None = None, *, gens=No
         res = minimize_ratios([(p.with_gens(used), q.with_gens(used)) for p, q in pairs0],
                               [g.with_gens(used) for g in eq0], [h.with_gens(used) for h in ineq0], degree,
                               gens=used, backend=backend, tolerances=tolerances, budget=budget)
-        return _lifted(res, gens, used)
+        return lifted(res, gens, used)
     degree = _degree(pairs0, eq0, ineq0, degree)
     scaling = balancing([v for pq in pairs0 for v in pq] + list(eq0) + list(ineq0), len(gens))
     pairs, eq, ineq, F = _normalised([(scaling.polynomial(p), scaling.polynomial(q)) for p, q in pairs0],
@@ -301,19 +301,3 @@ def minimize_ratios(terms, eq=(), ineq=(), degree: int | None = None, *, gens=No
     return RatioResult(status, None if lower is None else lower * F, None if upper is None else upper * F, mins,
                        optimal, prog.n_lmivar(),
                        degree, dbounds, gens, sol, time.perf_counter() - t0, msg)
-
-
-def _lifted(res: RatioResult, gens: tuple, used: tuple) -> RatioResult:
-    """A result over ``used`` as one over ``gens``: 0 in the variables no polynomial holds (any value is as good)."""
-    import dataclasses
-
-    pos = [gens.index(g) for g in used]
-
-    def up(p):
-        out = np.zeros(len(gens))
-        out[pos] = np.asarray(p, float)
-        return out
-    note = f"variables {[g for g in gens if g not in used]} appear in no polynomial: solved without them (0 in the " \
-           "points)"
-    return dataclasses.replace(res, gens=tuple(gens), minimizers=tuple(up(p) for p in res.minimizers),
-                               message="; ".join(m for m in (res.message, note) if m))

@@ -31,7 +31,7 @@ from fractions import Fraction
 import numpy as np
 
 from .analysis.proof import constraint_box
-from .analysis.rigor import _block_weight, _poly_sup, psd_defect_of
+from .analysis.rigor import block_weight, poly_sup, psd_defect_of
 
 __all__ = ["proven_ratio_bound", "MARGIN_ROUND_UP"]
 
@@ -107,7 +107,7 @@ def proven_ratio_bound(prog, names: list, sol, pairs, eq, ineq, q_min) -> tuple[
     for w in ws:
         _add(w0, w, -1)
     data_eq, data_ineq = [_exact(g) for g in eq], [_exact(h) for h in ineq]
-    h_sup = [_poly_sup(h, r) * MARGIN_ROUND_UP for h in ineq]
+    h_sup = [poly_sup(h, r) * MARGIN_ROUND_UP for h in ineq]
     margin = 0.0
     for k, (p, q) in enumerate(pairs):
         U = dict(_exact(p))
@@ -119,13 +119,13 @@ def proven_ratio_bound(prog, names: list, sol, pairs, eq, ineq, q_min) -> tuple[
             blk = prog.block(f"s{k}_{j}")
             S = _gram_matrix(blk, x)
             _add(U, _mul(_gram_poly(S, blk.gram.b), h), -1)
-            defect += psd_defect_of(S) * _block_weight(blk.gram.b, r, False) * h_sup[j]
+            defect += psd_defect_of(S) * block_weight(blk.gram.b, r, False) * h_sup[j]
         con = prog.sos_constraints[[c.name for c in prog.sos_constraints].index(names[k])]
         G, b = sol.grams.get(names[k]), con.gram.blocks[0].b
         if G is None or len(con.gram.blocks) != 1 or not np.all(np.isfinite(G)):
             return -np.inf, f"certificate {names[k]} has no finite Gram matrix"
         _add(U, _gram_poly(G, b), -1)                       # U is now e_k, exactly
-        D = psd_defect_of(G) * _block_weight(b, r, False) + _sup(U, r) + defect
+        D = psd_defect_of(G) * block_weight(b, r, False) + _sup(U, r) + defect
         margin += D * MARGIN_ROUND_UP / float(q_min[k])
     if not np.isfinite(margin):
         return -np.inf, "the certificate's margin on the constraints' box is not finite"

@@ -43,9 +43,8 @@ from .algebra.polynomial import Polynomial
 from .scaling import MAX_EXPONENT, scaled_program
 
 __all__ = ["Cancellation", "CANCELLATION_BITS", "T_BITS", "MAX_TERMS", "SCALE_MAX_TERMS", "translation_point",
-           "translated",
-           "cancellation_scale", "scale_of_result", "translated_program", "result_in_original", "exact_value",
-           "with_exact_values"]
+           "translated", "cancellation_scale", "scale_of_result", "translated_program", "result_in_original",
+           "exact_value", "exact_fraction", "with_exact_values"]
 
 #: significant bits kept of each coordinate of the translation t.
 T_BITS = 12
@@ -118,10 +117,8 @@ def _significant_part(p: Polynomial, t) -> Polynomial:
     return Polynomial(p.gens, {k: float(w) for k, w in acc.items() if w and abs(w) > CANCELLED * mag[k]})
 
 
-def exact_value(p: Polynomial, x) -> float:
-    """p(x) evaluated in rational arithmetic and rounded up to a float (a valid upper bound of p(x): where
-    coefficients cancel, a floating-point evaluation at a point far from the origin errs by
-    eps * sum_a |c_a| |x^a|, far above the gap being decided)."""
+def exact_fraction(p: Polynomial, x) -> Fraction:
+    """p(x) in rational arithmetic at the float point x, exactly."""
     xs = [Fraction(float(v)) for v in np.asarray(x, float)]
     total = Fraction(0)
     for a, c in p.terms.items():
@@ -130,6 +127,14 @@ def exact_value(p: Polynomial, x) -> float:
             if ai:
                 term *= xi ** int(ai)
         total += term
+    return total
+
+
+def exact_value(p: Polynomial, x) -> float:
+    """p(x) evaluated in rational arithmetic (:func:`exact_fraction`) and rounded up to a float (a valid upper bound
+    of p(x): where coefficients cancel, a floating-point evaluation at a point far from the origin errs by
+    eps * sum_a |c_a| |x^a|, far above the gap being decided)."""
+    total = exact_fraction(p, x)
     v = float(total)
     return float(np.nextafter(v, np.inf)) if Fraction(v) < total else v
 

@@ -176,8 +176,9 @@ def used_gens(gens: tuple, *polys) -> tuple:
 
 def lifted(res, gens: tuple, used: tuple):
     """The inverse of solving over ``used`` (:func:`used_gens`) instead of ``gens``: a :class:`sospoly.
-    MinimizeResult` over ``used`` as one over ``gens``, every point with 0 in the unused variables (any value is as
-    good: no polynomial holds them), ``gens`` the caller's; the moment matrices stay over ``used``."""
+    MinimizeResult` (or :class:`sospoly.RatioResult`) over ``used`` as one over ``gens``, every point with 0 in the
+    unused variables (any value is as good: no polynomial holds them), ``gens`` the caller's; the moment matrices stay
+    over ``used``."""
     pos = [gens.index(g) for g in used]
 
     def up(p):
@@ -188,9 +189,11 @@ def lifted(res, gens: tuple, used: tuple):
 
     note = f"variables {[g for g in gens if g not in used]} appear in no polynomial: solved without them (0 in the " \
            "points)"
-    return dataclasses.replace(res, gens=tuple(gens), minimizers=tuple(up(p) for p in res.minimizers),
-                               candidates=tuple(up(p) for p in res.candidates),
-                               message="; ".join(m for m in (res.message, note) if m))
+    points = {"minimizers": tuple(up(p) for p in res.minimizers)}
+    if hasattr(res, "candidates"):          # (a RatioResult has minimisers only)
+        points["candidates"] = tuple(up(p) for p in res.candidates)
+    return dataclasses.replace(res, gens=tuple(gens), message="; ".join(m for m in (res.message, note) if m),
+                               **points)
 
 
 def uncapped(res, f, eq, ineq):

@@ -53,6 +53,7 @@ from .algebra.basis import GramBasis, MonomialIndex, monomials
 from .algebra.polynomial import Polynomial
 from .budget import Budget, as_budget
 from .lowering.conic import GramForm, lower
+from .recentre import exact_fraction
 from .status import SolveStatus
 from .tolerances import DEFAULT_TOLERANCES, Tolerances, as_tolerances
 
@@ -317,17 +318,8 @@ def is_sos(p: Polynomial | float, *, backend: str | object | None = None, form: 
                      message=f"undecided: no Gram matrix passes the checks ({msg or status.value})")
 
 
-def exact_value(p: Polynomial, w) -> Fraction:
-    """p(w) in exact rational arithmetic at the float point w."""
-    W = [Fraction(float(v)) for v in w]
-    tot = Fraction(0)
-    for e, c in p.terms.items():
-        t = Fraction(float(c))
-        for v, d in zip(W, e):
-            if d:
-                t *= v ** d
-        tot += t
-    return tot
+#: p(w) in exact rational arithmetic (:func:`sospoly.recentre.exact_fraction`).
+exact_value = exact_fraction
 
 
 def negative_witness(pn: Polynomial, Q: np.ndarray, basis: np.ndarray, tol: Tolerances) -> np.ndarray | None:

@@ -46,7 +46,7 @@ import numpy as np
 from ..algebra.basis import unique_rows
 
 
-__all__ = ["solution_at_level", "gram_pairs", "psd_defect_of", "u_terms",
+__all__ = ["solution_at_level", "gram_pairs", "psd_defect_of", "block_weight", "poly_sup", "u_terms",
            "RigorousBound", "rigorous_psatz_bound", "certificate_residual", "exact_check", "ExactCheck",
            "image_form_stack_margin",
            # the exact-arithmetic steps of exact_check, shared with sospoly.analysis.exact_face
@@ -149,7 +149,7 @@ def gram_pairs(G: np.ndarray, s: int) -> np.ndarray:
     return 0.5 * (G[i, j] + G[j, i])
 
 
-def _block_weight(basis: np.ndarray, r: np.ndarray, ball: bool, cap: float | None = None) -> float:
+def block_weight(basis: np.ndarray, r: np.ndarray, ball: bool, cap: float | None = None) -> float:
     """sum over the degrees d present in ``basis`` of R^(2d): a bound of ||b(v)||^2 (sum_{|m| = d} v^(2m) <=
     (sum_i v_i^2)^d), with R^2 the sum of r_i^2 over the basis' variables on the box |v_i| <= r_i, or the
     ball's R^2 (``ball``: every r_i is the ball's radius); at most ``cap``^2 when a ball ||v|| <= cap holds
@@ -175,7 +175,7 @@ def psd_defect_of(G: np.ndarray) -> float:
     return max(0.0, -float(lam[0])) + err
 
 
-def _poly_sup(p, r: np.ndarray) -> float:
+def poly_sup(p, r: np.ndarray) -> float:
     """A bound of |p(v)| on the box |v_i| <= r_i."""
     if not p.terms:
         return 0.0
@@ -216,7 +216,7 @@ def rigorous_psatz_bound(psatz, sol, c: float, radius, ball: float | None = None
     psd = 0.0
     u = structure.u
     for name, blk in zip(u.block_names(), u.gram.blocks):
-        psd += psd_defect_of(sol.grams[name]) * _block_weight(blk.b, r, ball, cap)
+        psd += psd_defect_of(sol.grams[name]) * block_weight(blk.b, r, ball, cap)
     prog = structure.program
     x = np.asarray(sol.x, float)
     ineq = psatz.ineq if hasattr(psatz, "ineq") else \
@@ -226,7 +226,7 @@ def rigorous_psatz_bound(psatz, sol, c: float, radius, ball: float | None = None
         S = np.zeros((blk.gram.size, blk.gram.size))
         S[blk.gram.pair_i, blk.gram.pair_j] = x[blk.slice]
         S[blk.gram.pair_j, blk.gram.pair_i] = x[blk.slice]
-        psd += psd_defect_of(S) * _block_weight(blk.gram.b, r, ball, cap) * _poly_sup(ineq[k], r)
+        psd += psd_defect_of(S) * block_weight(blk.gram.b, r, ball, cap) * poly_sup(ineq[k], r)
     qmin = _q_min(structure, sol, r)
     if not qmin > 0:
         return RigorousBound(-np.inf, np.inf, R, psd, resid, qmin)

@@ -180,13 +180,10 @@ class TlsSearch(NodeBounds):
         (X, gamma_UB, residuals, depths, inliers) is reported on these, at the point moved back (:meth:`result`)."""
         self.C_user = cams
         self.frame = world_frame(cams) if origin is None else WorldFrame(np.asarray(origin, float))
-        #: the enumeration frame's origin terms when the enumeration decided (None: the report computes the term,
-        #: :func:`tritools.solve.robust_report.tls_reported`)
-        self.enum_terms = None
         if self.frame.moved:
             cams = self.frame.cameras(cams)
         self.C, self.c, self.opts, self.t0 = cams, c, opts, t0
-        self._regions = None if regions is None else list(regions)
+        self._regions, self.enum_terms = (None if regions is None else list(regions)), None   # enum_terms: robust_three
         self.N = len(regions) if regions is not None else len(points)
         with np.errstate(over="ignore"):
             self.c2 = c * c                              # c above 1e154: c^2 = inf (no threshold in floats)
@@ -543,8 +540,7 @@ class TlsSearch(NodeBounds):
                             None if self.points else rep.residuals, X, self.c, lb, self.tol,
                             self.tol.certified_one(lb, self.best_f, self.scale),    # lb valid also when stopped
                             None if self.cells_decided else self.best_f,
-                            None if self.points else self.regions,
-                            None if self.frame.moved else self.enum_terms)
+                            None if self.points else self.regions, None if self.frame.moved else self.enum_terms)
         return self.finish(X, rep, told, lb, stopped, timings, note)
 
     def user_estimate(self):

@@ -56,7 +56,7 @@ def test_tls_bounds_bracket_the_exact_cost_at_the_estimate(offset):
     assert not bad, bad
 
 
-def test_far_off_axis_points_are_not_certified_and_keep_valid_bounds():
+def test_far_off_axis_points_are_certified_only_within_the_resolution_and_keep_valid_bounds():
     h = CAMS @ np.array([0.2, -0.1, 1.0, 1.0])
     for k in (1e8, 1e10):
         x = k * h[:, :2] / h[:, 2:]
@@ -72,9 +72,12 @@ def test_far_off_axis_points_are_not_certified_and_keep_valid_bounds():
         f_best = min(_f_tls_exact(CAMS, x, np.full(3, np.inf), r.X) for _, r in runs + [(None, plain)])
         g_best = float(np.sqrt(float(f_best) / 6))              # achievable: >= gamma*
         for c, r in runs:
-            assert not r.optimal, (k, c, r.status, r.gamma_lb, r.gamma_ub)
+            # a certificate, as the plain call's, only by the resolution clause: a gap within 1e-8 of the coordinates
+            # (review 7 F2 certified 4.7 px and 59150 px here with 250 px gaps; 0.0165 px is achievable)
+            assert not r.optimal or r.gamma_ub - r.gamma_lb <= 1e-8 * np.median(np.abs(x)), (k, c, r.gamma_lb,
+                                                                                             r.gamma_ub)
             assert r.gamma_lb is None or r.gamma_lb <= g_best, (k, c, r.gamma_lb, g_best)
-            assert "cannot certify" in r.message or r.status != tritools.Status.OPTIMAL
+            assert r.gamma_ub <= max(g_best, 1e-8 * np.median(np.abs(x))) or not r.optimal
 
 
 def test_rounding_spread_is_tiny_on_ordinary_data_and_large_off_axis():
@@ -463,3 +466,49 @@ def test_a_drifted_search_keeps_a_certificate_that_needs_no_bound_of_it():
     off = x + np.array([[3e-4, 0.0], [0.0, 0.0], [0.0, 0.0]])             # gamma* ~ 1e-4: beyond the resolution
     far = tls_reported(CAMS, off, None, X, c, 0.0, tol, True, 1e-12)
     assert not far.holds and far.gamma_lb == 0.0 and "cancellation" in far.reason
+
+
+#: review 25a F4: a six-view track 1.5e7 from the origin, its optimum near camera 0 (c1 s=7 of the review)
+F4_P = np.array([float.fromhex(h) for h in (
+    '0x1.29b1ca911a868p+8', '-0x1.505c5d2bde164p+8', '-0x1.6fa413b3d2433p+9', '0x1.510103aa5fce2p+33',
+    '-0x1.0dfea9a01461dp+9', '0x1.87f40887af206p+8', '-0x1.f660d68d36c80p+8', '0x1.d98801645e43bp+29',
+    '0x1.0e9e4e20e4b77p-1', '0x1.55242442478c0p-1', '-0x1.0d518143ae73cp-1', '0x1.3b6c5f4711930p+23',
+    '-0x1.aecaa1b935084p+9', '-0x1.0910aaf50352dp+3', '-0x1.39fbeda9dddf0p+1', '-0x1.b8b653927ebd9p+32',
+    '-0x1.45f5b37c9a4b9p+6', '-0x1.9c97f3a4e62b3p+9', '0x1.9082fed91a668p+6', '-0x1.56bae5c69c779p+30',
+    '-0x1.7d973870fc78cp-2', '-0x1.246be63dfb2a9p-3', '0x1.d576dd038f3edp-1', '-0x1.a5be1881435e2p+23',
+    '-0x1.55e5e4a609140p+7', '0x1.0cf8bb1ac52d2p+9', '0x1.457f44383f97bp+9', '-0x1.1651e506efedcp+33',
+    '-0x1.876559760b31bp+9', '-0x1.056bb88f6ba12p+8', '0x1.00dffb810d698p+7', '-0x1.e33b226cc5ab2p+32',
+    '-0x1.0e30a5074344bp-8', '-0x1.e42454d83ed74p-2', '0x1.c327c8467dac6p-1', '-0x1.32d1b07ad35c3p+23',
+    '-0x1.bea413d074a3cp+8', '0x1.5849788c1e581p+9', '-0x1.06414e9cdee84p+8', '-0x1.1350d2d8b6b17p+30',
+    '-0x1.17cf972491643p+9', '-0x1.ec78bedd2b8a3p+3', '0x1.35e9f7de057acp+9', '-0x1.66b9de81c3b37p+33',
+    '0x1.748c9135913d7p-3', '0x1.99c34435d1133p-1', '0x1.24835c4645e0ap-1', '-0x1.501118592906ep+22',
+    '0x1.e9a0e9d25c3ecp+6', '0x1.9604ba20c320fp+9', '0x1.04cac696c84a5p+8', '-0x1.1f01f610bd75cp+31',
+    '-0x1.01489cc4dd120p+8', '-0x1.dbd639356312ap+6', '0x1.88d3d83860d4cp+9', '-0x1.51047a48129d9p+33',
+    '0x1.9db68e6029df5p-1', '0x1.5c55e4e8c3ef7p-4', '0x1.2a7a8f1f9ac03p-1', '0x1.f8fc75a3da16dp+16',
+    '-0x1.4e4747ac62f0cp+9', '-0x1.ad291c355a7c7p+7', '-0x1.f362f9f6b8bf6p+8', '0x1.3ea6f235afdd7p+27',
+    '0x1.5c7348f1be9a2p+7', '-0x1.98051e5f91428p+9', '-0x1.232165a4bd3f8p+5', '0x1.186dbf0df8345p+31',
+    '-0x1.6df968394c5a4p-1', '-0x1.e116bf2f7e3bfp-2', '0x1.093a0c55ccd70p-1', '-0x1.6cb5b0b8f4b45p+23',
+)]).reshape(6, 3, 4)
+F4_X = np.array([float.fromhex(h) for h in (
+    '0x1.08bafeba891e0p+9', '-0x1.7b0277dbb44b2p+8', '0x1.42001b275dae0p+8', '0x1.e18646d0382f0p+7',
+    '0x1.3eccfb631b32bp+8', '0x1.e02626c07114fp+7', '0x1.4093a1e74abfdp+8', '0x1.df9f57ca21687p+7',
+    '0x1.40aed337297b9p+8', '0x1.dfddf14ce0bb6p+7', '0x1.40aad0969e9dep+8', '0x1.e2e0863764edap+7',
+)]).reshape(6, 2)
+
+
+def test_a_track_the_l2_path_certifies_keeps_its_certificate_under_tls():
+    """Review 25a F4: every residual below c = 3 and f = 8.91 < c^2, so f*_TLS = L2* (a set without a view costs
+    >= 9); the L2 path certifies it, the TLS report withdrew its bound (0, not certified) because one ulp of X moves
+    the projections by 7e-5 px -- more than the coordinates' resolution, although f moves only to second order.
+    Reference: the L2 minimum next to the estimate in 60 digits."""
+    from tests.robust_refs import hp_l2_min
+
+    l2 = tritools.triangulate(F4_P, F4_X)
+    f_ref = hp_l2_min(F4_P, F4_X, l2.X)
+    assert l2.optimal and f_ref < 9
+    for r in (tritools.triangulate(F4_P, F4_X, robust=3.0),
+              tritools.triangulate_many([(F4_P, F4_X)], robust=3.0, progress=False)[0]):
+        assert r.optimal, r.message
+        assert r.inliers.all()
+        assert 12 * Fraction(r.gamma_lb) ** 2 <= f_ref <= 12 * Fraction(r.gamma_ub) ** 2
+        assert r.gamma_lb >= l2.gamma_lb - 1e-9 * l2.gamma_ub          # not below the L2 path's own bound

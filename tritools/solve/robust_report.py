@@ -9,15 +9,18 @@ here, in the caller's frame and units, by the L2 path's rules (:mod:`tritools.so
   projections, each distance enlarged by its round-off bound before truncation and the sum rounded up
   (:func:`tritools.solve.report.gamma_upper`): an upper bound of gamma*_TLS of the given float data.
 * gamma_LB from the search's bound in pixels^2, lowered by the normalisation's round-off
-  (:func:`tritools.solve.decide.gamma_lower`) and by the estimate's rounding spread (below), never above gamma_UB.
+  (:func:`tritools.solve.decide.gamma_lower`, with the L2 path's magnitudes: the points' obliquity and the frame
+  origin's term, :func:`_magnitudes`), never above gamma_UB.
 * The certificate, decided by the search in c units on its scale S = min(c^2, rho^2), must also pass on these
-  numbers the L2 path's two guards: a gap that does not pass through the relative part of the rule must be within
+  numbers the L2 path's guard: a gap that does not pass through the relative part of the rule must be within
   the coordinates' resolution (``RESOLUTION_REL`` max(1, median |x_i|) pixels; thresholds far above the
-  residuals make S = c^2 large, and without it a 250 px gap at 1e10 px coordinates certified), and the estimate's
-  own rounding must not move the projections by more than that resolution
-  (:func:`tritools.solve.report.rounding_spread`; a point near the cameras' principal planes seen 1e8 px off-axis
-  moves 0.5 px per unit in the last place, and bounds from a normalised frame then describe another problem:
-  gamma_LB is then reported as 0).
+  residuals make S = c^2 large, and without it a 250 px gap at 1e10 px coordinates certified).
+  Until wave 26 gamma_LB was also lowered by the estimate's rounding spread
+  (:func:`tritools.solve.report.rounding_spread`), and withdrawn (0, not certified) where that spread exceeded the
+  resolution: a stand-in for the frame-origin and obliquity round-off terms that the lowering now carries (waves
+  24-25).  It withdrew bounds the L2 path certifies on the same estimate (review 25a F4: a 6-view track 1.5e7 from
+  the origin, the spread 7e-5 px at 0.86 px; 72 of 200 such TLS calls), although an ulp of X moves f only to
+  second order at an optimum; the spread now only explains drift (:func:`rounding_drift`).
 * The search's own value at its estimate must agree with the compensated f_TLS (:func:`drift_within`: relatively, or
   absolutely within a tenth of the resolution in gamma); gamma_LB is lowered by the drift seen.
 """
@@ -134,12 +137,12 @@ def _magnitudes(C: np.ndarray, points: np.ndarray, X: np.ndarray) -> np.ndarray:
 def _checked(g_ub: float, spread: float, resolution: float, N: int, c: np.ndarray, lb: float, tolerances,
              certified: bool, res: np.ndarray, f_search, magnitude: float = 1.0) -> tuple:
     """(gamma_LB, gamma_UB, holds, reason) of :func:`tls_reported` from gamma_UB (float), the rounding spread and the
-    coordinates' resolution (module docstring): gamma_LB lowered by round-off and spread, never above gamma_UB; the
-    certificate withheld where the spread, the search's drift or the gap guard say so."""
-    # lowered by the normalisation's round-off and by the estimate's rounding spread: bounds from a normalised frame
-    # describe the caller's float problem only to that spread (a 6-view track 4.5e8 px off-axis: spread 0.06 px,
-    # the frame's bound 7e-4 px above an achievable value)
-    g_lb = max(0.0, gamma_lower_one(gamma_from_c(max(lb, 0.0), N, 1.0), g_ub, 1.0, resolution, magnitude) - spread)
+    coordinates' resolution (module docstring): gamma_LB lowered by round-off, never above gamma_UB; the certificate
+    withheld where the search's drift (beyond what the rounding ``spread`` explains) or the gap guard say so."""
+    # lowered by the normalisation's round-off, whose magnitude holds the frame origin's and the obliquity's terms
+    # (review 7's 6-view track 4.5e8 px off-axis, whose frame bound sat 7e-4 px above an achievable value, stays
+    # below it: tests/test_robust_report.py)
+    g_lb = max(0.0, gamma_lower_one(gamma_from_c(max(lb, 0.0), N, 1.0), g_ub, 1.0, resolution, magnitude))
     g_lb = min(g_lb, g_ub)
     holds, reason = certified, ""
     f_ub = 2.0 * N * g_ub * g_ub
@@ -148,12 +151,8 @@ def _checked(g_ub: float, spread: float, resolution: float, N: int, c: np.ndarra
     d_abs = search_drift_abs(res, c, f_search)
     if d_abs > 0.0:                      # the search's bound is in its own arithmetic: lowered by the drift seen
         g_lb = min(g_lb, max(0.0, gamma_lower_one(gamma_from_c(max(lb - d_abs, 0.0), N, 1.0), g_ub, 1.0,
-                                                  resolution, magnitude) - spread))
-    if not spread <= resolution:         # no bound from a normalised frame is known to hold
-        holds, g_lb = False, 0.0
-        reason = "the estimate's own rounding moves its projections by more than the coordinates' resolution " \
-                 f"({resolution:.3g} px): the float data cannot certify this optimum"
-    elif not drift_within(drift, d_abs, N, tolerances, resolved, rounding_drift(f_ub, spread, N)):
+                                                  resolution, magnitude)))
+    if not drift_within(drift, d_abs, N, tolerances, resolved, rounding_drift(f_ub, spread, N)):
         # the search's bounds are not trusted; a certificate that needs none (0 <= gamma* <= gamma_UB within the
         # resolution: an optimum near 0 in a georeferenced world with tiny thresholds) still holds, at gamma_LB 0
         g_lb = 0.0
@@ -193,8 +192,8 @@ def reported_resolution(centres: np.ndarray, c: np.ndarray, tolerances) -> float
 
 
 #: a TLS search prunes a node by the certificate rule only within this share of the report's gap guard
-#: (:meth:`tritools.solve.robust.TlsSearch.meets`; the reported gamma_LB is lowered by round-off and the rounding
-#: spread after the search, so its gap must pass with room).
+#: (:meth:`tritools.solve.robust.TlsSearch.meets`; the reported gamma_LB is lowered by round-off and drift after
+#: the search, so its gap must pass with room).
 PRUNE_SHARE = 0.5
 
 

@@ -26,7 +26,7 @@ from .angle import triangulation_angles
 from .rigour import box_from_bounds, combine, lower_bounds, round_down, round_up
 from .sets import EPS, dilate, structure_key, view_blocks, view_coefficients
 from .solve import objective_rows, solve_blocks
-from .witness import centres, pull_inside, rays_stay_inside, repeat_block, witness_gap
+from .witness import centres, feasible, pull_inside, rays_stay_inside, repeat_block, witness_gap
 
 __all__ = ["UncertaintyStatus", "UncertaintyOptions", "UncertaintyResult", "uncertainty", "uncertainty_many"]
 
@@ -330,6 +330,8 @@ def _group_chunk(C, blocks, X0, Xe, convexified, opts) -> list[UncertaintyResult
     solved = (st == BlockStatus.SOLVED) & ok
     ray = st == BlockStatus.UNBOUNDED
     empty = _empty(st, b.reshape(M, K), be.reshape(M, K), a.reshape(M, K, 3), ae.reshape(M, K, 3), sigma)
+    # a Farkas verdict is local (it excludes the points within its reach of X0): a point found in S refutes it
+    empty &= ~(feasible(blocks, R, X0, opts.witness_rtol) | feasible(blocks, R, Xe, opts.witness_rtol))
     witnesses = np.where(((st == BlockStatus.SOLVED))[:, :, None], X0[:, None, :] + sigma[:, None, None] * blk.eta,
                          np.nan)
     with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
@@ -454,7 +456,8 @@ def uncertainty(cameras: ArrayLike, regions: Sequence | ArrayLike, *, level: flo
     if level is None:
         C, regs, conv, widened = _prepare(cameras, regions, opts.dilation, opts.widen_roundoff)
         Xe = _estimate_arg(estimate, C[None], [regs])
-        res = _group(C[None], [regs], Xe, Xe, conv, opts)[0]
+        X0 = Xe if estimate is None else _estimates(C[None], [regs])
+        res = _group(C[None], [regs], X0, Xe, conv, opts)[0]
         return _unwidened_if_empty(res, cameras, regions, estimate, opts) if widened else res
     from .level import level_bounds
     return level_bounds(cameras, regions, level, estimate, opts)
@@ -488,8 +491,8 @@ def uncertainty_many(cameras: Sequence | ArrayLike, regions: Sequence, *, estima
     for idx in groups.values():
         C = np.stack([prepared[m][0] for m in idx])
         regs = [prepared[m][1] for m in idx]
-        Xe = E[idx] if E is not None else _estimates(C, regs)
-        res = _group(C, regs, Xe, Xe, np.array([prepared[m][2] for m in idx]), opts)
+        X0 = _estimates(C, regs)                    # the solvers' centre: never the caller's estimate (review 26b F1)
+        res = _group(C, regs, X0, X0 if E is None else E[idx], np.array([prepared[m][2] for m in idx]), opts)
         for m, r in zip(idx, res):
             out[m] = r
     for m, p in enumerate(prepared):

@@ -79,3 +79,15 @@ def test_truly_empty_sets_stay_empty():
     regions = [tritools.Ellipse.circle(xi, 1.0) for xi in x]
     for E in (None, np.array([-1.0, 0.0, -5.0])):
         assert tritools.uncertainty(CAMS, regions, estimate=E).status == tritools.UncertaintyStatus.EMPTY
+
+
+def test_an_affine_camera_is_refused_by_name():
+    """Review 26b F3: a camera with third row (0, 0, 0, 1) passed validation and failed deep inside with 'SVD did not
+    converge'."""
+    cams = CAMS.copy()
+    cams[1, 2] = [0.0, 0.0, 0.0, 1.0]
+    regions = [tritools.Ellipse.circle([320.0, 240.0], 1.0)] * 3
+    with pytest.raises(ValueError, match=r"cameras\[1\].*affine"):
+        tritools.uncertainty(cams, regions)
+    with pytest.raises(ValueError, match=r"point 1: cameras\[1\].*affine"):
+        tritools.uncertainty_many([CAMS, cams], [regions, regions])

@@ -146,6 +146,10 @@ class UncertaintyResult:
 # ----------------------------------------------------------------------------- preparation
 def _prepare(cameras, regions, dilation, widen=True):
     C = validate_cameras(cameras, min_views=1, require_distinct=False)
+    affine = np.flatnonzero(~np.all(np.isfinite(depth_rows(C)), axis=1))
+    if affine.size:
+        raise ValueError(f"cameras[{int(affine[0])}] has a zero third row in its left 3x3 block (an affine camera): "
+                         "its depth, and so the set S, is not defined; uncertainty needs projective cameras")
     regs = as_regions(regions, len(C))
     d = np.atleast_1d(np.asarray(dilation, float))
     if len(d) == 1:
@@ -477,7 +481,7 @@ def uncertainty_many(cameras: Sequence | ArrayLike, regions: Sequence, *, estima
                             f"got {type(seq).__name__}")
     if len(cameras) != len(regions):
         raise ValueError(f"cameras and regions must have one entry per point, got {len(cameras)} and {len(regions)}")
-    prepared = [_prepare(c, r, opts.dilation, opts.widen_roundoff) for c, r in zip(cameras, regions)]
+    prepared = [_prepared_point(m, c, r, opts) for m, (c, r) in enumerate(zip(cameras, regions))]
     E = None
     if estimates is not None:
         E = _real_or_none(estimates)
@@ -518,6 +522,18 @@ def _real_or_none(a):
     except (TypeError, ValueError):
         return None
     return raw.astype(float) if raw.dtype.kind in "iuf" else None
+
+
+def _prepared_point(m: int, cameras, regions, opts) -> tuple:
+    """:func:`_prepare` of point ``m`` of :func:`uncertainty_many`; a refusal names the point."""
+    try:
+        return _prepare(cameras, regions, opts.dilation, opts.widen_roundoff)
+    except ValueError as exc:
+        try:
+            named = type(exc)(f"point {m}: {exc}")
+        except TypeError:                       # a subclass with its own signature
+            named = ValueError(f"point {m}: {exc}")
+        raise named from None
 
 
 def _estimate_arg(estimate, C, regs):

@@ -91,3 +91,29 @@ def test_an_affine_camera_is_refused_by_name():
         tritools.uncertainty(cams, regions)
     with pytest.raises(ValueError, match=r"point 1: cameras\[1\].*affine"):
         tritools.uncertainty_many([CAMS, cams], [regions, regions])
+
+
+def _parallel_pair(r, d0=160.0, f=800.0, b=1.0):
+    K = np.diag([f, f, 1.0])
+    cams = np.array([K @ np.hstack([np.eye(3), [[-bx], [0.0], [0.0]]]) for bx in (0.0, b)])
+    return cams, [tritools.Ellipse.circle([0.0, 0.0], r), tritools.Ellipse.circle([-d0, 0.0], r)]
+
+
+@pytest.mark.parametrize("z_far", [1e10, 1e12])
+def test_a_set_bounded_far_away_is_not_called_unbounded(z_far):
+    """Review 26b F2: two parallel cameras whose discs leave a disparity f b / Z >= d0 - 2r = f b / z_far > 0, so S
+    is bounded at depth z_far (exact); a near-recession direction of the solver was accepted as a ray."""
+    r = (160.0 - 800.0 / z_far) / 2
+    assert Fraction(160.0) - 2 * Fraction(r) > 0
+    cams, regions = _parallel_pair(r)
+    res = tritools.uncertainty(cams, regions)
+    assert res.status != tritools.UncertaintyStatus.UNBOUNDED, res.hi
+    assert res.status == tritools.UncertaintyStatus.FAILED or res.depth_hi.max() >= 800.0 / (160.0 - 2 * r) * 0.999
+
+
+def test_a_true_ray_is_still_certified():
+    """Discs wider than the disparity window (0 disparity inside): every depth from ~5 on is in S, a true ray."""
+    cams, regions = _parallel_pair(81.0)
+    res = tritools.uncertainty(cams, regions)
+    assert res.status == tritools.UncertaintyStatus.UNBOUNDED
+    assert res.hi[2] == np.inf and np.all(np.isfinite(res.lo[2:]))

@@ -2,13 +2,15 @@
 the membership check of ray certificates (used by :mod:`.api`)."""
 from __future__ import annotations
 
+import math
 from dataclasses import replace
 
 import numpy as np
 
+from ..model.regions import ConeKind
 from .sets import contains
 
-__all__ = ["repeat_block", "take", "feasible", "pull_inside", "centres", "rays_stay_inside", "RAY_REACH",
+__all__ = ["repeat_block", "take", "feasible", "pull_inside", "centres", "rays_stay_inside", "recedes", "RAY_REACH",
            "witness_gap"]
 
 #: a ray is accepted when base + lambda d stays in S for lambda = scene scale times these factors
@@ -108,6 +110,48 @@ def rays_stay_inside(blocks, R, W, centre, eta, ray, rtol) -> np.ndarray:
         good &= feasible(sub, R[pm], base[pm] + (lam * scale[pm])[:, None] * d, rtol)
     keep[pm, ko] = good
     return keep
+
+
+def recedes(blocks, R, d) -> np.ndarray:
+    """(M,) whether (d, 0) is a recession direction of S, decided in exact rational arithmetic on the float data
+    (cameras R (M, N, 3, 4), directions d (M, 3)), for problems whose views are all ellipses or polytopes; True for
+    the others (points and segments have no interior, no float direction meets their equalities exactly: their
+    rays keep the float test of :func:`rays_stay_inside`).  Each view's set is a convex cone K_i in X~ = (X, 1),
+    (a, s) = (r_1 X~, r_2 X~, r_3 X~); when (a_d, s_d) = R_i (d, 0) is in K_i, (a, s) + lambda (a_d, s_d) stays in
+    K_i for every lambda >= 0, so S holds base + lambda d for every base in S: a ray.  A direction that only
+    nearly meets a cone (a set bounded at a depth of 1e10 seen by parallel cameras, review 26b F2) is refused."""
+    from fractions import Fraction
+
+    M = len(d)
+    out = np.ones(M, bool)
+    if not all(b.kind in (ConeKind.ELLIPSE, ConeKind.POLYTOPE) for b in blocks):
+        return out
+    for m in range(M):
+        dm = [Fraction(float(v)) for v in d[m]]
+        if not all(math.isfinite(float(v)) for v in d[m]):
+            out[m] = False
+            continue
+        for i, blk in enumerate(blocks):
+            a0, a1, s_ = (sum(Fraction(float(R[m, i, r, k])) * dm[k] for k in range(3)) for r in range(3))
+            if s_ < 0 or not _in_cone(blk, m, a0, a1, s_):
+                out[m] = False
+                break
+    return out
+
+
+def _in_cone(blk, m: int, a0, a1, s_) -> bool:
+    """(a, s) in the view's cone (exact): an ellipse v' D^-1 v <= s^2 with v = a - x^ s, through D's adjugate; a
+    polytope |B_k a + c_k s| <= s for every row k."""
+    from fractions import Fraction
+
+    if blk.kind == ConeKind.POLYTOPE:
+        return all(abs(Fraction(float(B[0])) * a0 + Fraction(float(B[1])) * a1 + Fraction(float(c)) * s_) <= s_
+                   for B, c in zip(blk.B[m], blk.c[m]))
+    x0, x1 = (Fraction(float(v)) for v in blk.center[m])
+    v0, v1 = a0 - x0 * s_, a1 - x1 * s_
+    (d00, d01), (d10, d11) = ([Fraction(float(v)) for v in row] for row in blk.D[m])
+    det = d00 * d11 - d01 * d10
+    return det > 0 and d11 * v0 * v0 - (d01 + d10) * v0 * v1 + d00 * v1 * v1 <= s_ * s_ * det
 
 
 def witness_gap(lo, hi, wl, wh, estimate, bounded: bool, points=None):

@@ -1,4 +1,4 @@
-"""Witnesses of the per-view set: exact membership, interior candidates, feasible inner points and
+"""Witnesses of the per-view set: membership (in floating point), interior candidates, feasible inner points and
 the membership check of ray certificates (used by :mod:`.api`)."""
 from __future__ import annotations
 
@@ -85,7 +85,7 @@ def centres(blocks, R, W, X0, dirs, sigma, rtol):
 
 
 def rays_stay_inside(blocks, R, W, centre, eta, ray, rtol) -> np.ndarray:
-    """(M, K) False where a ray certificate fails the exact membership test: from a feasible base point
+    """(M, K) False where a ray certificate fails the (float) membership test: from a feasible base point
     (the interior candidate, else a feasible witness) the points ``base + lambda d`` must lie in S for
     lambda up to 1e2 times the scene's scale (distance to the farthest camera centre).  A recession
     direction of S passes; a direction that only nearly satisfies a thin cone (a widened point) leaves

@@ -13,9 +13,24 @@ found by doubling.  A level c is accepted as feasible only when the solver says
 solved **and** the certificate passes :func:`sospoly.solvers.solve.check_certificate`
 (Gram eigenvalues and equality residuals with the margins of
 :class:`~sospoly.tolerances.Tolerances`): near-degenerate q lets solvers report
-"solved" for infeasible c.  The bisection stops when
-``c_hi - c_lo <= bisection_abs + bisection_rel * max(1, |c_lo|)``; the lower bound
-reported is ``c_lo``, the last level with a checked certificate.
+"solved" for infeasible c.
+
+**Proven steps** (``prove=True``, the default).  A Gram defect eps accepted by any margin
+lowers the level by up to eps ||b(v*)||^2 / q(v*) at a minimiser v*, and the bisection climbs
+to the edge of whatever margin it is given: at (x - 1e4)^2 + y^2 the margin 1e-9 max|G| let it
+"certify" 8.39e6 for a minimum of 0 (review 26a F2).  So a step is accepted only when its
+certificate is also *proven* at level c - m by the shifted certificate of
+:func:`sospoly.analysis.proof.global_psatz_bound` (m <= 1e-7 max(max|coef f|, |c|), the Gram
+matrices projected onto the exact identities, every rounding absorbed, q >= lambda_min(Q) > 0
+proven); the bound reported is the proven c - m of the highest accepted step.  ``prove=False``
+keeps the numerical acceptance alone (for callers that prove the bound themselves).
+
+The bisection stops when ``c_hi - c_lo <= bisection_abs + bisection_rel * max(1, |c_lo|)``.
+A step that fails (a solver failure, a failed check or proof) is treated as an upper end,
+which keeps the lower bound valid; but when *no* level was accepted, INFEASIBLE ("no
+certificate at this degree") is reported only when every tested level was proven infeasible
+by a checked Farkas certificate, NUMERICAL_ERROR otherwise (review 26a F7: 40 solver failures
+on x^2 + 1e12 were reported as infeasibility).
 """
 from __future__ import annotations
 
@@ -25,7 +40,9 @@ import numpy as np
 
 from ..certificates.psatz import Multiplier, PsatzProblem
 from ..lowering.conic import ConicProblem, GramForm
+from ..analysis.proof import global_psatz_bound
 from .compiled_solve import CompiledPsatz
+from .psatz_claims import as_certificate_data, data_scale
 from .solve import ProgramSolution, check_certificate, solve_conic
 from ..status import SolveStatus
 from ..tolerances import DEFAULT_TOLERANCES, Tolerances, as_tolerances
@@ -56,14 +73,18 @@ class CompiledGevp:
     ``feasible(c)`` solves one LMI."""
 
     def __init__(self, psatz: PsatzProblem, backend=None, form: GramForm = GramForm.IMAGE,
-                 tolerances: Tolerances = DEFAULT_TOLERANCES, deadline=None):
+                 tolerances: Tolerances = DEFAULT_TOLERANCES, deadline=None, prove: bool = True):
         if psatz.multiplier != Multiplier.FREE:
             raise ValueError("CompiledGevp needs a Psatz problem built with multiplier='free'")
         self.psatz = psatz
         self.backend = backend
         self.tolerances = as_tolerances(tolerances)
         self.deadline = deadline
+        self.prove = bool(prove)
         self.compiled = CompiledPsatz(psatz.structure, form)
+        self.proven: dict = {}          # accepted level c -> the level proven from its certificate (c - m)
+        self._data = as_certificate_data(psatz)
+        self._scale = data_scale(self._data)
 
     def _acceptance(self, inst: ConicProblem, c: float):
         """Accept level c only if the original certificate checks out (see module docstring).
@@ -114,7 +135,14 @@ class CompiledGevp:
             ps = ProgramSolution(SolveStatus.FEASIBLE, float(c), x[: prog.n_vars].copy(), inst.gram_matrices(x),
                                  inst.dual_matrices(sol.z[:-1]), check.mins, check.resid, sol.attempts,
                                  prog.n_lmivar(), sol.seconds, msg)
-            return SolveStatus.FEASIBLE, ps
+            if not self.prove:
+                self.proven[float(c)] = float(c)
+                return SolveStatus.FEASIBLE, ps
+            gb = global_psatz_bound(self._data, ps, float(c), scale=self._scale, deadline=self.deadline)
+            if np.isfinite(gb.lower_bound):
+                self.proven[float(c)] = float(gb.lower_bound)
+                return SolveStatus.FEASIBLE, ps
+            status, msg = SolveStatus.UNPROVEN, f"level {float(c):.10g} not proven: {gb.message}"
         ps = ProgramSolution(status, None, None, attempts=sol.attempts, n_lmivar=prog.n_lmivar(),
                              seconds=sol.seconds, message=msg)
         return status, ps
@@ -137,12 +165,17 @@ def bisect(compiled: CompiledGevp, c_lo: float | None = None, c_hi: float | None
         return st.ok, ps
 
     try:
-        return _bisect(c_lo, c_hi, max_search, tol, steps, test)
+        res = _bisect(c_lo, c_hi, max_search, tol, steps, test)
     except _OutOfTime:
         lo, best = found
+        lo = None if lo is None else compiled.proven.get(lo, lo)
         return GevpResult(SolveStatus.TIME_LIMIT, lo, (lo, c_hi), tuple(steps), best,
                           "time limit reached during the bisection" + (f" (best certified level {lo:.10g})"
                                                                        if lo is not None else ""))
+    lb = res.lower_bound
+    if lb is not None and np.isfinite(lb):          # the level proven from the accepted step's certificate
+        res = GevpResult(res.status, compiled.proven.get(lb, lb), res.bracket, res.steps, res.solution, res.message)
+    return res
 
 
 class _OutOfTime(Exception):
@@ -163,8 +196,14 @@ def _bisect(c_lo, c_hi, max_search, tol, steps, test) -> GevpResult:
             lo, best = c, ps
             break
     if lo is None:
-        return GevpResult(SolveStatus.INFEASIBLE, None, (None, c_hi), tuple(steps), None,
-                          "no feasible level c found: no certificate at this degree")
+        if steps and all(s.status == SolveStatus.INFEASIBLE for s in steps):
+            return GevpResult(SolveStatus.INFEASIBLE, None, (None, c_hi), tuple(steps), None,
+                              f"every tested level down to {steps[-1].c:.6g} is infeasible (checked Farkas "
+                              "certificates): no certificate at this degree")
+        failed = sorted({s.status.value for s in steps if s.status != SolveStatus.INFEASIBLE})
+        return GevpResult(SolveStatus.NUMERICAL_ERROR, None, (None, c_hi), tuple(steps), None,
+                          f"no level c was certified, and {sum(s.status != SolveStatus.INFEASIBLE for s in steps)} of "
+                          f"{len(steps)} steps failed numerically ({', '.join(failed)}): not a proof of infeasibility")
     # ---- an upper end
     if c_hi is None or c_hi <= lo:
         hi = None
@@ -177,9 +216,9 @@ def _bisect(c_lo, c_hi, max_search, tol, steps, test) -> GevpResult:
             else:
                 hi = c
                 break
-        if hi is None:
-            return GevpResult(SolveStatus.UNBOUNDED, np.inf, (lo, np.inf), tuple(steps), best,
-                              "every tested level is certified: the constraint set may be empty")
+        if hi is None:      # (a finite proven level, not inf: an empty set is not proven by finitely many levels)
+            return GevpResult(SolveStatus.UNBOUNDED, lo, (lo, np.inf), tuple(steps), best,
+                              f"every tested level up to {lo:.6g} is certified: the constraint set may be empty")
     else:
         hi = float(c_hi)
     # ---- bisection
@@ -192,4 +231,16 @@ def _bisect(c_lo, c_hi, max_search, tol, steps, test) -> GevpResult:
         else:
             hi = mid
         n += 1
+    # OPTIMAL: the upper end is f at a feasible point or a level the solver found infeasible (a Farkas certificate,
+    # or a checked answer rejected: margin t < 0 or a Gram defect); an upper end where the solver failed or the
+    # proof did not hold says nothing of c* (the lower bound stays proven)
+    end = next((s.status for s in reversed(steps) if s.c == hi), None)
+    if end in _FAILED:
+        return GevpResult(SolveStatus.INACCURATE, lo, (lo, hi), tuple(steps), best,
+                          f"the bracket's upper end {hi:.10g} is a failed step ({end.value}), not an infeasible level: "
+                          f"the bound {lo:.10g} is proven, its optimality is not")
     return GevpResult(SolveStatus.OPTIMAL, lo, (lo, hi), tuple(steps), best, "")
+
+
+#: step statuses that are failures, not evidence that the level is infeasible
+_FAILED = (SolveStatus.UNPROVEN, SolveStatus.NUMERICAL_ERROR, SolveStatus.INACCURATE, SolveStatus.NOT_SOLVED)

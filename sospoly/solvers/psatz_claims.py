@@ -1,0 +1,139 @@
+"""What a Positivstellensatz solve may claim: a level, "the set is empty", "no certificate" -- each only where proven.
+
+A solver's certificate u = q (f - c) + sum r_k g_k - sum s_k h_k = sum_j b_j^T G_j b_j is accepted numerically when
+lambda_min(G_j) >= -psd_margin max|G_j|.  That defect eps_j changes the *level* by up to
+eps_j ||b_j(v*)||^2 / q(v*) at a minimiser v*, which grows like ||v*||^(deg f): at f = x^2 - 2e4 x the accepted
+certificate's level lay 7.2e3 above the minimum -1e8 (review 26a F5), and a bisection that climbs to the edge of
+the margin (the GEVP, F2) overshoots by far more.  No margin on the Gram matrices alone can be right at every
+scale, so the claims are proven instead, by :func:`sospoly.analysis.proof.global_psatz_bound` (the shifted
+certificate: the level lowered by m, the Gram matrices shifted and projected onto the exact identities, every
+rounding bounded and absorbed, q proven positive for every v):
+
+* :func:`proven_level` -- the level of a fixed-q solve: OPTIMAL with ``lower_bound = c* - m`` when it is proven with
+  m <= 1e-7 max(scale, |c*|) (:data:`~sospoly.analysis.proof.GLOBAL_MARGINS`, inside the gap tolerance);
+  INACCURATE with the weaker proven ``c* - m`` when only a larger margin proves it
+  (:data:`~sospoly.analysis.proof.WEAK_MARGINS`); else UNPROVEN with no bound.  ``scale`` is max |coef f|, the
+  problem's own scale.  The solver's numerical c* stays available as ``relaxation``.
+* :func:`proven_empty` -- an unboundedness ray (c grows along it) is a certificate that the set is empty:
+  with f's coefficients set to 0 the ray d is a certificate  q (0 - c_d) + r_d^T g - s_d^T h = b^T G_d b,  G_d the
+  ray's Gram matrices, i.e. 0 >= c_d on the feasible set with c_d > 0.  It is proven the same way (the f = 0
+  instance at level c_d, lowered by m < c_d); otherwise the status is NUMERICAL_ERROR and nothing is claimed.
+  (:func:`sospoly.solvers.rays.check_unbounded_ray` measures the ray against its own terms: along a near-ray of
+  min x^2 s.t. x = 1e6 the violation is ~1e-6 of them, review 26a F1.)
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from types import SimpleNamespace
+
+import numpy as np
+
+from ..status import SolveStatus
+from .solve import LowerBound, ProgramSolution
+
+__all__ = ["PsatzBound", "proven_level", "proven_empty", "as_certificate_data", "data_scale"]
+
+
+@dataclass(frozen=True)
+class PsatzBound(LowerBound):
+    """A :class:`~sospoly.solvers.solve.LowerBound` whose ``lower_bound`` is proven (module docstring), with the
+    solver's numerical level ``relaxation`` (c*, not proven; None where the solve gave none)."""
+    relaxation: float | None = None
+
+
+def as_certificate_data(psatz, structure=None, theta=None):
+    """What the proofs read -- ``structure``, ``theta``, ``ineq`` -- of a PsatzProblem, a compiled instance, or a
+    structure and theta."""
+    if psatz is not None and hasattr(psatz, "ineq"):
+        return psatz
+    structure = psatz.structure if structure is None else structure
+    theta = np.asarray(psatz.theta if theta is None else theta, float)
+    slots = structure.slots
+    ineq = slots.ineq_polynomials(theta) if slots.n_ineq else ()
+    return SimpleNamespace(structure=structure, theta=theta, ineq=ineq)
+
+
+def data_scale(data) -> float:
+    """max |coef f| (the problem's own scale of the level), 1 for f = 0."""
+    off = data.structure.slots.offsets
+    th = np.abs(np.asarray(data.theta, float)[off[0]:off[1]])
+    top = float(th.max()) if th.size else 0.0
+    return top if top > 0 and np.isfinite(top) else 1.0
+
+
+def proven_level(data, lb: LowerBound, deadline=None) -> PsatzBound:
+    """The claim of a fixed- or free-q solve's level (module docstring); other statuses pass through unchanged."""
+    from ..analysis.proof import WEAK_MARGINS, global_psatz_bound
+
+    if isinstance(lb, PsatzBound) or lb.status != SolveStatus.OPTIMAL or lb.lower_bound is None \
+            or lb.solution is None or not np.isfinite(lb.lower_bound):
+        return _wrap(lb)
+    c, sol = float(lb.lower_bound), lb.solution
+    scale = data_scale(data)
+    gb = global_psatz_bound(data, sol, c, scale=scale, deadline=deadline)
+    if np.isfinite(gb.lower_bound):
+        return PsatzBound(SolveStatus.OPTIMAL, gb.lower_bound, sol, lb.bracket, lb.message, relaxation=c)
+    weak = global_psatz_bound(data, sol, c, scale=scale, margins=WEAK_MARGINS, deadline=deadline) \
+        if gb.q_min > 0 else gb
+    if np.isfinite(weak.lower_bound):
+        return PsatzBound(SolveStatus.INACCURATE, weak.lower_bound, sol, lb.bracket,
+                          f"the solver's level {c:.10g} is proven only lowered by {weak.margin:.3g} "
+                          f"(the shifted certificate; {gb.message})", relaxation=c)
+    return PsatzBound(SolveStatus.UNPROVEN, None, sol, lb.bracket,
+                      f"the solver's level {c:.10g} is not proven a lower bound: {weak.message}", relaxation=c)
+
+
+def proven_empty(data, lb: LowerBound, problem=None, deadline=None) -> PsatzBound:
+    """The claim "the constraint set is empty" of an UNBOUNDED solve, kept only when the ray is proven (module
+    docstring); ``problem`` the image-form conic problem the ray belongs to (None: the claim is not checked and
+    is withdrawn)."""
+    from ..analysis.proof import global_psatz_bound
+    from ..lowering.conic import GramForm
+
+    if lb.status != SolveStatus.UNBOUNDED:
+        return _wrap(lb)
+    why = "no ray to check"
+    st = data.structure
+    sol = lb.solution
+    d = None if sol is None else sol.x
+    if problem is not None and problem.form == GramForm.IMAGE and d is not None and np.all(np.isfinite(d)) \
+            and not st.free:
+        d = np.asarray(d, float) / max(float(np.max(np.abs(d))), 1e-300)
+        off = st.slots.offsets
+        theta0 = np.array(data.theta, float)
+        theta0[off[0]:off[1]] = 0.0                  # f = 0: the ray's own certificate
+        zero = SimpleNamespace(structure=st, theta=theta0, ineq=data.ineq)
+        grams = _ray_grams(problem, d)
+        c_d = float(d[st.program.block("c").slice][0])
+        ray = ProgramSolution(SolveStatus.OPTIMAL, c_d, d[: st.program.n_vars].copy(), grams)
+        if c_d > 0:
+            gb = global_psatz_bound(zero, ray, c_d, scale=0.0, deadline=deadline)
+            if np.isfinite(gb.lower_bound) and gb.lower_bound > 0:
+                return PsatzBound(SolveStatus.UNBOUNDED, np.inf, sol, lb.bracket,
+                                  "c is unbounded: the constraint set is empty (the solver's ray proven: "
+                                  f"0 >= {gb.lower_bound:.3g} on the set)")
+            why = gb.message or "the ray's certificate is not proven"
+        else:
+            why = f"the ray does not raise the level (c_d = {c_d:.3g})"
+    elif problem is not None and problem.form != GramForm.IMAGE:
+        why = "rays are proven in the image form only"
+    return PsatzBound(SolveStatus.NUMERICAL_ERROR, None, sol, lb.bracket,
+                      f"the solver reported an unbounded level (an empty set), not proven: {why}")
+
+
+def _ray_grams(problem, d: np.ndarray) -> dict:
+    """The Gram matrices of the ray alone: smat(-A d) on every PSD block (image form)."""
+    from ..algebra.svec import smat
+
+    out = {}
+    for blk in problem.psd_blocks:
+        rows = slice(blk.row_start, blk.row_start + blk.size * (blk.size + 1) // 2)
+        out[blk.name] = smat(-(problem.A[rows] @ d))
+    return out
+
+
+def _wrap(lb: LowerBound) -> PsatzBound:
+    if isinstance(lb, PsatzBound):
+        return lb
+    rel = lb.lower_bound if lb.lower_bound is not None and np.isfinite(lb.lower_bound) else None
+    return PsatzBound(lb.status, lb.lower_bound, lb.solution, lb.bracket, lb.message, relaxation=rel)

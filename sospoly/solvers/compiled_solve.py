@@ -87,16 +87,17 @@ class CompiledPsatz(LoweredPsatz):
                               "constraints: f is unbounded below")
         problem = self.problem_from_theta(theta) if problem is None else problem
         sol = solve_program(self.program, backend, self.form, tolerances, problem=problem, deadline=deadline)
-        return self._claim(theta, lower_bound_of(sol, self.degree), problem, prove, deadline)
+        return self._claim(theta, lower_bound_of(sol, self.degree), problem, prove, tolerances, deadline)
 
-    def _claim(self, theta, lb: LowerBound, problem: ConicProblem, prove: bool, deadline=None) -> LowerBound:
+    def _claim(self, theta, lb: LowerBound, problem: ConicProblem, prove: bool, tolerances,
+               deadline=None) -> LowerBound:
         """The claims of :meth:`solve_theta` (:mod:`sospoly.solvers.psatz_claims`)."""
         if lb.status not in (SolveStatus.OPTIMAL, SolveStatus.UNBOUNDED):
             return lb
         data = as_certificate_data(None, self.structure, np.asarray(theta, float).reshape(-1))
         if lb.status == SolveStatus.UNBOUNDED:
             return proven_empty(data, lb, problem, deadline)
-        return proven_level(data, lb, deadline) if prove else lb
+        return proven_level(data, lb, tolerances, deadline) if prove else lb
 
     def solve_batch(self, instances=None, *, thetas=None, fallback=None,
                     tolerances: Tolerances = DEFAULT_TOLERANCES, prove: bool = True) -> list[LowerBound]:
@@ -129,7 +130,7 @@ class CompiledPsatz(LoweredPsatz):
                                 float(res.dual_objective[i]), (att,)) if res.converged[i] else None
             problem = self.problem_from_theta(th[i])
             sol = solve_program(self.program, _Presolved(pre, att, fb), self.form, tolerances, problem=problem)
-            out.append(self._claim(th[i], lower_bound_of(sol, self.degree), problem, prove))
+            out.append(self._claim(th[i], lower_bound_of(sol, self.degree), problem, prove, tolerances))
         return out
 
     def batch_bounds(self, thetas, tolerances: Tolerances = DEFAULT_TOLERANCES) -> BatchBounds:

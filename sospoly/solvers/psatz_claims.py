@@ -61,26 +61,78 @@ def data_scale(data) -> float:
     return top if top > 0 and np.isfinite(top) else 1.0
 
 
-def proven_level(data, lb: LowerBound, deadline=None) -> PsatzBound:
-    """The claim of a fixed- or free-q solve's level (module docstring); other statuses pass through unchanged."""
+def proven_level(data, lb: LowerBound, tolerances=None, deadline=None) -> PsatzBound:
+    """The claim of a fixed- or free-q solve's level (module docstring); other statuses pass through unchanged.
+
+    The proven bound is the best of the shifted certificate (valid for every v) and, where the feasible set or a
+    sublevel set of f lies in a box, :func:`~sospoly.analysis.rigor.rigorous_psatz_bound` on that box (the box of
+    the constraints, :func:`~sospoly.analysis.proof.constraint_box`; for an unconstrained f the sublevel box
+    {f <= f(v^)} of :func:`~sospoly.analysis.proof.sublevel_box`, v^ the origin or the moment matrix's point,
+    every point being feasible).  The shifted certificate cannot move an equality multiplier: on the sphere
+    min v^T Q v s.t. ||v||^2 = 1 the Gram matrix is singular along a direction the lowered level does not reach,
+    and only the box proves it.  OPTIMAL when the proven bound lies within the gap tolerance of c*
+    (``tolerances.gap_tolerance(c*, scale)``), INACCURATE with the weaker proven bound otherwise, UNPROVEN
+    without one."""
     from ..analysis.proof import WEAK_MARGINS, global_psatz_bound
+    from ..tolerances import as_tolerances
 
     if isinstance(lb, PsatzBound) or lb.status != SolveStatus.OPTIMAL or lb.lower_bound is None \
             or lb.solution is None or not np.isfinite(lb.lower_bound):
         return _wrap(lb)
+    tol = as_tolerances(tolerances)
     c, sol = float(lb.lower_bound), lb.solution
     scale = data_scale(data)
     gb = global_psatz_bound(data, sol, c, scale=scale, deadline=deadline)
-    if np.isfinite(gb.lower_bound):
-        return PsatzBound(SolveStatus.OPTIMAL, gb.lower_bound, sol, lb.bracket, lb.message, relaxation=c)
-    weak = global_psatz_bound(data, sol, c, scale=scale, margins=WEAK_MARGINS, deadline=deadline) \
-        if gb.q_min > 0 else gb
-    if np.isfinite(weak.lower_bound):
-        return PsatzBound(SolveStatus.INACCURATE, weak.lower_bound, sol, lb.bracket,
-                          f"the solver's level {c:.10g} is proven only lowered by {weak.margin:.3g} "
-                          f"(the shifted certificate; {gb.message})", relaxation=c)
-    return PsatzBound(SolveStatus.UNPROVEN, None, sol, lb.bracket,
-                      f"the solver's level {c:.10g} is not proven a lower bound: {weak.message}", relaxation=c)
+    best, how = gb.lower_bound, "for every v by the shifted certificate"
+    near = tol.gap_tolerance_one(c, scale)
+    if not best >= c - near:
+        rb, where = _box_bound(data, sol, c)
+        if rb > best:
+            best, how = rb, where
+    if not np.isfinite(best) and gb.q_min > 0:
+        best = global_psatz_bound(data, sol, c, scale=scale, margins=WEAK_MARGINS, deadline=deadline).lower_bound
+    if not np.isfinite(best):
+        return PsatzBound(SolveStatus.UNPROVEN, None, sol, lb.bracket,
+                          f"the solver's level {c:.10g} is not proven a lower bound: {gb.message}", relaxation=c)
+    if best >= c - near:
+        return PsatzBound(SolveStatus.OPTIMAL, best, sol, lb.bracket, lb.message, relaxation=c)
+    return PsatzBound(SolveStatus.INACCURATE, best, sol, lb.bracket,
+                      f"the solver's level {c:.10g} is proven only lowered by {c - best:.3g} ({how})", relaxation=c)
+
+
+def _box_bound(data, sol, c: float) -> tuple[float, str]:
+    """(the rigorous bound on a box holding every feasible point or a minimiser, or -inf; which box)."""
+    from ..analysis.proof import constraint_box, sublevel_box
+    from ..analysis.rigor import rigorous_psatz_bound
+
+    st = data.structure
+    f, eq, ineq = st.slots.polynomials(data.theta)
+    n = len(st.gens)
+    if eq or ineq:
+        box, where = constraint_box(eq, ineq, n), "on the box of the constraints"
+    else:
+        upper = min(float(v) for v in (f.evaluate(np.zeros(n)), _moment_value(st, f, sol)) if np.isfinite(v))
+        box, where = sublevel_box(f, upper), f"on the box of the sublevel set f <= {upper:.6g}"
+    if box is None:
+        return -np.inf, ""
+    return rigorous_psatz_bound(data, sol, c, box).lower_bound, where
+
+
+def _moment_value(structure, f, sol) -> float:
+    """f at the point of u's moment matrix (its degree-1 moments over the constant's), NaN without one."""
+    blocks = structure.u.gram.blocks
+    M = sol.moments.get(structure.u.block_names()[0]) if sol.moments else None
+    if M is None or not blocks:
+        return np.nan
+    B = blocks[0].b
+    n = B.shape[1]
+    deg = B.sum(axis=1)
+    i0 = np.nonzero(deg == 0)[0]
+    idx = [np.nonzero((deg == 1) & (B[:, j] == 1))[0] for j in range(n)]
+    if i0.size == 0 or any(k.size == 0 for k in idx) or not M[i0[0], i0[0]] > 0:
+        return np.nan
+    v = np.array([M[i0[0], k[0]] for k in idx]) / M[i0[0], i0[0]]
+    return float(f.evaluate(v)) if np.all(np.isfinite(v)) else np.nan
 
 
 def proven_empty(data, lb: LowerBound, problem=None, deadline=None) -> PsatzBound:

@@ -294,9 +294,9 @@ def _ball_of(A, b, c0) -> float | None:
         else None
 
 
-def constraint_box(eq, ineq, n: int) -> np.ndarray | None:
+def constraint_box(eq, ineq, n: int, partial: bool = False) -> np.ndarray | None:
     """Per-variable bounds r_i >= |v_i| on the feasible set from the constraints (module docstring, item 1), or
-    None when some variable is not bounded this way."""
+    None when some variable is not bounded this way (``partial``: inf for those variables instead)."""
     r = np.full(n, np.inf)
     lo, hi = np.full(n, -np.inf), np.full(n, np.inf)
     for p, signs in [(h, (1.0,)) for h in ineq] + [(g, (1.0, -1.0)) for g in eq]:
@@ -320,7 +320,7 @@ def constraint_box(eq, ineq, n: int) -> np.ndarray | None:
                 r[S] = np.minimum(r[S], R)
     both = np.isfinite(lo) & np.isfinite(hi)
     r = np.where(both, np.minimum(r, np.maximum(np.abs(lo), np.abs(hi))), r)
-    return r if np.all(np.isfinite(r)) else None
+    return r if partial or np.all(np.isfinite(r)) else None
 
 
 # ----------------------------------------------------------------------------- a box from a sublevel set of f

@@ -17,7 +17,9 @@ rounding bounded and absorbed, q proven positive for every v):
 * :func:`proven_empty` -- an unboundedness ray (c grows along it) is a certificate that the set is empty:
   with f's coefficients set to 0 the ray d is a certificate  q (0 - c_d) + r_d^T g - s_d^T h = b^T G_d b,  G_d the
   ray's Gram matrices, i.e. 0 >= c_d on the feasible set with c_d > 0.  It is proven the same way (the f = 0
-  instance at level c_d, lowered by m < c_d); otherwise the status is NUMERICAL_ERROR and nothing is claimed.
+  instance at level c_d, lowered by m < c_d; or, where the constraints bound every feasible point in a box, by
+  :func:`~sospoly.analysis.rigor.rigorous_psatz_bound` on it, which also charges the inexact multipliers of the
+  ray); otherwise the status is NUMERICAL_ERROR (UNPROVEN where q is not proven positive) and nothing is claimed.
   (:func:`sospoly.solvers.rays.check_unbounded_ray` measures the ray against its own terms: along a near-ray of
   min x^2 s.t. x = 1e6 the violation is ~1e-6 of them, review 26a F1.)
 """
@@ -118,6 +120,36 @@ def _box_bound(data, sol, c: float) -> tuple[float, str]:
     return rigorous_psatz_bound(data, sol, c, box).lower_bound, where
 
 
+def _ray_box_bound(zero, ray, c_d: float) -> float:
+    """The rigorous bound of a ray's certificate (the f = 0 instance at level c_d) on the box of the constraints, a
+    variable the constraints do not bound taken as 0 where the certificate does not involve it (no non-zero term,
+    Gram entry or multiplier of a constraint holding it: the identity then holds for every value of it); -inf
+    without such a box."""
+    from ..analysis.proof import constraint_box
+    from ..analysis.rigor import rigorous_psatz_bound, solution_at_level, u_terms
+
+    st = zero.structure
+    _, eq, ineq = st.slots.polynomials(zero.theta)
+    r = constraint_box(eq, ineq, len(st.gens), partial=True)
+    if not np.all(np.isfinite(r)):
+        used = np.zeros(len(st.gens), bool)
+        E, v = u_terms(st, zero.theta, solution_at_level(st, ray.x, c_d), c_d)
+        used |= np.any(E[v != 0] > 0, axis=0)
+        for name, blk in zip(st.u.block_names(), st.u.gram.blocks):
+            G = np.asarray(ray.grams[name])
+            rows = np.any(G != 0, axis=1)
+            used |= np.any(blk.b[rows] > 0, axis=0)
+        prog = st.program
+        for k, p in enumerate(tuple(eq) + tuple(ineq)):
+            name = f"r{k}" if k < len(eq) else f"s{k - len(eq)}"
+            if np.any(ray.x[prog.block(name).slice] != 0):
+                used |= np.any(p.exponents() > 0, axis=0) if p.terms else False
+        r = np.where(np.isfinite(r) | used, r, 0.0)
+    if not np.all(np.isfinite(r)):
+        return -np.inf
+    return float(rigorous_psatz_bound(zero, ray, c_d, r).lower_bound)
+
+
 def _moment_value(structure, f, sol) -> float:
     """f at the point of u's moment matrix (its degree-1 moments over the constant's), NaN without one."""
     blocks = structure.u.gram.blocks
@@ -160,10 +192,17 @@ def proven_empty(data, lb: LowerBound, problem=None, deadline=None) -> PsatzBoun
         ray = ProgramSolution(SolveStatus.OPTIMAL, c_d, d[: st.program.n_vars].copy(), grams)
         if c_d > 0:
             gb = global_psatz_bound(zero, ray, c_d, scale=0.0, deadline=deadline)
-            if np.isfinite(gb.lower_bound) and gb.lower_bound > 0:
+            if not gb.q_min > 0:
+                return PsatzBound(SolveStatus.UNPROVEN, None, sol, lb.bracket,
+                                  "every level is feasible, but the multiplier q is not proven positive: q may vanish "
+                                  "on the set, so nothing is proven")
+            proven = gb.lower_bound
+            if not proven > 0:          # the multipliers of a ray are inexact too: its box bound, where there is one
+                proven = max(proven, _ray_box_bound(zero, ray, c_d))
+            if np.isfinite(proven) and proven > 0:
                 return PsatzBound(SolveStatus.UNBOUNDED, np.inf, sol, lb.bracket,
                                   "c is unbounded: the constraint set is empty (the solver's ray proven: "
-                                  f"0 >= {gb.lower_bound:.3g} on the set)")
+                                  f"0 >= {proven:.3g} on the set)")
             why = gb.message or "the ray's certificate is not proven"
         else:
             why = f"the ray does not raise the level (c_d = {c_d:.3g})"

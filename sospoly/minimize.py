@@ -474,7 +474,7 @@ class _Run:
                     found = self._points(fixed, fixed_sol)
                     c_hi = found[0][0] if found else None
             lb = solve_psatz(psatz, backend=be, form=fm, tolerances=self.tol, c_hi=c_hi, fixed_hint=fixed_sol,
-                             deadline=self.deadline, prove=psatz.multiplier == Multiplier.FREE)   # (step 2 proves)
+                             deadline=self.deadline, prove=False)          # (step 2 proves the bound)
             self.attempts.append(SolveAttempt(degree, _name_of(mult), label, fm.value, str(be), lb.status.value,
                                               None if lb.lower_bound is None else lb.lower_bound * self.fscale,
                                               time.perf_counter() - t1, lb.message))

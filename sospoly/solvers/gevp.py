@@ -19,10 +19,13 @@ solved **and** the certificate passes :func:`sospoly.solvers.solve.check_certifi
 lowers the level by up to eps ||b(v*)||^2 / q(v*) at a minimiser v*, and the bisection climbs
 to the edge of whatever margin it is given: at (x - 1e4)^2 + y^2 the margin 1e-9 max|G| let it
 "certify" 8.39e6 for a minimum of 0 (review 26a F2).  So a step is accepted only when its
-certificate is also *proven* at level c - m by the shifted certificate of
-:func:`sospoly.analysis.proof.global_psatz_bound` (m <= 1e-7 max(max|coef f|, |c|), the Gram
+certificate is also *proven* within the gap tolerance of c by
+:func:`sospoly.solvers.psatz_claims.proven_bound` (the shifted certificate of
+:func:`sospoly.analysis.proof.global_psatz_bound`: m <= 1e-7 max(max|coef f|, |c|), the Gram
 matrices projected onto the exact identities, every rounding absorbed, q >= lambda_min(Q) > 0
-proven); the bound reported is the proven c - m of the highest accepted step.  ``prove=False``
+proven; or the rigorous bound on the constraints' or a sublevel set's box); the bound reported is
+the proven level of the highest accepted step (at most the gap tolerance below the bracket's
+lower end, the highest accepted level).  ``prove=False``
 keeps the numerical acceptance alone (for callers that prove the bound themselves).
 
 The bisection stops when ``c_hi - c_lo <= bisection_abs + bisection_rel * max(1, |c_lo|)``.
@@ -40,9 +43,8 @@ import numpy as np
 
 from ..certificates.psatz import Multiplier, PsatzProblem
 from ..lowering.conic import ConicProblem, GramForm
-from ..analysis.proof import global_psatz_bound
 from .compiled_solve import CompiledPsatz
-from .psatz_claims import as_certificate_data, data_scale
+from .psatz_claims import as_certificate_data, data_scale, proven_bound
 from .solve import ProgramSolution, check_certificate, solve_conic
 from ..status import SolveStatus
 from ..tolerances import DEFAULT_TOLERANCES, Tolerances, as_tolerances
@@ -84,7 +86,7 @@ class CompiledGevp:
         self.compiled = CompiledPsatz(psatz.structure, form)
         self.proven: dict = {}          # accepted level c -> the level proven from its certificate (c - m)
         self._data = as_certificate_data(psatz)
-        self._scale = data_scale(self._data)
+        self.scale = data_scale(self._data)
 
     def _acceptance(self, inst: ConicProblem, c: float):
         """Accept level c only if the original certificate checks out (see module docstring).
@@ -138,11 +140,12 @@ class CompiledGevp:
             if not self.prove:
                 self.proven[float(c)] = float(c)
                 return SolveStatus.FEASIBLE, ps
-            gb = global_psatz_bound(self._data, ps, float(c), scale=self._scale, deadline=self.deadline)
-            if np.isfinite(gb.lower_bound):
-                self.proven[float(c)] = float(gb.lower_bound)
+            near = self.tolerances.gap_tolerance_one(float(c), self.scale)
+            best, _, why = proven_bound(self._data, ps, float(c), self.scale, near, self.deadline)
+            if best >= float(c) - near:
+                self.proven[float(c)] = float(best)
                 return SolveStatus.FEASIBLE, ps
-            status, msg = SolveStatus.UNPROVEN, f"level {float(c):.10g} not proven: {gb.message}"
+            status, msg = SolveStatus.UNPROVEN, f"level {float(c):.10g} not proven: {why}"
         ps = ProgramSolution(status, None, None, attempts=sol.attempts, n_lmivar=prog.n_lmivar(),
                              seconds=sol.seconds, message=msg)
         return status, ps
@@ -172,10 +175,7 @@ def bisect(compiled: CompiledGevp, c_lo: float | None = None, c_hi: float | None
         return GevpResult(SolveStatus.TIME_LIMIT, lo, (lo, c_hi), tuple(steps), best,
                           "time limit reached during the bisection" + (f" (best certified level {lo:.10g})"
                                                                        if lo is not None else ""))
-    lb = res.lower_bound
-    if lb is not None and np.isfinite(lb):          # the level proven from the accepted step's certificate
-        res = GevpResult(res.status, compiled.proven.get(lb, lb), res.bracket, res.steps, res.solution, res.message)
-    return res
+    return _claimed(res, compiled, c_hi)
 
 
 class _OutOfTime(Exception):
@@ -231,15 +231,32 @@ def _bisect(c_lo, c_hi, max_search, tol, steps, test) -> GevpResult:
         else:
             hi = mid
         n += 1
-    # OPTIMAL: the upper end is f at a feasible point or a level the solver found infeasible (a Farkas certificate,
-    # or a checked answer rejected: margin t < 0 or a Gram defect); an upper end where the solver failed or the
-    # proof did not hold says nothing of c* (the lower bound stays proven)
-    end = next((s.status for s in reversed(steps) if s.c == hi), None)
-    if end in _FAILED:
-        return GevpResult(SolveStatus.INACCURATE, lo, (lo, hi), tuple(steps), best,
-                          f"the bracket's upper end {hi:.10g} is a failed step ({end.value}), not an infeasible level: "
-                          f"the bound {lo:.10g} is proven, its optimality is not")
     return GevpResult(SolveStatus.OPTIMAL, lo, (lo, hi), tuple(steps), best, "")
+
+
+def _claimed(res: GevpResult, compiled, c_hi) -> GevpResult:
+    """The result with the level proven from the accepted step's certificate (``compiled.proven``), and OPTIMAL only
+    where the upper end says so: f at a feasible point, or a level the solver found infeasible (a Farkas
+    certificate, or a checked answer rejected: margin t < 0, a Gram defect).  An upper end where the solver failed
+    or the proof did not hold says nothing of c*, so there the lowest such infeasible level (or ``c_hi``) must lie
+    within the gap tolerance of the proven bound; else INACCURATE (the bound is proven, its optimality is not)."""
+    lo = res.lower_bound
+    if lo is None or not np.isfinite(lo):
+        return res
+    proven = compiled.proven.get(lo, lo)
+    status, msg = res.status, res.message
+    hi = res.bracket[1]
+    end = next((s.status for s in reversed(res.steps) if s.c == hi), None)
+    if status == SolveStatus.OPTIMAL and end in _FAILED:
+        tops = [s.c for s in res.steps if s.status in (SolveStatus.INFEASIBLE, SolveStatus.CHECK_FAILED)]
+        top = min(tops + ([float(c_hi)] if c_hi is not None else []), default=np.inf)
+        if not top - proven <= compiled.tolerances.gap_tolerance_one(top if np.isfinite(top) else 0.0,
+                                                                      compiled.scale):
+            status = SolveStatus.INACCURATE
+            msg = (f"the bracket's upper end {hi:.10g} is a failed step ({end.value}), not an infeasible level, and "
+                   f"no infeasible level lies within the gap tolerance: the bound {proven:.10g} is proven, its "
+                   "optimality is not")
+    return GevpResult(status, proven, res.bracket, res.steps, res.solution, msg)
 
 
 #: step statuses that are failures, not evidence that the level is infeasible

@@ -33,7 +33,7 @@ import numpy as np
 from ..status import SolveStatus
 from .solve import LowerBound, ProgramSolution
 
-__all__ = ["PsatzBound", "proven_level", "proven_empty", "as_certificate_data", "data_scale"]
+__all__ = ["PsatzBound", "proven_level", "proven_bound", "proven_empty", "as_certificate_data", "data_scale"]
 
 
 @dataclass(frozen=True)
@@ -84,22 +84,36 @@ def proven_level(data, lb: LowerBound, tolerances=None, deadline=None) -> PsatzB
     tol = as_tolerances(tolerances)
     c, sol = float(lb.lower_bound), lb.solution
     scale = data_scale(data)
-    gb = global_psatz_bound(data, sol, c, scale=scale, deadline=deadline)
-    best, how = gb.lower_bound, "for every v by the shifted certificate"
     near = tol.gap_tolerance_one(c, scale)
-    if not best >= c - near:
-        rb, where = _box_bound(data, sol, c)
-        if rb > best:
-            best, how = rb, where
-    if not np.isfinite(best) and gb.q_min > 0:
+    best, how, why = proven_bound(data, sol, c, scale, near, deadline)
+    if not np.isfinite(best) and why != _Q_NOT_POSITIVE:
         best = global_psatz_bound(data, sol, c, scale=scale, margins=WEAK_MARGINS, deadline=deadline).lower_bound
+        how = "the shifted certificate at a larger margin"
     if not np.isfinite(best):
         return PsatzBound(SolveStatus.UNPROVEN, None, sol, lb.bracket,
-                          f"the solver's level {c:.10g} is not proven a lower bound: {gb.message}", relaxation=c)
+                          f"the solver's level {c:.10g} is not proven a lower bound: {why}", relaxation=c)
     if best >= c - near:
         return PsatzBound(SolveStatus.OPTIMAL, best, sol, lb.bracket, lb.message, relaxation=c)
     return PsatzBound(SolveStatus.INACCURATE, best, sol, lb.bracket,
                       f"the solver's level {c:.10g} is proven only lowered by {c - best:.3g} ({how})", relaxation=c)
+
+
+_Q_NOT_POSITIVE = "the multiplier q is not proven positive everywhere"
+
+
+def proven_bound(data, sol, c: float, scale: float, near: float, deadline=None) -> tuple[float, str, str]:
+    """(the best bound proven from the certificate ``sol`` at level c, or -inf; how; why not): the shifted
+    certificate (every v), and where it proves less than c - ``near``, the rigorous bound on a box
+    (:func:`proven_level`'s docstring)."""
+    from ..analysis.proof import global_psatz_bound
+
+    gb = global_psatz_bound(data, sol, c, scale=scale, deadline=deadline)
+    best, how = gb.lower_bound, "for every v by the shifted certificate"
+    if not best >= c - near:
+        rb, where = _box_bound(data, sol, c)          # (q's lower bound on the box, for a q not proven positive too)
+        if rb > best:
+            best, how = rb, where
+    return best, how, (gb.message if gb.q_min > 0 else _Q_NOT_POSITIVE)
 
 
 def _box_bound(data, sol, c: float) -> tuple[float, str]:

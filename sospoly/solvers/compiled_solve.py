@@ -28,7 +28,7 @@ from ..status import SolveStatus
 from ..tolerances import DEFAULT_TOLERANCES, Tolerances, as_tolerances
 from .backends import Attempt, ConicSolution, RawStatus, get_backend
 from .ipm import ipm_solve_batch, layout_of
-from .psatz_claims import as_certificate_data, proven_empty, proven_level
+from .psatz_claims import as_certificate_data, balanced_recheck, proven_empty, proven_level
 from .solve import LowerBound, lower_bound_of, solve_program
 
 __all__ = ["BatchBounds", "CompiledPsatz", "PsatzCache", "compile_psatz"]
@@ -71,14 +71,17 @@ class CompiledPsatz(LoweredPsatz):
                                 prove=prove)
 
     def solve_theta(self, theta, *, backend=None, tolerances: Tolerances = DEFAULT_TOLERANCES,
-                    problem: ConicProblem | None = None, deadline=None, prove: bool = True) -> LowerBound:
+                    problem: ConicProblem | None = None, deadline=None, prove: bool = True,
+                    recheck: bool = True) -> LowerBound:
         """One instance's :class:`~sospoly.solvers.psatz_claims.PsatzBound`: with ``prove`` (the default) its
         ``lower_bound`` is the solver's c* proven for every v (:func:`~sospoly.solvers.psatz_claims.proven_level`:
         OPTIMAL at c* - m, m <= 1e-7 of the scale; INACCURATE with a weaker proven bound; UNPROVEN with none) and
         c* is ``relaxation``; ``prove=False`` gives the numerical c* as ``lower_bound`` (status OPTIMAL meaning
         "the solver's certificate passed the a-posteriori checks", not a proof: for callers that prove the bound
         themselves, such as :func:`sospoly.minimize` and tritools' rigour stage).  "The set is empty" (UNBOUNDED)
-        is claimed only with a proven ray (:func:`~sospoly.solvers.psatz_claims.proven_empty`) in both modes."""
+        is claimed only with a proven ray (:func:`~sospoly.solvers.psatz_claims.proven_empty`) in both modes, and
+        INFEASIBLE (or an unproven ray) is re-decided on the exactly balanced program
+        (:func:`~sospoly.solvers.psatz_claims.balanced_recheck`; ``recheck=False``: not)."""
         tolerances = as_tolerances(tolerances)
         if self.structure.free:
             raise ValueError("a free-multiplier structure is solved by bisection (sospoly.solve_psatz)")
@@ -87,7 +90,13 @@ class CompiledPsatz(LoweredPsatz):
                               "constraints: f is unbounded below")
         problem = self.problem_from_theta(theta) if problem is None else problem
         sol = solve_program(self.program, backend, self.form, tolerances, problem=problem, deadline=deadline)
-        return self._claim(theta, lower_bound_of(sol, self.degree), problem, prove, tolerances, deadline)
+        lb = self._claim(theta, lower_bound_of(sol, self.degree), problem, prove, tolerances, deadline)
+        if recheck:
+            def again(ps):
+                return CompiledPsatz(ps.structure, self.form).solve_theta(
+                    ps.theta, backend=backend, tolerances=tolerances, deadline=deadline, recheck=False)
+            lb = balanced_recheck(self.structure, theta, lb, again, prove)
+        return lb
 
     def _claim(self, theta, lb: LowerBound, problem: ConicProblem, prove: bool, tolerances,
                deadline=None) -> LowerBound:
@@ -130,7 +139,9 @@ class CompiledPsatz(LoweredPsatz):
                                 float(res.dual_objective[i]), (att,)) if res.converged[i] else None
             problem = self.problem_from_theta(th[i])
             sol = solve_program(self.program, _Presolved(pre, att, fb), self.form, tolerances, problem=problem)
-            out.append(self._claim(th[i], lower_bound_of(sol, self.degree), problem, prove, tolerances))
+            lb = self._claim(th[i], lower_bound_of(sol, self.degree), problem, prove, tolerances)
+            out.append(balanced_recheck(self.structure, th[i], lb, lambda ps: CompiledPsatz(
+                ps.structure, self.form).solve_theta(ps.theta, tolerances=tolerances, recheck=False), prove))
         return out
 
     def batch_bounds(self, thetas, tolerances: Tolerances = DEFAULT_TOLERANCES) -> BatchBounds:

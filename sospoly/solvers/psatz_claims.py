@@ -20,6 +20,15 @@ rounding bounded and absorbed, q proven positive for every v):
   instance at level c_d, lowered by m < c_d; or, where the constraints bound every feasible point in a box, by
   :func:`~sospoly.analysis.rigor.rigorous_psatz_bound` on it, which also charges the inexact multipliers of the
   ray); otherwise the status is NUMERICAL_ERROR (UNPROVEN where q is not proven positive) and nothing is claimed.
+* :func:`balanced_recheck` -- "no certificate at this degree" (INFEASIBLE) rests on a Farkas certificate checked
+  against its own terms, which cannot see an ill-conditioned dual: at f = x^2 - 2e6 x (q = 1) a moment matrix with
+  L(1) ~ 0 and L(x) ~ 1e-6 violates PSD-ness by ~1e-12 and "proves" L(f) < 0, although (x - 1e6)^2 is a
+  certificate (review 26a F5).  The claim is therefore re-decided on the *same* program written in balanced
+  variables v = 2^k w (:func:`sospoly.scaling.balancing`; f, the constraints and q(2^k w) divided by powers of
+  two: every step exact, so a certificate of one is a certificate of the other): INFEASIBLE is kept only where the
+  balanced program says so too (or the data is balanced already); where the balanced program is solved, its
+  proven bound (times f's divisor) is reported with status INACCURATE and no certificate (the certificate is the
+  balanced program's), or NUMERICAL_ERROR for ``prove=False``; an unproven ray is re-decided the same way.
   (:func:`sospoly.solvers.rays.check_unbounded_ray` measures the ray against its own terms: along a near-ray of
   min x^2 s.t. x = 1e6 the violation is ~1e-6 of them, review 26a F1.)
 """
@@ -33,7 +42,8 @@ import numpy as np
 from ..status import SolveStatus
 from .solve import LowerBound, ProgramSolution
 
-__all__ = ["PsatzBound", "proven_level", "proven_bound", "proven_empty", "as_certificate_data", "data_scale"]
+__all__ = ["PsatzBound", "proven_level", "proven_bound", "proven_empty", "balanced_recheck", "as_certificate_data",
+           "data_scale"]
 
 
 @dataclass(frozen=True)
@@ -70,7 +80,9 @@ def proven_level(data, lb: LowerBound, tolerances=None, deadline=None) -> PsatzB
     sublevel set of f lies in a box, :func:`~sospoly.analysis.rigor.rigorous_psatz_bound` on that box (the box of
     the constraints, :func:`~sospoly.analysis.proof.constraint_box`; for an unconstrained f the sublevel box
     {f <= f(v^)} of :func:`~sospoly.analysis.proof.sublevel_box`, v^ the origin or the moment matrix's point,
-    every point being feasible).  The shifted certificate cannot move an equality multiplier: on the sphere
+    every point being feasible; where neither proves anything, the exact proof on a face of the PSD cone of
+    :mod:`sospoly.analysis.exact_face`, small programs only).  The shifted certificate cannot move an equality
+    multiplier: on the sphere
     min v^T Q v s.t. ||v||^2 = 1 the Gram matrix is singular along a direction the lowered level does not reach,
     and only the box proves it.  OPTIMAL when the proven bound lies within the gap tolerance of c*
     (``tolerances.gap_tolerance(c*, scale)``), INACCURATE with the weaker proven bound otherwise, UNPROVEN
@@ -89,6 +101,15 @@ def proven_level(data, lb: LowerBound, tolerances=None, deadline=None) -> PsatzB
     if not np.isfinite(best) and why != _Q_NOT_POSITIVE:
         best = global_psatz_bound(data, sol, c, scale=scale, margins=WEAK_MARGINS, deadline=deadline).lower_bound
         how = "the shifted certificate at a larger margin"
+    if not np.isfinite(best) and why != _Q_NOT_POSITIVE and not data.structure.free:
+        # every Gram matrix on a singular face of the PSD cone (Rosenbrock's): the exact proof on that face, as
+        # minimize's step 2 (small programs only)
+        from ..analysis.exact_face import face_exact_check
+        from ..analysis.proof import GLOBAL_MARGINS
+
+        fc = face_exact_check(data, sol, c, [r * max(1.0, abs(c)) for r in GLOBAL_MARGINS + WEAK_MARGINS])
+        if fc.ok:
+            best, how = fc.level, f"in exact arithmetic on a face ({fc.message})"
     if not np.isfinite(best):
         return PsatzBound(SolveStatus.UNPROVEN, None, sol, lb.bracket,
                           f"the solver's level {c:.10g} is not proven a lower bound: {why}", relaxation=c)
@@ -223,7 +244,7 @@ def proven_empty(data, lb: LowerBound, problem=None, deadline=None) -> PsatzBoun
     elif problem is not None and problem.form != GramForm.IMAGE:
         why = "rays are proven in the image form only"
     return PsatzBound(SolveStatus.NUMERICAL_ERROR, None, sol, lb.bracket,
-                      f"the solver reported an unbounded level (an empty set), not proven: {why}")
+                      f"{_RAY_FAILED} (an empty set), not proven: {why}")
 
 
 def _ray_grams(problem, d: np.ndarray) -> dict:
@@ -242,3 +263,54 @@ def _wrap(lb: LowerBound) -> PsatzBound:
         return lb
     rel = lb.lower_bound if lb.lower_bound is not None and np.isfinite(lb.lower_bound) else None
     return PsatzBound(lb.status, lb.lower_bound, lb.solution, lb.bracket, lb.message, relaxation=rel)
+
+
+def balanced_recheck(structure, theta, lb: LowerBound, solve, prove: bool) -> LowerBound:
+    """The claim INFEASIBLE (or an unproven ray, NUMERICAL_ERROR from :func:`proven_empty`) of a fixed-q solve
+    re-decided on the balanced program (module docstring).  ``solve(psatz) -> LowerBound`` solves a
+    :class:`~sospoly.certificates.psatz.PsatzProblem` (proven, no further re-check)."""
+    from ..certificates.psatz import build_psatz
+    from ..scaling import balancing, power2_normalised
+
+    ray = lb.status == SolveStatus.NUMERICAL_ERROR and lb.message.startswith(_RAY_FAILED)
+    if structure.free or not (lb.status == SolveStatus.INFEASIBLE or ray):
+        return lb
+    f, eq, ineq = structure.slots.polynomials(np.asarray(theta, float))
+    sc = balancing([f, *eq, *ineq], len(structure.gens))
+    if sc.is_identity:
+        return lb
+    fn, fs = power2_normalised(sc.polynomial(f))
+    eqn = [power2_normalised(sc.polynomial(g))[0] for g in eq]
+    ineqn = [power2_normalised(sc.polynomial(h))[0] for h in ineq]
+    qn = power2_normalised(sc.polynomial(structure.q))[0]
+    try:
+        ps = build_psatz(fn, eqn, ineqn, structure.degree, qn, structure.gens, sparsity=structure.shape)
+    except ValueError as exc:
+        return _unconfirmed(lb, f"the balanced program could not be built ({exc})")
+    other = solve(ps)
+    what = "INFEASIBLE" if lb.status == SolveStatus.INFEASIBLE else "an unbounded level (an empty set)"
+    if other.status == lb.status == SolveStatus.INFEASIBLE:
+        return _wrap(LowerBound(lb.status, None, lb.solution, lb.bracket,
+                                lb.message + " (the exactly balanced program says so too)"))
+    if other.status == SolveStatus.UNBOUNDED:          # proven by proven_empty for the balanced program
+        return PsatzBound(SolveStatus.UNBOUNDED, np.inf, None, lb.bracket, other.message + " (the exactly balanced "
+                          f"program, v = 2^k w with k = {tuple(int(t) for t in sc.k)})")
+    if other.lower_bound is not None and np.isfinite(other.lower_bound) and \
+            other.status in (SolveStatus.OPTIMAL, SolveStatus.INACCURATE):
+        c = float(other.lower_bound) * fs
+        if not prove:
+            return _unconfirmed(lb, f"the exactly balanced program has a certificate (c* = {c:.10g})")
+        rel = getattr(other, "relaxation", None)
+        return PsatzBound(SolveStatus.INACCURATE, c, None, lb.bracket,
+                          f"the solver reported {what}, contradicted by the exactly balanced program (v = 2^k w, k = "
+                          f"{tuple(int(t) for t in sc.k)}): its proven bound, times f's divisor {fs:g}; its "
+                          "certificate is the balanced program's", relaxation=None if rel is None else rel * fs)
+    return _unconfirmed(lb, f"the exactly balanced program gives {other.status.value}")
+
+
+_RAY_FAILED = "the solver reported an unbounded level"
+
+
+def _unconfirmed(lb: LowerBound, why: str) -> PsatzBound:
+    return PsatzBound(SolveStatus.NUMERICAL_ERROR, None, lb.solution, lb.bracket,
+                      f"{lb.message}; not confirmed: {why}")

@@ -41,10 +41,11 @@ class BatchBounds:
     ``ok`` is True where the batched interior-point method converged *and* the returned Gram
     matrix passes :meth:`sospoly.Tolerances.psd_accepts` (the rule of
     :func:`sospoly.solvers.solve.check_certificate`); the image form's coefficient identity holds by
-    construction.  Only there is ``lower_bound`` a certified bound; ``reason`` says why not
-    elsewhere.  ``eigenvalues`` / ``eigenvectors`` are those of ``gram`` (ascending), for
-    extraction (identity where the IPM did not converge).  ``gram_error`` bounds the rounding of
-    ``gram`` (||G_computed - G(x)||_2) for :func:`sospoly.analysis.rigor.image_form_stack_margin`: the
+    construction.  Only there is ``lower_bound`` the checked numerical c* (like ``prove=False`` of
+    :meth:`CompiledPsatz.solve_theta`: the accepted Gram defect may lift it above the minimum at large scales,
+    review 26a F5); ``reason`` says why not elsewhere.  ``eigenvalues`` / ``eigenvectors`` are those of
+    ``gram`` (ascending), for extraction (identity where the IPM did not converge).  ``gram_error`` bounds the
+    rounding of ``gram`` (||G_computed - G(x)||_2) for :func:`sospoly.analysis.rigor.image_form_stack_margin`: the
     caller, who knows a region holding a minimiser, makes ``lower_bound`` rigorous with it."""
     lower_bound: np.ndarray     # (B,)
     gram: np.ndarray            # (B, n, n)
@@ -79,9 +80,10 @@ class CompiledPsatz(LoweredPsatz):
         c* is ``relaxation``; ``prove=False`` gives the numerical c* as ``lower_bound`` (status OPTIMAL meaning
         "the solver's certificate passed the a-posteriori checks", not a proof: for callers that prove the bound
         themselves, such as :func:`sospoly.minimize` and tritools' rigour stage).  "The set is empty" (UNBOUNDED)
-        is claimed only with a proven ray (:func:`~sospoly.solvers.psatz_claims.proven_empty`) in both modes, and
-        INFEASIBLE (or an unproven ray) is re-decided on the exactly balanced program
-        (:func:`~sospoly.solvers.psatz_claims.balanced_recheck`; ``recheck=False``: not)."""
+        is claimed only with a proven ray (:func:`~sospoly.solvers.psatz_claims.proven_empty`) in both modes;
+        with ``prove`` (and ``recheck``), INFEASIBLE (or an unproven ray) is re-decided on the exactly balanced
+        program (:func:`~sospoly.solvers.psatz_claims.balanced_recheck`).  With ``prove=False`` no further solve is
+        made: the solver's checked INFEASIBLE is the caller's to judge (minimize solves balanced data already)."""
         tolerances = as_tolerances(tolerances)
         if self.structure.free:
             raise ValueError("a free-multiplier structure is solved by bisection (sospoly.solve_psatz)")
@@ -91,7 +93,7 @@ class CompiledPsatz(LoweredPsatz):
         problem = self.problem_from_theta(theta) if problem is None else problem
         sol = solve_program(self.program, backend, self.form, tolerances, problem=problem, deadline=deadline)
         lb = self._claim(theta, lower_bound_of(sol, self.degree), problem, prove, tolerances, deadline)
-        if recheck:
+        if recheck and prove:
             def again(ps):
                 return CompiledPsatz(ps.structure, self.form).solve_theta(
                     ps.theta, backend=backend, tolerances=tolerances, deadline=deadline, recheck=False)
@@ -141,7 +143,8 @@ class CompiledPsatz(LoweredPsatz):
             sol = solve_program(self.program, _Presolved(pre, att, fb), self.form, tolerances, problem=problem)
             lb = self._claim(th[i], lower_bound_of(sol, self.degree), problem, prove, tolerances)
             out.append(balanced_recheck(self.structure, th[i], lb, lambda ps: CompiledPsatz(
-                ps.structure, self.form).solve_theta(ps.theta, tolerances=tolerances, recheck=False), prove))
+                ps.structure, self.form).solve_theta(ps.theta, tolerances=tolerances, recheck=False), True)
+                       if prove else lb)
         return out
 
     def batch_bounds(self, thetas, tolerances: Tolerances = DEFAULT_TOLERANCES) -> BatchBounds:

@@ -28,7 +28,8 @@ rounding bounded and absorbed, q proven positive for every v):
   two: every step exact, so a certificate of one is a certificate of the other): INFEASIBLE is kept only where the
   balanced program says so too (or the data is balanced already); where the balanced program is solved, its
   proven bound (times f's divisor) is reported with status INACCURATE and no certificate (the certificate is the
-  balanced program's), or NUMERICAL_ERROR for ``prove=False``; an unproven ray is re-decided the same way.
+  balanced program's); an unproven ray is re-decided the same way.  (With ``prove=False`` the solves make no
+  further solve: the caller, who proves its own bounds, judges the solver's checked INFEASIBLE.)
   (:func:`sospoly.solvers.rays.check_unbounded_ray` measures the ray against its own terms: along a near-ray of
   min x^2 s.t. x = 1e6 the violation is ~1e-6 of them, review 26a F1.)
 """

@@ -83,11 +83,10 @@ def proven_level(data, lb: LowerBound, tolerances=None, deadline=None) -> PsatzB
     {f <= f(v^)} of :func:`~sospoly.analysis.proof.sublevel_box`, v^ the origin or the moment matrix's point,
     every point being feasible; where neither proves anything, the exact proof on a face of the PSD cone of
     :mod:`sospoly.analysis.exact_face`, small programs only).  The shifted certificate cannot move an equality
-    multiplier: on the sphere
-    min v^T Q v s.t. ||v||^2 = 1 the Gram matrix is singular along a direction the lowered level does not reach,
-    and only the box proves it.  OPTIMAL when the proven bound lies within the gap tolerance of c*
-    (``tolerances.gap_tolerance(c*, scale)``), INACCURATE with the weaker proven bound otherwise, UNPROVEN
-    without one."""
+    multiplier: on the sphere, min v^T Q v s.t. ||v||^2 = 1, the Gram matrix is singular along a direction the
+    lowered level does not reach, and only the box proves it.  OPTIMAL when the proven bound lies within the gap
+    tolerance of c* (``tolerances.gap_tolerance(c*, scale)``), INACCURATE with the weaker proven bound otherwise,
+    UNPROVEN without one."""
     from ..analysis.proof import WEAK_MARGINS, global_psatz_bound
     from ..tolerances import as_tolerances
 

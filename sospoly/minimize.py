@@ -460,21 +460,21 @@ class _Run:
             self.attempts.append(SolveAttempt(degree, _name_of(mult), label, "-", "-", "budget_exceeded", None, 0.0,
                                               str(exc)))
             return self._empty(SolveStatus.BUDGET_EXCEEDED, degree, mult, label, str(exc))
-        fixed_sol = c_hi = None
+        fixed_sol = c_hi = lb = None
         found = []
-        lb = None
         n_before = len(self.attempts)
         for fm, be in _retry_chain(form, backend, len(psatz.shape.u_bases)):
             t1 = time.perf_counter()
             if psatz.multiplier == Multiplier.FREE and fixed_sol is None:
                 fixed = build_psatz(self.fn, self.eqn, self.ineqn, degree, Multiplier.FIXED, self.gens)
-                lb_fixed = solve_psatz(fixed, backend=be, form=fm, tolerances=self.tol, deadline=self.deadline)
+                lb_fixed = solve_psatz(fixed, backend=be, form=fm, tolerances=self.tol, deadline=self.deadline,
+                                       prove=False)
                 fixed_sol = lb_fixed.solution
                 if lb_fixed.status == SolveStatus.OPTIMAL:
                     found = self._points(fixed, fixed_sol)
                     c_hi = found[0][0] if found else None
             lb = solve_psatz(psatz, backend=be, form=fm, tolerances=self.tol, c_hi=c_hi, fixed_hint=fixed_sol,
-                             deadline=self.deadline)
+                             deadline=self.deadline, prove=False)          # (step 2 proves the bound)
             self.attempts.append(SolveAttempt(degree, _name_of(mult), label, fm.value, str(be), lb.status.value,
                                               None if lb.lower_bound is None else lb.lower_bound * self.fscale,
                                               time.perf_counter() - t1, lb.message))
@@ -493,7 +493,7 @@ class _Run:
 
         fm, be = _retry_chain(form, backend, len(psatz.shape.u_bases))[0]
         tol = dataclasses.replace(self.tol, accept_inaccurate=True)
-        lb = solve_psatz(psatz, backend=be, form=fm, tolerances=tol, deadline=self.deadline)
+        lb = solve_psatz(psatz, backend=be, form=fm, tolerances=tol, deadline=self.deadline, prove=False)
         sol = lb.solution
         if lb.status != SolveStatus.INACCURATE or sol is None or sol.objective is None or not sol.grams:
             return None

@@ -17,8 +17,8 @@ turn it into a bound valid in floating point:
    the exact identities (each monomial's residual spread evenly over its Gram entries -- Peyrl & Parrilo's
    projection, in floating point).  The residual e2 left by rounding is bounded and absorbed, monomial by
    monomial, into the diagonal: for v^m = b_i b_j, |e2_m v^m| <= |e2_m| (b_i^2 + b_j^2) / 2, so
-   u' >= sum_j b_j^T (G2_j - D_j) b_j, and u' >= 0 everywhere once every lambda_min(G2_j) minus its
-   eigenvalue error bound is >= max D_j.  Then, on the feasible set, q (f - c') >= 0, and f >= c' where
+   u' >= sum_j b_j^T (G2_j - D_j) b_j, and u' >= 0 everywhere once every lambda_min(G2_j - D_j) minus its
+   eigenvalue error bound is >= 0.  Then, on the feasible set, q (f - c') >= 0, and f >= c' where
    q > 0: :func:`q_lower_bound` proves q >= q_min > 0 for every v (a constant; q = 1 + terms that are even
    powers with positive coefficients, e.g. (1 + ||v||^2)^k; or a free SOS q whose Gram basis holds 1:
    q >= lambda_min(Q)).  A multiplier not proven positive proves nothing (q vanishing on the set makes every
@@ -249,9 +249,14 @@ def _absorbed_psd(gb, G2: np.ndarray, bound: np.ndarray, alive: np.ndarray) -> b
         rows[blk.pair_i[a]] = True
         if not rows.any():
             continue
-        lam = np.linalg.eigvalsh(M[np.ix_(rows, rows)])
-        err = 8 * s * _EPS * max(float(np.abs(lam).max()), 1e-300)
-        if float(lam[0]) - err < float(D[j][rows].max(initial=0.0)):
+        # G2 - diag(D) PSD (not lambda_min(G2) >= max D: a large D on one row -- the rounding of a constant term
+        # of ~1e8 -- would then have to fit under the smallest eigenvalue of another direction, review 26a F1);
+        # err bounds the eigenvalue computation and the rounding of the subtraction on the diagonal
+        Mr = M[np.ix_(rows, rows)]
+        d = D[j][rows]
+        lam = np.linalg.eigvalsh(Mr - np.diag(d))
+        err = 8 * s * _EPS * max(float(np.abs(lam).max()), 1e-300) + 2 * _EPS * float(np.max(np.abs(np.diag(Mr)) + d))
+        if float(lam[0]) - err < 0.0:
             return False
     return True
 
@@ -289,9 +294,9 @@ def _ball_of(A, b, c0) -> float | None:
         else None
 
 
-def constraint_box(eq, ineq, n: int) -> np.ndarray | None:
+def constraint_box(eq, ineq, n: int, partial: bool = False) -> np.ndarray | None:
     """Per-variable bounds r_i >= |v_i| on the feasible set from the constraints (module docstring, item 1), or
-    None when some variable is not bounded this way."""
+    None when some variable is not bounded this way (``partial``: inf for those variables instead)."""
     r = np.full(n, np.inf)
     lo, hi = np.full(n, -np.inf), np.full(n, np.inf)
     for p, signs in [(h, (1.0,)) for h in ineq] + [(g, (1.0, -1.0)) for g in eq]:
@@ -315,7 +320,7 @@ def constraint_box(eq, ineq, n: int) -> np.ndarray | None:
                 r[S] = np.minimum(r[S], R)
     both = np.isfinite(lo) & np.isfinite(hi)
     r = np.where(both, np.minimum(r, np.maximum(np.abs(lo), np.abs(hi))), r)
-    return r if np.all(np.isfinite(r)) else None
+    return r if partial or np.all(np.isfinite(r)) else None
 
 
 # ----------------------------------------------------------------------------- a box from a sublevel set of f

@@ -318,12 +318,18 @@ def exact_check(psatz, sol, c: float, margin: float | None = None) -> ExactCheck
     rows the identity forces to zero are removed; for t in ``margin * EXACT_SHIFTS`` the Gram matrices
     G + t I are projected onto the affine space of exact identities and tested by exact LDL^T (see the
     module docstring).  ``ok`` is True when some t gives PSD matrices: a proof, whatever the t.  ``level``
-    is then c - margin rounded down to a float.  Fixed multipliers only; ``margin`` defaults to
-    1e-7 max(1, |c|).  Cost grows like the cube of the Gram side with rational arithmetic: meant for
+    is then c - margin rounded down to a float.  Fixed multipliers only, and only a q proven positive for every v
+    (:func:`sospoly.analysis.proof.q_lower_bound`; q = (y - 1)^2 on {y = 1} would prove any level); ``margin``
+    defaults to 1e-7 max(1, |c|).  Cost grows like the cube of the Gram side with rational arithmetic: meant for
     small programs."""
     structure = psatz.structure
     if structure.free:
         return ExactCheck(False, float(c), "exact checks are implemented for fixed multipliers")
+    from .proof import q_lower_bound
+
+    if not q_lower_bound(structure, sol) > 0:       # q (f - c) >= 0 proves f >= c only where q > 0 (review 26a F3)
+        return ExactCheck(False, float(c), "the multiplier q is not proven positive everywhere (a positive constant "
+                                           "plus even powers with positive coefficients): nothing is proven")
     margin = 1e-7 * max(1.0, abs(c)) if margin is None else float(margin)
     if not (np.isfinite(c) and np.isfinite(margin) and margin >= 0):
         return ExactCheck(False, float(c), "c and margin must be finite, margin >= 0")

@@ -49,6 +49,7 @@ from ..algebra.linpoly import LinPoly
 from ..algebra.polynomial import Polynomial, as_polynomial
 from ..budget import BudgetExceeded, check_deadline, check_time_left
 from .program import SOSConstraint, SOSProgram
+from .q_check import check_q_not_evidently_negative
 from .shape import CertificateShape, correlative_shape, dense_shape, newton_shape
 from .term_hierarchy import parse_term_kind, term_level_shape
 from .reduction import reduce_shape
@@ -202,6 +203,7 @@ def _fixed_q(multiplier, gens, degree: int, f: Polynomial, dense: bool) -> Polyn
     if q.is_zero or (q.degree == 0 and q.coefficient((0,) * len(gens)) <= 0):
         raise ValueError("a fixed multiplier q must be SOS and not identically zero (a positive number "
                          "or an SOS polynomial)")
+    check_q_not_evidently_negative(q)
     if q.degree + max(f.degree, 0) > degree:
         raise ValueError(f"deg q + deg f = {q.degree + f.degree} exceeds degree {degree}")
     return q

@@ -28,6 +28,7 @@ from ..status import SolveStatus
 from ..tolerances import DEFAULT_TOLERANCES, Tolerances, as_tolerances
 from .backends import Attempt, ConicSolution, RawStatus, get_backend
 from .ipm import ipm_solve_batch, layout_of
+from .psatz_claims import as_certificate_data, balanced_recheck, proven_empty, proven_level
 from .solve import LowerBound, lower_bound_of, solve_program
 
 __all__ = ["BatchBounds", "CompiledPsatz", "PsatzCache", "compile_psatz"]
@@ -40,10 +41,11 @@ class BatchBounds:
     ``ok`` is True where the batched interior-point method converged *and* the returned Gram
     matrix passes :meth:`sospoly.Tolerances.psd_accepts` (the rule of
     :func:`sospoly.solvers.solve.check_certificate`); the image form's coefficient identity holds by
-    construction.  Only there is ``lower_bound`` a certified bound; ``reason`` says why not
-    elsewhere.  ``eigenvalues`` / ``eigenvectors`` are those of ``gram`` (ascending), for
-    extraction (identity where the IPM did not converge).  ``gram_error`` bounds the rounding of
-    ``gram`` (||G_computed - G(x)||_2) for :func:`sospoly.analysis.rigor.image_form_stack_margin`: the
+    construction.  Only there is ``lower_bound`` the checked numerical c* (like ``prove=False`` of
+    :meth:`CompiledPsatz.solve_theta`: the accepted Gram defect may lift it above the minimum at large scales,
+    review 26a F5); ``reason`` says why not elsewhere.  ``eigenvalues`` / ``eigenvectors`` are those of
+    ``gram`` (ascending), for extraction (identity where the IPM did not converge).  ``gram_error`` bounds the
+    rounding of ``gram`` (||G_computed - G(x)||_2) for :func:`sospoly.analysis.rigor.image_form_stack_margin`: the
     caller, who knows a region holding a minimiser, makes ``lower_bound`` rigorous with it."""
     lower_bound: np.ndarray     # (B,)
     gram: np.ndarray            # (B, n, n)
@@ -64,12 +66,24 @@ class CompiledPsatz(LoweredPsatz):
         return not s.n_eq and not s.n_ineq and s.degrees[0] > 0 and s.degrees[0] % 2 == 1     # (f = 0: degree -1)
 
     def solve(self, f, eq=(), ineq=(), *, backend=None, tolerances: Tolerances = DEFAULT_TOLERANCES,
-              deadline=None) -> LowerBound:
+              deadline=None, prove: bool = True) -> LowerBound:
         """c* of one instance: :func:`sospoly.solve_psatz`'s answer for the fixed multiplier."""
-        return self.solve_theta(self.theta(f, eq, ineq), backend=backend, tolerances=tolerances, deadline=deadline)
+        return self.solve_theta(self.theta(f, eq, ineq), backend=backend, tolerances=tolerances, deadline=deadline,
+                                prove=prove)
 
     def solve_theta(self, theta, *, backend=None, tolerances: Tolerances = DEFAULT_TOLERANCES,
-                    problem: ConicProblem | None = None, deadline=None) -> LowerBound:
+                    problem: ConicProblem | None = None, deadline=None, prove: bool = True,
+                    recheck: bool = True) -> LowerBound:
+        """One instance's :class:`~sospoly.solvers.psatz_claims.PsatzBound`: with ``prove`` (the default) its
+        ``lower_bound`` is the solver's c* proven for every v (:func:`~sospoly.solvers.psatz_claims.proven_level`:
+        OPTIMAL at c* - m, m <= 1e-7 of the scale; INACCURATE with a weaker proven bound; UNPROVEN with none) and
+        c* is ``relaxation``; ``prove=False`` gives the numerical c* as ``lower_bound`` (status OPTIMAL meaning
+        "the solver's certificate passed the a-posteriori checks", not a proof: for callers that prove the bound
+        themselves, such as :func:`sospoly.minimize` and tritools' rigour stage).  "The set is empty" (UNBOUNDED)
+        is claimed only with a proven ray (:func:`~sospoly.solvers.psatz_claims.proven_empty`) in both modes;
+        with ``prove`` (and ``recheck``), INFEASIBLE (or an unproven ray) is re-decided on the exactly balanced
+        program (:func:`~sospoly.solvers.psatz_claims.balanced_recheck`).  With ``prove=False`` no further solve is
+        made: the solver's checked INFEASIBLE is the caller's to judge (minimize solves balanced data already)."""
         tolerances = as_tolerances(tolerances)
         if self.structure.free:
             raise ValueError("a free-multiplier structure is solved by bisection (sospoly.solve_psatz)")
@@ -78,17 +92,33 @@ class CompiledPsatz(LoweredPsatz):
                               "constraints: f is unbounded below")
         problem = self.problem_from_theta(theta) if problem is None else problem
         sol = solve_program(self.program, backend, self.form, tolerances, problem=problem, deadline=deadline)
-        return lower_bound_of(sol, self.degree)
+        lb = self._claim(theta, lower_bound_of(sol, self.degree), problem, prove, tolerances, deadline)
+        if recheck and prove:
+            def again(ps):
+                return CompiledPsatz(ps.structure, self.form).solve_theta(
+                    ps.theta, backend=backend, tolerances=tolerances, deadline=deadline, recheck=False)
+            lb = balanced_recheck(self.structure, theta, lb, again, prove)
+        return lb
+
+    def _claim(self, theta, lb: LowerBound, problem: ConicProblem, prove: bool, tolerances,
+               deadline=None) -> LowerBound:
+        """The claims of :meth:`solve_theta` (:mod:`sospoly.solvers.psatz_claims`)."""
+        if lb.status not in (SolveStatus.OPTIMAL, SolveStatus.UNBOUNDED):
+            return lb
+        data = as_certificate_data(None, self.structure, np.asarray(theta, float).reshape(-1))
+        if lb.status == SolveStatus.UNBOUNDED:
+            return proven_empty(data, lb, problem, deadline)
+        return proven_level(data, lb, tolerances, deadline) if prove else lb
 
     def solve_batch(self, instances=None, *, thetas=None, fallback=None,
-                    tolerances: Tolerances = DEFAULT_TOLERANCES) -> list[LowerBound]:
+                    tolerances: Tolerances = DEFAULT_TOLERANCES, prove: bool = True) -> list[LowerBound]:
         """Solve many instances together with the batched interior-point method.
 
         ``instances``: (f, eq, ineq) triples, or ``thetas`` (B, n_theta) directly.  Each
         instance's answer passes the same a-posteriori checks as a single solve; an
         instance the batch did not converge on, or whose certificate fails the checks,
         is re-solved by ``fallback`` (default Clarabel) and its ``solution.attempts``
-        record both.
+        record both.  ``prove``: the claims of :meth:`solve_theta`.
         """
         tolerances = as_tolerances(tolerances)
         if thetas is None:
@@ -97,7 +127,7 @@ class CompiledPsatz(LoweredPsatz):
         if th.shape[0] == 0:
             return []
         if self._trivially_unbounded():
-            return [self.solve_theta(t, tolerances=tolerances) for t in th]
+            return [self.solve_theta(t, tolerances=tolerances, prove=prove) for t in th]
         t0 = time.perf_counter()
         A, b = self.dense_batch(th)
         res = ipm_solve_batch(A, b, self._template.q, self._template.cones, tolerances)
@@ -111,7 +141,10 @@ class CompiledPsatz(LoweredPsatz):
                                 float(res.dual_objective[i]), (att,)) if res.converged[i] else None
             problem = self.problem_from_theta(th[i])
             sol = solve_program(self.program, _Presolved(pre, att, fb), self.form, tolerances, problem=problem)
-            out.append(lower_bound_of(sol, self.degree))
+            lb = self._claim(th[i], lower_bound_of(sol, self.degree), problem, prove, tolerances)
+            out.append(balanced_recheck(self.structure, th[i], lb, lambda ps: CompiledPsatz(
+                ps.structure, self.form).solve_theta(ps.theta, tolerances=tolerances, recheck=False), True)
+                       if prove else lb)
         return out
 
     def batch_bounds(self, thetas, tolerances: Tolerances = DEFAULT_TOLERANCES) -> BatchBounds:

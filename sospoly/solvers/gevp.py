@@ -13,9 +13,27 @@ found by doubling.  A level c is accepted as feasible only when the solver says
 solved **and** the certificate passes :func:`sospoly.solvers.solve.check_certificate`
 (Gram eigenvalues and equality residuals with the margins of
 :class:`~sospoly.tolerances.Tolerances`): near-degenerate q lets solvers report
-"solved" for infeasible c.  The bisection stops when
-``c_hi - c_lo <= bisection_abs + bisection_rel * max(1, |c_lo|)``; the lower bound
-reported is ``c_lo``, the last level with a checked certificate.
+"solved" for infeasible c.
+
+**Proven steps** (``prove=True``, the default).  A Gram defect eps accepted by any margin
+lowers the level by up to eps ||b(v*)||^2 / q(v*) at a minimiser v*, and the bisection climbs
+to the edge of whatever margin it is given: at (x - 1e4)^2 + y^2 the margin 1e-9 max|G| let it
+"certify" 8.39e6 for a minimum of 0 (review 26a F2).  So a step is accepted only when its
+certificate is also *proven* within the gap tolerance of c by
+:func:`sospoly.solvers.psatz_claims.proven_bound` (the shifted certificate of
+:func:`sospoly.analysis.proof.global_psatz_bound`: m <= 1e-7 max(max|coef f|, |c|), the Gram
+matrices projected onto the exact identities, every rounding absorbed, q >= lambda_min(Q) > 0
+proven; or the rigorous bound on the constraints' or a sublevel set's box); the bound reported is
+the proven level of the highest accepted step (at most the gap tolerance below the bracket's
+lower end, the highest accepted level).  ``prove=False``
+keeps the numerical acceptance alone (for callers that prove the bound themselves).
+
+The bisection stops when ``c_hi - c_lo <= bisection_abs + bisection_rel * max(1, |c_lo|)``.
+A step that fails (a solver failure, a failed check or proof) is treated as an upper end,
+which keeps the lower bound valid; but when *no* level was accepted, INFEASIBLE ("no
+certificate at this degree") is reported only when every tested level was proven infeasible
+by a checked Farkas certificate, NUMERICAL_ERROR otherwise (review 26a F7: 40 solver failures
+on x^2 + 1e12 were reported as infeasibility).
 """
 from __future__ import annotations
 
@@ -26,6 +44,7 @@ import numpy as np
 from ..certificates.psatz import Multiplier, PsatzProblem
 from ..lowering.conic import ConicProblem, GramForm
 from .compiled_solve import CompiledPsatz
+from .psatz_claims import as_certificate_data, data_scale, proven_bound
 from .solve import ProgramSolution, check_certificate, solve_conic
 from ..status import SolveStatus
 from ..tolerances import DEFAULT_TOLERANCES, Tolerances, as_tolerances
@@ -56,14 +75,18 @@ class CompiledGevp:
     ``feasible(c)`` solves one LMI."""
 
     def __init__(self, psatz: PsatzProblem, backend=None, form: GramForm = GramForm.IMAGE,
-                 tolerances: Tolerances = DEFAULT_TOLERANCES, deadline=None):
+                 tolerances: Tolerances = DEFAULT_TOLERANCES, deadline=None, prove: bool = True):
         if psatz.multiplier != Multiplier.FREE:
             raise ValueError("CompiledGevp needs a Psatz problem built with multiplier='free'")
         self.psatz = psatz
         self.backend = backend
         self.tolerances = as_tolerances(tolerances)
         self.deadline = deadline
+        self.prove = bool(prove)
         self.compiled = CompiledPsatz(psatz.structure, form)
+        self.proven: dict = {}          # accepted level c -> the level proven from its certificate (c - m)
+        self._data = as_certificate_data(psatz)
+        self.scale = data_scale(self._data)
 
     def _acceptance(self, inst: ConicProblem, c: float):
         """Accept level c only if the original certificate checks out (see module docstring).
@@ -114,7 +137,15 @@ class CompiledGevp:
             ps = ProgramSolution(SolveStatus.FEASIBLE, float(c), x[: prog.n_vars].copy(), inst.gram_matrices(x),
                                  inst.dual_matrices(sol.z[:-1]), check.mins, check.resid, sol.attempts,
                                  prog.n_lmivar(), sol.seconds, msg)
-            return SolveStatus.FEASIBLE, ps
+            if not self.prove:
+                self.proven[float(c)] = float(c)
+                return SolveStatus.FEASIBLE, ps
+            near = self.tolerances.gap_tolerance_one(float(c), self.scale)
+            best, _, why = proven_bound(self._data, ps, float(c), self.scale, near, self.deadline)
+            if best >= float(c) - near:
+                self.proven[float(c)] = float(best)
+                return SolveStatus.FEASIBLE, ps
+            status, msg = SolveStatus.UNPROVEN, f"level {float(c):.10g} not proven: {why}"
         ps = ProgramSolution(status, None, None, attempts=sol.attempts, n_lmivar=prog.n_lmivar(),
                              seconds=sol.seconds, message=msg)
         return status, ps
@@ -137,12 +168,14 @@ def bisect(compiled: CompiledGevp, c_lo: float | None = None, c_hi: float | None
         return st.ok, ps
 
     try:
-        return _bisect(c_lo, c_hi, max_search, tol, steps, test)
+        res = _bisect(c_lo, c_hi, max_search, tol, steps, test)
     except _OutOfTime:
         lo, best = found
+        lo = None if lo is None else compiled.proven.get(lo, lo)
         return GevpResult(SolveStatus.TIME_LIMIT, lo, (lo, c_hi), tuple(steps), best,
                           "time limit reached during the bisection" + (f" (best certified level {lo:.10g})"
                                                                        if lo is not None else ""))
+    return _claimed(res, compiled, c_hi)
 
 
 class _OutOfTime(Exception):
@@ -163,8 +196,14 @@ def _bisect(c_lo, c_hi, max_search, tol, steps, test) -> GevpResult:
             lo, best = c, ps
             break
     if lo is None:
-        return GevpResult(SolveStatus.INFEASIBLE, None, (None, c_hi), tuple(steps), None,
-                          "no feasible level c found: no certificate at this degree")
+        if steps and all(s.status == SolveStatus.INFEASIBLE for s in steps):
+            return GevpResult(SolveStatus.INFEASIBLE, None, (None, c_hi), tuple(steps), None,
+                              f"every tested level down to {steps[-1].c:.6g} is infeasible (checked Farkas "
+                              "certificates): no certificate at this degree")
+        failed = sorted({s.status.value for s in steps if s.status != SolveStatus.INFEASIBLE})
+        return GevpResult(SolveStatus.NUMERICAL_ERROR, None, (None, c_hi), tuple(steps), None,
+                          f"no level c was certified, and {sum(s.status != SolveStatus.INFEASIBLE for s in steps)} of "
+                          f"{len(steps)} steps failed numerically ({', '.join(failed)}): not a proof of infeasibility")
     # ---- an upper end
     if c_hi is None or c_hi <= lo:
         hi = None
@@ -177,9 +216,9 @@ def _bisect(c_lo, c_hi, max_search, tol, steps, test) -> GevpResult:
             else:
                 hi = c
                 break
-        if hi is None:
-            return GevpResult(SolveStatus.UNBOUNDED, np.inf, (lo, np.inf), tuple(steps), best,
-                              "every tested level is certified: the constraint set may be empty")
+        if hi is None:      # (a finite proven level, not inf: an empty set is not proven by finitely many levels)
+            return GevpResult(SolveStatus.UNBOUNDED, lo, (lo, np.inf), tuple(steps), best,
+                              f"every tested level up to {lo:.6g} is certified: the constraint set may be empty")
     else:
         hi = float(c_hi)
     # ---- bisection
@@ -193,3 +232,32 @@ def _bisect(c_lo, c_hi, max_search, tol, steps, test) -> GevpResult:
             hi = mid
         n += 1
     return GevpResult(SolveStatus.OPTIMAL, lo, (lo, hi), tuple(steps), best, "")
+
+
+def _claimed(res: GevpResult, compiled, c_hi) -> GevpResult:
+    """The result with the level proven from the accepted step's certificate (``compiled.proven``), and OPTIMAL only
+    where the upper end says so: f at a feasible point, or a level the solver found infeasible (a Farkas
+    certificate, or a checked answer rejected: margin t < 0, a Gram defect).  An upper end where the solver failed
+    or the proof did not hold says nothing of c*, so there the lowest such infeasible level (or ``c_hi``) must lie
+    within the gap tolerance of the proven bound; else INACCURATE (the bound is proven, its optimality is not)."""
+    lo = res.lower_bound
+    if lo is None or not np.isfinite(lo):
+        return res
+    proven = compiled.proven.get(lo, lo)
+    status, msg = res.status, res.message
+    hi = res.bracket[1]
+    end = next((s.status for s in reversed(res.steps) if s.c == hi), None)
+    if status == SolveStatus.OPTIMAL and end in _FAILED:
+        tops = [s.c for s in res.steps if s.status in (SolveStatus.INFEASIBLE, SolveStatus.CHECK_FAILED)]
+        top = min(tops + ([float(c_hi)] if c_hi is not None else []), default=np.inf)
+        if not top - proven <= compiled.tolerances.gap_tolerance_one(top if np.isfinite(top) else 0.0,
+                                                                      compiled.scale):
+            status = SolveStatus.INACCURATE
+            msg = (f"the bracket's upper end {hi:.10g} is a failed step ({end.value}), not an infeasible level, and "
+                   f"no infeasible level lies within the gap tolerance: the bound {proven:.10g} is proven, its "
+                   "optimality is not")
+    return GevpResult(status, proven, res.bracket, res.steps, res.solution, msg)
+
+
+#: step statuses that are failures, not evidence that the level is infeasible
+_FAILED = (SolveStatus.UNPROVEN, SolveStatus.NUMERICAL_ERROR, SolveStatus.INACCURATE, SolveStatus.NOT_SOLVED)

@@ -153,7 +153,9 @@ def solve_psatz(ctx: PointContext, psatz, tol, chain: tuple | None = None, tried
     elif tried and s.auto_backend:
         backend = AutoBackend(tol, skip=tuple(t.split(":")[0] for t in tried))
     with level_scope(level):
-        return sospoly.solve_psatz(psatz, backend=backend, form=s.form, tolerances=tol, deadline=s.deadline)
+        # prove=False: the numerical c* (checked a posteriori), which the rigour stage proves on its own box
+        return sospoly.solve_psatz(psatz, backend=backend, form=s.form, tolerances=tol, deadline=s.deadline,
+                                   prove=False)
 
 
 def _chain(ctx: PointContext, step: Step) -> tuple | None:

@@ -265,10 +265,12 @@ class ConicResult:
 
 def solve_conic_problem(problem: ConicProblem, backend=None, tolerances=None) -> ConicResult:
     """Solve a lowered (or read: SDPA, CBF) conic problem with ``backend`` (default Clarabel) and check the
-    answer a posteriori (:func:`solve_conic`; ``optimal`` also needs x feasible at each cone's own scale and the dual
-    to prove it optimal, :func:`~sospoly.solvers.rays.check_primal_point` and
-    :func:`~sospoly.solvers.rays.check_dual_certificate`, else ``inaccurate``); a :class:`ConicResult` with the
-    caller's objective ``objective_sign * q^T x + objective_offset``."""
+    answer a posteriori (:func:`solve_conic`; ``optimal`` also needs x feasible at each cone's own scale,
+    :func:`~sospoly.solvers.rays.check_primal_point`, and the primal-dual pair to prove the objective at the
+    objective's own scale, :func:`~sospoly.solvers.optimality.check_optimality` -- the rule of
+    :func:`solve_program` too --, else ``inaccurate``, with the objective only while the primal's cone violation
+    leaves it a value of the program); a :class:`ConicResult` with the caller's objective
+    ``objective_sign * q^T x + objective_offset``."""
     if problem.params:
         raise ValueError("solve: instantiate the problem's parameters first (ConicProblem.instantiate)")
     tolerances = as_tolerances(tolerances or DEFAULT_TOLERANCES)
@@ -306,7 +308,12 @@ def _optimality_verdict(problem: ConicProblem, sol: ConicSolution, status: Solve
 def solve_program(program: SOSProgram, backend=None, form: GramForm = GramForm.IMAGE,
                   tolerances: Tolerances = DEFAULT_TOLERANCES, problem: ConicProblem | None = None,
                   deadline: Deadline | None = None) -> ProgramSolution:
-    """Lower (unless ``problem`` is given), solve and check ``program``."""
+    """Lower (unless ``problem`` is given), solve and check ``program``: ``optimal`` when the certificate passes
+    :func:`check_certificate` and the primal-dual pair proves the objective at the objective's own scale
+    (:func:`~sospoly.solvers.optimality.check_optimality`, the rule of :func:`solve_conic_problem`); otherwise
+    ``inaccurate``, with the objective, x and Gram matrices of the checked point when only the dual fails to prove
+    it (or with ``Tolerances.accept_inaccurate``), without them when the point's cone violation moves the objective
+    beyond the tolerance."""
     tolerances = as_tolerances(tolerances)
     if problem is None:
         problem = lower(program, form)

@@ -131,14 +131,15 @@ def test_convex_factor_matches_numpy(seed):
 
 
 # ---------------------------------------------------------------- F8: per-block PSD margins
-def test_mixed_scale_block_no_false_claim():
+@pytest.mark.parametrize("form", [sp.GramForm.IMAGE, sp.GramForm.KERNEL])
+def test_mixed_scale_block_no_false_claim(form):
     (x,) = sp.variables("x")
     prog = sp.SOSProgram(("x",))
     c1, c2 = prog.scalar("c1"), prog.scalar("c2")
     prog.add_sos(1e-10 * (x**4 - 3 * x**2 + 1) - c1, name="tiny")
     prog.add_sos(x**2 + 1 - c2, name="big")
     prog.maximize(c1 + c2)
-    s = sp.solve_program(prog)
+    s = sp.solve_program(prog, form=form)
     true_c1 = 1e-10 * _quartic_min(1, 3, 1)
     if s.status == SolveStatus.OPTIMAL:
         v1 = float(s.x[prog.block("c1").slice][0])

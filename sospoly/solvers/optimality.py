@@ -21,13 +21,16 @@ from both sides:
   ``E_d = sum_k delta_k tr(S_k) + |r|^T |x|`` (delta_k: z's violation of cone k; the residual r weighed by x's
   own magnitude, the proxy for the unknown optimal x*).
 
-The pair is optimal when ``|p - d| + E_p + E_d <= gap_tolerance(p, scale)``
-(:meth:`~sospoly.Tolerances.gap_tolerance`, gap_abs and gap_rel 1e-6) with ``scale = |q|^T |x| + |b|^T |z|``, the
+The pair is optimal when ``|p - d| + E_p + E_d <= DUAL_RTOL * scale``
+(:data:`~sospoly.solvers.rays.DUAL_RTOL` = 1e-5: the solvers' own accuracy, ~1e-8 relative in their scaling and
+~1e-9 absolute through cvxpy, is 1e-6..5e-6 of an objective scaled by 1e-3) with
+``scale = |q|^T |x| + |b|^T |z|``, the
 size of the terms of the primal and the dual objective (for max c s.t. f - c SOS: |c| plus the sizes of f's
 terms at the minimiser, through the moments z) -- not the size of the data, which for
 1e16 x^4 - 3e12 x^2 + 1e8 is 1e16 while the optimum and the terms at the minimiser are ~1e8 -- plus the floor
-min(1, max|b|) of :func:`~sospoly.solvers.solve.check_certificate` (an optimum 0 whose terms all vanish, e.g.
-max c s.t. x^2 - c SOS, is judged against the data's scale, not against 0).
+max|q| max(||x||_inf, 1), one unit of x's magnitude on the objective (an optimum 0 whose terms all vanish, e.g.
+max c s.t. x^2 - c SOS, is judged against the objective's unit, not against 0; the floor scales with q, so an
+objective scaled by 1e-9 is judged at its own scale, not against an absolute 1e-6).
 """
 from __future__ import annotations
 
@@ -38,6 +41,7 @@ import numpy as np
 from ..algebra.svec import smat
 from ..lowering.conic import ConicProblem
 from ..tolerances import Tolerances
+from .rays import DUAL_RTOL
 
 __all__ = ["Optimality", "check_optimality"]
 
@@ -105,8 +109,9 @@ def check_optimality(problem: ConicProblem, x: np.ndarray, z: np.ndarray, tol: T
             e_p += v_s * size_z
             e_d += v_z * size_s
     p, d = float(q @ x), float(-(b @ z))
-    bmax = float(np.max(np.abs(b), initial=0.0))
-    floor = min(1.0, bmax) if 0.0 < bmax < np.inf else 1.0
+    if not np.any(q):                      # a constant objective: every feasible point is optimal
+        return Optimality(0.0, 0.0, 0.0, 0.0, np.inf)
+    floor = float(np.max(np.abs(q))) * max(float(np.max(np.abs(x), initial=0.0)), 1.0)
     scale = float(np.abs(q) @ np.abs(x) + np.abs(b) @ np.abs(z)) + floor
-    allowed = float(tol.gap_tolerance(p, scale))
+    allowed = DUAL_RTOL * scale
     return Optimality(e_p, e_d, p - d, scale, allowed)

@@ -110,13 +110,20 @@ def check_certificate(problem: ConicProblem, x: np.ndarray, tol: Tolerances) -> 
 def _block_floors(problem: ConicProblem, floor: float) -> dict:
     """Each PSD block's own floor (review 26a F8): min(``floor``, max|b| over the block's rows) where the block's
     rows carry data of their own (an image-form SOS constraint: its polynomial's coefficients, an LMI: its constant
-    entries), ``floor`` where they carry none (b = 0 there: an SOS multiplier, a PSD matrix variable, a kernel-form
-    Gram variable, whose scale is that of the rows they enter).  With the program-wide floor, a block of data
+    entries), ``floor`` where they carry none (b = 0 there: an SOS multiplier, a PSD matrix variable, whose scale is
+    that of the rows they enter).  With the program-wide floor, a block of data
     ~1e-10 beside an O(1) block was measured against an absolute margin 1e-7 and passed indefinite by 56% of its
-    own entries."""
+    own entries.  A kernel-form SOS constraint's data are the coefficient-matching rows its Gram variables enter."""
     out = {}
+    n_zero = sum(c.dim for c in problem.cones if c.kind == "zero")
+    A = problem.A.tocsc()
     for blk in problem.psd_blocks:
-        rows = problem.b[blk.row_start:blk.row_start + blk.size * (blk.size + 1) // 2]
+        n = blk.size * (blk.size + 1) // 2
+        if blk.var_start is not None and blk.source == "constraint":     # kernel form: its coefficient matching
+            rows = A.indices[A.indptr[blk.var_start]:A.indptr[blk.var_start + n]]
+            rows = problem.b[rows[rows < n_zero]]
+        else:
+            rows = problem.b[blk.row_start:blk.row_start + n]
         bmax = float(np.max(np.abs(rows))) if rows.size else 0.0
         out[blk.name] = min(floor, bmax) if 0.0 < bmax and np.isfinite(bmax) else floor
     return out

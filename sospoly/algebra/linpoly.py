@@ -27,6 +27,16 @@ def _unique_rows(E: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return uniq, np.asarray(inv).ravel()
 
 
+def _join(a, b):
+    """The owner of a sum of expressions owned by ``a`` and ``b`` (None: no program's variables); ValueError when
+    they are two different programs' (review 26a F9: their columns would alias each other)."""
+    if a is None or a is b:
+        return b if a is None else a
+    if b is None:
+        return a
+    raise ValueError("an expression mixes decision variables of two different SOSPrograms")
+
+
 def _is_quad(other) -> bool:
     return type(other).__name__ == "QuadExpr"
 
@@ -34,10 +44,11 @@ def _is_quad(other) -> bool:
 class LinPoly:
     """A polynomial in ``gens`` with coefficients affine in decision variables."""
 
-    __slots__ = ("gens", "E", "const", "rows", "cols", "vals")
+    __slots__ = ("gens", "E", "const", "rows", "cols", "vals", "owner")
 
-    def __init__(self, gens, E, const, rows=None, cols=None, vals=None, canonical=False):
+    def __init__(self, gens, E, const, rows=None, cols=None, vals=None, canonical=False, owner=None):
         self.gens = tuple(gens)
+        self.owner = owner      # the token of the SOSProgram whose decision variables the columns index (or None)
         E = np.asarray(E, dtype=np.int64).reshape(-1, len(self.gens))
         const = np.asarray(const, dtype=float).reshape(-1)
         rows = np.zeros(0, np.int64) if rows is None else np.asarray(rows, dtype=np.int64)
@@ -70,11 +81,11 @@ class LinPoly:
         return cls(gens, p.exponents(), p.coefficients())
 
     @classmethod
-    def variable_terms(cls, gens, E, var_index) -> LinPoly:
+    def variable_terms(cls, gens, E, var_index, owner=None) -> LinPoly:
         """sum_k x[var_index[k]] * v^E[k] (one decision variable per monomial)."""
         E = np.asarray(E, dtype=np.int64).reshape(-1, len(gens))
         m = E.shape[0]
-        return cls(gens, E, np.zeros(m), np.arange(m), np.asarray(var_index), np.ones(m))
+        return cls(gens, E, np.zeros(m), np.arange(m), np.asarray(var_index), np.ones(m), owner=owner)
 
     def _coerce(self, other) -> LinPoly:
         if isinstance(other, LinPoly):
@@ -91,7 +102,7 @@ class LinPoly:
         m = self.E.shape[0]
         return LinPoly(self.gens, np.vstack([self.E, o.E]), np.concatenate([self.const, o.const]),
                        np.concatenate([self.rows, o.rows + m]), np.concatenate([self.cols, o.cols]),
-                       np.concatenate([self.vals, o.vals]))
+                       np.concatenate([self.vals, o.vals]), owner=_join(self.owner, o.owner))
 
     __radd__ = __add__
 
@@ -117,10 +128,12 @@ class LinPoly:
             s = float(other)
             if not np.isfinite(s):
                 raise ValueError("cannot scale by a non-finite number")
-            return LinPoly(self.gens, self.E, self.const * s, self.rows, self.cols, self.vals * s, canonical=True)
+            return LinPoly(self.gens, self.E, self.const * s, self.rows, self.cols, self.vals * s, canonical=True,
+                           owner=self.owner)
         p = as_polynomial(other, self.gens).with_gens(self.gens)
         if not p.terms:
-            return LinPoly(self.gens, np.zeros((0, len(self.gens)), np.int64), np.zeros(0), canonical=True)
+            return LinPoly(self.gens, np.zeros((0, len(self.gens)), np.int64), np.zeros(0), canonical=True,
+                           owner=self.owner)
         Ep, cp = p.exponents(), p.coefficients()
         t, m = Ep.shape[0], self.E.shape[0]
         E = (Ep[:, None, :] + self.E[None, :, :]).reshape(t * m, -1)
@@ -128,7 +141,7 @@ class LinPoly:
         rows = (np.arange(t)[:, None] * m + self.rows[None, :]).reshape(-1)
         cols = np.tile(self.cols, t)
         vals = (cp[:, None] * self.vals[None, :]).reshape(-1)
-        return LinPoly(self.gens, E, const, rows, cols, vals)
+        return LinPoly(self.gens, E, const, rows, cols, vals, owner=self.owner)
 
     __rmul__ = __mul__
 

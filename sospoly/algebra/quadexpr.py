@@ -14,7 +14,7 @@ import numbers
 import numpy as np
 import scipy.sparse as sp
 
-__all__ = ["QuadExpr"]
+__all__ = ["QuadExpr", "CURVATURE_RTOL", "convex_factor"]
 
 
 def _scalar_parts(p) -> tuple[float, np.ndarray, np.ndarray]:
@@ -100,3 +100,50 @@ class QuadExpr:
 
     def __repr__(self) -> str:
         return f"QuadExpr({self.qv.size} quadratic terms over decision variables)"
+
+
+#: a quadratic's matrix P counts as PSD when P + CURVATURE_RTOL Diag(P) is (:func:`convex_factor`): the negative
+#: curvature tolerated along any direction is this fraction of that direction's own diagonal terms
+CURVATURE_RTOL = 1e-10
+
+
+def convex_factor(P: np.ndarray) -> tuple[np.ndarray | None, np.ndarray | None, float]:
+    """F with F^T F = P (rows: the directions of positive curvature) for a symmetric P that is PSD at each
+    direction's own scale, or (None, a direction v, its relative curvature) when it is not.
+
+    The test is scale-free (review 26a F6): with D = Diag(P), C = D^{-1/2} P D^{-1/2} (unit diagonal: every
+    variable rescaled to unit curvature, so the test does not depend on the variables' units), P is accepted when
+    lambda_min(C) >= -:data:`CURVATURE_RTOL`, i.e. P + CURVATURE_RTOL D is PSD and dropping the negative part changes
+    x^T P x by at most CURVATURE_RTOL sum_i P_ii x_i^2 -- each direction against its own terms.  Measuring
+    lambda_min against the largest eigenvalue instead accepted 1e12 a^2 - 10 b^2 and minimised it as 1e12 a^2.  A
+    negative diagonal entry (v = e_i, v^T P v = P_ii < 0), or a zero one with a non-zero entry in its row (P_ij^2 >
+    P_ii P_jj = 0: v = t e_i - e_j for a large t), is indefinite exactly.  The relative curvature returned is
+    v^T P v / sum_i P_ii v_i^2 (-1 for those exact cases)."""
+    P = np.asarray(P, float)
+    n = P.shape[0]
+    d = np.diag(P).copy()
+    if np.any(d < 0):
+        i = int(np.argmin(d))
+        return None, np.eye(n)[i], -1.0
+    act = d > 0
+    off = np.abs(P[~act]).sum(axis=1) if (~act).any() else np.zeros(0)
+    if np.any(off > 0):
+        i = int(np.nonzero(~act)[0][np.argmax(off)])
+        j = int(np.argmax(np.abs(P[i])))
+        v = np.zeros(n)
+        v[j] = -1.0
+        v[i] = np.sign(P[i, j]) * (1.0 + abs(P[j, j])) / max(abs(P[i, j]), 1e-300)
+        return None, v, -1.0
+    idx = np.nonzero(act)[0]
+    if not idx.size:
+        return np.zeros((0, n)), None, 0.0
+    r = np.sqrt(d[idx])
+    lam, V = np.linalg.eigh(P[np.ix_(idx, idx)] / np.outer(r, r))
+    if lam[0] < -CURVATURE_RTOL:
+        v = np.zeros(n)
+        v[idx] = V[:, 0] / r
+        return None, v, float(lam[0])
+    keep = lam > 1e-14 * max(1.0, float(lam[-1]))
+    F = np.zeros((int(keep.sum()), n))
+    F[:, idx] = np.sqrt(lam[keep])[:, None] * V[:, keep].T * r[None, :]
+    return F, None, 0.0

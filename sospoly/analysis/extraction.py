@@ -236,13 +236,32 @@ def candidates_from_span(W: np.ndarray, basis: np.ndarray, source: str) -> list[
     return out
 
 
+def _matrix_and_basis(M, basis, what: str) -> tuple[np.ndarray, np.ndarray]:
+    """``M`` as a square float matrix of the side of ``basis`` (rows: exponent vectors), or ValueError naming
+    ``what`` (review 26a F9: sizes that disagree raised IndexError deep inside)."""
+    M = np.asarray(M, dtype=float)
+    basis = np.asarray(basis)
+    if basis.ndim != 2 or not basis.shape[0]:
+        raise ValueError(f"{what}: the basis must be a non-empty 2-D array of exponent rows, got shape {basis.shape}")
+    if M.ndim != 2 or M.shape != (basis.shape[0], basis.shape[0]):
+        raise ValueError(f"{what}: the matrix must be {basis.shape[0]} x {basis.shape[0]} (one row per basis "
+                         f"monomial), got shape {M.shape}")
+    return M, basis
+
+
 def extract_from_gram(G: np.ndarray, basis: np.ndarray, tol: Tolerances = DEFAULT_TOLERANCES) -> list[Candidate]:
-    """Candidates v* with b(v*) in the numerical kernel of the optimal Gram matrix."""
+    """Candidates v* with b(v*) in the numerical kernel of the optimal Gram matrix (ValueError for a matrix
+    that does not match the basis or is not finite)."""
+    G, basis = _matrix_and_basis(G, basis, "extract_from_gram")
+    if not np.all(np.isfinite(G)):
+        raise ValueError("extract_from_gram: the Gram matrix has non-finite entries")
     return candidates_from_span(kernel_basis(G, tol), basis, "gram")
 
 
 def extract_from_moment(M: np.ndarray, basis: np.ndarray, tol: Tolerances = DEFAULT_TOLERANCES) -> list[Candidate]:
-    """Candidates from the moment (dual) matrix with a rank test."""
+    """Candidates from the moment (dual) matrix with a rank test (none from a non-finite matrix or one whose
+    (0, 0) entry is not positive; ValueError for a matrix that does not match the basis)."""
+    M, basis = _matrix_and_basis(M, basis, "extract_from_moment")
     if not np.all(np.isfinite(M)) or M[0, 0] <= 0:
         return []
     return candidates_from_span(range_basis(M / M[0, 0], tol), basis, "moment")

@@ -322,6 +322,10 @@ def exact_check(psatz, sol, c: float, margin: float | None = None) -> ExactCheck
     (:func:`sospoly.analysis.proof.q_lower_bound`; q = (y - 1)^2 on {y = 1} would prove any level); ``margin``
     defaults to 1e-7 max(1, |c|).  Cost grows like the cube of the Gram side with rational arithmetic: meant for
     small programs."""
+    if sol is None or getattr(sol, "x", None) is None or not getattr(sol, "grams", None):
+        status = getattr(getattr(sol, "status", None), "value", "no solution")
+        raise ValueError(f"exact_check: the solution (status {status}) carries no certificate to check; it needs a "
+                         "solved program's decision values and Gram matrices")
     structure = psatz.structure
     if structure.free:
         return ExactCheck(False, float(c), "exact checks are implemented for fixed multipliers")

@@ -36,8 +36,17 @@ class MatrixSOSConstraint:
     gens: tuple
 
     def gram(self, solution) -> np.ndarray:
-        """G, the PSD Gram matrix of side m |b| (rows (k, i) -> k |b| + i)."""
-        return solution.grams[self.name]
+        """G, the PSD Gram matrix of side m |b| (rows (k, i) -> k |b| + i); ValueError for a solution without it
+        (not optimal: a failed solve carries no Gram matrices) and TypeError for something that is no solution."""
+        grams = getattr(solution, "grams", None)
+        if not isinstance(grams, dict):
+            raise TypeError(f"MatrixSOSConstraint {self.name!r}: expected a ProgramSolution, got "
+                            f"{type(solution).__name__}")
+        if self.name not in grams:
+            status = getattr(getattr(solution, "status", None), "value", "unknown")
+            raise ValueError(f"MatrixSOSConstraint {self.name!r}: the solution (status {status}) has no Gram "
+                             "matrix for it; only a solved program's solution carries one")
+        return grams[self.name]
 
     def factors(self, solution, rel_tol: float = 1e-9) -> tuple:
         """Polynomial vectors h_r (each a tuple of m Polynomials) with M(v) = sum_r h_r(v) h_r(v)^T (up to

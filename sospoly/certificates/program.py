@@ -35,7 +35,7 @@ import numpy as np
 from ..algebra.basis import GramBasis, GramBlocks, monomials
 from ..algebra.linpoly import LinPoly
 from ..algebra.polynomial import Polynomial, as_polynomial
-from ..algebra.quadexpr import QuadExpr
+from ..algebra.quadexpr import QuadExpr, convex_factor
 from ..algebra.svec import triu_pairs
 
 __all__ = ["square_entries",
@@ -159,6 +159,7 @@ class SOSProgram:
         self.objective: LinPoly | None = None
         self.objective_quadratic: QuadExpr | None = None   # the quadratic part when the objective is one
         self.sense: Sense = Sense.FEASIBILITY
+        self.token = object()    # marks this program's decision variables (LinPoly.owner): others' are refused
 
     @property
     def nvars_poly(self) -> int:
@@ -182,7 +183,7 @@ class SOSProgram:
     # ------------------------------------------------------------------ decision variables
     def scalar(self, name: str | None = None) -> LinPoly:
         blk = self._new_block(name, BlockKind.SCALAR, 1)
-        return LinPoly.variable_terms(self.gens, np.zeros((1, self.nvars_poly), np.int64), [blk.start])
+        return LinPoly.variable_terms(self.gens, np.zeros((1, self.nvars_poly), np.int64), [blk.start], self.token)
 
     def scalars(self, k: int, name: str | None = None) -> list:
         """``k`` free scalars in one block (a list of scalar expressions)."""
@@ -190,7 +191,7 @@ class SOSProgram:
             raise ValueError(f"scalars count must be a positive integer, got {k!r}")
         blk = self._new_block(name, BlockKind.SCALAR, int(k))
         zero = np.zeros((1, self.nvars_poly), np.int64)
-        return [LinPoly.variable_terms(self.gens, zero, [blk.start + t]) for t in range(int(k))]
+        return [LinPoly.variable_terms(self.gens, zero, [blk.start + t], self.token) for t in range(int(k))]
 
     def free_poly(self, degree: int, name: str | None = None, monomial_exponents=None) -> LinPoly:
         """A polynomial with free coefficients on all monomials of degree <= ``degree``."""
@@ -201,7 +202,7 @@ class SOSProgram:
         else:
             E = np.asarray(monomial_exponents, dtype=np.int64).reshape(-1, self.nvars_poly)
         blk = self._new_block(name, BlockKind.FREE_POLY, E.shape[0], monomials=E)
-        return LinPoly.variable_terms(self.gens, E, np.arange(blk.start, blk.start + blk.size))
+        return LinPoly.variable_terms(self.gens, E, np.arange(blk.start, blk.start + blk.size), self.token)
 
     def sos_poly(self, degree: int, name: str | None = None, basis=None) -> LinPoly:
         """An SOS polynomial b(v)^T S b(v): b all monomials of degree <= ``degree`` / 2 (rounded down),
@@ -217,7 +218,7 @@ class SOSProgram:
         # coefficient of monomial m: sum over pairs (i<=j) with b_i b_j = m of w_ij S_ij, w = 1 (i=j) or 2
         w = np.where(gb.pair_i == gb.pair_j, 1.0, 2.0)
         return LinPoly(self.gens, gb.products, np.zeros(gb.products.shape[0]),
-                       gb.pair_monomial, np.arange(blk.start, blk.start + npairs), w)
+                       gb.pair_monomial, np.arange(blk.start, blk.start + npairs), w, owner=self.token)
 
     def psd_matrix(self, side: int, name: str | None = None) -> list:
         """A symmetric PSD matrix variable of the given side, as a list of lists of scalar expressions."""
@@ -229,7 +230,7 @@ class SOSProgram:
         zero = np.zeros((1, self.nvars_poly), np.int64)
         M = [[None] * side for _ in range(side)]
         for t, (a, b) in enumerate(zip(i, j)):
-            M[a][b] = M[b][a] = LinPoly.variable_terms(self.gens, zero, [blk.start + t])
+            M[a][b] = M[b][a] = LinPoly.variable_terms(self.gens, zero, [blk.start + t], self.token)
         return M
 
     def gram_trace(self, block_name: str) -> LinPoly:
@@ -239,7 +240,7 @@ class SOSProgram:
             raise ValueError(f"block {block_name!r} is not an SOS polynomial")
         diag = np.nonzero(blk.gram.pair_i == blk.gram.pair_j)[0]
         return LinPoly(self.gens, np.zeros((1, self.nvars_poly), np.int64), [0.0],
-                       np.zeros(diag.size, np.int64), blk.start + diag, np.ones(diag.size))
+                       np.zeros(diag.size, np.int64), blk.start + diag, np.ones(diag.size), owner=self.token)
 
     # ------------------------------------------------------------------ constraints
     def add_sos(self, expr, degree: int | None = None, name: str | None = None, param_terms=None,
@@ -356,7 +357,8 @@ class SOSProgram:
             raise ValueError("the objective must be a scalar affine or quadratic expression in the decision "
                              "variables")
         if quad is not None:
-            _check_curvature(quad, self.n_vars, sense)
+            self._own(None, np.concatenate([quad.qi, quad.qj]))
+            _check_curvature(quad, self.n_vars, sense, self.blocks)
         self.objective, self.sense, self.objective_quadratic = expr, sense, quad
 
     def _as_linpoly_named(self, expr, what: str) -> LinPoly:
@@ -370,10 +372,21 @@ class SOSProgram:
         if isinstance(expr, LinPoly):
             if expr.gens != self.gens:
                 raise ValueError(f"expression over {expr.gens} used in a program over {self.gens}")
+            self._own(expr.owner, expr.cols)
             return expr
         if isinstance(expr, Polynomial):
             return LinPoly.from_polynomial(expr, self.gens)
         return LinPoly.from_polynomial(as_polynomial(expr, self.gens), self.gens)
+
+    def _own(self, owner, cols) -> None:
+        """ValueError for decision variables of another program (review 26a F9: they would alias this program's
+        columns): an expression owned by another program, or columns beyond this program's variables."""
+        if owner is not None and owner is not self.token:
+            raise ValueError("the expression uses decision variables of another SOSProgram; create them with this "
+                             "program's scalar / free_poly / sos_poly / psd_matrix")
+        if cols.size and int(cols.max()) >= self.n_vars:
+            raise ValueError(f"the expression uses decision variable {int(cols.max())}, but this SOSProgram has "
+                             f"{self.n_vars}: variables of another program?")
 
     def objective_value(self, x) -> float:
         """The objective (affine + quadratic part) at decision values ``x``."""
@@ -410,20 +423,35 @@ class SOSProgram:
 
 
 def _same_affine(a: LinPoly, b: LinPoly, n_vars: int) -> bool:
-    """Do two scalar affine expressions coincide (to round-off)?"""
-    d = a - b
-    lin = np.abs(d.linear_matrix(n_vars).toarray()).max(initial=0.0)
-    return lin <= 1e-12 * max(1.0, np.abs(a.vals).max(initial=0.0)) and abs(float(d.const.sum())) <= 1e-12 * max(
-        1.0, abs(float(a.const.sum())))
+    """Do two scalar affine expressions coincide to round-off, coefficient by coefficient (each decision
+    variable's coefficients, and the constants, against their own size: review 26a F9, where a difference 0.5 t
+    hid under a tolerance set by entries ~1e12 of other variables)?"""
+    la, lb = (np.asarray(e.linear_matrix(n_vars).sum(axis=0)).ravel() for e in (a, b))
+    ca, cb = float(a.const.sum()), float(b.const.sum())
+    lin_ok = np.all(np.abs(la - lb) <= 1e-12 * np.maximum(np.abs(la), np.abs(lb)))
+    return bool(lin_ok) and abs(ca - cb) <= 1e-12 * max(abs(ca), abs(cb))
 
 
-def _check_curvature(quad: QuadExpr, n_vars: int, sense: Sense) -> None:
-    """A minimised quadratic must be convex, a maximised one concave (P PSD / NSD to round-off)."""
-    P = quad.matrix(n_vars) * (1.0 if sense == Sense.MINIMIZE else -1.0)
+def _check_curvature(quad: QuadExpr, n_vars: int, sense: Sense, blocks=()) -> None:
+    """A minimised quadratic must be convex, a maximised one concave: +-P PSD at each direction's own scale
+    (:func:`~sospoly.algebra.quadexpr.convex_factor`); ValueError naming a direction of the wrong curvature."""
+    sign = 1.0 if sense == Sense.MINIMIZE else -1.0
+    P = quad.matrix(n_vars) * sign
     if not P.size:
         return
-    lam = np.linalg.eigvalsh(P)
-    if lam[0] < -1e-10 * max(1.0, float(np.abs(lam).max())):
+    F, v, rel = convex_factor(P)
+    if F is None:
         what = "convex" if sense == Sense.MINIMIZE else "concave"
-        raise ValueError(f"the quadratic objective must be {what} to be {sense.value}d "
-                         f"(its matrix has eigenvalue {lam[0] * (1 if sense == Sense.MINIMIZE else -1):.3g})")
+        top = np.argsort(-np.abs(v))[:3]
+        names = ", ".join(f"{_var_name(blocks, int(k))}: {v[k]:.3g}" for k in top if v[k] != 0)
+        raise ValueError(f"the quadratic objective must be {what} to be {sense.value}d: along the direction "
+                         f"({names}) its curvature is {sign * float(v @ P @ v):.3g}, {rel:.3g} times that "
+                         f"direction's own diagonal terms (nonconvex objectives are not solved)")
+
+
+def _var_name(blocks, k: int) -> str:
+    """The decision variable of global index ``k`` as 'block' or 'block[i]'."""
+    for b in blocks:
+        if b.start <= k < b.start + b.size:
+            return b.name if b.size == 1 else f"{b.name}[{k - b.start}]"
+    return f"x[{k}]"

@@ -162,7 +162,12 @@ def read_cbf(path):
     n = _dim(toks0[0], ln0, path, "VAR count")
     if any(toks[0] != "F" for _, toks in var[1:]):
         raise ValueError(f"{path}:{var[1][0]}: only free variables (F) are supported")
-    sense = _header(secs, "OBJSENSE", path)[1][0] if "OBJSENSE" in secs else "MIN"
+    sense = "MIN"
+    if "OBJSENSE" in secs:        # (the CBF keywords MIN and MAX; anything else is refused, not read as MIN)
+        ln, toks = _header(secs, "OBJSENSE", path)
+        sense = toks[0].upper()
+        if sense not in ("MIN", "MAX") or len(toks) != 1:
+            raise ValueError(f"{path}:{ln}: OBJSENSE must be MIN or MAX, got {' '.join(toks)!r}")
     sign = -1.0 if sense == "MAX" else 1.0
     q = np.zeros(n)
     for ln, (j, v) in _list(secs, "OBJACOORD", path, 2):

@@ -49,6 +49,7 @@ import scipy.sparse as sp
 
 from ..algebra.basis import GramBlocks, MonomialIndex
 from ..algebra.linpoly import LinPoly
+from ..algebra.quadexpr import convex_factor
 from ..certificates.program import BlockKind, Sense, SOSProgram
 from ..algebra.svec import smat, svec_scale
 from ..budget import check_deadline
@@ -429,14 +430,17 @@ def _objective(program: SOSProgram, ncols: int, t_col: int | None) -> tuple[np.n
 
 
 def _epigraph_factor(program: SOSProgram) -> np.ndarray | None:
-    """F with F^T F = +-P of a quadratic objective (sign: + minimised, - maximised), or None."""
+    """F with F^T F = +-P of a quadratic objective (sign: + minimised, - maximised; the Jacobi-scaled factor of
+    :func:`~sospoly.algebra.quadexpr.convex_factor`), or None."""
     quad = program.objective_quadratic
     if quad is None or program.sense == Sense.FEASIBILITY:
         return None
     P = quad.matrix(program.n_vars) * (1.0 if program.sense == Sense.MINIMIZE else -1.0)
-    lam, V = np.linalg.eigh(P)
-    keep = lam > 1e-14 * max(1.0, float(np.abs(lam).max(initial=0.0)))
-    return (np.sqrt(lam[keep])[:, None] * V[:, keep].T) if keep.any() else np.zeros((0, program.n_vars))
+    F, v, rel = convex_factor(P)
+    if F is None:       # (SOSProgram refuses such an objective; a program built around it is refused here too)
+        raise ValueError(f"the quadratic objective is not {'convex' if program.sense == Sense.MINIMIZE else 'concave'}"
+                         f" (relative curvature {rel:.3g} along a direction): refusing to drop its negative part")
+    return F
 
 
 def _scalar_cone_rows(program: SOSProgram, asm: _Assembly, row: int, cones: list, epi, t_col) -> int:

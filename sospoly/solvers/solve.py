@@ -26,7 +26,8 @@ import numpy as np
 
 from ..budget import Deadline
 from .backends import ConicSolution, RawStatus, get_backend
-from .rays import check_dual_certificate, check_infeasibility, check_primal_point, check_unbounded_ray
+from .optimality import check_optimality
+from .rays import check_infeasibility, check_primal_point, check_unbounded_ray
 from ..lowering.conic import ConicProblem, GramForm, lower
 from ..algebra.polynomial import Polynomial
 from ..certificates.program import Sense, SOSProgram
@@ -77,14 +78,15 @@ def check_certificate(problem: ConicProblem, x: np.ndarray, tol: Tolerances) -> 
     ok = True
     msg = []
     floor = check_floor(problem)
+    floors = _block_floors(problem, floor)
     for name, G in grams.items():
         scale = float(np.max(np.abs(G))) if G.size else 0.0
         lam = float(np.linalg.eigvalsh(G)[0]) if G.size else 0.0
         mins[name] = lam
-        if not tol.psd_accepts(lam, scale, floor):
+        if not tol.psd_accepts(lam, scale, floors[name]):
             ok = False
             msg.append(f"Gram {name}: lambda_min {lam:.3g} below the PSD margin "
-                       f"({tol.psd_margin:g} * max({floor:.3g}, {scale:.3g}))")
+                       f"({tol.psd_margin:g} * max({floors[name]:.3g}, {scale:.3g}))")
     for label, lam, scale in _scalar_cone_margins(problem, x):
         mins[label] = lam
         if not tol.psd_accepts(lam, scale, floor):
@@ -103,6 +105,28 @@ def check_certificate(problem: ConicProblem, x: np.ndarray, tol: Tolerances) -> 
         ok = False
         msg.append(f"equality residual {resid:.3g} > {tol.identity_residual:g}")
     return ok, mins, resid, "; ".join(msg)
+
+
+def _block_floors(problem: ConicProblem, floor: float) -> dict:
+    """Each PSD block's own floor (review 26a F8): min(``floor``, max|b| over the block's rows) where the block's
+    rows carry data of their own (an image-form SOS constraint: its polynomial's coefficients, an LMI: its constant
+    entries), ``floor`` where they carry none (b = 0 there: an SOS multiplier, a PSD matrix variable, whose scale is
+    that of the rows they enter).  With the program-wide floor, a block of data
+    ~1e-10 beside an O(1) block was measured against an absolute margin 1e-7 and passed indefinite by 56% of its
+    own entries.  A kernel-form SOS constraint's data are the coefficient-matching rows its Gram variables enter."""
+    out = {}
+    n_zero = sum(c.dim for c in problem.cones if c.kind == "zero")
+    A = problem.A.tocsc()
+    for blk in problem.psd_blocks:
+        n = blk.size * (blk.size + 1) // 2
+        if blk.var_start is not None and blk.source == "constraint":     # kernel form: its coefficient matching
+            rows = A.indices[A.indptr[blk.var_start]:A.indptr[blk.var_start + n]]
+            rows = problem.b[rows[rows < n_zero]]
+        else:
+            rows = problem.b[blk.row_start:blk.row_start + n]
+        bmax = float(np.max(np.abs(rows))) if rows.size else 0.0
+        out[blk.name] = min(floor, bmax) if 0.0 < bmax and np.isfinite(bmax) else floor
+    return out
 
 
 def check_floor(problem: ConicProblem) -> float:
@@ -248,10 +272,12 @@ class ConicResult:
 
 def solve_conic_problem(problem: ConicProblem, backend=None, tolerances=None) -> ConicResult:
     """Solve a lowered (or read: SDPA, CBF) conic problem with ``backend`` (default Clarabel) and check the
-    answer a posteriori (:func:`solve_conic`; ``optimal`` also needs x feasible at each cone's own scale and the dual
-    to prove it optimal, :func:`~sospoly.solvers.rays.check_primal_point` and
-    :func:`~sospoly.solvers.rays.check_dual_certificate`, else ``inaccurate``); a :class:`ConicResult` with the
-    caller's objective ``objective_sign * q^T x + objective_offset``."""
+    answer a posteriori (:func:`solve_conic`; ``optimal`` also needs x feasible at each cone's own scale,
+    :func:`~sospoly.solvers.rays.check_primal_point`, and the primal-dual pair to prove the objective at the
+    objective's own scale, :func:`~sospoly.solvers.optimality.check_optimality` -- the rule of
+    :func:`solve_program` too --, else ``inaccurate``, with the objective only while the primal's cone violation
+    leaves it a value of the program); a :class:`ConicResult` with the caller's objective
+    ``objective_sign * q^T x + objective_offset``."""
     if problem.params:
         raise ValueError("solve: instantiate the problem's parameters first (ConicProblem.instantiate)")
     tolerances = as_tolerances(tolerances or DEFAULT_TOLERANCES)
@@ -262,26 +288,49 @@ def solve_conic_problem(problem: ConicProblem, backend=None, tolerances=None) ->
         ok, why = check_primal_point(problem, sol.x, tolerances)
         if not ok:
             status, obj, msg = SolveStatus.INACCURATE, None, f"the point is not feasible at its cones' own scale: {why}"
-        elif status == SolveStatus.OPTIMAL and sol.z is not None:    # (a back-end without a dual: its word)
-            ok, why = check_dual_certificate(problem, sol.x, sol.z, tolerances)
-            if not ok:
-                status, msg = SolveStatus.INACCURATE, (
-                    f"a feasible point (checked) whose optimality the dual does not prove: {why}; the objective is "
-                    "its value (the problem may even be unbounded)")
+        else:
+            status, keep, msg = _optimality_verdict(problem, sol, status, tolerances, msg)
+            obj = obj if keep else None
     return ConicResult(status, obj, sol.x, sol.z, sol.attempts, msg)
+
+
+def _optimality_verdict(problem: ConicProblem, sol: ConicSolution, status: SolveStatus, tolerances: Tolerances,
+                        msg: str) -> tuple[SolveStatus, bool, str]:
+    """The one rule of ``optimal`` for :func:`solve_program` and :func:`solve_conic_problem` (review 26a F4): an
+    OPTIMAL answer of :func:`solve_conic` stays OPTIMAL only when the primal-dual pair proves its objective at the
+    objective's own scale (:func:`~sospoly.solvers.optimality.check_optimality`), else it is INACCURATE.  Returns
+    (status, whether the objective is still a value of the program -- the primal cone violation's effect on it is
+    within the tolerance --, message).  A back-end without a dual (z None) keeps its word."""
+    if status != SolveStatus.OPTIMAL or sol.z is None or sol.x is None:
+        return status, status.ok, msg
+    opt = check_optimality(problem, sol.x, sol.z, tolerances)
+    if opt.ok:
+        return status, True, msg
+    if opt.primal_ok:
+        return SolveStatus.INACCURATE, True, (f"a feasible point (checked) whose optimality the dual does not prove: "
+                                              f"{opt.describe()}; the objective is its value")
+    return SolveStatus.INACCURATE, False, f"the primal cone violation moves the objective too far: {opt.describe()}"
 
 
 def solve_program(program: SOSProgram, backend=None, form: GramForm = GramForm.IMAGE,
                   tolerances: Tolerances = DEFAULT_TOLERANCES, problem: ConicProblem | None = None,
                   deadline: Deadline | None = None) -> ProgramSolution:
-    """Lower (unless ``problem`` is given), solve and check ``program``."""
+    """Lower (unless ``problem`` is given), solve and check ``program``: ``optimal`` when the certificate passes
+    :func:`check_certificate` and the primal-dual pair proves the objective at the objective's own scale
+    (:func:`~sospoly.solvers.optimality.check_optimality`, the rule of :func:`solve_conic_problem`); otherwise
+    ``inaccurate``, with the objective, x and Gram matrices of the checked point when only the dual fails to prove
+    it (or with ``Tolerances.accept_inaccurate``), without them when the point's cone violation moves the objective
+    beyond the tolerance."""
     tolerances = as_tolerances(tolerances)
     if problem is None:
         problem = lower(program, form)
     feas = program.sense == Sense.FEASIBILITY or program.objective is None
     status, sol, mins, resid, msg = solve_conic(problem, backend, tolerances, feasibility=feas, deadline=deadline)
     n_lmivar = program.n_lmivar()
-    accepted_iterate = status == SolveStatus.INACCURATE and tolerances.accept_inaccurate and bool(mins)
+    keep = False
+    if not feas:
+        status, keep, msg = _optimality_verdict(problem, sol, status, tolerances, msg)
+    accepted_iterate = status == SolveStatus.INACCURATE and bool(mins) and (tolerances.accept_inaccurate or keep)
     if not status.ok and not accepted_iterate:
         return ProgramSolution(status, None, sol.x, attempts=sol.attempts, n_lmivar=n_lmivar,
                                seconds=sol.seconds, message=msg, min_eigenvalues=mins)

@@ -225,3 +225,15 @@ def test_exact_check_and_factors_on_unsolved_solutions():
         con.factors(failed)
     with pytest.raises(TypeError):
         con.factors("not a solution")
+
+
+def test_psatz_cache_user_key_holds_the_multiplier():
+    """Review 26a F9: ``PsatzCache.get(..., key=k)`` returned the structure cached for another multiplier on a hit."""
+    x, y = sp.variables("x y")
+    cache = sp.PsatzCache()
+    f, g = x ** 4 + y ** 4 - 3 * x * y, 1 - x ** 2 - y ** 2
+    fixed, _ = cache.get(f, ineq=[g], degree=6, multiplier=1 + x ** 2 + y ** 2, key="k")
+    putinar, _ = cache.get(f, ineq=[g], degree=6, multiplier="putinar", key="k")
+    again, _ = cache.get(f, ineq=[g], degree=6, multiplier=1 + x ** 2 + y ** 2, key="k")
+    assert putinar is not fixed and again is fixed
+    assert cache.compiles == 2

@@ -244,7 +244,8 @@ class PsatzCache:
         outside the cached entry's is compiled on the union of both."""
         eq, ineq = tuple(eq), tuple(ineq)
         f, eq, ineq, gens, degree = checked_inputs(f, eq, ineq, degree, gens, as_budget(budget).max_gram_side)
-        k = None if key is None else ("user", key, tuple(gens), int(degree), GramForm(form).value)
+        k = None if key is None else ("user", key, tuple(gens), int(degree), GramForm(form).value,
+                                      _token(multiplier), _token(sparsity), _token(low_degree))
         if k is not None:
             comp = self._store.get(k)
             if comp is not None:
@@ -268,6 +269,17 @@ class PsatzCache:
                                   slots=slots, budget=budget, form=form)
         comp = self.compiled(structure, form, key=k)
         return comp, comp.theta(f, eq, ineq)
+
+
+def _token(value):
+    """A hashable stand-in of a structure argument for :meth:`PsatzCache.get`'s key: the value itself, or its repr
+    (a user's key now also holds the multiplier, the sparsity and the low degree: a hit had returned the structure
+    of another multiplier, review 26a F9)."""
+    try:
+        hash(value)
+        return value
+    except TypeError:
+        return repr(value)
 
 
 def _sized(comp: CompiledPsatz, budget, n_gens: int, degree: int, f_degree: int, form) -> None:

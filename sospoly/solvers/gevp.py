@@ -85,6 +85,7 @@ class CompiledGevp:
         self.prove = bool(prove)
         self.compiled = CompiledPsatz(psatz.structure, form)
         self.proven: dict = {}          # accepted level c -> the level proven from its certificate (c - m)
+        self.negative_margin: set = set()   # levels whose solved margin t was negative (evidence of no certificate)
         self._data = as_certificate_data(psatz)
         self.scale = data_scale(self._data)
 
@@ -113,6 +114,8 @@ class CompiledGevp:
             eps = max(0.0, -mins.get("u", 0.0))
             G = inst.gram_matrices(x[:-1])["u"]
             strict = tol.gevp_psd_margin * max(1.0, float(np.max(np.abs(G))))
+            if x[-1] < -strict:             # the solved program's largest margin is negative: no certificate here
+                self.negative_margin.add(float(c))
             if x[-1] < -strict or eps > strict:
                 # above c*, lambda_min(G_u) ~ -(c - c*)/2: the general PSD margin would let the
                 # accepted level creep ~1e-7 above c*; this one keeps it at solver accuracy
@@ -237,18 +240,26 @@ def _bisect(c_lo, c_hi, max_search, tol, steps, test) -> GevpResult:
 def _claimed(res: GevpResult, compiled, c_hi) -> GevpResult:
     """The result with the level proven from the accepted step's certificate (``compiled.proven``), and OPTIMAL only
     where the upper end says so: f at a feasible point, or a level the solver found infeasible (a Farkas
-    certificate, or a checked answer rejected: margin t < 0, a Gram defect).  An upper end where the solver failed
-    or the proof did not hold says nothing of c*, so there the lowest such infeasible level (or ``c_hi``) must lie
-    within the gap tolerance of the proven bound; else INACCURATE (the bound is proven, its optimality is not)."""
+    certificate, or a solved program whose largest margin t is negative).  An upper end where the solver failed,
+    its answer failed the other checks (review 26c F1: a Gram defect or an ill-conditioned q is no evidence that no
+    certificate exists) or the proof did not hold says nothing of c*, so there the
+    lowest infeasible level (or ``c_hi``) must lie within the gap tolerance of the proven bound; else INACCURATE (the
+    bound is proven, its optimality is not).  An upward search that certified every level it tried is INACCURATE at
+    the proven level, not UNBOUNDED ("empty" needs a proven ray)."""
     lo = res.lower_bound
     if lo is None or not np.isfinite(lo):
         return res
     proven = compiled.proven.get(lo, lo)
     status, msg = res.status, res.message
+    if status == SolveStatus.UNBOUNDED and compiled.prove:
+        # every tested level certified, up to a finite one: no proven ray, so no "empty set" (review 26c F2)
+        return GevpResult(SolveStatus.INACCURATE, proven, res.bracket, res.steps, res.solution,
+                          f"{msg} (not proven: no ray); the bound {proven:.10g} is proven")
     hi = res.bracket[1]
     end = next((s.status for s in reversed(res.steps) if s.c == hi), None)
     if status == SolveStatus.OPTIMAL and end in _FAILED:
-        tops = [s.c for s in res.steps if s.status in (SolveStatus.INFEASIBLE, SolveStatus.CHECK_FAILED)]
+        tops = [s.c for s in res.steps if s.status == SolveStatus.INFEASIBLE or
+                (s.status == SolveStatus.CHECK_FAILED and s.c in getattr(compiled, "negative_margin", ()))]
         top = min(tops + ([float(c_hi)] if c_hi is not None else []), default=np.inf)
         if not top - proven <= compiled.tolerances.gap_tolerance_one(top if np.isfinite(top) else 0.0,
                                                                       compiled.scale):
@@ -260,4 +271,5 @@ def _claimed(res: GevpResult, compiled, c_hi) -> GevpResult:
 
 
 #: step statuses that are failures, not evidence that the level is infeasible
-_FAILED = (SolveStatus.UNPROVEN, SolveStatus.NUMERICAL_ERROR, SolveStatus.INACCURATE, SolveStatus.NOT_SOLVED)
+_FAILED = (SolveStatus.UNPROVEN, SolveStatus.NUMERICAL_ERROR, SolveStatus.INACCURATE, SolveStatus.NOT_SOLVED,
+           SolveStatus.CHECK_FAILED)

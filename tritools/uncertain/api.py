@@ -26,8 +26,7 @@ from .angle import triangulation_angles
 from .rigour import box_from_bounds, combine, lower_bounds, round_down, round_up
 from .sets import EPS, dilate, structure_key, view_blocks, view_coefficients
 from .solve import objective_rows, solve_blocks
-from .witness import (centres, feasible, pull_inside, rays_stay_inside, recedes, repeat_block, take,
-                      witness_gap)
+from .witness import centres, exact_rays, feasible, pull_inside, rays_stay_inside, repeat_block, witness_gap
 
 __all__ = ["UncertaintyStatus", "UncertaintyOptions", "UncertaintyResult", "uncertainty", "uncertainty_many"]
 
@@ -344,9 +343,7 @@ def _group_chunk(C, blocks, X0, Xe, convexified, opts) -> list[UncertaintyResult
     centre = centres(blocks, R, witnesses[:, :6], X0, dirs, sigma, opts.witness_rtol)
     witnesses = pull_inside(blocks, R, witnesses, centre, opts.witness_rtol)
     ray &= rays_stay_inside(blocks, R, witnesses, centre, blk.eta, ray, opts.witness_rtol)
-    pm, ko = np.nonzero(ray)
-    if pm.size:                                 # a ray claims +-inf: its direction must recede exactly
-        ray[pm, ko] &= recedes([take(b, pm) for b in blocks], R[pm], blk.eta[pm, ko])
+    ray = exact_rays(blocks, R, blk.eta, ray, targets)     # a ray claims +-inf: a direction must recede exactly
     q0, q0e = _depth_offsets(drows, X0)
     conv = np.broadcast_to(np.asarray(convexified, dtype=bool), (M,))
     w = np.linalg.svd(R.reshape(-1, 3, 4))[2][:, -1].reshape(M, N, 4)

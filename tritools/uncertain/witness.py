@@ -10,7 +10,8 @@ import numpy as np
 from ..model.regions import ConeKind
 from .sets import contains
 
-__all__ = ["repeat_block", "take", "feasible", "pull_inside", "centres", "rays_stay_inside", "recedes", "RAY_REACH",
+__all__ = ["repeat_block", "take", "feasible", "pull_inside", "centres", "rays_stay_inside", "recedes", "exact_rays",
+           "RAY_REACH",
            "witness_gap"]
 
 #: a ray is accepted when base + lambda d stays in S for lambda = scene scale times these factors
@@ -137,6 +138,43 @@ def recedes(blocks, R, d) -> np.ndarray:
                 out[m] = False
                 break
     return out
+
+
+def exact_rays(blocks, R, eta, ray, targets) -> np.ndarray:
+    """(M, K) the rays of ``ray`` that keep their claim: a direction that recedes exactly (:func:`recedes`) and
+    decreases the objective ``targets`` (M, K, 3), tried from the ray's own direction eta (M, K, 3), the mean of the
+    problem's ray directions, the mean of the views' centre rays (R_i d = (x^_i, 1): inside overlapping regions)
+    and their midpoints with eta -- a solver's ray lies on the recession cone's boundary, where a float direction
+    falls on either side of it (two parallel cameras with overlapping discs, review 26c F4)."""
+    out = ray.copy()
+    pm, ko = np.nonzero(ray)
+    if not pm.size or not all(b.kind in (ConeKind.ELLIPSE, ConeKind.POLYTOPE) for b in blocks):
+        return out
+    with np.errstate(all="ignore"):
+        unit = eta / np.linalg.norm(eta, axis=2, keepdims=True)
+    for m in np.unique(pm):
+        ks = ko[pm == m]
+        sub, Rm = [take(b, [m]) for b in blocks], R[[m]]
+        common = [np.nanmean(unit[m, ks], axis=0), _centre_ray(blocks, R[m], m)]
+        for k in ks:
+            cands = [eta[m, k]] + common + [0.5 * (unit[m, k] + c) for c in common]
+            t = targets[m, k]
+            out[m, k] = any(np.all(np.isfinite(c)) and float(t @ c) < -1e-12 * float(np.linalg.norm(t) *
+                                                                                    np.linalg.norm(c))
+                            and bool(recedes(sub, Rm, np.asarray(c, float)[None])[0]) for c in cands)
+    return out
+
+
+def _centre_ray(blocks, Rm: np.ndarray, m: int) -> np.ndarray:
+    """The mean of the views' unit centre rays d_i, R_i[:, :3] d_i = (x^_i, 1) (NaN where a view's is singular)."""
+    ds = []
+    for i, blk in enumerate(blocks):
+        try:
+            d = np.linalg.solve(Rm[i, :, :3], np.append(blk.center[m], 1.0))
+        except np.linalg.LinAlgError:
+            return np.full(3, np.nan)
+        ds.append(d / np.linalg.norm(d))
+    return np.mean(ds, axis=0)
 
 
 def _in_cone(blk, m: int, a0, a1, s_) -> bool:

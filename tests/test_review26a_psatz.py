@@ -156,7 +156,9 @@ def test_random_quartics_fixed_q_bound_is_below_the_minimum(hx):
     truth = _true_min_univariate(c)
     lb = sp.solve_psatz(sp.build_psatz(f, degree=4, multiplier="putinar"))
     _valid(lb, truth)
-    assert lb.relaxation is not None                         # the numerical c* stays available
+    # the numerical c* stays available wherever a bound is reported (an answer the optimality rule of solve_program
+    # rejects has neither: hx0, whose primal cone defect moves its objective 3x beyond the rule)
+    assert lb.lower_bound is None or getattr(lb, "relaxation", None) is not None
 
 
 def test_prove_false_keeps_the_numerical_level():

@@ -61,28 +61,6 @@ class CompiledPsatz(LoweredPsatz):
     """A Positivstellensatz structure lowered once (:class:`~sospoly.lowering.compiled.LoweredPsatz`), with the
     solvers of its instances (see module docstring)."""
 
-    def _iterate_claim(self, theta, lb: LowerBound, problem: ConicProblem, tolerances, deadline=None) -> LowerBound:
-        """An INACCURATE solve whose objective :func:`solve_program` dropped (the primal cone violation moves it beyond
-        the optimality rule) still has its iterate x: its level and Gram matrices, proven by
-        :func:`~sospoly.solvers.psatz_claims.proven_level` like an optimal one's (the proof does not rest on the
-        solver's claim), give a valid bound, reported INACCURATE (the relaxation's optimum is not known to be near)."""
-        sol = lb.solution
-        if sol is None or sol.x is None or not np.all(np.isfinite(sol.x)):
-            return lb
-        x = np.asarray(sol.x, float)
-        level = problem.objective_sign * float(problem.q @ x) + problem.objective_offset
-        if not np.isfinite(level):
-            return lb
-        it = dataclasses.replace(sol, status=SolveStatus.OPTIMAL, objective=level, x=x[: self.program.n_vars].copy(),
-                                 grams=problem.gram_matrices(x))
-        data = as_certificate_data(None, self.structure, np.asarray(theta, float).reshape(-1))
-        pl = proven_level(data, LowerBound(SolveStatus.OPTIMAL, level, it, lb.bracket, lb.message), tolerances,
-                          deadline)
-        if pl.status != SolveStatus.OPTIMAL:
-            return pl
-        return dataclasses.replace(pl, status=SolveStatus.INACCURATE,
-                                   message=f"{lb.message}; the iterate's level {level:.10g}, proven as a lower bound")
-
     def _trivially_unbounded(self) -> bool:
         s = self.slots
         return not s.n_eq and not s.n_ineq and s.degrees[0] > 0 and s.degrees[0] % 2 == 1     # (f = 0: degree -1)
@@ -125,8 +103,6 @@ class CompiledPsatz(LoweredPsatz):
     def _claim(self, theta, lb: LowerBound, problem: ConicProblem, prove: bool, tolerances,
                deadline=None) -> LowerBound:
         """The claims of :meth:`solve_theta` (:mod:`sospoly.solvers.psatz_claims`)."""
-        if prove and lb.status == SolveStatus.INACCURATE and lb.lower_bound is None:
-            return self._iterate_claim(theta, lb, problem, tolerances, deadline)
         if lb.status not in (SolveStatus.OPTIMAL, SolveStatus.UNBOUNDED):
             return lb
         data = as_certificate_data(None, self.structure, np.asarray(theta, float).reshape(-1))

@@ -117,3 +117,18 @@ def test_a_true_ray_is_still_certified():
     res = tritools.uncertainty(cams, regions)
     assert res.status == tritools.UncertaintyStatus.UNBOUNDED
     assert res.hi[2] == np.inf and np.all(np.isfinite(res.lo[2:]))
+
+
+def test_recedes_refuses_a_non_finite_direction_and_decides_exactly():
+    """The exact recession test: a direction imaged at (-80, 0) in both parallel cameras (inside both discs of radius
+    81 at (0, 0) and (-160, 0)) recedes, the optical axis (imaged at (0, 0), 160 from the second centre) does not,
+    and a NaN direction is refused (not a Fraction error)."""
+    from tritools.uncertain.sets import view_blocks
+    from tritools.uncertain.witness import recedes
+
+    cams, regions = _parallel_pair(81.0)
+    blocks = view_blocks([regions])
+    d = np.array([[-0.1, 0.0, 1.0], [0.0, 0.0, 1.0], [np.nan, 0.0, 1.0]])
+    R = np.repeat(cams[None], 3, axis=0)
+    got = [bool(recedes(blocks, R[[k]], d[[k]])[0]) for k in range(3)]
+    assert got == [True, False, False]

@@ -125,13 +125,13 @@ def recedes(blocks, R, d) -> np.ndarray:
 
     M = len(d)
     out = np.ones(M, bool)
-    if not all(b.kind in (ConeKind.ELLIPSE, ConeKind.POLYTOPE) for b in blocks):
+    if not _exact_kinds(blocks):
         return out
     for m in range(M):
-        dm = [Fraction(float(v)) for v in d[m]]
-        if not all(math.isfinite(float(v)) for v in d[m]):
+        if not all(math.isfinite(float(v)) for v in d[m]):      # (a NaN has no Fraction)
             out[m] = False
             continue
+        dm = [Fraction(float(v)) for v in d[m]]
         for i, blk in enumerate(blocks):
             a0, a1, s_ = (sum(Fraction(float(R[m, i, r, k])) * dm[k] for k in range(3)) for r in range(3))
             if s_ < 0 or not _in_cone(blk, m, a0, a1, s_):
@@ -148,7 +148,7 @@ def exact_rays(blocks, R, eta, ray, targets) -> np.ndarray:
     falls on either side of it (two parallel cameras with overlapping discs, review 26c F4)."""
     out = ray.copy()
     pm, ko = np.nonzero(ray)
-    if not pm.size or not all(b.kind in (ConeKind.ELLIPSE, ConeKind.POLYTOPE) for b in blocks):
+    if not pm.size or not _exact_kinds(blocks):
         return out
     with np.errstate(all="ignore"):
         unit = eta / np.linalg.norm(eta, axis=2, keepdims=True)
@@ -163,6 +163,11 @@ def exact_rays(blocks, R, eta, ray, targets) -> np.ndarray:
                                                                                     np.linalg.norm(c))
                             and bool(recedes(sub, Rm, np.asarray(c, float)[None])[0]) for c in cands)
     return out
+
+
+def _exact_kinds(blocks) -> bool:
+    """Every view an ellipse or a polytope: the views whose cones :func:`recedes` decides exactly."""
+    return all(b.kind in (ConeKind.ELLIPSE, ConeKind.POLYTOPE) for b in blocks)
 
 
 def _centre_ray(blocks, Rm: np.ndarray, m: int) -> np.ndarray:

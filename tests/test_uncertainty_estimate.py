@@ -132,3 +132,47 @@ def test_recedes_refuses_a_non_finite_direction_and_decides_exactly():
     R = np.repeat(cams[None], 3, axis=0)
     got = [bool(recedes(blocks, R[[k]], d[[k]])[0]) for k in range(3)]
     assert got == [True, False, False]
+
+
+@pytest.mark.parametrize("radius", [1e-9, 1e-3, 1.0])
+def test_discs_centre_on_the_dlt_where_the_estimate_is_far(radius):
+    """``uncertainty_discs`` (the SfM path): a stale estimate (a camera centre, 1e8 or 1e10 away) is only the
+    reference of ``max_distance``; before, the solver was centred on it (boxes 2x / 8x wider at 1e8 / 1e10 for
+    1e-3 px discs, and a local Farkas verdict taken far from the set)."""
+    from tritools.uncertain import uncertainty_discs
+    from tritools.uncertain.discs import solver_centres
+
+    rng = np.random.default_rng(7)
+    X = rng.normal(size=(4, 3)) * 0.3
+    x = np.array([[tritools.project(Xm, P) for P in CAMS] for Xm in X])
+    C = np.broadcast_to(CAMS, (4,) + CAMS.shape).copy()
+    assert all(_in_discs_exact(CAMS, x[m], radius, X[m]) for m in range(4))
+    base = uncertainty_discs(C, x, radius, X)
+    assert np.array_equal(solver_centres(C, x, np.full((4, 3), radius), X), X)      # a good estimate is kept
+    for E in (np.tile([-1.0, 0.0, -5.0], (4, 1)), X + 1e8, X - 1e10):
+        res = uncertainty_discs(C, x, radius, E)
+        for m, (b, r) in enumerate(zip(base, res)):
+            assert r.status == tritools.UncertaintyStatus.BOUNDED, (E[m], r.status)
+            assert r.contains(X[m])
+            assert np.all(r.hi - r.lo <= (b.hi - b.lo) * (1 + 1e-3) + 1e-12), (r.hi - r.lo, b.hi - b.lo)
+            assert r.max_distance >= np.linalg.norm(X[m] - E[m]) * (1 - 1e-12)
+
+
+def test_discs_in_a_georeferenced_world_centre_on_the_dlt():
+    """The DLT is solved in a world moved to the mean camera centre: at 1e6 m from the origin it still lands on
+    the discs, and an estimate 1e4 off gives the box of the true point's."""
+    from tritools.uncertain import uncertainty_discs
+
+    T = np.array([3.0e6, -1.0e6, 2.0e5])
+    shift = np.eye(4)
+    shift[:3, 3] = -T                                      # P' = P [I, -T; 0, 1]: the world moved by T
+    cams = np.array([P @ shift for P in CAMS])
+    X = np.array([[0.1, -0.2, 0.3], [-0.2, 0.1, 0.0]]) + T
+    x = np.array([[tritools.project(Xm, P) for P in cams] for Xm in X])
+    C = np.broadcast_to(cams, (2,) + cams.shape).copy()
+    base = uncertainty_discs(C, x, 0.5, X)
+    res = uncertainty_discs(C, x, 0.5, X + 1e4)
+    for m in range(2):
+        assert res[m].status == base[m].status == tritools.UncertaintyStatus.BOUNDED
+        assert res[m].contains(X[m])
+        assert np.all(res[m].hi - res[m].lo <= (base[m].hi - base[m].lo) * (1 + 1e-3) + 1e-6)

@@ -10,6 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..model.regions import real_array
+from ..model.stacked import dlt_stack, null_vectors, project_stack
 from .api import UncertaintyOptions, UncertaintyResult, group_blocks
 from .sets import ViewBlock
 
@@ -33,7 +34,8 @@ def uncertainty_discs(cameras, centres, radii, estimates, options: UncertaintyOp
     """Certified uncertainty of M points seen in N views each through discs.
 
     cameras (M, N, 3, 4); centres (M, N, 2) pixels; radii: a number or (M, N), > 0; estimates (M, 3)
-    (reference of ``max_distance`` and the solver's centre).  ``options.dilation`` is ignored (give
+    (reference of ``max_distance``; the solver's centre where it reprojects onto the discs at least as
+    closely as the DLT of their centres: :func:`solver_centres`).  ``options.dilation`` is ignored (give
     the radius you mean).  Cameras are not validated here (the callers have done so)."""
     C = real_array(cameras, "cameras")
     x = real_array(centres, "centres")
@@ -53,4 +55,41 @@ def uncertainty_discs(cameras, centres, radii, estimates, options: UncertaintyOp
     opts = options or UncertaintyOptions()
     if M == 0:
         return []
-    return group_blocks(C, disc_blocks(x, r), X, X, np.zeros(M, bool), opts)
+    return group_blocks(C, disc_blocks(x, r), solver_centres(C, x, r, X), X, np.zeros(M, bool), opts)
+
+
+#: :func:`solver_centres` replaces the caller's estimate by the DLT where it is this many times farther from the discs
+FAR_ESTIMATE = 2.0
+
+
+def solver_centres(C: np.ndarray, x: np.ndarray, r: np.ndarray, X: np.ndarray) -> np.ndarray:
+    """The solver's centre per point (M, 3): the caller's estimate X, or the DLT of the disc centres (solved in a
+    world moved to the mean camera centre, so that georeferenced coordinates do not drown it) where X lies outside
+    a disc and :data:`FAR_ESTIMATE` times farther from the discs than the DLT -- by max_i ||Phi(., P_i) -
+    centre_i|| / r_i.
+
+    The bounds hold from any centre, but the Farkas and dual steps are solved in (X - X0) / sigma: a centre far
+    from the set (a stale or default estimate, 1e8 away: boxes 2x wider, 1e10: 8x) loosens them and a local
+    verdict is taken far from the set (review 26b F1/F5, which :func:`~tritools.uncertain.api.uncertainty_many`
+    answers by always centring on the DLT).  Here the callers' estimates are usually their L2 optima, on or near
+    the discs: they are kept (and with them the SfM path's results), and only a clearly worse one is replaced."""
+    a = null_vectors(C)                                           # camera centres (homogeneous), (M, N, 4)
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        cen = a[..., :3] / a[..., 3:]
+        ok = np.isfinite(cen).all(axis=(1, 2))
+        c0 = np.where(ok[:, None], np.mean(np.where(ok[:, None, None], cen, 0.0), axis=1), 0.0)
+        Cc = C.copy()
+        Cc[..., 3] = C[..., 3] + np.einsum("mnij,mj->mni", C[..., :3], c0)
+        Xd, good = dlt_stack(Cc, x)
+        Xd = Xd + c0
+        good &= np.isfinite(Xd).all(axis=1)
+        d_own, d_dlt = _disc_distance(C, x, r, X), _disc_distance(C, x, r, np.where(good[:, None], Xd, X))
+    far = (d_own > 1.0) & (d_own > FAR_ESTIMATE * d_dlt)
+    return np.where((good & far)[:, None], Xd, X)
+
+
+def _disc_distance(C: np.ndarray, x: np.ndarray, r: np.ndarray, X: np.ndarray) -> np.ndarray:
+    """max_i ||Phi(X_m, P_mi) - x_mi|| / r_mi per point (M,), inf where a projection is not finite."""
+    u, _, fin = project_stack(C, X)
+    d = np.max(np.linalg.norm(u - x, axis=2) / r, axis=1)
+    return np.where(fin & np.isfinite(d), d, np.inf)

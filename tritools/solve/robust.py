@@ -588,7 +588,7 @@ def triangulate_robust(cams: np.ndarray, regions, c: np.ndarray, opts, t0: float
     thresholds of :func:`robust_thresholds`.  With every threshold infinite it is the L2 path (its result,
     every view an inlier)."""
     import dataclasses
-    from .robust_enum_run import enumerate_tls
+    from .robust_enum_run import enumerate_one
     from .triangulate import triangulate
     t0 = time.perf_counter() if t0 is None else t0
     if not np.any(np.isfinite(c)):
@@ -597,4 +597,4 @@ def triangulate_robust(cams: np.ndarray, regions, c: np.ndarray, opts, t0: float
     with np.errstate(all="ignore"):     # as in robust_batch.robust_many: finiteness is checked, warnings are noise
         search = TlsSearch(cams, regions, c, opts, t0)      # a few views: every inlier set enumerated (robust_enum_run)
         search.set_deadline(call_deadline(opts, t0, regions))   # the time limit counts from the call's entry
-        return enumerate_tls(search) or drive([search])[0]
+        return enumerate_one(search) or drive([search])[0]

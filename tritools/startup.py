@@ -6,18 +6,48 @@ long traceback and kill the process by the signal.  :func:`guard_startup` runs f
 tritools`` or the ``tritools`` script; a library import is never affected), handles SIGINT by
 printing ``tritools: interrupted`` and exiting 130.  :func:`end_startup` (called by the command's
 ``main``) restores Python's handler, so that an interrupt while solving raises KeyboardInterrupt and
-every ``finally`` (staging directories, temporary files) runs before the same exit code.
+every ``finally`` (staging directories, temporary files) runs before the same exit code.  SIGTERM (what
+``timeout``, SLURM and ``docker stop`` send) unwinds the same way while the command runs
+(:func:`terminate_unwinds`: :class:`Terminated`, exit 143; review 27a F7: it left a staging directory in OUT).
 """
 from __future__ import annotations
 
+import contextlib
 import os
 import signal
 import sys
+import threading
 
-__all__ = ["guard_startup", "end_startup", "is_command", "EXIT_INTERRUPTED", "INTERRUPTED_MESSAGE"]
+__all__ = ["guard_startup", "end_startup", "is_command", "terminate_unwinds", "Terminated", "EXIT_INTERRUPTED",
+           "INTERRUPTED_MESSAGE", "EXIT_TERMINATED", "TERMINATED_MESSAGE"]
 
 EXIT_INTERRUPTED = 130
 INTERRUPTED_MESSAGE = "tritools: interrupted"
+EXIT_TERMINATED = 128 + signal.SIGTERM
+TERMINATED_MESSAGE = "tritools: terminated"
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM while the command runs: unwinds as Ctrl-C does (every cleanup runs), then :data:`EXIT_TERMINATED`."""
+
+
+def _terminate(signum, frame) -> None:
+    raise Terminated()
+
+
+@contextlib.contextmanager
+def terminate_unwinds():
+    """While inside, SIGTERM raises :class:`Terminated` in the main thread (where Python's default would kill the
+    process and skip every ``finally``); the previous handler is restored on the way out.  Elsewhere (another
+    thread, or a handler the host program set) nothing changes."""
+    mine = threading.current_thread() is threading.main_thread() and signal.getsignal(signal.SIGTERM) == signal.SIG_DFL
+    if mine:
+        signal.signal(signal.SIGTERM, _terminate)
+    try:
+        yield
+    finally:
+        if mine:
+            signal.signal(signal.SIGTERM, signal.SIG_DFL)
 
 
 def is_command() -> bool:

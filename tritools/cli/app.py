@@ -34,7 +34,8 @@ from collections.abc import Sequence
 import numpy as np
 
 from ..model.constraints import Method
-from ..startup import EXIT_INTERRUPTED, INTERRUPTED_MESSAGE, end_startup
+from ..startup import (EXIT_INTERRUPTED, EXIT_TERMINATED, INTERRUPTED_MESSAGE, TERMINATED_MESSAGE, Terminated,
+                       end_startup, terminate_unwinds)
 from ..io.atomic import atomic_open
 from ..io.oxford import is_float
 from ..io.problem_file import (ProblemFileError, ProblemSpec, jsonable, load_problem_file, parse_problem_bytes,
@@ -515,7 +516,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         args = build_parser().parse_args(_joined_negative_values(sys.argv[1:] if argv is None else list(argv)))
         end_startup()                   # from here on Ctrl-C is a KeyboardInterrupt: cleanups run, then 130
-        with cli_logging(args):
+        with cli_logging(args), terminate_unwinds():      # SIGTERM too (then 143)
             if os.environ.get(DEBUG_ENV):
                 return int(args.func(args) or EXIT_OK)
             # extreme but finite input (|x| ~ 1e308) overflows inside numpy: its RuntimeWarnings would add
@@ -527,6 +528,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         return exit_invalid(exc)
     except SystemExit as exc:            # --help
         return exc.code if isinstance(exc.code, int) else EXIT_OK if exc.code is None else EXIT_INVALID
+    except Terminated:
+        print(TERMINATED_MESSAGE, file=sys.stderr)
+        return EXIT_TERMINATED
     except KeyboardInterrupt:
         print(INTERRUPTED_MESSAGE, file=sys.stderr)
         return EXIT_INTERRUPTED

@@ -75,9 +75,10 @@ def written_names() -> tuple:
         (CERTIFICATES_FILE, QUALITY_FILE)
 
 
-def _check_names(out_dir, fmt_out: str, in_dir) -> None:
+def _check_names(out_dir, fmt_out: str, in_dir, quality=None) -> None:
     """Refuse (:class:`OutputError`) before any work when a file the command writes into OUT is
-    the name of a directory there (it is never removed)."""
+    the name of a directory there (it is never removed), or when OUT holds a file of another model that this
+    run would leave beside the new one (:func:`_stale_files`)."""
     from .certificates import CERTIFICATES_FILE
 
     out = Path(out_dir)
@@ -85,6 +86,24 @@ def _check_names(out_dir, fmt_out: str, in_dir) -> None:
     for name in names:
         if (out / name).is_dir() and (name not in EXTRA_FILES[fmt_out] or (Path(in_dir) / name).is_file()):
             raise OutputError(f"{out / name}: is a directory (refusing to replace it with a file)")
+    stale = _stale_files(out, fmt_out, Path(in_dir), quality)
+    if stale:
+        raise OutputError(f"{out / stale[0][0]}: {stale[0][1]}; it would stay beside the new model (this command "
+                          "never deletes a file it did not write): remove it or choose another OUT_DIR")
+
+
+def _stale_files(out: Path, fmt_out: str, in_dir: Path, quality) -> list:
+    """(name, why) of the files in OUT that describe another model and that this run would neither replace nor
+    remove (review 27a F1): ``rigs``/``frames`` files of the output's format that IN does not have (COLMAP reads
+    them with the new model and refuses it: an image in no frame), and a quality file when this run writes none
+    (it lists points removed from another model)."""
+    from .quality import QUALITY_FILE
+
+    out_stale = [(n, "rigs/frames file of another model (IN has none)") for n in EXTRA_FILES[fmt_out]
+                 if (out / n).is_file() and not (in_dir / n).is_file()]
+    if (quality is None or not quality.active) and (out / QUALITY_FILE).is_file():
+        out_stale.append((QUALITY_FILE, "the point quality of another run (this run has no quality filter)"))
+    return out_stale
 
 
 def _other_model_notes(out_dir, fmt_out: str) -> list:
@@ -180,7 +199,7 @@ def retriangulate_folder(in_dir, out_dir, options: RetriangulationOptions | None
     ids, results, xyz, rgb = [], [], [], []
     removed: list = []                      # global keypoint indices of observations removed as outliers
     copied, notes = [], _other_model_notes(out_dir, fmt_out)
-    _check_names(out_dir, fmt_out, src.folder)
+    _check_names(out_dir, fmt_out, src.folder, quality)
     try:
         with _export_stack(exports) as staged_exports, atomic_directory(out_dir) as tmp:
             writer = ModelWriter(src.arrays, tmp, fmt_out)

@@ -297,6 +297,15 @@ def _solve_stacks(geom: ModelGeometry, chunk: PointChunk, options: Retriangulati
     return rec, outlier, n_inl, gamma_input
 
 
+def perspective_images(arrays: ModelArrays) -> np.ndarray:
+    """(V,) True where the image's camera model is a perspective one (it sees only in front of its z = 0 plane);
+    False for :data:`~tritools.io.colmap.lens.NON_PERSPECTIVE_MODELS` (a sphere)."""
+    from ..io.colmap.lens import NON_PERSPECTIVE_MODELS
+
+    spherical = np.array([m in NON_PERSPECTIVE_MODELS for m in arrays.camera_models], bool)
+    return ~spherical[arrays.image_camera] if len(spherical) else np.ones(arrays.n_images, bool)
+
+
 def process_chunk(arrays: ModelArrays, geom: ModelGeometry, chunk: PointChunk, options: RetriangulationOptions,
                   progress=None) -> ChunkResult:
     """Re-triangulate the points of ``chunk`` (see the module docstring)."""
@@ -319,8 +328,10 @@ def process_chunk(arrays: ModelArrays, geom: ModelGeometry, chunk: PointChunk, o
     Rt = np.concatenate([geom.R, geom.t[:, :, None]], axis=2)
     depth = depths_stack(Rt[obs_img][:, None], test[owner])[:, 0]
     # cheirality on the observations the estimate keeps: a robust estimate's outliers may lie "behind" their
-    # camera (docs/robust.md), as triangulate(..., robust=c) judges in_front
-    behind = np.bincount(owner[~(depth > 0) & ~outlier], minlength=n) > 0
+    # camera (docs/robust.md), as triangulate(..., robust=c) judges in_front; a spherical camera
+    # (EQUIRECTANGULAR) sees every direction, so its observations have no side to be behind (review 27a F2)
+    judged = ~outlier & perspective_images(arrays)[obs_img]
+    behind = np.bincount(owner[~(depth > 0) & judged], minlength=n) > 0
     ub, g_in = rec.gamma_ub, gamma_input
     better = has_X & np.isfinite(ub) & (rec.optimal | ~np.isfinite(g_in) | (ub <= g_in))
     # a robust estimate that keeps fewer than two observations does not determine the point (any point of one
@@ -342,7 +353,8 @@ def process_chunk(arrays: ModelArrays, geom: ModelGeometry, chunk: PointChunk, o
         sel = upd[owner] & usable & keep
         error[upd] = _colmap_error(arrays, geom, xyz, obs_img[sel], gk[sel], owner[sel], n)[upd]
     notes = SimpleNamespace(message=message, n_views=n_used, updated=upd)
-    _messages(arrays, geom, chunk, notes, dict(owner=owner, obs_img=obs_img, usable=usable, depth=depth, solve=solve,
+    _messages(arrays, geom, chunk, notes, dict(owner=owner, obs_img=obs_img, usable=usable,
+                                               depth=np.where(judged, depth, np.inf), solve=solve,
                                                stuck=stuck, behind=behind, has_X=has_X, better=better), options)
     if progress is not None:
         progress.update(int(np.count_nonzero(~solve)))

@@ -208,6 +208,9 @@ def check_references(arrays: ModelArrays, chunk: PointChunk, seen: np.ndarray | 
     updated).  The remaining direction (every keypoint with a POINT3D_ID is listed by that
     point's track) is :func:`unlisted_keypoint` once all chunks were seen.
     """
+    head = _bad_record(chunk)
+    if head is not None:
+        return head
     counts = np.diff(arrays.kp_offsets)[chunk.track_image]
     bad = (chunk.track_kp < 0) | (chunk.track_kp >= counts)
     owner = np.repeat(np.arange(len(chunk)), chunk.track_lengths)
@@ -234,6 +237,25 @@ def check_references(arrays: ModelArrays, chunk: PointChunk, seen: np.ndarray | 
             return int(owner[t]), (f"point3D {int(chunk.ids[owner[t]])} track lists keypoint {int(chunk.track_kp[t])} "
                                    f"of image {int(arrays.image_ids[chunk.track_image[t]])} a second time")
         seen[g] = True
+    return None
+
+
+def _bad_record(chunk: PointChunk):
+    """The first point of a chunk whose own fields are unusable, as ``(index, message)``, or None: an id that is
+    COLMAP's invalid id (2^64 - 1 in points3D.bin, -1 in points3D.txt; its unlinked keypoints carry the same
+    value, so the track check would pass) or does not fit an int64, or a non-finite X / Y / Z (written back
+    unchanged, it made a model that no reader, tritools' included, accepts)."""
+    neg = chunk.ids < 0
+    if neg.any():
+        p = int(np.argmax(neg))
+        v = int(chunk.ids[p])
+        label = "-1 (2^64 - 1)" if v == -1 else str(v % 2 ** 64)
+        return p, (f"POINT3D_ID {label} is not a valid point3D id (COLMAP's invalid id is 2^64 - 1 in points3D.bin, "
+                   f"-1 in points3D.txt; ids must fit an int64)")
+    fin = np.isfinite(chunk.xyz)
+    if not fin.all():
+        p, k = (int(v) for v in np.argwhere(~fin)[0])
+        return p, f"point3D {int(chunk.ids[p])}: {'XYZ'[k]} is not finite ({chunk.xyz[p, k]})"
     return None
 
 

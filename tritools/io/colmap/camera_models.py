@@ -145,6 +145,11 @@ def camera_problem(model: str, params) -> str | None:
         return ", ".join(f"focal length {n} = {v!r} must be > 0" for n, v in (("fx", fx), ("fy", fy)) if n in bad)
     if not np.all(np.isfinite([float(v) for v in params])):
         return "parameters must be finite"
+    with np.errstate(over="ignore", divide="ignore"):
+        tiny = [n for n, v in (("fx", fx), ("fy", fy)) if not np.isfinite(1.0 / np.float64(v))]
+    if tiny:            # (a subnormal focal length: undistortion divides by it and returned -inf as "converged")
+        return ", ".join(f"focal length {n} = {v!r} is too small (1/{n} overflows)" for n, v in (("fx", fx), ("fy", fy))
+                         if n in tiny)
     return None
 
 
@@ -285,7 +290,7 @@ def undistort(uv_d: np.ndarray, dist: np.ndarray, scale_px: float = 1.0) -> tupl
     uv_d = np.asarray(uv_d, float).reshape(-1, 2)
     uv = uv_d.copy()
     if not np.any(dist):
-        return uv, np.ones(len(uv), bool)
+        return uv, np.isfinite(uv).all(axis=1)      # (no distortion: nothing to solve; a non-finite pixel is not)
     tol = UNDISTORT_TOL_PX / scale_px
     active = np.ones(len(uv), bool)        # rows still iterating (not converged, not stuck)
     with np.errstate(all="ignore"):

@@ -155,3 +155,40 @@ def test_sigterm_unwinds_like_ctrl_c(tmp_path):
         pytest.skip("the run finished before the signal")
     assert p.returncode == 143 and err.strip().endswith("tritools: terminated")
     assert sorted(os.listdir(out)) == ["notes.txt"] and not (tmp_path / "exp").exists()
+
+
+def test_strict_must_be_a_boolean():
+    """'no' is truthy: it turned strict mode on."""
+    from tritools.sfm import OptionError, RetriangulationOptions
+
+    with pytest.raises(OptionError, match="strict"):
+        RetriangulationOptions(strict="no")
+    assert RetriangulationOptions(strict=np.bool_(True)).strict
+
+
+def test_a_keypoint_listed_twice_in_the_radii_file_is_refused(tmp_path):
+    from tritools.sfm.quality import read_keypoint_radii
+
+    arr, _ = _model(tmp_path)
+    v = 0
+    k = next(int(i) for i in range(int(arr.kp_offsets[1])) if arr.kp_point3D[i] != -1)
+    f = tmp_path / "radii.txt"
+    iid = int(arr.image_ids[v])
+    f.write_text(f"# IMAGE_ID POINT2D_IDX RADIUS\n{iid} {k} 1.0\n{iid} {k} 2.0\n")
+    again = rf"radii.txt:3: image {iid} keypoint {k} listed again \(first at .*radii.txt:2\)"
+    with pytest.raises(ValueError, match=again):
+        read_keypoint_radii(f, arr, 1.0)
+
+
+def test_non_unit_quaternions_get_a_note(tmp_path):
+    """F9: COLMAP uses a stored quaternion as it is, tritools normalises it: say so."""
+    import dataclasses
+
+    from tritools.sfm import retriangulate_folder
+
+    arr, _ = synthetic_arrays(20, 6, "PINHOLE", seed=5, max_track=4)
+    write_model_arrays(dataclasses.replace(arr, image_qvec=arr.image_qvec * 1.001), tmp_path / "in", "bin")
+    res = retriangulate_folder(tmp_path / "in", tmp_path / "out")
+    assert any("not unit" in n and "|q| = 1.001" in n for n in res.notes), res.notes
+    write_model_arrays(arr, tmp_path / "in2", "bin")
+    assert not any("not unit" in n for n in retriangulate_folder(tmp_path / "in2", tmp_path / "out2").notes)

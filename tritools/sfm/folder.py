@@ -115,6 +115,24 @@ def _other_model_notes(out_dir, fmt_out: str) -> list:
             f"points3D_certificates.txt there now describes the new {fmt_out} model, not them)"] if found else []
 
 
+#: a quaternion whose norm differs from 1 by more than this gets a note (:func:`_quaternion_notes`)
+QUATERNION_NORM_RTOL = 1e-6
+
+
+def _quaternion_notes(arrays) -> list:
+    """A note when an image's quaternion is not a unit one: tritools normalises it (the rotation it stands for),
+    COLMAP / pycolmap use it as stored -- a scaled, not orthogonal matrix -- so the two disagree on the pose
+    (review 27a F9: ERROR 0.42 px apart at |q| = 1.001); the model is written back with the quaternion as read."""
+    norms = np.linalg.norm(np.asarray(arrays.image_qvec, float).reshape(-1, 4), axis=1)
+    off = np.abs(norms - 1.0) > QUATERNION_NORM_RTOL
+    if not off.any():
+        return []
+    k = int(np.argmax(np.abs(norms - 1.0)))
+    return [f"{int(off.sum())} image quaternion(s) are not unit ones (image {int(arrays.image_ids[k])}: |q| = "
+            f"{norms[k]:.9g}): normalised here, whereas COLMAP uses them as stored; poses, reprojection errors and "
+            "certificates refer to the normalised rotations"]
+
+
 def _timed(iterator, timings: dict, key: str):
     """Iterate, adding the time spent producing each item to ``timings[key]``."""
     while True:
@@ -198,7 +216,7 @@ def retriangulate_folder(in_dir, out_dir, options: RetriangulationOptions | None
     bar = progress_bar(src.count_points() if want else None, options.progress)
     ids, results, xyz, rgb = [], [], [], []
     removed: list = []                      # global keypoint indices of observations removed as outliers
-    copied, notes = [], _other_model_notes(out_dir, fmt_out)
+    copied, notes = [], _other_model_notes(out_dir, fmt_out) + _quaternion_notes(src.arrays)
     _check_names(out_dir, fmt_out, src.folder, quality)
     try:
         with _export_stack(exports) as staged_exports, atomic_directory(out_dir) as tmp:

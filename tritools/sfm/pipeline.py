@@ -115,6 +115,8 @@ class RetriangulationOptions:
                                                   f"got {self.max_track_length}")
         if self.behind not in BEHIND_CHOICES:
             raise OptionError("behind", f"must be one of {', '.join(BEHIND_CHOICES)}, got {self.behind!r}")
+        if not isinstance(self.strict, (bool, np.bool_)):       # ("no" is truthy: it turned strict mode on)
+            raise OptionError("strict", f"must be True or False, got {self.strict!r}")
         _int_option("chunk_points", self.chunk_points, 1)
         if self.progress is not None and self.progress != "auto" and not isinstance(self.progress, (bool, np.bool_)):
             raise OptionError("progress", f"must be True, False, None or 'auto', got {self.progress!r}")
@@ -395,7 +397,8 @@ def _messages(arrays, geom, chunk, r, d, options) -> None:
     for p in np.nonzero(~d["solve"])[0]:
         k = int(r.n_views[p])
         if d["stuck"][p]:
-            why = "a keypoint cannot be undistorted (Newton did not converge)"
+            why = "a keypoint cannot be undistorted (no pinhole ray, e.g. a fisheye keypoint beyond 90 degrees, or " \
+                  "the undistortion did not converge)"
         elif k < options.min_track_length:
             why = f"{k} usable observation(s) < min_track_length {options.min_track_length}"
         else:

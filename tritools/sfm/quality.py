@@ -164,13 +164,18 @@ def read_keypoint_radii(path, arrays: ModelArrays, default: float | None) -> np.
     ValueError naming ``file:line`` for a malformed line, an unknown keypoint or a radius <= 0."""
     out = np.full(len(arrays.kp_xy), np.nan if default is None else float(default))
     index = {int(i): k for k, i in enumerate(arrays.image_ids.tolist())}
+    first: dict = {}
     for where, img, idx, r in _parse_radii(path):
         if img not in index:
             raise ValueError(f"{where}: unknown IMAGE_ID {img}")
         v = index[img]
         if not 0 <= idx < arrays.kp_offsets[v + 1] - arrays.kp_offsets[v]:
             raise ValueError(f"{where}: image {img} has no keypoint {idx}")
-        out[arrays.kp_offsets[v] + idx] = r
+        row = int(arrays.kp_offsets[v] + idx)
+        if row in first:            # (the last one won, silently: review 27a)
+            raise ValueError(f"{where}: image {img} keypoint {idx} listed again (first at {first[row]})")
+        first[row] = where
+        out[row] = r
     return out
 
 

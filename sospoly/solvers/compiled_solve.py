@@ -147,13 +147,14 @@ class CompiledPsatz(LoweredPsatz):
                        if prove else lb)
         return out
 
-    def batch_bounds(self, thetas, tolerances: Tolerances = DEFAULT_TOLERANCES) -> BatchBounds:
+    def batch_bounds(self, thetas, tolerances: Tolerances = DEFAULT_TOLERANCES, deadline=None) -> BatchBounds:
         """Lower bounds of many instances with no per-instance Python: the batched
         interior-point method, the Gram matrices from its x (G = smat(b - A x)), their
         eigendecomposition and the PSD-margin check, all on stacks.  No fallback: callers
         re-solve the instances with ``ok = False`` one by one (:meth:`solve_theta`).
         Programs with a single PSD block and no other cone (e.g. equality-constrained
-        programs in the image form) only."""
+        programs in the image form) only.  ``deadline`` (a :class:`sospoly.budget.Deadline`): the IPM stops one
+        predicted iteration before it; the instances it leaves are not ``ok`` (reason: the time limit)."""
         from ..algebra.svec import smat
 
         tolerances = as_tolerances(tolerances)
@@ -164,7 +165,7 @@ class CompiledPsatz(LoweredPsatz):
         n = lay.sizes[0]
         th = self._check_theta(thetas)
         A, b = self.dense_batch(th)
-        res = ipm_solve_batch(A, b, t.q, t.cones, tolerances)
+        res = ipm_solve_batch(A, b, t.q, t.cones, tolerances, deadline=deadline)
         G = smat(b - np.einsum("brm,bm->br", A, res.x), n)
         # rounding of b - A x: |error_r| <= gamma_(m+1) (|b_r| + sum_k |A_rk| |x_k|); smat scales off-diagonal
         # svec entries by 1/sqrt(2), so ||Delta G||_2 <= ||Delta G||_F <= ||error||_2

@@ -234,7 +234,7 @@ def _collect(stack: PointStack, idx, out: BatchOutcome) -> list:
         elif done[m]:
             out.stacked[i] = (stack, m)
         else:
-            items.append((i, *stack.item(m), stack.todo.get(m, stack.rest_opts), stack.prefix[m]))
+            items.append((i, *stack.item(m), stack.options_left(m), stack.prefix[m]))
     return items
 
 

@@ -161,7 +161,7 @@ def _solve_stack(F, ok, N: int, tol: Tolerances, reason: list, deadline):
             late[idx[start:]] = True
             _hand_back(ok, late, reason, "time limit reached before its SDP chunk")
             break
-        bb = comp.batch_bounds(th[start:start + step], ipm_tol)
+        bb = comp.batch_bounds(th[start:start + step], ipm_tol, deadline)
         iters[part], c_lb[part], lam[part], V[part] = bb.iterations, bb.lower_bound, bb.eigenvalues, bb.eigenvectors
         gram_error[part] = bb.gram_error
         for j in np.nonzero(~bb.ok)[0]:

@@ -166,7 +166,8 @@ class SparseQuadratics:
 
 
 def verify_quadratic_batch(f0, f1, F2, g0, g1, G2, points, *,
-                           tolerances: Tolerances = DEFAULT_TOLERANCES, radius=None) -> VerificationBatch:
+                           tolerances: Tolerances = DEFAULT_TOLERANCES, radius=None,
+                           constraint_error=None) -> VerificationBatch:
     """The Lagrangian bound of the module docstring for M programs at once.
 
     Program m: f(v) = f0[m] + f1[m].v + v^T F2[m] v and g_k(v) = g0[m,k] + g1[m,k].v +
@@ -187,9 +188,11 @@ def verify_quadratic_batch(f0, f1, F2, g0, g1, G2, points, *,
     r = 2 L2 w + L1, L(v) >= L(w) - eps ||v - w||^2 - ||r|| ||v - w|| for every v, so on the ball
     c - eps (R + ||w||)^2 - ||r|| (R + ||w||) - 8 eps_mach (|L0| + |L1.w| + |w^T L2 w|) is a lower bound.
 
+    ``constraint_error`` ((M, K)): e_k >= |g_k(v)| at the ball's points feasible for the caller's *true* constraints,
+    of which the g_k given are computed approximations; the bound is then c - sum_k |lambda_k| e_k
+    (:func:`constraint_margin`: lambda multiplies the data's error, and reaches 1e13 at a degenerate candidate).
     A stack of one (M = 1) runs the scalar twin of these steps (plain arrays, matrix products instead of the
-    stack's einsum, the same margin): equal to the stacked code up to round-off, not bit for bit.
-    """
+    stack's einsum, the same margin): equal to the stacked code up to round-off, not bit for bit."""
     f0 = np.asarray(f0, float)
     f1 = np.asarray(f1, float)
     F2 = np.asarray(F2, float)
@@ -206,9 +209,11 @@ def verify_quadratic_batch(f0, f1, F2, g0, g1, G2, points, *,
                          f"g0 {g0.shape}, g1 {g1.shape}, "
                          f"G2 {G2.vals.shape if isinstance(G2, SparseQuadratics) else np.shape(G2)}, "
                          f"points {v.shape}")
+    err = None if constraint_error is None else np.broadcast_to(np.asarray(constraint_error, float), (M, K))
     if M == 1:
         return _verify_one(f0[0], f1[0], F2[0], g0[0], g1[0], G2, v[0], tolerances,
-                           None if radius is None else float(np.broadcast_to(np.asarray(radius, float), (1,))[0]))
+                           None if radius is None else float(np.broadcast_to(np.asarray(radius, float), (1,))[0]),
+                           None if err is None else err[0])
     fv = f0 + np.einsum("mi,mi->m", f1, v) + np.einsum("mi,mij,mj->m", v, F2, v)
     grad_f = f1 + 2 * np.einsum("mij,mj->mi", F2, v)
     if K:
@@ -233,16 +238,23 @@ def verify_quadratic_batch(f0, f1, F2, g0, g1, G2, points, *,
     r_abs = _row_norms(2 * np.einsum("mij,mj->mi", L2, w) + L1)          # the stationarity residual ||2 L2 w + L1||
     in_range = stationary(r_abs, _row_norms(L1), s_f, tolerances)
     t1, t2 = np.einsum("mi,mi->m", L1, w), np.einsum("mi,mij,mj->m", w, L2, w)
-    c = L0 + t1 + t2
-    if radius is not None:
-        reach = np.asarray(radius, float) + _row_norms(w)
-        c = c - np.maximum(0.0, -eig[:, 0]) * reach ** 2 - r_abs * reach \
-            - 8 * _EPS * (np.abs(L0) + np.abs(t1) + np.abs(t2))
+    c = _with_margins(L0 + t1 + t2, (L0, t1, t2), eig[:, 0], r_abs, _row_norms(w), radius, lam, err)
     reason = np.where(~psd, 1, np.where(~in_range, 2, 0))
     bounded = reason == 0
     lower = np.where(bounded, c, np.nan)
     certified = bounded & np.asarray(tolerances.certified(lower, fv, s_f), bool)
     return VerificationBatch(lower, fv, certified, lam, eig[:, 0], reason)
+
+
+def _with_margins(c, terms, eig0, r_abs, w_norm, radius, lam, err):
+    """The stack's bounds c made rigorous (:func:`verify_quadratic_batch`'s docstring): on the ball of ``radius``
+    the round-off margins of the accepted Hessian, stationarity residual and sums, then the constraint data's
+    error (``err``: None, or (M, K))."""
+    if radius is not None:
+        L0, t1, t2 = terms
+        reach = np.asarray(radius, float) + w_norm
+        c = c - np.maximum(0.0, -eig0) * reach ** 2 - r_abs * reach - 8 * _EPS * (np.abs(L0) + np.abs(t1) + np.abs(t2))
+    return c if err is None else c - constraint_margin(lam, err)
 
 
 #: the denominator's floor of the stationarity test (a zero L1 and residual: in range)
@@ -279,8 +291,15 @@ def _lstsq_one(A: np.ndarray, b: np.ndarray) -> np.ndarray:
     return (inv * (b @ U)) @ Vt
 
 
+def constraint_margin(lam, err) -> np.ndarray:
+    """sum_k |lambda_k| e_k over the last axis, rounded up (the effect of constraint data known to within e_k on a
+    Lagrangian bound, :func:`verify_quadratic_batch`)."""
+    lam, err = np.abs(np.asarray(lam, float)), np.asarray(err, float)
+    return np.sum(lam * err, axis=-1) * (1.0 + 4 * lam.shape[-1] * _EPS) if lam.shape[-1] else np.zeros(lam.shape[:-1])
+
+
 def _verify_one(f0: float, f1, F2, g0, g1, G2: SparseQuadratics, v, tolerances: Tolerances,
-                radius: float | None) -> VerificationBatch:
+                radius: float | None, constraint_error=None) -> VerificationBatch:
     """The scalar (M = 1) twin of :func:`verify_quadratic_batch`: the same steps on one program with plain
     (n,), (K, n), (n, n) arrays and matrix products instead of the stack's einsum; equal to it up to round-off
     (tests/test_scalar_twins.py), the same rigorous margin.  Returns a :class:`VerificationBatch` of one."""
@@ -292,15 +311,16 @@ def _verify_one(f0: float, f1, F2, g0, g1, G2: SparseQuadratics, v, tolerances: 
         lam = _lstsq_one(J.T, -grad_f)
     else:
         lam = np.zeros(0)
-    return bound_at_one(f0, f1, F2, g0, g1, G2, lam, fv, tolerances, radius)
+    return bound_at_one(f0, f1, F2, g0, g1, G2, lam, fv, tolerances, radius, constraint_error)
 
 
 def bound_at_one(f0: float, f1, F2, g0, g1, G2: SparseQuadratics, lam, fv: float, tolerances: Tolerances,
-                 radius: float | None) -> VerificationBatch:
+                 radius: float | None, constraint_error=None) -> VerificationBatch:
     """The Lagrangian bound c(lambda) = min_v L(v, lambda) of one program at the given multipliers ``lam`` (K,),
     with the rigorous margin of :func:`verify_quadratic_batch` on the ball of ``radius`` and the certificate rule
     against the value ``fv`` of a feasible point (the second half of :func:`_verify_one`; also the bound of
-    multipliers found by :func:`sospoly.analysis.lagrangian.ascend_one`).  A :class:`VerificationBatch` of one."""
+    multipliers found by :func:`sospoly.analysis.lagrangian.ascend_one`; ``constraint_error`` as there).  A
+    :class:`VerificationBatch` of one."""
     n = len(f1)
     lam = np.asarray(lam, float)
     L0, L1 = f0 + lam @ g0, f1 + lam @ g1
@@ -320,6 +340,8 @@ def bound_at_one(f0: float, f1, F2, g0, g1, G2: SparseQuadratics, lam, fv: float
         reach = radius + math.sqrt(float(w @ w))
         c = c - max(0.0, -float(eig[0])) * reach ** 2 - r_abs * reach \
             - 8 * _EPS * (abs(L0) + abs(t1) + abs(t2))
+    if constraint_error is not None:
+        c = c - float(constraint_margin(lam, np.broadcast_to(np.asarray(constraint_error, float), lam.shape)))
     reason = 1 if not psd else 2 if not in_range else 0
     lower = np.array([c if reason == 0 else np.nan])
     fv = np.array([fv])

@@ -36,7 +36,7 @@ import scipy.sparse as sp
 
 from ..tolerances import DEFAULT_TOLERANCES, Tolerances
 from .banded import band_cholesky, band_from_dense, band_matvec, band_solve, cholesky_backward_error
-from .verify import SparseQuadratics, VerificationBatch, objective_scales, stationary
+from .verify import SparseQuadratics, VerificationBatch, constraint_margin, objective_scales, stationary
 
 __all__ = ["verify_quadratic_banded_batch", "RIDGE"]
 
@@ -88,7 +88,8 @@ class _RowPattern:
 
 
 def verify_quadratic_banded_batch(f0, f1, F2, g0, g1, G2: SparseQuadratics, points, *,
-                                  tolerances: Tolerances = DEFAULT_TOLERANCES, radius=None) -> VerificationBatch:
+                                  tolerances: Tolerances = DEFAULT_TOLERANCES, radius=None,
+                                  constraint_error=None) -> VerificationBatch:
     """The Lagrangian bound of the module docstring for M programs at once.
 
     Shapes as for :func:`~sospoly.analysis.verify.verify_quadratic_batch`: f0 (M,), f1 (M, n), F2 (M, n, n)
@@ -142,6 +143,8 @@ def verify_quadratic_banded_batch(f0, f1, F2, g0, g1, G2: SparseQuadratics, poin
     if radius is not None:
         reach = np.asarray(radius, float) + np.linalg.norm(w, axis=1)
         c = c - eps * reach ** 2 - r_abs * reach - 8 * np.finfo(float).eps * (np.abs(L0) + np.abs(t1) + np.abs(t2))
+    if constraint_error is not None:               # (verify_quadratic_batch's constraint_error)
+        c = c - constraint_margin(lam, np.broadcast_to(np.asarray(constraint_error, float), lam.shape))
     reason = np.where(~pd, 1, np.where(~in_range, 2, 0))
     bounded = (reason == 0) & np.isfinite(c)
     lower = np.where(bounded, c, np.nan)

@@ -42,6 +42,7 @@ from sospoly.analysis import verify_quadratic_batch
 from sospoly.analysis import verify_quadratic_banded_batch
 from sospoly.solvers import with_single_threaded_blas
 
+from ..model.epipolar_data import epipolar_errors
 from ..model.frame import project_world
 from ..model.geometry import camera_problems
 from ..model.normalize import normalization_stack
@@ -271,7 +272,8 @@ def _lagrangian_one(C: np.ndarray, Cn: np.ndarray, v: np.ndarray, radius: float,
         return None
     n = 2 * N
     ver = verify_quadratic_batch(np.zeros(1), np.zeros((1, n)), np.eye(n)[None], g0, g1, G2, v[None],
-                                 tolerances=tolerances, radius=np.array([radius]))
+                                 tolerances=tolerances, radius=np.array([radius]),
+                                 constraint_error=epipolar_errors(F, view_pairs(N), v[None], radius))
     return float(ver.lower_bound[0])
 
 
@@ -416,12 +418,15 @@ def _all_pairs_bounds(C, Cn, v, ok, radius, tolerances, f0, F2, views=None) -> t
     F, defined, raw = _fundamental_both(Cn, C)
     F, defined = np.where(raw[..., None, None], F, 0.0), defined & raw
     ok = ok & np.any(defined, axis=1) if F.shape[1] else ok
-    g0, g1, G2 = epipolar_quadratics(_held(F, view_pairs(N), views), N)
+    Fh = _held(F, view_pairs(N), views)
+    g0, g1, G2 = epipolar_quadratics(Fh, N)
     finite = np.isfinite(g0).all(axis=1) & np.isfinite(g1).all(axis=(1, 2)) & np.isfinite(G2.vals).all(axis=1)
     ok &= finite
     g0, g1, G2 = _zero_rows(g0, g1, G2, ok)
     n = 2 * N
-    ver = verify_quadratic_batch(f0, np.zeros((M, n)), F2, g0, g1, G2, v, tolerances=tolerances, radius=radius)
+    err = epipolar_errors(np.where(ok[:, None, None, None], Fh, 0.0), view_pairs(N), v, radius)
+    ver = verify_quadratic_batch(f0, np.zeros((M, n)), F2, g0, g1, G2, v, tolerances=tolerances, radius=radius,
+                                 constraint_error=err)
     return ver.lower_bound, ok
 
 
@@ -436,12 +441,14 @@ def _band_bounds(C, Cn, v, ok, radius, width, tolerances, f0, F2, views=None) ->
     pairs = band_pairs(N, width)
     F, defined, raw = _fundamental_both(Cn, C, pairs)
     defined &= raw
-    g0, g1, G2 = epipolar_quadratics(_held(F, pairs, views), N, pairs)
+    Fh = _held(F, pairs, views)
+    g0, g1, G2 = epipolar_quadratics(Fh, N, pairs)
     use = ok & defined.all(axis=1) & np.isfinite(g0).all(axis=1) & np.isfinite(g1).all(axis=(1, 2)) \
         & np.isfinite(G2.vals).all(axis=1)
     g0, g1, G2 = _zero_rows(g0, g1, G2, use)
     n = 2 * N
     ver = verify_quadratic_banded_batch(f0, np.zeros((M, n)), F2, g0, g1, G2, v, tolerances=tolerances,
-                                        radius=radius)
+                                        radius=radius, constraint_error=epipolar_errors(
+                                            np.where(use[:, None, None, None], Fh, 0.0), pairs, v, radius))
     lower = np.where(use, ver.lower_bound, np.nan)
     return lower, use

@@ -58,6 +58,7 @@ import numpy as np
 from sospoly.analysis import ascend_one, bound_at_one, verify_quadratic_batch
 
 from ..model.cameras import power2_scale
+from ..model.epipolar_data import epipolar_errors
 from ..model.exact import dot2, homogeneous_images
 from ..model.lm_one import refine_point_one
 from ..model.normalize import RHO_FLOOR_REL, SCALE_BOUNDS, Normalization
@@ -395,7 +396,8 @@ def _verified(v, fin, F, N: int, s, tolerances, size, accepted=True):
     n = 2 * N
     radius = np.sqrt(np.einsum("mi,mi->m", v, v))
     ver = verify_quadratic_batch(np.zeros(M), np.zeros((M, n)), np.broadcast_to(np.eye(n), (M, n, n)), g0, g1, G2,
-                                 v, tolerances=tolerances, radius=radius)
+                                 v, tolerances=tolerances, radius=radius,
+                                 constraint_error=epipolar_errors(F, view_pairs(N), v, radius))
     with np.errstate(invalid="ignore", over="ignore"):
         lb = np.maximum(np.minimum(ver.lower_bound, radius ** 2), 0.0) / (s * s) * ROUND_DOWN
         good &= np.isfinite(lb)
@@ -426,13 +428,15 @@ def ascended_bound(Cn, F, defined, W: np.ndarray, Xn: np.ndarray, s: float, tole
         return 0.0
     n = 2 * N
     radius = float(np.sqrt(v @ v))
+    err = epipolar_errors(np.where(held[:, None, None], F, 0.0)[None], (I, J), v[None], radius)
     ver = verify_quadratic_batch(np.zeros(1), np.zeros((1, n)), np.eye(n)[None], g0, g1, G2, v[None],
-                                 tolerances=tolerances, radius=np.array([radius]))
+                                 tolerances=tolerances, radius=np.array([radius]), constraint_error=err)
     found = ascend_one(0.0, np.zeros(n), np.eye(n), g0[0], g1[0], G2, ver.multipliers[0],
                        target=need * s * s * (1.0 + ASCENT_HEADROOM))
     if found is None:
         return 0.0
-    out = bound_at_one(0.0, np.zeros(n), np.eye(n), g0[0], g1[0], G2, found[0], radius * radius, tolerances, radius)
+    out = bound_at_one(0.0, np.zeros(n), np.eye(n), g0[0], g1[0], G2, found[0], radius * radius, tolerances, radius,
+                       err[0])
     with np.errstate(invalid="ignore", over="ignore"):
         lb = max(min(float(out.lower_bound[0]), radius * radius), 0.0) / (s * s) * ROUND_DOWN
     return lb if np.isfinite(lb) else 0.0

@@ -350,10 +350,11 @@ def bound_at_one(f0: float, f1, F2, g0, g1, G2: SparseQuadratics, lam, fv: float
 
 
 def verify_quadratic(f: Polynomial, eq, point, *, gens=None,
-                     tolerances: Tolerances = DEFAULT_TOLERANCES, radius: float | None = None) -> Verification:
+                     tolerances: Tolerances = DEFAULT_TOLERANCES, radius: float | None = None,
+                     constraint_error=None) -> Verification:
     """Lagrangian lower bound at a candidate ``point`` (see module docstring):
     :func:`verify_quadratic_batch` on a stack of one program (``radius``: a bound on the norm of a
-    minimiser, which makes the bound rigorous)."""
+    minimiser, which makes the bound rigorous; ``constraint_error`` (K,): as there)."""
     gens = tuple(gens or f.gens)
     n = len(gens)
     v = np.asarray(point, float)
@@ -364,5 +365,7 @@ def verify_quadratic(f: Polynomial, eq, point, *, gens=None,
     g1 = np.array([p[1] for p in parts]).reshape(1, K, n)
     G2 = np.array([p[2] for p in parts]).reshape(1, K, n, n)
     batch = verify_quadratic_batch(np.array([f0]), f1[None], F2[None], g0, g1, G2, v[None], tolerances=tolerances,
-                                   radius=None if radius is None else np.array([float(radius)]))
+                                   radius=None if radius is None else np.array([float(radius)]),
+                                   constraint_error=None if constraint_error is None else
+                                   np.asarray(constraint_error, float).reshape(1, K))
     return batch.item(0)

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["EPIPOLAR_DATA_RTOL", "epipolar_errors"]
+__all__ = ["EPIPOLAR_DATA_RTOL", "epipolar_errors", "polynomial_errors"]
 
 #: the relative error assumed of a computed, unit-norm fundamental matrix (16 units in the last place)
 EPIPOLAR_DATA_RTOL = 16 * 2.0 ** -52
@@ -42,3 +42,16 @@ def epipolar_errors(F: np.ndarray, pairs: tuple, v: np.ndarray, radius) -> np.nd
         e = np.maximum(base, np.where(np.isfinite(seen), seen, np.inf))
         R = np.broadcast_to(np.asarray(radius, float), (M,))
         return np.where(base > 0, e * (1.0 + R[:, None] ** 2 / 2) * (1 + 1e-12), 0.0)
+
+
+def polynomial_errors(eq, point: np.ndarray, radius: float) -> np.ndarray:
+    """(K,) the same bounds for constraints given as quadratic polynomials built from computed data (the generic
+    verification of a built problem): e_k = max(EPIPOLAR_DATA_RTOL sum_a |c_ka|, 4 |g_k(v^)|) max(1, R^2), each
+    coefficient c_ka known to within EPIPOLAR_DATA_RTOL of the largest and every monomial of degree <= 2 at most
+    max(1, R^2) on the ball; v^ the candidate (a true feasible point)."""
+    out = []
+    for g in eq:
+        coef = float(np.sum(np.abs(np.asarray(g.coefficients(), float))))
+        seen = 4 * abs(float(g(np.asarray(point, float))))
+        out.append(max(EPIPOLAR_DATA_RTOL * coef, seen if np.isfinite(seen) else np.inf))
+    return np.array(out) * max(1.0, float(radius) ** 2) * (1 + 1e-12)

@@ -33,6 +33,7 @@ from sospoly.analysis import verify_quadratic
 from sospoly.budget import TimeLimitReached
 
 from ...model.constraints import Method
+from ...model.epipolar_data import polynomial_errors
 from ...model.geometry import dlt, gamma as gamma_of, project, refine_l2
 from ...result import Attempt, Status, TriangulationResult
 from ..decide import cheirality, decide, gamma_from_c
@@ -221,7 +222,8 @@ def _verify_generic(ctx: PointContext, step: Step) -> TriangulationResult | None
         return None
     v = np.concatenate([project(Xn, P) for P in ctx.cams_n])[: 2 * ctx.N]
     ball = solve_ball(ctx.regs_n, float(problem.f(v)))          # holds a minimiser: a rigorous bound
-    ver = verify_quadratic(problem.f, problem.eq, v, gens=problem.gens, tolerances=ctx.tolerances, radius=ball)
+    ver = verify_quadratic(problem.f, problem.eq, v, gens=problem.gens, tolerances=ctx.tolerances, radius=ball,
+                           constraint_error=polynomial_errors(problem.eq, v, ball))
     status, optimal, c_lb = decide(ver.lower_bound, ver.upper_bound, ctx.tolerances, ctx.N, ctx.norm.resolution)
     if not optimal:
         return None

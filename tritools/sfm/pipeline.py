@@ -145,6 +145,7 @@ class ModelGeometry:
     dist: np.ndarray              # (V, 4) k1, k2, p1, p2 (OPENCV family; other models: zeros, unused)
     xy_u: np.ndarray              # (K, 2) undistorted keypoints (NaN where not computed)
     kp_ok: np.ndarray             # (K,) undistortion converged
+    perspective: np.ndarray       # (V,) the image's camera sees only in front of it (False: spherical, no depth test)
 
 
 def rotations(qvec: np.ndarray) -> np.ndarray:
@@ -154,6 +155,15 @@ def rotations(qvec: np.ndarray) -> np.ndarray:
     return np.stack([np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
                      np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
                      np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1)], 1)
+
+
+def _perspective_images(arrays: ModelArrays) -> np.ndarray:
+    """(V,) True where the image's camera model is a perspective one (it sees only in front of its z = 0 plane);
+    False for :data:`~tritools.io.colmap.lens.NON_PERSPECTIVE_MODELS` (a sphere)."""
+    from ..io.colmap.lens import NON_PERSPECTIVE_MODELS
+
+    spherical = np.array([m in NON_PERSPECTIVE_MODELS for m in arrays.camera_models], bool)
+    return ~spherical[arrays.image_camera] if len(spherical) else np.ones(arrays.n_images, bool)
 
 
 def prepare_geometry(arrays: ModelArrays, strict: bool = False) -> ModelGeometry:
@@ -194,7 +204,8 @@ def prepare_geometry(arrays: ModelArrays, strict: bool = False) -> ModelGeometry
         if r.size:
             xy_u[r], kp_ok[r] = undistorted_pixels(arrays.camera_models[k], arrays.camera_params[k], arrays.kp_xy[r])
     return ModelGeometry(reasons, image_ok, R, t, P, np.column_stack([Ks[cam, 0, 0], Ks[cam, 1, 1]]),
-                         np.column_stack([Ks[cam, 0, 2], Ks[cam, 1, 2]]), dists[cam], xy_u, kp_ok)
+                         np.column_stack([Ks[cam, 0, 2], Ks[cam, 1, 2]]), dists[cam], xy_u, kp_ok,
+                         _perspective_images(arrays))
 
 
 @dataclass(frozen=True, eq=False)
@@ -299,15 +310,6 @@ def _solve_stacks(geom: ModelGeometry, chunk: PointChunk, options: Retriangulati
     return rec, outlier, n_inl, gamma_input
 
 
-def perspective_images(arrays: ModelArrays) -> np.ndarray:
-    """(V,) True where the image's camera model is a perspective one (it sees only in front of its z = 0 plane);
-    False for :data:`~tritools.io.colmap.lens.NON_PERSPECTIVE_MODELS` (a sphere)."""
-    from ..io.colmap.lens import NON_PERSPECTIVE_MODELS
-
-    spherical = np.array([m in NON_PERSPECTIVE_MODELS for m in arrays.camera_models], bool)
-    return ~spherical[arrays.image_camera] if len(spherical) else np.ones(arrays.n_images, bool)
-
-
 def process_chunk(arrays: ModelArrays, geom: ModelGeometry, chunk: PointChunk, options: RetriangulationOptions,
                   progress=None) -> ChunkResult:
     """Re-triangulate the points of ``chunk`` (see the module docstring)."""
@@ -332,7 +334,7 @@ def process_chunk(arrays: ModelArrays, geom: ModelGeometry, chunk: PointChunk, o
     # cheirality on the observations the estimate keeps: a robust estimate's outliers may lie "behind" their
     # camera (docs/robust.md), as triangulate(..., robust=c) judges in_front; a spherical camera
     # (EQUIRECTANGULAR) sees every direction, so its observations have no side to be behind (review 27a F2)
-    judged = ~outlier & perspective_images(arrays)[obs_img]
+    judged = ~outlier & geom.perspective[obs_img]
     behind = np.bincount(owner[~(depth > 0) & judged], minlength=n) > 0
     ub, g_in = rec.gamma_ub, gamma_input
     better = has_X & np.isfinite(ub) & (rec.optimal | ~np.isfinite(g_in) | (ub <= g_in))

@@ -262,17 +262,26 @@ class ClarabelBackend:
         simply treated as "not certified").  ``deadline`` becomes Clarabel's ``time_limit``
         (less its uninterruptible start, see :meth:`solve_once`); no attempt starts that cannot
         finish its first iteration before the deadline, and the chain then ends with status
-        ``time_limit`` and the last attempt's iterate (if any).
+        ``time_limit`` and the last attempt's iterate (if any).  The retries after a failed first full attempt
+        share a time budget (``Tolerances.retry_budget_share`` / ``retry_budget_seconds``); one it stops is a
+        failed attempt and ends the chain.
         """
         attempts = []
-        last = provisional = None
+        last = provisional = budget = None
         first_seconds = 0.0          # the longest start (set-up + 2 iterations' worth) measured so far
         for label, overrides in self._chain(problem, retry):
             if deadline is not None and deadline.expired:
                 attempts.append(Attempt(label, RawStatus.TIME_LIMIT, "time limit reached", 0, 0.0))
                 return _kept(provisional, attempts) or self._time_limit(last, attempts)
-            sol, att = self.solve_once(problem, label, overrides, deadline, first_seconds)
+            limit = _earlier(deadline, budget)
+            sol, att = self.solve_once(problem, label, overrides, limit, first_seconds)
             attempts.append(att)
+            if budget is not None and limit is budget and att.raw_status == RawStatus.TIME_LIMIT:
+                attempts[-1] = dataclasses.replace(att, raw_status=RawStatus.FAILED,
+                                                   solver_status=f"{att.solver_status} (retry budget spent)")
+                break                                    # the retries' budget, not the caller's limit
+            if budget is None and not _provisional(overrides):
+                budget = self._retry_budget(att.seconds)
             if sol is None:
                 if att.raw_status == RawStatus.TIME_LIMIT:
                     return _kept(provisional, attempts) or self._time_limit(last, attempts)
@@ -308,6 +317,11 @@ class ClarabelBackend:
                                                                  tuple(attempts))
         return ConicSolution(last.raw_status, last.x, last.z, last.primal_objective, last.dual_objective,
                              tuple(attempts))
+
+    def _retry_budget(self, first: float) -> Deadline:
+        """The deadline of the retries after a first full attempt of ``first`` seconds (:class:`Tolerances`)."""
+        tol = self.tolerances
+        return Deadline.after(max(tol.retry_budget_seconds, tol.retry_budget_share * first))
 
     def _chain(self, problem: ConicProblem, retry: bool):
         """The retry chain for ``problem``: qdldl dropped where a PSD block is too large for it
@@ -455,6 +469,15 @@ AUTO_IPM_MIN_COST_SCALARS = 1e7
 #: the IPM's working set (~3 m sum_k n_k^2 + m^2 floats, see sospoly.budget) above which AutoBackend
 #: goes to Clarabel directly (whose memory grows with sum_k L_k^2 instead); one value with the budget's model.
 AUTO_IPM_MAX_BYTES = _AUTO_IPM_MAX_BYTES
+
+
+def _earlier(a: Deadline | None, b: Deadline | None) -> Deadline | None:
+    """The earlier of two deadlines (None: none)."""
+    if a is None or a.end is None:
+        return b
+    if b is None or b.end is None:
+        return a
+    return a if a.end <= b.end else b
 
 
 def _kept(provisional: ConicSolution | None, attempts: list) -> ConicSolution | None:

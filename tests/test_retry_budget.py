@@ -1,0 +1,117 @@
+"""Clarabel's retries after a failed first full attempt share a time budget (``Tolerances.retry_budget_share`` /
+``retry_budget_seconds``; review 27b F3: a four-view rectified rig whose L2 optimum lies behind the cameras spent
+47 s of retries after an 11 s Theorem 1 attempt, 59 s of the 60 s default limit, without an answer).
+
+The chain rule is checked on a hand-made conic program with a known optimum and a faked solver outcome; the
+end-to-end case on the reviewer's geometry against an independent multi-start least-squares reference.
+"""
+from __future__ import annotations
+
+import dataclasses
+import time
+
+import numpy as np
+import pytest
+from scipy.optimize import least_squares
+
+import tritools
+from sospoly import DEFAULT_TOLERANCES, Tolerances
+from sospoly.budget import Deadline
+from sospoly.solvers import ClarabelBackend
+from sospoly.solvers.backends import RawStatus
+from tests.test_mixed_fast_chain import _Problem
+
+
+def _faked(monkeypatch, outcomes: dict, seen: dict):
+    """solve_once answering ``outcomes[label]`` (a RawStatus) after the real solve, recording the time each attempt
+    was given (None: no limit)."""
+    real = ClarabelBackend.solve_once
+
+    def fake(self, problem, label="default", overrides=None, deadline=None, first_seconds=0.0):
+        seen[label] = None if deadline is None else deadline.remaining()
+        sol, att = real(self, problem, label, overrides, deadline, first_seconds)
+        return sol, dataclasses.replace(att, raw_status=outcomes.get(label.split("/")[0], att.raw_status))
+
+    monkeypatch.setattr(ClarabelBackend, "solve_once", fake)
+
+
+def test_a_retry_stopped_by_the_budget_is_a_failure_and_ends_the_chain(monkeypatch):
+    seen: dict = {}
+    _faked(monkeypatch, {"default": RawStatus.FAILED, "qdldl": RawStatus.TIME_LIMIT}, seen)
+    tol = dataclasses.replace(DEFAULT_TOLERANCES, retry_budget_share=0.0, retry_budget_seconds=0.5)
+    sol = ClarabelBackend(tol).solve(_Problem())
+    assert [a.label for a in sol.attempts] == ["default", "qdldl"]      # no attempt after the budget stop
+    assert sol.raw_status == RawStatus.FAILED                           # not the caller's time limit
+    assert "retry budget" in sol.attempts[-1].solver_status
+    assert seen["default"] is None and 0.0 < seen["qdldl"] <= 0.5       # only the retries are limited
+
+
+def test_the_callers_earlier_limit_stays_a_time_limit(monkeypatch):
+    seen: dict = {}
+    _faked(monkeypatch, {"default": RawStatus.FAILED, "qdldl": RawStatus.TIME_LIMIT}, seen)
+    tol = dataclasses.replace(DEFAULT_TOLERANCES, retry_budget_share=0.0, retry_budget_seconds=100.0)
+    sol = ClarabelBackend(tol).solve(_Problem(), deadline=Deadline.after(5.0))
+    assert sol.raw_status == RawStatus.TIME_LIMIT
+    assert seen["qdldl"] <= 5.0
+
+
+def test_the_budget_scales_with_the_first_attempt(monkeypatch):
+    seen: dict = {}
+    _faked(monkeypatch, {"default": RawStatus.FAILED, "qdldl": RawStatus.FAILED}, seen)
+    tol = dataclasses.replace(DEFAULT_TOLERANCES, retry_budget_share=1e6, retry_budget_seconds=0.0)
+    sol = ClarabelBackend(tol).solve(_Problem())
+    first = sol.attempts[0].seconds
+    assert len(sol.attempts) == 3 and sol.raw_status == RawStatus.SOLVED   # the retries ran to an answer
+    assert seen["qdldl"] == pytest.approx(1e6 * first, rel=0.5)
+
+
+def test_budget_fields_are_validated():
+    for bad in (-1.0, float("nan"), float("inf")):
+        with pytest.raises(ValueError, match="retry_budget_share"):
+            Tolerances(retry_budget_share=bad)
+        with pytest.raises(ValueError, match="retry_budget_seconds"):
+            Tolerances(retry_budget_seconds=bad)
+
+
+def _rectified_rig_behind():
+    """Review 27b's seed 16: four cameras K [I | -b e_1] on a line, negative disparity (the L2 optimum lies behind
+    the cameras), 0.3-1 px noise."""
+    rng = np.random.default_rng(16)
+    N = int(rng.integers(2, 7))
+    K = np.array([[800.0, 0, 320.0], [0, 800.0, 240.0], [0, 0, 1]])
+    cams = np.array([K @ np.hstack([np.eye(3), np.array([[-b], [0.0], [0.0]])]) for b in np.arange(N) * 0.5])
+    assert rng.choice(["zero", "neg", "pos_small"]) == "neg"
+    u0, v0 = rng.uniform(100, 500), rng.uniform(100, 400)
+    disp = -rng.uniform(0.5, 20)
+    x = np.array([[u0 - disp * i, v0] for i in range(N)]) + rng.normal(scale=rng.choice([0.0, 0.3, 1.0]),
+                                                                         size=(N, 2))
+    for j in rng.choice(N, int(rng.integers(0, N // 2 + 1)), replace=False):
+        x[j] += rng.normal(scale=rng.choice([5.0, 50.0]), size=2)
+    return cams, x
+
+
+def _reference_gamma(cams, x, starts) -> float:
+    """The smallest gamma reached by least squares from ``starts`` (an attained value: >= gamma*)."""
+    def res(X):
+        h = cams @ np.append(X, 1.0)
+        return (h[:, :2] / h[:, 2:] - x).ravel()
+    best = np.inf
+    for X0 in starts:
+        r = least_squares(res, X0, method="lm", xtol=1e-15, ftol=1e-15, gtol=1e-15, max_nfev=20000)
+        best = min(best, float(np.sqrt(np.sum(r.fun ** 2) / (2 * len(x)))))
+    return best
+
+
+@pytest.mark.slow
+def test_rectified_rig_behind_the_cameras_ends_well_inside_the_default_limit():
+    cams, x = _rectified_rig_behind()
+    t = time.perf_counter()
+    res = tritools.triangulate(cams, x)
+    seconds = time.perf_counter() - t
+    assert res.status != tritools.Status.TIME_LIMIT and seconds < 40.0      # 59 s (time_limit) before the budget
+    d = np.linalg.solve(cams[0][:, :3], np.append(x[0], 1.0))
+    starts = [res.X, tritools.dlt(cams, x)] + [s * t * d for t in (5.0, 20.0, 100.0) for s in (1, -1)]
+    ref = _reference_gamma(cams, x, starts)
+    assert res.gamma_lb is not None and res.gamma_lb <= ref * (1 + 1e-9)
+    assert res.gamma_ub == pytest.approx(tritools.gamma(res.X, cams, x), rel=1e-9)
+    assert res.gamma_ub <= ref * (1 + 1e-6)                                 # the estimate is the best found

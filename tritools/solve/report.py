@@ -188,11 +188,12 @@ def solve_ball(regions_n, c_upper: float) -> float | None:
     if not np.isfinite(c_upper):
         return None
     rho2, aux2 = 0.0, 0.0
-    for r in regions_n:
+    for r in regions_n:                 # products, not ** (a Python float's ** raises OverflowError; * gives inf)
         rho, a = region_extent(r)
-        rho2 += rho ** 2
-        aux2 += r.n_aux * a ** 2
-    return math.sqrt((math.sqrt(rho2) + math.sqrt(max(c_upper, 0.0))) ** 2 + aux2)
+        rho2 += rho * rho
+        aux2 += r.n_aux * (a * a)
+    reach = math.sqrt(rho2) + math.sqrt(max(c_upper, 0.0))
+    return math.sqrt(reach * reach + aux2)
 
 
 def region_extent(region) -> tuple[float, float]:

@@ -310,8 +310,31 @@ class EllipseBorder(Region):
         return float(self._axes[1])
 
     def similarity(self, scale, shift):
+        """The region mapped by y -> s (y - t).  The constructor's rule decides the copy's shape fields; where it
+        refuses s^2 D although D was accepted (an axis ratio near ``sqrt(PD_RTOL)``: the small eigenvalue of the
+        scaled matrix is only known to ~eps lam_max / lam_min relative, review 28a F2), the fields are carried over
+        instead (:meth:`_scaled`): the same ellipse, scaled."""
         s, t = similarity_args(scale, shift)
-        return type(self)(s * (self.center_ - t), s * s * self.D)
+        try:
+            return type(self)(s * (self.center_ - t), s * s * self.D)
+        except FieldError:
+            new = self._scaled(s, t)
+            if new is None:
+                raise
+            return new
+
+    def _scaled(self, s: float, t: np.ndarray):
+        """The copy mapped by y -> s (y - t) with its shape fields carried over (D s^2, semi-axes s, the same axis
+        directions, D^-1 / s^2); None where a field is not finite or a semi-axis vanishes in floating point."""
+        s2 = s * s
+        centre, D, axes, Dinv = s * (self.center_ - t), s2 * self.D, s * self._axes, self._Dinv / s2
+        if not (np.isfinite(centre).all() and np.isfinite(D).all() and np.isfinite(Dinv).all() and axes[1] > 0
+                and np.isfinite(axes[0])):
+            return None
+        new = object.__new__(type(self))
+        centre.setflags(write=False)
+        new._set_fields(centre, D, axes, self._Q.copy(), Dinv)
+        return new
 
     def extent(self) -> RegionExtent:
         """``(rho, rho)`` with rho = ``||x^||`` + the largest semi-axis: the auxiliary ``y`` is a point of the

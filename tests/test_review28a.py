@@ -90,3 +90,28 @@ def test_similarity_carries_a_thin_ellipse_over(cls):
                                                                                                         rel=1e-3)
     with pytest.raises(ValueError, match="positive definite"):
         cls([0.0, 0.0], np.diag([1.0, 1e-13]))                       # the constructor's rule is unchanged
+
+
+def test_a_too_thin_ellipse_is_refused_for_being_thin():
+    # review 28a F3: "must be positive definite" for diag(1, 1e-12), which is positive definite
+    for cls in (Ellipse, EllipseBorder):
+        with pytest.raises(ValueError, match="not thinner than") as err:
+            cls([0.0, 0.0], np.diag([1.0, 1e-12]))
+        assert "PD_RTOL" in str(err.value)
+        with pytest.raises(ValueError, match="must be positive definite, got eigenvalues"):
+            cls([0.0, 0.0], np.diag([1.0, -1.0]))
+
+
+def test_a_free_multiplier_runs_with_the_default_sparsity():
+    # review 28a: multiplier='free' with sparsity 'auto' raised ValueError inside the solve at N >= 6 (the plan
+    # chose the views formulation, where no free q exists); the plan keeps it dense, and 'views' is refused up front
+    from tritools.scene import random_scene
+
+    sc = random_scene(6, 1, noise_px=1.0, seed=3)
+    cams, x = np.asarray(sc.cameras), np.asarray(sc.points2d)[0]
+    res = tritools.triangulate(cams, x, multiplier="free", delta=4, max_delta=4, method="corollary1")
+    assert res.X is not None and np.isfinite(res.gamma_ub)
+    assert all(a.sparsity == "dense" for a in res.attempts if a.delta == 4)
+    assert res.gamma_lb is None or res.gamma_lb <= res.gamma_ub * (1 + 1e-9)
+    with pytest.raises(tritools.OptionError, match="multiplier"):
+        tritools.TriangulationOptions(multiplier="free", sparsity="views")

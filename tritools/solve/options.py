@@ -246,6 +246,9 @@ class TriangulationOptions:
             raise OptionError("max_delta", f"must be >= delta ({self.delta}), got {self.max_delta}",
                               f"max_delta ({self.max_delta}) must be >= delta ({self.delta})")
         set_(self, "multiplier", _multiplier(self.multiplier))
+        if self.multiplier == Multiplier.FREE and self.sparsity == Sparsity.CLIQUES:
+            raise OptionError("multiplier", "'free' needs a dense certificate: sparsity 'auto' or 'none', got "
+                                            "sparsity 'views'")
         for name in ("refine", "normalize", "require_in_front"):
             if not isinstance(getattr(self, name), (bool, int)) or isinstance(getattr(self, name), float):
                 raise OptionTypeError(name, f"must be True or False, got {getattr(self, name)!r}")

@@ -82,8 +82,8 @@ class Step:
 
 
 def _formulation(options: TriangulationOptions, method: Method, delta: int, n_views: int, n_vars: int) -> str:
-    if delta <= 2 or options.sparsity == Sparsity.DENSE:
-        return "dense"
+    if delta <= 2 or options.sparsity == Sparsity.DENSE or options.multiplier == Multiplier.FREE:
+        return "dense"      # (a free SOS multiplier q exists for dense certificates only; the options refuse 'views')
     if n_views <= 2 or (n_views == 3 and method == Method.THEOREM1):
         return "dense"      # one clique holds every view: the views add a redundant block (asked for too: Theorem 1
         #                     at three views of wrong matches, 'views' ended solver_failed after 1.1 s, dense 23 ms)

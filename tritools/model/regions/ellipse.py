@@ -210,8 +210,12 @@ class EllipseBorder(Region):
         if np.max(np.abs(D - D.T)) > SYMMETRY_RTOL * max(scale, 1e-300):
             raise FieldError("D", f"must be symmetric, got {D.tolist()}")
         D, axes, Q, Dinv, lam = _shape_fields(D[None])
-        if not (lam[0, 1] > 0 and lam[0, 0] > PD_RTOL * lam[0, 1]):
+        if not (lam[0, 1] > 0 and lam[0, 0] > 0):
             raise FieldError("D", f"must be positive definite, got eigenvalues {lam[0].tolist()}")
+        if not lam[0, 0] > PD_RTOL * lam[0, 1]:
+            raise FieldError("D", f"must be positive definite and not thinner than an eigenvalue ratio of PD_RTOL = "
+                                  f"{PD_RTOL:g} (semi-axis ratio {math.sqrt(PD_RTOL):g}), got eigenvalues "
+                                  f"{lam[0].tolist()} (for a thinner region use a Segment)")
         if not np.all(np.isfinite(Dinv)):
             raise FieldError("D", f"is too close to singular for floating point (its inverse overflows), "
                              f"got eigenvalues {lam[0].tolist()}")

@@ -115,3 +115,25 @@ def test_a_free_multiplier_runs_with_the_default_sparsity():
     assert res.gamma_lb is None or res.gamma_lb <= res.gamma_ub * (1 + 1e-9)
     with pytest.raises(tritools.OptionError, match="multiplier"):
         tritools.TriangulationOptions(multiplier="free", sparsity="views")
+
+
+def test_verification_with_a_huge_ball_neither_raises_nor_loses_an_exact_bound():
+    # the read-through after review 28a F1: the scalar twin squared the ball's reach with a Python float ** (an
+    # OverflowError for radius 1e200), and 0 * inf made the stacked bound NaN; an exactly PSD, exactly stationary
+    # Lagrangian needs no margin on any ball
+    import sospoly
+    from sospoly.analysis import verify_quadratic, verify_quadratic_batch
+    from tritools.model.epipolar_data import polynomial_errors
+
+    x, y = sospoly.variables("x y")
+    f = (x - 1) ** 2 + (y - 2) ** 2                      # min on x = y: 0.5 at (1.5, 1.5)
+    near = verify_quadratic(f, [x - y], [1.5, 1.5], radius=10.0)
+    assert near.certified and near.lower_bound <= 0.5
+    for radius in (1e200, np.inf):
+        far = verify_quadratic(f, [x - y], [1.5, 1.5], radius=radius)
+        assert far.lower_bound == near.lower_bound and far.certified
+        stacked = verify_quadratic_batch(np.array([5.0, 5.0]), np.array([[-2.0, -4.0]] * 2), np.stack([np.eye(2)] * 2),
+                                         np.zeros((2, 1)), np.array([[[1.0, -1.0]]] * 2), np.zeros((2, 1, 2, 2)),
+                                         np.array([[1.5, 1.5]] * 2), radius=np.array([radius, 10.0]))
+        assert stacked.lower_bound[0] == stacked.lower_bound[1] <= 0.5
+    assert polynomial_errors([x - y], [1.5, 1.5], 1e200)[0] == np.inf

@@ -253,8 +253,15 @@ def _with_margins(c, terms, eig0, r_abs, w_norm, radius, lam, err):
     if radius is not None:
         L0, t1, t2 = terms
         reach = np.asarray(radius, float) + w_norm
-        c = c - np.maximum(0.0, -eig0) * reach ** 2 - r_abs * reach - 8 * _EPS * (np.abs(L0) + np.abs(t1) + np.abs(t2))
+        c = c - _margin_terms(np.maximum(0.0, -eig0), r_abs, reach) - 8 * _EPS * (np.abs(L0) + np.abs(t1) + np.abs(t2))
     return c if err is None else c - constraint_margin(lam, err)
+
+
+def _margin_terms(defect, r_abs, reach):
+    """defect reach^2 + ||r|| reach, each term 0 where its factor is (a huge or infinite ball leaves an exact
+    Lagrangian bound as it is: 0 * inf is not a margin), inf past the largest float (products, never ``**``)."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        return np.where(defect > 0, defect * reach * reach, 0.0) + np.where(r_abs > 0, r_abs * reach, 0.0)
 
 
 #: the denominator's floor of the stationarity test (a zero L1 and residual: in range)
@@ -338,8 +345,7 @@ def bound_at_one(f0: float, f1, F2, g0, g1, G2: SparseQuadratics, lam, fv: float
     c = L0 + t1 + t2
     if radius is not None:
         reach = radius + math.sqrt(float(w @ w))
-        c = c - max(0.0, -float(eig[0])) * reach ** 2 - r_abs * reach \
-            - 8 * _EPS * (abs(L0) + abs(t1) + abs(t2))
+        c = c - float(_margin_terms(max(0.0, -float(eig[0])), r_abs, reach)) - 8 * _EPS * (abs(L0) + abs(t1) + abs(t2))
     if constraint_error is not None:
         c = c - float(constraint_margin(lam, np.broadcast_to(np.asarray(constraint_error, float), lam.shape)))
     reason = 1 if not psd else 2 if not in_range else 0

@@ -54,4 +54,5 @@ def polynomial_errors(eq, point: np.ndarray, radius: float) -> np.ndarray:
         coef = float(np.sum(np.abs(np.asarray(g.coefficients(), float))))
         seen = 4 * abs(float(g(np.asarray(point, float))))
         out.append(max(EPIPOLAR_DATA_RTOL * coef, seen if np.isfinite(seen) else np.inf))
-    return np.array(out) * max(1.0, float(radius) ** 2) * (1 + 1e-12)
+    r = float(radius)
+    return np.array(out) * max(1.0, r * r) * (1 + 1e-12)     # (r * r: inf past the largest float, ** raises)

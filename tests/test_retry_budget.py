@@ -8,7 +8,6 @@ end-to-end case on the reviewer's geometry against an independent multi-start le
 from __future__ import annotations
 
 import dataclasses
-import time
 
 import numpy as np
 import pytest
@@ -103,12 +102,14 @@ def _reference_gamma(cams, x, starts) -> float:
 
 
 @pytest.mark.slow
-def test_rectified_rig_behind_the_cameras_ends_well_inside_the_default_limit():
+def test_rectified_rig_behind_the_cameras_stops_its_retries_at_the_budget():
     cams, x = _rectified_rig_behind()
-    t = time.perf_counter()
     res = tritools.triangulate(cams, x)
-    seconds = time.perf_counter() - t
-    assert res.status != tritools.Status.TIME_LIMIT and seconds < 40.0      # 59 s (time_limit) before the budget
+    assert res.status != tritools.Status.TIME_LIMIT
+    # Theorem 1 at delta = 4: the default attempt fails, and the first retry, which needs ~3.4x its time, is stopped
+    # by the budget (1x); before, two retries ran to their iteration and time limits (45-59 s of the 60 s limit)
+    chain = [a.solver for a in res.attempts if a.method == "theorem1"][-1]
+    assert chain[-1].endswith("(retry budget spent)") and not any(s.startswith("regularised") for s in chain)
     d = np.linalg.solve(cams[0][:, :3], np.append(x[0], 1.0))
     starts = [res.X, tritools.dlt(cams, x)] + [s * t * d for t in (5.0, 20.0, 100.0) for s in (1, -1)]
     ref = _reference_gamma(cams, x, starts)

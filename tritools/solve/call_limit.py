@@ -27,7 +27,7 @@ import time
 
 import numpy as np
 
-from ..model.cameras import camera_problems
+from ..model.cameras import camera_problems, power2_scale
 from ..model.frame import recentred
 from ..model.stacked import dlt_stack, refine_points_stack
 from ..result import Attempt, Status, TriangulationResult
@@ -99,7 +99,7 @@ def expired_points(C: np.ndarray, x: np.ndarray, opts, *, refine: bool = True,
     camera_problems`, the vectorised twin of the camera checks) gets their ``invalid_input`` result instead
     (:func:`_refused`: what a batch without the limit reports); a stack the vectorised steps cannot take
     (LinAlgError on extreme numbers) is taken one problem at a time; each camera is divided by its largest entry
-    first (the same camera).  ``refine=False``: the DLT point itself (the robust rows: an L2 refinement through
+    first (exactly the same camera).  ``refine=False``: the DLT point itself (the robust rows: an L2 refinement through
     wrong matches costs tens of iterations and means nothing for their TLS value); with TLS thresholds ``c``
     (M, N), the cheap TLS start of :func:`~tritools.solve.robust_costs.tls_start_stack` instead."""
     t0 = time.perf_counter()
@@ -110,8 +110,8 @@ def expired_points(C: np.ndarray, x: np.ndarray, opts, *, refine: bool = True,
                                         c=None if c is None else c[finite]) if finite.any() else [])
         return [next(good_rows) if finite[m] else _refused(C[m], x[m], opts) for m in range(len(x))]
     with np.errstate(all="ignore"):
-        top = np.max(np.abs(C), axis=(2, 3), keepdims=True)
-        C = C / np.where(top > 0, top, 1.0)             # each camera at unit scale (the same camera: 1e300 overflowed)
+        C = C / power2_scale(C, (2, 3))             # each camera by a power of two near its largest entry: exact (a
+        # division by the entry itself rounds every entry, which a georeferenced world amplifies past gamma_UB's margin)
         try:
             Cr, origin = recentred(C)                   # a georeferenced world: the DLT in its local frame
             X0, ok = dlt_stack(Cr, x) if c is None else tls_start_stack(Cr, x, c)

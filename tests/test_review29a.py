@@ -70,3 +70,83 @@ def test_a_batch_cut_by_its_whole_call_limit_keeps_valid_upper_bounds():
     for (cams, x), r in zip(problems, res):
         assert r.status == "time_limit" and not r.optimal
         _assert_upper(cams, x, r)
+
+
+# ------------------------------------------------------------------------------------------------ F4: total_time_limit
+# A robust batch under ``total_time_limit`` ran 1.4-1.9x its limit: the drive's searches counted their time limit from
+# the drive's start (after the enumeration of their chunk), and the rows of the problems past the end (an L2
+# refinement of up to 100 iterations each) came on top.  The checks here are on the deadlines each step is given, not
+# on wall-clock times.
+def _wrong_match_tracks(n_problems: int, seed: int = 7):
+    rng = np.random.default_rng(seed)
+    out = []
+    for k in range(n_problems):
+        N = int(rng.choice([3, 5, 8, 12, 20]))
+        cams, x = _geo_track(N, 1000 + k, 0.0)
+        x = x.copy()
+        x[rng.choice(N, size=max(1, N // 4), replace=False)] += rng.uniform(40, 300, (max(1, N // 4), 2))
+        out.append((cams, x))
+    return out
+
+
+def test_reserve_rules():
+    import time
+
+    from tritools.solve.call_limit import EXPIRED_SECONDS, RESERVE_TOP_SHARE, reserve_for, reserved_end
+    a, b = EXPIRED_SECONDS
+    assert reserve_for([3, 100]) == pytest.approx(2 * a + 103 * b)
+    assert reserve_for([]) == 0.0
+    assert reserved_end(None, 5.0) is None
+    end = time.time() + 10.0
+    assert reserved_end(end, 0.0) == end
+    assert reserved_end(end, 1.0) == pytest.approx(end - 1.0)
+    assert end - reserved_end(end, 100.0) <= RESERVE_TOP_SHARE * 10.0 + 1e-6      # never more than its share
+
+
+def test_drive_searches_end_no_later_than_the_call(monkeypatch):
+    import time
+
+    from tritools.solve import robust as robust_mod
+    from tritools.solve.call_limit import current_end
+    seen = []
+    original = robust_mod.TlsSearch.set_deadline
+
+    def spy(self, deadline):
+        end = current_end()
+        if end is not None and deadline.end is not None:
+            seen.append(deadline.end - (time.monotonic() + (end - time.time())))
+        return original(self, deadline)
+
+    monkeypatch.setattr(robust_mod.TlsSearch, "set_deadline", spy)
+    problems = _wrong_match_tracks(120)
+    res = tritools.triangulate_many(problems, robust=6.0, time_limit=100.0, total_time_limit=30.0,
+                                  progress=False)
+    assert len(res) == len(problems)
+    assert seen, "no search of the drive was given a deadline"
+    assert max(seen) <= 1e-3, max(seen)       # no search's deadline after the end of its call's scope
+
+
+def test_batch_steps_keep_a_reserve_for_the_later_rows(monkeypatch):
+    """The point stacks of a batch run in a scope that ends before the call's end by the reserve of the problems
+    after them, and the later stacks get the rest."""
+    import time
+
+    from tritools.solve import batch as batch_mod
+    from tritools.solve.call_limit import current_end, reserve_for
+    ends = []
+    Original = batch_mod.PointStack
+
+    class Spy(Original):
+        def run(self):
+            ends.append((len(self.x) if hasattr(self, "x") else None, current_end()))
+            return super().run()
+
+    monkeypatch.setattr(batch_mod, "PointStack", Spy)
+    problems = [_geo_track(3, s, 0.0) for s in range(40)] + [_geo_track(30, 100 + s, 0.0) for s in range(40)]
+    t0 = time.time()
+    res = tritools.triangulate_many(problems, total_time_limit=60.0, progress=False)
+    assert len(res) == len(problems) and len(ends) == 2
+    call_end = t0 + 60.0
+    first, second = ends[0][1], ends[1][1]
+    assert first <= call_end - 0.9 * reserve_for([30] * 40)       # the 30-view stack's rows are kept time for
+    assert second >= first

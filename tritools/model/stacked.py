@@ -186,17 +186,18 @@ def _solve_or_pinv(A: np.ndarray, g: np.ndarray) -> np.ndarray:
 
 
 def refine_points_stack(C: np.ndarray, xhat: np.ndarray, X: np.ndarray, ok: np.ndarray, *,
-                        return_converged: bool = False, scalar: bool | None = None) -> tuple:
+                        return_converged: bool = False, scalar: bool | None = None,
+                        max_iter: int = LM_MAX_ITER) -> tuple:
     """Levenberg-Marquardt on sum_i ||Phi(X, P_i) - x^_i||^2 from X (M, 3), for the problems where ``ok``;
     the twin of :func:`tritools.model.geometry.refine_l2` with point regions.  (X, ok), and with
     ``return_converged`` also the mask of the problems that stopped by the step rule (not stalled, not at
-    LM_MAX_ITER): another run from their X would stop after one step.
+    ``max_iter``, LM_MAX_ITER by default): another run from their X would stop after one step.
 
     ``scalar``: run a stack of one through :func:`refine_point` (the same iteration on plain (N, 3, 4) arrays,
     ~3x cheaper for one problem; equal to the stacked code up to round-off, tests/test_scalar_twins.py); None
     (default): exactly when M = 1."""
     if (len(X) == 1) if scalar is None else scalar:
-        return _refine_one_as_stack(C, xhat, X, ok, return_converged)
+        return _refine_one_as_stack(C, xhat, X, ok, return_converged, max_iter)
     X = X.copy()
     converged = np.zeros(len(X), bool)
     mu = np.full(len(X), 1e-3)
@@ -206,7 +207,7 @@ def refine_points_stack(C: np.ndarray, xhat: np.ndarray, X: np.ndarray, ok: np.n
         cost = np.where(fin, np.add.reduce((u - xhat) ** 2, axis=(1, 2)), np.inf)
         ok = ok & fin
         active = np.nonzero(ok)[0]
-        for _ in range(LM_MAX_ITER):
+        for _ in range(max_iter):
             if active.size == 0:
                 break
             active = _lm_iteration(C, absC2, xhat, X, u, h, cost, mu, converged, active)
@@ -316,11 +317,11 @@ def _gauss_newton_one(C: np.ndarray, xhat: np.ndarray, X: np.ndarray) -> np.ndar
     return X
 
 
-def _refine_one_as_stack(C, xhat, X, ok, return_converged: bool) -> tuple:
+def _refine_one_as_stack(C, xhat, X, ok, return_converged: bool, max_iter: int = LM_MAX_ITER) -> tuple:
     """:func:`refine_point` on the one problem of a stack (M = 1), with the stack's return shapes."""
     if len(X) != 1:
         raise ValueError(f"refine_points_stack: scalar=True needs a stack of one problem, got {len(X)}")
-    X1, ok1, conv1 = refine_point(C[0], xhat[0], X[0], bool(ok[0]))
+    X1, ok1, conv1 = refine_point(C[0], xhat[0], X[0], bool(ok[0]), max_iter=max_iter)
     out = (X1[None], np.array([ok1]))
     return out + (np.array([conv1]),) if return_converged else out
 
@@ -397,15 +398,15 @@ def damped_step_one(JtJ: np.ndarray, g: np.ndarray, mu: float) -> np.ndarray:
     return -np.array(x)
 
 
-def refine_point(C: np.ndarray, xhat: np.ndarray, X: np.ndarray, ok: bool = True) -> tuple:
-    """The scalar (M = 1) twin of :func:`refine_points_stack`: the same Levenberg-Marquardt iteration on one
-    problem, cameras C (N, 3, 4), observed points x^ (N, 2), start X (3,) -- minimising
-    sum_i ||Phi(X, P_i) - x^_i||^2 with the Jacobian d Phi / d X = (P[:2, :3] - u P[2, :3]) / (P[2] . X~), the
-    damped step of :func:`damped_step_one`, a step accepted iff the cost does not increase, mu / 10 on
-    acceptance (floor 1e-12) and x 10 otherwise, stop when ||step|| <= LM_STEP_RTOL (1 + ||X||) (converged)
-    or mu > 1e12 (stalled) or after LM_MAX_ITER iterations.  Plain (N, 2, 3) arrays and a 3x3 solve on floats
-    instead of the stack's einsum and batched solve, so equal to it up to round-off only.
-    (X, ok, converged)."""
+def refine_point(C: np.ndarray, xhat: np.ndarray, X: np.ndarray, ok: bool = True, *,
+                 max_iter: int = LM_MAX_ITER) -> tuple:
+    """The scalar (M = 1) twin of :func:`refine_points_stack`: the same Levenberg-Marquardt iteration on one problem,
+    cameras C (N, 3, 4), observed points x^ (N, 2), start X (3,) -- minimising sum_i ||Phi(X, P_i) - x^_i||^2 with the
+    Jacobian d Phi / d X = (P[:2, :3] - u P[2, :3]) / (P[2] . X~), the damped step of :func:`damped_step_one`, a step
+    accepted iff the cost does not increase, mu / 10 on acceptance (floor 1e-12) and x 10 otherwise, stop when ||step||
+    <= LM_STEP_RTOL (1 + ||X||) (converged) or mu > 1e12 (stalled) or after ``max_iter`` (LM_MAX_ITER) iterations.
+    Plain (N, 2, 3) arrays and a 3x3 solve on floats instead of the stack's einsum and batched solve, so equal to it up
+    to round-off only. (X, ok, converged)."""
     X = np.array(X, float)
     if not ok:
         return X, False, False
@@ -414,15 +415,15 @@ def refine_point(C: np.ndarray, xhat: np.ndarray, X: np.ndarray, ok: bool = True
         at = cams.project(X, xhat)
         if at is None:
             return X, False, False
-        converged = _lm_loop(cams, xhat, X, at)
+        converged = _lm_loop(cams, xhat, X, at, max_iter)
     return X, bool(np.isfinite(X).all()), converged
 
 
-def _lm_loop(cams: _View, xhat: np.ndarray, X: np.ndarray, at: tuple) -> bool:
+def _lm_loop(cams: _View, xhat: np.ndarray, X: np.ndarray, at: tuple, max_iter: int = LM_MAX_ITER) -> bool:
     """The iterations of :func:`refine_point` (X updated in place); True when stopped by the step rule."""
     u, den, cost, r = at
     mu = 1e-3
-    for _ in range(LM_MAX_ITER):
+    for _ in range(max_iter):
         J = ((cams.A01 - u[:, :, None] * cams.A2) / den[:, None, None]).reshape(-1, 3)
         Jt = J.T
         step = damped_step_one(Jt @ J, Jt @ r, mu)

@@ -39,7 +39,8 @@ from ..model.regions import Region, declares_extent
 from ..model.constraints import Method
 from ..records import TriangulationResults
 from ..result import Attempt, Status, TriangulationResult
-from .call_limit import call_limit, expired, expired_points, expired_regions, mark_cut, within
+from .call_limit import (call_limit, expired, expired_points, expired_regions, mark_cut, reserve_for, reserved_end,
+                         reserving, within)
 from .options import TriangulationOptions, options_from
 from .discs import as_disc_problem, solve_disc_group
 from .plan import batch_steps
@@ -109,11 +110,20 @@ def _run_chunk(items, retries, end=None) -> list:
     """Executor task: [(index, result)] for items [(index, cameras, regions, options, prefix)]; the items whose
     turn comes after the whole call's ``end`` get their ``time_limit`` results at once (:func:`_expired_items`)."""
     out = []
+    later = reserve_for(_item_views(items))
     for k, (i, c, r, o, pre) in enumerate(items):
-        if expired(end):
+        later -= reserve_for(_item_views(items[k:k + 1]))
+        end_k = reserved_end(end, later)              # the rows of the items after it fit before the end
+        if expired(end_k):
             return out + _expired_items(items[k:], retries, end)
-        out.append((i, _solve_item(c, r, o, pre, retries, end)))
+        out.append((i, _solve_item(c, r, o, pre, retries, end_k)))
     return out
+
+
+def _item_views(items) -> list:
+    """The view counts of per-item problems (index, cameras, regions, options, prefix) for
+    :func:`~tritools.solve.call_limit.reserve_for` (2 where the regions have no length)."""
+    return [len(it[2]) if hasattr(it[2], "__len__") else 2 for it in items]
 
 
 def _expired_items(items, retries, end) -> list:
@@ -343,7 +353,8 @@ def _solve_problems(problems, opts: TriangulationOptions, executor, progress, re
         items.extend(rest)
     if bar is not None:
         bar.update(len(out.objects))
-    for group in groups.values():
+    order = list(groups.items())
+    for k, (_, group) in enumerate(order):
         idx = [g[0] for g in group]
         C, x = np.array([g[1] for g in group]), np.array([g[2] for g in group])
         if expired(end):                              # past the whole call's end: estimates only
@@ -351,7 +362,9 @@ def _solve_problems(problems, opts: TriangulationOptions, executor, progress, re
             if bar is not None:
                 bar.update(len(idx))
             continue
-        stack = PointStack(C, x, opts, stages=stages).run()    # no runner: the open rows join ``items``
+        later = sum(reserve_for((n,)) * len(g) for n, g in order[k + 1:]) + reserve_for(_item_views(items))
+        with reserving(later):                        # the rows of the problems after it fit before the end
+            stack = PointStack(C, x, opts, stages=stages).run()    # no runner: the open rows join ``items``
         items.extend(_collect(stack, idx, out))
         if bar is not None:
             bar.update(int(stack.done.sum()))

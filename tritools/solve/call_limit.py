@@ -36,10 +36,15 @@ from .robust_costs import tls_start_stack
 
 __all__ = ["call_limit", "current_end", "expired", "within", "mark_cut", "expired_points", "expired_regions",
            "expired_regions_validated",
-           "EXPIRED_SLICE", "CUT_MESSAGE"]
+           "reserve_for", "reserved_end", "reserving",
+           "EXPIRED_SLICE", "EXPIRED_LM_ITER", "EXPIRED_SECONDS", "RESERVE_TOP_SHARE", "CUT_MESSAGE"]
 
 #: the per-point time limit of a point whose turn comes after the end: enough to return the local estimate only.
 EXPIRED_SLICE = 1e-9
+#: Levenberg-Marquardt iterations of the estimate of last resort of a point past the end (:func:`expired_points`):
+#: past the end, so a few; a track with wrong matches ran to LM_MAX_ITER = 100 there, and 300 mixed problems under
+#: ``total_time_limit=0.5`` spent 0.3 s past it (review 29a F4).  gamma_UB is the value at whatever X it reaches.
+EXPIRED_LM_ITER = 8
 #: appended to the message of a point stopped by the whole-call limit.
 CUT_MESSAGE = "the whole call's time limit (total_time_limit) was reached"
 
@@ -70,6 +75,38 @@ def expired(end: float | None) -> bool:
     return end is not None and time.time() >= end
 
 
+#: seconds that the row of last resort of one point problem of N views past the end costs, a + b N (the DLT,
+#: :data:`EXPIRED_LM_ITER` iterations, the report): measured 0.07-0.15 ms at N = 3, 0.7-1.3 ms at N = 100 and
+#: 2.9-3.8 ms at N = 300 per problem on the 2-core machine under load (:func:`reserve_for`)
+EXPIRED_SECONDS = (1e-4, 1e-5)
+#: the most of the time left that the reserve for the rows of later problems takes (:func:`reserved_end`)
+RESERVE_TOP_SHARE = 0.5
+
+
+def reserve_for(view_counts) -> float:
+    """Seconds to keep before the end for the rows of last resort of problems with these view counts: a batch's
+    steps end that much earlier, so the rows of the problems they did not reach still fit in the whole call's
+    limit (review 29a F4: 300 problems of 2-100 views under ``total_time_limit=0.5`` returned after 0.6-0.9 s)."""
+    a, b = EXPIRED_SECONDS
+    return float(sum(a + b * int(n) for n in view_counts))
+
+
+def reserved_end(end: float | None, seconds: float) -> float | None:
+    """``end`` moved ``seconds`` earlier, by at most :data:`RESERVE_TOP_SHARE` of the time left (None: no end)."""
+    if end is None or seconds <= 0.0:
+        return end
+    return end - min(float(seconds), RESERVE_TOP_SHARE * max(0.0, end - time.time()))
+
+
+@contextlib.contextmanager
+def reserving(seconds: float):
+    """A :func:`call_limit` scope that ends :func:`reserved_end` ``seconds`` before the enclosing one (none without
+    an enclosing end); yields its end."""
+    end = reserved_end(current_end(), seconds)
+    with call_limit(None if end is None else max(0.0, end - time.time())) as inner:
+        yield inner
+
+
 def within(opts, end: float | None):
     """(options, cut): ``opts`` with its per-point time limit cut to what is left before ``end`` (at least
     :data:`EXPIRED_SLICE`), and whether it was cut."""
@@ -92,16 +129,16 @@ def mark_cut(result):
 
 def expired_points(C: np.ndarray, x: np.ndarray, opts, *, refine: bool = True,
                    c: np.ndarray | None = None) -> list[TriangulationResult]:
-    """``time_limit`` results of point problems (C (M, N, 3, 4), x (M, N, 2)) not solved before the end: the DLT
-    point refined by Levenberg-Marquardt (vectorised), gamma_UB = gamma(X) (a valid upper bound: the value of the
-    objective at a point), no lower bound, not optimal.  A problem that the per-point checks refuse (non-finite
-    numbers, a camera of rank < 3, cameras all equal, fewer than two views: :func:`~tritools.model.cameras.
-    camera_problems`, the vectorised twin of the camera checks) gets their ``invalid_input`` result instead
-    (:func:`_refused`: what a batch without the limit reports); a stack the vectorised steps cannot take
-    (LinAlgError on extreme numbers) is taken one problem at a time; each camera is divided by its largest entry
-    first (exactly the same camera).  ``refine=False``: the DLT point itself (the robust rows: an L2 refinement through
-    wrong matches costs tens of iterations and means nothing for their TLS value); with TLS thresholds ``c``
-    (M, N), the cheap TLS start of :func:`~tritools.solve.robust_costs.tls_start_stack` instead."""
+    """``time_limit`` results of point problems (C (M, N, 3, 4), x (M, N, 2)) not solved before the end: the DLT point
+    refined by :data:`EXPIRED_LM_ITER` Levenberg-Marquardt iterations (vectorised), gamma_UB = gamma(X) (a valid upper
+    bound: the value of the objective at a point), no lower bound, not optimal.  A problem that the per-point checks
+    refuse (non-finite numbers, a camera of rank < 3, cameras all equal, fewer than two views:
+    :func:`~tritools.model.cameras.camera_problems`, the vectorised twin of the camera checks) gets their
+    ``invalid_input`` result instead (:func:`_refused`: what a batch without the limit reports); a stack the vectorised
+    steps cannot take (LinAlgError on extreme numbers) is taken one problem at a time; each camera is divided by a power
+    of two near its largest entry first (exactly the same camera).  ``refine=False``: the DLT point itself (the robust
+    rows: an L2 refinement through wrong matches costs tens of iterations and means nothing for their TLS value); with
+    TLS thresholds ``c`` (M, N), the cheap TLS start of :func:`~tritools.solve.robust_costs.tls_start_stack` instead."""
     t0 = time.perf_counter()
     C, x = np.asarray(C, float), np.asarray(x, float)
     finite = camera_problems(C).valid & np.isfinite(x).all(axis=(1, 2)) & (x.shape[1] >= 2)
@@ -115,7 +152,7 @@ def expired_points(C: np.ndarray, x: np.ndarray, opts, *, refine: bool = True,
         try:
             Cr, origin = recentred(C)                   # a georeferenced world: the DLT in its local frame
             X0, ok = dlt_stack(Cr, x) if c is None else tls_start_stack(Cr, x, c)
-            Xr, ok = refine_points_stack(Cr, x, X0, ok) if refine else (X0, ok)
+            Xr, ok = refine_points_stack(Cr, x, X0, ok, max_iter=EXPIRED_LM_ITER) if refine else (X0, ok)
             X = origin + Xr
             gamma, res, dep = points_report_stack(C, x, X, opts.world_frame)
         except np.linalg.LinAlgError:

@@ -31,7 +31,8 @@ import numpy as np
 
 from ..model.regions import as_regions
 from ..result import Attempt, Status, TriangulationResult
-from .call_limit import call_limit, current_end, expired, expired_points, mark_cut, within
+from .call_limit import (call_limit, current_end, expired, expired_points, mark_cut, reserve_for, reserving,
+                         within)
 from .fastpath_cameras import validated_problem
 from .robust import robust_thresholds, triangulate_robust
 from .robust_report import tls_reported_stack
@@ -237,7 +238,7 @@ def _drive_chunks(problems, thresholds, opts, idx, out, points) -> None:
     whole-call limit a chunk takes about :data:`CHUNK_SHARE` of the time left at the last chunk's cost per problem
     (at least :data:`CHUNK_MIN` problems), and the problems whose chunk would start after the end get the rows of
     :func:`expired_tls` (a search past its deadline still costs ~1 ms: 200 problems took a 0.01 s limit to 0.1-0.4 s,
-    review 18)."""
+    review 18); a chunk ends early enough for those rows (:func:`~.call_limit.reserving`)."""
     k, per = 0, CHUNK_PRIOR_SECONDS
     while k < len(idx):
         end = current_end()
@@ -249,8 +250,17 @@ def _drive_chunks(problems, thresholds, opts, idx, out, points) -> None:
         t0 = time.perf_counter()
         chunk = idx[k:k + size]
         k += size
-        _drive_chunk(problems, thresholds, opts, chunk, out, points, t0)
+        with reserving(reserve_for(_view_count(problems[i]) for i in idx[k:])):    # their rows past the end
+            _drive_chunk(problems, thresholds, opts, chunk, out, points, t0)
         per = max((time.perf_counter() - t0) / len(chunk), 1e-6)
+
+
+def _view_count(problem) -> int:
+    """The view count of a batch item for :func:`~.call_limit.reserve_for` (2 for an item it cannot read)."""
+    try:
+        return max(2, len(problem[0]))
+    except (TypeError, IndexError, KeyError, ValueError, AttributeError):
+        return 2
 
 
 #: under a whole-call limit: a chunk's share of the time left, the fewest problems in a chunk, and the cost per

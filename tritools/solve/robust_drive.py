@@ -17,7 +17,7 @@ from ..result import Status, TriangulationResult
 from .call_limit import current_end
 from .robust_bounds import compute_many
 
-__all__ = ["drive", "credit"]
+__all__ = ["drive", "credit", "within_call"]
 
 log = logging.getLogger(__name__)
 
@@ -34,8 +34,9 @@ def drive(searches: list) -> list:
     results: list = [None] * len(gens)
     pending: dict = {}
     if len(searches) > 1:
+        call_end = current_end()
         for s in searches:
-            s.set_deadline(s.opts.budget.deadline())
+            s.set_deadline(within_call(s.opts.budget.deadline(), call_end))
 
     def step(i: int) -> float:
         t = time.monotonic()
@@ -93,15 +94,24 @@ def _collector_paused(n_searches: int):
             gc.enable()
 
 
+def within_call(deadline, call_end: float | None):
+    """``deadline`` (monotonic clock) no later than the whole call's wall-clock ``call_end`` (None: no end).  A
+    drive's searches count their time limit from the drive's start, after the enumeration that came before it in
+    their chunk: without this a batch under ``total_time_limit`` ran on that long past its end (review 29a F4: 1.4-1.9x
+    the limit, robust, 300 problems)."""
+    if call_end is None:
+        return deadline
+    end = time.monotonic() + (call_end - time.time())
+    if deadline.end is not None and deadline.end <= end:
+        return deadline
+    return type(deadline)(end, deadline.span)
+
+
 def credit(search, seconds: float) -> None:
     """Move a search's deadline (if any) on by ``seconds`` it was not charged, never past the end of the whole
     call (``total_time_limit``, :func:`tritools.solve.call_limit.current_end`, wall clock): the searches of a
     batch together stop there (review finding F4)."""
-    end = search.deadline.end
-    if end is not None and seconds > 0:
-        new = end + seconds
-        call_end = current_end()
-        if call_end is not None:                  # the wall-clock end in the deadline's (monotonic) clock
-            new = min(new, time.monotonic() + (call_end - time.time()))
-        search.set_deadline(type(search.deadline)(max(end, new)))
+    d = search.deadline
+    if d.end is not None and seconds > 0:
+        search.set_deadline(within_call(type(d)(d.end + seconds, d.span), current_end()))
 

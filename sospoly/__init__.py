@@ -39,6 +39,7 @@ from .solvers.lower_bound import solve_psatz
 from .solvers.solve import (ConicResult, LowerBound, ProgramSolution, check_certificate, solve_conic_problem,
                             solve_program)
 from .status import SolveStatus
+from .scaling import pow2_above, pow2_above_array
 from .tolerances import DEFAULT_TOLERANCES, Tolerances
 
 __version__ = "0.2.0"
@@ -56,5 +57,6 @@ __all__ = [
     "solve_psatz", "LowerBound", "ProgramSolution", "check_certificate", "solve_program", "SolveStatus",
     "DEFAULT_TOLERANCES", "Tolerances",
     "MomentMatrix", "MatrixSOSConstraint", "DDConstraint", "DDKind", "QuadExpr", "ConicResult",
-    "RatioResult", "minimize_ratios", "solve_conic_problem", "DEFAULT_TIME_LIMIT", "Sparsity",
+    "RatioResult", "minimize_ratios", "solve_conic_problem", "DEFAULT_TIME_LIMIT", "Sparsity", "pow2_above",
+    "pow2_above_array",
 ]

@@ -45,7 +45,7 @@ from .certificates.program import SOSProgram
 from .certificates.psatz import common_gens
 from .lowering.conic import GramForm
 from .ratios_proof import proven_ratio_bound
-from .scaling import balancing, lifted, used_gens
+from .scaling import balancing, lifted, pow2_above, used_gens
 from .solvers.solve import solve_program
 from .status import SolveStatus
 from .tolerances import Tolerances, as_tolerances
@@ -130,8 +130,8 @@ def _pow2(p) -> float:
 
 
 def _pow2_of(m: float) -> float:
-    """The power of two at or just above m (1 for 0 or a non-finite m)."""
-    return math.ldexp(1.0, math.frexp(m)[1]) if m > 0 and math.isfinite(m) else 1.0
+    """The power of two at or just above m (1 for 0 or a non-finite m; :func:`sospoly.scaling.pow2_above`)."""
+    return pow2_above(m)
 
 
 def _degree(pairs, eq, ineq, degree):

@@ -40,7 +40,7 @@ from itertools import product
 import numpy as np
 
 from .algebra.polynomial import Polynomial
-from .scaling import MAX_EXPONENT, scaled_program
+from .scaling import MAX_EXPONENT, pow2_above, scaled_program
 
 __all__ = ["Cancellation", "CANCELLATION_BITS", "T_BITS", "MAX_TERMS", "SCALE_MAX_TERMS", "translation_point",
            "translated", "cancellation_scale", "scale_of_result", "translated_program", "result_in_original",
@@ -218,7 +218,7 @@ def _structure_scale(ft: Polynomial) -> float | None:
     top = max(mags)
     if not (np.isfinite(top) and top > 0):
         return None
-    return math.ldexp(1.0, math.frexp(top)[1])
+    return pow2_above(top)
 
 
 def cancellation_scale(f: Polynomial, x) -> Cancellation:

@@ -26,12 +26,32 @@ import numpy as np
 from .algebra.polynomial import Polynomial
 
 __all__ = ["VariableScaling", "ScaledProgram", "balancing", "uncapped", "power2_normalised", "scaled_program",
-           "used_gens", "lifted", "MIN_GAIN_BITS", "MAX_EXPONENT"]
+           "used_gens", "lifted", "pow2_above", "pow2_above_array", "MIN_GAIN_BITS", "MAX_EXPONENT", "MAX_POW2_EXP"]
 
 #: the scaling is applied only when it narrows the largest log2-spread of the polynomials' coefficients by this.
 MIN_GAIN_BITS = 4.0
 #: |k_i| is capped here (2^200 ~ 1.6e60).
 MAX_EXPONENT = 200
+#: the largest binary exponent of a finite power of two: the power "at or just above" a magnitude in
+#: [2^1023, the largest double] would be 2^1024, which overflows (a camera entry of 1e308 raised OverflowError, review
+#: 29b F1), so :func:`pow2_above` stops at 2^1023 and a quotient by it is at most 2 in magnitude.
+MAX_POW2_EXP = 1023
+
+
+def pow2_above(m: float) -> float:
+    """The power of two at or just above ``m`` > 0 (2^e with m = f 2^e, 1/2 <= f < 1), at most 2^MAX_POW2_EXP; 1
+    for 0 or a non-finite m.  Dividing by it is exact (barring underflow) and brings |m| into (1/4, 1], or (1, 2)
+    at the cap."""
+    if not (m > 0 and math.isfinite(m)):
+        return 1.0
+    return math.ldexp(1.0, min(math.frexp(m)[1], MAX_POW2_EXP))
+
+
+def pow2_above_array(m: np.ndarray) -> np.ndarray:
+    """The vectorised twin of :func:`pow2_above` (elementwise, the same numbers)."""
+    m = np.asarray(m, float)
+    ok = (m > 0) & np.isfinite(m)
+    return np.where(ok, np.ldexp(1.0, np.minimum(np.frexp(np.where(ok, m, 1.0))[1], MAX_POW2_EXP)), 1.0)
 
 
 @dataclass(frozen=True)
@@ -121,7 +141,7 @@ def power2_normalised(p: Polynomial) -> tuple[Polynomial, float]:
     m = p.max_abs_coefficient()
     if not m or not np.isfinite(m):
         return p, 1.0
-    e = math.frexp(m)[1]
+    e = min(math.frexp(m)[1], MAX_POW2_EXP)
     return Polynomial(p.gens, {a: math.ldexp(float(c), -e) for a, c in p.terms.items()}), math.ldexp(1.0, e)
 
 

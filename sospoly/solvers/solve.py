@@ -20,11 +20,13 @@ solvers' own stopping rules have absolute parts that a tiny program sits below.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from ..budget import Deadline
+from ..scaling import MAX_POW2_EXP
 from .backends import ConicSolution, RawStatus, get_backend
 from .optimality import check_optimality
 from .rays import check_infeasibility, check_primal_point, check_unbounded_ray
@@ -149,7 +151,7 @@ def _rhs_scale(problem: ConicProblem) -> float:
     bmax = float(np.max(np.abs(problem.b)))
     if not (0.0 < bmax < RESCALE_BELOW and np.isfinite(bmax)):
         return 1.0
-    return float(np.ldexp(1.0, -int(np.frexp(bmax)[1]) + 1))
+    return math.ldexp(1.0, min(-math.frexp(bmax)[1] + 1, MAX_POW2_EXP))     # (a subnormal bmax: 2^1074 overflowed)
 
 
 def _unscaled(sol: ConicSolution, alpha: float) -> ConicSolution:

@@ -51,6 +51,8 @@ from operator import mul
 import numpy as np
 from numpy.typing import ArrayLike
 
+from sospoly import pow2_above, pow2_above_array
+
 from .regions.base import real_array
 
 __all__ = ["depth_rows", "numeric_cameras",
@@ -128,9 +130,7 @@ def power2_scale(A: np.ndarray, axes: tuple) -> np.ndarray:
     """The power of two at or just above the largest absolute entry over ``axes`` (kept as size-1
     axes), 1 where that entry is 0 or not finite.  Dividing by it is exact (barring underflow) and
     brings the entries into [-1, 1], so that later products and norms cannot overflow."""
-    m = np.maximum.reduce(np.abs(A), axis=axes, keepdims=True)      # (ndarray.max's ufunc, without its wrapper)
-    ok = (m > 0) & np.isfinite(m)
-    return np.where(ok, np.ldexp(1.0, np.frexp(np.where(ok, m, 1.0))[1]), 1.0)
+    return pow2_above_array(np.maximum.reduce(np.abs(A), axis=axes, keepdims=True))   # (ndarray.max's ufunc)
 
 
 def unit_rows(R: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -330,7 +330,7 @@ SCALAR_MAX_VIEWS = 8
 
 def _p2(m: float) -> float:
     """:func:`power2_scale` of one magnitude: the power of two at or just above ``m`` (1 for 0 / non-finite)."""
-    return math.ldexp(1.0, math.frexp(m)[1]) if m > 0 and math.isfinite(m) else 1.0
+    return pow2_above(m)
 
 
 def _rank_ratio_scalar(C: np.ndarray, decide_only: bool = False) -> list:

@@ -19,6 +19,7 @@ bound; the point is ``ill_posed``), and a rig with one exact centre (t = 0) is c
 """
 from __future__ import annotations
 
+import math
 from fractions import Fraction
 
 import numpy as np
@@ -47,8 +48,17 @@ def group_ball(raw: np.ndarray, views, floor: float = 0.0) -> float | None:
     pts = [_exact_point(raw[v]) for v in views]
     if any(p is None for p in pts):
         return None
-    sep = max(float(sum((a - b) ** 2 for a, b in zip(p, pts[0]))) ** 0.5 for p in pts)
+    sep = max(math.sqrt(_float_or_inf(sum((a - b) ** 2 for a, b in zip(p, pts[0])))) for p in pts)
     return BALL_RATIO * max(sep, floor)
+
+
+def _float_or_inf(q: Fraction) -> float:
+    """A non-negative Fraction as a float, inf beyond the largest double (``float()`` raises OverflowError there:
+    a camera entry of 1e200 put its exact centre that far, review 29b F1)."""
+    try:
+        return float(q)
+    except OverflowError:
+        return math.inf
 
 
 def ball_lower_cost(cams: np.ndarray, regions, outside, centre: np.ndarray, rho: float) -> float:

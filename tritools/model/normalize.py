@@ -56,6 +56,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from sospoly import pow2_above
+
 from .exact import homogeneous_images
 from .cameras import power2_scale
 from .geometry import COMMON_CENTRE_RTOL, POINT_AT_INFINITY_RTOL, point_from_image_points
@@ -265,7 +267,7 @@ def _obliquities_one(C: np.ndarray, at: np.ndarray) -> list:
     out = []
     for P, p in zip(C.tolist(), at.tolist()):
         m = max(abs(v) for row in P for v in row)                 # power2_scale's power of two, on floats
-        k = math.ldexp(1.0, math.frexp(m)[1]) if 0 < m < math.inf else 1.0
+        k = pow2_above(m)
         out.append(obliquity_one([[v / k for v in row] for row in P], p))
     return out
 

@@ -23,6 +23,7 @@ import math
 import numpy as np
 
 from sospoly.analysis import SparseQuadratics
+from sospoly import pow2_above_array
 
 from .geometry import POINT_AT_INFINITY_RTOL, PROJECTION_DENOM_RTOL, SAME_CENTER_RTOL
 
@@ -593,7 +594,7 @@ def sigma_max_2x3(B: np.ndarray) -> np.ndarray:
     fraction of the cost of a batched SVD call.  Each matrix is divided by a power of two near its largest entry
     first (exact), so nothing overflows or underflows; NaN / inf propagate (the SVD would raise)."""
     m = np.maximum.reduce(np.abs(B).reshape(B.shape[:-2] + (6,)), axis=-1)
-    k = np.ldexp(1.0, np.frexp(np.where(np.isfinite(m) & (m > 0), m, 1.0))[1])
+    k = pow2_above_array(m)
     B = B / k[..., None, None]
     b0, b1 = B[..., 0, :], B[..., 1, :]
     p, r, q = np.add.reduce(b0 * b0, axis=-1), np.add.reduce(b1 * b1, axis=-1), np.add.reduce(b0 * b1, axis=-1)

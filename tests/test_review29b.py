@@ -1,0 +1,52 @@
+"""Review 29b (independent: bad input and output hygiene) -- the fixes.
+
+F1: huge finite camera entries (1e200, 1e308) raised OverflowError out of ``triangulate`` (``validate_cameras``'s
+power of two "at or just above" 1e308 is 2^1024; the exact centres' squared separation past the largest double), and
+batches turned it into ``solver_failed`` rows."""
+import math
+import sys
+
+import numpy as np
+import pytest
+
+import tritools
+from sospoly.scaling import MAX_POW2_EXP, pow2_above, pow2_above_array
+
+CAMS = np.array([[[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 1]],
+                 [[1, 0, 0, 1], [0, 1, 0, 0], [0, 0, 1, 1]],
+                 [[1, 0, 0, 0], [0, 1, 0, 1], [0, 0, 1, 1]]], dtype=float)
+PTS = np.array([[0.1, -0.05], [0.6, -0.05], [0.1, 0.45]])
+
+
+@pytest.mark.parametrize("m", [0.0, -1.0, math.inf, math.nan, 5e-324, 1e-300, 0.75, 1.0, 3.0, 1e300,
+                               2.0 ** 1023, 1e308, sys.float_info.max])
+def test_pow2_above_is_a_finite_power_of_two_and_its_twin_agrees(m):
+    k = pow2_above(m)
+    assert math.isfinite(k) and k > 0 and math.frexp(k)[0] == 0.5          # a power of two
+    assert pow2_above_array(np.array([m]))[0] == k
+    if m > 0 and math.isfinite(m):
+        assert m / k <= 2.0 and (m / k > 0.25 or math.frexp(m)[1] > MAX_POW2_EXP)
+        assert (m / k) * k == m                                               # exact
+
+
+@pytest.mark.parametrize("where, value", [((0, 0, 0), 1e308), ((0, 2, 3), 1e200), ((1, 0, 3), -1e300)])
+def test_huge_camera_entries_give_a_result_not_an_exception(where, value):
+    cams = CAMS.copy()
+    cams[where] = value
+    tritools.validate_cameras(cams)
+    r = tritools.triangulate(cams, PTS)
+    assert r.status in tuple(tritools.Status)
+    if r.gamma_lb is not None and r.gamma_ub is not None:
+        assert r.gamma_lb <= r.gamma_ub
+    b = tritools.triangulate_points(cams, PTS[None])
+    assert b.status[0] != "solver_failed", b.message[0]
+    assert "OverflowError" not in b.message[0]
+
+
+def test_a_camera_scaled_by_1e308_is_the_same_camera():
+    cams = CAMS.copy()
+    cams[0] = np.hstack([1e308 * np.eye(3), np.zeros((3, 1))])
+    ref = tritools.triangulate(np.vstack([np.hstack([np.eye(3), np.zeros((3, 1))])[None], CAMS[1:]]), PTS)
+    r = tritools.triangulate(cams, PTS)
+    assert r.status == ref.status
+    assert r.gamma_ub == pytest.approx(ref.gamma_ub, rel=1e-9)

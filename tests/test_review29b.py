@@ -50,3 +50,33 @@ def test_a_camera_scaled_by_1e308_is_the_same_camera():
     r = tritools.triangulate(cams, PTS)
     assert r.status == ref.status
     assert r.gamma_ub == pytest.approx(ref.gamma_ub, rel=1e-9)
+
+
+# F2: ``tritools colmap --keypoint-radius 1e200`` ended "internal error: OverflowError" (exit 1): the discs' D = r^2 I
+# was inf on the diagonal and NaN off it (inf * 0), and the exact recession test made a Fraction of inf.
+def test_colmap_with_a_huge_keypoint_radius_finishes(tmp_path):
+    import subprocess
+
+    from tritools.io.colmap import write_model_arrays
+    from tritools.sfm.synthetic import synthetic_arrays
+
+    a, _ = synthetic_arrays(n_points=6, n_images=4, camera="PINHOLE", seed=3)
+    write_model_arrays(a, tmp_path / "in", "txt")
+    p = subprocess.run([sys.executable, "-m", "tritools", "colmap", str(tmp_path / "in"), str(tmp_path / "out"),
+                        "--keypoint-radius", "1e200", "--max-delta", "2"], capture_output=True, text=True, timeout=120)
+    assert p.returncode == 0, p.stderr
+    assert "Warning" not in p.stderr and "Error" not in p.stderr, p.stderr
+    rows = [line.split() for line in (tmp_path / "out" / "points3D_uncertainty.txt").read_text().splitlines()
+            if not line.startswith("#")]
+    assert len(rows) == 6
+    assert all(r[5] in ("inf", "nan") or float(r[5]) > 1e6 for r in rows)   # no small radius claimed
+
+
+def test_disc_blocks_are_diagonal_without_nan():
+    from tritools.uncertain.discs import disc_blocks
+
+    centres = np.zeros((2, 1, 2))
+    (blk,) = disc_blocks(centres, np.array([[2.0], [1e200]]))
+    assert np.array_equal(blk.D[0], 4.0 * np.eye(2)) and np.array_equal(blk.Dinv[0], 0.25 * np.eye(2))
+    assert blk.D[1, 0, 0] == np.inf and blk.D[1, 0, 1] == 0.0 and not np.isnan(blk.D).any()
+    assert not np.isnan(blk.L).any() and not np.isnan(blk.Dinv).any()

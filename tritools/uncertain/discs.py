@@ -18,14 +18,22 @@ __all__ = ["uncertainty_discs", "disc_blocks"]
 
 
 def disc_blocks(centres: np.ndarray, radii: np.ndarray) -> list[ViewBlock]:
-    """Per view, the stacked discs ``||y - centre|| <= r`` as ellipses ``D = r^2 I``."""
+    """Per view, the stacked discs ``||y - centre|| <= r`` as ellipses ``D = r^2 I`` (diagonal matrices built by
+    their diagonals: r^2 = inf for r > 1e154 stays off the zeros, where inf * 0 made NaN)."""
     out = []
-    eye = np.eye(2)
     for i in range(centres.shape[1]):
-        r = radii[:, i]
-        r2 = r * r
-        out.append(ViewBlock("ellipse", centres[:, i].copy(), D=r2[:, None, None] * eye,
-                             Dinv=(1.0 / r2)[:, None, None] * eye, L=(1.0 / r)[:, None, None] * eye))
+        r = np.asarray(radii[:, i], float)
+        with np.errstate(over="ignore", divide="ignore"):
+            r2 = r * r
+            out.append(ViewBlock("ellipse", centres[:, i].copy(), D=_diagonal(r2), Dinv=_diagonal(1.0 / r2),
+                                 L=_diagonal(1.0 / r)))
+    return out
+
+
+def _diagonal(v: np.ndarray) -> np.ndarray:
+    """(M, 2, 2) diagonal matrices v_m I."""
+    out = np.zeros((len(v), 2, 2))
+    out[:, 0, 0] = out[:, 1, 1] = v
     return out
 
 

@@ -184,9 +184,13 @@ def _centre_ray(blocks, Rm: np.ndarray, m: int) -> np.ndarray:
 
 def _in_cone(blk, m: int, a0, a1, s_) -> bool:
     """(a, s) in the view's cone (exact): an ellipse v' D^-1 v <= s^2 with v = a - x^ s, through D's adjugate; a
-    polytope |B_k a + c_k s| <= s for every row k."""
+    polytope |B_k a + c_k s| <= s for every row k.  False where the view's data is not finite (a disc of radius
+    1e200 has D = inf: no exact decision, so no ray is claimed; review 29b F2)."""
     from fractions import Fraction
 
+    data = (blk.B[m], blk.c[m]) if blk.kind == ConeKind.POLYTOPE else (blk.center[m], blk.D[m])
+    if not all(np.all(np.isfinite(np.asarray(a, float))) for a in data):
+        return False
     if blk.kind == ConeKind.POLYTOPE:
         return all(abs(Fraction(float(B[0])) * a0 + Fraction(float(B[1])) * a1 + Fraction(float(c)) * s_) <= s_
                    for B, c in zip(blk.B[m], blk.c[m]))

@@ -22,6 +22,7 @@ from ...model.geometry import project, project_point_views
 from ...result import Attempt, Status, TriangulationResult
 from ..decide import cheirality, decide_reported, gamma_lower
 from ..front import front_estimate
+from ..multistart import multistart_point
 from ..plan import Step
 from ..report import point_report
 from ..trivial import TRIVIAL_BOUND, trivially_certified, trivially_certified_reported
@@ -191,7 +192,15 @@ def _stopped_short(ctx: PointContext, best: TriangulationResult | None) -> Trian
 def settle_stage(ctx: PointContext) -> None:
     """The final result: the plan's outcome (:func:`_stopped_short`), then a certificate through the trivial
     bound at the best estimate (or the local one) when one holds; otherwise the best result, with the local
-    estimate when it has none (every status but ``invalid_input`` carries an estimate when one exists)."""
+    estimate when it has none (every status but ``invalid_input`` carries an estimate when one exists), and for
+    point regions the multi-start estimate of :mod:`tritools.solve.multistart` where it is lower."""
+    _settle(ctx)
+    if not ctx.best.status.certified and ctx.best.status != Status.INVALID_INPUT:
+        ctx.best = _multistart_estimate(ctx, ctx.best)
+
+
+def _settle(ctx: PointContext) -> None:
+    """:func:`settle_stage` before the multi-start estimate."""
     best = _stopped_short(ctx, ctx.best)
     if best.status.certified or best.status == Status.INVALID_INPUT:
         ctx.best = best
@@ -214,6 +223,29 @@ def settle_stage(ctx: PointContext) -> None:
     note = "X and gamma_UB from the local L2 refinement of the DLT point"
     ctx.best = replace(rep, delta=best.delta, n_lmivar=best.n_lmivar, sparsity=best.sparsity,
                        message=join(best.message, note))
+
+
+def _multistart_estimate(ctx: PointContext, best: TriangulationResult) -> TriangulationResult:
+    """``best`` (not certified) with X and gamma_UB from :func:`~tritools.solve.multistart.multistart_point` when
+    that is lower (point regions only, before the deadline; with ``require_in_front`` only an estimate in front of
+    every camera).  The bound, status and solver fields stay those of ``best``."""
+    if best.X is None or best.gamma_ub is None or ctx.expired or not all(r.is_point for r in ctx.regions):
+        return best
+    found = multistart_point(ctx.cams, np.array([r.center for r in ctx.regions]))
+    if found is None or not np.sqrt(found[1] / (2 * ctx.N)) < best.gamma_ub:
+        return best
+    X = found[0]
+    with np.errstate(all="ignore"):
+        x = _projections(X, ctx.cams)
+    rep = report_point(ctx, step_of(best, ctx), best.status, False, best.gamma_lb, X=X, X_raw=X, image_points=x,
+                       certified_by=None, lowered=True)
+    if rep.gamma_ub is None or not rep.gamma_ub < best.gamma_ub or \
+            (ctx.opts.require_in_front and not rep.in_front) or rep.status != best.status:
+        return best
+    return replace(best, X=rep.X, X_raw=rep.X_raw, gamma_ub=rep.gamma_ub, gamma_ub_raw=rep.gamma_ub_raw,
+                   gamma_lb=rep.gamma_lb, image_points=rep.image_points, residuals=rep.residuals, depths=rep.depths,
+                   in_front=rep.in_front, message=join(best.message, "X and gamma_UB from the best of the local "
+                                                                     "refinements from view-pair DLT points"))
 
 
 def _steps_best_estimate(ctx: PointContext, best: TriangulationResult) -> TriangulationResult:

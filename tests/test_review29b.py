@@ -80,3 +80,51 @@ def test_disc_blocks_are_diagonal_without_nan():
     assert np.array_equal(blk.D[0], 4.0 * np.eye(2)) and np.array_equal(blk.Dinv[0], 0.25 * np.eye(2))
     assert blk.D[1, 0, 0] == np.inf and blk.D[1, 0, 1] == 0.0 and not np.isnan(blk.D).any()
     assert not np.isnan(blk.L).any() and not np.isnan(blk.Dinv).any()
+
+
+# F4: Ctrl-C during ``tritools colmap --workers 2`` (or the default local pool) ran on for over a minute: the pool's
+# exit waited for every running task, and a worker inside a Clarabel solve sees its SIGINT only when it returns.
+def test_workers_stop_at_once_when_the_command_is_interrupted():
+    import time
+    from types import SimpleNamespace
+
+    from tritools.cli.workers import executor_from_args
+
+    t0 = time.monotonic()
+    procs = []
+    with pytest.raises(KeyboardInterrupt):
+        with executor_from_args(SimpleNamespace(workers=2, scheduler=None)) as ex:
+            futures = [ex.submit(time.sleep, 60) for _ in range(4)]     # 2 x 60 s of work per worker
+            procs = list(ex._processes.values())
+            time.sleep(0.5)
+            raise KeyboardInterrupt
+    _all_exit(procs)
+    assert time.monotonic() - t0 < 30
+    assert all(f.done() for f in futures)
+
+
+def _all_exit(procs, seconds: float = 10.0) -> None:
+    import time
+
+    end = time.monotonic() + seconds
+    while any(p.is_alive() for p in procs) and time.monotonic() < end:
+        time.sleep(0.1)
+    assert procs and all(not p.is_alive() for p in procs), procs
+
+
+def test_stop_pool_terminates_running_workers():
+    import concurrent.futures as cf
+    import multiprocessing
+    import time
+
+    from tritools.solve.batch import stop_pool
+
+    ex = cf.ProcessPoolExecutor(max_workers=2, mp_context=multiprocessing.get_context("spawn"))
+    futures = [ex.submit(time.sleep, 60) for _ in range(3)]
+    procs = list(ex._processes.values())
+    t0 = time.monotonic()
+    stop_pool(ex)
+    _all_exit(procs)
+    assert time.monotonic() - t0 < 20
+    cf.wait(futures, timeout=10)                    # the pool's manager settles the broken tasks' futures
+    assert all(f.done() for f in futures)

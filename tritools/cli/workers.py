@@ -73,8 +73,14 @@ def executor_from_args(args):
     else:
         import multiprocessing
 
-        from ..solve.batch import worker_init
+        from ..solve.batch import stop_pool, worker_init
 
-        with cf.ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
-                                    initializer=worker_init) as ex:
+        ex = cf.ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
+                                    initializer=worker_init)
+        try:
             yield ex
+        except BaseException:               # Ctrl-C, SIGTERM, an error: the workers stop now (stop_pool)
+            stop_pool(ex)
+            raise
+        finally:
+            ex.shutdown(wait=True, cancel_futures=True)

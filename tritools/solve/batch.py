@@ -172,6 +172,25 @@ def worker_init() -> None:
     os.environ["RUST_BACKTRACE"] = "0"   # Clarabel panics are caught and reported; no backtrace noise
 
 
+def stop_pool(ex) -> None:
+    """Stop a local process pool at once -- the tasks not started cancelled, the workers terminated -- for an
+    interrupt (Ctrl-C, SIGTERM) or an error in the caller.  ``shutdown(wait=True)`` waited for every running task,
+    and a worker inside a Clarabel solve sees its own SIGINT only when the solve returns: ``tritools colmap
+    --workers 2`` ran on for over a minute after Ctrl-C (review 29b F4).  Any other executor is shut down without
+    waiting."""
+    procs = list((getattr(ex, "_processes", None) or {}).values())
+    ex.shutdown(wait=False, cancel_futures=True)
+    for p in procs:
+        if p.is_alive():
+            p.terminate()
+    for p in procs:
+        p.join(STOP_JOIN_SECONDS)
+
+
+#: seconds :func:`stop_pool` waits for each terminated worker to exit.
+STOP_JOIN_SECONDS = 5.0
+
+
 def as_point_problem(cams, regions):
     """(cameras (N, 3, 4), points (N, 2)) when the item is a well-shaped point-region problem, else None
     (the item then goes through :func:`triangulate`, whose validation reports any problem)."""
@@ -283,6 +302,10 @@ def _run_items(items, retries, executor, chunk_size: int, store, end=None) -> No
         for k in list(pending):
             store(_run_chunk(chunks[k], retries, end))
             pending.remove(k)
+    except BaseException:
+        if own is not None:                 # an interrupt: the workers stop now, not after their running chunks
+            stop_pool(own)
+        raise
     finally:
         if own is not None:
             own.shutdown(wait=True, cancel_futures=True)

@@ -5,8 +5,9 @@ views.  With wrong matches in a long track that start can lie in a poor basin of
 gamma_UB = 1754 px (100 views, 20% wrong matches, ``budget_exceeded``) and 134.6 px (300 views) where a multi-start
 least-squares reaches 74.0 / 79.7 px.  :func:`multistart_point` refines the DLT points of :data:`MULTISTART_PAIRS`
 view pairs (a fixed sample, the same for every call of N views) over all views in one vectorised call, and the
-settle stage (:func:`tritools.solve.stages.outcome.settle_stage`) keeps the lowest cost when it beats the estimate --
-a lower upper bound; the lower bound and the status are unchanged.  Point regions only; never past the deadline.
+settle stage (:func:`tritools.solve.stages.outcome.settle_stage`, ``method="auto"``) keeps the lowest cost when it
+beats the estimate -- a lower upper bound; the lower bound and the status are unchanged.  Point regions only; never
+past the deadline.
 """
 from __future__ import annotations
 

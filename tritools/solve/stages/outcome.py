@@ -227,9 +227,11 @@ def _settle(ctx: PointContext) -> None:
 
 def _multistart_estimate(ctx: PointContext, best: TriangulationResult) -> TriangulationResult:
     """``best`` (not certified) with X and gamma_UB from :func:`~tritools.solve.multistart.multistart_point` when
-    that is lower (point regions only, before the deadline; with ``require_in_front`` only an estimate in front of
-    every camera).  The bound, status and solver fields stay those of ``best``."""
-    if best.X is None or best.gamma_ub is None or ctx.expired or not all(r.is_point for r in ctx.regions):
+    that is lower (``method="auto"``, point regions only, before the deadline; with ``require_in_front`` only an
+    estimate in front of every camera).  The bound, status, solver fields and X_raw (the step's own estimate before
+    refinement) stay those of ``best``; an explicit method reports the paper's estimate (its tables' X^)."""
+    if best.X is None or best.gamma_ub is None or ctx.expired or ctx.opts.explicit_method is not None \
+            or not all(r.is_point for r in ctx.regions):
         return best
     found = multistart_point(ctx.cams, np.array([r.center for r in ctx.regions]))
     if found is None or not np.sqrt(found[1] / (2 * ctx.N)) < best.gamma_ub:
@@ -242,8 +244,8 @@ def _multistart_estimate(ctx: PointContext, best: TriangulationResult) -> Triang
     if rep.gamma_ub is None or not rep.gamma_ub < best.gamma_ub or \
             (ctx.opts.require_in_front and not rep.in_front) or rep.status != best.status:
         return best
-    return replace(best, X=rep.X, X_raw=rep.X_raw, gamma_ub=rep.gamma_ub, gamma_ub_raw=rep.gamma_ub_raw,
-                   gamma_lb=rep.gamma_lb, image_points=rep.image_points, residuals=rep.residuals, depths=rep.depths,
+    return replace(best, X=rep.X, gamma_ub=rep.gamma_ub, gamma_lb=rep.gamma_lb, image_points=rep.image_points,
+                   residuals=rep.residuals, depths=rep.depths,
                    in_front=rep.in_front, message=join(best.message, "X and gamma_UB from the best of the local "
                                                                      "refinements from view-pair DLT points"))
 

@@ -72,7 +72,10 @@ def test_same_file_and_input_clash_follow_links(tmp_path):
                                                     folder=True)
     assert "contains IN_DIR" in input_clash(tmp_path, "OUT_DIR", [("IN_DIR", tmp_path / "sub")], folder=True)
     assert input_clash(tmp_path, "OUT_DIR", [("IN_DIR", tmp_path / "sub")]) is None      # a file output
-    assert input_clash(tmp_path / "sub", "OUT_DIR", [("IN_DIR", tmp_path)], folder=True) is None
+    # inside an input folder (review 29b F3: IN_DIR is never modified)
+    assert "is inside IN_DIR" in input_clash(tmp_path / "sub", "OUT_DIR", [("IN_DIR", tmp_path)], folder=True)
+    assert "is inside IN_DIR" in input_clash(tmp_path / "sub" / "x.ply", "export", [("IN_DIR", tmp_path)])
+    assert input_clash(tmp_path / "sub" / "x.ply", "export", [("IN_DIR", tmp_path / "other")]) is None
 
 
 @pytest.mark.parametrize("alias", ["same", "symlink", "hardlink", "dotdot"])

@@ -199,3 +199,31 @@ def test_multistart_pairs_are_fixed_and_distinct():
     p = pair_sample(300)
     assert p.shape == (MULTISTART_PAIRS, 2) and np.all(p[:, 0] != p[:, 1]) and np.all((0 <= p) & (p < 300))
     assert np.array_equal(p, pair_sample(300))
+
+
+# ------------------------------------------------------------------------ F6: time charged to a search in a batch
+# The drive split a round's batched calls evenly: a disc problem certified alone in 0.3 s paid for the other
+# problems' region sub-problems (solved one by one, seconds each) and stopped at its time limit in a batch.
+def test_a_round_charges_each_search_its_own_sub_problems():
+    from tritools.solve.robust_drive import charges
+
+    assert charges(3.0, []) == []
+    assert charges(3.0, [0.0, 0.0, 0.0]) == pytest.approx([2.0, 2.0, 2.0])      # the even split, as before
+    waited = charges(3.0, [2.7, 0.0, 0.0])      # 2.7 s of the round were search 0's own region solves
+    assert waited[1] == pytest.approx(2.9) and waited[2] == pytest.approx(2.9) and waited[0] == pytest.approx(0.2)
+    assert all(w >= 0 for w in charges(1.0, [0.8, 0.8]))                       # clocks never move back
+
+
+def test_compute_many_reports_the_seconds_of_its_one_by_one_solves():
+    from tritools.model.regions import Ellipse
+    from tritools.solve.robust_bounds import compute_many
+
+    cams, x = _geo_track(5, 3, 0.0)
+    regions = [Ellipse(p, np.eye(2)) for p in x]
+    from tritools.solve.options import TriangulationOptions
+    from tritools.solve.robust_bounds import SubsetBounds
+
+    sb = SubsetBounds(cams, tuple(regions), TriangulationOptions(), TriangulationOptions().budget.deadline(),
+                      points=False)
+    solved = compute_many([(sb, [frozenset(range(5)), frozenset({0, 1, 2})])])
+    assert set(solved) == {id(sb)} and solved[id(sb)] > 0

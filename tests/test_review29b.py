@@ -128,3 +128,91 @@ def test_stop_pool_terminates_running_workers():
     assert time.monotonic() - t0 < 20
     cf.wait(futures, timeout=10)                    # the pool's manager settles the broken tasks' futures
     assert all(f.done() for f in futures)
+
+
+def _model(tmp_path, fmt="txt", n_points=12):
+    from tritools.io.colmap import write_model_arrays
+    from tritools.sfm.synthetic import synthetic_arrays
+
+    a, _ = synthetic_arrays(n_points=n_points, n_images=5, camera="PINHOLE", seed=4)
+    write_model_arrays(a, tmp_path / "in", fmt)
+    return tmp_path / "in"
+
+
+def _colmap(*args):
+    import subprocess
+
+    return subprocess.run([sys.executable, "-m", "tritools", "colmap", *map(str, args)], capture_output=True,
+                          text=True, timeout=120)
+
+
+# F3: ``--export IN/fused.ply`` replaced the user's file in IN_DIR; OUT_DIR inside IN_DIR was accepted.
+def test_outputs_inside_the_input_folder_are_refused(tmp_path):
+    src = _model(tmp_path)
+    (src / "fused.ply").write_text("the user's point cloud")
+    before = {f.name: f.read_bytes() for f in src.iterdir()}
+    for args in ([src, tmp_path / "out", "--export", src / "fused.ply"],
+                 [src, tmp_path / "out", "--export", src / "new" / "p.npz"],
+                 [src, src / "sub"]):
+        p = _colmap(*args, "--max-delta", "2")
+        assert p.returncode == 2, (args, p.stderr)
+        assert len(p.stderr.strip().splitlines()) == 1 and "inside IN_DIR" in p.stderr, p.stderr
+    assert {f.name: f.read_bytes() for f in src.iterdir()} == before       # nothing written, nothing created
+    assert not (tmp_path / "out").exists()
+
+
+# F7: points removed by the quality filters were reported CERTIFIED = 1, UPDATED = 1 (sidecar and JSON).
+def test_points_removed_by_the_filters_are_not_reported_as_written(tmp_path):
+    import json
+
+    from tritools.io.colmap import read_model
+    from tritools.sfm.certificates import REMOVED_MESSAGE, read_certificates
+
+    src = _model(tmp_path, n_points=30)
+    p = _colmap(src, tmp_path / "out", "--max-error", "0", "--json", "--max-delta", "2")
+    assert p.returncode == 0, p.stderr
+    written = set(read_model(tmp_path / "out").points3D)
+    side = read_certificates(tmp_path / "out")
+    records = {r["point3D_id"]: r for r in json.loads(p.stdout)["points"]}
+    assert len(side) == len(records) == 30 and len(written) < 30
+    for pid, c in side.items():
+        if pid in written:
+            continue
+        assert not c.updated and not c.result.optimal or c.result.status != "optimal"
+        assert REMOVED_MESSAGE in c.result.message
+        rec = records[pid]
+        assert rec["kept"] is False and rec["certified"] is False and rec["updated"] is False
+        assert REMOVED_MESSAGE in rec["message"]
+    header = (tmp_path / "out" / "points3D_certificates.txt").read_text().splitlines()
+    count = [h for h in header if h.startswith("# Number of points:")][0]
+    n_cert = sum(1 for line in header if line and not line.startswith("#") and line.split()[4] == "1")
+    assert f"certified: {n_cert}," in count
+
+
+# F5: a bad ``executor`` raised AttributeError from inside the batch (or was accepted silently).
+@pytest.mark.parametrize("bad", ["x", 5, object()])
+def test_a_bad_executor_is_a_type_error_naming_it(bad):
+    with pytest.raises(TypeError, match="executor"):
+        tritools.triangulate_many([(CAMS, PTS)], executor=bad)
+
+
+# F6: ``tritools dataset`` on a sequence with an empty nview-corners file ended "internal error" (exit 1).
+def test_an_empty_sequence_is_a_one_line_error(tmp_path):
+    import shutil
+    import subprocess
+
+    from tritools.io.oxford import data_dir
+
+    try:
+        house = data_dir() / "house"
+    except (OSError, ValueError):
+        house = None
+    if house is None or not house.is_dir():
+        pytest.skip("Oxford data not found (../shared/data/oxford or $TRITOOLS_DATA)")
+    shutil.copytree(house, tmp_path / "house")
+    nview = next((tmp_path / "house").glob("*.nview-corners"))
+    nview.write_text("")
+    p = subprocess.run([sys.executable, "-m", "tritools", "dataset", "house", "--data-dir", str(tmp_path)],
+                       capture_output=True, text=True, timeout=120)
+    assert p.returncode == 2 and len(p.stderr.strip().splitlines()) == 1, p.stderr
+    assert "--world-frame" in p.stderr

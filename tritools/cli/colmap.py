@@ -238,7 +238,10 @@ def _skipped_status(report, quiet: bool = False) -> int:
 
 
 def _add_quality_records(summary, q) -> None:
-    """The quality summary and, per point record, angle, uncertainty radius, depth interval, kept."""
+    """The quality summary and, per point record, angle, uncertainty radius, depth interval, kept (a point not kept
+    is not in the written model: not certified, not updated, :data:`~tritools.sfm.certificates.REMOVED_MESSAGE`)."""
+    from ..sfm.certificates import REMOVED_MESSAGE
+
     summary["quality"] = q.summary()
     index = {int(p): i for i, p in enumerate(q.point_ids.tolist())}
     for rec in summary["points"]:
@@ -247,6 +250,9 @@ def _add_quality_records(summary, q) -> None:
             rec.update(angle_deg=float(q.angle_deg[i]), uncertainty_status=str(q.status[i]) or None,
                        uncertainty_radius=float(q.radius[i]), depth_lo=float(q.depth_lo[i]),
                        depth_hi=float(q.depth_hi[i]), depth_ratio=float(q.depth_ratio[i]), kept=bool(q.kept[i]))
+            if not q.kept[i]:                 # not in the written model: as the sidecar says (mark_removed)
+                rec.update(certified=False, updated=False,
+                           message="; ".join(m for m in (rec.get("message"), REMOVED_MESSAGE) if m))
 
 
 def _print_summary(report, result, summary) -> None:

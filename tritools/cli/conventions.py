@@ -105,7 +105,14 @@ def add_world_frame_option(p, sequence: bool = True) -> None:
 def sequence_options(options: TriangulationOptions, args, seq) -> TriangulationOptions:
     """``options`` with the world frame of ``--world-frame`` (``auto``: :attr:`Sequence.world_frame`)."""
     frame = getattr(args, "world_frame", "auto")
-    return options.replace(world_frame=seq.world_frame if frame == "auto" else frame)
+    if frame != "auto":
+        return options.replace(world_frame=frame)
+    try:
+        return options.replace(world_frame=seq.world_frame)
+    except ValueError as exc:                   # no track to read it from (an empty nview-corners file: review 29b F6)
+        from .app import CLIError
+
+        raise CLIError(f"--world-frame auto: {exc}; give --world-frame right_handed or reflected") from None
 
 
 def silence_stdout() -> None:

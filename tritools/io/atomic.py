@@ -69,19 +69,32 @@ def _contains(folder, path) -> bool:
     return any(same_file(folder, p) for p in parents)
 
 
+def inside(path, folder) -> bool:
+    """True when ``path`` (existing or not) lies inside the existing folder ``folder``, at any depth, after
+    resolving symbolic links."""
+    try:
+        parents = Path(path).resolve(strict=False).parents
+    except (OSError, RuntimeError, ValueError):
+        return False
+    return any(same_file(folder, p) for p in parents if os.path.lexists(p))
+
+
 def input_clash(output, output_name: str, inputs, folder: bool = False) -> str | None:
     """Why the command may not write ``output`` (named ``output_name`` in the message: a flag such as
     ``--output``, or ``OUT_DIR``), or None when it may.
 
     ``inputs``: ``(name, path)`` pairs of what the command reads.  The output is refused when it is one of
     them (:func:`same_file`); with ``folder`` (an output folder, whose files are replaced) also when it
-    contains one.  The one wording of the rule "a command never writes over its input".
+    contains one; and an output inside an input *folder* (``tritools colmap``'s IN_DIR, "never modified": review
+    29b F3, an export replaced a file there).  The one wording of the rule "a command never writes over its input".
     """
     for name, path in inputs:
         if same_file(output, path):
             return f"{output_name} must differ from {name} {path} (an input is never overwritten)"
         if folder and _contains(output, path):
             return f"{output_name} {output} contains {name} {path}: outputs are kept out of the input's folders"
+        if os.path.isdir(path) and inside(output, path):
+            return f"{output_name} {output} is inside {name} {path}: outputs are kept out of the input's folders"
     return None
 
 

@@ -25,7 +25,11 @@ from ..result import Status, TriangulationResult
 from .certify import STATUS_LEGEND, written_certified
 from .retriangulate import PointCertificate, RetriangulationReport
 
-__all__ = ["CERTIFICATES_FILE", "CertificateWriter", "write_certificates", "read_certificates", "COLUMNS"]
+__all__ = ["CERTIFICATES_FILE", "CertificateWriter", "write_certificates", "read_certificates", "mark_removed",
+           "COLUMNS", "REMOVED_MESSAGE"]
+
+#: MESSAGE of a point that the quality filters removed from the written model (:func:`mark_removed`)
+REMOVED_MESSAGE = "removed from the written model by the quality filters (points3D_uncertainty.txt: KEPT = 0)"
 
 CERTIFICATES_FILE = "points3D_certificates.txt"
 COLUMNS = ("POINT3D_ID", "N_VIEWS", "GAMMA_LB", "GAMMA_UB", "CERTIFIED", "STATUS", "DELTA", "CERTIFIED_BY",
@@ -87,6 +91,34 @@ def write_certificates(report: RetriangulationReport, folder) -> Path:
     w = CertificateWriter(folder, report.method, report.path)
     w.write(report.point_ids, report)
     return w.close()
+
+
+def mark_removed(folder, point_ids, message: str = REMOVED_MESSAGE) -> None:
+    """Rewrite the sidecar in ``folder`` (atomically) for points removed from the written model after it was
+    written (``tritools colmap``'s quality filters): their CERTIFIED and UPDATED become 0 and ``message`` is added to
+    MESSAGE -- the written model no longer holds them (review 29b F7: CERTIFIED = 1 was reported for a point absent
+    from points3D) -- and the header's count of certified points is updated."""
+    removed = {int(p) for p in np.asarray(point_ids).tolist()}
+    if not removed:
+        return
+    path = Path(folder) / CERTIFICATES_FILE
+    lines = path.read_text(encoding="utf-8").splitlines(keepends=True)
+    body, n_certified = [], 0
+    for line in lines:
+        t = line.split(None, 11)
+        if t and not t[0].startswith("#") and len(t) == 12 and int(t[0]) in removed:
+            msg = message if t[11].strip() == "-" else f"{t[11].strip()}; {message}"
+            t[4], t[9], t[11] = "0", "0", _clean(msg)
+            line = " ".join(t) + "\n"
+        if t and not t[0].startswith("#"):
+            n_certified += t[4] == "1"
+        body.append(line)
+    with atomic_open(path, "w", encoding="utf-8") as out:
+        for line in body:
+            if line.startswith("# Number of points:"):
+                head, _, rest = line.partition(", certified: ")
+                line = f"{head}, certified: {n_certified}," + rest.partition(",")[2]
+            out.write(line)
 
 
 def _float(v: str) -> float | None:

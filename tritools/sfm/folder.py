@@ -146,8 +146,8 @@ def _timed(iterator, timings: dict, key: str):
 
 def check_output(in_dir, out_dir, exports=()) -> None:
     """Refuse unusable outputs before any work (:class:`OutputError`): OUT a file, OUT = IN, OUT
-    containing IN (replacing OUT would delete the input), an export that is a directory or has
-    another suffix than .ply/.npz."""
+    containing IN (replacing OUT would delete the input), OUT or an export inside IN (IN is never modified), an
+    export that is a directory or has another suffix than .ply/.npz."""
     dst = Path(out_dir)
     if dst.exists() and not dst.is_dir():
         raise OutputError(f"OUT_DIR {out_dir}: exists and is not a directory")
@@ -160,6 +160,9 @@ def check_output(in_dir, out_dir, exports=()) -> None:
             raise OptionError("export", f"{e}: the file name must end with .ply or .npz")
         if p.is_dir():
             raise OptionError("export", f"{e}: is a directory")
+        clash = input_clash(e, "export", [("IN_DIR", in_dir)])
+        if clash:
+            raise OutputError(clash)
 
 
 @dataclass(frozen=True)

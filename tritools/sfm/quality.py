@@ -301,6 +301,7 @@ def apply_quality_staged(stage, options: QualityOptions, exports=()) -> PointQua
     leaves OUT_DIR and the exports as they were): the model files in ``stage`` are rewritten in place,
     :data:`QUALITY_FILE` is added, and ``exports`` (their staged paths) get the quality columns."""
     from ..io.colmap.formats import detect_format, read_model_arrays, write_model_arrays
+    from .certificates import CERTIFICATES_FILE, mark_removed
     from .pipeline import prepare_geometry
 
     stage = Path(stage)
@@ -309,6 +310,8 @@ def apply_quality_staged(stage, options: QualityOptions, exports=()) -> PointQua
     q = point_quality(arrays, prepare_geometry(arrays), options)
     filtered = options.filtering
     write_model_arrays(drop_points(arrays, q.kept) if filtered else arrays, stage, fmt)
+    if filtered and (stage / CERTIFICATES_FILE).is_file():
+        mark_removed(stage, q.point_ids[~q.kept])          # the sidecar describes the written model
     write_quality(stage, q, options)
     for e in exports:
         _update_export(Path(e), q, filtered)

@@ -442,6 +442,9 @@ def triangulate_many(problems: Iterable[Sequence], method: str | Method | None =
         raise ValueError(f"chunk_size must be a positive integer, got {chunk_size!r}")
     if isinstance(problems, (str, bytes)) or not hasattr(problems, "__iter__"):
         raise TypeError(f"problems must be an iterable of (cameras, regions) pairs, got {type(problems).__name__}")
+    if executor is not None and not callable(getattr(executor, "submit", None)):
+        raise TypeError(f"executor must be a concurrent.futures.Executor or a dask.distributed.Client (an object "
+                        f"with submit()), got {type(executor).__name__}")
     for step in retries:
         if not (isinstance(step, (tuple, list)) and len(step) == 2):
             raise ValueError(f"retries must be (method, delta) pairs, got {step!r}")

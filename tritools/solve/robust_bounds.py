@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import itertools
 import math
+import time
 from collections import defaultdict
 
 import numpy as np
@@ -353,13 +354,14 @@ class SubsetBounds:
         return out
 
 
-def compute_many(requests) -> None:
+def compute_many(requests) -> dict:
     """Fill the caches of several :class:`SubsetBounds` (``requests``: (cache, subsets) pairs) at once: point
     sub-problems of equal size, from every cache, in one vectorised verification call; what it does not certify
     gets its pair packing bound (:meth:`SubsetBounds.packing_bound`) when that reaches the cache's ``enough``,
     else one batched SDP call (what that hands back too is bounded by 0 for now and marked weak); other regions
     one by one through :func:`tritools.triangulate`.  A subset in a cache's ``defer`` set is only verified: not
-    certified, it is left unknown (and not verified again)."""
+    certified, it is left unknown (and not verified again).  Returns id(cache) -> seconds of the sub-problems solved
+    one by one for it (the drive charges them to their own search, :func:`tritools.solve.robust_drive.charges`)."""
     groups, single = defaultdict(list), []
     for sb, subsets in requests:
         for S in dict.fromkeys(subsets):
@@ -385,11 +387,15 @@ def compute_many(requests) -> None:
         for sb, S in left:                      # handed back by both batches (typically subsets with outliers):
             sb._store(S, 0.0, None)             # 0 for now (the caller keeps its inherited bounds);
             sb.weak.add(S)                      # strengthen() solves them one by one where the search needs it
+    solved: dict = defaultdict(float)
     for sb, S in single:
         if sb.deadline.expired:
             sb._store(S, 0.0, None)             # 0 is a valid bound; the search reports the time limit
         else:
+            t = time.monotonic()
             sb._solve_one(S)
+            solved[id(sb)] += time.monotonic() - t
+    return solved
 
 
 def _expired(items: list) -> list:

@@ -216,3 +216,38 @@ def test_an_empty_sequence_is_a_one_line_error(tmp_path):
                        capture_output=True, text=True, timeout=120)
     assert p.returncode == 2 and len(p.stderr.strip().splitlines()) == 1, p.stderr
     assert "--world-frame" in p.stderr
+
+
+# F1's batch side: an unexpected exception while a robust batch set up one problem's search (OverflowError from
+# the vectorised camera check) raised out of ``triangulate_many(..., robust=c)``: every point of the batch was lost.
+def test_a_robust_batch_keeps_every_point_when_a_search_fails_to_start(monkeypatch):
+    from tritools.model import cameras as cam_mod
+    from tritools.solve import robust as robust_mod
+
+    SENTINEL = 12345.678
+    real_init, real_problems = robust_mod.TlsSearch.__init__, cam_mod.camera_problems
+
+    def init(self, cams, *a, **k):
+        if np.any(np.asarray(cams) == SENTINEL):
+            raise OverflowError("math range error")
+        real_init(self, cams, *a, **k)
+
+    def problems(C):
+        if np.any(np.asarray(C) == SENTINEL):
+            raise OverflowError("math range error")
+        return real_problems(C)
+
+    monkeypatch.setattr(robust_mod.TlsSearch, "__init__", init)
+    monkeypatch.setattr(cam_mod, "camera_problems", problems)
+    rng = np.random.default_rng(0)
+    good = []
+    for _ in range(2):
+        X = rng.normal(size=3) + [0, 0, 4]
+        x = np.array([P[:2] @ np.append(X, 1) / (P[2] @ np.append(X, 1)) for P in CAMS])
+        good.append((CAMS.copy(), x))
+    bad = CAMS.copy()
+    bad[0, 0, 3] = SENTINEL
+    res = tritools.triangulate_many([good[0], (bad, PTS), good[1]], robust=5.0, progress=False)
+    assert len(res) == 3
+    assert res[0].status == "optimal" and res[2].status == "optimal"
+    assert res[1].status in ("solver_failed", "invalid_input") and "OverflowError" in res[1].message

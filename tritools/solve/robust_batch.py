@@ -25,6 +25,7 @@
 from __future__ import annotations
 
 import dataclasses
+import logging
 import time
 
 import numpy as np
@@ -38,6 +39,8 @@ from .robust import robust_thresholds, triangulate_robust
 from .robust_report import tls_reported_stack
 
 __all__ = ["robust_many", "thresholds_for"]
+
+log = logging.getLogger(__name__)
 
 def thresholds_for(robust, problems) -> list:
     """The thresholds of each problem from ``robust=``: a scalar; one array of per-view thresholds for problems of
@@ -177,6 +180,10 @@ def _search_or_failure(cameras, regions, c, opts):
         return TlsSearch(cams, regs, c, opts, t0)
     except (ValueError, TypeError) as exc:
         return TriangulationResult("tls", Status.INVALID_INPUT, message=f"{type(exc).__name__}: {exc}",
+                                   timings={"total": time.perf_counter() - t0})
+    except Exception as exc:  # noqa: BLE001 - a batch never loses a point (review 29b F1: an OverflowError here
+        log.debug("robust search set-up failed", exc_info=True)       # raised out of the batch, every row lost)
+        return TriangulationResult("tls", Status.SOLVER_FAILED, message=f"{type(exc).__name__}: {exc}",
                                    timings={"total": time.perf_counter() - t0})
 
 
@@ -426,10 +433,10 @@ def _point_searches(idx, points, thresholds, opts, t0) -> dict:
         C = np.stack([points[i][0] for i in group])
         try:
             valid = camera_problems(C).valid
-        except ValueError:
-            continue
-        rows = depth_rows(C)                    # the depth rows of every search's report, in one call
-        origins = world_origins(C)              # each search's world frame (TlsSearch), in one call
+            rows = depth_rows(C)                # the depth rows of every search's report, in one call
+            origins = world_origins(C)          # each search's world frame (TlsSearch), in one call
+        except (ValueError, ArithmeticError, np.linalg.LinAlgError):
+            continue                            # the per-problem path takes the group (and names any failure)
         for k, i in enumerate(group):
             if valid[k]:
                 out[i] = TlsSearch(C[k].copy(), None, thresholds[i], opts, t0, points=points[i][1],

@@ -388,6 +388,8 @@ def _solve_problems(problems, opts: TriangulationOptions, executor, progress, re
         later = sum(reserve_for((n,)) * len(g) for n, g in order[k + 1:]) + reserve_for(_item_views(items))
         with reserving(later):                        # the rows of the problems after it fit before the end
             stack = PointStack(C, x, opts, stages=stages).run()    # no runner: the open rows join ``items``
+        if expired(end):                              # past the end: the open rows' estimates at once (F9)
+            stack.expire_open()
         items.extend(_collect(stack, idx, out))
         if bar is not None:
             bar.update(int(stack.done.sum()))

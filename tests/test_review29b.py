@@ -302,3 +302,89 @@ def test_rows_open_past_the_end_get_their_rows_of_last_resort_at_once(monkeypatc
     assert len(solved.objects) + len(solved.stacked) == M
     assert len(res.status) == M and all(s == "time_limit" for s in res.status)
     assert np.all(np.isfinite(res.gamma_ub))
+
+
+# F17: ``--export LINK.ply`` with LINK a symlink to a file of the input model overwrote that file.
+def test_an_export_through_a_symlink_into_the_input_is_refused(tmp_path):
+    src = _model(tmp_path)
+    target = src / "points3D.txt"
+    before = target.read_bytes()
+    (tmp_path / "link.ply").symlink_to(target)
+    p = _colmap(src, tmp_path / "out", "--export", tmp_path / "link.ply", "--max-delta", "2")
+    assert p.returncode == 2 and len(p.stderr.strip().splitlines()) == 1, p.stderr
+    assert target.read_bytes() == before and not (tmp_path / "out").exists()
+
+
+# F14: ``retriangulate_folder(output_format='json')`` raised KeyError from deep inside.
+@pytest.mark.parametrize("field", ["output_format", "input_format"])
+def test_a_bad_model_format_is_refused_by_name(tmp_path, field):
+    from tritools.sfm import OptionError, retriangulate_folder
+
+    src = _model(tmp_path)
+    with pytest.raises(OptionError, match=field):
+        retriangulate_folder(src, tmp_path / "out", **{field: "json"})
+    assert not (tmp_path / "out").exists()
+
+
+# F11: ``colmap-from-oxford NAME OUT`` wrote its model into the sequence folder it reads.
+def test_colmap_from_oxford_never_writes_into_the_sequence(tmp_path):
+    import shutil
+    import subprocess
+
+    from tritools.io.oxford import data_dir
+
+    try:
+        house = data_dir() / "house"
+    except (OSError, ValueError):
+        house = None
+    if house is None or not house.is_dir():
+        pytest.skip("Oxford data not found (../shared/data/oxford or $TRITOOLS_DATA)")
+    shutil.copytree(house, tmp_path / "house")
+    before = sorted(f.name for f in (tmp_path / "house").iterdir())
+    for out in (tmp_path / "house", tmp_path / "house" / "model"):
+        p = subprocess.run([sys.executable, "-m", "tritools", "colmap-from-oxford", "house", str(out), "--data-dir",
+                            str(tmp_path)], capture_output=True, text=True, timeout=120)
+        assert p.returncode == 2 and "sequence folder" in p.stderr, p.stderr
+    assert sorted(f.name for f in (tmp_path / "house").iterdir()) == before
+
+
+# F15: SIGHUP (the terminal closed) killed ``tritools colmap`` and left its staging folder in OUT_DIR.
+@pytest.mark.slow
+def test_sighup_unwinds_like_sigterm(tmp_path):
+    import os
+    import signal
+    import subprocess
+    import time
+
+    from tritools.io.colmap import write_model_arrays
+    from tritools.sfm.synthetic import synthetic_arrays
+
+    arr, _ = synthetic_arrays(20000, 40, "OPENCV", seed=4)
+    write_model_arrays(arr, tmp_path / "in", "bin")
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "notes.txt").write_text("mine")
+    p = subprocess.Popen([sys.executable, "-m", "tritools", "colmap", str(tmp_path / "in"), str(out), "--chunk-points",
+                          "2000"], env=dict(os.environ, OPENBLAS_NUM_THREADS="1"), stdout=subprocess.PIPE,
+                         stderr=subprocess.PIPE, text=True)
+    deadline = time.time() + 60
+    while time.time() < deadline and not any(n.startswith(".tritools-staging") for n in os.listdir(out)):
+        time.sleep(0.05)
+    time.sleep(0.5)
+    p.send_signal(signal.SIGHUP)
+    _, err = p.communicate(timeout=120)
+    if p.returncode == 0:
+        pytest.skip("the run finished before the signal")
+    assert p.returncode == 128 + signal.SIGHUP and err.strip().endswith("tritools: SIGHUP"), (p.returncode, err)
+    assert sorted(os.listdir(out)) == ["notes.txt"]
+
+
+def test_terminated_carries_its_signal():
+    import signal
+
+    from tritools.startup import EXIT_TERMINATED, TERMINATED_MESSAGE, Terminated
+
+    assert Terminated().exit_code == EXIT_TERMINATED and Terminated().message == TERMINATED_MESSAGE
+    if hasattr(signal, "SIGHUP"):
+        t = Terminated(signal.SIGHUP)
+        assert t.exit_code == 129 and t.message == "tritools: SIGHUP" and isinstance(t, KeyboardInterrupt)

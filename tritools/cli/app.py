@@ -34,7 +34,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from ..model.constraints import Method
-from ..startup import (EXIT_INTERRUPTED, EXIT_TERMINATED, INTERRUPTED_MESSAGE, TERMINATED_MESSAGE, Terminated,
+from ..startup import (EXIT_INTERRUPTED, INTERRUPTED_MESSAGE, Terminated,
                        end_startup, terminate_unwinds)
 from ..io.atomic import atomic_open
 from ..io.oxford import is_float
@@ -366,7 +366,8 @@ def load_oxford(name: str, data_dir, command: str, outputs=()):
         seq = load_sequence(name, data_dir)
         folder = oxford_data_dir(data_dir) / name
         for flag, path in outputs:
-            refuse_input_as_output(path, flag, [("the data file", f) for f in folder.iterdir()])
+            refuse_input_as_output(path, flag, [("the sequence folder", folder)] +
+                                   [("the data file", f) for f in folder.iterdir()])
         return seq
     except DataNotFoundError as exc:
         msg = str(exc).replace("pass data_dir=...", "pass --data-dir DIR")
@@ -528,9 +529,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         return exit_invalid(exc)
     except SystemExit as exc:            # --help
         return exc.code if isinstance(exc.code, int) else EXIT_OK if exc.code is None else EXIT_INVALID
-    except Terminated:
-        print(TERMINATED_MESSAGE, file=sys.stderr)
-        return EXIT_TERMINATED
+    except Terminated as exc:
+        print(exc.message, file=sys.stderr)
+        return exc.exit_code
     except KeyboardInterrupt:
         print(INTERRUPTED_MESSAGE, file=sys.stderr)
         return EXIT_INTERRUPTED

@@ -284,8 +284,10 @@ def _print_summary(report, result, summary) -> None:
 
 def run_from_oxford(args) -> int:
     """``tritools colmap-from-oxford``: returns the exit code."""
+    from ..io.atomic import input_clash
     from ..io.colmap import model_from_oxford, write_model
     from ..io.oxford import DataNotFoundError
+    from ..io.oxford import data_dir as oxford_dir
     from ..sfm import OutputError, atomic_directory
 
     if args.max_tracks is not None and args.max_tracks < 1:
@@ -293,6 +295,10 @@ def run_from_oxford(args) -> int:
     if Path(args.out_dir).exists() and not Path(args.out_dir).is_dir():
         return exit_invalid(f"OUT_DIR {args.out_dir}: exists and is not a directory")
     try:
+        clash = input_clash(args.out_dir, "OUT_DIR", [("the sequence folder", oxford_dir(args.data_dir) / args.name)],
+                            folder=True)          # never into (or over) the data it reads (review 29b F11)
+        if clash:
+            return exit_invalid(clash)
         model = model_from_oxford(args.name, args.data_dir, args.max_tracks)
         with atomic_directory(args.out_dir) as tmp:
             write_model(model, tmp, args.output_type)

@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from ..io.atomic import DirectoryInTheWay, atomic_path, input_clash, new_folders, staged_directory
-from ..io.colmap.formats import ModelWriter, open_model
+from ..io.colmap.formats import FORMATS, ModelWriter, open_model
 from ..solve.call_limit import call_limit
 from .certificates import CertificateWriter
 from .pipeline import OptionError, RetriangulationOptions, prepare_geometry, process_chunk
@@ -205,6 +205,9 @@ def retriangulate_folder(in_dir, out_dir, options: RetriangulationOptions | None
     were)."""
     options = options or RetriangulationOptions()
     t_start = time.perf_counter()
+    for name, fmt in (("input_format", input_format), ("output_format", output_format)):
+        if fmt is not None and fmt not in FORMATS:          # (a KeyError from deep inside, review 29b F14)
+            raise OptionError(name, f"must be one of {', '.join(FORMATS)} or None, got {fmt!r}")
     check_output(in_dir, out_dir, exports)
     timings = dict.fromkeys(("open", "geometry", "read", "solve", "write"), 0.0)
     t0 = time.perf_counter()

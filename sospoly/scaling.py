@@ -39,9 +39,9 @@ MAX_POW2_EXP = 1023
 
 
 def pow2_above(m: float) -> float:
-    """The power of two at or just above ``m`` > 0 (2^e with m = f 2^e, 1/2 <= f < 1), at most 2^MAX_POW2_EXP; 1
-    for 0 or a non-finite m.  Dividing by it is exact (barring underflow) and brings |m| into (1/4, 1], or (1, 2)
-    at the cap."""
+    """The power of two just above ``m`` > 0 (2^e with m = f 2^e, 1/2 <= f < 1; 2 for m = 1), at most
+    2^MAX_POW2_EXP; 1 for 0 or a non-finite m.  Dividing by it is exact (barring underflow) and brings m into
+    [1/2, 1), or [1, 2) at the cap."""
     if not (m > 0 and math.isfinite(m)):
         return 1.0
     return math.ldexp(1.0, min(math.frexp(m)[1], MAX_POW2_EXP))

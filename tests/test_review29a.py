@@ -227,3 +227,16 @@ def test_compute_many_reports_the_seconds_of_its_one_by_one_solves():
                       points=False)
     solved = compute_many([(sb, [frozenset(range(5)), frozenset({0, 1, 2})])])
     assert set(solved) == {id(sb)} and solved[id(sb)] > 0
+
+
+def test_each_chunk_keeps_the_reserve_of_the_chunks_after_it():
+    """The reserve of a per-item chunk covered only its own later items: its last item ran to the end and every later
+    chunk started expired (the diff review of this wave)."""
+    from tritools.solve.batch import _after_seconds
+    from tritools.solve.call_limit import reserve_for
+
+    item = (0, None, [None] * 10, None, ())
+    chunks = [[item] * 8, [item] * 8, [item] * 4]
+    one = reserve_for([10])
+    assert _after_seconds(chunks, 1) == pytest.approx([12 * one, 4 * one, 0.0])
+    assert _after_seconds(chunks, 2) == pytest.approx([6 * one, 2 * one, 0.0])      # shared by two workers

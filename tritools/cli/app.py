@@ -21,6 +21,7 @@ not input errors: they get a result row with a status.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import csv
 import importlib
 import json
@@ -358,7 +359,7 @@ def load_oxford(name: str, data_dir, command: str, outputs=()):
     """:func:`tritools.io.oxford.load_sequence` for a subcommand: a missing or unreadable sequence is a
     :class:`CLIError` naming what was tried (``--data-dir``, ``$TRITOOLS_DATA``) or the bad file.
     ``outputs``: ``(flag, path)`` of the files the command will write, refused (:func:`refuse_input_as_output`)
-    when one is a file of the sequence's folder."""
+    when one is a file of the sequence's folder or lies anywhere inside that folder (review 29b F11)."""
     from ..io.oxford import DATA_ENV, DataNotFoundError, load_sequence
     from ..io.oxford import data_dir as oxford_data_dir
 
@@ -366,8 +367,8 @@ def load_oxford(name: str, data_dir, command: str, outputs=()):
         seq = load_sequence(name, data_dir)
         folder = oxford_data_dir(data_dir) / name
         for flag, path in outputs:
-            refuse_input_as_output(path, flag, [("the sequence folder", folder)] +
-                                   [("the data file", f) for f in folder.iterdir()])
+            refuse_input_as_output(path, flag, [("the data file", f) for f in folder.iterdir()] +
+                                   [("the sequence folder", folder)])
         return seq
     except DataNotFoundError as exc:
         msg = str(exc).replace("pass data_dir=...", "pass --data-dir DIR")
@@ -530,7 +531,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     except SystemExit as exc:            # --help
         return exc.code if isinstance(exc.code, int) else EXIT_OK if exc.code is None else EXIT_INVALID
     except Terminated as exc:
-        print(exc.message, file=sys.stderr)
+        with contextlib.suppress(OSError):     # after a hang-up the terminal may be gone
+            print(exc.message, file=sys.stderr)
         return exc.exit_code
     except KeyboardInterrupt:
         print(INTERRUPTED_MESSAGE, file=sys.stderr)

@@ -127,9 +127,10 @@ class CameraProblems:
 
 
 def power2_scale(A: np.ndarray, axes: tuple) -> np.ndarray:
-    """The power of two at or just above the largest absolute entry over ``axes`` (kept as size-1
-    axes), 1 where that entry is 0 or not finite.  Dividing by it is exact (barring underflow) and
-    brings the entries into [-1, 1], so that later products and norms cannot overflow."""
+    """The power of two just above the largest absolute entry over ``axes`` (kept as size-1 axes;
+    :func:`sospoly.pow2_above`), 1 where that entry is 0 or not finite.  Dividing by it is exact (barring
+    underflow) and brings the entries into (-1, 1) -- (-2, 2) past 2^1023 -- so that later products and norms
+    cannot overflow."""
     return pow2_above_array(np.maximum.reduce(np.abs(A), axis=axes, keepdims=True))   # (ndarray.max's ufunc)
 
 

@@ -106,11 +106,13 @@ def _solve_item(cams, regions, opts: TriangulationOptions, prefix: tuple, retrie
     return mark_cut(res) if cut else res
 
 
-def _run_chunk(items, retries, end=None) -> list:
+def _run_chunk(items, retries, end=None, after: float = 0.0) -> list:
     """Executor task: [(index, result)] for items [(index, cameras, regions, options, prefix)]; the items whose
-    turn comes after the whole call's ``end`` get their ``time_limit`` results at once (:func:`_expired_items`)."""
+    turn comes after the whole call's ``end`` get their ``time_limit`` results at once (:func:`_expired_items`).
+    Each item ends early enough for the rows of the items after it and ``after`` seconds more (the reserve of the
+    chunks queued after this one, :func:`_after_seconds`)."""
     out = []
-    later = reserve_for(_item_views(items))
+    later = reserve_for(_item_views(items)) + after
     for k, (i, c, r, o, pre) in enumerate(items):
         later -= reserve_for(_item_views(items[k:k + 1]))
         end_k = reserved_end(end, later)              # the rows of the items after it fit before the end
@@ -118,6 +120,15 @@ def _run_chunk(items, retries, end=None) -> list:
             return out + _expired_items(items[k:], retries, end)
         out.append((i, _solve_item(c, r, o, pre, retries, end_k)))
     return out
+
+
+def _after_seconds(chunks, workers) -> list:
+    """Per chunk, the reserve (:func:`~tritools.solve.call_limit.reserve_for`) of the rows of the chunks after it,
+    shared by ``workers`` processes: the last item of a chunk must not run up to the end while later chunks wait."""
+    secs = [reserve_for(_item_views(c)) for c in chunks]
+    tail = np.cumsum(secs[::-1])[::-1].tolist() + [0.0]
+    w = max(1, int(workers or 1))
+    return [tail[k + 1] / w for k in range(len(chunks))]
 
 
 def _item_views(items) -> list:
@@ -177,7 +188,7 @@ def stop_pool(ex) -> None:
     interrupt (Ctrl-C, SIGTERM) or an error in the caller.  ``shutdown(wait=True)`` waited for every running task,
     and a worker inside a Clarabel solve sees its own SIGINT only when the solve returns: ``tritools colmap
     --workers 2`` ran on for over a minute after Ctrl-C (review 29b F4).  Any other executor is shut down without
-    waiting."""
+    waiting (only local pools are passed: a dask Client is left to its owner)."""
     procs = list((getattr(ex, "_processes", None) or {}).values())
     ex.shutdown(wait=False, cancel_futures=True)
     for p in procs:
@@ -279,11 +290,12 @@ def _run_items(items, retries, executor, chunk_size: int, store, end=None) -> No
     elif ex is None:
         ex = own = _local_executor(len(items), len(chunks))
     pending = list(range(len(chunks)))
+    after = _after_seconds(chunks, getattr(ex, "_max_workers", 1) if ex is not None else 1)
     try:
         if ex is not None:
             futures = {}
             try:
-                futures = {ex.submit(_run_chunk, chunks[k], retries, end): k for k in pending}
+                futures = {ex.submit(_run_chunk, chunks[k], retries, end, after[k]): k for k in pending}
                 for fut in cf.as_completed(futures):
                     k = futures[fut]
                     try:
@@ -299,8 +311,9 @@ def _run_items(items, retries, executor, chunk_size: int, store, end=None) -> No
                         pending.remove(k)
             except cf.BrokenExecutor as exc:       # a worker died: the unfinished chunks are retried here
                 log.warning("executor broke (%s); retrying %d chunk(s) in this process", exc, len(pending))
-        for k in list(pending):
-            store(_run_chunk(chunks[k], retries, end))
+        after = _after_seconds([chunks[k] for k in pending], 1)
+        for j, k in enumerate(list(pending)):
+            store(_run_chunk(chunks[k], retries, end, after[j]))
             pending.remove(k)
     except BaseException:
         if own is not None:                 # an interrupt: the workers stop now, not after their running chunks

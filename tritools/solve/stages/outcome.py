@@ -227,9 +227,10 @@ def _settle(ctx: PointContext) -> None:
 
 def _multistart_estimate(ctx: PointContext, best: TriangulationResult) -> TriangulationResult:
     """``best`` (not certified) with X and gamma_UB from :func:`~tritools.solve.multistart.multistart_point` when
-    that is lower (``method="auto"``, point regions only, before the deadline; with ``require_in_front`` only an
-    estimate in front of every camera).  The bound, status, solver fields and X_raw (the step's own estimate before
-    refinement) stay those of ``best``; an explicit method reports the paper's estimate (its tables' X^)."""
+    that is lower (``method="auto"``, point regions only, before the deadline; when ``best`` is in front of its
+    cameras or ``require_in_front`` is set, only an estimate in front of every camera).  The bound, status, solver
+    fields and X_raw (the step's own estimate before refinement) stay those of ``best``; an explicit method reports
+    the paper's estimate (its tables' X^)."""
     if best.X is None or best.gamma_ub is None or ctx.expired or ctx.opts.explicit_method is not None \
             or not all(r.is_point for r in ctx.regions):
         return best
@@ -241,9 +242,9 @@ def _multistart_estimate(ctx: PointContext, best: TriangulationResult) -> Triang
         x = _projections(X, ctx.cams)
     rep = report_point(ctx, step_of(best, ctx), best.status, False, best.gamma_lb, X=X, X_raw=X, image_points=x,
                        certified_by=None, lowered=True)
-    if rep.gamma_ub is None or not rep.gamma_ub < best.gamma_ub or \
-            (ctx.opts.require_in_front and not rep.in_front) or rep.status != best.status:
-        return best
+    if rep.gamma_ub is None or not rep.gamma_ub < best.gamma_ub or rep.status != best.status or \
+            ((ctx.opts.require_in_front or best.in_front) and not rep.in_front):
+        return best                     # (an estimate in front of its cameras is never traded for one behind)
     return replace(best, X=rep.X, gamma_ub=rep.gamma_ub, gamma_lb=rep.gamma_lb, image_points=rep.image_points,
                    residuals=rep.residuals, depths=rep.depths,
                    in_front=rep.in_front, message=join(best.message, "X and gamma_UB from the best of the local "

@@ -196,20 +196,20 @@ def test_a_bad_executor_is_a_type_error_naming_it(bad):
         tritools.triangulate_many([(CAMS, PTS)], executor=bad)
 
 
-# F6: ``tritools dataset`` on a sequence with an empty nview-corners file ended "internal error" (exit 1).
-def test_an_empty_sequence_is_a_one_line_error(tmp_path):
+@pytest.fixture
+def house_copy(oxford_data, tmp_path):
+    """A copy of the house sequence in tmp_path/house (the conftest's ``oxford_data`` skips without the data)."""
     import shutil
+    from pathlib import Path
+
+    shutil.copytree(Path(oxford_data) / "house", tmp_path / "house")
+    return tmp_path / "house"
+
+
+# F6: ``tritools dataset`` on a sequence with an empty nview-corners file ended "internal error" (exit 1).
+def test_an_empty_sequence_is_a_one_line_error(house_copy, tmp_path):
     import subprocess
 
-    from tritools.io.oxford import data_dir
-
-    try:
-        house = data_dir() / "house"
-    except (OSError, ValueError):
-        house = None
-    if house is None or not house.is_dir():
-        pytest.skip("Oxford data not found (../shared/data/oxford or $TRITOOLS_DATA)")
-    shutil.copytree(house, tmp_path / "house")
     nview = next((tmp_path / "house").glob("*.nview-corners"))
     nview.write_text("")
     p = subprocess.run([sys.executable, "-m", "tritools", "dataset", "house", "--data-dir", str(tmp_path)],
@@ -327,19 +327,9 @@ def test_a_bad_model_format_is_refused_by_name(tmp_path, field):
 
 
 # F11: ``colmap-from-oxford NAME OUT`` wrote its model into the sequence folder it reads.
-def test_colmap_from_oxford_never_writes_into_the_sequence(tmp_path):
-    import shutil
+def test_colmap_from_oxford_never_writes_into_the_sequence(house_copy, tmp_path):
     import subprocess
 
-    from tritools.io.oxford import data_dir
-
-    try:
-        house = data_dir() / "house"
-    except (OSError, ValueError):
-        house = None
-    if house is None or not house.is_dir():
-        pytest.skip("Oxford data not found (../shared/data/oxford or $TRITOOLS_DATA)")
-    shutil.copytree(house, tmp_path / "house")
     before = sorted(f.name for f in (tmp_path / "house").iterdir())
     for out in (tmp_path / "house", tmp_path / "house" / "model"):
         p = subprocess.run([sys.executable, "-m", "tritools", "colmap-from-oxford", "house", str(out), "--data-dir",

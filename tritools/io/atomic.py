@@ -62,11 +62,7 @@ def same_file(a, b) -> bool:
 
 def _contains(folder, path) -> bool:
     """True when the existing folder ``folder`` is a parent (at any depth) of the existing ``path``."""
-    try:
-        parents = Path(path).resolve(strict=True).parents
-    except (OSError, RuntimeError, ValueError):
-        return False
-    return any(same_file(folder, p) for p in parents)
+    return os.path.exists(path) and inside(path, folder)
 
 
 def inside(path, folder) -> bool:

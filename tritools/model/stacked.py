@@ -186,9 +186,8 @@ def _solve_or_pinv(A: np.ndarray, g: np.ndarray) -> np.ndarray:
         return np.linalg.pinv(A) @ g
 
 
-def refine_points_stack(C: np.ndarray, xhat: np.ndarray, X: np.ndarray, ok: np.ndarray, *,
-                        return_converged: bool = False, scalar: bool | None = None,
-                        max_iter: int = LM_MAX_ITER) -> tuple:
+def refine_points_stack(C: np.ndarray, xhat: np.ndarray, X: np.ndarray, ok: np.ndarray, *, return_converged=False,
+                        scalar: bool | None = None, max_iter: int = LM_MAX_ITER) -> tuple:
     """Levenberg-Marquardt on sum_i ||Phi(X, P_i) - x^_i||^2 from X (M, 3), for the problems where ``ok``;
     the twin of :func:`tritools.model.geometry.refine_l2` with point regions.  (X, ok), and with
     ``return_converged`` also the mask of the problems that stopped by the step rule (not stalled, not at
@@ -399,8 +398,7 @@ def damped_step_one(JtJ: np.ndarray, g: np.ndarray, mu: float) -> np.ndarray:
     return -np.array(x)
 
 
-def refine_point(C: np.ndarray, xhat: np.ndarray, X: np.ndarray, ok: bool = True, *,
-                 max_iter: int = LM_MAX_ITER) -> tuple:
+def refine_point(C: np.ndarray, xhat: np.ndarray, X: np.ndarray, ok: bool = True, *, max_iter: int = LM_MAX_ITER):
     """The scalar (M = 1) twin of :func:`refine_points_stack`: the same Levenberg-Marquardt iteration on one problem,
     cameras C (N, 3, 4), observed points x^ (N, 2), start X (3,) -- minimising sum_i ||Phi(X, P_i) - x^_i||^2 with the
     Jacobian d Phi / d X = (P[:2, :3] - u P[2, :3]) / (P[2] . X~), the damped step of :func:`damped_step_one`, a step

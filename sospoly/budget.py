@@ -10,7 +10,10 @@ terabytes in native code.  Time is bounded the same way: ``Budget.time_limit`` b
 and between the steps of a bisection, so a solve returns with status ``time_limit`` instead of
 running for minutes.  What Clarabel cannot interrupt -- its set-up and one iteration -- is predicted from
 the program's size (:class:`ClarabelTimeModel`): an attempt that cannot finish it before the deadline is
-not started, and Clarabel's ``time_limit`` is the time left less that start.
+not started, and Clarabel's ``time_limit`` is the time left less that start.  A signal whose Python handler raises
+(Ctrl-C's ``KeyboardInterrupt``, a SIGTERM handler) ends a Clarabel solve at its next iteration, through
+Clarabel's termination callback, and is raised again once the solve has returned
+(:func:`sospoly.solvers.interrupt.solve_interruptibly`).
 
 Memory model (8-byte floats; an estimate, deliberately on the safe side):
 

@@ -28,6 +28,7 @@ from ..budget import AUTO_IPM_MAX_BYTES as _AUTO_IPM_MAX_BYTES
 from ..budget import CLARABEL_TIME_MODEL, BudgetExceeded, Deadline, estimate_size, memory_room
 from ..lowering.conic import ConicProblem
 from ..tolerances import DEFAULT_TOLERANCES, Tolerances, as_tolerances
+from .interrupt import solve_interruptibly
 from .rays import check_infeasibility, check_unbounded_ray
 
 __all__ = ["RawStatus", "Attempt", "ConicSolution", "ClarabelBackend", "IpmBackend", "AutoBackend",
@@ -237,7 +238,7 @@ class ClarabelBackend:
                                             np.asarray(problem.b, float), self._cones(problem),
                                             self._settings(overrides))
             t_setup = time.perf_counter() - t0
-            sol = solver.solve()
+            sol = solve_interruptibly(solver)
         except (KeyboardInterrupt, SystemExit):
             raise
         except BaseException as exc:  # pyo3 PanicException derives from BaseException

@@ -25,6 +25,8 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
+from .interrupt import solve_interruptibly
+
 __all__ = ["BlockStatus", "StackedConicSolution", "StackedConicOptions", "solve_stacked"]
 
 _LOG = logging.getLogger(__name__)
@@ -127,7 +129,7 @@ def _solve_stack(q, A, b, n_zero, n_nonneg, soc_dims, opts):
     s.tol_gap_abs, s.tol_gap_rel, s.tol_feas = opts.tol_gap_abs, opts.tol_gap_rel, opts.tol_feas
     s.max_iter = opts.max_iter
     try:
-        sol = clarabel.DefaultSolver(sp.csc_matrix((B * n, B * n)), q.ravel(), As, bs, cones, s).solve()
+        sol = solve_interruptibly(clarabel.DefaultSolver(sp.csc_matrix((B * n, B * n)), q.ravel(), As, bs, cones, s))
     except (KeyboardInterrupt, SystemExit):
         raise
     except BaseException as exc:            # pyo3 PanicException derives from BaseException

@@ -29,7 +29,7 @@ import threading
 import uuid
 from pathlib import Path
 
-__all__ = ["atomic_path", "atomic_open", "staged_directory", "locked_directory", "DirectoryInTheWay",
+__all__ = ["atomic_path", "atomic_open", "naming_errors", "staged_directory", "locked_directory", "DirectoryInTheWay",
            "same_file", "input_clash", "new_folders", "TEMP_PREFIX", "STAGING_PREFIX"]
 
 #: prefix of the temporary file beside a target.
@@ -147,8 +147,11 @@ def _fsync_path(path, directory: bool = False) -> None:
 
 
 def _rename_error(exc: OSError, temp, target) -> None:
-    """Make ``exc`` name ``target`` where it names the temporary ``temp`` (a file or a staging folder)."""
+    """Make ``exc`` name ``target`` where it names the temporary ``temp`` (a file or a staging folder), or names
+    nothing (a failed ``write()``: a file-size limit, a full disk; review 29b F16)."""
     temp, target = str(temp), str(target)
+    if exc.filename is None:
+        exc.filename = target
     for attr in ("filename", "filename2"):
         name = getattr(exc, attr, None)
         if isinstance(name, str) and name.startswith(temp):
@@ -158,6 +161,18 @@ def _rename_error(exc: OSError, temp, target) -> None:
 def _check_not_directory(path: Path) -> None:
     if path.is_dir():
         raise DirectoryInTheWay(path)
+
+
+@contextlib.contextmanager
+def naming_errors(path):
+    """An ``OSError`` raised inside that names no file (a failed ``write()``: ``EFBIG``, ``ENOSPC``) names ``path``:
+    for writers that stream a file in several calls (review 29b F16: "[Errno 27] File too large", no file named)."""
+    try:
+        yield
+    except OSError as exc:
+        if exc.filename is None:
+            exc.filename = str(path)
+        raise
 
 
 @contextlib.contextmanager

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..io.atomic import atomic_open
+from ..io.atomic import atomic_open, naming_errors
 from ..io.colmap.model import ModelFormatError
 from ..result import Status, TriangulationResult
 from .certify import STATUS_LEGEND, written_certified
@@ -64,13 +64,15 @@ class CertificateWriter:
         lines = [f"{pid} {n} {lb!r} {ub!r} {int(c)} {STATUS_LEGEND[s]} {d} {by or '-'} {g!r} {int(u)} {int(f)} "
                  f"{_clean(m)}" for pid, n, lb, ub, c, s, d, by, g, u, f, m in rows]
         if lines:
-            self.fh.write("\n".join(lines) + "\n")
+            with naming_errors(self.path):
+                self.fh.write("\n".join(lines) + "\n")
         self.n_points += len(lines)
         self.n_certified += int(np.count_nonzero(certified))
 
     def close(self) -> Path:
         """Write the header, then the body; returns the sidecar path."""
-        self.fh.close()
+        with naming_errors(self.path):
+            self.fh.close()
         with atomic_open(self.path, "w", encoding="utf-8") as out, open(self.body_path, encoding="utf-8") as body:
             out.write(_HEADER + f"# Number of points: {self.n_points}, certified: {self.n_certified}, "
                                 f"method: {self.method}, path: {self.solve_path}\n")

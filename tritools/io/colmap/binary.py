@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from .camera_models import COLMAP_MODEL_IDS, COLMAP_MODEL_N_PARAMS, COLMAP_MODEL_NAMES
-from ..atomic import atomic_open
+from ..atomic import atomic_open, naming_errors
 from .model import ModelFormatError
 
 __all__ = ["read_cameras_binary", "read_images_binary", "BinaryPointsReader", "write_cameras_binary",
@@ -280,15 +280,17 @@ class BinaryPointsWriter:
         first = np.repeat(np.cumsum(lens) - lens, lens)
         pos = np.repeat(starts + POINT_DTYPE.itemsize, lens) + 8 * (np.arange(T) - first)
         out[pos[:, None] + np.arange(8)] = tr.view(np.uint8).reshape(T, 8)
-        self.fh.write(out.tobytes())
+        with naming_errors(self.path):
+            self.fh.write(out.tobytes())
         self.n_points += n
         self.n_observations += T
 
     def close(self) -> None:
         """Write the number of points into the header and close."""
-        self.fh.seek(0)
-        self.fh.write(_U64.pack(self.n_points))
-        self.fh.close()
+        with naming_errors(self.path):
+            self.fh.seek(0)
+            self.fh.write(_U64.pack(self.n_points))
+            self.fh.close()
 
     def abort(self) -> None:
         """Close without completing (the caller discards the file)."""

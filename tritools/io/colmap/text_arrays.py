@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..atomic import atomic_open
+from ..atomic import atomic_open, naming_errors
 from .model import (LineFields, read_camera_records, parse_image_header, parse_point,
                     parse_points2d)
 
@@ -255,13 +255,15 @@ class TextPointsWriter:
             track = " ".join(pairs[off[p]:off[p + 1]])
             out.append(f"{pid} {x!r} {y!r} {z!r} {r} {g} {b} {e!r}" + (" " + track if track else ""))
         if out:
-            self.fh.write("\n".join(out) + "\n")
+            with naming_errors(self.path):
+                self.fh.write("\n".join(out) + "\n")
         self.n_points += len(out)
         self.n_observations += len(pairs)
 
     def close(self) -> None:
         """Write the header, then the body, and remove the side file."""
-        self.fh.close()
+        with naming_errors(self.path):
+            self.fh.close()
         mean = self.n_observations / self.n_points if self.n_points else 0.0
         with atomic_open(self.path, "w", encoding="utf-8") as out, open(self.body_path, encoding="utf-8") as body:
             out.write("# 3D point list with one line of data per point:\n"

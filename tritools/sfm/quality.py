@@ -141,7 +141,7 @@ def _usable(arrays: ModelArrays, geom: ModelGeometry):
 def _parse_radii(path) -> list:
     """[(file:line, image_id, point2D_idx, radius, text)] of a radii file (syntax and radius > 0 checked)."""
     out = []
-    for n, line in enumerate(Path(path).read_text(encoding="utf-8").splitlines(), 1):
+    for n, line in enumerate(Path(path).read_text(encoding="utf-8-sig").splitlines(), 1):
         t = line.split("#", 1)[0].split()
         if not t:
             continue

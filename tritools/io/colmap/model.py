@@ -245,7 +245,7 @@ def _data_lines(path: Path, strict: bool = False):
     """(line number, stripped text) of the non-comment lines; blank lines kept (images.txt
     uses an empty POINTS2D line for an image without keypoints).  Bytes that are not UTF-8 are
     kept as surrogates (an image NAME round-trips); ``strict``: refused, naming file:line."""
-    with open(path, encoding="utf-8", errors="surrogateescape") as fh:
+    with open(path, encoding="utf-8-sig", errors="surrogateescape") as fh:   # a BOM (review 29b F10) skipped
         for lineno, line in enumerate(fh, 1):
             if strict and not line.isascii():
                 _check_utf8(path, lineno, line)

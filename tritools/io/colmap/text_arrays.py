@@ -63,7 +63,7 @@ def _ints_ok(v: np.ndarray) -> bool:
 
 def _data_lines(path: Path):
     """(line number, stripped text) of the non-comment lines, read lazily."""
-    with open(path, encoding="utf-8", errors="surrogateescape") as fh:
+    with open(path, encoding="utf-8-sig", errors="surrogateescape") as fh:   # a BOM (review 29b F10) skipped
         for lineno, line in enumerate(fh, 1):
             s = line.strip()
             if not s.startswith("#"):

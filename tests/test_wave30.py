@@ -1,0 +1,120 @@
+"""Wave 30: review 29b's leftovers -- a write error names its file (F16), byte-order marks (F10), ..."""
+from __future__ import annotations
+
+import os
+import resource
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from tritools.io.colmap import write_model_arrays
+from tritools.sfm.synthetic import synthetic_arrays
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _run_limited(args, fsize: int, cwd) -> subprocess.CompletedProcess:
+    def limit():
+        resource.setrlimit(resource.RLIMIT_FSIZE, (fsize, fsize))
+    env = dict(os.environ, PYTHONPATH=str(ROOT), OPENBLAS_NUM_THREADS="1")
+    return subprocess.run([sys.executable, "-m", "tritools", *map(str, args)], cwd=cwd, env=env,
+                          preexec_fn=limit, capture_output=True, text=True, timeout=300)
+
+
+@pytest.mark.parametrize("fmt", ["txt", "bin"])
+def test_colmap_write_error_names_the_file(tmp_path, fmt):
+    """F16: under a file-size limit `tritools colmap` said "[Errno 27] File too large" and named no file."""
+    a, _ = synthetic_arrays(n_points=400, n_images=6, camera="PINHOLE", seed=3)
+    write_model_arrays(a, tmp_path / "in", "bin")
+    out = tmp_path / "out"
+    proc = _run_limited(["colmap", tmp_path / "in", out, "--max-delta", "2", "--output-type", fmt], 4000, tmp_path)
+    assert proc.returncode == 2 and proc.stderr.count("\n") == 1, proc.stderr
+    named = [str(out / f"{n}.{fmt}") for n in ("cameras", "images", "points3D")]
+    assert "File too large" in proc.stderr and any(f"{n}: " in proc.stderr for n in named), proc.stderr
+    assert ".tritools-staging" not in proc.stderr and not out.exists()
+
+
+class _FullDisk:
+    """A file object whose writes fail as on a full disk (no file name in the error)."""
+
+    def write(self, data):
+        raise OSError(28, "No space left on device")
+
+    def seek(self, pos):
+        return 0
+
+    def close(self):                 # a buffered file flushes on close
+        raise OSError(28, "No space left on device")
+
+
+def _streaming_writers(tmp_path):
+    from tritools.io.colmap.binary import BinaryPointsWriter
+    from tritools.io.colmap.text_arrays import TextPointsWriter
+    from tritools.sfm.certificates import CertificateWriter
+
+    return [BinaryPointsWriter(tmp_path / "points3D.bin"), TextPointsWriter(tmp_path / "points3D.txt"),
+            CertificateWriter(tmp_path)]
+
+
+def test_streaming_writers_name_their_file(tmp_path):
+    """F16: the chunked writers (points, sidecar) name the file a failed write() was for."""
+    import numpy as np
+
+    for w in _streaming_writers(tmp_path):
+        real, w.fh = w.fh, _FullDisk()
+        real.close()
+        with pytest.raises(OSError) as info:
+            if hasattr(w, "n_certified"):
+                w.close()
+            else:
+                w.write(np.array([1]), np.zeros((1, 3)), np.zeros((1, 3), np.uint8), np.zeros(1), np.array([2]),
+                        np.array([1, 2]), np.array([0, 0]))
+        assert info.value.filename == str(w.path) and info.value.errno == 28
+
+
+BOM = b"\xef\xbb\xbf"
+
+
+def _with_bom(path: Path) -> None:
+    path.write_bytes(BOM + path.read_bytes())
+
+
+def test_colmap_text_model_with_byte_order_marks(tmp_path):
+    """F10: a BOM (from Windows editors) in cameras.txt failed as "CAMERA_ID must be an integer, got '\\ufeff#'"."""
+    import numpy as np
+
+    from tritools.cli.app import main
+    from tritools.io.colmap import read_model, read_model_arrays
+
+    a, _ = synthetic_arrays(n_points=30, n_images=4, camera="PINHOLE", seed=5)
+    write_model_arrays(a, tmp_path / "plain", "txt")
+    write_model_arrays(a, tmp_path / "bom", "txt")
+    for name in ("cameras.txt", "images.txt", "points3D.txt"):
+        _with_bom(tmp_path / "bom" / name)
+    want, got = read_model_arrays(tmp_path / "plain"), read_model_arrays(tmp_path / "bom")
+    for field in ("camera_ids", "camera_params", "image_ids", "image_names", "image_qvec", "kp_xy", "point_ids",
+                  "point_xyz", "track_image", "track_kp"):
+        np.testing.assert_array_equal(getattr(want, field), getattr(got, field))
+    assert read_model(tmp_path / "bom") == read_model(tmp_path / "plain")
+    assert main(["colmap", str(tmp_path / "bom"), str(tmp_path / "out"), "--max-delta", "2"]) == 0
+
+
+def test_oxford_files_with_byte_order_marks(tmp_path):
+    """F10: an Oxford corners file with a BOM failed as "expected a number, got '\\ufeff601.723'"."""
+    import numpy as np
+
+    from tests.test_oxford import _write_vgg
+    from tritools.io.oxford import load_sequence
+    from tritools.scene import random_scene
+
+    scene = random_scene(3, 8, noise_px=0.5, seed=2)
+    _write_vgg(tmp_path / "plain", scene, set())
+    _write_vgg(tmp_path / "bom", scene, set())
+    for p in (tmp_path / "bom").iterdir():
+        _with_bom(p)
+    want, got = load_sequence("plain", tmp_path), load_sequence("bom", tmp_path)
+    np.testing.assert_array_equal(want.cameras, got.cameras)
+    assert [(t.views, np.asarray(t.points2d).tolist()) for t in want.tracks] == \
+        [(t.views, np.asarray(t.points2d).tolist()) for t in got.tracks]

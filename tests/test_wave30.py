@@ -118,3 +118,24 @@ def test_oxford_files_with_byte_order_marks(tmp_path):
     np.testing.assert_array_equal(want.cameras, got.cameras)
     assert [(t.views, np.asarray(t.points2d).tolist()) for t in want.tracks] == \
         [(t.views, np.asarray(t.points2d).tolist()) for t in got.tracks]
+
+
+@pytest.mark.parametrize("magnitude", [1e308, 1e100, 1e20])
+def test_huge_image_data_are_blamed_on_the_data_not_the_cameras(magnitude):
+    """F8 (a): one observation at 1e308 px raised "cameras[0] has rank < 3" from the estimate stage (the caller's
+    cameras are fine: the normalised ones lost rank).  Now a result that names the data, single call and batch."""
+    import numpy as np
+
+    import tritools
+    from tritools.scene import random_scene
+
+    sc = random_scene(3, 1, noise_px=1.0, seed=1)
+    C, x = np.asarray(sc.cameras), np.asarray(sc.points2d)[0].copy()
+    x[0] = [magnitude, -magnitude]
+    for r in (tritools.triangulate(C, x), tritools.triangulate_many([(C, x)])[0]):
+        assert r.status.value == "numerical_failure" and not r.optimal, (r.status, r.message)
+        assert "image data" in r.message and "rank < 3" in r.message and r.gamma_lb is None
+        if r.X is not None and np.all(np.isfinite(r.X)):          # an estimate's gamma_UB is its own cost
+            h = C @ np.append(r.X, 1.0)
+            d2 = np.sum((h[:, :2] / h[:, 2:] - x) ** 2)
+            assert r.gamma_ub == pytest.approx(np.sqrt(d2 / 6), rel=1e-6)

@@ -66,7 +66,8 @@ from .stacked import (dlt_stack, median_rows, norms, null_vectors, pixel_scales,
                       project_stack, refine_point, refine_points_stack)
 
 __all__ = ["Normalization", "NormalizationStack", "normalization_for", "normalization_stack", "regions_offset",
-           "unconstrained_reason", "resolutions", "magnitudes", "origin_magnitudes", "world_origin_magnitudes",
+           "unconstrained_reason", "data_magnitude", "resolutions", "magnitudes", "origin_magnitudes",
+           "world_origin_magnitudes",
            "RHO_FLOOR_REL", "RESOLUTION_REL", "DEPTH_FLOOR_REL",
            "SCALE_BOUNDS"]
 
@@ -550,6 +551,14 @@ def regions_offset(regions) -> float:
 ORDINARY_IMAGE_DATA = 1e12
 
 
+def data_magnitude(regions) -> float:
+    """The largest |coordinate| of the regions' centres (pixels; NaN without regions): the size of the image data
+    that messages about unrepresentable data quote."""
+    centers = np.array([r.center for r in regions], float)
+    with np.errstate(all="ignore"):
+        return float(np.max(np.abs(centers))) if centers.size else float("nan")
+
+
 def unconstrained_reason(cameras: np.ndarray, regions) -> tuple:
     """(status value, message) for a problem whose normalised data leave no view pair that constrains the point.
 
@@ -577,9 +586,7 @@ def unconstrained_reason(cameras: np.ndarray, regions) -> tuple:
         return "ill_posed", ("the camera centres coincide to round-off but not exactly: next to the centres the exact "
                              "problem sees their round-off baseline, so no one-centre bound is valid (give the views "
                              "one exact centre, e.g. the world origin at it, to have them certified as a rotation rig)")
-    centers = np.array([r.center for r in regions], float)
-    with np.errstate(all="ignore"):
-        big = float(np.max(np.abs(centers))) if centers.size else float("nan")
+    big = data_magnitude(regions)
     if big <= ORDINARY_IMAGE_DATA:
         return "numerical_failure", (f"no view pair constrains the point after normalisation although the cameras' "
                                      f"centres are distinct: they are too close to each other (a baseline near the "

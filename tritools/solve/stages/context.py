@@ -172,6 +172,15 @@ class PointContext:
         return self.norm.cameras(self.cams)
 
     @functools.cached_property
+    def cams_n_refusal(self) -> str | None:
+        """Why the normalised cameras fail the camera rule (:func:`~tritools.model.cameras.validate_cameras`'s
+        message), None when they pass.  The caller's cameras passed it: a refusal here means image data so far from
+        the cameras' image scale (regions at ~1e308 px) that the normalisation cannot represent them (review 29b F8)."""
+        from .estimate import camera_refusal
+
+        return camera_refusal(self.cams_n)
+
+    @functools.cached_property
     def regs_n(self) -> list:
         return self.norm.regions(self.regions)
 

@@ -256,6 +256,19 @@ def _resolve_limit(ctx: PointContext, step: Step) -> float:
     return INACCURATE_RESOLVE_CONTAINED_SECONDS if contained else INACCURATE_RESOLVE_MAX_SECONDS
 
 
+_CHECK = object()
+
+
+def camera_refusal(cams: np.ndarray) -> str | None:
+    """:func:`validate_cameras`' message for ``cams`` (no minimum number of views, equal cameras allowed), None when
+    it accepts them."""
+    try:
+        validate_cameras(cams, min_views=1, require_distinct=False)
+    except ValueError as exc:
+        return str(exc)
+    return None
+
+
 class CandidateCost:
     """gamma of the scene point of a candidate v (image points ``problem.image_points(v)`` -> X^ by the SVD of
     M0, :func:`tritools.model.geometry.point_from_validated`) for one problem's normalised cameras: the common
@@ -265,15 +278,13 @@ class CandidateCost:
     same numbers: tests/test_candidate_cost.py; stacked for point and disc regions), +inf where :meth:`one` gives
     None."""
 
-    def __init__(self, problem, cams: np.ndarray, regs):
+    def __init__(self, problem, cams: np.ndarray, regs, refused=_CHECK):
         self.problem, self.cams, self.regs = problem, cams, regs
         self.centre = common_centre(cams)
         self.shapes = disc_shapes(regs)
-        try:            # once: normalised cameras can lose rank in extreme data (a point at 1e308 px)
-            validate_cameras(cams, min_views=1, require_distinct=False)
-            self.refused = None
-        except ValueError as exc:
-            self.refused = str(exc)
+        # ``refused``: the cameras' check (PointContext.cams_n_refusal, made once per call; made here when not
+        # given): normalised cameras can lose rank in extreme data (a point at 1e308 px)
+        self.refused = camera_refusal(cams) if refused is _CHECK else refused
 
     def one(self, v):
         if self.refused is not None:            # as the per-candidate check raised (best_in_family: +inf)
@@ -308,7 +319,7 @@ class CandidateCost:
 
 def _best_candidate(ctx: PointContext, problem, psatz, sol):
     """Best (gamma_n, X_n, image points_n) over the extracted candidates (module docstring)."""
-    cost = CandidateCost(problem, ctx.cams_n, ctx.regs_n)
+    cost = CandidateCost(problem, ctx.cams_n, ctx.regs_n, ctx.cams_n_refusal)
     tol = ctx.tolerances
     points = [c.point for c in sospoly.candidates_of(psatz, sol, tol) if c.point.shape == (len(problem.gens),)]
     if len(psatz.u.block_names()) == 1 and "u" in sol.grams:

@@ -30,7 +30,7 @@ from sospoly.solvers import CLARABEL_FAST_CHAIN, CLARABEL_SPLIT_CHAIN, AutoBacke
 
 from ...errors import ProblemTooLarge
 from ...model.constraints import Method
-from ...model.normalize import unconstrained_reason
+from ...model.normalize import data_magnitude, unconstrained_reason
 from ...model.problem import TriangulationProblem, view_band, view_chain
 from ...result import Attempt, Status, TriangulationResult
 from ..plan import Step
@@ -196,6 +196,11 @@ def _build(ctx: PointContext, st: StepState) -> bool:
     if not problem.projection:
         status, why = unconstrained_reason(ctx.cams, ctx.regions)
         _fail(ctx, st, Status(status), why)
+        return False
+    if ctx.cams_n_refusal is not None:           # no candidate of this frame could be evaluated (review 29b F8)
+        _fail(ctx, st, Status.NUMERICAL_FAILURE, f"the image data (|x| up to {data_magnitude(ctx.regions):.3g}) are "
+                                                 "too far from the cameras' image scale to be represented in the "
+                                                 f"normalised frame: there, {ctx.cams_n_refusal}")
         return False
     if sospoly.delta_min(problem.f, problem.eq, problem.ineq) > step.delta:
         _fail(ctx, st, Status.INVALID_INPUT, f"delta {step.delta} is below delta_min of this problem")

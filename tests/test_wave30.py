@@ -139,3 +139,15 @@ def test_huge_image_data_are_blamed_on_the_data_not_the_cameras(magnitude):
             h = C @ np.append(r.X, 1.0)
             d2 = np.sum((h[:, :2] / h[:, 2:] - x) ** 2)
             assert r.gamma_ub == pytest.approx(np.sqrt(d2 / 6), rel=1e-6)
+
+
+def test_oxford_missing_camera_file_is_named(tmp_path):
+    """F8 (d): with house.001.P missing the error was "house.nview-corners:1: expected 9 entries, got 10"."""
+    from tests.test_oxford import _write_vgg
+    from tritools.io.oxford import DataNotFoundError, load_sequence
+    from tritools.scene import random_scene
+
+    _write_vgg(tmp_path / "seq", random_scene(4, 6, noise_px=0.5, seed=2), set())
+    (tmp_path / "seq" / "002.P").unlink()
+    with pytest.raises(DataNotFoundError, match=r"002\.P is missing"):
+        load_sequence("seq", tmp_path)

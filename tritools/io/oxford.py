@@ -203,9 +203,14 @@ def read_nview_corners(path: Path, n_views: int) -> list[list[int | None]]:
 
 
 def _view_files(folder: Path) -> list[tuple[Path, Path]]:
+    """(NNN.P, NNN.corners) of every view, in name order; a view with one file but not the other is named (a
+    missing camera file was reported as a wrong count in nview-corners: review 29b F8)."""
     Ps = sorted(folder.glob("*.P"), key=lambda p: p.name)
     if not Ps:
         raise DataNotFoundError(f"{folder}: no *.P camera files")
+    for corners in sorted(folder.glob("*.corners"), key=lambda p: p.name):
+        if not corners.with_suffix(".P").exists():
+            raise DataNotFoundError(f"{corners.with_suffix('.P')} is missing (its {corners.name} is there)")
     pairs = []
     for P in Ps:
         corners = P.with_suffix(".corners")

@@ -151,3 +151,53 @@ def test_oxford_missing_camera_file_is_named(tmp_path):
     (tmp_path / "seq" / "002.P").unlink()
     with pytest.raises(DataNotFoundError, match=r"002\.P is missing"):
         load_sequence("seq", tmp_path)
+
+
+def _huge_pose(tmp_path=None):
+    import dataclasses
+
+    import numpy as np
+
+    a, _ = synthetic_arrays(n_points=30, n_images=5, camera="PINHOLE", seed=3)
+    t = a.image_tvec.copy()
+    t[0] = [1e308, 0.0, 0.0]                        # K [R | t] overflows: not a camera
+    return a, dataclasses.replace(a, image_tvec=t)
+
+
+def test_an_image_whose_projection_overflows_is_skipped_not_every_point_it_sees():
+    """F8 (c): an image with TX = 1e308 made every point it sees invalid_input ("cameras[0] contains NaN or inf",
+    a track-local index, input finite).  Now the image is skipped, named, and its points solved from the others."""
+    import numpy as np
+
+    from tritools.sfm import CameraError, RetriangulationOptions, retriangulate_arrays
+
+    a, b = _huge_pose()
+    _, rep = retriangulate_arrays(b, RetriangulationOptions(max_delta=2))
+    assert [(i, r[:21]) for i, _, r, _ in rep.skipped_images] == [(int(a.image_ids[0]), "K [R | t] is not fini")]
+    seen = np.zeros(a.n_points, bool)                 # points that image 0 sees
+    off = a.track_offsets
+    for p in range(a.n_points):
+        seen[p] = 0 in a.track_image[off[p]:off[p + 1]].tolist()
+    lens = np.diff(off)
+    solvable = seen & (lens - 1 >= 2)
+    assert solvable.any()
+    for p in np.nonzero(solvable)[0]:
+        assert rep.results.status[p] != 9 and "unusable image(s) 1 left out" in rep.message[p], rep.message[p]
+        assert rep.certified[p]
+    assert rep.summary()["skipped_images"][0]["image_id"] == int(a.image_ids[0])
+    with pytest.raises(CameraError, match=r"image 1 \(.*\) cannot be used: K \[R \| t\] is not finite"):
+        retriangulate_arrays(b, RetriangulationOptions(max_delta=2, strict=True))
+
+
+def test_cli_colmap_reports_a_skipped_image(tmp_path, capsys):
+    import json
+
+    from tritools.cli.app import main
+
+    _, b = _huge_pose()
+    write_model_arrays(b, tmp_path / "in", "bin")
+    code = main(["colmap", str(tmp_path / "in"), str(tmp_path / "out"), "--max-delta", "2", "--json"])
+    out, err = capsys.readouterr()
+    assert code == 3 and err.count("\n") == 1 and "1 image(s)" in err, err
+    doc = json.loads(out)
+    assert doc["skipped_images"][0]["image_id"] == 1 and doc["skipped_images"][0]["n_observations"] > 0

@@ -226,12 +226,14 @@ def _skipped_status(report, quiet: bool = False) -> int:
     """0, or :data:`EXIT_CAMERAS_SKIPPED` with one warning line (unless ``quiet``) when unusable cameras left
     observations out."""
     used = [c for c in report.skipped_cameras if c[3] > 0]
-    if not used:
+    images = [i for i in report.skipped_images if i[3] > 0]
+    if not used and not images:
         return 0
-    models = sorted({c[1] for c in used})
-    n_obs = sum(c[3] for c in used)
+    what = [f"{len(used)} camera(s) could not be used ({', '.join(sorted({c[1] for c in used}))})"] if used else []
+    what += [f"{len(images)} image(s) could not be used (K [R | t] not a camera)"] if images else []
+    n_obs = sum(c[3] for c in used) + sum(i[3] for i in images)
     if not quiet:
-        print(f"tritools: warning: {len(used)} camera(s) could not be used ({', '.join(models)}): {n_obs} "
+        print(f"tritools: warning: {' and '.join(what)}: {n_obs} "
               f"observation(s) left out, {report.n_certified} of {report.n_points} point(s) certified",
               file=sys.stderr)
     return EXIT_CAMERAS_SKIPPED
@@ -264,6 +266,8 @@ def _print_summary(report, result, summary) -> None:
     print("status: " + (", ".join(f"{k} {v}" for k, v in summary["status"].items()) or "-"))
     for cid, model, reason, n_obs in report.skipped_cameras:
         print(printable(f"skipped camera {cid} ({model}): {reason}; {n_obs} observation(s) left out"))
+    for iid, name, reason, n_obs in report.skipped_images:
+        print(printable(f"skipped image {iid} ({name}): {reason}; {n_obs} observation(s) left out"))
     bad = report.uncertified(MAX_LISTED)
     if bad:
         n_bad = report.n_points - report.n_certified

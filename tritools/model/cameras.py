@@ -495,7 +495,8 @@ def depth_rows(C: np.ndarray) -> np.ndarray:
     m3 = Cs[..., 2, :3]
     k = power2_scale(m3, (-1,))[..., 0]
     n = k * np.sqrt(np.sum((m3 / k[..., None]) ** 2, axis=-1))
-    sign = np.sign(np.linalg.det(Cs[..., :3]))
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):   # (LAPACK's warnings on extreme rows)
+        sign = np.sign(np.linalg.det(Cs[..., :3]))
     sign = np.where(sign == 0, 1.0, sign)
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         f = np.where(n > 0, sign / np.where(n > 0, n, 1.0), np.nan)

@@ -29,7 +29,7 @@ from ..io.colmap.formats import FORMATS, ModelWriter, open_model
 from ..solve.call_limit import call_limit
 from .certificates import CertificateWriter
 from .pipeline import OptionError, RetriangulationOptions, prepare_geometry, process_chunk
-from .retriangulate import RetriangulationReport, has_tqdm, progress_bar, skipped_cameras
+from .retriangulate import RetriangulationReport, has_tqdm, progress_bar, skipped_cameras, skipped_images
 from .robust_tracks import drop_observations, rewrite_images
 
 __all__ = ["OutputError", "atomic_directory", "check_output", "retriangulate_folder", "FolderResult",
@@ -254,7 +254,8 @@ def retriangulate_folder(in_dir, out_dir, options: RetriangulationOptions | None
                 certs.abort()
                 raise
             _copy_extra_files(src.folder, tmp, fmt_out, copied, notes)
-            report = RetriangulationReport.from_chunks(options, ids, results, skipped_cameras(src.arrays, geom))
+            report = RetriangulationReport.from_chunks(options, ids, results, skipped_cameras(src.arrays, geom),
+                                                       skipped_images(src.arrays, geom))
             staged = _stage_exports(staged_exports, exports, xyz, rgb, report)
             point_quality = _staged_quality(tmp, quality, staged)
             timings["write"] += time.perf_counter() - t0

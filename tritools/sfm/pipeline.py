@@ -5,7 +5,9 @@
 numpy call per camera (:func:`tritools.io.colmap.camera_models.undistorted_pixels`).  A camera whose
 model tritools cannot undistort (EQUIRECTANGULAR; pycolmap-only models without pycolmap) or whose parameters are invalid
 (focal length <= 0) is *skipped*: its observations are left out of every track (a count and the
-camera's reason go to the report), unless ``strict`` (then :class:`CameraError`).
+camera's reason go to the report), unless ``strict`` (then :class:`CameraError`).  So is an image whose
+``K [R | t]`` is not a camera (:func:`image_problems`: not finite -- huge intrinsics or pose that overflow -- or rank
+< 3 by the one camera rule), reported per image.
 
 :func:`process_chunk` then handles a :class:`~tritools.io.colmap.arrays.PointChunk`: tracks are
 grouped by their number N of usable observations, each group becomes stacked arrays (cameras
@@ -23,7 +25,7 @@ import numpy as np
 from ..io.colmap.arrays import ModelArrays, PointChunk
 from ..io.colmap.camera_models import (OPENCV_FAMILY, camera_problem, distort_rows, distortion, intrinsics,
                                        pixels_from_camera, undistorted_pixels)
-from ..model.cameras import depths_stack
+from ..model.cameras import CAMERA_RANK_RTOL, camera_rank_ratio, depths_stack
 from ..records import TriangulationResults
 from ..result import Status
 from ..solve.decide import gamma_from_c
@@ -31,7 +33,8 @@ from ..solve.options import OptionError, TriangulationOptions
 from .certify import CertifyOptions, RecordColumns, certify_stack, robust_threshold, solver_options
 
 __all__ = ["RetriangulationOptions", "OptionError", "CameraError", "ModelGeometry", "prepare_geometry",
-           "ChunkResult", "process_chunk", "point_gammas", "rotations", "BEHIND_CHOICES", "DEFAULT_MAX_TRACK_LENGTH"]
+           "ChunkResult", "process_chunk", "point_gammas", "rotations", "image_problems", "BEHIND_CHOICES",
+           "DEFAULT_MAX_TRACK_LENGTH"]
 
 BEHIND_CHOICES = ("keep-input", "write")
 #: tracks with more usable observations than this are not solved by default: the Corollary 1
@@ -146,6 +149,7 @@ class ModelGeometry:
     xy_u: np.ndarray              # (K, 2) undistorted keypoints (NaN where not computed)
     kp_ok: np.ndarray             # (K,) undistortion converged
     perspective: np.ndarray       # (V,) the image's camera sees only in front of it (False: spherical, no depth test)
+    image_reason: tuple = ()      # None, or why image v cannot be used although its camera can (image_problems)
 
 
 def rotations(qvec: np.ndarray) -> np.ndarray:
@@ -188,9 +192,16 @@ def prepare_geometry(arrays: ModelArrays, strict: bool = False) -> ModelGeometry
     t = arrays.image_tvec
     Rt = np.concatenate([R, t[:, :, None]], axis=2)
     cam = arrays.image_camera
-    P = np.matmul(Ks[cam], Rt)
+    with np.errstate(all="ignore"):             # huge intrinsics or poses: image_problems names them
+        P = np.matmul(Ks[cam], Rt)
     cam_ok = np.array([r is None for r in reasons], bool)
     image_ok = cam_ok[cam] if V else np.zeros(0, bool)
+    image_reason = image_problems(P, image_ok)
+    if strict:
+        for v, why in enumerate(image_reason):
+            if why is not None:
+                raise CameraError(f"image {int(arrays.image_ids[v])} ({arrays.image_names[v]}) cannot be used: {why}")
+    image_ok = image_ok & np.array([r is None for r in image_reason], bool)
     counts = np.diff(arrays.kp_offsets)
     kp_cam = np.repeat(cam, counts)
     need = (arrays.kp_point3D != -1) & cam_ok[kp_cam] if len(kp_cam) else np.zeros(0, bool)
@@ -205,7 +216,32 @@ def prepare_geometry(arrays: ModelArrays, strict: bool = False) -> ModelGeometry
             xy_u[r], kp_ok[r] = undistorted_pixels(arrays.camera_models[k], arrays.camera_params[k], arrays.kp_xy[r])
     return ModelGeometry(reasons, image_ok, R, t, P, np.column_stack([Ks[cam, 0, 0], Ks[cam, 1, 1]]),
                          np.column_stack([Ks[cam, 0, 2], Ks[cam, 1, 2]]), dists[cam], xy_u, kp_ok,
-                         _perspective_images(arrays))
+                         _perspective_images(arrays), image_reason)
+
+
+def _posed(geom: ModelGeometry) -> np.ndarray:
+    """(V,) False for the images :func:`image_problems` skips: their K [R | t] gives no depth to judge cheirality by
+    (a skipped camera's image keeps its pose: its observations are judged)."""
+    return np.array([why is None for why in geom.image_reason], bool) if geom.image_reason else \
+        np.ones(len(geom.image_ok), bool)
+
+
+def image_problems(P: np.ndarray, ok: np.ndarray) -> tuple:
+    """Why each image's ``P = K [R | t]`` (V, 3, 4) cannot be used, None where it can or where ``ok`` is False (its
+    camera is skipped already): not finite (intrinsics or a translation so large that the product overflows), or
+    rank < 3 by the rule every camera of a problem meets (:func:`tritools.model.cameras.camera_rank_ratio`).  Such an
+    image's observations are left out of the tracks, as a skipped camera's, instead of failing every point it sees
+    with a message about a track-local ``cameras[k]`` (review 29b F8)."""
+    with np.errstate(all="ignore"):
+        finite = np.isfinite(P).all(axis=(1, 2))
+        ratio = np.ones(len(P))
+        sel = np.asarray(ok, bool) & finite
+        if sel.any():
+            ratio[sel] = camera_rank_ratio(P[sel])
+    return tuple(None if not ok[v] else
+                 "K [R | t] is not finite (its intrinsics or pose overflow in floating point)" if not finite[v] else
+                 f"K [R | t] has rank < 3 (sigma3/sigma1 = {ratio[v]:.3g} <= {CAMERA_RANK_RTOL:g})"
+                 if not ratio[v] > CAMERA_RANK_RTOL else None for v in range(len(P)))
 
 
 @dataclass(frozen=True, eq=False)
@@ -334,7 +370,7 @@ def process_chunk(arrays: ModelArrays, geom: ModelGeometry, chunk: PointChunk, o
     # cheirality on the observations the estimate keeps: a robust estimate's outliers may lie "behind" their
     # camera (docs/robust.md), as triangulate(..., robust=c) judges in_front; a spherical camera
     # (EQUIRECTANGULAR) sees every direction, so its observations have no side to be behind (review 27a F2)
-    judged = ~outlier & geom.perspective[obs_img]
+    judged = ~outlier & geom.perspective[obs_img] & _posed(geom)[obs_img]
     behind = np.bincount(owner[~(depth > 0) & judged], minlength=n) > 0
     ub, g_in = rec.gamma_ub, gamma_input
     better = has_X & np.isfinite(ub) & (rec.optimal | ~np.isfinite(g_in) | (ub <= g_in))
@@ -383,19 +419,31 @@ def _outlier_notes(arrays, obs_img, owner, keep, message) -> None:
         message[p] = f"{message[p]}; {note}" if message[p] else note
 
 
+def _unusable_notes(message, owner: np.ndarray, ids: np.ndarray, what: str) -> None:
+    """"K observation(s) in unusable WHAT ids left out" on the points ``owner`` (one entry per observation left out,
+    ``ids`` its camera or image id)."""
+    if not owner.size:
+        return
+    pairs = np.unique(np.stack([owner, ids], axis=1), axis=0)
+    counts = np.bincount(owner, minlength=len(message))
+    starts = np.searchsorted(pairs[:, 0], np.arange(len(message) + 1))
+    for p in np.nonzero(counts)[0]:
+        note = f"{int(counts[p])} observation(s) in unusable {what} " + \
+            ", ".join(str(c) for c in pairs[starts[p]:starts[p + 1], 1]) + " left out"
+        message[p] = note if not message[p] else f"{message[p]}; {note}"
+
+
 def _messages(arrays, geom, chunk, r, d, options) -> None:
     """Per-point messages for the points that need one (skips, skipped observations, cheirality)."""
     owner, off = d["owner"], chunk.track_offsets
     unusable = np.nonzero(~d["usable"])[0]
     if unusable.size:
-        cams = arrays.camera_ids[arrays.image_camera[d["obs_img"][unusable]]]
-        pairs = np.unique(np.stack([owner[unusable], cams], axis=1), axis=0)
-        counts = np.bincount(owner[unusable], minlength=len(chunk))
-        starts = np.searchsorted(pairs[:, 0], np.arange(len(chunk) + 1))
-        for p in np.nonzero(counts)[0]:
-            ids = ", ".join(str(c) for c in pairs[starts[p]:starts[p + 1], 1])
-            note = f"{int(counts[p])} observation(s) in unusable camera(s) {ids} left out"
-            r.message[p] = note if not r.message[p] else f"{r.message[p]}; {note}"
+        img = d["obs_img"][unusable]
+        skipped_camera = np.array([why is not None for why in geom.camera_reason], bool)
+        by_camera = skipped_camera[arrays.image_camera[img]]
+        _unusable_notes(r.message, owner[unusable[by_camera]], arrays.camera_ids[arrays.image_camera[img[by_camera]]],
+                        "camera(s)")
+        _unusable_notes(r.message, owner[unusable[~by_camera]], arrays.image_ids[img[~by_camera]], "image(s)")
     for p in np.nonzero(~d["solve"])[0]:
         k = int(r.n_views[p])
         if d["stuck"][p]:

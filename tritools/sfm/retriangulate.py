@@ -40,7 +40,8 @@ from .pipeline import RetriangulationOptions, prepare_geometry, process_chunk
 from .robust_tracks import removed_observations, without_observations
 
 __all__ = ["PointCertificate", "RetriangulationReport", "retriangulate", "retriangulate_arrays", "progress_bar",
-           "has_tqdm", "skipped_cameras", "PROGRESS_MIN_POINTS", "REPORT_FIELDS", "SKIPPED_CAMERAS_LOGGER"]
+           "has_tqdm", "skipped_cameras", "skipped_images", "PROGRESS_MIN_POINTS", "REPORT_FIELDS",
+           "SKIPPED_CAMERAS_LOGGER"]
 
 logger = logging.getLogger(__name__)
 #: the logger of the one warning per skipped camera (a child of ``tritools``: a caller that reports the skipped
@@ -150,13 +151,17 @@ class RetriangulationReport(RecordColumns):
     updated: np.ndarray
     skipped_cameras: tuple = ()
     n_skipped_observations: int = 0
+    #: ((image_id, name, reason, n_observations), ...) of the images left out although their camera is usable
+    #: (:func:`.pipeline.image_problems`: a K [R | t] that overflows or has rank < 3)
+    skipped_images: tuple = ()
     #: with ``robust``: (P,) inliers of each robust estimate (-1: none) and (K, 3) rows (point index, image id,
     #: keypoint index) of the observations removed from the written tracks, by point; None otherwise
     n_inliers: np.ndarray | None = None
     removed: np.ndarray | None = None
 
     @classmethod
-    def from_chunks(cls, options: RetriangulationOptions, ids: list, results: list, skipped_cameras=()):
+    def from_chunks(cls, options: RetriangulationOptions, ids: list, results: list, skipped_cameras=(),
+                    skipped_images=()):
         """Concatenate per-chunk :class:`~.pipeline.ChunkResult`."""
         def cat(name, dtype):
             """Concatenation of one field over the chunks."""
@@ -165,7 +170,7 @@ class RetriangulationReport(RecordColumns):
         robust = options.robust is not None
         return cls(options.method, options.path, np.concatenate(ids) if ids else np.zeros(0, np.int64),
                    TriangulationResults.concat([r.results for r in results]), cat("gamma_input", float),
-                   cat("updated", bool), skipped_cameras=tuple(skipped_cameras),
+                   cat("updated", bool), skipped_cameras=tuple(skipped_cameras), skipped_images=tuple(skipped_images),
                    n_skipped_observations=sum(r.n_skipped_observations for r in results),
                    n_inliers=cat("n_inliers", np.int32) if robust else None,
                    removed=_removed_rows(results) if robust else None)
@@ -227,7 +232,9 @@ class RetriangulationReport(RecordColumns):
                 "n_certified": self.n_certified, "n_updated": self.n_updated, "n_behind": self.n_behind,
                 "n_skipped_observations": self.n_skipped_observations, "status": self.status_counts(),
                 "skipped_cameras": [{"camera_id": c, "model": m, "reason": r, "n_observations": k}
-                                    for c, m, r, k in self.skipped_cameras]}
+                                    for c, m, r, k in self.skipped_cameras],
+                "skipped_images": [{"image_id": i, "name": n, "reason": r, "n_observations": k}
+                                   for i, n, r, k in self.skipped_images]}
 
 
 def has_tqdm() -> bool:
@@ -278,6 +285,20 @@ def skipped_cameras(arrays: ModelArrays, geom) -> tuple:
     return tuple(out)
 
 
+def skipped_images(arrays: ModelArrays, geom) -> tuple:
+    """((image_id, name, reason, n_observations), ...) of the images whose observations are left out although their
+    camera is usable (:func:`.pipeline.image_problems`), each also logged as a warning."""
+    n_obs = np.bincount(np.repeat(np.arange(arrays.n_images), np.diff(arrays.kp_offsets))[arrays.kp_point3D != -1],
+                        minlength=arrays.n_images)
+    out = []
+    for v, reason in enumerate(geom.image_reason):
+        if reason is not None:
+            out.append((int(arrays.image_ids[v]), arrays.image_names[v], reason, int(n_obs[v])))
+            logging.getLogger(SKIPPED_CAMERAS_LOGGER).warning("image %d (%s) skipped: %s", arrays.image_ids[v],
+                                                              arrays.image_names[v], reason)
+    return tuple(out)
+
+
 def retriangulate_arrays(arrays: ModelArrays, options: RetriangulationOptions | None = None
                          ) -> tuple[ModelArrays, RetriangulationReport]:
     """Re-triangulate every point of ``arrays`` (in chunks of ``options.chunk_points``).
@@ -299,7 +320,8 @@ def retriangulate_arrays(arrays: ModelArrays, options: RetriangulationOptions | 
     finally:
         if bar is not None:
             bar.close()
-    report = RetriangulationReport.from_chunks(options, ids, results, skipped_cameras(arrays, geom))
+    report = RetriangulationReport.from_chunks(options, ids, results, skipped_cameras(arrays, geom),
+                                               skipped_images(arrays, geom))
     xyz = np.concatenate([r.xyz for r in results]) if results else arrays.point_xyz
     err = np.concatenate([r.error for r in results]) if results else arrays.point_error
     new = arrays.with_points(xyz, err)

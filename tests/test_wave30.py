@@ -201,3 +201,23 @@ def test_cli_colmap_reports_a_skipped_image(tmp_path, capsys):
     assert code == 3 and err.count("\n") == 1 and "1 image(s)" in err, err
     doc = json.loads(out)
     assert doc["skipped_images"][0]["image_id"] == 1 and doc["skipped_images"][0]["n_observations"] > 0
+
+
+def test_colmap_json_counts_describe_the_written_model(tmp_path):
+    """29b leftover: with quality filters the JSON's top-level n_certified / n_updated counted points the filters
+    then removed, against the per-point records and the sidecar header."""
+    import json
+
+    from tests.test_review29b import _colmap, _model
+
+    src = _model(tmp_path, n_points=30)
+    p = _colmap(src, tmp_path / "out", "--max-error", "0", "--json", "--max-delta", "2")
+    assert p.returncode == 0, p.stderr
+    doc = json.loads(p.stdout)
+    assert doc["quality"]["n_removed"] > 0
+    assert doc["n_certified"] == sum(r["certified"] for r in doc["points"])
+    assert doc["n_updated"] == sum(r["updated"] for r in doc["points"])
+    header = (tmp_path / "out" / "points3D_certificates.txt").read_text()
+    assert f"certified: {doc['n_certified']}," in header
+    p = _colmap(src, tmp_path / "out2", "--max-error", "0", "--max-delta", "2")
+    assert p.returncode == 0 and f"30 points, {doc['n_certified']} certified globally optimal" in p.stdout, p.stdout

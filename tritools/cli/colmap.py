@@ -21,6 +21,8 @@ import logging
 import sys
 from pathlib import Path
 
+import numpy as np
+
 from .app import (CLIError, add_data_dir_option, add_robust_option, add_solver_options, exit_invalid, option_flag_error,
                   options_from_args, printable, refuse_input_as_output, robust_from_args)
 from .workers import executor_from_args
@@ -173,7 +175,7 @@ def run_colmap(args) -> int:
                "exports": [str(e) for e in result.exports], "copied": list(result.copied), "notes": list(result.notes),
                "delta": solver.delta, "max_delta": solver.max_delta, "time_limit": solver.budget.time_limit,
                "memory_limit_bytes": solver.budget.max_bytes, "total_time_limit": solver.total_time_limit,
-               **report.summary()}
+               **report.summary(), **_written_counts(report, q)}
     if args.json:
         summary["points"] = [{"point3D_id": r.point3D_id, "n_views": r.n_views, "status": r.status.value,
                               "gamma_lb": r.gamma_lb, "gamma_ub": r.gamma_ub, "certified": r.certified,
@@ -186,11 +188,22 @@ def run_colmap(args) -> int:
         if q is not None:
             _add_quality_records(summary, q)
         print(json.dumps(jsonable(summary), indent=1, allow_nan=False))   # NaN/inf -> null, as tritools solve
-        return _skipped_status(report, getattr(args, "quiet", False))
+        return _skipped_status(report, summary, getattr(args, "quiet", False))
     if q is not None:
         summary["quality"] = q.summary()
     _print_summary(report, result, summary)
-    return _skipped_status(report, getattr(args, "quiet", False))
+    return _skipped_status(report, summary, getattr(args, "quiet", False))
+
+
+def _written_counts(report, q) -> dict:
+    """``n_certified`` and ``n_updated`` of the written model: a point the quality filters removed is neither (as
+    the sidecar and the per-point records say: :func:`~tritools.sfm.certificates.mark_removed`); without filters,
+    the report's own counts."""
+    if q is None:
+        return {}
+    gone = np.isin(report.point_ids, q.point_ids[~q.kept])
+    return {"n_certified": int(np.count_nonzero(report.certified & ~gone)),
+            "n_updated": int(np.count_nonzero(report.updated & ~gone))}
 
 
 def _refuse_radii_as_output(args) -> None:
@@ -222,7 +235,7 @@ def _cameras_reported_here():
         lg.setLevel(saved)
 
 
-def _skipped_status(report, quiet: bool = False) -> int:
+def _skipped_status(report, summary: dict, quiet: bool = False) -> int:
     """0, or :data:`EXIT_CAMERAS_SKIPPED` with one warning line (unless ``quiet``) when unusable cameras left
     observations out."""
     used = [c for c in report.skipped_cameras if c[3] > 0]
@@ -234,7 +247,7 @@ def _skipped_status(report, quiet: bool = False) -> int:
     n_obs = sum(c[3] for c in used) + sum(i[3] for i in images)
     if not quiet:
         print(f"tritools: warning: {' and '.join(what)}: {n_obs} "
-              f"observation(s) left out, {report.n_certified} of {report.n_points} point(s) certified",
+              f"observation(s) left out, {summary['n_certified']} of {report.n_points} point(s) certified",
               file=sys.stderr)
     return EXIT_CAMERAS_SKIPPED
 
@@ -261,7 +274,8 @@ def _print_summary(report, result, summary) -> None:
     first = summary["delta"] or "min"
     last = summary["max_delta"] or ("4" if report.method == "auto" else "min+2" if summary["delta"] is None
                                     else summary["delta"])
-    print(f"{report.n_points} points, {report.n_certified} certified globally optimal, {report.n_updated} updated, "
+    print(f"{report.n_points} points, {summary['n_certified']} certified globally optimal, {summary['n_updated']} "
+          "updated, "
           f"{report.n_behind} behind a camera ({report.method}, path {report.path}, delta {first}..{last})")
     print("status: " + (", ".join(f"{k} {v}" for k, v in summary["status"].items()) or "-"))
     for cid, model, reason, n_obs in report.skipped_cameras:
@@ -270,7 +284,7 @@ def _print_summary(report, result, summary) -> None:
         print(printable(f"skipped image {iid} ({name}): {reason}; {n_obs} observation(s) left out"))
     bad = report.uncertified(MAX_LISTED)
     if bad:
-        n_bad = report.n_points - report.n_certified
+        n_bad = report.n_points - summary["n_certified"]        # of the written model (quality filters too)
         print(f"not certified: {n_bad} point(s)" + (f", first {len(bad)}:" if n_bad > len(bad) else ":"))
         for r in bad:
             print(printable(f"  point3D {r.point3D_id} ({r.n_views} views): {r.status.value}"

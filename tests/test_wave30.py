@@ -156,7 +156,6 @@ def test_oxford_missing_camera_file_is_named(tmp_path):
 def _huge_pose(tmp_path=None):
     import dataclasses
 
-    import numpy as np
 
     a, _ = synthetic_arrays(n_points=30, n_images=5, camera="PINHOLE", seed=3)
     t = a.image_tvec.copy()
@@ -221,3 +220,21 @@ def test_colmap_json_counts_describe_the_written_model(tmp_path):
     assert f"certified: {doc['n_certified']}," in header
     p = _colmap(src, tmp_path / "out2", "--max-error", "0", "--max-delta", "2")
     assert p.returncode == 0 and f"30 points, {doc['n_certified']} certified globally optimal" in p.stdout, p.stdout
+
+
+def test_text_output_notes_names_with_spaces(tmp_path, capsys):
+    """F12: a binary model with the image name "my image.png" written as text: COLMAP reads "my"; a note says so."""
+    import dataclasses
+    import json
+
+    from tritools.cli.app import main
+
+    a, _ = synthetic_arrays(n_points=10, n_images=3, camera="PINHOLE", seed=1)
+    a = dataclasses.replace(a, image_names=("my image.png",) + tuple(a.image_names[1:]))
+    write_model_arrays(a, tmp_path / "in", "bin")
+    assert main(["colmap", str(tmp_path / "in"), str(tmp_path / "out"), "--max-delta", "2",
+                 "--output-type", "txt"]) == 0
+    out, err = capsys.readouterr()
+    assert err == "" and "note: 1 image name(s) contain whitespace (image 1: 'my image.png')" in out, out
+    assert main(["colmap", str(tmp_path / "in"), str(tmp_path / "out2"), "--max-delta", "2", "--json"]) == 0
+    assert not any("whitespace" in n for n in json.loads(capsys.readouterr().out)["notes"])   # binary keeps names

@@ -133,6 +133,20 @@ def _quaternion_notes(arrays) -> list:
             "certificates refer to the normalised rotations"]
 
 
+def _spaced_name_notes(arrays, fmt_in: str, fmt_out: str) -> list:
+    """A note when a binary model's image names hold whitespace and the output is text: COLMAP's (and pycolmap's)
+    text reader takes the first word of a name, so the written text model would link other image files (review 29b
+    F12).  (A text input had the same names already: no note; tritools' own text reader keeps the whole name.)"""
+    if fmt_out != "txt" or fmt_in == "txt":
+        return []
+    spaced = [(i, n) for i, n in zip(arrays.image_ids.tolist(), arrays.image_names) if len(n.split()) > 1]
+    if not spaced:
+        return []
+    i, n = spaced[0]
+    return [f"{len(spaced)} image name(s) contain whitespace (image {i}: {n!r}): COLMAP's text reader takes only the "
+            f"first word ({n.split()[0]!r}); keep the binary format (--output-type bin) to keep them"]
+
+
 def _timed(iterator, timings: dict, key: str):
     """Iterate, adding the time spent producing each item to ``timings[key]``."""
     while True:
@@ -222,7 +236,8 @@ def retriangulate_folder(in_dir, out_dir, options: RetriangulationOptions | None
     bar = progress_bar(src.count_points() if want else None, options.progress)
     ids, results, xyz, rgb = [], [], [], []
     removed: list = []                      # global keypoint indices of observations removed as outliers
-    copied, notes = [], _other_model_notes(out_dir, fmt_out) + _quaternion_notes(src.arrays)
+    copied, notes = [], _other_model_notes(out_dir, fmt_out) + _quaternion_notes(src.arrays) + \
+        _spaced_name_notes(src.arrays, src.format, fmt_out)
     _check_names(out_dir, fmt_out, src.folder, quality)
     try:
         with _export_stack(exports) as staged_exports, atomic_directory(out_dir) as tmp:

@@ -44,6 +44,9 @@ __all__ = ["Method", "RANK_RTOL", "COEF_RTOL", "minors_matrix", "theorem1_constr
 #: makes the SDP inaccurate, sigma_7..9 ~ 3e-7 give a bound 7e-6 above f at the optimum).
 #: Dropping rows only enlarges {m2 = 0}, so the lower bound stays valid (maybe weaker).
 RANK_RTOL = 1e-6
+#: a term of a minor whose determinant is at most this times the product of its four rows' norms (Hadamard's bound
+#: of the determinant) is round-off (:func:`minors_matrix`): a 4 x 4 LU determinant errs by ~4 eps of that bound.
+MINOR_ROUNDOFF = 64 * float(np.finfo(float).eps)
 #: m2 coefficients below COEF_RTOL * max|row| are SVD round-off and set to zero (this also fixes deg m2_i).
 COEF_RTOL = 1e-12
 
@@ -120,7 +123,14 @@ def minors_matrix(cameras: np.ndarray, groups=None, loose=()) -> tuple[np.ndarra
     cameras = np.asarray(cameras, float)
     a, c, _ = _row_data(cameras)
     T, minor, mono, B1, n_minors = _minor_structure(cameras.shape[0])
-    d = np.linalg.det(np.vstack([a, c])[T])
+    rows = np.vstack([a, c])[T]
+    d = np.linalg.det(rows)
+    # a minor none of whose terms exceeds the rounding of its own determinant (the Hadamard bound of its four
+    # rows times MINOR_ROUNDOFF) is the zero polynomial to the data's precision: dropped whole (a relaxation: the
+    # bound stays valid).  Kept, the unit scaling of theorem1_constraints turned its round-off into a constraint
+    # the true image points violate (review 30a F1: a rectified rig, c_LB = 6.54 above c = 3 at a feasible point).
+    noise = np.abs(d) <= MINOR_ROUNDOFF * np.prod(np.linalg.norm(rows, axis=2), axis=1)
+    d = np.where((np.bincount(minor, weights=~noise, minlength=n_minors) == 0)[minor], 0.0, d)
     labels = centre_groups(cameras) if groups is None else np.asarray(groups)
     views = (T % (2 * cameras.shape[0])) // 2                                       # the view of each term's rows
     group = labels[views]                                                           # the centre of each term's rows

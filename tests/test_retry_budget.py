@@ -2,8 +2,9 @@
 ``retry_budget_seconds``; review 27b F3: a four-view rectified rig whose L2 optimum lies behind the cameras spent
 47 s of retries after an 11 s Theorem 1 attempt, 59 s of the 60 s default limit, without an answer).
 
-The chain rule is checked on a hand-made conic program with a known optimum and a faked solver outcome; the
-end-to-end case on the reviewer's geometry against an independent multi-start least-squares reference.
+The chain rule is checked on a hand-made conic program with a known optimum and a faked solver outcome.  The
+reviewer's geometry no longer needs retries (review 30a F1: its Theorem 1 program was inconsistent); it is checked
+end to end against an independent multi-start least-squares reference.
 """
 from __future__ import annotations
 
@@ -102,14 +103,16 @@ def _reference_gamma(cams, x, starts) -> float:
 
 
 @pytest.mark.slow
-def test_rectified_rig_behind_the_cameras_stops_its_retries_at_the_budget():
+def test_rectified_rig_behind_the_cameras_is_certified_without_retries():
+    """The reviewer's rig: Theorem 1 at delta = 4 failed here (and its retries ran 45-59 s of the 60 s limit until
+    the budget stopped them) because minors that vanish identically on a rectified rig came out as round-off and
+    were scaled into constraints the true image points violate (review 30a F1).  With them dropped, the first
+    attempt certifies; the budget itself is checked on the faked outcomes above."""
     cams, x = _rectified_rig_behind()
     res = tritools.triangulate(cams, x)
-    assert res.status != tritools.Status.TIME_LIMIT
-    # Theorem 1 at delta = 4: the default attempt fails, and the first retry, which needs ~3.4x its time, is stopped
-    # by the budget (1x); before, two retries ran to their iteration and time limits (45-59 s of the 60 s limit)
+    assert res.status == tritools.Status.OPTIMAL, (res.status, res.message)
     chain = [a.solver for a in res.attempts if a.method == "theorem1"][-1]
-    assert chain[-1].endswith("(retry budget spent)") and not any(s.startswith("regularised") for s in chain)
+    assert len(chain) == 1 and not chain[0].endswith("(retry budget spent)"), chain
     d = np.linalg.solve(cams[0][:, :3], np.append(x[0], 1.0))
     starts = [res.X, tritools.dlt(cams, x)] + [s * t * d for t in (5.0, 20.0, 100.0) for s in (1, -1)]
     ref = _reference_gamma(cams, x, starts)

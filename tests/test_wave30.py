@@ -297,3 +297,53 @@ def test_minors_that_vanish_identically_are_dropped_not_scaled_up():
         v = (h[:, :2] / h[:, 2:]).ravel()
         scale = max(1.0, float(np.max(np.abs(v)))) ** 2
         assert max(abs(float(p.evaluate(v))) for p in polys) < 1e-9 * scale
+
+
+def test_full_opencv_pole_undistorts_to_the_central_branch():
+    """Review 30a F3: FULL_OPENCV with a pole of its rational factor inside the image (k4 = -0.8: at r = 1.118):
+    Newton's method from the distorted point crossed the pole to a root on the opposite side of the axis (|u| = 8.6,
+    "converged"), though a same-side root (|u| = 0.708) exists.  Every accepted root is now on the central branch
+    and maps back to its pixel."""
+    import numpy as np
+    from scipy.optimize import brentq
+
+    from tritools.io.colmap.camera_models import undistorted_pixels
+    from tritools.io.colmap.lens import forward, split_params
+
+    params = [500.0, 500.0, 500.0, 400.0, 0.1, 0.0, 0.0, 0.0, 0.0, -0.8, 0.0, 0.0]
+    fx, fy, cx, cy, extra = split_params("FULL_OPENCV", params)
+    g = np.stack(np.meshgrid(np.linspace(0, 1000, 41), np.linspace(0, 800, 33)), -1).reshape(-1, 2)
+    xu, ok = undistorted_pixels("FULL_OPENCV", params, g)
+    u = np.column_stack([(xu[:, 0] - cx) / fx, (xu[:, 1] - cy) / fy])
+    ud = np.column_stack([(g[:, 0] - cx) / fx, (g[:, 1] - cy) / fy])
+    assert ok.all()                      # r (1 + 0.1 r^2) / (1 - 0.8 r^2) covers [0, inf) before the pole
+    r = np.hypot(u[:, 0], u[:, 1])
+    assert np.all(r < 1 / np.sqrt(0.8)) and np.all(np.sum(u * ud, axis=1) >= 0)
+    np.testing.assert_allclose(forward("FULL_OPENCV", extra, u), ud, atol=1e-9)
+    rd = np.hypot(*ud[0])                # the corner pixel (0, 0): the reference root by bisection
+    r0 = brentq(lambda t: t * (1 + 0.1 * t * t) / (1 - 0.8 * t * t) - rd, 0.0, 1 / np.sqrt(0.8) - 1e-12, xtol=1e-15)
+    assert r[0] == pytest.approx(r0, rel=1e-9)
+
+
+def test_fov_at_a_wide_omega_accepts_keypoints_with_a_pinhole_ray():
+    """Review 30a F5: FOV at omega = 3.0 refused 600 of 757 grid pixels that have an exact pinhole ray (undamped
+    Newton from the distorted point diverged), e.g. (490, 260), 12 degrees off the axis."""
+    import numpy as np
+
+    from tritools.io.colmap.camera_models import undistorted_pixels
+    from tritools.io.colmap.lens import forward, split_params
+
+    params = [300.0, 300.0, 500.0, 400.0, 3.0]
+    fx, fy, cx, cy, extra = split_params("FOV", params)
+    g = np.stack(np.meshgrid(np.linspace(0, 1000, 41), np.linspace(0, 800, 33)), -1).reshape(-1, 2)
+    g = np.vstack([[[490.0, 260.0]], g])
+    xu, ok = undistorted_pixels("FOV", params, g)
+    u = np.column_stack([(xu[:, 0] - cx) / fx, (xu[:, 1] - cy) / fy])
+    ud = np.column_stack([(g[:, 0] - cx) / fx, (g[:, 1] - cy) / fy])
+    assert ok[0] and np.degrees(np.arctan(np.hypot(*u[0]))) < 15
+    np.testing.assert_allclose(forward("FOV", extra, u[ok]), ud[ok], atol=1e-9)
+    assert np.all(np.sum(u[ok] * ud[ok], axis=1) >= 0)
+    # r_d = atan(2 r tan(omega / 2)) / omega is increasing in r from 0 to pi / (2 omega): every pixel inside that
+    # radius has exactly one ray, and must be accepted
+    inside = np.hypot(ud[:, 0], ud[:, 1]) < np.pi / (2 * 3.0) * (1 - 1e-6)
+    assert inside.sum() > 100 and ok[inside].all()

@@ -42,7 +42,7 @@ import functools
 import numpy as np
 
 from .lens import NON_PERSPECTIVE_MODELS, PYCOLMAP_MODELS, pycolmap_camera, split_params
-from .lens import forward as lens_forward, inverse as lens_inverse
+from .lens import central_inverse, forward as lens_forward
 
 __all__ = ["CameraModel", "COLMAP_MODEL_N_PARAMS", "COLMAP_MODEL_IDS", "COLMAP_MODEL_NAMES", "UNDISTORT_TOL_PX",
            "UNDISTORT_MAX_ITER", "UnsupportedCameraModelError", "camera_model", "camera_problem", "intrinsics",
@@ -200,6 +200,7 @@ class _Lens:
         if own:
             self.fx, self.fy, self.cx, self.cy, extra = split_params(model, params)
             self.D = lambda uv: lens_forward(model, extra, uv)
+            self.inverse = lambda uv_d, tol: central_inverse(model, extra, uv_d, tol, UNDISTORT_MAX_ITER)
             self.camera = None
         else:
             c = self.camera = pycolmap_camera(model, params)
@@ -222,7 +223,7 @@ class _Lens:
         if self.dist is not None:
             return undistort(uv_d, self.dist, scale_px=scale)
         if self.camera is None:
-            return lens_inverse(self.D, uv_d, UNDISTORT_TOL_PX / scale, UNDISTORT_MAX_ITER)
+            return self.inverse(uv_d, UNDISTORT_TOL_PX / scale)
         uv = np.asarray(self.camera.cam_from_img(np.ascontiguousarray(xy, float)), float).reshape(-1, 2)
         back = self.pixels(np.column_stack([uv, np.ones(len(uv))]))       # the round trip decides
         ok = np.all(np.isfinite(uv), axis=1) & np.all(np.abs(back - xy) <= PYCOLMAP_TOL_PX, axis=1)

@@ -28,7 +28,7 @@ from __future__ import annotations
 import numpy as np
 
 __all__ = ["OWN_MODELS", "PYCOLMAP_MODELS", "NON_PERSPECTIVE_MODELS", "split_params", "forward", "inverse",
-           "pycolmap_camera"]
+           "central_inverse", "pycolmap_camera"]
 
 #: model -> (names of PARAMS[], focal layout) for the models with own code below; "f" = one focal.
 OWN_MODELS = {
@@ -112,10 +112,46 @@ def _fov_factor(w: float, r2: np.ndarray) -> np.ndarray:
 FOV_EPS = 1e-4
 
 
-def inverse(fun, uv_d: np.ndarray, tol: float, max_iter: int) -> tuple[np.ndarray, np.ndarray]:
-    """Solve ``fun(uv) = uv_d`` (fun: (M, 2) -> (M, 2)) by Newton's method from ``uv = uv_d`` with a
-    central-difference Jacobian; ``(uv, converged)`` with converged = ``|fun(uv) - uv_d|_inf <= tol``."""
-    uv = uv_d.copy()
+#: starts of :func:`central_inverse` after ``uv_d`` itself, as fractions of it (towards the image centre).
+CENTRAL_STARTS = (0.5, 0.25, 0.1)
+
+
+def central_inverse(model: str, extra: dict, uv_d: np.ndarray, tol: float, max_iter: int
+                    ) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`inverse` of :func:`forward` that keeps only roots on the branch the model describes from the image
+    centre: on the side of the axis the distorted point is on, and for FULL_OPENCV before the first pole of its
+    rational factor (denominator > 0).  Newton's method from ``uv_d`` can cross the pole to a root on the opposite
+    side, converged in the pixel sense (review 30a F3: |u| = 8.6 beyond a pole at 1.12, where pycolmap refuses the
+    pixel and a same-side root at |u| = 0.71 exists), or diverge: such rows are started again nearer the centre
+    (:data:`CENTRAL_STARTS`), and refused (not converged) when no start reaches the central branch."""
+    uv, ok = inverse(lambda p: forward(model, extra, p), uv_d, tol, max_iter)
+    bad = ~(ok & _central(model, extra, uv, uv_d))
+    for s in CENTRAL_STARTS:
+        if not bad.any():
+            break
+        idx = np.nonzero(bad)[0]
+        uv2, ok2 = inverse(lambda p: forward(model, extra, p), uv_d[idx], tol, max_iter, start=s * uv_d[idx])
+        good = ok2 & _central(model, extra, uv2, uv_d[idx])
+        uv[idx[good]] = uv2[good]
+        bad[idx[good]] = False
+    return uv, ~bad
+
+
+def _central(model: str, extra: dict, uv: np.ndarray, uv_d: np.ndarray) -> np.ndarray:
+    """(M,) whether each root lies on the central branch (:func:`central_inverse`)."""
+    with np.errstate(all="ignore"):
+        side = (np.sum(uv * uv_d, axis=1) > 0) | np.all(uv_d == 0, axis=1)
+        if model == "FULL_OPENCV":
+            r2 = np.sum(uv * uv, axis=1)
+            side &= 1 + r2 * (extra["k4"] + r2 * (extra["k5"] + r2 * extra["k6"])) > 0
+    return side
+
+
+def inverse(fun, uv_d: np.ndarray, tol: float, max_iter: int, start: np.ndarray | None = None
+            ) -> tuple[np.ndarray, np.ndarray]:
+    """Solve ``fun(uv) = uv_d`` (fun: (M, 2) -> (M, 2)) by Newton's method from ``uv = start`` (default ``uv_d``)
+    with a central-difference Jacobian; ``(uv, converged)`` with converged = ``|fun(uv) - uv_d|_inf <= tol``."""
+    uv = (uv_d if start is None else np.asarray(start, float)).copy()
     active = np.ones(len(uv), bool)
     with np.errstate(all="ignore"):
         for _ in range(max_iter):

@@ -347,3 +347,75 @@ def test_fov_at_a_wide_omega_accepts_keypoints_with_a_pinhole_ray():
     # radius has exactly one ray, and must be accepted
     inside = np.hypot(ud[:, 0], ud[:, 1]) < np.pi / (2 * 3.0) * (1 - 1e-6)
     assert inside.sum() > 100 and ok[inside].all()
+
+
+def _pycolmap_rec(model, params, poses, tracks):
+    """A pycolmap Reconstruction: one camera (model, params) per image, ``poses`` [(R, t)], ``tracks``
+    {point3D_id: (xyz, [(image index, keypoint xy), ...])}."""
+    import numpy as np
+    pycolmap = pytest.importorskip("pycolmap")
+
+    rec = pycolmap.Reconstruction()
+    kps = [[] for _ in poses]
+    elems = {}
+    for pid, (xyz, obs) in tracks.items():
+        elems[pid] = (xyz, [])
+        for v, xy in obs:
+            elems[pid][1].append((v + 1, len(kps[v])))
+            kps[v].append(np.asarray(xy, float))
+    for v, (R, t) in enumerate(poses):
+        rec.add_camera_with_trivial_rig(pycolmap.Camera(camera_id=v + 1, model=model, width=640, height=480,
+                                                        params=list(params)))
+        im = pycolmap.Image(name=f"im{v}", points2D=pycolmap.Point2DList([pycolmap.Point2D(x) for x in kps[v]]),
+                            camera_id=v + 1, image_id=v + 1)
+        rec.add_image_with_trivial_frame(im, pycolmap.Rigid3d(pycolmap.Rotation3d(np.asarray(R, float)),
+                                                              np.asarray(t, float)))
+    for pid, (xyz, el) in elems.items():
+        track = pycolmap.Track()
+        for iid, idx in el:
+            track.add_element(iid, idx)
+        p = pycolmap.Point3D()
+        p.xyz, p.track = np.asarray(xyz, float), track
+        rec.add_point3D_with_id(pid, p)
+    return rec
+
+
+def test_behind_write_error_is_finite_and_the_pinhole_residual():
+    """Review 30a F6: behind="write" wrote ERROR = NaN (EUCM) for a point behind its cameras: pycolmap's projection
+    is undefined there.  Now the pinhole residual against the undistorted keypoints (the certificate's residual)."""
+    import numpy as np
+    pycolmap = pytest.importorskip("pycolmap")
+    from tritools.sfm import retriangulate
+
+    poses = [(np.eye(3), np.array([1.0, 0, 0])), (np.eye(3), np.array([-1.0, 0, 0]))]
+    params = [300, 300, 320, 240, 0.5, 1.0]
+    Xb = np.array([0.3, 0.2, -50.0])
+    rng = np.random.default_rng(2)
+    kp = [(v, 300 * (Xb[:2] + t[:2]) / Xb[2] + [320, 240] + rng.normal(0, 0.3, 2)) for v, (R, t) in enumerate(poses)]
+    new, rep = retriangulate(_pycolmap_rec("EUCM", params, poses, {1: (np.array([0.3, 0.2, 50.0]), kp)}),
+                             behind="write")
+    r = rep.record(0)
+    assert r.updated and not r.in_front
+    X = np.asarray(new.points3D[1].xyz)
+    cam = pycolmap.Camera(model="EUCM", width=640, height=480, params=params)
+    res = []
+    for v, xy in kp:
+        u = np.asarray(cam.cam_from_img(np.asarray(xy, float)[None]), float).reshape(2)   # undistorted ray
+        Xc = X + poses[v][1]
+        res.append(300 * np.hypot(*(Xc[:2] / Xc[2] - u)))
+    assert np.isfinite(new.points3D[1].error) and new.points3D[1].error == pytest.approx(np.mean(res), rel=1e-6)
+
+
+def test_a_track_refused_by_the_solver_reports_its_usable_observations():
+    """Review 30a F8: a track seen by two images with one pose (a duplicated frame) said N_VIEWS = 0."""
+    import numpy as np
+    from tritools.sfm import retriangulate
+
+    poses = [(np.eye(3), np.zeros(3)), (np.eye(3), np.zeros(3)), (np.eye(3), np.array([-1.0, 0, 0]))]
+    X = np.array([0.2, 0.1, 6.0])
+    kp = [800 * (X[:2] + t[:2]) / X[2] + [320, 240] for _, t in poses]
+    tracks = {1: (X + 0.01, [(0, kp[0] + [0.3, -0.2]), (1, kp[1] + [-0.4, 0.1])]),
+              2: (X + 0.01, [(0, kp[0] + [0.3, -0.2]), (1, kp[1] + [-0.4, 0.1]), (2, kp[2])])}
+    _, rep = retriangulate(_pycolmap_rec("PINHOLE", [800, 800, 320, 240], poses, tracks))
+    assert [int(rep.record(i).n_views) for i in range(2)] == [2, 3]
+    assert rep.record(0).status.value == "invalid_input" and rep.record(1).certified

@@ -298,7 +298,10 @@ def point_gammas(arrays: ModelArrays, geom: ModelGeometry, xyz: np.ndarray | Non
 
 
 def _colmap_error(arrays, geom, X, obs_img, gk, owner, n) -> np.ndarray:
-    """COLMAP's ERROR: mean over the observations of |pi(X) - x| in recorded pixels (full camera model)."""
+    """COLMAP's ERROR: mean over the observations of |pi(X) - x| in recorded pixels (full camera model).  An
+    observation whose camera has X behind it (written with ``behind="write"``) has no distorted projection (COLMAP's
+    own is NaN or garbage there: review 30a F6, ERROR NaN for EUCM, 4e5 px for DIVISION): it counts with its
+    pinhole residual, K (X_c / z) against the undistorted keypoint -- the residual the certificate is about."""
     Xc = np.einsum("tij,tj->ti", geom.R[obs_img], X[owner]) + geom.t[obs_img]
     cam = arrays.image_camera[obs_img]
     opencv = np.array([m in OPENCV_FAMILY for m in arrays.camera_models], bool)[cam]
@@ -309,6 +312,10 @@ def _colmap_error(arrays, geom, X, obs_img, gk, owner, n) -> np.ndarray:
             sel = cam == k
             px[sel] = pixels_from_camera(arrays.camera_models[k], arrays.camera_params[k], Xc[sel])
         e = np.hypot(*(px - arrays.kp_xy[gk]).T)
+        behind = ~(Xc[:, 2] > 0)
+        if behind.any():
+            pin = geom.focal[obs_img[behind]] * Xc[behind, :2] / Xc[behind, 2:3] + geom.centre[obs_img[behind]]
+            e[behind] = np.hypot(*(pin - geom.xy_u[gk[behind]]).T)
     return np.bincount(owner, weights=e, minlength=n) / np.maximum(np.bincount(owner, minlength=n), 1)
 
 
@@ -343,7 +350,8 @@ def _solve_stacks(geom: ModelGeometry, chunk: PointChunk, options: Retriangulati
         if progress is not None:
             progress.update(len(pts))
     rec = TriangulationResults.concat(parts).take(np.argsort(np.concatenate(order), kind="stable"))
-    return rec, outlier, n_inl, gamma_input
+    # every row counts the track's usable observations (a row refused by the solver said 0: review 30a F8)
+    return replace(rec, n_views=np.asarray(n_used, np.int64)), outlier, n_inl, gamma_input
 
 
 def process_chunk(arrays: ModelArrays, geom: ModelGeometry, chunk: PointChunk, options: RetriangulationOptions,

@@ -33,13 +33,14 @@ def solve_interruptibly(solver):
 
 def _watch(raised: list):
     """Yields, at each iteration, whether to stop: True once a signal handler has raised (the exception appended to
-    ``raised``).  Pending handlers run where the generator resumes after ``yield``, inside the ``try``."""
-    stop = False
+    ``raised``).  Pending handlers run where the generator resumes after ``yield`` and at the inner loop's jump back,
+    both inside the ``try`` (a loop around a ``try`` would check them at its own jump, outside it: review 30b F5);
+    only the outer loop's jump, taken after a first exception, is outside it."""
     while True:
         try:
-            yield stop
+            while True:
+                yield bool(raised)
         except GeneratorExit:
             return
         except BaseException as exc:
             raised.append(exc)
-            stop = True

@@ -419,3 +419,26 @@ def test_a_track_refused_by_the_solver_reports_its_usable_observations():
     _, rep = retriangulate(_pycolmap_rec("PINHOLE", [800, 800, 320, 240], poses, tracks))
     assert [int(rep.record(i).n_views) for i in range(2)] == [2, 3]
     assert rep.record(0).status.value == "invalid_input" and rep.record(1).certified
+
+
+@pytest.mark.parametrize("params,radial,r_max,pixels", [
+    # a fold without a pole (review 30b F1): D(r) = r / (1 - 2 r^2 + 1.2 r^4) rises to a maximum, then falls
+    ([1000.0, 1000.0, 0, 0, 0, 0, 0, 0, 0, -2.0, 1.2, 0], lambda r: 1 / (1 - 2 * r * r + 1.2 * r ** 4), 0.95,
+     (1361.9, 2168.3, 2672.4)),
+    # far pixels before a pole (review 30b F2): every start of Newton's method jumped past it
+    ([1000.0, 1000.0, 0, 0, 0.1, 0, 0, 0, 0, -0.8, 0, 0], lambda r: (1 + 0.1 * r * r) / (1 - 0.8 * r * r), 1.118,
+     (2243.9, 2344.8, 2546.4))])
+def test_full_opencv_roots_follow_the_central_branch(params, radial, r_max, pixels):
+    import numpy as np
+    from scipy.optimize import brentq
+
+    from tritools.io.colmap.camera_models import undistorted_pixels
+
+    xu, ok = undistorted_pixels("FULL_OPENCV", params, np.array([[p, 0.0] for p in pixels]))
+    assert ok.all()
+    for (x, _), p in zip(xu, pixels):
+        # the central root: the first r where r radial(r) reaches the distorted radius (bisection from the centre)
+        rs = np.linspace(0, r_max, 20001)
+        k = int(np.argmax(rs * radial(rs) >= p / 1000.0))
+        r0 = brentq(lambda r: r * radial(r) - p / 1000.0, rs[k - 1], rs[k], xtol=1e-15)
+        assert x / 1000.0 == pytest.approx(r0, rel=1e-9), (p, x / 1000.0, r0)

@@ -114,33 +114,59 @@ FOV_EPS = 1e-4
 
 #: starts of :func:`central_inverse` after ``uv_d`` itself, as fractions of it (towards the image centre).
 CENTRAL_STARTS = (0.5, 0.25, 0.1)
+#: steps of the continuation from the centre that :func:`central_inverse` falls back on.
+CONTINUATION_STEPS = 16
 
 
 def central_inverse(model: str, extra: dict, uv_d: np.ndarray, tol: float, max_iter: int
                     ) -> tuple[np.ndarray, np.ndarray]:
     """:func:`inverse` of :func:`forward` that keeps only roots on the branch the model describes from the image
-    centre: on the side of the axis the distorted point is on, and for FULL_OPENCV before the first pole of its
-    rational factor (denominator > 0).  Newton's method from ``uv_d`` can cross the pole to a root on the opposite
-    side, converged in the pixel sense (review 30a F3: |u| = 8.6 beyond a pole at 1.12, where pycolmap refuses the
-    pixel and a same-side root at |u| = 0.71 exists), or diverge: such rows are started again nearer the centre
-    (:data:`CENTRAL_STARTS`), and refused (not converged) when no start reaches the central branch."""
-    uv, ok = inverse(lambda p: forward(model, extra, p), uv_d, tol, max_iter)
+    centre (:func:`_central`: on the distorted point's side of the axis, D orientation-preserving there -- not past a
+    fold -- and for FULL_OPENCV before the first pole of its rational factor).  Newton's method from ``uv_d`` can
+    cross a pole or a fold to another root, converged in the pixel sense (review 30a F3: |u| = 8.6 beyond a pole at
+    1.12, where a same-side root at |u| = 0.71 exists; review 30b F1: a root past a fold), or diverge (30a F5: FOV at
+    omega = 3): such rows start again nearer the centre (:data:`CENTRAL_STARTS`), then follow the central branch
+    from the centre to ``uv_d`` in :data:`CONTINUATION_STEPS` steps, and are refused (not converged) when that does
+    not reach a central root either."""
+    fun = lambda p: forward(model, extra, p)      # noqa: E731
+    uv, ok = inverse(fun, uv_d, tol, max_iter)
     bad = ~(ok & _central(model, extra, uv, uv_d))
-    for s in CENTRAL_STARTS:
+    for s in CENTRAL_STARTS + (None,):
         if not bad.any():
             break
         idx = np.nonzero(bad)[0]
-        uv2, ok2 = inverse(lambda p: forward(model, extra, p), uv_d[idx], tol, max_iter, start=s * uv_d[idx])
+        if s is None:
+            uv2, ok2 = _continuation(model, extra, uv_d[idx], tol, max_iter)
+        else:
+            uv2, ok2 = inverse(fun, uv_d[idx], tol, max_iter, start=s * uv_d[idx])
         good = ok2 & _central(model, extra, uv2, uv_d[idx])
         uv[idx[good]] = uv2[good]
         bad[idx[good]] = False
     return uv, ~bad
 
 
+def _continuation(model: str, extra: dict, uv_d: np.ndarray, tol: float, max_iter: int):
+    """Roots of D(uv) = uv_d followed from the centre: Newton's method on t uv_d for t = 1/K, 2/K, ..., 1, each step
+    started at the root of the step before and kept only while it stays central."""
+    uv = np.zeros_like(uv_d)
+    ok = np.ones(len(uv_d), bool)
+    for t in np.arange(1, CONTINUATION_STEPS + 1) / CONTINUATION_STEPS:
+        uv2, ok2 = inverse(lambda p: forward(model, extra, p), t * uv_d, tol, max_iter, start=uv)
+        ok &= ok2 & _central(model, extra, uv2, t * uv_d)
+        uv = np.where(ok[:, None], uv2, uv)
+    return uv, ok
+
+
 def _central(model: str, extra: dict, uv: np.ndarray, uv_d: np.ndarray) -> np.ndarray:
-    """(M,) whether each root lies on the central branch (:func:`central_inverse`)."""
+    """(M,) whether each root lies on the central branch (:func:`central_inverse`): the side of ``uv_d``, det of D's
+    Jacobian > 0 (central differences), and for FULL_OPENCV a positive denominator."""
     with np.errstate(all="ignore"):
         side = (np.sum(uv * uv_d, axis=1) > 0) | np.all(uv_d == 0, axis=1)
+        h = 1e-7 * np.maximum(1.0, np.abs(uv))
+        J = [(forward(model, extra, uv + np.column_stack([h[:, 0] * (j == 0), h[:, 1] * (j == 1)]))
+              - forward(model, extra, uv - np.column_stack([h[:, 0] * (j == 0), h[:, 1] * (j == 1)])))
+             / (2 * h[:, j:j + 1]) for j in range(2)]
+        side &= J[0][:, 0] * J[1][:, 1] - J[1][:, 0] * J[0][:, 1] > 0
         if model == "FULL_OPENCV":
             r2 = np.sum(uv * uv, axis=1)
             side &= 1 + r2 * (extra["k4"] + r2 * (extra["k5"] + r2 * extra["k6"])) > 0

@@ -260,11 +260,13 @@ def _rectified(N: int, seed: int, axis: int = 0):
     return cams, x, float(np.sqrt((along @ along + across @ across) / (2 * N)))
 
 
-@pytest.mark.parametrize("N,seed,axis", [(3, 0, 0), (3, 1, 1), (3, 2, 0), (4, 3, 0), (4, 4, 1)])
+@pytest.mark.parametrize("N,seed,axis", [(3, 0, 0), (3, 1, 1), (3, 2, 0), (4, 3, 0), (4, 4, 1), (5, 0, 0), (6, 1, 1),
+                                         (8, 3, 0)])
 def test_rectified_rigs_are_certified_at_the_exact_optimum(N, seed, axis):
     """Review 30a F1/F4: on rectified rigs Theorem 1's minors that vanish identically (exact zeros of the cameras)
     came out as round-off, were scaled to unit rows and excluded the true image points: a "rigorous" c_LB of 6.54
-    above c = 3 at a feasible point (caught only by LB <= UB), and no 3-4-view point certified."""
+    above c = 3 at a feasible point (caught only by LB <= UB), and no 3-4-view point certified.  With 5-8 views the
+    default plan now reaches the exact-variety views step for collinear centres too (review 30b F4)."""
     import tritools
 
     cams, x, exact = _rectified(N, seed, axis)

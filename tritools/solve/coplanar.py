@@ -85,9 +85,9 @@ FUTILE_MESSAGE = ("coplanar camera centres: Corollary 1's bound sits on the spur
                   "(s_pi = {s:.6g} px^2 < f_ub = {ub:.6g} px^2), higher degrees cannot certify")
 
 
-def centre_plane(cameras: np.ndarray) -> np.ndarray | None:
-    """The plane pi (unit homogeneous 4-vector, pi^T C_i = 0) of the cameras' centres when they are finite, at
-    least three, not collinear, pairwise distinct and coplanar within :data:`COPLANAR_RTOL`; None otherwise."""
+def _centre_spread(cameras: np.ndarray):
+    """(C (N, 3) finite centres, their mean, singular values and V^T of C - mean) when there are at least three, all
+    finite and pairwise distinct (no two within 1e-9 of the spread); None otherwise."""
     cams = np.asarray(cameras, float)
     if cams.ndim != 3 or cams.shape[0] < 3:
         return None
@@ -98,16 +98,39 @@ def centre_plane(cameras: np.ndarray) -> np.ndarray | None:
         return None                                         # a centre at (or near) infinity
     C = a[:, :3] / w[:, None]
     mean = C.mean(axis=0)
-    D = C - mean
-    _, s, Vt = np.linalg.svd(D, full_matrices=False)
-    if s[0] == 0.0 or s[1] <= COPLANAR_RTOL * s[0] or s[2] > COPLANAR_RTOL * s[0]:
+    _, s, Vt = np.linalg.svd(C - mean, full_matrices=False)
+    if s[0] == 0.0:
         return None
     gaps = np.linalg.norm(C[:, None, :] - C[None, :, :], axis=-1) + np.eye(len(C)) * s[0]
     if np.min(gaps) <= 1e-9 * s[0]:
         return None                                         # coinciding centres: a homography pair
+    return C, mean, s, Vt
+
+
+def centre_plane(cameras: np.ndarray) -> np.ndarray | None:
+    """The plane pi (unit homogeneous 4-vector, pi^T C_i = 0) of the cameras' centres when they are finite, at
+    least three, not collinear, pairwise distinct and coplanar within :data:`COPLANAR_RTOL`; None otherwise."""
+    spread = _centre_spread(cameras)
+    if spread is None:
+        return None
+    _, mean, s, Vt = spread
+    if s[1] <= COPLANAR_RTOL * s[0] or s[2] > COPLANAR_RTOL * s[0]:
+        return None
     n = Vt[2]
     pi = np.append(n, -n @ mean)
     return pi / np.linalg.norm(pi)
+
+
+def collinear_centres(cameras: np.ndarray) -> str | None:
+    """A reason when the cameras' centres -- at least three, finite, pairwise distinct -- lie on one line within
+    :data:`COPLANAR_RTOL` (a rectified rig, a sideways drive with fixed heading); None otherwise.  Every plane
+    through that line holds every centre, so Corollary 1's epipolar variety holds the component of each of them and
+    its bound can stop at the residual across the baseline alone, at every degree (review 30a F4: 0 of 10 rectified
+    points of 3-7 views certified); the exact-variety steps apply as for coplanar centres."""
+    spread = _centre_spread(cameras)
+    if spread is None or spread[2][1] > COPLANAR_RTOL * spread[2][0]:
+        return None
+    return "collinear camera centres: Corollary 1's bound is capped by the planes through their line"
 
 
 def plane_lines(cameras: np.ndarray, pi: np.ndarray) -> np.ndarray:

@@ -14,14 +14,15 @@ a contradiction), below the options' ``lower_bound_stop``, and time remains; run
 with the larger of the two lower bounds.  The attempt is recorded like any other (``method="theorem1"``, ``delta=4``).
 
 Beyond the dense step's reach, a point whose Corollary 1 plan stopped at the ceiling of coplanar centres
-(:func:`tritools.solve.coplanar.futile_after`: its bound equals the cost of the centres' plane component) gets
+(:func:`tritools.solve.coplanar.futile_after`: its bound equals the cost of the centres' plane component), or whose
+centres are collinear (:func:`tritools.solve.coplanar.collinear_centres`: a pencil of such planes), gets
 :func:`tritools.solve.plan.exact_variety_views_step` instead (Theorem 1, delta = 4, view cliques, 5-8 views; no
 tight re-solve: its numerical failures are the formulation's, not the tolerances').
 """
 from __future__ import annotations
 
 from ...result import Status
-from ..coplanar import futile_after
+from ..coplanar import collinear_centres, futile_after
 from ..plan import exact_variety_step, exact_variety_views_step
 from .context import PointContext
 from .outcome import better, join, replace
@@ -38,9 +39,10 @@ def exact_variety_stage(ctx: PointContext) -> None:
         return
     n_vars = 2 * ctx.N + sum(r.n_aux for r in ctx.regions)
     step = exact_variety_step(ctx.opts, ctx.N, n_vars, ctx.steps)
-    why = futile_after(ctx.cams, ctx.regions, ctx.steps, best) if step is None else None
+    why = futile_after(ctx.cams, ctx.regions, ctx.steps, best) or collinear_centres(ctx.cams) \
+        if step is None else None
     if why is not None:
-        step = exact_variety_views_step(ctx.opts, ctx.N, n_vars)        # coplanar centres, 5-8 views
+        step = exact_variety_views_step(ctx.opts, ctx.N, n_vars)        # coplanar or collinear centres, 5-8 views
     if step is None:
         return
     res = run_step(ctx, step)

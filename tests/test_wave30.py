@@ -444,3 +444,56 @@ def test_full_opencv_roots_follow_the_central_branch(params, radial, r_max, pixe
         k = int(np.argmax(rs * radial(rs) >= p / 1000.0))
         r0 = brentq(lambda r: r * radial(r) - p / 1000.0, rs[k - 1], rs[k], xtol=1e-15)
         assert x / 1000.0 == pytest.approx(r0, rel=1e-9), (p, x / 1000.0, r0)
+
+
+def _own_model(model, params, poses, tracks):
+    """The same scene as :func:`_pycolmap_rec` as tritools' own ``Model`` (no pycolmap needed)."""
+    import numpy as np
+
+    from tritools.io.colmap import Camera, Image, Model
+    from tritools.io.colmap.model import Point3D
+    from tritools.sfm.pipeline import rotations  # noqa: F401  (the quaternion convention of the reader)
+
+    kps = {v + 1: [] for v in range(len(poses))}
+    points = {}
+    for pid, (xyz, obs) in tracks.items():
+        track = []
+        for v, xy in obs:
+            track.append((v + 1, len(kps[v + 1])))
+            kps[v + 1].append((float(xy[0]), float(xy[1]), pid))
+        points[pid] = Point3D(pid, tuple(np.asarray(xyz, float)), track=tuple(track))
+    cams = {v + 1: Camera(v + 1, model, 640, 480, tuple(float(p) for p in params)) for v in range(len(poses))}
+    images = {v + 1: Image(v + 1, (1.0, 0.0, 0.0, 0.0), tuple(float(c) for c in t), v + 1, f"im{v}.jpg",
+                           tuple(kps[v + 1])) for v, (R, t) in enumerate(poses)}
+    assert all(np.allclose(R, np.eye(3)) for R, _ in poses)        # identity rotations only (qvec = 1, 0, 0, 0)
+    return Model(cams, images, points)
+
+
+def test_refused_track_views_and_behind_error_without_pycolmap():
+    """Review 30a F8 and F6 with tritools' own model classes (run where pycolmap is not installed): a duplicated
+    frame's track reports its 2 usable observations; an OPENCV point written behind its cameras has ERROR equal to
+    its pinhole residuals against the undistorted keypoints."""
+    import numpy as np
+
+    from tritools.io.colmap.camera_models import undistorted_pixels
+    from tritools.sfm import retriangulate
+
+    poses = [(np.eye(3), np.zeros(3)), (np.eye(3), np.zeros(3)), (np.eye(3), np.array([-1.0, 0, 0]))]
+    X = np.array([0.2, 0.1, 6.0])
+    kp = [800 * (X[:2] + t[:2]) / X[2] + [320, 240] for _, t in poses]
+    tracks = {1: (X + 0.01, [(0, kp[0] + [0.3, -0.2]), (1, kp[1] + [-0.4, 0.1])]),
+              2: (X + 0.01, [(0, kp[0] + [0.3, -0.2]), (1, kp[1] + [-0.4, 0.1]), (2, kp[2])])}
+    _, rep = retriangulate(_own_model("PINHOLE", [800, 800, 320, 240], poses, tracks))
+    assert [int(rep.record(i).n_views) for i in range(2)] == [2, 3] and rep.record(1).certified
+
+    params = [800, 800, 320, 240, -0.2, 0.05, 0.001, -0.001]               # OPENCV: fx fy cx cy k1 k2 p1 p2
+    poses = [(np.eye(3), np.array([1.0, 0, 0])), (np.eye(3), np.array([-1.0, 0, 0]))]
+    Xb = np.array([0.3, 0.2, -50.0])
+    rng = np.random.default_rng(2)
+    kp = [(v, 800 * (Xb[:2] + t[:2]) / Xb[2] + [320, 240] + rng.normal(0, 0.3, 2)) for v, (_, t) in enumerate(poses)]
+    new, rep = retriangulate(_own_model("OPENCV", params, poses, {1: ([0.3, 0.2, 50.0], kp)}), behind="write")
+    assert rep.record(0).updated and not rep.record(0).in_front
+    Xw = np.asarray(new.points3D[1].xyz)
+    xu, ok = undistorted_pixels("OPENCV", params, np.array([xy for _, xy in kp]))
+    res = [np.hypot(*(800 * (Xw[:2] + t[:2]) / (Xw[2] + t[2]) + [320, 240] - xu[v])) for v, (_, t) in enumerate(poses)]
+    assert ok.all() and new.points3D[1].error == pytest.approx(np.mean(res), rel=1e-6)

@@ -58,7 +58,8 @@ from .regions.base import real_array
 __all__ = ["depth_rows", "numeric_cameras",
            "CAMERA_RANK_RTOL",
            "SAME_CAMERA_RTOL", "POINT_AT_INFINITY_RTOL", "CameraIssue", "CameraProblems",
-           "camera_rank_ratio", "cameras_all_equal", "check_camera", "validate_cameras", "camera_problems",
+           "camera_rank_ratio", "cameras_all_equal", "check_camera", "validate_cameras", "camera_refusal",
+           "camera_problems",
            "camera_center", "depths", "depths_stack", "power2_scale", "points3d_array", "unit_rows", "WorldFrame",
            "as_world_frame", "world_frame_of"]
 
@@ -323,6 +324,16 @@ def validate_cameras(cameras: ArrayLike, *, min_views: int = 2, require_distinct
     if require_distinct and C.shape[0] >= 2 and (_all_equal_scalar(C) if few else _all_equal(C)):
         raise ValueError("cameras are all equal up to scale: the triangulation is ill-posed")
     return C
+
+
+def camera_refusal(cameras) -> str | None:
+    """:func:`validate_cameras`' message for ``cameras`` (no minimum number of views, equal cameras allowed), None
+    when it accepts them."""
+    try:
+        validate_cameras(cameras, min_views=1, require_distinct=False)
+    except ValueError as exc:
+        return str(exc)
+    return None
 
 
 #: :func:`validate_cameras` checks up to this many cameras with the scalar twins of the rank and equality rules.

@@ -18,6 +18,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ...model.cameras import camera_refusal
 from ...model.constraints import Method, centre_relations
 from ...model.frame import WorldFrame, frame_centre_groups
 from ...model.geometry import gamma as gamma_of
@@ -176,8 +177,6 @@ class PointContext:
         """Why the normalised cameras fail the camera rule (:func:`~tritools.model.cameras.validate_cameras`'s
         message), None when they pass.  The caller's cameras passed it: a refusal here means image data so far from
         the cameras' image scale (regions at ~1e308 px) that the normalisation cannot represent them (review 29b F8)."""
-        from .estimate import camera_refusal
-
         return camera_refusal(self.cams_n)
 
     @functools.cached_property

@@ -41,7 +41,8 @@ from sospoly.analysis import OBJECTIVE_ERRORS, best_in_family, kernel_family, ri
 from sospoly.solvers import IPM_LEVEL
 
 from ...model.geometry import (common_centre, gamma as gamma_of, gamma_validated, point_from_validated,
-                               points_from_validated, refine_l2, validate_cameras)
+                               points_from_validated, refine_l2)
+from ...model.cameras import camera_refusal
 from ...model.refine import disc_shapes
 from ...result import Status, TriangulationResult
 from ..decide import decide, gamma_from_c
@@ -259,20 +260,10 @@ def _resolve_limit(ctx: PointContext, step: Step) -> float:
 _CHECK = object()
 
 
-def camera_refusal(cams: np.ndarray) -> str | None:
-    """:func:`validate_cameras`' message for ``cams`` (no minimum number of views, equal cameras allowed), None when
-    it accepts them."""
-    try:
-        validate_cameras(cams, min_views=1, require_distinct=False)
-    except ValueError as exc:
-        return str(exc)
-    return None
-
-
 class CandidateCost:
     """gamma of the scene point of a candidate v (image points ``problem.image_points(v)`` -> X^ by the SVD of
     M0, :func:`tritools.model.geometry.point_from_validated`) for one problem's normalised cameras: the common
-    centre, the regions' disc shapes and the cameras' check (:func:`validate_cameras`: a refusal raises its
+    centre, the regions' disc shapes and the cameras' check (:func:`camera_refusal`: a refusal raises its
     ValueError from every :meth:`one`, as the per-candidate check did) done once.  :meth:`one` gives
     (gamma, X^, image points) or None (no finite point or gamma); :meth:`many` the gammas of many candidates (the
     same numbers: tests/test_candidate_cost.py; stacked for point and disc regions), +inf where :meth:`one` gives

@@ -162,11 +162,8 @@ def _central(model: str, extra: dict, uv: np.ndarray, uv_d: np.ndarray) -> np.nd
     Jacobian > 0 (central differences), and for FULL_OPENCV a positive denominator."""
     with np.errstate(all="ignore"):
         side = (np.sum(uv * uv_d, axis=1) > 0) | np.all(uv_d == 0, axis=1)
-        h = 1e-7 * np.maximum(1.0, np.abs(uv))
-        J = [(forward(model, extra, uv + np.column_stack([h[:, 0] * (j == 0), h[:, 1] * (j == 1)]))
-              - forward(model, extra, uv - np.column_stack([h[:, 0] * (j == 0), h[:, 1] * (j == 1)])))
-             / (2 * h[:, j:j + 1]) for j in range(2)]
-        side &= J[0][:, 0] * J[1][:, 1] - J[1][:, 0] * J[0][:, 1] > 0
+        J = _jacobian(lambda p: forward(model, extra, p), uv)
+        side &= J[:, 0, 0] * J[:, 1, 1] - J[:, 0, 1] * J[:, 1, 0] > 0
         if model == "FULL_OPENCV":
             r2 = np.sum(uv * uv, axis=1)
             side &= 1 + r2 * (extra["k4"] + r2 * (extra["k5"] + r2 * extra["k6"])) > 0
@@ -185,12 +182,7 @@ def inverse(fun, uv_d: np.ndarray, tol: float, max_iter: int, start: np.ndarray 
             active &= ~np.all(np.abs(res) <= tol, axis=1)
             if not active.any():
                 break
-            h = 1e-7 * np.maximum(1.0, np.abs(uv))
-            J = np.empty((len(uv), 2, 2))
-            for j in range(2):
-                d = np.zeros_like(uv)
-                d[:, j] = h[:, j]
-                J[:, :, j] = (fun(uv + d) - fun(uv - d)) / (2 * h[:, j:j + 1])
+            J = _jacobian(fun, uv)
             det = J[:, 0, 0] * J[:, 1, 1] - J[:, 0, 1] * J[:, 1, 0]
             active &= np.isfinite(det) & (det != 0)
             safe = np.where(active, det, 1.0)
@@ -200,6 +192,17 @@ def inverse(fun, uv_d: np.ndarray, tol: float, max_iter: int, start: np.ndarray 
         res = fun(uv) - uv_d
     ok = np.all(np.isfinite(uv), axis=1) & np.all(np.abs(res) <= tol, axis=1)
     return uv, ok
+
+
+def _jacobian(fun, uv: np.ndarray) -> np.ndarray:
+    """(M, 2, 2) central-difference Jacobians of ``fun`` at the rows of ``uv`` (steps 1e-7 max(1, |uv|))."""
+    h = 1e-7 * np.maximum(1.0, np.abs(uv))
+    J = np.empty((len(uv), 2, 2))
+    for j in range(2):
+        d = np.zeros_like(uv)
+        d[:, j] = h[:, j]
+        J[:, :, j] = (fun(uv + d) - fun(uv - d)) / (2 * h[:, j:j + 1])
+    return J
 
 
 def pycolmap_camera(model: str, params):

@@ -351,24 +351,43 @@ def test_fov_at_a_wide_omega_accepts_keypoints_with_a_pinhole_ray():
     assert inside.sum() > 100 and ok[inside].all()
 
 
-def _pycolmap_rec(model, params, poses, tracks):
-    """A pycolmap Reconstruction: one camera (model, params) per image, ``poses`` [(R, t)], ``tracks``
-    {point3D_id: (xyz, [(image index, keypoint xy), ...])}."""
-    import numpy as np
-    pycolmap = pytest.importorskip("pycolmap")
-
-    rec = pycolmap.Reconstruction()
-    kps = [[] for _ in poses]
+def _keypoints_and_tracks(n_images: int, tracks):
+    """Per image (index v, id v + 1) its keypoints (x, y, point3D_id), and per point (xyz, ((image id, keypoint
+    index), ...)) of ``tracks`` {point3D_id: (xyz, [(image index, keypoint xy), ...])}."""
+    kps = [[] for _ in range(n_images)]
     elems = {}
     for pid, (xyz, obs) in tracks.items():
         elems[pid] = (xyz, [])
         for v, xy in obs:
             elems[pid][1].append((v + 1, len(kps[v])))
-            kps[v].append(np.asarray(xy, float))
+            kps[v].append((float(xy[0]), float(xy[1]), pid))
+    return kps, elems
+
+
+def _duplicated_frame():
+    """Review 30a F8's scene: images 1 and 2 share one pose (a duplicated frame); point 1 is seen by those two only,
+    point 2 also by image 3."""
+    import numpy as np
+
+    poses = [(np.eye(3), np.zeros(3)), (np.eye(3), np.zeros(3)), (np.eye(3), np.array([-1.0, 0, 0]))]
+    X = np.array([0.2, 0.1, 6.0])
+    kp = [800 * (X[:2] + t[:2]) / X[2] + [320, 240] for _, t in poses]
+    return poses, {1: (X + 0.01, [(0, kp[0] + [0.3, -0.2]), (1, kp[1] + [-0.4, 0.1])]),
+                   2: (X + 0.01, [(0, kp[0] + [0.3, -0.2]), (1, kp[1] + [-0.4, 0.1]), (2, kp[2])])}
+
+
+def _pycolmap_rec(model, params, poses, tracks):
+    """A pycolmap Reconstruction: one camera (model, params) per image, ``poses`` [(R, t)], ``tracks`` as for
+    :func:`_keypoints_and_tracks`."""
+    import numpy as np
+    pycolmap = pytest.importorskip("pycolmap")
+
+    rec = pycolmap.Reconstruction()
+    kps, elems = _keypoints_and_tracks(len(poses), tracks)
     for v, (R, t) in enumerate(poses):
         rec.add_camera_with_trivial_rig(pycolmap.Camera(camera_id=v + 1, model=model, width=640, height=480,
                                                         params=list(params)))
-        im = pycolmap.Image(name=f"im{v}", points2D=pycolmap.Point2DList([pycolmap.Point2D(x) for x in kps[v]]),
+        im = pycolmap.Image(name=f"im{v}", points2D=pycolmap.Point2DList([pycolmap.Point2D(k[:2]) for k in kps[v]]),
                             camera_id=v + 1, image_id=v + 1)
         rec.add_image_with_trivial_frame(im, pycolmap.Rigid3d(pycolmap.Rotation3d(np.asarray(R, float)),
                                                               np.asarray(t, float)))
@@ -410,15 +429,9 @@ def test_behind_write_error_is_finite_and_the_pinhole_residual():
 
 def test_a_track_refused_by_the_solver_reports_its_usable_observations():
     """Review 30a F8: a track seen by two images with one pose (a duplicated frame) said N_VIEWS = 0."""
-    import numpy as np
     from tritools.sfm import retriangulate
 
-    poses = [(np.eye(3), np.zeros(3)), (np.eye(3), np.zeros(3)), (np.eye(3), np.array([-1.0, 0, 0]))]
-    X = np.array([0.2, 0.1, 6.0])
-    kp = [800 * (X[:2] + t[:2]) / X[2] + [320, 240] for _, t in poses]
-    tracks = {1: (X + 0.01, [(0, kp[0] + [0.3, -0.2]), (1, kp[1] + [-0.4, 0.1])]),
-              2: (X + 0.01, [(0, kp[0] + [0.3, -0.2]), (1, kp[1] + [-0.4, 0.1]), (2, kp[2])])}
-    _, rep = retriangulate(_pycolmap_rec("PINHOLE", [800, 800, 320, 240], poses, tracks))
+    _, rep = retriangulate(_pycolmap_rec("PINHOLE", [800, 800, 320, 240], *_duplicated_frame()))
     assert [int(rep.record(i).n_views) for i in range(2)] == [2, 3]
     assert rep.record(0).status.value == "invalid_input" and rep.record(1).certified
 
@@ -452,19 +465,12 @@ def _own_model(model, params, poses, tracks):
 
     from tritools.io.colmap import Camera, Image, Model
     from tritools.io.colmap.model import Point3D
-    from tritools.sfm.pipeline import rotations  # noqa: F401  (the quaternion convention of the reader)
 
-    kps = {v + 1: [] for v in range(len(poses))}
-    points = {}
-    for pid, (xyz, obs) in tracks.items():
-        track = []
-        for v, xy in obs:
-            track.append((v + 1, len(kps[v + 1])))
-            kps[v + 1].append((float(xy[0]), float(xy[1]), pid))
-        points[pid] = Point3D(pid, tuple(np.asarray(xyz, float)), track=tuple(track))
+    kps, elems = _keypoints_and_tracks(len(poses), tracks)
+    points = {pid: Point3D(pid, tuple(np.asarray(xyz, float)), track=tuple(el)) for pid, (xyz, el) in elems.items()}
     cams = {v + 1: Camera(v + 1, model, 640, 480, tuple(float(p) for p in params)) for v in range(len(poses))}
     images = {v + 1: Image(v + 1, (1.0, 0.0, 0.0, 0.0), tuple(float(c) for c in t), v + 1, f"im{v}.jpg",
-                           tuple(kps[v + 1])) for v, (R, t) in enumerate(poses)}
+                           tuple(kps[v])) for v, (R, t) in enumerate(poses)}
     assert all(np.allclose(R, np.eye(3)) for R, _ in poses)        # identity rotations only (qvec = 1, 0, 0, 0)
     return Model(cams, images, points)
 
@@ -478,12 +484,7 @@ def test_refused_track_views_and_behind_error_without_pycolmap():
     from tritools.io.colmap.camera_models import undistorted_pixels
     from tritools.sfm import retriangulate
 
-    poses = [(np.eye(3), np.zeros(3)), (np.eye(3), np.zeros(3)), (np.eye(3), np.array([-1.0, 0, 0]))]
-    X = np.array([0.2, 0.1, 6.0])
-    kp = [800 * (X[:2] + t[:2]) / X[2] + [320, 240] for _, t in poses]
-    tracks = {1: (X + 0.01, [(0, kp[0] + [0.3, -0.2]), (1, kp[1] + [-0.4, 0.1])]),
-              2: (X + 0.01, [(0, kp[0] + [0.3, -0.2]), (1, kp[1] + [-0.4, 0.1]), (2, kp[2])])}
-    _, rep = retriangulate(_own_model("PINHOLE", [800, 800, 320, 240], poses, tracks))
+    _, rep = retriangulate(_own_model("PINHOLE", [800, 800, 320, 240], *_duplicated_frame()))
     assert [int(rep.record(i).n_views) for i in range(2)] == [2, 3] and rep.record(1).certified
 
     params = [800, 800, 320, 240, -0.2, 0.05, 0.001, -0.001]               # OPENCV: fx fy cx cy k1 k2 p1 p2

@@ -4,14 +4,12 @@ import io
 import os
 import signal
 import struct
-import subprocess
-import sys
-import time
 from contextlib import redirect_stderr, redirect_stdout
 
 import numpy as np
 import pytest
 
+from tests.cli_util import colmap_signalled
 from tritools.cli.app import main
 from tritools.io.colmap.formats import write_model_arrays
 from tritools.sfm.synthetic import synthetic_arrays
@@ -136,24 +134,10 @@ def test_an_integer_field_spelled_as_a_float_is_refused_whatever_the_chunk(tmp_p
 @pytest.mark.slow
 def test_sigterm_unwinds_like_ctrl_c(tmp_path):
     """F7: SIGTERM killed the run and left the staging directory in OUT; now exit 143, OUT as it was."""
-    arr, _ = synthetic_arrays(20000, 40, "OPENCV", seed=4)
-    write_model_arrays(arr, tmp_path / "in", "bin")
-    out = tmp_path / "out"
-    out.mkdir()
-    (out / "notes.txt").write_text("mine")
-    env = dict(os.environ, OPENBLAS_NUM_THREADS="1")
-    p = subprocess.Popen([sys.executable, "-m", "tritools", "colmap", str(tmp_path / "in"), str(out), "--chunk-points",
-                          "2000", "--export", str(tmp_path / "exp" / "p.ply")], env=env, stdout=subprocess.PIPE,
-                         stderr=subprocess.PIPE, text=True)
-    deadline = time.time() + 60
-    while time.time() < deadline and not any(n.startswith(".tritools-staging") for n in os.listdir(out)):
-        time.sleep(0.05)
-    time.sleep(0.5)
-    p.send_signal(signal.SIGTERM)
-    _, err = p.communicate(timeout=120)
-    if p.returncode == 0:
+    rc, err, out = colmap_signalled(tmp_path, signal.SIGTERM, "--export", tmp_path / "exp" / "p.ply")
+    if rc == 0:
         pytest.skip("the run finished before the signal")
-    assert p.returncode == 143 and err.strip().endswith("tritools: terminated")
+    assert rc == 143 and err.strip().endswith("tritools: terminated")
     assert sorted(os.listdir(out)) == ["notes.txt"] and not (tmp_path / "exp").exists()
 
 

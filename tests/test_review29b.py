@@ -343,29 +343,13 @@ def test_colmap_from_oxford_never_writes_into_the_sequence(house_copy, tmp_path)
 def test_sighup_unwinds_like_sigterm(tmp_path):
     import os
     import signal
-    import subprocess
-    import time
 
-    from tritools.io.colmap import write_model_arrays
-    from tritools.sfm.synthetic import synthetic_arrays
+    from tests.cli_util import colmap_signalled
 
-    arr, _ = synthetic_arrays(20000, 40, "OPENCV", seed=4)
-    write_model_arrays(arr, tmp_path / "in", "bin")
-    out = tmp_path / "out"
-    out.mkdir()
-    (out / "notes.txt").write_text("mine")
-    p = subprocess.Popen([sys.executable, "-m", "tritools", "colmap", str(tmp_path / "in"), str(out), "--chunk-points",
-                          "2000"], env=dict(os.environ, OPENBLAS_NUM_THREADS="1"), stdout=subprocess.PIPE,
-                         stderr=subprocess.PIPE, text=True)
-    deadline = time.time() + 60
-    while time.time() < deadline and not any(n.startswith(".tritools-staging") for n in os.listdir(out)):
-        time.sleep(0.05)
-    time.sleep(0.5)
-    p.send_signal(signal.SIGHUP)
-    _, err = p.communicate(timeout=120)
-    if p.returncode == 0:
+    rc, err, out = colmap_signalled(tmp_path, signal.SIGHUP)
+    if rc == 0:
         pytest.skip("the run finished before the signal")
-    assert p.returncode == 128 + signal.SIGHUP and err.strip().endswith("tritools: SIGHUP"), (p.returncode, err)
+    assert rc == 128 + signal.SIGHUP and err.strip().endswith("tritools: SIGHUP"), (rc, err)
     assert sorted(os.listdir(out)) == ["notes.txt"]
 
 

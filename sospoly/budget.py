@@ -271,7 +271,8 @@ def gram_block_exceeds(side: int, budget: Budget | None) -> str | None:
     floor = 8.0 * CLARABEL_ENTRY_COPIES * float(L) * float(L)
     room, what = memory_room(budget)
     if room is not None and floor > room:
-        return f"a Gram block of side {side} alone needs at least {_human(floor)}, beyond {what} {_human(room)}"
+        return (f"a program with a Gram block of side {side} needs at least {_human(floor)} for Clarabel's KKT "
+                f"system, beyond {what} {_human(room)}")
     return None
 
 

@@ -37,6 +37,14 @@ def test_unlimited_and_small_blocks_pass():
     assert "exceeds the limit" in gram_block_exceeds(6000, Budget(max_bytes=None))
 
 
+def test_the_memory_message_names_the_program_not_the_block():
+    """The floor is Clarabel's KKT system for a program holding the block (review 29b), not the block's own
+    matrix: a side-201 block is 323 KiB as floats, the message says what needs the bytes."""
+    msg = gram_block_exceeds(201, Budget(max_bytes=2 ** 20))
+    assert msg.startswith("a program with a Gram block of side 201 needs at least ")
+    assert "Clarabel's KKT system" in msg and "the memory budget 1 MiB" in msg
+
+
 def test_large_dense_sdp_call_refused_before_building():
     P, x, _, _ = robust_protocol_scene(150, 0, 1.0, np.random.default_rng(1))
     before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss

@@ -19,6 +19,13 @@ only (about half of the L2 optimum f* with isotropic noise: N of the 2N - 3 resi
 Corollary 1 cannot certify at any degree.  Theorem 1's minors (the trilinear relations among them) vanish only on
 the images of scene points and are not bounded by (C) (:func:`tritools.solve.plan.exact_variety_step`).
 
+Collinear centres (:func:`collinear_centres`: a straight drive along the optical axis, a rectified rig) lie in
+every plane pi(theta) of the pencil through their line, so (C) holds for each: the ceiling is the best of them,
+min_theta s_pi(theta) (:func:`pencil_ceiling`, an attained value on a grid of angles, refined), and the rule below
+applies to the point plan with it (review 31a: a 5-view drive ran Corollary 1 at degree 4 twice, ~1.5 s, before
+Theorem 1 certified).  The robust search's subset rules keep the coplanar ceiling only (its subsets' plans reach
+the exact-variety views step themselves).
+
 The futility rule (:func:`corollary1_futile`).  After a Corollary 1 step with lower bound f_lb and upper bound f_ub
 (pixels^2), escalating Corollary 1 to a higher degree can raise the lower bound by at most s_pi - f_lb, and it
 cannot certify unless f_ub (or a better upper bound it finds) comes within the certificate tolerance of s_pi.  So
@@ -60,7 +67,8 @@ from .plan import exact_variety_applies
 
 __all__ = ["centre_plane", "plane_lines", "spurious_cost", "corollary1_futile", "COPLANAR_RTOL", "SITS_RTOL",
            "GAP_RTOL", "FUTILE_MESSAGE", "futile_after", "subset_futile", "plane_distances2", "sits_on_ceiling",
-           "COPLANAR_MAX_CEILING", "hopeless_subset", "CEILING_MIN_VIEWS", "COPLANAR_BUDGET_NAME"]
+           "COPLANAR_MAX_CEILING", "hopeless_subset", "CEILING_MIN_VIEWS", "COPLANAR_BUDGET_NAME",
+           "pencil_ceiling", "plane_lines_raw", "PENCIL_SAMPLES", "collinear_centres"]
 
 #: centres are coplanar when the smallest singular value of the centred centres is at most this times the largest.
 #: Not exact on purpose: the rule also needs the bound to sit on s_pi of the fitted plane, which a configuration far
@@ -71,6 +79,8 @@ COPLANAR_RTOL = 1e-6
 SITS_RTOL = 1e-3
 #: ... and escalating is futile when s_pi is at most (1 - GAP_RTOL) times the upper bound
 GAP_RTOL = 1e-3
+#: angles of the grid on which :func:`pencil_ceiling` looks for the best plane through collinear centres
+PENCIL_SAMPLES = 360
 #: the robust search stops (:meth:`tritools.solve.robust_bounds.SubsetBounds.node_budget`) once this many subsets of
 #: at least :data:`CEILING_MIN_VIEWS` views got an uncertified delta = 2 bound sitting on their ceiling s_pi(S)
 #: (:func:`sits_on_ceiling`): their bounds cannot rise at any degree, so the search cannot prune with them
@@ -81,7 +91,7 @@ CEILING_MIN_VIEWS = 5
 COPLANAR_BUDGET_NAME = ("ceiling of coplanar camera centres (Corollary 1's subset bounds cannot exceed the cost of the "
                         "centres' plane component)")
 #: the message of a point whose Corollary 1 steps were stopped by the futility rule
-FUTILE_MESSAGE = ("coplanar camera centres: Corollary 1's bound sits on the spurious epipolar component "
+FUTILE_MESSAGE = ("{kind} camera centres: Corollary 1's bound sits on the spurious epipolar component "
                   "(s_pi = {s:.6g} px^2 < f_ub = {ub:.6g} px^2), higher degrees cannot certify")
 
 
@@ -133,10 +143,16 @@ def collinear_centres(cameras: np.ndarray) -> str | None:
     return "collinear camera centres: Corollary 1's bound is capped by the planes through their line"
 
 
+def plane_lines_raw(cameras: np.ndarray, pi: np.ndarray) -> np.ndarray:
+    """(N, 3) image lines l_i of the plane ``pi``: P_i^T l_i = pi (least squares; pi holds the centre, so it lies
+    in the column space of P_i^T), unscaled (linear in pi)."""
+    return np.array([np.linalg.lstsq(P.T, pi, rcond=None)[0] for P in np.asarray(cameras, float)])
+
+
 def plane_lines(cameras: np.ndarray, pi: np.ndarray) -> np.ndarray:
-    """(N, 3) image lines l_i of the plane ``pi``: P_i^T l_i ~ pi (least squares; pi holds the centre, so it lies
-    in the column space of P_i^T), each scaled to ||(l_1, l_2)|| = 1 (a signed point-line distance is l . (x, 1))."""
-    lines = np.array([np.linalg.lstsq(P.T, pi, rcond=None)[0] for P in np.asarray(cameras, float)])
+    """(N, 3) image lines l_i of the plane ``pi`` (:func:`plane_lines_raw`), each scaled to ||(l_1, l_2)|| = 1 (a
+    signed point-line distance is l . (x, 1))."""
+    lines = plane_lines_raw(cameras, pi)
     with np.errstate(divide="ignore", invalid="ignore"):    # a line at infinity: inf / NaN, no finite s_pi
         return lines / np.linalg.norm(lines[:, :2], axis=1, keepdims=True)
 
@@ -154,13 +170,52 @@ def plane_distances2(cameras: np.ndarray, points) -> np.ndarray | None:
     return d * d
 
 
-def spurious_cost(cameras: np.ndarray, regions) -> float | None:
-    """s_pi = sum_i dist(x^_i, l_i)^2 (pixels^2, module docstring) for point regions and coplanar centres; None
-    when the centres are not coplanar (:func:`centre_plane`) or a region is not a point."""
+def pencil_ceiling(cameras: np.ndarray, points) -> float | None:
+    """For collinear centres (:func:`collinear_centres`), min over the planes pi(theta) through their line of
+    s_pi(theta) = sum_i dist(x^_i, l_i(theta))^2 (pixels^2), found on a grid of :data:`PENCIL_SAMPLES` angles and
+    refined; None when the centres are not collinear.  Every tuple on the lines of one plane of the pencil satisfies
+    all epipolar relations, so each s_pi(theta) -- the minimum found or not -- caps Corollary 1's bound at every
+    degree ((C) for the pencil: the ceiling is an attained value, never a bound this module reports).  With
+    pi(theta) = cos(theta) pi_1 + sin(theta) pi_2 the lines are l_i(theta) = cos(theta) a_i + sin(theta) b_i."""
+    if collinear_centres(cameras) is None:
+        return None
+    _, mean, _, Vt = _centre_spread(cameras)
+    pis = [np.append(n, -n @ mean) for n in Vt[1:3]]
+    ab = [plane_lines_raw(cameras, pi) for pi in pis]
+    x = np.column_stack([np.asarray(points, float), np.ones(len(points))])
+    num = np.stack([np.einsum("ij,ij->i", m, x) for m in ab])             # (2, N): a_i . x, b_i . x
+    dirs = np.stack([m[:, :2] for m in ab])                                # (2, N, 2)
+
+    def cost(theta):
+        c, s = np.cos(theta), np.sin(theta)
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            d = (np.multiply.outer(c, num[0]) + np.multiply.outer(s, num[1])) ** 2 / np.sum(
+                (np.multiply.outer(c, dirs[0]) + np.multiply.outer(s, dirs[1])) ** 2, axis=-1)
+            return np.where(np.isnan(d), np.inf, d).sum(axis=-1)
+
+    grid = np.linspace(0.0, np.pi, PENCIL_SAMPLES, endpoint=False)
+    vals = cost(grid)
+    k = int(np.argmin(vals))
+    h = np.pi / PENCIL_SAMPLES
+    for _ in range(40):                                                      # golden-free ternary refinement
+        t = grid[k] + np.linspace(-h, h, 5)
+        v = cost(t)
+        j = int(np.argmin(v))
+        grid, k, h = t, j, h / 2
+        vals = v
+    best = float(vals[k])
+    return best if math.isfinite(best) else None
+
+
+def spurious_cost(cameras: np.ndarray, regions, pencil: bool = True) -> float | None:
+    """s_pi = sum_i dist(x^_i, l_i)^2 (pixels^2, module docstring) for point regions and coplanar centres, or (with
+    ``pencil``) the best plane of the pencil through collinear centres (:func:`pencil_ceiling`); None when the
+    centres are neither (:func:`centre_plane`) or a region is not a point."""
     if not all(r.is_point for r in regions):
         return None
-    d2 = plane_distances2(cameras, [r.center for r in regions])
-    s = None if d2 is None else float(np.sum(d2))
+    points = [r.center for r in regions]
+    d2 = plane_distances2(cameras, points)
+    s = (pencil_ceiling(cameras, points) if pencil else None) if d2 is None else float(np.sum(d2))
     return s if s is not None and math.isfinite(s) else None
 
 
@@ -171,15 +226,18 @@ def sits_on_ceiling(f_lb: float, d2: np.ndarray) -> bool:
     return math.isfinite(s) and math.isfinite(f_lb) and f_lb >= (1.0 - SITS_RTOL) * s
 
 
-def corollary1_futile(cameras: np.ndarray, regions, f_lb: float | None, f_ub: float | None) -> str | None:
+def corollary1_futile(cameras: np.ndarray, regions, f_lb: float | None, f_ub: float | None,
+                      pencil: bool = True) -> str | None:
     """The reason (:data:`FUTILE_MESSAGE`) why no Corollary 1 step of a higher degree can certify, after a step
-    with bounds ``f_lb`` <= ``f_ub`` (pixels^2; module docstring's rule); None when the rule does not apply."""
+    with bounds ``f_lb`` <= ``f_ub`` (pixels^2; module docstring's rule; ``pencil``: collinear centres too,
+    :func:`spurious_cost`); None when the rule does not apply."""
     if f_lb is None or f_ub is None or not (math.isfinite(f_lb) and math.isfinite(f_ub)):
         return None
-    s = spurious_cost(cameras, regions)
+    s = spurious_cost(cameras, regions, pencil)
     if s is None or not sits_on_ceiling(f_lb, np.array([s])) or s > (1.0 - GAP_RTOL) * f_ub:
         return None
-    return FUTILE_MESSAGE.format(s=s, ub=f_ub)
+    kind = "coplanar" if centre_plane(cameras) is not None else "collinear"
+    return FUTILE_MESSAGE.format(kind=kind, s=s, ub=f_ub)
 
 
 def futile_after(cameras: np.ndarray, regions, steps, res) -> str | None:
@@ -206,7 +264,7 @@ def subset_futile(cameras: np.ndarray, regions, options, f_lb: float, X) -> str 
     with np.errstate(divide="ignore", invalid="ignore"):
         r = h[:, :2] / h[:, 2:] - np.array([p.center for p in regions])
     f_ub = float(np.sum(r * r))
-    return corollary1_futile(cameras, regions, f_lb, f_ub)
+    return corollary1_futile(cameras, regions, f_lb, f_ub, pencil=False)     # collinear: the plan's views step
 
 
 

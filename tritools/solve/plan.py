@@ -54,7 +54,7 @@ from .options import MethodChoice, SolvePath, Sparsity, TriangulationOptions
 
 __all__ = ["Step", "degree_plan", "delta_min", "batch_steps", "last_delta", "DENSE_MAX_SIDE", "DENSE_FALLBACK_SIDE",
            "EXACT_VARIETY_MAX_SIDE", "exact_variety_step", "exact_variety_applies",
-           "exact_variety_views_step", "EXACT_VARIETY_VIEWS_MAX"]
+           "exact_variety_views_step", "EXACT_VARIETY_VIEWS_MAX", "EXACT_VARIETY_COLLINEAR_MAX"]
 
 #: ``sparsity="auto"``: dense certificates above degree 2 while the Gram side stays at most this (sigma(8, 2) = 45).
 DENSE_MAX_SIDE = 45
@@ -67,6 +67,10 @@ DENSE_FALLBACK_SIDE = 78
 EXACT_VARIETY_MAX_SIDE = DENSE_MAX_SIDE
 #: :func:`exact_variety_views_step` up to this many views (it certified none of five in-plane points at N = 10)
 EXACT_VARIETY_VIEWS_MAX = 8
+#: ... and up to this many where the centres are collinear (a straight drive, a rectified rig; review 31a).
+#: Measured (benchmarks/RESULTS.md, wave 31): forward motion 6 / 6 points of 9-12 views certified in 0.7-1.8 s and
+#: numerical failures at 14-16 views (~2 s); rectified rigs 5 / 6 of 9-12 views (2.6-5.2 s), 7-10 s at 14-16
+EXACT_VARIETY_COLLINEAR_MAX = 12
 
 
 @dataclass(frozen=True)
@@ -139,17 +143,20 @@ def exact_variety_step(options: TriangulationOptions, n_views: int, n_vars: int,
     return Step(Method.THEOREM1, 4, "dense")
 
 
-def exact_variety_views_step(options: TriangulationOptions, n_views: int, n_vars: int) -> Step | None:
+def exact_variety_views_step(options: TriangulationOptions, n_views: int, n_vars: int,
+                             collinear: bool = False) -> Step | None:
     """The exact-variety step beyond the dense one's reach, for a point whose Corollary 1 plan stopped at the
     ceiling of coplanar centres (:func:`tritools.solve.coplanar.futile_after`): Theorem 1 at delta = 4 in the view
     clique form (epipolar pairs + the minors of a chain of view triples, whose trilinear relations exclude the
-    plane's component) for 5 to :data:`EXACT_VARIETY_VIEWS_MAX` views with point regions (n_vars = 2N), with
+    plane's component) for 5 to :data:`EXACT_VARIETY_VIEWS_MAX` views (:data:`EXACT_VARIETY_COLLINEAR_MAX` where
+    the centres are ``collinear``: a pencil of such planes) with point regions (n_vars = 2N), with
     ``method="auto"`` and ``sparsity="auto"``; None otherwise.  Cheap (0.3-0.9 s) but numerically fragile there:
     certified about one point in five, the others stay not_certified with their valid bounds
     (benchmarks/RESULTS.md, "Coplanar camera centres")."""
     if options.explicit_method is not None or options.sparsity != Sparsity.AUTO or n_vars != 2 * n_views:
         return None
-    if not 5 <= n_views <= EXACT_VARIETY_VIEWS_MAX or options.max_delta is not None and options.max_delta < 4:
+    if not 5 <= n_views <= (EXACT_VARIETY_COLLINEAR_MAX if collinear else EXACT_VARIETY_VIEWS_MAX) \
+            or options.max_delta is not None and options.max_delta < 4:
         return None
     return Step(Method.THEOREM1, 4, "views")
 

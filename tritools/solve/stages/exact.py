@@ -16,8 +16,8 @@ with the larger of the two lower bounds.  The attempt is recorded like any other
 Beyond the dense step's reach, a point whose Corollary 1 plan stopped at the ceiling of coplanar centres
 (:func:`tritools.solve.coplanar.futile_after`: its bound equals the cost of the centres' plane component), or whose
 centres are collinear (:func:`tritools.solve.coplanar.collinear_centres`: a pencil of such planes), gets
-:func:`tritools.solve.plan.exact_variety_views_step` instead (Theorem 1, delta = 4, view cliques, 5-8 views; no
-tight re-solve: its numerical failures are the formulation's, not the tolerances').
+:func:`tritools.solve.plan.exact_variety_views_step` instead (Theorem 1, delta = 4, view cliques, 5-8 views, 5-12
+with collinear centres; no tight re-solve: its numerical failures are the formulation's, not the tolerances').
 """
 from __future__ import annotations
 
@@ -39,10 +39,10 @@ def exact_variety_stage(ctx: PointContext) -> None:
         return
     n_vars = 2 * ctx.N + sum(r.n_aux for r in ctx.regions)
     step = exact_variety_step(ctx.opts, ctx.N, n_vars, ctx.steps)
-    why = futile_after(ctx.cams, ctx.regions, ctx.steps, best) or collinear_centres(ctx.cams) \
-        if step is None else None
-    if why is not None:
-        step = exact_variety_views_step(ctx.opts, ctx.N, n_vars)        # coplanar or collinear centres, 5-8 views
+    collinear = collinear_centres(ctx.cams) if step is None else None
+    why = futile_after(ctx.cams, ctx.regions, ctx.steps, best) or collinear if step is None else None
+    if why is not None:                                                 # coplanar (5-8 views) or collinear (5-12)
+        step = exact_variety_views_step(ctx.opts, ctx.N, n_vars, collinear=collinear is not None)
     if step is None:
         return
     res = run_step(ctx, step)

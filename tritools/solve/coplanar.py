@@ -68,7 +68,8 @@ from .plan import exact_variety_applies
 __all__ = ["centre_plane", "plane_lines", "spurious_cost", "corollary1_futile", "COPLANAR_RTOL", "SITS_RTOL",
            "GAP_RTOL", "FUTILE_MESSAGE", "futile_after", "subset_futile", "plane_distances2", "sits_on_ceiling",
            "COPLANAR_MAX_CEILING", "hopeless_subset", "CEILING_MIN_VIEWS", "COPLANAR_BUDGET_NAME",
-           "pencil_ceiling", "plane_lines_raw", "PENCIL_SAMPLES", "collinear_centres"]
+           "pencil_ceiling", "plane_lines_raw", "PENCIL_SAMPLES", "collinear_centres",
+           "nearly_collinear_centres", "NEAR_COLLINEAR_RTOL"]
 
 #: centres are coplanar when the smallest singular value of the centred centres is at most this times the largest.
 #: Not exact on purpose: the rule also needs the bound to sit on s_pi of the fitted plane, which a configuration far
@@ -79,6 +80,10 @@ COPLANAR_RTOL = 1e-6
 SITS_RTOL = 1e-3
 #: ... and escalating is futile when s_pi is at most (1 - GAP_RTOL) times the upper bound
 GAP_RTOL = 1e-3
+#: centres are nearly collinear (:func:`nearly_collinear_centres`, the exact-variety views step's trigger) when the
+#: second singular value of the centred distinct centres is at most this times the first (a drive of 8 frames 0.5 m
+#: apart with 1 mm jitter: ~1e-3, where verification certifies; 0.1 mm: ~1e-4, where Corollary 1 stalls)
+NEAR_COLLINEAR_RTOL = 1e-3
 #: angles of the grid on which :func:`pencil_ceiling` looks for the best plane through collinear centres
 PENCIL_SAMPLES = 360
 #: the robust search stops (:meth:`tritools.solve.robust_bounds.SubsetBounds.node_budget`) once this many subsets of
@@ -95,9 +100,8 @@ FUTILE_MESSAGE = ("{kind} camera centres: Corollary 1's bound sits on the spurio
                   "(s_pi = {s:.6g} px^2 < f_ub = {ub:.6g} px^2), higher degrees cannot certify")
 
 
-def _centre_spread(cameras: np.ndarray):
-    """(C (N, 3) finite centres, their mean, singular values and V^T of C - mean) when there are at least three, all
-    finite and pairwise distinct (no two within 1e-9 of the spread); None otherwise."""
+def _finite_centres(cameras: np.ndarray) -> np.ndarray | None:
+    """(N, 3) centres of at least three cameras, all finite (None otherwise)."""
     cams = np.asarray(cameras, float)
     if cams.ndim != 3 or cams.shape[0] < 3:
         return None
@@ -106,7 +110,15 @@ def _centre_spread(cameras: np.ndarray):
     scale = np.max(np.abs(a[:, :3]), axis=1)
     if not np.all(np.isfinite(a)) or np.any(np.abs(w) <= 1e-12 * np.maximum(scale, 1e-300)):
         return None                                         # a centre at (or near) infinity
-    C = a[:, :3] / w[:, None]
+    return a[:, :3] / w[:, None]
+
+
+def _centre_spread(cameras: np.ndarray):
+    """(C (N, 3) finite centres, their mean, singular values and V^T of C - mean) when there are at least three, all
+    finite and pairwise distinct (no two within 1e-9 of the spread); None otherwise."""
+    C = _finite_centres(cameras)
+    if C is None:
+        return None
     mean = C.mean(axis=0)
     _, s, Vt = np.linalg.svd(C - mean, full_matrices=False)
     if s[0] == 0.0:
@@ -139,6 +151,27 @@ def collinear_centres(cameras: np.ndarray) -> str | None:
     points of 3-7 views certified); the exact-variety steps apply as for coplanar centres."""
     spread = _centre_spread(cameras)
     if spread is None or spread[2][1] > COPLANAR_RTOL * spread[2][0]:
+        return None
+    return "collinear camera centres: Corollary 1's bound is capped by the planes through their line"
+
+
+def nearly_collinear_centres(cameras: np.ndarray) -> str | None:
+    """A reason when the cameras' distinct centres -- at least three, finite; coinciding ones (within 1e-9 of the
+    spread: a pure rotation between two frames) counted once -- lie on one line within
+    :data:`NEAR_COLLINEAR_RTOL` (the second singular value of the centred centres over the first): the trigger of
+    Theorem 1's view-clique step (:mod:`tritools.solve.stages.exact`), which runs only where the plan did not
+    certify.  Near the line Corollary 1's variety is close to holding the pencil's component and its bound stalls
+    near its ceiling too (review 31a: drives with 0.1 mm jitter, 0 of 8 points of 8-12 views certified)."""
+    C = _finite_centres(cameras)
+    if C is None:
+        return None
+    span = float(np.max(np.ptp(C, axis=0)))
+    distinct = [c for k, c in enumerate(C) if not any(np.linalg.norm(c - d) <= 1e-9 * span for d in C[:k])]
+    if len(distinct) < 3 or span == 0.0:
+        return None
+    D = np.array(distinct)
+    sv = np.linalg.svd(D - D.mean(axis=0), compute_uv=False)
+    if sv[1] > NEAR_COLLINEAR_RTOL * sv[0]:
         return None
     return "collinear camera centres: Corollary 1's bound is capped by the planes through their line"
 

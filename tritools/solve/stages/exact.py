@@ -15,14 +15,14 @@ with the larger of the two lower bounds.  The attempt is recorded like any other
 
 Beyond the dense step's reach, a point whose Corollary 1 plan stopped at the ceiling of coplanar centres
 (:func:`tritools.solve.coplanar.futile_after`: its bound equals the cost of the centres' plane component), or whose
-centres are collinear (:func:`tritools.solve.coplanar.collinear_centres`: a pencil of such planes), gets
-:func:`tritools.solve.plan.exact_variety_views_step` instead (Theorem 1, delta = 4, view cliques, 5-8 views, 5-12
-with collinear centres; no tight re-solve: its numerical failures are the formulation's, not the tolerances').
+centres are (nearly) collinear (:func:`tritools.solve.coplanar.nearly_collinear_centres`: a pencil of such planes),
+gets :func:`tritools.solve.plan.exact_variety_views_step` instead (Theorem 1, delta = 4, view cliques, 5-8 views,
+5-12 with collinear centres; no tight re-solve: its numerical failures are the formulation's, not the tolerances').
 """
 from __future__ import annotations
 
 from ...result import Status
-from ..coplanar import collinear_centres, futile_after
+from ..coplanar import futile_after, nearly_collinear_centres
 from ..plan import exact_variety_step, exact_variety_views_step
 from .context import PointContext
 from .outcome import better, join, replace
@@ -39,7 +39,7 @@ def exact_variety_stage(ctx: PointContext) -> None:
         return
     n_vars = 2 * ctx.N + sum(r.n_aux for r in ctx.regions)
     step = exact_variety_step(ctx.opts, ctx.N, n_vars, ctx.steps)
-    collinear = collinear_centres(ctx.cams) if step is None else None
+    collinear = nearly_collinear_centres(ctx.cams) if step is None else None
     why = futile_after(ctx.cams, ctx.regions, ctx.steps, best) or collinear if step is None else None
     if why is not None:                                                 # coplanar (5-8 views) or collinear (5-12)
         step = exact_variety_views_step(ctx.opts, ctx.N, n_vars, collinear=collinear is not None)

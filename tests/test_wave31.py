@@ -164,3 +164,49 @@ def test_nearly_straight_drives_are_certified(N, seed):
     assert r.optimal and r.method == "theorem1", (r.status, r.message)
     ref = _lm_reference(cams, x, _starts(X, r, seed))
     assert r.gamma_lb <= ref * (1 + 1e-9) and r.gamma_ub == pytest.approx(ref, rel=1e-8)
+
+
+def test_discs_too_small_for_floats_fail_alone():
+    """Review 31b F2: a disc whose D^-1 overflows is `failed` and the others of its batch get the answers they
+    get alone (the CLI case below ended "error: q, A, b must be finite": the stacked solver refuses a non-finite
+    stack as a whole)."""
+    from tritools.uncertain.discs import uncertainty_discs
+
+    cams, x, X = _drive(4, 5, 0.05)
+    C = np.stack([cams, cams, cams])
+    xs = np.stack([x, x, x])
+    radii = np.array([[1.0] * 4, [1e-160] * 4, [1.0] * 4])
+    alone = uncertainty_discs(C[:1], xs[:1], radii[:1], np.stack([X]))[0]
+    res = uncertainty_discs(C, xs, radii, np.stack([X, X, X]))
+    assert [r.status.value for r in res] == [alone.status.value, "failed", alone.status.value]
+    assert alone.status.value == "bounded"
+    assert np.allclose(res[0].lo, alone.lo, rtol=1e-9, atol=1e-12) and np.allclose(res[2].hi, alone.hi, rtol=1e-9)
+
+
+def test_cli_tiny_keypoint_radius_is_a_status_not_an_error(tmp_path, capsys):
+    """Review 31b F2: `--keypoint-radius 1e-160` exited 2 with an internal message naming no flag; like 1e-300 and
+    1e200 it now writes the model with `failed` uncertainty rows."""
+    from tritools.cli.app import main
+    from tritools.io.colmap import write_model_arrays
+    from tritools.sfm.synthetic import synthetic_arrays
+
+    a, _ = synthetic_arrays(n_points=20, n_images=5, camera="PINHOLE", seed=4)
+    write_model_arrays(a, tmp_path / "in", "bin")
+    code = main(["colmap", str(tmp_path / "in"), str(tmp_path / "out"), "--max-delta", "2",
+                 "--keypoint-radius", "1e-160"])
+    assert code == 0, capsys.readouterr().err
+    rows = [ln.split() for ln in (tmp_path / "out" / "points3D_uncertainty.txt").read_text().splitlines()
+            if not ln.startswith("#")]
+    assert len(rows) == 20 and {r[4] for r in rows} == {"failed"}
+
+
+@pytest.mark.parametrize("radius", [1e-160, 1e160, 1e-300])
+def test_circle_names_the_radius(radius):
+    """Review 31b F6: `Ellipse.circle(c, 1e160)` blamed `D` (and numpy warned of an overflow)."""
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        for cls in (tritools.Ellipse, tritools.EllipseBorder):
+            with pytest.raises(ValueError, match="^radius"):
+                cls.circle([0.0, 0.0], radius)

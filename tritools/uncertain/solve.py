@@ -78,7 +78,25 @@ def _box_rows(M):
 
 
 def _run(rows, q, layout, boxed, options):
-    """Solve the blocks (M*K) for rows (M, m, 4) and unit objectives q (M, K, 3)."""
+    """Solve the blocks (M*K) for rows (M, m, 4) and unit objectives q (M, K, 3).  A problem whose rows or
+    objectives are not finite (a disc whose D^-1 overflows: radius 1e-160, review 31b F2) gets FAILED blocks and
+    NaN points, and the others are solved (the stacked solver refuses a non-finite stack as a whole)."""
+    finite = np.all(np.isfinite(rows), axis=(1, 2)) & np.all(np.isfinite(q), axis=(1, 2))
+    if np.all(finite):
+        return _run_finite(rows, q, layout, boxed, options)
+    M, K = q.shape[:2]
+    m = rows.shape[1] + (6 if boxed else 0)
+    status = np.full((M, K), BlockStatus.FAILED, dtype=np.asarray(BlockStatus.FAILED).dtype)
+    eta, z, zbox, solves = np.full((M, K, 3), np.nan), np.full((M, K, m - (6 if boxed else 0)), np.nan), \
+        np.full((M, K, 6), np.nan), 0
+    if np.any(finite):
+        status[finite], eta[finite], z[finite], zbox[finite], solves = \
+            _run_finite(rows[finite], q[finite], layout, boxed, options)
+    return status, eta, z, zbox, solves
+
+
+def _run_finite(rows, q, layout, boxed, options):
+    """:func:`_run` on finite data."""
     M, K = q.shape[:2]
     n0, n1, n2 = layout
     if boxed:

@@ -185,6 +185,20 @@ def _inv_or_nan(d: np.ndarray) -> np.ndarray:
         return np.full((2, 2), np.nan)
 
 
+def disc_matrix(radius) -> np.ndarray:
+    """``D = radius^2 I`` of a disc, refused by the name ``radius`` (a FieldError) where ``radius`` is not a
+    finite positive number or where radius^2 or its inverse leaves the floats (below ~1e-154, above ~1e154;
+    review 31b F6: the error named ``D``, with a numpy overflow warning)."""
+    r = positive_number(radius, "radius")
+    with np.errstate(over="ignore", under="ignore", divide="ignore"):
+        r2 = r * r
+        ok = r2 >= np.finfo(float).tiny and math.isfinite(r2) and math.isfinite(1.0 / r2)
+    if not ok:
+        raise FieldError("radius", f"must have radius^2 and its inverse finite and non-zero in floating point "
+                                   f"(about 1e-154 .. 1e154), got {r!r}")
+    return r2 * np.eye(2)
+
+
 @dataclass(frozen=True, eq=False)
 class EllipseBorder(Region):
     """Case IV: ``R = {y : (y - x^)' D^-1 (y - x^) = 1}``, ``D`` symmetric positive
@@ -256,8 +270,7 @@ class EllipseBorder(Region):
     @classmethod
     def circle(cls, center, radius) -> EllipseBorder:
         """The circle of radius ``radius`` (``D = radius^2 I``)."""
-        r = positive_number(radius, "radius")
-        return cls(center, r * r * np.eye(2))
+        return cls(center, disc_matrix(radius))
 
     @property
     def semi_axes(self) -> np.ndarray:

@@ -511,8 +511,8 @@ class TlsSearch(NodeBounds):
             self.offer_new()
         if not self.meets(self.loo_lb) and robust_suspects.ENABLED and robust_bounds.PACKING:
             self.loo_lb = max(self.loo_lb, (yield from robust_suspects.cover_bound(self)))   # many wrong matches
-        lb, stopped = max(self.root_bound() if self.bounds.known(frozenset(range(self.N))) else 0.0,
-                          self.loo_lb), None
+        full = frozenset(range(self.N))                 # (review 31a F4: a stop by the rule reported lb = 0)
+        lb, stopped = max(self.root_bound() if self.bounds.known(full) else 0.0, self.loo_lb), None
         cells = None if self.meets(lb) else robust_cells.search_bound(self)    # point regions (robust_cells)
         # the cells' bound comes from compensated frames (robust_cells.frame): a certificate resting on it is not
         # judged by the search's own plain-arithmetic value (robust_report.search_drift)
@@ -520,8 +520,8 @@ class TlsSearch(NodeBounds):
         lb = lb if cells is None else max(lb, cells.lb)
         # where the cells could not close, the inlier-set search gets a short budget (it closes small cases they miss)
         self.max_nodes = robust_cells.fallback_nodes(self.N) if cells is not None and cells.exhausted else MAX_NODES
-        if not self.meets(lb) and robust_futile.blocks(self):
-            stopped = robust_futile.FUTILE          # lb (root / leave-one-out) stays valid
+        if not self.meets(lb) and robust_futile.blocks(self):     # lb stays valid; the rule may have raised L2LB(V)
+            stopped, lb = robust_futile.FUTILE, max(lb, self.root_bound() if self.bounds.known(full) else 0.0)
         elif not self.meets(lb):
             order = branching_order(self.residuals(self.best_X) / self.c)
             yield from self.anchor_bounds(order)

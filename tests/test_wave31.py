@@ -243,3 +243,41 @@ def test_a_tls_search_stopped_out_of_reach_keeps_its_root_bound(kw):
     assert r.status == "not_certified" and plain.status == "not_certified" and r.inliers.all()
     assert r.gamma_lb == pytest.approx(plain.gamma_lb, rel=1e-6) and r.gamma_lb > 0.78
     assert r.gamma_ub == pytest.approx(plain.gamma_ub, rel=1e-9)
+
+
+# review 31b's s/f_3view_outlier_disc_slow.py, track 100: three views, one keypoint ~80 px off, 1-px discs
+F3_CAMS = np.array([[[578.4266730017997, -44.75099185040737, 637.0399773079189, 1920.0],
+                     [-154.06195355526373, 758.5752727571873, 313.7331191125578, 1439.9999999999998],
+                     [-0.4364512203661042, -0.13984684953252302, 0.888793109174889, 5.999999999999999]],
+                    [[496.5471203602523, -155.52300242613035, 686.770378640709, 1920.0],
+                     [-342.1507033978832, 582.5206213560748, 491.1238355641745, 1440.0000000000005],
+                     [-0.4995750643311518, -0.4860093825816574, 0.7170910926382518, 6.0]],
+                    [[697.2967952664163, 161.0326206997877, 479.8392172194182, 1919.9999999999995],
+                     [52.046498063795255, 812.0979022684461, -188.11740794111822, 1439.9999999999995],
+                     [-0.23042915863683486, 0.5032269396868366, 0.8328655653965658, 5.999999999999998]]])
+F3_XS = np.array([[359.1756955907798, 169.24813916802782], [345.1277979995463, 147.6356188645131],
+                  [530.6964048062462, 317.49453109087585]])
+
+
+def test_robust_batches_of_regions_run_no_dense_degree4_l2_pass(monkeypatch):
+    """Review 31b F3: a robust batch of uncertain keypoints first solved each track's L2 problem with the full
+    plan -- a dense degree-4 program (~6-30 s) for a 3-view disc track with a wrong match, whose L2 result cannot
+    settle the TLS problem -- then searched anyway (2.2 s per such track in a batch, 0.15 s alone).  The L2 pass now
+    stops at degree 2; the batch's results equal the single calls'."""
+    from tritools.solve.stages import sdp
+
+    steps = []
+    real = sdp.run_step
+
+    def spy(ctx, step, *a, **k):
+        steps.append((step.method, step.delta, step.formulation))
+        return real(ctx, step, *a, **k)
+
+    monkeypatch.setattr(sdp, "run_step", spy)
+    regions = [tritools.Ellipse.circle(x, 1.0) for x in F3_XS]
+    clean = [tritools.Ellipse.circle(x, 1.0) for x in _forward(3, 0)[1]]
+    batch = tritools.triangulate_many([(F3_CAMS, regions), (_forward(3, 0)[0], clean)], robust=5.0)
+    assert not [s for s in steps if s[1] >= 4], steps
+    single = tritools.triangulate(F3_CAMS, regions, robust=5.0)
+    assert batch[0].optimal and single.optimal and list(batch[0].inliers) == list(single.inliers) == [1, 1, 0]
+    assert batch[0].gamma_ub == pytest.approx(single.gamma_ub, rel=1e-9) and batch[1].optimal

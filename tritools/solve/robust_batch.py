@@ -15,9 +15,10 @@
    are checked in one :func:`tritools.model.cameras.camera_problems` call per view count (a problem that fails
    it takes the per-problem path below, whose :func:`tritools.model.cameras.validate_cameras` names the error).
 2. Other problems (and point problems whose thresholds are all infinite) first go through the batched L2 path
-   (:func:`tritools.solve.batch.solve_point_problems`).  A result certified with every residual below its
-   threshold and 2N gamma_UB^2 <= min_i c_i^2 is certified for TLS by that certificate alone: any inlier set
-   other than all views pays at least min_i c_i^2 >= f_TLS(X), so f_TLS* = L2*.  It is returned as it is, every
+   (:func:`tritools.solve.batch.solve_point_problems`; the default plan to degree 2 only, :func:`_first_pass`).
+   A result certified with every residual below its threshold and 2N gamma_UB^2 <= min_i c_i^2 is certified for
+   TLS by that certificate alone: any inlier set other than all views pays at least min_i c_i^2 >= f_TLS(X), so
+   f_TLS* = L2*.  It is returned as it is, every
    view an inlier; every other problem gets the branch and bound, in chunks as in 1.
 3. A failing item becomes a result with a status (INVALID_INPUT / SOLVER_FAILED), never stopping the batch.
    ``timings["batch_share"]``: a problem's even share of its chunk's time.
@@ -35,6 +36,7 @@ from ..result import Attempt, Status, TriangulationResult
 from .call_limit import (call_limit, current_end, expired, expired_points, mark_cut, reserve_for, reserving,
                          within)
 from .fastpath_cameras import validated_problem
+from .options import MethodChoice
 from .robust import robust_thresholds, triangulate_robust
 from .robust_report import tls_reported_stack
 
@@ -212,11 +214,22 @@ def _robust_many(problems: list, robust, opts, executor, progress) -> list[Trian
             points[i] = pp
     pending = direct
     if l2_first:
-        first = solve_point_problems([problems[i] for i in l2_first], opts, executor=executor,
+        first = solve_point_problems([problems[i] for i in l2_first], _first_pass(opts), executor=executor,
                                      progress=progress).record()
         pending = pending + _after_l2(problems, thresholds, opts, l2_first, first, out)
     _drive_chunks(problems, thresholds, opts, sorted(pending), out, points)
     return out
+
+
+def _first_pass(opts):
+    """The options of (2)'s L2 pass: the default plan stops at degree 2 (verification, the batched degree-2 SDP);
+    a problem it does not settle gets the branch and bound, whose sub-problems take the full plan where the search
+    needs them, as a single call's do.  The full plan here ran a dense degree-4 program (~6 s) on every 3-view disc
+    track with a wrong match, whose L2 result cannot settle it (review 31b F3: 2.2 s per track in a batch, 0.15 s
+    alone).  Explicit methods and degrees are the caller's and kept."""
+    if opts.method == MethodChoice.AUTO and opts.delta is None and opts.max_delta is None:
+        return opts.replace(max_delta=2)
+    return opts
 
 
 def _after_l2(problems, thresholds, opts, idx, first, out) -> list:

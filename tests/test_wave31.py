@@ -281,3 +281,25 @@ def test_robust_batches_of_regions_run_no_dense_degree4_l2_pass(monkeypatch):
     single = tritools.triangulate(F3_CAMS, regions, robust=5.0)
     assert batch[0].optimal and single.optimal and list(batch[0].inliers) == list(single.inliers) == [1, 1, 0]
     assert batch[0].gamma_ub == pytest.approx(single.gamma_ub, rel=1e-9) and batch[1].optimal
+
+
+def test_every_radii_file_error_has_one_form(tmp_path, capsys):
+    """Review 31b F7: some radii-file errors read `--keypoint-radii: FILE:2: ...`, others `FILE:1: unknown
+    IMAGE_ID 999` (no flag), and an undecodable file `--keypoint-radii: 'utf-8' codec can't decode ...` (no file).
+    Every one now names the flag and the file (with its line where there is one)."""
+    from tests.cli_util import run
+    from tritools.io.colmap import write_model_arrays
+    from tritools.sfm.synthetic import synthetic_arrays
+
+    a, _ = synthetic_arrays(n_points=20, n_images=5, camera="PINHOLE", seed=4)
+    write_model_arrays(a, tmp_path / "in", "bin")
+    bad = tmp_path / "radii.txt"
+    img = int(a.image_ids[0])
+    cases = [(b"1 x 2\n", ":1: expected"), (b"1 0 -1\n", ":1: RADIUS"), (b"99999 0 1.0\n", ":1: unknown IMAGE_ID"),
+             (f"{img} 0 1\n{img} 0 2\n".encode(), ":2: image"), (f"{img} 99999 1\n".encode(), ":1: image"),
+             (b"\xff\xfe1 0 1\n", ": not UTF-8 text"), (f"{img} 0 1\n".encode(), ": no radius for point3D")]
+    for content, what in cases:
+        bad.write_bytes(content)
+        rc, _, err = run(["colmap", tmp_path / "in", tmp_path / "out", "--keypoint-radii", bad], capsys)
+        assert rc == 2 and err.count("\n") == 1 and f"--keypoint-radii: {bad}{what}" in err, (content, err)
+        assert not (tmp_path / "out").exists()

@@ -141,7 +141,11 @@ def _usable(arrays: ModelArrays, geom: ModelGeometry):
 def _parse_radii(path) -> list:
     """[(file:line, image_id, point2D_idx, radius, text)] of a radii file (syntax and radius > 0 checked)."""
     out = []
-    for n, line in enumerate(Path(path).read_text(encoding="utf-8-sig").splitlines(), 1):
+    try:
+        text = Path(path).read_text(encoding="utf-8-sig")
+    except UnicodeDecodeError as exc:                   # (review 31b F7: the message named no file)
+        raise ValueError(f"{path}: not UTF-8 text (byte {exc.start}: {exc.reason})") from None
+    for n, line in enumerate(text.splitlines(), 1):
         t = line.split("#", 1)[0].split()
         if not t:
             continue
@@ -161,19 +165,22 @@ def _parse_radii(path) -> list:
 def read_keypoint_radii(path, arrays: ModelArrays, default: float | None) -> np.ndarray:
     """Radius (pixels) of every keypoint row of ``arrays`` from a text file of lines
     ``IMAGE_ID POINT2D_IDX RADIUS`` (``#`` comments); unlisted keypoints get ``default`` (NaN if None).
-    ValueError naming ``file:line`` for a malformed line, an unknown keypoint or a radius <= 0."""
+    ValueError naming ``file:line`` for a malformed line or a radius <= 0 (the options' check, where it becomes an
+    :class:`OptionError` of ``keypoint_radii``), an OptionError of ``keypoint_radii`` naming ``file:line`` for an
+    unknown keypoint: one form of message for every error of the file (review 31b F7)."""
     out = np.full(len(arrays.kp_xy), np.nan if default is None else float(default))
     index = {int(i): k for k, i in enumerate(arrays.image_ids.tolist())}
     first: dict = {}
     for where, img, idx, r in _parse_radii(path):
         if img not in index:
-            raise ValueError(f"{where}: unknown IMAGE_ID {img}")
+            raise OptionError("keypoint_radii", f"{where}: unknown IMAGE_ID {img}")
         v = index[img]
         if not 0 <= idx < arrays.kp_offsets[v + 1] - arrays.kp_offsets[v]:
-            raise ValueError(f"{where}: image {img} has no keypoint {idx}")
+            raise OptionError("keypoint_radii", f"{where}: image {img} has no keypoint {idx}")
         row = int(arrays.kp_offsets[v] + idx)
         if row in first:            # (the last one won, silently: review 27a)
-            raise ValueError(f"{where}: image {img} keypoint {idx} listed again (first at {first[row]})")
+            raise OptionError("keypoint_radii",
+                              f"{where}: image {img} keypoint {idx} listed again (first at {first[row]})")
         first[row] = where
         out[row] = r
     return out
@@ -207,8 +214,9 @@ def point_quality(arrays: ModelArrays, geom: ModelGeometry, options: QualityOpti
         radii = float(options.keypoint_radius) if kp_r is None else kp_r[gk[rows]]
         if kp_r is not None and np.any(np.isnan(radii)):
             j = np.argwhere(np.isnan(radii))[0]
-            raise ValueError(f"{options.keypoint_radii}: no radius for point3D {int(arrays.point_ids[pts[j[0]]])}'s "
-                             f"observation {int(j[1])} and no default (--keypoint-radius)")
+            raise OptionError("keypoint_radii", f"{options.keypoint_radii}: no radius for point3D "
+                              f"{int(arrays.point_ids[pts[j[0]]])}'s observation {int(j[1])} and no default "
+                              "(keypoint_radius, --keypoint-radius)")
         res = uncertainty_discs(geom.P[img[rows]], geom.xy_u[gk[rows]], radii, X,
                                 UncertaintyOptions(depth_bounds=bool(options.exact_depths)))
         for j, r in zip(pts, res):

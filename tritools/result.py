@@ -197,7 +197,8 @@ class TriangulationResult:
     optimal : bool, optional
         Whether ``gamma_lb`` certifies ``X`` (``None`` when no certificate exists).
     delta : int, optional
-        Relaxation degree of the certificate (or of the last degree tried).
+        Relaxation degree of the certificate; without one, of the step whose lower bound is reported (every
+        degree tried is in ``attempts``).
     n_lmivar : int, optional
         Number of independent scalar LMI variables (SPEC §8).
     image_points : ndarray, shape (N, 2), optional

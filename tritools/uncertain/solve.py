@@ -62,7 +62,8 @@ def _problem_rows(R, blocks, X0, sigma):
     shift = (shift + rows[:, :, 3]).astype(float)          # extended precision: georeferenced X0 cancel here
     eta_rows = np.concatenate([rows[:, :, :3] * sigma[:, None, None], shift[:, :, None]], axis=2)
     n0, n1, n2 = cone_layout(blocks)
-    norms = np.linalg.norm(eta_rows, axis=2)
+    with np.errstate(over="ignore", invalid="ignore"):                  # a disc too small for floats: FAILED
+        norms = np.linalg.norm(eta_rows, axis=2)
     scale = 1.0 / np.where(norms > 0, norms, 1.0)
     if n2:
         soc = norms[:, n0 + n1:].reshape(len(R), n2, 3).max(axis=2)

@@ -69,7 +69,7 @@ __all__ = ["centre_plane", "plane_lines", "spurious_cost", "corollary1_futile", 
            "GAP_RTOL", "FUTILE_MESSAGE", "futile_after", "subset_futile", "plane_distances2", "sits_on_ceiling",
            "COPLANAR_MAX_CEILING", "hopeless_subset", "CEILING_MIN_VIEWS", "COPLANAR_BUDGET_NAME",
            "pencil_ceiling", "plane_lines_raw", "PENCIL_SAMPLES", "collinear_centres",
-           "nearly_collinear_centres", "NEAR_COLLINEAR_RTOL"]
+           "nearly_collinear_centres", "NEAR_COLLINEAR_RTOL", "COLLINEAR_MESSAGE"]
 
 #: centres are coplanar when the smallest singular value of the centred centres is at most this times the largest.
 #: Not exact on purpose: the rule also needs the bound to sit on s_pi of the fitted plane, which a configuration far
@@ -95,6 +95,8 @@ CEILING_MIN_VIEWS = 5
 #: the reason a robust search stopped at that budget (its result's message: "stopped by the ...")
 COPLANAR_BUDGET_NAME = ("ceiling of coplanar camera centres (Corollary 1's subset bounds cannot exceed the cost of the "
                         "centres' plane component)")
+#: the reason given for (nearly) collinear centres (:func:`collinear_centres`, :func:`nearly_collinear_centres`)
+COLLINEAR_MESSAGE = "collinear camera centres: Corollary 1's bound is capped by the planes through their line"
 #: the message of a point whose Corollary 1 steps were stopped by the futility rule
 FUTILE_MESSAGE = ("{kind} camera centres: Corollary 1's bound sits on the spurious epipolar component "
                   "(s_pi = {s:.6g} px^2 < f_ub = {ub:.6g} px^2), higher degrees cannot certify")
@@ -143,16 +145,19 @@ def centre_plane(cameras: np.ndarray) -> np.ndarray | None:
     return pi / np.linalg.norm(pi)
 
 
+def _collinear_spread(cameras: np.ndarray):
+    """:func:`_centre_spread` of centres on one line within :data:`COPLANAR_RTOL`; None otherwise."""
+    spread = _centre_spread(cameras)
+    return None if spread is None or spread[2][1] > COPLANAR_RTOL * spread[2][0] else spread
+
+
 def collinear_centres(cameras: np.ndarray) -> str | None:
-    """A reason when the cameras' centres -- at least three, finite, pairwise distinct -- lie on one line within
-    :data:`COPLANAR_RTOL` (a rectified rig, a sideways drive with fixed heading); None otherwise.  Every plane
+    """A reason (:data:`COLLINEAR_MESSAGE`) when the cameras' centres -- at least three, finite, pairwise distinct --
+    lie on one line within :data:`COPLANAR_RTOL` (a rectified rig, a straight drive); None otherwise.  Every plane
     through that line holds every centre, so Corollary 1's epipolar variety holds the component of each of them and
     its bound can stop at the residual across the baseline alone, at every degree (review 30a F4: 0 of 10 rectified
     points of 3-7 views certified); the exact-variety steps apply as for coplanar centres."""
-    spread = _centre_spread(cameras)
-    if spread is None or spread[2][1] > COPLANAR_RTOL * spread[2][0]:
-        return None
-    return "collinear camera centres: Corollary 1's bound is capped by the planes through their line"
+    return None if _collinear_spread(cameras) is None else COLLINEAR_MESSAGE
 
 
 def nearly_collinear_centres(cameras: np.ndarray) -> str | None:
@@ -166,14 +171,12 @@ def nearly_collinear_centres(cameras: np.ndarray) -> str | None:
     if C is None:
         return None
     span = float(np.max(np.ptp(C, axis=0)))
-    distinct = [c for k, c in enumerate(C) if not any(np.linalg.norm(c - d) <= 1e-9 * span for d in C[:k])]
-    if len(distinct) < 3 or span == 0.0:
+    near = np.triu(np.linalg.norm(C[:, None, :] - C[None, :, :], axis=-1) <= 1e-9 * span, 1)
+    D = C[~near.any(axis=0)]                                # each centre unless an earlier one coincides with it
+    if len(D) < 3 or span == 0.0:
         return None
-    D = np.array(distinct)
     sv = np.linalg.svd(D - D.mean(axis=0), compute_uv=False)
-    if sv[1] > NEAR_COLLINEAR_RTOL * sv[0]:
-        return None
-    return "collinear camera centres: Corollary 1's bound is capped by the planes through their line"
+    return None if sv[1] > NEAR_COLLINEAR_RTOL * sv[0] else COLLINEAR_MESSAGE
 
 
 def plane_lines_raw(cameras: np.ndarray, pi: np.ndarray) -> np.ndarray:
@@ -210,9 +213,10 @@ def pencil_ceiling(cameras: np.ndarray, points) -> float | None:
     all epipolar relations, so each s_pi(theta) -- the minimum found or not -- caps Corollary 1's bound at every
     degree ((C) for the pencil: the ceiling is an attained value, never a bound this module reports).  With
     pi(theta) = cos(theta) pi_1 + sin(theta) pi_2 the lines are l_i(theta) = cos(theta) a_i + sin(theta) b_i."""
-    if collinear_centres(cameras) is None:
+    spread = _collinear_spread(cameras)
+    if spread is None:
         return None
-    _, mean, _, Vt = _centre_spread(cameras)
+    _, mean, _, Vt = spread
     pis = [np.append(n, -n @ mean) for n in Vt[1:3]]
     ab = [plane_lines_raw(cameras, pi) for pi in pis]
     x = np.column_stack([np.asarray(points, float), np.ones(len(points))])
@@ -230,7 +234,7 @@ def pencil_ceiling(cameras: np.ndarray, points) -> float | None:
     vals = cost(grid)
     k = int(np.argmin(vals))
     h = np.pi / PENCIL_SAMPLES
-    for _ in range(40):                                                      # golden-free ternary refinement
+    for _ in range(40):                                      # a finer grid of 5 angles around the best, halved
         t = grid[k] + np.linspace(-h, h, 5)
         v = cost(t)
         j = int(np.argmin(v))

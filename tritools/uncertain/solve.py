@@ -86,10 +86,9 @@ def _run(rows, q, layout, boxed, options):
     if np.all(finite):
         return _run_finite(rows, q, layout, boxed, options)
     M, K = q.shape[:2]
-    m = rows.shape[1] + (6 if boxed else 0)
-    status = np.full((M, K), BlockStatus.FAILED, dtype=np.asarray(BlockStatus.FAILED).dtype)
-    eta, z, zbox, solves = np.full((M, K, 3), np.nan), np.full((M, K, m - (6 if boxed else 0)), np.nan), \
-        np.full((M, K, 6), np.nan), 0
+    status = np.full((M, K), BlockStatus.FAILED, dtype=int)        # (the stacked solver's statuses are ints)
+    eta, z, zbox = (np.full((M, K, n), np.nan) for n in (3, rows.shape[1], 6))
+    solves = 0
     if np.any(finite):
         status[finite], eta[finite], z[finite], zbox[finite], solves = \
             _run_finite(rows[finite], q[finite], layout, boxed, options)

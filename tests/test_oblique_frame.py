@@ -6,7 +6,7 @@ any relative perturbation of the camera.  The normalised frame is the caller's p
 entry, so a bound computed there held the caller's float problem only to |x_i| sec theta_i units of round-off, not
 |x_i|: the reviewer found float points whose exact (rational) cost lies below reported lower bounds -- 0.51 px under
 a certified TLS gamma_LB of 13.5 px, 3.3 px under a certified 654 px in a world moved by 5e7.  gamma_LB is now lowered
-by the obliquity too (:func:`tritools.model.normalize.magnitudes` with the cameras).
+by the obliquity too (:func:`tritools.model.magnitude.magnitudes` with the cameras).
 """
 from fractions import Fraction
 from pathlib import Path
@@ -84,7 +84,7 @@ def test_the_scalar_obliquity_is_the_vectorised_one_bit_for_bit():
     """:func:`obliquity_one` (one problem's magnitude) against :func:`obliquities`, over random cameras of every scale,
     points on and far off the axis, affine cameras and cameras whose centre is at infinity."""
     from tritools.model.cameras import power2_scale
-    from tritools.model.normalize import _obliquities_one
+    from tritools.model.magnitude import _obliquities_one
     from tritools.model.oblique import obliquity_one
 
     rng = np.random.default_rng(5)

@@ -50,7 +50,7 @@ def test_small_inlier_cost_under_a_large_threshold_is_certified(scene):
         assert f_lb <= ref * (1 + 1e-9) + 1e-9         # a valid bound (independent subset enumeration)
         assert f_ub >= ref * (1 - 1e-9)                # gamma_UB is attained: never below the optimum
         # the reported gap passes the report's own guard (not only the search's absolute part)
-        resolved = reported_resolution(x, np.full(3, C), DEFAULT_TOLERANCES)
+        resolved = reported_resolution(x, np.full(3, C), DEFAULT_TOLERANCES, P)
         assert guards_pass(r.gamma_lb, r.gamma_ub, 3, DEFAULT_TOLERANCES, resolved)
 
 

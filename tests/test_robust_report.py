@@ -348,9 +348,10 @@ def test_batch_l2_settles_tls_only_within_the_tls_guard():
                                        optimal=True, residuals=np.full(4, 1e-5))
     wide = np.full(4, 1.0)
     tight = np.array([0.0144, 1.0, 1.0, 1.0])
-    assert reported_resolution(centres, wide, tol) > 8e-6 > reported_resolution(centres, tight, tol)
-    assert _l2_suffices(res, wide, centres, tol)
-    assert not _l2_suffices(res, tight, centres, tol)
+    cams = np.array([[[1e3, 0.0, 0.0, 0.0], [0.0, 1e3, 0.0, 0.0], [0.0, 0.0, 1.0, 10.0]]] * 4)   # f = 1000 px
+    assert reported_resolution(centres, wide, tol, cams) > 8e-6 > reported_resolution(centres, tight, tol, cams)
+    assert _l2_suffices(res, wide, cams, centres, tol)
+    assert not _l2_suffices(res, tight, cams, centres, tol)
 
 
 @pytest.mark.parametrize("kw,err,words", [

@@ -35,8 +35,10 @@ the residuals -- but not when s could not be estimated (clipped to ``SCALE_BOUND
 unit-focal cameras gave c ~ 1e-10 for a 460 px residual, "certified" against gamma_LB = 0).  So a gap
 that passes only through the absolute part (not ``Tolerances.certified_relatively``) must also be at most
 ``resolution`` in gamma:
-``RESOLUTION_REL`` max(1, median |x|) pixels (sqrt(eps) of the coordinates' magnitude, the resolution of
-a least-squares optimum in floating point), stored in normalised units (times s).
+``RESOLUTION_REL`` max(f_px, median |x|) pixels (sqrt(eps) of the coordinates' magnitude, the resolution of
+a least-squares optimum in floating point), stored in normalised units (times s).  The floor f_px =
+``PIXEL_FLOOR_REL`` times the views' median focal length (:func:`pixel_floors`; 1 px at f = 1000 px) stands in
+for coordinates at 0 and keeps every decision invariant under a rescaling of the images.
 
 World side: X = X0 + d X' with X0 the DLT estimate and d the median distance to the camera centres
 (an affine change of the 3D frame leaves reprojections unchanged).  Cameras become
@@ -56,25 +58,23 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from sospoly import pow2_above
-
 from .exact import homogeneous_images
 from .cameras import power2_scale
+from .magnitude import (PIXEL_FLOOR_REL, RESOLUTION_REL, magnitudes, median_pixel_scales, origin_magnitudes,
+                        pixel_floors, resolutions, world_origin_magnitudes)
 from .geometry import COMMON_CENTRE_RTOL, POINT_AT_INFINITY_RTOL, point_from_image_points
-from .oblique import obliquities, obliquity_one
 from .stacked import (dlt_stack, median_rows, norms, null_vectors, pixel_scales, project_one, project_quiet,
                       project_stack, refine_point, refine_points_stack)
 
 __all__ = ["Normalization", "NormalizationStack", "normalization_for", "normalization_stack", "regions_offset",
            "unconstrained_reason", "data_magnitude", "resolutions", "magnitudes", "origin_magnitudes",
            "world_origin_magnitudes",
-           "RHO_FLOOR_REL", "RESOLUTION_REL", "DEPTH_FLOOR_REL",
+           "median_pixel_scales", "pixel_floors",
+           "RHO_FLOOR_REL", "RESOLUTION_REL", "PIXEL_FLOOR_REL", "DEPTH_FLOOR_REL",
            "SCALE_BOUNDS"]
 
 #: floor of the residual scale rho, relative to the median pixel scale (focal length) of the views.
 RHO_FLOOR_REL = 1e-5
-#: the resolution of the coordinates, relative to their magnitude (sqrt of the machine epsilon).
-RESOLUTION_REL = 1e-8
 #: floor of the world scale d, relative to max(1, |X0|) (the DLT point).
 DEPTH_FLOOR_REL = 1e-3
 #: the common image scale s is clipped to this range.
@@ -96,15 +96,20 @@ class Normalization:
     frame_terms: tuple | None = None
 
     @classmethod
-    def identity(cls, n_views: int, points=None) -> Normalization:
-        res = np.inf if points is None else float(resolutions(np.ones(1), np.asarray(points, float)[None])[0])
+    def identity(cls, n_views: int, points=None, cameras=None) -> Normalization:
+        """No change of frame; the resolution of ``points`` (N, 2) with the pixel floor of ``cameras`` (1 px
+        without them), none without points."""
+        floor = 1.0 if cameras is None or points is None else \
+            pixel_floors(np.asarray(cameras, float)[None], np.asarray(points, float)[None])
+        res = np.inf if points is None else float(resolutions(np.ones(1), np.asarray(points, float)[None],
+                                                              floor)[0])
         mag = None if points is None else float(magnitudes(np.asarray(points, float)[None])[0])
         return cls(1.0, np.zeros((n_views, 2)), np.zeros(3), 1.0, res, mag)
 
     @property
     def magnitude(self) -> float:
-        """max(1, max |x_i|) of the caller's points in pixels (the shifts are the points): the magnitude whose
-        round-off every distance carries (:func:`tritools.solve.decide.gamma_lower`)."""
+        """max |x_i| of the caller's points in pixels (the shifts are the points): the magnitude whose round-off every
+        distance carries (:func:`tritools.solve.decide.gamma_lower`, which floors it by the resolution's magnitude)."""
         if self.points_magnitude is not None:
             return self.points_magnitude
         return float(magnitudes(np.asarray(self.shifts, float)[None])[0])
@@ -183,7 +188,7 @@ class NormalizationStack:
 
     @property
     def magnitude(self) -> np.ndarray:
-        """(M,) max(1, max_i |x_i| sec theta_i) of each problem's points (the shifts), the obliquities from the
+        """(M,) max_i |x_i| sec theta_i of each problem's points (the shifts), the obliquities from the
         normalised cameras at their origin (:func:`magnitudes`), and at least the frame's origin magnitude
         (:func:`origin_magnitudes`): :attr:`Normalization.magnitude`."""
         return self.magnitudes_of(slice(None))
@@ -197,109 +202,9 @@ class NormalizationStack:
         return np.maximum(magnitudes(x, Cn, np.zeros(x.shape)), np.where(np.isnan(frame), 1.0, frame))
 
 
-def magnitudes(x: np.ndarray, C: np.ndarray | None = None, at: np.ndarray | None = None) -> np.ndarray:
-    """max(1, max_i |x_i| sec theta_i) over the finite coordinates of each problem's points x (M, N, 2), in pixels: a
-    bound of the magnitude whose round-off each distance d_i carries (:func:`tritools.solve.decide.gamma_lower`; the
-    resolution, by contrast, is of the median magnitude, review 12 F1).  With the cameras C (M, N, 3, 4) (at the
-    points ``at``, default x: the normalised cameras at 0, the obliquity being the frame's), sec theta_i is the
-    obliquity of view i's ray (:func:`tritools.model.oblique.obliquities`): the depth of a point on a ray with sec
-    theta = 1e8 (an observation 1e11 px off-axis at f = 1e3) moves by ~1e8 times the round-off of the cameras, its
-    projection with it, so a bound computed in a rounded frame held the caller's problem only to that (review 24a
-    F2/F3: certified TLS bounds 13.5 and 654 px where the float data attain 0.51 and 3.3 px next to such a ray).
-    Without C, sec theta = 1."""
-    a = np.abs(np.asarray(x, float))
-    a = np.where(np.isfinite(a), a, 0.0)
-    if not a.size:
-        return np.ones(len(x))
-    a = a.max(axis=2)
-    if C is not None:
-        at = np.where(np.isfinite(x), x, 0.0) if at is None else at
-        if len(a) == 1 and a.shape[1] <= SCALAR_MAX_VIEWS:     # one problem: the scalar twin, the same numbers
-            sec = np.array([_obliquities_one(np.asarray(C[0], float), at[0])])
-        else:
-            sec = obliquities(C, at)
-        with np.errstate(invalid="ignore", over="ignore"):
-            a = np.where(a > 0, a * sec, 0.0)
-    # an obliquity that overflows (a ray parallel to the image plane): the largest finite magnitude, which lowers
-    # gamma_LB to 0 (gamma_lower reads a non-finite magnitude as 1)
-    return np.minimum(np.maximum(1.0, a.max(axis=1)), np.finfo(float).max)
-
-
-def origin_magnitudes(Cn: np.ndarray, x: np.ndarray, o: np.ndarray, scale) -> np.ndarray:
-    """(M,) max_i K_i, in pixels, for normalised cameras Cn (M, N, 3, 4) at their origin (the normalisation's point
-    X0), the caller's points x (M, N, 2), the given frame's origin o (M, 3) in normalised coordinates and the image
-    scales (M,): K_i = (max_k |h_ik(o)| / s + 2 |x_i| |h_i3(o)|) / |h_i3(X0)| with |h(o)| <= |Cn| |(o, 1)| (sums of
-    absolute products), i.e. (|P_k o~| + |x_i| |P_3 o~|) / |P_3 X0~| of the cameras as given.  The cameras given to
-    the normalisation are the caller's up to one rounding of their last column (a georeferenced world re-centred,
-    :func:`tritools.model.frame.moved_cameras`, or the robust search's frame at the centres' mean): a relative error
-    u there moves the projection of a point near X0 by u K_i, which the frame's other roundings (u |x_i| sec theta_i,
-    :func:`magnitudes`) do not cover where the frame's origin is far from the point relative to its depth (review
-    25a F1: the cameras' spread 700 depths, L2 bounds certified 6.7e-11 px above the real optimum; F2: an optimum
-    1e-9 from a camera centre).  inf where a depth vanishes (gamma_LB then lowered to 0), NaN where not finite."""
-    oh = np.concatenate([np.abs(o), np.ones(o.shape[:-1] + (1,))], axis=-1)[:, None, None, :]
-    A = np.add.reduce(np.abs(Cn) * oh, axis=-1)                         # (M, N, 3): bounds of |h(o)|
-    den = np.abs(Cn[..., 2, 3])
-    ax = np.max(np.abs(np.where(np.isfinite(x), x, 0.0)), axis=-1, initial=0.0)
-    K = (np.maximum(A[..., 0], A[..., 1]) / np.asarray(scale, float)[:, None] + 2.0 * ax * A[..., 2]) / den
-    return np.minimum(np.max(K, axis=1, initial=0.0), np.finfo(float).max)
-
-
-def world_origin_magnitudes(C: np.ndarray, x: np.ndarray, X: np.ndarray, o: np.ndarray) -> np.ndarray:
-    """:func:`origin_magnitudes` from the caller's cameras C (M, N, 3, 4) for a frame at origin o (M, 3) (the
-    cameras moved there, their last column rounded once) and a point X (M, 3): max_i (max_k |P_k o~| + |x_i|
-    |P_3 o~|) / |P_3 X~|, the homogeneous images compensated (:func:`tritools.model.exact.homogeneous_images`)."""
-    ones = np.ones((len(X), 1))
-    with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
-        ho = np.abs(homogeneous_images(C, np.concatenate([o, ones], axis=1)))
-        hx = np.abs(homogeneous_images(C, np.concatenate([X, ones], axis=1))[..., 2])
-        ax = np.max(np.abs(np.where(np.isfinite(x), x, 0.0)), axis=-1, initial=0.0)
-        K = (np.maximum(ho[..., 0], ho[..., 1]) + ax * ho[..., 2]) / hx
-        K = np.where(np.isnan(K), 1.0, K)
-    return np.minimum(np.max(K, axis=1, initial=0.0), np.finfo(float).max)
-
-
-#: :func:`magnitudes` of one problem takes the scalar obliquities up to this many views.
-SCALAR_MAX_VIEWS = 7
-
-
-def _obliquities_one(C: np.ndarray, at: np.ndarray) -> list:
-    """:func:`tritools.model.oblique.obliquities` of one problem (C (N, 3, 4), at (N, 2)) view by view
-    (:func:`~tritools.model.oblique.obliquity_one` on the cameras divided by the same powers of two)."""
-    out = []
-    for P, p in zip(C.tolist(), at.tolist()):
-        m = max(abs(v) for row in P for v in row)                 # power2_scale's power of two, on floats
-        k = pow2_above(m)
-        out.append(obliquity_one([[v / k for v in row] for row in P], p))
-    return out
-
-
-def resolutions(scale: np.ndarray, x: np.ndarray) -> np.ndarray:
-    """s RESOLUTION_REL max(1, median |x|) per problem (x (M, N, 2)): the coordinates' resolution in normalised
-    units (module docstring)."""
-    with np.errstate(all="ignore"):
-        mag = median_rows(np.abs(x.reshape(len(x), -1))) if x.size else np.ones(len(x))
-        out = np.asarray(scale, float) * RESOLUTION_REL * np.maximum(1.0, np.where(np.isfinite(mag), mag, 1.0))
-    return np.where(np.isfinite(out) & (out > 0), out, np.inf)
-
-
-def _nanmedian_rows(a: np.ndarray) -> np.ndarray:
-    """``numpy.nanmedian(a, axis=1)`` for a 2-D array (NaN for an all-NaN row), without its per-call overhead:
-    NaNs sort last, so the median of row m is the mean of its middle non-NaN entries."""
-    s = np.sort(a, axis=1)
-    k = np.sum(~np.isnan(a), axis=1)
-    if s.shape[1] == 0:
-        return np.full(len(a), np.nan)
-    rows = np.arange(len(a))
-    lo = s[rows, np.maximum((k - 1) // 2, 0)]
-    hi = s[rows, k // 2]                                             # k <= N, so k // 2 < N
-    return np.where(k > 0, (lo + hi) / 2, np.nan)
-
-
-def _rho_floor(C: np.ndarray, x: np.ndarray) -> np.ndarray:
-    """RHO_FLOOR_REL * median pixel scale per problem (fallback: 1e-4 max(1, median |x|) where no view has a
-    finite pixel scale)."""
-    ps = pixel_scales(C, x)
-    med = _nanmedian_rows(np.where(np.isfinite(ps) & (ps > 0), ps, np.nan))
+def _rho_floor(med: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """RHO_FLOOR_REL * median pixel scale per problem (``med``, :func:`median_pixel_scales`; fallback: 1e-4 max(1,
+    median |x|) where no view has a finite pixel scale)."""
     good = np.isfinite(med) & (med > 0)
     if good.all():                  # (the fallback would not be used)
         return RHO_FLOOR_REL * med
@@ -346,7 +251,8 @@ def _normalization_stack(C: np.ndarray, x: np.ndarray, ok: np.ndarray) -> Normal
     C = C / power2_scale(C, (2, 3))     # each camera by a power of two near its largest entry: exact, projectively
     X0, ok_dlt = dlt_stack(C, x)        # the same camera, and no product below overflows (cameras x 1e300)
     ok &= ok_dlt
-    rho_floor = _rho_floor(C, x)
+    med = median_pixel_scales(C, x)
+    rho_floor = _rho_floor(med, x)
     with np.errstate(over="ignore", invalid="ignore"):
         s, rho, X0, d, Cn = _frames(C, x, X0, ok, rho_floor)
     ok &= np.isfinite(Cn).all(axis=(1, 2, 3))
@@ -363,7 +269,7 @@ def _normalization_stack(C: np.ndarray, x: np.ndarray, ok: np.ndarray) -> Normal
     Cn[:, :, :2, :] *= (s_new / s)[:, None, None, None]
     Cn /= norms(Cn, axis=(2, 3))[..., None, None]
     return NormalizationStack(s_new, x.copy(), X0, d, Cn, np.where(use[:, None], Xn, 0.0), ok,
-                              resolutions(s_new, x), use & converged)
+                              resolutions(s_new, x, pixel_floors(medians=med)), use & converged)
 
 
 def _normalization_one(C: np.ndarray, x: np.ndarray, ok: np.ndarray) -> NormalizationStack | None:
@@ -387,7 +293,7 @@ def _normalization_one(C: np.ndarray, x: np.ndarray, ok: np.ndarray) -> Normaliz
         frame = _frame_one(P, xi, X0)
         if frame is None:
             return None
-        s, rho, rho_floor, d, Cn = frame
+        s, rho, rho_floor, d, Cn, med = frame
         Xn, ok_r, converged = refine_point(Cn, np.zeros((N, 2)), np.zeros(3), True)
         u, _, fin = project_one(Cn, Xn)
         r = math.sqrt(float(np.add.reduce(np.add.reduce(u * u, axis=1))) / N) / s if fin else math.nan
@@ -397,7 +303,8 @@ def _normalization_one(C: np.ndarray, x: np.ndarray, ok: np.ndarray) -> Normaliz
         Cn /= norms(Cn, axis=(1, 2))[:, None, None]
     s_arr = np.array([s_new])
     return NormalizationStack(s_arr, x.copy(), X0[None], np.array([d]), Cn[None], (Xn if use else np.zeros(3))[None],
-                              np.ones(1, bool), resolutions(s_arr, x), np.array([use and converged]))
+                              np.ones(1, bool), resolutions(s_arr, x, pixel_floors(medians=med)),
+                              np.array([use and converged]))
 
 
 def _median(values: list) -> float:
@@ -409,14 +316,15 @@ def _median(values: list) -> float:
 
 
 def _frame_one(P: np.ndarray, xi: np.ndarray, X0: np.ndarray) -> tuple | None:
-    """(s, rho, rho_floor, d, Cn) of :func:`_frames` and :func:`_rho_floor` for one problem (cameras P (N, 3, 4)
-    scaled by powers of two, points xi (N, 2), the DLT point X0), or None off the common path
-    (:func:`_normalization_one`)."""
+    """(s, rho, rho_floor, d, Cn, median pixel scale) of :func:`_frames`, :func:`_rho_floor` and
+    :func:`median_pixel_scales` for one problem (cameras P (N, 3, 4) scaled by powers of two, points xi (N, 2), the
+    DLT point X0), or None off the common path (:func:`_normalization_one`)."""
     N = len(xi)
     ps = [p for p in pixel_scales(P, xi).tolist() if 0.0 < p < math.inf]
     if not ps:
         return None
-    rho_floor = RHO_FLOOR_REL * _median(ps)
+    med = _median(ps)
+    rho_floor = RHO_FLOOR_REL * med
     u0, _, fin0 = project_one(P, X0)
     if not fin0 or not rho_floor > 0:
         return None
@@ -442,7 +350,7 @@ def _frame_one(P: np.ndarray, xi: np.ndarray, X0: np.ndarray) -> tuple | None:
     Cn /= norms(Cn, axis=(1, 2))[:, None, None]
     if not np.isfinite(Cn).all():
         return None
-    return s, rho, rho_floor, d, Cn
+    return s, rho, rho_floor, d, Cn, med
 
 
 def _clip_scale(s: np.ndarray) -> np.ndarray:
@@ -513,17 +421,20 @@ def normalization_for(cameras: np.ndarray, regions, enabled: bool = True) -> Nor
     centers = np.array([r.center for r in regions], float)
     if not enabled:
         mag = float(magnitudes(centers[None], np.asarray(cameras, float)[None])[0])
-        return dataclasses.replace(Normalization.identity(N, centers), points_magnitude=mag)
+        return dataclasses.replace(Normalization.identity(N, centers, cameras), points_magnitude=mag)
     st = normalization_stack(np.asarray(cameras, float)[None], centers[None])
     if st.ok[0]:
         norm = st.item(0)
     else:
-        norm = Normalization(1.0, centers, np.zeros(3), 1.0, float(resolutions(np.ones(1), centers[None])[0]),
+        floor = pixel_floors(np.asarray(cameras, float)[None], centers[None])
+        norm = Normalization(1.0, centers, np.zeros(3), 1.0, float(resolutions(np.ones(1), centers[None], floor)[0]),
                              float(magnitudes(centers[None], np.asarray(cameras, float)[None])[0]))
     offset = regions_offset(regions)
     if offset * norm.scale > 1.0:
         s = float(_clip_scale(np.array([1.0 / offset]))[0])
-        norm = dataclasses.replace(norm, scale=s, resolution=float(resolutions(np.array([s]), centers[None])[0]))
+        floor = pixel_floors(np.asarray(cameras, float)[None], centers[None])
+        norm = dataclasses.replace(norm, scale=s, resolution=float(resolutions(np.array([s]), centers[None],
+                                                                               floor)[0]))
     return norm
 
 

@@ -1,7 +1,7 @@
 """The obliquity of a view's ray (review 24a): sec theta, theta the angle between the ray through an image point and
 the camera's principal axis.  On a ray with sec theta = 1e8 a relative perturbation of the camera moves the depth of
 a point, and its projection, ~1e8 times more, so bounds computed in a rounded frame are lowered by it
-(:func:`tritools.model.normalize.magnitudes`, :func:`tritools.solve.decide.gamma_lower`).
+(:func:`tritools.model.magnitude.magnitudes`, :func:`tritools.solve.decide.gamma_lower`).
 """
 from __future__ import annotations
 
@@ -19,7 +19,7 @@ def obliquities(C: np.ndarray, x: np.ndarray) -> np.ndarray:
     x_i and the principal axis, sec theta = |m3| |M^-1 x~| (M = P[:, :3], m3 its third row; m3 . M^-1 x~ = 1), from
     M^-1 = [m2 x m3, m3 x m1, m1 x m2] / det M.  A relative perturbation of the camera moves the depth of a point on
     that ray by ~ sec theta times its own size, so the projection there by ~ |x_i| sec theta times it
-    (:func:`tritools.model.normalize.magnitudes`).  Invariant to the camera's scale, to image similarities (the point
+    (:func:`tritools.model.magnitude.magnitudes`).  Invariant to the camera's scale, to image similarities (the point
     moving with the image) and to world similarities (the ray and the axis are the camera's); 1 where it is NaN (an
     affine camera, m3 = 0: no depth), inf where the ray is parallel to the image plane or the numbers overflow."""
     C = np.asarray(C, float)

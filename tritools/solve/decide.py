@@ -115,9 +115,10 @@ def gamma_from_c(c, n_views, scale=1.0):
 
 def gamma_lower(gamma_lb, gamma_ub, scale, resolution, magnitude=None):
     """gamma_LB of the caller's float data from gamma_LB of the normalised data: lowered by
-    ``LB_ROUNDOFF_ULPS`` u (A + gamma_UB), A the coordinates' magnitude in pixels: ``magnitude`` = max(1, max_i
-    |x_i|) (:func:`tritools.model.normalize.magnitudes`) where given, at least max(1, median |x_i|) =
-    ``resolution / (scale RESOLUTION_REL)`` (:mod:`tritools.model.normalize`); never below 0.  The largest
+    ``LB_ROUNDOFF_ULPS`` u (A + gamma_UB), A the coordinates' magnitude in pixels: ``magnitude`` = max_i |x_i| sec
+    theta_i (:func:`tritools.model.magnitude.magnitudes`) where given, at least max(f_px, median |x_i|) =
+    ``resolution / (scale RESOLUTION_REL)`` (f_px the pixel floor, :func:`tritools.model.magnitude.pixel_floors`;
+    1 px where the resolution is not known); never below 0.  The largest
     coordinate, not the median: a minority of views 1e5..1e11 px off-axis among ~300 px ones moved the optimum by
     their own round-off, and a median-based lowering left gamma_LB up to 4.7x above an attained value (review 12 F1).
 

@@ -132,7 +132,7 @@ def settled_by_l2(res: TriangulationResult) -> TriangulationResult:
                                message=f"TLS: {n}/{n} inliers, 0 nodes, 1 L2 sub-problems", attempts=(attempt,))
 
 
-def _l2_suffices(res: TriangulationResult, c: np.ndarray, regions, tolerances) -> bool:
+def _l2_suffices(res: TriangulationResult, c: np.ndarray, cameras, regions, tolerances) -> bool:
     """Whether the certified L2 result settles the TLS problem: every residual below its threshold, f_L2 <= min c^2,
     and its gap within the TLS report's guard (:func:`tritools.solve.robust_report.guards_pass` on the coordinates'
     resolution capped by the thresholds' scale, as a single call's report checks it; review 12 F2: a 0.0144 px
@@ -145,7 +145,8 @@ def _l2_suffices(res: TriangulationResult, c: np.ndarray, regions, tolerances) -
     if not (np.all(res.residuals < c) and 2 * n * res.gamma_ub ** 2 <= np.min(c * c)):
         return False
     centres = np.array([r.center for r in as_regions(regions, n)], float)
-    return guards_pass(res.gamma_lb, res.gamma_ub, n, tolerances, reported_resolution(centres, c, tolerances))
+    return guards_pass(res.gamma_lb, res.gamma_ub, n, tolerances,
+                       reported_resolution(centres, c, tolerances, np.asarray(cameras, float)))
 
 
 #: problems searched together by :func:`tritools.solve.robust_drive.drive` (their sub-bounds batched per subset size);
@@ -242,7 +243,7 @@ def _after_l2(problems, thresholds, opts, idx, first, out) -> list:
         if res.status == Status.INVALID_INPUT or c is None:
             out[i] = dataclasses.replace(res, inliers=None if res.residuals is None
                                          else np.ones(len(res.residuals), bool))
-        elif _l2_suffices(res, c, problems[i][1], opts.tolerances):
+        elif _l2_suffices(res, c, *problems[i][:2], opts.tolerances):
             out[i] = settled_by_l2(res)
         elif not np.any(np.isfinite(c)):
             out[i] = triangulate_robust(*validated_problem(*problems[i]), c, opts)

@@ -62,7 +62,7 @@ class NodeBounds:
         (:func:`~tritools.solve.robust_report.reported_resolution`)."""
         if self._resolved is None:
             centres = self.x if self.points else np.array([r.center for r in self.regions])
-            self._resolved = reported_resolution(centres, self.c, self.tol)
+            self._resolved = reported_resolution(centres, self.c, self.tol, self.C)
         return self._resolved
 
     def leave_one_out_bound(self) -> float:

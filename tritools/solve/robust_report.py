@@ -13,7 +13,8 @@ here, in the caller's frame and units, by the L2 path's rules (:mod:`tritools.so
   origin's term, :func:`_magnitudes`), never above gamma_UB.
 * The certificate, decided by the search in c units on its scale S = min(c^2, rho^2), must also pass on these
   numbers the L2 path's guard: a gap that does not pass through the relative part of the rule must be within
-  the coordinates' resolution (``RESOLUTION_REL`` max(1, median |x_i|) pixels; thresholds far above the
+  the coordinates' resolution (``RESOLUTION_REL`` max(f_px, median |x_i|) pixels, f_px the cameras' pixel floor,
+  :func:`tritools.model.magnitude.pixel_floors`; thresholds far above the
   residuals make S = c^2 large, and without it a 250 px gap at 1e10 px coordinates certified).
   Until wave 26 gamma_LB was also lowered by the estimate's rounding spread
   (:func:`tritools.solve.report.rounding_spread`), and withdrawn (0, not certified) where that spread exceeded the
@@ -32,7 +33,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..model.cameras import power2_scale
-from ..model.normalize import RESOLUTION_REL, magnitudes, world_origin_magnitudes
+from ..model.magnitude import magnitudes, pixel_floors, resolutions, world_origin_magnitudes
 from ..model.stacked import norms, null_vectors
 from .decide import gamma_from_c, gamma_lower_one
 from .report import enlarged_distances, gamma_upper, projections_and_spread, projections_and_spread_stack
@@ -74,7 +75,7 @@ def tls_reported(C: np.ndarray, centres: np.ndarray, residuals, X, c: np.ndarray
     else:                                # the bounds' frame told its own terms (the enumeration's frame)
         mag = max(float(magnitudes(np.asarray(centres, float)[None], np.asarray(C, float)[None])[0]),
                   _terms_magnitude(frame_terms, X))
-    g_lb, g_ub, holds, reason = _checked(g_ub, spread, coordinate_resolution(centres), N, c, lb, tolerances,
+    g_lb, g_ub, holds, reason = _checked(g_ub, spread, coordinate_resolution(centres, C), N, c, lb, tolerances,
                                          certified, res, f_search, mag)
     inliers = inlier_mask(C, X, centres, res, c, u, exact=points_given, regions=regions)
     image_points = np.where(np.isfinite(res)[:, None] & np.isfinite(u), u, np.nan)
@@ -94,7 +95,7 @@ def tls_reported_stack(C: np.ndarray, points: np.ndarray, X: np.ndarray, c: np.n
     res = np.where(np.isfinite(residuals), residuals, np.inf)
     u_norm = norms(np.where(np.isfinite(u), u, 0.0), axis=2)
     g_ub = gamma_upper(np.where(np.isfinite(res), res, c), u_norm, cap=c)
-    resolution, magnitude = coordinate_resolutions(points), _magnitudes(np.asarray(C, float), points, X)
+    resolution, magnitude = coordinate_resolutions(points, C), _magnitudes(np.asarray(C, float), points, X)
     inliers = inlier_mask_stack(C, X, points, res, c, u, u_norm)
     image_points = np.where(np.isfinite(res)[:, :, None] & np.isfinite(u), u, np.nan)
     out = []
@@ -122,8 +123,8 @@ def _terms_magnitude(terms: tuple, X) -> float:
 
 def _magnitudes(C: np.ndarray, points: np.ndarray, X: np.ndarray) -> np.ndarray:
     """(M,) the magnitude that gamma_LB is lowered by (:func:`tritools.solve.decide.gamma_lower`): the points'
-    obliquity magnitudes (:func:`tritools.model.normalize.magnitudes`) and at least the frame's origin magnitude at
-    X (:func:`tritools.model.normalize.world_origin_magnitudes`) for the search's frame, the cameras moved to their
+    obliquity magnitudes (:func:`tritools.model.magnitude.magnitudes`) and at least the frame's origin magnitude at
+    X (:func:`tritools.model.magnitude.world_origin_magnitudes`) for the search's frame, the cameras moved to their
     centres' mean (:func:`tritools.solve.robust_enum.enum_frame`)."""
     with np.errstate(all="ignore"):
         Cs = C / power2_scale(C, (2, 3))
@@ -167,16 +168,17 @@ def _checked(g_ub: float, spread: float, resolution: float, N: int, c: np.ndarra
     return g_lb, g_ub if math.isfinite(g_ub) else math.inf, holds, reason
 
 
-def coordinate_resolution(centres: np.ndarray) -> float:
-    """The coordinates' resolution in pixels: ``RESOLUTION_REL`` max(1, median |x|) over the centres' coordinates."""
-    return float(coordinate_resolutions(np.asarray(centres, float)[None])[0])
+def coordinate_resolution(centres: np.ndarray, C: np.ndarray) -> float:
+    """The coordinates' resolution in pixels: ``RESOLUTION_REL`` max(f_px, median |x|) over the centres'
+    coordinates, f_px the pixel floor of the cameras C (N, 3, 4) (:func:`tritools.model.magnitude.resolutions` at
+    scale 1: the L2 path's rule)."""
+    return float(coordinate_resolutions(np.asarray(centres, float)[None], np.asarray(C, float)[None])[0])
 
 
-def coordinate_resolutions(points: np.ndarray) -> np.ndarray:
-    """:func:`coordinate_resolution` of M problems' points (M, N, 2) -> (M,) (the same rule, the same numbers)."""
-    a = np.sort(np.abs(points).reshape(len(points), -1), axis=1)
-    n = a.shape[1]
-    return RESOLUTION_REL * np.maximum(1.0, 0.5 * (a[:, (n - 1) // 2] + a[:, n // 2]))
+def coordinate_resolutions(points: np.ndarray, C: np.ndarray) -> np.ndarray:
+    """:func:`coordinate_resolution` of M problems' points (M, N, 2) and cameras (M, N, 3, 4) -> (M,) (the same rule,
+    the same numbers)."""
+    return resolutions(np.ones(len(points)), points, pixel_floors(C, points))
 
 
 def capped_resolution(resolution: float, c: np.ndarray, N: int, tolerances) -> float:
@@ -185,10 +187,10 @@ def capped_resolution(resolution: float, c: np.ndarray, N: int, tolerances) -> f
     return min(resolution, threshold_resolution(c, N, tolerances))
 
 
-def reported_resolution(centres: np.ndarray, c: np.ndarray, tolerances) -> float:
+def reported_resolution(centres: np.ndarray, c: np.ndarray, tolerances, C: np.ndarray) -> float:
     """:func:`capped_resolution` of a problem with the regions' ``centres`` (N, 2) and thresholds ``c`` (N,): the
     ``resolved`` of the report's gap guard, which a search prunes within (:data:`PRUNE_SHARE`)."""
-    return capped_resolution(coordinate_resolution(centres), c, len(centres), tolerances)
+    return capped_resolution(coordinate_resolution(centres, C), c, len(centres), tolerances)
 
 
 #: a TLS search prunes a node by the certificate rule only within this share of the report's gap guard

@@ -1,0 +1,151 @@
+"""The magnitudes a reported bound is rounded by, and the coordinates' resolution (:mod:`tritools.model.normalize`).
+
+A certificate holds for the normalised cameras and points, which are the caller's up to a few roundings per entry;
+each distance d_i(X) then moves by a few u (|x_i| + |u_i|) (u the unit round-off), and gamma_LB is lowered by
+that (:func:`tritools.solve.decide.gamma_lower`) with :func:`magnitudes` (the points' obliquity magnitudes) and the
+frame origin's terms (:func:`origin_magnitudes`, :func:`world_origin_magnitudes`).  A gap that passes the
+certificate rule only through its absolute part must also be within the coordinates' resolution
+(:func:`resolutions`): ``RESOLUTION_REL`` max(f_px, median |x|) pixels, the floor f_px = ``PIXEL_FLOOR_REL`` times
+the views' median focal length (:func:`pixel_floors`), so that rescaling the images rescales every bound and
+decision alike (review 31b F10).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from sospoly import pow2_above
+
+from .exact import homogeneous_images
+from .oblique import obliquities, obliquity_one
+from .stacked import median_rows, pixel_scales
+
+__all__ = ["magnitudes", "origin_magnitudes", "world_origin_magnitudes", "resolutions", "median_pixel_scales",
+           "pixel_floors", "RESOLUTION_REL", "PIXEL_FLOOR_REL", "SCALAR_MAX_VIEWS"]
+
+#: the resolution of the coordinates, relative to their magnitude (sqrt of the machine epsilon).
+RESOLUTION_REL = 1e-8
+#: the coordinates' magnitude floor relative to the views' median pixel scale (:func:`pixel_floors`).
+PIXEL_FLOOR_REL = 1e-3
+
+
+def magnitudes(x: np.ndarray, C: np.ndarray | None = None, at: np.ndarray | None = None) -> np.ndarray:
+    """max_i |x_i| sec theta_i over the finite coordinates of each problem's points x (M, N, 2), in pixels (0 for none):
+    a bound of the magnitude whose round-off each distance d_i carries (:func:`tritools.solve.decide.gamma_lower`,
+    which floors it by the resolution's magnitude, max(pixel floor, median |x|); the resolution, by contrast, is of
+    the median magnitude, review 12 F1).  With the cameras C (M, N, 3, 4) (at the
+    points ``at``, default x: the normalised cameras at 0, the obliquity being the frame's), sec theta_i is the
+    obliquity of view i's ray (:func:`tritools.model.oblique.obliquities`): the depth of a point on a ray with sec
+    theta = 1e8 (an observation 1e11 px off-axis at f = 1e3) moves by ~1e8 times the round-off of the cameras, its
+    projection with it, so a bound computed in a rounded frame held the caller's problem only to that (review 24a
+    F2/F3: certified TLS bounds 13.5 and 654 px where the float data attain 0.51 and 3.3 px next to such a ray).
+    Without C, sec theta = 1."""
+    a = np.abs(np.asarray(x, float))
+    a = np.where(np.isfinite(a), a, 0.0)
+    if not a.size:
+        return np.zeros(len(x))
+    a = a.max(axis=2)
+    if C is not None:
+        at = np.where(np.isfinite(x), x, 0.0) if at is None else at
+        if len(a) == 1 and a.shape[1] <= SCALAR_MAX_VIEWS:     # one problem: the scalar twin, the same numbers
+            sec = np.array([_obliquities_one(np.asarray(C[0], float), at[0])])
+        else:
+            sec = obliquities(C, at)
+        with np.errstate(invalid="ignore", over="ignore"):
+            a = np.where(a > 0, a * sec, 0.0)
+    # an obliquity that overflows (a ray parallel to the image plane): the largest finite magnitude, which lowers
+    # gamma_LB to 0 (gamma_lower reads a non-finite magnitude as 1)
+    return np.minimum(a.max(axis=1), np.finfo(float).max)
+
+
+def origin_magnitudes(Cn: np.ndarray, x: np.ndarray, o: np.ndarray, scale) -> np.ndarray:
+    """(M,) max_i K_i, in pixels, for normalised cameras Cn (M, N, 3, 4) at their origin (the normalisation's point
+    X0), the caller's points x (M, N, 2), the given frame's origin o (M, 3) in normalised coordinates and the image
+    scales (M,): K_i = (max_k |h_ik(o)| / s + 2 |x_i| |h_i3(o)|) / |h_i3(X0)| with |h(o)| <= |Cn| |(o, 1)| (sums of
+    absolute products), i.e. (|P_k o~| + |x_i| |P_3 o~|) / |P_3 X0~| of the cameras as given.  The cameras given to
+    the normalisation are the caller's up to one rounding of their last column (a georeferenced world re-centred,
+    :func:`tritools.model.frame.moved_cameras`, or the robust search's frame at the centres' mean): a relative error
+    u there moves the projection of a point near X0 by u K_i, which the frame's other roundings (u |x_i| sec theta_i,
+    :func:`magnitudes`) do not cover where the frame's origin is far from the point relative to its depth (review
+    25a F1: the cameras' spread 700 depths, L2 bounds certified 6.7e-11 px above the real optimum; F2: an optimum
+    1e-9 from a camera centre).  inf where a depth vanishes (gamma_LB then lowered to 0), NaN where not finite."""
+    oh = np.concatenate([np.abs(o), np.ones(o.shape[:-1] + (1,))], axis=-1)[:, None, None, :]
+    A = np.add.reduce(np.abs(Cn) * oh, axis=-1)                         # (M, N, 3): bounds of |h(o)|
+    den = np.abs(Cn[..., 2, 3])
+    ax = np.max(np.abs(np.where(np.isfinite(x), x, 0.0)), axis=-1, initial=0.0)
+    K = (np.maximum(A[..., 0], A[..., 1]) / np.asarray(scale, float)[:, None] + 2.0 * ax * A[..., 2]) / den
+    return np.minimum(np.max(K, axis=1, initial=0.0), np.finfo(float).max)
+
+
+def world_origin_magnitudes(C: np.ndarray, x: np.ndarray, X: np.ndarray, o: np.ndarray) -> np.ndarray:
+    """:func:`origin_magnitudes` from the caller's cameras C (M, N, 3, 4) for a frame at origin o (M, 3) (the
+    cameras moved there, their last column rounded once) and a point X (M, 3): max_i (max_k |P_k o~| + |x_i|
+    |P_3 o~|) / |P_3 X~|, the homogeneous images compensated (:func:`tritools.model.exact.homogeneous_images`)."""
+    ones = np.ones((len(X), 1))
+    with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
+        ho = np.abs(homogeneous_images(C, np.concatenate([o, ones], axis=1)))
+        hx = np.abs(homogeneous_images(C, np.concatenate([X, ones], axis=1))[..., 2])
+        ax = np.max(np.abs(np.where(np.isfinite(x), x, 0.0)), axis=-1, initial=0.0)
+        K = (np.maximum(ho[..., 0], ho[..., 1]) + ax * ho[..., 2]) / hx
+        K = np.where(np.isnan(K), 1.0, K)
+    return np.minimum(np.max(K, axis=1, initial=0.0), np.finfo(float).max)
+
+
+#: :func:`magnitudes` of one problem takes the scalar obliquities up to this many views.
+SCALAR_MAX_VIEWS = 7
+
+
+def _obliquities_one(C: np.ndarray, at: np.ndarray) -> list:
+    """:func:`tritools.model.oblique.obliquities` of one problem (C (N, 3, 4), at (N, 2)) view by view
+    (:func:`~tritools.model.oblique.obliquity_one` on the cameras divided by the same powers of two)."""
+    out = []
+    for P, p in zip(C.tolist(), at.tolist()):
+        m = max(abs(v) for row in P for v in row)                 # power2_scale's power of two, on floats
+        k = pow2_above(m)
+        out.append(obliquity_one([[v / k for v in row] for row in P], p))
+    return out
+
+
+def resolutions(scale: np.ndarray, x: np.ndarray, floor=1.0) -> np.ndarray:
+    """s RESOLUTION_REL max(floor, median |x|) per problem (x (M, N, 2)): the coordinates' resolution in normalised
+    units (module docstring); ``floor`` (M,) the pixel floor of the problems' cameras (:func:`pixel_floors`), 1 px
+    where their cameras are not known."""
+    with np.errstate(all="ignore"):
+        mag = median_rows(np.abs(x.reshape(len(x), -1))) if x.size else np.zeros(len(x))
+        out = np.asarray(scale, float) * RESOLUTION_REL * np.maximum(floor, np.where(np.isfinite(mag), mag, 1.0))
+    return np.where(np.isfinite(out) & (out > 0), out, np.inf)
+
+
+def median_pixel_scales(C: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """(M,) the median over the views of the finite positive pixel scales
+    (:func:`tritools.model.stacked.pixel_scales`: the focal lengths) of M problems (C (M, N, 3, 4), x (M, N, 2));
+    NaN where no view has one."""
+    ps = pixel_scales(C, x)
+    return _nanmedian_rows(np.where(np.isfinite(ps) & (ps > 0), ps, np.nan))
+
+
+def pixel_floors(C: np.ndarray | None = None, x: np.ndarray | None = None, *, medians=None) -> np.ndarray | float:
+    """The least magnitude in pixels that the coordinates' resolution and round-off are taken of: ``PIXEL_FLOOR_REL``
+    times the views' median pixel scale (:func:`median_pixel_scales` of C, x, or the given ``medians``), 1 px where
+    there is none.  Relative to the focal length, not a fixed pixel: rescaling the images by k rescales every bound,
+    resolution and decision by k (review 31b F10: with a 1 px floor, images scaled by 1e-12 were certified at a 1e-3
+    relative gap); at f = 1000 px the floor is the 1 px it was.  (M,) array, or a float for a float ``medians``."""
+    med = median_pixel_scales(C, x) if medians is None else medians
+    if isinstance(med, float):
+        return PIXEL_FLOOR_REL * med if 0.0 < med < math.inf else 1.0
+    with np.errstate(invalid="ignore"):
+        return np.where(np.isfinite(med) & (med > 0), PIXEL_FLOOR_REL * med, 1.0)
+
+
+def _nanmedian_rows(a: np.ndarray) -> np.ndarray:
+    """``numpy.nanmedian(a, axis=1)`` for a 2-D array (NaN for an all-NaN row), without its per-call overhead:
+    NaNs sort last, so the median of row m is the mean of its middle non-NaN entries."""
+    s = np.sort(a, axis=1)
+    k = np.sum(~np.isnan(a), axis=1)
+    if s.shape[1] == 0:
+        return np.full(len(a), np.nan)
+    rows = np.arange(len(a))
+    lo = s[rows, np.maximum((k - 1) // 2, 0)]
+    hi = s[rows, k // 2]                                             # k <= N, so k // 2 < N
+    return np.where(k > 0, (lo + hi) / 2, np.nan)

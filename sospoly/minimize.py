@@ -11,9 +11,8 @@
   at the best one;
 * ``optimal`` -- ``Tolerances.certified(lower_bound, upper_bound, scale)`` with ``scale`` the largest
   coefficient of the balanced f expanded at the origin or at the minimiser, the smaller (strategy steps 1 and
-  8: the problem's own scale, ``result.scale``): a certificate of
-  global optimality of ``minimizers[0]`` within that tolerance.  A lower bound above the upper bound within the
-  tolerance is reported equal to it; beyond it the status is ``INCONSISTENT``.
+  8: the problem's own scale, ``result.scale``): a certificate of global optimality of ``minimizers[0]``.  A
+  lower bound above the upper bound within the tolerance is reported equal to it; beyond it: ``INCONSISTENT``.
 
 The default strategy (each step recorded in ``attempts``):
 
@@ -27,8 +26,9 @@ The default strategy (each step recorded in ``attempts``):
 2. **A proven bound.** The solver's c* is reported only as far as it is proven
    (:mod:`sospoly.analysis.proof`): on a box that holds a minimiser -- ``radius``, or the box the
    constraints imply -- with the certificate's defects subtracted (:mod:`sospoly.analysis.rigor`), and
-   for every v through the shifted certificate (level lowered by a margin <= 1e-7 of the scale, Gram
-   matrices shifted, projected and checked PSD with every rounding bounded); the larger proven bound
+   for every v through the shifted certificate (level lowered by a margin of 1e-10..1e-7 of the scale, then
+   1e-6..1e-1 where none is proven, a weaker bound; Gram matrices shifted, projected and checked PSD with every
+   rounding bounded); the larger proven bound
    is reported.  A multiplier q counts only where it is proven positive (a constant, 1 + even positive
    terms, or a free q whose Gram matrix is positive definite).  Nothing proven: status
    ``unproven_bound``, no lower bound, the relaxation's value in the message.  An "almost solved"
@@ -59,9 +59,8 @@ The default strategy (each step recorded in ``attempts``):
    error is retried in the kernel form and with cvxpy's back-end (unless ``form`` / ``backend`` were
    given) before the step is given up.  The first back-end is ``"auto"`` for one Gram block and
    Clarabel for several (clique or term blocks: its sparse factorisation keeps them apart).
-7. **Budget.** Every program is sized before it is built (:mod:`sospoly.budget`); one that does not fit
-   is skipped with status ``budget_exceeded``, and the whole call stops at ``budget.time_limit``
-   (status ``time_limit``, with the best bounds found so far).
+7. **Budget.** Every program is sized before it is built (:mod:`sospoly.budget`); one that does not fit is
+   skipped (``budget_exceeded``); the call stops at ``budget.time_limit`` (``time_limit``, the best bounds so far).
 8. **Re-centring** (:mod:`sospoly.recentre`). The decision is made at the smaller of the scales of f at the
    origin and at the minimiser (coefficients that cancel there: (v - 1000)^4 - 3 (v - 1000)^2 + 1), with f valued
    exactly at the points; where the minimiser's scale is ``CANCELLATION_BITS`` smaller, the program translated
@@ -118,7 +117,8 @@ _NUMERICAL = (SolveStatus.NUMERICAL_ERROR, SolveStatus.INACCURATE, SolveStatus.C
 
 @dataclass(frozen=True)
 class SolveAttempt:
-    """One solve of the strategy: degree, multiplier, sparsity, form, back-end, outcome."""
+    """One solve of the strategy.  ``status`` and ``lower_bound`` are the solver's: the relaxation's value c*, not
+    proven (it may lie above the minimum; the result's ``lower_bound`` is the proven one, review 32b L1)."""
     degree: int
     multiplier: str
     sparsity: str
@@ -328,20 +328,21 @@ def _strategy(f, eq, ineq, multiplier, radius, *, gens, d0, last, sparsity, low_
     if unbounded is not None:                 # no bound at any degree (the SDP could miss it by its tolerance)
         return unbounded
     run = _Run(f, eq, ineq, prog=prog, gens=gens, tol=tol, budget=budget, deadline=deadline, refine=refine)
-    best = None
+    best, cut = None, False
     for d in range(d0, last + 1, 2):
         for kind, low in _choose_sparsity(sparsity, fn, eqn, ineqn, d, multiplier, d + 2 > last):
             low = low_degree if low_degree is not None else low
             for mult in _multipliers(multiplier, d, f.degree, kind == "none"):
                 res = run.solve(d, mult, kind, low, form, backend)
                 best = res if best is None or _better(res, best) else best
+                cut = cut or res.status == SolveStatus.TIME_LIMIT
                 if res.optimal or res.status == SolveStatus.TIME_LIMIT or deadline.expired:
                     break
             if best.optimal or deadline.expired:
                 break
         if best.optimal or deadline.expired:
             break
-    return _finish(best, run, time.perf_counter() - t0)
+    return _finish(best, run, time.perf_counter() - t0, cut)
 
 
 def _recentred(best: MinimizeResult, f, eq, ineq, multiplier, radius, solve, tol: Tolerances, deadline,
@@ -392,14 +393,13 @@ _OUT_OF_TIME = frozenset({SolveStatus.OPTIMAL, SolveStatus.INACCURATE, SolveStat
                           SolveStatus.NUMERICAL_ERROR, SolveStatus.UNPROVEN, SolveStatus.NOT_SOLVED})
 
 
-def _finish(best: MinimizeResult, run: _Run, seconds: float) -> MinimizeResult:
+def _finish(best: MinimizeResult, run: _Run, seconds: float, cut: bool = False) -> MinimizeResult:
     import dataclasses
 
     status = best.status
-    # past the deadline an uncertified answer is the time limit's, unless it is a verdict (an empty set, no
-    # certificate at any degree tried) or the budget refused what was left; a numerical failure too (review 18:
-    # a Motzkin call that spent its minute was reported as numerical_error)
-    if run.deadline.expired and not best.optimal and status in _OUT_OF_TIME:
+    # past the deadline or a step cut short by it (review 32b L4), an uncertified answer is the time limit's, unless
+    # it is a verdict (an empty set, no certificate at any degree tried) or the budget refused what was left
+    if (run.deadline.expired or cut) and not best.optimal and status in _OUT_OF_TIME:
         status = SolveStatus.TIME_LIMIT
     return dataclasses.replace(best, status=status, seconds=seconds, attempts=tuple(run.attempts))
 

@@ -28,7 +28,7 @@ from ..budget import AUTO_IPM_MAX_BYTES as _AUTO_IPM_MAX_BYTES
 from ..budget import CLARABEL_TIME_MODEL, BudgetExceeded, Deadline, estimate_size, memory_room
 from ..lowering.conic import ConicProblem
 from ..tolerances import DEFAULT_TOLERANCES, Tolerances, as_tolerances
-from .interrupt import solve_interruptibly
+from .interrupt import solve_interruptibly, stopped_for_time
 from .rays import check_infeasibility, check_unbounded_ray
 
 __all__ = ["RawStatus", "Attempt", "ConicSolution", "ClarabelBackend", "IpmBackend", "AutoBackend",
@@ -212,8 +212,10 @@ class ClarabelBackend:
         uninterruptible start -- set-up, initial point and one iteration, predicted by
         :data:`sospoly.budget.CLARABEL_TIME_MODEL` from the program's size, or ``first_seconds`` (what an
         earlier attempt on the same program measured) when larger -- and Clarabel's ``time_limit`` is the
-        time left minus that start, so its last iteration ends before the deadline.  A call not made
-        returns (None, an attempt with status ``time_limit`` and 0 iterations)."""
+        time left minus that start, so its last iteration ends before the deadline; nor is an iteration begun
+        that is predicted to end past it (:func:`sospoly.solvers.interrupt.solve_interruptibly`: an attempt so
+        stopped has status ``time_limit``).  A call not made returns (None, an attempt with status ``time_limit``
+        and 0 iterations)."""
         import clarabel
 
         n = problem.n_cols
@@ -238,7 +240,7 @@ class ClarabelBackend:
                                             np.asarray(problem.b, float), self._cones(problem),
                                             self._settings(overrides))
             t_setup = time.perf_counter() - t0
-            sol = solve_interruptibly(solver)
+            sol = solve_interruptibly(solver, deadline)
         except (KeyboardInterrupt, SystemExit):
             raise
         except BaseException as exc:  # pyo3 PanicException derives from BaseException
@@ -248,7 +250,7 @@ class ClarabelBackend:
         seconds = time.perf_counter() - t0
         CLARABEL_TIME_MODEL.observe(psd, problem.n_rows, t_setup, seconds - t_setup, int(sol.iterations))
         status_name = str(sol.status).split(".")[-1]
-        raw = _CLARABEL_MAP.get(status_name, RawStatus.FAILED)
+        raw = RawStatus.TIME_LIMIT if stopped_for_time(sol) else _CLARABEL_MAP.get(status_name, RawStatus.FAILED)
         start = t_setup + 2.0 * (seconds - t_setup) / (int(sol.iterations) + 1)
         att = Attempt(label, raw, status_name, int(sol.iterations), seconds, min(start, seconds))
         return sol, att

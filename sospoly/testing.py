@@ -252,8 +252,9 @@ class FakeClarabel(ClarabelBackend):
         self.calls: list[FakeCall] = []
 
     def solve_once(self, problem: ConicProblem, label="default", overrides=None, deadline: Deadline | None = None,
-                   first_seconds: float = 0.0):
-        """One scripted attempt: (raw answer or None, :class:`~sospoly.solvers.Attempt`)."""
+                   first_seconds: float = 0.0, stop_by: Deadline | None = None):
+        """One scripted attempt: (raw answer or None, :class:`~sospoly.solvers.Attempt`); ``stop_by`` unused (a
+        scripted answer has no iterations to stop)."""
         answer = self._script.next(problem)
         left = None if deadline is None else deadline.remaining()
         t0 = time.perf_counter()

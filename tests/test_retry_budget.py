@@ -27,9 +27,9 @@ def _faked(monkeypatch, outcomes: dict, seen: dict):
     was given (None: no limit)."""
     real = ClarabelBackend.solve_once
 
-    def fake(self, problem, label="default", overrides=None, deadline=None, first_seconds=0.0):
+    def fake(self, problem, label="default", overrides=None, deadline=None, first_seconds=0.0, stop_by=None):
         seen[label] = None if deadline is None else deadline.remaining()
-        sol, att = real(self, problem, label, overrides, deadline, first_seconds)
+        sol, att = real(self, problem, label, overrides, deadline, first_seconds, stop_by)
         return sol, dataclasses.replace(att, raw_status=outcomes.get(label.split("/")[0], att.raw_status))
 
     monkeypatch.setattr(ClarabelBackend, "solve_once", fake)
@@ -119,3 +119,49 @@ def test_rectified_rig_behind_the_cameras_is_certified_without_retries():
     assert res.gamma_lb is not None and res.gamma_lb <= ref * (1 + 1e-9)
     assert res.gamma_ub == pytest.approx(tritools.gamma(res.X, cams, x), rel=1e-9)
     assert res.gamma_ub <= ref * (1 + 1e-6)                                 # the estimate is the best found
+
+
+def test_only_the_callers_deadline_stops_an_iteration_early(monkeypatch):
+    """The retries' budget is a heuristic: it ends them through Clarabel's ``time_limit`` (their last iteration
+    finishes); the watch that begins no iteration predicted to end past a deadline keeps the caller's (none here)."""
+    import sospoly.solvers.backends as backends
+
+    watched = []
+    real = backends.solve_interruptibly
+
+    def spy(solver, deadline=None):
+        watched.append(deadline)
+        return real(solver, deadline)
+
+    monkeypatch.setattr(backends, "solve_interruptibly", spy)
+    _faked(monkeypatch, {"default": RawStatus.FAILED}, {})
+    tol = dataclasses.replace(DEFAULT_TOLERANCES, retry_budget_share=0.0, retry_budget_seconds=0.5)
+    sol = ClarabelBackend(tol).solve(_Problem())
+    assert [a.label for a in sol.attempts][:2] == ["default", "qdldl"]
+    assert len(watched) >= 2 and all(d is not None and d.end is None for d in watched)
+
+
+@pytest.mark.parametrize("left,started", [(50.0, False), (500.0, True)])
+def test_a_retry_the_time_left_cannot_finish_is_not_started(monkeypatch, left, started):
+    """Review 32b M1: after a faer attempt of ~10 s failed, a qdldl retry began with 5-7 s left and its first
+    factorisation alone (8x faer's start) ran a 20 s limit to 24-28 s.  A retry needs the time of the attempt it
+    repeats (its iterations, up to RETRY_MIN_ITERATIONS, at its pace): with less left before the caller's deadline it
+    is not started, and the chain ends with status time_limit and the failed attempt's iterate."""
+    real = ClarabelBackend.solve_once
+
+    def slow(self, problem, label="default", overrides=None, deadline=None, first_seconds=0.0, stop_by=None):
+        sol, att = real(self, problem, label, overrides, deadline, first_seconds, stop_by)
+        if label == "default":          # as if it had taken 100 s over 19 iterations and failed
+            att = dataclasses.replace(att, raw_status=RawStatus.FAILED, seconds=100.0, iterations=19)
+        return sol, att
+
+    monkeypatch.setattr(ClarabelBackend, "solve_once", slow)
+    sol = ClarabelBackend().solve(_Problem(), deadline=Deadline.after(left))
+    labels = [a.label for a in sol.attempts]
+    assert labels[:2] == ["default", "qdldl"]
+    if started:
+        assert sol.attempts[1].iterations > 0 and sol.raw_status != RawStatus.TIME_LIMIT
+    else:
+        assert labels == ["default", "qdldl"] and sol.attempts[1].iterations == 0
+        assert sol.raw_status == RawStatus.TIME_LIMIT and "repeats took 100 s" in sol.attempts[1].solver_status
+        assert sol.x is not None                        # the failed attempt's iterate, for the caller to judge

@@ -131,7 +131,7 @@ def test_the_retry_chain_starts_no_attempt_past_the_deadline(monkeypatch):
     prob, _ = _lambda_min_problem(4)
     started = []
 
-    def failing(self, problem, label="default", overrides=None, deadline=None, first_seconds=0.0):
+    def failing(self, problem, label="default", overrides=None, deadline=None, first_seconds=0.0, stop_by=None):
         rem = deadline.remaining()
         if rem < first_seconds:
             return None, Attempt(label, RawStatus.TIME_LIMIT, "not started", 0, 0.0)

@@ -29,6 +29,8 @@ from ..budget import CLARABEL_TIME_MODEL, BudgetExceeded, Deadline, estimate_siz
 from ..lowering.conic import ConicProblem
 from ..tolerances import DEFAULT_TOLERANCES, Tolerances, as_tolerances
 from .interrupt import solve_interruptibly, stopped_for_time
+from .retry_chain import (CLARABEL_FAST_CHAIN, CLARABEL_RETRY_CHAIN, CLARABEL_SPLIT_CHAIN, QDLDL_MAX_PSD_SIDE,
+                          RETRY_MIN_ITERATIONS)
 from .rays import check_infeasibility, check_unbounded_ray
 
 __all__ = ["RawStatus", "Attempt", "ConicSolution", "ClarabelBackend", "IpmBackend", "AutoBackend",
@@ -114,34 +116,8 @@ _CLARABEL_MAP = {
     "MaxTime": RawStatus.TIME_LIMIT,
 }
 
-#: Settings tried in order when an attempt fails numerically (label, overrides).
-CLARABEL_RETRY_CHAIN = (
-    ("default", {}),
-    ("qdldl", {"direct_solve_method": "qdldl"}),
-    ("no-equilibration", {"direct_solve_method": "qdldl", "equilibrate_enable": False}),
-    ("regularised", {"direct_solve_method": "qdldl", "equilibrate_enable": False,
-                     "static_regularization_constant": 1e-7, "max_iter": 1000}),
-)
-
-#: :data:`CLARABEL_RETRY_CHAIN` after a first attempt without iterative refinement of the KKT solves (Clarabel's
-#: refinement steps cost about as much as the factorisation on programs of many PSD blocks: a 16-view clique
-#: program 15.3 -> 8.4 s, a 30-view degree-2 program 4.6 -> 2.9 s, same iterations and objectives).  The first
-#: attempt is *provisional*: only a SOLVED answer (every tolerance met on Clarabel's own residuals) or the time
-#: limit ends the chain there; anything else goes on to the refined attempts.
-CLARABEL_FAST_CHAIN = (("no-refinement", {"iterative_refinement_enable": False}),) + CLARABEL_RETRY_CHAIN
-
-#: :data:`CLARABEL_RETRY_CHAIN` after a first attempt whose chordal decomposition keeps the cliques of a large
-#: sparse-patterned PSD block apart instead of merging them into compact ones (``chordal_decomposition_compact``
-#: off).  Measured on dense degree-2 programs with mixed regions (one block of side 2N + sum n_i + 1; 6
-#: programs at N = 16 and 30, CPU): 13-18 instead of 21-32 iterations, 0.23-3.4 s instead of 0.27-6.1 s, and
-#: "solved" where the default ended "almost solved" (4 of 6).  Not a provisional attempt: its answers are judged
-#: like the default's.  On a many-block views program it was slower (7.2 -> 15.1 s): not used there.
-CLARABEL_SPLIT_CHAIN = (("split-cliques", {"chordal_decomposition_compact": False}),) + CLARABEL_RETRY_CHAIN
-
-#: the retries' ``qdldl`` factorisation is used only while every PSD block has at most this side; beyond it
-#: the KKT fill-in makes one qdldl iteration take tens of seconds (one 77-sided block: 40 s, where the
-#: default faer factorisation takes 1 s), and no time limit can interrupt it, so the retries keep faer.
-QDLDL_MAX_PSD_SIDE = 40
+#: "no deadline" for :meth:`ClarabelBackend.solve_once`'s ``stop_by`` (None there means "the ``deadline``")
+_NO_DEADLINE = Deadline(None)
 
 
 def _check_native_memory(problem: ConicProblem) -> None:
@@ -205,17 +181,17 @@ class ClarabelBackend:
         return out
 
     def solve_once(self, problem: ConicProblem, label="default", overrides=None, deadline: Deadline | None = None,
-                   first_seconds: float = 0.0):
+                   first_seconds: float = 0.0, stop_by: Deadline | None = None):
         """One Clarabel call: (solution or None, :class:`Attempt`).
 
         With a ``deadline``, the call is not made when the time left is shorter than Clarabel's
         uninterruptible start -- set-up, initial point and one iteration, predicted by
         :data:`sospoly.budget.CLARABEL_TIME_MODEL` from the program's size, or ``first_seconds`` (what an
         earlier attempt on the same program measured) when larger -- and Clarabel's ``time_limit`` is the
-        time left minus that start, so its last iteration ends before the deadline; nor is an iteration begun
-        that is predicted to end past it (:func:`sospoly.solvers.interrupt.solve_interruptibly`: an attempt so
-        stopped has status ``time_limit``).  A call not made returns (None, an attempt with status ``time_limit``
-        and 0 iterations)."""
+        time left minus that start, so its last iteration ends before the deadline.  ``stop_by`` (default: the
+        ``deadline``): no iteration is begun that is predicted to end past it
+        (:func:`sospoly.solvers.interrupt.solve_interruptibly`: an attempt so stopped has status ``time_limit``).
+        A call not made returns (None, an attempt with status ``time_limit`` and 0 iterations)."""
         import clarabel
 
         n = problem.n_cols
@@ -240,7 +216,7 @@ class ClarabelBackend:
                                             np.asarray(problem.b, float), self._cones(problem),
                                             self._settings(overrides))
             t_setup = time.perf_counter() - t0
-            sol = solve_interruptibly(solver, deadline)
+            sol = solve_interruptibly(solver, deadline if stop_by is None else stop_by)
         except (KeyboardInterrupt, SystemExit):
             raise
         except BaseException as exc:  # pyo3 PanicException derives from BaseException
@@ -267,17 +243,22 @@ class ClarabelBackend:
         finish its first iteration before the deadline, and the chain then ends with status
         ``time_limit`` and the last attempt's iterate (if any).  The retries after a failed first full attempt
         share a time budget (``Tolerances.retry_budget_share`` / ``retry_budget_seconds``); one it stops is a
-        failed attempt and ends the chain.
+        failed attempt and ends the chain.  Only the caller's ``deadline`` stops an iteration predicted to end
+        past it (:meth:`solve_once`'s ``stop_by``), and only it keeps a retry from starting that cannot finish
+        before it: one that the time left does not give the attempt it repeats (:func:`_repeat_seconds`; review
+        32b M1: a qdldl retry's uninterruptible first factorisation took 5-10 s, 8x faer's, past a 20 s limit).
         """
         attempts = []
         last = provisional = budget = None
-        first_seconds = 0.0          # the longest start (set-up + 2 iterations' worth) measured so far
+        first_seconds = whole = 0.0  # the longest start measured so far; the last whole attempt (_repeat_seconds)
         for label, overrides in self._chain(problem, retry):
-            if deadline is not None and deadline.expired:
-                attempts.append(Attempt(label, RawStatus.TIME_LIMIT, "time limit reached", 0, 0.0))
+            if deadline is not None and deadline.expired or not _fits(deadline, whole):
+                attempts.append(Attempt(label, RawStatus.TIME_LIMIT, "time limit reached" if deadline.expired else
+                                        f"not started: the attempt it repeats took {whole:.3g} s", 0, 0.0))
                 return _kept(provisional, attempts) or self._time_limit(last, attempts)
             limit = _earlier(deadline, budget)
-            sol, att = self.solve_once(problem, label, overrides, limit, first_seconds)
+            sol, att = self.solve_once(problem, label, overrides, limit, first_seconds,
+                                       stop_by=deadline or _NO_DEADLINE)
             attempts.append(att)
             if budget is not None and limit is budget and att.raw_status == RawStatus.TIME_LIMIT:
                 attempts[-1] = dataclasses.replace(att, raw_status=RawStatus.FAILED,
@@ -291,6 +272,7 @@ class ClarabelBackend:
                 first_seconds = max(first_seconds, att.seconds)     # an exception: all of it was uninterruptible
                 continue
             first_seconds = max(first_seconds, att.start_seconds)
+            whole = _repeat_seconds(att)
             x, z = np.asarray(sol.x, float), np.asarray(sol.z, float)
             last = ConicSolution(att.raw_status, x, z, float(sol.obj_val), float(sol.obj_val_dual), tuple(attempts))
             if att.raw_status == RawStatus.TIME_LIMIT:
@@ -472,6 +454,22 @@ AUTO_IPM_MIN_COST_SCALARS = 1e7
 #: the IPM's working set (~3 m sum_k n_k^2 + m^2 floats, see sospoly.budget) above which AutoBackend
 #: goes to Clarabel directly (whose memory grows with sum_k L_k^2 instead); one value with the budget's model.
 AUTO_IPM_MAX_BYTES = _AUTO_IPM_MAX_BYTES
+
+
+def _repeat_seconds(att: Attempt) -> float:
+    """Seconds the next attempt of the chain is taken to need at least after ``att`` ended by itself: its whole
+    time, scaled to ``RETRY_MIN_ITERATIONS`` iterations where it took more (0 after a time limit).  A retry is no
+    faster per iteration (qdldl is the slower factorisation, refinement and regularisation add work) and needs
+    about as many iterations; one that cannot finish only spends the caller's time."""
+    if att.raw_status == RawStatus.TIME_LIMIT:
+        return 0.0
+    return att.seconds * min(1.0, RETRY_MIN_ITERATIONS / max(att.iterations, 1))
+
+
+def _fits(deadline: Deadline | None, seconds: float) -> bool:
+    """Is there ``seconds`` left before ``deadline`` (None, or no end: always)?"""
+    remaining = None if deadline is None else deadline.remaining()
+    return remaining is None or remaining >= seconds
 
 
 def _earlier(a: Deadline | None, b: Deadline | None) -> Deadline | None:

@@ -45,3 +45,34 @@ def test_the_batched_sdp_stops_at_its_deadline():
     b = solve_corollary1_points(C[None], x[None], deadline=Deadline.after(0.3))
     assert time.perf_counter() - t0 <= 0.3 * 1.5 + 0.3
     assert not b.done[0] and "time" in b.reason[0]
+
+
+def test_a_stack_under_a_whole_call_limit_is_solved_in_slices(monkeypatch):
+    """Review 33a M1: 40,000 tracks of 20 views went through the batch stages as one stack, whose vectorised steps
+    no deadline interrupts: a 3 s ``--total-time-limit`` ran to 18-21 s.  Under a whole-call limit the stack is
+    solved in slices sized from the measured pace, each begun only where it fits before the end; every row stays."""
+    import tritools.solve.batch as batch
+    from tritools.scene import random_scene
+    from tritools.solve.options import TriangulationOptions
+
+    sizes = []
+    real = batch.PointStack
+
+    def spy(C, x, *a, **k):
+        sizes.append(len(x))
+        return real(C, x, *a, **k)
+
+    monkeypatch.setattr(batch, "PointStack", spy)
+    sc = random_scene(6, 40, noise_px=1.0, seed=7)
+    M = 2000
+    C = np.broadcast_to(np.asarray(sc.cameras), (M, 6, 3, 4)).copy()
+    x = np.tile(np.asarray(sc.points2d), (M // 40, 1, 1))
+    rec = batch.solve_point_stack(C, x, TriangulationOptions(total_time_limit=5.0)).record()
+    assert len(rec) == M and sum(sizes) <= M
+    assert len(sizes) > 1 and max(sizes) < M                    # before: one stack of all 2000 rows
+    status = np.array([s.value if hasattr(s, "value") else s for s in rec.status])
+    assert set(status) <= {"optimal", "time_limit"} and (status == "optimal").sum() >= sizes[0]
+    assert np.isfinite(rec.gamma_ub).all()                         # every row with its estimate
+    sizes.clear()
+    rec = batch.solve_point_stack(C, x, TriangulationOptions()).record()
+    assert sizes == [M] and len(rec) == M                          # no whole-call limit: one stack, as before

@@ -72,11 +72,12 @@ def executor_from_args(args):
         yield InlineExecutor()
     else:
         import multiprocessing
+        import os
 
         from ..solve.batch import stop_pool, worker_init
 
         ex = cf.ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
-                                    initializer=worker_init)
+                                    initializer=worker_init, initargs=(os.getpid(),))
         try:
             yield ex
         except BaseException:               # Ctrl-C, SIGTERM, an error: the workers stop now (stop_pool)

@@ -128,6 +128,11 @@ def test_reader_accepts_colmap_documentation_example(tmp_path):
     ("images.txt", "1 1 0 0 0 0 0 0 9 a.png\n\n", "images.txt:1: image 1 refers to camera 9"),
     ("points3D.txt", "1 0 0 0 1 2 3 0.5 1\n", "points3D.txt:1: TRACK[] must be (IMAGE_ID, POINT2D_IDX) pairs"),
     ("points3D.txt", "1 0 0 0 1 2 300 0.5\n", "points3D.txt:1: R G B must be in 0..255"),
+    # review 33a M2: ids COLMAP cannot hold (uint32; 2^32 - 1 is its invalid id) were read and written
+    ("cameras.txt", "-1 PINHOLE 640 480 800 800 320 240\n", "cameras.txt:1: CAMERA_ID -1 is outside COLMAP's range"),
+    ("images.txt", "4294967295 1 0 0 0 0 0 0 1 a.png\n\n", "images.txt:1: IMAGE_ID 4294967295 is outside"),
+    ("images.txt", "4294967296 1 0 0 0 0 0 0 1 a.png\n\n", "images.txt:1: IMAGE_ID 4294967296 is outside"),
+    ("images.txt", "1 1 0 0 0 0 0 0 -1 a.png\n\n", "images.txt:1: CAMERA_ID -1 is outside COLMAP's range"),
     ("points3D.txt", "7 0 0 0 1 2 3 0.5 1 0\n", "points3D.txt:1: point3D 7 track refers to keypoint 0 of image 1, "
                                                  "which has 0 keypoints"),
 ])

@@ -290,6 +290,14 @@ class LineFields:
                       f"64-bit integer range")
         return v
 
+    def id32(self, k: int, name: str) -> int:
+        """Field k as a COLMAP camera or image id: uint32 below 2^32 - 1, COLMAP's invalid id (review 33a M2: -1 and
+        2^32 - 1 were read, and the models written with them were refused by COLMAP and pycolmap)."""
+        v = self.int(k, name)
+        if not 0 <= v < 2 ** 32 - 1:
+            self.fail(f"{name} {v} is outside COLMAP's range 0..4294967294 (uint32; 4294967295 is its invalid id)")
+        return v
+
     def float(self, k: int, name: str) -> float:
         """Field k as a finite float."""
         try:
@@ -309,7 +317,7 @@ def read_camera_records(path: Path) -> tuple[dict, dict]:
             continue
         f = LineFields(path, lineno, text)
         f.need(4, "CAMERA_ID MODEL WIDTH HEIGHT PARAMS[]")
-        cid, model = f.int(0, "CAMERA_ID"), f.tokens[1]
+        cid, model = f.id32(0, "CAMERA_ID"), f.tokens[1]
         if model not in COLMAP_MODEL_N_PARAMS:
             f.fail(f"unknown camera MODEL {model!r} (COLMAP models: {', '.join(COLMAP_MODEL_N_PARAMS)})")
         n = COLMAP_MODEL_N_PARAMS[model]
@@ -330,10 +338,10 @@ def parse_image_header(path: Path, lineno: int, text: str) -> tuple:
     naming file:line when malformed)."""
     f = LineFields(path, lineno, text)
     f.need(10, "IMAGE_ID QW QX QY QZ TX TY TZ CAMERA_ID NAME")
-    iid = f.int(0, "IMAGE_ID")
+    iid = f.id32(0, "IMAGE_ID")
     q = tuple(f.float(k, n) for k, n in zip(range(1, 5), ("QW", "QX", "QY", "QZ")))
     t = tuple(f.float(k, n) for k, n in zip(range(5, 8), ("TX", "TY", "TZ")))
-    cid = f.int(8, "CAMERA_ID")
+    cid = f.id32(8, "CAMERA_ID")
     name = text.split(None, 9)[9]
     if np.linalg.norm(q) == 0:
         f.fail("quaternion (QW, QX, QY, QZ) is zero")

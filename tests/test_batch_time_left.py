@@ -2,9 +2,11 @@
 and the batched SDP stops at the stack's deadline (review 27a: a 50-view track of random keypoints took 11.2 s
 under a 5 s limit -- 9.7 s in the batched SDP, whose IPM had no deadline, then a fresh 5 s for the per-point path;
 66.9 s under the default 60 s)."""
+import sys
 import time
 
 import numpy as np
+import pytest
 
 import tritools
 
@@ -76,3 +78,35 @@ def test_a_stack_under_a_whole_call_limit_is_solved_in_slices(monkeypatch):
     sizes.clear()
     rec = batch.solve_point_stack(C, x, TriangulationOptions()).record()
     assert sizes == [M] and len(rec) == M                          # no whole-call limit: one stack, as before
+
+
+def test_slices_keep_solving_when_the_reserve_model_exceeds_the_limit(monkeypatch):
+    """Review 33c M1: the reserve for the rows of last resort (a model, 3x their measured cost) exceeded a 3 s limit on
+    20,000 six-view rows, and no slice began (0 certified, where one stack certified all in 2.5 s).  The reserve is
+    capped as ``reserved_end`` caps it, and never above the measured pace of solving a row."""
+    import tritools.solve.batch as batch
+    from tritools.scene import random_scene
+    from tritools.solve.options import TriangulationOptions
+
+    model = batch.reserve_for
+    monkeypatch.setattr(batch, "reserve_for", lambda views: 10.0 * model(views))     # the model 30x the cost
+    sc = random_scene(6, 40, noise_px=1.0, seed=11)
+    M = 2000
+    C = np.broadcast_to(np.asarray(sc.cameras), (M, 6, 3, 4)).copy()
+    x = np.tile(np.asarray(sc.points2d), (M // 40, 1, 1))
+    assert batch.reserve_for((6,)) * M > 3.0
+    rec = batch.solve_point_stack(C, x, TriangulationOptions(total_time_limit=3.0)).record()
+    status = np.array([s.value if hasattr(s, "value") else s for s in rec.status])
+    assert len(rec) == M and (status == "optimal").sum() > M // 2
+
+
+@pytest.mark.parametrize("limit", [1e308, sys.float_info.max])
+def test_a_huge_finite_whole_call_limit_is_no_limit(limit):
+    """Review 33c (HIGH): a limit from ~3e306 s up overflowed the slice size (OverflowError: cannot convert float
+    infinity to integer) in every point batch; it is no limit."""
+    from tritools.scene import random_scene
+
+    sc = random_scene(4, 30, noise_px=1.0, seed=5)
+    free = tritools.triangulate_points(np.asarray(sc.cameras), np.asarray(sc.points2d))
+    got = tritools.triangulate_points(np.asarray(sc.cameras), np.asarray(sc.points2d), total_time_limit=limit)
+    assert np.array_equal(got.gamma_ub, free.gamma_ub) and np.array_equal(got.optimal, free.optimal)

@@ -142,6 +142,13 @@ def test_corrupt_cameras_and_images_bin_are_refused_with_record_and_offset(model
     bad = bytearray(ims)
     bad[0:8] = struct.pack("<Q", 7)                              # one image more than there is
     assert "record 6 (offset " in _corrupt(f, "images.bin", bytes(bad), tmp_path)
+    # COLMAP's invalid id (uint32 max) as a camera's or an image's id (review 33c: the text reader refused it)
+    bad = bytearray(cams)
+    bad[8:12] = struct.pack("<I", 2 ** 32 - 1)
+    assert "camera_id 4294967295 is COLMAP's invalid id" in _corrupt(f, "cameras.bin", bytes(bad), tmp_path)
+    bad = bytearray(ims)
+    bad[8:12] = struct.pack("<I", 2 ** 32 - 1)
+    assert "image_id 4294967295 is COLMAP's invalid id" in _corrupt(f, "images.bin", bytes(bad), tmp_path)
 
 
 def test_corrupt_points3d_bin_is_refused_with_record_and_offset(model, tmp_path):

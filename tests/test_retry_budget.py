@@ -165,3 +165,24 @@ def test_a_retry_the_time_left_cannot_finish_is_not_started(monkeypatch, left, s
         assert labels == ["default", "qdldl"] and sol.attempts[1].iterations == 0
         assert sol.raw_status == RawStatus.TIME_LIMIT and "repeats took 100 s" in sol.attempts[1].solver_status
         assert sol.x is not None                        # the failed attempt's iterate, for the caller to judge
+
+
+def test_a_stop_for_the_callers_deadline_within_the_retries_budget_stays_a_time_limit(monkeypatch):
+    """Review 33c L1: inside the retries' budget a retry that the caller's deadline stopped (Clarabel's
+    ``CallbackTerminated``, :mod:`sospoly.solvers.interrupt`) was relabelled a failed attempt ("retry budget
+    spent") and the chain ended ``failed``; it is the caller's time limit."""
+    real = ClarabelBackend.solve_once
+
+    def stopped(self, problem, label="default", overrides=None, deadline=None, first_seconds=0.0, stop_by=None):
+        sol, att = real(self, problem, label, overrides, deadline, first_seconds, stop_by)
+        if label == "default":
+            att = dataclasses.replace(att, raw_status=RawStatus.FAILED)
+        elif label == "qdldl":
+            att = dataclasses.replace(att, raw_status=RawStatus.TIME_LIMIT, solver_status="CallbackTerminated")
+        return sol, att
+
+    monkeypatch.setattr(ClarabelBackend, "solve_once", stopped)
+    tol = dataclasses.replace(DEFAULT_TOLERANCES, retry_budget_share=0.0, retry_budget_seconds=0.5)
+    sol = ClarabelBackend(tol).solve(_Problem(), deadline=Deadline.after(3600.0))
+    assert [a.label for a in sol.attempts] == ["default", "qdldl"]
+    assert sol.raw_status == RawStatus.TIME_LIMIT and "retry budget" not in sol.attempts[-1].solver_status

@@ -58,3 +58,19 @@ def test_workers_exit_when_their_parent_is_killed():
                 os.kill(p, signal.SIGKILL)
             except ProcessLookupError:
                 pass
+
+
+def test_a_forkserver_pools_workers_live_while_their_creator_does():
+    """Review 33c L2: a worker of a ``forkserver`` pool is the server's child, not its creator's: a watch of the
+    parent id alone ended every such worker after a second (BrokenProcessPool)."""
+    import concurrent.futures as cf
+    import multiprocessing
+
+    from tritools.solve.batch import PARENT_POLL_SECONDS, worker_init
+
+    ctx = multiprocessing.get_context("forkserver")
+    with cf.ProcessPoolExecutor(max_workers=1, mp_context=ctx, initializer=worker_init,
+                                initargs=(os.getpid(),)) as ex:
+        first = ex.submit(os.getpid).result(timeout=60)
+        time.sleep(2.5 * PARENT_POLL_SECONDS)
+        assert ex.submit(os.getpid).result(timeout=60) == first       # the same worker, alive

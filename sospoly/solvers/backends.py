@@ -260,7 +260,8 @@ class ClarabelBackend:
             sol, att = self.solve_once(problem, label, overrides, limit, first_seconds,
                                        stop_by=deadline or _NO_DEADLINE)
             attempts.append(att)
-            if budget is not None and limit is budget and att.raw_status == RawStatus.TIME_LIMIT:
+            if budget is not None and limit is budget and att.raw_status == RawStatus.TIME_LIMIT and \
+                    att.solver_status != "CallbackTerminated":         # (that stop is the caller's deadline's)
                 attempts[-1] = dataclasses.replace(att, raw_status=RawStatus.FAILED,
                                                    solver_status=f"{att.solver_status} (retry budget spent)")
                 break                                    # the retries' budget, not the caller's limit

@@ -181,10 +181,11 @@ def _local_executor(n_items: int, n_chunks: int):
 
 def worker_init(parent: int | None = None) -> None:
     """The set-up of a local worker process: no Rust backtraces (Clarabel panics are caught and reported), and a
-    watch that ends the worker once the process that started it, ``parent`` (its pid, passed by the pool: a
-    worker still starting when its parent died is already re-parented), is gone (:func:`_watch_parent`)."""
+    watch that ends the worker once the process that created its pool, ``parent`` (its pid, passed by the pool: a
+    worker still starting when that process died is already re-parented), is gone (:func:`_watch_parent`)."""
     os.environ["RUST_BACKTRACE"] = "0"
-    _watch_parent(os.getppid() if parent is None else parent)
+    if os.name == "posix":             # (Windows: a parent's death is not seen through its pid; no watch)
+        _watch_parent(os.getppid() if parent is None else parent)
 
 
 #: seconds between a local worker's checks that the process that started it still runs
@@ -192,15 +193,30 @@ PARENT_POLL_SECONDS = 1.0
 
 
 def _watch_parent(parent: int) -> None:
-    """A daemon thread that exits this worker within :data:`PARENT_POLL_SECONDS` of its parent's end: a parent
-    killed without clean-up (SIGKILL from a timeout wrapper, a job scheduler or the OOM killer) left its workers
-    solving, orphaned, for minutes (review 33a M3); the orphan is re-parented, so its parent id changes."""
+    """A daemon thread that exits this worker within :data:`PARENT_POLL_SECONDS` of the end of ``parent``, the
+    process that created its pool: one killed without clean-up (SIGKILL from a timeout wrapper, a job scheduler or
+    the OOM killer) left its workers solving, orphaned, for minutes (review 33a M3).  Gone means: this worker was
+    re-parented (its parent id changed), or ``parent`` no longer exists -- a worker of a ``forkserver`` pool is the
+    server's child, and one still starting when ``parent`` died was re-parented before it could look."""
     import threading
+
+    first = os.getppid()
+
+    def gone() -> bool:
+        if os.getppid() != first:
+            return True
+        try:
+            os.kill(parent, 0)
+        except ProcessLookupError:
+            return True
+        except OSError:                 # (e.g. another user's process now: it exists)
+            pass
+        return False
 
     def watch():
         while True:
             time.sleep(PARENT_POLL_SECONDS)
-            if os.getppid() != parent:
+            if gone():
                 os._exit(1)
 
     threading.Thread(target=watch, name="tritools-parent-watch", daemon=True).start()
@@ -377,8 +393,10 @@ def stack_in_slices(C, x, idx, opts, stages, end, later: float, out: BatchOutcom
     into ``out``; the per-item items of the rows left open.  Without a whole-call ``end``, one stack.  With one,
     slices sized by the pace measured on the last (:data:`SLICE_SHARE`, :data:`SLICE_PRIOR`), each begun only
     where it is predicted to end before ``end`` less the reserve for the rows after it (``later`` seconds of other
-    problems', :func:`~tritools.solve.call_limit.reserve_for` of its own); the rows not begun, and the open rows
-    of a slice that ended past ``end``, get their rows of last resort (:func:`expired_points`)."""
+    problems', :func:`~tritools.solve.call_limit.reserve_for` of its own -- at most the measured pace of solving a
+    row -- capped as :func:`~tritools.solve.call_limit.reserved_end` caps it: review 33c M1, 20,000 six-view rows
+    under a 3 s limit reserved 3.2 s and solved none, where one stack certified all in 2.5 s); the rows not begun,
+    and the open rows of a slice that ended past ``end``, get their rows of last resort (:func:`expired_points`)."""
     M = len(x)
     if end is None:
         return _collect(PointStack(C, x, opts, stages=stages, per_point=runner).run(), idx.tolist(), out)
@@ -386,8 +404,8 @@ def stack_in_slices(C, x, idx, opts, stages, end, later: float, out: BatchOutcom
     target = SLICE_SHARE * max(0.0, end - time.time())
     pace, a, items = SLICE_PRIOR * row_reserve, 0, []
     while a < M:
-        left = end - time.time() - later - row_reserve * (M - a)
-        rows = min(M - a, int(min(target, left) / pace))
+        left = reserved_end(end, later + row_reserve * (M - a)) - time.time()     # (at most RESERVE_TOP_SHARE)
+        rows = int(min(M - a, min(target, left) / pace))         # (a limit of 1e308 s: the ratio overflows)
         if rows < 1:
             break
         b, t0 = a + rows, time.time()
@@ -396,6 +414,7 @@ def stack_in_slices(C, x, idx, opts, stages, end, later: float, out: BatchOutcom
         if expired(end):                                       # past the end: the open rows' estimates at once
             stack.expire_open()
         pace = max((time.time() - t0) / rows, 1e-7)
+        row_reserve = min(row_reserve, pace)      # a row of last resort (DLT, a few LM steps) costs less than this
         items.extend(_collect(stack, idx[a:b].tolist(), out))
         a = b
     if a < M:                                                  # past the whole call's end: estimates only

@@ -52,6 +52,10 @@ def _count(path: Path, data, what: str) -> int:
     return _U64.unpack_from(data, 0)[0]
 
 
+#: COLMAP's invalid camera / image id (uint32 max): never a model's (the text reader refuses it too, review 33c)
+INVALID_ID32 = 2 ** 32 - 1
+
+
 def read_cameras_binary(path) -> dict:
     """Camera table of ``cameras.bin``: dict of ``ids, models, width, height, params, sources``."""
     path = Path(path)
@@ -75,6 +79,8 @@ def read_cameras_binary(path) -> dict:
             _fail(path, where, f"camera {cid}: PARAMS[{int(np.argmin(np.isfinite(params)))}] is not finite")
         if w == 0 or h == 0 or w > 2 ** 62 or h > 2 ** 62:
             _fail(path, where, f"camera {cid}: WIDTH and HEIGHT must be positive, got {w}x{h}")
+        if cid == INVALID_ID32:
+            _fail(path, where, f"camera_id {cid} is COLMAP's invalid id")
         if cid in seen:
             _fail(path, where, f"duplicate camera_id {cid}")
         seen.add(cid)
@@ -120,6 +126,8 @@ def read_images_binary(path, camera_ids: np.ndarray) -> dict:
         if not name or name != name.strip() or "\n" in name or "\r" in name:
             _fail(path, where, f"image {iid}: name must be non-empty, one line, without leading or trailing "
                                f"whitespace, got {name!r}")
+        if iid == INVALID_ID32:
+            _fail(path, where, f"image_id {iid} is COLMAP's invalid id")
         if iid in seen:
             _fail(path, where, f"duplicate image_id {iid}")
         kp = np.frombuffer(data, KEYPOINT_DTYPE, m, start)

@@ -391,36 +391,51 @@ SLICE_PRIOR = 4.0
 def stack_in_slices(C, x, idx, opts, stages, end, later: float, out: BatchOutcome, runner=None) -> list:
     """The point problems C (M, N, 3, 4), x (M, N, 2) under the batch indices ``idx`` through :class:`PointStack`
     into ``out``; the per-item items of the rows left open.  Without a whole-call ``end``, one stack.  With one,
-    slices sized by the pace measured on the last (:data:`SLICE_SHARE`, :data:`SLICE_PRIOR`), each begun only
-    where it is predicted to end before ``end`` less the reserve for the rows after it (``later`` seconds of other
-    problems', :func:`~tritools.solve.call_limit.reserve_for` of its own -- at most the measured pace of solving a
-    row -- capped as :func:`~tritools.solve.call_limit.reserved_end` caps it: review 33c M1, 20,000 six-view rows
-    under a 3 s limit reserved 3.2 s and solved none, where one stack certified all in 2.5 s); the rows not begun,
-    and the open rows of a slice that ended past ``end``, get their rows of last resort (:func:`expired_points`)."""
-    M = len(x)
+    the rows of last resort (:func:`expired_points`) of the last :func:`_sample_rows` rows first, which measures
+    their cost (the reserve model :func:`~tritools.solve.call_limit.reserve_for` is a bound 3x above it: review 33c
+    M1, 20,000 six-view rows under a 3 s limit reserved 3.2 s and solved none, where one stack certified all in
+    2.5 s); then slices sized by the pace measured on the last (:data:`SLICE_SHARE`, :data:`SLICE_PRIOR`), each begun
+    only where it is predicted to end before ``end`` less the reserve for the rows after it (``later`` seconds of
+    other problems', capped as :func:`~tritools.solve.call_limit.reserved_end` caps it, and its own rows' at the
+    measured cost); the rows not begun, and the open rows of a slice that ended past ``end``, keep or get their rows
+    of last resort."""
+    M, N = x.shape[:2]
     if end is None:
         return _collect(PointStack(C, x, opts, stages=stages, per_point=runner).run(), idx.tolist(), out)
-    row_reserve = reserve_for((x.shape[1],))
     target = SLICE_SHARE * max(0.0, end - time.time())
-    pace, a, items = SLICE_PRIOR * row_reserve, 0, []
+    k, t0 = _sample_rows(M, N), time.time()
+    tail = expired_points(C[M - k:], x[M - k:], opts)           # (kept for these rows if they are not solved)
+    row_reserve = min(reserve_for((N,)), RESERVE_MARGIN * (time.time() - t0) / k)
+    pace, a, items = SLICE_PRIOR * reserve_for((N,)), 0, []
     while a < M:
-        left = reserved_end(end, later + row_reserve * (M - a)) - time.time()     # (at most RESERVE_TOP_SHARE)
+        left = reserved_end(end, later) - time.time() - row_reserve * max(0, M - k - a)
         rows = int(min(M - a, min(target, left) / pace))         # (a limit of 1e308 s: the ratio overflows)
         if rows < 1:
             break
         b, t0 = a + rows, time.time()
-        with reserving(later + row_reserve * (M - b)):       # the rows after it fit before the end
+        with reserving(later + row_reserve * max(0, M - k - b)):       # the rows after it fit before the end
             stack = PointStack(C[a:b], x[a:b], opts, stages=stages, per_point=runner).run()
         if expired(end):                                       # past the end: the open rows' estimates at once
             stack.expire_open()
         pace = max((time.time() - t0) / rows, 1e-7)
-        row_reserve = min(row_reserve, pace)      # a row of last resort (DLT, a few LM steps) costs less than this
         items.extend(_collect(stack, idx[a:b].tolist(), out))
         a = b
-    if a < M:                                                  # past the whole call's end: estimates only
-        out.objects.update(zip(idx[a:].tolist(), expired_points(C[a:], x[a:], opts)))
+    if a < M - k:                                              # past the whole call's end: estimates only
+        out.objects.update(zip(idx[a:M - k].tolist(), expired_points(C[a:M - k], x[a:M - k], opts)))
+    out.objects.update((int(i), r) for i, r in zip(idx[max(a, M - k):], tail[max(a, M - k) - (M - k):]))
     return items
 
+
+#: the rows of last resort of a stack's last rows are computed first to measure their cost
+#: (:func:`stack_in_slices`): at most this many rows, and about this many views in all
+SAMPLE_ROWS, SAMPLE_VIEWS = 256, 4096
+#: the reserve per row is this many times the measured cost of the sample (its fixed costs already count in it)
+RESERVE_MARGIN = 1.25
+
+
+def _sample_rows(M: int, N: int) -> int:
+    """Rows of a stack of M problems of N views whose rows of last resort measure their cost (at least one)."""
+    return max(1, min(M, SAMPLE_ROWS, max(16, SAMPLE_VIEWS // max(N, 1))))
 
 
 def solve_point_problems(problems, opts: TriangulationOptions, *, executor=None, progress=None, retries=(),

@@ -110,3 +110,16 @@ def test_a_huge_finite_whole_call_limit_is_no_limit(limit):
     free = tritools.triangulate_points(np.asarray(sc.cameras), np.asarray(sc.points2d))
     got = tritools.triangulate_points(np.asarray(sc.cameras), np.asarray(sc.points2d), total_time_limit=limit)
     assert np.array_equal(got.gamma_ub, free.gamma_ub) and np.array_equal(got.optimal, free.optimal)
+
+
+def test_an_empty_stack_under_a_whole_call_limit_has_no_rows():
+    """Review of this wave's slices: an empty stack under a limit raised in the sample of rows of last resort."""
+    from tritools.scene import random_scene
+    from tritools.solve.batch import solve_point_stack
+    from tritools.solve.options import TriangulationOptions
+
+    sc = random_scene(3, 2, seed=1)
+    rec = solve_point_stack(np.zeros((0, 3, 3, 4)), np.zeros((0, 3, 2)), TriangulationOptions(total_time_limit=2.0))
+    assert len(rec.record()) == 0
+    got = tritools.triangulate_points(np.asarray(sc.cameras), np.zeros((0, 3, 2)), total_time_limit=2.0)
+    assert len(got.status) == 0

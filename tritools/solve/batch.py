@@ -402,6 +402,8 @@ def stack_in_slices(C, x, idx, opts, stages, end, later: float, out: BatchOutcom
     M, N = x.shape[:2]
     if end is None:
         return _collect(PointStack(C, x, opts, stages=stages, per_point=runner).run(), idx.tolist(), out)
+    if M == 0:                          # (no rows: no sample either)
+        return []
     target = SLICE_SHARE * max(0.0, end - time.time())
     k, t0 = _sample_rows(M, N), time.time()
     tail = expired_points(C[M - k:], x[M - k:], opts)           # (kept for these rows if they are not solved)

@@ -407,8 +407,9 @@ def stack_in_slices(C, x, idx, opts, stages, end, later: float, out: BatchOutcom
     target = SLICE_SHARE * max(0.0, end - time.time())
     k, t0 = _sample_rows(M, N), time.time()
     tail = expired_points(C[M - k:], x[M - k:], opts)           # (kept for these rows if they are not solved)
-    row_reserve = min(reserve_for((N,)), RESERVE_MARGIN * (time.time() - t0) / k)
-    pace, a, items = SLICE_PRIOR * reserve_for((N,)), 0, []
+    model = reserve_for((N,))
+    row_reserve = min(model, RESERVE_MARGIN * (time.time() - t0) / k)
+    pace, a, items = SLICE_PRIOR * model, 0, []
     while a < M:
         left = reserved_end(end, later) - time.time() - row_reserve * max(0, M - k - a)
         rows = int(min(M - a, min(target, left) / pace))         # (a limit of 1e308 s: the ratio overflows)

@@ -145,8 +145,33 @@ def _json_int(literal: str):
     return int(literal)
 
 
+def _plainly_finite(data) -> bool:
+    """True when decoded JSON holds only plain finite numbers, strings, booleans and nulls in lists and dicts
+    (one pass without locations: the common case of :func:`_find_non_finite`); False when anything else is
+    seen, which the located walk then examines."""
+    stack, finite, big = [data], math.isfinite, sys.float_info.max
+    while stack:
+        value = stack.pop()
+        kind = type(value)
+        if kind is list:
+            stack.extend(value)
+        elif kind is dict:
+            stack.extend(value.values())
+        elif kind is float:
+            if not finite(value):
+                return False
+        elif kind is int:
+            if abs(value) > big:
+                return False
+        elif not (kind is str or kind is bool or value is None):
+            return False
+    return True
+
+
 def _find_non_finite(data, root: str) -> None:
     """The first non-finite number of decoded JSON, by location (iterative: no recursion limit)."""
+    if _plainly_finite(data):
+        return
     stack = [(data, root)]
     while stack:
         value, loc = stack.pop()
@@ -182,7 +207,20 @@ def _short(value, limit: int = 60) -> str:
     return text if len(text) <= limit else text[:limit] + "..."
 
 
+def _plain_shape(value, shape: tuple) -> bool:
+    """True when ``value`` is nested lists of exactly ``shape`` holding plain ints and floats (the common case of
+    :func:`_numeric`, checked without building locations)."""
+    rows = [value]
+    for n in shape:
+        if not all(type(r) is list and len(r) == n for r in rows):
+            return False
+        rows = [v for r in rows for v in r]
+    return all(type(v) is float or type(v) is int for v in rows)
+
+
 def _numeric(value, loc: str, shape: tuple) -> np.ndarray:
+    if _plain_shape(value, shape):
+        return np.array(value, dtype=float)
     got = _nested_shape(value, loc, len(shape))
     if got != shape:
         raise ProblemFileError(loc, f"expected shape {shape}, got {got}")
@@ -200,14 +238,14 @@ def region_types() -> tuple[str, ...]:
     return tuple(out)
 
 
-def _parse_region(value, loc: str) -> Region:
+def _parse_region(value, loc: str, kinds: tuple | None = None) -> Region:
     if isinstance(value, (list, tuple)):          # shorthand: [u, v] is a point region
         return Point(_numeric(value, loc, (2,)))
     if not isinstance(value, Mapping):
         raise ProblemFileError(loc, f"expected a region object or an [u, v] point, got {_json_type(value)}")
     if "type" not in value:
         raise ProblemFileError(_join(loc, "type"), "missing required field")
-    kinds = region_types()
+    kinds = region_types() if kinds is None else kinds
     if value["type"] not in kinds:
         raise ProblemFileError(_join(loc, "type"),
                                f"unknown region type {_short(value['type'])} (expected {', '.join(kinds)})")
@@ -252,7 +290,7 @@ def _parse_options(obj: Mapping, loc: str) -> dict:
     return {k: getattr(opts, k) for k in given}
 
 
-def _parse_problem(obj, loc: str) -> ProblemSpec:
+def _parse_problem(obj, loc: str, kinds: tuple | None = None) -> ProblemSpec:
     if not isinstance(obj, Mapping):
         raise ProblemFileError(loc or "$", f"expected a problem object, got {_json_type(obj)}")
     for key in obj:
@@ -274,7 +312,8 @@ def _parse_problem(obj, loc: str) -> ProblemSpec:
         raise ProblemFileError(rloc, f"expected an array of regions, got {_json_type(regs)}")
     if len(regs) != len(cams):
         raise ProblemFileError(rloc, f"expected one region per camera ({len(cams)}), got {len(regs)}")
-    regions = tuple(_parse_region(r, _join(rloc, i)) for i, r in enumerate(regs))
+    kinds = region_types() if kinds is None else kinds
+    regions = tuple(_parse_region(r, _join(rloc, i), kinds) for i, r in enumerate(regs))
     name = obj.get("name")
     if name is not None and not isinstance(name, str):
         raise ProblemFileError(_join(loc, "name"), f"expected a string, got {_json_type(name)}")
@@ -307,7 +346,8 @@ def parse_problems(data: Any) -> list[ProblemSpec]:
                                     f"{{\"problems\": [...]}}, got {_json_type(data)}")
     if not items:
         raise ProblemFileError(prefix or "$", "no problems")
-    return [_parse_problem(p, _join(prefix, i)) for i, p in enumerate(items)]
+    kinds = region_types()
+    return [_parse_problem(p, _join(prefix, i), kinds) for i, p in enumerate(items)]
 
 
 def parse_problem_text(text: str, source: str = "<input>") -> list[ProblemSpec]:

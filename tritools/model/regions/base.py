@@ -27,10 +27,8 @@ import numpy as np
 from ...errors import MISSING, FieldError
 from .forms import ConicForm, RegionExtent
 
-__all__ = [
-    "Region", "RegionPolynomials", "real_array", "as_vector", "as_matrix", "as_points", "positive_number",
-    "similarity_args", "check_xy", "square", "declares_extent", "require_extent",
-]
+__all__ = ["Region", "RegionPolynomials", "real_array", "as_vector", "as_matrix", "as_points", "positive_number",
+           "similarity_args", "check_xy", "square", "declares_extent", "require_extent"]
 
 #: ``Region`` subclasses by ``kind`` (filled by ``Region.__init_subclass__``).
 _REGISTRY: dict[str, type[Region]] = {}
@@ -77,6 +75,8 @@ def real_array(value, name: str, what: str = "array") -> np.ndarray:
         kind = "b"                                # [True, 0] is an int array to numpy: refused like a bool array
     if arr.dtype.kind not in _REAL_KINDS or kind == "b":
         raise FieldError(name, f"must be real numbers, got {_KIND_NAMES.get(kind, arr.dtype.name)}")
+    if arr.dtype == np.float64:                   # nothing to convert: no error state to set (the common case)
+        return np.array(arr)
     with np.errstate(over="ignore"):              # long double beyond float64: inf, refused by the finite checks
         return np.array(arr, dtype=float)
 
@@ -85,7 +85,7 @@ def _holds_bool(value) -> bool:
     """True when a nested list/tuple holds a boolean anywhere."""
     if isinstance(value, (bool, np.bool_)):
         return True
-    return isinstance(value, (list, tuple)) and any(_holds_bool(v) for v in value)
+    return isinstance(value, (list, tuple)) and any(_holds_bool(v) for v in value if type(v) not in (float, int))
 
 
 def _big_integers(arr: np.ndarray, name: str) -> np.ndarray:

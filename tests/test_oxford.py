@@ -73,6 +73,17 @@ def test_nview_corners_accepts_star_and_minus_one(tmp_path):
         read_nview_corners(f, 3)
 
 
+def test_a_track_naming_a_missing_corner_is_reported_at_its_line(tmp_path):
+    scene = random_scene(3, 4, noise_px=0.5, seed=2)
+    _write_vgg(tmp_path / "synth", scene, set())
+    nv = tmp_path / "synth" / "nview-corners"
+    lines = nv.read_text().splitlines()
+    lines[2] = "0  99  1"                            # view 1 has 4 corners
+    nv.write_text("\n\n" + "\n".join(lines) + "\n")  # two blank lines first: line 5, track 2
+    with pytest.raises(ValueError, match=r"nview-corners:5: track 2 refers to corner 99 of view 1, which has 4"):
+        load_sequence("synth", tmp_path)
+
+
 def test_missing_data_directory_is_a_clear_error(tmp_path):
     with pytest.raises(DataNotFoundError, match="not found"):
         load_sequence("corridor", tmp_path / "nowhere")

@@ -182,6 +182,11 @@ def read_corners(path: Path) -> np.ndarray:
 
 def read_nview_corners(path: Path, n_views: int) -> list[list[int | None]]:
     """Rows of corner indices, None where missing (``*`` or ``-1``)."""
+    return [row for _, row in _nview_rows(path, n_views)]
+
+
+def _nview_rows(path: Path, n_views: int) -> list[tuple[int, list[int | None]]]:
+    """(line number, row) of :func:`read_nview_corners`, for messages about a row's content."""
     rows = []
     for lineno, line in enumerate(_read_text(path).splitlines(), 1):
         tokens = line.split()
@@ -198,7 +203,7 @@ def read_nview_corners(path: Path, n_views: int) -> list[list[int | None]]:
                     row.append(int(tok))
                 except ValueError:
                     raise ValueError(f"{path}:{lineno}: bad corner index {tok!r}") from None
-        rows.append(row)
+        rows.append((lineno, row))
     return rows
 
 
@@ -228,13 +233,13 @@ def _load_vgg(folder: Path, name: str, min_views: int) -> Sequence:
     if len(nv) != 1:
         raise DataNotFoundError(f"{folder}: expected one *nview-corners file, found {len(nv)}")
     tracks = []
-    for tid, row in enumerate(read_nview_corners(nv[0], len(views))):
+    for tid, (lineno, row) in enumerate(_nview_rows(nv[0], len(views))):
         vis = [(v, k) for v, k in enumerate(row) if k is not None]
         if len(vis) < min_views:
             continue
         for v, k in vis:
             if not 0 <= k < len(corners[v]):
-                raise ValueError(f"{nv[0]}: track {tid} refers to corner {k} of view {v}, "
+                raise ValueError(f"{nv[0]}:{lineno}: track {tid} refers to corner {k} of view {v}, "
                                  f"which has {len(corners[v])} corners")
         tracks.append(Track(tid, tuple(v for v, _ in vis), np.array([corners[v][k] for v, k in vis])))
     return Sequence(name, cameras, tuple(tracks))

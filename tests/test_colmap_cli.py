@@ -119,7 +119,11 @@ def test_bad_paths_exit_2(binary_in, tmp_path, capsys):
              ([str(binary_in), str(tmp_path)], "contains IN_DIR"),
              ([str(tmp_path / "nowhere"), str(tmp_path / "o")], "nowhere: no such directory"),
              ([str(binary_in), str(tmp_path / "o"), "--input-type", "txt"], "cameras.txt: missing"),
-             ([str(binary_in), str(tmp_path / "o"), "--export", str(tmp_path / "d.ply")], "d.ply: is a directory")]
+             ([str(binary_in), str(tmp_path / "o"), "--export", str(tmp_path / "d.ply")], "d.ply: is a directory"),
+             ([str(binary_in), str(tmp_path / "o"), "--export", str(tmp_path / "file" / "x.ply")],
+              f"--export: {tmp_path / 'file' / 'x.ply'}: {tmp_path / 'file'} is not a directory"),
+             ([str(binary_in), str(tmp_path / "file" / "sub" / "o")],
+              f"OUT_DIR {tmp_path / 'file' / 'sub' / 'o'}: {tmp_path / 'file'} is not a directory")]
     (tmp_path / "d.ply").mkdir()
     for argv, expect in cases:
         assert main(["colmap"] + argv) == 2, argv

@@ -17,6 +17,7 @@ from __future__ import annotations
 import contextlib
 import functools
 import logging
+import os
 import shutil
 import time
 from dataclasses import dataclass, field
@@ -165,6 +166,9 @@ def check_output(in_dir, out_dir, exports=()) -> None:
     dst = Path(out_dir)
     if dst.exists() and not dst.is_dir():
         raise OutputError(f"OUT_DIR {out_dir}: exists and is not a directory")
+    blocker = _file_in_the_way(dst.parent)
+    if blocker is not None:
+        raise OutputError(f"OUT_DIR {out_dir}: {blocker} is not a directory")
     clash = input_clash(out_dir, "OUT_DIR", [("IN_DIR", in_dir)], folder=True)   # the rule of every command
     if clash:
         raise OutputError(clash)
@@ -174,9 +178,21 @@ def check_output(in_dir, out_dir, exports=()) -> None:
             raise OptionError("export", f"{e}: the file name must end with .ply or .npz")
         if p.is_dir():
             raise OptionError("export", f"{e}: is a directory")
+        blocker = _file_in_the_way(p.parent)
+        if blocker is not None:
+            raise OptionError("export", f"{e}: {blocker} is not a directory")
         clash = input_clash(e, "export", [("IN_DIR", in_dir)])
         if clash:
             raise OutputError(clash)
+
+
+def _file_in_the_way(folder: Path) -> Path | None:
+    """The nearest existing ancestor of ``folder`` (itself included) when it is not a directory: a folder that
+    cannot be created there (``--export afile/x.ply`` with ``afile`` a file)."""
+    for p in (folder, *folder.parents):
+        if os.path.lexists(p):
+            return None if p.is_dir() else p
+    return None
 
 
 @dataclass(frozen=True)

@@ -135,7 +135,9 @@ def test_library_calls_show_no_bar_unless_asked(capfd):
     probs = [(P, rng.normal(scale=0.1, size=(2, 2))) for _ in range(1200)]       # above the CLI's threshold
     tritools.triangulate_many(probs)
     assert capfd.readouterr().err == ""
-    tritools.triangulate_many(probs, progress="auto")
+    tritools.triangulate_many(probs, progress="auto")       # a captured (not a terminal) stderr: no bar
+    assert capfd.readouterr().err == ""
+    tritools.triangulate_many(probs, progress=True)
     assert "triangulating" in capfd.readouterr().err
 
 

@@ -409,8 +409,10 @@ def test_no_progress_bar_for_tiny_batches(capsys):
 
     retri = importlib.import_module("tritools.sfm.retriangulate")
     assert progress_bar(PROGRESS_MIN_POINTS, "auto") is None      # (the command line's bar: a terminal only)
+    assert _progress_bar(PROGRESS_MIN_ITEMS, "auto") is None      # `tritools solve 2> log`: no bar (33a L10)
     with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(retri, "_stderr_is_terminal", lambda: True)
+        mp.setattr(retri, "stderr_is_terminal", lambda: True)
+        mp.setattr(importlib.import_module("tritools.solve.batch"), "stderr_is_terminal", lambda: True)
         for bar in (_progress_bar(PROGRESS_MIN_ITEMS, "auto"), progress_bar(PROGRESS_MIN_POINTS, "auto"),
                     progress_bar(3, True)):
             assert bar is not None

@@ -34,6 +34,7 @@ from ..io.colmap.model import NO_POINT3D, Model, Point3D
 from ..io.colmap.pycolmap_bridge import from_pycolmap, import_pycolmap, is_pycolmap_reconstruction
 from ..records import TriangulationResults
 from ..result import Status, TriangulationResult
+from ..solve.batch import stderr_is_terminal
 from ..solve.call_limit import call_limit
 from .certify import STATUS_LEGEND, RecordColumns, status_code, written_certified
 from .pipeline import RetriangulationOptions, prepare_geometry, process_chunk
@@ -251,7 +252,7 @@ def progress_bar(total: int | None, enabled: bool | str | None):
     redirected stream gets its one error line and nothing else, review 21b F3), or tqdm missing (a warning when
     ``enabled`` is True)."""
     if enabled is None or enabled is False or (enabled == "auto" and (total is None or total < PROGRESS_MIN_POINTS
-                                                                      or not _stderr_is_terminal())):
+                                                                      or not stderr_is_terminal())):
         return None
     try:
         from tqdm import tqdm
@@ -260,15 +261,6 @@ def progress_bar(total: int | None, enabled: bool | str | None):
             logger.warning("progress=True needs tqdm (pip install 'sospoly-tritools[progress]'): no progress bar")
         return None
     return tqdm(total=total, desc="re-triangulating", unit="pt", leave=False)
-
-
-def _stderr_is_terminal() -> bool:
-    import sys
-
-    try:
-        return bool(sys.stderr is not None and sys.stderr.isatty())
-    except (AttributeError, ValueError):            # a closed or replaced stream
-        return False
 
 
 def skipped_cameras(arrays: ModelArrays, geom) -> tuple:

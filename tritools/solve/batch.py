@@ -29,6 +29,7 @@ import concurrent.futures as cf
 import dataclasses
 import logging
 import os
+import sys
 import time
 from collections.abc import Iterable, Sequence
 
@@ -60,7 +61,7 @@ RetryStep = tuple
 LOCAL_PROCESS_MIN_ITEMS = 200
 #: per-item problems per executor task.
 DEFAULT_CHUNK_SIZE = 8
-#: with progress=None a bar is shown from this many problems on (and only when tqdm is installed).
+#: with progress="auto" a bar is shown from this many problems on (only on a terminal, and when tqdm is installed).
 PROGRESS_MIN_ITEMS = 1000
 
 
@@ -157,8 +158,10 @@ def _expired_items(items, retries, end) -> list:
 
 def _progress_bar(total: int, progress):
     """A tqdm bar, or None: ``progress`` None / False (a library call shows no bar unless asked), ``"auto"``
-    with fewer than PROGRESS_MIN_ITEMS problems, or tqdm missing (a warning when ``progress`` is True)."""
-    if progress is None or progress is False or (progress == "auto" and total < PROGRESS_MIN_ITEMS):
+    with fewer than PROGRESS_MIN_ITEMS problems or a standard error that is not a terminal (a redirected stream
+    gets no bar: review 33a L10), or tqdm missing (a warning when ``progress`` is True)."""
+    if progress is None or progress is False or (progress == "auto" and (total < PROGRESS_MIN_ITEMS
+                                                                          or not stderr_is_terminal())):
         return None
     try:
         from tqdm import tqdm
@@ -167,6 +170,14 @@ def _progress_bar(total: int, progress):
             log.warning("progress=True needs tqdm (pip install 'sospoly-tritools[progress]'): no progress bar")
         return None
     return tqdm(total=total, desc="triangulating", leave=False)
+
+
+def stderr_is_terminal() -> bool:
+    """Is standard error a terminal?  The condition of every ``"auto"`` progress bar."""
+    try:
+        return bool(sys.stderr is not None and sys.stderr.isatty())
+    except (AttributeError, ValueError):            # a closed or replaced stream
+        return False
 
 
 def _local_executor(n_items: int, n_chunks: int):
@@ -530,7 +541,7 @@ def triangulate_many(problems: Iterable[Sequence], method: str | Method | None =
     executor : None, a :class:`concurrent.futures.Executor`, or a ``dask.distributed.Client``
         (see the module docstring for the default)
     progress : a tqdm bar: True, False / None (the default: no bar), or "auto" (only for batches of
-        PROGRESS_MIN_ITEMS or more; what the command line does unless --progress)
+        PROGRESS_MIN_ITEMS or more on a terminal's stderr; what the command line does unless --progress)
     retries : (method, delta) steps tried in order on items the first call did not certify
         (e.g. ``[("corollary1", 4), ("theorem1", None)]``); the first certified result is kept, else the
         first call's.  Each result's ``attempts`` lists them all.

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
 
 import numpy as np
 import pytest
@@ -426,3 +427,23 @@ def test_pycolmap_reads_the_output_and_agrees_on_projection_undistortion_and_err
     for pid, p in new.points3D.items():
         assert errors[pid] == p.error                                     # read back exactly
         assert rec.points3D[pid].error == pytest.approx(p.error, rel=1e-9, abs=1e-12)
+
+
+@pytest.mark.parametrize("record, kwargs, field", [
+    ("camera", {"width": 10.5}, "camera width"), ("camera", {"height": True}, "camera height"),
+    ("camera", {"id": "1"}, "camera id"), ("image", {"camera_id": 1.25}, "image camera_id"),
+    ("image", {"points2D": ((1.0, 2.0, 2.7),)}, "points2D[0] point3D_id"),
+    ("point", {"rgb": (1.5, 2, 3)}, "rgb"), ("point", {"track": ((1, 0.5),)}, "track point2D_idx"),
+])
+def test_records_refuse_fractional_and_non_integer_ids(record, kwargs, field):
+    from tritools.io.colmap.model import Camera, Image, Point3D
+
+    base = {"camera": (Camera, dict(id=1, model="PINHOLE", width=640, height=480, params=(1, 1, 1, 1))),
+            "image": (Image, dict(id=1, qvec=(1, 0, 0, 0), tvec=(0, 0, 0), camera_id=1, name="a.jpg")),
+            "point": (Point3D, dict(id=1, xyz=(0, 0, 0)))}[record]
+    with pytest.raises(ValueError, match=re.escape(field)):
+        base[0](**{**base[1], **kwargs})
+    r = base[0](**{**base[1], "id": np.int64(7)})          # numpy integers and integral floats are integers
+    assert type(r.id) is int and r.id == 7
+    if record == "camera":
+        assert Camera(**{**base[1], "width": 640.0}).width == 640

@@ -20,6 +20,7 @@ naming the file and line.  Newer COLMAP versions also write ``rigs.txt`` and
 from __future__ import annotations
 
 import math
+import operator
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import MappingProxyType
@@ -53,6 +54,25 @@ def _finite_tuple(values, n: int | None, name: str) -> tuple:
     return out
 
 
+def _whole(value, name: str) -> int:
+    """``value`` as an int: Python and numpy integers, and floats without a fractional part (``640.0``);
+    refused with a ValueError naming ``name``: fractions (a width of 10.5), booleans, strings, NaN."""
+    if type(value) is int:
+        return value
+    if not isinstance(value, (bool, np.bool_)):
+        try:
+            return operator.index(value)
+        except TypeError:
+            if isinstance(value, (float, np.floating)) and math.isfinite(value) and float(value).is_integer():
+                return int(value)
+    raise ValueError(f"{name} must be an integer, got {value!r}")
+
+
+def _set_whole(record, names: tuple, what: str) -> None:
+    for name in names:
+        object.__setattr__(record, name, _whole(getattr(record, name), f"{what} {name}"))
+
+
 @dataclass(frozen=True)
 class Camera:
     """Intrinsics shared by images: ``model`` is a COLMAP model name (see camera_models)."""
@@ -63,6 +83,7 @@ class Camera:
     params: tuple
 
     def __post_init__(self):
+        _set_whole(self, ("id", "width", "height"), "camera")
         object.__setattr__(self, "params", _finite_tuple(self.params, None, f"camera {self.id} params"))
         if self.model not in COLMAP_MODEL_N_PARAMS:
             raise ValueError(f"camera {self.id}: unknown COLMAP camera model {self.model!r}")
@@ -85,6 +106,7 @@ class Image:
     points2D: tuple = ()
 
     def __post_init__(self):
+        _set_whole(self, ("id", "camera_id"), "image")
         object.__setattr__(self, "qvec", _finite_tuple(self.qvec, 4, f"image {self.id} qvec"))
         object.__setattr__(self, "tvec", _finite_tuple(self.tvec, 3, f"image {self.id} tvec"))
         if np.linalg.norm(self.qvec) == 0:
@@ -97,7 +119,7 @@ class Image:
             if len(p) != 3:
                 raise ValueError(f"image {self.id} points2D[{k}] must be (x, y, point3D_id), got {p!r}")
             x, y = _finite_tuple(p[:2], 2, f"image {self.id} points2D[{k}]")
-            pts.append((x, y, int(p[2])))
+            pts.append((x, y, _whole(p[2], f"image {self.id} points2D[{k}] point3D_id")))
         object.__setattr__(self, "points2D", tuple(pts))
 
     @property
@@ -127,13 +149,16 @@ class Point3D:
     track: tuple = ()
 
     def __post_init__(self):
+        _set_whole(self, ("id",), "point3D")
         object.__setattr__(self, "xyz", _finite_tuple(self.xyz, 3, f"point3D {self.id} xyz"))
-        rgb = tuple(int(c) for c in self.rgb)
+        rgb = tuple(_whole(c, f"point3D {self.id} rgb") for c in self.rgb)
         if len(rgb) != 3 or not all(0 <= c <= 255 for c in rgb):
             raise ValueError(f"point3D {self.id}: rgb must be 3 integers in 0..255, got {self.rgb!r}")
         object.__setattr__(self, "rgb", rgb)
         object.__setattr__(self, "error", float(self.error))
-        object.__setattr__(self, "track", tuple((int(i), int(k)) for i, k in self.track))
+        object.__setattr__(self, "track", tuple((_whole(i, f"point3D {self.id} track image_id"),
+                                                 _whole(k, f"point3D {self.id} track point2D_idx"))
+                                                for i, k in self.track))
 
 
 @dataclass(frozen=True)

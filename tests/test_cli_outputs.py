@@ -105,6 +105,20 @@ def test_solve_output_elsewhere_is_written(problem, tmp_path, capsys):
     assert (tmp_path / "R.txt").read_text().startswith("name")
 
 
+@pytest.mark.skipif(not os.path.isdir("/proc/self/fd"), reason="needs /proc/self/fd (Linux)")
+def test_an_output_that_is_a_link_to_a_pipe_is_written_into_the_pipe():
+    """``tritools solve f.json -o /dev/stdout | head`` (33a L2): /dev/stdout -> /proc/self/fd/1 -> ``pipe:[N]``, a
+    link that resolves to no path; the pipe is written as the special file it is."""
+    r, w = os.pipe()
+    try:
+        with atomic_open(f"/proc/self/fd/{w}", "w") as fh:
+            fh.write("through the pipe\n")
+        assert os.read(r, 100) == b"through the pipe\n"
+    finally:
+        os.close(r)
+        os.close(w)
+
+
 def test_solve_refuses_stdin_read_from_the_output_file(problem, tmp_path):
     """``tritools solve - -o F.json < F.json``: stdin is the output file (a subprocess: stdin is fd 0)."""
     data = problem.read_bytes()

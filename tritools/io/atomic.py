@@ -185,12 +185,13 @@ def atomic_path(path):
     replaced, the link kept: review 22a F4 -- a command never removes a file it did not write).
     """
     path = Path(path)
-    if path.is_symlink():               # written through the link (as a shell's redirection): the link stays
-        path = Path(os.path.realpath(path))
     _check_not_directory(path)
     if path.exists() and not path.is_file():       # /dev/stdout, /dev/null, a FIFO: nothing to replace
-        yield path
+        yield path                                  # (before links are resolved: /dev/stdout -> pipe:[N])
         return
+    if path.is_symlink():               # written through the link (as a shell's redirection): the link stays
+        path = Path(os.path.realpath(path))
+        _check_not_directory(path)
     tmp = _temp_name(path)
     try:
         try:

@@ -89,10 +89,10 @@ from .robust_rays import centre_pair_candidates, ray_candidates, sampled_pairs
 from .robust_costs import (decision_scale, disc_distances2, disc_shapes, point_distances2,  # noqa: F401
                            point_distances2_one, scale_from, tls_cost)
 from .robust_report import tls_reported
+from .stages.outcome import behind_message
 
 __all__ = ["robust_thresholds", "triangulate_robust", "drive", "lookahead_bound", "tls_cost", "point_distances2",
-           "MAX_NODES", "MAX_PAIRS", "MIN_THRESHOLD",
-           "LO_ROUNDS", "TlsSearch"]
+           "MAX_NODES", "MAX_PAIRS", "MIN_THRESHOLD", "LO_ROUNDS", "TlsSearch"]
 
 log = logging.getLogger(__name__)
 
@@ -574,6 +574,8 @@ class TlsSearch(NodeBounds):
             msg += f"; stopped by the {stopped}"
         if told.reason and not certified:
             msg += f"; {told.reason}"
+        elif certified and not in_front:               # as the L2 message says it (review 33a L9)
+            msg += f"; {behind_message(np.where(inliers, rep.depths, 1.0), 'TLS')}"
         attempt = Attempt("tls", None, status.value, gamma_lb, gamma_ub, "branch-and-bound", None, (),
                           timings["total"])
         return TriangulationResult("tls", status, X=X, gamma_ub=gamma_ub, gamma_lb=gamma_lb, optimal=certified,

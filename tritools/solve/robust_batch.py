@@ -39,6 +39,7 @@ from .fastpath_cameras import validated_problem
 from .options import MethodChoice
 from .robust import robust_thresholds, triangulate_robust
 from .robust_report import tls_reported_stack
+from .stages.outcome import behind_message
 
 __all__ = ["robust_many", "thresholds_for"]
 
@@ -128,8 +129,11 @@ def settled_by_l2(res: TriangulationResult) -> TriangulationResult:
     n = len(res.residuals)
     total = float(res.timings.get("total", 0.0)) if res.timings else 0.0
     attempt = Attempt("tls", None, res.status.value, res.gamma_lb, res.gamma_ub, "branch-and-bound", None, (), total)
+    msg = f"TLS: {n}/{n} inliers, 0 nodes, 1 L2 sub-problems"
+    if res.optimal and res.in_front is False and res.depths is not None:     # as the L2 message says it (33a L9)
+        msg += f"; {behind_message(res.depths, 'TLS')}"
     return dataclasses.replace(res, method="tls", certified_by="branch-and-bound", inliers=np.ones(n, bool),
-                               message=f"TLS: {n}/{n} inliers, 0 nodes, 1 L2 sub-problems", attempts=(attempt,))
+                               message=msg, attempts=(attempt,))
 
 
 def _l2_suffices(res: TriangulationResult, c: np.ndarray, cameras, regions, tolerances) -> bool:

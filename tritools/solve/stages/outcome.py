@@ -40,9 +40,10 @@ def join(*messages: str) -> str:
     return "; ".join(m for m in messages if m)
 
 
-def behind_message(depths) -> str:
-    """The message of a certified optimum behind some camera(s): which ones."""
-    return "certified L2 optimum, but behind camera(s) " + \
+def behind_message(depths, objective: str = "L2") -> str:
+    """The message of a certified optimum behind some camera(s): which ones (``objective``: "L2", or "TLS" with
+    the depths of its inlier views only)."""
+    return f"certified {objective} optimum, but behind camera(s) " + \
         ", ".join(str(i) for i in np.nonzero(~(np.asarray(depths, float) > 0))[0])
 
 

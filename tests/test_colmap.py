@@ -447,3 +447,20 @@ def test_records_refuse_fractional_and_non_integer_ids(record, kwargs, field):
     assert type(r.id) is int and r.id == 7
     if record == "camera":
         assert Camera(**{**base[1], "width": 640.0}).width == 640
+
+
+@pytest.mark.parametrize("token", ["9" * 5000, "x" * 5000, "1e" + "9" * 400, "-" + "7" * 30])
+def test_long_fields_are_cut_in_messages(tmp_path, token):
+    (tmp_path / "cameras.txt").write_text(f"1 PINHOLE {token} 480 500 500 320 240\n")
+    (tmp_path / "images.txt").write_text("")
+    (tmp_path / "points3D.txt").write_text("")
+    with pytest.raises(ModelFormatError) as err:
+        read_text_model(tmp_path)
+    assert "cameras.txt:1" in str(err.value) and "WIDTH" in str(err.value)
+    assert len(str(err.value)) < 120, str(err.value)
+    if np.isfinite(float(token) if token[-1].isdigit() and len(token) < 400 else np.inf):
+        return                                     # a float PARAM it is
+    (tmp_path / "cameras.txt").write_text(f"1 PINHOLE 640 480 {token} 1 1 1\n")
+    with pytest.raises(ModelFormatError) as err:
+        read_text_model(tmp_path)
+    assert "cameras.txt:1" in str(err.value) and len(str(err.value)) < 120, str(err.value)

@@ -288,6 +288,11 @@ def _check_utf8(path: Path, lineno: int, line: str) -> None:
                                f"{exc.start + 1})") from None
 
 
+def _cut(token: str, limit: int = 24) -> str:
+    """``token`` shortened for a one-line message (a 5,000-digit field is not printed whole)."""
+    return token if len(token) <= limit else token[:limit] + "..."
+
+
 class LineFields:
     """The whitespace-separated fields of one line of a text model, with errors naming file:line."""
 
@@ -309,10 +314,9 @@ class LineFields:
         try:
             v = int(self.tokens[k])
         except ValueError:
-            self.fail(f"{name} must be an integer, got {self.tokens[k][:40]!r}")
+            self.fail(f"{name} must be an integer, got {_cut(self.tokens[k])!r}")
         if not -2 ** 63 <= v < 2 ** 63:
-            self.fail(f"{name} {self.tokens[k][:24]}{'...' if len(self.tokens[k]) > 24 else ''} is beyond the "
-                      f"64-bit integer range")
+            self.fail(f"{name} {_cut(self.tokens[k])} is beyond the 64-bit integer range")
         return v
 
     def id32(self, k: int, name: str) -> int:
@@ -328,9 +332,9 @@ class LineFields:
         try:
             v = float(self.tokens[k])
         except ValueError:
-            self.fail(f"{name} must be a number, got {self.tokens[k]!r}")
+            self.fail(f"{name} must be a number, got {_cut(self.tokens[k])!r}")
         if not math.isfinite(v):
-            self.fail(f"{name} is {self.tokens[k]}")
+            self.fail(f"{name} is {_cut(self.tokens[k])}")
         return v
 
 

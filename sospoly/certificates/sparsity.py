@@ -37,9 +37,9 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from itertools import combinations
 
-import networkx as nx
+import importlib
+
 import numpy as np
-from scipy.optimize import linprog
 
 from ..algebra.basis import MonomialIndex
 
@@ -49,6 +49,20 @@ __all__ = [
     "newton_reduce", "term_sparsity_blocks", "term_sparsity_graph", "term_sparsity_iterate", "variables_of",
     "TERM_COMPLETIONS",
 ]
+
+
+class _OnFirstUse:
+    """A module imported when one of its attributes is first read (networkx costs ~0.2 s to import, and a point
+    triangulation never builds a graph: ``import tritools`` need not pay for it)."""
+
+    def __init__(self, name: str):
+        self._name = name
+
+    def __getattr__(self, attr: str):
+        return getattr(importlib.import_module(self._name), attr)
+
+
+nx = _OnFirstUse("networkx")
 
 #: the chordal-extension heuristics understood by :func:`chordal_extension`.
 HEURISTICS = ("min_degree", "min_fill", "mcs_m", "maximal")
@@ -362,6 +376,8 @@ def in_newton_polytope(support, points) -> np.ndarray:
         if np.any(p < lo) or np.any(p > hi):
             continue
         b_eq = np.append(p.astype(float), 1.0)
+        from scipy.optimize import linprog            # (on first use: scipy.optimize costs ~0.3 s to import)
+
         res = linprog(np.zeros(S.shape[0]), A_eq=A_eq, b_eq=b_eq, bounds=(0, None), method="highs")
         if res.status == 0:
             out[k] = bool(np.max(np.abs(A_eq @ res.x - b_eq)) <= 1e-7 * max(1.0, float(np.abs(b_eq).max())))

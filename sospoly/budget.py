@@ -392,6 +392,10 @@ class ClarabelTimeModel:
         e = self._entries(psd_sides)
         return self.scale_for(e) * (self.FIXED + self.PER_ENTRY_FIRST * e + self.PER_ROW * n_rows)
 
+    def reference_iteration(self, psd_sides, n_rows: int) -> float:
+        """Seconds of one iteration at scale 1 (not what this machine measured: a function of the program only)."""
+        return self.FIXED + self.PER_ENTRY_ITER * self._entries(psd_sides) + self.PER_ROW * n_rows
+
     def iteration(self, psd_sides, n_rows: int) -> float:
         """Predicted seconds of one interior-point iteration."""
         e = self._entries(psd_sides)

@@ -87,14 +87,19 @@ Why these values
   charges the PSD defect and the identity residual to the bound over a box holding the
   minimiser): tritools does, so its bounds stay valid while large many-view programs are not
   re-solved three more times for the last digits.
-* ``retry_budget_share`` / ``retry_budget_seconds``: when Clarabel's first full attempt on a program fails
-  numerically, the retries with other settings (:data:`sospoly.solvers.backends.CLARABEL_RETRY_CHAIN`) share
-  ``max(retry_budget_seconds, retry_budget_share * t_first)`` seconds, t_first that attempt's time.  Measured on
-  the fast test tier: every retry that rescued a program did so within 1.2 s, 1-3 times its first attempt's time;
-  on a four-view rectified rig whose L2 optimum lies behind the cameras (review 27b F3), Theorem 1 at delta = 4
-  failed after 11 s (73 iterations) and the retries ran another 47 s to their iteration and time limits without
-  an answer.  A retry stopped by the budget is a numerical failure (never ``time_limit``, which is the caller's
-  limit); 0 / 0 makes no retry after a failed first attempt, a large value restores the unbounded chain.
+* ``retry_budget_iterations`` / ``retry_budget_share`` / ``retry_budget_seconds``: when Clarabel's first full
+  attempt on a program fails numerically, the retries with other settings
+  (:data:`sospoly.solvers.backends.CLARABEL_RETRY_CHAIN`) share ``max(retry_budget_iterations, retry_budget_share
+  * k_first, retry_budget_seconds / t_ref)`` interior-point iterations, k_first that attempt's iterations and t_ref
+  the program's *reference* iteration time (:meth:`sospoly.budget.ClarabelTimeModel.reference_iteration`, a function
+  of its size: cheap programs get more iterations).  Counted in iterations, not measured seconds, so that whether a
+  retry rescues a program does not depend on the machine's load (a budget of 1 measured second certified a 9-view
+  Theorem 1 program on a quiet machine and not with two other jobs beside it).  Clarabel takes 15-30 iterations
+  on the SOS programs here; the default 60 is two such solves.  On a four-view rectified rig whose L2 optimum lies
+  behind the cameras (review 27b F3), Theorem 1 at delta = 4 failed after 73 iterations (11 s) and the unbounded
+  retries ran another 47 s to their iteration and time limits without an answer.  A retry stopped by the budget
+  is a numerical failure (never ``time_limit``, which is the caller's limit); 0 / 0 / 0 makes no retry after a
+  failed first attempt, a large value restores the unbounded chain.
 * ``bisection_abs`` / ``bisection_rel``: the GEVP bisection stops when the bracket
   ``[c_lo, c_hi]`` satisfies ``c_hi - c_lo <= bisection_abs + bisection_rel*max(1,|c_lo|)``.
 """
@@ -142,6 +147,7 @@ class Tolerances:
     ipm_dual_residual_gap: float = 1e-8
     ipm_flat_face_dual_residual_gap: float = 1e-6
     ipm_schur_regularization: float = 1e-16
+    retry_budget_iterations: int = 60
     retry_budget_share: float = 1.0
     retry_budget_seconds: float = 1.0
     accept_inaccurate: bool = False
@@ -152,6 +158,10 @@ class Tolerances:
             if f.name in _BOOL_FIELDS:
                 if not isinstance(v, bool):
                     raise ValueError(f"Tolerances.{f.name} must be True or False, got {v!r}")
+                continue
+            if f.name == "retry_budget_iterations":
+                if isinstance(v, bool) or not isinstance(v, numbers.Integral) or v < 0:
+                    raise ValueError(f"Tolerances.{f.name} must be an integer >= 0, got {v!r}")
                 continue
             if f.name in _INT_FIELDS:
                 if isinstance(v, bool) or not isinstance(v, numbers.Integral) or v < 1:

@@ -17,6 +17,7 @@ This module and :mod:`.cvxpy_backend` are the only ones of sospoly that import a
 from __future__ import annotations
 
 import enum
+import math
 import dataclasses
 import time
 from dataclasses import dataclass, field
@@ -242,31 +243,36 @@ class ClarabelBackend:
         (less its uninterruptible start, see :meth:`solve_once`); no attempt starts that cannot
         finish its first iteration before the deadline, and the chain then ends with status
         ``time_limit`` and the last attempt's iterate (if any).  The retries after a failed first full attempt
-        share a time budget (``Tolerances.retry_budget_share`` / ``retry_budget_seconds``); one it stops is a
-        failed attempt and ends the chain.  Only the caller's ``deadline`` stops an iteration predicted to end
+        share a budget of iterations (``Tolerances.retry_budget_*``: Clarabel's ``max_iter``, not a time limit, so
+        that the outcome does not depend on the machine's load); one it stops is a failed attempt and ends the
+        chain.  Only the caller's ``deadline`` stops an iteration predicted to end
         past it (:meth:`solve_once`'s ``stop_by``), and only it keeps a retry from starting that cannot finish
         before it: one that the time left does not give the attempt it repeats (:func:`_repeat_seconds`; review
         32b M1: a qdldl retry's uninterruptible first factorisation took 5-10 s, 8x faer's, past a 20 s limit).
         """
         attempts = []
-        last = provisional = budget = None
+        last = provisional = budget = None     # budget: the retries' iterations left (None before the first full)
         first_seconds = whole = 0.0  # the longest start measured so far; the last whole attempt (_repeat_seconds)
         for label, overrides in self._chain(problem, retry):
             if deadline is not None and deadline.expired or not _fits(deadline, whole):
                 attempts.append(Attempt(label, RawStatus.TIME_LIMIT, "time limit reached" if deadline.expired else
                                         f"not started: the attempt it repeats took {whole:.3g} s", 0, 0.0))
                 return _kept(provisional, attempts) or self._time_limit(last, attempts)
-            limit = _earlier(deadline, budget)
-            sol, att = self.solve_once(problem, label, overrides, limit, first_seconds,
+            if budget is not None and budget <= 0:
+                attempts.append(Attempt(label, RawStatus.FAILED, "not started (retry budget spent)", 0, 0.0))
+                break
+            capped = overrides if budget is None else {**overrides, "max_iter": min(budget, self._max_iter(overrides))}
+            sol, att = self.solve_once(problem, label, capped, deadline, first_seconds,
                                        stop_by=deadline or _NO_DEADLINE)
             attempts.append(att)
-            if budget is not None and limit is budget and att.raw_status == RawStatus.TIME_LIMIT and \
-                    att.solver_status != "CallbackTerminated":         # (that stop is the caller's deadline's)
-                attempts[-1] = dataclasses.replace(att, raw_status=RawStatus.FAILED,
-                                                   solver_status=f"{att.solver_status} (retry budget spent)")
-                break                                    # the retries' budget, not the caller's limit
+            if budget is not None:
+                budget -= att.iterations
+                if att.solver_status == "MaxIterations" and capped["max_iter"] < self._max_iter(overrides):
+                    attempts[-1] = dataclasses.replace(att, raw_status=RawStatus.FAILED,
+                                                       solver_status=f"{att.solver_status} (retry budget spent)")
+                    break                                # the retries' budget, not the caller's limit
             if budget is None and not _provisional(overrides):
-                budget = self._retry_budget(att.seconds)
+                budget = self._retry_budget(problem, att.iterations)
             if sol is None:
                 if att.raw_status == RawStatus.TIME_LIMIT:
                     return _kept(provisional, attempts) or self._time_limit(last, attempts)
@@ -304,10 +310,19 @@ class ClarabelBackend:
         return ConicSolution(last.raw_status, last.x, last.z, last.primal_objective, last.dual_objective,
                              tuple(attempts))
 
-    def _retry_budget(self, first: float) -> Deadline:
-        """The deadline of the retries after a first full attempt of ``first`` seconds (:class:`Tolerances`)."""
+    def _retry_budget(self, problem: ConicProblem, first: int) -> int:
+        """The iterations the retries share after a first full attempt of ``first`` iterations (:class:`Tolerances`:
+        counted in iterations, with ``retry_budget_seconds`` converted by the program's reference iteration time,
+        so that the chain's outcome does not depend on the machine's load)."""
         tol = self.tolerances
-        return Deadline.after(max(tol.retry_budget_seconds, tol.retry_budget_share * first))
+        psd = [c.size for c in problem.cones if c.kind == "psd"]
+        per = CLARABEL_TIME_MODEL.reference_iteration(psd, problem.n_rows)
+        n = max(tol.retry_budget_iterations, tol.retry_budget_share * first, tol.retry_budget_seconds / per)
+        return int(math.ceil(min(n, 1e9)))
+
+    def _max_iter(self, overrides) -> int:
+        """Clarabel's iteration limit of an attempt with ``overrides``."""
+        return int({**self.settings, **overrides}.get("max_iter", self.tolerances.solver_max_iter))
 
     def _chain(self, problem: ConicProblem, retry: bool):
         """The retry chain for ``problem``: qdldl dropped where a PSD block is too large for it
@@ -471,15 +486,6 @@ def _fits(deadline: Deadline | None, seconds: float) -> bool:
     """Is there ``seconds`` left before ``deadline`` (None, or no end: always)?"""
     remaining = None if deadline is None else deadline.remaining()
     return remaining is None or remaining >= seconds
-
-
-def _earlier(a: Deadline | None, b: Deadline | None) -> Deadline | None:
-    """The earlier of two deadlines (None: none)."""
-    if a is None or a.end is None:
-        return b
-    if b is None or b.end is None:
-        return a
-    return a if a.end <= b.end else b
 
 
 def _kept(provisional: ConicSolution | None, attempts: list) -> ConicSolution | None:

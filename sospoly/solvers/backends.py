@@ -106,6 +106,18 @@ class ConicSolution:
     def seconds(self) -> float:
         return sum(a.seconds for a in self.attempts)
 
+    @property
+    def stopped_for_time(self) -> bool:
+        """:func:`cut_by_deadline` of the attempts."""
+        return cut_by_deadline(self.attempts)
+
+
+def cut_by_deadline(attempts) -> bool:
+    """Did the caller's deadline end a retry chain short (an attempt stopped at it, or not started for lack of
+    time)?  Then an answer kept from an earlier attempt is not the chain's last word (review 34b: a robust search
+    took such a sub-problem as exhausted)."""
+    return any(a.raw_status == RawStatus.TIME_LIMIT for a in attempts)
+
 
 _CLARABEL_MAP = {
     "Solved": RawStatus.SOLVED,

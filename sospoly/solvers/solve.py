@@ -27,7 +27,7 @@ import numpy as np
 
 from ..budget import Deadline
 from ..scaling import MAX_POW2_EXP
-from .backends import ConicSolution, RawStatus, get_backend
+from .backends import ConicSolution, RawStatus, cut_by_deadline, get_backend
 from .optimality import check_optimality
 from .rays import check_infeasibility, check_primal_point, check_unbounded_ray
 from ..lowering.conic import ConicProblem, GramForm, lower
@@ -59,6 +59,11 @@ class ProgramSolution:
     n_lmivar: int = 0
     seconds: float = 0.0
     message: str = ""
+
+    @property
+    def stopped_for_time(self) -> bool:
+        """Did the caller's deadline cut the solver's retry chain short (:func:`~.backends.cut_by_deadline`)?"""
+        return cut_by_deadline(self.attempts)
 
     def value(self, expr) -> Polynomial | float:
         """Numeric value of a decision expression (LinPoly) at the solution."""

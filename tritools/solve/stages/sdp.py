@@ -49,6 +49,9 @@ SDP_FAST_NAME = ImplName.SDP_POINTS
 
 #: the message of a point whose plan stopped at the options' ``lower_bound_stop`` (``PointContext.bound_reached``)
 BOUND_STOP = "stopped: gamma_lb reached lower_bound_stop (not certified)"
+#: a step's statuses that become ``time_limit`` in its attempt when the caller's deadline cut the solver's retry chain
+#: short (an answer kept from an earlier attempt: :attr:`sospoly.solvers.ConicSolution.stopped_for_time`)
+CUT_BY_TIME = frozenset({Status.NOT_CERTIFIED, Status.SOLVER_FAILED, Status.NUMERICAL_FAILURE})
 
 
 def steps_stage(ctx: PointContext) -> None:
@@ -96,8 +99,12 @@ def run_step(ctx: PointContext, step: Step, tight: bool = False) -> Triangulatio
     if st.recorded:
         return st.result
     res = st.result
-    solver = tuple(f"{a.label}:{a.solver_status}" for a in (st.lb.solution.attempts if st.lb.solution else ()))
-    ctx.attempts.append(Attempt(step.method.value, step.delta, res.status.value, res.gamma_lb, res.gamma_ub,
+    solution = st.lb.solution if st.lb is not None else None
+    solver = tuple(f"{a.label}:{a.solver_status}" for a in (solution.attempts if solution else ()))
+    status = res.status
+    if status in CUT_BY_TIME and solution is not None and solution.stopped_for_time:
+        status = Status.TIME_LIMIT      # the deadline cut the solver's chain: not the step's last word (review 34b)
+    ctx.attempts.append(Attempt(step.method.value, step.delta, status.value, res.gamma_lb, res.gamma_ub,
                                 st.label, st.sparsity, solver, time.perf_counter() - st.t0))
     return replace(res, method=step.result_method.value, delta=step.delta, sparsity=st.sparsity,
                    n_lmivar=st.psatz.n_lmivar)

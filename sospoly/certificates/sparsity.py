@@ -52,8 +52,8 @@ __all__ = [
 
 
 class _OnFirstUse:
-    """A module imported when one of its attributes is first read (networkx costs ~0.2 s to import, and a point
-    triangulation never builds a graph: ``import tritools`` need not pay for it)."""
+    """A module imported when one of its attributes is first read (networkx costs ~0.2 s to import; a program
+    without sparsity never builds a graph, and importing sospoly need not pay for it)."""
 
     def __init__(self, name: str):
         self._name = name

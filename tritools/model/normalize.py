@@ -470,6 +470,22 @@ def data_magnitude(regions) -> float:
         return float(np.max(np.abs(centers))) if centers.size else float("nan")
 
 
+#: centres closer than this relative to their distance from the origin (~4,500 ulps) are said to coincide to round-off
+ROUND_OFF_BASELINE = 1e-12
+
+
+def _centre_spread(cameras: np.ndarray) -> tuple[float, float]:
+    """(largest distance of a centre from the first, largest distance from the world origin) of the cameras'
+    centres C = -M^-1 p4 (inf: a centre at infinity), for the message of :func:`unconstrained_reason` (review 34a M2:
+    centres 7.8e-4 apart at 8.6e6 were said to coincide to round-off)."""
+    with np.errstate(all="ignore"):
+        try:
+            c = -np.linalg.solve(cameras[:, :, :3], cameras[:, :, 3:])[..., 0]
+        except np.linalg.LinAlgError:
+            return math.inf, math.inf
+        return float(np.max(np.linalg.norm(c - c[0], axis=1))), float(np.max(np.linalg.norm(c, axis=1)))
+
+
 def unconstrained_reason(cameras: np.ndarray, regions) -> tuple:
     """(status value, message) for a problem whose normalised data leave no view pair that constrains the point.
 
@@ -494,9 +510,16 @@ def unconstrained_reason(cameras: np.ndarray, regions) -> tuple:
         if all(same_exact_centre(raw[0], P) for P in raw[1:]):
             return "ill_posed", ("all camera centres coincide: no view pair constrains the point (its depth is "
                                  "undetermined)")
-        return "ill_posed", ("the camera centres coincide to round-off but not exactly: next to the centres the exact "
-                             "problem sees their round-off baseline, so no one-centre bound is valid (give the views "
-                             "one exact centre, e.g. the world origin at it, to have them certified as a rotation rig)")
+        spread, far = _centre_spread(raw)
+        how = "coincide to round-off but not exactly" if not spread > ROUND_OFF_BASELINE * far else \
+            "are distinct but too close for their baseline to be resolved"
+        where = f"about {spread:.2g} apart at {far:.3g} from the world origin" if math.isfinite(spread + far) else \
+            "some at infinity"
+        return "ill_posed", (f"the camera centres {how} ({where}): no view pair constrains the point, and next to "
+                             f"the centres "
+                             f"the exact problem sees that baseline, so no one-centre bound is valid (give the views "
+                             f"one exact centre, e.g. the world origin at it, to have them certified as a rotation "
+                             f"rig; or move the world origin near the cameras)")
     big = data_magnitude(regions)
     if big <= ORDINARY_IMAGE_DATA:
         return "numerical_failure", (f"no view pair constrains the point after normalisation although the cameras' "

@@ -34,3 +34,13 @@ def test_import_and_point_calls_load_no_graph_or_lp_library():
     lines = out.stdout.splitlines()
     assert lines[0] == "import []" and lines[1] == "points []", out.stdout
     assert lines[2].startswith("graph ['networkx']") and "(0, 1)" in lines[2], out.stdout   # loaded on first use
+
+
+def test_the_lazy_module_copies_and_pickles():
+    import copy
+    import pickle
+
+    from sospoly.certificates import sparsity
+
+    assert type(copy.copy(sparsity.nx)).__name__ == "_OnFirstUse"
+    assert pickle.loads(pickle.dumps(sparsity.nx)).Graph is not None

@@ -245,3 +245,22 @@ def test_a_stop_for_the_callers_deadline_within_the_retries_budget_stays_a_time_
     sol = ClarabelBackend(_tol(iterations=50)).solve(_Problem(), deadline=Deadline.after(3600.0))
     assert [a.label for a in sol.attempts] == ["default", "qdldl"]
     assert sol.raw_status == RawStatus.TIME_LIMIT and "retry budget" not in sol.attempts[-1].solver_status
+
+
+def test_a_spent_budget_is_not_reported_as_the_callers_deadline(monkeypatch):
+    """Review 34c M1: with the budget spent (here 0 / 0 / 0) and less time left than the failed attempt took, the
+    chain ended ``time_limit`` ("not started: the attempt it repeats took 100 s") -- a cut by the deadline, which
+    tritools records as a time limit -- instead of a failure for the budget, depending on the time left."""
+    real = ClarabelBackend.solve_once
+
+    def slow(self, problem, label="default", overrides=None, deadline=None, first_seconds=0.0, stop_by=None):
+        sol, att = real(self, problem, label, overrides, deadline, first_seconds, stop_by)
+        if label == "default":
+            att = dataclasses.replace(att, raw_status=RawStatus.FAILED, seconds=100.0, iterations=19)
+        return sol, att
+
+    monkeypatch.setattr(ClarabelBackend, "solve_once", slow)
+    for left in (None, 50.0):
+        sol = ClarabelBackend(_tol()).solve(_Problem(), deadline=None if left is None else Deadline.after(left))
+        assert sol.raw_status == RawStatus.FAILED and not sol.stopped_for_time
+        assert sol.attempts[-1].solver_status == "not started (retry budget spent)"

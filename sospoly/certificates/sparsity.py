@@ -59,6 +59,8 @@ class _OnFirstUse:
         self._name = name
 
     def __getattr__(self, attr: str):
+        if attr.startswith("__") or attr == "_name":     # copy / pickle probe the instance before __init__
+            raise AttributeError(attr)
         return getattr(importlib.import_module(self._name), attr)
 
 

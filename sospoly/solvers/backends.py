@@ -113,9 +113,10 @@ class ConicSolution:
 
 
 def cut_by_deadline(attempts) -> bool:
-    """Did the caller's deadline end a retry chain short (an attempt stopped at it, or not started for lack of
-    time)?  Then an answer kept from an earlier attempt is not the chain's last word (review 34b: a robust search
-    took such a sub-problem as exhausted)."""
+    """Did the caller's deadline end a retry chain short after it began (an attempt stopped at it, or not started
+    for lack of time)?  Then an answer kept from an earlier attempt is not the chain's last word (review 34b: a
+    robust search took such a sub-problem as exhausted).  A solve the deadline ended before any attempt has no
+    attempts and its own status ``time_limit``."""
     return any(a.raw_status == RawStatus.TIME_LIMIT for a in attempts)
 
 
@@ -266,13 +267,13 @@ class ClarabelBackend:
         last = provisional = budget = None     # budget: the retries' iterations left (None before the first full)
         first_seconds = whole = 0.0  # the longest start measured so far; the last whole attempt (_repeat_seconds)
         for label, overrides in self._chain(problem, retry):
+            if budget is not None and budget <= 0:     # (before the deadline: a spent budget is no time limit)
+                attempts.append(Attempt(label, RawStatus.FAILED, "not started (retry budget spent)", 0, 0.0))
+                break
             if deadline is not None and deadline.expired or not _fits(deadline, whole):
                 attempts.append(Attempt(label, RawStatus.TIME_LIMIT, "time limit reached" if deadline.expired else
                                         f"not started: the attempt it repeats took {whole:.3g} s", 0, 0.0))
                 return _kept(provisional, attempts) or self._time_limit(last, attempts)
-            if budget is not None and budget <= 0:
-                attempts.append(Attempt(label, RawStatus.FAILED, "not started (retry budget spent)", 0, 0.0))
-                break
             capped = overrides if budget is None else {**overrides, "max_iter": min(budget, self._max_iter(overrides))}
             sol, att = self.solve_once(problem, label, capped, deadline, first_seconds,
                                        stop_by=deadline or _NO_DEADLINE)

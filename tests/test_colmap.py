@@ -430,8 +430,8 @@ def test_pycolmap_reads_the_output_and_agrees_on_projection_undistortion_and_err
 
 
 @pytest.mark.parametrize("record, kwargs, field", [
-    ("camera", {"width": 10.5}, "camera width"), ("camera", {"height": True}, "camera height"),
-    ("camera", {"id": "1"}, "camera id"), ("image", {"camera_id": 1.25}, "image camera_id"),
+    ("camera", {"width": 10.5}, "camera 1: width"), ("camera", {"height": True}, "camera 1: height"),
+    ("camera", {"id": "1"}, "camera id"), ("image", {"camera_id": 1.25}, "image 1: camera_id"),
     ("image", {"points2D": ((1.0, 2.0, 2.7),)}, "points2D[0] point3D_id"),
     ("point", {"rgb": (1.5, 2, 3)}, "rgb"), ("point", {"track": ((1, 0.5),)}, "track point2D_idx"),
 ])

@@ -69,8 +69,11 @@ def _whole(value, name: str) -> int:
 
 
 def _set_whole(record, names: tuple, what: str) -> None:
+    """The integer fields ``names`` of a record (``id`` first: the others' messages name it, ``camera 3: width``)."""
+    object.__setattr__(record, "id", _whole(record.id, f"{what} id"))
     for name in names:
-        object.__setattr__(record, name, _whole(getattr(record, name), f"{what} {name}"))
+        if name != "id":
+            object.__setattr__(record, name, _whole(getattr(record, name), f"{what} {record.id}: {name}"))
 
 
 @dataclass(frozen=True)

@@ -1,10 +1,10 @@
 """The scalar twins of the camera rules that validate_cameras runs on a single call's few cameras
-(_rank_ratio_scalar, _all_equal_scalar) equal the vectorised rules (camera_rank_ratio, cameras_all_equal)."""
+(rank_ratio_scalar, _all_equal_scalar) equal the vectorised rules (camera_rank_ratio, cameras_all_equal)."""
 import numpy as np
 import pytest
 
-from tritools.model.cameras import (CAMERA_RANK_RTOL, _all_equal, _all_equal_scalar, _rank_ratio,
-                                    _rank_ratio_scalar, validate_cameras)
+from tritools.model.cameras import (CAMERA_RANK_RTOL, _all_equal, _all_equal_scalar, checked_rank_ratio,
+                                    rank_ratio_scalar, validate_cameras)
 from tritools.scene import random_scene
 
 
@@ -28,10 +28,10 @@ def _cases():
 
 @pytest.mark.parametrize("C", list(_cases()))
 def test_rank_ratio_scalar_equals_the_vectorised_rule(C):
-    a, b = np.array(_rank_ratio_scalar(C)), _rank_ratio(C)
+    a, b = np.array(rank_ratio_scalar(C)), checked_rank_ratio(C)
     assert np.allclose(a, b, rtol=1e-12, atol=1e-15)
     assert np.array_equal(a > CAMERA_RANK_RTOL, b > CAMERA_RANK_RTOL)
-    d = np.array(_rank_ratio_scalar(C, decide_only=True))       # validate_cameras' form: the same decisions
+    d = np.array(rank_ratio_scalar(C, decide_only=True))       # validate_cameras' form: the same decisions
     assert np.array_equal(d > CAMERA_RANK_RTOL, b > CAMERA_RANK_RTOL) and np.all(d <= a)
     assert np.array_equal(d[a <= CAMERA_RANK_RTOL], a[a <= CAMERA_RANK_RTOL])     # a failing camera's value: the rule's
 

@@ -17,7 +17,7 @@ def test_shared_cameras_give_the_verdicts_of_each_camera():
     assert C.shape[0] * C.shape[1] >= cm.SHARED_MIN_CAMERAS
     got = cm.camera_problems(C)
     ratio = cm.camera_rank_ratio(C)                            # camera by camera
-    np.testing.assert_array_equal(cm._shared_rank_ratio(C), ratio)
+    np.testing.assert_array_equal(cm.shared_rank_ratio(C), ratio)
     bad = ~np.isfinite(C).all(axis=(2, 3)) | ~(ratio > cm.CAMERA_RANK_RTOL)
     assert np.array_equal(got.valid, ~bad.any(axis=1) & ~cm.cameras_all_equal(np.nan_to_num(C)))
     assert got.valid.any() and not got.valid.all()
@@ -25,4 +25,4 @@ def test_shared_cameras_give_the_verdicts_of_each_camera():
 
 def test_distinct_cameras_take_the_direct_rule():
     C = np.random.default_rng(4).standard_normal((700, 7, 3, 4))       # no repeats: one camera each
-    np.testing.assert_array_equal(cm._shared_rank_ratio(C), cm.camera_rank_ratio(C))
+    np.testing.assert_array_equal(cm.shared_rank_ratio(C), cm.camera_rank_ratio(C))

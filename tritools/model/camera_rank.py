@@ -12,7 +12,8 @@ from sospoly import pow2_above, pow2_above_array
 
 from .regions.base import real_array
 
-__all__ = ["CAMERA_RANK_RTOL", "EXACT_RANK_BELOW", "SHARED_MIN_CAMERAS", "camera_rank_ratio",
+__all__ = ["CAMERA_RANK_RTOL", "EXACT_RANK_BELOW", "SHARED_MIN_CAMERAS", "camera_rank_ratio", "checked_rank_ratio",
+           "rank_ratio_scalar", "shared_rank_ratio",
            "exactly_rank_deficient", "power2_scale", "unit_rows"]
 
 
@@ -66,10 +67,10 @@ def camera_rank_ratio(cameras) -> np.ndarray:
     C = real_array(cameras, "cameras")
     if C.ndim < 2 or C.shape[-2:] != (3, 4):
         raise ValueError(f"cameras must have shape (..., 3, 4), got {C.shape}")
-    return _rank_ratio(C)
+    return checked_rank_ratio(C)
 
 
-def _rank_ratio(C: np.ndarray) -> np.ndarray:
+def checked_rank_ratio(C: np.ndarray) -> np.ndarray:
     """:func:`camera_rank_ratio` of a float array (..., 3, 4) already checked: the larger of the conditioned
     camera's ratio and its conditioned left 3 x 3 block's (:func:`_conditioned_ratio` of both; NaN where an entry
     is not finite)."""
@@ -127,13 +128,8 @@ def _conditioned_ratio(C: np.ndarray) -> np.ndarray:
     return np.where(finite, ratio, np.nan)
 
 
-def _p2(m: float) -> float:
-    """:func:`power2_scale` of one magnitude: the power of two at or just above ``m`` (1 for 0 / non-finite)."""
-    return pow2_above(m)
-
-
-def _rank_ratio_scalar(C: np.ndarray, decide_only: bool = False) -> list:
-    """The scalar twin of :func:`_rank_ratio` for finite cameras (N, 3, 4): the same steps on Python floats
+def rank_ratio_scalar(C: np.ndarray, decide_only: bool = False) -> list:
+    """The scalar twin of :func:`checked_rank_ratio` for finite cameras (N, 3, 4): the same steps on Python floats
     (tests/test_cameras_scalar.py: equal to the vectorised rule within round-off).  ``decide_only``: a camera whose
     own conditioned ratio is at least ``EXACT_RANK_BELOW`` keeps that value without its left block's (the rule's
     value is the larger of the two, so it passes the rank test either way and needs no exact check): the same
@@ -150,11 +146,11 @@ def _rank_ratio_scalar(C: np.ndarray, decide_only: bool = False) -> list:
 def _conditioned_ratio_one(P: list) -> float:
     """The scalar twin of :func:`_conditioned_ratio` for one finite camera or left block (three rows of floats).
     (Its sums are ``sum(map(mul, a, b))``: the order and operations of a sum over a generator, without its cost.)"""
-    k = _p2(max(max(map(abs, P[0])), max(map(abs, P[1])), max(map(abs, P[2]))))
+    k = pow2_above(max(max(map(abs, P[0])), max(map(abs, P[1])), max(map(abs, P[2]))))
     rows, nonzero = [], []
     for row in P:
         row = [v / k for v in row]
-        sr = _p2(max(map(abs, row)))
+        sr = pow2_above(max(map(abs, row)))
         row = [v / sr for v in row]
         n = math.sqrt(sum(map(mul, row, row)))
         rows.append([v / n for v in row] if n > 0 else row)
@@ -183,7 +179,7 @@ SHARED_MIN_CAMERAS = 4096
 _KEY = np.random.default_rng(20261206).standard_normal(12)
 
 
-def _shared_rank_ratio(C: np.ndarray) -> np.ndarray:
+def shared_rank_ratio(C: np.ndarray) -> np.ndarray:
     """:func:`camera_rank_ratio` of C (M, N, 3, 4), computed once per distinct camera where the stack repeats few
     (found by a random projection of the entries, then compared entry by entry: the same numbers)."""
     flat = C.reshape(-1, 12)

@@ -52,9 +52,11 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 
-from .camera_rank import (CAMERA_RANK_RTOL, EXACT_RANK_BELOW, SHARED_MIN_CAMERAS, _p2, _rank_ratio,  # noqa: F401
-                          _rank_ratio_scalar, _shared_rank_ratio, camera_rank_ratio, exactly_rank_deficient,
-                          power2_scale, unit_rows)
+from sospoly import pow2_above
+
+from .camera_rank import (CAMERA_RANK_RTOL, EXACT_RANK_BELOW, SHARED_MIN_CAMERAS,  # noqa: F401 (re-exported)
+                          camera_rank_ratio, checked_rank_ratio, exactly_rank_deficient, power2_scale,
+                          rank_ratio_scalar, shared_rank_ratio, unit_rows)
 from .regions.base import real_array
 
 __all__ = ["depth_rows", "numeric_cameras",
@@ -208,7 +210,7 @@ def validate_cameras(cameras: ArrayLike, *, min_views: int = 2, require_distinct
     if not finite.all():
         raise ValueError(f"cameras[{int(np.argmin(finite))}] contains NaN or inf")
     few = C.shape[0] <= SCALAR_MAX_VIEWS          # a single call's few cameras: the scalar twins (plain floats)
-    ratio = _rank_ratio_scalar(C, decide_only=True) if few else _rank_ratio(C)
+    ratio = rank_ratio_scalar(C, decide_only=True) if few else checked_rank_ratio(C)
     for i, r in enumerate(ratio):
         if not r > CAMERA_RANK_RTOL:
             raise ValueError(_rank_message(f"cameras[{i}]", float(r)))
@@ -237,7 +239,7 @@ def _all_equal_scalar(C: np.ndarray) -> bool:
     units = []
     for P in C.tolist():
         flat = [v for row in P for v in row]
-        k = _p2(max(abs(v) for v in flat))
+        k = pow2_above(max(abs(v) for v in flat))
         flat = [v / k for v in flat]
         n = math.sqrt(sum(v * v for v in flat))
         U = [v / n for v in flat] if n > 0 else flat
@@ -277,7 +279,7 @@ def camera_problems(cameras, *, require_distinct: bool = True) -> CameraProblems
         raise ValueError(f"cameras must have shape (M, N, 3, 4), got {C.shape}")
     M, N = C.shape[:2]
     bad_finite = ~np.all(np.isfinite(C), axis=(2, 3))                          # (M, N)
-    bad_rank = ~(_shared_rank_ratio(C) > CAMERA_RANK_RTOL) & ~bad_finite       # NaN ratio -> not finite
+    bad_rank = ~(shared_rank_ratio(C) > CAMERA_RANK_RTOL) & ~bad_finite       # NaN ratio -> not finite
     any_finite, any_rank = bad_finite.any(axis=1), bad_rank.any(axis=1)
     equal = np.zeros(M, dtype=bool)
     if require_distinct and N >= 2:

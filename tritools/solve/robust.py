@@ -124,12 +124,9 @@ def robust_thresholds(robust, n_views: int) -> np.ndarray:
     ValueError naming ``robust`` otherwise."""
     if type(robust) is float and robust >= MIN_THRESHOLD:      # the common case, a valid float (NaN fails >=)
         return np.full(n_views, robust)
-    if isinstance(robust, (bool, np.bool_)) or isinstance(robust, (str, bytes)):
-        raise ValueError("robust must be a positive threshold in pixels (scalar or one per view), "
-                         f"got {_short(robust)}")
     try:
         raw = np.asarray(robust)
-        if raw.dtype.kind not in "iuf":                  # booleans, strings, objects (None), complex
+        if raw.dtype.kind not in "iuf":                  # booleans, strings and bytes, objects (None), complex
             raise TypeError
         c = raw.astype(float)
     except (TypeError, ValueError):

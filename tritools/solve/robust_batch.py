@@ -36,6 +36,7 @@ from ..result import Attempt, Status, TriangulationResult
 from .call_limit import (call_limit, current_end, expired, expired_points, mark_cut, reserve_for, reserving,
                          within)
 from .fastpath_cameras import validated_problem
+from .identical_views import identical_views, may_repeat_views
 from .options import MethodChoice
 from .robust import robust_thresholds, triangulate_robust
 from .robust_report import tls_reported_stack
@@ -180,10 +181,13 @@ def _mismatch(problem, exc: ValueError) -> TriangulationResult:
 def _search_or_failure(cameras, regions, c, opts):
     """A :class:`tritools.solve.robust.TlsSearch` for one problem, or a failed result (bad input)."""
     from .robust import TlsSearch
+    from .triangulate import solve_validated
 
     t0 = time.perf_counter()
     try:
         cams, regs = validated_problem(cameras, regions)
+        if identical_views(cams, regs, c) is not None:      # views listed twice: the single call's exact reduction
+            return solve_validated(cams, regs, c, opts, t0)
         return TlsSearch(cams, regs, c, opts, t0)
     except (ValueError, TypeError) as exc:
         return TriangulationResult("tls", Status.INVALID_INPUT, message=f"{type(exc).__name__}: {exc}",
@@ -450,7 +454,7 @@ def _point_searches(idx, points, thresholds, opts, t0) -> dict:
     for group in groups.values():
         C = np.stack([points[i][0] for i in group])
         try:
-            valid = camera_problems(C).valid
+            valid = camera_problems(C).valid & ~may_repeat_views(C)    # views listed twice: the per-problem path
             rows = depth_rows(C)                # the depth rows of every search's report, in one call
             origins = world_origins(C)          # each search's world frame (TlsSearch), in one call
         except (ValueError, ArithmeticError, np.linalg.LinAlgError):

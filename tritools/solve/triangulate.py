@@ -40,6 +40,7 @@ from sospoly.analysis import rigorous_psatz_bound  # noqa: F401 - re-exported (t
 from ..model.constraints import Method
 from ..result import TriangulationResult
 from .fastpath_cameras import validated_problem
+from .identical_views import identical_views
 from .options import TriangulationOptions, options_from
 from .stages import run_point
 from .stages.estimate import FAMILY_SEARCH_EVALS, INACCURATE_RESOLVE_MAX_SECONDS, MAX_FAMILY_DIM
@@ -47,7 +48,7 @@ from .stages.outcome import behind_message
 from .structures import STRUCTURE_CACHE
 
 __all__ = ["triangulate", "MAX_FAMILY_DIM", "INACCURATE_RESOLVE_MAX_SECONDS", "FAMILY_SEARCH_EVALS",
-           "STRUCTURE_CACHE", "behind_message"]
+           "STRUCTURE_CACHE", "behind_message", "solve_validated"]
 
 
 def triangulate(cameras: ArrayLike, regions: Sequence | ArrayLike, method: str | Method | None = None,
@@ -73,8 +74,23 @@ def triangulate(cameras: ArrayLike, regions: Sequence | ArrayLike, method: str |
     opts = options_from(options, method=method, delta=delta, max_delta=max_delta, **overrides)
     cams, regs = validated_problem(cameras, regions)     # (the camera checks remembered for the last cameras)
     if robust is not None:
-        from .robust import robust_thresholds, triangulate_robust
+        from .robust import robust_thresholds
 
-        return triangulate_robust(cams, regs, robust_thresholds(robust, cams.shape[0]), opts, t0)
+        return solve_validated(cams, regs, robust_thresholds(robust, cams.shape[0]), opts, t0)
+    return solve_validated(cams, regs, None, opts, t0)
+
+
+def solve_validated(cams: np.ndarray, regs, c: np.ndarray | None, opts: TriangulationOptions,
+                    t0: float | None = None) -> TriangulationResult:
+    """One validated problem: views listed more than once merged (:mod:`tritools.solve.identical_views`, an exact
+    reduction), then the TLS search (thresholds ``c``) or the point stages."""
+    merge = identical_views(cams, regs, c)
+    if merge is not None:
+        rc, rr, rt = merge.reduce(cams, regs, c)
+        return merge.expand(solve_validated(rc, rr, rt, merge.options(opts), t0))
+    if c is not None:
+        from .robust import triangulate_robust
+
+        return triangulate_robust(cams, regs, c, opts, t0)
     with np.errstate(all="ignore"):     # extreme numbers over- and underflow in steps that check finiteness (as the
         return run_point(cams, regs, opts, t0)     # robust path): numpy's warnings are noise, an error under -W error

@@ -5,6 +5,8 @@ References independent of tritools' solvers: multi-start scipy least squares on 
 set enumerated (TLS, :func:`robust_refs.tls_by_subsets`); attained values, so no valid lower bound exceeds them."""
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pytest
 
@@ -170,3 +172,18 @@ def test_batch_rows_with_copies_match_single_calls():
         np.testing.assert_array_equal(rm.inliers, r1.inliers)
         assert rm.gamma_ub == pytest.approx(r1.gamma_ub, rel=1e-9)
         assert len(rm.residuals) == len(p[0])
+
+
+def test_region_scaled_past_the_floats_is_solved_unmerged():
+    """A copied region at ~1e308 cannot be scaled by sqrt(2): the views are solved as given (same outcome as without
+    the reduction: a named status, no exception, no warning)."""
+    C, x, _, _ = outlier_track(4, 0, 1)
+    Cd, xd = _with_copy(C, x, [0], [1.0])
+    xd[0] = xd[4] = [1.5e308, 0.0]
+    regs = tritools.as_regions(xd)
+    assert identical_views(Cd, regs) is not None
+    assert identical_views(Cd, regs).reduce(Cd, regs) is None
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        res = tritools.triangulate(Cd, xd)
+    assert not res.optimal and "view 4 repeats" not in res.message

@@ -8,7 +8,8 @@ thresholds.  Cameras are compared after scaling each to unit Frobenius norm, up 
 
 k copies of view i add ``k d_i(X)^2`` to the L2 cost f(X) = 2N gamma(X)^2 (paper eq. (6)) and
 ``k min(d_i^2, c_i^2) = min((sqrt(k) d_i)^2, (sqrt(k) c_i)^2)`` to the TLS cost, so they are one view whose image
-is scaled by ``sqrt(k)`` about its origin: camera ``diag(sqrt(k), sqrt(k), 1) P_i``, region
+is scaled by ``sqrt(k)`` about its origin: camera ``diag(sqrt(k), sqrt(k), 1) P_i`` (stored as the projectively
+equal ``diag(1, 1, 1/sqrt(k)) P_i``), region
 ``R_i.similarity(sqrt(k), 0)``, threshold ``sqrt(k) c_i`` (:meth:`ViewMerge.reduce`).  f is the same function
 of X, so the N' < N views' problem has the same minimisers and
 
@@ -56,13 +57,19 @@ class ViewMerge:
         """sqrt(N' / N): gamma of the caller's views = ratio * gamma of the reduced ones."""
         return float(np.sqrt(len(self.keep) / len(self.group)))
 
-    def reduce(self, cameras: np.ndarray, regions, thresholds=None) -> tuple:
-        """(cameras (N', 3, 4), regions, thresholds or None) of the reduced problem."""
+    def reduce(self, cameras: np.ndarray, regions, thresholds=None) -> tuple | None:
+        """(cameras (N', 3, 4), regions, thresholds or None) of the reduced problem; None where scaling a region
+        by sqrt(k) leaves the floats (the caller then solves the views as given).  The camera's third row is
+        divided by sqrt(k) (projectively diag(sqrt(k), sqrt(k), 1) P: nothing overflows)."""
         root = np.sqrt(self.counts.astype(float))
         C = np.array(cameras[self.keep], float)
-        C[:, :2, :] *= root[:, None, None]
-        regs = [regions[i] if k == 1 else regions[i].similarity(r, (0.0, 0.0))
-                for i, k, r in zip(self.keep, self.counts, root)]
+        C[:, 2, :] /= root[:, None]
+        try:
+            with np.errstate(all="ignore"):
+                regs = [regions[i] if k == 1 else regions[i].similarity(r, (0.0, 0.0))
+                        for i, k, r in zip(self.keep, self.counts, root)]
+        except (ValueError, ArithmeticError):        # a region at ~1e308 scaled past the largest float
+            return None
         c = None if thresholds is None else np.asarray(thresholds, float)[self.keep] * root
         return C, regs, c
 

@@ -85,9 +85,9 @@ def solve_validated(cams: np.ndarray, regs, c: np.ndarray | None, opts: Triangul
     """One validated problem: views listed more than once merged (:mod:`tritools.solve.identical_views`, an exact
     reduction), then the TLS search (thresholds ``c``) or the point stages."""
     merge = identical_views(cams, regs, c)
-    if merge is not None:
-        rc, rr, rt = merge.reduce(cams, regs, c)
-        return merge.expand(solve_validated(rc, rr, rt, merge.options(opts), t0))
+    reduced = None if merge is None else merge.reduce(cams, regs, c)
+    if reduced is not None:
+        return merge.expand(solve_validated(*reduced, merge.options(opts), t0))
     if c is not None:
         from .robust import triangulate_robust
 

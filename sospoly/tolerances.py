@@ -147,10 +147,10 @@ class Tolerances:
     ipm_dual_residual_gap: float = 1e-8
     ipm_flat_face_dual_residual_gap: float = 1e-6
     ipm_schur_regularization: float = 1e-16
-    retry_budget_iterations: int = 60
     retry_budget_share: float = 1.0
     retry_budget_seconds: float = 1.0
     accept_inaccurate: bool = False
+    retry_budget_iterations: int = 60       # added last: the fields before it keep their positions (wave 33's order)
 
     def __post_init__(self) -> None:
         for f in fields(self):

@@ -59,6 +59,26 @@ def test_a_retry_stopped_by_the_budget_is_a_failure_and_ends_the_chain(monkeypat
     assert seen["default"][1] is None and seen["qdldl"] == (None, 7)    # only the retries are limited, in iterations
 
 
+def test_a_retry_ending_almost_solved_at_the_cap_is_labelled(monkeypatch):
+    """Review 34c: Clarabel answers AlmostSolved (its reduced tolerances met) when the budget's max_iter stops it;
+    the attempt says the budget stopped it, and no retry starts after it."""
+    seen: dict = {}
+    _faked(monkeypatch, {"default": RawStatus.FAILED, "qdldl": RawStatus.ALMOST_SOLVED}, seen, {"qdldl": 7})
+    sol = ClarabelBackend(_tol(iterations=7)).solve(_Problem())
+    assert [a.label for a in sol.attempts][:2] == ["default", "qdldl"]
+    assert sol.attempts[1].solver_status.endswith("(retry budget spent)")
+    assert all("not started (retry budget spent)" == a.solver_status for a in sol.attempts[2:])
+    assert sol.raw_status != RawStatus.SOLVED
+
+
+def test_tolerances_fields_keep_their_positions():
+    """Fields added later go last: a positional ``Tolerances(...)`` of an earlier release means the same."""
+    names = [f.name for f in dataclasses.fields(Tolerances)]
+    assert names[-5:] == ["ipm_schur_regularization", "retry_budget_share", "retry_budget_seconds",
+                          "accept_inaccurate", "retry_budget_iterations"]
+    assert names[:4] == ["solver_gap_abs", "solver_gap_rel", "solver_feas", "solver_max_iter"]
+
+
 def test_the_retries_share_one_budget_of_iterations(monkeypatch):
     seen: dict = {}
     _faked(monkeypatch, {"default": RawStatus.FAILED, "qdldl": RawStatus.FAILED}, seen, {"qdldl": 30})

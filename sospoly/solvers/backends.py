@@ -280,10 +280,14 @@ class ClarabelBackend:
             attempts.append(att)
             if budget is not None:
                 budget -= att.iterations
-                if att.solver_status == "MaxIterations" and capped["max_iter"] < self._max_iter(overrides):
+                cut = capped["max_iter"] < self._max_iter(overrides) and att.iterations >= capped["max_iter"]
+                if cut and att.solver_status == "MaxIterations":
                     attempts[-1] = dataclasses.replace(att, raw_status=RawStatus.FAILED,
                                                        solver_status=f"{att.solver_status} (retry budget spent)")
                     break                                # the retries' budget, not the caller's limit
+                if cut and att.raw_status != RawStatus.SOLVED:     # e.g. AlmostSolved at the cap: Clarabel's reduced
+                    attempts[-1] = dataclasses.replace(              # tolerances met when the budget stopped it
+                        att, solver_status=f"{att.solver_status} (retry budget spent)")
             if budget is None and not _provisional(overrides):
                 budget = self._retry_budget(problem, att.iterations)
             if sol is None:

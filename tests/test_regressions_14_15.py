@@ -157,21 +157,32 @@ def test_the_default_budget_bounds_every_point():
     assert TriangulationOptions().replace(time_limit=5).budget == sospoly.Budget(5, TRIANGULATION_BUDGET.max_bytes)
 
 
-def _duplicated_views_scene():
-    """#14's input: 5 views, two of them duplicates of others, one camera scaled by 1e17."""
+def _duplicated_views_scene(moved: float = 0.0):
+    """#14's input: 5 views, two of them duplicates of others, one camera scaled by 1e17; ``moved``: the duplicates'
+    keypoints moved by that many pixels (then two observations in one camera each, 5 distinct views)."""
     from tritools.scene import random_scene
 
     sc = random_scene(3, 1, noise_px=1.0, seed=1)
     cams = np.concatenate([sc.cameras, sc.cameras[:2]])
     cams[2] = cams[2] * 1e17
-    return cams, np.concatenate([sc.points2d[0], sc.points2d[0][:2]])
+    return cams, np.concatenate([sc.points2d[0], sc.points2d[0][:2] + moved])
+
+
+def test_exact_copies_are_solved_as_the_distinct_views():
+    """#14's exact copies are one view each, weighted (tritools.solve.identical_views): Theorem 1's dense delta = 6
+    program then has 3 views, and is certified."""
+    cams, pts = _duplicated_views_scene()
+    res = tritools.triangulate(cams, pts, "theorem1", delta=6, sparsity="none", time_limit=30)
+    assert "views 3 repeats view 0" not in res.message and "view 3 repeats view 0" in res.message
+    assert res.optimal and len(res.residuals) == 5
 
 
 def test_duplicated_views_and_a_1e17_camera_give_a_status_not_a_memory_error():
     """#14: Theorem 1 on this scene let a MemoryError escape (an (8008, 286, 286) array in the IPM, the dense
     delta = 6 program).  The dense program is now refused by its size estimate before anything is allocated,
-    and the default plan returns within its time limit."""
-    cams, pts = _duplicated_views_scene()
+    and the default plan returns within its time limit.  (The duplicated cameras see moved keypoints: five views,
+    not copies, which :func:`test_exact_copies_are_solved_as_the_distinct_views` reduces to three.)"""
+    cams, pts = _duplicated_views_scene(moved=0.5)
     try:
         dense, elapsed = _timed(lambda: tritools.triangulate(cams, pts, "theorem1", delta=6, sparsity="none",
                                                             time_limit=30))

@@ -125,6 +125,15 @@ def test_not_the_same_view():
     assert identical_views(near, xd) is None
 
 
+def test_one_camera_with_two_keypoints_and_a_copy():
+    """Views 0, 1, 2 share a camera; 0 and 2 see the same keypoint, 1 another: 2 is a copy of 0, 1 is not."""
+    C, x, _, _ = outlier_track(4, 0, 3)
+    Cs = np.concatenate([C[:1], 2.0 * C[:1], -C[:1], C[1:]])
+    xs = np.concatenate([x[:1], x[:1] + 3.0, x[:1], x[1:]])
+    m = identical_views(Cs, xs)
+    assert m is not None and m.group.tolist() == [0, 1, 0, 2, 3, 4] and m.counts.tolist() == [2, 1, 1, 1, 1]
+
+
 def test_reduction_is_exact_in_the_cost():
     """The reduced problem's cost at any X equals the caller's (f = 2N gamma^2 = 2N' gamma'^2)."""
     C, x, _, _ = outlier_track(5, 0, 4)

@@ -133,14 +133,16 @@ def identical_views(cameras: np.ndarray, regions, thresholds=None) -> ViewMerge 
     if min(b - a for a, b in zip(ks, ks[1:])) > _KEY_TOL:      # the common case: no camera near another
         return None
     order = np.argsort(key, kind="stable")
-    near = np.flatnonzero(np.diff(key[order]) <= _KEY_TOL)
     U = _unit_cameras(A)
     rep = np.arange(N)
-    for k in near:
-        i, j = order[k], order[k + 1]
-        root = rep[i]
-        if rep[j] == j and _same(U, regions, thresholds, root, j):
-            rep[j] = root
+    for run in _runs(key[order]):                # views whose keys chain within _KEY_TOL: compared pairwise
+        roots: list = []
+        for j in order[run]:
+            root = next((r for r in roots if _same(U, regions, thresholds, r, j)), None)
+            if root is None:
+                roots.append(j)              # (one camera seeing two keypoints: two roots of one run)
+            else:
+                rep[j] = root
     if np.all(rep == np.arange(N)):
         return None
     firsts = np.array([min(np.flatnonzero(rep == r)) for r in rep])     # each group named by its first view
@@ -148,6 +150,13 @@ def identical_views(cameras: np.ndarray, regions, thresholds=None) -> ViewMerge 
     if len(keep) < 2:
         return None
     return ViewMerge(group.astype(int), keep.astype(int), counts.astype(int))
+
+
+def _runs(sorted_keys: np.ndarray) -> list:
+    """Slices of the sorted keys whose neighbours lie within _KEY_TOL of each other (runs of two or more)."""
+    cut = np.flatnonzero(np.diff(sorted_keys) > _KEY_TOL) + 1
+    bounds = np.concatenate([[0], cut, [len(sorted_keys)]])
+    return [slice(a, b) for a, b in zip(bounds[:-1], bounds[1:]) if b - a > 1]
 
 
 def may_repeat_views(C: np.ndarray) -> np.ndarray:

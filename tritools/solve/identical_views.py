@@ -96,7 +96,7 @@ class ViewMerge:
         return dataclasses.replace(res, **fields)
 
     def describe(self) -> str:
-        """One line naming the copies, e.g. ``views 3, 5 repeat view 0: solved as 4 views (copies weighted)``."""
+        """One line naming the copies, e.g. ``views 3, 5 repeat view 0: solved as 4 views (copies weighted, exact)``."""
         parts = []
         for gi, first in enumerate(self.keep):
             if self.counts[gi] > 1:

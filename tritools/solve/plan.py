@@ -13,11 +13,6 @@ With ``method="auto"`` (the default everywhere):
    certify and the dense Gram side is at most :data:`DENSE_FALLBACK_SIDE` (e.g. 5 views with point
    regions, ~2 s) or the problem has three views, the dense certificate at the same degree follows (it
    contains the views one).  Two views, and Theorem 1 with three (one clique holds every view), stay dense.
-   With an ellipse border among the regions, the views step is preceded by its *border* step (``focus``
-   :data:`BORDERS`): the degree-4 blocks only on the cliques holding a view whose border has the best estimate's
-   projection inside.  The degree-2 certificate sees a border as its filled ellipse, so that is where its bound
-   stops short (benchmarks/RESULTS.md, wave 35: uncertain_problem(16, 0 / 2) certified by the border step with
-   about 40 % of the views step's N_LMIVAR in about half its time); without such a view the step is skipped.
 
 After the plan, for the problems it leaves uncertified, the point stage ``exact_variety``
 (:mod:`tritools.solve.stages.exact`) runs one more step, :func:`exact_variety_step`: Theorem 1 at delta = 4, dense
@@ -57,8 +52,8 @@ from sospoly import GramForm, Multiplier, sigma
 from ..model.constraints import THEOREM1_DENSE_MAX_VIEWS, Method
 from .options import MethodChoice, SolvePath, Sparsity, TriangulationOptions
 
-__all__ = ["Step", "BORDERS", "degree_plan", "delta_min", "batch_steps", "last_delta", "DENSE_MAX_SIDE",
-           "DENSE_FALLBACK_SIDE", "EXACT_VARIETY_MAX_SIDE", "exact_variety_step", "exact_variety_applies",
+__all__ = ["Step", "degree_plan", "delta_min", "batch_steps", "last_delta", "DENSE_MAX_SIDE", "DENSE_FALLBACK_SIDE",
+           "EXACT_VARIETY_MAX_SIDE", "exact_variety_step", "exact_variety_applies",
            "exact_variety_views_step", "EXACT_VARIETY_VIEWS_MAX", "EXACT_VARIETY_COLLINEAR_MAX"]
 
 #: ``sparsity="auto"``: dense certificates above degree 2 while the Gram side stays at most this (sigma(8, 2) = 45).
@@ -78,18 +73,12 @@ EXACT_VARIETY_VIEWS_MAX = 8
 EXACT_VARIETY_COLLINEAR_MAX = 12
 
 
-#: ``Step.focus`` of the plan's border step: resolved by the steps stage to the views whose ellipse border holds the
-#: best estimate's projection inside (:func:`tritools.solve.stages.sdp.border_focus`).
-BORDERS = "borders"
-
-
 @dataclass(frozen=True)
 class Step:
     method: Method            # the formulation's constraints (Corollary 1: epipolar; Theorem 1: minors)
     delta: int
     formulation: str          # "dense" or "views"
     reported: Method | None = None   # the method a result of this step is reported under (default: ``method``)
-    focus: tuple | str | None = None  # "views": None every clique of the band; a tuple of views: only their cliques
 
     @property
     def result_method(self) -> Method:
@@ -112,11 +101,9 @@ def _formulation(options: TriangulationOptions, method: Method, delta: int, n_vi
     return "dense" if sigma(n_vars, delta // 2) <= DENSE_MAX_SIDE else "views"
 
 
-def degree_plan(options: TriangulationOptions, n_views: int, n_vars: int, delta_min: int,
-                borders: bool = False) -> list[Step]:
-    """The steps for a problem with ``n_views`` views and ``n_vars`` polynomial variables (module docstring);
-    ``borders``: some region is an ellipse border (then, with ``sparsity="auto"``, a views step of Corollary 1 is
-    preceded by its :data:`BORDERS` step).  Raises ValueError for a ``delta`` below ``delta_min``."""
+def degree_plan(options: TriangulationOptions, n_views: int, n_vars: int, delta_min: int) -> list[Step]:
+    """The steps for a problem with ``n_views`` views and ``n_vars`` polynomial variables (module docstring).
+    Raises ValueError for a ``delta`` below ``delta_min``."""
     method = options.explicit_method
     if options.delta is not None and options.delta < delta_min:
         raise ValueError(f"delta must be even and >= delta_min = {delta_min} for this problem, got {options.delta}")
@@ -138,8 +125,6 @@ def degree_plan(options: TriangulationOptions, n_views: int, n_vars: int, delta_
         steps.append(Step(Method.COROLLARY1, 2, "dense", reported=Method.THEOREM1))
     for d in range(first, last + 1, 2):
         form = _formulation(options, method, d, n_views, n_vars)
-        if form == "views" and borders and method == Method.COROLLARY1 and options.sparsity == Sparsity.AUTO:
-            steps.append(Step(method, d, form, focus=BORDERS))
         steps.append(Step(method, d, form))
         small = sigma(n_vars, d // 2) <= DENSE_FALLBACK_SIDE or n_views <= 3   # three views: dense as before
         if form == "views" and options.sparsity == Sparsity.AUTO and small \

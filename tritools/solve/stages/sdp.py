@@ -23,8 +23,6 @@ from __future__ import annotations
 import dataclasses
 import time
 
-import numpy as np
-
 import sospoly
 from sospoly import BudgetExceeded, Multiplier
 from sospoly.budget import TimeLimitReached, gram_block_exceeds
@@ -34,9 +32,8 @@ from ...errors import ProblemTooLarge
 from ...model.constraints import Method
 from ...model.normalize import data_magnitude, unconstrained_reason
 from ...model.problem import TriangulationProblem, view_band, view_chain
-from ...model.regions import EllipseBorder
 from ...result import Attempt, Status, TriangulationResult
-from ..plan import BORDERS, Step
+from ..plan import Step
 from ..coplanar import futile_after
 from ..decide import c_from_gamma
 from ..sdp_batch import solve_corollary1_points
@@ -66,10 +63,6 @@ def steps_stage(ctx: PointContext) -> None:
     for step in ctx.steps:
         if ctx.finished or ctx.expired:
             break
-        if step.focus == BORDERS:
-            step = border_focus(ctx, step)
-            if step is None:
-                continue
         res = run_step(ctx, step)
         if res.status == Status.NUMERICAL_FAILURE:
             res = run_step(ctx, step, tight=True)
@@ -85,25 +78,6 @@ def steps_stage(ctx: PointContext) -> None:
         if why is not None and step is not ctx.steps[-1]:
             ctx.best = replace(ctx.best, message=join(ctx.best.message, why))
             break
-
-
-def border_focus(ctx: PointContext, step: Step) -> Step | None:
-    """The plan's border step (:data:`tritools.solve.plan.BORDERS`) on this point: focused on the views whose
-    ellipse border R = {y : (y - c)' D^-1 (y - c) = 1} holds the projection of the best estimate so far strictly
-    inside, or None (skipped) without an estimate or such a view."""
-    X = None if ctx.best is None else ctx.best.X
-    if X is None:
-        return None
-    inside = []
-    with np.errstate(all="ignore"):
-        for i, (P, r) in enumerate(zip(ctx.cams, ctx.regions)):
-            if r.kind != EllipseBorder.kind:
-                continue
-            h = P @ np.append(X, 1.0)
-            d = h[:2] / h[2] - r.center_
-            if float(d @ np.linalg.solve(r.D, d)) < 1.0:
-                inside.append(i)
-    return dataclasses.replace(step, focus=tuple(inside)) if inside else None
 
 
 def run_step(ctx: PointContext, step: Step, tight: bool = False) -> TriangulationResult:
@@ -270,8 +244,6 @@ def _shape(ctx: PointContext, problem: TriangulationProblem, step: Step):
     if step.formulation == "dense":
         return "none"
     groups = view_chain(problem.n_views, 3) if step.method == Method.THEOREM1 else view_band(problem.n_views)
-    if isinstance(step.focus, tuple):             # the border step: only the cliques of its views
-        groups = [t for t in groups if set(t) & set(step.focus)]
     cliques = [sorted(problem.variables_of_views(t)) for t in groups]
     n = len(problem.gens)
     return sospoly.clique_shape(n, step.delta, cliques, [problem.variables_of_views(v) for v in problem.eq_views],
@@ -286,8 +258,7 @@ def _compiled(ctx: PointContext, problem: TriangulationProblem, step: Step):
     if not (isinstance(m, Multiplier) and m != Multiplier.FREE):
         return None, None
     form = ctx.settings.form
-    formulation = step.formulation if step.focus is None else f"{step.formulation}:{step.focus}"
-    key = structure_key(ctx.N, tuple(r.kind for r in ctx.regions), step.method, step.delta, formulation, form)
+    key = structure_key(ctx.N, tuple(r.kind for r in ctx.regions), step.method, step.delta, step.formulation, form)
     try:
         return STRUCTURE_CACHE.get(problem.f, problem.eq, problem.ineq, step.delta, m, form, gens=problem.gens,
                                    key=key, sparsity=_shape(ctx, problem, step), budget=ctx.opts.budget)

@@ -35,7 +35,6 @@ from sospoly.budget import TimeLimitReached
 from ...model.constraints import Method
 from ...model.epipolar_data import polynomial_errors
 from ...model.geometry import dlt, gamma as gamma_of, project, refine_l2
-from ...model.regions import EllipseBorder
 from ...result import Attempt, Status, TriangulationResult
 from ..decide import cheirality, decide, gamma_from_c
 from ..discs import disc_radius, ellipse_shapes, verify_discs
@@ -57,8 +56,7 @@ def plan_stage(ctx: PointContext) -> None:
     """The degree plan (:func:`tritools.solve.plan.degree_plan`) of this problem."""
     first_method = ctx.opts.explicit_method or Method.COROLLARY1
     n_vars = 2 * ctx.N + sum(r.n_aux for r in ctx.regions)
-    ctx.steps = degree_plan(ctx.opts, ctx.N, n_vars, delta_min(first_method, ctx.N),
-                            borders=any(r.kind == EllipseBorder.kind for r in ctx.regions))
+    ctx.steps = degree_plan(ctx.opts, ctx.N, n_vars, delta_min(first_method, ctx.N))
 
 
 def verification_step(ctx: PointContext) -> Step | None:

@@ -1,10 +1,12 @@
-"""Views listed more than once: k copies of a view are one view of weight k (an exact reduction).
+"""Views listed more than once: k copies of a view are one view of weight k (the same cost function).
 
 Two views i, j are *the same view* when their cameras are proportional, ``P_j = lambda P_i`` with
-``lambda != 0`` (the same projection Phi(X, P) of the paper's eq. (1), and the same depth: Hartley & Zisserman
-eq. (6.15) is invariant to ``lambda``), their regions are equal, and -- with ``robust=`` -- so are their
-thresholds.  Cameras are compared after scaling each to unit Frobenius norm, up to :data:`SAME_CAMERA_TOL`
-(round-off: a copy rescaled by 3.0 in floats is the same view).
+``lambda = +-2^m`` -- exactly, entry by entry (the same projection Phi(X, P) of the paper's eq. (1), and the same
+depth: Hartley & Zisserman eq. (6.15) is invariant to ``lambda``) -- their regions are equal, and, with ``robust=``,
+so are their thresholds.  A copy rescaled by 3.0 in floats is another camera to round-off and is not merged: in a
+georeferenced frame that round-off moves projections by far more than it seems (review 35b: cameras 20 um apart
+along the axis 4e6 from the origin differed by 64 ulps of their norm, and merging them raised gamma_LB 8 % above
+the optimum).
 
 k copies of view i add ``k d_i(X)^2`` to the L2 cost f(X) = 2N gamma(X)^2 (paper eq. (6)) and
 ``k min(d_i^2, c_i^2) = min((sqrt(k) d_i)^2, (sqrt(k) c_i)^2)`` to the TLS cost, so they are one view whose image
@@ -16,23 +18,33 @@ of X, so the N' < N views' problem has the same minimisers and
     gamma = gamma' sqrt(N' / N)
 
 (:meth:`ViewMerge.expand`: the bounds scaled with outward rounding, per-view fields mapped back, every view
-of a group its copy's residual / sqrt(k), depth and inlier flag).  Why it matters: the degree plan's size rules
-count views (six views with one listed twice lost the certificate where the five distinct views are certified,
-review 34a M1), and a TLS search enumerates inlier sets of copies that can only be in or out together (34a M3).
+of a group its copy's residual / sqrt(k), depth and inlier flag).  The scaling by sqrt(k) rounds the copy's camera
+and region: a projection moves by about eps K |x| pixels, K the cancellation of its denominator (the largest
+sum_j |P_3j| |X~_j| / |P_3 X~| at the DLT point of the region centres, ~1 near the cameras, ~1e6 for a scene 5 m
+across 4e6 from the origin).  So views are merged only while K <= :data:`MAX_CANCELLATION` (not in a georeferenced
+frame: review 35b M1 saw gamma_LB 8e-7 above the optimum there), and gamma_LB is lowered by the rounding's effect
+at that point (:attr:`ViewMerge.margin`, :func:`_rounding`).
+
+Why it matters: the degree plan's size rules count views (six views with one listed twice lost the certificate
+where the five distinct views are certified, review 34a M1), and a TLS search enumerates inlier sets of copies that
+can only be in or out together (34a M3).
 """
 from __future__ import annotations
 
 import dataclasses
+import re
 from dataclasses import dataclass
 
 import numpy as np
 
 from ..result import Attempt, TriangulationResult
 
-__all__ = ["ViewMerge", "identical_views", "may_repeat_views", "SAME_CAMERA_TOL"]
+__all__ = ["ViewMerge", "identical_views", "may_repeat_views", "SAME_CAMERA_TOL", "MAX_CANCELLATION"]
 
-#: cameras scaled to unit Frobenius norm (sign free) closer than this in every entry are the same camera.
+#: the sort keys of the cameras (:func:`_keys`) are compared to this (unit-norm scale; exact copies give equal keys)
 SAME_CAMERA_TOL = 64 * np.finfo(float).eps
+#: views are merged only where the projection's cancellation K at the DLT point is at most this (module docstring)
+MAX_CANCELLATION = 1e3
 #: a fixed direction for the one-number sort key of a camera (any generic vector).
 _KEY = np.sin(np.arange(1.0, 13.0) * 1.618)
 #: the keys (:func:`_keys`, in [0, |_KEY|^2 < 7]) of copies of a camera in round-off differ by less than this
@@ -47,6 +59,7 @@ class ViewMerge:
     group: np.ndarray
     keep: np.ndarray
     counts: np.ndarray
+    margin: float = 0.0           # pixels: gamma_LB is lowered by this (the scaling's round-off, module docstring)
 
     @property
     def n_views(self) -> int:
@@ -84,6 +97,8 @@ class ViewMerge:
         root = np.sqrt(self.counts.astype(float))[g]
         fields = {name: _scaled(getattr(res, name), r, up) for name, up in
                   (("gamma_lb", False), ("gamma_ub", True), ("gamma_ub_raw", True))}
+        if fields["gamma_lb"] is not None and self.margin > 0:
+            fields["gamma_lb"] = max(0.0, fields["gamma_lb"] - self.margin)
         if res.image_points is not None:
             fields["image_points"] = res.image_points[g] / root[:, None]
         if res.residuals is not None:
@@ -91,8 +106,11 @@ class ViewMerge:
         for name in ("depths", "inliers"):
             if getattr(res, name) is not None:
                 fields[name] = getattr(res, name)[g]
-        fields["attempts"] = tuple(_attempt(a, r) for a in res.attempts)
-        fields["message"] = (res.message + "; " if res.message else "") + self.describe()
+        fields["attempts"] = tuple(_attempt(a, r, self.margin) for a in res.attempts)
+        message = res.message
+        if res.inliers is not None:             # the TLS count of the caller's views, not the reduced ones
+            message = re.sub(r"^TLS: \d+/\d+ inliers", f"TLS: {int(fields['inliers'].sum())}/{len(g)} inliers", message)
+        fields["message"] = (message + "; " if message else "") + self.describe()
         return dataclasses.replace(res, **fields)
 
     def describe(self) -> str:
@@ -114,10 +132,12 @@ def _scaled(value, r: float, up: bool):
     return out * (_UP if up else _DOWN) if out > 0 else out
 
 
-def _attempt(a, r: float):
+def _attempt(a, r: float, margin: float):
     if not isinstance(a, Attempt):
         return a
-    return dataclasses.replace(a, gamma_lb=_scaled(a.gamma_lb, r, False), gamma_ub=_scaled(a.gamma_ub, r, True))
+    lb = _scaled(a.gamma_lb, r, False)
+    lb = lb if lb is None or margin <= 0 else max(0.0, lb - margin)
+    return dataclasses.replace(a, gamma_lb=lb, gamma_ub=_scaled(a.gamma_ub, r, True))
 
 
 def identical_views(cameras: np.ndarray, regions, thresholds=None) -> ViewMerge | None:
@@ -133,12 +153,11 @@ def identical_views(cameras: np.ndarray, regions, thresholds=None) -> ViewMerge 
     if min(b - a for a, b in zip(ks, ks[1:])) > _KEY_TOL:      # the common case: no camera near another
         return None
     order = np.argsort(key, kind="stable")
-    U = _unit_cameras(A)
     rep = np.arange(N)
     for run in _runs(key[order]):                # views whose keys chain within _KEY_TOL: compared pairwise
         roots: list = []
         for j in order[run]:
-            root = next((r for r in roots if _same(U, regions, thresholds, r, j)), None)
+            root = next((r for r in roots if _same(A, regions, thresholds, r, j)), None)
             if root is None:
                 roots.append(j)              # (one camera seeing two keypoints: two roots of one run)
             else:
@@ -149,7 +168,33 @@ def identical_views(cameras: np.ndarray, regions, thresholds=None) -> ViewMerge 
     keep, group, counts = np.unique(firsts, return_inverse=True, return_counts=True)
     if len(keep) < 2:
         return None
-    return ViewMerge(group.astype(int), keep.astype(int), counts.astype(int))
+    K, margin = _rounding(A.reshape(N, 3, 4), regions, float(np.sqrt(counts.max())))
+    if not K <= MAX_CANCELLATION:
+        return None
+    return ViewMerge(group.astype(int), keep.astype(int), counts.astype(int), margin)
+
+
+def _rounding(C: np.ndarray, regions, root: float) -> tuple[float, float]:
+    """(K, margin) at the DLT point X0 of the region centres: K = max_i sum_j |P_i3j| |X0~_j| / |P_i3 X0~|, the
+    cancellation of the projection's denominator (inf where X0 is not finite or on a principal plane), and the margin
+    in pixels, 4 eps (K_xy + K M + sqrt(k) M) with K_xy = max_i,r<3 sum_j |P_irj| |X0~_j| / |P_i3 X0~| (pixels) and
+    M = max|x| + 1 over the centres: what one rounding of a copy's camera row and region moves a distance by."""
+    from ..model.stacked import dlt_stack
+
+    try:
+        x = np.asarray(regions, float) if isinstance(regions, np.ndarray) else np.array([r.center for r in regions])
+        with np.errstate(all="ignore"):
+            X0, ok = dlt_stack(C[None], x[None])
+            Xh = np.append(X0[0], 1.0)
+            den = np.abs(C[:, 2, :] @ Xh)
+            terms = (np.abs(C) @ np.abs(Xh)) / den[:, None]
+            K, K_xy, M = float(terms[:, 2].max()), float(terms[:, :2].max()), float(np.max(np.abs(x))) + 1.0
+            margin = 4 * np.finfo(float).eps * (K_xy + K * M + root * M)
+    except (ValueError, ArithmeticError, np.linalg.LinAlgError):
+        return np.inf, np.inf
+    if not (bool(ok[0]) and np.isfinite(margin)):
+        return np.inf, np.inf
+    return K, margin
 
 
 def _runs(sorted_keys: np.ndarray) -> list:
@@ -181,20 +226,12 @@ def _keys(A: np.ndarray) -> np.ndarray:
     return (B @ _KEY) ** 2 / np.einsum("ij,ij->i", B, B)
 
 
-def _unit_cameras(A: np.ndarray) -> np.ndarray:
-    """Each camera (row of A (n, 12)) as a 12-vector of unit norm whose entry of largest magnitude is positive (sign
-    and scale free; computed after an exact power-of-two scaling, so no camera over- or underflows)."""
-    big = np.abs(A).max(axis=1)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        A = A / np.exp2(np.ceil(np.log2(big)))[:, None]
-        A = A / np.linalg.norm(A, axis=1)[:, None]
-    sign = np.sign(A[np.arange(len(A)), np.abs(A).argmax(axis=1)])
-    return A * sign[:, None]
-
-
-def _same(U: np.ndarray, regions, thresholds, i: int, j: int) -> bool:
-    """Views i and j are the same view (module docstring)."""
-    if np.max(np.abs(U[i] - U[j])) > SAME_CAMERA_TOL:
+def _same(A: np.ndarray, regions, thresholds, i: int, j: int) -> bool:
+    """Views i and j are the same view (module docstring): A (N, 12) the cameras, P_j = +-2^m P_i exactly."""
+    k = int(np.argmax(np.abs(A[i])))
+    lam = A[j, k] / A[i, k]
+    mant, _ = np.frexp(lam)
+    if abs(mant) != 0.5 or not np.array_equal(A[i] * lam, A[j]):
         return False
     if thresholds is not None and not (thresholds[i] == thresholds[j]):
         return False

@@ -30,44 +30,13 @@ from ..budget import CLARABEL_TIME_MODEL, BudgetExceeded, Deadline, estimate_siz
 from ..lowering.conic import ConicProblem
 from ..tolerances import DEFAULT_TOLERANCES, Tolerances, as_tolerances
 from .interrupt import solve_interruptibly, stopped_for_time
+from .optional import _check_cvxpy_solver, cvxpy_available, import_cvxpy  # noqa: F401 - re-exported
 from .retry_chain import (CLARABEL_FAST_CHAIN, CLARABEL_RETRY_CHAIN, CLARABEL_SPLIT_CHAIN, QDLDL_MAX_PSD_SIDE,
                           RETRY_MIN_ITERATIONS)
 from .rays import check_infeasibility, check_unbounded_ray
 
 __all__ = ["RawStatus", "Attempt", "ConicSolution", "ClarabelBackend", "IpmBackend", "AutoBackend",
            "CLARABEL_FAST_CHAIN", "CLARABEL_SPLIT_CHAIN", "get_backend", "cvxpy_available", "import_cvxpy"]
-
-
-def cvxpy_available() -> bool:
-    """Whether the optional cvxpy back-end can be imported (``pip install sospoly-tritools[cvxpy]``)."""
-    import importlib.util
-
-    return importlib.util.find_spec("cvxpy") is not None
-
-
-def import_cvxpy():
-    """``import cvxpy``, or an ImportError saying how to install the optional back-end."""
-    try:
-        import cvxpy
-    except ImportError as exc:
-        raise ImportError("the 'cvxpy' back-end needs cvxpy, an optional dependency: "
-                          "pip install 'sospoly-tritools[cvxpy]' (or use backend='clarabel')") from exc
-    return cvxpy
-
-
-def _check_cvxpy_solver(solver: str | None) -> None:
-    """ValueError for a solver name cvxpy does not know, ImportError for a known one not installed."""
-    cp = import_cvxpy()
-    if solver is None:
-        return
-    import cvxpy.settings
-
-    if solver not in cvxpy.settings.SOLVERS:
-        raise ValueError(f"unknown cvxpy solver {solver!r} in backend 'cvxpy:{solver}': cvxpy knows "
-                         f"{', '.join(cvxpy.settings.SOLVERS)}")
-    if solver not in cp.installed_solvers():
-        raise ImportError(f"cvxpy solver {solver!r} (backend 'cvxpy:{solver}') is not installed; installed: "
-                          f"{', '.join(cp.installed_solvers())}")
 
 
 class RawStatus(str, enum.Enum):
@@ -280,14 +249,10 @@ class ClarabelBackend:
             attempts.append(att)
             if budget is not None:
                 budget -= att.iterations
-                cut = capped["max_iter"] < self._max_iter(overrides) and att.iterations >= capped["max_iter"]
-                if cut and att.solver_status == "MaxIterations":
-                    attempts[-1] = dataclasses.replace(att, raw_status=RawStatus.FAILED,
-                                                       solver_status=f"{att.solver_status} (retry budget spent)")
+                attempts[-1], spent = _budget_label(att, capped["max_iter"] < self._max_iter(overrides)
+                                                    and att.iterations >= capped["max_iter"])
+                if spent:
                     break                                # the retries' budget, not the caller's limit
-                if cut and att.raw_status != RawStatus.SOLVED:     # e.g. AlmostSolved at the cap: Clarabel's reduced
-                    attempts[-1] = dataclasses.replace(              # tolerances met when the budget stopped it
-                        att, solver_status=f"{att.solver_status} (retry budget spent)")
             if budget is None and not _provisional(overrides):
                 budget = self._retry_budget(problem, att.iterations)
             if sol is None:
@@ -503,6 +468,16 @@ def _fits(deadline: Deadline | None, seconds: float) -> bool:
     """Is there ``seconds`` left before ``deadline`` (None, or no end: always)?"""
     remaining = None if deadline is None else deadline.remaining()
     return remaining is None or remaining >= seconds
+
+def _budget_label(att: Attempt, cut: bool) -> tuple[Attempt, bool]:
+    """(attempt, chain ends) of a retry: one the budget's ``max_iter`` stopped says so -- MaxIterations becomes a
+    failed attempt and ends the chain; another unsolved answer at the cap (AlmostSolved: Clarabel's reduced tolerances
+    met) keeps its status."""
+    if not cut or att.raw_status == RawStatus.SOLVED:
+        return att, False
+    spent = att.solver_status == "MaxIterations"
+    return dataclasses.replace(att, raw_status=RawStatus.FAILED if spent else att.raw_status,
+                               solver_status=f"{att.solver_status} (retry budget spent)"), spent
 
 
 def _kept(provisional: ConicSolution | None, attempts: list) -> ConicSolution | None:

@@ -469,6 +469,7 @@ def _fits(deadline: Deadline | None, seconds: float) -> bool:
     remaining = None if deadline is None else deadline.remaining()
     return remaining is None or remaining >= seconds
 
+
 def _budget_label(att: Attempt, cut: bool) -> tuple[Attempt, bool]:
     """(attempt, chain ends) of a retry: one the budget's ``max_iter`` stopped says so -- MaxIterations becomes a
     failed attempt and ends the chain; another unsolved answer at the cap (AlmostSolved: Clarabel's reduced tolerances

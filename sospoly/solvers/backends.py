@@ -30,7 +30,7 @@ from ..budget import CLARABEL_TIME_MODEL, BudgetExceeded, Deadline, estimate_siz
 from ..lowering.conic import ConicProblem
 from ..tolerances import DEFAULT_TOLERANCES, Tolerances, as_tolerances
 from .interrupt import solve_interruptibly, stopped_for_time
-from .optional import _check_cvxpy_solver, cvxpy_available, import_cvxpy  # noqa: F401 - re-exported
+from .optional import check_cvxpy_solver, cvxpy_available, import_cvxpy  # noqa: F401 - re-exported
 from .retry_chain import (CLARABEL_FAST_CHAIN, CLARABEL_RETRY_CHAIN, CLARABEL_SPLIT_CHAIN, QDLDL_MAX_PSD_SIDE,
                           RETRY_MIN_ITERATIONS)
 from .rays import check_infeasibility, check_unbounded_ray
@@ -559,7 +559,7 @@ def get_backend(backend, tolerances: Tolerances = DEFAULT_TOLERANCES):
         if name == "cvxpy":
             from .cvxpy_backend import CvxpyBackend
 
-            _check_cvxpy_solver(solver or None)
+            check_cvxpy_solver(solver or None)
             return CvxpyBackend(solver or None, tolerances)
         if name == "ipm":
             return IpmBackend(tolerances)

@@ -2,7 +2,7 @@
 re-exports them): importing cvxpy costs seconds, so nothing here runs before a cvxpy back-end is asked for."""
 from __future__ import annotations
 
-__all__ = ["cvxpy_available", "import_cvxpy"]
+__all__ = ["cvxpy_available", "import_cvxpy", "check_cvxpy_solver"]
 
 
 def cvxpy_available() -> bool:
@@ -22,7 +22,7 @@ def import_cvxpy():
     return cvxpy
 
 
-def _check_cvxpy_solver(solver: str | None) -> None:
+def check_cvxpy_solver(solver: str | None) -> None:
     """ValueError for a solver name cvxpy does not know, ImportError for a known one not installed."""
     cp = import_cvxpy()
     if solver is None:

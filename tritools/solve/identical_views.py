@@ -62,10 +62,6 @@ class ViewMerge:
     margin: float = 0.0           # pixels: gamma_LB is lowered by this (the scaling's round-off, module docstring)
 
     @property
-    def n_views(self) -> int:
-        return len(self.group)
-
-    @property
     def ratio(self) -> float:
         """sqrt(N' / N): gamma of the caller's views = ratio * gamma of the reduced ones."""
         return float(np.sqrt(len(self.keep) / len(self.group)))
@@ -88,7 +84,7 @@ class ViewMerge:
 
     def options(self, opts):
         """``opts`` with ``lower_bound_stop`` (a level of gamma) in the reduced problem's gamma."""
-        stop = getattr(opts, "lower_bound_stop", None)
+        stop = opts.lower_bound_stop
         return opts if stop is None else opts.replace(lower_bound_stop=stop / self.ratio)
 
     def expand(self, res: TriangulationResult) -> TriangulationResult:

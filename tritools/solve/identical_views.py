@@ -39,16 +39,15 @@ import numpy as np
 
 from ..result import Attempt, TriangulationResult
 
-__all__ = ["ViewMerge", "identical_views", "may_repeat_views", "SAME_CAMERA_TOL", "MAX_CANCELLATION"]
+__all__ = ["ViewMerge", "identical_views", "may_repeat_views", "MAX_CANCELLATION"]
 
-#: the sort keys of the cameras (:func:`_keys`) are compared to this (unit-norm scale; exact copies give equal keys)
-SAME_CAMERA_TOL = 64 * np.finfo(float).eps
 #: views are merged only where the projection's cancellation K at the DLT point is at most this (module docstring)
 MAX_CANCELLATION = 1e3
 #: a fixed direction for the one-number sort key of a camera (any generic vector).
 _KEY = np.sin(np.arange(1.0, 13.0) * 1.618)
-#: the keys (:func:`_keys`, in [0, |_KEY|^2 < 7]) of copies of a camera in round-off differ by less than this
-_KEY_TOL = 64 * SAME_CAMERA_TOL
+#: keys (:func:`_keys`, in [0, |_KEY|^2 < 7]) this close are compared in full (exact copies give equal keys; the
+#: margin covers a matrix product's rounding differing between rows)
+_KEY_TOL = 4096 * np.finfo(float).eps
 _UP, _DOWN = 1.0 + 4 * np.finfo(float).eps, 1.0 - 4 * np.finfo(float).eps
 
 

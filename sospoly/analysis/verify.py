@@ -11,7 +11,8 @@ finite iff the Hessian H of L is PSD and the gradient of L at 0 lies in range(H)
 Any such lambda gives a valid lower bound c(lambda) <= min{f : g = 0}.
 
 Given a candidate minimiser v^ (e.g. from a local solver), lambda is recovered
-from the KKT conditions grad f(v^) + J(v^)^T lambda = 0 by least squares; the bound
+from the KKT conditions grad f(v^) + J(v^)^T lambda = 0 by least squares (again with a
+truncated SVD where dependent constraints leave J^T a singular value at round-off); the bound
 is then computed from the exact polynomial data (never from the local solver's
 word): H must have lambda_min(H) >= -ROUNDOFF * max(|F2|, |H|) (relative to the
 program's own quadratic terms: scaling f, or the variables, scales both sides), c(lambda)
@@ -40,7 +41,7 @@ from ..status import SolveStatus
 from ..tolerances import DEFAULT_TOLERANCES, Tolerances
 
 __all__ = ["Verification", "VerificationBatch", "SparseQuadratics", "quadratic_parts", "verify_quadratic",
-           "verify_quadratic_batch", "bound_at_one", "objective_scales", "stationary", "ROUNDOFF"]
+           "verify_quadratic_batch", "bound_at_one", "objective_scales", "stationary", "ROUNDOFF", "RETRY_RCOND"]
 
 #: the Lagrangian Hessian must satisfy lambda_min >= -ROUNDOFF * max(max|F2|, max|H|): float
 #: round-off only (a genuinely indefinite H means no bound for these multipliers).
@@ -131,10 +132,22 @@ def _lstsq_stack(A: np.ndarray, b: np.ndarray) -> np.ndarray:
     M, p, q = A.shape
     if p == 0 or q == 0:
         return np.zeros((M, q))
-    U, S, Vt = np.linalg.svd(A, full_matrices=False)
-    cut = _EPS * max(p, q) * S[:, :1]
+    return _svd_solve(*np.linalg.svd(A, full_matrices=False), b, _EPS * max(p, q))
+
+
+def _svd_solve(U: np.ndarray, S: np.ndarray, Vt: np.ndarray, b: np.ndarray, rcond: float) -> np.ndarray:
+    """x = V diag(1 / S) U^T b over the singular values S > rcond * max(S) of a stack's SVD (the others as zero)."""
+    cut = rcond * S[:, :1]
     inv = np.where(S > cut, 1.0 / np.where(S > cut, S, 1.0), 0.0)
     return np.einsum("mji,mj->mi", Vt, inv * np.einsum("mpj,mp->mj", U, b))
+
+
+#: the relative cut-off of the second multipliers (:func:`verify_quadratic_batch`): sqrt(eps).  The epipolar-type
+#: constraints of the callers are dependent at every feasible point (6 constraints of rank 5 for four views), so
+#: J^T has a singular value at round-off; where it lands just above lstsq's cut-off (eps * max(p, q), ~1e-15), its
+#: direction gets a multiplier ~ |grad f| / 1e-15 that breaks the Lagrangian Hessian.  Any multipliers give a valid
+#: bound, so a program not certified by the minimum-norm ones is tried again with those directions dropped.
+RETRY_RCOND = math.sqrt(_EPS)
 
 
 @dataclass(frozen=True)
@@ -164,6 +177,10 @@ class SparseQuadratics:
         np.add.at(out, (slice(None), self.i, self.j), self.vals * lam[:, self.k])
         return out
 
+    def rows(self, idx) -> SparseQuadratics:
+        """The programs ``idx`` of the stack (the same entry pattern)."""
+        return SparseQuadratics(self.k, self.i, self.j, self.vals[idx])
+
 
 def verify_quadratic_batch(f0, f1, F2, g0, g1, G2, points, *,
                            tolerances: Tolerances = DEFAULT_TOLERANCES, radius=None,
@@ -177,8 +194,9 @@ def verify_quadratic_batch(f0, f1, F2, g0, g1, G2, points, *,
     stack, values per program): memory O(M (K n + n^2)) instead of O(M K n^2).
 
     Steps, all vectorised over m: lambda = argmin ||J(v^)^T lambda + grad f(v^)|| (min-norm
-    least squares); L = f + lambda^T g with Hessian part L2; reject when
-    lambda_min(L2) < -ROUNDOFF * max(max|F2|, max|L2|); w = least-squares solution of
+    least squares; a program these do not certify is tried again with the singular values of J^T below
+    :data:`RETRY_RCOND` s_max dropped, the larger of the two valid bounds kept); L = f + lambda^T g
+    with Hessian part L2; reject when lambda_min(L2) < -ROUNDOFF * max(max|F2|, max|L2|); w = least-squares solution of
     2 L2 w = -L1, rejected when ||2 L2 w + L1|| / max(min(1, s_f), ||L1||) > identity_residual, s_f the
     objective's largest coefficient (:func:`objective_scales`); c = L(w) = min_v L(v, lambda) <= min{f : g = 0};
     certified iff ``tolerances.certified(c, f(v^), s_f)`` (the rule at the objective's own scale).
@@ -216,11 +234,28 @@ def verify_quadratic_batch(f0, f1, F2, g0, g1, G2, points, *,
                            None if err is None else err[0])
     fv = f0 + np.einsum("mi,mi->m", f1, v) + np.einsum("mi,mij,mj->m", v, F2, v)
     grad_f = f1 + 2 * np.einsum("mij,mj->mi", F2, v)
-    if K:
-        J = g1 + 2 * G2.apply(v, K, n)                                  # rows: grad g_k(v)
-        lam = _lstsq_stack(np.swapaxes(J, 1, 2), -grad_f)
-    else:
-        lam = np.zeros((M, 0))
+    if not K:
+        return _bounds_at(f0, f1, F2, g0, g1, G2, np.zeros((M, 0)), fv, tolerances, radius, err)
+    J = g1 + 2 * G2.apply(v, K, n)                                      # rows: grad g_k(v)
+    svd = np.linalg.svd(np.swapaxes(J, 1, 2), full_matrices=False)
+    out = _bounds_at(f0, f1, F2, g0, g1, G2, _svd_solve(*svd, -grad_f, _EPS * max(n, K)), fv, tolerances, radius,
+                     err)
+    S = svd[1]
+    again = np.nonzero(~out.certified & np.any((S > _EPS * max(n, K) * S[:, :1]) & (S <= RETRY_RCOND * S[:, :1]),
+                                               axis=1))[0]
+    if not again.size:
+        return out
+    lam = _svd_solve(*(a[again] for a in svd), -grad_f[again], RETRY_RCOND)
+    sub = _bounds_at(f0[again], f1[again], F2[again], g0[again], g1[again], G2.rows(again), lam, fv[again], tolerances,
+                     None if radius is None else np.broadcast_to(np.asarray(radius, float), (M,))[again],
+                     None if err is None else err[again])
+    return _better(out, sub, again)
+
+
+def _bounds_at(f0, f1, F2, g0, g1, G2, lam, fv, tolerances, radius, err) -> VerificationBatch:
+    """The stack's Lagrangian bounds c(lambda) at the multipliers ``lam`` (M, K), made rigorous, and the certificate
+    rule against the candidates' values ``fv`` (the steps of :func:`verify_quadratic_batch` after lambda)."""
+    n = f1.shape[1]
     L0 = f0 + np.einsum("mk,mk->m", lam, g0)
     L1 = f1 + np.einsum("mk,mki->mi", lam, g1)
     L2 = F2 + G2.combine(lam, n)
@@ -244,6 +279,21 @@ def verify_quadratic_batch(f0, f1, F2, g0, g1, G2, points, *,
     lower = np.where(bounded, c, np.nan)
     certified = bounded & np.asarray(tolerances.certified(lower, fv, s_f), bool)
     return VerificationBatch(lower, fv, certified, lam, eig[:, 0], reason)
+
+
+def _better(out: VerificationBatch, sub: VerificationBatch, rows: np.ndarray) -> VerificationBatch:
+    """``out`` with its ``rows`` replaced by those of ``sub`` (a second try at them) where ``sub``'s bound is higher
+    (a bound where ``out`` has none): both are valid bounds, the larger is kept with its multipliers."""
+    take = ~(sub.lower_bound <= out.lower_bound[rows]) & ~np.isnan(sub.lower_bound)
+    if not take.any():
+        return out
+    r = rows[take]
+    fields = {}
+    for name in ("lower_bound", "upper_bound", "certified", "multipliers", "min_hessian_eigenvalue", "reason"):
+        a = getattr(out, name).copy()
+        a[r] = getattr(sub, name)[take]
+        fields[name] = a
+    return VerificationBatch(**fields)
 
 
 def _with_margins(c, terms, eig0, r_abs, w_norm, radius, lam, err):
@@ -286,18 +336,6 @@ def objective_scales(f0, f1, F2) -> np.ndarray:
     return np.maximum.reduce([np.abs(f0), np.max(np.abs(f1), axis=1, initial=0.0), diag, off])
 
 
-def _lstsq_one(A: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """The scalar twin of :func:`_lstsq_stack`: the minimum-norm least-squares solution of A x = b (p, q), the
-    same cut-off of the singular values."""
-    p, q = A.shape
-    if p == 0 or q == 0:
-        return np.zeros(q)
-    U, S, Vt = np.linalg.svd(A, full_matrices=False)
-    cut = _EPS * max(p, q) * S[0]
-    inv = np.where(S > cut, 1.0 / np.where(S > cut, S, 1.0), 0.0)
-    return (inv * (b @ U)) @ Vt
-
-
 def constraint_margin(lam, err) -> np.ndarray:
     """sum_k |lambda_k| e_k over the last axis, rounded up (the effect of constraint data known to within e_k on a
     Lagrangian bound, :func:`verify_quadratic_batch`)."""
@@ -313,12 +351,25 @@ def _verify_one(f0: float, f1, F2, g0, g1, G2: SparseQuadratics, v, tolerances: 
     n, K = len(v), len(g0)
     fv = f0 + f1 @ v + v @ F2 @ v
     grad_f = f1 + 2 * (F2 @ v)
-    if K:                                   # rows: grad g_k(v) (sums of the sparse entries by bincount)
-        J = g1 + 2 * np.bincount(G2.k * n + G2.i, G2.vals[0] * v[G2.j], K * n).reshape(K, n)
-        lam = _lstsq_one(J.T, -grad_f)
-    else:
-        lam = np.zeros(0)
-    return bound_at_one(f0, f1, F2, g0, g1, G2, lam, fv, tolerances, radius, constraint_error)
+    if not K:
+        return bound_at_one(f0, f1, F2, g0, g1, G2, np.zeros(0), fv, tolerances, radius, constraint_error)
+    J = g1 + 2 * np.bincount(G2.k * n + G2.i, G2.vals[0] * v[G2.j], K * n).reshape(K, n)   # rows: grad g_k(v)
+    U, S, Vt = np.linalg.svd(J.T, full_matrices=False)
+    first = _EPS * max(n, K)
+    out = bound_at_one(f0, f1, F2, g0, g1, G2, _svd_solve_one(U, S, Vt, -grad_f, first), fv, tolerances, radius,
+                       constraint_error)
+    if out.certified[0] or not np.any((S > first * S[0]) & (S <= RETRY_RCOND * S[0])):
+        return out
+    sub = bound_at_one(f0, f1, F2, g0, g1, G2, _svd_solve_one(U, S, Vt, -grad_f, RETRY_RCOND), fv, tolerances,
+                       radius, constraint_error)             # (the second multipliers of verify_quadratic_batch)
+    return _better(out, sub, np.zeros(1, int))
+
+
+def _svd_solve_one(U: np.ndarray, S: np.ndarray, Vt: np.ndarray, b: np.ndarray, rcond: float) -> np.ndarray:
+    """The scalar twin of :func:`_svd_solve`."""
+    cut = rcond * S[0]
+    inv = np.where(S > cut, 1.0 / np.where(S > cut, S, 1.0), 0.0)
+    return (inv * (b @ U)) @ Vt
 
 
 def bound_at_one(f0: float, f1, F2, g0, g1, G2: SparseQuadratics, lam, fv: float, tolerances: Tolerances,

@@ -515,8 +515,7 @@ class TlsSearch(NodeBounds):
         # judged by the search's own plain-arithmetic value (robust_report.search_drift)
         self.cells_decided = cells is not None and cells.lb > lb and self.meets(cells.lb)
         lb = lb if cells is None else max(lb, cells.lb)
-        # where the cells could not close, the inlier-set search gets a short budget (it closes small cases they miss)
-        self.max_nodes = robust_cells.fallback_nodes(self.N) if cells is not None and cells.exhausted else MAX_NODES
+        robust_cells.set_node_budget(self, cells, MAX_NODES)     # short where the cells could not close
         if not self.meets(lb) and robust_futile.blocks(self):     # lb stays valid; the rule may have raised L2LB(V)
             stopped, lb = robust_futile.FUTILE, max(lb, self.root_bound() if self.bounds.known(full) else 0.0)
         elif not self.meets(lb):
@@ -524,6 +523,8 @@ class TlsSearch(NodeBounds):
             yield from self.anchor_bounds(order)
             lb_bb, stopped = yield from self.search(order)
             lb = max(lb, lb_bb)
+        if not self.meets(lb):      # the estimate reported uncertified: the L2 optimum of its own set (review 36a F3)
+            yield from self.local_optimisation([self.best_X])
         timings = {"candidates": t_cand, "total": time.perf_counter() - self.t0}
         return self.result(lb, stopped, timings)
 

@@ -53,8 +53,9 @@ import numpy as np
 
 from ..model.exact import homogeneous_images
 
-__all__ = ["search_bound", "cell_lower_bound", "CellBound", "FALLBACK_NODES", "fallback_nodes", "frame", "w_bound",
-           "evaluate_cells", "MAX_CELLS", "BATCH", "ENABLED", "MIN_VIEWS", "MAX_VIEWS"]
+__all__ = ["search_bound", "cell_lower_bound", "CellBound", "FALLBACK_NODES", "fallback_nodes", "set_node_budget",
+           "CELL_BUDGET_NAME", "frame", "w_bound", "evaluate_cells", "MAX_CELLS", "BATCH", "ENABLED", "MIN_VIEWS",
+           "MAX_VIEWS"]
 
 log = logging.getLogger(__name__)
 
@@ -83,6 +84,24 @@ FALLBACK_MAX_VIEWS = 12
 def fallback_nodes(n_views: int) -> int:
     """The inlier-set search's node budget after an exhausted cell search (:data:`FALLBACK_NODES`)."""
     return FALLBACK_NODES if n_views <= FALLBACK_MAX_VIEWS else 0
+
+
+#: the stop's name in the message of a search whose cell search used up its budget (review 36a F3: "0 nodes ...
+#: stopped by the node budget" named a budget of 0 inlier-set nodes beyond FALLBACK_MAX_VIEWS views).
+CELL_BUDGET_NAME = "cell search's budget"
+
+
+def set_node_budget(search, cells, default: int) -> None:
+    """The inlier-set search's node budget after the cell search ``cells`` (None: not run): ``default``, or
+    :func:`fallback_nodes` where the cells could not close (the search then closes small cases they miss), named
+    :data:`CELL_BUDGET_NAME` with the nodes left after it unless another rule named it (the coplanar ceiling)."""
+    exhausted = cells is not None and cells.exhausted
+    search.max_nodes = fallback_nodes(search.N) if exhausted else default
+    if exhausted and search.bounds.node_budget_name == "node budget":
+        n = search.max_nodes
+        search.bounds.node_budget_name = CELL_BUDGET_NAME + (f" and the {n} inlier-set nodes after it" if n else
+                                                             f" (no inlier-set nodes after it beyond "
+                                                             f"{FALLBACK_MAX_VIEWS} views)")
 #: cells split per vectorised step.
 BATCH = 64
 #: every cell bound is multiplied by this (the frame's and the evaluation's round-off, ~1e-13 relative).

@@ -43,7 +43,8 @@ from .robust_subsolve import EXHAUSTED, ROUND_DOWN, TRUSTED_LOWER_BOUND, solve_s
 from .robust_verify import parent_frames, verify_in_parent
 from .sdp_batch import solve_corollary1_points
 
-__all__ = ["SubsetBounds", "compute_many", "ROUND_DOWN", "TRUSTED_LOWER_BOUND", "EXHAUSTED", "PACKING"]
+__all__ = ["SubsetBounds", "compute_many", "ROUND_DOWN", "TRUSTED_LOWER_BOUND", "EXHAUSTED", "PACKING",
+           "NODE_BUDGET_NAME"]
 
 #: the cheap paths (pair packing bounds instead of SDPs, verification-only requests, and the search's
 #: leave-one-out root bound, :meth:`tritools.solve.robust.TlsSearch.leave_one_out_bound`); False gives the plain
@@ -65,6 +66,9 @@ SUB_TIME_LIMIT = 10.0
 #: 0.05 s call started its all-views sub-problem with 40 ms left and ended at 1.2-1.6x its limit); one with less
 #: time left is not started (bound 0, weak).
 SUB_REGION_SETUP_SECONDS = 5e-4
+#: the name of the search's own node budget in a stopped search's message (other rules rename it:
+#: :data:`tritools.solve.coplanar.COPLANAR_BUDGET_NAME`, :data:`tritools.solve.robust_cells.CELL_BUDGET_NAME`).
+NODE_BUDGET_NAME = "node budget"
 
 
 class SubsetBounds:
@@ -115,7 +119,7 @@ class SubsetBounds:
         self._plane_d2 = None                  # note_weak: dist(x_i, l_i)^2 of coplanar centres' lines, or False
         self.n_ceiling = 0                     # weak subsets whose bound sits on that ceiling (node_budget)
         self.on_ceiling: set = set()           # ... and which they are
-        self.node_budget_name = "node budget"
+        self.node_budget_name = NODE_BUDGET_NAME
 
     def frame(self):
         """The parent problem's :class:`tritools.solve.robust_verify.ParentFrame` (point regions; computed when first

@@ -52,6 +52,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..model.exact import homogeneous_images
+from .robust_bounds import NODE_BUDGET_NAME
 
 __all__ = ["search_bound", "cell_lower_bound", "CellBound", "FALLBACK_NODES", "fallback_nodes", "set_node_budget",
            "CELL_BUDGET_NAME", "frame", "w_bound", "evaluate_cells", "MAX_CELLS", "BATCH", "ENABLED", "MIN_VIEWS",
@@ -97,11 +98,13 @@ def set_node_budget(search, cells, default: int) -> None:
     :data:`CELL_BUDGET_NAME` with the nodes left after it unless another rule named it (the coplanar ceiling)."""
     exhausted = cells is not None and cells.exhausted
     search.max_nodes = fallback_nodes(search.N) if exhausted else default
-    if exhausted and search.bounds.node_budget_name == "node budget":
+    if exhausted and search.bounds.node_budget_name == NODE_BUDGET_NAME:
         n = search.max_nodes
         search.bounds.node_budget_name = CELL_BUDGET_NAME + (f" and the {n} inlier-set nodes after it" if n else
                                                              f" (no inlier-set nodes after it beyond "
                                                              f"{FALLBACK_MAX_VIEWS} views)")
+
+
 #: cells split per vectorised step.
 BATCH = 64
 #: every cell bound is multiplied by this (the frame's and the evaluation's round-off, ~1e-13 relative).

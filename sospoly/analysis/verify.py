@@ -123,18 +123,6 @@ def _row_norms(a: np.ndarray) -> np.ndarray:
     return np.sqrt(np.add.reduce(a * a, axis=1))
 
 
-def _lstsq_stack(A: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Minimum-norm least-squares solutions of A[m] x = b[m] for a stack (M, p, q), (M, p).
-
-    Singular values <= eps * max(p, q) * s_max are treated as zero: the rule of
-    ``numpy.linalg.lstsq(rcond=None)``, applied to every member of the stack.
-    """
-    M, p, q = A.shape
-    if p == 0 or q == 0:
-        return np.zeros((M, q))
-    return _svd_solve(*np.linalg.svd(A, full_matrices=False), b, _EPS * max(p, q))
-
-
 def _svd_solve(U: np.ndarray, S: np.ndarray, Vt: np.ndarray, b: np.ndarray, rcond: float) -> np.ndarray:
     """x = V diag(1 / S) U^T b over the singular values S > rcond * max(S) of a stack's SVD (the others as zero)."""
     cut = rcond * S[:, :1]
@@ -148,6 +136,18 @@ def _svd_solve(U: np.ndarray, S: np.ndarray, Vt: np.ndarray, b: np.ndarray, rcon
 #: direction gets a multiplier ~ |grad f| / 1e-15 that breaks the Lagrangian Hessian.  Any multipliers give a valid
 #: bound, so a program not certified by the minimum-norm ones is tried again with those directions dropped.
 RETRY_RCOND = math.sqrt(_EPS)
+
+
+def _first_rcond(n: int, K: int) -> float:
+    """The minimum-norm multipliers' relative cut-off for J^T (n, K): ``numpy.linalg.lstsq(rcond=None)``'s rule,
+    eps * max(n, K)."""
+    return _EPS * max(n, K)
+
+
+def _retried(S: np.ndarray, first: float) -> np.ndarray:
+    """(M,) bool: rows of singular values S (M, r), descending, with one kept by the cut-off ``first`` and dropped by
+    :data:`RETRY_RCOND` (where the second multipliers differ from the first)."""
+    return np.any((S > first * S[:, :1]) & (S <= RETRY_RCOND * S[:, :1]), axis=1)
 
 
 @dataclass(frozen=True)
@@ -238,11 +238,9 @@ def verify_quadratic_batch(f0, f1, F2, g0, g1, G2, points, *,
         return _bounds_at(f0, f1, F2, g0, g1, G2, np.zeros((M, 0)), fv, tolerances, radius, err)
     J = g1 + 2 * G2.apply(v, K, n)                                      # rows: grad g_k(v)
     svd = np.linalg.svd(np.swapaxes(J, 1, 2), full_matrices=False)
-    out = _bounds_at(f0, f1, F2, g0, g1, G2, _svd_solve(*svd, -grad_f, _EPS * max(n, K)), fv, tolerances, radius,
-                     err)
-    S = svd[1]
-    again = np.nonzero(~out.certified & np.any((S > _EPS * max(n, K) * S[:, :1]) & (S <= RETRY_RCOND * S[:, :1]),
-                                               axis=1))[0]
+    first = _first_rcond(n, K)
+    out = _bounds_at(f0, f1, F2, g0, g1, G2, _svd_solve(*svd, -grad_f, first), fv, tolerances, radius, err)
+    again = np.nonzero(~out.certified & _retried(svd[1], first))[0]
     if not again.size:
         return out
     lam = _svd_solve(*(a[again] for a in svd), -grad_f[again], RETRY_RCOND)
@@ -355,10 +353,10 @@ def _verify_one(f0: float, f1, F2, g0, g1, G2: SparseQuadratics, v, tolerances: 
         return bound_at_one(f0, f1, F2, g0, g1, G2, np.zeros(0), fv, tolerances, radius, constraint_error)
     J = g1 + 2 * np.bincount(G2.k * n + G2.i, G2.vals[0] * v[G2.j], K * n).reshape(K, n)   # rows: grad g_k(v)
     U, S, Vt = np.linalg.svd(J.T, full_matrices=False)
-    first = _EPS * max(n, K)
+    first = _first_rcond(n, K)
     out = bound_at_one(f0, f1, F2, g0, g1, G2, _svd_solve_one(U, S, Vt, -grad_f, first), fv, tolerances, radius,
                        constraint_error)
-    if out.certified[0] or not np.any((S > first * S[0]) & (S <= RETRY_RCOND * S[0])):
+    if out.certified[0] or not _retried(S[None], first)[0]:
         return out
     sub = bound_at_one(f0, f1, F2, g0, g1, G2, _svd_solve_one(U, S, Vt, -grad_f, RETRY_RCOND), fv, tolerances,
                        radius, constraint_error)             # (the second multipliers of verify_quadratic_batch)

@@ -130,8 +130,8 @@ def _svd_solve(U: np.ndarray, S: np.ndarray, Vt: np.ndarray, b: np.ndarray, rcon
     return np.einsum("mji,mj->mi", Vt, inv * np.einsum("mpj,mp->mj", U, b))
 
 
-#: the relative cut-off of the second multipliers (:func:`verify_quadratic_batch`): sqrt(eps).  The epipolar-type
-#: constraints of the callers are dependent at every feasible point (6 constraints of rank 5 for four views), so
+#: the relative cut-off of the second multipliers (:func:`verify_quadratic_batch`): sqrt(eps).  Where equality
+#: constraints are dependent at every feasible point (e.g. six of rank five, a common case of pairwise constraints),
 #: J^T has a singular value at round-off; where it lands just above lstsq's cut-off (eps * max(p, q), ~1e-15), its
 #: direction gets a multiplier ~ |grad f| / 1e-15 that breaks the Lagrangian Hessian.  Any multipliers give a valid
 #: bound, so a program not certified by the minimum-norm ones is tried again with those directions dropped.

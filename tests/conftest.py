@@ -7,6 +7,12 @@ if str(ROOT) not in sys.path:
 
 import os  # noqa: E402
 
+# Under pytest-xdist (pyproject's addopts run one worker per core) each worker keeps BLAS to one thread: two
+# workers with a multi-threaded BLAS each oversubscribe the cores.  Set before numpy is first imported.
+if os.environ.get("PYTEST_XDIST_WORKER") and "numpy" not in sys.modules:
+    for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+        os.environ.setdefault(_var, "1")
+
 import pytest  # noqa: E402
 from hypothesis import settings as _hypothesis_settings  # noqa: E402
 

@@ -79,15 +79,15 @@ from ..result import Attempt, Status, TriangulationResult
 from .decide import cheirality
 from .report import PointReport, point_report
 from .trivial import local_estimate
-from . import robust_bounds, robust_cells, robust_futile, robust_suspects
+from . import robust_bounds, robust_cells, robust_front, robust_futile, robust_suspects
 from .robust_bounds import ROUND_DOWN, SubsetBounds
 from .robust_drive import drive
 from .settings import call_deadline
 from .robust_loo import leave_one_out
 from .robust_nodes import NodeBounds, lookahead_bound
 from .robust_rays import centre_pair_candidates, ray_candidates, sampled_pairs
-from .robust_costs import (decision_scale, disc_distances2, disc_shapes, point_distances2,  # noqa: F401
-                           point_distances2_one, scale_from, tls_cost)
+from .robust_costs import (MIN_THRESHOLD, decision_scale, disc_distances2, disc_shapes, point_distances2,  # noqa: F401
+                           point_distances2_one, robust_thresholds, scale_from, tls_cost)
 from .robust_report import tls_reported
 from .stages.outcome import behind_message
 
@@ -114,42 +114,6 @@ RESIDUAL_MEMO = 256
 #: within a factor AMBIGUOUS of 1.
 ANCHORS = 2
 AMBIGUOUS = 2.0
-#: the smallest threshold accepted (pixels): below it c^2 leaves the normal floats (review finding F3).  Above
-#: ~1.3e154, c^2 = inf: min(d^2, c^2) = d^2 for every finite d, which is f_TLS exactly (no threshold in floats).
-MIN_THRESHOLD = 1.5e-154
-
-
-def robust_thresholds(robust, n_views: int) -> np.ndarray:
-    """The thresholds c (N,) from ``robust=`` (a positive scalar or one per view, pixels; ``inf`` allowed).
-    ValueError naming ``robust`` otherwise."""
-    if type(robust) is float and robust >= MIN_THRESHOLD:      # the common case, a valid float (NaN fails >=)
-        return np.full(n_views, robust)
-    try:
-        raw = np.asarray(robust)
-        if raw.dtype.kind not in "iuf":                  # booleans, strings and bytes, objects (None), complex
-            raise TypeError
-        c = raw.astype(float)
-    except (TypeError, ValueError):
-        raise ValueError(f"robust must be a positive threshold in pixels (scalar or one per view), "
-                         f"got {_short(robust)}") from None
-    if c.ndim == 0:
-        c = np.full(n_views, float(c))
-    if c.shape != (n_views,):
-        raise ValueError(f"robust must be a scalar or have one threshold per view ({n_views}), got shape {c.shape}")
-    if np.any(np.isnan(c)) or np.any(c <= 0):
-        raise ValueError(f"robust thresholds must be positive (inf allowed), got {_short(c.tolist())}")
-    if np.any(c < MIN_THRESHOLD):
-        raise ValueError(f"robust thresholds must be at least {MIN_THRESHOLD:g} pixels (c^2 underflows below), "
-                         f"got {float(np.min(c))!r}")
-    return c
-
-
-def _short(value, limit: int = 120) -> str:
-    """repr(value), cut to ``limit`` characters (a bad entry in a long list stays a one-line message)."""
-    text = repr(value)
-    return text if len(text) <= limit else text[:limit - 5] + " ...]"
-
-
 def branching_order(ratio: np.ndarray) -> np.ndarray:
     """The views in branching order from r_i = d_i / c_i at the best candidate: the :data:`ANCHORS` most
     confident inliers first (the lookahead needs inliers in I), then the ambiguous views (1/AMBIGUOUS < r_i <
@@ -303,15 +267,19 @@ class TlsSearch(NodeBounds):
         its :meth:`sq_distances`, where a stack computed them (:func:`~.robust_costs.point_distances2_rows`)."""
         if X is None or not np.all(np.isfinite(X)):
             return
-        if self.points:                                 # tls_cost from the squared distances (inf: c^2)
-            d2 = self.sq_distances(X) if d2 is None else d2
-            d, f = np.sqrt(d2), float(np.minimum(d2, self.c2).sum())
-        else:
-            d = self.residuals(X)
-            f = tls_cost(d, self.c)
+        d, f = self.cost(X, d2)
         if f < self.best_f * (1 - 1e-12) or (self.best_X is None and np.isfinite(f)):
             self.best_X, self.best_f = np.asarray(X, float), f
             self.best_S = frozenset(int(i) for i in np.nonzero(d < self.c)[0])
+
+    def cost(self, X, d2=None) -> tuple:
+        """(d_i(X) (N,), f_TLS(X)) of a candidate X, exactly: :meth:`sq_distances` (or ``d2``) for point regions,
+        tls_cost from the squared distances (inf: c^2); :meth:`residuals` for other regions."""
+        if self.points:
+            d2 = self.sq_distances(X) if d2 is None else d2
+            return np.sqrt(d2), float(np.minimum(d2, self.c2).sum())
+        d = self.residuals(X)
+        return d, tls_cost(d, self.c)
 
     def fallback_estimate(self):
         """The local L2 estimate of every view (:func:`tritools.solve.trivial.local_estimate`, in the normalised
@@ -532,6 +500,7 @@ class TlsSearch(NodeBounds):
         """The result at the search's lower bound ``lb`` (pixels^2): the decision by the one rule on this search's
         scale, the reported numbers and their checks (:func:`~.robust_report.tls_reported`; a stack of point searches:
         :func:`~.robust_report.tls_reported_stack`, then :meth:`finish`), the message (``note``: what decided)."""
+        robust_front.front_tie(self, lb)            # a tie on a line through a shared centre: in front (36a F2)
         X = self.user_estimate()
         rep = self.report(X)
         told = tls_reported(self.C_user, self.x if self.points else np.array([r.center for r in self.regions]),

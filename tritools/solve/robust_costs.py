@@ -13,9 +13,45 @@ import numpy as np
 from ..model.geometry import PROJECTION_DENOM_RTOL
 from ..model.refine import disc_shapes
 
-__all__ = ["tls_cost", "tls_costs2", "decision_scale", "scale_from",
+__all__ = ["robust_thresholds", "MIN_THRESHOLD", "tls_cost", "tls_costs2", "decision_scale", "scale_from",
            "point_distances2", "point_distances2_one", "point_distances2_rows", "point_distances2_stack", "projections",
            "disc_distances2", "disc_shapes", "tls_start_stack", "START_PAIRS"]
+
+
+#: the smallest threshold accepted (pixels): below it c^2 leaves the normal floats (review finding F3).  Above
+#: ~1.3e154, c^2 = inf: min(d^2, c^2) = d^2 for every finite d, which is f_TLS exactly (no threshold in floats).
+MIN_THRESHOLD = 1.5e-154
+
+
+def robust_thresholds(robust, n_views: int) -> np.ndarray:
+    """The thresholds c (N,) from ``robust=`` (a positive scalar or one per view, pixels; ``inf`` allowed).
+    ValueError naming ``robust`` otherwise."""
+    if type(robust) is float and robust >= MIN_THRESHOLD:      # the common case, a valid float (NaN fails >=)
+        return np.full(n_views, robust)
+    try:
+        raw = np.asarray(robust)
+        if raw.dtype.kind not in "iuf":                  # booleans, strings and bytes, objects (None), complex
+            raise TypeError
+        c = raw.astype(float)
+    except (TypeError, ValueError):
+        raise ValueError(f"robust must be a positive threshold in pixels (scalar or one per view), "
+                         f"got {_short(robust)}") from None
+    if c.ndim == 0:
+        c = np.full(n_views, float(c))
+    if c.shape != (n_views,):
+        raise ValueError(f"robust must be a scalar or have one threshold per view ({n_views}), got shape {c.shape}")
+    if np.any(np.isnan(c)) or np.any(c <= 0):
+        raise ValueError(f"robust thresholds must be positive (inf allowed), got {_short(c.tolist())}")
+    if np.any(c < MIN_THRESHOLD):
+        raise ValueError(f"robust thresholds must be at least {MIN_THRESHOLD:g} pixels (c^2 underflows below), "
+                         f"got {float(np.min(c))!r}")
+    return c
+
+
+def _short(value, limit: int = 120) -> str:
+    """repr(value), cut to ``limit`` characters (a bad entry in a long list stays a one-line message)."""
+    text = repr(value)
+    return text if len(text) <= limit else text[:limit - 5] + " ...]"
 
 
 def projections(X, cameras) -> np.ndarray:

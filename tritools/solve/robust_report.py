@@ -371,6 +371,10 @@ def enumerated_results(searches: list, lbs, n_bounded, n_sets: int) -> list:
         s.bounds.n_solved += int(n)
         t = time.perf_counter() - s.t0
         timings.append({"enumeration": t, "total": t})
+    from .robust_front import front_tie
+
+    for s, b in zip(searches, lbs):         # before the stack's estimates are read (TlsSearch.result does it too)
+        front_tie(s, float(b))
     first = searches[0]
     stack = [k for k, s in enumerate(searches) if s.points and s.best_X is not None and not s.cells_decided
              and s.N == first.N and s.tol is first.tol]

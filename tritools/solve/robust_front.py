@@ -1,0 +1,120 @@
+"""A certified TLS estimate on a line of minimisers, moved to a well-placed point of it (review 36a F2).
+
+With point regions the L2 optimum of an inlier set is generically unique, and so is the TLS optimum; a certified
+estimate behind a camera is then the answer (:func:`tritools.solve.decide.cheirality` says so).  Not when the
+inlier views S share one camera centre C (a camera listed twice, one view left as the only inlier): every point
+
+    X(t) = C + t (X - C),    t != 0,
+
+projects to the same image points in the views of S, so f_TLS restricted to S is constant on that line and the
+optimum may be a whole ray (the other views stay outliers on much of it).  The search returns one point of it,
+possibly behind the cameras while points of equal cost lie in front, or within round-off of C itself, where no
+projection is defined in the caller's frame (a georeferenced world: the estimate's report then refuses the
+certificate it met).
+
+:func:`front_tie` acts on a certified estimate of such an S that lies behind a camera of S or within
+:data:`NEAR_RTOL` of the scene's scale from C (cheap screens on its depths first; the centres only then).  It tries
+(1) where S is one camera given |S| times with point regions (:func:`tritools.model.exact.one_exact_camera`), the
+ray of the observations' mean x_bar at depths B * :data:`STEPS` (B the camera baseline) -- S's own L2 optimum
+(:func:`tritools.solve.robust_subsolve._one_camera`); (2) the line through X: t = -1 (the reflection through C),
+then t = +-:data:`STEPS`.  It keeps the first point in front of every camera (else the first in front of every
+camera of S) whose exact f_TLS (:meth:`tritools.solve.robust.TlsSearch.cost`) is not above the certified value
+beyond :data:`TIE_RTOL` (the tie rule of :meth:`~tritools.solve.robust.TlsSearch.offer`) or, for an estimate at
+C, whose value the lower bound certifies.  The lower bound is unchanged; the upper bound becomes f at the new point
+and the certificate is decided on it by the one rule as before, so the rigour is the search's.  Certified estimates
+behind a camera whose inlier views do not share a centre are left alone: their minimiser is the answer.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..model.cameras import camera_center
+from ..model.exact import one_exact_camera
+
+__all__ = ["front_tie", "STEPS", "TIE_RTOL", "CENTRE_RTOL", "NEAR_RTOL"]
+
+#: multiples of the scale tried along a line (both signs on the line through X), nearest the scale first
+STEPS = (1.0, 0.5, 2.0, 0.1, 10.0, 1e-2, 1e2, 1e-3, 1e3)
+#: a point of the line replaces the estimate when its f_TLS is at most (1 + TIE_RTOL) times the certified value
+TIE_RTOL = 1e-12
+#: the inlier views share a centre when their centres differ by at most this much of |C| + |X - C| + B
+CENTRE_RTOL = 1e-9
+#: an estimate whose depth in a view of S is at most this much of the scene's scale sits at that view's centre
+NEAR_RTOL = 1e-6
+
+
+def front_tie(search, lb: float) -> bool:
+    """Move a certified TLS estimate of ``search`` (a :class:`~tritools.solve.robust.TlsSearch`, lower bound ``lb``
+    in pixels^2) behind a camera of its inlier set, or at its centre, to a well-placed point of equal cost on the
+    line of minimisers through the inlier views' shared centre (module docstring); True when it moved."""
+    X, S = search.best_X, sorted(search.best_S)
+    if X is None or not S or not search.tol.certified_one(lb, search.best_f, search.scale):
+        return False
+    dep = _depths(search, X)
+    near = bool(np.min(np.abs(dep[S])) <= NEAR_RTOL * max(np.linalg.norm(search.frame.user_point(X)
+                                                                           if search.frame.moved else X),
+                                                          float(np.max(np.abs(dep[np.isfinite(dep)]), initial=0.0))))
+    if not near and np.all(dep[S] > 0):
+        return False
+    centres = _centres(search.C)
+    if centres is None:
+        return False
+    C, B = centres[S[0]], _scale(centres)
+    if np.any(np.linalg.norm(centres[S] - C, axis=1) > CENTRE_RTOL * (np.linalg.norm(C) + np.linalg.norm(X - C) + B)):
+        return False
+    fallback = None
+    for Y in _line_points(search, S, C, X, B, near):
+        dep = _depths(search, Y)
+        if not np.all(dep[S] > 0):
+            continue
+        d, f = search.cost(Y)
+        if not (f <= search.best_f * (1 + TIE_RTOL) or (near and search.tol.certified_one(lb, f, search.scale))):
+            continue
+        if np.all(dep > 0):
+            return _take(search, Y, d, f)
+        fallback = fallback or (Y, d, f)
+    return fallback is not None and _take(search, *fallback)
+
+
+def _line_points(search, S: list, C: np.ndarray, X: np.ndarray, B: float, near: bool):
+    """The points tried, in order (module docstring): the mean observation's ray of one exact camera, then the line
+    through X (not where X sits at C: its direction is round-off there)."""
+    if search.points and (len(S) == 1 or one_exact_camera(search.C[S])):
+        M = search.C[S[0]][:, :3]
+        try:
+            u = np.linalg.solve(M, np.append(np.mean(search.x[S], axis=0), 1.0)) * np.sign(np.linalg.det(M))
+        except np.linalg.LinAlgError:
+            u = np.zeros(3)
+        if np.all(np.isfinite(u)) and np.linalg.norm(u) > 0:
+            for s in STEPS:
+                yield C + s * B * u / np.linalg.norm(u)
+    if not near:
+        for t in (-1.0,) + tuple(s * v for v in STEPS[1:] for s in (-1.0, 1.0)):
+            yield C + t * (X - C)
+
+
+def _depths(search, X) -> np.ndarray:
+    """The depths of the search-frame point X in every view (the caller's cameras; -inf where undefined)."""
+    dep = search.report(search.frame.user_point(X) if search.frame.moved else X).depths
+    return np.where(np.isfinite(dep), dep, -np.inf)
+
+
+def _centres(cams: np.ndarray):
+    """The camera centres (N, 3) in the search frame, or None (a centre at infinity)."""
+    try:
+        centres = np.array([camera_center(P) for P in cams])
+    except ValueError:
+        return None
+    return centres if np.all(np.isfinite(centres)) else None
+
+
+def _scale(centres: np.ndarray) -> float:
+    """B: the median distance between distinct camera centres, else max(1, max |C_i|)."""
+    from .robust_rays import _baseline
+    return _baseline(centres)
+
+
+def _take(search, Y, d, f) -> bool:
+    search.best_X, search.best_f = np.asarray(Y, float), float(f)
+    search.best_S = frozenset(int(i) for i in np.nonzero(d < search.c)[0])
+    return True

@@ -500,9 +500,11 @@ class TlsSearch(NodeBounds):
         """The result at the search's lower bound ``lb`` (pixels^2): the decision by the one rule on this search's
         scale, the reported numbers and their checks (:func:`~.robust_report.tls_reported`; a stack of point searches:
         :func:`~.robust_report.tls_reported_stack`, then :meth:`finish`), the message (``note``: what decided)."""
-        robust_front.front_tie(self, lb)            # a tie on a line through a shared centre: in front (36a F2)
         X = self.user_estimate()
         rep = self.report(X)
+        if robust_front.front_tie(self, lb, rep.depths):     # on a line of minimisers: in front (review 36a F2)
+            X = self.user_estimate()
+            rep = self.report(X)
         told = tls_reported(self.C_user, self.x if self.points else np.array([r.center for r in self.regions]),
                             None if self.points else rep.residuals, X, self.c, lb, self.tol,
                             self.tol.certified_one(lb, self.best_f, self.scale),    # lb valid also when stopped

@@ -43,18 +43,21 @@ CENTRE_RTOL = 1e-9
 NEAR_RTOL = 1e-6
 
 
-def front_tie(search, lb: float) -> bool:
+def front_tie(search, lb: float, depths: np.ndarray) -> bool:
     """Move a certified TLS estimate of ``search`` (a :class:`~tritools.solve.robust.TlsSearch`, lower bound ``lb``
-    in pixels^2) behind a camera of its inlier set, or at its centre, to a well-placed point of equal cost on the
-    line of minimisers through the inlier views' shared centre (module docstring); True when it moved."""
+    in pixels^2; ``depths``: the estimate's depths in every view, from its report) behind a camera of its inlier
+    set, or at its centre, to a well-placed point of equal cost on the line of minimisers through the inlier views'
+    shared centre (module docstring); True when it moved.  A few array operations where it does not act."""
     X, S = search.best_X, sorted(search.best_S)
-    if X is None or not S or not search.tol.certified_one(lb, search.best_f, search.scale):
+    if X is None or not S or depths is None:
         return False
-    dep = _depths(search, X)
-    near = bool(np.min(np.abs(dep[S])) <= NEAR_RTOL * max(np.linalg.norm(search.frame.user_point(X)
-                                                                           if search.frame.moved else X),
-                                                          float(np.max(np.abs(dep[np.isfinite(dep)]), initial=0.0))))
-    if not near and np.all(dep[S] > 0):
+    lo = depths[S].min()
+    if lo > NEAR_RTOL * max(np.abs(X).max(), np.abs(depths).max()):    # the common case (False for NaN)
+        return False
+    dep = np.where(np.isfinite(depths), depths, -np.inf)
+    near = float(np.min(np.abs(dep[S]))) <= NEAR_RTOL * max(float(np.max(np.abs(X))),
+                                                             float(np.max(np.abs(dep[np.isfinite(dep)]), initial=0.0)))
+    if (not near and float(np.min(dep[S])) > 0) or not search.tol.certified_one(lb, search.best_f, search.scale):
         return False
     centres = _centres(search.C)
     if centres is None:

@@ -371,25 +371,36 @@ def enumerated_results(searches: list, lbs, n_bounded, n_sets: int) -> list:
         s.bounds.n_solved += int(n)
         t = time.perf_counter() - s.t0
         timings.append({"enumeration": t, "total": t})
-    from .robust_front import front_tie
-
-    for s, b in zip(searches, lbs):         # before the stack's estimates are read (TlsSearch.result does it too)
-        front_tie(s, float(b))
     first = searches[0]
     stack = [k for k, s in enumerate(searches) if s.points and s.best_X is not None and not s.cells_decided
              and s.N == first.N and s.tol is first.tol]
     out = [None] * len(searches)
     if len(stack) > 1:
         group = [searches[k] for k in stack]
-        X = np.array([s.user_estimate() for s in group])
         lb = np.array([float(lbs[k]) for k in stack])
+        X, reps = _estimates_in_front(group, lb)
         certified = [s.tol.certified_one(float(b), s.best_f, s.scale) for s, b in zip(group, lb)]
         told = tls_reported_stack(np.stack([s.C_user for s in group]), np.stack([s.x for s in group]), X,
                                   np.stack([s.c for s in group]), lb, first.tol, certified,
                                   np.array([s.best_f for s in group]))
-        for k, s, Xk, t, b in zip(stack, group, X, told, lb):
-            out[k] = s.finish(Xk.copy(), s.report(Xk), t, float(b), None, timings[k], note)
+        for k, s, Xk, rep, t, b in zip(stack, group, X, reps, told, lb):
+            out[k] = s.finish(Xk.copy(), rep, t, float(b), None, timings[k], note)
     for k, s in enumerate(searches):
         if out[k] is None:
             out[k] = s.result(float(lbs[k]), None, timings[k], note)
     return out
+
+
+def _estimates_in_front(group: list, lb: np.ndarray) -> tuple:
+    """The estimates (P, 3) of a stack of searches in the caller's frame and their reports, each estimate first moved
+    along a line of minimisers where :func:`tritools.solve.robust_front.front_tie` moves it (as
+    :meth:`~tritools.solve.robust.TlsSearch.result` does)."""
+    from .robust_front import front_tie
+
+    X = np.array([s.user_estimate() for s in group])
+    reps = [s.report(Xk) for s, Xk in zip(group, X)]
+    for j, (s, b) in enumerate(zip(group, lb)):
+        if front_tie(s, float(b), reps[j].depths):
+            X[j] = s.user_estimate()
+            reps[j] = s.report(X[j])
+    return X, reps

@@ -88,7 +88,7 @@ def solve_subproblem(cameras, regions, opts, *, light: bool, from_delta: int | N
     seconds (inf: the options' budget); None when the input is refused (e.g. coincident cameras: 0 is a valid
     bound then)."""
     if points and len(cameras) >= 2 and one_exact_camera(cameras):
-        return _one_camera(regions)
+        return _one_camera(cameras, regions)
     opts = opts.replace(time_limit=max(1e-3, limit)) if math.isfinite(limit) else opts
     if light:
         try:
@@ -115,20 +115,38 @@ def solve_subproblem(cameras, regions, opts, *, light: bool, from_delta: int | N
     return _larger(first, plan)
 
 
-def _one_camera(regions) -> SubSolve:
+def _one_camera(cameras, regions) -> SubSolve:
     """The sub-problem of one camera given |S| times with point regions x_i
     (:func:`~tritools.model.exact.one_exact_camera`): every view
     projects X to the same point u, so sum_i |u - x_i|^2 >= sum_i |x_bar - x_i|^2 = sum_{i<j} |x_i - x_j|^2 / |S|,
     attained on the ray of x_bar: L2*(S) exactly, from the differences' squares (each within a few roundings of its
-    exact value) summed exactly (``math.fsum``), divided and rounded down by ``ROUND_DOWN``; certified, no estimate
-    (the ray's depth is not determined by S).  Not 0 where the observations differ, so a track that lists one image
-    twice with two keypoints is certified (review 22a F3: the sub-problem was refused, its bound 0)."""
+    exact value) summed exactly (``math.fsum``), divided and rounded down by ``ROUND_DOWN``; certified.  Not 0 where
+    the observations differ, so a track that lists one image twice with two keypoints is certified (review 22a F3: the
+    sub-problem was refused, its bound 0).  The estimate is a point of that ray in front of the camera
+    (:func:`_ray_point`; S does not determine its depth, the search's exact f_TLS ranks it among the others)."""
     x = np.array([r.center for r in regions], float)
     n = len(x)
     with np.errstate(over="ignore", invalid="ignore"):
         terms = [(x[i + 1:] - x[i]) ** 2 for i in range(n - 1)]
     lb = math.fsum(float(v) for t in terms for v in t.ravel()) / n * ROUND_DOWN    # (a few roundings of 1e-16)
-    return SubSolve(lb if math.isfinite(lb) else 0.0, None, math.isfinite(lb))
+    return SubSolve(lb if math.isfinite(lb) else 0.0, _ray_point(np.asarray(cameras[0], float), x.mean(axis=0)),
+                    math.isfinite(lb))
+
+
+def _ray_point(P: np.ndarray, u: np.ndarray):
+    """The point C + |C| d of the ray of image point u (d the unit direction toward positive depth, C the centre;
+    |C| its distance from the frame's origin, which the search puts among the cameras in a moved world, else 1), or
+    None where the camera gives no ray."""
+    M = P[:, :3]
+    try:
+        C = -np.linalg.solve(M, P[:, 3])
+        d = np.linalg.solve(M, np.append(u, 1.0)) * np.sign(np.linalg.det(M))
+    except np.linalg.LinAlgError:
+        return None
+    n, r = float(np.linalg.norm(d)), float(np.linalg.norm(C))
+    if not (np.all(np.isfinite(C)) and math.isfinite(n) and n > 0 and math.isfinite(r)):
+        return None
+    return C + (r if r > 0 else 1.0) * d / n
 
 
 def _theorem1(opts):

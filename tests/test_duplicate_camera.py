@@ -69,10 +69,16 @@ def test_one_camera_is_exact_proportionality():
 
 
 def test_one_camera_value_is_the_spread_about_the_mean():
+    """The value, and the estimate: a point in front of the camera whose projection is the observations' mean, so
+    its cost on the copies is that value (attained)."""
     x = np.array([[1.0, 2.0], [4.0, 6.0], [-2.0, 0.5]])
-    out = _one_camera(tritools.as_regions(x))
-    assert out.certified and out.X is None
+    P = robust_protocol_scene(2, 0, 1.0, np.random.default_rng(3))[0][0]
+    cams = np.stack([P, -2.0 * P, 0.5 * P])
+    out = _one_camera(cams, tritools.as_regions(x))
     exact = float(np.sum((x - x.mean(axis=0)) ** 2))
-    assert out.lb <= exact and out.lb == pytest.approx(exact, rel=1e-11)
-    huge = _one_camera(tritools.as_regions(np.array([[1e300, 0.0], [-1e300, 0.0]])))
+    assert out.certified and out.lb <= exact and out.lb == pytest.approx(exact, rel=1e-11)
+    h = P @ np.append(out.X, 1.0)
+    assert h[2] * np.sign(np.linalg.det(P[:, :3])) > 0                     # in front
+    np.testing.assert_allclose(h[:2] / h[2], x.mean(axis=0), rtol=0, atol=1e-9)
+    huge = _one_camera(cams[:2], tritools.as_regions(np.array([[1e300, 0.0], [-1e300, 0.0]])))
     assert huge.lb == 0.0 and not huge.certified

@@ -117,6 +117,11 @@ def test_the_staged_order_runs_only_where_the_first_leaves_the_problem_open(monk
         P, x, _, _ = robust_protocol_scene(N, n_out, 1.0, rng)
         assert tritools.triangulate(P, x, robust=200.0).optimal
     assert not staged_singles
+    # case 0 (one camera listed with +-P): the first enumeration certifies it since the one-camera inlier set's
+    # sub-problem gives an estimate on the mean observation's ray (wave 37); case 1 still needs the staged order
     P, x, c = CASES[0]["P"], CASES[0]["x"], CASES[0]["c"]
+    assert tritools.triangulate(P, x, robust=c).optimal
+    assert not staged_singles
+    P, x, c = CASES[1]["P"], CASES[1]["x"], CASES[1]["c"]
     assert tritools.triangulate(P, x, robust=c).optimal
     assert len(staged_singles) == 1

@@ -30,6 +30,7 @@ import numpy as np
 
 from ..model.cameras import camera_center
 from ..model.exact import one_exact_camera
+from .robust_rays import _baseline
 
 __all__ = ["front_tie", "STEPS", "TIE_RTOL", "CENTRE_RTOL", "NEAR_RTOL"]
 
@@ -62,7 +63,7 @@ def front_tie(search, lb: float, depths: np.ndarray) -> bool:
     centres = _centres(search.C)
     if centres is None:
         return False
-    C, B = centres[S[0]], _scale(centres)
+    C, B = centres[S[0]], _baseline(centres)      # B: the median distance between distinct centres
     if np.any(np.linalg.norm(centres[S] - C, axis=1) > CENTRE_RTOL * (np.linalg.norm(C) + np.linalg.norm(X - C) + B)):
         return False
     fallback = None
@@ -109,12 +110,6 @@ def _centres(cams: np.ndarray):
     except ValueError:
         return None
     return centres if np.all(np.isfinite(centres)) else None
-
-
-def _scale(centres: np.ndarray) -> float:
-    """B: the median distance between distinct camera centres, else max(1, max |C_i|)."""
-    from .robust_rays import _baseline
-    return _baseline(centres)
 
 
 def _take(search, Y, d, f) -> bool:

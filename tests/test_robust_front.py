@@ -139,3 +139,41 @@ def test_one_camera_subset_estimate_certifies_single_and_batch(seed):
         f, _ = f_tls(r.X, P, x, 100.0)
         assert f <= ref * (1 + 1e-9) and 6 * r.gamma_lb ** 2 <= f * (1 + 1e-12)
     assert row.gamma_ub == pytest.approx(one.gamma_ub, rel=1e-9)
+
+
+def copies_only_scene(seed):
+    """One camera listed four times (x 1, -1, 2, 0.5) with its own noisy observations, then two distinct cameras
+    with wrong matches (c = 10 px): the optimal inlier set is the four copies, its minimisers the mean
+    observation's ray."""
+    from tritools.scene import PROTOCOL_IMAGE, sphere_cameras
+
+    rng = np.random.default_rng([seed, 11])
+    Pd = sphere_cameras(3, rng)
+    Xt = rng.uniform(-0.5, 0.5, 3)
+    P = np.array([Pd[0], -Pd[0], 2 * Pd[0], 0.5 * Pd[0], Pd[1], Pd[2]])
+    h = P @ np.append(Xt, 1.0)
+    x = h[:, :2] / h[:, 2:] + rng.normal(size=(6, 2))
+    x[4:] = rng.uniform([0, 0], PROTOCOL_IMAGE, size=(2, 2))
+    return P, x
+
+
+@pytest.mark.parametrize("seed", range(12))
+def test_copies_only_inlier_set_is_placed_in_the_scene(seed):
+    """Review 37b M1: such an estimate was certified at depth 1.5e-5 (a scene of scale ~2) by one path and at 1.98 by
+    the other, their gamma_LB 1.2e-7 apart.  Now both are certified at the same values, in front, away from the
+    centre, at the mean ray's cost."""
+    P, x = copies_only_scene(seed)
+    one = tritools.triangulate(P, x, robust=10.0)
+    row = tritools.triangulate_many([(P, x)], robust=10.0, progress=False)[0]
+    M = P[0][:, :3]
+    C = -np.linalg.solve(M, P[0][:, 3])
+    ray = np.linalg.solve(M, np.append(x[:4].mean(axis=0), 1.0)) * np.sign(np.linalg.det(M))
+    ref = f_tls(C + 2.0 * ray / np.linalg.norm(ray), P, x, 10.0)[0]
+    for r in (one, row):
+        if list(r.inliers) != [True] * 4 + [False] * 2:
+            pytest.skip("a wrong match fell within c of the ray")
+        f, w = f_tls(r.X, P, x, 10.0)
+        assert r.optimal and np.all(w > 0) and f <= ref * (1 + 1e-9), r.message
+        assert np.min(r.depths) > 1e-2 * np.max(r.depths)
+    assert row.gamma_lb == pytest.approx(one.gamma_lb, rel=1e-9)
+    assert row.gamma_ub == pytest.approx(one.gamma_ub, rel=1e-9)

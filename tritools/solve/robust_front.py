@@ -51,8 +51,8 @@ CLOSE_RTOL = 1e-2
 def front_tie(search, lb: float, depths: np.ndarray) -> bool:
     """Move a certified TLS estimate of ``search`` (a :class:`~tritools.solve.robust.TlsSearch`, lower bound ``lb``
     in pixels^2; ``depths``: the estimate's depths in every view, from its report) behind a camera of its inlier
-    set, or at its centre, to a well-placed point of equal cost on the line of minimisers through the inlier views'
-    shared centre (module docstring); True when it moved.  A few array operations where it does not act."""
+    set, or next to its centre, to a well-placed point of equal cost on the line of minimisers through the inlier
+    views' shared centre (module docstring); True when it moved.  A few array operations where it does not act."""
     X, S = search.best_X, sorted(search.best_S)
     if X is None or not S or depths is None:
         return False

@@ -31,7 +31,7 @@ import numpy as np
 
 from ..model.cameras import camera_center
 from ..model.exact import one_exact_camera
-from .robust_rays import _baseline
+from .robust_rays import camera_baseline, view_ray
 
 __all__ = ["front_tie", "STEPS", "TIE_RTOL", "CENTRE_RTOL", "NEAR_RTOL", "CLOSE_RTOL"]
 
@@ -67,7 +67,7 @@ def front_tie(search, lb: float, depths: np.ndarray) -> bool:
     centres = _centres(search.C)
     if centres is None:
         return False
-    C, B = centres[S[0]], _baseline(centres)      # B: the median distance between distinct centres
+    C, B = centres[S[0]], camera_baseline(centres)      # B: the median distance between distinct centres
     if np.any(np.linalg.norm(centres[S] - C, axis=1) > CENTRE_RTOL * (np.linalg.norm(C) + np.linalg.norm(X - C) + B)):
         return False
     fallback = None
@@ -87,15 +87,11 @@ def front_tie(search, lb: float, depths: np.ndarray) -> bool:
 def _line_points(search, S: list, C: np.ndarray, X: np.ndarray, B: float, near: bool):
     """The points tried, in order (module docstring): the mean observation's ray of one exact camera, then the line
     through X (not where X sits at C: its direction is round-off there)."""
-    if search.points and (len(S) == 1 or one_exact_camera(search.C[S])):
-        M = search.C[S[0]][:, :3]
-        try:
-            u = np.linalg.solve(M, np.append(np.mean(search.x[S], axis=0), 1.0)) * np.sign(np.linalg.det(M))
-        except np.linalg.LinAlgError:
-            u = np.zeros(3)
-        if np.all(np.isfinite(u)) and np.linalg.norm(u) > 0:
-            for s in STEPS:
-                yield C + s * B * u / np.linalg.norm(u)
+    ray = view_ray(search.C[S[0]], np.mean(search.x[S], axis=0)) \
+        if search.points and (len(S) == 1 or one_exact_camera(search.C[S])) else None
+    if ray is not None:
+        for s in STEPS:
+            yield C + s * B * ray[1]
     v = X - C
     if not near and np.linalg.norm(v) > 0:
         v = B * v / np.linalg.norm(v)

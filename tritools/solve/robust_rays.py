@@ -23,7 +23,7 @@ import math
 import numpy as np
 
 __all__ = ["ray_candidates", "ray_samples_stack", "best_ray_samples", "sampled_pairs",
-           "centre_pair_candidates", "SWEEP", "GOLDEN_STEPS", "MAX_RAYS",
+           "centre_pair_candidates", "view_ray", "camera_baseline", "SWEEP", "GOLDEN_STEPS", "MAX_RAYS",
            "CENTRE_PAIRS"]
 
 #: depths of the geometric sweep along each ray: baseline * 10^k, k in [-3, 3] (this many).
@@ -44,6 +44,13 @@ def _rays(C: np.ndarray, pts: np.ndarray):
     """Centres (N, 3), unit directions (N, 3) towards positive depth, and a mask of views whose M_i is
     invertible (others give no ray): :func:`_rays_stack` of one problem."""
     return tuple(a[0] for a in _rays_stack(C[None], pts[None]))
+
+
+def view_ray(P: np.ndarray, u: np.ndarray):
+    """(centre, unit direction toward positive depth) of the ray of image point ``u`` (2,) in camera ``P`` (3, 4), or
+    None where M is singular or the numbers are not finite (:func:`_rays_one_by_one` of one view)."""
+    centres, dirs, ok = _rays_one_by_one(np.asarray(P, float)[None], np.asarray(u, float)[None])
+    return (centres[0], dirs[0]) if ok[0] else None
 
 
 def _rays_one_by_one(C: np.ndarray, pts: np.ndarray):
@@ -84,7 +91,7 @@ def _closest_depths(centres: np.ndarray, dirs: np.ndarray) -> tuple:
     return t, good
 
 
-def _baseline(centres: np.ndarray) -> float:
+def camera_baseline(centres: np.ndarray) -> float:
     """The median distance between camera centres, or (coincident centres) max(1, |C|): :func:`_baselines` of one."""
     return float(_baselines(centres[None])[0])
 
@@ -114,7 +121,7 @@ def ray_candidates(search) -> list:
     views = _kept_views(search, ok)
     if views.size == 0:
         return []
-    base = _baseline(centres[views])
+    base = camera_baseline(centres[views])
     sweep = base * np.logspace(-3, 3, SWEEP)
     closest = _closest_depths_all(centres[views], dirs[views])
     ts = [np.unique(np.concatenate([sweep, t, [np.median(t)] if t.size else []])) for t in closest]

@@ -35,6 +35,7 @@ import numpy as np
 from ..model.exact import one_exact_camera
 from ..result import Status
 from .options import MethodChoice
+from .robust_rays import view_ray
 
 __all__ = ["SubSolve", "solve_subproblem", "stop_level", "THEOREM1_FIRST", "BOUND_STOP", "ROUND_DOWN",
            "TRUSTED_LOWER_BOUND", "EXHAUSTED"]
@@ -134,19 +135,14 @@ def _one_camera(cameras, regions) -> SubSolve:
 
 
 def _ray_point(P: np.ndarray, u: np.ndarray):
-    """The point C + |C| d of the ray of image point u (d the unit direction toward positive depth, C the centre;
-    |C| its distance from the frame's origin, which the search puts among the cameras in a moved world, else 1), or
-    None where the camera gives no ray."""
-    M = P[:, :3]
-    try:
-        C = -np.linalg.solve(M, P[:, 3])
-        d = np.linalg.solve(M, np.append(u, 1.0)) * np.sign(np.linalg.det(M))
-    except np.linalg.LinAlgError:
+    """The point C + |C| d of the ray of image point u (:func:`~tritools.solve.robust_rays.view_ray`: C the centre, d
+    the unit direction toward positive depth; |C| its distance from the frame's origin, which the search puts among
+    the cameras in a moved world, else 1), or None where the camera gives no ray."""
+    ray = view_ray(P, u)
+    if ray is None:
         return None
-    n, r = float(np.linalg.norm(d)), float(np.linalg.norm(C))
-    if not (np.all(np.isfinite(C)) and math.isfinite(n) and n > 0 and math.isfinite(r)):
-        return None
-    return C + (r if r > 0 else 1.0) * d / n
+    r = float(np.linalg.norm(ray[0]))
+    return ray[0] + (r if 0 < r < math.inf else 1.0) * ray[1]
 
 
 def _theorem1(opts):

@@ -41,7 +41,8 @@ from ..status import SolveStatus
 from ..tolerances import DEFAULT_TOLERANCES, Tolerances
 
 __all__ = ["Verification", "VerificationBatch", "SparseQuadratics", "quadratic_parts", "verify_quadratic",
-           "verify_quadratic_batch", "bound_at_one", "objective_scales", "stationary", "ROUNDOFF", "RETRY_RCOND"]
+           "verify_quadratic_batch", "bound_at_one", "objective_scales", "objective_scale_one", "stationary",
+           "ROUNDOFF", "RETRY_RCOND"]
 
 #: the Lagrangian Hessian must satisfy lambda_min >= -ROUNDOFF * max(max|F2|, max|H|): float
 #: round-off only (a genuinely indefinite H means no bound for these multipliers).
@@ -334,6 +335,19 @@ def objective_scales(f0, f1, F2) -> np.ndarray:
     return np.maximum.reduce([np.abs(f0), np.max(np.abs(f1), axis=1, initial=0.0), diag, off])
 
 
+def objective_scale_one(f0: float, f1: np.ndarray, F2: np.ndarray) -> float:
+    """The scalar twin of :func:`objective_scales` for one program (f0 float, f1 (n,), F2 (n, n)): the same largest
+    absolute coefficient (maxima are exact, so the same number) without the stack's einsum and identity; non-finite
+    data take :func:`objective_scales` itself (its NaN propagation)."""
+    A = np.abs(F2)
+    g = np.abs(f1)
+    if not (math.isfinite(f0) and np.isfinite(A).all() and np.isfinite(g).all()):
+        return float(objective_scales(f0, f1, F2)[0])
+    d = A.diagonal()
+    off = 2 * float((A - np.diag(d)).max()) if A.size else 0.0
+    return max(abs(f0), float(g.max()) if g.size else 0.0, float(d.max()) if d.size else 0.0, off)
+
+
 def constraint_margin(lam, err) -> np.ndarray:
     """sum_k |lambda_k| e_k over the last axis, rounded up (the effect of constraint data known to within e_k on a
     Lagrangian bound, :func:`verify_quadratic_batch`)."""
@@ -383,7 +397,7 @@ def bound_at_one(f0: float, f1, F2, g0, g1, G2: SparseQuadratics, lam, fv: float
     L2 = F2 + np.bincount(G2.i * n + G2.j, G2.vals[0] * lam[G2.k], n * n).reshape(n, n)
     eig, Q = np.linalg.eigh(L2)
     psd = bool(eig[0] >= -ROUNDOFF * max(float(np.max(np.abs(F2))), float(np.max(np.abs(L2)))))  # (NaN: not PSD)
-    s_f = float(objective_scales(f0, f1, F2)[0])
+    s_f = objective_scale_one(float(f0), f1, F2)
     s = 2 * eig
     cut = _EPS * n * np.max(np.abs(s))
     inv = np.where(np.abs(s) > cut, 1.0 / np.where(np.abs(s) > cut, s, 1.0), 0.0)

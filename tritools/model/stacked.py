@@ -1,10 +1,10 @@
 """Vectorised twins of the scalar geometry of :mod:`tritools.model.geometry`, over stacks of problems.
 
-Every function takes a leading problem axis M (cameras (M, N, 3, 4), points (M, N, 2)) and runs as
-numpy operations over the whole stack; ``tests/test_stacked.py`` checks each against its scalar twin
-(``dlt``, ``project``, ``refine_l2`` with point regions, ``fundamental_matrix``, ``camera_center``).
-Problems whose data a function cannot handle are flagged in a boolean mask, never raised on, so one
-bad problem does not stop the stack.
+Every function takes a leading problem axis M (cameras (M, N, 3, 4), points (M, N, 2)) and runs as numpy
+operations over the whole stack; ``tests/test_stacked.py`` checks each against its scalar twin (``dlt``, ``project``,
+``refine_l2`` with point regions, ``fundamental_matrix``, ``camera_center``; a few cameras' centres:
+:mod:`tritools.model.centres_few`).  Problems whose data a function cannot handle are flagged in a boolean mask,
+never raised on, so one bad problem does not stop the stack.
 
 * :func:`null_vectors` -- camera centres a (P a = 0) from the signed 3x3 minors;
 * :func:`dlt_stack` -- Hartley-normalised linear triangulation;
@@ -25,6 +25,7 @@ import numpy as np
 from sospoly.analysis import SparseQuadratics
 from sospoly import pow2_above_array
 
+from .centres_few import few_centres
 from .geometry import POINT_AT_INFINITY_RTOL, PROJECTION_DENOM_RTOL, SAME_CENTER_RTOL
 
 __all__ = ["null_vectors", "dlt_stack", "project_stack", "refine_points_stack", "fundamental_stack",
@@ -36,7 +37,6 @@ __all__ = ["null_vectors", "dlt_stack", "project_stack", "refine_points_stack", 
 LM_MAX_ITER = 100
 #: a problem's iteration stops when its step is below LM_STEP_RTOL * (1 + ||X||) (normalised units, X ~ 1).
 LM_STEP_RTOL = 1e-13
-
 
 #: the 3x3 identity of the damped step (read-only: one array, not one per iteration).
 _EYE3 = np.eye(3)
@@ -75,8 +75,7 @@ def view_pairs(N: int) -> tuple[np.ndarray, np.ndarray]:
 #: the columns of the four 3x3 minors of a 3x4 matrix (column k left out) and their cofactor signs (-1)^k.
 _MINOR_COLUMNS = np.array([[1, 2, 3], [0, 2, 3], [0, 1, 3], [0, 1, 2]])
 _MINOR_SIGNS = np.array([1.0, -1.0, 1.0, -1.0])
-#: up to this many matrices the four minors are computed at once (one gather: fewer numpy calls, the cost of a
-#: small stack); above it minor by minor (no gathered copy: the cost of a large stack).  The same bits either way.
+#: up to this many matrices the four minors come from one gather (fewer calls), above it minor by minor (no copy).
 _GATHER_MAX = 512
 
 
@@ -496,7 +495,8 @@ def fundamental_stack(C: np.ndarray, pairs: tuple | None = None) -> tuple[np.nda
     M, N = C.shape[:2]
     I, J = view_pairs(N) if pairs is None else pairs
     Pi = C[:, I]
-    a = null_vectors(C)
+    few = few_centres(C, I, J)                          # a single call's few cameras: the same numbers
+    a = null_vectors(C) if few is None else few[0]
     with np.errstate(over="ignore", invalid="ignore"):
         inv = _inverses(C @ np.swapaxes(C, 2, 3))
         pinv = np.einsum("mnij,mnjk->mnik", np.swapaxes(C, 2, 3), inv)
@@ -508,8 +508,8 @@ def fundamental_stack(C: np.ndarray, pairs: tuple | None = None) -> tuple[np.nda
     ex[..., 1, 0], ex[..., 2, 0], ex[..., 2, 1] = e[..., 2], -e[..., 1], e[..., 0]
     F = ex @ Pi @ pinv[:, J]
     nrm = norms(F, axis=(2, 3))
-    c = centre_vectors(C)
-    defined = distinct_centres(c[:, I], c[:, J]) & np.isfinite(nrm) & (nrm > 0)
+    c = None if few else centre_vectors(C)
+    defined = (few[1] if few else distinct_centres(c[:, I], c[:, J])) & np.isfinite(nrm) & (nrm > 0)
     F = np.where(defined[..., None, None], F / np.where(nrm > 0, nrm, 1.0)[..., None, None], 0.0)
     return F, defined
 

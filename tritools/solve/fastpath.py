@@ -48,7 +48,8 @@ from ..model.geometry import camera_problems
 from ..model.normalize import normalization_stack
 from ..model.stacked import (band_pairs, epipolar_quadratics, fundamental_stack, gauss_newton_polish, norms,
                              project_one, project_stack, refine_point, refine_points_stack, view_pairs)
-from .decide import decide, decide_one, decide_reported, decide_reported_one, gamma_from_c, gamma_lower
+from .decide import (decide, decide_one, decide_reported, decide_reported_one, gamma_from_c, gamma_lower,
+                     gamma_lower_one)
 from .report import gamma_upper
 from .trivial import trivially_certified, trivially_certified_reported
 
@@ -245,8 +246,8 @@ def verify_one(C: np.ndarray, x: np.ndarray, tolerances: Tolerances, *,
     residuals = norms(uw - x, axis=2)             # (the report's formulas: points_report_stack)
     gamma_ub = gamma_upper(residuals, norms(uw, axis=2))
     g_ub = float(gamma_ub[0])
-    gamma_lb = min(gamma_lower(math.sqrt(max(c_lower, 0.0) / (2.0 * N)) / scale, g_ub, scale, res,
-                               float(norm.magnitude[0])), g_ub)
+    gamma_lb = min(gamma_lower_one(math.sqrt(max(c_lower, 0.0) / (2.0 * N)) / scale, g_ub, scale, res,
+                                   float(norm.magnitude[0])), g_ub)
     certified = optimal and decide_reported_one(gamma_lb, g_ub, tolerances, N, scale, res)
     trivial = not certified and decide_one(0.0, upper, tolerances, N, res)[1] and math.isfinite(upper) and \
         decide_reported_one(0.0, g_ub, tolerances, N, scale, res)

@@ -41,3 +41,26 @@ def test_objective_scale_one_non_finite_as_stack(bad):
             want = float(objective_scales(f0, g, G)[0])
         got = objective_scale_one(f0, g, G)
         assert got == want or (np.isnan(got) and np.isnan(want))
+
+
+def test_epipolar_errors_as_with_linalg_norm():
+    """epipolar_errors with the stacked ``norms`` gives the numbers of its numpy.linalg.norm formula bit for bit."""
+    from tritools.model.epipolar_data import EPIPOLAR_DATA_RTOL, epipolar_errors
+    from tritools.model.stacked import view_pairs
+
+    rng = np.random.default_rng(5)
+    for N in (2, 3, 6, 11):
+        I, J = view_pairs(N)
+        M = 7
+        F = rng.standard_normal((M, len(I), 3, 3)) * 10.0 ** rng.integers(-5, 5, (M, len(I), 1, 1))
+        F[0, 0] = 0.0
+        v = rng.standard_normal((M, 2 * N)) * 10.0 ** rng.integers(-3, 6)
+        R = rng.uniform(0.5, 100.0, M)
+        vt = np.concatenate([v.reshape(M, N, 2), np.ones((M, N, 1))], axis=2)
+        vi, vj = vt[:, I], vt[:, J]
+        g = np.einsum("mka,mkab,mkb->mk", vi, F, vj)
+        seen = 4 * np.abs(g) / (np.linalg.norm(vi, axis=2) * np.linalg.norm(vj, axis=2))
+        base = EPIPOLAR_DATA_RTOL * np.linalg.norm(F, axis=(2, 3))
+        e = np.maximum(base, np.where(np.isfinite(seen), seen, np.inf))
+        want = np.where(base > 0, e * (1.0 + R[:, None] ** 2 / 2) * (1 + 1e-12), 0.0)
+        assert np.array_equal(epipolar_errors(F, (I, J), v, R), want)

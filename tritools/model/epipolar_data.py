@@ -20,6 +20,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .stacked import norms
+
 __all__ = ["EPIPOLAR_DATA_RTOL", "epipolar_errors", "polynomial_errors"]
 
 #: the relative error assumed of a computed, unit-norm fundamental matrix (16 units in the last place)
@@ -37,8 +39,8 @@ def epipolar_errors(F: np.ndarray, pairs: tuple, v: np.ndarray, radius) -> np.nd
     vi, vj = vt[:, I], vt[:, J]                                          # (M, K, 3)
     with np.errstate(invalid="ignore", over="ignore"):
         g = np.einsum("mka,mkab,mkb->mk", vi, F, vj)
-        seen = 4 * np.abs(g) / (np.linalg.norm(vi, axis=2) * np.linalg.norm(vj, axis=2))
-        base = EPIPOLAR_DATA_RTOL * np.linalg.norm(F, axis=(2, 3))
+        seen = 4 * np.abs(g) / (norms(vi, axis=2) * norms(vj, axis=2))      # (np.linalg.norm's numbers)
+        base = EPIPOLAR_DATA_RTOL * norms(F, axis=(2, 3))
         e = np.maximum(base, np.where(np.isfinite(seen), seen, np.inf))
         R = np.broadcast_to(np.asarray(radius, float), (M,))
         return np.where(base > 0, e * (1.0 + R[:, None] ** 2 / 2) * (1 + 1e-12), 0.0)

@@ -261,9 +261,9 @@ def test_whole_call_limit_rows_past_the_end_are_cheap_and_valid():
     rng = np.random.default_rng(1)
     probs = [robust_protocol_scene(int(rng.choice([8, 12, 20])), 3, 1.0, rng)[:2] for _ in range(600)]
     tritools.triangulate_many(probs[:2], robust=3.0, progress=False)
-    t = time.perf_counter()
+    t = time.process_time()            # (this process's CPU: the work done, not the waits of a loaded machine)
     rs = tritools.triangulate_many(probs, robust=3.0, total_time_limit=0.05, progress=False)
-    elapsed = time.perf_counter() - t
+    elapsed = time.process_time() - t
     assert elapsed < 0.5                                   # 0.9 s before (600 searches past the end)
     late = [(r, p) for r, p in zip(rs, probs) if r.status == tritools.Status.TIME_LIMIT and "DLT point" in r.message]
     assert len(late) > 400

@@ -64,3 +64,64 @@ def test_epipolar_errors_as_with_linalg_norm():
         e = np.maximum(base, np.where(np.isfinite(seen), seen, np.inf))
         want = np.where(base > 0, e * (1.0 + R[:, None] ** 2 / 2) * (1 + 1e-12), 0.0)
         assert np.array_equal(epipolar_errors(F, (I, J), v, R), want)
+
+
+def _vq(f, eq, point, radius=None):
+    from sospoly.analysis.verify import verify_quadratic
+
+    return verify_quadratic(f, eq, point, radius=radius)
+
+
+def test_verify_quadratic_without_radius_needs_definite_hessian():
+    """Review 38a H1: without a ball, a Hessian only PSD up to the relative round-off test (or a linear term off its
+    range) left the Lagrangian unbounded below and the bound invalid: certified +1e-5 at the maximiser of
+    1e8 x^2 + 1e-5 y on y^2 = 1 (minimum -1e-5), 0 for the unbounded 1e8 x^2 - 1e-5 y^2 and x^2 + 1e-12 y."""
+    import sospoly as sp
+
+    x, y = sp.variables("x y")
+    for f, eq, v in ((1e8 * x**2 + 1e-5 * y, [y**2 - 1], [0.0, 1.0]),
+                     (1e8 * x**2 + 1e-5 * y, [x**2 + y**2 - 1], [0.0, 1.0]),
+                     (1e8 * x**2 - 1e-5 * y**2, [], [0.0, 0.0]),
+                     (x**2 + 1e-12 * y, [], [0.0, 0.0])):
+        ver = _vq(f, eq, v)
+        assert not ver.certified and ver.lower_bound is None
+    # with a ball the margin makes the same bound valid (below the true minimum -1e-5 of the first problem)
+    ver = _vq(1e8 * x**2 + 1e-5 * y, [y**2 - 1], [0.0, 1.0], radius=2.0)
+    assert ver.lower_bound is not None and ver.lower_bound <= -1e-5
+
+
+def test_verify_quadratic_without_radius_still_certifies_definite_problems():
+    """Strictly convex Lagrangians keep their certificate without a ball, with a bound below the exact minimum."""
+    import sospoly as sp
+
+    x, y = sp.variables("x y")
+    r = 2 ** -0.5
+    cases = ((x + y, [x**2 + y**2 - 1], [-r, -r], -2 * r),                 # lambda = 1 / sqrt 2: L2 = I / sqrt 2
+             (x**2 + 3 * y**2 + x, [], [-0.5, 0.0], -0.25),
+             (1e6 * (x**2 + y**2) + x, [x - y], [-2.5e-7, -2.5e-7], -1.25e-7),
+             (1e-6 * (x**2 + y**2), [x + y - 2], [1.0, 1.0], 2e-6))
+    for f, eq, v, fmin in cases:
+        ver = _vq(f, eq, v)
+        assert ver.certified, (f, ver)
+        assert ver.lower_bound <= fmin
+        assert ver.lower_bound >= fmin - 1e-9 * max(1.0, abs(fmin))
+
+
+def test_banded_verification_without_radius_gives_no_bound():
+    """The banded verification certifies lambda_min(L2) >= -eps only: without a ball it gives no bound (it gave the
+    unmargined Lagrangian value), with one the same bound as the dense verification."""
+    from sospoly.analysis.verify import SparseQuadratics, verify_quadratic_batch
+    from sospoly.analysis.verify_sparse import verify_quadratic_banded_batch
+
+    f0, f1, F2 = np.zeros(1), np.array([[0.0, 1e-12]]), np.diag([1.0, 0.0])[None]     # x^2 + 1e-12 y: unbounded
+    g0, g1, G2 = np.zeros((1, 0)), np.zeros((1, 0, 2)), SparseQuadratics.from_dense(np.zeros((1, 0, 2, 2)))
+    v = np.zeros((1, 2))
+    assert np.isnan(verify_quadratic_banded_batch(f0, f1, F2, g0, g1, G2, v).lower_bound[0])
+    f1, F2 = np.zeros((1, 2)), np.eye(2)[None]                                       # x^2 + y^2 on x + y = 1
+    g0, g1 = np.array([[-1.0]]), np.array([[[1.0, 1.0]]])
+    G2 = SparseQuadratics.from_dense(np.zeros((1, 1, 2, 2)))
+    v = np.array([[0.5, 0.5]])
+    banded = verify_quadratic_banded_batch(f0, f1, F2, g0, g1, G2, v, radius=2.0)
+    dense = verify_quadratic_batch(f0, f1, F2, g0, g1, G2, v, radius=2.0)
+    assert banded.certified[0] and abs(banded.lower_bound[0] - dense.lower_bound[0]) < 1e-12
+    assert np.isnan(verify_quadratic_banded_batch(f0, f1, F2, g0, g1, G2, v).lower_bound[0])

@@ -41,8 +41,8 @@ from ..status import SolveStatus
 from ..tolerances import DEFAULT_TOLERANCES, Tolerances
 
 __all__ = ["Verification", "VerificationBatch", "SparseQuadratics", "quadratic_parts", "verify_quadratic",
-           "verify_quadratic_batch", "bound_at_one", "objective_scales", "objective_scale_one", "stationary",
-           "ROUNDOFF", "RETRY_RCOND"]
+           "verify_quadratic_batch", "bound_at_one", "objective_scales", "objective_scale_one", "free_margins",
+           "stationary", "ROUNDOFF", "RETRY_RCOND"]
 
 #: the Lagrangian Hessian must satisfy lambda_min >= -ROUNDOFF * max(max|F2|, max|H|): float
 #: round-off only (a genuinely indefinite H means no bound for these multipliers).
@@ -206,6 +206,9 @@ def verify_quadratic_batch(f0, f1, F2, g0, g1, G2, points, *,
     against the accepted round-off: with eps = max(0, -lambda_min(L2)) and the stationarity residual
     r = 2 L2 w + L1, L(v) >= L(w) - eps ||v - w||^2 - ||r|| ||v - w|| for every v, so on the ball
     c - eps (R + ||w||)^2 - ||r|| (R + ||w||) - 8 eps_mach (|L0| + |L1.w| + |w^T L2 w|) is a lower bound.
+    Without a radius (None) there is no ball to charge these to: a bound is given only where L2 is positive
+    definite beyond round-off, c - ||r||^2 / (4 mu) - 8 eps_mach (...) with mu > 0 (:func:`free_margins`); elsewhere
+    none (reason 1), however close lambda_min(L2) is to 0.
 
     ``constraint_error`` ((M, K)): e_k >= |g_k(v)| at the ball's points feasible for the caller's *true* constraints,
     of which the g_k given are computed approximations; the bound is then c - sum_k |lambda_k| e_k
@@ -273,6 +276,10 @@ def _bounds_at(f0, f1, F2, g0, g1, G2, lam, fv, tolerances, radius, err) -> Veri
     in_range = stationary(r_abs, _row_norms(L1), s_f, tolerances)
     t1, t2 = np.einsum("mi,mi->m", L1, w), np.einsum("mi,mij,mj->m", w, L2, w)
     c = _with_margins(L0 + t1 + t2, (L0, t1, t2), eig[:, 0], r_abs, _row_norms(w), radius, lam, err)
+    if radius is None:                  # no ball: positive definite beyond round-off, the residual's exact margin
+        hess = _row_norms(F2.reshape(len(F2), -1)) + np.add.reduce(np.abs(G2.vals * lam[:, G2.k]), axis=1)
+        margin, definite = free_margins(eig[:, 0], hess, n, r_abs)
+        c, psd = c - margin, psd & definite
     reason = np.where(~psd, 1, np.where(~in_range, 2, 0))
     bounded = reason == 0
     lower = np.where(bounded, c, np.nan)
@@ -299,10 +306,12 @@ def _with_margins(c, terms, eig0, r_abs, w_norm, radius, lam, err):
     """The stack's bounds c made rigorous (:func:`verify_quadratic_batch`'s docstring): on the ball of ``radius``
     the round-off margins of the accepted Hessian, stationarity residual and sums, then the constraint data's
     error (``err``: None, or (M, K))."""
+    L0, t1, t2 = terms
+    rounding = 8 * _EPS * (np.abs(L0) + np.abs(t1) + np.abs(t2))
     if radius is not None:
-        L0, t1, t2 = terms
-        reach = np.asarray(radius, float) + w_norm
-        c = c - _margin_terms(np.maximum(0.0, -eig0), r_abs, reach) - 8 * _EPS * (np.abs(L0) + np.abs(t1) + np.abs(t2))
+        c = c - _margin_terms(np.maximum(0.0, -eig0), r_abs, np.asarray(radius, float) + w_norm) - rounding
+    else:                               # (without a ball the caller adds free_margins')
+        c = c - rounding
     return c if err is None else c - constraint_margin(lam, err)
 
 
@@ -311,6 +320,21 @@ def _margin_terms(defect, r_abs, reach):
     Lagrangian bound as it is: 0 * inf is not a margin), inf past the largest float (products, never ``**``)."""
     with np.errstate(over="ignore", invalid="ignore"):
         return np.where(defect > 0, defect * reach * reach, 0.0) + np.where(r_abs > 0, r_abs * reach, 0.0)
+
+
+def free_margins(eig0, hess_scale, n: int, r_abs):
+    """(margin, ok) of a bound without a ball (``radius=None``): L2 must be positive definite beyond the
+    eigensolver's and the assembly's round-off, mu = lambda_min(L2) - 16 n eps_mach A > 0 (A = ``hess_scale`` >=
+    ||F2||_F + sum_k |lambda_k| ||G2_k||_F); then L(v) >= L(w) + r . (v - w) + mu ||v - w||^2 >= L(w) - ||r||^2 / (4 mu)
+    for every v, r = 2 L2 w + L1 the stationarity residual.  Where L2 is only positive semidefinite up to round-off
+    a direction of (near) zero curvature may carry a linear term and L is then unbounded below: no bound (ok False;
+    review 38a H1: 1e8 x^2 + 1e-5 y on y^2 = 1 was certified at +1e-5 from its maximiser, the minimum is -1e-5).
+    Scalars or arrays."""
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+        mu = np.asarray(eig0, float) - 16 * n * _EPS * np.asarray(hess_scale, float)
+        ok = mu > 0
+        margin = np.where(ok, np.asarray(r_abs, float) ** 2 / np.where(ok, 4 * mu, 1.0), np.inf)
+    return margin, ok
 
 
 #: the denominator's floor of the stationarity test (a zero L1 and residual: in range)
@@ -406,9 +430,13 @@ def bound_at_one(f0: float, f1, F2, g0, g1, G2: SparseQuadratics, lam, fv: float
     in_range = bool(stationary(r_abs, math.sqrt(float(L1 @ L1)), s_f, tolerances))
     t1, t2 = float(L1 @ w), float(w @ L2 @ w)
     c = L0 + t1 + t2
+    rounding = 8 * _EPS * (abs(L0) + abs(t1) + abs(t2))
     if radius is not None:
-        reach = radius + math.sqrt(float(w @ w))
-        c = c - float(_margin_terms(max(0.0, -float(eig[0])), r_abs, reach)) - 8 * _EPS * (abs(L0) + abs(t1) + abs(t2))
+        c = c - float(_margin_terms(max(0.0, -float(eig[0])), r_abs, radius + math.sqrt(float(w @ w)))) - rounding
+    else:                               # no ball: positive definite beyond round-off (free_margins)
+        hess = math.sqrt(float(np.sum(F2 * F2))) + float(np.sum(np.abs(G2.vals[0] * lam[G2.k])))
+        margin, definite = free_margins(float(eig[0]), hess, n, r_abs)
+        c, psd = c - rounding - float(margin), psd and bool(definite)
     if constraint_error is not None:
         c = c - float(constraint_margin(lam, np.broadcast_to(np.asarray(constraint_error, float), lam.shape)))
     reason = 1 if not psd else 2 if not in_range else 0

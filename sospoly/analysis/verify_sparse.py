@@ -94,7 +94,8 @@ def verify_quadratic_banded_batch(f0, f1, F2, g0, g1, G2: SparseQuadratics, poin
 
     Shapes as for :func:`~sospoly.analysis.verify.verify_quadratic_batch`: f0 (M,), f1 (M, n), F2 (M, n, n)
     (may be a broadcast view), g0 (M, K), g1 (M, K, n), G2 a :class:`~sospoly.analysis.verify.SparseQuadratics`,
-    points (M, n); ``radius`` (scalar or (M,)) bounds the norm of a minimiser.  ``min_hessian_eigenvalue`` of the
+    points (M, n); ``radius`` (scalar or (M,)) bounds the norm of a minimiser (None: no bound, reason 1 -- the banded
+    factorisation does not certify the positive floor a bound without a ball needs).  ``min_hessian_eigenvalue`` of the
     result is the certified lower bound -eps of lambda_min(L2) (NaN where the factorisation failed).  Under an
     active deadline (:func:`sospoly.budget.deadline_scope`) the banded column loops raise
     :class:`sospoly.budget.TimeLimitReached` once it has passed (:mod:`sospoly.analysis.banded`).
@@ -145,6 +146,8 @@ def verify_quadratic_banded_batch(f0, f1, F2, g0, g1, G2: SparseQuadratics, poin
         c = c - eps * reach ** 2 - r_abs * reach - 8 * np.finfo(float).eps * (np.abs(L0) + np.abs(t1) + np.abs(t2))
     if constraint_error is not None:               # (verify_quadratic_batch's constraint_error)
         c = c - constraint_margin(lam, np.broadcast_to(np.asarray(constraint_error, float), lam.shape))
+    if radius is None:                 # the factorisation certifies lambda_min >= -eps only: no bound without a ball
+        pd = np.zeros_like(pd)         # (verify.free_margins needs lambda_min > 0 beyond round-off; review 38a H1)
     reason = np.where(~pd, 1, np.where(~in_range, 2, 0))
     bounded = (reason == 0) & np.isfinite(c)
     lower = np.where(bounded, c, np.nan)

@@ -292,7 +292,9 @@ def minimize_ratios(terms, eq=(), ineq=(), degree: int | None = None, *, gens=No
         scale = max(1.0, abs(upper))
         if tol.contradicts(lower, upper, scale):
             status, msg = SolveStatus.INCONSISTENT, f"lower bound {lower * F:.10g} exceeds the objective " \
-                                                     f"{upper * F:.10g} at a feasible point: numerical failure"
+                                                     f"{upper * F:.10g} at a point that meets the constraints only " \
+                                                     "within the tolerances: not reported as an upper bound"
+            upper, found = None, []     # (the proven bound stays: a result never contradicts itself, review 38a M4)
         else:
             optimal = bool(tol.certified(lower, upper, scale))
             lower = tol.consistent(lower, upper)

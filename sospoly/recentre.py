@@ -169,8 +169,18 @@ def with_exact_values(res, f: Polynomial, tol, scale: float):
         note = f"not certified: f(y + t) at the minimiser has more than {SCALE_MAX_TERMS} terms, so the gap cannot " \
                "be decided at the minimiser's scale"
         message = "; ".join(m for m in (message, note) if m)
+    solved = getattr(res.solution, "status", status)
+    if status == type(status).OPTIMAL and not optimal and solved != status:
+        status = solved                 # a certificate withdrawn here: the solve's own status (review 38a M2)
     near = tol.gap_tolerance(upper, scale) if upper is not None else 0.0
     mins = tuple(p for v, p in vals if v <= upper + near) if upper is not None else ()
+    if status == type(status).INCONSISTENT and upper is not None:
+        # the proven lower bound exceeds f exactly valued at points that meet the constraints only within the
+        # feasibility tolerance: they are no upper bound (the constraints may have no real solution at all; review
+        # 38a M4: two concentric circles 1e-6 apart); the lower bound stays, so the result never contradicts itself
+        message = "; ".join(m for m in (message, f"f = {upper:.10g} at the best candidate, which meets the "
+                                        "constraints only within the tolerances: not reported as an upper bound") if m)
+        upper, mins = None, ()
     return replace(res, lower_bound=lower, upper_bound=upper, minimizers=mins, candidates=tuple(p for _, p in vals),
                    optimal=optimal, status=status, scale=scale, message=message)
 

@@ -125,3 +125,32 @@ def test_banded_verification_without_radius_gives_no_bound():
     dense = verify_quadratic_batch(f0, f1, F2, g0, g1, G2, v, radius=2.0)
     assert banded.certified[0] and abs(banded.lower_bound[0] - dense.lower_bound[0]) < 1e-12
     assert np.isnan(verify_quadratic_banded_batch(f0, f1, F2, g0, g1, G2, v).lower_bound[0])
+
+
+def test_minimize_inconsistent_keeps_the_proven_bound_only():
+    """Review 38a M4: two concentric circles 1e-6 apart (no real solution) returned inconsistent_bounds with lower
+    1.30 > upper 0.59.  Whatever the outcome, the numbers never contradict each other; an inconsistent result keeps
+    its proven lower bound and reports no upper bound or minimiser."""
+    import sospoly as sp
+
+    x, y = sp.variables("x y")
+    r = sp.minimize(x + y, eq=[x**2 + y**2 - 1, x**2 + y**2 - 1 - 1e-6])
+    assert r.lower_bound is None or r.upper_bound is None or r.lower_bound <= r.upper_bound
+    if r.status == sp.SolveStatus.INCONSISTENT:
+        assert r.upper_bound is None and r.minimizers == () and r.lower_bound is not None
+    assert not r.optimal
+
+
+def test_minimize_withdrawn_certificate_reports_the_solves_status():
+    """Review 38a M2: the six-hump camel moved to (1000.1, -1000.1) was certified at the origin's scale from an
+    inaccurate iterate and withdrawn at the minimiser's scale, but kept status optimal (optimal=False)."""
+    import sospoly as sp
+
+    x, y = sp.variables("x y")
+    X, Y = x - 1000.1, y + 1000.1
+    f = 4 * X**2 - 2.1 * X**4 + X**6 / 3 + X * Y - 4 * Y**2 + 4 * Y**4
+    r = sp.minimize(f, budget=sp.Budget(time_limit=60))
+    assert r.optimal or r.status != sp.SolveStatus.OPTIMAL or all(
+        a.status == sp.SolveStatus.OPTIMAL for a in r.attempts if a.lower_bound is None)
+    if not r.optimal and r.status == sp.SolveStatus.OPTIMAL:
+        assert r.solution is None or r.solution.status == sp.SolveStatus.OPTIMAL

@@ -189,6 +189,9 @@ def _candidates(prog, names, sol, tol, n):
 def _polish(obj, eq, ineq, x0):
     from scipy.optimize import minimize as sp_min
 
+    from .analysis.candidates import slsqp_equalities
+
+    eq = slsqp_equalities(list(eq), np.asarray(x0, float))         # (at most n: SLSQP's heap, review 38a M5)
     cons = [{"type": "eq", "fun": (lambda v, g=g: g(v))} for g in eq] + \
         [{"type": "ineq", "fun": (lambda v, h=h: h(v))} for h in ineq]
     try:

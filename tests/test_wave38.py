@@ -154,3 +154,39 @@ def test_minimize_withdrawn_certificate_reports_the_solves_status():
         a.status == sp.SolveStatus.OPTIMAL for a in r.attempts if a.lower_bound is None)
     if not r.optimal and r.status == sp.SolveStatus.OPTIMAL:
         assert r.solution is None or r.solution.status == sp.SolveStatus.OPTIMAL
+
+
+_MANY_EQUALITIES = """
+import gc
+import sospoly as sp
+x, y = sp.variables("x y")
+eq = [x - 1, y - 1] + [k * (x - 1) + (y - 1) for k in range(1, 18)]
+r = sp.minimize(x + y, eq=eq)
+gc.collect()
+print(r.status.value, r.lower_bound, r.upper_bound)
+"""
+
+
+def test_many_equalities_do_not_kill_the_process():
+    """Review 38a M5: 19 redundant equalities in 2 variables -- scipy's SLSQP (the candidates' polish) corrupted the
+    heap and the process died (exit 139 / 134).  The polish now takes at most n of them (slsqp_equalities)."""
+    import subprocess
+    import sys
+
+    out = subprocess.run([sys.executable, "-c", _MANY_EQUALITIES], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr[-500:]
+    status, lower, upper = out.stdout.split()
+    assert status == "optimal" and float(lower) <= 2.0 <= float(upper) + 1e-9
+
+
+def test_slsqp_equalities_keeps_independent_ones():
+    import sospoly as sp
+    from sospoly.analysis.candidates import slsqp_equalities
+
+    x, y, z = sp.variables("x y z")
+    eq = [x - 1, 2 * (x - 1), y - z, 3 * (y - z), x + y + z - 3, 4 * (x - 1)]
+    picked = slsqp_equalities(eq, np.array([0.5, 0.2, 0.1]))
+    assert len(picked) == 3
+    J = np.array([[float(g.diff(v)([0.5, 0.2, 0.1])) for v in ("x", "y", "z")] for g in picked])
+    assert np.linalg.matrix_rank(J) == 3
+    assert slsqp_equalities(eq[:2], np.zeros(3)) == eq[:2]

@@ -28,7 +28,8 @@ from .term_extraction import second_moment_candidates
 if TYPE_CHECKING:                     # annotations only: analysis reads a solution, it never solves
     from ..solvers.solve import ProgramSolution
 
-__all__ = ["feasibility_violation", "candidates_of", "feasible_points", "dedupe_points", "support_of"]
+__all__ = ["feasibility_violation", "candidates_of", "feasible_points", "dedupe_points", "support_of",
+           "slsqp_equalities"]
 
 
 def support_of(p: Polynomial) -> np.ndarray:
@@ -91,12 +92,32 @@ class _Compiled:
         return J
 
 
+def slsqp_equalities(eq: list, x0: np.ndarray) -> list:
+    """At most n of the equality constraints ``eq`` for an SLSQP polish in n variables from x0: all of them when
+    there are at most n, else those of the n most independent gradients at x0 (a column-pivoted QR of the
+    Jacobian's transpose).  scipy's SLSQP (1.16-1.17) corrupts the heap and kills the process with ~15 or more
+    equalities beyond n (review 38a M5: 19 redundant linear equalities in 2 variables); its subproblem is
+    overdetermined there anyway.  The polished point is checked against every constraint afterwards
+    (:func:`feasible_points`), so a subset loses nothing but the polish of a point it cannot make feasible."""
+    n = len(x0)
+    if len(eq) <= n:
+        return list(eq)
+    from scipy.linalg import qr
+
+    J = _Compiled(eq).jacobian(x0)
+    J = np.where(np.isfinite(J), J, 0.0)
+    pivots = qr(J.T, pivoting=True, mode="r")[1]
+    return [eq[k] for k in sorted(pivots[:n].tolist())]
+
+
 def _polish(f: Polynomial, eq, ineq, x0: np.ndarray) -> np.ndarray | None:
-    """Local polish of a candidate (any feasible point gives a valid upper bound): SLSQP with constraints,
-    L-BFGS-B without (SLSQP's dense O(n^3) steps cost ~0.1 s each at n = 200)."""
+    """Local polish of a candidate (any feasible point gives a valid upper bound): SLSQP with constraints (at most
+    n equalities, :func:`slsqp_equalities`), L-BFGS-B without (SLSQP's dense O(n^3) steps cost ~0.1 s each at
+    n = 200)."""
     from scipy.optimize import minimize as sp_min
 
     fc = _Compiled([f])
+    eq = slsqp_equalities(list(eq), np.asarray(x0, float))
     cons = [{"type": kind, "fun": c.values, "jac": c.jacobian}
             for kind, c in (("eq", _Compiled(eq) if eq else None), ("ineq", _Compiled(ineq) if ineq else None))
             if c is not None]

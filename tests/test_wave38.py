@@ -190,3 +190,30 @@ def test_slsqp_equalities_keeps_independent_ones():
     J = np.array([[float(g.diff(v)([0.5, 0.2, 0.1])) for v in ("x", "y", "z")] for g in picked])
     assert np.linalg.matrix_rank(J) == 3
     assert slsqp_equalities(eq[:2], np.zeros(3)) == eq[:2]
+
+
+def test_bounded_convex_quadratics_are_not_called_unbounded():
+    """Review 38a M1: 1e-40 x^2 + 1e40 y^2 + x + y (minimum -2.5e39, an ordinary float) was reported "unbounded
+    below ... no lower bound exists": its computed eigenvalue 1e-40 lay within round-off of 0.  The claim now needs
+    the exact test on the float data."""
+    import warnings
+
+    import sospoly as sp
+    from sospoly.analysis.recession import exactly_unbounded
+
+    x, y = sp.variables("x y")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")              # (no numpy warning leaks either)
+        for f in (1e-40 * x**2 + 1e40 * y**2 + x + y, 1e-80 * x**2 + x + y**2, 1e-30 * x**2 + 1e30 * y**2 + x + y):
+            r = sp.minimize(f)
+            assert "unbounded" not in r.message and r.status != sp.SolveStatus.INFEASIBLE
+            assert r.lower_bound is None or r.lower_bound <= f([-0.5 / f.coefficient((2, 0)), 0.0])
+    # exact decisions
+    assert not exactly_unbounded(np.diag([1e-40, 1e40]), np.array([1.0, 1.0]))
+    assert exactly_unbounded(np.diag([0.0, 1.0]), np.array([1e-30, 1.0]))            # b off the range
+    assert not exactly_unbounded(np.diag([0.0, 1.0]), np.array([0.0, 1.0]))
+    assert exactly_unbounded(np.array([[1.0, 1.0], [1.0, 1.0 - 2.0**-52]]), np.zeros(2))   # det < 0 exactly
+    assert not exactly_unbounded(np.array([[1.0, 1.0], [1.0, 1.0]]), np.array([1.0, 1.0]))  # b in the range
+    # still unbounded: a genuinely singular PSD Q with b off its range, and an indefinite one
+    for f in (x**2 + y, x**2 - 1e-6 * x * y):
+        assert sp.minimize(f).status == sp.SolveStatus.INFEASIBLE

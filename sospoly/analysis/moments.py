@@ -146,6 +146,7 @@ def moment_matrices_of(constraint, solution, scale_exponents=None) -> tuple:
             M = np.asarray(M, float)
             if scale_exponents is not None and np.any(scale_exponents):
                 e = np.asarray(blk.b, np.int64) @ np.asarray(scale_exponents, np.int64)
-                M = np.ldexp(M, e[:, None] + e[None, :])
+                with np.errstate(over="ignore"):        # (moments past the float range: inf, as reported)
+                    M = np.ldexp(M, e[:, None] + e[None, :])
             out.append(MomentMatrix(name, np.asarray(blk.b), _normalised(M, blk.b), tuple(constraint.expr.gens)))
     return tuple(out)

@@ -10,8 +10,8 @@ program ``max c : f - c SOS`` is infeasible only by ~1e-13, below the solver's t
 * ``deg f = 2``, ``f = x' Q x + b' x + c``: ``Q`` has an eigenvalue below ``-tol`` (``tol`` =
   :data:`EIG_RTOL` ``* n * ||Q||``: beyond the rounding of the eigen-decomposition), or ``Q`` is positive
   semidefinite with eigenvalues within ``tol`` of zero along which ``b`` has a component
-  (``f(-t N N' b) = -t ||N'b||^2 + O(tol t^2)``): then ``f`` is unbounded below, or bounded only below
-  ``-||N'b||^2 / (4 tol)``, beyond what any floating-point certificate can resolve;
+  (``f(-t N N' b) = -t ||N'b||^2 + O(tol t^2)``) and the exact test :func:`exactly_unbounded` on the float data
+  confirms it (up to ``EXACT_MAX_VARS`` variables; beyond, no claim);
 * ``deg f`` even ``> 2``: ``f_top`` is negative at one of the tried directions, or at a local minimiser
   of ``f_top`` on the unit sphere started from the three best (a sufficient test only).
 
@@ -24,7 +24,8 @@ import numpy as np
 
 from ..algebra.polynomial import Polynomial
 
-__all__ = ["recession_direction", "unbounded_result", "EIG_RTOL", "LOCAL_SEARCH_MAX_VARS", "MAX_TRIAL_ENTRIES"]
+__all__ = ["recession_direction", "unbounded_result", "exactly_unbounded", "EIG_RTOL", "EXACT_MAX_VARS",
+           "LOCAL_SEARCH_MAX_VARS", "MAX_TRIAL_ENTRIES"]
 
 #: eigenvalues of the quadratic part within ``EIG_RTOL * n * ||Q||`` of zero are treated as zero.
 EIG_RTOL = 64 * float(np.finfo(float).eps)
@@ -94,9 +95,44 @@ def _quadratic_direction(E, c, n) -> np.ndarray | None:
     null = V[:, np.abs(lam) <= tol]
     if null.shape[1]:
         d = -null @ (null.T @ b)
-        if float(b @ d) < -EIG_RTOL * n * float(np.linalg.norm(b)) * float(np.linalg.norm(d)) and np.any(d):
+        if float(b @ d) < -EIG_RTOL * n * float(np.linalg.norm(b)) * float(np.linalg.norm(d)) and np.any(d) \
+                and n <= EXACT_MAX_VARS and exactly_unbounded(Q, b):
             return d / np.linalg.norm(d)
     return None
+
+
+#: :func:`exactly_unbounded` decides quadratics of at most this many variables (rational elimination, O(n^3)).
+EXACT_MAX_VARS = 40
+
+
+def exactly_unbounded(Q: np.ndarray, b: np.ndarray) -> bool:
+    """Is x' Q x + b' x unbounded below, decided exactly on the float data (rational arithmetic)?  True iff Q is not
+    positive semidefinite, or it is and b is not in its range: symmetric elimination with the largest remaining
+    diagonal as pivot, completing the square (a zero pivot needs its row zero and its linear coefficient zero).
+    Eigenvalues within round-off of zero decide nothing: 1e-40 x^2 + 1e40 y^2 + x + y has a computed eigenvalue
+    1e-40 << EIG_RTOL ||Q|| but its minimum -2.5e39 is an ordinary float (review 38a M1: it was called unbounded)."""
+    from fractions import Fraction
+
+    A = [[Fraction(float(v)) for v in row] for row in Q]
+    r = [Fraction(float(v)) for v in b]
+    rest = list(range(len(r)))
+    while rest:
+        k = max(rest, key=lambda i: A[i][i])
+        rest.remove(k)
+        p = A[k][k]
+        if p < 0:
+            return True
+        if p == 0:
+            if any(A[k][j] != 0 for j in rest) or r[k] != 0:
+                return True                 # not PSD (a zero diagonal with a non-zero row), or b off the range
+            continue
+        for i in rest:
+            m = A[i][k] / p
+            if m:
+                for j in rest:
+                    A[i][j] -= m * A[k][j]
+                r[i] -= m * r[k]
+    return False
 
 
 def recession_direction(f: Polynomial, eq=(), ineq=()) -> np.ndarray | None:

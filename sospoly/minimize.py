@@ -69,6 +69,7 @@ The default strategy (each step recorded in ``attempts``):
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 import numbers
 import time
@@ -85,7 +86,7 @@ from .analysis.moments import moment_matrices_of
 from .budget import Budget, BudgetExceeded, TimeLimitReached, as_budget, deadline_scope
 from .analysis.proof import unsolved_claim
 from .certificates.psatz import Multiplier, PsatzProblem, as_multiplier, build_psatz, checked_inputs
-from .certificates.shape import MINIMIZE_SPARSITIES, Sparsity
+from .certificates.shape import MINIMIZE_SPARSITIES, Sparsity, low_block_helps
 from .certificates.sparsity import correlative_sparsity
 from .certificates.term_hierarchy import (cheap_term_level, newton_smaller, parse_term_kind, term_level_shape,
                                          term_levels)
@@ -164,27 +165,11 @@ class MinimizeResult:
 
 
 # ----------------------------------------------------------------------------- strategy
-def _low_block_helps(eq, ineq, multiplier) -> bool:
-    """Can a dense degree-2 block beside degree >= 4 clique blocks strengthen the certificate?
-
-    Only through a multiplier that couples variables of different cliques.  Otherwise every
-    monomial x_i x_j with i, j in no common clique is produced by that block alone, so its Gram
-    entry is 0: the block's Gram matrix has the chordal pattern of the cliques (with the constant
-    monomial joined to all) and is, by Agler et al. (1988), a sum of PSD matrices on {1} + C_k --
-    quadratic SOS in the variables of one clique, which the clique blocks already hold.  The low
-    parts of the multipliers couple cliques only for an equality of degree <= 1 (r_k of degree 1
-    in all variables) or a constant inequality (s_k of degree 2); a non-constant user q couples
-    whatever its terms couple."""
-    if isinstance(multiplier, Polynomial) and multiplier.degree > 0:
-        return True
-    return any(g.degree <= 1 for g in eq) or any(h.degree <= 0 for h in ineq)
-
-
 def _choose_sparsity(sparsity, f, eq, ineq, degree: int, multiplier="auto", last: bool = True
                      ) -> list[tuple[str, int | None]]:
     """The (sparsity kind, low degree of a dense block) steps for ``sparsity`` at ``degree`` (see the
     module docstring).  The dense degree-2 block only where it can add strength
-    (:func:`_low_block_helps`): elsewhere it would cost a Gram block of side n + 1 for nothing.  By
+    (:func:`~sospoly.certificates.shape.low_block_helps`): elsewhere a Gram block of side n + 1 for nothing.  By
     the same argument the dense degree-2 certificate gives the correlative one's bound there, so
     after a correlative degree-2 step it is tried only at the ``last`` degree (for its minimisers:
     Gram-kernel extraction separates two minimisers that degree-1 clique moments cannot)."""
@@ -192,7 +177,7 @@ def _choose_sparsity(sparsity, f, eq, ineq, degree: int, multiplier="auto", last
 
     sparsity = Sparsity.parse(sparsity, allowed=MINIMIZE_SPARSITIES)
     n = len(f.gens)
-    low = 2 if degree > 2 and n + 1 <= LOW_BLOCK_MAX_SIDE and _low_block_helps(eq, ineq, multiplier) else None
+    low = 2 if degree > 2 and n + 1 <= LOW_BLOCK_MAX_SIDE and low_block_helps(eq, ineq, multiplier) else None
     if sparsity == "correlative":
         return [("correlative", low)]
     supports = (support_of(f), [support_of(g) for g in eq], [support_of(h) for h in ineq])
@@ -205,7 +190,7 @@ def _choose_sparsity(sparsity, f, eq, ineq, degree: int, multiplier="auto", last
     cs = correlative_sparsity(n, *supports)
     steps = [] if cs.is_dense else [("correlative", low)]
     if cs.is_dense or (sigma(n, degree // 2) <= DENSE_AUTO_MAX_SIDE and
-                       (degree > 2 or last or _low_block_helps(eq, ineq, multiplier))):
+                       (degree > 2 or last or low_block_helps(eq, ineq, multiplier))):
         # before the dense certificate (q = 1 only): the cheapest term-sparsity level when clearly smaller, and
         # for an unconstrained f the Newton-polytope basis when smaller (the dense bound for q = 1)
         q1 = isinstance(multiplier, str) and multiplier in ("auto", "putinar") and \
@@ -330,7 +315,7 @@ def _strategy(f, eq, ineq, multiplier, radius, *, gens, d0, last, sparsity, low_
     run = _Run(f, eq, ineq, prog=prog, gens=gens, tol=tol, budget=budget, deadline=deadline, refine=refine)
     best, cut = None, False
     for d in range(d0, last + 1, 2):
-        for kind, low in _choose_sparsity(sparsity, fn, eqn, ineqn, d, multiplier, d + 2 > last):
+        for kind, low in _steps(deadline, sparsity, fn, eqn, ineqn, d, multiplier, d + 2 > last):
             low = low_degree if low_degree is not None else low
             for mult in _multipliers(multiplier, d, f.degree, kind == "none"):
                 res = run.solve(d, mult, kind, low, form, backend)
@@ -338,19 +323,29 @@ def _strategy(f, eq, ineq, multiplier, radius, *, gens, d0, last, sparsity, low_
                 cut = cut or res.status == SolveStatus.TIME_LIMIT
                 if res.optimal or res.status == SolveStatus.TIME_LIMIT or deadline.expired:
                     break
-            if best.optimal or deadline.expired:
+            if (best is not None and best.optimal) or deadline.expired:
                 break
-        if best.optimal or deadline.expired:
+        if (best is not None and best.optimal) or deadline.expired:
             break
+    best = best or run._empty(SolveStatus.TIME_LIMIT, d0, multiplier, "-", "time limit reached while choosing the "
+                              "certificate's sparsity")
     return _finish(best, run, time.perf_counter() - t0, cut)
+
+
+def _steps(deadline, *args) -> list:
+    """:func:`_choose_sparsity` under the call's deadline: no steps once it passed while they were sized (the term
+    hierarchy's graph work ran past a 1 s limit for 2 s, review 38a M3)."""
+    try:
+        with deadline_scope(deadline):
+            return _choose_sparsity(*args)
+    except TimeLimitReached:
+        return []
 
 
 def _recentred(best: MinimizeResult, f, eq, ineq, multiplier, radius, solve, tol: Tolerances, deadline,
                t0: float) -> MinimizeResult:
     """Strategy step 6 (:mod:`sospoly.recentre`): decide at the minimiser's scale, and solve the program
     translated to the minimiser when the scale there is smaller and the translation is exact."""
-    import dataclasses
-
     from .recentre import (cancellation_scale, result_in_original, scale_of_result, translated_program,
                            with_exact_values)
 
@@ -394,8 +389,6 @@ _OUT_OF_TIME = frozenset({SolveStatus.OPTIMAL, SolveStatus.INACCURATE, SolveStat
 
 
 def _finish(best: MinimizeResult, run: _Run, seconds: float, cut: bool = False) -> MinimizeResult:
-    import dataclasses
-
     status = best.status
     # past the deadline or a step cut short by it (review 32b L4), an uncertified answer is the time limit's, unless
     # it is a verdict (an empty set, no certificate at any degree tried) or the budget refused what was left
@@ -489,8 +482,6 @@ class _Run:
     def _iterate(self, psatz, form, backend) -> LowerBound | None:
         """An "almost solved" iterate that passes the a-posteriori checks (``accept_inaccurate``), as a
         LowerBound with status INACCURATE and the iterate's level: used only through the proven bound."""
-        import dataclasses
-
         fm, be = _retry_chain(form, backend, len(psatz.shape.u_bases))[0]
         tol = dataclasses.replace(self.tol, accept_inaccurate=True)
         lb = solve_psatz(psatz, backend=be, form=fm, tolerances=tol, deadline=self.deadline, prove=False)

@@ -83,13 +83,17 @@ def _translated_sums(p: Polynomial, t) -> tuple[dict, dict]:
     mag: dict = {}
     for a, c in p.terms.items():
         cf = Fraction(float(c))
-        per_var = [[(b, math.comb(ai, b) * ti ** (ai - b)) for b in range(ai + 1)] for ai, ti in zip(a, t)]
+        live = [i for i, ai in enumerate(a) if ai]        # (a variable absent from the term contributes b = 0 only)
+        per_var = [[(b, math.comb(a[i], b) * t[i] ** (a[i] - b)) for b in range(a[i] + 1)] for i in live]
         for combo in product(*per_var):
             w = cf
             for _, coef in combo:
                 w *= coef
             if w:
-                key = tuple(b for b, _ in combo)
+                key = [0] * len(a)
+                for i, (b, _) in zip(live, combo):
+                    key[i] = b
+                key = tuple(key)
                 acc[key] = acc.get(key, 0) + w
                 mag[key] = mag.get(key, 0) + abs(w)
     return acc, mag

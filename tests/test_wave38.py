@@ -217,3 +217,42 @@ def test_bounded_convex_quadratics_are_not_called_unbounded():
     # still unbounded: a genuinely singular PSD Q with b off its range, and an indefinite one
     for f in (x**2 + y, x**2 - 1e-6 * x * y):
         assert sp.minimize(f).status == sp.SolveStatus.INFEASIBLE
+
+
+def test_minimize_time_limit_covers_choosing_the_sparsity():
+    """Review 38a M3: the term hierarchy's graph work (networkx chordal completions) ran outside the deadline: a
+    1 s limit ended after ~3 s.  The steps are now chosen under the deadline (this process's CPU, generous)."""
+    import time
+
+    import sospoly as sp
+
+    v = sp.variables("v", n=3)
+    f = sum(vi**12 for vi in v) + (sum(v))**11 + 1
+    sp.minimize(v[0]**2 + v[1]**2, budget=sp.Budget(time_limit=5))          # (imports and a first solve)
+    t = time.process_time()
+    r = sp.minimize(f, ineq=[1 - v[0]**2 - v[1]**2 - v[2]**2], budget=sp.Budget(time_limit=1.0))
+    assert r.status == sp.SolveStatus.TIME_LIMIT
+    assert time.process_time() - t < 2.4                  # (3.0-3.2 s before)
+
+
+def test_exact_valuation_of_a_long_chain_is_fast():
+    """Review 38a M3: the exact translation sums (recentre) iterated over every variable of every term: a 300-variable
+    quadratic chain spent ~20 s there after a 0.3 s solve.  Absent variables are now skipped (the same numbers)."""
+    import time
+    from fractions import Fraction
+
+    import sospoly as sp
+    from sospoly.recentre import translated
+
+    v = sp.variables("v", n=200)
+    f = sum((vi - 1)**2 for vi in v) + sum(0.1 * v[i] * v[i + 1] for i in range(199))
+    t0 = np.full(200, 0.75)
+    t = time.process_time()
+    g = translated(f, t0, exact=False)
+    assert time.process_time() - t < 0.5                  # (1.0 s before, 0.07 s now)
+    # the same numbers as a direct evaluation: g(y) = f(y + t) at a few points
+    rng = np.random.default_rng(0)
+    for _ in range(3):
+        y = rng.standard_normal(200)
+        scale = float(sum((Fraction(float(a)) + Fraction(0.75) - 1) ** 2 for a in y))
+        assert abs(float(g(y)) - f(y + t0)) <= 1e-9 * max(1.0, scale)

@@ -36,12 +36,13 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..algebra.basis import monomials, sigma
+from ..algebra.polynomial import Polynomial
 from ..budget import BudgetExceeded, ProgramSize, check_deadline, estimate_size
 from .sparsity import correlative_sparsity, newton_reduce, term_sparsity_blocks, variables_of
 
 __all__ = ["u_support_of",
            "CertificateShape", "dense_shape", "clique_shape", "correlative_shape", "term_shape", "newton_shape",
-           "clique_monomials", "Sparsity", "SPARSITY_KINDS"]
+           "clique_monomials", "Sparsity", "SPARSITY_KINDS", "low_block_helps"]
 
 
 class Sparsity(str, enum.Enum):
@@ -303,3 +304,18 @@ def newton_shape(f_support, degree: int, *, q_support=None, max_gram_side: int |
     basis = newton_reduce(support, dense.u_bases[0])
     return CertificateShape(Sparsity.NEWTON, (basis,), (), ())
 
+
+def low_block_helps(eq, ineq, multiplier) -> bool:
+    """Can a dense degree-2 block beside degree >= 4 clique blocks strengthen the certificate?
+
+    Only through a multiplier that couples variables of different cliques.  Otherwise every
+    monomial x_i x_j with i, j in no common clique is produced by that block alone, so its Gram
+    entry is 0: the block's Gram matrix has the chordal pattern of the cliques (with the constant
+    monomial joined to all) and is, by Agler et al. (1988), a sum of PSD matrices on {1} + C_k --
+    quadratic SOS in the variables of one clique, which the clique blocks already hold.  The low
+    parts of the multipliers couple cliques only for an equality of degree <= 1 (r_k of degree 1
+    in all variables) or a constant inequality (s_k of degree 2); a non-constant user q couples
+    whatever its terms couple."""
+    if isinstance(multiplier, Polynomial) and multiplier.degree > 0:
+        return True
+    return any(g.degree <= 1 for g in eq) or any(h.degree <= 0 for h in ineq)

@@ -42,6 +42,7 @@ import importlib
 import numpy as np
 
 from ..algebra.basis import MonomialIndex
+from ..budget import check_deadline
 
 __all__ = [
     "HEURISTICS", "CorrelativeSparsity", "TermSparsity", "assign_constraints", "chordal_extension", "clique_tree",
@@ -503,6 +504,7 @@ def term_sparsity_iterate(support, basis, steps: int, heuristic: str = "min_degr
     H = _complete(term_sparsity_graph(A, B), completion, heuristic)
     done, stable = 1, False
     while done < steps:
+        check_deadline("completing the term-sparsity graph")
         edges = np.array(sorted(H.edges), dtype=np.int64).reshape(-1, 2)
         A = np.unique(np.vstack([A, B[edges[:, 0]] + B[edges[:, 1]]]), axis=0)
         H_next = _complete(term_sparsity_graph(A, B), completion, heuristic)

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..budget import check_deadline
 from .shape import CertificateShape, Sparsity, u_support_of, dense_shape
 from .sparsity import TERM_COMPLETIONS, newton_reduce, term_sparsity_iterate
 
@@ -100,6 +101,7 @@ def term_level_costs(f_support, eq_supports, ineq_supports, degree: int, *, max_
     seen, out = set(), []
     for completion in TERM_COMPLETIONS:
         for steps in range(1, MAX_TERM_STEPS + 1):
+            check_deadline("choosing the term-sparsity level")       # (graph work: review 38a M3)
             ts = _level(u_support, basis, completion, steps)
             key = tuple(tuple(b.tolist()) for b in ts.blocks)
             if key not in seen:

@@ -232,23 +232,47 @@ def test_a_killed_writer_s_staging_directory_is_swept(tmp_path):
     free); the stage of a live writer (locked) is left alone."""
     import fcntl
 
-    from tritools.io.atomic import STAGING_PREFIX
+    from tritools.io.atomic import STAGE_MARKER, STAGING_PREFIX
 
     out = tmp_path / "out"
     stale = out / f"{STAGING_PREFIX}dead"
     live = out / f"{STAGING_PREFIX}live"
-    for d in (stale, live):
+    mine = out / f"{STAGING_PREFIX}mine"          # a user's folder with the prefix, no marker (review 38b M3)
+    for d in (stale, live, mine):
         d.mkdir(parents=True)
         (d / "points3D.bin").write_bytes(b"half")
+    for d in (stale, live):
+        (d / STAGE_MARKER).touch()
     fd = os.open(live, os.O_RDONLY)
     fcntl.flock(fd, fcntl.LOCK_EX)
     try:
         with staged_directory(out) as stage:
             (stage / "cameras.bin").write_bytes(b"new")
         assert not stale.exists() and live.exists()
-        assert sorted(os.listdir(out)) == [live.name, "cameras.bin"]
+        assert sorted(os.listdir(out)) == sorted([live.name, mine.name, "cameras.bin"])
+        assert (mine / "points3D.bin").read_bytes() == b"half"
     finally:
         os.close(fd)
+
+
+def test_a_user_folder_with_the_staging_prefix_is_not_a_stage(tmp_path):
+    """Review 38b M3: ``tritools colmap IN OUT`` deleted OUT/.tritools-staging-mine/keep.txt (any unlocked folder with
+    the prefix was swept), and a target with the prefix was written into as if it were an outer writer's stage.
+    The marker file is never committed."""
+    from tritools.io.atomic import STAGE_MARKER, STAGING_PREFIX
+
+    out = tmp_path / "out"
+    mine = out / f"{STAGING_PREFIX}mine"
+    mine.mkdir(parents=True)
+    (mine / "keep.txt").write_text("user data")
+    with staged_directory(out) as stage:
+        (stage / "points3D.txt").write_text("x")
+    assert (mine / "keep.txt").read_text() == "user data"
+    with staged_directory(mine) as stage:             # a target with the prefix: staged like any folder
+        assert stage != mine
+        (stage / "cameras.txt").write_text("y")
+    assert sorted(os.listdir(mine)) == ["cameras.txt", "keep.txt"]
+    assert not any(STAGE_MARKER in files for _, _, files in os.walk(tmp_path))
 
 
 def test_special_files_are_written_directly(tmp_path, capsys):

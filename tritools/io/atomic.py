@@ -36,6 +36,9 @@ __all__ = ["atomic_path", "atomic_open", "naming_errors", "staged_directory", "l
 TEMP_PREFIX = ".tmp-"
 #: prefix of the staging directory inside a folder written by :func:`staged_directory`.
 STAGING_PREFIX = ".tritools-staging-"
+#: the file every stage holds from its creation (never committed): only a folder holding it is a stage that a later
+#: writer may sweep or write into -- a user's folder that merely starts with the prefix is not (review 38b M3).
+STAGE_MARKER = ".tritools-stage"
 
 
 class DirectoryInTheWay(IsADirectoryError):
@@ -251,7 +254,7 @@ def staged_directory(target):
     created for the call, ``target`` and missing parents, are removed again while empty).  A name taken
     by a directory in ``target`` raises :class:`DirectoryInTheWay` before anything is replaced."""
     target = Path(target)
-    if target.name.startswith(STAGING_PREFIX) and target.is_dir():
+    if target.name.startswith(STAGING_PREFIX) and (target / STAGE_MARKER).is_file():
         # already the (locked) stage of an outer writer, which commits its files: a second stage and lock
         # inside it would wait for the outer writer's own lock forever
         yield target
@@ -263,6 +266,7 @@ def staged_directory(target):
         with locked_directory(target):   # a stage is created and locked, or swept, under the folder's lock
             _sweep_stale_stages(target)
             stage = Path(tempfile.mkdtemp(prefix=STAGING_PREFIX, dir=target))
+            (stage / STAGE_MARKER).touch()
             held = _hold(stage)          # marks the stage as in use for the sweep of other writers
     except OSError as exc:               # e.g. a read-only folder: name the folder, not the temporary name
         if isinstance(exc.filename, str) and exc.filename.startswith(str(target / STAGING_PREFIX)):
@@ -272,7 +276,7 @@ def staged_directory(target):
     try:
         try:
             yield stage
-            names = sorted(os.listdir(stage))
+            names = sorted(n for n in os.listdir(stage) if n != STAGE_MARKER)
             for name in names:
                 _fsync_path(stage / name)
             with locked_directory(target):
@@ -332,10 +336,12 @@ def _key(fd: int) -> tuple:
 
 def _sweep_stale_stages(target: Path) -> None:
     """Remove staging directories left in ``target`` by a writer that was killed (SIGKILL, power
-    loss): a live writer holds a lock on its stage, a stale stage's lock is free."""
+    loss): a live writer holds a lock on its stage, a stale stage's lock is free.  Only folders holding the
+    :data:`STAGE_MARKER` are stages: a user's folder with the prefix is never touched."""
     try:
         import fcntl
-        names = [n for n in os.listdir(target) if n.startswith(STAGING_PREFIX)]
+        names = [n for n in os.listdir(target)
+                 if n.startswith(STAGING_PREFIX) and (target / n / STAGE_MARKER).is_file()]
     except (ImportError, OSError):
         return
     for name in names:

@@ -523,8 +523,9 @@ class TlsSearch(NodeBounds):
         certified = self.tol.certified_one(lb, ub, self.scale)
         inliers = told.inliers
         if not certified and stopped is None:   # the deadline cut a step short, or a sub-problem hit the memory budget
-            stopped = "time limit" if self.deadline.expired or self.bounds.deadline.expired else \
-                "memory budget" if self.bounds.budget_exceeded else None
+            # (or its share of the time: more time could certify, so the time limit's status, review 38b M1)
+            stopped = "time limit" if self.deadline.expired or self.bounds.deadline.expired or \
+                self.bounds.timed_out else "memory budget" if self.bounds.budget_exceeded else None
         # also against the compensated value: best_f's plain arithmetic can fall below a rigorous lb (review 12 F3)
         f_told = 2.0 * self.N * told.gamma_ub ** 2 if math.isfinite(told.gamma_ub) else math.inf
         contradicts = self.tol.contradicts_one(lb, max(ub, f_told), self.scale)

@@ -114,6 +114,7 @@ class SubsetBounds:
         self._frame = None                     # the parent's normalised frame (robust_verify.ParentFrame), or False
         self.n_in_parent = 0                   # subsets bounded in the parent's frame
         self.budget_exceeded = False           # a sub-problem stopped at the memory budget (the caller's status)
+        self.timed_out = False                 # a sub-problem stopped by its share of the time (review 38b M1)
         self.trial: dict = {}                  # subsets verified in the parent frame but not accepted: their
         #                                        polished estimate (a candidate only, no bound)
         self._plane_d2 = None                  # note_weak: dist(x_i, l_i)^2 of coplanar centres' lines, or False
@@ -344,6 +345,7 @@ class SubsetBounds:
         if out is not None:
             self.n_solved += 1
             self.budget_exceeded |= out.budget_exceeded
+            self.timed_out |= out.timed_out
         return out
 
     def _store(self, S: frozenset, lb: float, X) -> None:

@@ -291,3 +291,24 @@ def test_robust_call_starved_in_a_sub_problem_says_time_limit():
     assert r.status in (tritools.Status.OPTIMAL, tritools.Status.TIME_LIMIT), (r.status, r.message)
     assert r.optimal or "time limit" in r.message
     assert r.gamma_lb <= 7.073057725428402 * (1 + 1e-9)       # (the certified optimum with more time)
+
+
+@pytest.mark.parametrize("seed", [0, 3])
+def test_duplicated_camera_certified_under_power_of_two_pixels(seed):
+    """Review 38b M2: three views, the third the first's camera with another keypoint; pixels (and K) times 2^17 or
+    more lost the certificate (0/30; 30/30 at 2^14): the coincident pair's homography was refused by cond(M) > 1e8,
+    a test in pixel units.  A power of two changes no decision: the same bounds, scaled."""
+    import tritools
+    from tritools.scene import random_scene
+
+    sc = random_scene(3, 1, noise_px=3.0, seed=seed)
+    cams, x = sc.cameras.copy(), sc.points2d[0].copy()
+    cams[-1] = cams[0]
+    x[-1] = x[0] + np.random.default_rng(seed).normal(0, 3.0, 2)
+    base = tritools.triangulate(cams, x)
+    assert base.optimal
+    for s in (2.0**17, 2.0**24):
+        r = tritools.triangulate(np.diag([s, s, 1.0]) @ cams, x * s)
+        assert r.optimal, (s, r.status, r.message)
+        assert r.gamma_lb / s == pytest.approx(base.gamma_lb, rel=1e-12)
+        assert r.gamma_ub / s == pytest.approx(base.gamma_ub, rel=1e-12)

@@ -456,8 +456,9 @@ def _pair_homography(Pi: np.ndarray, Pj: np.ndarray, check: bool = True) -> np.n
     keeps no constraint at all, which is weaker but sound.  ``check=False``: the caller decided coincidence on
     the raw cameras (``cameras`` are normalised ones, whose rounding broke the exact relation)."""
     Mi, Mj = Pi[:, :3], Pj[:, :3]
-    if np.linalg.cond(Mi) > 1e8:
-        return None
+    rows = np.linalg.norm(Mi, axis=1, keepdims=True)
+    if not np.all(rows > 0) or np.linalg.cond(Mi / rows) > 1e8:
+        return None            # (rows equilibrated: pixel units do not decide it, review 38b M2: 2^17 px refused)
     if check and not same_exact_centre(Pi, Pj):
         return None
     H = Mj @ np.linalg.inv(Mi)

@@ -312,3 +312,15 @@ def test_duplicated_camera_certified_under_power_of_two_pixels(seed):
         assert r.optimal, (s, r.status, r.message)
         assert r.gamma_lb / s == pytest.approx(base.gamma_lb, rel=1e-12)
         assert r.gamma_ub / s == pytest.approx(base.gamma_ub, rel=1e-12)
+
+
+def test_polynomial_sum_overflow_is_refused():
+    """Review 38a L3: 1.7e308 x^2 + 1.7e308 x^2 gave Polynomial(inf x^2) silently (products were refused)."""
+    import sospoly as sp
+
+    (x,) = sp.variables("x")
+    with pytest.raises(ValueError, match="overflowed"):
+        _ = 1.7e308 * x**2 + 1.7e308 * x**2
+    with pytest.raises(ValueError, match="overflowed"):
+        _ = 1.7e308 * x - (-1.7e308 * x)
+    assert ((x + 2) - (x + 2)).terms == {} and (8e307 * x + 8e307 * x).coefficient((1,)) == 1.6e308

@@ -213,7 +213,7 @@ class Polynomial:
         out = dict(a.terms)
         for e, c in b.terms.items():
             out[e] = out.get(e, 0.0) + c
-        return Polynomial._raw(a.gens, {e: c for e, c in out.items() if c != 0.0})
+        return Polynomial._checked(a.gens, out)           # (a sum past the float range: refused, review 38a L3)
 
     __radd__ = __add__
 

@@ -5,7 +5,8 @@ operation on a 3x4 array) dominates the arithmetic.  These functions do the same
 Python floats, so they return the stacked functions' numbers bit for bit (``tests/test_centres_few.py``):
 
 * :func:`null_vectors_few` -- :func:`tritools.model.stacked.null_vectors` (the signed 3x3 minors expanded along the
-  first row, the operations of :func:`tritools.model.stacked._det3`);
+  first row, the operations of :func:`tritools.model.stacked._det3`; also the world frame's
+  :func:`tritools.model.frame.world_origin_one`);
 * :func:`centre_vectors_few` -- :func:`tritools.model.stacked.centre_vectors` (each camera divided by its largest
   |entry|, row 3 to unit norm, rows 1 and 2 made orthogonal to it twice, then the null vector);
 * :func:`distinct_few` -- :func:`tritools.model.stacked.distinct_centres` (the sine of the angle between two
@@ -23,7 +24,8 @@ import numpy as np
 
 from .geometry import SAME_CENTER_RTOL
 
-__all__ = ["null_vectors_few", "centre_vectors_few", "distinct_few", "few_centres", "FEW_CAMERAS"]
+__all__ = ["null_vector_one", "null_vectors_few", "centre_vector_one", "centre_vectors_few", "distinct_few",
+           "few_centres", "FEW_CAMERAS"]
 
 #: stacks of at most this many cameras (problems x views) take the scalar twins in
 #: :func:`tritools.model.stacked.fundamental_stack`: a single call's one problem of up to 8 views, or its two

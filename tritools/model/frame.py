@@ -24,6 +24,7 @@ import numpy as np
 from sospoly.budget import check_deadline
 
 from .cameras import power2_scale
+from .centres_few import null_vector_one
 from .exact import (CANCELLATION_RATIO, COMPENSATED_DENOM_RTOL, EXACT_ROUNDING_RATIO, dot2, exactly_rounded,
                     homogeneous_images, two_prod, two_sum)
 from .stacked import norms, project_quiet_views
@@ -116,15 +117,6 @@ def world_frame(cameras) -> WorldFrame:
 SCALAR_MAX_VIEWS = 7
 
 
-def _minor(P: list, c0: int, c1: int, c2: int) -> float:
-    """det of the columns c0, c1, c2 of a 3x4 matrix of floats (rows P[r]), expanded along the first row: the
-    operations of :func:`tritools.model.stacked._det3`, in its order."""
-    (a00, a01, a02), (a10, a11, a12), (a20, a21, a22) = ((r[c0], r[c1], r[c2]) for r in P)
-    return (a00 * (a11 * a22 - a12 * a21)
-            - a01 * (a10 * a22 - a12 * a20)
-            + a02 * (a10 * a21 - a11 * a20))
-
-
 def world_origin_one(C: np.ndarray) -> np.ndarray:
     """The scalar twin of :func:`world_origins` for one problem's finite cameras (N, 3, 4), N <= 7: the same
     operations in the same order on Python floats (each camera divided by its largest |entry|, the null vector
@@ -136,7 +128,7 @@ def world_origin_one(C: np.ndarray) -> np.ndarray:
         c = None
         if m > 0:                                   # (an all-zero camera, not a validated one: no centre)
             P = [[v / m for v in row] for row in P]
-            a0, a1, a2, a3 = (_minor(P, 1, 2, 3), -_minor(P, 0, 2, 3), _minor(P, 0, 1, 3), -_minor(P, 0, 1, 2))
+            a0, a1, a2, a3 = null_vector_one(P)     # (the signed minors of the stack's null_vectors, in its order)
             if a3 != 0:
                 c = (a0 / a3, a1 / a3, a2 / a3)
                 c = c if all(math.isfinite(v) for v in c) else None

@@ -37,7 +37,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .algebra.polynomial import Polynomial
+from .algebra.polynomial import Polynomial, checked_gens
 from .algebra.basis import sigma
 from .analysis.extraction import extract_from_moment
 from .budget import as_budget
@@ -102,7 +102,7 @@ def _check_terms(terms, eq, ineq, gens):
     eq, ineq = _constraint_list(eq, "eq"), _constraint_list(ineq, "ineq")
     polys = [Polynomial.constant(float(v)) if not isinstance(v, Polynomial) else v
              for t in terms for v in t] + list(eq) + list(ineq)
-    gens = tuple(gens) if gens is not None else common_gens(*polys)
+    gens = checked_gens(gens) if gens is not None else common_gens(*polys)
     if not gens:
         raise ValueError("minimize_ratios: the problem has no variables")
     conv = [p.with_gens(gens) if isinstance(p, Polynomial) else Polynomial.constant(float(p), gens) for p in polys]
@@ -216,7 +216,8 @@ def _distinct(found, rtol: float = 1e-4):
 
 
 def _denominator_bounds(pairs, eq, ineq, gens, tol, backend, budget):
-    """Certified lower bounds of every q_i on K (sospoly.minimize), or the index of one not certified > 0."""
+    """Certified lower bounds of every q_i on K (sospoly.minimize), the index of one not certified > 0 (or None),
+    and the empty-set result of minimize when bounding a q_i proved K empty (its lower bound +inf; else None)."""
     from .minimize import minimize
 
     out = []
@@ -225,11 +226,13 @@ def _denominator_bounds(pairs, eq, ineq, gens, tol, backend, budget):
             out.append(float(q.coefficient((0,) * len(gens))))
         else:
             r = minimize(q, eq, ineq, gens=gens, tolerances=tol, backend=backend, budget=budget)
+            if r.lower_bound == np.inf:                 # K proven empty (review 38a L6): no q_i matters
+                return tuple(out) + (np.inf,), None, r
             ok = r.status == SolveStatus.OPTIMAL and r.lower_bound is not None
             out.append(r.lower_bound if ok else -np.inf)
         if not out[-1] > 0:
-            return tuple(out), k
-    return tuple(out), None
+            return tuple(out), k, None
+    return tuple(out), None, None
 
 
 def minimize_ratios(terms, eq=(), ineq=(), degree: int | None = None, *, gens=None, backend=None,
@@ -262,7 +265,11 @@ def minimize_ratios(terms, eq=(), ineq=(), degree: int | None = None, *, gens=No
     if side > budget.max_gram_side:
         return RatioResult(SolveStatus.BUDGET_EXCEEDED, None, None, (), False, 0, degree, (), gens, None,
                            time.perf_counter() - t0, f"Gram side {side} exceeds max_gram_side {budget.max_gram_side}")
-    dbounds, bad = _denominator_bounds(pairs0, eq0, ineq0, gens, tol, backend, budget)
+    dbounds, bad, empty = _denominator_bounds(pairs0, eq0, ineq0, gens, tol, backend, budget)
+    if empty is not None:
+        return RatioResult(empty.status, np.inf, None, (), False, 0, degree, dbounds, gens, None,
+                           time.perf_counter() - t0, f"{empty.message} (proven while bounding the denominator "
+                           f"terms[{len(dbounds) - 1}].q): every sum of ratios is bounded below by +inf there")
     if bad is not None:
         return RatioResult(SolveStatus.INFEASIBLE, None, None, (), False, 0, degree, dbounds, gens, None,
                            time.perf_counter() - t0, f"denominator terms[{bad}].q is not certified positive on the "

@@ -182,6 +182,7 @@ class Polynomial:
         gens = tuple(gens)
         if gens == self.gens:
             return self
+        checked_gens(gens)
         pos = {g: i for i, g in enumerate(gens)}
         used = {self.gens[k] for e in self.terms for k, p in enumerate(e) if p}
         missing = used - set(gens)
@@ -521,3 +522,18 @@ def sum_in_order(gens: tuple, polys: list) -> Polynomial:
             else:
                 out.pop(e, None)
     return Polynomial.from_trusted_terms(gens, out) if total is None else total
+
+
+def checked_gens(gens) -> tuple:
+    """``gens`` as a tuple of distinct variable names (TypeError naming an entry that is not a string, ValueError
+    naming a repeated one)."""
+    if isinstance(gens, (str, bytes)) or not hasattr(gens, "__iter__"):
+        raise TypeError(f"gens must be a sequence of variable names (strings), got {type(gens).__name__}")
+    gens = tuple(gens)
+    for k, g in enumerate(gens):
+        if not isinstance(g, str):
+            raise TypeError(f"gens[{k}] must be a variable name (a string), got {g!r} ({type(g).__name__})")
+    if len(set(gens)) < len(gens):
+        seen = [g for k, g in enumerate(gens) if g in gens[:k]]
+        raise ValueError(f"gens names variable {seen[0]!r} twice")
+    return gens

@@ -46,7 +46,7 @@ import numpy as np
 
 from ..algebra.basis import MonomialIndex, monomials, sigma
 from ..algebra.linpoly import LinPoly
-from ..algebra.polynomial import Polynomial, as_polynomial
+from ..algebra.polynomial import Polynomial, as_polynomial, checked_gens
 from ..budget import BudgetExceeded, check_deadline, check_time_left
 from .program import SOSConstraint, SOSProgram
 from .q_check import check_q_not_evidently_negative
@@ -154,7 +154,7 @@ def checked_inputs(f, eq, ineq, degree, gens, max_gram_side: int | None = MAX_GR
     ineq = tuple(_check_poly(h, "each inequality h_k") for h in _sequence(ineq, "ineq"))
     if gens is None:
         gens = common_gens(f, *eq, *ineq)
-    gens = tuple(gens)
+    gens = checked_gens(gens)
     if not gens:
         raise ValueError("the problem has no variables")
     f = f.with_gens(gens)

@@ -64,8 +64,9 @@ The default strategy (each step recorded in ``attempts``):
 8. **Re-centring** (:mod:`sospoly.recentre`). The decision is made at the smaller of the scales of f at the
    origin and at the minimiser (coefficients that cancel there: (v - 1000)^4 - 3 (v - 1000)^2 + 1), with f valued
    exactly at the points; where the minimiser's scale is ``CANCELLATION_BITS`` smaller, the program translated
-   exactly to the minimiser is solved too (decided at the smaller of its own scale and that) and the better
-   result is kept.
+   exactly to the minimiser is solved too, again at a better point whose scale is smaller still (at most
+   ``RECENTRE_ROUNDS`` translations); the better result is kept, with the larger proven lower bound and the best
+   point of all the solves, decided at the smallest of their scales.
 """
 from __future__ import annotations
 
@@ -295,8 +296,8 @@ def minimize(f: Polynomial | float, eq: Sequence[Polynomial | float] = (), ineq:
         raise ValueError(f"max_degree must be an integer >= the first degree {d0}, got {max_degree!r}")
     last = d0 if degree is not None else int(max_degree if max_degree is not None else d0 + 4)
 
-    def solve(f, eq, ineq, multiplier, radius) -> MinimizeResult:
-        return _strategy(f, eq, ineq, multiplier, radius, gens=gens, d0=d0, last=last, sparsity=sparsity,
+    def solve(f, eq, ineq, multiplier, radius, top=last) -> MinimizeResult:
+        return _strategy(f, eq, ineq, multiplier, radius, gens=gens, d0=d0, last=top, sparsity=sparsity,
                          low_degree=low_degree, form=form, backend=backend, tol=tol, budget=budget,
                          deadline=deadline, refine=refine, t0=t0)
 
@@ -344,30 +345,19 @@ def _steps(deadline, *args) -> list:
 
 def _recentred(best: MinimizeResult, f, eq, ineq, multiplier, radius, solve, tol: Tolerances, deadline,
                t0: float) -> MinimizeResult:
-    """Strategy step 6 (:mod:`sospoly.recentre`): decide at the minimiser's scale, and solve the program
-    translated to the minimiser when the scale there is smaller and the translation is exact."""
-    from .recentre import (cancellation_scale, result_in_original, scale_of_result, translated_program,
-                           with_exact_values)
+    """Strategy step 8 (:func:`sospoly.recentre.recentred`): decide at the minimiser's scale, and solve the program
+    translated to the best point found while the scale there keeps falling and the translation is exact."""
+    from .recentre import recentred, result_in_original, translated_program
 
-    if not best.minimizers:
-        return best
-    cut = cancellation_scale(f, best.minimizers[0])
-    if cut.st >= cut.s0:
-        return with_exact_values(best, f, tol, best.scale)       # an upper bound f(v^) never below f(v^)
-    cands, note = [best], f"scale {cut.s0:.3g} at the origin, {cut.st:.3g} at the minimiser"
-    prog = None
-    if cut.worth_translating and not deadline.expired:
-        prog = translated_program(cut.t, f, eq, ineq, multiplier, radius)
+    def solve_at(t, current: MinimizeResult):
+        prog = translated_program(t, f, eq, ineq, multiplier, radius)
         if prog is None:
-            note += "; the translation to it is not exact in floating point (not solved there)"
-    if prog is not None:
-        other = result_in_original(solve(*prog), cut.t)
-        cands.append(dataclasses.replace(other, attempts=best.attempts + other.attempts))
-    out = [with_exact_values(r, f, tol, scale_of_result(r, f, cut)) for r in cands]
-    moved = len(out) > 1 and _better(out[1], out[0])
-    chosen = out[1] if moved else out[0]
-    note = f"{'re-centred at the minimiser' if moved else 'decided at the minimiser scale'} ({note})"
-    chosen = dataclasses.replace(chosen, message="; ".join(m for m in (chosen.message, note) if m))
+            return None
+        # a certified result is re-decided at its own degree (the translation checks its claim at the minimiser's
+        # scale); an uncertified one gets the whole range of degrees
+        return result_in_original(solve(*prog, top=current.degree) if current.optimal else solve(*prog), t)
+
+    chosen = recentred(best, f, tol, solve_at, deadline, _better)
     return dataclasses.replace(chosen, seconds=time.perf_counter() - t0)
 
 

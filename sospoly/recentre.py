@@ -42,9 +42,9 @@ import numpy as np
 from .algebra.polynomial import Polynomial
 from .scaling import MAX_EXPONENT, pow2_above, scaled_program
 
-__all__ = ["Cancellation", "CANCELLATION_BITS", "T_BITS", "MAX_TERMS", "SCALE_MAX_TERMS", "translation_point",
-           "translated", "cancellation_scale", "scale_of_result", "translated_program", "result_in_original",
-           "exact_value", "exact_fraction", "with_exact_values"]
+__all__ = ["Cancellation", "CANCELLATION_BITS", "T_BITS", "MAX_TERMS", "SCALE_MAX_TERMS", "RECENTRE_ROUNDS",
+           "translation_point", "translated", "cancellation_scale", "scale_of_result", "translated_program",
+           "result_in_original", "exact_value", "exact_fraction", "with_exact_values", "pooled", "recentred"]
 
 #: significant bits kept of each coordinate of the translation t.
 T_BITS = 12
@@ -57,6 +57,10 @@ NEGLIGIBLE_SHIFT = 2.0 ** -20
 CANCELLED = 64 * float(np.finfo(float).eps)
 #: candidates re-valued exactly per result.
 MAX_CANDIDATES = 20
+#: translated programs solved at most per call (each at a best point whose scale is ``CANCELLATION_BITS`` below the
+#: last translation's; review 39b: Rosenbrock shifted by 1024, whose first solve stops 8458 above the minimum 0 at a
+#: point of scale 1.1e12, certifies at (1025, 1) from the second translation).
+RECENTRE_ROUNDS = 3
 #: a translation that would expand to more terms than this is not attempted (its cost would dominate).
 MAX_TERMS = 5000
 #: the scale at a minimiser (:func:`cancellation_scale`) is measured up to this many expanded terms (~0.2-2 s);
@@ -300,3 +304,54 @@ def result_in_original(res, t):
     mms = tuple(m for m in (_moments_in_original(mm, t) for mm in res.moment_matrices) if m is not None)
     return replace(res, minimizers=tuple(np.asarray(p, float) + t for p in res.minimizers),
                    candidates=tuple(np.asarray(p, float) + t for p in res.candidates), moment_matrices=mms)
+
+
+def pooled(chosen, spare, f: Polynomial, tol, scale: float):
+    """``chosen`` with the evidence of ``spare``, another solve of the same problem (an exact translation of it):
+    the larger of their proven lower bounds and the points of both, valued exactly and decided again
+    (:func:`with_exact_values`) at the smaller of ``scale`` and the scale at the best point -- a gap is measured at
+    the problem's scale where its best known point is, not where a worse solve stopped."""
+    lows = [r.lower_bound for r in (chosen, spare) if r.lower_bound is not None and not np.isnan(r.lower_bound)]
+    half = MAX_CANDIDATES // 2
+    pts = tuple(chosen.candidates or chosen.minimizers)[:half] + tuple(spare.candidates or spare.minimizers)[:half]
+    merged = replace(chosen, lower_bound=max(lows) if lows else None, candidates=pts)
+    out = with_exact_values(merged, f, tol, scale)
+    if out.minimizers:
+        there = cancellation_scale(f, out.minimizers[0]).st
+        if there < scale:
+            out = with_exact_values(merged, f, tol, there)
+    return out
+
+
+def recentred(best, f: Polynomial, tol, solve_at, deadline, better):
+    """Step 8 of :func:`sospoly.minimize` (module docstring): ``best`` decided at the scale of its minimiser, and
+    while the scale at the best point found is ``CANCELLATION_BITS`` below the last translation's (at most
+    ``RECENTRE_ROUNDS`` times, before the deadline), ``solve_at(t, res)`` -- the program translated exactly to t
+    (solved to check ``res``), its result in the caller's variables, or None when the translation is not exact --
+    pooled with it
+    (:func:`pooled`; ``better(a, b)`` chooses whose solve the result reports)."""
+    if not best.minimizers:
+        return best
+    cut = cancellation_scale(f, best.minimizers[0])
+    if cut.st >= cut.s0:
+        return with_exact_values(best, f, tol, best.scale)       # an upper bound f(v^) never below f(v^)
+    res = with_exact_values(best, f, tol, scale_of_result(best, f, cut))
+    note, moved, last = f"scale {cut.s0:.3g} at the origin, {cut.st:.3g} at the minimiser", False, cut.s0
+    for _ in range(RECENTRE_ROUNDS):
+        if not worth_translating(last, cut.st) or deadline.expired:
+            break
+        other = solve_at(cut.t, res)
+        if other is None:
+            note += "; the translation to it is not exact in floating point (not solved there)"
+            break
+        other = replace(other, attempts=res.attempts + other.attempts)
+        scale = min(res.scale, scale_of_result(other, f, cut))
+        ahead = better(with_exact_values(other, f, tol, scale), res)
+        res = pooled(other, res, f, tol, scale) if ahead else pooled(res, other, f, tol, scale)
+        moved, last = moved or ahead, cut.st
+        if not res.minimizers:
+            break
+        cut = cancellation_scale(f, res.minimizers[0])
+        note += f"; {cut.st:.3g} at the next best point" if worth_translating(last, cut.st) else ""
+    note = f"{'re-centred at the minimiser' if moved else 'decided at the minimiser scale'} ({note})"
+    return replace(res, message="; ".join(m for m in (res.message, note) if m))

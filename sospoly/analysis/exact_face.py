@@ -247,6 +247,19 @@ def _free_values(sys_: _System, grams: list, live: list, faces: list, t: float) 
     return out
 
 
+def _reduction_coefficients(coef0: dict, coefq: dict) -> dict:
+    """The coefficients that decide the facial reduction at every margin m: u + m q has coef0 + m coefq, so a
+    monomial of q is positive there once m is large enough (its rows stay live: the exact LDL^T decides), and only
+    a monomial absent from q keeps coef0 at every margin (0: its diagonal rows are forced to zero; negative: no
+    margin proves the level).  Review 39b: x^2 + 100 (y - x^2)^2, minimum 0 at the origin, had "monomial (0, 0) has
+    a negative coefficient" at the solver's level 3.8e-9 and no bound."""
+    out = dict(coef0)
+    for m, v in coefq.items():
+        if v > 0 or (v != 0 and out.get(m, Fraction(0)) > 0):
+            out[m] = Fraction(1)
+    return out
+
+
 def face_exact_check(psatz, sol, c: float, margins) -> FaceCheck:
     """The proof of the module docstring at the levels c - m, m in ``margins`` (smallest first); the first proven
     level wins."""
@@ -266,7 +279,7 @@ def face_exact_check(psatz, sol, c: float, margins) -> FaceCheck:
     pairs = gram_entries(u)
     if any(v != 0 and m not in pairs for m, v in list(coef0.items()) + list(coefq.items())):
         return FaceCheck(False, -np.inf, np.inf, 0, "the certificate has monomials outside every Gram block")
-    live = facial_reduction(u, pairs, coef0)
+    live = facial_reduction(u, pairs, _reduction_coefficients(coef0, coefq))
     if isinstance(live, str) or sum(int(lv.sum()) * (int(lv.sum()) + 1) // 2 for lv in live) > MAX_EXACT_ENTRIES:
         return FaceCheck(False, -np.inf, np.inf, 0, live if isinstance(live, str) else "too large for exact checks")
     grams = [np.asarray(sol.grams[name], float) for name in u.block_names()]

@@ -107,3 +107,27 @@ def test_pooled_results_decide_at_the_better_points_scale():
     assert not out.optimal
     assert out.lower_bound == -1.0 and out.upper_bound == 0.0
     assert np.array_equal(out.minimizers[0], [1000.0]) and out.scale < 2.0 ** 20
+
+
+def test_rigorous_bound_of_a_solve_without_a_certificate_is_no_bound():
+    """Review 39b: rigorous_psatz_bound on an inaccurate solve that returned no Gram matrices (x - 1e6)^2 + ...
+    at degree 2) raised a bare KeyError 'u'; it now proves nothing (-inf), as for any unprovable margin."""
+    from sospoly.analysis.rigor import rigorous_psatz_bound
+    from sospoly.solvers.solve import ProgramSolution
+
+    x, y = sp.variables("x y")
+    ps = sp.build_psatz((x - 3) ** 2 + (y + 3) ** 2 + 5, degree=2)
+    good = sp.solve_psatz(ps)
+    assert good.solution.grams
+    empty = dataclasses_replace(good.solution, grams={})
+    rb = rigorous_psatz_bound(ps, empty, 4.0, 10.0)
+    assert rb.lower_bound == -np.inf
+    assert isinstance(empty, ProgramSolution)
+    ok = rigorous_psatz_bound(ps, good.solution, good.solution.objective, 10.0)
+    assert ok.lower_bound <= 5.0 and ok.lower_bound > 4.9
+
+
+def dataclasses_replace(obj, **kw):
+    import dataclasses
+
+    return dataclasses.replace(obj, **kw)

@@ -202,9 +202,12 @@ def rigorous_psatz_bound(psatz, sol, c: float, radius, ball: float | None = None
     a bound of ||v|| (one number: a ball) or of every |v_i| (one per variable: a box); ``ball`` optionally a
     bound of ||v|| that holds on the box's minimiser too (it caps each block's R^2: a box of many variables
     has corners far outside a ball of the same per-variable radius))."""
-    if not _check_rigor_inputs(sol, c, radius, ball):
-        return RigorousBound(-np.inf, np.inf, float(np.max(np.asarray(radius, float))), np.inf, np.inf, 0.0)
     structure = psatz.structure
+    if not _check_rigor_inputs(sol, c, radius, ball) or sol.x is None or \
+            any(name not in (sol.grams or {}) for name in structure.u.block_names()):
+        # (a solve that returned no iterate, or one without u's Gram matrices -- an inaccurate solve that stopped
+        # before a certificate: nothing to prove, review 39b; was a KeyError)
+        return RigorousBound(-np.inf, np.inf, float(np.max(np.asarray(radius, float))), np.inf, np.inf, 0.0)
     theta = np.asarray(psatz.theta, float)
     n = len(structure.gens)
     cap = None if ball is None else float(ball)

@@ -131,3 +131,79 @@ def dataclasses_replace(obj, **kw):
     import dataclasses
 
     return dataclasses.replace(obj, **kw)
+
+
+def _scaled_quartic_program(s):
+    x, y = sp.variables("x y")
+    X, Y = x * s, y * s
+    prog = sp.SOSProgram(("x", "y"))
+    c = prog.scalar("c")
+    prog.add_sos(X**4 + Y**4 + 0.5 * X * Y + 1 - c, name="u")
+    prog.maximize(c)
+    return prog
+
+
+@pytest.mark.parametrize("s", [1.0, 1e-6, 1e-3, 2.0 ** -30, 1e3])
+def test_solve_program_never_claims_an_objective_past_the_optimum_under_variable_scaling(s):
+    """Review 39b A1: max c s.t. X^4 + Y^4 + 0.5 X Y + 1 - c SOS with X = s x (optimum 1 - 1/32 = 0.96875 for every
+    s) was "optimal" at c = 1.00000000001 for s = 1e-6: the PSD test measured the Gram matrix against its largest
+    entry and the data's floor, under which the rows of x^2 (entries 1e-24) hid.  Gram matrices are also tested at
+    the balanced scale of their monomials (sospoly.solvers.balance): an optimal claim is the optimum's."""
+    sol = sp.solve_program(_scaled_quartic_program(s))
+    if sol.status == sp.SolveStatus.OPTIMAL:
+        assert abs(sol.objective - 0.96875) < 1e-6
+    if s == 1.0:
+        assert sol.status == sp.SolveStatus.OPTIMAL        # the balanced test changes nothing on balanced data
+
+
+def test_balanced_scalings_of_a_lowered_program():
+    """block_scalings fits k = 20 per variable for X = 2^-20 x (the data's monomials balanced), 0 (None) for
+    balanced data; the PSD test at that scale rejects the false Gram matrix and accepts the true one."""
+    from sospoly.solvers.balance import block_scalings
+
+    S = block_scalings(sp.lower(_scaled_quartic_program(2.0 ** -20)))
+    assert S["u"] is not None and set(np.log2(S["u"]).round().astype(int).tolist()) == {0, 20, 40}
+    assert block_scalings(sp.lower(_scaled_quartic_program(1.0)))["u"] is None
+
+
+def _annulus_program(s):
+    x, y = sp.variables("x y")
+    X, Y = x * (1.0 / s), y * (1.0 / s)
+    prog = sp.SOSProgram(("x", "y"))
+    c = prog.scalar("c")
+    s1, s2 = prog.sos_poly(2, name="s1"), prog.sos_poly(2, name="s2")
+    prog.add_sos(X**4 + Y**4 - 3 * X * Y - c - s1 * (X**2 + Y**2 - 1) - s2 * (4 - X**2 - Y**2), name="u")
+    prog.maximize(c)
+    return prog
+
+
+@pytest.mark.parametrize("s", [1.0, 1000.0])
+def test_a_bounded_program_is_never_called_unbounded_under_variable_scaling(s):
+    """Review 39b A2: the docs' annulus S-procedure with x -> x / 1000 (optimum -9/8) was "unbounded" (the
+    constraint set empty): the solver's ray passed the check, whose PSD cones were measured against their largest
+    terms.  The ray is also checked at the balanced scale of the monomials now, and fails there."""
+    sol = sp.solve_program(_annulus_program(s))
+    assert sol.status != sp.SolveStatus.UNBOUNDED
+    if sol.status == sp.SolveStatus.OPTIMAL:
+        assert abs(sol.objective + 9 / 8) < 1e-6
+    if s == 1.0:
+        assert sol.status == sp.SolveStatus.OPTIMAL
+
+
+@pytest.mark.parametrize("field, bad", [("objective_sign=1.0", "objective_sign=nan"),
+                                        ("objective_offset=0.0", "objective_offset=inf")])
+def test_sdpa_header_with_a_non_finite_objective_is_refused(tmp_path, field, bad):
+    """Review 39b A5: an SDPA file whose sospoly header says objective_sign=nan (or offset inf) was read and
+    solved to an "optimal" NaN objective; now a ValueError naming file:line."""
+    x, = sp.variables("x")
+    prog = sp.SOSProgram(("x",))
+    a = prog.scalar("a")
+    prog.add_inequality(3 - a)
+    prog.minimize(a)
+    p = tmp_path / "q.dat-s"
+    sp.lower(prog).to_sdpa(p)
+    text = p.read_text()
+    assert field in text
+    p.write_text(text.replace(field, bad))
+    with pytest.raises(ValueError, match=r"q\.dat-s:\d+: objective_(sign|offset) is not finite"):
+        sp.ConicProblem.from_sdpa(p)

@@ -100,7 +100,7 @@ def write_sdpa(problem, path) -> pathlib.Path:
     return path
 
 
-def _header_and_lines(text: str):
+def _header_and_lines(text: str, path=""):
     """(header tokens with line numbers, data lines with line numbers, sign, offset): comments skipped;
     header lines (m, block count, block sizes, c) cut at their first non-number (``=mDIM``...)."""
     sign, offset = 1.0, 0.0
@@ -110,7 +110,8 @@ def _header_and_lines(text: str):
         if not s or s[0] in '"*':
             m = _MARK.search(s)
             if m:
-                sign, offset = float(m.group(1)), float(m.group(2))
+                sign = _number(m.group(1), n, float, path, "objective_sign")        # (NaN / inf: ValueError, review
+                offset = _number(m.group(2), n, float, path, "objective_offset")    # 39b: a NaN objective "optimal")
             continue
         lines.append((n, [t for t in re.split(r"[\s,{}()]+", s) if t]))
     return lines, sign, offset
@@ -186,7 +187,7 @@ def read_sdpa(path):
     from ..lowering.conic import Cone, ConicProblem, PSDBlockMap
 
     path = pathlib.Path(path)
-    lines, sign, offset = _header_and_lines(path.read_text())
+    lines, sign, offset = _header_and_lines(path.read_text(), path)
     m, sizes, c, first = _header(lines, path)
     entries = _entries(lines[first:], sizes, m, path)
     # rows: zero pairs, then LP, then PSD blocks

@@ -86,6 +86,7 @@ class PSDBlockMap:
     size: int                  # matrix side
     source: str                # "constraint", "multiplier", "matrix" (a PSD matrix variable) or "lmi"
     var_start: int | None = None   # kernel form: first column of its Q variables
+    basis: np.ndarray | None = field(default=None, compare=False, repr=False)   # exponents of b(v) (SOS blocks)
 
 
 @dataclass(frozen=True)
@@ -360,7 +361,8 @@ def _variable_psd_rows(program: SOSProgram, asm: _Assembly, row: int, cones: lis
             continue
         s, n = (blk.gram.size if blk.kind == BlockKind.SOS_POLY else blk.side), blk.size
         asm.main.add(row + np.arange(n), blk.start + np.arange(n), -svec_scale(s))
-        psd_blocks.append(PSDBlockMap(blk.name, row, s, "multiplier" if blk.kind == BlockKind.SOS_POLY else "matrix"))
+        psd_blocks.append(PSDBlockMap(blk.name, row, s, "multiplier" if blk.kind == BlockKind.SOS_POLY else "matrix",
+                                      basis=blk.gram.b if blk.kind == BlockKind.SOS_POLY else None))
         cones.append(Cone("psd", n, s))
         row += n
     return row
@@ -390,7 +392,7 @@ def _sos_psd_rows(program: SOSProgram, form: GramForm, asm: _Assembly, row: int,
         for j, (bname, blk_basis) in enumerate(zip(con.block_names(), gb.blocks)):
             off = int(gb.block_offsets[j])
             var_start = None if form == GramForm.IMAGE else extra_start[k] + off
-            psd_blocks.append(PSDBlockMap(bname, row + off, blk_basis.size, "constraint", var_start))
+            psd_blocks.append(PSDBlockMap(bname, row + off, blk_basis.size, "constraint", var_start, blk_basis.b))
             cones.append(Cone("psd", blk_basis.n_pairs, blk_basis.size))
         row += gb.n_pairs
     return row

@@ -12,6 +12,7 @@ import numpy as np
 from ..algebra.svec import smat
 from ..lowering.conic import ConicProblem
 from ..tolerances import Tolerances
+from .balance import balanced_ray
 
 __all__ = ["check_unbounded_ray", "check_infeasibility", "check_dual_certificate", "check_primal_point", "DUAL_RTOL"]
 
@@ -76,7 +77,9 @@ def _checked(problem: ConicProblem, d: np.ndarray, tol: Tolerances) -> tuple[boo
     qd, qn = float(problem.q @ d), float(np.linalg.norm(problem.q)) * float(np.linalg.norm(d))
     if not qd <= -_RAY_DESCENT * qn:
         return False, f"q^T d = {qd:.3g} is not clearly negative (|q| |d| = {qn:.3g})"
-    return _cones_hold(problem, -(problem.A @ d), np.abs(problem.A) @ np.abs(d), tol)
+    v, size = -(problem.A @ d), np.abs(problem.A) @ np.abs(d)
+    ok, why = _cones_hold(problem, v, size, tol)
+    return balanced_ray(problem, v, size, tol) if ok else (ok, why)
 
 
 def _cones_hold(problem: ConicProblem, v: np.ndarray, size: np.ndarray, tol: Tolerances) -> tuple[bool, str]:

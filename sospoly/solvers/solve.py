@@ -27,6 +27,7 @@ import numpy as np
 
 from ..budget import Deadline
 from ..scaling import MAX_POW2_EXP
+from .balance import balanced_psd, block_scalings
 from .backends import ConicSolution, RawStatus, cut_by_deadline, get_backend
 from .optimality import check_optimality
 from .rays import check_infeasibility, check_primal_point, check_unbounded_ray
@@ -99,6 +100,12 @@ def check_certificate(problem: ConicProblem, x: np.ndarray, tol: Tolerances) -> 
         if not tol.psd_accepts(lam, scale, floor):
             ok = False
             msg.append(f"{label}: violated by {-lam:.3g} (margin {tol.psd_margin:g} * max({floor:.3g}, {scale:.3g}))")
+    scalings = block_scalings(problem)
+    if any(S is not None for S in scalings.values()):
+        good, why = balanced_psd(problem, scalings, grams, tol)      # the monomials' own scale (review 39b)
+        if not good:
+            ok = False
+            msg.append(why)
     # zero-cone rows
     resid = 0.0
     row = 0

@@ -150,10 +150,8 @@ def test_solve_program_never_claims_an_objective_past_the_optimum_under_variable
     entry and the data's floor, under which the rows of x^2 (entries 1e-24) hid.  Gram matrices are also tested at
     the balanced scale of their monomials (sospoly.solvers.balance): an optimal claim is the optimum's."""
     sol = sp.solve_program(_scaled_quartic_program(s))
-    if sol.status == sp.SolveStatus.OPTIMAL:
-        assert abs(sol.objective - 0.96875) < 1e-6
-    if s == 1.0:
-        assert sol.status == sp.SolveStatus.OPTIMAL        # the balanced test changes nothing on balanced data
+    assert sol.status == sp.SolveStatus.OPTIMAL            # solved at the monomials' balanced scale (Balance)
+    assert abs(sol.objective - 0.96875) < 1e-6
 
 
 def test_balanced_scalings_of_a_lowered_program():
@@ -183,11 +181,43 @@ def test_a_bounded_program_is_never_called_unbounded_under_variable_scaling(s):
     constraint set empty): the solver's ray passed the check, whose PSD cones were measured against their largest
     terms.  The ray is also checked at the balanced scale of the monomials now, and fails there."""
     sol = sp.solve_program(_annulus_program(s))
+    assert sol.status == sp.SolveStatus.OPTIMAL
+    assert abs(sol.objective + 9 / 8) < 1e-6
+
+
+def test_a_translated_program_is_not_called_unbounded():
+    """The same annulus translated by 1000 (coefficients that cancel: no power-of-two scaling balances them) was
+    "unbounded" too; its ray fails the balanced check.  No claim is made (sospoly.minimize translates exactly,
+    solve_program does not)."""
+    x, y = sp.variables("x y")
+    X, Y = x - 1000.0, y - 1000.0
+    prog = sp.SOSProgram(("x", "y"))
+    c = prog.scalar("c")
+    s1, s2 = prog.sos_poly(2, name="s1"), prog.sos_poly(2, name="s2")
+    prog.add_sos(X**4 + Y**4 - 3 * X * Y - c - s1 * (X**2 + Y**2 - 1) - s2 * (4 - X**2 - Y**2), name="u")
+    prog.maximize(c)
+    sol = sp.solve_program(prog)
     assert sol.status != sp.SolveStatus.UNBOUNDED
     if sol.status == sp.SolveStatus.OPTIMAL:
         assert abs(sol.objective + 9 / 8) < 1e-6
-    if s == 1.0:
-        assert sol.status == sp.SolveStatus.OPTIMAL
+
+
+def test_balance_is_an_exact_equivalence():
+    """Balance maps a solution of the balanced program back exactly (powers of two): q'^T x' = q^T x, the slack
+    of the balanced program is R times the original's."""
+    from sospoly.solvers.balance import balancing
+
+    P = sp.lower(_annulus_program(1000.0))
+    bal = balancing(P)
+    assert bal is not None
+    Q = bal.problem(P)
+    rng = np.random.default_rng(0)
+    xp = rng.normal(size=P.n_cols)
+    x = bal.x(xp)
+    assert np.array_equal(x / bal.cols, xp)
+    assert np.isclose(float(Q.q @ xp), float(P.q @ x), rtol=1e-12)
+    assert np.allclose(Q.b - Q.A @ xp, bal.rows * (P.b - P.A @ x), rtol=1e-9, atol=1e-9 * np.abs(Q.b).max())
+    assert set(np.log2(bal.rows).tolist()) <= set(range(-400, 401)) and np.all(np.log2(bal.cols) % 1 == 0)
 
 
 @pytest.mark.parametrize("field, bad", [("objective_sign=1.0", "objective_sign=nan"),

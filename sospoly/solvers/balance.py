@@ -10,19 +10,32 @@ indefinite by 100% of its own entries on the rows of x^2, because those rows are
 :func:`block_scalings` chooses k (integers, per indeterminate) that balances the data of the program's image-form
 SOS constraints -- least squares on log2 |b_r| ~ mu - (beta_i + beta_j) . k over their nonzero rows r = (i, j), the
 fit of :func:`sospoly.recentre` -- and returns S for every PSD block with a monomial basis (constraints and SOS
-multipliers; k = 0 or no basis: None, the test is unchanged).  :func:`balanced_psd` is the extra test: S G S PSD
-within the margin of its own entries and of its data's scale.  It only adds a condition (an accepted certificate
-passes both tests), so it can withdraw a claim, never make one.
+multipliers; every |k_i| below ``MIN_BALANCE_EXPONENT`` or no basis: None, nothing changes).
+:func:`balanced_psd` is the extra test: S G S PSD within the margin of its own entries and of its data's scale.  It
+only adds a condition (an accepted certificate passes both tests), so it can withdraw a claim, never make one.
+
+:func:`balancing` goes further and gives :func:`sospoly.solvers.solve.solve_conic` the program itself at that scale
+(:class:`Balance`: rows and columns scaled by powers of two, an exact equivalence that owns its inverse), so the
+solver sees O(1) data: the example above is then solved, c = 0.96875.  Programs translated far from the origin
+(coefficients that cancel) are not balanced by any such scaling: their claims are only withdrawn (``minimize``
+translates exactly, :mod:`sospoly.recentre`; a hand-written program does not).
 """
 from __future__ import annotations
 
+from dataclasses import dataclass, replace
+
 import numpy as np
+from scipy import sparse
 
 from ..algebra.svec import smat, svec_scale, triu_pairs
 from ..lowering.conic import ConicProblem
 
-__all__ = ["MAX_BALANCE_EXPONENT", "block_scalings", "balanced_psd", "balanced_ray"]
+__all__ = ["MIN_BALANCE_EXPONENT", "MAX_BALANCE_EXPONENT", "MAX_BALANCE_BITS", "Balance", "balancing",
+           "block_scalings", "balanced_psd", "balanced_ray"]
 
+#: programs whose fitted |k_i| are all below this are balanced enough: checked and solved as they are (sospoly's own
+#: programs are balanced before they are lowered, sospoly.scaling; a factor 2^8 per variable is 2^32 on a quartic)
+MIN_BALANCE_EXPONENT = 8
 #: |k_i| is capped at this (2^k beyond the float range would overflow S)
 MAX_BALANCE_EXPONENT = 60
 
@@ -60,7 +73,7 @@ def block_scalings(problem: ConicProblem) -> dict:
     except np.linalg.LinAlgError:
         return out
     k = np.clip(np.round(k), -MAX_BALANCE_EXPONENT, MAX_BALANCE_EXPONENT)
-    if not np.any(k):
+    if not np.max(np.abs(k)) >= MIN_BALANCE_EXPONENT:
         return out
     for blk in problem.psd_blocks:
         basis = getattr(blk, "basis", None)
@@ -124,3 +137,72 @@ def balanced_ray(problem: ConicProblem, v: np.ndarray, size: np.ndarray, tol) ->
             return False, f"PSD cone {blk.name}: violated by {-lam:.3g} at the balanced scale of its monomials " \
                           f"(its terms {float(T.max()):.3g})"
     return True, ""
+
+
+@dataclass(frozen=True)
+class Balance:
+    """The exact power-of-two equilibration of a lowered program at the balanced scale of its monomials: rows
+    scaled by R (S_i S_j on the rows (i, j) of an SOS block, 1 elsewhere) and columns by C (1 / (S_i S_j) on the
+    Gram variables of an SOS multiplier, 1 elsewhere): A' = R A C, b' = R b, q' = C q.  On a PSD block R is the
+    congruence G -> S G S, so s' = R s lies in K iff s does; x = C x' and z = R z' map a solution back, with the
+    same objective values (q'^T x' = q^T x, b'^T z' = b^T z).  Every factor is a power of two: exact."""
+    rows: np.ndarray
+    cols: np.ndarray
+
+    def problem(self, p: ConicProblem) -> ConicProblem:
+        A = (sparse.diags(self.rows) @ p.A @ sparse.diags(self.cols)).tocsc()
+        return replace(p, A=A, b=p.b * self.rows, q=p.q * self.cols)
+
+    def x(self, x):
+        return None if x is None else np.asarray(x, float) * self.cols
+
+    def z(self, z):
+        return None if z is None else np.asarray(z, float) * self.rows
+
+
+#: S_i S_j beyond 2^this (or below its inverse) is not used to re-solve (the factors must stay exact and finite)
+MAX_BALANCE_BITS = 400
+
+
+def balancing(problem: ConicProblem) -> Balance | None:
+    """The :class:`Balance` of ``problem`` (None: balanced already, parametric, a kernel-form SOS block, or factors
+    beyond 2^``MAX_BALANCE_BITS``)."""
+    if problem.params or any(b.var_start is not None for b in problem.psd_blocks):
+        return None
+    scalings = block_scalings(problem)
+    if all(S is None for S in scalings.values()):
+        return None
+    R, C = np.ones(problem.n_rows), np.ones(problem.n_cols)
+    A = problem.A.tocsr()
+    for blk in problem.psd_blocks:
+        S = scalings.get(blk.name)
+        if S is None:
+            continue
+        i, j = triu_pairs(blk.size)
+        with np.errstate(over="ignore", under="ignore"):
+            f = S[i] * S[j]
+        if not (np.all(np.isfinite(f)) and np.all(np.abs(np.log2(f)) <= MAX_BALANCE_BITS)):
+            return None
+        rows = np.arange(blk.row_start, blk.row_start + len(f))
+        R[rows] = f
+        if blk.source == "multiplier":                 # s = svec(G): one column per row, scaled inversely
+            for r, fr in zip(rows.tolist(), f.tolist()):
+                cols = A.indices[A.indptr[r]:A.indptr[r + 1]]
+                if len(cols) != 1:
+                    return None
+                C[cols[0]] = 1.0 / fr
+    _other_columns(problem, R, C, done=C != 1.0)
+    return Balance(R, C)
+
+
+def _other_columns(problem: ConicProblem, R: np.ndarray, C: np.ndarray, done: np.ndarray) -> None:
+    """C of the columns not set yet: 2^-m, m the median of log2 R over the column's nonzero rows (rounded).  The
+    image form's parameters (each moves weight between the pairs of one monomial, rows of one R) come out exactly
+    balanced; a scalar on the constant row keeps 1.  Any positive C gives the same program: this only chooses its
+    conditioning."""
+    A = problem.A.tocsc()
+    logR = np.log2(R)
+    for col in np.flatnonzero(~done).tolist():
+        rows = A.indices[A.indptr[col]:A.indptr[col + 1]]
+        if rows.size:
+            C[col] = np.ldexp(1.0, -int(np.round(np.median(logR[rows]))))

@@ -27,7 +27,7 @@ import numpy as np
 
 from ..budget import Deadline
 from ..scaling import MAX_POW2_EXP
-from .balance import balanced_psd, block_scalings
+from .balance import balanced_psd, balancing, block_scalings
 from .backends import ConicSolution, RawStatus, cut_by_deadline, get_backend
 from .optimality import check_optimality
 from .rays import check_infeasibility, check_primal_point, check_unbounded_ray
@@ -210,8 +210,10 @@ def solve_conic(problem: ConicProblem, backend=None, tolerances: Tolerances = DE
         return SolveStatus.TIME_LIMIT, ConicSolution(RawStatus.TIME_LIMIT, None, None, None, None, ()), {}, np.nan, \
             "time limit reached before the solve"
     cache = {}
-    alpha = _rhs_scale(problem)
-    work = problem if alpha == 1.0 else replace(problem, b=problem.b * alpha)
+    bal = balancing(problem)                    # the monomials' balanced scale (review 39b; None: already there)
+    base = problem if bal is None else bal.problem(problem)
+    alpha = _rhs_scale(base)
+    work = base if alpha == 1.0 else replace(base, b=base.b * alpha)
 
     def checked(x):
         """The a-posteriori check of ``x`` (with ``extra_check``), made once per iterate."""
@@ -225,17 +227,22 @@ def solve_conic(problem: ConicProblem, backend=None, tolerances: Tolerances = DE
         cache["last"] = (x, res)
         return res
 
+    def original(x):
+        return x if bal is None else bal.x(x)
+
     def accept(x, z):           # (an iterate of the scaled form: checked as the program's)
-        if alpha == 1.0 or x is None:
+        if (alpha == 1.0 and bal is None) or x is None:
             return checked(x)[0]
         if "scaled" not in cache or cache["scaled"][0] is not x:
-            cache["scaled"] = (x, x / alpha)
+            cache["scaled"] = (x, original(x / alpha))
         return checked(cache["scaled"][1])[0]
 
     sol = be.solve(work, accept=accept, retry=retry, deadline=deadline)
-    if alpha != 1.0:
+    if alpha != 1.0 or bal is not None:
         scaled_x = sol.x
         sol = _unscaled(sol, alpha)
+        if bal is not None:
+            sol = replace(sol, x=bal.x(sol.x), z=bal.z(sol.z))
         if "scaled" in cache and cache["scaled"][0] is scaled_x:
             sol = replace(sol, x=cache["scaled"][1])       # (the array checked: its cached check)
     if sol.raw_status == RawStatus.SOLVED:
@@ -317,7 +324,9 @@ def _optimality_verdict(problem: ConicProblem, sol: ConicSolution, status: Solve
     within the tolerance --, message).  A back-end without a dual (z None) keeps its word."""
     if status != SolveStatus.OPTIMAL or sol.z is None or sol.x is None:
         return status, status.ok, msg
-    opt = check_optimality(problem, sol.x, sol.z, tolerances)
+    bal = balancing(problem)        # (the program solve_conic solved: the same terms at the monomials' scale)
+    opt = check_optimality(problem, sol.x, sol.z, tolerances) if bal is None else \
+        check_optimality(bal.problem(problem), sol.x / bal.cols, sol.z / bal.rows, tolerances)
     if opt.ok:
         return status, True, msg
     if opt.primal_ok:

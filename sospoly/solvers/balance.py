@@ -62,7 +62,10 @@ def _fit_rows(problem: ConicProblem) -> tuple[np.ndarray, np.ndarray] | None:
 
 def block_scalings(problem: ConicProblem) -> dict:
     """{block name: S (diagonal, a vector) or None} of the module docstring."""
-    out = {blk.name: None for blk in problem.psd_blocks}
+    blocks = getattr(problem, "psd_blocks", None) or ()        # (a problem-like object without blocks: nothing)
+    out = {blk.name: None for blk in blocks}
+    if not blocks:
+        return out
     fit = _fit_rows(problem)
     if fit is None:
         return out
@@ -122,7 +125,7 @@ def balanced_ray(problem: ConicProblem, v: np.ndarray, size: np.ndarray, tol) ->
     """The PSD cones of a ray's slack ``v`` (terms of sizes ``size``, one per row) at the balanced scale of
     :func:`block_scalings`: lambda_min(S smat(v) S) >= -psd_margin max(S smat(size) S).  (ok, why not.)"""
     scalings = block_scalings(problem)
-    for blk in problem.psd_blocks:
+    for blk in getattr(problem, "psd_blocks", None) or ():
         S = scalings.get(blk.name)
         if S is None:
             continue

@@ -227,14 +227,11 @@ def solve_conic(problem: ConicProblem, backend=None, tolerances: Tolerances = DE
         cache["last"] = (x, res)
         return res
 
-    def original(x):
-        return x if bal is None else bal.x(x)
-
     def accept(x, z):           # (an iterate of the scaled form: checked as the program's)
         if (alpha == 1.0 and bal is None) or x is None:
             return checked(x)[0]
         if "scaled" not in cache or cache["scaled"][0] is not x:
-            cache["scaled"] = (x, original(x / alpha))
+            cache["scaled"] = (x, x / alpha if bal is None else bal.x(x / alpha))
         return checked(cache["scaled"][1])[0]
 
     sol = be.solve(work, accept=accept, retry=retry, deadline=deadline)

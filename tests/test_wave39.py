@@ -237,3 +237,73 @@ def test_sdpa_header_with_a_non_finite_objective_is_refused(tmp_path, field, bad
     p.write_text(text.replace(field, bad))
     with pytest.raises(ValueError, match=r"q\.dat-s:\d+: objective_(sign|offset) is not finite"):
         sp.ConicProblem.from_sdpa(p)
+
+
+def _look_at(C, f=800.0):
+    z = -C / np.linalg.norm(C)
+    x = np.cross([0, 1, 0], z)
+    x /= np.linalg.norm(x)
+    R = np.array([x, np.cross(z, x), z])
+    K = np.array([[f, 0, 320], [0, f, 240], [0, 0, 1.0]])
+    return K @ np.hstack([R, -R @ C[:, None]])
+
+
+def _three_views():
+    rng = np.random.default_rng(5)
+    P = np.array([_look_at(np.array(C)) for C in ([5., 0, 0], [0, 5., .5], [-3, -4, 1.])])
+    Xt = np.array([.1, .2, -.1])
+    x = np.array([(p @ np.append(Xt, 1))[:2] / (p @ np.append(Xt, 1))[2] for p in P]) + rng.normal(size=(3, 2))
+    return P, x, Xt
+
+
+def _point_optimum(P, x, X0):
+    from scipy.optimize import least_squares
+
+    def resid(X):
+        h = P @ np.append(X, 1.0)
+        return (h[:, :2] / h[:, 2:] - x).ravel()
+
+    best = min((least_squares(resid, X0 + d, method="lm", xtol=1e-15, ftol=1e-15)
+                for d in (np.zeros(3), np.full(3, 0.3), np.array([-0.5, 0.2, 0.4]))), key=lambda r: r.cost)
+    return float(np.sqrt(2 * best.cost / (2 * len(P))))
+
+
+@pytest.mark.parametrize("D", [1e-200, 1e-160, 1e-40])
+def test_a_tiny_disc_is_never_the_whole_plane(D):
+    """Review 39a F5 (HIGH): Ellipse(x0, 1e-200 I) (radius 1e-100 px) in a batch was "optimal" at gamma_ub 0.27211,
+    the optimum *without* that view, at an X where gamma is 0.752 (the true optimum, the point problem's, 0.41500):
+    the closest point on the ellipse overflowed (alpha^2 = 1e400), the Newton step was NaN and the projection came
+    back inside.  Now solved in the units of the ellipse's axis: single calls, batches and robust batches certify
+    the point problem's optimum (scipy least squares, the reference), and gamma_ub is gamma at X."""
+    import tritools
+    from tritools import Ellipse, Point
+
+    P, x, Xt = _three_views()
+    ref = _point_optimum(P, x, Xt)
+    regions = [Ellipse(x[0], D * np.eye(2)), Point(x[1]), Point(x[2])]
+    results = [tritools.triangulate(P, regions), tritools.triangulate_many([(P, regions)], progress=False)[0],
+               tritools.triangulate_many([(P, regions)], robust=5.0, progress=False)[0]]
+    for r in results:
+        assert r.gamma_lb is None or r.gamma_lb <= ref * (1 + 1e-9)
+        assert abs(tritools.gamma(r.X, P, regions) - r.gamma_ub) <= 1e-9 * max(1.0, r.gamma_ub)
+        if r.optimal:
+            assert r.gamma_ub <= ref * (1 + 1e-7)
+    assert results[1].optimal
+
+
+def test_closest_point_on_a_tiny_ellipse_is_on_it():
+    """closest_on_ellipses for axes 1e-100 .. 1e-150 (alpha^2 beyond the float range): Y on the ellipse's border
+    (to its own scale), t > 0, and the same numbers as before for an ordinary ellipse (exact power-of-two units)."""
+    from tritools.solve.regions_verify import closest_on_ellipses
+
+    U = np.array([[0.3, -1.7], [2.0, 0.5]])
+    for s in (1e-100, 1e-150):
+        sigma = np.array([[s, 2 * s], [3 * s, s]])
+        Y, t = closest_on_ellipses(U, sigma)
+        assert np.all(t > 0) and np.all(np.isfinite(Y))
+        level = np.sum((Y / sigma) ** 2, axis=-1)
+        assert np.allclose(level, 1.0, rtol=1e-9)
+    sigma = np.array([[0.5, 2.0], [3.0, 1.0]])
+    U = np.array([[0.3, -1.7], [4.0, 0.5]])                      # both outside
+    Y, t = closest_on_ellipses(U, sigma)
+    assert np.allclose(np.sum((Y / sigma) ** 2, axis=-1), 1.0, rtol=1e-12) and np.all(t > 0)

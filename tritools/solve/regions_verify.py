@@ -121,7 +121,31 @@ def closest_on_ellipses(U: np.ndarray, sigma: np.ndarray) -> tuple[np.ndarray, n
     root of the secular equation r(t)^2 = sum_k alpha_k u_k^2 / (1 + t alpha_k)^2 = 1 (alpha = sigma^-2): t is
     the KKT multiplier of u - y = t A y.  Newton on K(t) = 1 / r(t) - 1, increasing and concave in t (as in
     More and Sorensen's trust-region iteration), from t = 0: the iterates rise monotonically to the root,
-    quadratically near it (exact in one step for a disc)."""
+    quadratically near it (exact in one step for a disc).
+
+    Computed in the units of each ellipse's larger axis rounded to a power of two, lam (U / lam, sigma / lam: exact,
+    so the same numbers for ordinary sizes), then t = t' lam^2 and Y = Y' lam: alpha^2 of a radius below ~1e-77 px
+    overflowed, the Newton step was NaN and a point far outside a tiny ellipse came back "inside" (Y = U, t = 0;
+    review 39a F5: a false certificate in a batch).  A Y that Newton left outside the ellipse (it rises from the
+    left: short of the root, Y is outside) is scaled onto the border, so |U - Y| is always an upper bound of the
+    distance; a row whose iteration fails (non-finite) gets the centre Y = 0 and t = 0."""
+    lam = np.ldexp(1.0, np.frexp(np.max(sigma, axis=-1))[1])[..., None]
+    Y, t = _closest_scaled(U / lam, sigma / lam)
+    level = np.sum((Y * lam / sigma) ** 2, axis=-1)
+    far = level > 1.0 + 1e-12             # Newton stopped short (from the left: outside): scaled onto the border
+    if np.any(far):
+        Y = np.where(far[..., None], Y * ((1.0 - 4 * np.finfo(float).eps) / np.sqrt(np.where(far, level, 1.0)))[
+            ..., None], Y)
+    t = t * lam[..., 0] ** 2
+    Y = Y * lam
+    bad = ~(np.all(np.isfinite(Y), axis=-1) & np.isfinite(t))
+    if np.any(bad):
+        Y, t = np.where(bad[..., None], 0.0, Y), np.where(bad, 0.0, t)
+    return Y, t
+
+
+def _closest_scaled(U: np.ndarray, sigma: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`closest_on_ellipses` in the units of the larger axis (sigma <= 1)."""
     alpha = 1.0 / sigma ** 2
     level = np.sum(alpha * U * U, axis=-1)
     out = level > 1.0
@@ -135,7 +159,7 @@ def closest_on_ellipses(U: np.ndarray, sigma: np.ndarray) -> tuple[np.ndarray, n
         dr2 = -2.0 * np.sum(alpha ** 2 * U ** 2 * q ** 3, axis=-1)          # d r^2 / dt
         r2 = np.where(active, r2, 1.0)
         K = 1.0 / np.sqrt(r2) - 1.0
-        dK = -0.5 * dr2 / np.where(active, r2 ** 1.5, 1.0)
+        dK = -0.5 * (dr2 / r2) / np.sqrt(r2)                                # (r2^1.5 overflows first)
         step = np.where(active & (dK > 0), -K / np.where(dK > 0, dK, 1.0), 0.0)
         t_new = np.maximum(t + step, t)                                     # monotone from the left
         active &= t_new - t > 4 * np.finfo(float).eps * np.maximum(t_new, np.finfo(float).tiny)

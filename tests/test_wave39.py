@@ -307,3 +307,16 @@ def test_closest_point_on_a_tiny_ellipse_is_on_it():
     U = np.array([[0.3, -1.7], [4.0, 0.5]])                      # both outside
     Y, t = closest_on_ellipses(U, sigma)
     assert np.allclose(np.sum((Y / sigma) ** 2, axis=-1), 1.0, rtol=1e-12) and np.all(t > 0)
+
+
+def test_too_many_variables_are_refused_before_any_name_is_built():
+    """Review 39b A9: variables("w", n=10**9) built a billion names (> 30 s) before the MAX_VARIABLES check."""
+    import time
+
+    from sospoly.algebra.polynomial import MAX_VARIABLES
+
+    t = time.process_time()
+    with pytest.raises(ValueError, match="MAX_VARIABLES"):
+        sp.variables("w", n=10**9)
+    assert time.process_time() - t < 1.0
+    assert MAX_VARIABLES < 10**9 and len(sp.variables("w", n=100)) == 100

@@ -455,6 +455,9 @@ def variables(names: str | Iterable[str], n: int | None = None) -> tuple[Polynom
             raise TypeError("with n=..., names must be one prefix string")
         if isinstance(n, (bool, np.bool_)) or not isinstance(n, numbers.Integral) or n < 1:
             raise ValueError(f"n must be a positive integer, got {n!r}")
+        if n > MAX_VARIABLES:           # before building n names (n = 10**9 took minutes, review 39b A9)
+            raise ValueError(f"n = {n} variables exceed the limit sospoly.algebra.polynomial.MAX_VARIABLES = "
+                             f"{MAX_VARIABLES} (exponents are dense: n variables hold n**2 entries)")
         gens = tuple(f"{names}{k}" for k in range(1, int(n) + 1))
     else:
         gens = tuple(names.replace(",", " ").split()) if isinstance(names, str) else tuple(names)

@@ -320,3 +320,31 @@ def test_too_many_variables_are_refused_before_any_name_is_built():
         sp.variables("w", n=10**9)
     assert time.process_time() - t < 1.0
     assert MAX_VARIABLES < 10**9 and len(sp.variables("w", n=100)) == 100
+
+
+@pytest.mark.parametrize("spoil", ["underscore_id", "underscore_xyz", "nul"])
+def test_colmap_text_numbers_are_colmaps_not_pythons(tmp_path, spoil):
+    """Review 39b B3: the text reader took "1_0" as 10 (Python's digit separator; COLMAP's reader does not) and
+    ignored NUL bytes; both are a format error naming points3D.txt:line now."""
+    from tests.test_colmap import synthetic_model
+    from tritools.io.colmap import ModelFormatError
+    from tritools.io.colmap.formats import read_model, read_model_arrays, write_model
+
+    model, _ = synthetic_model(n_points=4)
+    folder = write_model(model, tmp_path / "m", "txt")
+    p = folder / "points3D.txt"
+    lines = p.read_text().splitlines()
+    k = next(i for i, ln in enumerate(lines) if ln and not ln.startswith("#"))
+    fields = lines[k].split(" ")
+    if spoil == "underscore_id":
+        fields[0] = fields[0][0] + "_" + fields[0][1:] if len(fields[0]) > 1 else "1_0"
+    elif spoil == "underscore_xyz":
+        fields[1] = "1_0.5"
+    else:
+        fields[2] = fields[2] + "\x00"
+    lines[k] = " ".join(fields)
+    p.write_text("\n".join(lines) + "\n")
+    with pytest.raises(ModelFormatError, match=r"points3D\.txt:\d+"):
+        read_model(folder)
+    with pytest.raises(ModelFormatError, match=r"points3D\.txt:\d+"):
+        read_model_arrays(folder)                              # the chunked reader of `tritools colmap`

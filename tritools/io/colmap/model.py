@@ -296,6 +296,14 @@ def _cut(token: str, limit: int = 24) -> str:
     return token if len(token) <= limit else token[:limit] + "..."
 
 
+def _plain(token: str) -> str:
+    """``token`` unless it holds Python's digit separator ``_`` or a NUL byte (ValueError: "1_0" is 10 to int() and
+    float(), not to COLMAP; review 39b B3)."""
+    if "_" in token or "\x00" in token:
+        raise ValueError(token)
+    return token
+
+
 class LineFields:
     """The whitespace-separated fields of one line of a text model, with errors naming file:line."""
 
@@ -315,7 +323,7 @@ class LineFields:
     def int(self, k: int, name: str) -> int:
         """Field k as an integer in the 64-bit range (COLMAP's widest integer type)."""
         try:
-            v = int(self.tokens[k])
+            v = int(_plain(self.tokens[k]))
         except ValueError:
             self.fail(f"{name} must be an integer, got {_cut(self.tokens[k])!r}")
         if not -2 ** 63 <= v < 2 ** 63:
@@ -333,7 +341,7 @@ class LineFields:
     def float(self, k: int, name: str) -> float:
         """Field k as a finite float."""
         try:
-            v = float(self.tokens[k])
+            v = float(_plain(self.tokens[k]))
         except ValueError:
             self.fail(f"{name} must be a number, got {_cut(self.tokens[k])!r}")
         if not math.isfinite(v):

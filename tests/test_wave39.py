@@ -348,3 +348,30 @@ def test_colmap_text_numbers_are_colmaps_not_pythons(tmp_path, spoil):
         read_model(folder)
     with pytest.raises(ModelFormatError, match=r"points3D\.txt:\d+"):
         read_model_arrays(folder)                              # the chunked reader of `tritools colmap`
+
+
+@pytest.mark.parametrize("kind", ["point_disc", "disc_point"])
+def test_an_unbounded_set_with_a_point_view_is_reported_unbounded(kind):
+    """Review 39a F4: a point and a 3 px disc seen by cameras 0.01 apart at depth 6 (disparity 1.3 px: every point
+    far along the point's ray stays in the disc, in front of both) was ``failed`` (box = whole space): the solver's
+    float ray leaves the point's round-off disc.  Each view's own centre ray is tried too, exactly (recedes): the set
+    is ``unbounded`` with its finite sides, and it holds the true X and the far points of that ray (the reference,
+    checked with tritools.project only)."""
+    import tritools
+
+    P = np.array([_look_at(np.array([0.0, 0, -6])), _look_at(np.array([0.01, 0, -6]))])
+    X = np.array([0.1, -0.2, 0.3])
+    x = [tritools.project(X, p) for p in P]
+    regs = [tritools.Point(x[0]), tritools.Ellipse.circle(x[1] + [0.4, -0.3], 3.0)]
+    C0 = np.array([0.0, 0, -6])
+    if kind == "disc_point":
+        P, regs, x = P[::-1].copy(), regs[::-1], x[::-1]
+    res = tritools.uncertainty(P, regs)
+    assert res.status.value == "unbounded"
+    assert np.all(res.lo <= X) and np.all(X <= res.hi)
+    assert np.isfinite(res.lo).any() or np.isfinite(res.hi).any()           # a finite near side is reported
+    for s in (1e1, 1e3, 1e6):
+        Y = X + s * (X - C0)
+        assert np.linalg.norm(tritools.project(Y, P[0 if kind == "point_disc" else 1]) - regs[0 if kind ==
+                              "point_disc" else 1].center) < 1e-6 * max(1.0, s)
+        assert np.all(res.lo <= Y) and np.all(Y <= res.hi)

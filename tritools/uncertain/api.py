@@ -342,7 +342,7 @@ def _group_chunk(C, blocks, X0, Xe, convexified, opts) -> list[UncertaintyResult
         dirs = np.where(ray[:, :, None], blk.eta / np.linalg.norm(blk.eta, axis=2, keepdims=True), np.nan)
     centre = centres(blocks, R, witnesses[:, :6], X0, dirs, sigma, opts.witness_rtol)
     witnesses = pull_inside(blocks, R, witnesses, centre, opts.witness_rtol)
-    ray &= rays_stay_inside(blocks, R, witnesses, centre, blk.eta, ray, opts.witness_rtol)
+    ray &= rays_stay_inside(blocks, R, witnesses, centre, blk.eta, ray, opts.witness_rtol, targets)
     ray = exact_rays(blocks, R, blk.eta, ray, targets)     # a ray claims +-inf: a direction must recede exactly
     q0, q0e = _depth_offsets(drows, X0)
     conv = np.broadcast_to(np.asarray(convexified, dtype=bool), (M,))

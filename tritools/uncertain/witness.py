@@ -10,9 +10,8 @@ import numpy as np
 from ..model.regions import ConeKind
 from .sets import contains
 
-__all__ = ["repeat_block", "take", "feasible", "pull_inside", "centres", "rays_stay_inside", "recedes", "exact_rays",
-           "RAY_REACH",
-           "witness_gap"]
+__all__ = ["repeat_block", "take", "feasible", "pull_inside", "centres", "rays_stay_inside", "view_rays", "recedes",
+           "exact_rays", "RAY_REACH", "witness_gap"]
 
 #: a ray is accepted when base + lambda d stays in S for lambda = scene scale times these factors
 RAY_REACH = (1e-3, 1.0, 1e2)
@@ -85,7 +84,35 @@ def centres(blocks, R, W, X0, dirs, sigma, rtol):
     return out
 
 
-def rays_stay_inside(blocks, R, W, centre, eta, ray, rtol) -> np.ndarray:
+def view_rays(blocks, R, m: int) -> list:
+    """The unit centre rays d_i of problem m's views, R_i[:, :3] d_i = (x^_i, 1), on the side of increasing depth
+    (a view that is singular there is skipped).  A tiny region (a point widened by its round-off) has no other
+    recession direction: a solver's float ray leaves it, its own centre ray stays in it up to rounding (review 39a
+    F4: a point and a 3 px disc seen by cameras 0.01 apart, an unbounded set, was reported ``failed``)."""
+    out = []
+    for i, blk in enumerate(blocks):
+        try:
+            d = np.linalg.solve(R[m, i, :, :3], np.append(blk.center[m], 1.0))
+        except np.linalg.LinAlgError:
+            continue
+        n = float(np.linalg.norm(d))
+        if np.all(np.isfinite(d)) and n > 0:
+            d = d / n
+            out.append(-d if float(R[m, i, 2, :3] @ d) < 0 else d)
+    return out
+
+
+def _snapped(blocks, R, eta, targets) -> list:
+    """Per ray, the view rays (:func:`view_rays`) on the side of the solver's ray ``eta`` that decrease ``targets``."""
+    out = []
+    for m in range(len(eta)):
+        t = targets[m]
+        out.append([d for d in view_rays(blocks, R, m)
+                    if float(d @ eta[m]) > 0 and float(t @ d) < -1e-12 * float(np.linalg.norm(t))])
+    return out
+
+
+def rays_stay_inside(blocks, R, W, centre, eta, ray, rtol, targets=None) -> np.ndarray:
     """(M, K) False where a ray certificate fails the (float) membership test: from a feasible base point
     (the interior candidate, else a feasible witness) the points ``base + lambda d`` must lie in S for
     lambda up to 1e2 times the scene's scale (distance to the farthest camera centre).  A recession
@@ -109,6 +136,15 @@ def rays_stay_inside(blocks, R, W, centre, eta, ray, rtol) -> np.ndarray:
     sub = [take(b, pm) for b in blocks]
     for lam in RAY_REACH:
         good &= feasible(sub, R[pm], base[pm] + (lam * scale[pm])[:, None] * d, rtol)
+    if targets is not None and _exact_kinds(blocks) and not good.all():   # a view's own ray (view_rays); only
+        # where exact_rays then decides the ray exactly (a segment's float test alone could pass a direction
+        # that is bounded far away)
+        for r, cands in enumerate(_snapped(sub, R[pm], d, targets[pm, ko])):
+            if good[r] or not (ok[pm[r]] and np.isfinite(scale[pm[r]])):
+                continue
+            one = [take(b, [r]) for b in sub]
+            good[r] = any(all(bool(feasible(one, R[pm][[r]], base[pm][[r]] + lam * scale[pm[r]] * c[None], rtol)[0])
+                              for lam in RAY_REACH) for c in cands)
     keep[pm, ko] = good
     return keep
 
@@ -155,7 +191,7 @@ def exact_rays(blocks, R, eta, ray, targets) -> np.ndarray:
     for m in np.unique(pm):
         ks = ko[pm == m]
         sub, Rm = [take(b, [m]) for b in blocks], R[[m]]
-        common = [np.nanmean(unit[m, ks], axis=0), _centre_ray(blocks, R[m], m)]
+        common = [np.nanmean(unit[m, ks], axis=0), _centre_ray(blocks, R[m], m)] + view_rays(blocks, R, m)
         for k in ks:
             cands = [eta[m, k]] + common + [0.5 * (unit[m, k] + c) for c in common]
             t = targets[m, k]

@@ -22,6 +22,7 @@ translates exactly, :mod:`sospoly.recentre`; a hand-written program does not).
 """
 from __future__ import annotations
 
+import weakref
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -40,19 +41,27 @@ MIN_BALANCE_EXPONENT = 8
 MAX_BALANCE_EXPONENT = 60
 
 
+def _has_data(blk) -> bool:
+    """An image-form SOS constraint block with its monomials: its rows (i, j) carry the polynomial's data."""
+    return blk.source == "constraint" and blk.var_start is None and blk.basis is not None and \
+        len(blk.basis) == blk.size
+
+
+def _data_rows(problem: ConicProblem, blk) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(the data b on the block's rows as Gram entries -- svec's sqrt 2 taken off --, i, j of each row)."""
+    n = blk.size * (blk.size + 1) // 2
+    i, j = triu_pairs(blk.size)
+    return problem.b[blk.row_start:blk.row_start + n] / svec_scale(blk.size), i, j
+
+
 def _fit_rows(problem: ConicProblem) -> tuple[np.ndarray, np.ndarray] | None:
     """(exponents (R, n), log2 |data|) of the nonzero rows of the image-form SOS constraints."""
     E, y = [], []
-    for blk in problem.psd_blocks:
-        basis = getattr(blk, "basis", None)
-        if basis is None or blk.source != "constraint" or blk.var_start is not None or len(basis) != blk.size:
-            continue
-        n = blk.size * (blk.size + 1) // 2
-        rows = problem.b[blk.row_start:blk.row_start + n] / svec_scale(blk.size)
-        i, j = triu_pairs(blk.size)
+    for blk in filter(_has_data, problem.psd_blocks):
+        rows, i, j = _data_rows(problem, blk)
         live = (rows != 0) & np.isfinite(rows)
         if live.any():
-            B = np.asarray(basis, float)
+            B = np.asarray(blk.basis, float)
             E.append(B[i[live]] + B[j[live]])
             y.append(np.log2(np.abs(rows[live])))
     if not E:
@@ -60,8 +69,26 @@ def _fit_rows(problem: ConicProblem) -> tuple[np.ndarray, np.ndarray] | None:
     return np.vstack(E), np.concatenate(y)
 
 
+#: the last problem's scalings (a weak reference: the checks, the balancing, the ray test and the optimality rule of
+#: one solve ask for the same problem's, as fastpath_cameras remembers the last cameras)
+_LAST: tuple = (None, None)
+
+
 def block_scalings(problem: ConicProblem) -> dict:
     """{block name: S (diagonal, a vector) or None} of the module docstring."""
+    global _LAST
+    ref, out = _LAST                            # (one tuple, read and replaced whole: safe across threads)
+    if ref is not None and ref() is problem:
+        return out
+    out = _scalings(problem)
+    try:
+        _LAST = (weakref.ref(problem), out)
+    except TypeError:                           # (an object without weak references: not remembered)
+        pass
+    return out
+
+
+def _scalings(problem: ConicProblem) -> dict:
     blocks = getattr(problem, "psd_blocks", None) or ()        # (a problem-like object without blocks: nothing)
     out = {blk.name: None for blk in blocks}
     if not blocks:
@@ -79,22 +106,27 @@ def block_scalings(problem: ConicProblem) -> dict:
     if not np.max(np.abs(k)) >= MIN_BALANCE_EXPONENT:
         return out
     for blk in problem.psd_blocks:
-        basis = getattr(blk, "basis", None)
-        if basis is not None and blk.source in ("constraint", "multiplier") and len(basis) == blk.size:
-            out[blk.name] = np.ldexp(1.0, (np.asarray(basis, np.int64) @ k.astype(np.int64)).clip(-1000, 1000))
+        if blk.basis is not None and blk.source in ("constraint", "multiplier") and len(blk.basis) == blk.size:
+            out[blk.name] = np.ldexp(1.0, (np.asarray(blk.basis, np.int64) @ k.astype(np.int64)).clip(-1000, 1000))
     return out
 
 
 def _block_data_scale(problem: ConicProblem, blk, S: np.ndarray) -> float:
     """max |b_r| S_i S_j over the block's rows (image form: its data), 0 where it has none."""
-    if blk.var_start is not None or blk.source != "constraint":
+    if not _has_data(blk):
         return 0.0
-    n = blk.size * (blk.size + 1) // 2
-    i, j = triu_pairs(blk.size)
+    rows, i, j = _data_rows(problem, blk)
     with np.errstate(over="ignore", invalid="ignore"):
-        rows = np.abs(problem.b[blk.row_start:blk.row_start + n] / svec_scale(blk.size)) * S[i] * S[j]
+        rows = np.abs(rows) * S[i] * S[j]
     rows = rows[np.isfinite(rows)]
     return float(rows.max()) if rows.size else 0.0
+
+
+def _congruent(M: np.ndarray, S: np.ndarray) -> np.ndarray | None:
+    """S M S (symmetrised), None where it leaves the float range."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        H = np.asarray(M, float) * np.outer(S, S)
+    return 0.5 * (H + H.T) if np.all(np.isfinite(H)) else None
 
 
 def balanced_psd(problem: ConicProblem, scalings: dict, values: dict, tol) -> tuple[bool, str]:
@@ -108,13 +140,12 @@ def balanced_psd(problem: ConicProblem, scalings: dict, values: dict, tol) -> tu
         S, G = scalings.get(blk.name), values.get(blk.name)
         if S is None or G is None or not G.size:
             continue
-        with np.errstate(over="ignore", invalid="ignore"):
-            H = np.asarray(G, float) * np.outer(S, S)
-        if not np.all(np.isfinite(H)):
+        H = _congruent(G, S)
+        if H is None:
             continue
         own = data.get(blk.name, 0.0) or everywhere
         floor = min(1.0, own) if own > 0 else 1.0
-        lam = float(np.linalg.eigvalsh(0.5 * (H + H.T))[0])
+        lam = float(np.linalg.eigvalsh(H)[0])
         if not tol.psd_accepts(lam, float(np.max(np.abs(H))), floor):
             return False, f"Gram {blk.name}: lambda_min {lam:.3g} at the balanced scale of its monomials " \
                           f"(2^k per variable; margin {tol.psd_margin:g} * max({floor:.3g}, {np.max(np.abs(H)):.3g}))"
@@ -130,12 +161,10 @@ def balanced_ray(problem: ConicProblem, v: np.ndarray, size: np.ndarray, tol) ->
         if S is None:
             continue
         rows = slice(blk.row_start, blk.row_start + blk.size * (blk.size + 1) // 2)
-        W = np.outer(S, S)
-        with np.errstate(over="ignore", invalid="ignore"):
-            H, T = smat(v[rows], blk.size) * W, np.abs(smat(size[rows], blk.size)) * W
-        if not (np.all(np.isfinite(H)) and np.all(np.isfinite(T))):
+        H, T = _congruent(smat(v[rows], blk.size), S), _congruent(np.abs(smat(size[rows], blk.size)), S)
+        if H is None or T is None:
             continue
-        lam = float(np.linalg.eigvalsh(0.5 * (H + H.T))[0])
+        lam = float(np.linalg.eigvalsh(H)[0])
         if not lam >= -tol.psd_margin * float(T.max()):
             return False, f"PSD cone {blk.name}: violated by {-lam:.3g} at the balanced scale of its monomials " \
                           f"(its terms {float(T.max()):.3g})"

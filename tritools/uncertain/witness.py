@@ -85,10 +85,10 @@ def centres(blocks, R, W, X0, dirs, sigma, rtol):
 
 
 def view_rays(blocks, R, m: int) -> list:
-    """The unit centre rays d_i of problem m's views, R_i[:, :3] d_i = (x^_i, 1), on the side of increasing depth
-    (a view that is singular there is skipped).  A tiny region (a point widened by its round-off) has no other
-    recession direction: a solver's float ray leaves it, its own centre ray stays in it up to rounding (review 39a
-    F4: a point and a 3 px disc seen by cameras 0.01 apart, an unbounded set, was reported ``failed``)."""
+    """The unit centre rays d_i of problem m's views, R_i[:, :3] d_i = (x^_i, 1) (depth s = 1 > 0 along them; a view
+    that is singular there is skipped).  A tiny region (a point widened by its round-off) has no other recession
+    direction: a solver's float ray leaves it, its own centre ray stays in it up to rounding (review 39a F4: a point
+    and a 3 px disc seen by cameras 0.01 apart, an unbounded set, was reported ``failed``)."""
     out = []
     for i, blk in enumerate(blocks):
         try:
@@ -97,8 +97,7 @@ def view_rays(blocks, R, m: int) -> list:
             continue
         n = float(np.linalg.norm(d))
         if np.all(np.isfinite(d)) and n > 0:
-            d = d / n
-            out.append(-d if float(R[m, i, 2, :3] @ d) < 0 else d)
+            out.append(d / n)
     return out
 
 
@@ -112,7 +111,7 @@ def _snapped(blocks, R, eta, targets) -> list:
     return out
 
 
-def rays_stay_inside(blocks, R, W, centre, eta, ray, rtol, targets=None) -> np.ndarray:
+def rays_stay_inside(blocks, R, W, centre, eta, ray, rtol, targets) -> np.ndarray:
     """(M, K) False where a ray certificate fails the (float) membership test: from a feasible base point
     (the interior candidate, else a feasible witness) the points ``base + lambda d`` must lie in S for
     lambda up to 1e2 times the scene's scale (distance to the farthest camera centre).  A recession
@@ -136,7 +135,7 @@ def rays_stay_inside(blocks, R, W, centre, eta, ray, rtol, targets=None) -> np.n
     sub = [take(b, pm) for b in blocks]
     for lam in RAY_REACH:
         good &= feasible(sub, R[pm], base[pm] + (lam * scale[pm])[:, None] * d, rtol)
-    if targets is not None and _exact_kinds(blocks) and not good.all():   # a view's own ray (view_rays); only
+    if _exact_kinds(blocks) and not good.all():         # a view's own ray (view_rays, decreasing ``targets``); only
         # where exact_rays then decides the ray exactly (a segment's float test alone could pass a direction
         # that is bounded far away)
         for r, cands in enumerate(_snapped(sub, R[pm], d, targets[pm, ko])):
@@ -179,9 +178,10 @@ def recedes(blocks, R, d) -> np.ndarray:
 def exact_rays(blocks, R, eta, ray, targets) -> np.ndarray:
     """(M, K) the rays of ``ray`` that keep their claim: a direction that recedes exactly (:func:`recedes`) and
     decreases the objective ``targets`` (M, K, 3), tried from the ray's own direction eta (M, K, 3), the mean of the
-    problem's ray directions, the mean of the views' centre rays (R_i d = (x^_i, 1): inside overlapping regions)
-    and their midpoints with eta -- a solver's ray lies on the recession cone's boundary, where a float direction
-    falls on either side of it (two parallel cameras with overlapping discs, review 26c F4)."""
+    problem's ray directions, the mean of the views' centre rays (R_i d = (x^_i, 1): inside overlapping regions),
+    each view's own (:func:`view_rays`: a point widened by its round-off) and their midpoints with eta -- a
+    solver's ray lies on the recession cone's boundary, where a float direction falls on either side of it (two
+    parallel cameras with overlapping discs, review 26c F4)."""
     out = ray.copy()
     pm, ko = np.nonzero(ray)
     if not pm.size or not _exact_kinds(blocks):
@@ -191,7 +191,9 @@ def exact_rays(blocks, R, eta, ray, targets) -> np.ndarray:
     for m in np.unique(pm):
         ks = ko[pm == m]
         sub, Rm = [take(b, [m]) for b in blocks], R[[m]]
-        common = [np.nanmean(unit[m, ks], axis=0), _centre_ray(blocks, R[m], m)] + view_rays(blocks, R, m)
+        rays = view_rays(blocks, R, m)
+        centre = np.mean(rays, axis=0) if len(rays) == len(blocks) else np.full(3, np.nan)   # (the views' mean)
+        common = [np.nanmean(unit[m, ks], axis=0), centre] + rays
         for k in ks:
             cands = [eta[m, k]] + common + [0.5 * (unit[m, k] + c) for c in common]
             t = targets[m, k]
@@ -204,18 +206,6 @@ def exact_rays(blocks, R, eta, ray, targets) -> np.ndarray:
 def _exact_kinds(blocks) -> bool:
     """Every view an ellipse or a polytope: the views whose cones :func:`recedes` decides exactly."""
     return all(b.kind in (ConeKind.ELLIPSE, ConeKind.POLYTOPE) for b in blocks)
-
-
-def _centre_ray(blocks, Rm: np.ndarray, m: int) -> np.ndarray:
-    """The mean of the views' unit centre rays d_i, R_i[:, :3] d_i = (x^_i, 1) (NaN where a view's is singular)."""
-    ds = []
-    for i, blk in enumerate(blocks):
-        try:
-            d = np.linalg.solve(Rm[i, :, :3], np.append(blk.center[m], 1.0))
-        except np.linalg.LinAlgError:
-            return np.full(3, np.nan)
-        ds.append(d / np.linalg.norm(d))
-    return np.mean(ds, axis=0)
 
 
 def _in_cone(blk, m: int, a0, a1, s_) -> bool:

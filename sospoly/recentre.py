@@ -311,16 +311,23 @@ def pooled(chosen, spare, f: Polynomial, tol, scale: float):
     the larger of their proven lower bounds and the points of both, valued exactly and decided again
     (:func:`with_exact_values`) at the smaller of ``scale`` and the scale at the best point -- a gap is measured at
     the problem's scale where its best known point is, not where a worse solve stopped."""
+    return _pooled(chosen, spare, f, tol, scale)[0]
+
+
+def _pooled(chosen, spare, f: Polynomial, tol, scale: float):
+    """(:func:`pooled`, the :func:`cancellation_scale` at its best point or None: measured once, for
+    :func:`recentred`'s next round too)."""
     lows = [r.lower_bound for r in (chosen, spare) if r.lower_bound is not None and not np.isnan(r.lower_bound)]
     half = MAX_CANDIDATES // 2
     pts = tuple(chosen.candidates or chosen.minimizers)[:half] + tuple(spare.candidates or spare.minimizers)[:half]
     merged = replace(chosen, lower_bound=max(lows) if lows else None, candidates=pts)
     out = with_exact_values(merged, f, tol, scale)
-    if out.minimizers:
-        there = cancellation_scale(f, out.minimizers[0]).st
-        if there < scale:
-            out = with_exact_values(merged, f, tol, there)
-    return out
+    if not out.minimizers:
+        return out, None
+    cut = cancellation_scale(f, out.minimizers[0])
+    if cut.st < scale:
+        out = with_exact_values(merged, f, tol, cut.st)
+    return out, cut
 
 
 def recentred(best, f: Polynomial, tol, solve_at, deadline, better):
@@ -347,11 +354,11 @@ def recentred(best, f: Polynomial, tol, solve_at, deadline, better):
         other = replace(other, attempts=res.attempts + other.attempts)
         scale = min(res.scale, scale_of_result(other, f, cut))
         ahead = better(with_exact_values(other, f, tol, scale), res)
-        res = pooled(other, res, f, tol, scale) if ahead else pooled(res, other, f, tol, scale)
+        res, there = _pooled(other, res, f, tol, scale) if ahead else _pooled(res, other, f, tol, scale)
         moved, last = moved or ahead, cut.st
-        if not res.minimizers:
+        if there is None:
             break
-        cut = cancellation_scale(f, res.minimizers[0])
+        cut = there
         note += f"; {cut.st:.3g} at the next best point" if worth_translating(last, cut.st) else ""
     note = f"{'re-centred at the minimiser' if moved else 'decided at the minimiser scale'} ({note})"
     return replace(res, message="; ".join(m for m in (res.message, note) if m))

@@ -239,13 +239,10 @@ def test_sdpa_header_with_a_non_finite_objective_is_refused(tmp_path, field, bad
         sp.ConicProblem.from_sdpa(p)
 
 
-def _look_at(C, f=800.0):
-    z = -C / np.linalg.norm(C)
-    x = np.cross([0, 1, 0], z)
-    x /= np.linalg.norm(x)
-    R = np.array([x, np.cross(z, x), z])
-    K = np.array([[f, 0, 320], [0, f, 240], [0, 0, 1.0]])
-    return K @ np.hstack([R, -R @ C[:, None]])
+def _look_at(C):
+    from tests.test_uncertainty import look_at      # (a camera at C looking at the origin, f = 800, pp (320, 240))
+
+    return look_at(np.asarray(C, float))
 
 
 def _three_views():

@@ -106,9 +106,13 @@ def _snapped(blocks, R, eta, targets) -> list:
     out = []
     for m in range(len(eta)):
         t = targets[m]
-        out.append([d for d in view_rays(blocks, R, m)
-                    if float(d @ eta[m]) > 0 and float(t @ d) < -1e-12 * float(np.linalg.norm(t))])
+        out.append([d for d in view_rays(blocks, R, m) if float(d @ eta[m]) > 0 and _descends(t, d)])
     return out
+
+
+def _descends(t: np.ndarray, c: np.ndarray) -> bool:
+    """Does the finite direction c decrease the objective t clear of rounding (t . c < -1e-12 |t| |c|)?"""
+    return bool(np.all(np.isfinite(c))) and float(t @ c) < -1e-12 * float(np.linalg.norm(t) * np.linalg.norm(c))
 
 
 def rays_stay_inside(blocks, R, W, centre, eta, ray, rtol, targets) -> np.ndarray:
@@ -197,9 +201,7 @@ def exact_rays(blocks, R, eta, ray, targets) -> np.ndarray:
         for k in ks:
             cands = [eta[m, k]] + common + [0.5 * (unit[m, k] + c) for c in common]
             t = targets[m, k]
-            out[m, k] = any(np.all(np.isfinite(c)) and float(t @ c) < -1e-12 * float(np.linalg.norm(t) *
-                                                                                    np.linalg.norm(c))
-                            and bool(recedes(sub, Rm, np.asarray(c, float)[None])[0]) for c in cands)
+            out[m, k] = any(_descends(t, c) and bool(recedes(sub, Rm, np.asarray(c, float)[None])[0]) for c in cands)
     return out
 
 

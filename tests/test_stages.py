@@ -49,8 +49,8 @@ def _multistart_gamma(cams, regions, X0) -> float:
 
 
 def test_stage_lists_are_named_data():
-    assert [s.name for s in POINT_STAGES] == ["plan", "verify", "trivial", "steps", "exact_variety", "settle",
-                                              "world_frame", "report"]
+    assert [s.name for s in POINT_STAGES] == ["plan", "verify", "trivial", "sub_problem", "steps", "exact_variety",
+                                              "settle", "world_frame", "report"]
     assert [s.name for s in STEP_STAGES] == ["sdp", "estimate", "rigor", "decide", "resolve"]
     assert [i.name for i in VERIFY_IMPLEMENTATIONS] == ["verify-points", "verify-discs", "verify-ellipses",
                                                         "verify-regions", "generic"]

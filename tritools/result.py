@@ -208,8 +208,9 @@ class TriangulationResult:
     certified_by : str, optional
         ``"sdp"`` (the LMI of Theorem 1 / Corollary 1), ``"verification"`` (KKT multipliers and the
         Lagrangian bound of :mod:`sospoly.analysis.verify`) or ``"trivial_bound"`` (gamma(X) within the
-        certificate tolerance of the lower bound 0, :mod:`tritools.solve.trivial`); ``None`` when not
-        certified.
+        certificate tolerance of the lower bound 0, :mod:`tritools.solve.trivial`), ``"sub_problem"`` (the
+        problem without views whose regions hold its minimiser, :mod:`tritools.solve.stages.subproblem`) or
+        ``"branch-and-bound"`` (robust TLS, :mod:`tritools.solve.robust`); ``None`` when not certified.
     message : str
         Human readable details.
     timings : dict

@@ -30,7 +30,7 @@ __all__ = ["write_ply", "read_ply", "write_npz", "read_npz", "export_points", "S
 #: status code -> value (the codes of the exports; same order as :class:`tritools.Status`).
 STATUS_LEGEND = tuple(s.value for s in Status)
 #: certified_by code -> value ("" when not certified).
-CERTIFIED_BY_LEGEND = ("", "verification", "sdp", "trivial_bound")
+CERTIFIED_BY_LEGEND = ("", "verification", "sdp", "trivial_bound", "branch-and-bound", "sub_problem")
 #: PLY type name -> little-endian numpy dtype.
 PLY_TYPES = {"char": "i1", "uchar": "u1", "short": "<i2", "ushort": "<u2", "int": "<i4", "uint": "<u4",
              "float": "<f4", "double": "<f8"}

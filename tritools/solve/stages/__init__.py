@@ -5,7 +5,8 @@
 :class:`~tritools.solve.settings.SolveSettings`, problems built so far, attempts, timings -- and runs the
 stages of :data:`POINT_STAGES` in order, each a module-level function ``stage(ctx) -> None``:
 
-``plan`` -> ``verify`` -> ``trivial`` -> ``steps`` -> ``exact_variety`` -> ``settle`` -> ``world_frame`` -> ``report``
+``plan`` -> ``verify`` -> ``trivial`` -> ``sub_problem`` -> ``steps`` ->
+``exact_variety`` -> ``settle`` -> ``world_frame`` -> ``report``
 
 ``steps`` walks the degree plan; each plan step runs :data:`STEP_STAGES`, functions
 ``stage(ctx, step_state) -> None``:
@@ -38,6 +39,7 @@ from .context import FAST_DEFAULT, AttemptStep, ImplName, Implementation, PointC
 from .estimate import decide_stage, estimate_stage, resolve_stage, rigor_stage
 from .exact import exact_variety_stage
 from .outcome import report_stage, settle_stage, world_frame_stage
+from .subproblem import sub_problem_stage
 from .sdp import SDP_FAST_NAME, SDP_IMPLEMENTATIONS, run_step, sdp_stage, steps_stage
 from .verify import VERIFY_IMPLEMENTATIONS, plan_stage, trivial_stage, verify_stage
 
@@ -59,6 +61,7 @@ POINT_STAGES: tuple[Stage, ...] = (
     Stage("plan", plan_stage),
     Stage("verify", verify_stage),
     Stage("trivial", trivial_stage),
+    Stage("sub_problem", sub_problem_stage),            # views whose regions hold the estimate left out
     Stage("steps", steps_stage),
     Stage("exact_variety", exact_variety_stage),        # the plan left it uncertified: Theorem 1, delta 4
     Stage("settle", settle_stage),

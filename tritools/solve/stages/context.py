@@ -42,6 +42,7 @@ class AttemptStep(str, enum.Enum):
     TIGHT = "tight"                     #: the same SDP re-solved with 100x tighter solver tolerances
     SDP_BATCH = "sdp-batch"             #: the batched delta = 2 SDP (:mod:`tritools.solve.sdp_batch`)
     TRIVIAL_BOUND = "trivial_bound"     #: the trivial lower bound 0 (:mod:`tritools.solve.trivial`)
+    SUB_PROBLEM = "sub-problem"         #: the problem without views holding the estimate (:mod:`.subproblem`)
     RETRY = "retry"                     #: a retry step of a batch
     CALL = "call"                       #: a call that raised (a batch's failed item)
 

@@ -1,0 +1,165 @@
+"""Wave 40: certification through the sub-problem without the views whose regions hold the estimate (review 39a F3),
+and the export legend of every ``certified_by``."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.optimize import least_squares
+
+import tritools
+from tritools import Ellipse, EllipseBorder, Point, Polytope, Segment
+from tritools.solve.stages import POINT_STAGES
+from tritools.solve.stages.subproblem import SUB_PROBLEM, held_views, sub_lower_bound
+
+from .test_uncertainty import look_at
+
+
+def _scene(seed=5, offset=(0.0, 0.0, 0.0)):
+    rng = np.random.default_rng(seed)
+    o = np.asarray(offset, float)
+    P = np.array([look_at(np.array(C) + o, target=o) for C in ([5., 0, 0], [0, 5., .5], [-3, -4, 1.])])
+    Xt = np.array([.1, .2, -.1]) + o
+    x = np.array([(p @ np.append(Xt, 1))[:2] / (p @ np.append(Xt, 1))[2] for p in P]) + rng.normal(size=(3, 2))
+    return P, x
+
+
+def _proj(P, X):
+    h = P @ np.append(X, 1.0)
+    return h[:2] / h[2]
+
+
+def _two_view_reference(P, x, X0):
+    """The L2 optimum f* of the point views 1, 2 by multistart least squares (independent of tritools)."""
+    best = np.inf
+    for d in (0.0, 0.3, -0.3, 1.0):
+        sol = least_squares(lambda X: np.concatenate([_proj(P[i], X) - x[i] for i in (1, 2)]), X0 + d,
+                            xtol=1e-15, ftol=1e-15, gtol=1e-15)
+        best = min(best, 2 * sol.cost)
+    return best, sol.x
+
+
+@pytest.mark.parametrize("rad", [1e4, 1e6, 1e10])
+@pytest.mark.parametrize("kind", ["ellipse", "polytope"])
+def test_a_region_far_larger_than_the_residuals_is_certified_through_the_sub_problem(rad, kind):
+    """Review 39a F3: view 0 a disc / square of half-width 1e4-1e10 px around its keypoint, views 1, 2 points.  The
+    optimum of views 1, 2 projects inside view 0's region, so gamma* = sqrt(f*_12 / 6) (f*_12 the two-view optimum
+    by least squares here).  It was not_certified with lower bound 0.26 / 0 after 3-4 s; now certified at it."""
+    P, x = _scene()
+    region = Ellipse(x[0], rad ** 2 * np.eye(2)) if kind == "ellipse" else Polytope(np.eye(2) / rad, -x[0] / rad)
+    r = tritools.triangulate(P, [region, Point(x[1]), Point(x[2])])
+    f12, X12 = _two_view_reference(P, x, np.array([.1, .2, -.1]))
+    ref = np.sqrt(f12 / 6)
+    assert np.linalg.norm(_proj(P[0], X12) - x[0]) < rad          # the reference's projection is inside view 0's region
+    assert r.optimal and r.status == tritools.Status.OPTIMAL and r.certified_by == SUB_PROBLEM
+    assert r.gamma_lb <= ref * (1 + 1e-12) and abs(r.gamma_ub - ref) <= 1e-9 * ref
+    assert np.linalg.norm(r.X - X12) < 1e-6
+    assert any(a.step == "sub-problem" for a in r.attempts)
+
+
+def test_the_sub_problem_certificate_holds_in_a_georeferenced_world_and_in_batches():
+    """The stage works in the re-centred frame (the sub-problem's X is moved back with the whole problem's) and on
+    the per-point path of ``triangulate_many``: the same certified value."""
+    P, x = _scene(offset=(4.1e6, -2.7e6, 310.0))
+    regs = [Ellipse(x[0], 1e12 * np.eye(2)), Point(x[1]), Point(x[2])]
+    single = tritools.triangulate(P, regs)
+    Pc, xc = _scene()
+    ref = tritools.triangulate(Pc, [Ellipse(xc[0], 1e12 * np.eye(2)), Point(xc[1]), Point(xc[2])])
+    assert single.optimal and single.certified_by == SUB_PROBLEM
+    assert abs(single.gamma_ub - ref.gamma_ub) <= 1e-6 * ref.gamma_ub
+    assert np.linalg.norm(single.X - np.array([4.1e6, -2.7e6, 310.0]) - ref.X) < 1e-4
+    batch = tritools.triangulate_many([(P, regs)] * 2)
+    for b in batch:
+        assert b.optimal and abs(b.gamma_ub - single.gamma_ub) <= 1e-9 * single.gamma_ub
+
+
+def _reference_full(P, regs, X0):
+    """min over X of sum_i d(P_i X, R_i)^2 by multistart least squares with the regions' own exact distances."""
+    def res(X):
+        return np.array([r.distance(_proj(Pi, X)) for Pi, r in zip(P, regs)])
+    best = np.inf
+    for d in np.linspace(-0.5, 0.5, 5):
+        sol = least_squares(res, X0 + d, xtol=1e-14, ftol=1e-14, gtol=1e-14)
+        best = min(best, 2 * sol.cost)
+    return best
+
+
+def _four_views(seed):
+    rng = np.random.default_rng(100 + seed)
+    P = np.array([look_at(np.array(c)) for c in ([5., 0, 0], [0, 5., .5], [-3, -4, 1.], [1, 1, 5.])])
+    Xt = rng.normal(scale=0.3, size=3)
+    x = np.array([_proj(p, Xt) for p in P]) + rng.normal(scale=2.0, size=(4, 2))
+    return rng, P, Xt, x
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_bounds_through_the_sub_problem_never_pass_the_optimum(seed):
+    """Discs of radius 1e3-1e8 px (log-uniform) off their keypoints by up to 0.9 radius in views 0 and 1 of a
+    4-view scene, points elsewhere: whatever the stage decides, gamma_LB stays below an independent attained value
+    (multistart least squares with exact distances), and a certificate's gamma_UB meets it."""
+    rng, P, Xt, x = _four_views(seed)
+    rad = 10 ** rng.uniform(3, 8, size=2)
+    regs = [Ellipse(x[i] + 0.9 * rad[i] * rng.uniform(-.7, .7, size=2), rad[i] ** 2 * np.eye(2)) for i in (0, 1)] \
+        + [Point(x[2]), Point(x[3])]
+    r = tritools.triangulate(P, regs)
+    ref = np.sqrt(_reference_full(P, regs, Xt) / 8)
+    assert r.gamma_lb is not None and r.gamma_lb <= ref * (1 + 1e-9) + 1e-12
+    assert r.optimal and r.certified_by in (SUB_PROBLEM, "verification") and r.gamma_ub <= ref * (1 + 1e-6) + 1e-9
+
+
+def test_a_sub_problem_whose_optimum_leaves_the_region_gives_a_lower_bound_only(monkeypatch):
+    """W forced to view 0, a 2 px disc that does not hold the optimum: the sub-problem's bound scaled by
+    sqrt(3 / 4) is still a lower bound (d_0 >= 0), never a certificate through the sub-problem, and the plan goes
+    on (its own certificate, or its larger bound, is reported)."""
+    from tritools.solve.stages import subproblem
+
+    rng, P, Xt, x = _four_views(0)
+    regs = [Ellipse(x[0] + 30.0, 4.0 * np.eye(2)), Point(x[1]), Point(x[2]), Point(x[3])]
+    seen = []
+    real = subproblem.report_point
+
+    def spy(*a, **k):
+        out = real(*a, **k)
+        seen.append(out)
+        return out
+    monkeypatch.setattr(subproblem, "held_views", lambda cams, regions, X: [0])
+    monkeypatch.setattr(subproblem, "report_point", spy)
+    r = tritools.triangulate(P, regs, path="sdp")
+    ref = np.sqrt(_reference_full(P, regs, Xt) / 8)
+    assert len(seen) == 1 and not seen[0].optimal and seen[0].gamma_lb <= ref
+    assert seen[0].gamma_lb > 0.1                   # the bound of views 1-3 (0.69), not 0
+    assert r.certified_by != SUB_PROBLEM and r.gamma_lb <= ref * (1 + 1e-9)
+    assert any(a.step == "sub-problem" and a.status == "not_certified" for a in r.attempts)
+
+
+def test_held_views_and_the_scaled_bound():
+    """W: the views other than points whose region holds the projection (exact distance 0); a point, a region
+    not holding it, and a border through a nearby point are not in W; the bound sqrt(|V - W| / N) rounded down."""
+    P, x = _scene()
+    X = np.array([.1, .2, -.1])
+    p = [_proj(Pi, X) for Pi in P]
+    regs = [Ellipse(p[0], 4 * np.eye(2)), Point(p[1]), Segment(p[2] + 5, [1, 0])]
+    assert held_views(P, regs, X) == [0]
+    regs2 = [EllipseBorder(p[0] + [1, 0], 4 * np.eye(2)), Ellipse(p[1] + 10, np.eye(2)), Polytope(np.eye(2), -p[2])]
+    assert held_views(P, regs2, X) == [2]
+    bound = sub_lower_bound(2.0, 2, 3)
+    assert 2.0 * np.sqrt(2 / 3) * (1 - 1e-11) < bound < 2.0 * np.sqrt(2 / 3)
+
+
+def test_an_explicit_method_reports_its_own_certificate():
+    """``method="corollary1"`` (the paper's tables) never goes through the sub-problem."""
+    P, x = _scene()
+    r = tritools.triangulate(P, [Ellipse(x[0], 1e8 * np.eye(2)), Point(x[1]), Point(x[2])], "corollary1", delta=2)
+    assert r.certified_by != SUB_PROBLEM and not any(a.step == "sub-problem" for a in r.attempts)
+
+
+def test_the_stage_list_names_the_sub_problem():
+    names = [s.name for s in POINT_STAGES]
+    assert names.index("trivial") < names.index("sub_problem") < names.index("steps")
+
+
+def test_every_certified_by_has_an_export_code(tmp_path):
+    """``certified_by`` "branch-and-bound" (robust TLS) and "sub_problem" were exported as code 0 ("" = not
+    certified) by write_npz; each now has its own code and reads back."""
+    from tritools.io.export import CERTIFIED_BY_LEGEND
+    assert {"verification", "sdp", "trivial_bound", "branch-and-bound", SUB_PROBLEM} <= set(CERTIFIED_BY_LEGEND)
+    assert CERTIFIED_BY_LEGEND[:4] == ("", "verification", "sdp", "trivial_bound")     # old codes unchanged

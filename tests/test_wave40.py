@@ -163,3 +163,45 @@ def test_every_certified_by_has_an_export_code(tmp_path):
     from tritools.io.export import CERTIFIED_BY_LEGEND
     assert {"verification", "sdp", "trivial_bound", "branch-and-bound", SUB_PROBLEM} <= set(CERTIFIED_BY_LEGEND)
     assert CERTIFIED_BY_LEGEND[:4] == ("", "verification", "sdp", "trivial_bound")     # old codes unchanged
+
+
+def _three_point_reference(P, x):
+    """The L2 optimum of the three point views (multistart least squares, independent of tritools): gamma*."""
+    best = np.inf
+    for d in (0.0, 0.3, -0.3, 1.0):
+        sol = least_squares(lambda X: np.concatenate([_proj(P[i], X) - x[i] for i in range(3)]),
+                            np.array([.1, .2, -.1]) + d, xtol=1e-15, ftol=1e-15, gtol=1e-15)
+        best = min(best, 2 * sol.cost)
+    return np.sqrt(best / 6)
+
+
+@pytest.mark.parametrize("rad", [1e-20, 1e-60, 1e-100])
+def test_a_tiny_polytope_is_certified_through_its_centre(rad):
+    """Review 39a F1: view 0 a square of half-side 1e-20-1e-100 px around its keypoint was ``solver_failed`` with no
+    lower bound.  The region collapsed to its centre c: d_R >= d_c - rho (rho >= max ||y - c||), so
+    gamma*_R >= gamma*_c - ||rho|| / sqrt(2N), and gamma_R at the point problem's minimiser meets it."""
+    P, x = _scene()
+    B = np.eye(2) / rad
+    r = tritools.triangulate(P, [Polytope(B, -B @ x[0]), Point(x[1]), Point(x[2])])
+    ref = _three_point_reference(P, x)
+    assert r.optimal and r.certified_by == SUB_PROBLEM and "collapsed" in r.message
+    assert r.gamma_lb <= ref and abs(r.gamma_ub - ref) <= 1e-9 * ref
+
+
+def test_centre_radius_bounds_every_point_of_the_region():
+    """rho of :func:`centre_radius` is at least the largest distance of a region point from the centre (polytope
+    vertices, ellipse and border points sampled densely), also 1e6 px from the origin; and the collapsed bound
+    subtracts ||rho|| / sqrt(2N)."""
+    from tritools.solve.stages.subproblem import centre_radius, collapsed_lower_bound
+    t = np.linspace(0, 2 * np.pi, 721)
+    for c0 in (np.zeros(2), np.array([3e5, -1e6])):
+        E = np.array([[4.0, 1.0], [1.0, 2.0]])
+        L = np.linalg.cholesky(E)
+        ring = c0 + (L @ np.array([np.cos(t), np.sin(t)])).T
+        B = np.array([[1.0, 0.5], [-0.2, 1.0], [0.3, -2.0]])
+        poly = Polytope(B, -B @ c0 + np.array([0.1, 0.0, 0.2]))
+        for reg, pts in ((Ellipse(c0, E), ring), (EllipseBorder(c0, E), ring), (poly, poly.vertices)):
+            far = np.max(np.linalg.norm(pts - reg.center, axis=1))
+            rho = centre_radius(reg)
+            assert far <= rho <= far * (1 + 1e-6) + 1e-6
+    assert collapsed_lower_bound(1.0, (0.3, 0.4), 2) < 1.0 - 0.25 and collapsed_lower_bound(0.1, (3.0,), 3) == 0.0

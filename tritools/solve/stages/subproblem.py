@@ -1,4 +1,14 @@
-"""The stage ``sub_problem``: certification through the problem without the views whose regions hold the estimate.
+"""The stage ``sub_problem``: certification through a simpler problem whose optimum bounds the whole one's.
+
+Two relaxations, tried in this order at the local estimate:
+
+* **tiny regions collapsed to their centres** (review 39a F1: a square of half-side 1e-20 px was ``solver_failed``
+  with no bound): with c_i the centre of R_i and rho_i >= max_{y in R_i} ||y - c_i|| (:func:`centre_radius`),
+  d(x, R_i) >= ||x - c_i|| - rho_i, so by the triangle inequality in R^N,
+  gamma*_R >= gamma*_C - ||rho|| / sqrt(2N) (:func:`collapsed_lower_bound`), C the problem with points c_i: a point
+  problem, certified in milliseconds.  Tried where every collapsed rho_i is at most :data:`COLLAPSE_SHARE` of the
+  local estimate's gamma;
+* **views whose regions hold the estimate dropped** (below).
 
 For a set W of views, f_V(X) = sum_{i in V} d_i(X)^2 >= f_{V-W}(X) for every X (d_w >= 0), so the L2 optimum of the
 sub-problem bounds the whole problem's from below: with gamma = sqrt(f / 2N) (the paper's (6)),
@@ -31,16 +41,22 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from functools import partial
 
 import numpy as np
 
 from ...model.geometry import project
+from ...model.regions import Point
+from ...model.regions.forms import extent_of
 from ...result import Attempt, Status
 from ..options import SolvePath
 from .context import AttemptStep, PointContext
 from .outcome import better, join, replace, report_point, step_of
 
-__all__ = ["sub_problem_stage", "held_views", "sub_lower_bound", "sub_stages", "SUB_PROBLEM", "ROUND_DOWN"]
+__all__ = ["sub_problem_stage", "held_views", "sub_lower_bound", "sub_stages", "centre_radius", "collapsed_lower_bound",
+           "Relaxation", "relaxations", "SUB_PROBLEM", "ROUND_DOWN", "COLLAPSE_SHARE"]
 
 #: ``certified_by`` of a certificate through the sub-problem
 SUB_PROBLEM = "sub_problem"
@@ -48,6 +64,9 @@ SUB_PROBLEM = "sub_problem"
 #: the product a lower bound by a wide margin (relative error ~1e-15 at most)
 ROUND_DOWN = 1.0 - 1e-12
 #: the statuses whose gamma_lb is a valid lower bound of the sub-problem
+#: regions whose points all lie within this share of the local estimate's gamma of their centre are collapsed to
+#: the centre (:func:`relaxations`): the bound then loses at most that share of gamma
+COLLAPSE_SHARE = 1e-9
 _TRUSTED = frozenset({Status.OPTIMAL, Status.BEHIND_CAMERA, Status.NOT_CERTIFIED, Status.TIME_LIMIT,
                       Status.BUDGET_EXCEEDED})
 
@@ -71,6 +90,63 @@ def sub_lower_bound(gamma_lb: float, n_sub: int, n_views: int) -> float:
     return max(0.0, float(gamma_lb) * math.sqrt(n_sub / n_views) * ROUND_DOWN)
 
 
+def centre_radius(region) -> float:
+    """An upper bound of max_{y in R} ||y - c|| for the region's centre c: the extent of the region shifted to c,
+    plus 64 units of round-off of |c| (the shift's rounding; the rule of :data:`~tritools.solve.decide.
+    LB_ROUNDOFF_ULPS`)."""
+    c = np.asarray(region.center, float)
+    rho = float(extent_of(region.similarity(1.0, c)).radius)
+    return rho * (1.0 + 1e-12) + 64.0 * 2.0 ** -53 * float(np.max(np.abs(c)))
+
+
+def collapsed_lower_bound(gamma_lb: float, radii, n_views: int) -> float:
+    """gamma*_R >= gamma*_C - ||rho|| / sqrt(2N) (module docstring: regions R_i replaced by their centres c_i,
+    rho_i >= max_{y in R_i} ||y - c_i||), rounded down; 0 at least."""
+    slack = math.sqrt(math.fsum(r * r for r in radii) / (2 * n_views)) * (1.0 + 1e-12)
+    return max(0.0, (float(gamma_lb) - slack) * ROUND_DOWN)
+
+
+@dataclass(frozen=True)
+class Relaxation:
+    """A simpler problem whose optimum bounds the whole one's: the views ``keep`` with ``regions``; ``bound`` maps
+    its gamma_LB to one of the whole problem; ``what`` names it in the messages."""
+    keep: tuple
+    regions: tuple
+    bound: Callable
+    what: str
+
+
+def relaxations(ctx: PointContext, X) -> list[Relaxation]:
+    """The relaxations tried at the local estimate ``X`` (world frame), in order: regions far smaller than the
+    residuals collapsed to their centres (a point problem), then the views whose regions hold X's projection
+    dropped (module docstring)."""
+    out = []
+    gamma_px = float(ctx.local()[0]) / ctx.norm.scale
+    tiny = []
+    for i, r in enumerate(ctx.regions):
+        if not r.is_point:
+            try:
+                rho = centre_radius(r)
+            except (TypeError, ValueError):         # no extent, or a shift the region refuses
+                continue
+            if rho <= COLLAPSE_SHARE * gamma_px:
+                tiny.append((i, rho))
+    if tiny:
+        idx = dict(tiny)
+        regs = tuple(Point(r.center) if i in idx else r for i, r in enumerate(ctx.regions))
+        views = ", ".join(map(str, idx))
+        out.append(Relaxation(tuple(range(ctx.N)), regs,
+                              partial(collapsed_lower_bound, radii=tuple(idx.values()), n_views=ctx.N),
+                              f"the problem with the region(s) of view(s) {views} collapsed to their centres"))
+    W = held_views(ctx.cams, ctx.regions, X)
+    keep = tuple(i for i in range(ctx.N) if i not in set(W))
+    if W and len(keep) >= 2:
+        out.append(Relaxation(keep, tuple(ctx.regions[i] for i in keep),
+                              partial(sub_lower_bound, n_sub=len(keep), n_views=ctx.N),
+                              f"the sub-problem without view(s) {', '.join(map(str, W))}"))
+    return out
+
+
 def _applies(ctx: PointContext) -> bool:
     opts = ctx.opts
     return ctx.N >= 3 and not (ctx.finished or ctx.expired) and opts.explicit_method is None \
@@ -78,41 +154,38 @@ def _applies(ctx: PointContext) -> bool:
 
 
 def sub_problem_stage(ctx: PointContext) -> None:
-    """Certification through the sub-problem without the views whose regions hold the local estimate (module
-    docstring)."""
-    if not _applies(ctx):
+    """Certification through a simpler problem (module docstring): each of :func:`relaxations` in turn until one
+    certifies."""
+    if not _applies(ctx) or ctx.local() is None:
         return
-    est = ctx.local()
-    if est is None:
-        return
-    W = held_views(ctx.cams, ctx.regions, ctx.norm.world_point(est[1]))
-    keep = [i for i in range(ctx.N) if i not in set(W)]
-    if not W or len(keep) < 2:
-        return
+    for relax in relaxations(ctx, ctx.norm.world_point(ctx.local()[1])):
+        if ctx.finished or ctx.expired:
+            return
+        _try(ctx, relax)
+
+
+def _try(ctx: PointContext, relax: Relaxation) -> None:
+    """One relaxation: solved, its bound carried to the whole problem, the report at its minimiser decides."""
     t = time.perf_counter()
-    sub = _solve(ctx, keep)
+    sub = _solve(ctx, relax)
     ctx.tick("sub_problem", t)
     if sub is None or sub.X is None or sub.gamma_lb is None or sub.status not in _TRUSTED:
         why = "failed" if sub is None else sub.status.value if sub.gamma_lb is not None else "no_bound"
         ctx.attempts.append(Attempt("auto", None, why, None, None, AttemptStep.SUB_PROBLEM, None, (),
                                     time.perf_counter() - t))
         return
-    lb = sub_lower_bound(sub.gamma_lb, len(keep), ctx.N)
-    step = step_of(sub, ctx)
+    certified = sub.status.certified
     with np.errstate(all="ignore"):
         x = np.array([project(sub.X, P) for P in ctx.cams])
-    res = report_point(ctx, step, Status.OPTIMAL if sub.status.certified else sub.status, sub.status.certified, lb,
-                       X=sub.X, X_raw=sub.X, image_points=x, certified_by=SUB_PROBLEM, lowered=True)
+    res = report_point(ctx, step_of(sub, ctx), Status.OPTIMAL if certified else Status.NOT_CERTIFIED, certified,
+                       relax.bound(sub.gamma_lb), X=sub.X, X_raw=sub.X, image_points=x, certified_by=SUB_PROBLEM,
+                       lowered=True)
     ctx.attempts.append(Attempt(sub.method, sub.delta, res.status.value, res.gamma_lb, res.gamma_ub,
                                 AttemptStep.SUB_PROBLEM, sub.sparsity, (), time.perf_counter() - t))
-    dropped = ", ".join(map(str, W))
     if res.optimal:
-        ctx.best, ctx.finished = replace(res, message=join(
-            f"certified by the sub-problem without view(s) {dropped}, whose regions hold its optimum", res.message)), \
-            True
+        ctx.best, ctx.finished = replace(res, message=join(f"certified by {relax.what}", res.message)), True
     elif res.gamma_lb is not None and (ctx.best is None or better(res, ctx.best)):
-        ctx.best = replace(res, message=join(f"lower bound of the sub-problem without view(s) {dropped}",
-                                             res.message))
+        ctx.best = replace(res, message=join(f"lower bound of {relax.what}", res.message))
 
 
 #: the point stages the sub-problem never runs: itself (no recursion), and the degree-4 exact-variety step
@@ -131,16 +204,16 @@ def sub_stages(regions) -> tuple:
     return tuple(s for s in POINT_STAGES if s.name not in never)
 
 
-def _solve(ctx: PointContext, keep: list[int]):
-    """The sub-problem of the views ``keep`` (:func:`sub_stages`, delta = 2 at most) within the time left."""
+def _solve(ctx: PointContext, relax: Relaxation):
+    """The relaxation's problem (:func:`sub_stages`, delta = 2 at most) within the time left."""
     from . import run_point
 
     left = ctx.settings.deadline.remaining()
     opts = ctx.opts.replace(max_delta=2, path=SolvePath.AUTO)
     if left is not None:
         opts = opts.replace(time_limit=max(1e-3, left))
-    regions = [ctx.regions[i] for i in keep]
+    regions = list(relax.regions)
     try:
-        return run_point(ctx.cams[keep], regions, opts, stages=sub_stages(regions), fast=ctx.fast)
+        return run_point(ctx.cams[list(relax.keep)], regions, opts, stages=sub_stages(regions), fast=ctx.fast)
     except (ValueError, TypeError):         # e.g. the kept views share one centre: no sub-problem to solve
         return None

@@ -151,8 +151,8 @@ def test_a_batch_of_one_is_a_single_call(n_views, noise, seed):
 
 
 def test_point_stages_are_untouched_by_the_batch_list():
-    assert [s.name for s in POINT_STAGES] == ["plan", "verify", "trivial", "steps", "exact_variety", "settle",
-                                             "world_frame", "report"]
+    assert [s.name for s in POINT_STAGES] == ["plan", "verify", "trivial", "sub_problem", "steps", "exact_variety",
+                                              "settle", "world_frame", "report"]
 
 
 def test_triangulate_many_engine_runs_the_batch_stages_per_group():

@@ -283,6 +283,8 @@ def minimize(f: Polynomial | float, eq: Sequence[Polynomial | float] = (), ineq:
         if not (math.isfinite(radius) and radius > 0):
             raise ValueError(f"radius must be a positive finite number, got {radius!r}")
     f, eq, ineq, gens, d0 = checked_inputs(f, eq, ineq, degree, gens, budget.max_gram_side)
+    if degree is None and isinstance(multiplier, Polynomial) and multiplier.degree > 0:
+        d0 = max(d0, 2 * ((multiplier.degree + max(f.degree, 0) + 1) // 2))   # q (f - c) is written at deg q + deg f
     used = used_gens(gens, f, *eq, *ineq, *([multiplier] if isinstance(multiplier, Polynomial) else []))
     if 0 < len(used) < len(gens):               # a variable in no polynomial: solved without it (review 21a F5)
         res = minimize(f.with_gens(used), [g.with_gens(used) for g in eq], [h.with_gens(used) for h in ineq], degree,

@@ -205,3 +205,16 @@ def test_centre_radius_bounds_every_point_of_the_region():
             rho = centre_radius(reg)
             assert far <= rho <= far * (1 + 1e-6) + 1e-6
     assert collapsed_lower_bound(1.0, (0.3, 0.4), 2) < 1.0 - 0.25 and collapsed_lower_bound(0.1, (3.0,), 3) == 0.0
+
+
+@pytest.mark.parametrize("q_of, degree", [(lambda x: (x - 1) ** 2 + 1, 4), (lambda x: (1 + x ** 2) ** 2, 6)])
+def test_a_polynomial_multiplier_without_degree_starts_at_its_own_degree(q_of, degree):
+    """Review 39b A10: ``minimize(f, multiplier=q)`` with a polynomial q and no ``degree`` raised "deg q + deg f = 4
+    exceeds degree 2"; the first degree is now deg q + deg f (rounded up to even).  min (x - 1)^2 + 2x = 1 at 0."""
+    import sospoly as sp
+    x, = sp.variables("x")
+    r = sp.minimize((x - 1) ** 2 + 2 * x, multiplier=q_of(x))
+    assert r.optimal and r.lower_bound <= 1.0 <= r.upper_bound and r.upper_bound - r.lower_bound < 1e-8
+    assert r.degree == degree
+    with pytest.raises(ValueError, match="exceeds degree 2"):       # an explicit degree is still the caller's
+        sp.minimize((x - 1) ** 2 + 2 * x, multiplier=q_of(x), degree=2)

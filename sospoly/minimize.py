@@ -259,7 +259,8 @@ def minimize(f: Polynomial | float, eq: Sequence[Polynomial | float] = (), ineq:
     for the strategy).
 
     ``multiplier``: ``"auto"`` (default), ``"fixed"`` (q = (1+||v||^2)^k), ``"putinar"`` (q = 1), ``"free"``
-    (q a free SOS, GEVP by bisection), or a Polynomial / positive number used as q.  ``sparsity``:
+    (q a free SOS, GEVP by bisection), or a Polynomial / positive number used as q (without ``degree``, the first
+    degree is then at least deg q + deg f, rounded up to even).  ``sparsity``:
     a :class:`sospoly.Sparsity` or its spelling: ``"auto"``, ``"none"`` (= ``"dense"``), ``"correlative"``
     (``low_degree``: add the dense certificate of that degree), ``"term"``, ``"newton"``.  ``budget``: a
     :class:`sospoly.Budget` (time limit, memory; default :data:`sospoly.budget.DEFAULT_TIME_LIMIT`).  ``radius``:

@@ -218,3 +218,30 @@ def test_a_polynomial_multiplier_without_degree_starts_at_its_own_degree(q_of, d
     assert r.degree == degree
     with pytest.raises(ValueError, match="exceeds degree 2"):       # an explicit degree is still the caller's
         sp.minimize((x - 1) ** 2 + 2 * x, multiplier=q_of(x), degree=2)
+
+
+def test_robust_tls_with_a_wide_disc_is_certified_through_its_l2_sub_problems():
+    """Truncated least squares (c = 5 px), five views, one wrong match (view 3), view 0 a disc of radius 1e6 px: the
+    L2 sub-problems of the search now certify through the sub-problem without view 0 (the search ran into its time
+    limit with gamma_LB 1.65 after 12-14 s).  Reference: inlier sets S of the point views enumerated here, each with
+    its L2 optimum by multistart least squares; view 0's disc holds every such optimum's projection (d_0 = 0)."""
+    from itertools import combinations
+    rng = np.random.default_rng(3)
+    P = np.array([look_at(np.array(c)) for c in ([5., 0, 0], [0, 5., .5], [-3, -4, 1.], [1, 1, 5.], [4, -3, 1.])])
+    Xt = np.array([.1, .2, -.1])
+    x = np.array([_proj(p, Xt) for p in P]) + rng.normal(size=(5, 2))
+    x[3] += [60, -40]
+    regs = [Ellipse(x[0], 1e12 * np.eye(2))] + [Point(v) for v in x[1:]]
+    best = np.inf
+    for k in (2, 3, 4):
+        for S in combinations((1, 2, 3, 4), k):
+            sol = least_squares(lambda X: np.concatenate([_proj(P[i], X) - x[i] for i in S]), Xt, xtol=1e-15,
+                                ftol=1e-15, gtol=1e-15)
+            assert np.linalg.norm(_proj(P[0], sol.x) - x[0]) < 1e6
+            best = min(best, 2 * sol.cost + (4 - k) * 25.0)
+    ref = np.sqrt(best / 10)
+    single = tritools.triangulate(P, regs, robust=5.0)
+    batch = tritools.triangulate_many([(P, regs)] * 2, robust=5.0)
+    for r in [single, *batch]:
+        assert r.optimal and r.gamma_lb <= ref * (1 + 1e-12) and abs(r.gamma_ub - ref) <= 1e-8 * ref
+        assert r.inliers.tolist() == [True, True, True, False, True]

@@ -30,7 +30,8 @@ The default strategy (each step recorded in ``attempts``):
    1e-6..1e-1 where none is proven, a weaker bound; Gram matrices shifted, projected and checked PSD with every
    rounding bounded); the larger proven bound
    is reported.  A multiplier q counts only where it is proven positive (a constant, 1 + even positive
-   terms, or a free q whose Gram matrix is positive definite).  Nothing proven: status
+   terms, a free q whose Gram matrix is positive definite, or another fixed q whose minimum is proven
+   positive, :mod:`sospoly.analysis.q_floor`).  Nothing proven: status
    ``unproven_bound``, no lower bound, the relaxation's value in the message.  An "almost solved"
    iterate that passes the a-posteriori checks is used the same way (its bound, when proven, is valid).
 3. **Degrees.** ``degree`` given: that degree only.  Otherwise delta_min, delta_min + 2, ... up to

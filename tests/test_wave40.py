@@ -245,3 +245,21 @@ def test_robust_tls_with_a_wide_disc_is_certified_through_its_l2_sub_problems():
     for r in [single, *batch]:
         assert r.optimal and r.gamma_lb <= ref * (1 + 1e-12) and abs(r.gamma_ub - ref) <= 1e-8 * ref
         assert r.inliers.tolist() == [True, True, True, False, True]
+
+
+def test_a_positive_multiplier_with_cross_terms_proves_its_bound():
+    """Review 39b A10: q = (x - 1)^2 + 1 (>= 1, but not "1 + even powers") made ``minimize((x - 1)^2, multiplier=q,
+    degree=4)`` UNPROVEN although q f is SOS.  q's floor is now proven by sospoly.minimize (q >= 1 - margin), so the
+    bound stands; a q that vanishes, (x - 1)^2, still proves nothing, and on {y = 1} with q = (y - 1)^2 no level
+    of x^3 is claimed (review 26a F3)."""
+    import sospoly as sp
+    from sospoly.analysis.q_floor import proven_floor
+    x, y = sp.variables("x y")
+    r = sp.minimize((x - 1) ** 2, multiplier=(x - 1) ** 2 + 1, degree=4)
+    assert r.optimal and r.lower_bound <= 0.0 <= r.upper_bound and r.upper_bound - r.lower_bound < 1e-6
+    assert 0.99 < proven_floor((x - 1) ** 2 + 1) <= 1.0
+    assert proven_floor((x - 1) ** 2) == 0.0 and proven_floor(x ** 2 * y ** 2 - 1e-3 + 0 * x) == 0.0
+    bad = sp.minimize((x - 1) ** 2, multiplier=(x - 1) ** 2, degree=4)
+    assert bad.lower_bound is None and not bad.optimal
+    r3 = sp.minimize(x ** 3, eq=[y - 1], multiplier=(y - 1) ** 2, degree=6)
+    assert r3.lower_bound is None or r3.lower_bound == -np.inf

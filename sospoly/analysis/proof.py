@@ -20,9 +20,10 @@ turn it into a bound valid in floating point:
    u' >= sum_j b_j^T (G2_j - D_j) b_j, and u' >= 0 everywhere once every lambda_min(G2_j - D_j) minus its
    eigenvalue error bound is >= 0.  Then, on the feasible set, q (f - c') >= 0, and f >= c' where
    q > 0: :func:`q_lower_bound` proves q >= q_min > 0 for every v (a constant; q = 1 + terms that are even
-   powers with positive coefficients, e.g. (1 + ||v||^2)^k; or a free SOS q whose Gram basis holds 1:
-   q >= lambda_min(Q)).  A multiplier not proven positive proves nothing (q vanishing on the set makes every
-   level "feasible": min x^3 s.t. y = 1 with q = (y - 1)^2).
+   powers with positive coefficients, e.g. (1 + ||v||^2)^k; a free SOS q whose Gram basis holds 1:
+   q >= lambda_min(Q); any other fixed q: its minimum proven by :func:`sospoly.minimize`,
+   :mod:`sospoly.analysis.q_floor`).  A multiplier not proven positive proves nothing (q vanishing on the set
+   makes every level "feasible": min x^3 s.t. y = 1 with q = (y - 1)^2).
 
 The kernel directions b(v*) of the solver's G (the minimisers) gain m q(v*) > 0 from the lowered level,
 which is what lets the projection stay PSD; the margin m and the shift t are tried small first.
@@ -84,9 +85,11 @@ def q_lower_bound(structure, sol) -> float:
     E, c = q.exponents(), q.coefficients()
     const = float(c[E.sum(axis=1) == 0].sum()) if E.size else 0.0
     rest = E.sum(axis=1) > 0
-    if np.any(rest & ~(np.all(E % 2 == 0, axis=1) & (c > 0))):
-        return 0.0
-    return max(0.0, const)
+    if np.any(rest & ~(np.all(E % 2 == 0, axis=1) & (c > 0))) or not const > 0:
+        from .q_floor import proven_floor          # any other q: its proven minimum (sospoly.minimize)
+
+        return proven_floor(q)
+    return const
 
 
 def _product_index(gb, E: np.ndarray) -> np.ndarray:

@@ -263,3 +263,17 @@ def test_a_positive_multiplier_with_cross_terms_proves_its_bound():
     assert bad.lower_bound is None and not bad.optimal
     r3 = sp.minimize(x ** 3, eq=[y - 1], multiplier=(y - 1) ** 2, degree=6)
     assert r3.lower_bound is None or r3.lower_bound == -np.inf
+
+
+@pytest.mark.parametrize("s", [1e-170, 1e-180, 1e-250])
+def test_a_tiny_rotated_polytope_never_raises_from_lapack(s):
+    """Review 40a MEDIUM-1: a rotated square of half-side 1e-180 px (B ~ 1e180) made the verification's least
+    squares overflow, and ``LinAlgError: SVD did not converge`` escaped ``triangulate``.  The overflowed data now
+    gives no multipliers (not verified; any LAPACK error there too), and the point is certified through its centre."""
+    P, x = _scene()
+    th = 0.3
+    R = np.array([[np.cos(th), -np.sin(th)], [np.sin(th), np.cos(th)]])
+    B = R.T / s
+    r = tritools.triangulate(P, [Polytope(B, -B @ x[0]), Point(x[1]), Point(x[2])])
+    ref = _three_point_reference(P, x)
+    assert r.optimal and r.gamma_lb <= ref and abs(r.gamma_ub - ref) <= 1e-9 * ref

@@ -212,9 +212,9 @@ def _polytope(form: ConicForm, u, y, face_mu: float = 0.0):
     e = u - y
     mu = np.zeros(len(c))
     act = np.abs(s) >= 1.0 - ACTIVE_RTOL
-    if np.any(act) and np.any(e != 0):
-        J = (B[act] * s[act, None]).T                     # 2 x n_active: columns s_k B_k
-        sol = np.linalg.lstsq(J, e, rcond=None)[0]
+    J = (B[act] * s[act, None]).T                         # 2 x n_active: columns s_k B_k
+    if np.any(act) and np.any(e != 0) and np.all(np.isfinite(J)) and np.all(np.isfinite(e)):
+        sol = np.linalg.lstsq(J, e, rcond=None)[0]        # (overflowed data, B ~ 1e180: no multipliers, not verified)
         mu[act] = np.maximum(sol, 0.0)
         if face_mu > 0 and act.sum() == 1:
             mu[~act] = face_mu / max(1, int((~act).sum()))

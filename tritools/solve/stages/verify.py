@@ -77,6 +77,8 @@ def verify_stage(ctx: PointContext) -> None:
         res = None if impl is None else impl.run(ctx, step)
     except TimeLimitReached:          # building the problem ran out of time: the SDP step reports it
         res = None
+    except (np.linalg.LinAlgError, FloatingPointError):     # LAPACK on overflowed data (a 1e-180 px polytope's
+        res = None                                          # B ~ 1e180, review 40a): not verified, the plan goes on
     ctx.timings["verify"] = time.perf_counter() - t
     cut = ctx.verify_cut or (res is None and ctx.expired)           # not run (or not finished) for lack of time
     failed = Status.TIME_LIMIT.value if cut else "verification_failed"

@@ -277,3 +277,29 @@ def test_a_tiny_rotated_polytope_never_raises_from_lapack(s):
     r = tritools.triangulate(P, [Polytope(B, -B @ x[0]), Point(x[1]), Point(x[2])])
     ref = _three_point_reference(P, x)
     assert r.optimal and r.gamma_lb <= ref and abs(r.gamma_ub - ref) <= 1e-9 * ref
+
+
+def _segment_distance(p, c, h):
+    t = np.clip(np.dot(p - c, h) / np.dot(h, h), -1.0, 1.0)
+    return np.linalg.norm(p - (c + t * h))
+
+
+@pytest.mark.slow
+def test_a_wide_segment_gets_the_bound_of_the_views_without_it():
+    """Review 39a F3: with view 0 a segment of half-length ~1e6 px (no region holds the estimate: a segment holds
+    nothing off its line) the plan's lower bound was 0.  The sub-problem without the wide region bounds it:
+    gamma* >= gamma*_12 sqrt(2 / 3) (f_12 by least squares here), below the optimum (multistart least squares with
+    this segment's exact distance)."""
+    P, x = _scene()
+    h = np.array([1e6, 3e5])
+    r = tritools.triangulate(P, [Segment(x[0], h), Point(x[1]), Point(x[2])], time_limit=20)
+    f12, X12 = _two_view_reference(P, x, np.array([.1, .2, -.1]))
+    best = np.inf
+    for d in (0.0, 0.3, -0.3):
+        sol = least_squares(lambda X: np.array([_segment_distance(_proj(P[0], X), x[0], h)]
+                                               + [np.linalg.norm(_proj(P[i], X) - x[i]) for i in (1, 2)]),
+                            np.array([.1, .2, -.1]) + d, xtol=1e-15, ftol=1e-15, gtol=1e-15)
+        best = min(best, 2 * sol.cost)
+    ref = np.sqrt(best / 6)
+    assert r.gamma_lb >= np.sqrt(f12 / 6) * (1 - 1e-9) and r.gamma_lb <= ref
+    assert r.gamma_ub >= ref * (1 - 1e-12)

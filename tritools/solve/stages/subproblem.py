@@ -8,7 +8,9 @@ Two relaxations, tried in this order at the local estimate:
   gamma*_R >= gamma*_C - ||rho|| / sqrt(2N) (:func:`collapsed_lower_bound`), C the problem with points c_i: a point
   problem, certified in milliseconds.  Tried where every collapsed rho_i is at most :data:`COLLAPSE_SHARE` of the
   local estimate's gamma;
-* **views whose regions hold the estimate dropped** (below).
+* **views whose regions hold the estimate dropped** (below); where none holds it, the views whose regions reach
+  farther than :data:`WIDE_SHARE` times the local estimate's gamma from their centre (a 1e4 px segment): a lower
+  bound only, unless the sub-problem's minimiser happens to lie in them.
 
 For a set W of views, f_V(X) = sum_{i in V} d_i(X)^2 >= f_{V-W}(X) for every X (d_w >= 0), so the L2 optimum of the
 sub-problem bounds the whole problem's from below: with gamma = sqrt(f / 2N) (the paper's (6)),
@@ -56,7 +58,7 @@ from .context import AttemptStep, PointContext
 from .outcome import better, join, replace, report_point, step_of
 
 __all__ = ["sub_problem_stage", "held_views", "sub_lower_bound", "sub_stages", "centre_radius", "collapsed_lower_bound",
-           "Relaxation", "relaxations", "SUB_PROBLEM", "ROUND_DOWN", "COLLAPSE_SHARE"]
+           "Relaxation", "relaxations", "SUB_PROBLEM", "ROUND_DOWN", "COLLAPSE_SHARE", "WIDE_SHARE"]
 
 #: ``certified_by`` of a certificate through the sub-problem
 SUB_PROBLEM = "sub_problem"
@@ -67,6 +69,10 @@ ROUND_DOWN = 1.0 - 1e-12
 #: regions whose points all lie within this share of the local estimate's gamma of their centre are collapsed to
 #: the centre (:func:`relaxations`): the bound then loses at most that share of gamma
 COLLAPSE_SHARE = 1e-9
+#: regions reaching farther than this multiple of the local estimate's gamma from their centre are "wide": where no
+#: region holds the estimate, the sub-problem without the wide ones still gives a lower bound (:func:`relaxations`;
+#: a 1e4 px segment's plan ended with lower bound 0, review 39a F3)
+WIDE_SHARE = 1e3
 _TRUSTED = frozenset({Status.OPTIMAL, Status.BEHIND_CAMERA, Status.NOT_CERTIFIED, Status.TIME_LIMIT,
                       Status.BUDGET_EXCEEDED})
 
@@ -122,7 +128,7 @@ def relaxations(ctx: PointContext, X) -> list[Relaxation]:
     dropped (module docstring)."""
     out = []
     gamma_px = float(ctx.local()[0]) / ctx.norm.scale
-    tiny = []
+    tiny, wide = [], []
     for i, r in enumerate(ctx.regions):
         if not r.is_point:
             try:
@@ -131,6 +137,8 @@ def relaxations(ctx: PointContext, X) -> list[Relaxation]:
                 continue
             if rho <= COLLAPSE_SHARE * gamma_px:
                 tiny.append((i, rho))
+            elif rho > WIDE_SHARE * gamma_px:
+                wide.append(i)
     if tiny:
         idx = dict(tiny)
         regs = tuple(Point(r.center) if i in idx else r for i, r in enumerate(ctx.regions))
@@ -139,11 +147,14 @@ def relaxations(ctx: PointContext, X) -> list[Relaxation]:
                               partial(collapsed_lower_bound, radii=tuple(idx.values()), n_views=ctx.N),
                               f"the problem with the region(s) of view(s) {views} collapsed to their centres"))
     W = held_views(ctx.cams, ctx.regions, X)
+    what = "the sub-problem without view(s) {}"
+    if not W:                   # no region holds X: a bound without the wide ones (their d_w >= 0, nothing more)
+        W, what = wide, "the sub-problem without the wide region(s) of view(s) {}"
     keep = tuple(i for i in range(ctx.N) if i not in set(W))
     if W and len(keep) >= 2:
         out.append(Relaxation(keep, tuple(ctx.regions[i] for i in keep),
                               partial(sub_lower_bound, n_sub=len(keep), n_views=ctx.N),
-                              f"the sub-problem without view(s) {', '.join(map(str, W))}"))
+                              what.format(", ".join(map(str, W)))))
     return out
 
 

@@ -303,3 +303,19 @@ def test_a_wide_segment_gets_the_bound_of_the_views_without_it():
     ref = np.sqrt(best / 6)
     assert r.gamma_lb >= np.sqrt(f12 / 6) * (1 - 1e-9) and r.gamma_lb <= ref
     assert r.gamma_ub >= ref * (1 - 1e-12)
+
+
+def test_a_floor_cut_by_the_callers_deadline_is_not_remembered():
+    """Under an enclosing deadline that has passed, q's floor is 0 (nothing proven, no exception) and is asked
+    again later, when it is proven (q = (x - 1)^2 + 2 >= 2)."""
+    import time as _time
+
+    import sospoly as sp
+    from sospoly.analysis import q_floor
+    from sospoly.budget import Deadline, deadline_scope
+    x, = sp.variables("x")
+    q = (x - 1) ** 2 + 2
+    with deadline_scope(Deadline.after(1e-6)):
+        _time.sleep(1e-3)
+        assert q_floor.proven_floor(q) == 0.0
+    assert 1.99 < q_floor.proven_floor(q) <= 2.0

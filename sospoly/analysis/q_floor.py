@@ -34,23 +34,31 @@ def proven_floor(q) -> float:
     if _INSIDE.get():
         return 0.0
     key = _key(q)
-    if key not in _MEMO:
+    if key in _MEMO:
+        return _MEMO[key]
+    floor, final = _floor(q)
+    if final:                   # (a floor cut by a time limit -- the caller's may be short -- is asked again)
         if len(_MEMO) >= _MEMO_SIZE:
             _MEMO.pop(next(iter(_MEMO)))
-        _MEMO[key] = _floor(q)
-    return _MEMO[key]
+        _MEMO[key] = floor
+    return floor
 
 
-def _floor(q) -> float:
-    from ..budget import Budget
+def _floor(q) -> tuple[float, bool]:
+    """(the proven floor or 0.0, whether it is final: not cut by a time or memory limit)."""
+    from ..budget import Budget, BudgetExceeded, TimeLimitReached
     from ..minimize import minimize
+    from ..status import SolveStatus
 
     token = _INSIDE.set(True)
     try:
         res = minimize(q, budget=Budget(time_limit=Q_FLOOR_SECONDS))
     except (ValueError, TypeError, ArithmeticError):
-        return 0.0
+        return 0.0, True
+    except (TimeLimitReached, BudgetExceeded):         # an enclosing deadline (the caller's) came first
+        return 0.0, False
     finally:
         _INSIDE.reset(token)
     lb = res.lower_bound
-    return float(lb) if lb is not None and math.isfinite(lb) and lb > 0 else 0.0
+    final = res.status not in (SolveStatus.TIME_LIMIT, SolveStatus.BUDGET_EXCEEDED)
+    return (float(lb) if lb is not None and math.isfinite(lb) and lb > 0 else 0.0), final

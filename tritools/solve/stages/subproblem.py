@@ -73,6 +73,10 @@ COLLAPSE_SHARE = 1e-9
 #: region holds the estimate, the sub-problem without the wide ones still gives a lower bound (:func:`relaxations`;
 #: a 1e4 px segment's plan ended with lower bound 0, review 39a F3)
 WIDE_SHARE = 1e3
+#: a sub-problem starts only with this multiple of the whole problem's verification and local-estimate time left,
+#: and at least SUB_MIN_SECONDS (:func:`_time_for_it`)
+SUB_TIME_FACTOR = 2.0
+SUB_MIN_SECONDS = 0.02
 _TRUSTED = frozenset({Status.OPTIMAL, Status.BEHIND_CAMERA, Status.NOT_CERTIFIED, Status.TIME_LIMIT,
                       Status.BUDGET_EXCEEDED})
 
@@ -161,7 +165,21 @@ def relaxations(ctx: PointContext, X) -> list[Relaxation]:
 def _applies(ctx: PointContext) -> bool:
     opts = ctx.opts
     return ctx.N >= 3 and not (ctx.finished or ctx.expired) and opts.explicit_method is None \
-        and not all(r.is_point for r in ctx.regions)
+        and not all(r.is_point for r in ctx.regions) and _time_for_it(ctx)
+
+
+def _time_for_it(ctx: PointContext) -> bool:
+    """Whether a sub-problem fits in the time left: its local estimate and verification cost about the whole
+    problem's (review 40a LOW-2: started with 0.03 s left, it took 0.08-0.15 s past a 0.05 s limit), so at least
+    :data:`SUB_TIME_FACTOR` times theirs and :data:`SUB_MIN_SECONDS` must be left, and not after a verification
+    the time limit cut."""
+    left = ctx.settings.deadline.remaining()
+    if left is None:
+        return True
+    spent = ctx.timings.get("verify", 0.0) + ctx.timings.get("local", 0.0)
+    cut = ctx.verify_cut or any(a.step == AttemptStep.VERIFICATION and a.status == Status.TIME_LIMIT.value
+                                for a in ctx.attempts)
+    return not cut and left >= SUB_TIME_FACTOR * spent + SUB_MIN_SECONDS
 
 
 def sub_problem_stage(ctx: PointContext) -> None:

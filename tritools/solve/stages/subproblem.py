@@ -55,6 +55,7 @@ from ...model.regions.forms import extent_of
 from ...result import Attempt, Status
 from ..options import SolvePath
 from .context import AttemptStep, PointContext
+from ..decide import decide_reported
 from .outcome import better, join, replace, report_point, step_of
 
 __all__ = ["sub_problem_stage", "held_views", "sub_lower_bound", "sub_stages", "centre_radius", "collapsed_lower_bound",
@@ -203,12 +204,16 @@ def _try(ctx: PointContext, relax: Relaxation) -> None:
         ctx.attempts.append(Attempt("auto", None, why, None, None, AttemptStep.SUB_PROBLEM, None, (),
                                     time.perf_counter() - t))
         return
-    certified = sub.status.certified
     with np.errstate(all="ignore"):
         x = np.array([project(sub.X, P) for P in ctx.cams])
-    res = report_point(ctx, step_of(sub, ctx), Status.OPTIMAL if certified else Status.NOT_CERTIFIED, certified,
-                       relax.bound(sub.gamma_lb), X=sub.X, X_raw=sub.X, image_points=x, certified_by=SUB_PROBLEM,
-                       lowered=True)
+    step, lb = step_of(sub, ctx), relax.bound(sub.gamma_lb)
+    res = report_point(ctx, step, Status.NOT_CERTIFIED, False, lb, X=sub.X, X_raw=sub.X, image_points=x,
+                       certified_by=None, lowered=True)
+    met = res.gamma_lb is not None and res.gamma_ub is not None and np.isfinite(res.gamma_ub) and \
+        decide_reported(res.gamma_lb, res.gamma_ub, ctx.tolerances, ctx.N, ctx.norm.scale, ctx.norm.resolution)
+    if sub.status.certified and met:            # (X' in the dropped regions: the rule, on the reported numbers)
+        res = report_point(ctx, step, Status.OPTIMAL, True, lb, X=sub.X, X_raw=sub.X, image_points=x,
+                           certified_by=SUB_PROBLEM, lowered=True)     # (its cheirality and messages)
     ctx.attempts.append(Attempt(sub.method, sub.delta, res.status.value, res.gamma_lb, res.gamma_ub,
                                 AttemptStep.SUB_PROBLEM, sub.sparsity, (), time.perf_counter() - t))
     if res.optimal:

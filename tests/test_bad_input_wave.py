@@ -292,15 +292,30 @@ def test_sdpa_sizes_are_bounded(tmp_path, text, needle):
 def test_regions_that_overflow_in_the_normalised_frame_are_a_numerical_failure():
     """Review 21b F2: a disc holding everything (D = 1e308 I) or a box of half-width 1e-300 (B = 1e300 I) is a valid
     region whose program overflows when built: status numerical_failure naming the overflow, never budget_exceeded
-    (the memory budget's status); a Theorem 1 program refused for its size is still budget_exceeded."""
+    (the memory budget's status); a Theorem 1 program refused for its size is still budget_exceeded.  The box is
+    certified through its centre since wave 40."""
     import numpy as np
 
     import tritools
 
     cams = np.array([[[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 1]], [[1, 0, 0, 1], [0, 1, 0, 0], [0, 0, 1, 1]],
                      [[1, 0, 0, 0], [0, 1, 0, 1], [0, 0, 1, 1]]], float)
-    for reg in (tritools.Ellipse([0.5, 0.0], 1e308 * np.eye(2)), tritools.Polytope(1e300 * np.eye(2), [0.0, 0.0])):
-        regions = [tritools.Point([0.0, 0.0]), reg, tritools.Segment([0.0, 0.5], [0.1, 0.0])]
-        r = tritools.triangulate(cams, regions)
-        assert r.status == tritools.Status.NUMERICAL_FAILURE and "not representable" in r.message, r.message
-        assert not r.optimal
+    regions = [tritools.Point([0.0, 0.0]), tritools.Ellipse([0.5, 0.0], 1e308 * np.eye(2)),
+               tritools.Segment([0.0, 0.5], [0.1, 0.0])]
+    r = tritools.triangulate(cams, regions)
+    assert r.status == tritools.Status.NUMERICAL_FAILURE and "not representable" in r.message, r.message
+    assert not r.optimal
+    # the box (half-width 1e-300) is certified through its centre since wave 40 (tritools.solve.stages.subproblem):
+    # the point problem's optimum, here by multistart least squares with the segment's exact distance
+    from scipy.optimize import least_squares
+
+    def residuals(X):
+        u = [(P @ np.append(X, 1.0))[:2] / (P @ np.append(X, 1.0))[2] for P in cams]
+        t = np.clip((u[2][0] - 0.0) / 0.1, -1.0, 1.0)
+        return np.array([np.linalg.norm(u[0]), np.linalg.norm(u[1]), np.linalg.norm(u[2] - [0.1 * t, 0.5])])
+    ref = min(2 * least_squares(residuals, X0, xtol=1e-15, ftol=1e-15, gtol=1e-15).cost
+              for X0 in np.random.default_rng(0).normal(scale=2.0, size=(20, 3)))
+    ref = np.sqrt(ref / 6)
+    regions[1] = tritools.Polytope(1e300 * np.eye(2), [0.0, 0.0])
+    r = tritools.triangulate(cams, regions)
+    assert r.optimal and r.certified_by == "sub_problem" and r.gamma_lb <= ref and abs(r.gamma_ub - ref) < 1e-9

@@ -53,9 +53,9 @@ from ...model.geometry import project
 from ...model.regions import Point
 from ...model.regions.forms import extent_of
 from ...result import Attempt, Status
+from ..decide import decide_reported
 from ..options import SolvePath
 from .context import AttemptStep, PointContext
-from ..decide import decide_reported
 from .outcome import better, join, replace, report_point, step_of
 
 __all__ = ["sub_problem_stage", "held_views", "sub_lower_bound", "sub_stages", "centre_radius", "collapsed_lower_bound",
@@ -66,7 +66,6 @@ SUB_PROBLEM = "sub_problem"
 #: f = 2 |S| gamma^2 is rescaled with a few roundings (and gamma came through a square root): this factor keeps
 #: the product a lower bound by a wide margin (relative error ~1e-15 at most)
 ROUND_DOWN = 1.0 - 1e-12
-#: the statuses whose gamma_lb is a valid lower bound of the sub-problem
 #: regions whose points all lie within this share of the local estimate's gamma of their centre are collapsed to
 #: the centre (:func:`relaxations`): the bound then loses at most that share of gamma
 COLLAPSE_SHARE = 1e-9
@@ -78,6 +77,7 @@ WIDE_SHARE = 1e3
 #: and at least SUB_MIN_SECONDS (:func:`_time_for_it`)
 SUB_TIME_FACTOR = 2.0
 SUB_MIN_SECONDS = 0.02
+#: the statuses whose gamma_lb is a valid lower bound of the sub-problem
 _TRUSTED = frozenset({Status.OPTIMAL, Status.BEHIND_CAMERA, Status.NOT_CERTIFIED, Status.TIME_LIMIT,
                       Status.BUDGET_EXCEEDED})
 

@@ -346,3 +346,27 @@ def test_the_sub_problem_starts_only_when_it_fits_in_the_time_left(monkeypatch):
     r = tritools.triangulate(sc.cameras, regs, time_limit=0.3)
     assert _time.perf_counter() - t <= 1.1 * 0.3 + 0.05
     assert not any(a.step == "sub-problem" for a in r.attempts) and r.gamma_ub is not None
+
+
+def test_no_certificate_through_a_dropped_region_that_misses_the_sub_problem_minimiser():
+    """Review 40a HIGH-1 (its data: 7 views, principal points at 6.4e6 px, three ellipses and two polygons of
+    3e4-6e6 px, two points): the sub-problem without views 1, 2, 4 was certified at its minimiser X', which lies
+    0.08 px outside one of the dropped polygons; its gap (5e-4 relative) passed the whole problem's rule (the
+    coordinates' resolution ~0.1 px), while a point 1.2e-4 relative lower exists.  Only a sub-problem whose minimiser
+    every dropped region holds certifies now: no certificate at gamma_UB above that point; the bound stays valid."""
+    import json
+    import pathlib
+
+    z = np.load(pathlib.Path(__file__).parent / "data" / "review40a_dropped_region_misses.npz")
+    P = z["cameras"]
+    regs = [tritools.Region.from_dict(d) for d in json.loads(str(z["regions"]))]
+
+    def residuals(X):
+        return np.array([float(r.distance(_proj(p, X))) for p, r in zip(P, regs)])
+    sol = least_squares(residuals, np.array([-0.04275472, -0.28492509, 0.20632258]), xtol=1e-15, ftol=1e-15,
+                        gtol=1e-15)
+    lower = np.sqrt(2 * sol.cost / (2 * len(P)))             # attained at sol.x: gamma* <= lower
+    r = tritools.triangulate(P, regs)
+    assert r.gamma_lb <= lower
+    assert not r.optimal or r.gamma_ub <= lower * (1 + 1e-6)
+    assert r.certified_by != SUB_PROBLEM

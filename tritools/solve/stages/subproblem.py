@@ -18,8 +18,11 @@ sub-problem bounds the whole problem's from below: with gamma = sqrt(f / 2N) (th
     gamma*_V >= gamma*_{V-W} sqrt(|V - W| / N),
 
 a valid lower bound for any W whatever the sub-problem's minimiser X'.  Where X' projects into every region of W
-(d_w(X') = 0) the bound is attained, gamma_V(X') = gamma*_{V-W} sqrt(|V - W| / N), and the whole problem is
-certified at X'.  This is the case of a region much larger than the residuals (a keypoint with a 1e4 px
+(d_w(X') = 0, computed exactly 0: the region's closest point is the projection itself) the bound is attained,
+gamma_V(X') = gamma*_{V-W} sqrt(|V - W| / N), the whole problem's gap is the sub-problem's (certified under its own
+rule), and the whole problem is certified at X' -- only then: a gap that merely passes the whole problem's rule
+with X' outside a dropped region (0.08 px outside a polygon, coordinates of 6e6 px: review 40a HIGH-1) is not.
+This is the case of a region much larger than the residuals (a keypoint with a 1e4 px
 uncertainty, a wide polytope): the optimum of the other views projects inside it, the view drops out, and the
 sub-problem -- fewer views, no auxiliary variables for that region -- is the easy one.  The degree plan of the
 whole problem meanwhile works on a program scaled by the large region and stops uncertified (review 39a F3:
@@ -125,6 +128,7 @@ class Relaxation:
     regions: tuple
     bound: Callable
     what: str
+    dropped: tuple = ()
 
 
 def relaxations(ctx: PointContext, X) -> list[Relaxation]:
@@ -159,7 +163,7 @@ def relaxations(ctx: PointContext, X) -> list[Relaxation]:
     if W and len(keep) >= 2:
         out.append(Relaxation(keep, tuple(ctx.regions[i] for i in keep),
                               partial(sub_lower_bound, n_sub=len(keep), n_views=ctx.N),
-                              what.format(", ".join(map(str, W)))))
+                              what.format(", ".join(map(str, W))), tuple(W)))
     return out
 
 
@@ -211,7 +215,9 @@ def _try(ctx: PointContext, relax: Relaxation) -> None:
                        certified_by=None, lowered=True)
     met = res.gamma_lb is not None and res.gamma_ub is not None and np.isfinite(res.gamma_ub) and \
         decide_reported(res.gamma_lb, res.gamma_ub, ctx.tolerances, ctx.N, ctx.norm.scale, ctx.norm.resolution)
-    if sub.status.certified and met:            # (X' in the dropped regions: the rule, on the reported numbers)
+    held = set(held_views(ctx.cams[list(relax.dropped)], [ctx.regions[w] for w in relax.dropped], sub.X)) == \
+        set(range(len(relax.dropped)))
+    if sub.status.certified and met and held:   # X' in every dropped region: the gap is the sub-problem's own
         res = report_point(ctx, step, Status.OPTIMAL, True, lb, X=sub.X, X_raw=sub.X, image_points=x,
                            certified_by=SUB_PROBLEM, lowered=True)     # (its cheirality and messages)
     ctx.attempts.append(Attempt(sub.method, sub.delta, res.status.value, res.gamma_lb, res.gamma_ub,

@@ -370,3 +370,15 @@ def test_no_certificate_through_a_dropped_region_that_misses_the_sub_problem_min
     assert r.gamma_lb <= lower
     assert not r.optimal or r.gamma_ub <= lower * (1 + 1e-6)
     assert r.certified_by != SUB_PROBLEM
+
+
+def test_a_caller_degree_or_level_does_not_break_the_sub_problem():
+    """The CI rehearsal of this wave: a robust search asks its L2 sub-problems for delta >= 4 (and a level,
+    ``lower_bound_stop``); the sub-problem's own options (``max_delta=2``) then refused the caller's delta and the
+    ValueError escaped ``triangulate`` -- the search lost that bound (a 7-view region problem ended with lower bound
+    0).  The sub-problem takes delta = 2 and no level of its own; the caller's options stand for the whole problem."""
+    P, x = _scene()
+    regs = [Ellipse(x[0], 1e12 * np.eye(2)), Point(x[1]), Point(x[2])]
+    for kw in ({"delta": 4}, {"delta": 4, "lower_bound_stop": 0.1}, {"max_delta": 6}):
+        r = tritools.triangulate(P, regs, **kw)
+        assert r.optimal and r.certified_by == SUB_PROBLEM, kw

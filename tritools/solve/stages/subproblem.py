@@ -44,6 +44,7 @@ otherwise the result joins the plan's steps as a candidate (the larger lower bou
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from collections.abc import Callable
@@ -249,11 +250,13 @@ def _solve(ctx: PointContext, relax: Relaxation):
     from . import run_point
 
     left = ctx.settings.deadline.remaining()
-    opts = ctx.opts.replace(max_delta=2, path=SolvePath.AUTO)
-    if left is not None:
-        opts = opts.replace(time_limit=max(1e-3, left))
     regions = list(relax.regions)
     try:
+        # delta = 2 whatever degree the caller started from (a robust search asks its whole problem for delta >= 4),
+        # and none of the caller's lower_bound_stop: a level of the whole problem, not of this one
+        opts = dataclasses.replace(ctx.opts, delta=None, max_delta=2, path=SolvePath.AUTO, lower_bound_stop=None)
+        if left is not None:
+            opts = opts.replace(time_limit=max(1e-3, left))
         return run_point(ctx.cams[list(relax.keep)], regions, opts, stages=sub_stages(regions), fast=ctx.fast)
-    except (ValueError, TypeError):         # e.g. the kept views share one centre: no sub-problem to solve
-        return None
+    except (ValueError, TypeError, ArithmeticError, np.linalg.LinAlgError):     # e.g. the kept views share one
+        return None                                                             # centre: no sub-problem to solve

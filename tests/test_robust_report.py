@@ -339,7 +339,7 @@ def test_batch_l2_settles_tls_only_within_the_tls_guard():
     """Review 12 F2: a batch took an L2 certificate as the TLS one (every residual below c, f_L2 <= min c^2) with a
     gap that passed only the L2 guard (coordinates' resolution), not the TLS report's (capped by c_min sqrt(gap_abs /
     2N)); a single call refused it.  _l2_suffices now applies the report's guard, as the single call does."""
-    from tritools.solve.robust_batch import _l2_suffices
+    from tritools.solve.robust_settle import l2_suffices as _l2_suffices
     from tritools.solve.robust_report import reported_resolution
 
     tol = tritools.TriangulationOptions().tolerances

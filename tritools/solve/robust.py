@@ -561,11 +561,16 @@ def triangulate_robust(cams: np.ndarray, regions, c: np.ndarray, opts, t0: float
     every view an inlier)."""
     import dataclasses
     from .robust_enum_run import enumerate_one
+    from .robust_settle import settle_by_l2
     from .triangulate import triangulate
     t0 = time.perf_counter() if t0 is None else t0
     if not np.any(np.isfinite(c)):
         res = triangulate(cams, regions, options=opts)
         return dataclasses.replace(res, inliers=None if res.residuals is None else np.ones(len(regions), bool))
+    if not all(r.is_point for r in regions):            # settled by its L2 certificate, as in a batch
+        settled = settle_by_l2(cams, regions, c, opts)
+        if settled is not None:
+            return settled
     with np.errstate(all="ignore"):     # as in robust_batch.robust_many: finiteness is checked, warnings are noise
         search = TlsSearch(cams, regions, c, opts, t0)      # a few views: every inlier set enumerated (robust_enum_run)
         search.set_deadline(call_deadline(opts, t0, regions))   # the time limit counts from the call's entry

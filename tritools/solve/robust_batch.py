@@ -15,7 +15,8 @@
    are checked in one :func:`tritools.model.cameras.camera_problems` call per view count (a problem that fails
    it takes the per-problem path below, whose :func:`tritools.model.cameras.validate_cameras` names the error).
 2. Other problems (and point problems whose thresholds are all infinite) first go through the batched L2 path
-   (:func:`tritools.solve.batch.solve_point_problems`; the default plan to degree 2 only, :func:`_first_pass`).
+   (:func:`tritools.solve.batch.solve_point_problems`; the default plan to degree 2 only,
+   :func:`tritools.solve.robust_settle.first_pass`).
    A result certified with every residual below its threshold and 2N gamma_UB^2 <= min_i c_i^2 is certified for
    TLS by that certificate alone: any inlier set other than all views pays at least min_i c_i^2 >= f_TLS(X), so
    f_TLS* = L2*.  It is returned as it is, every
@@ -31,16 +32,14 @@ import time
 
 import numpy as np
 
-from ..model.regions import as_regions
 from ..result import Attempt, Status, TriangulationResult
 from .call_limit import (call_limit, current_end, expired, expired_points, mark_cut, reserve_for, reserving,
                          within)
 from .fastpath_cameras import validated_problem
 from .identical_views import identical_views, may_repeat_views
-from .options import MethodChoice
 from .robust import robust_thresholds, triangulate_robust
 from .robust_report import tls_reported_stack
-from .stages.outcome import behind_message
+from .robust_settle import first_pass, l2_suffices, settled_by_l2
 
 __all__ = ["robust_many", "thresholds_for"]
 
@@ -122,38 +121,6 @@ def _n_views(problem) -> int | None:
     return n
 
 
-def settled_by_l2(res: TriangulationResult) -> TriangulationResult:
-    """An L2 result that settles the TLS problem (module docstring, 2) in the TLS result's form, as the single call
-    gives it for the same problem (its root bound, the L2 bound of all views, settles it the same way, review 8 F8):
-    method ``tls``, every view an inlier, certified by the branch and bound's root (0 nodes), one TLS attempt.  The
-    numbers are the L2 certificate's (f_TLS = f_L2 at X, and TLS* = L2* there)."""
-    n = len(res.residuals)
-    total = float(res.timings.get("total", 0.0)) if res.timings else 0.0
-    attempt = Attempt("tls", None, res.status.value, res.gamma_lb, res.gamma_ub, "branch-and-bound", None, (), total)
-    msg = f"TLS: {n}/{n} inliers, 0 nodes, 1 L2 sub-problems"
-    if res.optimal and res.in_front is False and res.depths is not None:     # as the L2 message says it (33a L9)
-        msg += f"; {behind_message(res.depths, 'TLS')}"
-    return dataclasses.replace(res, method="tls", certified_by="branch-and-bound", inliers=np.ones(n, bool),
-                               message=msg, attempts=(attempt,))
-
-
-def _l2_suffices(res: TriangulationResult, c: np.ndarray, cameras, regions, tolerances) -> bool:
-    """Whether the certified L2 result settles the TLS problem: every residual below its threshold, f_L2 <= min c^2,
-    and its gap within the TLS report's guard (:func:`tritools.solve.robust_report.guards_pass` on the coordinates'
-    resolution capped by the thresholds' scale, as a single call's report checks it; review 12 F2: a 0.0144 px
-    threshold settled by an L2 certificate whose gap passed only the L2 guard)."""
-    from .robust_report import guards_pass, reported_resolution
-
-    if not res.optimal or res.residuals is None or res.gamma_ub is None or res.gamma_lb is None:
-        return False
-    n = len(res.residuals)
-    if not (np.all(res.residuals < c) and 2 * n * res.gamma_ub ** 2 <= np.min(c * c)):
-        return False
-    centres = np.array([r.center for r in as_regions(regions, n)], float)
-    return guards_pass(res.gamma_lb, res.gamma_ub, n, tolerances,
-                       reported_resolution(centres, c, tolerances, np.asarray(cameras, float)))
-
-
 #: problems searched together by :func:`tritools.solve.robust_drive.drive` (their sub-bounds batched per subset size);
 #: each keeps its own time budget, from the start of its chunk, charged with its own steps and an even share of
 #: the batched calls only.
@@ -223,22 +190,11 @@ def _robust_many(problems: list, robust, opts, executor, progress) -> list[Trian
             points[i] = pp
     pending = direct
     if l2_first:
-        first = solve_point_problems([problems[i] for i in l2_first], _first_pass(opts), executor=executor,
+        first = solve_point_problems([problems[i] for i in l2_first], first_pass(opts), executor=executor,
                                      progress=progress).record()
         pending = pending + _after_l2(problems, thresholds, opts, l2_first, first, out)
     _drive_chunks(problems, thresholds, opts, sorted(pending), out, points)
     return out
-
-
-def _first_pass(opts):
-    """The options of (2)'s L2 pass: the default plan stops at degree 2 (verification, the batched degree-2 SDP);
-    a problem it does not settle gets the branch and bound, whose sub-problems take the full plan where the search
-    needs them, as a single call's do.  The full plan here ran a dense degree-4 program (~6 s) on every 3-view disc
-    track with a wrong match, whose L2 result cannot settle it (review 31b F3: 2.2 s per track in a batch, 0.15 s
-    alone).  Explicit methods and degrees are the caller's and kept."""
-    if opts.method == MethodChoice.AUTO and opts.delta is None and opts.max_delta is None:
-        return opts.replace(max_delta=2)
-    return opts
 
 
 def _after_l2(problems, thresholds, opts, idx, first, out) -> list:
@@ -251,7 +207,7 @@ def _after_l2(problems, thresholds, opts, idx, first, out) -> list:
         if res.status == Status.INVALID_INPUT or c is None:
             out[i] = dataclasses.replace(res, inliers=None if res.residuals is None
                                          else np.ones(len(res.residuals), bool))
-        elif _l2_suffices(res, c, *problems[i][:2], opts.tolerances):
+        elif l2_suffices(res, c, *problems[i][:2], opts.tolerances):
             out[i] = settled_by_l2(res)
         elif not np.any(np.isfinite(c)):
             out[i] = triangulate_robust(*validated_problem(*problems[i]), c, opts)

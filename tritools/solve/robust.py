@@ -562,16 +562,20 @@ def triangulate_robust(cams: np.ndarray, regions, c: np.ndarray, opts, t0: float
     import dataclasses
     from .robust_enum_run import enumerate_one
     from .robust_settle import settle_by_l2
+    from .robust_subsolve import subsolve_of
     from .triangulate import triangulate
     t0 = time.perf_counter() if t0 is None else t0
     if not np.any(np.isfinite(c)):
         res = triangulate(cams, regions, options=opts)
         return dataclasses.replace(res, inliers=None if res.residuals is None else np.ones(len(regions), bool))
+    root = None
     if not all(r.is_point for r in regions):            # settled by its L2 certificate, as in a batch
-        settled = settle_by_l2(cams, regions, c, opts)
+        settled, root = settle_by_l2(cams, regions, c, opts)
         if settled is not None:
             return settled
     with np.errstate(all="ignore"):     # as in robust_batch.robust_many: finiteness is checked, warnings are noise
         search = TlsSearch(cams, regions, c, opts, t0)      # a few views: every inlier set enumerated (robust_enum_run)
         search.set_deadline(call_deadline(opts, t0, regions))   # the time limit counts from the call's entry
+        if root is not None:                            # that L2 solve is the search's root: not solved twice
+            search.bounds.seed(frozenset(range(len(regions))), subsolve_of(root, len(regions), light=True))
         return enumerate_one(search) or drive([search])[0]

@@ -335,6 +335,16 @@ class SubsetBounds:
             self.exhausted.add(S)
         self._store(S, out.lb, out.X)
 
+    def seed(self, S: frozenset, out) -> None:
+        """S's bound from a :class:`~tritools.solve.robust_subsolve.SubSolve` solved elsewhere (the single call's L2
+        pass, :mod:`tritools.solve.robust_settle`), kept as :meth:`_solve_one` keeps its own."""
+        self.n_solved += 1
+        if (out.light or out.stopped) and not out.certified:
+            self.weak.add(S)
+        if out.exhausted:
+            self.exhausted.add(S)
+        self._store(S, out.lb, out.X)
+
     def _solved(self, views: list, light: bool, from_delta, limit: float, need: float):
         """:func:`~tritools.solve.robust_subsolve.solve_subproblem` of the sub-problem of ``views`` within ``limit``
         seconds and the deadline, counted (``n_solved``, ``budget_exceeded``); None where the input is refused."""

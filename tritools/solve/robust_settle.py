@@ -62,15 +62,20 @@ def first_pass(opts):
     return opts
 
 
-def settle_by_l2(cams, regions, c: np.ndarray, opts) -> TriangulationResult | None:
-    """The single call's first step for a problem with regions other than points (module docstring): the L2 result
-    under :func:`first_pass`'s options, as the TLS result when it settles the problem (:func:`l2_suffices`), else
-    None (the branch and bound decides).  A batch settles the same problems the same way (review 40a M2: a batch
-    certified what the single call's search left uncertified, its report lowering the same bound again)."""
+def settle_by_l2(cams, regions, c: np.ndarray, opts) -> tuple:
+    """The single call's first step for a problem with regions other than points (module docstring): (the TLS
+    result when the L2 result under :func:`first_pass`'s options settles the problem (:func:`l2_suffices`), else
+    None; that L2 result when it is the search's root solve -- the degree-2 plan, which the search then takes instead
+    of solving it again (:meth:`tritools.solve.robust_bounds.SubsetBounds.seed`) -- else None).  A batch settles the
+    same problems the same way (review 40a M2: a batch certified what the single call's search left uncertified, its
+    report lowering the same bound again)."""
     from .triangulate import triangulate
 
+    options = first_pass(opts)
     try:
-        res = triangulate(cams, regions, options=first_pass(opts))
+        res = triangulate(cams, regions, options=options)
     except (ValueError, TypeError, ArithmeticError, np.linalg.LinAlgError):
-        return None
-    return settled_by_l2(res) if l2_suffices(res, c, cams, regions, opts.tolerances) else None
+        return None, None
+    if l2_suffices(res, c, cams, regions, opts.tolerances):
+        return settled_by_l2(res), None
+    return None, (res if options is not opts else None)    # (max_delta = 2: the search's light root solve)

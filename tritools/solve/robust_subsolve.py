@@ -37,7 +37,7 @@ from ..result import Status
 from .options import MethodChoice
 from .robust_rays import view_ray
 
-__all__ = ["SubSolve", "solve_subproblem", "stop_level", "THEOREM1_FIRST", "BOUND_STOP", "ROUND_DOWN",
+__all__ = ["SubSolve", "solve_subproblem", "subsolve_of", "stop_level", "THEOREM1_FIRST", "BOUND_STOP", "ROUND_DOWN",
            "TRUSTED_LOWER_BOUND", "EXHAUSTED"]
 
 #: f = 2 |S| gamma^2 is computed with a few roundings (and gamma came through a square root): multiplying by
@@ -161,9 +161,15 @@ def _run(cameras, regions, opts, light: bool, stop, need: float) -> SubSolve | N
         res = triangulate(cameras, regions, options=opts)
     except (ValueError, TypeError, ArithmeticError, np.linalg.LinAlgError):
         return None
+    return subsolve_of(res, len(cameras), light, stop, need)
+
+
+def subsolve_of(res, n_views: int, light: bool, stop=None, need: float = math.inf) -> SubSolve:
+    """The :class:`SubSolve` of an L2 result ``res`` of ``n_views`` views solved ``light`` (or the full plan) with
+    the level ``stop`` for ``need`` (None, inf: none)."""
     lb = 0.0
     if res.status in TRUSTED_LOWER_BOUND and res.gamma_lb is not None and math.isfinite(res.gamma_lb):
-        lb = 2 * len(cameras) * max(res.gamma_lb, 0.0) ** 2 * ROUND_DOWN
+        lb = 2 * n_views * max(res.gamma_lb, 0.0) ** 2 * ROUND_DOWN
     certified = bool(res.status.certified)
     stopped = stop is not None and not certified and lb >= need
     X = np.asarray(res.X, float) if res.X is not None and np.all(np.isfinite(res.X)) else None

@@ -8,9 +8,10 @@ Two relaxations, tried in this order at the local estimate:
   gamma*_R >= gamma*_C - ||rho|| / sqrt(2N) (:func:`collapsed_lower_bound`), C the problem with points c_i: a point
   problem, certified in milliseconds.  Tried where every collapsed rho_i is at most :data:`COLLAPSE_SHARE` of the
   local estimate's gamma;
-* **views whose regions hold the estimate dropped** (below); where none holds it, the views whose regions reach
-  farther than :data:`WIDE_SHARE` times the local estimate's gamma from their centre (a 1e4 px segment): a lower
-  bound only, unless the sub-problem's minimiser happens to lie in them.
+* **views whose regions hold the estimate dropped** (below); then (where they are not the same views) those whose
+  regions reach farther than :data:`WIDE_SHARE` times the local estimate's gamma from their centre (a 1e4 px
+  segment; a 1e8 px box that a poor local estimate misses): certified where they hold the sub-problem's minimiser,
+  else a lower bound.
 
 For a set W of views, f_V(X) = sum_{i in V} d_i(X)^2 >= f_{V-W}(X) for every X (d_w >= 0), so the L2 optimum of the
 sub-problem bounds the whole problem's from below: with gamma = sqrt(f / 2N) (the paper's (6)),
@@ -156,15 +157,17 @@ def relaxations(ctx: PointContext, X) -> list[Relaxation]:
         out.append(Relaxation(tuple(range(ctx.N)), regs,
                               partial(collapsed_lower_bound, radii=tuple(idx.values()), n_views=ctx.N),
                               f"the problem with the region(s) of view(s) {views} collapsed to their centres"))
-    W = held_views(ctx.cams, ctx.regions, X)
-    what = "the sub-problem without view(s) {}"
-    if not W:                   # no region holds X: a bound without the wide ones (their d_w >= 0, nothing more)
-        W, what = wide, "the sub-problem without the wide region(s) of view(s) {}"
-    keep = tuple(i for i in range(ctx.N) if i not in set(W))
-    if W and len(keep) >= 2:
-        out.append(Relaxation(keep, tuple(ctx.regions[i] for i in keep),
-                              partial(sub_lower_bound, n_sub=len(keep), n_views=ctx.N),
-                              what.format(", ".join(map(str, W))), tuple(W)))
+    held = held_views(ctx.cams, ctx.regions, X)
+    # then the wide regions (a poor local estimate -- the whole problem's frame scaled by them -- may sit outside
+    # some): a certificate where they hold the sub-problem's minimiser, a lower bound at least (d_w >= 0)
+    wide = wide if set(wide) != set(held) else []
+    for W, what in ((held, "the sub-problem without view(s) {}"),
+                    (wide, "the sub-problem without the wide region(s) of view(s) {}")):
+        keep = tuple(i for i in range(ctx.N) if i not in set(W))
+        if W and len(keep) >= 2:
+            out.append(Relaxation(keep, tuple(ctx.regions[i] for i in keep),
+                                  partial(sub_lower_bound, n_sub=len(keep), n_views=ctx.N),
+                                  what.format(", ".join(map(str, W))), tuple(W)))
     return out
 
 

@@ -329,19 +329,19 @@ class SubsetBounds:
         if out is None:
             self._store(S, 0.0, None)           # e.g. coincident or duplicated cameras: 0 is a valid bound
             return
-        if (out.light or out.stopped) and not out.certified:     # light as it ran (the options may refuse it)
-            self.weak.add(S)
-        if out.exhausted:                       # the plan ran out, not at a time or memory limit nor at ``need``
-            self.exhausted.add(S)
-        self._store(S, out.lb, out.X)
+        self._keep(S, out)
 
     def seed(self, S: frozenset, out) -> None:
         """S's bound from a :class:`~tritools.solve.robust_subsolve.SubSolve` solved elsewhere (the single call's L2
         pass, :mod:`tritools.solve.robust_settle`), kept as :meth:`_solve_one` keeps its own."""
         self.n_solved += 1
-        if (out.light or out.stopped) and not out.certified:
+        self._keep(S, out)
+
+    def _keep(self, S: frozenset, out) -> None:
+        """A solved sub-problem's outcome into the cache: weak, exhausted, its bound and estimate."""
+        if (out.light or out.stopped) and not out.certified:     # light as it ran (the options may refuse it)
             self.weak.add(S)
-        if out.exhausted:
+        if out.exhausted:                       # the plan ran out, not at a time or memory limit nor at ``need``
             self.exhausted.add(S)
         self._store(S, out.lb, out.X)
 

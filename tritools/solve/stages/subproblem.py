@@ -58,19 +58,16 @@ from ...model.geometry import project
 from ...model.regions import Point
 from ...model.regions.forms import extent_of
 from ...result import Attempt, Status
-from ..decide import decide_reported
 from ..options import SolvePath
+from ..robust_subsolve import ROUND_DOWN, TRUSTED_LOWER_BOUND
 from .context import AttemptStep, PointContext
 from .outcome import better, join, replace, report_point, step_of
 
 __all__ = ["sub_problem_stage", "held_views", "sub_lower_bound", "sub_stages", "centre_radius", "collapsed_lower_bound",
-           "Relaxation", "relaxations", "SUB_PROBLEM", "ROUND_DOWN", "COLLAPSE_SHARE", "WIDE_SHARE"]
+           "Relaxation", "relaxations", "SUB_PROBLEM", "COLLAPSE_SHARE", "WIDE_SHARE"]
 
 #: ``certified_by`` of a certificate through the sub-problem
 SUB_PROBLEM = "sub_problem"
-#: f = 2 |S| gamma^2 is rescaled with a few roundings (and gamma came through a square root): this factor keeps
-#: the product a lower bound by a wide margin (relative error ~1e-15 at most)
-ROUND_DOWN = 1.0 - 1e-12
 #: regions whose points all lie within this share of the local estimate's gamma of their centre are collapsed to
 #: the centre (:func:`relaxations`): the bound then loses at most that share of gamma
 COLLAPSE_SHARE = 1e-9
@@ -82,9 +79,6 @@ WIDE_SHARE = 1e3
 #: and at least SUB_MIN_SECONDS (:func:`_time_for_it`)
 SUB_TIME_FACTOR = 2.0
 SUB_MIN_SECONDS = 0.02
-#: the statuses whose gamma_lb is a valid lower bound of the sub-problem
-_TRUSTED = frozenset({Status.OPTIMAL, Status.BEHIND_CAMERA, Status.NOT_CERTIFIED, Status.TIME_LIMIT,
-                      Status.BUDGET_EXCEEDED})
 
 
 def held_views(cams: np.ndarray, regions, X) -> list[int]:
@@ -210,23 +204,20 @@ def _try(ctx: PointContext, relax: Relaxation) -> None:
     t = time.perf_counter()
     sub = _solve(ctx, relax)
     ctx.tick("sub_problem", t)
-    if sub is None or sub.X is None or sub.gamma_lb is None or sub.status not in _TRUSTED:
+    if sub is None or sub.X is None or sub.gamma_lb is None or sub.status not in TRUSTED_LOWER_BOUND:
         why = "failed" if sub is None else sub.status.value if sub.gamma_lb is not None else "no_bound"
         ctx.attempts.append(Attempt("auto", None, why, None, None, AttemptStep.SUB_PROBLEM, None, (),
                                     time.perf_counter() - t))
         return
     with np.errstate(all="ignore"):
         x = np.array([project(sub.X, P) for P in ctx.cams])
-    step, lb = step_of(sub, ctx), relax.bound(sub.gamma_lb)
-    res = report_point(ctx, step, Status.NOT_CERTIFIED, False, lb, X=sub.X, X_raw=sub.X, image_points=x,
-                       certified_by=None, lowered=True)
-    met = res.gamma_lb is not None and res.gamma_ub is not None and np.isfinite(res.gamma_ub) and \
-        decide_reported(res.gamma_lb, res.gamma_ub, ctx.tolerances, ctx.N, ctx.norm.scale, ctx.norm.resolution)
-    held = set(held_views(ctx.cams[list(relax.dropped)], [ctx.regions[w] for w in relax.dropped], sub.X)) == \
-        set(range(len(relax.dropped)))
-    if sub.status.certified and met and held:   # X' in every dropped region: the gap is the sub-problem's own
-        res = report_point(ctx, step, Status.OPTIMAL, True, lb, X=sub.X, X_raw=sub.X, image_points=x,
-                           certified_by=SUB_PROBLEM, lowered=True)     # (its cheirality and messages)
+    held = len(held_views(ctx.cams[list(relax.dropped)], [ctx.regions[w] for w in relax.dropped], sub.X)) == \
+        len(relax.dropped)
+    certify = sub.status.certified and held     # X' in every dropped region: the gap is the sub-problem's own
+    # (report_point decides again on the whole problem's reported numbers, with its cheirality)
+    res = report_point(ctx, step_of(sub, ctx), Status.OPTIMAL if certify else Status.NOT_CERTIFIED, certify,
+                       relax.bound(sub.gamma_lb), X=sub.X, X_raw=sub.X, image_points=x,
+                       certified_by=SUB_PROBLEM if certify else None, lowered=True)
     ctx.attempts.append(Attempt(sub.method, sub.delta, res.status.value, res.gamma_lb, res.gamma_ub,
                                 AttemptStep.SUB_PROBLEM, sub.sparsity, (), time.perf_counter() - t))
     if res.optimal:

@@ -28,14 +28,19 @@ OPTIMUM = 0.96875
 SCALES = (1.0, 1e-3, 1e-6, 2.0 ** -30, 1e3)
 
 
-def sospoly_solve(s: float):
+def scaled_quartic_program(s: float) -> sp.SOSProgram:
+    """max c s.t. X^4 + Y^4 + 0.5 X Y + 1 - c SOS with X = s x, Y = s y (optimum :data:`OPTIMUM` for every s)."""
     x, y = sp.variables("x y")
     X, Y = x * s, y * s
     prog = sp.SOSProgram(("x", "y"))
     c = prog.scalar("c")
     prog.add_sos(X**4 + Y**4 + 0.5 * X * Y + 1 - c, name="u")
     prog.maximize(c)
-    sol = sp.solve_program(prog)
+    return prog
+
+
+def sospoly_solve(s: float):
+    sol = sp.solve_program(scaled_quartic_program(s))
     return sol.status.value, sol.objective
 
 

@@ -1,6 +1,8 @@
 """Wave 39: the review leftovers of wave 38 (sospoly messages) and this wave's reviews."""
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -119,7 +121,7 @@ def test_rigorous_bound_of_a_solve_without_a_certificate_is_no_bound():
     ps = sp.build_psatz((x - 3) ** 2 + (y + 3) ** 2 + 5, degree=2)
     good = sp.solve_psatz(ps)
     assert good.solution.grams
-    empty = dataclasses_replace(good.solution, grams={})
+    empty = dataclasses.replace(good.solution, grams={})
     rb = rigorous_psatz_bound(ps, empty, 4.0, 10.0)
     assert rb.lower_bound == -np.inf
     assert isinstance(empty, ProgramSolution)
@@ -127,20 +129,16 @@ def test_rigorous_bound_of_a_solve_without_a_certificate_is_no_bound():
     assert ok.lower_bound <= 5.0 and ok.lower_bound > 4.9
 
 
-def dataclasses_replace(obj, **kw):
-    import dataclasses
-
-    return dataclasses.replace(obj, **kw)
-
-
 def _scaled_quartic_program(s):
-    x, y = sp.variables("x y")
-    X, Y = x * s, y * s
-    prog = sp.SOSProgram(("x", "y"))
-    c = prog.scalar("c")
-    prog.add_sos(X**4 + Y**4 + 0.5 * X * Y + 1 - c, name="u")
-    prog.maximize(c)
-    return prog
+    """The program of benchmarks/scaled_sos.py (one generator for the benchmark and these tests)."""
+    import importlib.util
+    import pathlib
+
+    path = pathlib.Path(__file__).resolve().parents[1] / "benchmarks" / "scaled_sos.py"
+    spec = importlib.util.spec_from_file_location("scaled_sos", path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod.scaled_quartic_program(s)
 
 
 @pytest.mark.parametrize("s", [1.0, 1e-6, 1e-3, 2.0 ** -30, 1e3])

@@ -21,7 +21,7 @@ import numpy as np
 from ..result import Status
 
 __all__ = ["decide", "decide_reported", "gamma_from_c", "c_from_gamma", "cheirality", "decide_one", "gamma_lower_one",
-           "decide_reported_one", "gamma_lower", "LB_ROUNDOFF_ULPS"]
+           "decide_reported_one", "gamma_lower", "within_resolution", "within_resolution_one", "LB_ROUNDOFF_ULPS"]
 
 #: gamma_LB is lowered by this many units of round-off of the coordinates' magnitude (:func:`gamma_lower`).
 LB_ROUNDOFF_ULPS = 64.0
@@ -30,12 +30,13 @@ _U = 2.0 ** -53
 _CODES = np.array([Status.NOT_CERTIFIED.value, Status.OPTIMAL.value, Status.NUMERICAL_FAILURE.value], dtype=object)
 
 
-def decide(c_lower, c_upper, tolerances, n_views=None, resolution=None):
+def decide(c_lower, c_upper, tolerances, n_views=None, resolution=None, squares=True):
     """(status, optimal, reported lower bound) for lower/upper bounds in c units (scalars or arrays).
 
     OPTIMAL when the bounds meet (``tolerances.certified``) and -- when the gap passes only through the rule's
-    absolute part -- the gap in gamma = sqrt(c / 2N) is at most ``resolution`` (the normalisation's
-    resolution of the coordinates, :mod:`tritools.model.normalize`; with ``n_views``), NUMERICAL_FAILURE
+    absolute part -- the gap is within ``resolution`` (the normalisation's resolution of the coordinates,
+    :mod:`tritools.model.normalize`; with ``n_views``) by :func:`within_resolution` (on the squares; ``squares=False``:
+    in gamma, for the reported numbers, :func:`decide_reported`), NUMERICAL_FAILURE
     when the lower bound is above the upper bound beyond the tolerance (``tolerances.contradicts``: never a
     certificate), NOT_CERTIFIED otherwise; the reported lower bound is ``tolerances.consistent`` (never above
     the upper bound)."""
@@ -44,8 +45,9 @@ def decide(c_lower, c_upper, tolerances, n_views=None, resolution=None):
         lo, up = np.asarray(c_lower, float), np.asarray(c_upper, float)
         with np.errstate(invalid="ignore"):
             relative = np.asarray(tolerances.certified_relatively(lo, up), bool)
-            gap = gamma_from_c(up, n_views, 1.0) - gamma_from_c(lo, n_views, 1.0)
-            certified = certified & (relative | (gap <= np.asarray(resolution, float)))
+            resolved = within_resolution(gamma_from_c(lo, n_views, 1.0), gamma_from_c(up, n_views, 1.0), resolution,
+                                         squares=squares)
+            certified = certified & (relative | resolved)
     contradicts = np.asarray(tolerances.contradicts(c_lower, c_upper), bool)
     code = np.where(contradicts, 2, np.where(certified, 1, 0))
     status = _CODES[code]
@@ -60,17 +62,20 @@ def decide_reported(gamma_lb, gamma_ub, tolerances, n_views, scale, resolution):
     """Whether the bounds as reported in pixels (gamma_UB at the world point, after the normalisation's
     inverse) still pass :func:`decide`: the final consistency step of every path.  The world point can lose
     what the normalised one had (e.g. a depth of 1e-8 in world units), so a decision taken in normalised
-    coordinates is confirmed on the numbers the user sees; False where either bound is missing."""
+    coordinates is confirmed on the numbers the user sees; False where either bound is missing.  The resolution
+    guard is on the gap in gamma here (``squares=False``): the reported gamma_LB lies below the decided one by
+    round-off bounds in gamma (:func:`gamma_lower`), which the squares would weigh by gamma_UB."""
     lo, up = np.asarray(gamma_lb, float), np.asarray(gamma_ub, float)
     known = np.isfinite(lo) & np.isfinite(up)
     lo, up = np.where(known, lo, 0.0), np.where(known, up, 0.0)
     _, optimal, _ = decide(c_from_gamma(np.minimum(lo, up), n_views, scale), c_from_gamma(up, n_views, scale),
-                           tolerances, n_views, resolution)
+                           tolerances, n_views, resolution, squares=False)
     out = np.asarray(optimal, bool) & known
     return bool(out) if out.ndim == 0 else out
 
 
-def decide_one(c_lower: float, c_upper: float, tolerances, n_views: int, resolution: float) -> tuple:
+def decide_one(c_lower: float, c_upper: float, tolerances, n_views: int, resolution: float,
+               squares: bool = True) -> tuple:
     """The scalar twin of :func:`decide` for one problem: Python floats, ``n_views`` an int > 0, ``tolerances`` a
     :class:`sospoly.Tolerances` (not a subclass: its scalar twins ``gap_tolerance_one`` /
     ``certified_relatively_one`` are the rule here).  (status, optimal, reported lower bound) with the numbers of
@@ -82,8 +87,8 @@ def decide_one(c_lower: float, c_upper: float, tolerances, n_views: int, resolut
     certified = fin_up and not math.isnan(lo) and up - lo <= tol
     if certified and not tolerances.certified_relatively_one(lo, up):      # only through the absolute part
         two_n = 2.0 * n_views
-        gap = math.sqrt(max(up, 0.0) / two_n) - math.sqrt(max(lo, 0.0) / two_n)
-        certified = gap <= resolution
+        certified = within_resolution_one(math.sqrt(max(lo, 0.0) / two_n), math.sqrt(max(up, 0.0) / two_n),
+                                          resolution, squares=squares)
     contradicts = fin_lo and fin_up and lo - up > tol
     status = Status.NUMERICAL_FAILURE if contradicts else Status.OPTIMAL if certified else Status.NOT_CERTIFIED
     return status, certified and not contradicts, up if fin_up and lo > up else lo
@@ -97,7 +102,35 @@ def decide_reported_one(gamma_lb: float, gamma_ub: float, tolerances, n_views: i
         return False
     two_n = 2.0 * n_views
     g_lo, g_up = min(lo, up) * scale, up * scale
-    return decide_one(two_n * g_lo * g_lo, two_n * g_up * g_up, tolerances, n_views, resolution)[1]
+    return decide_one(two_n * g_lo * g_lo, two_n * g_up * g_up, tolerances, n_views, resolution, squares=False)[1]
+
+
+def within_resolution(gamma_lb, gamma_ub, resolution, share=1.0, squares=True):
+    """Is the gap between ``gamma_lb`` <= ``gamma_ub`` within the coordinates' ``resolution`` (in the same units)?
+    The rule is on the squares: gamma_UB^2 - gamma_LB^2 <= share resolution^2 -- for a solver's bounds, whose
+    error is one of f = 2N gamma^2; with ``squares=False`` on gamma, gamma_UB - gamma_LB <= share resolution -- for
+    bounds apart by round-off terms in gamma (:func:`decide_reported`, the TLS report's guard).
+
+    Why squares: the resolution r = ``RESOLUTION_REL`` |x| (sqrt(eps) of the coordinates' magnitude) is where a
+    least-squares optimum can be placed in floating point, and an error r in the projections raises the sum of
+    squares f = 2N gamma^2 by ~r^2 per view, whatever gamma* is: a gap of f within 2N r^2.  At gamma_LB = 0 this
+    is the gap in gamma of at most r (the rule before wave 41); above, it is ~r^2 / (2 gamma), far below r.  A gap in
+    gamma of r let a 16% gap certify a 0.18 px optimum at principal points of 3.9e6 px (r = 0.039 px, a local
+    estimate 1400 times the optimum set the normalised units; review 40a MEDIUM-3).  Scalars or arrays; NaN never
+    passes."""
+    lo, up = np.asarray(gamma_lb, float), np.asarray(gamma_ub, float)
+    res = np.asarray(resolution, float)
+    with np.errstate(invalid="ignore", over="ignore"):
+        out = (up - lo) * (up + lo) <= share * res * res if squares else up - lo <= share * res
+    return out.item() if out.ndim == 0 else out
+
+
+def within_resolution_one(gamma_lb: float, gamma_ub: float, resolution: float, share: float = 1.0,
+                          squares: bool = True) -> bool:
+    """The scalar twin of :func:`within_resolution` for floats (the same operations)."""
+    if not squares:
+        return gamma_ub - gamma_lb <= share * resolution
+    return (gamma_ub - gamma_lb) * (gamma_ub + gamma_lb) <= share * resolution * resolution
 
 
 def gamma_from_c(c, n_views, scale=1.0):

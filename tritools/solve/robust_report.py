@@ -35,7 +35,7 @@ import numpy as np
 from ..model.cameras import power2_scale
 from ..model.magnitude import magnitudes, pixel_floors, resolutions, world_origin_magnitudes
 from ..model.stacked import norms, null_vectors
-from .decide import gamma_from_c, gamma_lower_one
+from .decide import gamma_from_c, gamma_lower_one, within_resolution_one
 from .report import enlarged_distances, gamma_upper, projections_and_spread, projections_and_spread_stack
 
 __all__ = ["TlsReported", "tls_reported", "tls_reported_stack", "guards_pass", "capped_resolution",
@@ -205,7 +205,8 @@ def guards_pass(g_lb: float, g_ub: float, N: int, tolerances, resolved: float, s
     :func:`threshold_resolution`).  Searches prune within :data:`PRUNE_SHARE` of it
     (:meth:`tritools.solve.robust.TlsSearch.meets`, also in :mod:`tritools.solve.robust_cells`)."""
     f_lb, f_ub = 2.0 * N * g_lb * g_lb, 2.0 * N * g_ub * g_ub
-    return tolerances.certified_relatively_one(f_lb, f_ub, share) or g_ub - g_lb <= share * resolved
+    return tolerances.certified_relatively_one(f_lb, f_ub, share) or \
+        within_resolution_one(g_lb, g_ub, resolved, share, squares=False)
 
 
 #: the search's value at its estimate may differ from the compensated f_TLS by at most this fraction of the decision

@@ -1,0 +1,83 @@
+"""Wave 41: the coordinates' resolution guard of the decision rule on the squares (review 40a MEDIUM-3)."""
+from __future__ import annotations
+
+import os
+
+import numpy as np
+import pytest
+from scipy.optimize import minimize, minimize_scalar
+
+import tritools
+from tritools import Ellipse, Point
+from tritools.solve.decide import decide, decide_one, within_resolution, within_resolution_one
+from sospoly import DEFAULT_TOLERANCES
+
+DATA = os.path.join(os.path.dirname(__file__), "data", "review40a_medium3_pp4e6.npz")
+
+
+def _ellipse_distance(y, c, E):
+    """Distance from y to the filled ellipse {c + L u : ||u|| <= 1}, E = L L^T (independent of tritools: the boundary
+    sampled densely, then the nearest sample refined by a bounded scalar search)."""
+    L = np.linalg.cholesky(E)
+    if np.linalg.norm(np.linalg.solve(L, y - c)) <= 1.0:
+        return 0.0
+    t = np.linspace(0.0, 2 * np.pi, 20001)
+    pts = c[:, None] + L @ np.vstack([np.cos(t), np.sin(t)])
+    k = int(np.argmin(np.hypot(*(pts - y[:, None]))))
+    f = lambda s: float(np.hypot(*(c + L @ np.array([np.cos(s), np.sin(s)]) - y)))
+    return minimize_scalar(f, bounds=(t[max(k - 1, 0)], t[min(k + 1, len(t) - 1)]), method="bounded",
+                           options={"xatol": 1e-14}).fun
+
+
+def _gamma(P, x, c, E, X):
+    h = P @ np.append(X, 1.0)
+    y = h[:, :2] / h[:, 2:]
+    d = [np.linalg.norm(y[0] - x[0]), np.linalg.norm(y[1] - x[1]), _ellipse_distance(y[2], c, E)]
+    return float(np.sqrt(np.sum(np.square(d)) / 6.0))
+
+
+def test_a_certificate_at_principal_points_of_4e6_px_keeps_its_gap_within_the_resolution_on_the_squares():
+    """Review 40a MEDIUM-3: two point views and a ~1e3 px ellipse, principal points shifted by 3.93e6 px.  The
+    ellipse caps the normalisation's scale at ~1 / 720 px, so the rule's absolute part allowed a gap of ~0.4 px; the
+    resolution guard (a gamma gap of 1e-8 |x| = 0.039 px) let the delta = 2 step certify 0.1530 .. 0.1813 (16%).
+    Now a certificate's gap satisfies gamma_UB^2 - gamma_LB^2 <= r^2, and gamma_LB stays below an independent
+    upper bound of gamma* (the review's minimiser, distances computed here)."""
+    d = np.load(DATA)
+    P, x0, x1, c, E = d["cameras"], d["x0"], d["x1"], d["ell_centre"], d["ell_matrix"]
+    r = tritools.triangulate(P, [Point(x0), Point(x1), Ellipse(c, E)], time_limit=60)
+    reference = min(_gamma(P, [x0, x1], c, E, d["ref_X"]), float(d["ref_gamma"]) * (1 + 1e-9))
+    assert r.gamma_lb <= reference
+    res = 1e-8 * float(np.median(np.abs(np.concatenate([x0, x1, c]))))
+    if r.optimal:
+        assert r.gamma_ub ** 2 - r.gamma_lb ** 2 <= res ** 2
+        assert (r.gamma_ub - r.gamma_lb) / r.gamma_ub < 0.01
+    # the reported estimate is the optimum (an independent local refinement from it finds nothing lower)
+    g = _gamma(P, [x0, x1], c, E, r.X)
+    sol = minimize(lambda X: _gamma(P, [x0, x1], c, E, X), r.X, method="Nelder-Mead",
+                   options={"xatol": 1e-12, "fatol": 1e-14, "maxiter": 400})
+    assert sol.fun >= g * (1 - 1e-6)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_the_resolution_rule_is_the_old_gamma_gap_at_a_zero_lower_bound_and_tighter_above(seed):
+    rng = np.random.default_rng(seed)
+    res = 10.0 ** rng.uniform(-12, 0, 200)
+    up = res * 10.0 ** rng.uniform(-2, 2, 200)
+    assert np.array_equal(within_resolution(0.0, up, res), up <= res)
+    lo = up * rng.uniform(0, 1, 200)
+    new = within_resolution(lo, up, res)
+    assert not np.any(new & ~(up - lo <= res))                       # never looser than a gamma gap of r
+    assert np.any(~new & (up - lo <= res))                           # strictly tighter somewhere
+    assert [within_resolution_one(float(a), float(b), float(e)) for a, b, e in zip(lo, up, res)] == list(new)
+
+
+def test_decide_and_its_scalar_twin_refuse_a_gap_that_passes_only_through_the_absolute_part_above_the_squares():
+    """c units, N = 3: c_UB = 3.79e-7, c_LB = 2.70e-7 (the review's delta = 2 step) with the normalised
+    resolution 5.45e-5 (gamma gap 4.4e-5 <= r: certified before); gamma^2 gap 1.8e-8 > r^2 = 3.0e-9: refused."""
+    lo, up, res = 2.6984356000664453e-07, 3.788973862455947e-07, 5.4498074917983166e-05
+    assert not decide_one(lo, up, DEFAULT_TOLERANCES, 3, res)[1]
+    assert not bool(decide(np.array([lo]), np.array([up]), DEFAULT_TOLERANCES, 3, np.array([res]))[1][0])
+    # a zero lower bound with gamma_UB within r still certifies (an optimum at 0 in coarse coordinates)
+    up0 = 6 * (0.9 * res) ** 2
+    assert decide_one(0.0, up0, DEFAULT_TOLERANCES, 3, res)[1]
+    assert bool(decide(np.array([0.0]), np.array([up0]), DEFAULT_TOLERANCES, 3, np.array([res]))[1][0])

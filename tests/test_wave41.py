@@ -81,3 +81,23 @@ def test_decide_and_its_scalar_twin_refuse_a_gap_that_passes_only_through_the_ab
     up0 = 6 * (0.9 * res) ** 2
     assert decide_one(0.0, up0, DEFAULT_TOLERANCES, 3, res)[1]
     assert bool(decide(np.array([0.0]), np.array([up0]), DEFAULT_TOLERANCES, 3, np.array([res]))[1][0])
+
+
+def test_a_gap_within_the_rule_at_the_upper_bounds_own_scale_certifies_without_the_resolution():
+    """c_UB = 2N = 6 (the normalisation at the residuals' scale): a gap of 1.06e-6 relative passes the rule
+    (1e-6 + 1e-6 c_UB) through its absolute part; at c_UB >= 1 that is within 2e-6 of c_UB, a meaningful relative
+    gap, so no resolution is asked for (Theorem 1 on a rectified 6-view rig, tests/test_wave30.py).  The same
+    relative gap at c_UB = 3.8e-7 is within the rule at c_UB's own scale (2e-6 c_UB); one of 5e-6 is not, and needs
+    the resolution."""
+    lo, up, res = 5.999993662, 6.0, 5.22e-06
+    assert (up - lo) / up > DEFAULT_TOLERANCES.gap_rel                # not through the relative part alone
+    assert not within_resolution(np.sqrt(lo / 6), np.sqrt(up / 6), res)
+    assert decide_one(lo, up, DEFAULT_TOLERANCES, 3, res)[1]
+    assert bool(decide(np.array([lo]), np.array([up]), DEFAULT_TOLERANCES, 3, np.array([res]))[1][0])
+    up2 = 3.8e-7
+    assert decide_one(up2 * lo / up, up2, DEFAULT_TOLERANCES, 3, 1e-300)[1]
+    lo2 = up2 * (1 - 5e-6)
+    assert DEFAULT_TOLERANCES.certified(lo2, up2)                             # through the absolute part
+    assert not decide_one(lo2, up2, DEFAULT_TOLERANCES, 3, 1e-9)[1]
+    assert not bool(decide(np.array([lo2]), np.array([up2]), DEFAULT_TOLERANCES, 3, np.array([1e-9]))[1][0])
+    assert decide_one(lo2, up2, DEFAULT_TOLERANCES, 3, 1e-6)[1]              # within the resolution on the squares

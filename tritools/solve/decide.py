@@ -33,10 +33,12 @@ _CODES = np.array([Status.NOT_CERTIFIED.value, Status.OPTIMAL.value, Status.NUME
 def decide(c_lower, c_upper, tolerances, n_views=None, resolution=None, squares=True):
     """(status, optimal, reported lower bound) for lower/upper bounds in c units (scalars or arrays).
 
-    OPTIMAL when the bounds meet (``tolerances.certified``) and -- when the gap passes only through the rule's
-    absolute part -- the gap is within ``resolution`` (the normalisation's resolution of the coordinates,
-    :mod:`tritools.model.normalize`; with ``n_views``) by :func:`within_resolution` (on the squares; ``squares=False``:
-    in gamma, for the reported numbers, :func:`decide_reported`), NUMERICAL_FAILURE
+    OPTIMAL when the bounds meet (``tolerances.certified``) and -- when they meet only through the rule's absolute
+    part taken at a scale above c_UB's own (c_UB < 1: ``tolerances.gap_tolerance(c_UB, min(1, |c_UB|))`` exceeded) --
+    the gap is within ``resolution`` (the normalisation's resolution of the coordinates,
+    :mod:`tritools.model.normalize`; with ``n_views``) on the squares, :func:`within_resolution`.  With
+    ``squares=False`` (the repeat on the reported numbers, :func:`decide_reported`) the guard is the one of wave 40:
+    a gap that does not pass the relative part alone must be within ``resolution`` in gamma.  NUMERICAL_FAILURE
     when the lower bound is above the upper bound beyond the tolerance (``tolerances.contradicts``: never a
     certificate), NOT_CERTIFIED otherwise; the reported lower bound is ``tolerances.consistent`` (never above
     the upper bound)."""
@@ -44,10 +46,13 @@ def decide(c_lower, c_upper, tolerances, n_views=None, resolution=None, squares=
     if resolution is not None and n_views is not None:
         lo, up = np.asarray(c_lower, float), np.asarray(c_upper, float)
         with np.errstate(invalid="ignore"):
-            relative = np.asarray(tolerances.certified_relatively(lo, up), bool)
+            if squares:         # the rule at c_UB's own scale where c_UB < 1 (the solver's absolute error is in c)
+                own = np.asarray(up - lo <= tolerances.gap_tolerance(up, np.minimum(1.0, np.abs(up))), bool)
+            else:
+                own = np.asarray(tolerances.certified_relatively(lo, up), bool)
             resolved = within_resolution(gamma_from_c(lo, n_views, 1.0), gamma_from_c(up, n_views, 1.0), resolution,
                                          squares=squares)
-            certified = certified & (relative | resolved)
+            certified = certified & (own | resolved)
     contradicts = np.asarray(tolerances.contradicts(c_lower, c_upper), bool)
     code = np.where(contradicts, 2, np.where(certified, 1, 0))
     status = _CODES[code]
@@ -85,7 +90,9 @@ def decide_one(c_lower: float, c_upper: float, tolerances, n_views: int, resolut
     fin_up, fin_lo = math.isfinite(up), math.isfinite(lo)
     tol = tolerances.gap_tolerance_one(up) if fin_up else math.nan
     certified = fin_up and not math.isnan(lo) and up - lo <= tol
-    if certified and not tolerances.certified_relatively_one(lo, up):      # only through the absolute part
+    own = (up - lo <= tolerances.gap_tolerance_one(up, min(1.0, abs(up)))) if squares else \
+        tolerances.certified_relatively_one(lo, up)
+    if certified and not own:                   # only through the absolute part above c_UB's own scale
         two_n = 2.0 * n_views
         certified = within_resolution_one(math.sqrt(max(lo, 0.0) / two_n), math.sqrt(max(up, 0.0) / two_n),
                                           resolution, squares=squares)

@@ -101,3 +101,39 @@ def test_a_gap_within_the_rule_at_the_upper_bounds_own_scale_certifies_without_t
     assert not decide_one(lo2, up2, DEFAULT_TOLERANCES, 3, 1e-9)[1]
     assert not bool(decide(np.array([lo2]), np.array([up2]), DEFAULT_TOLERANCES, 3, np.array([1e-9]))[1][0])
     assert decide_one(lo2, up2, DEFAULT_TOLERANCES, 3, 1e-6)[1]              # within the resolution on the squares
+
+
+TINY = os.path.join(os.path.dirname(__file__), "data", "review40a_tiny_time_limit.npz")
+
+
+def test_the_region_refinements_start_no_iteration_past_the_deadline():
+    """Review 40a LOW-3: the ellipse / disc verification's Levenberg-Marquardt ran its 100 iterations (0.27-0.38 s on
+    a 3-view problem with a 3e6 px ellipse) whatever the time limit.  Past the deadline no iteration starts and the
+    problems still iterating leave ``ok`` (no certificate from an unfinished refinement)."""
+    from sospoly.budget import Deadline
+    from tritools.solve.discs import verify_discs
+    from tritools.solve.ellipses import verify_ellipses
+
+    d = np.load(TINY)
+    P = d["cameras"]
+    x = np.array([d["x0"], d["ell_centre"], d["x2"]])
+    D = np.zeros((3, 2, 2))
+    D[1] = d["ell_matrix"]
+    past = Deadline(0.0)
+    out = verify_ellipses(P[None], x[None], D[None], deadline=past)
+    assert not out.ok[0] and not out.certified[0]
+    free = verify_ellipses(P[None], x[None], D[None])
+    assert free.ok[0]                                       # the same problem refines without a deadline
+    rho = np.array([1e-3, 1e6, 1e-3])
+    assert not verify_discs(P[None], x[None], rho[None], deadline=past).ok[0]
+
+
+def test_a_tiny_time_limit_on_a_huge_ellipse_ends_as_time_limit_without_a_certificate():
+    d = np.load(TINY)
+    regions = [Point(d["x0"]), Ellipse(d["ell_centre"], d["ell_matrix"]), Point(d["x2"])]
+    r = tritools.triangulate(d["cameras"], regions, time_limit=0.02)
+    assert r.status == tritools.Status.TIME_LIMIT and not r.optimal
+    verification = [a for a in r.attempts if a.step == "verification"]
+    assert all(a.status == "time_limit" for a in verification)
+    full = tritools.triangulate(d["cameras"], regions)
+    assert full.optimal and abs(full.gamma_ub - 0.6100736726960243) <= 1e-7

@@ -84,9 +84,11 @@ def _disc_residual(u: np.ndarray, rho: np.ndarray):
     return u * k[..., None], r, outside
 
 
-def refine_discs_stack(C: np.ndarray, rho: np.ndarray, X: np.ndarray, ok: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def refine_discs_stack(C: np.ndarray, rho: np.ndarray, X: np.ndarray, ok: np.ndarray,
+                       deadline: Deadline | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Levenberg-Marquardt on sum_i dist(Phi(X, P_i), disc_i)^2 (discs of radii rho (M, N) at the origin) from
-    X (M, 3), for the problems where ``ok`` (the twin of :func:`tritools.model.stacked.refine_points_stack`)."""
+    X (M, 3), for the problems where ``ok`` (the twin of :func:`tritools.model.stacked.refine_points_stack`).
+    Past the ``deadline`` no iteration starts and the problems still iterating leave ``ok`` (review 40a LOW-3)."""
     X = X.copy()
     M = len(X)
     mu = np.full(M, 1e-3)
@@ -102,6 +104,10 @@ def refine_discs_stack(C: np.ndarray, rho: np.ndarray, X: np.ndarray, ok: np.nda
     eye2 = np.eye(2)
     for _ in range(LM_MAX_ITER):
         if active.size == 0:
+            break
+        if deadline is not None and deadline.expired:
+            ok = ok.copy()
+            ok[active] = False
             break
         Ca, ra, Xa = C[active], rho[active], X[active]
         u, h, _ = project_stack(Ca, Xa)
@@ -138,7 +144,7 @@ def verify_discs(cameras, centers, radii, *, tolerances: Tolerances = DEFAULT_TO
     ok &= norm.ok
     Cn = norm.cameras_n
     rho_n = rho * norm.scale[:, None]
-    Xn, ok = refine_discs_stack(Cn, rho_n, norm.Xn, ok)
+    Xn, ok = refine_discs_stack(Cn, rho_n, norm.Xn, ok, deadline)
     u, _, fin = project_stack(Cn, Xn)
     ok &= fin
     u = np.where(ok[:, None, None], u, 0.0)

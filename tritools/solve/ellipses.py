@@ -63,9 +63,10 @@ def _hessian(yl, t, R, sigma, outside):
     return np.where(outside[..., None, None], H, 0.0)
 
 
-def refine_ellipses_stack(C, R, sigma, X, ok):
+def refine_ellipses_stack(C, R, sigma, X, ok, deadline: Deadline | None = None):
     """Levenberg-Marquardt on sum_i dist(Phi(X, P_i), E_i)^2 (ellipses at the origin, axes R, sigma (M, N, ...))
-    from X (M, 3), for the problems where ``ok`` (the twin of :func:`tritools.solve.discs.refine_discs_stack`)."""
+    from X (M, 3), for the problems where ``ok`` (the twin of :func:`tritools.solve.discs.refine_discs_stack`, its
+    ``deadline`` too)."""
     X = X.copy()
     mu = np.full(len(X), 1e-3)
 
@@ -79,6 +80,10 @@ def refine_ellipses_stack(C, R, sigma, X, ok):
     active = np.nonzero(ok)[0]
     for _ in range(LM_MAX_ITER):
         if active.size == 0:
+            break
+        if deadline is not None and deadline.expired:
+            ok = ok.copy()
+            ok[active] = False
             break
         Ca, Ra, sa, Xa = C[active], R[active], sigma[active], X[active]
         u, h, _ = project_stack(Ca, Xa)
@@ -119,7 +124,7 @@ def verify_ellipses(cameras, centers, D, *, tolerances: Tolerances = DEFAULT_TOL
     ok &= norm.ok
     Cn = norm.cameras_n
     sig_n = sigma * norm.scale[:, None, None]
-    Xn, ok = refine_ellipses_stack(Cn, R, sig_n, norm.Xn, ok)
+    Xn, ok = refine_ellipses_stack(Cn, R, sig_n, norm.Xn, ok, deadline)
     u, _, fin = project_stack(Cn, Xn)
     ok &= fin
     u = np.where(ok[:, None, None], u, 0.0)

@@ -8,7 +8,11 @@ D_i' = s^2 D_i), in each view's own axes (u_i^loc = R_i^T u_i):
 * the local optimum: Levenberg-Marquardt on the distances to the ellipses (:func:`refine_ellipses_stack`), with
   the exact Hessian of d^2 / 2 in u: for the closest point y = G u
   (:func:`tritools.solve.regions_verify.closest_on_ellipses`), G = (I + t A)^-1, t >= 0 the multiplier of
-  u - y = t A y, it is  I - dy/du = (I - G) + n n^T / (y^T A n),  n = G A y;
+  u - y = t A y, it is  I - dy/du = (I - G) + n n^T / (y^T A n),  n = G A y; from the frame's origin (the DLT of
+  the centres) and, where at least two views are points beside an ellipse, also from the DLT of the point views
+  alone (:func:`tritools.solve.trivial.point_views_start`) where the first did not certify, the lower cost kept
+  (an ellipse of ~1e3 px whose centre is far from the optimum's projection drew the first start to a local minimum
+  at 262 px, the optimum 0.18 px: review 40a);
 * the degree-2 certificate with constant multipliers (:mod:`tritools.solve.regions_verify`): mu_i = t_i (0 inside),
   min_y L = sum_i (omega_i . (R_i^T x_i)^2 - mu_i) + lambda^T g(x), omega_ik = mu_i alpha_ik / (1 + mu_i alpha_ik)
   (rounded down): the point-region bound in the rotated frames, cameras [R_i^T 0; 0 1] P_i, views inside their
@@ -30,6 +34,7 @@ from ..model.stacked import LM_MAX_ITER, damped_step, lm_accept, project_stack
 from .decide import decide
 from .discs import DiscBatch, reported_batch
 from .regions_verify import closest_on_ellipses, compact_bounds, ellipse_axes
+from .trivial import point_views_start
 
 __all__ = ["refine_ellipses_stack", "verify_ellipses"]
 
@@ -99,6 +104,34 @@ def refine_ellipses_stack(C, R, sigma, X, ok, deadline: Deadline | None = None):
     return X, ok & np.all(np.isfinite(X), axis=1)
 
 
+def _cost(Cn, R, sig_n, Xn):
+    """The sum of squared distances to the ellipses at Xn (M, 3), inf where a projection is not finite."""
+    u, _, fin = project_stack(Cn, Xn)
+    e = _local_residual(np.where(fin[:, None, None], u, 0.0), R, sig_n)[0]
+    return np.where(fin, np.sum(e ** 2, axis=(1, 2)), np.inf)
+
+
+def _bounds_at(Cw, Cn, R, sig_n, Xn, ok, resolution, tolerances, deadline):
+    """(ok, optimal, c_lower) of the degree-2 certificate with constant multipliers at the local optima Xn (module
+    docstring), decided by :func:`tritools.solve.decide.decide` in normalised units."""
+    u, _, fin = project_stack(Cn, Xn)
+    ok = ok & fin
+    u = np.where(ok[:, None, None], u, 0.0)
+    e, _, t, outside = _local_residual(u, R, sig_n)
+    pt = sig_n[..., 1] == 0                              # point regions: weight 1, no multiplier
+    alpha = 1.0 / np.where(pt[..., None], 1.0, sig_n) ** 2
+    omega = np.where(outside[..., None], t[..., None] * alpha / (1.0 + t[..., None] * alpha), 0.0) * _ROUND_DOWN
+    omega = np.where(pt[..., None], 1.0, omega)
+    upper_f = np.sum(e ** 2, axis=(1, 2))
+    radius = np.linalg.norm(sig_n[..., 0], axis=1) + np.sqrt(upper_f)
+    z = np.einsum("mnji,mnj->mni", R, u)
+    lower, ok_b = compact_bounds(Cw, _rotated(Cn, R), z, omega, -t, outside & ok[:, None], radius, resolution,
+                                 tolerances, deadline=deadline)
+    ok &= ok_b
+    _, optimal, c_lower = decide(lower, upper_f, tolerances, Cn.shape[1], resolution)
+    return ok, np.array(optimal, bool), np.array(c_lower, float)
+
+
 def _rotated(Cn, R):
     """The cameras of the ellipses' frames: [R^T 0; 0 1] P per view."""
     T = np.zeros(R.shape[:-2] + (3, 3))
@@ -124,22 +157,20 @@ def verify_ellipses(cameras, centers, D, *, tolerances: Tolerances = DEFAULT_TOL
     ok &= norm.ok
     Cn = norm.cameras_n
     sig_n = sigma * norm.scale[:, None, None]
+    start_ok = ok
     Xn, ok = refine_ellipses_stack(Cn, R, sig_n, norm.Xn, ok, deadline)
-    u, _, fin = project_stack(Cn, Xn)
-    ok &= fin
-    u = np.where(ok[:, None, None], u, 0.0)
-    e, _, t, outside = _local_residual(u, R, sig_n)
-    pt = sig_n[..., 1] == 0                              # point regions: weight 1, no multiplier
-    alpha = 1.0 / np.where(pt[..., None], 1.0, sig_n) ** 2
-    omega = np.where(outside[..., None], t[..., None] * alpha / (1.0 + t[..., None] * alpha), 0.0) * _ROUND_DOWN
-    omega = np.where(pt[..., None], 1.0, omega)
-    upper_f = np.sum(e ** 2, axis=(1, 2))
-    radius = np.linalg.norm(sig_n[..., 0], axis=1) + np.sqrt(upper_f)
-    z = np.einsum("mnji,mnj->mni", R, u)
-    lower, ok_b = compact_bounds(Cw, _rotated(Cn, R), z, omega, -t, outside & ok[:, None], radius, norm.resolution,
-                                 tolerances, deadline=deadline)
-    ok &= ok_b
-    _, optimal, c_lower = decide(lower, upper_f, tolerances, N, norm.resolution)
+    ok, optimal, c_lower = _bounds_at(Cw, Cn, R, sig_n, Xn, ok, norm.resolution, tolerances, deadline)
+    X2, second = point_views_start(Cn, sig_n[..., 1] == 0)
+    idx = np.nonzero(second & start_ok & ~optimal)[0]        # not certified from the centres: the second start
+    if idx.size and not (deadline is not None and deadline.expired):
+        Xb, okb = refine_ellipses_stack(Cn[idx], R[idx], sig_n[idx], X2[idx], np.ones(idx.size, bool), deadline)
+        better = okb & (_cost(Cn[idx], R[idx], sig_n[idx], Xb) < _cost(Cn[idx], R[idx], sig_n[idx], Xn[idx]))
+        j, Xb = idx[better], Xb[better]
+        if j.size:
+            Xn = Xn.copy()
+            Xn[j] = Xb
+            ok[j], optimal[j], c_lower[j] = _bounds_at(Cw[j], Cn[j], R[j], sig_n[j], Xb, np.ones(j.size, bool),
+                                                       norm.resolution[j], tolerances, deadline)
     X = norm.world_points(Xn) + origin
     uw, _, fin_w = project_world(C, X)    # the reported numbers: compensated projections, as verify_discs (review 10)
     ok &= fin_w

@@ -22,7 +22,8 @@ from ..model.geometry import common_centre, refine_l2
 from ..model.lm_one import refine_point_one
 from .decide import decide, decide_reported
 
-__all__ = ["TRIVIAL_BOUND", "trivially_certified", "trivially_certified_reported", "local_estimate"]
+__all__ = ["TRIVIAL_BOUND", "trivially_certified", "trivially_certified_reported", "local_estimate",
+           "point_views_start"]
 
 #: ``certified_by`` of a certificate through the trivial lower bound 0.
 TRIVIAL_BOUND = "trivial_bound"
@@ -50,11 +51,24 @@ LOCAL_POINTS_MAX_VIEWS = 10
 
 def local_estimate(cameras_n, regions_n) -> tuple[float, np.ndarray] | None:
     """(gamma'(X), X) in the normalised frame: Levenberg-Marquardt from the frame's origin (the DLT point of
-    the region centres); None when the refinement fails or gamma is not finite.  Point regions of few views take
-    the scalar LM of the single calls (:func:`_points_lm`), the others scipy's (:func:`refine_l2`)."""
+    the region centres) and, with two point views beside a region view, also from their DLT
+    (:func:`point_views_start`), the lower gamma kept; None when the refinements fail or gamma is not finite.
+    Point regions of few views take the scalar LM of the single calls (:func:`_points_lm`), the others scipy's
+    (:func:`refine_l2`)."""
     X = _points_lm(cameras_n, regions_n)
     if X is None:
         X = refine_l2(np.zeros(3), cameras_n, regions_n)
+    best = _scored(X, cameras_n, regions_n)
+    X2, second = point_views_start(np.asarray(cameras_n, float)[None], np.array([[r.is_point for r in regions_n]]))
+    if second[0]:                                       # two point views beside a region: also from their DLT
+        other = _scored(refine_l2(X2[0], cameras_n, regions_n), cameras_n, regions_n)
+        if other is not None and (best is None or other[0] < best[0]):
+            best = other
+    return best
+
+
+def _scored(X, cameras_n, regions_n) -> tuple[float, np.ndarray] | None:
+    """(gamma'(X), X), or None for no X or a gamma that is not finite."""
     if X is None:
         return None
     g = float(gamma_validated(np.asarray(X, float)[None], np.asarray(cameras_n, float), regions_n)[0])   # (checked)
@@ -74,3 +88,18 @@ def _points_lm(cameras_n, regions_n) -> np.ndarray | None:
     xhat = [[float(v) for v in np.asarray(r.center, float).reshape(2)] for r in regions_n]
     X, ok, converged = refine_point_one(C.tolist(), xhat, [0.0, 0.0, 0.0])
     return np.array(X, float) if ok and converged else None
+
+
+def point_views_start(Cn: np.ndarray, pt: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(X (M, 3), ok (M,)): a second start for the local optimum of M problems with region views in the normalised
+    frame (every region's centre at the origin): the DLT of the point views ``pt`` (M, N) alone (rows P_i[k] of
+    those views, each scaled to unit norm), ok where a problem has at least two point views and another view and
+    the point is finite.  A region far larger than the residuals whose centre is far from the optimum's projection
+    can draw the start from all centres to another local minimum (review 40a: 262 px, the optimum 0.18 px)."""
+    use = np.asarray(pt, bool)
+    A = np.where(use[..., None, None], Cn[..., :2, :], 0.0).reshape(len(Cn), -1, 4)
+    nA = np.linalg.norm(A, axis=2, keepdims=True)
+    A = A / np.where(nA > 0, nA, 1.0)
+    w = np.linalg.eigh(np.einsum("mki,mkj->mij", A, A))[1][..., 0]
+    ok = (np.sum(use, axis=1) >= 2) & ~use.all(axis=1) & (np.abs(w[:, 3]) > 1e-12 * np.abs(w).max(axis=1))
+    return w[:, :3] / np.where(ok, w[:, 3], 1.0)[:, None], ok

@@ -54,11 +54,12 @@ from functools import partial
 
 import numpy as np
 
-from ...model.geometry import project
+from ...model.geometry import gamma_validated, project
 from ...model.regions import Point
 from ...model.regions.forms import extent_of
 from ...result import Attempt, Status
 from ..options import SolvePath
+from ..decide import c_from_gamma, decide
 from ..robust_subsolve import ROUND_DOWN, TRUSTED_LOWER_BOUND
 from .context import AttemptStep, PointContext
 from .outcome import better, join, replace, report_point, step_of
@@ -213,7 +214,7 @@ def _try(ctx: PointContext, relax: Relaxation) -> None:
         x = np.array([project(sub.X, P) for P in ctx.cams])
     held = len(held_views(ctx.cams[list(relax.dropped)], [ctx.regions[w] for w in relax.dropped], sub.X)) == \
         len(relax.dropped)
-    certify = sub.status.certified and held     # X' in every dropped region: the gap is the sub-problem's own
+    certify = sub.status.certified and held and _decided(ctx, relax.bound(sub.gamma_lb), sub.X)
     # (report_point decides again on the whole problem's reported numbers, with its cheirality)
     res = report_point(ctx, step_of(sub, ctx), Status.OPTIMAL if certify else Status.NOT_CERTIFIED, certify,
                        relax.bound(sub.gamma_lb), X=sub.X, X_raw=sub.X, image_points=x,
@@ -224,6 +225,20 @@ def _try(ctx: PointContext, relax: Relaxation) -> None:
         ctx.best, ctx.finished = replace(res, message=join(f"certified by {relax.what}", res.message)), True
     elif res.gamma_lb is not None and (ctx.best is None or better(res, ctx.best)):
         ctx.best = replace(res, message=join(f"lower bound of {relax.what}", res.message))
+
+
+def _decided(ctx: PointContext, gamma_lb: float, X) -> bool:
+    """The whole problem's decision in its normalised units (:func:`tritools.solve.decide.decide`, its resolution
+    guard on the squares) on the carried bound and gamma(X') on all N views: with X' in every dropped region the gap
+    is the sub-problem's own, but that was decided with the sub-problem's resolution (its kept views' coordinates,
+    1e5-1e6 px where the whole problem's are 1-25 px: a 1.5e-3 relative gap certified, review 41a MEDIUM-1)."""
+    with np.errstate(all="ignore"):
+        g = float(gamma_validated(np.asarray(X, float)[None], ctx.cams, ctx.regions)[0])
+    if not np.isfinite(g):
+        return False
+    s = ctx.norm.scale
+    return bool(decide(c_from_gamma(min(gamma_lb, g), ctx.N, s), c_from_gamma(g, ctx.N, s), ctx.tolerances, ctx.N,
+                       ctx.norm.resolution)[1])
 
 
 #: the point stages the sub-problem never runs: itself (no recursion), and the degree-4 exact-variety step

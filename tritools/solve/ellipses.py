@@ -68,19 +68,20 @@ def _hessian(yl, t, R, sigma, outside):
     return np.where(outside[..., None, None], H, 0.0)
 
 
+def _cost(Cn, R, sig_n, Xn):
+    """The sum of squared distances to the ellipses at Xn (M, 3), inf where a projection is not finite."""
+    u, _, fin = project_stack(Cn, Xn)
+    e = _local_residual(np.where(fin[:, None, None], u, 0.0), R, sig_n)[0]
+    return np.where(fin, np.sum(e ** 2, axis=(1, 2)), np.inf)
+
+
 def refine_ellipses_stack(C, R, sigma, X, ok, deadline: Deadline | None = None):
     """Levenberg-Marquardt on sum_i dist(Phi(X, P_i), E_i)^2 (ellipses at the origin, axes R, sigma (M, N, ...))
     from X (M, 3), for the problems where ``ok`` (the twin of :func:`tritools.solve.discs.refine_discs_stack`, its
     ``deadline`` too)."""
     X = X.copy()
     mu = np.full(len(X), 1e-3)
-
-    def cost_of(Xc, Cc, Rc, sc):
-        u, h, fin = project_stack(Cc, Xc)
-        e = _local_residual(np.where(fin[:, None, None], u, 0.0), Rc, sc)[0]
-        return np.where(fin, np.sum(e ** 2, axis=(1, 2)), np.inf)
-
-    cost = cost_of(X, C, R, sigma)
+    cost = _cost(C, R, sigma, X)
     ok = ok & np.isfinite(cost)
     active = np.nonzero(ok)[0]
     for _ in range(LM_MAX_ITER):
@@ -99,16 +100,9 @@ def refine_ellipses_stack(C, R, sigma, X, ok, deadline: Deadline | None = None):
         g = np.einsum("mnai,mna->mi", Ju, e)
         step = damped_step(JtJ, g, mu[active])
         Xt = Xa + step
-        ct = cost_of(Xt, Ca, Ra, sa)
+        ct = _cost(Ca, Ra, sa, Xt)
         active = lm_accept(X, cost, mu, active, Xa, step, Xt, ct)
     return X, ok & np.all(np.isfinite(X), axis=1)
-
-
-def _cost(Cn, R, sig_n, Xn):
-    """The sum of squared distances to the ellipses at Xn (M, 3), inf where a projection is not finite."""
-    u, _, fin = project_stack(Cn, Xn)
-    e = _local_residual(np.where(fin[:, None, None], u, 0.0), R, sig_n)[0]
-    return np.where(fin, np.sum(e ** 2, axis=(1, 2)), np.inf)
 
 
 def _bounds_at(Cw, Cn, R, sig_n, Xn, ok, resolution, tolerances, deadline):

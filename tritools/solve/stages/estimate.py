@@ -168,7 +168,9 @@ def _known_estimate_meets(ctx: PointContext, st: StepState) -> bool:
 
 def _local_seed(ctx: PointContext) -> tuple | None:
     """The local estimate (:meth:`PointContext.local`: L2 refinement from the frame's origin) as an estimate
-    tuple, its image points the regions' points closest to its projections; None without one."""
+    tuple, its image points its projections (as an extraction's x_i* from v*, ``TriangulationResult.image_points``:
+    the regions' closest points were reported before wave 41, so a step that took this estimate reported other
+    image points than one that extracted the same X); None without one."""
     loc = ctx.local()
     if loc is None:
         return None
@@ -176,9 +178,7 @@ def _local_seed(ctx: PointContext) -> tuple | None:
     h = ctx.cams_n @ np.append(X, 1.0)
     if not np.all(np.isfinite(h)) or np.any(h[:, 2] == 0):
         return None
-    p = h[:, :2] / h[:, 2:]
-    x = np.array([np.asarray(r.closest_point(p[i]), float).reshape(2) for i, r in enumerate(ctx.regs_n)])
-    return (float(g), np.asarray(X, float), np.asarray(X, float), x)
+    return (float(g), np.asarray(X, float), np.asarray(X, float), h[:, :2] / h[:, 2:])
 
 
 def _after_shortcut(ctx: PointContext, st: StepState) -> None:

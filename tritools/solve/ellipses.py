@@ -9,7 +9,8 @@ D_i' = s^2 D_i), in each view's own axes (u_i^loc = R_i^T u_i):
   the exact Hessian of d^2 / 2 in u: for the closest point y = G u
   (:func:`tritools.solve.regions_verify.closest_on_ellipses`), G = (I + t A)^-1, t >= 0 the multiplier of
   u - y = t A y, it is  I - dy/du = (I - G) + n n^T / (y^T A n),  n = G A y; from the frame's origin (the DLT of
-  the centres) and, where at least two views are points beside an ellipse, also from the DLT of the point views
+  the centres) and, where at least two views are points or ellipses far smaller than another
+  (:func:`tritools.solve.trivial.small_views`), also from the DLT of those views
   alone (:func:`tritools.solve.trivial.point_views_start`) where the first did not certify, the lower cost kept
   (an ellipse of ~1e3 px whose centre is far from the optimum's projection drew the first start to a local minimum
   at 262 px, the optimum 0.18 px: review 40a);
@@ -34,7 +35,7 @@ from ..model.stacked import LM_MAX_ITER, damped_step, lm_accept, project_stack
 from .decide import decide
 from .discs import DiscBatch, reported_batch
 from .regions_verify import closest_on_ellipses, compact_bounds, ellipse_axes
-from .trivial import point_views_start
+from .trivial import point_views_start, small_views
 
 __all__ = ["refine_ellipses_stack", "verify_ellipses"]
 
@@ -154,7 +155,7 @@ def verify_ellipses(cameras, centers, D, *, tolerances: Tolerances = DEFAULT_TOL
     start_ok = ok
     Xn, ok = refine_ellipses_stack(Cn, R, sig_n, norm.Xn, ok, deadline)
     ok, optimal, c_lower = _bounds_at(Cw, Cn, R, sig_n, Xn, ok, norm.resolution, tolerances, deadline)
-    X2, second = point_views_start(Cn, sig_n[..., 1] == 0)
+    X2, second = point_views_start(Cn, small_views(sig_n[..., 0]))
     idx = np.nonzero(second & start_ok & ~optimal)[0]        # not certified from the centres: the second start
     if idx.size and not (deadline is not None and deadline.expired):
         Xb, okb = refine_ellipses_stack(Cn[idx], R[idx], sig_n[idx], X2[idx], np.ones(idx.size, bool), deadline)

@@ -23,7 +23,7 @@ from ..model.lm_one import refine_point_one
 from .decide import decide, decide_reported
 
 __all__ = ["TRIVIAL_BOUND", "trivially_certified", "trivially_certified_reported", "local_estimate",
-           "point_views_start"]
+           "point_views_start", "small_views", "SMALL_SHARE"]
 
 #: ``certified_by`` of a certificate through the trivial lower bound 0.
 TRIVIAL_BOUND = "trivial_bound"
@@ -51,16 +51,18 @@ LOCAL_POINTS_MAX_VIEWS = 10
 
 def local_estimate(cameras_n, regions_n) -> tuple[float, np.ndarray] | None:
     """(gamma'(X), X) in the normalised frame: Levenberg-Marquardt from the frame's origin (the DLT point of
-    the region centres) and, with two point views beside a region view, also from their DLT
-    (:func:`point_views_start`), the lower gamma kept; None when the refinements fail or gamma is not finite.
+    the region centres) and, with two point views (or regions far smaller than another, :func:`small_views`) beside
+    a region view, also from their DLT (:func:`point_views_start`), the lower gamma kept; None when the refinements
+    fail or gamma is not finite.
     Point regions of few views take the scalar LM of the single calls (:func:`_points_lm`), the others scipy's
     (:func:`refine_l2`)."""
     X = _points_lm(cameras_n, regions_n)
     if X is None:
         X = refine_l2(np.zeros(3), cameras_n, regions_n)
     best = _scored(X, cameras_n, regions_n)
-    X2, second = point_views_start(np.asarray(cameras_n, float)[None], np.array([[r.is_point for r in regions_n]]))
-    if second[0]:                                       # two point views beside a region: also from their DLT
+    extent = np.array([[0.0 if r.is_point else float(r.extent().radius) for r in regions_n]])
+    X2, second = point_views_start(np.asarray(cameras_n, float)[None], small_views(extent))
+    if second[0]:                                       # two small views beside a large region: also from their DLT
         other = _scored(refine_l2(X2[0], cameras_n, regions_n), cameras_n, regions_n)
         if other is not None and (best is None or other[0] < best[0]):
             best = other
@@ -88,6 +90,18 @@ def _points_lm(cameras_n, regions_n) -> np.ndarray | None:
     xhat = [[float(v) for v in np.asarray(r.center, float).reshape(2)] for r in regions_n]
     X, ok, converged = refine_point_one(C.tolist(), xhat, [0.0, 0.0, 0.0])
     return np.array(X, float) if ok and converged else None
+
+
+#: a view's region is "small" for :func:`small_views` when its extent is at most this share of the largest one's
+SMALL_SHARE = 1e-2
+
+
+def small_views(extent: np.ndarray) -> np.ndarray:
+    """(M, N) bool: the views whose region's extent (M, N; 0 for a point) is at most ``SMALL_SHARE`` of the problem's
+    largest -- the views :func:`point_views_start` triangulates (points, and keypoint-sized regions beside a region
+    far larger than them)."""
+    e = np.asarray(extent, float)
+    return e <= SMALL_SHARE * np.max(e, axis=1, keepdims=True)
 
 
 def point_views_start(Cn: np.ndarray, pt: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -155,10 +155,12 @@ def verify_ellipses(cameras, centers, D, *, tolerances: Tolerances = DEFAULT_TOL
     start_ok = ok
     Xn, ok = refine_ellipses_stack(Cn, R, sig_n, norm.Xn, ok, deadline)
     ok, optimal, c_lower = _bounds_at(Cw, Cn, R, sig_n, Xn, ok, norm.resolution, tolerances, deadline)
-    X2, second = point_views_start(Cn, small_views(sig_n[..., 0]))
-    idx = np.nonzero(second & start_ok & ~optimal)[0]        # not certified from the centres: the second start
+    idx = np.nonzero(start_ok & ~optimal)[0]                 # not certified from the centres: the second start
+    if idx.size:
+        X2, second = point_views_start(Cn[idx], small_views(sig_n[idx, :, 0]))
+        idx, X2 = idx[second], X2[second]
     if idx.size and not (deadline is not None and deadline.expired):
-        Xb, okb = refine_ellipses_stack(Cn[idx], R[idx], sig_n[idx], X2[idx], np.ones(idx.size, bool), deadline)
+        Xb, okb = refine_ellipses_stack(Cn[idx], R[idx], sig_n[idx], X2, np.ones(idx.size, bool), deadline)
         better = okb & (_cost(Cn[idx], R[idx], sig_n[idx], Xb) < _cost(Cn[idx], R[idx], sig_n[idx], Xn[idx]))
         j, Xb = idx[better], Xb[better]
         if j.size:

@@ -20,6 +20,7 @@ import numpy as np
 from ..model.geometry import gamma_validated
 from ..model.geometry import common_centre, refine_l2
 from ..model.lm_one import refine_point_one
+from ..model.stacked import dlt_stack
 from .decide import decide, decide_reported
 
 __all__ = ["TRIVIAL_BOUND", "trivially_certified", "trivially_certified_reported", "local_estimate",
@@ -106,14 +107,11 @@ def small_views(extent: np.ndarray) -> np.ndarray:
 
 def point_views_start(Cn: np.ndarray, pt: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(X (M, 3), ok (M,)): a second start for the local optimum of M problems with region views in the normalised
-    frame (every region's centre at the origin): the DLT of the point views ``pt`` (M, N) alone (rows P_i[k] of
-    those views, each scaled to unit norm), ok where a problem has at least two point views and another view and
-    the point is finite.  A region far larger than the residuals whose centre is far from the optimum's projection
-    can draw the start from all centres to another local minimum (review 40a: 262 px, the optimum 0.18 px)."""
+    frame (every region's centre at the origin): :func:`tritools.model.stacked.dlt_stack` of the views ``pt`` (M, N)
+    alone (the other views' cameras zeroed: rows of zeros), ok where a problem has at least two such views and
+    another view and the point is finite.  A region far larger than the residuals whose centre is far from the
+    optimum's projection can draw the start from all centres to another local minimum (review 40a: 262 px, the
+    optimum 0.18 px)."""
     use = np.asarray(pt, bool)
-    A = np.where(use[..., None, None], Cn[..., :2, :], 0.0).reshape(len(Cn), -1, 4)
-    nA = np.linalg.norm(A, axis=2, keepdims=True)
-    A = A / np.where(nA > 0, nA, 1.0)
-    w = np.linalg.eigh(np.einsum("mki,mkj->mij", A, A))[1][..., 0]
-    ok = (np.sum(use, axis=1) >= 2) & ~use.all(axis=1) & (np.abs(w[:, 3]) > 1e-12 * np.abs(w).max(axis=1))
-    return w[:, :3] / np.where(ok, w[:, 3], 1.0)[:, None], ok
+    X, ok = dlt_stack(np.where(use[..., None, None], Cn, 0.0), np.zeros(use.shape + (2,)))
+    return X, ok & (np.sum(use, axis=1) >= 2) & ~use.all(axis=1)

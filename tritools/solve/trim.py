@@ -39,10 +39,10 @@ from fractions import Fraction
 
 import numpy as np
 
-from ..model.regions import ConeKind, Segment, conic_form_of
+from ..model.regions import ConeKind, Polytope, Segment, conic_form_of, polytope_vertices
 
-__all__ = ["exact_fundamental", "segment_interval", "trimmed_regions", "segment_of", "TRIM_SHARE", "TRIM_MIN_RATIO",
-           "TRIM_ANCHORS"]
+__all__ = ["exact_fundamental", "segment_interval", "trimmed_regions", "segment_of", "polytope_axis", "TRIM_SHARE",
+           "TRIM_MIN_RATIO", "TRIM_ANCHORS"]
 
 #: a segment is trimmed only where its part that can hold the closest point is at most this share of it
 TRIM_SHARE = 0.25
@@ -95,11 +95,18 @@ def _divide(num: tuple, den: tuple) -> tuple[float, float] | None:
     return min(q), max(q)
 
 
-def segment_interval(cams: np.ndarray, regions, s: int, u_s: np.ndarray, r: float, radii) -> tuple | None:
+def segment_interval(cams: np.ndarray, regions, s: int, u_s: np.ndarray, r: float, radii, *, line=None,
+                     reach: float = 0.0) -> tuple | None:
     """(tau_lo, tau_hi): the parameters of segment ``regions[s]`` that can hold the closest point of the optimum's
     projection (module docstring), from the local estimate's projection ``u_s`` in view s, r = sqrt(f_UB) and the
-    regions' centre radii ``radii``; None where no view bounds it."""
-    c, d = segment_of(regions[s])
+    regions' centre radii ``radii``; None where no view bounds it.  ``line`` = (c, d, w): the axis c + tau d of a
+    region within w of it (:func:`polytope_axis`) instead of a segment; ``reach``: the interval grown by that many
+    pixels (r for a polytope: its closest point lies within r of the projection)."""
+    if line is None:
+        c, d = segment_of(regions[s])
+        w = 0.0
+    else:
+        c, d, w = line
     L = float(np.hypot(d[0], d[1]))
     if not (L > 0 and math.isfinite(L) and np.all(np.isfinite(u_s))):
         return None
@@ -107,7 +114,7 @@ def segment_interval(cams: np.ndarray, regions, s: int, u_s: np.ndarray, r: floa
     n = np.array([-u[1], u[0]])
     t0 = float(u @ (u_s - c))
     c0 = c + t0 * u
-    rd = r * (1 + 1e-12) + 1e-12 * (float(np.max(np.abs(c))) + L + abs(t0))
+    rd = (r + w) * (1 + 1e-12) + 1e-12 * (float(np.max(np.abs(c))) + L + abs(t0))
     lo, hi = -math.inf, math.inf
     anchors = sorted((radii[j], j) for j in range(len(regions)) if j != s and math.isfinite(radii[j]))
     for _, j in anchors[:TRIM_ANCHORS]:
@@ -125,7 +132,7 @@ def segment_interval(cams: np.ndarray, regions, s: int, u_s: np.ndarray, r: floa
             lo, hi = max(lo, t[0]), min(hi, t[1])
     if not (math.isfinite(lo) and math.isfinite(hi)):
         return None
-    pad = 1e-9 * (abs(t0) + max(abs(lo), abs(hi)) + float(np.max(np.abs(c))) + r)
+    pad = 1e-9 * (abs(t0) + max(abs(lo), abs(hi)) + float(np.max(np.abs(c))) + r) + reach
     if lo > hi:               # (no point with f <= f_UB: f_UB is not an upper bound after all; nothing trimmed)
         return None
     tau = [min(1.0, max(-1.0, (t0 + lo - pad) / L)), min(1.0, max(-1.0, (t0 + hi + pad) / L))]
@@ -144,6 +151,50 @@ def segment_of(region) -> tuple:
     return np.asarray(form.center, float), np.asarray(form.direction, float)
 
 
+def polytope_axis(region) -> tuple | None:
+    """(c, d, w, B, cb) of a region whose conic form is exactly a polytope ||B y + cb||_inf <= 1: its vertices lie
+    within w of the axis c + tau d, |tau| <= 1, along the direction of its two farthest vertices (w padded for the
+    vertices' rounding); None otherwise."""
+    try:
+        form = conic_form_of(region)
+        V = np.asarray(polytope_vertices(form.B, form.c), float) if form.kind == ConeKind.POLYTOPE and \
+            not form.convexified else None
+    except (TypeError, ValueError, AttributeError, NotImplementedError):
+        return None
+    if V is None or len(V) < 2 or not np.all(np.isfinite(V)):
+        return None
+    diff = V[:, None] - V[None]
+    i, j = np.unravel_index(np.argmax(np.einsum("ijk,ijk->ij", diff, diff)), diff.shape[:2])
+    u = (V[i] - V[j]) / np.linalg.norm(V[i] - V[j])
+    n = np.array([-u[1], u[0]])
+    a, b = (V - V[j]) @ u, (V - V[j]) @ n
+    c = V[j] + (a.max() + a.min()) / 2 * u + (b.max() + b.min()) / 2 * n
+    L = (a.max() - a.min()) / 2
+    w = (b.max() - b.min()) / 2 + 1e-6 * L + 1e-9 * float(np.max(np.abs(V)))
+    return c, L * u, w, np.asarray(form.B, float), np.asarray(form.c, float)
+
+
+def _trimmed_polytope(cams, regions, s, h, r, radii):
+    """The polytope of view s cut by the slab across its axis that holds the closest point (module docstring), or
+    None where that slab is not at most :data:`TRIM_SHARE` of it."""
+    ax = polytope_axis(regions[s])
+    if ax is None:
+        return None
+    c, d, w, B, cb = ax
+    L = float(np.hypot(d[0], d[1]))
+    if not (L > TRIM_MIN_RATIO * (r + w) and w < TRIM_SHARE * L):
+        return None
+    iv = segment_interval(cams, regions, s, h[:2] / h[2], r, radii, line=(c, d, w), reach=r)
+    if iv is None or (iv[1] - iv[0]) / 2 > TRIM_SHARE:
+        return None
+    u = d / L
+    mid, half = c + (iv[0] + iv[1]) / 2 * d, (iv[1] - iv[0]) / 2 * L
+    try:
+        return Polytope(np.vstack([B, u / half]), np.append(cb, -float(u @ mid) / half))
+    except (ValueError, ArithmeticError):        # (an empty cut in floats: left as it is)
+        return None
+
+
 def trimmed_regions(cams: np.ndarray, regions, X: np.ndarray, f_ub: float, radii) -> tuple | None:
     """The regions with every long segment (a region whose conic form is a segment, :func:`segment_of`; at least
     :data:`TRIM_MIN_RATIO` r long) replaced by its part that can hold the closest point (:func:`segment_interval`,
@@ -157,9 +208,14 @@ def trimmed_regions(cams: np.ndarray, regions, X: np.ndarray, f_ub: float, radii
         Xh = np.append(np.asarray(X, float), 1.0)
         for s, reg in enumerate(regions):
             c, d = segment_of(reg)
-            if c is None or not float(np.hypot(d[0], d[1])) > TRIM_MIN_RATIO * r:
-                continue
             h = cams[s] @ Xh
+            if c is None:
+                cut = _trimmed_polytope(cams, regions, s, h, r, radii)
+                if cut is not None:
+                    out[s], changed = cut, True
+                continue
+            if not float(np.hypot(d[0], d[1])) > TRIM_MIN_RATIO * r:
+                continue
             iv = segment_interval(cams, regions, s, h[:2] / h[2], r, radii)
             if iv is None or (iv[1] - iv[0]) / 2 > TRIM_SHARE:
                 continue

@@ -64,7 +64,7 @@ from ...result import Attempt, Status
 from ..options import SolvePath
 from ..decide import c_from_gamma, decide
 from ..robust_subsolve import ROUND_DOWN, TRUSTED_LOWER_BOUND
-from ..trim import segment_of, trimmed_regions
+from ..trim import polytope_axis, segment_of, trimmed_regions
 from .context import AttemptStep, PointContext
 from .outcome import better, join, replace, report_point, step_of
 
@@ -162,7 +162,7 @@ def relaxations(ctx: PointContext, X) -> list[Relaxation]:
     if trimmed is not None:
         views = ", ".join(str(i) for i, (a, b) in enumerate(zip(trimmed, ctx.regions)) if a is not b)
         out.append(Relaxation(tuple(range(ctx.N)), trimmed, _same,
-                              f"the problem with the long segment(s) of view(s) {views} trimmed", plan=True))
+                              f"the problem with the long region(s) of view(s) {views} trimmed", plan=True))
     held = held_views(ctx.cams, ctx.regions, X)
     # then the wide regions (a poor local estimate -- the whole problem's frame scaled by them -- may sit outside
     # some): a certificate where they hold the sub-problem's minimiser, a lower bound at least (d_w >= 0)
@@ -185,7 +185,7 @@ def _same(gamma_lb: float) -> float:
 def _trimmed(ctx: PointContext, X, gamma_px: float) -> tuple | None:
     """The regions with the long segments trimmed (:func:`tritools.solve.trim.trimmed_regions`) at the local
     estimate X, f_UB = 2N gamma(X)^2 on the whole problem; None where none is."""
-    if all(segment_of(r)[0] is None for r in ctx.regions):
+    if all(segment_of(r)[0] is None and polytope_axis(r) is None for r in ctx.regions if not r.is_point):
         return None
     with np.errstate(all="ignore"):
         g = float(gamma_validated(np.asarray(X, float)[None], ctx.cams, ctx.regions)[0])

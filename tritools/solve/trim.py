@@ -135,8 +135,10 @@ def segment_interval(cams: np.ndarray, regions, s: int, u_s: np.ndarray, r: floa
     pad = 1e-9 * (abs(t0) + max(abs(lo), abs(hi)) + float(np.max(np.abs(c))) + r) + reach
     if lo > hi:               # (no point with f <= f_UB: f_UB is not an upper bound after all; nothing trimmed)
         return None
-    tau = [min(1.0, max(-1.0, (t0 + lo - pad) / L)), min(1.0, max(-1.0, (t0 + hi + pad) / L))]
-    return tau[0], tau[1]
+    lo, hi = (t0 + lo - pad) / L, (t0 + hi + pad) / L
+    if line is not None:            # (a polytope's axis ends at its computed vertices: not clipped, the cut is R's)
+        return lo, hi
+    return min(1.0, max(-1.0, lo)), min(1.0, max(-1.0, hi))
 
 
 def segment_of(region) -> tuple:
@@ -189,6 +191,8 @@ def _trimmed_polytope(cams, regions, s, h, r, radii):
         return None
     u = d / L
     mid, half = c + (iv[0] + iv[1]) / 2 * d, (iv[1] - iv[0]) / 2 * L
+    if not half > 0:
+        return None
     try:
         return Polytope(np.vstack([B, u / half]), np.append(cb, -float(u @ mid) / half))
     except (ValueError, ArithmeticError):        # (an empty cut in floats: left as it is)

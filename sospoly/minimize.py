@@ -94,6 +94,7 @@ from .certificates.term_hierarchy import (cheap_term_level, newton_smaller, pars
                                          term_levels)
 from .lowering.conic import GramForm
 from .solvers.backends import cvxpy_available, get_backend
+from .recentre import in_callers_units
 from .scaling import ScaledProgram, lifted, scaled_program, uncapped, used_gens
 from .solvers.lower_bound import solve_psatz
 from .solvers.solve import LowerBound, ProgramSolution
@@ -306,7 +307,8 @@ def minimize(f: Polynomial | float, eq: Sequence[Polynomial | float] = (), ineq:
                          deadline=deadline, refine=refine, t0=t0)
 
     best = solve(f, eq, ineq, multiplier, radius)
-    return uncapped(_recentred(best, f, eq, ineq, multiplier, radius, solve, tol, deadline, t0), f, eq, ineq)
+    best = _recentred(best, f, eq, ineq, multiplier, radius, solve, tol, deadline, t0)
+    return uncapped(in_callers_units(best, f, eq, ineq, tol), f, eq, ineq)
 
 
 def _strategy(f, eq, ineq, multiplier, radius, *, gens, d0, last, sparsity, low_degree, form, backend, tol, budget,

@@ -40,11 +40,13 @@ from itertools import product
 import numpy as np
 
 from .algebra.polynomial import Polynomial
+from .analysis.candidates import feasibility_violation
 from .scaling import MAX_EXPONENT, pow2_above, scaled_program
 
 __all__ = ["Cancellation", "CANCELLATION_BITS", "T_BITS", "MAX_TERMS", "SCALE_MAX_TERMS", "RECENTRE_ROUNDS",
            "translation_point", "translated", "cancellation_scale", "scale_of_result", "translated_program",
-           "result_in_original", "exact_value", "exact_fraction", "with_exact_values", "pooled", "recentred"]
+           "result_in_original", "exact_value", "exact_fraction", "with_exact_values", "pooled", "recentred",
+           "in_callers_units"]
 
 #: significant bits kept of each coordinate of the translation t.
 T_BITS = 12
@@ -193,6 +195,24 @@ def with_exact_values(res, f: Polynomial, tol, scale: float):
                    optimal=optimal, status=status, scale=scale, message=message)
 
 
+def in_callers_units(res, f: Polynomial, eq, ineq, tol):
+    """``res`` with the candidates that meet the constraints *as given* within ``tol.feasibility`` (the rule of
+    :mod:`sospoly.tolerances`, :func:`sospoly.analysis.candidates.feasibility_violation`) and decided again on them
+    (:func:`with_exact_values` at ``res.scale``).  The candidates are screened on the balanced, normalised program,
+    whose coefficients the rule reads in other units: a minimiser 2.2e-6 (3.6e-5 without the polish) outside a
+    constraint by the caller's measure was reported as a certified minimiser (review 42b F2)."""
+    pts = [np.asarray(p, float) for p in (res.candidates or res.minimizers)]
+    if not pts or (not eq and not ineq):
+        return res
+    keep = tuple(p for p in pts if feasibility_violation(p, eq, ineq) <= tol.feasibility)
+    if len(keep) == len(pts):
+        return res
+    note = f"{len(pts) - len(keep)} candidate(s) outside the constraints as given (feasibility tolerance " \
+           f"{tol.feasibility:g}) not reported"
+    out = with_exact_values(replace(res, candidates=keep, minimizers=keep[:1]), f, tol, res.scale)
+    return replace(out, message="; ".join(m for m in (out.message, note) if m))
+
+
 def _away_from_origin(f: Polynomial, x) -> bool:
     """Is the translation point of x (:func:`translation_point`) away from the origin, in the balanced units of
     :func:`cancellation_scale`?"""
@@ -339,10 +359,16 @@ def recentred(best, f: Polynomial, tol, solve_at, deadline, better):
     (:func:`pooled`; ``better(a, b)`` chooses whose solve the result reports)."""
     if not best.minimizers:
         return best
-    cut = cancellation_scale(f, best.minimizers[0])
+    # the minimiser by the exact values: float values of f cancel away from the origin (a candidate of a translated
+    # Motzkin polynomial at +860 read as -9.8e4 was taken as the minimiser, and the origin's scale 1.8e19 decided a
+    # 0.72 gap: review 42b F1)
+    first = with_exact_values(best, f, tol, best.scale)          # an upper bound f(v^) never below f(v^)
+    if not first.minimizers:
+        return first
+    cut = cancellation_scale(f, first.minimizers[0])
     if cut.st >= cut.s0:
-        return with_exact_values(best, f, tol, best.scale)       # an upper bound f(v^) never below f(v^)
-    res = with_exact_values(best, f, tol, scale_of_result(best, f, cut))
+        return first
+    res = with_exact_values(best, f, tol, scale_of_result(first, f, cut))
     note, moved, last = f"scale {cut.s0:.3g} at the origin, {cut.st:.3g} at the minimiser", False, cut.s0
     for _ in range(RECENTRE_ROUNDS):
         if not worth_translating(last, cut.st) or deadline.expired:

@@ -333,6 +333,7 @@ def negative_witness(pn: Polynomial, Q: np.ndarray, basis: np.ndarray, tol: Tole
     point: the numerical verdict stands there, module docstring.)"""
     from scipy.optimize import minimize as sp_min
 
+    from .analysis.candidates import _Compiled
     from .analysis.extraction import extract_from_gram
 
     n = pn.nvars
@@ -346,17 +347,22 @@ def negative_witness(pn: Polynomial, Q: np.ndarray, basis: np.ndarray, tol: Tole
         starts += [sg * eye[i] for i in range(n) for sg in (1.0, -1.0)]
     starts += list(np.random.default_rng(0).standard_normal((WITNESS_RANDOM_STARTS, n)))
 
+    comp = _Compiled([pn])          # (values and gradient as arrays: BFGS with the exact gradient at any n)
+
     def f(w):
-        return float(pn(np.asarray(w, float)))
+        return float(comp.values(np.asarray(w, float))[0])
+
+    def grad(w):
+        return comp.jacobian(np.asarray(w, float))[0]
     with np.errstate(all="ignore"):
         for w0 in starts:
             if not np.all(np.isfinite(w0)):
                 continue
             pts = [np.asarray(w0, float)]
             try:
-                if n > WITNESS_MAX_POLISHED_VARS:           # (finite-difference gradients: n + 1 values a step)
+                if n > WITNESS_MAX_GRADIENT_VARS:
                     raise ValueError("not polished")
-                r = sp_min(f, w0, method="BFGS", options={"maxiter": WITNESS_ITERATIONS, "gtol": 1e-14})
+                r = sp_min(f, w0, jac=grad, method="BFGS", options={"maxiter": WITNESS_ITERATIONS, "gtol": 1e-14})
                 if np.all(np.isfinite(r.x)):
                     pts.append(np.asarray(r.x, float))
             except (ValueError, FloatingPointError, OverflowError, ArithmeticError):
@@ -383,8 +389,11 @@ WITNESS_ROUNDOFF = 64 * 2.0 ** -53
 WITNESS_KERNEL_POINTS = 8
 WITNESS_RANDOM_STARTS = 4
 WITNESS_ITERATIONS = 50
-#: above this many variables the starts are only evaluated, not polished (and the unit vectors are left out).
+#: above this many variables the unit vectors are left out of the starts.
 WITNESS_MAX_POLISHED_VARS = 8
+#: above this many variables the starts are only evaluated, not polished (below, BFGS with the exact gradient: from 9
+#: variables the starts were only evaluated and p - 1e-8 with an exact zero at sqrt(a) was "SOS", review 42b F3).
+WITNESS_MAX_GRADIENT_VARS = 64
 
 
 def _over_budget(side: int, n: int, budget: Budget, reduction: bool = True) -> str:

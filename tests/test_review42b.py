@@ -4,6 +4,7 @@ from __future__ import annotations
 import math
 from fractions import Fraction
 
+import numpy as np
 import pytest
 
 import sospoly as sp
@@ -50,3 +51,15 @@ def test_a_certified_minimiser_meets_the_constraints_as_given():
         assert -_exact(h, p) <= sp.DEFAULT_TOLERANCES.feasibility * max(1.0, cmax)
     assert res.lower_bound is not None and res.lower_bound <= -3080.79300      # the minimum (the review's mpmath)
     assert res.upper_bound is None or res.upper_bound >= res.lower_bound
+
+
+@pytest.mark.parametrize("n", [9, pytest.param(12, marks=pytest.mark.slow)])
+def test_is_sos_refutes_a_polynomial_negative_at_a_point_in_many_variables(n):
+    """sum (v_i^2 - a_i)^2 + sum (v_i - v_{i+1} - (sqrt a_i - sqrt a_{i+1}))^2 - 1e-8 is -1e-8 at sqrt(a): refuted
+    in 8 variables, "SOS" from 9 on, where the witness search only evaluated its starts (F3)."""
+    v = sp.variables("v", n=n)
+    a = [float(t) for t in np.random.default_rng(n).uniform(0.3, 2.0, size=n)]
+    p = sum((v[i] ** 2 - a[i]) ** 2 for i in range(n)) \
+        + sum((v[i] - v[i + 1] - (math.sqrt(a[i]) - math.sqrt(a[i + 1]))) ** 2 for i in range(n - 1)) - 1e-8
+    assert _exact(p, [math.sqrt(t) for t in a]) < 0
+    assert not sp.is_sos(p).is_sos

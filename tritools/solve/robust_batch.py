@@ -188,13 +188,24 @@ def _robust_many(problems: list, robust, opts, executor, progress) -> list[Trian
         (direct if pp is not None and np.any(np.isfinite(c)) else l2_first).append(i)
         if pp is not None:
             points[i] = pp
-    pending = direct
+    pending, spent = direct, {}
     if l2_first:
         first = solve_point_problems([problems[i] for i in l2_first], first_pass(opts), executor=executor,
                                      progress=progress).record()
         pending = pending + _after_l2(problems, thresholds, opts, l2_first, first, out)
-    _drive_chunks(problems, thresholds, opts, sorted(pending), out, points)
+        # the first pass counts against each problem's time limit, as in a single call (robust_settle): its search
+        # gets the rest (a 30-view box track ran 1.9-2.1x its limit, review 42a MEDIUM-1)
+        spent = {i: float((res.timings or {}).get("total", 0.0)) for i, res in zip(l2_first, first)}
+    _drive_chunks(problems, thresholds, opts, sorted(pending), out, points, spent)
     return out
+
+
+def _less(opts, seconds: float):
+    """``opts`` with ``seconds`` less of its per-problem time limit (none: unchanged; at least 1 ms left)."""
+    limit = opts.budget.time_limit
+    if limit is None or not seconds > 0:
+        return opts
+    return opts.replace(time_limit=max(1e-3, limit - seconds))
 
 
 def _after_l2(problems, thresholds, opts, idx, first, out) -> list:
@@ -216,14 +227,15 @@ def _after_l2(problems, thresholds, opts, idx, first, out) -> list:
     return rest
 
 
-def _drive_chunks(problems, thresholds, opts, idx, out, points) -> None:
+def _drive_chunks(problems, thresholds, opts, idx, out, points, spent=None) -> None:
     """The TLS results of the problems ``idx`` (:func:`_enumerated_then_searched`), :data:`ROBUST_CHUNK` together at
     a time (each search's time budget starts with its chunk).  ``points``: index -> (cameras, centres) of the point
     problems (their cameras checked in one vectorised call per view count, :func:`_point_searches`).  Under a
     whole-call limit a chunk takes about :data:`CHUNK_SHARE` of the time left at the last chunk's cost per problem
     (at least :data:`CHUNK_MIN` problems), and the problems whose chunk would start after the end get the rows of
     :func:`expired_tls` (a search past its deadline still costs ~1 ms: 200 problems took a 0.01 s limit to 0.1-0.4 s,
-    review 18); a chunk ends early enough for those rows (:func:`~.call_limit.reserving`)."""
+    review 18); a chunk ends early enough for those rows (:func:`~.call_limit.reserving`).  ``spent``: index ->
+    seconds of a problem's time limit already used (its L2 first pass)."""
     k, per = 0, CHUNK_PRIOR_SECONDS
     while k < len(idx):
         end = current_end()
@@ -236,7 +248,7 @@ def _drive_chunks(problems, thresholds, opts, idx, out, points) -> None:
         chunk = idx[k:k + size]
         k += size
         with reserving(reserve_for(_view_count(problems[i]) for i in idx[k:])):    # their rows past the end
-            _drive_chunk(problems, thresholds, opts, chunk, out, points, t0)
+            _drive_chunk(problems, thresholds, opts, chunk, out, points, t0, spent or {})
         per = max((time.perf_counter() - t0) / len(chunk), 1e-6)
 
 
@@ -255,14 +267,14 @@ CHUNK_MIN = 2
 CHUNK_PRIOR_SECONDS = 2e-3
 
 
-def _drive_chunk(problems, thresholds, opts, chunk, out, points, t0) -> None:
+def _drive_chunk(problems, thresholds, opts, chunk, out, points, t0, spent) -> None:
     """The results of one chunk of :func:`_drive_chunks`."""
     run, cut = within(opts, current_end())
     searches = _point_searches([i for i in chunk if i in points], points, thresholds, run, t0)
     for i in chunk:
         if i in searches:
             continue
-        s = _search_or_failure(*problems[i], thresholds[i], run)
+        s = _search_or_failure(*problems[i], thresholds[i], _less(run, spent.get(i, 0.0)))
         if isinstance(s, TriangulationResult):
             out[i] = s
         else:

@@ -67,7 +67,8 @@ def _det4(rows: list) -> Fraction:
 def exact_fundamental(Ps: np.ndarray, Pj: np.ndarray) -> np.ndarray | None:
     """F (3, 3) with p~_s^T F y~_j = 0 for the projections of every point (module docstring), computed exactly from
     the float cameras and divided by its largest entry before one rounding to floats (entries in [-1, 1], each within
-    a unit of round-off, or 2^-1074, of the exact quotient); None where F vanishes (one centre)."""
+    a unit of round-off, or 2^-1074, of the exact quotient); None where F vanishes.  (One camera given twice gives a
+    skew F, for which the relation holds trivially: no bound comes of it.)"""
     a = [[Fraction(float(v)) for v in row] for row in np.asarray(Pj, float).tolist()]
     b = [[Fraction(float(v)) for v in row] for row in np.asarray(Ps, float).tolist()]
     F = [[_det4([a[r] for r in range(3) if r != i] + [b[r] for r in range(3) if r != k]) * (-1) ** (i + k)

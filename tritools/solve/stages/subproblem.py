@@ -8,9 +8,10 @@ Three kinds, tried in this order at the local estimate:
   gamma*_R >= gamma*_C - ||rho|| / sqrt(2N) (:func:`collapsed_lower_bound`), C the problem with points c_i: a point
   problem, certified in milliseconds.  Tried where every collapsed rho_i is at most :data:`COLLAPSE_SHARE` of the
   local estimate's gamma;
-* **long segments trimmed** (:mod:`tritools.solve.trim`): an exact reduction -- the problem with each long segment
-  cut to the part that can hold the closest point of the optimum's projection has the same optimum -- solved by its
-  own degree plan (``Relaxation.plan``); where that plan ran to its end the whole problem's is not repeated;
+* **long segments and thin polytopes trimmed** (:mod:`tritools.solve.trim`): an exact reduction -- the problem with
+  each such region cut to the part that can hold the closest point of the optimum's projection has the same optimum
+  -- solved by its own degree plan (``Relaxation.plan``); where that plan ran to its end the whole problem's is not
+  repeated;
 * **views whose regions hold the estimate dropped** (below); then (where they are not the same views) those whose
   regions reach farther than :data:`WIDE_SHARE` times the local estimate's gamma from their centre (a 1e4 px
   segment; a 1e8 px box that a poor local estimate misses): certified where they hold the sub-problem's minimiser,

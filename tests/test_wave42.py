@@ -1,13 +1,16 @@
 """Wave 42: long segments trimmed to the part that can hold the optimum's closest point (tritools.solve.trim)."""
 from __future__ import annotations
 
+import json
+import os
+
 import mpmath
 import numpy as np
 import pytest
 from scipy.optimize import least_squares
 
 import tritools
-from tritools import Point, Polytope, Segment
+from tritools import Point, Polytope, Region, Segment
 from tritools.scene import random_scene
 from tritools.solve.trim import exact_fundamental, segment_interval, trimmed_regions
 
@@ -250,3 +253,17 @@ def test_the_cut_box_holds_the_closest_point_of_every_point_below_the_level():
             inside += 1
             assert float(cut.distance(p)) == pytest.approx(_box_distance(p, *box), rel=1e-9, abs=1e-9)
     assert inside > 100
+
+
+
+def test_a_poor_trimmed_plan_does_not_end_the_point():
+    """Review 42c MEDIUM-1: a trimmed plan that ended with lower bound 0 from a poor local estimate ended the point at
+    gamma_UB 77.56 where the reviewer's multi-start point has 56.85 (the whole problem's plan finds it)."""
+    with open(os.path.join(os.path.dirname(__file__), "data", "review42c_trim_stops_plan.json")) as fh:
+        data = json.load(fh)
+    cams = np.array(data["cameras"])
+    regs = [Region.from_dict(r) for r in data["regions"]]
+    g_ref = float(tritools.gamma(np.array(data["X_ref"])[None], cams, regs)[0])
+    res = tritools.triangulate(cams, regs)
+    assert res.gamma_ub <= g_ref * (1 + 1e-6)
+    assert res.gamma_lb is None or res.gamma_lb <= g_ref

@@ -81,6 +81,9 @@ COLLAPSE_SHARE = 1e-9
 #: region holds the estimate, the sub-problem without the wide ones still gives a lower bound (:func:`relaxations`;
 #: a 1e4 px segment's plan ended with lower bound 0, review 39a F3)
 WIDE_SHARE = 1e3
+#: an exact reduction's plan that ended uncertified with gamma_LB at least this share of gamma_UB ends the point (the
+#: whole problem's plan is not repeated; :func:`_try`)
+PLAN_NEAR = 0.99
 #: a sub-problem starts only with this multiple of the whole problem's verification and local-estimate time left,
 #: and at least SUB_MIN_SECONDS (:func:`_time_for_it`)
 SUB_TIME_FACTOR = 2.0
@@ -259,9 +262,11 @@ def _try(ctx: PointContext, relax: Relaxation) -> None:
         return
     if res.gamma_lb is not None and (ctx.best is None or better(res, ctx.best)):
         ctx.best = replace(res, message=join(f"lower bound of {relax.what}", res.message))
-    # an exact reduction whose whole plan ran: the whole problem's plan would repeat it on data scaled by the long
-    # segments (a 4-view problem with 20-70 px residuals: 12 s, then 17 s more for a lower bound 2.6e-3 below its)
-    ctx.finished = ctx.finished or (relax.plan and sub.status != Status.TIME_LIMIT)
+    # an exact reduction whose whole plan ran to a bound near its estimate: the whole problem's plan would repeat it on
+    # data scaled by the long regions (a 4-view problem with 20-70 px residuals: 12 s, then 17 s more for a lower bound
+    # 2.6e-3 below its); not after a poor one (lower bound 0 at a local estimate 36 % above another point: review 42c)
+    near = res.gamma_lb is not None and res.gamma_ub is not None and res.gamma_lb >= PLAN_NEAR * res.gamma_ub
+    ctx.finished = ctx.finished or (relax.plan and sub.status != Status.TIME_LIMIT and near)
 
 
 def _decided(ctx: PointContext, gamma_lb: float, X) -> bool:

@@ -162,7 +162,7 @@ def relaxations(ctx: PointContext, X) -> list[Relaxation]:
         out.append(Relaxation(tuple(range(ctx.N)), regs,
                               partial(collapsed_lower_bound, radii=tuple(idx.values()), n_views=ctx.N),
                               f"the problem with the region(s) of view(s) {views} collapsed to their centres"))
-    trimmed = _trimmed(ctx, X, gamma_px)
+    trimmed = _trimmed(ctx, X)
     if trimmed is not None:
         views = ", ".join(str(i) for i, (a, b) in enumerate(zip(trimmed, ctx.regions)) if a is not b)
         out.append(Relaxation(tuple(range(ctx.N)), trimmed, _same,
@@ -186,7 +186,7 @@ def _same(gamma_lb: float) -> float:
     return float(gamma_lb)
 
 
-def _trimmed(ctx: PointContext, X, gamma_px: float) -> tuple | None:
+def _trimmed(ctx: PointContext, X) -> tuple | None:
     """The regions with the long segments trimmed (:func:`tritools.solve.trim.trimmed_regions`) at the local
     estimate X, f_UB = 2N gamma(X)^2 on the whole problem; None where none is."""
     if all(segment_of(r)[0] is None and polytope_axis(r) is None for r in ctx.regions if not r.is_point):

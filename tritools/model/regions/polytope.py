@@ -107,6 +107,16 @@ def _check_bc(B, c) -> tuple[np.ndarray, np.ndarray]:
     return B, c
 
 
+def _nxt(a: np.ndarray) -> np.ndarray:
+    """``np.roll(a, -1, axis=0)`` (the next element, cyclically) without np.roll's overhead on small arrays."""
+    return np.concatenate((a[1:], a[:1]))
+
+
+def _prv(a: np.ndarray) -> np.ndarray:
+    """``np.roll(a, 1, axis=0)`` (the previous element, cyclically)."""
+    return np.concatenate((a[-1:], a[:-1]))
+
+
 def _halfplanes(B: np.ndarray, c: np.ndarray):
     """(normals (n, 2), offsets (n,), slack (n,), y0 (2,)) of the half-planes, sorted by angle,
     parallel duplicates merged; raises for an empty set found on the way."""
@@ -120,7 +130,7 @@ def _halfplanes(B: np.ndarray, c: np.ndarray):
     U = B / nrm[:, None]
     s = float(np.max(np.abs(B)))
     y0 = np.linalg.lstsq(B / s, -c / s, rcond=None)[0]
-    if not np.all(np.isfinite(y0)):
+    if not np.isfinite(y0).all():
         y0 = np.zeros(2)
     with np.errstate(over="ignore", invalid="ignore"):
         Uy0 = U @ y0
@@ -137,7 +147,7 @@ def _halfplanes(B: np.ndarray, c: np.ndarray):
     order = np.argsort(np.arctan2(N[:, 1], N[:, 0]), kind="stable")
     N, b, slack = N[order], b[order], slack[order]
     # merge runs of parallel normals with the same direction (cyclically), keeping the smallest b
-    nxt = np.roll(N, -1, axis=0)
+    nxt = _nxt(N)
     same_next = (np.abs(N[:, 0] * nxt[:, 1] - N[:, 1] * nxt[:, 0]) <= _PARALLEL_ATOL) & (np.sum(N * nxt, axis=1) > 0)
     gid = np.concatenate([[0], np.cumsum(~same_next[:-1])])
     if len(N) > 1 and same_next[-1]:
@@ -186,7 +196,7 @@ def _sweep(N: np.ndarray, b: np.ndarray) -> list[int] | None:
 def _corners(N: np.ndarray, b: np.ndarray, cycle: list[int]) -> np.ndarray:
     """Intersections of consecutive lines of ``cycle`` (k, 2)."""
     i = np.asarray(cycle)
-    j = np.roll(i, -1)
+    j = _nxt(i)
     det = N[i, 0] * N[j, 1] - N[i, 1] * N[j, 0]
     with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
         x = (b[i] * N[j, 1] - N[i, 1] * b[j]) / det
@@ -200,15 +210,15 @@ def _consistent(V: np.ndarray, N: np.ndarray, b: np.ndarray, slack: np.ndarray, 
     the two cycle normals that bracket its angle (where ``n_j . z`` is largest on a convex polygon).
     Allowed errors: the line's slack plus the rounding of the vertex, ``POLYTOPE_ROUNDOFF *
     (|v| + (|b_k| + |b_k+1|) / det)`` (Cramer's rule for two lines at a small angle)."""
-    if not np.all(np.isfinite(V)):
+    if not np.isfinite(V).all():
         return False
     i = np.asarray(cycle)
-    j = np.roll(i, -1)
+    j = _nxt(i)
     det = N[i, 0] * N[j, 1] - N[i, 1] * N[j, 0]
     err = POLYTOPE_ROUNDOFF * (np.max(np.abs(V), axis=1) + (np.abs(b[i]) + np.abs(b[j])) / det)
-    prev = np.roll(V, 1, axis=0)
+    prev = _prv(V)
     along = (V[:, 1] - prev[:, 1]) * N[i, 0] - (V[:, 0] - prev[:, 0]) * N[i, 1]    # (V_k - V_k-1) . (-n_y, n_x)
-    if np.any(along < -(err + np.roll(err, 1))):
+    if np.any(along < -(err + _prv(err))):
         return False
     ang = np.arctan2(N[:, 1], N[:, 0])
     k = (np.searchsorted(ang[i], ang, side="right") - 1) % len(i)
@@ -225,13 +235,13 @@ def _vertices(B: np.ndarray, c: np.ndarray) -> np.ndarray:
         if cycle is None:
             raise ValueError("polytope {y : ||B y + c||_inf <= 1} is empty")
         V = _corners(N, b, cycle)
-        if not np.all(np.isfinite(V)):
+        if not np.isfinite(V).all():
             V = _corners(N, b + slack, cycle)
-    if not np.all(np.isfinite(V)):
+    if not np.isfinite(V).all():
         raise ValueError("polytope vertices are beyond the floating-point range")
     V = _simplify(V, 16.0 * float(np.max(slack[cycle])), relative=not interior)
     V = V + y0
-    if not np.all(np.isfinite(V)):
+    if not np.isfinite(V).all():
         raise ValueError("polytope vertices are beyond the floating-point range")
     mean = (V / 2.0).mean(axis=0) * 2.0                    # halved: no overflow near the float limit
     return V[np.argsort(np.arctan2(V[:, 1] - mean[1], V[:, 0] - mean[0]), kind="stable")]
@@ -257,10 +267,26 @@ def _simplify(V: np.ndarray, floor: float, relative: bool = True) -> np.ndarray:
     W = V[keep]
     if len(W) >= 3:
         x, y = (W[:, 0] - W[:, 0].mean()) / diam, (W[:, 1] - W[:, 1].mean()) / diam    # no under/overflow
-        area = 0.5 * abs(float(np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y)))        # relative to diam^2
+        area = 0.5 * abs(float(np.sum(x * _nxt(y) - _nxt(x) * y)))        # relative to diam^2
         if 2.0 * area * diam > tol:
             return W
     return V[[int(np.argmin(proj)), int(np.argmax(proj))]]
+
+
+def _centroid(V: np.ndarray) -> np.ndarray:
+    """Area centroid of the convex polygon ``V`` (counter-clockwise), the vertex mean if it is degenerate."""
+    mean = V / 2.0
+    mean = mean.mean(axis=0) * 2.0                          # halved: no overflow near the float limit
+    if len(V) < 3:
+        return mean
+    span = float(np.max(np.abs(V - mean)))
+    x, y = (V[:, 0] - mean[0]) / span, (V[:, 1] - mean[1]) / span     # the shape at unit scale
+    xn, yn = _nxt(x), _nxt(y)
+    cross = x * yn - xn * y
+    area = cross.sum() / 2.0
+    if abs(area) <= 1e-14:
+        return mean
+    return mean + span * np.array([((x + xn) * cross).sum(), ((y + yn) * cross).sum()]) / (6.0 * area)
 
 
 # ----------------------------------------------------------------------------- the region
@@ -331,22 +357,12 @@ class Polytope(Region):
         """The boundary at unit scale for :func:`~.polygon_distance.closest_on_boundary_one`, once."""
         return unit_edges(self.vertices)
 
-    @property
+    @functools.cached_property
     def center(self) -> np.ndarray:
-        """Area centroid of the polygon (vertex mean if it is degenerate)."""
-        V = self.vertices
-        mean = V / 2.0
-        mean = mean.mean(axis=0) * 2.0
-        if len(V) < 3:
-            return mean
-        span = float(np.max(np.abs(V - mean)))
-        x, y = (V[:, 0] - mean[0]) / span, (V[:, 1] - mean[1]) / span     # the shape at unit scale
-        xn, yn = np.roll(x, -1), np.roll(y, -1)
-        cross = x * yn - xn * y
-        area = cross.sum() / 2.0
-        if abs(area) <= 1e-14:
-            return mean
-        return mean + span * np.array([((x + xn) * cross).sum(), ((y + yn) * cross).sum()]) / (6.0 * area)
+        """Area centroid of the polygon (vertex mean if it is degenerate); computed once, read-only."""
+        out = _centroid(self.vertices)
+        out.setflags(write=False)
+        return out
 
     @property
     def center_offset(self) -> float:

@@ -26,6 +26,7 @@ from .base import Region
 from .ellipse import Ellipse
 from .forms import ConeKind, ConicForm, conic_form_of
 from .polytope import Polytope
+from .shapes import shape_fields
 
 __all__ = ["dilate", "DILATION_GROW"]
 
@@ -56,9 +57,10 @@ def dilate(region: Region, r: float) -> Region:
 
 
 def _dilate_ellipse(form: ConicForm, r: float) -> Ellipse:
-    """The coaxial ellipse of the module docstring (axes from ``eigh(D)``, largest first)."""
-    lam, Q = np.linalg.eigh(form.D)
-    a, Q = np.sqrt(lam[::-1]), Q[:, ::-1]
+    """The coaxial ellipse of the module docstring (axes from :func:`~.shapes.shape_fields`, largest first: exact to
+    round-off for thin ellipses, where an eigensolver's minor axis is off by ~eps lam_max)."""
+    _, a, Q, _, _ = shape_fields(np.asarray(form.D, float)[None])
+    a, Q = a[0], Q[0]
     best = None
     for t in (r / a[0], r / a[1], r / np.sqrt(a[0] * a[1])):
         ax = np.sqrt((1 + t) * a ** 2 + (1 + 1 / t) * r * r)

@@ -14,6 +14,7 @@ from ...errors import FieldError
 from .base import (Region, RegionPolynomials, as_matrix, as_points, as_vector, check_xy, positive_number,
                    similarity_args, square)
 from .forms import ConeKind, ConicForm, RegionExtent
+from .shapes import shape_fields
 
 __all__ = ["EllipseBorder", "Ellipse", "SYMMETRY_RTOL", "PD_RTOL", "ELLIPSE_MAX_ITER", "ELLIPSE_SCALAR_MAX"]
 
@@ -162,29 +163,6 @@ def rotate(U: np.ndarray, Q: np.ndarray, back: bool = False) -> np.ndarray:
     return u0 * Q[:, 0, :] + u1 * Q[:, 1, :]
 
 
-def _shape_fields(D: np.ndarray) -> tuple:
-    """The constructor's rule for the shape fields of stacked matrices D (M, 2, 2), symmetric to round-off:
-    (D symmetrised, semi-axes sqrt(eig D) descending, the matching axis directions (columns), D^-1 symmetrised,
-    the eigenvalues ascending); the caller checks positive definiteness and a finite inverse."""
-    D = 0.5 * D + 0.5 * np.swapaxes(D, 1, 2)        # (not 0.5 (D + D^T): that overflows for entries near 1e308)
-    with np.errstate(all="ignore"):
-        lam, Q = np.linalg.eigh(D)
-        axes = np.sqrt(lam[:, ::-1])
-        try:
-            Dinv = np.linalg.inv(D)
-        except np.linalg.LinAlgError:               # a singular matrix in the stack: one by one, NaN where singular
-            Dinv = np.array([_inv_or_nan(d) for d in D])
-    Dinv = 0.5 * (Dinv + np.swapaxes(Dinv, 1, 2))
-    return D, axes, Q[:, :, ::-1], Dinv, lam
-
-
-def _inv_or_nan(d: np.ndarray) -> np.ndarray:
-    try:
-        return np.linalg.inv(d)
-    except np.linalg.LinAlgError:
-        return np.full((2, 2), np.nan)
-
-
 def disc_matrix(radius) -> np.ndarray:
     """``D = radius^2 I`` of a disc, refused by the name ``radius`` (a FieldError) where ``radius`` is not a
     finite positive number or where radius^2 or its inverse leaves the floats (below ~1e-154, above ~1e154;
@@ -223,7 +201,7 @@ class EllipseBorder(Region):
         scale = float(np.max(np.abs(D)))
         if np.max(np.abs(D - D.T)) > SYMMETRY_RTOL * max(scale, 1e-300):
             raise FieldError("D", f"must be symmetric, got {D.tolist()}")
-        D, axes, Q, Dinv, lam = _shape_fields(D[None])
+        D, axes, Q, Dinv, lam = shape_fields(D[None])
         if not (lam[0, 1] > 0 and lam[0, 0] > 0):
             raise FieldError("D", f"must be positive definite, got eigenvalues {lam[0].tolist()}")
         if not lam[0, 0] > PD_RTOL * lam[0, 1]:
@@ -244,7 +222,7 @@ class EllipseBorder(Region):
     def similarity_many(cls, regions, scale, shifts) -> list:
         """``[r.similarity(scale, shifts[i]) for i, r in enumerate(regions)]`` for regions of this very class, with
         the shape fields of all of them computed in one stacked call of the constructor's rule
-        (:func:`_shape_fields`: the same LAPACK routine per matrix, so the same numbers, tested equal); any region
+        (:func:`~.shapes.shape_fields`: the same closed forms per matrix, so the same numbers, tested equal); any region
         the stacked rule does not accept (non-finite, not positive definite after scaling) is built one by one,
         which raises the constructor's error.  The normalisation of N views' regions in a few numpy calls."""
         s = positive_number(scale, "scale")
@@ -252,7 +230,7 @@ class EllipseBorder(Region):
         if not np.all(np.isfinite(T)) or any(type(r) is not cls for r in regions):
             return [r.similarity(s, T[i]) for i, r in enumerate(regions)]
         centres = s * (np.array([r.center_ for r in regions]) - T)
-        D, axes, Q, Dinv, lam = _shape_fields(s * s * np.array([r.D for r in regions]))
+        D, axes, Q, Dinv, lam = shape_fields(s * s * np.array([r.D for r in regions]))
         good = np.isfinite(centres).all(axis=1) & np.isfinite(D).all(axis=(1, 2)) & (lam[:, 1] > 0) \
             & (lam[:, 0] > PD_RTOL * lam[:, 1]) & np.isfinite(Dinv).all(axis=(1, 2))
         out = []

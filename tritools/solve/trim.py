@@ -39,10 +39,11 @@ from fractions import Fraction
 
 import numpy as np
 
-from ..model.regions import ConeKind, Polytope, Segment, conic_form_of, polytope_vertices
+from ..model.regions import ConeKind, Ellipse, Polytope, Segment, conic_form_of, polytope_vertices
+from ..model.regions.clipped import ClippedEllipse
 
-__all__ = ["exact_fundamental", "segment_interval", "trimmed_regions", "segment_of", "polytope_axis", "TRIM_SHARE",
-           "TRIM_MIN_RATIO", "TRIM_ANCHORS"]
+__all__ = ["exact_fundamental", "segment_interval", "trimmed_regions", "segment_of", "polytope_axis", "ellipse_axis",
+           "TRIM_SHARE", "TRIM_MIN_RATIO", "TRIM_ANCHORS"]
 
 #: a segment is trimmed only where its part that can hold the closest point is at most this share of it
 TRIM_SHARE = 0.25
@@ -177,25 +178,60 @@ def polytope_axis(region) -> tuple | None:
     return c, L * u, w, np.asarray(form.B, float), np.asarray(form.c, float)
 
 
-def _trimmed_polytope(cams, regions, s, h, r, radii):
-    """The polytope of view s cut by the slab across its axis that holds the closest point (module docstring), or
-    None where that slab is not at most :data:`TRIM_SHARE` of it."""
-    ax = polytope_axis(regions[s])
-    if ax is None:
+def ellipse_axis(region) -> tuple | None:
+    """(c, d, w, D) of a region whose conic form is exactly a filled ellipse (y - c)' D^-1 (y - c) <= 1: it lies within
+    w (its minor semi-axis) of its major axis c + tau d, |tau| <= 1; None otherwise."""
+    try:
+        form = conic_form_of(region)
+    except (TypeError, ValueError, AttributeError, NotImplementedError):
         return None
-    c, d, w, B, cb = ax
+    if form.kind != ConeKind.ELLIPSE or form.convexified:
+        return None
+    lam, Q = np.linalg.eigh(np.asarray(form.D, float))
+    if not (lam[0] > 0 and np.all(np.isfinite(lam))):
+        return None
+    c = np.asarray(form.center, float)
+    return c, math.sqrt(lam[1]) * Q[:, 1], math.sqrt(lam[0]) * (1 + 1e-12), np.asarray(form.D, float)
+
+
+def _cut(cams, regions, s, h, r, radii, axis) -> tuple | None:
+    """(u, mid, half) of the slab across the axis (c, d, w) of view s's region that holds the closest point (module
+    docstring): |u . y - u . mid| <= half; None where the region is not long and thin or the slab is not at most
+    :data:`TRIM_SHARE` of it."""
+    c, d, w = axis
     L = float(np.hypot(d[0], d[1]))
     if not (L > TRIM_MIN_RATIO * (r + w) and w < TRIM_SHARE * L):
         return None
     iv = segment_interval(cams, regions, s, h[:2] / h[2], r, radii, line=(c, d, w), reach=r)
     if iv is None or (iv[1] - iv[0]) / 2 > TRIM_SHARE:
         return None
-    u = d / L
     mid, half = c + (iv[0] + iv[1]) / 2 * d, (iv[1] - iv[0]) / 2 * L
-    if not half > 0:
+    return (d / L, mid, half) if half > 0 else None
+
+
+def _trimmed_polytope(cams, regions, s, h, r, radii):
+    """The polytope of view s cut by the slab across its axis that holds the closest point, or None."""
+    ax = polytope_axis(regions[s])
+    cut = None if ax is None else _cut(cams, regions, s, h, r, radii, ax[:3])
+    if cut is None:
         return None
+    u, mid, half = cut
     try:
-        return Polytope(np.vstack([B, u / half]), np.append(cb, -float(u @ mid) / half))
+        return Polytope(np.vstack([ax[3], u / half]), np.append(ax[4], -float(u @ mid) / half))
+    except (ValueError, ArithmeticError):        # (an empty cut in floats: left as it is)
+        return None
+
+
+def _trimmed_ellipse(cams, regions, s, h, r, radii):
+    """The filled ellipse of view s cut by the slab across its major axis that holds the closest point
+    (:class:`~tritools.model.regions.clipped.ClippedEllipse`), or None."""
+    ax = ellipse_axis(regions[s])
+    cut = None if ax is None else _cut(cams, regions, s, h, r, radii, ax[:3])
+    if cut is None:
+        return None
+    u, mid, half = cut
+    try:
+        return ClippedEllipse(Ellipse(ax[0], ax[3]), u, float(u @ mid), half)
     except (ValueError, ArithmeticError):        # (an empty cut in floats: left as it is)
         return None
 
@@ -216,6 +252,8 @@ def trimmed_regions(cams: np.ndarray, regions, X: np.ndarray, f_ub: float, radii
             h = cams[s] @ Xh
             if c is None:
                 cut = _trimmed_polytope(cams, regions, s, h, r, radii)
+                if cut is None:
+                    cut = _trimmed_ellipse(cams, regions, s, h, r, radii)
                 if cut is not None:
                     out[s], changed = cut, True
                 continue

@@ -65,7 +65,7 @@ from ...result import Attempt, Status
 from ..options import SolvePath
 from ..decide import c_from_gamma, decide
 from ..robust_subsolve import ROUND_DOWN, TRUSTED_LOWER_BOUND
-from ..trim import polytope_axis, segment_of, trimmed_regions
+from ..trim import ellipse_axis, polytope_axis, segment_of, trimmed_regions
 from .context import AttemptStep, PointContext
 from .outcome import better, join, replace, report_point, step_of
 
@@ -189,7 +189,8 @@ def _same(gamma_lb: float) -> float:
 def _trimmed(ctx: PointContext, X) -> tuple | None:
     """The regions with the long segments trimmed (:func:`tritools.solve.trim.trimmed_regions`) at the local
     estimate X, f_UB = 2N gamma(X)^2 on the whole problem; None where none is."""
-    if all(segment_of(r)[0] is None and polytope_axis(r) is None for r in ctx.regions if not r.is_point):
+    if all(segment_of(r)[0] is None and polytope_axis(r) is None and ellipse_axis(r) is None
+           for r in ctx.regions if not r.is_point):
         return None
     with np.errstate(all="ignore"):
         g = float(gamma_validated(np.asarray(X, float)[None], ctx.cams, ctx.regions)[0])

@@ -194,3 +194,39 @@ def test_thin_ellipse_shape_fields_are_exact_to_round_off(ratio):
         for i in range(2):
             for j in range(2):
                 assert abs(E._Dinv[i, j] - float(inv[i, j])) <= 1e-15 * float(abs(inv[0, 0]) + abs(inv[1, 1]))
+
+
+def _gamma_mp(X, cams, xs):
+    """gamma at X of point views in 50-digit arithmetic on the float data."""
+    mpmath.mp.dps = 50
+    tot = mpmath.mpf(0)
+    Xh = [mpmath.mpf(float(v)) for v in X] + [mpmath.mpf(1)]
+    for P, x in zip(cams, xs):
+        h = [mpmath.fsum(mpmath.mpf(float(P[i, j])) * Xh[j] for j in range(4)) for i in range(3)]
+        tot += (h[0] / h[2] - mpmath.mpf(float(x[0]))) ** 2 + (h[1] / h[2] - mpmath.mpf(float(x[1]))) ** 2
+    return float(mpmath.sqrt(tot / (2 * len(cams))))
+
+
+@pytest.mark.parametrize("path", ["auto", "sdp"])
+def test_a_repeated_view_in_a_georeferenced_world_is_not_merged_on_a_wrong_dlt_point(path):
+    """Review 43a: three views 1.1e7 from the origin, view 0 listed twice.  The merge's cancellation test ran at the
+    DLT point computed in the caller's frame, 3e6 off (K ~1 there, 7.6e5 at the point): the copy was merged, its
+    rounded camera row moved projections by ~6e-8 px, and gamma_LB was certified 3.2e-9 px above the cost of the
+    returned X.  Now the DLT runs in the cameras' frame: not merged, the bound below the cost at X."""
+    cams = np.array([[[8.0027894825195608e+02, 0.0, 3.1930174597822526e+02, -2.2432089550725393e+09],
+                      [2.0943965238548029e-01, 8.0000000000000023e+02, 2.3999990861463266e+02, -7.2808368327651892e+09],
+                      [8.7266521827283449e-04, 0.0, 9.9999961922763603e-01, 2.9965131968117207e+06]],
+                     [[7.9972044251226157e+02, 0.0, 3.2069801032746182e+02, -2.2367861390660515e+09],
+                      [-2.0943965238548029e-01, 8.0000000000000023e+02, 2.3999990861463266e+02, -7.2791613155461054e+09],  # noqa: E501
+                      [-8.7266521827283449e-04, 0.0, 9.9999961922763603e-01, 3.0034945185579034e+06]],
+                     [[8.0000000000000000e+02, -2.7925289964959532e-01, 3.1999987815281747e+02, -2.2372062365444422e+09],  # noqa: E501
+                      [0.0, 7.9979025570730653e+02, 2.4069804086373711e+02, -7.2758072344813976e+09],
+                      [0.0, -8.7266531140498546e-04, 9.9999961922755465e-01, 3.0087305107986177e+06]]])
+    xs = np.array([[331.13866347229407, 235.45742995592664], [331.6278698745634, 235.88465260162764],
+                   [331.6015691008927, 235.84213105773733]])
+    cams4, xs4 = np.concatenate([cams, cams[:1]]), np.concatenate([xs, xs[:1]])
+    r = tritools.triangulate(cams4, xs4, path=path)
+    g = _gamma_mp(r.X, cams4, xs4)
+    assert r.gamma_lb <= g
+    assert r.gamma_ub >= g * (1 - 1e-12)
+    assert "repeat" not in (r.message or "")

@@ -170,17 +170,20 @@ def identical_views(cameras: np.ndarray, regions, thresholds=None) -> ViewMerge 
 
 
 def _rounding(C: np.ndarray, regions, root: float) -> tuple[float, float]:
-    """(K, margin) at the DLT point X0 of the region centres: K = max_i sum_j |P_i3j| |X0~_j| / |P_i3 X0~|, the
+    """(K, margin) at the DLT point X0 of the region centres (computed in the cameras' world frame,
+    :func:`tritools.model.frame.world_frame`, and moved back): K = max_i sum_j |P_i3j| |X0~_j| / |P_i3 X0~|, the
     cancellation of the projection's denominator (inf where X0 is not finite or on a principal plane), and the margin
     in pixels, 4 eps (K_xy + K M + sqrt(k) M) with K_xy = max_i,r<3 sum_j |P_irj| |X0~_j| / |P_i3 X0~| (pixels) and
     M = max|x| + 1 over the centres: what one rounding of a copy's camera row and region moves a distance by."""
+    from ..model.frame import world_frame
     from ..model.stacked import dlt_stack
 
     try:
         x = np.asarray(regions, float) if isinstance(regions, np.ndarray) else np.array([r.center for r in regions])
         with np.errstate(all="ignore"):
-            X0, ok = dlt_stack(C[None], x[None])
-            Xh = np.append(X0[0], 1.0)
+            frame = world_frame(C)          # the DLT in the cameras' own frame: in the caller's, a georeferenced
+            X0, ok = dlt_stack(frame.cameras(C)[None], x[None])     # world's cancellation moved it by 3e6 (review 43a)
+            Xh = np.append(frame.user_point(X0[0]), 1.0)
             den = np.abs(C[:, 2, :] @ Xh)
             terms = (np.abs(C) @ np.abs(Xh)) / den[:, None]
             K, K_xy, M = float(terms[:, 2].max()), float(terms[:, :2].max()), float(np.max(np.abs(x))) + 1.0

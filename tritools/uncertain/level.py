@@ -18,6 +18,7 @@ relaxation's box).
 from __future__ import annotations
 
 from dataclasses import replace
+from fractions import Fraction
 
 import numpy as np
 
@@ -115,6 +116,23 @@ def _extreme(C, regs, tau, start, k, sign, scale, frame):
     return None
 
 
+def _projection_equation(P, j, x, c, s, w, u, weight):
+    """``weight ((x + w) h_3 - h_j)`` with ``h_r = P_r . (c + s u, 1)``, its coefficients computed exactly from the
+    float data (rational arithmetic, one rounding each): in a georeferenced world the constant term ``x P_3 . c~ -
+    P_j . c~`` is a difference of terms ~1e10 times larger, whose float rounding moved the set the SOS bounds
+    certified (review 43a: points of the level set up to 5e-4 of the box width outside it)."""
+    F = [Fraction(float(v)) for v in c] + [Fraction(1)]
+    xr = Fraction(x)
+    lin = [xr * Fraction(float(P[2, k])) - Fraction(float(P[j, k])) for k in range(4)]
+    const = float(sum(lin[k] * F[k] for k in range(4)) * Fraction(weight))
+    a3 = float(sum(Fraction(float(P[2, k])) * F[k] for k in range(4)) * Fraction(weight))
+    poly = const + a3 * w
+    for k in range(3):
+        poly = poly + float(lin[k] * Fraction(float(s[k])) * Fraction(weight)) * u[k] \
+            + float(Fraction(float(P[2, k])) * Fraction(float(s[k])) * Fraction(weight)) * (w * u[k])
+    return poly
+
+
 def _sos_box(C, regs, tau, lo, hi, degree):
     """Tighter bounds of L for point regions through sospoly: with ``X = c + s u`` (the relaxation's box,
     ``|u_k| <= 1``) and ``x_i = x^_i + sqrt(2N) tau v_i`` (``sum ||v_i||^2 <= 1`` is ``gamma <= tau``),
@@ -134,11 +152,9 @@ def _sos_box(C, regs, tau, lo, hi, degree):
     u, v = V[:3], [V[3 + 2 * i:5 + 2 * i] for i in range(N)]
     eqs = []
     for i, P in enumerate(C):
-        Xt = [float(c[k]) + float(s[k]) * u[k] for k in range(3)]
-        h = [sum(float(P[r, k]) * Xt[k] for k in range(3)) + float(P[r, 3]) for r in range(3)]
         for j in range(2):
             scale = float(np.abs(P[j, :3]) @ np.abs(s) + abs(xs[i, j]) * (np.abs(P[2, :3]) @ np.abs(s)))
-            eqs.append(((float(xs[i, j]) + tp * v[i][j]) * h[2] - h[j]) * (1.0 / max(scale, 1e-300)))
+            eqs.append(_projection_equation(P, j, float(xs[i, j]), c, s, tp * v[i][j], u, 1.0 / max(scale, 1e-300)))
     ineq = [1 - sum(w[0] ** 2 + w[1] ** 2 for w in v)] + [1 - u[k] ** 2 for k in range(3)]
     new_lo, new_hi = lo.copy(), hi.copy()
     for k in range(3):

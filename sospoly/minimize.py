@@ -488,7 +488,7 @@ class _Run:
 
     def _points(self, psatz, sol):
         return feasible_points(self.fn, self.eqn, self.ineqn, candidates_of(psatz, sol, self.tol), self.tol,
-                                self.refine)
+                                self.refine, self.deadline)
 
     def _evaluate(self, psatz: PsatzProblem, lb: LowerBound, found, degree, mult, label) -> MinimizeResult:
         tol, fs = self.tol, self.fscale

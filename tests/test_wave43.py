@@ -280,3 +280,47 @@ def test_level_sos_box_holds_the_level_set_in_georeferenced_worlds(case):
     assert res.definition == "level_sos"
     assert res.lo[k] <= P[k] <= res.hi[k]
     assert np.all(res.lo <= P) and np.all(P <= res.hi)
+
+
+def test_joined_clique_points_are_capped():
+    """Review 43b H1: 12 cliques {x0, x_i} with two candidates each joined into 2^11 points, each deduplicated
+    against all (O(n^2) in Python) and polished: 165 s of a 2 s limit.  At most MAX_JOINED_POINTS now."""
+    from sospoly.analysis.sparse_extraction import MAX_JOINED_POINTS, join_clique_candidates
+
+    cliques = [(0, i) for i in range(1, 13)]
+    cands = [[np.array([1.0, 1.0]), np.array([1.0, -1.0])] for _ in cliques]
+    pts = join_clique_candidates(cands, cliques, 13)
+    assert 0 < len(pts) <= MAX_JOINED_POINTS
+    assert all(p[0] == 1.0 and np.all(np.abs(p[1:]) == 1.0) for p in pts)
+    assert len({tuple(p) for p in pts}) == len(pts)
+
+
+def test_candidates_are_not_polished_past_the_deadline(monkeypatch):
+    import sospoly
+    from sospoly.analysis import candidates as cmod
+    from sospoly.budget import Deadline
+
+    calls = []
+    monkeypatch.setattr(cmod, "_polish", lambda *a: calls.append(1))
+    x, y = sospoly.variables("x y")
+    f = (x - 1) ** 2 + (y + 2) ** 2
+    cands = [cmod.Candidate(np.array([1.0 + k, -2.0]), "test", 0.0) for k in range(5)]
+    found = cmod.feasible_points(f, [], [], cands, sospoly.Tolerances(), True, Deadline.after(0.0))
+    assert calls == [] and len(found) == 5 and found[0][0] == 0.0
+    cmod.feasible_points(f, [], [], cands, sospoly.Tolerances(), True, None)
+    assert len(calls) == 5
+
+
+def test_minimize_of_a_star_rosenbrock_honours_its_time_limit():
+    """Review 43b H1's case: 95-166 s under a 2 s limit before (candidate extraction unbounded)."""
+    import time
+
+    import sospoly
+
+    v = sospoly.variables("v", n=12)
+    f = sum(100 * (v[i] - v[0] ** 2) ** 2 + (1 - v[i]) ** 2 for i in range(1, 12))
+    t = time.perf_counter()
+    r = sospoly.minimize(f, budget=sospoly.Budget(time_limit=2.0))
+    assert time.perf_counter() - t < 20.0
+    assert r.lower_bound is None or r.lower_bound <= 1e-9
+    assert r.upper_bound is None or r.upper_bound >= -1e-12

@@ -271,7 +271,9 @@ def _linear_model_fails(c: _Compiled, p: np.ndarray, v: np.ndarray, J: np.ndarra
     return out
 
 
-def feasible_points(f, eq, ineq, cands, tol: Tolerances, refine: bool):
+def feasible_points(f, eq, ineq, cands, tol: Tolerances, refine: bool, deadline=None):
+    """(f(p), p) of the feasible candidates, lowest first, near-duplicates merged; each polished first (``refine``)
+    while the ``deadline`` (None: none) has not passed."""
     pts, raw = [], []
     violation = _violation_of(eq, ineq)
     for cand in cands:
@@ -279,10 +281,10 @@ def feasible_points(f, eq, ineq, cands, tol: Tolerances, refine: bool):
         if not np.all(np.isfinite(p)):
             continue
         # the same point extracted twice (Gram kernel and moments, clique and dense blocks) is polished once
-        if any(np.linalg.norm(p - r) <= 1e-8 * max(1.0, np.linalg.norm(r)) for r in raw):
+        if raw and np.any(_norms(p - np.array(raw)) <= 1e-8 * np.maximum(1.0, _norms(np.array(raw)))):
             continue
         raw.append(p)
-        if refine:
+        if refine and not (deadline is not None and deadline.expired):
             q = _polish(f, eq, ineq, p)
             if q is not None and tol.feasible(violation(q)):
                 # the polished point replaces the raw one: a raw candidate that violates a constraint
@@ -296,8 +298,14 @@ def feasible_points(f, eq, ineq, cands, tol: Tolerances, refine: bool):
 
 def dedupe_points(found, rtol: float = 1e-4):
     """Merge candidates closer than rtol*max(1,|p|) (extraction noise), keeping the lowest f."""
-    uniq = []
+    uniq, kept = [], []
     for val, p in found:
-        if all(np.linalg.norm(p - q) > rtol * max(1.0, np.linalg.norm(q)) for _, q in uniq):
+        if not kept or np.all(_norms(p - np.array(kept)) > rtol * np.maximum(1.0, _norms(np.array(kept)))):
             uniq.append((val, p))
+            kept.append(p)
     return uniq
+
+
+def _norms(A: np.ndarray) -> np.ndarray:
+    """Euclidean norms of the rows of A (n, k)."""
+    return np.sqrt(np.einsum("ij,ij->i", A, A))

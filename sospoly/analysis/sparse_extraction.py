@@ -49,10 +49,19 @@ def _degree1_rows(basis: np.ndarray) -> np.ndarray:
     return idx
 
 
+#: at most this many global points are joined from the cliques' candidates (:func:`join_clique_candidates`)
+MAX_JOINED_POINTS = 256
+
+
 def _dedupe(points: list[np.ndarray], tol: float) -> list[np.ndarray]:
+    """The points in order, each dropped where it lies within ``tol max(1, |q|)`` (entrywise) of an earlier kept q
+    (one vectorised comparison per point against those kept)."""
     out: list[np.ndarray] = []
+    kept = np.empty((len(points), len(points[0]) if points else 0))
     for p in points:
-        if not any(np.all(np.abs(p - q) <= tol * np.maximum(1.0, np.abs(q))) for q in out):
+        K = kept[:len(out)]
+        if not np.any(np.all(np.abs(p - K) <= tol * np.maximum(1.0, np.abs(K)), axis=1)):
+            kept[len(out)] = p
             out.append(p)
     return out
 
@@ -107,15 +116,17 @@ def _dfs_order(parents: Sequence[int]) -> list[int]:
 
 
 def join_clique_candidates(candidates: Sequence[Sequence[np.ndarray]], cliques: Sequence[Sequence[int]], n_vars: int,
-                           agree_tol: float = 1e-4, max_combinations: int = 10_000) -> list[np.ndarray]:
+                           agree_tol: float = 1e-4, max_combinations: int = 10_000,
+                           max_points: int = MAX_JOINED_POINTS) -> list[np.ndarray]:
     """Global points made of one candidate per clique that agree on all shared variables.
 
     ``candidates[k]`` holds points over the variables ``cliques[k]`` (in that order).  The
     combinations are searched depth-first along :func:`sospoly.certificates.sparsity.clique_tree`,
     pruning as soon as a candidate disagrees with the running mean of a shared variable
     by more than ``agree_tol * max(1, |mean|)``; at most ``max_combinations`` partial
-    combinations are explored.  Shared coordinates are averaged, variables in no clique
-    are 0, near-duplicate results are merged.
+    combinations are explored and ``max_points`` points made (review 43b H1: 2^11 joined points of a star
+    Rosenbrock, each deduplicated and polished, took 165 s of a 2 s limit).  Shared coordinates are averaged,
+    variables in no clique are 0, near-duplicate results are merged.
     """
     m = len(cliques)
     if len(candidates) != m:
@@ -129,6 +140,9 @@ def join_clique_candidates(candidates: Sequence[Sequence[np.ndarray]], cliques: 
 
     def search(pos: int, sums: np.ndarray, counts: np.ndarray) -> None:
         if pos == m:
+            if len(results) >= max_points:
+                budget[0] = 0
+                return
             results.append(np.where(counts > 0, sums / np.maximum(counts, 1), 0.0))
             return
         k = order[pos]

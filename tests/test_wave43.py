@@ -324,3 +324,17 @@ def test_minimize_of_a_star_rosenbrock_honours_its_time_limit():
     assert time.perf_counter() - t < 20.0
     assert r.lower_bound is None or r.lower_bound <= 1e-9
     assert r.upper_bound is None or r.upper_bound >= -1e-12
+
+
+def test_robinson_is_certified_when_its_float_contradiction_is_repaired():
+    """Review 43b M1: a far candidate valued -1.5e51 in floats (Robinson's polynomial is >= 0) made the result
+    INCONSISTENT; the exact values repaired the status to OPTIMAL but left optimal=False with a gap of 3e-9 against
+    a tolerance of 8e-6.  The decision is the rule on the exact numbers now."""
+    import sospoly
+
+    x, y = sospoly.variables("x y")
+    R = x**6 + y**6 - x**4*y**2 - x**2*y**4 - x**4 - y**4 - x**2 - y**2 + 3*x**2*y**2 + 1
+    r = sospoly.minimize(R, degree=8, multiplier="fixed")
+    assert r.status == sospoly.SolveStatus.OPTIMAL and r.optimal
+    assert r.lower_bound <= 0.0 <= r.upper_bound + 1e-15
+    assert r.upper_bound - r.lower_bound <= sospoly.DEFAULT_TOLERANCES.gap_tolerance(r.upper_bound, r.scale)

@@ -338,3 +338,23 @@ def test_robinson_is_certified_when_its_float_contradiction_is_repaired():
     assert r.status == sospoly.SolveStatus.OPTIMAL and r.optimal
     assert r.lower_bound <= 0.0 <= r.upper_bound + 1e-15
     assert r.upper_bound - r.lower_bound <= sospoly.DEFAULT_TOLERANCES.gap_tolerance(r.upper_bound, r.scale)
+
+
+def test_level_sos_bounds_have_a_time_limit():
+    """Review 43a: the level set's SOS bounds had no time limit (116 s at 40 views, then the relaxed box anyway).
+    ``level_time_limit`` bounds them; past it the relaxation's (valid) box is kept."""
+    from tritools.uncertain.api import UncertaintyOptions
+
+    sc = tritools.scene.random_scene(3, 1, noise_px=0.5, seed=3)
+    cams, xs = np.asarray(sc.cameras), np.asarray(sc.points2d)[0]
+    opt = tritools.triangulate(cams, xs)
+    pts = [Point(x) for x in xs]
+    fast = tritools.uncertainty(cams, pts, level=opt.gamma_ub + 0.5, estimate=opt.X,
+                                options=UncertaintyOptions(level_time_limit=1e-6))
+    full = tritools.uncertainty(cams, pts, level=opt.gamma_ub + 0.5, estimate=opt.X)
+    assert fast.definition == "level_relaxed" and full.definition == "level_sos"
+    assert np.all(fast.lo <= opt.X) and np.all(opt.X <= fast.hi)
+    assert np.all(fast.lo <= full.lo) and np.all(full.hi <= fast.hi)
+    for bad in (0.0, -1.0, float("inf"), True, "5"):
+        with pytest.raises(ValueError, match="level_time_limit"):
+            UncertaintyOptions(level_time_limit=bad)

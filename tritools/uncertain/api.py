@@ -60,8 +60,10 @@ class UncertaintyOptions:
     degenerate one; when such a widened set yields no feasible point at all, the regions as given are
     solved too and their Farkas certificate, if any, reports the set empty; ``level_degree``: relaxation
     degree of the SOS bounds of a level set of point regions (None: the dilation relaxation only);
-    ``world_frame``: the handedness in which "in front" (depth > 0) is judged, as
-    :class:`tritools.TriangulationOptions` (``"reflected"`` for a mirrored reconstruction)."""
+    ``level_time_limit``: seconds for those SOS bounds together (past it the relaxation's box is kept,
+    ``definition = "level_relaxed"``; review 43a: 116 s at 40 views); ``world_frame``: the handedness in which
+    "in front" (depth > 0) is judged, as :class:`tritools.TriangulationOptions` (``"reflected"`` for a mirrored
+    reconstruction)."""
     dilation: float | tuple = 0.0
     solver: StackedConicOptions = field(default_factory=StackedConicOptions)
     witness_rtol: float = 1e-9
@@ -69,6 +71,7 @@ class UncertaintyOptions:
     widen_roundoff: bool = True
     level_degree: int | None = 2
     world_frame: WorldFrame | str = WorldFrame.RIGHT_HANDED
+    level_time_limit: float = 20.0
 
     def __post_init__(self) -> None:
         try:
@@ -88,6 +91,9 @@ class UncertaintyOptions:
                                           f"got {self.dilation!r}")
         if not isinstance(self.solver, StackedConicOptions):
             raise OptionTypeError("solver", f"must be a StackedConicOptions, got {type(self.solver).__name__}")
+        t = self.level_time_limit
+        if isinstance(t, bool) or not isinstance(t, (int, float)) or not (t > 0 and np.isfinite(t)):
+            raise OptionError("level_time_limit", f"must be a positive finite number of seconds, got {t!r}")
         if not (isinstance(self.witness_rtol, (int, float)) and 0 <= self.witness_rtol < 1):
             raise OptionError("witness_rtol", f"must be in [0, 1), got {self.witness_rtol!r}")
 

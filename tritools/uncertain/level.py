@@ -133,17 +133,21 @@ def _projection_equation(P, j, x, c, s, w, u, weight):
     return poly
 
 
-def _sos_box(C, regs, tau, lo, hi, degree):
+def _sos_box(C, regs, tau, lo, hi, degree, time_limit=None):
     """Tighter bounds of L for point regions through sospoly: with ``X = c + s u`` (the relaxation's box,
     ``|u_k| <= 1``) and ``x_i = x^_i + sqrt(2N) tau v_i`` (``sum ||v_i||^2 <= 1`` is ``gamma <= tau``),
     ``min +-u_k`` subject to the projection equalities ``x_i (p3_i . X~) = p12_i . X~`` (each row
     scaled) is a polynomial program whose certified lower bound (``sospoly.minimize`` at ``degree``,
     rigorous with ``radius = 2``: ``||(u, v)|| <= 2`` on the feasible set) bounds ``X_k``.  Returns
-    (lo, hi) intersected with the box, or None if a program gives no bound."""
+    (lo, hi) intersected with the box, or None if a program gives no bound or ``time_limit`` seconds (for the six
+    programs together; None: none) pass first."""
+    import time
+
     import sospoly
 
     from .rigour import round_down, round_up
 
+    start = time.monotonic()
     N = len(C)
     xs = np.array([r.center for r in regs])
     c, s = lo / 2.0 + hi / 2.0, hi / 2.0 - lo / 2.0
@@ -159,7 +163,11 @@ def _sos_box(C, regs, tau, lo, hi, degree):
     new_lo, new_hi = lo.copy(), hi.copy()
     for k in range(3):
         for sign in (1.0, -1.0):
-            res = sospoly.minimize(sign * u[k], eq=eqs, ineq=ineq, degree=degree, radius=2.0, refine=False)
+            left = None if time_limit is None else time_limit - (time.monotonic() - start)
+            if left is not None and left <= 0:
+                return None
+            res = sospoly.minimize(sign * u[k], eq=eqs, ineq=ineq, degree=degree, radius=2.0, refine=False,
+                                   budget=sospoly.Budget(time_limit=left))
             if res.lower_bound is None or not np.isfinite(res.lower_bound):
                 return None
             if sign > 0:
@@ -187,7 +195,7 @@ def level_bounds(cameras, regions, level, estimate, opts):
     out = uncertainty(C, regs, estimate=estimate, options=replace(opts, dilation=r))
     definition = "level_relaxed"
     if opts.level_degree and out.status.value == "bounded" and all(g.is_point for g in regs):
-        box = _sos_box(C, regs, tau, out.lo, out.hi, opts.level_degree)
+        box = _sos_box(C, regs, tau, out.lo, out.hi, opts.level_degree, opts.level_time_limit)
         if box is not None:
             out = _with_box(out, *box)
             definition = "level_sos"

@@ -41,6 +41,7 @@ import numpy as np
 
 from ..model.regions import ConeKind, Ellipse, Polytope, Segment, conic_form_of, polytope_vertices
 from ..model.regions.clipped import ClippedEllipse
+from ..model.regions.shapes import shape_fields
 
 __all__ = ["exact_fundamental", "segment_interval", "trimmed_regions", "segment_of", "polytope_axis", "ellipse_axis",
            "TRIM_SHARE", "TRIM_MIN_RATIO", "TRIM_ANCHORS"]
@@ -187,11 +188,12 @@ def ellipse_axis(region) -> tuple | None:
         return None
     if form.kind != ConeKind.ELLIPSE or form.convexified:
         return None
-    lam, Q = np.linalg.eigh(np.asarray(form.D, float))
-    if not (lam[0] > 0 and np.all(np.isfinite(lam))):
+    D = np.asarray(form.D, float)
+    _, axes, Q, _, lam = shape_fields(D[None])            # exact to round-off for thin ellipses (not eigh's)
+    if not (lam[0, 0] > 0 and np.all(np.isfinite(lam)) and np.all(np.isfinite(Q))):
         return None
     c = np.asarray(form.center, float)
-    return c, math.sqrt(lam[1]) * Q[:, 1], math.sqrt(lam[0]) * (1 + 1e-12), np.asarray(form.D, float)
+    return c, float(axes[0, 0]) * Q[0, :, 0], float(axes[0, 1]) * (1 + 1e-12), D
 
 
 def _cut(cams, regions, s, h, r, radii, axis) -> tuple | None:

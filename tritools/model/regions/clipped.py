@@ -83,13 +83,14 @@ class ClippedEllipse(Region):
         v = np.array([-u[1], u[0]])
         c, Dinv = self.ellipse.center_, self.ellipse._Dinv
         out = []
+        uc = float(u @ c)
         for t in (self.m - self.half, self.m + self.half):
-            w0 = t * u - c
-            qa, qb, qc = float(v @ Dinv @ v), float(v @ Dinv @ w0), float(w0 @ Dinv @ w0) - 1.0
+            w0 = (t - uc) * u               # the line's foot of the ellipse's centre, relative to it (review 43c:
+            qa, qb, qc = float(v @ Dinv @ v), float(v @ Dinv @ w0), float(w0 @ Dinv @ w0) - 1.0   # not the origin's)
             disc = qb * qb - qa * qc
             if disc >= 0 and qa > 0:
                 root = math.sqrt(disc)
-                out.append((t * u + ((-qb - root) / qa) * v, t * u + ((-qb + root) / qa) * v))
+                out.append((c + w0 + ((-qb - root) / qa) * v, c + w0 + ((-qb + root) / qa) * v))
         return out
 
     def closest_point(self, points) -> np.ndarray:

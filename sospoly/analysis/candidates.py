@@ -281,7 +281,8 @@ def feasible_points(f, eq, ineq, cands, tol: Tolerances, refine: bool, deadline=
         if not np.all(np.isfinite(p)):
             continue
         # the same point extracted twice (Gram kernel and moments, clique and dense blocks) is polished once
-        if raw and np.any(_norms(p - np.array(raw)) <= 1e-8 * np.maximum(1.0, _norms(np.array(raw)))):
+        R = np.array(raw) if raw else None
+        if R is not None and np.any(_norms(p - R) <= 1e-8 * np.maximum(1.0, _norms(R))):
             continue
         raw.append(p)
         if refine and not (deadline is not None and deadline.expired):
@@ -300,7 +301,8 @@ def dedupe_points(found, rtol: float = 1e-4):
     """Merge candidates closer than rtol*max(1,|p|) (extraction noise), keeping the lowest f."""
     uniq, kept = [], []
     for val, p in found:
-        if not kept or np.all(_norms(p - np.array(kept)) > rtol * np.maximum(1.0, _norms(np.array(kept)))):
+        K = np.array(kept) if kept else None
+        if K is None or np.all(_norms(p - K) > rtol * np.maximum(1.0, _norms(K))):
             uniq.append((val, p))
             kept.append(p)
     return uniq

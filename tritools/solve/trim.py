@@ -211,31 +211,32 @@ def _cut(cams, regions, s, h, r, radii, axis) -> tuple | None:
     return (d / L, mid, half) if half > 0 else None
 
 
-def _trimmed_polytope(cams, regions, s, h, r, radii):
-    """The polytope of view s cut by the slab across its axis that holds the closest point, or None."""
-    ax = polytope_axis(regions[s])
+def _trimmed_by(cams, regions, s, h, r, radii, axis_of, build):
+    """View s's region cut by the slab across the axis that ``axis_of`` gives it (:func:`polytope_axis`,
+    :func:`ellipse_axis`) where the closest point can be (:func:`_cut`), built by ``build(axis, u, mid, half)``; None
+    where it is not cut."""
+    ax = axis_of(regions[s])
     cut = None if ax is None else _cut(cams, regions, s, h, r, radii, ax[:3])
     if cut is None:
         return None
-    u, mid, half = cut
     try:
-        return Polytope(np.vstack([ax[3], u / half]), np.append(ax[4], -float(u @ mid) / half))
+        return build(ax, *cut)
     except (ValueError, ArithmeticError):        # (an empty cut in floats: left as it is)
         return None
 
 
-def _trimmed_ellipse(cams, regions, s, h, r, radii):
-    """The filled ellipse of view s cut by the slab across its major axis that holds the closest point
-    (:class:`~tritools.model.regions.clipped.ClippedEllipse`), or None."""
-    ax = ellipse_axis(regions[s])
-    cut = None if ax is None else _cut(cams, regions, s, h, r, radii, ax[:3])
-    if cut is None:
-        return None
-    u, mid, half = cut
-    try:
-        return ClippedEllipse(Ellipse(ax[0], ax[3]), u, float(u @ mid), half)
-    except (ValueError, ArithmeticError):        # (an empty cut in floats: left as it is)
-        return None
+def _polytope_cut(ax, u, mid, half) -> Polytope:
+    """The polytope with one more slab row, |u . y - u . mid| <= half."""
+    return Polytope(np.vstack([ax[3], u / half]), np.append(ax[4], -float(u @ mid) / half))
+
+
+def _ellipse_cut(ax, u, mid, half) -> ClippedEllipse:
+    """The filled ellipse cut by the slab (:class:`~tritools.model.regions.clipped.ClippedEllipse`)."""
+    return ClippedEllipse(Ellipse(ax[0], ax[3]), u, float(u @ mid), half)
+
+
+#: the region kinds cut across their axis, tried in this order: (the axis, the cut region)
+_CUTS = ((polytope_axis, _polytope_cut), (ellipse_axis, _ellipse_cut))
 
 
 def trimmed_regions(cams: np.ndarray, regions, X: np.ndarray, f_ub: float, radii) -> tuple | None:
@@ -253,9 +254,8 @@ def trimmed_regions(cams: np.ndarray, regions, X: np.ndarray, f_ub: float, radii
             c, d = segment_of(reg)
             h = cams[s] @ Xh
             if c is None:
-                cut = _trimmed_polytope(cams, regions, s, h, r, radii)
-                if cut is None:
-                    cut = _trimmed_ellipse(cams, regions, s, h, r, radii)
+                cut = next((x for x in (_trimmed_by(cams, regions, s, h, r, radii, *kind) for kind in _CUTS)
+                            if x is not None), None)
                 if cut is not None:
                     out[s], changed = cut, True
                 continue

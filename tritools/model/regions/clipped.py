@@ -12,6 +12,7 @@ It declares no conic form (the certified uncertainty and the verification paths 
 """
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
 from typing import ClassVar
@@ -77,8 +78,9 @@ class ClippedEllipse(Region):
         a0, a1, b = (float(self.axis[0] / self.half), float(self.axis[1] / self.half), float(-self.m / self.half))
         return RegionPolynomials(f, (), (self.ellipse._quadratic(y), 1.0 - square(a0 * y[0] + a1 * y[1] + b)))
 
+    @functools.cached_property
     def _chords(self) -> list:
-        """The chords ``E ∩ {u . y = m +- half}`` as (start, end) pairs (points), those that exist."""
+        """The chords ``E ∩ {u . y = m +- half}`` as (start, end) pairs (points), those that exist; computed once."""
         u = self.axis
         v = np.array([-u[1], u[0]])
         c, Dinv = self.ellipse.center_, self.ellipse._Dinv
@@ -100,7 +102,7 @@ class ClippedEllipse(Region):
         if np.any(off):
             Q = P[off]
             best, dist = np.full_like(Q, np.nan), np.full(len(Q), np.inf)
-            for a, b in self._chords():
+            for a, b in self._chords:
                 d = b - a
                 dd = float(d @ d)
                 t = np.clip((Q - a) @ d / dd, 0.0, 1.0) if dd > 0 else np.zeros(len(Q))

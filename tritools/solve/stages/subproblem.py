@@ -8,10 +8,10 @@ Three kinds, tried in this order at the local estimate:
   gamma*_R >= gamma*_C - ||rho|| / sqrt(2N) (:func:`collapsed_lower_bound`), C the problem with points c_i: a point
   problem, certified in milliseconds.  Tried where every collapsed rho_i is at most :data:`COLLAPSE_SHARE` of the
   local estimate's gamma;
-* **long segments and thin polytopes trimmed** (:mod:`tritools.solve.trim`): an exact reduction -- the problem with
-  each such region cut to the part that can hold the closest point of the optimum's projection has the same optimum
-  -- solved by its own degree plan (``Relaxation.plan``); where that plan ran to its end the whole problem's is not
-  repeated;
+* **long segments, thin polytopes and thin filled ellipses trimmed** (:mod:`tritools.solve.trim`): an exact
+  reduction -- the problem with each such region cut to the part that can hold the closest point of the optimum's
+  projection has the same optimum -- solved by its own degree plan (``Relaxation.plan``); where that plan ran to its
+  end the whole problem's is not repeated;
 * **views whose regions hold the estimate dropped** (below); then (where they are not the same views) those whose
   regions reach farther than :data:`WIDE_SHARE` times the local estimate's gamma from their centre (a 1e4 px
   segment; a 1e8 px box that a poor local estimate misses): certified where they hold the sub-problem's minimiser,
@@ -187,7 +187,8 @@ def _same(gamma_lb: float) -> float:
 
 
 def _trimmed(ctx: PointContext, X) -> tuple | None:
-    """The regions with the long segments trimmed (:func:`tritools.solve.trim.trimmed_regions`) at the local
+    """The regions with the long segments, thin polytopes and thin ellipses trimmed
+    (:func:`tritools.solve.trim.trimmed_regions`) at the local
     estimate X, f_UB = 2N gamma(X)^2 on the whole problem; None where none is."""
     if all(segment_of(r)[0] is None and polytope_axis(r) is None and ellipse_axis(r) is None
            for r in ctx.regions if not r.is_point):

@@ -71,7 +71,7 @@ __all__ = ["Normalization", "NormalizationStack", "normalization_for", "normaliz
            "world_origin_magnitudes",
            "median_pixel_scales", "pixel_floors",
            "RHO_FLOOR_REL", "RESOLUTION_REL", "PIXEL_FLOOR_REL", "DEPTH_FLOOR_REL",
-           "SCALE_BOUNDS"]
+           "SCALE_BOUNDS", "image_scale"]
 
 #: floor of the residual scale rho, relative to the median pixel scale (focal length) of the views.
 RHO_FLOOR_REL = 1e-5
@@ -265,7 +265,7 @@ def _normalization_stack(C: np.ndarray, x: np.ndarray, ok: np.ndarray) -> Normal
     r = np.sqrt(np.add.reduce(np.add.reduce(np.where(fin[:, None, None], u, 0.0) ** 2, axis=2), axis=1) / N) / s
     use = ok_r & fin & np.isfinite(r)
     rho_ref = np.where(use, np.maximum(np.minimum(r, rho), rho_floor), rho)
-    s_new = _clip_scale(1.0 / rho_ref)
+    s_new = image_scale(1.0 / rho_ref)
     Cn[:, :, :2, :] *= (s_new / s)[:, None, None, None]
     Cn /= norms(Cn, axis=(2, 3))[..., None, None]
     return NormalizationStack(s_new, x.copy(), X0, d, Cn, np.where(use[:, None], Xn, 0.0), ok,
@@ -298,7 +298,7 @@ def _normalization_one(C: np.ndarray, x: np.ndarray, ok: np.ndarray) -> Normaliz
         u, _, fin = project_one(Cn, Xn)
         r = math.sqrt(float(np.add.reduce(np.add.reduce(u * u, axis=1))) / N) / s if fin else math.nan
         use = ok_r and fin and math.isfinite(r)
-        s_new = float(_clip_scale(1.0 / (max(min(r, rho), rho_floor) if use else rho)))
+        s_new = float(image_scale(1.0 / (max(min(r, rho), rho_floor) if use else rho)))
         Cn[:, :2, :] *= s_new / s
         Cn /= norms(Cn, axis=(1, 2))[:, None, None]
     s_arr = np.array([s_new])
@@ -329,7 +329,7 @@ def _frame_one(P: np.ndarray, xi: np.ndarray, X0: np.ndarray) -> tuple | None:
     if not fin0 or not rho_floor > 0:
         return None
     rho = max(math.sqrt(float(np.add.reduce(np.add.reduce((u0 - xi) ** 2, axis=1))) / N), rho_floor)
-    s = float(_clip_scale(1.0 / rho))
+    s = float(image_scale(1.0 / rho))
     a = null_vectors(P)
     a = a / norms(a, axis=1, keepdims=True)
     if not (np.abs(a[:, 3]) > POINT_AT_INFINITY_RTOL).all():
@@ -353,10 +353,17 @@ def _frame_one(P: np.ndarray, xi: np.ndarray, X0: np.ndarray) -> tuple | None:
     return s, rho, rho_floor, d, Cn, med
 
 
-def _clip_scale(s: np.ndarray) -> np.ndarray:
-    """``np.clip(s, *SCALE_BOUNDS)`` as the two ufuncs it is made of (max, then min; NaN stays NaN), without
-    clip's per-call overhead."""
-    return np.minimum(np.maximum(s, SCALE_BOUNDS[0]), SCALE_BOUNDS[1])
+def image_scale(s: np.ndarray) -> np.ndarray:
+    """``np.clip(s, *SCALE_BOUNDS)`` rounded down to a power of two (up once more where that leaves the bounds; NaN
+    stays NaN).  A power of two makes the image similarity exact: s^2 D of an ellipse, s times a distance and
+    gamma' = s gamma carry no round-off, so a normalised thin ellipse is the caller's ellipse scaled, not a slightly
+    thinner one (review 43c LOW-1: at an axis ratio of 1e6 the rounding of s^2 D moved the border by ~1e-6 of the
+    minor axis and the lower bound of the moved ellipse exceeded the caller's optimum)."""
+    s = np.minimum(np.maximum(s, SCALE_BOUNDS[0]), SCALE_BOUNDS[1])
+    with np.errstate(invalid="ignore"):
+        p = np.ldexp(1.0, np.frexp(s)[1] - 1)
+        p = np.where(p < SCALE_BOUNDS[0], 2.0 * p, p)
+        return np.where(np.isfinite(s), p, s)
 
 
 def _frames(C: np.ndarray, x: np.ndarray, X0: np.ndarray, ok: np.ndarray, rho_floor: np.ndarray) -> tuple:
@@ -368,7 +375,7 @@ def _frames(C: np.ndarray, x: np.ndarray, X0: np.ndarray, ok: np.ndarray, rho_fl
     res = np.where(fin0[:, None], norms(u0 - x, axis=2), np.inf)
     rho = np.where(fin0, np.sqrt(np.add.reduce(np.where(fin0[:, None], res, 0.0) ** 2, axis=1) / N), 1.0)
     rho = np.maximum(rho, rho_floor)
-    s = _clip_scale(1.0 / rho)
+    s = image_scale(1.0 / rho)
     a = null_vectors(C)
     a = a / norms(a, axis=2, keepdims=True)
     affine = ~(np.abs(a[..., 3]) > POINT_AT_INFINITY_RTOL)
@@ -431,7 +438,7 @@ def normalization_for(cameras: np.ndarray, regions, enabled: bool = True) -> Nor
                              float(magnitudes(centers[None], np.asarray(cameras, float)[None])[0]))
     offset = regions_offset(regions)
     if offset * norm.scale > 1.0:
-        s = float(_clip_scale(np.array([1.0 / offset]))[0])
+        s = float(image_scale(np.array([1.0 / offset]))[0])
         floor = pixel_floors(np.asarray(cameras, float)[None], centers[None])
         norm = dataclasses.replace(norm, scale=s, resolution=float(resolutions(np.array([s]), centers[None],
                                                                                floor)[0]))

@@ -146,24 +146,33 @@ def _degree(pairs, eq, ineq, degree):
     return int(degree)
 
 
+def _weights(pairs) -> list:
+    """a_k = 1 / (the power of two at or above max|coef p_k|): certificate k is a_k (p_k - w_k q_k) - ... SOS, the
+    same constraint (a positive factor, exact), its Gram matrix at the scale of its own ratio.  Without it a ratio
+    1e6 times smaller than another had a Gram block ~1e-6 whose round-off failed the solver's PSD check relative to
+    that block on every back-end (review 43b M3: a numerator x1e6 gave no bound at all)."""
+    return [1.0 / _pow2(p) for p, _ in pairs]
+
+
 def _build(pairs, eq, ineq, gens, degree):
-    """The program of the module docstring: maximise lambda (block 'lambda')."""
+    """The program of the module docstring: maximise lambda (block 'lambda'); (program, SOS constraint names, the
+    weights a_k of :func:`_weights`)."""
     prog = SOSProgram(gens)
     lam = prog.scalar("lambda")
     dw = degree - max(q.degree for _, q in pairs)
     ws = [prog.free_poly(dw, name=f"w{k}") for k in range(1, len(pairs))]
     w0 = lam - sum(ws[1:], ws[0]) if ws else lam * 1.0
-    names = []
+    names, weights = [], _weights(pairs)
     for k, (p, q) in enumerate(pairs):
         w = w0 if k == 0 else ws[k - 1]
-        expr = p - w * q
+        expr = (p - w * q) * weights[k]
         for j, g in enumerate(eq):
             expr = expr - prog.free_poly(degree - g.degree, name=f"r{k}_{j}") * g
         for j, h in enumerate(ineq):
             expr = expr - prog.sos_poly(degree - h.degree, name=f"s{k}_{j}") * h
         names.append(prog.add_sos(expr, degree=degree, name=f"u{k}").name)
     prog.maximize(lam)
-    return prog, names
+    return prog, names, weights
 
 
 def _objective(pairs):
@@ -274,7 +283,7 @@ def minimize_ratios(terms, eq=(), ineq=(), degree: int | None = None, *, gens=No
         return RatioResult(SolveStatus.INFEASIBLE, None, None, (), False, 0, degree, dbounds, gens, None,
                            time.perf_counter() - t0, f"denominator terms[{bad}].q is not certified positive on the "
                            f"set (certified lower bound {dbounds[bad]}): the sum-of-ratios bound needs q_i > 0")
-    prog, names = _build(pairs, eq, ineq, gens, degree)
+    prog, names, weights = _build(pairs, eq, ineq, gens, degree)
     deadline = budget.deadline()
     for form, be in _RETRIES if backend is None else ((GramForm.IMAGE, backend),):
         sol = solve_program(prog, be, form, tolerances=tol, deadline=deadline)
@@ -285,7 +294,8 @@ def minimize_ratios(terms, eq=(), ineq=(), degree: int | None = None, *, gens=No
                            time.perf_counter() - t0, sol.message)
     relaxed = float(sol.objective)
     q_unit = [_pow2(scaling.polynomial(q)) for _, q in pairs0]          # the divisors of the normalised q_i
-    lower, note = proven_ratio_bound(prog, names, sol, pairs, eq, ineq, [b / u for b, u in zip(dbounds, q_unit)])
+    lower, note = proven_ratio_bound(prog, names, sol, pairs, eq, ineq, [b / u for b, u in zip(dbounds, q_unit)],
+                                     weights)
     obj = _objective(pairs)
     found = []
     for p in _candidates(prog, names, sol, tol, len(gens)):

@@ -2,9 +2,10 @@
 
 The program (Bugarin, Henrion & Lasserre) certifies, for k = 0..m-1,
 
-    p_k - w_k q_k - sum_j r_kj g_j - sum_j s_kj h_j  =  b_k^T G_k b_k          (SOS, Gram G_k)
+    a_k (p_k - w_k q_k) - sum_j r_kj g_j - sum_j s_kj h_j  =  b_k^T G_k b_k          (SOS, Gram G_k)
 
-with w_0 = lambda - w_1 - ... - w_{m-1}, r_kj free, s_kj SOS (Gram S_kj).  The solver's values satisfy it only
+with w_0 = lambda - w_1 - ... - w_{m-1}, r_kj free, s_kj SOS (Gram S_kj), a_k > 0 a power of two (each certificate
+at its own ratio's scale).  The solver's values satisfy it only
 up to two defects, both accounted for here, as :mod:`sospoly.analysis.rigor` does for one Positivstellensatz
 certificate:
 
@@ -15,10 +16,11 @@ certificate:
   bound): b^T G b >= -eps ||b||^2.
 
 On the feasible set K (g = 0, h >= 0) inside a box |v_i| <= r_i that holds K (:func:`sospoly.analysis.proof.
-constraint_box`), p_k - w_k q_k >= -D_k with D_k = eps_k W_k + E_k + sum_j eta_kj W_kj H_j (W: bounds of ||b(v)||^2,
-E_k >= |e_k(v)|, H_j >= |h_j(v)| on the box), and q_k >= q_min,k > 0 on K (the denominators' proven bounds), so
+constraint_box`), a_k (p_k - w_k q_k) >= -D_k with D_k = eps_k W_k + E_k + sum_j eta_kj W_kj H_j (W: bounds of
+||b(v)||^2, E_k >= |e_k(v)|, H_j >= |h_j(v)| on the box), and q_k >= q_min,k > 0 on K (the denominators' proven
+bounds), so
 
-    sum_k p_k / q_k  >=  sum_k w_k - sum_k D_k / q_min,k  =  lambda - sum_k D_k / q_min,k       on K.
+    sum_k p_k / q_k  >=  sum_k w_k - sum_k D_k / (a_k q_min,k)  =  lambda - sum_k D_k / (a_k q_min,k)       on K.
 
 Every float evaluation of the margin is rounded up.  Without a box (K not bounded by its constraints) nothing is
 proven: the caller reports no bound (review 25b: the solver's lambda, reported as it was, stood 8.7e-8 above the
@@ -88,10 +90,11 @@ def _sup(poly: dict, r: np.ndarray) -> float:
         return float(np.sum(c * mono)) * MARGIN_ROUND_UP * (1.0 + 4.0 * np.finfo(float).eps)
 
 
-def proven_ratio_bound(prog, names: list, sol, pairs, eq, ineq, q_min) -> tuple[float, str]:
+def proven_ratio_bound(prog, names: list, sol, pairs, eq, ineq, q_min, weights=None) -> tuple[float, str]:
     """(a proven lower bound of min sum p_k / q_k on K for the program ``prog`` of :func:`sospoly.ratios._build`
     solved as ``sol`` -- the normalised data ``pairs``, ``eq``, ``ineq`` exactly as the program holds them -- or
-    -inf; a note): the module docstring's bound, with ``q_min`` (m,) proven lower bounds of the q_k on K."""
+    -inf; a note): the module docstring's bound, with ``q_min`` (m,) proven lower bounds of the q_k on K and
+    ``weights`` the certificates' factors a_k (powers of two; None: all 1)."""
     n = len(prog.gens)
     r = constraint_box(eq, ineq, n)
     if r is None:
@@ -109,9 +112,13 @@ def proven_ratio_bound(prog, names: list, sol, pairs, eq, ineq, q_min) -> tuple[
     data_eq, data_ineq = [_exact(g) for g in eq], [_exact(h) for h in ineq]
     h_sup = [poly_sup(h, r) * MARGIN_ROUND_UP for h in ineq]
     margin = 0.0
+    weights = [1.0] * m if weights is None else [float(a) for a in weights]
+    if not all(a > 0 and np.isfinite(a) for a in weights):
+        return -np.inf, "a certificate's weight is not a positive number"
     for k, (p, q) in enumerate(pairs):
-        U = dict(_exact(p))
-        _add(U, _mul(w0 if k == 0 else ws[k - 1], _exact(q)), -1)
+        a = Fraction(weights[k])
+        U = {e: a * c for e, c in _exact(p).items()}
+        _add(U, {e: a * c for e, c in _mul(w0 if k == 0 else ws[k - 1], _exact(q)).items()}, -1)
         for j, g in enumerate(data_eq):
             _add(U, _mul(_free(prog, x, f"r{k}_{j}"), g), -1)
         defect = 0.0
@@ -126,7 +133,7 @@ def proven_ratio_bound(prog, names: list, sol, pairs, eq, ineq, q_min) -> tuple[
             return -np.inf, f"certificate {names[k]} has no finite Gram matrix"
         _add(U, _gram_poly(G, b), -1)                       # U is now e_k, exactly
         D = psd_defect_of(G) * block_weight(b, r, False) + _sup(U, r) + defect
-        margin += D * MARGIN_ROUND_UP / float(q_min[k])
+        margin += D * MARGIN_ROUND_UP / (weights[k] * float(q_min[k]))
     if not np.isfinite(margin):
         return -np.inf, "the certificate's margin on the constraints' box is not finite"
     lower = float(np.nextafter(lam - margin * MARGIN_ROUND_UP, -np.inf))

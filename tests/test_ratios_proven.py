@@ -50,13 +50,13 @@ def test_a_raised_level_is_not_proven():
     sol, prog_names = r.solution, ["u0"]
     from sospoly.ratios import _build, _normalised
     pairs, eq, ineq, F = _normalised([(x ** 2 + 1, x + 2)], [], [1 - x ** 2])
-    prog, names = _build(pairs, eq, ineq, ("x",), r.degree)
+    prog, names, weights = _build(pairs, eq, ineq, ("x",), r.degree)
     assert names == prog_names
     xs = np.array(sol.x, float)
     xs[prog.block("lambda").slice] += 1e-3
     forged = dataclasses.replace(sol, x=xs)
     q_min = [r.denominator_bounds[0] / 4.0]                            # q / 4: the normalised denominator
-    lb, _ = proven_ratio_bound(prog, names, forged, pairs, eq, ineq, q_min)
+    lb, _ = proven_ratio_bound(prog, names, forged, pairs, eq, ineq, q_min, weights)
     assert lb * F <= float(EXACT) and np.isfinite(lb)
 
 

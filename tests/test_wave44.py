@@ -82,3 +82,18 @@ def test_thin_ellipse_lower_bound_is_valid_after_normalisation(seed):
         gX = _gamma_mp(res.X, C, regions, ellipses)
         assert mpmath.mpf(res.gamma_lb) <= gX, (seed, res.status, res.gamma_lb, float(gX))
         assert mpmath.mpf(res.gamma_ub) >= gX
+
+
+@pytest.mark.parametrize("k", [1e6, 1e9])
+def test_sum_of_ratios_with_a_scaled_numerator_is_certified(k):
+    """Review 43b M3: the docs' example with the first numerator times 1e6 gave no bound at all (every back-end's
+    PSD check failed on the second certificate's Gram block, ~1e-6 after the objective's normalisation); each
+    certificate now has its own power-of-two weight.  Closed form: k (2 sqrt 5 - 4) + 3/2."""
+    import sospoly as sp
+    x, y = sp.variables("x y")
+    r = sp.minimize_ratios([(k * (x ** 2 + 1), x + 2), (y ** 2 + 2, y ** 2 + 1)], ineq=[1 - x ** 2, 1 - y ** 2])
+    exact = k * (2 * math.sqrt(5) - 4) + 1.5
+    assert r.lower_bound is not None and r.upper_bound is not None, r.message
+    assert r.lower_bound <= exact * (1 + 1e-15)
+    assert r.optimal and r.status == sp.SolveStatus.OPTIMAL
+    assert abs(r.upper_bound - exact) <= 1e-7 * exact

@@ -3,7 +3,8 @@
 Image side: view i is translated by its region centre t_i and **all** views are scaled by one
 common factor s, x' = s (x - t_i).  A common isotropic scale multiplies every distance by s, so
 gamma' = s gamma and the minimiser is unchanged (a per-view scale would re-weight the views and
-change the problem).  The scale makes the unknowns O(1) at the optimum: s = 1 / rho with rho the RMS
+change the problem).  The scale makes the unknowns O(1) at the optimum: s = 1 / rho, rounded down to a power of
+two so that the similarity is exact (:func:`image_scale`), with rho the RMS
 residual of a *locally refined* L2 estimate of the region centres (the linear (DLT) estimate, then
 Levenberg-Marquardt on the reprojection residuals), an approximation of gamma* from above.  Then
 c = 2N gamma'^2 is O(1), the scale at which the certificate tolerances of
@@ -77,8 +78,8 @@ __all__ = ["Normalization", "NormalizationStack", "normalization_for", "normaliz
 RHO_FLOOR_REL = 1e-5
 #: floor of the world scale d, relative to max(1, |X0|) (the DLT point).
 DEPTH_FLOOR_REL = 1e-3
-#: the common image scale s is clipped to this range.
-SCALE_BOUNDS = (1e-8, 1e8)
+#: the common image scale s is clipped to this range (powers of two, ~7.5e-9 and ~1.3e8: :func:`image_scale`).
+SCALE_BOUNDS = (2.0 ** -27, 2.0 ** 27)
 
 
 @dataclass(frozen=True)
@@ -354,15 +355,14 @@ def _frame_one(P: np.ndarray, xi: np.ndarray, X0: np.ndarray) -> tuple | None:
 
 
 def image_scale(s: np.ndarray) -> np.ndarray:
-    """``np.clip(s, *SCALE_BOUNDS)`` rounded down to a power of two (up once more where that leaves the bounds; NaN
-    stays NaN).  A power of two makes the image similarity exact: s^2 D of an ellipse, s times a distance and
-    gamma' = s gamma carry no round-off, so a normalised thin ellipse is the caller's ellipse scaled, not a slightly
-    thinner one (review 43c LOW-1: at an axis ratio of 1e6 the rounding of s^2 D moved the border by ~1e-6 of the
-    minor axis and the lower bound of the moved ellipse exceeded the caller's optimum)."""
+    """``np.clip(s, *SCALE_BOUNDS)`` rounded down to a power of two (NaN stays NaN; the bounds are powers of two).
+    A power of two makes the image similarity exact: s^2 D of an ellipse, s times a distance and gamma' = s gamma
+    carry no round-off, so a normalised thin ellipse is the caller's ellipse scaled, not a slightly thinner one
+    (review 43c LOW-1: at an axis ratio of 1e6 the rounding of s^2 D moved the border by ~1e-6 of the minor axis and
+    the lower bound of the moved ellipse exceeded the caller's optimum)."""
     s = np.minimum(np.maximum(s, SCALE_BOUNDS[0]), SCALE_BOUNDS[1])
     with np.errstate(invalid="ignore"):
         p = np.ldexp(1.0, np.frexp(s)[1] - 1)
-        p = np.where(p < SCALE_BOUNDS[0], 2.0 * p, p)
         return np.where(np.isfinite(s), p, s)
 
 

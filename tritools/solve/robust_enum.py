@@ -61,7 +61,7 @@ from ..model.cameras import power2_scale
 from ..model.epipolar_data import epipolar_errors
 from ..model.exact import dot2, homogeneous_images
 from ..model.lm_one import refine_point_one
-from ..model.normalize import RHO_FLOOR_REL, Normalization, image_scale
+from ..model.normalize import RHO_FLOOR_REL, SCALE_BOUNDS, Normalization
 from ..model.stacked import (dlt_stack, epipolar_quadratics, fundamental_stack, gauss_newton_polish,
                              median_rows, norms, null_vectors, pixel_scales, project_stack,
                              refine_points_stack, view_pairs)
@@ -195,7 +195,7 @@ def enum_frame_one(C: np.ndarray, x: np.ndarray):
             rho = max(rho, RHO_FLOOR_REL * float(np.median(ps)) if ps.size else 0.0)
         if not (math.isfinite(d) and d > 0 and math.isfinite(rho) and rho > 0):
             return None
-        s = float(image_scale(np.array([1.0 / rho]))[0])
+        s = min(max(1.0 / rho, SCALE_BOUNDS[0]), SCALE_BOUNDS[1])
         CH = np.empty_like(C)
         CH[:, :, :3] = C[:, :, :3] * d
         CH[:, :, 3] = homogeneous_images(Cc, np.append(X0, 1.0))
@@ -244,7 +244,7 @@ def enum_frames(C: np.ndarray, x: np.ndarray) -> tuple:
             ps = ps[np.isfinite(ps) & (ps > 0)]
             rho[p] = max(rho[p], RHO_FLOOR_REL * float(np.median(ps)) if ps.size else 0.0)
         ok &= np.isfinite(d) & (d > 0) & np.isfinite(rho) & (rho > 0)
-        s = image_scale(1.0 / rho)
+        s = np.minimum(np.maximum(1.0 / rho, SCALE_BOUNDS[0]), SCALE_BOUNDS[1])
         # P'_i = T_i P_i H / ||.||_F (Normalization.cameras, vectorised):
         # T_i = [[s, 0, -s x_i], [0, s, -s y_i], [0, 0, 1]]
         Xh = np.concatenate([X0, np.ones((P, 1))], axis=1)

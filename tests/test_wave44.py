@@ -97,3 +97,17 @@ def test_sum_of_ratios_with_a_scaled_numerator_is_certified(k):
     assert r.lower_bound <= exact * (1 + 1e-15)
     assert r.optimal and r.status == sp.SolveStatus.OPTIMAL
     assert abs(r.upper_bound - exact) <= 1e-7 * exact
+
+
+def test_fixed_multiplier_psatz_far_from_its_optimum_is_not_optimal():
+    """Review 43b M2: min 1e8 x on the disc of radius 1e-6, degree 2, q = 1: the program's optimum is -100 (exact,
+    s = 1e8 / (2r)); the solver's level -1719 passed the optimality rule (its floor used ||x||_inf over every decision
+    variable, the multiplier's Gram entry ~1e12) and was reported OPTIMAL.  Now a level the rule accepts is the
+    optimum to its tolerance, and whatever is reported stays a valid bound."""
+    import sospoly as sp
+    x, y = sp.variables("x y")
+    r = 1e-6
+    lb = sp.solve_psatz(sp.build_psatz(1e8 * x, ineq=[r ** 2 - x ** 2 - y ** 2], degree=2, multiplier=1.0))
+    if lb.status == sp.SolveStatus.OPTIMAL:
+        assert abs(lb.lower_bound + 100.0) <= 1e-3, lb.lower_bound
+    assert lb.lower_bound is None or lb.lower_bound <= -100.0

@@ -28,9 +28,11 @@ The pair is optimal when ``|p - d| + E_p + E_d <= DUAL_RTOL * scale``
 size of the terms of the primal and the dual objective (for max c s.t. f - c SOS: |c| plus the sizes of f's
 terms at the minimiser, through the moments z) -- not the size of the data, which for
 1e16 x^4 - 3e12 x^2 + 1e8 is 1e16 while the optimum and the terms at the minimiser are ~1e8 -- plus the floor
-max|q| max(||x||_inf, 1), one unit of x's magnitude on the objective (an optimum 0 whose terms all vanish, e.g.
-max c s.t. x^2 - c SOS, is judged against the objective's unit, not against 0; the floor scales with q, so an
-objective scaled by 1e-9 is judged at its own scale, not against an absolute 1e-6).
+max|q| max(||x_q||_inf, 1), one unit of the magnitude of the objective's own variables x_q (those with q_j != 0) on
+the objective (an optimum 0 whose terms all vanish, e.g. max c s.t. x^2 - c SOS, is judged against the objective's
+unit, not against 0; the floor scales with q, so an objective scaled by 1e-9 is judged at its own scale, not against
+an absolute 1e-6).  Not over all of x: a multiplier's Gram entry of 5e13 (min 1e8 x on a disc of radius 1e-6) let a
+level 17x below the program's optimum pass as optimal (review 43b M2).
 """
 from __future__ import annotations
 
@@ -111,7 +113,7 @@ def check_optimality(problem: ConicProblem, x: np.ndarray, z: np.ndarray, tol: T
     p, d = float(q @ x), float(-(b @ z))
     if not np.any(q):                      # a constant objective: every feasible point is optimal
         return Optimality(0.0, 0.0, 0.0, 0.0, np.inf)
-    floor = float(np.max(np.abs(q))) * max(float(np.max(np.abs(x), initial=0.0)), 1.0)
+    floor = float(np.max(np.abs(q))) * max(float(np.max(np.abs(x[q != 0]), initial=0.0)), 1.0)
     scale = float(np.abs(q) @ np.abs(x) + np.abs(b) @ np.abs(z)) + floor
     allowed = DUAL_RTOL * scale
     return Optimality(e_p, e_d, p - d, scale, allowed)

@@ -175,7 +175,9 @@ def test_floudas_4_10_putinar_vs_fixed_multiplier():
     # ... where the fixed q = (1 + |v|^2)^k stalls: a valid but loose bound, never `optimal`
     fix = sp.minimize(f, ineq=FLOUDAS_INEQ, degree=8, multiplier="fixed")
     check_consistent(fix, f, (), FLOUDAS_INEQ)
-    assert fix.status == SolveStatus.OPTIMAL
+    # (the solver's pair proves its level only to ~6e-4 at the objective's scale 8.6, beyond the rule's 8.6e-5 since
+    # review 43b M2: the iterate's bound, proven, with status inaccurate; the same bound either way)
+    assert fix.status in (SolveStatus.OPTIMAL, SolveStatus.INACCURATE)
     assert fix.lower_bound <= fstar + 1e-6
     assert fix.upper_bound - fix.lower_bound > 1e-2
     assert not fix.optimal

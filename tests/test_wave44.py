@@ -1,6 +1,7 @@
 """Wave 44: the normalisation's exact image similarity (review 43c LOW-1), ..."""
 from __future__ import annotations
 
+import functools
 import math
 
 import mpmath
@@ -111,3 +112,71 @@ def test_fixed_multiplier_psatz_far_from_its_optimum_is_not_optimal():
     if lb.status == sp.SolveStatus.OPTIMAL:
         assert abs(lb.lower_bound + 100.0) <= 1e-3, lb.lower_bound
     assert lb.lower_bound is None or lb.lower_bound <= -100.0
+
+
+@functools.lru_cache
+def _fold_radius(k1, k2):
+    """The first r > 0 where r (1 + k1 r^2 + k2 r^4) stops rising (a fine grid; 10 where it does not in [0, 10])."""
+    rs = np.linspace(0.0, 10.0, 200001)
+    slope = 1 + 3 * k1 * rs ** 2 + 5 * k2 * rs ** 4
+    return float(rs[np.argmax(slope <= 0)]) if np.any(slope <= 0) else 10.0
+
+
+def _radial_root(k1, k2, r_d):
+    """The smallest r >= 0 with r (1 + k1 r^2 + k2 r^4) = r_d before the first fold (bisection), None where there is
+    none, "edge" within 1e-6 of the fold's value (either answer is right)."""
+    g = lambda r: r * (1 + k1 * r * r + k2 * r ** 4)        # noqa: E731
+    end = _fold_radius(k1, k2)
+    if abs(g(end) - r_d) <= 1e-6:
+        return "edge"
+    if g(end) < r_d:
+        return None
+    lo, hi = 0.0, end
+    for _ in range(200):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if g(mid) < r_d else (lo, mid)
+    return 0.5 * (lo + hi)
+
+
+@pytest.mark.parametrize("model, params, k1, k2, f, cx", [
+    ("SIMPLE_RADIAL", (300.0, 320.0, 240.0, -0.3), -0.3, 0.0, 300.0, 320.0),
+    ("RADIAL", (800.0, 320.0, 240.0, -0.5, 0.1), -0.5, 0.1, 800.0, 320.0),
+    ("OPENCV", (500.0, 500.0, 320.0, 240.0, -0.5, 0.1, 0.0, 0.0), -0.5, 0.1, 500.0, 320.0),
+    ("FULL_OPENCV", (300.0, 300.0, 320.0, 240.0, -0.5, 0.1, 0, 0, 0, 0, 0, 0), -0.5, 0.1, 300.0, 320.0)])
+def test_undistortion_keeps_only_central_roots(model, params, k1, k2, f, cx):
+    """Review 44b HIGH-1: the OPENCV family's Newton undistortion kept roots on the other side of the axis or past
+    the fold of a negative k (SIMPLE_RADIAL f = 300, k = -0.3: 48952 of 56160 grid pixels accepted where COLMAP
+    undistorts 622), and the own models' branch test looked at the root's Jacobian only (third-branch roots past
+    the fold of k1 = -0.5, k2 = 0.1).  Along the horizontal axis every accepted root must be the central root
+    (bisection before the fold), and every pixel with one must be accepted."""
+    from tritools.io.colmap.camera_models import undistorted_pixels
+    r_d = np.concatenate([np.linspace(-2.5, 2.5, 501), [0.59, 0.61, 0.7, 0.9, -0.933]])
+    xy = np.column_stack([cx + f * r_d, np.full(len(r_d), 240.0)])
+    und, ok = undistorted_pixels(model, params, xy)
+    for rd, u, good in zip(r_d, und, ok):
+        ref = _radial_root(k1, k2, abs(rd))
+        if ref == "edge":
+            continue
+        assert good == (ref is not None), (rd, u, good, ref)
+        if good:
+            assert (u[0] - cx) / f == pytest.approx(np.sign(rd) * ref, rel=1e-9, abs=1e-12), rd
+
+
+def test_keypoint_beyond_the_fold_is_not_certified():
+    """Review 44b HIGH-1 end to end: a keypoint inside a SIMPLE_RADIAL image beyond the model's fold (no central
+    root; pycolmap's cam_from_img gives NaN) made its track certified at gamma 168 px; it is invalid_input now."""
+    from tritools.io.colmap import Camera, Image, Model, Point3D, qvec_from_rotation
+    from tritools.io.colmap.camera_models import pixels_from_camera
+    from tritools.sfm import retriangulate
+
+    params = (300.0, 320.0, 240.0, -0.3)
+    cam = Camera(1, "SIMPLE_RADIAL", 640, 480, params)
+    poses = [np.array([0.0, 0, 5]), np.array([-0.5, 0, 5]), np.array([0.5, 0, 5])]
+    kps = [tuple(pixels_from_camera("SIMPLE_RADIAL", params, (t + np.array([0.0, 0.0, 0.0]))[None])[0]) for t in poses]
+    kps[2] = (40.0, 0.0)
+    images = {k + 1: Image(k + 1, tuple(qvec_from_rotation(np.eye(3))), tuple(t), 1, f"im{k}.jpg",
+                           ((float(kps[k][0]), float(kps[k][1]), 1),)) for k, t in enumerate(poses)}
+    model = Model({1: cam}, images, {1: Point3D(1, (0.01, 0.0, 0.0), (1, 2, 3), 0.0, ((1, 0), (2, 0), (3, 0)))})
+    _, rep = retriangulate(model)
+    r = rep.records[0]
+    assert r.status.value == "invalid_input" and not r.certified, (r.status, r.message)

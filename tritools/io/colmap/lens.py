@@ -28,7 +28,7 @@ from __future__ import annotations
 import numpy as np
 
 __all__ = ["OWN_MODELS", "PYCOLMAP_MODELS", "NON_PERSPECTIVE_MODELS", "split_params", "forward", "inverse",
-           "central_inverse", "pycolmap_camera"]
+           "central_inverse", "pycolmap_camera", "FOLD_SAMPLES", "radial_fold_image"]
 
 #: model -> (names of PARAMS[], focal layout) for the models with own code below; "f" = one focal.
 OWN_MODELS = {
@@ -131,6 +131,10 @@ def central_inverse(model: str, extra: dict, uv_d: np.ndarray, tol: float, max_i
     fun = lambda p: forward(model, extra, p)      # noqa: E731
     uv, ok = inverse(fun, uv_d, tol, max_iter)
     bad = ~(ok & _central(model, extra, uv, uv_d))
+    refused = np.zeros(len(uv_d), bool)
+    if model == "FULL_OPENCV" and bad.any():        # beyond the image of the central branch: no root to look for
+        refused = bad & (np.hypot(uv_d[:, 0], uv_d[:, 1]) > radial_fold_image(extra))
+        bad &= ~refused
     for s in CENTRAL_STARTS + (None,):
         if not bad.any():
             break
@@ -142,7 +146,31 @@ def central_inverse(model: str, extra: dict, uv_d: np.ndarray, tol: float, max_i
         good = ok2 & _central(model, extra, uv2, uv_d[idx])
         uv[idx[good]] = uv2[good]
         bad[idx[good]] = False
-    return uv, ~bad
+    return uv, ~(bad | refused)
+
+
+def radial_fold_image(extra: dict) -> float:
+    """FULL_OPENCV without tangential terms: the largest distorted radius its central branch reaches, i.e. g(r) =
+    r N(r^2) / M(r^2) (N = 1 + k1 s + k2 s^2 + k3 s^3, M = 1 + k4 s + k5 s^2 + k6 s^3) at its first fold -- the
+    smallest s = r^2 > 0 where (N + 2 s N') M - 2 s N M' = 0 -- times 1 + 1e-9; inf where g does not fold, a pole of
+    M comes first, or p1, p2 are not 0 (then nothing is skipped)."""
+    e = extra
+    if e["p1"] or e["p2"]:
+        return np.inf
+    N = np.polynomial.Polynomial([1.0, e["k1"], e["k2"], e["k3"]])
+    M = np.polynomial.Polynomial([1.0, e["k4"], e["k5"], e["k6"]])
+    S = np.polynomial.Polynomial([0.0, 1.0])
+    slope = (N + 2 * S * N.deriv()) * M - 2 * S * N * M.deriv()
+
+    def first(p):
+        z = p.trim().roots() if p.trim().degree() > 0 else np.array([])
+        r = [float(v.real) for v in np.atleast_1d(z) if abs(v.imag) <= 1e-9 * max(1.0, abs(v)) and v.real > 0]
+        return min(r) if r else np.inf
+    s_fold, s_pole = first(slope), first(M)
+    if not (s_fold < s_pole and np.isfinite(s_fold)):
+        return np.inf
+    r = float(np.sqrt(s_fold))
+    return abs(r * N(s_fold) / M(s_fold)) * (1.0 + 1e-9)
 
 
 def _continuation(model: str, extra: dict, uv_d: np.ndarray, tol: float, max_iter: int):
@@ -151,23 +179,41 @@ def _continuation(model: str, extra: dict, uv_d: np.ndarray, tol: float, max_ite
     uv = np.zeros_like(uv_d)
     ok = np.ones(len(uv_d), bool)
     for t in np.arange(1, CONTINUATION_STEPS + 1) / CONTINUATION_STEPS:
-        uv2, ok2 = inverse(lambda p: forward(model, extra, p), t * uv_d, tol, max_iter, start=uv)
-        ok &= ok2 & _central(model, extra, uv2, t * uv_d)
-        uv = np.where(ok[:, None], uv2, uv)
+        idx = np.nonzero(ok)[0]
+        if not idx.size:
+            break
+        uv2, ok2 = inverse(lambda p: forward(model, extra, p), t * uv_d[idx], tol, max_iter, start=uv[idx])
+        ok2 &= _central(model, extra, uv2, t * uv_d[idx], samples=1)      # (the whole segment at the end)
+        ok[idx[~ok2]] = False
+        uv[idx[ok2]] = uv2[ok2]
+    ok[ok] = _central(model, extra, uv[ok], uv_d[ok])
     return uv, ok
 
 
-def _central(model: str, extra: dict, uv: np.ndarray, uv_d: np.ndarray) -> np.ndarray:
-    """(M,) whether each root lies on the central branch (:func:`central_inverse`): the side of ``uv_d``, det of D's
-    Jacobian > 0 (central differences), and for FULL_OPENCV a positive denominator."""
+#: points of the segment from the centre to a root at which :func:`_central` checks that D does not fold
+FOLD_SAMPLES = 16
+
+
+def _central(model: str, extra: dict, uv: np.ndarray, uv_d: np.ndarray, samples: int = FOLD_SAMPLES) -> np.ndarray:
+    """(M,) whether each root lies on the central branch (:func:`central_inverse`): the side of ``uv_d``, and on the
+    segment from the centre to the root (at t uv, t = 1/K, ..., 1, K = ``samples``) det of D's Jacobian > 0
+    (central differences) and for FULL_OPENCV a positive denominator.  The root's own Jacobian is not enough: past
+    a fold where D rises again (k1 = -0.5, k2 = 0.1: a fold at r = 1, a minimum of D at 1.41) a third-branch root
+    has det > 0 (review 44b HIGH-1)."""
+    fun = lambda p: forward(model, extra, p)      # noqa: E731
     with np.errstate(all="ignore"):
-        side = (np.sum(uv * uv_d, axis=1) > 0) | np.all(uv_d == 0, axis=1)
-        J = _jacobian(lambda p: forward(model, extra, p), uv)
-        side &= J[:, 0, 0] * J[:, 1, 1] - J[:, 0, 1] * J[:, 1, 0] > 0
-        if model == "FULL_OPENCV":
-            r2 = np.sum(uv * uv, axis=1)
-            side &= 1 + r2 * (extra["k4"] + r2 * (extra["k5"] + r2 * extra["k6"])) > 0
-    return side
+        ok = (np.sum(uv * uv_d, axis=1) > 0) | np.all(uv_d == 0, axis=1)
+        for k in range(samples, 0, -1):
+            if not ok.any():
+                break
+            p = uv[ok] * (k / samples)
+            J = _jacobian(fun, p)
+            good = J[:, 0, 0] * J[:, 1, 1] - J[:, 0, 1] * J[:, 1, 0] > 0
+            if model == "FULL_OPENCV":
+                r2 = np.sum(p * p, axis=1)
+                good &= 1 + r2 * (extra["k4"] + r2 * (extra["k5"] + r2 * extra["k6"])) > 0
+            ok[np.nonzero(ok)[0][~good]] = False
+    return ok
 
 
 def inverse(fun, uv_d: np.ndarray, tol: float, max_iter: int, start: np.ndarray | None = None

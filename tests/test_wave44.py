@@ -180,3 +180,33 @@ def test_keypoint_beyond_the_fold_is_not_certified():
     _, rep = retriangulate(model)
     r = rep.records[0]
     assert r.status.value == "invalid_input" and not r.certified, (r.status, r.message)
+
+
+def test_bad_executor_is_refused_when_the_options_are_built():
+    """Review 44b MEDIUM-1: RetriangulationOptions(executor=5) was accepted and died with AttributeError in the
+    batch once a point needed an SDP; one rule (``batch.executor_problem``) for both entry points now."""
+    from tritools.sfm import RetriangulationOptions
+    with pytest.raises(ValueError, match="executor"):
+        RetriangulationOptions(executor=5)
+    with pytest.raises(TypeError, match="executor"):
+        tritools.triangulate_many([], executor="process")
+    assert RetriangulationOptions(executor=None).executor is None
+
+
+def test_retriangulate_folder_names_a_missing_path(tmp_path):
+    """Review 44b LOW-4: retriangulate_folder(None, out) raised os.stat's TypeError, which names no argument."""
+    from tritools.sfm import retriangulate_folder
+    with pytest.raises(TypeError, match="in_dir"):
+        retriangulate_folder(None, tmp_path / "out")
+    with pytest.raises(TypeError, match="out_dir"):
+        retriangulate_folder(tmp_path, 3)
+
+
+def test_masked_thresholds_are_refused():
+    """Review 44a LOW-2: np.asarray drops a masked array's mask, so a masked threshold was used as if unmasked."""
+    sc = random_scene(3, 1, noise_px=1.0, seed=2)
+    c = np.ma.masked_array([2.0, 3.0, 4.0], mask=[False, True, False])
+    with pytest.raises(ValueError, match="masked"):
+        tritools.triangulate(sc.cameras, sc.points2d[0], robust=c)
+    r = tritools.triangulate(sc.cameras, sc.points2d[0], robust=c.filled(np.inf))
+    assert r.inliers is not None and len(r.inliers) == 3

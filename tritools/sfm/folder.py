@@ -238,6 +238,10 @@ def retriangulate_folder(in_dir, out_dir, options: RetriangulationOptions | None
     for name, fmt in (("input_format", input_format), ("output_format", output_format)):
         if fmt is not None and fmt not in FORMATS:          # (a KeyError from deep inside, review 29b F14)
             raise OptionError(name, f"must be one of {', '.join(FORMATS)} or None, got {fmt!r}")
+    for name, value in (("in_dir", in_dir), ("out_dir", out_dir)):
+        if not isinstance(value, (str, os.PathLike)):
+            raise TypeError(f"retriangulate_folder {name} must be a path (str or os.PathLike), got "
+                            f"{type(value).__name__}")
     check_output(in_dir, out_dir, exports)
     timings = dict.fromkeys(("open", "geometry", "read", "solve", "write"), 0.0)
     t0 = time.perf_counter()

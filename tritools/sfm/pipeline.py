@@ -28,6 +28,7 @@ from ..io.colmap.camera_models import (OPENCV_FAMILY, camera_problem, distort_ro
 from ..model.cameras import CAMERA_RANK_RTOL, camera_rank_ratio, depths_stack
 from ..records import TriangulationResults
 from ..result import Status
+from ..solve.batch import executor_problem
 from ..solve.decide import gamma_from_c
 from ..solve.options import OptionError, TriangulationOptions
 from .certify import CertifyOptions, RecordColumns, certify_stack, robust_threshold, solver_options
@@ -123,6 +124,9 @@ class RetriangulationOptions:
         _int_option("chunk_points", self.chunk_points, 1)
         if self.progress is not None and self.progress != "auto" and not isinstance(self.progress, (bool, np.bool_)):
             raise OptionError("progress", f"must be True, False, None or 'auto', got {self.progress!r}")
+        why = executor_problem(self.executor)
+        if why:
+            raise OptionError("executor", why)
         object.__setattr__(self, "robust", robust_threshold(self.robust))
 
     method = property(lambda self: self.solver.method.value, doc="the solver's method (a string)")

@@ -301,6 +301,14 @@ class BatchOutcome:
         return TriangulationResults.concat(parts).take(np.argsort(order, kind="stable"))
 
 
+def executor_problem(executor) -> str | None:
+    """Why ``executor`` cannot run per-point work (None: it can -- None itself, or an object with ``submit()``)."""
+    if executor is None or callable(getattr(executor, "submit", None)):
+        return None
+    return (f"must be a concurrent.futures.Executor or a dask.distributed.Client (an object with submit()), got "
+            f"{type(executor).__name__}")
+
+
 def per_point_runner(executor=None, chunk_size: int = DEFAULT_CHUNK_SIZE, end: float | None = None):
     """The runner of the batch stage ``per_point`` (:mod:`tritools.solve.stages.batch`): items (row, cameras,
     regions, options, attempts) solved by :func:`tritools.triangulate` in chunks through ``executor`` (the
@@ -555,9 +563,9 @@ def triangulate_many(problems: Iterable[Sequence], method: str | Method | None =
         raise ValueError(f"chunk_size must be a positive integer, got {chunk_size!r}")
     if isinstance(problems, (str, bytes)) or not hasattr(problems, "__iter__"):
         raise TypeError(f"problems must be an iterable of (cameras, regions) pairs, got {type(problems).__name__}")
-    if executor is not None and not callable(getattr(executor, "submit", None)):
-        raise TypeError(f"executor must be a concurrent.futures.Executor or a dask.distributed.Client (an object "
-                        f"with submit()), got {type(executor).__name__}")
+    why = executor_problem(executor)
+    if why:
+        raise TypeError(f"executor {why}")
     for step in retries:
         if not (isinstance(step, (tuple, list)) and len(step) == 2):
             raise ValueError(f"retries must be (method, delta) pairs, got {step!r}")

@@ -28,6 +28,9 @@ def robust_thresholds(robust, n_views: int) -> np.ndarray:
     ValueError naming ``robust`` otherwise."""
     if type(robust) is float and robust >= MIN_THRESHOLD:      # the common case, a valid float (NaN fails >=)
         return np.full(n_views, robust)
+    if isinstance(robust, np.ma.MaskedArray):       # (np.asarray drops the mask: masked entries would count)
+        raise ValueError("robust must not be a masked array (its mask would be ignored): fill the masked "
+                         "thresholds, e.g. robust.filled(np.inf) for views without one")
     try:
         raw = np.asarray(robust)
         if raw.dtype.kind not in "iuf":                  # booleans, strings and bytes, objects (None), complex

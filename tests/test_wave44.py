@@ -210,3 +210,26 @@ def test_masked_thresholds_are_refused():
         tritools.triangulate(sc.cameras, sc.points2d[0], robust=c)
     r = tritools.triangulate(sc.cameras, sc.points2d[0], robust=c.filled(np.inf))
     assert r.inliers is not None and len(r.inliers) == 3
+
+
+#: review 44b MEDIUM-2: three PINHOLE views, one keypoint moved to (1e9, -1e9) px
+_FAR_P = [[[669.7027251688561, 0.0, 542.1238418492657, 2560.0], [-70.92484959872152, 820.0, 229.28075739014542, 1920.0],
+           [-0.29552020666133966, 0.0, 0.955336489125606, 8.0]],
+          [[800.0, 0.0, 320.0, 2560.0], [0.0, 820.0, 240.0, 1920.0], [0.0, 0.0, 1.0, 8.0]],
+          [[858.8356574321134, 0.0, 69.29151119112218, 2560.0], [70.92484959872152, 820.0, 229.28075739014542, 1920.0],
+           [0.29552020666133966, 0.0, 0.955336489125606, 8.0]]]
+_FAR_X = [[1e9, -1e9], [322.8857526674369, 341.5445398430696], [345.5763409773566, 340.8400799737439]]
+
+
+@pytest.mark.parametrize("batch", [False, True])
+def test_a_step_bound_above_the_plans_best_estimate_is_refuted(batch):
+    """Review 44b MEDIUM-2: the Theorem 1 delta = 4 step's stalled iterate gave gamma_LB ~4650 px beside its own
+    estimate at ~4680 px, while another step's estimate costs ~1736 px; the plan reported the largest lower bound
+    clipped to the best gamma_UB (rounded up), above gamma(X) >= gamma*.  Such a bound is refuted now, and the
+    largest bound of the other steps is reported (the iterate's invalid bound itself: an open finding)."""
+    P, x = np.array(_FAR_P), np.array(_FAR_X)
+    r = tritools.triangulate_many([(P, x)])[0] if batch else tritools.triangulate(P, x)
+    assert r.X is not None and not r.optimal
+    gX = _gamma_mp(r.X, P, [Point(v) for v in x], {})
+    assert r.gamma_lb is None or mpmath.mpf(r.gamma_lb) <= gX, (r.gamma_lb, float(gX), r.message)
+    assert mpmath.mpf(r.gamma_ub) >= gX

@@ -267,9 +267,17 @@ def _steps_best_estimate(ctx: PointContext, best: TriangulationResult) -> Triang
                        lowered=True)
     if rep.gamma_ub is None or not rep.gamma_ub < best.gamma_ub:
         return best
+    gamma_lb, note = rep.gamma_lb, "X and gamma_UB from the plan's best estimate"
+    if best.gamma_lb is not None and best.gamma_lb > rep.gamma_ub:
+        # a valid bound is at most gamma* <= gamma(X) <= gamma_UB: this step's is refuted (review 44b MEDIUM-2: a
+        # stalled delta = 4 program's 4647 px beside a 1736 px estimate was clipped to that gamma_UB, rounded up)
+        gamma_lb = max((a.gamma_lb for a in ctx.attempts if a.gamma_lb is not None and a.gamma_lb <= rep.gamma_ub),
+                       default=None)
+        note = join(note, f"the lower bound {best.gamma_lb:.10g} of the {best.method} delta = {best.delta} step is "
+                          f"above it (numerical failure): the largest bound of the other steps is reported")
     return replace(best, X=rep.X, X_raw=rep.X_raw, gamma_ub=rep.gamma_ub, gamma_ub_raw=rep.gamma_ub_raw,
-                   gamma_lb=rep.gamma_lb, image_points=rep.image_points, residuals=rep.residuals, depths=rep.depths,
-                   in_front=rep.in_front, message=join(best.message, "X and gamma_UB from the plan's best estimate"))
+                   gamma_lb=gamma_lb, image_points=rep.image_points, residuals=rep.residuals, depths=rep.depths,
+                   in_front=rep.in_front, message=join(best.message, note))
 
 
 def world_frame_stage(ctx: PointContext) -> None:

@@ -9,7 +9,6 @@ wrong matches).  Checked: the branch itself on a forced stall (deterministic), t
 Clarabel, and the end-to-end certificate against an independent multi-start reference.
 """
 from pathlib import Path
-from unittest import mock
 
 import numpy as np
 import pytest
@@ -20,7 +19,6 @@ import tritools
 from sospoly.solvers.backends import ClarabelBackend, IpmBackend, RawStatus, ipm_almost_solved
 from sospoly.solvers.ipm import MomentReduction, ipm_solve_sparse
 from tests.reference.multistart import best_local_gamma
-import tritools.model.normalize as NZ
 from tritools.model.normalize import normalization_for
 from tritools.model.problem import build_problem
 from tritools.model.regions import as_regions
@@ -28,16 +26,9 @@ from tritools.model.regions import as_regions
 DATA = Path(__file__).parent / "data" / "stalled_moment_theorem1.npz"
 
 
-def _continuous_scale(s):
-    """The image scale before wave 44 (the clip only, not rounded to a power of two): the recorded programs stall in
-    the frame it gave."""
-    return np.minimum(np.maximum(s, NZ.SCALE_BOUNDS[0]), NZ.SCALE_BOUNDS[1])
-
-
 def _program(C, x, delta=4):
     regs = as_regions(x)
-    with mock.patch.object(NZ, "image_scale", _continuous_scale):
-        norm = normalization_for(C, regs)
+    norm = normalization_for(C, regs)
     pb = build_problem(norm.cameras(C), norm.regions(regs), "theorem1")
     comp = sospoly.compile_psatz(pb.f, pb.eq, pb.ineq, delta, gens=pb.gens)
     return comp.instantiate(pb.f, pb.eq, pb.ineq).problem

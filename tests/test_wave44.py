@@ -245,3 +245,23 @@ def test_a_track_seen_only_by_one_camera_is_ill_posed_in_a_batch():
     assert r.status == tritools.Status.ILL_POSED and "ValueError" not in r.message, (r.status, r.message)
     with pytest.raises(ValueError, match="all equal"):
         tritools.triangulate(P, x)
+
+
+def test_power_of_two_scale_only_for_thin_ellipses():
+    """The normalisation's image scale is a power of two (the similarity exact) when a region declares
+    ``exact_scale`` (a filled ellipse or border thinner than EXACT_SCALE_RATIO), and the residual rule's own scale
+    otherwise; ``power_of_two_below`` is the largest power of two at or below its argument, within SCALE_BOUNDS."""
+    from tritools import EllipseBorder
+    from tritools.model.normalize import SCALE_BOUNDS, normalization_for, power_of_two_below
+    from tritools.model.regions.ellipse import EXACT_SCALE_RATIO
+    for s in (3.0, 0.5, 1e-3, 7e7, 1.5e-8):
+        p = power_of_two_below(s)
+        assert math.frexp(p)[0] == 0.5 and (p <= s < 2 * p or p == 2 * power_of_two_below(s / 2) >= SCALE_BOUNDS[0])
+    C, regions, _ = _thin_ellipse_problem(105)
+    assert regions[-1].exact_scale and not Ellipse([0.0, 0.0], np.diag([4.0, 1.0])).exact_scale
+    assert EllipseBorder([0.0, 0.0], np.diag([(EXACT_SCALE_RATIO * 1.01) ** 2, 1.0])).exact_scale
+    s = normalization_for(C, regions).scale
+    assert math.frexp(s)[0] == 0.5
+    pts = [Point(r.center) for r in regions]
+    s_pts = normalization_for(C, pts).scale
+    assert s_pts != power_of_two_below(s_pts) and power_of_two_below(s_pts) == s

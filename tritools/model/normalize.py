@@ -3,8 +3,7 @@
 Image side: view i is translated by its region centre t_i and **all** views are scaled by one
 common factor s, x' = s (x - t_i).  A common isotropic scale multiplies every distance by s, so
 gamma' = s gamma and the minimiser is unchanged (a per-view scale would re-weight the views and
-change the problem).  The scale makes the unknowns O(1) at the optimum: s = 1 / rho, rounded down to a power of
-two so that the similarity is exact (:func:`image_scale`), with rho the RMS
+change the problem).  The scale makes the unknowns O(1) at the optimum: s = 1 / rho with rho the RMS
 residual of a *locally refined* L2 estimate of the region centres (the linear (DLT) estimate, then
 Levenberg-Marquardt on the reprojection residuals), an approximation of gamma* from above.  Then
 c = 2N gamma'^2 is O(1), the scale at which the certificate tolerances of
@@ -72,14 +71,14 @@ __all__ = ["Normalization", "NormalizationStack", "normalization_for", "normaliz
            "world_origin_magnitudes",
            "median_pixel_scales", "pixel_floors",
            "RHO_FLOOR_REL", "RESOLUTION_REL", "PIXEL_FLOOR_REL", "DEPTH_FLOOR_REL",
-           "SCALE_BOUNDS", "image_scale"]
+           "SCALE_BOUNDS", "power_of_two_below"]
 
 #: floor of the residual scale rho, relative to the median pixel scale (focal length) of the views.
 RHO_FLOOR_REL = 1e-5
 #: floor of the world scale d, relative to max(1, |X0|) (the DLT point).
 DEPTH_FLOOR_REL = 1e-3
-#: the common image scale s is clipped to this range (powers of two, ~7.5e-9 and ~1.3e8: :func:`image_scale`).
-SCALE_BOUNDS = (2.0 ** -27, 2.0 ** 27)
+#: the common image scale s is clipped to this range.
+SCALE_BOUNDS = (1e-8, 1e8)
 
 
 @dataclass(frozen=True)
@@ -266,7 +265,7 @@ def _normalization_stack(C: np.ndarray, x: np.ndarray, ok: np.ndarray) -> Normal
     r = np.sqrt(np.add.reduce(np.add.reduce(np.where(fin[:, None, None], u, 0.0) ** 2, axis=2), axis=1) / N) / s
     use = ok_r & fin & np.isfinite(r)
     rho_ref = np.where(use, np.maximum(np.minimum(r, rho), rho_floor), rho)
-    s_new = image_scale(1.0 / rho_ref)
+    s_new = _clip_scale(1.0 / rho_ref)
     Cn[:, :, :2, :] *= (s_new / s)[:, None, None, None]
     Cn /= norms(Cn, axis=(2, 3))[..., None, None]
     return NormalizationStack(s_new, x.copy(), X0, d, Cn, np.where(use[:, None], Xn, 0.0), ok,
@@ -299,7 +298,7 @@ def _normalization_one(C: np.ndarray, x: np.ndarray, ok: np.ndarray) -> Normaliz
         u, _, fin = project_one(Cn, Xn)
         r = math.sqrt(float(np.add.reduce(np.add.reduce(u * u, axis=1))) / N) / s if fin else math.nan
         use = ok_r and fin and math.isfinite(r)
-        s_new = float(image_scale(1.0 / (max(min(r, rho), rho_floor) if use else rho)))
+        s_new = float(_clip_scale(1.0 / (max(min(r, rho), rho_floor) if use else rho)))
         Cn[:, :2, :] *= s_new / s
         Cn /= norms(Cn, axis=(1, 2))[:, None, None]
     s_arr = np.array([s_new])
@@ -330,7 +329,7 @@ def _frame_one(P: np.ndarray, xi: np.ndarray, X0: np.ndarray) -> tuple | None:
     if not fin0 or not rho_floor > 0:
         return None
     rho = max(math.sqrt(float(np.add.reduce(np.add.reduce((u0 - xi) ** 2, axis=1))) / N), rho_floor)
-    s = float(image_scale(1.0 / rho))
+    s = float(_clip_scale(1.0 / rho))
     a = null_vectors(P)
     a = a / norms(a, axis=1, keepdims=True)
     if not (np.abs(a[:, 3]) > POINT_AT_INFINITY_RTOL).all():
@@ -354,16 +353,10 @@ def _frame_one(P: np.ndarray, xi: np.ndarray, X0: np.ndarray) -> tuple | None:
     return s, rho, rho_floor, d, Cn, med
 
 
-def image_scale(s: np.ndarray) -> np.ndarray:
-    """``np.clip(s, *SCALE_BOUNDS)`` rounded down to a power of two (NaN stays NaN; the bounds are powers of two).
-    A power of two makes the image similarity exact: s^2 D of an ellipse, s times a distance and gamma' = s gamma
-    carry no round-off, so a normalised thin ellipse is the caller's ellipse scaled, not a slightly thinner one
-    (review 43c LOW-1: at an axis ratio of 1e6 the rounding of s^2 D moved the border by ~1e-6 of the minor axis and
-    the lower bound of the moved ellipse exceeded the caller's optimum)."""
-    s = np.minimum(np.maximum(s, SCALE_BOUNDS[0]), SCALE_BOUNDS[1])
-    with np.errstate(invalid="ignore"):
-        p = np.ldexp(1.0, np.frexp(s)[1] - 1)
-        return np.where(np.isfinite(s), p, s)
+def _clip_scale(s: np.ndarray) -> np.ndarray:
+    """``np.clip(s, *SCALE_BOUNDS)`` as the two ufuncs it is made of (max, then min; NaN stays NaN), without
+    clip's per-call overhead."""
+    return np.minimum(np.maximum(s, SCALE_BOUNDS[0]), SCALE_BOUNDS[1])
 
 
 def _frames(C: np.ndarray, x: np.ndarray, X0: np.ndarray, ok: np.ndarray, rho_floor: np.ndarray) -> tuple:
@@ -375,7 +368,7 @@ def _frames(C: np.ndarray, x: np.ndarray, X0: np.ndarray, ok: np.ndarray, rho_fl
     res = np.where(fin0[:, None], norms(u0 - x, axis=2), np.inf)
     rho = np.where(fin0, np.sqrt(np.add.reduce(np.where(fin0[:, None], res, 0.0) ** 2, axis=1) / N), 1.0)
     rho = np.maximum(rho, rho_floor)
-    s = image_scale(1.0 / rho)
+    s = _clip_scale(1.0 / rho)
     a = null_vectors(C)
     a = a / norms(a, axis=2, keepdims=True)
     affine = ~(np.abs(a[..., 3]) > POINT_AT_INFINITY_RTOL)
@@ -437,12 +430,30 @@ def normalization_for(cameras: np.ndarray, regions, enabled: bool = True) -> Nor
         norm = Normalization(1.0, centers, np.zeros(3), 1.0, float(resolutions(np.ones(1), centers[None], floor)[0]),
                              float(magnitudes(centers[None], np.asarray(cameras, float)[None])[0]))
     offset = regions_offset(regions)
-    if offset * norm.scale > 1.0:
-        s = float(image_scale(np.array([1.0 / offset]))[0])
+    s = norm.scale
+    if offset * s > 1.0:
+        s = float(_clip_scale(np.array([1.0 / offset]))[0])
+    if any(getattr(r, "exact_scale", False) for r in regions):
+        s = power_of_two_below(s)
+    if s != norm.scale:
         floor = pixel_floors(np.asarray(cameras, float)[None], centers[None])
         norm = dataclasses.replace(norm, scale=s, resolution=float(resolutions(np.array([s]), centers[None],
                                                                                floor)[0]))
     return norm
+
+
+def power_of_two_below(s: float) -> float:
+    """The largest power of two <= s (s > 0 finite; s itself otherwise), within ``SCALE_BOUNDS`` (doubled once where
+    it falls below them).  The image scale of a problem with a region whose shape the similarity's rounding would
+    change (``Region.exact_scale``: a thin ellipse, whose s^2 D rounded moves the border by ~eps lam_max / lam_min of
+    the minor axis -- review 43c LOW-1: the lower bound of the moved ellipse exceeded the caller's optimum): with a
+    power of two, s^2 D, s times a distance and gamma' = s gamma carry no round-off.  Only there: a power of two
+    moves c = 2N gamma'^2 by up to a factor 4 from the residual's scale, and the SDPs' conditioning with it (one
+    stalled Theorem 1 delta = 6 program took 24 s instead of 1 s when every problem was rounded)."""
+    if not (math.isfinite(s) and s > 0):
+        return s
+    p = math.ldexp(1.0, math.frexp(s)[1] - 1)
+    return p if p >= SCALE_BOUNDS[0] else 2.0 * p
 
 
 def regions_offset(regions) -> float:

@@ -62,6 +62,7 @@ from sospoly import DEFAULT_TOLERANCES, Tolerances
 from sospoly.budget import Deadline
 
 from ..model.regions import ConeKind, ConicForm, Region, conic_form_of, extent_of
+from ..model.regions.shapes import shape_fields
 from .fastpath import BAND_MIN_VIEWS, BAND_WIDTHS, all_pairs_seconds, band_seconds, lagrangian_bounds, seconds_fit
 
 __all__ = ["ViewQuadratics", "view_quadratics", "reduce_views", "compact_bounds", "region_bound", "region_forms",
@@ -110,9 +111,18 @@ def constraint_counts(forms) -> tuple[int, int]:
 
 
 def ellipse_axes(D: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(R (..., 2, 2), sigma (..., 2)): D = R diag(sigma^2) R^T, largest semi-axis first."""
-    lam, R = np.linalg.eigh(D)
-    return R[..., ::-1], np.sqrt(np.maximum(lam[..., ::-1], 0.0))
+    """(R (..., 2, 2), sigma (..., 2)): D = R diag(sigma^2) R^T, largest semi-axis first; the closed forms of
+    :func:`~tritools.model.regions.shapes.shape_fields` (the regions' own: eigh's minor semi-axis of a thin ellipse is
+    off by ~eps lam_max / lam_min of itself, 3e-7 at an axis ratio of 1e5, so the verification bounded another
+    ellipse); D = 0 (a point) gives sigma = 0."""
+    D = np.asarray(D, float)
+    flat = D.reshape(-1, 2, 2)
+    _, axes, Q, _, lam = shape_fields(flat)
+    with np.errstate(invalid="ignore"):
+        sigma = np.sqrt(np.maximum(np.nan_to_num(lam[:, ::-1], nan=0.0), 0.0))
+    zero = ~np.any(flat, axis=(1, 2))
+    Q[zero] = np.eye(2)
+    return Q.reshape(D.shape), sigma.reshape(D.shape[:-1])
 
 
 def closest_on_ellipses(U: np.ndarray, sigma: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -69,6 +69,11 @@ class ClippedEllipse(Region):
         object.__setattr__(self, "_center", c)
 
     @property
+    def exact_scale(self) -> bool:
+        """The ellipse's (:attr:`EllipseBorder.exact_scale`): the cut keeps its shape."""
+        return self.ellipse.exact_scale
+
+    @property
     def n_aux(self) -> int:
         return 2
 

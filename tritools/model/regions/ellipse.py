@@ -16,7 +16,8 @@ from .base import (Region, RegionPolynomials, as_matrix, as_points, as_vector, c
 from .forms import ConeKind, ConicForm, RegionExtent
 from .shapes import shape_fields
 
-__all__ = ["EllipseBorder", "Ellipse", "SYMMETRY_RTOL", "PD_RTOL", "ELLIPSE_MAX_ITER", "ELLIPSE_SCALAR_MAX"]
+__all__ = ["EllipseBorder", "Ellipse", "SYMMETRY_RTOL", "PD_RTOL", "ELLIPSE_MAX_ITER", "ELLIPSE_SCALAR_MAX",
+           "EXACT_SCALE_RATIO"]
 
 #: Relative tolerance for ``D == D.T``.
 SYMMETRY_RTOL = 1e-10
@@ -24,6 +25,9 @@ SYMMETRY_RTOL = 1e-10
 PD_RTOL = 1e-12
 #: Maximum steps of the point-to-ellipse root finder (safeguarded Newton: at most ~35 measured, bisection ~52).
 ELLIPSE_MAX_ITER = 200
+#: semi-axis ratio above which a normalisation scales the ellipse by a power of two (``exact_scale``): s^2 D's
+#: rounding moves the minor semi-axis by ~eps (a / b)^2 / 2 of itself, 5e-13 at this ratio
+EXACT_SCALE_RATIO = 100.0
 #: Up to this many points the point-to-ellipse solver runs a scalar loop (faster than numpy).
 ELLIPSE_SCALAR_MAX = 8
 
@@ -254,6 +258,12 @@ class EllipseBorder(Region):
     def semi_axes(self) -> np.ndarray:
         """Semi-axis lengths ``sqrt(eig D)``, largest first."""
         return self._axes.copy()
+
+    @property
+    def exact_scale(self) -> bool:
+        """Whether a normalisation must scale this region by a power of two (:func:`tritools.model.normalize.
+        power_of_two_below`): an axis ratio above ``EXACT_SCALE_RATIO``, where rounding s^2 D moves the border."""
+        return bool(self._axes[0] > EXACT_SCALE_RATIO * self._axes[1])
 
     @property
     def n_aux(self) -> int:

@@ -1,6 +1,7 @@
 """Issue #18 items 5-6: one options class (the SfM options compose TriangulationOptions), the structured
 OptionError, one Sparsity enum, one default time limit, and the whole-call limit ``total_time_limit``."""
 import dataclasses
+from types import SimpleNamespace
 import json
 import pickle
 import time
@@ -67,8 +68,9 @@ def test_sfm_options_hold_one_triangulation_options():
     assert (r.method, r.path, r.delta, r.max_delta) == ("corollary1", "auto", None, 2)
     assert r.solver.budget.time_limit == 7 and r.solver.sparsity is sospoly.Sparsity.CLIQUES
     assert "method" not in {f.name for f in dataclasses.fields(r)}          # not re-declared: read from solver
-    again = dataclasses.replace(r, executor="pool")
-    assert again == r and again.executor == "pool" and again.chunk_points == 5
+    pool = SimpleNamespace(submit=lambda *a: None)                  # (any object with submit(), checked)
+    again = dataclasses.replace(r, executor=pool)
+    assert again == r and again.executor is pool and again.chunk_points == 5
     c = r.certify_options()
     assert c.triangulation_options() is r.solver and c == CertifyOptions(options=r.solver)
     assert CertifyOptions(delta=4).options == DEFAULT_OPTIONS.replace(delta=4)

@@ -235,18 +235,6 @@ def test_a_step_bound_above_the_plans_best_estimate_is_refuted(batch):
     assert mpmath.mpf(r.gamma_ub) >= gX
 
 
-def test_a_track_seen_only_by_one_camera_is_ill_posed_in_a_batch():
-    """Review 44b LOW-2: a track seen only by duplicated images came back invalid_input with a raw 'ValueError: ...'
-    message; equal cameras are the ill-posed case of SPEC §6 (a single call still raises the ValueError)."""
-    sc = random_scene(2, 1, noise_px=1.0, seed=4)
-    P = np.array([sc.cameras[0], 2.0 * sc.cameras[0]])
-    x = np.array([sc.points2d[0][0], sc.points2d[0][0] + 1.0])
-    r = tritools.triangulate_many([(P, x)])[0]
-    assert r.status == tritools.Status.ILL_POSED and "ValueError" not in r.message, (r.status, r.message)
-    with pytest.raises(ValueError, match="all equal"):
-        tritools.triangulate(P, x)
-
-
 def test_power_of_two_scale_only_for_thin_ellipses():
     """The normalisation's image scale is a power of two (the similarity exact) when a region declares
     ``exact_scale`` (a filled ellipse or border thinner than EXACT_SCALE_RATIO), and the residual rule's own scale

@@ -59,7 +59,7 @@ from .camera_rank import (CAMERA_RANK_RTOL, EXACT_RANK_BELOW, SHARED_MIN_CAMERAS
                           rank_ratio_scalar, shared_rank_ratio, unit_rows)
 from .regions.base import real_array
 
-__all__ = ["depth_rows", "numeric_cameras", "CamerasAllEqual",
+__all__ = ["depth_rows", "numeric_cameras",
            "CAMERA_RANK_RTOL",
            "SAME_CAMERA_RTOL", "POINT_AT_INFINITY_RTOL", "CameraIssue", "CameraProblems",
            "camera_rank_ratio", "cameras_all_equal", "check_camera", "validate_cameras", "camera_refusal",
@@ -215,13 +215,8 @@ def validate_cameras(cameras: ArrayLike, *, min_views: int = 2, require_distinct
         if not r > CAMERA_RANK_RTOL:
             raise ValueError(_rank_message(f"cameras[{i}]", float(r)))
     if require_distinct and C.shape[0] >= 2 and (_all_equal_scalar(C) if few else _all_equal(C)):
-        raise CamerasAllEqual("cameras are all equal up to scale: the triangulation is ill-posed")
+        raise ValueError("cameras are all equal up to scale: the triangulation is ill-posed")
     return C
-
-
-class CamerasAllEqual(ValueError):
-    """Every camera of a problem is the same up to scale: no depth can be recovered (a batch reports the problem as
-    ``ill_posed``, SPEC §6, not as bad input)."""
 
 
 def camera_refusal(cameras) -> str | None:

@@ -35,7 +35,7 @@ from collections.abc import Iterable, Sequence
 
 import numpy as np
 
-from ..model.cameras import CamerasAllEqual, numeric_cameras
+from ..model.cameras import numeric_cameras
 from ..model.regions import Region, declares_extent
 from ..model.constraints import Method
 from ..records import TriangulationResults
@@ -70,8 +70,6 @@ def safe_triangulate(cameras, regions, options: TriangulationOptions) -> Triangu
     t0 = time.perf_counter()
     try:
         return triangulate(cameras, regions, options=options)
-    except CamerasAllEqual as exc:
-        status, msg = Status.ILL_POSED, str(exc)
     except (ValueError, TypeError) as exc:
         status, msg = Status.INVALID_INPUT, f"{type(exc).__name__}: {exc}"
     except Exception as exc:  # noqa: BLE001 - a batch records every failure

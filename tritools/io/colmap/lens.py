@@ -25,6 +25,8 @@ round-trip check.  EQUIRECTANGULAR (a sphere, no pinhole ray for half the direct
 """
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 __all__ = ["OWN_MODELS", "PYCOLMAP_MODELS", "NON_PERSPECTIVE_MODELS", "split_params", "forward", "inverse",
@@ -157,8 +159,21 @@ def radial_fold_image(extra: dict) -> float:
     e = extra
     if e["p1"] or e["p2"]:
         return np.inf
-    N = np.polynomial.Polynomial([1.0, e["k1"], e["k2"], e["k3"]])
-    M = np.polynomial.Polynomial([1.0, e["k4"], e["k5"], e["k6"]])
+    s_fold, s_pole = _radial_limits(tuple(float(e[k]) for k in ("k1", "k2", "k3", "k4", "k5", "k6")))
+    if not (s_fold < s_pole and np.isfinite(s_fold)):
+        return np.inf
+    r = float(np.sqrt(s_fold))
+    N = 1.0 + s_fold * (e["k1"] + s_fold * (e["k2"] + s_fold * e["k3"]))
+    M = 1.0 + s_fold * (e["k4"] + s_fold * (e["k5"] + s_fold * e["k6"]))
+    return abs(r * N / M) * (1.0 + 1e-9)
+
+
+@functools.lru_cache(maxsize=256)
+def _radial_limits(k: tuple) -> tuple[float, float]:
+    """(s_fold, s_pole): the smallest s = r^2 > 0 where FULL_OPENCV's radial map g(r) = r N(s) / M(s) stops rising
+    ((N + 2 s N') M - 2 s N M' = 0) and where M vanishes (inf where none)."""
+    N = np.polynomial.Polynomial([1.0, k[0], k[1], k[2]])
+    M = np.polynomial.Polynomial([1.0, k[3], k[4], k[5]])
     S = np.polynomial.Polynomial([0.0, 1.0])
     slope = (N + 2 * S * N.deriv()) * M - 2 * S * N * M.deriv()
 
@@ -166,11 +181,7 @@ def radial_fold_image(extra: dict) -> float:
         z = p.trim().roots() if p.trim().degree() > 0 else np.array([])
         r = [float(v.real) for v in np.atleast_1d(z) if abs(v.imag) <= 1e-9 * max(1.0, abs(v)) and v.real > 0]
         return min(r) if r else np.inf
-    s_fold, s_pole = first(slope), first(M)
-    if not (s_fold < s_pole and np.isfinite(s_fold)):
-        return np.inf
-    r = float(np.sqrt(s_fold))
-    return abs(r * N(s_fold) / M(s_fold)) * (1.0 + 1e-9)
+    return first(slope), first(M)
 
 
 def _continuation(model: str, extra: dict, uv_d: np.ndarray, tol: float, max_iter: int):
@@ -203,17 +214,44 @@ def _central(model: str, extra: dict, uv: np.ndarray, uv_d: np.ndarray, samples:
     fun = lambda p: forward(model, extra, p)      # noqa: E731
     with np.errstate(all="ignore"):
         ok = (np.sum(uv * uv_d, axis=1) > 0) | np.all(uv_d == 0, axis=1)
+        if model == "FULL_OPENCV" and not (extra["p1"] or extra["p2"]):
+            # radially symmetric: det J = g'(r) g(r) / r > 0 on the segment iff r^2 is below the first fold and pole
+            s_fold, s_pole = _radial_limits(tuple(float(extra[k]) for k in ("k1", "k2", "k3", "k4", "k5", "k6")))
+            return ok & (np.sum(uv * uv, axis=1) < min(s_fold, s_pole))
+        jac = (lambda p: _full_opencv_jacobian(extra, p)) if model == "FULL_OPENCV" else \
+            (lambda p: _jacobian(fun, p))
         for k in range(samples, 0, -1):
             if not ok.any():
                 break
             p = uv[ok] * (k / samples)
-            J = _jacobian(fun, p)
+            J = jac(p)
             good = J[:, 0, 0] * J[:, 1, 1] - J[:, 0, 1] * J[:, 1, 0] > 0
             if model == "FULL_OPENCV":
                 r2 = np.sum(p * p, axis=1)
                 good &= 1 + r2 * (extra["k4"] + r2 * (extra["k5"] + r2 * extra["k6"])) > 0
             ok[np.nonzero(ok)[0][~good]] = False
     return ok
+
+
+def _full_opencv_jacobian(e: dict, uv: np.ndarray) -> np.ndarray:
+    """(M, 2, 2) analytic Jacobians of FULL_OPENCV's map (module docstring) at the rows of ``uv``: with s = r^2,
+    radial = N(s) / M(s) and d radial / du = 2 u (N' M - N M') / M^2 (the sign of det J is what :func:`_central`
+    reads; four forward maps per central difference cost 8x the numpy calls)."""
+    u, v = uv[:, 0], uv[:, 1]
+    s = u * u + v * v
+    N = 1 + s * (e["k1"] + s * (e["k2"] + s * e["k3"]))
+    Nd = e["k1"] + s * (2 * e["k2"] + s * 3 * e["k3"])
+    M = 1 + s * (e["k4"] + s * (e["k5"] + s * e["k6"]))
+    Md = e["k4"] + s * (2 * e["k5"] + s * 3 * e["k6"])
+    radial = N / M
+    dr = 2.0 * (Nd * M - N * Md) / (M * M)              # d radial / d u = dr u, d radial / d v = dr v
+    p1, p2 = e["p1"], e["p2"]
+    J = np.empty((len(uv), 2, 2))
+    J[:, 0, 0] = radial + dr * u * u + 2 * p1 * v + 6 * p2 * u
+    J[:, 0, 1] = dr * u * v + 2 * p1 * u + 2 * p2 * v
+    J[:, 1, 0] = dr * u * v + 2 * p2 * v + 2 * p1 * u
+    J[:, 1, 1] = radial + dr * v * v + 2 * p2 * u + 6 * p1 * v
+    return J
 
 
 def inverse(fun, uv_d: np.ndarray, tol: float, max_iter: int, start: np.ndarray | None = None

@@ -40,6 +40,7 @@ import numpy as np
 from .algebra.polynomial import Polynomial, checked_gens
 from .algebra.basis import sigma
 from .analysis.extraction import extract_from_moment
+from .analysis.proof import constraint_box
 from .budget import as_budget
 from .certificates.program import SOSProgram
 from .certificates.psatz import common_gens
@@ -298,7 +299,10 @@ def minimize_ratios(terms, eq=(), ineq=(), degree: int | None = None, *, gens=No
                                      weights)
     obj = _objective(pairs)
     found = []
+    box = constraint_box(eq, ineq, len(gens), partial=True)
     for p in _candidates(prog, names, sol, tol, len(gens)):
+        if not np.all(np.abs(p) <= 2.0 * box + 1.0):
+            continue            # far outside the set the constraints bound: no start for the polish (seconds each)
         for v in (p, _polish(obj, eq, ineq, p)):
             if v is not None and _feasible(v, eq, ineq, pairs, tol):
                 found.append((obj(v), v))

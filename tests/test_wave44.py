@@ -191,6 +191,9 @@ def test_bad_executor_is_refused_when_the_options_are_built():
     with pytest.raises(TypeError, match="executor"):
         tritools.triangulate_many([], executor="process")
     assert RetriangulationOptions(executor=None).executor is None
+    from concurrent.futures import ThreadPoolExecutor
+    with pytest.raises(ValueError, match="executor"):
+        RetriangulationOptions(executor=ThreadPoolExecutor)           # the class, not an instance (review 44c L3)
 
 
 def test_retriangulate_folder_names_a_missing_path(tmp_path):

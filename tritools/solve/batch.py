@@ -303,8 +303,8 @@ class BatchOutcome:
 
 def executor_problem(executor) -> str | None:
     """Why ``executor`` cannot run per-point work (None: it can -- None itself, or an object with ``submit()``)."""
-    if executor is None or callable(getattr(executor, "submit", None)):
-        return None
+    if executor is None or (not isinstance(executor, type) and callable(getattr(executor, "submit", None))):
+        return None       # (a class has a submit function too: an instance is needed)
     return (f"must be a concurrent.futures.Executor or a dask.distributed.Client (an object with submit()), got "
             f"{type(executor).__name__}")
 

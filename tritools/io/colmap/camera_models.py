@@ -42,7 +42,7 @@ import functools
 import numpy as np
 
 from .lens import NON_PERSPECTIVE_MODELS, PYCOLMAP_MODELS, pycolmap_camera, split_params
-from .lens import _central as _lens_central, central_inverse, forward as lens_forward
+from .lens import central_inverse, forward as lens_forward, keep_central
 
 __all__ = ["CameraModel", "COLMAP_MODEL_N_PARAMS", "COLMAP_MODEL_IDS", "COLMAP_MODEL_NAMES", "UNDISTORT_TOL_PX",
            "UNDISTORT_MAX_ITER", "UnsupportedCameraModelError", "camera_model", "camera_problem", "intrinsics",
@@ -232,19 +232,16 @@ class _Lens:
 
 
 def _central_rows(uv: np.ndarray, ok: np.ndarray, uv_d: np.ndarray, dist: np.ndarray, tol: float) -> tuple:
-    """The OPENCV family's Newton roots kept where they lie on the central branch (the rule of the own models,
-    :func:`~.lens.central_inverse`, on OPENCV's map: FULL_OPENCV with k3..k6 = 0); the other rows solved again by
-    that inverse, refused where it finds no central root.  Newton's method from the keypoint crossed the fold of a
-    negative k to a root on the other side of the axis, or to one past the fold, and such keypoints were certified
-    (review 44b HIGH-1: SIMPLE_RADIAL f = 300, k = -0.3, a keypoint inside the image 280 px from its centre)."""
+    """The OPENCV family's Newton roots kept where they lie on the central branch (the rule of the own models on
+    OPENCV's map, FULL_OPENCV with k3..k6 = 0: :func:`~.lens.keep_central`); the other rows searched again as
+    :func:`~.lens.central_inverse` does, refused where no central root is found.  Newton's method from the keypoint
+    crossed the fold of a negative k to a root on the other side of the axis, or to one past the fold, and such
+    keypoints were certified (review 44b HIGH-1: SIMPLE_RADIAL f = 300, k = -0.3, a keypoint inside the image 280 px
+    from its centre)."""
     if not np.any(dist):
         return uv, ok
     extra = dict(zip(("k1", "k2", "p1", "p2"), (float(v) for v in dist)), k3=0.0, k4=0.0, k5=0.0, k6=0.0)
-    bad = ~(ok & _lens_central("FULL_OPENCV", extra, uv, uv_d))
-    if bad.any():
-        uv, ok = uv.copy(), ok.copy()
-        uv[bad], ok[bad] = central_inverse("FULL_OPENCV", extra, uv_d[bad], tol, UNDISTORT_MAX_ITER)
-    return uv, ok
+    return keep_central("FULL_OPENCV", extra, uv_d, uv.copy(), ok, tol, UNDISTORT_MAX_ITER)
 
 
 #: pycolmap's own inverse stops at its tolerance: a pixel it unprojects must project back within this.

@@ -30,7 +30,7 @@ import functools
 import numpy as np
 
 __all__ = ["OWN_MODELS", "PYCOLMAP_MODELS", "NON_PERSPECTIVE_MODELS", "split_params", "forward", "inverse",
-           "central_inverse", "pycolmap_camera", "FOLD_SAMPLES", "radial_fold_image"]
+           "central_inverse", "keep_central", "pycolmap_camera", "FOLD_SAMPLES", "radial_fold_image"]
 
 #: model -> (names of PARAMS[], focal layout) for the models with own code below; "f" = one focal.
 OWN_MODELS = {
@@ -130,8 +130,16 @@ def central_inverse(model: str, extra: dict, uv_d: np.ndarray, tol: float, max_i
     omega = 3): such rows start again nearer the centre (:data:`CENTRAL_STARTS`), then follow the central branch
     from the centre to ``uv_d`` in :data:`CONTINUATION_STEPS` steps, and are refused (not converged) when that does
     not reach a central root either."""
+    uv, ok = inverse(lambda p: forward(model, extra, p), uv_d, tol, max_iter)
+    return keep_central(model, extra, uv_d, uv, ok, tol, max_iter)
+
+
+def keep_central(model: str, extra: dict, uv_d: np.ndarray, uv: np.ndarray, ok: np.ndarray, tol: float,
+                 max_iter: int) -> tuple[np.ndarray, np.ndarray]:
+    """Roots ``uv`` (converged where ``ok``) of D(uv) = uv_d from any solver, kept where they lie on the central
+    branch; the other rows searched again as :func:`central_inverse` does (the work after its own first Newton
+    solve: the OPENCV family's analytic Newton hands its roots here).  ``uv`` is updated in place."""
     fun = lambda p: forward(model, extra, p)      # noqa: E731
-    uv, ok = inverse(fun, uv_d, tol, max_iter)
     bad = ~(ok & _central(model, extra, uv, uv_d))
     refused = np.zeros(len(uv_d), bool)
     if model == "FULL_OPENCV" and bad.any():        # beyond the image of the central branch: no root to look for

@@ -98,7 +98,9 @@ def test_constraints_equal_the_pair_loop(offset, with_relations):
         for pairs in (None, [(i, j) for i in range(N) for j in range(i + 1, N) if rng.random() < 0.5]):
             got, ginfo = corollary1_constraints(C, gens, x_index, pairs, rel)
             ref, rinfo = _reference(C, gens, x_index, pairs, rel)
+            errors = ginfo.pop("errors")
             assert ginfo == rinfo
+            assert np.isin(errors.rows, np.arange(len(got))).all() and (errors.E >= 0).all()
             assert len(got) == len(ref) and all(_same(p, q) for p, q in zip(got, ref))
 
 

@@ -106,8 +106,8 @@ def margins(monkeypatch):
     calls = []
     original = sospoly.analysis.rigorous_psatz_bound
 
-    def spy(psatz, sol, c, radius, ball=None):
-        out = original(psatz, sol, c, radius, ball=ball)
+    def spy(psatz, sol, c, radius, ball=None, eq_error=None):
+        out = original(psatz, sol, c, radius, ball=ball, eq_error=eq_error)
         calls.append((float(c), out))
         return out
 

@@ -65,6 +65,9 @@ class RigorousBound:
     psd_defect: float           # sum_j eps_j W_j(R) + sum_k eta_k W_sk H_k: the PSD part of the margin (before / q_min)
     residual: float             # E(R)
     q_min: float
+    #: sum_k sup|r_k| sup|e_k| on the box for equalities known up to coefficient errors e_k (``eq_error``; before
+    #: / q_min)
+    constraint_error: float = 0.0
 
 
 def _owner_offsets(structure) -> tuple[np.ndarray, np.ndarray]:
@@ -196,12 +199,17 @@ def _q_min(structure, sol, r: np.ndarray) -> float:
     return const - float(np.sum(np.abs(c[rest]) * _monomial_sup(E[rest], r)))
 
 
-def rigorous_psatz_bound(psatz, sol, c: float, radius, ball: float | None = None) -> RigorousBound:
+def rigorous_psatz_bound(psatz, sol, c: float, radius, ball: float | None = None, eq_error=None) -> RigorousBound:
     """c minus the margin of the module docstring, for a solved fixed- or free-q Psatz certificate
     (``psatz`` a PsatzProblem or compiled instance; ``sol`` its ProgramSolution; ``c`` its level; ``radius``
     a bound of ||v|| (one number: a ball) or of every |v_i| (one per variable: a box); ``ball`` optionally a
     bound of ||v|| that holds on the box's minimiser too (it caps each block's R^2: a box of many variables
-    has corners far outside a ball of the same per-variable radius))."""
+    has corners far outside a ball of the same per-variable radius)).
+
+    ``eq_error``: for equalities computed from inexact data, one bound e_k >= 0 per equality of |g_k(v)| at every
+    point v of the box that is feasible for the *true* constraints (0 for an exact one; e.g. the coefficient errors
+    of g_k times the box's monomial bounds).  There the identity leaves sum_k r_k(v) g_k(v), so the margin gains
+    sum_k sup|r_k| e_k (``constraint_error``): the bound holds for the true feasible set, not the computed one."""
     structure = psatz.structure
     if not _check_rigor_inputs(sol, c, radius, ball) or sol.x is None or \
             any(name not in (sol.grams or {}) for name in structure.u.block_names()):
@@ -230,11 +238,40 @@ def rigorous_psatz_bound(psatz, sol, c: float, radius, ball: float | None = None
         S[blk.gram.pair_i, blk.gram.pair_j] = x[blk.slice]
         S[blk.gram.pair_j, blk.gram.pair_i] = x[blk.slice]
         psd += psd_defect_of(S) * block_weight(blk.gram.b, r, ball, cap) * poly_sup(ineq[k], r)
+    cerr = _constraint_error(structure, x, r, eq_error)
     qmin = _q_min(structure, sol, r)
     if not qmin > 0:
-        return RigorousBound(-np.inf, np.inf, R, psd, resid, qmin)
-    margin = (psd + resid) / qmin
-    return RigorousBound(float(c) - margin, margin, R, psd, resid, qmin)
+        return RigorousBound(-np.inf, np.inf, R, psd, resid, qmin, cerr)
+    with np.errstate(over="ignore", invalid="ignore"):
+        margin = (psd + resid + cerr) / qmin
+    if not np.isfinite(margin):
+        return RigorousBound(-np.inf, np.inf, R, psd, resid, qmin, cerr)
+    return RigorousBound(float(c) - margin, margin, R, psd, resid, qmin, cerr)
+
+
+def _constraint_error(structure, x: np.ndarray, r: np.ndarray, eq_error) -> float:
+    """sum_k sup|r_k| e_k on the box |v_i| <= r_i (:func:`rigorous_psatz_bound`'s ``eq_error``)."""
+    if eq_error is None:
+        return 0.0
+    e = np.asarray(eq_error, float).reshape(-1)
+    if e.size != structure.slots.n_eq:
+        raise ValueError(f"rigorous_psatz_bound eq_error needs one bound per equality ({structure.slots.n_eq}), got "
+                         f"{e.size}")
+    if np.any(np.isnan(e)) or np.any(e < 0):
+        raise ValueError("rigorous_psatz_bound eq_error must hold non-negative bounds")
+    total = 0.0
+    with np.errstate(over="ignore", invalid="ignore"):
+        for k in np.flatnonzero(e):
+            total += _linpoly_sup(structure.r[k], x, r) * float(e[k])
+    return float(total) if not np.isnan(total) else np.inf
+
+
+def _linpoly_sup(p, x: np.ndarray, r: np.ndarray) -> float:
+    """A bound of |p(v)| on the box for the multiplier ``p`` (a LinPoly) at decision values ``x``."""
+    coef = np.array(p.const, float)
+    if p.rows.size:
+        np.add.at(coef, p.rows, p.vals * x[p.cols])
+    return float(np.sum(np.abs(coef) * _monomial_sup(p.E, r))) if coef.size else 0.0
 
 
 def _check_rigor_inputs(sol, c, radius, ball) -> bool:

@@ -29,6 +29,7 @@ import numpy as np
 from sospoly import Polynomial
 from sospoly.budget import check_deadline
 
+from .coef_error import EpipolarErrors, MinorErrors, det4, fundamental_errors, minor_rows
 from .exact import same_exact_centre
 from .centres import dot_norms, group_pairs, merged_labels, pair_fundamentals, stackable, stacked_pair_tests
 from .geometry import fundamental_matrix
@@ -120,11 +121,19 @@ def minors_matrix(cameras: np.ndarray, groups=None, loose=()) -> tuple[np.ndarra
     homography to round-off -- the constraint withheld from them (review 9 F2).  A term's rows are the minor's
     rows, so zeroing by term drops whole minors: a relaxation, the bound stays valid.
     """
+    M1, B1, _ = minors_with_error(cameras, groups, loose)
+    return M1.astype(float), B1
+
+
+def minors_with_error(cameras: np.ndarray, groups=None, loose=()) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(M1, B1, dM1) of :func:`minors_matrix` with M1 in extended precision (``numpy.longdouble``) and dM1 >= |M1 - M1
+    in exact arithmetic| entrywise (:func:`tritools.model.coef_error.det4`; terms set to zero by a rule below are
+    exact zeros of a relaxation and carry no error)."""
     cameras = np.asarray(cameras, float)
     a, c, _ = _row_data(cameras)
     T, minor, mono, B1, n_minors = _minor_structure(cameras.shape[0])
     rows = np.vstack([a, c])[T]
-    d = np.linalg.det(rows)
+    d, err = det4(rows, extended=True)
     # a minor none of whose terms exceeds the rounding of its own determinant (the Hadamard bound of its four
     # rows times MINOR_ROUNDOFF) is the zero polynomial to the data's precision: dropped whole (a relaxation: the
     # bound stays valid).  Kept, the unit scaling of theorem1_constraints turned its round-off into a constraint
@@ -137,10 +146,13 @@ def minors_matrix(cameras: np.ndarray, groups=None, loose=()) -> tuple[np.ndarra
     d = np.where(np.all(group == group[:, :1], axis=1), 0.0, d)
     if len(loose):
         d = np.where(np.isin(views, list(loose)).any(axis=1), 0.0, d)
-    M1 = np.zeros((n_minors, B1.shape[0]))
+    err = np.where(d != 0.0, err, 0.0)
+    M1 = np.zeros((n_minors, B1.shape[0]), d.dtype)
+    dM1 = np.zeros((n_minors, B1.shape[0]))
     np.add.at(M1, (minor, mono), d)
+    np.add.at(dM1, (minor, mono), err)
     used = np.bincount(mono[d != 0.0], minlength=B1.shape[0]) > 0
-    return M1[:, used], B1[used]
+    return M1[:, used], B1[used], dM1[:, used]
 
 
 @dataclass(frozen=True)
@@ -247,16 +259,22 @@ def theorem1_constraints(cameras: np.ndarray, gens, x_index, groups=None, loose=
     (:class:`CentreRelations`, decided on the caller's raw cameras; default: from ``cameras``).  Returns
     the list and diagnostics (N1, N2, singular values).
     """
-    M1, B1 = minors_matrix(cameras, groups, loose)
+    M1x, B1, dM1 = minors_with_error(cameras, groups, loose)
+    M1 = M1x.astype(float)
     norms = np.linalg.norm(M1, axis=1)
     keep = norms > 0
     M1n = M1[keep] / norms[keep, None]
     U, S, Vt = np.linalg.svd(M1n, full_matrices=False)
     n2 = int(np.sum(S > RANK_RTOL * S[0])) if S.size else 0
-    M2 = S[:n2, None] * Vt[:n2]
-    # unit scale per row (same zero set, better conditioned SDP); round-off coefficients to 0
-    M2 = M2 / np.max(np.abs(M2), axis=1, keepdims=True) if n2 else M2
-    M2 = np.where(np.abs(M2) > COEF_RTOL, M2, 0.0)
+    # m2 = S2 V2^T = U2^T M1n, formed as W M1 from the extended determinants (coef_error's module docstring), each
+    # row at unit scale (same zero set, better conditioned SDP); round-off coefficients to 0 (charged in E)
+    W = U[:, :n2].T / norms[keep][None, :]
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+        W = W / np.max(np.abs(S[:n2, None] * Vt[:n2]), axis=1, keepdims=True) if n2 else W
+    M2, E = minor_rows(W, M1x[keep], dM1[keep])
+    small = np.abs(M2) <= COEF_RTOL * np.max(np.abs(M2), axis=1, keepdims=True) if n2 else np.zeros_like(M2, bool)
+    E = E + np.where(small, np.abs(M2), 0.0)
+    M2 = np.where(small, 0.0, M2)
     gens = tuple(gens)
     exps = _exponent_tuples(np.ascontiguousarray(B1).tobytes(), B1.shape, len(gens),
                             tuple(int(k) for k in x_index))
@@ -269,7 +287,8 @@ def theorem1_constraints(cameras: np.ndarray, gens, x_index, groups=None, loose=
         check_deadline("building the minors")
         nz = np.nonzero(row)[0]
         polys.append(Polynomial.from_trusted_terms(gens, dict(zip([exps[k] for k in nz], row[nz].tolist()))))
-    return polys, {"N1": M1.shape[0], "N2": n2, "singular_values": S}
+    errors = MinorErrors(np.arange(n2), np.array(exps, dtype=np.int64).reshape(-1, len(gens)), E)
+    return polys, {"N1": M1.shape[0], "N2": n2, "singular_values": S, "errors": errors}
 
 
 #: Theorem 1 with all C(2N, 4) minors is built for at most this many views; beyond, the minors of view
@@ -287,7 +306,7 @@ def triple_minor_constraints(cameras: np.ndarray, gens, x_index, triples, groups
     overlapping triples it is exact at generic configurations (consecutive triples share two views,
     which fix the point).  ``info["views"]`` gives the triple of each returned polynomial."""
     x_index = np.asarray(x_index)
-    polys, views, n1, n2 = [], [], 0, 0
+    polys, views, errors, n1, n2 = [], [], [], 0, 0
     for t in triples:
         check_deadline("building the minors")
         t = tuple(int(i) for i in t)
@@ -295,11 +314,12 @@ def triple_minor_constraints(cameras: np.ndarray, gens, x_index, triples, groups
         local = [t.index(i) for i in loose if i in t]
         p, info = theorem1_constraints(cameras[list(t)], gens, sub,
                                        None if groups is None else np.asarray(groups)[list(t)], local)
+        errors.append(info["errors"].shifted(len(polys)))
         polys += p
         views += [t] * len(p)
         n1 += info["N1"]
         n2 += info["N2"]
-    return polys, {"N1": n1, "N2": n2, "views": views}
+    return polys, {"N1": n1, "N2": n2, "views": views, "errors": tuple(errors)}
 
 
 def corollary1_constraints(cameras: np.ndarray, gens, x_index, pairs=None, relations=None
@@ -337,8 +357,9 @@ def corollary1_constraints(cameras: np.ndarray, gens, x_index, pairs=None, relat
         return views[i]
 
     Fs = _epipolar_matrices(cameras, pairs)
+    Es = _epipolar_errors(cameras, pairs, Fs)
     mono = _Monomials(n, x_index)
-    polys, kept, skipped, homography = [], [], [], []
+    polys, kept, skipped, homography, errors = [], [], [], [], []
     loose = relations.loose if relations is not None else frozenset()
     for (i, j), F in zip(pairs, Fs):
         check_deadline("building the epipolar constraints")
@@ -358,15 +379,22 @@ def corollary1_constraints(cameras: np.ndarray, gens, x_index, pairs=None, relat
                   for a in range(3)]
             for a in range(3):                              # (x~_j x H x~_i)_a
                 b, c = (a + 1) % 3, (a + 2) % 3
-                polys.append(xt(j)[b] * Hx[c] - xt(j)[c] * Hx[b])
+                polys.append(xt(j)[b] * Hx[c] - xt(j)[c] * Hx[b])      # (H's error is not bounded here)
                 kept.append((i, j))
             homography.append((i, j))
             continue
         terms = mono.bilinear(i, j, F)
         polys.append(Polynomial.from_trusted_terms(gens, terms) if terms is not None
                      else epipolar_polynomial(gens, F, xt(i), xt(j)))
+        if (i, j) in Es:
+            errors.append((len(polys) - 1, [x_index[2 * i], x_index[2 * i + 1], x_index[2 * j], x_index[2 * j + 1]],
+                           Es[(i, j)]))
         kept.append((i, j))
-    return polys, {"N1": len(polys), "N2": len(polys), "pairs": kept, "skipped": skipped, "homography": homography}
+    rows, gvars, E = zip(*errors) if errors else ((), np.zeros((0, 4)), np.zeros((0, 3, 3)))
+    errs = EpipolarErrors(np.array(rows, dtype=np.intp), np.array(gvars, dtype=np.intp).reshape(-1, 4),
+                          np.array(E, float).reshape(-1, 3, 3))
+    return polys, {"N1": len(polys), "N2": len(polys), "pairs": kept, "skipped": skipped, "homography": homography,
+                   "errors": errs}
 
 
 def epipolar_polynomial(gens: tuple, F: np.ndarray, xi: list, xj: list) -> Polynomial:
@@ -433,6 +461,19 @@ def _epipolar_matrices(cameras: np.ndarray, pairs: list) -> list:
         check_deadline("computing the fundamental matrices")
         out[k] = _epipolar_matrix(C[I[k]], C[J[k]])
     return out
+
+
+def _epipolar_errors(cameras: np.ndarray, pairs: list, Fs: list) -> dict:
+    """{pair: E (3, 3)} bounds of each computed F's coefficient error (:func:`~.coef_error.fundamental_errors`)
+    for the pairs with a matrix."""
+    idx = [k for k, F in enumerate(Fs) if F is not None]
+    if not idx:
+        return {}
+    C = np.asarray(cameras, float)
+    I = np.array([pairs[k][0] for k in idx], dtype=np.intp)
+    J = np.array([pairs[k][1] for k in idx], dtype=np.intp)
+    E = fundamental_errors(np.array([Fs[k] for k in idx]), C[I], C[J])
+    return {pairs[k]: E[m] for m, k in enumerate(idx)}
 
 
 def _epipolar_matrix(Pi: np.ndarray, Pj: np.ndarray) -> np.ndarray | None:

@@ -30,6 +30,7 @@ from sospoly import Polynomial, sum_in_order, variables
 from sospoly.budget import check_deadline
 
 from ..errors import ProblemTooLarge
+from .coef_error import ConstraintErrors
 from .constraints import (THEOREM1_DENSE_MAX_VIEWS, Method, centre_relations, corollary1_constraints,
                           theorem1_constraints, triple_minor_constraints)
 
@@ -53,6 +54,9 @@ class TriangulationProblem:
     eq_views: tuple = ()          # per equality: the views it involves
     ineq_views: tuple = ()        # per inequality: the views it involves
     formulation: str = "dense"
+    #: how far the coefficients of ``eq`` are from exact constraints' (:class:`~.coef_error.ConstraintErrors`: the
+    #: regions' are exact, the projection constraints' computed), charged by :func:`sospoly.rigorous_psatz_bound`
+    eq_error: ConstraintErrors | None = None
 
     def image_points(self, v: np.ndarray) -> np.ndarray:
         """(N, 2) image points x_i read from a vector v in ``gens`` order."""
@@ -121,24 +125,27 @@ def build_problem(cameras: np.ndarray, regions, method: Method = Method.THEOREM1
                              f"(C(2N, 4) = {_comb4(2 * N)} minors for N = {N}); use the 'views' formulation")
         rel = centre_relations(cameras) if relations is None else relations
         proj, info = theorem1_constraints(cameras, gens, x_index, rel.groups, rel.loose)
-        proj_views = [tuple(range(N))] * len(proj)
+        proj_views, errors = [tuple(range(N))] * len(proj), [info["errors"]]
         if rel.coincident:          # views with one centre: their minors vanish; the pair's homography instead
             hom, hinfo = corollary1_constraints(cameras, gens, x_index, sorted(rel.coincident), relations=rel)
+            errors.append(hinfo["errors"].shifted(len(proj)))
             proj, proj_views = proj + hom, proj_views + list(hinfo["pairs"])
             info = {**info, "N1": info["N1"] + hinfo["N1"], "N2": info["N2"] + hinfo["N2"],
                     "homography": hinfo["homography"]}
     else:
         proj, info = corollary1_constraints(cameras, gens, x_index, relations=relations)
-        proj_views = list(info["pairs"])
+        proj_views, errors = list(info["pairs"]), [info["errors"]]
         if method == Method.THEOREM1:
             minors, tinfo = triple_minor_constraints(cameras, gens, x_index, view_chain(N),
                                                      None if relations is None else relations.groups,
                                                      () if relations is None else relations.loose)
+            errors += [e.shifted(len(proj)) for e in tinfo["errors"]]
             proj, proj_views = proj + minors, proj_views + tinfo["views"]
             info = {**info, "N1": info["N1"] + tinfo["N1"], "N2": info["N2"] + tinfo["N2"], "triples": view_chain(N)}
     return TriangulationProblem(gens, x_index, f.with_gens(gens), tuple(eq) + tuple(proj), tuple(ineq), N,
                                 method, tuple(proj), info, tuple(view_vars), tuple(eq_views) + tuple(proj_views),
-                                tuple(ineq_views), formulation)
+                                tuple(ineq_views), formulation,
+                                ConstraintErrors(len(eq) + len(proj), tuple(e.shifted(len(eq)) for e in errors)))
 
 
 def _comb4(n: int) -> int:

@@ -200,8 +200,11 @@ def rigor_stage(ctx: PointContext, st: StepState) -> None:
     c_ub = _c_upper(ctx, st)
     R = solve_radius(ctx.regs_n, c_ub)
     if R is not None:
-        st.c_lower = rigorous_psatz_bound(st.psatz, st.lb.solution, st.c_lower, R,
-                                          ball=solve_ball(ctx.regs_n, c_ub)).lower_bound
+        errors = st.problem.eq_error
+        n = len(st.problem.gens)
+        st.c_lower = rigorous_psatz_bound(st.psatz, st.lb.solution, st.c_lower, R, ball=solve_ball(ctx.regs_n, c_ub),
+                                          eq_error=None if errors is None else
+                                          errors.bounds(np.broadcast_to(np.asarray(R, float), (n,)))).lower_bound
     elif _iterate(st.lb):
         _unsolved(st)
 

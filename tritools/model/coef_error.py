@@ -34,7 +34,7 @@ from dataclasses import dataclass
 import numpy as np
 
 __all__ = ["det4", "minor_rows", "fundamental_errors", "EXTENDED", "MinorErrors", "EpipolarErrors",
-           "ConstraintErrors"]
+           "ConstraintErrors", "ExactMatrix"]
 
 _EPS = float(np.finfo(float).eps)
 #: whether numpy's longdouble is wider than double here (x86: 64-bit mantissa); the bounds use its own epsilon
@@ -82,7 +82,7 @@ def minor_rows(W: np.ndarray, M1: np.ndarray, dM1: np.ndarray) -> tuple[np.ndarr
         M2 = P.astype(float)
         absW = np.abs(W)
         E = (np.abs(M2.astype(_LD) - P)).astype(float) * (1 + 4 * _EPS) \
-            + ((n + 4) * _EPS_LD * (np.abs(Wl) @ np.abs(M1))).astype(float) * (1 + 1e-6) \
+            + (n + 4) * _EPS_LD * (absW @ np.abs(M1).astype(float)) * (1 + (n + 4) * _EPS) \
             + (absW @ dM1) * (1 + (n + 4) * _EPS)
     return M2, np.where(np.isfinite(E), E, np.inf)
 
@@ -178,3 +178,106 @@ class ConstraintErrors:
     @staticmethod
     def joined(n: int, parts) -> ConstraintErrors:
         return ConstraintErrors(n, tuple(parts))
+
+
+def _dyadic(A: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(integer mantissas, exponents) with A = m * 2**e exactly (int64 mantissas of 53 bits; 0 for zeros)."""
+    m, e = np.frexp(np.asarray(A, float))
+    return (m * 2.0 ** 53).astype(np.int64), e.astype(np.int64) - 53
+
+
+def _exact_det(a: list, shift: int) -> tuple[int, int]:
+    """det of the 4 x 4 integer matrix ``a`` (rows of Python integers) times 2**shift exactly, by Laplace's
+    expansion: (integer, exponent)."""
+    d = 0
+    for (p, q), (r, s), sign in _PAIRS:
+        d += int(sign) * (a[0][p] * a[1][q] - a[0][q] * a[1][p]) * (a[2][r] * a[3][s] - a[2][s] * a[3][r])
+    return d, shift
+
+
+def _integer_rows(A: np.ndarray) -> tuple[list, list]:
+    """Matrices (T, R, C) of floats as integer rows: A[t, r] = ints[t][r] * 2**e[t, r] exactly, each row brought to
+    the smallest exponent of its non-zero entries; returns (ints as nested lists, per-matrix exponent sums)."""
+    if A.size == 0:
+        return [[[] for _ in range(A.shape[1])] for _ in range(A.shape[0])], [0] * A.shape[0]
+    mi, ex = _dyadic(A)
+    big = np.iinfo(np.int64).max
+    e0 = np.where(mi != 0, ex, big).min(axis=2)
+    e0 = np.where(e0 == big, 0, e0)
+    sh = np.where(mi != 0, ex - e0[..., None], 0).tolist()
+    mil = mi.tolist()
+    ints = [[[m << k for m, k in zip(mr, sr)] for mr, sr in zip(mt, st)] for mt, st in zip(mil, sh)]
+    return ints, e0.sum(axis=1).tolist()
+
+
+def _rounded(num: int, exp: int) -> tuple[float, float]:
+    """(num * 2**exp rounded to the nearest double, a bound of that rounding's error); inf where it overflows."""
+    if num == 0:
+        return 0.0, 0.0
+    try:
+        val = float(num << exp) if exp >= 0 else num / (1 << -exp)      # (int true division: correctly rounded)
+    except OverflowError:
+        return (np.inf if num > 0 else -np.inf), np.inf
+    p, q = val.as_integer_ratio()                                       # q a power of two
+    k = max(q.bit_length() - 1, -exp, 0)
+    diff = abs((p << (k - (q.bit_length() - 1))) - (num << (k + exp)))  # |val - exact| * 2**k, exactly
+    return val, (diff / (1 << k)) * (1 + 4 * _EPS) + 5e-324
+
+
+class ExactMatrix:
+    """A matrix of exact dyadic rationals ``num * 2**exp`` (Python integers), for Theorem 1's minors of few views."""
+
+    def __init__(self, num: list, exp: list, shape: tuple):
+        self.num, self.exp, self.shape = num, exp, shape
+
+    @classmethod
+    def of_terms(cls, rows: np.ndarray, live: np.ndarray, minor: np.ndarray, mono: np.ndarray, shape: tuple):
+        """Entry (minor[t], mono[t]) = det(rows[t]) exactly for the ``live`` terms (one term per entry)."""
+        num = [[0] * shape[1] for _ in range(shape[0])]
+        exp = [[0] * shape[1] for _ in range(shape[0])]
+        idx = np.flatnonzero(live)
+        ints, shifts = _integer_rows(rows[idx])
+        for k, t in enumerate(idx):
+            d, e = _exact_det(ints[k], shifts[k])
+            if d:
+                i, j = int(minor[t]), int(mono[t])
+                if num[i][j]:                   # (never in Theorem 1's structure; exact all the same)
+                    e0 = min(e, exp[i][j])
+                    d = (d << (e - e0)) + (num[i][j] << (exp[i][j] - e0))
+                    e = e0
+                num[i][j], exp[i][j] = d, e
+        return cls(num, exp, shape)
+
+    def columns(self, idx) -> ExactMatrix:
+        idx = [int(j) for j in idx]
+        return ExactMatrix([[row[j] for j in idx] for row in self.num], [[row[j] for j in idx] for row in self.exp],
+                           (self.shape[0], len(idx)))
+
+    def rows(self, keep) -> ExactMatrix:
+        idx = np.flatnonzero(keep)
+        return ExactMatrix([self.num[i] for i in idx], [self.exp[i] for i in idx], (len(idx), self.shape[1]))
+
+    def times(self, W: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(M2, E): W @ self in exact arithmetic, rounded to the nearest doubles, and bounds of that rounding."""
+        W = np.asarray(W, float)
+        n2, n = W.shape
+        cols = self.shape[1]
+        if not (n2 and n and cols):
+            return np.zeros((n2, cols)), np.zeros((n2, cols))
+        ints, _ = _integer_rows(W[None])
+        Wi = ints[0]
+        mi, ex = _dyadic(W)
+        big = np.iinfo(np.int64).max
+        Wexp = np.where(mi != 0, ex, big).min(axis=1)
+        Wexp = np.where(Wexp == big, 0, Wexp).tolist()
+        M2, E = np.zeros((n2, cols)), np.zeros((n2, cols))
+        for m in range(cols):
+            live = [j for j in range(n) if self.num[j][m]]
+            if not live:
+                continue
+            e0 = min(self.exp[j][m] for j in live)
+            D = [(j, self.num[j][m] << (self.exp[j][m] - e0)) for j in live]
+            for k in range(n2):
+                row = Wi[k]
+                M2[k, m], E[k, m] = _rounded(sum(row[j] * d for j, d in D), Wexp[k] + e0)
+        return M2, E

@@ -29,7 +29,7 @@ import numpy as np
 from sospoly import Polynomial
 from sospoly.budget import check_deadline
 
-from .coef_error import EpipolarErrors, MinorErrors, det4, fundamental_errors, minor_rows
+from .coef_error import EpipolarErrors, ExactMatrix, MinorErrors, det4, fundamental_errors, minor_rows
 from .exact import same_exact_centre
 from .centres import dot_norms, group_pairs, merged_labels, pair_fundamentals, stackable, stacked_pair_tests
 from .geometry import fundamental_matrix
@@ -50,6 +50,14 @@ RANK_RTOL = 1e-6
 MINOR_ROUNDOFF = 64 * float(np.finfo(float).eps)
 #: m2 coefficients below COEF_RTOL * max|row| are SVD round-off and set to zero (this also fixes deg m2_i).
 COEF_RTOL = 1e-12
+#: Theorem 1's minors are computed exactly (integers; m2 = W M1 then correctly rounded, :mod:`.coef_error`) for at most
+#: this many 4x4 minors (C(6, 4) = 15: three views, every triple of the 'views' formulation; ~5 ms), in extended
+#: precision with a rounding bound beyond (C(8, 4) = 70 at four views)
+EXACT_MINORS = 15
+
+
+def _comb4(n: int) -> int:
+    return n * (n - 1) * (n - 2) * (n - 3) // 24
 
 
 class Method(str, enum.Enum):
@@ -121,14 +129,15 @@ def minors_matrix(cameras: np.ndarray, groups=None, loose=()) -> tuple[np.ndarra
     homography to round-off -- the constraint withheld from them (review 9 F2).  A term's rows are the minor's
     rows, so zeroing by term drops whole minors: a relaxation, the bound stays valid.
     """
-    M1, B1, _ = minors_with_error(cameras, groups, loose)
+    M1, B1, _, _ = minors_with_error(cameras, groups, loose)
     return M1.astype(float), B1
 
 
-def minors_with_error(cameras: np.ndarray, groups=None, loose=()) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(M1, B1, dM1) of :func:`minors_matrix` with M1 in extended precision (``numpy.longdouble``) and dM1 >= |M1 - M1
-    in exact arithmetic| entrywise (:func:`tritools.model.coef_error.det4`; terms set to zero by a rule below are
-    exact zeros of a relaxation and carry no error)."""
+def minors_with_error(cameras: np.ndarray, groups=None, loose=(), exact: bool = False) -> tuple:
+    """(M1, B1, dM1, M1_exact) of :func:`minors_matrix` with M1 in extended precision (``numpy.longdouble``) and dM1
+    >= |M1 - M1 in exact arithmetic| entrywise (:func:`tritools.model.coef_error.det4`; terms set to zero by a rule
+    below are exact zeros of a relaxation and carry no error).  ``exact``: M1_exact holds the exact determinants
+    (:class:`~tritools.model.coef_error.ExactMatrix`; None otherwise)."""
     cameras = np.asarray(cameras, float)
     a, c, _ = _row_data(cameras)
     T, minor, mono, B1, n_minors = _minor_structure(cameras.shape[0])
@@ -139,20 +148,24 @@ def minors_with_error(cameras: np.ndarray, groups=None, loose=()) -> tuple[np.nd
     # bound stays valid).  Kept, the unit scaling of theorem1_constraints turned its round-off into a constraint
     # the true image points violate (review 30a F1: a rectified rig, c_LB = 6.54 above c = 3 at a feasible point).
     noise = np.abs(d) <= MINOR_ROUNDOFF * np.prod(np.linalg.norm(rows, axis=2), axis=1)
-    d = np.where((np.bincount(minor, weights=~noise, minlength=n_minors) == 0)[minor], 0.0, d)
+    ruled = (np.bincount(minor, weights=~noise, minlength=n_minors) == 0)[minor]
     labels = centre_groups(cameras) if groups is None else np.asarray(groups)
     views = (T % (2 * cameras.shape[0])) // 2                                       # the view of each term's rows
     group = labels[views]                                                           # the centre of each term's rows
-    d = np.where(np.all(group == group[:, :1], axis=1), 0.0, d)
+    ruled |= np.all(group == group[:, :1], axis=1)
     if len(loose):
-        d = np.where(np.isin(views, list(loose)).any(axis=1), 0.0, d)
-    err = np.where(d != 0.0, err, 0.0)
+        ruled |= np.isin(views, list(loose)).any(axis=1)
+    d = np.where(ruled, 0.0, d)
+    err = np.where(ruled, 0.0, err)
     M1 = np.zeros((n_minors, B1.shape[0]), d.dtype)
     dM1 = np.zeros((n_minors, B1.shape[0]))
     np.add.at(M1, (minor, mono), d)
     np.add.at(dM1, (minor, mono), err)
-    used = np.bincount(mono[d != 0.0], minlength=B1.shape[0]) > 0
-    return M1[:, used], B1[used], dM1[:, used]
+    used = np.bincount(mono[(d != 0.0) | (err > 0.0)], minlength=B1.shape[0]) > 0
+    M1x = None
+    if exact:
+        M1x = ExactMatrix.of_terms(rows, ~ruled, minor, mono, (n_minors, B1.shape[0])).columns(np.flatnonzero(used))
+    return M1[:, used], B1[used], dM1[:, used], M1x
 
 
 @dataclass(frozen=True)
@@ -259,7 +272,7 @@ def theorem1_constraints(cameras: np.ndarray, gens, x_index, groups=None, loose=
     (:class:`CentreRelations`, decided on the caller's raw cameras; default: from ``cameras``).  Returns
     the list and diagnostics (N1, N2, singular values).
     """
-    M1x, B1, dM1 = minors_with_error(cameras, groups, loose)
+    M1x, B1, dM1, M1e = minors_with_error(cameras, groups, loose, exact=_comb4(2 * cameras.shape[0]) <= EXACT_MINORS)
     M1 = M1x.astype(float)
     norms = np.linalg.norm(M1, axis=1)
     keep = norms > 0
@@ -271,7 +284,7 @@ def theorem1_constraints(cameras: np.ndarray, gens, x_index, groups=None, loose=
     W = U[:, :n2].T / norms[keep][None, :]
     with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
         W = W / np.max(np.abs(S[:n2, None] * Vt[:n2]), axis=1, keepdims=True) if n2 else W
-    M2, E = minor_rows(W, M1x[keep], dM1[keep])
+    M2, E = minor_rows(W, M1x[keep], dM1[keep]) if M1e is None else M1e.rows(keep).times(W)
     small = np.abs(M2) <= COEF_RTOL * np.max(np.abs(M2), axis=1, keepdims=True) if n2 else np.zeros_like(M2, bool)
     E = E + np.where(small, np.abs(M2), 0.0)
     M2 = np.where(small, 0.0, M2)

@@ -224,8 +224,11 @@ def _verify_generic(ctx: PointContext, step: Step) -> TriangulationResult | None
         return None
     v = np.concatenate([project(Xn, P) for P in ctx.cams_n])[: 2 * ctx.N]
     ball = solve_ball(ctx.regs_n, float(problem.f(v)))          # holds a minimiser: a rigorous bound
+    error = polynomial_errors(problem.eq, v, ball)
+    if problem.eq_error is not None:            # the projection constraints' proven coefficient errors on the ball
+        error = np.maximum(error, problem.eq_error.bounds(np.full(len(problem.gens), float(ball))))
     ver = verify_quadratic(problem.f, problem.eq, v, gens=problem.gens, tolerances=ctx.tolerances, radius=ball,
-                           constraint_error=polynomial_errors(problem.eq, v, ball))
+                           constraint_error=error)
     status, optimal, c_lb = decide(ver.lower_bound, ver.upper_bound, ctx.tolerances, ctx.N, ctx.norm.resolution)
     if not optimal:
         return None

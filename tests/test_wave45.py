@@ -158,3 +158,41 @@ def test_rigorous_bound_charges_inexact_equalities():
         sospoly.rigorous_psatz_bound(ps, sol, c, 2.0, eq_error=[0.001, 0.0])
     with pytest.raises(ValueError, match="non-negative"):
         sospoly.rigorous_psatz_bound(ps, sol, c, 2.0, eq_error=[-1.0])
+
+
+def _stereo(disparity):
+    f, cx, cy = 800.0, 320.0, 240.0
+    K = np.array([[f, 0, cx], [0, f, cy], [0, 0, 1.0]])
+    cams = np.array([K @ np.hstack([np.eye(3), [[-b], [0], [0]]]) for b in (0.0, 1.0)])
+    return cams, np.array([[cx, cy], [cx - disparity, cy]])
+
+
+@pytest.mark.parametrize("disparity", [0.0, 1e-9])
+def test_far_set_of_a_stereo_pair_is_not_called_empty(disparity):
+    """Review 45b H1: 0.2 px discs of a stereo pair with (near) zero disparity hold the optical axis beyond depth 2000
+    (X = (0, 0, 1e4) projects onto both centres); the Farkas dual excluded a ball of radius ~1650 only, the solver's
+    scale having fallen to 1e-6 (the DLT 'at infinity'), and the set was certified empty."""
+    cams, obs = _stereo(disparity)
+    discs = [tritools.Ellipse.circle(x, 0.2) for x in obs]
+    X = np.array([0.0, 0.0, 1e4])
+    assert all(float(g.distance(tritools.project(X, P))) == 0.0 for g, P in zip(discs, cams))
+    for res in (tritools.uncertainty(cams, discs), tritools.uncertainty(cams, [tritools.Point(x) for x in obs],
+                                                                        dilation=0.2),
+                tritools.uncertainty_many([cams], [discs])[0]):
+        assert res.status != tritools.UncertaintyStatus.EMPTY
+        assert np.all(res.lo <= X) and np.all(X <= res.hi)
+
+
+@pytest.mark.parametrize("disparity", [1e-8, 1e-10])
+def test_far_intersection_of_point_rays_is_not_called_empty(disparity):
+    """Review 45b H1b: point regions whose rays meet at depth ~8e10-8e12 (exactly, in rational arithmetic)."""
+    cams, obs = _stereo(disparity)
+    res = tritools.uncertainty(cams, [tritools.Point(x) for x in obs])
+    assert res.status != tritools.UncertaintyStatus.EMPTY
+
+
+def test_empty_set_is_still_certified_empty():
+    cams, obs = _stereo(0.0)
+    obs[1, 0] += 50.0                               # the second point 50 px to the right: rays diverge (behind)
+    res = tritools.uncertainty(cams, [tritools.Ellipse.circle(x, 0.2) for x in obs])
+    assert res.status == tritools.UncertaintyStatus.EMPTY

@@ -26,7 +26,8 @@ from .angle import triangulation_angles
 from .rigour import box_from_bounds, combine, lower_bounds, round_down, round_up
 from .sets import EPS, dilate, structure_key, view_blocks, view_coefficients
 from .solve import objective_rows, solve_blocks
-from .witness import centres, exact_rays, feasible, pull_inside, rays_stay_inside, repeat_block, witness_gap
+from .witness import (centres, exact_rays, feasible, pull_inside, ray_point_in_set, rays_stay_inside, repeat_block,
+                      witness_gap)
 
 __all__ = ["UncertaintyStatus", "UncertaintyOptions", "UncertaintyResult", "uncertainty", "uncertainty_many"]
 
@@ -339,9 +340,13 @@ def _group_chunk(C, blocks, X0, Xe, convexified, opts) -> list[UncertaintyResult
     st = blk.status
     solved = (st == BlockStatus.SOLVED) & ok
     ray = st == BlockStatus.UNBOUNDED
-    empty = _empty(st, b.reshape(M, K), be.reshape(M, K), a.reshape(M, K, 3), ae.reshape(M, K, 3), sigma)
+    size = _scene_size(R, X0)
+    empty = _empty(st, b.reshape(M, K), be.reshape(M, K), a.reshape(M, K, 3), ae.reshape(M, K, 3),
+                   np.maximum(sigma, EMPTY_SCENE_FLOOR * size))
     # a Farkas verdict is local (it excludes the points within its reach of X0): a point found in S refutes it
     empty &= ~(feasible(blocks, R, X0, opts.witness_rtol) | feasible(blocks, R, Xe, opts.witness_rtol))
+    if np.any(empty):
+        empty &= ~ray_point_in_set(blocks, R, np.maximum(size, sigma), opts.witness_rtol, empty)
     witnesses = np.where(((st == BlockStatus.SOLVED))[:, :, None], X0[:, None, :] + sigma[:, None, None] * blk.eta,
                          np.nan)
     with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
@@ -362,9 +367,27 @@ def _group_chunk(C, blocks, X0, Xe, convexified, opts) -> list[UncertaintyResult
     return [replace(r, angle_deg=float(a)) for r, a in zip(out, angles)]
 
 
+#: an "empty" Farkas verdict must exclude the ball of 1e6 sigma around X0 with sigma at least this fraction of the
+#: scene's size (:func:`_empty`)
+EMPTY_SCENE_FLOOR = 1e-3
+
+
+def _scene_size(R, X0) -> np.ndarray:
+    """(M,) the largest distance from X0 to a finite camera centre (0 where none is)."""
+    M, N = R.shape[:2]
+    w = np.linalg.svd(R.reshape(-1, 3, 4))[2][:, -1].reshape(M, N, 4)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        far = np.linalg.norm(w[..., :3] / w[..., 3:] - X0[:, None, :], axis=2)
+    return np.where(np.isfinite(far), far, 0.0).max(axis=1)
+
+
 def _empty(st, b, be, a, ae, sigma):
     """A problem is empty when a block's Farkas dual, turned into ``a' xi + b >= 0`` with ``b < 0``,
-    excludes every point within ``1e6 sigma`` of X0 (rigorous there; beyond, to the dual's residual)."""
+    excludes every point within ``1e6 sigma`` of X0 (rigorous there; beyond, to the dual's residual), ``sigma`` here
+    at least :data:`EMPTY_SCENE_FLOOR` of the scene's size (the distance from X0 to the farthest camera centre: the
+    solver's scale alone fell to 1e-6 of it, review 45b H1); the caller then looks for a point of S along the views'
+    centre rays and at their pairwise closest points (:func:`.witness.ray_point_in_set`), where the sets a ball
+    misses lie (nearly parallel rays)."""
     inf = st == BlockStatus.INFEASIBLE
     reach = 1e6 * sigma[:, None]
     excl = (b + be < 0) & ((np.abs(a) + ae).sum(axis=2) * reach < -(b + be))

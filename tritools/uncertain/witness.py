@@ -101,6 +101,55 @@ def view_rays(blocks, R, m: int) -> list:
     return out
 
 
+#: distances along each view's centre ray, as multiples of the scene's size, where an "empty" verdict looks for a point
+RAY_PROBES = tuple(10.0 ** (k / 4) for k in range(-12, 69))
+
+
+def ray_point_in_set(blocks, R, size, rtol, rows) -> np.ndarray:
+    """(M,) bool: for the problems ``rows`` (a mask), a point of S on some view's centre ray (from its camera centre,
+    :func:`view_rays`, at ``RAY_PROBES`` times ``size``).  A Farkas verdict excludes a ball only; the sets it missed
+    were the points of nearly parallel rays, far away along them (review 45b H1: 0.2 px discs of a stereo pair with
+    zero disparity, S the optical axis beyond depth 2000, called empty)."""
+    found = np.zeros(len(rows), bool)
+    for m in np.flatnonzero(rows):
+        cams = np.linalg.svd(R[m])[2][:, -1]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            centres_m = cams[:, :3] / cams[:, 3:]
+        rays = [(c, d) for c, d in zip(centres_m, view_rays(blocks, R, m)) if np.all(np.isfinite(c))]
+        cand = [c + t * size[m] * d for c, d in rays for t in RAY_PROBES] + _closest_points(rays)
+        if not cand:
+            continue
+        P = np.array(cand)
+        one = [_take(b, m, len(P)) for b in blocks]
+        found[m] = bool(np.any(feasible(one, np.repeat(R[m:m + 1], len(P), axis=0), P, rtol)))
+    return found
+
+
+def _closest_points(rays) -> list:
+    """For every pair of rays (c, d), the point of each ray closest to the other (cross products: accurate for nearly
+    parallel rays, where the DLT of the centres fails as 'at infinity')."""
+    out = []
+    for a in range(len(rays)):
+        for b in range(len(rays)):
+            if a == b:
+                continue
+            (ci, di), (cj, dj) = rays[a], rays[b]
+            n = np.cross(di, dj)
+            nn = float(n @ n)
+            if nn > 0:
+                t = float(np.cross(cj - ci, dj) @ n) / nn
+                if np.isfinite(t) and t > 0:
+                    out.append(ci + t * di)
+    return out
+
+
+def _take(blk, m: int, k: int):
+    """Problem m's block repeated k times."""
+    fields = {name: (None if getattr(blk, name) is None else np.repeat(getattr(blk, name)[m:m + 1], k, axis=0))
+              for name in ("center", "D", "Dinv", "L", "B", "c", "d")}
+    return type(blk)(blk.kind, **fields)
+
+
 def _snapped(blocks, R, eta, targets) -> list:
     """Per ray, the view rays (:func:`view_rays`) on the side of the solver's ray ``eta`` that decrease ``targets``."""
     out = []

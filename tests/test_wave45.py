@@ -196,3 +196,19 @@ def test_empty_set_is_still_certified_empty():
     obs[1, 0] += 50.0                               # the second point 50 px to the right: rays diverge (behind)
     res = tritools.uncertainty(cams, [tritools.Ellipse.circle(x, 0.2) for x in obs])
     assert res.status == tritools.UncertaintyStatus.EMPTY
+
+
+@pytest.mark.filterwarnings("ignore::RuntimeWarning")
+@pytest.mark.parametrize("scale", [1e-200, 1e-20, 1e200])
+def test_segment_of_extreme_length_does_not_crash_uncertainty(scale):
+    """Review 45b M1: the segment's rectangle took np.linalg.norm of its direction (1e-400 underflows, 1e400
+    overflows) and raised FieldError from a valid Segment."""
+    K = np.array([[800.0, 0, 320], [0, 800.0, 240], [0, 0, 1]])
+    cams = np.array([K @ np.hstack([np.eye(3), [[-b], [0.0], [5.0]]]) for b in (0.0, 1.0)])
+    X = np.array([0.1, -0.2, 0.3])
+    x = [tritools.project(X, P) for P in cams]
+    res = tritools.uncertainty(cams, [tritools.Segment(x[0], [scale, 0.0]), tritools.Ellipse.circle(x[1], 1.0)])
+    assert res.status in (tritools.UncertaintyStatus.BOUNDED, tritools.UncertaintyStatus.FAILED,
+                          tritools.UncertaintyStatus.UNBOUNDED)
+    if res.status == tritools.UncertaintyStatus.BOUNDED:
+        assert np.all(res.lo <= X) and np.all(X <= res.hi)

@@ -72,9 +72,11 @@ def _dilate_ellipse(form: ConicForm, r: float) -> Ellipse:
 
 def _dilate_segment(form: ConicForm, r: float) -> Polytope:
     """The rectangle ``||d|| + r`` along the direction d, ``r`` across, around the centre."""
-    d = form.direction
-    nd = float(np.linalg.norm(d))
-    u = d / nd
+    d = np.asarray(form.direction, float)
+    s = float(np.max(np.abs(d)))
+    u = d / s                                       # (scaled first: a norm of 1e-200 or 1e200 under/overflows)
+    nd = s * float(np.linalg.norm(u))
+    u = u / float(np.linalg.norm(u))
     n = np.array([-u[1], u[0]])
     half = np.array([nd + r, r]) * DILATION_GROW
     B = np.array([u / half[0], n / half[1]])

@@ -341,8 +341,7 @@ def _group_chunk(C, blocks, X0, Xe, convexified, opts) -> list[UncertaintyResult
     solved = (st == BlockStatus.SOLVED) & ok
     ray = st == BlockStatus.UNBOUNDED
     size = _scene_size(R, X0)
-    empty = _empty(st, b.reshape(M, K), be.reshape(M, K), a.reshape(M, K, 3), ae.reshape(M, K, 3),
-                   np.maximum(sigma, EMPTY_SCENE_FLOOR * size))
+    empty = _empty(st, b.reshape(M, K), be.reshape(M, K), a.reshape(M, K, 3), ae.reshape(M, K, 3), sigma)
     # a Farkas verdict is local (it excludes the points within its reach of X0): a point found in S refutes it
     empty &= ~(feasible(blocks, R, X0, opts.witness_rtol) | feasible(blocks, R, Xe, opts.witness_rtol))
     if np.any(empty):
@@ -367,11 +366,6 @@ def _group_chunk(C, blocks, X0, Xe, convexified, opts) -> list[UncertaintyResult
     return [replace(r, angle_deg=float(a)) for r, a in zip(out, angles)]
 
 
-#: an "empty" Farkas verdict must exclude the ball of 1e6 sigma around X0 with sigma at least this fraction of the
-#: scene's size (:func:`_empty`)
-EMPTY_SCENE_FLOOR = 1e-3
-
-
 def _scene_size(R, X0) -> np.ndarray:
     """(M,) the largest distance from X0 to a finite camera centre (0 where none is)."""
     M, N = R.shape[:2]
@@ -383,11 +377,11 @@ def _scene_size(R, X0) -> np.ndarray:
 
 def _empty(st, b, be, a, ae, sigma):
     """A problem is empty when a block's Farkas dual, turned into ``a' xi + b >= 0`` with ``b < 0``,
-    excludes every point within ``1e6 sigma`` of X0 (rigorous there; beyond, to the dual's residual), ``sigma`` here
-    at least :data:`EMPTY_SCENE_FLOOR` of the scene's size (the distance from X0 to the farthest camera centre: the
-    solver's scale alone fell to 1e-6 of it, review 45b H1); the caller then looks for a point of S along the views'
-    centre rays and at their pairwise closest points (:func:`.witness.ray_point_in_set`), where the sets a ball
-    misses lie (nearly parallel rays)."""
+    excludes every point within ``1e6 sigma`` of X0 (rigorous there; beyond, to the dual's residual).  A ball is not
+    space: the caller then looks for a point of S along the views' centre rays and at their pairwise closest points
+    (:func:`.witness.ray_point_in_set`), where the sets a ball misses lie (nearly parallel rays; review 45b H1: the
+    solver's scale fell to 1e-6 of the scene with the DLT 'at infinity', and a ball of radius 1650 was accepted for a
+    set starting at depth 2000)."""
     inf = st == BlockStatus.INFEASIBLE
     reach = 1e6 * sigma[:, None]
     excl = (b + be < 0) & ((np.abs(a) + ae).sum(axis=2) * reach < -(b + be))

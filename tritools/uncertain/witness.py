@@ -102,50 +102,64 @@ def view_rays(blocks, R, m: int) -> list:
 
 
 #: distances along each view's centre ray, as multiples of the scene's size, where an "empty" verdict looks for a point
-RAY_PROBES = tuple(10.0 ** (k / 4) for k in range(-12, 69))
+RAY_PROBES = tuple(10.0 ** (k / 2) for k in range(-6, 35))
 
 
 def ray_point_in_set(blocks, R, size, rtol, rows) -> np.ndarray:
     """(M,) bool: for the problems ``rows`` (a mask), a point of S on some view's centre ray (from its camera centre,
-    :func:`view_rays`, at ``RAY_PROBES`` times ``size``).  A Farkas verdict excludes a ball only; the sets it missed
-    were the points of nearly parallel rays, far away along them (review 45b H1: 0.2 px discs of a stereo pair with
-    zero disparity, S the optical axis beyond depth 2000, called empty)."""
+    :func:`view_rays`, at ``RAY_PROBES`` times ``size``) or at two such rays' closest points.  A Farkas verdict
+    excludes a ball only; the sets it missed were the points of nearly parallel rays, far along them (review 45b H1:
+    0.2 px discs of a stereo pair with zero disparity, S the optical axis beyond depth 2000, called empty)."""
     found = np.zeros(len(rows), bool)
-    for m in np.flatnonzero(rows):
-        cams = np.linalg.svd(R[m])[2][:, -1]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            centres_m = cams[:, :3] / cams[:, 3:]
-        rays = [(c, d) for c, d in zip(centres_m, view_rays(blocks, R, m)) if np.all(np.isfinite(c))]
-        cand = [c + t * size[m] * d for c, d in rays for t in RAY_PROBES] + _closest_points(rays)
-        if not cand:
-            continue
-        P = np.array(cand)
-        one = [_take(b, m, len(P)) for b in blocks]
-        found[m] = bool(np.any(feasible(one, np.repeat(R[m:m + 1], len(P), axis=0), P, rtol)))
+    idx = np.flatnonzero(rows)
+    if not idx.size:
+        return found
+    Rm = R[idx]                                                     # (E, N, 3, 4)
+    E, N = Rm.shape[:2]
+    w = np.linalg.svd(Rm.reshape(-1, 3, 4))[2][:, -1].reshape(E, N, 4)
+    centre = np.stack([np.append(b.center[idx][e], 1.0) for e in range(E) for b in blocks]).reshape(E, N, 3)
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        C = w[..., :3] / w[..., 3:]
+        d = _solve3(Rm[..., :3], centre)
+        d = d / np.linalg.norm(d, axis=2, keepdims=True)
+        t = np.asarray(RAY_PROBES)[None, None, :, None] * size[idx][:, None, None, None]
+        along = (C[:, :, None, :] + t * d[:, :, None, :]).reshape(E, -1, 3)
+        cand = np.concatenate([along, _closest(C, d)], axis=1)      # (E, Kc, 3)
+    Kc = cand.shape[1]
+    ok = np.all(np.isfinite(cand), axis=2)
+    rep = [_take_rows(b, idx, Kc) for b in blocks]
+    inside = feasible(rep, np.repeat(Rm, Kc, axis=0), np.where(ok[..., None], cand, 0.0).reshape(-1, 3), rtol)
+    found[idx] = np.any(inside.reshape(E, Kc) & ok, axis=1)
     return found
 
 
-def _closest_points(rays) -> list:
-    """For every pair of rays (c, d), the point of each ray closest to the other (cross products: accurate for nearly
-    parallel rays, where the DLT of the centres fails as 'at infinity')."""
-    out = []
-    for a in range(len(rays)):
-        for b in range(len(rays)):
-            if a == b:
-                continue
-            (ci, di), (cj, dj) = rays[a], rays[b]
-            n = np.cross(di, dj)
-            nn = float(n @ n)
-            if nn > 0:
-                t = float(np.cross(cj - ci, dj) @ n) / nn
-                if np.isfinite(t) and t > 0:
-                    out.append(ci + t * di)
-    return out
+def _solve3(A: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """x with A x = y for stacks of 3 x 3 systems by Cramer's rule (NaN where A is singular)."""
+    det = np.linalg.det(A)
+    out = np.empty(y.shape)
+    for k in range(3):
+        Ak = A.copy()
+        Ak[..., :, k] = y
+        out[..., k] = np.linalg.det(Ak) / det
+    return np.where(np.isfinite(out), out, np.nan)
 
 
-def _take(blk, m: int, k: int):
-    """Problem m's block repeated k times."""
-    fields = {name: (None if getattr(blk, name) is None else np.repeat(getattr(blk, name)[m:m + 1], k, axis=0))
+def _closest(C: np.ndarray, d: np.ndarray) -> np.ndarray:
+    """(E, N (N - 1), 3): for every ordered pair of rays (C_a + t d_a), the point of ray a closest to ray b (cross
+    products: accurate for nearly parallel rays, where the DLT of the centres fails as 'at infinity'); NaN where it
+    is behind C_a or undefined."""
+    E, N = C.shape[:2]
+    a, b = np.array([(i, j) for i in range(N) for j in range(N) if i != j]).T
+    n = np.cross(d[:, a], d[:, b])
+    nn = np.einsum("eka,eka->ek", n, n)
+    t = np.einsum("eka,eka->ek", np.cross(C[:, b] - C[:, a], d[:, b]), n) / nn
+    t = np.where(np.isfinite(t) & (t > 0), t, np.nan)
+    return C[:, a] + t[..., None] * d[:, a]
+
+
+def _take_rows(blk, idx: np.ndarray, k: int):
+    """The problems ``idx`` of a block, each repeated k times."""
+    fields = {name: (None if getattr(blk, name) is None else np.repeat(getattr(blk, name)[idx], k, axis=0))
               for name in ("center", "D", "Dinv", "L", "B", "c", "d")}
     return type(blk)(blk.kind, **fields)
 

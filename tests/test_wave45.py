@@ -212,3 +212,30 @@ def test_segment_of_extreme_length_does_not_crash_uncertainty(scale):
                           tritools.UncertaintyStatus.UNBOUNDED)
     if res.status == tritools.UncertaintyStatus.BOUNDED:
         assert np.all(res.lo <= X) and np.all(X <= res.hi)
+
+
+def test_set_of_parallel_rays_across_the_baseline_is_not_called_empty():
+    """Review 45c H1: 0.2 px discs 0.3 px apart across the baseline, zero disparity: X = (0.5, 1, 5000) is in both
+    (squared distances 0.032 and 0.026 < 0.04), the set runs to infinity; the ray search misses it (no centre ray
+    stays in the other disc) and a DLT 'at infinity' now refuses the Farkas verdict."""
+    cams, obs = _stereo(0.0)
+    obs[1, 1] += 0.3
+    discs = [tritools.Ellipse.circle(x, 0.2) for x in obs]
+    X = np.array([0.5, 1.0, 5000.0])
+    assert all(float(g.distance(tritools.project(X, P))) == 0.0 for g, P in zip(discs, cams))
+    for res in (tritools.uncertainty(cams, discs), tritools.uncertainty_many([cams], [discs])[0]):
+        assert res.status != tritools.UncertaintyStatus.EMPTY
+
+
+def test_eq_error_input_is_checked():
+    x = variables(["x"])[0]
+    ps = sospoly.build_psatz(x * x, [x - 1.0], [], 2)
+    sol = sospoly.solve_psatz(ps).solution
+    c = float(sol.objective)
+    assert sospoly.rigorous_psatz_bound(ps, sol, c, 2.0, eq_error=[None]).constraint_error == 0.0
+    with pytest.raises(TypeError, match="real numbers"):
+        sospoly.rigorous_psatz_bound(ps, sol, c, 2.0, eq_error=[1j])
+    with pytest.raises(ValueError, match="one bound per equality"):
+        sospoly.rigorous_psatz_bound(ps, sol, c, 2.0, eq_error=[[0.1]])
+    with pytest.raises(TypeError, match="sequence"):
+        sospoly.rigorous_psatz_bound(ps, sol, c, 2.0, eq_error=0.1)

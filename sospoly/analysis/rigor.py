@@ -253,8 +253,14 @@ def _constraint_error(structure, x: np.ndarray, r: np.ndarray, eq_error) -> floa
     """sum_k sup|r_k| e_k on the box |v_i| <= r_i (:func:`rigorous_psatz_bound`'s ``eq_error``)."""
     if eq_error is None:
         return 0.0
-    e = np.asarray(eq_error, float).reshape(-1)
-    if e.size != structure.slots.n_eq:
+    if isinstance(eq_error, (str, bytes)) or not np.iterable(eq_error):
+        raise TypeError(f"rigorous_psatz_bound eq_error must be a sequence of numbers, got {type(eq_error).__name__}")
+    try:
+        e = np.asarray([0.0 if v is None else v for v in eq_error], dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise TypeError(f"rigorous_psatz_bound eq_error must hold real numbers (None for an exact equality): {exc}") \
+            from None
+    if e.ndim != 1 or e.size != structure.slots.n_eq:
         raise ValueError(f"rigorous_psatz_bound eq_error needs one bound per equality ({structure.slots.n_eq}), got "
                          f"{e.size}")
     if np.any(np.isnan(e)) or np.any(e < 0):

@@ -64,7 +64,7 @@ def det4(rows: np.ndarray, extended: bool = False) -> tuple[np.ndarray, np.ndarr
     with np.errstate(over="ignore"):
         # gamma_k perm(|A|) with k = 2 (2x2 minors) + 1 (their product) + 5 (the sum of six) + 1 (sign), doubled for
         # the permanent's own rounding; then the rounding to double
-        err = (24 * _EPS_LD * perm).astype(float) * (1 + 1e-6)
+        err = (24 * _EPS_LD * perm).astype(float) * (1 + 1e-6) + 5e-324        # (never rounded down to 0)
         if extended:
             return d, err
         out = d.astype(float)
@@ -83,7 +83,7 @@ def minor_rows(W: np.ndarray, M1: np.ndarray, dM1: np.ndarray) -> tuple[np.ndarr
         absW = np.abs(W)
         E = (np.abs(M2.astype(_LD) - P)).astype(float) * (1 + 4 * _EPS) \
             + (n + 4) * _EPS_LD * (absW @ np.abs(M1).astype(float)) * (1 + (n + 4) * _EPS) \
-            + (absW @ dM1) * (1 + (n + 4) * _EPS)
+            + (absW @ dM1) * (1 + (n + 4) * _EPS) + 5e-324
     return M2, np.where(np.isfinite(E), E, np.inf)
 
 
@@ -166,7 +166,7 @@ class ConstraintErrors:
     def bounds(self, radius) -> np.ndarray:
         """(n,) bounds of |g~_k(v)| at the points of the box |v_i| <= r_i (``radius`` one per generator) that satisfy
         the exact constraints (those points make g_k vanish, so what g~_k shows there is its coefficient error)."""
-        r = np.asarray(radius, float)
+        r = np.abs(np.asarray(radius, float))
         out = np.zeros(self.n)
         for part in self.parts:
             out[part.rows] = part.bounds(r)

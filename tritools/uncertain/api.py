@@ -346,6 +346,7 @@ def _group_chunk(C, blocks, X0, Xe, convexified, opts) -> list[UncertaintyResult
     empty &= ~(feasible(blocks, R, X0, opts.witness_rtol) | feasible(blocks, R, Xe, opts.witness_rtol))
     if np.any(empty):
         empty &= ~ray_point_in_set(blocks, R, np.maximum(size, sigma), opts.witness_rtol, empty)
+        empty &= _finite_start(R, blocks, empty)
     witnesses = np.where(((st == BlockStatus.SOLVED))[:, :, None], X0[:, None, :] + sigma[:, None, None] * blk.eta,
                          np.nan)
     with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
@@ -364,6 +365,20 @@ def _group_chunk(C, blocks, X0, Xe, convexified, opts) -> list[UncertaintyResult
         out.append(_assemble(m, N, solved[m], ray[m], empty[m], beta[m], rho[m], witnesses[m], X0[m], Xe[m],
                              sigma[m], q0[m], q0e[m], bool(conv[m]), drows[m]))
     return [replace(r, angle_deg=float(a)) for r, a in zip(out, angles)]
+
+
+def _finite_start(R, blocks, rows) -> np.ndarray:
+    """(M,) False for the problems ``rows`` whose region centres have no finite DLT point ('at infinity': nearly
+    parallel rays, whose set a Farkas ball and the ray search both miss -- review 45c H1: 0.2 px discs 0.3 px apart
+    across the baseline of a stereo pair with zero disparity, a set from depth ~3000 to infinity, called empty)."""
+    from ..model.geometry import dlt
+    ok = np.ones(len(rows), bool)
+    for m in np.flatnonzero(rows):
+        try:
+            dlt(R[m], np.array([b.center[m] for b in blocks]))
+        except ValueError:
+            ok[m] = False
+    return ok
 
 
 def _scene_size(R, X0) -> np.ndarray:

@@ -76,15 +76,24 @@ def minor_rows(W: np.ndarray, M1: np.ndarray, dM1: np.ndarray) -> tuple[np.ndarr
     E >= |M2 - W M1_exact| entrywise (module docstring, Theorem 1): the rounding of the extended product (gamma_n of
     |W| |M1|, the last rounding to double) and |W| dM1."""
     n = M1.shape[0]
+    absW = np.abs(W)
     with np.errstate(over="ignore", invalid="ignore"):
-        Wl = W.astype(_LD)
-        P = Wl @ M1
-        M2 = P.astype(float)
-        absW = np.abs(W)
-        E = (np.abs(M2.astype(_LD) - P)).astype(float) * (1 + 4 * _EPS) \
-            + (n + 4) * _EPS_LD * (absW @ np.abs(M1).astype(float)) * (1 + (n + 4) * _EPS) \
-            + (absW @ dM1) * (1 + (n + 4) * _EPS) + 5e-324
+        if W.shape[0] * n * M1.shape[1] <= EXTENDED_PRODUCT_MAX:
+            P = W.astype(_LD) @ M1
+            M2 = P.astype(float)
+            E = (np.abs(M2.astype(_LD) - P)).astype(float) * (1 + 4 * _EPS) \
+                + (n + 4) * _EPS_LD * (absW @ np.abs(M1).astype(float)) * (1 + (n + 4) * _EPS)
+        else:                       # numpy's extended product has no BLAS: seconds at eight views; double instead
+            M1d = M1.astype(float)
+            M2 = W @ M1d
+            E = ((n + 4) * _EPS * (absW @ (np.abs(M1d) + np.abs((M1 - M1d.astype(_LD)).astype(float))))
+                 + absW @ np.abs((M1 - M1d.astype(_LD)).astype(float))) * (1 + (n + 8) * _EPS)
+        E = E + (absW @ dM1) * (1 + (n + 4) * _EPS) + 5e-324
     return M2, np.where(np.isfinite(E), E, np.inf)
+
+
+#: the largest W @ M1 (rows x inner x columns) formed in extended precision (~0.3 s); beyond, in double with its bound
+EXTENDED_PRODUCT_MAX = 2e7
 
 
 def fundamental_errors(F: np.ndarray, Pi: np.ndarray, Pj: np.ndarray) -> np.ndarray:

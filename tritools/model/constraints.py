@@ -11,7 +11,8 @@ Theorem 1 (minors)
     which gives the coefficient matrix M1 of m1 = M1 b1(v) with numeric 4x4
     determinants only (two rows of one view share c_r, so their product term is 0:
     minors have degree 2, 3 or 4).  SVD M1 = U1 S1 V1^T, N2 = numerical rank
-    (``RANK_RTOL``), m2 = S2 V1^T b1: same zero set, N2 <= N1 entries.
+    (``RANK_RTOL``), m2 = S2 V1^T b1: same zero set, N2 <= N1 entries (formed as W M1 from exact or
+    extended-precision determinants, with bounds of its coefficients' errors: :mod:`tritools.model.coef_error`).
 Corollary 1 (epipolar)
     m1_ij = x~_i^T F_ij x~_j for i < j, F_ij from the camera pair (quadratic).
 
@@ -36,7 +37,8 @@ from .geometry import fundamental_matrix
 
 __all__ = ["Method", "RANK_RTOL", "COEF_RTOL", "minors_matrix", "theorem1_constraints", "corollary1_constraints",
            "triple_minor_constraints", "THEOREM1_DENSE_MAX_VIEWS", "centre_groups", "centre_groups_loop",
-           "epipolar_polynomial", "CentreRelations", "centre_relations"]
+           "epipolar_polynomial", "CentreRelations", "centre_relations", "minors_with_error", "minor_count",
+           "EXACT_MINORS"]
 
 #: relative singular-value threshold for the numerical rank N2 of M1 (rows scaled to unit norm first).
 #: Directions below it are dropped: at an exactly feasible point their values are float
@@ -56,7 +58,8 @@ COEF_RTOL = 1e-12
 EXACT_MINORS = 15
 
 
-def _comb4(n: int) -> int:
+def minor_count(n: int) -> int:
+    """C(n, 4): the 4x4 minors of a matrix of n rows (M0 has n = 2N)."""
     return n * (n - 1) * (n - 2) * (n - 3) // 24
 
 
@@ -270,9 +273,11 @@ def theorem1_constraints(cameras: np.ndarray, gens, x_index, groups=None, loose=
 
     ``x_index[2i + k]`` is the position in ``gens`` of x_{i+1, k+1}.  ``groups``: the views' centre labels
     (:class:`CentreRelations`, decided on the caller's raw cameras; default: from ``cameras``).  Returns
-    the list and diagnostics (N1, N2, singular values).
+    the list and diagnostics (N1, N2, singular values, and ``errors``: the rows' coefficient error bounds,
+    :class:`~tritools.model.coef_error.MinorErrors`).
     """
-    M1x, B1, dM1, M1e = minors_with_error(cameras, groups, loose, exact=_comb4(2 * cameras.shape[0]) <= EXACT_MINORS)
+    exact = minor_count(2 * cameras.shape[0]) <= EXACT_MINORS
+    M1x, B1, dM1, M1e = minors_with_error(cameras, groups, loose, exact=exact)
     M1 = M1x.astype(float)
     norms = np.linalg.norm(M1, axis=1)
     keep = norms > 0

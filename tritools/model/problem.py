@@ -31,7 +31,7 @@ from sospoly.budget import check_deadline
 
 from ..errors import ProblemTooLarge
 from .coef_error import ConstraintErrors
-from .constraints import (THEOREM1_DENSE_MAX_VIEWS, Method, centre_relations, corollary1_constraints,
+from .constraints import (THEOREM1_DENSE_MAX_VIEWS, Method, centre_relations, corollary1_constraints, minor_count,
                           theorem1_constraints, triple_minor_constraints)
 
 __all__ = ["TriangulationProblem", "build_problem", "view_chain", "view_band", "FORMULATIONS"]
@@ -122,7 +122,7 @@ def build_problem(cameras: np.ndarray, regions, method: Method = Method.THEOREM1
     if method == Method.THEOREM1 and formulation == "dense":
         if N > THEOREM1_DENSE_MAX_VIEWS:
             raise ProblemTooLarge(f"Theorem 1 with all minors is built for at most {THEOREM1_DENSE_MAX_VIEWS} views "
-                             f"(C(2N, 4) = {_comb4(2 * N)} minors for N = {N}); use the 'views' formulation")
+                             f"(C(2N, 4) = {minor_count(2 * N)} minors for N = {N}); use the 'views' formulation")
         rel = centre_relations(cameras) if relations is None else relations
         proj, info = theorem1_constraints(cameras, gens, x_index, rel.groups, rel.loose)
         proj_views, errors = [tuple(range(N))] * len(proj), [info["errors"]]
@@ -146,7 +146,3 @@ def build_problem(cameras: np.ndarray, regions, method: Method = Method.THEOREM1
                                 method, tuple(proj), info, tuple(view_vars), tuple(eq_views) + tuple(proj_views),
                                 tuple(ineq_views), formulation,
                                 ConstraintErrors(len(eq) + len(proj), tuple(e.shifted(len(eq)) for e in errors)))
-
-
-def _comb4(n: int) -> int:
-    return n * (n - 1) * (n - 2) * (n - 3) // 24

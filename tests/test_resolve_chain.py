@@ -63,7 +63,13 @@ def test_resolve_of_a_mixed_problem_repeats_no_attempt(monkeypatch):
     per_program = {}
     for rows, cols, _label, settings in calls:
         per_program.setdefault((rows, cols), []).append(settings)
-    assert any(len(v) > 1 for v in per_program.values())          # a re-solve happened
+    # a re-solve happened where the degree-2 program's first solve ended "almost solved" (the Clarabel outcome of this
+    # knife-edge program differs between runs of the full suite: twice in wave 45's CI it ended solved, and then no
+    # re-solve is due; the no-repeat rule below holds either way)
+    first = next((a for a in r.attempts if a.delta == 2 and a.step.value == "sdp"), None)
+    assert first is not None
+    if "AlmostSolved" in " ".join(first.solver):
+        assert any(len(v) > 1 for v in per_program.values())
     for settings in per_program.values():
         assert len(settings) == len(set(settings))                  # no repeated settings on one program
     assert r.optimal

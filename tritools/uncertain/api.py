@@ -243,10 +243,7 @@ def _scale(R, blocks, X0, depth_rows) -> np.ndarray:
     with np.errstate(divide="ignore", invalid="ignore"):
         lat = np.where((rad > 0) & (gain > 0), rad / gain, np.inf)
     sigma = np.where(np.isfinite(lat), lat, 0.0).max(axis=1)      # the thickest view sets the scale
-    w = np.linalg.svd(R.reshape(-1, 3, 4))[2][:, -1].reshape(R.shape[0], R.shape[1], 4)   # camera centres
-    with np.errstate(divide="ignore", invalid="ignore"):
-        far = np.linalg.norm(w[..., :3] / w[..., 3:] - X0[:, None, :], axis=2)
-    far = np.where(np.isfinite(far), far, 0.0).max(axis=1)
+    far = _scene_size(R, X0)
     fallback = 1e-6 * np.maximum(np.maximum(dep.mean(axis=1), far), 1e-300)
     sigma = np.where(np.isfinite(sigma) & (sigma > 0), sigma, fallback)
     return np.where(np.isfinite(sigma) & (sigma > 0), sigma, 1.0)
@@ -340,12 +337,11 @@ def _group_chunk(C, blocks, X0, Xe, convexified, opts) -> list[UncertaintyResult
     st = blk.status
     solved = (st == BlockStatus.SOLVED) & ok
     ray = st == BlockStatus.UNBOUNDED
-    size = _scene_size(R, X0)
     empty = _empty(st, b.reshape(M, K), be.reshape(M, K), a.reshape(M, K, 3), ae.reshape(M, K, 3), sigma)
     # a Farkas verdict is local (it excludes the points within its reach of X0): a point found in S refutes it
     empty &= ~(feasible(blocks, R, X0, opts.witness_rtol) | feasible(blocks, R, Xe, opts.witness_rtol))
     if np.any(empty):
-        empty &= ~ray_point_in_set(blocks, R, np.maximum(size, sigma), opts.witness_rtol, empty)
+        empty &= ~ray_point_in_set(blocks, R, np.maximum(_scene_size(R, X0), sigma), opts.witness_rtol, empty)
         empty &= _finite_start(R, blocks, empty)
     witnesses = np.where(((st == BlockStatus.SOLVED))[:, :, None], X0[:, None, :] + sigma[:, None, None] * blk.eta,
                          np.nan)

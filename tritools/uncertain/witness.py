@@ -127,7 +127,7 @@ def ray_point_in_set(blocks, R, size, rtol, rows) -> np.ndarray:
         cand = np.concatenate([along, _closest(C, d)], axis=1)      # (E, Kc, 3)
     Kc = cand.shape[1]
     ok = np.all(np.isfinite(cand), axis=2)
-    rep = [_take_rows(b, idx, Kc) for b in blocks]
+    rep = [repeat_block(take(b, idx), Kc) for b in blocks]
     inside = feasible(rep, np.repeat(Rm, Kc, axis=0), np.where(ok[..., None], cand, 0.0).reshape(-1, 3), rtol)
     found[idx] = np.any(inside.reshape(E, Kc) & ok, axis=1)
     return found
@@ -155,13 +155,6 @@ def _closest(C: np.ndarray, d: np.ndarray) -> np.ndarray:
     t = np.einsum("eka,eka->ek", np.cross(C[:, b] - C[:, a], d[:, b]), n) / nn
     t = np.where(np.isfinite(t) & (t > 0), t, np.nan)
     return C[:, a] + t[..., None] * d[:, a]
-
-
-def _take_rows(blk, idx: np.ndarray, k: int):
-    """The problems ``idx`` of a block, each repeated k times."""
-    fields = {name: (None if getattr(blk, name) is None else np.repeat(getattr(blk, name)[idx], k, axis=0))
-              for name in ("center", "D", "Dinv", "L", "B", "c", "d")}
-    return type(blk)(blk.kind, **fields)
 
 
 def _snapped(blocks, R, eta, targets) -> list:

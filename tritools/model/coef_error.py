@@ -85,9 +85,9 @@ def minor_rows(W: np.ndarray, M1: np.ndarray, dM1: np.ndarray) -> tuple[np.ndarr
                 + (n + 4) * _EPS_LD * (absW @ np.abs(M1).astype(float)) * (1 + (n + 4) * _EPS)
         else:                       # numpy's extended product has no BLAS: seconds at eight views; double instead
             M1d = M1.astype(float)
+            lost = np.abs((M1 - M1d.astype(_LD)).astype(float))       # what rounding M1 to double dropped
             M2 = W @ M1d
-            E = ((n + 4) * _EPS * (absW @ (np.abs(M1d) + np.abs((M1 - M1d.astype(_LD)).astype(float))))
-                 + absW @ np.abs((M1 - M1d.astype(_LD)).astype(float))) * (1 + (n + 8) * _EPS)
+            E = ((n + 4) * _EPS * (absW @ (np.abs(M1d) + lost)) + absW @ lost) * (1 + (n + 8) * _EPS)
         E = E + (absW @ dM1) * (1 + (n + 4) * _EPS) + 5e-324
     return M2, np.where(np.isfinite(E), E, np.inf)
 
@@ -181,12 +181,6 @@ class ConstraintErrors:
             out[part.rows] = part.bounds(r)
         return out
 
-    def shifted(self, offset: int, n: int) -> ConstraintErrors:
-        return ConstraintErrors(n, tuple(p.shifted(offset) for p in self.parts))
-
-    @staticmethod
-    def joined(n: int, parts) -> ConstraintErrors:
-        return ConstraintErrors(n, tuple(parts))
 
 
 def _dyadic(A: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -204,6 +204,13 @@ class Tolerances:
         lo, up = float(lower), float(upper)
         return math.isfinite(lo) and math.isfinite(up) and lo - up > self.gap_tolerance_one(up, float(scale))
 
+    def solver_gap_within(self, primal: float, dual: float, share: float = 1.0) -> bool:
+        """Is a solver's own duality gap within ``1 / share`` of the rule's relative part:
+        ``|p - d| <= (gap_rel / share) max(1, min(|p|, |d|))``?  (An iterate accepted as "almost solved" by it is
+        made rigorous by its caller: :func:`sospoly.solvers.backends.ipm_almost_solved`.)"""
+        gap = abs(primal - dual) / max(1.0, min(abs(primal), abs(dual)))
+        return gap <= self.gap_rel / share
+
     def certified(self, lower, upper, scale=1.0):
         """Do ``lower`` and ``upper`` meet (``upper - lower <= gap_tolerance``)?  False where either
         is None or NaN.  Scalars give a bool, arrays an elementwise boolean array."""

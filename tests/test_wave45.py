@@ -239,3 +239,26 @@ def test_eq_error_input_is_checked():
         sospoly.rigorous_psatz_bound(ps, sol, c, 2.0, eq_error=[[0.1]])
     with pytest.raises(TypeError, match="sequence"):
         sospoly.rigorous_psatz_bound(ps, sol, c, 2.0, eq_error=0.1)
+
+
+def test_stacked_centre_rays_equal_view_rays():
+    """The ray search's vectorised centre rays (Cramer's rule) are the scalar :func:`view_rays`' up to round-off."""
+    from tritools.uncertain.sets import view_blocks
+    from tritools.uncertain.witness import _solve3, view_rays
+
+    rng = np.random.default_rng(11)
+    R = rng.normal(size=(3, 4, 3, 4))
+    regs = [[tritools.Ellipse.circle(rng.normal(size=2) * 100, 2.0) for _ in range(4)] for _ in range(3)]
+    blocks = view_blocks(regs)
+    centre = np.stack([np.append(b.center[m], 1.0) for m in range(3) for b in blocks]).reshape(3, 4, 3)
+    d = _solve3(R[..., :3], centre)
+    d = d / np.linalg.norm(d, axis=2, keepdims=True)
+    for m in range(3):
+        np.testing.assert_allclose(d[m], np.array(view_rays(blocks, R, m)), rtol=1e-9, atol=1e-12)
+
+
+def test_solver_gap_rule_is_the_tolerances_one():
+    tol = sospoly.DEFAULT_TOLERANCES
+    assert tol.solver_gap_within(1.0, 1.0 + 0.5 * tol.gap_rel / 10, 10)
+    assert not tol.solver_gap_within(1.0, 1.0 + 2.0 * tol.gap_rel / 10, 10)
+    assert tol.solver_gap_within(1e-9, 0.5 * tol.gap_rel)           # the floor of 1 on the scale

@@ -436,8 +436,8 @@ def ipm_almost_solved(problem: ConicProblem, res, tolerances: Tolerances = DEFAU
     b, q = np.asarray(problem.b, float), np.asarray(problem.q, float)
     r_p = np.max(np.abs(b - problem.A @ x - s), initial=0.0) / (1.0 + np.max(np.abs(b), initial=0.0))
     r_d = np.max(np.abs(problem.A.T @ z + q), initial=0.0) / (1.0 + np.max(np.abs(q), initial=0.0))
-    gap = abs(p - d) / max(1.0, min(abs(p), abs(d)))
-    return bool(gap <= tolerances.gap_rel / IPM_ALMOST_GAP_SHARE and r_p <= IPM_ALMOST_FEAS and r_d <= IPM_ALMOST_FEAS)
+    return bool(tolerances.solver_gap_within(p, d, IPM_ALMOST_GAP_SHARE) and r_p <= IPM_ALMOST_FEAS and
+                r_d <= IPM_ALMOST_FEAS)
 
 
 #: below this estimated IPM cost (sum over PSD blocks of m n^3) one Clarabel call is faster

@@ -42,6 +42,9 @@ def test_ctrl_c_during_start_up_exits_130_with_one_line(tmp_path, delay):
 
 def test_a_library_import_keeps_python_s_handler():
     code = "import signal, tritools; print(signal.getsignal(signal.SIGINT) is signal.default_int_handler)"
+    # the child starts with SIGINT at its default: a parent that ignores it (a test worker) would hand SIG_IGN down,
+    # and Python then keeps SIG_IGN (seen once in a README run of the full suite)
     out = subprocess.run([sys.executable, "-c", code], env=dict(os.environ, PYTHONPATH=str(ROOT)),
-                         capture_output=True, text=True, timeout=60).stdout
+                         capture_output=True, text=True, timeout=60,
+                         preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL)).stdout
     assert out.strip() == "True"

@@ -114,6 +114,13 @@ class Normalization:
             return self.points_magnitude
         return float(magnitudes(np.asarray(self.shifts, float)[None])[0])
 
+    def magnitude_at(self, cameras: np.ndarray, X: np.ndarray) -> float:
+        """:attr:`magnitude` and at least the estimate's: :meth:`NormalizationStack.magnitudes_at` of one problem
+        (``cameras`` (N, 3, 4) the normalisation was made of, X (3,) in their frame)."""
+        K = world_origin_magnitudes(np.asarray(cameras, float)[None], np.asarray(self.shifts, float)[None],
+                                    np.asarray(X, float)[None], np.asarray(self.origin, float)[None])
+        return max(self.magnitude, float(K[0]))
+
     def transform(self, i: int) -> np.ndarray:
         s, (tx, ty) = self.scale, self.shifts[i]
         return np.array([[s, 0.0, -s * tx], [0.0, s, -s * ty], [0.0, 0.0, 1.0]])
@@ -192,6 +199,13 @@ class NormalizationStack:
         normalised cameras at their origin (:func:`magnitudes`), and at least the frame's origin magnitude
         (:func:`origin_magnitudes`): :attr:`Normalization.magnitude`."""
         return self.magnitudes_of(slice(None))
+
+    def magnitudes_at(self, C: np.ndarray, X: np.ndarray, shift=0.0) -> np.ndarray:
+        """(M,) :attr:`magnitude` and at least the estimate's (:func:`world_origin_magnitudes` of the cameras C
+        (M, N, 3, 4) the normalisation was made of, moved by ``shift`` (M, 3) from their given frame, at the world
+        points X (M, 3) in C's frame): what gamma_LB is lowered by at the reported estimate."""
+        o = self.origin + shift
+        return np.maximum(self.magnitude, world_origin_magnitudes(C, self.shifts, X, o))
 
     def magnitudes_of(self, rows) -> np.ndarray:
         """:attr:`magnitude` of the problems ``rows`` (a slice)."""

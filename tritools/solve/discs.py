@@ -159,21 +159,24 @@ def verify_discs(cameras, centers, radii, *, tolerances: Tolerances = DEFAULT_TO
                                  tolerances, deadline=deadline)
     ok &= ok_b
     status, optimal, c_lower = decide(lower, upper_f, tolerances, N, norm.resolution)
+    mag = norm.magnitudes_at(Cw, norm.world_points(Xn))    # the estimate's, in the frame normalised
     X = norm.world_points(Xn) + origin
     uw, _, fin_w = project_world(C, X)
     ok &= fin_w
     dist = disc_distances(uw, x, np.broadcast_to(rho, x.shape[:2]))     # the rule of point_report (review 10)
-    return reported_batch(ok, optimal, c_lower, X, uw, fin_w, dist, norm, tolerances)
+    return reported_batch(ok, optimal, c_lower, X, uw, fin_w, dist, norm, tolerances, mag)
 
 
-def reported_batch(ok, optimal, c_lower, X, uw, fin_w, dist, norm, tolerances) -> DiscBatch:
+def reported_batch(ok, optimal, c_lower, X, uw, fin_w, dist, norm, tolerances, magnitude) -> DiscBatch:
     """The :class:`DiscBatch` of a region verification from the world points X, their projections ``uw`` (finite
     where ``fin_w``) and distances ``dist`` (M, N) to the regions: gamma_UB at X, gamma_LB from the certified
-    ``c_lower`` (normalised units, ``norm``'s scale), the decision confirmed on these reported numbers."""
+    ``c_lower`` (normalised units, ``norm``'s scale; ``magnitude`` (M,) the round-off magnitudes at the estimates,
+    :meth:`tritools.model.normalize.NormalizationStack.magnitudes_at`), the decision confirmed on these reported
+    numbers."""
     N = dist.shape[1]
     gamma_ub = np.where(fin_w, gamma_upper(dist, norms(uw, axis=2)), np.inf)
     gamma_lb = np.minimum(gamma_lower(gamma_from_c(np.maximum(c_lower, 0.0), N, norm.scale), gamma_ub, norm.scale,
-                                      norm.resolution, norm.magnitude), gamma_ub)
+                                      norm.resolution, magnitude), gamma_ub)
     certified = ok & optimal & decide_reported(gamma_lb, gamma_ub, tolerances, N, norm.scale, norm.resolution)
     return DiscBatch(certified, ok, X, gamma_lb, gamma_ub, uw, dist)
 

@@ -168,8 +168,9 @@ def verify_ellipses(cameras, centers, D, *, tolerances: Tolerances = DEFAULT_TOL
             Xn[j] = Xb
             ok[j], optimal[j], c_lower[j] = _bounds_at(Cw[j], Cn[j], R[j], sig_n[j], Xb, np.ones(j.size, bool),
                                                        norm.resolution[j], tolerances, deadline)
+    mag = norm.magnitudes_at(Cw, norm.world_points(Xn))    # the estimate's, in the frame normalised
     X = norm.world_points(Xn) + origin
     uw, _, fin_w = project_world(C, X)    # the reported numbers: compensated projections, as verify_discs (review 10)
     ok &= fin_w
     ew = _local_residual(np.where(fin_w[:, None, None], uw - x, 0.0), R, sigma)[0]
-    return reported_batch(ok, optimal, c_lower, X, uw, fin_w, np.linalg.norm(ew, axis=2), norm, tolerances)
+    return reported_batch(ok, optimal, c_lower, X, uw, fin_w, np.linalg.norm(ew, axis=2), norm, tolerances, mag)

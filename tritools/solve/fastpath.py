@@ -193,7 +193,7 @@ def verify_checked(C: np.ndarray, x: np.ndarray, ok: np.ndarray, tolerances: Tol
     residuals = np.where(fin_w[:, None], norms(uw - x, axis=2), np.inf)
     gamma_ub = np.where(fin_w, gamma_upper(np.where(fin_w[:, None], residuals, 0.0), norms(uw, axis=2)), np.inf)
     gamma_lb = np.minimum(gamma_lower(gamma_from_c(c_lower, N, norm.scale), gamma_ub, norm.scale, norm.resolution,
-                                      norm.magnitude),
+                                      norm.magnitudes_at(C, X)),
                           gamma_ub)
     certified = ok & optimal & decide_reported(gamma_lb, gamma_ub, tolerances, N, norm.scale, norm.resolution)
     trivial = ok & ~certified
@@ -247,7 +247,7 @@ def verify_one(C: np.ndarray, x: np.ndarray, tolerances: Tolerances, *,
     gamma_ub = gamma_upper(residuals, norms(uw, axis=2))
     g_ub = float(gamma_ub[0])
     gamma_lb = min(gamma_lower_one(math.sqrt(max(c_lower, 0.0) / (2.0 * N)) / scale, g_ub, scale, res,
-                                   float(norm.magnitude[0])), g_ub)
+                                   float(norm.magnitudes_at(C[None], X)[0])), g_ub)
     certified = optimal and decide_reported_one(gamma_lb, g_ub, tolerances, N, scale, res)
     trivial = not certified and decide_one(0.0, upper, tolerances, N, res)[1] and math.isfinite(upper) and \
         decide_reported_one(0.0, g_ub, tolerances, N, scale, res)

@@ -230,7 +230,8 @@ def _decided(C, x, norm, ok, reason, tol, c_lb, c_ub, X_n, X_raw_n, xn, comp, it
     X_world = norm.world_points(X_n)
     u_w, _, fin_w = project_world(C, X_world)
     g_ub = np.where(fin_w, gamma_upper(norms(u_w - x, axis=2), norms(u_w, axis=2)), np.inf)
-    g_lb = gamma_lower(gamma_from_c(c_rep, N, norm.scale), g_ub, norm.scale, norm.resolution, norm.magnitude)
+    g_lb = gamma_lower(gamma_from_c(c_rep, N, norm.scale), g_ub, norm.scale, norm.resolution,
+                       norm.magnitudes_at(C, X_world))
     reported = decide_reported(g_lb, g_ub, tol, N, norm.scale, norm.resolution)
     for m in np.nonzero(ok & optimal & ~reported)[0]:
         reason[m] = "the bounds met in normalised coordinates, but not at the estimate in world coordinates"

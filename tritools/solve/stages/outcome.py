@@ -71,7 +71,8 @@ def report_point(ctx: PointContext, step: Step, status, optimal, gamma_lb, *, X,
     if gamma_lb is not None and rep.gamma is not None and np.isfinite(rep.gamma):
         # of the caller's float data (the normalisation's round-off), never above the reported upper bound
         if not lowered:
-            gamma_lb = gamma_lower(gamma_lb, rep.gamma, ctx.norm.scale, ctx.norm.resolution, ctx.norm.magnitude)
+            gamma_lb = gamma_lower(gamma_lb, rep.gamma, ctx.norm.scale, ctx.norm.resolution,
+                                   ctx.norm.magnitude_at(ctx.cams, X))
         gamma_lb = min(gamma_lb, rep.gamma)
         if optimal:                                  # the decision again, on the numbers reported
             optimal = decide_reported(gamma_lb, rep.gamma, ctx.tolerances, ctx.N, ctx.norm.scale,

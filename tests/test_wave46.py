@@ -60,11 +60,11 @@ def test_estimate_magnitude_grows_next_to_a_camera_centre():
     Ks = []
     for eps in (1e-2, 1e-4, 1e-6):
         X = np.array([[eps * 0.1, -eps * 0.2, eps]])
-        Ks.append(float(world_origin_magnitudes(P, x, X, o)[0]))
+        Ks.append(float(world_origin_magnitudes(P, x, X, o, entries=True)[0]))
     assert Ks[0] < Ks[1] < Ks[2]
     assert Ks[2] > 1e5 * Ks[0] / 10                 # ~ 1 / depth
     # at the frame's own origin it is the origin term: about |x^| + |x| pixels
-    K0 = float(world_origin_magnitudes(P, x, o, o)[0])
+    K0 = float(world_origin_magnitudes(P, x, o, o, entries=True)[0])
     h = P[0, 0] @ np.append(o[0], 1.0)
     xhat = np.abs(h[:2] / h[2]).max()
     assert xhat <= K0 <= 4 * (xhat + 300.0)
@@ -74,3 +74,21 @@ def test_estimate_magnitude_is_infinite_at_a_camera_centre():
     P = np.array([[[[800.0, 0.0, 320.0, 0.0], [0.0, 800.0, 240.0, 0.0], [0.0, 0.0, 1.0, 0.0]]]])
     K = world_origin_magnitudes(P, np.zeros((1, 1, 2)), np.zeros((1, 3)), np.array([[0.0, 0.0, 5.0]]))
     assert K[0] == np.finfo(float).max
+
+
+def test_estimate_magnitude_scalar_twin_equals_the_stack():
+    from tritools.model.magnitude import world_origin_magnitude_one
+    rng = np.random.default_rng(46)
+    M, N = 60, 5
+    C = rng.normal(size=(M, N, 3, 4)) * 10.0 ** rng.integers(-3, 4, size=(M, 1, 1, 1))
+    x = rng.normal(size=(M, N, 2)) * 10.0 ** rng.integers(0, 6, size=(M, 1, 1))
+    X = rng.normal(size=(M, 3)) + 10.0 ** rng.integers(0, 7, size=(M, 1)) * (rng.random((M, 1)) < 0.3)
+    o = X + rng.normal(size=(M, 3)) * 10.0 ** rng.integers(-9, 1, size=(M, 1))
+    X[0] = np.linalg.svd(C[0, 0])[2][-1][:3] / np.linalg.svd(C[0, 0])[2][-1][3]     # a camera centre: the maximum
+    for entries in (False, True):
+        K = world_origin_magnitudes(C, x, X, o, entries=entries)
+        one = np.array([world_origin_magnitude_one(C[m], x[m], X[m], o[m], entries=entries) for m in range(M)])
+        assert np.array_equal(K, one)
+        assert K[0] == np.finfo(float).max and np.all(K > 0)
+    # the estimate's terms only add
+    assert np.all(world_origin_magnitudes(C, x, X, o, entries=True) >= world_origin_magnitudes(C, x, X, o))

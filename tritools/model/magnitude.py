@@ -17,12 +17,11 @@ import numpy as np
 
 from sospoly import pow2_above
 
-from .exact import homogeneous_images
 from .oblique import obliquities, obliquity_one
 from .stacked import median_rows, pixel_scales
 
-__all__ = ["magnitudes", "origin_magnitudes", "world_origin_magnitudes", "resolutions", "median_pixel_scales",
-           "pixel_floors", "RESOLUTION_REL", "PIXEL_FLOOR_REL", "SCALAR_MAX_VIEWS"]
+__all__ = ["magnitudes", "origin_magnitudes", "world_origin_magnitudes", "world_origin_magnitude_one", "resolutions",
+           "median_pixel_scales", "pixel_floors", "RESOLUTION_REL", "PIXEL_FLOOR_REL", "SCALAR_MAX_VIEWS"]
 
 #: the resolution of the coordinates, relative to their magnitude (sqrt of the machine epsilon).
 RESOLUTION_REL = 1e-8
@@ -78,27 +77,80 @@ def origin_magnitudes(Cn: np.ndarray, x: np.ndarray, o: np.ndarray, scale) -> np
     return np.minimum(np.max(K, axis=1, initial=0.0), np.finfo(float).max)
 
 
-def world_origin_magnitudes(C: np.ndarray, x: np.ndarray, X: np.ndarray, o: np.ndarray) -> np.ndarray:
+def world_origin_magnitudes(C: np.ndarray, x: np.ndarray, X: np.ndarray, o: np.ndarray,
+                            entries: bool = False) -> np.ndarray:
     """(M,) max_i K_i, in pixels, for the caller's cameras C (M, N, 3, 4) moved to a frame at origin o (M, 3) and the
-    estimate X (M, 3): the cameras P' = P [I o; 0 1] (their last column P o~ rounded once, the rest as given) err by a
-    few u relative per entry, which moves the projection of X by u K_i, K_i = (max_k a_k + r_i a_3) / |P_3 X~| with
-    a_k = |P_k o~| + |P_k,1:3| . |X - o| (a bound of |P'_k| . |(X - o)~|) and r_i = max(|x_i|, |x^_i|) (the observed
-    point and the projection).  The first terms are the frame origin's (:func:`origin_magnitudes`); the second ones
-    grow where X is close to a camera centre relative to its distance from o (review 45a HIGH-1: two cameras 2e-9
-    apart, the optimum 6e-8 of the scene size from their centres, gamma_LB clipped to gamma_UB 1.8e-11 px above the
-    cost at X).  The homogeneous images are compensated (:func:`tritools.model.exact.homogeneous_images`); inf where a
-    depth vanishes (gamma_LB then lowered to 0)."""
-    ones = np.ones((len(X), 1))
+    estimate X (M, 3): the cameras P' = P [I o; 0 1] have their last column P o~ rounded once, the rest as given, which
+    moves the projection of X by u K_i, K_i = (max_k a_k + r_i a_3) / |P_3 X~| with a_k = |P_k o~| and r_i =
+    max(|x_i|, |x^_i|) (the observed point and the projection): the frame origin's term (:func:`origin_magnitudes`).
+    With ``entries`` every entry of P' errs by a few u relative (a frame normalised further, e.g. by a depth that
+    is no power of two: the L2 paths' :meth:`tritools.model.normalize.NormalizationStack.magnitudes_at`), and a_k
+    gains |P_k,1:3| . |X - o| (a_k then bounds |P'_k| . |(X - o)~|): large where X is close to a camera centre
+    relative to its distance from o (review 45a HIGH-1: two cameras 2e-9 apart, the optimum 6e-8 of the scene size
+    from their centres, gamma_LB clipped to gamma_UB 1.8e-11 px above the cost at X).  Plain float sums with their
+    error bounds (gamma_4 times the sums of absolute products: |P_k o~| from above, |P_3 X~| from below), so no
+    compensated sums are needed; inf where the depth's bound reaches 0 (gamma_LB then lowered to 0).
+    :func:`world_origin_magnitude_one` is the scalar twin (the same operations)."""
+    C, x, X, o = (np.asarray(a, float) for a in (C, x, X, o))
+    P = [[C[..., k, c] for c in range(4)] for k in range(3)]              # (M, N) entries
+    Xe = [X[:, c, None] for c in range(3)]
+    oe = [o[:, c, None] for c in range(3)]
     with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
-        ho = np.abs(homogeneous_images(C, np.concatenate([o, ones], axis=1)))
-        hX = homogeneous_images(C, np.concatenate([X, ones], axis=1))
-        hx = np.abs(hX[..., 2])
-        a = ho + np.einsum("mnij,mj->mni", np.abs(C[..., :3]), np.abs(X - o))
-        ax = np.max(np.abs(np.where(np.isfinite(x), x, 0.0)), axis=-1, initial=0.0)
-        r = np.maximum(ax, np.max(np.abs(hX[..., :2]), axis=-1) / hx)
-        K = (np.maximum(a[..., 0], a[..., 1]) + np.where(np.isfinite(r), r, 0.0) * a[..., 2]) / hx
+        d = [np.abs(Xe[c] - oe[c]) for c in range(3)]
+        a = []
+        for k in range(3):
+            Pk = P[k]
+            ho = ((Pk[0] * oe[0] + Pk[1] * oe[1]) + Pk[2] * oe[2]) + Pk[3]
+            ao = ((np.abs(Pk[0]) * np.abs(oe[0]) + np.abs(Pk[1]) * np.abs(oe[1])) + np.abs(Pk[2]) * np.abs(oe[2])) \
+                + np.abs(Pk[3])
+            dk = ((np.abs(Pk[0]) * d[0] + np.abs(Pk[1]) * d[1]) + np.abs(Pk[2]) * d[2]) if entries else 0.0
+            a.append(((np.abs(ho) + _GAMMA4 * ao) + dk) * _UP)
+        h = [((P[k][0] * Xe[0] + P[k][1] * Xe[1]) + P[k][2] * Xe[2]) + P[k][3] for k in range(3)]
+        aX = ((np.abs(P[2][0]) * np.abs(Xe[0]) + np.abs(P[2][1]) * np.abs(Xe[1])) + np.abs(P[2][2]) * np.abs(Xe[2])) \
+            + np.abs(P[2][3])
+        den = np.abs(h[2]) - _GAMMA4 * aX
+        r = np.maximum(np.maximum(np.abs(x[..., 0]), np.abs(x[..., 1])), np.maximum(np.abs(h[0]), np.abs(h[1])) / den)
+        r = np.where(np.isfinite(r), r, 0.0)
+        K = np.where(den > 0, (np.maximum(a[0], a[1]) + r * a[2]) / den, np.inf)
         K = np.where(np.isnan(K), np.inf, K)
     return np.minimum(np.max(K, axis=1, initial=0.0), np.finfo(float).max)
+
+
+def world_origin_magnitude_one(C, x, X, o, entries: bool = False) -> float:
+    """The scalar twin of :func:`world_origin_magnitudes` for one problem (C (N, 3, 4), x (N, 2), X (3,), o (3,),
+    nested lists or arrays of floats): the same operations on Python floats, equal bit for bit
+    (tests/test_wave46.py)."""
+    X0, X1, X2 = (float(v) for v in X)
+    o0, o1, o2 = (float(v) for v in o)
+    d0, d1, d2 = abs(X0 - o0), abs(X1 - o1), abs(X2 - o2)
+    big = float(np.finfo(float).max)
+    out = 0.0
+    for P, xi in zip(np.asarray(C, float).tolist(), np.asarray(x, float).tolist()):
+        a = []
+        for Pk in P:
+            ho = ((Pk[0] * o0 + Pk[1] * o1) + Pk[2] * o2) + Pk[3]
+            ao = ((abs(Pk[0]) * abs(o0) + abs(Pk[1]) * abs(o1)) + abs(Pk[2]) * abs(o2)) + abs(Pk[3])
+            dk = ((abs(Pk[0]) * d0 + abs(Pk[1]) * d1) + abs(Pk[2]) * d2) if entries else 0.0
+            a.append(((abs(ho) + _GAMMA4 * ao) + dk) * _UP)
+        h = [((Pk[0] * X0 + Pk[1] * X1) + Pk[2] * X2) + Pk[3] for Pk in P]
+        P3 = P[2]
+        aX = ((abs(P3[0]) * abs(X0) + abs(P3[1]) * abs(X1)) + abs(P3[2]) * abs(X2)) + abs(P3[3])
+        den = abs(h[2]) - _GAMMA4 * aX
+        if not den > 0:
+            return big
+        r = max(max(abs(xi[0]), abs(xi[1])), max(abs(h[0]), abs(h[1])) / den)
+        r = r if math.isfinite(r) else 0.0
+        K = (max(a[0], a[1]) + r * a[2]) / den
+        if K != K or K > big:
+            return big
+        out = max(out, K)
+    return out
+
+
+#: gamma_4 (4 u / (1 - 4 u), rounded up): the error bound of a float sum of four products relative to the sum of
+#: their absolute values; _UP rounds a sum of a few non-negative terms up.
+_GAMMA4 = 5.0 * 2.0 ** -53
+_UP = 1.0 + 8.0 * 2.0 ** -53
 
 
 #: :func:`magnitudes` of one problem takes the scalar obliquities up to this many views.

@@ -60,8 +60,9 @@ import numpy as np
 
 from .exact import homogeneous_images
 from .cameras import power2_scale
-from .magnitude import (PIXEL_FLOOR_REL, RESOLUTION_REL, magnitudes, median_pixel_scales, origin_magnitudes,
-                        pixel_floors, resolutions, world_origin_magnitudes)
+from .magnitude import (PIXEL_FLOOR_REL, RESOLUTION_REL, SCALAR_MAX_VIEWS, magnitudes, median_pixel_scales,
+                        origin_magnitudes, pixel_floors, resolutions, world_origin_magnitude_one,
+                        world_origin_magnitudes)
 from .geometry import COMMON_CENTRE_RTOL, POINT_AT_INFINITY_RTOL, point_from_image_points
 from .stacked import (dlt_stack, median_rows, norms, null_vectors, pixel_scales, project_one, project_quiet,
                       project_stack, refine_point, refine_points_stack)
@@ -117,9 +118,7 @@ class Normalization:
     def magnitude_at(self, cameras: np.ndarray, X: np.ndarray) -> float:
         """:attr:`magnitude` and at least the estimate's: :meth:`NormalizationStack.magnitudes_at` of one problem
         (``cameras`` (N, 3, 4) the normalisation was made of, X (3,) in their frame)."""
-        K = world_origin_magnitudes(np.asarray(cameras, float)[None], np.asarray(self.shifts, float)[None],
-                                    np.asarray(X, float)[None], np.asarray(self.origin, float)[None])
-        return max(self.magnitude, float(K[0]))
+        return max(self.magnitude, world_origin_magnitude_one(cameras, self.shifts, X, self.origin, entries=True))
 
     def transform(self, i: int) -> np.ndarray:
         s, (tx, ty) = self.scale, self.shifts[i]
@@ -205,7 +204,10 @@ class NormalizationStack:
         (M, N, 3, 4) the normalisation was made of, moved by ``shift`` (M, 3) from their given frame, at the world
         points X (M, 3) in C's frame): what gamma_LB is lowered by at the reported estimate."""
         o = self.origin + shift
-        return np.maximum(self.magnitude, world_origin_magnitudes(C, self.shifts, X, o))
+        if len(X) == 1 and C.shape[1] <= SCALAR_MAX_VIEWS:        # one problem: the scalar twin, its numbers
+            K = world_origin_magnitude_one(C[0], self.shifts[0], X[0], o[0], entries=True)
+            return np.maximum(self.magnitude, K)
+        return np.maximum(self.magnitude, world_origin_magnitudes(C, self.shifts, X, o, entries=True))
 
     def magnitudes_of(self, rows) -> np.ndarray:
         """:attr:`magnitude` of the problems ``rows`` (a slice)."""

@@ -92,3 +92,13 @@ def test_estimate_magnitude_scalar_twin_equals_the_stack():
         assert K[0] == np.finfo(float).max and np.all(K > 0)
     # the estimate's terms only add
     assert np.all(world_origin_magnitudes(C, x, X, o, entries=True) >= world_origin_magnitudes(C, x, X, o))
+
+
+def test_monomial_sup_is_one_rule_for_sospoly_and_the_constraint_errors():
+    from sospoly.analysis import monomial_sup
+    from tritools.model import coef_error
+    E = np.array([[2, 0, 1], [0, 0, 0], [0, 3, 0]])
+    r = np.array([2.0, np.inf, 0.5])
+    out = monomial_sup(E, r)
+    assert np.array_equal(out, [2.0, 1.0, np.inf])         # an absent variable counts 1, even at radius inf
+    assert coef_error.monomial_sup is monomial_sup

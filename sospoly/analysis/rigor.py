@@ -46,7 +46,7 @@ import numpy as np
 from ..algebra.basis import unique_rows
 
 
-__all__ = ["solution_at_level", "gram_pairs", "psd_defect_of", "block_weight", "poly_sup", "u_terms",
+__all__ = ["solution_at_level", "gram_pairs", "psd_defect_of", "block_weight", "poly_sup", "monomial_sup", "u_terms",
            "RigorousBound", "rigorous_psatz_bound", "certificate_residual", "exact_check", "ExactCheck",
            "image_form_stack_margin",
            # the exact-arithmetic steps of exact_check, shared with sospoly.analysis.exact_face
@@ -164,10 +164,12 @@ def block_weight(basis: np.ndarray, r: np.ndarray, ball: bool, cap: float | None
     return float(sum(R2 ** d for d in np.unique(basis.sum(axis=1))))
 
 
-def _monomial_sup(E: np.ndarray, r: np.ndarray) -> np.ndarray:
-    """prod_i r_i^(m_i) for every exponent row m: the sup of |v^m| on the box."""
-    with np.errstate(over="ignore"):
-        return np.prod(r[None, :] ** E, axis=1)
+def monomial_sup(E: np.ndarray, r: np.ndarray) -> np.ndarray:
+    """prod_i r_i^(m_i) for every exponent row m of E (k, n): the sup of |v^m| on the box |v_i| <= r_i (r (n,));
+    a variable absent from m contributes 1 whatever its radius (inf included)."""
+    E, r = np.asarray(E), np.asarray(r, float)
+    with np.errstate(over="ignore", invalid="ignore"):
+        return np.prod(np.where(E > 0, r[None, :] ** E, 1.0), axis=1)
 
 
 def psd_defect_of(G: np.ndarray) -> float:
@@ -182,7 +184,7 @@ def poly_sup(p, r: np.ndarray) -> float:
     """A bound of |p(v)| on the box |v_i| <= r_i."""
     if not p.terms:
         return 0.0
-    return float(np.sum(np.abs(p.coefficients()) * _monomial_sup(p.exponents(), r)))
+    return float(np.sum(np.abs(p.coefficients()) * monomial_sup(p.exponents(), r)))
 
 
 def _q_min(structure, sol, r: np.ndarray) -> float:
@@ -196,7 +198,7 @@ def _q_min(structure, sol, r: np.ndarray) -> float:
     const = float(c[E.sum(axis=1) == 0].sum()) if E.size else 0.0
     even_pos = np.all(E % 2 == 0, axis=1) & (c > 0)
     rest = ~even_pos & (E.sum(axis=1) > 0)
-    return const - float(np.sum(np.abs(c[rest]) * _monomial_sup(E[rest], r)))
+    return const - float(np.sum(np.abs(c[rest]) * monomial_sup(E[rest], r)))
 
 
 def rigorous_psatz_bound(psatz, sol, c: float, radius, ball: float | None = None, eq_error=None) -> RigorousBound:
@@ -223,7 +225,7 @@ def rigorous_psatz_bound(psatz, sol, c: float, radius, ball: float | None = None
     r = np.broadcast_to(np.asarray(radius, float), (n,)).copy()
     R = float(r[0]) if ball else float(np.sqrt(np.sum(r ** 2)))
     E_mono, e, rnd = certificate_residual(structure, theta, sol, c)
-    resid = float(np.sum((np.abs(e) + rnd) * _monomial_sup(E_mono, r)))
+    resid = float(np.sum((np.abs(e) + rnd) * monomial_sup(E_mono, r)))
     psd = 0.0
     u = structure.u
     for name, blk in zip(u.block_names(), u.gram.blocks):
@@ -277,7 +279,7 @@ def _linpoly_sup(p, x: np.ndarray, r: np.ndarray) -> float:
     coef = np.array(p.const, float)
     if p.rows.size:
         np.add.at(coef, p.rows, p.vals * x[p.cols])
-    return float(np.sum(np.abs(coef) * _monomial_sup(p.E, r))) if coef.size else 0.0
+    return float(np.sum(np.abs(coef) * monomial_sup(p.E, r))) if coef.size else 0.0
 
 
 def _check_rigor_inputs(sol, c, radius, ball) -> bool:

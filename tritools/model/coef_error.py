@@ -33,6 +33,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from sospoly.analysis import monomial_sup
+
 __all__ = ["det4", "minor_rows", "fundamental_errors", "EXTENDED", "MinorErrors", "EpipolarErrors",
            "ConstraintErrors", "ExactMatrix"]
 
@@ -121,11 +123,6 @@ def fundamental_errors(F: np.ndarray, Pi: np.ndarray, Pj: np.ndarray) -> np.ndar
     return np.where(ok[:, None, None], E, np.inf)
 
 
-def _monomial_sup(E: np.ndarray, r: np.ndarray) -> np.ndarray:
-    with np.errstate(over="ignore", invalid="ignore"):
-        return np.prod(np.where(E > 0, r[None, :] ** E, 1.0), axis=1)
-
-
 @dataclass(frozen=True)
 class MinorErrors:
     """Theorem 1's rows ``rows`` (indices among the constraints of a list): ``coef[k]`` bounds the coefficient
@@ -136,7 +133,7 @@ class MinorErrors:
 
     def bounds(self, r: np.ndarray) -> np.ndarray:
         with np.errstate(over="ignore", invalid="ignore"):
-            b = self.coef @ _monomial_sup(self.exponents, r) if self.coef.size else np.zeros(len(self.rows))
+            b = self.coef @ monomial_sup(self.exponents, r) if self.coef.size else np.zeros(len(self.rows))
         return np.where(np.isnan(b), np.inf, b)
 
     def shifted(self, offset: int) -> MinorErrors:

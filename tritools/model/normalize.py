@@ -60,7 +60,7 @@ import numpy as np
 
 from .exact import homogeneous_images
 from .cameras import power2_scale
-from .magnitude import (PIXEL_FLOOR_REL, RESOLUTION_REL, SCALAR_MAX_VIEWS, magnitudes, median_pixel_scales,
+from .magnitude import (PIXEL_FLOOR_REL, RESOLUTION_REL, magnitudes, median_pixel_scales,
                         origin_magnitudes, pixel_floors, resolutions, world_origin_magnitude_one,
                         world_origin_magnitudes)
 from .geometry import COMMON_CENTRE_RTOL, POINT_AT_INFINITY_RTOL, point_from_image_points
@@ -204,7 +204,7 @@ class NormalizationStack:
         (M, N, 3, 4) the normalisation was made of, moved by ``shift`` (M, 3) from their given frame, at the world
         points X (M, 3) in C's frame): what gamma_LB is lowered by at the reported estimate."""
         o = self.origin + shift
-        if len(X) == 1 and C.shape[1] <= SCALAR_MAX_VIEWS:        # one problem: the scalar twin, its numbers
+        if len(X) == 1:                         # one problem: the scalar twin, the stack's numbers (any N)
             K = world_origin_magnitude_one(C[0], self.shifts[0], X[0], o[0], entries=True)
             return np.maximum(self.magnitude, K)
         return np.maximum(self.magnitude, world_origin_magnitudes(C, self.shifts, X, o, entries=True))

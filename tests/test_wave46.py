@@ -102,3 +102,27 @@ def test_monomial_sup_is_one_rule_for_sospoly_and_the_constraint_errors():
     out = monomial_sup(E, r)
     assert np.array_equal(out, [2.0, 1.0, np.inf])         # an absent variable counts 1, even at radius inf
     assert coef_error.monomial_sup is monomial_sup
+
+
+def test_equal_cameras_are_ill_posed_in_batches_and_a_value_error_alone():
+    """Review 44b LOW-2: a track seen only by duplicated images was ``invalid_input`` with a raw exception text."""
+    from tritools.io.colmap import Camera, Image, Model, Point3D
+    from tritools.sfm import retriangulate
+
+    P = np.array([[[800.0, 0, 320, 0], [0, 800.0, 240, 0], [0, 0, 1.0, 5.0]]] * 2)
+    x = np.array([[330.0, 250.0], [330.4, 249.7]])
+    try:
+        tritools.triangulate(P, x)
+        raise AssertionError("equal cameras were accepted")
+    except ValueError as exc:           # the single call's contract: a ValueError, now an IllPosedError
+        assert isinstance(exc, tritools.IllPosedError) and "equal" in str(exc)
+    for kw in ({}, {"robust": 5.0}):
+        r = tritools.triangulate_many([(P, x)], **kw)[0]
+        assert r.status == tritools.Status.ILL_POSED and not r.message.startswith(("ValueError", "IllPosedError"))
+    cam = Camera(1, "PINHOLE", 640, 480, (800.0, 800.0, 320.0, 240.0))
+    q, t = (1.0, 0.0, 0.0, 0.0), (0.0, 0.0, 5.0)
+    images = {1: Image(1, q, t, 1, "a.jpg", ((330.0, 250.0, 1),)),
+              2: Image(2, q, t, 1, "a_copy.jpg", ((330.4, 249.7, 1),))}
+    model = Model({1: cam}, images, {1: Point3D(1, (0.0, 0.0, 0.0), (1, 1, 1), 0.0, ((1, 0), (2, 0)))})
+    rec = retriangulate(model)[1].records[0]
+    assert rec.status == tritools.Status.ILL_POSED and "ValueError" not in rec.message

@@ -22,7 +22,7 @@ from .model.geometry import depths, dlt, fundamental_matrix, gamma, project, val
 from .model.opencv import PointsLayout, cameras_from_krt
 from .model.regions import Ellipse, EllipseBorder, Point, Polytope, Region, Segment, as_regions
 from .records import TriangulationResults
-from .result import Attempt, Status, TriangulationResult
+from .result import Attempt, IllPosedError, Status, TriangulationResult
 from .scene import paper_example
 from .solve.batch import triangulate_many
 from .solve.options import DEFAULT_OPTIONS, OptionError, SolvePath, Sparsity, TriangulationOptions
@@ -37,7 +37,7 @@ _logging.getLogger(__name__).addHandler(_logging.NullHandler())
 
 __all__ = ["Method", "depths", "dlt", "fundamental_matrix", "gamma", "project", "validate_cameras", "Ellipse",
            "EllipseBorder", "Point", "Polytope", "Region", "Segment", "as_regions", "Attempt", "Status",
-           "TriangulationResult", "paper_example", "triangulate_many", "DEFAULT_OPTIONS", "SolvePath", "Sparsity",
-           "TriangulationOptions", "PointsResult", "triangulate_points", "triangulate", "PointsLayout",
+           "IllPosedError", "TriangulationResult", "paper_example", "triangulate_many", "DEFAULT_OPTIONS", "SolvePath",
+           "Sparsity", "TriangulationOptions", "PointsResult", "triangulate_points", "triangulate", "PointsLayout",
            "cameras_from_krt", "UncertaintyOptions", "UncertaintyResult", "UncertaintyStatus", "triangulation_angle",
            "uncertainty", "uncertainty_many", "OptionError", "TriangulationResults"]

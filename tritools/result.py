@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["Status", "Attempt", "TriangulationResult", "jsonable"]
+__all__ = ["Status", "Attempt", "TriangulationResult", "jsonable", "IllPosedError", "input_failure"]
 
 
 def __getattr__(name: str):
@@ -102,6 +102,20 @@ def jsonable(v):
     if isinstance(v, (list, tuple)):
         return [jsonable(x) for x in v]
     return v
+
+
+class IllPosedError(ValueError):
+    """Valid data that define no triangulation (SPEC section 6): e.g. every camera the same up to scale, so no point
+    has a depth.  A ValueError for the single call's caller; a batch records it as ``Status.ILL_POSED``
+    (:func:`input_failure`), not as bad input."""
+
+
+def input_failure(exc: Exception) -> tuple[Status, str]:
+    """(status, message) of a batch item whose problem could not be set up: ``ILL_POSED`` with the error's own words
+    for an :class:`IllPosedError`, ``INVALID_INPUT`` with the error's class for other ValueError / TypeError."""
+    if isinstance(exc, IllPosedError):
+        return Status.ILL_POSED, str(exc)
+    return Status.INVALID_INPUT, f"{type(exc).__name__}: {exc}"
 
 
 @dataclass(frozen=True)

@@ -57,6 +57,7 @@ from sospoly import pow2_above
 from .camera_rank import (CAMERA_RANK_RTOL, EXACT_RANK_BELOW, SHARED_MIN_CAMERAS,  # noqa: F401 (re-exported)
                           camera_rank_ratio, checked_rank_ratio, exactly_rank_deficient, power2_scale,
                           rank_ratio_scalar, shared_rank_ratio, unit_rows)
+from ..result import IllPosedError
 from .regions.base import real_array
 
 __all__ = ["depth_rows", "numeric_cameras",
@@ -215,7 +216,7 @@ def validate_cameras(cameras: ArrayLike, *, min_views: int = 2, require_distinct
         if not r > CAMERA_RANK_RTOL:
             raise ValueError(_rank_message(f"cameras[{i}]", float(r)))
     if require_distinct and C.shape[0] >= 2 and (_all_equal_scalar(C) if few else _all_equal(C)):
-        raise ValueError("cameras are all equal up to scale: the triangulation is ill-posed")
+        raise IllPosedError("cameras are all equal up to scale: the triangulation is ill-posed")
     return C
 
 

@@ -12,7 +12,8 @@
 3. results are put back in input order.
 
 A failing item (bad input, solver error, anything raised, a crashed worker) becomes a result with a
-status and a message (``INVALID_INPUT`` for bad input, ``SOLVER_FAILED`` otherwise); it never stops or
+status and a message (``INVALID_INPUT`` for bad input, ``ILL_POSED`` for valid data that define no problem -- every
+camera the same, :class:`tritools.result.IllPosedError` --, ``SOLVER_FAILED`` otherwise); it never stops or
 shrinks the batch.  Each result's ``attempts`` lists every step, batched ones included.
 
 Executors: any :class:`concurrent.futures.Executor` (``submit``), or a ``dask.distributed.Client``
@@ -39,7 +40,7 @@ from ..model.cameras import numeric_cameras
 from ..model.regions import Region, declares_extent
 from ..model.constraints import Method
 from ..records import TriangulationResults
-from ..result import Attempt, Status, TriangulationResult
+from ..result import Attempt, Status, TriangulationResult, input_failure
 from .call_limit import (call_limit, expired, expired_points, expired_regions, mark_cut, reserve_for, reserved_end,
                          reserving, within)
 from .options import TriangulationOptions, options_from
@@ -71,7 +72,7 @@ def safe_triangulate(cameras, regions, options: TriangulationOptions) -> Triangu
     try:
         return triangulate(cameras, regions, options=options)
     except (ValueError, TypeError) as exc:
-        status, msg = Status.INVALID_INPUT, f"{type(exc).__name__}: {exc}"
+        status, msg = input_failure(exc)
     except Exception as exc:  # noqa: BLE001 - a batch records every failure
         log.debug("triangulate failed", exc_info=True)
         status, msg = Status.SOLVER_FAILED, f"{type(exc).__name__}: {exc}"

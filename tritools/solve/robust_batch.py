@@ -32,7 +32,7 @@ import time
 
 import numpy as np
 
-from ..result import Attempt, Status, TriangulationResult
+from ..result import Attempt, Status, TriangulationResult, input_failure
 from .call_limit import (call_limit, current_end, expired, expired_points, mark_cut, reserve_for, reserving,
                          within)
 from .fastpath_cameras import validated_problem
@@ -157,8 +157,8 @@ def _search_or_failure(cameras, regions, c, opts):
             return solve_validated(cams, regs, c, opts, t0)
         return TlsSearch(cams, regs, c, opts, t0)
     except (ValueError, TypeError) as exc:
-        return TriangulationResult("tls", Status.INVALID_INPUT, message=f"{type(exc).__name__}: {exc}",
-                                   timings={"total": time.perf_counter() - t0})
+        status, msg = input_failure(exc)
+        return TriangulationResult("tls", status, message=msg, timings={"total": time.perf_counter() - t0})
     except Exception as exc:  # noqa: BLE001 - a batch never loses a point (review 29b F1: an OverflowError here
         log.debug("robust search set-up failed", exc_info=True)       # raised out of the batch, every row lost)
         return TriangulationResult("tls", Status.SOLVER_FAILED, message=f"{type(exc).__name__}: {exc}",

@@ -126,3 +126,16 @@ def test_equal_cameras_are_ill_posed_in_batches_and_a_value_error_alone():
     model = Model({1: cam}, images, {1: Point3D(1, (0.0, 0.0, 0.0), (1, 1, 1), 0.0, ((1, 0), (2, 0)))})
     rec = retriangulate(model)[1].records[0]
     assert rec.status == tritools.Status.ILL_POSED and "ValueError" not in rec.message
+
+
+def test_segments_kept_as_given_claim_no_ray():
+    """Review 45b M2: with widen_roundoff=False two segments seen by parallel cameras (disparity >= 1e-9 px, so S is
+    bounded at depth <= 8e11) were reported ``unbounded``: a ray certificate only the float test had checked."""
+    f, cx, cy = 800.0, 320.0, 240.0
+    K = np.array([[f, 0, cx], [0, f, cy], [0, 0, 1.0]])
+    cams = np.array([K @ np.hstack([np.eye(3), [[-b], [0], [0]]]) for b in (0.0, 1.0)])
+    s1 = tritools.Segment.from_endpoints([cx - 1, cy], [cx + 1, cy])
+    s2 = tritools.Segment.from_endpoints([cx - 3, cy], [cx - 1 - 1e-9, cy])
+    r = tritools.uncertainty(cams, [s1, s2], options=tritools.UncertaintyOptions(widen_roundoff=False))
+    assert r.status != tritools.UncertaintyStatus.UNBOUNDED
+    assert r.status == tritools.UncertaintyStatus.FAILED and np.all(np.isinf(r.hi)) and r.rigorous

@@ -241,10 +241,14 @@ def exact_rays(blocks, R, eta, ray, targets) -> np.ndarray:
     problem's ray directions, the mean of the views' centre rays (R_i d = (x^_i, 1): inside overlapping regions),
     each view's own (:func:`view_rays`: a point widened by its round-off) and their midpoints with eta -- a
     solver's ray lies on the recession cone's boundary, where a float direction falls on either side of it (two
-    parallel cameras with overlapping discs, review 26c F4)."""
+    parallel cameras with overlapping discs, review 26c F4).  Where a view is a point or a segment (kept as such by
+    ``widen_roundoff=False``) no ray is decided exactly, so none is kept: that side is failed, not unbounded."""
     out = ray.copy()
     pm, ko = np.nonzero(ray)
-    if not pm.size or not _exact_kinds(blocks):
+    if not pm.size:
+        return out
+    if not _exact_kinds(blocks):        # a point or segment view (widen_roundoff=False): no exact decision, no ray
+        out[pm, ko] = False             # claimed -- the float test alone passed sets bounded at 8e11 (review 45b M2)
         return out
     with np.errstate(all="ignore"):
         unit = eta / np.linalg.norm(eta, axis=2, keepdims=True)

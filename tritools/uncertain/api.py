@@ -26,8 +26,8 @@ from .angle import triangulation_angles
 from .rigour import box_from_bounds, combine, lower_bounds, round_down, round_up
 from .sets import EPS, dilate, structure_key, view_blocks, view_coefficients
 from .solve import objective_rows, solve_blocks
-from .witness import (centres, exact_rays, feasible, pull_inside, ray_point_in_set, rays_stay_inside, repeat_block,
-                      witness_gap)
+from .witness import (centres, exact_rays, feasible, in_box, pull_inside, ray_point_in_set, rays_stay_inside,
+                      repeat_block, witness_gap)
 
 __all__ = ["UncertaintyStatus", "UncertaintyOptions", "UncertaintyResult", "uncertainty", "uncertainty_many"]
 
@@ -428,6 +428,7 @@ def _assemble(m, N, solved, ray, empty, beta, rho, W, X0, Xe, sigma, q0, q0e, co
         dlo, dhi = _depth_bounds(N, solved, ray, beta, rho, Mx, q0, q0e, status)
     else:
         dlo, dhi = _box_depths(lo, hi, drows, X0, q0, q0e, status)
+    W = in_box(W, lo_w, hi_w)
     wl = np.where(np.isfinite(lo_w)[:, None], W[:3], np.nan)
     wh = np.where(np.isfinite(hi_w)[:, None], W[3:6], np.nan)
     gap, gap_rel, inner, dw = witness_gap(lo_w, hi_w, wl, wh, Xe, status == UncertaintyStatus.BOUNDED, W)

@@ -25,7 +25,7 @@ import numpy as np
 from ..model.geometry import depths, dlt, gamma_validated, refine_l2, validate_cameras
 from ..model.cameras import as_world_frame, depth_rows
 from ..model.regions import as_regions
-from .witness import witness_gap
+from .witness import in_box, witness_gap
 
 __all__ = ["level_bounds"]
 
@@ -213,6 +213,7 @@ def level_bounds(cameras, regions, level, estimate, opts):
             if np.isfinite(out.hi[k]):
                 w = _extreme(C, regs, tau, start, k, -1.0, scale, frame)
                 wh[k] = np.nan if w is None else w
+    wl, wh = in_box(wl, out.lo, out.hi), in_box(wh, out.lo, out.hi)
     gap, gap_rel, inner, dw = witness_gap(out.lo, out.hi, wl, wh, out.estimate, out.status.value == "bounded")
     return replace(out, witness_lo=wl, witness_hi=wh, gap=gap, gap_rel=gap_rel, distance_witness=dw,
                    distance_inner=inner, convexified=definition == "level_relaxed", definition=definition)

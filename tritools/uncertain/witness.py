@@ -289,6 +289,13 @@ def _in_cone(blk, m: int, a0, a1, s_) -> bool:
     return det > 0 and d11 * v0 * v0 - (d01 + d10) * v0 * v1 + d00 * v1 * v1 <= s_ * s_ * det
 
 
+def in_box(W, lo, hi) -> np.ndarray:
+    """Witnesses W (..., 3) pulled into the certified box [lo, hi]: every point of S lies in the box, so a witness
+    outside it is outside S by its projection's round-off and moves by no more than that (review 45b L1: 1 ulp
+    below ``lo`` in a world at 3e6, a negative gap); NaN rows stay NaN."""
+    return np.clip(np.asarray(W, float), np.asarray(lo, float), np.asarray(hi, float))
+
+
 def witness_gap(lo, hi, wl, wh, estimate, bounded: bool, points=None):
     """How tight a box [lo, hi] is, from its witnesses (the one rule of :mod:`.api` and :mod:`.level`).
 

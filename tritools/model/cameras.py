@@ -216,7 +216,8 @@ def validate_cameras(cameras: ArrayLike, *, min_views: int = 2, require_distinct
         if not r > CAMERA_RANK_RTOL:
             raise ValueError(_rank_message(f"cameras[{i}]", float(r)))
     if require_distinct and C.shape[0] >= 2 and (_all_equal_scalar(C) if few else _all_equal(C)):
-        raise IllPosedError("cameras are all equal up to scale: the triangulation is ill-posed")
+        raise IllPosedError(f"cameras are all equal up to scale (unit-norm cameras within {SAME_CAMERA_RTOL:g} of "
+                            "each other): the triangulation is ill-posed")
     return C
 
 

@@ -174,3 +174,30 @@ def test_witnesses_lie_in_the_certified_box_in_a_georeferenced_world():
         assert fin.all()
         assert np.all((W >= r.lo) & (W <= r.hi))
     assert r.gap >= 0
+
+
+# review 46a HIGH-2: views 0 / 1 near-duplicates (1e-9), the optimum ~1e-8 from their centres; every path certified
+# gamma_LB = gamma_UB = 0.14363159127 while the float point W_46 costs 0.1436301226 exactly: the per-point
+# normalisation formed P H by a plain product whose last column lost 11 digits next to the centres
+P_46 = np.array([
+    [[6.769424357261904, 754.7602116261003, -415.5613045508396, 1600.0000000000005],
+     [-829.3537009662134, 71.75279427272788, -67.99981770343287, 1199.9999999999998],
+     [-0.2729806805560048, 0.7548144548445554, 0.5964366578278845, 5.000000000000001]],
+    [[6.769424357821644, 754.7602107379066, -415.5613050313737, 1600.000001569926],
+     [-829.3536997634576, 71.75279435235507, -67.99981766182879, 1199.9999988253785],
+     [-0.27298068075623894, 0.7548144542890476, 0.5964366569497458, 4.999999996977067]],
+    [[546.7237279109207, -199.63562696553691, -635.3257288865789, 1600.0000000000005],
+     [-530.6311563396276, 154.79677619453238, -626.1537622672641, 1200.0000000000002],
+     [0.33868636122765367, 0.8159057137266563, -0.4686036865268635, 5.000000000000001]]])
+X_46 = np.array([[3767.161979046111, 625.8183176970743], [2547.769255376599, 1647.4171222630648],
+                 [1321.3981320569014, 465.20191659412694]])
+W_46 = np.array([1.364903403289264, -3.774072281982612, -2.982183282853562])
+
+
+def test_per_point_normalisation_keeps_the_frame_origin_exact_next_to_camera_centres():
+    runs = [tritools.triangulate(P_46, X_46),
+            tritools.triangulate(P_46, X_46, method="corollary1", delta=2, path="sdp"),
+            tritools.triangulate_many([(P_46, X_46), (P_46, X_46)])[0]]
+    for r in runs:
+        assert r.gamma_lb is not None and _below(r.gamma_lb, P_46, X_46, W_46)
+

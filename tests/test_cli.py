@@ -103,12 +103,12 @@ def test_list_file_bad_problem_gets_status_row_and_overrides_apply(tmp_path, cap
     assert (good["method"], good["delta"]) == ("corollary1", 2)                  # per-problem overrides
     assert good["status"] == "not_certified"            # Table 10: Corollary 1 at delta 2 does not certify
     assert abs(good["gamma_lb"] - 0.729) <= PAPER_ATOL  # our gamma_LB for that row (tritools example 4)
-    assert bad["status"] == "invalid_input" and "equal" in bad["message"] and bad["X"] is None
+    assert bad["status"] == "ill_posed" and "equal" in bad["message"] and bad["X"] is None
     rc, out, err = run(["solve", path], capsys)
     assert rc == 0
     lines = out.strip().splitlines()
-    assert lines[3].split()[:3] == ["same", "3", "invalid_input"]
-    assert lines[-1].startswith("same: invalid_input: ") and "equal up to scale" in lines[-1]
+    assert lines[3].split()[:3] == ["same", "3", "ill_posed"]
+    assert lines[-1].startswith("same: ill_posed: ") and "equal up to scale" in lines[-1]
 
 
 def test_solve_output_file_and_stdin(tmp_path, capsys, monkeypatch):

@@ -324,13 +324,14 @@ def test_ill_posed_cameras_get_a_status_row_not_an_error(tmp_path, capsys):
     rc, out, err = run(["solve", path, "--json"], capsys)
     assert rc == 0 and err == "", err
     rows = {r["name"]: r for r in json.loads(out)}
-    for name in ("equal", "rank2", "zero", "scaled"):
-        assert rows[name]["status"] == "invalid_input" and rows[name]["message"], rows[name]
+    expected = {"equal": "ill_posed", "rank2": "invalid_input", "zero": "invalid_input", "scaled": "ill_posed"}
+    for name, status in expected.items():            # equal cameras: valid data, no problem (IllPosedError)
+        assert rows[name]["status"] == status and rows[name]["message"], rows[name]
         assert rows[name]["X"] is None
     assert rows["fine"]["status"] == "optimal"
     rc, out, err = run(["solve", path], capsys)
     assert rc == 0 and err == ""
-    assert [line.split()[2] for line in out.splitlines()[2:7]] == ["invalid_input"] * 4 + ["optimal"]
+    assert [line.split()[2] for line in out.splitlines()[2:7]] == list(expected.values()) + ["optimal"]
 
 
 # ----------------------------------------------------------------------------- example 4: X_raw beside X
@@ -497,4 +498,4 @@ def test_random_command_lines_exit_0_or_2_never_1(tmp_path, capsys, flags):
         assert_one_line_error(rc, out, err)
     else:
         rows = json.loads(out)
-        assert [r["name"] for r in rows] == ["cheap", "equal"] and rows[1]["status"] == "invalid_input"
+        assert [r["name"] for r in rows] == ["cheap", "equal"] and rows[1]["status"] == "ill_posed"

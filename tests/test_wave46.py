@@ -201,3 +201,31 @@ def test_per_point_normalisation_keeps_the_frame_origin_exact_next_to_camera_cen
     for r in runs:
         assert r.gamma_lb is not None and _below(r.gamma_lb, P_46, X_46, W_46)
 
+
+
+def test_a_transfer_that_still_contradicts_gamma_ub_reports_no_bound(monkeypatch):
+    """Review 46a's second cause: a bound of the normalised problem that, lowered, is still above gamma(X) was clipped
+    to gamma_UB and certified.  With the per-point normalisation of before (a plain product P H), the guard alone
+    keeps every path from reporting a bound above an attained cost."""
+    from sospoly import Tolerances
+    from tritools.model.cameras import power2_scale
+    from tritools.model.normalize import Normalization
+    from tritools.solve.decide import transfer_contradicts
+
+    tol = Tolerances()
+    assert transfer_contradicts(1.01, 1.0, tol, 3, 1.0) and not transfer_contradicts(1.0 + 1e-12, 1.0, tol, 3, 1.0)
+    assert np.array_equal(transfer_contradicts(np.array([1.01, np.nan, 0.5]), np.array([1.0, 1.0, 1.0]), tol, 3, 1.0),
+                          [True, False, False])
+
+    def plain(self, cameras):
+        H = self.world()
+        C = np.asarray(cameras, float)
+        C = C / power2_scale(C, (1, 2))
+        out = np.array([self.transform(i) @ P @ H for i, P in enumerate(C)])
+        out = out / power2_scale(out, (1, 2))
+        return out / np.linalg.norm(out, axis=(1, 2))[:, None, None]
+
+    monkeypatch.setattr(Normalization, "cameras", plain)
+    for r in (tritools.triangulate(P_46, X_46), tritools.triangulate(P_46, X_46, method="corollary1", delta=2,
+                                                                     path="sdp")):
+        assert r.gamma_lb is None or _below(r.gamma_lb, P_46, X_46, W_46)

@@ -30,7 +30,7 @@ import numpy as np
 from ..model.cameras import camera_problems, power2_scale
 from ..model.frame import recentred
 from ..model.stacked import dlt_stack, refine_points_stack
-from ..result import Attempt, Status, TriangulationResult
+from ..result import Attempt, Status, TriangulationResult, input_failure
 from .report import points_report_stack
 from .robust_costs import tls_start_stack
 
@@ -181,7 +181,7 @@ def expired_points(C: np.ndarray, x: np.ndarray, opts, *, refine: bool = True,
 
 
 def _refused(cameras, points, opts) -> TriangulationResult:
-    """The ``invalid_input`` result of one point problem that the per-point checks refuse
+    """The ``invalid_input`` (``ill_posed``) result of one point problem that the per-point checks refuse
     (:func:`~tritools.solve.fastpath_cameras.validated_problem`: the message a batch without the limit gives); a
     ``time_limit`` result without an estimate if they accept it."""
     from .fastpath_cameras import validated_problem
@@ -189,10 +189,9 @@ def _refused(cameras, points, opts) -> TriangulationResult:
     try:
         validated_problem(cameras, points)
     except (ValueError, TypeError) as exc:
-        why = f"{type(exc).__name__}: {exc}"
-        return TriangulationResult(opts.method.value, Status.INVALID_INPUT, message=why,
-                                   attempts=(Attempt(opts.method.value, None, Status.INVALID_INPUT.value,
-                                                     step="call"),))
+        status, why = input_failure(exc)                 # (all cameras equal: ill_posed, as without the limit)
+        return TriangulationResult(opts.method.value, status, message=why,
+                                   attempts=(Attempt(opts.method.value, None, status.value, step="call"),))
     return TriangulationResult(opts.method.value, Status.TIME_LIMIT, optimal=False,
                                message=f"{CUT_MESSAGE} before this point was solved; no estimate",
                                attempts=(Attempt(opts.method.value, None, Status.TIME_LIMIT.value, step="call"),))

@@ -21,7 +21,8 @@ import numpy as np
 from ..result import Status
 
 __all__ = ["decide", "decide_reported", "gamma_from_c", "c_from_gamma", "cheirality", "decide_one", "gamma_lower_one",
-           "decide_reported_one", "gamma_lower", "within_resolution", "within_resolution_one", "LB_ROUNDOFF_ULPS"]
+           "decide_reported_one", "gamma_lower", "within_resolution", "within_resolution_one", "LB_ROUNDOFF_ULPS",
+           "transfer_contradicts"]
 
 #: gamma_LB is lowered by this many units of round-off of the coordinates' magnitude (:func:`gamma_lower`).
 LB_ROUNDOFF_ULPS = 64.0
@@ -180,6 +181,20 @@ def gamma_lower(gamma_lb, gamma_ub, scale, resolution, magnitude=None):
         out = np.maximum(0.0, g - LB_ROUNDOFF_ULPS * _U * (A + np.where(np.isfinite(ub), ub, g)))
     out = np.where(np.isnan(g), g, out)
     return out.item() if out.ndim == 0 else out
+
+
+def transfer_contradicts(gamma_lb, gamma_ub, tolerances, n_views, scale):
+    """Whether gamma_LB of the caller's data (:func:`gamma_lower`) lies above gamma_UB = gamma(X) beyond the
+    certificate rule (``tolerances.contradicts`` in c units): the normalised problem's bound, lowered by its
+    round-off allowance, still exceeds a cost the caller's data attain, so the allowance did not hold (review 46a:
+    1.5e-4 relative next to two near-duplicate camera centres) and the bound is not one.  Clipping it to gamma_UB
+    would report a certificate; scalars or arrays (False where either is missing)."""
+    lo, up = np.asarray(gamma_lb, float), np.asarray(gamma_ub, float)
+    known = np.isfinite(lo) & np.isfinite(up)
+    with np.errstate(invalid="ignore", over="ignore"):
+        out = known & np.asarray(tolerances.contradicts(c_from_gamma(np.where(known, lo, 0.0), n_views, scale),
+                                                        c_from_gamma(np.where(known, up, 0.0), n_views, scale)), bool)
+    return bool(out) if out.ndim == 0 else out
 
 
 def gamma_lower_one(gamma_lb: float, gamma_ub: float, scale: float, resolution: float,

@@ -49,7 +49,7 @@ from ..model.normalize import normalization_stack
 from ..model.stacked import (band_pairs, epipolar_quadratics, fundamental_stack, gauss_newton_polish, norms,
                              project_one, project_stack, refine_point, refine_points_stack, view_pairs)
 from .decide import (decide, decide_one, decide_reported, decide_reported_one, gamma_from_c, gamma_lower,
-                     gamma_lower_one)
+                     gamma_lower_one, transfer_contradicts)
 from .report import gamma_upper
 from .trivial import trivially_certified, trivially_certified_reported
 
@@ -192,10 +192,12 @@ def verify_checked(C: np.ndarray, x: np.ndarray, ok: np.ndarray, tolerances: Tol
     # same numbers, so a single call reports these without projecting again
     residuals = np.where(fin_w[:, None], norms(uw - x, axis=2), np.inf)
     gamma_ub = np.where(fin_w, gamma_upper(np.where(fin_w[:, None], residuals, 0.0), norms(uw, axis=2)), np.inf)
-    gamma_lb = np.minimum(gamma_lower(gamma_from_c(c_lower, N, norm.scale), gamma_ub, norm.scale, norm.resolution,
-                                      norm.magnitudes_at(C, X)),
-                          gamma_ub)
-    certified = ok & optimal & decide_reported(gamma_lb, gamma_ub, tolerances, N, norm.scale, norm.resolution)
+    gamma_lb = gamma_lower(gamma_from_c(c_lower, N, norm.scale), gamma_ub, norm.scale, norm.resolution,
+                           norm.magnitudes_at(C, X))
+    contra = transfer_contradicts(gamma_lb, gamma_ub, tolerances, N, norm.scale)    # no bound (review 46a)
+    gamma_lb = np.where(contra, np.nan, np.minimum(gamma_lb, gamma_ub))
+    certified = ok & optimal & ~contra & decide_reported(gamma_lb, gamma_ub, tolerances, N, norm.scale,
+                                                         norm.resolution)
     trivial = ok & ~certified
     if trivial.any():               # (a stack of certified problems skips the trivial rule: no change)
         trivial &= trivially_certified(upper, tolerances, N, norm.resolution) & \
@@ -246,9 +248,11 @@ def verify_one(C: np.ndarray, x: np.ndarray, tolerances: Tolerances, *,
     residuals = norms(uw - x, axis=2)             # (the report's formulas: points_report_stack)
     gamma_ub = gamma_upper(residuals, norms(uw, axis=2))
     g_ub = float(gamma_ub[0])
-    gamma_lb = min(gamma_lower_one(math.sqrt(max(c_lower, 0.0) / (2.0 * N)) / scale, g_ub, scale, res,
-                                   float(norm.magnitudes_at(C[None], X)[0])), g_ub)
-    certified = optimal and decide_reported_one(gamma_lb, g_ub, tolerances, N, scale, res)
+    gamma_lb = gamma_lower_one(math.sqrt(max(c_lower, 0.0) / (2.0 * N)) / scale, g_ub, scale, res,
+                               float(norm.magnitudes_at(C[None], X)[0]))
+    contra = transfer_contradicts(gamma_lb, g_ub, tolerances, N, scale)         # no bound (review 46a)
+    gamma_lb = math.nan if contra else min(gamma_lb, g_ub)
+    certified = optimal and not contra and decide_reported_one(gamma_lb, g_ub, tolerances, N, scale, res)
     trivial = not certified and decide_one(0.0, upper, tolerances, N, res)[1] and math.isfinite(upper) and \
         decide_reported_one(0.0, g_ub, tolerances, N, scale, res)
     return FastPathBatch(np.array([certified or trivial]), np.ones(1, bool), X,

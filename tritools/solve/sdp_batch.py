@@ -48,7 +48,7 @@ from ..model.geometry import POINT_AT_INFINITY_RTOL
 from ..model.normalize import normalization_stack
 from ..model.stacked import fundamental_stack, norms, project_stack, refine_points_stack
 from ..result import Status
-from .decide import decide, decide_reported, gamma_from_c, gamma_lower
+from .decide import decide, decide_reported, gamma_from_c, gamma_lower, transfer_contradicts
 from .report import gamma_upper
 from .fastpath import expired, stack_point_problems
 from .structures import corollary1_point_structure
@@ -232,6 +232,8 @@ def _decided(C, x, norm, ok, reason, tol, c_lb, c_ub, X_n, X_raw_n, xn, comp, it
     g_ub = np.where(fin_w, gamma_upper(norms(u_w - x, axis=2), norms(u_w, axis=2)), np.inf)
     g_lb = gamma_lower(gamma_from_c(c_rep, N, norm.scale), g_ub, norm.scale, norm.resolution,
                        norm.magnitudes_at(C, X_world))
+    _hand_back(ok, transfer_contradicts(g_lb, g_ub, tol, N, norm.scale), reason,
+               "the lower bound transferred to the caller's data lies above gamma(X): per-point re-solve")
     reported = decide_reported(g_lb, g_ub, tol, N, norm.scale, norm.resolution)
     for m in np.nonzero(ok & optimal & ~reported)[0]:
         reason[m] = "the bounds met in normalised coordinates, but not at the estimate in world coordinates"

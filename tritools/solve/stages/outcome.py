@@ -20,7 +20,7 @@ import numpy as np
 from ...model.constraints import Method
 from ...model.geometry import project, project_point_views
 from ...result import Attempt, Status, TriangulationResult
-from ..decide import cheirality, decide_reported, gamma_lower
+from ..decide import cheirality, decide_reported, gamma_lower, transfer_contradicts
 from ..front import front_estimate
 from ..multistart import multistart_point
 from ..plan import Step
@@ -73,8 +73,14 @@ def report_point(ctx: PointContext, step: Step, status, optimal, gamma_lb, *, X,
         if not lowered:
             gamma_lb = gamma_lower(gamma_lb, rep.gamma, ctx.norm.scale, ctx.norm.resolution,
                                    ctx.norm.magnitude_at(ctx.cams, X))
-        gamma_lb = min(gamma_lb, rep.gamma)
-        if optimal:                                  # the decision again, on the numbers reported
+        if transfer_contradicts(gamma_lb, rep.gamma, ctx.tolerances, ctx.N, ctx.norm.scale):
+            # the bound of the normalised problem, lowered by its round-off, is above gamma(X) of the caller's data
+            # beyond the rule: the transfer's allowance did not hold, so there is no bound to report (review 46a)
+            status, optimal, gamma_lb = Status.NUMERICAL_FAILURE, False, None
+            msg = "the lower bound transferred to the caller's data lies above gamma(X): no bound"
+        else:
+            gamma_lb = min(gamma_lb, rep.gamma)
+        if optimal and gamma_lb is not None:         # the decision again, on the numbers reported
             optimal = decide_reported(gamma_lb, rep.gamma, ctx.tolerances, ctx.N, ctx.norm.scale,
                                       ctx.norm.resolution)
             if not optimal:

@@ -229,3 +229,18 @@ def test_a_transfer_that_still_contradicts_gamma_ub_reports_no_bound(monkeypatch
     for r in (tritools.triangulate(P_46, X_46), tritools.triangulate(P_46, X_46, method="corollary1", delta=2,
                                                                      path="sdp")):
         assert r.gamma_lb is None or _below(r.gamma_lb, P_46, X_46, W_46)
+
+
+def test_equal_cameras_with_an_infinite_threshold_keep_their_row():
+    """Review 46c HIGH: robust=inf settles a problem by its L2 row; an ill_posed row went on to be validated again and
+    raised IllPosedError out of the whole batch (every row lost; the CLI exited 1)."""
+    P = np.array([[[800.0, 0, 320, 0], [0, 800.0, 240, 0], [0, 0, 1.0, 5.0]]] * 2)
+    x = np.array([[330.0, 250.0], [330.4, 249.7]])
+    K = np.array([[800.0, 0, 320], [0, 800.0, 240], [0, 0, 1.0]])
+    good = np.array([K @ np.hstack([np.eye(3), [[0.0], [0], [5]]]), K @ np.hstack([np.eye(3), [[-1.0], [0], [5]]])])
+    xg = np.array([[336.0, 272.0], [176.0, 272.0]])
+    for c in (np.inf, [np.inf, np.inf]):
+        out = tritools.triangulate_many([(P, x), (good, xg)], robust=c)
+        assert [r.status for r in out] == [tritools.Status.ILL_POSED, tritools.Status.OPTIMAL]
+    pts = tritools.triangulate_points(P, x[None], robust=np.inf)
+    assert pts[0].status == tritools.Status.ILL_POSED

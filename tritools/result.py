@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["Status", "Attempt", "TriangulationResult", "jsonable", "IllPosedError", "input_failure"]
+__all__ = ["Status", "Attempt", "TriangulationResult", "jsonable", "IllPosedError", "input_failure", "refused"]
 
 
 def __getattr__(name: str):
@@ -116,6 +116,12 @@ def input_failure(exc: Exception) -> tuple[Status, str]:
     if isinstance(exc, IllPosedError):
         return Status.ILL_POSED, str(exc)
     return Status.INVALID_INPUT, f"{type(exc).__name__}: {exc}"
+
+
+def refused(result) -> bool:
+    """Whether a result is an :func:`input_failure` row (its problem was never set up: ``INVALID_INPUT``, or
+    ``ILL_POSED`` without an estimate), which later stages pass on as it is rather than solve again."""
+    return result.status == Status.INVALID_INPUT or (result.status == Status.ILL_POSED and result.X is None)
 
 
 @dataclass(frozen=True)

@@ -40,7 +40,7 @@ from ..model.cameras import numeric_cameras
 from ..model.regions import Region, declares_extent
 from ..model.constraints import Method
 from ..records import TriangulationResults
-from ..result import Attempt, Status, TriangulationResult, input_failure
+from ..result import Attempt, Status, TriangulationResult, input_failure, refused
 from .call_limit import (call_limit, expired, expired_points, expired_regions, mark_cut, reserve_for, reserved_end,
                          reserving, within)
 from .options import TriangulationOptions, options_from
@@ -91,8 +91,8 @@ def _solve_item(cams, regions, opts: TriangulationOptions, prefix: tuple, retrie
     run, cut = within(opts, end)
     res = safe_triangulate(cams, regions, run)
     tried = list(prefix) + list(res.attempts)
-    if res.status == Status.INVALID_INPUT:
-        tried = list(res.attempts)          # the batch did not fail on it: it could not read the data
+    if refused(res):
+        tried = list(res.attempts)          # the batch did not fail on it: it could not read (or pose) the data
     if not res.status.certified:
         for m, d in retries:
             if expired(end):

@@ -32,7 +32,7 @@ import time
 
 import numpy as np
 
-from ..result import Attempt, Status, TriangulationResult, input_failure
+from ..result import Attempt, Status, TriangulationResult, input_failure, refused
 from .call_limit import (call_limit, current_end, expired, expired_points, mark_cut, reserve_for, reserving,
                          within)
 from .fastpath_cameras import validated_problem
@@ -215,7 +215,7 @@ def _after_l2(problems, thresholds, opts, idx, first, out) -> list:
         c = thresholds[i]                        # None: a malformed entry, invalid_input from the L2 stage
         if res.status == Status.INVALID_INPUT and res.message:     # the L2 stage saw problems[k]: the caller's i
             res = dataclasses.replace(res, message=res.message.replace(f"problems[{k}]", f"problems[{i}]", 1))
-        if res.status == Status.INVALID_INPUT or c is None:
+        if refused(res) or c is None:
             out[i] = dataclasses.replace(res, inliers=None if res.residuals is None
                                          else np.ones(len(res.residuals), bool))
         elif l2_suffices(res, c, *problems[i][:2], opts.tolerances):
@@ -345,7 +345,7 @@ def _expired_region_tls(problem, c, opts, out, i) -> bool:
 
 def _expired_row(r: TriangulationResult, told) -> TriangulationResult:
     """The TLS form of an expired L2 row ``r`` (:func:`expired_tls`) with its reported TLS numbers ``told``."""
-    if r.status == Status.INVALID_INPUT:
+    if refused(r):
         return dataclasses.replace(r, method="tls")
     if told is None:
         return dataclasses.replace(r, method="tls", attempts=(Attempt("tls", None, Status.TIME_LIMIT.value,

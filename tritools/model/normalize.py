@@ -136,9 +136,7 @@ class Normalization:
         relative next to a camera centre, beyond the round-off the lowering of gamma_LB assumes (review 46a)."""
         C = np.asarray(cameras, float)
         C = C / power2_scale(C, (1, 2))                  # exact, projectively the same: nothing below overflows
-        CH = C.copy()
-        CH[..., :3] *= self.depth
-        CH[..., 3] = homogeneous_images(C, np.append(np.asarray(self.origin, float), 1.0))
+        CH = framed(C, np.asarray(self.origin, float), self.depth)
         out = np.array([self.transform(i) @ M for i, M in enumerate(CH)])
         with np.errstate(over="ignore", invalid="ignore"):
             out = out / power2_scale(out, (1, 2))
@@ -363,15 +361,24 @@ def _frame_one(P: np.ndarray, xi: np.ndarray, X0: np.ndarray) -> tuple | None:
         return None
     d = _median(dist)
     d = max(d, DEPTH_FLOOR_REL * max(1.0, math.sqrt(float(X0 @ X0)))) if d > 0 else 1.0
-    CH = P.copy()
-    CH[..., :3] *= d
-    CH[..., 3] = homogeneous_images(P, np.append(X0, 1.0))
+    CH = framed(P, X0, d)
     Cn = CH.copy()
     Cn[:, :2, :] = s * (CH[:, :2, :] - xi[..., None] * CH[:, 2:3, :])
     Cn /= norms(Cn, axis=(1, 2))[:, None, None]
     if not np.isfinite(Cn).all():
         return None
     return s, rho, rho_floor, d, Cn, med
+
+
+def framed(C: np.ndarray, X0: np.ndarray, d) -> np.ndarray:
+    """P H of cameras C (..., N, 3, 4) for H = [[d I, X0], [0, 1]] (X0 (..., 3), d broadcast against C): the last
+    column P (X0, 1) compensated where it cancels (:func:`tritools.model.exact.homogeneous_images`: an exact change
+    of frame to one rounding; a plain product lost 11 digits next to a camera centre, review 46a), the others scaled
+    once.  The one frame of :func:`_frames`, :func:`_frame_one` and :meth:`Normalization.cameras`."""
+    CH = C.copy()
+    CH[..., :3] *= d
+    CH[..., 3] = homogeneous_images(C, np.concatenate([X0, np.ones(X0.shape[:-1] + (1,))], axis=-1))
+    return CH
 
 
 def _clip_scale(s: np.ndarray) -> np.ndarray:
@@ -401,10 +408,7 @@ def _frames(C: np.ndarray, x: np.ndarray, X0: np.ndarray, ok: np.ndarray, rho_fl
     # DLT point *is* that centre and d ~ 1e-15 would map every normalised point onto it
     d = np.where(np.isfinite(d) & (d > 0), np.maximum(d, DEPTH_FLOOR_REL * np.maximum(1.0, norms(X0, axis=1))), 1.0)
     # P_i' = T_i P_i H / ||.||_F with T_i = [[s, 0, -s t_i], [0, s, -s t_i'], [0, 0, 1]], H = [[d I, X0], [0, 1]]
-    Xh = np.concatenate([X0, np.ones((M, 1))], axis=1)
-    CH = C.copy()
-    CH[..., :3] *= d[:, None, None, None]
-    CH[..., 3] = homogeneous_images(C, Xh)             # compensated where it cancels: an exact change of frame
+    CH = framed(C, X0, d[:, None, None, None])
     Cn = CH.copy()
     Cn[:, :, :2, :] = s[:, None, None, None] * (CH[:, :, :2, :] - x[..., None] * CH[:, :, 2:3, :])
     Cn /= norms(Cn, axis=(2, 3))[..., None, None]

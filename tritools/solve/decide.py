@@ -22,7 +22,7 @@ from ..result import Status
 
 __all__ = ["decide", "decide_reported", "gamma_from_c", "c_from_gamma", "cheirality", "decide_one", "gamma_lower_one",
            "decide_reported_one", "gamma_lower", "within_resolution", "within_resolution_one", "LB_ROUNDOFF_ULPS",
-           "transfer_contradicts"]
+           "transfer_contradicts", "reported_lower"]
 
 #: gamma_LB is lowered by this many units of round-off of the coordinates' magnitude (:func:`gamma_lower`).
 LB_ROUNDOFF_ULPS = 64.0
@@ -195,6 +195,13 @@ def transfer_contradicts(gamma_lb, gamma_ub, tolerances, n_views, scale):
         out = known & np.asarray(tolerances.contradicts(c_from_gamma(np.where(known, lo, 0.0), n_views, scale),
                                                         c_from_gamma(np.where(known, up, 0.0), n_views, scale)), bool)
     return bool(out) if out.ndim == 0 else out
+
+
+def reported_lower(gamma_lb, gamma_ub, tolerances, n_views, scale):
+    """(gamma_LB to report, contradicts) for a lowered bound (:func:`gamma_lower`) of stacked problems: NaN where
+    :func:`transfer_contradicts` (no bound), else never above gamma_UB."""
+    contra = transfer_contradicts(gamma_lb, gamma_ub, tolerances, n_views, scale)
+    return np.where(contra, np.nan, np.minimum(gamma_lb, gamma_ub)), contra
 
 
 def gamma_lower_one(gamma_lb: float, gamma_ub: float, scale: float, resolution: float,

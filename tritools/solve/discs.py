@@ -41,7 +41,7 @@ from ..model.frame import project_world, recentred
 from ..model.normalize import normalization_stack
 from ..model.regions import ConeKind, Region
 from ..model.stacked import LM_MAX_ITER, damped_step, lm_accept, norms, project_stack
-from .decide import decide, decide_reported, gamma_from_c, gamma_lower, transfer_contradicts
+from .decide import decide, decide_reported, gamma_from_c, gamma_lower, reported_lower
 from .report import disc_distances, gamma_upper
 from .regions_verify import compact_bounds, region_forms
 
@@ -177,8 +177,7 @@ def reported_batch(ok, optimal, c_lower, X, uw, fin_w, dist, norm, tolerances, m
     gamma_ub = np.where(fin_w, gamma_upper(dist, norms(uw, axis=2)), np.inf)
     gamma_lb = gamma_lower(gamma_from_c(np.maximum(c_lower, 0.0), N, norm.scale), gamma_ub, norm.scale,
                            norm.resolution, magnitude)
-    contra = transfer_contradicts(gamma_lb, gamma_ub, tolerances, N, norm.scale)    # no bound (review 46a)
-    gamma_lb = np.where(contra, np.nan, np.minimum(gamma_lb, gamma_ub))
+    gamma_lb, contra = reported_lower(gamma_lb, gamma_ub, tolerances, N, norm.scale)     # (review 46a)
     certified = ok & optimal & ~contra & decide_reported(gamma_lb, gamma_ub, tolerances, N, norm.scale,
                                                          norm.resolution)
     return DiscBatch(certified, ok, X, gamma_lb, gamma_ub, uw, dist)

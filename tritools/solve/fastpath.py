@@ -49,7 +49,7 @@ from ..model.normalize import normalization_stack
 from ..model.stacked import (band_pairs, epipolar_quadratics, fundamental_stack, gauss_newton_polish, norms,
                              project_one, project_stack, refine_point, refine_points_stack, view_pairs)
 from .decide import (decide, decide_one, decide_reported, decide_reported_one, gamma_from_c, gamma_lower,
-                     gamma_lower_one, transfer_contradicts)
+                     gamma_lower_one, reported_lower, transfer_contradicts)
 from .report import gamma_upper
 from .trivial import trivially_certified, trivially_certified_reported
 
@@ -194,8 +194,7 @@ def verify_checked(C: np.ndarray, x: np.ndarray, ok: np.ndarray, tolerances: Tol
     gamma_ub = np.where(fin_w, gamma_upper(np.where(fin_w[:, None], residuals, 0.0), norms(uw, axis=2)), np.inf)
     gamma_lb = gamma_lower(gamma_from_c(c_lower, N, norm.scale), gamma_ub, norm.scale, norm.resolution,
                            norm.magnitudes_at(C, X))
-    contra = transfer_contradicts(gamma_lb, gamma_ub, tolerances, N, norm.scale)    # no bound (review 46a)
-    gamma_lb = np.where(contra, np.nan, np.minimum(gamma_lb, gamma_ub))
+    gamma_lb, contra = reported_lower(gamma_lb, gamma_ub, tolerances, N, norm.scale)     # (review 46a)
     certified = ok & optimal & ~contra & decide_reported(gamma_lb, gamma_ub, tolerances, N, norm.scale,
                                                          norm.resolution)
     trivial = ok & ~certified

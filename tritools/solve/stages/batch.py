@@ -48,7 +48,7 @@ from ...model.magnitude import pixel_floors, resolutions
 from ...model.regions import Point
 from ...records import TriangulationResults
 from ...result import Attempt, Status
-from ..decide import cheirality, decide_reported
+from ..decide import cheirality, decide_reported, reported_lower
 from ..fastpath import BAND_MIN_VIEWS, BAND_WIDTHS, verify_points
 from ..options import TriangulationOptions
 from ..plan import batch_steps, last_delta
@@ -56,6 +56,7 @@ from ..report import points_report_stack
 from ..sdp_batch import solve_corollary1_points
 from ..settings import stack_deadline
 from ..trivial import TRIVIAL_BOUND
+from .outcome import TRANSFER_MESSAGE
 from .context import AttemptStep, ImplName, Implementation, bound_stop_reached, fast_names
 
 __all__ = ["BatchContext", "BatchPlan", "BATCH_VERIFY_IMPLEMENTATIONS", "BATCH_SDP_IMPLEMENTATIONS",
@@ -222,8 +223,18 @@ class BatchContext:
         self.gamma_ub_raw[d] = points_report_stack(self.C[d], self.x[d], self.X_raw[d])[0]
         self.status[d], self.in_front[d] = cheirality(self.status[d], dep, self.opts.require_in_front)
         self.message[d] = np.where(self.in_front[d] | ~self.optimal[d], "", BEHIND_MESSAGE)
-        self.gamma_lb[d] = np.minimum(self.gamma_lb[d], self.gamma_ub[d])
+        self._no_contradiction(d)
         self._confirm_moved(d)
+
+    def _no_contradiction(self, d: np.ndarray) -> None:
+        """gamma_LB of rows ``d`` never above their gamma_UB on the caller's cameras; a row whose bound (of a
+        re-centred frame, moved back) lies above it beyond the rule has none: ``numerical_failure`` (the point
+        stage ``world_frame``'s rule, :func:`tritools.solve.decide.reported_lower`; review 46c L3)."""
+        self.gamma_lb[d], contra = reported_lower(self.gamma_lb[d], self.gamma_ub[d], self.opts.tolerances, self.N,
+                                                  self.scale[d])
+        bad = d[contra]
+        self.status[bad], self.optimal[bad], self.certified_by[bad] = Status.NUMERICAL_FAILURE.value, False, None
+        self.message[bad] = TRANSFER_MESSAGE + " in the caller's frame"
 
     def _confirm_moved(self, d: np.ndarray) -> None:
         """The certificates of rows solved in a moved frame, confirmed on the caller's cameras at the moved-back

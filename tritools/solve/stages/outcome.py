@@ -49,6 +49,9 @@ def behind_message(depths, objective: str = "L2") -> str:
 
 #: why a result whose bounds met is not certified when its estimate has no finite gamma_UB.
 UNDEFINED_MESSAGE = "the estimate's projection is undefined in some view (a point at a camera centre)"
+#: a lowered bound above gamma(X) of the caller's data beyond the rule (:func:`~tritools.solve.decide.
+#: transfer_contradicts`): the transfer's allowance did not hold, so no bound is reported.
+TRANSFER_MESSAGE = "the lower bound transferred to the caller's data lies above gamma(X): no bound"
 
 
 def has_upper(rep) -> bool:
@@ -77,7 +80,7 @@ def report_point(ctx: PointContext, step: Step, status, optimal, gamma_lb, *, X,
             # the bound of the normalised problem, lowered by its round-off, is above gamma(X) of the caller's data
             # beyond the rule: the transfer's allowance did not hold, so there is no bound to report (review 46a)
             status, optimal, gamma_lb = Status.NUMERICAL_FAILURE, False, None
-            msg = "the lower bound transferred to the caller's data lies above gamma(X): no bound"
+            msg = TRANSFER_MESSAGE
         else:
             gamma_lb = min(gamma_lb, rep.gamma)
         if optimal and gamma_lb is not None:         # the decision again, on the numbers reported
@@ -299,6 +302,13 @@ def world_frame_stage(ctx: PointContext) -> None:
     kw = dict(X=X, X_raw=X_raw, gamma_ub=rep.gamma, residuals=rep.residuals, depths=rep.depths,
               gamma_ub_raw=point_report(X_raw, ctx.cams_user, ctx.regions).gamma)
     if res.gamma_lb is not None and rep.gamma is not None and np.isfinite(rep.gamma):
+        if transfer_contradicts(res.gamma_lb, rep.gamma, ctx.tolerances, ctx.N, ctx.norm.scale):
+            # the re-centred frame's bound lies above a cost the caller's data attain beyond the rule: no bound, as
+            # in report_point (review 46c L3; clipping it to gamma_UB would report a certificate)
+            ctx.best = replace(res, **kw, gamma_lb=None, status=Status.NUMERICAL_FAILURE, optimal=False,
+                               certified_by=None, message=join(res.message, TRANSFER_MESSAGE + " in the caller's "
+                                                                            "frame"))
+            return
         kw["gamma_lb"] = min(res.gamma_lb, rep.gamma)
         if res.optimal and not decide_reported(kw["gamma_lb"], rep.gamma, ctx.tolerances, ctx.N, ctx.norm.scale,
                                                ctx.norm.resolution):

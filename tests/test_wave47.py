@@ -1,0 +1,75 @@
+"""Wave 47: the re-centred frames' last step keeps the transfer guard (review 46c L3)."""
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from tritools.model.geometry import validate_cameras
+from tritools.model.regions import Point
+from tritools.result import Status
+from tritools.scene import random_scene
+from tritools.solve.batch import solve_point_stack
+from tritools.solve.options import TriangulationOptions
+from tritools.solve.stages import BATCH_STAGES, POINT_STAGES, Stage, run_point, with_stage
+
+SHIFT = np.array([3.0e6, -2.0e6, 1.0e6])         # a georeferenced world: solved in a re-centred frame
+
+
+def _geo_problems(n_views: int, n_points: int, seed: int):
+    """Cameras (N, 3, 4) and points (M, N, 2) of a random scene moved to a world 3e6 from the origin."""
+    sc = random_scene(n_views, n_points, noise_px=1.0, seed=seed)
+    C = validate_cameras(sc.cameras)
+    T = np.eye(4)
+    T[:3, 3] = -SHIFT                                            # X_world = X + SHIFT
+    x = np.array([[r.center for r in sc.regions(j)] for j in range(n_points)])
+    return C @ T, x
+
+
+def _raise_lower(factor: float):
+    """A point stage that multiplies the re-centred frame's gamma_LB by ``factor`` (a transfer that failed)."""
+    def stage(ctx):
+        if ctx.best.gamma_lb is not None:
+            ctx.best = dataclasses.replace(ctx.best, gamma_lb=ctx.best.gamma_lb * factor)
+    return Stage("raise_lower", stage)
+
+
+def test_single_call_a_bound_above_the_callers_cost_is_no_bound():
+    """A re-centred frame's gamma_LB 1 % above gamma(X) on the caller's cameras: numerical_failure with no bound
+    (it used to be clipped to gamma_UB: a certificate); within round-off of it the certificate stays."""
+    C, x = _geo_problems(3, 1, seed=5)
+    regions = [Point(p) for p in x[0]]
+    opts = TriangulationOptions()
+    plain = run_point(C, regions, opts)
+    assert plain.optimal and plain.gamma_lb <= plain.gamma_ub
+    bad = run_point(C, regions, opts, stages=with_stage(POINT_STAGES, _raise_lower(1.01), before="world_frame"))
+    assert bad.status == Status.NUMERICAL_FAILURE and not bad.optimal and bad.gamma_lb is None
+    assert bad.certified_by is None and "no bound" in bad.message
+    assert bad.gamma_ub == plain.gamma_ub
+    ok = run_point(C, regions, opts, stages=with_stage(POINT_STAGES, _raise_lower(1 + 1e-12), before="world_frame"))
+    assert ok.optimal and ok.gamma_lb <= ok.gamma_ub
+
+
+def test_batch_a_bound_above_the_callers_cost_is_no_bound():
+    """The batch twin: rows whose re-centred gamma_LB exceeds the caller's gamma_UB beyond the rule lose the bound
+    and the certificate (numerical_failure); the other rows are the plain batch's."""
+    C, x = _geo_problems(4, 12, seed=6)
+    Cs = np.broadcast_to(C, (len(x),) + C.shape).copy()
+    rows = np.array([1, 4, 9])
+
+    def raise_lower(ctx):
+        ctx.gamma_lb[rows] = ctx.gamma_lb[rows] * 1.01
+
+    opts = TriangulationOptions()
+    plain = solve_point_stack(Cs, x, opts).record()
+    assert plain.optimal.all()
+    mine = solve_point_stack(Cs, x, opts, stages=with_stage(BATCH_STAGES, Stage("raise", raise_lower),
+                                                            before="report")).record()
+    assert set(np.nonzero(~mine.optimal)[0]) == set(rows)
+    for m in rows:
+        r = mine[m]
+        assert r.status == Status.NUMERICAL_FAILURE and r.gamma_lb is None and r.certified_by is None
+        assert "no bound" in r.message
+    keep = np.setdiff1d(np.arange(len(x)), rows)
+    np.testing.assert_array_equal(mine.gamma_lb[keep], plain.gamma_lb[keep])
+    assert np.all(mine.gamma_lb[keep] <= mine.gamma_ub[keep])

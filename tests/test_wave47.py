@@ -73,3 +73,33 @@ def test_batch_a_bound_above_the_callers_cost_is_no_bound():
     keep = np.setdiff1d(np.arange(len(x)), rows)
     np.testing.assert_array_equal(mine.gamma_lb[keep], plain.gamma_lb[keep])
     assert np.all(mine.gamma_lb[keep] <= mine.gamma_ub[keep])
+
+
+def test_world_origin_magnitude_twins_agree_on_non_finite_entries():
+    """The scalar twin equals the vectorised function also where an entry is NaN or infinite (Python's ``max`` kept
+    the first of a NaN pair: 116 of 8000 fuzzed cases differed, the scalar sometimes the smaller, review 46c L2);
+    a missing coordinate leaves the point's |x_i| out, a projection that is not finite makes K infinite."""
+    from tritools.model.magnitude import world_origin_magnitude_one, world_origin_magnitudes
+
+    rng = np.random.default_rng(47)
+    specials = [np.nan, np.inf, -np.inf, 0.0, 1e300, -1e300, 1e-300, 1e154]
+    for t in range(600):
+        N = int(rng.integers(1, 9))
+        C = rng.normal(size=(N, 3, 4)) * 10.0 ** rng.integers(-4, 5)
+        x = rng.normal(size=(N, 2)) * 10.0 ** rng.integers(-3, 4)
+        X, o = rng.normal(size=3) * 10.0, rng.normal(size=3) * 10.0
+        for arr in ([C, x, X, o][t % 4], x):
+            arr.flat[int(rng.integers(arr.size))] = specials[int(rng.integers(len(specials)))]
+        for entries in (False, True):
+            with np.errstate(all="ignore"):
+                a = float(world_origin_magnitudes(C[None], x[None], X[None], o[None], entries=entries)[0])
+            b = world_origin_magnitude_one(C, x, X, o, entries=entries)
+            assert a == b, (t, entries, a, b)
+    P = np.array([[[1.0, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 5]]])
+    X0, o0 = np.array([0.1, 0.2, 0.0]), np.zeros(3)
+    full = world_origin_magnitude_one(P, np.array([[1.0, 0.5]]), X0, o0, entries=True)
+    for xx in ([[1.0, np.nan]], [[np.nan, 1.0]]):           # the finite coordinate still counts
+        assert world_origin_magnitude_one(P, np.array(xx), X0, o0, entries=True) == full
+    huge = np.array([[[1e308, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 5]]])
+    assert world_origin_magnitude_one(huge, np.array([[1.0, 0.5]]), np.array([10.0, 0, 0]), o0) == \
+        float(np.finfo(float).max)

@@ -89,7 +89,8 @@ def world_origin_magnitudes(C: np.ndarray, x: np.ndarray, X: np.ndarray, o: np.n
     relative to its distance from o (review 45a HIGH-1: two cameras 2e-9 apart, the optimum 6e-8 of the scene size
     from their centres, gamma_LB clipped to gamma_UB 1.8e-11 px above the cost at X).  Plain float sums with their
     error bounds (gamma_4 times the sums of absolute products: |P_k o~| from above, |P_3 X~| from below), so no
-    compensated sums are needed; inf where the depth's bound reaches 0 (gamma_LB then lowered to 0).
+    compensated sums are needed; inf where the depth's bound reaches 0 or the projection is not finite (gamma_LB
+    then lowered to 0); a NaN coordinate of x (no observation) is left out of r_i.
     :func:`world_origin_magnitude_one` is the scalar twin (the same operations)."""
     C, x, X, o = (np.asarray(a, float) for a in (C, x, X, o))
     P = [[C[..., k, c] for c in range(4)] for k in range(3)]              # (M, N) entries
@@ -109,17 +110,18 @@ def world_origin_magnitudes(C: np.ndarray, x: np.ndarray, X: np.ndarray, o: np.n
         aX = ((np.abs(P[2][0]) * np.abs(Xe[0]) + np.abs(P[2][1]) * np.abs(Xe[1])) + np.abs(P[2][2]) * np.abs(Xe[2])) \
             + np.abs(P[2][3])
         den = np.abs(h[2]) - _GAMMA4 * aX
-        r = np.maximum(np.maximum(np.abs(x[..., 0]), np.abs(x[..., 1])), np.maximum(np.abs(h[0]), np.abs(h[1])) / den)
+        rh = np.maximum(np.abs(h[0]), np.abs(h[1])) / den
+        r = np.fmax(np.fmax(np.abs(x[..., 0]), np.abs(x[..., 1])), rh)          # a missing coordinate: not counted
         r = np.where(np.isfinite(r), r, 0.0)
-        K = np.where(den > 0, (np.maximum(a[0], a[1]) + r * a[2]) / den, np.inf)
+        K = np.where((den > 0) & np.isfinite(rh), (np.maximum(a[0], a[1]) + r * a[2]) / den, np.inf)
         K = np.where(np.isnan(K), np.inf, K)
     return np.minimum(np.max(K, axis=1, initial=0.0), np.finfo(float).max)
 
 
 def world_origin_magnitude_one(C, x, X, o, entries: bool = False) -> float:
     """The scalar twin of :func:`world_origin_magnitudes` for one problem (C (N, 3, 4), x (N, 2), X (3,), o (3,),
-    nested lists or arrays of floats): the same operations on Python floats, equal bit for bit
-    (tests/test_wave46.py)."""
+    nested lists or arrays of floats): the same operations on Python floats, equal bit for bit, also on non-finite
+    entries (tests/test_wave46.py, tests/test_wave47.py)."""
     X0, X1, X2 = (float(v) for v in X)
     o0, o1, o2 = (float(v) for v in o)
     d0, d1, d2 = abs(X0 - o0), abs(X1 - o1), abs(X2 - o2)
@@ -138,13 +140,32 @@ def world_origin_magnitude_one(C, x, X, o, entries: bool = False) -> float:
         den = abs(h[2]) - _GAMMA4 * aX
         if not den > 0:
             return big
-        r = max(max(abs(xi[0]), abs(xi[1])), max(abs(h[0]), abs(h[1])) / den)
+        rh = _max_nan(abs(h[0]), abs(h[1])) / den
+        if not math.isfinite(rh):
+            return big
+        r = _fmax(_fmax(abs(xi[0]), abs(xi[1])), rh)
         r = r if math.isfinite(r) else 0.0
-        K = (max(a[0], a[1]) + r * a[2]) / den
+        K = (_max_nan(a[0], a[1]) + r * a[2]) / den
         if K != K or K > big:
             return big
         out = max(out, K)
     return out
+
+
+def _max_nan(a: float, b: float) -> float:
+    """``numpy.maximum`` of two floats: NaN if either is (Python's ``max`` depends on the order; review 46c L2)."""
+    if a != a or b != b:
+        return math.nan
+    return a if a >= b else b
+
+
+def _fmax(a: float, b: float) -> float:
+    """``numpy.fmax`` of two floats: the other where one is NaN."""
+    if a != a:
+        return b
+    if b != b:
+        return a
+    return a if a >= b else b
 
 
 #: gamma_4 (4 u / (1 - 4 u), rounded up): the error bound of a float sum of four products relative to the sum of

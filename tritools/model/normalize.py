@@ -202,11 +202,11 @@ class NormalizationStack:
         (:func:`origin_magnitudes`): :attr:`Normalization.magnitude`."""
         return self.magnitudes_of(slice(None))
 
-    def magnitudes_at(self, C: np.ndarray, X: np.ndarray, shift=0.0) -> np.ndarray:
+    def magnitudes_at(self, C: np.ndarray, X: np.ndarray) -> np.ndarray:
         """(M,) :attr:`magnitude` and at least the estimate's (:func:`world_origin_magnitudes` of the cameras C
-        (M, N, 3, 4) the normalisation was made of, moved by ``shift`` (M, 3) from their given frame, at the world
-        points X (M, 3) in C's frame): what gamma_LB is lowered by at the reported estimate."""
-        o = self.origin + shift
+        (M, N, 3, 4) the normalisation was made of, at the world points X (M, 3) in C's frame): what gamma_LB is
+        lowered by at the reported estimate."""
+        o = self.origin
         if len(X) == 1:                         # one problem: the scalar twin, the stack's numbers (any N)
             K = world_origin_magnitude_one(C[0], self.shifts[0], X[0], o[0], entries=True)
             return np.maximum(self.magnitude, K)

@@ -103,3 +103,32 @@ def test_world_origin_magnitude_twins_agree_on_non_finite_entries():
     huge = np.array([[[1e308, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 5]]])
     assert world_origin_magnitude_one(huge, np.array([[1.0, 0.5]]), np.array([10.0, 0, 0]), o0) == \
         float(np.finfo(float).max)
+
+
+def test_refinement_of_a_few_views_on_floats_equals_the_array_iteration(monkeypatch):
+    """refine_point and gauss_newton_polish of one problem of <= FLOAT_MAX_VIEWS views run on floats
+    (tritools.model.lm_one, issue #22): the same iterations as the array code, so the same local optimum, converged
+    flag and cost up to round-off; an undefined start projection gives (X, False, False) on both."""
+    from tritools.model import stacked
+    from tritools.model.lm_one import FLOAT_MAX_VIEWS
+
+    rng = np.random.default_rng(470)
+    for trial in range(40):
+        N = 2 + trial % (FLOAT_MAX_VIEWS - 1)
+        sc = random_scene(N, 1, noise_px=float(rng.choice([0.0, 1.0, 30.0])), seed=1000 + trial)
+        C = validate_cameras(sc.cameras)
+        x = np.array([r.center for r in sc.regions(0)])
+        X0 = np.asarray(sc.points3d[0], float) + rng.normal(scale=0.2, size=3)
+        fl = stacked.refine_point(C, x, X0)
+        pol = stacked.gauss_newton_polish(C[None], x[None], fl[0][None], np.ones(1, bool))[0]
+        monkeypatch.setattr(stacked, "FLOAT_MAX_VIEWS", 0)
+        ar = stacked.refine_point(C, x, X0)
+        pol_ar = stacked.gauss_newton_polish(C[None], x[None], ar[0][None], np.ones(1, bool))[0]
+        monkeypatch.undo()
+        assert fl[1] and ar[1] and fl[2] == ar[2]
+        np.testing.assert_allclose(fl[0], ar[0], rtol=1e-8, atol=1e-8 * np.abs(ar[0]).max())
+        np.testing.assert_allclose(pol, pol_ar, rtol=1e-8, atol=1e-8 * np.abs(ar[0]).max())
+    centre = np.linalg.svd(C[0])[2][-1]
+    at_centre = centre[:3] / centre[3]
+    X, ok, conv = stacked.refine_point(C, x, at_centre)
+    assert not ok and not conv and np.array_equal(X, at_centre)

@@ -27,16 +27,13 @@ from sospoly import pow2_above_array
 
 from .centres_few import few_centres
 from .geometry import POINT_AT_INFINITY_RTOL, PROJECTION_DENOM_RTOL, SAME_CENTER_RTOL
+from .lm_one import FLOAT_MAX_VIEWS, LM_MAX_ITER, LM_STEP_RTOL, polish_floats, refine_floats, solve3
 
 __all__ = ["null_vectors", "dlt_stack", "project_stack", "refine_points_stack", "fundamental_stack",
            "epipolar_quadratics", "pixel_scales", "distinct_centres", "centre_vectors", "view_pairs", "band_pairs",
            "norms", "median_rows", "gauss_newton_polish", "project_quiet", "project_quiet_views", "project_one",
            "next_damping", "lm_accept", "solve3", "LM_MAX_ITER", "LM_STEP_RTOL"]
 
-#: Levenberg-Marquardt iterations at most (from the DLT start it converges in ~5-10).
-LM_MAX_ITER = 100
-#: a problem's iteration stops when its step is below LM_STEP_RTOL * (1 + ||X||) (normalised units, X ~ 1).
-LM_STEP_RTOL = 1e-13
 
 #: the 3x3 identity of the damped step (read-only: one array, not one per iteration).
 _EYE3 = np.eye(3)
@@ -300,7 +297,9 @@ def gauss_newton_polish(C: np.ndarray, xhat: np.ndarray, X: np.ndarray, ok: np.n
 
 def _gauss_newton_one(C: np.ndarray, xhat: np.ndarray, X: np.ndarray) -> np.ndarray:
     """:func:`gauss_newton_polish` of one problem on plain arrays (:class:`_View`, :func:`damped_step_one` with
-    mu = 0): equal to the stacked step up to round-off."""
+    mu = 0; for a few views :func:`~tritools.model.lm_one.polish_floats`): equal to the stacked step up to round-off."""
+    if len(C) <= FLOAT_MAX_VIEWS:
+        return polish_floats(C, xhat, X)
     cams = _View(C)
     X = np.array(X, float)
     with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
@@ -351,39 +350,6 @@ class _View:
         return u, den, cost, r
 
 
-def solve3(A: list, g: list) -> list | None:
-    """x with A x = g for a 3x3 matrix (lists), Gaussian elimination with partial pivoting (LAPACK gesv's
-    algorithm on plain floats, unrolled: the pivot is the first row of the largest |A[i][k]|, i >= k, and each
-    elimination computes only the entries that later steps read, the same operations as the loop over whole rows,
-    bit for bit, tests/test_scalar_twins.py); None for an exactly singular A (gesv's LinAlgError)."""
-    r0, r1, r2 = (A[0][0], A[0][1], A[0][2], g[0]), (A[1][0], A[1][1], A[1][2], g[1]), (A[2][0], A[2][1], A[2][2], g[2])
-    if abs(r1[0]) > abs(r0[0]):                             # column 0: the pivot row swapped with row 0
-        if abs(r2[0]) > abs(r1[0]):
-            r0, r2 = r2, r0
-        else:
-            r0, r1 = r1, r0
-    elif abs(r2[0]) > abs(r0[0]):
-        r0, r2 = r2, r0
-    p0 = r0[0]
-    if p0 == 0.0:
-        return None
-    f = r1[0] / p0
-    s1 = (r1[1] - f * r0[1], r1[2] - f * r0[2], r1[3] - f * r0[3])       # rows 1, 2 from column 1 on
-    f = r2[0] / p0
-    s2 = (r2[1] - f * r0[1], r2[2] - f * r0[2], r2[3] - f * r0[3])
-    if abs(s2[0]) > abs(s1[0]):                             # column 1
-        s1, s2 = s2, s1
-    if s1[0] == 0.0:
-        return None
-    f = s2[0] / s1[0]
-    t2 = (s2[1] - f * s1[1], s2[2] - f * s1[2])                           # row 2 from column 2 on
-    if t2[0] == 0.0:
-        return None
-    x2 = t2[1] / t2[0]
-    x1 = (s1[2] - s1[1] * x2) / s1[0]
-    return [(r0[3] - r0[1] * x1 - r0[2] * x2) / r0[0], x1, x2]
-
-
 def damped_step_one(JtJ: np.ndarray, g: np.ndarray, mu: float) -> np.ndarray:
     """The scalar twin of :func:`damped_step`: -(J^T J + mu (1 + tr J^T J) / 3 I)^{-1} g for one 3x3 system
     (:func:`solve3`; the pseudo-inverse where it is exactly singular)."""
@@ -408,6 +374,8 @@ def refine_point(C: np.ndarray, xhat: np.ndarray, X: np.ndarray, ok: bool = True
     X = np.array(X, float)
     if not ok:
         return X, False, False
+    if len(C) <= FLOAT_MAX_VIEWS:                 # a few views: the same iteration on floats (issue #22)
+        return refine_floats(C, xhat, X, max_iter)
     cams = _View(C)
     with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
         at = cams.project(X, xhat)

@@ -132,3 +132,21 @@ def test_refinement_of_a_few_views_on_floats_equals_the_array_iteration(monkeypa
     at_centre = centre[:3] / centre[3]
     X, ok, conv = stacked.refine_point(C, x, at_centre)
     assert not ok and not conv and np.array_equal(X, at_centre)
+
+
+def test_robust_batch_refused_row_records_its_call_attempt():
+    """A robust batch row whose cameras are all equal is ``ill_posed`` with the one ``call`` attempt the L2 batch's
+    rows record (it had none: review 46c L1); the other rows are solved."""
+    import tritools
+
+    P = np.hstack([np.eye(3), [[0.0], [0.0], [1.0]]])
+    bad = (np.stack([P, 2 * P]), np.array([[1.0, 2.0], [1.0, 2.0]]))
+    sc = random_scene(3, 1, noise_px=1.0, seed=4)
+    good = (np.asarray(sc.cameras), np.asarray(sc.points2d)[0])
+    for rows in ([bad], [good, bad]):
+        res = tritools.triangulate_many(rows, robust=5.0, progress=False)
+        r = res[len(rows) - 1]
+        assert r.status == Status.ILL_POSED and r.gamma_lb is None
+        assert [(a.method, a.status, a.step) for a in r.attempts] == [("tls", "ill_posed", "call")]
+        if len(rows) == 2:
+            assert res[0].status.certified

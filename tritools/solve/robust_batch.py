@@ -158,11 +158,12 @@ def _search_or_failure(cameras, regions, c, opts):
         return TlsSearch(cams, regs, c, opts, t0)
     except (ValueError, TypeError) as exc:
         status, msg = input_failure(exc)
-        return TriangulationResult("tls", status, message=msg, timings={"total": time.perf_counter() - t0})
     except Exception as exc:  # noqa: BLE001 - a batch never loses a point (review 29b F1: an OverflowError here
         log.debug("robust search set-up failed", exc_info=True)       # raised out of the batch, every row lost)
-        return TriangulationResult("tls", Status.SOLVER_FAILED, message=f"{type(exc).__name__}: {exc}",
-                                   timings={"total": time.perf_counter() - t0})
+        status, msg = Status.SOLVER_FAILED, f"{type(exc).__name__}: {exc}"
+    # the call's one attempt, as the L2 batch's rows record it (batch.safe_triangulate; review 46c L1)
+    return TriangulationResult("tls", status, message=msg, timings={"total": time.perf_counter() - t0},
+                               attempts=(Attempt("tls", opts.delta, status.value, step="call"),))
 
 
 def robust_many(problems: list, robust, opts, *, executor=None, progress=None) -> list[TriangulationResult]:

@@ -277,7 +277,7 @@ def _lagrangian_one(C: np.ndarray, Cn: np.ndarray, v: np.ndarray, radius: float,
     n = 2 * N
     ver = verify_quadratic_batch(np.zeros(1), np.zeros((1, n)), np.eye(n)[None], g0, g1, G2, v[None],
                                  tolerances=tolerances, radius=np.array([radius]),
-                                 constraint_error=epipolar_errors(F, view_pairs(N), v[None], radius))
+                                 constraint_error=epipolar_errors(F, view_pairs(N), v[None], radius, Cn[None]))
     return float(ver.lower_bound[0])
 
 
@@ -428,7 +428,7 @@ def _all_pairs_bounds(C, Cn, v, ok, radius, tolerances, f0, F2, views=None) -> t
     ok &= finite
     g0, g1, G2 = _zero_rows(g0, g1, G2, ok)
     n = 2 * N
-    err = epipolar_errors(np.where(ok[:, None, None, None], Fh, 0.0), view_pairs(N), v, radius)
+    err = epipolar_errors(np.where(ok[:, None, None, None], Fh, 0.0), view_pairs(N), v, radius, Cn)
     ver = verify_quadratic_batch(f0, np.zeros((M, n)), F2, g0, g1, G2, v, tolerances=tolerances, radius=radius,
                                  constraint_error=err)
     return ver.lower_bound, ok
@@ -453,6 +453,6 @@ def _band_bounds(C, Cn, v, ok, radius, width, tolerances, f0, F2, views=None) ->
     n = 2 * N
     ver = verify_quadratic_banded_batch(f0, np.zeros((M, n)), F2, g0, g1, G2, v, tolerances=tolerances,
                                         radius=radius, constraint_error=epipolar_errors(
-                                            np.where(use[:, None, None, None], Fh, 0.0), pairs, v, radius))
+                                            np.where(use[:, None, None, None], Fh, 0.0), pairs, v, radius, Cn))
     lower = np.where(use, ver.lower_bound, np.nan)
     return lower, use

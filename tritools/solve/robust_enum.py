@@ -384,12 +384,14 @@ def _masked_bounds(Cn, F, defined, W: np.ndarray, Xn: np.ndarray, s: np.ndarray,
     v = np.where(W[:, :, None] & fin[:, None, None], u, 0.0).reshape(M, -1)
     I, J = view_pairs(N)
     held = W[:, I] & W[:, J] & defined
-    return _verified(v, fin, np.where(held[..., None, None], F, 0.0), N, s, tolerances, W.sum(axis=1), accepted)
+    return _verified(v, fin, np.where(held[..., None, None], F, 0.0), N, s, tolerances, W.sum(axis=1), accepted,
+                     Cn)
 
 
-def _verified(v, fin, F, N: int, s, tolerances, size, accepted=True):
+def _verified(v, fin, F, N: int, s, tolerances, size, accepted=True, Cn=None):
     """The bounds and acceptance of :func:`enum_bounds_rows` from the rows' image candidates v (M, 2N), finiteness
-    ``fin`` and the fundamental matrices F (M, N(N-1)/2, 3, 3) of the constraints they hold (0: dropped)."""
+    ``fin`` and the fundamental matrices F (M, N(N-1)/2, 3, 3) of the constraints they hold (0: dropped), computed
+    from the cameras Cn (M, N, 3, 4) (their proven error, :func:`tritools.model.epipolar_data.fundamental_bounds`)."""
     M = len(v)
     g0, g1, G2 = epipolar_quadratics(F, N)
     good = fin & np.isfinite(g0).all(axis=1) & np.isfinite(g1).all(axis=(1, 2))
@@ -397,7 +399,7 @@ def _verified(v, fin, F, N: int, s, tolerances, size, accepted=True):
     radius = np.sqrt(np.einsum("mi,mi->m", v, v))
     ver = verify_quadratic_batch(np.zeros(M), np.zeros((M, n)), np.broadcast_to(np.eye(n), (M, n, n)), g0, g1, G2,
                                  v, tolerances=tolerances, radius=radius,
-                                 constraint_error=epipolar_errors(F, view_pairs(N), v, radius))
+                                 constraint_error=epipolar_errors(F, view_pairs(N), v, radius, Cn))
     with np.errstate(invalid="ignore", over="ignore"):
         lb = np.maximum(np.minimum(ver.lower_bound, radius ** 2), 0.0) / (s * s) * ROUND_DOWN
         good &= np.isfinite(lb)
@@ -428,7 +430,7 @@ def ascended_bound(Cn, F, defined, W: np.ndarray, Xn: np.ndarray, s: float, tole
         return 0.0
     n = 2 * N
     radius = float(np.sqrt(v @ v))
-    err = epipolar_errors(np.where(held[:, None, None], F, 0.0)[None], (I, J), v[None], radius)
+    err = epipolar_errors(np.where(held[:, None, None], F, 0.0)[None], (I, J), v[None], radius, Cn[None])
     ver = verify_quadratic_batch(np.zeros(1), np.zeros((1, n)), np.eye(n)[None], g0, g1, G2, v[None],
                                  tolerances=tolerances, radius=np.array([radius]), constraint_error=err)
     found = ascend_one(0.0, np.zeros(n), np.eye(n), g0[0], g1[0], G2, ver.multipliers[0],
@@ -453,7 +455,7 @@ def _subset_bounds(Cn, F, defined, Xn: np.ndarray, s: np.ndarray, tolerances, ac
     u, _, fin = project_stack(Cn, Xn)
     fin &= np.isfinite(Xn).all(axis=1)
     v = np.where(fin[:, None, None], u, 0.0).reshape(M, -1)
-    return _verified(v, fin, np.where(defined[..., None, None], F, 0.0), N, s, tolerances, N, accepted)
+    return _verified(v, fin, np.where(defined[..., None, None], F, 0.0), N, s, tolerances, N, accepted, Cn)
 
 
 @functools.lru_cache(maxsize=16)

@@ -28,7 +28,9 @@ def test_batch_and_points_decide_as_the_single_call(case):
     for r in (many, points):
         assert r.optimal, r.message
         assert r.gamma_ub == pytest.approx(single.gamma_ub, rel=1e-7)
-        assert r.gamma_lb == pytest.approx(single.gamma_lb, rel=1e-7)
+        # (each path's bound carries the proven error of its fundamental matrices at its own candidate, wave 47:
+        # ~4e-7 relative on this 0.01 degree arc, so the paths' bounds agree to the certificate rule's scale)
+        assert r.gamma_lb == pytest.approx(single.gamma_lb, rel=1e-6)
         assert np.array_equal(r.inliers, single.inliers)
     for r in (single, many):            # the bound never above an attained value (exact arithmetic at X)
         assert 2 * N * r.gamma_lb ** 2 <= _f_tls_exact(P, x, c, r.X) * (1 + 1e-12)

@@ -48,7 +48,7 @@ from ..algebra.basis import unique_rows
 
 __all__ = ["solution_at_level", "gram_pairs", "psd_defect_of", "block_weight", "poly_sup", "monomial_sup", "u_terms",
            "RigorousBound", "rigorous_psatz_bound", "certificate_residual", "exact_check", "ExactCheck",
-           "image_form_stack_margin",
+           "image_form_stack_margin", "constraint_error_stack",
            # the exact-arithmetic steps of exact_check, shared with sospoly.analysis.exact_face
            "ldl_psd", "shift_multipliers", "exact_multipliers", "gram_entries", "facial_reduction", "exact_u_terms"]
 
@@ -297,6 +297,29 @@ def _check_rigor_inputs(sol, c, radius, ball) -> bool:
     if ball is not None and (np.isnan(ball) or ball < 0):
         raise ValueError(f"rigorous_psatz_bound ball must be non-negative, got {ball!r}")
     return bool(np.isfinite(c) and np.all(np.isfinite(r)))
+
+
+def constraint_error_stack(structure, X, radius, eq_error) -> np.ndarray:
+    """(B,) sum_k sup|r_k| e_k for B solutions of one structure at once: the ``eq_error`` charge of
+    :func:`rigorous_psatz_bound` (its ``_constraint_error``) for decision vectors X (B, columns) -- the program's
+    variables first, as lowered (:mod:`sospoly.lowering.conic`) -- each multiplier's sup on the box |v_i| <= R_b
+    (``radius`` (B,) or a number: every monomial v^E is at most R_b^|E| there) and ``eq_error`` (B, K) bounds of
+    |g_k(v)| at the points feasible for the true constraints.  The sums are rounded up; inf where not finite."""
+    X = np.asarray(X, float)
+    B = X.shape[0]
+    e = np.broadcast_to(np.asarray(eq_error, float), (B, structure.slots.n_eq))
+    R = np.broadcast_to(np.asarray(radius, float), (B,))
+    total = np.zeros(B)
+    with np.errstate(over="ignore", invalid="ignore"):
+        for k in np.flatnonzero(np.any(e != 0, axis=0)):
+            p = structure.r[k]
+            coef = np.tile(np.asarray(p.const, float), (B, 1))
+            if p.rows.size:
+                np.add.at(coef.T, p.rows, (p.vals * X[:, p.cols]).T)
+            sup = R[:, None] ** np.sum(p.E, axis=1)[None, :]
+            total = total + np.sum(np.abs(coef) * sup, axis=1) * e[:, k]
+        total = total * (1 + 4 * (structure.slots.n_eq + 8) * _EPS)
+    return np.where(np.isnan(total), np.inf, total)
 
 
 def image_form_stack_margin(eigenvalues, gram_error, weight, q_min=1.0) -> np.ndarray:

@@ -55,6 +55,7 @@ class BatchBounds:
     iterations: np.ndarray      # (B,) int
     reason: tuple               # (B,) str
     gram_error: np.ndarray | None = None    # (B,)
+    x: np.ndarray | None = None             # (B, columns) the IPM's decision vectors (the program's variables first)
 
 
 class CompiledPsatz(LoweredPsatz):
@@ -180,7 +181,7 @@ class CompiledPsatz(LoweredPsatz):
                                              f"Gram lambda_min {l0:.3g} below the PSD margin")
                        for c, p, r, l0 in zip(res.converged, psd, res.reason, lam[:, 0]))
         c_lb = t.objective_sign * (res.x @ t.q) + t.objective_offset
-        return BatchBounds(c_lb, G, lam, V, res.converged & psd, res.iterations, reason, gram_error)
+        return BatchBounds(c_lb, G, lam, V, res.converged & psd, res.iterations, reason, gram_error, res.x)
 
 
 class _Presolved:

@@ -5,9 +5,11 @@ each distance d_i(X) then moves by a few u (|x_i| + |u_i|) (u the unit round-off
 that (:func:`tritools.solve.decide.gamma_lower`) with :func:`magnitudes` (the points' obliquity magnitudes) and the
 frame origin's terms (:func:`origin_magnitudes`, :func:`world_origin_magnitudes`).  A gap that passes the
 certificate rule only through its absolute part must also be within the coordinates' resolution
-(:func:`resolutions`): ``RESOLUTION_REL`` max(f_px, median |x|) pixels, the floor f_px = ``PIXEL_FLOOR_REL`` times
-the views' median focal length (:func:`pixel_floors`), so that rescaling the images rescales every bound and
-decision alike (review 31b F10).
+(:func:`guard_resolutions`): ``RESOLUTION_REL`` min_i max(f_i, |x_i|) pixels over the views, the floor f_i =
+``PIXEL_FLOOR_REL`` times view i's focal length (:func:`view_floors`), so that rescaling the images rescales every
+bound and decision alike (review 31b F10) and a view of fine pixels is not judged at a coarse view's resolution
+(review 47b H1); the median rule RESOLUTION_REL max(f_px, median |x|) (:func:`resolutions`, f_px from the views'
+median focal length, :func:`pixel_floors`) stays the floor of the lowering's magnitude.
 """
 from __future__ import annotations
 
@@ -21,7 +23,8 @@ from .oblique import obliquities, obliquity_one
 from .stacked import median_rows, pixel_scales
 
 __all__ = ["magnitudes", "origin_magnitudes", "world_origin_magnitudes", "world_origin_magnitude_one", "resolutions",
-           "median_pixel_scales", "pixel_floors", "RESOLUTION_REL", "PIXEL_FLOOR_REL", "SCALAR_MAX_VIEWS"]
+           "guard_resolutions", "view_floors", "median_pixel_scales", "pixel_floors", "RESOLUTION_REL",
+           "PIXEL_FLOOR_REL", "SCALAR_MAX_VIEWS"]
 
 #: the resolution of the coordinates, relative to their magnitude (sqrt of the machine epsilon).
 RESOLUTION_REL = 1e-8
@@ -197,6 +200,33 @@ def resolutions(scale: np.ndarray, x: np.ndarray, floor=1.0) -> np.ndarray:
         mag = median_rows(np.abs(x.reshape(len(x), -1))) if x.size else np.zeros(len(x))
         out = np.asarray(scale, float) * RESOLUTION_REL * np.maximum(floor, np.where(np.isfinite(mag), mag, 1.0))
     return np.where(np.isfinite(out) & (out > 0), out, np.inf)
+
+
+def guard_resolutions(scale, x: np.ndarray, view_floor) -> np.ndarray:
+    """s RESOLUTION_REL min_i max(f_i, |x_i|) per problem (x (M, N, 2), ``view_floor`` (M, N) the views' pixel floors,
+    :func:`view_floors`): the resolution below which the decision lets a gap pass (module docstring), of the view
+    resolved most finely.  Per view, not of the median: a view's pixels weigh in gamma as its own, so with two views
+    of pixel scales 1e-3 and 1e6 a median (their mean) let a gap of 1e-5 pass on the first view's ~1e-6 coordinates
+    (review 47b H1: gamma_UB certified 68 % above the optimum).  Never above :func:`resolutions` (the median rule,
+    which the lowering of gamma_LB keeps as its floor); views without a finite point are left out."""
+    x = np.asarray(x, float)
+    with np.errstate(all="ignore"):
+        a = np.max(np.abs(x), axis=2) if x.size else np.zeros(x.shape[:2])
+        per = np.where(np.isfinite(a), np.maximum(np.asarray(view_floor, float), a), np.inf)
+        mag = np.min(per, axis=1, initial=np.inf)
+        out = np.asarray(scale, float) * RESOLUTION_REL * mag
+    median_rule = resolutions(scale, x, _nanmedian_rows(np.where(np.isfinite(view_floor), view_floor, np.nan))
+                              if x.shape[1] else 1.0)
+    return np.where(np.isfinite(out) & (out > 0), np.minimum(out, median_rule), median_rule)
+
+
+def view_floors(C: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """(M, N) ``PIXEL_FLOOR_REL`` times each view's pixel scale at its point (:func:`tritools.model.stacked.
+    pixel_scales`), the problem's :func:`pixel_floors` where a view has none."""
+    ps = pixel_scales(C, x)
+    good = np.isfinite(ps) & (ps > 0)
+    fallback = pixel_floors(medians=_nanmedian_rows(np.where(good, ps, np.nan)))
+    return np.where(good, PIXEL_FLOOR_REL * ps, fallback[:, None])
 
 
 def median_pixel_scales(C: np.ndarray, x: np.ndarray) -> np.ndarray:

@@ -61,8 +61,8 @@ import numpy as np
 from .exact import homogeneous_images
 from .cameras import power2_scale
 from .magnitude import (PIXEL_FLOOR_REL, RESOLUTION_REL, magnitudes, median_pixel_scales,
-                        origin_magnitudes, pixel_floors, resolutions, world_origin_magnitude_one,
-                        world_origin_magnitudes)
+                        origin_magnitudes, pixel_floors, resolutions, world_origin_magnitude_one, guard_resolutions,
+                        world_origin_magnitudes, view_floors)
 from .geometry import COMMON_CENTRE_RTOL, POINT_AT_INFINITY_RTOL, point_from_image_points
 from .stacked import (dlt_stack, median_rows, norms, null_vectors, pixel_scales, project_one, project_quiet,
                       project_stack, refine_point, refine_points_stack)
@@ -85,7 +85,10 @@ SCALE_BOUNDS = (1e-8, 1e8)
 @dataclass(frozen=True)
 class Normalization:
     """The normalisation of one problem: x' = scale (x - shifts[i]), X = origin + depth X'; ``resolution`` the
-    coordinates' resolution in normalised units (module docstring; inf: not known, no guard)."""
+    coordinates' resolution in normalised units that the decision lets a gap pass within (module docstring; inf: not
+    known, no guard; :func:`~tritools.model.magnitude.guard_resolutions`), ``floor_resolution`` the median rule's
+    (:func:`~tritools.model.magnitude.resolutions`) whose magnitude floors the lowering of gamma_LB (None: the
+    resolution)."""
     scale: float
     shifts: np.ndarray      # (N, 2)
     origin: np.ndarray      # (3,)
@@ -95,17 +98,25 @@ class Normalization:
     #: (num (N,), the moved cameras' third rows (N, 4), their origin c0 (3,), |depth| at X0 (N,)): the frame origin's
     #: term num_i / |P_3 X~| of :func:`origin_magnitudes`, where the frame's builder knows it
     frame_terms: tuple | None = None
+    floor_resolution: float | None = None
+
+    @property
+    def lowering_resolution(self) -> float:
+        """The resolution whose magnitude floors the lowering of gamma_LB (:func:`tritools.solve.decide.gamma_lower`):
+        ``floor_resolution``, else ``resolution``."""
+        return self.resolution if self.floor_resolution is None else self.floor_resolution
 
     @classmethod
     def identity(cls, n_views: int, points=None, cameras=None) -> Normalization:
         """No change of frame; the resolution of ``points`` (N, 2) with the pixel floor of ``cameras`` (1 px
         without them), none without points."""
-        floor = 1.0 if cameras is None or points is None else \
-            pixel_floors(np.asarray(cameras, float)[None], np.asarray(points, float)[None])
-        res = np.inf if points is None else float(resolutions(np.ones(1), np.asarray(points, float)[None],
-                                                              floor)[0])
-        mag = None if points is None else float(magnitudes(np.asarray(points, float)[None])[0])
-        return cls(1.0, np.zeros((n_views, 2)), np.zeros(3), 1.0, res, mag)
+        if points is None:
+            return cls(1.0, np.zeros((n_views, 2)), np.zeros(3), 1.0)
+        x = np.asarray(points, float)[None]
+        res, floor_res = (float(r[0]) for r in _resolution_pair(np.ones(1), x, None if cameras is None else
+                                                                np.asarray(cameras, float)[None]))
+        return cls(1.0, np.zeros((n_views, 2)), np.zeros(3), 1.0, res, float(magnitudes(x)[0]),
+                   floor_resolution=floor_res)
 
     @property
     def magnitude(self) -> float:
@@ -182,15 +193,21 @@ class NormalizationStack:
     cameras_n: np.ndarray   # (M, N, 3, 4) normalised cameras, unit Frobenius norm each
     Xn: np.ndarray          # (M, 3)
     ok: np.ndarray          # (M,)
-    resolution: np.ndarray  # (M,) the coordinates' resolution in normalised units (module docstring)
+    resolution: np.ndarray  # (M,) the coordinates' resolution in normalised units (:class:`Normalization`)
     #: (M,) Xn is a converged local L2 minimiser (the step rule of the refinement; the image rescaling after it is
     #: a similarity, which keeps the minimiser): polishing it again is a no-op
     converged: np.ndarray | None = None
+    floor_resolution: np.ndarray | None = None      # (M,) the median rule's (:class:`Normalization`)
+
+    @property
+    def lowering_resolution(self) -> np.ndarray:
+        """(M,) :attr:`Normalization.lowering_resolution` of each problem."""
+        return self.resolution if self.floor_resolution is None else self.floor_resolution
 
     def item(self, m: int) -> Normalization:
         mag = float(self.magnitudes_of(slice(m, m + 1))[0])
         return Normalization(float(self.scale[m]), self.shifts[m].copy(), self.origin[m].copy(), float(self.depth[m]),
-                             float(self.resolution[m]), mag)
+                             float(self.resolution[m]), mag, floor_resolution=float(self.lowering_resolution[m]))
 
     def world_points(self, Xn: np.ndarray) -> np.ndarray:
         return self.origin + self.depth[:, None] * Xn
@@ -258,10 +275,20 @@ def normalization_stack(C: np.ndarray, x: np.ndarray, ok: np.ndarray | None = No
     return st
 
 
+def _resolution_pair(scale, x: np.ndarray, C: np.ndarray | None, floor=None) -> tuple:
+    """((M,) the decision's resolution, (M,) the median rule's) of problems with points x (M, N, 2) and cameras C
+    (M, N, 3, 4) (None: 1 px floors) at image scales ``scale``: :func:`~tritools.model.magnitude.guard_resolutions`
+    and :func:`~tritools.model.magnitude.resolutions` (``floor``: the problems' pixel floors, when known)."""
+    if C is None:
+        return guard_resolutions(scale, x, np.ones(x.shape[:2])), resolutions(scale, x, 1.0)
+    floor = pixel_floors(C, x) if floor is None else floor
+    return guard_resolutions(scale, x, view_floors(C, x)), resolutions(scale, x, floor)
+
+
 def _copied(st: NormalizationStack) -> NormalizationStack:
     return NormalizationStack(*(None if a is None else a.copy() for a in
                                 (st.scale, st.shifts, st.origin, st.depth, st.cameras_n, st.Xn, st.ok, st.resolution,
-                                 st.converged)))
+                                 st.converged, st.floor_resolution)))
 
 
 def _normalization_stack(C: np.ndarray, x: np.ndarray, ok: np.ndarray) -> NormalizationStack:
@@ -287,8 +314,9 @@ def _normalization_stack(C: np.ndarray, x: np.ndarray, ok: np.ndarray) -> Normal
     s_new = _clip_scale(1.0 / rho_ref)
     Cn[:, :, :2, :] *= (s_new / s)[:, None, None, None]
     Cn /= norms(Cn, axis=(2, 3))[..., None, None]
-    return NormalizationStack(s_new, x.copy(), X0, d, Cn, np.where(use[:, None], Xn, 0.0), ok,
-                              resolutions(s_new, x, pixel_floors(medians=med)), use & converged)
+    res, floor_res = _resolution_pair(s_new, x, C, pixel_floors(medians=med))
+    return NormalizationStack(s_new, x.copy(), X0, d, Cn, np.where(use[:, None], Xn, 0.0), ok, res, use & converged,
+                              floor_res)
 
 
 def _normalization_one(C: np.ndarray, x: np.ndarray, ok: np.ndarray) -> NormalizationStack | None:
@@ -321,9 +349,9 @@ def _normalization_one(C: np.ndarray, x: np.ndarray, ok: np.ndarray) -> Normaliz
         Cn[:, :2, :] *= s_new / s
         Cn /= norms(Cn, axis=(1, 2))[:, None, None]
     s_arr = np.array([s_new])
+    res, floor_res = _resolution_pair(s_arr, x, P[None], pixel_floors(medians=med))
     return NormalizationStack(s_arr, x.copy(), X0[None], np.array([d]), Cn[None], (Xn if use else np.zeros(3))[None],
-                              np.ones(1, bool), resolutions(s_arr, x, pixel_floors(medians=med)),
-                              np.array([use and converged]))
+                              np.ones(1, bool), res, np.array([use and converged]), floor_res)
 
 
 def _median(values: list) -> float:
@@ -451,9 +479,11 @@ def normalization_for(cameras: np.ndarray, regions, enabled: bool = True) -> Nor
     if st.ok[0]:
         norm = st.item(0)
     else:
-        floor = pixel_floors(np.asarray(cameras, float)[None], centers[None])
-        norm = Normalization(1.0, centers, np.zeros(3), 1.0, float(resolutions(np.ones(1), centers[None], floor)[0]),
-                             float(magnitudes(centers[None], np.asarray(cameras, float)[None])[0]))
+        res, floor_res = (float(r[0]) for r in _resolution_pair(np.ones(1), centers[None],
+                                                                np.asarray(cameras, float)[None]))
+        norm = Normalization(1.0, centers, np.zeros(3), 1.0, res,
+                             float(magnitudes(centers[None], np.asarray(cameras, float)[None])[0]),
+                             floor_resolution=floor_res)
     offset = regions_offset(regions)
     s = norm.scale
     if offset * s > 1.0:
@@ -461,9 +491,9 @@ def normalization_for(cameras: np.ndarray, regions, enabled: bool = True) -> Nor
     if any(getattr(r, "exact_scale", False) for r in regions):
         s = power_of_two_below(s)
     if s != norm.scale:
-        floor = pixel_floors(np.asarray(cameras, float)[None], centers[None])
-        norm = dataclasses.replace(norm, scale=s, resolution=float(resolutions(np.array([s]), centers[None],
-                                                                               floor)[0]))
+        res, floor_res = (float(r[0]) for r in _resolution_pair(np.array([s]), centers[None],
+                                                                np.asarray(cameras, float)[None]))
+        norm = dataclasses.replace(norm, scale=s, resolution=res, floor_resolution=floor_res)
     return norm
 
 

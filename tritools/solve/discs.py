@@ -176,7 +176,7 @@ def reported_batch(ok, optimal, c_lower, X, uw, fin_w, dist, norm, tolerances, m
     N = dist.shape[1]
     gamma_ub = np.where(fin_w, gamma_upper(dist, norms(uw, axis=2)), np.inf)
     gamma_lb = gamma_lower(gamma_from_c(np.maximum(c_lower, 0.0), N, norm.scale), gamma_ub, norm.scale,
-                           norm.resolution, magnitude)
+                           norm.lowering_resolution, magnitude)
     gamma_lb, contra = reported_lower(gamma_lb, gamma_ub, tolerances, N, norm.scale)     # (review 46a)
     certified = ok & optimal & ~contra & decide_reported(gamma_lb, gamma_ub, tolerances, N, norm.scale,
                                                          norm.resolution)

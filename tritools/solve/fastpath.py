@@ -192,7 +192,7 @@ def verify_checked(C: np.ndarray, x: np.ndarray, ok: np.ndarray, tolerances: Tol
     # same numbers, so a single call reports these without projecting again
     residuals = np.where(fin_w[:, None], norms(uw - x, axis=2), np.inf)
     gamma_ub = np.where(fin_w, gamma_upper(np.where(fin_w[:, None], residuals, 0.0), norms(uw, axis=2)), np.inf)
-    gamma_lb = gamma_lower(gamma_from_c(c_lower, N, norm.scale), gamma_ub, norm.scale, norm.resolution,
+    gamma_lb = gamma_lower(gamma_from_c(c_lower, N, norm.scale), gamma_ub, norm.scale, norm.lowering_resolution,
                            norm.magnitudes_at(C, X))
     gamma_lb, contra = reported_lower(gamma_lb, gamma_ub, tolerances, N, norm.scale)     # (review 46a)
     certified = ok & optimal & ~contra & decide_reported(gamma_lb, gamma_ub, tolerances, N, norm.scale,
@@ -247,8 +247,8 @@ def verify_one(C: np.ndarray, x: np.ndarray, tolerances: Tolerances, *,
     residuals = norms(uw - x, axis=2)             # (the report's formulas: points_report_stack)
     gamma_ub = gamma_upper(residuals, norms(uw, axis=2))
     g_ub = float(gamma_ub[0])
-    gamma_lb = gamma_lower_one(math.sqrt(max(c_lower, 0.0) / (2.0 * N)) / scale, g_ub, scale, res,
-                               float(norm.magnitudes_at(C[None], X)[0]))
+    gamma_lb = gamma_lower_one(math.sqrt(max(c_lower, 0.0) / (2.0 * N)) / scale, g_ub, scale,
+                               float(norm.lowering_resolution[0]), float(norm.magnitudes_at(C[None], X)[0]))
     contra = transfer_contradicts(gamma_lb, g_ub, tolerances, N, scale)         # no bound (review 46a)
     gamma_lb = math.nan if contra else min(gamma_lb, g_ub)
     certified = optimal and not contra and decide_reported_one(gamma_lb, g_ub, tolerances, N, scale, res)

@@ -13,8 +13,8 @@ here, in the caller's frame and units, by the L2 path's rules (:mod:`tritools.so
   origin's term, :func:`_magnitudes`), never above gamma_UB.
 * The certificate, decided by the search in c units on its scale S = min(c^2, rho^2), must also pass on these
   numbers the L2 path's guard: a gap that does not pass through the relative part of the rule must be within
-  the coordinates' resolution (``RESOLUTION_REL`` max(f_px, median |x_i|) pixels, f_px the cameras' pixel floor,
-  :func:`tritools.model.magnitude.pixel_floors`; thresholds far above the
+  the coordinates' resolution (``RESOLUTION_REL`` min_i max(f_i, |x_i|) pixels, f_i view i's pixel floor,
+  :func:`tritools.model.magnitude.guard_resolutions`; thresholds far above the
   residuals make S = c^2 large, and without it a 250 px gap at 1e10 px coordinates certified).
   Until wave 26 gamma_LB was also lowered by the estimate's rounding spread
   (:func:`tritools.solve.report.rounding_spread`), and withdrawn (0, not certified) where that spread exceeded the
@@ -33,7 +33,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..model.cameras import power2_scale
-from ..model.magnitude import magnitudes, pixel_floors, resolutions, world_origin_magnitudes
+from ..model.magnitude import (RESOLUTION_REL, guard_resolutions, magnitudes, pixel_floors, resolutions, view_floors,
+                               world_origin_magnitudes)
 from ..model.stacked import norms, null_vectors
 from .decide import gamma_from_c, gamma_lower_one, within_resolution_one
 from .report import enlarged_distances, gamma_upper, projections_and_spread, projections_and_spread_stack
@@ -75,8 +76,10 @@ def tls_reported(C: np.ndarray, centres: np.ndarray, residuals, X, c: np.ndarray
     else:                                # the bounds' frame told its own terms (the enumeration's frame)
         mag = max(float(magnitudes(np.asarray(centres, float)[None], np.asarray(C, float)[None])[0]),
                   _terms_magnitude(frame_terms, X))
-    g_lb, g_ub, holds, reason = _checked(g_ub, spread, coordinate_resolution(centres, C), N, c, lb, tolerances,
-                                         certified, res, f_search, mag)
+    resolution, floor = (float(r[0]) for r in _resolution_pair(np.asarray(centres, float)[None],
+                                                                  np.asarray(C, float)[None]))
+    g_lb, g_ub, holds, reason = _checked(g_ub, spread, resolution, N, c, lb, tolerances, certified, res, f_search,
+                                         max(mag, floor))
     inliers = inlier_mask(C, X, centres, res, c, u, exact=points_given, regions=regions)
     image_points = np.where(np.isfinite(res)[:, None] & np.isfinite(u), u, np.nan)
     return TlsReported(g_lb, g_ub, residuals, inliers, holds, reason, image_points)
@@ -95,7 +98,8 @@ def tls_reported_stack(C: np.ndarray, points: np.ndarray, X: np.ndarray, c: np.n
     res = np.where(np.isfinite(residuals), residuals, np.inf)
     u_norm = norms(np.where(np.isfinite(u), u, 0.0), axis=2)
     g_ub = gamma_upper(np.where(np.isfinite(res), res, c), u_norm, cap=c)
-    resolution, magnitude = coordinate_resolutions(points, C), _magnitudes(np.asarray(C, float), points, X)
+    resolution, floor = _resolution_pair(points, C)
+    magnitude = np.maximum(_magnitudes(np.asarray(C, float), points, X), floor)
     inliers = inlier_mask_stack(C, X, points, res, c, u, u_norm)
     image_points = np.where(np.isfinite(res)[:, :, None] & np.isfinite(u), u, np.nan)
     out = []
@@ -169,16 +173,24 @@ def _checked(g_ub: float, spread: float, resolution: float, N: int, c: np.ndarra
 
 
 def coordinate_resolution(centres: np.ndarray, C: np.ndarray) -> float:
-    """The coordinates' resolution in pixels: ``RESOLUTION_REL`` max(f_px, median |x|) over the centres'
-    coordinates, f_px the pixel floor of the cameras C (N, 3, 4) (:func:`tritools.model.magnitude.resolutions` at
-    scale 1: the L2 path's rule)."""
+    """The coordinates' resolution in pixels: ``RESOLUTION_REL`` min_i max(f_i, |x_i|) over the views, f_i the
+    pixel floor of view i of the cameras C (N, 3, 4) at its centre (:func:`tritools.model.magnitude.
+    guard_resolutions` at scale 1: the L2 path's rule; review 47b H1)."""
     return float(coordinate_resolutions(np.asarray(centres, float)[None], np.asarray(C, float)[None])[0])
 
 
 def coordinate_resolutions(points: np.ndarray, C: np.ndarray) -> np.ndarray:
     """:func:`coordinate_resolution` of M problems' points (M, N, 2) and cameras (M, N, 3, 4) -> (M,) (the same rule,
     the same numbers)."""
-    return resolutions(np.ones(len(points)), points, pixel_floors(C, points))
+    return guard_resolutions(np.ones(len(points)), points, view_floors(C, points))
+
+
+def _resolution_pair(points: np.ndarray, C: np.ndarray) -> tuple:
+    """((M,) :func:`coordinate_resolutions`, (M,) the magnitude in pixels that floors the lowering of gamma_LB: the
+    median rule's, :func:`tritools.model.magnitude.resolutions` / ``RESOLUTION_REL``, as before the per-view
+    guard)."""
+    floor = resolutions(np.ones(len(points)), points, pixel_floors(C, points)) / RESOLUTION_REL
+    return coordinate_resolutions(points, C), floor
 
 
 def capped_resolution(resolution: float, c: np.ndarray, N: int, tolerances) -> float:

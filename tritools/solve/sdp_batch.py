@@ -39,14 +39,15 @@ from dataclasses import dataclass
 import numpy as np
 
 from sospoly import DEFAULT_TOLERANCES, Tolerances, n_lmivar_formula
-from sospoly.analysis import has_constant_entry, image_form_stack_margin
+from sospoly.analysis import constraint_error_stack, has_constant_entry, image_form_stack_margin
 from sospoly.budget import Deadline, TimeLimitReached, deadline_scope
 from sospoly.solvers import with_single_threaded_blas
 
 from ..model.frame import project_world
 from ..model.geometry import POINT_AT_INFINITY_RTOL
 from ..model.normalize import normalization_stack
-from ..model.stacked import fundamental_stack, norms, project_stack, refine_points_stack
+from ..model.epipolar_data import fundamental_bounds
+from ..model.stacked import fundamental_stack, norms, project_stack, refine_points_stack, view_pairs
 from ..result import Status
 from .decide import decide, decide_reported, gamma_from_c, gamma_lower, transfer_contradicts
 from .report import gamma_upper
@@ -121,7 +122,7 @@ def solve_corollary1_points(cameras, points2d, *, tolerances: Tolerances = DEFAU
     solved = _solve_stack(F, ok, N, tolerances, reason, deadline)
     if solved is None:                          # the compilation ran out of time: every problem handed back
         return _handed_back(C, x, reason)
-    c_lb, lam, V, gram_error, iters, comp = solved
+    c_lb, lam, V, gram_error, iters, comp, xs = solved
     X_raw_n, xn = _extract(V, lam, Cn, ok, reason, tolerances)
     X_n, g_n = _refined(Cn, X_raw_n, ok, refine, scalar)
     c_ub = 2 * N * g_n ** 2
@@ -129,7 +130,24 @@ def solve_corollary1_points(cameras, points2d, *, tolerances: Tolerances = DEFAU
     # minimiser has ||v*||^2 = f(v*) <= c_ub; the basis is b = (1, v) (||b||^2 <= 1 + c_ub) and q = 1 (degree 2)
     assert comp.structure.q.degree == 0
     c_lb = c_lb - image_form_stack_margin(lam, gram_error, 1.0 + c_ub, q_min=float(comp.structure.q.coefficients()[0]))
+    c_lb = c_lb - _data_error(comp, xs, Cn, F, ok, c_ub)
     return _decided(C, x, norm, ok, reason, tolerances, c_lb, c_ub, X_n, X_raw_n, xn, comp, iters)
+
+
+def _data_error(comp, xs, Cn, F, ok, c_ub) -> np.ndarray:
+    """(M,) sum_k |r_k| e_k: the certificates' multipliers r_k (constants at degree 2) times bounds e_k of the computed
+    constraints at a true minimiser v* (exactly feasible for the exact fundamental matrices of the normalised float
+    cameras): |g~_k(v*)| <= ||F~_k - lambda F_k||_F ||v~*_i|| ||v~*_j|| <= that norm times (1 + ||v*||^2 / 2), with
+    ||v*||^2 <= c_ub (:func:`tritools.model.epipolar_data.fundamental_bounds`; :func:`sospoly.analysis.rigor.
+    constraint_error_stack`).  0 for the problems not solved."""
+    M, N = Cn.shape[:2]
+    if not ok.any() or not F.shape[1]:
+        return np.zeros(M)
+    E = np.where(ok[:, None], fundamental_bounds(Cn, view_pairs(N), F), 0.0)
+    with np.errstate(invalid="ignore", over="ignore"):
+        e = E * (1.0 + np.where(ok, c_ub, 0.0) / 2)[:, None]
+    out = constraint_error_stack(comp.structure, np.where(ok[:, None], xs, 0.0), np.sqrt(np.where(ok, c_ub, 0.0)), e)
+    return np.where(ok, out, 0.0)
 
 
 def _solve_stack(F, ok, N: int, tol: Tolerances, reason: list, deadline):
@@ -141,7 +159,7 @@ def _solve_stack(F, ok, N: int, tol: Tolerances, reason: list, deadline):
     n = 2 * N + 1
     c_lb = np.full(M, np.nan)
     lam, V = np.tile(np.ones(n), (M, 1)), np.tile(np.eye(n), (M, 1, 1))
-    gram_error, iters = np.zeros(M), np.zeros(M, int)
+    gram_error, iters, xs = np.zeros(M), np.zeros(M, int), None
     try:
         with deadline_scope(deadline):
             ps = corollary1_point_structure(N)
@@ -164,11 +182,14 @@ def _solve_stack(F, ok, N: int, tol: Tolerances, reason: list, deadline):
         bb = comp.batch_bounds(th[start:start + step], ipm_tol, deadline)
         iters[part], c_lb[part], lam[part], V[part] = bb.iterations, bb.lower_bound, bb.eigenvalues, bb.eigenvectors
         gram_error[part] = bb.gram_error
+        if xs is None:
+            xs = np.zeros((M, bb.x.shape[1]))
+        xs[part] = bb.x
         for j in np.nonzero(~bb.ok)[0]:
             reason[part[j]] = bb.reason[j]
         ok[part[~bb.ok]] = False
     ok &= np.isfinite(c_lb)
-    return c_lb, lam, V, gram_error, iters, comp
+    return c_lb, lam, V, gram_error, iters, comp, (np.zeros((M, 0)) if xs is None else xs)
 
 
 def _extract(V, lam, Cn, ok, reason: list, tol: Tolerances) -> tuple[np.ndarray, np.ndarray]:
@@ -230,7 +251,7 @@ def _decided(C, x, norm, ok, reason, tol, c_lb, c_ub, X_n, X_raw_n, xn, comp, it
     X_world = norm.world_points(X_n)
     u_w, _, fin_w = project_world(C, X_world)
     g_ub = np.where(fin_w, gamma_upper(norms(u_w - x, axis=2), norms(u_w, axis=2)), np.inf)
-    g_lb = gamma_lower(gamma_from_c(c_rep, N, norm.scale), g_ub, norm.scale, norm.resolution,
+    g_lb = gamma_lower(gamma_from_c(c_rep, N, norm.scale), g_ub, norm.scale, norm.lowering_resolution,
                        norm.magnitudes_at(C, X_world))
     _hand_back(ok, transfer_contradicts(g_lb, g_ub, tol, N, norm.scale), reason,
                "the lower bound transferred to the caller's data lies above gamma(X): per-point re-solve")

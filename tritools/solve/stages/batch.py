@@ -44,7 +44,7 @@ from sospoly import n_lmivar_formula
 
 from ...model.constraints import Method
 from ...model.frame import moved_cameras, world_origins
-from ...model.magnitude import pixel_floors, resolutions
+from ...model.magnitude import guard_resolutions, view_floors
 from ...model.regions import Point
 from ...records import TriangulationResults
 from ...result import Attempt, Status
@@ -242,7 +242,7 @@ class BatchContext:
         m = d[np.any(self.origin[d] != 0, axis=1) & self.optimal[d] & (self.certified_by[d] != TRIVIAL_BOUND)]
         if not m.size:
             return
-        res = resolutions(self.scale[m], self.x[m], pixel_floors(self.C[m], self.x[m]))
+        res = guard_resolutions(self.scale[m], self.x[m], view_floors(self.C[m], self.x[m]))
         ok = decide_reported(self.gamma_lb[m], self.gamma_ub[m], self.opts.tolerances, self.N, self.scale[m], res)
         lost = m[~ok]
         self.optimal[lost], self.certified_by[lost] = False, None

@@ -74,7 +74,7 @@ def report_point(ctx: PointContext, step: Step, status, optimal, gamma_lb, *, X,
     if gamma_lb is not None and rep.gamma is not None and np.isfinite(rep.gamma):
         # of the caller's float data (the normalisation's round-off), never above the reported upper bound
         if not lowered:
-            gamma_lb = gamma_lower(gamma_lb, rep.gamma, ctx.norm.scale, ctx.norm.resolution,
+            gamma_lb = gamma_lower(gamma_lb, rep.gamma, ctx.norm.scale, ctx.norm.lowering_resolution,
                                    ctx.norm.magnitude_at(ctx.cams, X))
         if transfer_contradicts(gamma_lb, rep.gamma, ctx.tolerances, ctx.N, ctx.norm.scale):
             # the bound of the normalised problem, lowered by its round-off, is above gamma(X) of the caller's data

@@ -132,6 +132,12 @@ def test_refinement_of_a_few_views_on_floats_equals_the_array_iteration(monkeypa
     at_centre = centre[:3] / centre[3]
     X, ok, conv = stacked.refine_point(C, x, at_centre)
     assert not ok and not conv and np.array_equal(X, at_centre)
+    monkeypatch.setattr(stacked, "FLOAT_MAX_VIEWS", 0)
+    X, ok, conv = stacked.refine_point(C, x, at_centre)
+    assert not ok and not conv and np.array_equal(X, at_centre)
+    monkeypatch.undo()
+    listed = stacked.refine_point(C.tolist(), x.tolist(), X0)          # nested lists (review 47b L3)
+    assert listed[1] and np.allclose(listed[0], stacked.refine_point(C, x, X0)[0])
 
 
 def test_robust_batch_refused_row_records_its_call_attempt():

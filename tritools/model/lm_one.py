@@ -53,7 +53,7 @@ def refine_point_one(C: list, xhat: list, X: list) -> tuple:
 def refine_floats(C: np.ndarray, xhat: np.ndarray, X: np.ndarray, max_iter: int = LM_MAX_ITER) -> tuple:
     """:func:`tritools.model.stacked.refine_point` of cameras C (N, 3, 4), points x^ (N, 2) from X (3,) on floats
     (the iterations of the module docstring, at most ``max_iter``): (X (3,) array, ok, converged)."""
-    views, xh = [_split(P) for P in C.tolist()], xhat.tolist()
+    views, xh = [_split(P) for P in np.asarray(C, float).tolist()], np.asarray(xhat, float).tolist()
     Xl = [float(v) for v in X]
     at = _project(views, xh, Xl)
     if at is None:
@@ -66,7 +66,7 @@ def refine_floats(C: np.ndarray, xhat: np.ndarray, X: np.ndarray, max_iter: int 
 def polish_floats(C: np.ndarray, xhat: np.ndarray, X: np.ndarray) -> np.ndarray:
     """:func:`tritools.model.stacked.gauss_newton_polish` of one problem (C (N, 3, 4), x^ (N, 2), X (3,)) on floats:
     X after one undamped Gauss-Newton step kept iff it lowers f strictly and stays finite (a copy)."""
-    views, xh = [_split(P) for P in C.tolist()], xhat.tolist()
+    views, xh = [_split(P) for P in np.asarray(C, float).tolist()], np.asarray(xhat, float).tolist()
     Xl = [float(v) for v in X]
     at = _project(views, xh, Xl)
     return np.array(X, float) if at is None else np.array(_gauss_newton(views, xh, Xl, at))

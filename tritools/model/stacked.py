@@ -369,8 +369,9 @@ def refine_point(C: np.ndarray, xhat: np.ndarray, X: np.ndarray, ok: bool = True
     Jacobian d Phi / d X = (P[:2, :3] - u P[2, :3]) / (P[2] . X~), the damped step of :func:`damped_step_one`, a step
     accepted iff the cost does not increase, mu / 10 on acceptance (floor 1e-12) and x 10 otherwise, stop when ||step||
     <= LM_STEP_RTOL (1 + ||X||) (converged) or mu > 1e12 (stalled) or after ``max_iter`` (LM_MAX_ITER) iterations.
-    Plain (N, 2, 3) arrays and a 3x3 solve on floats instead of the stack's einsum and batched solve, so equal to it up
-    to round-off only. (X, ok, converged)."""
+    Plain (N, 2, 3) arrays and a 3x3 solve on floats instead of the stack's einsum and batched solve -- up to
+    ``FLOAT_MAX_VIEWS`` views the whole iteration on Python floats (:func:`tritools.model.lm_one.refine_floats`) --
+    so equal to it up to round-off only. (X, ok, converged)."""
     X = np.array(X, float)
     if not ok:
         return X, False, False

@@ -306,8 +306,7 @@ def world_frame_stage(ctx: PointContext) -> None:
             # the re-centred frame's bound lies above a cost the caller's data attain beyond the rule: no bound, as
             # in report_point (review 46c L3; clipping it to gamma_UB would report a certificate)
             ctx.best = replace(res, **kw, gamma_lb=None, status=Status.NUMERICAL_FAILURE, optimal=False,
-                               certified_by=None, message=join(res.message, TRANSFER_MESSAGE + " in the caller's "
-                                                                            "frame"))
+                               certified_by=None, message=TRANSFER_MESSAGE + " in the caller's frame")
             return
         kw["gamma_lb"] = min(res.gamma_lb, rep.gamma)
         if res.optimal and not decide_reported(kw["gamma_lb"], rep.gamma, ctx.tolerances, ctx.N, ctx.norm.scale,

@@ -60,7 +60,8 @@ class Status(str, enum.Enum):
     TIME_LIMIT
         The time limit of the budget was reached first (the best bounds found so far are reported).
     BUDGET_EXCEEDED
-        Every program that could certify the point exceeds the memory budget (nothing was built).
+        The next program of the plan exceeds the memory budget, so it was not built (the programs before it were
+        built and solved: their best bounds are reported; review 47a F2).
     INVALID_INPUT
         The method is not applicable to the given input (e.g. Newton with a non-point region).
     """

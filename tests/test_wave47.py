@@ -361,3 +361,29 @@ def test_two_views_of_very_different_pixel_scales_are_not_certified_beyond_the_f
                     assert r.gamma_ub <= ref * (1 + 1e-5) + 1e-12, (s0, s1, r.gamma_ub, ref)
                     certified_equal += s0 == s1
     assert certified_equal == 8
+
+
+def test_single_problem_resolutions_equal_the_stacked_rule():
+    """normalize._resolution_pair_one (the single call's per-view guard and median rule on floats, wave 47) equals
+    _resolution_pair on the stack of one, bit for bit: random scenes, per-view pixel scales 1e-3..1e6, a view without
+    a finite pixel scale, odd and even view counts."""
+    from tritools.model.normalize import _resolution_pair, _resolution_pair_one
+    from tritools.model.magnitude import pixel_floors
+    from tritools.model.stacked import pixel_scales
+
+    rng = np.random.default_rng(7)
+    for t in range(60):
+        N = 2 + t % 5
+        sc = random_scene(N, 1, noise_px=1.0, seed=200 + t)
+        s_view = 10.0 ** rng.uniform(-3, 6, N) if t % 3 else np.ones(N)
+        C = np.array([np.diag([k, k, 1.0]) @ P for k, P in zip(s_view, validate_cameras(sc.cameras))])
+        x = np.array([r.center for r in sc.regions(0)]) * s_view[:, None]
+        if t % 7 == 6:
+            C[0, 2, :3] = 0.0                        # a view with no finite pixel scale (its depth row's direction 0)
+        ps_all = pixel_scales(C, x).tolist()
+        good = [p for p in ps_all if 0.0 < p < np.inf]
+        med = float(np.median(good))
+        s = float(10.0 ** rng.uniform(-4, 2))
+        one = _resolution_pair_one(s, x.tolist(), ps_all, med)
+        stack = _resolution_pair(np.array([s]), x[None], C[None], pixel_floors(medians=med))
+        assert one[0][0] == stack[0][0] and one[1][0] == stack[1][0], (t, one, stack)

@@ -285,6 +285,30 @@ def _resolution_pair(scale, x: np.ndarray, C: np.ndarray | None, floor=None) -> 
     return guard_resolutions(scale, x, view_floors(C, x)), resolutions(scale, x, floor)
 
 
+def _resolution_pair_one(s: float, xi: list, ps_all: list, med: float) -> tuple:
+    """The scalar twin of :func:`_resolution_pair` for one problem on the common path of :func:`_normalization_one`
+    (points xi as N pairs, every view's pixel scale ``ps_all``, their median over the finite positive ones ``med``):
+    the same operations on floats, equal bit for bit (tests/test_wave47.py)."""
+    good = [p for p in ps_all if 0.0 < p < math.inf]
+    vmed = _median(good)
+    fallback = PIXEL_FLOOR_REL * vmed if 0.0 < vmed < math.inf else 1.0            # view_floors' fill
+    vf = [PIXEL_FLOOR_REL * p if 0.0 < p < math.inf else fallback for p in ps_all]
+    per = [max(f, max(abs(a), abs(b))) for f, (a, b) in zip(vf, xi)
+           if math.isfinite(a) and math.isfinite(b)]
+    coords = [abs(v) for pair in xi for v in pair]
+    xmed = math.nan if any(v != v for v in coords) else _median(coords)         # (median_rows: NaN sorts last)
+    xmag = xmed if math.isfinite(xmed) else 1.0
+
+    def rule(floor: float) -> float:                     # resolutions(): s RESOLUTION_REL max(floor, median |x|)
+        out = s * RESOLUTION_REL * max(floor, xmag)
+        return out if math.isfinite(out) and out > 0 else math.inf
+
+    median_rule = rule(_median(vf))
+    out = s * RESOLUTION_REL * min(per) if per else math.inf
+    guard = min(out, median_rule) if math.isfinite(out) and out > 0 else median_rule
+    return np.array([guard]), np.array([rule(PIXEL_FLOOR_REL * med if 0.0 < med < math.inf else 1.0)])
+
+
 def _copied(st: NormalizationStack) -> NormalizationStack:
     return NormalizationStack(*(None if a is None else a.copy() for a in
                                 (st.scale, st.shifts, st.origin, st.depth, st.cameras_n, st.Xn, st.ok, st.resolution,
@@ -340,7 +364,7 @@ def _normalization_one(C: np.ndarray, x: np.ndarray, ok: np.ndarray) -> Normaliz
         frame = _frame_one(P, xi, X0)
         if frame is None:
             return None
-        s, rho, rho_floor, d, Cn, med = frame
+        s, rho, rho_floor, d, Cn, med, ps_all = frame
         Xn, ok_r, converged = refine_point(Cn, np.zeros((N, 2)), np.zeros(3), True)
         u, _, fin = project_one(Cn, Xn)
         r = math.sqrt(float(np.add.reduce(np.add.reduce(u * u, axis=1))) / N) / s if fin else math.nan
@@ -349,7 +373,7 @@ def _normalization_one(C: np.ndarray, x: np.ndarray, ok: np.ndarray) -> Normaliz
         Cn[:, :2, :] *= s_new / s
         Cn /= norms(Cn, axis=(1, 2))[:, None, None]
     s_arr = np.array([s_new])
-    res, floor_res = _resolution_pair(s_arr, x, P[None], pixel_floors(medians=med))
+    res, floor_res = _resolution_pair_one(s_new, x[0].tolist(), ps_all, med)
     return NormalizationStack(s_arr, x.copy(), X0[None], np.array([d]), Cn[None], (Xn if use else np.zeros(3))[None],
                               np.ones(1, bool), res, np.array([use and converged]), floor_res)
 
@@ -363,11 +387,12 @@ def _median(values: list) -> float:
 
 
 def _frame_one(P: np.ndarray, xi: np.ndarray, X0: np.ndarray) -> tuple | None:
-    """(s, rho, rho_floor, d, Cn, median pixel scale) of :func:`_frames`, :func:`_rho_floor` and
-    :func:`median_pixel_scales` for one problem (cameras P (N, 3, 4) scaled by powers of two, points xi (N, 2), the
-    DLT point X0), or None off the common path (:func:`_normalization_one`)."""
+    """(s, rho, rho_floor, d, Cn, median pixel scale, every view's pixel scale) of :func:`_frames`,
+    :func:`_rho_floor` and :func:`median_pixel_scales` for one problem (cameras P (N, 3, 4) scaled by powers of two,
+    points xi (N, 2), the DLT point X0), or None off the common path (:func:`_normalization_one`)."""
     N = len(xi)
-    ps = [p for p in pixel_scales(P, xi).tolist() if 0.0 < p < math.inf]
+    ps_all = pixel_scales(P, xi).tolist()
+    ps = [p for p in ps_all if 0.0 < p < math.inf]
     if not ps:
         return None
     med = _median(ps)
@@ -395,7 +420,7 @@ def _frame_one(P: np.ndarray, xi: np.ndarray, X0: np.ndarray) -> tuple | None:
     Cn /= norms(Cn, axis=(1, 2))[:, None, None]
     if not np.isfinite(Cn).all():
         return None
-    return s, rho, rho_floor, d, Cn, med
+    return s, rho, rho_floor, d, Cn, med, ps_all
 
 
 def framed(C: np.ndarray, X0: np.ndarray, d) -> np.ndarray:

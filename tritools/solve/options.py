@@ -182,7 +182,11 @@ class TriangulationOptions:
 
     Parameters
     ----------
-    method : "auto", "theorem1" (4x4 minors + SVD reduction) or "corollary1" (epipolar constraints)
+    method : "auto", "theorem1" (4x4 minors + SVD reduction) or "corollary1" (epipolar constraints); an explicit
+        method runs that certificate's degree plan only, without the stages "auto" adds (the sub-problem of the views
+        whose regions hold the estimate, where long regions are trimmed; the exact-variety step at 5+ views; the
+        multi-start estimate of uncertified point problems; docs/certificates.md), so it may leave ``not_certified``
+        a problem "auto" certifies (review 47a F6)
     delta : first relaxation degree (even, >= delta_min; default delta_min)
     max_delta : last degree tried (default: 4 for ``method="auto"``; ``delta`` when given, else
         delta_min + 2, for an explicit method)

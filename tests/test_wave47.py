@@ -364,10 +364,11 @@ def test_two_views_of_very_different_pixel_scales_are_not_certified_beyond_the_f
 
 
 def test_single_problem_resolutions_equal_the_stacked_rule():
-    """normalize._resolution_pair_one (the single call's per-view guard and median rule on floats, wave 47) equals
-    _resolution_pair on the stack of one, bit for bit: random scenes, per-view pixel scales 1e-3..1e6, a view without
+    """magnitude.resolution_pair_one (the single call's per-view guard and median rule on floats, wave 47) equals
+    resolution_pair on the stack of one, bit for bit: random scenes, per-view pixel scales 1e-3..1e6, a view without
     a finite pixel scale, odd and even view counts."""
-    from tritools.model.normalize import _resolution_pair, _resolution_pair_one
+    from tritools.model.magnitude import resolution_pair as _resolution_pair
+    from tritools.model.magnitude import resolution_pair_one as _resolution_pair_one
     from tritools.model.magnitude import pixel_floors
     from tritools.model.stacked import pixel_scales
 

@@ -23,7 +23,8 @@ from .oblique import obliquities, obliquity_one
 from .stacked import median_rows, pixel_scales
 
 __all__ = ["magnitudes", "origin_magnitudes", "world_origin_magnitudes", "world_origin_magnitude_one", "resolutions",
-           "guard_resolutions", "view_floors", "median_pixel_scales", "pixel_floors", "RESOLUTION_REL",
+           "guard_resolutions", "view_floors", "resolution_pair", "resolution_pair_one", "list_median",
+           "median_pixel_scales", "pixel_floors", "RESOLUTION_REL",
            "PIXEL_FLOOR_REL", "SCALAR_MAX_VIEWS"]
 
 #: the resolution of the coordinates, relative to their magnitude (sqrt of the machine epsilon).
@@ -227,6 +228,49 @@ def view_floors(C: np.ndarray, x: np.ndarray) -> np.ndarray:
     good = np.isfinite(ps) & (ps > 0)
     fallback = pixel_floors(medians=_nanmedian_rows(np.where(good, ps, np.nan)))
     return np.where(good, PIXEL_FLOOR_REL * ps, fallback[:, None])
+
+
+def resolution_pair(scale, x: np.ndarray, C: np.ndarray | None, floor=None) -> tuple:
+    """((M,) the decision's resolution, (M,) the median rule's) of problems with points x (M, N, 2) and cameras C
+    (M, N, 3, 4) (None: 1 px floors) at image scales ``scale``: :func:`guard_resolutions` and :func:`resolutions`
+    (``floor``: the problems' pixel floors, when known)."""
+    if C is None:
+        return guard_resolutions(scale, x, np.ones(x.shape[:2])), resolutions(scale, x, 1.0)
+    floor = pixel_floors(C, x) if floor is None else floor
+    return guard_resolutions(scale, x, view_floors(C, x)), resolutions(scale, x, floor)
+
+
+def resolution_pair_one(s: float, xi: list, ps_all: list, med: float) -> tuple:
+    """The scalar twin of :func:`resolution_pair` for one problem on the common path of
+    :func:`tritools.model.normalize._normalization_one`
+    (points xi as N pairs, every view's pixel scale ``ps_all``, their median over the finite positive ones ``med``):
+    the same operations on floats, equal bit for bit (tests/test_wave47.py)."""
+    good = [p for p in ps_all if 0.0 < p < math.inf]
+    vmed = list_median(good)
+    fallback = PIXEL_FLOOR_REL * vmed if 0.0 < vmed < math.inf else 1.0            # view_floors' fill
+    vf = [PIXEL_FLOOR_REL * p if 0.0 < p < math.inf else fallback for p in ps_all]
+    per = [max(f, max(abs(a), abs(b))) for f, (a, b) in zip(vf, xi)
+           if math.isfinite(a) and math.isfinite(b)]
+    coords = [abs(v) for pair in xi for v in pair]
+    xmed = math.nan if any(v != v for v in coords) else list_median(coords)         # (median_rows: NaN sorts last)
+    xmag = xmed if math.isfinite(xmed) else 1.0
+
+    def rule(floor: float) -> float:                     # resolutions(): s RESOLUTION_REL max(floor, median |x|)
+        out = s * RESOLUTION_REL * max(floor, xmag)
+        return out if math.isfinite(out) and out > 0 else math.inf
+
+    median_rule = rule(list_median(vf))
+    out = s * RESOLUTION_REL * min(per) if per else math.inf
+    guard = min(out, median_rule) if math.isfinite(out) and out > 0 else median_rule
+    return np.array([guard]), np.array([rule(PIXEL_FLOOR_REL * med if 0.0 < med < math.inf else 1.0)])
+
+
+def list_median(values: list) -> float:
+    """The median of a non-empty list of floats without NaN: the middle one, or the mean of the middle two as
+    (lo + hi) / 2 (:func:`median_rows`' formula)."""
+    v = sorted(values)
+    n = len(v)
+    return v[n // 2] if n % 2 else (v[n // 2 - 1] + v[n // 2]) / 2
 
 
 def median_pixel_scales(C: np.ndarray, x: np.ndarray) -> np.ndarray:

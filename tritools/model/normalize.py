@@ -60,9 +60,9 @@ import numpy as np
 
 from .exact import homogeneous_images
 from .cameras import power2_scale
-from .magnitude import (PIXEL_FLOOR_REL, RESOLUTION_REL, magnitudes, median_pixel_scales,
-                        origin_magnitudes, pixel_floors, resolutions, world_origin_magnitude_one, guard_resolutions,
-                        world_origin_magnitudes, view_floors)
+from .magnitude import (PIXEL_FLOOR_REL, RESOLUTION_REL, list_median as _median, magnitudes, median_pixel_scales,
+                        origin_magnitudes, pixel_floors, resolution_pair, resolution_pair_one, resolutions,
+                        world_origin_magnitude_one, world_origin_magnitudes)
 from .geometry import COMMON_CENTRE_RTOL, POINT_AT_INFINITY_RTOL, point_from_image_points
 from .stacked import (dlt_stack, median_rows, norms, null_vectors, pixel_scales, project_one, project_quiet,
                       project_stack, refine_point, refine_points_stack)
@@ -113,7 +113,7 @@ class Normalization:
         if points is None:
             return cls(1.0, np.zeros((n_views, 2)), np.zeros(3), 1.0)
         x = np.asarray(points, float)[None]
-        res, floor_res = (float(r[0]) for r in _resolution_pair(np.ones(1), x, None if cameras is None else
+        res, floor_res = (float(r[0]) for r in resolution_pair(np.ones(1), x, None if cameras is None else
                                                                 np.asarray(cameras, float)[None]))
         return cls(1.0, np.zeros((n_views, 2)), np.zeros(3), 1.0, res, float(magnitudes(x)[0]),
                    floor_resolution=floor_res)
@@ -275,40 +275,6 @@ def normalization_stack(C: np.ndarray, x: np.ndarray, ok: np.ndarray | None = No
     return st
 
 
-def _resolution_pair(scale, x: np.ndarray, C: np.ndarray | None, floor=None) -> tuple:
-    """((M,) the decision's resolution, (M,) the median rule's) of problems with points x (M, N, 2) and cameras C
-    (M, N, 3, 4) (None: 1 px floors) at image scales ``scale``: :func:`~tritools.model.magnitude.guard_resolutions`
-    and :func:`~tritools.model.magnitude.resolutions` (``floor``: the problems' pixel floors, when known)."""
-    if C is None:
-        return guard_resolutions(scale, x, np.ones(x.shape[:2])), resolutions(scale, x, 1.0)
-    floor = pixel_floors(C, x) if floor is None else floor
-    return guard_resolutions(scale, x, view_floors(C, x)), resolutions(scale, x, floor)
-
-
-def _resolution_pair_one(s: float, xi: list, ps_all: list, med: float) -> tuple:
-    """The scalar twin of :func:`_resolution_pair` for one problem on the common path of :func:`_normalization_one`
-    (points xi as N pairs, every view's pixel scale ``ps_all``, their median over the finite positive ones ``med``):
-    the same operations on floats, equal bit for bit (tests/test_wave47.py)."""
-    good = [p for p in ps_all if 0.0 < p < math.inf]
-    vmed = _median(good)
-    fallback = PIXEL_FLOOR_REL * vmed if 0.0 < vmed < math.inf else 1.0            # view_floors' fill
-    vf = [PIXEL_FLOOR_REL * p if 0.0 < p < math.inf else fallback for p in ps_all]
-    per = [max(f, max(abs(a), abs(b))) for f, (a, b) in zip(vf, xi)
-           if math.isfinite(a) and math.isfinite(b)]
-    coords = [abs(v) for pair in xi for v in pair]
-    xmed = math.nan if any(v != v for v in coords) else _median(coords)         # (median_rows: NaN sorts last)
-    xmag = xmed if math.isfinite(xmed) else 1.0
-
-    def rule(floor: float) -> float:                     # resolutions(): s RESOLUTION_REL max(floor, median |x|)
-        out = s * RESOLUTION_REL * max(floor, xmag)
-        return out if math.isfinite(out) and out > 0 else math.inf
-
-    median_rule = rule(_median(vf))
-    out = s * RESOLUTION_REL * min(per) if per else math.inf
-    guard = min(out, median_rule) if math.isfinite(out) and out > 0 else median_rule
-    return np.array([guard]), np.array([rule(PIXEL_FLOOR_REL * med if 0.0 < med < math.inf else 1.0)])
-
-
 def _copied(st: NormalizationStack) -> NormalizationStack:
     return NormalizationStack(*(None if a is None else a.copy() for a in
                                 (st.scale, st.shifts, st.origin, st.depth, st.cameras_n, st.Xn, st.ok, st.resolution,
@@ -338,7 +304,7 @@ def _normalization_stack(C: np.ndarray, x: np.ndarray, ok: np.ndarray) -> Normal
     s_new = _clip_scale(1.0 / rho_ref)
     Cn[:, :, :2, :] *= (s_new / s)[:, None, None, None]
     Cn /= norms(Cn, axis=(2, 3))[..., None, None]
-    res, floor_res = _resolution_pair(s_new, x, C, pixel_floors(medians=med))
+    res, floor_res = resolution_pair(s_new, x, C, pixel_floors(medians=med))
     return NormalizationStack(s_new, x.copy(), X0, d, Cn, np.where(use[:, None], Xn, 0.0), ok, res, use & converged,
                               floor_res)
 
@@ -373,17 +339,9 @@ def _normalization_one(C: np.ndarray, x: np.ndarray, ok: np.ndarray) -> Normaliz
         Cn[:, :2, :] *= s_new / s
         Cn /= norms(Cn, axis=(1, 2))[:, None, None]
     s_arr = np.array([s_new])
-    res, floor_res = _resolution_pair_one(s_new, x[0].tolist(), ps_all, med)
+    res, floor_res = resolution_pair_one(s_new, x[0].tolist(), ps_all, med)
     return NormalizationStack(s_arr, x.copy(), X0[None], np.array([d]), Cn[None], (Xn if use else np.zeros(3))[None],
                               np.ones(1, bool), res, np.array([use and converged]), floor_res)
-
-
-def _median(values: list) -> float:
-    """The median of a non-empty list of floats without NaN: the middle one, or the mean of the middle two as
-    (lo + hi) / 2 (:func:`median_rows`' formula)."""
-    v = sorted(values)
-    n = len(v)
-    return v[n // 2] if n % 2 else (v[n // 2 - 1] + v[n // 2]) / 2
 
 
 def _frame_one(P: np.ndarray, xi: np.ndarray, X0: np.ndarray) -> tuple | None:
@@ -504,7 +462,7 @@ def normalization_for(cameras: np.ndarray, regions, enabled: bool = True) -> Nor
     if st.ok[0]:
         norm = st.item(0)
     else:
-        res, floor_res = (float(r[0]) for r in _resolution_pair(np.ones(1), centers[None],
+        res, floor_res = (float(r[0]) for r in resolution_pair(np.ones(1), centers[None],
                                                                 np.asarray(cameras, float)[None]))
         norm = Normalization(1.0, centers, np.zeros(3), 1.0, res,
                              float(magnitudes(centers[None], np.asarray(cameras, float)[None])[0]),
@@ -516,7 +474,7 @@ def normalization_for(cameras: np.ndarray, regions, enabled: bool = True) -> Nor
     if any(getattr(r, "exact_scale", False) for r in regions):
         s = power_of_two_below(s)
     if s != norm.scale:
-        res, floor_res = (float(r[0]) for r in _resolution_pair(np.array([s]), centers[None],
+        res, floor_res = (float(r[0]) for r in resolution_pair(np.array([s]), centers[None],
                                                                 np.asarray(cameras, float)[None]))
         norm = dataclasses.replace(norm, scale=s, resolution=res, floor_resolution=floor_res)
     return norm

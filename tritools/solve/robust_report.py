@@ -33,8 +33,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..model.cameras import power2_scale
-from ..model.magnitude import (RESOLUTION_REL, guard_resolutions, magnitudes, pixel_floors, resolutions, view_floors,
-                               world_origin_magnitudes)
+from ..model.magnitude import (RESOLUTION_REL, guard_resolutions, magnitudes, resolution_pair,
+                               view_floors, world_origin_magnitudes)
 from ..model.stacked import norms, null_vectors
 from .decide import gamma_from_c, gamma_lower_one, within_resolution_one
 from .report import enlarged_distances, gamma_upper, projections_and_spread, projections_and_spread_stack
@@ -187,10 +187,10 @@ def coordinate_resolutions(points: np.ndarray, C: np.ndarray) -> np.ndarray:
 
 def _resolution_pair(points: np.ndarray, C: np.ndarray) -> tuple:
     """((M,) :func:`coordinate_resolutions`, (M,) the magnitude in pixels that floors the lowering of gamma_LB: the
-    median rule's, :func:`tritools.model.magnitude.resolutions` / ``RESOLUTION_REL``, as before the per-view
-    guard)."""
-    floor = resolutions(np.ones(len(points)), points, pixel_floors(C, points)) / RESOLUTION_REL
-    return coordinate_resolutions(points, C), floor
+    median rule's (:func:`tritools.model.magnitude.resolution_pair` at scale 1, its second part / ``RESOLUTION_REL``),
+    as before the per-view guard)."""
+    guard, median_rule = resolution_pair(np.ones(len(points)), points, C)
+    return guard, median_rule / RESOLUTION_REL
 
 
 def capped_resolution(resolution: float, c: np.ndarray, N: int, tolerances) -> float:

@@ -81,12 +81,13 @@ def test_subset_bounds_below_every_subset_optimum(N, n_out, pixel_scale):
     W = enum_mod.subset_masks(N)
     Xn = enum_mod.enum_candidates(Cn, W)
     lb, accepted = enum_mod.enum_bounds(cams, Cn, W, Xn, norm.scale, TOL)
-    F, defined = enum_mod.fundamentals(cams[None], Cn[None])
+    F, defined, E = enum_mod.fundamentals(cams[None], Cn[None])
     M = len(W)
     only, none = enum_mod.enum_bounds_rows(np.broadcast_to(Cn, (M,) + Cn.shape),
                                            np.broadcast_to(F[0], (M,) + F.shape[1:]),
                                            np.broadcast_to(defined[0], (M,) + defined.shape[1:]), W, Xn,
-                                           np.full(M, norm.scale), TOL, accepted=False)
+                                           np.full(M, norm.scale), TOL, accepted=False,
+                                           errors=np.broadcast_to(E[0], (M,) + E.shape[1:]))
     assert none is None and np.array_equal(only, lb)          # the enumeration's call: the same bounds
     bits = W.astype(np.int64) @ (1 << np.arange(N))
     table = np.zeros(1 << N)
@@ -310,3 +311,28 @@ def test_first_of_runs_equals_numpy_unique_on_sorted_keys():
     for _ in range(500):
         a = np.sort(rng.integers(0, rng.integers(1, 10), size=rng.integers(0, 30)))
         assert np.array_equal(_first_of_runs(a), np.unique(a, return_index=True)[1])
+
+
+@pytest.mark.parametrize("by_size", [False, True])
+def test_precomputed_f_errors_reach_their_pairs(by_size):
+    """F's proven errors are computed once per problem (:func:`fundamentals`) and gathered per subset: an error of
+    inf on the pair (0, 1) only costs the bounds of the subsets holding both views 0 and 1 (their bound drops to
+    0); every other subset keeps the bound it has with the finite errors."""
+    N = 4
+    rng = np.random.default_rng(5)
+    P, obs, X, out = robust_protocol_scene(N, 0, 1.0, rng)
+    norm, Cn = enum_mod.enum_frame(P, obs)
+    W = enum_mod.subset_masks(N)
+    Xn = enum_mod.enum_candidates(Cn, W)
+    F, defined, E = enum_mod.fundamentals(P[None], Cn[None])
+    assert np.isfinite(E).all() and (E > 0).all()
+    M = len(W)
+    args = (np.broadcast_to(Cn, (M,) + Cn.shape), F, defined, W, Xn, np.full(M, norm.scale), TOL)
+    problem = np.zeros(M, int)
+    lb, _ = enum_mod.enum_bounds_rows(*args, problem=problem, by_size=by_size, accepted=False, errors=E)
+    bad = E.copy()
+    bad[0, 0] = np.inf                                   # view_pairs(4)[0] is the pair (0, 1)
+    lb_bad, _ = enum_mod.enum_bounds_rows(*args, problem=problem, by_size=by_size, accepted=False, errors=bad)
+    both = W[:, 0] & W[:, 1]
+    assert (lb[both] > 0).all() and (lb_bad[both] == 0).all()
+    assert np.array_equal(lb_bad[~both], lb[~both])

@@ -21,7 +21,7 @@ from tritools.solve import robust_enum as enum
 
 def _framed(P, x):
     frame, Cn = enum.enum_frame(P, x)
-    F, defined = enum.fundamentals(P[None], Cn[None])
+    F, defined, _ = enum.fundamentals(P[None], Cn[None])
     assert defined[0, 0]
     return frame, Cn, F[0, 0]
 

@@ -49,11 +49,12 @@ _R1P, _R2Q, _R1Q, _R2P = (np.array([[4 * rows[ra] + cols[cb] for cols in _COLUMN
 EPIPOLAR_DATA_RTOL = 16 * 2.0 ** -52
 
 
-def epipolar_errors(F: np.ndarray, pairs: tuple, v: np.ndarray, radius, cameras: np.ndarray | None = None
-                    ) -> np.ndarray:
+def epipolar_errors(F: np.ndarray, pairs: tuple, v: np.ndarray, radius, cameras: np.ndarray | None = None,
+                    proven: np.ndarray | None = None) -> np.ndarray:
     """(M, K) bounds e_k of the module docstring for F (M, K, 3, 3) of the view pairs ``pairs`` = (I, J) (rows of
     zeros: dropped constraints, e = 0), the candidates v (M, 2N) and the radii (M,) (or a scalar); ``cameras``
-    (M, N, 3, 4): the cameras F was computed from, whose :func:`fundamental_bounds` replace the model's 16 ulps."""
+    (M, N, 3, 4): the cameras F was computed from, whose :func:`fundamental_bounds` replace the model's 16 ulps;
+    ``proven`` (M, K): those bounds computed already (e.g. once per problem for many subsets of its pairs)."""
     F = np.asarray(F, float)
     M, K = F.shape[:2]
     I, J = (np.asarray(p, int) for p in pairs)
@@ -64,7 +65,9 @@ def epipolar_errors(F: np.ndarray, pairs: tuple, v: np.ndarray, radius, cameras:
         g = np.einsum("mka,mkab,mkb->mk", vi, F, vj)
         seen = 4 * np.abs(g) / (norms(vi, axis=2) * norms(vj, axis=2))      # (np.linalg.norm's numbers)
         base = EPIPOLAR_DATA_RTOL * norms(F, axis=(2, 3))
-        proven = base if cameras is None else np.where(base > 0, fundamental_bounds(cameras, (I, J), F), 0.0)
+        if proven is None:
+            proven = base if cameras is None else fundamental_bounds(cameras, (I, J), F)
+        proven = np.where(base > 0, proven, 0.0)
         e = np.maximum(proven, np.where(np.isfinite(seen), seen, np.inf))
         R = np.broadcast_to(np.asarray(radius, float), (M,))
         return np.where(base > 0, e * (1.0 + R[:, None] ** 2 / 2) * (1 + 1e-12), 0.0)

@@ -58,7 +58,7 @@ import numpy as np
 from sospoly.analysis import ascend_one, bound_at_one, verify_quadratic_batch
 
 from ..model.cameras import power2_scale
-from ..model.epipolar_data import epipolar_errors
+from ..model.epipolar_data import epipolar_errors, fundamental_bounds
 from ..model.exact import dot2, homogeneous_images
 from ..model.lm_one import refine_point_one
 from ..model.normalize import RHO_FLOOR_REL, SCALE_BOUNDS, Normalization
@@ -312,29 +312,33 @@ def refine_row_one(Cn: np.ndarray, X0: np.ndarray, views: list) -> tuple:
 
 
 def fundamentals(C: np.ndarray, Cn: np.ndarray) -> tuple:
-    """(F (P, K, 3, 3), defined (P, K)) of the view pairs of P problems in their normalised frames Cn (P, N, 3, 4),
-    with coincident centres decided on the raw cameras C (P, N, 3, 4) too: computed once per problem, for every
-    subset bound of :func:`enum_bounds_rows`."""
+    """(F (P, K, 3, 3), defined (P, K), E (P, K)) of the view pairs of P problems in their normalised frames Cn
+    (P, N, 3, 4), with coincident centres decided on the raw cameras C (P, N, 3, 4) too, and E the proven errors of
+    the computed F (:func:`tritools.model.epipolar_data.fundamental_bounds` of Cn): computed once per problem, for
+    every subset bound of :func:`enum_bounds_rows` and :func:`ascended_bound` (a subset's pairs gather them)."""
     Cs = C / norms(C, axis=(2, 3))[..., None, None]
     F, defined = fundamental_stack(np.concatenate([Cn, Cs]))
     P = len(Cn)
-    return F[:P], defined[:P] & defined[P:]
+    F = F[:P]
+    return F, defined[:P] & defined[P:], fundamental_bounds(Cn, view_pairs(Cn.shape[1]), F)
 
 
 def enum_bounds(C: np.ndarray, Cn: np.ndarray, W: np.ndarray, Xn: np.ndarray, s: float, tolerances):
     """:func:`enum_bounds_rows` of one problem (cameras C (N, 3, 4), normalised Cn, frame scale s)."""
-    F, defined = fundamentals(C[None], Cn[None])
+    F, defined, E = fundamentals(C[None], Cn[None])
     M = len(W)
     return enum_bounds_rows(np.broadcast_to(Cn, (M,) + Cn.shape), np.broadcast_to(F[0], (M,) + F.shape[1:]),
-                            np.broadcast_to(defined[0], (M,) + defined.shape[1:]), W, Xn, np.full(M, s), tolerances)
+                            np.broadcast_to(defined[0], (M,) + defined.shape[1:]), W, Xn, np.full(M, s), tolerances,
+                            errors=np.broadcast_to(E[0], (M,) + E.shape[1:]))
 
 
 def enum_bounds_rows(Cn, F, defined, W: np.ndarray, Xn: np.ndarray, s: np.ndarray, tolerances, problem=None,
-                     by_size: bool = False, accepted: bool = True):
+                     by_size: bool = False, accepted: bool = True, errors=None):
     """(L2 lower bounds (M,) pixels^2, accepted (M,)) of the subsets ``W`` (M, N) at the normalised candidates Xn
     (M, 3), each row with its problem's normalised cameras Cn (M, N, 3, 4), fundamental matrices F (M, K, 3, 3) and
     ``defined`` (M, K) (:func:`fundamentals`; with ``problem`` (M,): F (P, K, 3, 3) and ``defined`` (P, K) per
-    problem, row m's problem ``problem[m]``, so that only its subset's pairs are gathered) and frame scale s (M,)
+    problem, row m's problem ``problem[m]``, so that only its subset's pairs are gathered), F's proven errors
+    ``errors`` shaped as ``defined`` (:func:`fundamentals`' E; None: computed from Cn) and frame scale s (M,)
     (module docstring): the Lagrangian bound of
     the degree-2 program of each subset, the epipolar constraints of its view pairs only.  ``accepted``: the bound
     meets the candidate's value under the certificate rule at the subset's residual scale (as
@@ -349,7 +353,8 @@ def enum_bounds_rows(Cn, F, defined, W: np.ndarray, Xn: np.ndarray, s: np.ndarra
     if not by_size:
         if problem is not None:
             F, defined = F[problem], defined[problem]
-        return _masked_bounds(Cn, F, defined, W, Xn, s, tolerances, accepted)
+            errors = None if errors is None else errors[problem]
+        return _masked_bounds(Cn, F, defined, W, Xn, s, tolerances, accepted, errors)
     size = W.sum(axis=1)
     lb, ok = np.zeros(M), np.zeros(M, bool)
     for k in np.unique(size):
@@ -359,7 +364,7 @@ def enum_bounds_rows(Cn, F, defined, W: np.ndarray, Xn: np.ndarray, s: np.ndarra
         pair = _pair_index(N)[views[:, Ik], views[:, Jk]]     # (R, k(k-1)/2): their pairs' rows of F
         owner = (r if problem is None else problem[r])[:, None]
         lb[r], acc = _subset_bounds(Cn[r[:, None], views], F[owner, pair], defined[owner, pair], Xn[r], s[r],
-                                    tolerances, accepted)
+                                    tolerances, accepted, None if errors is None else errors[owner, pair])
         if accepted:
             ok[r] = acc
     return lb, (ok if accepted else None)
@@ -375,7 +380,8 @@ def _pair_index(N: int) -> np.ndarray:
     return out
 
 
-def _masked_bounds(Cn, F, defined, W: np.ndarray, Xn: np.ndarray, s: np.ndarray, tolerances, accepted=True):
+def _masked_bounds(Cn, F, defined, W: np.ndarray, Xn: np.ndarray, s: np.ndarray, tolerances, accepted=True,
+                   errors=None):
     """:func:`enum_bounds_rows` in one masked stack of N views (a view outside a row's subset: its image variables
     0 in the candidate, its epipolar constraints dropped)."""
     M, N = W.shape
@@ -385,13 +391,14 @@ def _masked_bounds(Cn, F, defined, W: np.ndarray, Xn: np.ndarray, s: np.ndarray,
     I, J = view_pairs(N)
     held = W[:, I] & W[:, J] & defined
     return _verified(v, fin, np.where(held[..., None, None], F, 0.0), N, s, tolerances, W.sum(axis=1), accepted,
-                     Cn)
+                     Cn, errors)
 
 
-def _verified(v, fin, F, N: int, s, tolerances, size, accepted=True, Cn=None):
+def _verified(v, fin, F, N: int, s, tolerances, size, accepted=True, Cn=None, errors=None):
     """The bounds and acceptance of :func:`enum_bounds_rows` from the rows' image candidates v (M, 2N), finiteness
     ``fin`` and the fundamental matrices F (M, N(N-1)/2, 3, 3) of the constraints they hold (0: dropped), computed
-    from the cameras Cn (M, N, 3, 4) (their proven error, :func:`tritools.model.epipolar_data.fundamental_bounds`)."""
+    from the cameras Cn (M, N, 3, 4) (their proven error ``errors`` (M, N(N-1)/2), None: computed here,
+    :func:`tritools.model.epipolar_data.fundamental_bounds`)."""
     M = len(v)
     g0, g1, G2 = epipolar_quadratics(F, N)
     good = fin & np.isfinite(g0).all(axis=1) & np.isfinite(g1).all(axis=(1, 2))
@@ -399,7 +406,7 @@ def _verified(v, fin, F, N: int, s, tolerances, size, accepted=True, Cn=None):
     radius = np.sqrt(np.einsum("mi,mi->m", v, v))
     ver = verify_quadratic_batch(np.zeros(M), np.zeros((M, n)), np.broadcast_to(np.eye(n), (M, n, n)), g0, g1, G2,
                                  v, tolerances=tolerances, radius=radius,
-                                 constraint_error=epipolar_errors(F, view_pairs(N), v, radius, Cn))
+                                 constraint_error=epipolar_errors(F, view_pairs(N), v, radius, Cn, errors))
     with np.errstate(invalid="ignore", over="ignore"):
         lb = np.maximum(np.minimum(ver.lower_bound, radius ** 2), 0.0) / (s * s) * ROUND_DOWN
         good &= np.isfinite(lb)
@@ -410,12 +417,14 @@ def _verified(v, fin, F, N: int, s, tolerances, size, accepted=True, Cn=None):
         return lb, good & np.asarray(tolerances.certified(lb, ub, ub / size), bool)
 
 
-def ascended_bound(Cn, F, defined, W: np.ndarray, Xn: np.ndarray, s: float, tolerances, need: float) -> float:
+def ascended_bound(Cn, F, defined, W: np.ndarray, Xn: np.ndarray, s: float, tolerances, need: float,
+                   errors=None) -> float:
     """The L2 lower bound (pixels^2) of one subset ``W`` (N,) of one problem (Cn (N, 3, 4), F (K, 3, 3), ``defined``
-    (K,) of :func:`fundamentals`, frame scale ``s``) by the best degree-2 certificate rather than the one at the
-    candidate Xn (3,) (:func:`sospoly.analysis.ascend_one` from the candidate's KKT multipliers, stopping once the
-    bound passes ``need`` pixels^2; the bound itself :func:`sospoly.analysis.bound_at_one` at the multipliers found,
-    with the rigorous margin on the ball of the candidate's norm, rounded as :func:`_verified` rounds).  0 when
+    (K,) and F's proven errors ``errors`` (K,; None: computed) of :func:`fundamentals`, frame scale ``s``) by the
+    best degree-2 certificate rather than the one at the candidate Xn (3,) (:func:`sospoly.analysis.ascend_one`
+    from the candidate's KKT multipliers, stopping once the bound passes ``need`` pixels^2; the bound itself
+    :func:`sospoly.analysis.bound_at_one` at the multipliers found, with the rigorous margin on the ball of the
+    candidate's norm, rounded as :func:`_verified` rounds).  0 when
     no bound is found.  Where the relaxation is not tight at the candidate (a wrong match among three views: the
     KKT multipliers' Lagrangian is indefinite) its SDP value may still exceed what a search needs."""
     N = len(W)
@@ -430,7 +439,8 @@ def ascended_bound(Cn, F, defined, W: np.ndarray, Xn: np.ndarray, s: float, tole
         return 0.0
     n = 2 * N
     radius = float(np.sqrt(v @ v))
-    err = epipolar_errors(np.where(held[:, None, None], F, 0.0)[None], (I, J), v[None], radius, Cn[None])
+    err = epipolar_errors(np.where(held[:, None, None], F, 0.0)[None], (I, J), v[None], radius, Cn[None],
+                          None if errors is None else errors[None])
     ver = verify_quadratic_batch(np.zeros(1), np.zeros((1, n)), np.eye(n)[None], g0, g1, G2, v[None],
                                  tolerances=tolerances, radius=np.array([radius]), constraint_error=err)
     found = ascend_one(0.0, np.zeros(n), np.eye(n), g0[0], g1[0], G2, ver.multipliers[0],
@@ -448,14 +458,14 @@ def ascended_bound(Cn, F, defined, W: np.ndarray, Xn: np.ndarray, s: float, tole
 ASCENT_HEADROOM = 1e-6
 
 
-def _subset_bounds(Cn, F, defined, Xn: np.ndarray, s: np.ndarray, tolerances, accepted=True):
-    """:func:`enum_bounds_rows` of rows holding all their k views: cameras Cn (M, k, 3, 4), F (M, k(k-1)/2, 3, 3)
-    and ``defined`` of the pairs of :func:`view_pairs` (k)."""
+def _subset_bounds(Cn, F, defined, Xn: np.ndarray, s: np.ndarray, tolerances, accepted=True, errors=None):
+    """:func:`enum_bounds_rows` of rows holding all their k views: cameras Cn (M, k, 3, 4), F (M, k(k-1)/2, 3, 3),
+    ``defined`` and F's proven ``errors`` (None: computed) of the pairs of :func:`view_pairs` (k)."""
     M, N = Cn.shape[:2]
     u, _, fin = project_stack(Cn, Xn)
     fin &= np.isfinite(Xn).all(axis=1)
     v = np.where(fin[:, None, None], u, 0.0).reshape(M, -1)
-    return _verified(v, fin, np.where(defined[..., None, None], F, 0.0), N, s, tolerances, N, accepted, Cn)
+    return _verified(v, fin, np.where(defined[..., None, None], F, 0.0), N, s, tolerances, N, accepted, Cn, errors)
 
 
 @functools.lru_cache(maxsize=16)

@@ -350,7 +350,7 @@ class _Group:
         rows = self._failing() & self.bounded & probs[:, None] & self.has
         if not rows.any():
             return
-        F, defined = self._fundamentals
+        F, defined, E = self._fundamentals
         ub = self._ub()
         order = np.argsort(-self.size, kind="stable")
         for p in np.nonzero(rows.any(axis=1))[0]:
@@ -358,7 +358,7 @@ class _Group:
                 if self.group[p].deadline.expired:
                     break
                 b = enum.ascended_bound(self.Cn[p], F[p], defined[p], self.W[m], self.Xn[p, m],
-                                        self.frames[p].scale, self.tol, float(ub[p] - self.rest[p, m]))
+                                        self.frames[p].scale, self.tol, float(ub[p] - self.rest[p, m]), E[p])
                 if b > self.lb[p, m]:
                     self.lb[p, m] = b
                     self._terms_cache = None
@@ -492,14 +492,15 @@ class _Group:
         if self._fundamentals is None:                 # once per problem, of the problems with frames
             F = np.zeros(self.Cn.shape[:1] + (len(enum.view_pairs(self.N)[0]), 3, 3))
             defined = np.zeros(F.shape[:2], bool)
+            E = np.full(F.shape[:2], np.inf)
             has = np.array([f is not None for f in self.frames])
-            F[has], defined[has] = enum.fundamentals(self.C[has], self.Cn[has])
-            self._fundamentals = F, defined
-        F, defined = self._fundamentals
+            F[has], defined[has], E[has] = enum.fundamentals(self.C[has], self.Cn[has])
+            self._fundamentals = F, defined, E
+        F, defined, E = self._fundamentals
         s = np.array([f.scale if f is not None else 1.0 for f in self.frames])
         self._terms_cache = None
         self.lb[pp, mm] = _by_rows(lambda C, W, X, sc, p: enum.enum_bounds_rows(
-            C, F, defined, W, X, sc, self.tol, problem=p, by_size=self.staged, accepted=False)[0],
+            C, F, defined, W, X, sc, self.tol, problem=p, by_size=self.staged, accepted=False, errors=E)[0],
             pp.size, self.Cn[pp], self.W[mm], self.Xn[pp, mm], s[pp], pp)
 
     def _floors(self) -> np.ndarray:

@@ -91,7 +91,7 @@ class _ThreeViews:
         self.rest = np.array(self._rest(c2))           # c^2(V - S); inf: c_i = inf
         self.lb = np.zeros(len(self.W))
         self.bounded = np.zeros(len(self.W), bool)
-        self.F = None
+        self.F = self.E = None
         self.refined = np.zeros(len(self.W), bool)     # rows whose candidate was refined on its own set
         from .robust import scale_from
 
@@ -208,7 +208,7 @@ class _ThreeViews:
             return lb
         self._fundamentals()
         bound = enum.ascended_bound(self.Cn, self.F, self.defined, self.W[row], self.Xn[row], self.frame.scale,
-                                    s.tol, s.best_f)
+                                    s.tol, s.best_f, self.E)
         self.lb[row] = max(self.lb[row], bound)          # both bounds are valid: the larger
         return self._lower_bound()
 
@@ -245,13 +245,14 @@ class _ThreeViews:
         self.lb[m], _ = enum.enum_bounds_rows(
             np.broadcast_to(self.Cn, (R,) + self.Cn.shape), np.broadcast_to(self.F, (R,) + self.F.shape),
             np.broadcast_to(self.defined, (R,) + self.defined.shape), self.W[m], self.Xn[m],
-            np.full(R, self.frame.scale), self.s.tol, accepted=False)
+            np.full(R, self.frame.scale), self.s.tol, accepted=False,
+            errors=np.broadcast_to(self.E, (R,) + self.E.shape))
 
     def _fundamentals(self) -> None:
         """The view pairs' fundamental matrices (``F``, ``defined``), computed once."""
         if self.F is None:
-            F, defined = enum.fundamentals(self.s.C[None], self.Cn[None])
-            self.F, self.defined = F[0], defined[0]
+            F, defined, E = enum.fundamentals(self.s.C[None], self.Cn[None])
+            self.F, self.defined, self.E = F[0], defined[0], E[0]
 
     @staticmethod
     def _rest(c2: list) -> list:

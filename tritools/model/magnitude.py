@@ -22,9 +22,9 @@ from sospoly import pow2_above
 from .oblique import obliquities, obliquity_one
 from .stacked import median_rows, pixel_scales
 
-__all__ = ["magnitudes", "origin_magnitudes", "world_origin_magnitudes", "world_origin_magnitude_one", "resolutions",
-           "guard_resolutions", "view_floors", "resolution_pair", "resolution_pair_one", "list_median",
-           "median_pixel_scales", "pixel_floors", "RESOLUTION_REL",
+__all__ = ["magnitudes", "origin_magnitudes", "world_origin_magnitudes", "world_origin_magnitude_one",
+           "frame_magnitude_one", "resolutions", "guard_resolutions", "view_floors", "resolution_pair",
+           "resolution_pair_one", "list_median", "median_pixel_scales", "pixel_floors", "RESOLUTION_REL",
            "PIXEL_FLOOR_REL", "SCALAR_MAX_VIEWS"]
 
 #: the resolution of the coordinates, relative to their magnitude (sqrt of the machine epsilon).
@@ -154,6 +154,33 @@ def world_origin_magnitude_one(C, x, X, o, entries: bool = False) -> float:
             return big
         out = max(out, K)
     return out
+
+
+def frame_magnitude_one(Cn, x, o, scale: float) -> float:
+    """The scalar twin of ``max(magnitudes(x, Cn, 0), origin_magnitudes(Cn, x, o, scale))`` (NaN of the latter read
+    as 1: :meth:`tritools.model.normalize.NormalizationStack.magnitude`) for one problem (normalised cameras Cn
+    (N, 3, 4), the caller's points x (N, 2), the given frame's origin o (3,) in normalised coordinates, the image
+    scale): the same operations on Python floats, equal bit for bit (tests/test_wave48.py)."""
+    o0, o1, o2 = (abs(float(v)) for v in o)
+    scale = float(scale)
+    big = float(np.finfo(float).max)
+    mag, frame = 0.0, 0.0
+    for P, (u, v) in zip(np.asarray(Cn, float).tolist(), np.asarray(x, float).tolist()):
+        u, v = (u if math.isfinite(u) else 0.0), (v if math.isfinite(v) else 0.0)
+        ax = _max_nan(abs(u), abs(v))
+        if ax > 0:                                     # magnitudes(): |x_i| sec theta_i at the frame's origin
+            k = pow2_above(max(abs(e) for row in P for e in row))
+            mag = max(mag, ax * obliquity_one([[e / k for e in row] for row in P], (0.0, 0.0)))
+        A = [((abs(r[0]) * o0 + abs(r[1]) * o1) + abs(r[2]) * o2) + abs(r[3]) for r in P]
+        num = _max_nan(A[0], A[1]) / scale + 2.0 * ax * A[2]
+        den = abs(P[2][3])
+        K = num / den if den > 0 else (math.inf if num > 0 and den == 0 else math.nan)       # (numpy's x / 0)
+        if K != K or frame != frame:
+            frame = math.nan
+        else:
+            frame = max(frame, K)
+    frame = 1.0 if frame != frame else min(frame, big)
+    return _max_nan(min(mag, big), frame)
 
 
 def _max_nan(a: float, b: float) -> float:

@@ -60,10 +60,14 @@ import numpy as np
 
 from .exact import homogeneous_images
 from .cameras import power2_scale
-from .magnitude import (PIXEL_FLOOR_REL, RESOLUTION_REL, list_median as _median, magnitudes, median_pixel_scales,
-                        origin_magnitudes, pixel_floors, resolution_pair, resolution_pair_one, resolutions,
-                        world_origin_magnitude_one, world_origin_magnitudes)
+from .magnitude import (PIXEL_FLOOR_REL, RESOLUTION_REL, SCALAR_MAX_VIEWS, frame_magnitude_one,
+                        list_median as _median, magnitudes, median_pixel_scales, origin_magnitudes, pixel_floors,
+                        resolution_pair, resolution_pair_one, resolutions, world_origin_magnitude_one,
+                        world_origin_magnitudes)
+from .frame_floats import (centre_distances, centre_distances_array, pixel_scale_one, residual_squares,
+                           residual_squares_array)
 from .geometry import COMMON_CENTRE_RTOL, POINT_AT_INFINITY_RTOL, point_from_image_points
+from .lm_one import FLOAT_MAX_VIEWS
 from .stacked import (dlt_stack, median_rows, norms, null_vectors, pixel_scales, project_one, project_quiet,
                       project_stack, refine_point, refine_points_stack)
 
@@ -233,6 +237,8 @@ class NormalizationStack:
         """:attr:`magnitude` of the problems ``rows`` (a slice)."""
         x, Cn = self.shifts[rows], self.cameras_n[rows]
         o = -self.origin[rows] / self.depth[rows, None]          # the given frame's origin, in the normalised one
+        if len(x) == 1 and x.shape[1] <= SCALAR_MAX_VIEWS:      # one problem: the scalar twin, the same numbers
+            return np.array([frame_magnitude_one(Cn[0], x[0], o[0], self.scale[rows][0])])
         with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
             frame = origin_magnitudes(Cn, x, o, self.scale[rows])
         return np.maximum(magnitudes(x, Cn, np.zeros(x.shape)), np.where(np.isnan(frame), 1.0, frame))
@@ -349,26 +355,21 @@ def _frame_one(P: np.ndarray, xi: np.ndarray, X0: np.ndarray) -> tuple | None:
     :func:`_rho_floor` and :func:`median_pixel_scales` for one problem (cameras P (N, 3, 4) scaled by powers of two,
     points xi (N, 2), the DLT point X0), or None off the common path (:func:`_normalization_one`)."""
     N = len(xi)
-    ps_all = pixel_scales(P, xi).tolist()
+    few = N <= FLOAT_MAX_VIEWS                           # the pieces on floats (tritools.model.frame_floats)
+    Pl, xl, Xl = (P.tolist(), xi.tolist(), X0.tolist()) if few else (None, None, None)
+    ps_all = [pixel_scale_one(p, q) for p, q in zip(Pl, xl)] if few else pixel_scales(P, xi).tolist()
     ps = [p for p in ps_all if 0.0 < p < math.inf]
     if not ps:
         return None
     med = _median(ps)
     rho_floor = RHO_FLOOR_REL * med
-    u0, _, fin0 = project_one(P, X0)
-    if not fin0 or not rho_floor > 0:
+    sq = residual_squares(Pl, Xl, xl) if few else residual_squares_array(P, X0, xi)
+    if sq is None or not rho_floor > 0:
         return None
-    rho = max(math.sqrt(float(np.add.reduce(np.add.reduce((u0 - xi) ** 2, axis=1))) / N), rho_floor)
+    rho = max(math.sqrt(sq / N), rho_floor)
     s = float(_clip_scale(1.0 / rho))
-    a = null_vectors(P)
-    a = a / norms(a, axis=1, keepdims=True)
-    if not (np.abs(a[:, 3]) > POINT_AT_INFINITY_RTOL).all():
-        return None
-    a0 = a[0]
-    if (np.abs(P @ a0) <= COMMON_CENTRE_RTOL * np.maximum.reduce(np.abs(P) @ np.abs(a0), axis=1)[:, None]).all():
-        return None                                      # every view has one centre: the stacked code's special case
-    dist = norms(a[:, :3] / a[:, 3:] - X0, axis=1).tolist()
-    if not all(math.isfinite(t) for t in dist):
+    dist = centre_distances(Pl, Xl) if few else centre_distances_array(P, X0)
+    if dist is None:
         return None
     d = _median(dist)
     d = max(d, DEPTH_FLOOR_REL * max(1.0, math.sqrt(float(X0 @ X0)))) if d > 0 else 1.0

@@ -1,0 +1,134 @@
+"""Wave 48: the single call's normalisation on floats (issue #22), against the numpy code it stands in for.
+
+* :func:`tritools.model.magnitude.frame_magnitude_one` (the normalisation's round-off magnitude of one problem) vs
+  the stacked :func:`~tritools.model.magnitude.magnitudes` / :func:`~tritools.model.magnitude.origin_magnitudes`:
+  bit for bit, also on non-finite points and cameras, zero depths and rank-deficient rows;
+* the float pieces of the frame (:mod:`tritools.model.frame_floats`) vs the numpy ones (pixel scales, the DLT
+  point's residual, the centres' distances and the off-path cases: a centre at infinity, one centre for every view);
+* the normalisation of one problem with the float frame vs the same with the numpy frame (``FLOAT_MAX_VIEWS`` 0):
+  every field within round-off, on the adversarial scenes (pixel scales 1e-3..1e6, georeferenced worlds, rescaled
+  cameras, duplicated views, zero noise).
+"""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from tritools.model import frame_floats as FF
+from tritools.model import normalize as NZ
+from tritools.model.camera_rank import power2_scale
+from tritools.model.magnitude import frame_magnitude_one, magnitudes, origin_magnitudes
+from tritools.model.stacked import dlt_stack, pixel_scales
+
+from .test_stacked_single import SCENES, _fields
+
+
+def _stacked_magnitude(Cn, x, o, s) -> float:
+    with np.errstate(all="ignore"):
+        frame = origin_magnitudes(Cn[None], x[None], o[None], np.array([s]))
+        return float(np.maximum(magnitudes(x[None], Cn[None], np.zeros((1,) + x.shape)),
+                                np.where(np.isnan(frame), 1.0, frame))[0])
+
+
+def test_frame_magnitude_one_equals_the_stacked_magnitudes_bit_for_bit():
+    rng = np.random.default_rng(48)
+    specials = 0
+    for t in range(1500):
+        N = int(rng.integers(1, 8))
+        Cn = rng.normal(size=(N, 3, 4)) * 10.0 ** rng.uniform(-3, 3, (N, 1, 1))
+        x = rng.normal(size=(N, 2)) * 10.0 ** rng.uniform(-3, 6)
+        if t % 7 == 0:
+            Cn[0, 2, 3] = 0.0                                # a zero depth at the origin: inf (or NaN -> 1)
+        if t % 11 == 0:
+            Cn[-1, 2, :3] = 0.0
+        if t % 17 == 0:
+            Cn[-1, t % 3, t % 4] = (np.nan, np.inf, -np.inf)[t % 3]
+        if t % 5 == 0:
+            x[0] = np.nan                                    # no observation
+        if t % 13 == 0:
+            x[-1, 0] = np.inf
+        if t % 19 == 0:
+            x[:] = 0.0
+        o = rng.normal(size=3) * 10.0 ** rng.uniform(-3, 8)
+        s = 10.0 ** rng.uniform(-6, 6)
+        ref, got = _stacked_magnitude(Cn, x, o, s), frame_magnitude_one(Cn, x, o, s)
+        specials += not np.isfinite(ref) or ref == 1.0
+        assert ref == got or (np.isnan(ref) and np.isnan(got)), (t, ref, got)
+    assert specials > 10                                     # the special cases were reached
+
+
+def _problems():
+    out = []
+    for name, C, x in SCENES:
+        if len(C) > 10:
+            continue
+        P = C / power2_scale(C, (1, 2))
+        for m in range(len(x)):
+            out.append((name, P, x[m]))
+    return out
+
+
+@pytest.mark.parametrize("name, P, xi", _problems()[::3], ids=[p[0] for p in _problems()[::3]])
+def test_float_frame_pieces_equal_the_numpy_ones(name, P, xi):
+    """Pixel scales (relative 1e-15), the DLT point's residual (1e-9 of the coordinates or of itself: the
+    projections' round-off; a georeferenced DLT point's cancels) and the centres' distances (relative 1e-12 of the
+    largest) as the numpy code computes them."""
+    X0 = dlt_stack(P[None], xi[None])[0][0]
+    Pl, xl, Xl = P.tolist(), xi.tolist(), X0.tolist()
+    ref = pixel_scales(P, xi)
+    got = np.array([FF.pixel_scale_one(p, q) for p, q in zip(Pl, xl)])
+    assert np.allclose(got, ref, rtol=1e-15, atol=0)
+    sq_ref, sq = FF.residual_squares_array(P, X0, xi), FF.residual_squares(Pl, Xl, xl)
+    assert abs(np.sqrt(sq) - np.sqrt(sq_ref)) <= 1e-9 * max(np.max(np.abs(xi)), np.sqrt(sq_ref))   # (round-off)
+    d_ref = FF.centre_distances_array(P, X0)
+    d = FF.centre_distances(Pl, Xl)
+    assert (d is None) == (d_ref is None)
+    if d is not None:
+        assert np.allclose(d, d_ref, rtol=1e-12, atol=1e-12 * max(d_ref))
+
+
+def test_float_frame_pieces_leave_the_path_as_the_numpy_ones():
+    """A centre at infinity (an affine camera), every view through one centre, a projection at infinity, a camera
+    without a depth direction: the float pieces say so where the numpy ones do."""
+    rng = np.random.default_rng(3)
+    P = rng.normal(size=(3, 3, 4))
+    X0 = rng.normal(size=3)
+    affine = P.copy()
+    affine[1, 2, :3] = 0.0                                   # third row (0, 0, 0, t): the centre at infinity
+    shared = P.copy()
+    c = np.append(rng.normal(size=3), 1.0)
+    for i in range(3):                                       # every camera through the centre c
+        shared[i, :, 3] = -shared[i, :, :3] @ c[:3]
+    for Q in (affine, shared):
+        assert FF.centre_distances_array(Q, X0) is None
+        assert FF.centre_distances(Q.tolist(), X0.tolist()) is None
+    assert FF.centre_distances_array(P, X0) is not None
+    on_plane = P.copy()
+    on_plane[0, 2, 3] = -on_plane[0, 2, :3] @ X0             # X0 on view 0's principal plane
+    xi = rng.normal(size=(3, 2))
+    assert FF.residual_squares_array(on_plane, X0, xi) is None and FF.residual_squares(
+        on_plane.tolist(), X0.tolist(), xi.tolist()) is None
+    flat = P.copy()
+    flat[2, 2, :3] = 0.0
+    assert np.isnan(pixel_scales(flat, xi)[2]) and np.isnan(FF.pixel_scale_one(flat[2].tolist(), xi[2]))
+
+
+@pytest.mark.parametrize("name, C, x", [s for s in SCENES if len(s[1]) <= 10], ids=[s[0] for s in SCENES
+                                                                                       if len(s[1]) <= 10])
+def test_normalisation_with_the_float_frame_equals_the_numpy_frame(name, C, x, monkeypatch):
+    """The normalisation of one problem (the scalar twin) with the frame's pieces on floats and on arrays: the same
+    masks, every number within 1e-9 relative (the frame is an exact change of coordinates: these are round-off)."""
+    for m in range(len(x)):
+        NZ._LAST_SINGLE[0] = None
+        fl = NZ.normalization_stack(C[None].copy(), x[m:m + 1].copy())
+        with monkeypatch.context() as mp:
+            mp.setattr(NZ, "FLOAT_MAX_VIEWS", 0)
+            NZ._LAST_SINGLE[0] = None
+            ar = NZ.normalization_stack(C[None].copy(), x[m:m + 1].copy())
+        NZ._LAST_SINGLE[0] = None
+        for a, b in zip(_fields(fl), _fields(ar)):
+            if a.dtype == bool:
+                assert np.array_equal(a, b)
+            else:
+                assert np.allclose(a, b, rtol=1e-9, atol=1e-9 * max(1.0, float(np.max(np.abs(b))))), name
+        assert float(fl.magnitude[0]) == pytest.approx(float(ar.magnitude[0]), rel=1e-9)

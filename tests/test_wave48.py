@@ -132,3 +132,61 @@ def test_normalisation_with_the_float_frame_equals_the_numpy_frame(name, C, x, m
             else:
                 assert np.allclose(a, b, rtol=1e-9, atol=1e-9 * max(1.0, float(np.max(np.abs(b))))), name
         assert float(fl.magnitude[0]) == pytest.approx(float(ar.magnitude[0]), rel=1e-9)
+
+
+def test_transfer_contradicts_one_equals_the_vectorised_rule():
+    """The scalar twin decides as :func:`tritools.solve.decide.transfer_contradicts` on random, boundary and
+    non-finite pairs (gamma_LB just above / below gamma_UB by the rule's tolerance, NaN, inf, overflow of c)."""
+    import sospoly
+    from tritools.solve.decide import c_from_gamma, transfer_contradicts, transfer_contradicts_one
+
+    tol = sospoly.Tolerances()
+    rng = np.random.default_rng(4)
+    seen = set()
+    for t in range(4000):
+        N = int(rng.integers(2, 12))
+        s = 10.0 ** rng.uniform(-8, 8)
+        up = 10.0 ** rng.uniform(-12, 6)
+        c_up = c_from_gamma(up, N, s)
+        gap = tol.gap_tolerance(c_up, 1.0)
+        c_lo = c_up + gap * rng.choice([0.5, 0.999999, 1.000001, 2.0, -1.0])
+        lo = np.sqrt(max(c_lo, 0.0) / (2 * N)) / s
+        if t % 50 == 0:
+            lo = (np.nan, np.inf, 1e300, -np.inf)[t // 50 % 4]
+        ref = transfer_contradicts(lo, up, tol, N, s)
+        assert transfer_contradicts_one(lo, up, tol, N, s) == ref, (lo, up, N, s)
+        seen.add(bool(ref))
+    assert seen == {True, False}
+
+
+def test_depth_rows_and_depths_of_one_point_equal_the_stacked_ones_bit_for_bit():
+    """:func:`tritools.model.cameras.depth_row_one` vs :func:`~tritools.model.cameras.depth_rows` and the single
+    call's depths (:func:`tritools.solve.fastpath_cameras.depths_one`, floats up to ``SCALAR_MAX_VIEWS`` views) vs
+    :func:`~tritools.model.cameras.depths_stack_arrays`: bit for bit on random cameras at scales 1e-200..1e200,
+    reflected ones (det M < 0), nearly singular left blocks (the sign from numpy's determinant), affine cameras (no
+    depth: NaN) and both frame handednesses."""
+    from tritools.model.cameras import depth_row_one, depth_rows, depths_stack_arrays
+    from tritools.solve import fastpath_cameras as fc
+
+    rng = np.random.default_rng(48)
+    kinds = set()
+    for t in range(600):
+        N = int(rng.integers(2, 12))
+        C = rng.normal(size=(N, 3, 4)) * 10.0 ** rng.uniform(-200, 200, (N, 1, 1))
+        if t % 3 == 0:
+            C[0, :, 0] *= -1.0                               # det M < 0
+        if t % 7 == 0:
+            C[-1, 2, :3] = C[-1, 0, :3] * 2.0 + C[-1, 1, :3] * 1e-13     # M nearly singular
+        if t % 11 == 0:
+            C[1, 2, :3] = 0.0                                # affine: no depth direction
+        ref = depth_rows(C)
+        got = np.array([depth_row_one(P) for P in C.tolist()])
+        assert np.array_equal(got, ref, equal_nan=True), t
+        X = rng.normal(size=3) * 10.0 ** rng.uniform(-3, 3)
+        for frame in ("right_handed", "reflected"):
+            fc._LAST_ROWS[0] = None
+            d = fc.depths_one(C, X, frame)
+            assert np.array_equal(d, depths_stack_arrays(C[None], X[None], frame)[0], equal_nan=True), t
+            kinds.add(bool(np.isnan(d).any()))
+            kinds.add(bool((d < 0).any()))
+    assert kinds == {True, False}

@@ -60,7 +60,7 @@ from .camera_rank import (CAMERA_RANK_RTOL, EXACT_RANK_BELOW, SHARED_MIN_CAMERAS
 from ..result import IllPosedError
 from .regions.base import real_array
 
-__all__ = ["depth_rows", "numeric_cameras",
+__all__ = ["depth_rows", "depth_row_one", "numeric_cameras",
            "CAMERA_RANK_RTOL",
            "SAME_CAMERA_RTOL", "POINT_AT_INFINITY_RTOL", "CameraIssue", "CameraProblems",
            "camera_rank_ratio", "cameras_all_equal", "check_camera", "validate_cameras", "camera_refusal",
@@ -357,6 +357,29 @@ def depth_rows(C: np.ndarray) -> np.ndarray:
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         f = np.where(n > 0, sign / np.where(n > 0, n, 1.0), np.nan)
     return Cs[..., 2, :] * f[..., None]
+
+
+def depth_row_one(P: list) -> list:
+    """The scalar twin of :func:`depth_rows` for one finite camera (3 lists of 4 floats): the same operations on
+    floats, equal bit for bit (tests/test_wave48.py); the sign of det M from its cofactor expansion where that
+    is far from round-off (relative 1e-8 of |m1| |m2| |m3|), from ``numpy.linalg.det`` (the stacked code's) else."""
+    k0 = pow2_above(max(abs(v) for row in P for v in row))
+    Cs = [[v / k0 for v in row] for row in P]
+    m3 = Cs[2][:3]
+    k = pow2_above(max(abs(v) for v in m3))
+    t = [v / k for v in m3]
+    n = k * math.sqrt((t[0] * t[0] + t[1] * t[1]) + t[2] * t[2])
+    (a, b, c, _), (d, e, f, _), (g, h, i, _) = Cs
+    det = a * (e * i - f * h) - b * (d * i - f * g) + c * (d * h - e * g)
+    scale = math.sqrt((a * a + b * b) + c * c) * math.sqrt((d * d + e * e) + f * f) * n
+    if not (abs(det) > 1e-8 * scale and math.isfinite(det)):
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            det = float(np.linalg.det(np.array([row[:3] for row in Cs])))
+    sign = 1.0 if det > 0 or det == 0 else (-1.0 if det < 0 else math.nan)
+    if not n > 0:
+        return [math.nan] * 4
+    f_ = sign / n
+    return [v * f_ for v in Cs[2]]
 
 
 def depths(X: ArrayLike, cameras: ArrayLike, world_frame: WorldFrame | str = WorldFrame.RIGHT_HANDED) -> np.ndarray:

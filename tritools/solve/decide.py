@@ -22,7 +22,7 @@ from ..result import Status
 
 __all__ = ["decide", "decide_reported", "gamma_from_c", "c_from_gamma", "cheirality", "decide_one", "gamma_lower_one",
            "decide_reported_one", "gamma_lower", "within_resolution", "within_resolution_one", "LB_ROUNDOFF_ULPS",
-           "transfer_contradicts", "reported_lower"]
+           "transfer_contradicts", "transfer_contradicts_one", "reported_lower"]
 
 #: gamma_LB is lowered by this many units of round-off of the coordinates' magnitude (:func:`gamma_lower`).
 LB_ROUNDOFF_ULPS = 64.0
@@ -195,6 +195,16 @@ def transfer_contradicts(gamma_lb, gamma_ub, tolerances, n_views, scale):
         out = known & np.asarray(tolerances.contradicts(c_from_gamma(np.where(known, lo, 0.0), n_views, scale),
                                                         c_from_gamma(np.where(known, up, 0.0), n_views, scale)), bool)
     return bool(out) if out.ndim == 0 else out
+
+
+def transfer_contradicts_one(gamma_lb: float, gamma_ub: float, tolerances, n_views: int, scale: float) -> bool:
+    """The scalar twin of :func:`transfer_contradicts` for floats (``tolerances.contradicts_one``, c = 2N (s
+    gamma)^2 on floats: the same operations, tests/test_wave48.py)."""
+    lo, up, sc = float(gamma_lb), float(gamma_ub), float(scale)
+    if not (math.isfinite(lo) and math.isfinite(up)):
+        return False
+    n2 = 2 * float(n_views)
+    return tolerances.contradicts_one(n2 * (lo * sc) * (lo * sc), n2 * (up * sc) * (up * sc))
 
 
 def reported_lower(gamma_lb, gamma_ub, tolerances, n_views, scale):

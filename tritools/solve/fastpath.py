@@ -43,13 +43,13 @@ from sospoly.analysis import verify_quadratic_banded_batch
 from sospoly.solvers import with_single_threaded_blas
 
 from ..model.epipolar_data import epipolar_errors
-from ..model.frame import project_world
+from ..model.frame import project_world, project_world_one
 from ..model.geometry import camera_problems
 from ..model.normalize import normalization_stack
 from ..model.stacked import (band_pairs, epipolar_quadratics, fundamental_stack, gauss_newton_polish, norms,
                              project_one, project_stack, refine_point, refine_points_stack, view_pairs)
 from .decide import (decide, decide_one, decide_reported, decide_reported_one, gamma_from_c, gamma_lower,
-                     gamma_lower_one, reported_lower, transfer_contradicts)
+                     gamma_lower_one, reported_lower, transfer_contradicts_one)
 from .report import gamma_upper
 from .trivial import trivially_certified, trivially_certified_reported
 
@@ -241,15 +241,16 @@ def verify_one(C: np.ndarray, x: np.ndarray, tolerances: Tolerances, *,
     scale, res = float(norm.scale[0]), float(norm.resolution[0])
     _, optimal, c_lower = decide_one(lower, upper, tolerances, N, res)
     X = norm.world_points(Xn[None])
-    uw, _, fin_w = project_world(C[None], X)
-    if not fin_w[0]:
+    uw, defined = project_world_one(C.tolist(), X[0].tolist())       # (project_world's twin: its bits)
+    if not all(defined):
         return None
+    uw = np.array(uw)[None]
     residuals = norms(uw - x, axis=2)             # (the report's formulas: points_report_stack)
     gamma_ub = gamma_upper(residuals, norms(uw, axis=2))
     g_ub = float(gamma_ub[0])
     gamma_lb = gamma_lower_one(math.sqrt(max(c_lower, 0.0) / (2.0 * N)) / scale, g_ub, scale,
                                float(norm.lowering_resolution[0]), float(norm.magnitudes_at(C[None], X)[0]))
-    contra = transfer_contradicts(gamma_lb, g_ub, tolerances, N, scale)         # no bound (review 46a)
+    contra = transfer_contradicts_one(gamma_lb, g_ub, tolerances, N, scale)     # no bound (review 46a)
     gamma_lb = math.nan if contra else min(gamma_lb, g_ub)
     certified = optimal and not contra and decide_reported_one(gamma_lb, g_ub, tolerances, N, scale, res)
     trivial = not certified and decide_one(0.0, upper, tolerances, N, res)[1] and math.isfinite(upper) and \

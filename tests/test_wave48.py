@@ -11,6 +11,8 @@
 """
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 import pytest
 
@@ -190,3 +192,68 @@ def test_depth_rows_and_depths_of_one_point_equal_the_stacked_ones_bit_for_bit()
             kinds.add(bool(np.isnan(d).any()))
             kinds.add(bool((d < 0).any()))
     assert kinds == {True, False}
+
+
+_TINY_CAMS = np.array([
+    [[9.7210466930349287e+02, -2.3073293629627915e+02, 7.0469863231033912e+01, 1.6532261595875550e+03],
+     [1.3311522235299017e+02, 4.8457517465228636e+02, 8.4015380454174976e+02, 1.1763654275279860e+03],
+     [1.0843043327061400e-01, -7.2104042592587236e-01, 6.8435629997931879e-01, 4.9996225157595608e+00]],
+    [[8.4066983498971308e+02, 1.0089690200023256e+01, -2.8316362895536986e+02, 1.4475047905728745e+03],
+     [1.3670543078805835e+02, 8.3456702816020004e+02, 1.6437370463076380e+02, 1.0945930566270258e+03],
+     [6.3911350912185727e-01, 3.1530281875072674e-02, 7.6846585075904583e-01, 4.9950837248517814e+00]],
+    [[6.2678700150175746e+02, -2.2999878435434766e+02, 7.9558275373602214e+00, 1.5491310555893619e+03],
+     [2.0173199926796187e+02, 2.3494763183374795e+02, 5.5238436981409120e+02, 1.2604670201362906e+03],
+     [2.3850754320286532e-01, -7.1874620110733645e-01, 6.5308349407185728e-01, 4.9981832537695672e+00]],
+    [[8.3863446361514809e+02, 6.3738280450731047e+01, -4.7850877013224084e+02, 1.4587707412281252e+03],
+     [4.0015899411944282e+01, 9.4270906931851675e+02, 3.5203884305881203e+01, 7.7718721703223196e+02],
+     [7.3576324447323105e-01, 1.9918212640853453e-01, 6.4728581677771913e-01, 4.9769197647558325e+00]]])
+_TINY_CENTRES = np.array([[353.7854979561222, 259.89987472857786], [312.99657916603053, 258.3846080934189],
+                          [324.88921773615215, 269.56144063074737], [316.15457416443803, 200.72232748739088]])
+
+
+def _tiny_regions(e):
+    from tritools import Ellipse, Point, Polytope, Segment
+
+    c = _TINY_CENTRES
+    first = Point(c[0]) if e == 0 else Polytope.box(c[0], [e, 2 * e])
+    return [first, Ellipse(c[1], 4 * np.eye(2)), Segment(c[2], [3.0, -1.0]), Point(c[3])]
+
+
+@functools.lru_cache(maxsize=1)
+def _tiny_reference() -> float:
+    """min gamma of the problem with the box's centre (an upper bound of the box problem's optimum; the box problem's
+    is at least it minus the box's radius / sqrt(8)), by multi-start least squares on independent distances."""
+    from scipy.optimize import least_squares
+
+    c = _TINY_CENTRES
+
+    def dists(X):
+        h = _TINY_CAMS @ np.append(X, 1.0)
+        u = h[:, :2] / h[:, 2:]
+        d0 = np.linalg.norm(u[0] - c[0])
+        v = u[1] - c[1]
+        d1 = max(np.linalg.norm(v) - 2.0, 0.0)                     # the disc of radius 2
+        t = np.clip((u[2] - c[2]) @ np.array([3.0, -1.0]) / 10.0, -1.0, 1.0)    # segment c2 +- (3, -1)
+        d2 = np.linalg.norm(u[2] - (c[2] + t * np.array([3.0, -1.0])))
+        d3 = np.linalg.norm(u[3] - c[3])
+        return np.array([d0, d1, d2, d3])
+
+    best = np.inf
+    rng = np.random.default_rng(0)
+    for X0 in [np.zeros(3)] + list(rng.normal(scale=0.5, size=(5, 3))):
+        r = least_squares(dists, X0, xtol=1e-15, ftol=1e-15, gtol=1e-15)
+        best = min(best, float(np.sqrt(np.sum(dists(r.x) ** 2) / 8)))
+    return best
+
+
+@pytest.mark.parametrize("e", [1e-20, 1e-12, 1e-9])
+def test_tiny_box_beside_other_regions_is_certified_through_its_collapsed_problem(e):
+    """Review 47a F4: a box of half-widths (e, 2e) beside a disc and a segment ended ``solver_failed`` with no bound
+    (the whole problem's rows scaled by the box; its collapsed problem was only verified).  Now the collapsed problem
+    runs its own plan: certified, gamma_LB below the independent reference minus the box's radius, gamma_UB at it."""
+    import tritools
+
+    ref = _tiny_reference()
+    r = tritools.triangulate(_TINY_CAMS, _tiny_regions(e), time_limit=60)
+    assert r.status.value == "optimal" and r.optimal and r.certified_by == "sub_problem"
+    assert r.gamma_lb <= ref + 1e-12 and abs(r.gamma_ub - ref) <= 1e-9 * ref + np.sqrt(5) * e

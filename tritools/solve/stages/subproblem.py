@@ -6,8 +6,8 @@ Three kinds, tried in this order at the local estimate:
   with no bound): with c_i the centre of R_i and rho_i >= max_{y in R_i} ||y - c_i|| (:func:`centre_radius`),
   d(x, R_i) >= ||x - c_i|| - rho_i, so by the triangle inequality in R^N,
   gamma*_R >= gamma*_C - ||rho|| / sqrt(2N) (:func:`collapsed_lower_bound`), C the problem with points c_i: a point
-  problem, certified in milliseconds.  Tried where every collapsed rho_i is at most :data:`COLLAPSE_SHARE` of the
-  local estimate's gamma;
+  problem, certified in milliseconds (where other regions remain, a problem of those regions solved by its own
+  degree plan).  Tried where every collapsed rho_i is at most :data:`COLLAPSE_SHARE` of the local estimate's gamma;
 * **long segments, thin polytopes and thin filled ellipses trimmed** (:mod:`tritools.solve.trim`): an exact
   reduction -- the problem with each such region cut to the part that can hold the closest point of the optimum's
   projection has the same optimum -- solved by its own degree plan (``Relaxation.plan``); where that plan ran to its
@@ -75,8 +75,9 @@ __all__ = ["sub_problem_stage", "held_views", "sub_lower_bound", "sub_stages", "
 #: ``certified_by`` of a certificate through the sub-problem
 SUB_PROBLEM = "sub_problem"
 #: regions whose points all lie within this share of the local estimate's gamma of their centre are collapsed to
-#: the centre (:func:`relaxations`): the bound then loses at most that share of gamma
-COLLAPSE_SHARE = 1e-9
+#: the centre (:func:`relaxations`): the bound then loses at most that share of gamma over sqrt(2), ~1e-8 of the
+#: certificate rule's relative gap in c (a 2e-9 px box at gamma = 0.29 px was not collapsed at 1e-9: review 47a F4)
+COLLAPSE_SHARE = 1e-8
 #: regions reaching farther than this multiple of the local estimate's gamma from their centre are "wide": where no
 #: region holds the estimate, the sub-problem without the wide ones still gives a lower bound (:func:`relaxations`;
 #: a 1e4 px segment's plan ended with lower bound 0, review 39a F3)
@@ -159,9 +160,13 @@ def relaxations(ctx: PointContext, X) -> list[Relaxation]:
         idx = dict(tiny)
         regs = tuple(Point(r.center) if i in idx else r for i, r in enumerate(ctx.regions))
         views = ", ".join(map(str, idx))
+        # where other regions remain the collapsed problem runs its own degree plan: the whole problem's works on
+        # rows scaled by the tiny region and fails numerically (review 47a F4: a 1e-20 px box beside an ellipse and
+        # a segment ended solver_failed with no bound, its collapsed problem's verification alone did not certify)
         out.append(Relaxation(tuple(range(ctx.N)), regs,
                               partial(collapsed_lower_bound, radii=tuple(idx.values()), n_views=ctx.N),
-                              f"the problem with the region(s) of view(s) {views} collapsed to their centres"))
+                              f"the problem with the region(s) of view(s) {views} collapsed to their centres",
+                              plan=not all(r.is_point for r in regs)))
     trimmed = _trimmed(ctx, X)
     if trimmed is not None:
         views = ", ".join(str(i) for i, (a, b) in enumerate(zip(trimmed, ctx.regions)) if a is not b)

@@ -257,3 +257,37 @@ def test_tiny_box_beside_other_regions_is_certified_through_its_collapsed_proble
     r = tritools.triangulate(_TINY_CAMS, _tiny_regions(e), time_limit=60)
     assert r.status.value == "optimal" and r.optimal and r.certified_by == "sub_problem"
     assert r.gamma_lb <= ref + 1e-12 and abs(r.gamma_ub - ref) <= 1e-9 * ref + np.sqrt(5) * e
+
+
+def test_tls_report_twins_of_one_problem_equal_the_stacked_code_bit_for_bit():
+    """The robust report's magnitude and resolution pair of one problem on floats
+    (``robust_report._magnitude_one``, :func:`tritools.model.magnitude.resolution_pair_floats`) vs the stacked code
+    (the stack's arithmetic on a stack of two, so the twins are not used): bit for bit on random cameras at scales
+    1e-100..1e100, points 1e-3..1e7 px, NaN points, a view without a depth direction, estimates on a principal
+    plane, near a centre and at infinity."""
+    from tritools.model.magnitude import resolution_pair, resolution_pair_floats
+    from tritools.solve import robust_report as RR
+
+    rng = np.random.default_rng(480)
+    for t in range(600):
+        N = int(rng.integers(2, 8))
+        C = rng.normal(size=(N, 3, 4)) * 10.0 ** rng.uniform(-100, 100, (N, 1, 1))
+        x = rng.normal(size=(N, 2)) * 10.0 ** rng.uniform(-3, 7)
+        X = rng.normal(size=3) * 10.0 ** rng.uniform(-3, 5)
+        if t % 5 == 0:
+            x[0, 1] = np.nan
+        if t % 7 == 0:
+            C[-1, 2, :3] = 0.0
+        if t % 11 == 0:
+            C[0, 2, 3] = -C[0, 2, :3] @ X                    # X on view 0's principal plane
+        if t % 13 == 0:
+            X = np.array([np.inf, 0.0, 1.0])
+        C2, x2, X2 = np.stack([C, C]), np.stack([x, x]), np.stack([X, X])
+        with np.errstate(all="ignore"):
+            ref = RR._magnitudes(C2, x2, X2)[0]
+            got = RR._magnitudes(C[None], x[None], X[None])[0]
+            assert got == ref or (np.isnan(got) and np.isnan(ref)), t
+            one = resolution_pair_floats(1.0, x, C)
+            two = resolution_pair(np.ones(2), x2, C2)
+        if one is not None:
+            assert one[0][0] == two[0][0] and one[1][0] == two[1][0], t

@@ -24,8 +24,8 @@ from .stacked import median_rows, pixel_scales
 
 __all__ = ["magnitudes", "origin_magnitudes", "world_origin_magnitudes", "world_origin_magnitude_one",
            "frame_magnitude_one", "resolutions", "guard_resolutions", "view_floors", "resolution_pair",
-           "resolution_pair_one", "list_median", "median_pixel_scales", "pixel_floors", "RESOLUTION_REL",
-           "PIXEL_FLOOR_REL", "SCALAR_MAX_VIEWS"]
+           "resolution_pair_one", "resolution_pair_floats", "list_median", "median_pixel_scales", "pixel_floors",
+           "RESOLUTION_REL", "PIXEL_FLOOR_REL", "SCALAR_MAX_VIEWS"]
 
 #: the resolution of the coordinates, relative to their magnitude (sqrt of the machine epsilon).
 RESOLUTION_REL = 1e-8
@@ -290,6 +290,21 @@ def resolution_pair_one(s: float, xi: list, ps_all: list, med: float) -> tuple:
     out = s * RESOLUTION_REL * min(per) if per else math.inf
     guard = min(out, median_rule) if math.isfinite(out) and out > 0 else median_rule
     return np.array([guard]), np.array([rule(PIXEL_FLOOR_REL * med if 0.0 < med < math.inf else 1.0)])
+
+
+def resolution_pair_floats(s: float, xi, C) -> tuple | None:
+    """:func:`resolution_pair` of one problem (points xi (N, 2), cameras C (N, 3, 4)) on floats: the views' pixel
+    scales by :func:`tritools.model.frame_floats.pixel_scale_one` (numpy's bits), then :func:`resolution_pair_one`;
+    ((1,), (1,)) arrays, or None where no view has a finite positive pixel scale (the stacked code decides that
+    case)."""
+    from .frame_floats import pixel_scale_one
+
+    pts = np.asarray(xi, float).tolist()
+    ps_all = [pixel_scale_one(P, q) for P, q in zip(np.asarray(C, float).tolist(), pts)]
+    good = [p for p in ps_all if 0.0 < p < math.inf]
+    if not good:
+        return None
+    return resolution_pair_one(float(s), pts, ps_all, list_median(good))
 
 
 def list_median(values: list) -> float:

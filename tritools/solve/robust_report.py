@@ -33,8 +33,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..model.cameras import power2_scale
-from ..model.magnitude import (RESOLUTION_REL, guard_resolutions, magnitudes, resolution_pair,
-                               view_floors, world_origin_magnitudes)
+from sospoly import pow2_above
+
+from ..model.frame_floats import null_vector_one
+from ..model.magnitude import (RESOLUTION_REL, SCALAR_MAX_VIEWS, guard_resolutions, magnitudes, resolution_pair,
+                               resolution_pair_floats, view_floors, world_origin_magnitude_one,
+                               world_origin_magnitudes)
 from ..model.stacked import norms, null_vectors
 from .decide import gamma_from_c, gamma_lower_one, within_resolution_one
 from .report import enlarged_distances, gamma_upper, projections_and_spread, projections_and_spread_stack
@@ -130,6 +134,8 @@ def _magnitudes(C: np.ndarray, points: np.ndarray, X: np.ndarray) -> np.ndarray:
     obliquity magnitudes (:func:`tritools.model.magnitude.magnitudes`) and at least the frame's origin magnitude at
     X (:func:`tritools.model.magnitude.world_origin_magnitudes`) for the search's frame, the cameras moved to their
     centres' mean (:func:`tritools.solve.robust_enum.enum_frame`)."""
+    if len(C) == 1 and C.shape[1] <= SCALAR_MAX_VIEWS:            # one problem: the twin on floats, the same bits
+        return np.array([_magnitude_one(C[0], points[0], X[0])])
     with np.errstate(all="ignore"):
         Cs = C / power2_scale(C, (2, 3))
         a = null_vectors(Cs)
@@ -137,6 +143,42 @@ def _magnitudes(C: np.ndarray, points: np.ndarray, X: np.ndarray) -> np.ndarray:
         o = np.add.reduce(c, axis=1) / C.shape[1]
         o = np.where(np.isfinite(o), o, 0.0)
     return np.maximum(magnitudes(points, C), world_origin_magnitudes(C, points, X, o))
+
+
+def _magnitude_one(C: np.ndarray, points: np.ndarray, X: np.ndarray) -> float:
+    """:func:`_magnitudes` of one problem of at most ``SCALAR_MAX_VIEWS`` views on floats (the null vectors by
+    :func:`tritools.model.frame_floats.null_vector_one`, the centres' mean summed in view order as numpy's reduction
+    of so few rows, :func:`tritools.model.magnitude.world_origin_magnitude_one`): equal bit for bit
+    (tests/test_wave48.py)."""
+    N = len(C)
+    o = [0.0, 0.0, 0.0]
+    for P in C.tolist():
+        k = pow2_above(_max_abs(P))
+        a = null_vector_one([[v / k for v in row] for row in P])
+        o = [o[j] + _ieee_div(a[j], a[3]) for j in range(3)]
+    o = [t / N if math.isfinite(t / N) else 0.0 for t in o]
+    return max(float(magnitudes(points[None], C[None])[0]), world_origin_magnitude_one(C, points, X, o))
+
+
+def _ieee_div(a: float, b: float) -> float:
+    """a / b with numpy's answers where Python raises: +-inf for a / +-0 (a != 0), NaN for 0 / 0 and NaN."""
+    if b != 0.0 or b != b:
+        return a / b
+    if a == 0.0 or a != a:
+        return math.nan
+    return math.copysign(math.inf, a) * math.copysign(1.0, b)
+
+
+def _max_abs(P: list) -> float:
+    """``numpy.maximum.reduce`` of |entries| of a camera (NaN if any is NaN)."""
+    out = 0.0
+    for row in P:
+        for v in row:
+            v = abs(v)
+            if v != v:
+                return math.nan
+            out = v if v > out else out
+    return out
 
 
 def _checked(g_ub: float, spread: float, resolution: float, N: int, c: np.ndarray, lb: float, tolerances,
@@ -189,7 +231,8 @@ def _resolution_pair(points: np.ndarray, C: np.ndarray) -> tuple:
     """((M,) :func:`coordinate_resolutions`, (M,) the magnitude in pixels that floors the lowering of gamma_LB: the
     median rule's (:func:`tritools.model.magnitude.resolution_pair` at scale 1, its second part / ``RESOLUTION_REL``),
     as before the per-view guard)."""
-    guard, median_rule = resolution_pair(np.ones(len(points)), points, C)
+    one = resolution_pair_floats(1.0, points[0], C[0]) if len(points) == 1 else None     # (its twin, the same bits)
+    guard, median_rule = resolution_pair(np.ones(len(points)), points, C) if one is None else one
     return guard, median_rule / RESOLUTION_REL
 
 

@@ -291,3 +291,26 @@ def test_tls_report_twins_of_one_problem_equal_the_stacked_code_bit_for_bit():
             two = resolution_pair(np.ones(2), x2, C2)
         if one is not None:
             assert one[0][0] == two[0][0] and one[1][0] == two[1][0], t
+
+
+def test_dot2_one_equals_dot2_bit_for_bit():
+    """:func:`tritools.model.exact.dot2_one` vs :func:`~tritools.model.exact.dot2` on rows at scales 1e-200..1e200,
+    sums that cancel to 1e-14 of their terms (the exact rounding), and products that overflow (the plain sum)."""
+    from tritools.model.exact import dot2, dot2_one
+
+    rng = np.random.default_rng(2)
+    cancelled = 0
+    for t in range(3000):
+        A = rng.normal(size=(4, 3)) * 10.0 ** rng.uniform(-200, 200, (4, 1))
+        x = rng.normal(size=3) * 10.0 ** rng.uniform(-8, 8)
+        b = rng.normal(size=4) * 10.0 ** rng.uniform(-200, 200, 4)
+        if t % 3 == 0:
+            b = -(A @ x) * (1 + rng.normal(size=4) * 1e-14)
+            cancelled += 1
+        if t % 17 == 0:
+            A[0, 0], x[0] = 1e300, 1e10
+        with np.errstate(all="ignore"):
+            ref = dot2(A, np.broadcast_to(x, (4, 3)), b)
+            got = np.array([dot2_one(A[i].tolist(), x.tolist(), float(b[i])) for i in range(4)])
+        assert np.array_equal(got, ref, equal_nan=True), t
+    assert cancelled > 100

@@ -9,9 +9,9 @@ from fractions import Fraction
 
 import numpy as np
 
-__all__ = ["two_sum", "two_prod", "dot2", "accurate_homogeneous", "homogeneous_images", "CANCELLATION_RATIO",
-           "HOMOGENEOUS_RTOL", "COMPENSATED_DENOM_RTOL", "EXACT_ROUNDING_RATIO", "exactly_rounded",
-           "exact_centre", "same_exact_centre", "one_exact_camera"]
+__all__ = ["two_sum", "two_prod", "dot2", "dot2_one", "accurate_homogeneous", "homogeneous_images",
+           "CANCELLATION_RATIO", "HOMOGENEOUS_RTOL", "COMPENSATED_DENOM_RTOL", "EXACT_ROUNDING_RATIO",
+           "exactly_rounded", "exact_centre", "same_exact_centre", "one_exact_camera"]
 
 #: a sum of products is recomputed by :func:`dot2` when the sum of its terms' magnitudes exceeds this many times
 #: its magnitude (more than 6 bits lost to cancellation); below, the plain sum of 4 products errs by at most
@@ -75,6 +75,28 @@ def dot2(A: np.ndarray, x: np.ndarray, b: np.ndarray) -> np.ndarray:
         out = np.array(out, dtype=float)
         for idx in zip(*flagged):
             out[idx] = exactly_rounded(b[idx], P[idx], EP[idx], out[idx])
+    return out
+
+
+def dot2_one(a, x, b: float) -> float:
+    """:func:`dot2` of one row on floats (a, x sequences of floats, b a float): the same operations in its order,
+    the plain sum (numpy's, for its bits) where the result is not finite, and the same exact rounding where more than
+    40 bits cancel; equal bit for bit (tests/test_wave48.py)."""
+    s, c, S = b, 0.0, abs(b)
+    P, EP = [], []
+    for ak, xk in zip(a, x):
+        p, ep = two_prod(ak, xk)
+        s, es = two_sum(s, p)
+        c = c + (ep + es)
+        S = S + abs(p)
+        P.append(p)
+        EP.append(ep)
+    out = s + c
+    if not math.isfinite(out):
+        with np.errstate(all="ignore"):
+            out = float(np.einsum("k,k->", np.asarray(a, float), np.asarray(x, float)) + b)
+    if math.isfinite(out) and S > EXACT_ROUNDING_RATIO * abs(out):
+        out = exactly_rounded(b, P, EP, out)
     return out
 
 

@@ -59,11 +59,11 @@ from sospoly.analysis import ascend_one, bound_at_one, verify_quadratic_batch
 
 from ..model.cameras import power2_scale
 from ..model.epipolar_data import epipolar_errors, fundamental_bounds
-from ..model.exact import dot2, homogeneous_images
+from ..model.exact import dot2, dot2_one, homogeneous_images
 from ..model.lm_one import refine_point_one
 from ..model.normalize import RHO_FLOOR_REL, SCALE_BOUNDS, Normalization
 from ..model.stacked import (dlt_stack, epipolar_quadratics, fundamental_stack, gauss_newton_polish,
-                             median_rows, norms, null_vectors, pixel_scales, project_stack,
+                             median_rows, norms, null_vectors, pixel_scales, project_one, project_stack,
                              refine_points_stack, view_pairs)
 from .robust_bounds import ROUND_DOWN
 from .robust_verify import polish_rows
@@ -174,19 +174,19 @@ def enum_frame_one(C: np.ndarray, x: np.ndarray):
             sx, sy, sz = sx + cx, sy + cy, sz + cz
         c0 = [sx / N, sy / N, sz / N]
         Cc = C.copy()
-        Cc[:, :, 3] = dot2(C[:, :, :3], np.broadcast_to(c0, (N, 3, 3)), C[:, :, 3])
+        Cc[:, :, 3] = [[dot2_one(row[:3], c0, row[3]) for row in P] for P in C.tolist()]     # (dot2's bits)
         X0, good = dlt_stack(Cc[None], x[None])
         X0 = X0[0]
         if not (good[0] and np.isfinite(X0).all()):
             return None
-        u, _, fin = project_stack(Cc[None], X0[None])
-        if not fin[0]:
+        u, _, fin = project_one(Cc, X0)
+        if not fin:
             return None
         X0l = X0.tolist()
         dist = sorted(math.sqrt((cx - c0[0] - X0l[0]) ** 2 + (cy - c0[1] - X0l[1]) ** 2 + (cz - c0[2] - X0l[2]) ** 2)
                       for cx, cy, cz in centres)
         d = dist[(N - 1) // 2] if N % 2 else (dist[N // 2 - 1] + dist[N // 2]) / 2
-        rho = math.sqrt(float(np.add.reduce((u[0] - x) ** 2, axis=None)) / N)
+        rho = math.sqrt(float(np.add.reduce((u - x) ** 2, axis=None)) / N)
         B = C[:, :2, :3] - x[:, :, None] * C[:, 2:3, :3]
         top = norms(B, axis=(1, 2)) / norms(C[:, 2, :3], axis=1)
         if not rho > RHO_FLOOR_REL * float(np.max(top)):

@@ -14,9 +14,9 @@ from __future__ import annotations
 
 import math
 
-from sospoly import pow2_above
-
 import numpy as np
+
+from sospoly import pow2_above
 
 from .geometry import COMMON_CENTRE_RTOL, POINT_AT_INFINITY_RTOL, PROJECTION_DENOM_RTOL
 from .stacked import norms, null_vectors, project_one
@@ -122,8 +122,8 @@ def centre_distances(P: list, X0) -> list | None:
     shared = True
     for Pi in P:
         dots = [((r[0] * a0[0] + r[1] * a0[1]) + r[2] * a0[2]) + r[3] * a0[3] for r in Pi]
-        tol = COMMON_CENTRE_RTOL * max(((abs(r[0]) * b0[0] + abs(r[1]) * b0[1]) + abs(r[2]) * b0[2]) + abs(r[3]) * b0[3]
-                                for r in Pi)
+        scale = [((abs(r[0]) * b0[0] + abs(r[1]) * b0[1]) + abs(r[2]) * b0[2]) + abs(r[3]) * b0[3] for r in Pi]
+        tol = COMMON_CENTRE_RTOL * max(scale)
         if not all(abs(t) <= tol for t in dots):
             shared = False
             break

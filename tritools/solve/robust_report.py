@@ -32,9 +32,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..model.cameras import power2_scale
 from sospoly import pow2_above
 
+from ..model.cameras import power2_scale
 from ..model.frame_floats import null_vector_one
 from ..model.magnitude import (RESOLUTION_REL, SCALAR_MAX_VIEWS, guard_resolutions, magnitudes, resolution_pair,
                                resolution_pair_floats, view_floors, world_origin_magnitude_one,

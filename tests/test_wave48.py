@@ -314,3 +314,25 @@ def test_dot2_one_equals_dot2_bit_for_bit():
             got = np.array([dot2_one(A[i].tolist(), x.tolist(), float(b[i])) for i in range(4)])
         assert np.array_equal(got, ref, equal_nan=True), t
     assert cancelled > 100
+
+
+def test_twins_at_a_zero_scale_and_near_overflow_answer_as_the_stacked_code():
+    """Review 48b F2: ``frame_magnitude_one`` at an image scale of +-0 raised ``ZeroDivisionError`` where the stacked
+    code returns a number (inf, or NaN read as 1); F1: ``resolution_pair_floats`` with a pixel scale near the
+    largest float differed from ``resolution_pair`` by ~190 orders of magnitude (the medians' rules part there):
+    it now leaves that case to the stacked code."""
+    from tritools.model.magnitude import resolution_pair, resolution_pair_floats
+
+    C = np.ones((2, 3, 4))
+    C[1, 0, 0] = 2.0
+    x = np.ones((2, 2))
+    for s in (0.0, -0.0, 5e-324):
+        assert frame_magnitude_one(C, x, np.zeros(3), s) == _stacked_magnitude(C, x, np.zeros(3), s)
+    P = np.array([[[1.0, 0, 0, 0], [0, 1.0, 0, 0], [0, 0, 0, 1.0]],                 # no depth direction: NaN
+                  [[1.0, 0, 0, 0], [0, 1.0, 0, 0], [0, 0, 1.0, 1.0]]])
+    pts = np.array([[0.0, 0.0], [1.7e308, 0.0]])
+    with np.errstate(all="ignore"):
+        ref = resolution_pair(np.ones(1), pts[None], P[None])
+        got = resolution_pair_floats(1.0, pts, P)
+    assert got is None or all(a[0] == b[0] for a, b in zip(got, ref))
+    assert resolution_pair_floats(1.0, np.array([[300.0, 200.0], [310.0, 190.0]]), P) is not None

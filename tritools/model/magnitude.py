@@ -25,7 +25,7 @@ from .stacked import median_rows, pixel_scales
 __all__ = ["magnitudes", "origin_magnitudes", "world_origin_magnitudes", "world_origin_magnitude_one",
            "frame_magnitude_one", "resolutions", "guard_resolutions", "view_floors", "resolution_pair",
            "resolution_pair_one", "resolution_pair_floats", "list_median", "median_pixel_scales", "pixel_floors",
-           "RESOLUTION_REL", "PIXEL_FLOOR_REL", "SCALAR_MAX_VIEWS"]
+           "ieee_div", "RESOLUTION_REL", "PIXEL_FLOOR_REL", "SCALAR_MAX_VIEWS"]
 
 #: the resolution of the coordinates, relative to their magnitude (sqrt of the machine epsilon).
 RESOLUTION_REL = 1e-8
@@ -172,15 +172,24 @@ def frame_magnitude_one(Cn, x, o, scale: float) -> float:
             k = pow2_above(max(abs(e) for row in P for e in row))
             mag = max(mag, ax * obliquity_one([[e / k for e in row] for row in P], (0.0, 0.0)))
         A = [((abs(r[0]) * o0 + abs(r[1]) * o1) + abs(r[2]) * o2) + abs(r[3]) for r in P]
-        num = _max_nan(A[0], A[1]) / scale + 2.0 * ax * A[2]
-        den = abs(P[2][3])
-        K = num / den if den > 0 else (math.inf if num > 0 and den == 0 else math.nan)       # (numpy's x / 0)
+        num = ieee_div(_max_nan(A[0], A[1]), scale) + 2.0 * ax * A[2]
+        K = ieee_div(num, abs(P[2][3]))
         if K != K or frame != frame:
             frame = math.nan
         else:
             frame = max(frame, K)
     frame = 1.0 if frame != frame else min(frame, big)
     return _max_nan(min(mag, big), frame)
+
+
+def ieee_div(a: float, b: float) -> float:
+    """a / b on floats with numpy's answers where Python raises: +-inf for a / +-0 (a != 0, the signs' product),
+    NaN for 0 / 0 and NaN / 0 (review 48b F2: an image scale of 0 raised ``ZeroDivisionError`` in a twin)."""
+    if b != 0.0 or b != b:
+        return a / b
+    if a == 0.0 or a != a:
+        return math.nan
+    return math.copysign(math.inf, a) * math.copysign(1.0, b)
 
 
 def _max_nan(a: float, b: float) -> float:
@@ -295,16 +304,21 @@ def resolution_pair_one(s: float, xi: list, ps_all: list, med: float) -> tuple:
 def resolution_pair_floats(s: float, xi, C) -> tuple | None:
     """:func:`resolution_pair` of one problem (points xi (N, 2), cameras C (N, 3, 4)) on floats: the views' pixel
     scales by :func:`tritools.model.frame_floats.pixel_scale_one` (numpy's bits), then :func:`resolution_pair_one`;
-    ((1,), (1,)) arrays, or None where no view has a finite positive pixel scale (the stacked code decides that
-    case)."""
+    ((1,), (1,)) arrays, or None where no view has a finite positive pixel scale or one is near overflow (the stacked
+    code decides those cases)."""
     from .frame_floats import pixel_scale_one
 
     pts = np.asarray(xi, float).tolist()
     ps_all = [pixel_scale_one(P, q) for P, q in zip(np.asarray(C, float).tolist(), pts)]
     good = [p for p in ps_all if 0.0 < p < math.inf]
-    if not good:
+    if not good or max(good) > _FLOATS_MAX_SCALE:      # (near overflow the medians' rules part: review 48b F1)
         return None
     return resolution_pair_one(float(s), pts, ps_all, list_median(good))
+
+
+#: :func:`resolution_pair_floats` leaves pixel scales above this to the stacked code (its median's mean of the two
+#: middle scales overflows there, the float twin's does not)
+_FLOATS_MAX_SCALE = 1e300
 
 
 def list_median(values: list) -> float:

@@ -36,8 +36,8 @@ from sospoly import pow2_above
 
 from ..model.cameras import power2_scale
 from ..model.frame_floats import null_vector_one
-from ..model.magnitude import (RESOLUTION_REL, SCALAR_MAX_VIEWS, guard_resolutions, magnitudes, resolution_pair,
-                               resolution_pair_floats, view_floors, world_origin_magnitude_one,
+from ..model.magnitude import (RESOLUTION_REL, SCALAR_MAX_VIEWS, guard_resolutions, ieee_div, magnitudes,
+                               resolution_pair, resolution_pair_floats, view_floors, world_origin_magnitude_one,
                                world_origin_magnitudes)
 from ..model.stacked import norms, null_vectors
 from .decide import gamma_from_c, gamma_lower_one, within_resolution_one
@@ -155,18 +155,9 @@ def _magnitude_one(C: np.ndarray, points: np.ndarray, X: np.ndarray) -> float:
     for P in C.tolist():
         k = pow2_above(_max_abs(P))
         a = null_vector_one([[v / k for v in row] for row in P])
-        o = [o[j] + _ieee_div(a[j], a[3]) for j in range(3)]
+        o = [o[j] + ieee_div(a[j], a[3]) for j in range(3)]
     o = [t / N if math.isfinite(t / N) else 0.0 for t in o]
     return max(float(magnitudes(points[None], C[None])[0]), world_origin_magnitude_one(C, points, X, o))
-
-
-def _ieee_div(a: float, b: float) -> float:
-    """a / b with numpy's answers where Python raises: +-inf for a / +-0 (a != 0), NaN for 0 / 0 and NaN."""
-    if b != 0.0 or b != b:
-        return a / b
-    if a == 0.0 or a != a:
-        return math.nan
-    return math.copysign(math.inf, a) * math.copysign(1.0, b)
 
 
 def _max_abs(P: list) -> float:

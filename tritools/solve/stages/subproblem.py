@@ -135,8 +135,11 @@ class Relaxation:
     bound: Callable
     what: str
     dropped: tuple = ()
-    #: an exact reduction solved by its own degree plan (:func:`_solve`), not at delta = 2 only
+    #: solved by its own degree plan (:func:`_solve`), not at delta = 2 only
     plan: bool = False
+    #: an exact reduction (its optimum is the whole problem's): a plan of it that ends near its estimate ends the
+    #: point (:func:`_try`); a relaxation that only bounds the optimum leaves the others to be tried
+    exact: bool = False
 
 
 def relaxations(ctx: PointContext, X) -> list[Relaxation]:
@@ -171,7 +174,8 @@ def relaxations(ctx: PointContext, X) -> list[Relaxation]:
     if trimmed is not None:
         views = ", ".join(str(i) for i, (a, b) in enumerate(zip(trimmed, ctx.regions)) if a is not b)
         out.append(Relaxation(tuple(range(ctx.N)), trimmed, _same,
-                              f"the problem with the long region(s) of view(s) {views} trimmed", plan=True))
+                              f"the problem with the long region(s) of view(s) {views} trimmed", plan=True,
+                              exact=True))
     held = held_views(ctx.cams, ctx.regions, X)
     # then the wide regions (a poor local estimate -- the whole problem's frame scaled by them -- may sit outside
     # some): a certificate where they hold the sub-problem's minimiser, a lower bound at least (d_w >= 0)
@@ -273,7 +277,7 @@ def _try(ctx: PointContext, relax: Relaxation) -> None:
     # data scaled by the long regions (a 4-view problem with 20-70 px residuals: 12 s, then 17 s more for a lower bound
     # 2.6e-3 below its); not after a poor one (lower bound 0 at a local estimate 36 % above another point: review 42c)
     near = res.gamma_lb is not None and res.gamma_ub is not None and res.gamma_lb >= PLAN_NEAR * res.gamma_ub
-    ctx.finished = ctx.finished or (relax.plan and sub.status != Status.TIME_LIMIT and near)
+    ctx.finished = ctx.finished or (relax.exact and sub.status != Status.TIME_LIMIT and near)
 
 
 def _decided(ctx: PointContext, gamma_lb: float, X) -> bool:

@@ -181,7 +181,7 @@ def test_depth_rows_and_depths_of_one_point_equal_the_stacked_ones_bit_for_bit()
             C[-1, 2, :3] = C[-1, 0, :3] * 2.0 + C[-1, 1, :3] * 1e-13     # M nearly singular
         if t % 11 == 0:
             C[1, 2, :3] = 0.0                                # affine: no depth direction
-        ref = depth_rows(C)
+        ref = depth_rows(C[None])[0]                          # (a stack: the array code)
         got = np.array([depth_row_one(P) for P in C.tolist()])
         assert np.array_equal(got, ref, equal_nan=True), t
         X = rng.normal(size=3) * 10.0 ** rng.uniform(-3, 3)

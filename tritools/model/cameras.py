@@ -345,8 +345,11 @@ def depth_rows(C: np.ndarray) -> np.ndarray:
 
     Each camera is divided by a power of two near its largest entry first (the depth does not
     change under ``P -> k P``, k > 0), and ``||m3||`` is taken without overflow or underflow.
-    NaN rows for cameras with ``m3 = 0`` (depth undefined) or non-finite entries.
+    NaN rows for cameras with ``m3 = 0`` (depth undefined) or non-finite entries.  A few finite cameras (N, 3, 4),
+    at most ``SCALAR_MAX_VIEWS``: :func:`depth_row_one` each, the same bits without the array calls.
     """
+    if C.ndim == 3 and len(C) <= SCALAR_MAX_VIEWS and np.isfinite(C).all():
+        return np.array([depth_row_one(P) for P in C.tolist()]).reshape(C.shape[0], 4)
     Cs = C / power2_scale(C, (-2, -1))
     m3 = Cs[..., 2, :3]
     k = power2_scale(m3, (-1,))[..., 0]

@@ -21,7 +21,7 @@ from sospoly import pow2_above
 from .geometry import COMMON_CENTRE_RTOL, POINT_AT_INFINITY_RTOL, PROJECTION_DENOM_RTOL
 from .stacked import norms, null_vectors, project_one
 
-__all__ = ["pixel_scale_one", "project_floats", "null_vector_one", "residual_squares", "centre_distances",
+__all__ = ["pixel_scale_one", "project_floats", "null_vector_one", "max_abs", "residual_squares", "centre_distances",
            "residual_squares_array", "centre_distances_array"]
 
 
@@ -35,7 +35,7 @@ def pixel_scale_one(P: list, x) -> float:
     n = math.sqrt((g * g + h * h) + i * i)
     if not n > 0:
         return math.nan
-    m = _max_abs(B)
+    m = max_abs(B)
     k = pow2_above(m)
     b00, b01, b02, b10, b11, b12 = (t / k for t in B)
     p = (b00 * b00 + b01 * b01) + b02 * b02
@@ -47,7 +47,7 @@ def pixel_scale_one(P: list, x) -> float:
     return k * (math.sqrt(s) if s == s else math.nan) / n
 
 
-def _max_abs(values) -> float:
+def max_abs(values) -> float:
     """``numpy.maximum.reduce`` of the absolute values: NaN if any is NaN."""
     out = 0.0
     for t in values:

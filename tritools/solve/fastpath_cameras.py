@@ -23,7 +23,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..model.cameras import WorldFrame as Handedness
-from ..model.cameras import SCALAR_MAX_VIEWS, as_world_frame, depth_row_one, depth_rows, validate_cameras
+from ..model.cameras import SCALAR_MAX_VIEWS, as_world_frame, depth_rows, validate_cameras
 from ..model.frame import WorldFrame, world_frame
 from ..model.regions.base import real_array
 
@@ -89,9 +89,10 @@ def depths_one(C: np.ndarray, X: np.ndarray, world_frame: Handedness | str = Han
     remembered."""
     key = _key(C)
     last = _LAST_ROWS[0]
-    few = len(C) <= SCALAR_MAX_VIEWS                    # the rows and sums on floats: the same bits
+    few = len(C) <= SCALAR_MAX_VIEWS                    # the sums on floats: the same bits
     if last is None or last[0] != key or isinstance(last[1], list) != few:
-        last = (key, [depth_row_one(P) for P in C.tolist()] if few else _read_only(depth_rows(C)[None]))
+        rows = depth_rows(C)
+        last = (key, rows.tolist() if few else _read_only(rows[None]))
         _LAST_ROWS[0] = last
     h = as_world_frame(world_frame).sign
     if few:                                             # einsum's order of the four products, (p0 + p2) + (p1 + p3)

@@ -72,7 +72,7 @@ import time
 
 import numpy as np
 
-from ..model.cameras import SCALAR_MAX_VIEWS, as_world_frame, depth_row_one, depth_rows
+from ..model.cameras import as_world_frame, depth_rows
 from ..model.frame import WorldFrame, world_frame
 from ..model.normalize import normalization_for
 from ..result import Attempt, Status, TriangulationResult
@@ -255,9 +255,7 @@ class TlsSearch(NodeBounds):
         if not self.points:
             return point_report(X, self.C_user, self.regions, self.opts.world_frame)
         if self.drows is None:                          # depth = h row_i . X~ (depths_stack's rows), once
-            C = self.C_user                             # (a few cameras: the rows' twin on floats, their bits)
-            self.drows = np.array([depth_row_one(P) for P in C.tolist()]) if len(C) <= SCALAR_MAX_VIEWS else \
-                depth_rows(C)
+            self.drows = depth_rows(self.C_user)
         Xh = np.array([X[0], X[1], X[2], 1.0], float)
         with np.errstate(over="ignore", invalid="ignore"):
             depths = as_world_frame(self.opts.world_frame).sign * (self.drows @ Xh)

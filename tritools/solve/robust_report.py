@@ -35,7 +35,7 @@ import numpy as np
 from sospoly import pow2_above
 
 from ..model.cameras import power2_scale
-from ..model.frame_floats import null_vector_one
+from ..model.frame_floats import max_abs, null_vector_one
 from ..model.magnitude import (RESOLUTION_REL, SCALAR_MAX_VIEWS, guard_resolutions, ieee_div, magnitudes,
                                resolution_pair, resolution_pair_floats, view_floors, world_origin_magnitude_one,
                                world_origin_magnitudes)
@@ -153,23 +153,11 @@ def _magnitude_one(C: np.ndarray, points: np.ndarray, X: np.ndarray) -> float:
     N = len(C)
     o = [0.0, 0.0, 0.0]
     for P in C.tolist():
-        k = pow2_above(_max_abs(P))
+        k = pow2_above(max_abs(v for row in P for v in row))
         a = null_vector_one([[v / k for v in row] for row in P])
         o = [o[j] + ieee_div(a[j], a[3]) for j in range(3)]
     o = [t / N if math.isfinite(t / N) else 0.0 for t in o]
     return max(float(magnitudes(points[None], C[None])[0]), world_origin_magnitude_one(C, points, X, o))
-
-
-def _max_abs(P: list) -> float:
-    """``numpy.maximum.reduce`` of |entries| of a camera (NaN if any is NaN)."""
-    out = 0.0
-    for row in P:
-        for v in row:
-            v = abs(v)
-            if v != v:
-                return math.nan
-            out = v if v > out else out
-    return out
 
 
 def _checked(g_ub: float, spread: float, resolution: float, N: int, c: np.ndarray, lb: float, tolerances,

@@ -68,7 +68,7 @@ def test_fundamental_stack_few_equals_stacked(kind, monkeypatch):
     for _ in range(30):
         N = int(rng.integers(2, 5))
         C = np.array([_cameras(rng, N, kind) for _ in range(int(rng.integers(1, 3)))])
-        assert cf.few_centres(C, *view_pairs(N)) is not None
+        assert cf.few_distinct(C, *view_pairs(N)) is not None
         with np.errstate(all="ignore"):             # (extreme cameras overflow in F, as every caller allows)
             F, defined = fundamental_stack(C)
             monkeypatch.setattr(cf, "FEW_CAMERAS", 0)
@@ -88,11 +88,11 @@ def test_shared_centres_found():
     assert not cf.distinct_few(c[0], (0.0, 0.0, 0.0, 0.0))
 
 
-def test_few_centres_declines_large_or_non_finite():
+def test_few_distinct_declines_large_or_non_finite():
     rng = np.random.default_rng(3)
     C = _cameras(rng, 3, "generic")[None]
     I, J = view_pairs(3)
-    assert cf.few_centres(np.repeat(C, 3, axis=0), I, J) is None        # 9 cameras > FEW_CAMERAS
+    assert cf.few_distinct(np.repeat(C, 3, axis=0), I, J) is None        # 9 cameras > FEW_CAMERAS
     bad = C.copy()
     bad[0, 1, 0, 0] = np.nan
-    assert cf.few_centres(bad, I, J) is None
+    assert cf.few_distinct(bad, I, J) is None

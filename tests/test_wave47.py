@@ -188,7 +188,8 @@ def test_fundamental_bounds_hold_against_the_exact_matrix_and_exceed_the_old_mod
     """fundamental_bounds (the fast path's proven F error, wave 47) bounds min over lambda of ||F~ - lambda F||_F for
     the exact F of the float cameras -- checked at the lambda fitted to the exact F, in rationals -- for random and
     nearly coincident camera pairs; and the computed F~ does err by more than the 16 ulps the model assumed
-    (EPIPOLAR_DATA_RTOL), which is why the model is no longer what is charged."""
+    (EPIPOLAR_DATA_RTOL; the pseudo-inverse form on ordinary pairs then, the determinant form of wave 49 on nearly
+    coincident ones), which is why the model is no longer what is charged."""
     from fractions import Fraction
 
     from tritools.model.epipolar_data import EPIPOLAR_DATA_RTOL, fundamental_bounds
@@ -215,17 +216,24 @@ def test_fundamental_bounds_hold_against_the_exact_matrix_and_exceed_the_old_mod
 
 
 def test_fast_paths_charge_the_proven_fundamental_error(monkeypatch):
-    """The verification of a single call and of a batch charges fundamental_bounds (not the 16-ulp model): with the
-    bound made large, verification no longer certifies the same points (the SDP steps, which charge their own
-    proven coefficient errors, may); as computed, it does."""
+    """The verification of a single call and of a batch charges the proven error of F (not the 16-ulp model; since
+    wave 49 the bound fundamental_stack returns beside its determinant-form F): with the bound made large,
+    verification no longer certifies the same points (the SDP steps, which charge their own proven coefficient
+    errors, may); as computed, it does."""
     import tritools
-    from tritools.model import epipolar_data
+    from tritools.model import stacked
 
     sc = random_scene(3, 6, noise_px=1.0, seed=8)
     C, x = np.asarray(sc.cameras), np.asarray(sc.points2d)
     plain = [tritools.triangulate(C, x[j]) for j in range(6)]
     assert all(r.optimal and r.certified_by == "verification" for r in plain)
-    monkeypatch.setattr(epipolar_data, "fundamental_bounds", lambda C, pairs, F: np.full(F.shape[:2], 1e-2))
+    real = stacked.fundamental_determinants
+
+    def large(C, I, J):
+        F, ok, e = real(C, I, J)
+        return F, ok, np.where(ok, 1e-2, np.inf)
+
+    monkeypatch.setattr(stacked, "fundamental_determinants", large)
     big = [tritools.triangulate(C, x[j]) for j in range(6)]
     assert not any(r.certified_by == "verification" for r in big)
     assert all(a.status == "verification_failed" for r in big for a in r.attempts[:1])
@@ -261,8 +269,8 @@ def test_constraint_error_stack_equals_the_single_solution_charge():
 
 
 def test_batched_sdp_charges_the_fundamental_error(monkeypatch):
-    """solve_corollary1_points (the batched delta = 2 SDP) lowers c_LB by sum_k |r_k| e_k with e_k from
-    fundamental_bounds: as computed the stack is certified; with the bound made large its lower bounds drop by at
+    """solve_corollary1_points (the batched delta = 2 SDP) lowers c_LB by sum_k |r_k| e_k with e_k the proven error of
+    F (fundamental_stack's ``errors``): as computed the stack is certified; with the bound made large its lower bounds drop by at
     least that much times the multipliers, and the certificates go (it charged no data error before)."""
     from tritools.solve import sdp_batch
 
@@ -271,7 +279,13 @@ def test_batched_sdp_charges_the_fundamental_error(monkeypatch):
     x = np.asarray(sc.points2d)
     plain = sdp_batch.solve_corollary1_points(C, x)
     assert plain.done.all() and plain.optimal.all()
-    monkeypatch.setattr(sdp_batch, "fundamental_bounds", lambda Cn, pairs, F: np.full(F.shape[:2], 1e-2))
+    real = sdp_batch.fundamental_stack
+
+    def large(C, pairs=None, errors=False):
+        out = real(C, pairs, errors)
+        return (out[0], out[1], np.where(out[1], 1e-2, np.inf)) if errors else out
+
+    monkeypatch.setattr(sdp_batch, "fundamental_stack", large)
     big = sdp_batch.solve_corollary1_points(C, x)
     done = big.done & plain.done
     assert done.sum() >= 3

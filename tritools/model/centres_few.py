@@ -25,7 +25,7 @@ import numpy as np
 from .geometry import SAME_CENTER_RTOL
 
 __all__ = ["null_vector_one", "null_vectors_few", "centre_vector_one", "centre_vectors_few", "distinct_few",
-           "few_centres", "FEW_CAMERAS"]
+           "few_distinct", "FEW_CAMERAS"]
 
 #: stacks of at most this many cameras (problems x views) take the scalar twins in
 #: :func:`tritools.model.stacked.fundamental_stack`: a single call's one problem of up to 8 views, or its two
@@ -93,18 +93,17 @@ def distinct_few(a: tuple, b: tuple) -> bool:
     return math.sqrt(e0 * e0 + e1 * e1 + e2 * e2 + e3 * e3) > SAME_CENTER_RTOL
 
 
-def few_centres(C: np.ndarray, I, J) -> tuple | None:
-    """(null vectors a (M, N, 4), distinct centres (M, K) for the pairs (I, J)) of cameras C (M, N, 3, 4) by the
-    scalar twins -- the numbers of :func:`tritools.model.stacked.fundamental_stack`'s stacked steps -- or None for a
-    stack of more than :data:`FEW_CAMERAS` cameras or with a non-finite entry."""
+def few_distinct(C: np.ndarray, I, J) -> np.ndarray | None:
+    """distinct centres (M, K) for the pairs (I, J) of cameras C (M, N, 3, 4) by the scalar twins -- the numbers of
+    :func:`tritools.model.stacked.fundamental_stack`'s stacked steps (:func:`~tritools.model.stacked.centre_vectors`,
+    :func:`~tritools.model.stacked.distinct_centres`) -- or None for a stack of more than :data:`FEW_CAMERAS` cameras
+    or with a non-finite entry."""
     M, N = C.shape[:2]
     if M * N > FEW_CAMERAS or not np.isfinite(C).all():
         return None
-    cams = C.tolist()
-    a = [null_vectors_few(p) for p in cams]
     pairs = list(zip(I.tolist(), J.tolist()))
     distinct = []
-    for p in cams:
+    for p in C.tolist():
         c = centre_vectors_few(p)
         distinct.append([distinct_few(c[i], c[j]) for i, j in pairs])
-    return np.array(a, dtype=float).reshape(M, N, 4), np.array(distinct, dtype=bool).reshape(M, len(pairs))
+    return np.array(distinct, dtype=bool).reshape(M, len(pairs))

@@ -25,25 +25,12 @@ from __future__ import annotations
 
 import numpy as np
 
+from .fundamental_det import determinant_form
 from .stacked import norms
 
 __all__ = ["EPIPOLAR_DATA_RTOL", "epipolar_errors", "fundamental_bounds", "polynomial_errors"]
 
 _U = 2.0 ** -53
-#: the minors and their products are formed in numpy's longdouble (64-bit mantissa on x86; double elsewhere, and then
-#: its own unit round-off): the determinants' error bound 2^11 times tighter than in double
-_LD = np.longdouble
-_U_LD = float(np.finfo(_LD).eps) / 2
-#: the 2 x 2 column pairs (p, q) of a Laplace expansion of a 4 x 4 determinant along its first two rows, in the order
-#: whose complements are the same list reversed, and their signs
-_COLUMN_PAIRS = ((0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3))
-_PAIR_SIGNS = np.array([1.0, -1.0, 1.0, 1.0, -1.0, 1.0])
-_ENTRY_SIGNS = np.array([[1.0, -1.0, 1.0], [-1.0, 1.0, -1.0], [1.0, -1.0, 1.0]])
-_OTHER_ROWS = ((1, 2), (0, 2), (0, 1))
-# flat indices (row * 4 + column) of the entries a_p, b_q, a_q, b_p of the minor a_p b_q - a_q b_p of rows (a, b) =
-# _OTHER_ROWS[k] on the column pair _COLUMN_PAIRS[c], as (3, 6) arrays
-_R1P, _R2Q, _R1Q, _R2P = (np.array([[4 * rows[ra] + cols[cb] for cols in _COLUMN_PAIRS] for rows in _OTHER_ROWS])
-                          for ra, cb in ((0, 0), (1, 1), (0, 1), (1, 0)))
 
 #: the relative error assumed of a computed, unit-norm fundamental matrix (16 units in the last place)
 EPIPOLAR_DATA_RTOL = 16 * 2.0 ** -52
@@ -88,14 +75,9 @@ def fundamental_bounds(C: np.ndarray, pairs: tuple, F: np.ndarray) -> np.ndarray
     C = np.asarray(C, float)
     I, J = (np.asarray(p, int) for p in pairs)
     with np.errstate(over="ignore", invalid="ignore"):
-        s = C.reshape(C.shape[:2] + (12,)).astype(_LD)        # the 2 x 2 minors of every camera at once
-        ps, qs = s[..., _R1P] * s[..., _R2Q], s[..., _R1Q] * s[..., _R2P]
-        m, mh = ps - qs, np.abs(ps) + np.abs(qs)              # (M, N, 3, 6)
-        mi, mj = m[:, I] * _PAIR_SIGNS, m[:, J][..., ::-1]
-        D_ld = np.einsum("mkac,mkbc->mkab", mi, mj) * _ENTRY_SIGNS
-        perm = np.einsum("mkac,mkbc->mkab", mh[:, I], mh[:, J][..., ::-1]).astype(float)
+        D_ld, dD = determinant_form(C, I, J)
         D = D_ld.astype(float)                                # (rounded once more: u |D|)
-        dD = 16 * _U_LD * perm * (1 + 16 * _U) + _U * np.abs(D) + 5e-324
+        dD = dD + _U * np.abs(D) + 5e-324
         F = np.asarray(F, float)
         nn = np.einsum("mkab,mkab->mk", D, D)
         lam = (np.einsum("mkab,mkab->mk", F, D) / nn)[..., None, None]

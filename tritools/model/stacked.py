@@ -10,7 +10,7 @@ never raised on, so one bad problem does not stop the stack.
 * :func:`dlt_stack` -- Hartley-normalised linear triangulation;
 * :func:`project_stack` -- projections with a finite mask;
 * :func:`refine_points_stack` -- Levenberg-Marquardt on sum_i ||Phi(X, P_i) - x_i||^2;
-* :func:`fundamental_stack` -- F_ij = [e]_x P_i P_j^+ of view pairs (coincident centres flagged);
+* :func:`fundamental_stack` -- F_ij from the cameras' 4 x 4 determinants, of view pairs (coincident centres flagged);
 * :func:`epipolar_quadratics` -- the quadratic parts of x~_i^T F_ij x~_j;
 * :func:`pixel_scales` -- the image scale of each view at a point (the focal length in pixels for a
   finite camera), used by the normalisation's floor.
@@ -25,7 +25,8 @@ import numpy as np
 from sospoly.analysis import SparseQuadratics
 from sospoly import pow2_above_array
 
-from .centres_few import few_centres
+from .centres_few import few_distinct
+from .fundamental_det import fundamental_determinants
 from .geometry import POINT_AT_INFINITY_RTOL, PROJECTION_DENOM_RTOL, SAME_CENTER_RTOL
 from .lm_one import FLOAT_MAX_VIEWS, LM_MAX_ITER, LM_STEP_RTOL, polish_floats, refine_floats, solve3
 
@@ -456,49 +457,23 @@ def distinct_centres(a_i: np.ndarray, a_j: np.ndarray) -> np.ndarray:
         return (sin > SAME_CENTER_RTOL) & (ni[..., 0] > 0) & (nj[..., 0] > 0)
 
 
-def fundamental_stack(C: np.ndarray, pairs: tuple | None = None) -> tuple[np.ndarray, np.ndarray]:
+def fundamental_stack(C: np.ndarray, pairs: tuple | None = None, errors: bool = False) -> tuple:
     """(F (M, K, 3, 3) unit Frobenius norm, defined (M, K)) for the view pairs ``pairs`` = (I, J) (default: all,
-    :func:`view_pairs`): F_ij = [e]_x P_i P_j^+, e = P_i a_j, P_j a_j = 0 (SPEC §7); ``defined`` is False where
-    the two camera centres coincide (:func:`distinct_centres` of :func:`centre_vectors`, invariant to the cameras'
-    scales and image homographies) or F is not finite or vanishes."""
-    M, N = C.shape[:2]
-    I, J = view_pairs(N) if pairs is None else pairs
-    Pi = C[:, I]
-    few = few_centres(C, I, J)                          # a single call's few cameras: the same numbers
-    a = null_vectors(C) if few is None else few[0]
-    with np.errstate(over="ignore", invalid="ignore"):
-        inv = _inverses(C @ np.swapaxes(C, 2, 3))
-        pinv = np.einsum("mnij,mnjk->mnik", np.swapaxes(C, 2, 3), inv)
-        aJ = a[:, J]                        # e = P_i a_j term by term (einsum's order varies with the stack's shape)
-        e = ((Pi[..., 0] * aJ[:, :, None, 0] + Pi[..., 1] * aJ[:, :, None, 1]) + Pi[..., 2] * aJ[:, :, None, 2]) \
-            + Pi[..., 3] * aJ[:, :, None, 3]
-    ex = np.zeros(e.shape + (3,))
-    ex[..., 0, 1], ex[..., 0, 2], ex[..., 1, 2] = -e[..., 2], e[..., 1], -e[..., 0]
-    ex[..., 1, 0], ex[..., 2, 0], ex[..., 2, 1] = e[..., 2], -e[..., 1], e[..., 0]
-    F = ex @ Pi @ pinv[:, J]
-    nrm = norms(F, axis=(2, 3))
-    c = None if few else centre_vectors(C)
-    defined = (few[1] if few else distinct_centres(c[:, I], c[:, J])) & np.isfinite(nrm) & (nrm > 0)
-    F = np.where(defined[..., None, None], F / np.where(nrm > 0, nrm, 1.0)[..., None, None], 0.0)
-    return F, defined
-
-
-def _inverses(A: np.ndarray) -> np.ndarray:
-    """The inverses of a stack of square matrices (..., n, n); where one is exactly singular (a camera of points at
-    1e20 px), that one's pseudo-inverse (non-finite entries read as 0) and the others' inverses as they are: each
-    matrix's numbers do not depend on the rest of its stack (review 19 F4)."""
-    try:
-        return np.linalg.inv(A)
-    except np.linalg.LinAlgError:
-        flat = A.reshape((-1,) + A.shape[-2:])
-        return np.array([_inverse_or_pinv(a) for a in flat]).reshape(A.shape)
-
-
-def _inverse_or_pinv(a: np.ndarray) -> np.ndarray:
-    try:
-        return np.linalg.inv(a[None])[0]
-    except np.linalg.LinAlgError:
-        return np.linalg.pinv(np.where(np.isfinite(a), a, 0.0))
+    :func:`view_pairs`): the exact fundamental matrix of the float cameras (SPEC §7, x_i^T F_ij x_j = 0), its entries
+    the 4 x 4 determinants from the cameras' 2 x 2 minors in extended precision, rounded once
+    (:func:`tritools.model.fundamental_det.fundamental_determinants`); ``defined`` is False where the two camera
+    centres coincide (:func:`distinct_centres` of :func:`centre_vectors`, invariant to the cameras' scales and image
+    homographies) or F is not finite or vanishes.  ``errors``: also (M, K) proven bounds of ||F - lambda F_exact||_F
+    (inf where not defined), the ``proven`` errors of :func:`tritools.model.epipolar_data.epipolar_errors`."""
+    I, J = view_pairs(C.shape[1]) if pairs is None else pairs
+    F, ok, e = fundamental_determinants(C, I, J)
+    few = few_distinct(C, I, J)                         # a single call's few cameras: the same numbers
+    if few is None:
+        c = centre_vectors(C)
+        few = distinct_centres(c[:, I], c[:, J])
+    defined = few & ok
+    F = np.where(defined[..., None, None], F, 0.0)
+    return (F, defined, np.where(defined, e, np.inf)) if errors else (F, defined)
 
 
 def epipolar_quadratics(F: np.ndarray, N: int, pairs: tuple | None = None):

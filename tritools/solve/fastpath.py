@@ -267,7 +267,7 @@ def _lagrangian_one(C: np.ndarray, Cn: np.ndarray, v: np.ndarray, radius: float,
     normalised Cn (N, 3, 4), the candidate v (2N,)), or None where that function would flag the problem (no
     defined pair, non-finite constraints).  Pairs with coincident centres carry no constraint, as there."""
     N = len(C)
-    F, defined, raw = _fundamental_both(Cn[None], C[None])      # (one call for both, as the stack)
+    F, defined, raw, E = _fundamental_both(Cn[None], C[None])      # (one call for both, as the stack)
     if not raw.all():
         F, defined = np.where(raw[..., None, None], F, 0.0), defined & raw
     if not defined.any():
@@ -278,7 +278,7 @@ def _lagrangian_one(C: np.ndarray, Cn: np.ndarray, v: np.ndarray, radius: float,
     n = 2 * N
     ver = verify_quadratic_batch(np.zeros(1), np.zeros((1, n)), np.eye(n)[None], g0, g1, G2, v[None],
                                  tolerances=tolerances, radius=np.array([radius]),
-                                 constraint_error=epipolar_errors(F, view_pairs(N), v[None], radius, Cn[None]))
+                                 constraint_error=epipolar_errors(F, view_pairs(N), v[None], radius, proven=E))
     return float(ver.lower_bound[0])
 
 
@@ -392,11 +392,12 @@ def all_pairs_chunk(n_views: int) -> int:
 
 
 def _fundamental_both(Cn, C, pairs=None):
-    """(F, defined) of the normalised cameras and ``defined`` of the raw ones -- one centre or not is decided on
-    the raw cameras (CentreRelations' rule) -- in one vectorised call."""
+    """(F, defined, proven errors of F) of the normalised cameras and ``defined`` of the raw ones -- one centre or
+    not is decided on the raw cameras (CentreRelations' rule) -- in one vectorised call:
+    (F, defined, raw defined, errors)."""
     M = len(Cn)
-    F, defined = fundamental_stack(np.concatenate([Cn, C]), pairs)
-    return F[:M], defined[:M], defined[M:]
+    F, defined, E = fundamental_stack(np.concatenate([Cn, C]), pairs, errors=True)
+    return F[:M], defined[:M], defined[M:], E[:M]
 
 
 def _held(F: np.ndarray, pairs, views) -> np.ndarray:
@@ -420,7 +421,7 @@ def _all_pairs_bounds(C, Cn, v, ok, radius, tolerances, f0, F2, views=None) -> t
     """(Lagrangian lower bound (NaN: none), ok) with the epipolar constraints of all N(N - 1)/2 view pairs,
     vectorised over the stack (:func:`sospoly.analysis.verify.verify_quadratic_batch`)."""
     M, N = C.shape[:2]
-    F, defined, raw = _fundamental_both(Cn, C)
+    F, defined, raw, E = _fundamental_both(Cn, C)
     F, defined = np.where(raw[..., None, None], F, 0.0), defined & raw
     ok = ok & np.any(defined, axis=1) if F.shape[1] else ok
     Fh = _held(F, view_pairs(N), views)
@@ -429,7 +430,7 @@ def _all_pairs_bounds(C, Cn, v, ok, radius, tolerances, f0, F2, views=None) -> t
     ok &= finite
     g0, g1, G2 = _zero_rows(g0, g1, G2, ok)
     n = 2 * N
-    err = epipolar_errors(np.where(ok[:, None, None, None], Fh, 0.0), view_pairs(N), v, radius, Cn)
+    err = epipolar_errors(np.where(ok[:, None, None, None], Fh, 0.0), view_pairs(N), v, radius, proven=E)
     ver = verify_quadratic_batch(f0, np.zeros((M, n)), F2, g0, g1, G2, v, tolerances=tolerances, radius=radius,
                                  constraint_error=err)
     return ver.lower_bound, ok
@@ -444,7 +445,7 @@ def _band_bounds(C, Cn, v, ok, radius, width, tolerances, f0, F2, views=None) ->
     all pairs)."""
     M, N = C.shape[:2]
     pairs = band_pairs(N, width)
-    F, defined, raw = _fundamental_both(Cn, C, pairs)
+    F, defined, raw, E = _fundamental_both(Cn, C, pairs)
     defined &= raw
     Fh = _held(F, pairs, views)
     g0, g1, G2 = epipolar_quadratics(Fh, N, pairs)
@@ -454,6 +455,6 @@ def _band_bounds(C, Cn, v, ok, radius, width, tolerances, f0, F2, views=None) ->
     n = 2 * N
     ver = verify_quadratic_banded_batch(f0, np.zeros((M, n)), F2, g0, g1, G2, v, tolerances=tolerances,
                                         radius=radius, constraint_error=epipolar_errors(
-                                            np.where(use[:, None, None, None], Fh, 0.0), pairs, v, radius, Cn))
+                                            np.where(use[:, None, None, None], Fh, 0.0), pairs, v, radius, proven=E))
     lower = np.where(use, ver.lower_bound, np.nan)
     return lower, use

@@ -58,7 +58,7 @@ import numpy as np
 from sospoly.analysis import ascend_one, bound_at_one, verify_quadratic_batch
 
 from ..model.cameras import power2_scale
-from ..model.epipolar_data import epipolar_errors, fundamental_bounds
+from ..model.epipolar_data import epipolar_errors
 from ..model.exact import dot2, dot2_one, homogeneous_images
 from ..model.lm_one import refine_point_one
 from ..model.normalize import RHO_FLOOR_REL, SCALE_BOUNDS, Normalization
@@ -314,13 +314,12 @@ def refine_row_one(Cn: np.ndarray, X0: np.ndarray, views: list) -> tuple:
 def fundamentals(C: np.ndarray, Cn: np.ndarray) -> tuple:
     """(F (P, K, 3, 3), defined (P, K), E (P, K)) of the view pairs of P problems in their normalised frames Cn
     (P, N, 3, 4), with coincident centres decided on the raw cameras C (P, N, 3, 4) too, and E the proven errors of
-    the computed F (:func:`tritools.model.epipolar_data.fundamental_bounds` of Cn): computed once per problem, for
+    the computed F (:func:`tritools.model.stacked.fundamental_stack`'s ``errors``): computed once per problem, for
     every subset bound of :func:`enum_bounds_rows` and :func:`ascended_bound` (a subset's pairs gather them)."""
     Cs = C / norms(C, axis=(2, 3))[..., None, None]
-    F, defined = fundamental_stack(np.concatenate([Cn, Cs]))
+    F, defined, E = fundamental_stack(np.concatenate([Cn, Cs]), errors=True)
     P = len(Cn)
-    F = F[:P]
-    return F, defined[:P] & defined[P:], fundamental_bounds(Cn, view_pairs(Cn.shape[1]), F)
+    return F[:P], defined[:P] & defined[P:], E[:P]
 
 
 def enum_bounds(C: np.ndarray, Cn: np.ndarray, W: np.ndarray, Xn: np.ndarray, s: float, tolerances):

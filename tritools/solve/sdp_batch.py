@@ -46,8 +46,7 @@ from sospoly.solvers import with_single_threaded_blas
 from ..model.frame import project_world
 from ..model.geometry import POINT_AT_INFINITY_RTOL
 from ..model.normalize import normalization_stack
-from ..model.epipolar_data import fundamental_bounds
-from ..model.stacked import fundamental_stack, norms, project_stack, refine_points_stack, view_pairs
+from ..model.stacked import fundamental_stack, norms, project_stack, refine_points_stack
 from ..result import Status
 from .decide import decide, decide_reported, gamma_from_c, gamma_lower, transfer_contradicts
 from .report import gamma_upper
@@ -115,7 +114,7 @@ def solve_corollary1_points(cameras, points2d, *, tolerances: Tolerances = DEFAU
     reason = ["" if k else "invalid or degenerate data" for k in ok]
     norm = normalization_stack(C, x, ok, scalar=scalar)
     Cn = norm.cameras_n
-    F, defined = fundamental_stack(Cn)
+    F, defined, E = fundamental_stack(Cn, errors=True)
     defined &= fundamental_stack(C)[1]          # one centre or not: decided on the raw cameras
     good = norm.ok & np.all(defined, axis=1) & np.all(np.isfinite(F), axis=(1, 2, 3))
     _hand_back(ok, ~good, reason, "normalisation or epipolar data undefined (e.g. coincident camera centres)")
@@ -130,20 +129,20 @@ def solve_corollary1_points(cameras, points2d, *, tolerances: Tolerances = DEFAU
     # minimiser has ||v*||^2 = f(v*) <= c_ub; the basis is b = (1, v) (||b||^2 <= 1 + c_ub) and q = 1 (degree 2)
     assert comp.structure.q.degree == 0
     c_lb = c_lb - image_form_stack_margin(lam, gram_error, 1.0 + c_ub, q_min=float(comp.structure.q.coefficients()[0]))
-    c_lb = c_lb - _data_error(comp, xs, Cn, F, ok, c_ub)
+    c_lb = c_lb - _data_error(comp, xs, Cn, F, E, ok, c_ub)
     return _decided(C, x, norm, ok, reason, tolerances, c_lb, c_ub, X_n, X_raw_n, xn, comp, iters)
 
 
-def _data_error(comp, xs, Cn, F, ok, c_ub) -> np.ndarray:
+def _data_error(comp, xs, Cn, F, E, ok, c_ub) -> np.ndarray:
     """(M,) sum_k |r_k| e_k: the certificates' multipliers r_k (constants at degree 2) times bounds e_k of the computed
     constraints at a true minimiser v* (exactly feasible for the exact fundamental matrices of the normalised float
     cameras): |g~_k(v*)| <= ||F~_k - lambda F_k||_F ||v~*_i|| ||v~*_j|| <= that norm times (1 + ||v*||^2 / 2), with
-    ||v*||^2 <= c_ub (:func:`tritools.model.epipolar_data.fundamental_bounds`; :func:`sospoly.analysis.rigor.
-    constraint_error_stack`).  0 for the problems not solved."""
+    ||v*||^2 <= c_ub (E: :func:`tritools.model.stacked.fundamental_stack`'s proven ``errors``;
+    :func:`sospoly.analysis.rigor.constraint_error_stack`).  0 for the problems not solved."""
     M, N = Cn.shape[:2]
     if not ok.any() or not F.shape[1]:
         return np.zeros(M)
-    E = np.where(ok[:, None], fundamental_bounds(Cn, view_pairs(N), F), 0.0)
+    E = np.where(ok[:, None], E, 0.0)
     with np.errstate(invalid="ignore", over="ignore"):
         e = E * (1.0 + np.where(ok, c_ub, 0.0) / 2)[:, None]
     out = constraint_error_stack(comp.structure, np.where(ok[:, None], xs, 0.0), np.sqrt(np.where(ok, c_ub, 0.0)), e)

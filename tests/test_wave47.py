@@ -270,8 +270,8 @@ def test_constraint_error_stack_equals_the_single_solution_charge():
 
 def test_batched_sdp_charges_the_fundamental_error(monkeypatch):
     """solve_corollary1_points (the batched delta = 2 SDP) lowers c_LB by sum_k |r_k| e_k with e_k the proven error of
-    F (fundamental_stack's ``errors``): as computed the stack is certified; with the bound made large its lower bounds drop by at
-    least that much times the multipliers, and the certificates go (it charged no data error before)."""
+    F (fundamental_stack's ``errors``): as computed the stack is certified; with the bound made large its lower bounds
+    drop by at least that much times the multipliers, and the certificates go (it charged no data error before)."""
     from tritools.solve import sdp_batch
 
     sc = random_scene(3, 6, noise_px=2.0, seed=12)

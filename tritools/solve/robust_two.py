@@ -122,6 +122,10 @@ def two_view_optimum(F: np.ndarray):
     return (y0, y1, cost) if np.isfinite(cost) and np.isfinite(y0).all() and np.isfinite(y1).all() else None
 
 
+#: :func:`_stationary` drops leading coefficients of its polynomial below this share of the largest one.
+LEADING_RTOL = 1e-13
+
+
 def _stationary(a: float, b: float, c: float, d: float, f0: float, f1: float):
     """The t of :func:`two_view_optimum` (a real root of its polynomial or inf) where s(t) is least, or None."""
     e = f0 * f0
@@ -132,6 +136,12 @@ def _stationary(a: float, b: float, c: float, d: float, f0: float, f1: float):
          p1 * p1 + 2 * p2 * p0 - 2 * k * h2 * q1, 2 * p1 * p0 - k * (2 * h2 * q0 + q2), p0 * p0 - k * q1, -k * q0]
     if not all(math.isfinite(v) for v in g) or not any(g):
         return None
+    # leading coefficients at round-off of the largest (an epipole at infinity up to round-off, f_1 ~ 1e-17: the
+    # f_1^4 terms ~1e-68) left out: their roots sit at |t| ~ 1e13 and beyond, where s(t) ~ min(t^2, 1 / f_1^2) is
+    # nowhere near the least (t = inf is tried on its own), and np.roots lost the others' digits to them
+    top = max(abs(v) for v in g)
+    while abs(g[0]) <= LEADING_RTOL * top:
+        g = g[1:]
     ts = np.roots(g).real.tolist()
 
     def cost(t: float) -> float:

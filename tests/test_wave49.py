@@ -123,3 +123,133 @@ def test_two_view_single_calls_stay_below_the_exact_reference():
             ref = _two_view_reference(C, x[j])
             assert r.gamma_lb <= ref * (1 + 1e-9) + 1e-12
             assert r.gamma_ub >= ref * (1 - 1e-9)
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# Review 48a F1: a wrong match far off the image no longer costs the TLS certificate.
+
+def _far_track(N: int, seed: int, magnitude: float):
+    """A protocol track (1 px noise) whose views 1 and N - 2 are wrong matches ``magnitude`` px off the image, and its
+    independent reference: the L2 optimum of the other views (scipy from the true point) plus c^2 per wrong match."""
+    from scipy.optimize import least_squares
+
+    from tritools.scene import robust_protocol_scene
+
+    rng = np.random.default_rng(seed)
+    P, x, X, _ = robust_protocol_scene(N, 0, 1.0, rng)
+    bad = sorted({1, N - 2})                # (three views: one wrong match)
+    x[bad] = np.array([[magnitude, -0.6 * magnitude], [-0.3 * magnitude, magnitude]])[:len(bad)]
+    good = [i for i in range(N) if i not in bad]
+
+    def res(Y):
+        h = P[good] @ np.append(Y, 1.0)
+        return (h[:, :2] / h[:, 2:] - x[good]).ravel()
+
+    f_in = float(np.sum(least_squares(res, X, xtol=1e-15, ftol=1e-15, gtol=1e-15).fun ** 2))
+    return P, x, np.sqrt((f_in + len(bad) * 5.0 ** 2) / (2 * N)), bad
+
+
+@pytest.mark.parametrize("N", [3, 5, 7])
+@pytest.mark.parametrize("magnitude", [1e6, 1e8])
+def test_wrong_matches_far_off_the_image_keep_the_certificate(N, magnitude):
+    """Two wrong matches 1e6 / 1e8 px off (review 48a F1: not_certified from 1e6 px on, the gap growing as their
+    magnitude squared): certified, gamma_LB below and gamma_UB at the independent reference, the wrong matches out
+    of the inlier set; the same in a batch."""
+    import tritools
+
+    P, x, ref, bad = _far_track(N, 10 + N, magnitude)
+    for r in (tritools.triangulate(P, x, robust=5.0), tritools.triangulate_many([(P, x)], robust=5.0)[0]):
+        assert r.optimal, (r.status, r.message)
+        assert r.gamma_lb <= ref * (1 + 1e-12)
+        assert abs(r.gamma_ub - ref) <= 1e-8 * ref
+        assert not r.inliers[bad].any() and r.inliers.sum() == N - len(bad)
+
+
+def test_far_wrong_matches_in_a_stack_of_points():
+    """triangulate_many over several such tracks of one view count: one enumeration stack, its results reported by
+    the stacked report (tls_reported_stack's ``splits``)."""
+    import tritools
+
+    tracks = [_far_track(6, 40 + k, 1e7) for k in range(6)]
+    out = tritools.triangulate_many([(t[0], t[1]) for t in tracks], robust=5.0)
+    for r, (_, _, ref, bad) in zip(out, tracks):
+        assert r.optimal and r.gamma_lb <= ref * (1 + 1e-12) and not r.inliers[bad].any()
+
+
+def test_split_lowering_is_the_smaller_of_the_two_lowered_bounds():
+    """_split_lower: lb lowered by the kept views' magnitude, lb_out by every view's, the smaller reported; without a
+    split the plain lowering."""
+    from tritools.solve.decide import gamma_lower_one
+    from tritools.solve.robust_report import _split_lower
+
+    N, ub = 7, 2.05
+    plain = _split_lower(58.9, 0.0, ub, N, 3e-6, 1.5e9, None)
+    assert plain == gamma_lower_one(np.sqrt(58.9 / 14), ub, 1.0, 3e-6, 1.5e9)
+    inner = _split_lower(58.9, 0.0, ub, N, 3e-6, 1.5e9, (700.0, 77.3))
+    assert inner == gamma_lower_one(np.sqrt(58.9 / 14), ub, 1.0, 3e-6, 700.0) > plain
+    # a set holding the wrong match with the least term: its bound, lowered by every view's magnitude, is reported
+    low_out = _split_lower(58.9, 0.0, ub, N, 3e-6, 1.5e9, (700.0, 58.0))
+    assert low_out == gamma_lower_one(np.sqrt(58.0 / 14), ub, 1.0, 3e-6, 1.5e9) < inner
+
+
+def test_outside_split_takes_the_least_term_of_the_sets_holding_an_outside_view():
+    from tritools.solve.robust_enum import subset_masks
+    from tritools.solve.robust_enum_run import outside_split
+
+    W = subset_masks(4)
+    terms = np.arange(len(W), dtype=float) + 10.0
+    assert outside_split(W, terms, [False] * 4) is None
+    mask, lb_out = outside_split(W, terms, [False, False, True, False])
+    holds = W[:, 2] & (W.sum(axis=1) >= 2)
+    assert mask.tolist() == [False, False, True, False] and lb_out == terms[holds].min()
+
+
+def test_enum_frame_caps_the_residuals_at_the_thresholds():
+    """The enumeration frame's image scale from the DLT residuals capped at c^2 (where one exceeds it), the scalar
+    twin and the stack alike; no threshold exceeded (or none given): the frame of before, bit for bit."""
+    from tritools.scene import robust_protocol_scene
+    from tritools.solve.robust_enum import enum_frame_one, enum_frames
+
+    rng = np.random.default_rng(5)
+    P, x, _, _ = robust_protocol_scene(6, 0, 1.0, rng)
+    c2 = np.full(6, 25.0)
+    plain = enum_frame_one(P, x)[0].scale
+    assert enum_frame_one(P, x, c2)[0].scale == plain == enum_frames(P[None], x[None], c2[None])[0][0].scale
+    x[2] = [1e6, -4e5]
+    wide = enum_frame_one(P, x)[0].scale
+    capped = enum_frame_one(P, x, c2)[0].scale
+    assert wide < 1e-4 < capped <= 1.0                  # the wrong match no longer sets the unit
+    assert capped == pytest.approx(enum_frames(P[None], x[None], c2[None])[0][0].scale, rel=1e-12)
+
+
+def test_world_origin_magnitude_over_some_views_twin_and_stack():
+    from tritools.model.magnitude import world_origin_magnitude_one, world_origin_magnitudes
+
+    rng = np.random.default_rng(8)
+    for _ in range(20):
+        N = int(rng.integers(2, 7))
+        C = rng.normal(size=(N, 3, 4))
+        x = rng.normal(size=(N, 2)) * 100
+        X, o = rng.normal(size=3), rng.normal(size=3)
+        views = rng.random(N) < 0.5
+        one = world_origin_magnitude_one(C, x, X, o, entries=True, views=views)
+        st = world_origin_magnitudes(C[None], x[None], X[None], o[None], entries=True, views=views[None])[0]
+        assert one == st
+        full = world_origin_magnitude_one(C, x, X, o, entries=True)
+        assert one <= full
+        if views.any():
+            assert one == world_origin_magnitude_one(C[views], x[views], X, o, entries=True)
+
+
+def test_two_view_stationary_point_ignores_round_off_leading_terms():
+    """robust_two._stationary with an epipole at infinity up to round-off (f_1 = 1e-17, as the determinant-form F of
+    a sideways pair gives): the same optimum as at f_1 = 0 (np.roots lost every digit to the 1e-68 leading term:
+    a cost of 5.7e11 where Hartley-Sturm's is 0.016)."""
+    from tritools.solve.robust_two import _stationary
+
+    rng = np.random.default_rng(3)
+    for _ in range(20):
+        a, b, c, d, f0 = rng.normal(size=5)
+        exact = _stationary(a, b, c, d, f0, 0.0)
+        near = _stationary(a, b, c, d, f0, 1e-17)
+        assert near == pytest.approx(exact, rel=1e-9, abs=1e-12)

@@ -82,7 +82,7 @@ def origin_magnitudes(Cn: np.ndarray, x: np.ndarray, o: np.ndarray, scale) -> np
 
 
 def world_origin_magnitudes(C: np.ndarray, x: np.ndarray, X: np.ndarray, o: np.ndarray,
-                            entries: bool = False) -> np.ndarray:
+                            entries: bool = False, views: np.ndarray | None = None) -> np.ndarray:
     """(M,) max_i K_i, in pixels, for the caller's cameras C (M, N, 3, 4) moved to a frame at origin o (M, 3) and the
     estimate X (M, 3): the cameras P' = P [I o; 0 1] have their last column P o~ rounded once, the rest as given, which
     moves the projection of X by u K_i, K_i = (max_k a_k + r_i a_3) / |P_3 X~| with a_k = |P_k o~| and r_i =
@@ -94,8 +94,9 @@ def world_origin_magnitudes(C: np.ndarray, x: np.ndarray, X: np.ndarray, o: np.n
     from their centres, gamma_LB clipped to gamma_UB 1.8e-11 px above the cost at X).  Plain float sums with their
     error bounds (gamma_4 times the sums of absolute products: |P_k o~| from above, |P_3 X~| from below), so no
     compensated sums are needed; inf where the depth's bound reaches 0 or the projection is not finite (gamma_LB
-    then lowered to 0); a NaN coordinate of x (no observation) is left out of r_i.
-    :func:`world_origin_magnitude_one` is the scalar twin (the same operations)."""
+    then lowered to 0); a NaN coordinate of x (no observation) is left out of r_i.  ``views`` (M, N) bool: the max
+    over these views only (0 for none).  :func:`world_origin_magnitude_one` is the scalar twin (the same
+    operations)."""
     C, x, X, o = (np.asarray(a, float) for a in (C, x, X, o))
     P = [[C[..., k, c] for c in range(4)] for k in range(3)]              # (M, N) entries
     Xe = [X[:, c, None] for c in range(3)]
@@ -119,19 +120,24 @@ def world_origin_magnitudes(C: np.ndarray, x: np.ndarray, X: np.ndarray, o: np.n
         r = np.where(np.isfinite(r), r, 0.0)
         K = np.where((den > 0) & np.isfinite(rh), (np.maximum(a[0], a[1]) + r * a[2]) / den, np.inf)
         K = np.where(np.isnan(K), np.inf, K)
+        if views is not None:
+            K = np.where(views, K, 0.0)
     return np.minimum(np.max(K, axis=1, initial=0.0), np.finfo(float).max)
 
 
-def world_origin_magnitude_one(C, x, X, o, entries: bool = False) -> float:
+def world_origin_magnitude_one(C, x, X, o, entries: bool = False, views=None) -> float:
     """The scalar twin of :func:`world_origin_magnitudes` for one problem (C (N, 3, 4), x (N, 2), X (3,), o (3,),
-    nested lists or arrays of floats): the same operations on Python floats, equal bit for bit, also on non-finite
-    entries (tests/test_wave46.py, tests/test_wave47.py)."""
+    nested lists or arrays of floats; ``views`` (N,) bool or None): the same operations on Python floats, equal bit
+    for bit, also on non-finite entries (tests/test_wave46.py, tests/test_wave47.py, tests/test_wave49.py)."""
     X0, X1, X2 = (float(v) for v in X)
     o0, o1, o2 = (float(v) for v in o)
     d0, d1, d2 = abs(X0 - o0), abs(X1 - o1), abs(X2 - o2)
     big = float(np.finfo(float).max)
     out = 0.0
-    for P, xi in zip(np.asarray(C, float).tolist(), np.asarray(x, float).tolist()):
+    keep = [True] * len(C) if views is None else [bool(v) for v in views]
+    for P, xi, use in zip(np.asarray(C, float).tolist(), np.asarray(x, float).tolist(), keep):
+        if not use:
+            continue
         a = []
         for Pk in P:
             ho = ((Pk[0] * o0 + Pk[1] * o1) + Pk[2] * o2) + Pk[3]

@@ -145,6 +145,7 @@ class TlsSearch(NodeBounds):
             cams = self.frame.cameras(cams)
         self.C, self.c, self.opts, self.t0 = cams, c, opts, t0
         self._regions, self.enum_terms = (None if regions is None else list(regions)), None   # enum_terms: robust_three
+        self.enum_split = None       # (views, lb_out) of an enumeration's bound (robust_report._split_lower)
         self.N = len(regions) if regions is not None else len(points)
         with np.errstate(over="ignore"):
             self.c2 = c * c                              # c above 1e154: c^2 = inf (no threshold in floats)
@@ -509,7 +510,8 @@ class TlsSearch(NodeBounds):
                             None if self.points else rep.residuals, X, self.c, lb, self.tol,
                             self.tol.certified_one(lb, self.best_f, self.scale),    # lb valid also when stopped
                             None if self.cells_decided else self.best_f,
-                            None if self.points else self.regions, None if self.frame.moved else self.enum_terms)
+                            None if self.points else self.regions, None if self.frame.moved else self.enum_terms,
+                            self.enum_split)
         return self.finish(X, rep, told, lb, stopped, timings, note)
 
     def user_estimate(self):

@@ -141,12 +141,13 @@ def closure(N: int, lb_by_bits: np.ndarray) -> np.ndarray:
     return np.moveaxis(L, 0, -1)
 
 
-def enum_frame(C: np.ndarray, x: np.ndarray):
-    """:func:`enum_frames` of one problem (cameras C (N, 3, 4), points x (N, 2)): (Normalization, Cn (N, 3, 4)) or
-    None; up to :data:`FRAME_SCALAR_MAX_VIEWS` views by the scalar twin :func:`enum_frame_one`."""
+def enum_frame(C: np.ndarray, x: np.ndarray, c2: np.ndarray | None = None):
+    """:func:`enum_frames` of one problem (cameras C (N, 3, 4), points x (N, 2), squared thresholds c2 (N,) or None):
+    (Normalization, Cn (N, 3, 4)) or None; up to :data:`FRAME_SCALAR_MAX_VIEWS` views by the scalar twin
+    :func:`enum_frame_one`."""
     if len(x) <= FRAME_SCALAR_MAX_VIEWS:
-        return enum_frame_one(C, x)
-    frames, Cn = enum_frames(C[None], x[None])
+        return enum_frame_one(C, x, c2)
+    frames, Cn = enum_frames(C[None], x[None], None if c2 is None else np.asarray(c2, float)[None])
     return None if frames[0] is None else (frames[0], Cn[0])
 
 
@@ -155,7 +156,7 @@ def enum_frame(C: np.ndarray, x: np.ndarray):
 FRAME_SCALAR_MAX_VIEWS = 7
 
 
-def enum_frame_one(C: np.ndarray, x: np.ndarray):
+def enum_frame_one(C: np.ndarray, x: np.ndarray, c2: np.ndarray | None = None):
     """The scalar twin of :func:`enum_frames` for one problem (cameras C (N, 3, 4), points x (N, 2)): the same steps,
     the camera centres, their mean c0, the compensated last columns of the cameras moved to c0 and the frame's
     scalars on Python floats, the DLT, the floor's pixel scales and the normalised cameras on the problem's small
@@ -187,6 +188,11 @@ def enum_frame_one(C: np.ndarray, x: np.ndarray):
                       for cx, cy, cz in centres)
         d = dist[(N - 1) // 2] if N % 2 else (dist[N // 2 - 1] + dist[N // 2]) / 2
         rho = math.sqrt(float(np.add.reduce((u - x) ** 2, axis=None)) / N)
+        if c2 is not None:
+            r2 = np.add.reduce((u - x) ** 2, axis=1)
+            cap = FRAME_CAP2 * np.asarray(c2, float)
+            if (r2 > cap).any():                            # (enum_frames' rule, on the one problem)
+                rho = math.sqrt(float(np.add.reduce(np.minimum(r2, cap))) / N)
         B = C[:, :2, :3] - x[:, :, None] * C[:, 2:3, :3]
         top = norms(B, axis=(1, 2)) / norms(C[:, 2, :3], axis=1)
         if not rho > RHO_FLOOR_REL * float(np.max(top)):
@@ -209,11 +215,20 @@ def enum_frame_one(C: np.ndarray, x: np.ndarray):
     return Normalization(s, x, np.array(c0) + X0, d, frame_terms=terms), Cn
 
 
-def enum_frames(C: np.ndarray, x: np.ndarray) -> tuple:
+#: the enumeration frame's residuals are capped at FRAME_CAP2 c_i^2 (:func:`enum_frames`): a wrong match far off the
+#: image then no longer sets the unit of the inliers' bounds (which lost ~u / s^2 px^2: 1e-5 of f at 1e6 px, review
+#: 48a F1), while the sets holding it keep coordinates of at most ~sqrt(FRAME_CAP2) times their magnitude / c, where
+#: their Lagrangian bounds still hold (capped at c^2 itself, a wrong match 1e7 px off sat at 2e6 units and its sets'
+#: bounds failed: the term of the inliers then did not decide)
+FRAME_CAP2 = 1e6
+
+
+def enum_frames(C: np.ndarray, x: np.ndarray, c2: np.ndarray | None = None) -> tuple:
     """Normalisations of P point problems of N views (cameras C (P, N, 3, 4), points x (P, N, 2)) without the local
     refinement of :func:`tritools.model.normalize.normalization_for`: X_0 the DLT point (solved in a world
     translated to the mean camera centre), d the median distance to the camera centres, s = 1 / rho with rho the
-    RMS residual of X_0 (floored at ``RHO_FLOOR_REL`` times the median pixel scale, s clipped to
+    RMS residual of X_0 (each view's squared residual capped at ``FRAME_CAP2`` times its squared threshold c2 (P, N)
+    where given and exceeded; floored at ``RHO_FLOOR_REL`` times the median pixel scale, s clipped to
     ``SCALE_BOUNDS``).  Any frame gives exact identities (module docstring); this one only conditions the numbers.
     Returns (a list of P :class:`Normalization` or None where one cannot be formed -- the caller runs the search,
     whose normalisation handles degenerate data --, the normalised cameras Cn (P, N, 3, 4))."""
@@ -235,6 +250,11 @@ def enum_frames(C: np.ndarray, x: np.ndarray) -> tuple:
         ok &= fin
         d = median_rows(norms(centres - c0[:, None] - X0[:, None], axis=2))
         rho = np.sqrt(np.sum((u - x) ** 2, axis=(1, 2)) / N)
+        if c2 is not None:
+            r2 = np.add.reduce((u - x) ** 2, axis=2)
+            cap = FRAME_CAP2 * c2
+            capped = (r2 > cap).any(axis=1)
+            rho = np.where(capped, np.sqrt(np.add.reduce(np.minimum(r2, cap), axis=1) / N), rho)
         # the floor (zero noise): pixel scales are at most ||P[:2, :3] - x P[2, :3]||_F / ||P[2, :3]||, computed
         # only where that bound does not already put the floor below rho
         B = C[..., :2, :3] - x[..., None] * C[..., 2:3, :3]

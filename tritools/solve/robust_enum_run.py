@@ -33,6 +33,7 @@ depend on the others of its stack (each row's numbers are its own problem's).
 from __future__ import annotations
 
 import logging
+import math
 import time
 
 import numpy as np
@@ -46,7 +47,7 @@ from .robust_report import enumerated_result, enumerated_results
 from .robust_two import two_view_rays
 
 __all__ = ["enumerate_tls", "enumerate_one", "enumerate_many", "eligible", "closed_terms", "lower_bounds",
-           "enumerated_result", "enumerated_results", "ENUM_CHUNK", "ENUM_ROWS", "SINGLE_POLISH_STEPS",
+           "outside_split", "enumerated_result", "enumerated_results", "ENUM_CHUNK", "ENUM_ROWS", "SINGLE_POLISH_STEPS",
            "THREE_VIEW_PATH", "ASCENT_ROWS"]
 
 log = logging.getLogger(__name__)
@@ -198,6 +199,19 @@ def lower_bounds(ub: np.ndarray, terms: np.ndarray, c2: np.ndarray) -> np.ndarra
                                   np.sum(c2, axis=1) * ROUND_DOWN])
 
 
+def outside_split(W: np.ndarray, terms, outside) -> tuple | None:
+    """(outside (N,) bool, lb_out) for the report's lowering (:func:`tritools.solve.robust_report.tls_reported`'s
+    ``split``): lb_out the least closed term of the sets ``W`` (M, N) of at least two views that hold a view
+    ``outside`` (the views left out of the best inlier set; inf for none), None where no view is outside.  The sets
+    of at most one view are exact (no data) and stay with the others' bound."""
+    outside = np.asarray(outside, bool)
+    if not outside.any():
+        return None
+    holds = (W & outside[None]).any(axis=1) & (W.sum(axis=1) >= 2)
+    terms = np.asarray(terms, float)
+    return outside, float(np.min(terms[holds])) if holds.any() else math.inf
+
+
 def _outside_sums(c2: np.ndarray, W: np.ndarray) -> np.ndarray:
     """c^2(V - S) (P, M) of the sets ``W`` (M, N), c2 (P, N), rounded down (inf where a view outside S has c_i =
     inf): one matrix product where every c_i is finite (0 * inf would be NaN there)."""
@@ -229,7 +243,7 @@ class _Group:
 
     def run(self) -> list:
         """The results (module docstring, steps 1-3); None where not decided."""
-        self.frames, self.Cn = enum.enum_frames(self.C, self.x)
+        self.frames, self.Cn = enum.enum_frames(self.C, self.x, self.c2)
         live = np.array([f is not None for f in self.frames])
         self.origin = np.array([f.origin if f is not None else np.zeros(3) for f in self.frames])
         self.depth = np.array([f.depth if f is not None else 1.0 for f in self.frames])
@@ -575,8 +589,13 @@ class _Group:
         return [p for p in late if self.results[p] is None]
 
     def _results(self, probs: list, lb_all: np.ndarray) -> None:
-        """The results of the decided problems ``probs`` at their lower bounds (:func:`enumerated_results`)."""
+        """The results of the decided problems ``probs`` at their lower bounds (:func:`enumerated_results`), each
+        search told the split of its bound by the views outside its best inlier set (:func:`outside_split`)."""
         if probs:
+            terms = self._terms()
+            for p in probs:
+                s = self.group[p]
+                s.enum_split = outside_split(self.W, terms[p], [i not in s.best_S for i in range(self.N)])
             done = enumerated_results([self.group[p] for p in probs], lb_all[probs], self.bounded[probs].sum(axis=1),
                                       len(self.W))
             for p, r in zip(probs, done):

@@ -60,11 +60,13 @@ class TlsReported:
 
 def tls_reported(C: np.ndarray, centres: np.ndarray, residuals, X, c: np.ndarray, lb: float, tolerances,
                  certified: bool, f_search: float | None = None, regions=None,
-                 frame_terms: tuple | None = None) -> TlsReported:
+                 frame_terms: tuple | None = None, split: tuple | None = None) -> TlsReported:
     """The reported bounds and checks of a TLS result at X (module docstring): cameras C (N, 3, 4), the regions'
     centres (N, 2) (their magnitude sets the resolution), ``residuals`` the distances d_i(X) or None for point
     regions (computed here from compensated projections; ``centres`` are then the points), ``lb`` the search's
-    bound of f*_TLS (pixels^2), ``certified`` the search's decision (on its scale S)."""
+    bound of f*_TLS (pixels^2), ``certified`` the search's decision (on its scale S).  ``split`` = (views (N,) bool,
+    lb_out): the search's bound split by the sets of views (:func:`_split_lower`): ``lb`` then holds for the sets
+    without these views, ``lb_out`` for the sets holding one of them."""
     N = len(C)
     u, defined, spread = projections_and_spread(np.asarray(C, float), X)
     u = np.where(defined[:, None], u, np.inf)            # an undefined view: d_i = inf, counted c_i^2
@@ -74,27 +76,27 @@ def tls_reported(C: np.ndarray, centres: np.ndarray, residuals, X, c: np.ndarray
     res = np.where(np.isfinite(residuals), residuals, np.inf)
     g_ub = float(gamma_upper(np.where(np.isfinite(res), res, c), norms(np.where(np.isfinite(u), u, 0.0), axis=1),
                              cap=c))
-    if frame_terms is None:
-        mag = float(_magnitudes(np.asarray(C, float)[None], np.asarray(centres, float)[None],
-                                np.asarray(X, float)[None])[0])
-    else:                                # the bounds' frame told its own terms (the enumeration's frame)
-        mag = max(float(magnitudes(np.asarray(centres, float)[None], np.asarray(C, float)[None])[0]),
-                  _terms_magnitude(frame_terms, X))
+    mag = _reported_magnitude(C, centres, X, frame_terms)
     resolution, floor = (float(r[0]) for r in _resolution_pair(np.asarray(centres, float)[None],
                                                                   np.asarray(C, float)[None]))
+    inner = None
+    if split is not None and np.asarray(split[0], bool).any():
+        inner = (max(_reported_magnitude(C, centres, X, frame_terms, ~np.asarray(split[0], bool)), floor),
+                 float(split[1]))
     g_lb, g_ub, holds, reason = _checked(g_ub, spread, resolution, N, c, lb, tolerances, certified, res, f_search,
-                                         max(mag, floor))
+                                         max(mag, floor), inner)
     inliers = inlier_mask(C, X, centres, res, c, u, exact=points_given, regions=regions)
     image_points = np.where(np.isfinite(res)[:, None] & np.isfinite(u), u, np.nan)
     return TlsReported(g_lb, g_ub, residuals, inliers, holds, reason, image_points)
 
 
 def tls_reported_stack(C: np.ndarray, points: np.ndarray, X: np.ndarray, c: np.ndarray, lb, tolerances, certified,
-                       f_search) -> list:
+                       f_search, splits: list | None = None) -> list:
     """The twin of :func:`tls_reported` for M point problems of N views (tested equal, bit for bit): C (M, N, 3, 4),
     ``points`` (M, N, 2), X (M, 3), c (M, N), lb, certified and f_search (M,) (f_search NaN: none); one
     :class:`TlsReported` per problem.  The projections, distances, gamma_UB and inlier flags in stacked calls
-    (:func:`tritools.solve.report.projections_and_spread_stack`), the checks per problem (:func:`_checked`)."""
+    (:func:`tritools.solve.report.projections_and_spread_stack`), the checks per problem (:func:`_checked`).
+    ``splits``: per problem None or :func:`tls_reported`'s ``split``."""
     M, N = points.shape[:2]
     u, defined, spread = projections_and_spread_stack(np.asarray(C, float), X)
     u = np.where(defined[..., None], u, np.inf)
@@ -106,18 +108,35 @@ def tls_reported_stack(C: np.ndarray, points: np.ndarray, X: np.ndarray, c: np.n
     magnitude = np.maximum(_magnitudes(np.asarray(C, float), points, X), floor)
     inliers = inlier_mask_stack(C, X, points, res, c, u, u_norm)
     image_points = np.where(np.isfinite(res)[:, :, None] & np.isfinite(u), u, np.nan)
+    inner = [None] * M
+    for k, sp in enumerate(splits or []):
+        if sp is not None and np.asarray(sp[0], bool).any():
+            kept = ~np.asarray(sp[0], bool)[None]
+            inner[k] = (max(float(_magnitudes(C[k:k + 1], points[k:k + 1], X[k:k + 1], kept)[0]), float(floor[k])),
+                        float(sp[1]))
     out = []
     for k in range(M):
         f_k = float(f_search[k])
         checked = _checked(float(g_ub[k]), float(spread[k]), float(resolution[k]), N, c[k],
                            float(lb[k]), tolerances, bool(certified[k]), res[k], f_k if f_k == f_k else None,
-                           float(magnitude[k]))
+                           float(magnitude[k]), inner[k])
         out.append(TlsReported(checked[0], checked[1], residuals[k].copy(), inliers[k].copy(), checked[2],
                                checked[3], image_points[k].copy()))
     return out
 
 
-def _terms_magnitude(terms: tuple, X) -> float:
+def _reported_magnitude(C, centres, X, frame_terms, views=None) -> float:
+    """The magnitude gamma_LB is lowered by (:func:`_magnitudes`, or with the enumeration frame's own terms
+    ``frame_terms``) over the ``views`` (N,) bool (None: all)."""
+    C, centres = np.asarray(C, float), np.asarray(centres, float)
+    if frame_terms is None:
+        return float(_magnitudes(C[None], centres[None], np.asarray(X, float)[None],
+                                 None if views is None else np.asarray(views, bool)[None])[0])
+    kept = centres if views is None else np.where(np.asarray(views, bool)[:, None], centres, np.nan)
+    return max(float(magnitudes(kept[None], C[None])[0]), _terms_magnitude(frame_terms, X, views))
+
+
+def _terms_magnitude(terms: tuple, X, views=None) -> float:
     """max_i num_i / min(|P_3 X0~|, |P_3 X~|) from a frame's origin terms (:attr:`tritools.model.normalize.
     Normalization.frame_terms`: the enumeration's frame, cameras moved to c0): the term of :func:`_magnitudes` at X
     and at the frame's own point X0 (the DLT of every view, which a wrong match may move), the smaller depth."""
@@ -125,27 +144,30 @@ def _terms_magnitude(terms: tuple, X) -> float:
     with np.errstate(all="ignore"):
         d = np.asarray(X, float) - c0
         h3 = np.abs(row3[:, 0] * d[0] + row3[:, 1] * d[1] + row3[:, 2] * d[2] + row3[:, 3])
-        K = float(np.max(num / np.minimum(h3, h3_0)))
+        K = num / np.minimum(h3, h3_0)
+        K = float(np.max(K if views is None else np.where(views, K, 0.0)))
     return min(K, float(np.finfo(float).max)) if K == K else float(np.finfo(float).max)
 
 
-def _magnitudes(C: np.ndarray, points: np.ndarray, X: np.ndarray) -> np.ndarray:
+def _magnitudes(C: np.ndarray, points: np.ndarray, X: np.ndarray, views: np.ndarray | None = None) -> np.ndarray:
     """(M,) the magnitude that gamma_LB is lowered by (:func:`tritools.solve.decide.gamma_lower`): the points'
     obliquity magnitudes (:func:`tritools.model.magnitude.magnitudes`) and at least the frame's origin magnitude at
     X (:func:`tritools.model.magnitude.world_origin_magnitudes`) for the search's frame, the cameras moved to their
-    centres' mean (:func:`tritools.solve.robust_enum.enum_frame`)."""
+    centres' mean (:func:`tritools.solve.robust_enum.enum_frame`); ``views`` (M, N) bool: the largest over these views
+    only (the frame still that of every view)."""
     if len(C) == 1 and C.shape[1] <= SCALAR_MAX_VIEWS:            # one problem: the twin on floats, the same bits
-        return np.array([_magnitude_one(C[0], points[0], X[0])])
+        return np.array([_magnitude_one(C[0], points[0], X[0], None if views is None else views[0])])
     with np.errstate(all="ignore"):
         Cs = C / power2_scale(C, (2, 3))
         a = null_vectors(Cs)
         c = a[..., :3] / a[..., 3:]
         o = np.add.reduce(c, axis=1) / C.shape[1]
         o = np.where(np.isfinite(o), o, 0.0)
-    return np.maximum(magnitudes(points, C), world_origin_magnitudes(C, points, X, o))
+    kept = points if views is None else np.where(views[..., None], points, np.nan)
+    return np.maximum(magnitudes(kept, C), world_origin_magnitudes(C, points, X, o, views=views))
 
 
-def _magnitude_one(C: np.ndarray, points: np.ndarray, X: np.ndarray) -> float:
+def _magnitude_one(C: np.ndarray, points: np.ndarray, X: np.ndarray, views=None) -> float:
     """:func:`_magnitudes` of one problem of at most ``SCALAR_MAX_VIEWS`` views on floats (the null vectors by
     :func:`tritools.model.frame_floats.null_vector_one`, the centres' mean summed in view order as numpy's reduction
     of so few rows, :func:`tritools.model.magnitude.world_origin_magnitude_one`): equal bit for bit
@@ -157,18 +179,20 @@ def _magnitude_one(C: np.ndarray, points: np.ndarray, X: np.ndarray) -> float:
         a = null_vector_one([[v / k for v in row] for row in P])
         o = [o[j] + ieee_div(a[j], a[3]) for j in range(3)]
     o = [t / N if math.isfinite(t / N) else 0.0 for t in o]
-    return max(float(magnitudes(points[None], C[None])[0]), world_origin_magnitude_one(C, points, X, o))
+    kept = points if views is None else np.where(np.asarray(views, bool)[:, None], points, np.nan)
+    return max(float(magnitudes(kept[None], C[None])[0]), world_origin_magnitude_one(C, points, X, o, views=views))
 
 
 def _checked(g_ub: float, spread: float, resolution: float, N: int, c: np.ndarray, lb: float, tolerances,
-             certified: bool, res: np.ndarray, f_search, magnitude: float = 1.0) -> tuple:
+             certified: bool, res: np.ndarray, f_search, magnitude: float = 1.0, inner: tuple | None = None) -> tuple:
     """(gamma_LB, gamma_UB, holds, reason) of :func:`tls_reported` from gamma_UB (float), the rounding spread and the
     coordinates' resolution (module docstring): gamma_LB lowered by round-off, never above gamma_UB; the certificate
-    withheld where the search's drift (beyond what the rounding ``spread`` explains) or the gap guard say so."""
+    withheld where the search's drift (beyond what the rounding ``spread`` explains) or the gap guard say so.
+    ``inner`` = (magnitude of the kept views, lb_out): the split of :func:`_split_lower`."""
     # lowered by the normalisation's round-off, whose magnitude holds the frame origin's and the obliquity's terms
     # (review 7's 6-view track 4.5e8 px off-axis, whose frame bound sat 7e-4 px above an achievable value, stays
     # below it: tests/test_robust_report.py)
-    g_lb = max(0.0, gamma_lower_one(gamma_from_c(max(lb, 0.0), N, 1.0), g_ub, 1.0, resolution, magnitude))
+    g_lb = _split_lower(lb, 0.0, g_ub, N, resolution, magnitude, inner)
     g_lb = min(g_lb, g_ub)
     holds, reason = certified, ""
     f_ub = 2.0 * N * g_ub * g_ub
@@ -176,8 +200,7 @@ def _checked(g_ub: float, spread: float, resolution: float, N: int, c: np.ndarra
     drift = search_drift(res, c, f_search, f_ub)
     d_abs = search_drift_abs(res, c, f_search)
     if d_abs > 0.0:                      # the search's bound is in its own arithmetic: lowered by the drift seen
-        g_lb = min(g_lb, max(0.0, gamma_lower_one(gamma_from_c(max(lb - d_abs, 0.0), N, 1.0), g_ub, 1.0,
-                                                  resolution, magnitude)))
+        g_lb = min(g_lb, _split_lower(lb, d_abs, g_ub, N, resolution, magnitude, inner))
     if not drift_within(drift, d_abs, N, tolerances, resolved, rounding_drift(f_ub, spread, N)):
         # the search's bounds are not trusted; a certificate that needs none (0 <= gamma* <= gamma_UB within the
         # resolution: an optimum near 0 in a georeferenced world with tiny thresholds) still holds, at gamma_LB 0
@@ -191,6 +214,26 @@ def _checked(g_ub: float, spread: float, resolution: float, N: int, c: np.ndarra
         holds, reason = False, "the bounds met on the search's scale, but their gap exceeds the coordinates' " \
                                f"resolution ({resolved:.3g} px, at most the thresholds' own scale)"
     return g_lb, g_ub if math.isfinite(g_ub) else math.inf, holds, reason
+
+
+def _split_lower(lb: float, drift: float, g_ub: float, N: int, resolution: float, magnitude: float,
+                 inner: tuple | None) -> float:
+    """gamma_LB of the caller's data from the search's bound ``lb`` (pixels^2) less ``drift``: lowered by the round-off
+    of the coordinates' ``magnitude`` (:func:`tritools.solve.decide.gamma_lower_one`), >= 0.
+
+    With ``inner`` = (A_in, lb_out): f*_TLS = min_S L2*(S) + c^2(V - S), and the L2 problem of a set S holds the
+    data of its own views only, so each term moves by the round-off of its own views' coordinates (gamma by at most
+    LB_ROUNDOFF_ULPS u (A_S + gamma_UB), as for the L2 path).  The search's ``lb`` bounds the terms of the sets
+    without the split's views, whose magnitude is A_in; ``lb_out`` those of the sets holding one of them (every
+    view's magnitude, ``magnitude``): gamma_LB is the smaller of the two lowered bounds.  A wrong match 1e6 px off
+    the image then costs its own sets only, which sit c^2 above UB or more (review 48a F1: it lowered every bound by
+    ~u 1e9 px and withdrew the certificate)."""
+    def lowered(b: float, A: float) -> float:
+        return max(0.0, gamma_lower_one(gamma_from_c(max(b - drift, 0.0), N, 1.0), g_ub, 1.0, resolution, A))
+
+    if inner is None:
+        return lowered(lb, magnitude)
+    return min(lowered(lb, inner[0]), lowered(inner[1], magnitude))
 
 
 def coordinate_resolution(centres: np.ndarray, C: np.ndarray) -> float:
@@ -417,7 +460,7 @@ def enumerated_results(searches: list, lbs, n_bounded, n_sets: int) -> list:
         certified = [s.tol.certified_one(float(b), s.best_f, s.scale) for s, b in zip(group, lb)]
         told = tls_reported_stack(np.stack([s.C_user for s in group]), np.stack([s.x for s in group]), X,
                                   np.stack([s.c for s in group]), lb, first.tol, certified,
-                                  np.array([s.best_f for s in group]))
+                                  np.array([s.best_f for s in group]), [s.enum_split for s in group])
         for k, s, Xk, rep, t, b in zip(stack, group, X, reps, told, lb):
             out[k] = s.finish(Xk.copy(), rep, t, float(b), None, timings[k], note)
     for k, s in enumerate(searches):

@@ -34,7 +34,7 @@ from ..model.normalize import SCALE_BOUNDS
 from . import robust_enum as enum
 from .robust_bounds import ROUND_DOWN
 from .robust_costs import point_distances2
-from .robust_enum_run import LO_ROUNDS, eligible, lower_bounds
+from .robust_enum_run import LO_ROUNDS, eligible, lower_bounds, outside_split
 from .robust_report import enumerated_result
 from .robust_two import optimum_candidate, ray_offers
 
@@ -100,7 +100,7 @@ class _ThreeViews:
 
     def run(self):
         s = self.s
-        framed = enum.enum_frame(s.C, s.x)
+        framed = enum.enum_frame(s.C, s.x, s.c2)
         if framed is None:
             return None
         self.frame, self.Cn = framed
@@ -276,6 +276,7 @@ class _ThreeViews:
 
     def _result(self, lb: float):
         self.s.enum_terms = self.frame.frame_terms             # the frame of every bound the enumeration used
+        self.s.enum_split = outside_split(self.W, self._terms(), [i not in self.s.best_S for i in range(self.views)])
         return enumerated_result(self.s, lb, self.bounded.sum(), len(self.W))
 
 

@@ -194,7 +194,7 @@ def test_split_lowering_is_the_smaller_of_the_two_lowered_bounds():
 
 def test_outside_split_takes_the_least_term_of_the_sets_holding_an_outside_view():
     from tritools.solve.robust_enum import subset_masks
-    from tritools.solve.robust_enum_run import outside_split
+    from tritools.solve.robust_report import outside_split
 
     W = subset_masks(4)
     terms = np.arange(len(W), dtype=float) + 10.0

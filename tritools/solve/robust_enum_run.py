@@ -33,7 +33,6 @@ depend on the others of its stack (each row's numbers are its own problem's).
 from __future__ import annotations
 
 import logging
-import math
 import time
 
 import numpy as np
@@ -43,11 +42,11 @@ from . import robust_enum as enum
 from .robust_bounds import ROUND_DOWN
 from .robust_costs import point_distances2_rows, point_distances2_stack
 from .robust_drive import credit     # (the drive's rule: per-problem time limits)
-from .robust_report import enumerated_result, enumerated_results
+from .robust_report import enumerated_result, enumerated_results, outside_split
 from .robust_two import two_view_rays
 
 __all__ = ["enumerate_tls", "enumerate_one", "enumerate_many", "eligible", "closed_terms", "lower_bounds",
-           "outside_split", "enumerated_result", "enumerated_results", "ENUM_CHUNK", "ENUM_ROWS", "SINGLE_POLISH_STEPS",
+           "enumerated_result", "enumerated_results", "ENUM_CHUNK", "ENUM_ROWS", "SINGLE_POLISH_STEPS",
            "THREE_VIEW_PATH", "ASCENT_ROWS"]
 
 log = logging.getLogger(__name__)
@@ -197,19 +196,6 @@ def lower_bounds(ub: np.ndarray, terms: np.ndarray, c2: np.ndarray) -> np.ndarra
         small = np.sum(np.where(np.eye(N, dtype=bool)[None], 0.0, c2[:, None, :]), axis=2)   # |S| = 1: exact
         return np.minimum.reduce([ub, np.min(terms, axis=1), np.min(small, axis=1) * ROUND_DOWN,
                                   np.sum(c2, axis=1) * ROUND_DOWN])
-
-
-def outside_split(W: np.ndarray, terms, outside) -> tuple | None:
-    """(outside (N,) bool, lb_out) for the report's lowering (:func:`tritools.solve.robust_report.tls_reported`'s
-    ``split``): lb_out the least closed term of the sets ``W`` (M, N) of at least two views that hold a view
-    ``outside`` (the views left out of the best inlier set; inf for none), None where no view is outside.  The sets
-    of at most one view are exact (no data) and stay with the others' bound."""
-    outside = np.asarray(outside, bool)
-    if not outside.any():
-        return None
-    holds = (W & outside[None]).any(axis=1) & (W.sum(axis=1) >= 2)
-    terms = np.asarray(terms, float)
-    return outside, float(np.min(terms[holds])) if holds.any() else math.inf
 
 
 def _outside_sums(c2: np.ndarray, W: np.ndarray) -> np.ndarray:

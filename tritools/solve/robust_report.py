@@ -44,7 +44,7 @@ from .decide import gamma_from_c, gamma_lower_one, within_resolution_one
 from .report import enlarged_distances, gamma_upper, projections_and_spread, projections_and_spread_stack
 
 __all__ = ["TlsReported", "tls_reported", "tls_reported_stack", "guards_pass", "capped_resolution",
-           "reported_resolution", "enumerated_result", "enumerated_results", "PRUNE_SHARE"]
+           "reported_resolution", "enumerated_result", "enumerated_results", "PRUNE_SHARE", "outside_split"]
 
 
 @dataclass(frozen=True)
@@ -214,6 +214,19 @@ def _checked(g_ub: float, spread: float, resolution: float, N: int, c: np.ndarra
         holds, reason = False, "the bounds met on the search's scale, but their gap exceeds the coordinates' " \
                                f"resolution ({resolved:.3g} px, at most the thresholds' own scale)"
     return g_lb, g_ub if math.isfinite(g_ub) else math.inf, holds, reason
+
+
+def outside_split(W: np.ndarray, terms, outside) -> tuple | None:
+    """(outside (N,) bool, lb_out) for the report's lowering (:func:`tritools.solve.robust_report.tls_reported`'s
+    ``split``): lb_out the least closed term of the sets ``W`` (M, N) of at least two views that hold a view
+    ``outside`` (the views left out of the best inlier set; inf for none), None where no view is outside.  The sets
+    of at most one view are exact (no data) and stay with the others' bound."""
+    outside = np.asarray(outside, bool)
+    if not outside.any():
+        return None
+    holds = (W & outside[None]).any(axis=1) & (W.sum(axis=1) >= 2)
+    terms = np.asarray(terms, float)
+    return outside, float(np.min(terms[holds])) if holds.any() else math.inf
 
 
 def _split_lower(lb: float, drift: float, g_ub: float, N: int, resolution: float, magnitude: float,

@@ -34,8 +34,8 @@ from ..model.normalize import SCALE_BOUNDS
 from . import robust_enum as enum
 from .robust_bounds import ROUND_DOWN
 from .robust_costs import point_distances2
-from .robust_enum_run import LO_ROUNDS, eligible, lower_bounds, outside_split
-from .robust_report import enumerated_result
+from .robust_enum_run import LO_ROUNDS, eligible, lower_bounds
+from .robust_report import enumerated_result, outside_split
 from .robust_two import optimum_candidate, ray_offers
 
 __all__ = ["two_view_tls", "three_view_tls", "three_terms", "three_lower_bound", "exact_terms",

@@ -145,7 +145,6 @@ class TlsSearch(NodeBounds):
             cams = self.frame.cameras(cams)
         self.C, self.c, self.opts, self.t0 = cams, c, opts, t0
         self._regions, self.enum_terms = (None if regions is None else list(regions)), None   # enum_terms: robust_three
-        self.enum_split = None       # (views, lb_out) of an enumeration's bound (robust_report._split_lower)
         self.N = len(regions) if regions is not None else len(points)
         with np.errstate(over="ignore"):
             self.c2 = c * c                              # c above 1e154: c^2 = inf (no threshold in floats)
@@ -497,10 +496,11 @@ class TlsSearch(NodeBounds):
         timings = {"candidates": t_cand, "total": time.perf_counter() - self.t0}
         return self.result(lb, stopped, timings)
 
-    def result(self, lb: float, stopped, timings, note: str = "") -> TriangulationResult:
+    def result(self, lb: float, stopped, timings, note: str = "", split: tuple | None = None) -> TriangulationResult:
         """The result at the search's lower bound ``lb`` (pixels^2): the decision by the one rule on this search's
-        scale, the reported numbers and their checks (:func:`~.robust_report.tls_reported`; a stack of point searches:
-        :func:`~.robust_report.tls_reported_stack`, then :meth:`finish`), the message (``note``: what decided)."""
+        scale, the reported numbers and their checks (:func:`~.robust_report.tls_reported`, with an enumeration's
+        ``split`` of its bound; a stack of point searches: :func:`~.robust_report.tls_reported_stack`, then
+        :meth:`finish`), the message (``note``: what decided)."""
         X = self.user_estimate()
         rep = self.report(X)
         if robust_front.front_tie(self, lb, rep.depths):     # on a line of minimisers: in front (review 36a F2)
@@ -511,7 +511,7 @@ class TlsSearch(NodeBounds):
                             self.tol.certified_one(lb, self.best_f, self.scale),    # lb valid also when stopped
                             None if self.cells_decided else self.best_f,
                             None if self.points else self.regions, None if self.frame.moved else self.enum_terms,
-                            self.enum_split)
+                            split)
         return self.finish(X, rep, told, lb, stopped, timings, note)
 
     def user_estimate(self):

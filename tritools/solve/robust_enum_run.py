@@ -579,10 +579,9 @@ class _Group:
         search told the split of its bound by the views outside its best inlier set (:func:`outside_split`)."""
         if probs:
             terms = self._terms()
-            for p in probs:
-                s = self.group[p]
-                s.enum_split = outside_split(self.W, terms[p], [i not in s.best_S for i in range(self.N)])
+            splits = [outside_split(self.W, terms[p], [i not in self.group[p].best_S for i in range(self.N)])
+                      for p in probs]
             done = enumerated_results([self.group[p] for p in probs], lb_all[probs], self.bounded[probs].sum(axis=1),
-                                      len(self.W))
+                                      len(self.W), splits)
             for p, r in zip(probs, done):
                 self.results[p] = r

@@ -440,14 +440,16 @@ def _exact_below(P: np.ndarray, X, x: np.ndarray, c: float) -> bool:
     return dx * dx + dy * dy < Fraction(c) ** 2
 
 
-def enumerated_result(search, lb: float, n_bounded: int, n_sets: int):
+def enumerated_result(search, lb: float, n_bounded: int, n_sets: int, split: tuple | None = None):
     """The result of a search decided by the enumeration (:meth:`tritools.solve.robust.TlsSearch.result` at the lower
-    bound ``lb``, pixels^2), its message saying so; ``n_bounded`` subsets were bounded."""
-    return enumerated_results([search], [lb], [n_bounded], n_sets)[0]
+    bound ``lb``, pixels^2, and its ``split``, :func:`outside_split`), its message saying so; ``n_bounded`` subsets
+    were bounded."""
+    return enumerated_results([search], [lb], [n_bounded], n_sets, [split])[0]
 
 
-def enumerated_results(searches: list, lbs, n_bounded, n_sets: int) -> list:
-    """:func:`enumerated_result` of point searches of one view count at once: their reported numbers from one
+def enumerated_results(searches: list, lbs, n_bounded, n_sets: int, splits: list | None = None) -> list:
+    """:func:`enumerated_result` of point searches of one view count at once (``splits``: each one's or None): their
+    reported numbers from one
     :func:`tritools.solve.robust_report.tls_reported_stack` (the twin of :meth:`TlsSearch.result`'s
     :func:`~tritools.solve.robust_report.tls_reported`, equal bit for bit), then each search's
     :meth:`~tritools.solve.robust.TlsSearch.finish`; a search without an estimate (or not of points) takes
@@ -457,6 +459,7 @@ def enumerated_results(searches: list, lbs, n_bounded, n_sets: int) -> list:
     from .robust_enum import ENUMERATED
 
     note = f"; {ENUMERATED} ({n_sets} sets of >= 2 views)"
+    splits = [None] * len(searches) if splits is None else splits
     timings = []
     for s, n in zip(searches, n_bounded):
         s.bounds.n_solved += int(n)
@@ -473,12 +476,12 @@ def enumerated_results(searches: list, lbs, n_bounded, n_sets: int) -> list:
         certified = [s.tol.certified_one(float(b), s.best_f, s.scale) for s, b in zip(group, lb)]
         told = tls_reported_stack(np.stack([s.C_user for s in group]), np.stack([s.x for s in group]), X,
                                   np.stack([s.c for s in group]), lb, first.tol, certified,
-                                  np.array([s.best_f for s in group]), [s.enum_split for s in group])
+                                  np.array([s.best_f for s in group]), [splits[k] for k in stack])
         for k, s, Xk, rep, t, b in zip(stack, group, X, reps, told, lb):
             out[k] = s.finish(Xk.copy(), rep, t, float(b), None, timings[k], note)
     for k, s in enumerate(searches):
         if out[k] is None:
-            out[k] = s.result(float(lbs[k]), None, timings[k], note)
+            out[k] = s.result(float(lbs[k]), None, timings[k], note, splits[k])
     return out
 
 

@@ -276,8 +276,8 @@ class _ThreeViews:
 
     def _result(self, lb: float):
         self.s.enum_terms = self.frame.frame_terms             # the frame of every bound the enumeration used
-        self.s.enum_split = outside_split(self.W, self._terms(), [i not in self.s.best_S for i in range(self.views)])
-        return enumerated_result(self.s, lb, self.bounded.sum(), len(self.W))
+        split = outside_split(self.W, self._terms(), [i not in self.s.best_S for i in range(self.views)])
+        return enumerated_result(self.s, lb, self.bounded.sum(), len(self.W), split)
 
 
 

@@ -109,11 +109,12 @@ def tls_reported_stack(C: np.ndarray, points: np.ndarray, X: np.ndarray, c: np.n
     inliers = inlier_mask_stack(C, X, points, res, c, u, u_norm)
     image_points = np.where(np.isfinite(res)[:, :, None] & np.isfinite(u), u, np.nan)
     inner = [None] * M
-    for k, sp in enumerate(splits or []):
-        if sp is not None and np.asarray(sp[0], bool).any():
-            kept = ~np.asarray(sp[0], bool)[None]
-            inner[k] = (max(float(_magnitudes(C[k:k + 1], points[k:k + 1], X[k:k + 1], kept)[0]), float(floor[k])),
-                        float(sp[1]))
+    split = [k for k, sp in enumerate(splits or []) if sp is not None and np.asarray(sp[0], bool).any()]
+    if split:                            # the kept views' magnitudes in one stacked call
+        kept = np.array([~np.asarray(splits[k][0], bool) for k in split])
+        mag_in = np.maximum(_magnitudes(np.asarray(C, float)[split], points[split], X[split], kept), floor[split])
+        for k, m in zip(split, mag_in):
+            inner[k] = (float(m), float(splits[k][1]))
     out = []
     for k in range(M):
         f_k = float(f_search[k])

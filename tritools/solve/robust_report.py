@@ -79,12 +79,13 @@ def tls_reported(C: np.ndarray, centres: np.ndarray, residuals, X, c: np.ndarray
     mag = _reported_magnitude(C, centres, X, frame_terms)
     resolution, floor = (float(r[0]) for r in _resolution_pair(np.asarray(centres, float)[None],
                                                                   np.asarray(C, float)[None]))
-    inner = None
-    if split is not None and np.asarray(split[0], bool).any():
+    checked = _checked(g_ub, spread, resolution, N, c, lb, tolerances, certified, res, f_search, max(mag, floor))
+    if _split_needed(checked, certified, split):      # (the kept views' magnitude only where it can matter)
         inner = (max(_reported_magnitude(C, centres, X, frame_terms, ~np.asarray(split[0], bool)), floor),
                  float(split[1]))
-    g_lb, g_ub, holds, reason = _checked(g_ub, spread, resolution, N, c, lb, tolerances, certified, res, f_search,
-                                         max(mag, floor), inner)
+        checked = _checked(g_ub, spread, resolution, N, c, lb, tolerances, certified, res, f_search, max(mag, floor),
+                           inner)
+    g_lb, g_ub, holds, reason = checked
     inliers = inlier_mask(C, X, centres, res, c, u, exact=points_given, regions=regions)
     image_points = np.where(np.isfinite(res)[:, None] & np.isfinite(u), u, np.nan)
     return TlsReported(g_lb, g_ub, residuals, inliers, holds, reason, image_points)
@@ -108,22 +109,22 @@ def tls_reported_stack(C: np.ndarray, points: np.ndarray, X: np.ndarray, c: np.n
     magnitude = np.maximum(_magnitudes(np.asarray(C, float), points, X), floor)
     inliers = inlier_mask_stack(C, X, points, res, c, u, u_norm)
     image_points = np.where(np.isfinite(res)[:, :, None] & np.isfinite(u), u, np.nan)
-    inner = [None] * M
-    split = [k for k, sp in enumerate(splits or []) if sp is not None and np.asarray(sp[0], bool).any()]
-    if split:                            # the kept views' magnitudes in one stacked call
-        kept = np.array([~np.asarray(splits[k][0], bool) for k in split])
-        mag_in = np.maximum(_magnitudes(np.asarray(C, float)[split], points[split], X[split], kept), floor[split])
-        for k, m in zip(split, mag_in):
-            inner[k] = (float(m), float(splits[k][1]))
-    out = []
-    for k in range(M):
+    splits = [None] * M if splits is None else splits
+
+    def checked(k: int, inner=None) -> tuple:
         f_k = float(f_search[k])
-        checked = _checked(float(g_ub[k]), float(spread[k]), float(resolution[k]), N, c[k],
-                           float(lb[k]), tolerances, bool(certified[k]), res[k], f_k if f_k == f_k else None,
-                           float(magnitude[k]), inner[k])
-        out.append(TlsReported(checked[0], checked[1], residuals[k].copy(), inliers[k].copy(), checked[2],
-                               checked[3], image_points[k].copy()))
-    return out
+        return _checked(float(g_ub[k]), float(spread[k]), float(resolution[k]), N, c[k], float(lb[k]), tolerances,
+                        bool(certified[k]), res[k], f_k if f_k == f_k else None, float(magnitude[k]), inner)
+
+    told = [checked(k) for k in range(M)]
+    again = [k for k in range(M) if _split_needed(told[k], bool(certified[k]), splits[k])]
+    if again:                            # the kept views' magnitudes in one stacked call
+        kept = np.array([~np.asarray(splits[k][0], bool) for k in again])
+        mag_in = np.maximum(_magnitudes(np.asarray(C, float)[again], points[again], X[again], kept), floor[again])
+        for k, m in zip(again, mag_in):
+            told[k] = checked(k, (float(m), float(splits[k][1])))
+    return [TlsReported(t[0], t[1], residuals[k].copy(), inliers[k].copy(), t[2], t[3], image_points[k].copy())
+            for k, t in enumerate(told)]
 
 
 def _reported_magnitude(C, centres, X, frame_terms, views=None) -> float:
@@ -228,6 +229,13 @@ def outside_split(W: np.ndarray, terms, outside) -> tuple | None:
     holds = (W & outside[None]).any(axis=1) & (W.sum(axis=1) >= 2)
     terms = np.asarray(terms, float)
     return outside, float(np.min(terms[holds])) if holds.any() else math.inf
+
+
+def _split_needed(checked: tuple, certified: bool, split: tuple | None) -> bool:
+    """Is the split of the search's bound (:func:`_split_lower`) worth its magnitudes: the search certified, the
+    bounds lowered by every view's magnitude did not pass the guard, and some view is outside the split?  (Elsewhere
+    the plain lowering is reported: valid as well, and what a clean track gets.)"""
+    return bool(certified and not checked[2] and split is not None and np.asarray(split[0], bool).any())
 
 
 def _split_lower(lb: float, drift: float, g_ub: float, N: int, resolution: float, magnitude: float,

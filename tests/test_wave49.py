@@ -253,3 +253,54 @@ def test_two_view_stationary_point_ignores_round_off_leading_terms():
         exact = _stationary(a, b, c, d, f0, 0.0)
         near = _stationary(a, b, c, d, f0, 1e-17)
         assert near == pytest.approx(exact, rel=1e-9, abs=1e-12)
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# Review 49a F1: a stacked conic solve no longer lets a block stop at the stack's (the sum's) tolerances.
+
+def _look(c, target):
+    z = target - c
+    z = z / np.linalg.norm(z)
+    x = np.cross([0, 1.0, 0], z)
+    x /= np.linalg.norm(x)
+    R = np.array([x, np.cross(z, x), z])
+    K = np.array([[800.0, 0, 320], [0, 800, 240], [0, 0, 1]])
+    return K @ np.hstack([R, (-R @ c)[:, None]])
+
+
+def test_uncertainty_many_box_beside_an_unbounded_problem_is_the_single_calls():
+    """A zero-noise [point, 1 px disc, point] problem in one uncertainty_many with three 1 px discs on a 1e-4 baseline
+    (an unbounded set of the same structure): its box as tight as the single call's (before: ~2e4 times wider, the
+    bounded blocks stopping at the stack's tolerance beside the boxed-out unbounded one), the same statuses."""
+    import tritools
+    from tritools import Ellipse, Point
+
+    rng = np.random.default_rng(1)
+    for t in range(4):
+        sc = random_scene(3, 1, noise_px=0.0, seed=t)
+        C, x = np.asarray(sc.cameras), np.asarray(sc.points2d)[0]
+        A = [Point(x[0]), Ellipse(x[1], np.eye(2)), Point(x[2])]
+        X = rng.normal(size=3) * 0.3
+        cams = np.array([_look(np.array([b, 0.0, -5.0]), X) for b in (0.0, 1e-4, -1e-4)])
+        h = cams @ np.append(X, 1.0)
+        B = [Ellipse(p, np.eye(2)) for p in h[:, :2] / h[:, 2:]]
+        one = tritools.uncertainty(C, A)
+        both = tritools.uncertainty_many([C, cams], [A, B])
+        assert one.status.value == both[0].status.value == "bounded" and both[1].status.value == "unbounded"
+        assert np.max(both[0].hi - both[0].lo) <= 10 * np.max(one.hi - one.lo) + 1e-15
+        assert both[0].contains(np.asarray(sc.points3d)[0])
+
+
+def test_loose_blocks_are_those_whose_own_gap_exceeds_the_tolerances_at_their_scale():
+    from sospoly.solvers.stacked_conic import LOOSE_GAP_FACTOR, StackedConicOptions, _loose_blocks
+
+    opts = StackedConicOptions()
+    q = np.array([[1.0], [1.0], [1.0]])
+    x = np.array([[1.0], [1e8], [1.0]])
+    b = np.array([[-1.0], [-1e8], [-1.0]])
+    z = np.array([[1.0], [1.0 - 1e-6], [1.0 - 1e-6]])     # gaps 0, 1e2 (at a scale of 1e8), 1e-6 (at a scale of 1)
+    tol = LOOSE_GAP_FACTOR * (opts.tol_gap_abs + opts.tol_gap_rel * 1e8)
+    assert 1e2 > tol
+    assert _loose_blocks(q, b, x, z, opts).tolist() == [False, True, True]
+    z[1] = 1.0 - 1e-19
+    assert _loose_blocks(q, b, x, z, opts).tolist() == [False, False, True]

@@ -340,9 +340,10 @@ def test_node_budget_and_time_limit_give_valid_bounds(monkeypatch):
     import tritools.solve.robust as robust_mod
     import tritools.solve.robust_enum as enum_mod
     import tritools.solve.robust_suspects as suspects
-    from tritools.solve import robust_cells
+    from tritools.solve import robust_batch, robust_cells
 
     monkeypatch.setattr(enum_mod, "ENUM_MAX_VIEWS", 0)
+    monkeypatch.setattr(robust_batch, "BATCH_ENUM_MAX_VIEWS", 0)    # (nor a single call's second try, wave 49)
     monkeypatch.setattr(robust_cells, "ENABLED", False)   # the cells certify it before any node
     monkeypatch.setattr(suspects, "ENABLED", False)      # the suspect stage certifies this scene without nodes
     cams, x, X, _ = outlier_scene(6, 2, 21, noise=1.0, shift=(300, 500))

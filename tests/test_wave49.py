@@ -304,3 +304,41 @@ def test_loose_blocks_are_those_whose_own_gap_exceeds_the_tolerances_at_their_sc
     assert _loose_blocks(q, b, x, z, opts).tolist() == [False, True, True]
     z[1] = 1.0 - 1e-19
     assert _loose_blocks(q, b, x, z, opts).tolist() == [False, False, True]
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# Review 49b: single calls of 9-10 views (M1) and two views in a georeferenced world (M2).
+
+@pytest.mark.parametrize("N", [9, 10])
+def test_far_wrong_matches_single_call_of_nine_or_ten_views_is_certified_like_the_batch(N):
+    """Single calls of more views than a single call enumerates: where the search leaves a track with wrong matches
+    1e7 px off uncertified, the batch's enumeration (and its split bound) decides it, as in a batch (review 49b M1)."""
+    import tritools
+
+    P, x, ref, bad = _far_track(N, 60 + N, 1e7)
+    one = tritools.triangulate(P, x, robust=5.0)
+    many = tritools.triangulate_many([(P, x)], robust=5.0)[0]
+    assert one.optimal and many.optimal
+    assert one.gamma_lb <= ref * (1 + 1e-12) and abs(one.gamma_ub - ref) <= 1e-8 * ref
+    assert np.array_equal(one.inliers, many.inliers) and not one.inliers[bad].any()
+
+
+def test_two_views_georeferenced_with_a_wrong_match_far_off_keep_their_inlier():
+    """Review 49b M2: a world 1e7 from the origin, a wrong match ~1e9 px off, c = 5: the capped frame left the
+    two-view single call at 0/2 inliers (gamma_UB 3.54); two views are not capped (their inlier set is one view):
+    1/2 inliers at gamma_UB = c / 2 = 2.5, the single call as the batch."""
+    import tritools
+
+    C = np.array([[[527.343040918857, -662.3810962511644, -159.87682922662165, 20534223591.12133],
+                   [90.8721052017625, -235.74960867480831, 796.0931996354915, -889345659.1542579],
+                   [-0.46806113484567735, -0.878605512097169, 0.09471603961023702, -1763747.7598003563]],
+                  [[86.64132369404561, -599.42431027417, 612.8489024881085, 4296479299.253986],
+                   [-726.2001080477141, 157.00840327394408, 381.5517846542654, -21100555293.17258],
+                   [-0.5893708066593318, -0.7903035667325579, -0.16751813235445923, -3689552.587772479]]])
+    x = np.array([[334.8771082266243, 223.5134908878445], [812341521.9659, 377984093.415523]])
+    one = tritools.triangulate(C, x, robust=5.0)
+    many = tritools.triangulate_many([(C, x)], robust=5.0)[0]
+    for r in (one, many):
+        assert r.inliers.sum() == 1 and abs(r.gamma_ub - 2.5) < 1e-9
+        assert r.gamma_lb <= 2.5
+    assert one.status == many.status

@@ -188,10 +188,10 @@ def enum_frame_one(C: np.ndarray, x: np.ndarray, c2: np.ndarray | None = None):
                       for cx, cy, cz in centres)
         d = dist[(N - 1) // 2] if N % 2 else (dist[N // 2 - 1] + dist[N // 2]) / 2
         rho = math.sqrt(float(np.add.reduce((u - x) ** 2, axis=None)) / N)
-        if c2 is not None:
+        if c2 is not None and N > 2:                        # (enum_frames' rule, two views uncapped)
             r2 = np.add.reduce((u - x) ** 2, axis=1)
             cap = FRAME_CAP2 * np.asarray(c2, float)
-            if (r2 > cap).any():                            # (enum_frames' rule, on the one problem)
+            if (r2 > cap).any():
                 rho = math.sqrt(float(np.add.reduce(np.minimum(r2, cap))) / N)
         B = C[:, :2, :3] - x[:, :, None] * C[:, 2:3, :3]
         top = norms(B, axis=(1, 2)) / norms(C[:, 2, :3], axis=1)
@@ -228,7 +228,9 @@ def enum_frames(C: np.ndarray, x: np.ndarray, c2: np.ndarray | None = None) -> t
     refinement of :func:`tritools.model.normalize.normalization_for`: X_0 the DLT point (solved in a world
     translated to the mean camera centre), d the median distance to the camera centres, s = 1 / rho with rho the
     RMS residual of X_0 (each view's squared residual capped at ``FRAME_CAP2`` times its squared threshold c2 (P, N)
-    where given and exceeded; floored at ``RHO_FLOOR_REL`` times the median pixel scale, s clipped to
+    where given and exceeded, from three views on: two views with a wrong match have an inlier set of one view, whose
+    term is exact, and the cap only moved the two-view path's candidates, review 49b M2;
+    floored at ``RHO_FLOOR_REL`` times the median pixel scale, s clipped to
     ``SCALE_BOUNDS``).  Any frame gives exact identities (module docstring); this one only conditions the numbers.
     Returns (a list of P :class:`Normalization` or None where one cannot be formed -- the caller runs the search,
     whose normalisation handles degenerate data --, the normalised cameras Cn (P, N, 3, 4))."""
@@ -250,7 +252,7 @@ def enum_frames(C: np.ndarray, x: np.ndarray, c2: np.ndarray | None = None) -> t
         ok &= fin
         d = median_rows(norms(centres - c0[:, None] - X0[:, None], axis=2))
         rho = np.sqrt(np.sum((u - x) ** 2, axis=(1, 2)) / N)
-        if c2 is not None:
+        if c2 is not None and N > 2:
             r2 = np.add.reduce((u - x) ** 2, axis=2)
             cap = FRAME_CAP2 * c2
             capped = (r2 > cap).any(axis=1)

@@ -40,8 +40,8 @@ print(json.dumps(out))
 def run_cell(tree: str, N: int, frac: float, noise: float, c: float, trials: int, limit: float) -> list:
     env = dict(os.environ, PYTHONPATH=os.path.abspath(tree), OPENBLAS_NUM_THREADS="1")
     arg = json.dumps([N, int(round(frac * N)), noise, c, trials, limit])
-    res = subprocess.run([sys.executable, "-c", CELL, arg, os.path.abspath(tree)], env=env, capture_output=True, text=True, check=True,
-                         cwd=os.path.abspath(tree))              # sys.path[0] = cwd: the tree, not the caller's
+    res = subprocess.run([sys.executable, "-c", CELL, arg, os.path.abspath(tree)], env=env, capture_output=True,
+                         text=True, check=True, cwd=os.path.abspath(tree))   # sys.path[0] = cwd: the tree
     return json.loads(res.stdout.strip().splitlines()[-1])
 
 

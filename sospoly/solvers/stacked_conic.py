@@ -11,7 +11,10 @@ of the blocks' optima and whose primal/dual solutions are the blocks' own, so on
 interior-point solve (Clarabel, linear in the number of blocks) replaces thousands of tiny
 Python-level solves.  A stack that is infeasible or unbounded (one bad block spoils the sum)
 is bisected down to single blocks, whose own status and certificate (a Farkas dual for an
-infeasible block, a primal ray for an unbounded one) are returned.
+infeasible block, a primal ray for an unbounded one) are returned.  The solver's tolerances hold for
+the sum, so a block of a solved stack whose own duality gap exceeds ``LOOSE_GAP_FACTOR`` times them at
+its own objective's scale is solved again without the others (:func:`_loose_blocks`): every block gets
+the accuracy it would get alone, whatever it is stacked with.
 
 Besides :mod:`.backends` this is the only module of sospoly that imports a solver (Clarabel).
 It knows nothing of where the blocks come from.

@@ -342,3 +342,19 @@ def test_two_views_georeferenced_with_a_wrong_match_far_off_keep_their_inlier():
         assert r.inliers.sum() == 1 and abs(r.gamma_ub - 2.5) < 1e-9
         assert r.gamma_lb <= 2.5
     assert one.status == many.status
+
+
+def test_determinant_fundamental_bound_holds_with_entries_spanning_the_exponent_range():
+    """Cameras whose rows differ by 1e-100..1e-200 in scale (a product of four entries leaves the doubles' range):
+    computed in longdouble (UNDERFLOW_SAFE), the bound still holds against the exact determinants."""
+    from tritools.model.fundamental_det import UNDERFLOW_SAFE
+
+    rng = np.random.default_rng(11)
+    I, J = np.array([0]), np.array([1])
+    for scale in (1e-100, 1e-150, 1e-200):
+        C = rng.normal(size=(2, 3, 4))
+        C[:, 2] *= scale                     # the depth rows: an image scaling diag(1, 1, scale), tiny in every camera
+        assert (np.abs(C / np.abs(C).max(axis=(1, 2), keepdims=True)) < UNDERFLOW_SAFE).any()
+        F, ok, e = fundamental_determinants(C[None], I, J)
+        assert ok[0, 0] and np.isfinite(e[0, 0])
+        assert _exact_error(F[0, 0], C[0], C[1]) <= e[0, 0]

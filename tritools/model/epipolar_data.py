@@ -77,7 +77,7 @@ def fundamental_bounds(C: np.ndarray, pairs: tuple, F: np.ndarray) -> np.ndarray
     with np.errstate(over="ignore", invalid="ignore"):
         D_ld, dD = determinant_form(C, I, J)
         D = D_ld.astype(float)                                # (rounded once more: u |D|)
-        dD = dD + _U * np.abs(D) + 5e-324
+        dD = dD.astype(float) * (1 + 4 * _U) + _U * np.abs(D) + 5e-324      # (a bound below 2^-1074: the last term)
         F = np.asarray(F, float)
         nn = np.einsum("mkab,mkab->mk", D, D)
         lam = (np.einsum("mkab,mkab->mk", F, D) / nn)[..., None, None]

@@ -17,7 +17,9 @@ overflows).  For the exact number lambda = 1 / ||D~||_computed,
 
     |F - lambda D| <= |F - lambda D~| + lambda |D~ - D| <= 3 u (1 + 4 u) |F| + dD / ||D~|| (1 + 8 u) + eta
 
-entrywise (eta = 5e-324: an entry rounded into the subnormals), whose Frobenius norm, rounded up, is the bound e_F
+entrywise (eta = 5e-324: an entry rounded into the subnormals; the minors' products in double assume no
+underflow, so a camera with an entry below ``UNDERFLOW_SAFE`` of its largest takes longdouble's wider exponent range,
+or no pair where the platform's longdouble is double), whose Frobenius norm, rounded up, is the bound e_F
 returned beside F: the ``proven`` error of :func:`tritools.model.epipolar_data.epipolar_errors`.  On normalised
 cameras e_F is ~5e-15..2e-14, where the pseudo-inverse form F = [e]_x P_i P_j^+ used before wave 49 erred by up to
 ~800 x 16 ulps (wave 47) and needed a second, longdouble determinant pass to bound it.
@@ -29,7 +31,7 @@ import numpy as np
 
 from sospoly import pow2_above_array
 
-__all__ = ["determinant_form", "fundamental_determinants"]
+__all__ = ["determinant_form", "fundamental_determinants", "UNDERFLOW_SAFE"]
 
 _U = 2.0 ** -53
 _LD = np.longdouble
@@ -46,19 +48,16 @@ _R1P, _R2Q, _R1Q, _R2P = (np.array([[4 * rows[ra] + cols[cb] for cols in _COLUMN
 
 
 def determinant_form(C: np.ndarray, I: np.ndarray, J: np.ndarray, dtype=_LD) -> tuple[np.ndarray, np.ndarray]:
-    """(D~ (M, K, 3, 3) in ``dtype`` (longdouble or float64), dD (M, K, 3, 3) float bounds of |D~ - D|) of the exact
-    fundamental matrices D of the float cameras C (M, N, 3, 4) for the pairs (I, J) (module docstring, u' the
-    unit round-off of ``dtype``, any order of the six-term sums; the cameras as given, no scaling)."""
+    """(D~, dD) (M, K, 3, 3), both in ``dtype`` (longdouble or float64): the determinants of the exact fundamental
+    matrices D of the float cameras C (M, N, 3, 4) for the pairs (I, J) and bounds of |D~ - D| (module docstring, u'
+    the unit round-off of ``dtype``, any order of the six-term sums; the cameras as given, no scaling)."""
     u = float(np.finfo(dtype).eps) / 2
     with np.errstate(over="ignore", invalid="ignore"):
         s = C.reshape(C.shape[:2] + (12,)).astype(dtype)      # the 2 x 2 minors of every camera at once
         ps, qs = s[..., _R1P] * s[..., _R2Q], s[..., _R1Q] * s[..., _R2P]
-        m = ps - qs                                           # (M, N, 3, 6)
-        mh = (np.abs(ps) + np.abs(qs)).astype(float)          # (rounded: within (1 + u) of the dtype's sums)
+        m, mh = ps - qs, np.abs(ps) + np.abs(qs)              # (M, N, 3, 6)
         D = _pair_products(m * _PAIR_SIGNS, m[..., ::-1], I, J) * _ENTRY_SIGNS
-        # sum_c mhat_i mhat_j in double: six products of non-negative numbers, each mhat rounded within (1 + u), so
-        # within (1 + u)^2 (1 + 6 u) < 1 + 16 u of the same sum of the unrounded ones
-        perm = _pair_products(mh, mh[..., ::-1], I, J)
+        perm = _pair_products(mh, mh[..., ::-1], I, J)        # (its own rounding: within (1 + 8 u'))
         return D, 16 * u * perm * (1 + 32 * _U)
 
 
@@ -79,19 +78,43 @@ def fundamental_determinants(C: np.ndarray, I: np.ndarray, J: np.ndarray
     (I, J): F = D~ / ||D~|| of the module docstring, ``ok`` where that and its bound are finite and D~ does not
     vanish (else F = 0, e_F = inf), e_F the proven bound of ||F - lambda D||_F for the exact D of the float
     cameras and some lambda.  The determinants in double (:func:`determinant_form`): 16 u' = 16 u there, so e_F ~
-    2e-15 times the pairs' ratio sum_c mhat_i mhat_j / |D| (1.5-9 on normalised cameras)."""
+    2e-15 times the pairs' ratio sum_c mhat_i mhat_j / |D| (1.5-9 on normalised cameras).  A problem with a camera
+    entry below ``UNDERFLOW_SAFE`` of its camera's largest (a product of four such entries could leave the doubles'
+    normal range, where the relative error analysis fails) takes numpy's longdouble where its exponent range is
+    wider, else gets no pair (ok False)."""
     C = np.asarray(C, float)
-    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore", under="ignore"):
         top = np.maximum.reduce(np.abs(C).reshape(C.shape[:2] + (12,)), axis=-1)
         S = C / pow2_above_array(top)[..., None, None]         # exact (a power of two per camera)
-        D, dD = determinant_form(S, I, J, np.float64)
-        nrm = np.sqrt(np.add.reduce((D * D).reshape(D.shape[:2] + (9,)), axis=-1))
-        ok = np.isfinite(nrm) & (nrm > 0)
-        safe = np.where(ok, nrm, 1)
-        F = (D / safe[..., None, None]).astype(float)
-        ok &= np.isfinite(F).all(axis=(2, 3))
-        E = 3 * _U * (1 + 4 * _U) * np.abs(F) + dD / safe.astype(float)[..., None, None] * (1 + 8 * _U) \
-            + 5e-324
-        e = np.sqrt(np.add.reduce((E * E).reshape(E.shape[:2] + (9,)), axis=-1)) * (1 + 8 * _U)
+        A = np.abs(S)
+        low = ((A > 0) & (A < UNDERFLOW_SAFE)).any(axis=(1, 2, 3))
+        F, ok, e = _normalised(S, I, J, np.float64)
+        if low.any():
+            if np.finfo(_LD).minexp < -2000:         # (an exponent range beyond the doubles's)
+                F[low], ok[low], e[low] = _normalised(S[low], I, J, _LD)
+            else:
+                ok[low] = False
+    return np.where(ok[..., None, None], F, 0.0), ok, np.where(ok, e, np.inf)
+
+
+#: camera entries (of a camera divided by a power of two near its largest) below this may underflow in the products
+#: of four entries of :func:`determinant_form` in double (2^-250: four of them stay above 2^-1000)
+UNDERFLOW_SAFE = 2.0 ** -250
+
+
+def _normalised(S: np.ndarray, I: np.ndarray, J: np.ndarray, dtype) -> tuple:
+    """(F, ok, e_F) of :func:`fundamental_determinants` for scaled cameras S, the determinants in ``dtype``: F =
+    fl(D~ / ||D~||) (norm and quotient in ``dtype``, rounded to double once) within (u + 2 u') (1 + 4 u) |F| +
+    dD / ||D~|| (1 + 8 u) + eta of lambda D entrywise (module docstring)."""
+    u_t = float(np.finfo(dtype).eps) / 2
+    D, dD = determinant_form(S, I, J, dtype)
+    nrm = np.sqrt(np.add.reduce((D * D).reshape(D.shape[:2] + (9,)), axis=-1))
+    ok = np.isfinite(nrm) & (nrm > 0)
+    safe = np.where(ok, nrm, 1)
+    F = (D / safe[..., None, None]).astype(float)
+    ok &= np.isfinite(F).all(axis=(2, 3))
+    rel = (dD / safe[..., None, None]).astype(float)        # (in dtype, then rounded: a ratio, no underflow)
+    E = (_U + 2 * u_t) * (1 + 4 * _U) * np.abs(F) + rel * (1 + 8 * _U) + 5e-324
+    e = np.sqrt(np.add.reduce((E * E).reshape(E.shape[:2] + (9,)), axis=-1)) * (1 + 8 * _U)
     ok &= np.isfinite(e)        # (a norm below the doubles' range: no bound in double, the pair is not used)
     return np.where(ok[..., None, None], F, 0.0), ok, np.where(ok, e, np.inf)

@@ -113,7 +113,9 @@ def _normalised(S: np.ndarray, I: np.ndarray, J: np.ndarray, dtype) -> tuple:
     safe = np.where(ok, nrm, 1)
     F = (D / safe[..., None, None]).astype(float)
     ok &= np.isfinite(F).all(axis=(2, 3))
-    rel = (dD / safe[..., None, None]).astype(float)        # (in dtype, then rounded: a ratio, no underflow)
+    # (in dtype, then rounded: a ratio, no underflow; 1e-320 ~ 2000 subnormal units: products of two minors near 2^-552
+    # round absolutely)
+    rel = ((dD + 1e-320) / safe[..., None, None]).astype(float)
     E = (_U + 2 * u_t) * (1 + 4 * _U) * np.abs(F) + rel * (1 + 8 * _U) + 5e-324
     e = np.sqrt(np.add.reduce((E * E).reshape(E.shape[:2] + (9,)), axis=-1)) * (1 + 8 * _U)
     ok &= np.isfinite(e)        # (a norm below the doubles' range: no bound in double, the pair is not used)

@@ -8,8 +8,8 @@ by every pair that holds it (:func:`determinant_form`, in double or in numpy's l
 
 Error (u' the unit round-off of the type the minors are formed in, u the double's): each minor errs by at most
 gamma_2 of its absolute form mhat = |a_p b_q| + |a_q b_p|, so |D~ - D| <= dD = 16 u' sum_c mhat_i mhat_j (the
-products, the six-term sum in any order and its rounding, generously; the sum of non-negative terms formed in
-double and rounded up by (1 + 32 u)).
+products, the six-term sum in any order and its rounding, generously; the sum of non-negative terms formed in the
+same type and rounded up by (1 + 32 u)).
 
 :func:`fundamental_determinants` returns F = fl(D~ / ||D~||) itself, the minors in double, each camera first divided
 by a power of two near its largest entry (exact: D scales by a power of two, which the normalisation removes; nothing

@@ -460,7 +460,7 @@ def distinct_centres(a_i: np.ndarray, a_j: np.ndarray) -> np.ndarray:
 def fundamental_stack(C: np.ndarray, pairs: tuple | None = None, errors: bool = False) -> tuple:
     """(F (M, K, 3, 3) unit Frobenius norm, defined (M, K)) for the view pairs ``pairs`` = (I, J) (default: all,
     :func:`view_pairs`): the exact fundamental matrix of the float cameras (SPEC §7, x_i^T F_ij x_j = 0), its entries
-    the 4 x 4 determinants from the cameras' 2 x 2 minors in extended precision, rounded once
+    the 4 x 4 determinants from the cameras' 2 x 2 minors (in double; longdouble where double would underflow)
     (:func:`tritools.model.fundamental_det.fundamental_determinants`); ``defined`` is False where the two camera
     centres coincide (:func:`distinct_centres` of :func:`centre_vectors`, invariant to the cameras' scales and image
     homographies) or F is not finite or vanishes.  ``errors``: also (M, K) proven bounds of ||F - lambda F_exact||_F

@@ -125,9 +125,15 @@ class PointQuality:
         fin = np.isfinite(self.radius)
         return {"n_points": int(len(self.point_ids)), "n_kept": int(np.count_nonzero(self.kept)),
                 "n_removed": int(np.count_nonzero(~self.kept)),
-                "median_angle_deg": float(np.median(self.angle_deg)) if len(self.angle_deg) else None,
+                "median_angle_deg": _nan_median(self.angle_deg),
                 "median_radius": float(np.median(self.radius[fin])) if np.any(fin) else None,
                 "uncertainty_status": {str(k): int(c) for k, c in zip(st, cnt)}}
+
+
+def _nan_median(values: np.ndarray) -> float | None:
+    """Median of the defined values (an angle is NaN at a camera centre), None when there is none."""
+    fin = values[np.isfinite(values)]
+    return float(np.median(fin)) if len(fin) else None
 
 
 def _usable(arrays: ModelArrays, geom: ModelGeometry):

@@ -254,7 +254,8 @@ def test_batched_sdp_starts_nothing_past_its_deadline(monkeypatch):
     x = sc.points2d                                             # (3 points, 5 views, 2)
     done = sb.solve_corollary1_points(C, x)
     assert done.done.all()
-    monkeypatch.setattr(sb, "fundamental_stack", lambda *a: pytest.fail("epipolar data computed past the deadline"))
+    monkeypatch.setattr(sb, "fundamental_stack_both",
+                        lambda *a: pytest.fail("epipolar data computed past the deadline"))
     late = sb.solve_corollary1_points(C, x, deadline=Deadline.after(0.0))
     assert not late.done.any() and set(late.reason) == {"time limit reached before the batched SDP"}
 

@@ -279,13 +279,13 @@ def test_batched_sdp_charges_the_fundamental_error(monkeypatch):
     x = np.asarray(sc.points2d)
     plain = sdp_batch.solve_corollary1_points(C, x)
     assert plain.done.all() and plain.optimal.all()
-    real = sdp_batch.fundamental_stack
+    real = sdp_batch.fundamental_stack_both
 
-    def large(C, pairs=None, errors=False):
-        out = real(C, pairs, errors)
-        return (out[0], out[1], np.where(out[1], 1e-2, np.inf)) if errors else out
+    def large(Cn, C, pairs=None):
+        F, defined, raw, E = real(Cn, C, pairs)
+        return F, defined, raw, np.where(defined, 1e-2, np.inf)
 
-    monkeypatch.setattr(sdp_batch, "fundamental_stack", large)
+    monkeypatch.setattr(sdp_batch, "fundamental_stack_both", large)
     big = sdp_batch.solve_corollary1_points(C, x)
     done = big.done & plain.done
     assert done.sum() >= 3

@@ -49,3 +49,22 @@ def test_quality_median_angle_skips_undefined_angles():
     from tritools.sfm.quality import _nan_median
     assert _nan_median(np.array([np.nan, 3.0, 1.0, 2.0])) == 2.0
     assert _nan_median(np.array([np.nan])) is None and _nan_median(np.array([])) is None
+
+
+@pytest.mark.parametrize("scale", [1.0, 1e-200, 1e200])
+def test_fundamental_stack_both_decides_centres_on_raw_cameras_at_any_scale(scale):
+    """One helper for 'F of the normalised cameras, one centre or not decided on the raw ones' (the fast path, the
+    robust enumeration and the batched SDP): its raw ``defined`` is invariant to the cameras' scales and flags a pair
+    whose raw centres coincide although the normalised cameras (here perturbed) would not say so."""
+    from tritools.model.stacked import fundamental_stack, fundamental_stack_both
+    from tritools.solve.robust_enum import fundamentals
+    rng = np.random.default_rng(50)
+    C = rng.normal(size=(2, 4, 3, 4))
+    C[1, 2] = rng.normal(size=(3, 3)) @ C[1, 0]                  # views 0 and 2 of problem 1: one centre
+    Cn = C + 1e-3 * rng.normal(size=C.shape)                      # stands in for the normalised frame
+    F, d, raw, E = fundamental_stack_both(Cn, C * scale)
+    F0, d0, E0 = fundamental_stack(Cn, errors=True)
+    assert np.array_equal(d, d0) and np.allclose(F, F0) and np.allclose(E, E0)
+    assert raw[0].all() and not raw[1, 1] and raw[1].sum() == 5   # pair (0, 2) is the second of view_pairs(4)
+    Ff, df, Ef = fundamentals(C * scale, Cn)
+    assert np.array_equal(df, d & raw) and np.isinf(Ef[~d]).all()

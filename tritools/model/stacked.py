@@ -11,6 +11,7 @@ never raised on, so one bad problem does not stop the stack.
 * :func:`project_stack` -- projections with a finite mask;
 * :func:`refine_points_stack` -- Levenberg-Marquardt on sum_i ||Phi(X, P_i) - x_i||^2;
 * :func:`fundamental_stack` -- F_ij from the cameras' 4 x 4 determinants, of view pairs (coincident centres flagged);
+* :func:`fundamental_stack_both` -- the same of normalised cameras with the raw cameras' ``defined``;
 * :func:`epipolar_quadratics` -- the quadratic parts of x~_i^T F_ij x~_j;
 * :func:`pixel_scales` -- the image scale of each view at a point (the focal length in pixels for a
   finite camera), used by the normalisation's floor.
@@ -31,6 +32,7 @@ from .geometry import POINT_AT_INFINITY_RTOL, PROJECTION_DENOM_RTOL, SAME_CENTER
 from .lm_one import FLOAT_MAX_VIEWS, LM_MAX_ITER, LM_STEP_RTOL, polish_floats, refine_floats, solve3
 
 __all__ = ["null_vectors", "dlt_stack", "project_stack", "refine_points_stack", "fundamental_stack",
+           "fundamental_stack_both",
            "epipolar_quadratics", "pixel_scales", "distinct_centres", "centre_vectors", "view_pairs", "band_pairs",
            "norms", "median_rows", "gauss_newton_polish", "project_quiet", "project_quiet_views", "project_one",
            "next_damping", "lm_accept", "solve3", "LM_MAX_ITER", "LM_STEP_RTOL"]
@@ -474,6 +476,16 @@ def fundamental_stack(C: np.ndarray, pairs: tuple | None = None, errors: bool = 
     defined = few & ok
     F = np.where(defined[..., None, None], F, 0.0)
     return (F, defined, np.where(defined, e, np.inf)) if errors else (F, defined)
+
+
+def fundamental_stack_both(Cn: np.ndarray, C: np.ndarray, pairs: tuple | None = None) -> tuple:
+    """(F, defined, raw defined, E) of P problems: :func:`fundamental_stack` (with ``errors``) of the normalised
+    cameras Cn (P, N, 3, 4) and the ``defined`` of the raw cameras C (the same shape), in one vectorised call.
+    One centre or not is decided on the raw cameras too (CentreRelations' rule): the programs hold a pair's
+    constraint only where both say defined (or drop it where the raw cameras say one centre)."""
+    P = len(Cn)
+    F, defined, E = fundamental_stack(np.concatenate([Cn, C]), pairs, errors=True)
+    return F[:P], defined[:P], defined[P:], E[:P]
 
 
 def epipolar_quadratics(F: np.ndarray, N: int, pairs: tuple | None = None):

@@ -46,7 +46,7 @@ from ..model.epipolar_data import epipolar_errors
 from ..model.frame import project_world, project_world_one
 from ..model.geometry import camera_problems
 from ..model.normalize import normalization_stack
-from ..model.stacked import (band_pairs, epipolar_quadratics, fundamental_stack, gauss_newton_polish, norms,
+from ..model.stacked import (band_pairs, epipolar_quadratics, fundamental_stack_both, gauss_newton_polish, norms,
                              project_one, project_stack, refine_point, refine_points_stack, view_pairs)
 from .decide import (decide, decide_one, decide_reported, decide_reported_one, gamma_from_c, gamma_lower,
                      gamma_lower_one, reported_lower, transfer_contradicts_one)
@@ -267,7 +267,7 @@ def _lagrangian_one(C: np.ndarray, Cn: np.ndarray, v: np.ndarray, radius: float,
     normalised Cn (N, 3, 4), the candidate v (2N,)), or None where that function would flag the problem (no
     defined pair, non-finite constraints).  Pairs with coincident centres carry no constraint, as there."""
     N = len(C)
-    F, defined, raw, E = _fundamental_both(Cn[None], C[None])      # (one call for both, as the stack)
+    F, defined, raw, E = fundamental_stack_both(Cn[None], C[None])      # (one call for both, as the stack)
     if not raw.all():
         F, defined = np.where(raw[..., None, None], F, 0.0), defined & raw
     if not defined.any():
@@ -391,15 +391,6 @@ def all_pairs_chunk(n_views: int) -> int:
     return int(max(1, ALL_PAIRS_CHUNK_BYTES // (8 * (4 * K * n + 8 * n * n + 64))))
 
 
-def _fundamental_both(Cn, C, pairs=None):
-    """(F, defined, proven errors of F) of the normalised cameras and ``defined`` of the raw ones -- one centre or
-    not is decided on the raw cameras (CentreRelations' rule) -- in one vectorised call:
-    (F, defined, raw defined, errors)."""
-    M = len(Cn)
-    F, defined, E = fundamental_stack(np.concatenate([Cn, C]), pairs, errors=True)
-    return F[:M], defined[:M], defined[M:], E[:M]
-
-
 def _held(F: np.ndarray, pairs, views) -> np.ndarray:
     """F with the pairs not between two ``views`` zeroed (their constraints dropped)."""
     if views is None:
@@ -421,7 +412,7 @@ def _all_pairs_bounds(C, Cn, v, ok, radius, tolerances, f0, F2, views=None) -> t
     """(Lagrangian lower bound (NaN: none), ok) with the epipolar constraints of all N(N - 1)/2 view pairs,
     vectorised over the stack (:func:`sospoly.analysis.verify.verify_quadratic_batch`)."""
     M, N = C.shape[:2]
-    F, defined, raw, E = _fundamental_both(Cn, C)
+    F, defined, raw, E = fundamental_stack_both(Cn, C)
     F, defined = np.where(raw[..., None, None], F, 0.0), defined & raw
     ok = ok & np.any(defined, axis=1) if F.shape[1] else ok
     Fh = _held(F, view_pairs(N), views)
@@ -445,7 +436,7 @@ def _band_bounds(C, Cn, v, ok, radius, width, tolerances, f0, F2, views=None) ->
     all pairs)."""
     M, N = C.shape[:2]
     pairs = band_pairs(N, width)
-    F, defined, raw, E = _fundamental_both(Cn, C, pairs)
+    F, defined, raw, E = fundamental_stack_both(Cn, C, pairs)
     defined &= raw
     Fh = _held(F, pairs, views)
     g0, g1, G2 = epipolar_quadratics(Fh, N, pairs)

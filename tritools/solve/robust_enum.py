@@ -62,7 +62,7 @@ from ..model.epipolar_data import epipolar_errors
 from ..model.exact import dot2, dot2_one, homogeneous_images
 from ..model.lm_one import refine_point_one
 from ..model.normalize import RHO_FLOOR_REL, SCALE_BOUNDS, Normalization
-from ..model.stacked import (dlt_stack, epipolar_quadratics, fundamental_stack, gauss_newton_polish,
+from ..model.stacked import (dlt_stack, epipolar_quadratics, fundamental_stack_both, gauss_newton_polish,
                              median_rows, norms, null_vectors, pixel_scales, project_one, project_stack,
                              refine_points_stack, view_pairs)
 from .robust_bounds import ROUND_DOWN
@@ -338,10 +338,8 @@ def fundamentals(C: np.ndarray, Cn: np.ndarray) -> tuple:
     (P, N, 3, 4), with coincident centres decided on the raw cameras C (P, N, 3, 4) too, and E the proven errors of
     the computed F (:func:`tritools.model.stacked.fundamental_stack`'s ``errors``): computed once per problem, for
     every subset bound of :func:`enum_bounds_rows` and :func:`ascended_bound` (a subset's pairs gather them)."""
-    Cs = C / norms(C, axis=(2, 3))[..., None, None]
-    F, defined, E = fundamental_stack(np.concatenate([Cn, Cs]), errors=True)
-    P = len(Cn)
-    return F[:P], defined[:P] & defined[P:], E[:P]
+    F, defined, raw, E = fundamental_stack_both(Cn, C)
+    return F, defined & raw, E
 
 
 def enum_bounds(C: np.ndarray, Cn: np.ndarray, W: np.ndarray, Xn: np.ndarray, s: float, tolerances):

@@ -46,7 +46,7 @@ from sospoly.solvers import with_single_threaded_blas
 from ..model.frame import project_world
 from ..model.geometry import POINT_AT_INFINITY_RTOL
 from ..model.normalize import normalization_stack
-from ..model.stacked import fundamental_stack, norms, project_stack, refine_points_stack
+from ..model.stacked import fundamental_stack_both, norms, project_stack, refine_points_stack
 from ..result import Status
 from .decide import decide, decide_reported, gamma_from_c, gamma_lower, transfer_contradicts
 from .report import gamma_upper
@@ -114,8 +114,8 @@ def solve_corollary1_points(cameras, points2d, *, tolerances: Tolerances = DEFAU
     reason = ["" if k else "invalid or degenerate data" for k in ok]
     norm = normalization_stack(C, x, ok, scalar=scalar)
     Cn = norm.cameras_n
-    F, defined, E = fundamental_stack(Cn, errors=True)
-    defined &= fundamental_stack(C)[1]          # one centre or not: decided on the raw cameras
+    F, defined, raw, E = fundamental_stack_both(Cn, C)
+    defined &= raw                              # one centre or not: decided on the raw cameras too
     good = norm.ok & np.all(defined, axis=1) & np.all(np.isfinite(F), axis=(1, 2, 3))
     _hand_back(ok, ~good, reason, "normalisation or epipolar data undefined (e.g. coincident camera centres)")
     solved = _solve_stack(F, ok, N, tolerances, reason, deadline)

@@ -1,4 +1,7 @@
-"""Wave 50: review 49a F4 (the triangulation angle at a camera centre is undefined, not a round-off angle), ...
+"""Wave 50: review 49a F4 (the triangulation angle at a camera centre is undefined, not a round-off angle); one
+helper for F with centres decided on the raw cameras; review 49b L1 (the TLS report's split keeps the exact c^2 of the
+sets of one view: a two-view single call whose best inlier set is the view of a wrong match 1e8 px off certifies, as
+the batch does); review 49b M1 (a cover bound's split: 11-12 views with wrong matches 1e7 px off certify).
 """
 from __future__ import annotations
 
@@ -68,3 +71,99 @@ def test_fundamental_stack_both_decides_centres_on_raw_cameras_at_any_scale(scal
     assert raw[0].all() and not raw[1, 1] and raw[1].sum() == 5   # pair (0, 2) is the second of view_pairs(4)
     Ff, df, Ef = fundamentals(C * scale, Cn)
     assert np.array_equal(df, d & raw) and np.isinf(Ef[~d]).all()
+
+
+_L1_C = np.array([[[184.3031076553391, 295.94346271804534, 787.9402460739251, 3623.0899626226765],
+                   [193.86541239671274, 776.322540009621, -239.4567095515664, 1823.4678071183534],
+                   [-0.7213209094734442, 0.5973828676755599, 0.35047090458999314, 10.259698880005269]],
+                  [[-786.4251483159685, 101.75587092437482, -337.01814317426425, 2928.5570698481424],
+                   [257.86793310316034, 211.62475541372052, -765.7147588842643, 1694.1481445225318],
+                   [-0.24545291695878427, -0.757164618533504, -0.6053549421599177, 10.069027227831665]]])
+_L1_x = np.array([[327.0215270946136, 255.1479902104928], [-13374951.565172592, 68494673.0950706]])
+
+
+def _far_two_view_cases():
+    """Review 49b's case and random two-view problems with one observation 1e7..1e9 px off (c = 5 px)."""
+    yield _L1_C, _L1_x
+    from tritools.scene import random_scene
+    for seed in range(6):
+        rng = np.random.default_rng(seed)
+        sc = random_scene(2, 1, noise_px=1.0, seed=100 + seed)
+        x = np.asarray(sc.points2d)[0].copy()
+        a = rng.uniform(0, 2 * np.pi)
+        x[seed % 2] += 10.0 ** rng.uniform(7, 9) * np.array([np.cos(a), np.sin(a)])
+        yield np.asarray(sc.cameras), x
+
+
+def test_two_view_far_wrong_match_single_certifies_as_the_batch():
+    """f*_TLS = min(L2*, c^2) with L2* from the exact two-view reduction (independent): here L2* >> c^2, so
+    gamma* = sqrt(c^2 / 4) = 2.5 exactly; the single call and the batch certify it with valid bounds."""
+    from .test_wave47 import _two_view_reference
+    n = 0
+    for C, x in _far_two_view_cases():
+        l2 = 4 * _two_view_reference(C, x) ** 2
+        ref = np.sqrt(min(l2, 25.0) / 4)
+        single = tritools.triangulate(C, x, robust=5.0)
+        batch = tritools.triangulate_many([(C, x)], robust=5.0)[0]
+        for r in (single, batch):
+            assert r.gamma_lb <= ref * (1 + 1e-12) and r.gamma_ub >= ref * (1 - 1e-9)
+            assert r.optimal, r.message
+        n += 1
+    assert n == 7
+
+
+def test_exact_sets_bound_is_the_enumeration_rule():
+    from tritools.solve.robust_enum_run import lower_bounds
+    from tritools.solve.robust_report import exact_sets_bound, outside_split
+    c2 = np.array([[4.0, 9.0, 25.0], [1.0, np.inf, 1.0]])
+    e = exact_sets_bound(c2)
+    assert e[0] == pytest.approx(13.0, rel=1e-11) and e[0] < 13.0 and e[1] == pytest.approx(2.0) and e[1] < 2.0
+    assert np.array_equal(lower_bounds(np.full(2, np.inf), np.full((2, 1), np.inf), c2), e)
+    W = np.array([[True, True, False], [True, False, True], [False, True, True], [True, True, True]])
+    out, lb_out, lb_in, exact = outside_split(W, [30.0, 40.0, 50.0, 60.0], [False, False, True], c2[0])
+    assert lb_out == 40.0 and lb_in == 30.0 and exact == e[0]
+    assert outside_split(W, [30.0, 40.0, 50.0, 60.0], [False, False, False], c2[0]) is None
+
+
+def _far_track(N: int, seed: int):
+    """N views, 1 px noise, one to three observations 1e7 px off: (C, x, the clean views)."""
+    from tritools.scene import random_scene
+    rng = np.random.default_rng(seed)
+    sc = random_scene(N, 1, noise_px=1.0, seed=seed)
+    x = np.asarray(sc.points2d)[0].copy()
+    bad = rng.choice(N, 1 + seed % 3, replace=False)
+    a = rng.uniform(0, 2 * np.pi, len(bad))
+    x[bad] += 1e7 * rng.uniform(0.5, 1, len(bad))[:, None] * np.c_[np.cos(a), np.sin(a)]
+    return np.asarray(sc.cameras), x, np.setdiff1d(np.arange(N), bad), np.asarray(sc.points3d)[0]
+
+
+def _tls_reference(C, x, keep, X0, c: float) -> float:
+    """An attained gamma_TLS (independent): scipy's least squares on the clean views from the true point, every
+    other view charged c^2 (an upper bound of gamma*_TLS; equal to it unless a clean view is better dropped)."""
+    from scipy.optimize import least_squares
+
+    def res(X):
+        y = C[keep] @ np.append(X, 1.0)
+        return (y[:, :2] / y[:, 2:] - x[keep]).ravel()
+
+    X = least_squares(res, X0, xtol=1e-15, ftol=1e-15, gtol=1e-15).x
+    d2 = np.sum(res(X).reshape(-1, 2) ** 2, axis=1)
+    f = np.sum(np.minimum(d2, c * c)) + c * c * (len(C) - len(keep))
+    return float(np.sqrt(f / (2 * len(C))))
+
+
+@pytest.mark.parametrize("N,seed", [(11, 0), (11, 1), (12, 2), (12, 3), (9, 4), (10, 5)])
+def test_far_wrong_matches_certified_beyond_the_enumeration(N, seed):
+    """The branch-and-bound path (single calls beyond 8 views, every call beyond 10) certifies tracks whose wrong
+    matches are 1e7 px off: its cover bound is lowered per part (review 49b M1: 'gap exceeds the coordinates'
+    resolution' at 11-12 views), and the bounds hold against an independent attained value."""
+    C, x, keep, X0 = _far_track(N, seed)
+    ref = _tls_reference(C, x, keep, X0, 5.0)
+    single = tritools.triangulate(C, x, robust=5.0)
+    batch = tritools.triangulate_many([(C, x)], robust=5.0)[0]
+    for r in (single, batch):
+        assert r.optimal, r.message
+        assert r.gamma_lb <= ref * (1 + 1e-12)
+        assert r.gamma_ub <= ref * (1 + 1e-9)
+        assert not np.asarray(r.inliers)[np.setdiff1d(np.arange(N), keep)].any()
+

@@ -170,6 +170,7 @@ class TlsSearch(NodeBounds):
         self.futile_leaf = None                     # (inlier set, its leaf bound) that fired the rule
         self.max_nodes = MAX_NODES                  # the search's node budget (smaller after an exhausted cell search)
         self.covered = set()                        # suspect sets O whose cover bound was taken (robust_suspects)
+        self.cover_splits = {}                      # suspect set O -> its cover's split (robust_suspects._told)
 
     @property
     def regions(self) -> list:
@@ -494,7 +495,16 @@ class TlsSearch(NodeBounds):
         if not self.meets(lb):      # the estimate reported uncertified: the L2 optimum of its own set (review 36a F3)
             yield from self.local_optimisation([self.best_X])
         timings = {"candidates": t_cand, "total": time.perf_counter() - self.t0}
-        return self.result(lb, stopped, timings)
+        return self.result(lb, stopped, timings, split=self.cover_split())
+
+    def cover_split(self) -> tuple | None:
+        """The split of the search's bound by a cover (:func:`robust_suspects._told`; valid with any bound of the
+        search): the cover of the best inlier set's outliers, else the one whose sets holding its views are bounded
+        highest; None without a cover."""
+        if not self.cover_splits:
+            return None
+        return self.cover_splits.get(frozenset(range(self.N)) - frozenset(self.best_S)) or \
+            max(self.cover_splits.values(), key=lambda split: split[1])
 
     def result(self, lb: float, stopped, timings, note: str = "", split: tuple | None = None) -> TriangulationResult:
         """The result at the search's lower bound ``lb`` (pixels^2): the decision by the one rule on this search's

@@ -42,7 +42,7 @@ from . import robust_enum as enum
 from .robust_bounds import ROUND_DOWN
 from .robust_costs import point_distances2_rows, point_distances2_stack
 from .robust_drive import credit     # (the drive's rule: per-problem time limits)
-from .robust_report import enumerated_result, enumerated_results, outside_split
+from .robust_report import enumerated_result, enumerated_results, exact_sets_bound, outside_split
 from .robust_two import two_view_rays
 
 __all__ = ["enumerate_tls", "enumerate_one", "enumerate_many", "eligible", "closed_terms", "lower_bounds",
@@ -191,11 +191,7 @@ def lower_bounds(ub: np.ndarray, terms: np.ndarray, c2: np.ndarray) -> np.ndarra
     """LB (P,): the least of UB (P,), the closed terms (P, M) (:func:`closed_terms`), the exact terms of the sets of
     one view (c^2 of the others) and of the empty set (c^2(V)), c2 (P, N) the squared thresholds (module docstring of
     :mod:`tritools.solve.robust_enum`)."""
-    N = c2.shape[1]
-    with np.errstate(over="ignore", invalid="ignore"):
-        small = np.sum(np.where(np.eye(N, dtype=bool)[None], 0.0, c2[:, None, :]), axis=2)   # |S| = 1: exact
-        return np.minimum.reduce([ub, np.min(terms, axis=1), np.min(small, axis=1) * ROUND_DOWN,
-                                  np.sum(c2, axis=1) * ROUND_DOWN])
+    return np.minimum.reduce([ub, np.min(terms, axis=1), exact_sets_bound(c2)])
 
 
 def _outside_sums(c2: np.ndarray, W: np.ndarray) -> np.ndarray:
@@ -579,8 +575,8 @@ class _Group:
         search told the split of its bound by the views outside its best inlier set (:func:`outside_split`)."""
         if probs:
             terms = self._terms()
-            splits = [outside_split(self.W, terms[p], [i not in self.group[p].best_S for i in range(self.N)])
-                      for p in probs]
+            splits = [outside_split(self.W, terms[p], [i not in self.group[p].best_S for i in range(self.N)],
+                                    self.group[p].c2) for p in probs]
             done = enumerated_results([self.group[p] for p in probs], lb_all[probs], self.bounded[probs].sum(axis=1),
                                       len(self.W), splits)
             for p, r in zip(probs, done):

@@ -143,6 +143,17 @@ class NodeBounds:
         g = lookahead_bound(lb_I, hi, a[Ua], self.c2[Ua])
         return min(self.best_f, max(base, (c2_out + g) * ROUND_DOWN))
 
+    def bound_uncapped(self, I: frozenset, c2_out: float, U: list, lb_I: float, a: np.ndarray) -> float:
+        """:meth:`_bound` with s over all of [L2LB(I), c^2(I)] and no min with UB: a lower bound of the node's own
+        f_TLS optimum that does not lean on UB (a cover's split, :func:`tritools.solve.robust_suspects._told`, lowers
+        it by other coordinates' round-off than UB's)."""
+        base = c2_out + lb_I
+        if not I or not U:
+            return base
+        Ua = np.array(U)
+        g = lookahead_bound(lb_I, float(np.sum(self.c2[list(I)])), a[Ua], self.c2[Ua])
+        return max(base, (c2_out + g) * ROUND_DOWN)
+
     def child_bounds(self, v: int, lb_I: float, a: np.ndarray):
         """Inherited bounds of the child I + {v}: L2*(I + {v}) >= a_v, L2*(I + {v, u}) >= a_u and >= L2*({v, u})."""
         pair = np.array([self.bounds.bound(frozenset((v, u))) if self.bounds.known(frozenset((v, u))) else 0.0

@@ -41,10 +41,12 @@ from ..model.magnitude import (RESOLUTION_REL, SCALAR_MAX_VIEWS, guard_resolutio
                                world_origin_magnitudes)
 from ..model.stacked import norms, null_vectors
 from .decide import gamma_from_c, gamma_lower_one, within_resolution_one
+from .robust_subsolve import ROUND_DOWN
 from .report import enlarged_distances, gamma_upper, projections_and_spread, projections_and_spread_stack
 
 __all__ = ["TlsReported", "tls_reported", "tls_reported_stack", "guards_pass", "capped_resolution",
-           "reported_resolution", "enumerated_result", "enumerated_results", "PRUNE_SHARE", "outside_split"]
+           "reported_resolution", "enumerated_result", "enumerated_results", "PRUNE_SHARE", "outside_split",
+           "exact_sets_bound"]
 
 
 @dataclass(frozen=True)
@@ -81,8 +83,8 @@ def tls_reported(C: np.ndarray, centres: np.ndarray, residuals, X, c: np.ndarray
                                                                   np.asarray(C, float)[None]))
     checked = _checked(g_ub, spread, resolution, N, c, lb, tolerances, certified, res, f_search, max(mag, floor))
     if _split_needed(checked, certified, split):      # (the kept views' magnitude only where it can matter)
-        inner = (max(_reported_magnitude(C, centres, X, frame_terms, ~np.asarray(split[0], bool)), floor),
-                 float(split[1]))
+        inner = (max(_reported_magnitude(C, centres, X, frame_terms, ~np.asarray(split[0], bool)), floor),) + \
+            tuple(split[1:])
         checked = _checked(g_ub, spread, resolution, N, c, lb, tolerances, certified, res, f_search, max(mag, floor),
                            inner)
     g_lb, g_ub, holds, reason = checked
@@ -122,7 +124,7 @@ def tls_reported_stack(C: np.ndarray, points: np.ndarray, X: np.ndarray, c: np.n
         kept = np.array([~np.asarray(splits[k][0], bool) for k in again])
         mag_in = np.maximum(_magnitudes(np.asarray(C, float)[again], points[again], X[again], kept), floor[again])
         for k, m in zip(again, mag_in):
-            told[k] = checked(k, (float(m), float(splits[k][1])))
+            told[k] = checked(k, (float(m),) + tuple(splits[k][1:]))
     return [TlsReported(t[0], t[1], residuals[k].copy(), inliers[k].copy(), t[2], t[3], image_points[k].copy())
             for k, t in enumerate(told)]
 
@@ -218,17 +220,35 @@ def _checked(g_ub: float, spread: float, resolution: float, N: int, c: np.ndarra
     return g_lb, g_ub if math.isfinite(g_ub) else math.inf, holds, reason
 
 
-def outside_split(W: np.ndarray, terms, outside) -> tuple | None:
-    """(outside (N,) bool, lb_out) for the report's lowering (:func:`tritools.solve.robust_report.tls_reported`'s
-    ``split``): lb_out the least closed term of the sets ``W`` (M, N) of at least two views that hold a view
-    ``outside`` (the views left out of the best inlier set; inf for none), None where no view is outside.  The sets
-    of at most one view are exact (no data) and stay with the others' bound."""
+def outside_split(W: np.ndarray, terms, outside, c2=None) -> tuple | None:
+    """(outside (N,) bool, lb_out, lb_in, exact) for the report's lowering (:func:`tritools.solve.robust_report.
+    tls_reported`'s ``split``): lb_out the least closed term of the sets ``W`` (M, N) of at least two views that hold a
+    view ``outside`` (the views left out of the best inlier set; inf for none), lb_in the least of those that hold none
+    (inf for none) and ``exact`` the least value of the sets of at most one view (:func:`exact_sets_bound` of the
+    squared thresholds ``c2`` (N,); None without them: lb_in and exact then stay with the search's bound), None where
+    no view is outside.  Every set of at least two views must be a row of ``W`` (an enumeration's)."""
     outside = np.asarray(outside, bool)
     if not outside.any():
         return None
-    holds = (W & outside[None]).any(axis=1) & (W.sum(axis=1) >= 2)
+    big = W.sum(axis=1) >= 2
+    holds = (W & outside[None]).any(axis=1)
     terms = np.asarray(terms, float)
-    return outside, float(np.min(terms[holds])) if holds.any() else math.inf
+
+    def least(rows) -> float:
+        return float(np.min(terms[rows])) if rows.any() else math.inf
+
+    exact = None if c2 is None else float(exact_sets_bound(np.asarray(c2, float)[None])[0])
+    return outside, least(holds & big), least(~holds & big), exact
+
+
+def exact_sets_bound(c2: np.ndarray) -> np.ndarray:
+    """(P,) the least f_TLS bound of the sets S of at most one view, rounded down: L2*(S) = 0 exactly (no data), so
+    the term is c^2(V - S), least at S = {the view of the largest c} (the empty set's c^2(V) is no less); c2 (P, N)
+    the squared thresholds (inf where one is inf)."""
+    N = c2.shape[1]
+    with np.errstate(over="ignore", invalid="ignore"):
+        small = np.sum(np.where(np.eye(N, dtype=bool)[None], 0.0, c2[:, None, :]), axis=2)
+        return np.minimum(np.min(small, axis=1), np.sum(c2, axis=1)) * ROUND_DOWN
 
 
 def _split_needed(checked: tuple, certified: bool, split: tuple | None) -> bool:
@@ -243,19 +263,26 @@ def _split_lower(lb: float, drift: float, g_ub: float, N: int, resolution: float
     """gamma_LB of the caller's data from the search's bound ``lb`` (pixels^2) less ``drift``: lowered by the round-off
     of the coordinates' ``magnitude`` (:func:`tritools.solve.decide.gamma_lower_one`), >= 0.
 
-    With ``inner`` = (A_in, lb_out): f*_TLS = min_S L2*(S) + c^2(V - S), and the L2 problem of a set S holds the
-    data of its own views only, so each term moves by the round-off of its own views' coordinates (gamma by at most
-    LB_ROUNDOFF_ULPS u (A_S + gamma_UB), as for the L2 path).  The search's ``lb`` bounds the terms of the sets
-    without the split's views, whose magnitude is A_in; ``lb_out`` those of the sets holding one of them (every
-    view's magnitude, ``magnitude``): gamma_LB is the smaller of the two lowered bounds.  A wrong match 1e6 px off
-    the image then costs its own sets only, which sit c^2 above UB or more (review 48a F1: it lowered every bound by
-    ~u 1e9 px and withdrew the certificate)."""
-    def lowered(b: float, A: float) -> float:
+    With ``inner`` = (A_in, lb_out[, lb_in, exact]): f*_TLS = min_S L2*(S) + c^2(V - S), and the L2 problem of a set
+    S holds the data of its own views only, so each term moves by the round-off of its own views' coordinates (gamma
+    by at most LB_ROUNDOFF_ULPS u (A_S + gamma_UB), as for the L2 path).  ``lb_out`` bounds the terms of the sets
+    holding one of the split's views (every view's magnitude, ``magnitude``); the others, whose magnitude is A_in, by
+    the search's ``lb`` -- or, given lb_in and exact (:func:`outside_split` of an enumeration, where every set of two
+    views or more has its term), the sets of two views or more by lb_in and the sets of at most one view by
+    ``exact``, which holds no data and moves by no coordinate's round-off.  gamma_LB is the least lowered part.  A
+    wrong match 1e6 px off the image then costs its own sets only, which sit c^2 above UB or more (review 48a F1: it
+    lowered every bound by ~u 1e9 px and withdrew the certificate), and a best inlier set of one view at a wrong
+    match keeps the exact c^2 of the other (review 49b L1: two views, one 1e8 px off)."""
+    def lowered(b: float, A: float | None) -> float:
+        if b == math.inf:
+            return math.inf
         return max(0.0, gamma_lower_one(gamma_from_c(max(b - drift, 0.0), N, 1.0), g_ub, 1.0, resolution, A))
 
     if inner is None:
         return lowered(lb, magnitude)
-    return min(lowered(lb, inner[0]), lowered(inner[1], magnitude))
+    if len(inner) < 4 or inner[3] is None:
+        return min(lowered(lb, inner[0]), lowered(inner[1], magnitude))
+    return min(lowered(inner[3], None), lowered(inner[2], inner[0]), lowered(inner[1], magnitude))
 
 
 def coordinate_resolution(centres: np.ndarray, C: np.ndarray) -> float:

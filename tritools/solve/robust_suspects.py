@@ -27,7 +27,9 @@ the argument of :meth:`tritools.solve.robust.TlsSearch.leave_one_out_bound` on W
 pays c_k^2 plus the root bound of W - k).  Sub-bounds the verification does not certify count 0 (valid, only
 weaker): the stage never solves an SDP; a track it does not certify goes on to the full search, which reuses
 every sub-bound cached here.  The result is rounded down (:data:`tritools.solve.robust_bounds.ROUND_DOWN`).
-The validity does not depend on how O was chosen: O only decides how tight the bound is.
+The validity does not depend on how O was chosen: O only decides how tight the bound is.  The two parts are kept
+with the bound (:func:`_told`): the report lowers each by the round-off of its own views' coordinates (a wrong match
+1e7 px off moves only the nodes that keep it an inlier; review 49b M1).
 """
 from __future__ import annotations
 
@@ -133,7 +135,7 @@ def _near_cover(search, far: frozenset, near: frozenset):
         kept.append((yield from kept_bound(search, S | near, frozenset((a,)), c2_far)))
         if not search.meets(kept[-1]):
             return 0.0
-    return min([inside, both] + kept)
+    return _told(search, far | near, min([inside, both] + kept), min([inside] + kept))
 
 
 def _inside(search, O: frozenset):
@@ -196,7 +198,21 @@ def cover(search, O: frozenset):
     W = frozenset(range(search.N)) - O
     c2_out = float(np.sum(search.c2[sorted(O)]))
     outside = yield from _outside(search, W, c2_out)
-    return min(inside, outside)
+    return _told(search, O, min(inside, outside), max(inside, min(_inlier_node(search, j, True) for j in O)))
+
+
+def _told(search, O: frozenset, lb: float, lb_out: float) -> float:
+    """``lb``, with the cover's split kept on the search (``cover_splits``: O -> (O as a mask, lb_out)) for the
+    report's lowering (:func:`tritools.solve.robust_report._split_lower`).  ``lb_out`` bounds the terms
+    L2*(S) + c^2(V - S) of the sets S holding a view j of O: where the minimiser of S keeps j an inlier, the term is
+    at least its f_TLS, which the node {j} bounds; else the term is at least that of S - j, and so on down to a set
+    without O's views, which every valid bound of f*_TLS bounds (the search's, whatever gave it).  The terms of
+    those sets hold only the data of V - O, the others that of every view: each part is lowered by the round-off of
+    its own coordinates."""
+    mask = np.zeros(search.N, bool)
+    mask[sorted(O)] = True
+    search.cover_splits[O] = (mask, lb_out)
+    return lb
 
 
 def _suspects(search):
@@ -254,15 +270,17 @@ def _worst(search, X, views: frozenset) -> int:
     return int(idx[int(np.argmax(np.where(np.isnan(r[idx]), np.inf, r[idx])))])
 
 
-def _inlier_node(search, j: int) -> float:
-    """LB(node I = {j}) (module docstring) from the cached pair bounds L2LB({j, u}) (unknown: 0)."""
+def _inlier_node(search, j: int, uncapped: bool = False) -> float:
+    """LB(node I = {j}) (module docstring) from the cached pair bounds L2LB({j, u}) (unknown: 0); ``uncapped``: a
+    bound of the node's optimum that does not lean on UB (:meth:`~tritools.solve.robust_nodes.NodeBounds.
+    bound_uncapped`)."""
     a = np.zeros(search.N)
     for u in range(search.N):
         P = frozenset((j, u))
         if u != j and search.bounds.known(P):
             a[u] = search.bounds.bound(P)
     U = [u for u in range(search.N) if u != j]
-    return search._bound(frozenset((j,)), 0.0, U, 0.0, a)
+    return (search.bound_uncapped if uncapped else search._bound)(frozenset((j,)), 0.0, U, 0.0, a)
 
 
 def _outside(search, W: frozenset, c2_out: float):

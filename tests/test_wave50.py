@@ -167,3 +167,29 @@ def test_far_wrong_matches_certified_beyond_the_enumeration(N, seed):
         assert r.gamma_ub <= ref * (1 + 1e-9)
         assert not np.asarray(r.inliers)[np.setdiff1d(np.arange(N), keep)].any()
 
+
+def test_stack_pre_equals_the_scalar_report_pieces():
+    """The stacked report's gap-guard resolution and compensated f_TLS equal the scalar ones bit for bit (rows with
+    infinite thresholds, infinite / NaN distances and missing search values included)."""
+    import sospoly
+    from tritools.solve.robust_report import _compensated_f, _stack_pre, capped_resolution
+    rng = np.random.default_rng(7)
+    M, N = 40, 9
+    tol = sospoly.Tolerances()
+    c = rng.uniform(0.5, 50, (M, N))
+    c[3] = np.inf
+    c[5, :4] = np.inf
+    res = rng.uniform(0, 80, (M, N)) * 10.0 ** rng.integers(-3, 4, (M, 1))
+    res[7, 2] = np.inf
+    res[8, 1] = np.nan
+    resolution = 10.0 ** rng.uniform(-8, -3, M)
+    resolution[9] = np.nan
+    f_search = rng.uniform(0, 1e4, M)
+    f_search[11] = np.nan
+    f_search[12] = np.inf
+    pre = _stack_pre(resolution, c, N, tol, res, f_search)
+    for k in range(M):
+        f_k = float(f_search[k])
+        want = (capped_resolution(float(resolution[k]), c[k], N, tol), _compensated_f(res[k], c[k], f_k if f_k == f_k
+                                                                                      else None))
+        assert (pre[k][0] == want[0] or (np.isnan(pre[k][0]) and np.isnan(want[0]))) and pre[k][1] == want[1], k

@@ -113,10 +113,12 @@ def tls_reported_stack(C: np.ndarray, points: np.ndarray, X: np.ndarray, c: np.n
     image_points = np.where(np.isfinite(res)[:, :, None] & np.isfinite(u), u, np.nan)
     splits = [None] * M if splits is None else splits
 
+    pre = _stack_pre(resolution, c, N, tolerances, res, f_search)
+
     def checked(k: int, inner=None) -> tuple:
         f_k = float(f_search[k])
         return _checked(float(g_ub[k]), float(spread[k]), float(resolution[k]), N, c[k], float(lb[k]), tolerances,
-                        bool(certified[k]), res[k], f_k if f_k == f_k else None, float(magnitude[k]), inner)
+                        bool(certified[k]), res[k], f_k if f_k == f_k else None, float(magnitude[k]), inner, pre[k])
 
     told = [checked(k) for k in range(M)]
     again = [k for k in range(M) if _split_needed(told[k], bool(certified[k]), splits[k])]
@@ -127,6 +129,21 @@ def tls_reported_stack(C: np.ndarray, points: np.ndarray, X: np.ndarray, c: np.n
             told[k] = checked(k, (float(m),) + tuple(splits[k][1:]))
     return [TlsReported(t[0], t[1], residuals[k].copy(), inliers[k].copy(), t[2], t[3], image_points[k].copy())
             for k, t in enumerate(told)]
+
+
+def _stack_pre(resolution: np.ndarray, c: np.ndarray, N: int, tolerances, res: np.ndarray, f_search) -> list:
+    """Per problem of a stack: (:func:`capped_resolution`, :func:`_compensated_f`) of :func:`_checked`, in whole-stack
+    operations (the same operations row by row: the same numbers, tests/test_wave50.py)."""
+    c = np.asarray(c, float)
+    fin = np.isfinite(c)
+    with np.errstate(over="ignore", invalid="ignore"):
+        cmin = np.min(np.where(fin, c, np.inf), axis=1)
+        resolved = np.minimum(resolution, np.where(fin.any(axis=1), cmin * math.sqrt(tolerances.gap_abs / (2.0 * N)),
+                                                   np.inf))
+        f_comp = np.sum(np.minimum(np.where(np.isfinite(res), res * res, np.inf), c * c), axis=1)
+    f_search = np.asarray(f_search, float)
+    keep = np.isfinite(f_search) & np.isfinite(f_comp)
+    return [(float(r), float(f) if k else None) for r, f, k in zip(resolved, f_comp, keep)]
 
 
 def _reported_magnitude(C, centres, X, frame_terms, views=None) -> float:
@@ -188,11 +205,13 @@ def _magnitude_one(C: np.ndarray, points: np.ndarray, X: np.ndarray, views=None)
 
 
 def _checked(g_ub: float, spread: float, resolution: float, N: int, c: np.ndarray, lb: float, tolerances,
-             certified: bool, res: np.ndarray, f_search, magnitude: float = 1.0, inner: tuple | None = None) -> tuple:
+             certified: bool, res: np.ndarray, f_search, magnitude: float = 1.0, inner: tuple | None = None,
+             pre: tuple | None = None) -> tuple:
     """(gamma_LB, gamma_UB, holds, reason) of :func:`tls_reported` from gamma_UB (float), the rounding spread and the
     coordinates' resolution (module docstring): gamma_LB lowered by round-off, never above gamma_UB; the certificate
     withheld where the search's drift (beyond what the rounding ``spread`` explains) or the gap guard say so.
-    ``inner`` = (magnitude of the kept views, lb_out): the split of :func:`_split_lower`."""
+    ``inner`` = (magnitude of the kept views, lb_out): the split of :func:`_split_lower`.  ``pre``: (the gap guard's
+    resolution, :func:`_compensated_f`) computed for a stack at once (:func:`_stack_pre`, the same numbers)."""
     # lowered by the normalisation's round-off, whose magnitude holds the frame origin's and the obliquity's terms
     # (review 7's 6-view track 4.5e8 px off-axis, whose frame bound sat 7e-4 px above an achievable value, stays
     # below it: tests/test_robust_report.py)
@@ -200,9 +219,10 @@ def _checked(g_ub: float, spread: float, resolution: float, N: int, c: np.ndarra
     g_lb = min(g_lb, g_ub)
     holds, reason = certified, ""
     f_ub = 2.0 * N * g_ub * g_ub
-    resolved = capped_resolution(resolution, c, N, tolerances)
-    drift = search_drift(res, c, f_search, f_ub)
-    d_abs = search_drift_abs(res, c, f_search)
+    resolved, f_comp = (capped_resolution(resolution, c, N, tolerances), _compensated_f(res, c, f_search)) \
+        if pre is None else pre
+    drift = 0.0 if f_comp is None else abs(f_search - f_comp) / max(f_comp, 1e-300)     # search_drift
+    d_abs = 0.0 if f_comp is None else abs(f_search - f_comp)                           # search_drift_abs
     if d_abs > 0.0:                      # the search's bound is in its own arithmetic: lowered by the drift seen
         g_lb = min(g_lb, _split_lower(lb, d_abs, g_ub, N, resolution, magnitude, inner))
     if not drift_within(drift, d_abs, N, tolerances, resolved, rounding_drift(f_ub, spread, N)):

@@ -42,17 +42,21 @@ import functools
 import numpy as np
 
 from .lens import NON_PERSPECTIVE_MODELS, PYCOLMAP_MODELS, pycolmap_camera, split_params
-from .lens import central_inverse, forward as lens_forward, keep_central
+from .lens import central_inverse, forward as lens_forward, inverse as lens_inverse, keep_central
 
-__all__ = ["CameraModel", "COLMAP_MODEL_N_PARAMS", "COLMAP_MODEL_IDS", "COLMAP_MODEL_NAMES", "UNDISTORT_TOL_PX",
-           "UNDISTORT_MAX_ITER", "UnsupportedCameraModelError", "camera_model", "camera_problem", "intrinsics",
+__all__ = ["CameraModel", "COLMAP_MODEL_N_PARAMS", "COLMAP_MODEL_IDS", "COLMAP_MODEL_NAMES", "UNDISTORT_RTOL",
+           "undistort_tolerance", "UNDISTORT_MAX_ITER", "UnsupportedCameraModelError", "camera_model", "camera_problem",
+           "intrinsics",
            "distortion", "distort", "distort_rows", "undistort", "pixels_from_camera", "undistorted_pixels",
            "OPENCV_FAMILY", "usable_models"]
 
-#: Newton's iteration for D^-1 stops when the forward model reproduces the observed pixel
-#: to this many pixels (a few hundred ulps of a 1000 px coordinate, far below any
-#: detector noise, so the undistortion adds no measurable error to gamma).
-UNDISTORT_TOL_PX = 1e-10
+#: Newton's iteration for D^-1 stops when the forward model reproduces the observed normalised coordinates
+#: (u_d, v_d) = ((x - cx) / fx, (y - cy) / fy) to this relative accuracy (of max(1, the call's median |u_d|_inf):
+#: :func:`undistort_tolerance`) -- a few ulps, the round-off of the coordinates themselves, whatever the focal length
+#: and the pixel unit.  An absolute pixel tolerance (1e-10 px before wave 50) was 1e-4 of the noise of cameras
+#: calibrated in metres on the sensor (f ~ 1e-3: lower bounds 3e-5..7.5e-5 relative above the optimum of the exactly
+#: undistorted keypoints) and below one ulp at f >= 1e7 (in-image keypoints refused; review 50a F1, F3).
+UNDISTORT_RTOL = 16 * 2.0 ** -52
 #: ... or gives up after this many iterations (Newton converges quadratically; 5-8 steps
 #: suffice for the distortions of real lenses within their image).
 UNDISTORT_MAX_ITER = 50
@@ -217,18 +221,35 @@ class _Lens:
         return np.column_stack([self.fx * uv[:, 0] + self.cx, self.fy * uv[:, 1] + self.cy])
 
     def undistort(self, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Normalised (u, v) of observed pixels and whether D(u, v) reproduces them to UNDISTORT_TOL_PX."""
-        scale = max(abs(self.fx), abs(self.fy))
+        """Normalised (u, v) of observed pixels and whether D(u, v) reproduces their normalised coordinates to
+        :func:`undistort_tolerance`."""
         uv_d = np.column_stack([(xy[:, 0] - self.cx) / self.fx, (xy[:, 1] - self.cy) / self.fy])
+        tol = undistort_tolerance(uv_d)
         if self.dist is not None:
-            uv, ok = undistort(uv_d, self.dist, scale_px=scale)
-            return _central_rows(uv, ok, uv_d, self.dist, UNDISTORT_TOL_PX / scale)
+            uv, ok = undistort(uv_d, self.dist)
+            return _central_rows(uv, ok, uv_d, self.dist, tol)
         if self.camera is None:
-            return self.inverse(uv_d, UNDISTORT_TOL_PX / scale)
-        uv = np.asarray(self.camera.cam_from_img(np.ascontiguousarray(xy, float)), float).reshape(-1, 2)
-        back = self.pixels(np.column_stack([uv, np.ones(len(uv))]))       # the round trip decides
-        ok = np.all(np.isfinite(uv), axis=1) & np.all(np.abs(back - xy) <= PYCOLMAP_TOL_PX, axis=1)
-        return uv, ok
+            return self.inverse(uv_d, tol)
+        with np.errstate(all="ignore"):
+            start = np.asarray(self.camera.cam_from_img(np.ascontiguousarray(xy, float)), float).reshape(-1, 2)
+        found = np.all(np.isfinite(start), axis=1)       # pycolmap's inverse, polished to the tolerance on its forward
+        uv, ok = lens_inverse(self._normalised_forward, uv_d, tol, UNDISTORT_MAX_ITER,
+                              start=np.where(found[:, None], start, uv_d))
+        return uv, ok & found
+
+    def _normalised_forward(self, uv: np.ndarray) -> np.ndarray:
+        """D(u, v) of a pycolmap model: its pixels of the camera-frame points (u, v, 1), normalised."""
+        xy = self.pixels(np.column_stack([uv, np.ones(len(uv))]))
+        return np.column_stack([(xy[:, 0] - self.cx) / self.fx, (xy[:, 1] - self.cy) / self.fy])
+
+
+def undistort_tolerance(uv_d: np.ndarray) -> float:
+    """The undistortion's tolerance on the forward residual in normalised coordinates: ``UNDISTORT_RTOL``
+    max(1, median over the finite rows of |uv_d|_inf) (the median: one keypoint far off the image does not loosen the
+    others)."""
+    a = np.max(np.abs(np.asarray(uv_d, float).reshape(-1, 2)), axis=1)
+    a = a[np.isfinite(a)]
+    return UNDISTORT_RTOL * max(1.0, float(np.median(a)) if len(a) else 1.0)
 
 
 def _central_rows(uv: np.ndarray, ok: np.ndarray, uv_d: np.ndarray, dist: np.ndarray, tol: float) -> tuple:
@@ -242,10 +263,6 @@ def _central_rows(uv: np.ndarray, ok: np.ndarray, uv_d: np.ndarray, dist: np.nda
         return uv, ok
     extra = dict(zip(("k1", "k2", "p1", "p2"), (float(v) for v in dist)), k3=0.0, k4=0.0, k5=0.0, k6=0.0)
     return keep_central("FULL_OPENCV", extra, uv_d, uv.copy(), ok, tol, UNDISTORT_MAX_ITER)
-
-
-#: pycolmap's own inverse stops at its tolerance: a pixel it unprojects must project back within this.
-PYCOLMAP_TOL_PX = 1e-6
 
 
 def intrinsics(model: str, params) -> np.ndarray:
@@ -295,18 +312,18 @@ def _jacobian(uv: np.ndarray, dist: np.ndarray) -> np.ndarray:
     return J
 
 
-def undistort(uv_d: np.ndarray, dist: np.ndarray, scale_px: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+def undistort(uv_d: np.ndarray, dist: np.ndarray, scale_px: float | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Solve D(uv) = uv_d by Newton's method from uv = uv_d.
 
-    Returns ``(uv, converged)``: ``converged[j]`` is True when
-    ``scale_px * |D(uv_j) - uv_d_j|_inf <= UNDISTORT_TOL_PX`` (``scale_px`` = the focal
-    length turns the normalised residual into pixels).
+    Returns ``(uv, converged)``: ``converged[j]`` is True when ``|D(uv_j) - uv_d_j|_inf`` is within
+    :func:`undistort_tolerance` of ``uv_d`` (normalised coordinates: the same keypoints converge whatever the focal
+    length; ``scale_px`` is accepted for compatibility and not used).
     """
     uv_d = np.asarray(uv_d, float).reshape(-1, 2)
     uv = uv_d.copy()
     if not np.any(dist):
         return uv, np.isfinite(uv).all(axis=1)      # (no distortion: nothing to solve; a non-finite pixel is not)
-    tol = UNDISTORT_TOL_PX / scale_px
+    tol = undistort_tolerance(uv_d)
     active = np.ones(len(uv), bool)        # rows still iterating (not converged, not stuck)
     with np.errstate(all="ignore"):
         for _ in range(UNDISTORT_MAX_ITER):

@@ -18,10 +18,11 @@ The maps ``D`` with own code here (COLMAP's ``src/colmap/sensor/models.h``; each
   small omega or r (:func:`_fov_factor`), so that small-omega cameras match COLMAP to the last bit.
 
 The inverse ``D^-1`` is Newton's method with a central-difference Jacobian (its accuracy is decided by
-the forward residual, checked in pixels against ``UNDISTORT_TOL_PX``, not by the Jacobian).  The other
+the forward residual, checked in normalised coordinates against ``UNDISTORT_RTOL``, not by the Jacobian).  The other
 perspective models (RAD_TAN_THIN_PRISM_FISHEYE, SIMPLE_DIVISION, DIVISION, EUCM, and any later one) go
-through ``pycolmap.Camera.cam_from_img`` / ``img_from_cam`` when pycolmap is installed, with the same
-round-trip check.  EQUIRECTANGULAR (a sphere, no pinhole ray for half the directions) cannot be used.
+through ``pycolmap.Camera.cam_from_img`` when pycolmap is installed, polished by the same Newton iteration on
+``img_from_cam`` to the same tolerance.  EQUIRECTANGULAR (a sphere, no pinhole ray for half the directions)
+cannot be used.
 """
 from __future__ import annotations
 

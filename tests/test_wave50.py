@@ -220,3 +220,43 @@ def test_undistortion_accuracy_does_not_depend_on_the_focal_length(model):
         xu, ok = undistorted_pixels(model, params, xy)
         assert ok.all(), (model, f)
         assert np.max(np.abs(xu - (uv * f + 0.5 * f))) / f <= 64 * eps, (model, f)
+
+
+def test_retriangulate_refuses_options_beside_individual_settings(tmp_path):
+    """Review 50a F4: ``options=`` beside ``robust=`` (or any other setting) silently ran the options alone (a plain
+    L2 model with its outliers kept); now a TypeError names both.  A wrong type for ``options`` is a TypeError too
+    (it was an AttributeError), in :func:`retriangulate`, :func:`retriangulate_folder` and :func:`to_pycolmap`."""
+    from tritools.io.colmap import write_model_arrays
+    from tritools.io.colmap.pycolmap_bridge import to_pycolmap
+    from tritools.sfm import RetriangulationOptions, retriangulate, retriangulate_folder
+    from tritools.sfm.synthetic import synthetic_arrays
+
+    arr, _ = synthetic_arrays(20, 5, "PINHOLE", seed=2)
+    model = arr.to_model()
+    opts = RetriangulationOptions(max_track_length=40)
+    with pytest.raises(TypeError, match="robust"):
+        retriangulate(model, options=opts, robust=5.0)
+    with pytest.raises(TypeError, match="method"):
+        retriangulate(model, "theorem1", options=opts)
+    with pytest.raises(TypeError, match="options must be a RetriangulationOptions"):
+        retriangulate(model, options="x")
+    write_model_arrays(arr, tmp_path / "in", "bin")
+    with pytest.raises(TypeError, match="options must be a RetriangulationOptions"):
+        retriangulate_folder(tmp_path / "in", tmp_path / "out", 5)
+    with pytest.raises(TypeError, match="model must be a tritools.io.colmap.Model"):
+        to_pycolmap(object())
+    new, report = retriangulate(model, options=RetriangulationOptions(robust=5.0))     # options alone: applied
+    assert report.records and all(r.n_inliers is not None for r in report.records)
+
+
+def test_tiny_quaternion_is_the_same_rotation():
+    """Review 50a F5: a quaternion scaled by 1e-200 (or 1e200) is the same rotation (|q|^2 underflowed to 0)."""
+    from tritools.io.colmap.model import rotation_from_qvec
+    from tritools.sfm.pipeline import rotations
+    q = np.array([0.4706592935523419, -0.5908609013383833, 0.655258135899436, 0.1])
+    R = rotation_from_qvec(q)
+    assert np.allclose(R @ R.T, np.eye(3), atol=1e-15)
+    for s in (1e-200, 1e200, 1e-310):
+        assert np.array_equal(rotation_from_qvec(q * s), R) or np.allclose(rotation_from_qvec(q * s), R, atol=4e-16)
+        assert np.allclose(rotations((q * s)[None])[0], R, atol=4e-16)
+    assert np.array_equal(rotations(q[None])[0], rotations((q * 2.0 ** -600)[None])[0])

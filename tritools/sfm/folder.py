@@ -217,6 +217,8 @@ def _within_total_limit(run):
     (:mod:`tritools.solve.call_limit`: the points not solved by then get status ``time_limit``)."""
     @functools.wraps(run)
     def limited(in_dir, out_dir, options: RetriangulationOptions | None = None, **kw):
+        if options is not None and not isinstance(options, RetriangulationOptions):
+            raise TypeError(f"options must be a RetriangulationOptions, got {type(options).__name__}")
         with call_limit((options or RetriangulationOptions()).solver.total_time_limit):
             return run(in_dir, out_dir, options, **kw)
     return limited

@@ -157,8 +157,10 @@ class ModelGeometry:
 
 
 def rotations(qvec: np.ndarray) -> np.ndarray:
-    """Rotation matrices (V, 3, 3) of Hamilton quaternions (V, 4), w first (normalised first)."""
-    q = qvec / np.linalg.norm(qvec, axis=1, keepdims=True)
+    """Rotation matrices (V, 3, 3) of Hamilton quaternions (V, 4), w first (normalised first: divided by the power of
+    two of their largest entry, exact, so that |q|^2 neither underflows nor overflows; review 50a F5)."""
+    q = qvec / 2.0 ** np.frexp(np.max(np.abs(qvec), axis=1, keepdims=True))[1]
+    q = q / np.linalg.norm(q, axis=1, keepdims=True)
     w, x, y, z = q.T
     return np.stack([np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
                      np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),

@@ -349,9 +349,8 @@ def retriangulate(model: Model, method: str | None = None, path: str | None = No
     if not isinstance(model, Model):
         raise TypeError(f"model must be a tritools.io.colmap.Model or a pycolmap.Reconstruction, got "
                         f"{type(model).__name__}")
-    if options is None:
-        options = RetriangulationOptions(method=method, path=path, min_track_length=min_track_length, delta=delta,
-                                         max_delta=max_delta, progress=progress, **kw)
+    options = _options_of(options, kw, method=method, path=path, min_track_length=min_track_length, delta=delta,
+                          max_delta=max_delta, progress=progress)
     arrays = ModelArrays.from_model(model)
     new, report = retriangulate_arrays(arrays, options)
     changed = np.nonzero(report.updated)[0]
@@ -364,6 +363,21 @@ def retriangulate(model: Model, method: str | None = None, path: str | None = No
     if not gone:
         return model.replace_points(points), report
     return _without_observations(model, gone, points), report
+
+
+def _options_of(options, kw: dict, **settings) -> RetriangulationOptions:
+    """The run's options: ``options`` as given, else the individual ``settings`` and keywords ``kw``.  Both at once
+    is a TypeError naming them (review 50a F4: ``options=`` silently dropped ``robust=5``, and a plain L2 model came
+    back with the outliers in its tracks); so is an ``options`` that is not a :class:`RetriangulationOptions`."""
+    if options is None:
+        return RetriangulationOptions(**settings, **kw)
+    if not isinstance(options, RetriangulationOptions):
+        raise TypeError(f"options must be a RetriangulationOptions, got {type(options).__name__}")
+    given = sorted(kw) + [k for k, v in settings.items() if v != (2 if k == "min_track_length" else None)]
+    if given:
+        raise TypeError(f"retriangulate: pass either options= or the individual settings, not both (got options "
+                        f"and {', '.join(given)}; set them on the RetriangulationOptions)")
+    return options
 
 
 def _without_observations(model: Model, gone: set, points: list) -> Model:

@@ -238,8 +238,11 @@ def _reference_error(cameras, images, points3D):
 
 # ----------------------------------------------------------------------------- rotations
 def rotation_from_qvec(qvec) -> np.ndarray:
-    """Rotation matrix of the Hamilton quaternion (w, x, y, z) (normalised first)."""
-    w, x, y, z = np.asarray(qvec, float) / np.linalg.norm(qvec)
+    """Rotation matrix of the Hamilton quaternion (w, x, y, z) (normalised first, after an exact power-of-two scaling
+    of its largest entry to [0.5, 1): a quaternion of norm 1e-200 is the same rotation; review 50a F5)."""
+    q = np.asarray(qvec, float)
+    q = q / 2.0 ** np.frexp(np.max(np.abs(q)))[1]
+    w, x, y, z = q / np.linalg.norm(q)
     return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
                      [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
                      [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])

@@ -84,6 +84,8 @@ def from_pycolmap(rec: pycolmap.Reconstruction) -> Model:
 def to_pycolmap(model: Model) -> pycolmap.Reconstruction:
     """A ``pycolmap.Reconstruction`` of a :class:`~.model.Model` (a trivial rig per camera, a trivial frame
     per image; ids, names, poses, keypoints, colours, errors and tracks as in ``model``)."""
+    if not isinstance(model, Model):
+        raise TypeError(f"model must be a tritools.io.colmap.Model, got {type(model).__name__}")
     pycolmap = import_pycolmap()
     rec = pycolmap.Reconstruction()
     for c in sorted(model.cameras.values(), key=lambda c: c.id):

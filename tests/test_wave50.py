@@ -125,16 +125,16 @@ def test_exact_sets_bound_is_the_enumeration_rule():
     assert outside_split(W, [30.0, 40.0, 50.0, 60.0], [False, False, False], c2[0]) is None
 
 
-def _far_track(N: int, seed: int):
-    """N views, 1 px noise, one to three observations 1e7 px off: (C, x, the clean views)."""
+def _far_track(N: int, seed: int, mag: float = 1e7, camera_scale: float = 1.0):
+    """N views, 1 px noise, one to three observations ``mag`` px off: (C, x, the clean views, the true point)."""
     from tritools.scene import random_scene
     rng = np.random.default_rng(seed)
     sc = random_scene(N, 1, noise_px=1.0, seed=seed)
     x = np.asarray(sc.points2d)[0].copy()
     bad = rng.choice(N, 1 + seed % 3, replace=False)
     a = rng.uniform(0, 2 * np.pi, len(bad))
-    x[bad] += 1e7 * rng.uniform(0.5, 1, len(bad))[:, None] * np.c_[np.cos(a), np.sin(a)]
-    return np.asarray(sc.cameras), x, np.setdiff1d(np.arange(N), bad), np.asarray(sc.points3d)[0]
+    x[bad] += mag * rng.uniform(0.5, 1, len(bad))[:, None] * np.c_[np.cos(a), np.sin(a)]
+    return np.asarray(sc.cameras) * camera_scale, x, np.setdiff1d(np.arange(N), bad), np.asarray(sc.points3d)[0]
 
 
 def _tls_reference(C, x, keep, X0, c: float) -> float:
@@ -152,12 +152,15 @@ def _tls_reference(C, x, keep, X0, c: float) -> float:
     return float(np.sqrt(f / (2 * len(C))))
 
 
-@pytest.mark.parametrize("N,seed", [(11, 0), (11, 1), (12, 2), (12, 3), (9, 4), (10, 5)])
-def test_far_wrong_matches_certified_beyond_the_enumeration(N, seed):
+@pytest.mark.parametrize("N,seed,mag,scale", [(11, 0, 1e7, 1.0), (11, 1, 1e7, 1.0), (12, 2, 1e7, 1.0),
+                                               (12, 3, 1e7, 1.0), (9, 4, 1e7, 1.0), (10, 5, 1e7, 1.0),
+                                               (14, 6, 6e8, 1e-5), (16, 7, 9e8, 1e4)])
+def test_far_wrong_matches_certified_beyond_the_enumeration(N, seed, mag, scale):
     """The branch-and-bound path (single calls beyond 8 views, every call beyond 10) certifies tracks whose wrong
-    matches are 1e7 px off: its cover bound is lowered per part (review 49b M1: 'gap exceeds the coordinates'
-    resolution' at 11-12 views), and the bounds hold against an independent attained value."""
-    C, x, keep, X0 = _far_track(N, seed)
+    matches are 1e7..1e9 px off (cameras rescaled too): its cover bound is lowered per part, the nodes through their
+    own pair bounds (review 49b M1: 'gap exceeds the coordinates' resolution' at 11-12 views), and the bounds hold
+    against an independent attained value."""
+    C, x, keep, X0 = _far_track(N, seed, mag, scale)
     ref = _tls_reference(C, x, keep, X0, 5.0)
     single = tritools.triangulate(C, x, robust=5.0)
     batch = tritools.triangulate_many([(C, x)], robust=5.0)[0]
@@ -260,3 +263,19 @@ def test_tiny_quaternion_is_the_same_rotation():
         assert np.array_equal(rotation_from_qvec(q * s), R) or np.allclose(rotation_from_qvec(q * s), R, atol=4e-16)
         assert np.allclose(rotations((q * s)[None])[0], R, atol=4e-16)
     assert np.array_equal(rotations(q[None])[0], rotations((q * 2.0 ** -600)[None])[0])
+
+
+def test_cover_nodes_bound_is_lowered_through_its_pairs():
+    """The report's bound of a cover's nodes (robust_report._nodes_bound): saturated pairs (a_u >> c_u^2 + c_j^2)
+    give the sum of the thresholds whatever the magnitude; pairs near the thresholds are lowered by the magnitude,
+    monotonically, and never above the unlowered node bound."""
+    from tritools.solve.robust_nodes import lookahead_bound
+    from tritools.solve.robust_report import _nodes_bound
+    c2 = np.full(9, 25.0)
+    far = ((25.0, np.full(9, 1e16), c2),)
+    for mag in (1.0, 1e6, 1e14):
+        assert _nodes_bound(far, 10, 1.5, 1e-6, mag) == pytest.approx(225.0, rel=1e-11)
+    near = ((25.0, np.linspace(20.0, 60.0, 9), c2),)
+    raw = lookahead_bound(0.0, 25.0, near[0][1], c2)
+    lows = [_nodes_bound(near, 10, 1.5, 1e-6, mag) for mag in (1.0, 1e8, 1e12, 1e14)]
+    assert all(lo <= raw for lo in lows) and lows == sorted(lows, reverse=True) and lows[-1] < lows[0]

@@ -40,7 +40,7 @@ from ..model.magnitude import (RESOLUTION_REL, SCALAR_MAX_VIEWS, guard_resolutio
                                resolution_pair, resolution_pair_floats, view_floors, world_origin_magnitude_one,
                                world_origin_magnitudes)
 from ..model.stacked import norms, null_vectors
-from .decide import gamma_from_c, gamma_lower_one, within_resolution_one
+from .decide import gamma_from_c, gamma_lower, gamma_lower_one, within_resolution_one
 from .robust_subsolve import ROUND_DOWN
 from .report import enlarged_distances, gamma_upper, projections_and_spread, projections_and_spread_stack
 
@@ -300,9 +300,30 @@ def _split_lower(lb: float, drift: float, g_ub: float, N: int, resolution: float
 
     if inner is None:
         return lowered(lb, magnitude)
+    if len(inner) > 4 and inner[4] is not None:         # a cover's nodes: their pair bounds lowered one by one
+        return min(lowered(lb, inner[0]), lowered(_nodes_bound(inner[4], N, g_ub, resolution, magnitude), None))
     if len(inner) < 4 or inner[3] is None:
         return min(lowered(lb, inner[0]), lowered(inner[1], magnitude))
     return min(lowered(inner[3], None), lowered(inner[2], inner[0]), lowered(inner[1], magnitude))
+
+
+def _nodes_bound(nodes: tuple, N: int, g_ub: float, resolution: float, magnitude: float) -> float:
+    """min_j g_j of a cover's nodes (:func:`tritools.solve.robust_suspects._told`) on the caller's data: each pair
+    bound a_u lowered by the round-off of every view's coordinates as an L2 bound (gamma_from_c(a_u) less
+    LB_ROUNDOFF_ULPS u (magnitude + max(gamma_UB, its own gamma)), :func:`tritools.solve.decide.gamma_lower`), then
+    the node's piecewise-linear minimum (:func:`tritools.solve.robust_nodes.lookahead_bound`), rounded down.  A
+    pair holding a wrong match 1e7 px off keeps a_u ~1e14 px^2 >> c^2 after the lowering, so the node's bound stays
+    the sum of the thresholds (it is lowered through its pairs, not as a whole: that is what makes it valid)."""
+    from .robust_nodes import lookahead_bound
+
+    best = math.inf
+    for c2_j, a, c2_u in nodes:
+        g = gamma_from_c(np.maximum(a, 0.0), N, 1.0)
+        with np.errstate(invalid="ignore", over="ignore"):
+            low = gamma_lower(g, np.maximum(g, g_ub), 1.0, resolution, magnitude)
+            a_low = np.where(np.isfinite(low), 2.0 * N * low * low * ROUND_DOWN, 0.0)
+        best = min(best, lookahead_bound(0.0, c2_j, a_low, c2_u) * ROUND_DOWN)
+    return best
 
 
 def coordinate_resolution(centres: np.ndarray, C: np.ndarray) -> float:

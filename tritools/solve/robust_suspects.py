@@ -29,7 +29,7 @@ weaker): the stage never solves an SDP; a track it does not certify goes on to t
 every sub-bound cached here.  The result is rounded down (:data:`tritools.solve.robust_bounds.ROUND_DOWN`).
 The validity does not depend on how O was chosen: O only decides how tight the bound is.  The two parts are kept
 with the bound (:func:`_told`): the report lowers each by the round-off of its own views' coordinates (a wrong match
-1e7 px off moves only the nodes that keep it an inlier; review 49b M1).
+1e7 px off moves only the pair bounds holding it, which sit far above the thresholds; review 49b M1).
 """
 from __future__ import annotations
 
@@ -135,7 +135,7 @@ def _near_cover(search, far: frozenset, near: frozenset):
         kept.append((yield from kept_bound(search, S | near, frozenset((a,)), c2_far)))
         if not search.meets(kept[-1]):
             return 0.0
-    return _told(search, far | near, min([inside, both] + kept), min([inside] + kept))
+    return min([inside, both] + kept)
 
 
 def _inside(search, O: frozenset):
@@ -198,20 +198,33 @@ def cover(search, O: frozenset):
     W = frozenset(range(search.N)) - O
     c2_out = float(np.sum(search.c2[sorted(O)]))
     outside = yield from _outside(search, W, c2_out)
-    return _told(search, O, min(inside, outside), max(inside, min(_inlier_node(search, j, True) for j in O)))
+    return _told(search, O, min(inside, outside))
 
 
-def _told(search, O: frozenset, lb: float, lb_out: float) -> float:
-    """``lb``, with the cover's split kept on the search (``cover_splits``: O -> (O as a mask, lb_out)) for the
-    report's lowering (:func:`tritools.solve.robust_report._split_lower`).  ``lb_out`` bounds the terms
-    L2*(S) + c^2(V - S) of the sets S holding a view j of O: where the minimiser of S keeps j an inlier, the term is
-    at least its f_TLS, which the node {j} bounds; else the term is at least that of S - j, and so on down to a set
-    without O's views, which every valid bound of f*_TLS bounds (the search's, whatever gave it).  The terms of
-    those sets hold only the data of V - O, the others that of every view: each part is lowered by the round-off of
-    its own coordinates."""
+def _told(search, O: frozenset, lb: float) -> float:
+    """``lb``, with the cover's split kept on the search (``cover_splits``: O -> (O as a mask, lb_out, None, None,
+    nodes)) for the report's lowering (:func:`tritools.solve.robust_report._split_lower`).
+
+    Every set S holding a view j of O has a term L2*(S) + c^2(V - S) of at least min(g_j, the term of S - j), where
+    g_j = min_{s in [0, c_j^2]} s + sum_{u != j} min(c_u^2, max(0, a_u - s)) with a_u <= L2*({j, u}) (s = d_j^2 at the
+    minimiser of S: where s <= c_j^2 each u in S pays d_u^2 >= a_u - s and each u outside pays c_u^2; where s > c_j^2
+    the term is at least c_j^2 + L2*(S - j) + c^2(V - S), the term of S - j) -- on any data, so on the caller's too,
+    with a_u the pair bounds lowered by their own round-off (``nodes``: (c_j^2, a (N - 1,), c_u^2 (N - 1,)) per j;
+    the report lowers each a_u, the bound is monotone in them).  Down the chain a set without O's views remains,
+    whose term holds only V - O's data and is at least any valid bound of f*_TLS (the search's, whatever gave it),
+    lowered by V - O's round-off.  ``lb_out`` = min_j g_j on the search's data (which cover to report)."""
     mask = np.zeros(search.N, bool)
     mask[sorted(O)] = True
-    search.cover_splits[O] = (mask, lb_out)
+    nodes, lb_out = [], math.inf
+    for j in sorted(O):
+        U = [u for u in range(search.N) if u != j]
+        a = np.array([search.bounds.bound(frozenset((j, u))) if search.bounds.known(frozenset((j, u))) else 0.0
+                      for u in U])
+        nodes.append((float(search.c2[j]), a, search.c2[U].copy()))
+        full = np.zeros(search.N)
+        full[U] = a
+        lb_out = min(lb_out, search.bound_uncapped(frozenset((j,)), 0.0, U, 0.0, full))
+    search.cover_splits[O] = (mask, lb_out, None, None, tuple(nodes))
     return lb
 
 
@@ -270,17 +283,15 @@ def _worst(search, X, views: frozenset) -> int:
     return int(idx[int(np.argmax(np.where(np.isnan(r[idx]), np.inf, r[idx])))])
 
 
-def _inlier_node(search, j: int, uncapped: bool = False) -> float:
-    """LB(node I = {j}) (module docstring) from the cached pair bounds L2LB({j, u}) (unknown: 0); ``uncapped``: a
-    bound of the node's optimum that does not lean on UB (:meth:`~tritools.solve.robust_nodes.NodeBounds.
-    bound_uncapped`)."""
+def _inlier_node(search, j: int) -> float:
+    """LB(node I = {j}) (module docstring) from the cached pair bounds L2LB({j, u}) (unknown: 0)."""
     a = np.zeros(search.N)
     for u in range(search.N):
         P = frozenset((j, u))
         if u != j and search.bounds.known(P):
             a[u] = search.bounds.bound(P)
     U = [u for u in range(search.N) if u != j]
-    return (search.bound_uncapped if uncapped else search._bound)(frozenset((j,)), 0.0, U, 0.0, a)
+    return search._bound(frozenset((j,)), 0.0, U, 0.0, a)
 
 
 def _outside(search, W: frozenset, c2_out: float):

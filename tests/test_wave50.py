@@ -279,3 +279,64 @@ def test_cover_nodes_bound_is_lowered_through_its_pairs():
     raw = lookahead_bound(0.0, 25.0, near[0][1], c2)
     lows = [_nodes_bound(near, 10, 1.5, 1e-6, mag) for mag in (1.0, 1e8, 1e12, 1e14)]
     assert all(lo <= raw for lo in lows) and lows == sorted(lows, reverse=True) and lows[-1] < lows[0]
+
+
+def _exact_local_cameras(arrays, img, off):
+    """Independent reference cameras of the stored model about ``off``: R of the stored quaternion and R off + t in
+    rationals, rounded once; K from the stored PINHOLE parameters."""
+    from fractions import Fraction as Fr
+    out = []
+    for v in img:
+        w, x, y, z = (Fr(float(a)) for a in arrays.image_qvec[v])
+        n = w * w + x * x + y * y + z * z
+        R = [[(w * w + x * x - y * y - z * z) / n, 2 * (x * y - w * z) / n, 2 * (x * z + w * y) / n],
+             [2 * (x * y + w * z) / n, (w * w - x * x + y * y - z * z) / n, 2 * (y * z - w * x) / n],
+             [2 * (x * z - w * y) / n, 2 * (y * z + w * x) / n, (w * w - x * x - y * y + z * z) / n]]
+        t = [float(sum(R[i][j] * Fr(float(off[j])) for j in range(3)) + Fr(float(arrays.image_tvec[v][i])))
+             for i in range(3)]
+        fx, fy, cx, cy = arrays.camera_params[arrays.image_camera[v]][:4]
+        K = np.array([[fx, 0, cx], [0, fy, cy], [0, 0, 1.0]])
+        out.append(K @ np.column_stack([np.array([[float(e) for e in row] for row in R]), t]))
+    return np.array(out)
+
+
+def test_georeferenced_model_is_certified_in_a_local_frame():
+    """Review 50a F2 / 44b HIGH-2: a model 7e6 m from its origin (UTM-like) was certified for K [R | t] formed in
+    that frame, whose rounding moved projections by ~u |X| f / depth: lower bounds up to 4.5e-8 px above the optimum
+    of the stored poses.  Now every certified lower bound stays below the optimum of the stored problem (exact
+    rationals about the offset, scipy least squares from the true point), and the points certify as the local
+    model's do."""
+    from dataclasses import replace
+    from scipy.optimize import least_squares
+    from tritools.io.colmap.model import rotation_from_qvec
+    from tritools.sfm import RetriangulationOptions
+    from tritools.sfm.local_frame import model_origin
+    from tritools.sfm.retriangulate import retriangulate_arrays
+    from tritools.sfm.synthetic import synthetic_arrays
+
+    arr, X_true = synthetic_arrays(60, 12, "PINHOLE", noise_px=0.5, seed=5)
+    off = np.array([4.5e6, 5.2e6, 1.2e3])
+    R = np.array([rotation_from_qvec(q) for q in arr.image_qvec])
+    geo = replace(arr, point_xyz=arr.point_xyz + off, image_tvec=arr.image_tvec - np.einsum("vij,j->vi", R, off))
+    assert model_origin(R, geo.image_tvec, np.ones(len(R), bool)) is not None
+    assert model_origin(R, arr.image_tvec, np.ones(len(R), bool)) is None          # a local model: untouched
+    _, rep = retriangulate_arrays(geo, RetriangulationOptions())
+    _, rep_local = retriangulate_arrays(arr, RetriangulationOptions())
+    assert rep.optimal.sum() >= rep_local.optimal.sum() - 1 and rep.optimal.sum() >= 50
+    checked = 0
+    for i in np.nonzero(rep.optimal)[0][:25]:
+        a, b = geo.track_offsets[i], geo.track_offsets[i + 1]
+        img = geo.track_image[a:b]
+        x = geo.kp_xy[geo.kp_offsets[img] + geo.track_kp[a:b]]
+        P = _exact_local_cameras(geo, img, off)
+
+        def res(Y):
+            h = np.einsum("nij,j->ni", P, np.append(Y, 1.0))
+            return (h[:, :2] / h[:, 2:] - x).ravel()
+
+        Y = least_squares(res, X_true[i], method="lm", xtol=1e-15, ftol=1e-15, gtol=1e-15).x
+        g = np.sqrt(np.sum(res(Y) ** 2) / (2 * len(x)))
+        assert rep.gamma_lb[i] <= g * (1 + 1e-12) + 1e-13, (i, rep.gamma_lb[i], g)
+        assert np.linalg.norm(rep.X[i] - off - Y) < 1e-6
+        checked += 1
+    assert checked == 25

@@ -31,6 +31,7 @@ from ..result import Status
 from ..solve.batch import executor_problem
 from ..solve.decide import gamma_from_c
 from ..solve.options import OptionError, TriangulationOptions
+from .local_frame import local_translations, model_origin
 from .certify import CertifyOptions, RecordColumns, certify_stack, robust_threshold, solver_options
 
 __all__ = ["RetriangulationOptions", "OptionError", "CameraError", "ModelGeometry", "prepare_geometry",
@@ -154,6 +155,8 @@ class ModelGeometry:
     kp_ok: np.ndarray             # (K,) undistortion converged
     perspective: np.ndarray       # (V,) the image's camera sees only in front of it (False: spherical, no depth test)
     image_reason: tuple = ()      # None, or why image v cannot be used although its camera can (image_problems)
+    origin: np.ndarray | None = None      # c of the local frame of a georeferenced model (:mod:`.local_frame`)
+    P_local: np.ndarray | None = None     # (V, 3, 4) K [R | t + R(q) c], exact t_c rounded once (with ``origin``)
 
 
 def rotations(qvec: np.ndarray) -> np.ndarray:
@@ -220,9 +223,15 @@ def prepare_geometry(arrays: ModelArrays, strict: bool = False) -> ModelGeometry
         r = rows[bounds[k]:bounds[k + 1]]
         if r.size:
             xy_u[r], kp_ok[r] = undistorted_pixels(arrays.camera_models[k], arrays.camera_params[k], arrays.kp_xy[r])
+    origin = model_origin(R, t, image_ok) if V else None
+    P_local = None
+    if origin is not None:           # a georeferenced model: certified about its cameras' centre (.local_frame)
+        t_c = local_translations(arrays.image_qvec, t, origin)
+        with np.errstate(all="ignore"):
+            P_local = np.matmul(Ks[cam], np.concatenate([R, t_c[:, :, None]], axis=2))
     return ModelGeometry(reasons, image_ok, R, t, P, np.column_stack([Ks[cam, 0, 0], Ks[cam, 1, 1]]),
                          np.column_stack([Ks[cam, 0, 2], Ks[cam, 1, 2]]), dists[cam], xy_u, kp_ok,
-                         _perspective_images(arrays), image_reason)
+                         _perspective_images(arrays), image_reason, origin, P_local)
 
 
 def _posed(geom: ModelGeometry) -> np.ndarray:
@@ -343,15 +352,18 @@ def _solve_stacks(geom: ModelGeometry, chunk: PointChunk, options: Retriangulati
     for N in np.unique(n_used[solve]):
         pts = np.nonzero(solve & (n_used == N))[0]
         o = used_obs[used_off[pts][:, None] + np.arange(N)]
-        C, x = geom.P[d["obs_img"][o]], geom.xy_u[d["gk"][o]]
+        local = geom.origin is not None                           # a georeferenced model: Y = X - c (.local_frame)
+        C, x = (geom.P_local if local else geom.P)[d["obs_img"][o]], geom.xy_u[d["gk"][o]]
         s = certify_stack(C, x, copts)
         if s.inliers is not None:
             outlier[o[~s.inliers]] = True
             n_inl[pts] = s.inliers.sum(axis=1)
-        parts.append(s.results.drop(*DROPPED_COLUMNS))
+        part = s.results.drop(*DROPPED_COLUMNS)
+        parts.append(replace(part, X=part.X + geom.origin) if local and part.X is not None else part)
         order.append(pts)
         with np.errstate(all="ignore"):
-            g = _gamma(C, x, chunk.xyz[pts], options.robust)      # TLS gamma with robust: comparable
+            xyz_in = chunk.xyz[pts] - geom.origin if local else chunk.xyz[pts]
+            g = _gamma(C, x, xyz_in, options.robust)      # TLS gamma with robust: comparable
         gamma_input[pts] = np.where(np.isfinite(g), g, np.nan)
         if progress is not None:
             progress.update(len(pts))

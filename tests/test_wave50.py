@@ -340,3 +340,24 @@ def test_georeferenced_model_is_certified_in_a_local_frame():
         assert np.linalg.norm(rep.X[i] - off - Y) < 1e-6
         checked += 1
     assert checked == 25
+
+
+def test_georeferenced_quality_radii_match_the_local_model():
+    """The certified uncertainty radii and depth intervals of a model 7e6 m from its origin (computed in its local
+    frame) match those of the same model at the origin."""
+    from dataclasses import replace
+    from tritools.io.colmap.model import rotation_from_qvec
+    from tritools.sfm.pipeline import prepare_geometry
+    from tritools.sfm.quality import QualityOptions, point_quality
+    from tritools.sfm.synthetic import synthetic_arrays
+
+    arr, _ = synthetic_arrays(12, 8, "PINHOLE", noise_px=0.5, seed=6)
+    off = np.array([4.5e6, 5.2e6, 1.2e3])
+    R = np.array([rotation_from_qvec(q) for q in arr.image_qvec])
+    geo = replace(arr, point_xyz=arr.point_xyz + off, image_tvec=arr.image_tvec - np.einsum("vij,j->vi", R, off))
+    opts = QualityOptions(keypoint_radius=1.0)
+    a, b = point_quality(arr, prepare_geometry(arr), opts), point_quality(geo, prepare_geometry(geo), opts)
+    fin = np.isfinite(a.radius)
+    assert fin.sum() >= 8 and np.array_equal(fin, np.isfinite(b.radius))
+    assert np.allclose(a.radius[fin], b.radius[fin], rtol=1e-6) and np.allclose(a.depth_lo[fin], b.depth_lo[fin],
+                                                                                rtol=1e-6)

@@ -361,3 +361,19 @@ def test_georeferenced_quality_radii_match_the_local_model():
     assert fin.sum() >= 8 and np.array_equal(fin, np.isfinite(b.radius))
     assert np.allclose(a.radius[fin], b.radius[fin], rtol=1e-6) and np.allclose(a.depth_lo[fin], b.depth_lo[fin],
                                                                                 rtol=1e-6)
+
+
+def test_point_gammas_of_a_georeferenced_model_match_the_local_model():
+    """:func:`tritools.sfm.pipeline.point_gammas` of a model 7e6 m from its origin equals the local model's up to
+    the rounding of the points themselves (an ulp of 7e6 m moves a projection by ~1e-7 px here)."""
+    from dataclasses import replace
+    from tritools.io.colmap.model import rotation_from_qvec
+    from tritools.sfm.pipeline import point_gammas, prepare_geometry
+    from tritools.sfm.synthetic import synthetic_arrays
+
+    arr, _ = synthetic_arrays(30, 8, "PINHOLE", noise_px=0.5, seed=8)
+    off = np.array([4.5e6, 5.2e6, 1.2e3])
+    R = np.array([rotation_from_qvec(q) for q in arr.image_qvec])
+    geo = replace(arr, point_xyz=arr.point_xyz + off, image_tvec=arr.image_tvec - np.einsum("vij,j->vi", R, off))
+    a, b = point_gammas(arr, prepare_geometry(arr)), point_gammas(geo, prepare_geometry(geo))
+    assert np.allclose(a, b, rtol=0, atol=1e-6)

@@ -305,7 +305,11 @@ def point_gammas(arrays: ModelArrays, geom: ModelGeometry, xyz: np.ndarray | Non
     use = geom.image_ok[arrays.track_image]
     img, own = arrays.track_image[use], owner[use]
     gk = arrays.kp_offsets[img] + arrays.track_kp[use]
-    h = np.einsum("tij,tj->ti", geom.P[img], np.concatenate([X[own], np.ones((len(own), 1))], axis=1))
+    if geom.origin is not None:                     # a georeferenced model: its local frame (.local_frame)
+        X, P = X - geom.origin, geom.P_local
+    else:
+        P = geom.P
+    h = np.einsum("tij,tj->ti", P[img], np.concatenate([X[own], np.ones((len(own), 1))], axis=1))
     with np.errstate(all="ignore"):
         r2 = np.sum((h[:, :2] / h[:, 2:3] - geom.xy_u[gk]) ** 2, axis=1)
         n = np.bincount(own, minlength=arrays.n_points)

@@ -495,16 +495,7 @@ class TlsSearch(NodeBounds):
         if not self.meets(lb):      # the estimate reported uncertified: the L2 optimum of its own set (review 36a F3)
             yield from self.local_optimisation([self.best_X])
         timings = {"candidates": t_cand, "total": time.perf_counter() - self.t0}
-        return self.result(lb, stopped, timings, split=self.cover_split())
-
-    def cover_split(self) -> tuple | None:
-        """The split of the search's bound by a cover (:func:`robust_suspects._told`; valid with any bound of the
-        search): the cover of the best inlier set's outliers, else the one whose sets holding its views are bounded
-        highest; None without a cover."""
-        if not self.cover_splits:
-            return None
-        return self.cover_splits.get(frozenset(range(self.N)) - frozenset(self.best_S)) or \
-            max(self.cover_splits.values(), key=lambda split: split[1])
+        return self.result(lb, stopped, timings, split=robust_suspects.cover_split(self))
 
     def result(self, lb: float, stopped, timings, note: str = "", split: tuple | None = None) -> TriangulationResult:
         """The result at the search's lower bound ``lb`` (pixels^2): the decision by the one rule on this search's

@@ -41,8 +41,8 @@ from . import robust_bounds
 from .robust_bounds import ROUND_DOWN
 from .robust_loo import kept_bound, leave_one_out
 
-__all__ = ["skip_full", "suspect_bound", "cover_bound", "cover", "ENABLED", "MAX_SUSPECTS", "PAIRS_FIRST", "ROUNDS",
-           "SMALL_N"]
+__all__ = ["skip_full", "suspect_bound", "cover_bound", "cover", "cover_split", "ENABLED", "MAX_SUSPECTS",
+           "PAIRS_FIRST", "ROUNDS", "SMALL_N"]
 
 #: False skips the stage (the tests compare the two).
 ENABLED = True
@@ -226,6 +226,15 @@ def _told(search, O: frozenset, lb: float) -> float:
         lb_out = min(lb_out, search.bound_uncapped(frozenset((j,)), 0.0, U, 0.0, full))
     search.cover_splits[O] = (mask, lb_out, None, None, tuple(nodes))
     return lb
+
+
+def cover_split(search) -> tuple | None:
+    """The split of the search's bound by one of its covers (:func:`_told`; valid with any bound of the search): the
+    cover of the best inlier set's outliers, else the one whose nodes are bounded highest; None without a cover."""
+    if not search.cover_splits:
+        return None
+    return search.cover_splits.get(frozenset(range(search.N)) - frozenset(search.best_S)) or \
+        max(search.cover_splits.values(), key=lambda split: split[1])
 
 
 def _suspects(search):

@@ -199,9 +199,9 @@ def test_outside_split_takes_the_least_term_of_the_sets_holding_an_outside_view(
     W = subset_masks(4)
     terms = np.arange(len(W), dtype=float) + 10.0
     assert outside_split(W, terms, [False] * 4) is None
-    mask, lb_out, lb_in, exact = outside_split(W, terms, [False, False, True, False])
+    mask, lb_out, lb_in, exact, nodes = outside_split(W, terms, [False, False, True, False])
     holds = W[:, 2] & (W.sum(axis=1) >= 2)
-    assert mask.tolist() == [False, False, True, False] and lb_out == terms[holds].min() and exact is None
+    assert mask.tolist() == [False, False, True, False] and lb_out == terms[holds].min() and exact is None is nodes
     assert lb_in == terms[~W[:, 2] & (W.sum(axis=1) >= 2)].min()
 
 

@@ -170,7 +170,7 @@ class TlsSearch(NodeBounds):
         self.futile_leaf = None                     # (inlier set, its leaf bound) that fired the rule
         self.max_nodes = MAX_NODES                  # the search's node budget (smaller after an exhausted cell search)
         self.covered = set()                        # suspect sets O whose cover bound was taken (robust_suspects)
-        self.cover_splits = {}                      # suspect set O -> its cover's split (robust_suspects._told)
+        self.cover_splits, self.cover_keys = {}, {}  # suspect set O -> its cover's split, its nodes' bound (_told)
 
     @property
     def regions(self) -> list:
@@ -581,21 +581,9 @@ def triangulate_robust(cams: np.ndarray, regions, c: np.ndarray, opts, t0: float
         search.set_deadline(call_deadline(opts, t0, regions))   # the time limit counts from the call's entry
         if root is not None:                            # that L2 solve is the search's root: not solved twice
             search.bounds.seed(frozenset(range(len(regions))), subsolve_of(root, len(regions), light=True))
-        res = enumerate_one(search) or drive([search])[0]
-        return res if res.optimal else _enumerated_again(search, res)
+        from . import robust_batch
+        res = enumerate_one(search)
+        res = drive([search])[0] if res is None else robust_batch.searched_again_one(search, res)
+        return res if res.optimal else robust_batch.enumerated_again(search, res)
 
 
-def _enumerated_again(search, res: TriangulationResult) -> TriangulationResult:
-    """An uncertified single call of more views than a single call enumerates (:data:`robust_enum.ENUM_MAX_VIEWS`) but
-    at most what a batch does (:data:`robust_batch.BATCH_ENUM_MAX_VIEWS`): the batch's staged enumeration, its
-    certificate taken where it gives one (review 49b M1: a wrong match 1e7 px off certified by the batch at 9-10 views
-    -- its bound split by sets of views, :func:`robust_report._split_lower` -- and not by the search of a single
-    call); else ``res``."""
-    from .robust_batch import BATCH_ENUM_MAX_VIEWS
-    from .robust_enum import ENUM_MAX_VIEWS
-    from .robust_enum_run import eligible, enumerate_many
-
-    if not (ENUM_MAX_VIEWS < search.N and eligible(search, BATCH_ENUM_MAX_VIEWS)):
-        return res
-    again = enumerate_many([search], max_views=BATCH_ENUM_MAX_VIEWS, staged=True)[0]
-    return again if again is not None and again.optimal else res

@@ -384,9 +384,34 @@ def _enumerated_then_searched(searches: list) -> list:
         if eligible(searches[k], BATCH_ENUM_MAX_VIEWS):
             results[k] = enumerate_tls(searches[k])
     left = [k for k in left if results[k] is None]
+    again = [k for k, r in enumerate(results) if r is not None and withheld(r)]
     for k, r in zip(left, drive([searches[k] for k in left]) if left else []):
         results[k] = r
+    for k, r in zip(again, searched_again([searches[k] for k in again], [results[k] for k in again])):
+        results[k] = r
     return results
+
+
+def withheld(res) -> bool:
+    """Did the report withhold the certificate an enumeration gave on its own scale, at the coordinates' resolution
+    (:data:`tritools.solve.robust_report.GAP_GUARD_REASON`: the round-off of a wrong match far off the image)?"""
+    from .robust_report import GAP_GUARD_REASON
+    return res.status == Status.NOT_CERTIFIED and GAP_GUARD_REASON in (res.message or "")
+
+
+def searched_again(searches: list, results: list) -> list:
+    """Enumerated results that :func:`withheld` flags, searched again by the branch and bound (its suspect cover's
+    bound splits by views down to the pair bounds, :func:`tritools.solve.robust_suspects._told`: a 9-view track with
+    wrong matches 7e4 and 1e8 px off at zero noise was certified by the search and not by the enumeration, review 50b),
+    the search's certificate taken where it gives one, else the enumeration's result.  The search starts from the
+    enumeration's best estimate; its bounds are its own (the enumeration frame's terms are not reused)."""
+    from .robust_drive import drive
+
+    if not searches:
+        return []
+    for s in searches:
+        s.enum_terms = None
+    return [r if r.optimal else old for r, old in zip(drive(searches), results)]
 
 
 def _normalization_scales(searches) -> None:
@@ -434,3 +459,23 @@ def _point_searches(idx, points, thresholds, opts, t0) -> dict:
                                    origin=origins[k])
                 out[i].drows = rows[k]
     return out
+
+
+def searched_again_one(search, res: TriangulationResult) -> TriangulationResult:
+    """:func:`searched_again` of one enumerated result where :func:`withheld` flags it (a single call), else ``res``."""
+    return searched_again([search], [res])[0] if withheld(res) else res
+
+
+def enumerated_again(search, res: TriangulationResult) -> TriangulationResult:
+    """An uncertified single call of more views than a single call enumerates (:data:`robust_enum.ENUM_MAX_VIEWS`) but
+    at most what a batch does (:data:`robust_batch.BATCH_ENUM_MAX_VIEWS`): the batch's staged enumeration, its
+    certificate taken where it gives one (review 49b M1: a wrong match 1e7 px off certified by the batch at 9-10 views
+    -- its bound split by sets of views, :func:`robust_report._split_lower` -- and not by the search of a single
+    call); else ``res``."""
+    from .robust_enum import ENUM_MAX_VIEWS
+    from .robust_enum_run import eligible, enumerate_many
+
+    if not (ENUM_MAX_VIEWS < search.N and eligible(search, BATCH_ENUM_MAX_VIEWS)):
+        return res
+    again = enumerate_many([search], max_views=BATCH_ENUM_MAX_VIEWS, staged=True)[0]
+    return again if again is not None and again.optimal else res

@@ -576,7 +576,7 @@ class _Group:
         if probs:
             terms = self._terms()
             splits = [outside_split(self.W, terms[p], [i not in self.group[p].best_S for i in range(self.N)],
-                                    self.group[p].c2) for p in probs]
+                                    self.group[p].c2, self.lb[p]) for p in probs]
             done = enumerated_results([self.group[p] for p in probs], lb_all[probs], self.bounded[probs].sum(axis=1),
                                       len(self.W), splits)
             for p, r in zip(probs, done):

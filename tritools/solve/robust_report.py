@@ -46,7 +46,7 @@ from .report import enlarged_distances, gamma_upper, projections_and_spread, pro
 
 __all__ = ["TlsReported", "tls_reported", "tls_reported_stack", "guards_pass", "capped_resolution",
            "reported_resolution", "enumerated_result", "enumerated_results", "PRUNE_SHARE", "outside_split",
-           "exact_sets_bound"]
+           "exact_sets_bound", "pair_nodes", "GAP_GUARD_REASON"]
 
 
 @dataclass(frozen=True)
@@ -235,18 +235,22 @@ def _checked(g_ub: float, spread: float, resolution: float, N: int, c: np.ndarra
                      "(relative): its arithmetic lost digits to cancellation (a georeferenced or rescaled frame), so " \
                      "its bounds are not trusted"
     elif certified and not guards_pass(g_lb, g_ub, N, tolerances, resolved):
-        holds, reason = False, "the bounds met on the search's scale, but their gap exceeds the coordinates' " \
-                               f"resolution ({resolved:.3g} px, at most the thresholds' own scale)"
+        holds, reason = False, f"{GAP_GUARD_REASON} ({resolved:.3g} px, at most the thresholds' own scale)"
     return g_lb, g_ub if math.isfinite(g_ub) else math.inf, holds, reason
 
 
-def outside_split(W: np.ndarray, terms, outside, c2=None) -> tuple | None:
-    """(outside (N,) bool, lb_out, lb_in, exact) for the report's lowering (:func:`tritools.solve.robust_report.
+#: the start of the reason a report withholds a certificate the search gave (:func:`_checked`)
+GAP_GUARD_REASON = "the bounds met on the search's scale, but their gap exceeds the coordinates' resolution"
+
+
+def outside_split(W: np.ndarray, terms, outside, c2=None, lb=None) -> tuple | None:
+    """(outside (N,) bool, lb_out, lb_in, exact, nodes) for the report's lowering (:func:`tritools.solve.robust_report.
     tls_reported`'s ``split``): lb_out the least closed term of the sets ``W`` (M, N) of at least two views that hold a
     view ``outside`` (the views left out of the best inlier set; inf for none), lb_in the least of those that hold none
     (inf for none) and ``exact`` the least value of the sets of at most one view (:func:`exact_sets_bound` of the
-    squared thresholds ``c2`` (N,); None without them: lb_in and exact then stay with the search's bound), None where
-    no view is outside.  Every set of at least two views must be a row of ``W`` (an enumeration's)."""
+    squared thresholds ``c2`` (N,); None without them: lb_in and exact then stay with the search's bound), and with
+    the sets' L2 bounds ``lb`` (M,) the nodes of the outside views (:func:`pair_nodes`; else None), None where no view
+    is outside.  Every set of at least two views must be a row of ``W`` (an enumeration's)."""
     outside = np.asarray(outside, bool)
     if not outside.any():
         return None
@@ -258,7 +262,28 @@ def outside_split(W: np.ndarray, terms, outside, c2=None) -> tuple | None:
         return float(np.min(terms[rows])) if rows.any() else math.inf
 
     exact = None if c2 is None else float(exact_sets_bound(np.asarray(c2, float)[None])[0])
-    return outside, least(holds & big), least(~holds & big), exact
+    nodes = None if c2 is None or lb is None else pair_nodes(W, lb, outside, c2)
+    return outside, least(holds & big), least(~holds & big), exact, nodes
+
+
+def pair_nodes(W: np.ndarray, lb, outside: np.ndarray, c2) -> tuple:
+    """The nodes {j} of the ``outside`` views for :func:`_nodes_bound`: (c_j^2, a (N - 1,), c_u^2 (N - 1,)) with a_u the
+    L2 bound of the pair {j, u} among the sets ``W`` (M, N) and their bounds ``lb`` (M,) (0 where it has none)."""
+    W = np.asarray(W, bool)
+    lb = np.asarray(lb, float)
+    c2 = np.asarray(c2, float)
+    N = W.shape[1]
+    pair = np.full((N, N), 0.0)
+    rows = np.nonzero(W.sum(axis=1) == 2)[0]
+    for r in rows:
+        i, j = np.nonzero(W[r])[0]
+        b = lb[r] if np.isfinite(lb[r]) and lb[r] > 0 else 0.0
+        pair[i, j] = pair[j, i] = b
+    out = []
+    for j in np.nonzero(outside)[0]:
+        U = np.array([u for u in range(N) if u != j])
+        out.append((float(c2[j]), pair[j, U].copy(), c2[U].copy()))
+    return tuple(out)
 
 
 def exact_sets_bound(c2: np.ndarray) -> np.ndarray:
@@ -300,11 +325,12 @@ def _split_lower(lb: float, drift: float, g_ub: float, N: int, resolution: float
 
     if inner is None:
         return lowered(lb, magnitude)
-    if len(inner) > 4 and inner[4] is not None:         # a cover's nodes: their pair bounds lowered one by one
-        return min(lowered(lb, inner[0]), lowered(_nodes_bound(inner[4], N, g_ub, resolution, magnitude), None))
-    if len(inner) < 4 or inner[3] is None:
-        return min(lowered(lb, inner[0]), lowered(inner[1], magnitude))
-    return min(lowered(inner[3], None), lowered(inner[2], inner[0]), lowered(inner[1], magnitude))
+    A_in, lb_out, lb_in, exact, nodes = tuple(inner) + (None,) * (5 - len(inner))
+    inside = lowered(lb, A_in) if exact is None else min(lowered(exact, None), lowered(lb_in, A_in))
+    out = 0.0 if lb_out is None else lowered(lb_out, magnitude)
+    if nodes:                            # the outside views' nodes: their pair bounds lowered one by one
+        out = max(out, lowered(_nodes_bound(nodes, N, g_ub, resolution, magnitude), None))
+    return min(inside, out)
 
 
 def _nodes_bound(nodes: tuple, N: int, g_ub: float, resolution: float, magnitude: float) -> float:

@@ -202,8 +202,8 @@ def cover(search, O: frozenset):
 
 
 def _told(search, O: frozenset, lb: float) -> float:
-    """``lb``, with the cover's split kept on the search (``cover_splits``: O -> (O as a mask, lb_out, None, None,
-    nodes)) for the report's lowering (:func:`tritools.solve.robust_report._split_lower`).
+    """``lb``, with the cover's split kept on the search (``cover_splits``: O -> (O as a mask, None, None, None,
+    nodes); ``cover_keys``: O -> lb_out) for the report's lowering (:func:`tritools.solve.robust_report._split_lower`).
 
     Every set S holding a view j of O has a term L2*(S) + c^2(V - S) of at least min(g_j, the term of S - j), where
     g_j = min_{s in [0, c_j^2]} s + sum_{u != j} min(c_u^2, max(0, a_u - s)) with a_u <= L2*({j, u}) (s = d_j^2 at the
@@ -224,7 +224,8 @@ def _told(search, O: frozenset, lb: float) -> float:
         full = np.zeros(search.N)
         full[U] = a
         lb_out = min(lb_out, search.bound_uncapped(frozenset((j,)), 0.0, U, 0.0, full))
-    search.cover_splits[O] = (mask, lb_out, None, None, tuple(nodes))
+    search.cover_splits[O] = (mask, None, None, None, tuple(nodes))    # (lb_out: not valid lowered as one number)
+    search.cover_keys[O] = lb_out
     return lb
 
 
@@ -233,8 +234,8 @@ def cover_split(search) -> tuple | None:
     cover of the best inlier set's outliers, else the one whose nodes are bounded highest; None without a cover."""
     if not search.cover_splits:
         return None
-    return search.cover_splits.get(frozenset(range(search.N)) - frozenset(search.best_S)) or \
-        max(search.cover_splits.values(), key=lambda split: split[1])
+    best = frozenset(range(search.N)) - frozenset(search.best_S)
+    return search.cover_splits.get(best) or search.cover_splits[max(search.cover_keys, key=search.cover_keys.get)]
 
 
 def _suspects(search):

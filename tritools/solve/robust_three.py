@@ -276,7 +276,8 @@ class _ThreeViews:
 
     def _result(self, lb: float):
         self.s.enum_terms = self.frame.frame_terms             # the frame of every bound the enumeration used
-        split = outside_split(self.W, self._terms(), [i not in self.s.best_S for i in range(self.views)], self.s.c2)
+        split = outside_split(self.W, self._terms(), [i not in self.s.best_S for i in range(self.views)], self.s.c2,
+                              self.lb)
         return enumerated_result(self.s, lb, self.bounded.sum(), len(self.W), split)
 
 

@@ -470,7 +470,7 @@ def enumerated_again(search, res: TriangulationResult) -> TriangulationResult:
     """An uncertified single call of more views than a single call enumerates (:data:`robust_enum.ENUM_MAX_VIEWS`) but
     at most what a batch does (:data:`robust_batch.BATCH_ENUM_MAX_VIEWS`): the batch's staged enumeration, its
     certificate taken where it gives one (review 49b M1: a wrong match 1e7 px off certified by the batch at 9-10 views
-    -- its bound split by sets of views, :func:`robust_report._split_lower` -- and not by the search of a single
+    -- its bound split by sets of views, :func:`robust_split._split_lower` -- and not by the search of a single
     call); else ``res``."""
     from .robust_enum import ENUM_MAX_VIEWS
     from .robust_enum_run import eligible, enumerate_many

@@ -40,6 +40,7 @@ import numpy as np
 from . import robust_bounds
 from .robust_bounds import ROUND_DOWN
 from .robust_loo import kept_bound, leave_one_out
+from .robust_split import Split
 
 __all__ = ["skip_full", "suspect_bound", "cover_bound", "cover", "cover_split", "ENABLED", "MAX_SUSPECTS",
            "PAIRS_FIRST", "ROUNDS", "SMALL_N"]
@@ -203,7 +204,7 @@ def cover(search, O: frozenset):
 
 def _told(search, O: frozenset, lb: float) -> float:
     """``lb``, with the cover's split kept on the search (``cover_splits``: O -> (O as a mask, None, None, None,
-    nodes); ``cover_keys``: O -> lb_out) for the report's lowering (:func:`tritools.solve.robust_report._split_lower`).
+    nodes); ``cover_keys``: O -> lb_out) for the report's lowering (:func:`tritools.solve.robust_split._split_lower`).
 
     Every set S holding a view j of O has a term L2*(S) + c^2(V - S) of at least min(g_j, the term of S - j), where
     g_j = min_{s in [0, c_j^2]} s + sum_{u != j} min(c_u^2, max(0, a_u - s)) with a_u <= L2*({j, u}) (s = d_j^2 at the
@@ -224,7 +225,7 @@ def _told(search, O: frozenset, lb: float) -> float:
         full = np.zeros(search.N)
         full[U] = a
         lb_out = min(lb_out, search.bound_uncapped(frozenset((j,)), 0.0, U, 0.0, full))
-    search.cover_splits[O] = (mask, None, None, None, tuple(nodes))    # (lb_out: not valid lowered as one number)
+    search.cover_splits[O] = Split(mask, parts=(None, None, None, tuple(nodes)))   # (lb_out: not valid as one number)
     search.cover_keys[O] = lb_out
     return lb
 

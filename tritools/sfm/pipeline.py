@@ -158,6 +158,11 @@ class ModelGeometry:
     origin: np.ndarray | None = None      # c of the local frame of a georeferenced model (:mod:`.local_frame`)
     P_local: np.ndarray | None = None     # (V, 3, 4) K [R | t + R(q) c], exact t_c rounded once (with ``origin``)
 
+    def certified_frame(self, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(cameras (V, 3, 4), X (..., 3)) in the frame certificates are computed in: the local frame of a
+        georeferenced model (``P_local``, X - ``origin``; :mod:`.local_frame`), else the model's own."""
+        return (self.P, X) if self.origin is None else (self.P_local, X - self.origin)
+
 
 def rotations(qvec: np.ndarray) -> np.ndarray:
     """Rotation matrices (V, 3, 3) of Hamilton quaternions (V, 4), w first (normalised first: divided by the power of
@@ -305,10 +310,7 @@ def point_gammas(arrays: ModelArrays, geom: ModelGeometry, xyz: np.ndarray | Non
     use = geom.image_ok[arrays.track_image]
     img, own = arrays.track_image[use], owner[use]
     gk = arrays.kp_offsets[img] + arrays.track_kp[use]
-    if geom.origin is not None:                     # a georeferenced model: its local frame (.local_frame)
-        X, P = X - geom.origin, geom.P_local
-    else:
-        P = geom.P
+    P, X = geom.certified_frame(X)
     h = np.einsum("tij,tj->ti", P[img], np.concatenate([X[own], np.ones((len(own), 1))], axis=1))
     with np.errstate(all="ignore"):
         r2 = np.sum((h[:, :2] / h[:, 2:3] - geom.xy_u[gk]) ** 2, axis=1)
@@ -356,17 +358,16 @@ def _solve_stacks(geom: ModelGeometry, chunk: PointChunk, options: Retriangulati
     for N in np.unique(n_used[solve]):
         pts = np.nonzero(solve & (n_used == N))[0]
         o = used_obs[used_off[pts][:, None] + np.arange(N)]
-        local = geom.origin is not None                           # a georeferenced model: Y = X - c (.local_frame)
-        C, x = (geom.P_local if local else geom.P)[d["obs_img"][o]], geom.xy_u[d["gk"][o]]
+        P, xyz_in = geom.certified_frame(chunk.xyz[pts])         # a georeferenced model: Y = X - c (.local_frame)
+        C, x = P[d["obs_img"][o]], geom.xy_u[d["gk"][o]]
         s = certify_stack(C, x, copts)
         if s.inliers is not None:
             outlier[o[~s.inliers]] = True
             n_inl[pts] = s.inliers.sum(axis=1)
         part = s.results.drop(*DROPPED_COLUMNS)
-        parts.append(replace(part, X=part.X + geom.origin) if local and part.X is not None else part)
+        parts.append(part if geom.origin is None or part.X is None else replace(part, X=part.X + geom.origin))
         order.append(pts)
         with np.errstate(all="ignore"):
-            xyz_in = chunk.xyz[pts] - geom.origin if local else chunk.xyz[pts]
             g = _gamma(C, x, xyz_in, options.robust)      # TLS gamma with robust: comparable
         gamma_input[pts] = np.where(np.isfinite(g), g, np.nan)
         if progress is not None:

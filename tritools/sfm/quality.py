@@ -223,9 +223,8 @@ def point_quality(arrays: ModelArrays, geom: ModelGeometry, options: QualityOpti
             raise OptionError("keypoint_radii", f"{options.keypoint_radii}: no radius for point3D "
                               f"{int(arrays.point_ids[pts[j[0]]])}'s observation {int(j[1])} and no default "
                               "(keypoint_radius, --keypoint-radius)")
-        local = geom.origin is not None        # a georeferenced model: its local frame (radii and depths are the same)
-        res = uncertainty_discs((geom.P_local if local else geom.P)[img[rows]], geom.xy_u[gk[rows]], radii,
-                                X - geom.origin if local else X,
+        Pc, Xc = geom.certified_frame(X)       # a georeferenced model: its local frame (radii and depths are the same)
+        res = uncertainty_discs(Pc[img[rows]], geom.xy_u[gk[rows]], radii, Xc,
                                 UncertaintyOptions(depth_bounds=bool(options.exact_depths)))
         for j, r in zip(pts, res):
             status[j] = r.status.value

@@ -218,19 +218,15 @@ def _told(search, O: frozenset, lb: float) -> float:
     mask[sorted(O)] = True
     nodes, lb_out = [], math.inf
     for j in sorted(O):
-        U = [u for u in range(search.N) if u != j]
-        a = np.array([search.bounds.bound(frozenset((j, u))) if search.bounds.known(frozenset((j, u))) else 0.0
-                      for u in U])
-        nodes.append((float(search.c2[j]), a, search.c2[U].copy()))
-        full = np.zeros(search.N)
-        full[U] = a
-        lb_out = min(lb_out, search.bound_uncapped(frozenset((j,)), 0.0, U, 0.0, full))
+        U, a = _pair_bounds(search, j)
+        nodes.append((float(search.c2[j]), a[U], search.c2[U].copy()))
+        lb_out = min(lb_out, search.bound_uncapped(frozenset((j,)), 0.0, U, 0.0, a))
     search.cover_splits[O] = Split(mask, parts=(None, None, None, tuple(nodes)))   # (lb_out: not valid as one number)
     search.cover_keys[O] = lb_out
     return lb
 
 
-def cover_split(search) -> tuple | None:
+def cover_split(search) -> Split | None:
     """The split of the search's bound by one of its covers (:func:`_told`; valid with any bound of the search): the
     cover of the best inlier set's outliers, else the one whose nodes are bounded highest; None without a cover."""
     if not search.cover_splits:
@@ -296,13 +292,18 @@ def _worst(search, X, views: frozenset) -> int:
 
 def _inlier_node(search, j: int) -> float:
     """LB(node I = {j}) (module docstring) from the cached pair bounds L2LB({j, u}) (unknown: 0)."""
+    U, a = _pair_bounds(search, j)
+    return search._bound(frozenset((j,)), 0.0, U, 0.0, a)
+
+
+def _pair_bounds(search, j: int) -> tuple[list, np.ndarray]:
+    """(the other views U, a (N,)): a_u the cached pair bound L2LB({j, u}) (unknown: 0; a_j = 0)."""
     a = np.zeros(search.N)
     for u in range(search.N):
         P = frozenset((j, u))
         if u != j and search.bounds.known(P):
             a[u] = search.bounds.bound(P)
-    U = [u for u in range(search.N) if u != j]
-    return search._bound(frozenset((j,)), 0.0, U, 0.0, a)
+    return [u for u in range(search.N) if u != j], a
 
 
 def _outside(search, W: frozenset, c2_out: float):

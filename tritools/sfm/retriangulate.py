@@ -23,6 +23,7 @@ invert, are not solved and left unchanged (status ``invalid_input`` with a messa
 from __future__ import annotations
 
 import dataclasses
+import inspect
 import logging
 from dataclasses import dataclass
 from functools import cached_property
@@ -373,7 +374,8 @@ def _options_of(options, kw: dict, **settings) -> RetriangulationOptions:
         return RetriangulationOptions(**settings, **kw)
     if not isinstance(options, RetriangulationOptions):
         raise TypeError(f"options must be a RetriangulationOptions, got {type(options).__name__}")
-    given = sorted(kw) + [k for k, v in settings.items() if v != (2 if k == "min_track_length" else None)]
+    defaults = inspect.signature(retriangulate).parameters           # the settings as given vs their defaults
+    given = sorted(kw) + [k for k, v in settings.items() if v != defaults[k].default]
     if given:
         raise TypeError(f"retriangulate: pass either options= or the individual settings, not both (got options "
                         f"and {', '.join(given)}; set them on the RetriangulationOptions)")
